@@ -1,0 +1,106 @@
+"""The command line: ``python -m depthcore {reproduce,estimate,figures} ...``.
+
+Bad input ends with a one-line message on stderr and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from . import __version__, reproduce
+from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
+from .second_order import noise_free_state
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _prior(mu, prior_mean, prior_cov) -> Gaussian:
+    """The prior from the command line, defaulting to the paper's rule."""
+    c = noise_free_state(mu)
+    default = paper_prior(c)
+    mean = default.mean if prior_mean is None else np.array(prior_mean)
+    if prior_cov is None:
+        cov = PAPER_PRIOR_SCALE * np.eye(3)
+    elif len(prior_cov) == 1:
+        if not prior_cov[0] > 0:
+            raise ValueError(f"prior_cov must be positive definite; S = {prior_cov[0]} is not > 0")
+        cov = prior_cov[0] * np.eye(3)
+    elif len(prior_cov) == 9:
+        cov = np.array(prior_cov).reshape(3, 3)
+    else:
+        raise ValueError(f"prior_cov takes 1 value (S I) or 9 (a 3 x 3 matrix), got {len(prior_cov)}")
+    try:
+        return Gaussian(mean, cov)
+    except ValueError as exc:
+        raise ValueError(str(exc).replace("cov ", "prior_cov ", 1).replace("mean ", "prior_mean ", 1)) from None
+
+
+def _cmd_reproduce(args) -> str:
+    result = reproduce.reproduce()
+    return json.dumps(result, indent=2) if args.json else reproduce.format_table(result)
+
+
+def _cmd_estimate(args) -> str:
+    mu = np.array(args.mu)
+    summary = reproduce.summarize(mu, args.rho, _prior(mu, args.prior_mean, args.prior_cov))
+    return json.dumps(summary, indent=2) if args.json else reproduce.format_summary(summary)
+
+
+def _cmd_figures(args) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from . import figures
+
+    paths = figures.save_all(args.out)
+    return "\n".join(str(p) for p in paths) + "\n"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``python -m depthcore``."""
+    p = _Parser(prog="python -m depthcore", description=__doc__.splitlines()[0])
+    p.add_argument("--version", action="version", version=f"depthcore {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    r = sub.add_parser("reproduce", help="moments of every filter for Figures 2-6, beside the paper's")
+    r.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    r.set_defaults(run=_cmd_reproduce)
+
+    e = sub.add_parser("estimate", help="moments of every filter for any three measurements")
+    e.add_argument("--mu", type=float, nargs=3, required=True, metavar=("M1", "M2", "M3"),
+                   help="the measurements mu1 mu2 mu3 (tangents of the bearings)")
+    e.add_argument("--rho", type=float, required=True, help="noise standard deviation, > 0")
+    e.add_argument("--prior-mean", type=float, nargs=3, metavar=("X", "Y", "V"),
+                   help="prior mean at time 1 (default: the paper's (c1 - 2 c3, c2 - 2, 0))")
+    e.add_argument("--prior-cov", type=float, nargs="+", metavar="S",
+                   help="prior covariance: S for S I (default 1000), or 9 values row by row")
+    e.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    e.set_defaults(run=_cmd_estimate)
+
+    f = sub.add_parser("figures", help="write Figures 2-6 as PDF, PNG and SVG")
+    f.add_argument("--out", default="figures", help="output folder (default: figures)")
+    f.set_defaults(run=_cmd_figures)
+    return p
+
+
+def main(argv=None) -> int:
+    """Run the command line; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        text = args.run(args)
+    except ValueError as exc:
+        sys.stderr.write(f"python -m depthcore {args.command}: error: {exc}\n")
+        return 2
+    sys.stdout.write(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

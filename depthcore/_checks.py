@@ -1,0 +1,87 @@
+"""Input checks shared by the public functions.
+
+Every check raises :class:`ValueError` whose message names the offending
+argument and says what is wrong with it, so that bad input never turns into a
+NaN or a silently wrong answer further down.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Triples whose second difference ``|mu1 + mu3 - 2 mu2|`` is at or below this
+#: value are treated as degenerate: the three bearings are (numerically)
+#: collinear in time and no finite depth explains them.
+DEGENERACY_TOL = 1e-12
+
+
+def finite_array(value, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """Return ``value`` as a float array, checking shape and finiteness."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be numeric, got {value!r}") from exc
+    if shape is not None and arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+    return arr
+
+
+def positive_scalar(value, name: str) -> float:
+    """Return ``value`` as a float, checking that it is finite and > 0."""
+    arr = finite_array(value, name)
+    if arr.ndim != 0:
+        raise ValueError(f"{name} must be a scalar, got shape {arr.shape}")
+    if not arr > 0:
+        raise ValueError(f"{name} must be positive, got {float(arr)}")
+    return float(arr)
+
+
+def positive_array(value, name: str) -> np.ndarray:
+    """Return ``value`` as a float array (scalar or 1-D), checking every entry is finite and > 0."""
+    arr = finite_array(value, name)
+    if arr.ndim > 1:
+        raise ValueError(f"{name} must be a scalar or 1-D, got shape {arr.shape}")
+    if not np.all(arr > 0):
+        raise ValueError(f"{name} must be positive, got {arr.tolist()}")
+    return arr
+
+
+def covariance(value, name: str, dim: int) -> np.ndarray:
+    """Return ``value`` as a symmetric positive-definite ``(dim, dim)`` array."""
+    arr = finite_array(value, name, (dim, dim))
+    scale = max(np.max(np.abs(arr)), np.finfo(float).tiny)
+    if np.max(np.abs(arr - arr.T)) > 1e-10 * scale:
+        raise ValueError(f"{name} must be symmetric, got {arr.tolist()}")
+    try:
+        np.linalg.cholesky(arr)
+    except np.linalg.LinAlgError:
+        raise ValueError(
+            f"{name} must be positive definite; eigenvalues are "
+            f"{np.linalg.eigvalsh(arr).tolist()}"
+        ) from None
+    return 0.5 * (arr + arr.T)
+
+
+def measurements(mu, name: str = "mu") -> np.ndarray:
+    """Check a triple ``(mu1, mu2, mu3)`` of image measurements.
+
+    The triple must be finite, not degenerate (see :data:`DEGENERACY_TOL`), and
+    its noise-free solution, Eq. (7), must lie in front of the camera at all
+    three times: depth ``c2 - 2 > 0`` at the first frame.
+    """
+    arr = finite_array(mu, name, (3,))
+    second_difference = arr[0] + arr[2] - 2.0 * arr[1]
+    if abs(second_difference) <= DEGENERACY_TOL:
+        raise ValueError(
+            f"{name} is degenerate: mu1 + mu3 - 2*mu2 = {second_difference:.3g}, "
+            "so no finite depth explains the three measurements"
+        )
+    depth_first = 2.0 * (arr[0] - arr[1]) / second_difference - 2.0
+    if not depth_first > 0:
+        raise ValueError(
+            f"{name} puts the point behind the camera: its noise-free depth at the "
+            f"first frame is c2 - 2 = {depth_first:.6g}, which is not positive"
+        )
+    return arr

@@ -1,0 +1,145 @@
+"""The extended Kalman filter p_e of the paper, Eqs. (10)-(12).
+
+Recommended import: ``from depthcore import ekf``.
+
+The functions work on batches: a leading shape ``(...)`` on means, covariances
+and measurements runs independent filters side by side (one per Monte Carlo
+trial, say) with no Python loop over them.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from . import _checks, model
+from .gaussian import Gaussian
+
+
+class MeanAndCov(NamedTuple):
+    """A mean of shape ``(..., 3)`` and covariance of shape ``(..., 3, 3)``."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+
+class EKFHistory(NamedTuple):
+    """The EKF's estimates after each measurement.
+
+    Attributes
+    ----------
+    means : ndarray, shape (3, 3)
+        Row ``i`` is ``m_{i+1}``, the mean after measurement ``mu_{i+1}``.
+    covs : ndarray, shape (3, 3, 3)
+        ``covs[i]`` is ``P_{i+1}``.
+    """
+
+    means: np.ndarray
+    covs: np.ndarray
+
+    @property
+    def posterior(self) -> Gaussian:
+        """``p_e = N(x, m_3, P_3)``, the EKF density at time 3."""
+        return Gaussian(self.means[-1], self.covs[-1])
+
+
+def predict(m, P) -> MeanAndCov:
+    """Eq. (10): ``n = F m + e``, ``C = F P F^T``.
+
+    Parameters
+    ----------
+    m : array_like, shape (..., 3)
+    P : array_like, shape (..., 3, 3)
+    """
+    m = np.asarray(m, dtype=float)
+    P = np.asarray(P, dtype=float)
+    return MeanAndCov(m @ model.F.T + model.e, model.F @ P @ model.F.T)
+
+
+def update(n, C, mu, rho: float) -> MeanAndCov:
+    """Eq. (12): incorporate one measurement ``mu`` into the prediction ``(n, C)``.
+
+    ``P = C - (rho**2 + h^T C h)^{-1} C h h^T C`` and
+    ``m = n + (mu - n1/n2) / (rho**2 + h^T C h) C h``, with ``h`` from Eq. (11) at ``n``.
+
+    Parameters
+    ----------
+    n : array_like, shape (..., 3)
+        Predicted mean; its depth ``n2`` must be positive.
+    C : array_like, shape (..., 3, 3)
+        Predicted covariance.
+    mu : float or array_like, shape (...)
+        The measurement.
+    rho : float
+        Noise standard deviation, > 0.
+    """
+    n = np.asarray(n, dtype=float)
+    C = np.asarray(C, dtype=float)
+    if not np.all(n[..., 1] > 0):
+        raise ValueError(
+            "prior_mean leads the EKF to a predicted depth n2 <= 0 "
+            f"(min {float(np.min(n[..., 1])):.6g}); the projection x/y is not defined there"
+        )
+    h = model.observation_vector(n)  # Eq. (11)
+    Ch = np.einsum("...ij,...j->...i", C, h)
+    s = rho**2 + np.einsum("...i,...i->...", h, Ch)
+    innovation = np.asarray(mu, dtype=float) - n[..., 0] / n[..., 1]
+    mean = n + (innovation / s)[..., None] * Ch
+    cov = C - Ch[..., :, None] * Ch[..., None, :] / s[..., None, None]
+    return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
+
+
+def run(mu, rho: float, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
+    """Run the EKF over three measurements, batched.
+
+    Initialise ``n = m``, ``C = P`` (the prior), incorporate ``mu1`` with (12),
+    then predict (10) and update (12) twice.
+
+    Parameters
+    ----------
+    mu : array_like, shape (..., 3)
+        Measurements in time order.
+    rho : float
+    prior_mean : array_like, shape (..., 3)
+    prior_cov : array_like, shape (..., 3, 3)
+
+    Returns
+    -------
+    means : ndarray, shape (..., 3, 3)
+        ``means[..., i, :]`` is the mean after measurement ``i + 1``.
+    covs : ndarray, shape (..., 3, 3, 3)
+    """
+    rho = _checks.positive_scalar(rho, "rho")
+    mu = _checks.finite_array(mu, "mu")
+    n, C = np.asarray(prior_mean, dtype=float), np.asarray(prior_cov, dtype=float)
+    means, covs = [], []
+    for i in range(mu.shape[-1]):
+        if i > 0:
+            n, C = predict(means[-1], covs[-1])
+        m, P = update(n, C, mu[..., i], rho)
+        means.append(m)
+        covs.append(P)
+    return np.stack(means, axis=-2), np.stack(covs, axis=-3)
+
+
+def ekf(mu, rho: float, prior: Gaussian) -> EKFHistory:
+    """Eqs. (10)-(12): the EKF for one triple of measurements.
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+        Checked by :func:`depthcore._checks.measurements`.
+    rho : float
+        Noise standard deviation, > 0.
+    prior : Gaussian
+        Density of the state at time 1.
+
+    Returns
+    -------
+    EKFHistory
+        Means and covariances after each measurement; ``.posterior`` is ``p_e``.
+    """
+    mu = _checks.measurements(mu)
+    means, covs = run(mu, rho, prior.mean, prior.cov)
+    return EKFHistory(means, covs)

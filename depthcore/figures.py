@@ -1,0 +1,108 @@
+"""One function per figure of the paper; each draws curves from :mod:`depthcore.reproduce`.
+
+Recommended import: ``from depthcore import figures``.
+
+Nothing here computes a density: :func:`depthcore.reproduce.curves` does. The
+functions return a :class:`matplotlib.figure.Figure` and never show or save it,
+except :func:`save_all`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from . import reproduce
+from .scenarios import SCENARIOS
+
+#: One vocabulary for every plot: label, colour and line style of each filter.
+STYLE = {
+    "optimal": {"label": "optimal $p_o$", "color": "black", "linestyle": "-"},
+    "second_order": {"label": "second order $p_s$", "color": "tab:blue", "linestyle": "--"},
+    "ekf": {"label": "EKF $p_e$", "color": "tab:red", "linestyle": ":"},
+}
+
+#: Axis ranges comparable with the paper's plots.
+GRIDS = {
+    "fig2": (2.5, 10.5),
+    "fig3": (2.5, 30.0),
+    "fig4": (0.4, 2.2),
+    "fig5": (4.5, 8.0),
+    "fig6": (2.5, 10.5),
+}
+#: Where the paper truncates the EKF's peak, so do we (upper limit of the density axis).
+YLIM = {"fig3": 0.5}
+_SYMBOL = {"depth": "y", "velocity": "v"}
+#: Leave the creation date out, so that the same figure gives the same file.
+_NO_DATE = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
+
+
+def plot_marginals(ax, curves: dict, quantity: str, filters=reproduce.FILTERS):
+    """Draw the marginal densities in ``curves`` on ``ax`` with the shared style."""
+    for name in filters:
+        ax.plot(curves["grid"], curves[name], linewidth=1.6, **STYLE[name])
+    sym = _SYMBOL[quantity]
+    ax.set_xlabel(f"{quantity} ${sym}$" + (" at time 3" if quantity == "depth" else ""))
+    ax.set_ylabel(f"marginal density of ${sym}$")
+    ax.legend(frameon=False)
+    return ax
+
+
+def figure(key: str, n: int = 801, filters=reproduce.FILTERS):
+    """Figure ``key`` (``"fig2"`` ... ``"fig6"``): the marginal densities the paper plots.
+
+    Parameters
+    ----------
+    key : str
+    n : int
+        Grid points.
+    filters : sequence of str
+        Which filters to draw; all three by default (the paper's Figure 4
+        omits the optimal one).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    s = SCENARIOS[key]
+    lo, hi = GRIDS[key]
+    curves = reproduce.curves(s, np.linspace(lo, hi, n))
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
+    plot_marginals(ax, curves, s.quantity, filters)
+    if key in YLIM:
+        peak = max(np.max(curves[f]) for f in filters)
+        ax.set_ylim(0, YLIM[key])
+        if peak > YLIM[key]:
+            ax.annotate(f"EKF peak truncated (height {peak:.2f})", xy=(0.98, 0.95),
+                        xycoords="axes fraction", ha="right", va="top", fontsize=9)
+    ax.set_title(f"Figure {s.figure}: {caption(key)}", fontsize=10)
+    return fig
+
+
+def caption(key: str) -> str:
+    """What figure ``key`` plots and with which parameters."""
+    s = SCENARIOS[key]
+    mu = ", ".join(f"{m:g}" for m in s.mu)
+    prior = s.prior.mean
+    return (f"{s.quantity} marginals, mu = ({mu}), rho = 1/{1 / s.rho:.0f}, "
+            f"prior mean ({prior[0]:g}, {prior[1]:g}, {prior[2]:g}), covariance 1000 I")
+
+
+def save_all(out_dir, formats=("pdf", "png", "svg")) -> list[Path]:
+    """Write Figures 2-6 as ``figure<N>.<fmt>`` into ``out_dir``; returns the paths."""
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for key, s in SCENARIOS.items():
+        fig = figure(key)
+        for fmt in formats:
+            path = out / f"figure{s.figure}.{fmt}"
+            fig.savefig(path, dpi=200, metadata=_NO_DATE.get(fmt))
+            paths.append(path)
+        plt.close(fig)
+    return paths

@@ -1,0 +1,145 @@
+"""The motion and measurement model of the paper, Eqs. (1), (3), (4), (9), (11).
+
+A point moves in the (x, y) plane with constant velocity ``(v, 1)``; its state
+at time ``i`` is ``(x_i, y_i, v_i)``, with ``y`` the depth. The camera sees the
+bearing ``x / y`` plus white Gaussian noise of standard deviation ``rho``.
+
+Recommended import: ``from depthcore import model``.
+
+All functions act on the last axis of arrays of states, so ``x`` may have shape
+``(3,)`` or ``(..., 3)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _checks
+
+#: Eq. (9): the linear part of the motion G.
+F = np.array([[1.0, 0.0, 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+F.setflags(write=False)
+
+#: Eq. (9): the constant part of the motion G.
+e = np.array([0.0, 1.0, 0.0])
+e.setflags(write=False)
+
+#: Number of measurements the paper's filters use.
+N_MEASUREMENTS = 3
+
+
+def G_linear(k: int) -> np.ndarray:
+    """Linear part of ``G**k`` (``k`` may be negative), a ``(3, 3)`` array.
+
+    Eqs. (1), (9): ``G**k x = (x + k v, y + k, v)``, so the linear part is ``F**k``
+    with ``F**k = [[1, 0, k], [0, 1, 0], [0, 0, 1]]``.
+    """
+    return np.array([[1.0, 0.0, float(k)], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def G(x, k: int = 1) -> np.ndarray:
+    """Eq. (1): move states ``k`` steps forward (backward for ``k < 0``).
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 3)
+        States ``(x, y, v)``.
+    k : int
+        Number of time steps; ``G(x, -2)`` is the paper's ``G^{-2} x``.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``(x + k v, y + k, v)``.
+    """
+    x = np.asarray(x, dtype=float)
+    return np.stack([x[..., 0] + k * x[..., 2], x[..., 1] + k, x[..., 2]], axis=-1)
+
+
+def project(x) -> np.ndarray:
+    """The noise-free image measurement ``x / y`` of states ``x`` (shape (..., 3))."""
+    x = np.asarray(x, dtype=float)
+    return x[..., 0] / x[..., 1]
+
+
+def observation_vector(n) -> np.ndarray:
+    """Eq. (11): gradient of the projection ``x / y`` at the state ``n``.
+
+    Parameters
+    ----------
+    n : array_like, shape (..., 3)
+        The state at which the projection is linearised (the EKF's predicted mean).
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``h = (1 / n2, -n1 / n2**2, 0)``.
+    """
+    n = np.asarray(n, dtype=float)
+    return np.stack([1.0 / n[..., 1], -n[..., 0] / n[..., 1] ** 2, np.zeros(n.shape[:-1])], axis=-1)
+
+
+def log_likelihood(mu, x, rho: float) -> np.ndarray:
+    """Eq. (4): log density of one measurement ``mu`` given states ``x``.
+
+    Parameters
+    ----------
+    mu : float or array_like broadcastable to ``x.shape[:-1]``
+        Measured bearing (radians, as a tangent).
+    x : array_like, shape (..., 3)
+        States at the time of the measurement.
+    rho : float
+        Noise standard deviation, > 0.
+
+    Returns
+    -------
+    ndarray, shape x.shape[:-1]
+        ``-log(sqrt(2 pi) rho) - (x / y - mu)**2 / (2 rho**2)``.
+    """
+    rho = _checks.positive_scalar(rho, "rho")
+    r = project(x) - np.asarray(mu, dtype=float)
+    return -0.5 * np.log(2.0 * np.pi) - np.log(rho) - 0.5 * (r / rho) ** 2
+
+
+def trajectory(x1, n: int = N_MEASUREMENTS) -> np.ndarray:
+    """States at times ``1 .. n`` of a point whose state at time 1 is ``x1``.
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+    """
+    x1 = _checks.finite_array(x1, "x1", (3,))
+    return np.stack([G(x1, k) for k in range(n)])
+
+
+def simulate_measurements(x1, rho: float, rng: np.random.Generator, n: int = N_MEASUREMENTS,
+                          size: int | None = None) -> np.ndarray:
+    """Draw noisy measurements ``mu_i = x_i / y_i + w_i`` along a trajectory.
+
+    Parameters
+    ----------
+    x1 : array_like, shape (3,)
+        True state at time 1. Its depth must be positive at every time.
+    rho : float
+        Noise standard deviation, > 0.
+    rng : numpy.random.Generator
+        Source of the noise.
+    n : int
+        Number of measurements.
+    size : int, optional
+        Number of independent noise draws; ``None`` for a single triple.
+
+    Returns
+    -------
+    ndarray, shape (n,) or (size, n)
+        The measurements ``mu_1 .. mu_n`` in time order.
+    """
+    rho = _checks.positive_scalar(rho, "rho")
+    states = trajectory(x1, n)
+    if not np.all(states[:, 1] > 0):
+        raise ValueError(
+            f"x1 puts the point behind the camera: depths {states[:, 1].tolist()} "
+            "are not all positive"
+        )
+    shape = (n,) if size is None else (size, n)
+    return project(states) + rho * rng.standard_normal(shape)

@@ -1,0 +1,544 @@
+"""The optimal filter p_o and its exact marginals, Eqs. (2)-(6) and (13)-(16).
+
+Recommended import: ``from depthcore import optimal``.
+
+For a fixed depth ``y`` the log posterior (6) is quadratic in ``u = (x, v)``:
+each measurement term of ``f`` is linear in ``u`` and so is the prior's
+argument ``G^{-2} x = (x - 2v, y - 2, v)``. Writing all six terms (three
+measurements, three whitened prior components) as ``g_i . u - z_i``,
+
+    log p_o(x, y, v) = -1/2 sum_i (g_i(y) . u - z_i(y))**2 + const,
+
+so the inner integral over ``u`` is Gaussian (Eqs. (14)-(16)) with precision
+``M = sum_i g_i g_i^T`` and
+
+    log p_oy(y) = -1/2 log det M(y) - 1/2 S(y) + const,
+
+where ``S(y) = min_u sum_i (g_i . u - z_i)**2``. The paper's Eq. (16) keeps
+only ``-1/2 log det M + l^T M^{-1} l / 8`` and calls the rest a constant
+"independent of y"; it is not: ``S = |z|**2 - l^T M^{-1} l / 4`` and ``|z|**2``
+contains the prior's depth term ``(y - 2 - m2)**2 / P22``. ``reading="printed"``
+drops it as the print does; ``reading="derived"`` (the default) keeps it.
+
+Both ``det M`` and ``S`` are computed as sums of squares by the Cauchy-Binet
+formula (``det M = sum_{i<j} (g_i x g_j)**2``, ``S det M = sum_{i<j<k}
+det[g z]_{ijk}**2``), so neither suffers cancellation near the poles
+``y = 0, 1, 2`` or at small noise.
+
+The depth marginal is then a one-dimensional integral, done on each of the
+intervals ``(-inf, 0)``, ``(0, 1)``, ``(1, 2)``, ``(2, inf)`` by the trapezoid
+rule after a change of variable that sends the interval to the real line;
+the step is halved until the moments agree to the requested tolerance, and
+the last change is reported as the error estimate. The velocity marginal is
+the mixture over the same nodes of the Gaussian conditionals of ``v`` given
+``y``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+from typing import NamedTuple
+
+import numpy as np
+
+from . import _checks, model
+from .gaussian import Gaussian
+from .second_order import A2, b2, f, noise_free_states, second_order_batch
+
+READINGS = ("derived", "printed")
+#: ``"front"``: depths ``y > 2``, the point in front of the camera at all three
+#: frames; ``"all"``: every real ``y`` but the poles, Eq. (6) taken literally.
+SUPPORTS = ("front", "all")
+
+_PAIRS = np.array(list(combinations(range(6), 2)))
+_TRIPLES = np.array(list(combinations(range(6), 3)))
+#: ``G^{-2} x`` as a function of ``u = (x, v)`` for fixed ``y``: ``L u + (0, y - 2, 0)``.
+_L = A2[:, [0, 2]]
+#: Nodes whose log integrand is this far below the maximum are cut off (e^-60 ~ 1e-26).
+_CUTOFF = 60.0
+#: The intervals (k, k + 1) are mapped from t in [-_T_MAX, _T_MAX].
+_T_MAX = 60.0
+_SCAN_STEP = 1.0
+_MAX_HALVINGS = 12
+
+
+class _Problem(NamedTuple):
+    """A batch of ``B`` problems: measurements, noise, prior (whitened)."""
+
+    mu: np.ndarray  # (B, 3)
+    rho: np.ndarray  # (B,)
+    mean: np.ndarray  # (B, 3) prior mean
+    R: np.ndarray  # (B, 3, 3), P^{-1} = R^T R
+    reading: str
+
+    def take(self, idx) -> "_Problem":
+        return _Problem(self.mu[idx], self.rho[idx], self.mean[idx], self.R[idx], self.reading)
+
+
+def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
+    if reading not in READINGS:
+        raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
+    mu = np.atleast_2d(_checks.finite_array(mu, "mu"))
+    B = mu.shape[0]
+    rho = _checks.positive_array(rho, "rho")
+    if rho.ndim and rho.shape != (B,):
+        raise ValueError(f"rho must be a scalar or have shape ({B},), got shape {rho.shape}")
+    prior_mean = _checks.finite_array(prior_mean, "prior_mean")
+    if prior_mean.shape not in ((3,), (B, 3)):
+        raise ValueError(f"prior_mean must have shape (3,) or ({B}, 3), got {prior_mean.shape}")
+    prior_cov = _checks.finite_array(prior_cov, "prior_cov")
+    prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
+    R = np.linalg.inv(np.linalg.cholesky(prior_cov))
+    return _Problem(mu, np.full(B, rho), np.broadcast_to(prior_mean, (B, 3)),
+                    np.broadcast_to(R, (B, 3, 3)), reading)
+
+
+def log_posterior(x, mu, rho: float, prior: Gaussian) -> np.ndarray:
+    """Eq. (6): unnormalised log density of the optimal filter at time 3.
+
+    ``-f(x) / (2 rho**2) + log p(G^{-2} x)``, with ``f`` from Eq. (5).
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 3)
+        States at time 3.
+    mu : array_like, shape (3,)
+    rho : float
+    prior : Gaussian
+        Density of the state at time 1.
+
+    Returns
+    -------
+    ndarray, shape x.shape[:-1]
+    """
+    rho = _checks.positive_scalar(rho, "rho")
+    mu = _checks.measurements(mu)
+    x = np.asarray(x, dtype=float)
+    return -f(x, mu) / (2.0 * rho**2) + prior.logpdf(model.G(x, -2))
+
+
+def _terms(offsets, pb: _Problem):
+    """The six linear terms ``g_i . u - z_i`` of Eq. (6) at fixed depths.
+
+    ``offsets`` has shape (B, n, 3): ``(y, y - 1, y - 2)``. Returns ``gx``,
+    ``gv`` and ``z``, each of shape (6, B, n): rows 0-2 are the measurement
+    terms at times 3, 2, 1 (``((x - k v) / (y - k) - mu_{3-k}) / rho`` for
+    ``k = 0, 1, 2``), rows 3-5 the prior's argument ``G^{-2} x - m``
+    whitened by ``R``.
+    """
+    B, n, _ = offsets.shape
+    s = np.moveaxis(offsets, -1, 0) * pb.rho[:, None]
+    np.reciprocal(s, out=s)
+    RL = pb.R @ _L  # (B, 3, 2)
+    gx = np.empty((6, B, n))
+    gv = np.empty((6, B, n))
+    z = np.empty((6, B, n))
+    gx[:3] = s
+    gv[:3] = -np.array([0.0, 1.0, 2.0])[:, None, None] * s
+    gx[3:] = RL[:, :, 0].T[:, :, None]
+    gv[3:] = RL[:, :, 1].T[:, :, None]
+    z[:3] = (pb.mu[:, ::-1] / pb.rho[:, None]).T[:, :, None]
+    # G^{-2} x - m = L u + b with b = (-m1, (y - 2) - m2, -m3), and z = -R b.
+    z[3:] = (np.einsum("bij,bj->bi", pb.R, pb.mean).T[:, :, None]
+             - pb.R[:, :, 1].T[:, :, None] * offsets[None, ..., 2])
+    return gx, gv, z
+
+
+#: For each triple (a, b, c), the pairs (b, c), (a, c), (a, b) as indices into _PAIRS.
+_PAIR_INDEX = {tuple(p): k for k, p in enumerate(_PAIRS.tolist())}
+_TRIPLE_PAIRS = np.array([[_PAIR_INDEX[(b, c)], _PAIR_INDEX[(a, c)], _PAIR_INDEX[(a, b)]]
+                          for a, b, c in _TRIPLES.tolist()])
+
+
+def _solve(offsets, pb: _Problem):
+    """Log depth marginal and the Gaussian of ``(x, v)`` given ``y``, batched.
+
+    Returns ``log_density`` (B, n), ``mean`` (2, B, n) and the covariance
+    entries ``(cxx, cxv, cvv)``, each (B, n).
+    """
+    gx, gv, z = _terms(offsets, pb)
+    I, J = _PAIRS[:, 0], _PAIRS[:, 1]
+    gxi, gxj, gvi, gvj, zi, zj = gx[I], gx[J], gv[I], gv[J], z[I], z[J]
+    D = gxi * gvj - gvi * gxj  # the 2 x 2 minors of g, (15, B, n)
+    det_M = np.einsum("pbn,pbn->bn", D, D)
+    # Cramer's rule on M u = g^T z, each determinant expanded by Cauchy-Binet.
+    mean = np.stack([np.einsum("pbn,pbn->bn", D, zi * gvj - gvi * zj),
+                     np.einsum("pbn,pbn->bn", D, gxi * zj - zi * gxj)]) / det_M
+    cxx = np.einsum("ibn,ibn->bn", gv, gv) / det_M
+    cxv = -np.einsum("ibn,ibn->bn", gx, gv) / det_M
+    cvv = np.einsum("ibn,ibn->bn", gx, gx) / det_M
+    # det[g z] of each triple (a, b, c), expanded along z: z_a D_bc - z_b D_ac + z_c D_ab.
+    T, P = _TRIPLES, _TRIPLE_PAIRS
+    det3 = z[T[:, 0]] * D[P[:, 0]] - z[T[:, 1]] * D[P[:, 1]] + z[T[:, 2]] * D[P[:, 2]]
+    S = np.einsum("tbn,tbn->bn", det3, det3) / det_M
+    log_density = -0.5 * np.log(det_M) - 0.5 * S
+    if pb.reading == "printed":
+        # Eq. (16) keeps only l^T M^{-1} l / 8 = (|z|^2 - S) / 2 beside the determinant.
+        log_density += 0.5 * np.einsum("ibn,ibn->bn", z, z)
+    return log_density, mean, (cxx, cxv, cvv)
+
+
+def quadratic_coefficients(y, mu, rho: float, prior: Gaussian) -> np.ndarray:
+    """Eq. (14): the coefficients ``A, B, C, D, E`` of ``p_o`` at fixed depths.
+
+    ``log p_o = -1/2 (A x**2 + B x v + C v**2 + D x + E v) + terms in y only``.
+
+    Parameters
+    ----------
+    y : array_like, shape (n,)
+    mu, rho, prior
+        As in :func:`log_posterior`.
+
+    Returns
+    -------
+    ndarray, shape (n, 5)
+        Columns ``A, B, C, D, E``; ``M = [[A, B/2], [B/2, C]]`` and ``l = (D, E)``
+        of Eq. (15).
+    """
+    y = np.atleast_1d(np.asarray(y, dtype=float))
+    pb = _problem(_checks.measurements(mu), rho, prior.mean, prior.cov, "derived")
+    gx, gv, z = (a[:, 0] for a in _terms(np.stack([y, y - 1, y - 2], -1)[None], pb))
+    A, B, C = np.sum(gx * gx, 0), 2.0 * np.sum(gx * gv, 0), np.sum(gv * gv, 0)
+    D, E = -2.0 * np.sum(gx * z, 0), -2.0 * np.sum(gv * z, 0)
+    return np.stack([A, B, C, D, E], -1)
+
+
+def conditional(y, mu, rho: float, prior: Gaussian, reading: str = "derived"):
+    """Eqs. (14)-(16): log depth marginal and the Gaussian of ``(x, v)`` given ``y``.
+
+    Parameters
+    ----------
+    y : array_like, shape (n,)
+        Depths at time 3, none at a pole ``0, 1, 2``.
+    mu, rho, prior
+        As in :func:`log_posterior`.
+    reading : {"derived", "printed"}
+        See the module docstring.
+
+    Returns
+    -------
+    log_density : ndarray, shape (n,)
+        Unnormalised ``log p_oy(y)`` (the Gaussian integral's ``2 pi`` dropped).
+    mean : ndarray, shape (n, 2)
+        ``E[(x, v) | y]``.
+    cov : ndarray, shape (n, 2, 2)
+        ``Cov[(x, v) | y] = M^{-1}``.
+    """
+    y = np.atleast_1d(_checks.finite_array(y, "y"))
+    if np.any(np.isin(y, (0.0, 1.0, 2.0))):
+        raise ValueError("y must avoid the poles 0, 1, 2 of Eq. (5)")
+    pb = _problem(_checks.measurements(mu), rho, prior.mean, prior.cov, reading)
+    log_density, mean, (cxx, cxv, cvv) = _solve(np.stack([y, y - 1, y - 2], -1)[None], pb)
+    cov = np.stack([np.stack([cxx, cxv], -1), np.stack([cxv, cvv], -1)], -2)
+    return log_density[0], mean[:, 0].T, cov[0]
+
+
+def _nodes(interval: int, t: np.ndarray):
+    """Map ``t`` (any shape) to depths in one interval between the poles.
+
+    Returns the offsets ``(y, y - 1, y - 2)`` (shape ``t.shape + (3,)``) and
+    ``log |dy/dt|``.
+    """
+    if interval == 0:  # (-inf, 0): y = -exp(t)
+        y = -np.exp(t)
+        return np.stack([y, y - 1, y - 2], -1), t
+    if interval == 3:  # (2, inf): y - 2 = exp(t)
+        d = np.exp(t)
+        return np.stack([d + 2, d + 1, d], -1), t
+    # (k, k + 1): y - k = 1 / (1 + exp(-t)), y - k - 1 = -1 / (1 + exp(t))
+    lo, hi = 1.0 / (1.0 + np.exp(-t)), -1.0 / (1.0 + np.exp(t))
+    log_jac = -np.logaddexp(0.0, -t) - np.logaddexp(0.0, t)
+    if interval == 1:
+        return np.stack([lo, hi, hi - 1], -1), log_jac
+    return np.stack([lo + 1, lo, hi], -1), log_jac
+
+
+class _Sums(NamedTuple):
+    """Trapezoid sums (without the step) of the depth integrand and its moments."""
+
+    s: np.ndarray  # (6, B): Z, y, y^2, v, v^2 (centred), P(y < 2)
+
+    def __add__(self, other):
+        return _Sums(self.s + other.s)
+
+
+def _evaluate(interval, t, pb, shift, centre):
+    """Sums over nodes ``t`` (B, n) and the per-node data."""
+    offsets, log_jac = _nodes(interval, t)
+    log_density, mean, (_, _, cvv) = _solve(offsets, pb)
+    log_w = log_density + log_jac - shift[:, None]
+    w = np.exp(log_w)
+    dy = offsets[..., 0] - centre[:, 1:2]
+    dv = mean[1] - centre[:, 2:3]
+    sums = np.stack([w.sum(-1), (w * dy).sum(-1), (w * dy**2).sum(-1), (w * dv).sum(-1),
+                     (w * (dv**2 + cvv)).sum(-1), (w * (offsets[..., 0] < 2)).sum(-1)])
+    return _Sums(sums), (offsets[..., 0], log_w, mean[1], cvv)
+
+
+def _moments(totals: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """``(E y, sd y, E v, sd v, P(y < 2), Z)`` from summed trapezoid totals, each (B,)."""
+    Z, y1, y2, v1, v2, behind = totals
+    my, mv = y1 / Z, v1 / Z
+    return np.stack([centre[:, 1] + my, np.sqrt(np.maximum(y2 / Z - my**2, 0.0)),
+                     centre[:, 2] + mv, np.sqrt(np.maximum(v2 / Z - mv**2, 0.0)), behind / Z, Z])
+
+
+def _ranges(pb: _Problem, intervals):
+    """Scan each interval; keep the ``t`` range where the integrand matters.
+
+    Returns the log-integrand maximum found (B,), per interval ``(lo, hi, active)``
+    arrays and a starting step (B,) for each interval.
+    """
+    c = noise_free_states(pb.mu)
+    cov_p = np.linalg.inv(np.swapaxes(pb.R, -1, -2) @ pb.R)
+    mean_s, cov_s = second_order_batch(pb.mu, pb.rho, pb.mean, cov_p)
+    sd_t = np.sqrt(cov_s[:, 1, 1]) / (c[:, 1] - 2.0)
+    # Beyond |y| = 1e4 times the prior's scale the integrand has long decayed.
+    far = np.log(1e4 * (np.sqrt(np.max(np.trace(cov_p, axis1=-2, axis2=-1)))
+                        + np.max(np.abs(pb.mean)) + 10.0))
+    limits = {0: (-_T_MAX, far), 1: (-_T_MAX, _T_MAX), 2: (-_T_MAX, _T_MAX), 3: (-_T_MAX, far)}
+    local = np.linspace(-12.0, 12.0, 25)
+    scans = {}
+    for i in intervals:
+        t = np.arange(limits[i][0], limits[i][1] + _SCAN_STEP / 2, _SCAN_STEP)
+        t = np.broadcast_to(t, (len(c), t.size))
+        if i == 3:
+            centres = [np.log(c[:, 1] - 2.0)]
+            if np.all(mean_s[:, 1] > 2.0):
+                centres.append(np.log(mean_s[:, 1] - 2.0))
+            t = np.concatenate([t] + [ct[:, None] + sd_t[:, None] * local for ct in centres], 1)
+        offsets, log_jac = _nodes(i, t)
+        scans[i] = (t, _solve(offsets, pb)[0] + log_jac)
+    top = np.max([np.max(s, axis=1) for _, s in scans.values()], axis=0)
+    ranges = {}
+    for i, (t, s) in scans.items():
+        keep = s > (top - _CUTOFF)[:, None]
+        if i in (0, 3) and np.any(keep[:, int(np.argmax(t[0]))]):
+            raise RuntimeError(
+                f"the depth marginal does not decay by |y| = {np.exp(far):.3g}; "
+                "its moments do not exist in this reading"
+            )
+        lo = np.maximum(np.min(np.where(keep, t, np.inf), axis=1) - _SCAN_STEP, limits[i][0])
+        hi = np.minimum(np.max(np.where(keep, t, -np.inf), axis=1) + _SCAN_STEP, limits[i][1])
+        active = np.any(keep, axis=1)
+        lo, hi = np.where(active, lo, 0.0), np.where(active, hi, 1.0)
+        step = np.minimum(0.25, 0.5 * sd_t) if i == 3 else np.full(len(c), 0.125)
+        ranges[i] = (lo, hi, active, step)
+    return top, ranges
+
+
+def _integrate(pb: _Problem, intervals, rtol: float, keep_nodes: bool = False):
+    """Integrate the depth marginal of a batch; returns moments, errors, nodes."""
+    top, ranges = _ranges(pb, intervals)
+    centre = noise_free_states(pb.mu)
+    grids = {}
+    totals = {}
+    kept = {i: [] for i in ranges}
+    for i, (lo, hi, active, step) in ranges.items():
+        n = max(9, int(np.ceil(np.max((hi - lo) / step))) + 1)
+        h = (hi - lo) / (n - 1)
+        t = lo[:, None] + h[:, None] * np.arange(n)
+        sums, nodes = _evaluate(i, t, pb, top, centre)
+        grids[i] = (lo, h * active, n)
+        totals[i] = sums.s
+        if keep_nodes:
+            kept[i].append(nodes)
+    previous = _moments(sum(totals[i] * grids[i][1] for i in ranges), centre)
+    for _ in range(_MAX_HALVINGS):
+        for i, (lo, h, n) in grids.items():
+            t = lo[:, None] + h[:, None] * (np.arange(n - 1) + 0.5)
+            sums, nodes = _evaluate(i, np.where(h[:, None] > 0, t, 0.0), pb, top, centre)
+            totals[i] = totals[i] + sums.s
+            grids[i] = (lo, 0.5 * h, 2 * n - 1)
+            if keep_nodes:
+                kept[i].append(nodes)
+        current = _moments(sum(totals[i] * grids[i][1] for i in ranges), centre)
+        change = np.abs(current - previous)
+        err_y = np.maximum(change[0], change[1])
+        err_v = np.maximum(change[2], change[3])
+        if np.all(err_y <= rtol * current[1]) and np.all(err_v <= rtol * current[3]):
+            break
+        previous = current
+    else:
+        raise RuntimeError("the optimal marginal's quadrature did not converge")
+    return current, err_y, err_v, top, grids, kept
+
+
+class Moments(NamedTuple):
+    """Moments of the optimal depth and velocity marginals for a batch of problems.
+
+    Every field is an array of shape (B,). ``depth_error`` and
+    ``velocity_error`` are absolute error estimates of the means and SDs: the
+    largest change at the last halving of the quadrature step, an upper bound
+    in practice since the trapezoid rule converges geometrically here.
+    ``prob_behind_camera`` is the posterior probability that the depth at the
+    first frame, ``y - 2``, is not positive (zero for ``support="front"``).
+    """
+
+    depth_mean: np.ndarray
+    depth_sd: np.ndarray
+    velocity_mean: np.ndarray
+    velocity_sd: np.ndarray
+    depth_error: np.ndarray
+    velocity_error: np.ndarray
+    prob_behind_camera: np.ndarray
+
+
+def moments(mu, rho: float, prior_mean, prior_cov, reading: str = "derived",
+            support: str = "front", rtol: float = 1e-10, chunk: int = 64) -> Moments:
+    """Eqs. (13)-(16) for a batch: the optimal depth and velocity moments.
+
+    Parameters
+    ----------
+    mu : array_like, shape (B, 3)
+        One triple of measurements per row, each checked as in
+        :func:`depthcore._checks.measurements`.
+    rho : float or array_like, shape (B,)
+        Noise standard deviation, > 0.
+    prior_mean : array_like, shape (3,) or (B, 3)
+        Prior mean of the state at time 1.
+    prior_cov : array_like, shape (3, 3)
+        Prior covariance, symmetric positive definite.
+    reading : {"derived", "printed"}
+    support : {"front", "all"}
+        See :func:`marginals`.
+    rtol : float
+        Target accuracy of each mean and SD, relative to the SD.
+    chunk : int
+        Problems integrated together (memory grows with it).
+
+    Returns
+    -------
+    Moments
+    """
+    pb = _problem(mu, rho, prior_mean, prior_cov, reading)
+    if pb.mu.shape[1] != 3:
+        raise ValueError(f"mu must have shape (B, 3), got shape {pb.mu.shape}")
+    intervals = _intervals(support)
+    rtol = _checks.positive_scalar(rtol, "rtol")
+    out = []
+    for start in range(0, pb.mu.shape[0], chunk):
+        m, err_y, err_v, *_ = _integrate(pb.take(slice(start, start + chunk)), intervals, rtol)
+        out.append(np.stack([m[0], m[1], m[2], m[3], err_y, err_v, m[4]]))
+    return Moments(*np.concatenate(out, axis=1))
+
+
+def _intervals(support: str):
+    if support not in SUPPORTS:
+        raise ValueError(f"support must be one of {SUPPORTS}, got {support!r}")
+    return (3,) if support == "front" else (0, 1, 2, 3)
+
+
+@dataclass(frozen=True)
+class OptimalMarginals:
+    """The optimal filter's depth and velocity marginals, Eqs. (13)-(16).
+
+    Built by :func:`marginals`.
+
+    Attributes
+    ----------
+    depth_mean, depth_sd, velocity_mean, velocity_sd : float
+    depth_error, velocity_error : float
+        Absolute error estimates of the means and SDs (see :class:`Moments`).
+    prob_behind_camera : float
+        Posterior probability that the depth at the first frame is not positive.
+    log_normaliser : float
+        ``log`` of the integral of the unnormalised depth marginal of :func:`conditional`.
+    n_nodes : int
+        Number of quadrature nodes used.
+    """
+
+    mu: np.ndarray
+    rho: float
+    prior: Gaussian
+    reading: str
+    support: str
+    depth_mean: float
+    depth_sd: float
+    velocity_mean: float
+    velocity_sd: float
+    depth_error: float
+    velocity_error: float
+    prob_behind_camera: float
+    log_normaliser: float
+    n_nodes: int
+    _mixture: tuple
+
+    def depth_pdf(self, y) -> np.ndarray:
+        """Normalised depth marginal ``p_oy`` at depths ``y`` (any shape).
+
+        Zero at the poles ``y = 0, 1, 2`` and, for ``support="front"``, at ``y <= 2``.
+        """
+        y = np.asarray(y, dtype=float)
+        flat = y.ravel()
+        outside = np.isin(flat, (0.0, 1.0, 2.0))
+        if self.support == "front":
+            outside |= flat <= 2
+        safe = np.where(outside, 3.0, flat)
+        log_density, _, _ = conditional(safe, self.mu, self.rho, self.prior, self.reading)
+        pdf = np.where(outside, 0.0, np.exp(log_density - self.log_normaliser))
+        return pdf.reshape(y.shape)
+
+    def velocity_pdf(self, v) -> np.ndarray:
+        """Normalised velocity marginal ``p_ov`` at velocities ``v`` (any shape).
+
+        The mixture, over the quadrature nodes, of the Gaussian conditionals of
+        ``v`` given ``y``.
+        """
+        v = np.asarray(v, dtype=float)
+        w, m, s2 = self._mixture
+        z = (v.ravel()[:, None] - m) ** 2 / s2
+        pdf = (np.exp(-0.5 * z) / np.sqrt(2.0 * np.pi * s2)) @ w
+        return pdf.reshape(v.shape)
+
+
+def marginals(mu, rho: float, prior: Gaussian, reading: str = "derived",
+              support: str = "front", rtol: float = 1e-10) -> OptimalMarginals:
+    """Eqs. (13)-(16): the optimal depth and velocity marginals and their moments.
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+        Measurements; checked by :func:`depthcore._checks.measurements`.
+    rho : float
+        Noise standard deviation, > 0.
+    prior : Gaussian
+        Density of the state at time 1.
+    reading : {"derived", "printed"}
+        ``"printed"`` drops the y-dependent factor that Eq. (16) calls constant.
+    support : {"front", "all"}
+        ``"front"`` (default) conditions on the point being in front of the
+        camera at every frame (``y > 2``), as a camera that sees the point
+        implies; ``"all"`` integrates Eq. (6) over every depth, behind the
+        camera too, and reports that mass as ``prob_behind_camera``.
+    rtol : float
+        Target accuracy of each mean and SD, relative to the SD.
+
+    Returns
+    -------
+    OptimalMarginals
+    """
+    mu = _checks.measurements(mu)
+    if not isinstance(prior, Gaussian):
+        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
+    pb = _problem(mu, rho, prior.mean, prior.cov, reading)
+    rtol = _checks.positive_scalar(rtol, "rtol")
+    m, err_y, err_v, top, grids, kept = _integrate(pb, _intervals(support), rtol, keep_nodes=True)
+    log_z = float(np.log(m[5, 0]) + top[0])
+    weights, v_mean, v_var = [], [], []
+    for i, levels in kept.items():
+        h = grids[i][1][0]
+        for _, log_w, vm, vv in levels:
+            weights.append(np.exp(log_w[0]) * h / m[5, 0])
+            v_mean.append(vm[0])
+            v_var.append(vv[0])
+    w = np.concatenate(weights)
+    keep = w > 1e-17 * np.max(w)
+    return OptimalMarginals(
+        mu=mu, rho=float(rho), prior=prior, reading=reading, support=support,
+        depth_mean=float(m[0, 0]), depth_sd=float(m[1, 0]), velocity_mean=float(m[2, 0]),
+        velocity_sd=float(m[3, 0]), depth_error=float(err_y[0]), velocity_error=float(err_v[0]),
+        prob_behind_camera=float(m[4, 0]), log_normaliser=log_z, n_nodes=int(w.size),
+        _mixture=(w[keep], np.concatenate(v_mean)[keep], np.concatenate(v_var)[keep]),
+    )

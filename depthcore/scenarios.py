@@ -1,0 +1,97 @@
+"""The paper's experiments (Figures 2-6) and the numbers it reports, in one place.
+
+Recommended import: ``from depthcore.scenarios import SCENARIOS, REPORTED``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .gaussian import Gaussian, paper_prior
+from .second_order import noise_free_state
+
+#: Eq. (17): the measurements of Figures 2, 4, 5 and 6.
+MU_17 = (-3 / 10, 0.0, 1 / 5)
+#: Eq. (18): the measurements of Figure 3.
+MU_18 = (-1 / 4, 0.0, 1 / 5)
+#: The noise level of most experiments (radians); "about 5 pixels".
+RHO_200 = 1 / 200
+#: The noise level of Figure 5; "about 1 pixel".
+RHO_500 = 1 / 500
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One of the paper's experiments.
+
+    Attributes
+    ----------
+    key : str
+        ``"fig2"`` ... ``"fig6"``.
+    figure : int
+    quantity : str
+        The marginal the paper plots: ``"depth"`` or ``"velocity"``.
+    mu : tuple of float
+        Measurements ``(mu1, mu2, mu3)``.
+    rho : float
+        Noise standard deviation (radians).
+    depth_offset : float
+        Added to the depth of the paper's prior mean (Figure 6 uses 2).
+    description : str
+    """
+
+    key: str
+    figure: int
+    quantity: str
+    mu: tuple
+    rho: float
+    depth_offset: float
+    description: str
+
+    @property
+    def c(self):
+        """Eq. (7): the noise-free state at time 3."""
+        return noise_free_state(self.mu)
+
+    @property
+    def prior(self) -> Gaussian:
+        """The paper's prior: mean ``(c1 - 2 c3, c2 - 2 + offset, 0)``, covariance ``1000 I``."""
+        return paper_prior(self.c, self.depth_offset)
+
+
+SCENARIOS = {
+    s.key: s
+    for s in (
+        Scenario("fig2", 2, "depth", MU_17, RHO_200, 0.0,
+                 "Depth marginals, measurements (17), rho = 1/200"),
+        Scenario("fig3", 3, "depth", MU_18, RHO_200, 0.0,
+                 "Depth marginals, measurements (18), rho = 1/200"),
+        Scenario("fig4", 4, "velocity", MU_17, RHO_200, 0.0,
+                 "Velocity marginals, measurements (17), rho = 1/200"),
+        Scenario("fig5", 5, "depth", MU_17, RHO_500, 0.0,
+                 "Depth marginals, measurements (17), rho = 1/500"),
+        Scenario("fig6", 6, "depth", MU_17, RHO_200, 2.0,
+                 "Depth marginals, measurements (17), rho = 1/200, prior depth two units higher"),
+    )
+}
+
+#: The means and standard deviations the paper prints, as ``(mean, sd)`` of the
+#: depth marginal, with the scan's text where it is garbled. Figures 4-6 carry
+#: no numbers.
+REPORTED = {
+    "fig2": {
+        "optimal": {"depth": (6.47, 0.80)},
+        "second_order": {"depth": (6.00, 0.62)},
+        "ekf": {"depth": (6.00, 0.16)},
+    },
+    "fig3": {
+        # The scan reads "E(p_oy) = 6745  sigma_oy = 67.45": a decimal point is
+        # lost in the mean, and the SD repeats the mean's digits.
+        "optimal": {"depth": (67.45, 67.45)},
+        "second_order": {"depth": (10.00, 2.20)},
+        "ekf": {"depth": (10.00, 0.28)},
+    },
+}
+
+#: Decimal places the paper prints its means and SDs with.
+REPORTED_DECIMALS = 2
