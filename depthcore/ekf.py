@@ -112,7 +112,9 @@ def run(mu, rho: float, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
     """
     rho = _checks.positive_scalar(rho, "rho")
     mu = _checks.finite_array(mu, "mu")
-    n, C = np.asarray(prior_mean, dtype=float), np.asarray(prior_cov, dtype=float)
+    batch = mu.shape[:-1]
+    n = np.broadcast_to(np.asarray(prior_mean, dtype=float), batch + (3,))
+    C = np.broadcast_to(np.asarray(prior_cov, dtype=float), batch + (3, 3))
     means, covs = [], []
     for i in range(mu.shape[-1]):
         if i > 0:

@@ -1,0 +1,26 @@
+"""Strategies and helpers shared by the core tests."""
+
+import numpy as np
+from hypothesis import strategies as st
+
+from depthcore import model
+
+
+@st.composite
+def states(draw):
+    """A state at time 3 whose point is in front of the camera at times 1-3 and
+    whose three bearings are not collinear in time (|second difference| >= 1e-3)."""
+    y = draw(st.floats(3.0, 40.0))
+    x = draw(st.floats(-0.8, 0.8)) * y
+    v = draw(st.floats(-2.0, 2.0))
+    c = np.array([x, y, v])
+    mu = np.array([model.project(model.G(c, k - 2)) for k in range(3)])
+    if abs(mu[0] + mu[2] - 2 * mu[1]) < 1e-3:
+        v = v + 0.5 if v < 1.5 else v - 0.5
+        c = np.array([x, y, v])
+    return c
+
+
+def bearings(c):
+    """The noise-free measurements (mu1, mu2, mu3) of a state ``c`` at time 3."""
+    return np.array([model.project(model.G(c, k - 2)) for k in range(3)])

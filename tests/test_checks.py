@@ -1,0 +1,80 @@
+"""Bad input gets a ValueError that names the argument and the problem."""
+
+import numpy as np
+import pytest
+
+from depthcore import _checks, optimal, paper_prior
+from depthcore.ekf import ekf
+from depthcore.gaussian import Gaussian
+from depthcore.scenarios import MU_17
+from depthcore.second_order import noise_free_state, second_order
+
+PRIOR = paper_prior(noise_free_state(MU_17))
+FILTERS = [
+    lambda mu, rho, prior: optimal.marginals(mu, rho, prior),
+    lambda mu, rho, prior: second_order(mu, rho, prior),
+    lambda mu, rho, prior: ekf(mu, rho, prior),
+]
+
+
+@pytest.mark.parametrize("run", FILTERS)
+@pytest.mark.parametrize("mu, message", [
+    ((0.1, 0.1, 0.1), "mu is degenerate"),
+    ((-0.1, 0.0, 0.1), "mu is degenerate"),
+    ((np.nan, 0.0, 0.2), "mu must be finite"),
+    ((-0.3, np.inf, 0.2), "mu must be finite"),
+    ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
+    ((-0.3, 0.0), r"mu must have shape \(3,\)"),
+    (("a", 0.0, 0.2), "mu must be numeric"),
+])
+def test_bad_measurements(run, mu, message):
+    with pytest.raises(ValueError, match=message):
+        run(mu, 0.005, PRIOR)
+
+
+@pytest.mark.parametrize("run", FILTERS)
+@pytest.mark.parametrize("rho, message", [
+    (0.0, "rho must be positive"),
+    (-0.005, "rho must be positive"),
+    (np.nan, "rho must be finite"),
+    (np.inf, "rho must be finite"),
+])
+def test_bad_noise_level(run, rho, message):
+    with pytest.raises(ValueError, match=message):
+        run(MU_17, rho, PRIOR)
+
+
+@pytest.mark.parametrize("cov, message", [
+    (np.diag([1.0, -1.0, 1.0]), "cov must be positive definite"),
+    (np.zeros((3, 3)), "cov must be positive definite"),
+    (np.array([[1.0, 2.0, 0], [0, 1, 0], [0, 0, 1]]), "cov must be symmetric"),
+    (np.eye(2), r"cov must have shape \(3, 3\)"),
+    (np.full((3, 3), np.nan), "cov must be finite"),
+])
+def test_bad_prior_covariance(cov, message):
+    with pytest.raises(ValueError, match=message):
+        Gaussian([0.0, 4.0, 0.0], cov)
+
+
+def test_bad_prior_mean():
+    with pytest.raises(ValueError, match="mean must be finite"):
+        Gaussian([0.0, np.nan, 0.0], np.eye(3))
+
+
+def test_degeneracy_boundary():
+    # |mu1 + mu3 - 2 mu2| <= 1e-12 is degenerate; just above it is accepted.
+    tol = _checks.DEGENERACY_TOL
+    with pytest.raises(ValueError, match="degenerate"):
+        _checks.measurements([0.0, -tol / 2, 0.0])
+    mu = _checks.measurements([4 * tol, 0.0, -2 * tol])  # second difference 2e-12, c2 = 4
+    assert noise_free_state(mu)[1] == pytest.approx(4.0)
+
+
+def test_behind_camera_boundary():
+    # c2 = 2 exactly (depth 0 at the first frame) is rejected; c2 slightly above 2 is not.
+    with pytest.raises(ValueError, match="behind the camera"):
+        _checks.measurements([0.3, 0.0, 0.0])  # mu = (a, 0, b) gives c2 = 2 a / (a + b) = 2
+    # c2 = 2 + 1e-9 needs b = -a * 1e-9 / (2 + 1e-9)
+    a = 0.3
+    b = -a * 1e-9 / (2 + 1e-9)
+    assert noise_free_state([a, 0.0, b])[1] == pytest.approx(2 + 1e-9, abs=1e-12)

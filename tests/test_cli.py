@@ -1,0 +1,82 @@
+"""The command line: python -m depthcore reproduce | estimate | figures."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from depthcore.__main__ import main
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "depthcore", *args], capture_output=True, text=True)
+
+
+def test_reproduce_json_has_every_scenario_filter_and_reading(capsys):
+    assert main(["reproduce", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    keys = [s["key"] for s in data["scenarios"]]
+    assert keys == ["fig2", "fig3", "fig4", "fig5", "fig6"]
+    for s in data["scenarios"]:
+        combos = {(r["filter"], r["reading"], r["support"], r["quantity"]) for r in s["rows"]}
+        assert ("optimal", "derived", "front", "velocity") in combos
+        assert ("second_order", "printed", "all", "depth") in combos
+        assert ("ekf", "printed", "all", "depth") in combos
+        assert len(combos) == len(s["rows"]) == 14
+
+
+def test_reproduce_table_prints_paper_numbers(capsys):
+    assert main(["reproduce"]) == 0
+    out = capsys.readouterr().out
+    assert "6.47" in out and "67.45" in out and "mean yes, sd yes" in out
+
+
+def test_estimate_matches_the_library(capsys):
+    assert main(["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["c"] == pytest.approx([1.2, 6.0, 1.2])
+    assert data["prior_mean"] == pytest.approx([-1.2, 4.0, 0.0])
+    assert data["filters"]["optimal"]["depth"]["mean"] == pytest.approx(6.4659786, abs=1e-6)
+    assert data["filters"]["ekf"]["depth"]["sd"] == pytest.approx(0.16, abs=5e-4)
+
+
+def test_estimate_accepts_prior_options(capsys):
+    args = ["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005", "--prior-mean", "-1.2", "6",
+            "0", "--prior-cov", "500", "--json"]
+    assert main(args) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["prior_cov"][0][0] == 500 and data["prior_mean"][1] == 6
+    full = ["--prior-cov"] + "4 0 0 0 4 0 0 0 4".split()
+    assert main(args[:-3] + full + ["--json"]) == 0
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--mu", "0.1", "0.1", "0.1", "--rho", "0.01"], "mu is degenerate"),
+    (["--mu", "-0.3", "0", "0.2", "--rho", "0"], "rho must be positive"),
+    (["--mu", "-0.3", "0", "0.2", "--rho", "-1"], "rho must be positive"),
+    (["--mu", "-0.3", "0", "0.2", "--rho", "nan"], "rho must be finite"),
+    (["--mu", "-0.3", "nan", "0.2", "--rho", "0.01"], "mu must be finite"),
+    (["--mu", "0.2", "0", "-0.3", "--rho", "0.01"], "behind the camera"),
+    (["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov", "-5"], "prior_cov must be positive definite"),
+    (["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov", "1", "2"], "prior_cov takes 1 value"),
+    (["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov"] + "1 0 0 0 -1 0 0 0 1".split(),
+     "prior_cov must be positive definite"),
+    (["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-mean", "0", "inf", "0"], "prior_mean must be finite"),
+    (["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-mean", "0", "-4", "0"], "predicted depth"),
+    (["--mu", "-0.3", "0", "--rho", "0.01"], "argument --mu"),
+    (["--mu", "-0.3", "0", "0.2", "--rho", "abc"], "invalid float value"),
+])
+def test_estimate_rejects_bad_input_with_one_line(args, message):
+    result = run("estimate", *args)
+    assert result.returncode == 2
+    assert result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0]
+    assert "Traceback" not in result.stderr
+
+
+def test_figures_command_writes_files(tmp_path):
+    assert main(["figures", "--out", str(tmp_path)]) == 0
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == sorted(f"figure{n}.{ext}" for n in range(2, 7) for ext in ("pdf", "png", "svg"))

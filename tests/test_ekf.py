@@ -1,0 +1,104 @@
+"""Eqs. (10)-(12) and Theorem 1, Eqs. (19)-(24): the extended Kalman filter."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from numpy.testing import assert_allclose
+
+from depthcore import ekf as ekf_module
+from depthcore import model, paper_prior
+from depthcore.ekf import ekf, predict, run, update
+from depthcore.gaussian import Gaussian
+from depthcore.scenarios import MU_17, SCENARIOS
+from depthcore.second_order import noise_free_state, second_order
+
+from helpers import bearings, states
+
+
+def test_eq10_predict_is_the_linear_motion():
+    m = np.array([1.0, 4.0, 0.5])
+    P = np.diag([1.0, 2.0, 3.0])
+    n, C = predict(m, P)
+    assert_allclose(n, model.G(m))
+    assert_allclose(C, model.F @ P @ model.F.T)
+
+
+def test_eq12_update_is_bayes_for_the_linearised_measurement():
+    # Information form of the exact posterior for mu = h.x + (n1/n2 - h.n) + w.
+    rng = np.random.default_rng(2)
+    n = np.array([1.0, 5.0, 0.3])
+    A = rng.normal(size=(3, 3))
+    C = A @ A.T + 0.5 * np.eye(3)
+    rho, mu = 0.02, 0.25
+    h = model.observation_vector(n)
+    info = np.linalg.inv(C) + np.outer(h, h) / rho**2
+    P = np.linalg.inv(info)
+    m = P @ (np.linalg.solve(C, n) + h * (mu - n[0] / n[1] + h @ n) / rho**2)
+    got = update(n, C, mu, rho)
+    assert_allclose(got.mean, m, rtol=1e-10)
+    assert_allclose(got.cov, P, rtol=1e-9, atol=1e-12)
+    assert np.all(np.linalg.eigvalsh(got.cov) > 0)
+
+
+def test_eq12_update_matches_the_joseph_form():
+    n = np.array([0.4, 3.0, -0.2])
+    C = np.diag([4.0, 9.0, 1.0]) + 0.5
+    rho = 0.01
+    h = model.observation_vector(n)
+    K = C @ h / (rho**2 + h @ C @ h)
+    joseph = (np.eye(3) - np.outer(K, h)) @ C @ (np.eye(3) - np.outer(K, h)).T + rho**2 * np.outer(K, K)
+    assert_allclose(update(n, C, 0.1, rho).cov, joseph, rtol=1e-8, atol=1e-12)
+
+
+def test_run_is_batched_like_a_loop():
+    rng = np.random.default_rng(7)
+    x1 = np.array([-1.2, 4.0, 1.2])
+    mu = model.simulate_measurements(x1, 0.005, rng, size=5)
+    prior = paper_prior(noise_free_state(MU_17))
+    means, covs = run(mu, 0.005, prior.mean, prior.cov)
+    for i in range(5):
+        h = ekf(mu[i], 0.005, prior)
+        assert_allclose(means[i], h.means, rtol=1e-13)
+        assert_allclose(covs[i], h.covs, rtol=1e-12)
+
+
+def test_ekf_history_shapes():
+    s = SCENARIOS["fig2"]
+    h = ekf(s.mu, s.rho, s.prior)
+    assert h.means.shape == (3, 3) and h.covs.shape == (3, 3, 3)
+    assert_allclose(h.posterior.mean, h.means[-1])
+
+
+@settings(max_examples=50, deadline=None)
+@given(states())
+def test_theorem1_ekf_equals_second_order_when_prior_mean_is_exact(c):
+    mu = bearings(c)
+    c = noise_free_state(mu)
+    prior = Gaussian(model.G(c, -2), 1000 * np.eye(3))
+    rho = 1 / 200
+    hist = ekf(mu, rho, prior)
+    # Eq. (19): every innovation is zero, so the means are G^-2 c, G^-1 c, c.
+    assert_allclose(hist.means, [model.G(c, -2), model.G(c, -1), c], rtol=1e-9, atol=1e-9)
+    ps = second_order(mu, rho, prior)
+    assert_allclose(ps.mean, c, rtol=1e-7, atol=1e-7)
+    # Eq. (24): the covariances agree (condition numbers reach 1e8: rtol 1e-6).
+    assert_allclose(hist.posterior.cov, ps.cov, rtol=1e-6, atol=1e-9 * np.abs(ps.cov).max())
+
+
+def test_theorem1_fails_for_the_printed_covariance():
+    c = noise_free_state(MU_17)
+    prior = Gaussian(model.G(c, -2), 1000 * np.eye(3))
+    pe = ekf(MU_17, 1 / 200, prior).posterior
+    printed = second_order(MU_17, 1 / 200, prior, reading="printed")
+    assert printed.cov[1, 1] == pytest.approx(pe.cov[1, 1] / 2, rel=1e-3)
+
+
+def test_ekf_rejects_prior_mean_behind_the_camera():
+    prior = Gaussian([0.0, -3.0, 0.0], np.eye(3))
+    with pytest.raises(ValueError, match="prior_mean leads the EKF to a predicted depth"):
+        ekf(MU_17, 0.01, prior)
+
+
+def test_run_rejects_bad_rho():
+    with pytest.raises(ValueError, match="rho must be positive"):
+        ekf_module.run(np.array(MU_17), -0.1, np.zeros(3) + [0, 4, 0], np.eye(3))

@@ -1,0 +1,58 @@
+"""Eqs. (1), (4), (9), (11): the motion and measurement model."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy import integrate
+
+from depthcore import model
+
+
+def test_eq1_G_forward_and_back_are_inverse():
+    x = np.array([0.3, 5.0, -0.7])
+    assert_allclose(model.G(model.G(x, 2), -2), x, rtol=0, atol=1e-15)
+    assert_allclose(model.G(x, 1), [x[0] + x[2], x[1] + 1, x[2]])
+
+
+def test_eq9_F_and_e_give_G():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(20, 3))
+    assert_allclose(model.G(x), x @ model.F.T + model.e, rtol=0, atol=1e-14)
+    for k in (-2, -1, 2):
+        assert_allclose(model.G(x, k), x @ model.G_linear(k).T + k * model.e, atol=1e-14)
+
+
+def test_eq11_observation_vector_is_gradient_of_projection():
+    n = np.array([1.3, 4.2, 0.6])
+    eps = 1e-6  # central differences: error O(eps^2) ~ 1e-12
+    fd = [(model.project(n + eps * e) - model.project(n - eps * e)) / (2 * eps) for e in np.eye(3)]
+    assert_allclose(model.observation_vector(n), fd, rtol=1e-8, atol=1e-10)
+
+
+def test_eq4_likelihood_integrates_to_one_over_mu():
+    x = np.array([1.2, 6.0, 1.2])
+    total, _ = integrate.quad(lambda m: np.exp(model.log_likelihood(m, x, 0.01)), -1, 1, points=[0.2])
+    assert total == pytest.approx(1.0, abs=1e-10)
+
+
+def test_simulate_measurements_statistics_and_repeatability():
+    x1 = np.array([-1.2, 4.0, 1.2])
+    mu = model.simulate_measurements(x1, 0.01, np.random.default_rng(5), size=20000)
+    truth = [-0.3, 0.0, 0.2]
+    # standard error of a mean of 20000 draws with sd 0.01 is 7e-5: allow 5 of them
+    assert_allclose(mu.mean(axis=0), truth, atol=3.5e-4)
+    assert_allclose(mu.std(axis=0), 0.01, rtol=0.03)
+    again = model.simulate_measurements(x1, 0.01, np.random.default_rng(5), size=20000)
+    assert np.array_equal(mu, again)
+
+
+@pytest.mark.parametrize("x1", [[0.0, -1.0, 0.0], [0.0, -2.0, 0.0], [0.0, -0.5, 0.0]])
+def test_simulate_rejects_point_behind_camera(x1):
+    with pytest.raises(ValueError, match="x1 puts the point behind the camera"):
+        model.simulate_measurements(x1, 0.01, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("rho", [0.0, -1.0, np.nan, np.inf])
+def test_log_likelihood_rejects_bad_rho(rho):
+    with pytest.raises(ValueError, match="rho must be"):
+        model.log_likelihood(0.1, [1.0, 5.0, 0.0], rho)

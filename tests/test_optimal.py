@@ -1,0 +1,198 @@
+"""Eqs. (6), (13)-(16): the optimal filter and its exact marginals."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy import integrate
+
+from depthcore import model, optimal, reference
+from depthcore.gaussian import Gaussian
+from depthcore.scenarios import MU_17, SCENARIOS
+from depthcore.second_order import f, noise_free_state
+
+
+def test_eq6_log_posterior_is_likelihood_times_prior():
+    s = SCENARIOS["fig2"]
+    x = np.array([[1.1, 5.5, 1.0], [1.3, 7.0, 1.4]])
+    expected = sum(model.log_likelihood(s.mu[k], model.G(x, k - 2), s.rho) for k in range(3))
+    expected = expected + s.prior.logpdf(model.G(x, -2))
+    diff = optimal.log_posterior(x, s.mu, s.rho, s.prior) - expected
+    assert np.ptp(diff) < 1e-9  # equal up to the constant 3 log(sqrt(2 pi) rho)
+
+
+def test_eq14_coefficients_reproduce_the_log_posterior_at_fixed_depth():
+    s = SCENARIOS["fig3"]
+    y = np.array([4.0, 9.5, 30.0])
+    A, B, C, D, E = optimal.quadratic_coefficients(y, s.mu, s.rho, s.prior).T
+    rng = np.random.default_rng(1)
+    u = rng.normal(size=(4, 2)) * 0.1 + [2.0, 2.0]
+    for k, yk in enumerate(y):
+        x = np.stack([u[:, 0], np.full(4, yk), u[:, 1]], -1)
+        lp = optimal.log_posterior(x, s.mu, s.rho, s.prior)
+        quad = -0.5 * (A[k] * u[:, 0] ** 2 + B[k] * u[:, 0] * u[:, 1] + C[k] * u[:, 1] ** 2
+                       + D[k] * u[:, 0] + E[k] * u[:, 1])
+        assert np.ptp(lp - quad) < 1e-7 * np.abs(lp).max()  # a function of y alone
+
+
+def _inner_integral(y, s):
+    """log of the integral over (x, v) of exp(Eq. (6)) at one depth, by a tensor
+    Gauss-Legendre rule over 12 SDs along the principal axes (the closed form
+    only places the box)."""
+    _, mean, cov = optimal.conditional(np.array([y]), s.mu, s.rho, s.prior)
+    vals, vecs = np.linalg.eigh(cov[0])
+    axes = vecs * np.sqrt(vals)
+    t, w = np.polynomial.legendre.leggauss(80)
+    t, w = 12 * t, 12 * w
+    T = np.stack(np.meshgrid(t, t, indexing="ij"), -1).reshape(-1, 2)
+    u = mean[0] + T @ axes.T
+    lp = optimal.log_posterior(np.stack([u[:, 0], np.full(len(u), y), u[:, 1]], -1),
+                               s.mu, s.rho, s.prior)
+    shift = lp.max()
+    return np.log(np.sum(np.exp(lp - shift) * np.outer(w, w).ravel()) * abs(np.linalg.det(axes))) + shift
+
+
+def test_eq16_derived_depth_marginal_matches_2d_quadrature_up_to_a_constant():
+    s = SCENARIOS["fig2"]
+    y = np.array([4.5, 6.0, 9.0])
+    brute = np.array([_inner_integral(yk, s) for yk in y])
+    closed, _, _ = optimal.conditional(y, s.mu, s.rho, s.prior, "derived")
+    assert np.ptp(brute - closed) < 1e-7
+
+
+def test_eq16_printed_reading_drops_the_prior_depth_factor():
+    s = SCENARIOS["fig3"]
+    y = np.array([5.0, 20.0, 80.0])
+    derived, _, _ = optimal.conditional(y, s.mu, s.rho, s.prior, "derived")
+    printed, _, _ = optimal.conditional(y, s.mu, s.rho, s.prior, "printed")
+    # The difference is |z|^2 / 2: the whitened prior's constant part plus its depth term.
+    R = np.linalg.inv(np.linalg.cholesky(s.prior.cov))
+    gap = printed - derived
+    # For P = 1000 I the y-dependence is exactly (y - 2 - m2)^2 / 2000.
+    expected = (y - 2 - s.prior.mean[1]) ** 2 / 2000.0
+    assert_allclose(gap - gap[0], expected - expected[0], rtol=1e-9)
+    assert np.allclose(R, np.eye(3) / np.sqrt(1000))
+
+
+def test_depth_and_velocity_marginals_integrate_to_one(scenario):
+    m = optimal.marginals(scenario.mu, scenario.rho, scenario.prior)
+    total, _ = integrate.quad(m.depth_pdf, 2, np.inf, limit=400, points=None)
+    assert total == pytest.approx(1.0, abs=1e-8)
+    v = np.linspace(m.velocity_mean - 40 * m.velocity_sd, m.velocity_mean + 40 * m.velocity_sd, 40001)
+    pv = m.velocity_pdf(v)
+    assert np.trapezoid(pv, v) == pytest.approx(1.0, abs=1e-6)
+    assert np.trapezoid(pv * v, v) == pytest.approx(m.velocity_mean, abs=1e-5 * m.velocity_sd)
+
+
+def test_depth_marginal_is_zero_at_and_below_the_poles():
+    s = SCENARIOS["fig2"]
+    m = optimal.marginals(s.mu, s.rho, s.prior, support="all")
+    assert np.all(m.depth_pdf(np.array([0.0, 1.0, 2.0])) == 0)
+    front = optimal.marginals(s.mu, s.rho, s.prior)
+    assert np.all(front.depth_pdf(np.array([-3.0, 1.5, 2.0])) == 0)
+
+
+@pytest.mark.parametrize("key", ["fig2", "fig3", "fig5"])
+def test_moments_match_brute_force_3d_quadrature(key):
+    s = SCENARIOS[key]
+    m = optimal.marginals(s.mu, s.rho, s.prior)
+    b = reference.grid_moments(s.mu, s.rho, s.prior, panels=300, uv_order=32)
+    # the grid route converges to ~1e-12 here; 1e-8 relative leaves room
+    assert_allclose([m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd],
+                    [b.depth_mean, b.depth_sd, b.velocity_mean, b.velocity_sd], rtol=1e-8)
+
+
+def test_moments_match_importance_sampling():
+    s = SCENARIOS["fig2"]
+    m = optimal.marginals(s.mu, s.rho, s.prior)
+    means, sds, se = reference.importance_moments(s.mu, s.rho, s.prior, np.random.default_rng(11),
+                                                  n=100_000)
+    # five standard errors: a false alarm has probability below 1e-6
+    assert abs(means[0] - m.depth_mean) < 5 * se[0]
+    assert abs(means[1] - m.velocity_mean) < 5 * se[1]
+    assert sds[0] == pytest.approx(m.depth_sd, rel=0.02)
+
+
+def test_error_estimate_bounds_the_actual_error():
+    s = SCENARIOS["fig3"]
+    coarse = optimal.marginals(s.mu, s.rho, s.prior, rtol=1e-4)
+    fine = optimal.marginals(s.mu, s.rho, s.prior, rtol=1e-13)
+    assert abs(coarse.depth_mean - fine.depth_mean) <= coarse.depth_error + 1e-12
+    assert abs(coarse.velocity_sd - fine.velocity_sd) <= coarse.velocity_error + 1e-12
+    assert fine.depth_error <= 1e-13 * fine.depth_sd * 10
+
+
+def test_batch_moments_match_single(scenario):
+    s = scenario
+    batch = optimal.moments(np.array([s.mu] * 2), s.rho, s.prior.mean, s.prior.cov)
+    single = optimal.marginals(s.mu, s.rho, s.prior)
+    assert_allclose(batch.depth_mean, single.depth_mean, rtol=1e-12)
+    assert_allclose(batch.velocity_sd, single.velocity_sd, rtol=1e-10)
+
+
+def test_batch_mixes_scenarios():
+    keys = list(SCENARIOS)
+    mus = np.array([SCENARIOS[k].mu for k in keys])
+    rhos = np.array([SCENARIOS[k].rho for k in keys])
+    means = np.array([SCENARIOS[k].prior.mean for k in keys])
+    batch = optimal.moments(mus, rhos, means, 1000 * np.eye(3))
+    for i, k in enumerate(keys):
+        s = SCENARIOS[k]
+        m = optimal.marginals(s.mu, s.rho, s.prior)
+        assert_allclose(batch.depth_sd[i], m.depth_sd, rtol=1e-9)
+        assert_allclose(batch.velocity_mean[i], m.velocity_mean, rtol=1e-9)
+
+
+def test_support_all_adds_the_mass_behind_the_camera():
+    s = SCENARIOS["fig3"]
+    front = optimal.marginals(s.mu, s.rho, s.prior)
+    every = optimal.marginals(s.mu, s.rho, s.prior, support="all")
+    assert front.prob_behind_camera == 0
+    assert 1e-5 < every.prob_behind_camera < 1e-3
+    # Conditioning on y > 2 removes mass at low depths and so raises the mean.
+    assert every.depth_mean < front.depth_mean
+    below, _ = integrate.quad(every.depth_pdf, -np.inf, 0, limit=200)
+    between, _ = integrate.quad(every.depth_pdf, 0, 2, points=[1], limit=200)
+    assert below + between == pytest.approx(every.prob_behind_camera, rel=1e-6)
+
+
+def test_small_noise_limit_the_optimal_mean_tends_to_c():
+    c = noise_free_state(MU_17)
+    prior = Gaussian(model.G(c, -2), 1000 * np.eye(3))
+    for rho, tol in [(1e-3, 2e-2), (1e-4, 2e-3)]:
+        m = optimal.marginals(MU_17, rho, prior)
+        assert abs(m.depth_mean - c[1]) < tol  # the bias shrinks like rho
+
+
+def test_log_posterior_zero_residual_at_c():
+    c = noise_free_state(MU_17)
+    assert f(c, MU_17) == pytest.approx(0.0, abs=1e-28)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"reading": "paper"}, "reading must be one of"),
+    ({"support": "positive"}, "support must be one of"),
+    ({"rtol": 0.0}, "rtol must be positive"),
+])
+def test_marginals_reject_bad_options(kwargs, message):
+    s = SCENARIOS["fig2"]
+    with pytest.raises(ValueError, match=message):
+        optimal.marginals(s.mu, s.rho, s.prior, **kwargs)
+
+
+def test_marginals_reject_a_prior_that_is_not_gaussian():
+    with pytest.raises(ValueError, match="prior must be a Gaussian"):
+        optimal.marginals(MU_17, 0.005, {"mean": [0, 4, 0]})
+
+
+def test_conditional_rejects_depths_at_the_poles():
+    s = SCENARIOS["fig2"]
+    with pytest.raises(ValueError, match="y must avoid the poles"):
+        optimal.conditional([1.0], s.mu, s.rho, s.prior)
+
+
+def test_batch_rejects_bad_rows():
+    s = SCENARIOS["fig2"]
+    with pytest.raises(ValueError, match=r"mu\[1\] is degenerate"):
+        optimal.moments(np.array([s.mu, (0.2, 0.2, 0.2)]), s.rho, s.prior.mean, s.prior.cov)
+    with pytest.raises(ValueError, match="rho must be a scalar or have shape"):
+        optimal.moments(np.array([s.mu]), [0.1, 0.2], s.prior.mean, s.prior.cov)
