@@ -143,3 +143,38 @@ def simulate_measurements(x1, rho: float, rng: np.random.Generator, n: int = N_M
         )
     shape = (n,) if size is None else (size, n)
     return project(states) + rho * rng.standard_normal(shape)
+
+
+def noise_in_pixels(rho: float, image_size: int = 512, fov_deg: float = 30.0,
+                    small_angle: bool = True) -> float:
+    """The image error, in pixels, of a bearing error ``rho`` (radians).
+
+    With ``small_angle`` (the paper's arithmetic) the image's ``image_size``
+    pixels span ``fov_deg`` degrees uniformly: ``rho * image_size / fov``.
+    Without it, a pinhole camera whose image spans the field of view has focal
+    length ``(image_size / 2) / tan(fov / 2)`` pixels, and a bearing error
+    ``rho`` at the image centre moves the image by ``focal * tan(rho)``.
+
+    Parameters
+    ----------
+    rho : float
+        Bearing noise (radians), > 0.
+    image_size : int
+        Image width in pixels.
+    fov_deg : float
+        Horizontal field of view in degrees, in (0, 180).
+    small_angle : bool
+
+    Returns
+    -------
+    float
+    """
+    rho = _checks.positive_scalar(rho, "rho")
+    size = _checks.positive_scalar(image_size, "image_size")
+    fov = _checks.positive_scalar(fov_deg, "fov_deg")
+    if fov >= 180:
+        raise ValueError(f"fov_deg must be below 180, got {fov}")
+    fov = np.deg2rad(fov)
+    if small_angle:
+        return float(rho * size / fov)
+    return float(size / 2 / np.tan(fov / 2) * np.tan(rho))

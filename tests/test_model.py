@@ -56,3 +56,21 @@ def test_simulate_rejects_point_behind_camera(x1):
 def test_log_likelihood_rejects_bad_rho(rho):
     with pytest.raises(ValueError, match="rho must be"):
         model.log_likelihood(0.1, [1.0, 5.0, 0.0], rho)
+
+
+def test_noise_in_pixels_paper_arithmetic():
+    # 512 pixels over 30 degrees: 977.8 pixels per radian.
+    assert model.noise_in_pixels(1 / 200) == pytest.approx(4.889, abs=1e-3)  # "about 5 pixels"
+    assert model.noise_in_pixels(1 / 500) == pytest.approx(1.956, abs=1e-3)  # printed "about 1 pixel"
+    pinhole = model.noise_in_pixels(1 / 200, small_angle=False)
+    assert pinhole == pytest.approx(256 / np.tan(np.deg2rad(15)) * np.tan(1 / 200), rel=1e-12)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"rho": 0}, "rho must be positive"),
+    ({"rho": 0.01, "fov_deg": 180}, "fov_deg must be below 180"),
+    ({"rho": 0.01, "image_size": -5}, "image_size must be positive"),
+])
+def test_noise_in_pixels_rejects_bad_input(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        model.noise_in_pixels(**kwargs)
