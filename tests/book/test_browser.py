@@ -1,0 +1,144 @@
+"""The built book renders in a browser with no network.
+
+Opens the ``file://`` pages of ``_build/html`` in headless Chromium (Debian's
+``chromium`` and ``chromium-driver``) with every host name unresolvable, and
+checks that
+
+* each page of ``_toc.yml`` loads, fetches nothing over the network, and has
+  its mathematics typeset by MathJax (served from the book's own
+  ``_static/mathjax``, see ``sphinx-mathjax-offline`` in ``_config.yml``);
+* each page of ``tests/data/figure_pages.json`` shows its images and at least
+  one table.
+
+Without Chromium the browser tests are skipped, except under CI, where a
+missing browser is a failure. The check that the HTML asks no CDN for MathJax
+needs no browser.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import tempfile
+from pathlib import Path
+
+import pytest
+
+CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium") or "",
+                             shutil.which("chromium-browser") or "") if p and Path(p).exists()), None)
+CHROMEDRIVER = next((p for p in ("/usr/bin/chromedriver", shutil.which("chromedriver") or "")
+                     if p and Path(p).exists()), None)
+CHROMIUM_FLAGS = (
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--disable-dev-shm-usage", "--window-size=1280,1024",
+    # No name resolves: anything fetched from a host would fail.
+    "--host-resolver-rules=MAP * ~NOTFOUND",
+)
+MATHJAX_SRC_RE = re.compile(r'<script[^>]*src="([^"]*mathjax[^"]*)"', re.IGNORECASE)
+LOAD_TIMEOUT = 60  # seconds for a page and its typesetting
+
+
+@pytest.fixture(scope="module")
+def browser(missing_prerequisite):
+    if CHROMIUM is None or CHROMEDRIVER is None:
+        missing_prerequisite("Chromium or ChromeDriver not found (apt-get install chromium "
+                             "chromium-driver): browser checks of the built book not run")
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    options.set_capability("goog:loggingPrefs", {"performance": "ALL"})
+    profile = tempfile.mkdtemp(prefix="depthcore-chromium-")
+    for flag in CHROMIUM_FLAGS + (f"--user-data-dir={profile}",):
+        options.add_argument(flag)
+    driver = webdriver.Chrome(service=Service(executable_path=CHROMEDRIVER), options=options)
+    driver.set_page_load_timeout(LOAD_TIMEOUT)
+    driver.set_script_timeout(LOAD_TIMEOUT)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+def open_page(driver, html_dir: Path, page: str) -> None:
+    path = html_dir / f"{page}.html"
+    assert path.exists(), f"{path} not built"
+    driver.get_log("performance")  # drop the previous page's events
+    driver.get(path.as_uri())
+
+
+def network_requests(driver) -> list[str]:
+    """Network URLs the page requested (from Chrome's network log)."""
+    urls = []
+    for entry in driver.get_log("performance"):
+        message = json.loads(entry["message"])["message"]
+        if message["method"] == "Network.requestWillBeSent":
+            urls.append(message["params"]["request"]["url"])
+    return [url for url in urls if url.split(":", 1)[0] in ("http", "https", "ws", "wss", "ftp")]
+
+
+def wait_for_mathjax(driver) -> dict:
+    """Wait for MathJax's first typesetting; return counts of math and of its output."""
+    return driver.execute_async_script(
+        """
+        const done = arguments[arguments.length - 1];
+        const counts = () => done({
+            loaded: typeof window.MathJax === 'object' && !!MathJax.startup,
+            math: document.querySelectorAll('.math').length,
+            typeset: document.querySelectorAll('mjx-container').length,
+            errors: document.querySelectorAll('mjx-merror').length,
+        });
+        if (!document.querySelector('.math')) { counts(); return; }
+        const t0 = Date.now();
+        (function poll() {
+            if (window.MathJax && MathJax.startup && MathJax.startup.promise) {
+                MathJax.startup.promise.then(counts, counts);
+            } else if (Date.now() - t0 > 30000) {
+                counts();
+            } else {
+                setTimeout(poll, 100);
+            }
+        })();
+        """)
+
+
+def test_mathjax_is_served_from_the_book(html_pages, html_dir):
+    with_math = [page for page, html in html_pages.items() if 'class="math' in html]
+    assert with_math, "no page of the built book has math"
+    for page, html in html_pages.items():
+        sources = MATHJAX_SRC_RE.findall(html)
+        if page in with_math:
+            assert sources, f"{page} has math but loads no MathJax"
+        for src in sources:
+            assert not re.match(r"(https?:)?//", src), f"{page} loads MathJax from {src}"
+            target = (html_dir / page).parent / src
+            assert target.resolve().is_file(), f"{src} (from {page}) is not in the built book"
+
+
+def test_page_typesets_its_math_offline(browser, html_dir, toc_page):
+    open_page(browser, html_dir, toc_page)
+    counts = wait_for_mathjax(browser)
+    if counts["math"]:
+        assert counts["loaded"], f"MathJax did not load on {toc_page}.html"
+        assert counts["typeset"] >= counts["math"], (
+            f"{toc_page}.html: {counts['typeset']} MathJax outputs for {counts['math']} math elements")
+        assert counts["errors"] == 0, f"{toc_page}.html: {counts['errors']} MathJax errors"
+    assert network_requests(browser) == []
+
+
+def test_figure_page_shows_images_and_a_table(browser, html_dir, figure_page):
+    open_page(browser, html_dir, figure_page)
+    wait_for_mathjax(browser)
+    images = browser.execute_script(
+        "return Array.from(document.querySelectorAll('main img, article img'))"
+        ".map(img => [img.getAttribute('src').slice(0, 80), img.complete, img.naturalWidth]);")
+    assert images, f"{figure_page}.html has no image"
+    broken = [src for src, complete, width in images if not complete or width == 0]
+    assert not broken, f"{figure_page}.html: images not shown: {broken}"
+    tables = browser.execute_script("return document.querySelectorAll('main table, article table').length;")
+    assert tables >= 1, f"{figure_page}.html has no table"
+    assert network_requests(browser) == []
