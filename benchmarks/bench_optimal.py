@@ -1,0 +1,139 @@
+"""Benchmark: the optimal filter's depth and velocity moments for Figures 2-6.
+
+Measures, side by side in one run, on one core:
+
+* the 1-D route of :func:`depthcore.optimal.moments` (Eqs. (14)-(16)), all five
+  scenarios in one batch, at the default tolerance;
+* a dense 3-D Gauss-Legendre grid over Eq. (6) itself
+  (:func:`depthcore.reference.grid_moments`), refined until it agrees with
+  its next refinement to 1e-8 of each SD;
+* with ``--nquad``, scipy's adaptive ``nquad`` on Eq. (6) for one integral
+  (the normaliser of Figure 2) at ``epsrel=1e-9``; the full set (five
+  integrals per scenario, five scenarios) is that time multiplied by 25,
+  marked as extrapolated.
+
+Accuracy is the largest difference, over scenarios and over the depth and
+velocity means and SDs, from the 1-D route at ``rtol=1e-13``, divided by
+the SD. Usage: ``python benchmarks/bench_optimal.py [--nquad] [--repeat N]``.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import math  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+from scipy import integrate  # noqa: E402
+
+from depthcore import optimal, reference  # noqa: E402
+from depthcore.scenarios import SCENARIOS  # noqa: E402
+
+LADDER = [(50, 12), (100, 16), (150, 20), (200, 24), (300, 28), (400, 32), (600, 40)]
+
+
+def _inputs():
+    keys = list(SCENARIOS)
+    mus = np.array([SCENARIOS[k].mu for k in keys])
+    rhos = np.array([SCENARIOS[k].rho for k in keys])
+    means = np.array([SCENARIOS[k].prior.mean for k in keys])
+    return keys, mus, rhos, means, 1000.0 * np.eye(3)
+
+
+def _best_time(fn, repeat):
+    best = math.inf
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t)
+    return best, out
+
+
+def _as_array(m):
+    return np.array([m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd]).T  # (5, 4)
+
+
+def _rel_error(values, truth):
+    sd = truth[:, [1, 1, 3, 3]]
+    return float(np.max(np.abs(values - truth) / sd))
+
+
+def _grid(keys, panels, order):
+    return np.array([list(reference.grid_moments(SCENARIOS[k].mu, SCENARIOS[k].rho, SCENARIOS[k].prior,
+                                                 panels=panels, uv_order=order))[:4] for k in keys])
+
+
+def _nquad_normaliser():
+    """Normaliser of Eq. (6) for Figure 2 by nested adaptive quadrature."""
+    s = SCENARIOS["fig2"]
+    mu, rho, pm = np.array(s.mu), s.rho, s.prior.mean
+    q = 1.0 / s.prior.cov[0, 0]
+
+    def log_post(v, x, y):  # Eq. (6), scalar, with P = 1000 I
+        r3, r2, r1 = x / y - mu[2], (x - v) / (y - 1) - mu[1], (x - 2 * v) / (y - 2) - mu[0]
+        d0, d1, d2 = x - 2 * v - pm[0], y - 2 - pm[1], v - pm[2]
+        return -(r1 * r1 + r2 * r2 + r3 * r3) / (2 * rho * rho) - 0.5 * q * (d0 * d0 + d1 * d1 + d2 * d2)
+
+    shift = log_post(1.2, 1.2, 6.0)
+    # Integration box: bearing x / y in [mu3 - 0.2, mu3 + 0.2], v within +-3 of x / y * y
+    box = [lambda x, y: (x - 3.0, x + 3.0), lambda y: ((mu[2] - 0.2) * y, (mu[2] + 0.2) * y), (2.2, 60.0)]
+    opts = {"epsrel": 1e-9, "epsabs": 0, "limit": 200}
+    z, _ = integrate.nquad(lambda v, x, y: math.exp(log_post(v, x, y) - shift), box,
+                           opts=[opts, opts, {**opts, "points": [6.0]}])
+    return z
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--nquad", action="store_true", help="also time scipy's nquad (minutes)")
+    p.add_argument("--repeat", type=int, default=50, help="repetitions of the fast route")
+    args = p.parse_args(argv)
+
+    keys, mus, rhos, means, cov = _inputs()
+    truth = _as_array(optimal.moments(mus, rhos, means, cov, rtol=1e-13))
+    t_ours, ours = _best_time(lambda: optimal.moments(mus, rhos, means, cov), args.repeat)
+    est = float(np.max(np.maximum(ours.depth_error / ours.depth_sd, ours.velocity_error / ours.velocity_sd)))
+    err_ours = _rel_error(_as_array(ours), truth)
+
+    previous, chosen = None, None
+    for panels, order in LADDER:
+        t, vals = _best_time(lambda: _grid(keys, panels, order), 1)
+        if previous is not None and _rel_error(previous[2], vals) <= 1e-8:
+            chosen = previous
+            break
+        previous = (panels, order, vals, t)
+    if chosen is None:
+        raise SystemExit("the grid did not reach 1e-8 on the ladder")
+    panels, order, vals, _ = chosen
+    t_grid, vals = _best_time(lambda: _grid(keys, panels, order), 3)
+    err_grid = _rel_error(vals, truth)
+
+    rows = [("1-D route, Eqs. (14)-(16), one batch", f"{t_ours * 1e3:.2f} ms",
+             f"{err_ours:.1e} (estimate {est:.1e})", "1")]
+    rows.append((f"3-D Gauss-Legendre grid of Eq. (6) ({panels} x 8 depth, {order}^2 (x, v) nodes)",
+                 f"{t_grid * 1e3:.0f} ms", f"{err_grid:.1e}", f"{t_grid / t_ours:,.0f}"))
+    if args.nquad:
+        t_nq, _ = _best_time(_nquad_normaliser, 1)
+        total = 25 * t_nq
+        rows.append(("scipy nquad of Eq. (6), epsrel 1e-9: 1 integral measured",
+                     f"{t_nq:.1f} s", "-", f"{t_nq / t_ours:,.0f}"))
+        rows.append(("  x 25 integrals (5 moments x 5 scenarios), extrapolated",
+                     f"{total:.0f} s", "-", f"{total / t_ours:,.0f}"))
+
+    print(f"Optimal depth and velocity moments, Figures 2-6 ({len(keys)} scenarios, 4 moments each), one core")
+    widths = [max(len(r[i]) for r in rows + [("route", "time", "rel. error / SD", "ratio")]) for i in range(4)]
+    head = ("route", "time", "rel. error / SD", "ratio")
+    fmt = f"| {{:<{widths[0]}}} | {{:>{widths[1]}}} | {{:>{widths[2]}}} | {{:>{widths[3]}}} |"
+    print(fmt.format(*head))
+    print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
+    for r in rows:
+        print(fmt.format(*r))
+
+
+if __name__ == "__main__":
+    main()
