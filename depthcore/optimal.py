@@ -254,34 +254,58 @@ def _nodes(interval: int, t: np.ndarray):
     return np.stack([lo + 1, lo, hi], -1), log_jac
 
 
-class _Sums(NamedTuple):
-    """Trapezoid sums (without the step) of the depth integrand and its moments."""
-
-    s: np.ndarray  # (6, B): Z, y, y^2, v, v^2 (centred), P(y < 2)
-
-    def __add__(self, other):
-        return _Sums(self.s + other.s)
+#: Index pairs (i, j) of the second moments accumulated, in (x, y, v) order.
+_SECOND = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
 
 
 def _evaluate(interval, t, pb, shift, centre):
-    """Sums over nodes ``t`` (B, n) and the per-node data."""
+    """Trapezoid sums (without the step) over nodes ``t`` (B, n), and the node data.
+
+    The sums, shape (11, B), are of the weight, of the first moments of
+    ``(x, y, v) - centre`` and of the second moments in :data:`_SECOND` order
+    (the conditional covariance of ``(x, v)`` given ``y`` included), and of
+    the weight below ``y = 2``.
+    """
     offsets, log_jac = _nodes(interval, t)
-    log_density, mean, (_, _, cvv) = _solve(offsets, pb)
+    log_density, mean, (cxx, cxv, cvv) = _solve(offsets, pb)
     log_w = log_density + log_jac - shift[:, None]
     w = np.exp(log_w)
-    dy = offsets[..., 0] - centre[:, 1:2]
-    dv = mean[1] - centre[:, 2:3]
-    sums = np.stack([w.sum(-1), (w * dy).sum(-1), (w * dy**2).sum(-1), (w * dv).sum(-1),
-                     (w * (dv**2 + cvv)).sum(-1), (w * (offsets[..., 0] < 2)).sum(-1)])
-    return _Sums(sums), (offsets[..., 0], log_w, mean[1], cvv)
+    d = (mean[0] - centre[:, 0:1], offsets[..., 0] - centre[:, 1:2], mean[1] - centre[:, 2:3])
+    extra = {(0, 0): cxx, (2, 2): cvv, (0, 2): cxv}
+    sums = [w.sum(-1)] + [(w * di).sum(-1) for di in d]
+    for i, j in _SECOND:
+        term = d[i] * d[j]
+        if (i, j) in extra:
+            term = term + extra[(i, j)]
+        sums.append((w * term).sum(-1))
+    sums.append((w * (offsets[..., 0] < 2)).sum(-1))
+    return np.stack(sums), (offsets[..., 0], log_w, mean, (cxx, cxv, cvv))
 
 
-def _moments(totals: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    """``(E y, sd y, E v, sd v, P(y < 2), Z)`` from summed trapezoid totals, each (B,)."""
-    Z, y1, y2, v1, v2, behind = totals
-    my, mv = y1 / Z, v1 / Z
-    return np.stack([centre[:, 1] + my, np.sqrt(np.maximum(y2 / Z - my**2, 0.0)),
-                     centre[:, 2] + mv, np.sqrt(np.maximum(v2 / Z - mv**2, 0.0)), behind / Z, Z])
+class _Totals(NamedTuple):
+    """Posterior mean (B, 3), covariance (B, 3, 3), P(y < 2) (B,), normaliser (B,)."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    behind: np.ndarray
+    Z: np.ndarray
+
+    def key_moments(self) -> np.ndarray:
+        """``(E y, sd y, E v, sd v)``, shape (4, B)."""
+        return np.stack([self.mean[:, 1], np.sqrt(self.cov[:, 1, 1]),
+                         self.mean[:, 2], np.sqrt(self.cov[:, 2, 2])])
+
+
+def _moments(totals: np.ndarray, centre: np.ndarray) -> _Totals:
+    """Mean, covariance, P(y < 2) and normaliser from summed trapezoid totals."""
+    Z = totals[0]
+    m = (totals[1:4] / Z).T  # (B, 3), centred
+    cov = np.empty((Z.size, 3, 3))
+    for k, (i, j) in enumerate(_SECOND):
+        cov[:, i, j] = cov[:, j, i] = totals[4 + k] / Z - m[:, i] * m[:, j]
+    for i in range(3):
+        cov[:, i, i] = np.maximum(cov[:, i, i], 0.0)
+    return _Totals(centre + m, cov, totals[10] / Z, Z)
 
 
 def _ranges(pb: _Problem, intervals):
@@ -341,7 +365,7 @@ def _integrate(pb: _Problem, intervals, rtol: float, keep_nodes: bool = False):
         t = lo[:, None] + h[:, None] * np.arange(n)
         sums, nodes = _evaluate(i, t, pb, top, centre)
         grids[i] = (lo, h * active, n)
-        totals[i] = sums.s
+        totals[i] = sums
         if keep_nodes:
             kept[i].append(nodes)
     previous = _moments(sum(totals[i] * grids[i][1] for i in ranges), centre)
@@ -349,15 +373,16 @@ def _integrate(pb: _Problem, intervals, rtol: float, keep_nodes: bool = False):
         for i, (lo, h, n) in grids.items():
             t = lo[:, None] + h[:, None] * (np.arange(n - 1) + 0.5)
             sums, nodes = _evaluate(i, np.where(h[:, None] > 0, t, 0.0), pb, top, centre)
-            totals[i] = totals[i] + sums.s
+            totals[i] = totals[i] + sums
             grids[i] = (lo, 0.5 * h, 2 * n - 1)
             if keep_nodes:
                 kept[i].append(nodes)
         current = _moments(sum(totals[i] * grids[i][1] for i in ranges), centre)
-        change = np.abs(current - previous)
+        now = current.key_moments()
+        change = np.abs(now - previous.key_moments())
         err_y = np.maximum(change[0], change[1])
         err_v = np.maximum(change[2], change[3])
-        if np.all(err_y <= rtol * current[1]) and np.all(err_v <= rtol * current[3]):
+        if np.all(err_y <= rtol * now[1]) and np.all(err_v <= rtol * now[3]):
             break
         previous = current
     else:
@@ -374,6 +399,8 @@ class Moments(NamedTuple):
     in practice since the trapezoid rule converges geometrically here.
     ``prob_behind_camera`` is the posterior probability that the depth at the
     first frame, ``y - 2``, is not positive (zero for ``support="front"``).
+    ``mean`` (B, 3) and ``cov`` (B, 3, 3) are the posterior mean and covariance
+    of the whole state ``(x, y, v)`` at time 3.
     """
 
     depth_mean: np.ndarray
@@ -383,6 +410,8 @@ class Moments(NamedTuple):
     depth_error: np.ndarray
     velocity_error: np.ndarray
     prob_behind_camera: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
 
 
 def moments(mu, rho: float, prior_mean, prior_cov, reading: str = "derived",
@@ -417,11 +446,13 @@ def moments(mu, rho: float, prior_mean, prior_cov, reading: str = "derived",
         raise ValueError(f"mu must have shape (B, 3), got shape {pb.mu.shape}")
     intervals = _intervals(support)
     rtol = _checks.positive_scalar(rtol, "rtol")
-    out = []
+    out, means, covs = [], [], []
     for start in range(0, pb.mu.shape[0], chunk):
         m, err_y, err_v, *_ = _integrate(pb.take(slice(start, start + chunk)), intervals, rtol)
-        out.append(np.stack([m[0], m[1], m[2], m[3], err_y, err_v, m[4]]))
-    return Moments(*np.concatenate(out, axis=1))
+        out.append(np.concatenate([m.key_moments(), [err_y, err_v, m.behind]]))
+        means.append(m.mean)
+        covs.append(m.cov)
+    return Moments(*np.concatenate(out, axis=1), np.concatenate(means), np.concatenate(covs))
 
 
 def _intervals(support: str):
@@ -447,6 +478,10 @@ class OptimalMarginals:
         ``log`` of the integral of the unnormalised depth marginal of :func:`conditional`.
     n_nodes : int
         Number of quadrature nodes used.
+    mean : ndarray, shape (3,)
+        Posterior mean of ``(x, y, v)`` at time 3.
+    cov : ndarray, shape (3, 3)
+        Posterior covariance of ``(x, y, v)`` at time 3.
     """
 
     mu: np.ndarray
@@ -463,6 +498,8 @@ class OptimalMarginals:
     prob_behind_camera: float
     log_normaliser: float
     n_nodes: int
+    mean: np.ndarray
+    cov: np.ndarray
     _mixture: tuple
 
     def depth_pdf(self, y) -> np.ndarray:
@@ -525,20 +562,22 @@ def marginals(mu, rho: float, prior: Gaussian, reading: str = "derived",
     pb = _problem(mu, rho, prior.mean, prior.cov, reading)
     rtol = _checks.positive_scalar(rtol, "rtol")
     m, err_y, err_v, top, grids, kept = _integrate(pb, _intervals(support), rtol, keep_nodes=True)
-    log_z = float(np.log(m[5, 0]) + top[0])
+    log_z = float(np.log(m.Z[0]) + top[0])
     weights, v_mean, v_var = [], [], []
     for i, levels in kept.items():
         h = grids[i][1][0]
-        for _, log_w, vm, vv in levels:
-            weights.append(np.exp(log_w[0]) * h / m[5, 0])
-            v_mean.append(vm[0])
-            v_var.append(vv[0])
+        for _, log_w, mean, (_, _, cvv) in levels:
+            weights.append(np.exp(log_w[0]) * h / m.Z[0])
+            v_mean.append(mean[1, 0])
+            v_var.append(cvv[0])
     w = np.concatenate(weights)
     keep = w > 1e-17 * np.max(w)
     return OptimalMarginals(
         mu=mu, rho=float(rho), prior=prior, reading=reading, support=support,
-        depth_mean=float(m[0, 0]), depth_sd=float(m[1, 0]), velocity_mean=float(m[2, 0]),
-        velocity_sd=float(m[3, 0]), depth_error=float(err_y[0]), velocity_error=float(err_v[0]),
-        prob_behind_camera=float(m[4, 0]), log_normaliser=log_z, n_nodes=int(w.size),
+        depth_mean=float(m.mean[0, 1]), depth_sd=float(np.sqrt(m.cov[0, 1, 1])),
+        velocity_mean=float(m.mean[0, 2]), velocity_sd=float(np.sqrt(m.cov[0, 2, 2])),
+        depth_error=float(err_y[0]), velocity_error=float(err_v[0]),
+        prob_behind_camera=float(m.behind[0]), log_normaliser=log_z, n_nodes=int(w.size),
+        mean=m.mean[0], cov=m.cov[0],
         _mixture=(w[keep], np.concatenate(v_mean)[keep], np.concatenate(v_var)[keep]),
     )

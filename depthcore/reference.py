@@ -21,13 +21,16 @@ from .second_order import second_order
 
 
 class BruteMoments(NamedTuple):
-    """Depth and velocity means and SDs of the optimal filter, with a sample size."""
+    """Depth and velocity means and SDs of the optimal filter, the number of
+    evaluations of Eq. (6), and the mean (3,) and covariance (3, 3) of the state."""
 
     depth_mean: float
     depth_sd: float
     velocity_mean: float
     velocity_sd: float
     n_evaluations: int
+    mean: np.ndarray
+    cov: np.ndarray
 
 
 def _gauss_legendre_panels(lo, hi, panels, order):
@@ -107,7 +110,10 @@ def grid_moments(mu, rho: float, prior: Gaussian, y_range=(2.0, None), panels: i
     ev = np.sum(w * u[..., 1]) / Z
     sd_y = np.sqrt(np.sum(w.sum(1) * (y - ey) ** 2) / Z)
     sd_v = np.sqrt(np.sum(w * (u[..., 1] - ev) ** 2) / Z)
-    return BruteMoments(float(ey), float(sd_y), float(ev), float(sd_v), int(lp.size))
+    mean = np.einsum("nk,nki->i", w, x) / Z
+    d = x - mean
+    cov = np.einsum("nk,nki,nkj->ij", w, d, d) / Z
+    return BruteMoments(float(ey), float(sd_y), float(ev), float(sd_v), int(lp.size), mean, cov)
 
 
 def importance_moments(mu, rho: float, prior: Gaussian, rng: np.random.Generator,

@@ -99,6 +99,8 @@ def test_moments_match_brute_force_3d_quadrature(key):
     # the grid route converges to ~1e-12 here; 1e-8 relative leaves room
     assert_allclose([m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd],
                     [b.depth_mean, b.depth_sd, b.velocity_mean, b.velocity_sd], rtol=1e-8)
+    assert_allclose(m.mean, b.mean, rtol=1e-8)
+    assert_allclose(m.cov, b.cov, rtol=1e-7, atol=1e-10 * np.abs(b.cov).max())
 
 
 def test_moments_match_importance_sampling():
