@@ -198,3 +198,19 @@ def test_batch_rejects_bad_rows():
         optimal.moments(np.array([s.mu, (0.2, 0.2, 0.2)]), s.rho, s.prior.mean, s.prior.cov)
     with pytest.raises(ValueError, match="rho must be a scalar or have shape"):
         optimal.moments(np.array([s.mu]), [0.1, 0.2], s.prior.mean, s.prior.cov)
+
+
+def test_batch_marginals_cdfs_and_density_match_quadrature():
+    s = SCENARIOS["fig3"]
+    b = optimal.batch_marginals(np.array([s.mu, s.mu]), s.rho, s.prior.mean, s.prior.cov)
+    m = optimal.marginals(s.mu, s.rho, s.prior)
+    y = np.array([10.0, 50.0])
+    ref = [integrate.quad(m.depth_pdf, 2, yk, limit=200, epsabs=1e-13, epsrel=1e-12)[0] for yk in y]
+    assert_allclose(b.depth_cdf(y), ref, atol=1e-10)
+    assert_allclose(b.depth_cdf(np.array([1.5, 1e4])), [0.0, 1.0], atol=1e-10)
+    v = np.array([2.0, 4.0])
+    ref_v = [integrate.quad(m.velocity_pdf, -60, vk, limit=200)[0] for vk in v]
+    assert_allclose(b.velocity_cdf(v), ref_v, atol=1e-8)
+    grid = np.array([[5.0, 10.0], [20.0, 1.5]])
+    assert_allclose(np.exp(b.depth_log_pdf(grid)), m.depth_pdf(grid), rtol=1e-10)
+    assert_allclose(b.moments.cov[0], m.cov, rtol=1e-10)
