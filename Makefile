@@ -4,6 +4,7 @@
 #   make test               core tests, notebook drift check, book build, checks of the built book
 #   make notebooks          re-run every book page and compare its outputs with book/_nbval/
 #   make notebooks-update   re-execute every page and rewrite book/_nbval/ (deliberate update)
+#   make check-book         checks of the built book alone (equation numbers, browser)
 #   make figures            write the paper's figures to figures/
 #   make bench              print the benchmark table
 #   make clean              remove build outputs (make distclean also removes .venv/)
@@ -32,7 +33,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 .PHONY: help venv book test test-core notebooks notebooks-update check-book figures bench clean distclean
 
 help:
-	@sed -n '3,10p' Makefile | sed 's/^# \{0,1\}//'
+	@sed -n '3,/^#$$/p' Makefile | sed -e 's/^# \{0,1\}//' -e '/^$$/d'
 
 $(STAMP): requirements.txt
 	@test -n "$(PYTHON)" || { echo "make: no python3.11 or python3 on PATH" >&2; exit 1; }
