@@ -1,4 +1,4 @@
-"""The command line: ``python -m depthcore {reproduce,estimate,figures} ...``.
+"""The command line: ``python -m depthcore {reproduce,estimate,study,figures} ...``.
 
 Bad input ends with a one-line message on stderr and exit status 2.
 """
@@ -63,6 +63,20 @@ def _cmd_figures(args) -> str:
     return "\n".join(str(p) for p in paths) + "\n"
 
 
+def _cmd_study(args) -> str:
+    from . import study
+
+    progress = None
+    if sys.stderr.isatty():
+        def progress(done, total):
+            sys.stderr.write(f"\rstudy: {done}/{total} trials" + ("\n" if done == total else ""))
+            sys.stderr.flush()
+    truth = None if args.truth is None else np.array(args.truth)
+    result = study.study(truth=truth, rho=args.rho, trials=args.trials, seed=args.seed,
+                         prior=args.prior, names=tuple(args.filters), progress=progress)
+    return json.dumps(result, indent=2) if args.json else study.format_result(result)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m depthcore``."""
     p = _Parser(prog="python -m depthcore", description=__doc__.splitlines()[0])
@@ -83,6 +97,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="prior covariance: S for S I (default 1000), or 9 values row by row")
     e.add_argument("--json", action="store_true", help="print JSON instead of a table")
     e.set_defaults(run=_cmd_estimate)
+
+    st = sub.add_parser("study", help="Monte Carlo study of every filter's error and calibration")
+    st.add_argument("--trials", type=int, default=500, help="number of noise draws (default 500)")
+    st.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    st.add_argument("--rho", type=float, default=1 / 200, help="noise standard deviation (default 1/200)")
+    st.add_argument("--truth", type=float, nargs=3, metavar=("X", "Y", "V"),
+                    help="true state at time 3 (default: Figure 2's c = (1.2, 6, 1.2))")
+    st.add_argument("--prior", choices=("paper", "fixed"), default="paper",
+                    help="paper: the paper's rule on each trial's measurements; fixed: on the truth")
+    st.add_argument("--filters", nargs="+", default=["optimal", "second_order", "ekf"],
+                    help="filters to score")
+    st.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    st.set_defaults(run=_cmd_study)
 
     f = sub.add_parser("figures", help="write Figures 2-6 as PDF, PNG and SVG")
     f.add_argument("--out", default="figures", help="output folder (default: figures)")

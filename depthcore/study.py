@@ -1,0 +1,276 @@
+"""A Monte Carlo study: which filter's estimate, and which stated uncertainty, to trust.
+
+Recommended import: ``from depthcore import study``.
+
+For a true state at time 3 (by default the noise-free state ``c`` of the
+paper's Figure 2), each trial draws the three measurements afresh, builds the
+prior by the paper's rule from that trial's measurements (``prior="paper"``,
+as the paper does) or once from the truth's noise-free measurements
+(``prior="fixed"``), runs every filter, and scores it:
+
+* bias and RMSE of its depth and velocity means;
+* coverage of its central 68 % and 95 % intervals: the truth lies in the
+  central ``p`` interval when its marginal CDF at the truth is within
+  ``p / 2`` of one half;
+* mean NEES, ``(m - x)^T P^{-1} (m - x)`` over the whole state (3 for a
+  filter whose covariance matches its error);
+* the Hellinger distance from its depth marginal to the optimal one.
+
+Trials whose measurements have no noise-free solution in front of the camera
+(Eq. (7) degenerate or ``c2 <= 2``) cannot run the second-order filter or the
+paper's prior rule; they are counted and left out of every score.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy.special import ndtr
+
+from . import _checks, model, optimal
+from .ekf import run as ekf_run
+from .gaussian import PAPER_PRIOR_SCALE
+from .scenarios import SCENARIOS
+from .second_order import second_order_batch
+
+PRIORS = ("paper", "fixed")
+LEVELS = (0.68, 0.95)
+
+
+@dataclass(frozen=True)
+class Trials:
+    """Simulated measurements and the priors built from them.
+
+    Attributes
+    ----------
+    truth : ndarray, shape (3,)
+        True state at time 3.
+    rho : float
+    mu : ndarray, shape (N, 3)
+        Measurements of the valid trials.
+    prior_mean : ndarray, shape (N, 3)
+    prior_cov : ndarray, shape (3, 3)
+    n_rejected : int
+        Trials drawn but left out (no noise-free solution in front of the camera).
+    """
+
+    truth: np.ndarray
+    rho: float
+    mu: np.ndarray
+    prior_mean: np.ndarray
+    prior_cov: np.ndarray
+    n_rejected: int
+
+
+@dataclass(frozen=True)
+class Estimates:
+    """One filter's results over the trials.
+
+    Attributes
+    ----------
+    mean : ndarray, shape (N, 3)
+    cov : ndarray, shape (N, 3, 3)
+    depth_cdf, velocity_cdf : ndarray, shape (N,)
+        The filter's marginal CDFs at the true depth and velocity.
+    hellinger : ndarray, shape (N,)
+        Hellinger distance from its depth marginal to the optimal one.
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+    depth_cdf: np.ndarray
+    velocity_cdf: np.ndarray
+    hellinger: np.ndarray
+
+
+def valid_triples(mu) -> np.ndarray:
+    """Rows of ``mu`` (N, 3) with a noise-free solution, Eq. (7), in front of the camera."""
+    mu = np.asarray(mu, dtype=float)
+    d = mu[:, 0] + mu[:, 2] - 2.0 * mu[:, 1]
+    ok = np.isfinite(mu).all(axis=1) & (np.abs(d) > _checks.DEGENERACY_TOL)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c2 = 2.0 * (mu[:, 0] - mu[:, 1]) / d
+    return ok & (c2 > 2.0)
+
+
+def simulate(truth, rho: float, n: int, rng: np.random.Generator, prior: str = "paper",
+             prior_scale: float = PAPER_PRIOR_SCALE) -> Trials:
+    """Draw ``n`` trials of three measurements of ``truth`` and build their priors.
+
+    Parameters
+    ----------
+    truth : array_like, shape (3,)
+        True state at time 3; its depth must be positive at times 1-3.
+    rho : float
+    n : int
+        Number of trials, >= 1.
+    rng : numpy.random.Generator
+    prior : {"paper", "fixed"}
+        ``"paper"``: mean ``(c1 - 2 c3, c2 - 2, 0)`` from each trial's own
+        noise-free solution; ``"fixed"``: the same rule applied once to the
+        truth.
+    prior_scale : float
+        Prior covariance ``prior_scale * I``.
+    """
+    truth = _checks.finite_array(truth, "truth", (3,))
+    rho = _checks.positive_scalar(rho, "rho")
+    if not (isinstance(n, (int, np.integer)) and n >= 1):
+        raise ValueError(f"trials must be a positive integer, got {n!r}")
+    if prior not in PRIORS:
+        raise ValueError(f"prior must be one of {PRIORS}, got {prior!r}")
+    prior_scale = _checks.positive_scalar(prior_scale, "prior_scale")
+    if not truth[1] - 2 > 0:
+        raise ValueError(f"truth puts the point behind the camera: depth at time 1 is {truth[1] - 2:.6g}")
+    mu = model.simulate_measurements(model.G(truth, -2), rho, rng, size=int(n))
+    keep = valid_triples(mu)
+    mu = mu[keep]
+    if prior == "paper":
+        c = optimal.noise_free_states(mu)
+    else:
+        c = np.broadcast_to(truth, mu.shape)
+    mean = np.stack([c[:, 0] - 2.0 * c[:, 2], c[:, 1] - 2.0, np.zeros(len(c))], axis=-1)
+    return Trials(truth, rho, mu, mean, prior_scale * np.eye(3), int(np.sum(~keep)))
+
+
+def _gaussian_estimates(trials: Trials, mean, cov, reference) -> Estimates:
+    t = trials.truth
+    depth_cdf = ndtr((t[1] - mean[:, 1]) / np.sqrt(cov[:, 1, 1]))
+    velocity_cdf = ndtr((t[2] - mean[:, 2]) / np.sqrt(cov[:, 2, 2]))
+    def log_q(y):
+        s = np.sqrt(cov[:, 1, 1])[:, None]
+        return -0.5 * ((y - mean[:, 1:2]) / s) ** 2 - np.log(np.sqrt(2 * np.pi) * s)
+    return Estimates(mean, cov, depth_cdf, velocity_cdf, hellinger(reference, log_q, mean[:, 1],
+                                                                   np.sqrt(cov[:, 1, 1])))
+
+
+def hellinger(reference: optimal.BatchMarginals, log_q: Callable, q_mean, q_sd,
+              n: int = 801) -> np.ndarray:
+    """Hellinger distance from depth densities ``q`` to the optimal ones, per trial.
+
+    ``H^2 = 1 - int sqrt(p_o q) dy`` over ``y > 2`` by the trapezoid rule in
+    ``t = log(y - 2)`` on ``n`` points spanning both densities (12 SDs of
+    ``q`` and the optimal quadrature range).
+
+    Parameters
+    ----------
+    reference : BatchMarginals
+    log_q : callable
+        ``log q`` at depths of shape (N, n).
+    q_mean, q_sd : ndarray, shape (N,)
+        Where ``q`` lives, to place the grid.
+    """
+    m = reference.moments
+    lo_y = np.minimum(q_mean - 12 * q_sd, m.depth_mean - 12 * m.depth_sd)
+    hi_y = np.maximum(q_mean + 12 * q_sd, m.depth_mean + 40 * m.depth_sd)
+    lo = np.maximum(np.log(np.maximum(lo_y - 2, 1e-12)), reference._start[0])
+    hi = np.log(np.maximum(hi_y - 2, 1e-12))
+    t = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, n)
+    y = 2.0 + np.exp(t)
+    log_pq = 0.5 * (reference.depth_log_pdf(y) + log_q(y)) + t
+    bc = np.trapezoid(np.exp(log_pq), t, axis=1)
+    return np.sqrt(np.clip(1.0 - bc, 0.0, 1.0))
+
+
+def run_filters(trials: Trials, names=("optimal", "second_order", "ekf")) -> dict:
+    """Run the named filters over every trial; returns ``{name: Estimates}``."""
+    mu, rho, pm, pc = trials.mu, trials.rho, trials.prior_mean, trials.prior_cov
+    ref = optimal.batch_marginals(mu, rho, pm, pc)
+    out = {}
+    for name in names:
+        if name == "optimal":
+            m = ref.moments
+            out[name] = Estimates(m.mean, m.cov, ref.depth_cdf(np.full(len(mu), trials.truth[1])),
+                                  ref.velocity_cdf(np.full(len(mu), trials.truth[2])),
+                                  np.zeros(len(mu)))
+        elif name == "second_order":
+            mean, cov = second_order_batch(mu, rho, pm, pc)
+            out[name] = _gaussian_estimates(trials, mean, cov, ref)
+        elif name == "ekf":
+            means, covs = ekf_run(mu, rho, pm, pc)
+            out[name] = _gaussian_estimates(trials, means[:, -1], covs[:, -1], ref)
+        else:
+            raise ValueError(f"unknown filter {name!r}")
+    return out
+
+
+def scores(trials: Trials, est: Estimates) -> dict:
+    """Bias, RMSE, coverage, NEES and Hellinger distance of one filter."""
+    t = trials.truth
+    err = est.mean - t
+    out = {}
+    for q, i, cdf in (("depth", 1, est.depth_cdf), ("velocity", 2, est.velocity_cdf)):
+        out[q] = {
+            "bias": float(np.mean(err[:, i])),
+            "rmse": float(np.sqrt(np.mean(err[:, i] ** 2))),
+            "mean_sd": float(np.mean(np.sqrt(est.cov[:, i, i]))),
+            **{f"coverage_{round(100 * p)}": float(np.mean(np.abs(cdf - 0.5) <= p / 2)) for p in LEVELS},
+        }
+    nees = np.einsum("ni,ni->n", err, np.linalg.solve(est.cov, err[..., None])[..., 0])
+    out["nees"] = float(np.mean(nees))
+    out["hellinger_depth"] = {"mean": float(np.mean(est.hellinger)),
+                              "median": float(np.median(est.hellinger))}
+    return out
+
+
+def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, seed: int = 0,
+          prior: str = "paper", names=("optimal", "second_order", "ekf"), chunk: int = 250,
+          progress: Callable[[int, int], None] | None = None) -> dict:
+    """The whole study; returns a JSON-ready dict.
+
+    Parameters
+    ----------
+    truth : array_like, shape (3,), optional
+        True state at time 3; default the noise-free state of Figure 2.
+    rho : float
+    trials : int
+    seed : int
+        Seed of the ``numpy.random.Generator`` that draws the noise.
+    prior : {"paper", "fixed"}
+    names : sequence of str
+        Filters to score.
+    chunk : int
+        Trials run together; ``progress(done, total)`` is called after each chunk.
+    """
+    truth = SCENARIOS["fig2"].c if truth is None else truth
+    rng = np.random.default_rng(seed)
+    all_trials = simulate(truth, rho, trials, rng, prior)
+    parts = []
+    n = len(all_trials.mu)
+    for start in range(0, n, chunk):
+        sl = slice(start, start + chunk)
+        part = Trials(all_trials.truth, all_trials.rho, all_trials.mu[sl], all_trials.prior_mean[sl],
+                      all_trials.prior_cov, 0)
+        parts.append(run_filters(part, names))
+        if progress is not None:
+            progress(min(start + chunk, n), n)
+    merged = {name: Estimates(*(np.concatenate([getattr(p[name], f) for p in parts])
+                                for f in Estimates.__dataclass_fields__)) for name in names}
+    return {
+        "truth": [float(v) for v in all_trials.truth],
+        "rho": float(rho),
+        "prior": prior,
+        "seed": int(seed),
+        "trials": int(trials),
+        "valid_trials": n,
+        "rejected_trials": all_trials.n_rejected,
+        "filters": {name: scores(all_trials, merged[name]) for name in names},
+    }
+
+
+def format_result(result: dict) -> str:
+    """A plain-text table of :func:`study`'s result."""
+    lines = [f"truth {tuple(round(v, 6) for v in result['truth'])}, rho {result['rho']:.6g}, "
+             f"prior {result['prior']}, seed {result['seed']}: {result['valid_trials']} trials "
+             f"({result['rejected_trials']} without a noise-free solution in front of the camera left out)"]
+    head = (f"{'filter':<13} {'quantity':<9} {'bias':>9} {'rmse':>9} {'mean sd':>9} "
+            f"{'cover 68':>8} {'cover 95':>8} {'NEES':>8} {'Hellinger':>9}")
+    lines += [head, "-" * len(head)]
+    for name, f in result["filters"].items():
+        for q in ("depth", "velocity"):
+            r = f[q]
+            extra = (f"{f['nees']:>8.2f} {f['hellinger_depth']['mean']:>9.3f}" if q == "depth" else "")
+            lines.append(f"{name:<13} {q:<9} {r['bias']:>9.4f} {r['rmse']:>9.4f} {r['mean_sd']:>9.4f} "
+                         f"{r['coverage_68']:>8.3f} {r['coverage_95']:>8.3f} {extra}".rstrip())
+    return "\n".join(lines) + "\n"

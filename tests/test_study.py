@@ -1,0 +1,104 @@
+"""The Monte Carlo study: simulation, scores, repeatability, bad input."""
+
+import json
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy import integrate
+
+from depthcore import optimal, study
+from depthcore.__main__ import main
+from depthcore.scenarios import SCENARIOS
+
+
+def test_same_seed_same_result():
+    a = study.study(trials=40, seed=3)
+    b = study.study(trials=40, seed=3)
+    assert a == b
+    assert study.study(trials=40, seed=4) != a
+
+
+def test_chunking_does_not_change_the_result():
+    a = study.study(trials=30, seed=2, chunk=7)
+    b = study.study(trials=30, seed=2, chunk=100)
+    for name in a["filters"]:
+        for q in ("depth", "velocity"):
+            for k, v in a["filters"][name][q].items():
+                assert v == pytest.approx(b["filters"][name][q][k], rel=1e-9, abs=1e-12)
+
+
+def test_scores_follow_their_definitions():
+    trials = study.simulate(SCENARIOS["fig2"].c, 1 / 200, 25, np.random.default_rng(0))
+    est = study.run_filters(trials, ("optimal", "ekf"))
+    s = study.scores(trials, est["ekf"])
+    err = est["ekf"].mean[:, 1] - trials.truth[1]
+    assert s["depth"]["bias"] == pytest.approx(np.mean(err))
+    assert s["depth"]["rmse"] == pytest.approx(np.sqrt(np.mean(err**2)))
+    inside = np.abs(est["ekf"].mean[:, 1] - trials.truth[1]) <= 0.9944578832097535 * np.sqrt(
+        est["ekf"].cov[:, 1, 1])  # the 68 % normal quantile
+    assert s["depth"]["coverage_68"] == pytest.approx(np.mean(inside))
+
+
+def test_hellinger_matches_adaptive_quadrature():
+    s = SCENARIOS["fig2"]
+    trials = study.simulate(s.c, s.rho, 3, np.random.default_rng(5))
+    est = study.run_filters(trials, ("optimal", "ekf"))
+    ref = optimal.batch_marginals(trials.mu, trials.rho, trials.prior_mean, trials.prior_cov)
+    for i in range(3):
+        m = optimal.marginals(trials.mu[i], s.rho, optimal.Gaussian(trials.prior_mean[i], trials.prior_cov))
+        mean, sd = est["ekf"].mean[i, 1], np.sqrt(est["ekf"].cov[i, 1, 1])
+        q = lambda y: np.exp(-0.5 * ((y - mean) / sd) ** 2) / (np.sqrt(2 * np.pi) * sd)  # noqa: E731
+        bc, _ = integrate.quad(lambda y: np.sqrt(m.depth_pdf(y) * q(y)), 2, 60, points=[mean], limit=400)
+        assert est["ekf"].hellinger[i] == pytest.approx(np.sqrt(1 - bc), abs=1e-6)
+    assert ref.moments.depth_mean.shape == (3,)
+
+
+def test_ekf_is_overconfident_and_second_order_is_not():
+    r = study.study(trials=200, seed=1)
+    ekf, so = r["filters"]["ekf"], r["filters"]["second_order"]
+    # 200 trials: the binomial SD of a coverage near 0.68 is 0.033
+    assert ekf["depth"]["coverage_68"] < 0.4
+    assert abs(so["depth"]["coverage_68"] - 0.68) < 0.12
+    assert ekf["nees"] > 10 > so["nees"]
+
+
+def test_rejected_trials_are_counted():
+    # Noise so large that some triples have no solution in front of the camera.
+    t = study.simulate(SCENARIOS["fig3"].c, 0.05, 200, np.random.default_rng(0))
+    assert t.n_rejected > 0
+    assert len(t.mu) + t.n_rejected == 200
+    assert study.valid_triples(t.mu).all()
+
+
+def test_fixed_prior_is_built_from_the_truth():
+    c = SCENARIOS["fig2"].c
+    t = study.simulate(c, 1 / 200, 5, np.random.default_rng(0), prior="fixed")
+    assert_allclose(t.prior_mean, np.tile([c[0] - 2 * c[2], c[1] - 2, 0.0], (5, 1)))
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"n": 0}, "trials must be a positive integer"),
+    ({"prior": "flat"}, "prior must be one of"),
+    ({"rho": -1.0}, "rho must be positive"),
+    ({"truth": [0.0, 1.0, 0.0]}, "truth puts the point behind the camera"),
+])
+def test_simulate_rejects_bad_input(kwargs, message):
+    args = {"truth": SCENARIOS["fig2"].c, "rho": 0.005, "n": 10, "rng": np.random.default_rng(0)}
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=message):
+        study.simulate(**args)
+
+
+def test_study_command_json(capsys):
+    assert main(["study", "--trials", "30", "--seed", "1", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["valid_trials"] == 30
+    for f in data["filters"].values():
+        assert set(f) == {"depth", "velocity", "nees", "hellinger_depth"}
+        assert set(f["depth"]) == {"bias", "rmse", "mean_sd", "coverage_68", "coverage_95"}
+
+
+def test_study_command_rejects_bad_trials(capsys):
+    assert main(["study", "--trials", "0"]) == 2
+    assert "trials must be a positive integer" in capsys.readouterr().err
