@@ -37,7 +37,6 @@ the mixture over the same nodes of the Gaussian conditionals of ``v`` given
 from __future__ import annotations
 
 from dataclasses import dataclass
-from itertools import combinations
 from typing import NamedTuple
 
 import numpy as np
@@ -51,8 +50,6 @@ READINGS = ("derived", "printed")
 #: frames; ``"all"``: every real ``y`` but the poles, Eq. (6) taken literally.
 SUPPORTS = ("front", "all")
 
-_PAIRS = np.array(list(combinations(range(6), 2)))
-_TRIPLES = np.array(list(combinations(range(6), 3)))
 #: ``G^{-2} x`` as a function of ``u = (x, v)`` for fixed ``y``: ``L u + (0, y - 2, 0)``.
 _L = A2[:, [0, 2]]
 #: Nodes whose log integrand is this far below the maximum are cut off (e^-60 ~ 1e-26).
@@ -145,37 +142,76 @@ def _terms(offsets, pb: _Problem):
     return gx, gv, z
 
 
-#: For each triple (a, b, c), the pairs (b, c), (a, c), (a, b) as indices into _PAIRS.
-_PAIR_INDEX = {tuple(p): k for k, p in enumerate(_PAIRS.tolist())}
-_TRIPLE_PAIRS = np.array([[_PAIR_INDEX[(b, c)], _PAIR_INDEX[(a, c)], _PAIR_INDEX[(a, b)]]
-                          for a, b, c in _TRIPLES.tolist()])
+_MEAS_PAIRS = ((0, 1), (0, 2), (1, 2))
 
 
 def _solve(offsets, pb: _Problem):
     """Log depth marginal and the Gaussian of ``(x, v)`` given ``y``, batched.
 
-    Returns ``log_density`` (B, n), ``mean`` (2, B, n) and the covariance
-    entries ``(cxx, cxv, cvv)``, each (B, n).
+    ``offsets`` has shape (B, n, 3): ``(y, y - 1, y - 2)``. Returns
+    ``log_density`` (B, n), ``mean`` (2, B, n) and the covariance entries
+    ``(cxx, cxv, cvv)``, each (B, n).
+
+    The six terms of :func:`_terms` have a structure that the Cauchy-Binet
+    sums exploit: measurement row ``k`` is ``g = s_k (1, -k)``, ``z = w_k``
+    with ``s_k = 1 / ((y - k) rho)`` and ``w_k = mu_{3-k} / rho``; prior row
+    ``j`` is ``g = q_j`` (constant), ``z = zeta_j = alpha_j - beta_j (y - 2)``.
+    So every 2 x 2 minor of ``g`` is ``s_k s_l (k - l)``, ``s_k K_kj`` with
+    ``K_kj = q_jv + k q_jx``, or a constant ``P_jj'``; every 3 x 3 minor of
+    ``[g z]`` expands along ``z`` into those. ``det M`` is the sum of the
+    squared 2 x 2 minors, ``S det M`` that of the squared 3 x 3 minors, and
+    the conditional mean follows by Cramer's rule.
     """
-    gx, gv, z = _terms(offsets, pb)
-    I, J = _PAIRS[:, 0], _PAIRS[:, 1]
-    gxi, gxj, gvi, gvj, zi, zj = gx[I], gx[J], gv[I], gv[J], z[I], z[J]
-    D = gxi * gvj - gvi * gxj  # the 2 x 2 minors of g, (15, B, n)
-    det_M = np.einsum("pbn,pbn->bn", D, D)
-    # Cramer's rule on M u = g^T z, each determinant expanded by Cauchy-Binet.
-    mean = np.stack([np.einsum("pbn,pbn->bn", D, zi * gvj - gvi * zj),
-                     np.einsum("pbn,pbn->bn", D, gxi * zj - zi * gxj)]) / det_M
-    cxx = np.einsum("ibn,ibn->bn", gv, gv) / det_M
-    cxv = -np.einsum("ibn,ibn->bn", gx, gv) / det_M
-    cvv = np.einsum("ibn,ibn->bn", gx, gx) / det_M
-    # det[g z] of each triple (a, b, c), expanded along z: z_a D_bc - z_b D_ac + z_c D_ab.
-    T, P = _TRIPLES, _TRIPLE_PAIRS
-    det3 = z[T[:, 0]] * D[P[:, 0]] - z[T[:, 1]] * D[P[:, 1]] + z[T[:, 2]] * D[P[:, 2]]
-    S = np.einsum("tbn,tbn->bn", det3, det3) / det_M
+    rho = pb.rho[:, None]
+    s = [1.0 / (offsets[..., k] * rho) for k in range(3)]
+    s2 = [sk * sk for sk in s]
+    RL = pb.R @ _L
+    qx, qv = RL[:, :, 0], RL[:, :, 1]  # (B, 3)
+    K = [[(qv[:, j] + k * qx[:, j])[:, None] for j in range(3)] for k in range(3)]
+    P = {p: (qx[:, p[0]] * qv[:, p[1]] - qv[:, p[0]] * qx[:, p[1]])[:, None] for p in _MEAS_PAIRS}
+    w = [(pb.mu[:, 2 - k] / pb.rho)[:, None] for k in range(3)]
+    alpha = np.einsum("bij,bj->bi", pb.R, pb.mean)
+    zeta = [alpha[:, j:j + 1] - pb.R[:, j, 1:2] * offsets[..., 2] for j in range(3)]
+    qxc = [qx[:, j:j + 1] for j in range(3)]
+    qvc = [qv[:, j:j + 1] for j in range(3)]
+
+    det_M = (s2[0] * s2[1] + 4.0 * s2[0] * s2[2] + s2[1] * s2[2]
+             + sum(s2[k] * sum(K[k][j] ** 2 for j in range(3)) for k in range(3))
+             + sum(P[p] ** 2 for p in _MEAS_PAIRS))
+    minors3 = (-w[0] * s[1] * s[2] + 2.0 * w[1] * s[0] * s[2] - w[2] * s[0] * s[1]) ** 2
+    for k, l in _MEAS_PAIRS:
+        for j in range(3):
+            minors3 = minors3 + (w[k] * s[l] * K[l][j] - w[l] * s[k] * K[k][j]
+                                 + (k - l) * zeta[j] * s[k] * s[l]) ** 2
+    for k in range(3):
+        for j, jj in _MEAS_PAIRS:
+            minors3 = minors3 + (w[k] * P[(j, jj)] - zeta[j] * s[k] * K[k][jj]
+                                 + zeta[jj] * s[k] * K[k][j]) ** 2
+    minors3 = minors3 + (zeta[0] * P[(1, 2)] - zeta[1] * P[(0, 2)] + zeta[2] * P[(0, 1)]) ** 2
+    S = minors3 / det_M
+
+    nx = nv = 0.0
+    for k, l in _MEAS_PAIRS:
+        D = (k - l) * s[k] * s[l]
+        nx = nx + D * (k * w[l] * s[k] - l * w[k] * s[l])
+        nv = nv + D * (w[l] * s[k] - w[k] * s[l])
+    for k in range(3):
+        for j in range(3):
+            D = s[k] * K[k][j]
+            nx = nx + D * (w[k] * qvc[j] + k * s[k] * zeta[j])
+            nv = nv + D * (s[k] * zeta[j] - w[k] * qxc[j])
+    for j, jj in _MEAS_PAIRS:
+        D = P[(j, jj)]
+        nx = nx + D * (zeta[j] * qvc[jj] - qvc[j] * zeta[jj])
+        nv = nv + D * (qxc[j] * zeta[jj] - zeta[j] * qxc[jj])
+    mean = np.stack([nx / det_M, nv / det_M])
+    cxx = (s2[1] + 4.0 * s2[2] + np.sum(qv**2, 1)[:, None]) / det_M
+    cvv = (s2[0] + s2[1] + s2[2] + np.sum(qx**2, 1)[:, None]) / det_M
+    cxv = (s2[1] + 2.0 * s2[2] - np.sum(qx * qv, 1)[:, None]) / det_M
     log_density = -0.5 * np.log(det_M) - 0.5 * S
     if pb.reading == "printed":
         # Eq. (16) keeps only l^T M^{-1} l / 8 = (|z|^2 - S) / 2 beside the determinant.
-        log_density += 0.5 * np.einsum("ibn,ibn->bn", z, z)
+        log_density = log_density + 0.5 * (sum(wk**2 for wk in w) + sum(zj**2 for zj in zeta))
     return log_density, mean, (cxx, cxv, cvv)
 
 
