@@ -62,6 +62,8 @@ def update(n, C, mu, rho: float) -> MeanAndCov:
 
     ``P = C - (rho**2 + h^T C h)^{-1} C h h^T C`` and
     ``m = n + (mu - n1/n2) / (rho**2 + h^T C h) C h``, with ``h`` from Eq. (11) at ``n``.
+    The covariance is computed in the algebraically equal Joseph form
+    ``(I - K h^T) C (I - K h^T)^T + rho**2 K K^T``, ``K = C h / (rho**2 + h^T C h)``.
 
     Parameters
     ----------
@@ -85,8 +87,12 @@ def update(n, C, mu, rho: float) -> MeanAndCov:
     Ch = np.einsum("...ij,...j->...i", C, h)
     s = rho**2 + np.einsum("...i,...i->...", h, Ch)
     innovation = np.asarray(mu, dtype=float) - n[..., 0] / n[..., 1]
-    mean = n + (innovation / s)[..., None] * Ch
-    cov = C - Ch[..., :, None] * Ch[..., None, :] / s[..., None, None]
+    K = Ch / s[..., None]  # the Kalman gain
+    mean = n + innovation[..., None] * K
+    # C - C h h^T C / s of Eq. (12), in the Joseph form (I - K h^T) C (I - K h^T)^T + rho^2 K K^T,
+    # which equals it algebraically and keeps P symmetric positive definite in floating point.
+    A = np.eye(3) - K[..., :, None] * h[..., None, :]
+    cov = A @ C @ np.swapaxes(A, -1, -2) + rho**2 * K[..., :, None] * K[..., None, :]
     return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
 
 
