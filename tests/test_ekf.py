@@ -102,3 +102,23 @@ def test_ekf_rejects_prior_mean_behind_the_camera():
 def test_run_rejects_bad_rho():
     with pytest.raises(ValueError, match="rho must be positive"):
         ekf_module.run(np.array(MU_17), -0.1, np.zeros(3) + [0, 4, 0], np.eye(3))
+
+
+def test_ekf_matches_filterpy_trial_by_trial():
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_ekf_filterpy import filterpy_run
+
+    s = SCENARIOS["fig2"]
+    rng = np.random.default_rng(4)
+    mu = model.simulate_measurements(model.G(s.c, -2), s.rho, rng, size=20)
+    prior = paper_prior(noise_free_state(MU_17))
+    means, covs = run(mu, s.rho, prior.mean, prior.cov)
+    for i in range(20):
+        fm, fP = filterpy_run(mu[i], s.rho, prior.mean, prior.cov)
+        sd = np.sqrt(np.einsum("kii->ki", fP))
+        assert np.max(np.abs(means[i] - fm) / sd) < 1e-10
+        # cond(P) ~ 1e7 after the first measurement: rounding of that order times eps
+        assert np.max(np.linalg.norm(covs[i] - fP, axis=(1, 2)) / np.linalg.norm(fP, axis=(1, 2))) < 1e-9
