@@ -73,7 +73,7 @@ def update(n, C, mu, rho: float) -> MeanAndCov:
         Predicted covariance.
     mu : float or array_like, shape (...)
         The measurement.
-    rho : float
+    rho : float or array_like, shape (...)
         Noise standard deviation, > 0.
     """
     n = np.asarray(n, dtype=float)
@@ -83,16 +83,17 @@ def update(n, C, mu, rho: float) -> MeanAndCov:
             "prior_mean leads the EKF to a predicted depth n2 <= 0 "
             f"(min {float(np.min(n[..., 1])):.6g}); the projection x/y is not defined there"
         )
+    r2 = np.asarray(rho, dtype=float) ** 2
     h = model.observation_vector(n)  # Eq. (11)
     Ch = np.einsum("...ij,...j->...i", C, h)
-    s = rho**2 + np.einsum("...i,...i->...", h, Ch)
+    s = r2 + np.einsum("...i,...i->...", h, Ch)
     innovation = np.asarray(mu, dtype=float) - n[..., 0] / n[..., 1]
     K = Ch / s[..., None]  # the Kalman gain
     mean = n + innovation[..., None] * K
     # C - C h h^T C / s of Eq. (12), in the Joseph form (I - K h^T) C (I - K h^T)^T + rho^2 K K^T,
     # which equals it algebraically and keeps P symmetric positive definite in floating point.
     A = np.eye(3) - K[..., :, None] * h[..., None, :]
-    cov = A @ C @ np.swapaxes(A, -1, -2) + rho**2 * K[..., :, None] * K[..., None, :]
+    cov = A @ C @ np.swapaxes(A, -1, -2) + r2[..., None, None] * K[..., :, None] * K[..., None, :]
     return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
 
 
@@ -106,7 +107,7 @@ def run(mu, rho: float, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
     ----------
     mu : array_like, shape (..., 3)
         Measurements in time order.
-    rho : float
+    rho : float or array_like, shape (...)
     prior_mean : array_like, shape (..., 3)
     prior_cov : array_like, shape (..., 3, 3)
 
@@ -116,8 +117,10 @@ def run(mu, rho: float, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
         ``means[..., i, :]`` is the mean after measurement ``i + 1``.
     covs : ndarray, shape (..., 3, 3, 3)
     """
-    rho = _checks.positive_scalar(rho, "rho")
+    rho = _checks.positive_array(rho, "rho")
     mu = _checks.finite_array(mu, "mu")
+    if rho.ndim and rho.shape != mu.shape[:-1]:
+        raise ValueError(f"rho must be a scalar or have shape {mu.shape[:-1]}, got shape {rho.shape}")
     batch = mu.shape[:-1]
     n = np.broadcast_to(np.asarray(prior_mean, dtype=float), batch + (3,))
     C = np.broadcast_to(np.asarray(prior_cov, dtype=float), batch + (3, 3))

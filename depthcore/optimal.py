@@ -638,7 +638,7 @@ class BatchMarginals:
     rtol: float
     _problem: _Problem
     _mixture: tuple  # normalised weights, v means, v variances: each (B, n)
-    _start: tuple  # lower end (B,) of the t range and a panel width (B,)
+    _start: tuple  # lower and upper ends (B,) of the t range and a panel width (B,)
 
     def depth_log_pdf(self, y) -> np.ndarray:
         """``log p_oy`` at depths ``y`` of shape (B, m); ``-inf`` at ``y <= 2``."""
@@ -656,7 +656,7 @@ class BatchMarginals:
         doubling the panels until the mass changes by at most ``rtol``.
         """
         y = _checks.finite_array(y, "y")
-        lo, step = self._start
+        lo, _, step = self._start
         with np.errstate(divide="ignore"):
             t_up = np.log(np.maximum(y - 2.0, 0.0))
         inside = t_up > lo
@@ -708,5 +708,5 @@ def batch_marginals(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> Batc
     vm = np.concatenate([mean[1] for _, _, mean, _ in levels], 1)
     vv = np.concatenate([cov[2] for _, _, _, cov in levels], 1)
     moments_ = Moments(*m.key_moments(), err_y, err_v, m.behind, m.mean, m.cov)
-    lo = grids[3][0]
-    return BatchMarginals(moments_, log_z, rtol, pb, (w, vm, vv), (lo, 2.0 * h))
+    lo, _, n = grids[3]
+    return BatchMarginals(moments_, log_z, rtol, pb, (w, vm, vv), (lo, lo + (n - 1) * h, 2.0 * h))

@@ -151,7 +151,7 @@ def hellinger(reference: optimal.BatchMarginals, log_q: Callable, q_mean, q_sd,
 
     ``H^2 = 1 - int sqrt(p_o q) dy`` over ``y > 2`` by the trapezoid rule in
     ``t = log(y - 2)`` on ``n`` points spanning both densities (12 SDs of
-    ``q`` and the optimal quadrature range).
+    ``q`` and the optimal filter's quadrature range, which reaches its tail).
 
     Parameters
     ----------
@@ -161,11 +161,10 @@ def hellinger(reference: optimal.BatchMarginals, log_q: Callable, q_mean, q_sd,
     q_mean, q_sd : ndarray, shape (N,)
         Where ``q`` lives, to place the grid.
     """
-    m = reference.moments
-    lo_y = np.minimum(q_mean - 12 * q_sd, m.depth_mean - 12 * m.depth_sd)
-    hi_y = np.maximum(q_mean + 12 * q_sd, m.depth_mean + 40 * m.depth_sd)
-    lo = np.maximum(np.log(np.maximum(lo_y - 2, 1e-12)), reference._start[0])
-    hi = np.log(np.maximum(hi_y - 2, 1e-12))
+    t_lo, t_hi, _ = reference._start
+    with np.errstate(divide="ignore"):
+        lo = np.maximum(np.minimum(np.log(np.maximum(q_mean - 12 * q_sd - 2, 0.0)), t_lo), t_lo - 10)
+        hi = np.maximum(np.log(np.maximum(q_mean + 12 * q_sd - 2, 1e-300)), t_hi)
     t = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, n)
     y = 2.0 + np.exp(t)
     log_pq = 0.5 * (reference.depth_log_pdf(y) + log_q(y)) + t
