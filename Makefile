@@ -6,7 +6,7 @@
 #   make notebooks-update   re-execute every page and rewrite book/_nbval/ (deliberate update)
 #   make check-book         checks of the built book alone (equation numbers, browser)
 #   make figures            write the paper's figures to figures/
-#   make bench              print the benchmark table
+#   make bench              print the benchmark tables
 #   make clean              remove build outputs (make distclean also removes .venv/)
 #
 # Every target runs in .venv/, created with Python 3.11 from the pinned
@@ -78,6 +78,8 @@ figures: $(EDITABLE)
 
 bench: $(EDITABLE)
 	$(PY) benchmarks/bench_optimal.py
+	$(PY) benchmarks/bench_ekf_filterpy.py
+	$(PY) benchmarks/bench_trials.py
 
 clean:
 	rm -rf _build figures .pytest_cache .hypothesis book/.nbval-check-*
