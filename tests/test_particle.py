@@ -1,0 +1,424 @@
+"""The particle filter (Prince section 19.5): resampling, weights, collapse, convergence."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from scipy import stats
+from scipy.special import logsumexp
+
+from depthcore import model, optimal
+from depthcore import particle as pf
+from depthcore.gaussian import Gaussian
+from depthcore.particle import (RESAMPLERS, effective_sample_size, multinomial, normalise,
+                                particle_filter, residual, run, systematic)
+from depthcore.scenarios import MU_17, SCENARIOS
+from depthcore.second_order import second_order_batch
+
+FIG2 = SCENARIOS["fig2"]
+
+
+@pytest.fixture(scope="module")
+def fig2_optimal():
+    return optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior, support="front")
+
+
+def reference(opt):
+    return np.array([opt.depth_mean, opt.depth_sd, opt.velocity_mean, opt.velocity_sd])
+
+
+def replicates(n_particles, n_replicates, seed, scenario=FIG2, **kwargs):
+    """``n_replicates`` independent filters on one triple, in one batched call."""
+    mu = np.tile(scenario.mu, (n_replicates, 1))
+    return run(mu, scenario.rho, scenario.prior.mean, scenario.prior.cov, n_particles,
+               np.random.default_rng(seed), **kwargs)
+
+
+def random_weights(rng, shape):
+    w = rng.gamma(0.3, size=shape)  # uneven: many small, a few large
+    return w / w.sum(axis=-1, keepdims=True)
+
+
+# --- resampling ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("M", [None, 7, 50, 1000])
+def test_systematic_counts_are_floor_or_ceil_of_M_W(M):
+    rng = np.random.default_rng(1)
+    W = random_weights(rng, (200, 50))
+    idx = systematic(W, rng, M)
+    M = 50 if M is None else M
+    assert idx.shape == (200, M)
+    counts = np.stack([np.bincount(row, minlength=50) for row in idx])
+    assert np.all(counts >= np.floor(M * W) - 1e-9) and np.all(counts <= np.ceil(M * W) + 1e-9)
+
+
+@pytest.mark.parametrize("name", sorted(RESAMPLERS))
+def test_resampling_counts_have_expectation_M_W(name):
+    # Over R independent draws the mean count of particle i is M W_i; the
+    # multinomial SD sqrt(M W (1 - W) / R) bounds that of all three schemes.
+    rng = np.random.default_rng(2)
+    W = random_weights(rng, (1, 30))[0]
+    R, M = 4000, 30
+    idx = RESAMPLERS[name](np.broadcast_to(W, (R, 30)), rng, M)
+    mean = np.mean([np.bincount(row, minlength=30) for row in idx], axis=0)
+    se = np.sqrt(M * W * (1 - W) / R)
+    assert np.all(np.abs(mean - M * W) <= 5 * se + 1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(RESAMPLERS))
+def test_resampling_returns_sorted_valid_indices(name):
+    rng = np.random.default_rng(3)
+    W = random_weights(rng, (5, 40))
+    W[:, ::3] = 0.0
+    W /= W.sum(axis=-1, keepdims=True)
+    idx = RESAMPLERS[name](W, rng)
+    assert idx.shape == (5, 40) and idx.dtype.kind == "i"
+    assert np.all(np.diff(idx, axis=-1) >= 0)
+    assert np.all(np.take_along_axis(W, idx, axis=-1) > 0)  # weight-zero particles never drawn
+
+
+def test_residual_keeps_the_integer_part():
+    rng = np.random.default_rng(4)
+    W = random_weights(rng, (100, 20))
+    counts = np.stack([np.bincount(row, minlength=20) for row in residual(W, rng, 20)])
+    assert np.all(counts >= np.floor(20 * W))
+    # filterpy 1.4.5 draws the rest with weights W - floor(N W) (negative here); the
+    # residuals N W - floor(N W) are what is left after the deterministic copies.
+    W = np.array([0.55, 0.3, 0.15])
+    counts = np.bincount(residual(np.broadcast_to(W, (20000, 3)), rng, 3).ravel(), minlength=3)
+    assert_allclose(counts / 20000, 3 * W, atol=0.02)
+
+
+def test_resampling_is_deterministic_for_degenerate_weights():
+    rng = np.random.default_rng(5)
+    W = np.zeros((3, 6))
+    W[:, 2] = 1.0
+    for resampler in RESAMPLERS.values():
+        assert_array_equal(resampler(W, rng), 2)
+
+
+# --- weights ---------------------------------------------------------------------------
+
+
+def test_normalise_gives_log_weights_summing_to_one():
+    rng = np.random.default_rng(6)
+    log_w = 1e3 * rng.normal(size=(4, 100)) - 5e4  # exp() of these underflows
+    log_w[:, :10] = -np.inf
+    lw = normalise(log_w)
+    assert_allclose(logsumexp(lw, axis=-1), 0.0, atol=1e-12)
+    assert np.all(np.isneginf(lw[:, :10]))
+    assert_allclose(np.exp(lw).sum(axis=-1), 1.0, rtol=1e-12)
+
+
+def test_ess_formula():
+    rng = np.random.default_rng(7)
+    log_w = rng.normal(scale=2.0, size=(3, 50))
+    log_w[:, 0] = -np.inf
+    W = np.exp(normalise(log_w))
+    assert_allclose(effective_sample_size(log_w), 1.0 / np.sum(W**2, axis=-1), rtol=1e-12)
+    # Shift invariance, up to the rounding of log_w + 1e3 (1e3 * 2**-52 ~ 2e-13).
+    assert_allclose(effective_sample_size(log_w + 1e3), effective_sample_size(log_w), rtol=1e-11)
+    assert_allclose(effective_sample_size(np.zeros(17)), 17.0, rtol=1e-14)
+    one = np.full(9, -np.inf)
+    one[4] = 3.0
+    assert_allclose(effective_sample_size(one), 1.0, rtol=1e-14)
+
+
+def test_result_log_weights_are_normalised_and_ess_matches():
+    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 3000, np.random.default_rng(8))
+    assert r.particles.shape == (3000, 3) and r.log_weights.shape == (3000,)
+    assert_allclose(logsumexp(r.log_weights), 0.0, atol=1e-12)
+    assert_allclose(r.ess[-1], 1.0 / np.sum(r.weights**2), rtol=1e-10)
+    assert np.all(r.weights[r.particles[:, 1] <= 2.0] == 0.0)  # y1 = y3 - 2 <= 0: weight zero
+
+
+def test_gaussian_proposal_is_the_limit_of_infinite_df():
+    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 2000, np.random.default_rng(25),
+                        df=np.inf)
+    m, S = second_order_batch(np.array([FIG2.mu]), FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
+    q = stats.multivariate_normal(m[0], pf.DEFAULT_INFLATION**2 * S[0])
+    alive = np.isfinite(r.log_weights)
+    diff = (r.log_weights[alive] + q.logpdf(r.particles[alive])
+            - optimal.log_posterior(r.particles[alive], FIG2.mu, FIG2.rho, FIG2.prior))
+    assert_allclose(diff, diff[0], rtol=0, atol=1e-8)
+
+
+def test_final_weights_are_posterior_over_proposal():
+    # Without resampling the look-ahead terms cancel: log W = log p_o - log q + const,
+    # with p_o the optimal posterior (6) and q the t proposal (scipy's density).
+    N = 2000
+    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(9),
+                        ess_threshold=0.0)
+    m, S = second_order_batch(np.array([FIG2.mu]), FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
+    q = stats.multivariate_t(m[0], pf.DEFAULT_INFLATION**2 * S[0], df=pf.DEFAULT_DF)
+    x = r.particles
+    alive = np.isfinite(r.log_weights)
+    target = optimal.log_posterior(x[alive], FIG2.mu, FIG2.rho, FIG2.prior) - q.logpdf(x[alive])
+    diff = r.log_weights[alive] - target
+    assert alive.sum() > 0.9 * N
+    assert_allclose(diff, diff[0], rtol=0, atol=1e-8)
+
+
+# --- repeatability and batching --------------------------------------------------------
+
+
+@pytest.mark.parametrize("proposal", ["second_order", "prior"])
+def test_same_seed_gives_identical_output(proposal):
+    kwargs = dict(proposal=proposal, ess_threshold=1.0)  # resampling at every step too
+    a = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 500, np.random.default_rng(10), **kwargs)
+    b = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 500, np.random.default_rng(10), **kwargs)
+    c = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 500, np.random.default_rng(11), **kwargs)
+    for name in ("particles", "log_weights", "ess", "resampled", "ancestors"):
+        assert_array_equal(getattr(a, name), getattr(b, name))
+    assert not np.array_equal(a.particles, c.particles)
+
+
+def test_single_is_the_batch_of_one():
+    a = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 400, np.random.default_rng(12))
+    b = run(np.array([FIG2.mu]), FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 400,
+            np.random.default_rng(12))
+    assert len(b) == 1
+    assert_array_equal(a.particles, b.particles[0])
+    assert_array_equal(a.log_weights, b.log_weights[0])
+    assert_allclose(np.array(b.moments())[:, 0], a.moments(), rtol=1e-15)
+    assert_allclose(np.array(b.standard_errors())[:, 0], a.standard_errors(), rtol=1e-15)
+
+
+def test_batch_of_different_triples():
+    rng = np.random.default_rng(13)
+    mu = model.simulate_measurements(model.G(FIG2.c, -2), FIG2.rho, rng, size=8)
+    b = run(mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 1000, rng)
+    assert b.particles.shape == (8, 1000, 3) and b.ess.shape == (8, 3)
+    assert_allclose(logsumexp(b.log_weights, axis=-1), 0.0, atol=1e-12)
+    m = b.moments()
+    for i in (0, 7):
+        assert_allclose(b.trial(i).moments(), [f[i] for f in m], rtol=1e-12)
+
+
+def test_resampling_duplicates_particles_with_their_ancestors():
+    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 800, np.random.default_rng(14),
+                        ess_threshold=1.0)
+    assert_array_equal(r.resampled, [False, True, True])
+    assert len(np.unique(r.ancestors)) < 800
+    for a in np.unique(r.ancestors)[:20]:
+        same = r.particles[r.ancestors == a]
+        assert_array_equal(same, np.broadcast_to(same[0], same.shape))
+    assert r.distinct_ess() <= r.ess[-1] + 1e-9
+
+
+def test_result_is_immutable():
+    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 100, np.random.default_rng(15))
+    with pytest.raises(ValueError):
+        r.particles[0, 0] = 1.0
+    with pytest.raises(AttributeError):
+        r.ess = None
+
+
+# --- collapse and convergence ----------------------------------------------------------
+
+
+def test_bootstrap_collapses_on_fig2_while_the_proposal_does_not():
+    N = 4000
+    boot = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(16),
+                           proposal="prior", ess_threshold=0.5)
+    assert boot.ess[0] < 0.02 * N  # a bearing alone leaves a thin wedge of the prior
+    assert boot.resampled[1]
+    assert boot.distinct_ess() < 10  # the copies made by resampling count as one particle
+    plain = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(16),
+                            proposal="prior", ess_threshold=0.0)
+    assert np.all(plain.ess[1:] < 10)  # after two bearings: a handful of particles
+    good = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(16))
+    assert np.all(good.ess > 0.3 * N) and not good.resampled.any()
+    assert good.distinct_ess() == pytest.approx(good.ess[-1], rel=1e-12)
+
+
+def test_fig2_moments_agree_with_the_optimal_filter_at_N_4000(fig2_optimal):
+    b = replicates(4000, 16, seed=17)
+    est = np.array(b.moments())  # (4, R)
+    ref = reference(fig2_optimal)[:, None]
+    # Each replicate within 5 of its own delta-method standard errors ...
+    se = np.array(b.standard_errors())
+    assert np.all(np.abs(est - ref) < 5 * se)
+    # ... and their average within 4 standard errors of the average.
+    spread = est.std(axis=1, ddof=1) / np.sqrt(est.shape[1])
+    assert np.all(np.abs(est.mean(axis=1) - ref[:, 0]) < 4 * spread)
+    # The error is a few percent of the posterior SDs.
+    assert np.all(np.abs(est - ref) < 0.1 * ref[[1, 1, 3, 3]])
+
+
+def root_mean_square_errors(opt, sizes, n_replicates, seed):
+    ref = reference(opt)[:, None]
+    return np.array([np.sqrt(np.mean((np.array(replicates(n, n_replicates, seed + i).moments())
+                                       - ref) ** 2, axis=1))
+                     for i, n in enumerate(sizes)])
+
+
+def test_error_shrinks_with_N(fig2_optimal):
+    # 40 times the particles: the RMS error over 16 replicates should fall by
+    # about sqrt(40) = 6.3 (between 3.4 and 9 over 20 seeds tried).
+    rmse = root_mean_square_errors(fig2_optimal, (500, 20000), 16, seed=18)
+    assert np.all(rmse[1] < rmse[0] / 2.5)
+
+
+@pytest.mark.slow
+def test_error_shrinks_like_one_over_root_N(fig2_optimal):
+    sizes = (500, 2000, 20000)
+    rmse = root_mean_square_errors(fig2_optimal, sizes, 48, seed=19)
+    assert np.all(rmse[1:] < rmse[:-1])
+    ratio = rmse[0] / rmse[-1]  # sqrt(40) = 6.3 expected
+    assert np.all(ratio > 3.5) and np.all(ratio < 12)
+    # At N = 20000 the errors are about 1 % of the posterior SDs.
+    assert np.all(rmse[-1] < 0.015 * reference(fig2_optimal)[[1, 1, 3, 3]])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("key", ["fig5", "fig6"])
+def test_other_scenarios_agree_with_the_optimal_filter(key):
+    s = SCENARIOS[key]
+    opt = optimal.marginals(s.mu, s.rho, s.prior, support="front")
+    b = replicates(8000, 8, seed=20, scenario=s)
+    est, se = np.array(b.moments()), np.array(b.standard_errors())
+    assert np.all(np.abs(est - reference(opt)[:, None]) < 5 * se)
+
+
+@pytest.mark.slow
+def test_fig3_converges_without_resampling_but_not_with_it():
+    # Fig. 3's posterior (depth 20.7 +- 13.7) is far from the second-order
+    # Gaussian (10.0 +- 2.2): the hard case for the proposal.
+    s = SCENARIOS["fig3"]
+    ref = reference(optimal.marginals(s.mu, s.rho, s.prior, support="front"))[:, None]
+    b = replicates(50000, 8, seed=24, scenario=s)
+    est, se = np.array(b.moments()), np.array(b.standard_errors())
+    assert np.all(np.abs(est - ref) < 5 * se)
+    assert np.all(np.abs(est - ref) < 0.1 * ref[[1, 1, 3, 3]])
+    # Resampling against the intermediate targets loses the far depth tail for good.
+    b = replicates(50000, 8, seed=24, scenario=s, ess_threshold=0.5)
+    assert np.all(b.resampled[:, 1:])
+    assert np.all(np.array(b.moments()) - ref < -0.2 * ref[[1, 1, 3, 3]])
+
+
+# --- densities -------------------------------------------------------------------------
+
+
+def test_depth_density_approaches_the_optimal_marginal(fig2_optimal):
+    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 20000, np.random.default_rng(21))
+    grid = np.linspace(2.5, 14.0, 231)
+    exact = fig2_optimal.depth_pdf(grid)
+    step = grid[1] - grid[0]
+    for method in ("kde", "histogram"):
+        p = r.density("y", grid, method=method)
+        assert p.shape == grid.shape and np.all(p >= 0)
+        assert np.sum(p) * step == pytest.approx(1.0, abs=0.02)  # the grid holds ~all the mass
+        assert np.sum(np.abs(p - exact)) * step < 0.1  # L1 distance
+    v = np.linspace(0.0, 3.0, 151)
+    l1 = np.sum(np.abs(r.density("v", v) - fig2_optimal.velocity_pdf(v))) * (v[1] - v[0])
+    assert l1 < 0.1
+
+
+def test_density_bandwidth_and_grid_checks():
+    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 500, np.random.default_rng(22))
+    narrow = r.density("y", np.linspace(0, 20, 50), bandwidth=0.05)
+    wide = r.density("y", np.linspace(0, 20, 50), bandwidth=2.0)
+    assert narrow.max() > wide.max()
+    with pytest.raises(ValueError, match="evenly spaced"):
+        r.density("y", [1.0, 2.0, 4.0], method="histogram")
+    with pytest.raises(ValueError, match="grid must be increasing"):
+        r.density("y", [3.0, 2.0])
+    with pytest.raises(ValueError, match="bandwidth must be positive"):
+        r.density("y", [1.0, 2.0], bandwidth=0.0)
+    with pytest.raises(ValueError, match="method must be"):
+        r.density("y", [1.0, 2.0], method="spline")
+    with pytest.raises(ValueError, match="component must be one of"):
+        r.marginal("depth")
+
+
+# --- bad input -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n", [0, -5, 2.5, True, "100"])
+def test_rejects_bad_n_particles(n):
+    with pytest.raises(ValueError, match="n_particles must be an integer >= 1"):
+        particle_filter(MU_17, 0.005, FIG2.prior, n, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("mu, message", [
+    ((0.1, 0.1, 0.1), "mu is degenerate"),
+    ((-0.1, 0.0, 0.1), "mu is degenerate"),
+    ((np.nan, 0.0, 0.2), "mu must be finite"),
+    ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
+    ((-0.3, 0.0), r"mu must have shape \(3,\)"),
+])
+def test_rejects_bad_measurements(mu, message):
+    with pytest.raises(ValueError, match=message):
+        particle_filter(mu, 0.005, FIG2.prior, 100, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("rho, message", [(0.0, "rho must be positive"),
+                                          (-1.0, "rho must be positive"),
+                                          (np.inf, "rho must be finite")])
+def test_rejects_bad_rho(rho, message):
+    with pytest.raises(ValueError, match=message):
+        particle_filter(MU_17, rho, FIG2.prior, 100, np.random.default_rng(0))
+    with pytest.raises(ValueError, match=message):
+        run(np.array([MU_17]), rho, FIG2.prior.mean, FIG2.prior.cov, 100, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"proposal": "gaussian"}, "proposal must be one of"),
+    ({"resampler": "stratified"}, "resampler must be one of"),
+    ({"ess_threshold": 1.5}, r"ess_threshold must lie in \[0, 1\]"),
+    ({"ess_threshold": -0.1}, r"ess_threshold must lie in \[0, 1\]"),
+    ({"df": 0.0}, "df must be positive"),
+    ({"df": "many"}, "df must be numeric"),
+    ({"inflation": -1.0}, "inflation must be positive"),
+])
+def test_rejects_bad_options(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        particle_filter(MU_17, 0.005, FIG2.prior, 100, np.random.default_rng(0), **kwargs)
+
+
+def test_rejects_a_bad_rng_or_prior():
+    with pytest.raises(ValueError, match="rng must be a numpy.random.Generator"):
+        particle_filter(MU_17, 0.005, FIG2.prior, 100, 42)
+    with pytest.raises(ValueError, match="rng must be a numpy.random.Generator"):
+        particle_filter(MU_17, 0.005, FIG2.prior, 100, np.random.RandomState(0))
+    with pytest.raises(ValueError, match="prior must be a Gaussian"):
+        particle_filter(MU_17, 0.005, (FIG2.prior.mean, FIG2.prior.cov), 100,
+                        np.random.default_rng(0))
+
+
+def test_run_rejects_bad_shapes():
+    rng = np.random.default_rng(0)
+    p = FIG2.prior
+    with pytest.raises(ValueError, match=r"mu must have shape \(B, 3\)"):
+        run(np.array(MU_17), 0.005, p.mean, p.cov, 10, rng)
+    with pytest.raises(ValueError, match=r"rho must be a scalar or have shape \(2,\)"):
+        run(np.array([MU_17, MU_17]), [0.005] * 3, p.mean, p.cov, 10, rng)
+    with pytest.raises(ValueError, match=r"prior_mean must have shape \(3,\) or \(2, 3\)"):
+        run(np.array([MU_17, MU_17]), 0.005, np.zeros((3, 3)), p.cov, 10, rng)
+    with pytest.raises(ValueError, match="prior_cov must be positive definite"):
+        run(np.array([MU_17]), 0.005, p.mean, -np.eye(3), 10, rng)
+    with pytest.raises(ValueError, match=r"mu\[1\] is degenerate"):
+        run(np.array([MU_17, (0.1, 0.1, 0.1)]), 0.005, p.mean, p.cov, 10, rng)
+
+
+@pytest.mark.parametrize("W, M, message", [
+    ([0.5, 0.6], None, "W must sum to 1"),
+    ([1.5, -0.5], None, "W must be non-negative"),
+    ([0.5, np.nan], None, "W must be finite"),
+    ([0.5, 0.5], 0, "M must be an integer >= 1"),
+    (np.zeros((2, 0)), None, r"W must have shape \(\.\.\., N\)"),
+])
+def test_resamplers_reject_bad_weights(W, M, message):
+    for resampler in RESAMPLERS.values():
+        with pytest.raises(ValueError, match=message):
+            resampler(W, np.random.default_rng(0), M)
+    with pytest.raises(ValueError, match="rng must be a numpy.random.Generator"):
+        systematic([0.5, 0.5], None)
+
+
+def test_prior_proposal_with_one_particle_can_lose_every_particle():
+    # Half the prior's mass is behind the camera; a lone particle there has weight zero.
+    prior = Gaussian(FIG2.prior.mean - [0.0, 60.0, 0.0], FIG2.prior.cov)
+    with pytest.raises(RuntimeError, match="every particle of trial 0 has zero weight after mu_1"):
+        particle_filter(FIG2.mu, FIG2.rho, prior, 1, np.random.default_rng(0), proposal="prior")
