@@ -11,10 +11,12 @@ Modules: :mod:`~depthcore.model` (Eqs. (1)-(4), (9), (11)),
 :mod:`~depthcore.second_order` (Eqs. (5), (7), (8)), :mod:`~depthcore.ekf`
 (Eqs. (10)-(12)), :mod:`~depthcore.optimal` (Eqs. (6), (13)-(16)),
 :mod:`~depthcore.scenarios` (Figures 2-6), :mod:`~depthcore.reproduce` and
-:mod:`~depthcore.figures`.
+:mod:`~depthcore.figures`; beyond the paper, the unscented Kalman filter
+(:mod:`~depthcore.ukf`), a particle filter (:mod:`~depthcore.particle`), a
+Monte Carlo study (:mod:`~depthcore.study`) and sweeps (:mod:`~depthcore.sweeps`).
 """
 
-from . import ekf, model, optimal, reproduce, scenarios, second_order
+from . import ekf, model, optimal, particle, reproduce, scenarios, second_order, ukf
 from .gaussian import Gaussian, paper_prior
 from .optimal import marginals as optimal_marginals
 from .scenarios import SCENARIOS
@@ -32,7 +34,9 @@ __all__ = [
     "optimal",
     "optimal_marginals",
     "paper_prior",
+    "particle",
     "reproduce",
     "scenarios",
     "second_order",
+    "ukf",
 ]

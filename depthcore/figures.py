@@ -21,6 +21,8 @@ STYLE = {
     "optimal": {"label": "optimal $p_o$", "color": "black", "linestyle": "-"},
     "second_order": {"label": "second order $p_s$", "color": "tab:blue", "linestyle": "--"},
     "ekf": {"label": "EKF $p_e$", "color": "tab:red", "linestyle": ":"},
+    "ukf": {"label": "UKF", "color": "tab:green", "linestyle": "-."},
+    "particle": {"label": "particle filter", "color": "tab:purple", "linestyle": (0, (5, 1, 1, 1, 1, 1))},
 }
 
 #: Axis ranges comparable with the paper's plots.
@@ -38,7 +40,7 @@ _SYMBOL = {"depth": "y", "velocity": "v"}
 _NO_DATE = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 
 
-def plot_marginals(ax, curves: dict, quantity: str, filters=reproduce.FILTERS):
+def plot_marginals(ax, curves: dict, quantity: str, filters=reproduce.PAPER_FILTERS):
     """Draw the marginal densities in ``curves`` on ``ax`` with the shared style."""
     for name in filters:
         ax.plot(curves["grid"], curves[name], linewidth=1.6, **STYLE[name])
@@ -49,7 +51,7 @@ def plot_marginals(ax, curves: dict, quantity: str, filters=reproduce.FILTERS):
     return ax
 
 
-def figure(key: str, n: int = 801, filters=reproduce.FILTERS):
+def figure(key: str, n: int = 801, filters=reproduce.PAPER_FILTERS):
     """Figure ``key`` (``"fig2"`` ... ``"fig6"``): the marginal densities the paper plots.
 
     Parameters
@@ -58,8 +60,10 @@ def figure(key: str, n: int = 801, filters=reproduce.FILTERS):
     n : int
         Grid points.
     filters : sequence of str
-        Which filters to draw; all three by default (the paper's Figure 4
-        omits the optimal one).
+        Which filters to draw: the paper's three by default (its Figure 4
+        omits the optimal one, which we draw), or
+        :data:`depthcore.reproduce.FILTERS` for the extended figure with the
+        UKF and the particle filter.
 
     Returns
     -------
@@ -69,7 +73,7 @@ def figure(key: str, n: int = 801, filters=reproduce.FILTERS):
 
     s = SCENARIOS[key]
     lo, hi = GRIDS[key]
-    curves = reproduce.curves(s, np.linspace(lo, hi, n))
+    curves = reproduce.curves(s, np.linspace(lo, hi, n), filters=filters)
     fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
     plot_marginals(ax, curves, s.quantity, filters)
     if key in YLIM:
@@ -78,7 +82,8 @@ def figure(key: str, n: int = 801, filters=reproduce.FILTERS):
         if peak > YLIM[key]:
             ax.annotate(f"EKF peak truncated (height {peak:.2f})", xy=(0.98, 0.95),
                         xycoords="axes fraction", ha="right", va="top", fontsize=9)
-    ax.set_title(f"Figure {s.figure}: {caption(key)}", fontsize=10)
+    extended = "extended " if set(filters) - set(reproduce.PAPER_FILTERS) else ""
+    ax.set_title(f"Figure {s.figure} ({extended}reproduction): {caption(key)}", fontsize=9, wrap=True)
     return fig
 
 
@@ -92,17 +97,22 @@ def caption(key: str) -> str:
 
 
 def save_all(out_dir, formats=("pdf", "png", "svg")) -> list[Path]:
-    """Write Figures 2-6 as ``figure<N>.<fmt>`` into ``out_dir``; returns the paths."""
+    """Write Figures 2-6 into ``out_dir``; returns the paths.
+
+    ``figure<N>.<fmt>`` has the paper's three filters, ``figure<N>-extended.<fmt>``
+    adds the UKF and the particle filter.
+    """
     import matplotlib.pyplot as plt
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for key, s in SCENARIOS.items():
-        fig = figure(key)
-        for fmt in formats:
-            path = out / f"figure{s.figure}.{fmt}"
-            fig.savefig(path, dpi=200, metadata=_NO_DATE.get(fmt))
-            paths.append(path)
-        plt.close(fig)
+        for suffix, filters in (("", reproduce.PAPER_FILTERS), ("-extended", reproduce.FILTERS)):
+            fig = figure(key, filters=filters)
+            for fmt in formats:
+                path = out / f"figure{s.figure}{suffix}.{fmt}"
+                fig.savefig(path, dpi=200, metadata=_NO_DATE.get(fmt))
+                paths.append(path)
+            plt.close(fig)
     return paths

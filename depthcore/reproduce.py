@@ -11,14 +11,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import optimal
+from . import optimal, particle, ukf
 from .ekf import ekf
 from .gaussian import Gaussian
 from .scenarios import REPORTED, REPORTED_DECIMALS, SCENARIOS, Scenario
 from .second_order import noise_free_state, second_order
 
-FILTERS = ("optimal", "second_order", "ekf")
+#: The paper's three filters.
+PAPER_FILTERS = ("optimal", "second_order", "ekf")
+#: With the two filters of the textbook chapter: the UKF and a particle filter.
+FILTERS = PAPER_FILTERS + ("ukf", "particle")
 QUANTITIES = ("depth", "velocity")
+#: Particles and seed of the particle filter wherever this module runs it.
+PARTICLES = 20_000
+PARTICLE_SEED = 1990
 _COMPONENT = {"depth": "y", "velocity": "v"}
 
 
@@ -37,6 +43,33 @@ def optimal_moments(m: optimal.OptimalMarginals) -> dict:
         "depth": {"mean": m.depth_mean, "sd": m.depth_sd, "error": m.depth_error},
         "velocity": {"mean": m.velocity_mean, "sd": m.velocity_sd, "error": m.velocity_error},
         "prob_behind_camera": m.prob_behind_camera,
+    }
+
+
+def ukf_posterior(mu, rho: float, prior: Gaussian) -> Gaussian:
+    """The UKF's density at time 3, with the default sigma points.
+
+    With the paper's broad prior some sigma points lie behind the camera at
+    the first update; the filter is run all the same (``allow_behind_camera``),
+    as the comparison is the point.
+    """
+    return ukf.ukf(mu, rho, prior, allow_behind_camera=True).posterior
+
+
+def particle_result(mu, rho: float, prior: Gaussian, n: int = PARTICLES,
+                    seed: int = PARTICLE_SEED) -> "particle.ParticleResult":
+    """The particle filter with ``n`` particles and a fixed seed (repeatable)."""
+    return particle.particle_filter(mu, rho, prior, n, np.random.default_rng(seed))
+
+
+def particle_moments(r) -> dict:
+    """Depth and velocity moments of a particle filter, with Monte Carlo standard errors."""
+    m, se = r.moments(), r.standard_errors()
+    return {
+        "depth": {"mean": float(m.depth_mean), "sd": float(m.depth_sd),
+                  "error": float(max(se.depth_mean, se.depth_sd))},
+        "velocity": {"mean": float(m.velocity_mean), "sd": float(m.velocity_sd),
+                     "error": float(max(se.velocity_mean, se.velocity_sd))},
     }
 
 
@@ -64,6 +97,8 @@ def summarize(mu, rho: float, prior: Gaussian) -> dict:
     }
     filters["optimal"]["prob_behind_camera_all_depths"] = optimal.marginals(
         mu, rho, prior, support="all").prob_behind_camera
+    filters["ukf"] = gaussian_moments(ukf_posterior(mu, rho, prior))
+    filters["particle"] = particle_moments(particle_result(mu, rho, prior))
     return {
         "mu": [float(v) for v in mu],
         "rho": float(rho),
@@ -93,6 +128,14 @@ def _rows(s: Scenario) -> list[dict]:
     for q in QUANTITIES:
         rows.append({"filter": "ekf", "reading": "printed", "support": "all",
                      "quantity": q, **m[q], "error": 0.0})
+    m = gaussian_moments(ukf_posterior(s.mu, s.rho, prior))
+    for q in QUANTITIES:
+        rows.append({"filter": "ukf", "reading": "-", "support": "all",
+                     "quantity": q, **m[q], "error": 0.0})
+    m = particle_moments(particle_result(s.mu, s.rho, prior))
+    for q in QUANTITIES:
+        rows.append({"filter": "particle", "reading": "-", "support": "front",
+                     "quantity": q, **m[q]})
     for row in rows:
         reported = REPORTED.get(s.key, {}).get(row["filter"], {}).get(row["quantity"])
         row["reported_mean"], row["reported_sd"] = reported if reported else (None, None)
@@ -132,8 +175,8 @@ def reproduce(keys=None) -> dict:
     return {"scenarios": out}
 
 
-def curves(s: Scenario, grid, quantity: str | None = None) -> dict:
-    """The marginal densities of the three filters on ``grid``, for plotting.
+def curves(s: Scenario, grid, quantity: str | None = None, filters=PAPER_FILTERS) -> dict:
+    """The marginal densities of the filters on ``grid``, for plotting.
 
     Parameters
     ----------
@@ -142,25 +185,33 @@ def curves(s: Scenario, grid, quantity: str | None = None) -> dict:
         Depths or velocities.
     quantity : {"depth", "velocity"}, optional
         Defaults to the one the paper plots for ``s``.
+    filters : sequence of str
+        Names from :data:`FILTERS`; the particle filter's density is a
+        weighted Gaussian kernel density estimate (Silverman's bandwidth).
 
     Returns
     -------
     dict
-        ``{"grid": (n,), "optimal": (n,), "second_order": (n,), "ekf": (n,)}``.
+        ``{"grid": (n,), name: (n,) for each filter}``.
     """
     quantity = quantity or s.quantity
     if quantity not in QUANTITIES:
         raise ValueError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")
     grid = np.asarray(grid, dtype=float)
     prior = s.prior
-    m = optimal.marginals(s.mu, s.rho, prior)
+    unknown = set(filters) - set(FILTERS)
+    if unknown:
+        raise ValueError(f"filters must be among {FILTERS}, got {sorted(unknown)}")
     comp = _COMPONENT[quantity]
-    return {
-        "grid": grid,
-        "optimal": m.depth_pdf(grid) if quantity == "depth" else m.velocity_pdf(grid),
-        "second_order": second_order(s.mu, s.rho, prior).marginal_pdf(comp, grid),
-        "ekf": ekf(s.mu, s.rho, prior).posterior.marginal_pdf(comp, grid),
+    density = {
+        "optimal": lambda: (optimal.marginals(s.mu, s.rho, prior).depth_pdf(grid) if quantity == "depth"
+                            else optimal.marginals(s.mu, s.rho, prior).velocity_pdf(grid)),
+        "second_order": lambda: second_order(s.mu, s.rho, prior).marginal_pdf(comp, grid),
+        "ekf": lambda: ekf(s.mu, s.rho, prior).posterior.marginal_pdf(comp, grid),
+        "ukf": lambda: ukf_posterior(s.mu, s.rho, prior).marginal_pdf(comp, grid),
+        "particle": lambda: particle_result(s.mu, s.rho, prior).density(comp, grid),
     }
+    return {"grid": grid, **{name: density[name]() for name in filters}}
 
 
 def format_table(result: dict) -> str:

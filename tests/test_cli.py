@@ -23,7 +23,9 @@ def test_reproduce_json_has_every_scenario_filter_and_reading(capsys):
         assert ("optimal", "derived", "front", "velocity") in combos
         assert ("second_order", "printed", "all", "depth") in combos
         assert ("ekf", "printed", "all", "depth") in combos
-        assert len(combos) == len(s["rows"]) == 14
+        assert ("ukf", "-", "all", "velocity") in combos
+        assert ("particle", "-", "front", "depth") in combos
+        assert len(combos) == len(s["rows"]) == 18
 
 
 def test_reproduce_table_prints_paper_numbers(capsys):
@@ -79,4 +81,5 @@ def test_estimate_rejects_bad_input_with_one_line(args, message):
 def test_figures_command_writes_files(tmp_path):
     assert main(["figures", "--out", str(tmp_path)]) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == sorted(f"figure{n}.{ext}" for n in range(2, 7) for ext in ("pdf", "png", "svg"))
+    assert names == sorted(f"figure{n}{x}.{ext}" for n in range(2, 7) for x in ("", "-extended")
+                           for ext in ("pdf", "png", "svg"))
