@@ -16,6 +16,9 @@ from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from .second_order import noise_free_state
 
 
+_STUDY_FILTERS = ("optimal", "second_order", "ekf", "ukf", "particle")
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message}\n")
@@ -72,8 +75,11 @@ def _cmd_study(args) -> str:
             sys.stderr.write(f"\rstudy: {done}/{total} trials" + ("\n" if done == total else ""))
             sys.stderr.flush()
     truth = None if args.truth is None else np.array(args.truth)
+    if args.particles < 1:
+        raise ValueError(f"particles must be a positive integer, got {args.particles}")
     result = study.study(truth=truth, rho=args.rho, trials=args.trials, seed=args.seed,
-                         prior=args.prior, names=tuple(args.filters), progress=progress)
+                         prior=args.prior, names=tuple(args.filters), n_particles=args.particles,
+                         progress=progress)
     return json.dumps(result, indent=2) if args.json else study.format_result(result)
 
 
@@ -106,8 +112,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="true state at time 3 (default: Figure 2's c = (1.2, 6, 1.2))")
     st.add_argument("--prior", choices=("paper", "fixed"), default="paper",
                     help="paper: the paper's rule on each trial's measurements; fixed: on the truth")
-    st.add_argument("--filters", nargs="+", default=["optimal", "second_order", "ekf"],
-                    help="filters to score")
+    st.add_argument("--filters", nargs="+", default=list(_STUDY_FILTERS), choices=_STUDY_FILTERS,
+                    metavar="NAME", help=f"filters to score (default all: {' '.join(_STUDY_FILTERS)})")
+    st.add_argument("--particles", type=int, default=2000, help="particles per trial (default 2000)")
     st.add_argument("--json", action="store_true", help="print JSON instead of a table")
     st.set_defaults(run=_cmd_study)
 

@@ -29,7 +29,7 @@ from typing import Callable
 import numpy as np
 from scipy.special import ndtr
 
-from . import _checks, model, optimal
+from . import _checks, model, optimal, particle, ukf
 from .ekf import run as ekf_run
 from .gaussian import PAPER_PRIOR_SCALE
 from .scenarios import SCENARIOS
@@ -37,6 +37,9 @@ from .second_order import second_order_batch
 
 PRIORS = ("paper", "fixed")
 LEVELS = (0.68, 0.95)
+FILTERS = ("optimal", "second_order", "ekf", "ukf", "particle")
+#: Particles per trial of the particle filter.
+PARTICLES = 2000
 
 
 @dataclass(frozen=True)
@@ -172,8 +175,64 @@ def hellinger(reference: optimal.BatchMarginals, log_q: Callable, q_mean, q_sd,
     return np.sqrt(np.clip(1.0 - bc, 0.0, 1.0))
 
 
-def run_filters(trials: Trials, names=("optimal", "second_order", "ekf")) -> dict:
-    """Run the named filters over every trial; returns ``{name: Estimates}``."""
+def _particle_estimates(trials: Trials, batch, reference) -> Estimates:
+    """Scores' inputs for the particle filter: weighted moments, CDFs, a binned KDE."""
+    W = np.exp(batch.log_weights)
+    x = batch.particles
+    mean = np.einsum("bn,bni->bi", W, x)
+    d = x - mean[:, None, :]
+    cov = np.einsum("bn,bni,bnj->bij", W, d, d)
+    t = trials.truth
+    depth_cdf = np.sum(W * (x[..., 1] <= t[1]), axis=1)
+    velocity_cdf = np.sum(W * (x[..., 2] <= t[2]), axis=1)
+    sd = np.sqrt(cov[:, 1, 1])
+    ess = 1.0 / np.sum(W**2, axis=1)
+    bandwidth = 1.06 * sd * ess ** -0.2  # Scott's rule with the effective sample size
+    log_q = _binned_kde(x[..., 1], W, bandwidth)
+    h = hellinger(reference, log_q, mean[:, 1], sd)
+    return Estimates(mean, cov, depth_cdf, velocity_cdf, h)
+
+
+def _binned_kde(samples, W, bandwidth, bins: int = 2048):
+    """A weighted Gaussian kernel density estimate per row, by linear binning.
+
+    Returns ``log_q(y)`` for depths ``y`` of shape (B, n): the weights are
+    spread linearly onto ``bins`` equal bins spanning each row's samples plus
+    six bandwidths, convolved with the kernel, and interpolated.
+    """
+    B = samples.shape[0]
+    lo = np.min(samples, axis=1) - 6 * bandwidth
+    hi = np.max(samples, axis=1) + 6 * bandwidth
+    step = (hi - lo) / (bins - 1)
+    pos = (samples - lo[:, None]) / step[:, None]
+    left = np.clip(np.floor(pos).astype(int), 0, bins - 2)
+    frac = pos - left
+    rows = np.arange(B)[:, None] * bins
+    grid_w = (np.bincount((rows + left).ravel(), (W * (1 - frac)).ravel(), B * bins)
+              + np.bincount((rows + left + 1).ravel(), (W * frac).ravel(), B * bins)).reshape(B, bins)
+    k = np.arange(-bins + 1, bins) * step[:, None] / bandwidth[:, None]
+    kernel = np.exp(-0.5 * k**2) / (np.sqrt(2 * np.pi) * bandwidth[:, None])
+    n_fft = 4 * bins
+    dens = np.fft.irfft(np.fft.rfft(grid_w, n_fft) * np.fft.rfft(kernel, n_fft), n_fft)
+    dens = np.maximum(dens[:, bins - 1:2 * bins - 1], 1e-300)
+    centres = lo[:, None] + step[:, None] * np.arange(bins)
+
+    def log_q(y):
+        out = np.stack([np.interp(y[i], centres[i], dens[i], left=1e-300, right=1e-300)
+                        for i in range(B)])
+        return np.log(out)
+
+    return log_q
+
+
+def run_filters(trials: Trials, names=FILTERS, rng: np.random.Generator | None = None,
+                n_particles: int = PARTICLES) -> dict:
+    """Run the named filters over every trial; returns ``{name: Estimates}``.
+
+    ``rng`` drives the particle filter (required when it is among ``names``).
+    The UKF runs with the default sigma points even where some lie behind the
+    camera (the paper's prior is that broad).
+    """
     mu, rho, pm, pc = trials.mu, trials.rho, trials.prior_mean, trials.prior_cov
     ref = optimal.batch_marginals(mu, rho, pm, pc)
     out = {}
@@ -189,6 +248,15 @@ def run_filters(trials: Trials, names=("optimal", "second_order", "ekf")) -> dic
         elif name == "ekf":
             means, covs = ekf_run(mu, rho, pm, pc)
             out[name] = _gaussian_estimates(trials, means[:, -1], covs[:, -1], ref)
+        elif name == "ukf":
+            means, covs = ukf.run(mu, rho, pm, np.broadcast_to(pc, (len(mu), 3, 3)),
+                                  allow_behind_camera=True)
+            out[name] = _gaussian_estimates(trials, means[:, -1], covs[:, -1], ref)
+        elif name == "particle":
+            if rng is None:
+                raise ValueError("rng is required to run the particle filter")
+            batch = particle.run(mu, rho, pm, pc, n_particles, rng)
+            out[name] = _particle_estimates(trials, batch, ref)
         else:
             raise ValueError(f"unknown filter {name!r}")
     return out
@@ -214,7 +282,7 @@ def scores(trials: Trials, est: Estimates) -> dict:
 
 
 def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, seed: int = 0,
-          prior: str = "paper", names=("optimal", "second_order", "ekf"), chunk: int = 250,
+          prior: str = "paper", names=FILTERS, chunk: int = 100, n_particles: int = PARTICLES,
           progress: Callable[[int, int], None] | None = None) -> dict:
     """The whole study; returns a JSON-ready dict.
 
@@ -228,20 +296,29 @@ def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, see
         Seed of the ``numpy.random.Generator`` that draws the noise.
     prior : {"paper", "fixed"}
     names : sequence of str
-        Filters to score.
+        Filters to score, from :data:`FILTERS`.
     chunk : int
         Trials run together; ``progress(done, total)`` is called after each chunk.
+    n_particles : int
+        Particles per trial of the particle filter.
+
+    The noise and the particle filter draw from two streams of the one seed:
+    the same seed and ``chunk`` give the same result; the particle filter's
+    draws (not the noise) also depend on ``chunk``.
     """
     truth = SCENARIOS["fig2"].c if truth is None else truth
-    rng = np.random.default_rng(seed)
-    all_trials = simulate(truth, rho, trials, rng, prior)
+    unknown = set(names) - set(FILTERS)
+    if unknown:
+        raise ValueError(f"filters must be among {FILTERS}, got {sorted(unknown)}")
+    noise_rng, particle_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    all_trials = simulate(truth, rho, trials, noise_rng, prior)
     parts = []
     n = len(all_trials.mu)
     for start in range(0, n, chunk):
         sl = slice(start, start + chunk)
         part = Trials(all_trials.truth, all_trials.rho, all_trials.mu[sl], all_trials.prior_mean[sl],
                       all_trials.prior_cov, 0)
-        parts.append(run_filters(part, names))
+        parts.append(run_filters(part, names, particle_rng, n_particles))
         if progress is not None:
             progress(min(start + chunk, n), n)
     merged = {name: Estimates(*(np.concatenate([getattr(p[name], f) for p in parts])
@@ -254,6 +331,7 @@ def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, see
         "trials": int(trials),
         "valid_trials": n,
         "rejected_trials": all_trials.n_rejected,
+        "particles": int(n_particles) if "particle" in names else None,
         "filters": {name: scores(all_trials, merged[name]) for name in names},
     }
 

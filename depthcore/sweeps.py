@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import model, optimal, study
+from . import model, optimal, study, ukf
 from .ekf import run as ekf_run
 from .gaussian import PAPER_PRIOR_SCALE
 from .scenarios import SCENARIOS
@@ -28,6 +28,9 @@ def _gaussian_rows(mu, rho, pm, pc):
     out = {"second_order": second_order_batch(mu, rho, pm, pc)}
     means, covs = ekf_run(mu, rho, pm, pc)
     out["ekf"] = (means[..., -1, :], covs[..., -1, :, :])
+    rhos = np.broadcast_to(rho, (len(mu),))
+    rows = [ukf.run(mu[i], rhos[i], pm[i], pc, allow_behind_camera=True) for i in range(len(mu))]
+    out["ukf"] = (np.array([m[-1] for m, _ in rows]), np.array([c[-1] for _, c in rows]))
     return out
 
 
@@ -60,7 +63,7 @@ def noise_sweep(rhos, truth=None, prior_scale: float = PAPER_PRIOR_SCALE) -> dic
     -------
     dict
         ``{"rho": (R,), name: {"depth_mean", "depth_sd", "hellinger"}}`` with
-        arrays of shape (R,) for ``"optimal"``, ``"second_order"``, ``"ekf"``.
+        arrays of shape (R,) for ``"optimal"``, ``"second_order"``, ``"ekf"``, ``"ukf"``.
     """
     truth = SCENARIOS["fig2"].c if truth is None else np.asarray(truth, dtype=float)
     rhos = np.atleast_1d(np.asarray(rhos, dtype=float))

@@ -13,15 +13,41 @@ from depthcore.scenarios import SCENARIOS
 
 
 def test_same_seed_same_result():
-    a = study.study(trials=40, seed=3)
-    b = study.study(trials=40, seed=3)
+    a = study.study(trials=40, seed=3, n_particles=300)
+    b = study.study(trials=40, seed=3, n_particles=300)
     assert a == b
-    assert study.study(trials=40, seed=4) != a
+    assert study.study(trials=40, seed=4, n_particles=300) != a
 
 
-def test_chunking_does_not_change_the_result():
-    a = study.study(trials=30, seed=2, chunk=7)
-    b = study.study(trials=30, seed=2, chunk=100)
+def test_particle_filter_tracks_the_optimal_filter():
+    r = study.study(trials=60, seed=5, n_particles=4000)
+    o, p = r["filters"]["optimal"], r["filters"]["particle"]
+    # averaged over 60 trials, the Monte Carlo error of the means is ~0.01 SD
+    assert abs(o["depth"]["bias"] - p["depth"]["bias"]) < 0.05 * o["depth"]["mean_sd"]
+    assert p["hellinger_depth"]["mean"] < 0.05
+
+
+def test_binned_kde_matches_direct_kde():
+    rng = np.random.default_rng(0)
+    x = rng.normal(5, 1, size=(2, 500))
+    W = rng.random((2, 500))
+    W /= W.sum(1, keepdims=True)
+    bw = np.array([0.3, 0.5])
+    y = np.linspace(2, 8, 50)[None].repeat(2, 0)
+    direct = np.stack([np.exp(-0.5 * ((y[i][:, None] - x[i]) / bw[i]) ** 2) @ W[i] / (np.sqrt(2 * np.pi) * bw[i])
+                       for i in range(2)])
+    assert_allclose(np.exp(study._binned_kde(x, W, bw)(y)), direct, rtol=1e-3, atol=1e-6)
+
+
+def test_unknown_filter_is_rejected():
+    with pytest.raises(ValueError, match="filters must be among"):
+        study.study(trials=5, names=("kalman",))
+
+
+def test_chunking_does_not_change_the_deterministic_filters():
+    names = ("optimal", "second_order", "ekf", "ukf")
+    a = study.study(trials=30, seed=2, chunk=7, names=names)
+    b = study.study(trials=30, seed=2, chunk=100, names=names)
     for name in a["filters"]:
         for q in ("depth", "velocity"):
             for k, v in a["filters"][name][q].items():
@@ -30,7 +56,7 @@ def test_chunking_does_not_change_the_result():
 
 def test_scores_follow_their_definitions():
     trials = study.simulate(SCENARIOS["fig2"].c, 1 / 200, 25, np.random.default_rng(0))
-    est = study.run_filters(trials, ("optimal", "ekf"))
+    est = study.run_filters(trials, ("optimal", "ekf"))  # no particle filter: no rng needed
     s = study.scores(trials, est["ekf"])
     err = est["ekf"].mean[:, 1] - trials.truth[1]
     assert s["depth"]["bias"] == pytest.approx(np.mean(err))
@@ -94,6 +120,7 @@ def test_study_command_json(capsys):
     assert main(["study", "--trials", "30", "--seed", "1", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["valid_trials"] == 30
+    assert set(data["filters"]) == {"optimal", "second_order", "ekf", "ukf", "particle"}
     for f in data["filters"].values():
         assert set(f) == {"depth", "velocity", "nees", "hellinger_depth"}
         assert set(f["depth"]) == {"bias", "rmse", "mean_sd", "coverage_68", "coverage_95"}
