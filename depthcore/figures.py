@@ -116,3 +116,66 @@ def save_all(out_dir, formats=("pdf", "png", "svg")) -> list[Path]:
                 paths.append(path)
             plt.close(fig)
     return paths
+
+
+def calibration(result: dict, quantity: str = "depth"):
+    """Coverage of each filter's central intervals against their nominal level.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.study.study`.
+    quantity : {"depth", "velocity"}
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.2, 4.6), layout="constrained")
+    ax.plot([0, 1], [0, 1], color="0.7", linewidth=1, label="calibrated")
+    for name, f in result["filters"].items():
+        cal = f["calibration"]
+        ax.plot(cal["levels"], cal[quantity], marker="o", markersize=3, **STYLE[name])
+    ax.set_xlabel("nominal level of the central interval")
+    ax.set_ylabel(f"fraction of trials whose true {quantity} it covers")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.legend(frameon=False, fontsize=8)
+    ax.set_title(f"{quantity}: {result['valid_trials']} trials, rho = {result['rho']:.4g}, "
+                 f"{result['prior']} prior", fontsize=9)
+    return fig
+
+
+def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False):
+    """One field of each filter against the swept variable.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.sweeps.noise_sweep` (``x="rho"``) or
+        :func:`depthcore.sweeps.prior_offset_sweep` (``x="offset"``).
+    field : {"hellinger", "depth_mean", "depth_sd"}
+    log_x : bool
+        Logarithmic horizontal axis.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    labels = {"rho": "noise level rho (radians)", "offset": "offset of the prior's depth"}
+    ylabels = {"hellinger": "Hellinger distance of the depth marginal to the optimal one",
+               "depth_mean": "depth mean", "depth_sd": "depth SD"}
+    fig, ax = plt.subplots(figsize=(6.0, 4.0), layout="constrained")
+    for name in reproduce.FILTERS:
+        if name in result and not (field == "hellinger" and name == "optimal"):
+            ax.plot(result[x], result[name][field], marker="o", markersize=3, **STYLE[name])
+    if log_x:
+        ax.set_xscale("log")
+    ax.set_xlabel(labels[x])
+    ax.set_ylabel(ylabels[field], fontsize=9)
+    ax.legend(frameon=False, fontsize=8)
+    return fig

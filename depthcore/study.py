@@ -38,6 +38,8 @@ from .second_order import second_order_batch
 PRIORS = ("paper", "fixed")
 LEVELS = (0.68, 0.95)
 FILTERS = ("optimal", "second_order", "ekf", "ukf", "particle")
+#: Nominal levels of the calibration curve: central intervals from 5 % to 99 %.
+CALIBRATION_LEVELS = tuple(np.round(np.concatenate([np.arange(0.05, 0.951, 0.05), [0.99]]), 2))
 #: Particles per trial of the particle filter.
 PARTICLES = 2000
 
@@ -263,7 +265,11 @@ def run_filters(trials: Trials, names=FILTERS, rng: np.random.Generator | None =
 
 
 def scores(trials: Trials, est: Estimates) -> dict:
-    """Bias, RMSE, coverage, NEES and Hellinger distance of one filter."""
+    """Bias, RMSE, coverage, NEES and Hellinger distance of one filter.
+
+    ``calibration`` holds the coverage of the central intervals at every level
+    of :data:`CALIBRATION_LEVELS`: a calibrated filter's curve is the diagonal.
+    """
     t = trials.truth
     err = est.mean - t
     out = {}
@@ -276,6 +282,11 @@ def scores(trials: Trials, est: Estimates) -> dict:
         }
     nees = np.einsum("ni,ni->n", err, np.linalg.solve(est.cov, err[..., None])[..., 0])
     out["nees"] = float(np.mean(nees))
+    out["calibration"] = {
+        "levels": list(CALIBRATION_LEVELS),
+        **{q: [float(np.mean(np.abs(cdf - 0.5) <= p / 2)) for p in CALIBRATION_LEVELS]
+           for q, cdf in (("depth", est.depth_cdf), ("velocity", est.velocity_cdf))},
+    }
     out["hellinger_depth"] = {"mean": float(np.mean(est.hellinger)),
                               "median": float(np.median(est.hellinger))}
     return out

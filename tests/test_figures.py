@@ -37,3 +37,19 @@ def test_curves_reject_unknown_quantity_or_filter():
         reproduce.curves(SCENARIOS["fig2"], [1.0], "position")
     with pytest.raises(ValueError, match="filters must be among"):
         reproduce.curves(SCENARIOS["fig2"], [1.0], filters=("kalman",))
+
+
+def test_calibration_and_sweep_figures():
+    from depthcore import study, sweeps
+
+    r = study.study(trials=20, seed=0, n_particles=200)
+    fig = figures.calibration(r)
+    assert len(fig.axes[0].get_lines()) == 1 + len(r["filters"])
+    plt.close(fig)
+    sw = sweeps.noise_sweep([1 / 500, 1 / 200])
+    fig = figures.sweep(sw, "rho", log_x=True)
+    assert len(fig.axes[0].get_lines()) == 3  # the optimal filter is the reference
+    plt.close(fig)
+    fig = figures.sweep(sweeps.prior_offset_sweep([0.0, 2.0]), "offset", "depth_mean")
+    assert len(fig.axes[0].get_lines()) == 4
+    plt.close(fig)
