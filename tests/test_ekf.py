@@ -71,7 +71,7 @@ def test_ekf_history_shapes():
 
 @settings(max_examples=50, deadline=None)
 @given(states())
-def test_theorem1_ekf_equals_second_order_when_prior_mean_is_exact(c):
+def test_theorem1_eq19_eq24_ekf_equals_second_order_when_prior_mean_is_exact(c):
     mu = bearings(c)
     c = noise_free_state(mu)
     prior = Gaussian(model.G(c, -2), 1000 * np.eye(3))
@@ -85,7 +85,7 @@ def test_theorem1_ekf_equals_second_order_when_prior_mean_is_exact(c):
     assert_allclose(hist.posterior.cov, ps.cov, rtol=1e-6, atol=1e-9 * np.abs(ps.cov).max())
 
 
-def test_theorem1_fails_for_the_printed_covariance():
+def test_theorem1_eq24_fails_for_the_printed_covariance():
     c = noise_free_state(MU_17)
     prior = Gaussian(model.G(c, -2), 1000 * np.eye(3))
     pe = ekf(MU_17, 1 / 200, prior).posterior

@@ -214,3 +214,19 @@ def test_batch_marginals_cdfs_and_density_match_quadrature():
     grid = np.array([[5.0, 10.0], [20.0, 1.5]])
     assert_allclose(np.exp(b.depth_log_pdf(grid)), m.depth_pdf(grid), rtol=1e-10)
     assert_allclose(b.moments.cov[0], m.cov, rtol=1e-10)
+
+
+def test_eq2_eq3_recursion_gives_eq6():
+    # Eq. (2) with the deterministic transition (3): the density at time k is the
+    # likelihood of mu_k times the density at time k-1 at the predecessor G^{-1} x
+    # (F has unit determinant, so no Jacobian). Three steps give Eq. (6).
+    s = SCENARIOS["fig2"]
+    rng = np.random.default_rng(9)
+    x3 = s.c + rng.normal(scale=[0.1, 0.5, 0.1], size=(30, 3))
+
+    def step(k, x):  # log p(x_k | I^k) up to a constant
+        lp = model.log_likelihood(s.mu[k - 1], x, s.rho)
+        return lp + (s.prior.logpdf(x) if k == 1 else step(k - 1, model.G(x, -1)))
+
+    diff = step(3, x3) - optimal.log_posterior(x3, s.mu, s.rho, s.prior)
+    assert np.ptp(diff) < 1e-8 * np.abs(diff).max()

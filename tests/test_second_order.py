@@ -16,7 +16,7 @@ from depthcore.second_order import (
 from helpers import bearings, states
 
 
-def test_eq7_paper_values():
+def test_eq7_eq17_eq18_paper_values():
     assert_allclose(noise_free_state(MU_17), [6 / 5, 6, 6 / 5], rtol=1e-14)
     assert_allclose(noise_free_state(MU_18), [2, 10, 2], rtol=1e-14)
 

@@ -1,0 +1,45 @@
+"""Eq. (13): Gaussian marginals, and the paper's prior."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from depthcore.gaussian import Gaussian, paper_prior
+from depthcore.scenarios import SCENARIOS
+
+
+def test_eq13_marginals_match_samples():
+    g = SCENARIOS["fig2"].prior
+    A = np.array([[2.0, 0.3, 0.1], [0.3, 1.0, -0.2], [0.1, -0.2, 0.5]])
+    g = Gaussian([1.0, 6.0, -0.5], A @ A.T)
+    x = np.random.default_rng(0).multivariate_normal(g.mean, g.cov, size=200_000)
+    for i, comp in enumerate("xyv"):
+        mean, sd = g.marginal(comp)
+        # 200000 draws: standard error of a mean sd/447, of an SD sd/632; 5 of them
+        assert abs(x[:, i].mean() - mean) < 5 * sd / 447
+        assert abs(x[:, i].std() - sd) < 5 * sd / 632
+
+
+def test_eq13_marginal_pdf_is_normalised_and_logpdf_matches_scipy():
+    from scipy.stats import multivariate_normal
+
+    g = Gaussian([0.0, 4.0, 1.0], np.diag([1.0, 4.0, 0.25]))
+    grid = np.linspace(-20, 30, 20001)
+    assert np.trapezoid(g.marginal_pdf("y", grid), grid) == pytest.approx(1.0, abs=1e-10)
+    x = np.array([[0.1, 3.0, 1.2], [1.0, 5.0, 0.0]])
+    assert_allclose(g.logpdf(x), multivariate_normal(g.mean, g.cov).logpdf(x), rtol=1e-12)
+
+
+def test_paper_prior_rule():
+    c = SCENARIOS["fig2"].c
+    p = paper_prior(c, depth_offset=2.0)
+    assert_allclose(p.mean, [c[0] - 2 * c[2], c[1], 0.0])
+    assert_allclose(p.cov, 1000 * np.eye(3))
+    with pytest.raises(ValueError, match="scale must be positive"):
+        paper_prior(c, scale=0.0)
+
+
+def test_gaussian_is_immutable():
+    g = Gaussian([0.0, 4.0, 1.0], np.eye(3))
+    with pytest.raises(ValueError):
+        g.mean[0] = 1.0
