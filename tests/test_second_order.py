@@ -96,3 +96,31 @@ def test_noise_free_states_names_the_bad_row():
 def test_reading_must_be_known():
     with pytest.raises(ValueError, match="reading must be one of"):
         likelihood_covariance(MU_17, 0.01, "halved")
+
+
+def test_eq20_eq21_eq22_residuals_are_linear_in_the_observation_vectors_near_c():
+    from depthcore.second_order import residual_gradients
+
+    mu = MU_17
+    c = noise_free_state(mu)
+    g = residual_gradients(c)
+    rng = np.random.default_rng(2)
+    d = rng.normal(size=3)
+    d /= np.linalg.norm(d)
+    for eps in (1e-2, 1e-3, 1e-4):
+        rest = residuals(c + eps * d, mu) - g @ (eps * d)
+        assert np.max(np.abs(rest)) < 0.05 * eps**2  # O(|x - c|^2)
+
+
+def test_eq23_second_order_density_is_the_linearised_posterior():
+    from depthcore import model
+    from depthcore.second_order import residual_gradients
+
+    mu, rho = MU_17, 1 / 200
+    c = noise_free_state(mu)
+    prior = paper_prior(c)
+    g = residual_gradients(c)
+    ps = second_order(mu, rho, prior)
+    x = ps.mean + np.random.default_rng(3).normal(scale=0.2, size=(40, 3))
+    eq23 = -np.sum(((x - c) @ g.T) ** 2, axis=1) / (2 * rho**2) + prior.logpdf(model.G(x, -2))
+    assert np.ptp(ps.logpdf(x) - eq23) < 1e-8
