@@ -295,7 +295,7 @@ _SECOND = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
 
 
 def _evaluate(interval, t, pb, shift, centre):
-    """Trapezoid sums (without the step) over nodes ``t`` (B, n), and the node data.
+    """Trapezoid sums (without the step) over nodes ``t`` (B, n).
 
     The sums, shape (11, B), are of the weight, of the first moments of
     ``(x, y, v) - centre`` and of the second moments in :data:`_SECOND` order
@@ -315,7 +315,7 @@ def _evaluate(interval, t, pb, shift, centre):
             term = term + extra[(i, j)]
         sums.append((w * term).sum(-1))
     sums.append((w * (offsets[..., 0] < 2)).sum(-1))
-    return np.stack(sums), (offsets[..., 0], log_w, mean, (cxx, cxv, cvv))
+    return np.stack(sums)
 
 
 class _Totals(NamedTuple):
@@ -388,31 +388,24 @@ def _ranges(pb: _Problem, intervals):
     return top, ranges
 
 
-def _integrate(pb: _Problem, intervals, rtol: float, keep_nodes: bool = False):
-    """Integrate the depth marginal of a batch; returns moments, errors, nodes."""
+def _integrate(pb: _Problem, intervals, rtol: float):
+    """Integrate the depth marginal of a batch; returns moments, errors, shift, grids."""
     top, ranges = _ranges(pb, intervals)
     centre = noise_free_states(pb.mu)
     grids = {}
     totals = {}
-    kept = {i: [] for i in ranges}
     for i, (lo, hi, active, step) in ranges.items():
         n = max(9, int(np.ceil(np.max((hi - lo) / step))) + 1)
         h = (hi - lo) / (n - 1)
         t = lo[:, None] + h[:, None] * np.arange(n)
-        sums, nodes = _evaluate(i, t, pb, top, centre)
         grids[i] = (lo, h * active, n)
-        totals[i] = sums
-        if keep_nodes:
-            kept[i].append(nodes)
+        totals[i] = _evaluate(i, t, pb, top, centre)
     previous = _moments(sum(totals[i] * grids[i][1] for i in ranges), centre)
     for _ in range(_MAX_HALVINGS):
         for i, (lo, h, n) in grids.items():
             t = lo[:, None] + h[:, None] * (np.arange(n - 1) + 0.5)
-            sums, nodes = _evaluate(i, np.where(h[:, None] > 0, t, 0.0), pb, top, centre)
-            totals[i] = totals[i] + sums
+            totals[i] = totals[i] + _evaluate(i, np.where(h[:, None] > 0, t, 0.0), pb, top, centre)
             grids[i] = (lo, 0.5 * h, 2 * n - 1)
-            if keep_nodes:
-                kept[i].append(nodes)
         current = _moments(sum(totals[i] * grids[i][1] for i in ranges), centre)
         now = current.key_moments()
         change = np.abs(now - previous.key_moments())
@@ -423,7 +416,7 @@ def _integrate(pb: _Problem, intervals, rtol: float, keep_nodes: bool = False):
         previous = current
     else:
         raise RuntimeError("the optimal marginal's quadrature did not converge")
-    return current, err_y, err_v, top, grids, kept
+    return current, err_y, err_v, top, grids
 
 
 class Moments(NamedTuple):
@@ -484,7 +477,7 @@ def moments(mu, rho: float, prior_mean, prior_cov, reading: str = "derived",
     rtol = _checks.positive_scalar(rtol, "rtol")
     out, means, covs = [], [], []
     for start in range(0, pb.mu.shape[0], chunk):
-        m, err_y, err_v, *_ = _integrate(pb.take(slice(start, start + chunk)), intervals, rtol)
+        m, err_y, err_v, _, _ = _integrate(pb.take(slice(start, start + chunk)), intervals, rtol)
         out.append(np.concatenate([m.key_moments(), [err_y, err_v, m.behind]]))
         means.append(m.mean)
         covs.append(m.cov)
@@ -495,6 +488,42 @@ def _intervals(support: str):
     if support not in SUPPORTS:
         raise ValueError(f"support must be one of {SUPPORTS}, got {support!r}")
     return (3,) if support == "front" else (0, 1, 2, 3)
+
+
+def _fine_velocity_mixture(pb: _Problem, grids: dict, log_normaliser, max_refine: int = 256):
+    """The velocity mixture on nodes close enough for a smooth curve, batched.
+
+    Given the depth, the velocity is Gaussian with SD ``s_v(y)``, which at
+    small noise is far narrower than the spacing of the conditional means
+    ``vbar(y_j)`` at the moment quadrature's nodes: summed there, the mixture
+    ``sum_j w_j N(v, vbar_j, s_v_j**2)`` ripples although its moments are
+    right. Starting from those nodes, the step in ``t`` is halved until
+    neighbouring nodes with weight above 1e-14 have means within half an SD,
+    where the ripple is below 1e-30 of the density.
+
+    Returns normalised weights, means and SDs, each of shape (B, n).
+    """
+    weights, means, sds = [], [], []
+    for i, (lo, h, n) in grids.items():
+        factor = 1
+        while True:
+            m = (n - 1) * factor + 1
+            step = h / factor
+            t = lo[:, None] + step[:, None] * np.arange(m)
+            offsets, log_jac = _nodes(i, t)
+            log_density, mean, (_, _, cvv) = _solve(offsets, pb)
+            w = np.exp(log_density + log_jac - log_normaliser[:, None]) * step[:, None]
+            sd = np.sqrt(cvv)
+            big = w > 1e-14 * np.max(w, axis=1, keepdims=True)
+            gap = np.abs(np.diff(mean[1], axis=1)) / np.minimum(sd[:, 1:], sd[:, :-1])
+            if factor >= max_refine or not np.any((big[:, 1:] | big[:, :-1]) & (gap > 0.5)):
+                break
+            factor *= 2
+        weights.append(w)
+        means.append(mean[1])
+        sds.append(sd)
+    w = np.concatenate(weights, axis=1)
+    return w / np.sum(w, axis=1, keepdims=True), np.concatenate(means, axis=1), np.concatenate(sds, axis=1)
 
 
 @dataclass(frozen=True)
@@ -536,7 +565,8 @@ class OptimalMarginals:
     n_nodes: int
     mean: np.ndarray
     cov: np.ndarray
-    _mixture: tuple
+    _problem: _Problem
+    _grids: dict
 
     def depth_pdf(self, y) -> np.ndarray:
         """Normalised depth marginal ``p_oy`` at depths ``y`` (any shape).
@@ -556,13 +586,20 @@ class OptimalMarginals:
     def velocity_pdf(self, v) -> np.ndarray:
         """Normalised velocity marginal ``p_ov`` at velocities ``v`` (any shape).
 
-        The mixture, over the quadrature nodes, of the Gaussian conditionals of
-        ``v`` given ``y``.
+        The mixture over depths ``y_j`` of the Gaussian conditionals of ``v``
+        given ``y``, weighted by the depth marginal, on nodes fine enough for a
+        smooth curve (see :func:`_fine_velocity_mixture`).
         """
         v = np.asarray(v, dtype=float)
-        w, m, s2 = self._mixture
-        z = (v.ravel()[:, None] - m) ** 2 / s2
-        pdf = (np.exp(-0.5 * z) / np.sqrt(2.0 * np.pi * s2)) @ w
+        w, m, sd = (a[0] for a in _fine_velocity_mixture(self._problem, self._grids,
+                                                           np.array([self.log_normaliser])))
+        keep = w > 1e-17 * np.max(w)
+        w, m, sd = w[keep], m[keep], sd[keep]
+        flat = v.ravel()
+        pdf = np.empty(flat.size)
+        for start in range(0, flat.size, 512):  # bounded memory: 512 velocities at a time
+            z = (flat[start:start + 512, None] - m) / sd
+            pdf[start:start + 512] = (np.exp(-0.5 * z**2) / (np.sqrt(2.0 * np.pi) * sd)) @ w
         return pdf.reshape(v.shape)
 
 
@@ -597,25 +634,16 @@ def marginals(mu, rho: float, prior: Gaussian, reading: str = "derived",
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
     pb = _problem(mu, rho, prior.mean, prior.cov, reading)
     rtol = _checks.positive_scalar(rtol, "rtol")
-    m, err_y, err_v, top, grids, kept = _integrate(pb, _intervals(support), rtol, keep_nodes=True)
+    m, err_y, err_v, top, grids = _integrate(pb, _intervals(support), rtol)
     log_z = float(np.log(m.Z[0]) + top[0])
-    weights, v_mean, v_var = [], [], []
-    for i, levels in kept.items():
-        h = grids[i][1][0]
-        for _, log_w, mean, (_, _, cvv) in levels:
-            weights.append(np.exp(log_w[0]) * h / m.Z[0])
-            v_mean.append(mean[1, 0])
-            v_var.append(cvv[0])
-    w = np.concatenate(weights)
-    keep = w > 1e-17 * np.max(w)
+    n_nodes = sum(n for _, _, n in grids.values())
     return OptimalMarginals(
         mu=mu, rho=float(rho), prior=prior, reading=reading, support=support,
         depth_mean=float(m.mean[0, 1]), depth_sd=float(np.sqrt(m.cov[0, 1, 1])),
         velocity_mean=float(m.mean[0, 2]), velocity_sd=float(np.sqrt(m.cov[0, 2, 2])),
         depth_error=float(err_y[0]), velocity_error=float(err_v[0]),
-        prob_behind_camera=float(m.behind[0]), log_normaliser=log_z, n_nodes=int(w.size),
-        mean=m.mean[0], cov=m.cov[0],
-        _mixture=(w[keep], np.concatenate(v_mean)[keep], np.concatenate(v_var)[keep]),
+        prob_behind_camera=float(m.behind[0]), log_normaliser=log_z, n_nodes=int(n_nodes),
+        mean=m.mean[0], cov=m.cov[0], _problem=pb, _grids=grids,
     )
 
 
@@ -637,7 +665,7 @@ class BatchMarginals:
     log_normaliser: np.ndarray
     rtol: float
     _problem: _Problem
-    _mixture: tuple  # normalised weights, v means, v variances: each (B, n)
+    _grids: dict  # the quadrature's t grids: {interval: (lo, h, n)}
     _start: tuple  # lower and upper ends (B,) of the t range and a panel width (B,)
 
     def depth_log_pdf(self, y) -> np.ndarray:
@@ -681,14 +709,14 @@ class BatchMarginals:
     def velocity_cdf(self, v) -> np.ndarray:
         """``P(velocity <= v)`` for one velocity per problem, ``v`` of shape (B,).
 
-        The mixture over the quadrature nodes of the Gaussian CDFs of ``v``
-        given ``y``.
+        The mixture over depths of the Gaussian CDFs of ``v`` given ``y``, on
+        the nodes of :func:`_fine_velocity_mixture`.
         """
         from scipy.special import ndtr
 
         v = _checks.finite_array(v, "v")
-        w, m, s2 = self._mixture
-        return np.sum(w * ndtr((v[:, None] - m) / np.sqrt(s2)), axis=1)
+        w, m, sd = _fine_velocity_mixture(self._problem, self._grids, self.log_normaliser)
+        return np.sum(w * ndtr((v[:, None] - m) / sd), axis=1)
 
 
 def batch_marginals(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> BatchMarginals:
@@ -700,13 +728,8 @@ def batch_marginals(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> Batc
     """
     pb = _problem(mu, rho, prior_mean, prior_cov, "derived")
     rtol = _checks.positive_scalar(rtol, "rtol")
-    m, err_y, err_v, top, grids, kept = _integrate(pb, (3,), rtol, keep_nodes=True)
+    m, err_y, err_v, top, grids = _integrate(pb, (3,), rtol)
     log_z = np.log(m.Z) + top
-    h = grids[3][1]
-    levels = kept[3]
-    w = np.concatenate([np.exp(log_w) * h[:, None] for _, log_w, _, _ in levels], 1) / m.Z[:, None]
-    vm = np.concatenate([mean[1] for _, _, mean, _ in levels], 1)
-    vv = np.concatenate([cov[2] for _, _, _, cov in levels], 1)
     moments_ = Moments(*m.key_moments(), err_y, err_v, m.behind, m.mean, m.cov)
-    lo, _, n = grids[3]
-    return BatchMarginals(moments_, log_z, rtol, pb, (w, vm, vv), (lo, lo + (n - 1) * h, 2.0 * h))
+    lo, h, n = grids[3]
+    return BatchMarginals(moments_, log_z, rtol, pb, grids, (lo, lo + (n - 1) * h, 2.0 * h))

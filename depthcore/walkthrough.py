@@ -18,8 +18,6 @@ into :mod:`depthcore.model`, :mod:`depthcore.optimal`,
 * :func:`theorem1_precision`: the inverse covariance of Eq. (24);
 * :func:`trapezoid_depth_moments`: the depth moments by one trapezoid rule;
 * :func:`depth_quantiles`: quantiles of the optimal depth marginal;
-* :func:`velocity_pdf`, :func:`figure4`: the optimal velocity marginal on a
-  grid fine enough to draw, and Figure 4 with it;
 * :func:`filter_moments`, :func:`comparison`, :func:`comparison_texts`: the
   reported-versus-reproduced tables of the figure pages.
 """
@@ -261,56 +259,6 @@ def theorem1_precision(mu, rho: float, prior: Gaussian) -> np.ndarray:
     return precision + F2.T @ np.linalg.solve(prior.cov, F2)
 
 
-def velocity_pdf(mu, rho: float, prior: Gaussian, v, step: float = 0.005,
-                 t_range=(-8.0, 8.0), reading: str = "derived") -> np.ndarray:
-    """The optimal velocity marginal ``p_ov`` on a fine grid of depths (support ``y > 2``).
-
-    The mixture ``p_ov(v) = sum_j w_j N(v, vbar(y_j), s_v(y_j)**2)`` over
-    depths ``y_j = 2 + exp(t_j)`` spaced ``step`` apart in ``t``, with the
-    trapezoid weights ``w_j`` of the depth marginal and the conditional
-    Gaussian of ``v`` given ``y`` from :func:`depthcore.optimal.conditional`.
-    Given the depth, the velocity is known to within ``s_v``, which at
-    ``rho = 1/200`` is a few hundredths; the nodes must be closer than that in
-    ``vbar`` for the mixture to be a smooth curve, so ``step`` is much finer
-    than the quadrature of :func:`depthcore.optimal.marginals` needs for the
-    moments.
-
-    Parameters
-    ----------
-    mu, rho, prior
-        As in :func:`depthcore.optimal.log_posterior`.
-    v : array_like
-        Velocities (any shape).
-    step : float
-        Node spacing in ``t = log(y - 2)``, > 0.
-    t_range : (float, float)
-        First and last node; the default covers ``y - 2`` from 3e-4 to 3e3.
-    reading : {"derived", "printed"}
-
-    Returns
-    -------
-    ndarray, shape of ``v``
-    """
-    step = _checks.positive_scalar(step, "step")
-    t_lo, t_hi = (float(t) for t in _checks.finite_array(t_range, "t_range", (2,)))
-    if not t_hi > t_lo:
-        raise ValueError(f"t_range must be increasing, got {(t_lo, t_hi)}")
-    v = np.asarray(v, dtype=float)
-    t = np.arange(t_lo, t_hi + step / 2, step)
-    log_density, mean, cov = optimal.conditional(2.0 + np.exp(t), mu, rho, prior, reading)
-    log_w = log_density + t
-    w = np.exp(log_w - np.max(log_w))
-    keep = w > 1e-17 * np.max(w)
-    w = w[keep] / np.sum(w[keep])
-    v_mean, v_sd = mean[keep, 1], np.sqrt(cov[keep, 1, 1])
-    flat = v.ravel()
-    pdf = np.empty(flat.size)
-    for start in range(0, flat.size, 512):  # bounded memory: 512 x nodes at a time
-        z = (flat[start:start + 512, None] - v_mean) / v_sd
-        pdf[start:start + 512] = (np.exp(-0.5 * z**2) / (np.sqrt(2.0 * np.pi) * v_sd)) @ w
-    return pdf.reshape(v.shape)
-
-
 def depth_quantiles(m: optimal.OptimalMarginals, probs, n: int = 20001) -> np.ndarray:
     """Quantiles of the optimal depth marginal ``p_oy`` (support ``y > 2``).
 
@@ -507,33 +455,4 @@ def readings_figure(key: str, y_max: float = 150.0, n: int = 1201):
     ax.legend(frameon=False)
     ax.set_title(f"Figure {s.figure}'s measurements: the optimal depth marginal, two readings",
                  fontsize=10)
-    return fig
-
-
-def figure4(n: int = 801):
-    """Figure 4 with the optimal velocity marginal drawn from :func:`velocity_pdf`.
-
-    The same figure as :func:`depthcore.figures.figure` ``("fig4")``, except
-    that the optimal curve comes from the fine mixture of :func:`velocity_pdf`
-    (the mixture over the moment quadrature's own nodes is too coarse to draw:
-    it shows ripples at the node spacing).
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
-    import matplotlib.pyplot as plt
-
-    from . import figures
-    from .reproduce import PAPER_FILTERS, curves
-    from .scenarios import SCENARIOS
-
-    s = SCENARIOS["fig4"]
-    grid = np.linspace(*figures.GRIDS["fig4"], n)
-    drawn = curves(s, grid, filters=("second_order", "ekf"))
-    drawn["optimal"] = velocity_pdf(s.mu, s.rho, s.prior, grid)
-    fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
-    figures.plot_marginals(ax, drawn, "velocity", PAPER_FILTERS)
-    ax.set_title(f"Figure {s.figure} (reproduction): {figures.caption('fig4')}", fontsize=9,
-                 wrap=True)
     return fig

@@ -230,3 +230,18 @@ def test_eq2_eq3_recursion_gives_eq6():
 
     diff = step(3, x3) - optimal.log_posterior(x3, s.mu, s.rho, s.prior)
     assert np.ptp(diff) < 1e-8 * np.abs(diff).max()
+
+
+def test_velocity_marginal_is_a_smooth_curve():
+    # Summed over the moment quadrature's nodes alone the mixture ripples (the
+    # velocity given the depth is known to a few hundredths); refined, Figure 4's
+    # optimal curve is unimodal.
+    s = SCENARIOS["fig4"]
+    m = optimal.marginals(s.mu, s.rho, s.prior)
+    pdf = m.velocity_pdf(np.linspace(0.4, 2.2, 3601))
+    assert np.sum(np.diff(np.sign(np.diff(pdf))) != 0) == 1
+    v = np.linspace(-2.0, 20.0, 110001)
+    pdf = m.velocity_pdf(v)
+    # trapezoid rules on a fast-converging integrand: agree to 1e-6
+    assert np.trapezoid(pdf, v) == pytest.approx(1.0, abs=1e-6)
+    assert np.trapezoid(v * pdf, v) == pytest.approx(m.velocity_mean, abs=1e-6)
