@@ -46,6 +46,18 @@ def _distances(ref: optimal.BatchMarginals, gaussians: dict) -> dict:
     return out
 
 
+def _compare(mu, rho, pm, pc) -> dict:
+    """Depth means, SDs and Hellinger distances to the optimal filter, per filter, for a batch."""
+    ref = optimal.batch_marginals(mu, rho, pm, pc)
+    gaussians = _gaussian_rows(mu, rho, pm, pc)
+    dist = _distances(ref, gaussians)
+    out = {"optimal": {"depth_mean": ref.moments.depth_mean, "depth_sd": ref.moments.depth_sd,
+                       "hellinger": np.zeros(len(mu))}}
+    for name, (mean, cov) in gaussians.items():
+        out[name] = {"depth_mean": mean[:, 1], "depth_sd": np.sqrt(cov[:, 1, 1]), "hellinger": dist[name]}
+    return out
+
+
 def noise_sweep(rhos, truth=None, prior_scale: float = PAPER_PRIOR_SCALE) -> dict:
     """Depth moments and Hellinger distances to the optimal filter against the noise level.
 
@@ -70,16 +82,7 @@ def noise_sweep(rhos, truth=None, prior_scale: float = PAPER_PRIOR_SCALE) -> dic
     mu = np.tile([model.project(model.G(truth, k - 2)) for k in range(3)], (len(rhos), 1))
     c = optimal.noise_free_states(mu)
     pm = np.stack([c[:, 0] - 2 * c[:, 2], c[:, 1] - 2, np.zeros(len(c))], -1)
-    pc = prior_scale * np.eye(3)
-    ref = optimal.batch_marginals(mu, rhos, pm, pc)
-    gaussians = _gaussian_rows(mu, rhos, pm, pc)
-    dist = _distances(ref, gaussians)
-    out = {"rho": rhos, "optimal": {"depth_mean": ref.moments.depth_mean,
-                                     "depth_sd": ref.moments.depth_sd,
-                                     "hellinger": np.zeros(len(rhos))}}
-    for name, (mean, cov) in gaussians.items():
-        out[name] = {"depth_mean": mean[:, 1], "depth_sd": np.sqrt(cov[:, 1, 1]), "hellinger": dist[name]}
-    return out
+    return {"rho": rhos, **_compare(mu, rhos, pm, prior_scale * np.eye(3))}
 
 
 def prior_offset_sweep(offsets, mu=None, rho: float | None = None,
@@ -110,13 +113,4 @@ def prior_offset_sweep(offsets, mu=None, rho: float | None = None,
         raise ValueError("offsets must keep the prior's depth at time 1, c2 - 2 + offset, positive")
     pm = np.stack([np.full(len(offsets), c[0] - 2 * c[2]), c[1] - 2 + offsets, np.zeros(len(offsets))], -1)
     mus = np.tile(mu, (len(offsets), 1))
-    pc = prior_scale * np.eye(3)
-    ref = optimal.batch_marginals(mus, rho, pm, pc)
-    gaussians = _gaussian_rows(mus, rho, pm, pc)
-    dist = _distances(ref, gaussians)
-    out = {"offset": offsets, "optimal": {"depth_mean": ref.moments.depth_mean,
-                                           "depth_sd": ref.moments.depth_sd,
-                                           "hellinger": np.zeros(len(offsets))}}
-    for name, (mean, cov) in gaussians.items():
-        out[name] = {"depth_mean": mean[:, 1], "depth_sd": np.sqrt(cov[:, 1, 1]), "hellinger": dist[name]}
-    return out
+    return {"offset": offsets, **_compare(mus, rho, pm, prior_scale * np.eye(3))}
