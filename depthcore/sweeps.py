@@ -6,8 +6,8 @@ Recommended import: ``from depthcore import sweeps``.
   approximation beats the EKF "particularly when the noise level is low":
   for each noise level, the Hellinger distance from each filter's depth
   marginal to the optimal one, for one fixed truth and its noise-free
-  measurements (deterministic), and optionally the Monte Carlo scores of
-  :func:`depthcore.study.study`.
+  measurements (deterministic). For Monte Carlo scores at each noise level,
+  run :func:`depthcore.study.study` with that ``rho``.
 * :func:`prior_offset_sweep` generalises Figure 6: the depth of the prior mean
   is moved by an offset and each filter's depth estimate is followed.
 """
