@@ -301,7 +301,9 @@ def _standard_errors(x, W) -> tuple[np.ndarray, np.ndarray]:
     d2 = (x - mean[..., None]) ** 2
     se_mean = np.sqrt(np.sum(W**2 * d2, axis=-1))
     se_var = np.sqrt(np.sum(W**2 * (d2 - sd[..., None] ** 2) ** 2, axis=-1))
-    return se_mean, se_var / (2.0 * sd)
+    # All the weight on one value (a collapsed filter): the SD's error is unknown.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return se_mean, np.where(sd > 0, se_var / (2.0 * sd), np.inf)
 
 
 def _freeze(result):

@@ -422,3 +422,13 @@ def test_prior_proposal_with_one_particle_can_lose_every_particle():
     prior = Gaussian(FIG2.prior.mean - [0.0, 60.0, 0.0], FIG2.prior.cov)
     with pytest.raises(RuntimeError, match="every particle of trial 0 has zero weight after mu_1"):
         particle_filter(FIG2.mu, FIG2.rho, prior, 1, np.random.default_rng(0), proposal="prior")
+
+
+def test_standard_errors_of_a_collapsed_filter_are_infinite_not_nan():
+    from depthcore.particle import _standard_errors
+
+    x = np.array([[1.0, 2.0, 3.0]])
+    W = np.array([[0.0, 1.0, 0.0]])
+    with np.errstate(all="raise"):
+        se_mean, se_sd = _standard_errors(x, W)
+    assert se_mean[0] == 0 and np.isinf(se_sd[0])
