@@ -54,7 +54,11 @@ def predict(m, P) -> MeanAndCov:
     """
     m = np.asarray(m, dtype=float)
     P = np.asarray(P, dtype=float)
-    return MeanAndCov(m @ model.F.T + model.e, model.F @ P @ model.F.T)
+    # F P F^T with F = I + E_13: add the v row to the x row, then the v column to the x column.
+    C = P.copy()
+    C[..., 0, :] += P[..., 2, :]
+    C[..., :, 0] += C[..., :, 2]
+    return MeanAndCov(m @ model.F.T + model.e, C)
 
 
 def update(n, C, mu, rho: float) -> MeanAndCov:
