@@ -16,12 +16,14 @@ from __future__ import annotations
 import json
 import os
 import re
+import sys
 from pathlib import Path
 
 import pytest
-import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "tools"))
+import check_notebooks  # noqa: E402  (the one reader of _toc.yml)
 HTML_DIR = ROOT / "_build" / "html"
 DATA_DIR = ROOT / "tests" / "data"
 
@@ -39,23 +41,7 @@ def in_ci() -> bool:
 
 def toc_pages() -> list[str]:
     """Source pages of the book in TOC order, as ``book/<name>`` (no suffix)."""
-    toc = yaml.safe_load((ROOT / "_toc.yml").read_text(encoding="utf-8"))
-    pages: list[str] = []
-
-    def walk(node):
-        if isinstance(node, dict):
-            for key in ("root", "file"):
-                if isinstance(node.get(key), str):
-                    pages.append(str(Path(node[key]).with_suffix("")))
-            for value in node.values():
-                if isinstance(value, (list, dict)):
-                    walk(value)
-        elif isinstance(node, list):
-            for item in node:
-                walk(item)
-
-    walk(toc)
-    return pages
+    return [str(Path(entry).with_suffix("")) for entry in check_notebooks.toc_files()]
 
 
 def load_json(name: str):
