@@ -143,11 +143,17 @@ def _gaussian_estimates(trials: Trials, mean, cov, reference) -> Estimates:
     t = trials.truth
     depth_cdf = ndtr((t[1] - mean[:, 1]) / np.sqrt(cov[:, 1, 1]))
     velocity_cdf = ndtr((t[2] - mean[:, 2]) / np.sqrt(cov[:, 2, 2]))
+    return Estimates(mean, cov, depth_cdf, velocity_cdf, gaussian_hellinger(reference, mean, cov))
+
+
+def gaussian_hellinger(reference: optimal.BatchMarginals, mean, cov) -> np.ndarray:
+    """:func:`hellinger` for Gaussian filters: means (N, 3) and covariances (N, 3, 3)."""
+    sd = np.sqrt(cov[:, 1, 1])
+
     def log_q(y):
-        s = np.sqrt(cov[:, 1, 1])[:, None]
-        return -0.5 * ((y - mean[:, 1:2]) / s) ** 2 - np.log(np.sqrt(2 * np.pi) * s)
-    return Estimates(mean, cov, depth_cdf, velocity_cdf, hellinger(reference, log_q, mean[:, 1],
-                                                                   np.sqrt(cov[:, 1, 1])))
+        return -0.5 * ((y - mean[:, 1:2]) / sd[:, None]) ** 2 - np.log(np.sqrt(2 * np.pi) * sd[:, None])
+
+    return hellinger(reference, log_q, mean[:, 1], sd)
 
 
 def hellinger(reference: optimal.BatchMarginals, log_q: Callable, q_mean, q_sd,

@@ -34,27 +34,14 @@ def _gaussian_rows(mu, rho, pm, pc):
     return out
 
 
-def _distances(ref: optimal.BatchMarginals, gaussians: dict) -> dict:
-    out = {}
-    for name, (mean, cov) in gaussians.items():
-        sd = np.sqrt(cov[:, 1, 1])
-
-        def log_q(y, mean=mean, sd=sd):
-            return -0.5 * ((y - mean[:, 1:2]) / sd[:, None]) ** 2 - np.log(np.sqrt(2 * np.pi) * sd[:, None])
-
-        out[name] = study.hellinger(ref, log_q, mean[:, 1], sd)
-    return out
-
-
 def _compare(mu, rho, pm, pc) -> dict:
     """Depth means, SDs and Hellinger distances to the optimal filter, per filter, for a batch."""
     ref = optimal.batch_marginals(mu, rho, pm, pc)
     gaussians = _gaussian_rows(mu, rho, pm, pc)
-    dist = _distances(ref, gaussians)
     out = {"optimal": {"depth_mean": ref.moments.depth_mean, "depth_sd": ref.moments.depth_sd,
                        "hellinger": np.zeros(len(mu))}}
     for name, (mean, cov) in gaussians.items():
-        out[name] = {"depth_mean": mean[:, 1], "depth_sd": np.sqrt(cov[:, 1, 1]), "hellinger": dist[name]}
+        out[name] = {"depth_mean": mean[:, 1], "depth_sd": np.sqrt(cov[:, 1, 1]), "hellinger": study.gaussian_hellinger(ref, mean, cov)}
     return out
 
 
