@@ -381,12 +381,35 @@ def run(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p=None, mu_m=No
 # --- smoothers -------------------------------------------------------------------------
 
 
+def _solve_or_pinv(A, B):
+    """``A^{-1} B`` for symmetric positive semi-definite ``A`` (..., n, n), matrix by matrix.
+
+    Where ``A`` is singular to working precision (condition number above
+    ``1 / eps``) its pseudo-inverse takes the place of the inverse; the choice
+    is made for each matrix alone, so a batch gives what a loop gives.
+    """
+    singular = ~(np.linalg.cond(A) < 1.0 / np.finfo(float).eps)
+    if not np.any(singular):
+        return np.linalg.solve(A, B)
+    eye = np.broadcast_to(np.eye(A.shape[-1]), A.shape)
+    safe = np.where(singular[..., None, None], eye, A)
+    return np.where(singular[..., None, None], np.linalg.pinv(A, hermitian=True) @ B,
+                    np.linalg.solve(safe, B))
+
+
 def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     """Textbook 19.2.6: the fixed-interval (Rauch-Tung-Striebel) smoother's backward recursions.
 
     ``C_t = Sigma_t Psi^T Sigma_{+|t+1}^{-1}``,
     ``mu_{t|T} = mu_t + C_t (mu_{t+1|T} - mu_{+|t+1})``,
     ``Sigma_{t|T} = Sigma_t + C_t (Sigma_{t+1|T} - Sigma_{+|t+1}) C_t^T``.
+
+    ``C_t`` is the regression coefficient of ``w_t`` on ``w_{t+1}`` given
+    ``x_1 .. x_t``. Where a predicted covariance ``Sigma_{+|t+1}`` is singular
+    (a direction the motion moves without noise, with no prior uncertainty
+    left), its pseudo-inverse takes the place of the inverse: ``w_{t+1} -
+    mu_{+|t+1}`` lies in its range, where every generalised inverse gives the
+    same conditional mean and covariance.
 
     Parameters
     ----------
@@ -410,11 +433,7 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     for t in range(T - 2, -1, -1):
         P_pred = filtered.predicted_covs[..., t + 1, :, :]
         PsiP = _at(Psi, t, 2) @ filtered.covs[..., t, :, :]
-        try:  # C_t^T = Sigma_+^{-1} Psi Sigma_t, Sigma_+ symmetric
-            C = np.swapaxes(np.linalg.solve(P_pred, PsiP), -1, -2)
-        except np.linalg.LinAlgError:
-            raise ValueError(f"filtered has a singular predicted covariance at time {t + 2}; "
-                             "the smoother gain needs it invertible") from None
+        C = np.swapaxes(_solve_or_pinv(P_pred, PsiP), -1, -2)  # C_t^T = Sigma_+^{-1} Psi Sigma_t
         mean = filtered.means[..., t, :] + np.einsum(
             "...ij,...j->...i", C, means[-1] - filtered.predicted_means[..., t + 1, :])
         cov = filtered.covs[..., t, :, :] + C @ (covs[-1] - P_pred) @ np.swapaxes(C, -1, -2)

@@ -409,12 +409,21 @@ def test_fixed_interval_smoother_refuses_what_is_not_a_filter_result():
         fixed_interval_smoother((np.zeros((3, 2)), np.zeros((3, 2, 2))), np.eye(2))
 
 
-def test_fixed_interval_smoother_refuses_a_singular_prediction():
-    # Psi = 0 and no motion noise: the predicted covariance is zero.
-    res = run(np.ones((3, 1)), np.zeros(2), np.eye(2), np.zeros((2, 2)), np.zeros((2, 2)),
-              np.array([[1.0, 0.0]]), np.array([[0.5]]))
-    with pytest.raises(ValueError, match="singular predicted covariance"):
-        fixed_interval_smoother(res, np.zeros((2, 2)))
+def test_textbook_19_2_6_fixed_interval_smoother_with_a_singular_prediction():
+    # Psi drops the second component and there is no motion noise: every predicted
+    # covariance is singular, and the smoother's gain uses the pseudo-inverse.
+    rng = np.random.default_rng(92)
+    T = 5
+    model = dict(x=rng.normal(size=(T, 1)), prior_mean=np.array([0.3, -0.2]),
+                 prior_cov=np.array([[2.0, 0.5], [0.5, 1.0]]), Psi=np.array([[1.0, 1.0], [0.0, 0.0]]),
+                 Sigma_p=np.zeros((2, 2)), Phi=np.array([[1.0, 0.5]]), Sigma_m=np.array([[0.3]]),
+                 mu_p=None, mu_m=None)
+    res = run(**model)
+    assert np.all(np.abs(np.linalg.det(res.predicted_covs[1:])) < 1e-15)
+    got = fixed_interval_smoother(res, model["Psi"])
+    means, covs = condition(model, T)
+    assert_allclose(got.mean, means, rtol=1e-9, atol=1e-11)
+    assert_allclose(got.cov, covs, rtol=1e-9, atol=1e-11)
 
 
 def test_module_docstring_cites_the_textbook():
