@@ -1,0 +1,729 @@
+"""The exact optimal filter for any number of frames: a bank of Kalman filters over depth.
+
+Recommended import: ``from depthcore import bank``.
+
+The model for ``N`` frames. The state at frame ``k = 1 .. N`` is
+``(x_k, y_k, v_k)``; it moves by
+
+    y_{k+1} = y_k + 1,   x_{k+1} = x_k + v_k,   v_{k+1} = v_k + a_k,   a_k ~ N(0, q**2),
+
+(``q = 0`` is the paper's constant velocity, Eq. (1)), the camera sees the
+bearings ``mu_k = x_k / y_k + w_k``, ``w_k ~ N(0, rho**2)`` (Eq. (4)), and the
+state at frame 1 has the Gaussian prior ``N(m, P)`` (Eq. (13)). With ``N = 3``
+and ``q = 0`` this is the paper's problem.
+
+Why a bank of Kalman filters is exact. The depth advances deterministically,
+so fixing the depth at frame 1, ``y_1 = y``, fixes it at every frame,
+``y_k = y + k - 1``. Given ``y`` the lateral state ``u_k = (x_k, v_k)`` is
+linear-Gaussian (Prince, section 19.2, textbook Eqs. (19.5), (19.7)):
+
+* its prior is the prior ``N(m, P)`` conditioned on ``y_1 = y``, a Gaussian in
+  ``(x_1, v_1)`` with mean ``m_u + P_uy (y - m_y) / P_yy`` and covariance
+  ``P_uu - P_uy P_yu / P_yy``;
+* it moves by ``Psi = [[1, 1], [0, 1]]`` with noise ``Sigma_p = diag(0, q**2)``;
+* each bearing is a linear observation of it, ``Phi_k = (1 / y_k, 0)``, with
+  noise variance ``rho**2``.
+
+So the Kalman filter (:mod:`depthcore.kalman`) gives the exact posterior of
+``(x_N, v_N)`` given ``y`` and the marginal likelihood ``L(y) = p(mu_1 .. mu_N | y)``
+from its innovations, and
+
+    p(y_1 = y | mu_1 .. mu_N)  proportional to  N(y; m_y, P_yy) L(y).
+
+The exact posterior of the state at frame ``N`` is the mixture over depth of
+the Kalman filters' Gaussians weighted by this density. Given depth nodes
+``y_j`` and quadrature weights ``w_j`` (``sum_j w_j g(y_j)`` approximates
+``integral g(y) dy``), the mixture's probabilities are proportional to
+``w_j N(y_j; m_y, P_yy) L(y_j)``, summed in log space. Adding a frame updates
+each node's filter and log weight (:func:`step`); the past is not revisited.
+The nodes are the depths at frame 1, which do not move as frames are added; the
+depth at frame ``N`` is ``y_N = y_1 + N - 1``.
+
+The support is the caller's: the nodes must be positive (the point in front of
+the camera at every frame, the "front" support of
+:func:`depthcore.optimal.marginals`), and the mixture is exact up to the
+quadrature error of the nodes, which the caller controls. At ``N = 3``,
+``q = 0`` the unnormalised depth density is that of Eqs. (14)-(16)
+(:func:`depthcore.optimal.conditional`) up to a constant factor.
+
+References
+----------
+.. [prince2012] S. J. D. Prince, *Computer Vision: Models, Learning, and
+   Inference*, chapter 19, section 19.2 (the Kalman filter and its smoothers).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from scipy.special import logsumexp, ndtr
+
+from . import kalman
+
+#: The lateral state ``(x, v)`` moves by ``x <- x + v``: the transition matrix.
+PSI = np.array([[1.0, 1.0], [0.0, 1.0]])
+PSI.setflags(write=False)
+
+_LOG_2PI = float(np.log(2.0 * np.pi))
+#: Nodes whose log probability is this far below the largest are ignored by the CDF.
+_CUTOFF = 60.0
+_GAUSS_LEGENDRE = np.polynomial.legendre.leggauss(8)
+_MAX_DOUBLINGS = 12
+
+
+class Bank(NamedTuple):
+    """The bank of Kalman filters over depth nodes after ``N`` frames.
+
+    Built by :func:`filter_bank`, extended by :func:`step`. The batch shape
+    ``(...)`` is that of the trials (empty for one problem); ``J`` is the
+    number of nodes.
+
+    Attributes
+    ----------
+    nodes : ndarray, shape (..., J)
+        Depths at frame 1, ``y_1 > 0``.
+    mean : ndarray, shape (..., J, 2)
+        ``E[(x_N, v_N) | y_1, mu_1 .. mu_N]`` for each node.
+    cov : ndarray, shape (..., J, 2, 2)
+        ``Cov[(x_N, v_N) | y_1, mu_1 .. mu_N]``.
+    log_weight : ndarray, shape (..., J)
+        ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``: the unnormalised log
+        posterior density of the depth at frame 1.
+    mu : ndarray, shape (..., N)
+        The bearings so far.
+    rho : ndarray, shape (...) or ()
+    q : ndarray, shape (...) or ()
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+    history : kalman.FilterResult or None
+        With ``history=True``: each node's filter at every frame, arrays of shape
+        ``(..., J, N, ...)``.
+    """
+
+    nodes: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+    log_weight: np.ndarray
+    mu: np.ndarray
+    rho: np.ndarray
+    q: np.ndarray
+    prior_mean: np.ndarray
+    prior_cov: np.ndarray
+    history: kalman.FilterResult | None
+
+    @property
+    def n_frames(self) -> int:
+        """``N``, the number of bearings seen."""
+        return self.mu.shape[-1]
+
+
+# --- checks ----------------------------------------------------------------------------
+
+
+def _nodes(nodes) -> np.ndarray:
+    nodes = _finite(nodes, "nodes")
+    if nodes.ndim < 1 or nodes.shape[-1] < 1:
+        raise ValueError(f"nodes must have shape (..., J) with J >= 1, got shape {nodes.shape}")
+    if not np.all(nodes > 0):
+        raise ValueError(f"nodes must be positive (depths at frame 1 in front of the camera), "
+                         f"got minimum {float(np.min(nodes)):.6g}")
+    return nodes
+
+
+def _finite(value, name: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be numeric, got {type(value).__name__}") from exc
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {int(np.sum(~np.isfinite(arr)))} "
+                         "non-finite entries")
+    return arr
+
+
+def _prior(prior_mean, prior_cov):
+    prior_mean = _finite(prior_mean, "prior_mean")
+    if prior_mean.ndim < 1 or prior_mean.shape[-1] != 3:
+        raise ValueError(f"prior_mean must have shape (..., 3), got shape {prior_mean.shape}")
+    prior_cov = _finite(prior_cov, "prior_cov")
+    if prior_cov.ndim < 2 or prior_cov.shape[-2:] != (3, 3):
+        raise ValueError(f"prior_cov must have shape (..., 3, 3), got shape {prior_cov.shape}")
+    # kalman's check: symmetric positive definite, batched
+    prior_cov = kalman._covariance(prior_cov, "prior_cov", 3, definite=True)
+    return prior_mean, prior_cov
+
+
+def _noise(rho, q):
+    rho = _finite(rho, "rho")
+    if not np.all(rho > 0):
+        raise ValueError(f"rho must be positive, got minimum {float(np.min(rho)):.6g}")
+    q = _finite(q, "q")
+    if not np.all(q >= 0):
+        raise ValueError(f"q must be >= 0, got minimum {float(np.min(q)):.6g}")
+    return rho, q
+
+
+def _bearings(mu) -> np.ndarray:
+    mu = _finite(mu, "mu")
+    if mu.ndim < 1 or mu.shape[-1] < 1:
+        raise ValueError(f"mu must have shape (..., N) with N >= 1, got shape {mu.shape}")
+    return mu
+
+
+# --- the model given the depth ---------------------------------------------------------
+
+
+def conditional_prior(nodes, prior_mean, prior_cov):
+    """The prior of ``(x_1, v_1)`` given the depth ``y_1``, and the prior depth density.
+
+    Gaussian conditioning of ``N(m, P)`` on ``(x_1, y_1, v_1)``:
+    ``E[u | y] = m_u + P_uy (y - m_y) / P_yy``, ``Cov[u | y] = P_uu - P_uy P_yu / P_yy``
+    with ``u = (x_1, v_1)``.
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (..., J)
+        Depths at frame 1.
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+
+    Returns
+    -------
+    prior : kalman.MeanAndCov
+        Mean (..., J, 2) and covariance (..., 1, 2, 2) of ``(x_1, v_1)`` given ``y_1``.
+    log_density : ndarray, shape (..., J)
+        ``log N(y_1; m_y, P_yy)``.
+    """
+    u = [0, 2]
+    m_u, m_y = prior_mean[..., u], prior_mean[..., 1]
+    P_yy = prior_cov[..., 1, 1]
+    P_uy = prior_cov[..., u, 1]
+    slope = P_uy / P_yy[..., None]  # (..., 2)
+    d = nodes - m_y[..., None]  # (..., J)
+    mean = m_u[..., None, :] + slope[..., None, :] * d[..., None]
+    cov = prior_cov[..., u, :][..., :, u] - slope[..., :, None] * P_uy[..., None, :]
+    log_density = -0.5 * (_LOG_2PI + np.log(P_yy)[..., None]) - 0.5 * d**2 / P_yy[..., None]
+    return kalman.MeanAndCov(mean, cov[..., None, :, :]), log_density
+
+
+def sigma_p(q) -> np.ndarray:
+    """The lateral motion noise ``diag(0, q**2)``: shape ``q.shape + (2, 2)``."""
+    q = np.asarray(q, dtype=float)
+    out = np.zeros(q.shape + (2, 2))
+    out[..., 1, 1] = q**2
+    return out
+
+
+def measurement_matrices(nodes, frames) -> np.ndarray:
+    """``Phi_k = (1 / y_k, 0)`` with ``y_k = y_1 + k - 1``, for frames ``k`` (1-based).
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (..., J)
+    frames : array_like of int, shape (K,)
+
+    Returns
+    -------
+    ndarray, shape (..., J, K, 1, 2)
+    """
+    depth = nodes[..., None] + (np.asarray(frames, dtype=float) - 1.0)
+    Phi = np.zeros(depth.shape + (1, 2))
+    Phi[..., 0, 0] = 1.0 / depth
+    return Phi
+
+
+# --- the bank --------------------------------------------------------------------------
+
+
+def filter_bank(nodes, mu, rho, prior_mean, prior_cov, q=0.0, history: bool = False) -> Bank:
+    """Run one Kalman filter (textbook 19.2.3) per depth node over the bearings ``mu_1 .. mu_N``.
+
+    Parameters
+    ----------
+    nodes : array_like, shape (..., J)
+        Depths at frame 1, all > 0. Leading axes broadcast with those of the
+        other arguments (one set of nodes per trial, or shared).
+    mu : array_like, shape (..., N)
+        Bearings at frames 1 .. N, ``N >= 1``.
+    rho : float or array_like, shape (...)
+        Bearing noise SD, > 0.
+    prior_mean : array_like, shape (..., 3)
+        Prior mean of ``(x_1, y_1, v_1)``.
+    prior_cov : array_like, shape (..., 3, 3)
+        Prior covariance, symmetric positive definite.
+    q : float or array_like, shape (...)
+        SD of the lateral acceleration ``a_k``, >= 0 (0: constant velocity).
+    history : bool
+        Keep every node's filter at every frame (:meth:`Mixture.smoothed` reuses
+        it, and reruns the filters without it).
+
+    Returns
+    -------
+    Bank
+    """
+    nodes = _nodes(nodes)
+    mu = _bearings(mu)
+    rho, q = _noise(rho, q)
+    prior_mean, prior_cov = _prior(prior_mean, prior_cov)
+    _batch(nodes=nodes.shape[:-1], mu=mu.shape[:-1], rho=rho.shape, q=q.shape,
+           prior_mean=prior_mean.shape[:-1], prior_cov=prior_cov.shape[:-2])
+    return _filter_bank(nodes, mu, rho, q, prior_mean, prior_cov, history)
+
+
+def _batch(**shapes) -> tuple:
+    """The shape the leading (batch) shapes broadcast to, or a ValueError naming them."""
+    try:
+        return np.broadcast_shapes(*shapes.values())
+    except ValueError:
+        listed = ", ".join(f"{k} {v}" for k, v in shapes.items())
+        raise ValueError(f"the leading (batch) shapes do not broadcast: {listed}") from None
+
+
+def _filter_bank(nodes, mu, rho, q, prior_mean, prior_cov, history) -> Bank:
+    N = mu.shape[-1]
+    start, log_prior = conditional_prior(nodes, prior_mean, prior_cov)
+    # per node (axis -3 of the Kalman arrays): the prior given its depth, Phi_k = (1 / y_k, 0)
+    Phi = measurement_matrices(nodes, np.arange(1, N + 1))
+    res = kalman.run(mu[..., None, :, None], start.mean, start.cov, PSI,
+                     sigma_p(q)[..., None, None, :, :], Phi, (rho**2)[..., None, None, None, None])
+    return Bank(nodes=nodes, mean=res.means[..., -1, :], cov=res.covs[..., -1, :, :],
+                log_weight=log_prior + res.log_likelihood, mu=mu, rho=rho, q=q,
+                prior_mean=prior_mean, prior_cov=prior_cov, history=res if history else None)
+
+
+def step(bank: Bank, mu_next) -> Bank:
+    """Add frame ``N + 1``: predict (textbook 19.2.1) and update (19.2.2) every node's filter.
+
+    Each node's log weight gains the log density of ``mu_{N+1}`` given the
+    earlier bearings and its depth; nothing earlier is recomputed.
+
+    Parameters
+    ----------
+    bank : Bank
+        The bank after ``N`` frames.
+    mu_next : float or array_like, shape (...)
+        The bearing at frame ``N + 1``, one per trial.
+
+    Returns
+    -------
+    Bank
+        The bank after ``N + 1`` frames (with its history extended if it has one).
+    """
+    if not isinstance(bank, Bank):
+        raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")
+    mu_next = _finite(mu_next, "mu_next")
+    _batch(bank=bank.log_weight.shape[:-1], mu_next=mu_next.shape)
+    N = bank.n_frames
+    pred = kalman.predict(bank.mean, bank.cov, PSI, sigma_p(bank.q)[..., None, :, :])
+    Phi = measurement_matrices(bank.nodes, [N + 1])[..., 0, :, :]
+    upd = kalman.update(pred.mean, pred.cov, mu_next[..., None, None], Phi,
+                        (bank.rho**2)[..., None, None, None])
+    mu = _extend(bank.mu, mu_next)
+    history = bank.history
+    if history is not None:
+        history = _append(history, pred, upd)
+    return bank._replace(mean=upd.mean, cov=upd.cov, mu=mu, history=history,
+                         log_weight=bank.log_weight + upd.log_likelihood)
+
+
+def _extend(mu, mu_next):
+    shape = np.broadcast_shapes(mu.shape[:-1], mu_next.shape)
+    return np.concatenate([np.broadcast_to(mu, shape + mu.shape[-1:]),
+                           np.broadcast_to(mu_next, shape)[..., None]], axis=-1)
+
+
+def _append(history: kalman.FilterResult, pred, upd) -> kalman.FilterResult:
+    new = {"means": upd.mean, "covs": upd.cov, "predicted_means": pred.mean,
+           "predicted_covs": pred.cov, "log_likelihoods": upd.log_likelihood}
+    core = {"means": 1, "predicted_means": 1, "covs": 2, "predicted_covs": 2, "log_likelihoods": 0}
+    out = {}
+    for k, old in zip(history._fields, history):
+        c = core[k]
+        item = np.expand_dims(new[k], axis=-1 - c)
+        batch = np.broadcast_shapes(old.shape[:old.ndim - c - 1], item.shape[:item.ndim - c - 1])
+        out[k] = np.concatenate([np.broadcast_to(old, batch + old.shape[old.ndim - c - 1:]),
+                                 np.broadcast_to(item, batch + item.shape[item.ndim - c - 1:])],
+                                axis=-1 - c)
+    return kalman.FilterResult(**out)
+
+
+# --- the mixture over the nodes --------------------------------------------------------
+
+
+def _mixture_moments(W, means, covs, depths):
+    """Mean (..., 3) and covariance (..., 3, 3) of ``(x, y, v)`` under the node mixture.
+
+    ``W`` (..., J) are probabilities; ``means`` (..., J, 2) and ``covs``
+    (..., J, 2, 2) the Gaussians of ``(x, v)`` at each node; ``depths`` (..., J)
+    the node depths (known exactly given the node).
+    """
+    m = np.stack(np.broadcast_arrays(means[..., 0], depths, means[..., 1]), axis=-1)
+    mean = np.einsum("...j,...ji->...i", W, m)
+    d = m - mean[..., None, :]
+    cov = np.einsum("...j,...ji,...jk->...ik", W, d, d)
+    lateral = np.einsum("...j,...jik->...ik", W, np.broadcast_to(covs, m.shape[:-1] + (2, 2)))
+    cov[..., 0, 0] += lateral[..., 0, 0]
+    cov[..., 0, 2] += lateral[..., 0, 1]
+    cov[..., 2, 0] += lateral[..., 1, 0]
+    cov[..., 2, 2] += lateral[..., 1, 1]
+    return mean, cov
+
+
+class Smoothed(NamedTuple):
+    """The state at every frame given all ``N`` bearings (the mixture of the nodes' smoothers).
+
+    Attributes
+    ----------
+    mean : ndarray, shape (..., N, 3)
+        ``E[(x_k, y_k, v_k) | mu_1 .. mu_N]``, row ``k - 1`` for frame ``k``.
+    cov : ndarray, shape (..., N, 3, 3)
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+    @property
+    def depth_mean(self) -> np.ndarray:
+        """``E[y_k]`` at every frame, shape (..., N)."""
+        return self.mean[..., 1]
+
+    @property
+    def depth_sd(self) -> np.ndarray:
+        return np.sqrt(self.cov[..., 1, 1])
+
+    @property
+    def lateral_mean(self) -> np.ndarray:
+        """``E[x_k]`` at every frame, shape (..., N)."""
+        return self.mean[..., 0]
+
+    @property
+    def lateral_sd(self) -> np.ndarray:
+        return np.sqrt(self.cov[..., 0, 0])
+
+    @property
+    def velocity_mean(self) -> np.ndarray:
+        return self.mean[..., 2]
+
+    @property
+    def velocity_sd(self) -> np.ndarray:
+        return np.sqrt(self.cov[..., 2, 2])
+
+
+@dataclass(frozen=True)
+class Mixture:
+    """The optimal posterior at frame ``N``: the bank's Gaussians mixed over the depth nodes.
+
+    Built by :func:`mixture`. ``(...)`` is the batch shape.
+
+    Attributes
+    ----------
+    bank : Bank
+    log_weights : ndarray, shape (..., J)
+        Log quadrature weights of the nodes.
+    probabilities : ndarray, shape (..., J)
+        ``w_j N(y_j; m_y, P_yy) L(y_j)``, normalised over the nodes.
+    log_normaliser : ndarray, shape (...)
+        ``log sum_j w_j N(y_j; m_y, P_yy) L(y_j)``: the log density of the bearings
+        with the depth integrated over the nodes' support.
+    mean : ndarray, shape (..., 3)
+        Posterior mean of ``(x_N, y_N, v_N)``.
+    cov : ndarray, shape (..., 3, 3)
+        Posterior covariance of ``(x_N, y_N, v_N)``.
+    """
+
+    bank: Bank
+    log_weights: np.ndarray
+    probabilities: np.ndarray
+    log_normaliser: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+
+    @property
+    def depth_mean(self) -> np.ndarray:
+        """``E[y_N]``, shape (...)."""
+        return self.mean[..., 1]
+
+    @property
+    def depth_sd(self) -> np.ndarray:
+        return np.sqrt(self.cov[..., 1, 1])
+
+    @property
+    def velocity_mean(self) -> np.ndarray:
+        """``E[v_N]``, shape (...)."""
+        return self.mean[..., 2]
+
+    @property
+    def velocity_sd(self) -> np.ndarray:
+        return np.sqrt(self.cov[..., 2, 2])
+
+    def _query(self, value, name):
+        """Queries as (batch..., K) and a function restoring the caller's shape."""
+        value = _finite(value, name)
+        batch = self.log_normaliser.shape
+        if batch == ():
+            return value.reshape(-1), (lambda out: out.reshape(value.shape))
+        if value.ndim < 1:
+            raise ValueError(f"{name} must have shape (..., K) for a batch, got a scalar")
+        try:
+            np.broadcast_shapes(value.shape[:-1], batch)
+        except ValueError:
+            raise ValueError(f"{name} must have shape (..., K) with leading axes broadcasting "
+                             f"with {batch}, got shape {value.shape}") from None
+        return value, (lambda out: out)
+
+    def depth_log_pdf(self, y) -> np.ndarray:
+        """Log posterior density of the depth at frame ``N``, ``y_N``; ``-inf`` at ``y_N <= N - 1``.
+
+        Each query depth gets its own Kalman filter over all ``N`` bearings.
+
+        Parameters
+        ----------
+        y : array_like
+            Any shape for one problem; ``(..., K)`` for a batch.
+        """
+        y, restore = self._query(y, "y")
+        b = self.bank
+        y1 = y - (b.n_frames - 1)
+        inside = y1 > 0
+        log_w = _filter_bank(np.where(inside, y1, 1.0), b.mu, b.rho, b.q, b.prior_mean,
+                             b.prior_cov, False).log_weight
+        return restore(np.where(inside, log_w - self.log_normaliser[..., None], -np.inf))
+
+    def depth_pdf(self, y) -> np.ndarray:
+        """Posterior density of the depth at frame ``N`` (see :meth:`depth_log_pdf`)."""
+        return np.exp(self.depth_log_pdf(y))
+
+    def depth_cdf(self, y, rtol: float = 1e-10) -> np.ndarray:
+        """``P(y_N <= y)``, integrated from the density.
+
+        The mass lies between the smallest and largest nodes whose probability
+        is within ``e**-60`` of the largest; the CDF is 0 below and 1 above them.
+        In between, the density is integrated from the lower end by composite
+        8-point Gauss-Legendre panels in ``t = log(y_1)``, the panels halved
+        until the CDF changes by at most ``rtol``.
+
+        Parameters
+        ----------
+        y : array_like
+            Depths at frame ``N``: any shape for one problem; ``(..., K)`` for a batch.
+        rtol : float
+            Absolute tolerance of the CDF, > 0.
+        """
+        rtol = _positive_scalar(rtol, "rtol")
+        y, restore = self._query(y, "y")
+        b = self.bank
+        log_p = b.log_weight + self.log_weights - self.log_normaliser[..., None]
+        big = log_p > np.max(log_p, axis=-1, keepdims=True) - _CUTOFF
+        nodes = np.broadcast_to(b.nodes, big.shape)
+        lo = np.log(np.min(np.where(big, nodes, np.inf), axis=-1))[..., None]
+        hi = np.log(np.max(np.where(big, nodes, 0.0), axis=-1))[..., None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.log(np.maximum(y - (b.n_frames - 1), 0.0))
+        top = np.minimum(t, hi)
+        width = np.maximum(top - lo, 0.0)
+        # Start with panels of half the SD of log(y_1) under the mixture.
+        log_nodes = np.log(nodes)
+        centre = np.sum(self.probabilities * log_nodes, axis=-1, keepdims=True)
+        sd_t = np.sqrt(np.sum(self.probabilities * (log_nodes - centre) ** 2, axis=-1))
+        panels = int(np.clip(np.ceil(np.max(width) / np.min(0.5 * sd_t + 1e-3)), 4, 4096))
+        x, w = _GAUSS_LEGENDRE
+        previous = None
+        for _ in range(_MAX_DOUBLINGS):
+            edges = lo[..., None] + width[..., None] * np.linspace(0.0, 1.0, panels + 1)
+            half = 0.5 * np.diff(edges, axis=-1)[..., None]  # (..., K, P, 1)
+            tt = 0.5 * (edges[..., 1:] + edges[..., :-1])[..., None] + half * x
+            shape = tt.shape
+            y1 = np.exp(tt.reshape(shape[:-3] + (-1,)))
+            log_w = _filter_bank(y1, b.mu, b.rho, b.q, b.prior_mean, b.prior_cov, False).log_weight
+            dens = np.exp(log_w - self.log_normaliser[..., None] + np.log(y1))  # dy = y dt
+            cdf = np.sum(dens.reshape(shape) * half * w, axis=(-2, -1))
+            if previous is not None and np.all(np.abs(cdf - previous) <= rtol):
+                break
+            previous, panels = cdf, 2 * panels
+        else:
+            raise RuntimeError("the depth CDF's quadrature did not converge")
+        cdf = np.where(t >= hi, 1.0, np.where(t <= lo, 0.0, np.clip(cdf, 0.0, 1.0)))
+        return restore(cdf)
+
+    @property
+    def velocity_gap(self) -> np.ndarray:
+        """The resolution of the velocity mixture, shape (...).
+
+        The largest difference between the conditional means ``E[v_N | y_j]``
+        of neighbouring nodes (in depth order), in units of the smaller
+        conditional SD, over the pairs where either node has probability above
+        ``1e-14`` of the largest. :meth:`velocity_pdf` and :meth:`velocity_cdf`
+        sum one Gaussian per node, so they are smooth curves (and converged
+        integrals over depth) only when this is below about 0.5; the moments
+        need no such resolution.
+        """
+        b = self.bank
+        order = np.argsort(np.broadcast_to(b.nodes, self.probabilities.shape), axis=-1)
+        p = np.take_along_axis(self.probabilities, order, axis=-1)
+        m = np.take_along_axis(np.broadcast_to(b.mean[..., 1], p.shape), order, axis=-1)
+        sd = np.take_along_axis(np.broadcast_to(np.sqrt(b.cov[..., 1, 1]), p.shape), order, axis=-1)
+        big = p > 1e-14 * np.max(p, axis=-1, keepdims=True)
+        gap = np.abs(np.diff(m, axis=-1)) / np.minimum(sd[..., 1:], sd[..., :-1])
+        return np.max(np.where(big[..., 1:] | big[..., :-1], gap, 0.0), axis=-1, initial=0.0)
+
+    def _velocity_terms(self):
+        b = self.bank
+        sd = np.sqrt(b.cov[..., 1, 1])
+        return self.probabilities[..., None, :], b.mean[..., None, :, 1], sd[..., None, :]
+
+    def velocity_pdf(self, v) -> np.ndarray:
+        """Posterior density of ``v_N``: ``sum_j p_j N(v; E[v_N | y_j], Var[v_N | y_j])``.
+
+        The nodes must be close enough that neighbouring conditional means
+        differ by less than about half a conditional SD (:attr:`velocity_gap`),
+        or the sum ripples.
+
+        Parameters
+        ----------
+        v : array_like
+            Any shape for one problem; ``(..., K)`` for a batch.
+        """
+        v, restore = self._query(v, "v")
+        W, m, sd = self._velocity_terms()
+        z = (v[..., :, None] - m) / sd
+        return restore(np.sum(W * np.exp(-0.5 * z**2) / (np.sqrt(2.0 * np.pi) * sd), axis=-1))
+
+    def velocity_cdf(self, v) -> np.ndarray:
+        """``P(v_N <= v)``: the mixture of the nodes' Gaussian CDFs.
+
+        Converged only when the nodes resolve the velocity (:attr:`velocity_gap`
+        below about 0.5), as for :meth:`velocity_pdf`.
+        """
+        v, restore = self._query(v, "v")
+        W, m, sd = self._velocity_terms()
+        return restore(np.sum(W * ndtr((v[..., :, None] - m) / sd), axis=-1))
+
+    def smoothed(self) -> Smoothed:
+        """Textbook 19.2.6: the state at every frame given all bearings.
+
+        Each node's filter history (the bank's, or from a rerun of the filters
+        if the bank kept none) is smoothed by the fixed-interval smoother
+        (:func:`depthcore.kalman.fixed_interval_smoother`);
+        the smoothed Gaussians of ``(x_k, v_k)`` are mixed with the nodes'
+        probabilities, and the depth at frame ``k`` is ``y_1 + k - 1``.
+        """
+        b = self.bank
+        res = b.history
+        if res is None:
+            res = _filter_bank(b.nodes, b.mu, b.rho, b.q, b.prior_mean, b.prior_cov, True).history
+        s = kalman.fixed_interval_smoother(res, PSI)  # (..., J, N, 2), (..., J, N, 2, 2)
+        frames = np.arange(b.n_frames)
+        mean, cov = _mixture_moments(self.probabilities[..., None, :],
+                                     np.swapaxes(s.mean, -2, -3), np.swapaxes(s.cov, -3, -4),
+                                     b.nodes[..., None, :] + frames[:, None])
+        return Smoothed(mean, cov)
+
+
+def _positive_scalar(value, name: str) -> float:
+    arr = _finite(value, name)
+    if arr.ndim != 0 or not arr > 0:
+        raise ValueError(f"{name} must be a positive scalar, got {value!r}")
+    return float(arr)
+
+
+def mixture(bank: Bank, weights) -> Mixture:
+    """The optimal posterior at frame ``N`` from the bank and the nodes' quadrature weights.
+
+    Parameters
+    ----------
+    bank : Bank
+    weights : array_like, shape (..., J)
+        Positive quadrature weights of the nodes for integrals over the depth
+        at frame 1 (``sum_j w_j g(y_j)`` approximates ``integral g(y) dy``),
+        broadcasting with ``bank.nodes``.
+
+    Returns
+    -------
+    Mixture
+        The probabilities ``p_j`` proportional to ``w_j N(y_j; m_y, P_yy) L(y_j)``
+        (in log space, the largest subtracted), the log normaliser, and the
+        mixture's mean and covariance of ``(x_N, y_N, v_N)``: with
+        ``m_j = (E[x_N | y_j], y_j + N - 1, E[v_N | y_j])``,
+        ``mean = sum_j p_j m_j`` and
+        ``cov = sum_j p_j (Cov[(x_N, v_N) | y_j] + (m_j - mean)(m_j - mean)^T)``.
+    """
+    if not isinstance(bank, Bank):
+        raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")
+    weights = _finite(weights, "weights")
+    if not np.all(weights > 0):
+        raise ValueError(f"weights must be positive, got minimum {float(np.min(weights)):.6g}")
+    try:
+        np.broadcast_shapes(weights.shape, bank.nodes.shape)
+    except ValueError:
+        raise ValueError(f"weights must broadcast with the nodes' shape {bank.nodes.shape}, "
+                         f"got shape {weights.shape}") from None
+    log_weights = np.log(weights)
+    a = bank.log_weight + log_weights
+    log_normaliser = logsumexp(a, axis=-1)
+    probabilities = np.exp(a - log_normaliser[..., None])
+    depth_N = bank.nodes + (bank.n_frames - 1)
+    mean, cov = _mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
+    return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
+
+
+# --- simulation ------------------------------------------------------------------------
+
+
+class Simulation(NamedTuple):
+    """A simulated track: states (..., N, 3) ``(x_k, y_k, v_k)`` and bearings (..., N)."""
+
+    states: np.ndarray
+    mu: np.ndarray
+
+
+def simulate(x1, n_frames: int, rho, q, rng: np.random.Generator,
+             size: int | None = None) -> Simulation:
+    """Draw a track of ``N`` frames with lateral process noise, and its noisy bearings.
+
+    ``y_{k+1} = y_k + 1``, ``x_{k+1} = x_k + v_k``, ``v_{k+1} = v_k + a_k`` with
+    ``a_k ~ N(0, q**2)``, and ``mu_k = x_k / y_k + w_k``, ``w_k ~ N(0, rho**2)``.
+
+    Parameters
+    ----------
+    x1 : array_like, shape (..., 3)
+        The state ``(x_1, y_1, v_1)`` at frame 1, with ``y_1 > 0``.
+    n_frames : int
+        ``N >= 1``.
+    rho : float
+        Bearing noise SD, > 0.
+    q : float
+        Acceleration SD, >= 0.
+    rng : numpy.random.Generator
+    size : int, optional
+        Number of independent tracks from each ``x1``; ``None`` for one.
+
+    Returns
+    -------
+    Simulation
+        Leading shape ``(size,) + x1.shape[:-1]`` (without ``size`` if ``None``).
+    """
+    x1 = _finite(x1, "x1")
+    if x1.ndim < 1 or x1.shape[-1] != 3:
+        raise ValueError(f"x1 must have shape (..., 3), got shape {x1.shape}")
+    if not np.all(x1[..., 1] > 0):
+        raise ValueError(f"x1 puts the point behind the camera: depth y_1 must be > 0, "
+                         f"got minimum {float(np.min(x1[..., 1])):.6g}")
+    if isinstance(n_frames, bool) or not isinstance(n_frames, (int, np.integer)) or n_frames < 1:
+        raise ValueError(f"n_frames must be an integer >= 1, got {n_frames!r}")
+    rho, q = _noise(rho, q)
+    if rho.ndim or q.ndim:
+        raise ValueError(f"rho and q must be scalars, got shapes {rho.shape} and {q.shape}")
+    rho, q = float(rho), float(q)
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    lead = ((size,) if size is not None else ()) + x1.shape[:-1]
+    a = q * rng.standard_normal(lead + (n_frames - 1,))
+    v = x1[..., 2, None] + np.concatenate([np.zeros(lead + (1,)), np.cumsum(a, axis=-1)], axis=-1)
+    x = x1[..., 0, None] + np.concatenate([np.zeros(lead + (1,)), np.cumsum(v[..., :-1], axis=-1)],
+                                          axis=-1)
+    y = np.broadcast_to(x1[..., 1, None] + np.arange(n_frames), x.shape)
+    states = np.stack([x, y, v], axis=-1)
+    mu = x / y + rho * rng.standard_normal(lead + (n_frames,))
+    return Simulation(states, mu)

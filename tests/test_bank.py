@@ -1,0 +1,450 @@
+"""The exact optimal filter for N frames and process noise q, as a bank of Kalman filters over depth.
+
+Independent routes: at N = 3, q = 0, the one-dimensional route of Eqs. (14)-(16)
+(:func:`depthcore.optimal.moments`); at a fixed depth, the batch least-squares
+solution for the whole lateral trajectory given all bearings; overall, a
+brute-force three-dimensional quadrature of the posterior (q = 0, N = 5) and
+importance sampling of the depth (q > 0).
+"""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy import stats
+from scipy.special import logsumexp
+
+from depthcore import bank as bk
+from depthcore import kalman, model, optimal
+from depthcore.gaussian import paper_prior
+from depthcore.scenarios import MU_17, RHO_200, SCENARIOS
+from depthcore.second_order import noise_free_state
+
+ORDER = 20  # Gauss-Legendre points per panel
+
+
+def log_depth_rule(panels, lo=-12.0, hi=14.0):
+    """Nodes and weights for integrals over y_1 > 0: composite Gauss-Legendre in t = log(y_1)
+    over [lo, hi] (depths 6e-6 to 1.2e6), with the Jacobian dy/dt = y folded into the weights."""
+    x, w = np.polynomial.legendre.leggauss(ORDER)
+    edges = np.linspace(lo, hi, panels + 1)
+    half = 0.5 * np.diff(edges)
+    t = (0.5 * (edges[1:] + edges[:-1])[:, None] + half[:, None] * x).ravel()
+    wt = (half[:, None] * w).ravel()
+    return np.exp(t), wt * np.exp(t)
+
+
+def key_moments(mx):
+    return np.array([mx.depth_mean, mx.depth_sd, mx.velocity_mean, mx.velocity_sd])
+
+
+def converged_mixture(mu, rho, prior_mean, prior_cov, q=0.0, tol=1e-11, v_probe=None):
+    """The bank's mixture on the log-depth rule, panels doubled until the key moments
+    change by at most ``tol`` relative (the rounding floor is a few 1e-12), and the
+    velocity CDF at ``v_probe`` too if given (it needs more nodes than the moments)."""
+    panels, previous = 20, None
+    while True:
+        y, w = log_depth_rule(panels)
+        mx = bk.mixture(bk.filter_bank(y, mu, rho, prior_mean, prior_cov, q), w)
+        now = key_moments(mx)
+        if v_probe is not None:
+            now = np.concatenate([now, mx.velocity_cdf(v_probe)])
+        if previous is not None and np.all(np.abs(now - previous) <= tol * np.abs(now)):
+            return mx
+        assert panels < 2000, "the test's depth rule did not converge"
+        previous, panels = now, 2 * panels
+
+
+# --- the model at a fixed depth: batch least squares --------------------------------
+
+
+def lateral_map(N):
+    """The lateral states as a linear map of z = (x_1, v_1, a_1 .. a_{N-1}):
+    rows 2k, 2k+1 give x_{k+1}, v_{k+1}."""
+    A = np.zeros((2 * N, N + 1))
+    for k in range(N):
+        A[2 * k, 0] = 1.0
+        A[2 * k, 1] = k  # x_{k+1} = x_1 + k v_1 + sum_{j<k} (k - j) a_j
+        A[2 * k + 1, 1] = 1.0
+        for j in range(1, k + 1):  # a_j enters v from frame j + 1 and x from frame j + 2
+            A[2 * k + 1, 1 + j] = 1.0
+            A[2 * k, 1 + j] = k - j
+    return A
+
+
+def batch_least_squares(y, mu, rho, q, prior_mean, prior_cov):
+    """At one depth y_1 = y, the whole lateral trajectory at once, with no Kalman recursion.
+
+    The unknowns are z = (x_1, v_1, a_1 .. a_{N-1}) (just (x_1, v_1) when q = 0), with the
+    prior N(m, P) conditioned on y_1 = y on (x_1, v_1) and N(0, q**2) on each a_k; the
+    bearings are mu = G z + w with G = H A (H picks x_k / y_k, A = :func:`lateral_map`).
+    The whitened residuals r(z) = ((mu - G z) / rho, R^-1 (z - m_z)), Z = R R^T, are
+    minimised by least squares, and
+
+        log p(mu | y) = -N/2 log(2 pi) - N log rho - log det R - 1/2 log det M - 1/2 |r(z*)|^2
+
+    with M the normal matrix; z | mu ~ N(z*, M^-1). Returns the log weight
+    log N(y; m_y, P_yy) + log p(mu | y) and the means (N, 2) and covariances (N, 2, 2) of
+    (x_k, v_k) given all bearings.
+    """
+    N = len(mu)
+    u = [0, 2]
+    P_yy = prior_cov[1, 1]
+    mean_1 = prior_mean[u] + prior_cov[u, 1] * (y - prior_mean[1]) / P_yy
+    cov_1 = prior_cov[np.ix_(u, u)] - np.outer(prior_cov[u, 1], prior_cov[u, 1]) / P_yy
+    d = N + 1 if q > 0 else 2
+    A = lateral_map(N)[:, :d]
+    m_z = np.concatenate([mean_1, np.zeros(d - 2)])
+    R = np.zeros((d, d))
+    R[:2, :2] = np.linalg.cholesky(cov_1)
+    R[2:, 2:] = q * np.eye(d - 2)
+    H = np.zeros((N, 2 * N))
+    H[np.arange(N), 2 * np.arange(N)] = 1.0 / (y + np.arange(N))
+    R_inv = np.linalg.inv(R)
+    design = np.vstack([H @ A / rho, R_inv])
+    target = np.concatenate([mu / rho, R_inv @ m_z])
+    z, *_ = np.linalg.lstsq(design, target, rcond=None)
+    residual = design @ z - target
+    M = design.T @ design
+    log_like = (-0.5 * N * np.log(2 * np.pi) - N * np.log(rho) - np.sum(np.log(np.diag(R)))
+                - 0.5 * np.linalg.slogdet(M)[1] - 0.5 * residual @ residual)
+    log_weight = stats.norm(prior_mean[1], np.sqrt(P_yy)).logpdf(y) + log_like
+    mean = (A @ z).reshape(N, 2)
+    cov = A @ np.linalg.inv(M) @ A.T
+    return log_weight, mean, np.stack([cov[2 * k:2 * k + 2, 2 * k:2 * k + 2] for k in range(N)])
+
+
+def long_track(N, q, seed, rho=RHO_200):
+    """Fig. 2's point continued for N frames with process noise q, and the paper's prior."""
+    c = noise_free_state(MU_17)
+    x1 = model.G(c, -2)
+    sim = bk.simulate(x1, N, rho, q, np.random.default_rng(seed))
+    prior = paper_prior(c)
+    return sim, prior
+
+
+# --- N = 3, q = 0: the paper's problem -------------------------------------------------
+
+
+def test_eq14_16_bank_moments_equal_the_one_dimensional_route(scenario):
+    s = scenario
+    prior = s.prior
+    ref = optimal.moments(np.array([s.mu]), s.rho, prior.mean, prior.cov)
+    mx = converged_mixture(s.mu, s.rho, prior.mean, prior.cov)
+    expected = np.array([ref.depth_mean[0], ref.depth_sd[0], ref.velocity_mean[0],
+                         ref.velocity_sd[0]])
+    # both routes are converged to ~1e-12; the requirement is 1e-10 relative
+    assert_allclose(key_moments(mx), expected, rtol=1e-10, atol=0)
+    scale = np.sqrt(np.diag(ref.cov[0]))
+    assert_allclose(mx.mean, ref.mean[0], rtol=0, atol=1e-10 * scale.max())
+    assert_allclose(mx.cov, ref.cov[0], rtol=0, atol=1e-10 * np.outer(scale, scale).max())
+
+
+def test_eq16_bank_depth_density_is_the_one_dimensional_one_up_to_a_constant(scenario):
+    # log p(y_1) + log L(y_1) of the bank against Eq. (16)'s log p_oy at y = y_1 + 2.
+    s = scenario
+    y1 = np.array([0.05, 0.7, 2.0, 4.5, 6.3, 11.0, 40.0, 300.0])
+    b = bk.filter_bank(y1, s.mu, s.rho, s.prior.mean, s.prior.cov)
+    log_oy, mean, cov = optimal.conditional(y1 + 2.0, s.mu, s.rho, s.prior)
+    diff = b.log_weight - log_oy
+    assert np.ptp(diff) < 1e-9 * np.max(np.abs(b.log_weight))
+    # and the Gaussian of (x_3, v_3) given the depth is Eq. (15)'s
+    assert_allclose(b.mean, mean, rtol=1e-9, atol=1e-12)
+    assert_allclose(b.cov, cov, rtol=1e-7, atol=1e-14)
+
+
+def test_eq13_16_densities_and_cdfs_match_the_one_dimensional_route():
+    s = SCENARIOS["fig3"]
+    prior = s.prior
+    v = np.array([-1.0, 2.0, 4.4, 7.0, 12.0])
+    mx = converged_mixture(s.mu, s.rho, prior.mean, prior.cov, v_probe=v[1:])
+    assert mx.velocity_gap < 0.5  # converged nodes resolve the velocity
+    ref = optimal.batch_marginals(np.array([s.mu]), s.rho, prior.mean, prior.cov)
+    opt = optimal.marginals(s.mu, s.rho, prior)
+    y = np.array([2.5, 5.0, 10.0, 20.0, 45.0, 120.0])
+    assert_allclose(mx.depth_pdf(y), opt.depth_pdf(y), rtol=1e-9, atol=1e-15)
+    assert_allclose(mx.depth_cdf(y), ref.depth_cdf(y), rtol=0, atol=1e-9)
+    assert_allclose(mx.velocity_cdf(v), ref.velocity_cdf(v), rtol=0, atol=1e-9)
+    assert_allclose(mx.velocity_pdf(v), opt.velocity_pdf(v), rtol=1e-8, atol=1e-14)
+    # the log normaliser is a log density of the bearings: the same constant offset as Eq. (16)
+    assert np.isfinite(mx.log_normaliser)
+
+
+def test_depth_pdf_integrates_to_one_and_the_cdf_is_its_integral():
+    sim, prior = long_track(6, 0.02, seed=3)
+    mx = converged_mixture(sim.mu, RHO_200, prior.mean, prior.cov, q=0.02)
+    y, w = log_depth_rule(160)
+    N = 6
+    assert_allclose(np.sum(mx.depth_pdf(y + N - 1) * w), 1.0, rtol=1e-10)
+    grid = mx.depth_mean + mx.depth_sd * np.array([-2.0, -0.5, 0.0, 1.0, 3.0])
+    h = 1e-4 * mx.depth_sd
+    slope = (mx.depth_cdf(grid + h) - mx.depth_cdf(grid - h)) / (2 * h)
+    assert_allclose(slope, mx.depth_pdf(grid), rtol=1e-5)  # central difference, O(h^2)
+    cdf = mx.depth_cdf(np.array([N - 1.0, 1e9]))
+    assert_allclose(cdf, [0.0, 1.0], atol=1e-10)
+    v = mx.velocity_mean + mx.velocity_sd * np.array([-1.0, 0.3, 2.0])
+    hv = 1e-5 * mx.velocity_sd
+    assert_allclose((mx.velocity_cdf(v + hv) - mx.velocity_cdf(v - hv)) / (2 * hv),
+                    mx.velocity_pdf(v), rtol=1e-6)
+
+
+# --- N > 3 and q > 0 -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("q", [0.0, 0.03])
+def test_textbook_19_2_3_each_node_is_the_batch_least_squares_at_its_depth(q):
+    N = 8
+    sim, prior = long_track(N, q, seed=5)
+    y1 = np.array([0.3, 2.0, 3.7, 5.5, 20.0])
+    b = bk.filter_bank(y1, sim.mu, RHO_200, prior.mean, prior.cov, q, history=True)
+    for j, y in enumerate(y1):
+        log_weight, mean, cov = batch_least_squares(y, sim.mu, RHO_200, q, prior.mean, prior.cov)
+        # The Joseph update meets a prior variance of 1000 with a bearing variance of
+        # (rho y_k)**2: relative rounding up to 1e-16 * 1000 / (rho y)**2 in the covariances,
+        # ~4e-8 at y = 0.3, whose log weight (-3867) is then right to 5e-10 relative; near
+        # the posterior's mode (y ~ 4) everything agrees to ~1e-12.
+        sd = np.sqrt(np.diag(cov[-1]))
+        assert_allclose(b.log_weight[j], log_weight, rtol=1e-9, atol=1e-11)
+        assert_allclose(b.mean[j], mean[-1], rtol=0, atol=1e-7 * sd.max())
+        assert_allclose(b.cov[j], cov[-1], rtol=1e-8, atol=1e-8 * np.outer(sd, sd).max())
+        assert_allclose(b.history.means[j, -1], b.mean[j], rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("q", [0.0, 0.03])
+def test_textbook_19_2_6_smoothed_single_node_is_the_batch_least_squares(q):
+    # One node with weight 1: the mixture's smoothed states are that node's smoother.
+    N = 7
+    sim, prior = long_track(N, q, seed=6)
+    y = 4.2
+    mx = bk.mixture(bk.filter_bank([y], sim.mu, RHO_200, prior.mean, prior.cov, q), [1.0])
+    sm = mx.smoothed()
+    _, mean, cov = batch_least_squares(y, sim.mu, RHO_200, q, prior.mean, prior.cov)
+    assert_allclose(sm.lateral_mean, mean[:, 0], rtol=1e-8, atol=1e-12)
+    assert_allclose(sm.velocity_mean, mean[:, 1], rtol=1e-8, atol=1e-12)
+    assert_allclose(sm.cov[:, [0, 2]][:, :, [0, 2]], cov, rtol=1e-6, atol=1e-13)
+    assert_allclose(sm.depth_mean, y + np.arange(N), rtol=1e-15)
+    assert_allclose(sm.depth_sd, 0.0, atol=1e-15)
+
+
+def brute_force_q0(mu, rho, prior, panels=60, order=48, width=12.0):
+    """Moments at frame N and smoothed lateral means by a 3-D Gauss-Legendre rule for q = 0.
+
+    Coordinates (t, a, b): t = log(y_1), a = x_1 / y_1 and b = x_N / y_N, the noise-free
+    bearings at the first and last frames, over a +-width rho box around mu_1 and mu_N,
+    where the likelihood of those two bearings alone is negligible outside. Then
+    x_1 = a y_1, v = (b y_N - a y_1) / (N - 1), and dx_1 dy_1 dv = y_1**2 y_N / (N - 1) dt da db.
+    The posterior is Eq. (6)'s for N bearings: the prior times the N likelihoods.
+    """
+    N = len(mu)
+    t, wt = log_depth_rule(panels, lo=-6.0, hi=8.0)
+    g, wg = np.polynomial.legendre.leggauss(order)
+    a, wa = mu[0] + width * rho * g, width * rho * wg
+    b, wb = mu[-1] + width * rho * g, width * rho * wg
+    y1 = t[:, None, None]
+    A, B = a[None, :, None], b[None, None, :]
+    yN = y1 + N - 1
+    x1 = A * y1
+    v = (B * yN - x1) / (N - 1)
+    X = np.stack(np.broadcast_arrays(x1, y1, v), axis=-1)
+    log_p = stats.multivariate_normal(prior.mean, prior.cov).logpdf(X)
+    for k in range(N):
+        log_p = log_p + stats.norm(mu[k], rho).logpdf((x1 + k * v) / (y1 + k))
+    log_p = log_p + np.log(y1 * yN / (N - 1)) + np.log(wt)[:, None, None]  # wt = y_1 dt
+    log_p = log_p + np.log(wa)[None, :, None] + np.log(wb)[None, None, :]
+    W = np.exp(log_p - logsumexp(log_p)).ravel()
+    state_N = np.stack(np.broadcast_arrays(x1 + (N - 1) * v, yN, v), axis=-1).reshape(-1, 3)
+    mean = W @ state_N
+    d = state_N - mean
+    cov = (W[:, None] * d).T @ d
+    lateral = np.array([W @ np.broadcast_to(x1 + k * v, log_p.shape).ravel() for k in range(N)])
+    return mean, cov, lateral
+
+
+def test_q0_n5_moments_and_smoothing_match_brute_force_3d_quadrature():
+    N = 5
+    sim, prior = long_track(N, 0.0, seed=7)
+    mx = converged_mixture(sim.mu, RHO_200, prior.mean, prior.cov)
+    mean, cov, lateral = brute_force_q0(sim.mu, RHO_200, prior)
+    # this 3-D rule is within 3e-11 in the means and 2e-10 in the covariance of a finer
+    # one (90 panels, 64 points, which is 1e-13 from the bank): tolerances 1e-9 of the
+    # largest SD and 1e-8 of the largest variance leave room
+    scale = np.sqrt(np.diag(cov))
+    assert_allclose(mx.mean, mean, rtol=0, atol=1e-9 * scale.max())
+    assert_allclose(mx.cov, cov, rtol=0, atol=1e-8 * np.outer(scale, scale).max())
+    assert_allclose(mx.smoothed().lateral_mean, lateral, rtol=0, atol=1e-9 * scale.max())
+
+
+def test_q_positive_moments_match_importance_sampling_of_the_depth():
+    # Self-normalised importance sampling of y_1 from a log-normal proposal, each draw
+    # weighted by the prior depth density times p(mu | y_1) from batch least squares, and
+    # carrying E[(x_N, v_N) | y_1, mu] from the same solution: no Kalman recursion.
+    N, q = 9, 0.04
+    sim, prior = long_track(N, q, seed=8)
+    mx = converged_mixture(sim.mu, RHO_200, prior.mean, prior.cov, q=q)
+    rng = np.random.default_rng(9)
+    n = 3000
+    proposal = stats.t(df=3, loc=np.log(sim.states[0, 1]), scale=0.2)  # in log(y_1), heavy tails
+    y = np.exp(proposal.rvs(size=n, random_state=rng))
+    log_g = proposal.logpdf(np.log(y)) - np.log(y)
+    rows = [batch_least_squares(yi, sim.mu, RHO_200, q, prior.mean, prior.cov) for yi in y]
+    log_w = np.array([r[0] for r in rows]) - log_g
+    W = np.exp(log_w - logsumexp(log_w))
+    depth = y + N - 1
+    v_mean = np.array([r[1][-1, 1] for r in rows])
+    v_var = np.array([r[2][-1, 1, 1] for r in rows])
+    ess = 1.0 / np.sum(W**2)
+    assert ess > 0.15 * n  # the proposal, centred on the true depth, covers the posterior
+    for values, target, extra in ((depth, mx.depth_mean, 0.0), (v_mean, mx.velocity_mean, 0.0)):
+        est = np.sum(W * values)
+        se = np.sqrt(np.sum(W**2 * (values - est) ** 2))  # delta-method standard error
+        assert abs(est - target) < 5 * se + 1e-12  # five SEs: a false alarm below 1e-6
+    sd_depth = np.sqrt(np.sum(W * (depth - np.sum(W * depth)) ** 2))
+    sd_v = np.sqrt(np.sum(W * (v_var + (v_mean - np.sum(W * v_mean)) ** 2)))
+    assert sd_depth == pytest.approx(mx.depth_sd, rel=0.05)
+    assert sd_v == pytest.approx(mx.velocity_sd, rel=0.05)
+
+
+# --- online updates, batching, smoothing -----------------------------------------------
+
+
+@pytest.mark.parametrize("q", [0.0, 0.05])
+def test_textbook_19_2_3_online_step_equals_recomputing_from_scratch(q):
+    N = 8
+    sim, prior = long_track(N, q, seed=10)
+    y, _ = log_depth_rule(10)
+    b = bk.filter_bank(y, sim.mu[:3], RHO_200, prior.mean, prior.cov, q, history=True)
+    for k in range(3, N):
+        b = bk.step(b, sim.mu[k])
+    fresh = bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, q, history=True)
+    assert b.n_frames == N
+    assert_allclose(b.mu, sim.mu, rtol=0, atol=0)
+    assert_allclose(b.log_weight, fresh.log_weight, rtol=1e-13, atol=1e-11)
+    assert_allclose(b.mean, fresh.mean, rtol=1e-13, atol=1e-14)
+    assert_allclose(b.cov, fresh.cov, rtol=1e-13, atol=1e-18)
+    for field in kalman.FilterResult._fields:
+        assert_allclose(getattr(b.history, field), getattr(fresh.history, field),
+                        rtol=1e-13, atol=1e-13)
+
+
+def test_batched_bank_equals_a_loop_over_trials():
+    # Four trials, each with its own nodes, bearings, noise and process noise.
+    rng = np.random.default_rng(11)
+    N, B = 6, 4
+    c = noise_free_state(MU_17)
+    prior = paper_prior(c)
+    x1 = model.G(c, -2) + rng.normal(size=(B, 3)) * [0.2, 0.5, 0.1]
+    rho = np.array([1 / 200, 1 / 500, 1 / 100, 1 / 200])
+    q = np.array([0.0, 0.02, 0.05, 0.01])
+    mu = np.stack([bk.simulate(x1[i], N, rho[i], q[i], rng).mu for i in range(B)])
+    y, w = log_depth_rule(20)
+    nodes = y[None, :] * (1.0 + 0.01 * np.arange(B))[:, None]
+    b = bk.filter_bank(nodes, mu[:, :4], rho, prior.mean, prior.cov, q)
+    b = bk.step(bk.step(b, mu[:, 4]), mu[:, 5])
+    mx = bk.mixture(b, w[None, :] * (1.0 + 0.01 * np.arange(B))[:, None])
+    for i in range(B):
+        one = bk.mixture(bk.filter_bank(nodes[i], mu[i], rho[i], prior.mean, prior.cov, q[i]),
+                         w * (1.0 + 0.01 * i))
+        assert_allclose(mx.mean[i], one.mean, rtol=1e-12)
+        assert_allclose(mx.cov[i], one.cov, rtol=1e-10, atol=1e-14)
+        assert_allclose(mx.log_normaliser[i], one.log_normaliser, rtol=1e-13)
+        ys = one.depth_mean + np.array([-1.0, 0.0, 1.0]) * one.depth_sd
+        assert_allclose(mx.depth_pdf(np.tile(ys, (B, 1)))[i], one.depth_pdf(ys), rtol=1e-11)
+        assert_allclose(mx.velocity_cdf(np.tile(ys, (B, 1)))[i], one.velocity_cdf(ys), rtol=1e-12)
+        assert_allclose(mx.smoothed().mean[i], one.smoothed().mean, rtol=1e-11, atol=1e-13)
+
+
+def test_smoothed_state_at_the_last_frame_is_the_filtered_mixture():
+    sim, prior = long_track(6, 0.03, seed=12)
+    y, w = log_depth_rule(40)
+    b = bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, 0.03)
+    mx = bk.mixture(b, w)
+    sm = mx.smoothed()
+    assert_allclose(sm.mean[-1], mx.mean, rtol=1e-12)
+    assert_allclose(sm.cov[-1], mx.cov, rtol=1e-9, atol=1e-14)
+    # the depth advances by one per frame and its SD does not change
+    assert_allclose(np.diff(sm.depth_mean), 1.0, rtol=1e-12)
+    assert_allclose(sm.depth_sd, mx.depth_sd, rtol=1e-9)
+    # with history kept, the smoother reuses it
+    hist = bk.mixture(bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, 0.03, history=True), w)
+    assert_allclose(hist.smoothed().mean, sm.mean, rtol=0, atol=0)
+
+
+# --- simulation ------------------------------------------------------------------------
+
+
+def test_simulate_follows_the_motion_and_is_repeatable():
+    x1 = np.array([-1.2, 4.0, 1.2])
+    a = bk.simulate(x1, 12, 0.01, 0.1, np.random.default_rng(1), size=500)
+    b = bk.simulate(x1, 12, 0.01, 0.1, np.random.default_rng(1), size=500)
+    assert a.states.shape == (500, 12, 3) and a.mu.shape == (500, 12)
+    assert np.array_equal(a.mu, b.mu) and np.array_equal(a.states, b.states)
+    x, y, v = np.moveaxis(a.states, -1, 0)
+    assert_allclose(y, 4.0 + np.arange(12) + 0 * x, rtol=0, atol=0)
+    assert_allclose(x[:, 1:], x[:, :-1] + v[:, :-1], rtol=1e-14, atol=1e-14)
+    assert_allclose(a.states[:, 0], np.broadcast_to(x1, (500, 3)))
+    # accelerations have SD q, bearing errors SD rho (chi-square: 5500 and 6000 draws, 5%)
+    assert np.std(np.diff(v, axis=-1)) == pytest.approx(0.1, rel=0.05)
+    assert np.std(a.mu - x / y) == pytest.approx(0.01, rel=0.05)
+    still = bk.simulate(x1, 5, 0.01, 0.0, np.random.default_rng(2))
+    assert_allclose(still.states, model.trajectory(x1, 5), rtol=1e-15)
+
+
+# --- refusals --------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def fig2_args():
+    s = SCENARIOS["fig2"]
+    return dict(nodes=[1.0, 4.0, 9.0], mu=s.mu, rho=s.rho, prior_mean=s.prior.mean,
+                prior_cov=s.prior.cov)
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(nodes=[1.0, 0.0, 3.0]), "nodes must be positive"),
+    (dict(nodes=[1.0, np.nan]), "nodes must be finite"),
+    (dict(nodes=np.zeros((2, 0))), r"nodes must have shape \(..., J\) with J >= 1"),
+    (dict(mu=[0.1, np.inf, 0.2]), "mu must be finite"),
+    (dict(mu=np.zeros((3, 0))), r"mu must have shape \(..., N\) with N >= 1"),
+    (dict(rho=0.0), "rho must be positive"),
+    (dict(rho=-0.1), "rho must be positive"),
+    (dict(q=-0.01), "q must be >= 0"),
+    (dict(prior_cov=np.diag([1.0, -1.0, 1.0])), "prior_cov must be positive definite"),
+    (dict(prior_cov=np.eye(2)), r"prior_cov must have shape \(..., 3, 3\)"),
+    (dict(prior_mean=[0.0, 1.0]), r"prior_mean must have shape \(..., 3\)"),
+    (dict(nodes=np.ones((2, 3)), mu=np.zeros((3, 3))), r"batch\) shapes do not broadcast: nodes \(2,\), mu \(3,\)"),
+])
+def test_filter_bank_refuses_bad_input_naming_the_argument(fig2_args, change, message):
+    with pytest.raises(ValueError, match=message):
+        bk.filter_bank(**dict(fig2_args, **change))
+
+
+def test_mixture_and_step_refuse_bad_input(fig2_args):
+    b = bk.filter_bank(**fig2_args)
+    with pytest.raises(ValueError, match="weights must be positive"):
+        bk.mixture(b, [1.0, 0.0, 1.0])
+    with pytest.raises(ValueError, match="weights must broadcast"):
+        bk.mixture(b, [1.0, 1.0])
+    with pytest.raises(ValueError, match="bank must be a Bank"):
+        bk.mixture(tuple(b), [1.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="mu_next must be finite"):
+        bk.step(b, np.nan)
+    with pytest.raises(ValueError, match="bank must be a Bank"):
+        bk.step(None, 0.1)
+    two = bk.filter_bank(**dict(fig2_args, mu=np.tile(fig2_args["mu"], (2, 1))))
+    with pytest.raises(ValueError, match=r"do not broadcast: bank \(2,\), mu_next \(3,\)"):
+        bk.step(two, [0.1, 0.2, 0.3])
+    with pytest.raises(ValueError, match="rtol must be a positive scalar"):
+        bk.mixture(b, [1.0, 1.0, 1.0]).depth_cdf([5.0], rtol=0.0)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(x1=[0.0, -1.0, 0.0]), "behind the camera"),
+    (dict(n_frames=0), "n_frames must be an integer >= 1"),
+    (dict(n_frames=2.5), "n_frames must be an integer >= 1"),
+    (dict(rho=0.0), "rho must be positive"),
+    (dict(q=-1.0), "q must be >= 0"),
+    (dict(rng=1), "rng must be a numpy.random.Generator"),
+])
+def test_simulate_refuses_bad_input(kwargs, message):
+    args = dict(x1=[0.0, 3.0, 0.5], n_frames=4, rho=0.01, q=0.0, rng=np.random.default_rng(0))
+    with pytest.raises(ValueError, match=message):
+        bk.simulate(**dict(args, **kwargs))
