@@ -13,17 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
+from . import filters as _filters
 from . import reproduce
 from .scenarios import SCENARIOS
 
-#: One vocabulary for every plot: label, colour and line style of each filter.
-STYLE = {
-    "optimal": {"label": "optimal $p_o$", "color": "black", "linestyle": "-"},
-    "second_order": {"label": "second order $p_s$", "color": "tab:blue", "linestyle": "--"},
-    "ekf": {"label": "EKF $p_e$", "color": "tab:red", "linestyle": ":"},
-    "ukf": {"label": "UKF", "color": "tab:green", "linestyle": "-."},
-    "particle": {"label": "particle filter", "color": "tab:purple", "linestyle": (0, (5, 1, 1, 1, 1, 1))},
-}
+#: One vocabulary for every plot: label, colour and line style of each filter,
+#: from the registry :data:`depthcore.filters.FILTERS`.
+STYLE = {name: f.plot_style for name, f in _filters.FILTERS.items()}
 
 #: Axis ranges comparable with the paper's plots.
 GRIDS = {
@@ -40,7 +36,7 @@ _SYMBOL = {"depth": "y", "velocity": "v"}
 _NO_DATE = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 
 
-def plot_marginals(ax, curves: dict, quantity: str, filters=reproduce.PAPER_FILTERS):
+def plot_marginals(ax, curves: dict, quantity: str, filters=_filters.PAPER_FILTERS):
     """Draw the marginal densities in ``curves`` on ``ax`` with the shared style."""
     for name in filters:
         ax.plot(curves["grid"], curves[name], linewidth=1.6, **STYLE[name])
@@ -51,7 +47,7 @@ def plot_marginals(ax, curves: dict, quantity: str, filters=reproduce.PAPER_FILT
     return ax
 
 
-def figure(key: str, n: int = 801, filters=reproduce.PAPER_FILTERS):
+def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
     """Figure ``key`` (``"fig2"`` ... ``"fig6"``): the marginal densities the paper plots.
 
     Parameters
@@ -62,7 +58,7 @@ def figure(key: str, n: int = 801, filters=reproduce.PAPER_FILTERS):
     filters : sequence of str
         Which filters to draw: the paper's three by default (its Figure 4
         omits the optimal one, which we draw), or
-        :data:`depthcore.reproduce.FILTERS` for the extended figure with the
+        :data:`depthcore.filters.NAMES` for the extended figure with the
         UKF and the particle filter.
 
     Returns
@@ -82,7 +78,7 @@ def figure(key: str, n: int = 801, filters=reproduce.PAPER_FILTERS):
         if peak > YLIM[key]:
             ax.annotate(f"EKF peak truncated (height {peak:.2f})", xy=(0.98, 0.95),
                         xycoords="axes fraction", ha="right", va="top", fontsize=9)
-    extended = "extended " if set(filters) - set(reproduce.PAPER_FILTERS) else ""
+    extended = "extended " if set(filters) - set(_filters.PAPER_FILTERS) else ""
     ax.set_title(f"Figure {s.figure} ({extended}reproduction): {caption(key)}", fontsize=9, wrap=True)
     return fig
 
@@ -108,7 +104,7 @@ def save_all(out_dir, formats=("pdf", "png", "svg")) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for key, s in SCENARIOS.items():
-        for suffix, filters in (("", reproduce.PAPER_FILTERS), ("-extended", reproduce.FILTERS)):
+        for suffix, filters in (("", _filters.PAPER_FILTERS), ("-extended", _filters.NAMES)):
             fig = figure(key, filters=filters)
             for fmt in formats:
                 path = out / f"figure{s.figure}{suffix}.{fmt}"
@@ -170,7 +166,7 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False):
     ylabels = {"hellinger": "Hellinger distance of the depth marginal to the optimal one",
                "depth_mean": "depth mean", "depth_sd": "depth SD"}
     fig, ax = plt.subplots(figsize=(6.0, 4.0), layout="constrained")
-    for name in reproduce.FILTERS:
+    for name in _filters.NAMES:
         if name in result and not (field == "hellinger" and name == "optimal"):
             ax.plot(result[x], result[name][field], marker="o", markersize=3, **STYLE[name])
     if log_x:

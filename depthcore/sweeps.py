@@ -16,32 +16,25 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import model, optimal, study, ukf
-from .ekf import run as ekf_run
-from .gaussian import PAPER_PRIOR_SCALE
+from . import model, study
+from .filters import FILTERS
+from .gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from .scenarios import SCENARIOS
-from .second_order import second_order_batch
-
-
-def _gaussian_rows(mu, rho, pm, pc):
-    """Means (B, 3) and covariances (B, 3, 3) of the Gaussian filters, by name."""
-    out = {"second_order": second_order_batch(mu, rho, pm, pc)}
-    means, covs = ekf_run(mu, rho, pm, pc)
-    out["ekf"] = (means[..., -1, :], covs[..., -1, :, :])
-    rhos = np.broadcast_to(rho, (len(mu),))
-    rows = [ukf.run(mu[i], rhos[i], pm[i], pc, allow_behind_camera=True) for i in range(len(mu))]
-    out["ukf"] = (np.array([m[-1] for m, _ in rows]), np.array([c[-1] for _, c in rows]))
-    return out
 
 
 def _compare(mu, rho, pm, pc) -> dict:
-    """Depth means, SDs and Hellinger distances to the optimal filter, per filter, for a batch."""
-    ref = optimal.batch_marginals(mu, rho, pm, pc)
-    gaussians = _gaussian_rows(mu, rho, pm, pc)
-    out = {"optimal": {"depth_mean": ref.moments.depth_mean, "depth_sd": ref.moments.depth_sd,
+    """Depth means, SDs and Hellinger distances to the optimal filter, for a batch.
+
+    The optimal filter and every Gaussian filter of :data:`depthcore.filters.FILTERS`.
+    """
+    reference = FILTERS["optimal"](mu, rho, pm, pc)
+    out = {"optimal": {"depth_mean": reference.depth_mean, "depth_sd": reference.depth_sd,
                        "hellinger": np.zeros(len(mu))}}
-    for name, (mean, cov) in gaussians.items():
-        out[name] = {"depth_mean": mean[:, 1], "depth_sd": np.sqrt(cov[:, 1, 1]), "hellinger": study.gaussian_hellinger(ref, mean, cov)}
+    for name, f in FILTERS.items():
+        if f.family == "gaussian":
+            est = f(mu, rho, pm, pc)
+            out[name] = {"depth_mean": est.depth_mean, "depth_sd": est.depth_sd,
+                         "hellinger": study.gaussian_hellinger(reference.detail, est.mean, est.cov)}
     return out
 
 
@@ -67,8 +60,7 @@ def noise_sweep(rhos, truth=None, prior_scale: float = PAPER_PRIOR_SCALE) -> dic
     truth = SCENARIOS["fig2"].c if truth is None else np.asarray(truth, dtype=float)
     rhos = np.atleast_1d(np.asarray(rhos, dtype=float))
     mu = np.tile([model.project(model.G(truth, k - 2)) for k in range(3)], (len(rhos), 1))
-    c = optimal.noise_free_states(mu)
-    pm = np.stack([c[:, 0] - 2 * c[:, 2], c[:, 1] - 2, np.zeros(len(c))], -1)
+    pm = paper_prior_means(model.noise_free_states(mu))
     return {"rho": rhos, **_compare(mu, rhos, pm, prior_scale * np.eye(3))}
 
 
@@ -95,9 +87,9 @@ def prior_offset_sweep(offsets, mu=None, rho: float | None = None,
     mu = np.asarray(SCENARIOS["fig2"].mu if mu is None else mu, dtype=float)
     rho = SCENARIOS["fig2"].rho if rho is None else rho
     offsets = np.atleast_1d(np.asarray(offsets, dtype=float))
-    c = optimal.noise_free_states(mu[None])[0]
+    c = model.noise_free_states(mu[None])[0]
     if np.any(c[1] - 2 + offsets <= 0):
         raise ValueError("offsets must keep the prior's depth at time 1, c2 - 2 + offset, positive")
-    pm = np.stack([np.full(len(offsets), c[0] - 2 * c[2]), c[1] - 2 + offsets, np.zeros(len(offsets))], -1)
+    pm = paper_prior_means(c, offsets)
     mus = np.tile(mu, (len(offsets), 1))
     return {"offset": offsets, **_compare(mus, rho, pm, prior_scale * np.eye(3))}
