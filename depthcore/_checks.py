@@ -151,3 +151,21 @@ def generator(rng, name: str = "rng") -> np.random.Generator:
     if isinstance(rng, np.random.Generator):
         return rng
     return np.random.default_rng(seed_sequence(rng, name))
+
+
+def spawn(seed, n: int) -> list[np.random.SeedSequence]:
+    """The first ``n`` children of ``seed`` (int or SeedSequence), without spawning from it.
+
+    ``SeedSequence.spawn`` counts the children it has given; this does not, so
+    the same ``seed`` always gives the same children.
+    """
+    seed = seed_sequence(seed)
+    return [np.random.SeedSequence(seed.entropy, spawn_key=seed.spawn_key + (i,),
+                                   pool_size=seed.pool_size) for i in range(n)]
+
+
+def count(value, name: str) -> int:
+    """Return ``value`` as an int, checking that it is an integer >= 1."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    return int(value)

@@ -275,3 +275,51 @@ def noise_free_states(mu) -> np.ndarray:
         i = int(np.argmax(behind))
         _checks.measurements(mu[i], f"mu[{i}]")
     return c
+
+
+# --- the least misfit at each depth ----------------------------------------------------------
+
+
+def profile_misfit(mu, depths) -> np.ndarray:
+    """The least misfit ``f`` (Eq. (5)) of the measurements over states with a given depth.
+
+    At a fixed depth ``y3`` at time 3 the bearings
+    ``(x3 - (3 - i) v) / (y3 - 3 + i)`` are linear in ``(x3, v)``, so
+    ``min_{x3, v} sum_i (mu_i - x_i / y_i)**2`` is a linear least-squares
+    problem, solved here for each depth. ``exp(-f / (2 rho**2))`` at the
+    minimum is the profile likelihood of the depth, relative to its value at
+    the noise-free solution (where the misfit is 0).
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+    depths : array_like, shape (n,)
+        Depths ``y3 > 2`` at time 3 (the point in front of the camera at times 1-3).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    mu = _checks.measurements(mu)
+    y3 = np.atleast_1d(_checks.finite_array(depths, "depths"))
+    if y3.ndim != 1 or np.any(y3 <= 2.0):
+        raise ValueError("depths must be a 1-D array of depths > 2 at time 3")
+    back = np.array([2.0, 1.0, 0.0])  # 3 - i for i = 1, 2, 3
+    yi = y3[:, None] - back  # (n, 3): depth at times 1..3
+    A = np.stack([1.0 / yi, -back / yi], axis=-1)  # (n, 3, 2): bearings = A @ (x3, v)
+    AtA = np.einsum("nij,nik->njk", A, A)
+    Atb = np.einsum("nij,i->nj", A, mu)
+    xv = np.linalg.solve(AtA, Atb[..., None])[..., 0]
+    r = mu - np.einsum("nij,nj->ni", A, xv)
+    return np.sum(r**2, axis=-1)
+
+
+def far_misfit(mu) -> float:
+    """The limit of :func:`profile_misfit` at infinite depth, ``(mu1 - 2 mu2 + mu3)**2 / 6``.
+
+    Far away the bearings of a point moving with constant velocity change
+    linearly in time, ``a + b (i - 1)``, and the least misfit of three
+    measurements by such a line is their component along ``(1, -2, 1) / sqrt(6)``.
+    """
+    mu = _checks.measurements(mu)
+    return float((mu[0] - 2.0 * mu[1] + mu[2]) ** 2 / 6.0)

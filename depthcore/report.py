@@ -259,8 +259,8 @@ def sweep_texts(result: dict, x: str, prefix: str, decimals: int = 3) -> dict:
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.sweeps.noise_sweep` (``x="rho"``) or
-        :func:`depthcore.sweeps.prior_offset_sweep` (``x="offset"``).
+        From :func:`depthcore.experiments.noise_sweep` (``x="rho"``) or
+        :func:`depthcore.experiments.prior_offset_sweep` (``x="offset"``).
     x : {"rho", "offset"}
     prefix : str
     decimals : int

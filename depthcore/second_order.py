@@ -138,3 +138,24 @@ def _reading(reading: str) -> str:
     if reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
     return reading
+
+
+def theorem1_precision(mu, rho: float, prior: Gaussian) -> np.ndarray:
+    """Eq. (24): ``D^{-1}``, the inverse covariance of ``p_s`` written with EKF vectors.
+
+    ``D^{-1} = (1/rho**2) sum_k (F^{k-3})^T h_k h_k^T F^{k-3} + (F^{-2})^T P^{-1} F^{-2}``,
+    with ``h_k`` the observation vector (11) at ``G^{k-3} c``, the EKF's
+    predicted mean at time ``k`` when the prior mean is ``G^{-2} c`` (Eq. (19)),
+    and ``F^{k-3}`` the linear part of ``G^{k-3}``.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+    """
+    rho = _checks.positive_scalar(rho, "rho")
+    g = residual_gradients(noise_free_state(mu))  # rows h_k^T F^{k-3}, Eqs. (20)-(22)
+    precision = np.zeros((3, 3))
+    for row in g:
+        precision += np.outer(row, row) / rho**2
+    F2 = model.G_linear(-2)
+    return precision + F2.T @ np.linalg.solve(prior.cov, F2)

@@ -323,7 +323,7 @@ def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, see
     truth = SCENARIOS["fig2"].c if truth is None else truth
     names = check_names(names)
     seed = _checks.seed_sequence(seed)
-    noise_rng, particle_rng = (np.random.default_rng(s) for s in seed.spawn(2))
+    noise_rng, particle_rng = (np.random.default_rng(s) for s in _checks.spawn(seed, 2))
     all_trials = simulate(truth, rho, trials, noise_rng, prior)
     parts = []
     n = len(all_trials.mu)

@@ -6,6 +6,9 @@ from numpy.testing import assert_allclose
 from scipy import integrate
 
 from depthcore import model
+from depthcore.scenarios import SCENARIOS
+
+FIG2 = SCENARIOS["fig2"]
 
 
 def test_eq1_G_forward_and_back_are_inverse():
@@ -74,3 +77,37 @@ def test_noise_in_pixels_paper_arithmetic():
 def test_noise_in_pixels_rejects_bad_input(kwargs, message):
     with pytest.raises(ValueError, match=message):
         model.noise_in_pixels(**kwargs)
+
+
+def test_profile_misfit_vanishes_at_the_noise_free_depth():
+    c = FIG2.c
+    assert model.profile_misfit(FIG2.mu, [c[1]])[0] == pytest.approx(0.0, abs=1e-25)
+
+
+def test_profile_misfit_is_the_least_misfit_at_that_depth():
+    # Independent route: least squares by numpy's lstsq, then the misfit of the
+    # states moved by model.G and projected; rounding only (1e-12 relative).
+    from depthcore import model
+
+    mu = np.asarray(FIG2.mu)
+    for y3 in (2.5, 6.0, 40.0):
+        back = np.array([2.0, 1.0, 0.0])
+        A = np.stack([1.0 / (y3 - back), -back / (y3 - back)], axis=-1)
+        (x3, v), *_ = np.linalg.lstsq(A, mu, rcond=None)
+        f = sum((mu[i] - model.project(model.G([x3, y3, v], i - 2))) ** 2 for i in range(3))
+        got = model.profile_misfit(mu, [y3])[0]
+        assert got == pytest.approx(f, rel=1e-12, abs=1e-30)
+        for dx, dv in ((1e-3, 0.0), (0.0, 1e-3)):  # any other state at this depth fits worse
+            g = sum((mu[i] - model.project(model.G([x3 + dx, y3, v + dv], i - 2))) ** 2
+                    for i in range(3))
+            assert g > got
+
+
+def test_profile_misfit_tends_to_the_far_limit():
+    mu = FIG2.mu
+    far = model.far_misfit(mu)
+    assert far == pytest.approx(0.1**2 / 6, rel=1e-12)  # mu1 - 2 mu2 + mu3 = -0.1
+    # the misfit approaches its limit like 1 / y: within 1e-4 relative at y = 1e6
+    assert model.profile_misfit(mu, [1e6])[0] == pytest.approx(far, rel=1e-4)
+    with pytest.raises(ValueError, match="depths > 2"):
+        model.profile_misfit(mu, [2.0])

@@ -5,12 +5,20 @@ import pytest
 from hypothesis import given, settings
 from numpy.testing import assert_allclose
 
-from depthcore import optimal, paper_prior
+from depthcore import model, optimal, paper_prior
+from depthcore.ekf import ekf
 from depthcore.gaussian import Gaussian
 from depthcore.scenarios import MU_17, MU_18
 from depthcore.second_order import (
-    hessian, likelihood_covariance, noise_free_state, noise_free_states, residuals, second_order,
-    second_order_batch, f,
+    f,
+    hessian,
+    likelihood_covariance,
+    noise_free_state,
+    noise_free_states,
+    residuals,
+    second_order,
+    second_order_batch,
+    theorem1_precision,
 )
 
 from helpers import bearings, states
@@ -124,3 +132,16 @@ def test_eq23_second_order_density_is_the_linearised_posterior():
     x = ps.mean + np.random.default_rng(3).normal(scale=0.2, size=(40, 3))
     eq23 = -np.sum(((x - c) @ g.T) ** 2, axis=1) / (2 * rho**2) + prior.logpdf(model.G(x, -2))
     assert np.ptp(ps.logpdf(x) - eq23) < 1e-8
+
+
+@pytest.mark.parametrize("mu", [MU_17, MU_18])
+def test_theorem1_precision_is_the_inverse_of_the_ekf_and_second_order_covariances(mu):
+    c = noise_free_state(mu)
+    prior = Gaussian(model.G(c, -2), 1000.0 * np.eye(3))
+    rho = 1 / 200
+    D_inv = theorem1_precision(mu, rho, prior)
+    P3 = ekf(mu, rho, prior).posterior.cov
+    D = second_order(mu, rho, prior).cov
+    # inverses of matrices with condition number ~1e6: 1e-8 relative
+    assert_allclose(D_inv @ P3, np.eye(3), atol=1e-8)
+    assert_allclose(D_inv @ D, np.eye(3), atol=1e-8)
