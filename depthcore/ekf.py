@@ -9,7 +9,7 @@ trial, say) with no Python loop over them.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

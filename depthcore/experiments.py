@@ -218,7 +218,7 @@ def particle_convergence(scenario: Scenario, sizes, repeats: int, seed,
     exact = np.array([getattr(opt, m) for m in MOMENTS])
     streams = _checks.spawn(seed, len(settings))
     rmse, ess = {}, {}
-    for (name, kwargs), stream in zip(settings.items(), streams):
+    for (name, kwargs), stream in zip(settings.items(), streams, strict=True):
         rng = np.random.default_rng(stream)
         err, frac = [], []
         for n in sizes:
@@ -229,7 +229,7 @@ def particle_convergence(scenario: Scenario, sizes, repeats: int, seed,
         rmse[name] = {m: err[:, i] for i, m in enumerate(MOMENTS)}
         ess[name] = np.array(frac)
     return {"sizes": sizes, "repeats": int(repeats),
-            "exact": {m: float(v) for m, v in zip(MOMENTS, exact)}, "rmse": rmse, "ess": ess}
+            "exact": {m: float(v) for m, v in zip(MOMENTS, exact, strict=True)}, "rmse": rmse, "ess": ess}
 
 
 # --- the first update of the EKF and the UKF -------------------------------------------------

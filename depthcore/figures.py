@@ -240,7 +240,7 @@ def convergence_figure(result: dict, quantity: str = "depth"):
     N = result["sizes"]
     ideal = result["exact"][f"{quantity}_sd"] / np.sqrt(N)
     fig, axes = plt.subplots(1, 2, figsize=(9.6, 4.8), layout="constrained", sharey=True)
-    for ax, moment, title in zip(axes, ("mean", "sd"), ("mean", "SD")):
+    for ax, moment, title in zip(axes, ("mean", "sd"), ("mean", "SD"), strict=True):
         for name, err in result["rmse"].items():
             ax.plot(N, err[f"{quantity}_{moment}"], markersize=4,
                     **SETTING_STYLE.get(name, {"label": name}))

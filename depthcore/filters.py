@@ -28,13 +28,15 @@ the unscented Kalman filter (:mod:`depthcore.ukf`) and a particle filter
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from . import _checks, ekf, optimal, particle, second_order, ukf
 from .gaussian import Gaussian, History
+from .resampling import weighted_mean_and_cov
 
 QUANTITIES = ("depth", "velocity")
 #: The state component of each quantity.
@@ -236,13 +238,6 @@ def _ukf(mu, rho, prior_mean, prior_cov, sigma_points: ukf.SigmaPoints = ukf.Sig
     return _gaussian_estimate(h.means[..., -1, :], h.covs[..., -1, :, :], h)
 
 
-def _weighted_state_moments(particles, W):
-    """Weighted mean (..., 3) and covariance (..., 3, 3) of particles (..., N, 3)."""
-    mean = np.einsum("...n,...ni->...i", W, particles)
-    d = particles - mean[..., None, :]
-    return mean, np.einsum("...n,...ni,...nj->...ij", W, d, d)
-
-
 def _particle(mu, rho, prior_mean, prior_cov, rng=None, n_particles: int = PARTICLES,
               **options) -> Estimate:
     """The particle filter; ``detail`` is its ParticleResult (one triple) or ParticleBatch.
@@ -260,13 +255,13 @@ def _particle(mu, rho, prior_mean, prior_cov, rng=None, n_particles: int = PARTI
         r = particle.particle_filter(mu, rho, _prior(prior_mean, prior_cov), n_particles, rng,
                                      **options)
         m, se = r.moments(), r.standard_errors()
-        mean, cov = _weighted_state_moments(r.particles, r.weights)
+        mean, cov = weighted_mean_and_cov(r.particles, r.weights)
         return Estimate(float(m.depth_mean), float(m.depth_sd), float(m.velocity_mean),
                         float(m.velocity_sd), float(max(se.depth_mean, se.depth_sd)),
                         float(max(se.velocity_mean, se.velocity_sd)), mean, cov, r)
     b = particle.run(mu, rho, prior_mean, prior_cov, n_particles, rng, **options)
     m, se = b.moments(), b.standard_errors()
-    mean, cov = _weighted_state_moments(b.particles, np.exp(b.log_weights))
+    mean, cov = weighted_mean_and_cov(b.particles, np.exp(b.log_weights))
     return Estimate(m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd,
                     np.maximum(se.depth_mean, se.depth_sd),
                     np.maximum(se.velocity_mean, se.velocity_sd), mean, cov, b)

@@ -199,11 +199,11 @@ def noise_free_state(mu) -> np.ndarray:
     ndarray, shape (3,)
         ``c = (c1, c2, c3)``: position ``(c1, c2)``, velocity ``(c3, 1)``.
     """
-    return _noise_free(_checks.measurements(mu))
+    return noise_free_states_unchecked(_checks.measurements(mu))
 
 
-def _noise_free(mu) -> np.ndarray:
-    """Eq. (7) for triples ``mu`` of shape (..., 3), unchecked."""
+def noise_free_states_unchecked(mu) -> np.ndarray:
+    """Eq. (7) for triples ``mu`` of shape (..., 3), unchecked (NaN or inf where degenerate)."""
     mu1, mu2, mu3 = np.moveaxis(np.asarray(mu, dtype=float), -1, 0)
     d = mu3 + mu1 - 2.0 * mu2
     return np.stack([
@@ -269,7 +269,7 @@ def noise_free_states(mu) -> np.ndarray:
     bad = np.abs(d) <= _checks.DEGENERACY_TOL
     if np.any(bad):
         _checks.measurements(mu[np.argmax(bad)], f"mu[{int(np.argmax(bad))}]")
-    c = _noise_free(mu)
+    c = noise_free_states_unchecked(mu)
     behind = ~(c[:, 1] > 2.0)
     if np.any(behind):
         i = int(np.argmax(behind))

@@ -43,7 +43,7 @@ import numpy as np
 
 from . import _checks, model
 from .gaussian import Gaussian
-from .second_order import A2, b2, f, noise_free_states, second_order_batch
+from .second_order import A2, f, noise_free_states, second_order_batch
 
 READINGS = ("derived", "printed")
 #: ``"front"``: depths ``y > 2``, the point in front of the camera at all three
@@ -69,7 +69,7 @@ class _Problem(NamedTuple):
     R: np.ndarray  # (B, 3, 3), P^{-1} = R^T R
     reading: str
 
-    def take(self, idx) -> "_Problem":
+    def take(self, idx) -> _Problem:
         return _Problem(self.mu[idx], self.rho[idx], self.mean[idx], self.R[idx], self.reading)
 
 
@@ -77,18 +77,11 @@ def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
     if reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
     mu = np.atleast_2d(_checks.finite_array(mu, "mu"))
-    B = mu.shape[0]
-    rho = _checks.positive_array(rho, "rho")
-    if rho.ndim and rho.shape != (B,):
-        raise ValueError(f"rho must be a scalar or have shape ({B},), got shape {rho.shape}")
-    prior_mean = _checks.finite_array(prior_mean, "prior_mean")
-    if prior_mean.shape not in ((3,), (B, 3)):
-        raise ValueError(f"prior_mean must have shape (3,) or ({B}, 3), got {prior_mean.shape}")
-    prior_cov = _checks.finite_array(prior_cov, "prior_cov")
     prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
+    mu, rho, prior_mean, _ = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)
+    B = mu.shape[0]
     R = np.linalg.inv(np.linalg.cholesky(prior_cov))
-    return _Problem(mu, np.full(B, rho), np.broadcast_to(prior_mean, (B, 3)),
-                    np.broadcast_to(R, (B, 3, 3)), reading)
+    return _Problem(mu, np.full(B, rho), prior_mean, np.broadcast_to(R, (B, 3, 3)), reading)
 
 
 def log_posterior(x, mu, rho: float, prior: Gaussian) -> np.ndarray:

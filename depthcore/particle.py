@@ -1,49 +1,43 @@
-"""A particle filter (sampling-importance-resampling) on the paper's problem.
+"""A particle filter on the paper's problem: by default, importance sampling from a Student t proposal.
 
 Recommended import: ``from depthcore import particle``.
 
-Implements the particle filter of Prince, section 19.5 [prince2012]_ (the
-bootstrap filter of [gordon1993]_) for the three measurements and the prior of
-the paper, with a proposal that keeps it from collapsing. The state at time 1
-is drawn from a distribution ``q``, weighted by ``prior / q``, and then, for
-``k = 1, 2, 3``: moved deterministically by ``G`` (Eq. (1)), reweighted by the
-likelihood of ``mu_k`` (Eq. (4)), and (optionally, see below) resampled when
-the effective sample size falls below ``ess_threshold * N``. Weights are kept
-as logarithms and normalised by log-sum-exp with the maximum subtracted. A particle whose depth
-is ``<= 0`` at any frame gets weight zero: the point is in front of the camera,
-so the filter targets the optimal posterior restricted to ``y3 > 2``, as
-:func:`depthcore.optimal.marginals` does with ``support="front"``.
+By default (``proposal="second_order"``, ``ess_threshold=0``) the filter is
+importance sampling of the state: the particles are drawn from a multivariate
+Student t distribution built on the second-order Gaussian ``p_s`` (Eq. (8)),
+weighted by the prior and the three likelihoods (Eq. (4)) over the proposal's
+density, and never resampled. With ``proposal="prior"`` and
+``ess_threshold > 0`` it is the sampling-importance-resampling (bootstrap)
+filter of Prince, section 19.5 [prince2012]_, [gordon1993]_.
 
-Why the bootstrap filter collapses. The motion is deterministic: nothing ever
-spreads the particles again, so the filter can only reweight (and duplicate)
-the particles it drew at time 1. With ``proposal="prior"`` they come from the
-prior ``N(m, 1000 I)``, whose SD is 31.6 in every component, while three
-bearings with noise ``rho = 1/200`` pin it down to about a unit in depth and a
-few tenths in position and velocity. On Fig. 2 the ESS after ``mu_1`` is about
-0.3 % of ``N`` and after ``mu_2`` one or two particles, for ``N`` from ``1e3``
-to ``1e5``: the estimate is whichever particle happens to fit best. (After a
-resampling step ``ess`` counts the copies of a particle separately;
-:meth:`ParticleResult.distinct_ess` pools them.)
+The steps. The state at time 1 is drawn from a distribution ``q``, weighted by
+``prior / q``, and then, for ``k = 1, 2, 3``: moved deterministically by ``G``
+(Eq. (1)), reweighted by the likelihood of ``mu_k`` (Eq. (4)), and, if
+``ess_threshold > 0``, resampled when the effective sample size falls below
+``ess_threshold * N`` (:mod:`depthcore.resampling`). Weights are kept as
+logarithms. A particle whose depth is ``<= 0`` at any frame gets weight zero:
+the point is in front of the camera, so the filter targets the optimal
+posterior restricted to ``y3 > 2``, as :func:`depthcore.optimal.marginals`
+does with ``support="front"``.
 
-How the proposal avoids it (``proposal="second_order"``, the default). The
-particles are drawn where the posterior is: from a multivariate Student t
-distribution with ``df`` degrees of freedom centred on the mean of the
-second-order Gaussian ``p_s`` (Eq. (8)) of the state at time 3, with scale
-matrix ``inflation**2`` times its covariance, and pulled back to time 1 by
-``G^{-2}``. The pull-back is affine with unit Jacobian (``F^{-2}`` is unit
-upper triangular), so the density of the time-1 particles is ``q`` at their
-image at time 3, and the initial log weight is ``log prior - log q``. The heavy
-t tails and the inflation cover the parts of the optimal posterior that the
-Gaussian ``p_s`` misses (its depth marginal is skewed and, with a broad prior,
-heavy-tailed), so the weights ``prior * likelihood / q`` vary little where the
-posterior has mass. The defaults ``df = 1`` (Cauchy tails) and ``inflation =
-1.5`` were chosen over ``df`` in 1-4 and ``inflation`` in 1.2-3 on Figs. 2, 3,
-5 and on 100 noisy triples around Fig. 2's point: they keep the RMS error of
-the means and SDs at about 1.5 times the ideal ``sd / sqrt(N)`` (2.5 at worst
-among the triples) and 3.5-4.5 times on Fig. 3 (``df = 2, inflation = 1.2``
-does a little better on the easy cases and twice as badly on Fig. 3 and the
-worst triples). The ESS is then about ``0.43 N`` on
-Figs. 2, 4, 5 and 6 and ``0.2 N`` on Fig. 3.
+The bootstrap filter. The motion is deterministic: nothing ever spreads the
+particles again, so the filter can only reweight (and duplicate) the particles
+it drew at time 1. With ``proposal="prior"`` they come from the paper's broad
+prior, of which only a thin wedge is compatible with the three bearings, so
+the effective sample size collapses. (After a resampling step ``ess`` counts
+the copies of a particle separately; :meth:`ParticleResult.distinct_ess`
+pools them.)
+
+The proposal (``proposal="second_order"``). The particles are drawn where the
+posterior is: from a multivariate Student t distribution with ``df`` degrees
+of freedom (default :data:`DEFAULT_DF`) centred on the mean of ``p_s`` at time
+3, with scale matrix ``inflation**2`` (default :data:`DEFAULT_INFLATION`)
+times its covariance, and pulled back to time 1 by ``G^{-2}``. The pull-back
+is affine with unit Jacobian (``F^{-2}`` is unit upper triangular), so the
+density of the time-1 particles is ``q`` at their image at time 3, and the
+initial log weight is ``log prior - log q``. The heavy tails and the inflation
+cover the parts of the optimal posterior that ``p_s`` misses (its depth
+marginal is skewed and, with a broad prior, heavy-tailed).
 
 Because ``q`` already anticipates all three measurements, the intermediate
 targets are chosen to match it ([delmoral2006]_: any sequence of intermediate
@@ -52,49 +46,31 @@ distributions may be used as long as the last is the posterior): after
 
     pi_k(x) ~ prior(x1) prod_{j <= k} L_j(x) prod_{j > k} Lt_j(x),
 
-where ``Lt_j(x) = exp(-(g_j . (x3 - c))**2 / (2 rho**2))`` is the linearised
-likelihood of ``mu_j`` about the noise-free state ``c`` (Eq. (7)) -- the
-factors whose product with the prior is ``p_s`` itself. So the initial log
-weight also carries ``sum_j log Lt_j``, and step ``k`` adds
-``log L_k - log Lt_k``. After ``mu_3`` every ``Lt`` has been swapped for the
-exact ``L`` and the weights are ``prior * L_1 L_2 L_3 / q``, the importance
-weights of the posterior. On the way each ``pi_k`` stays close to ``q``, so the
-ESS after every step measures how well the particles fit: without the
-look-ahead, the weights after ``mu_1`` alone would be those of the broad wedge
-``prior * L_1`` seen through particles concentrated near ``p_s``, with an ESS
-below 1 % of ``N`` even though the final weights are good. With
-``proposal="prior"`` there is no look-ahead and the filter is the textbook one.
+where ``Lt_j(x) = exp(-(g_j . (x3 - c))**2 / (2 rho**2))`` is the likelihood
+of ``mu_j`` linearised about the noise-free state ``c`` (Eq. (7)), ``g_j``
+the residual gradients of Eqs. (20)-(22) -- the factors whose product with the
+prior is ``p_s`` itself. So the initial log weight also carries
+``sum_j log Lt_j``, and step ``k`` adds ``log L_k - log Lt_k``. After ``mu_3``
+every ``Lt`` has been swapped for the exact ``L`` and the weights are
+``prior * L_1 L_2 L_3 / q``, the importance weights of the posterior; on the
+way, the ESS after each step measures how well the particles fit.
 
-Resampling. Systematic (default), multinomial and residual resampling share the
-signature ``resampler(W, rng, M=None) -> indices``, and the filter resamples
-before a move when the ESS is below ``ess_threshold * N``. The usual SIR rule
-is ``ess_threshold = 0.5``; the default here is ``0``, never, because the
+Resampling. The default ``ess_threshold = 0`` never resamples, because the
 motion is deterministic: duplicated particles are never diversified again, so
 resampling cannot improve the final estimates, and it commits the particles to
-the intermediate target of the step at which it fires, whose tails may differ
-from the posterior's. The deliberately broad default proposal starts below
-``N / 2``, so the rule ``0.5`` fires on every scenario: on Fig. 2 it triples
-the RMS error at ``N = 4000`` (4.8 instead of 1.6 times ``sd / sqrt(N)`` for
-the depth mean, 6.9 instead of 1.1 for its SD), and on Fig. 3, whose
-posterior (depth ``20.7 +- 13.7``) is far from ``p_s`` (``10.0 +- 2.2``), the
-depth mean then comes out about 0.5 posterior SDs too low, at ``N = 4000`` and
-still at ``N = 50000``, against 0.002 SDs without resampling. With
-``ess_threshold = 0`` the filter is importance sampling of the time-1 state
-and ``resampler`` is unused.
+the intermediate target of the step at which it fires. ``ess_threshold = 0.5``
+is the usual rule.
 
-Why the estimates converge to the optimal filter. Without resampling the final
-particles are an importance sample of the time-3 posterior ``p_o`` restricted
-to ``y > 2``, with weights proportional to ``p_o / q``. ``q`` is positive
-everywhere, so self-normalised weighted averages converge almost surely to the
-posterior expectations as ``N`` grows (the strong law of large numbers), and
-since ``q`` has polynomial tails while ``p_o`` inherits the Gaussian tails of
-the prior, ``E_q[(p_o / q)**2]`` is finite and the error falls as
-``1 / sqrt(N)`` (the central limit theorem; delta method for the SDs). With
-resampling the limits still hold, each resampling step being an unbiased
-selection [douc2005]_, but as Fig. 3 shows ``N`` may have to be huge. The
-means and SDs of the depth ``y`` and velocity ``v`` therefore approach the
-exact ones of :func:`depthcore.optimal.marginals`, with Monte Carlo standard
-errors estimated by :meth:`ParticleResult.standard_errors`.
+Convergence. Without resampling the final particles are an importance sample
+of the time-3 posterior ``p_o`` restricted to ``y > 2``, with weights
+proportional to ``p_o / q``. ``q`` is positive everywhere, so self-normalised
+weighted averages converge almost surely to the posterior expectations as
+``N`` grows, and since ``q`` has polynomial tails while ``p_o`` inherits the
+Gaussian tails of the prior, ``E_q[(p_o / q)**2]`` is finite and the error
+falls as ``1 / sqrt(N)`` (delta method for the SDs). With resampling the
+limits still hold, each resampling step being an unbiased selection
+[douc2005]_. :meth:`ParticleResult.standard_errors` estimates the Monte Carlo
+standard errors of the moments.
 
 References
 ----------
@@ -117,6 +93,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+
 from . import _checks, model
 from .gaussian import INDEX, Gaussian, gaussian_logpdf, student_t
 from .resampling import (
@@ -455,20 +432,13 @@ def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generat
     -------
     ParticleBatch
     """
-    mu = _checks.finite_array(mu, "mu")
+    prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
+    mu, rho, prior_mean, _ = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)
     if mu.ndim != 2 or mu.shape[1] != 3:
         raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
     model.noise_free_states(mu)  # checks each triple
     B = mu.shape[0]
-    rho = _checks.positive_array(rho, "rho")
-    if rho.ndim and rho.shape != (B,):
-        raise ValueError(f"rho must be a scalar or have shape ({B},), got shape {rho.shape}")
     rho = np.broadcast_to(rho, (B,))
-    prior_mean = _checks.finite_array(prior_mean, "prior_mean")
-    if prior_mean.shape not in ((3,), (B, 3)):
-        raise ValueError(f"prior_mean must have shape (3,) or ({B}, 3), got {prior_mean.shape}")
-    prior_mean = np.broadcast_to(prior_mean, (B, 3))
-    prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
     N = _checks.count(n_particles, "n_particles")
     check_rng(rng)
     if proposal not in PROPOSALS:

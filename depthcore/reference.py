@@ -19,13 +19,15 @@ They are slow by design; :mod:`depthcore.optimal` is the route to use.
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
 from . import _checks, model, optimal
 from .gaussian import Gaussian, student_t
 from .optimal import log_posterior
+from .resampling import weighted_moments, weighted_standard_errors
 from .second_order import second_order
 
 LogDensity = Callable[[np.ndarray], np.ndarray]
@@ -152,11 +154,10 @@ def importance_moments(mu, rho: float, prior: Gaussian, rng: np.random.Generator
     log_w[front] = log_posterior(x[front], mu, rho, prior) - log_q[front]
     w = np.exp(log_w - log_w.max())
     w /= w.sum()
-    vals = x[:, [1, 2]]
-    means = w @ vals
-    sds = np.sqrt(w @ (vals - means) ** 2)
-    se = np.sqrt(np.sum(w[:, None] ** 2 * (vals - means) ** 2, 0))
-    return means, sds, se
+    vals = x[:, [1, 2]].T  # (2, n): depths and velocities
+    means, sds = weighted_moments(vals, w)
+    se_means, _ = weighted_standard_errors(vals, w)
+    return means, sds, se_means
 
 
 # --- independent routes to the recursion (2)-(4), Eqs. (8), (11), (16) -------------------------
@@ -195,11 +196,27 @@ def bayes_filter(mu, rho: float, prior: Gaussian) -> list[LogDensity]:
     predicted: LogDensity = prior.logpdf  # p(x_1 | I^0)
     for k, mu_k in enumerate(mu.tolist()):
         if k:
-            # Prediction: the integral of (2) with the delta (3).
-            predicted = (lambda x, prev=densities[-1]: prev(model.G(x, -1)) - log_det_F)
-        # Measurement update: Bayes' rule with the likelihood (4).
-        densities.append(lambda x, pred=predicted, m=mu_k: model.log_likelihood(m, x, rho) + pred(x))
+            predicted = _predicted(densities[-1], log_det_F)
+        densities.append(_updated(predicted, mu_k, rho))
     return densities
+
+
+def _predicted(previous: LogDensity, log_det_F: float) -> LogDensity:
+    """Prediction: the integral of (2) with the delta (3), ``p(G^{-1} x) / |det F|``."""
+
+    def log_density(x):
+        return previous(model.G(x, -1)) - log_det_F
+
+    return log_density
+
+
+def _updated(predicted: LogDensity, mu_k: float, rho: float) -> LogDensity:
+    """Measurement update: Bayes' rule with the likelihood (4), unnormalised."""
+
+    def log_density(x):
+        return model.log_likelihood(mu_k, x, rho) + predicted(x)
+
+    return log_density
 
 
 def numerical_gradient(fun: Callable, x, step: float = 1e-6) -> np.ndarray:

@@ -177,3 +177,13 @@ def weighted_standard_errors(x, W) -> tuple[np.ndarray, np.ndarray]:
     # All the weight on one value (a collapsed filter): the SD's error is unknown.
     with np.errstate(divide="ignore", invalid="ignore"):
         return se_mean, np.where(sd > 0, se_var / (2.0 * sd), np.inf)
+
+
+def weighted_mean_and_cov(x, W) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean (..., d) and covariance (..., d, d) of points ``x`` (..., N, d).
+
+    ``W`` (..., N) are normalised weights.
+    """
+    mean = np.einsum("...n,...ni->...i", W, x)
+    d = x - mean[..., None, :]
+    return mean, np.einsum("...n,...ni,...nj->...ij", W, d, d)

@@ -23,8 +23,8 @@ paper's prior rule; they are counted and left out of every score.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -93,7 +93,7 @@ def valid_triples(mu) -> np.ndarray:
     d = mu[:, 0] + mu[:, 2] - 2.0 * mu[:, 1]
     ok = np.isfinite(mu).all(axis=1) & (np.abs(d) > _checks.DEGENERACY_TOL)
     with np.errstate(divide="ignore", invalid="ignore"):
-        c2 = 2.0 * (mu[:, 0] - mu[:, 1]) / d
+        c2 = model.noise_free_states_unchecked(mu)[:, 1]  # Eq. (7)
     return ok & (c2 > 2.0)
 
 
