@@ -1,10 +1,14 @@
-"""One function per figure of the paper; each draws curves from :mod:`depthcore.reproduce`.
+"""Every plot: the paper's figures and the book's other plots, in one style.
 
 Recommended import: ``from depthcore import figures``.
 
-Nothing here computes a density: :func:`depthcore.reproduce.curves` does. The
-functions return a :class:`matplotlib.figure.Figure` and never show or save it,
-except :func:`save_all`.
+:func:`figure` draws the paper's Figures 2-6 from the curves of
+:func:`depthcore.reproduce.curves`; the other functions draw the results of
+:mod:`depthcore.optimal`, :mod:`depthcore.study` and :mod:`depthcore.experiments`.
+Each filter's label and line style come from the registry
+:data:`depthcore.filters.FILTERS` (:data:`STYLE`). The functions return a
+:class:`matplotlib.figure.Figure` and never show or save it, except
+:func:`save_all`.
 """
 
 from __future__ import annotations
