@@ -7,6 +7,7 @@
 #   make check-book         checks of the built book alone (equation numbers, browser)
 #   make figures            write the paper's figures to figures/
 #   make bench              print the benchmark tables
+#   make lint               ruff check of the package, tests, tools and benchmarks
 #   make clean              remove build outputs (make distclean also removes .venv/)
 #
 # Every target runs in .venv/, created with Python 3.11 from the pinned
@@ -80,6 +81,11 @@ bench: $(EDITABLE)
 	$(PY) benchmarks/bench_optimal.py
 	$(PY) benchmarks/bench_ekf_filterpy.py
 	$(PY) benchmarks/bench_trials.py
+	$(PY) benchmarks/bench_import.py
+
+.PHONY: lint
+lint: $(EDITABLE)
+	$(VENV)/bin/ruff check .
 
 clean:
 	rm -rf _build figures .pytest_cache .hypothesis book/.nbval-check-*

@@ -86,8 +86,8 @@ def main(argv=None):
     d_cov, d_cov_median = np.max(rel), np.median(rel)
 
     print(f"EKF over {len(mu):,} trials of Figure 2 (three measurements each), one core")
-    print(f"| route | time | ratio |")
-    print(f"|---|---:|---:|")
+    print("| route | time | ratio |")
+    print("|---|---:|---:|")
     print(f"| depthcore.ekf.run, vectorised | {best * 1e3:.1f} ms | 1 |")
     print(f"| filterpy ExtendedKalmanFilter, trial by trial | {t_fp * 1e3:,.0f} ms | {t_fp / best:,.0f} |")
     print(f"largest difference after any measurement: means {d_mean:.1e} posterior SDs, "

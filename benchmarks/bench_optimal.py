@@ -106,7 +106,7 @@ def main(argv=None):
 
     previous, chosen = None, None
     for panels, order in LADDER:
-        t, vals = _best_time(lambda: _grid(keys, panels, order), 1)
+        t, vals = _best_time(lambda p=panels, o=order: _grid(keys, p, o), 1)
         if previous is not None and _rel_error(previous[2], vals) <= 1e-8:
             chosen = previous
             break

@@ -7,36 +7,48 @@ estimates of its state that the paper compares: the optimal Bayes filter
 (:mod:`depthcore.second_order`) and the extended Kalman filter
 (:mod:`depthcore.ekf`), with their depth and velocity marginals.
 
-Modules: :mod:`~depthcore.model` (Eqs. (1)-(4), (9), (11)),
-:mod:`~depthcore.second_order` (Eqs. (5), (7), (8)), :mod:`~depthcore.ekf`
-(Eqs. (10)-(12)), :mod:`~depthcore.optimal` (Eqs. (6), (13)-(16)),
-:mod:`~depthcore.scenarios` (Figures 2-6), :mod:`~depthcore.reproduce` and
-:mod:`~depthcore.figures`; beyond the paper, the unscented Kalman filter
-(:mod:`~depthcore.ukf`), a particle filter (:mod:`~depthcore.particle`), a
-Monte Carlo study (:mod:`~depthcore.study`) and sweeps (:mod:`~depthcore.sweeps`).
+Modules, by concept: :mod:`~depthcore.model` (Eqs. (1)-(5), (7), (9), (11),
+(20)-(22)), :mod:`~depthcore.gaussian` (Eq. (13), the paper's prior),
+:mod:`~depthcore.scenarios` (Figures 2-6 and the reported numbers),
+:mod:`~depthcore.second_order` (Eqs. (8), (24)), :mod:`~depthcore.ekf`
+(Eqs. (10)-(12)), :mod:`~depthcore.optimal` (Eqs. (6), (13)-(16)); beyond the
+paper, the unscented Kalman filter (:mod:`~depthcore.ukf`) and a particle
+filter (:mod:`~depthcore.particle`, with :mod:`~depthcore.resampling`). The
+registry :mod:`~depthcore.filters` lists every filter;
+:mod:`~depthcore.reproduce`, :mod:`~depthcore.study` and
+:mod:`~depthcore.experiments` run them; :mod:`~depthcore.figures` draws and
+:mod:`~depthcore.report` formats the results; :mod:`~depthcore.reference`
+holds independent routes for checking.
+
+Every public module is an attribute of the package, imported when first used
+(``import depthcore; depthcore.study`` works).
 """
 
-from . import ekf, model, optimal, particle, reproduce, scenarios, second_order, ukf
+import importlib
+
 from .gaussian import Gaussian, paper_prior
-from .optimal import marginals as optimal_marginals
+from .model import noise_free_state
 from .scenarios import SCENARIOS
-from .second_order import noise_free_state
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "Gaussian",
-    "SCENARIOS",
-    "__version__",
-    "ekf",
-    "model",
-    "noise_free_state",
-    "optimal",
-    "optimal_marginals",
-    "paper_prior",
-    "particle",
-    "reproduce",
-    "scenarios",
-    "second_order",
-    "ukf",
-]
+#: The public modules, imported on first access as attributes of the package.
+MODULES = (
+    "ekf", "experiments", "figures", "filters", "gaussian", "model", "optimal", "particle",
+    "reference", "report", "reproduce", "resampling", "scenarios", "second_order", "study", "ukf",
+)
+
+__all__ = ["Gaussian", "MODULES", "SCENARIOS", "__version__", "noise_free_state",
+           "optimal_marginals", "paper_prior", *MODULES]
+
+
+def __getattr__(name):
+    if name in MODULES:
+        return importlib.import_module(f"{__name__}.{name}")
+    if name == "optimal_marginals":
+        return importlib.import_module(f"{__name__}.optimal").marginals
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(MODULES) | {"optimal_marginals"})

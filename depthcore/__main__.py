@@ -11,12 +11,10 @@ import sys
 
 import numpy as np
 
-from . import __version__, reproduce
+from . import __version__, report, reproduce
+from .filters import NAMES as _STUDY_FILTERS
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
-from .second_order import noise_free_state
-
-
-_STUDY_FILTERS = ("optimal", "second_order", "ekf", "ukf", "particle")
+from .model import noise_free_state
 
 
 class _Parser(argparse.ArgumentParser):
@@ -47,13 +45,13 @@ def _prior(mu, prior_mean, prior_cov) -> Gaussian:
 
 def _cmd_reproduce(args) -> str:
     result = reproduce.reproduce()
-    return json.dumps(result, indent=2) if args.json else reproduce.format_table(result)
+    return json.dumps(result, indent=2) if args.json else report.format_table(result)
 
 
 def _cmd_estimate(args) -> str:
     mu = np.array(args.mu)
     summary = reproduce.summarize(mu, args.rho, _prior(mu, args.prior_mean, args.prior_cov))
-    return json.dumps(summary, indent=2) if args.json else reproduce.format_summary(summary)
+    return json.dumps(summary, indent=2) if args.json else report.format_summary(summary)
 
 
 def _cmd_figures(args) -> str:
@@ -80,7 +78,7 @@ def _cmd_study(args) -> str:
     result = study.study(truth=truth, rho=args.rho, trials=args.trials, seed=args.seed,
                          prior=args.prior, names=tuple(args.filters), n_particles=args.particles,
                          progress=progress)
-    return json.dumps(result, indent=2) if args.json else study.format_result(result)
+    return json.dumps(result, indent=2) if args.json else report.format_study(result)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -9,39 +9,16 @@ trial, say) with no Python loop over them.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from collections.abc import Callable
 
 import numpy as np
 
 from . import _checks, model
-from .gaussian import Gaussian
+from .gaussian import Gaussian, History, MeanAndCov
 
-
-class MeanAndCov(NamedTuple):
-    """A mean of shape ``(..., 3)`` and covariance of shape ``(..., 3, 3)``."""
-
-    mean: np.ndarray
-    cov: np.ndarray
-
-
-class EKFHistory(NamedTuple):
-    """The EKF's estimates after each measurement.
-
-    Attributes
-    ----------
-    means : ndarray, shape (3, 3)
-        Row ``i`` is ``m_{i+1}``, the mean after measurement ``mu_{i+1}``.
-    covs : ndarray, shape (3, 3, 3)
-        ``covs[i]`` is ``P_{i+1}``.
-    """
-
-    means: np.ndarray
-    covs: np.ndarray
-
-    @property
-    def posterior(self) -> Gaussian:
-        """``p_e = N(x, m_3, P_3)``, the EKF density at time 3."""
-        return Gaussian(self.means[-1], self.covs[-1])
+#: The EKF's estimates after each measurement: ``means[i]`` is ``m_{i+1}``,
+#: ``covs[i]`` is ``P_{i+1}``; ``.posterior`` is ``p_e = N(x, m_3, P_3)``.
+EKFHistory = History
 
 
 def predict(m, P) -> MeanAndCov:
@@ -101,44 +78,66 @@ def update(n, C, mu, rho: float) -> MeanAndCov:
     return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
 
 
-def run(mu, rho: float, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
-    """Run the EKF over three measurements, batched.
+def run_gaussian_filter(update_step: Callable, mu, rho, prior_mean, prior_cov) -> History:
+    """The run loop shared by the Gaussian filters (EKF, UKF), batched.
 
-    Initialise ``n = m``, ``C = P`` (the prior), incorporate ``mu1`` with (12),
-    then predict (10) and update (12) twice.
+    Initialise ``n = m``, ``C = P`` (the prior is the density of the state at
+    time 1), incorporate ``mu1``, then, for each further measurement, predict
+    with Eq. (10) (exact for the linear motion) and incorporate it.
+
+    Parameters
+    ----------
+    update_step : callable
+        ``update_step(n, C, mu_k, rho) -> MeanAndCov``, batched; a
+        :class:`ValueError` it raises is reraised naming the measurement.
+    mu : array_like, shape (..., K)
+        Measurements in time order; the leading shape runs independent filters.
+    rho : float or array_like, shape (...)
+        Noise standard deviation, > 0.
+    prior_mean : array_like, shape (3,) or (..., 3)
+    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
+
+    Returns
+    -------
+    History
+        ``means`` (..., K, 3) and ``covs`` (..., K, 3, 3) after each measurement.
+    """
+    mu, rho, n, C = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)
+    means, covs = [], []
+    for i in range(mu.shape[-1]):
+        if i > 0:
+            n, C = predict(means[-1], covs[-1])
+        try:
+            m, P = update_step(n, C, mu[..., i], rho)
+        except ValueError as exc:
+            raise ValueError(f"update with measurement {i + 1}: {exc}") from None
+        means.append(m)
+        covs.append(P)
+    return History(np.stack(means, axis=-2), np.stack(covs, axis=-3))
+
+
+def run(mu, rho, prior_mean, prior_cov) -> History:
+    """Run the EKF over the measurements, batched: Eq. (12), then (10) and (12) per measurement.
 
     Parameters
     ----------
     mu : array_like, shape (..., 3)
         Measurements in time order.
     rho : float or array_like, shape (...)
-    prior_mean : array_like, shape (..., 3)
-    prior_cov : array_like, shape (..., 3, 3)
+    prior_mean : array_like, shape (3,) or (..., 3)
+    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
 
     Returns
     -------
-    means : ndarray, shape (..., 3, 3)
-        ``means[..., i, :]`` is the mean after measurement ``i + 1``.
-    covs : ndarray, shape (..., 3, 3, 3)
+    History
+        ``means`` (..., 3, 3): ``means[..., i, :]`` is the mean after
+        measurement ``i + 1``; ``covs`` (..., 3, 3, 3). It unpacks as
+        ``means, covs = run(...)``.
     """
-    rho = _checks.positive_array(rho, "rho")
-    mu = _checks.finite_array(mu, "mu")
-    if rho.ndim and rho.shape != mu.shape[:-1]:
-        raise ValueError(f"rho must be a scalar or have shape {mu.shape[:-1]}, got shape {rho.shape}")
-    batch = mu.shape[:-1]
-    n = np.broadcast_to(np.asarray(prior_mean, dtype=float), batch + (3,))
-    C = np.broadcast_to(np.asarray(prior_cov, dtype=float), batch + (3, 3))
-    means, covs = [], []
-    for i in range(mu.shape[-1]):
-        if i > 0:
-            n, C = predict(means[-1], covs[-1])
-        m, P = update(n, C, mu[..., i], rho)
-        means.append(m)
-        covs.append(P)
-    return np.stack(means, axis=-2), np.stack(covs, axis=-3)
+    return run_gaussian_filter(update, mu, rho, prior_mean, prior_cov)
 
 
-def ekf(mu, rho: float, prior: Gaussian) -> EKFHistory:
+def ekf(mu, rho: float, prior: Gaussian) -> History:
     """Eqs. (10)-(12): the EKF for one triple of measurements.
 
     Parameters
@@ -152,9 +151,8 @@ def ekf(mu, rho: float, prior: Gaussian) -> EKFHistory:
 
     Returns
     -------
-    EKFHistory
+    History
         Means and covariances after each measurement; ``.posterior`` is ``p_e``.
     """
     mu = _checks.measurements(mu)
-    means, covs = run(mu, rho, prior.mean, prior.cov)
-    return EKFHistory(means, covs)
+    return run(mu, rho, prior.mean, prior.cov)

@@ -1,10 +1,14 @@
-"""One function per figure of the paper; each draws curves from :mod:`depthcore.reproduce`.
+"""Every plot: the paper's figures and the book's other plots, in one style.
 
 Recommended import: ``from depthcore import figures``.
 
-Nothing here computes a density: :func:`depthcore.reproduce.curves` does. The
-functions return a :class:`matplotlib.figure.Figure` and never show or save it,
-except :func:`save_all`.
+:func:`figure` draws the paper's Figures 2-6 from the curves of
+:func:`depthcore.reproduce.curves`; the other functions draw the results of
+:mod:`depthcore.optimal`, :mod:`depthcore.study` and :mod:`depthcore.experiments`.
+Each filter's label and line style come from the registry
+:data:`depthcore.filters.FILTERS` (:data:`STYLE`). The functions return a
+:class:`matplotlib.figure.Figure` and never show or save it, except
+:func:`save_all`.
 """
 
 from __future__ import annotations
@@ -13,18 +17,24 @@ from pathlib import Path
 
 import numpy as np
 
-from . import reproduce
+from . import _checks, model, report, reproduce
+from . import filters as _filters
 from .scenarios import SCENARIOS
 
-#: One vocabulary for every plot: label, colour and line style of each filter.
-STYLE = {
-    "optimal": {"label": "optimal $p_o$", "color": "black", "linestyle": "-"},
-    "second_order": {"label": "second order $p_s$", "color": "tab:blue", "linestyle": "--"},
-    "ekf": {"label": "EKF $p_e$", "color": "tab:red", "linestyle": ":"},
-    "ukf": {"label": "UKF", "color": "tab:green", "linestyle": "-."},
-    "particle": {"label": "particle filter", "color": "tab:purple", "linestyle": (0, (5, 1, 1, 1, 1, 1))},
-}
+#: One vocabulary for every plot: label, colour and line style of each filter,
+#: from the registry :data:`depthcore.filters.FILTERS`.
+STYLE = {name: f.plot_style for name, f in _filters.FILTERS.items()}
 
+#: Legend labels and line styles of the particle filter's settings,
+#: :data:`depthcore.experiments.SETTINGS`.
+SETTING_STYLE = {
+    "default": {"label": "t proposal from $p_s$, no resampling (default)",
+                "color": "tab:purple", "linestyle": "-", "marker": "o"},
+    "resampling": {"label": "same, resampling when ESS < N/2",
+                   "color": "tab:orange", "linestyle": "--", "marker": "s"},
+    "bootstrap": {"label": "bootstrap: particles from the prior",
+                  "color": "0.45", "linestyle": ":", "marker": "^"},
+}
 #: Axis ranges comparable with the paper's plots.
 GRIDS = {
     "fig2": (2.5, 10.5),
@@ -40,7 +50,7 @@ _SYMBOL = {"depth": "y", "velocity": "v"}
 _NO_DATE = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
 
 
-def plot_marginals(ax, curves: dict, quantity: str, filters=reproduce.PAPER_FILTERS):
+def plot_marginals(ax, curves: dict, quantity: str, filters=_filters.PAPER_FILTERS):
     """Draw the marginal densities in ``curves`` on ``ax`` with the shared style."""
     for name in filters:
         ax.plot(curves["grid"], curves[name], linewidth=1.6, **STYLE[name])
@@ -51,7 +61,7 @@ def plot_marginals(ax, curves: dict, quantity: str, filters=reproduce.PAPER_FILT
     return ax
 
 
-def figure(key: str, n: int = 801, filters=reproduce.PAPER_FILTERS):
+def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
     """Figure ``key`` (``"fig2"`` ... ``"fig6"``): the marginal densities the paper plots.
 
     Parameters
@@ -62,7 +72,7 @@ def figure(key: str, n: int = 801, filters=reproduce.PAPER_FILTERS):
     filters : sequence of str
         Which filters to draw: the paper's three by default (its Figure 4
         omits the optimal one, which we draw), or
-        :data:`depthcore.reproduce.FILTERS` for the extended figure with the
+        :data:`depthcore.filters.NAMES` for the extended figure with the
         UKF and the particle filter.
 
     Returns
@@ -82,7 +92,7 @@ def figure(key: str, n: int = 801, filters=reproduce.PAPER_FILTERS):
         if peak > YLIM[key]:
             ax.annotate(f"EKF peak truncated (height {peak:.2f})", xy=(0.98, 0.95),
                         xycoords="axes fraction", ha="right", va="top", fontsize=9)
-    extended = "extended " if set(filters) - set(reproduce.PAPER_FILTERS) else ""
+    extended = "extended " if set(filters) - set(_filters.PAPER_FILTERS) else ""
     ax.set_title(f"Figure {s.figure} ({extended}reproduction): {caption(key)}", fontsize=9, wrap=True)
     return fig
 
@@ -108,7 +118,7 @@ def save_all(out_dir, formats=("pdf", "png", "svg")) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for key, s in SCENARIOS.items():
-        for suffix, filters in (("", reproduce.PAPER_FILTERS), ("-extended", reproduce.FILTERS)):
+        for suffix, filters in (("", _filters.PAPER_FILTERS), ("-extended", _filters.NAMES)):
             fig = figure(key, filters=filters)
             for fmt in formats:
                 path = out / f"figure{s.figure}{suffix}.{fmt}"
@@ -116,6 +126,199 @@ def save_all(out_dir, formats=("pdf", "png", "svg")) -> list[Path]:
                 paths.append(path)
             plt.close(fig)
     return paths
+
+
+def readings_figure(key: str, y_max: float = 150.0, n: int = 1201):
+    """The optimal depth marginal of a figure under both readings of Eq. (16).
+
+    Draws ``p_oy`` computed from Eq. (6) (``reading="derived"``) and from
+    Eq. (16) as printed, which drops the factor ``exp(-K(y) / 2)``
+    (``reading="printed"``), each normalised over ``y > 2``, with their means
+    marked.
+
+    Parameters
+    ----------
+    key : str
+        ``"fig2"`` ... ``"fig6"``.
+    y_max : float
+        Upper end of the depth axis (> 2).
+    n : int
+        Grid points.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    s = SCENARIOS[key]
+    y_max = _checks.positive_scalar(y_max - 2.0, "y_max - 2") + 2.0
+    y = np.linspace(2.0, y_max, n)[1:]
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), layout="constrained")
+    styles = {"derived": ("black", "-", "from Eq. (6)"),
+              "printed": ("tab:orange", "--", "Eq. (16) as printed")}
+    for reading, (color, linestyle, label) in styles.items():
+        m = _filters.optimal.marginals(s.mu, s.rho, s.prior, reading=reading)
+        ax.plot(y, m.depth_pdf(y), color=color, linestyle=linestyle, linewidth=1.6,
+                label=f"{label} (mean {m.depth_mean:.2f})")
+        ax.axvline(m.depth_mean, color=color, linestyle=":", linewidth=1.0)
+    ax.set_xlabel("depth $y$ at time 3")
+    ax.set_ylabel("optimal marginal density of $y$")
+    ax.set_xlim(0.0, y_max)
+    ax.set_ylim(bottom=0.0)
+    ax.legend(frameon=False)
+    ax.set_title(f"Figure {s.figure}'s measurements: the optimal depth marginal, two readings",
+                 fontsize=10)
+    return fig
+
+
+def _ellipse(mean, cov, n_sd: float = 2.0, n: int = 361) -> np.ndarray:
+    """Points (n, 2) of the ``n_sd``-SD ellipse of a 2-D Gaussian (a segment if singular)."""
+    vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
+    t = np.linspace(0.0, 2.0 * np.pi, n)
+    circle = np.stack([np.cos(t), np.sin(t)], axis=-1)
+    return mean + n_sd * (circle * np.sqrt(np.clip(vals, 0.0, None))) @ vecs.T
+
+
+def first_update_figure(update: dict, extent: float = 70.0):
+    """The prior's sigma points and the EKF's and UKF's densities after ``mu_1``, in ``(x, y)``.
+
+    Parameters
+    ----------
+    update : dict
+        From :func:`depthcore.experiments.first_update`.
+    extent : float
+        Half-width of the plotted square around the camera.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 7.0), layout="constrained")
+    y = np.array([-extent, extent])
+    ax.plot(update["mu1"] * y, y, color="0.6", linewidth=1,
+            label=r"bearing of $\mu_1$: $x = \mu_1 y$")
+    ax.axhline(0.0, color="0.85", linewidth=0.8)
+    ax.plot([0], [0], marker="^", color="black", linestyle="none", label="camera")
+    prior = update["prior"]
+    ax.plot(*_ellipse(prior.mean[:2], prior.cov[:2, :2]).T, color="0.6", linestyle="--",
+            linewidth=1, label="prior, 2 SD")
+    X = update["sigma_points"]
+    ax.plot(X[:, 0], X[:, 1], marker="o", color="tab:green", linestyle="none",
+            label="UKF sigma points of the prior")
+    for name in ("ekf", "ukf"):
+        mean, cov = update[name]
+        ax.plot(*_ellipse(mean[:2], cov[:2, :2]).T, color=STYLE[name]["color"],
+                linewidth=2, label=f"{STYLE[name]['label']} after $\\mu_1$, 2 SD")
+    ax.set_xlim(-extent, extent)
+    ax.set_ylim(-extent, extent)
+    ax.set_box_aspect(1)  # square box and equal limits: equal scales
+    ax.set_xlabel("$x$ at time 1")
+    ax.set_ylabel("depth $y$ at time 1")
+    fig.legend(loc="outside lower center", ncol=2, frameon=False, fontsize=9)
+    return fig
+
+
+def convergence_figure(result: dict, quantity: str = "depth"):
+    """RMS errors of the mean and the SD of one marginal against ``N``, on log axes.
+
+    The grey line is ``sd / sqrt(N)``, the standard error of the mean of
+    ``N`` independent draws from the optimal posterior.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.experiments.particle_convergence`.
+    quantity : {"depth", "velocity"}
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    if quantity not in _filters.QUANTITIES:
+        raise ValueError(f"quantity must be one of {_filters.QUANTITIES}, got {quantity!r}")
+    N = result["sizes"]
+    ideal = result["exact"][f"{quantity}_sd"] / np.sqrt(N)
+    fig, axes = plt.subplots(1, 2, figsize=(9.6, 4.8), layout="constrained", sharey=True)
+    for ax, moment, title in zip(axes, ("mean", "sd"), ("mean", "SD"), strict=True):
+        for name, err in result["rmse"].items():
+            ax.plot(N, err[f"{quantity}_{moment}"], markersize=4,
+                    **SETTING_STYLE.get(name, {"label": name}))
+        ax.plot(N, ideal, color="0.7", linewidth=3, alpha=0.6, zorder=0,
+                label=r"posterior SD$/\sqrt{N}$")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("number of particles $N$")
+        ax.set_title(f"{quantity} {title}: RMS error over {result['repeats']} runs", fontsize=9)
+    axes[0].set_ylabel("RMS error from the optimal filter")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=2, frameon=False, fontsize=9)
+    return fig
+
+
+def noise_study_figure(result: dict):
+    """Coverage of the central 68 % depth interval, and the depth RMSE, against ``rho``.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.experiments.noise_study`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(9.6, 4.0), layout="constrained")
+    names = [n for n in _filters.NAMES if n in result]
+    for name in names:
+        axes[0].plot(result["rho"], result[name]["coverage_68"], marker="o", markersize=3,
+                     **STYLE[name])
+        axes[1].plot(result["rho"], result[name]["rmse"], marker="o", markersize=3,
+                     **STYLE[name])
+    axes[0].axhline(0.68, color="0.7", linewidth=1, label="calibrated: 0.68")
+    axes[0].set_ylim(0, 1.02)
+    axes[0].set_ylabel("fraction of trials whose true depth\nthe central 68 % interval covers")
+    axes[1].set_yscale("log")
+    axes[1].set_ylabel("RMS error of the depth mean")
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_xlabel("noise level rho (radians)")
+    axes[0].legend(frameon=False, fontsize=8)
+    return fig
+
+
+def profile_figure(mu, rhos, depths):
+    """The profile likelihood ``exp(-f_min(y) / (2 rho**2))`` of the depth, for several ``rho``.
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+    rhos : array_like, shape (R,)
+    depths : array_like, shape (n,)
+        Depths > 2 at time 3; plotted on a logarithmic axis.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    f = model.profile_misfit(mu, depths)
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
+    for rho in np.atleast_1d(_checks.positive_array(rhos, "rhos")):
+        ax.plot(depths, np.exp(-f / (2.0 * rho**2)), linewidth=1.6, label=f"rho = {report.rho_label(rho)}")
+    ax.set_xscale("log")
+    ax.set_xlabel("depth $y$ at time 3")
+    ax.set_ylabel("profile likelihood of the depth\n(relative to its maximum)")
+    ax.set_ylim(0, 1.05)
+    ax.legend(frameon=False, fontsize=8)
+    return fig
 
 
 def calibration(result: dict, quantity: str = "depth"):
@@ -154,8 +357,8 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False):
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.sweeps.noise_sweep` (``x="rho"``) or
-        :func:`depthcore.sweeps.prior_offset_sweep` (``x="offset"``).
+        From :func:`depthcore.experiments.noise_sweep` (``x="rho"``) or
+        :func:`depthcore.experiments.prior_offset_sweep` (``x="offset"``).
     field : {"hellinger", "depth_mean", "depth_sd"}
     log_x : bool
         Logarithmic horizontal axis.
@@ -170,7 +373,7 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False):
     ylabels = {"hellinger": "Hellinger distance of the depth marginal to the optimal one",
                "depth_mean": "depth mean", "depth_sd": "depth SD"}
     fig, ax = plt.subplots(figsize=(6.0, 4.0), layout="constrained")
-    for name in reproduce.FILTERS:
+    for name in _filters.NAMES:
         if name in result and not (field == "hellinger" and name == "optimal"):
             ax.plot(result[x], result[name][field], marker="o", markersize=3, **STYLE[name])
     if log_x:

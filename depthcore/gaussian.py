@@ -1,11 +1,20 @@
-"""A small immutable Gaussian type and the paper's prior, Eq. (13).
+"""Gaussian densities on the state, the Gaussian filters' results, and the paper's prior.
 
 Recommended import: ``from depthcore.gaussian import Gaussian, paper_prior``.
+
+* :class:`Gaussian`, with its marginals (Eq. (13)); :func:`gaussian_logpdf`,
+  the batched log density every module uses;
+* :class:`MeanAndCov` and :class:`History`, the result types of the Gaussian
+  filters (:mod:`depthcore.ekf`, :mod:`depthcore.ukf`);
+* :func:`paper_prior` and :func:`paper_prior_means`: the paper's prior rule,
+  for one triple and for a batch;
+* :func:`student_t`: draws from multivariate Student t laws with their log densities.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -53,12 +62,57 @@ class Gaussian:
 
     def logpdf(self, x) -> np.ndarray:
         """Log density at states ``x`` of shape ``(..., 3)``; returns shape ``x.shape[:-1]``."""
-        x = np.asarray(x, dtype=float)
-        chol = np.linalg.cholesky(self.cov)
-        d = x - self.mean
-        z = np.linalg.solve(chol, d.reshape(-1, 3).T).T.reshape(d.shape)
-        logdet = 2.0 * np.sum(np.log(np.diag(chol)))
-        return -0.5 * np.sum(z**2, axis=-1) - 0.5 * logdet - 1.5 * np.log(2.0 * np.pi)
+        return gaussian_logpdf(x, self.mean, self.cov)
+
+
+def gaussian_logpdf(x, mean, cov) -> np.ndarray:
+    """Log density of ``N(mean, cov)`` at ``x``.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., d)
+    mean : array_like, broadcastable to ``x``
+    cov : array_like, shape (d, d)
+        Symmetric positive definite (one covariance for every point).
+
+    Returns
+    -------
+    ndarray, shape x.shape[:-1]
+    """
+    x = np.asarray(x, dtype=float)
+    chol = np.linalg.cholesky(np.asarray(cov, dtype=float))
+    dim = chol.shape[-1]
+    d = x - np.asarray(mean, dtype=float)
+    z = np.linalg.solve(chol, d.reshape(-1, dim).T).T.reshape(d.shape)
+    logdet = 2.0 * np.sum(np.log(np.diag(chol)))
+    return -0.5 * np.sum(z**2, axis=-1) - 0.5 * logdet - 0.5 * dim * np.log(2.0 * np.pi)
+
+
+class MeanAndCov(NamedTuple):
+    """A mean of shape ``(..., 3)`` and covariance of shape ``(..., 3, 3)``."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+
+class History(NamedTuple):
+    """A Gaussian filter's estimates after each measurement.
+
+    Attributes
+    ----------
+    means : ndarray, shape (..., K, 3)
+        ``means[..., i, :]`` is the mean after measurement ``mu_{i+1}``.
+    covs : ndarray, shape (..., K, 3, 3)
+        ``covs[..., i, :, :]`` is the covariance after measurement ``mu_{i+1}``.
+    """
+
+    means: np.ndarray
+    covs: np.ndarray
+
+    @property
+    def posterior(self) -> Gaussian:
+        """The filter's density of the state at the last time (one triple only)."""
+        return Gaussian(self.means[-1], self.covs[-1])
 
 
 def paper_prior(c, depth_offset: float = 0.0, scale: float = PAPER_PRIOR_SCALE) -> Gaussian:
@@ -80,5 +134,85 @@ def paper_prior(c, depth_offset: float = 0.0, scale: float = PAPER_PRIOR_SCALE) 
     c = _checks.finite_array(c, "c", (3,))
     depth_offset = float(_checks.finite_array(depth_offset, "depth_offset"))
     scale = _checks.positive_scalar(scale, "scale")
-    mean = np.array([c[0] - 2.0 * c[2], c[1] - 2.0 + depth_offset, 0.0])
-    return Gaussian(mean, scale * np.eye(3))
+    return Gaussian(paper_prior_means(c, depth_offset), scale * np.eye(3))
+
+
+def paper_prior_means(c, depth_offset=0.0) -> np.ndarray:
+    """The paper's prior mean ``(c1 - 2 c3, c2 - 2 + depth_offset, 0)``, batched.
+
+    The position of ``G^{-2} c`` (Eq. (1)) with the velocity set to zero.
+
+    Parameters
+    ----------
+    c : array_like, shape (..., 3)
+        Noise-free states at time 3, Eq. (7).
+    depth_offset : float or array_like, broadcastable to ``c.shape[:-1]``
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+    """
+    c = np.asarray(c, dtype=float)
+    depth = c[..., 1] - 2.0 + np.asarray(depth_offset, dtype=float)
+    x = np.broadcast_to(c[..., 0] - 2.0 * c[..., 2], depth.shape)
+    return np.stack([x, depth, np.zeros(depth.shape)], axis=-1)
+
+
+def correlation(cov, i: int = 0, j: int = 1) -> float:
+    """The correlation ``cov[i, j] / sqrt(cov[i, i] cov[j, j])`` of components ``i`` and ``j``.
+
+    Parameters
+    ----------
+    cov : array_like, shape (d, d)
+        A covariance with positive ``cov[i, i]`` and ``cov[j, j]``.
+    """
+    cov = _checks.finite_array(cov, "cov")
+    if cov.ndim != 2 or cov.shape[0] != cov.shape[1]:
+        raise ValueError(f"cov must be square, got shape {cov.shape}")
+    if not (cov[i, i] > 0 and cov[j, j] > 0):
+        raise ValueError(f"cov[{i}, {i}] and cov[{j}, {j}] must be positive")
+    return float(cov[i, j] / np.sqrt(cov[i, i] * cov[j, j]))
+
+
+def student_t(mean, scale, df: float, n: int, rng: np.random.Generator):
+    """Draw ``n`` points per row from multivariate Student t laws, with their log densities.
+
+    ``x = mean + sqrt(df / g) L z`` with ``z`` standard normal, ``g ~ chi2(df)``
+    and ``L`` the lower Cholesky factor of ``scale``; ``df = inf`` is the
+    Gaussian ``N(mean, scale)``.
+
+    Parameters
+    ----------
+    mean : array_like, shape (B, d)
+    scale : array_like, shape (B, d, d)
+        Scale matrices, symmetric positive definite.
+    df : float
+        Degrees of freedom, > 0, or ``inf``.
+    n : int
+        Draws per row.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    x : ndarray, shape (B, n, d)
+    log_q : ndarray, shape (B, n)
+        The normalised log density of each draw.
+    """
+    from scipy.special import gammaln
+
+    mean = np.asarray(mean, dtype=float)
+    L = np.linalg.cholesky(np.asarray(scale, dtype=float))
+    dim = mean.shape[-1]
+    z = rng.standard_normal(mean.shape[:1] + (n, dim))
+    log_det = np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=-1)[:, None]
+    delta = np.sum(z**2, axis=-1)
+    if np.isinf(df):
+        factor = np.ones(delta.shape)
+        log_q = -0.5 * delta - 0.5 * dim * np.log(2.0 * np.pi) - log_det
+    else:
+        factor = np.sqrt(df / rng.chisquare(df, delta.shape))
+        delta = delta * factor**2  # the Mahalanobis distance of the t draw
+        log_q = (gammaln((df + dim) / 2.0) - gammaln(df / 2.0) - 0.5 * dim * np.log(df * np.pi)
+                 - log_det - 0.5 * (df + dim) * np.log1p(delta / df))
+    x = mean[:, None, :] + factor[..., None] * np.einsum("bij,bnj->bni", L, z)
+    return x, log_q

@@ -1,4 +1,4 @@
-"""The motion and measurement model of the paper, Eqs. (1), (3), (4), (9), (11).
+"""The motion and measurement model of the paper, Eqs. (1), (3)-(5), (7), (9), (11), (20)-(22).
 
 A point moves in the (x, y) plane with constant velocity ``(v, 1)``; its state
 at time ``i`` is ``(x_i, y_i, v_i)``, with ``y`` the depth. The camera sees the
@@ -7,7 +7,10 @@ bearing ``x / y`` plus white Gaussian noise of standard deviation ``rho``.
 Recommended import: ``from depthcore import model``.
 
 All functions act on the last axis of arrays of states, so ``x`` may have shape
-``(3,)`` or ``(..., 3)``.
+``(3,)`` or ``(..., 3)``. Besides the motion ``G`` (1), (9), the projection and
+its gradient ``h`` (11) and the likelihood (4), the module holds the misfit
+``f`` of three measurements (5), its residuals and their gradients (20)-(22),
+the noise-free state ``c`` (7), and the least misfit at each depth.
 """
 
 from __future__ import annotations
@@ -178,3 +181,145 @@ def noise_in_pixels(rho: float, image_size: int = 512, fov_deg: float = 30.0,
     if small_angle:
         return float(rho * size / fov)
     return float(size / 2 / np.tan(fov / 2) * np.tan(rho))
+
+
+# --- the misfit of three measurements, Eqs. (5), (7), (20)-(22) ---------------------------------
+
+
+def noise_free_state(mu) -> np.ndarray:
+    """Eq. (7): the state ``c`` at time 3 with ``f(c) = 0``.
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+        Measurements ``(mu1, mu2, mu3)``; checked by :func:`depthcore._checks.measurements`.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        ``c = (c1, c2, c3)``: position ``(c1, c2)``, velocity ``(c3, 1)``.
+    """
+    return noise_free_states_unchecked(_checks.measurements(mu))
+
+
+def noise_free_states_unchecked(mu) -> np.ndarray:
+    """Eq. (7) for triples ``mu`` of shape (..., 3), unchecked (NaN or inf where degenerate)."""
+    mu1, mu2, mu3 = np.moveaxis(np.asarray(mu, dtype=float), -1, 0)
+    d = mu3 + mu1 - 2.0 * mu2
+    return np.stack([
+        2.0 * mu3 * (mu1 - mu2) / d,
+        2.0 * (mu1 - mu2) / d,
+        (2.0 * mu1 * mu3 - mu2 * mu3 - mu1 * mu2) / d,
+    ], axis=-1)
+
+
+def residuals(x, mu) -> np.ndarray:
+    """The three terms of Eq. (5) before squaring, in time order.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 3)
+        States at time 3.
+    mu : array_like, shape (3,)
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``((x - 2v)/(y - 2) - mu1, (x - v)/(y - 1) - mu2, x/y - mu3)``.
+    """
+    x = np.asarray(x, dtype=float)
+    mu = np.asarray(mu, dtype=float)
+    return np.stack([project(G(x, k - 2)) - mu[k] for k in range(3)], axis=-1)
+
+
+def f(x, mu) -> np.ndarray:
+    """Eq. (5): the sum of squared residuals, shape ``x.shape[:-1]``."""
+    return np.sum(residuals(x, mu) ** 2, axis=-1)
+
+
+def residual_gradients(x) -> np.ndarray:
+    """Eqs. (20)-(22): gradients of the three residuals at states ``x``, rows in time order.
+
+    Row ``k`` is ``h(G^{k-2} x) F^{k-2}``: the observation vector (11) at the
+    state of time ``k + 1``, pulled back to time 3.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 3)
+        States at time 3.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+    """
+    x = np.asarray(x, dtype=float)
+    return np.stack([observation_vector(G(x, k - 2)) @ G_linear(k - 2) for k in range(3)],
+                    axis=-2)
+
+
+def noise_free_states(mu) -> np.ndarray:
+    """Eq. (7) for a batch of triples ``mu`` of shape ``(B, 3)``; returns ``(B, 3)``.
+
+    Each row is checked as in :func:`noise_free_state`.
+    """
+    mu = _checks.finite_array(mu, "mu")
+    if mu.ndim != 2 or mu.shape[1] != 3:
+        raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
+    d = mu[:, 2] + mu[:, 0] - 2.0 * mu[:, 1]
+    bad = np.abs(d) <= _checks.DEGENERACY_TOL
+    if np.any(bad):
+        _checks.measurements(mu[np.argmax(bad)], f"mu[{int(np.argmax(bad))}]")
+    c = noise_free_states_unchecked(mu)
+    behind = ~(c[:, 1] > 2.0)
+    if np.any(behind):
+        i = int(np.argmax(behind))
+        _checks.measurements(mu[i], f"mu[{i}]")
+    return c
+
+
+# --- the least misfit at each depth ----------------------------------------------------------
+
+
+def profile_misfit(mu, depths) -> np.ndarray:
+    """The least misfit ``f`` (Eq. (5)) of the measurements over states with a given depth.
+
+    At a fixed depth ``y3`` at time 3 the bearings
+    ``(x3 - (3 - i) v) / (y3 - 3 + i)`` are linear in ``(x3, v)``, so
+    ``min_{x3, v} sum_i (mu_i - x_i / y_i)**2`` is a linear least-squares
+    problem, solved here for each depth. ``exp(-f / (2 rho**2))`` at the
+    minimum is the profile likelihood of the depth, relative to its value at
+    the noise-free solution (where the misfit is 0).
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+    depths : array_like, shape (n,)
+        Depths ``y3 > 2`` at time 3 (the point in front of the camera at times 1-3).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    mu = _checks.measurements(mu)
+    y3 = np.atleast_1d(_checks.finite_array(depths, "depths"))
+    if y3.ndim != 1 or np.any(y3 <= 2.0):
+        raise ValueError("depths must be a 1-D array of depths > 2 at time 3")
+    back = np.array([2.0, 1.0, 0.0])  # 3 - i for i = 1, 2, 3
+    yi = y3[:, None] - back  # (n, 3): depth at times 1..3
+    A = np.stack([1.0 / yi, -back / yi], axis=-1)  # (n, 3, 2): bearings = A @ (x3, v)
+    AtA = np.einsum("nij,nik->njk", A, A)
+    Atb = np.einsum("nij,i->nj", A, mu)
+    xv = np.linalg.solve(AtA, Atb[..., None])[..., 0]
+    r = mu - np.einsum("nij,nj->ni", A, xv)
+    return np.sum(r**2, axis=-1)
+
+
+def far_misfit(mu) -> float:
+    """The limit of :func:`profile_misfit` at infinite depth, ``(mu1 - 2 mu2 + mu3)**2 / 6``.
+
+    Far away the bearings of a point moving with constant velocity change
+    linearly in time, ``a + b (i - 1)``, and the least misfit of three
+    measurements by such a line is their component along ``(1, -2, 1) / sqrt(6)``.
+    """
+    mu = _checks.measurements(mu)
+    return float((mu[0] - 2.0 * mu[1] + mu[2]) ** 2 / 6.0)

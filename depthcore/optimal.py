@@ -43,7 +43,7 @@ import numpy as np
 
 from . import _checks, model
 from .gaussian import Gaussian
-from .second_order import A2, b2, f, noise_free_states, second_order_batch
+from .second_order import A2, f, noise_free_states, second_order_batch
 
 READINGS = ("derived", "printed")
 #: ``"front"``: depths ``y > 2``, the point in front of the camera at all three
@@ -69,7 +69,7 @@ class _Problem(NamedTuple):
     R: np.ndarray  # (B, 3, 3), P^{-1} = R^T R
     reading: str
 
-    def take(self, idx) -> "_Problem":
+    def take(self, idx) -> _Problem:
         return _Problem(self.mu[idx], self.rho[idx], self.mean[idx], self.R[idx], self.reading)
 
 
@@ -77,18 +77,11 @@ def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
     if reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
     mu = np.atleast_2d(_checks.finite_array(mu, "mu"))
-    B = mu.shape[0]
-    rho = _checks.positive_array(rho, "rho")
-    if rho.ndim and rho.shape != (B,):
-        raise ValueError(f"rho must be a scalar or have shape ({B},), got shape {rho.shape}")
-    prior_mean = _checks.finite_array(prior_mean, "prior_mean")
-    if prior_mean.shape not in ((3,), (B, 3)):
-        raise ValueError(f"prior_mean must have shape (3,) or ({B}, 3), got {prior_mean.shape}")
-    prior_cov = _checks.finite_array(prior_cov, "prior_cov")
     prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
+    mu, rho, prior_mean, _ = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)
+    B = mu.shape[0]
     R = np.linalg.inv(np.linalg.cholesky(prior_cov))
-    return _Problem(mu, np.full(B, rho), np.broadcast_to(prior_mean, (B, 3)),
-                    np.broadcast_to(R, (B, 3, 3)), reading)
+    return _Problem(mu, np.full(B, rho), prior_mean, np.broadcast_to(R, (B, 3, 3)), reading)
 
 
 def log_posterior(x, mu, rho: float, prior: Gaussian) -> np.ndarray:
@@ -733,3 +726,84 @@ def batch_marginals(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> Batc
     moments_ = Moments(*m.key_moments(), err_y, err_v, m.behind, m.mean, m.cov)
     lo, h, n = grids[3]
     return BatchMarginals(moments_, log_z, rtol, pb, grids, (lo, lo + (n - 1) * h, 2.0 * h))
+
+
+# --- pieces of the derivation of Eq. (16), and quantiles --------------------------------------
+
+
+def eq16_printed(coefficients) -> np.ndarray:
+    """Eq. (16) as printed: ``log(exp(l^T M^{-1} l / 8) / sqrt(det M))`` from ``A .. E``.
+
+    Parameters
+    ----------
+    coefficients : array_like, shape (n, 5)
+        Columns ``A, B, C, D, E`` of Eq. (14) at ``n`` depths
+        (:func:`depthcore.optimal.quadratic_coefficients`).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        The log of the printed ``p_oy`` without its constant ``c``.
+    """
+    A, B, C, D, E = np.asarray(coefficients, dtype=float).T
+    det_M = A * C - B**2 / 4.0  # Eq. (15): M = [[A, B/2], [B/2, C]]
+    # l^T M^{-1} l with M^{-1} = [[C, -B/2], [-B/2, A]] / det M, l = (D, E)
+    quad = (C * D**2 - B * D * E + A * E**2) / det_M
+    return quad / 8.0 - 0.5 * np.log(det_M)
+
+
+def prior_exponent(y, mu, rho: float, prior: Gaussian) -> np.ndarray:
+    """``K(y)``: the part of the exponent of (6) at depth ``y`` free of ``x`` and ``v``.
+
+    At fixed ``y`` the log posterior (6) is
+    ``-1/2 (A x**2 + B x v + C v**2 + D x + E v) - 1/2 K(y)`` up to a constant;
+    ``K(y)`` is minus twice its value at ``x = v = 0``. Eq. (14) leaves it out.
+
+    Parameters
+    ----------
+    y : array_like, shape (n,)
+    mu, rho, prior
+        As in :func:`depthcore.optimal.log_posterior`.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``K(y)``, up to an additive constant.
+    """
+    y = np.atleast_1d(_checks.finite_array(y, "y"))
+    x = np.stack([np.zeros_like(y), y, np.zeros_like(y)], -1)
+    return -2.0 * log_posterior(x, mu, rho, prior)
+
+
+def depth_quantiles(m: OptimalMarginals, probs, n: int = 20001) -> np.ndarray:
+    """Quantiles of the optimal depth marginal ``p_oy`` (support ``y > 2``).
+
+    The cumulative distribution is the trapezoid rule on a grid uniform in
+    ``t = log(y - 2)`` from ``y - 2 = 1e-4`` to ``50 * (E y + 10 sd)``,
+    inverted by linear interpolation.
+
+    Parameters
+    ----------
+    m : OptimalMarginals
+        From :func:`depthcore.optimal.marginals` with ``support="front"``.
+    probs : array_like
+        Probabilities in (0, 1).
+    n : int
+        Grid points.
+
+    Returns
+    -------
+    ndarray, shape of ``probs``
+    """
+    if m.support != "front":
+        raise ValueError(f"depth_quantiles needs support='front', got {m.support!r}")
+    probs = _checks.finite_array(probs, "probs")
+    if np.any((probs <= 0) | (probs >= 1)):
+        raise ValueError(f"probs must lie in (0, 1), got {probs.tolist()}")
+    t = np.linspace(np.log(1e-4), np.log(50.0 * (m.depth_mean + 10.0 * m.depth_sd)), n)
+    d = np.exp(t)
+    integrand = m.depth_pdf(2.0 + d) * d
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(t))])
+    if not abs(cdf[-1] - 1.0) < 1e-6:
+        raise RuntimeError(f"the depth marginal integrates to {cdf[-1]:.8f} on the grid, not 1")
+    return np.interp(probs, cdf / cdf[-1], 2.0 + d)

@@ -1,23 +1,36 @@
-"""Brute-force routes to the optimal filter's moments, for checking the closed forms.
+"""Independent routes to what the package computes in closed form, for checking it.
 
 Recommended import: ``from depthcore import reference``.
 
-Nothing here uses Eqs. (14)-(16): both routes evaluate the log posterior (6)
-itself, by a dense three-dimensional Gauss-Legendre grid or by importance
-sampling. They are slow by design; :func:`depthcore.optimal.marginals` is the
-route to use.
+* :func:`grid_moments`, :func:`importance_moments`: the optimal filter's
+  moments without Eqs. (14)-(16), from the log posterior (6) itself, by a
+  dense three-dimensional Gauss-Legendre grid or by importance sampling;
+* :func:`bayes_filter`: the recursion (2) with (3) and (4) run literally, as
+  an independent route to the optimal density (6);
+* :func:`numerical_gradient`, :func:`numerical_hessian`: central differences,
+  to check the observation vector (11) and the Hessian ``J`` of (8);
+* :func:`log_gaussian_integral_brute`: the Gaussian integral behind Eq. (16)
+  by brute force;
+* :func:`trapezoid_depth_moments`: the depth moments by one trapezoid rule of
+  a fixed step.
+
+They are slow by design; :mod:`depthcore.optimal` is the route to use.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
 
-from . import _checks
-from .gaussian import Gaussian
+from . import _checks, model, optimal
+from .gaussian import Gaussian, student_t
 from .optimal import log_posterior
+from .resampling import weighted_moments, weighted_standard_errors
 from .second_order import second_order
+
+LogDensity = Callable[[np.ndarray], np.ndarray]
 
 
 class BruteMoments(NamedTuple):
@@ -134,20 +147,189 @@ def importance_moments(mu, rho: float, prior: Gaussian, rng: np.random.Generator
     """
     mu = _checks.measurements(mu)
     ps = second_order(mu, rho, prior)
-    L = np.linalg.cholesky(ps.cov) * inflate
-    z = rng.standard_normal((n, 3))
-    g = rng.chisquare(df, n) / df
-    x = ps.mean + (z @ L.T) / np.sqrt(g)[:, None]
-    # log density of the t proposal, up to a constant
-    q = np.linalg.solve(L, (x - ps.mean).T).T
-    log_q = -0.5 * (df + 3) * np.log1p(np.sum(q**2, 1) / df)
+    draws, log_q = student_t(ps.mean[None], inflate**2 * ps.cov[None], df, n, rng)
+    x, log_q = draws[0], log_q[0]
     front = x[:, 1] > 2
     log_w = np.full(n, -np.inf)
     log_w[front] = log_posterior(x[front], mu, rho, prior) - log_q[front]
     w = np.exp(log_w - log_w.max())
     w /= w.sum()
-    vals = x[:, [1, 2]]
-    means = w @ vals
-    sds = np.sqrt(w @ (vals - means) ** 2)
-    se = np.sqrt(np.sum(w[:, None] ** 2 * (vals - means) ** 2, 0))
-    return means, sds, se
+    vals = x[:, [1, 2]].T  # (2, n): depths and velocities
+    means, sds = weighted_moments(vals, w)
+    se_means, _ = weighted_standard_errors(vals, w)
+    return means, sds, se_means
+
+
+# --- independent routes to the recursion (2)-(4), Eqs. (8), (11), (16) -------------------------
+
+
+def bayes_filter(mu, rho: float, prior: Gaussian) -> list[LogDensity]:
+    """Eqs. (2)-(4): the filtering densities after each measurement, by the recursion.
+
+    Each step is a prediction and a measurement update. With the deterministic
+    motion (3) the Chapman-Kolmogorov integral of the prediction collapses to
+    ``p(x_k | I^{k-1}) = p(G^{-1} x_k | I^{k-1}) / |det F|`` with
+    ``det F = 1``; the update multiplies by the likelihood (4) (Bayes' rule,
+    up to the normalising constant ``c`` of (2)).
+
+    Parameters
+    ----------
+    mu : array_like, shape (k,)
+        Measurements ``mu_1 .. mu_k`` in time order.
+    rho : float
+        Noise standard deviation, > 0.
+    prior : Gaussian
+        Density of the state at time 1 before the first measurement.
+
+    Returns
+    -------
+    list of callables
+        Entry ``i`` maps states of shape ``(..., 3)`` at time ``i + 1`` to the
+        unnormalised ``log p(x_{i+1} | I^{i+1})``, shape ``(...)``.
+    """
+    rho = _checks.positive_scalar(rho, "rho")
+    mu = _checks.finite_array(mu, "mu")
+    if mu.ndim != 1 or mu.size == 0:
+        raise ValueError(f"mu must be a non-empty 1-D array, got shape {mu.shape}")
+    log_det_F = float(np.log(abs(np.linalg.det(model.F))))
+    densities: list[LogDensity] = []
+    predicted: LogDensity = prior.logpdf  # p(x_1 | I^0)
+    for k, mu_k in enumerate(mu.tolist()):
+        if k:
+            predicted = _predicted(densities[-1], log_det_F)
+        densities.append(_updated(predicted, mu_k, rho))
+    return densities
+
+
+def _predicted(previous: LogDensity, log_det_F: float) -> LogDensity:
+    """Prediction: the integral of (2) with the delta (3), ``p(G^{-1} x) / |det F|``."""
+
+    def log_density(x):
+        return previous(model.G(x, -1)) - log_det_F
+
+    return log_density
+
+
+def _updated(predicted: LogDensity, mu_k: float, rho: float) -> LogDensity:
+    """Measurement update: Bayes' rule with the likelihood (4), unnormalised."""
+
+    def log_density(x):
+        return model.log_likelihood(mu_k, x, rho) + predicted(x)
+
+    return log_density
+
+
+def numerical_gradient(fun: Callable, x, step: float = 1e-6) -> np.ndarray:
+    """Central-difference gradient of a scalar function of a state.
+
+    Parameters
+    ----------
+    fun : callable
+        Maps an array of shape ``(3,)`` to a float.
+    x : array_like, shape (n,)
+    step : float
+        Difference step, > 0; the error is ``O(step**2)``.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    x = _checks.finite_array(x, "x")
+    step = _checks.positive_scalar(step, "step")
+    eye = np.eye(x.size) * step
+    return np.array([(fun(x + d) - fun(x - d)) / (2.0 * step) for d in eye])
+
+
+def numerical_hessian(fun: Callable, x, step: float = 1e-4) -> np.ndarray:
+    """Central-difference Hessian of a scalar function of a state.
+
+    Uses ``(f(x+a+b) - f(x+a-b) - f(x-a+b) + f(x-a-b)) / (4 step**2)`` for the
+    steps ``a, b`` along two axes; the error is ``O(step**2)``.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        Symmetric.
+    """
+    x = _checks.finite_array(x, "x")
+    step = _checks.positive_scalar(step, "step")
+    eye = np.eye(x.size) * step
+    H = np.array([[(fun(x + a + b) - fun(x + a - b) - fun(x - a + b) + fun(x - a - b))
+                   / (4.0 * step**2) for b in eye] for a in eye])
+    return 0.5 * (H + H.T)
+
+
+def log_gaussian_integral_brute(M, l, n: int = 801, width: float = 12.0) -> float:
+    """``log`` of the integral of ``exp(-1/2 (u^T M u + l^T u))`` over the plane, by brute force.
+
+    A tensor trapezoid rule on an ``n x n`` grid covering ``width`` standard
+    deviations either side of the maximum along each principal axis: an
+    independent check of the closed form ``2 pi exp(l^T M^{-1} l / 8) / sqrt(det M)``.
+
+    Parameters
+    ----------
+    M : array_like, shape (2, 2)
+        Symmetric positive definite, Eq. (15).
+    l : array_like, shape (2,)
+    n : int
+        Grid points per axis.
+    width : float
+        Half-width of the grid in standard deviations.
+
+    Returns
+    -------
+    float
+    """
+    M = _checks.covariance(M, "M", 2)
+    l = _checks.finite_array(l, "l", (2,))
+    vals, vecs = np.linalg.eigh(M)
+    axes = vecs / np.sqrt(vals)  # columns: principal axes scaled to one SD
+    s = np.linspace(-width, width, n)
+    S = np.stack(np.meshgrid(s, s, indexing="ij"), -1)
+    # The grid sits on the maximum; where it sits does not change the integral.
+    centre = -0.5 * np.linalg.solve(M, l)
+    u = centre + S @ axes.T
+    exponent = -0.5 * (np.einsum("...i,ij,...j->...", u, M, u) + u @ l)
+    top = float(np.max(exponent))
+    h = s[1] - s[0]
+    w = np.full(n, h)
+    w[[0, -1]] *= 0.5
+    total = float(np.einsum("i,j,ij->", w, w, np.exp(exponent - top)))
+    return top + np.log(total) + float(np.log(abs(np.linalg.det(axes))))
+
+
+def trapezoid_depth_moments(mu, rho: float, prior: Gaussian, step: float,
+                            t_range=(-8.0, 8.0), reading: str = "derived") -> tuple[float, float, int]:
+    """Mean and SD of the optimal depth marginal by one trapezoid rule of a given step.
+
+    The rule is applied in ``t = log(y - 2)`` (support ``y > 2``) on the nodes
+    ``t_lo, t_lo + step, ...`` up to ``t_hi``, to the closed form of
+    :func:`depthcore.optimal.conditional` times the Jacobian ``dy/dt = e^t``.
+    This is the rule :func:`depthcore.optimal.marginals` refines by halving
+    its step; with a fixed step it shows how fast the rule converges.
+
+    Parameters
+    ----------
+    mu, rho, prior
+        As in :func:`depthcore.optimal.log_posterior`.
+    step : float
+        Node spacing in ``t``, > 0.
+    t_range : (float, float)
+        First and last node; the default covers ``y - 2`` from 3e-4 to 3e3.
+    reading : {"derived", "printed"}
+
+    Returns
+    -------
+    mean, sd : float
+    n_nodes : int
+    """
+    step = _checks.positive_scalar(step, "step")
+    t_lo, t_hi = (float(t) for t in _checks.finite_array(t_range, "t_range", (2,)))
+    if not t_hi > t_lo:
+        raise ValueError(f"t_range must be increasing, got {(t_lo, t_hi)}")
+    t = np.arange(t_lo, t_hi + step / 2, step)
+    y = 2.0 + np.exp(t)
+    log_w = optimal.conditional(y, mu, rho, prior, reading)[0] + t
+    w = np.exp(log_w - np.max(log_w))
+    mean = float(np.sum(w * y) / np.sum(w))
+    return mean, float(np.sqrt(np.sum(w * (y - mean) ** 2) / np.sum(w))), int(t.size)

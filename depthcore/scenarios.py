@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .gaussian import Gaussian, paper_prior
-from .second_order import noise_free_state
+from .model import noise_free_state
 
 #: Eq. (17): the measurements of Figures 2, 4, 5 and 6.
 MU_17 = (-3 / 10, 0.0, 1 / 5)

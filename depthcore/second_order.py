@@ -1,4 +1,4 @@
-"""The noise-free state and the second-order approximation p_s, Eqs. (5), (7), (8).
+"""The second-order approximation p_s, Eqs. (8) and (24).
 
 Recommended import: ``from depthcore import second_order``.
 
@@ -17,78 +17,34 @@ follows the print, ``reading="derived"`` (the default) the expansion.
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
 
 from . import _checks, model
 from .gaussian import Gaussian
+from .model import f, noise_free_state, noise_free_states, residual_gradients, residuals
+
+__all__ = ["A2", "READINGS", "b2", "f", "hessian", "likelihood_covariance", "noise_free_state",
+           "noise_free_states", "residual_gradients", "residuals", "second_order",
+           "second_order_batch", "theorem1_precision"]
 
 READINGS = ("derived", "printed")
+
+def cho_factor(a):
+    """:func:`scipy.linalg.cho_factor`, imported when first needed."""
+    from scipy.linalg import cho_factor as factor
+
+    return factor(a)
+
+
+def cho_solve(factor, b):
+    """:func:`scipy.linalg.cho_solve`, imported when first needed."""
+    from scipy.linalg import cho_solve as solve
+
+    return solve(factor, b)
+
 
 #: Linear and constant parts of ``G^{-2}``: ``G^{-2} x = A2 x + b2``.
 A2 = model.G_linear(-2)
 b2 = np.array([0.0, -2.0, 0.0])
-
-
-def noise_free_state(mu) -> np.ndarray:
-    """Eq. (7): the state ``c`` at time 3 with ``f(c) = 0``.
-
-    Parameters
-    ----------
-    mu : array_like, shape (3,)
-        Measurements ``(mu1, mu2, mu3)``; checked by :func:`depthcore._checks.measurements`.
-
-    Returns
-    -------
-    ndarray, shape (3,)
-        ``c = (c1, c2, c3)``: position ``(c1, c2)``, velocity ``(c3, 1)``.
-    """
-    mu1, mu2, mu3 = _checks.measurements(mu)
-    d = mu3 + mu1 - 2.0 * mu2
-    return np.array([
-        2.0 * mu3 * (mu1 - mu2) / d,
-        2.0 * (mu1 - mu2) / d,
-        (2.0 * mu1 * mu3 - mu2 * mu3 - mu1 * mu2) / d,
-    ])
-
-
-def residuals(x, mu) -> np.ndarray:
-    """The three terms of Eq. (5) before squaring, in time order.
-
-    Parameters
-    ----------
-    x : array_like, shape (..., 3)
-        States at time 3.
-    mu : array_like, shape (3,)
-
-    Returns
-    -------
-    ndarray, shape (..., 3)
-        ``((x - 2v)/(y - 2) - mu1, (x - v)/(y - 1) - mu2, x/y - mu3)``.
-    """
-    x = np.asarray(x, dtype=float)
-    mu = np.asarray(mu, dtype=float)
-    return np.stack([model.project(model.G(x, k - 2)) - mu[k] for k in range(3)], axis=-1)
-
-
-def f(x, mu) -> np.ndarray:
-    """Eq. (5): the sum of squared residuals, shape ``x.shape[:-1]``."""
-    return np.sum(residuals(x, mu) ** 2, axis=-1)
-
-
-def residual_gradients(x) -> np.ndarray:
-    """Gradients of the three residuals at a state ``x`` (shape (3,)), rows in time order.
-
-    Row ``k`` is ``h(G^{k-2} x) F^{k-2}``: the observation vector (11) at the
-    state of time ``k + 1``, pulled back to time 3; these are the vectors of
-    Eqs. (20)-(22).
-
-    Returns
-    -------
-    ndarray, shape (3, 3)
-    """
-    x = np.asarray(x, dtype=float)
-    return np.stack([model.observation_vector(model.G(x, k - 2)) @ model.G_linear(k - 2)
-                     for k in range(3)])
 
 
 def hessian(mu) -> np.ndarray:
@@ -117,28 +73,6 @@ def likelihood_covariance(mu, rho: float, reading: str = "derived") -> np.ndarra
     factor = {"derived": 2.0, "printed": 1.0}[_reading(reading)]
     J = hessian(mu)
     return factor * rho**2 * np.linalg.inv(J)
-
-
-def noise_free_states(mu) -> np.ndarray:
-    """Eq. (7) for a batch of triples ``mu`` of shape ``(B, 3)``; returns ``(B, 3)``.
-
-    Each row is checked as in :func:`noise_free_state`.
-    """
-    mu = _checks.finite_array(mu, "mu")
-    if mu.ndim != 2 or mu.shape[1] != 3:
-        raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
-    mu1, mu2, mu3 = mu.T
-    d = mu3 + mu1 - 2.0 * mu2
-    bad = np.abs(d) <= _checks.DEGENERACY_TOL
-    if np.any(bad):
-        _checks.measurements(mu[np.argmax(bad)], f"mu[{int(np.argmax(bad))}]")
-    c = np.stack([2.0 * mu3 * (mu1 - mu2) / d, 2.0 * (mu1 - mu2) / d,
-                  (2.0 * mu1 * mu3 - mu2 * mu3 - mu1 * mu2) / d], axis=-1)
-    behind = ~(c[:, 1] > 2.0)
-    if np.any(behind):
-        i = int(np.argmax(behind))
-        _checks.measurements(mu[i], f"mu[{i}]")
-    return c
 
 
 def second_order_batch(mu, rho: float, prior_mean, prior_cov,
@@ -204,3 +138,24 @@ def _reading(reading: str) -> str:
     if reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
     return reading
+
+
+def theorem1_precision(mu, rho: float, prior: Gaussian) -> np.ndarray:
+    """Eq. (24): ``D^{-1}``, the inverse covariance of ``p_s`` written with EKF vectors.
+
+    ``D^{-1} = (1/rho**2) sum_k (F^{k-3})^T h_k h_k^T F^{k-3} + (F^{-2})^T P^{-1} F^{-2}``,
+    with ``h_k`` the observation vector (11) at ``G^{k-3} c``, the EKF's
+    predicted mean at time ``k`` when the prior mean is ``G^{-2} c`` (Eq. (19)),
+    and ``F^{k-3}`` the linear part of ``G^{k-3}``.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+    """
+    rho = _checks.positive_scalar(rho, "rho")
+    g = residual_gradients(noise_free_state(mu))  # rows h_k^T F^{k-3}, Eqs. (20)-(22)
+    precision = np.zeros((3, 3))
+    for row in g:
+        precision += np.outer(row, row) / rho**2
+    F2 = model.G_linear(-2)
+    return precision + F2.T @ np.linalg.solve(prior.cov, F2)

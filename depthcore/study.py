@@ -23,21 +23,18 @@ paper's prior rule; they are counted and left out of every score.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
-from scipy.special import ndtr
 
-from . import _checks, model, optimal, particle, ukf
-from .ekf import run as ekf_run
-from .gaussian import PAPER_PRIOR_SCALE
+from . import _checks, model, optimal
+from .filters import FILTERS, NAMES, check_names
+from .gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from .scenarios import SCENARIOS
-from .second_order import second_order_batch
 
 PRIORS = ("paper", "fixed")
 LEVELS = (0.68, 0.95)
-FILTERS = ("optimal", "second_order", "ekf", "ukf", "particle")
 #: Nominal levels of the calibration curve: central intervals from 5 % to 99 %.
 CALIBRATION_LEVELS = tuple(np.round(np.concatenate([np.arange(0.05, 0.951, 0.05), [0.99]]), 2))
 #: Particles per trial of the particle filter.
@@ -96,7 +93,7 @@ def valid_triples(mu) -> np.ndarray:
     d = mu[:, 0] + mu[:, 2] - 2.0 * mu[:, 1]
     ok = np.isfinite(mu).all(axis=1) & (np.abs(d) > _checks.DEGENERACY_TOL)
     with np.errstate(divide="ignore", invalid="ignore"):
-        c2 = 2.0 * (mu[:, 0] - mu[:, 1]) / d
+        c2 = model.noise_free_states_unchecked(mu)[:, 1]  # Eq. (7)
     return ok & (c2 > 2.0)
 
 
@@ -132,14 +129,16 @@ def simulate(truth, rho: float, n: int, rng: np.random.Generator, prior: str = "
     keep = valid_triples(mu)
     mu = mu[keep]
     if prior == "paper":
-        c = optimal.noise_free_states(mu)
+        c = model.noise_free_states(mu)
     else:
         c = np.broadcast_to(truth, mu.shape)
-    mean = np.stack([c[:, 0] - 2.0 * c[:, 2], c[:, 1] - 2.0, np.zeros(len(c))], axis=-1)
+    mean = paper_prior_means(c)
     return Trials(truth, rho, mu, mean, prior_scale * np.eye(3), int(np.sum(~keep)))
 
 
 def _gaussian_estimates(trials: Trials, mean, cov, reference) -> Estimates:
+    from scipy.special import ndtr
+
     t = trials.truth
     depth_cdf = ndtr((t[1] - mean[:, 1]) / np.sqrt(cov[:, 1, 1]))
     velocity_cdf = ndtr((t[2] - mean[:, 2]) / np.sqrt(cov[:, 2, 2]))
@@ -183,13 +182,12 @@ def hellinger(reference: optimal.BatchMarginals, log_q: Callable, q_mean, q_sd,
     return np.sqrt(np.clip(1.0 - bc, 0.0, 1.0))
 
 
-def _particle_estimates(trials: Trials, batch, reference) -> Estimates:
+def _particle_estimates(trials: Trials, estimate, reference) -> Estimates:
     """Scores' inputs for the particle filter: weighted moments, CDFs, a binned KDE."""
+    batch = estimate.detail
     W = np.exp(batch.log_weights)
     x = batch.particles
-    mean = np.einsum("bn,bni->bi", W, x)
-    d = x - mean[:, None, :]
-    cov = np.einsum("bn,bni,bnj->bij", W, d, d)
+    mean, cov = estimate.mean, estimate.cov
     t = trials.truth
     depth_cdf = np.sum(W * (x[..., 1] <= t[1]), axis=1)
     velocity_cdf = np.sum(W * (x[..., 2] <= t[2]), axis=1)
@@ -233,40 +231,38 @@ def _binned_kde(samples, W, bandwidth, bins: int = 2048):
     return log_q
 
 
-def run_filters(trials: Trials, names=FILTERS, rng: np.random.Generator | None = None,
+def run_filters(trials: Trials, names=NAMES, rng: np.random.Generator | None = None,
                 n_particles: int = PARTICLES) -> dict:
-    """Run the named filters over every trial; returns ``{name: Estimates}``.
+    """Run the named filters of :data:`depthcore.filters.FILTERS` over every trial.
 
-    ``rng`` drives the particle filter (required when it is among ``names``).
-    The UKF runs with the default sigma points even where some lie behind the
-    camera (the paper's prior is that broad).
+    Returns ``{name: Estimates}``. ``rng`` drives the random filters (the
+    particle filter; required when one is among ``names``). The UKF runs with
+    the default sigma points even where some lie behind the camera (the
+    paper's prior is that broad).
     """
+    names = check_names(names)
     mu, rho, pm, pc = trials.mu, trials.rho, trials.prior_mean, trials.prior_cov
-    ref = optimal.batch_marginals(mu, rho, pm, pc)
+    reference = FILTERS["optimal"](mu, rho, pm, pc)
+    ref = reference.detail
     out = {}
     for name in names:
-        if name == "optimal":
-            m = ref.moments
-            out[name] = Estimates(m.mean, m.cov, ref.depth_cdf(np.full(len(mu), trials.truth[1])),
+        f = FILTERS[name]
+        if f.family == "exact":
+            out[name] = Estimates(reference.mean, reference.cov,
+                                  ref.depth_cdf(np.full(len(mu), trials.truth[1])),
                                   ref.velocity_cdf(np.full(len(mu), trials.truth[2])),
                                   np.zeros(len(mu)))
-        elif name == "second_order":
-            mean, cov = second_order_batch(mu, rho, pm, pc)
-            out[name] = _gaussian_estimates(trials, mean, cov, ref)
-        elif name == "ekf":
-            means, covs = ekf_run(mu, rho, pm, pc)
-            out[name] = _gaussian_estimates(trials, means[:, -1], covs[:, -1], ref)
-        elif name == "ukf":
-            means, covs = ukf.run(mu, rho, pm, np.broadcast_to(pc, (len(mu), 3, 3)),
-                                  allow_behind_camera=True)
-            out[name] = _gaussian_estimates(trials, means[:, -1], covs[:, -1], ref)
-        elif name == "particle":
+            continue
+        options = {}
+        if f.random:
             if rng is None:
-                raise ValueError("rng is required to run the particle filter")
-            batch = particle.run(mu, rho, pm, pc, n_particles, rng)
-            out[name] = _particle_estimates(trials, batch, ref)
+                raise ValueError(f"rng is required to run the {name} filter")
+            options = {"rng": rng, "n_particles": n_particles}
+        est = f(mu, rho, pm, pc, **options)
+        if f.family == "particles":
+            out[name] = _particle_estimates(trials, est, ref)
         else:
-            raise ValueError(f"unknown filter {name!r}")
+            out[name] = _gaussian_estimates(trials, est.mean, est.cov, ref)
     return out
 
 
@@ -298,8 +294,8 @@ def scores(trials: Trials, est: Estimates) -> dict:
     return out
 
 
-def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, seed: int = 0,
-          prior: str = "paper", names=FILTERS, chunk: int = 100, n_particles: int = PARTICLES,
+def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, seed=0,
+          prior: str = "paper", names=NAMES, chunk: int = 100, n_particles: int = PARTICLES,
           progress: Callable[[int, int], None] | None = None) -> dict:
     """The whole study; returns a JSON-ready dict.
 
@@ -309,11 +305,12 @@ def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, see
         True state at time 3; default the noise-free state of Figure 2.
     rho : float
     trials : int
-    seed : int
-        Seed of the ``numpy.random.Generator`` that draws the noise.
+    seed : int or numpy.random.SeedSequence
+        Seeds the ``numpy.random.Generator`` streams that draw the noise and
+        the particles (default 0).
     prior : {"paper", "fixed"}
     names : sequence of str
-        Filters to score, from :data:`FILTERS`.
+        Filters to score, from :data:`depthcore.filters.FILTERS`.
     chunk : int
         Trials run together; ``progress(done, total)`` is called after each chunk.
     n_particles : int
@@ -324,10 +321,9 @@ def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, see
     draws (not the noise) also depend on ``chunk``.
     """
     truth = SCENARIOS["fig2"].c if truth is None else truth
-    unknown = set(names) - set(FILTERS)
-    if unknown:
-        raise ValueError(f"filters must be among {FILTERS}, got {sorted(unknown)}")
-    noise_rng, particle_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    names = check_names(names)
+    seed = _checks.seed_sequence(seed)
+    noise_rng, particle_rng = (np.random.default_rng(s) for s in _checks.spawn(seed, 2))
     all_trials = simulate(truth, rho, trials, noise_rng, prior)
     parts = []
     n = len(all_trials.mu)
@@ -344,27 +340,10 @@ def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, see
         "truth": [float(v) for v in all_trials.truth],
         "rho": float(rho),
         "prior": prior,
-        "seed": int(seed),
+        "seed": seed.entropy,
         "trials": int(trials),
         "valid_trials": n,
         "rejected_trials": all_trials.n_rejected,
         "particles": int(n_particles) if "particle" in names else None,
         "filters": {name: scores(all_trials, merged[name]) for name in names},
     }
-
-
-def format_result(result: dict) -> str:
-    """A plain-text table of :func:`study`'s result."""
-    lines = [f"truth {tuple(round(v, 6) for v in result['truth'])}, rho {result['rho']:.6g}, "
-             f"prior {result['prior']}, seed {result['seed']}: {result['valid_trials']} trials "
-             f"({result['rejected_trials']} without a noise-free solution in front of the camera left out)"]
-    head = (f"{'filter':<13} {'quantity':<9} {'bias':>9} {'rmse':>9} {'mean sd':>9} "
-            f"{'cover 68':>8} {'cover 95':>8} {'NEES':>8} {'Hellinger':>9}")
-    lines += [head, "-" * len(head)]
-    for name, f in result["filters"].items():
-        for q in ("depth", "velocity"):
-            r = f[q]
-            extra = (f"{f['nees']:>8.2f} {f['hellinger_depth']['mean']:>9.3f}" if q == "depth" else "")
-            lines.append(f"{name:<13} {q:<9} {r['bias']:>9.4f} {r['rmse']:>9.4f} {r['mean_sd']:>9.4f} "
-                         f"{r['coverage_68']:>8.3f} {r['coverage_95']:>8.3f} {extra}".rstrip())
-    return "\n".join(lines) + "\n"

@@ -55,14 +55,6 @@ a few units, so the default check rejects every paper scenario; smaller
 ``alpha`` pulls the points in, and ``allow_behind_camera=True`` runs the
 transform across the pole anyway (to show what it does).
 
-Neither helps on the paper's scenarios. On Fig. 2 the optimal depth is
-``6.47 +- 0.80`` and the EKF's ``6.00 +- 0.16``; the UKF across the pole ends
-at ``7.08 +- 31.5``, and with ``alpha = 0.05, beta = 2`` at ``15.9 +- 30.4``.
-After ``mu1`` the EKF, linearising at the prior mean, keeps the ray
-``x = mu1 y`` (the correlation of ``x`` and ``y`` is -1.00), while the UKF's
-regression of ``x / y`` over points 55 units apart keeps almost none of it
-(correlation 0.09), so the next bearings cannot fix the depth.
-
 References
 ----------
 .. [julier1997] S. J. Julier and J. K. Uhlmann, "A new extension of the Kalman
@@ -76,13 +68,16 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from functools import partial
 
 import numpy as np
 
 from . import _checks, model
-from .ekf import MeanAndCov, predict
-from .gaussian import Gaussian
+from .ekf import predict, run_gaussian_filter  # noqa: F401 (the prediction, Eq. (10), is exact)
+from .gaussian import Gaussian, History, MeanAndCov
+
+#: The UKF's estimates after each measurement (the type of :func:`depthcore.ekf.run`).
+UKFHistory = History
 
 #: Dimension of the state ``(x, y, v)``.
 DIM = 3
@@ -226,7 +221,7 @@ def measurement_update(n, C, mu, rho: float, h=model.project,
         Predicted covariance, symmetric positive definite.
     mu : float or array_like, shape (...)
         The measurement.
-    rho : float
+    rho : float or array_like, shape (...)
         Noise standard deviation, > 0.
     h : callable
         Maps states of shape ``(..., 3)`` to measurements of shape ``(...)``;
@@ -242,7 +237,8 @@ def measurement_update(n, C, mu, rho: float, h=model.project,
     X = sigma_points.points(n, C)  # (..., 7, 3)
     Wm, Wc = sigma_points.weights()
     Z = np.asarray(h(X), dtype=float)[..., None]  # (..., 7, 1)
-    z, S = unscented_transform(Z, Wm, Wc, rho**2)
+    noise_var = np.asarray(rho, dtype=float) ** 2
+    z, S = unscented_transform(Z, Wm, Wc, noise_var[..., None, None])
     z, s = z[..., 0], S[..., 0, 0]
     c = np.einsum("i,...ij,...i->...j", Wc, X - n[..., None, :], Z[..., 0] - z[..., None])
     innovation = np.asarray(mu, dtype=float) - z
@@ -266,7 +262,7 @@ def update(n, C, mu, rho: float, sigma_points: SigmaPoints = SigmaPoints(),
         Predicted covariance, symmetric positive definite.
     mu : float or array_like, shape (...)
         The measurement.
-    rho : float
+    rho : float or array_like, shape (...)
         Noise standard deviation, > 0.
     sigma_points : SigmaPoints
     allow_behind_camera : bool
@@ -292,21 +288,22 @@ def update(n, C, mu, rho: float, sigma_points: SigmaPoints = SigmaPoints(),
     return measurement_update(n, C, mu, rho, model.project, sigma_points)
 
 
-def run(mu, rho: float, prior_mean, prior_cov, sigma_points: SigmaPoints = SigmaPoints(),
-        allow_behind_camera: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def run(mu, rho, prior_mean, prior_cov, sigma_points: SigmaPoints = SigmaPoints(),
+        allow_behind_camera: bool = False) -> History:
     """Run the UKF over the measurements, batched like :func:`depthcore.ekf.run`.
 
     Incorporate ``mu1`` into the prior (the density of the state at time 1),
-    then predict exactly with Eq. (10) and update, once per further measurement.
+    then predict exactly with Eq. (10) and update, once per further measurement
+    (the loop :func:`depthcore.ekf.run_gaussian_filter`).
 
     Parameters
     ----------
     mu : array_like, shape (..., 3)
         Measurements in time order; the leading shape runs independent filters.
-    rho : float
+    rho : float or array_like, shape (...)
         Noise standard deviation, > 0.
-    prior_mean : array_like, shape (..., 3)
-    prior_cov : array_like, shape (..., 3, 3)
+    prior_mean : array_like, shape (3,) or (..., 3)
+    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
         Symmetric positive definite.
     sigma_points : SigmaPoints
     allow_behind_camera : bool
@@ -314,54 +311,18 @@ def run(mu, rho: float, prior_mean, prior_cov, sigma_points: SigmaPoints = Sigma
 
     Returns
     -------
-    means : ndarray, shape (..., 3, 3)
-        ``means[..., i, :]`` is the mean after measurement ``i + 1``.
-    covs : ndarray, shape (..., 3, 3, 3)
+    History
+        ``means`` (..., 3, 3): ``means[..., i, :]`` is the mean after
+        measurement ``i + 1``; ``covs`` (..., 3, 3, 3).
     """
-    rho = _checks.positive_scalar(rho, "rho")
-    mu = _checks.finite_array(mu, "mu")
-    if mu.ndim < 1 or mu.shape[-1] < 1:
-        raise ValueError(f"mu must have shape (..., n_measurements), got shape {mu.shape}")
     if not isinstance(sigma_points, SigmaPoints):
         raise ValueError(f"sigma_points must be a SigmaPoints, got {type(sigma_points).__name__}")
-    batch = mu.shape[:-1]
-    n = np.broadcast_to(_checks.finite_array(prior_mean, "prior_mean"), batch + (3,))
-    C = np.broadcast_to(_checks.finite_array(prior_cov, "prior_cov"), batch + (3, 3))
-    means, covs = [], []
-    for i in range(mu.shape[-1]):
-        if i > 0:
-            n, C = predict(means[-1], covs[-1])  # Eq. (10): exact for the linear motion
-        try:
-            m, P = update(n, C, mu[..., i], rho, sigma_points, allow_behind_camera)
-        except ValueError as exc:
-            raise ValueError(f"update with measurement {i + 1}: {exc}") from None
-        means.append(m)
-        covs.append(P)
-    return np.stack(means, axis=-2), np.stack(covs, axis=-3)
-
-
-class UKFHistory(NamedTuple):
-    """The UKF's estimates after each measurement, like :class:`depthcore.ekf.EKFHistory`.
-
-    Attributes
-    ----------
-    means : ndarray, shape (3, 3)
-        Row ``i`` is the mean after measurement ``mu_{i+1}``.
-    covs : ndarray, shape (3, 3, 3)
-        ``covs[i]`` is the covariance after measurement ``mu_{i+1}``.
-    """
-
-    means: np.ndarray
-    covs: np.ndarray
-
-    @property
-    def posterior(self) -> Gaussian:
-        """The UKF's Gaussian of the state at time 3."""
-        return Gaussian(self.means[-1], self.covs[-1])
+    step = partial(update, sigma_points=sigma_points, allow_behind_camera=allow_behind_camera)
+    return run_gaussian_filter(step, mu, rho, prior_mean, prior_cov)
 
 
 def ukf(mu, rho: float, prior: Gaussian, sigma_points: SigmaPoints = SigmaPoints(),
-        allow_behind_camera: bool = False) -> UKFHistory:
+        allow_behind_camera: bool = False) -> History:
     """The unscented Kalman filter for one triple of measurements.
 
     Parameters
@@ -379,11 +340,10 @@ def ukf(mu, rho: float, prior: Gaussian, sigma_points: SigmaPoints = SigmaPoints
 
     Returns
     -------
-    UKFHistory
+    History
         Means and covariances after each measurement; ``.posterior`` at time 3.
     """
     mu = _checks.measurements(mu)
     if not isinstance(prior, Gaussian):
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    means, covs = run(mu, rho, prior.mean, prior.cov, sigma_points, allow_behind_camera)
-    return UKFHistory(means, covs)
+    return run(mu, rho, prior.mean, prior.cov, sigma_points, allow_behind_camera)

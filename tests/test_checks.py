@@ -78,3 +78,28 @@ def test_behind_camera_boundary():
     a = 0.3
     b = -a * 1e-9 / (2 + 1e-9)
     assert noise_free_state([a, 0.0, b])[1] == pytest.approx(2 + 1e-9, abs=1e-12)
+
+
+def test_spawn_gives_the_children_of_a_fresh_seed_sequence():
+    fresh = [np.random.default_rng(s).random() for s in np.random.SeedSequence(5).spawn(3)]
+    seq = np.random.SeedSequence(5)
+    for _ in range(2):
+        assert [np.random.default_rng(s).random() for s in _checks.spawn(seq, 3)] == fresh
+    assert seq.n_children_spawned == 0
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, True, "1"])
+def test_seed_sequence_rejects_what_is_not_a_seed(seed):
+    with pytest.raises(ValueError, match="seed must be a non-negative integer"):
+        _checks.seed_sequence(seed)
+
+
+def test_batch_inputs_broadcast_the_prior_and_check_shapes():
+    mu, rho, pm, pc = _checks.batch_inputs(np.zeros((4, 3)), 0.1, np.ones(3), np.eye(3))
+    assert pm.shape == (4, 3) and pc.shape == (4, 3, 3) and rho.shape == ()
+    with pytest.raises(ValueError, match=r"rho must be a scalar or have shape \(4,\)"):
+        _checks.batch_inputs(np.zeros((4, 3)), [0.1, 0.2], np.ones(3), np.eye(3))
+    with pytest.raises(ValueError, match=r"prior_mean must have shape \(3,\) or \(4, 3\)"):
+        _checks.batch_inputs(np.zeros((4, 3)), 0.1, np.ones((2, 3)), np.eye(3))
+    with pytest.raises(ValueError, match="rho must be positive"):
+        _checks.batch_inputs(np.zeros((2, 2, 3)), [[0.1, -0.2]] * 2, np.ones(3), np.eye(3))

@@ -7,9 +7,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from numpy.testing import assert_allclose  # noqa: E402
 
-from depthcore import figures, reproduce  # noqa: E402
+from depthcore import experiments, figures, reproduce  # noqa: E402  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
+
+FIG2 = SCENARIOS["fig2"]
 
 
 @pytest.mark.parametrize("key", list(SCENARIOS))
@@ -40,16 +43,67 @@ def test_curves_reject_unknown_quantity_or_filter():
 
 
 def test_calibration_and_sweep_figures():
-    from depthcore import study, sweeps
+    from depthcore import experiments, study
 
     r = study.study(trials=20, seed=0, n_particles=200)
     fig = figures.calibration(r)
     assert len(fig.axes[0].get_lines()) == 1 + len(r["filters"])
     plt.close(fig)
-    sw = sweeps.noise_sweep([1 / 500, 1 / 200])
+    sw = experiments.noise_sweep([1 / 500, 1 / 200])
     fig = figures.sweep(sw, "rho", log_x=True)
     assert len(fig.axes[0].get_lines()) == 3  # the optimal filter is the reference
     plt.close(fig)
-    fig = figures.sweep(sweeps.prior_offset_sweep([0.0, 2.0]), "offset", "depth_mean")
+    fig = figures.sweep(experiments.prior_offset_sweep([0.0, 2.0]), "offset", "depth_mean")
     assert len(fig.axes[0].get_lines()) == 4
+    plt.close(fig)
+
+
+def test_readings_figure_draws_both_readings():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = figures.readings_figure("fig3", n=101)
+    labels = [line.get_label() for line in fig.axes[0].get_lines()]
+    assert labels[0].startswith("from Eq. (6) (mean 20.74")
+    assert any(label.startswith("Eq. (16) as printed (mean 67.45") for label in labels)
+    plt.close(fig)
+    with pytest.raises(ValueError, match="y_max"):
+        figures.readings_figure("fig3", y_max=1.0)
+
+
+def test_ellipse_lies_at_two_mahalanobis_units():
+    mean, cov = np.array([1.0, -2.0]), np.array([[2.0, 0.6], [0.6, 1.0]])
+    pts = figures._ellipse(mean, cov)
+    d = pts - mean
+    assert_allclose(np.einsum("ni,ni->n", d, np.linalg.solve(cov, d.T).T), 4.0, rtol=1e-12)
+
+
+def test_first_update_figure_draws_both_filters():
+    fig = figures.first_update_figure(experiments.first_update(FIG2))
+    labels = [line.get_label() for line in fig.axes[0].get_lines()]
+    for name in ("ekf", "ukf"):
+        assert any(label.startswith(figures.STYLE[name]["label"]) for label in labels)
+    plt.close(fig)
+
+
+@pytest.fixture(scope="module")
+def convergence():
+    return experiments.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
+
+
+def test_convergence_figure_draws_each_setting_and_the_reference(convergence):
+    fig = figures.convergence_figure(convergence)
+    assert len(fig.axes) == 2
+    assert len(fig.axes[0].get_lines()) == len(experiments.SETTINGS) + 1
+    assert fig.axes[0].get_xscale() == "log" and fig.axes[0].get_yscale() == "log"
+    plt.close(fig)
+    with pytest.raises(ValueError, match="quantity must be one of"):
+        figures.convergence_figure(convergence, "position")
+
+
+def test_profile_figure_draws_each_noise_level():
+    fig = figures.profile_figure(FIG2.mu, [1 / 200, 1 / 50], np.geomspace(2.5, 100, 50))
+    assert [line.get_label() for line in fig.axes[0].get_lines()] == ["rho = 1/200", "rho = 1/50"]
     plt.close(fig)

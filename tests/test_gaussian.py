@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from depthcore import gaussian
 from depthcore.gaussian import Gaussian, paper_prior
 from depthcore.scenarios import SCENARIOS
 
@@ -43,3 +44,12 @@ def test_gaussian_is_immutable():
     g = Gaussian([0.0, 4.0, 1.0], np.eye(3))
     with pytest.raises(ValueError):
         g.mean[0] = 1.0
+
+
+def test_correlation_of_a_known_covariance():
+    cov = np.array([[4.0, -3.0], [-3.0, 9.0]])
+    assert gaussian.correlation(cov) == pytest.approx(-0.5, rel=1e-15)
+    with pytest.raises(ValueError, match="must be square"):
+        gaussian.correlation(np.ones((2, 3)))
+    with pytest.raises(ValueError, match="must be positive"):
+        gaussian.correlation(np.diag([1.0, 0.0]))

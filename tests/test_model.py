@@ -1,11 +1,18 @@
-"""Eqs. (1), (4), (9), (11): the motion and measurement model."""
+"""Eqs. (1), (4), (5), (7), (9), (11), (20)-(22): the motion and measurement model, the misfit."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
 from numpy.testing import assert_allclose
 from scipy import integrate
 
 from depthcore import model
+from depthcore.model import f, noise_free_state, noise_free_states, residual_gradients, residuals
+from depthcore.scenarios import MU_17, MU_18, SCENARIOS
+
+from helpers import bearings, states
+
+FIG2 = SCENARIOS["fig2"]
 
 
 def test_eq1_G_forward_and_back_are_inverse():
@@ -74,3 +81,78 @@ def test_noise_in_pixels_paper_arithmetic():
 def test_noise_in_pixels_rejects_bad_input(kwargs, message):
     with pytest.raises(ValueError, match=message):
         model.noise_in_pixels(**kwargs)
+
+
+def test_profile_misfit_vanishes_at_the_noise_free_depth():
+    c = FIG2.c
+    assert model.profile_misfit(FIG2.mu, [c[1]])[0] == pytest.approx(0.0, abs=1e-25)
+
+
+def test_profile_misfit_is_the_least_misfit_at_that_depth():
+    # Independent route: least squares by numpy's lstsq, then the misfit of the
+    # states moved by model.G and projected; rounding only (1e-12 relative).
+    from depthcore import model
+
+    mu = np.asarray(FIG2.mu)
+    for y3 in (2.5, 6.0, 40.0):
+        back = np.array([2.0, 1.0, 0.0])
+        A = np.stack([1.0 / (y3 - back), -back / (y3 - back)], axis=-1)
+        (x3, v), *_ = np.linalg.lstsq(A, mu, rcond=None)
+        f = sum((mu[i] - model.project(model.G([x3, y3, v], i - 2))) ** 2 for i in range(3))
+        got = model.profile_misfit(mu, [y3])[0]
+        assert got == pytest.approx(f, rel=1e-12, abs=1e-30)
+        for dx, dv in ((1e-3, 0.0), (0.0, 1e-3)):  # any other state at this depth fits worse
+            g = sum((mu[i] - model.project(model.G([x3 + dx, y3, v + dv], i - 2))) ** 2
+                    for i in range(3))
+            assert g > got
+
+
+def test_profile_misfit_tends_to_the_far_limit():
+    mu = FIG2.mu
+    far = model.far_misfit(mu)
+    assert far == pytest.approx(0.1**2 / 6, rel=1e-12)  # mu1 - 2 mu2 + mu3 = -0.1
+    # the misfit approaches its limit like 1 / y: within 1e-4 relative at y = 1e6
+    assert model.profile_misfit(mu, [1e6])[0] == pytest.approx(far, rel=1e-4)
+    with pytest.raises(ValueError, match="depths > 2"):
+        model.profile_misfit(mu, [2.0])
+
+
+def test_eq7_eq17_eq18_paper_values():
+    assert_allclose(noise_free_state(MU_17), [6 / 5, 6, 6 / 5], rtol=1e-14)
+    assert_allclose(noise_free_state(MU_18), [2, 10, 2], rtol=1e-14)
+
+
+@settings(max_examples=60, deadline=None)
+@given(states())
+def test_eq7_recovers_the_state_from_noise_free_bearings(c):
+    mu = bearings(c)
+    assert_allclose(noise_free_state(mu), c, rtol=1e-7, atol=1e-9)
+    assert f(noise_free_state(mu), mu) == pytest.approx(0.0, abs=1e-20)
+
+
+def test_eq5_f_is_sum_of_squared_residuals_in_time_order():
+    x = np.array([1.0, 5.0, 0.5])
+    mu = np.array([-0.3, 0.0, 0.2])
+    expected = [(x[0] - 2 * x[2]) / (x[1] - 2) - mu[0], (x[0] - x[2]) / (x[1] - 1) - mu[1],
+                x[0] / x[1] - mu[2]]
+    assert_allclose(residuals(x, mu), expected)
+    assert f(x, mu) == pytest.approx(np.sum(np.square(expected)))
+
+
+def test_noise_free_states_names_the_bad_row():
+    with pytest.raises(ValueError, match=r"mu\[1\] is degenerate"):
+        noise_free_states([MU_17, (0.1, 0.1, 0.1)])
+    with pytest.raises(ValueError, match=r"mu\[0\] puts the point behind the camera"):
+        noise_free_states([(0.2, 0.0, -0.3), MU_17])
+
+
+def test_eq20_eq21_eq22_residuals_are_linear_in_the_observation_vectors_near_c():
+    mu = MU_17
+    c = noise_free_state(mu)
+    g = residual_gradients(c)
+    rng = np.random.default_rng(2)
+    d = rng.normal(size=3)
+    d /= np.linalg.norm(d)
+    rest = [np.max(np.abs(residuals(c + eps * d, mu) - g @ (eps * d))) for eps in (1e-2, 1e-3)]
+    # the remainder is O(|x - c|^2): ten times closer, a hundred times smaller
+    assert rest[1] / rest[0] == pytest.approx(1e-2, rel=0.05)

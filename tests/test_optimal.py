@@ -245,3 +245,82 @@ def test_velocity_marginal_is_a_smooth_curve():
     # trapezoid rules on a fast-converging integrand: agree to 1e-6
     assert np.trapezoid(pdf, v) == pytest.approx(1.0, abs=1e-6)
     assert np.trapezoid(v * pdf, v) == pytest.approx(m.velocity_mean, abs=1e-6)
+
+
+@pytest.mark.parametrize("key", ["fig2", "fig3"])
+def test_eq16_printed_matches_the_printed_reading_up_to_a_constant(key):
+    s = SCENARIOS[key]
+    y = np.linspace(2.5, 60.0, 40)
+    coeffs = optimal.quadratic_coefficients(y, s.mu, s.rho, s.prior)
+    printed = optimal.eq16_printed(coeffs)
+    code, _, _ = optimal.conditional(y, s.mu, s.rho, s.prior, reading="printed")
+    # both are O(1e4) at rho = 1/200 (l^T M^-1 l / 8 ~ K(y) / 2)
+    assert np.ptp(printed - code) < 1e-9 * np.max(np.abs(printed))
+
+
+@pytest.mark.parametrize("key", ["fig2", "fig3"])
+def test_derived_reading_is_printed_minus_half_K(key):
+    s = SCENARIOS[key]
+    y = np.linspace(2.5, 60.0, 40)
+    printed = optimal.eq16_printed(optimal.quadratic_coefficients(y, s.mu, s.rho, s.prior))
+    K = optimal.prior_exponent(y, s.mu, s.rho, s.prior)
+    derived, _, _ = optimal.conditional(y, s.mu, s.rho, s.prior, reading="derived")
+    assert np.ptp(printed - 0.5 * K - derived) < 1e-9 * np.max(np.abs(printed))
+
+
+def test_prior_exponent_is_the_priors_depth_term():
+    s = SCENARIOS["fig3"]
+    y = np.linspace(2.5, 60.0, 20)
+    K = optimal.prior_exponent(y, s.mu, s.rho, s.prior)
+    expected = (y - 2.0 - s.prior.mean[1]) ** 2 / s.prior.cov[1, 1]
+    assert_allclose(K - K[0], expected - expected[0], rtol=1e-9, atol=1e-9)
+
+
+def test_prior_exponent_drops_what_eq14_keeps():
+    s = SCENARIOS["fig2"]
+    rng = np.random.default_rng(3)
+    y = rng.uniform(3.0, 12.0, 10)
+    x, v = rng.normal(1.2, 0.3, 10), rng.normal(1.2, 0.2, 10)
+    A, B, C, D, E = optimal.quadratic_coefficients(y, s.mu, s.rho, s.prior).T
+    K = optimal.prior_exponent(y, s.mu, s.rho, s.prior)
+    lp = optimal.log_posterior(np.stack([x, y, v], -1), s.mu, s.rho, s.prior)
+    assert_allclose(lp, -0.5 * (A * x**2 + B * x * v + C * v**2 + D * x + E * v) - 0.5 * K,
+                    rtol=1e-10)
+
+
+@pytest.mark.parametrize("key", ["fig2", "fig3", "fig5"])
+def test_depth_quantiles_are_consistent_with_the_moments(key):
+    s = SCENARIOS[key]
+    m = optimal.marginals(s.mu, s.rho, s.prior)
+    q = optimal.depth_quantiles(m, [0.001, 0.25, 0.5, 0.75, 0.999])
+    assert np.all(np.diff(q) > 0)
+    assert q[0] > 2.0
+    assert q[0] < m.depth_mean < q[-1]
+    # interquartile range of a unimodal law of moderate skew: between 0.5 and 2 SDs
+    assert 0.5 * m.depth_sd < q[3] - q[1] < 2.0 * m.depth_sd
+
+
+def test_depth_quantiles_of_a_near_gaussian_marginal():
+    # Figure 5 (rho = 1/500) is close to Gaussian: median near mean, quartiles near +-0.674 sd
+    s = SCENARIOS["fig5"]
+    m = optimal.marginals(s.mu, s.rho, s.prior)
+    q1, q2, q3 = optimal.depth_quantiles(m, [0.25, 0.5, 0.75])
+    assert q2 == pytest.approx(m.depth_mean, abs=0.1 * m.depth_sd)
+    assert (q3 - q1) / 2 == pytest.approx(0.674 * m.depth_sd, rel=0.05)
+
+
+def test_depth_quantiles_invert_the_cdf():
+    s = SCENARIOS["fig2"]
+    m = optimal.marginals(s.mu, s.rho, s.prior)
+    (median,) = optimal.depth_quantiles(m, [0.5])
+    y = np.linspace(2.0 + 1e-6, median, 200001)
+    below = np.trapezoid(m.depth_pdf(y), y)
+    assert below == pytest.approx(0.5, abs=1e-5)
+
+
+def test_depth_quantiles_reject_bad_arguments():
+    s = SCENARIOS["fig2"]
+    with pytest.raises(ValueError, match="probs"):
+        optimal.depth_quantiles(optimal.marginals(s.mu, s.rho, s.prior), [0.0, 0.5])
+    with pytest.raises(ValueError, match="support"):
+        optimal.depth_quantiles(optimal.marginals(s.mu, s.rho, s.prior, support="all"), [0.5])

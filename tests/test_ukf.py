@@ -318,3 +318,15 @@ def test_sigma_points_reject_bad_shapes_and_covariances():
 def test_ukf_rejects_a_prior_that_is_not_a_gaussian():
     with pytest.raises(ValueError, match="prior must be a Gaussian"):
         ukf(MU_17, 0.005, (TIGHT.mean, TIGHT.cov))
+
+
+def test_run_takes_rho_batched_like_the_ekf():
+    mu = np.array([MU_17, MU_17, MU_17])
+    rho = np.array([0.004, 0.005, 0.008])
+    means, covs = run(mu, rho, TIGHT.mean, TIGHT.cov)
+    for i in range(3):
+        m, c = run(mu[i], rho[i], TIGHT.mean, TIGHT.cov)
+        assert_allclose(means[i], m, rtol=1e-13, atol=1e-15)
+        assert_allclose(covs[i], c, rtol=1e-12, atol=1e-18)
+    with pytest.raises(ValueError, match=r"rho must be a scalar or have shape \(3,\)"):
+        run(mu, rho[:2], TIGHT.mean, TIGHT.cov)

@@ -192,7 +192,7 @@ def check(pages: list[Path], workers: int) -> int:
     tag = uuid.uuid4().hex[:8]
     copies = [page.parent / f"{TMP_PREFIX}{page.stem}-{tag}.ipynb" for page in combined]
     try:
-        for copy, nb in zip(copies, combined.values()):
+        for copy, nb in zip(copies, combined.values(), strict=True):
             nbformat.write(nb, copy)
         cmd = [sys.executable, "-m", "pytest", "--nbval", "--nbval-current-env",
                "--nbval-sanitize-with", str(SANITIZE), "--nbval-cell-timeout", str(TIMEOUT),

@@ -24,6 +24,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tools"))
 import check_notebooks  # noqa: E402  (the one reader of _toc.yml)
+
 HTML_DIR = ROOT / "_build" / "html"
 DATA_DIR = ROOT / "tests" / "data"
 

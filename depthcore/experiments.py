@@ -1,0 +1,266 @@
+"""Experiments beyond the paper: sweeps, the particle filter's convergence, the first update.
+
+Recommended import: ``from depthcore import experiments``.
+
+* :func:`noise_sweep` tests the paper's conjecture that the second-order
+  approximation beats the EKF "particularly when the noise level is low":
+  for each noise level, the Hellinger distance from each filter's depth
+  marginal to the optimal one, for one fixed truth and its noise-free
+  measurements (deterministic);
+* :func:`prior_offset_sweep` generalises Figure 6: the depth of the prior mean
+  is moved by an offset and each filter's depth estimate is followed;
+* :func:`noise_study`: the Monte Carlo study (:func:`depthcore.study.study`)
+  at several noise levels;
+* :func:`particle_convergence`: the particle filter's error against the
+  number of particles, for several settings;
+* :func:`first_update`: the EKF and the UKF after the first measurement.
+
+:mod:`depthcore.figures` draws and :mod:`depthcore.report` formats what these return.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _checks, ekf, model, optimal, particle, study, ukf
+from .filters import FILTERS
+from .gaussian import PAPER_PRIOR_SCALE, MeanAndCov, paper_prior_means
+from .scenarios import SCENARIOS, Scenario
+
+#: Settings of the particle filter compared by :func:`particle_convergence`:
+#: keyword arguments of :func:`depthcore.particle.run`.
+SETTINGS = {
+    "default": {},
+    "resampling": {"ess_threshold": 0.5},
+    "bootstrap": {"proposal": "prior"},
+}
+#: The moments whose errors :func:`particle_convergence` measures.
+MOMENTS = ("depth_mean", "depth_sd", "velocity_mean", "velocity_sd")
+#: Particles per call of :func:`depthcore.particle.run` (bounds the memory, about 200 bytes each).
+CHUNK_PARTICLES = 200_000
+
+
+# --- sweeps --------------------------------------------------------------------------------
+
+
+def _compare(mu, rho, pm, pc) -> dict:
+    """Depth means, SDs and Hellinger distances to the optimal filter, for a batch.
+
+    The optimal filter and every Gaussian filter of :data:`depthcore.filters.FILTERS`.
+    """
+    reference = FILTERS["optimal"](mu, rho, pm, pc)
+    out = {"optimal": {"depth_mean": reference.depth_mean, "depth_sd": reference.depth_sd,
+                       "hellinger": np.zeros(len(mu))}}
+    for name, f in FILTERS.items():
+        if f.family == "gaussian":
+            est = f(mu, rho, pm, pc)
+            out[name] = {"depth_mean": est.depth_mean, "depth_sd": est.depth_sd,
+                         "hellinger": study.gaussian_hellinger(reference.detail, est.mean, est.cov)}
+    return out
+
+
+def noise_sweep(rhos, truth=None, prior_scale: float = PAPER_PRIOR_SCALE) -> dict:
+    """Depth moments and Hellinger distances to the optimal filter against the noise level.
+
+    For each ``rho`` the measurements are the noise-free ones of ``truth``
+    (so the noise-free state is the truth), and the prior is the paper's.
+
+    Parameters
+    ----------
+    rhos : array_like, shape (R,)
+        Noise levels, each > 0.
+    truth : array_like, shape (3,), optional
+        State at time 3; default Figure 2's ``c``.
+
+    Returns
+    -------
+    dict
+        ``{"rho": (R,), name: {"depth_mean", "depth_sd", "hellinger"}}`` with
+        arrays of shape (R,) for ``"optimal"``, ``"second_order"``, ``"ekf"``, ``"ukf"``.
+    """
+    truth = SCENARIOS["fig2"].c if truth is None else np.asarray(truth, dtype=float)
+    rhos = np.atleast_1d(np.asarray(rhos, dtype=float))
+    mu = np.tile([model.project(model.G(truth, k - 2)) for k in range(3)], (len(rhos), 1))
+    pm = paper_prior_means(model.noise_free_states(mu))
+    return {"rho": rhos, **_compare(mu, rhos, pm, prior_scale * np.eye(3))}
+
+
+def prior_offset_sweep(offsets, mu=None, rho: float | None = None,
+                       prior_scale: float = PAPER_PRIOR_SCALE) -> dict:
+    """Each filter's depth estimate as the prior mean's depth moves (Figure 6 generalised).
+
+    The prior mean is ``(c1 - 2 c3, c2 - 2 + offset, 0)``.
+
+    Parameters
+    ----------
+    offsets : array_like, shape (R,)
+        Depth offsets; ``c2 - 2 + offset`` must stay positive.
+    mu : array_like, shape (3,), optional
+        Default: Eq. (17).
+    rho : float, optional
+        Default: 1/200.
+
+    Returns
+    -------
+    dict
+        ``{"offset": (R,), name: {"depth_mean", "depth_sd", "hellinger"}}``.
+    """
+    mu = np.asarray(SCENARIOS["fig2"].mu if mu is None else mu, dtype=float)
+    rho = SCENARIOS["fig2"].rho if rho is None else rho
+    offsets = np.atleast_1d(np.asarray(offsets, dtype=float))
+    c = model.noise_free_states(mu[None])[0]
+    if np.any(c[1] - 2 + offsets <= 0):
+        raise ValueError("offsets must keep the prior's depth at time 1, c2 - 2 + offset, positive")
+    pm = paper_prior_means(c, offsets)
+    mus = np.tile(mu, (len(offsets), 1))
+    return {"offset": offsets, **_compare(mus, rho, pm, prior_scale * np.eye(3))}
+
+
+# --- the Monte Carlo study at several noise levels --------------------------------------------
+
+#: Depth scores of :func:`noise_study`, from :func:`depthcore.study.scores`.
+NOISE_STUDY_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
+
+
+def noise_study(rhos, trials: int, seed, names=("optimal", "second_order", "ekf", "ukf"),
+                prior: str = "paper") -> dict:
+    """:func:`depthcore.study.study` at each noise level, its depth scores gathered.
+
+    Parameters
+    ----------
+    rhos : array_like, shape (R,)
+        Noise levels, each > 0.
+    trials : int
+        Trials per noise level (the same seed at every level).
+    seed : int or numpy.random.SeedSequence
+    names : sequence of str
+        Filters, from :data:`depthcore.filters.FILTERS`.
+    prior : {"paper", "fixed"}
+
+    Returns
+    -------
+    dict
+        ``"rho"`` (R,), ``"valid_trials"`` (R,) and, per filter,
+        ``{score: (R,)}`` for :data:`NOISE_STUDY_SCORES` (of the depth), ``"nees"``
+        and ``"hellinger"`` (the mean Hellinger distance of the depth marginal).
+    """
+    rhos = np.atleast_1d(_checks.positive_array(rhos, "rhos"))
+    runs = [study.study(rho=float(r), trials=trials, seed=seed, prior=prior, names=tuple(names))
+            for r in rhos]
+    out = {"rho": rhos, "valid_trials": np.array([r["valid_trials"] for r in runs])}
+    for name in names:
+        f = [r["filters"][name] for r in runs]
+        out[name] = {s: np.array([x["depth"][s] for x in f]) for s in NOISE_STUDY_SCORES}
+        out[name]["nees"] = np.array([x["nees"] for x in f])
+        out[name]["hellinger"] = np.array([x["hellinger_depth"]["mean"] for x in f])
+    return out
+
+
+# --- convergence of the particle filter ------------------------------------------------------
+
+
+def _sizes(sizes) -> np.ndarray:
+    sizes = np.atleast_1d(np.asarray(sizes))
+    if sizes.ndim != 1 or sizes.size < 1 or not np.issubdtype(sizes.dtype, np.integer) \
+            or np.any(sizes < 1):
+        raise ValueError(f"sizes must be positive integers, got {sizes!r}")
+    return sizes.astype(int)
+
+
+def _run_repeats(scenario: Scenario, n: int, repeats: int, rng, kwargs: dict):
+    """Moments (repeats,) per field and the ESS after each measurement (repeats, 3)."""
+    s, prior = scenario, scenario.prior
+    per_call = max(1, CHUNK_PARTICLES // n)
+    moments, ess = [], []
+    for start in range(0, repeats, per_call):
+        b = min(per_call, repeats - start)
+        batch = particle.run(np.tile(s.mu, (b, 1)), s.rho, prior.mean, prior.cov, n, rng, **kwargs)
+        moments.append(np.stack(batch.moments(), axis=-1))
+        ess.append(batch.ess)
+    return np.concatenate(moments), np.concatenate(ess)
+
+
+def particle_convergence(scenario: Scenario, sizes, repeats: int, seed,
+                         settings: dict | None = None) -> dict:
+    """Root-mean-square errors of the particle filter's moments against ``N``.
+
+    Each setting runs ``repeats`` independent filters on the scenario's
+    measurements for each number of particles; the errors are measured from
+    the optimal filter's exact moments (:func:`depthcore.optimal.marginals`).
+
+    Parameters
+    ----------
+    scenario : Scenario
+    sizes : array_like of int, shape (S,)
+        Numbers of particles ``N``.
+    repeats : int
+        Independent runs per ``N``, >= 1.
+    seed : int or numpy.random.SeedSequence
+        Each setting draws from its own child stream of this seed.
+    settings : dict, optional
+        ``{name: keyword arguments of particle.run}``; default :data:`SETTINGS`.
+
+    Returns
+    -------
+    dict
+        ``"sizes"`` (S,), ``"repeats"``, ``"exact"``: ``{moment: float}`` for
+        :data:`MOMENTS`, ``"rmse"``: ``{setting: {moment: (S,)}}`` and
+        ``"ess"``: ``{setting: (S, 3)}``, the mean ESS after each measurement
+        as a fraction of ``N``.
+    """
+    if not isinstance(scenario, Scenario):
+        raise ValueError(f"scenario must be a Scenario, got {type(scenario).__name__}")
+    sizes = _sizes(sizes)
+    if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:
+        raise ValueError(f"repeats must be a positive integer, got {repeats!r}")
+    settings = SETTINGS if settings is None else settings
+    opt = optimal.marginals(scenario.mu, scenario.rho, scenario.prior)
+    exact = np.array([getattr(opt, m) for m in MOMENTS])
+    streams = _checks.spawn(seed, len(settings))
+    rmse, ess = {}, {}
+    for (name, kwargs), stream in zip(settings.items(), streams, strict=True):
+        rng = np.random.default_rng(stream)
+        err, frac = [], []
+        for n in sizes:
+            m, e = _run_repeats(scenario, int(n), int(repeats), rng, kwargs)
+            err.append(np.sqrt(np.mean((m - exact) ** 2, axis=0)))
+            frac.append(np.mean(e, axis=0) / n)
+        err = np.array(err)
+        rmse[name] = {m: err[:, i] for i, m in enumerate(MOMENTS)}
+        ess[name] = np.array(frac)
+    return {"sizes": sizes, "repeats": int(repeats),
+            "exact": {m: float(v) for m, v in zip(MOMENTS, exact, strict=True)}, "rmse": rmse, "ess": ess}
+
+
+# --- the first update of the EKF and the UKF -------------------------------------------------
+
+
+def first_update(scenario: Scenario, sigma_points: ukf.SigmaPoints = ukf.SigmaPoints()) -> dict:
+    """The EKF and the UKF after ``mu_1``, and the sigma points of the prior.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    sigma_points : SigmaPoints
+        The UKF's rule (default ``alpha = 1, beta = 0, kappa = 0``).
+
+    Returns
+    -------
+    dict
+        ``"mu1"`` (float), ``"prior"`` (Gaussian), ``"sigma_points"`` of
+        shape (7, 3), and ``"ekf"``, ``"ukf"``: ``MeanAndCov`` of the state at
+        time 1 after ``mu_1``, shapes (3,) and (3, 3). The UKF runs with
+        sigma points behind the camera (``allow_behind_camera=True``).
+    """
+    if not isinstance(scenario, Scenario):
+        raise ValueError(f"scenario must be a Scenario, got {type(scenario).__name__}")
+    prior = scenario.prior
+    e = ekf.ekf(scenario.mu, scenario.rho, prior)
+    u = ukf.ukf(scenario.mu, scenario.rho, prior, sigma_points, allow_behind_camera=True)
+    return {
+        "mu1": float(scenario.mu[0]),
+        "prior": prior,
+        "sigma_points": sigma_points.points(prior.mean, prior.cov),
+        "ekf": MeanAndCov(e.means[0], e.covs[0]),
+        "ukf": MeanAndCov(u.means[0], u.covs[0]),
+    }

@@ -1,0 +1,310 @@
+"""Every text the command line and the book show: tables, vectors, glued numbers.
+
+Recommended import: ``from depthcore import report``.
+
+Nothing here computes an estimate: the functions format what
+:mod:`depthcore.reproduce`, :mod:`depthcore.study` and
+:mod:`depthcore.experiments` return.
+
+* :func:`format_table`, :func:`format_summary`, :func:`format_study`: the
+  command line's plain-text tables;
+* :func:`vec`: a vector as the book prints it;
+* :func:`comparison`, :func:`comparison_texts`: the reported-versus-reproduced
+  tables of the figure pages;
+* :func:`moments_texts`, :func:`study_texts`, :func:`sweep_texts`,
+  :func:`noise_study_texts`, :func:`rho_label`: the texts the chapters beyond
+  the paper glue into their tables.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _checks
+from .filters import NAMES, QUANTITIES
+from .reproduce import scenario_rows
+from .scenarios import REPORTED_DECIMALS, SCENARIOS
+
+#: Rows of the figure pages' tables: (row id, filter, reading, support, label).
+#: The optimal filter with Eq. (16) as derived and as printed; the second-order
+#: filter with the covariance ``2 rho**2 J^{-1}`` of the expansion (8) and with
+#: the printed ``rho**2 J^{-1}``; the EKF.
+TABLE_ROWS = (
+    ("opt", "optimal", "derived", "front", "optimal $p_o$"),
+    ("opt_printed", "optimal", "printed", "front", "optimal, Eq. (16) as printed"),
+    ("so", "second_order", "derived", "all", r"second order $p_s$, $2\rho^2 J^{-1}$"),
+    ("so_printed", "second_order", "printed", "all", r"second order, $\rho^2 J^{-1}$ as printed"),
+    ("ekf", "ekf", "printed", "all", "EKF $p_e$"),
+)
+
+#: Decimal places of the reproduced means and SDs in the book's tables.
+DECIMALS = 4
+
+
+#: Scores of :func:`depthcore.study.scores` per quantity, with their decimals in the book's tables.
+STUDY_DECIMALS = {"bias": 3, "rmse": 3, "mean_sd": 3, "coverage_68": 2, "coverage_95": 2}
+
+
+# --- the command line's tables ------------------------------------------------------------
+
+
+def format_table(result: dict) -> str:
+    """A plain-text table of :func:`reproduce`'s result."""
+    head = (f"{'fig':>3}  {'filter':<12} {'reading':<8} {'support':<7} {'quantity':<8} "
+            f"{'mean':>10} {'sd':>10} {'error':>8}  {'paper mean':>10} {'paper sd':>9}  agrees")
+    lines = [head, "-" * len(head)]
+    for sc in result["scenarios"]:
+        for r in sc["rows"]:
+            rep_m = "" if r["reported_mean"] is None else f"{r['reported_mean']:.2f}"
+            rep_s = "" if r["reported_sd"] is None else f"{r['reported_sd']:.2f}"
+            match = "" if r["mean_matches"] is None else (
+                f"mean {'yes' if r['mean_matches'] else 'no'}, sd {'yes' if r['sd_matches'] else 'no'}")
+            lines.append(
+                f"{sc['figure']:>3}  {r['filter']:<12} {r['reading']:<8} {r['support']:<7} "
+                f"{r['quantity']:<8} {r['mean']:>10.4f} {r['sd']:>10.4f} {r['error']:>8.1e}  "
+                f"{rep_m:>10} {rep_s:>9}  {match}")
+        lines.append("")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def format_summary(summary: dict) -> str:
+    """A plain-text rendering of :func:`summarize`'s result."""
+    c = summary["c"]
+    lines = [f"noise-free state c = ({c[0]:.6g}, {c[1]:.6g}, {c[2]:.6g})",
+             f"{'filter':<13} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}"]
+    for name in summary["filters"]:
+        f = summary["filters"][name]
+        lines.append(f"{name:<13} {f['depth']['mean']:>11.6g} {f['depth']['sd']:>10.4g} "
+                     f"{f['velocity']['mean']:>10.6g} {f['velocity']['sd']:>10.4g}")
+    o = summary["filters"]["optimal"]
+    lines.append(f"optimal error estimates: depth {o['depth']['error']:.1e}, "
+                 f"velocity {o['velocity']['error']:.1e}; probability behind the camera "
+                 f"if depths y <= 2 are allowed: {o['prob_behind_camera_all_depths']:.3g}")
+    return "\n".join(lines) + "\n"
+
+
+def format_study(result: dict) -> str:
+    """A plain-text table of :func:`study`'s result."""
+    lines = [f"truth {tuple(round(v, 6) for v in result['truth'])}, rho {result['rho']:.6g}, "
+             f"prior {result['prior']}, seed {result['seed']}: {result['valid_trials']} trials "
+             f"({result['rejected_trials']} without a noise-free solution in front of the camera left out)"]
+    head = (f"{'filter':<13} {'quantity':<9} {'bias':>9} {'rmse':>9} {'mean sd':>9} "
+            f"{'cover 68':>8} {'cover 95':>8} {'NEES':>8} {'Hellinger':>9}")
+    lines += [head, "-" * len(head)]
+    for name, f in result["filters"].items():
+        for q in ("depth", "velocity"):
+            r = f[q]
+            extra = (f"{f['nees']:>8.2f} {f['hellinger_depth']['mean']:>9.3f}" if q == "depth" else "")
+            lines.append(f"{name:<13} {q:<9} {r['bias']:>9.4f} {r['rmse']:>9.4f} {r['mean_sd']:>9.4f} "
+                         f"{r['coverage_68']:>8.3f} {r['coverage_95']:>8.3f} {extra}".rstrip())
+    return "\n".join(lines) + "\n"
+
+
+# --- the book's texts ----------------------------------------------------------------------
+
+
+def vec(values, decimals: int = 4) -> str:
+    """A vector as the book prints it: ``"(1.2000, 6.0000, 1.2000)"``.
+
+    Rounds first, so that a value that rounds to zero prints as ``0.0000``,
+    never ``-0.0000``.
+
+    Parameters
+    ----------
+    values : array_like, shape (n,)
+    decimals : int
+        Places after the decimal point, >= 0.
+    """
+    values = _checks.finite_array(values, "values")
+    if values.ndim != 1:
+        raise ValueError(f"values must be 1-D, got shape {values.shape}")
+    if int(decimals) != decimals or decimals < 0:
+        raise ValueError(f"decimals must be a non-negative integer, got {decimals!r}")
+    decimals = int(decimals)
+    return "(" + ", ".join(f"{v + 0.0:.{decimals}f}" for v in np.round(values, decimals)) + ")"
+
+
+def comparison(key: str) -> list[dict]:
+    """The rows of a figure page's table: the paper's numbers beside ours.
+
+    Parameters
+    ----------
+    key : str
+        ``"fig2"`` ... ``"fig6"``.
+
+    Returns
+    -------
+    list of dict
+        One per entry of :data:`TABLE_ROWS`, with ``id``, ``label``,
+        ``quantity``, ``mean``, ``sd``, ``reported_mean``, ``reported_sd``
+        (``None`` where the paper prints nothing), ``mean_matches`` and
+        ``sd_matches`` (agreement at the paper's printed precision, or ``None``).
+    """
+    if key not in SCENARIOS:
+        raise ValueError(f"key must be one of {tuple(SCENARIOS)}, got {key!r}")
+    s = SCENARIOS[key]
+    quantity = s.quantity
+    rows = scenario_rows(s, names=tuple(dict.fromkeys(row[1] for row in TABLE_ROWS)))
+    out = []
+    for row_id, filt, reading, support, label in TABLE_ROWS:
+        (row,) = [r for r in rows if (r["filter"], r["reading"], r["support"], r["quantity"])
+                  == (filt, reading, support, quantity)]
+        out.append({"id": row_id, "label": label, "quantity": quantity,
+                    **{k: row[k] for k in ("mean", "sd", "reported_mean", "reported_sd",
+                                           "mean_matches", "sd_matches")}})
+    return out
+
+
+def comparison_texts(key: str, rows: list[dict]) -> dict[str, str]:
+    """The numbers of :func:`comparison` as the strings the book shows, keyed for glue.
+
+    Keys are ``f"{key}_{row id}_{field}"`` with fields ``mean``, ``sd`` (ours,
+    :data:`DECIMALS` places), ``paper_mean``, ``paper_sd`` (the paper's
+    precision, or an em dash where it prints nothing) and ``agrees``.
+    """
+    texts = {}
+    for row in rows:
+        name = f"{key}_{row['id']}"
+        texts[f"{name}_mean"] = f"{row['mean']:.{DECIMALS}f}"
+        texts[f"{name}_sd"] = f"{row['sd']:.{DECIMALS}f}"
+        for field in ("mean", "sd"):
+            value = row[f"reported_{field}"]
+            texts[f"{name}_paper_{field}"] = "—" if value is None else f"{value:.{REPORTED_DECIMALS}f}"
+        texts[f"{name}_agrees"] = _agreement(row["mean_matches"], row["sd_matches"])
+    return texts
+
+
+def _agreement(mean_matches, sd_matches) -> str:
+    if mean_matches is None:
+        return "—"
+    return {(True, True): "yes", (True, False): "mean only",
+            (False, True): "SD only", (False, False): "no"}[(mean_matches, sd_matches)]
+
+
+def rho_label(rho: float) -> str:
+    """A noise level as the paper writes it, ``"1/200"`` (``1 / rho`` rounded to an integer)."""
+    rho = _checks.positive_scalar(rho, "rho")
+    return f"1/{1.0 / rho:.0f}"
+
+
+def _pm(mean: float, sd: float, decimals: int) -> str:
+    return f"{float(mean) + 0.0:.{decimals}f} ± {float(sd):.{decimals}f}"
+
+
+def _row(rows: list[dict], name: str, quantity: str) -> dict:
+    """The row of ``name`` for ``quantity`` in :func:`depthcore.reproduce.reproduce`'s scenario rows.
+
+    The optimal filter as derived, restricted to the front of the camera; the
+    second-order filter with the covariance ``2 rho**2 J^-1``; the others' only row.
+    """
+    want = {"optimal": ("derived", "front"), "second_order": ("derived", "all")}.get(name)
+    found = [r for r in rows if r["filter"] == name and r["quantity"] == quantity
+             and (want is None or (r["reading"], r["support"]) == want)]
+    if len(found) != 1:
+        raise ValueError(f"expected one row of {name!r} for {quantity!r}, found {len(found)}")
+    return found[0]
+
+
+def moments_texts(result: dict, decimals: int = 3) -> dict:
+    """Texts ``"mean ± sd"`` of every filter in every scenario, for glue.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.reproduce.reproduce`.
+    decimals : int
+
+    Returns
+    -------
+    dict
+        ``"bf_<key>_<filter>_<quantity>"``: ``"6.466 ± 0.799"`` for each
+        scenario key, filter of :data:`depthcore.filters.FILTERS` and
+        quantity; ``"bf_<key>_particle_<quantity>_se"``: the particle filter's
+        Monte Carlo standard error (the larger of its mean's and SD's).
+    """
+    out = {}
+    for sc in result["scenarios"]:
+        for name in NAMES:
+            for q in QUANTITIES:
+                r = _row(sc["rows"], name, q)
+                out[f"bf_{sc['key']}_{name}_{q}"] = _pm(r["mean"], r["sd"], decimals)
+                if name == "particle":
+                    out[f"bf_{sc['key']}_{name}_{q}_se"] = f"{r['error']:.{decimals}f}"
+    return out
+
+
+def study_texts(result: dict, prefix: str) -> dict:
+    """Texts of every score of :func:`depthcore.study.study`'s result, for glue.
+
+    Returns
+    -------
+    dict
+        ``"<prefix>_<filter>_<quantity>_<score>"`` for the scores of
+        :data:`STUDY_DECIMALS`, and ``"<prefix>_<filter>_nees"`` (1 decimal),
+        ``"<prefix>_<filter>_hellinger"`` (3 decimals); ``"<prefix>_trials"``.
+    """
+    out = {f"{prefix}_trials": str(result["valid_trials"])}
+    for name, f in result["filters"].items():
+        for q in QUANTITIES:
+            for score, d in STUDY_DECIMALS.items():
+                out[f"{prefix}_{name}_{q}_{score}"] = f"{f[q][score] + 0.0:.{d}f}"
+        out[f"{prefix}_{name}_nees"] = f"{f['nees']:.1f}"
+        out[f"{prefix}_{name}_hellinger"] = f"{f['hellinger_depth']['mean']:.3f}"
+    return out
+
+
+def sweep_texts(result: dict, x: str, prefix: str, decimals: int = 3) -> dict:
+    """Texts of a sweep's rows, for glue.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.experiments.noise_sweep` (``x="rho"``) or
+        :func:`depthcore.experiments.prior_offset_sweep` (``x="offset"``).
+    x : {"rho", "offset"}
+    prefix : str
+    decimals : int
+
+    Returns
+    -------
+    dict
+        For row ``i``: ``"<prefix>_<i>_x"`` (``"1/200"`` or the offset),
+        ``"<prefix>_<i>_<filter>"`` (``"mean ± sd"`` of the depth) and
+        ``"<prefix>_<i>_<filter>_h"`` (the Hellinger distance to the optimal
+        filter, 3 decimals) for each filter in the result.
+    """
+    if x not in ("rho", "offset"):
+        raise ValueError(f"x must be 'rho' or 'offset', got {x!r}")
+    out = {}
+    names = [n for n in NAMES if n in result]
+    for i, value in enumerate(result[x]):
+        out[f"{prefix}_{i}_x"] = rho_label(value) if x == "rho" else f"{float(value) + 0.0:g}"
+        for name in names:
+            r = result[name]
+            out[f"{prefix}_{i}_{name}"] = _pm(r["depth_mean"][i], r["depth_sd"][i], decimals)
+            out[f"{prefix}_{i}_{name}_h"] = f"{float(r['hellinger'][i]):.3f}"
+    return out
+
+
+def noise_study_texts(result: dict, prefix: str) -> dict:
+    """Texts of :func:`noise_study`'s rows, for glue.
+
+    Returns
+    -------
+    dict
+        For row ``i``: ``"<prefix>_<i>_x"`` (``"1/200"``), ``"<prefix>_<i>_trials"``,
+        and per filter ``"<prefix>_<i>_<filter>_cov68"``, ``"..._cov95"`` (2
+        decimals), ``"..._rmse"`` (3 decimals), ``"..._nees"`` (1 decimal).
+    """
+    out = {}
+    names = [n for n in NAMES if n in result]
+    for i, rho in enumerate(result["rho"]):
+        out[f"{prefix}_{i}_x"] = rho_label(rho)
+        out[f"{prefix}_{i}_trials"] = str(int(result["valid_trials"][i]))
+        for name in names:
+            r = result[name]
+            out[f"{prefix}_{i}_{name}_cov68"] = f"{r['coverage_68'][i]:.2f}"
+            out[f"{prefix}_{i}_{name}_cov95"] = f"{r['coverage_95'][i]:.2f}"
+            out[f"{prefix}_{i}_{name}_rmse"] = f"{r['rmse'][i]:.3f}"
+            out[f"{prefix}_{i}_{name}_nees"] = f"{r['nees'][i]:.1f}"
+    return out

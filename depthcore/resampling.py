@@ -1,0 +1,189 @@
+"""Weights of a particle sample: normalising, effective sample size, resampling, moments.
+
+Recommended import: ``from depthcore import resampling``.
+
+Weights are kept as logarithms and normalised by log-sum-exp with the
+maximum subtracted. Systematic, multinomial and residual resampling share the
+signature ``resampler(W, rng, M=None) -> indices`` and are batched over the
+leading axes of ``W`` [douc2005]_.
+
+References
+----------
+.. [douc2005] R. Douc, O. Cappe and E. Moulines, "Comparison of resampling
+   schemes for particle filtering", ISPA 2005 (multinomial, residual,
+   stratified and systematic resampling).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _checks
+
+
+def check_rng(rng):
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+
+
+def _weights(W, M) -> tuple[np.ndarray, int]:
+    """Check normalised weights ``W`` (..., N) and the number of draws ``M``."""
+    W = _checks.finite_array(W, "W")
+    if W.ndim < 1 or W.shape[-1] < 1:
+        raise ValueError(f"W must have shape (..., N) with N >= 1, got shape {W.shape}")
+    if np.any(W < 0):
+        raise ValueError(f"W must be non-negative, got minimum {float(W.min()):.3g}")
+    total = W.sum(axis=-1)
+    if np.any(np.abs(total - 1.0) > 1e-9):
+        raise ValueError(f"W must sum to 1 along its last axis, got sums {np.unique(total)[:5]}")
+    M = W.shape[-1] if M is None else _checks.count(M, "M")
+    return W / total[..., None], M
+
+
+def _indices(counts) -> np.ndarray:
+    """Indices ``(..., M)`` that repeat particle ``i`` ``counts[..., i]`` times (rows sum to M)."""
+    counts = np.asarray(counts)
+    *batch, N = counts.shape
+    M = int(counts.reshape(-1, N)[0].sum()) if counts.size else 0
+    flat = np.repeat(np.tile(np.arange(N), int(np.prod(batch, dtype=int))), counts.ravel())
+    return flat.reshape(tuple(batch) + (M,))
+
+
+def systematic(W, rng: np.random.Generator, M: int | None = None) -> np.ndarray:
+    """Systematic resampling, batched over the leading axes of ``W``.
+
+    One uniform ``U`` per row; the points ``(U + j) / M``, ``j = 0 .. M-1``,
+    select particle ``i`` when they fall in ``[C_{i-1}, C_i)`` with ``C`` the
+    cumulative weights [douc2005]_. Particle ``i`` is drawn ``floor(M W_i)`` or
+    ``ceil(M W_i)`` times.
+
+    Parameters
+    ----------
+    W : array_like, shape (..., N)
+        Normalised weights (each row sums to 1).
+    rng : numpy.random.Generator
+    M : int, optional
+        Number of draws; ``N`` by default.
+
+    Returns
+    -------
+    ndarray of int, shape (..., M)
+        Sorted indices into the last axis of ``W``.
+    """
+    W, M = _weights(W, M)
+    check_rng(rng)
+    U = rng.random(W.shape[:-1])
+    C = np.cumsum(W, axis=-1)
+    C[..., -1] = 1.0
+    # Points below C_i: #{j in 0..M-1 : j < M C_i - U} = clip(ceil(M C_i - U), 0, M).
+    below = np.clip(np.ceil(M * C - U[..., None]), 0, M).astype(np.int64)
+    return _indices(np.diff(below, axis=-1, prepend=0))
+
+
+def multinomial(W, rng: np.random.Generator, M: int | None = None) -> np.ndarray:
+    """Multinomial resampling: ``M`` independent draws from the weights, batched.
+
+    Parameters and returns as :func:`systematic`; particle ``i`` is drawn
+    ``M W_i`` times on average.
+    """
+    W, M = _weights(W, M)
+    check_rng(rng)
+    return _indices(rng.multinomial(M, W))
+
+
+def residual(W, rng: np.random.Generator, M: int | None = None) -> np.ndarray:
+    """Residual resampling, batched.
+
+    Particle ``i`` is kept ``floor(M W_i)`` times, and the remaining ``R = M -
+    sum_i floor(M W_i)`` draws are multinomial with probabilities proportional
+    to the residuals ``M W_i - floor(M W_i)`` [douc2005]_. (filterpy's
+    ``residual_resample``, in 1.4.5 and 2.0.0, computes ``weights -
+    num_copies``, i.e. ``W_i - floor(N W_i)``, which is negative for every
+    copied particle; the residual is ``N W_i - floor(N W_i)``.) Parameters and
+    returns as :func:`systematic`; particle ``i`` is drawn at least
+    ``floor(M W_i)`` times and ``M W_i`` times on average.
+    """
+    W, M = _weights(W, M)
+    check_rng(rng)
+    floor = np.floor(M * W)
+    rest = M * W - floor
+    R = M - floor.sum(axis=-1).astype(np.int64)
+    total = rest.sum(axis=-1, keepdims=True)
+    p = np.where(total > 0, rest / np.where(total > 0, total, 1.0), 1.0 / W.shape[-1])
+    return _indices(floor.astype(np.int64) + rng.multinomial(R, p))
+
+
+RESAMPLERS = {"systematic": systematic, "multinomial": multinomial, "residual": residual}
+
+
+def normalise(log_w) -> np.ndarray:
+    """Normalise log weights along the last axis: ``log W = log w - logsumexp(log w)``.
+
+    Parameters
+    ----------
+    log_w : array_like, shape (..., N)
+        Unnormalised log weights; ``-inf`` is weight zero.
+
+    Returns
+    -------
+    ndarray, shape (..., N)
+        ``logsumexp`` of each row is 0.
+    """
+    log_w = np.asarray(log_w, dtype=float)
+    top = np.max(log_w, axis=-1, keepdims=True)
+    if not np.all(np.isfinite(top)):
+        raise ValueError("log_w has a row with no positive, finite weight")
+    return log_w - (top + np.log(np.sum(np.exp(log_w - top), axis=-1, keepdims=True)))
+
+
+def effective_sample_size(log_w) -> np.ndarray:
+    """Kish's effective sample size ``1 / sum_i W_i**2`` from (unnormalised) log weights.
+
+    Computed as ``exp(2 logsumexp(log w) - logsumexp(2 log w))``.
+
+    Parameters
+    ----------
+    log_w : array_like, shape (..., N)
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Between 1 and ``N``.
+    """
+    from scipy.special import logsumexp
+
+    log_w = np.asarray(log_w, dtype=float)
+    return np.exp(2.0 * logsumexp(log_w, axis=-1) - logsumexp(2.0 * log_w, axis=-1))
+
+
+def weighted_moments(x, W) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted means and SDs of ``x`` (..., N) with weights ``W`` (..., N)."""
+    mean = np.sum(W * x, axis=-1)
+    return mean, np.sqrt(np.sum(W * (x - mean[..., None]) ** 2, axis=-1))
+
+
+def weighted_standard_errors(x, W) -> tuple[np.ndarray, np.ndarray]:
+    """Delta-method standard errors of the weighted mean and SD of ``x`` (..., N).
+
+    For self-normalised weights the mean ``m = sum W x`` has variance about
+    ``sum W**2 (x - m)**2``, and the variance ``s2 = sum W (x - m)**2`` about
+    ``sum W**2 ((x - m)**2 - s2)**2``; the SD's standard error is that of
+    ``s2`` over ``2 s``.
+    """
+    mean, sd = weighted_moments(x, W)
+    d2 = (x - mean[..., None]) ** 2
+    se_mean = np.sqrt(np.sum(W**2 * d2, axis=-1))
+    se_var = np.sqrt(np.sum(W**2 * (d2 - sd[..., None] ** 2) ** 2, axis=-1))
+    # All the weight on one value (a collapsed filter): the SD's error is unknown.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return se_mean, np.where(sd > 0, se_var / (2.0 * sd), np.inf)
+
+
+def weighted_mean_and_cov(x, W) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean (..., d) and covariance (..., d, d) of points ``x`` (..., N, d).
+
+    ``W`` (..., N) are normalised weights.
+    """
+    mean = np.einsum("...n,...ni->...i", W, x)
+    d = x - mean[..., None, :]
+    return mean, np.einsum("...n,...ni,...nj->...ij", W, d, d)

@@ -1,0 +1,162 @@
+"""The experiments beyond the paper: sweeps, the particle filter's convergence, the first update."""
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from depthcore import (
+    SCENARIOS,
+    ekf,
+    experiments,
+    figures,
+    gaussian,
+    optimal,
+    study,
+    ukf,
+)
+from depthcore.second_order import second_order
+
+FIG2 = SCENARIOS["fig2"]
+
+
+def test_first_update_is_the_filters_first_step():
+    u = experiments.first_update(FIG2)
+    e = ekf.ekf(FIG2.mu, FIG2.rho, FIG2.prior)
+    k = ukf.ukf(FIG2.mu, FIG2.rho, FIG2.prior, allow_behind_camera=True)
+    assert_allclose(u["ekf"].mean, e.means[0], rtol=0, atol=0)
+    assert_allclose(u["ukf"].cov, k.covs[0], rtol=0, atol=0)
+    assert u["mu1"] == FIG2.mu[0]
+
+
+def test_first_update_sigma_points_reach_behind_the_camera():
+    u = experiments.first_update(FIG2)
+    X = u["sigma_points"]
+    assert X.shape == (7, 3)
+    # depth points at the prior depth +- sqrt(3 * 1000): one lies behind the camera
+    spread = np.sqrt(3 * 1000.0)
+    assert_allclose(sorted(X[:, 1] - FIG2.prior.mean[1])[::6], [-spread, spread], rtol=1e-12)
+    assert X[:, 1].min() < 0
+
+
+def test_first_update_ekf_keeps_the_ray_and_ukf_does_not():
+    # The documented behaviour (depthcore/ukf.py): correlation of x and y after
+    # mu1 is -1.00 for the EKF, 0.09 for the UKF.
+    u = experiments.first_update(FIG2)
+    assert gaussian.correlation(u["ekf"].cov) == pytest.approx(-1.0, abs=1e-4)
+    assert abs(gaussian.correlation(u["ukf"].cov)) < 0.2
+
+
+def test_first_update_rejects_a_non_scenario():
+    with pytest.raises(ValueError, match="scenario must be a Scenario"):
+        experiments.first_update("fig2")
+
+
+@pytest.fixture(scope="module")
+def convergence():
+    return experiments.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
+
+
+def test_particle_convergence_shapes(convergence):
+    r = convergence
+    assert_allclose(r["sizes"], [300, 600])
+    assert set(r["rmse"]) == set(experiments.SETTINGS)
+    for name in experiments.SETTINGS:
+        assert set(r["rmse"][name]) == set(experiments.MOMENTS)
+        assert r["rmse"][name]["depth_mean"].shape == (2,)
+        assert r["ess"][name].shape == (2, 3)
+    m = optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior)
+    assert r["exact"]["depth_sd"] == m.depth_sd
+
+
+def test_particle_convergence_default_is_close_and_bootstrap_collapses(convergence):
+    r = convergence
+    sd = r["exact"]["depth_sd"]
+    # default: the RMS error of the depth mean is about 1.5 sd / sqrt(N)
+    # (particle.py), i.e. ~0.07 sd at N = 300; 0.3 sd leaves room for 4 runs.
+    assert np.all(r["rmse"]["default"]["depth_mean"] < 0.3 * sd)
+    # ESS: about 0.43 N for the default; a few particles after mu2 for the bootstrap
+    assert np.all(r["ess"]["default"] > 0.3)
+    assert np.all(r["ess"]["bootstrap"][:, 1:] < 0.05)
+
+
+def test_particle_convergence_streams_are_per_setting_and_repeatable(convergence):
+    alone = experiments.particle_convergence(FIG2, [300, 600], repeats=4, seed=3,
+                                             settings={"default": {}})
+    for m in experiments.MOMENTS:
+        assert_allclose(alone["rmse"]["default"][m], convergence["rmse"]["default"][m], rtol=0, atol=0)
+
+
+def test_particle_convergence_chunks_repeats(monkeypatch):
+    monkeypatch.setattr(experiments, "CHUNK_PARTICLES", 500)  # one run of N = 300 per call
+    r = experiments.particle_convergence(FIG2, [300], repeats=3, seed=0, settings={"default": {}})
+    assert r["rmse"]["default"]["depth_mean"].shape == (1,)
+    assert np.isfinite(r["rmse"]["default"]["depth_mean"]).all()
+
+
+@pytest.mark.parametrize("bad", [[0], [1.5], [[10, 20]], []])
+def test_particle_convergence_rejects_bad_sizes(bad):
+    with pytest.raises(ValueError, match="sizes must be positive integers"):
+        experiments.particle_convergence(FIG2, bad, repeats=2, seed=0)
+
+
+def test_particle_convergence_rejects_bad_repeats():
+    with pytest.raises(ValueError, match="repeats must be a positive integer"):
+        experiments.particle_convergence(FIG2, [100], repeats=0, seed=0)
+
+
+def test_noise_study_gathers_the_study_at_each_level():
+    rhos = [1 / 500, 1 / 200]
+    r = experiments.noise_study(rhos, trials=30, seed=2, names=("optimal", "ekf"))
+    direct = study.study(rho=1 / 200, trials=30, seed=2, names=("optimal", "ekf"))
+    assert r["valid_trials"][1] == direct["valid_trials"]
+    assert r["ekf"]["coverage_68"][1] == direct["filters"]["ekf"]["depth"]["coverage_68"]
+    assert r["optimal"]["nees"][1] == direct["filters"]["optimal"]["nees"]
+    assert r["ekf"]["hellinger"][1] == direct["filters"]["ekf"]["hellinger_depth"]["mean"]
+    assert r["ekf"]["rmse"].shape == (2,)
+    fig = figures.noise_study_figure(r)
+    assert len(fig.axes[0].get_lines()) == 3  # two filters and the 0.68 line
+    plt.close(fig)
+
+
+def test_noise_sweep_at_the_papers_noise_matches_figure2():
+    s = SCENARIOS["fig2"]
+    r = experiments.noise_sweep([s.rho])
+    m = optimal.marginals(s.mu, s.rho, s.prior)
+    assert r["optimal"]["depth_mean"][0] == pytest.approx(m.depth_mean, rel=1e-9)
+    assert r["ekf"]["depth_sd"][0] == pytest.approx(ekf.ekf(s.mu, s.rho, s.prior).posterior.marginal("y")[1])
+
+
+def test_second_order_approaches_the_optimal_filter_as_noise_falls():
+    r = experiments.noise_sweep(1 / np.array([50.0, 200.0, 1000.0]))
+    h = r["second_order"]["hellinger"]
+    assert h[0] > h[1] > h[2]
+    # the EKF's distance stays large: its error comes from the prior mean
+    assert np.all(r["ekf"]["hellinger"] > 0.5)
+
+
+def test_prior_offset_sweep_matches_figure6():
+    s6 = SCENARIOS["fig6"]
+    r = experiments.prior_offset_sweep([0.0, 2.0])
+    assert r["ekf"]["depth_mean"][1] == pytest.approx(ekf.ekf(s6.mu, s6.rho, s6.prior).posterior.mean[1])
+    assert r["second_order"]["depth_mean"][1] == pytest.approx(second_order(s6.mu, s6.rho, s6.prior).mean[1])
+    # the EKF follows the offset, the optimal filter hardly moves
+    assert r["ekf"]["depth_mean"][1] - r["ekf"]["depth_mean"][0] > 1.5
+    assert abs(np.diff(r["optimal"]["depth_mean"])[0]) < 0.01
+
+
+def test_prior_offset_sweep_rejects_a_prior_behind_the_camera():
+    with pytest.raises(ValueError, match="offsets must keep the prior's depth"):
+        experiments.prior_offset_sweep([-4.5])
+
+
+def test_hellinger_is_zero_for_identical_densities_and_bounded():
+    s = SCENARIOS["fig2"]
+    ref = optimal.batch_marginals(np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov)
+    from depthcore import study
+    h = study.hellinger(ref, ref.depth_log_pdf, ref.moments.depth_mean, ref.moments.depth_sd)
+    assert_allclose(h, 0.0, atol=1e-6)  # H = sqrt(1 - BC): BC to 1e-12
