@@ -12,8 +12,15 @@ Modules, by concept: :mod:`~depthcore.model` (Eqs. (1)-(5), (7), (9), (11),
 :mod:`~depthcore.scenarios` (Figures 2-6 and the reported numbers),
 :mod:`~depthcore.second_order` (Eqs. (8), (24)), :mod:`~depthcore.ekf`
 (Eqs. (10)-(12)), :mod:`~depthcore.optimal` (Eqs. (6), (13)-(16)); beyond the
-paper, the unscented Kalman filter (:mod:`~depthcore.ukf`) and a particle
-filter (:mod:`~depthcore.particle`, with :mod:`~depthcore.resampling`). The
+paper, the unscented Kalman filter (:mod:`~depthcore.ukf`), importance
+sampling from a second-order proposal (:mod:`~depthcore.particle`, with
+:mod:`~depthcore.resampling`), the causal bootstrap filter with resample-move
+(:mod:`~depthcore.resample_move`), the iterated EKF and smoother
+(:mod:`~depthcore.iterated`), the inverse-depth EKF
+(:mod:`~depthcore.inverse_depth`), the textbook's Kalman filter and smoothers
+(:mod:`~depthcore.kalman`), the exact filter for any number of frames as a bank
+of Kalman filters over depth (:mod:`~depthcore.bank`) and the self-calibration
+check (:mod:`~depthcore.calibration`). The
 registry :mod:`~depthcore.filters` lists every filter;
 :mod:`~depthcore.reproduce`, :mod:`~depthcore.study` and
 :mod:`~depthcore.experiments` run them; :mod:`~depthcore.figures` draws and
@@ -34,8 +41,9 @@ __version__ = "0.1.0"
 
 #: The public modules, imported on first access as attributes of the package.
 MODULES = (
-    "ekf", "experiments", "figures", "filters", "gaussian", "model", "optimal", "particle",
-    "reference", "report", "reproduce", "resampling", "scenarios", "second_order", "study", "ukf",
+    "bank", "calibration", "ekf", "experiments", "figures", "filters", "gaussian", "inverse_depth",
+    "iterated", "kalman", "model", "optimal", "particle", "reference", "report", "reproduce",
+    "resample_move", "resampling", "scenarios", "second_order", "study", "ukf",
 )
 
 __all__ = ["Gaussian", "MODULES", "SCENARIOS", "__version__", "noise_free_state",

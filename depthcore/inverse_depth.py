@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _checks
-from .ekf import MeanAndCov
+from .gaussian import MeanAndCov
 
 
 def _symmetric(cov):

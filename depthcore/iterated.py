@@ -52,7 +52,8 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _checks, model
-from .ekf import MeanAndCov, predict
+from .ekf import predict
+from .gaussian import MeanAndCov
 
 #: Largest number of Gauss-Newton iterations of one update or smoother.
 MAX_ITERATIONS = 100

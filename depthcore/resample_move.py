@@ -60,7 +60,7 @@ import numpy as np
 
 from . import _checks, model
 from .gaussian import Gaussian
-from .particle import RESAMPLERS, effective_sample_size, normalise
+from .resampling import RESAMPLERS, effective_sample_size, normalise
 
 #: Random-walk scale for a three-dimensional target [roberts1997]_.
 _RW_SCALE = 2.38 / np.sqrt(3.0)
