@@ -62,6 +62,8 @@ _MAX_HALVINGS = 12
 _U_STEP = 0.5
 #: Most nodes of one interval for one problem; beyond it the tolerance is declared out of reach.
 _NODE_BUDGET = 4097
+#: Widths of the mode within which the quadrature's variable is linear in ``t`` (see :class:`_Frame`).
+_CORE = 4.0
 #: Newton steps locating the mode of the depth integrand.
 _NEWTON_STEPS = 8
 
@@ -302,12 +304,15 @@ def _nodes(interval: int, t: np.ndarray):
 
 
 class _Frame(NamedTuple):
-    """Where one interval's integrand lives, per problem: ``t = t0 + sigma sinh(u)``.
+    """Where one interval's integrand lives, per problem: ``t = t0 + sigma L sinh(u / L)``.
 
     ``t0`` (B,) is the mode of the integrand in ``t`` and ``sigma`` (B,) its
-    width there (from the curvature), so that ``u`` is a standardised
-    variable near the mode and the node spacing in ``t`` grows in proportion
-    to the distance from it in the tails.
+    width there (from the curvature); ``L`` is :data:`_CORE`. Within ``L``
+    widths of the mode ``u`` is the standardised variable ``(t - t0) /
+    sigma``, where the trapezoid rule converges as fast as on a Gaussian;
+    beyond, the node spacing in ``t`` grows in proportion to the distance
+    from the mode, so that tails reaching any multiple of the width cost
+    only a logarithmic number of nodes.
     """
 
     t0: np.ndarray
@@ -315,11 +320,18 @@ class _Frame(NamedTuple):
 
     def t(self, u):
         """``t`` at ``u`` of shape (B, n)."""
-        return self.t0[:, None] + self.sigma[:, None] * np.sinh(u)
+        return self.t0[:, None] + (self.sigma * _CORE)[:, None] * np.sinh(u / _CORE)
 
     def u(self, t):
-        """Inverse of :meth:`t` for ``t`` of shape (B,)."""
-        return np.arcsinh((t - self.t0) / self.sigma)
+        """Inverse of :meth:`t` for ``t`` of shape (B,) or (B, n)."""
+        t = np.asarray(t)
+        if t.ndim == 2:
+            return _CORE * np.arcsinh((t - self.t0[:, None]) / (self.sigma * _CORE)[:, None])
+        return _CORE * np.arcsinh((t - self.t0) / (self.sigma * _CORE))
+
+    def log_jacobian(self, u):
+        """``log |dt/du|`` at ``u`` of shape (B, n)."""
+        return np.log(self.sigma)[:, None] + _log_cosh(u / _CORE)
 
 
 def _log_cosh(u):
@@ -330,7 +342,7 @@ def _log_cosh(u):
 def _mapped_nodes(interval: int, u: np.ndarray, frame: _Frame):
     """Offsets ``(y, y - 1, y - 2)`` and ``log |dy/du|`` at nodes ``u`` (B, n)."""
     offsets, log_jac = _nodes(interval, frame.t(u))
-    return offsets, log_jac + np.log(frame.sigma)[:, None] + _log_cosh(u)
+    return offsets, log_jac + frame.log_jacobian(u)
 
 
 def _log_integrand(interval: int, t: np.ndarray, pb: _Problem) -> np.ndarray:
@@ -341,6 +353,9 @@ def _log_integrand(interval: int, t: np.ndarray, pb: _Problem) -> np.ndarray:
 
 #: Index pairs (i, j) of the second moments accumulated, in (x, y, v) order.
 _SECOND = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
+_FIRST_INDEX, _SECOND_INDEX = (np.array(ix) for ix in zip(*_SECOND))
+#: Where each entry of a 3 x 3 covariance (row-major) sits in :data:`_SECOND` order.
+_SYMMETRIC = np.array([0, 3, 5, 3, 1, 4, 5, 4, 2])
 
 
 def _evaluate(interval, u, frame, pb, shift, centre):
@@ -351,21 +366,26 @@ def _evaluate(interval, u, frame, pb, shift, centre):
     (the conditional covariance of ``(x, v)`` given ``y`` included), and of
     the weight below ``y = 2``. Nodes at ``u = nan`` count for nothing.
     """
-    skip = np.isnan(u)
-    offsets, log_jac = _mapped_nodes(interval, np.where(skip, 0.0, u), frame)
-    log_density, mean, (cxx, cxv, cvv) = _solve(offsets, pb)
-    log_w = np.where(skip, -np.inf, log_density + log_jac - shift[:, None])
-    w = np.exp(log_w)
-    d = (mean[0] - centre[:, 0:1], offsets[..., 0] - centre[:, 1:2], mean[1] - centre[:, 2:3])
-    extra = {(0, 0): cxx, (2, 2): cvv, (0, 2): cxv}
-    sums = [w.sum(-1)] + [(w * di).sum(-1) for di in d]
-    for i, j in _SECOND:
-        term = d[i] * d[j]
-        if (i, j) in extra:
-            term = term + extra[(i, j)]
-        sums.append((w * term).sum(-1))
-    sums.append((w * (offsets[..., 0] < 2)).sum(-1))
-    return np.stack(sums)
+    return _sums(_node_values(interval, u, frame, pb), np.isnan(u), shift, centre)
+
+
+def _node_values(interval, u, frame, pb):
+    """Offsets, ``log`` integrand in ``u`` and the conditional Gaussian at nodes ``u`` (B, n)."""
+    offsets, log_jac = _mapped_nodes(interval, np.where(np.isnan(u), 0.0, u), frame)
+    log_density, mean, cov = _solve(offsets, pb)
+    return offsets, log_density + log_jac, mean, cov
+
+
+def _sums(values, skip, shift, centre):
+    """The sums of :func:`_evaluate` from :func:`_node_values`, leaving out nodes where ``skip``."""
+    offsets, log_f, mean, (cxx, cxv, cvv) = values
+    w = np.exp(np.where(skip, -np.inf, log_f - shift[:, None]))
+    d = np.stack([mean[0] - centre[:, 0:1], offsets[..., 0] - centre[:, 1:2], mean[1] - centre[:, 2:3]])
+    zero = np.zeros_like(cxx)
+    conditional = np.stack([cxx, zero, cvv, zero, zero, cxv])  # in _SECOND order
+    second = d[_FIRST_INDEX] * d[_SECOND_INDEX] + conditional
+    return np.concatenate([w.sum(-1)[None], np.einsum("kbn,bn->kb", d, w), np.einsum("kbn,bn->kb", second, w),
+                           (w * (offsets[..., 0] < 2)).sum(-1)[None]])
 
 
 class _Totals(NamedTuple):
@@ -386,15 +406,13 @@ def _moments(totals: np.ndarray, centre: np.ndarray) -> _Totals:
     """Mean, covariance, P(y < 2) and normaliser from summed trapezoid totals."""
     Z = totals[0]
     m = (totals[1:4] / Z).T  # (B, 3), centred
-    cov = np.empty((Z.size, 3, 3))
-    for k, (i, j) in enumerate(_SECOND):
-        cov[:, i, j] = cov[:, j, i] = totals[4 + k] / Z - m[:, i] * m[:, j]
-    for i in range(3):
-        cov[:, i, i] = np.maximum(cov[:, i, i], 0.0)
+    second = (totals[4:10] / Z).T - m[:, _FIRST_INDEX] * m[:, _SECOND_INDEX]  # (B, 6) in _SECOND order
+    second[:, :3] = np.maximum(second[:, :3], 0.0)
+    cov = second[:, _SYMMETRIC].reshape(-1, 3, 3)
     return _Totals(centre + m, cov, totals[10] / Z, Z)
 
 
-def _t_limits(interval: int, pb: _Problem, c: np.ndarray):
+def _t_limits(interval: int, pb: _Problem, c: np.ndarray, cov_p: np.ndarray):
     """The ``t`` range searched in one interval, per problem: two arrays (B,).
 
     On the unbounded intervals the far end lies 1e4 times beyond the largest
@@ -404,50 +422,63 @@ def _t_limits(interval: int, pb: _Problem, c: np.ndarray):
     B = len(c)
     if interval in (1, 2):
         return np.full(B, -_T_MAX), np.full(B, _T_MAX)
-    scale = np.sqrt(np.trace(np.linalg.inv(np.swapaxes(pb.R, -1, -2) @ pb.R), axis1=-2, axis2=-1))
+    scale = np.sqrt(np.trace(cov_p, axis1=-2, axis2=-1))
     far = np.log(1e4 * (scale + np.max(np.abs(pb.mean), axis=1) + np.abs(c[:, 1]) + 10.0))
     return np.full(B, -_T_MAX), far
 
 
-def _frame(interval: int, pb: _Problem, c, mean_s, sd_s, lo_t, hi_t):
-    """Locate the mode of one interval's integrand in ``t`` and its width, per problem.
+def _scan_points(interval: int, c, mean_s, sd_s, lo_t, hi_t, guessed: bool = False):
+    """Where to look for the mode in ``t``: (B, n) points, the first ``n_coarse`` of them coarse.
 
-    Candidates are a scan of the whole range at about unit steps and, on
-    ``y > 2``, 25 points across 12 second-order SDs about the noise-free
-    depth and about the second-order mean. A parabola through the best
-    candidate and its neighbours gives the mode and the width ``(-d2 log f /
-    dt2) ** -1/2``; where the best candidate lies on the coarse scan only,
-    Newton steps on parabolas one width wide refine both. Returns the
-    :class:`_Frame`, the largest log integrand seen (B,) and the scan
-    ``(t, log f)``, each (B, n).
+    A scan of the whole range at about unit steps and, on ``y > 2``, 25
+    points across 12 second-order SDs about the noise-free depth and about
+    the second-order mean (left out when ``guessed``, the second-order frame's
+    first level being evaluated too, and both lie within an SD of each other).
+    Returns the points and ``n_coarse``.
     """
-    B = len(c)
-    t = lo_t[:, None] + (hi_t - lo_t)[:, None] * np.linspace(0.0, 1.0, int(2 * _T_MAX / _SCAN_STEP) + 1)
+    t = lo_t[:, None] + (hi_t - lo_t)[:, None] * _unit(int(np.ceil(np.max(hi_t - lo_t) / _SCAN_STEP)) + 1)
     n_coarse = t.shape[1]
     if interval == 3:
-        local = np.linspace(-12.0, 12.0, 25)
-        sd_t = np.clip(sd_s / (c[:, 1] - 2.0), _sigma_floor(np.log(c[:, 1] - 2.0)), 1.0)
+        local = np.arange(-12.0, 12.5)
+        sd_t = _clip(sd_s / (c[:, 1] - 2.0), _sigma_floor(np.log(c[:, 1] - 2.0)), 1.0)
+        t_c = np.log(c[:, 1] - 2.0)
         t_s = np.log(np.where(mean_s[:, 1] > 2.0, mean_s[:, 1] - 2.0, c[:, 1] - 2.0))
-        t = np.concatenate([t] + [ct[:, None] + sd_t[:, None] * local for ct in (np.log(c[:, 1] - 2.0), t_s)], 1)
-        t = np.clip(t, lo_t[:, None], hi_t[:, None])
-    scan = _log_integrand(interval, t, pb)
+        centres = [t_c, t_s]
+        if guessed and np.all(np.abs(t_c - t_s) <= sd_t):
+            centres = []  # the first level in the second-order frame covers both densely
+        t = np.concatenate([t] + [ct[:, None] + sd_t[:, None] * local for ct in centres], 1)
+        t = _clip(t, lo_t[:, None], hi_t[:, None])
+    return t, n_coarse
+
+
+def _frame(interval: int, pb: _Problem, t, scan, coarse_mask, lo_t, hi_t):
+    """Locate the mode of one interval's integrand in ``t`` and its width, per problem.
+
+    From the integrand ``scan`` at points ``t`` (B, n): a parabola through
+    the best point and its neighbours gives the mode and the width ``(-d2
+    log f / dt2) ** -1/2``; where the best point is one of the coarse ones
+    (``coarse_mask``, (n,)), Newton steps on parabolas one width wide refine
+    both. Returns the :class:`_Frame` and the largest log integrand seen (B,).
+    """
+    B = t.shape[0]
     order = np.argsort(t, axis=1, kind="stable")
     ts = np.take_along_axis(t, order, 1)
     ss = np.take_along_axis(scan, order, 1)
     rows = np.arange(B)
-    k = np.clip(np.argmax(ss, axis=1), 1, ts.shape[1] - 2)
+    best = np.argmax(ss, axis=1)
+    k = _clip(best, 1, ts.shape[1] - 2)
     t0, sigma, top = _parabola(ts[rows, k - 1], ts[rows, k], ts[rows, k + 1],
                                ss[rows, k - 1], ss[rows, k], ss[rows, k + 1])
-    coarse = order[rows, np.argmax(ss, axis=1)] < n_coarse
+    coarse = coarse_mask[order[rows, best]]
     for _ in range(_NEWTON_STEPS if np.any(coarse) else 0):
-        pts = np.clip(t0[:, None] + sigma[:, None] * np.array([-1.0, 0.0, 1.0]), lo_t[:, None], hi_t[:, None])
+        pts = _clip(t0[:, None] + sigma[:, None] * np.array([-1.0, 0.0, 1.0]), lo_t[:, None], hi_t[:, None])
         phi = _log_integrand(interval, pts, pb)
         t1, s1, top1 = _parabola(*pts.T, *phi.T)
         better = coarse & (top1 >= top)
         t0, sigma, top = np.where(better, t1, t0), np.where(coarse, s1, sigma), np.maximum(top, np.where(coarse, top1, top))
-    t0 = np.clip(t0, lo_t, hi_t)
-    sigma = np.clip(sigma, _sigma_floor(t0), 1.0)
-    return _Frame(t0, sigma), top, (t, scan)
+    t0 = _clip(t0, lo_t, hi_t)
+    sigma = _clip(sigma, _sigma_floor(t0), 1.0)
+    return _Frame(t0, sigma), top
 
 
 def _parabola(ta, tb, tc, fa, fb, fc):
@@ -463,11 +494,21 @@ def _parabola(ta, tb, tc, fa, fb, fc):
         concave = np.isfinite(curv) & (curv < 0) & np.isfinite(fa) & np.isfinite(fc)
         safe = np.where(concave, curv, -1.0)
         vertex = 0.5 * (ta + tb) - d1 / safe + 0.5 * (tb - ta)
-        vertex = np.where(concave, np.clip(vertex, ta, tc), tb)
+        vertex = np.where(concave, _clip(vertex, ta, tc), tb)
         gap = np.maximum(tb - ta, tc - tb)
-        width = np.where(concave, np.clip(1.0 / np.sqrt(-safe), 0.25 * gap, 4.0 * gap), gap)
+        width = np.where(concave, _clip(1.0 / np.sqrt(-safe), 0.25 * gap, 4.0 * gap), gap)
         value = np.where(concave, fb + d1 * (vertex - tb) + 0.5 * curv * (vertex - ta) * (vertex - tb), fb)
     return vertex, width, np.maximum(value, fb)
+
+
+def _unit(n: int) -> np.ndarray:
+    """``n`` equally spaced points from 0 to 1."""
+    return np.arange(n) / (n - 1)
+
+
+def _clip(a, lo, hi):
+    """``np.clip`` without its overhead on small arrays."""
+    return np.minimum(np.maximum(a, lo), hi)
 
 
 def _sigma_floor(t0):
@@ -475,13 +516,30 @@ def _sigma_floor(t0):
     return 1e3 * np.finfo(float).eps * np.maximum(1.0, np.abs(t0))
 
 
+def _level0(frame: _Frame, lo_t, hi_t):
+    """The first trapezoid level: the whole ``u`` range at step :data:`_U_STEP`, (B, n)."""
+    u_lo, u_hi = frame.u(lo_t), frame.u(hi_t)
+    n = int(np.ceil(np.max(u_hi - u_lo) / _U_STEP)) + 1
+    return u_lo[:, None] + (u_hi - u_lo)[:, None] * _unit(n)
+
+
 def _ranges(pb: _Problem, intervals):
     """Place each interval's nodes relative to its own mode and width.
 
-    Returns the log-integrand maximum found in ``t`` (B,) and, per interval,
-    ``(u_lo, u_hi, frame, hi_t, coarse)``: the whole ``u`` range (B,), the
-    :class:`_Frame`, the far end in ``t`` and the unit-step scan ``(t, log f)``;
-    and the second-order mean (B, 3), about which the moments are accumulated.
+    On ``y > 2`` the second-order density gives a first frame (its mean and
+    SD in ``t``), and the first trapezoid level in that frame is evaluated
+    together with the scan of :func:`_scan_points`. If the best node is not
+    one of the first level's, or the parabola through it and its neighbours
+    disagrees with the first frame (mode more than three widths away, width
+    off by more than a factor 3), the mode and width are found from all
+    nodes (:func:`_frame`) and the first level is evaluated again in that
+    frame. Elsewhere the scan comes first.
+
+    Returns the log-integrand maximum found in ``t`` (B,), per interval
+    ``(frame, u, values, hi_t, (t, log f))``: the :class:`_Frame`, the first
+    level's nodes ``u`` and :func:`_node_values` there, the far end in ``t``
+    and the scan; and the second-order mean (B, 3), about which the moments
+    are accumulated.
     """
     c = noise_free_states(pb.mu)
     cov_p = np.linalg.inv(np.swapaxes(pb.R, -1, -2) @ pb.R)
@@ -489,10 +547,49 @@ def _ranges(pb: _Problem, intervals):
     sd_s = np.sqrt(cov_s[:, 1, 1])
     found, tops = {}, []
     for i in intervals:
-        lo_t, hi_t = _t_limits(i, pb, c)
-        frame, top_i, coarse = _frame(i, pb, c, mean_s, sd_s, lo_t, hi_t)
-        found[i] = (frame.u(lo_t), frame.u(hi_t), frame, hi_t, coarse)
-        tops.append(top_i + np.log(frame.sigma))
+        lo_t, hi_t = _t_limits(i, pb, c, cov_p)
+        t_scan, n_coarse = _scan_points(i, c, mean_s, sd_s, lo_t, hi_t, guessed=i == 3)
+        guess = None
+        if i == 3:
+            y_s = np.where(mean_s[:, 1] > 2.0, mean_s[:, 1], c[:, 1])
+            t0 = _clip(np.log(y_s - 2.0), lo_t, hi_t)
+            guess = _Frame(t0, _clip(sd_s / (y_s - 2.0), _sigma_floor(t0), 1.0))
+            u = _level0(guess, lo_t, hi_t)
+            t_all = np.concatenate([guess.t(u), t_scan], axis=1)
+        else:
+            t_all = t_scan
+        offsets, log_jac = _nodes(i, t_all)
+        log_density, mean, cov = _solve(offsets, pb)
+        log_t = log_density + log_jac
+        m = t_all.shape[1] - t_scan.shape[1]
+        coarse_mask = np.arange(t_all.shape[1]) - m < n_coarse
+        coarse_mask[:m] = False
+        if guess is not None:
+            # the mode and width from the first level's nodes about its best one
+            rows = np.arange(len(c))
+            best = np.argmax(log_t, axis=1)
+            k = _clip(best, 1, m - 2)
+            t0, sigma, top_i = _parabola(*(t_all[rows, k + o] for o in (-1, 0, 1)),
+                                         *(log_t[rows, k + o] for o in (-1, 0, 1)))
+            good = ((best < m) & (np.abs(t0 - guess.t0) <= 3.0 * guess.sigma)
+                    & (sigma <= 3.0 * guess.sigma) & (3.0 * sigma >= guess.sigma))
+            if not np.all(good):
+                frame, top_i = _frame(i, pb, t_all, log_t, coarse_mask, lo_t, hi_t)
+            if np.all(good):
+                frame = guess
+                values = (offsets[:, :m], log_t[:, :m] + guess.log_jacobian(u),
+                          mean[:, :, :m], tuple(a[:, :m] for a in cov))
+            else:
+                frame = _Frame(np.where(good, guess.t0, frame.t0), np.where(good, guess.sigma, frame.sigma))
+                guess = None
+        else:
+            frame, top_i = _frame(i, pb, t_all, log_t, coarse_mask, lo_t, hi_t)
+        if guess is None:
+            u = _level0(frame, lo_t, hi_t)
+            values = _node_values(i, u, frame, pb)
+        scan = (t_all[:, m:], log_t[:, m:])
+        found[i] = (frame, u, values, hi_t, scan)
+        tops.append(np.maximum(top_i + np.log(frame.sigma), np.max(values[1], axis=1)))
     centre = np.where(np.isfinite(mean_s), mean_s, c)
     return np.max(tops, axis=0), found, centre
 
@@ -512,15 +609,11 @@ def _integrate(pb: _Problem, intervals, rtol: float):
     """
     top, found, centre = _ranges(pb, intervals)
     B = len(top)
-    rows = np.arange(B)
-    n0 = {i: int(np.ceil(np.max(f[1] - f[0]) / _U_STEP)) + 1 for i, f in found.items()}
-    levels = {i: f[0][:, None] + (f[1] - f[0])[:, None] * np.linspace(0.0, 1.0, n0[i]) for i, f in found.items()}
-    logs = {i: _mapped_log_integrand(i, levels[i], f[2], pb) for i, f in found.items()}
-    top = np.maximum(top, np.max([np.max(v, axis=1) for v in logs.values()], axis=0))
     grids, totals = {}, {}
-    for i, (u_lo, u_hi, frame, hi_t, (t_c, scan_c)) in found.items():
-        u = levels[i]
-        keep = logs[i] > (top - _CUTOFF)[:, None]
+    for i, (frame, u, values, hi_t, (t_c, scan_c)) in found.items():
+        n0 = u.shape[1]
+        u_lo, h0 = u[:, 0], u[:, 1] - u[:, 0]
+        keep = values[1] > (top - _CUTOFF)[:, None]
         keep_t = scan_c + np.log(frame.sigma)[:, None] > (top - _CUTOFF)[:, None]
         if i in (0, 3):
             at_end = keep[:, -1] | np.any(keep_t & (t_c >= hi_t[:, None]), axis=1)
@@ -530,54 +623,81 @@ def _integrate(pb: _Problem, intervals, rtol: float):
                     f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g}: the depth marginal "
                     f"does not decay by |y| = {np.exp(hi_t[k]):.3g}; its moments do not exist in this reading"
                 )
-        u_c = frame.u(t_c) if t_c.ndim == 1 else np.arcsinh((t_c - frame.t0[:, None]) / frame.sigma[:, None])
-        h0 = (u_hi - u_lo) / (n0[i] - 1)
+        u_c = frame.u(t_c)
         first = np.minimum(np.min(np.where(keep, u, np.inf), axis=1), np.min(np.where(keep_t, u_c, np.inf), axis=1))
         last = np.maximum(np.max(np.where(keep, u, -np.inf), axis=1), np.max(np.where(keep_t, u_c, -np.inf), axis=1))
         active = np.isfinite(first)
-        j_lo = np.where(active, np.floor((first - u_lo) / h0) - 1, 0).clip(0, n0[i] - 1)
-        j_hi = np.where(active, np.ceil((last - u_lo) / h0) + 1, 0).clip(0, n0[i] - 1)
+        j_lo = _clip(np.where(active, np.floor((first - u_lo) / h0) - 1, 0), 0, n0 - 1)
+        j_hi = _clip(np.where(active, np.ceil((last - u_lo) / h0) + 1, 0), 0, n0 - 1)
         lo = u_lo + j_lo * h0
         n = (j_hi - j_lo).astype(int) + 1
         h = np.where(active & (n > 1), h0, 0.0)
         grids[i] = (lo, h, n, frame)
-        totals[i] = _evaluate(i, np.where((np.arange(n0[i]) >= j_lo[:, None]) & (np.arange(n0[i]) <= j_hi[:, None])
-                                          & active[:, None], u, np.nan), frame, pb, top, centre)
-    previous = _moments(sum(totals[i] * grids[i][1] for i in grids), centre)
+        inside = (np.arange(n0) >= j_lo[:, None]) & (np.arange(n0) <= j_hi[:, None]) & active[:, None]
+        totals[i] = _sums(values, ~inside, top, centre)
     done = np.zeros(B, dtype=bool)
-    final = previous
+    final = previous = None
     errors = np.zeros((2, B))
+    halvings = 2  # the first pass adds two levels in one evaluation
     while True:
-        if max(np.max(np.where(done, 0, 2 * g[2] - 1)) for g in grids.values()) > _NODE_BUDGET:
+        growth = 2**halvings
+        if max(np.max(np.where(done, 0, growth * (g[2] - 1) + 1)) for g in grids.values()) > _NODE_BUDGET:
             k = int(np.argmin(done))
             raise ValueError(
                 f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g} and prior mean "
                 f"{pb.mean[k].tolist()}: the optimal marginal's quadrature did not reach "
                 f"rtol = {rtol:.3g} within {_NODE_BUDGET} nodes per interval"
             )
+        levels = [dict() for _ in range(halvings)]
         for i, (lo, h, n, frame) in grids.items():
             hh = np.where(done, 0.0, h)
-            totals[i] = totals[i] + _evaluate(i, _grid(lo, hh, n - 1, 0.5), frame, pb, top, centre)
-            grids[i] = (lo, np.where(done, h, 0.5 * h), np.where(done | (h == 0), n, 2 * n - 1), frame)
-        current = _moments(sum(totals[i] * grids[i][1] for i in grids), centre)
+            # the new nodes of each level, as fractions of the current step, in one evaluation
+            fractions = [[(2 * j + 1) / 2**(lev + 1) for j in range(2**lev)] for lev in range(halvings)]
+            flat = np.concatenate([np.array(f) for f in fractions])
+            m = int(np.max(n)) - 1
+            j = np.arange(m)
+            u = lo[:, None, None] + hh[:, None, None] * (j[None, :] + flat[:, None])[None]  # (B, f, m)
+            valid = (j < (np.broadcast_to(n, lo.shape) - 1)[:, None])[:, None, :] & (hh > 0)[:, None, None]
+            u = np.where(valid, u, np.nan).reshape(len(lo), -1)
+            values = _node_values(i, u, frame, pb)
+            start = 0
+            for lev, fr in enumerate(fractions):
+                block = slice(start * m, (start + len(fr)) * m)
+                totals[i] = totals[i] + _sums(_take(values, block), np.isnan(u[:, block]), top, centre)
+                start += len(fr)
+                levels[lev][i] = (totals[i], np.where(done, h, h / 2**(lev + 1)))
+            grids[i] = (lo, np.where(done, h, h / growth),
+                        np.where(done | (h == 0), n, growth * (n - 1) + 1), frame)
+        if halvings == 2:
+            previous = _moments(sum(tot * step for tot, step in levels[0].values()), centre)
+        current = _moments(sum(tot * step for tot, step in levels[-1].values()), centre)
         now = current.key_moments()
         change = np.abs(now - previous.key_moments())
         floor = _roundoff(current, top, centre)
         err = np.maximum(np.stack([np.maximum(change[0], change[1]), np.maximum(change[2], change[3])]), floor)
         ok = (err[0] <= np.maximum(rtol * now[1], floor[0])) & (err[1] <= np.maximum(rtol * now[3], floor[1]))
         newly = ok & ~done
-        final = _Totals(*(np.where(_expand(newly, a), a, b) for a, b in zip(current, final)))
+        if final is None or np.all(newly):
+            final = current
+        else:
+            final = _Totals(*(np.where(_expand(newly, a), a, b) for a, b in zip(current, final)))
         errors = np.where(newly, err, errors)
         done = done | ok
         if np.all(done):
             break
-        previous = current
+        previous, halvings = current, 1
     return final, errors[0], errors[1], top, grids
 
 
 def _mapped_log_integrand(interval, u, frame, pb):
     offsets, log_jac = _mapped_nodes(interval, u, frame)
     return _solve(offsets, pb)[0] + log_jac
+
+
+def _take(values, columns):
+    """The node values of :func:`_node_values` at a slice of the node axis."""
+    offsets, log_f, mean, cov = values
+    return offsets[:, columns], log_f[:, columns], mean[:, :, columns], tuple(c[:, columns] for c in cov)
 
 
 def _expand(mask, a):
@@ -606,10 +726,9 @@ def _roundoff(totals: _Totals, top: np.ndarray, centre: np.ndarray) -> np.ndarra
     """
     eps = np.finfo(float).eps
     noise = 1.0 + np.abs(top)
-    idx = [1, 2]
-    sd = np.sqrt(np.stack([totals.cov[:, 1, 1], totals.cov[:, 2, 2]]))
-    mean = totals.mean[:, idx].T
-    offset = (mean - centre[:, idx].T) ** 2 + sd**2
+    sd = np.sqrt(totals.cov[:, [1, 2], [1, 2]].T)
+    mean = totals.mean[:, 1:].T
+    offset = (mean - centre[:, 1:].T) ** 2 + sd**2
     with np.errstate(divide="ignore", invalid="ignore"):
         cancel = np.where(sd > 0, offset / sd, 0.0)
     return 64.0 * eps * (np.abs(mean) + sd + noise * sd + cancel)

@@ -186,18 +186,14 @@ def _square_root_solve(c, g, weight, prior_mean, prior_cov):
     mean : ndarray, shape (B, 3)
     cov : ndarray, shape (B, 3, 3)
     """
-    from scipy.linalg import solve_triangular
-
     B = c.shape[0]
     L = np.broadcast_to(np.linalg.cholesky(np.asarray(prior_cov, dtype=float)), (B, 3, 3))
-    prior_rows = np.stack([solve_triangular(L[b], A2, lower=True) for b in range(B)]) if B else np.empty((0, 3, 3))
     gap = np.broadcast_to(np.asarray(prior_mean, dtype=float), (B, 3)) - b2 - c @ A2.T
-    rhs_prior = np.stack([solve_triangular(L[b], gap[b], lower=True) for b in range(B)]) if B else np.empty((0, 3))
-    K = np.concatenate([weight[:, None, None] * g, prior_rows], axis=1)  # (B, 6, 3)
-    r = np.concatenate([np.zeros((B, 3)), rhs_prior], axis=1)  # (B, 6)
+    whitened = np.linalg.solve(L, np.concatenate([np.broadcast_to(A2, (B, 3, 3)), gap[..., None]], axis=-1))
+    K = np.concatenate([weight[:, None, None] * g, whitened[..., :3]], axis=1)  # (B, 6, 3)
     Q, R = np.linalg.qr(K)
-    delta = np.stack([solve_triangular(R[b], Q[b].T @ r[b]) for b in range(B)]) if B else np.empty((0, 3))
-    R_inv = np.stack([solve_triangular(R[b], np.eye(3)) for b in range(B)]) if B else np.empty((0, 3, 3))
+    R_inv = np.linalg.inv(R)
+    delta = np.einsum("bij,bkj,bk->bi", R_inv, Q[:, 3:], whitened[..., 3])
     cov = R_inv @ np.swapaxes(R_inv, -1, -2)
     return c + delta, 0.5 * (cov + np.swapaxes(cov, -1, -2))
 
