@@ -110,10 +110,12 @@ def run(mu, rho: float, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
     Parameters
     ----------
     mu : array_like, shape (..., 3)
-        Measurements in time order.
+        Measurements in time order; each triple checked by
+        :func:`depthcore._checks.batch_problem`, as are the other arguments.
     rho : float or array_like, shape (...)
     prior_mean : array_like, shape (..., 3)
     prior_cov : array_like, shape (..., 3, 3)
+        Symmetric positive definite.
 
     Returns
     -------
@@ -121,13 +123,10 @@ def run(mu, rho: float, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
         ``means[..., i, :]`` is the mean after measurement ``i + 1``.
     covs : ndarray, shape (..., 3, 3, 3)
     """
-    rho = _checks.positive_array(rho, "rho")
-    mu = _checks.finite_array(mu, "mu")
-    if rho.ndim and rho.shape != mu.shape[:-1]:
-        raise ValueError(f"rho must be a scalar or have shape {mu.shape[:-1]}, got shape {rho.shape}")
+    mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
     batch = mu.shape[:-1]
-    n = np.broadcast_to(np.asarray(prior_mean, dtype=float), batch + (3,))
-    C = np.broadcast_to(np.asarray(prior_cov, dtype=float), batch + (3, 3))
+    n = np.broadcast_to(prior_mean, batch + (3,))
+    C = np.broadcast_to(prior_cov, batch + (3, 3))
     means, covs = [], []
     for i in range(mu.shape[-1]):
         if i > 0:

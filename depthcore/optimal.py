@@ -85,15 +85,19 @@ def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
     if reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
     mu = np.atleast_2d(_checks.finite_array(mu, "mu"))
+    if mu.ndim != 2:
+        raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
     B = mu.shape[0]
-    rho = _checks.positive_array(rho, "rho")
+    rho = _checks.finite_array(rho, "rho")
     if rho.ndim and rho.shape != (B,):
         raise ValueError(f"rho must be a scalar or have shape ({B},), got shape {rho.shape}")
     prior_mean = _checks.finite_array(prior_mean, "prior_mean")
     if prior_mean.shape not in ((3,), (B, 3)):
         raise ValueError(f"prior_mean must have shape (3,) or ({B}, 3), got {prior_mean.shape}")
     prior_cov = _checks.finite_array(prior_cov, "prior_cov")
-    prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
+    if prior_cov.shape != (3, 3):
+        raise ValueError(f"prior_cov must have shape (3, 3), got shape {prior_cov.shape}")
+    mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
     R = np.linalg.inv(np.linalg.cholesky(prior_cov))
     return _Problem(mu, np.full(B, rho), np.broadcast_to(prior_mean, (B, 3)),
                     np.broadcast_to(R, (B, 3, 3)), reading)

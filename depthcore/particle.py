@@ -641,7 +641,6 @@ def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generat
     mu = _checks.finite_array(mu, "mu")
     if mu.ndim != 2 or mu.shape[1] != 3:
         raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
-    noise_free_states(mu)  # checks each triple
     B = mu.shape[0]
     rho = _checks.positive_array(rho, "rho")
     if rho.ndim and rho.shape != (B,):
@@ -650,8 +649,12 @@ def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generat
     prior_mean = _checks.finite_array(prior_mean, "prior_mean")
     if prior_mean.shape not in ((3,), (B, 3)):
         raise ValueError(f"prior_mean must have shape (3,) or ({B}, 3), got {prior_mean.shape}")
+    prior_cov = _checks.finite_array(prior_cov, "prior_cov")
+    if prior_cov.shape != (3, 3):
+        raise ValueError(f"prior_cov must have shape (3, 3), got shape {prior_cov.shape}")
+    mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
+    rho = np.broadcast_to(rho, (B,))
     prior_mean = np.broadcast_to(prior_mean, (B, 3))
-    prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
     N = _count(n_particles, "n_particles")
     _check_rng(rng)
     if proposal not in PROPOSALS:

@@ -150,11 +150,14 @@ def second_order_batch(mu, rho: float, prior_mean, prior_cov,
     rho : float or array_like, shape (B,)
     prior_mean : array_like, shape (3,) or (B, 3)
     prior_cov : array_like, shape (3, 3) or (B, 3, 3)
-        Symmetric positive definite (checked by the caller).
+        Symmetric positive definite. All four are checked by
+        :func:`depthcore._checks.batch_problem`.
     reading : {"derived", "printed"}
     """
-    rho = _checks.positive_array(rho, "rho")
     factor = {"derived": 2.0, "printed": 1.0}[_reading(reading)]
+    mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
+    if mu.ndim != 2:
+        raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
     c = noise_free_states(mu)
     g = np.stack([model.observation_vector(model.G(c, k - 2)) @ model.G_linear(k - 2)
                   for k in range(3)], axis=-2)  # (B, 3, 3), rows in time order

@@ -326,7 +326,7 @@ def run(mu, rho: float, prior_mean, prior_cov, sigma_points: SigmaPoints = Sigma
         raise ValueError(f"sigma_points must be a SigmaPoints, got {type(sigma_points).__name__}")
     batch = mu.shape[:-1]
     n = np.broadcast_to(_checks.finite_array(prior_mean, "prior_mean"), batch + (3,))
-    C = np.broadcast_to(_checks.finite_array(prior_cov, "prior_cov"), batch + (3, 3))
+    C = np.broadcast_to(_checks.covariances(prior_cov, "prior_cov", 3), batch + (3, 3))
     means, covs = [], []
     for i in range(mu.shape[-1]):
         if i > 0:
