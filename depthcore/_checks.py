@@ -87,20 +87,109 @@ def measurements(mu, name: str = "mu") -> np.ndarray:
     return arr
 
 
-def batch_inputs(mu, rho, prior_mean, prior_cov, measurements_axis: bool = True):
-    """Check the inputs of a batched filter; return them as float arrays.
+def _index(flat_index: int, batch: tuple[int, ...]) -> str:
+    """``[i]`` or ``[i, j]``: the position of a flat row in a batch of shape ``batch``."""
+    return "[" + ", ".join(str(int(i)) for i in np.unravel_index(flat_index, batch)) + "]"
+
+
+def measurements_batch(mu, name: str = "mu") -> np.ndarray:
+    """Check triples of measurements, shape ``(..., 3)``, each as :func:`measurements` does.
+
+    The first offending triple is named with its index, e.g. ``mu[4]``.
+    """
+    arr = finite_array(mu, name)
+    if arr.ndim < 1 or arr.shape[-1] != 3:
+        raise ValueError(f"{name} must have shape (..., 3), got shape {arr.shape}")
+    batch = arr.shape[:-1]
+    flat = arr.reshape(-1, 3)
+    d = flat[:, 0] + flat[:, 2] - 2.0 * flat[:, 1]
+    degenerate = ~(np.abs(d) > DEGENERACY_TOL)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        depth_first = 2.0 * (flat[:, 0] - flat[:, 1]) / np.where(degenerate, 1.0, d) - 2.0
+    bad = degenerate | ~(depth_first > 0)
+    if np.any(bad):
+        i = int(np.argmax(bad))
+        measurements(flat[i], name + (_index(i, batch) if batch else ""))
+    return arr
+
+
+def covariances(value, name: str, dim: int = 3) -> np.ndarray:
+    """Check symmetric positive-definite matrices of shape ``(..., dim, dim)``.
+
+    The first offending matrix is named with its index, e.g. ``prior_cov[2]``;
+    returns the symmetrised array.
+    """
+    arr = finite_array(value, name)
+    if arr.ndim < 2 or arr.shape[-2:] != (dim, dim):
+        raise ValueError(f"{name} must have shape (..., {dim}, {dim}), got shape {arr.shape}")
+    batch = arr.shape[:-2]
+    flat = arr.reshape(-1, dim, dim)
+    scale = np.maximum(np.max(np.abs(flat), axis=(1, 2)), np.finfo(float).tiny)
+    asymmetric = np.max(np.abs(flat - np.swapaxes(flat, 1, 2)), axis=(1, 2)) > 1e-10 * scale
+    sym = 0.5 * (flat + np.swapaxes(flat, 1, 2))
+    # a symmetric matrix is positive definite iff its Cholesky factor exists: test each at once
+    definite = np.all(np.linalg.eigvalsh(sym) > 0, axis=1) if len(sym) else np.ones(0, bool)
+    bad = asymmetric | ~definite
+    if np.any(bad):
+        i = int(np.argmax(bad))
+        covariance(flat[i], name + (_index(i, batch) if batch else ""), dim)
+        raise ValueError(f"{name}{_index(i, batch) if batch else ''} must be positive definite; "
+                         f"eigenvalues are {np.linalg.eigvalsh(sym[i]).tolist()}")
+    return sym.reshape(arr.shape)
+
+
+def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
+    """The checks shared by the batched filters: measurements, noise and prior.
 
     Parameters
     ----------
-    mu : array_like, shape (..., K)
-        Measurements in time order; the leading shape ``(...)`` is the batch.
-    rho : float or array_like, shape (...)
-        Noise standard deviation, > 0.
-    prior_mean : array_like, broadcastable to (..., 3)
-    prior_cov : array_like, broadcastable to (..., 3, 3)
-    measurements_axis : bool
-        Whether ``mu`` has a last axis of measurements (else ``mu`` is one
-        measurement per problem).
+    mu : array_like, shape (..., 3), or (..., K) when ``triples`` is false
+        Triples checked by :func:`measurements_batch`; otherwise any finite
+        bearings, ``K >= 1``.
+    rho : float or array_like, shape ``mu.shape[:-1]``
+        Finite and > 0.
+    prior_mean : array_like, broadcastable to ``mu.shape``
+        Finite.
+    prior_cov : array_like, broadcastable to ``mu.shape + (3,)``
+        Symmetric positive definite, checked by :func:`covariances`.
+
+    Returns
+    -------
+    mu, rho, prior_mean, prior_cov : ndarray
+        As float arrays (the covariances symmetrised), not broadcast.
+    """
+    if triples:
+        mu = measurements_batch(mu, "mu")
+    else:
+        mu = finite_array(mu, "mu")
+        if mu.ndim < 1 or mu.shape[-1] < 1:
+            raise ValueError(f"mu must have shape (..., n_measurements), got shape {mu.shape}")
+    batch = mu.shape[:-1]
+    rho = finite_array(rho, "rho")
+    if rho.ndim and rho.shape != batch:
+        raise ValueError(f"rho must be a scalar or have shape {batch}, got shape {rho.shape}")
+    if not np.all(rho > 0):
+        raise ValueError(f"rho must be positive, got {rho.tolist()}")
+    prior_mean = finite_array(prior_mean, "prior_mean")
+    if prior_mean.ndim < 1 or prior_mean.shape[-1] != 3 or not _broadcasts(prior_mean.shape, batch + (3,)):
+        allowed = "(3,)" + (f" or {batch + (3,)}" if batch else "")
+        raise ValueError(f"prior_mean must have shape {allowed}, got {prior_mean.shape}")
+    prior_cov = covariances(prior_cov, "prior_cov", 3)
+    if not _broadcasts(prior_cov.shape, batch + (3, 3)):
+        allowed = "(3, 3)" + (f" or {batch + (3, 3)}" if batch else "")
+        raise ValueError(f"prior_cov must have shape {allowed}, got {prior_cov.shape}")
+    return mu, rho, prior_mean, prior_cov
+
+
+def _broadcasts(shape: tuple[int, ...], target: tuple[int, ...]) -> bool:
+    try:
+        return np.broadcast_shapes(shape, target) == target
+    except ValueError:
+        return False
+
+
+def batch_inputs(mu, rho, prior_mean, prior_cov, triples: bool = True):
+    """:func:`batch_problem`, with the priors broadcast to the batch.
 
     Returns
     -------
@@ -110,30 +199,10 @@ def batch_inputs(mu, rho, prior_mean, prior_cov, measurements_axis: bool = True)
     prior_cov : ndarray, shape (..., 3, 3)
         Read-only broadcast views of the priors.
     """
-    mu = finite_array(mu, "mu")
-    if measurements_axis and (mu.ndim < 1 or mu.shape[-1] < 1):
-        raise ValueError(f"mu must have shape (..., n_measurements), got shape {mu.shape}")
-    batch = mu.shape[:-1] if measurements_axis else mu.shape
-    rho = positive_array(rho, "rho") if np.ndim(rho) <= 1 else finite_array(rho, "rho")
-    if rho.ndim and rho.shape != batch:
-        raise ValueError(f"rho must be a scalar or have shape {batch}, got shape {rho.shape}")
-    if not np.all(rho > 0):
-        raise ValueError(f"rho must be positive, got {rho.tolist()}")
-    prior_mean = finite_array(prior_mean, "prior_mean")
-    prior_cov = finite_array(prior_cov, "prior_cov")
-    try:
-        prior_mean = np.broadcast_to(prior_mean, batch + (3,))
-    except ValueError:
-        raise ValueError(
-            f"prior_mean must have shape (3,) or {batch + (3,)}, got shape {prior_mean.shape}"
-        ) from None
-    try:
-        prior_cov = np.broadcast_to(prior_cov, batch + (3, 3))
-    except ValueError:
-        raise ValueError(
-            f"prior_cov must have shape (3, 3) or {batch + (3, 3)}, got shape {prior_cov.shape}"
-        ) from None
-    return mu, rho, prior_mean, prior_cov
+    mu, rho, prior_mean, prior_cov = batch_problem(mu, rho, prior_mean, prior_cov, triples)
+    batch = mu.shape[:-1]
+    return (mu, rho, np.broadcast_to(prior_mean, batch + (3,)),
+            np.broadcast_to(prior_cov, batch + (3, 3)))
 
 
 def seed_sequence(seed, name: str = "seed") -> np.random.SeedSequence:

@@ -102,7 +102,7 @@ def run_gaussian_filter(update_step: Callable, mu, rho, prior_mean, prior_cov) -
     History
         ``means`` (..., K, 3) and ``covs`` (..., K, 3, 3) after each measurement.
     """
-    mu, rho, n, C = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)
+    mu, rho, n, C = _checks.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
     means, covs = [], []
     for i in range(mu.shape[-1]):
         if i > 0:
@@ -119,13 +119,21 @@ def run_gaussian_filter(update_step: Callable, mu, rho, prior_mean, prior_cov) -
 def run(mu, rho, prior_mean, prior_cov) -> History:
     """Run the EKF over the measurements, batched: Eq. (12), then (10) and (12) per measurement.
 
+    Initialise ``n = m``, ``C = P`` (the prior), incorporate ``mu1`` with (12),
+    then predict (10) and update (12) for each further measurement. The information is carried as a
+    square root (:func:`_update_information`), which equals :func:`predict`
+    and :func:`update` algebraically and keeps the small variances accurate
+    at small noise.
+
     Parameters
     ----------
     mu : array_like, shape (..., 3)
-        Measurements in time order.
+        Measurements in time order; each triple checked by
+        :func:`depthcore._checks.batch_problem`, as are the other arguments.
     rho : float or array_like, shape (...)
-    prior_mean : array_like, shape (3,) or (..., 3)
-    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
+    prior_mean : array_like, shape (..., 3)
+    prior_cov : array_like, shape (..., 3, 3)
+        Symmetric positive definite.
 
     Returns
     -------
@@ -134,7 +142,53 @@ def run(mu, rho, prior_mean, prior_cov) -> History:
         measurement ``i + 1``; ``covs`` (..., 3, 3, 3). It unpacks as
         ``means, covs = run(...)``.
     """
-    return run_gaussian_filter(update, mu, rho, prior_mean, prior_cov)
+    mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
+    batch = mu.shape[:-1]
+    n = np.broadcast_to(prior_mean, batch + (3,))
+    # square root of the information: R^T R = P^{-1}, with P = L L^T
+    R = np.broadcast_to(np.linalg.inv(np.linalg.cholesky(prior_cov)), batch + (3, 3))
+    rho = np.broadcast_to(rho, batch)
+    means, roots = [], []
+    for i in range(mu.shape[-1]):
+        if i > 0:
+            n = means[-1] @ model.F.T + model.e  # Eq. (10)
+            R = roots[-1] @ _F_INVERSE  # (F P F^T)^{-1} = F^{-T} P^{-1} F^{-1}
+        m, R_new = _update_information(n, R, mu[..., i], rho)
+        means.append(m)
+        roots.append(R_new)
+    R_inv = np.linalg.inv(np.stack(roots, axis=-3))
+    covs = R_inv @ np.swapaxes(R_inv, -1, -2)
+    return History(np.stack(means, axis=-2), 0.5 * (covs + np.swapaxes(covs, -1, -2)))
+
+
+#: Linear part of ``G^{-1}``, the inverse of ``F`` of Eq. (9).
+_F_INVERSE = model.G_linear(-1)
+
+
+def _update_information(n, R, mu, rho):
+    """Eq. (12) in square-root information form, batched: returns the mean and the new root.
+
+    With the prediction's information ``C^{-1} = R^T R`` and the linearised
+    measurement ``h . (x - n) = mu - n1 / n2`` of Eqs. (11)-(12), the update
+    minimises ``|R delta|**2 + (h . delta - (mu - n1/n2))**2 / rho**2`` over
+    ``delta = x - n``: the QR factorisation of ``R`` stacked on ``h^T / rho``
+    gives the new root ``R'`` (``P^{-1} = R'^T R'``, so ``P`` is Eq. (12)'s
+    ``C - C h h^T C / (rho**2 + h^T C h)``) and ``delta``, the mean's step
+    ``C h (mu - n1/n2) / (rho**2 + h^T C h)``. No covariance is formed by a
+    subtraction, so its small eigenvalues keep their relative accuracy at
+    small noise.
+    """
+    if not np.all(n[..., 1] > 0):
+        raise ValueError(
+            "prior_mean leads the EKF to a predicted depth n2 <= 0 "
+            f"(min {float(np.min(n[..., 1])):.6g}); the projection x/y is not defined there"
+        )
+    h = model.observation_vector(n)  # Eq. (11)
+    innovation = np.asarray(mu, dtype=float) - n[..., 0] / n[..., 1]
+    stacked = np.concatenate([R, (h / rho[..., None])[..., None, :]], axis=-2)  # (..., 4, 3)
+    Q, R_new = np.linalg.qr(stacked)
+    delta = np.linalg.solve(R_new, (Q[..., 3, :] * (innovation / rho)[..., None])[..., None])[..., 0]
+    return n + delta, R_new
 
 
 def ekf(mu, rho: float, prior: Gaussian) -> History:

@@ -58,6 +58,14 @@ _CUTOFF = 60.0
 _T_MAX = 60.0
 _SCAN_STEP = 1.0
 _MAX_HALVINGS = 12
+#: Starting step of the quadrature in its standardised variable ``u`` (see :class:`_Frame`).
+_U_STEP = 0.5
+#: Most nodes of one interval for one problem; beyond it the tolerance is declared out of reach.
+_NODE_BUDGET = 4097
+#: Widths of the mode within which the quadrature's variable is linear in ``t`` (see :class:`_Frame`).
+_CORE = 4.0
+#: Newton steps locating the mode of the depth integrand.
+_NEWTON_STEPS = 8
 
 
 class _Problem(NamedTuple):
@@ -77,9 +85,12 @@ def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
     if reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
     mu = np.atleast_2d(_checks.finite_array(mu, "mu"))
-    prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
-    mu, rho, prior_mean, _ = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)
+    prior_cov = _checks.finite_array(prior_cov, "prior_cov")
+    if prior_cov.shape != (3, 3):
+        raise ValueError(f"prior_cov must have shape (3, 3), got shape {prior_cov.shape}")
+    mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
     B = mu.shape[0]
+    prior_mean = np.broadcast_to(prior_mean, (B, 3))
     R = np.linalg.inv(np.linalg.cholesky(prior_cov))
     return _Problem(mu, np.full(B, rho), prior_mean, np.broadcast_to(R, (B, 3, 3)), reading)
 
@@ -171,7 +182,12 @@ def _solve(offsets, pb: _Problem):
     det_M = (s2[0] * s2[1] + 4.0 * s2[0] * s2[2] + s2[1] * s2[2]
              + sum(s2[k] * sum(K[k][j] ** 2 for j in range(3)) for k in range(3))
              + sum(P[p] ** 2 for p in _MEAS_PAIRS))
-    minors3 = (-w[0] * s[1] * s[2] + 2.0 * w[1] * s[0] * s[2] - w[2] * s[0] * s[1]) ** 2
+    # The three measurement rows' minor, -w0 s1 s2 + 2 w1 s0 s2 - w2 s0 s1, equals
+    # (2 (mu1 - mu2) - d y) s0 s1 s2 = d (c2 - y) s0 s1 s2 with d = mu1 + mu3 - 2 mu2:
+    # the factored form keeps its relative accuracy where the terms cancel (near y = c2).
+    d = (pb.mu[:, 0] + pb.mu[:, 2] - 2.0 * pb.mu[:, 1])[:, None]
+    c2 = 2.0 * (pb.mu[:, 0] - pb.mu[:, 1])[:, None] / d
+    minors3 = (d * (c2 - offsets[..., 0]) * s[0] * s[1] * s[2]) ** 2
     for k, l in _MEAS_PAIRS:
         for j in range(3):
             minors3 = minors3 + (w[k] * s[l] * K[l][j] - w[l] * s[k] * K[k][j]
@@ -283,32 +299,89 @@ def _nodes(interval: int, t: np.ndarray):
     return np.stack([lo + 1, lo, hi], -1), log_jac
 
 
+class _Frame(NamedTuple):
+    """Where one interval's integrand lives, per problem: ``t = t0 + sigma L sinh(u / L)``.
+
+    ``t0`` (B,) is the mode of the integrand in ``t`` and ``sigma`` (B,) its
+    width there (from the curvature); ``L`` is :data:`_CORE`. Within ``L``
+    widths of the mode ``u`` is the standardised variable ``(t - t0) /
+    sigma``, where the trapezoid rule converges as fast as on a Gaussian;
+    beyond, the node spacing in ``t`` grows in proportion to the distance
+    from the mode, so that tails reaching any multiple of the width cost
+    only a logarithmic number of nodes.
+    """
+
+    t0: np.ndarray
+    sigma: np.ndarray
+
+    def t(self, u):
+        """``t`` at ``u`` of shape (B, n)."""
+        return self.t0[:, None] + (self.sigma * _CORE)[:, None] * np.sinh(u / _CORE)
+
+    def u(self, t):
+        """Inverse of :meth:`t` for ``t`` of shape (B,) or (B, n)."""
+        t = np.asarray(t)
+        if t.ndim == 2:
+            return _CORE * np.arcsinh((t - self.t0[:, None]) / (self.sigma * _CORE)[:, None])
+        return _CORE * np.arcsinh((t - self.t0) / (self.sigma * _CORE))
+
+    def log_jacobian(self, u):
+        """``log |dt/du|`` at ``u`` of shape (B, n)."""
+        return np.log(self.sigma)[:, None] + _log_cosh(u / _CORE)
+
+
+def _log_cosh(u):
+    a = np.abs(u)
+    return a + np.log1p(np.exp(-2.0 * a)) - np.log(2.0)
+
+
+def _mapped_nodes(interval: int, u: np.ndarray, frame: _Frame):
+    """Offsets ``(y, y - 1, y - 2)`` and ``log |dy/du|`` at nodes ``u`` (B, n)."""
+    offsets, log_jac = _nodes(interval, frame.t(u))
+    return offsets, log_jac + frame.log_jacobian(u)
+
+
+def _log_integrand(interval: int, t: np.ndarray, pb: _Problem) -> np.ndarray:
+    """``log p_oy(y(t)) + log |dy/dt|`` at ``t`` of shape (B, n)."""
+    offsets, log_jac = _nodes(interval, t)
+    return _solve(offsets, pb)[0] + log_jac
+
+
 #: Index pairs (i, j) of the second moments accumulated, in (x, y, v) order.
 _SECOND = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
+_FIRST_INDEX, _SECOND_INDEX = (np.array(ix) for ix in zip(*_SECOND))
+#: Where each entry of a 3 x 3 covariance (row-major) sits in :data:`_SECOND` order.
+_SYMMETRIC = np.array([0, 3, 5, 3, 1, 4, 5, 4, 2])
 
 
-def _evaluate(interval, t, pb, shift, centre):
-    """Trapezoid sums (without the step) over nodes ``t`` (B, n).
+def _evaluate(interval, u, frame, pb, shift, centre):
+    """Trapezoid sums (without the step) over nodes ``u`` (B, n) of one interval.
 
     The sums, shape (11, B), are of the weight, of the first moments of
     ``(x, y, v) - centre`` and of the second moments in :data:`_SECOND` order
     (the conditional covariance of ``(x, v)`` given ``y`` included), and of
-    the weight below ``y = 2``.
+    the weight below ``y = 2``. Nodes at ``u = nan`` count for nothing.
     """
-    offsets, log_jac = _nodes(interval, t)
-    log_density, mean, (cxx, cxv, cvv) = _solve(offsets, pb)
-    log_w = log_density + log_jac - shift[:, None]
-    w = np.exp(log_w)
-    d = (mean[0] - centre[:, 0:1], offsets[..., 0] - centre[:, 1:2], mean[1] - centre[:, 2:3])
-    extra = {(0, 0): cxx, (2, 2): cvv, (0, 2): cxv}
-    sums = [w.sum(-1)] + [(w * di).sum(-1) for di in d]
-    for i, j in _SECOND:
-        term = d[i] * d[j]
-        if (i, j) in extra:
-            term = term + extra[(i, j)]
-        sums.append((w * term).sum(-1))
-    sums.append((w * (offsets[..., 0] < 2)).sum(-1))
-    return np.stack(sums)
+    return _sums(_node_values(interval, u, frame, pb), np.isnan(u), shift, centre)
+
+
+def _node_values(interval, u, frame, pb):
+    """Offsets, ``log`` integrand in ``u`` and the conditional Gaussian at nodes ``u`` (B, n)."""
+    offsets, log_jac = _mapped_nodes(interval, np.where(np.isnan(u), 0.0, u), frame)
+    log_density, mean, cov = _solve(offsets, pb)
+    return offsets, log_density + log_jac, mean, cov
+
+
+def _sums(values, skip, shift, centre):
+    """The sums of :func:`_evaluate` from :func:`_node_values`, leaving out nodes where ``skip``."""
+    offsets, log_f, mean, (cxx, cxv, cvv) = values
+    w = np.exp(np.where(skip, -np.inf, log_f - shift[:, None]))
+    d = np.stack([mean[0] - centre[:, 0:1], offsets[..., 0] - centre[:, 1:2], mean[1] - centre[:, 2:3]])
+    zero = np.zeros_like(cxx)
+    conditional = np.stack([cxx, zero, cvv, zero, zero, cxv])  # in _SECOND order
+    second = d[_FIRST_INDEX] * d[_SECOND_INDEX] + conditional
+    return np.concatenate([w.sum(-1)[None], np.einsum("kbn,bn->kb", d, w), np.einsum("kbn,bn->kb", second, w),
+                           (w * (offsets[..., 0] < 2)).sum(-1)[None]])
 
 
 class _Totals(NamedTuple):
@@ -329,87 +402,332 @@ def _moments(totals: np.ndarray, centre: np.ndarray) -> _Totals:
     """Mean, covariance, P(y < 2) and normaliser from summed trapezoid totals."""
     Z = totals[0]
     m = (totals[1:4] / Z).T  # (B, 3), centred
-    cov = np.empty((Z.size, 3, 3))
-    for k, (i, j) in enumerate(_SECOND):
-        cov[:, i, j] = cov[:, j, i] = totals[4 + k] / Z - m[:, i] * m[:, j]
-    for i in range(3):
-        cov[:, i, i] = np.maximum(cov[:, i, i], 0.0)
+    second = (totals[4:10] / Z).T - m[:, _FIRST_INDEX] * m[:, _SECOND_INDEX]  # (B, 6) in _SECOND order
+    second[:, :3] = np.maximum(second[:, :3], 0.0)
+    cov = second[:, _SYMMETRIC].reshape(-1, 3, 3)
     return _Totals(centre + m, cov, totals[10] / Z, Z)
 
 
-def _ranges(pb: _Problem, intervals):
-    """Scan each interval; keep the ``t`` range where the integrand matters.
+def _t_limits(interval: int, pb: _Problem, c: np.ndarray, cov_p: np.ndarray):
+    """The ``t`` range searched in one interval, per problem: two arrays (B,).
 
-    Returns the log-integrand maximum found (B,), per interval ``(lo, hi, active)``
-    arrays and a starting step (B,) for each interval.
+    On the unbounded intervals the far end lies 1e4 times beyond the largest
+    of the prior's scale, the prior mean and the noise-free depth, where the
+    integrand has long decayed (checked by :func:`_ranges`).
+    """
+    B = len(c)
+    if interval in (1, 2):
+        return np.full(B, -_T_MAX), np.full(B, _T_MAX)
+    scale = np.sqrt(np.trace(cov_p, axis1=-2, axis2=-1))
+    far = np.log(1e4 * (scale + np.max(np.abs(pb.mean), axis=1) + np.abs(c[:, 1]) + 10.0))
+    return np.full(B, -_T_MAX), far
+
+
+def _scan_points(interval: int, c, mean_s, sd_s, lo_t, hi_t, guessed: bool = False):
+    """Where to look for the mode in ``t``: (B, n) points, the first ``n_coarse`` of them coarse.
+
+    A scan of the whole range at about unit steps and, on ``y > 2``, 25
+    points across 12 second-order SDs about the noise-free depth and about
+    the second-order mean (left out when ``guessed``, the second-order frame's
+    first level being evaluated too, and both lie within an SD of each other).
+    Returns the points and ``n_coarse``.
+    """
+    t = lo_t[:, None] + (hi_t - lo_t)[:, None] * _unit(int(np.ceil(np.max(hi_t - lo_t) / _SCAN_STEP)) + 1)
+    n_coarse = t.shape[1]
+    if interval == 3:
+        local = np.arange(-12.0, 12.5)
+        sd_t = _clip(sd_s / (c[:, 1] - 2.0), _sigma_floor(np.log(c[:, 1] - 2.0)), 1.0)
+        t_c = np.log(c[:, 1] - 2.0)
+        t_s = np.log(np.where(mean_s[:, 1] > 2.0, mean_s[:, 1] - 2.0, c[:, 1] - 2.0))
+        centres = [t_c, t_s]
+        if guessed and np.all(np.abs(t_c - t_s) <= sd_t):
+            centres = []  # the first level in the second-order frame covers both densely
+        t = np.concatenate([t] + [ct[:, None] + sd_t[:, None] * local for ct in centres], 1)
+        t = _clip(t, lo_t[:, None], hi_t[:, None])
+    return t, n_coarse
+
+
+def _frame(interval: int, pb: _Problem, t, scan, coarse_mask, lo_t, hi_t):
+    """Locate the mode of one interval's integrand in ``t`` and its width, per problem.
+
+    From the integrand ``scan`` at points ``t`` (B, n): a parabola through
+    the best point and its neighbours gives the mode and the width ``(-d2
+    log f / dt2) ** -1/2``; where the best point is one of the coarse ones
+    (``coarse_mask``, (n,)), Newton steps on parabolas one width wide refine
+    both. Returns the :class:`_Frame` and the largest log integrand seen (B,).
+    """
+    B = t.shape[0]
+    order = np.argsort(t, axis=1, kind="stable")
+    ts = np.take_along_axis(t, order, 1)
+    ss = np.take_along_axis(scan, order, 1)
+    rows = np.arange(B)
+    best = np.argmax(ss, axis=1)
+    k = _clip(best, 1, ts.shape[1] - 2)
+    t0, sigma, top = _parabola(ts[rows, k - 1], ts[rows, k], ts[rows, k + 1],
+                               ss[rows, k - 1], ss[rows, k], ss[rows, k + 1])
+    coarse = coarse_mask[order[rows, best]]
+    for _ in range(_NEWTON_STEPS if np.any(coarse) else 0):
+        pts = _clip(t0[:, None] + sigma[:, None] * np.array([-1.0, 0.0, 1.0]), lo_t[:, None], hi_t[:, None])
+        phi = _log_integrand(interval, pts, pb)
+        t1, s1, top1 = _parabola(*pts.T, *phi.T)
+        better = coarse & (top1 >= top)
+        t0, sigma, top = np.where(better, t1, t0), np.where(coarse, s1, sigma), np.maximum(top, np.where(coarse, top1, top))
+    t0 = _clip(t0, lo_t, hi_t)
+    sigma = _clip(sigma, _sigma_floor(t0), 1.0)
+    return _Frame(t0, sigma), top
+
+
+def _parabola(ta, tb, tc, fa, fb, fc):
+    """Vertex, width and value of the parabola through three points (B,) with ``tb`` in the middle.
+
+    Where the points are not concave the middle point is kept and the width
+    is the wider gap.
+    """
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        d1 = (fb - fa) / (tb - ta)
+        d2 = (fc - fb) / (tc - tb)
+        curv = 2.0 * (d2 - d1) / (tc - ta)  # second derivative
+        concave = np.isfinite(curv) & (curv < 0) & np.isfinite(fa) & np.isfinite(fc)
+        safe = np.where(concave, curv, -1.0)
+        vertex = 0.5 * (ta + tb) - d1 / safe + 0.5 * (tb - ta)
+        vertex = np.where(concave, _clip(vertex, ta, tc), tb)
+        gap = np.maximum(tb - ta, tc - tb)
+        width = np.where(concave, _clip(1.0 / np.sqrt(-safe), 0.25 * gap, 4.0 * gap), gap)
+        value = np.where(concave, fb + d1 * (vertex - tb) + 0.5 * curv * (vertex - ta) * (vertex - tb), fb)
+    return vertex, width, np.maximum(value, fb)
+
+
+def _unit(n: int) -> np.ndarray:
+    """``n`` equally spaced points from 0 to 1."""
+    return np.arange(n) / (n - 1)
+
+
+def _clip(a, lo, hi):
+    """``np.clip`` without its overhead on small arrays."""
+    return np.minimum(np.maximum(a, lo), hi)
+
+
+def _sigma_floor(t0):
+    """The narrowest width resolved in ``t`` near ``t0``: a thousand roundoffs."""
+    return 1e3 * np.finfo(float).eps * np.maximum(1.0, np.abs(t0))
+
+
+def _level0(frame: _Frame, lo_t, hi_t):
+    """The first trapezoid level: the whole ``u`` range at step :data:`_U_STEP`, (B, n)."""
+    u_lo, u_hi = frame.u(lo_t), frame.u(hi_t)
+    n = int(np.ceil(np.max(u_hi - u_lo) / _U_STEP)) + 1
+    return u_lo[:, None] + (u_hi - u_lo)[:, None] * _unit(n)
+
+
+def _ranges(pb: _Problem, intervals):
+    """Place each interval's nodes relative to its own mode and width.
+
+    On ``y > 2`` the second-order density gives a first frame (its mean and
+    SD in ``t``), and the first trapezoid level in that frame is evaluated
+    together with the scan of :func:`_scan_points`. If the best node is not
+    one of the first level's, or the parabola through it and its neighbours
+    disagrees with the first frame (mode more than three widths away, width
+    off by more than a factor 3), the mode and width are found from all
+    nodes (:func:`_frame`) and the first level is evaluated again in that
+    frame. Elsewhere the scan comes first.
+
+    Returns the log-integrand maximum found in ``t`` (B,), per interval
+    ``(frame, u, values, hi_t, (t, log f))``: the :class:`_Frame`, the first
+    level's nodes ``u`` and :func:`_node_values` there, the far end in ``t``
+    and the scan; and the second-order mean (B, 3), about which the moments
+    are accumulated.
     """
     c = noise_free_states(pb.mu)
     cov_p = np.linalg.inv(np.swapaxes(pb.R, -1, -2) @ pb.R)
     mean_s, cov_s = second_order_batch(pb.mu, pb.rho, pb.mean, cov_p)
-    sd_t = np.sqrt(cov_s[:, 1, 1]) / (c[:, 1] - 2.0)
-    # Beyond |y| = 1e4 times the prior's scale the integrand has long decayed.
-    far = np.log(1e4 * (np.sqrt(np.max(np.trace(cov_p, axis1=-2, axis2=-1)))
-                        + np.max(np.abs(pb.mean)) + 10.0))
-    limits = {0: (-_T_MAX, far), 1: (-_T_MAX, _T_MAX), 2: (-_T_MAX, _T_MAX), 3: (-_T_MAX, far)}
-    local = np.linspace(-12.0, 12.0, 25)
-    scans = {}
+    sd_s = np.sqrt(cov_s[:, 1, 1])
+    found, tops = {}, []
     for i in intervals:
-        t = np.arange(limits[i][0], limits[i][1] + _SCAN_STEP / 2, _SCAN_STEP)
-        t = np.broadcast_to(t, (len(c), t.size))
+        lo_t, hi_t = _t_limits(i, pb, c, cov_p)
+        t_scan, n_coarse = _scan_points(i, c, mean_s, sd_s, lo_t, hi_t, guessed=i == 3)
+        guess = None
         if i == 3:
-            centres = [np.log(c[:, 1] - 2.0)]
-            if np.all(mean_s[:, 1] > 2.0):
-                centres.append(np.log(mean_s[:, 1] - 2.0))
-            t = np.concatenate([t] + [ct[:, None] + sd_t[:, None] * local for ct in centres], 1)
-        offsets, log_jac = _nodes(i, t)
-        scans[i] = (t, _solve(offsets, pb)[0] + log_jac)
-    top = np.max([np.max(s, axis=1) for _, s in scans.values()], axis=0)
-    ranges = {}
-    for i, (t, s) in scans.items():
-        keep = s > (top - _CUTOFF)[:, None]
-        if i in (0, 3) and np.any(keep[:, int(np.argmax(t[0]))]):
-            raise RuntimeError(
-                f"the depth marginal does not decay by |y| = {np.exp(far):.3g}; "
-                "its moments do not exist in this reading"
-            )
-        lo = np.maximum(np.min(np.where(keep, t, np.inf), axis=1) - _SCAN_STEP, limits[i][0])
-        hi = np.minimum(np.max(np.where(keep, t, -np.inf), axis=1) + _SCAN_STEP, limits[i][1])
-        active = np.any(keep, axis=1)
-        lo, hi = np.where(active, lo, 0.0), np.where(active, hi, 1.0)
-        step = np.minimum(0.25, 0.5 * sd_t) if i == 3 else np.full(len(c), 0.125)
-        ranges[i] = (lo, hi, active, step)
-    return top, ranges
+            y_s = np.where(mean_s[:, 1] > 2.0, mean_s[:, 1], c[:, 1])
+            t0 = _clip(np.log(y_s - 2.0), lo_t, hi_t)
+            guess = _Frame(t0, _clip(sd_s / (y_s - 2.0), _sigma_floor(t0), 1.0))
+            u = _level0(guess, lo_t, hi_t)
+            t_all = np.concatenate([guess.t(u), t_scan], axis=1)
+        else:
+            t_all = t_scan
+        offsets, log_jac = _nodes(i, t_all)
+        log_density, mean, cov = _solve(offsets, pb)
+        log_t = log_density + log_jac
+        m = t_all.shape[1] - t_scan.shape[1]
+        coarse_mask = np.arange(t_all.shape[1]) - m < n_coarse
+        coarse_mask[:m] = False
+        if guess is not None:
+            # the mode and width from the first level's nodes about its best one
+            rows = np.arange(len(c))
+            best = np.argmax(log_t, axis=1)
+            k = _clip(best, 1, m - 2)
+            t0, sigma, top_i = _parabola(*(t_all[rows, k + o] for o in (-1, 0, 1)),
+                                         *(log_t[rows, k + o] for o in (-1, 0, 1)))
+            good = ((best < m) & (np.abs(t0 - guess.t0) <= 3.0 * guess.sigma)
+                    & (sigma <= 3.0 * guess.sigma) & (3.0 * sigma >= guess.sigma))
+            if not np.all(good):
+                frame, top_i = _frame(i, pb, t_all, log_t, coarse_mask, lo_t, hi_t)
+            if np.all(good):
+                frame = guess
+                values = (offsets[:, :m], log_t[:, :m] + guess.log_jacobian(u),
+                          mean[:, :, :m], tuple(a[:, :m] for a in cov))
+            else:
+                frame = _Frame(np.where(good, guess.t0, frame.t0), np.where(good, guess.sigma, frame.sigma))
+                guess = None
+        else:
+            frame, top_i = _frame(i, pb, t_all, log_t, coarse_mask, lo_t, hi_t)
+        if guess is None:
+            u = _level0(frame, lo_t, hi_t)
+            values = _node_values(i, u, frame, pb)
+        scan = (t_all[:, m:], log_t[:, m:])
+        found[i] = (frame, u, values, hi_t, scan)
+        tops.append(np.maximum(top_i + np.log(frame.sigma), np.max(values[1], axis=1)))
+    centre = np.where(np.isfinite(mean_s), mean_s, c)
+    return np.max(tops, axis=0), found, centre
 
 
 def _integrate(pb: _Problem, intervals, rtol: float):
-    """Integrate the depth marginal of a batch; returns moments, errors, shift, grids."""
-    top, ranges = _ranges(pb, intervals)
-    centre = noise_free_states(pb.mu)
-    grids = {}
-    totals = {}
-    for i, (lo, hi, active, step) in ranges.items():
-        n = max(9, int(np.ceil(np.max((hi - lo) / step))) + 1)
-        h = (hi - lo) / (n - 1)
-        t = lo[:, None] + h[:, None] * np.arange(n)
-        grids[i] = (lo, h * active, n)
-        totals[i] = _evaluate(i, t, pb, top, centre)
-    previous = _moments(sum(totals[i] * grids[i][1] for i in ranges), centre)
-    for _ in range(_MAX_HALVINGS):
-        for i, (lo, h, n) in grids.items():
-            t = lo[:, None] + h[:, None] * (np.arange(n - 1) + 0.5)
-            totals[i] = totals[i] + _evaluate(i, np.where(h[:, None] > 0, t, 0.0), pb, top, centre)
-            grids[i] = (lo, 0.5 * h, 2 * n - 1)
-        current = _moments(sum(totals[i] * grids[i][1] for i in ranges), centre)
+    """Integrate the depth marginal of a batch; returns moments, errors, shift, grids.
+
+    The first level of the trapezoid rule spans each interval's whole ``u``
+    range at step :data:`_U_STEP`; the nodes where the integrand is above
+    ``e^-60`` of its maximum (and the unit-step scan's) set the range
+    ``[lo, hi]`` that later levels refine by halving the step. Each problem's
+    step is halved until its means and SDs change by at most ``rtol`` of the
+    SD (or by the roundoff floor of :func:`_roundoff`); a problem that has
+    converged keeps its result, so it does not depend on the other rows of
+    the batch. More than :data:`_NODE_BUDGET` nodes in an interval is a
+    ``ValueError`` naming the problem.
+    """
+    top, found, centre = _ranges(pb, intervals)
+    B = len(top)
+    grids, totals = {}, {}
+    for i, (frame, u, values, hi_t, (t_c, scan_c)) in found.items():
+        n0 = u.shape[1]
+        u_lo, h0 = u[:, 0], u[:, 1] - u[:, 0]
+        keep = values[1] > (top - _CUTOFF)[:, None]
+        keep_t = scan_c + np.log(frame.sigma)[:, None] > (top - _CUTOFF)[:, None]
+        if i in (0, 3):
+            at_end = keep[:, -1] | np.any(keep_t & (t_c >= hi_t[:, None]), axis=1)
+            if np.any(at_end):
+                k = int(np.argmax(at_end))
+                raise ValueError(
+                    f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g}: the depth marginal "
+                    f"does not decay by |y| = {np.exp(hi_t[k]):.3g}; its moments do not exist in this reading"
+                )
+        u_c = frame.u(t_c)
+        first = np.minimum(np.min(np.where(keep, u, np.inf), axis=1), np.min(np.where(keep_t, u_c, np.inf), axis=1))
+        last = np.maximum(np.max(np.where(keep, u, -np.inf), axis=1), np.max(np.where(keep_t, u_c, -np.inf), axis=1))
+        active = np.isfinite(first)
+        j_lo = _clip(np.where(active, np.floor((first - u_lo) / h0) - 1, 0), 0, n0 - 1)
+        j_hi = _clip(np.where(active, np.ceil((last - u_lo) / h0) + 1, 0), 0, n0 - 1)
+        lo = u_lo + j_lo * h0
+        n = (j_hi - j_lo).astype(int) + 1
+        h = np.where(active & (n > 1), h0, 0.0)
+        grids[i] = (lo, h, n, frame)
+        inside = (np.arange(n0) >= j_lo[:, None]) & (np.arange(n0) <= j_hi[:, None]) & active[:, None]
+        totals[i] = _sums(values, ~inside, top, centre)
+    done = np.zeros(B, dtype=bool)
+    final = previous = None
+    errors = np.zeros((2, B))
+    halvings = 2  # the first pass adds two levels in one evaluation
+    while True:
+        growth = 2**halvings
+        if max(np.max(np.where(done, 0, growth * (g[2] - 1) + 1)) for g in grids.values()) > _NODE_BUDGET:
+            k = int(np.argmin(done))
+            raise ValueError(
+                f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g} and prior mean "
+                f"{pb.mean[k].tolist()}: the optimal marginal's quadrature did not reach "
+                f"rtol = {rtol:.3g} within {_NODE_BUDGET} nodes per interval"
+            )
+        levels = [dict() for _ in range(halvings)]
+        for i, (lo, h, n, frame) in grids.items():
+            hh = np.where(done, 0.0, h)
+            # the new nodes of each level, as fractions of the current step, in one evaluation
+            fractions = [[(2 * j + 1) / 2**(lev + 1) for j in range(2**lev)] for lev in range(halvings)]
+            flat = np.concatenate([np.array(f) for f in fractions])
+            m = int(np.max(n)) - 1
+            j = np.arange(m)
+            u = lo[:, None, None] + hh[:, None, None] * (j[None, :] + flat[:, None])[None]  # (B, f, m)
+            valid = (j < (np.broadcast_to(n, lo.shape) - 1)[:, None])[:, None, :] & (hh > 0)[:, None, None]
+            u = np.where(valid, u, np.nan).reshape(len(lo), -1)
+            values = _node_values(i, u, frame, pb)
+            start = 0
+            for lev, fr in enumerate(fractions):
+                block = slice(start * m, (start + len(fr)) * m)
+                totals[i] = totals[i] + _sums(_take(values, block), np.isnan(u[:, block]), top, centre)
+                start += len(fr)
+                levels[lev][i] = (totals[i], np.where(done, h, h / 2**(lev + 1)))
+            grids[i] = (lo, np.where(done, h, h / growth),
+                        np.where(done | (h == 0), n, growth * (n - 1) + 1), frame)
+        if halvings == 2:
+            previous = _moments(sum(tot * step for tot, step in levels[0].values()), centre)
+        current = _moments(sum(tot * step for tot, step in levels[-1].values()), centre)
         now = current.key_moments()
         change = np.abs(now - previous.key_moments())
-        err_y = np.maximum(change[0], change[1])
-        err_v = np.maximum(change[2], change[3])
-        if np.all(err_y <= rtol * now[1]) and np.all(err_v <= rtol * now[3]):
+        floor = _roundoff(current, top, centre)
+        err = np.maximum(np.stack([np.maximum(change[0], change[1]), np.maximum(change[2], change[3])]), floor)
+        ok = (err[0] <= np.maximum(rtol * now[1], floor[0])) & (err[1] <= np.maximum(rtol * now[3], floor[1]))
+        newly = ok & ~done
+        if final is None or np.all(newly):
+            final = current
+        else:
+            final = _Totals(*(np.where(_expand(newly, a), a, b) for a, b in zip(current, final)))
+        errors = np.where(newly, err, errors)
+        done = done | ok
+        if np.all(done):
             break
-        previous = current
-    else:
-        raise RuntimeError("the optimal marginal's quadrature did not converge")
-    return current, err_y, err_v, top, grids
+        previous, halvings = current, 1
+    return final, errors[0], errors[1], top, grids
+
+
+def _mapped_log_integrand(interval, u, frame, pb):
+    offsets, log_jac = _mapped_nodes(interval, u, frame)
+    return _solve(offsets, pb)[0] + log_jac
+
+
+def _take(values, columns):
+    """The node values of :func:`_node_values` at a slice of the node axis."""
+    offsets, log_f, mean, cov = values
+    return offsets[:, columns], log_f[:, columns], mean[:, :, columns], tuple(c[:, columns] for c in cov)
+
+
+def _expand(mask, a):
+    return mask.reshape(mask.shape + (1,) * (np.ndim(a) - 1))
+
+
+def _grid(lo, h, n, offset):
+    """Nodes ``lo + h (j + offset)``, ``j < n`` (n per problem), padded with NaN, shape (B, max n)."""
+    n = np.broadcast_to(n, lo.shape)
+    j = np.arange(int(np.max(n)))
+    u = lo[:, None] + h[:, None] * (j + offset)
+    return np.where((j < n[:, None]) & (h[:, None] > 0), u, np.nan)
+
+
+def _roundoff(totals: _Totals, top: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """A floor (2, B) on the error of the depth and velocity moments from roundoff.
+
+    Three sources are counted, each with a safety factor of 64: the depths at
+    the nodes are rounded to ``eps |y|``, which moves the moments by up to
+    ``eps (|E y| + sd y)`` (likewise for the velocity); the log integrand, a
+    difference of terms as large as its maximum ``top``, carries an absolute
+    error of about ``eps |top|``, which perturbs the weights and so moves a
+    mean or SD by up to ``eps |top|`` times the SD; and the variance, a
+    difference of second moments about ``centre``, loses ``eps (E y -
+    centre)**2``, which moves the SD by that over the SD.
+    """
+    eps = np.finfo(float).eps
+    noise = 1.0 + np.abs(top)
+    sd = np.sqrt(totals.cov[:, [1, 2], [1, 2]].T)
+    mean = totals.mean[:, 1:].T
+    offset = (mean - centre[:, 1:].T) ** 2 + sd**2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cancel = np.where(sd > 0, offset / sd, 0.0)
+    return 64.0 * eps * (np.abs(mean) + sd + noise * sd + cancel)
 
 
 class Moments(NamedTuple):
@@ -497,15 +815,14 @@ def _fine_velocity_mixture(pb: _Problem, grids: dict, log_normaliser, max_refine
     Returns normalised weights, means and SDs, each of shape (B, n).
     """
     weights, means, sds = [], [], []
-    for i, (lo, h, n) in grids.items():
+    for i, (lo, h, n, frame) in grids.items():
         factor = 1
         while True:
-            m = (n - 1) * factor + 1
-            step = h / factor
-            t = lo[:, None] + step[:, None] * np.arange(m)
-            offsets, log_jac = _nodes(i, t)
+            u = _grid(lo, h / factor, (n - 1) * factor + 1, 0.0)
+            skip = np.isnan(u)
+            offsets, log_jac = _mapped_nodes(i, np.where(skip, 0.0, u), frame)
             log_density, mean, (_, _, cvv) = _solve(offsets, pb)
-            w = np.exp(log_density + log_jac - log_normaliser[:, None]) * step[:, None]
+            w = np.where(skip, 0.0, np.exp(log_density + log_jac - log_normaliser[:, None]) * (h / factor)[:, None])
             sd = np.sqrt(cvv)
             big = w > 1e-14 * np.max(w, axis=1, keepdims=True)
             gap = np.abs(np.diff(mean[1], axis=1)) / np.minimum(sd[:, 1:], sd[:, :-1])
@@ -513,8 +830,8 @@ def _fine_velocity_mixture(pb: _Problem, grids: dict, log_normaliser, max_refine
                 break
             factor *= 2
         weights.append(w)
-        means.append(mean[1])
-        sds.append(sd)
+        means.append(np.where(skip, 0.0, mean[1]))
+        sds.append(np.where(skip, 1.0, sd))
     w = np.concatenate(weights, axis=1)
     return w / np.sum(w, axis=1, keepdims=True), np.concatenate(means, axis=1), np.concatenate(sds, axis=1)
 
@@ -629,7 +946,7 @@ def marginals(mu, rho: float, prior: Gaussian, reading: str = "derived",
     rtol = _checks.positive_scalar(rtol, "rtol")
     m, err_y, err_v, top, grids = _integrate(pb, _intervals(support), rtol)
     log_z = float(np.log(m.Z[0]) + top[0])
-    n_nodes = sum(n for _, _, n in grids.values())
+    n_nodes = sum(int(g[2][0]) for g in grids.values())
     return OptimalMarginals(
         mu=mu, rho=float(rho), prior=prior, reading=reading, support=support,
         depth_mean=float(m.mean[0, 1]), depth_sd=float(np.sqrt(m.cov[0, 1, 1])),
@@ -658,8 +975,8 @@ class BatchMarginals:
     log_normaliser: np.ndarray
     rtol: float
     _problem: _Problem
-    _grids: dict  # the quadrature's t grids: {interval: (lo, h, n)}
-    _start: tuple  # lower and upper ends (B,) of the t range and a panel width (B,)
+    _grids: dict  # the quadrature's u grids: {interval: (lo, h, n, frame)}
+    _start: tuple  # lower and upper ends (B,) of the range in t = log(y - 2) and a panel width in u (B,)
 
     def depth_log_pdf(self, y) -> np.ndarray:
         """``log p_oy`` at depths ``y`` of shape (B, m); ``-inf`` at ``y <= 2``."""
@@ -677,26 +994,29 @@ class BatchMarginals:
         doubling the panels until the mass changes by at most ``rtol``.
         """
         y = _checks.finite_array(y, "y")
-        lo, _, step = self._start
+        lo, h, _, frame = self._grids[3]
+        step = 2.0 * h
         with np.errstate(divide="ignore"):
             t_up = np.log(np.maximum(y - 2.0, 0.0))
-        inside = t_up > lo
-        hi = np.where(inside, t_up, lo + 1.0)
+        u_up = frame.u(t_up)
+        inside = u_up > lo
+        hi = np.where(inside, u_up, lo + 1.0)
         x, w = np.polynomial.legendre.leggauss(8)
         panels = max(1, int(np.ceil(np.max((hi - lo) / step))))
         previous = None
-        for _ in range(_MAX_HALVINGS):
+        while True:
             edges = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, panels + 1)
             half = 0.5 * np.diff(edges, axis=1)[..., None]
-            t = (0.5 * (edges[:, 1:] + edges[:, :-1]))[..., None] + half * x
-            offsets, log_jac = _nodes(3, t.reshape(len(y), -1))
+            u = (0.5 * (edges[:, 1:] + edges[:, :-1]))[..., None] + half * x
+            offsets, log_jac = _mapped_nodes(3, u.reshape(len(y), -1), frame)
             log_f = _solve(offsets, self._problem)[0] + log_jac - self.log_normaliser[:, None]
             cdf = np.sum(np.exp(log_f) * (half * w).reshape(len(y), -1), axis=1)
             if previous is not None and np.all(np.abs(cdf - previous) <= self.rtol):
                 break
+            if 8 * panels > 4 * _NODE_BUDGET:
+                raise ValueError(f"y: the depth CDF did not reach rtol = {self.rtol:.3g} "
+                                 f"within {4 * _NODE_BUDGET} nodes")
             previous, panels = cdf, 2 * panels
-        else:
-            raise RuntimeError("the depth CDF's quadrature did not converge")
         return np.where(inside, np.clip(cdf, 0.0, 1.0), 0.0)
 
     def velocity_cdf(self, v) -> np.ndarray:
@@ -724,8 +1044,9 @@ def batch_marginals(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> Batc
     m, err_y, err_v, top, grids = _integrate(pb, (3,), rtol)
     log_z = np.log(m.Z) + top
     moments_ = Moments(*m.key_moments(), err_y, err_v, m.behind, m.mean, m.cov)
-    lo, h, n = grids[3]
-    return BatchMarginals(moments_, log_z, rtol, pb, grids, (lo, lo + (n - 1) * h, 2.0 * h))
+    lo, h, n, frame = grids[3]
+    t_ends = frame.t(np.stack([lo, lo + (n - 1) * h], 1))
+    return BatchMarginals(moments_, log_z, rtol, pb, grids, (t_ends[:, 0], t_ends[:, 1], 2.0 * h))
 
 
 # --- pieces of the derivation of Eq. (16), and quantiles --------------------------------------

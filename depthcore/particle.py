@@ -433,10 +433,9 @@ def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generat
     ParticleBatch
     """
     prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
-    mu, rho, prior_mean, _ = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)
+    mu, rho, prior_mean, _ = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)  # checks each triple
     if mu.ndim != 2 or mu.shape[1] != 3:
         raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
-    model.noise_free_states(mu)  # checks each triple
     B = mu.shape[0]
     rho = np.broadcast_to(rho, (B,))
     N = _checks.count(n_particles, "n_particles")

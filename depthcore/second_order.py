@@ -85,23 +85,55 @@ def second_order_batch(mu, rho: float, prior_mean, prior_cov,
     rho : float or array_like, shape (B,)
     prior_mean : array_like, shape (3,) or (B, 3)
     prior_cov : array_like, shape (3, 3) or (B, 3, 3)
-        Symmetric positive definite (checked by the caller).
+        Symmetric positive definite. All four are checked by
+        :func:`depthcore._checks.batch_problem`.
     reading : {"derived", "printed"}
     """
-    rho = _checks.positive_array(rho, "rho")
     factor = {"derived": 2.0, "printed": 1.0}[_reading(reading)]
+    mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
+    if mu.ndim != 2:
+        raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
     c = noise_free_states(mu)
-    scale = np.broadcast_to(factor * rho**2, (c.shape[0],))[:, None, None]
     g = np.stack([model.observation_vector(model.G(c, k - 2)) @ model.G_linear(k - 2)
                   for k in range(3)], axis=-2)  # (B, 3, 3), rows in time order
-    lik_precision = 2.0 * np.swapaxes(g, -1, -2) @ g / scale
-    prior_precision = A2.T @ np.linalg.inv(np.asarray(prior_cov, dtype=float)) @ A2
-    info = (np.einsum("bij,bj->bi", lik_precision, c)
-            + np.einsum("...ij,...j->...i", prior_precision,
-                        np.linalg.solve(A2, (np.asarray(prior_mean, float) - b2).T).T))
-    cov = np.linalg.inv(lik_precision + prior_precision)
-    cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
-    return np.einsum("bij,bj->bi", cov, info), cov
+    return _square_root_solve(c, g, np.sqrt(2.0 / factor) / np.broadcast_to(rho, (c.shape[0],)),
+                              prior_mean, prior_cov)
+
+
+def _square_root_solve(c, g, weight, prior_mean, prior_cov):
+    """Eq. (8) in square-root form: the Gaussian ``N(c, S) p(G^{-2} x)`` by QR, batched.
+
+    With ``S^{-1} = weight**2 g^T g`` (``g`` the residual gradients, ``weight``
+    per problem) and ``P = L L^T``, the mean is ``c + delta`` where ``delta``
+    minimises ``|weight g delta|**2 + |L^{-1} (A2 (c + delta) + b2 - m)|**2``:
+    a least-squares problem whose 6 x 3 matrix ``K`` stacks the whitened
+    residual Jacobian on the prior's whitened map. Its QR factor ``R``
+    gives ``delta = R^{-1} Q^T r`` and the covariance ``R^{-1} R^{-T}``,
+    without forming (and squaring the condition of) the information matrix.
+
+    Parameters
+    ----------
+    c : ndarray, shape (B, 3)
+    g : ndarray, shape (B, 3, 3)
+    weight : ndarray, shape (B,)
+    prior_mean : array_like, shape (3,) or (B, 3)
+    prior_cov : array_like, shape (3, 3) or (B, 3, 3)
+
+    Returns
+    -------
+    mean : ndarray, shape (B, 3)
+    cov : ndarray, shape (B, 3, 3)
+    """
+    B = c.shape[0]
+    L = np.broadcast_to(np.linalg.cholesky(np.asarray(prior_cov, dtype=float)), (B, 3, 3))
+    gap = np.broadcast_to(np.asarray(prior_mean, dtype=float), (B, 3)) - b2 - c @ A2.T
+    whitened = np.linalg.solve(L, np.concatenate([np.broadcast_to(A2, (B, 3, 3)), gap[..., None]], axis=-1))
+    K = np.concatenate([weight[:, None, None] * g, whitened[..., :3]], axis=1)  # (B, 6, 3)
+    Q, R = np.linalg.qr(K)
+    R_inv = np.linalg.inv(R)
+    delta = np.einsum("bij,bkj,bk->bi", R_inv, Q[:, 3:], whitened[..., 3])
+    cov = R_inv @ np.swapaxes(R_inv, -1, -2)
+    return c + delta, 0.5 * (cov + np.swapaxes(cov, -1, -2))
 
 
 def second_order(mu, rho: float, prior: Gaussian, reading: str = "derived") -> Gaussian:
@@ -125,13 +157,12 @@ def second_order(mu, rho: float, prior: Gaussian, reading: str = "derived") -> G
         Mean and covariance of ``p_s`` (state at time 3).
     """
     c = noise_free_state(mu)
-    lik_precision = np.linalg.inv(likelihood_covariance(mu, rho, reading))
-    prior_precision = A2.T @ np.linalg.solve(prior.cov, A2)
-    precision = lik_precision + prior_precision
-    info = lik_precision @ c + A2.T @ np.linalg.solve(prior.cov, prior.mean - b2)
-    factor = cho_factor(precision)
-    cov = cho_solve(factor, np.eye(3))
-    return Gaussian(cho_solve(factor, info), 0.5 * (cov + cov.T))
+    rho = _checks.positive_scalar(rho, "rho")
+    factor = {"derived": 2.0, "printed": 1.0}[_reading(reading)]
+    g = residual_gradients(c)
+    mean, cov = _square_root_solve(c[None], g[None], np.array([np.sqrt(2.0 / factor) / rho]),
+                                   prior.mean, prior.cov)
+    return Gaussian(mean[0], cov[0])
 
 
 def _reading(reading: str) -> str:

@@ -95,11 +95,11 @@ def test_seed_sequence_rejects_what_is_not_a_seed(seed):
 
 
 def test_batch_inputs_broadcast_the_prior_and_check_shapes():
-    mu, rho, pm, pc = _checks.batch_inputs(np.zeros((4, 3)), 0.1, np.ones(3), np.eye(3))
+    mu, rho, pm, pc = _checks.batch_inputs(np.zeros((4, 3)), 0.1, np.ones(3), np.eye(3), triples=False)
     assert pm.shape == (4, 3) and pc.shape == (4, 3, 3) and rho.shape == ()
     with pytest.raises(ValueError, match=r"rho must be a scalar or have shape \(4,\)"):
-        _checks.batch_inputs(np.zeros((4, 3)), [0.1, 0.2], np.ones(3), np.eye(3))
+        _checks.batch_inputs(np.zeros((4, 3)), [0.1, 0.2], np.ones(3), np.eye(3), triples=False)
     with pytest.raises(ValueError, match=r"prior_mean must have shape \(3,\) or \(4, 3\)"):
-        _checks.batch_inputs(np.zeros((4, 3)), 0.1, np.ones((2, 3)), np.eye(3))
+        _checks.batch_inputs(np.zeros((4, 3)), 0.1, np.ones((2, 3)), np.eye(3), triples=False)
     with pytest.raises(ValueError, match="rho must be positive"):
-        _checks.batch_inputs(np.zeros((2, 2, 3)), [[0.1, -0.2]] * 2, np.ones(3), np.eye(3))
+        _checks.batch_inputs(np.zeros((2, 2, 3)), [[0.1, -0.2]] * 2, np.ones(3), np.eye(3), triples=False)
