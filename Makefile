@@ -1,7 +1,9 @@
 # depthcore: the package, its tests and the executable book.
 #
-#   make book               clean, strict build of the book into _build/html
-#   make test               core tests, notebook drift check, book build, checks of the built book
+#   make book               clean, strict build of the book into _build/html, with its downloads
+#   make pdf                the book as a PDF, _build/latex/depthcore.pdf (needs TeX Live's xelatex)
+#   make lab                JupyterLab on the book's pages (MyST .md files open as notebooks)
+#   make test               core tests, notebook drift check, PDF and book builds, checks of both
 #   make notebooks          re-run every book page and compare its outputs with book/_nbval/
 #   make notebooks-update   re-execute every page and rewrite book/_nbval/ (deliberate update)
 #   make check-book         checks of the built book alone (equation numbers, browser)
@@ -25,13 +27,19 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 EDITABLE := $(VENV)/.editable
 PYTEST_ARGS ?=
+# cffconvert (validates CITATION.cff) pins jsonschema 3: a venv of its own.
+CITE_VENV := $(VENV)/cffconvert
+CITE_STAMP := $(CITE_VENV)/.installed
 
 # Kernels and tools run from .venv/ even where a user-wide Jupyter setup exists.
 export JUPYTER_PREFER_ENV_PATH := 1
 export PYDEVD_DISABLE_FILE_VALIDATION := 1
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
+# The book's pages run with the python3 kernel of tools/jupyter/kernels/ (ipykernel
+# without its notice about local TCP, which would repeat once per page in the logs).
+export JUPYTER_PATH := $(CURDIR)/tools/jupyter$(if $(JUPYTER_PATH),:$(JUPYTER_PATH))
 
-.PHONY: help venv book test test-core notebooks notebooks-update check-book figures bench clean distclean
+.PHONY: help venv cite-venv book pdf lab test test-core notebooks notebooks-update check-book figures bench clean distclean
 
 help:
 	@sed -n '3,/^#$$/p' Makefile | sed -e 's/^# \{0,1\}//' -e '/^$$/d'
@@ -51,18 +59,64 @@ $(EDITABLE): $(STAMP) pyproject.toml depthcore/__init__.py
 
 venv: $(EDITABLE)
 
+$(CITE_STAMP): requirements-cite.txt $(STAMP)
+	rm -rf $(CITE_VENV)
+	$(PYTHON) -m venv $(CITE_VENV)
+	$(CITE_VENV)/bin/python -m pip install -q -r requirements-cite.txt
+	touch $(CITE_STAMP)
+
+cite-venv: $(CITE_STAMP)
+
+# The HTML book ships, under _build/html/downloads/, what a reader takes away:
+# Figures 2-6 as PDF, SVG and PNG, depthcore's source archive with the pinned
+# requirements, and the PDF of the book when `make pdf` has built it (as
+# `make test` does first). The pages' executed notebooks are offered on each page.
+DOWNLOADS := _build/extra/downloads
+PDF := _build/latex/depthcore.pdf
+
 book: $(EDITABLE)
-	rm -rf _build
-	$(VENV)/bin/jupyter-book build . --all -W -n --keep-going
+	find _build -mindepth 1 -maxdepth 1 ! -name latex -exec rm -rf {} + 2>/dev/null || true
+	mkdir -p $(DOWNLOADS)
+	$(PY) -m depthcore figures --out $(DOWNLOADS)/figures
+	$(PY) -c 'from setuptools import build_meta; import sys; sys.stdout = sys.stderr; \
+	  print(build_meta.build_sdist("$(DOWNLOADS)"))' 2>/dev/null
+	mv $(DOWNLOADS)/depthcore-*.tar.gz $(DOWNLOADS)/depthcore.tar.gz
+	cp requirements.txt CITATION.cff $(DOWNLOADS)/
+	@if [[ -f $(PDF) ]]; then cp $(PDF) $(DOWNLOADS)/depthcore.pdf; else \
+	  echo "make book: NOTE: $(PDF) not found, so the book links a PDF it does not ship: run \`make pdf\` first" >&2; fi
+	$(VENV)/bin/jupyter-book build . --all -W -n --keep-going 2>&1 | tee _build/book.log
+
+# Sphinx's LaTeX builder, then xelatex (Debian: texlive-xetex texlive-latex-extra
+# texlive-fonts-recommended lmodern latexmk fonts-freefont-otf; .ci/run installs them).
+pdf: $(EDITABLE)
+	@for tool in xelatex latexmk; do command -v $$tool >/dev/null || { \
+	  echo "make pdf: $$tool not found: the PDF needs TeX Live (Debian: apt-get install texlive-xetex" \
+	    "texlive-latex-extra texlive-fonts-recommended lmodern latexmk fonts-freefont-otf)" >&2; exit 1; }; done
+	rm -rf _build/latex
+	mkdir -p _build/latex
+	$(VENV)/bin/jupyter-book build . --builder latex --all -W -n --keep-going 2>&1 | tee _build/latex.log
+	cd _build/latex && latexmk -xelatex -interaction=nonstopmode -halt-on-error depthcore.tex \
+	  > latexmk.log 2>&1 || { tail -n 40 latexmk.log >&2; echo "make pdf: xelatex failed, see _build/latex/depthcore.log" >&2; exit 1; }
+	@echo "make pdf: wrote $(PDF)"
+
+# JupyterLab from .venv/; jupytext opens the book's MyST pages (book/*.md) as
+# notebooks with one click (tools/jupyter/lab/settings/overrides.json, copied
+# into .venv/ where JupyterLab reads its defaults). LAB_ARGS, e.g. --no-browser.
+LAB_ARGS ?=
+lab: $(EDITABLE)
+	mkdir -p $(VENV)/share/jupyter/lab/settings
+	cp tools/jupyter/lab/settings/overrides.json $(VENV)/share/jupyter/lab/settings/overrides.json
+	$(VENV)/bin/jupyter lab --ServerApp.root_dir=. $(LAB_ARGS) book/intro.md
 
 test: $(EDITABLE)
 	$(MAKE) --no-print-directory test-core
 	$(MAKE) --no-print-directory notebooks
+	$(MAKE) --no-print-directory pdf
 	$(MAKE) --no-print-directory book
 	$(MAKE) --no-print-directory check-book
 
-test-core: $(EDITABLE)
-	$(PY) -m pytest -q -n 2 tests $(PYTEST_ARGS)
+test-core: $(EDITABLE) $(CITE_STAMP)
+	$(PY) -m pytest -q -rs -n 2 tests $(PYTEST_ARGS)
 
 notebooks: $(EDITABLE)
 	$(PY) tools/check_notebooks.py check
@@ -72,7 +126,7 @@ notebooks-update: $(EDITABLE)
 
 # Checks of the built book in _build/html (run `make book` first).
 check-book: $(EDITABLE)
-	$(PY) -m pytest -q tests/book $(PYTEST_ARGS)
+	$(PY) -m pytest -q -rs tests/book $(PYTEST_ARGS)
 
 figures: $(EDITABLE)
 	$(PY) -m depthcore figures --out figures/

@@ -382,3 +382,66 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False):
     ax.set_ylabel(ylabels[field], fontsize=9)
     ax.legend(frameon=False, fontsize=8)
     return fig
+
+
+def translating_point(x3=None, n: int = 3):
+    """Figure 1 of the paper: a translating point and its bearings from the camera.
+
+    Draws the positions of the point at times ``1 .. n`` (moving by Eq. (1)
+    with velocity ``(v, 1)``), the ray from the camera at the origin to each of
+    them, and where each ray meets the image line ``y = 1``: the noise-free
+    measurement ``mu_i = x_i / y_i`` of Eq. (4).
+
+    Parameters
+    ----------
+    x3 : array_like, shape (3,), optional
+        The state ``(x, y, v)`` at time 3; by default the noise-free solution
+        ``c`` of Figure 2's measurements (17), ``(6/5, 6, 6/5)``.
+    n : int
+        Number of frames drawn (at least 2).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    from . import model
+
+    if n < 2:
+        raise ValueError(f"n: at least 2 frames are needed to show the motion, got {n}")
+    x3 = np.asarray(SCENARIOS["fig2"].c if x3 is None else x3, dtype=float)
+    if x3.shape != (3,):
+        raise ValueError(f"x3: expected a state (x, y, v) of shape (3,), got shape {x3.shape}")
+    states = model.trajectory(model.G(x3, -2), n)
+    if np.any(states[:, 1] <= 1.0):
+        raise ValueError("x3: the point must be beyond the image line (y > 1) at every frame drawn")
+    mu = model.project(states)
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
+    reach = float(np.max(states[:, 1])) + 0.8
+    wide = max(float(np.max(np.abs(states[:, 0]))), float(np.max(np.abs(mu)))) + 0.8
+    ax.plot(states[:, 0], states[:, 1], color="0.55", linewidth=1, linestyle="--", zorder=1)
+    ax.annotate("", xy=states[-1, :2] + 0.45 * np.array([states[-1, 2], 1.0]), xytext=states[-1, :2],
+                arrowprops={"arrowstyle": "->", "color": "0.3"})
+    ax.annotate("velocity $(v, 1)$", xy=states[-1, :2] + 0.45 * np.array([states[-1, 2], 1.0]),
+                xytext=(6, 0), textcoords="offset points", fontsize=9, va="center")
+    ax.axhline(1.0, color="tab:blue", linewidth=1)
+    ax.annotate("image line $y = 1$", xy=(wide, 1.0), xytext=(-2, 4), textcoords="offset points",
+                fontsize=9, color="tab:blue", ha="right")
+    for i, (state, m) in enumerate(zip(states, mu), start=1):
+        ax.plot([0.0, state[0]], [0.0, state[1]], color="tab:red", linewidth=1, zorder=2)
+        ax.plot(state[0], state[1], "o", color="black", markersize=5, zorder=3)
+        ax.annotate(f"$(x_{i}, y_{i})$", xy=state[:2], xytext=(-8, 6), textcoords="offset points",
+                    fontsize=9, ha="right")
+        ax.plot(m, 1.0, "|", color="tab:red", markersize=10, markeredgewidth=1.5, zorder=3)
+        ax.annotate(f"$\\mu_{i}$", xy=(m, 1.0), xytext=(0, -16), textcoords="offset points",
+                    fontsize=9, color="tab:red", ha="center")
+    ax.plot(0.0, 0.0, marker="^", color="black", markersize=9)
+    ax.annotate("camera", xy=(0.0, 0.0), xytext=(8, -4), textcoords="offset points", fontsize=9)
+    ax.set_xlim(-wide, wide)
+    ax.set_ylim(-0.4, reach)
+    ax.set_xlabel("lateral position $x$")
+    ax.set_ylabel("depth $y$")
+    ax.set_title(f"Figure 1 (reproduction): a translating point seen at times 1 to {n}", fontsize=9)
+    return fig

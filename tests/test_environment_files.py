@@ -55,7 +55,7 @@ def test_requirements_pin_every_package_exactly():
     pins = requirements_pins()
     for name in ("numpy", "scipy", "matplotlib", "jupyter-book", "jupytext", "nbval", "pytest",
                  "hypothesis", "ipykernel", "sympy", "selenium", "filterpy", "pytest-xdist",
-                 "sphinx-mathjax-offline", "setuptools"):
+                 "sphinx-mathjax-offline", "setuptools", "jupyterlab"):
         assert name in pins, f"requirements.txt does not pin {name}"
 
 

@@ -9,7 +9,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from numpy.testing import assert_allclose  # noqa: E402
 
-from depthcore import experiments, figures, reproduce  # noqa: E402  # noqa: E402
+from depthcore import experiments, figures, reproduce  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
 FIG2 = SCENARIOS["fig2"]
@@ -107,3 +107,30 @@ def test_profile_figure_draws_each_noise_level():
     fig = figures.profile_figure(FIG2.mu, [1 / 200, 1 / 50], np.geomspace(2.5, 100, 50))
     assert [line.get_label() for line in fig.axes[0].get_lines()] == ["rho = 1/200", "rho = 1/50"]
     plt.close(fig)
+
+
+def test_figure_1_draws_the_bearings_of_figure_2s_measurements():
+    # Figure 1 draws the noise-free state c of Figure 2 at times 1-3: each ray
+    # runs from the camera at the origin to (x_i, y_i), and crosses the image
+    # line y = 1 at the measurement mu_i of Eq. (17), (-3/10, 0, 1/5).
+    fig = figures.translating_point()
+    ax = fig.axes[0]
+    lines = [line.get_xydata() for line in ax.get_lines()]
+    rays = [xy for xy in lines if len(xy) == 2 and np.allclose(xy[0], 0.0)]
+    assert len(rays) == 3
+    ends = np.array([ray[1] for ray in rays])
+    assert np.allclose(ends, [[-1.2, 4.0], [0.0, 5.0], [1.2, 6.0]])
+    marks = np.array([xy[0] for xy in lines if len(xy) == 1 and xy[0][1] == 1.0])
+    assert np.allclose(marks[:, 0], SCENARIOS["fig2"].mu, atol=1e-12)
+    assert np.allclose(marks[:, 0], [-0.3, 0.0, 0.2], atol=1e-12)
+    assert "Figure 1" in ax.get_title()
+    plt.close(fig)
+
+
+def test_figure_1_rejects_a_point_at_or_behind_the_image_line():
+    with pytest.raises(ValueError, match="^x3: the point must be beyond"):
+        figures.translating_point([0.0, 2.5, 0.0])
+    with pytest.raises(ValueError, match="^x3: expected a state"):
+        figures.translating_point([1.0, 6.0])
+    with pytest.raises(ValueError, match="^n: at least 2"):
+        figures.translating_point(n=1)

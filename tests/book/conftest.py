@@ -118,3 +118,9 @@ def html_pages(html_dir: Path) -> dict[str, str]:
             continue
         pages[rel] = path.read_text(encoding="utf-8")
     return pages
+
+
+@pytest.fixture(scope="session")
+def load_figure_numbers() -> dict[str, dict[str, str]]:
+    """tests/data/figure_numbers.json: label of each of the paper's figures -> number, page."""
+    return load_json("figure_numbers.json")

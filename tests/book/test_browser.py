@@ -143,3 +143,39 @@ def test_figure_page_shows_images_and_a_table(browser, html_dir, figure_page):
     tables = browser.execute_script("return document.querySelectorAll('main table, article table').length;")
     assert tables >= 1, f"{figure_page}.html has no table"
     assert network_requests(browser) == []
+
+
+def test_equations_fit_or_scroll_in_their_own_box(browser, html_dir, toc_page):
+    # At 1280 px (CHROMIUM_FLAGS), a display equation wider than the text
+    # column scrolls inside its own box, so that none is cut off.
+    open_page(browser, html_dir, toc_page)
+    wait_for_mathjax(browser)
+    cut = browser.execute_script(
+        """
+        const scrolls = el => ['auto', 'scroll'].includes(getComputedStyle(el).overflowX);
+        return Array.from(document.querySelectorAll('article div.math mjx-container[display="true"]'))
+          .filter(c => c.scrollWidth > c.clientWidth + 1 && !scrolls(c) && !scrolls(c.parentElement))
+          .map(c => c.parentElement.id || c.textContent.slice(0, 40));
+        """)
+    assert not cut, f"{toc_page}.html: equations cut off at 1280 px: {cut}"
+
+
+def test_tables_scroll_inside_themselves_on_a_phone(browser, html_dir, toc_page):
+    size = browser.get_window_size()
+    browser.set_window_size(390, 844)
+    try:
+        open_page(browser, html_dir, toc_page)
+        wait_for_mathjax(browser)
+        widths = browser.execute_script(
+            """
+            const scrolls = el => ['auto', 'scroll'].includes(getComputedStyle(el).overflowX);
+            const wide = Array.from(document.querySelectorAll('article table'))
+              .filter(t => t.scrollWidth > t.clientWidth + 1 || t.getBoundingClientRect().right > window.innerWidth)
+              .filter(t => !(scrolls(t) || scrolls(t.parentElement)) || t.clientWidth > window.innerWidth)
+              .map(t => t.textContent.trim().slice(0, 40));
+            return {page: document.documentElement.scrollWidth, window: window.innerWidth, wide: wide};
+            """)
+    finally:
+        browser.set_window_size(size["width"], size["height"])
+    assert widths["page"] <= widths["window"], f"{toc_page}.html is wider than a phone's screen: {widths}"
+    assert not widths["wide"], f"{toc_page}.html: tables that run off a phone's screen: {widths['wide']}"

@@ -1,0 +1,99 @@
+"""What a reader of the HTML book can take away.
+
+* every page that runs code offers its executed notebook (``.ipynb`` with
+  outputs) in its download menu, at ``_sources/<page>.ipynb``;
+* the pages of Figures 2-6 link the figure as PDF, SVG and PNG under
+  ``downloads/figures/``, and the files are the formats they claim;
+* the intro links the PDF of the book, ``depthcore``'s source archive (an
+  sdist of the package's current version with every module) and the pinned
+  requirements;
+* every link into ``downloads/`` resolves to a file of the built book.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import tarfile
+from pathlib import Path
+
+import pytest
+
+import depthcore
+from conftest import ROOT
+
+HREF_RE = re.compile(r'href="([^"#?]*downloads/[^"#?]+)"')
+MAGIC = {"pdf": b"%PDF-", "png": b"\x89PNG\r\n\x1a\n"}
+
+
+def visible_outputs(nb: dict) -> int:
+    """Number of outputs of a notebook's code cells that Jupyter displays (not glue records)."""
+    count = 0
+    for cell in nb["cells"]:
+        for output in cell.get("outputs", []) if cell["cell_type"] == "code" else []:
+            data = output.get("data", {})
+            if output["output_type"] == "stream" or any(
+                    not mime.startswith("application/papermill.record/") for mime in data):
+                count += 1
+    return count
+
+
+def notebook_pages() -> list[str]:
+    import check_notebooks
+
+    return [str(p.relative_to(ROOT).with_suffix("")) for p in check_notebooks.notebook_pages()]
+
+
+@pytest.mark.parametrize("page", notebook_pages())
+def test_page_offers_its_executed_notebook(html_dir, html_pages, page):
+    html = html_pages[f"{page}.html"]
+    assert f"_sources/{page}.ipynb" in html, f"{page}.html offers no .ipynb download"
+    nb = json.loads((html_dir / "_sources" / f"{page}.ipynb").read_text(encoding="utf-8"))
+    code = [cell for cell in nb["cells"] if cell["cell_type"] == "code"]
+    assert code and all(cell.get("execution_count") for cell in code), f"{page}.ipynb is not executed"
+    # A page whose reference shows outputs offers a notebook that shows them.
+    reference = json.loads((ROOT / "book" / "_nbval" / f"{Path(page).name}.ipynb").read_text(encoding="utf-8"))
+    # (the book merges a cell's streams into one output, the reference does not: compare presence)
+    if visible_outputs(reference):
+        assert visible_outputs(nb), f"{page}.ipynb shows no output, the reference {visible_outputs(reference)}"
+
+
+def test_every_download_link_resolves(html_dir, html_pages):
+    links = 0
+    for page, html in html_pages.items():
+        for href in HREF_RE.findall(html):
+            target = (html_dir / page).parent / href
+            assert target.resolve().is_file(), f"{page} links {href}, which the build does not ship"
+            links += 1
+    assert links, "no page links into downloads/"
+
+
+@pytest.mark.parametrize("number", range(2, 7))
+def test_figure_page_links_the_figure_in_three_formats(html_dir, html_pages, number):
+    hrefs = set(HREF_RE.findall(html_pages[f"book/fig{number}.html"]))
+    for fmt in ("pdf", "svg", "png"):
+        href = f"../downloads/figures/figure{number}.{fmt}"
+        assert href in hrefs, f"book/fig{number}.html does not link {href}"
+        data = (html_dir / "downloads" / "figures" / f"figure{number}.{fmt}").read_bytes()
+        if fmt in MAGIC:
+            assert data.startswith(MAGIC[fmt]), f"figure{number}.{fmt} is not a {fmt.upper()} file"
+        else:
+            assert b"<svg" in data[:2000], f"figure{number}.svg is not an SVG file"
+
+
+def test_intro_links_the_pdf_the_source_archive_and_the_requirements(html_pages):
+    hrefs = set(HREF_RE.findall(html_pages["book/intro.html"]))
+    for name in ("depthcore.pdf", "depthcore.tar.gz", "requirements.txt"):
+        assert f"../downloads/{name}" in hrefs, f"the intro does not link downloads/{name}"
+
+
+def test_source_archive_is_an_sdist_of_this_version(html_dir):
+    modules = sorted(p.name for p in (ROOT / "depthcore").glob("*.py"))
+    with tarfile.open(html_dir / "downloads" / "depthcore.tar.gz") as tar:
+        names = tar.getnames()
+        top = f"depthcore-{depthcore.__version__}"
+        assert f"{top}/pyproject.toml" in names
+        missing = [m for m in modules if f"{top}/depthcore/{m}" not in names]
+        assert not missing, f"the source archive lacks {missing}"
+        info = tar.extractfile(f"{top}/PKG-INFO").read().decode()
+    assert f"\nVersion: {depthcore.__version__}\n" in info

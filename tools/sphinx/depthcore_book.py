@@ -1,0 +1,53 @@
+"""Sphinx extension of the book: what a reader can download from the HTML book.
+
+Each page's executed notebook
+-----------------------------
+
+The book's pages are MyST Markdown notebooks; myst-nb executes each one into
+``_build/jupyter_execute/<page>.ipynb``. This extension copies that notebook,
+with its outputs, to ``_sources/<page>.ipynb`` in the HTML build and tells
+sphinx-book-theme about it, so that the page's download menu offers
+``.ipynb`` beside ``.md`` (the theme does so itself only when a launch
+service such as Binder is configured).
+
+The downloads folder
+--------------------
+``make book`` writes into ``_build/extra/downloads/`` (the config value
+``depthcore_downloads``) the figures, the source archive, the pinned
+requirements, CITATION.cff and the PDF; at the end of an HTML build this
+extension copies that folder to ``_build/html/downloads/``, where the pages
+link them. A build without it (``jupyter-book build .`` alone) has none.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+
+def add_executed_notebook(app, pagename, templatename, context, doctree):
+    if app.builder.format != "html" or doctree is None:
+        return
+    executed = Path(app.outdir).parent / "jupyter_execute" / f"{pagename}.ipynb"
+    if not executed.is_file():
+        return
+    target = Path(app.outdir) / "_sources" / f"{pagename}.ipynb"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(executed, target)
+    context["ipynb_source"] = f"{pagename}.ipynb"
+
+
+def copy_downloads(app, exception):
+    if exception is not None or app.builder.format != "html":
+        return
+    source = Path(app.confdir) / app.config.depthcore_downloads
+    if source.is_dir():
+        shutil.copytree(source, Path(app.outdir) / "downloads", dirs_exist_ok=True)
+
+
+def setup(app):
+    app.add_config_value("depthcore_downloads", "_build/extra/downloads", "html")
+    # Before sphinx-book-theme builds its header buttons (priority 501).
+    app.connect("html-page-context", add_executed_notebook, priority=450)
+    app.connect("build-finished", copy_downloads)
+    return {"parallel_read_safe": True, "parallel_write_safe": True}
