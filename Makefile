@@ -9,7 +9,7 @@
 #   make check-book         checks of the built book alone (equation numbers, browser)
 #   make figures            write the paper's figures to figures/
 #   make bench              print the benchmark tables
-#   make lint               ruff check of the package, tests, tools and benchmarks
+#   make lint               ruff check and ruff format --check of the package, tests, tools, benchmarks
 #   make clean              remove build outputs (make distclean also removes .venv/)
 #
 # Every target runs in .venv/, created with Python 3.11 from the pinned
@@ -109,6 +109,7 @@ lab: $(EDITABLE)
 	$(VENV)/bin/jupyter lab --ServerApp.root_dir=. $(LAB_ARGS) book/intro.md
 
 test: $(EDITABLE)
+	$(MAKE) --no-print-directory lint
 	$(MAKE) --no-print-directory test-core
 	$(MAKE) --no-print-directory notebooks
 	$(MAKE) --no-print-directory pdf
@@ -140,6 +141,7 @@ bench: $(EDITABLE)
 .PHONY: lint
 lint: $(EDITABLE)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 
 clean:
 	rm -rf _build figures .pytest_cache .hypothesis book/.nbval-check-*

@@ -89,9 +89,14 @@ def main(argv=None):
     print("| route | time | ratio |")
     print("|---|---:|---:|")
     print(f"| depthcore.ekf.run, vectorised | {best * 1e3:.1f} ms | 1 |")
-    print(f"| filterpy ExtendedKalmanFilter, trial by trial | {t_fp * 1e3:,.0f} ms | {t_fp / best:,.0f} |")
-    print(f"largest difference after any measurement: means {d_mean:.1e} posterior SDs, "
-          f"covariances {d_cov:.1e} of their Frobenius norm (median {d_cov_median:.1e})")
+    print(
+        f"| filterpy ExtendedKalmanFilter, trial by trial | {t_fp * 1e3:,.0f} ms "
+        f"| {t_fp / best:,.0f} |"
+    )
+    print(
+        f"largest difference after any measurement: means {d_mean:.1e} posterior SDs, "
+        f"covariances {d_cov:.1e} of their Frobenius norm (median {d_cov_median:.1e})"
+    )
     if not (d_mean < 1e-10 and d_cov < 1e-9):
         raise SystemExit("depthcore and filterpy disagree beyond rounding")
 

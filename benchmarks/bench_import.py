@@ -18,8 +18,14 @@ def _time(module: str) -> float:
     """Median seconds to import ``module`` in a fresh interpreter (NumPy imported first)."""
     times = []
     for _ in range(RUNS):
-        code = "import numpy; " + CODE.format(module=module) if module != "numpy" else CODE.format(module=module)
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+        code = (
+            "import numpy; " + CODE.format(module=module)
+            if module != "numpy"
+            else CODE.format(module=module)
+        )
+        out = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True
+        )
         times.append(float(out.stdout))
     return statistics.median(times)
 

@@ -65,8 +65,20 @@ def _rel_error(values, truth):
 
 
 def _grid(keys, panels, order):
-    return np.array([list(reference.grid_moments(SCENARIOS[k].mu, SCENARIOS[k].rho, SCENARIOS[k].prior,
-                                                 panels=panels, uv_order=order))[:4] for k in keys])
+    return np.array(
+        [
+            list(
+                reference.grid_moments(
+                    SCENARIOS[k].mu,
+                    SCENARIOS[k].rho,
+                    SCENARIOS[k].prior,
+                    panels=panels,
+                    uv_order=order,
+                )
+            )[:4]
+            for k in keys
+        ]
+    )
 
 
 def _nquad_normaliser():
@@ -78,14 +90,23 @@ def _nquad_normaliser():
     def log_post(v, x, y):  # Eq. (6), scalar, with P = 1000 I
         r3, r2, r1 = x / y - mu[2], (x - v) / (y - 1) - mu[1], (x - 2 * v) / (y - 2) - mu[0]
         d0, d1, d2 = x - 2 * v - pm[0], y - 2 - pm[1], v - pm[2]
-        return -(r1 * r1 + r2 * r2 + r3 * r3) / (2 * rho * rho) - 0.5 * q * (d0 * d0 + d1 * d1 + d2 * d2)
+        return -(r1 * r1 + r2 * r2 + r3 * r3) / (2 * rho * rho) - 0.5 * q * (
+            d0 * d0 + d1 * d1 + d2 * d2
+        )
 
     shift = log_post(1.2, 1.2, 6.0)
     # Integration box: bearing x / y in [mu3 - 0.2, mu3 + 0.2], v within +-3 of x / y * y
-    box = [lambda x, y: (x - 3.0, x + 3.0), lambda y: ((mu[2] - 0.2) * y, (mu[2] + 0.2) * y), (2.2, 60.0)]
+    box = [
+        lambda x, y: (x - 3.0, x + 3.0),
+        lambda y: ((mu[2] - 0.2) * y, (mu[2] + 0.2) * y),
+        (2.2, 60.0),
+    ]
     opts = {"epsrel": 1e-9, "epsabs": 0, "limit": 200}
-    z, _ = integrate.nquad(lambda v, x, y: math.exp(log_post(v, x, y) - shift), box,
-                           opts=[opts, opts, {**opts, "points": [6.0]}])
+    z, _ = integrate.nquad(
+        lambda v, x, y: math.exp(log_post(v, x, y) - shift),
+        box,
+        opts=[opts, opts, {**opts, "points": [6.0]}],
+    )
     # The same integral from the 1-D route: 2 pi exp(log_normaliser), since the
     # inner Gaussian integral over (x, v) is 2 pi / sqrt(det M) exp(-S / 2).
     exact = 2 * math.pi * math.exp(optimal.marginals(s.mu, s.rho, s.prior).log_normaliser - shift)
@@ -101,7 +122,9 @@ def main(argv=None):
     keys, mus, rhos, means, cov = _inputs()
     truth = _as_array(optimal.moments(mus, rhos, means, cov, rtol=1e-13))
     t_ours, ours = _best_time(lambda: optimal.moments(mus, rhos, means, cov), args.repeat)
-    est = float(np.max(np.maximum(ours.depth_error / ours.depth_sd, ours.velocity_error / ours.velocity_sd)))
+    est = float(
+        np.max(np.maximum(ours.depth_error / ours.depth_sd, ours.velocity_error / ours.velocity_sd))
+    )
     err_ours = _rel_error(_as_array(ours), truth)
 
     previous, chosen = None, None
@@ -117,22 +140,52 @@ def main(argv=None):
     t_grid, vals = _best_time(lambda: _grid(keys, panels, order), 3)
     err_grid = _rel_error(vals, truth)
 
-    rows = [("1-D route, Eqs. (14)-(16), one batch", f"{t_ours * 1e3:.2f} ms",
-             f"{err_ours:.1e} (estimate {est:.1e})", "1")]
-    rows.append((f"3-D Gauss-Legendre grid of Eq. (6) ({panels} x 8 depth, {order}^2 (x, v) nodes)",
-                 f"{t_grid * 1e3:.0f} ms", f"{err_grid:.1e}", f"{t_grid / t_ours:,.0f}"))
+    rows = [
+        (
+            "1-D route, Eqs. (14)-(16), one batch",
+            f"{t_ours * 1e3:.2f} ms",
+            f"{err_ours:.1e} (estimate {est:.1e})",
+            "1",
+        )
+    ]
+    rows.append(
+        (
+            f"3-D Gauss-Legendre grid of Eq. (6) ({panels} x 8 depth, {order}^2 (x, v) nodes)",
+            f"{t_grid * 1e3:.0f} ms",
+            f"{err_grid:.1e}",
+            f"{t_grid / t_ours:,.0f}",
+        )
+    )
     if args.nquad:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", integrate.IntegrationWarning)
             t_nq, err_nq = _best_time(_nquad_normaliser, 1)
         total = 25 * t_nq
-        rows.append(("scipy nquad of Eq. (6), epsrel 1e-9: 1 integral (Figure 2's normaliser)",
-                     f"{t_nq:.1f} s", f"{err_nq:.1e} (relative)", f"{t_nq / t_ours:,.0f}"))
-        rows.append(("  x 25 integrals (5 moments x 5 scenarios), extrapolated",
-                     f"{total:.0f} s", "-", f"{total / t_ours:,.0f}"))
+        rows.append(
+            (
+                "scipy nquad of Eq. (6), epsrel 1e-9: 1 integral (Figure 2's normaliser)",
+                f"{t_nq:.1f} s",
+                f"{err_nq:.1e} (relative)",
+                f"{t_nq / t_ours:,.0f}",
+            )
+        )
+        rows.append(
+            (
+                "  x 25 integrals (5 moments x 5 scenarios), extrapolated",
+                f"{total:.0f} s",
+                "-",
+                f"{total / t_ours:,.0f}",
+            )
+        )
 
-    print(f"Optimal depth and velocity moments, Figures 2-6 ({len(keys)} scenarios, 4 moments each), one core")
-    widths = [max(len(r[i]) for r in rows + [("route", "time", "rel. error / SD", "ratio")]) for i in range(4)]
+    print(
+        f"Optimal depth and velocity moments, Figures 2-6 ({len(keys)} scenarios, "
+        "4 moments each), one core"
+    )
+    widths = [
+        max(len(r[i]) for r in rows + [("route", "time", "rel. error / SD", "ratio")])
+        for i in range(4)
+    ]
     head = ("route", "time", "rel. error / SD", "ratio")
     fmt = f"| {{:<{widths[0]}}} | {{:>{widths[1]}}} | {{:>{widths[2]}}} | {{:>{widths[3]}}} |"
     print(fmt.format(*head))

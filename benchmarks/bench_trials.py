@@ -36,17 +36,31 @@ def main(argv=None):
     t_vec = time.perf_counter() - t
     n = min(args.loop, len(tr.mu))
     t = time.perf_counter()
-    single = [optimal.marginals(tr.mu[i], tr.rho, Gaussian(tr.prior_mean[i], tr.prior_cov)) for i in range(n)]
+    single = [
+        optimal.marginals(tr.mu[i], tr.rho, Gaussian(tr.prior_mean[i], tr.prior_cov))
+        for i in range(n)
+    ]
     t_loop = (time.perf_counter() - t) * len(tr.mu) / n
-    diff = max(max(abs(a.depth_mean - m.depth_mean[i]) / m.depth_sd[i],
-                   abs(a.velocity_sd - m.velocity_sd[i]) / m.velocity_sd[i]) for i, a in enumerate(single))
+    diff = max(
+        max(
+            abs(a.depth_mean - m.depth_mean[i]) / m.depth_sd[i],
+            abs(a.velocity_sd - m.velocity_sd[i]) / m.velocity_sd[i],
+        )
+        for i, a in enumerate(single)
+    )
     est = float(np.max(np.maximum(m.depth_error / m.depth_sd, m.velocity_error / m.velocity_sd)))
     print(f"Optimal depth and velocity moments for {len(tr.mu):,} trials of Figure 2, one core")
     print("| route | time | ratio |")
     print("|---|---:|---:|")
     print(f"| optimal.moments, vectorised over trials | {t_vec:.2f} s | 1 |")
-    print(f"| optimal.marginals, trial by trial ({n} timed, scaled) | {t_loop:.2f} s | {t_loop / t_vec:.1f} |")
-    print(f"largest error estimate {est:.1e} of the SD; vectorised and single routes differ by {diff:.1e} SDs")
+    print(
+        f"| optimal.marginals, trial by trial ({n} timed, scaled) | {t_loop:.2f} s "
+        f"| {t_loop / t_vec:.1f} |"
+    )
+    print(
+        f"largest error estimate {est:.1e} of the SD; "
+        f"vectorised and single routes differ by {diff:.1e} SDs"
+    )
 
 
 if __name__ == "__main__":

@@ -41,13 +41,40 @@ __version__ = "0.1.0"
 
 #: The public modules, imported on first access as attributes of the package.
 MODULES = (
-    "bank", "calibration", "ekf", "experiments", "figures", "filters", "gaussian", "inverse_depth",
-    "iterated", "kalman", "model", "optimal", "particle", "reference", "report", "reproduce",
-    "resample_move", "resampling", "scenarios", "second_order", "study", "ukf",
+    "bank",
+    "calibration",
+    "ekf",
+    "experiments",
+    "figures",
+    "filters",
+    "gaussian",
+    "inverse_depth",
+    "iterated",
+    "kalman",
+    "model",
+    "optimal",
+    "particle",
+    "reference",
+    "report",
+    "reproduce",
+    "resample_move",
+    "resampling",
+    "scenarios",
+    "second_order",
+    "study",
+    "ukf",
 )
 
-__all__ = ["Gaussian", "MODULES", "SCENARIOS", "__version__", "noise_free_state",
-           "optimal_marginals", "paper_prior", *MODULES]
+__all__ = [
+    "Gaussian",
+    "MODULES",
+    "SCENARIOS",
+    "__version__",
+    "noise_free_state",
+    "optimal_marginals",
+    "paper_prior",
+    *MODULES,
+]
 
 
 def __getattr__(name):

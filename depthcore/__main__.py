@@ -36,11 +36,15 @@ def _prior(mu, prior_mean, prior_cov) -> Gaussian:
     elif len(prior_cov) == 9:
         cov = np.array(prior_cov).reshape(3, 3)
     else:
-        raise ValueError(f"prior_cov takes 1 value (S I) or 9 (a 3 x 3 matrix), got {len(prior_cov)}")
+        raise ValueError(
+            f"prior_cov takes 1 value (S I) or 9 (a 3 x 3 matrix), got {len(prior_cov)}"
+        )
     try:
         return Gaussian(mean, cov)
     except ValueError as exc:
-        raise ValueError(str(exc).replace("cov ", "prior_cov ", 1).replace("mean ", "prior_mean ", 1)) from None
+        raise ValueError(
+            str(exc).replace("cov ", "prior_cov ", 1).replace("mean ", "prior_mean ", 1)
+        ) from None
 
 
 def _cmd_reproduce(args) -> str:
@@ -69,15 +73,24 @@ def _cmd_study(args) -> str:
 
     progress = None
     if sys.stderr.isatty():
+
         def progress(done, total):
             sys.stderr.write(f"\rstudy: {done}/{total} trials" + ("\n" if done == total else ""))
             sys.stderr.flush()
+
     truth = None if args.truth is None else np.array(args.truth)
     if args.particles < 1:
         raise ValueError(f"particles must be a positive integer, got {args.particles}")
-    result = study.study(truth=truth, rho=args.rho, trials=args.trials, seed=args.seed,
-                         prior=args.prior, names=tuple(args.filters), n_particles=args.particles,
-                         progress=progress)
+    result = study.study(
+        truth=truth,
+        rho=args.rho,
+        trials=args.trials,
+        seed=args.seed,
+        prior=args.prior,
+        names=tuple(args.filters),
+        n_particles=args.particles,
+        progress=progress,
+    )
     return json.dumps(result, indent=2) if args.json else report.format_study(result)
 
 
@@ -87,32 +100,69 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"depthcore {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
-    r = sub.add_parser("reproduce", help="moments of every filter for Figures 2-6, beside the paper's")
+    r = sub.add_parser(
+        "reproduce", help="moments of every filter for Figures 2-6, beside the paper's"
+    )
     r.add_argument("--json", action="store_true", help="print JSON instead of a table")
     r.set_defaults(run=_cmd_reproduce)
 
     e = sub.add_parser("estimate", help="moments of every filter for any three measurements")
-    e.add_argument("--mu", type=float, nargs=3, required=True, metavar=("M1", "M2", "M3"),
-                   help="the measurements mu1 mu2 mu3 (tangents of the bearings)")
+    e.add_argument(
+        "--mu",
+        type=float,
+        nargs=3,
+        required=True,
+        metavar=("M1", "M2", "M3"),
+        help="the measurements mu1 mu2 mu3 (tangents of the bearings)",
+    )
     e.add_argument("--rho", type=float, required=True, help="noise standard deviation, > 0")
-    e.add_argument("--prior-mean", type=float, nargs=3, metavar=("X", "Y", "V"),
-                   help="prior mean at time 1 (default: the paper's (c1 - 2 c3, c2 - 2, 0))")
-    e.add_argument("--prior-cov", type=float, nargs="+", metavar="S",
-                   help="prior covariance: S for S I (default 1000), or 9 values row by row")
+    e.add_argument(
+        "--prior-mean",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "V"),
+        help="prior mean at time 1 (default: the paper's (c1 - 2 c3, c2 - 2, 0))",
+    )
+    e.add_argument(
+        "--prior-cov",
+        type=float,
+        nargs="+",
+        metavar="S",
+        help="prior covariance: S for S I (default 1000), or 9 values row by row",
+    )
     e.add_argument("--json", action="store_true", help="print JSON instead of a table")
     e.set_defaults(run=_cmd_estimate)
 
     st = sub.add_parser("study", help="Monte Carlo study of every filter's error and calibration")
     st.add_argument("--trials", type=int, default=500, help="number of noise draws (default 500)")
     st.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    st.add_argument("--rho", type=float, default=1 / 200, help="noise standard deviation (default 1/200)")
-    st.add_argument("--truth", type=float, nargs=3, metavar=("X", "Y", "V"),
-                    help="true state at time 3 (default: Figure 2's c = (1.2, 6, 1.2))")
-    st.add_argument("--prior", choices=("paper", "fixed"), default="paper",
-                    help="paper: the paper's rule on each trial's measurements; fixed: on the truth")
-    st.add_argument("--filters", nargs="+", default=list(_STUDY_FILTERS), choices=_STUDY_FILTERS,
-                    metavar="NAME", help=f"filters to score (default all: {' '.join(_STUDY_FILTERS)})")
-    st.add_argument("--particles", type=int, default=2000, help="particles per trial (default 2000)")
+    st.add_argument(
+        "--rho", type=float, default=1 / 200, help="noise standard deviation (default 1/200)"
+    )
+    st.add_argument(
+        "--truth",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "V"),
+        help="true state at time 3 (default: Figure 2's c = (1.2, 6, 1.2))",
+    )
+    st.add_argument(
+        "--prior",
+        choices=("paper", "fixed"),
+        default="paper",
+        help="paper: the paper's rule on each trial's measurements; fixed: on the truth",
+    )
+    st.add_argument(
+        "--filters",
+        nargs="+",
+        default=list(_STUDY_FILTERS),
+        choices=_STUDY_FILTERS,
+        metavar="NAME",
+        help=f"filters to score (default all: {' '.join(_STUDY_FILTERS)})",
+    )
+    st.add_argument(
+        "--particles", type=int, default=2000, help="particles per trial (default 2000)"
+    )
     st.add_argument("--json", action="store_true", help="print JSON instead of a table")
     st.set_defaults(run=_cmd_study)
 

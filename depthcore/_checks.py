@@ -58,8 +58,7 @@ def covariance(value, name: str, dim: int) -> np.ndarray:
         np.linalg.cholesky(arr)
     except np.linalg.LinAlgError:
         raise ValueError(
-            f"{name} must be positive definite; eigenvalues are "
-            f"{np.linalg.eigvalsh(arr).tolist()}"
+            f"{name} must be positive definite; eigenvalues are {np.linalg.eigvalsh(arr).tolist()}"
         ) from None
     return 0.5 * (arr + arr.T)
 
@@ -133,8 +132,10 @@ def covariances(value, name: str, dim: int = 3) -> np.ndarray:
     if np.any(bad):
         i = int(np.argmax(bad))
         covariance(flat[i], name + (_index(i, batch) if batch else ""), dim)
-        raise ValueError(f"{name}{_index(i, batch) if batch else ''} must be positive definite; "
-                         f"eigenvalues are {np.linalg.eigvalsh(sym[i]).tolist()}")
+        raise ValueError(
+            f"{name}{_index(i, batch) if batch else ''} must be positive definite; "
+            f"eigenvalues are {np.linalg.eigvalsh(sym[i]).tolist()}"
+        )
     return sym.reshape(arr.shape)
 
 
@@ -171,7 +172,11 @@ def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
     if not np.all(rho > 0):
         raise ValueError(f"rho must be positive, got {rho.tolist()}")
     prior_mean = finite_array(prior_mean, "prior_mean")
-    if prior_mean.ndim < 1 or prior_mean.shape[-1] != 3 or not _broadcasts(prior_mean.shape, batch + (3,)):
+    if (
+        prior_mean.ndim < 1
+        or prior_mean.shape[-1] != 3
+        or not _broadcasts(prior_mean.shape, batch + (3,))
+    ):
         allowed = "(3,)" + (f" or {batch + (3,)}" if batch else "")
         raise ValueError(f"prior_mean must have shape {allowed}, got {prior_mean.shape}")
     prior_cov = covariances(prior_cov, "prior_cov", 3)
@@ -201,8 +206,12 @@ def batch_inputs(mu, rho, prior_mean, prior_cov, triples: bool = True):
     """
     mu, rho, prior_mean, prior_cov = batch_problem(mu, rho, prior_mean, prior_cov, triples)
     batch = mu.shape[:-1]
-    return (mu, rho, np.broadcast_to(prior_mean, batch + (3,)),
-            np.broadcast_to(prior_cov, batch + (3, 3)))
+    return (
+        mu,
+        rho,
+        np.broadcast_to(prior_mean, batch + (3,)),
+        np.broadcast_to(prior_cov, batch + (3, 3)),
+    )
 
 
 def seed_sequence(seed, name: str = "seed") -> np.random.SeedSequence:
@@ -210,8 +219,9 @@ def seed_sequence(seed, name: str = "seed") -> np.random.SeedSequence:
     if isinstance(seed, np.random.SeedSequence):
         return seed
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"{name} must be a non-negative integer or a numpy.random.SeedSequence, "
-                         f"got {seed!r}")
+        raise ValueError(
+            f"{name} must be a non-negative integer or a numpy.random.SeedSequence, got {seed!r}"
+        )
     return np.random.SeedSequence(int(seed))
 
 
@@ -229,8 +239,12 @@ def spawn(seed, n: int) -> list[np.random.SeedSequence]:
     the same ``seed`` always gives the same children.
     """
     seed = seed_sequence(seed)
-    return [np.random.SeedSequence(seed.entropy, spawn_key=seed.spawn_key + (i,),
-                                   pool_size=seed.pool_size) for i in range(n)]
+    return [
+        np.random.SeedSequence(
+            seed.entropy, spawn_key=seed.spawn_key + (i,), pool_size=seed.pool_size
+        )
+        for i in range(n)
+    ]
 
 
 def count(value, name: str) -> int:

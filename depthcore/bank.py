@@ -127,8 +127,10 @@ def _nodes(nodes) -> np.ndarray:
     if nodes.ndim < 1 or nodes.shape[-1] < 1:
         raise ValueError(f"nodes must have shape (..., J) with J >= 1, got shape {nodes.shape}")
     if not np.all(nodes > 0):
-        raise ValueError(f"nodes must be positive (depths at frame 1 in front of the camera), "
-                         f"got minimum {float(np.min(nodes)):.6g}")
+        raise ValueError(
+            f"nodes must be positive (depths at frame 1 in front of the camera), "
+            f"got minimum {float(np.min(nodes)):.6g}"
+        )
     return nodes
 
 
@@ -138,8 +140,9 @@ def _finite(value, name: str) -> np.ndarray:
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name} must be numeric, got {type(value).__name__}") from exc
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {int(np.sum(~np.isfinite(arr)))} "
-                         "non-finite entries")
+        raise ValueError(
+            f"{name} must be finite, got {int(np.sum(~np.isfinite(arr)))} non-finite entries"
+        )
     return arr
 
 
@@ -267,8 +270,14 @@ def filter_bank(nodes, mu, rho, prior_mean, prior_cov, q=0.0, history: bool = Fa
     mu = _bearings(mu)
     rho, q = _noise(rho, q)
     prior_mean, prior_cov = _prior(prior_mean, prior_cov)
-    _batch(nodes=nodes.shape[:-1], mu=mu.shape[:-1], rho=rho.shape, q=q.shape,
-           prior_mean=prior_mean.shape[:-1], prior_cov=prior_cov.shape[:-2])
+    _batch(
+        nodes=nodes.shape[:-1],
+        mu=mu.shape[:-1],
+        rho=rho.shape,
+        q=q.shape,
+        prior_mean=prior_mean.shape[:-1],
+        prior_cov=prior_cov.shape[:-2],
+    )
     return _filter_bank(nodes, mu, rho, q, prior_mean, prior_cov, history)
 
 
@@ -286,11 +295,27 @@ def _filter_bank(nodes, mu, rho, q, prior_mean, prior_cov, history) -> Bank:
     start, log_prior = conditional_prior(nodes, prior_mean, prior_cov)
     # per node (axis -3 of the Kalman arrays): the prior given its depth, Phi_k = (1 / y_k, 0)
     Phi = measurement_matrices(nodes, np.arange(1, N + 1))
-    res = kalman.run(mu[..., None, :, None], start.mean, start.cov, PSI,
-                     sigma_p(q)[..., None, None, :, :], Phi, (rho**2)[..., None, None, None, None])
-    return Bank(nodes=nodes, mean=res.means[..., -1, :], cov=res.covs[..., -1, :, :],
-                log_weight=log_prior + res.log_likelihood, mu=mu, rho=rho, q=q,
-                prior_mean=prior_mean, prior_cov=prior_cov, history=res if history else None)
+    res = kalman.run(
+        mu[..., None, :, None],
+        start.mean,
+        start.cov,
+        PSI,
+        sigma_p(q)[..., None, None, :, :],
+        Phi,
+        (rho**2)[..., None, None, None, None],
+    )
+    return Bank(
+        nodes=nodes,
+        mean=res.means[..., -1, :],
+        cov=res.covs[..., -1, :, :],
+        log_weight=log_prior + res.log_likelihood,
+        mu=mu,
+        rho=rho,
+        q=q,
+        prior_mean=prior_mean,
+        prior_cov=prior_cov,
+        history=res if history else None,
+    )
 
 
 def step(bank: Bank, mu_next) -> Bank:
@@ -318,34 +343,51 @@ def step(bank: Bank, mu_next) -> Bank:
     N = bank.n_frames
     pred = kalman.predict(bank.mean, bank.cov, PSI, sigma_p(bank.q)[..., None, :, :])
     Phi = measurement_matrices(bank.nodes, [N + 1])[..., 0, :, :]
-    upd = kalman.update(pred.mean, pred.cov, mu_next[..., None, None], Phi,
-                        (bank.rho**2)[..., None, None, None])
+    upd = kalman.update(
+        pred.mean, pred.cov, mu_next[..., None, None], Phi, (bank.rho**2)[..., None, None, None]
+    )
     mu = _extend(bank.mu, mu_next)
     history = bank.history
     if history is not None:
         history = _append(history, pred, upd)
-    return bank._replace(mean=upd.mean, cov=upd.cov, mu=mu, history=history,
-                         log_weight=bank.log_weight + upd.log_likelihood)
+    return bank._replace(
+        mean=upd.mean,
+        cov=upd.cov,
+        mu=mu,
+        history=history,
+        log_weight=bank.log_weight + upd.log_likelihood,
+    )
 
 
 def _extend(mu, mu_next):
     shape = np.broadcast_shapes(mu.shape[:-1], mu_next.shape)
-    return np.concatenate([np.broadcast_to(mu, shape + mu.shape[-1:]),
-                           np.broadcast_to(mu_next, shape)[..., None]], axis=-1)
+    return np.concatenate(
+        [np.broadcast_to(mu, shape + mu.shape[-1:]), np.broadcast_to(mu_next, shape)[..., None]],
+        axis=-1,
+    )
 
 
 def _append(history: kalman.FilterResult, pred, upd) -> kalman.FilterResult:
-    new = {"means": upd.mean, "covs": upd.cov, "predicted_means": pred.mean,
-           "predicted_covs": pred.cov, "log_likelihoods": upd.log_likelihood}
+    new = {
+        "means": upd.mean,
+        "covs": upd.cov,
+        "predicted_means": pred.mean,
+        "predicted_covs": pred.cov,
+        "log_likelihoods": upd.log_likelihood,
+    }
     core = {"means": 1, "predicted_means": 1, "covs": 2, "predicted_covs": 2, "log_likelihoods": 0}
     out = {}
-    for k, old in zip(history._fields, history):
+    for k, old in zip(history._fields, history, strict=True):
         c = core[k]
         item = np.expand_dims(new[k], axis=-1 - c)
-        batch = np.broadcast_shapes(old.shape[:old.ndim - c - 1], item.shape[:item.ndim - c - 1])
-        out[k] = np.concatenate([np.broadcast_to(old, batch + old.shape[old.ndim - c - 1:]),
-                                 np.broadcast_to(item, batch + item.shape[item.ndim - c - 1:])],
-                                axis=-1 - c)
+        batch = np.broadcast_shapes(old.shape[: old.ndim - c - 1], item.shape[: item.ndim - c - 1])
+        out[k] = np.concatenate(
+            [
+                np.broadcast_to(old, batch + old.shape[old.ndim - c - 1 :]),
+                np.broadcast_to(item, batch + item.shape[item.ndim - c - 1 :]),
+            ],
+            axis=-1 - c,
+        )
     return kalman.FilterResult(**out)
 
 
@@ -469,8 +511,10 @@ class Mixture:
         try:
             np.broadcast_shapes(value.shape[:-1], batch)
         except ValueError:
-            raise ValueError(f"{name} must have shape (..., K) with leading axes broadcasting "
-                             f"with {batch}, got shape {value.shape}") from None
+            raise ValueError(
+                f"{name} must have shape (..., K) with leading axes broadcasting "
+                f"with {batch}, got shape {value.shape}"
+            ) from None
         return value, (lambda out: out)
 
     def depth_log_pdf(self, y) -> np.ndarray:
@@ -487,8 +531,9 @@ class Mixture:
         b = self.bank
         y1 = y - (b.n_frames - 1)
         inside = y1 > 0
-        log_w = _filter_bank(np.where(inside, y1, 1.0), b.mu, b.rho, b.q, b.prior_mean,
-                             b.prior_cov, False).log_weight
+        log_w = _filter_bank(
+            np.where(inside, y1, 1.0), b.mu, b.rho, b.q, b.prior_mean, b.prior_cov, False
+        ).log_weight
         return restore(np.where(inside, log_w - self.log_normaliser[..., None], -np.inf))
 
     def depth_pdf(self, y) -> np.ndarray:
@@ -617,9 +662,12 @@ class Mixture:
             res = _filter_bank(b.nodes, b.mu, b.rho, b.q, b.prior_mean, b.prior_cov, True).history
         s = kalman.fixed_interval_smoother(res, PSI)  # (..., J, N, 2), (..., J, N, 2, 2)
         frames = np.arange(b.n_frames)
-        mean, cov = _mixture_moments(self.probabilities[..., None, :],
-                                     np.swapaxes(s.mean, -2, -3), np.swapaxes(s.cov, -3, -4),
-                                     b.nodes[..., None, :] + frames[:, None])
+        mean, cov = _mixture_moments(
+            self.probabilities[..., None, :],
+            np.swapaxes(s.mean, -2, -3),
+            np.swapaxes(s.cov, -3, -4),
+            b.nodes[..., None, :] + frames[:, None],
+        )
         return Smoothed(mean, cov)
 
 
@@ -659,8 +707,10 @@ def mixture(bank: Bank, weights) -> Mixture:
     try:
         np.broadcast_shapes(weights.shape, bank.nodes.shape)
     except ValueError:
-        raise ValueError(f"weights must broadcast with the nodes' shape {bank.nodes.shape}, "
-                         f"got shape {weights.shape}") from None
+        raise ValueError(
+            f"weights must broadcast with the nodes' shape {bank.nodes.shape}, "
+            f"got shape {weights.shape}"
+        ) from None
     log_weights = np.log(weights)
     a = bank.log_weight + log_weights
     log_normaliser = logsumexp(a, axis=-1)
@@ -680,8 +730,9 @@ class Simulation(NamedTuple):
     mu: np.ndarray
 
 
-def simulate(x1, n_frames: int, rho, q, rng: np.random.Generator,
-             size: int | None = None) -> Simulation:
+def simulate(
+    x1, n_frames: int, rho, q, rng: np.random.Generator, size: int | None = None
+) -> Simulation:
     """Draw a track of ``N`` frames with lateral process noise, and its noisy bearings.
 
     ``y_{k+1} = y_k + 1``, ``x_{k+1} = x_k + v_k``, ``v_{k+1} = v_k + a_k`` with
@@ -710,8 +761,10 @@ def simulate(x1, n_frames: int, rho, q, rng: np.random.Generator,
     if x1.ndim < 1 or x1.shape[-1] != 3:
         raise ValueError(f"x1 must have shape (..., 3), got shape {x1.shape}")
     if not np.all(x1[..., 1] > 0):
-        raise ValueError(f"x1 puts the point behind the camera: depth y_1 must be > 0, "
-                         f"got minimum {float(np.min(x1[..., 1])):.6g}")
+        raise ValueError(
+            f"x1 puts the point behind the camera: depth y_1 must be > 0, "
+            f"got minimum {float(np.min(x1[..., 1])):.6g}"
+        )
     if isinstance(n_frames, bool) or not isinstance(n_frames, (int, np.integer)) or n_frames < 1:
         raise ValueError(f"n_frames must be an integer >= 1, got {n_frames!r}")
     rho, q = _noise(rho, q)
@@ -723,8 +776,9 @@ def simulate(x1, n_frames: int, rho, q, rng: np.random.Generator,
     lead = ((size,) if size is not None else ()) + x1.shape[:-1]
     a = q * rng.standard_normal(lead + (n_frames - 1,))
     v = x1[..., 2, None] + np.concatenate([np.zeros(lead + (1,)), np.cumsum(a, axis=-1)], axis=-1)
-    x = x1[..., 0, None] + np.concatenate([np.zeros(lead + (1,)), np.cumsum(v[..., :-1], axis=-1)],
-                                          axis=-1)
+    x = x1[..., 0, None] + np.concatenate(
+        [np.zeros(lead + (1,)), np.cumsum(v[..., :-1], axis=-1)], axis=-1
+    )
     y = np.broadcast_to(x1[..., 1, None] + np.arange(n_frames), x.shape)
     states = np.stack([x, y, v], axis=-1)
     mu = x / y + rho * rng.standard_normal(lead + (n_frames,))

@@ -70,8 +70,9 @@ class PriorDraws:
     n_rejected: int
 
 
-def draw_from_prior(prior_mean, prior_cov, rho: float, n: int, rng: np.random.Generator,
-                    max_rounds: int = 100) -> PriorDraws:
+def draw_from_prior(
+    prior_mean, prior_cov, rho: float, n: int, rng: np.random.Generator, max_rounds: int = 100
+) -> PriorDraws:
     """Draw ``n`` truths from ``N(m, P)`` with ``y_1 > 0`` and simulate their bearings.
 
     Parameters
@@ -160,9 +161,13 @@ def uniformity(pit, bins: int = BINS) -> dict:
     ks = stats.kstest(u, "uniform")
     counts = np.histogram(u, bins=bins, range=(0.0, 1.0))[0]
     chi2 = stats.chisquare(counts)
-    return {"ks_statistic": float(ks.statistic), "ks_pvalue": float(ks.pvalue),
-            "chi2_statistic": float(chi2.statistic), "chi2_pvalue": float(chi2.pvalue),
-            "counts": counts.tolist()}
+    return {
+        "ks_statistic": float(ks.statistic),
+        "ks_pvalue": float(ks.pvalue),
+        "chi2_statistic": float(chi2.statistic),
+        "chi2_pvalue": float(chi2.pvalue),
+        "counts": counts.tolist(),
+    }
 
 
 @dataclass(frozen=True)
@@ -194,8 +199,15 @@ class SelfCalibration:
         return out
 
 
-def self_calibration(prior_mean, prior_cov, rho: float, trials: int, rng: np.random.Generator,
-                     filter_rho: float | None = None, chunk: int = 256) -> SelfCalibration:
+def self_calibration(
+    prior_mean,
+    prior_cov,
+    rho: float,
+    trials: int,
+    rng: np.random.Generator,
+    filter_rho: float | None = None,
+    chunk: int = 256,
+) -> SelfCalibration:
     """Simulation-based calibration of the optimal filter, Eqs. (6) and (13)-(16).
 
     Parameters
@@ -226,5 +238,6 @@ def self_calibration(prior_mean, prior_cov, rho: float, trials: int, rng: np.ran
         ref = optimal.batch_marginals(draws.mu[part], filter_rho, prior_mean, prior_cov)
         depth.append(ref.depth_cdf(draws.truth[part, 1]))
         velocity.append(ref.velocity_cdf(draws.truth[part, 2]))
-    return SelfCalibration(draws, float(rho), float(filter_rho), np.concatenate(depth),
-                           np.concatenate(velocity))
+    return SelfCalibration(
+        draws, float(rho), float(filter_rho), np.concatenate(depth), np.concatenate(velocity)
+    )

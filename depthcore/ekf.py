@@ -187,7 +187,9 @@ def _update_information(n, R, mu, rho):
     innovation = np.asarray(mu, dtype=float) - n[..., 0] / n[..., 1]
     stacked = np.concatenate([R, (h / rho[..., None])[..., None, :]], axis=-2)  # (..., 4, 3)
     Q, R_new = np.linalg.qr(stacked)
-    delta = np.linalg.solve(R_new, (Q[..., 3, :] * (innovation / rho)[..., None])[..., None])[..., 0]
+    delta = np.linalg.solve(R_new, (Q[..., 3, :] * (innovation / rho)[..., None])[..., None])[
+        ..., 0
+    ]
     return n + delta, R_new
 
 

@@ -49,13 +49,21 @@ def _compare(mu, rho, pm, pc) -> dict:
     The optimal filter and every Gaussian filter of :data:`depthcore.filters.FILTERS`.
     """
     reference = FILTERS["optimal"](mu, rho, pm, pc)
-    out = {"optimal": {"depth_mean": reference.depth_mean, "depth_sd": reference.depth_sd,
-                       "hellinger": np.zeros(len(mu))}}
+    out = {
+        "optimal": {
+            "depth_mean": reference.depth_mean,
+            "depth_sd": reference.depth_sd,
+            "hellinger": np.zeros(len(mu)),
+        }
+    }
     for name, f in FILTERS.items():
         if f.family == "gaussian":
             est = f(mu, rho, pm, pc)
-            out[name] = {"depth_mean": est.depth_mean, "depth_sd": est.depth_sd,
-                         "hellinger": study.gaussian_hellinger(reference.detail, est.mean, est.cov)}
+            out[name] = {
+                "depth_mean": est.depth_mean,
+                "depth_sd": est.depth_sd,
+                "hellinger": study.gaussian_hellinger(reference.detail, est.mean, est.cov),
+            }
     return out
 
 
@@ -85,8 +93,9 @@ def noise_sweep(rhos, truth=None, prior_scale: float = PAPER_PRIOR_SCALE) -> dic
     return {"rho": rhos, **_compare(mu, rhos, pm, prior_scale * np.eye(3))}
 
 
-def prior_offset_sweep(offsets, mu=None, rho: float | None = None,
-                       prior_scale: float = PAPER_PRIOR_SCALE) -> dict:
+def prior_offset_sweep(
+    offsets, mu=None, rho: float | None = None, prior_scale: float = PAPER_PRIOR_SCALE
+) -> dict:
     """Each filter's depth estimate as the prior mean's depth moves (Figure 6 generalised).
 
     The prior mean is ``(c1 - 2 c3, c2 - 2 + offset, 0)``.
@@ -122,8 +131,9 @@ def prior_offset_sweep(offsets, mu=None, rho: float | None = None,
 NOISE_STUDY_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
 
 
-def noise_study(rhos, trials: int, seed, names=("optimal", "second_order", "ekf", "ukf"),
-                prior: str = "paper") -> dict:
+def noise_study(
+    rhos, trials: int, seed, names=("optimal", "second_order", "ekf", "ukf"), prior: str = "paper"
+) -> dict:
     """:func:`depthcore.study.study` at each noise level, its depth scores gathered.
 
     Parameters
@@ -145,8 +155,10 @@ def noise_study(rhos, trials: int, seed, names=("optimal", "second_order", "ekf"
         and ``"hellinger"`` (the mean Hellinger distance of the depth marginal).
     """
     rhos = np.atleast_1d(_checks.positive_array(rhos, "rhos"))
-    runs = [study.study(rho=float(r), trials=trials, seed=seed, prior=prior, names=tuple(names))
-            for r in rhos]
+    runs = [
+        study.study(rho=float(r), trials=trials, seed=seed, prior=prior, names=tuple(names))
+        for r in rhos
+    ]
     out = {"rho": rhos, "valid_trials": np.array([r["valid_trials"] for r in runs])}
     for name in names:
         f = [r["filters"][name] for r in runs]
@@ -161,8 +173,12 @@ def noise_study(rhos, trials: int, seed, names=("optimal", "second_order", "ekf"
 
 def _sizes(sizes) -> np.ndarray:
     sizes = np.atleast_1d(np.asarray(sizes))
-    if sizes.ndim != 1 or sizes.size < 1 or not np.issubdtype(sizes.dtype, np.integer) \
-            or np.any(sizes < 1):
+    if (
+        sizes.ndim != 1
+        or sizes.size < 1
+        or not np.issubdtype(sizes.dtype, np.integer)
+        or np.any(sizes < 1)
+    ):
         raise ValueError(f"sizes must be positive integers, got {sizes!r}")
     return sizes.astype(int)
 
@@ -180,8 +196,9 @@ def _run_repeats(scenario: Scenario, n: int, repeats: int, rng, kwargs: dict):
     return np.concatenate(moments), np.concatenate(ess)
 
 
-def particle_convergence(scenario: Scenario, sizes, repeats: int, seed,
-                         settings: dict | None = None) -> dict:
+def particle_convergence(
+    scenario: Scenario, sizes, repeats: int, seed, settings: dict | None = None
+) -> dict:
     """Root-mean-square errors of the particle filter's moments against ``N``.
 
     Each setting runs ``repeats`` independent filters on the scenario's
@@ -228,8 +245,13 @@ def particle_convergence(scenario: Scenario, sizes, repeats: int, seed,
         err = np.array(err)
         rmse[name] = {m: err[:, i] for i, m in enumerate(MOMENTS)}
         ess[name] = np.array(frac)
-    return {"sizes": sizes, "repeats": int(repeats),
-            "exact": {m: float(v) for m, v in zip(MOMENTS, exact, strict=True)}, "rmse": rmse, "ess": ess}
+    return {
+        "sizes": sizes,
+        "repeats": int(repeats),
+        "exact": {m: float(v) for m, v in zip(MOMENTS, exact, strict=True)},
+        "rmse": rmse,
+        "ess": ess,
+    }
 
 
 # --- the first update of the EKF and the UKF -------------------------------------------------

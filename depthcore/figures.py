@@ -28,12 +28,24 @@ STYLE = {name: f.plot_style for name, f in _filters.FILTERS.items()}
 #: Legend labels and line styles of the particle filter's settings,
 #: :data:`depthcore.experiments.SETTINGS`.
 SETTING_STYLE = {
-    "default": {"label": "t proposal from $p_s$, no resampling (default)",
-                "color": "tab:purple", "linestyle": "-", "marker": "o"},
-    "resampling": {"label": "same, resampling when ESS < N/2",
-                   "color": "tab:orange", "linestyle": "--", "marker": "s"},
-    "bootstrap": {"label": "bootstrap: particles from the prior",
-                  "color": "0.45", "linestyle": ":", "marker": "^"},
+    "default": {
+        "label": "t proposal from $p_s$, no resampling (default)",
+        "color": "tab:purple",
+        "linestyle": "-",
+        "marker": "o",
+    },
+    "resampling": {
+        "label": "same, resampling when ESS < N/2",
+        "color": "tab:orange",
+        "linestyle": "--",
+        "marker": "s",
+    },
+    "bootstrap": {
+        "label": "bootstrap: particles from the prior",
+        "color": "0.45",
+        "linestyle": ":",
+        "marker": "^",
+    },
 }
 #: Axis ranges comparable with the paper's plots.
 GRIDS = {
@@ -90,10 +102,18 @@ def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
         peak = max(np.max(curves[f]) for f in filters)
         ax.set_ylim(0, YLIM[key])
         if peak > YLIM[key]:
-            ax.annotate(f"EKF peak truncated (height {peak:.2f})", xy=(0.98, 0.95),
-                        xycoords="axes fraction", ha="right", va="top", fontsize=9)
+            ax.annotate(
+                f"EKF peak truncated (height {peak:.2f})",
+                xy=(0.98, 0.95),
+                xycoords="axes fraction",
+                ha="right",
+                va="top",
+                fontsize=9,
+            )
     extended = "extended " if set(filters) - set(_filters.PAPER_FILTERS) else ""
-    ax.set_title(f"Figure {s.figure} ({extended}reproduction): {caption(key)}", fontsize=9, wrap=True)
+    ax.set_title(
+        f"Figure {s.figure} ({extended}reproduction): {caption(key)}", fontsize=9, wrap=True
+    )
     return fig
 
 
@@ -102,8 +122,10 @@ def caption(key: str) -> str:
     s = SCENARIOS[key]
     mu = ", ".join(f"{m:g}" for m in s.mu)
     prior = s.prior.mean
-    return (f"{s.quantity} marginals, mu = ({mu}), rho = 1/{1 / s.rho:.0f}, "
-            f"prior mean ({prior[0]:g}, {prior[1]:g}, {prior[2]:g}), covariance 1000 I")
+    return (
+        f"{s.quantity} marginals, mu = ({mu}), rho = 1/{1 / s.rho:.0f}, "
+        f"prior mean ({prior[0]:g}, {prior[1]:g}, {prior[2]:g}), covariance 1000 I"
+    )
 
 
 def save_all(out_dir, formats=("pdf", "png", "svg")) -> list[Path]:
@@ -155,20 +177,29 @@ def readings_figure(key: str, y_max: float = 150.0, n: int = 1201):
     y_max = _checks.positive_scalar(y_max - 2.0, "y_max - 2") + 2.0
     y = np.linspace(2.0, y_max, n)[1:]
     fig, ax = plt.subplots(figsize=(6.4, 3.6), layout="constrained")
-    styles = {"derived": ("black", "-", "from Eq. (6)"),
-              "printed": ("tab:orange", "--", "Eq. (16) as printed")}
+    styles = {
+        "derived": ("black", "-", "from Eq. (6)"),
+        "printed": ("tab:orange", "--", "Eq. (16) as printed"),
+    }
     for reading, (color, linestyle, label) in styles.items():
         m = _filters.optimal.marginals(s.mu, s.rho, s.prior, reading=reading)
-        ax.plot(y, m.depth_pdf(y), color=color, linestyle=linestyle, linewidth=1.6,
-                label=f"{label} (mean {m.depth_mean:.2f})")
+        ax.plot(
+            y,
+            m.depth_pdf(y),
+            color=color,
+            linestyle=linestyle,
+            linewidth=1.6,
+            label=f"{label} (mean {m.depth_mean:.2f})",
+        )
         ax.axvline(m.depth_mean, color=color, linestyle=":", linewidth=1.0)
     ax.set_xlabel("depth $y$ at time 3")
     ax.set_ylabel("optimal marginal density of $y$")
     ax.set_xlim(0.0, y_max)
     ax.set_ylim(bottom=0.0)
     ax.legend(frameon=False)
-    ax.set_title(f"Figure {s.figure}'s measurements: the optimal depth marginal, two readings",
-                 fontsize=10)
+    ax.set_title(
+        f"Figure {s.figure}'s measurements: the optimal depth marginal, two readings", fontsize=10
+    )
     return fig
 
 
@@ -198,20 +229,36 @@ def first_update_figure(update: dict, extent: float = 70.0):
 
     fig, ax = plt.subplots(figsize=(6.4, 7.0), layout="constrained")
     y = np.array([-extent, extent])
-    ax.plot(update["mu1"] * y, y, color="0.6", linewidth=1,
-            label=r"bearing of $\mu_1$: $x = \mu_1 y$")
+    ax.plot(
+        update["mu1"] * y, y, color="0.6", linewidth=1, label=r"bearing of $\mu_1$: $x = \mu_1 y$"
+    )
     ax.axhline(0.0, color="0.85", linewidth=0.8)
     ax.plot([0], [0], marker="^", color="black", linestyle="none", label="camera")
     prior = update["prior"]
-    ax.plot(*_ellipse(prior.mean[:2], prior.cov[:2, :2]).T, color="0.6", linestyle="--",
-            linewidth=1, label="prior, 2 SD")
+    ax.plot(
+        *_ellipse(prior.mean[:2], prior.cov[:2, :2]).T,
+        color="0.6",
+        linestyle="--",
+        linewidth=1,
+        label="prior, 2 SD",
+    )
     X = update["sigma_points"]
-    ax.plot(X[:, 0], X[:, 1], marker="o", color="tab:green", linestyle="none",
-            label="UKF sigma points of the prior")
+    ax.plot(
+        X[:, 0],
+        X[:, 1],
+        marker="o",
+        color="tab:green",
+        linestyle="none",
+        label="UKF sigma points of the prior",
+    )
     for name in ("ekf", "ukf"):
         mean, cov = update[name]
-        ax.plot(*_ellipse(mean[:2], cov[:2, :2]).T, color=STYLE[name]["color"],
-                linewidth=2, label=f"{STYLE[name]['label']} after $\\mu_1$, 2 SD")
+        ax.plot(
+            *_ellipse(mean[:2], cov[:2, :2]).T,
+            color=STYLE[name]["color"],
+            linewidth=2,
+            label=f"{STYLE[name]['label']} after $\\mu_1$, 2 SD",
+        )
     ax.set_xlim(-extent, extent)
     ax.set_ylim(-extent, extent)
     ax.set_box_aspect(1)  # square box and equal limits: equal scales
@@ -246,10 +293,21 @@ def convergence_figure(result: dict, quantity: str = "depth"):
     fig, axes = plt.subplots(1, 2, figsize=(9.6, 4.8), layout="constrained", sharey=True)
     for ax, moment, title in zip(axes, ("mean", "sd"), ("mean", "SD"), strict=True):
         for name, err in result["rmse"].items():
-            ax.plot(N, err[f"{quantity}_{moment}"], markersize=4,
-                    **SETTING_STYLE.get(name, {"label": name}))
-        ax.plot(N, ideal, color="0.7", linewidth=3, alpha=0.6, zorder=0,
-                label=r"posterior SD$/\sqrt{N}$")
+            ax.plot(
+                N,
+                err[f"{quantity}_{moment}"],
+                markersize=4,
+                **SETTING_STYLE.get(name, {"label": name}),
+            )
+        ax.plot(
+            N,
+            ideal,
+            color="0.7",
+            linewidth=3,
+            alpha=0.6,
+            zorder=0,
+            label=r"posterior SD$/\sqrt{N}$",
+        )
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("number of particles $N$")
@@ -277,10 +335,10 @@ def noise_study_figure(result: dict):
     fig, axes = plt.subplots(1, 2, figsize=(9.6, 4.0), layout="constrained")
     names = [n for n in _filters.NAMES if n in result]
     for name in names:
-        axes[0].plot(result["rho"], result[name]["coverage_68"], marker="o", markersize=3,
-                     **STYLE[name])
-        axes[1].plot(result["rho"], result[name]["rmse"], marker="o", markersize=3,
-                     **STYLE[name])
+        axes[0].plot(
+            result["rho"], result[name]["coverage_68"], marker="o", markersize=3, **STYLE[name]
+        )
+        axes[1].plot(result["rho"], result[name]["rmse"], marker="o", markersize=3, **STYLE[name])
     axes[0].axhline(0.68, color="0.7", linewidth=1, label="calibrated: 0.68")
     axes[0].set_ylim(0, 1.02)
     axes[0].set_ylabel("fraction of trials whose true depth\nthe central 68 % interval covers")
@@ -312,7 +370,12 @@ def profile_figure(mu, rhos, depths):
     f = model.profile_misfit(mu, depths)
     fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
     for rho in np.atleast_1d(_checks.positive_array(rhos, "rhos")):
-        ax.plot(depths, np.exp(-f / (2.0 * rho**2)), linewidth=1.6, label=f"rho = {report.rho_label(rho)}")
+        ax.plot(
+            depths,
+            np.exp(-f / (2.0 * rho**2)),
+            linewidth=1.6,
+            label=f"rho = {report.rho_label(rho)}",
+        )
     ax.set_xscale("log")
     ax.set_xlabel("depth $y$ at time 3")
     ax.set_ylabel("profile likelihood of the depth\n(relative to its maximum)")
@@ -346,8 +409,11 @@ def calibration(result: dict, quantity: str = "depth"):
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1)
     ax.legend(frameon=False, fontsize=8)
-    ax.set_title(f"{quantity}: {result['valid_trials']} trials, rho = {result['rho']:.4g}, "
-                 f"{result['prior']} prior", fontsize=9)
+    ax.set_title(
+        f"{quantity}: {result['valid_trials']} trials, rho = {result['rho']:.4g}, "
+        f"{result['prior']} prior",
+        fontsize=9,
+    )
     return fig
 
 
@@ -370,8 +436,11 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False):
     import matplotlib.pyplot as plt
 
     labels = {"rho": "noise level rho (radians)", "offset": "offset of the prior's depth"}
-    ylabels = {"hellinger": "Hellinger distance of the depth marginal to the optimal one",
-               "depth_mean": "depth mean", "depth_sd": "depth SD"}
+    ylabels = {
+        "hellinger": "Hellinger distance of the depth marginal to the optimal one",
+        "depth_mean": "depth mean",
+        "depth_sd": "depth SD",
+    }
     fig, ax = plt.subplots(figsize=(6.0, 4.0), layout="constrained")
     for name in _filters.NAMES:
         if name in result and not (field == "hellinger" and name == "optimal"):
@@ -422,21 +491,51 @@ def translating_point(x3=None, n: int = 3):
     reach = float(np.max(states[:, 1])) + 0.8
     wide = max(float(np.max(np.abs(states[:, 0]))), float(np.max(np.abs(mu)))) + 0.8
     ax.plot(states[:, 0], states[:, 1], color="0.55", linewidth=1, linestyle="--", zorder=1)
-    ax.annotate("", xy=states[-1, :2] + 0.45 * np.array([states[-1, 2], 1.0]), xytext=states[-1, :2],
-                arrowprops={"arrowstyle": "->", "color": "0.3"})
-    ax.annotate("velocity $(v, 1)$", xy=states[-1, :2] + 0.45 * np.array([states[-1, 2], 1.0]),
-                xytext=(6, 0), textcoords="offset points", fontsize=9, va="center")
+    ax.annotate(
+        "",
+        xy=states[-1, :2] + 0.45 * np.array([states[-1, 2], 1.0]),
+        xytext=states[-1, :2],
+        arrowprops={"arrowstyle": "->", "color": "0.3"},
+    )
+    ax.annotate(
+        "velocity $(v, 1)$",
+        xy=states[-1, :2] + 0.45 * np.array([states[-1, 2], 1.0]),
+        xytext=(6, 0),
+        textcoords="offset points",
+        fontsize=9,
+        va="center",
+    )
     ax.axhline(1.0, color="tab:blue", linewidth=1)
-    ax.annotate("image line $y = 1$", xy=(wide, 1.0), xytext=(-2, 4), textcoords="offset points",
-                fontsize=9, color="tab:blue", ha="right")
-    for i, (state, m) in enumerate(zip(states, mu), start=1):
+    ax.annotate(
+        "image line $y = 1$",
+        xy=(wide, 1.0),
+        xytext=(-2, 4),
+        textcoords="offset points",
+        fontsize=9,
+        color="tab:blue",
+        ha="right",
+    )
+    for i, (state, m) in enumerate(zip(states, mu, strict=True), start=1):
         ax.plot([0.0, state[0]], [0.0, state[1]], color="tab:red", linewidth=1, zorder=2)
         ax.plot(state[0], state[1], "o", color="black", markersize=5, zorder=3)
-        ax.annotate(f"$(x_{i}, y_{i})$", xy=state[:2], xytext=(-8, 6), textcoords="offset points",
-                    fontsize=9, ha="right")
+        ax.annotate(
+            f"$(x_{i}, y_{i})$",
+            xy=state[:2],
+            xytext=(-8, 6),
+            textcoords="offset points",
+            fontsize=9,
+            ha="right",
+        )
         ax.plot(m, 1.0, "|", color="tab:red", markersize=10, markeredgewidth=1.5, zorder=3)
-        ax.annotate(f"$\\mu_{i}$", xy=(m, 1.0), xytext=(0, -16), textcoords="offset points",
-                    fontsize=9, color="tab:red", ha="center")
+        ax.annotate(
+            f"$\\mu_{i}$",
+            xy=(m, 1.0),
+            xytext=(0, -16),
+            textcoords="offset points",
+            fontsize=9,
+            color="tab:red",
+            ha="center",
+        )
     ax.plot(0.0, 0.0, marker="^", color="black", markersize=9)
     ax.annotate("camera", xy=(0.0, 0.0), xytext=(8, -4), textcoords="offset points", fontsize=9)
     ax.set_xlim(-wide, wide)

@@ -85,7 +85,10 @@ class Estimate:
     extras: dict = field(default_factory=dict)
 
     def moments(self, quantity: str) -> dict:
-        """``{"mean", "sd"}`` of ``"depth"`` or ``"velocity"``, with ``"error"`` where there is one."""
+        """``{"mean", "sd"}`` of ``"depth"`` or ``"velocity"``.
+
+        Includes ``"error"`` where there is one.
+        """
         _quantity(quantity)
         out = {"mean": getattr(self, f"{quantity}_mean"), "sd": getattr(self, f"{quantity}_sd")}
         error = getattr(self, f"{quantity}_error")
@@ -166,8 +169,9 @@ def _prior(prior_mean, prior_cov) -> Gaussian:
     try:
         return Gaussian(prior_mean, prior_cov)
     except ValueError as exc:
-        raise ValueError(str(exc).replace("cov ", "prior_cov ", 1)
-                         .replace("mean ", "prior_mean ", 1)) from None
+        raise ValueError(
+            str(exc).replace("cov ", "prior_cov ", 1).replace("mean ", "prior_mean ", 1)
+        ) from None
 
 
 def _gaussian_estimate(mean, cov, detail) -> Estimate:
@@ -178,12 +182,28 @@ def _gaussian_estimate(mean, cov, detail) -> Estimate:
         g = Gaussian(mean, cov)
         (dm, ds), (vm, vs) = g.marginal("y"), g.marginal("v")
         return Estimate(dm, ds, vm, vs, None, None, g.mean, g.cov, detail)
-    return Estimate(mean[..., 1], np.sqrt(cov[..., 1, 1]), mean[..., 2], np.sqrt(cov[..., 2, 2]),
-                    None, None, mean, cov, detail)
+    return Estimate(
+        mean[..., 1],
+        np.sqrt(cov[..., 1, 1]),
+        mean[..., 2],
+        np.sqrt(cov[..., 2, 2]),
+        None,
+        None,
+        mean,
+        cov,
+        detail,
+    )
 
 
-def _optimal(mu, rho, prior_mean, prior_cov, reading: str = "derived", support: str = "front",
-             rtol: float = 1e-10) -> Estimate:
+def _optimal(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    reading: str = "derived",
+    support: str = "front",
+    rtol: float = 1e-10,
+) -> Estimate:
     """The optimal filter, Eqs. (6), (13)-(16); see :func:`depthcore.optimal.marginals`.
 
     For a batch with the default reading and support, ``detail`` is the
@@ -192,17 +212,35 @@ def _optimal(mu, rho, prior_mean, prior_cov, reading: str = "derived", support: 
     """
     if _single(mu):
         m = optimal.marginals(mu, rho, _prior(prior_mean, prior_cov), reading, support, rtol)
-        return Estimate(m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd, m.depth_error,
-                        m.velocity_error, m.mean, m.cov, m,
-                        {"prob_behind_camera": m.prob_behind_camera})
+        return Estimate(
+            m.depth_mean,
+            m.depth_sd,
+            m.velocity_mean,
+            m.velocity_sd,
+            m.depth_error,
+            m.velocity_error,
+            m.mean,
+            m.cov,
+            m,
+            {"prob_behind_camera": m.prob_behind_camera},
+        )
     if (reading, support) == ("derived", "front"):
         detail = optimal.batch_marginals(mu, rho, prior_mean, prior_cov, rtol)
         m = detail.moments
     else:
         m = detail = optimal.moments(mu, rho, prior_mean, prior_cov, reading, support, rtol)
-    return Estimate(m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd, m.depth_error,
-                    m.velocity_error, m.mean, m.cov, detail,
-                    {"prob_behind_camera": m.prob_behind_camera})
+    return Estimate(
+        m.depth_mean,
+        m.depth_sd,
+        m.velocity_mean,
+        m.velocity_sd,
+        m.depth_error,
+        m.velocity_error,
+        m.mean,
+        m.cov,
+        detail,
+        {"prob_behind_camera": m.prob_behind_camera},
+    )
 
 
 def _second_order(mu, rho, prior_mean, prior_cov, reading: str = "derived") -> Estimate:
@@ -223,23 +261,31 @@ def _ekf(mu, rho, prior_mean, prior_cov) -> Estimate:
     return _gaussian_estimate(h.means[..., -1, :], h.covs[..., -1, :, :], h)
 
 
-def _ukf(mu, rho, prior_mean, prior_cov, sigma_points: ukf.SigmaPoints = ukf.SigmaPoints(),
-         allow_behind_camera: bool = True) -> Estimate:
+def _ukf(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    sigma_points: ukf.SigmaPoints = ukf.SigmaPoints(),
+    allow_behind_camera: bool = True,
+) -> Estimate:
     """The UKF; ``detail`` is its :class:`~depthcore.gaussian.History`.
 
     By default it runs even where sigma points of the paper's broad prior lie
     behind the camera (``allow_behind_camera``): the comparison is the point.
     """
     if _single(mu):
-        h: History = ukf.ukf(mu, rho, _prior(prior_mean, prior_cov), sigma_points,
-                             allow_behind_camera)
+        h: History = ukf.ukf(
+            mu, rho, _prior(prior_mean, prior_cov), sigma_points, allow_behind_camera
+        )
     else:
         h = ukf.run(mu, rho, prior_mean, prior_cov, sigma_points, allow_behind_camera)
     return _gaussian_estimate(h.means[..., -1, :], h.covs[..., -1, :, :], h)
 
 
-def _particle(mu, rho, prior_mean, prior_cov, rng=None, n_particles: int = PARTICLES,
-              **options) -> Estimate:
+def _particle(
+    mu, rho, prior_mean, prior_cov, rng=None, n_particles: int = PARTICLES, **options
+) -> Estimate:
     """The particle filter; ``detail`` is its ParticleResult (one triple) or ParticleBatch.
 
     ``rng``, a ``numpy.random.Generator`` or a ``SeedSequence`` (or an int
@@ -248,42 +294,98 @@ def _particle(mu, rho, prior_mean, prior_cov, rng=None, n_particles: int = PARTI
     and of the SD.
     """
     if rng is None:
-        raise ValueError("rng is required to run the particle filter: pass a "
-                         "numpy.random.Generator or SeedSequence")
+        raise ValueError(
+            "rng is required to run the particle filter: pass a "
+            "numpy.random.Generator or SeedSequence"
+        )
     rng = _checks.generator(rng)
     if _single(mu):
-        r = particle.particle_filter(mu, rho, _prior(prior_mean, prior_cov), n_particles, rng,
-                                     **options)
+        r = particle.particle_filter(
+            mu, rho, _prior(prior_mean, prior_cov), n_particles, rng, **options
+        )
         m, se = r.moments(), r.standard_errors()
         mean, cov = weighted_mean_and_cov(r.particles, r.weights)
-        return Estimate(float(m.depth_mean), float(m.depth_sd), float(m.velocity_mean),
-                        float(m.velocity_sd), float(max(se.depth_mean, se.depth_sd)),
-                        float(max(se.velocity_mean, se.velocity_sd)), mean, cov, r)
+        return Estimate(
+            float(m.depth_mean),
+            float(m.depth_sd),
+            float(m.velocity_mean),
+            float(m.velocity_sd),
+            float(max(se.depth_mean, se.depth_sd)),
+            float(max(se.velocity_mean, se.velocity_sd)),
+            mean,
+            cov,
+            r,
+        )
     b = particle.run(mu, rho, prior_mean, prior_cov, n_particles, rng, **options)
     m, se = b.moments(), b.standard_errors()
     mean, cov = weighted_mean_and_cov(b.particles, np.exp(b.log_weights))
-    return Estimate(m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd,
-                    np.maximum(se.depth_mean, se.depth_sd),
-                    np.maximum(se.velocity_mean, se.velocity_sd), mean, cov, b)
+    return Estimate(
+        m.depth_mean,
+        m.depth_sd,
+        m.velocity_mean,
+        m.velocity_sd,
+        np.maximum(se.depth_mean, se.depth_sd),
+        np.maximum(se.velocity_mean, se.velocity_sd),
+        mean,
+        cov,
+        b,
+    )
 
 
 #: Every filter, in the order of the tables and legends.
 FILTERS: dict[str, Filter] = {
     f.name: f
     for f in (
-        Filter("optimal", "optimal $p_o$", {"color": "black", "linestyle": "-"}, "exact", True,
-               _optimal, tuple((r, s, {"reading": r, "support": s})
-                               for r in optimal.READINGS for s in optimal.SUPPORTS)),
-        Filter("second_order", "second order $p_s$", {"color": "tab:blue", "linestyle": "--"},
-               "gaussian", True, _second_order,
-               tuple((r, "all", {"reading": r}) for r in second_order.READINGS)),
-        Filter("ekf", "EKF $p_e$", {"color": "tab:red", "linestyle": ":"}, "gaussian", True,
-               _ekf, (("printed", "all", {}),)),
-        Filter("ukf", "UKF", {"color": "tab:green", "linestyle": "-."}, "gaussian", False,
-               _ukf, (("-", "all", {}),)),
-        Filter("particle", "particle filter",
-               {"color": "tab:purple", "linestyle": (0, (5, 1, 1, 1, 1, 1))}, "particles", False,
-               _particle, (("-", "front", {}),), random=True),
+        Filter(
+            "optimal",
+            "optimal $p_o$",
+            {"color": "black", "linestyle": "-"},
+            "exact",
+            True,
+            _optimal,
+            tuple(
+                (r, s, {"reading": r, "support": s})
+                for r in optimal.READINGS
+                for s in optimal.SUPPORTS
+            ),
+        ),
+        Filter(
+            "second_order",
+            "second order $p_s$",
+            {"color": "tab:blue", "linestyle": "--"},
+            "gaussian",
+            True,
+            _second_order,
+            tuple((r, "all", {"reading": r}) for r in second_order.READINGS),
+        ),
+        Filter(
+            "ekf",
+            "EKF $p_e$",
+            {"color": "tab:red", "linestyle": ":"},
+            "gaussian",
+            True,
+            _ekf,
+            (("printed", "all", {}),),
+        ),
+        Filter(
+            "ukf",
+            "UKF",
+            {"color": "tab:green", "linestyle": "-."},
+            "gaussian",
+            False,
+            _ukf,
+            (("-", "all", {}),),
+        ),
+        Filter(
+            "particle",
+            "particle filter",
+            {"color": "tab:purple", "linestyle": (0, (5, 1, 1, 1, 1, 1))},
+            "particles",
+            False,
+            _particle,
+            (("-", "front", {}),),
+            random=True,
+        ),
     )
 }
 

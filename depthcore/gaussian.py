@@ -212,7 +212,12 @@ def student_t(mean, scale, df: float, n: int, rng: np.random.Generator):
     else:
         factor = np.sqrt(df / rng.chisquare(df, delta.shape))
         delta = delta * factor**2  # the Mahalanobis distance of the t draw
-        log_q = (gammaln((df + dim) / 2.0) - gammaln(df / 2.0) - 0.5 * dim * np.log(df * np.pi)
-                 - log_det - 0.5 * (df + dim) * np.log1p(delta / df))
+        log_q = (
+            gammaln((df + dim) / 2.0)
+            - gammaln(df / 2.0)
+            - 0.5 * dim * np.log(df * np.pi)
+            - log_det
+            - 0.5 * (df + dim) * np.log1p(delta / df)
+        )
     x = mean[:, None, :] + factor[..., None] * np.einsum("bij,bnj->bni", L, z)
     return x, log_q

@@ -52,7 +52,9 @@ def _symmetric(cov):
 
 
 def prior(mean, cov) -> MeanAndCov:
-    """The prior ``N(m, P)`` of ``(x_1, y_1, v)`` carried to ``(a_1, w, s_1)`` by linearisation at ``m``.
+    """The prior ``N(m, P)`` of ``(x_1, y_1, v)`` carried to ``(a_1, w, s_1)``.
+
+    The prior is carried over by linearisation at ``m``.
 
     Parameters
     ----------
@@ -79,8 +81,9 @@ def prior(mean, cov) -> MeanAndCov:
     J[..., 1, 1] = -1.0 / y**2
     J[..., 2, 1] = -v / y**2
     J[..., 2, 2] = 1.0 / y
-    return MeanAndCov(np.stack([x / y, 1.0 / y, v / y], axis=-1),
-                      _symmetric(J @ P @ np.swapaxes(J, -1, -2)))
+    return MeanAndCov(
+        np.stack([x / y, 1.0 / y, v / y], axis=-1), _symmetric(J @ P @ np.swapaxes(J, -1, -2))
+    )
 
 
 def predict(z, S, process_noise: float = 0.0) -> MeanAndCov:
@@ -105,7 +108,10 @@ def predict(z, S, process_noise: float = 0.0) -> MeanAndCov:
 
 
 def observation_vector(z, k: int) -> np.ndarray:
-    """Gradient of ``a / (1 + (k - 1) w)`` at ``z = (a, w, s)``, shape (..., 3); frames count from 1."""
+    """Gradient of ``a / (1 + (k - 1) w)`` at ``z = (a, w, s)``, shape (..., 3).
+
+    Frames count from 1.
+    """
     z = np.asarray(z, dtype=float)
     D = 1.0 + (k - 1) * z[..., 1]
     return np.stack([1.0 / D, -(k - 1) * z[..., 0] / D**2, 0.0 * D], axis=-1)
@@ -139,8 +145,10 @@ def update(z, S, mu, rho, k: int) -> MeanAndCov:
     K = Sh / s[..., None]
     mean = z + (np.asarray(mu, dtype=float) - z[..., 0] / D)[..., None] * K
     A = np.eye(3) - K[..., :, None] * h[..., None, :]
-    cov = A @ S @ np.swapaxes(A, -1, -2) + np.asarray(r2)[..., None, None] * K[..., :, None] \
-        * K[..., None, :]
+    cov = (
+        A @ S @ np.swapaxes(A, -1, -2)
+        + np.asarray(r2)[..., None, None] * K[..., :, None] * K[..., None, :]
+    )
     return MeanAndCov(mean, _symmetric(cov))
 
 
@@ -175,7 +183,9 @@ def to_state(z, S, k: int) -> MeanAndCov:
     return MeanAndCov(mean, _symmetric(J @ S @ np.swapaxes(J, -1, -2)))
 
 
-def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def run(
+    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """The inverse-depth EKF over ``K`` bearings, batched, in its own coordinates.
 
     Parameters
@@ -205,7 +215,9 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> tuple[np.
         raise ValueError(f"mu must have shape (..., K) with K >= 1, got shape {mu.shape}")
     rho = _checks.positive_array(rho, "rho")
     if rho.ndim and rho.shape != mu.shape[:-1]:
-        raise ValueError(f"rho must be a scalar or have shape {mu.shape[:-1]}, got shape {rho.shape}")
+        raise ValueError(
+            f"rho must be a scalar or have shape {mu.shape[:-1]}, got shape {rho.shape}"
+        )
     q = float(_checks.finite_array(process_noise, "process_noise"))
     if q < 0:
         raise ValueError(f"process_noise must be >= 0, got {q}")

@@ -53,7 +53,6 @@ import numpy as np
 
 from . import _checks, model
 from .ekf import predict
-from .gaussian import MeanAndCov
 
 #: Largest number of Gauss-Newton iterations of one update or smoother.
 MAX_ITERATIONS = 100
@@ -72,7 +71,10 @@ class IteratedUpdate(NamedTuple):
 
 
 def _objective(x, n, C_chol, mu, r2):
-    """``|x - n|_C**2 + (mu - x1/x2)**2 / rho**2``, shape x.shape[:-1]; ``inf`` behind the camera."""
+    """``|x - n|_C**2 + (mu - x1/x2)**2 / rho**2``, shape x.shape[:-1].
+
+    ``inf`` behind the camera.
+    """
     z = np.linalg.solve(C_chol, (x - n)[..., None])[..., 0]
     front = x[..., 1] > 0
     safe = np.where(front[..., None], x, 1.0)
@@ -162,8 +164,9 @@ def _damped(x, step, f, objective):
     return np.where(keep[..., None], x, x_new), np.where(keep, f, f_new)
 
 
-def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0,
-        max_iterations: int = MAX_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
+def run(
+    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, max_iterations: int = MAX_ITERATIONS
+) -> tuple[np.ndarray, np.ndarray]:
     """The iterated EKF over ``K`` bearings, batched.
 
     Initialise with the prior, apply the iterated update to ``mu_1``, then
@@ -192,7 +195,9 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0,
         raise ValueError(f"mu must have shape (..., K) with K >= 1, got shape {mu.shape}")
     rho = _checks.positive_array(rho, "rho")
     if rho.ndim and rho.shape != mu.shape[:-1]:
-        raise ValueError(f"rho must be a scalar or have shape {mu.shape[:-1]}, got shape {rho.shape}")
+        raise ValueError(
+            f"rho must be a scalar or have shape {mu.shape[:-1]}, got shape {rho.shape}"
+        )
     q = float(_checks.finite_array(process_noise, "process_noise"))
     if q < 0:
         raise ValueError(f"process_noise must be >= 0, got {q}")
@@ -233,8 +238,9 @@ class SmootherResult(NamedTuple):
     converged: np.ndarray
 
 
-def smoother(mu, rho, prior_mean, prior_cov,
-             max_iterations: int = MAX_ITERATIONS) -> SmootherResult:
+def smoother(
+    mu, rho, prior_mean, prior_cov, max_iterations: int = MAX_ITERATIONS
+) -> SmootherResult:
     """The iterated extended Kalman smoother with no process noise, batched.
 
     Gauss-Newton passes over all ``K`` bearings, each relinearising every
@@ -288,7 +294,8 @@ def smoother(mu, rho, prior_mean, prior_cov,
         Jw = J / rho[..., None, None]
         A = P_inv + np.swapaxes(Jw, -1, -2) @ Jw
         g = np.einsum("...ij,...j->...i", P_inv, x - m) - np.einsum(
-            "...ki,...k->...i", Jw, (mu - h) / rho[..., None])
+            "...ki,...k->...i", Jw, (mu - h) / rho[..., None]
+        )
         step = -np.linalg.solve(A, g[..., None])[..., 0]
         x_new, f_new = _damped(x, step, f, objective)
         iterations = iterations + active
@@ -301,5 +308,6 @@ def smoother(mu, rho, prior_mean, prior_cov,
     cov1 = np.linalg.inv(P_inv + np.swapaxes(Jw, -1, -2) @ Jw)
     FK = model.G_linear(K - 1)
     cov = FK @ cov1 @ FK.T
-    return SmootherResult(model.G(x, K - 1), 0.5 * (cov + np.swapaxes(cov, -1, -2)), iterations,
-                          ~active)
+    return SmootherResult(
+        model.G(x, K - 1), 0.5 * (cov + np.swapaxes(cov, -1, -2)), iterations, ~active
+    )

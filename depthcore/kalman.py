@@ -126,13 +126,14 @@ def _array(value, name: str, min_ndim: int) -> np.ndarray:
     if arr.ndim < min_ndim:
         raise ValueError(f"{name} must have at least {min_ndim} dimensions, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {int(np.sum(~np.isfinite(arr)))} "
-                         "non-finite entries")
+        raise ValueError(
+            f"{name} must be finite, got {int(np.sum(~np.isfinite(arr)))} non-finite entries"
+        )
     return arr
 
 
 def _last(arr: np.ndarray, name: str, shape: tuple) -> np.ndarray:
-    if arr.shape[arr.ndim - len(shape):] != shape:
+    if arr.shape[arr.ndim - len(shape) :] != shape:
         raise ValueError(f"{name} must have trailing shape {shape}, got shape {arr.shape}")
     return arr
 
@@ -298,8 +299,10 @@ def _at(arr: np.ndarray, t: int, core: int) -> np.ndarray:
 
 def _time_axis(arr: np.ndarray, name: str, core: int, steps: int) -> None:
     if arr.ndim > core and arr.shape[-core - 1] not in (1, steps):
-        raise ValueError(f"{name} must have {steps} (or 1) entries on its time axis "
-                         f"{-core - 1}, got shape {arr.shape}")
+        raise ValueError(
+            f"{name} must have {steps} (or 1) entries on its time axis "
+            f"{-core - 1}, got shape {arr.shape}"
+        )
 
 
 def _run(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> FilterResult:
@@ -307,20 +310,22 @@ def _run(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> FilterResult:
     out = {k: [] for k in FilterResult._fields}
     for t in range(T):
         if t > 0:
-            mean, cov = _predict(mean, cov, _at(Psi, t - 1, 2), _at(Sigma_p, t - 1, 2),
-                                 _at(mu_p, t - 1, 1))
+            mean, cov = _predict(
+                mean, cov, _at(Psi, t - 1, 2), _at(Sigma_p, t - 1, 2), _at(mu_p, t - 1, 1)
+            )
         out["predicted_means"].append(mean)
         out["predicted_covs"].append(cov)
-        mean, cov, ll = _update(mean, cov, x[..., t, :], _at(Phi, t, 2), _at(Sigma_m, t, 2),
-                                _at(mu_m, t, 1))
+        mean, cov, ll = _update(
+            mean, cov, x[..., t, :], _at(Phi, t, 2), _at(Sigma_m, t, 2), _at(mu_m, t, 1)
+        )
         out["means"].append(mean)
         out["covs"].append(cov)
         out["log_likelihoods"].append(ll)
     core = {"means": 1, "predicted_means": 1, "covs": 2, "predicted_covs": 2, "log_likelihoods": 0}
-    batch = np.broadcast_shapes(*(a.shape[:a.ndim - core[k]] for k, v in out.items() for a in v))
+    batch = np.broadcast_shapes(*(a.shape[: a.ndim - core[k]] for k, v in out.items() for a in v))
     stacked = {}
     for k, v in out.items():
-        full = [np.broadcast_to(a, batch + a.shape[a.ndim - core[k]:]) for a in v]
+        full = [np.broadcast_to(a, batch + a.shape[a.ndim - core[k] :]) for a in v]
         stacked[k] = np.stack(full, axis=-1 - core[k])
     return FilterResult(**stacked)
 
@@ -335,9 +340,14 @@ def _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m):
     T, m = x.shape[-2:]
     if m != Phi.shape[-2]:
         raise ValueError(f"x must have trailing shape (T, {Phi.shape[-2]}), got shape {x.shape}")
-    for arr, name, core, steps in ((Psi, "Psi", 2, T - 1), (Sigma_p, "Sigma_p", 2, T - 1),
-                                   (mu_p, "mu_p", 1, T - 1), (Phi, "Phi", 2, T),
-                                   (Sigma_m, "Sigma_m", 2, T), (mu_m, "mu_m", 1, T)):
+    for arr, name, core, steps in (
+        (Psi, "Psi", 2, T - 1),
+        (Sigma_p, "Sigma_p", 2, T - 1),
+        (mu_p, "mu_p", 1, T - 1),
+        (Phi, "Phi", 2, T),
+        (Sigma_m, "Sigma_m", 2, T),
+        (mu_m, "mu_m", 1, T),
+    ):
         _time_axis(arr, name, core, steps)
     return x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
 
@@ -393,8 +403,9 @@ def _solve_or_pinv(A, B):
         return np.linalg.solve(A, B)
     eye = np.broadcast_to(np.eye(A.shape[-1]), A.shape)
     safe = np.where(singular[..., None, None], eye, A)
-    return np.where(singular[..., None, None], np.linalg.pinv(A, hermitian=True) @ B,
-                    np.linalg.solve(safe, B))
+    return np.where(
+        singular[..., None, None], np.linalg.pinv(A, hermitian=True) @ B, np.linalg.solve(safe, B)
+    )
 
 
 def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
@@ -435,7 +446,8 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
         PsiP = _at(Psi, t, 2) @ filtered.covs[..., t, :, :]
         C = np.swapaxes(_solve_or_pinv(P_pred, PsiP), -1, -2)  # C_t^T = Sigma_+^{-1} Psi Sigma_t
         mean = filtered.means[..., t, :] + np.einsum(
-            "...ij,...j->...i", C, means[-1] - filtered.predicted_means[..., t + 1, :])
+            "...ij,...j->...i", C, means[-1] - filtered.predicted_means[..., t + 1, :]
+        )
         cov = filtered.covs[..., t, :, :] + C @ (covs[-1] - P_pred) @ np.swapaxes(C, -1, -2)
         means.append(mean)
         covs.append(0.5 * (cov + np.swapaxes(cov, -1, -2)))
@@ -474,7 +486,7 @@ def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):
     Psi_a = np.zeros(Psi.shape[:-2] + (N, N))
     Psi_a[..., :n, :n] = Psi
     for j in range(lag):
-        Psi_a[..., n * (j + 1):n * (j + 2), n * j:n * (j + 1)] = np.eye(n)
+        Psi_a[..., n * (j + 1) : n * (j + 2), n * j : n * (j + 1)] = np.eye(n)
     Sigma_pa = np.zeros(Sigma_p.shape[:-2] + (N, N))
     Sigma_pa[..., :n, :n] = Sigma_p
     Phi_a = np.zeros(Phi.shape[:-1] + (N,))
@@ -490,8 +502,9 @@ def _lag(lag) -> int:
     return int(lag)
 
 
-def fixed_lag_smoother(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, lag: int,
-                       mu_p=None, mu_m=None) -> MeanAndCov:
+def fixed_lag_smoother(
+    x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, lag: int, mu_p=None, mu_m=None
+) -> MeanAndCov:
     """Textbook 19.2.6: the fixed-lag smoother, by running the filter on the augmented state.
 
     At time ``t`` the augmented filter (:func:`augment`) holds the state at
@@ -518,12 +531,22 @@ def fixed_lag_smoother(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, lag
         ``min(s + 1 + lag, T)``.
     """
     x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m = _sequence(
-        x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m)
+        x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
+    )
     T, n = x.shape[-2], prior_mean.shape[-1]
     lag = min(_lag(lag), T - 1)  # a longer lag changes nothing
     Psi_a, Sigma_pa, Phi_a, mu_pa = augment(Psi, Sigma_p, Phi, lag, mu_p)
-    res = _run(x, np.tile(prior_mean, lag + 1), np.tile(prior_cov, (lag + 1, lag + 1)),
-               Psi_a, Sigma_pa, Phi_a, Sigma_m, mu_pa, mu_m)
+    res = _run(
+        x,
+        np.tile(prior_mean, lag + 1),
+        np.tile(prior_cov, (lag + 1, lag + 1)),
+        Psi_a,
+        Sigma_pa,
+        Phi_a,
+        Sigma_m,
+        mu_pa,
+        mu_m,
+    )
     means, covs = [], []
     for s in range(T):
         t = min(s + lag, T - 1)  # read at time t, block t - s

@@ -115,8 +115,9 @@ def trajectory(x1, n: int = N_MEASUREMENTS) -> np.ndarray:
     return np.stack([G(x1, k) for k in range(n)])
 
 
-def simulate_measurements(x1, rho: float, rng: np.random.Generator, n: int = N_MEASUREMENTS,
-                          size: int | None = None) -> np.ndarray:
+def simulate_measurements(
+    x1, rho: float, rng: np.random.Generator, n: int = N_MEASUREMENTS, size: int | None = None
+) -> np.ndarray:
     """Draw noisy measurements ``mu_i = x_i / y_i + w_i`` along a trajectory.
 
     Parameters
@@ -148,8 +149,9 @@ def simulate_measurements(x1, rho: float, rng: np.random.Generator, n: int = N_M
     return project(states) + rho * rng.standard_normal(shape)
 
 
-def noise_in_pixels(rho: float, image_size: int = 512, fov_deg: float = 30.0,
-                    small_angle: bool = True) -> float:
+def noise_in_pixels(
+    rho: float, image_size: int = 512, fov_deg: float = 30.0, small_angle: bool = True
+) -> float:
     """The image error, in pixels, of a bearing error ``rho`` (radians).
 
     With ``small_angle`` (the paper's arithmetic) the image's ``image_size``
@@ -206,11 +208,14 @@ def noise_free_states_unchecked(mu) -> np.ndarray:
     """Eq. (7) for triples ``mu`` of shape (..., 3), unchecked (NaN or inf where degenerate)."""
     mu1, mu2, mu3 = np.moveaxis(np.asarray(mu, dtype=float), -1, 0)
     d = mu3 + mu1 - 2.0 * mu2
-    return np.stack([
-        2.0 * mu3 * (mu1 - mu2) / d,
-        2.0 * (mu1 - mu2) / d,
-        (2.0 * mu1 * mu3 - mu2 * mu3 - mu1 * mu2) / d,
-    ], axis=-1)
+    return np.stack(
+        [
+            2.0 * mu3 * (mu1 - mu2) / d,
+            2.0 * (mu1 - mu2) / d,
+            (2.0 * mu1 * mu3 - mu2 * mu3 - mu1 * mu2) / d,
+        ],
+        axis=-1,
+    )
 
 
 def residuals(x, mu) -> np.ndarray:
@@ -253,8 +258,7 @@ def residual_gradients(x) -> np.ndarray:
     ndarray, shape (..., 3, 3)
     """
     x = np.asarray(x, dtype=float)
-    return np.stack([observation_vector(G(x, k - 2)) @ G_linear(k - 2) for k in range(3)],
-                    axis=-2)
+    return np.stack([observation_vector(G(x, k - 2)) @ G_linear(k - 2) for k in range(3)], axis=-2)
 
 
 def noise_free_states(mu) -> np.ndarray:

@@ -62,7 +62,8 @@ _MAX_HALVINGS = 12
 _U_STEP = 0.5
 #: Most nodes of one interval for one problem; beyond it the tolerance is declared out of reach.
 _NODE_BUDGET = 4097
-#: Widths of the mode within which the quadrature's variable is linear in ``t`` (see :class:`_Frame`).
+#: Widths of the mode within which the quadrature's variable is linear in ``t``
+#: (see :class:`_Frame`).
 _CORE = 4.0
 #: Newton steps locating the mode of the depth integrand.
 _NEWTON_STEPS = 8
@@ -141,8 +142,10 @@ def _terms(offsets, pb: _Problem):
     gv[3:] = RL[:, :, 1].T[:, :, None]
     z[:3] = (pb.mu[:, ::-1] / pb.rho[:, None]).T[:, :, None]
     # G^{-2} x - m = L u + b with b = (-m1, (y - 2) - m2, -m3), and z = -R b.
-    z[3:] = (np.einsum("bij,bj->bi", pb.R, pb.mean).T[:, :, None]
-             - pb.R[:, :, 1].T[:, :, None] * offsets[None, ..., 2])
+    z[3:] = (
+        np.einsum("bij,bj->bi", pb.R, pb.mean).T[:, :, None]
+        - pb.R[:, :, 1].T[:, :, None] * offsets[None, ..., 2]
+    )
     return gx, gv, z
 
 
@@ -175,13 +178,17 @@ def _solve(offsets, pb: _Problem):
     P = {p: (qx[:, p[0]] * qv[:, p[1]] - qv[:, p[0]] * qx[:, p[1]])[:, None] for p in _MEAS_PAIRS}
     w = [(pb.mu[:, 2 - k] / pb.rho)[:, None] for k in range(3)]
     alpha = np.einsum("bij,bj->bi", pb.R, pb.mean)
-    zeta = [alpha[:, j:j + 1] - pb.R[:, j, 1:2] * offsets[..., 2] for j in range(3)]
-    qxc = [qx[:, j:j + 1] for j in range(3)]
-    qvc = [qv[:, j:j + 1] for j in range(3)]
+    zeta = [alpha[:, j : j + 1] - pb.R[:, j, 1:2] * offsets[..., 2] for j in range(3)]
+    qxc = [qx[:, j : j + 1] for j in range(3)]
+    qvc = [qv[:, j : j + 1] for j in range(3)]
 
-    det_M = (s2[0] * s2[1] + 4.0 * s2[0] * s2[2] + s2[1] * s2[2]
-             + sum(s2[k] * sum(K[k][j] ** 2 for j in range(3)) for k in range(3))
-             + sum(P[p] ** 2 for p in _MEAS_PAIRS))
+    det_M = (
+        s2[0] * s2[1]
+        + 4.0 * s2[0] * s2[2]
+        + s2[1] * s2[2]
+        + sum(s2[k] * sum(K[k][j] ** 2 for j in range(3)) for k in range(3))
+        + sum(P[p] ** 2 for p in _MEAS_PAIRS)
+    )
     # The three measurement rows' minor, -w0 s1 s2 + 2 w1 s0 s2 - w2 s0 s1, equals
     # (2 (mu1 - mu2) - d y) s0 s1 s2 = d (c2 - y) s0 s1 s2 with d = mu1 + mu3 - 2 mu2:
     # the factored form keeps its relative accuracy where the terms cancel (near y = c2).
@@ -190,12 +197,17 @@ def _solve(offsets, pb: _Problem):
     minors3 = (d * (c2 - offsets[..., 0]) * s[0] * s[1] * s[2]) ** 2
     for k, l in _MEAS_PAIRS:
         for j in range(3):
-            minors3 = minors3 + (w[k] * s[l] * K[l][j] - w[l] * s[k] * K[k][j]
-                                 + (k - l) * zeta[j] * s[k] * s[l]) ** 2
+            minors3 = (
+                minors3
+                + (w[k] * s[l] * K[l][j] - w[l] * s[k] * K[k][j] + (k - l) * zeta[j] * s[k] * s[l])
+                ** 2
+            )
     for k in range(3):
         for j, jj in _MEAS_PAIRS:
-            minors3 = minors3 + (w[k] * P[(j, jj)] - zeta[j] * s[k] * K[k][jj]
-                                 + zeta[jj] * s[k] * K[k][j]) ** 2
+            minors3 = (
+                minors3
+                + (w[k] * P[(j, jj)] - zeta[j] * s[k] * K[k][jj] + zeta[jj] * s[k] * K[k][j]) ** 2
+            )
     minors3 = minors3 + (zeta[0] * P[(1, 2)] - zeta[1] * P[(0, 2)] + zeta[2] * P[(0, 1)]) ** 2
     S = minors3 / det_M
 
@@ -349,7 +361,7 @@ def _log_integrand(interval: int, t: np.ndarray, pb: _Problem) -> np.ndarray:
 
 #: Index pairs (i, j) of the second moments accumulated, in (x, y, v) order.
 _SECOND = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
-_FIRST_INDEX, _SECOND_INDEX = (np.array(ix) for ix in zip(*_SECOND))
+_FIRST_INDEX, _SECOND_INDEX = (np.array(ix) for ix in zip(*_SECOND, strict=True))
 #: Where each entry of a 3 x 3 covariance (row-major) sits in :data:`_SECOND` order.
 _SYMMETRIC = np.array([0, 3, 5, 3, 1, 4, 5, 4, 2])
 
@@ -376,12 +388,20 @@ def _sums(values, skip, shift, centre):
     """The sums of :func:`_evaluate` from :func:`_node_values`, leaving out nodes where ``skip``."""
     offsets, log_f, mean, (cxx, cxv, cvv) = values
     w = np.exp(np.where(skip, -np.inf, log_f - shift[:, None]))
-    d = np.stack([mean[0] - centre[:, 0:1], offsets[..., 0] - centre[:, 1:2], mean[1] - centre[:, 2:3]])
+    d = np.stack(
+        [mean[0] - centre[:, 0:1], offsets[..., 0] - centre[:, 1:2], mean[1] - centre[:, 2:3]]
+    )
     zero = np.zeros_like(cxx)
     conditional = np.stack([cxx, zero, cvv, zero, zero, cxv])  # in _SECOND order
     second = d[_FIRST_INDEX] * d[_SECOND_INDEX] + conditional
-    return np.concatenate([w.sum(-1)[None], np.einsum("kbn,bn->kb", d, w), np.einsum("kbn,bn->kb", second, w),
-                           (w * (offsets[..., 0] < 2)).sum(-1)[None]])
+    return np.concatenate(
+        [
+            w.sum(-1)[None],
+            np.einsum("kbn,bn->kb", d, w),
+            np.einsum("kbn,bn->kb", second, w),
+            (w * (offsets[..., 0] < 2)).sum(-1)[None],
+        ]
+    )
 
 
 class _Totals(NamedTuple):
@@ -394,15 +414,23 @@ class _Totals(NamedTuple):
 
     def key_moments(self) -> np.ndarray:
         """``(E y, sd y, E v, sd v)``, shape (4, B)."""
-        return np.stack([self.mean[:, 1], np.sqrt(self.cov[:, 1, 1]),
-                         self.mean[:, 2], np.sqrt(self.cov[:, 2, 2])])
+        return np.stack(
+            [
+                self.mean[:, 1],
+                np.sqrt(self.cov[:, 1, 1]),
+                self.mean[:, 2],
+                np.sqrt(self.cov[:, 2, 2]),
+            ]
+        )
 
 
 def _moments(totals: np.ndarray, centre: np.ndarray) -> _Totals:
     """Mean, covariance, P(y < 2) and normaliser from summed trapezoid totals."""
     Z = totals[0]
     m = (totals[1:4] / Z).T  # (B, 3), centred
-    second = (totals[4:10] / Z).T - m[:, _FIRST_INDEX] * m[:, _SECOND_INDEX]  # (B, 6) in _SECOND order
+    second = (totals[4:10] / Z).T - m[:, _FIRST_INDEX] * m[
+        :, _SECOND_INDEX
+    ]  # (B, 6) in _SECOND order
     second[:, :3] = np.maximum(second[:, :3], 0.0)
     cov = second[:, _SYMMETRIC].reshape(-1, 3, 3)
     return _Totals(centre + m, cov, totals[10] / Z, Z)
@@ -432,7 +460,9 @@ def _scan_points(interval: int, c, mean_s, sd_s, lo_t, hi_t, guessed: bool = Fal
     first level being evaluated too, and both lie within an SD of each other).
     Returns the points and ``n_coarse``.
     """
-    t = lo_t[:, None] + (hi_t - lo_t)[:, None] * _unit(int(np.ceil(np.max(hi_t - lo_t) / _SCAN_STEP)) + 1)
+    t = lo_t[:, None] + (hi_t - lo_t)[:, None] * _unit(
+        int(np.ceil(np.max(hi_t - lo_t) / _SCAN_STEP)) + 1
+    )
     n_coarse = t.shape[1]
     if interval == 3:
         local = np.arange(-12.0, 12.5)
@@ -463,15 +493,22 @@ def _frame(interval: int, pb: _Problem, t, scan, coarse_mask, lo_t, hi_t):
     rows = np.arange(B)
     best = np.argmax(ss, axis=1)
     k = _clip(best, 1, ts.shape[1] - 2)
-    t0, sigma, top = _parabola(ts[rows, k - 1], ts[rows, k], ts[rows, k + 1],
-                               ss[rows, k - 1], ss[rows, k], ss[rows, k + 1])
+    t0, sigma, top = _parabola(
+        ts[rows, k - 1], ts[rows, k], ts[rows, k + 1], ss[rows, k - 1], ss[rows, k], ss[rows, k + 1]
+    )
     coarse = coarse_mask[order[rows, best]]
     for _ in range(_NEWTON_STEPS if np.any(coarse) else 0):
-        pts = _clip(t0[:, None] + sigma[:, None] * np.array([-1.0, 0.0, 1.0]), lo_t[:, None], hi_t[:, None])
+        pts = _clip(
+            t0[:, None] + sigma[:, None] * np.array([-1.0, 0.0, 1.0]), lo_t[:, None], hi_t[:, None]
+        )
         phi = _log_integrand(interval, pts, pb)
         t1, s1, top1 = _parabola(*pts.T, *phi.T)
         better = coarse & (top1 >= top)
-        t0, sigma, top = np.where(better, t1, t0), np.where(coarse, s1, sigma), np.maximum(top, np.where(coarse, top1, top))
+        t0, sigma, top = (
+            np.where(better, t1, t0),
+            np.where(coarse, s1, sigma),
+            np.maximum(top, np.where(coarse, top1, top)),
+        )
     t0 = _clip(t0, lo_t, hi_t)
     sigma = _clip(sigma, _sigma_floor(t0), 1.0)
     return _Frame(t0, sigma), top
@@ -493,7 +530,9 @@ def _parabola(ta, tb, tc, fa, fb, fc):
         vertex = np.where(concave, _clip(vertex, ta, tc), tb)
         gap = np.maximum(tb - ta, tc - tb)
         width = np.where(concave, _clip(1.0 / np.sqrt(-safe), 0.25 * gap, 4.0 * gap), gap)
-        value = np.where(concave, fb + d1 * (vertex - tb) + 0.5 * curv * (vertex - ta) * (vertex - tb), fb)
+        value = np.where(
+            concave, fb + d1 * (vertex - tb) + 0.5 * curv * (vertex - ta) * (vertex - tb), fb
+        )
     return vertex, width, np.maximum(value, fb)
 
 
@@ -565,18 +604,29 @@ def _ranges(pb: _Problem, intervals):
             rows = np.arange(len(c))
             best = np.argmax(log_t, axis=1)
             k = _clip(best, 1, m - 2)
-            t0, sigma, top_i = _parabola(*(t_all[rows, k + o] for o in (-1, 0, 1)),
-                                         *(log_t[rows, k + o] for o in (-1, 0, 1)))
-            good = ((best < m) & (np.abs(t0 - guess.t0) <= 3.0 * guess.sigma)
-                    & (sigma <= 3.0 * guess.sigma) & (3.0 * sigma >= guess.sigma))
+            t0, sigma, top_i = _parabola(
+                *(t_all[rows, k + o] for o in (-1, 0, 1)), *(log_t[rows, k + o] for o in (-1, 0, 1))
+            )
+            good = (
+                (best < m)
+                & (np.abs(t0 - guess.t0) <= 3.0 * guess.sigma)
+                & (sigma <= 3.0 * guess.sigma)
+                & (3.0 * sigma >= guess.sigma)
+            )
             if not np.all(good):
                 frame, top_i = _frame(i, pb, t_all, log_t, coarse_mask, lo_t, hi_t)
             if np.all(good):
                 frame = guess
-                values = (offsets[:, :m], log_t[:, :m] + guess.log_jacobian(u),
-                          mean[:, :, :m], tuple(a[:, :m] for a in cov))
+                values = (
+                    offsets[:, :m],
+                    log_t[:, :m] + guess.log_jacobian(u),
+                    mean[:, :, :m],
+                    tuple(a[:, :m] for a in cov),
+                )
             else:
-                frame = _Frame(np.where(good, guess.t0, frame.t0), np.where(good, guess.sigma, frame.sigma))
+                frame = _Frame(
+                    np.where(good, guess.t0, frame.t0), np.where(good, guess.sigma, frame.sigma)
+                )
                 guess = None
         else:
             frame, top_i = _frame(i, pb, t_all, log_t, coarse_mask, lo_t, hi_t)
@@ -617,11 +667,17 @@ def _integrate(pb: _Problem, intervals, rtol: float):
                 k = int(np.argmax(at_end))
                 raise ValueError(
                     f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g}: the depth marginal "
-                    f"does not decay by |y| = {np.exp(hi_t[k]):.3g}; its moments do not exist in this reading"
+                    f"does not decay by |y| = {np.exp(hi_t[k]):.3g}; "
+                    "its moments do not exist in this reading"
                 )
         u_c = frame.u(t_c)
-        first = np.minimum(np.min(np.where(keep, u, np.inf), axis=1), np.min(np.where(keep_t, u_c, np.inf), axis=1))
-        last = np.maximum(np.max(np.where(keep, u, -np.inf), axis=1), np.max(np.where(keep_t, u_c, -np.inf), axis=1))
+        first = np.minimum(
+            np.min(np.where(keep, u, np.inf), axis=1), np.min(np.where(keep_t, u_c, np.inf), axis=1)
+        )
+        last = np.maximum(
+            np.max(np.where(keep, u, -np.inf), axis=1),
+            np.max(np.where(keep_t, u_c, -np.inf), axis=1),
+        )
         active = np.isfinite(first)
         j_lo = _clip(np.where(active, np.floor((first - u_lo) / h0) - 1, 0), 0, n0 - 1)
         j_hi = _clip(np.where(active, np.ceil((last - u_lo) / h0) + 1, 0), 0, n0 - 1)
@@ -629,7 +685,9 @@ def _integrate(pb: _Problem, intervals, rtol: float):
         n = (j_hi - j_lo).astype(int) + 1
         h = np.where(active & (n > 1), h0, 0.0)
         grids[i] = (lo, h, n, frame)
-        inside = (np.arange(n0) >= j_lo[:, None]) & (np.arange(n0) <= j_hi[:, None]) & active[:, None]
+        inside = (
+            (np.arange(n0) >= j_lo[:, None]) & (np.arange(n0) <= j_hi[:, None]) & active[:, None]
+        )
         totals[i] = _sums(values, ~inside, top, centre)
     done = np.zeros(B, dtype=bool)
     final = previous = None
@@ -637,7 +695,10 @@ def _integrate(pb: _Problem, intervals, rtol: float):
     halvings = 2  # the first pass adds two levels in one evaluation
     while True:
         growth = 2**halvings
-        if max(np.max(np.where(done, 0, growth * (g[2] - 1) + 1)) for g in grids.values()) > _NODE_BUDGET:
+        if (
+            max(np.max(np.where(done, 0, growth * (g[2] - 1) + 1)) for g in grids.values())
+            > _NODE_BUDGET
+        ):
             k = int(np.argmin(done))
             raise ValueError(
                 f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g} and prior mean "
@@ -648,35 +709,53 @@ def _integrate(pb: _Problem, intervals, rtol: float):
         for i, (lo, h, n, frame) in grids.items():
             hh = np.where(done, 0.0, h)
             # the new nodes of each level, as fractions of the current step, in one evaluation
-            fractions = [[(2 * j + 1) / 2**(lev + 1) for j in range(2**lev)] for lev in range(halvings)]
+            fractions = [
+                [(2 * j + 1) / 2 ** (lev + 1) for j in range(2**lev)] for lev in range(halvings)
+            ]
             flat = np.concatenate([np.array(f) for f in fractions])
             m = int(np.max(n)) - 1
             j = np.arange(m)
-            u = lo[:, None, None] + hh[:, None, None] * (j[None, :] + flat[:, None])[None]  # (B, f, m)
-            valid = (j < (np.broadcast_to(n, lo.shape) - 1)[:, None])[:, None, :] & (hh > 0)[:, None, None]
+            u = (
+                lo[:, None, None] + hh[:, None, None] * (j[None, :] + flat[:, None])[None]
+            )  # (B, f, m)
+            valid = (j < (np.broadcast_to(n, lo.shape) - 1)[:, None])[:, None, :] & (hh > 0)[
+                :, None, None
+            ]
             u = np.where(valid, u, np.nan).reshape(len(lo), -1)
             values = _node_values(i, u, frame, pb)
             start = 0
             for lev, fr in enumerate(fractions):
                 block = slice(start * m, (start + len(fr)) * m)
-                totals[i] = totals[i] + _sums(_take(values, block), np.isnan(u[:, block]), top, centre)
+                totals[i] = totals[i] + _sums(
+                    _take(values, block), np.isnan(u[:, block]), top, centre
+                )
                 start += len(fr)
-                levels[lev][i] = (totals[i], np.where(done, h, h / 2**(lev + 1)))
-            grids[i] = (lo, np.where(done, h, h / growth),
-                        np.where(done | (h == 0), n, growth * (n - 1) + 1), frame)
+                levels[lev][i] = (totals[i], np.where(done, h, h / 2 ** (lev + 1)))
+            grids[i] = (
+                lo,
+                np.where(done, h, h / growth),
+                np.where(done | (h == 0), n, growth * (n - 1) + 1),
+                frame,
+            )
         if halvings == 2:
             previous = _moments(sum(tot * step for tot, step in levels[0].values()), centre)
         current = _moments(sum(tot * step for tot, step in levels[-1].values()), centre)
         now = current.key_moments()
         change = np.abs(now - previous.key_moments())
         floor = _roundoff(current, top, centre)
-        err = np.maximum(np.stack([np.maximum(change[0], change[1]), np.maximum(change[2], change[3])]), floor)
-        ok = (err[0] <= np.maximum(rtol * now[1], floor[0])) & (err[1] <= np.maximum(rtol * now[3], floor[1]))
+        err = np.maximum(
+            np.stack([np.maximum(change[0], change[1]), np.maximum(change[2], change[3])]), floor
+        )
+        ok = (err[0] <= np.maximum(rtol * now[1], floor[0])) & (
+            err[1] <= np.maximum(rtol * now[3], floor[1])
+        )
         newly = ok & ~done
         if final is None or np.all(newly):
             final = current
         else:
-            final = _Totals(*(np.where(_expand(newly, a), a, b) for a, b in zip(current, final)))
+            final = _Totals(
+                *(np.where(_expand(newly, a), a, b) for a, b in zip(current, final, strict=True))
+            )
         errors = np.where(newly, err, errors)
         done = done | ok
         if np.all(done):
@@ -693,7 +772,12 @@ def _mapped_log_integrand(interval, u, frame, pb):
 def _take(values, columns):
     """The node values of :func:`_node_values` at a slice of the node axis."""
     offsets, log_f, mean, cov = values
-    return offsets[:, columns], log_f[:, columns], mean[:, :, columns], tuple(c[:, columns] for c in cov)
+    return (
+        offsets[:, columns],
+        log_f[:, columns],
+        mean[:, :, columns],
+        tuple(c[:, columns] for c in cov),
+    )
 
 
 def _expand(mask, a):
@@ -701,7 +785,10 @@ def _expand(mask, a):
 
 
 def _grid(lo, h, n, offset):
-    """Nodes ``lo + h (j + offset)``, ``j < n`` (n per problem), padded with NaN, shape (B, max n)."""
+    """Nodes ``lo + h (j + offset)``, ``j < n`` (n per problem).
+
+    Padded with NaN, shape (B, max n).
+    """
     n = np.broadcast_to(n, lo.shape)
     j = np.arange(int(np.max(n)))
     u = lo[:, None] + h[:, None] * (j + offset)
@@ -754,8 +841,16 @@ class Moments(NamedTuple):
     cov: np.ndarray
 
 
-def moments(mu, rho: float, prior_mean, prior_cov, reading: str = "derived",
-            support: str = "front", rtol: float = 1e-10, chunk: int = 64) -> Moments:
+def moments(
+    mu,
+    rho: float,
+    prior_mean,
+    prior_cov,
+    reading: str = "derived",
+    support: str = "front",
+    rtol: float = 1e-10,
+    chunk: int = 64,
+) -> Moments:
     """Eqs. (13)-(16) for a batch: the optimal depth and velocity moments.
 
     Parameters
@@ -822,7 +917,11 @@ def _fine_velocity_mixture(pb: _Problem, grids: dict, log_normaliser, max_refine
             skip = np.isnan(u)
             offsets, log_jac = _mapped_nodes(i, np.where(skip, 0.0, u), frame)
             log_density, mean, (_, _, cvv) = _solve(offsets, pb)
-            w = np.where(skip, 0.0, np.exp(log_density + log_jac - log_normaliser[:, None]) * (h / factor)[:, None])
+            w = np.where(
+                skip,
+                0.0,
+                np.exp(log_density + log_jac - log_normaliser[:, None]) * (h / factor)[:, None],
+            )
             sd = np.sqrt(cvv)
             big = w > 1e-14 * np.max(w, axis=1, keepdims=True)
             gap = np.abs(np.diff(mean[1], axis=1)) / np.minimum(sd[:, 1:], sd[:, :-1])
@@ -833,7 +932,11 @@ def _fine_velocity_mixture(pb: _Problem, grids: dict, log_normaliser, max_refine
         means.append(np.where(skip, 0.0, mean[1]))
         sds.append(np.where(skip, 1.0, sd))
     w = np.concatenate(weights, axis=1)
-    return w / np.sum(w, axis=1, keepdims=True), np.concatenate(means, axis=1), np.concatenate(sds, axis=1)
+    return (
+        w / np.sum(w, axis=1, keepdims=True),
+        np.concatenate(means, axis=1),
+        np.concatenate(sds, axis=1),
+    )
 
 
 @dataclass(frozen=True)
@@ -901,20 +1004,30 @@ class OptimalMarginals:
         smooth curve (see :func:`_fine_velocity_mixture`).
         """
         v = np.asarray(v, dtype=float)
-        w, m, sd = (a[0] for a in _fine_velocity_mixture(self._problem, self._grids,
-                                                           np.array([self.log_normaliser])))
+        w, m, sd = (
+            a[0]
+            for a in _fine_velocity_mixture(
+                self._problem, self._grids, np.array([self.log_normaliser])
+            )
+        )
         keep = w > 1e-17 * np.max(w)
         w, m, sd = w[keep], m[keep], sd[keep]
         flat = v.ravel()
         pdf = np.empty(flat.size)
         for start in range(0, flat.size, 512):  # bounded memory: 512 velocities at a time
-            z = (flat[start:start + 512, None] - m) / sd
-            pdf[start:start + 512] = (np.exp(-0.5 * z**2) / (np.sqrt(2.0 * np.pi) * sd)) @ w
+            z = (flat[start : start + 512, None] - m) / sd
+            pdf[start : start + 512] = (np.exp(-0.5 * z**2) / (np.sqrt(2.0 * np.pi) * sd)) @ w
         return pdf.reshape(v.shape)
 
 
-def marginals(mu, rho: float, prior: Gaussian, reading: str = "derived",
-              support: str = "front", rtol: float = 1e-10) -> OptimalMarginals:
+def marginals(
+    mu,
+    rho: float,
+    prior: Gaussian,
+    reading: str = "derived",
+    support: str = "front",
+    rtol: float = 1e-10,
+) -> OptimalMarginals:
     """Eqs. (13)-(16): the optimal depth and velocity marginals and their moments.
 
     Parameters
@@ -948,12 +1061,24 @@ def marginals(mu, rho: float, prior: Gaussian, reading: str = "derived",
     log_z = float(np.log(m.Z[0]) + top[0])
     n_nodes = sum(int(g[2][0]) for g in grids.values())
     return OptimalMarginals(
-        mu=mu, rho=float(rho), prior=prior, reading=reading, support=support,
-        depth_mean=float(m.mean[0, 1]), depth_sd=float(np.sqrt(m.cov[0, 1, 1])),
-        velocity_mean=float(m.mean[0, 2]), velocity_sd=float(np.sqrt(m.cov[0, 2, 2])),
-        depth_error=float(err_y[0]), velocity_error=float(err_v[0]),
-        prob_behind_camera=float(m.behind[0]), log_normaliser=log_z, n_nodes=int(n_nodes),
-        mean=m.mean[0], cov=m.cov[0], _problem=pb, _grids=grids,
+        mu=mu,
+        rho=float(rho),
+        prior=prior,
+        reading=reading,
+        support=support,
+        depth_mean=float(m.mean[0, 1]),
+        depth_sd=float(np.sqrt(m.cov[0, 1, 1])),
+        velocity_mean=float(m.mean[0, 2]),
+        velocity_sd=float(np.sqrt(m.cov[0, 2, 2])),
+        depth_error=float(err_y[0]),
+        velocity_error=float(err_v[0]),
+        prob_behind_camera=float(m.behind[0]),
+        log_normaliser=log_z,
+        n_nodes=int(n_nodes),
+        mean=m.mean[0],
+        cov=m.cov[0],
+        _problem=pb,
+        _grids=grids,
     )
 
 
@@ -976,7 +1101,8 @@ class BatchMarginals:
     rtol: float
     _problem: _Problem
     _grids: dict  # the quadrature's u grids: {interval: (lo, h, n, frame)}
-    _start: tuple  # lower and upper ends (B,) of the range in t = log(y - 2) and a panel width in u (B,)
+    # lower and upper ends (B,) of the range in t = log(y - 2) and a panel width in u (B,)
+    _start: tuple
 
     def depth_log_pdf(self, y) -> np.ndarray:
         """``log p_oy`` at depths ``y`` of shape (B, m); ``-inf`` at ``y <= 2``."""
@@ -1014,8 +1140,10 @@ class BatchMarginals:
             if previous is not None and np.all(np.abs(cdf - previous) <= self.rtol):
                 break
             if 8 * panels > 4 * _NODE_BUDGET:
-                raise ValueError(f"y: the depth CDF did not reach rtol = {self.rtol:.3g} "
-                                 f"within {4 * _NODE_BUDGET} nodes")
+                raise ValueError(
+                    f"y: the depth CDF did not reach rtol = {self.rtol:.3g} "
+                    f"within {4 * _NODE_BUDGET} nodes"
+                )
             previous, panels = cdf, 2 * panels
         return np.where(inside, np.clip(cdf, 0.0, 1.0), 0.0)
 

@@ -1,4 +1,6 @@
-"""A particle filter on the paper's problem: by default, importance sampling from a Student t proposal.
+"""A particle filter on the paper's problem.
+
+By default, importance sampling from a Student t proposal.
 
 Recommended import: ``from depthcore import particle``.
 
@@ -109,9 +111,22 @@ from .resampling import (
 )
 from .second_order import second_order_batch
 
-__all__ = ["DEFAULT_DF", "DEFAULT_INFLATION", "PROPOSALS", "RESAMPLERS", "ParticleBatch",
-           "ParticleMoments", "ParticleResult", "effective_sample_size", "multinomial",
-           "normalise", "particle_filter", "residual", "run", "systematic"]
+__all__ = [
+    "DEFAULT_DF",
+    "DEFAULT_INFLATION",
+    "PROPOSALS",
+    "RESAMPLERS",
+    "ParticleBatch",
+    "ParticleMoments",
+    "ParticleResult",
+    "effective_sample_size",
+    "multinomial",
+    "normalise",
+    "particle_filter",
+    "residual",
+    "run",
+    "systematic",
+]
 
 PROPOSALS = ("second_order", "prior")
 #: Default degrees of freedom of the Student t proposal.
@@ -221,8 +236,9 @@ class ParticleResult:
         y, v = (weighted_standard_errors(self.particles[:, INDEX[c]], W) for c in "yv")
         return ParticleMoments(float(y[0]), float(y[1]), float(v[0]), float(v[1]))
 
-    def density(self, component: str, grid, method: str = "kde",
-                bandwidth: float | None = None) -> np.ndarray:
+    def density(
+        self, component: str, grid, method: str = "kde", bandwidth: float | None = None
+    ) -> np.ndarray:
         """Weighted density estimate of one component's marginal on ``grid``.
 
         Parameters
@@ -248,7 +264,8 @@ class ParticleResult:
         grid = _checks.finite_array(grid, "grid")
         if grid.ndim != 1 or grid.size < 2 or not np.all(np.diff(grid) > 0):
             raise ValueError(
-                f"grid must be increasing with at least 2 points, got shape {grid.shape}")
+                f"grid must be increasing with at least 2 points, got shape {grid.shape}"
+            )
         if method == "histogram":
             step = np.diff(grid)
             if not np.allclose(step, step[0], rtol=1e-9, atol=0):
@@ -318,20 +335,30 @@ class ParticleBatch:
 
     def trial(self, i: int) -> ParticleResult:
         """The result of trial ``i``."""
-        return ParticleResult(self.particles[i], self.log_weights[i], self.ess[i],
-                              self.resampled[i], self.ancestors[i], self.proposal)
+        return ParticleResult(
+            self.particles[i],
+            self.log_weights[i],
+            self.ess[i],
+            self.resampled[i],
+            self.ancestors[i],
+            self.proposal,
+        )
 
     def moments(self) -> ParticleMoments:
         """Weighted means and SDs of the depth and velocity, arrays of shape (B,)."""
         W = np.exp(self.log_weights)
-        return ParticleMoments(*weighted_moments(self.particles[..., 1], W),
-                               *weighted_moments(self.particles[..., 2], W))
+        return ParticleMoments(
+            *weighted_moments(self.particles[..., 1], W),
+            *weighted_moments(self.particles[..., 2], W),
+        )
 
     def standard_errors(self) -> ParticleMoments:
         """Delta-method standard errors of :meth:`moments`, arrays of shape (B,)."""
         W = np.exp(self.log_weights)
-        return ParticleMoments(*weighted_standard_errors(self.particles[..., 1], W),
-                               *weighted_standard_errors(self.particles[..., 2], W))
+        return ParticleMoments(
+            *weighted_standard_errors(self.particles[..., 1], W),
+            *weighted_standard_errors(self.particles[..., 2], W),
+        )
 
 
 # --- the filter ------------------------------------------------------------------------
@@ -395,10 +422,19 @@ def _resample(x, log_w, ancestors, need, N, rng, resampler):
     return x, log_w, ancestors
 
 
-def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generator,
-        proposal: str = "second_order", resampler: str = "systematic",
-        ess_threshold: float = 0.0, df: float = DEFAULT_DF,
-        inflation: float = DEFAULT_INFLATION) -> ParticleBatch:
+def run(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    n_particles: int,
+    rng: np.random.Generator,
+    proposal: str = "second_order",
+    resampler: str = "systematic",
+    ess_threshold: float = 0.0,
+    df: float = DEFAULT_DF,
+    inflation: float = DEFAULT_INFLATION,
+) -> ParticleBatch:
     """The particle filter for ``B`` triples of measurements at once, vectorised over trials.
 
     Parameters
@@ -433,7 +469,9 @@ def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generat
     ParticleBatch
     """
     prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
-    mu, rho, prior_mean, _ = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)  # checks each triple
+    mu, rho, prior_mean, _ = _checks.batch_inputs(
+        mu, rho, prior_mean, prior_cov
+    )  # checks each triple
     if mu.ndim != 2 or mu.shape[1] != 3:
         raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
     B = mu.shape[0]
@@ -457,8 +495,9 @@ def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generat
     for k in range(3):
         if k > 0:
             resampled[:, k] = ess[:, k - 1] < threshold * N
-            x, log_w, ancestors = _resample(x, log_w, ancestors, resampled[:, k], N, rng,
-                                            RESAMPLERS[resampler])
+            x, log_w, ancestors = _resample(
+                x, log_w, ancestors, resampled[:, k], N, rng, RESAMPLERS[resampler]
+            )
             x = model.G(x)  # Eq. (1): the deterministic motion
         log_w = log_w + _log_likelihood(mu[:, k], x, rho)
         if look_ahead is not None:
@@ -474,10 +513,18 @@ def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generat
     return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal)
 
 
-def particle_filter(mu, rho: float, prior: Gaussian, n_particles: int, rng: np.random.Generator,
-                    proposal: str = "second_order", resampler: str = "systematic",
-                    ess_threshold: float = 0.0, df: float = DEFAULT_DF,
-                    inflation: float = DEFAULT_INFLATION) -> ParticleResult:
+def particle_filter(
+    mu,
+    rho: float,
+    prior: Gaussian,
+    n_particles: int,
+    rng: np.random.Generator,
+    proposal: str = "second_order",
+    resampler: str = "systematic",
+    ess_threshold: float = 0.0,
+    df: float = DEFAULT_DF,
+    inflation: float = DEFAULT_INFLATION,
+) -> ParticleResult:
     """The particle filter for one triple of measurements.
 
     Parameters
@@ -504,6 +551,17 @@ def particle_filter(mu, rho: float, prior: Gaussian, n_particles: int, rng: np.r
     rho = _checks.positive_scalar(rho, "rho")
     if not isinstance(prior, Gaussian):
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    batch = run(mu[None], rho, prior.mean, prior.cov, n_particles, rng, proposal, resampler,
-                ess_threshold, df, inflation)
+    batch = run(
+        mu[None],
+        rho,
+        prior.mean,
+        prior.cov,
+        n_particles,
+        rng,
+        proposal,
+        resampler,
+        ess_threshold,
+        df,
+        inflation,
+    )
     return batch.trial(0)

@@ -74,16 +74,28 @@ def _uv_box(y, mu, rho, prior):
     hess = np.empty((y.size, 2, 2))
     for i in range(2):
         for j in range(2):
-            hess[:, i, j] = (lp(u0 + h * (e[i] + e[j])) - lp(u0 + h * (e[i] - e[j]))
-                             - lp(u0 - h * (e[i] - e[j])) + lp(u0 - h * (e[i] + e[j]))) / (4 * h[:, 0] ** 2)
+            hess[:, i, j] = (
+                lp(u0 + h * (e[i] + e[j]))
+                - lp(u0 + h * (e[i] - e[j]))
+                - lp(u0 - h * (e[i] - e[j]))
+                + lp(u0 - h * (e[i] + e[j]))
+            ) / (4 * h[:, 0] ** 2)
     cov = np.linalg.inv(-hess)
     centre = u0 + np.einsum("nij,nj->ni", cov, grad)
     vals, vecs = np.linalg.eigh(cov)
     return centre, vecs * np.sqrt(vals)[:, None, :]
 
 
-def grid_moments(mu, rho: float, prior: Gaussian, y_range=(2.0, None), panels: int = 400,
-                 order: int = 8, uv_order: int = 40, width: float = 10.0) -> BruteMoments:
+def grid_moments(
+    mu,
+    rho: float,
+    prior: Gaussian,
+    y_range=(2.0, None),
+    panels: int = 400,
+    order: int = 8,
+    uv_order: int = 40,
+    width: float = 10.0,
+) -> BruteMoments:
     """Moments of Eq. (6) by a dense 3-D Gauss-Legendre grid over ``y > 2``.
 
     Depth nodes: composite Gauss-Legendre in ``t = log(y - 2)``; at each depth,
@@ -129,8 +141,15 @@ def grid_moments(mu, rho: float, prior: Gaussian, y_range=(2.0, None), panels: i
     return BruteMoments(float(ey), float(sd_y), float(ev), float(sd_v), int(lp.size), mean, cov)
 
 
-def importance_moments(mu, rho: float, prior: Gaussian, rng: np.random.Generator,
-                       n: int = 200_000, df: float = 3.0, inflate: float = 2.0):
+def importance_moments(
+    mu,
+    rho: float,
+    prior: Gaussian,
+    rng: np.random.Generator,
+    n: int = 200_000,
+    df: float = 3.0,
+    inflate: float = 2.0,
+):
     """Moments of Eq. (6) over ``y > 2`` by self-normalised importance sampling.
 
     The proposal is a multivariate Student t with ``df`` degrees of freedom,
@@ -254,8 +273,16 @@ def numerical_hessian(fun: Callable, x, step: float = 1e-4) -> np.ndarray:
     x = _checks.finite_array(x, "x")
     step = _checks.positive_scalar(step, "step")
     eye = np.eye(x.size) * step
-    H = np.array([[(fun(x + a + b) - fun(x + a - b) - fun(x - a + b) + fun(x - a - b))
-                   / (4.0 * step**2) for b in eye] for a in eye])
+    H = np.array(
+        [
+            [
+                (fun(x + a + b) - fun(x + a - b) - fun(x - a + b) + fun(x - a - b))
+                / (4.0 * step**2)
+                for b in eye
+            ]
+            for a in eye
+        ]
+    )
     return 0.5 * (H + H.T)
 
 
@@ -298,8 +325,9 @@ def log_gaussian_integral_brute(M, l, n: int = 801, width: float = 12.0) -> floa
     return top + np.log(total) + float(np.log(abs(np.linalg.det(axes))))
 
 
-def trapezoid_depth_moments(mu, rho: float, prior: Gaussian, step: float,
-                            t_range=(-8.0, 8.0), reading: str = "derived") -> tuple[float, float, int]:
+def trapezoid_depth_moments(
+    mu, rho: float, prior: Gaussian, step: float, t_range=(-8.0, 8.0), reading: str = "derived"
+) -> tuple[float, float, int]:
     """Mean and SD of the optimal depth marginal by one trapezoid rule of a given step.
 
     The rule is applied in ``t = log(y - 2)`` (support ``y > 2``) on the nodes

@@ -50,19 +50,28 @@ STUDY_DECIMALS = {"bias": 3, "rmse": 3, "mean_sd": 3, "coverage_68": 2, "coverag
 
 def format_table(result: dict) -> str:
     """A plain-text table of :func:`reproduce`'s result."""
-    head = (f"{'fig':>3}  {'filter':<12} {'reading':<8} {'support':<7} {'quantity':<8} "
-            f"{'mean':>10} {'sd':>10} {'error':>8}  {'paper mean':>10} {'paper sd':>9}  agrees")
+    head = (
+        f"{'fig':>3}  {'filter':<12} {'reading':<8} {'support':<7} {'quantity':<8} "
+        f"{'mean':>10} {'sd':>10} {'error':>8}  {'paper mean':>10} {'paper sd':>9}  agrees"
+    )
     lines = [head, "-" * len(head)]
     for sc in result["scenarios"]:
         for r in sc["rows"]:
             rep_m = "" if r["reported_mean"] is None else f"{r['reported_mean']:.2f}"
             rep_s = "" if r["reported_sd"] is None else f"{r['reported_sd']:.2f}"
-            match = "" if r["mean_matches"] is None else (
-                f"mean {'yes' if r['mean_matches'] else 'no'}, sd {'yes' if r['sd_matches'] else 'no'}")
+            match = (
+                ""
+                if r["mean_matches"] is None
+                else (
+                    f"mean {'yes' if r['mean_matches'] else 'no'}, "
+                    f"sd {'yes' if r['sd_matches'] else 'no'}"
+                )
+            )
             lines.append(
                 f"{sc['figure']:>3}  {r['filter']:<12} {r['reading']:<8} {r['support']:<7} "
                 f"{r['quantity']:<8} {r['mean']:>10.4f} {r['sd']:>10.4f} {r['error']:>8.1e}  "
-                f"{rep_m:>10} {rep_s:>9}  {match}")
+                f"{rep_m:>10} {rep_s:>9}  {match}"
+            )
         lines.append("")
     return "\n".join(lines).rstrip() + "\n"
 
@@ -70,33 +79,48 @@ def format_table(result: dict) -> str:
 def format_summary(summary: dict) -> str:
     """A plain-text rendering of :func:`summarize`'s result."""
     c = summary["c"]
-    lines = [f"noise-free state c = ({c[0]:.6g}, {c[1]:.6g}, {c[2]:.6g})",
-             f"{'filter':<13} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}"]
+    lines = [
+        f"noise-free state c = ({c[0]:.6g}, {c[1]:.6g}, {c[2]:.6g})",
+        f"{'filter':<13} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}",
+    ]
     for name in summary["filters"]:
         f = summary["filters"][name]
-        lines.append(f"{name:<13} {f['depth']['mean']:>11.6g} {f['depth']['sd']:>10.4g} "
-                     f"{f['velocity']['mean']:>10.6g} {f['velocity']['sd']:>10.4g}")
+        lines.append(
+            f"{name:<13} {f['depth']['mean']:>11.6g} {f['depth']['sd']:>10.4g} "
+            f"{f['velocity']['mean']:>10.6g} {f['velocity']['sd']:>10.4g}"
+        )
     o = summary["filters"]["optimal"]
-    lines.append(f"optimal error estimates: depth {o['depth']['error']:.1e}, "
-                 f"velocity {o['velocity']['error']:.1e}; probability behind the camera "
-                 f"if depths y <= 2 are allowed: {o['prob_behind_camera_all_depths']:.3g}")
+    lines.append(
+        f"optimal error estimates: depth {o['depth']['error']:.1e}, "
+        f"velocity {o['velocity']['error']:.1e}; probability behind the camera "
+        f"if depths y <= 2 are allowed: {o['prob_behind_camera_all_depths']:.3g}"
+    )
     return "\n".join(lines) + "\n"
 
 
 def format_study(result: dict) -> str:
     """A plain-text table of :func:`study`'s result."""
-    lines = [f"truth {tuple(round(v, 6) for v in result['truth'])}, rho {result['rho']:.6g}, "
-             f"prior {result['prior']}, seed {result['seed']}: {result['valid_trials']} trials "
-             f"({result['rejected_trials']} without a noise-free solution in front of the camera left out)"]
-    head = (f"{'filter':<13} {'quantity':<9} {'bias':>9} {'rmse':>9} {'mean sd':>9} "
-            f"{'cover 68':>8} {'cover 95':>8} {'NEES':>8} {'Hellinger':>9}")
+    lines = [
+        f"truth {tuple(round(v, 6) for v in result['truth'])}, rho {result['rho']:.6g}, "
+        f"prior {result['prior']}, seed {result['seed']}: {result['valid_trials']} trials "
+        f"({result['rejected_trials']} without a noise-free solution in front of the camera "
+        "left out)"
+    ]
+    head = (
+        f"{'filter':<13} {'quantity':<9} {'bias':>9} {'rmse':>9} {'mean sd':>9} "
+        f"{'cover 68':>8} {'cover 95':>8} {'NEES':>8} {'Hellinger':>9}"
+    )
     lines += [head, "-" * len(head)]
     for name, f in result["filters"].items():
         for q in ("depth", "velocity"):
             r = f[q]
-            extra = (f"{f['nees']:>8.2f} {f['hellinger_depth']['mean']:>9.3f}" if q == "depth" else "")
-            lines.append(f"{name:<13} {q:<9} {r['bias']:>9.4f} {r['rmse']:>9.4f} {r['mean_sd']:>9.4f} "
-                         f"{r['coverage_68']:>8.3f} {r['coverage_95']:>8.3f} {extra}".rstrip())
+            extra = (
+                f"{f['nees']:>8.2f} {f['hellinger_depth']['mean']:>9.3f}" if q == "depth" else ""
+            )
+            lines.append(
+                f"{name:<13} {q:<9} {r['bias']:>9.4f} {r['rmse']:>9.4f} {r['mean_sd']:>9.4f} "
+                f"{r['coverage_68']:>8.3f} {r['coverage_95']:>8.3f} {extra}".rstrip()
+            )
     return "\n".join(lines) + "\n"
 
 
@@ -147,11 +171,30 @@ def comparison(key: str) -> list[dict]:
     rows = scenario_rows(s, names=tuple(dict.fromkeys(row[1] for row in TABLE_ROWS)))
     out = []
     for row_id, filt, reading, support, label in TABLE_ROWS:
-        (row,) = [r for r in rows if (r["filter"], r["reading"], r["support"], r["quantity"])
-                  == (filt, reading, support, quantity)]
-        out.append({"id": row_id, "label": label, "quantity": quantity,
-                    **{k: row[k] for k in ("mean", "sd", "reported_mean", "reported_sd",
-                                           "mean_matches", "sd_matches")}})
+        (row,) = [
+            r
+            for r in rows
+            if (r["filter"], r["reading"], r["support"], r["quantity"])
+            == (filt, reading, support, quantity)
+        ]
+        out.append(
+            {
+                "id": row_id,
+                "label": label,
+                "quantity": quantity,
+                **{
+                    k: row[k]
+                    for k in (
+                        "mean",
+                        "sd",
+                        "reported_mean",
+                        "reported_sd",
+                        "mean_matches",
+                        "sd_matches",
+                    )
+                },
+            }
+        )
     return out
 
 
@@ -169,7 +212,9 @@ def comparison_texts(key: str, rows: list[dict]) -> dict[str, str]:
         texts[f"{name}_sd"] = f"{row['sd']:.{DECIMALS}f}"
         for field in ("mean", "sd"):
             value = row[f"reported_{field}"]
-            texts[f"{name}_paper_{field}"] = "—" if value is None else f"{value:.{REPORTED_DECIMALS}f}"
+            texts[f"{name}_paper_{field}"] = (
+                "—" if value is None else f"{value:.{REPORTED_DECIMALS}f}"
+            )
         texts[f"{name}_agrees"] = _agreement(row["mean_matches"], row["sd_matches"])
     return texts
 
@@ -177,8 +222,12 @@ def comparison_texts(key: str, rows: list[dict]) -> dict[str, str]:
 def _agreement(mean_matches, sd_matches) -> str:
     if mean_matches is None:
         return "—"
-    return {(True, True): "yes", (True, False): "mean only",
-            (False, True): "SD only", (False, False): "no"}[(mean_matches, sd_matches)]
+    return {
+        (True, True): "yes",
+        (True, False): "mean only",
+        (False, True): "SD only",
+        (False, False): "no",
+    }[(mean_matches, sd_matches)]
 
 
 def rho_label(rho: float) -> str:
@@ -192,14 +241,21 @@ def _pm(mean: float, sd: float, decimals: int) -> str:
 
 
 def _row(rows: list[dict], name: str, quantity: str) -> dict:
-    """The row of ``name`` for ``quantity`` in :func:`depthcore.reproduce.reproduce`'s scenario rows.
+    """The row of ``name`` for ``quantity``.
+
+    The row is taken from :func:`depthcore.reproduce.reproduce`'s scenario rows.
 
     The optimal filter as derived, restricted to the front of the camera; the
     second-order filter with the covariance ``2 rho**2 J^-1``; the others' only row.
     """
     want = {"optimal": ("derived", "front"), "second_order": ("derived", "all")}.get(name)
-    found = [r for r in rows if r["filter"] == name and r["quantity"] == quantity
-             and (want is None or (r["reading"], r["support"]) == want)]
+    found = [
+        r
+        for r in rows
+        if r["filter"] == name
+        and r["quantity"] == quantity
+        and (want is None or (r["reading"], r["support"]) == want)
+    ]
     if len(found) != 1:
         raise ValueError(f"expected one row of {name!r} for {quantity!r}, found {len(found)}")
     return found[0]

@@ -24,8 +24,19 @@ from .scenarios import REPORTED, REPORTED_DECIMALS, SCENARIOS, Scenario
 #: The default seed of the particle filter wherever this module runs it.
 PARTICLE_SEED = 1990
 
-__all__ = ["FILTERS", "NAMES", "PAPER_FILTERS", "PARTICLES", "PARTICLE_SEED", "QUANTITIES", "curves",
-           "filter_moments", "reproduce", "scenario_rows", "summarize"]
+__all__ = [
+    "FILTERS",
+    "NAMES",
+    "PAPER_FILTERS",
+    "PARTICLES",
+    "PARTICLE_SEED",
+    "QUANTITIES",
+    "curves",
+    "filter_moments",
+    "reproduce",
+    "scenario_rows",
+    "summarize",
+]
 
 
 def _options(name: str, seed) -> dict:
@@ -69,7 +80,8 @@ def summarize(mu, rho: float, prior: Gaussian, seed=PARTICLE_SEED) -> dict:
     c = noise_free_state(mu)
     filters = {name: _moments(_run(name, mu, rho, prior, seed)) for name in FILTERS}
     filters["optimal"]["prob_behind_camera_all_depths"] = float(
-        _run("optimal", mu, rho, prior, seed, support="all").extras["prob_behind_camera"])
+        _run("optimal", mu, rho, prior, seed, support="all").extras["prob_behind_camera"]
+    )
     return {
         "mu": [float(v) for v in mu],
         "rho": float(rho),
@@ -95,9 +107,17 @@ def scenario_rows(s: Scenario, names=NAMES, seed=PARTICLE_SEED) -> list[dict]:
             est = _run(name, s.mu, s.rho, prior, seed, **options)
             for q in QUANTITIES:
                 m = est.moments(q)
-                rows.append({"filter": name, "reading": reading, "support": support,
-                             "quantity": q, "mean": float(m["mean"]), "sd": float(m["sd"]),
-                             "error": float(m.get("error", 0.0))})
+                rows.append(
+                    {
+                        "filter": name,
+                        "reading": reading,
+                        "support": support,
+                        "quantity": q,
+                        "mean": float(m["mean"]),
+                        "sd": float(m["sd"]),
+                        "error": float(m.get("error", 0.0)),
+                    }
+                )
     for row in rows:
         reported = REPORTED.get(s.key, {}).get(row["filter"], {}).get(row["quantity"])
         row["reported_mean"], row["reported_sd"] = reported if reported else (None, None)
@@ -108,7 +128,7 @@ def scenario_rows(s: Scenario, names=NAMES, seed=PARTICLE_SEED) -> list[dict]:
 
 def _agrees(value: float, printed: float) -> bool:
     """Whether ``value`` rounds to ``printed`` at the paper's precision."""
-    return bool(abs(value - printed) <= 0.5 * 10.0 ** -REPORTED_DECIMALS + 1e-12)
+    return bool(abs(value - printed) <= 0.5 * 10.0**-REPORTED_DECIMALS + 1e-12)
 
 
 def reproduce(keys=None, seed=PARTICLE_SEED) -> dict:
@@ -137,16 +157,24 @@ def reproduce(keys=None, seed=PARTICLE_SEED) -> dict:
     out = []
     for key in keys or SCENARIOS:
         s = SCENARIOS[key]
-        out.append({
-            "key": s.key, "figure": s.figure, "description": s.description,
-            "mu": list(s.mu), "rho": s.rho, "prior_mean": s.prior.mean.tolist(),
-            "c": s.c.tolist(), "rows": scenario_rows(s, seed=seed),
-        })
+        out.append(
+            {
+                "key": s.key,
+                "figure": s.figure,
+                "description": s.description,
+                "mu": list(s.mu),
+                "rho": s.rho,
+                "prior_mean": s.prior.mean.tolist(),
+                "c": s.c.tolist(),
+                "rows": scenario_rows(s, seed=seed),
+            }
+        )
     return {"scenarios": out}
 
 
-def curves(s: Scenario, grid, quantity: str | None = None, filters=PAPER_FILTERS,
-           seed=PARTICLE_SEED) -> dict:
+def curves(
+    s: Scenario, grid, quantity: str | None = None, filters=PAPER_FILTERS, seed=PARTICLE_SEED
+) -> dict:
     """The marginal densities of the filters on ``grid``, for plotting.
 
     Parameters
@@ -173,8 +201,13 @@ def curves(s: Scenario, grid, quantity: str | None = None, filters=PAPER_FILTERS
     grid = np.asarray(grid, dtype=float)
     prior = s.prior
     names = check_names(filters)
-    return {"grid": grid, **{name: FILTERS[name].density(_run(name, s.mu, s.rho, prior, seed),
-                                                          quantity, grid) for name in names}}
+    return {
+        "grid": grid,
+        **{
+            name: FILTERS[name].density(_run(name, s.mu, s.rho, prior, seed), quantity, grid)
+            for name in names
+        },
+    }
 
 
 def filter_moments(s: Scenario, quantity: str | None = None, names=PAPER_FILTERS) -> dict:

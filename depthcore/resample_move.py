@@ -105,7 +105,9 @@ class ResampleMoveBatch:
 
 
 def _log_likelihood(mu_k, x1, k: int, rho) -> np.ndarray:
-    """Eq. (4) for bearing ``mu_k`` (B,) of the states ``G^k x1`` (B, N, 3); ``-inf`` behind the camera.
+    """Eq. (4) for bearing ``mu_k`` (B,) of the states ``G^k x1`` (B, N, 3).
+
+    ``-inf`` behind the camera.
 
     ``k`` counts frames after the first (``mu_1`` has ``k = 0``).
     """
@@ -154,9 +156,17 @@ def _increment_chol(x1, W, prior_chol) -> np.ndarray:
     return np.linalg.cholesky(cov + 1e-12 * (prior_chol @ prior_chol.T))
 
 
-def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generator,
-        moves: int = 20, ess_threshold: float = 0.5,
-        resampler: str = "systematic") -> ResampleMoveBatch:
+def run(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    n_particles: int,
+    rng: np.random.Generator,
+    moves: int = 20,
+    ess_threshold: float = 0.5,
+    resampler: str = "systematic",
+) -> ResampleMoveBatch:
     """The bootstrap filter with resample-move for ``B`` sequences of bearings, vectorised.
 
     Parameters
@@ -199,8 +209,11 @@ def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generat
         raise ValueError(f"prior_mean must have shape (3,) or ({B}, 3), got {prior_mean.shape}")
     prior_mean = np.broadcast_to(prior_mean, (B, 3))
     prior_chol = np.linalg.cholesky(_checks.covariance(prior_cov, "prior_cov", 3))
-    if isinstance(n_particles, bool) or not isinstance(n_particles, (int, np.integer)) \
-            or n_particles < 2:
+    if (
+        isinstance(n_particles, bool)
+        or not isinstance(n_particles, (int, np.integer))
+        or n_particles < 2
+    ):
         raise ValueError(f"n_particles must be an integer >= 2, got {n_particles!r}")
     N = int(n_particles)
     if not isinstance(rng, np.random.Generator):
@@ -233,13 +246,25 @@ def run(mu, rho, prior_mean, prior_cov, n_particles: int, rng: np.random.Generat
             continue
         resampled[:, k] = need
         x1, log_w, acceptance[need, k] = _resample_move(
-            x1, log_w, need, mu[:, : k + 1], rho, prior_mean, prior_chol, moves, rng,
-            RESAMPLERS[resampler])
+            x1,
+            log_w,
+            need,
+            mu[:, : k + 1],
+            rho,
+            prior_mean,
+            prior_chol,
+            moves,
+            rng,
+            RESAMPLERS[resampler],
+        )
     return ResampleMoveBatch(model.G(x1, K - 1), log_w, ess, resampled, acceptance)
 
 
 def _resample_move(x1, log_w, need, mu, rho, prior_mean, prior_chol, moves, rng, resampler):
-    """Resample the trials ``need`` (B,) and move their particles; returns ``x1, log_w, acceptance``."""
+    """Resample the trials ``need`` (B,) and move their particles.
+
+    Returns ``x1, log_w, acceptance``.
+    """
     W = np.exp(log_w[need])
     sub = x1[need]
     chol = _increment_chol(sub, W, prior_chol)
@@ -262,9 +287,16 @@ def _resample_move(x1, log_w, need, mu, rho, prior_mean, prior_chol, moves, rng,
     return x1, log_w, accepted / moves if moves else np.full(sub.shape[0], np.nan)
 
 
-def resample_move(mu, rho: float, prior: Gaussian, n_particles: int, rng: np.random.Generator,
-                  moves: int = 20, ess_threshold: float = 0.5,
-                  resampler: str = "systematic") -> ResampleMoveBatch:
+def resample_move(
+    mu,
+    rho: float,
+    prior: Gaussian,
+    n_particles: int,
+    rng: np.random.Generator,
+    moves: int = 20,
+    ess_threshold: float = 0.5,
+    resampler: str = "systematic",
+) -> ResampleMoveBatch:
     """The resample-move filter for one sequence of bearings ``mu`` (shape (K,)); a batch of one.
 
     Parameters are as for :func:`run`, with ``prior`` the density of the state
@@ -276,5 +308,6 @@ def resample_move(mu, rho: float, prior: Gaussian, n_particles: int, rng: np.ran
     rho = _checks.positive_scalar(rho, "rho")
     if not isinstance(prior, Gaussian):
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    return run(mu[None], rho, prior.mean, prior.cov, n_particles, rng, moves, ess_threshold,
-               resampler)
+    return run(
+        mu[None], rho, prior.mean, prior.cov, n_particles, rng, moves, ess_threshold, resampler
+    )

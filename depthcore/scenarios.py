@@ -62,16 +62,51 @@ class Scenario:
 SCENARIOS = {
     s.key: s
     for s in (
-        Scenario("fig2", 2, "depth", MU_17, RHO_200, 0.0,
-                 "Depth marginals, measurements (17), rho = 1/200"),
-        Scenario("fig3", 3, "depth", MU_18, RHO_200, 0.0,
-                 "Depth marginals, measurements (18), rho = 1/200"),
-        Scenario("fig4", 4, "velocity", MU_17, RHO_200, 0.0,
-                 "Velocity marginals, measurements (17), rho = 1/200"),
-        Scenario("fig5", 5, "depth", MU_17, RHO_500, 0.0,
-                 "Depth marginals, measurements (17), rho = 1/500"),
-        Scenario("fig6", 6, "depth", MU_17, RHO_200, 2.0,
-                 "Depth marginals, measurements (17), rho = 1/200, prior depth two units higher"),
+        Scenario(
+            "fig2",
+            2,
+            "depth",
+            MU_17,
+            RHO_200,
+            0.0,
+            "Depth marginals, measurements (17), rho = 1/200",
+        ),
+        Scenario(
+            "fig3",
+            3,
+            "depth",
+            MU_18,
+            RHO_200,
+            0.0,
+            "Depth marginals, measurements (18), rho = 1/200",
+        ),
+        Scenario(
+            "fig4",
+            4,
+            "velocity",
+            MU_17,
+            RHO_200,
+            0.0,
+            "Velocity marginals, measurements (17), rho = 1/200",
+        ),
+        Scenario(
+            "fig5",
+            5,
+            "depth",
+            MU_17,
+            RHO_500,
+            0.0,
+            "Depth marginals, measurements (17), rho = 1/500",
+        ),
+        Scenario(
+            "fig6",
+            6,
+            "depth",
+            MU_17,
+            RHO_200,
+            2.0,
+            "Depth marginals, measurements (17), rho = 1/200, prior depth two units higher",
+        ),
     )
 }
 

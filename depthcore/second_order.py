@@ -22,11 +22,24 @@ from . import _checks, model
 from .gaussian import Gaussian
 from .model import f, noise_free_state, noise_free_states, residual_gradients, residuals
 
-__all__ = ["A2", "READINGS", "b2", "f", "hessian", "likelihood_covariance", "noise_free_state",
-           "noise_free_states", "residual_gradients", "residuals", "second_order",
-           "second_order_batch", "theorem1_precision"]
+__all__ = [
+    "A2",
+    "READINGS",
+    "b2",
+    "f",
+    "hessian",
+    "likelihood_covariance",
+    "noise_free_state",
+    "noise_free_states",
+    "residual_gradients",
+    "residuals",
+    "second_order",
+    "second_order_batch",
+    "theorem1_precision",
+]
 
 READINGS = ("derived", "printed")
+
 
 def cho_factor(a):
     """:func:`scipy.linalg.cho_factor`, imported when first needed."""
@@ -75,8 +88,9 @@ def likelihood_covariance(mu, rho: float, reading: str = "derived") -> np.ndarra
     return factor * rho**2 * np.linalg.inv(J)
 
 
-def second_order_batch(mu, rho: float, prior_mean, prior_cov,
-                       reading: str = "derived") -> tuple[np.ndarray, np.ndarray]:
+def second_order_batch(
+    mu, rho: float, prior_mean, prior_cov, reading: str = "derived"
+) -> tuple[np.ndarray, np.ndarray]:
     """Eq. (8) for a batch of triples: means ``(B, 3)`` and covariances ``(B, 3, 3)``.
 
     Parameters
@@ -94,10 +108,13 @@ def second_order_batch(mu, rho: float, prior_mean, prior_cov,
     if mu.ndim != 2:
         raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
     c = noise_free_states(mu)
-    g = np.stack([model.observation_vector(model.G(c, k - 2)) @ model.G_linear(k - 2)
-                  for k in range(3)], axis=-2)  # (B, 3, 3), rows in time order
-    return _square_root_solve(c, g, np.sqrt(2.0 / factor) / np.broadcast_to(rho, (c.shape[0],)),
-                              prior_mean, prior_cov)
+    g = np.stack(
+        [model.observation_vector(model.G(c, k - 2)) @ model.G_linear(k - 2) for k in range(3)],
+        axis=-2,
+    )  # (B, 3, 3), rows in time order
+    return _square_root_solve(
+        c, g, np.sqrt(2.0 / factor) / np.broadcast_to(rho, (c.shape[0],)), prior_mean, prior_cov
+    )
 
 
 def _square_root_solve(c, g, weight, prior_mean, prior_cov):
@@ -127,7 +144,9 @@ def _square_root_solve(c, g, weight, prior_mean, prior_cov):
     B = c.shape[0]
     L = np.broadcast_to(np.linalg.cholesky(np.asarray(prior_cov, dtype=float)), (B, 3, 3))
     gap = np.broadcast_to(np.asarray(prior_mean, dtype=float), (B, 3)) - b2 - c @ A2.T
-    whitened = np.linalg.solve(L, np.concatenate([np.broadcast_to(A2, (B, 3, 3)), gap[..., None]], axis=-1))
+    whitened = np.linalg.solve(
+        L, np.concatenate([np.broadcast_to(A2, (B, 3, 3)), gap[..., None]], axis=-1)
+    )
     K = np.concatenate([weight[:, None, None] * g, whitened[..., :3]], axis=1)  # (B, 6, 3)
     Q, R = np.linalg.qr(K)
     R_inv = np.linalg.inv(R)
@@ -160,8 +179,9 @@ def second_order(mu, rho: float, prior: Gaussian, reading: str = "derived") -> G
     rho = _checks.positive_scalar(rho, "rho")
     factor = {"derived": 2.0, "printed": 1.0}[_reading(reading)]
     g = residual_gradients(c)
-    mean, cov = _square_root_solve(c[None], g[None], np.array([np.sqrt(2.0 / factor) / rho]),
-                                   prior.mean, prior.cov)
+    mean, cov = _square_root_solve(
+        c[None], g[None], np.array([np.sqrt(2.0 / factor) / rho]), prior.mean, prior.cov
+    )
     return Gaussian(mean[0], cov[0])
 
 

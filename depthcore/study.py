@@ -97,8 +97,14 @@ def valid_triples(mu) -> np.ndarray:
     return ok & (c2 > 2.0)
 
 
-def simulate(truth, rho: float, n: int, rng: np.random.Generator, prior: str = "paper",
-             prior_scale: float = PAPER_PRIOR_SCALE) -> Trials:
+def simulate(
+    truth,
+    rho: float,
+    n: int,
+    rng: np.random.Generator,
+    prior: str = "paper",
+    prior_scale: float = PAPER_PRIOR_SCALE,
+) -> Trials:
     """Draw ``n`` trials of three measurements of ``truth`` and build their priors.
 
     Parameters
@@ -124,7 +130,9 @@ def simulate(truth, rho: float, n: int, rng: np.random.Generator, prior: str = "
         raise ValueError(f"prior must be one of {PRIORS}, got {prior!r}")
     prior_scale = _checks.positive_scalar(prior_scale, "prior_scale")
     if not truth[1] - 2 > 0:
-        raise ValueError(f"truth puts the point behind the camera: depth at time 1 is {truth[1] - 2:.6g}")
+        raise ValueError(
+            f"truth puts the point behind the camera: depth at time 1 is {truth[1] - 2:.6g}"
+        )
     mu = model.simulate_measurements(model.G(truth, -2), rho, rng, size=int(n))
     keep = valid_triples(mu)
     mu = mu[keep]
@@ -150,13 +158,16 @@ def gaussian_hellinger(reference: optimal.BatchMarginals, mean, cov) -> np.ndarr
     sd = np.sqrt(cov[:, 1, 1])
 
     def log_q(y):
-        return -0.5 * ((y - mean[:, 1:2]) / sd[:, None]) ** 2 - np.log(np.sqrt(2 * np.pi) * sd[:, None])
+        return -0.5 * ((y - mean[:, 1:2]) / sd[:, None]) ** 2 - np.log(
+            np.sqrt(2 * np.pi) * sd[:, None]
+        )
 
     return hellinger(reference, log_q, mean[:, 1], sd)
 
 
-def hellinger(reference: optimal.BatchMarginals, log_q: Callable, q_mean, q_sd,
-              n: int = 801) -> np.ndarray:
+def hellinger(
+    reference: optimal.BatchMarginals, log_q: Callable, q_mean, q_sd, n: int = 801
+) -> np.ndarray:
     """Hellinger distance from depth densities ``q`` to the optimal ones, per trial.
 
     ``H^2 = 1 - int sqrt(p_o q) dy`` over ``y > 2`` by the trapezoid rule in
@@ -173,7 +184,9 @@ def hellinger(reference: optimal.BatchMarginals, log_q: Callable, q_mean, q_sd,
     """
     t_lo, t_hi, _ = reference._start
     with np.errstate(divide="ignore"):
-        lo = np.maximum(np.minimum(np.log(np.maximum(q_mean - 12 * q_sd - 2, 0.0)), t_lo), t_lo - 10)
+        lo = np.maximum(
+            np.minimum(np.log(np.maximum(q_mean - 12 * q_sd - 2, 0.0)), t_lo), t_lo - 10
+        )
         hi = np.maximum(np.log(np.maximum(q_mean + 12 * q_sd - 2, 1e-300)), t_hi)
     t = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, n)
     y = 2.0 + np.exp(t)
@@ -193,7 +206,7 @@ def _particle_estimates(trials: Trials, estimate, reference) -> Estimates:
     velocity_cdf = np.sum(W * (x[..., 2] <= t[2]), axis=1)
     sd = np.sqrt(cov[:, 1, 1])
     ess = 1.0 / np.sum(W**2, axis=1)
-    bandwidth = 1.06 * sd * ess ** -0.2  # Scott's rule with the effective sample size
+    bandwidth = 1.06 * sd * ess**-0.2  # Scott's rule with the effective sample size
     log_q = _binned_kde(x[..., 1], W, bandwidth)
     h = hellinger(reference, log_q, mean[:, 1], sd)
     return Estimates(mean, cov, depth_cdf, velocity_cdf, h)
@@ -214,25 +227,32 @@ def _binned_kde(samples, W, bandwidth, bins: int = 2048):
     left = np.clip(np.floor(pos).astype(int), 0, bins - 2)
     frac = pos - left
     rows = np.arange(B)[:, None] * bins
-    grid_w = (np.bincount((rows + left).ravel(), (W * (1 - frac)).ravel(), B * bins)
-              + np.bincount((rows + left + 1).ravel(), (W * frac).ravel(), B * bins)).reshape(B, bins)
+    grid_w = (
+        np.bincount((rows + left).ravel(), (W * (1 - frac)).ravel(), B * bins)
+        + np.bincount((rows + left + 1).ravel(), (W * frac).ravel(), B * bins)
+    ).reshape(B, bins)
     k = np.arange(-bins + 1, bins) * step[:, None] / bandwidth[:, None]
     kernel = np.exp(-0.5 * k**2) / (np.sqrt(2 * np.pi) * bandwidth[:, None])
     n_fft = 4 * bins
     dens = np.fft.irfft(np.fft.rfft(grid_w, n_fft) * np.fft.rfft(kernel, n_fft), n_fft)
-    dens = np.maximum(dens[:, bins - 1:2 * bins - 1], 1e-300)
+    dens = np.maximum(dens[:, bins - 1 : 2 * bins - 1], 1e-300)
     centres = lo[:, None] + step[:, None] * np.arange(bins)
 
     def log_q(y):
-        out = np.stack([np.interp(y[i], centres[i], dens[i], left=1e-300, right=1e-300)
-                        for i in range(B)])
+        out = np.stack(
+            [np.interp(y[i], centres[i], dens[i], left=1e-300, right=1e-300) for i in range(B)]
+        )
         return np.log(out)
 
     return log_q
 
 
-def run_filters(trials: Trials, names=NAMES, rng: np.random.Generator | None = None,
-                n_particles: int = PARTICLES) -> dict:
+def run_filters(
+    trials: Trials,
+    names=NAMES,
+    rng: np.random.Generator | None = None,
+    n_particles: int = PARTICLES,
+) -> dict:
     """Run the named filters of :data:`depthcore.filters.FILTERS` over every trial.
 
     Returns ``{name: Estimates}``. ``rng`` drives the random filters (the
@@ -248,10 +268,13 @@ def run_filters(trials: Trials, names=NAMES, rng: np.random.Generator | None = N
     for name in names:
         f = FILTERS[name]
         if f.family == "exact":
-            out[name] = Estimates(reference.mean, reference.cov,
-                                  ref.depth_cdf(np.full(len(mu), trials.truth[1])),
-                                  ref.velocity_cdf(np.full(len(mu), trials.truth[2])),
-                                  np.zeros(len(mu)))
+            out[name] = Estimates(
+                reference.mean,
+                reference.cov,
+                ref.depth_cdf(np.full(len(mu), trials.truth[1])),
+                ref.velocity_cdf(np.full(len(mu), trials.truth[2])),
+                np.zeros(len(mu)),
+            )
             continue
         options = {}
         if f.random:
@@ -280,23 +303,38 @@ def scores(trials: Trials, est: Estimates) -> dict:
             "bias": float(np.mean(err[:, i])),
             "rmse": float(np.sqrt(np.mean(err[:, i] ** 2))),
             "mean_sd": float(np.mean(np.sqrt(est.cov[:, i, i]))),
-            **{f"coverage_{round(100 * p)}": float(np.mean(np.abs(cdf - 0.5) <= p / 2)) for p in LEVELS},
+            **{
+                f"coverage_{round(100 * p)}": float(np.mean(np.abs(cdf - 0.5) <= p / 2))
+                for p in LEVELS
+            },
         }
     nees = np.einsum("ni,ni->n", err, np.linalg.solve(est.cov, err[..., None])[..., 0])
     out["nees"] = float(np.mean(nees))
     out["calibration"] = {
         "levels": list(CALIBRATION_LEVELS),
-        **{q: [float(np.mean(np.abs(cdf - 0.5) <= p / 2)) for p in CALIBRATION_LEVELS]
-           for q, cdf in (("depth", est.depth_cdf), ("velocity", est.velocity_cdf))},
+        **{
+            q: [float(np.mean(np.abs(cdf - 0.5) <= p / 2)) for p in CALIBRATION_LEVELS]
+            for q, cdf in (("depth", est.depth_cdf), ("velocity", est.velocity_cdf))
+        },
     }
-    out["hellinger_depth"] = {"mean": float(np.mean(est.hellinger)),
-                              "median": float(np.median(est.hellinger))}
+    out["hellinger_depth"] = {
+        "mean": float(np.mean(est.hellinger)),
+        "median": float(np.median(est.hellinger)),
+    }
     return out
 
 
-def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, seed=0,
-          prior: str = "paper", names=NAMES, chunk: int = 100, n_particles: int = PARTICLES,
-          progress: Callable[[int, int], None] | None = None) -> dict:
+def study(
+    truth=None,
+    rho: float = SCENARIOS["fig2"].rho,
+    trials: int = 500,
+    seed=0,
+    prior: str = "paper",
+    names=NAMES,
+    chunk: int = 100,
+    n_particles: int = PARTICLES,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict:
     """The whole study; returns a JSON-ready dict.
 
     Parameters
@@ -329,13 +367,26 @@ def study(truth=None, rho: float = SCENARIOS["fig2"].rho, trials: int = 500, see
     n = len(all_trials.mu)
     for start in range(0, n, chunk):
         sl = slice(start, start + chunk)
-        part = Trials(all_trials.truth, all_trials.rho, all_trials.mu[sl], all_trials.prior_mean[sl],
-                      all_trials.prior_cov, 0)
+        part = Trials(
+            all_trials.truth,
+            all_trials.rho,
+            all_trials.mu[sl],
+            all_trials.prior_mean[sl],
+            all_trials.prior_cov,
+            0,
+        )
         parts.append(run_filters(part, names, particle_rng, n_particles))
         if progress is not None:
             progress(min(start + chunk, n), n)
-    merged = {name: Estimates(*(np.concatenate([getattr(p[name], f) for p in parts])
-                                for f in Estimates.__dataclass_fields__)) for name in names}
+    merged = {
+        name: Estimates(
+            *(
+                np.concatenate([getattr(p[name], f) for p in parts])
+                for f in Estimates.__dataclass_fields__
+            )
+        )
+        for name in names
+    }
     return {
         "truth": [float(v) for v in all_trials.truth],
         "rho": float(rho),

@@ -206,8 +206,9 @@ def unscented_transform(points, Wm, Wc, noise_cov=None) -> MeanAndCov:
     return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
 
 
-def measurement_update(n, C, mu, rho: float, h=model.project,
-                       sigma_points: SigmaPoints = SigmaPoints()) -> MeanAndCov:
+def measurement_update(
+    n, C, mu, rho: float, h=model.project, sigma_points: SigmaPoints = SigmaPoints()
+) -> MeanAndCov:
     """Incorporate one scalar measurement ``mu = h(x) + w`` into ``N(n, C)``, batched.
 
     The measurement update of [wan2000]_, section 3, for a scalar measurement
@@ -247,8 +248,14 @@ def measurement_update(n, C, mu, rho: float, h=model.project,
     return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
 
 
-def update(n, C, mu, rho: float, sigma_points: SigmaPoints = SigmaPoints(),
-           allow_behind_camera: bool = False) -> MeanAndCov:
+def update(
+    n,
+    C,
+    mu,
+    rho: float,
+    sigma_points: SigmaPoints = SigmaPoints(),
+    allow_behind_camera: bool = False,
+) -> MeanAndCov:
     """Incorporate one image measurement ``mu`` of ``x / y`` into ``N(n, C)``, batched.
 
     :func:`measurement_update` with ``h = x / y``, after checking that every
@@ -288,8 +295,14 @@ def update(n, C, mu, rho: float, sigma_points: SigmaPoints = SigmaPoints(),
     return measurement_update(n, C, mu, rho, model.project, sigma_points)
 
 
-def run(mu, rho, prior_mean, prior_cov, sigma_points: SigmaPoints = SigmaPoints(),
-        allow_behind_camera: bool = False) -> History:
+def run(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    sigma_points: SigmaPoints = SigmaPoints(),
+    allow_behind_camera: bool = False,
+) -> History:
     """Run the UKF over the measurements, batched like :func:`depthcore.ekf.run`.
 
     Incorporate ``mu1`` into the prior (the density of the state at time 1),
@@ -321,8 +334,13 @@ def run(mu, rho, prior_mean, prior_cov, sigma_points: SigmaPoints = SigmaPoints(
     return run_gaussian_filter(step, mu, rho, prior_mean, prior_cov)
 
 
-def ukf(mu, rho: float, prior: Gaussian, sigma_points: SigmaPoints = SigmaPoints(),
-        allow_behind_camera: bool = False) -> History:
+def ukf(
+    mu,
+    rho: float,
+    prior: Gaussian,
+    sigma_points: SigmaPoints = SigmaPoints(),
+    allow_behind_camera: bool = False,
+) -> History:
     """The unscented Kalman filter for one triple of measurements.
 
     Parameters

@@ -1,4 +1,6 @@
-"""The exact optimal filter for N frames and process noise q, as a bank of Kalman filters over depth.
+"""The exact optimal filter for N frames and process noise q.
+
+It is computed as a bank of Kalman filters over depth.
 
 Independent routes: at N = 3, q = 0, the one-dimensional route of Eqs. (14)-(16)
 (:func:`depthcore.optimal.moments`); at a fixed depth, the batch least-squares
@@ -105,12 +107,17 @@ def batch_least_squares(y, mu, rho, q, prior_mean, prior_cov):
     z, *_ = np.linalg.lstsq(design, target, rcond=None)
     residual = design @ z - target
     M = design.T @ design
-    log_like = (-0.5 * N * np.log(2 * np.pi) - N * np.log(rho) - np.sum(np.log(np.diag(R)))
-                - 0.5 * np.linalg.slogdet(M)[1] - 0.5 * residual @ residual)
+    log_like = (
+        -0.5 * N * np.log(2 * np.pi)
+        - N * np.log(rho)
+        - np.sum(np.log(np.diag(R)))
+        - 0.5 * np.linalg.slogdet(M)[1]
+        - 0.5 * residual @ residual
+    )
     log_weight = stats.norm(prior_mean[1], np.sqrt(P_yy)).logpdf(y) + log_like
     mean = (A @ z).reshape(N, 2)
     cov = A @ np.linalg.inv(M) @ A.T
-    return log_weight, mean, np.stack([cov[2 * k:2 * k + 2, 2 * k:2 * k + 2] for k in range(N)])
+    return log_weight, mean, np.stack([cov[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] for k in range(N)])
 
 
 def long_track(N, q, seed, rho=RHO_200):
@@ -130,8 +137,9 @@ def test_eq14_16_bank_moments_equal_the_one_dimensional_route(scenario):
     prior = s.prior
     ref = optimal.moments(np.array([s.mu]), s.rho, prior.mean, prior.cov)
     mx = converged_mixture(s.mu, s.rho, prior.mean, prior.cov)
-    expected = np.array([ref.depth_mean[0], ref.depth_sd[0], ref.velocity_mean[0],
-                         ref.velocity_sd[0]])
+    expected = np.array(
+        [ref.depth_mean[0], ref.depth_sd[0], ref.velocity_mean[0], ref.velocity_sd[0]]
+    )
     # both routes are converged to ~1e-12; the requirement is 1e-10 relative
     assert_allclose(key_moments(mx), expected, rtol=1e-10, atol=0)
     scale = np.sqrt(np.diag(ref.cov[0]))
@@ -200,8 +208,11 @@ def test_depth_pdf_integrates_to_one_and_the_cdf_is_its_integral():
     assert_allclose(cdf, [0.0, 1.0], atol=1e-10)
     v = mx.velocity_mean + mx.velocity_sd * np.array([-1.0, 0.3, 2.0])
     hv = 1e-5 * mx.velocity_sd
-    assert_allclose((mx.velocity_cdf(v + hv) - mx.velocity_cdf(v - hv)) / (2 * hv),
-                    mx.velocity_pdf(v), rtol=1e-6)
+    assert_allclose(
+        (mx.velocity_cdf(v + hv) - mx.velocity_cdf(v - hv)) / (2 * hv),
+        mx.velocity_pdf(v),
+        rtol=1e-6,
+    )
 
 
 # --- N > 3 and q > 0 -------------------------------------------------------------------
@@ -309,7 +320,7 @@ def test_q_positive_moments_match_importance_sampling_of_the_depth():
     v_var = np.array([r[2][-1, 1, 1] for r in rows])
     ess = 1.0 / np.sum(W**2)
     assert ess > 0.15 * n  # the proposal, centred on the true depth, covers the posterior
-    for values, target, extra in ((depth, mx.depth_mean, 0.0), (v_mean, mx.velocity_mean, 0.0)):
+    for values, target, _extra in ((depth, mx.depth_mean, 0.0), (v_mean, mx.velocity_mean, 0.0)):
         est = np.sum(W * values)
         se = np.sqrt(np.sum(W**2 * (values - est) ** 2))  # delta-method standard error
         assert abs(est - target) < 5 * se + 1e-12  # five SEs: a false alarm below 1e-6
@@ -337,8 +348,9 @@ def test_textbook_19_2_3_online_step_equals_recomputing_from_scratch(q):
     assert_allclose(b.mean, fresh.mean, rtol=1e-13, atol=1e-14)
     assert_allclose(b.cov, fresh.cov, rtol=1e-13, atol=1e-18)
     for field in kalman.FilterResult._fields:
-        assert_allclose(getattr(b.history, field), getattr(fresh.history, field),
-                        rtol=1e-13, atol=1e-13)
+        assert_allclose(
+            getattr(b.history, field), getattr(fresh.history, field), rtol=1e-13, atol=1e-13
+        )
 
 
 def test_batched_bank_equals_a_loop_over_trials():
@@ -357,8 +369,10 @@ def test_batched_bank_equals_a_loop_over_trials():
     b = bk.step(bk.step(b, mu[:, 4]), mu[:, 5])
     mx = bk.mixture(b, w[None, :] * (1.0 + 0.01 * np.arange(B))[:, None])
     for i in range(B):
-        one = bk.mixture(bk.filter_bank(nodes[i], mu[i], rho[i], prior.mean, prior.cov, q[i]),
-                         w * (1.0 + 0.01 * i))
+        one = bk.mixture(
+            bk.filter_bank(nodes[i], mu[i], rho[i], prior.mean, prior.cov, q[i]),
+            w * (1.0 + 0.01 * i),
+        )
         assert_allclose(mx.mean[i], one.mean, rtol=1e-12)
         assert_allclose(mx.cov[i], one.cov, rtol=1e-10, atol=1e-14)
         assert_allclose(mx.log_normaliser[i], one.log_normaliser, rtol=1e-13)
@@ -380,7 +394,9 @@ def test_smoothed_state_at_the_last_frame_is_the_filtered_mixture():
     assert_allclose(np.diff(sm.depth_mean), 1.0, rtol=1e-12)
     assert_allclose(sm.depth_sd, mx.depth_sd, rtol=1e-9)
     # with history kept, the smoother reuses it
-    hist = bk.mixture(bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, 0.03, history=True), w)
+    hist = bk.mixture(
+        bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, 0.03, history=True), w
+    )
     assert_allclose(hist.smoothed().mean, sm.mean, rtol=0, atol=0)
 
 
@@ -410,24 +426,31 @@ def test_simulate_follows_the_motion_and_is_repeatable():
 @pytest.fixture(scope="module")
 def fig2_args():
     s = SCENARIOS["fig2"]
-    return dict(nodes=[1.0, 4.0, 9.0], mu=s.mu, rho=s.rho, prior_mean=s.prior.mean,
-                prior_cov=s.prior.cov)
+    return dict(
+        nodes=[1.0, 4.0, 9.0], mu=s.mu, rho=s.rho, prior_mean=s.prior.mean, prior_cov=s.prior.cov
+    )
 
 
-@pytest.mark.parametrize("change, message", [
-    (dict(nodes=[1.0, 0.0, 3.0]), "nodes must be positive"),
-    (dict(nodes=[1.0, np.nan]), "nodes must be finite"),
-    (dict(nodes=np.zeros((2, 0))), r"nodes must have shape \(..., J\) with J >= 1"),
-    (dict(mu=[0.1, np.inf, 0.2]), "mu must be finite"),
-    (dict(mu=np.zeros((3, 0))), r"mu must have shape \(..., N\) with N >= 1"),
-    (dict(rho=0.0), "rho must be positive"),
-    (dict(rho=-0.1), "rho must be positive"),
-    (dict(q=-0.01), "q must be >= 0"),
-    (dict(prior_cov=np.diag([1.0, -1.0, 1.0])), "prior_cov must be positive definite"),
-    (dict(prior_cov=np.eye(2)), r"prior_cov must have shape \(..., 3, 3\)"),
-    (dict(prior_mean=[0.0, 1.0]), r"prior_mean must have shape \(..., 3\)"),
-    (dict(nodes=np.ones((2, 3)), mu=np.zeros((3, 3))), r"batch\) shapes do not broadcast: nodes \(2,\), mu \(3,\)"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (dict(nodes=[1.0, 0.0, 3.0]), "nodes must be positive"),
+        (dict(nodes=[1.0, np.nan]), "nodes must be finite"),
+        (dict(nodes=np.zeros((2, 0))), r"nodes must have shape \(..., J\) with J >= 1"),
+        (dict(mu=[0.1, np.inf, 0.2]), "mu must be finite"),
+        (dict(mu=np.zeros((3, 0))), r"mu must have shape \(..., N\) with N >= 1"),
+        (dict(rho=0.0), "rho must be positive"),
+        (dict(rho=-0.1), "rho must be positive"),
+        (dict(q=-0.01), "q must be >= 0"),
+        (dict(prior_cov=np.diag([1.0, -1.0, 1.0])), "prior_cov must be positive definite"),
+        (dict(prior_cov=np.eye(2)), r"prior_cov must have shape \(..., 3, 3\)"),
+        (dict(prior_mean=[0.0, 1.0]), r"prior_mean must have shape \(..., 3\)"),
+        (
+            dict(nodes=np.ones((2, 3)), mu=np.zeros((3, 3))),
+            r"batch\) shapes do not broadcast: nodes \(2,\), mu \(3,\)",
+        ),
+    ],
+)
 def test_filter_bank_refuses_bad_input_naming_the_argument(fig2_args, change, message):
     with pytest.raises(ValueError, match=message):
         bk.filter_bank(**dict(fig2_args, **change))
@@ -452,14 +475,17 @@ def test_mixture_and_step_refuse_bad_input(fig2_args):
         bk.mixture(b, [1.0, 1.0, 1.0]).depth_cdf([5.0], rtol=0.0)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    (dict(x1=[0.0, -1.0, 0.0]), "behind the camera"),
-    (dict(n_frames=0), "n_frames must be an integer >= 1"),
-    (dict(n_frames=2.5), "n_frames must be an integer >= 1"),
-    (dict(rho=0.0), "rho must be positive"),
-    (dict(q=-1.0), "q must be >= 0"),
-    (dict(rng=1), "rng must be a numpy.random.Generator"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(x1=[0.0, -1.0, 0.0]), "behind the camera"),
+        (dict(n_frames=0), "n_frames must be an integer >= 1"),
+        (dict(n_frames=2.5), "n_frames must be an integer >= 1"),
+        (dict(rho=0.0), "rho must be positive"),
+        (dict(q=-1.0), "q must be >= 0"),
+        (dict(rng=1), "rng must be a numpy.random.Generator"),
+    ],
+)
 def test_simulate_refuses_bad_input(kwargs, message):
     args = dict(x1=[0.0, 3.0, 0.5], n_frames=4, rho=0.01, q=0.0, rng=np.random.default_rng(0))
     with pytest.raises(ValueError, match=message):

@@ -12,7 +12,9 @@ RHO = 1 / 200
 
 def test_draws_come_from_the_prior_in_front_of_the_camera():
     """Truths at time 3 are G^2 of prior draws with y_1 > 0, and their bearings are Eq. (4)'s."""
-    d = calibration.draw_from_prior(PRIOR_MEAN, 4.0 * np.eye(3), RHO, 4000, np.random.default_rng(0))
+    d = calibration.draw_from_prior(
+        PRIOR_MEAN, 4.0 * np.eye(3), RHO, 4000, np.random.default_rng(0)
+    )
     x1 = model.G(d.truth, -2)
     assert np.all(x1[:, 1] > 0)
     assert d.n_behind > 0  # the prior's depth SD is 2 about a mean of 4: about 2 % lie behind
@@ -25,7 +27,10 @@ def test_draws_come_from_the_prior_in_front_of_the_camera():
 
 
 def test_coverage_and_uniformity_definitions():
-    """Central intervals: |u - 1/2| <= p/2; uniform PITs cover at the nominal rate; KS rejects a spike."""
+    """Central intervals: |u - 1/2| <= p/2.
+
+    Uniform PITs cover at the nominal rate; KS rejects a spike.
+    """
     u = (np.arange(10_000) + 0.5) / 10_000
     np.testing.assert_allclose(calibration.coverage(u, (0.5, 0.9)), [0.5, 0.9], atol=1e-4)
     assert calibration.uniformity(u)["ks_pvalue"] > 0.99
@@ -33,7 +38,10 @@ def test_coverage_and_uniformity_definitions():
 
 
 def test_the_optimal_filter_is_calibrated_over_its_prior():
-    """PIT values of the depth and velocity pass KS and chi-square tests at a 0.1 % false-alarm rate."""
+    """PIT values of the depth and velocity pass KS and chi-square tests.
+
+    The tests are run at a 0.1 % false-alarm rate.
+    """
     r = calibration.self_calibration(PRIOR_MEAN, PRIOR_COV, RHO, 120, np.random.default_rng(1))
     s = r.summary()
     assert s["trials"] > 100
@@ -47,8 +55,9 @@ def test_a_miscalibrated_filter_is_caught():
     With about a hundred trials the velocity's PIT values fail both tests; the
     depth's 90 % intervals cover under 80 % of the truths.
     """
-    r = calibration.self_calibration(PRIOR_MEAN, PRIOR_COV, RHO, 120, np.random.default_rng(1),
-                                     filter_rho=RHO / 2)
+    r = calibration.self_calibration(
+        PRIOR_MEAN, PRIOR_COV, RHO, 120, np.random.default_rng(1), filter_rho=RHO / 2
+    )
     s = r.summary()
     assert s["velocity"]["ks_pvalue"] < 1e-3 and s["velocity"]["chi2_pvalue"] < 1e-3
     assert s["depth"]["coverage"][s["levels"].index(0.9)] < 0.8
@@ -56,13 +65,23 @@ def test_a_miscalibrated_filter_is_caught():
 
 @pytest.mark.parametrize(
     ("kwargs", "name"),
-    [({"prior_mean": [0.0, 1.0]}, "prior_mean"), ({"prior_cov": np.zeros((3, 3))}, "prior_cov"),
-     ({"rho": -1.0}, "rho"), ({"n": 0}, "trials"), ({"rng": 5}, "rng"),
-     ({"prior_mean": [0.0, -1e6, 0.0]}, "prior_mean")],
+    [
+        ({"prior_mean": [0.0, 1.0]}, "prior_mean"),
+        ({"prior_cov": np.zeros((3, 3))}, "prior_cov"),
+        ({"rho": -1.0}, "rho"),
+        ({"n": 0}, "trials"),
+        ({"rng": 5}, "rng"),
+        ({"prior_mean": [0.0, -1e6, 0.0]}, "prior_mean"),
+    ],
 )
 def test_bad_input_is_refused(kwargs, name):
-    args = {"prior_mean": PRIOR_MEAN, "prior_cov": PRIOR_COV, "rho": RHO, "n": 10,
-            "rng": np.random.default_rng(0)}
+    args = {
+        "prior_mean": PRIOR_MEAN,
+        "prior_cov": PRIOR_COV,
+        "rho": RHO,
+        "n": 10,
+        "rng": np.random.default_rng(0),
+    }
     args.update(kwargs)
     with pytest.raises(ValueError, match=name):
         calibration.draw_from_prior(**args)

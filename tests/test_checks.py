@@ -18,39 +18,48 @@ FILTERS = [
 
 
 @pytest.mark.parametrize("run", FILTERS)
-@pytest.mark.parametrize("mu, message", [
-    ((0.1, 0.1, 0.1), "mu is degenerate"),
-    ((-0.1, 0.0, 0.1), "mu is degenerate"),
-    ((np.nan, 0.0, 0.2), "mu must be finite"),
-    ((-0.3, np.inf, 0.2), "mu must be finite"),
-    ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
-    ((-0.3, 0.0), r"mu must have shape \(3,\)"),
-    (("a", 0.0, 0.2), "mu must be numeric"),
-])
+@pytest.mark.parametrize(
+    "mu, message",
+    [
+        ((0.1, 0.1, 0.1), "mu is degenerate"),
+        ((-0.1, 0.0, 0.1), "mu is degenerate"),
+        ((np.nan, 0.0, 0.2), "mu must be finite"),
+        ((-0.3, np.inf, 0.2), "mu must be finite"),
+        ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
+        ((-0.3, 0.0), r"mu must have shape \(3,\)"),
+        (("a", 0.0, 0.2), "mu must be numeric"),
+    ],
+)
 def test_bad_measurements(run, mu, message):
     with pytest.raises(ValueError, match=message):
         run(mu, 0.005, PRIOR)
 
 
 @pytest.mark.parametrize("run", FILTERS)
-@pytest.mark.parametrize("rho, message", [
-    (0.0, "rho must be positive"),
-    (-0.005, "rho must be positive"),
-    (np.nan, "rho must be finite"),
-    (np.inf, "rho must be finite"),
-])
+@pytest.mark.parametrize(
+    "rho, message",
+    [
+        (0.0, "rho must be positive"),
+        (-0.005, "rho must be positive"),
+        (np.nan, "rho must be finite"),
+        (np.inf, "rho must be finite"),
+    ],
+)
 def test_bad_noise_level(run, rho, message):
     with pytest.raises(ValueError, match=message):
         run(MU_17, rho, PRIOR)
 
 
-@pytest.mark.parametrize("cov, message", [
-    (np.diag([1.0, -1.0, 1.0]), "cov must be positive definite"),
-    (np.zeros((3, 3)), "cov must be positive definite"),
-    (np.array([[1.0, 2.0, 0], [0, 1, 0], [0, 0, 1]]), "cov must be symmetric"),
-    (np.eye(2), r"cov must have shape \(3, 3\)"),
-    (np.full((3, 3), np.nan), "cov must be finite"),
-])
+@pytest.mark.parametrize(
+    "cov, message",
+    [
+        (np.diag([1.0, -1.0, 1.0]), "cov must be positive definite"),
+        (np.zeros((3, 3)), "cov must be positive definite"),
+        (np.array([[1.0, 2.0, 0], [0, 1, 0], [0, 0, 1]]), "cov must be symmetric"),
+        (np.eye(2), r"cov must have shape \(3, 3\)"),
+        (np.full((3, 3), np.nan), "cov must be finite"),
+    ],
+)
 def test_bad_prior_covariance(cov, message):
     with pytest.raises(ValueError, match=message):
         Gaussian([0.0, 4.0, 0.0], cov)
@@ -95,11 +104,15 @@ def test_seed_sequence_rejects_what_is_not_a_seed(seed):
 
 
 def test_batch_inputs_broadcast_the_prior_and_check_shapes():
-    mu, rho, pm, pc = _checks.batch_inputs(np.zeros((4, 3)), 0.1, np.ones(3), np.eye(3), triples=False)
+    mu, rho, pm, pc = _checks.batch_inputs(
+        np.zeros((4, 3)), 0.1, np.ones(3), np.eye(3), triples=False
+    )
     assert pm.shape == (4, 3) and pc.shape == (4, 3, 3) and rho.shape == ()
     with pytest.raises(ValueError, match=r"rho must be a scalar or have shape \(4,\)"):
         _checks.batch_inputs(np.zeros((4, 3)), [0.1, 0.2], np.ones(3), np.eye(3), triples=False)
     with pytest.raises(ValueError, match=r"prior_mean must have shape \(3,\) or \(4, 3\)"):
         _checks.batch_inputs(np.zeros((4, 3)), 0.1, np.ones((2, 3)), np.eye(3), triples=False)
     with pytest.raises(ValueError, match="rho must be positive"):
-        _checks.batch_inputs(np.zeros((2, 2, 3)), [[0.1, -0.2]] * 2, np.ones(3), np.eye(3), triples=False)
+        _checks.batch_inputs(
+            np.zeros((2, 2, 3)), [[0.1, -0.2]] * 2, np.ones(3), np.eye(3), triples=False
+        )

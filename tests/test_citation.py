@@ -34,12 +34,16 @@ def cff() -> dict:
 
 def test_cffconvert_validates_citation_cff():
     if not CFFCONVERT.exists():
-        message = f"{CFFCONVERT.relative_to(ROOT)} not found (run `make cite-venv`): CITATION.cff not validated"
+        message = (
+            f"{CFFCONVERT.relative_to(ROOT)} not found (run `make cite-venv`): "
+            "CITATION.cff not validated"
+        )
         if in_ci():
             pytest.fail(message)
         pytest.skip(message)
-    run = subprocess.run([str(CFFCONVERT), "--validate", "-i", str(CFF)],
-                         capture_output=True, text=True, timeout=120)
+    run = subprocess.run(
+        [str(CFFCONVERT), "--validate", "-i", str(CFF)], capture_output=True, text=True, timeout=120
+    )
     assert run.returncode == 0, run.stdout + run.stderr
     assert "valid" in run.stdout
 

@@ -10,7 +10,9 @@ from depthcore.__main__ import main
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "depthcore", *args], capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "depthcore", *args], capture_output=True, text=True
+    )
 
 
 def test_reproduce_json_has_every_scenario_filter_and_reading(capsys):
@@ -44,8 +46,22 @@ def test_estimate_matches_the_library(capsys):
 
 
 def test_estimate_accepts_prior_options(capsys):
-    args = ["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005", "--prior-mean", "-1.2", "6",
-            "0", "--prior-cov", "500", "--json"]
+    args = [
+        "estimate",
+        "--mu",
+        "-0.3",
+        "0",
+        "0.2",
+        "--rho",
+        "0.005",
+        "--prior-mean",
+        "-1.2",
+        "6",
+        "0",
+        "--prior-cov",
+        "500",
+        "--json",
+    ]
     assert main(args) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["prior_cov"][0][0] == 500 and data["prior_mean"][1] == 6
@@ -53,22 +69,40 @@ def test_estimate_accepts_prior_options(capsys):
     assert main(args[:-3] + full + ["--json"]) == 0
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--mu", "0.1", "0.1", "0.1", "--rho", "0.01"], "mu is degenerate"),
-    (["--mu", "-0.3", "0", "0.2", "--rho", "0"], "rho must be positive"),
-    (["--mu", "-0.3", "0", "0.2", "--rho", "-1"], "rho must be positive"),
-    (["--mu", "-0.3", "0", "0.2", "--rho", "nan"], "rho must be finite"),
-    (["--mu", "-0.3", "nan", "0.2", "--rho", "0.01"], "mu must be finite"),
-    (["--mu", "0.2", "0", "-0.3", "--rho", "0.01"], "behind the camera"),
-    (["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov", "-5"], "prior_cov must be positive definite"),
-    (["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov", "1", "2"], "prior_cov takes 1 value"),
-    (["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov"] + "1 0 0 0 -1 0 0 0 1".split(),
-     "prior_cov must be positive definite"),
-    (["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-mean", "0", "inf", "0"], "prior_mean must be finite"),
-    (["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-mean", "0", "-4", "0"], "predicted depth"),
-    (["--mu", "-0.3", "0", "--rho", "0.01"], "argument --mu"),
-    (["--mu", "-0.3", "0", "0.2", "--rho", "abc"], "invalid float value"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--mu", "0.1", "0.1", "0.1", "--rho", "0.01"], "mu is degenerate"),
+        (["--mu", "-0.3", "0", "0.2", "--rho", "0"], "rho must be positive"),
+        (["--mu", "-0.3", "0", "0.2", "--rho", "-1"], "rho must be positive"),
+        (["--mu", "-0.3", "0", "0.2", "--rho", "nan"], "rho must be finite"),
+        (["--mu", "-0.3", "nan", "0.2", "--rho", "0.01"], "mu must be finite"),
+        (["--mu", "0.2", "0", "-0.3", "--rho", "0.01"], "behind the camera"),
+        (
+            ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov", "-5"],
+            "prior_cov must be positive definite",
+        ),
+        (
+            ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov", "1", "2"],
+            "prior_cov takes 1 value",
+        ),
+        (
+            ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov"]
+            + "1 0 0 0 -1 0 0 0 1".split(),
+            "prior_cov must be positive definite",
+        ),
+        (
+            ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-mean", "0", "inf", "0"],
+            "prior_mean must be finite",
+        ),
+        (
+            ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-mean", "0", "-4", "0"],
+            "predicted depth",
+        ),
+        (["--mu", "-0.3", "0", "--rho", "0.01"], "argument --mu"),
+        (["--mu", "-0.3", "0", "0.2", "--rho", "abc"], "invalid float value"),
+    ],
+)
 def test_estimate_rejects_bad_input_with_one_line(args, message):
     result = run("estimate", *args)
     assert result.returncode == 2
@@ -81,5 +115,9 @@ def test_estimate_rejects_bad_input_with_one_line(args, message):
 def test_figures_command_writes_files(tmp_path):
     assert main(["figures", "--out", str(tmp_path)]) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == sorted(f"figure{n}{x}.{ext}" for n in range(2, 7) for x in ("", "-extended")
-                           for ext in ("pdf", "png", "svg"))
+    assert names == sorted(
+        f"figure{n}{x}.{ext}"
+        for n in range(2, 7)
+        for x in ("", "-extended")
+        for ext in ("pdf", "png", "svg")
+    )

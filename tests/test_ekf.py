@@ -46,7 +46,9 @@ def test_eq12_update_matches_the_joseph_form():
     rho = 0.01
     h = model.observation_vector(n)
     K = C @ h / (rho**2 + h @ C @ h)
-    joseph = (np.eye(3) - np.outer(K, h)) @ C @ (np.eye(3) - np.outer(K, h)).T + rho**2 * np.outer(K, K)
+    joseph = (np.eye(3) - np.outer(K, h)) @ C @ (np.eye(3) - np.outer(K, h)).T + rho**2 * np.outer(
+        K, K
+    )
     assert_allclose(update(n, C, 0.1, rho).cov, joseph, rtol=1e-8, atol=1e-12)
 
 
@@ -121,4 +123,7 @@ def test_ekf_matches_filterpy_trial_by_trial():
         sd = np.sqrt(np.einsum("kii->ki", fP))
         assert np.max(np.abs(means[i] - fm) / sd) < 1e-10
         # cond(P) ~ 1e7 after the first measurement: rounding of that order times eps
-        assert np.max(np.linalg.norm(covs[i] - fP, axis=(1, 2)) / np.linalg.norm(fP, axis=(1, 2))) < 1e-9
+        assert (
+            np.max(np.linalg.norm(covs[i] - fP, axis=(1, 2)) / np.linalg.norm(fP, axis=(1, 2)))
+            < 1e-9
+        )

@@ -37,7 +37,9 @@ def parse_pins(lines: list[str], source: str) -> dict[str, str]:
 
 def requirements_pins() -> dict[str, str]:
     text = (ROOT / "requirements.txt").read_text(encoding="utf-8")
-    lines = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    lines = [
+        line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")
+    ]
     return parse_pins(lines, "requirements.txt")
 
 
@@ -53,9 +55,24 @@ def environment_pip_lines() -> list[str]:
 
 def test_requirements_pin_every_package_exactly():
     pins = requirements_pins()
-    for name in ("numpy", "scipy", "matplotlib", "jupyter-book", "jupytext", "nbval", "pytest",
-                 "hypothesis", "ipykernel", "sympy", "selenium", "filterpy", "pytest-xdist",
-                 "sphinx-mathjax-offline", "setuptools", "jupyterlab"):
+    for name in (
+        "numpy",
+        "scipy",
+        "matplotlib",
+        "jupyter-book",
+        "jupytext",
+        "nbval",
+        "pytest",
+        "hypothesis",
+        "ipykernel",
+        "sympy",
+        "selenium",
+        "filterpy",
+        "pytest-xdist",
+        "sphinx-mathjax-offline",
+        "setuptools",
+        "jupyterlab",
+    ):
         assert name in pins, f"requirements.txt does not pin {name}"
 
 
@@ -90,7 +107,9 @@ def test_pyproject_bounds_admit_the_pins():
         requirement = Requirement(dependency)
         name = canonicalize_name(requirement.name)
         assert name in pins, f"runtime dependency {name} is not pinned"
-        assert requirement.specifier.contains(pins[name]), f"{name}=={pins[name]} outside {requirement}"
+        assert requirement.specifier.contains(pins[name]), (
+            f"{name}=={pins[name]} outside {requirement}"
+        )
 
 
 def test_installed_packages_are_the_pinned_versions():
@@ -109,4 +128,6 @@ def test_version_agrees_in_package_metadata_and_citation():
     import depthcore
 
     citation = yaml.safe_load((ROOT / "CITATION.cff").read_text(encoding="utf-8"))
-    assert depthcore.__version__ == importlib.metadata.version("depthcore") == str(citation["version"])
+    assert (
+        depthcore.__version__ == importlib.metadata.version("depthcore") == str(citation["version"])
+    )

@@ -85,10 +85,13 @@ def test_particle_convergence_default_is_close_and_bootstrap_collapses(convergen
 
 
 def test_particle_convergence_streams_are_per_setting_and_repeatable(convergence):
-    alone = experiments.particle_convergence(FIG2, [300, 600], repeats=4, seed=3,
-                                             settings={"default": {}})
+    alone = experiments.particle_convergence(
+        FIG2, [300, 600], repeats=4, seed=3, settings={"default": {}}
+    )
     for m in experiments.MOMENTS:
-        assert_allclose(alone["rmse"]["default"][m], convergence["rmse"]["default"][m], rtol=0, atol=0)
+        assert_allclose(
+            alone["rmse"]["default"][m], convergence["rmse"]["default"][m], rtol=0, atol=0
+        )
 
 
 def test_particle_convergence_chunks_repeats(monkeypatch):
@@ -128,7 +131,9 @@ def test_noise_sweep_at_the_papers_noise_matches_figure2():
     r = experiments.noise_sweep([s.rho])
     m = optimal.marginals(s.mu, s.rho, s.prior)
     assert r["optimal"]["depth_mean"][0] == pytest.approx(m.depth_mean, rel=1e-9)
-    assert r["ekf"]["depth_sd"][0] == pytest.approx(ekf.ekf(s.mu, s.rho, s.prior).posterior.marginal("y")[1])
+    assert r["ekf"]["depth_sd"][0] == pytest.approx(
+        ekf.ekf(s.mu, s.rho, s.prior).posterior.marginal("y")[1]
+    )
 
 
 def test_second_order_approaches_the_optimal_filter_as_noise_falls():
@@ -142,8 +147,12 @@ def test_second_order_approaches_the_optimal_filter_as_noise_falls():
 def test_prior_offset_sweep_matches_figure6():
     s6 = SCENARIOS["fig6"]
     r = experiments.prior_offset_sweep([0.0, 2.0])
-    assert r["ekf"]["depth_mean"][1] == pytest.approx(ekf.ekf(s6.mu, s6.rho, s6.prior).posterior.mean[1])
-    assert r["second_order"]["depth_mean"][1] == pytest.approx(second_order(s6.mu, s6.rho, s6.prior).mean[1])
+    assert r["ekf"]["depth_mean"][1] == pytest.approx(
+        ekf.ekf(s6.mu, s6.rho, s6.prior).posterior.mean[1]
+    )
+    assert r["second_order"]["depth_mean"][1] == pytest.approx(
+        second_order(s6.mu, s6.rho, s6.prior).mean[1]
+    )
     # the EKF follows the offset, the optimal filter hardly moves
     assert r["ekf"]["depth_mean"][1] - r["ekf"]["depth_mean"][0] > 1.5
     assert abs(np.diff(r["optimal"]["depth_mean"])[0]) < 0.01
@@ -158,5 +167,6 @@ def test_hellinger_is_zero_for_identical_densities_and_bounded():
     s = SCENARIOS["fig2"]
     ref = optimal.batch_marginals(np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov)
     from depthcore import study
+
     h = study.hellinger(ref, ref.depth_log_pdf, ref.moments.depth_mean, ref.moments.depth_sd)
     assert_allclose(h, 0.0, atol=1e-6)  # H = sqrt(1 - BC): BC to 1e-12

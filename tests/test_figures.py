@@ -20,7 +20,9 @@ FIG2 = SCENARIOS["fig2"]
 def test_figure_draws_the_filters(key, filters):
     fig = figures.figure(key, n=101, filters=filters)
     ax = fig.axes[0]
-    assert [line.get_label() for line in ax.get_lines()] == [figures.STYLE[f]["label"] for f in filters]
+    assert [line.get_label() for line in ax.get_lines()] == [
+        figures.STYLE[f]["label"] for f in filters
+    ]
     assert f"Figure {SCENARIOS[key].figure}" in ax.get_title()
     assert ("extended" in ax.get_title()) == (len(filters) == 5)
     plt.close(fig)

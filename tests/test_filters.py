@@ -13,8 +13,9 @@ FIG2 = SCENARIOS["fig2"]
 
 
 def _batch(n=4, seed=3):
-    mu = model.simulate_measurements(model.G(FIG2.c, -2), FIG2.rho, np.random.default_rng(seed),
-                                     size=n)
+    mu = model.simulate_measurements(
+        model.G(FIG2.c, -2), FIG2.rho, np.random.default_rng(seed), size=n
+    )
     return mu, paper_prior_means(model.noise_free_states(mu)), FIG2.prior.cov
 
 
@@ -72,8 +73,9 @@ def test_estimates_are_those_of_each_filters_module():
     u = FILTERS["ukf"](FIG2.mu, FIG2.rho, p.mean, p.cov)
     h = ukf.ukf(FIG2.mu, FIG2.rho, p, allow_behind_camera=True)
     assert (u.velocity_mean, u.velocity_sd) == h.posterior.marginal("v")
-    r = FILTERS["particle"](FIG2.mu, FIG2.rho, p.mean, p.cov, rng=np.random.SeedSequence(4),
-                            n_particles=800)
+    r = FILTERS["particle"](
+        FIG2.mu, FIG2.rho, p.mean, p.cov, rng=np.random.SeedSequence(4), n_particles=800
+    )
     direct = particle.particle_filter(FIG2.mu, FIG2.rho, p, 800, np.random.default_rng(4))
     assert r.depth_mean == direct.moments().depth_mean
     se = direct.standard_errors()
@@ -84,7 +86,9 @@ def test_particle_filter_needs_an_explicit_random_source():
     p = FIG2.prior
     with pytest.raises(ValueError, match="rng is required"):
         FILTERS["particle"](FIG2.mu, FIG2.rho, p.mean, p.cov)
-    with pytest.raises(ValueError, match="rng must be a non-negative integer or a numpy.random.SeedSequence"):
+    with pytest.raises(
+        ValueError, match="rng must be a non-negative integer or a numpy.random.SeedSequence"
+    ):
         FILTERS["particle"](FIG2.mu, FIG2.rho, p.mean, p.cov, rng="seed")
 
 
@@ -92,8 +96,9 @@ def test_particle_filter_needs_an_explicit_random_source():
 def test_density_integrates_to_about_one(name):
     f = FILTERS[name]
     est = f(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, **_options(name))
-    grid = np.linspace(est.velocity_mean - 10 * est.velocity_sd,
-                       est.velocity_mean + 10 * est.velocity_sd, 4001)
+    grid = np.linspace(
+        est.velocity_mean - 10 * est.velocity_sd, est.velocity_mean + 10 * est.velocity_sd, 4001
+    )
     mass = np.trapezoid(f.density(est, "velocity", grid), grid)
     assert mass == pytest.approx(1.0, abs=0.02)
     with pytest.raises(ValueError, match="quantity must be one of"):

@@ -9,19 +9,24 @@ import depthcore
 
 
 def _run(code: str) -> str:
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          check=True).stdout.strip()
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.strip()
 
 
 def test_import_leaves_scipy_and_the_heavy_modules_unloaded():
-    out = _run("import sys, depthcore; "
-               "print(sorted(m for m in ('scipy', 'matplotlib', 'depthcore.study', "
-               "'depthcore.optimal') if m in sys.modules))")
+    out = _run(
+        "import sys, depthcore; "
+        "print(sorted(m for m in ('scipy', 'matplotlib', 'depthcore.study', "
+        "'depthcore.optimal') if m in sys.modules))"
+    )
     assert out == "[]"
 
 
 def test_every_public_module_is_an_attribute():
-    out = _run("import depthcore; print(depthcore.study.__name__, depthcore.optimal_marginals.__name__)")
+    out = _run(
+        "import depthcore; print(depthcore.study.__name__, depthcore.optimal_marginals.__name__)"
+    )
     assert out == "depthcore.study marginals"
     for name in depthcore.MODULES:
         assert getattr(depthcore, name).__name__ == f"depthcore.{name}"

@@ -51,7 +51,9 @@ def test_update_gradient_by_finite_differences():
     z = np.array([0.1, 0.2, 0.3])
     for k in (1, 2, 5):
         num = _jacobian(lambda u, k=k: np.array([u[0] / (1 + (k - 1) * u[1])] * 3), z)[0]
-        np.testing.assert_allclose(inverse_depth.observation_vector(z, k), num, rtol=1e-7, atol=1e-12)
+        np.testing.assert_allclose(
+            inverse_depth.observation_vector(z, k), num, rtol=1e-7, atol=1e-12
+        )
 
 
 def test_prediction_is_linear_with_process_noise_on_s():
@@ -70,12 +72,19 @@ def test_bearings_from_a_far_point_over_many_frames_recover_it():
 
 
 def test_depends_on_the_prior_mean_less_than_the_ekf_on_fig6():
-    """Fig. 6 raises the prior's depth by 2: the EKF's depth moves by > 2, the inverse-depth EKF's by < 1."""
+    """Fig. 6 raises the prior's depth by 2.
+
+    The EKF's depth moves by > 2, the inverse-depth EKF's by < 1.
+    """
     a, b = SCENARIOS["fig2"], SCENARIOS["fig6"]
-    moved = inverse_depth.estimate(np.array(b.mu), b.rho, b.prior.mean, b.prior.cov).mean[1] - \
-        inverse_depth.estimate(np.array(a.mu), a.rho, a.prior.mean, a.prior.cov).mean[1]
-    ekf_moved = ekf.run(np.array(b.mu), b.rho, b.prior.mean, b.prior.cov)[0][-1, 1] - \
-        ekf.run(np.array(a.mu), a.rho, a.prior.mean, a.prior.cov)[0][-1, 1]
+    moved = (
+        inverse_depth.estimate(np.array(b.mu), b.rho, b.prior.mean, b.prior.cov).mean[1]
+        - inverse_depth.estimate(np.array(a.mu), a.rho, a.prior.mean, a.prior.cov).mean[1]
+    )
+    ekf_moved = (
+        ekf.run(np.array(b.mu), b.rho, b.prior.mean, b.prior.cov)[0][-1, 1]
+        - ekf.run(np.array(a.mu), a.rho, a.prior.mean, a.prior.cov)[0][-1, 1]
+    )
     assert ekf_moved > 2.0 and 0 < moved < 1.0
 
 
@@ -91,8 +100,13 @@ def test_batched_equals_looped():
 
 @pytest.mark.parametrize(
     ("kwargs", "name"),
-    [({"mu": [np.nan, 0.0]}, "mu"), ({"rho": -1.0}, "rho"), ({"process_noise": -0.1}, "process_noise"),
-     ({"prior_mean": [0.0, 0.0, 0.0]}, "prior_mean"), ({"prior_mean": [0.0, np.inf, 0.0]}, "prior_mean")],
+    [
+        ({"mu": [np.nan, 0.0]}, "mu"),
+        ({"rho": -1.0}, "rho"),
+        ({"process_noise": -0.1}, "process_noise"),
+        ({"prior_mean": [0.0, 0.0, 0.0]}, "prior_mean"),
+        ({"prior_mean": [0.0, np.inf, 0.0]}, "prior_mean"),
+    ],
 )
 def test_bad_input_is_refused(kwargs, name):
     s = SCENARIOS["fig2"]

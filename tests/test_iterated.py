@@ -15,18 +15,32 @@ def _one_step_objective(x, n, C, mu, rho):
 
 @pytest.mark.parametrize("key", ["fig2", "fig3", "fig6"])
 def test_iterated_update_is_the_mode_of_the_one_step_posterior(key):
-    """The iterated update's fixed point minimises |x - n|_C^2 + (mu - h(x))^2 / rho^2 [bell1993]."""
+    """The iterated update's fixed point is the mode of the one-step posterior.
+
+    It minimises |x - n|_C^2 + (mu - h(x))^2 / rho^2 [bell1993].
+    """
     s = SCENARIOS[key]
     m1, P1 = ekf.update(s.prior.mean, s.prior.cov, s.mu[0], s.rho)
     n, C = ekf.predict(m1, P1)
     out = iterated.update(n, C, s.mu[1], s.rho)
-    best = minimize(_one_step_objective, out.mean, args=(n, C, s.mu[1], s.rho), method="BFGS",
-                    options={"gtol": 1e-10})
+    best = minimize(
+        _one_step_objective,
+        out.mean,
+        args=(n, C, s.mu[1], s.rho),
+        method="BFGS",
+        options={"gtol": 1e-10},
+    )
     assert _one_step_objective(out.mean, n, C, s.mu[1], s.rho) <= best.fun + 1e-9
-    grad = np.array([
-        (_one_step_objective(out.mean + e, n, C, s.mu[1], s.rho)
-         - _one_step_objective(out.mean - e, n, C, s.mu[1], s.rho)) / (2 * np.linalg.norm(e))
-        for e in 1e-6 * np.eye(3)])
+    grad = np.array(
+        [
+            (
+                _one_step_objective(out.mean + e, n, C, s.mu[1], s.rho)
+                - _one_step_objective(out.mean - e, n, C, s.mu[1], s.rho)
+            )
+            / (2 * np.linalg.norm(e))
+            for e in 1e-6 * np.eye(3)
+        ]
+    )
     assert np.max(np.abs(grad)) < 1e-3 * np.max(np.abs(np.linalg.solve(C, out.mean - n)) + 1)
 
 
@@ -36,14 +50,18 @@ def test_one_iteration_is_the_ekf_update_eq_12():
     n, C = ekf.predict(*ekf.update(s.prior.mean, s.prior.cov, s.mu[0], s.rho))
     e = ekf.update(n, C, s.mu[1], s.rho)
     assert _one_step_objective(e.mean, n, C, s.mu[1], s.rho) < _one_step_objective(
-        n, n, C, s.mu[1], s.rho)
+        n, n, C, s.mu[1], s.rho
+    )
     one = iterated.update(n, C, s.mu[1], s.rho, max_iterations=1)
     np.testing.assert_allclose(one.mean, e.mean, rtol=1e-12)
     np.testing.assert_allclose(one.cov, e.cov, rtol=1e-10, atol=1e-12 * np.max(np.abs(e.cov)))
 
 
 def test_linear_measurement_needs_one_iteration():
-    """At a state the projection maps linearly near (a tiny covariance), the iteration stops at once."""
+    """At a state the projection maps linearly near (a tiny covariance).
+
+    There the iteration stops at once.
+    """
     n = np.array([1.0, 5.0, 0.5])
     out = iterated.update(n, 1e-12 * np.eye(3), 0.2, 0.01)
     assert out.iterations <= 3
@@ -59,14 +77,18 @@ def test_smoother_converges_to_the_mode_of_eq_6(key):
     def f(x3):
         return -optimal.log_posterior(x3, s.mu, s.rho, s.prior)
 
-    best = minimize(f, sm.mean, method="Nelder-Mead",
-                    options={"xatol": 1e-12, "fatol": 1e-14, "maxiter": 20000})
+    best = minimize(
+        f, sm.mean, method="Nelder-Mead", options={"xatol": 1e-12, "fatol": 1e-14, "maxiter": 20000}
+    )
     assert f(sm.mean) <= best.fun + 1e-8
     np.testing.assert_allclose(sm.mean, best.x, atol=1e-5)
 
 
 def test_smoother_covariance_is_the_gauss_newton_inverse_at_the_mode():
-    """cov = F^2 (P^-1 + sum J_k^T J_k / rho^2)^-1 F^2T, J by central differences of the bearings."""
+    """cov = F^2 (P^-1 + sum J_k^T J_k / rho^2)^-1 F^2T.
+
+    J is taken by central differences of the bearings.
+    """
     s = SCENARIOS["fig3"]
     sm = iterated.smoother(np.array(s.mu), s.rho, s.prior.mean, s.prior.cov)
     x1 = model.G(sm.mean, -2)
@@ -81,7 +103,10 @@ def test_smoother_covariance_is_the_gauss_newton_inverse_at_the_mode():
 
 
 def test_iterated_ekf_removes_most_of_the_prior_mean_dependence_on_fig6():
-    """Fig. 6 moves the prior's depth by 2: the EKF's depth moves by over 2, the iterated EKF's by < 0.01."""
+    """Fig. 6 moves the prior's depth by 2.
+
+    The EKF's depth moves by over 2, the iterated EKF's by < 0.01.
+    """
     a, b = SCENARIOS["fig2"], SCENARIOS["fig6"]
     it_a = iterated.run(np.array(a.mu), a.rho, a.prior.mean, a.prior.cov)[0][-1]
     it_b = iterated.run(np.array(b.mu), b.rho, b.prior.mean, b.prior.cov)[0][-1]
@@ -113,14 +138,20 @@ def test_batched_equals_looped():
         m1, c1 = iterated.run(mu[i], s.rho, s.prior.mean, s.prior.cov)
         np.testing.assert_allclose(means[i], m1, rtol=1e-12)
         np.testing.assert_allclose(covs[i], c1, rtol=1e-10, atol=1e-14)
-        np.testing.assert_allclose(sm.mean[i], iterated.smoother(mu[i], s.rho, s.prior.mean,
-                                                                 s.prior.cov).mean, rtol=1e-10)
+        np.testing.assert_allclose(
+            sm.mean[i], iterated.smoother(mu[i], s.rho, s.prior.mean, s.prior.cov).mean, rtol=1e-10
+        )
 
 
 @pytest.mark.parametrize(
     ("kwargs", "name"),
-    [({"mu": [np.inf, 0.0, 0.2]}, "mu"), ({"mu": []}, "mu"), ({"rho": 0.0}, "rho"),
-     ({"process_noise": -1.0}, "process_noise"), ({"prior_mean": [0.0, -3.0, 0.0]}, "prior_mean")],
+    [
+        ({"mu": [np.inf, 0.0, 0.2]}, "mu"),
+        ({"mu": []}, "mu"),
+        ({"rho": 0.0}, "rho"),
+        ({"process_noise": -1.0}, "process_noise"),
+        ({"prior_mean": [0.0, -3.0, 0.0]}, "prior_mean"),
+    ],
 )
 def test_bad_input_is_refused(kwargs, name):
     s = SCENARIOS["fig2"]

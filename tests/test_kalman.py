@@ -1,4 +1,6 @@
-"""The Kalman filter and its smoothers (Prince, section 19.2), against filterpy and exact conditioning.
+"""The Kalman filter and its smoothers (Prince, section 19.2).
+
+They are checked against filterpy and exact conditioning.
 
 Every test names the textbook section it checks: the prediction (19.2.1), the
 gain form of the measurement incorporation with its Joseph covariance (19.2.2),
@@ -21,8 +23,16 @@ from numpy.testing import assert_allclose
 from scipy import stats
 
 from depthcore import kalman
-from depthcore.kalman import (FilterResult, MeanAndCov, augment, fixed_interval_smoother,
-                              fixed_lag_smoother, predict, run, update)
+from depthcore.kalman import (
+    FilterResult,
+    MeanAndCov,
+    augment,
+    fixed_interval_smoother,
+    fixed_lag_smoother,
+    predict,
+    run,
+    update,
+)
 
 
 def random_spd(rng, n, scale=1.0):
@@ -45,8 +55,17 @@ def random_model(rng, n=3, m=2, T=7, time_varying=False, offsets=True, singular_
     prior_mean = rng.normal(size=n)
     prior_cov = random_spd(rng, n, 2.0)
     x = rng.normal(size=(T, m)) * 2.0
-    return dict(x=x, prior_mean=prior_mean, prior_cov=prior_cov, Psi=Psi, Sigma_p=Sigma_p,
-                Phi=Phi, Sigma_m=Sigma_m, mu_p=mu_p, mu_m=mu_m)
+    return dict(
+        x=x,
+        prior_mean=prior_mean,
+        prior_cov=prior_cov,
+        Psi=Psi,
+        Sigma_p=Sigma_p,
+        Phi=Phi,
+        Sigma_m=Sigma_m,
+        mu_p=mu_p,
+        mu_m=mu_m,
+    )
 
 
 def step_matrices(model, T):
@@ -60,13 +79,21 @@ def step_matrices(model, T):
 
     mu_p = np.zeros(n) if model["mu_p"] is None else model["mu_p"]
     mu_m = np.zeros(m) if model["mu_m"] is None else model["mu_m"]
-    return (per_step(model["Psi"], T - 1, 2), per_step(model["Sigma_p"], T - 1, 2),
-            per_step(mu_p, T - 1, 1), per_step(model["Phi"], T, 2),
-            per_step(model["Sigma_m"], T, 2), per_step(mu_m, T, 1))
+    return (
+        per_step(model["Psi"], T - 1, 2),
+        per_step(model["Sigma_p"], T - 1, 2),
+        per_step(mu_p, T - 1, 1),
+        per_step(model["Phi"], T, 2),
+        per_step(model["Sigma_m"], T, 2),
+        per_step(mu_m, T, 1),
+    )
 
 
 def dense_gaussian(model):
-    """The trajectory and the measurements as one Gaussian; returns (mean_W, cov_W, mean_X, cov_X, cov_WX)."""
+    """The trajectory and the measurements as one Gaussian.
+
+    Returns (mean_W, cov_W, mean_X, cov_X, cov_WX).
+    """
     x = model["x"]
     T, m = x.shape
     n = model["prior_mean"].size
@@ -84,13 +111,13 @@ def dense_gaussian(model):
     E = np.zeros((T * n, T * n))
     E[:n, :n] = model["prior_cov"]
     for t in range(1, T):
-        E[t * n:(t + 1) * n, t * n:(t + 1) * n] = Qs[t - 1]
+        E[t * n : (t + 1) * n, t * n : (t + 1) * n] = Qs[t - 1]
     cov_W = A @ E @ A.T
     H = np.zeros((T * m, T * n))
     R = np.zeros((T * m, T * m))
     for t in range(T):
-        H[t * m:(t + 1) * m, t * n:(t + 1) * n] = Phis[t]
-        R[t * m:(t + 1) * m, t * m:(t + 1) * m] = Rs[t]
+        H[t * m : (t + 1) * m, t * n : (t + 1) * n] = Phis[t]
+        R[t * m : (t + 1) * m, t * m : (t + 1) * m] = Rs[t]
     mean_X = H @ b + np.concatenate(mu_ms)
     return b, cov_W, mean_X, H @ cov_W @ H.T + R, cov_W @ H.T
 
@@ -105,12 +132,15 @@ def condition(model, upto):
     mean = mean_W + gain @ (model["x"].ravel()[:k] - mean_X[:k])
     cov = cov_W - gain @ cov_WX[:, :k].T
     means = mean.reshape(T, n)
-    covs = np.stack([cov[t * n:(t + 1) * n, t * n:(t + 1) * n] for t in range(T)])
+    covs = np.stack([cov[t * n : (t + 1) * n, t * n : (t + 1) * n] for t in range(T)])
     return means, covs
 
 
 def filterpy_run(model):
-    """filterpy's KalmanFilter over the model's measurements: means, covariances, log likelihoods."""
+    """filterpy's KalmanFilter over the model's measurements.
+
+    Returns means, covariances, log likelihoods.
+    """
     x = model["x"]
     T, m = x.shape
     n = model["prior_mean"].size
@@ -164,13 +194,19 @@ def test_textbook_19_2_2_update_matches_filterpy(m):
 
 
 def test_textbook_19_2_2_gain_form_equals_the_information_form_of_eq_19_10():
-    # Eq. (19.10), before the matrix inversion lemma: Sigma = (Sigma_+^-1 + Phi^T Sigma_m^-1 Phi)^-1,
+    # Eq. (19.10), before the matrix inversion lemma:
+    # Sigma = (Sigma_+^-1 + Phi^T Sigma_m^-1 Phi)^-1,
     # mu = Sigma (Phi^T Sigma_m^-1 (x - mu_m) + Sigma_+^-1 mu_+); the Joseph form and
     # (I - K Phi) Sigma_+ are the same matrix.
     rng = np.random.default_rng(3)
     n, m = 4, 2
     mean, cov = rng.normal(size=n), random_spd(rng, n)
-    Phi, R, x, mu_m = rng.normal(size=(m, n)), random_spd(rng, m), rng.normal(size=m), rng.normal(size=m)
+    Phi, R, x, mu_m = (
+        rng.normal(size=(m, n)),
+        random_spd(rng, m),
+        rng.normal(size=m),
+        rng.normal(size=m),
+    )
     got = update(mean, cov, x, Phi, R, mu_m)
     info = np.linalg.inv(cov) + Phi.T @ np.linalg.solve(R, Phi)
     Sigma = np.linalg.inv(info)
@@ -185,7 +221,12 @@ def test_textbook_19_2_2_log_likelihood_is_the_innovation_density():
     rng = np.random.default_rng(4)
     n, m = 3, 2
     mean, cov = rng.normal(size=n), random_spd(rng, n)
-    Phi, R, x, mu_m = rng.normal(size=(m, n)), random_spd(rng, m), rng.normal(size=m), rng.normal(size=m)
+    Phi, R, x, mu_m = (
+        rng.normal(size=(m, n)),
+        random_spd(rng, m),
+        rng.normal(size=m),
+        rng.normal(size=m),
+    )
     expected = stats.multivariate_normal(mu_m + Phi @ mean, R + Phi @ cov @ Phi.T).logpdf(x)
     assert_allclose(update(mean, cov, x, Phi, R, mu_m).log_likelihood, expected, rtol=1e-13)
 
@@ -194,7 +235,9 @@ def test_textbook_19_2_2_joseph_form_stays_symmetric_positive_definite():
     # A broad prior and a precise measurement: the posterior variance along the measured
     # direction is 1e-12 of the prior's, where C - K S K^T loses most of its digits.
     prior_cov = np.array([[1e6, 0.3e6], [0.3e6, 1e6]])
-    got = update(np.zeros(2), prior_cov, np.array([0.2]), np.array([[1.0, 0.5]]), np.array([[1e-6]]))
+    got = update(
+        np.zeros(2), prior_cov, np.array([0.2]), np.array([[1.0, 0.5]]), np.array([[1e-6]])
+    )
     assert_allclose(got.cov, got.cov.T, rtol=0, atol=0)
     assert np.all(np.linalg.eigvalsh(got.cov) > 0)
 
@@ -205,8 +248,9 @@ def test_textbook_19_2_2_joseph_form_stays_symmetric_positive_definite():
 @pytest.mark.parametrize("m", [1, 2])
 @pytest.mark.parametrize("time_varying", [False, True])
 def test_textbook_19_2_3_filter_matches_filterpy(m, time_varying):
-    model = random_model(np.random.default_rng(10 + m + 2 * time_varying), m=m,
-                         time_varying=time_varying)
+    model = random_model(
+        np.random.default_rng(10 + m + 2 * time_varying), m=m, time_varying=time_varying
+    )
     res = run(**model)
     assert isinstance(res, FilterResult)
     means, covs, lls = filterpy_run(model)
@@ -217,7 +261,9 @@ def test_textbook_19_2_3_filter_matches_filterpy(m, time_varying):
 
 @pytest.mark.parametrize("singular_noise", [False, True])
 def test_textbook_19_2_3_filter_equals_dense_gaussian_conditioning(singular_noise):
-    model = random_model(np.random.default_rng(20), time_varying=True, singular_noise=singular_noise)
+    model = random_model(
+        np.random.default_rng(20), time_varying=True, singular_noise=singular_noise
+    )
     res = run(**model)
     T = model["x"].shape[0]
     for t in range(T):
@@ -245,9 +291,17 @@ def test_textbook_19_2_5_alternating_scalar_measurements():
     rng = np.random.default_rng(40)
     T = 8
     Phi = np.stack([[[1.0, 0.0]] if t % 2 == 0 else [[0.0, 1.0]] for t in range(T)])
-    model = dict(x=rng.normal(size=(T, 1)), prior_mean=np.zeros(2), prior_cov=10.0 * np.eye(2),
-                 Psi=np.eye(2), Sigma_p=0.1 * np.eye(2), Phi=Phi, Sigma_m=np.array([[0.2]]),
-                 mu_p=None, mu_m=None)
+    model = dict(
+        x=rng.normal(size=(T, 1)),
+        prior_mean=np.zeros(2),
+        prior_cov=10.0 * np.eye(2),
+        Psi=np.eye(2),
+        Sigma_p=0.1 * np.eye(2),
+        Phi=Phi,
+        Sigma_m=np.array([[0.2]]),
+        mu_p=None,
+        mu_m=None,
+    )
     res = run(**model)
     means, covs, lls = filterpy_run(model)
     assert_allclose(res.means, means, rtol=1e-12, atol=1e-13)
@@ -276,7 +330,9 @@ def test_textbook_19_2_6_fixed_interval_smoother_matches_filterpy_rts():
 
 @pytest.mark.parametrize("singular_noise", [False, True])
 def test_textbook_19_2_6_fixed_interval_smoother_equals_dense_conditioning(singular_noise):
-    model = random_model(np.random.default_rng(51), time_varying=True, singular_noise=singular_noise)
+    model = random_model(
+        np.random.default_rng(51), time_varying=True, singular_noise=singular_noise
+    )
     T = model["x"].shape[0]
     Psi = np.broadcast_to(model["Psi"], (T - 1, 3, 3))  # given per step
     got = fixed_interval_smoother(run(**model), Psi)
@@ -306,7 +362,12 @@ def test_textbook_19_2_6_fixed_lag_smoother_is_the_fixed_interval_marginal_at_th
 def test_textbook_19_2_6_augmented_model_copies_the_state_down():
     rng = np.random.default_rng(70)
     n, m, lag = 2, 1, 3
-    Psi, Q, Phi, mu_p = rng.normal(size=(n, n)), random_spd(rng, n), rng.normal(size=(m, n)), rng.normal(size=n)
+    Psi, Q, Phi, mu_p = (
+        rng.normal(size=(n, n)),
+        random_spd(rng, n),
+        rng.normal(size=(m, n)),
+        rng.normal(size=n),
+    )
     Psi_a, Q_a, Phi_a, mu_pa = augment(Psi, Q, Phi, lag, mu_p)
     w = rng.normal(size=(lag + 1, n))  # (w_t, w_{t-1}, .., w_{t-lag})
     moved = (Psi_a @ w.ravel() + mu_pa).reshape(lag + 1, n)
@@ -368,23 +429,32 @@ def bad(model, **changes):
     return dict(model, **changes)
 
 
-@pytest.mark.parametrize("change, message", [
-    (dict(prior_mean=np.array([0.0, np.nan, 0.0])), "prior_mean must be finite"),
-    (dict(x=np.full((7, 2), np.inf)), "x must be finite"),
-    (dict(prior_cov=np.diag([1.0, -1.0, 1.0])), "prior_cov must be positive definite"),
-    (dict(prior_cov=np.diag([1.0, 0.0, 1.0])), "prior_cov must be positive definite"),
-    (dict(prior_cov=np.array([[1.0, 0.5, 0], [0, 1, 0], [0, 0, 1]])), "prior_cov must be symmetric"),
-    (dict(Sigma_m=np.diag([0.1, 0.0])), r"Sigma_m \(the measurement noise covariance\) must be positive definite"),
-    (dict(Sigma_p=-np.eye(3)), "Sigma_p must be positive semi-definite"),
-    (dict(prior_cov=np.eye(2)), r"prior_cov must have trailing shape \(3, 3\)"),
-    (dict(Psi=np.eye(2)), r"Psi must have trailing shape \(3, 3\)"),
-    (dict(Phi=np.ones((2, 4))), r"Phi must have trailing shape \(m, 3\)"),
-    (dict(x=np.ones((7, 3))), r"x must have trailing shape \(T, 2\)"),
-    (dict(Phi=np.ones((5, 2, 3))), "Phi must have 7 \\(or 1\\) entries on its time axis"),
-    (dict(mu_m=np.ones(3)), r"mu_m must have trailing shape \(2,\)"),
-    (dict(x=np.ones(7)), "x must have at least 2 dimensions"),
-    (dict(prior_mean="a"), "prior_mean must be numeric"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (dict(prior_mean=np.array([0.0, np.nan, 0.0])), "prior_mean must be finite"),
+        (dict(x=np.full((7, 2), np.inf)), "x must be finite"),
+        (dict(prior_cov=np.diag([1.0, -1.0, 1.0])), "prior_cov must be positive definite"),
+        (dict(prior_cov=np.diag([1.0, 0.0, 1.0])), "prior_cov must be positive definite"),
+        (
+            dict(prior_cov=np.array([[1.0, 0.5, 0], [0, 1, 0], [0, 0, 1]])),
+            "prior_cov must be symmetric",
+        ),
+        (
+            dict(Sigma_m=np.diag([0.1, 0.0])),
+            r"Sigma_m \(the measurement noise covariance\) must be positive definite",
+        ),
+        (dict(Sigma_p=-np.eye(3)), "Sigma_p must be positive semi-definite"),
+        (dict(prior_cov=np.eye(2)), r"prior_cov must have trailing shape \(3, 3\)"),
+        (dict(Psi=np.eye(2)), r"Psi must have trailing shape \(3, 3\)"),
+        (dict(Phi=np.ones((2, 4))), r"Phi must have trailing shape \(m, 3\)"),
+        (dict(x=np.ones((7, 3))), r"x must have trailing shape \(T, 2\)"),
+        (dict(Phi=np.ones((5, 2, 3))), "Phi must have 7 \\(or 1\\) entries on its time axis"),
+        (dict(mu_m=np.ones(3)), r"mu_m must have trailing shape \(2,\)"),
+        (dict(x=np.ones(7)), "x must have at least 2 dimensions"),
+        (dict(prior_mean="a"), "prior_mean must be numeric"),
+    ],
+)
 def test_run_refuses_bad_input_naming_the_argument(change, message):
     model = random_model(np.random.default_rng(90))
     with pytest.raises(ValueError, match=message):
@@ -394,7 +464,13 @@ def test_run_refuses_bad_input_naming_the_argument(change, message):
 def test_scalar_noise_variance_must_be_positive():
     for variance in (0.0, -1e-3):
         with pytest.raises(ValueError, match="Sigma_m .* must be positive definite"):
-            update(np.zeros(2), np.eye(2), np.array([0.1]), np.array([[1.0, 0.0]]), np.array([[variance]]))
+            update(
+                np.zeros(2),
+                np.eye(2),
+                np.array([0.1]),
+                np.array([[1.0, 0.0]]),
+                np.array([[variance]]),
+            )
 
 
 @pytest.mark.parametrize("lag", [-1, 1.5, True, "2"])
@@ -414,10 +490,17 @@ def test_textbook_19_2_6_fixed_interval_smoother_with_a_singular_prediction():
     # covariance is singular, and the smoother's gain uses the pseudo-inverse.
     rng = np.random.default_rng(92)
     T = 5
-    model = dict(x=rng.normal(size=(T, 1)), prior_mean=np.array([0.3, -0.2]),
-                 prior_cov=np.array([[2.0, 0.5], [0.5, 1.0]]), Psi=np.array([[1.0, 1.0], [0.0, 0.0]]),
-                 Sigma_p=np.zeros((2, 2)), Phi=np.array([[1.0, 0.5]]), Sigma_m=np.array([[0.3]]),
-                 mu_p=None, mu_m=None)
+    model = dict(
+        x=rng.normal(size=(T, 1)),
+        prior_mean=np.array([0.3, -0.2]),
+        prior_cov=np.array([[2.0, 0.5], [0.5, 1.0]]),
+        Psi=np.array([[1.0, 1.0], [0.0, 0.0]]),
+        Sigma_p=np.zeros((2, 2)),
+        Phi=np.array([[1.0, 0.5]]),
+        Sigma_m=np.array([[0.3]]),
+        mu_p=None,
+        mu_m=None,
+    )
     res = run(**model)
     assert np.all(np.abs(np.linalg.det(res.predicted_covs[1:])) < 1e-15)
     got = fixed_interval_smoother(res, model["Psi"])

@@ -38,7 +38,9 @@ def test_eq11_observation_vector_is_gradient_of_projection():
 
 def test_eq4_likelihood_integrates_to_one_over_mu():
     x = np.array([1.2, 6.0, 1.2])
-    total, _ = integrate.quad(lambda m: np.exp(model.log_likelihood(m, x, 0.01)), -1, 1, points=[0.2])
+    total, _ = integrate.quad(
+        lambda m: np.exp(model.log_likelihood(m, x, 0.01)), -1, 1, points=[0.2]
+    )
     assert total == pytest.approx(1.0, abs=1e-10)
 
 
@@ -68,16 +70,21 @@ def test_log_likelihood_rejects_bad_rho(rho):
 def test_noise_in_pixels_paper_arithmetic():
     # 512 pixels over 30 degrees: 977.8 pixels per radian.
     assert model.noise_in_pixels(1 / 200) == pytest.approx(4.889, abs=1e-3)  # "about 5 pixels"
-    assert model.noise_in_pixels(1 / 500) == pytest.approx(1.956, abs=1e-3)  # printed "about 1 pixel"
+    assert model.noise_in_pixels(1 / 500) == pytest.approx(
+        1.956, abs=1e-3
+    )  # printed "about 1 pixel"
     pinhole = model.noise_in_pixels(1 / 200, small_angle=False)
     assert pinhole == pytest.approx(256 / np.tan(np.deg2rad(15)) * np.tan(1 / 200), rel=1e-12)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"rho": 0}, "rho must be positive"),
-    ({"rho": 0.01, "fov_deg": 180}, "fov_deg must be below 180"),
-    ({"rho": 0.01, "image_size": -5}, "image_size must be positive"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"rho": 0}, "rho must be positive"),
+        ({"rho": 0.01, "fov_deg": 180}, "fov_deg must be below 180"),
+        ({"rho": 0.01, "image_size": -5}, "image_size must be positive"),
+    ],
+)
 def test_noise_in_pixels_rejects_bad_input(kwargs, message):
     with pytest.raises(ValueError, match=message):
         model.noise_in_pixels(**kwargs)
@@ -102,8 +109,10 @@ def test_profile_misfit_is_the_least_misfit_at_that_depth():
         got = model.profile_misfit(mu, [y3])[0]
         assert got == pytest.approx(f, rel=1e-12, abs=1e-30)
         for dx, dv in ((1e-3, 0.0), (0.0, 1e-3)):  # any other state at this depth fits worse
-            g = sum((mu[i] - model.project(model.G([x3 + dx, y3, v + dv], i - 2))) ** 2
-                    for i in range(3))
+            g = sum(
+                (mu[i] - model.project(model.G([x3 + dx, y3, v + dv], i - 2))) ** 2
+                for i in range(3)
+            )
             assert g > got
 
 
@@ -133,8 +142,11 @@ def test_eq7_recovers_the_state_from_noise_free_bearings(c):
 def test_eq5_f_is_sum_of_squared_residuals_in_time_order():
     x = np.array([1.0, 5.0, 0.5])
     mu = np.array([-0.3, 0.0, 0.2])
-    expected = [(x[0] - 2 * x[2]) / (x[1] - 2) - mu[0], (x[0] - x[2]) / (x[1] - 1) - mu[1],
-                x[0] / x[1] - mu[2]]
+    expected = [
+        (x[0] - 2 * x[2]) / (x[1] - 2) - mu[0],
+        (x[0] - x[2]) / (x[1] - 1) - mu[1],
+        x[0] / x[1] - mu[2],
+    ]
     assert_allclose(residuals(x, mu), expected)
     assert f(x, mu) == pytest.approx(np.sum(np.square(expected)))
 

@@ -29,8 +29,13 @@ def test_eq14_coefficients_reproduce_the_log_posterior_at_fixed_depth():
     for k, yk in enumerate(y):
         x = np.stack([u[:, 0], np.full(4, yk), u[:, 1]], -1)
         lp = optimal.log_posterior(x, s.mu, s.rho, s.prior)
-        quad = -0.5 * (A[k] * u[:, 0] ** 2 + B[k] * u[:, 0] * u[:, 1] + C[k] * u[:, 1] ** 2
-                       + D[k] * u[:, 0] + E[k] * u[:, 1])
+        quad = -0.5 * (
+            A[k] * u[:, 0] ** 2
+            + B[k] * u[:, 0] * u[:, 1]
+            + C[k] * u[:, 1] ** 2
+            + D[k] * u[:, 0]
+            + E[k] * u[:, 1]
+        )
         assert np.ptp(lp - quad) < 1e-7 * np.abs(lp).max()  # a function of y alone
 
 
@@ -45,10 +50,14 @@ def _inner_integral(y, s):
     t, w = 12 * t, 12 * w
     T = np.stack(np.meshgrid(t, t, indexing="ij"), -1).reshape(-1, 2)
     u = mean[0] + T @ axes.T
-    lp = optimal.log_posterior(np.stack([u[:, 0], np.full(len(u), y), u[:, 1]], -1),
-                               s.mu, s.rho, s.prior)
+    lp = optimal.log_posterior(
+        np.stack([u[:, 0], np.full(len(u), y), u[:, 1]], -1), s.mu, s.rho, s.prior
+    )
     shift = lp.max()
-    return np.log(np.sum(np.exp(lp - shift) * np.outer(w, w).ravel()) * abs(np.linalg.det(axes))) + shift
+    return (
+        np.log(np.sum(np.exp(lp - shift) * np.outer(w, w).ravel()) * abs(np.linalg.det(axes)))
+        + shift
+    )
 
 
 def test_eq16_derived_depth_marginal_matches_2d_quadrature_up_to_a_constant():
@@ -77,7 +86,9 @@ def test_depth_and_velocity_marginals_integrate_to_one(scenario):
     m = optimal.marginals(scenario.mu, scenario.rho, scenario.prior)
     total, _ = integrate.quad(m.depth_pdf, 2, np.inf, limit=400, points=None)
     assert total == pytest.approx(1.0, abs=1e-8)
-    v = np.linspace(m.velocity_mean - 40 * m.velocity_sd, m.velocity_mean + 40 * m.velocity_sd, 40001)
+    v = np.linspace(
+        m.velocity_mean - 40 * m.velocity_sd, m.velocity_mean + 40 * m.velocity_sd, 40001
+    )
     pv = m.velocity_pdf(v)
     assert np.trapezoid(pv, v) == pytest.approx(1.0, abs=1e-6)
     assert np.trapezoid(pv * v, v) == pytest.approx(m.velocity_mean, abs=1e-5 * m.velocity_sd)
@@ -97,8 +108,11 @@ def test_moments_match_brute_force_3d_quadrature(key):
     m = optimal.marginals(s.mu, s.rho, s.prior)
     b = reference.grid_moments(s.mu, s.rho, s.prior, panels=300, uv_order=32)
     # the grid route converges to ~1e-12 here; 1e-8 relative leaves room
-    assert_allclose([m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd],
-                    [b.depth_mean, b.depth_sd, b.velocity_mean, b.velocity_sd], rtol=1e-8)
+    assert_allclose(
+        [m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd],
+        [b.depth_mean, b.depth_sd, b.velocity_mean, b.velocity_sd],
+        rtol=1e-8,
+    )
     assert_allclose(m.mean, b.mean, rtol=1e-8)
     assert_allclose(m.cov, b.cov, rtol=1e-7, atol=1e-10 * np.abs(b.cov).max())
 
@@ -106,8 +120,9 @@ def test_moments_match_brute_force_3d_quadrature(key):
 def test_moments_match_importance_sampling():
     s = SCENARIOS["fig2"]
     m = optimal.marginals(s.mu, s.rho, s.prior)
-    means, sds, se = reference.importance_moments(s.mu, s.rho, s.prior, np.random.default_rng(11),
-                                                  n=100_000)
+    means, sds, se = reference.importance_moments(
+        s.mu, s.rho, s.prior, np.random.default_rng(11), n=100_000
+    )
     # five standard errors: a false alarm has probability below 1e-6
     assert abs(means[0] - m.depth_mean) < 5 * se[0]
     assert abs(means[1] - m.velocity_mean) < 5 * se[1]
@@ -170,11 +185,14 @@ def test_log_posterior_zero_residual_at_c():
     assert f(c, MU_17) == pytest.approx(0.0, abs=1e-28)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"reading": "paper"}, "reading must be one of"),
-    ({"support": "positive"}, "support must be one of"),
-    ({"rtol": 0.0}, "rtol must be positive"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"reading": "paper"}, "reading must be one of"),
+        ({"support": "positive"}, "support must be one of"),
+        ({"rtol": 0.0}, "rtol must be positive"),
+    ],
+)
 def test_marginals_reject_bad_options(kwargs, message):
     s = SCENARIOS["fig2"]
     with pytest.raises(ValueError, match=message):
@@ -284,8 +302,9 @@ def test_prior_exponent_drops_what_eq14_keeps():
     A, B, C, D, E = optimal.quadratic_coefficients(y, s.mu, s.rho, s.prior).T
     K = optimal.prior_exponent(y, s.mu, s.rho, s.prior)
     lp = optimal.log_posterior(np.stack([x, y, v], -1), s.mu, s.rho, s.prior)
-    assert_allclose(lp, -0.5 * (A * x**2 + B * x * v + C * v**2 + D * x + E * v) - 0.5 * K,
-                    rtol=1e-10)
+    assert_allclose(
+        lp, -0.5 * (A * x**2 + B * x * v + C * v**2 + D * x + E * v) - 0.5 * K, rtol=1e-10
+    )
 
 
 @pytest.mark.parametrize("key", ["fig2", "fig3", "fig5"])

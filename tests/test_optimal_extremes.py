@@ -6,7 +6,7 @@ from numpy.testing import assert_allclose
 
 from depthcore import optimal, reference
 from depthcore.gaussian import Gaussian
-from depthcore.second_order import A2, b2, noise_free_state, second_order
+from depthcore.second_order import noise_free_state, second_order
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -35,8 +35,14 @@ def _brute_1d(mu, rho, prior, t_lo, t_hi, panels=20000):
     p = np.exp(log_density - log_density.max()) * wt
     Z = p.sum()
     ey, ev = p @ y / Z, p @ mean[:, 1] / Z
-    return np.array([ey, np.sqrt(p @ (y - ey) ** 2 / Z), ev,
-                     np.sqrt(p @ ((mean[:, 1] - ev) ** 2 + cov[:, 1, 1]) / Z)])
+    return np.array(
+        [
+            ey,
+            np.sqrt(p @ (y - ey) ** 2 / Z),
+            ev,
+            np.sqrt(p @ ((mean[:, 1] - ev) ** 2 + cov[:, 1, 1]) / Z),
+        ]
+    )
 
 
 EXTREMES = {
@@ -65,8 +71,9 @@ def test_extremes_run_within_the_node_bound_with_finite_moments(name):
     assert m.depth_error <= max(1e-6 * m.depth_sd, floor)
 
 
-@pytest.mark.parametrize("name", ["rho=1e-5", "rho=1", "prior scale 1e-6", "prior scale 1e6",
-                                  "c2 - 2 = 0.009"])
+@pytest.mark.parametrize(
+    "name", ["rho=1e-5", "rho=1", "prior scale 1e-6", "prior scale 1e6", "c2 - 2 = 0.009"]
+)
 def test_extremes_match_a_fixed_gauss_legendre_rule_in_log_depth(name):
     mu, rho, scale = EXTREMES[name]
     prior = _prior(mu, scale)
@@ -95,8 +102,12 @@ def test_moderate_extreme_matches_the_3d_grid_of_eq6():
     prior = _prior(mu, scale)
     m = optimal.marginals(mu, rho, prior)
     b = reference.grid_moments(mu, rho, prior, panels=300, uv_order=32)
-    assert_allclose(_key(m), [b.depth_mean, b.depth_sd, b.velocity_mean, b.velocity_sd],
-                    rtol=0, atol=1e-8 * m.depth_sd)
+    assert_allclose(
+        _key(m),
+        [b.depth_mean, b.depth_sd, b.velocity_mean, b.velocity_sd],
+        rtol=0,
+        atol=1e-8 * m.depth_sd,
+    )
 
 
 def test_small_noise_limit_is_p_s_plus_a_term_linear_in_rho():
@@ -126,7 +137,7 @@ def test_batch_result_does_not_depend_on_row_order():
     a = optimal.moments(mus, 1 / 200, [-1.2, 4, 0], 1000 * np.eye(3))
     b = optimal.moments(mus[::-1], 1 / 200, [-1.2, 4, 0], 1000 * np.eye(3))
     for k in range(2):
-        single = optimal.moments(mus[k:k + 1], 1 / 200, [-1.2, 4, 0], 1000 * np.eye(3))
+        single = optimal.moments(mus[k : k + 1], 1 / 200, [-1.2, 4, 0], 1000 * np.eye(3))
         assert_allclose(a.depth_mean[k], single.depth_mean[0], rtol=1e-13)
         assert_allclose(a.velocity_sd[k], single.velocity_sd[0], rtol=1e-13)
     assert_allclose(a.depth_mean, b.depth_mean[::-1], rtol=1e-13)
@@ -139,7 +150,7 @@ def test_batch_of_extremes_matches_single_calls():
     rhos = np.array([EXTREMES[n][1] for n in names])
     means = np.array([_prior(mu).mean for mu in mus])
     batch = optimal.moments(mus, rhos, means, 1000 * np.eye(3))
-    for k, n in enumerate(names):
+    for k, _n in enumerate(names):
         single = optimal.marginals(mus[k], rhos[k], _prior(mus[k]))
         assert batch.depth_mean[k] == pytest.approx(single.depth_mean, rel=1e-12)
         assert batch.velocity_sd[k] == pytest.approx(single.velocity_sd, rel=1e-10)

@@ -9,8 +9,11 @@ from depthcore.scenarios import REPORTED
 @pytest.fixture(scope="module")
 def rows():
     table = reproduce.reproduce(["fig2", "fig3"])
-    return {(s["key"], r["filter"], r["reading"], r["support"], r["quantity"]): r
-            for s in table["scenarios"] for r in s["rows"]}
+    return {
+        (s["key"], r["filter"], r["reading"], r["support"], r["quantity"]): r
+        for s in table["scenarios"]
+        for r in s["rows"]
+    }
 
 
 @pytest.mark.parametrize("key", ["fig2", "fig3"])
@@ -44,7 +47,9 @@ def test_fig3_optimal_sd_is_reproduced_by_no_reading(rows):
     for reading in ("derived", "printed"):
         for support in ("front", "all"):
             assert not rows[("fig3", "optimal", reading, support, "depth")]["sd_matches"]
-    assert rows[("fig3", "optimal", "printed", "front", "depth")]["sd"] == pytest.approx(68.14, abs=0.005)
+    assert rows[("fig3", "optimal", "printed", "front", "depth")]["sd"] == pytest.approx(
+        68.14, abs=0.005
+    )
 
 
 def test_reported_table_is_complete():

@@ -28,8 +28,15 @@ def reference(opt):
 def replicates(n_particles, n_replicates, seed, scenario=FIG2, **kwargs):
     """``n_replicates`` independent filters on one triple, in one batched call."""
     mu = np.tile(scenario.mu, (n_replicates, 1))
-    return run(mu, scenario.rho, scenario.prior.mean, scenario.prior.cov, n_particles,
-               np.random.default_rng(seed), **kwargs)
+    return run(
+        mu,
+        scenario.rho,
+        scenario.prior.mean,
+        scenario.prior.cov,
+        n_particles,
+        np.random.default_rng(seed),
+        **kwargs,
+    )
 
 
 # --- weights ---------------------------------------------------------------------------
@@ -44,13 +51,15 @@ def test_result_log_weights_are_normalised_and_ess_matches():
 
 
 def test_gaussian_proposal_is_the_limit_of_infinite_df():
-    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 2000, np.random.default_rng(25),
-                        df=np.inf)
+    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 2000, np.random.default_rng(25), df=np.inf)
     m, S = second_order_batch(np.array([FIG2.mu]), FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     q = stats.multivariate_normal(m[0], pf.DEFAULT_INFLATION**2 * S[0])
     alive = np.isfinite(r.log_weights)
-    diff = (r.log_weights[alive] + q.logpdf(r.particles[alive])
-            - optimal.log_posterior(r.particles[alive], FIG2.mu, FIG2.rho, FIG2.prior))
+    diff = (
+        r.log_weights[alive]
+        + q.logpdf(r.particles[alive])
+        - optimal.log_posterior(r.particles[alive], FIG2.mu, FIG2.rho, FIG2.prior)
+    )
     assert_allclose(diff, diff[0], rtol=0, atol=1e-8)
 
 
@@ -58,8 +67,9 @@ def test_final_weights_are_posterior_over_proposal():
     # Without resampling the look-ahead terms cancel: log W = log p_o - log q + const,
     # with p_o the optimal posterior (6) and q the t proposal (scipy's density).
     N = 2000
-    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(9),
-                        ess_threshold=0.0)
+    r = particle_filter(
+        FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(9), ess_threshold=0.0
+    )
     m, S = second_order_batch(np.array([FIG2.mu]), FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     q = stats.multivariate_t(m[0], pf.DEFAULT_INFLATION**2 * S[0], df=pf.DEFAULT_DF)
     x = r.particles
@@ -86,8 +96,14 @@ def test_same_seed_gives_identical_output(proposal):
 
 def test_single_is_the_batch_of_one():
     a = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 400, np.random.default_rng(12))
-    b = run(np.array([FIG2.mu]), FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 400,
-            np.random.default_rng(12))
+    b = run(
+        np.array([FIG2.mu]),
+        FIG2.rho,
+        FIG2.prior.mean,
+        FIG2.prior.cov,
+        400,
+        np.random.default_rng(12),
+    )
     assert len(b) == 1
     assert_array_equal(a.particles, b.particles[0])
     assert_array_equal(a.log_weights, b.log_weights[0])
@@ -107,8 +123,9 @@ def test_batch_of_different_triples():
 
 
 def test_resampling_duplicates_particles_with_their_ancestors():
-    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 800, np.random.default_rng(14),
-                        ess_threshold=1.0)
+    r = particle_filter(
+        FIG2.mu, FIG2.rho, FIG2.prior, 800, np.random.default_rng(14), ess_threshold=1.0
+    )
     assert_array_equal(r.resampled, [False, True, True])
     assert len(np.unique(r.ancestors)) < 800
     for a in np.unique(r.ancestors)[:20]:
@@ -130,13 +147,27 @@ def test_result_is_immutable():
 
 def test_bootstrap_collapses_on_fig2_while_the_proposal_does_not():
     N = 4000
-    boot = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(16),
-                           proposal="prior", ess_threshold=0.5)
+    boot = particle_filter(
+        FIG2.mu,
+        FIG2.rho,
+        FIG2.prior,
+        N,
+        np.random.default_rng(16),
+        proposal="prior",
+        ess_threshold=0.5,
+    )
     assert boot.ess[0] < 0.02 * N  # a bearing alone leaves a thin wedge of the prior
     assert boot.resampled[1]
     assert boot.distinct_ess() < 10  # the copies made by resampling count as one particle
-    plain = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(16),
-                            proposal="prior", ess_threshold=0.0)
+    plain = particle_filter(
+        FIG2.mu,
+        FIG2.rho,
+        FIG2.prior,
+        N,
+        np.random.default_rng(16),
+        proposal="prior",
+        ess_threshold=0.0,
+    )
     assert np.all(plain.ess[1:] < 10)  # after two bearings: a handful of particles
     good = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(16))
     assert np.all(good.ess > 0.3 * N) and not good.resampled.any()
@@ -159,9 +190,16 @@ def test_fig2_moments_agree_with_the_optimal_filter_at_N_4000(fig2_optimal):
 
 def root_mean_square_errors(opt, sizes, n_replicates, seed):
     ref = reference(opt)[:, None]
-    return np.array([np.sqrt(np.mean((np.array(replicates(n, n_replicates, seed + i).moments())
-                                       - ref) ** 2, axis=1))
-                     for i, n in enumerate(sizes)])
+    return np.array(
+        [
+            np.sqrt(
+                np.mean(
+                    (np.array(replicates(n, n_replicates, seed + i).moments()) - ref) ** 2, axis=1
+                )
+            )
+            for i, n in enumerate(sizes)
+        ]
+    )
 
 
 def test_error_shrinks_with_N(fig2_optimal):
@@ -252,21 +290,25 @@ def test_rejects_bad_n_particles(n):
         particle_filter(MU_17, 0.005, FIG2.prior, n, np.random.default_rng(0))
 
 
-@pytest.mark.parametrize("mu, message", [
-    ((0.1, 0.1, 0.1), "mu is degenerate"),
-    ((-0.1, 0.0, 0.1), "mu is degenerate"),
-    ((np.nan, 0.0, 0.2), "mu must be finite"),
-    ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
-    ((-0.3, 0.0), r"mu must have shape \(3,\)"),
-])
+@pytest.mark.parametrize(
+    "mu, message",
+    [
+        ((0.1, 0.1, 0.1), "mu is degenerate"),
+        ((-0.1, 0.0, 0.1), "mu is degenerate"),
+        ((np.nan, 0.0, 0.2), "mu must be finite"),
+        ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
+        ((-0.3, 0.0), r"mu must have shape \(3,\)"),
+    ],
+)
 def test_rejects_bad_measurements(mu, message):
     with pytest.raises(ValueError, match=message):
         particle_filter(mu, 0.005, FIG2.prior, 100, np.random.default_rng(0))
 
 
-@pytest.mark.parametrize("rho, message", [(0.0, "rho must be positive"),
-                                          (-1.0, "rho must be positive"),
-                                          (np.inf, "rho must be finite")])
+@pytest.mark.parametrize(
+    "rho, message",
+    [(0.0, "rho must be positive"), (-1.0, "rho must be positive"), (np.inf, "rho must be finite")],
+)
 def test_rejects_bad_rho(rho, message):
     with pytest.raises(ValueError, match=message):
         particle_filter(MU_17, rho, FIG2.prior, 100, np.random.default_rng(0))
@@ -274,15 +316,18 @@ def test_rejects_bad_rho(rho, message):
         run(np.array([MU_17]), rho, FIG2.prior.mean, FIG2.prior.cov, 100, np.random.default_rng(0))
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"proposal": "gaussian"}, "proposal must be one of"),
-    ({"resampler": "stratified"}, "resampler must be one of"),
-    ({"ess_threshold": 1.5}, r"ess_threshold must lie in \[0, 1\]"),
-    ({"ess_threshold": -0.1}, r"ess_threshold must lie in \[0, 1\]"),
-    ({"df": 0.0}, "df must be positive"),
-    ({"df": "many"}, "df must be numeric"),
-    ({"inflation": -1.0}, "inflation must be positive"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"proposal": "gaussian"}, "proposal must be one of"),
+        ({"resampler": "stratified"}, "resampler must be one of"),
+        ({"ess_threshold": 1.5}, r"ess_threshold must lie in \[0, 1\]"),
+        ({"ess_threshold": -0.1}, r"ess_threshold must lie in \[0, 1\]"),
+        ({"df": 0.0}, "df must be positive"),
+        ({"df": "many"}, "df must be numeric"),
+        ({"inflation": -1.0}, "inflation must be positive"),
+    ],
+)
 def test_rejects_bad_options(kwargs, message):
     with pytest.raises(ValueError, match=message):
         particle_filter(MU_17, 0.005, FIG2.prior, 100, np.random.default_rng(0), **kwargs)
@@ -294,8 +339,9 @@ def test_rejects_a_bad_rng_or_prior():
     with pytest.raises(ValueError, match="rng must be a numpy.random.Generator"):
         particle_filter(MU_17, 0.005, FIG2.prior, 100, np.random.RandomState(0))
     with pytest.raises(ValueError, match="prior must be a Gaussian"):
-        particle_filter(MU_17, 0.005, (FIG2.prior.mean, FIG2.prior.cov), 100,
-                        np.random.default_rng(0))
+        particle_filter(
+            MU_17, 0.005, (FIG2.prior.mean, FIG2.prior.cov), 100, np.random.default_rng(0)
+        )
 
 
 def test_run_rejects_bad_shapes():

@@ -68,14 +68,21 @@ def test_numerical_hessian_of_f_matches_eq8(mu):
 
 def test_numerical_gradient_of_projection_is_eq11():
     n = np.array([1.3, 5.0, 0.8])
-    assert_allclose(reference.numerical_gradient(model.project, n),
-                    model.observation_vector(n), rtol=1e-8, atol=1e-12)
+    assert_allclose(
+        reference.numerical_gradient(model.project, n),
+        model.observation_vector(n),
+        rtol=1e-8,
+        atol=1e-12,
+    )
 
 
-@pytest.mark.parametrize("M, l", [
-    (np.array([[2.0, 0.3], [0.3, 0.5]]), np.array([1.0, -2.0])),
-    (np.array([[4e4, -1e4], [-1e4, 9e3]]), np.array([-3e4, 2e3])),
-])
+@pytest.mark.parametrize(
+    "M, l",
+    [
+        (np.array([[2.0, 0.3], [0.3, 0.5]]), np.array([1.0, -2.0])),
+        (np.array([[4e4, -1e4], [-1e4, 9e3]]), np.array([-3e4, 2e3])),
+    ],
+)
 def test_log_gaussian_integral_brute_matches_the_closed_form_of_eq16(M, l):
     closed = np.log(2 * np.pi) + l @ np.linalg.solve(M, l) / 8 - 0.5 * np.log(np.linalg.det(M))
     # the trapezoid rule on a Gaussian converges geometrically: 1e-10 is loose

@@ -98,8 +98,9 @@ def test_sweep_texts_label_the_rows():
     r = experiments.noise_sweep([1 / 1000, 1 / 200])
     texts = report.sweep_texts(r, "rho", "ns")
     assert texts["ns_0_x"] == "1/1000" and texts["ns_1_x"] == "1/200"
-    assert texts["ns_1_optimal"] == (f"{r['optimal']['depth_mean'][1]:.3f} ± "
-                                     f"{r['optimal']['depth_sd'][1]:.3f}")
+    assert texts["ns_1_optimal"] == (
+        f"{r['optimal']['depth_mean'][1]:.3f} ± {r['optimal']['depth_sd'][1]:.3f}"
+    )
     assert texts["ns_0_ekf_h"] == f"{r['ekf']['hellinger'][0]:.3f}"
     off = report.sweep_texts(experiments.prior_offset_sweep([-1.0, 2.0]), "offset", "po")
     assert off["po_0_x"] == "-1" and off["po_1_x"] == "2"
@@ -114,4 +115,5 @@ def test_noise_study_texts():
     assert texts["mc_0_trials"] == str(r["valid_trials"][0])
     assert texts["mc_0_second_order_cov68"] == f"{r['second_order']['coverage_68'][0]:.2f}"
     assert set(texts) == {"mc_0_x", "mc_0_trials"} | {
-        f"mc_0_second_order_{s}" for s in ("cov68", "cov95", "rmse", "nees")}
+        f"mc_0_second_order_{s}" for s in ("cov68", "cov95", "rmse", "nees")
+    }

@@ -28,7 +28,9 @@ def test_filter_moments_rejects_an_unknown_quantity():
 def test_the_particle_filters_seed_is_an_argument():
     s = SCENARIOS["fig5"]
     default = [r for r in reproduce.scenario_rows(s, names=("particle",))]
-    same = reproduce.scenario_rows(s, names=("particle",), seed=np.random.SeedSequence(reproduce.PARTICLE_SEED))
+    same = reproduce.scenario_rows(
+        s, names=("particle",), seed=np.random.SeedSequence(reproduce.PARTICLE_SEED)
+    )
     other = reproduce.scenario_rows(s, names=("particle",), seed=1)
     assert default == same
     assert default[0]["mean"] != other[0]["mean"]
@@ -41,7 +43,12 @@ def test_comparison_runs_only_the_filters_of_its_table(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("the particle filter is not in the figure pages' tables")
 
-    monkeypatch.setitem(filters.FILTERS, "particle",
-                        filters.FILTERS["particle"].__class__(**{**vars(filters.FILTERS["particle"]), "run": refuse}))
+    monkeypatch.setitem(
+        filters.FILTERS,
+        "particle",
+        filters.FILTERS["particle"].__class__(
+            **{**vars(filters.FILTERS["particle"]), "run": refuse}
+        ),
+    )
     rows = report.comparison("fig4")
     assert {r["quantity"] for r in rows} == {"velocity"}

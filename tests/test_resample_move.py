@@ -10,8 +10,9 @@ from depthcore.scenarios import SCENARIOS
 def _run(key, n, repeats, seed, **kwargs):
     s = SCENARIOS[key]
     rng = np.random.default_rng(seed)
-    return resample_move.run(np.tile(s.mu, (repeats, 1)), s.rho, s.prior.mean, s.prior.cov, n,
-                             rng, **kwargs)
+    return resample_move.run(
+        np.tile(s.mu, (repeats, 1)), s.rho, s.prior.mean, s.prior.cov, n, rng, **kwargs
+    )
 
 
 @pytest.mark.parametrize("key", ["fig2", "fig3", "fig6"])
@@ -42,7 +43,10 @@ def test_error_falls_as_particles_grow():
 
 
 def test_without_moves_the_bootstrap_filter_collapses():
-    """moves = 0 is the plain bootstrap filter: on Fig. 2 its final cloud holds few distinct states."""
+    """moves = 0 is the plain bootstrap filter.
+
+    On Fig. 2 its final cloud holds few distinct states.
+    """
     b = _run("fig2", 5000, 1, seed=5, moves=0)
     distinct = np.unique(b.particles[0][np.exp(b.log_weights[0]) > 1e-12], axis=0)
     assert len(distinct) < 50
@@ -51,15 +55,19 @@ def test_without_moves_the_bootstrap_filter_collapses():
 
 
 def test_is_causal():
-    """The filter's steps up to mu_k use only mu_1 .. mu_k: another mu_3 leaves the first two ESS alone."""
+    """The filter's steps up to mu_k use only mu_1 .. mu_k.
+
+    Another mu_3 leaves the first two ESS alone.
+    """
     s = SCENARIOS["fig2"]
     mu = np.array([s.mu, (s.mu[0], s.mu[1], s.mu[2] + 0.05)])
     a = resample_move.run(mu[:1], s.rho, s.prior.mean, s.prior.cov, 3000, np.random.default_rng(7))
     b = resample_move.run(mu[1:], s.rho, s.prior.mean, s.prior.cov, 3000, np.random.default_rng(7))
     np.testing.assert_array_equal(a.ess[:, :2], b.ess[:, :2])
     assert a.ess[0, 2] != b.ess[0, 2]
-    two = resample_move.run(mu[:1, :2], s.rho, s.prior.mean, s.prior.cov, 3000,
-                            np.random.default_rng(7))
+    two = resample_move.run(
+        mu[:1, :2], s.rho, s.prior.mean, s.prior.cov, 3000, np.random.default_rng(7)
+    )
     np.testing.assert_array_equal(two.ess, a.ess[:, :2])
 
 
@@ -69,8 +77,9 @@ def test_log_target_is_the_log_posterior_eq_6_up_to_a_constant():
     rng = np.random.default_rng(0)
     x1 = s.prior.mean + rng.normal(size=(1, 50, 3)) * [1.0, 1.0, 0.3] + [0.0, 2.0, 0.0]
     chol = np.linalg.cholesky(s.prior.cov)
-    ours = resample_move.log_target(x1, np.array([s.mu]), np.array([s.rho]), s.prior.mean[None],
-                                    chol)[0]
+    ours = resample_move.log_target(
+        x1, np.array([s.mu]), np.array([s.rho]), s.prior.mean[None], chol
+    )[0]
     paper = optimal.log_posterior(model.G(x1[0], 2), s.mu, s.rho, s.prior)
     diff = ours - paper
     np.testing.assert_allclose(diff, diff[0], rtol=0, atol=1e-9 * np.max(np.abs(paper)))
@@ -79,8 +88,9 @@ def test_log_target_is_the_log_posterior_eq_6_up_to_a_constant():
 def test_log_target_is_minus_infinity_behind_the_camera():
     s = SCENARIOS["fig2"]
     x1 = np.array([[[0.0, -0.5, 0.0], [0.0, 0.0, 0.0], [0.1, 3.0, 0.1]]])
-    out = resample_move.log_target(x1, np.array([s.mu]), np.array([s.rho]), s.prior.mean[None],
-                                   np.linalg.cholesky(s.prior.cov))
+    out = resample_move.log_target(
+        x1, np.array([s.mu]), np.array([s.rho]), s.prior.mean[None], np.linalg.cholesky(s.prior.cov)
+    )
     assert np.isneginf(out[0, :2]).all() and np.isfinite(out[0, 2])
 
 
@@ -89,21 +99,24 @@ def test_any_number_of_bearings():
     s = SCENARIOS["fig2"]
     truth = np.array([-1.2, 4.0, 1.2])
     mu5 = model.project(np.stack([model.G(truth, k) for k in range(5)]))
-    b = resample_move.run(mu5[None], s.rho, s.prior.mean, s.prior.cov, 4000,
-                          np.random.default_rng(1))
+    b = resample_move.run(
+        mu5[None], s.rho, s.prior.mean, s.prior.cov, 4000, np.random.default_rng(1)
+    )
     assert b.ess.shape == (1, 5)
     m = b.moments()
     assert abs(m["depth_mean"][0] - 8.0) < 1.0
-    one = resample_move.run(mu5[None, :1], s.rho, s.prior.mean, s.prior.cov, 500,
-                            np.random.default_rng(1))
+    one = resample_move.run(
+        mu5[None, :1], s.rho, s.prior.mean, s.prior.cov, 500, np.random.default_rng(1)
+    )
     assert one.particles.shape == (1, 500, 3)
 
 
 def test_single_entry_point_matches_the_batch():
     s = SCENARIOS["fig2"]
     a = resample_move.resample_move(s.mu, s.rho, s.prior, 2000, np.random.default_rng(4))
-    b = resample_move.run(np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov, 2000,
-                          np.random.default_rng(4))
+    b = resample_move.run(
+        np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov, 2000, np.random.default_rng(4)
+    )
     np.testing.assert_array_equal(a.particles, b.particles)
 
 
@@ -126,8 +139,14 @@ def test_single_entry_point_matches_the_batch():
 )
 def test_bad_input_is_refused_naming_the_argument(kwargs, name):
     s = SCENARIOS["fig2"]
-    args = {"mu": [s.mu], "rho": s.rho, "prior_mean": s.prior.mean, "prior_cov": s.prior.cov,
-            "n_particles": 100, "rng": np.random.default_rng(0)}
+    args = {
+        "mu": [s.mu],
+        "rho": s.rho,
+        "prior_mean": s.prior.mean,
+        "prior_cov": s.prior.cov,
+        "n_particles": 100,
+        "rng": np.random.default_rng(0),
+    }
     args.update(kwargs)
     with pytest.raises(ValueError, match=name):
         resample_move.run(**args)
@@ -135,5 +154,6 @@ def test_bad_input_is_refused_naming_the_argument(kwargs, name):
 
 def test_every_particle_behind_the_camera_is_refused():
     with pytest.raises(ValueError, match="n_particles"):
-        resample_move.run([[0.0, 0.1, 0.2]], 0.01, [0.0, -1e6, 0.0], np.eye(3), 10,
-                          np.random.default_rng(0))
+        resample_move.run(
+            [[0.0, 0.1, 0.2]], 0.01, [0.0, -1e6, 0.0], np.eye(3), 10, np.random.default_rng(0)
+        )

@@ -79,13 +79,16 @@ def test_resampling_is_deterministic_for_degenerate_weights():
         assert_array_equal(resampler(W, rng), 2)
 
 
-@pytest.mark.parametrize("W, M, message", [
-    ([0.5, 0.6], None, "W must sum to 1"),
-    ([1.5, -0.5], None, "W must be non-negative"),
-    ([0.5, np.nan], None, "W must be finite"),
-    ([0.5, 0.5], 0, "M must be an integer >= 1"),
-    (np.zeros((2, 0)), None, r"W must have shape \(\.\.\., N\)"),
-])
+@pytest.mark.parametrize(
+    "W, M, message",
+    [
+        ([0.5, 0.6], None, "W must sum to 1"),
+        ([1.5, -0.5], None, "W must be non-negative"),
+        ([0.5, np.nan], None, "W must be finite"),
+        ([0.5, 0.5], 0, "M must be an integer >= 1"),
+        (np.zeros((2, 0)), None, r"W must have shape \(\.\.\., N\)"),
+    ],
+)
 def test_resamplers_reject_bad_weights(W, M, message):
     for resampler in RESAMPLERS.values():
         with pytest.raises(ValueError, match=message):

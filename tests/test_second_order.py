@@ -26,8 +26,21 @@ def test_eq8_hessian_matches_finite_differences(mu):
     c = noise_free_state(mu)
     h = 1e-4 * c[1]  # central second differences: truncation O(h^2) relative
     E = np.eye(3) * h
-    fd = np.array([[(f(c + E[i] + E[j], mu) - f(c + E[i] - E[j], mu) - f(c - E[i] + E[j], mu)
-                     + f(c - E[i] - E[j], mu)) / (4 * h * h) for j in range(3)] for i in range(3)])
+    fd = np.array(
+        [
+            [
+                (
+                    f(c + E[i] + E[j], mu)
+                    - f(c + E[i] - E[j], mu)
+                    - f(c - E[i] + E[j], mu)
+                    + f(c - E[i] - E[j], mu)
+                )
+                / (4 * h * h)
+                for j in range(3)
+            ]
+            for i in range(3)
+        ]
+    )
     assert_allclose(hessian(mu), fd, rtol=1e-5, atol=1e-7 * np.abs(fd).max())
 
 
@@ -54,6 +67,7 @@ def test_eq8_second_order_is_the_product_of_its_two_gaussians():
     rng = np.random.default_rng(3)
     x = ps.mean + rng.normal(scale=0.3, size=(50, 3))
     from depthcore import model
+
     diff = ps.logpdf(x) - lik.logpdf(x) - prior.logpdf(model.G(x, -2))
     assert np.ptp(diff) < 1e-9  # a constant: the log normaliser
 

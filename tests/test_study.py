@@ -34,8 +34,14 @@ def test_binned_kde_matches_direct_kde():
     W /= W.sum(1, keepdims=True)
     bw = np.array([0.3, 0.5])
     y = np.linspace(2, 8, 50)[None].repeat(2, 0)
-    direct = np.stack([np.exp(-0.5 * ((y[i][:, None] - x[i]) / bw[i]) ** 2) @ W[i] / (np.sqrt(2 * np.pi) * bw[i])
-                       for i in range(2)])
+    direct = np.stack(
+        [
+            np.exp(-0.5 * ((y[i][:, None] - x[i]) / bw[i]) ** 2)
+            @ W[i]
+            / (np.sqrt(2 * np.pi) * bw[i])
+            for i in range(2)
+        ]
+    )
     assert_allclose(np.exp(study._binned_kde(x, W, bw)(y)), direct, rtol=1e-3, atol=1e-6)
 
 
@@ -62,7 +68,8 @@ def test_scores_follow_their_definitions():
     assert s["depth"]["bias"] == pytest.approx(np.mean(err))
     assert s["depth"]["rmse"] == pytest.approx(np.sqrt(np.mean(err**2)))
     inside = np.abs(est["ekf"].mean[:, 1] - trials.truth[1]) <= 0.9944578832097535 * np.sqrt(
-        est["ekf"].cov[:, 1, 1])  # the 68 % normal quantile
+        est["ekf"].cov[:, 1, 1]
+    )  # the 68 % normal quantile
     assert s["depth"]["coverage_68"] == pytest.approx(np.mean(inside))
 
 
@@ -72,13 +79,17 @@ def test_hellinger_matches_adaptive_quadrature():
     est = study.run_filters(trials, ("optimal", "ekf"))
     ref = optimal.batch_marginals(trials.mu, trials.rho, trials.prior_mean, trials.prior_cov)
     for i in range(3):
-        m = optimal.marginals(trials.mu[i], s.rho, optimal.Gaussian(trials.prior_mean[i], trials.prior_cov))
+        m = optimal.marginals(
+            trials.mu[i], s.rho, optimal.Gaussian(trials.prior_mean[i], trials.prior_cov)
+        )
         mean, sd = est["ekf"].mean[i, 1], np.sqrt(est["ekf"].cov[i, 1, 1])
+
         def q(y, mean=mean, sd=sd):
             return np.exp(-0.5 * ((y - mean) / sd) ** 2) / (np.sqrt(2 * np.pi) * sd)
 
-        bc, _ = integrate.quad(lambda y, m=m, q=q: np.sqrt(m.depth_pdf(y) * q(y)), 2, 60,
-                               points=[mean], limit=400)
+        bc, _ = integrate.quad(
+            lambda y, m=m, q=q: np.sqrt(m.depth_pdf(y) * q(y)), 2, 60, points=[mean], limit=400
+        )
         assert est["ekf"].hellinger[i] == pytest.approx(np.sqrt(1 - bc), abs=1e-6)
     assert ref.moments.depth_mean.shape == (3,)
 
@@ -106,12 +117,15 @@ def test_fixed_prior_is_built_from_the_truth():
     assert_allclose(t.prior_mean, np.tile([c[0] - 2 * c[2], c[1] - 2, 0.0], (5, 1)))
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"n": 0}, "trials must be a positive integer"),
-    ({"prior": "flat"}, "prior must be one of"),
-    ({"rho": -1.0}, "rho must be positive"),
-    ({"truth": [0.0, 1.0, 0.0]}, "truth puts the point behind the camera"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"n": 0}, "trials must be a positive integer"),
+        ({"prior": "flat"}, "prior must be one of"),
+        ({"rho": -1.0}, "rho must be positive"),
+        ({"truth": [0.0, 1.0, 0.0]}, "truth puts the point behind the camera"),
+    ],
+)
 def test_simulate_rejects_bad_input(kwargs, message):
     args = {"truth": SCENARIOS["fig2"].c, "rho": 0.005, "n": 10, "rng": np.random.default_rng(0)}
     args.update(kwargs)

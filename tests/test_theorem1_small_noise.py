@@ -41,8 +41,11 @@ def _information_solve_50_digits(mu, rho, scale):
 
 
 @settings(max_examples=150, deadline=None)
-@given(mu=triples(), log_rho=st.floats(np.log(1e-5), np.log(0.05)),
-       log_scale=st.floats(np.log(1.0), np.log(1e4)))
+@given(
+    mu=triples(),
+    log_rho=st.floats(np.log(1e-5), np.log(0.05)),
+    log_scale=st.floats(np.log(1.0), np.log(1e4)),
+)
 def test_theorem1_small_noise_ekf_equals_p_s_and_the_exact_covariance(mu, log_rho, log_scale):
     """Theorem 1, Eqs. (19), (24): with prior mean G^-2 c, p_s and the EKF have the same
     mean (c, Eq. (19)) and covariance, the D of Eq. (24) from a 50-digit solve, to 1e-9
@@ -85,7 +88,8 @@ def test_p_s_matches_a_50_digit_information_solve_at_rho_1e_5():
     p_s = second_order.second_order(np.array([-0.3, 0, 0.2]), 1e-5, prior)
     scale = np.sqrt(np.outer(np.diag(D), np.diag(D)))
     assert np.max(np.abs(p_s.cov - D) / scale) < 1e-12
-    batch_mean, batch_cov = second_order.second_order_batch(np.array([[-0.3, 0, 0.2]]), 1e-5,
-                                                            prior.mean, prior.cov)
+    batch_mean, batch_cov = second_order.second_order_batch(
+        np.array([[-0.3, 0, 0.2]]), 1e-5, prior.mean, prior.cov
+    )
     assert np.max(np.abs(batch_cov[0] - D) / scale) < 1e-12
     assert np.allclose(batch_mean[0], cf, rtol=0, atol=1e-12)

@@ -18,8 +18,12 @@ from depthcore.ukf import SigmaPoints, measurement_update, run, ukf, unscented_t
 #: Sigma-point rules exercised throughout: the default, Wan and van der
 #: Merwe's usual (alpha = 1e-3 is too extreme for the checks at 1e-12, so 0.1),
 #: and a Julier-style positive kappa.
-RULES = [SigmaPoints(), SigmaPoints(alpha=0.1, beta=2.0, kappa=0.0),
-         SigmaPoints(alpha=0.5, beta=2.0, kappa=1.0), SigmaPoints(alpha=1.0, beta=0.0, kappa=2.0)]
+RULES = [
+    SigmaPoints(),
+    SigmaPoints(alpha=0.1, beta=2.0, kappa=0.0),
+    SigmaPoints(alpha=0.5, beta=2.0, kappa=1.0),
+    SigmaPoints(alpha=1.0, beta=0.0, kappa=2.0),
+]
 
 C_17 = noise_free_state(MU_17)
 #: A prior tight enough that every sigma point stays in front of the camera.
@@ -53,8 +57,9 @@ def test_sigma_points_reproduce_mean_and_covariance(rule):
     # Mean with Wm, covariance with Wc (the centre's deviation is exactly zero).
     assert_allclose(np.einsum("i,bij->bj", Wm, X), mean, rtol=0, atol=1e-12 * np.abs(mean).max())
     d = X - mean[:, None, :]
-    assert_allclose(np.einsum("i,bij,bik->bjk", Wc, d, d), cov, rtol=0,
-                    atol=1e-12 * np.abs(cov).max())
+    assert_allclose(
+        np.einsum("i,bij,bik->bjk", Wc, d, d), cov, rtol=0, atol=1e-12 * np.abs(cov).max()
+    )
 
 
 @pytest.mark.parametrize("rule", RULES)
@@ -152,8 +157,9 @@ def test_update_approaches_the_ekf_update_as_the_covariance_shrinks():
     for s in (1e-1, 1e-2, 1e-3):
         C = s**2 * np.diag([1.0, 4.0, 1.0])
         u, e = update(n, C, 0.21, 1e-3), ekf_update(n, C, 0.21, 1e-3)
-        errors.append((np.abs(u.mean - e.mean).max() / s,
-                       np.abs(u.cov - e.cov).max() / np.abs(e.cov).max()))
+        errors.append(
+            (np.abs(u.mean - e.mean).max() / s, np.abs(u.cov - e.cov).max() / np.abs(e.cov).max())
+        )
     errors = np.array(errors)
     assert errors[-1, 0] < 1e-5 and errors[-1, 1] < 1e-8
     assert np.all(errors[1:] < errors[:-1] / 8)
@@ -165,9 +171,14 @@ def test_update_approaches_the_ekf_update_as_the_covariance_shrinks():
 def filterpy_run(mu, rho, prior, rule):
     """The same filter with filterpy's UnscentedKalmanFilter."""
     points = MerweScaledSigmaPoints(3, alpha=rule.alpha, beta=rule.beta, kappa=rule.kappa)
-    f = UnscentedKalmanFilter(dim_x=3, dim_z=1, dt=1.0, points=points,
-                              fx=lambda x, dt: model.F @ x + model.e,
-                              hx=lambda x: np.array([x[0] / x[1]]))
+    f = UnscentedKalmanFilter(
+        dim_x=3,
+        dim_z=1,
+        dt=1.0,
+        points=points,
+        fx=lambda x, dt: model.F @ x + model.e,
+        hx=lambda x: np.array([x[0] / x[1]]),
+    )
     f.x, f.P = prior.mean.copy(), prior.cov.copy()
     f.Q, f.R = np.zeros((3, 3)), np.array([[rho**2]])
     f.sigmas_f = points.sigma_points(f.x, f.P)  # the prior is the state at time 1: update first
@@ -240,8 +251,12 @@ def test_ukf_approaches_the_ekf_in_the_small_noise_tight_prior_limit():
     for s in (1e-1, 1e-2, 1e-3):
         prior = Gaussian(model.G(C_17, -2) + [0.01, 0.05, -0.01], s**2 * np.diag([1.0, 4.0, 1.0]))
         u, e = ukf(MU_17, 0.05 * s, prior), ekf(MU_17, 0.05 * s, prior)
-        errors.append((np.abs(u.means - e.means).max() / s,
-                       np.abs(u.covs - e.covs).max() / np.abs(e.covs).max()))
+        errors.append(
+            (
+                np.abs(u.means - e.means).max() / s,
+                np.abs(u.covs - e.covs).max() / np.abs(e.covs).max(),
+            )
+        )
     errors = np.array(errors)
     assert errors[-1, 0] < 1e-3 and errors[-1, 1] < 1e-6
     assert np.all(errors[1:] < errors[:-1] / 8)  # shrinking like s (means) and s**2 (covs)
@@ -250,12 +265,15 @@ def test_ukf_approaches_the_ekf_in_the_small_noise_tight_prior_limit():
 # --- bad input ------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("mu, message", [
-    ((0.1, 0.1, 0.1), "mu is degenerate"),
-    ((np.nan, 0.0, 0.2), "mu must be finite"),
-    ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
-    ((-0.3, 0.0), r"mu must have shape \(3,\)"),
-])
+@pytest.mark.parametrize(
+    "mu, message",
+    [
+        ((0.1, 0.1, 0.1), "mu is degenerate"),
+        ((np.nan, 0.0, 0.2), "mu must be finite"),
+        ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
+        ((-0.3, 0.0), r"mu must have shape \(3,\)"),
+    ],
+)
 def test_ukf_rejects_bad_measurements(mu, message):
     with pytest.raises(ValueError, match=message):
         ukf(mu, 0.005, TIGHT)
@@ -296,13 +314,16 @@ def test_run_names_the_trial_with_a_sigma_point_behind_the_camera():
         run(np.array([MU_17, MU_17]), 0.005, mean, TIGHT.cov)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"alpha": 0.0}, "alpha must be positive"),
-    ({"alpha": -1.0}, "alpha must be positive"),
-    ({"kappa": -3.0}, "kappa must exceed -dim"),
-    ({"beta": np.inf}, "beta must be finite"),
-    ({"dim": 0}, "dim must be a positive integer"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"alpha": 0.0}, "alpha must be positive"),
+        ({"alpha": -1.0}, "alpha must be positive"),
+        ({"kappa": -3.0}, "kappa must exceed -dim"),
+        ({"beta": np.inf}, "beta must be finite"),
+        ({"dim": 0}, "dim must be a positive integer"),
+    ],
+)
 def test_sigma_points_reject_bad_parameters(kwargs, message):
     with pytest.raises(ValueError, match=message):
         SigmaPoints(**kwargs)

@@ -13,12 +13,34 @@ MEAN = np.array([-1.2, 4.0, 0.0])
 COV = 1000.0 * np.eye(3)
 
 BAD = {
-    "indefinite prior_cov": (MU, 1 / 200, MEAN, np.diag([1.0, -1.0, 1.0]), r"prior_cov must be positive definite"),
-    "non-symmetric prior_cov": (MU, 1 / 200, MEAN, np.array([[1, 0.5, 0], [0, 1, 0], [0, 0, 1.0]]),
-                                r"prior_cov must be symmetric"),
-    "degenerate triple": (np.array([[-0.3, 0, 0.2], [0.1, 0.2, 0.3]]), 1 / 200, MEAN, COV, r"mu\[1\] is degenerate"),
-    "triple behind the camera": (np.array([[-0.3, 0, 0.2], [0.2, 0, -0.3]]), 1 / 200, MEAN, COV,
-                                 r"mu\[1\] puts the point behind the camera"),
+    "indefinite prior_cov": (
+        MU,
+        1 / 200,
+        MEAN,
+        np.diag([1.0, -1.0, 1.0]),
+        r"prior_cov must be positive definite",
+    ),
+    "non-symmetric prior_cov": (
+        MU,
+        1 / 200,
+        MEAN,
+        np.array([[1, 0.5, 0], [0, 1, 0], [0, 0, 1.0]]),
+        r"prior_cov must be symmetric",
+    ),
+    "degenerate triple": (
+        np.array([[-0.3, 0, 0.2], [0.1, 0.2, 0.3]]),
+        1 / 200,
+        MEAN,
+        COV,
+        r"mu\[1\] is degenerate",
+    ),
+    "triple behind the camera": (
+        np.array([[-0.3, 0, 0.2], [0.2, 0, -0.3]]),
+        1 / 200,
+        MEAN,
+        COV,
+        r"mu\[1\] puts the point behind the camera",
+    ),
     "NaN prior mean": (MU[None], 1 / 200, [np.nan, 4.0, 0.0], COV, r"prior_mean must be finite"),
     "infinite mu": (np.array([[np.inf, 0, 0.2]]), 1 / 200, MEAN, COV, r"mu must be finite"),
     "zero rho": (MU[None], 0.0, MEAN, COV, r"rho must be positive"),

@@ -98,8 +98,11 @@ def notebook_pages() -> list[Path]:
     """The book pages that are notebooks, from ``_toc.yml``, in TOC order."""
     pages = []
     for entry in toc_files():
-        candidates = [ROOT / entry] if Path(entry).suffix else [
-            ROOT / (entry + ext) for ext in (".md", ".ipynb")]
+        candidates = (
+            [ROOT / entry]
+            if Path(entry).suffix
+            else [ROOT / (entry + ext) for ext in (".md", ".ipynb")]
+        )
         path = next((p for p in candidates if p.exists()), None)
         if path is None:
             raise CheckError(f"_toc.yml lists {entry!r}, but no such page exists")
@@ -111,7 +114,8 @@ def notebook_pages() -> list[Path]:
         elif re.search(r"^(```|~~~)\{code-cell\}", text, flags=re.MULTILINE):
             raise CheckError(
                 f"{path.relative_to(ROOT)} has code cells but no jupytext/kernelspec "
-                "front matter, so the book would not execute it")
+                "front matter, so the book would not execute it"
+            )
     return pages
 
 
@@ -134,13 +138,19 @@ def structural_problems(page: Path, text_nb, ref_nb) -> list[str]:
         matcher = difflib.SequenceMatcher(a=old, b=new, autojunk=False)
         for op, i1, i2, j1, j2 in matcher.get_opcodes():
             if op in ("replace", "insert"):
-                changes += [f"code cell {j + 1} is new or edited: {new[j].strip()[:50]!r}"
-                            for j in range(j1, j2)]
+                changes += [
+                    f"code cell {j + 1} is new or edited: {new[j].strip()[:50]!r}"
+                    for j in range(j1, j2)
+                ]
             elif op == "delete":
-                changes += [f"reference code cell {i + 1} was removed: {old[i].strip()[:50]!r}"
-                            for i in range(i1, i2)]
-        problems.append(f"{name}: code cells differ from "
-                        f"{reference_path(page).relative_to(ROOT)}: " + "; ".join(changes))
+                changes += [
+                    f"reference code cell {i + 1} was removed: {old[i].strip()[:50]!r}"
+                    for i in range(i1, i2)
+                ]
+        problems.append(
+            f"{name}: code cells differ from "
+            f"{reference_path(page).relative_to(ROOT)}: " + "; ".join(changes)
+        )
     for i, cell in enumerate(c for c in ref_nb.cells if c.cell_type == "code"):
         if cell.get("execution_count") is None:
             problems.append(f"{name}: code cell {i + 1} of the reference was never executed")
@@ -149,7 +159,8 @@ def structural_problems(page: Path, text_nb, ref_nb) -> list[str]:
         if last.rstrip().endswith(";") and not last.lstrip().startswith("#"):
             problems.append(
                 f"{name}: code cell {i + 1} ends with ';', which does not hide the output "
-                "under nbval: assign it instead (`_ = ...`)")
+                "under nbval: assign it instead (`_ = ...`)"
+            )
     return problems
 
 
@@ -163,7 +174,9 @@ def check(pages: list[Path], workers: int) -> int:
     for page in pages:
         ref = reference_path(page)
         if not ref.exists():
-            problems.append(f"{page.relative_to(ROOT)}: no reference notebook {ref.relative_to(ROOT)}")
+            problems.append(
+                f"{page.relative_to(ROOT)}: no reference notebook {ref.relative_to(ROOT)}"
+            )
             continue
         text_nb = jupytext.read(page)
         ref_nb = nbformat.read(ref, as_version=4)
@@ -178,11 +191,16 @@ def check(pages: list[Path], workers: int) -> int:
         if ref not in known:
             problems.append(f"{ref.relative_to(ROOT)}: reference notebook of no page in _toc.yml")
     if problems:
-        print("make notebooks: the committed reference outputs do not match the book:", file=sys.stderr)
+        print(
+            "make notebooks: the committed reference outputs do not match the book:",
+            file=sys.stderr,
+        )
         for p in problems:
             print(f"  - {p}", file=sys.stderr)
-        print("After reviewing the change, run `make notebooks-update` and commit book/_nbval/.",
-              file=sys.stderr)
+        print(
+            "After reviewing the change, run `make notebooks-update` and commit book/_nbval/.",
+            file=sys.stderr,
+        )
         return 1
     if not combined:
         print("make notebooks: no notebook pages in _toc.yml", file=sys.stderr)
@@ -194,22 +212,39 @@ def check(pages: list[Path], workers: int) -> int:
     try:
         for copy, nb in zip(copies, combined.values(), strict=True):
             nbformat.write(nb, copy)
-        cmd = [sys.executable, "-m", "pytest", "--nbval", "--nbval-current-env",
-               "--nbval-sanitize-with", str(SANITIZE), "--nbval-cell-timeout", str(TIMEOUT),
-               "-p", "check_notebooks", "-q", "-o", "console_output_style=classic"]
+        cmd = [
+            sys.executable,
+            "-m",
+            "pytest",
+            "--nbval",
+            "--nbval-current-env",
+            "--nbval-sanitize-with",
+            str(SANITIZE),
+            "--nbval-cell-timeout",
+            str(TIMEOUT),
+            "-p",
+            "check_notebooks",
+            "-q",
+            "-o",
+            "console_output_style=classic",
+        ]
         if workers > 1 and len(copies) > 1:
             cmd += ["-n", str(min(workers, len(copies))), "--dist", "loadfile"]
         cmd += [str(c.relative_to(ROOT)) for c in copies]
         env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(Path(__file__).parent), env.get("PYTHONPATH")]))
+        env["PYTHONPATH"] = os.pathsep.join(
+            filter(None, [str(Path(__file__).parent), env.get("PYTHONPATH")])
+        )
         result = subprocess.run(cmd, cwd=ROOT, env=env)
     finally:
         for copy in copies:
             copy.unlink(missing_ok=True)
     if result.returncode != 0:
-        print("make notebooks: outputs differ from the committed references (see above). "
-              "If the change is intended, run `make notebooks-update` and commit book/_nbval/.",
-              file=sys.stderr)
+        print(
+            "make notebooks: outputs differ from the committed references (see above). "
+            "If the change is intended, run `make notebooks-update` and commit book/_nbval/.",
+            file=sys.stderr,
+        )
     return result.returncode
 
 
@@ -231,8 +266,13 @@ def update(pages: list[Path]) -> int:
     for page in pages:
         nb = jupytext.read(page)
         print(f"executing {page.relative_to(ROOT)}", flush=True)
-        NotebookClient(nb, timeout=TIMEOUT, kernel_name="python3", record_timing=False,
-                       resources={"metadata": {"path": str(page.parent)}}).execute()
+        NotebookClient(
+            nb,
+            timeout=TIMEOUT,
+            kernel_name="python3",
+            record_timing=False,
+            resources={"metadata": {"path": str(page.parent)}},
+        ).execute()
         stable_cell_ids(nb)
         ref = reference_path(page)
         ref.parent.mkdir(exist_ok=True)
@@ -249,8 +289,13 @@ def update(pages: list[Path]) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("command", choices=["check", "update"])
-    parser.add_argument("-n", "--workers", type=int, default=2,
-                        help="parallel nbval workers for `check` (default 2)")
+    parser.add_argument(
+        "-n",
+        "--workers",
+        type=int,
+        default=2,
+        help="parallel nbval workers for `check` (default 2)",
+    )
     args = parser.parse_args(argv)
     try:
         pages = notebook_pages()

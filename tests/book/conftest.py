@@ -30,8 +30,8 @@ DATA_DIR = ROOT / "tests" / "data"
 
 
 SOURCE_LABEL_RES = (
-    re.compile(r"^\((eq-[^)\s]+)\)=\s*$", re.MULTILINE),        # (eq-N)= target
-    re.compile(r"^:label:\s*(eq-\S+)\s*$", re.MULTILINE),       # {math} :label: eq-N
+    re.compile(r"^\((eq-[^)\s]+)\)=\s*$", re.MULTILINE),  # (eq-N)= target
+    re.compile(r"^:label:\s*(eq-\S+)\s*$", re.MULTILINE),  # {math} :label: eq-N
     re.compile(r"^\$\$\s*\((eq-[^)\s]+)\)\s*$", re.MULTILINE),  # $$ ... $$ (eq-N)
 )
 
@@ -57,7 +57,9 @@ def source_labels() -> list[tuple[str, str]]:
             continue
         text = path.read_text(encoding="utf-8")
         for pattern in SOURCE_LABEL_RES:
-            found += [(m.group(1), path.relative_to(ROOT).as_posix()) for m in pattern.finditer(text)]
+            found += [
+                (m.group(1), path.relative_to(ROOT).as_posix()) for m in pattern.finditer(text)
+            ]
     return found
 
 

@@ -25,14 +25,37 @@ from pathlib import Path
 
 import pytest
 
-CHROMIUM = next((p for p in ("/usr/bin/chromium", shutil.which("chromium") or "",
-                             shutil.which("chromium-browser") or "") if p and Path(p).exists()), None)
-CHROMEDRIVER = next((p for p in ("/usr/bin/chromedriver", shutil.which("chromedriver") or "")
-                     if p and Path(p).exists()), None)
+CHROMIUM = next(
+    (
+        p
+        for p in (
+            "/usr/bin/chromium",
+            shutil.which("chromium") or "",
+            shutil.which("chromium-browser") or "",
+        )
+        if p and Path(p).exists()
+    ),
+    None,
+)
+CHROMEDRIVER = next(
+    (
+        p
+        for p in ("/usr/bin/chromedriver", shutil.which("chromedriver") or "")
+        if p and Path(p).exists()
+    ),
+    None,
+)
 CHROMIUM_FLAGS = (
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-    "--disable-dev-shm-usage", "--window-size=1280,1024",
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--disable-dev-shm-usage",
+    "--window-size=1280,1024",
     # No name resolves: anything fetched from a host would fail.
     "--host-resolver-rules=MAP * ~NOTFOUND",
 )
@@ -43,8 +66,10 @@ LOAD_TIMEOUT = 60  # seconds for a page and its typesetting
 @pytest.fixture(scope="module")
 def browser(missing_prerequisite):
     if CHROMIUM is None or CHROMEDRIVER is None:
-        missing_prerequisite("Chromium or ChromeDriver not found (apt-get install chromium "
-                             "chromium-driver): browser checks of the built book not run")
+        missing_prerequisite(
+            "Chromium or ChromeDriver not found (apt-get install chromium "
+            "chromium-driver): browser checks of the built book not run"
+        )
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -103,7 +128,8 @@ def wait_for_mathjax(driver) -> dict:
                 setTimeout(poll, 100);
             }
         })();
-        """)
+        """
+    )
 
 
 def test_mathjax_is_served_from_the_book(html_pages, html_dir):
@@ -126,7 +152,9 @@ def test_page_typesets_its_math_offline(browser, html_dir, toc_page):
     if counts["math"]:
         assert counts["loaded"], f"MathJax did not load on {toc_page}.html"
         assert counts["typeset"] >= counts["math"], (
-            f"{toc_page}.html: {counts['typeset']} MathJax outputs for {counts['math']} math elements")
+            f"{toc_page}.html: {counts['typeset']} MathJax outputs "
+            f"for {counts['math']} math elements"
+        )
         assert counts["errors"] == 0, f"{toc_page}.html: {counts['errors']} MathJax errors"
     assert network_requests(browser) == []
 
@@ -136,11 +164,14 @@ def test_figure_page_shows_images_and_a_table(browser, html_dir, figure_page):
     wait_for_mathjax(browser)
     images = browser.execute_script(
         "return Array.from(document.querySelectorAll('main img, article img'))"
-        ".map(img => [img.getAttribute('src').slice(0, 80), img.complete, img.naturalWidth]);")
+        ".map(img => [img.getAttribute('src').slice(0, 80), img.complete, img.naturalWidth]);"
+    )
     assert images, f"{figure_page}.html has no image"
     broken = [src for src, complete, width in images if not complete or width == 0]
     assert not broken, f"{figure_page}.html: images not shown: {broken}"
-    tables = browser.execute_script("return document.querySelectorAll('main table, article table').length;")
+    tables = browser.execute_script(
+        "return document.querySelectorAll('main table, article table').length;"
+    )
     assert tables >= 1, f"{figure_page}.html has no table"
     assert network_requests(browser) == []
 
@@ -153,10 +184,13 @@ def test_equations_fit_or_scroll_in_their_own_box(browser, html_dir, toc_page):
     cut = browser.execute_script(
         """
         const scrolls = el => ['auto', 'scroll'].includes(getComputedStyle(el).overflowX);
-        return Array.from(document.querySelectorAll('article div.math mjx-container[display="true"]'))
-          .filter(c => c.scrollWidth > c.clientWidth + 1 && !scrolls(c) && !scrolls(c.parentElement))
+        const selector = 'article div.math mjx-container[display="true"]';
+        return Array.from(document.querySelectorAll(selector))
+          .filter(c => c.scrollWidth > c.clientWidth + 1
+                       && !scrolls(c) && !scrolls(c.parentElement))
           .map(c => c.parentElement.id || c.textContent.slice(0, 40));
-        """)
+        """
+    )
     assert not cut, f"{toc_page}.html: equations cut off at 1280 px: {cut}"
 
 
@@ -170,12 +204,21 @@ def test_tables_scroll_inside_themselves_on_a_phone(browser, html_dir, toc_page)
             """
             const scrolls = el => ['auto', 'scroll'].includes(getComputedStyle(el).overflowX);
             const wide = Array.from(document.querySelectorAll('article table'))
-              .filter(t => t.scrollWidth > t.clientWidth + 1 || t.getBoundingClientRect().right > window.innerWidth)
-              .filter(t => !(scrolls(t) || scrolls(t.parentElement)) || t.clientWidth > window.innerWidth)
+              .filter(t => t.scrollWidth > t.clientWidth + 1
+                           || t.getBoundingClientRect().right > window.innerWidth)
+              .filter(t => !(scrolls(t) || scrolls(t.parentElement))
+                           || t.clientWidth > window.innerWidth)
               .map(t => t.textContent.trim().slice(0, 40));
-            return {page: document.documentElement.scrollWidth, window: window.innerWidth, wide: wide};
-            """)
+            return {
+              page: document.documentElement.scrollWidth, window: window.innerWidth, wide: wide
+            };
+            """
+        )
     finally:
         browser.set_window_size(size["width"], size["height"])
-    assert widths["page"] <= widths["window"], f"{toc_page}.html is wider than a phone's screen: {widths}"
-    assert not widths["wide"], f"{toc_page}.html: tables that run off a phone's screen: {widths['wide']}"
+    assert widths["page"] <= widths["window"], (
+        f"{toc_page}.html is wider than a phone's screen: {widths}"
+    )
+    assert not widths["wide"], (
+        f"{toc_page}.html: tables that run off a phone's screen: {widths['wide']}"
+    )

@@ -10,14 +10,13 @@ from __future__ import annotations
 import re
 
 import pytest
-
 from conftest import ROOT
 
 LOG = ROOT / "_build" / "book.log"
 WARNING_RES = (
     re.compile(r"\[\w*(Kernel|App)\w*\]\s*(WARNING|ERROR|CRITICAL)"),  # a kernel's own log
-    re.compile(r"\b[A-Z]\w*Warning: "),                               # Python warnings
-    re.compile(r"(^|: )WARNING: "),                                    # Sphinx
+    re.compile(r"\b[A-Z]\w*Warning: "),  # Python warnings
+    re.compile(r"(^|: )WARNING: "),  # Sphinx
 )
 
 
@@ -30,6 +29,8 @@ def build_log(html_dir, missing_prerequisite) -> list[str]:
 
 
 def test_build_log_has_no_warnings(build_log):
-    assert any("build succeeded" in line for line in build_log), "the log is not of a finished build"
+    assert any("build succeeded" in line for line in build_log), (
+        "the log is not of a finished build"
+    )
     found = [line for line in build_log if any(r.search(line) for r in WARNING_RES)]
     assert not found, f"{len(found)} warning lines in {LOG.relative_to(ROOT)}, e.g. {found[:3]}"

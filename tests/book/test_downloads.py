@@ -18,9 +18,9 @@ import tarfile
 from pathlib import Path
 
 import pytest
+from conftest import ROOT
 
 import depthcore
-from conftest import ROOT
 
 HREF_RE = re.compile(r'href="([^"#?]*downloads/[^"#?]+)"')
 MAGIC = {"pdf": b"%PDF-", "png": b"\x89PNG\r\n\x1a\n"}
@@ -33,7 +33,8 @@ def visible_outputs(nb: dict) -> int:
         for output in cell.get("outputs", []) if cell["cell_type"] == "code" else []:
             data = output.get("data", {})
             if output["output_type"] == "stream" or any(
-                    not mime.startswith("application/papermill.record/") for mime in data):
+                not mime.startswith("application/papermill.record/") for mime in data
+            ):
                 count += 1
     return count
 
@@ -50,12 +51,18 @@ def test_page_offers_its_executed_notebook(html_dir, html_pages, page):
     assert f"_sources/{page}.ipynb" in html, f"{page}.html offers no .ipynb download"
     nb = json.loads((html_dir / "_sources" / f"{page}.ipynb").read_text(encoding="utf-8"))
     code = [cell for cell in nb["cells"] if cell["cell_type"] == "code"]
-    assert code and all(cell.get("execution_count") for cell in code), f"{page}.ipynb is not executed"
+    assert code and all(cell.get("execution_count") for cell in code), (
+        f"{page}.ipynb is not executed"
+    )
     # A page whose reference shows outputs offers a notebook that shows them.
-    reference = json.loads((ROOT / "book" / "_nbval" / f"{Path(page).name}.ipynb").read_text(encoding="utf-8"))
+    reference = json.loads(
+        (ROOT / "book" / "_nbval" / f"{Path(page).name}.ipynb").read_text(encoding="utf-8")
+    )
     # (the book merges a cell's streams into one output, the reference does not: compare presence)
     if visible_outputs(reference):
-        assert visible_outputs(nb), f"{page}.ipynb shows no output, the reference {visible_outputs(reference)}"
+        assert visible_outputs(nb), (
+            f"{page}.ipynb shows no output, the reference {visible_outputs(reference)}"
+        )
 
 
 def test_every_download_link_resolves(html_dir, html_pages):

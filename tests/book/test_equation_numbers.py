@@ -42,29 +42,38 @@ def test_equation_labels_json_lists_the_papers_24_equations(expected_equation_nu
 
 def test_source_labels_are_the_papers_and_unique(equation_sources, expected_equation_numbers):
     assert equation_sources, "no equation label eq-N in book/*.md"
-    unknown = [(label, page) for label, page in equation_sources
-               if label not in expected_equation_numbers]
+    unknown = [
+        (label, page) for label, page in equation_sources if label not in expected_equation_numbers
+    ]
     assert not unknown, f"labels that are not the paper's equations eq-1 ... eq-24: {unknown}"
     twice = [label for label, n in Counter(label for label, _ in equation_sources).items() if n > 1]
     assert not twice, f"labels defined more than once: {twice}"
 
 
 def test_labelled_equation_renders_with_the_papers_number(
-        equation_label, html_pages, expected_equation_numbers):
-    rendered = [(number, page) for label, number, page in rendered_numbers(html_pages)
-                if label == equation_label]
+    equation_label, html_pages, expected_equation_numbers
+):
+    rendered = [
+        (number, page)
+        for label, number, page in rendered_numbers(html_pages)
+        if label == equation_label
+    ]
     expected = expected_equation_numbers.get(equation_label)
     assert rendered, f"{equation_label} is not rendered with a number in _build/html"
     assert [number for number, _ in rendered] == [expected], (
-        f"{equation_label} renders as {rendered}, expected ({expected})")
+        f"{equation_label} renders as {rendered}, expected ({expected})"
+    )
 
 
 def test_no_other_numbered_equations(html_pages, equation_sources, expected_equation_numbers):
     labels = {label for label, _ in equation_sources}
     rendered = rendered_numbers(html_pages)
     assert rendered, "no numbered equation found in _build/html"
-    stray = [(label, number, page) for label, number, page in rendered
-             if label not in labels or expected_equation_numbers.get(label) != number]
+    stray = [
+        (label, number, page)
+        for label, number, page in rendered
+        if label not in labels or expected_equation_numbers.get(label) != number
+    ]
     assert not stray, f"numbered equations that are not the paper's, or misnumbered: {stray}"
     twice = [n for n, count in Counter(number for _, number, _ in rendered).items() if count > 1]
     assert not twice, f"equation numbers shown more than once: {twice}"

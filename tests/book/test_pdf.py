@@ -23,32 +23,38 @@ import shutil
 import subprocess
 
 import pytest
-
 from conftest import HTML_DIR, ROOT
 
 PDF = ROOT / "_build" / "latex" / "depthcore.pdf"
-FIGURE_RE = re.compile(r"^```\{glue:figure\}\s*\S+\s*\n:name:\s*(\S+)\s*\n(?::\w+:.*\n)*\s*\n(.*?)\n```",
-                       re.MULTILINE | re.DOTALL)
+FIGURE_RE = re.compile(
+    r"^```\{glue:figure\}\s*\S+\s*\n:name:\s*(\S+)\s*\n(?::\w+:.*\n)*\s*\n(.*?)\n```",
+    re.MULTILINE | re.DOTALL,
+)
 EQNO_RE = re.compile(r"\S.* {6,}\((\d+)\)\s*$", re.MULTILINE)
 RAW_RES = (
-    re.compile(r"\\[A-Za-z]{2,}"),          # a LaTeX command
-    re.compile(r"\$"),                      # MyST/LaTeX math delimiters
+    re.compile(r"\\[A-Za-z]{2,}"),  # a LaTeX command
+    re.compile(r"\$"),  # MyST/LaTeX math delimiters
     re.compile(r"\{(glue|eq|doc|cite|numref|math|ref)[:}]"),  # MyST roles
-    re.compile(r"\?\?"),                    # an unresolved reference
+    re.compile(r"\?\?"),  # an unresolved reference
 )
 
 
 def pdftotext(*args: str) -> str:
-    return subprocess.run(["pdftotext", *args, str(PDF), "-"], capture_output=True, text=True,
-                          check=True, timeout=120).stdout
+    return subprocess.run(
+        ["pdftotext", *args, str(PDF), "-"], capture_output=True, text=True, check=True, timeout=120
+    ).stdout
 
 
 @pytest.fixture(scope="module")
 def pdf(missing_prerequisite):
     if not PDF.exists():
-        missing_prerequisite(f"{PDF.relative_to(ROOT)} not found: run `make pdf` (TeX Live's xelatex)")
+        missing_prerequisite(
+            f"{PDF.relative_to(ROOT)} not found: run `make pdf` (TeX Live's xelatex)"
+        )
     if shutil.which("pdftotext") is None:
-        missing_prerequisite("pdftotext not found (apt-get install poppler-utils): the PDF is not checked")
+        missing_prerequisite(
+            "pdftotext not found (apt-get install poppler-utils): the PDF is not checked"
+        )
     return PDF
 
 
@@ -88,8 +94,9 @@ def captions_in_pdf(plain_text: str) -> list[tuple[str, int]]:
     pattern = re.compile(r"Figure (\d+): (" + "|".join(map(re.escape, starts)) + ")")
     shown = [(m.group(2), int(m.group(1))) for m in pattern.finditer(plain_text)]
     assert [start for start, _ in shown] == [start for _, start in figures], (
-        f"the PDF's figure captions {shown} are not the book's {figures}")
-    return [(label, number) for (label, _), (_, number) in zip(figures, shown)]
+        f"the PDF's figure captions {shown} are not the book's {figures}"
+    )
+    return [(label, number) for (label, _), (_, number) in zip(figures, shown, strict=True)]
 
 
 def test_equations_are_numbered_1_to_24_in_order(layout_text):
@@ -106,18 +113,26 @@ def test_the_papers_figures_carry_the_papers_numbers(plain_text, load_figure_num
 
 def test_no_other_figure_takes_the_papers_numbers(plain_text, load_figure_numbers):
     papers = {int(where["number"]) for where in load_figure_numbers.values()}
-    others = [number for label, number in captions_in_pdf(plain_text) if label not in load_figure_numbers]
+    others = [
+        number for label, number in captions_in_pdf(plain_text) if label not in load_figure_numbers
+    ]
     assert others and min(others) > max(papers), f"the book's own figures are numbered {others}"
     assert len(set(others)) == len(others), f"figure numbers used twice: {others}"
 
 
 def test_no_raw_latex_or_myst_in_the_text(plain_text):
     for pattern in RAW_RES:
-        found = [plain_text[max(m.start() - 40, 0):m.end() + 40] for m in pattern.finditer(plain_text)]
+        found = [
+            plain_text[max(m.start() - 40, 0) : m.end() + 40] for m in pattern.finditer(plain_text)
+        ]
         assert not found, f"{pattern.pattern!r} in the PDF's text: {found[:3]}"
 
 
 def test_the_html_book_ships_this_pdf(pdf):
     shipped = HTML_DIR / "downloads" / "depthcore.pdf"
-    assert shipped.is_file(), f"{shipped.relative_to(ROOT)} not found: run `make pdf` before `make book`"
-    assert shipped.read_bytes() == pdf.read_bytes(), "the HTML book ships another PDF than _build/latex's"
+    assert shipped.is_file(), (
+        f"{shipped.relative_to(ROOT)} not found: run `make pdf` before `make book`"
+    )
+    assert shipped.read_bytes() == pdf.read_bytes(), (
+        "the HTML book ships another PDF than _build/latex's"
+    )
