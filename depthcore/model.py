@@ -82,7 +82,7 @@ def observation_vector(n) -> np.ndarray:
     return np.stack([1.0 / n[..., 1], -n[..., 0] / n[..., 1] ** 2, np.zeros(n.shape[:-1])], axis=-1)
 
 
-def log_likelihood(mu, x, rho: float) -> np.ndarray:
+def log_likelihood(mu, x, rho, front: bool = False) -> np.ndarray:
     """Eq. (4): log density of one measurement ``mu`` given states ``x``.
 
     Parameters
@@ -91,17 +91,27 @@ def log_likelihood(mu, x, rho: float) -> np.ndarray:
         Measured bearing (radians, as a tangent).
     x : array_like, shape (..., 3)
         States at the time of the measurement.
-    rho : float
+    rho : float or array_like broadcastable to ``x.shape[:-1]``
         Noise standard deviation, > 0.
+    front : bool
+        If true, states with depth ``y <= 0`` (behind the camera) get ``-inf``,
+        the log of the support's indicator.
 
     Returns
     -------
     ndarray, shape x.shape[:-1]
         ``-log(sqrt(2 pi) rho) - (x / y - mu)**2 / (2 rho**2)``.
     """
-    rho = _checks.positive_scalar(rho, "rho")
+    rho = _checks.positive_array(rho, "rho") if np.ndim(rho) <= 1 else np.asarray(rho, float)
+    if not np.all(rho > 0):
+        raise ValueError(f"rho must be positive, got minimum {float(np.min(rho))}")
+    x = np.asarray(x, dtype=float)
+    if front:
+        inside = x[..., 1] > 0
+        x = np.where(inside[..., None], x, 1.0)
     r = project(x) - np.asarray(mu, dtype=float)
-    return -0.5 * np.log(2.0 * np.pi) - np.log(rho) - 0.5 * (r / rho) ** 2
+    log_l = -0.5 * np.log(2.0 * np.pi) - np.log(rho) - 0.5 * (r / rho) ** 2
+    return np.where(inside, log_l, -np.inf) if front else log_l
 
 
 def trajectory(x1, n: int = N_MEASUREMENTS) -> np.ndarray:

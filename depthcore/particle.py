@@ -374,15 +374,6 @@ def _degrees_of_freedom(df) -> float:
     return _checks.positive_scalar(df, "df")
 
 
-def _log_likelihood(mu, x, rho) -> np.ndarray:
-    """Eq. (4) for ``mu`` (B,), states ``x`` (B, n, 3), ``rho`` (B,); ``-inf`` where ``y <= 0``."""
-    front = x[..., 1] > 0
-    h = np.where(front, x[..., 0], 0.0) / np.where(front, x[..., 1], 1.0)
-    r = (h - mu[:, None]) / rho[:, None]
-    log_l = -0.5 * r**2 - np.log(rho)[:, None] - 0.5 * np.log(2.0 * np.pi)
-    return np.where(front, log_l, -np.inf)
-
-
 def _linearised_log_likelihood(x3, c, g, rho, k: int) -> np.ndarray:
     """``log Lt_k``: the log likelihood of ``mu_{k+1}`` linearised about ``c``, at states ``x3``.
 
@@ -499,7 +490,7 @@ def run(
                 x, log_w, ancestors, resampled[:, k], N, rng, RESAMPLERS[resampler]
             )
             x = model.G(x)  # Eq. (1): the deterministic motion
-        log_w = log_w + _log_likelihood(mu[:, k], x, rho)
+        log_w = log_w + model.log_likelihood(mu[:, k, None], x, rho[:, None], front=True)
         if look_ahead is not None:
             log_w = log_w - _linearised_log_likelihood(model.G(x, 2 - k), *look_ahead, rho, k)
         dead = ~np.any(np.isfinite(log_w), axis=-1)

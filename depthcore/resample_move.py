@@ -107,15 +107,13 @@ class ResampleMoveBatch:
 def _log_likelihood(mu_k, x1, k: int, rho) -> np.ndarray:
     """Eq. (4) for bearing ``mu_k`` (B,) of the states ``G^k x1`` (B, N, 3).
 
-    ``-inf`` behind the camera.
-
-    ``k`` counts frames after the first (``mu_1`` has ``k = 0``).
+    ``k`` counts frames after the first (``mu_1`` has ``k = 0``). States with
+    ``y_1 <= 0`` get ``-inf``: the point is in front of the camera at every frame.
     """
-    xk = model.G(x1, k)
-    front = x1[..., 1] > 0
-    safe = np.where(front[..., None], xk, 1.0)
-    r = (model.project(safe) - mu_k[:, None]) / rho[:, None]
-    return np.where(front, -0.5 * r**2 - np.log(rho)[:, None] - 0.5 * np.log(2.0 * np.pi), -np.inf)
+    inside = x1[..., 1] > 0
+    xk = model.G(np.where(inside[..., None], x1, 1.0), k)
+    log_l = model.log_likelihood(mu_k[:, None], xk, rho[:, None])
+    return np.where(inside, log_l, -np.inf)
 
 
 def log_target(x1, mu, rho, prior_mean, prior_chol) -> np.ndarray:
