@@ -30,7 +30,7 @@ MAX_TRIALS = 100_000
 #: Numeric limits of the command line (the library itself accepts more).
 RHO_RANGE = (1e-12, 1e3)
 MU_MAX = 1e6
-PRIOR_MEAN_MAX = 1e4
+PRIOR_MEAN_MAX = 1e3
 PRIOR_COV_RANGE = (1e-12, 1e12)
 
 # A negative number in any notation (-1, -.5, -1e-1, -1E+3, -inf, -nan) is a
@@ -49,8 +49,10 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _check_limits(name: str, values, largest: float) -> None:
-    """Refuse a finite value of magnitude above ``largest`` (NaN and inf are the library's)."""
+    """Refuse a value that is not finite or whose magnitude exceeds ``largest``."""
     v = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be finite, got {v.tolist()}")
     big = np.isfinite(v) & (np.abs(v) > largest)
     if np.any(big):
         raise ValueError(f"{name} must be at most {largest:g} in magnitude, got {v[big][0]:g}")
