@@ -23,6 +23,7 @@ from . import __version__, report, reproduce
 from .filters import NAMES as _STUDY_FILTERS
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from .model import noise_free_state
+from .report import STUDY_LEGEND
 
 #: Largest ``study --trials``: the study keeps 15 numbers per trial and filter.
 MAX_TRIALS = 100_000
@@ -185,9 +186,48 @@ def _cmd_study(args) -> str:
     return json.dumps(result, indent=2) if args.json else report.format_study(result)
 
 
+EXAMPLES = {
+    "reproduce": """\
+examples:
+  python -m depthcore reproduce          the table of Figures 2-6 beside the paper
+  python -m depthcore reproduce --json   the same as JSON""",
+    "estimate": """\
+examples:
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
+  python -m depthcore estimate --mu -1e-1 0 0.2 --rho 0.01 --prior-cov 100
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --prior-mean -1 4 0 --json
+
+The noise-free state c is (x, y, v) at time 3; the prior is at time 1.""",
+    "study": f"""\
+examples:
+  python -m depthcore study --trials 500 --seed 1
+  python -m depthcore study --filters ekf ukf --rho 0.01 --json
+
+{STUDY_LEGEND}""",
+    "figures": """\
+examples:
+  python -m depthcore figures --out figures""",
+}
+EXAMPLES["all"] = """\
+examples:
+  python -m depthcore reproduce
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
+  python -m depthcore study --trials 500 --seed 1
+  python -m depthcore figures --out figures
+
+`python -m depthcore COMMAND --help` shows each command's options and examples."""
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m depthcore``."""
-    p = _Parser(prog="python -m depthcore", description=__doc__.splitlines()[0])
+    raw = argparse.RawDescriptionHelpFormatter
+    p = _Parser(
+        prog="python -m depthcore",
+        description="Filter based estimates of depth (Maybank 1990): the paper's filters "
+        "on any three bearings.",
+        epilog=EXAMPLES["all"],
+        formatter_class=raw,
+    )
     p.add_argument("--version", action="version", version=f"depthcore {__version__}")
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
@@ -198,13 +238,19 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser(
         "reproduce",
         parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["reproduce"],
         help="moments of every filter for Figures 2-6, beside the paper's",
     )
     r.add_argument("--json", action="store_true", help="print JSON instead of a table")
     r.set_defaults(run=_cmd_reproduce)
 
     e = sub.add_parser(
-        "estimate", parents=[common], help="moments of every filter for any three measurements"
+        "estimate",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["estimate"],
+        help="moments of every filter for any three measurements",
     )
     e.add_argument(
         "--mu",
@@ -233,7 +279,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(run=_cmd_estimate)
 
     st = sub.add_parser(
-        "study", parents=[common], help="Monte Carlo study of every filter's error and calibration"
+        "study",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["study"],
+        help="Monte Carlo study of every filter's error and calibration",
     )
     st.add_argument(
         "--trials",
@@ -273,7 +323,13 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--json", action="store_true", help="print JSON instead of a table")
     st.set_defaults(run=_cmd_study)
 
-    f = sub.add_parser("figures", parents=[common], help="write Figures 2-6 as PDF, PNG and SVG")
+    f = sub.add_parser(
+        "figures",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["figures"],
+        help="write Figures 2-6 as PDF, PNG and SVG",
+    )
     f.add_argument("--out", default="figures", help="output folder (default: figures)")
     f.set_defaults(run=_cmd_figures)
     return p
