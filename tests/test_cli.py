@@ -161,3 +161,27 @@ def test_debug_shows_the_traceback_of_an_unexpected_failure(capsys, monkeypatch)
     assert err.count("\n") == 1 and "rerun with --debug" in err
     assert main([*argv, "--debug"]) == 1
     assert "Traceback" in capsys.readouterr().err
+
+
+def test_study_shows_a_progress_bar_on_a_terminal_only():
+    import fcntl
+    import os
+    import pty
+    import struct
+    import termios
+
+    argv = [sys.executable, "-m", "depthcore", "study", "--trials", "150", "--filters", "ekf"]
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+    done = subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=slave, timeout=120)
+    os.close(slave)
+    shown = b""
+    try:
+        while chunk := os.read(master, 4096):
+            shown += chunk
+    except OSError:  # the terminal closed
+        pass
+    os.close(master)
+    assert done.returncode == 0 and b"150/150" in shown
+    quiet = subprocess.run(argv, capture_output=True, timeout=120)
+    assert quiet.returncode == 0 and quiet.stderr == b""
