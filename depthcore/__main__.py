@@ -1,13 +1,21 @@
 """The command line: ``python -m depthcore {reproduce,estimate,study,figures} ...``.
 
-Bad input ends with a one-line message on stderr and exit status 2.
+Bad input ends with a one-line message on stderr naming the argument and exit
+status 2. Any other failure (out of memory, an overflow, a bug) ends with a
+one-line message asking to rerun with ``--debug`` (which shows the traceback)
+and exit status 1. Warnings never reach stderr: inside the command line they
+are errors, reported like any other failure.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
+import traceback
+import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -15,15 +23,54 @@ from . import __version__, report, reproduce
 from .filters import NAMES as _STUDY_FILTERS
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from .model import noise_free_state
+from .report import STUDY_LEGEND
+
+#: Largest ``study --trials``: the study keeps 15 numbers per trial and filter.
+MAX_TRIALS = 100_000
+
+#: Numeric limits of the command line (the library itself accepts more).
+RHO_RANGE = (1e-12, 1e3)
+MU_MAX = 1e6
+PRIOR_MEAN_MAX = 1e3
+PRIOR_COV_RANGE = (1e-12, 1e12)
+
+# A negative number in any notation (-1, -.5, -1e-1, -1E+3, -inf, -nan) is a
+# value, not an option.
+_NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.I)
 
 
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE
+        self._has_negative_number_optionals = []
+
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+def _check_limits(name: str, values, largest: float) -> None:
+    """Refuse a value that is not finite or whose magnitude exceeds ``largest``."""
+    v = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be finite, got {v.tolist()}")
+    big = np.isfinite(v) & (np.abs(v) > largest)
+    if np.any(big):
+        raise ValueError(f"{name} must be at most {largest:g} in magnitude, got {v[big][0]:g}")
+
+
+def _check_rho(rho: float) -> None:
+    lo, hi = RHO_RANGE
+    if np.isfinite(rho) and rho > 0 and not lo <= rho <= hi:
+        raise ValueError(f"rho must be from {lo:g} to {hi:g}, got {rho:g}")
+
+
 def _prior(mu, prior_mean, prior_cov) -> Gaussian:
     """The prior from the command line, defaulting to the paper's rule."""
+    if prior_mean is not None:
+        _check_limits("prior_mean", prior_mean, PRIOR_MEAN_MAX)
+    if prior_cov is not None:
+        _check_limits("prior_cov", prior_cov, PRIOR_COV_RANGE[1])
     c = noise_free_state(mu)
     default = paper_prior(c)
     mean = default.mean if prior_mean is None else np.array(prior_mean)
@@ -40,11 +87,17 @@ def _prior(mu, prior_mean, prior_cov) -> Gaussian:
             f"prior_cov takes 1 value (S I) or 9 (a 3 x 3 matrix), got {len(prior_cov)}"
         )
     try:
-        return Gaussian(mean, cov)
+        prior = Gaussian(mean, cov)
     except ValueError as exc:
         raise ValueError(
             str(exc).replace("cov ", "prior_cov ", 1).replace("mean ", "prior_mean ", 1)
         ) from None
+    smallest = np.linalg.eigvalsh(prior.cov)[0]
+    if smallest < PRIOR_COV_RANGE[0]:
+        raise ValueError(
+            f"prior_cov must have eigenvalues of at least {PRIOR_COV_RANGE[0]:g}, got {smallest:g}"
+        )
+    return prior
 
 
 def _cmd_reproduce(args) -> str:
@@ -54,59 +107,151 @@ def _cmd_reproduce(args) -> str:
 
 def _cmd_estimate(args) -> str:
     mu = np.array(args.mu)
-    summary = reproduce.summarize(mu, args.rho, _prior(mu, args.prior_mean, args.prior_cov))
+    _check_limits("mu", mu, MU_MAX)
+    _check_rho(args.rho)
+    prior = _prior(mu, args.prior_mean, args.prior_cov)
+    try:
+        summary = reproduce.summarize(mu, args.rho, prior)
+    except ValueError as exc:
+        if str(exc).startswith(("mu ", "rho ", "prior_mean ", "prior_cov ")):
+            raise
+        raise ValueError(f"mu, rho and the prior have no answer: {exc}") from None
     return json.dumps(summary, indent=2) if args.json else report.format_summary(summary)
 
 
+def _check_out(out: str) -> Path:
+    """The folder of ``figures --out``: refuses an empty path, a file, a path below a file."""
+    if not out.strip():
+        raise ValueError("out must be a folder, got an empty path")
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"out must be a folder, but {out!r} is an existing file")
+    for parent in path.parents:
+        if parent.exists() and not parent.is_dir():
+            raise ValueError(f"out must be a folder, but {str(parent)!r} in {out!r} is a file")
+    return path
+
+
 def _cmd_figures(args) -> str:
+    out = _check_out(args.out)
     import matplotlib
 
     matplotlib.use("Agg")
     from . import figures
 
-    paths = figures.save_all(args.out)
+    paths = figures.save_all(out)
     return "\n".join(str(p) for p in paths) + "\n"
 
 
 def _cmd_study(args) -> str:
     from . import study
 
-    progress = None
-    if sys.stderr.isatty():
-
-        def progress(done, total):
-            sys.stderr.write(f"\rstudy: {done}/{total} trials" + ("\n" if done == total else ""))
-            sys.stderr.flush()
-
-    truth = None if args.truth is None else np.array(args.truth)
+    if not 1 <= args.trials <= MAX_TRIALS:
+        raise ValueError(
+            f"trials must be a positive integer at most {MAX_TRIALS}, got {args.trials}"
+        )
     if args.particles < 1:
         raise ValueError(f"particles must be a positive integer, got {args.particles}")
-    result = study.study(
-        truth=truth,
-        rho=args.rho,
-        trials=args.trials,
-        seed=args.seed,
-        prior=args.prior,
-        names=tuple(args.filters),
-        n_particles=args.particles,
-        progress=progress,
-    )
+    if args.seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {args.seed}")
+    _check_rho(args.rho)
+    if args.truth is not None:
+        _check_limits("truth", args.truth, MU_MAX)
+    truth = None if args.truth is None else np.array(args.truth)
+    bar = None
+    if sys.stderr.isatty():
+        from tqdm import tqdm
+
+        bar = tqdm(total=args.trials, desc="study", unit="trial", file=sys.stderr)
+
+    def progress(done, total):
+        if bar is not None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+    try:
+        result = study.study(
+            truth=truth,
+            rho=args.rho,
+            trials=args.trials,
+            seed=args.seed,
+            prior=args.prior,
+            names=tuple(args.filters),
+            n_particles=args.particles,
+            progress=progress,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
     return json.dumps(result, indent=2) if args.json else report.format_study(result)
+
+
+EXAMPLES = {
+    "reproduce": """\
+examples:
+  python -m depthcore reproduce          the table of Figures 2-6 beside the paper
+  python -m depthcore reproduce --json   the same as JSON""",
+    "estimate": """\
+examples:
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
+  python -m depthcore estimate --mu -1e-1 0 0.2 --rho 0.01 --prior-cov 100
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --prior-mean -1 4 0 --json
+
+The noise-free state c is (x, y, v) at time 3; the prior is at time 1.""",
+    "study": f"""\
+examples:
+  python -m depthcore study --trials 500 --seed 1
+  python -m depthcore study --filters ekf ukf --rho 0.01 --json
+
+{STUDY_LEGEND}""",
+    "figures": """\
+examples:
+  python -m depthcore figures --out figures""",
+}
+EXAMPLES["all"] = """\
+examples:
+  python -m depthcore reproduce
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
+  python -m depthcore study --trials 500 --seed 1
+  python -m depthcore figures --out figures
+
+`python -m depthcore COMMAND --help` shows each command's options and examples."""
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m depthcore``."""
-    p = _Parser(prog="python -m depthcore", description=__doc__.splitlines()[0])
+    raw = argparse.RawDescriptionHelpFormatter
+    p = _Parser(
+        prog="python -m depthcore",
+        description="Filter based estimates of depth (Maybank 1990): the paper's filters "
+        "on any three bearings.",
+        epilog=EXAMPLES["all"],
+        formatter_class=raw,
+    )
     p.add_argument("--version", action="version", version=f"depthcore {__version__}")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--debug", action="store_true", help="show the traceback of an unexpected failure"
+    )
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     r = sub.add_parser(
-        "reproduce", help="moments of every filter for Figures 2-6, beside the paper's"
+        "reproduce",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["reproduce"],
+        help="moments of every filter for Figures 2-6, beside the paper's",
     )
     r.add_argument("--json", action="store_true", help="print JSON instead of a table")
     r.set_defaults(run=_cmd_reproduce)
 
-    e = sub.add_parser("estimate", help="moments of every filter for any three measurements")
+    e = sub.add_parser(
+        "estimate",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["estimate"],
+        help="moments of every filter for any three measurements",
+    )
     e.add_argument(
         "--mu",
         type=float,
@@ -133,8 +278,19 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--json", action="store_true", help="print JSON instead of a table")
     e.set_defaults(run=_cmd_estimate)
 
-    st = sub.add_parser("study", help="Monte Carlo study of every filter's error and calibration")
-    st.add_argument("--trials", type=int, default=500, help="number of noise draws (default 500)")
+    st = sub.add_parser(
+        "study",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["study"],
+        help="Monte Carlo study of every filter's error and calibration",
+    )
+    st.add_argument(
+        "--trials",
+        type=int,
+        default=500,
+        help=f"number of noise draws, 1 to {MAX_TRIALS} (default 500)",
+    )
     st.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     st.add_argument(
         "--rho", type=float, default=1 / 200, help="noise standard deviation (default 1/200)"
@@ -158,7 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=list(_STUDY_FILTERS),
         choices=_STUDY_FILTERS,
         metavar="NAME",
-        help=f"filters to score (default all: {' '.join(_STUDY_FILTERS)})",
+        help=f"filters to score (default all: {' '.join(_STUDY_FILTERS)}); the optimal "
+        "filter also runs when not named, as the reference of every Hellinger distance",
     )
     st.add_argument(
         "--particles", type=int, default=2000, help="particles per trial (default 2000)"
@@ -166,20 +323,45 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--json", action="store_true", help="print JSON instead of a table")
     st.set_defaults(run=_cmd_study)
 
-    f = sub.add_parser("figures", help="write Figures 2-6 as PDF, PNG and SVG")
+    f = sub.add_parser(
+        "figures",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["figures"],
+        help="write Figures 2-6 as PDF, PNG and SVG",
+    )
     f.add_argument("--out", default="figures", help="output folder (default: figures)")
     f.set_defaults(run=_cmd_figures)
     return p
 
 
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
 def main(argv=None) -> int:
-    """Run the command line; returns the exit status."""
+    """Run the command line; returns the exit status (0, 1 or 2)."""
     args = build_parser().parse_args(argv)
+    prog = f"python -m depthcore {args.command}"
     try:
-        text = args.run(args)
+        # Warnings become errors here only: the warning filters are restored on
+        # return, so library users are not affected.
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            text = args.run(args)
     except ValueError as exc:
-        sys.stderr.write(f"python -m depthcore {args.command}: error: {exc}\n")
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(f"{prog}: error: {_one_line(exc)}\n")
         return 2
+    except Exception as exc:  # noqa: BLE001 - every failure is one line
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(
+            f"{prog}: error: unexpected {type(exc).__name__}: {_one_line(exc)[:200]}"
+            " (rerun with --debug to see the traceback)\n"
+        )
+        return 1
     sys.stdout.write(text)
     return 0
 

@@ -47,6 +47,25 @@ STUDY_DECIMALS = {"bias": 3, "rmse": 3, "mean_sd": 3, "coverage_68": 2, "coverag
 
 # --- the command line's tables ------------------------------------------------------------
 
+#: The key of :func:`format_table`'s columns.
+TABLE_KEY = """\
+key: reading  derived = Eq. (16) or the second-order covariance as derived;
+              printed = as printed in the paper
+     support  front = the optimal filter's depth restricted to y > 2 (in front of
+              the camera at every frame); all = no restriction
+     error    error estimate of the optimal filter's quadrature, standard error of the
+              particle filter's Monte Carlo estimate; 0 for the Gaussian filters
+     agrees   whether the mean and the SD round to the paper's printed numbers"""
+
+#: The legend of :func:`format_study`'s columns.
+STUDY_LEGEND = """\
+legend: bias, rmse  mean and root mean square of estimate - truth over the trials
+        mean sd     mean of the filter's reported standard deviation
+        cover 68/95 fraction of trials whose central 68% / 95% interval holds the truth
+        NEES        mean normalized estimation error squared of (x, y, v); 3 if calibrated
+        Hellinger   mean Hellinger distance from the depth marginal to the optimal one
+                    (0 = the same density, 1 = disjoint)"""
+
 
 def format_table(result: dict) -> str:
     """A plain-text table of :func:`reproduce`'s result."""
@@ -73,21 +92,47 @@ def format_table(result: dict) -> str:
                 f"{rep_m:>10} {rep_s:>9}  {match}"
             )
         lines.append("")
+    compared = [
+        (sc["figure"], r)
+        for sc in result["scenarios"]
+        for r in sc["rows"]
+        if r["mean_matches"] is not None
+    ]
+    matched = sum(bool(r["mean_matches"]) + bool(r["sd_matches"]) for _, r in compared)
+    differ = [
+        f"Fig. {fig} {r['filter']} {r['reading']} {r['support']} {r['quantity']}"
+        for fig, r in compared
+        if not (r["mean_matches"] and r["sd_matches"])
+    ]
+    lines += [
+        TABLE_KEY,
+        "",
+        f"{matched} of the paper's {2 * len(compared)} printed means and SDs are matched"
+        + (f"; differing: {', '.join(differ)}" if differ else "")
+        + " (the book's page on the discrepancies explains each).",
+    ]
     return "\n".join(lines).rstrip() + "\n"
 
 
 def format_summary(summary: dict) -> str:
     """A plain-text rendering of :func:`summarize`'s result."""
     c = summary["c"]
+    m, cov = summary["prior_mean"], np.asarray(summary["prior_cov"])
+    if np.array_equal(cov, cov[0, 0] * np.eye(3)):
+        cov_text = f"{cov[0, 0]:.4g} I"
+    else:
+        cov_text = "[" + "; ".join(" ".join(f"{v:.4g}" for v in row) for row in cov) + "]"
     lines = [
-        f"noise-free state c = ({c[0]:.6g}, {c[1]:.6g}, {c[2]:.6g})",
+        f"noise-free state c = (x, y, v) at time 3 = ({c[0]:#.4g}, {c[1]:#.4g}, {c[2]:#.4g})",
+        f"prior at time 1: mean (x, y, v) = ({m[0]:#.4g}, {m[1]:#.4g}, {m[2]:#.4g}), "
+        f"covariance {cov_text}",
         f"{'filter':<13} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}",
     ]
     for name in summary["filters"]:
         f = summary["filters"][name]
         lines.append(
-            f"{name:<13} {f['depth']['mean']:>11.6g} {f['depth']['sd']:>10.4g} "
-            f"{f['velocity']['mean']:>10.6g} {f['velocity']['sd']:>10.4g}"
+            f"{name:<13} {f['depth']['mean']:>#11.4g} {f['depth']['sd']:>#10.4g} "
+            f"{f['velocity']['mean']:>#10.4g} {f['velocity']['sd']:>#10.4g}"
         )
     o = summary["filters"]["optimal"]
     lines.append(
@@ -121,6 +166,7 @@ def format_study(result: dict) -> str:
                 f"{name:<13} {q:<9} {r['bias']:>9.4f} {r['rmse']:>9.4f} {r['mean_sd']:>9.4f} "
                 f"{r['coverage_68']:>8.3f} {r['coverage_95']:>8.3f} {extra}".rstrip()
             )
+    lines.append(STUDY_LEGEND)
     return "\n".join(lines) + "\n"
 
 

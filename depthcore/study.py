@@ -365,6 +365,11 @@ def study(
     all_trials = simulate(truth, rho, trials, noise_rng, prior)
     parts = []
     n = len(all_trials.mu)
+    if n == 0:
+        raise ValueError(
+            f"truth and rho leave no valid trial: all {trials} noisy triples are degenerate "
+            "or put the point behind the camera"
+        )
     for start in range(0, n, chunk):
         sl = slice(start, start + chunk)
         part = Trials(

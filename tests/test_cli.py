@@ -6,6 +6,7 @@ import sys
 
 import pytest
 
+from depthcore import reproduce
 from depthcore.__main__ import main
 
 
@@ -121,3 +122,66 @@ def test_figures_command_writes_files(tmp_path):
         for x in ("", "-extended")
         for ext in ("pdf", "png", "svg")
     )
+
+
+@pytest.mark.parametrize("command", ["reproduce", "estimate", "study", "figures"])
+def test_every_help_is_plain_text_with_examples(command, capsys):
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    out = capsys.readouterr().out
+    assert f"python -m depthcore {command}" in out.split("examples:")[1]
+    assert "``" not in out and ":func:" not in out
+
+
+def test_estimate_shows_its_prior_and_labels_c(capsys):
+    assert main(["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005"]) == 0
+    out = capsys.readouterr().out
+    assert "c = (x, y, v) at time 3 = (1.200, 6.000, 1.200)" in out
+    assert "prior at time 1: mean (x, y, v) = (-1.200, 4.000, 0.000), covariance 1000 I" in out
+
+
+def test_reproduce_counts_the_matched_numbers(capsys):
+    assert main(["reproduce"]) == 0
+    out = capsys.readouterr().out
+    rows = [r for sc in reproduce.reproduce()["scenarios"] for r in sc["rows"]]
+    compared = [r for r in rows if r["mean_matches"] is not None]
+    matched = sum(r["mean_matches"] + r["sd_matches"] for r in compared)
+    assert f"{matched} of the paper's {2 * len(compared)} printed means and SDs" in out
+    assert "key: reading" in out
+
+
+def test_debug_shows_the_traceback_of_an_unexpected_failure(capsys, monkeypatch):
+    def boom(*args, **kwargs):
+        raise OverflowError("boom")
+
+    monkeypatch.setattr(reproduce, "summarize", boom)
+    argv = ["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "rerun with --debug" in err
+    assert main([*argv, "--debug"]) == 1
+    assert "Traceback" in capsys.readouterr().err
+
+
+def test_study_shows_a_progress_bar_on_a_terminal_only():
+    import fcntl
+    import os
+    import pty
+    import struct
+    import termios
+
+    argv = [sys.executable, "-m", "depthcore", "study", "--trials", "150", "--filters", "ekf"]
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+    done = subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=slave, timeout=120)
+    os.close(slave)
+    shown = b""
+    try:
+        while chunk := os.read(master, 4096):
+            shown += chunk
+    except OSError:  # the terminal closed
+        pass
+    os.close(master)
+    assert done.returncode == 0 and b"150/150" in shown
+    quiet = subprocess.run(argv, capture_output=True, timeout=120)
+    assert quiet.returncode == 0 and quiet.stderr == b""
