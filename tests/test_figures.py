@@ -136,3 +136,180 @@ def test_figure_1_rejects_a_point_at_or_behind_the_image_line():
         figures.translating_point([1.0, 6.0])
     with pytest.raises(ValueError, match="^n: at least 2"):
         figures.translating_point(n=1)
+
+
+def _lines(ax):
+    """``{label: (x, y)}`` of the lines drawn on ``ax``."""
+    return {line.get_label(): (line.get_xdata(), line.get_ydata()) for line in ax.get_lines()}
+
+
+def _normal_pdf(x, mean, sd):
+    return np.exp(-0.5 * ((x - mean) / sd) ** 2) / (np.sqrt(2 * np.pi) * sd)
+
+
+@pytest.mark.parametrize("key", list(SCENARIOS))
+def test_figure_draws_the_densities_of_each_filter(key):
+    # The drawn curves, against the filters' own marginals computed here:
+    # the optimal filter's quadrature density and the Gaussian ones of Eq. (13).
+    from depthcore import optimal
+    from depthcore.ekf import ekf
+    from depthcore.second_order import second_order
+
+    s = SCENARIOS[key]
+    fig = figures.figure(key, n=201)
+    lines = _lines(fig.axes[0])
+    grid = np.linspace(*figures.GRIDS[key], 201)
+    comp = {"depth": "y", "velocity": "v"}[s.quantity]
+    m = optimal.marginals(s.mu, s.rho, s.prior)
+    pdf = m.depth_pdf if s.quantity == "depth" else m.velocity_pdf
+    want = {
+        "optimal": pdf(grid),
+        "second_order": _normal_pdf(grid, *second_order(s.mu, s.rho, s.prior).marginal(comp)),
+        "ekf": _normal_pdf(grid, *ekf(s.mu, s.rho, s.prior).posterior.marginal(comp)),
+    }
+    for name, y in want.items():
+        x_drawn, y_drawn = lines[figures.STYLE[name]["label"]]
+        assert_allclose(x_drawn, grid, rtol=1e-15)
+        assert_allclose(y_drawn, y, rtol=1e-9, atol=1e-12 * np.max(y))
+    plt.close(fig)
+
+
+def test_extended_figure_draws_the_curves_of_every_filter():
+    from depthcore.ukf import ukf
+
+    s = FIG2
+    fig = figures.figure("fig2", n=101, filters=reproduce.FILTERS)
+    lines = _lines(fig.axes[0])
+    grid = np.linspace(*figures.GRIDS["fig2"], 101)
+    c = reproduce.curves(s, grid, filters=reproduce.FILTERS)
+    for name in reproduce.FILTERS:
+        assert_allclose(lines[figures.STYLE[name]["label"]][1], c[name], rtol=1e-12, atol=0)
+    u = ukf(s.mu, s.rho, s.prior, allow_behind_camera=True).posterior.marginal("y")
+    u = _normal_pdf(grid, *u)
+    assert_allclose(lines[figures.STYLE["ukf"]["label"]][1], u, rtol=1e-9)
+    # the particle filter's kernel estimate integrates to one and sits on the optimal curve
+    p, o = lines[figures.STYLE["particle"]["label"]][1], lines[figures.STYLE["optimal"]["label"]][1]
+    assert np.max(np.abs(p - o)) < 0.1 * np.max(o)
+    plt.close(fig)
+
+
+def test_readings_figure_draws_both_densities_and_their_means():
+    from depthcore import optimal
+
+    s = SCENARIOS["fig3"]
+    fig = figures.readings_figure("fig3", y_max=60.0, n=301)
+    ax = fig.axes[0]
+    y = np.linspace(2.0, 60.0, 301)[1:]
+    drawn = [line for line in ax.get_lines() if len(line.get_xdata()) == len(y)]
+    means = [line.get_xdata()[0] for line in ax.get_lines() if len(line.get_xdata()) == 2]
+    assert len(drawn) == 2
+    for line, mean, reading in zip(drawn, means, ("derived", "printed"), strict=True):
+        m = optimal.marginals(s.mu, s.rho, s.prior, reading=reading)
+        assert_allclose(line.get_xdata(), y, rtol=1e-15)
+        assert_allclose(line.get_ydata(), m.depth_pdf(y), rtol=1e-12)
+        assert mean == pytest.approx(m.depth_mean, rel=1e-12)
+    # both are normalised over y > 2: below y_max they hold most of the mass, not more
+    for line in drawn:
+        assert 0.5 < np.trapezoid(line.get_ydata(), y) < 1.0
+    plt.close(fig)
+
+
+def test_first_update_figure_draws_the_ellipses_and_sigma_points():
+    u = experiments.first_update(FIG2)
+    fig = figures.first_update_figure(u, extent=50.0)
+    lines = _lines(fig.axes[0])
+    x, y = lines[r"bearing of $\mu_1$: $x = \mu_1 y$"]
+    assert_allclose(x, u["mu1"] * np.asarray(y), rtol=1e-15)
+    assert_allclose(np.asarray(y), [-50.0, 50.0])
+    X = u["sigma_points"]
+    sx, sy = lines["UKF sigma points of the prior"]
+    assert_allclose(np.column_stack([sx, sy]), X[:, :2], rtol=1e-15)
+    for label, (mean, cov) in (
+        ("prior, 2 SD", (u["prior"].mean, u["prior"].cov)),
+        (f"{figures.STYLE['ekf']['label']} after $\\mu_1$, 2 SD", u["ekf"]),
+        (f"{figures.STYLE['ukf']['label']} after $\\mu_1$, 2 SD", u["ukf"]),
+    ):
+        pts = np.column_stack(lines[label]) - mean[:2]
+        c = cov[:2, :2]
+        # every drawn point at Mahalanobis distance 2, and the whole ellipse drawn
+        r2 = np.einsum("ni,ni->n", pts, np.linalg.solve(c, pts.T).T)
+        assert_allclose(r2, 4.0, rtol=1e-9)
+        assert np.ptp(pts[:, 0]) == pytest.approx(4 * np.sqrt(c[0, 0]), rel=1e-3)
+        assert np.ptp(pts[:, 1]) == pytest.approx(4 * np.sqrt(c[1, 1]), rel=1e-3)
+    plt.close(fig)
+
+
+def test_convergence_figure_draws_the_errors_and_the_ideal_line(convergence):
+    for quantity in ("depth", "velocity"):
+        fig = figures.convergence_figure(convergence, quantity)
+        N = np.asarray(convergence["sizes"])
+        for ax, moment in zip(fig.axes, ("mean", "sd"), strict=True):
+            lines = ax.get_lines()
+            for line, err in zip(lines[:-1], convergence["rmse"].values(), strict=True):
+                assert_allclose(line.get_xdata(), N)
+                assert_allclose(line.get_ydata(), err[f"{quantity}_{moment}"], rtol=1e-15)
+            ideal = convergence["exact"][f"{quantity}_sd"] / np.sqrt(N)
+            assert_allclose(lines[-1].get_ydata(), ideal, rtol=1e-15)
+        plt.close(fig)
+
+
+def test_profile_figure_draws_the_profile_likelihood():
+    # exp(-f_min(y) / (2 rho^2)) against a direct minimisation of Eq. (5) over (x3, v).
+    from scipy.optimize import minimize
+
+    depths = np.array([3.0, 4.0, 5.0, 8.0, 20.0])
+    rhos = [1 / 200, 1 / 50]
+    fig = figures.profile_figure(FIG2.mu, rhos, depths)
+    mu = np.asarray(FIG2.mu)
+    back = np.array([2.0, 1.0, 0.0])
+    for line, rho in zip(fig.axes[0].get_lines(), rhos, strict=True):
+        assert_allclose(line.get_xdata(), depths)
+        for y3, drawn in zip(depths, line.get_ydata(), strict=True):
+
+            def f(p, y3=y3):
+                return np.sum((mu - (p[0] - back * p[1]) / (y3 - back)) ** 2)
+
+            best = minimize(
+                f, [0.0, 0.0], method="Nelder-Mead", options={"xatol": 1e-12, "fatol": 1e-16}
+            )
+            assert drawn == pytest.approx(np.exp(-best.fun / (2 * rho**2)), rel=1e-6, abs=1e-12)
+    plt.close(fig)
+
+
+def test_calibration_and_sweep_figures_draw_their_results():
+    from depthcore import study
+
+    r = study.study(trials=20, seed=0, names=("optimal", "ekf"))
+    for quantity in ("depth", "velocity"):
+        fig = figures.calibration(r, quantity)
+        lines = fig.axes[0].get_lines()
+        assert_allclose(lines[0].get_xydata(), [[0, 0], [1, 1]])
+        for line, f in zip(lines[1:], r["filters"].values(), strict=True):
+            assert_allclose(line.get_xdata(), f["calibration"]["levels"])
+            assert_allclose(line.get_ydata(), f["calibration"][quantity])
+        plt.close(fig)
+    sw = experiments.prior_offset_sweep([0.0, 1.0, 2.0])
+    for field in ("hellinger", "depth_mean", "depth_sd"):
+        fig = figures.sweep(sw, "offset", field)
+        drawn = {line.get_label(): line for line in fig.axes[0].get_lines()}
+        names = [n for n in reproduce.NAMES if n in sw]
+        if field == "hellinger":
+            names.remove("optimal")
+        assert len(drawn) == len(names)
+        for name in names:
+            line = drawn[figures.STYLE[name]["label"]]
+            assert_allclose(line.get_xdata(), sw["offset"])
+            assert_allclose(line.get_ydata(), sw[name][field])
+        plt.close(fig)
+
+
+def test_noise_study_figure_draws_coverage_and_rmse():
+    r = experiments.noise_study([1 / 400, 1 / 100], trials=20, seed=1, names=("optimal", "ekf"))
+    fig = figures.noise_study_figure(r)
+    for ax, field in zip(fig.axes, ("coverage_68", "rmse"), strict=True):
+        drawn = {line.get_label(): line for line in ax.get_lines()}
+        for name in ("optimal", "ekf"):
+            line = drawn[figures.STYLE[name]["label"]]
+            assert_allclose(line.get_xdata(), r["rho"])
+            assert_allclose(line.get_ydata(), r[name][field])
+    plt.close(fig)

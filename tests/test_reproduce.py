@@ -52,3 +52,29 @@ def test_comparison_runs_only_the_filters_of_its_table(monkeypatch):
     )
     rows = report.comparison("fig4")
     assert {r["quantity"] for r in rows} == {"velocity"}
+
+
+def test_agreement_with_the_paper_is_rounding_to_its_printed_precision():
+    # The paper prints two decimals: a value agrees when it lies within half a
+    # unit of the last printed digit, i.e. when it would be printed the same.
+    from depthcore.scenarios import REPORTED_DECIMALS
+
+    assert REPORTED_DECIMALS == 2
+    for printed in (20.74, 0.0, -1.23, 5.1):
+        for offset, agrees in ((0.0, True), (0.0049, True), (-0.0049, True)):
+            assert reproduce._agrees(printed + offset, printed) is agrees
+        for offset in (0.0051, -0.0051, 0.01, 0.1):
+            assert reproduce._agrees(printed + offset, printed) is False
+
+
+def test_rows_agree_with_the_paper_exactly_when_they_round_to_its_numbers():
+    # An independent route: format each value at the paper's two decimals.
+    for row in reproduce.scenario_rows(SCENARIOS["fig2"], names=("optimal", "ekf")):
+        for k in ("mean", "sd"):
+            printed = row[f"reported_{k}"]
+            if printed is None:
+                assert row[f"{k}_matches"] is None
+                continue
+            # values within 1e-9 of a rounding boundary would be ambiguous
+            assert abs(abs(row[k] - printed) - 0.005) > 1e-9
+            assert row[f"{k}_matches"] is (float(f"{row[k]:.2f}") == printed)

@@ -158,3 +158,68 @@ def test_a_seed_sequence_and_its_integer_give_the_same_study():
     assert a["seed"] == 7
     with pytest.raises(ValueError, match="seed must be a non-negative integer"):
         study.study(trials=12, seed=-1)
+
+
+def _estimates_with_cdfs(cdf):
+    """Estimates of a fictitious filter whose marginal CDFs at the truth are ``cdf``."""
+    n = len(cdf)
+    return study.Estimates(
+        np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)), cdf, cdf[::-1].copy(), np.zeros(n)
+    )
+
+
+def test_coverage_of_exactly_uniform_cdfs_is_the_nominal_level():
+    # A calibrated filter's CDFs at the truth are uniform: on the midpoints of
+    # 10,000 equal cells, the central p interval [1/2 - p/2, 1/2 + p/2] holds
+    # exactly 10,000 p of them at every level (no midpoint is an end point).
+    n = 10_000
+    cdf = (np.arange(n) + 0.5) / n
+    trials = study.Trials(np.zeros(3), 0.01, np.zeros((n, 3)), np.zeros((n, 3)), np.eye(3), 0)
+    s = study.scores(trials, _estimates_with_cdfs(cdf))
+    for q in ("depth", "velocity"):
+        assert s[q]["coverage_68"] == 0.68
+        assert s[q]["coverage_95"] == 0.95
+        assert s["calibration"][q] == pytest.approx(list(study.CALIBRATION_LEVELS), abs=1e-12)
+
+
+def test_coverage_counts_a_small_hand_computed_case():
+    # Central 68 % interval of the CDF: [0.16, 0.84]; central 95 %: [0.025, 0.975].
+    cdf = np.array([0.5, 0.17, 0.83, 0.15, 0.85, 0.03, 0.97, 0.02, 0.98, 0.0])
+    trials = study.Trials(np.zeros(3), 0.01, np.zeros((10, 3)), np.zeros((10, 3)), np.eye(3), 0)
+    s = study.scores(trials, _estimates_with_cdfs(cdf))
+    assert s["depth"]["coverage_68"] == 3 / 10
+    assert s["depth"]["coverage_95"] == 7 / 10
+    levels = list(study.CALIBRATION_LEVELS)
+    assert s["calibration"]["depth"][levels.index(0.7)] == 5 / 10  # [0.15, 0.85]
+    assert s["calibration"]["depth"][levels.index(0.05)] == 1 / 10
+
+
+@pytest.mark.parametrize("name", ["second_order", "ekf", "ukf"])
+def test_gaussian_filters_cdfs_at_the_truth_are_normal_cdfs_of_their_marginals(name):
+    # Each Gaussian filter's marginal CDF at the truth, against scipy's normal
+    # CDF with the filter's own mean and SD of that component.
+    from scipy.stats import norm
+
+    trials = study.simulate(SCENARIOS["fig2"].c, 1 / 200, 20, np.random.default_rng(11))
+    est = study.run_filters(trials, ("optimal", name))[name]
+    for i, cdf in ((1, est.depth_cdf), (2, est.velocity_cdf)):
+        want = norm.cdf(trials.truth[i], loc=est.mean[:, i], scale=np.sqrt(est.cov[:, i, i]))
+        assert_allclose(cdf, want, rtol=1e-12, atol=1e-300)
+    # and hence the 68 % coverage of the velocity counts |m - v| <= z sd
+    z = norm.ppf(0.84)
+    inside = np.abs(est.mean[:, 2] - trials.truth[2]) <= z * np.sqrt(est.cov[:, 2, 2])
+    assert study.scores(trials, est)["velocity"]["coverage_68"] == pytest.approx(np.mean(inside))
+
+
+def test_optimal_cdfs_at_the_truth_match_quadrature_of_its_marginals():
+    s = SCENARIOS["fig2"]
+    trials = study.simulate(s.c, s.rho, 2, np.random.default_rng(4))
+    est = study.run_filters(trials, ("optimal",))["optimal"]
+    for i in range(2):
+        m = optimal.marginals(
+            trials.mu[i], s.rho, optimal.Gaussian(trials.prior_mean[i], trials.prior_cov)
+        )
+        y_cdf, _ = integrate.quad(m.depth_pdf, 2, s.c[1], limit=400)
+        v_cdf, _ = integrate.quad(m.velocity_pdf, -np.inf, s.c[2], limit=400)
+        assert est.depth_cdf[i] == pytest.approx(y_cdf, abs=1e-6)
+        assert est.velocity_cdf[i] == pytest.approx(v_cdf, abs=1e-6)
