@@ -364,3 +364,35 @@ def noise_study_texts(result: dict, prefix: str) -> dict:
             out[f"{prefix}_{i}_{name}_rmse"] = f"{r['rmse'][i]:.3f}"
             out[f"{prefix}_{i}_{name}_nees"] = f"{r['nees'][i]:.1f}"
     return out
+
+
+def format_prior_study(result: dict) -> str:
+    """A plain-text table of :func:`depthcore.study.prior_study`'s result."""
+    alpha = result["false_alarm"]
+    lines = [
+        f"truths drawn from the fixed prior N({vec(result['prior_mean'], 3)}, "
+        f"{result['prior_cov'][0][0]:.6g} I) with the point in front of the camera; "
+        f"rho {result['rho']:.6g}, seed {result['seed']}: {result['valid_trials']} trials "
+        f"({result['behind_camera_draws']} draws behind the camera redrawn, "
+        f"{result['rejected_trials']} without a noise-free solution in front left out)",
+        "optimal filter: coverage of its central intervals (binomial SE in brackets)",
+    ]
+    head = f"{'nominal':>8} {'depth':>16} {'velocity':>16}"
+    lines += [head, "-" * len(head)]
+    for i, p in enumerate(result["levels"]):
+        se = result["coverage_se"][i]
+        cells = " ".join(
+            f"{result[q]['coverage'][i]:>7.3f} ({se:.3f})".rjust(16) for q in ("depth", "velocity")
+        )
+        lines.append(f"{p:>8.2f} {cells}")
+    lines.append(
+        f"uniformity of the PIT values (each test at {alpha / 2:.3g}: "
+        f"false-alarm rate {alpha:.3g} per quantity)"
+    )
+    for q in ("depth", "velocity"):
+        r = result[q]
+        verdict = "calibrated" if r["calibrated"] else "NOT calibrated"
+        lines.append(
+            f"{q:<9} KS p {r['ks_pvalue']:.3g}, chi-square p {r['chi2_pvalue']:.3g}: {verdict}"
+        )
+    return "\n".join(lines) + "\n"

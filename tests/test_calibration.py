@@ -85,3 +85,66 @@ def test_bad_input_is_refused(kwargs, name):
     args.update(kwargs)
     with pytest.raises(ValueError, match=name):
         calibration.draw_from_prior(**args)
+
+
+def test_prior_study_reports_coverage_at_every_level_and_the_tests():
+    """``study --truth prior``: the fixed prior is the paper's rule at Figure 2's c, 1000 I.
+
+    Coverage at every nominal level is the fraction of PIT values in the central
+    interval, with the binomial standard error sqrt(p (1 - p) / n); the verdict
+    is the Bonferroni rule at the stated false-alarm rate.
+    """
+    from depthcore import study
+
+    r = study.prior_study(trials=60, seed=3, false_alarm=0.05)
+    np.testing.assert_allclose(r["prior_mean"], [-1.2, 4.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(r["prior_cov"], 1000.0 * np.eye(3))
+    assert r["prior"] == "fixed" and r["truth"] == "prior"
+    n = r["valid_trials"]
+    assert n + r["rejected_trials"] == 60
+    p = np.asarray(r["levels"])
+    assert len(p) == len(study.CALIBRATION_LEVELS)
+    np.testing.assert_allclose(r["coverage_se"], np.sqrt(p * (1 - p) / n))
+    # The same seed reproduces the PIT values: recompute them through the calibration module.
+    prior_mean, prior_cov = np.array(r["prior_mean"]), np.array(r["prior_cov"])
+    rng = np.random.default_rng(np.random.SeedSequence(3))
+    direct = calibration.self_calibration(prior_mean, prior_cov, RHO, 60, rng)
+    for q, pit in (("depth", direct.depth_pit), ("velocity", direct.velocity_pit)):
+        np.testing.assert_allclose(r[q]["coverage"], calibration.coverage(pit, p))
+        assert r[q]["ks_pvalue"] == calibration.uniformity(pit)["ks_pvalue"]
+        assert r[q]["calibrated"] == (min(r[q]["ks_pvalue"], r[q]["chi2_pvalue"]) > 0.025)
+        # A calibrated filter: every coverage within 4 binomial SEs of nominal.
+        assert np.all(np.abs(np.asarray(r[q]["coverage"]) - p) <= 4 * np.asarray(r["coverage_se"]))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        ({"false_alarm": 1.0}, "false_alarm"),
+        ({"prior_scale": 0.0}, "prior_scale"),
+        ({"trials": 0}, "trials"),
+    ],
+)
+def test_prior_study_refuses_bad_input(kwargs, name):
+    from depthcore import study
+
+    with pytest.raises(ValueError, match=name):
+        study.prior_study(**kwargs)
+
+
+def test_command_line_truth_prior(capsys):
+    """``study --truth prior`` prints the table or JSON; ``--prior paper`` is refused, status 2."""
+    import json
+
+    from depthcore.__main__ import main
+
+    assert main(["study", "--truth", "prior", "--trials", "20", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["truth"] == "prior" and len(out["depth"]["coverage"]) == len(out["levels"])
+    assert main(["study", "--truth", "prior", "--trials", "20"]) == 0
+    text = capsys.readouterr().out
+    assert "KS p" in text and "false-alarm rate 0.01" in text and "1000 I" in text
+    assert main(["study", "--truth", "prior", "--prior", "paper", "--trials", "5"]) == 2
+    assert "prior" in capsys.readouterr().err
+    assert main(["study", "--truth", "1", "2", "--trials", "5"]) == 2
+    assert "truth" in capsys.readouterr().err
