@@ -396,3 +396,42 @@ def format_prior_study(result: dict) -> str:
             f"{q:<9} KS p {r['ks_pvalue']:.3g}, chi-square p {r['chi2_pvalue']:.3g}: {verdict}"
         )
     return "\n".join(lines) + "\n"
+
+
+def prior_study_texts(result: dict, prefix: str) -> dict:
+    """Texts of :func:`depthcore.study.prior_study`'s result, for glue.
+
+    Returns
+    -------
+    dict
+        ``"<prefix>_trials"``, ``"<prefix>_prior_mean"``, ``"<prefix>_prior_scale"``,
+        ``"<prefix>_false_alarm"`` and ``"<prefix>_test_level"`` (percent),
+        ``"<prefix>_max_se"`` (largest deviation of a coverage from nominal, in
+        binomial standard errors, 1 decimal), and per quantity ``q``:
+        ``"<prefix>_<q>_coverage_50"``, ``_90`` and ``_95`` (2 decimals, when
+        those levels are reported),
+        ``"<prefix>_<q>_ks"``, ``"<prefix>_<q>_chi2"`` (p-values, 2 decimals) and
+        ``"<prefix>_<q>_verdict"``.
+    """
+    levels = list(result["levels"])
+    se = np.asarray(result["coverage_se"])
+    out = {
+        f"{prefix}_trials": str(result["valid_trials"]),
+        f"{prefix}_prior_mean": vec(result["prior_mean"], 1),
+        f"{prefix}_prior_scale": f"{result['prior_cov'][0][0]:g}",
+        f"{prefix}_false_alarm": f"{100 * result['false_alarm']:g} %",
+        f"{prefix}_test_level": f"{50 * result['false_alarm']:g} %",
+    }
+    worst = 0.0
+    for q in QUANTITIES:
+        r = result[q]
+        cov = np.asarray(r["coverage"])
+        worst = max(worst, float(np.max(np.abs(cov - np.asarray(levels)) / se)))
+        for p in (0.5, 0.9, 0.95):
+            if p in levels:
+                out[f"{prefix}_{q}_coverage_{round(100 * p)}"] = f"{cov[levels.index(p)]:.2f}"
+        out[f"{prefix}_{q}_ks"] = f"{r['ks_pvalue']:.2f}"
+        out[f"{prefix}_{q}_chi2"] = f"{r['chi2_pvalue']:.2f}"
+        out[f"{prefix}_{q}_verdict"] = "passes" if r["calibrated"] else "fails"
+    out[f"{prefix}_max_se"] = f"{worst:.1f}"
+    return out

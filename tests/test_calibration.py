@@ -148,3 +148,68 @@ def test_command_line_truth_prior(capsys):
     assert "prior" in capsys.readouterr().err
     assert main(["study", "--truth", "1", "2", "--trials", "5"]) == 2
     assert "truth" in capsys.readouterr().err
+
+
+def _fake_prior_study():
+    levels = [0.5, 0.9, 0.95]
+    return {
+        "truth": "prior",
+        "rho": 0.005,
+        "prior": "fixed",
+        "prior_mean": [-1.2, 4.0, 0.0],
+        "prior_cov": (1000.0 * np.eye(3)).tolist(),
+        "seed": 0,
+        "trials": 110,
+        "valid_trials": 100,
+        "behind_camera_draws": 3,
+        "rejected_trials": 10,
+        "false_alarm": 0.01,
+        "levels": levels,
+        "coverage_se": np.sqrt(np.array(levels) * (1 - np.array(levels)) / 100).tolist(),
+        "depth": {
+            "coverage": [0.45, 0.93, 0.96],
+            "ks_pvalue": 0.5,
+            "chi2_pvalue": 0.004,
+            "calibrated": False,
+        },
+        "velocity": {
+            "coverage": [0.5, 0.9, 0.95],
+            "ks_pvalue": 0.25,
+            "chi2_pvalue": 0.75,
+            "calibrated": True,
+        },
+    }
+
+
+def test_prior_calibration_texts_and_figure_show_the_result():
+    """Glue texts and the plot's drawn data come from the result, errors bars of 2 SE."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from depthcore import figures, report
+
+    r = _fake_prior_study()
+    t = report.prior_study_texts(r, "x")
+    assert t["x_depth_coverage_50"] == "0.45" and t["x_velocity_coverage_95"] == "0.95"
+    assert t["x_depth_verdict"] == "fails" and t["x_velocity_verdict"] == "passes"
+    assert t["x_false_alarm"] == "1 %" and t["x_test_level"] == "0.5 %"
+    assert t["x_max_se"] == f"{0.05 / np.sqrt(0.25 / 100):.1f}"
+    assert t["x_prior_mean"] == "(-1.2, 4.0, 0.0)" and t["x_prior_scale"] == "1000"
+    text = report.format_prior_study(r)
+    assert "NOT calibrated" in text and "chi-square p 0.004" in text
+    fig = figures.prior_calibration(r)
+    ax = fig.axes[0]
+    depth, velocity = ax.containers
+    np.testing.assert_allclose(
+        np.asarray(depth.lines[0].get_ydata(), float), r["depth"]["coverage"]
+    )
+    np.testing.assert_allclose(
+        np.asarray(velocity.lines[0].get_ydata(), float), r["velocity"]["coverage"]
+    )
+    segs = depth.lines[2][0].get_segments()
+    np.testing.assert_allclose(
+        [s[1, 1] - s[0, 1] for s in segs], 4 * np.asarray(r["coverage_se"]), rtol=1e-12
+    )
+    plt.close(fig)
