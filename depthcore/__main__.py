@@ -143,6 +143,17 @@ def _cmd_figures(args) -> str:
     return "\n".join(str(p) for p in paths) + "\n"
 
 
+def _truth(values) -> np.ndarray:
+    """``--truth``'s three numbers X Y V."""
+    try:
+        truth = np.array([float(v) for v in values])
+    except ValueError:
+        truth = None
+    if truth is None or truth.shape != (3,):
+        raise ValueError(f"truth must be 'prior' or three numbers X Y V, got {' '.join(values)}")
+    return truth
+
+
 def _cmd_study(args) -> str:
     from . import study
 
@@ -155,9 +166,18 @@ def _cmd_study(args) -> str:
     if args.seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {args.seed}")
     _check_rho(args.rho)
+    if args.truth == [study.PRIOR_TRUTH]:
+        if args.prior == "paper":
+            raise ValueError(
+                "prior: --truth prior needs a fixed prior (the paper's rule centres the prior "
+                "on each trial's own measurements, which is not a prior), got paper"
+            )
+        result = study.prior_study(rho=args.rho, trials=args.trials, seed=args.seed)
+        return json.dumps(result, indent=2) if args.json else report.format_prior_study(result)
+    truth = None
     if args.truth is not None:
-        _check_limits("truth", args.truth, MU_MAX)
-    truth = None if args.truth is None else np.array(args.truth)
+        truth = _truth(args.truth)
+        _check_limits("truth", truth, MU_MAX)
     bar = None
     if sys.stderr.isatty():
         from tqdm import tqdm
@@ -175,7 +195,7 @@ def _cmd_study(args) -> str:
             rho=args.rho,
             trials=args.trials,
             seed=args.seed,
-            prior=args.prior,
+            prior=args.prior or "paper",
             names=tuple(args.filters),
             n_particles=args.particles,
             progress=progress,
@@ -297,16 +317,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     st.add_argument(
         "--truth",
-        type=float,
-        nargs=3,
-        metavar=("X", "Y", "V"),
-        help="true state at time 3 (default: Figure 2's c = (1.2, 6, 1.2))",
+        nargs="+",
+        metavar="X Y V | prior",
+        help="true state at time 3 (default: Figure 2's c = (1.2, 6, 1.2)); 'prior': truths "
+        "drawn from the fixed prior, N((-1.2, 4, 0), 1000 I) at time 1, to check the optimal "
+        "filter's calibration",
     )
     st.add_argument(
         "--prior",
         choices=("paper", "fixed"),
-        default="paper",
-        help="paper: the paper's rule on each trial's measurements; fixed: on the truth",
+        help="paper (default): the paper's rule on each trial's measurements; fixed: on the "
+        "truth (the only choice with --truth prior)",
     )
     st.add_argument(
         "--filters",

@@ -544,3 +544,50 @@ def translating_point(x3=None, n: int = 3):
     ax.set_ylabel("depth $y$")
     ax.set_title(f"Figure 1 (reproduction): a translating point seen at times 1 to {n}", fontsize=9)
     return fig
+
+
+def prior_calibration(result: dict):
+    """The optimal filter's coverage over truths drawn from its prior, with binomial error bars.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.study.prior_study`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Nominal level against the fraction of trials covered, for the depth and
+        the velocity, with bars of two binomial standard errors
+        ``sqrt(p (1 - p) / n)`` about the nominal level.
+    """
+    import matplotlib.pyplot as plt
+
+    levels = np.asarray(result["levels"])
+    se = np.asarray(result["coverage_se"])
+    fig, ax = plt.subplots(figsize=(5.2, 4.6), layout="constrained")
+    ax.plot([0, 1], [0, 1], color="0.7", linewidth=1, label="calibrated")
+    ax.fill_between(
+        levels, levels - 2 * se, levels + 2 * se, color="0.85", label="two binomial SEs"
+    )
+    for quantity, marker, shift in (("depth", "o", -0.004), ("velocity", "s", 0.004)):
+        ax.errorbar(
+            levels + shift,
+            result[quantity]["coverage"],
+            yerr=2 * se,
+            marker=marker,
+            markersize=3,
+            linestyle="none",
+            capsize=2,
+            label=f"optimal filter, {quantity}",
+        )
+    ax.set_xlabel("nominal level of the central interval")
+    ax.set_ylabel("fraction of trials whose truth it covers")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.legend(frameon=False, fontsize=8)
+    ax.set_title(
+        f"truths from the prior: {result['valid_trials']} trials, rho = {result['rho']:.4g}",
+        fontsize=9,
+    )
+    return fig

@@ -410,3 +410,74 @@ def noise_study_texts(result: dict, prefix: str) -> dict:
             out[f"{prefix}_{i}_{name}_rmse"] = f"{r['rmse'][i]:.3f}"
             out[f"{prefix}_{i}_{name}_nees"] = f"{r['nees'][i]:.1f}"
     return out
+
+
+def format_prior_study(result: dict) -> str:
+    """A plain-text table of :func:`depthcore.study.prior_study`'s result."""
+    alpha = result["false_alarm"]
+    lines = [
+        f"truths drawn from the fixed prior N({vec(result['prior_mean'], 3)}, "
+        f"{result['prior_cov'][0][0]:.6g} I) with the point in front of the camera; "
+        f"rho {result['rho']:.6g}, seed {result['seed']}: {result['valid_trials']} trials "
+        f"({result['behind_camera_draws']} draws behind the camera redrawn, "
+        f"{result['rejected_trials']} without a noise-free solution in front left out)",
+        "optimal filter: coverage of its central intervals (binomial SE in brackets)",
+    ]
+    head = f"{'nominal':>8} {'depth':>16} {'velocity':>16}"
+    lines += [head, "-" * len(head)]
+    for i, p in enumerate(result["levels"]):
+        se = result["coverage_se"][i]
+        cells = " ".join(
+            f"{result[q]['coverage'][i]:>7.3f} ({se:.3f})".rjust(16) for q in ("depth", "velocity")
+        )
+        lines.append(f"{p:>8.2f} {cells}")
+    lines.append(
+        f"uniformity of the PIT values (each test at {alpha / 2:.3g}: "
+        f"false-alarm rate {alpha:.3g} per quantity)"
+    )
+    for q in ("depth", "velocity"):
+        r = result[q]
+        verdict = "calibrated" if r["calibrated"] else "NOT calibrated"
+        lines.append(
+            f"{q:<9} KS p {r['ks_pvalue']:.3g}, chi-square p {r['chi2_pvalue']:.3g}: {verdict}"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def prior_study_texts(result: dict, prefix: str) -> dict:
+    """Texts of :func:`depthcore.study.prior_study`'s result, for glue.
+
+    Returns
+    -------
+    dict
+        ``"<prefix>_trials"``, ``"<prefix>_prior_mean"``, ``"<prefix>_prior_scale"``,
+        ``"<prefix>_false_alarm"`` and ``"<prefix>_test_level"`` (percent),
+        ``"<prefix>_max_se"`` (largest deviation of a coverage from nominal, in
+        binomial standard errors, 1 decimal), and per quantity ``q``:
+        ``"<prefix>_<q>_coverage_50"``, ``_90`` and ``_95`` (2 decimals, when
+        those levels are reported),
+        ``"<prefix>_<q>_ks"``, ``"<prefix>_<q>_chi2"`` (p-values, 2 decimals) and
+        ``"<prefix>_<q>_verdict"``.
+    """
+    levels = list(result["levels"])
+    se = np.asarray(result["coverage_se"])
+    out = {
+        f"{prefix}_trials": str(result["valid_trials"]),
+        f"{prefix}_prior_mean": vec(result["prior_mean"], 1),
+        f"{prefix}_prior_scale": f"{result['prior_cov'][0][0]:g}",
+        f"{prefix}_false_alarm": f"{100 * result['false_alarm']:g} %",
+        f"{prefix}_test_level": f"{50 * result['false_alarm']:g} %",
+    }
+    worst = 0.0
+    for q in QUANTITIES:
+        r = result[q]
+        cov = np.asarray(r["coverage"])
+        worst = max(worst, float(np.max(np.abs(cov - np.asarray(levels)) / se)))
+        for p in (0.5, 0.9, 0.95):
+            if p in levels:
+                out[f"{prefix}_{q}_coverage_{round(100 * p)}"] = f"{cov[levels.index(p)]:.2f}"
+        out[f"{prefix}_{q}_ks"] = f"{r['ks_pvalue']:.2f}"
+        out[f"{prefix}_{q}_chi2"] = f"{r['chi2_pvalue']:.2f}"
+        out[f"{prefix}_{q}_verdict"] = "passes" if r["calibrated"] else "fails"
+    out[f"{prefix}_max_se"] = f"{worst:.1f}"
+    return out

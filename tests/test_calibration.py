@@ -85,3 +85,131 @@ def test_bad_input_is_refused(kwargs, name):
     args.update(kwargs)
     with pytest.raises(ValueError, match=name):
         calibration.draw_from_prior(**args)
+
+
+def test_prior_study_reports_coverage_at_every_level_and_the_tests():
+    """``study --truth prior``: the fixed prior is the paper's rule at Figure 2's c, 1000 I.
+
+    Coverage at every nominal level is the fraction of PIT values in the central
+    interval, with the binomial standard error sqrt(p (1 - p) / n); the verdict
+    is the Bonferroni rule at the stated false-alarm rate.
+    """
+    from depthcore import study
+
+    r = study.prior_study(trials=60, seed=3, false_alarm=0.05)
+    np.testing.assert_allclose(r["prior_mean"], [-1.2, 4.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(r["prior_cov"], 1000.0 * np.eye(3))
+    assert r["prior"] == "fixed" and r["truth"] == "prior"
+    n = r["valid_trials"]
+    assert n + r["rejected_trials"] == 60
+    p = np.asarray(r["levels"])
+    assert len(p) == len(study.CALIBRATION_LEVELS)
+    np.testing.assert_allclose(r["coverage_se"], np.sqrt(p * (1 - p) / n))
+    # The same seed reproduces the PIT values: recompute them through the calibration module.
+    prior_mean, prior_cov = np.array(r["prior_mean"]), np.array(r["prior_cov"])
+    rng = np.random.default_rng(np.random.SeedSequence(3))
+    direct = calibration.self_calibration(prior_mean, prior_cov, RHO, 60, rng)
+    for q, pit in (("depth", direct.depth_pit), ("velocity", direct.velocity_pit)):
+        np.testing.assert_allclose(r[q]["coverage"], calibration.coverage(pit, p))
+        assert r[q]["ks_pvalue"] == calibration.uniformity(pit)["ks_pvalue"]
+        assert r[q]["calibrated"] == (min(r[q]["ks_pvalue"], r[q]["chi2_pvalue"]) > 0.025)
+        # A calibrated filter: every coverage within 4 binomial SEs of nominal.
+        assert np.all(np.abs(np.asarray(r[q]["coverage"]) - p) <= 4 * np.asarray(r["coverage_se"]))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        ({"false_alarm": 1.0}, "false_alarm"),
+        ({"prior_scale": 0.0}, "prior_scale"),
+        ({"trials": 0}, "trials"),
+    ],
+)
+def test_prior_study_refuses_bad_input(kwargs, name):
+    from depthcore import study
+
+    with pytest.raises(ValueError, match=name):
+        study.prior_study(**kwargs)
+
+
+def test_command_line_truth_prior(capsys):
+    """``study --truth prior`` prints the table or JSON; ``--prior paper`` is refused, status 2."""
+    import json
+
+    from depthcore.__main__ import main
+
+    assert main(["study", "--truth", "prior", "--trials", "20", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["truth"] == "prior" and len(out["depth"]["coverage"]) == len(out["levels"])
+    assert main(["study", "--truth", "prior", "--trials", "20"]) == 0
+    text = capsys.readouterr().out
+    assert "KS p" in text and "false-alarm rate 0.01" in text and "1000 I" in text
+    assert main(["study", "--truth", "prior", "--prior", "paper", "--trials", "5"]) == 2
+    assert "prior" in capsys.readouterr().err
+    assert main(["study", "--truth", "1", "2", "--trials", "5"]) == 2
+    assert "truth" in capsys.readouterr().err
+
+
+def _fake_prior_study():
+    levels = [0.5, 0.9, 0.95]
+    return {
+        "truth": "prior",
+        "rho": 0.005,
+        "prior": "fixed",
+        "prior_mean": [-1.2, 4.0, 0.0],
+        "prior_cov": (1000.0 * np.eye(3)).tolist(),
+        "seed": 0,
+        "trials": 110,
+        "valid_trials": 100,
+        "behind_camera_draws": 3,
+        "rejected_trials": 10,
+        "false_alarm": 0.01,
+        "levels": levels,
+        "coverage_se": np.sqrt(np.array(levels) * (1 - np.array(levels)) / 100).tolist(),
+        "depth": {
+            "coverage": [0.45, 0.93, 0.96],
+            "ks_pvalue": 0.5,
+            "chi2_pvalue": 0.004,
+            "calibrated": False,
+        },
+        "velocity": {
+            "coverage": [0.5, 0.9, 0.95],
+            "ks_pvalue": 0.25,
+            "chi2_pvalue": 0.75,
+            "calibrated": True,
+        },
+    }
+
+
+def test_prior_calibration_texts_and_figure_show_the_result():
+    """Glue texts and the plot's drawn data come from the result, errors bars of 2 SE."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from depthcore import figures, report
+
+    r = _fake_prior_study()
+    t = report.prior_study_texts(r, "x")
+    assert t["x_depth_coverage_50"] == "0.45" and t["x_velocity_coverage_95"] == "0.95"
+    assert t["x_depth_verdict"] == "fails" and t["x_velocity_verdict"] == "passes"
+    assert t["x_false_alarm"] == "1 %" and t["x_test_level"] == "0.5 %"
+    assert t["x_max_se"] == f"{0.05 / np.sqrt(0.25 / 100):.1f}"
+    assert t["x_prior_mean"] == "(-1.2, 4.0, 0.0)" and t["x_prior_scale"] == "1000"
+    text = report.format_prior_study(r)
+    assert "NOT calibrated" in text and "chi-square p 0.004" in text
+    fig = figures.prior_calibration(r)
+    ax = fig.axes[0]
+    depth, velocity = ax.containers
+    np.testing.assert_allclose(
+        np.asarray(depth.lines[0].get_ydata(), float), r["depth"]["coverage"]
+    )
+    np.testing.assert_allclose(
+        np.asarray(velocity.lines[0].get_ydata(), float), r["velocity"]["coverage"]
+    )
+    segs = depth.lines[2][0].get_segments()
+    np.testing.assert_allclose(
+        [s[1, 1] - s[0, 1] for s in segs], 4 * np.asarray(r["coverage_se"]), rtol=1e-12
+    )
+    plt.close(fig)
