@@ -21,7 +21,7 @@ from . import _checks, model, report, reproduce
 from . import filters as _filters
 from .scenarios import SCENARIOS
 
-#: One vocabulary for every plot: label, colour and line style of each filter,
+#: One vocabulary for every plot, the label, colour and line style of each filter,
 #: from the registry :data:`depthcore.filters.FILTERS`.
 STYLE = {name: f.plot_style for name, f in _filters.FILTERS.items()}
 

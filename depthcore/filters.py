@@ -2,7 +2,7 @@
 
 Recommended import: ``from depthcore.filters import FILTERS``.
 
-Each entry of :data:`FILTERS` is a :class:`Filter`. Calling it,
+Each entry of :data:`FILTERS` is a :class:`Filter`. Calling it::
 
     estimate = FILTERS[name](mu, rho, prior_mean, prior_cov, **options)
 
@@ -41,7 +41,7 @@ from .resampling import weighted_mean_and_cov
 QUANTITIES = ("depth", "velocity")
 #: The state component of each quantity.
 COMPONENT = {"depth": "y", "velocity": "v"}
-#: How a filter's estimates are scored: ``"exact"`` (the optimal filter, the
+#: How a filter's estimates are scored, one of ``"exact"`` (the optimal filter, the
 #: reference), ``"gaussian"`` (a mean and covariance), ``"particles"``
 #: (weighted particles, in ``detail``).
 FAMILIES = ("exact", "gaussian", "particles")

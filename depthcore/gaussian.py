@@ -23,7 +23,7 @@ from . import _checks
 #: Index of each state component in ``(x, y, v)``.
 INDEX = {"x": 0, "y": 1, "v": 2}
 
-#: The paper's prior covariance scale: ``P = 1000 I``.
+#: The paper's prior covariance scale, ``P = 1000 I``.
 PAPER_PRIOR_SCALE = 1000.0
 
 

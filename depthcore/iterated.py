@@ -22,7 +22,7 @@ textbook (Prince, section 19.3 [prince2012]_) names two remedies:
   bearings, relinearising every measurement about the previous pass's
   smoothed states. With no process noise the motion is deterministic, so the
   whole trajectory is ``G^{k-1} x_1`` and each pass is one Gauss-Newton step
-  on the negative log posterior of ``x_1``,
+  on the negative log posterior of ``x_1``::
 
       |x_1 - m|_P**2 + sum_k (mu_k - h(G^{k-1} x_1))**2 / rho**2,
 

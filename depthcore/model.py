@@ -19,11 +19,11 @@ import numpy as np
 
 from . import _checks
 
-#: Eq. (9): the linear part of the motion G.
+#: The linear part of the motion G, Eq. (9).
 F = np.array([[1.0, 0.0, 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
 F.setflags(write=False)
 
-#: Eq. (9): the constant part of the motion G.
+#: The constant part of the motion G, Eq. (9).
 e = np.array([0.0, 1.0, 0.0])
 e.setflags(write=False)
 

@@ -25,7 +25,7 @@ from .filters import NAMES, QUANTITIES
 from .reproduce import scenario_rows
 from .scenarios import REPORTED_DECIMALS, SCENARIOS
 
-#: Rows of the figure pages' tables: (row id, filter, reading, support, label).
+#: Rows of the figure pages' tables, as (row id, filter, reading, support, label).
 #: The optimal filter with Eq. (16) as derived and as printed; the second-order
 #: filter with the covariance ``2 rho**2 J^{-1}`` of the expansion (8) and with
 #: the printed ``rho**2 J^{-1}``; the EKF.
@@ -68,7 +68,7 @@ legend: bias, rmse  mean and root mean square of estimate - truth over the trial
 
 
 def format_table(result: dict) -> str:
-    """A plain-text table of :func:`reproduce`'s result."""
+    """A plain-text table of :func:`~depthcore.reproduce.reproduce`'s result."""
     head = (
         f"{'fig':>3}  {'filter':<12} {'reading':<8} {'support':<7} {'quantity':<8} "
         f"{'mean':>10} {'sd':>10} {'error':>8}  {'paper mean':>10} {'paper sd':>9}  agrees"
@@ -115,7 +115,7 @@ def format_table(result: dict) -> str:
 
 
 def format_summary(summary: dict) -> str:
-    """A plain-text rendering of :func:`summarize`'s result."""
+    """A plain-text rendering of :func:`~depthcore.reproduce.summarize`'s result."""
     c = summary["c"]
     m, cov = summary["prior_mean"], np.asarray(summary["prior_cov"])
     if np.array_equal(cov, cov[0, 0] * np.eye(3)):
@@ -144,7 +144,7 @@ def format_summary(summary: dict) -> str:
 
 
 def format_study(result: dict) -> str:
-    """A plain-text table of :func:`study`'s result."""
+    """A plain-text table of :func:`~depthcore.study.study`'s result."""
     lines = [
         f"truth {tuple(round(v, 6) for v in result['truth'])}, rho {result['rho']:.6g}, "
         f"prior {result['prior']}, seed {result['seed']}: {result['valid_trials']} trials "
@@ -389,7 +389,7 @@ def sweep_texts(result: dict, x: str, prefix: str, decimals: int = 3) -> dict:
 
 
 def noise_study_texts(result: dict, prefix: str) -> dict:
-    """Texts of :func:`noise_study`'s rows, for glue.
+    """Texts of :func:`~depthcore.experiments.noise_study`'s rows, for glue.
 
     Returns
     -------

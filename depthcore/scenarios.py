@@ -10,9 +10,9 @@ from dataclasses import dataclass
 from .gaussian import Gaussian, paper_prior
 from .model import noise_free_state
 
-#: Eq. (17): the measurements of Figures 2, 4, 5 and 6.
+#: The measurements of Figures 2, 4, 5 and 6, Eq. (17).
 MU_17 = (-3 / 10, 0.0, 1 / 5)
-#: Eq. (18): the measurements of Figure 3.
+#: The measurements of Figure 3, Eq. (18).
 MU_18 = (-1 / 4, 0.0, 1 / 5)
 #: The noise level of most experiments (radians); "about 5 pixels".
 RHO_200 = 1 / 200
@@ -50,15 +50,16 @@ class Scenario:
 
     @property
     def c(self):
-        """Eq. (7): the noise-free state at time 3."""
+        """The noise-free state at time 3, Eq. (7)."""
         return noise_free_state(self.mu)
 
     @property
     def prior(self) -> Gaussian:
-        """The paper's prior: mean ``(c1 - 2 c3, c2 - 2 + offset, 0)``, covariance ``1000 I``."""
+        """The paper's prior, mean ``(c1 - 2 c3, c2 - 2 + offset, 0)``, covariance ``1000 I``."""
         return paper_prior(self.c, self.depth_offset)
 
 
+#: The paper's five experiments by key (``"fig2"`` ... ``"fig6"``).
 SCENARIOS = {
     s.key: s
     for s in (

@@ -35,7 +35,7 @@ from .scenarios import SCENARIOS
 
 PRIORS = ("paper", "fixed")
 LEVELS = (0.68, 0.95)
-#: Nominal levels of the calibration curve: central intervals from 5 % to 99 %.
+#: Nominal levels of the calibration curve, central intervals from 5 % to 99 %.
 CALIBRATION_LEVELS = tuple(np.round(np.concatenate([np.arange(0.05, 0.951, 0.05), [0.99]]), 2))
 #: Particles per trial of the particle filter.
 PARTICLES = 2000

@@ -21,8 +21,11 @@ link them. A build without it (``jupyter-book build .`` alone) has none.
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
+
+CITATION_RE = re.compile(r"^\.\. \[(\w+)\]")
 
 
 def add_executed_notebook(app, pagename, templatename, context, doctree):
@@ -45,7 +48,29 @@ def copy_downloads(app, exception):
         shutil.copytree(source, Path(app.outdir) / "downloads", dirs_exist_ok=True)
 
 
+def drop_repeated_citations(app, what, name, obj, options, lines):
+    """Keep one definition of each citation of the docstrings (the API page).
+
+    Several modules cite the same work (``.. [prince2012] ...``); on one page
+    the repeated definitions would be duplicate targets. The first module's
+    definition is kept and the later references (``[prince2012]_``) link to it.
+    """
+    seen = app.env.temp_data.setdefault("depthcore_citations", set())
+    kept, skipping = [], False
+    for line in lines:
+        match = CITATION_RE.match(line)
+        if match:
+            skipping = match.group(1) in seen
+            seen.add(match.group(1))
+        elif skipping and not line.startswith(" "):
+            skipping = False
+        if not skipping:
+            kept.append(line)
+    lines[:] = kept
+
+
 def setup(app):
+    app.connect("autodoc-process-docstring", drop_repeated_citations)
     app.add_config_value("depthcore_downloads", "_build/extra/downloads", "html")
     # Before sphinx-book-theme builds its header buttons (priority 501).
     app.connect("html-page-context", add_executed_notebook, priority=450)
