@@ -38,6 +38,28 @@ def predict(m, P) -> MeanAndCov:
     return MeanAndCov(m @ model.F.T + model.e, C)
 
 
+def _gradient(n) -> np.ndarray:
+    """Eq. (11) at predicted means ``n`` (..., 3); refuses depths where it is undefined or huge.
+
+    A predicted depth ``n2 <= 0`` puts the point behind the camera; one so small
+    that ``n1 / n2**2`` overflows (e.g. ``1e-300``) leaves no finite gradient.
+    """
+    if not np.all(n[..., 1] > 0):
+        raise ValueError(
+            "prior_mean leads the EKF to a predicted depth n2 <= 0 "
+            f"(min {float(np.min(n[..., 1])):.6g}); the projection x/y is not defined there"
+        )
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        h = model.observation_vector(n)
+        finite = np.all(np.isfinite(h)) and np.all(np.isfinite(n[..., 0] / n[..., 1]))
+    if not finite:
+        raise ValueError(
+            "prior_mean leads the EKF to a predicted depth n2 so close to the camera "
+            f"(min {float(np.min(n[..., 1])):.3g}) that the gradient of x/y, Eq. (11), overflows"
+        )
+    return h
+
+
 def update(n, C, mu, rho: float) -> MeanAndCov:
     """Eq. (12): incorporate one measurement ``mu`` into the prediction ``(n, C)``.
 
@@ -59,13 +81,8 @@ def update(n, C, mu, rho: float) -> MeanAndCov:
     """
     n = np.asarray(n, dtype=float)
     C = np.asarray(C, dtype=float)
-    if not np.all(n[..., 1] > 0):
-        raise ValueError(
-            "prior_mean leads the EKF to a predicted depth n2 <= 0 "
-            f"(min {float(np.min(n[..., 1])):.6g}); the projection x/y is not defined there"
-        )
+    h = _gradient(n)  # Eq. (11)
     r2 = np.asarray(rho, dtype=float) ** 2
-    h = model.observation_vector(n)  # Eq. (11)
     Ch = np.einsum("...ij,...j->...i", C, h)
     s = r2 + np.einsum("...i,...i->...", h, Ch)
     innovation = np.asarray(mu, dtype=float) - n[..., 0] / n[..., 1]
@@ -178,12 +195,7 @@ def _update_information(n, R, mu, rho):
     subtraction, so its small eigenvalues keep their relative accuracy at
     small noise.
     """
-    if not np.all(n[..., 1] > 0):
-        raise ValueError(
-            "prior_mean leads the EKF to a predicted depth n2 <= 0 "
-            f"(min {float(np.min(n[..., 1])):.6g}); the projection x/y is not defined there"
-        )
-    h = model.observation_vector(n)  # Eq. (11)
+    h = _gradient(n)  # Eq. (11)
     innovation = np.asarray(mu, dtype=float) - n[..., 0] / n[..., 1]
     stacked = np.concatenate([R, (h / rho[..., None])[..., None, :]], axis=-2)  # (..., 4, 3)
     Q, R_new = np.linalg.qr(stacked)

@@ -127,3 +127,11 @@ def test_ekf_matches_filterpy_trial_by_trial():
             np.max(np.linalg.norm(covs[i] - fP, axis=(1, 2)) / np.linalg.norm(fP, axis=(1, 2)))
             < 1e-9
         )
+
+
+def test_a_predicted_depth_whose_gradient_eq_11_overflows_is_refused():
+    """n2 = 1e-300 passes n2 > 0, but n1 / n2**2 overflows: a one-line refusal naming prior_mean."""
+    with pytest.raises(ValueError, match="prior_mean .* overflows"):
+        run([-0.3, 0.0, 0.2], 0.005, [-1.0, 1e-300, 0.0], 1000 * np.eye(3))
+    with pytest.raises(ValueError, match="prior_mean .* overflows"):
+        update([-1.0, 1e-300, 0.0], np.eye(3), -0.3, 0.005)

@@ -131,10 +131,8 @@ for extra in (
 
 # Library bugs these inputs expose: the EKF accepts a predicted depth n2 > 0 so
 # small that its observation vector overflows.
-XFAIL = {
-    _case_id_key: "EKF: a predicted depth of 1e-300 passes the n2 > 0 check and overflows"
-    for _case_id_key in ("--prior-mean -1 1e-300 0", "--prior-mean -1 -1e-300 0")
-}
+#: Cases known to fail, with the reason (none at present).
+XFAIL: dict[str, str] = {}
 
 
 def _case_id(argv):
