@@ -38,6 +38,16 @@ def positive_scalar(value, name: str) -> float:
     return float(arr)
 
 
+def nonnegative_scalar(value, name: str) -> float:
+    """Return ``value`` as a float, checking that it is finite and >= 0."""
+    arr = finite_array(value, name)
+    if arr.ndim != 0:
+        raise ValueError(f"{name} must be a scalar, got shape {arr.shape}")
+    if not arr >= 0:
+        raise ValueError(f"{name} must be >= 0, got {float(arr)}")
+    return float(arr)
+
+
 def positive_array(value, name: str) -> np.ndarray:
     """Return ``value`` as a float array (scalar or 1-D), checking every entry is finite and > 0."""
     arr = finite_array(value, name)

@@ -190,20 +190,8 @@ def run(
         ``means[..., k, :]`` is the mean after bearing ``k + 1``.
     covs : ndarray, shape (..., K, 3, 3)
     """
-    mu = _checks.finite_array(mu, "mu")
-    if mu.ndim < 1 or mu.shape[-1] < 1:
-        raise ValueError(f"mu must have shape (..., K) with K >= 1, got shape {mu.shape}")
-    rho = _checks.positive_array(rho, "rho")
-    if rho.ndim and rho.shape != mu.shape[:-1]:
-        raise ValueError(
-            f"rho must be a scalar or have shape {mu.shape[:-1]}, got shape {rho.shape}"
-        )
-    q = float(_checks.finite_array(process_noise, "process_noise"))
-    if q < 0:
-        raise ValueError(f"process_noise must be >= 0, got {q}")
-    batch = mu.shape[:-1]
-    n = np.broadcast_to(_checks.finite_array(prior_mean, "prior_mean"), batch + (3,))
-    C = np.broadcast_to(_checks.finite_array(prior_cov, "prior_cov"), batch + (3, 3))
+    mu, rho, n, C = _checks.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
+    q = _checks.nonnegative_scalar(process_noise, "process_noise")
     Q = np.diag([0.0, 0.0, q**2])
     means, covs = [], []
     for k in range(mu.shape[-1]):

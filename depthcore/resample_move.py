@@ -60,7 +60,13 @@ import numpy as np
 
 from . import _checks, model
 from .gaussian import Gaussian
-from .resampling import RESAMPLERS, effective_sample_size, normalise
+from .resampling import (
+    RESAMPLERS,
+    check_rng,
+    effective_sample_size,
+    normalise,
+    weighted_mean_and_cov,
+)
 
 #: Random-walk scale for a three-dimensional target [roberts1997]_.
 _RW_SCALE = 2.38 / np.sqrt(3.0)
@@ -148,9 +154,7 @@ def _increment_chol(x1, W, prior_chol) -> np.ndarray:
     A collapsed cloud (one distinct particle) has no spread: ``1e-12`` times
     the prior covariance is added so the chain can still move.
     """
-    mean = np.einsum("bn,bni->bi", W, x1)
-    d = x1 - mean[:, None, :]
-    cov = np.einsum("bn,bni,bnj->bij", W, d, d)
+    _, cov = weighted_mean_and_cov(x1, W)
     return np.linalg.cholesky(cov + 1e-12 * (prior_chol @ prior_chol.T))
 
 
@@ -194,19 +198,17 @@ def run(
     -------
     ResampleMoveBatch
     """
-    mu = _checks.finite_array(mu, "mu")
-    if mu.ndim != 2 or mu.shape[1] < 1 or mu.shape[0] < 1:
+    mu, rho, prior_mean, prior_cov = _checks.batch_problem(
+        mu, rho, prior_mean, prior_cov, triples=False
+    )
+    if mu.ndim != 2 or mu.shape[0] < 1:
         raise ValueError(f"mu must have shape (B, K) with B, K >= 1, got shape {mu.shape}")
+    if prior_cov.shape != (3, 3):
+        raise ValueError(f"prior_cov must have shape (3, 3), got shape {prior_cov.shape}")
     B, K = mu.shape
-    rho = _checks.positive_array(rho, "rho")
-    if rho.ndim and rho.shape != (B,):
-        raise ValueError(f"rho must be a scalar or have shape ({B},), got shape {rho.shape}")
     rho = np.broadcast_to(rho, (B,))
-    prior_mean = _checks.finite_array(prior_mean, "prior_mean")
-    if prior_mean.shape not in ((3,), (B, 3)):
-        raise ValueError(f"prior_mean must have shape (3,) or ({B}, 3), got {prior_mean.shape}")
     prior_mean = np.broadcast_to(prior_mean, (B, 3))
-    prior_chol = np.linalg.cholesky(_checks.covariance(prior_cov, "prior_cov", 3))
+    prior_chol = np.linalg.cholesky(prior_cov)
     if (
         isinstance(n_particles, bool)
         or not isinstance(n_particles, (int, np.integer))
@@ -214,8 +216,7 @@ def run(
     ):
         raise ValueError(f"n_particles must be an integer >= 2, got {n_particles!r}")
     N = int(n_particles)
-    if not isinstance(rng, np.random.Generator):
-        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    check_rng(rng)
     if isinstance(moves, bool) or not isinstance(moves, (int, np.integer)) or moves < 0:
         raise ValueError(f"moves must be an integer >= 0, got {moves!r}")
     threshold = float(_checks.finite_array(ess_threshold, "ess_threshold"))
