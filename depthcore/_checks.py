@@ -73,6 +73,16 @@ def covariance(value, name: str, dim: int) -> np.ndarray:
     return 0.5 * (arr + arr.T)
 
 
+def _noise_free_depth(mu) -> np.ndarray:
+    """``c2`` of Eq. (7): :func:`depthcore.model.noise_free_depth_unchecked`.
+
+    Imported when called: :mod:`depthcore.model` imports this module.
+    """
+    from .model import noise_free_depth_unchecked
+
+    return noise_free_depth_unchecked(mu)
+
+
 def measurements(mu, name: str = "mu") -> np.ndarray:
     """Check a triple ``(mu1, mu2, mu3)`` of image measurements.
 
@@ -87,7 +97,7 @@ def measurements(mu, name: str = "mu") -> np.ndarray:
             f"{name} is degenerate: mu1 + mu3 - 2*mu2 = {second_difference:.3g}, "
             "so no finite depth explains the three measurements"
         )
-    depth_first = 2.0 * (arr[0] - arr[1]) / second_difference - 2.0
+    depth_first = _noise_free_depth(arr) - 2.0
     if not depth_first > 0:
         raise ValueError(
             f"{name} puts the point behind the camera: its noise-free depth at the "
@@ -114,7 +124,7 @@ def measurements_batch(mu, name: str = "mu") -> np.ndarray:
     d = flat[:, 0] + flat[:, 2] - 2.0 * flat[:, 1]
     degenerate = ~(np.abs(d) > DEGENERACY_TOL)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        depth_first = 2.0 * (flat[:, 0] - flat[:, 1]) / np.where(degenerate, 1.0, d) - 2.0
+        depth_first = _noise_free_depth(flat) - 2.0
     bad = degenerate | ~(depth_first > 0)
     if np.any(bad):
         i = int(np.argmax(bad))

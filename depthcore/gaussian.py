@@ -72,19 +72,24 @@ def gaussian_logpdf(x, mean, cov) -> np.ndarray:
     ----------
     x : array_like, shape (..., d)
     mean : array_like, broadcastable to ``x``
-    cov : array_like, shape (d, d)
-        Symmetric positive definite (one covariance for every point).
+    cov : array_like, shape (d, d) or (..., d, d)
+        Symmetric positive definite: one covariance for every point, or a
+        stack whose leading axes broadcast against ``x.shape[:-1]``.
 
     Returns
     -------
-    ndarray, shape x.shape[:-1]
+    ndarray, shape x.shape[:-1] (broadcast with ``cov.shape[:-2]``)
     """
     x = np.asarray(x, dtype=float)
     chol = np.linalg.cholesky(np.asarray(cov, dtype=float))
     dim = chol.shape[-1]
     d = x - np.asarray(mean, dtype=float)
-    z = np.linalg.solve(chol, d.reshape(-1, dim).T).T.reshape(d.shape)
-    logdet = 2.0 * np.sum(np.log(np.diag(chol)))
+    if chol.ndim == 2:
+        z = np.linalg.solve(chol, d.reshape(-1, dim).T).T.reshape(d.shape)
+        logdet = 2.0 * np.sum(np.log(np.diag(chol)))
+    else:
+        z = (np.linalg.inv(chol) @ d[..., None])[..., 0]
+        logdet = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
     return -0.5 * np.sum(z**2, axis=-1) - 0.5 * logdet - 0.5 * dim * np.log(2.0 * np.pi)
 
 

@@ -221,11 +221,22 @@ def noise_free_states_unchecked(mu) -> np.ndarray:
     return np.stack(
         [
             2.0 * mu3 * (mu1 - mu2) / d,
-            2.0 * (mu1 - mu2) / d,
+            noise_free_depth_unchecked(mu),
             (2.0 * mu1 * mu3 - mu2 * mu3 - mu1 * mu2) / d,
         ],
         axis=-1,
     )
+
+
+def noise_free_depth_unchecked(mu) -> np.ndarray:
+    """``c2`` of Eq. (7), the noise-free depth at time 3, for triples ``mu`` of shape (..., 3).
+
+    ``c2 = 2 (mu1 - mu2) / (mu1 + mu3 - 2 mu2)``, unchecked (NaN or inf where
+    the triple is degenerate); returns shape ``mu.shape[:-1]``. The point is
+    in front of the camera at all three times when ``c2 - 2 > 0``.
+    """
+    mu1, mu2, mu3 = np.moveaxis(np.asarray(mu, dtype=float), -1, 0)
+    return 2.0 * (mu1 - mu2) / (mu3 + mu1 - 2.0 * mu2)
 
 
 def residuals(x, mu) -> np.ndarray:

@@ -31,6 +31,20 @@ def test_eq13_marginal_pdf_is_normalised_and_logpdf_matches_scipy():
     assert_allclose(g.logpdf(x), multivariate_normal(g.mean, g.cov).logpdf(x), rtol=1e-12)
 
 
+def test_logpdf_with_one_covariance_per_point_matches_scipy():
+    from scipy.stats import multivariate_normal
+
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(4, 3, 3))
+    covs = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(3)
+    means = rng.normal(size=(4, 3))
+    x = rng.normal(size=(4, 5, 3))  # five points per covariance
+    got = gaussian.gaussian_logpdf(x, means[:, None], covs[:, None])
+    want = [multivariate_normal(means[i], covs[i]).logpdf(x[i]) for i in range(4)]
+    assert got.shape == (4, 5)
+    assert_allclose(got, want, rtol=1e-12)
+
+
 def test_paper_prior_rule():
     c = SCENARIOS["fig2"].c
     p = paper_prior(c, depth_offset=2.0)

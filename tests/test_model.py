@@ -139,6 +139,14 @@ def test_eq7_recovers_the_state_from_noise_free_bearings(c):
     assert f(noise_free_state(mu), mu) == pytest.approx(0.0, abs=1e-20)
 
 
+@settings(max_examples=30, deadline=None)
+@given(states())
+def test_eq7_noise_free_depth_is_the_depth_of_the_noise_free_state(c):
+    mu = np.stack([bearings(c), bearings(c)])
+    assert_allclose(model.noise_free_depth_unchecked(mu), [c[1], c[1]], rtol=1e-7)
+    assert model.noise_free_depth_unchecked(mu[0]) == noise_free_state(mu[0])[1]
+
+
 def test_eq5_f_is_sum_of_squared_residuals_in_time_order():
     x = np.array([1.0, 5.0, 0.5])
     mu = np.array([-0.3, 0.0, 0.2])
