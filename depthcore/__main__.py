@@ -19,13 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__, report, reproduce
+from . import __version__, report, reproduce, study
 from .filters import NAMES as _STUDY_FILTERS
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from .model import noise_free_state
 from .report import STUDY_LEGEND
 
-#: Largest ``study --trials``: the study keeps 15 numbers per trial and filter.
+#: Largest ``study --trials``: a limit on run time (the study streams its trials in
+#: chunks, so its memory does not grow with their number).
 MAX_TRIALS = 100_000
 
 #: Numeric limits of the command line (the library itself accepts more).
@@ -155,8 +156,6 @@ def _truth(values) -> np.ndarray:
 
 
 def _cmd_study(args) -> str:
-    from . import study
-
     if not 1 <= args.trials <= MAX_TRIALS:
         raise ValueError(
             f"trials must be a positive integer at most {MAX_TRIALS}, got {args.trials}"
@@ -335,11 +334,15 @@ def build_parser() -> argparse.ArgumentParser:
         default=list(_STUDY_FILTERS),
         choices=_STUDY_FILTERS,
         metavar="NAME",
-        help=f"filters to score (default all: {' '.join(_STUDY_FILTERS)}); the optimal "
-        "filter also runs when not named, as the reference of every Hellinger distance",
+        help=f"filters to score (default all: {' '.join(_STUDY_FILTERS)}); only these run: "
+        "the Hellinger distances need the optimal filter, their reference, so without "
+        "'optimal' they are not computed (- in the table, null in JSON)",
     )
     st.add_argument(
-        "--particles", type=int, default=2000, help="particles per trial (default 2000)"
+        "--particles",
+        type=int,
+        default=study.PARTICLES,
+        help=f"particles per trial (default {study.PARTICLES})",
     )
     st.add_argument("--json", action="store_true", help="print JSON instead of a table")
     st.set_defaults(run=_cmd_study)

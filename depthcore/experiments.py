@@ -152,7 +152,8 @@ def noise_study(
     dict
         ``"rho"`` (R,), ``"valid_trials"`` (R,) and, per filter,
         ``{score: (R,)}`` for :data:`NOISE_STUDY_SCORES` (of the depth), ``"nees"``
-        and ``"hellinger"`` (the mean Hellinger distance of the depth marginal).
+        and ``"hellinger"`` (the mean Hellinger distance of the depth marginal; NaN
+        unless ``"optimal"``, the reference, is among ``names``).
     """
     rhos = np.atleast_1d(_checks.positive_array(rhos, "rhos"))
     runs = [
@@ -164,7 +165,9 @@ def noise_study(
         f = [r["filters"][name] for r in runs]
         out[name] = {s: np.array([x["depth"][s] for x in f]) for s in NOISE_STUDY_SCORES}
         out[name]["nees"] = np.array([x["nees"] for x in f])
-        out[name]["hellinger"] = np.array([x["hellinger_depth"]["mean"] for x in f])
+        out[name]["hellinger"] = np.array(
+            [np.nan if x["hellinger_depth"] is None else x["hellinger_depth"]["mean"] for x in f]
+        )
     return out
 
 

@@ -64,7 +64,8 @@ legend: bias, rmse  mean and root mean square of estimate - truth over the trial
         cover 68/95 fraction of trials whose central 68% / 95% interval holds the truth
         NEES        mean normalized estimation error squared of (x, y, v); 3 if calibrated
         Hellinger   mean Hellinger distance from the depth marginal to the optimal one
-                    (0 = the same density, 1 = disjoint)"""
+                    (0 = the same density, 1 = disjoint); a dash: not computed, as the
+                    optimal filter, the reference, runs only when it is among the filters"""
 
 
 def format_table(result: dict) -> str:
@@ -159,8 +160,11 @@ def format_study(result: dict) -> str:
     for name, f in result["filters"].items():
         for q in ("depth", "velocity"):
             r = f[q]
+            h = f["hellinger_depth"]
             extra = (
-                f"{f['nees']:>8.2f} {f['hellinger_depth']['mean']:>9.3f}" if q == "depth" else ""
+                f"{f['nees']:>8.2f} " + ("-".rjust(9) if h is None else f"{h['mean']:>9.3f}")
+                if q == "depth"
+                else ""
             )
             lines.append(
                 f"{name:<13} {q:<9} {r['bias']:>9.4f} {r['rmse']:>9.4f} {r['mean_sd']:>9.4f} "
@@ -343,7 +347,8 @@ def study_texts(result: dict, prefix: str) -> dict:
     dict
         ``"<prefix>_<filter>_<quantity>_<score>"`` for the scores of
         :data:`STUDY_DECIMALS`, and ``"<prefix>_<filter>_nees"`` (1 decimal),
-        ``"<prefix>_<filter>_hellinger"`` (3 decimals); ``"<prefix>_trials"``.
+        ``"<prefix>_<filter>_hellinger"`` (3 decimals, ``"-"`` when not
+        computed); ``"<prefix>_trials"``.
     """
     out = {f"{prefix}_trials": str(result["valid_trials"])}
     for name, f in result["filters"].items():
@@ -351,7 +356,8 @@ def study_texts(result: dict, prefix: str) -> dict:
             for score, d in STUDY_DECIMALS.items():
                 out[f"{prefix}_{name}_{q}_{score}"] = f"{f[q][score] + 0.0:.{d}f}"
         out[f"{prefix}_{name}_nees"] = f"{f['nees']:.1f}"
-        out[f"{prefix}_{name}_hellinger"] = f"{f['hellinger_depth']['mean']:.3f}"
+        h = f["hellinger_depth"]
+        out[f"{prefix}_{name}_hellinger"] = "-" if h is None else f"{h['mean']:.3f}"
     return out
 
 

@@ -14,11 +14,17 @@ as the paper does) or once from the truth's noise-free measurements
   ``p / 2`` of one half;
 * mean NEES, ``(m - x)^T P^{-1} (m - x)`` over the whole state (3 for a
   filter whose covariance matches its error);
-* the Hellinger distance from its depth marginal to the optimal one.
+* the mean Hellinger distance from its depth marginal to the optimal one,
+  when the optimal filter is among the filters run (it is run only when
+  asked for; otherwise the distance is not computed and reported as ``None``).
 
 Trials whose measurements have no noise-free solution in front of the camera
 (Eq. (7) degenerate or ``c2 <= 2``) cannot run the second-order filter or the
 paper's prior rule; they are counted and left out of every score.
+
+:func:`study` streams the trials: it draws and filters them in chunks of at
+most :data:`CHUNK` and keeps only running sums (:class:`Tally`), so its memory
+does not grow with the number of trials.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ import numpy as np
 
 from . import _checks, model, optimal
 from .filters import FILTERS, NAMES, check_names
-from .gaussian import PAPER_PRIOR_SCALE, paper_prior_means
+from .gaussian import PAPER_PRIOR_SCALE, gaussian_logpdf, paper_prior_means
 from .scenarios import SCENARIOS
 
 PRIORS = ("paper", "fixed")
@@ -39,6 +45,8 @@ LEVELS = (0.68, 0.95)
 CALIBRATION_LEVELS = tuple(np.round(np.concatenate([np.arange(0.05, 0.951, 0.05), [0.99]]), 2))
 #: Particles per trial of the particle filter.
 PARTICLES = 2000
+#: Trials drawn and filtered together by :func:`study`: its memory is that of one chunk.
+CHUNK = 100
 
 
 @dataclass(frozen=True)
@@ -76,15 +84,16 @@ class Estimates:
     cov : ndarray, shape (N, 3, 3)
     depth_cdf, velocity_cdf : ndarray, shape (N,)
         The filter's marginal CDFs at the true depth and velocity.
-    hellinger : ndarray, shape (N,)
-        Hellinger distance from its depth marginal to the optimal one.
+    hellinger : ndarray, shape (N,), or None
+        Hellinger distance from its depth marginal to the optimal one;
+        ``None`` when the optimal filter was not run.
     """
 
     mean: np.ndarray
     cov: np.ndarray
     depth_cdf: np.ndarray
     velocity_cdf: np.ndarray
-    hellinger: np.ndarray
+    hellinger: np.ndarray | None
 
 
 def valid_triples(mu) -> np.ndarray:
@@ -93,7 +102,7 @@ def valid_triples(mu) -> np.ndarray:
     d = mu[:, 0] + mu[:, 2] - 2.0 * mu[:, 1]
     ok = np.isfinite(mu).all(axis=1) & (np.abs(d) > _checks.DEGENERACY_TOL)
     with np.errstate(divide="ignore", invalid="ignore"):
-        c2 = model.noise_free_states_unchecked(mu)[:, 1]  # Eq. (7)
+        c2 = model.noise_free_depth_unchecked(mu)  # Eq. (7)
     return ok & (c2 > 2.0)
 
 
@@ -145,24 +154,27 @@ def simulate(
 
 
 def _gaussian_estimates(trials: Trials, mean, cov, reference) -> Estimates:
+    """Scores' inputs for a Gaussian filter; no Hellinger distance without ``reference``."""
     from scipy.special import ndtr
 
     t = trials.truth
     depth_cdf = ndtr((t[1] - mean[:, 1]) / np.sqrt(cov[:, 1, 1]))
     velocity_cdf = ndtr((t[2] - mean[:, 2]) / np.sqrt(cov[:, 2, 2]))
-    return Estimates(mean, cov, depth_cdf, velocity_cdf, gaussian_hellinger(reference, mean, cov))
+    h = None if reference is None else gaussian_hellinger(reference, mean, cov)
+    return Estimates(mean, cov, depth_cdf, velocity_cdf, h)
 
 
 def gaussian_hellinger(reference: optimal.BatchMarginals, mean, cov) -> np.ndarray:
-    """:func:`hellinger` for Gaussian filters: means (N, 3) and covariances (N, 3, 3)."""
-    sd = np.sqrt(cov[:, 1, 1])
+    """:func:`hellinger` for Gaussian filters: means (N, 3) and covariances (N, 3, 3).
+
+    The filter's depth marginal (Eq. (13)) is the Gaussian with the depth
+    component of the mean and covariance; returns shape (N,).
+    """
 
     def log_q(y):
-        return -0.5 * ((y - mean[:, 1:2]) / sd[:, None]) ** 2 - np.log(
-            np.sqrt(2 * np.pi) * sd[:, None]
-        )
+        return gaussian_logpdf(y[..., None], mean[:, None, 1:2], cov[:, None, 1:2, 1:2])
 
-    return hellinger(reference, log_q, mean[:, 1], sd)
+    return hellinger(reference, log_q, mean[:, 1], np.sqrt(cov[:, 1, 1]))
 
 
 def hellinger(
@@ -196,7 +208,10 @@ def hellinger(
 
 
 def _particle_estimates(trials: Trials, estimate, reference) -> Estimates:
-    """Scores' inputs for the particle filter: weighted moments, CDFs, a binned KDE."""
+    """Scores' inputs for the particle filter: weighted moments, CDFs, a binned KDE.
+
+    Without ``reference`` there is no Hellinger distance, and no KDE.
+    """
     batch = estimate.detail
     W = np.exp(batch.log_weights)
     x = batch.particles
@@ -204,6 +219,8 @@ def _particle_estimates(trials: Trials, estimate, reference) -> Estimates:
     t = trials.truth
     depth_cdf = np.sum(W * (x[..., 1] <= t[1]), axis=1)
     velocity_cdf = np.sum(W * (x[..., 2] <= t[2]), axis=1)
+    if reference is None:
+        return Estimates(mean, cov, depth_cdf, velocity_cdf, None)
     sd = np.sqrt(cov[:, 1, 1])
     ess = 1.0 / np.sum(W**2, axis=1)
     bandwidth = 1.06 * sd * ess**-0.2  # Scott's rule with the effective sample size
@@ -255,15 +272,17 @@ def run_filters(
 ) -> dict:
     """Run the named filters of :data:`depthcore.filters.FILTERS` over every trial.
 
-    Returns ``{name: Estimates}``. ``rng`` drives the random filters (the
-    particle filter; required when one is among ``names``). The UKF runs with
-    the default sigma points even where some lie behind the camera (the
-    paper's prior is that broad).
+    Returns ``{name: Estimates}``. Only the named filters run: the optimal
+    filter, the reference of the Hellinger distances, runs only when it is
+    among ``names``, and otherwise every ``Estimates.hellinger`` is ``None``.
+    ``rng`` drives the random filters (the particle filter; required when one
+    is among ``names``). The UKF runs with the default sigma points even where
+    some lie behind the camera (the paper's prior is that broad).
     """
     names = check_names(names)
     mu, rho, pm, pc = trials.mu, trials.rho, trials.prior_mean, trials.prior_cov
-    reference = FILTERS["optimal"](mu, rho, pm, pc)
-    ref = reference.detail
+    reference = FILTERS["optimal"](mu, rho, pm, pc) if "optimal" in names else None
+    ref = None if reference is None else reference.detail
     out = {}
     for name in names:
         f = FILTERS[name]
@@ -289,39 +308,97 @@ def run_filters(
     return out
 
 
+#: Every nominal level whose coverage is counted: :data:`LEVELS` and :data:`CALIBRATION_LEVELS`.
+_COVERAGE_LEVELS = tuple(sorted(set(LEVELS) | set(CALIBRATION_LEVELS)))
+
+
+class Tally:
+    """Running sums of one filter's scores over chunks of trials.
+
+    Holds a fixed number of sums and counts, whatever the number of trials:
+    :meth:`add` each chunk's :class:`Estimates`, then read :meth:`scores`. The
+    sums of a chunk are taken with ``numpy.sum`` and added in order, so one
+    chunk gives exactly the means ``numpy.mean`` gives over it, and several
+    chunks agree with one to rounding.
+
+    Parameters
+    ----------
+    truth : array_like, shape (3,)
+        True state at time 3.
+    """
+
+    def __init__(self, truth):
+        self.truth = _checks.finite_array(truth, "truth", (3,))
+        self.n = 0
+        self.error = np.zeros(2)  # sums of estimate - truth, depth and velocity
+        self.squared_error = np.zeros(2)
+        self.sd = np.zeros(2)
+        self.covered = np.zeros((2, len(_COVERAGE_LEVELS)), dtype=np.int64)
+        self.nees = 0.0
+        self.hellinger: float | None = 0.0
+
+    def add(self, est: Estimates) -> None:
+        """Add the scores of one chunk of trials (an empty chunk adds nothing)."""
+        n = len(est.mean)
+        if n == 0:
+            return
+        err = est.mean - self.truth
+        for k, (i, cdf) in enumerate(((1, est.depth_cdf), (2, est.velocity_cdf))):
+            self.error[k] += np.sum(err[:, i])
+            self.squared_error[k] += np.sum(err[:, i] ** 2)
+            self.sd[k] += np.sum(np.sqrt(est.cov[:, i, i]))
+            off = np.abs(cdf - 0.5)
+            self.covered[k] += [np.count_nonzero(off <= p / 2) for p in _COVERAGE_LEVELS]
+        nees = np.einsum("ni,ni->n", err, np.linalg.solve(est.cov, err[..., None])[..., 0])
+        self.nees += np.sum(nees)
+        if est.hellinger is None or self.hellinger is None:
+            self.hellinger = None
+        else:
+            self.hellinger += np.sum(est.hellinger)
+        self.n += n
+
+    def scores(self) -> dict:
+        """The scores of :func:`scores` over every trial added."""
+        if self.n == 0:
+            raise ValueError("trials: no trial was added to the tally")
+        n = self.n
+        level = {p: j for j, p in enumerate(_COVERAGE_LEVELS)}
+        out = {}
+        for k, q in enumerate(("depth", "velocity")):
+            out[q] = {
+                "bias": float(self.error[k] / n),
+                "rmse": float(np.sqrt(self.squared_error[k] / n)),
+                "mean_sd": float(self.sd[k] / n),
+                **{
+                    f"coverage_{round(100 * p)}": float(self.covered[k, level[p]] / n)
+                    for p in LEVELS
+                },
+            }
+        out["nees"] = float(self.nees / n)
+        out["calibration"] = {
+            "levels": list(CALIBRATION_LEVELS),
+            **{
+                q: [float(self.covered[k, level[p]] / n) for p in CALIBRATION_LEVELS]
+                for k, q in enumerate(("depth", "velocity"))
+            },
+        }
+        out["hellinger_depth"] = (
+            None if self.hellinger is None else {"mean": float(self.hellinger / n)}
+        )
+        return out
+
+
 def scores(trials: Trials, est: Estimates) -> dict:
     """Bias, RMSE, coverage, NEES and Hellinger distance of one filter.
 
     ``calibration`` holds the coverage of the central intervals at every level
     of :data:`CALIBRATION_LEVELS`: a calibrated filter's curve is the diagonal.
+    ``hellinger_depth`` is ``{"mean": ...}``, or ``None`` when the estimates
+    have no Hellinger distances (the optimal filter was not run).
     """
-    t = trials.truth
-    err = est.mean - t
-    out = {}
-    for q, i, cdf in (("depth", 1, est.depth_cdf), ("velocity", 2, est.velocity_cdf)):
-        out[q] = {
-            "bias": float(np.mean(err[:, i])),
-            "rmse": float(np.sqrt(np.mean(err[:, i] ** 2))),
-            "mean_sd": float(np.mean(np.sqrt(est.cov[:, i, i]))),
-            **{
-                f"coverage_{round(100 * p)}": float(np.mean(np.abs(cdf - 0.5) <= p / 2))
-                for p in LEVELS
-            },
-        }
-    nees = np.einsum("ni,ni->n", err, np.linalg.solve(est.cov, err[..., None])[..., 0])
-    out["nees"] = float(np.mean(nees))
-    out["calibration"] = {
-        "levels": list(CALIBRATION_LEVELS),
-        **{
-            q: [float(np.mean(np.abs(cdf - 0.5) <= p / 2)) for p in CALIBRATION_LEVELS]
-            for q, cdf in (("depth", est.depth_cdf), ("velocity", est.velocity_cdf))
-        },
-    }
-    out["hellinger_depth"] = {
-        "mean": float(np.mean(est.hellinger)),
-        "median": float(np.median(est.hellinger)),
-    }
-    return out
+    tally = Tally(trials.truth)
+    tally.add(est)
+    return tally.scores()
 
 
 def study(
@@ -331,7 +408,7 @@ def study(
     seed=0,
     prior: str = "paper",
     names=NAMES,
-    chunk: int = 100,
+    chunk: int = CHUNK,
     n_particles: int = PARTICLES,
     progress: Callable[[int, int], None] | None = None,
 ) -> dict:
@@ -343,65 +420,68 @@ def study(
         True state at time 3; default the noise-free state of Figure 2.
     rho : float
     trials : int
+        Trials drawn, >= 1 (those without a noise-free solution in front of
+        the camera are counted and left out).
     seed : int or numpy.random.SeedSequence
         Seeds the ``numpy.random.Generator`` streams that draw the noise and
         the particles (default 0).
     prior : {"paper", "fixed"}
     names : sequence of str
-        Filters to score, from :data:`depthcore.filters.FILTERS`.
+        Filters to score, from :data:`depthcore.filters.FILTERS`; only these
+        run. The Hellinger distances need the optimal filter: when
+        ``"optimal"`` is not among ``names`` it is not run and every
+        filter's ``hellinger_depth`` is ``None``.
     chunk : int
-        Trials run together; ``progress(done, total)`` is called after each chunk.
+        Trials drawn and filtered together (default :data:`CHUNK`);
+        ``progress(done, total)`` is called after each chunk with the trials
+        drawn so far and ``trials``. Memory grows with ``chunk`` (and
+        ``n_particles``), not with ``trials``: only running sums are kept.
     n_particles : int
         Particles per trial of the particle filter.
 
-    The noise and the particle filter draw from two streams of the one seed:
-    the same seed and ``chunk`` give the same result; the particle filter's
-    draws (not the noise) also depend on ``chunk``.
+    Notes
+    -----
+    The noise and the particle filter draw from two streams spawned from the
+    one seed, whichever filters run: a filter's results do not depend on
+    which other filters are named. The noise does not depend on ``chunk``
+    either, so the scores of the deterministic filters agree across chunk
+    sizes to rounding; the particle filter's draws do depend on ``chunk``.
     """
     truth = SCENARIOS["fig2"].c if truth is None else truth
     names = check_names(names)
+    if not (isinstance(trials, (int, np.integer)) and trials >= 1):
+        raise ValueError(f"trials must be a positive integer, got {trials!r}")
+    chunk = _checks.count(chunk, "chunk")
     seed = _checks.seed_sequence(seed)
     noise_rng, particle_rng = (np.random.default_rng(s) for s in _checks.spawn(seed, 2))
-    all_trials = simulate(truth, rho, trials, noise_rng, prior)
-    parts = []
-    n = len(all_trials.mu)
-    if n == 0:
+    tallies = None
+    n_valid = n_rejected = 0
+    for start in range(0, int(trials), chunk):
+        part = simulate(truth, rho, min(chunk, int(trials) - start), noise_rng, prior)
+        if tallies is None:
+            tallies = {name: Tally(part.truth) for name in names}
+        n_rejected += part.n_rejected
+        if len(part.mu):
+            n_valid += len(part.mu)
+            for name, est in run_filters(part, names, particle_rng, n_particles).items():
+                tallies[name].add(est)
+        if progress is not None:
+            progress(min(start + chunk, int(trials)), int(trials))
+    if n_valid == 0:
         raise ValueError(
             f"truth and rho leave no valid trial: all {trials} noisy triples are degenerate "
             "or put the point behind the camera"
         )
-    for start in range(0, n, chunk):
-        sl = slice(start, start + chunk)
-        part = Trials(
-            all_trials.truth,
-            all_trials.rho,
-            all_trials.mu[sl],
-            all_trials.prior_mean[sl],
-            all_trials.prior_cov,
-            0,
-        )
-        parts.append(run_filters(part, names, particle_rng, n_particles))
-        if progress is not None:
-            progress(min(start + chunk, n), n)
-    merged = {
-        name: Estimates(
-            *(
-                np.concatenate([getattr(p[name], f) for p in parts])
-                for f in Estimates.__dataclass_fields__
-            )
-        )
-        for name in names
-    }
     return {
-        "truth": [float(v) for v in all_trials.truth],
+        "truth": [float(v) for v in part.truth],
         "rho": float(rho),
         "prior": prior,
         "seed": seed.entropy,
         "trials": int(trials),
-        "valid_trials": n,
-        "rejected_trials": all_trials.n_rejected,
+        "valid_trials": n_valid,
+        "rejected_trials": n_rejected,
         "particles": int(n_particles) if "particle" in names else None,
-        "filters": {name: scores(all_trials, merged[name]) for name in names},
+        "filters": {name: tallies[name].scores() for name in names},
     }
 
 

@@ -1,5 +1,6 @@
 """The Monte Carlo study: simulation, scores, repeatability, bad input."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -7,8 +8,9 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from depthcore import optimal, study
+from depthcore import _checks, optimal, study
 from depthcore.__main__ import main
+from depthcore.filters import FILTERS, NAMES
 from depthcore.scenarios import SCENARIOS
 
 
@@ -50,14 +52,125 @@ def test_unknown_filter_is_rejected():
         study.study(trials=5, names=("kalman",))
 
 
-def test_chunking_does_not_change_the_deterministic_filters():
+def _assert_same_scores(a, b, rel=1e-12):
+    """Two results' scores agree to ``rel``, every key of every filter."""
+    assert a.keys() == b.keys()
+    for key, x in a.items():
+        if isinstance(x, dict):
+            _assert_same_scores(x, b[key], rel)
+        elif isinstance(x, float):
+            assert x == pytest.approx(b[key], rel=rel, abs=1e-300), key
+        else:
+            assert x == b[key], key
+
+
+def test_chunk_size_does_not_change_the_deterministic_filters():
     names = ("optimal", "second_order", "ekf", "ukf")
     a = study.study(trials=30, seed=2, chunk=7, names=names)
-    b = study.study(trials=30, seed=2, chunk=100, names=names)
-    for name in a["filters"]:
-        for q in ("depth", "velocity"):
-            for k, v in a["filters"][name][q].items():
-                assert v == pytest.approx(b["filters"][name][q][k], rel=1e-9, abs=1e-12)
+    b = study.study(trials=30, seed=2, chunk=30, names=names)
+    assert a["filters"] != {}
+    _assert_same_scores(a["filters"], b["filters"])
+
+
+def _direct_scores(truth, est):
+    """Scores from every trial's estimates at once, by their definitions."""
+    err = est.mean - truth
+    out = {}
+    for q, i, cdf in (("depth", 1, est.depth_cdf), ("velocity", 2, est.velocity_cdf)):
+        out[q] = {
+            "bias": np.mean(err[:, i]),
+            "rmse": np.sqrt(np.mean(err[:, i] ** 2)),
+            "mean_sd": np.mean(np.sqrt(est.cov[:, i, i])),
+            "coverage_68": np.mean(np.abs(cdf - 0.5) <= 0.34),
+            "coverage_95": np.mean(np.abs(cdf - 0.5) <= 0.475),
+        }
+    out["nees"] = np.mean([e @ np.linalg.solve(c, e) for e, c in zip(err, est.cov, strict=True)])
+    out["hellinger"] = np.mean(est.hellinger)
+    return out
+
+
+def test_streamed_scores_equal_those_of_all_trials_at_once():
+    # The study draws the noise and the particles from the first two children
+    # of the seed: redo it without chunks and score every trial at once.
+    seed, n = 9, 40
+    noise, particles = (np.random.default_rng(s) for s in _checks.spawn(seed, 2))
+    trials = study.simulate(SCENARIOS["fig2"].c, 1 / 200, n, noise)
+    est = study.run_filters(trials, NAMES, particles, 300)
+    one = study.study(trials=n, seed=seed, chunk=n, n_particles=300)
+    several = study.study(trials=n, seed=seed, chunk=9, n_particles=300)
+    for name in NAMES:
+        want = _direct_scores(trials.truth, est[name])
+        for got, rel in ((one, 1e-15), (several, 1e-12)):
+            f = got["filters"][name]
+            if name == "particle" and got is several:
+                continue  # its draws depend on the chunks
+            for q in ("depth", "velocity"):
+                for k, v in want[q].items():
+                    assert f[q][k] == pytest.approx(v, rel=rel, abs=1e-300), (name, q, k)
+            assert f["nees"] == pytest.approx(want["nees"], rel=1e-12)
+            assert f["hellinger_depth"]["mean"] == pytest.approx(want["hellinger"], rel=rel)
+
+
+def test_study_keeps_only_running_sums():
+    # Memory of a chunk, not of the trials: the peak allocation of 16 chunks is
+    # that of 2 (each trial kept would add 15 numbers per filter).
+    import tracemalloc
+
+    def peak(n):
+        study.study(trials=10, seed=0, chunk=10, names=("ekf",))  # warm the imports
+        tracemalloc.start()
+        study.study(trials=n, seed=0, chunk=50, names=("ekf", "ukf"))
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        return peak
+
+    small, large = peak(100), peak(800)
+    assert large < small + 8 * (800 - 100) * 15 * 2 / 2  # half of what keeping them would take
+
+
+def test_progress_is_reported_after_each_chunk():
+    calls = []
+    study.study(trials=25, seed=0, chunk=10, names=("ekf",), progress=lambda *a: calls.append(a))
+    assert calls == [(10, 25), (20, 25), (25, 25)]
+
+
+def test_only_the_named_filters_run(monkeypatch):
+    # Without "optimal", neither the optimal filter nor its batched marginals
+    # may run, the Hellinger distances are not computed, and every other score
+    # is what a run including the optimal filter gives with the same seed.
+    names = ("second_order", "ekf", "ukf", "particle")
+    full = study.study(trials=25, seed=4, chunk=10, n_particles=200)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the optimal filter ran")
+
+    monkeypatch.setitem(FILTERS, "optimal", dataclasses.replace(FILTERS["optimal"], run=refuse))
+    monkeypatch.setattr(optimal, "batch_marginals", refuse)
+    monkeypatch.setattr(optimal, "moments", refuse)
+    part = study.study(trials=25, seed=4, chunk=10, n_particles=200, names=names)
+    assert list(part["filters"]) == list(names)
+    for name in names:
+        got, want = dict(part["filters"][name]), dict(full["filters"][name])
+        assert got.pop("hellinger_depth") is None
+        assert want.pop("hellinger_depth")["mean"] >= 0
+        assert got == want
+    with pytest.raises(AssertionError, match="the optimal filter ran"):
+        study.study(trials=5, seed=4, names=("optimal",))
+
+
+def test_study_command_without_the_optimal_filter_shows_no_hellinger(capsys):
+    assert main(["study", "--trials", "5", "--filters", "ekf", "ukf", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert [f["hellinger_depth"] for f in data["filters"].values()] == [None, None]
+    assert main(["study", "--trials", "5", "--filters", "ekf", "optimal"]) == 0
+    table = capsys.readouterr().out
+    ekf_depth = next(line for line in table.splitlines() if line.startswith("ekf  "))
+    assert ekf_depth.split()[-1] != "-"
+    assert main(["study", "--trials", "5", "--filters", "ekf"]) == 0
+    table = capsys.readouterr().out
+    ekf_depth = next(line for line in table.splitlines() if line.startswith("ekf  "))
+    assert ekf_depth.split()[-1] == "-"
+    assert "a dash: not computed" in table
 
 
 def test_scores_follow_their_definitions():
