@@ -111,6 +111,20 @@ def _index(flat_index: int, batch: tuple[int, ...]) -> str:
     return "[" + ", ".join(str(int(i)) for i in np.unravel_index(flat_index, batch)) + "]"
 
 
+def valid_measurements(mu) -> np.ndarray:
+    """Which triples of ``mu`` (..., 3) :func:`measurements` accepts, without raising.
+
+    Finite, not degenerate, and with the noise-free depth ``c2`` of Eq. (7)
+    above 2 (in front of the camera at all three times); returns a boolean
+    array of shape ``mu.shape[:-1]``.
+    """
+    arr = np.asarray(mu, dtype=float)
+    d = arr[..., 0] + arr[..., 2] - 2.0 * arr[..., 1]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        depth_first = _noise_free_depth(arr) - 2.0
+    return np.all(np.isfinite(arr), axis=-1) & (np.abs(d) > DEGENERACY_TOL) & (depth_first > 0)
+
+
 def measurements_batch(mu, name: str = "mu") -> np.ndarray:
     """Check triples of measurements, shape ``(..., 3)``, each as :func:`measurements` does.
 
@@ -121,11 +135,7 @@ def measurements_batch(mu, name: str = "mu") -> np.ndarray:
         raise ValueError(f"{name} must have shape (..., 3), got shape {arr.shape}")
     batch = arr.shape[:-1]
     flat = arr.reshape(-1, 3)
-    d = flat[:, 0] + flat[:, 2] - 2.0 * flat[:, 1]
-    degenerate = ~(np.abs(d) > DEGENERACY_TOL)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        depth_first = _noise_free_depth(flat) - 2.0
-    bad = degenerate | ~(depth_first > 0)
+    bad = ~valid_measurements(flat)
     if np.any(bad):
         i = int(np.argmax(bad))
         measurements(flat[i], name + (_index(i, batch) if batch else ""))

@@ -117,17 +117,8 @@ def draw_from_prior(
     x1 = np.concatenate(kept)[:n]
     states = np.stack([model.G(x1, k) for k in range(3)], axis=1)
     mu = model.project(states) + rho * rng.standard_normal((n, 3))
-    ok = _front_solution(mu)
+    ok = _checks.valid_measurements(mu)  # the noise-free solution, Eq. (7), in front
     return PriorDraws(model.G(x1[ok], 2), mu[ok], behind, int(np.sum(~ok)))
-
-
-def _front_solution(mu) -> np.ndarray:
-    """Rows of ``mu`` (n, 3) whose noise-free solution, Eq. (7), lies in front of the camera."""
-    d = mu[:, 0] + mu[:, 2] - 2.0 * mu[:, 1]
-    ok = np.abs(d) > _checks.DEGENERACY_TOL
-    with np.errstate(divide="ignore", invalid="ignore"):
-        c2 = 2.0 * (mu[:, 0] - mu[:, 1]) / d
-    return ok & (c2 > 2.0)
 
 
 def coverage(pit, levels=LEVELS) -> np.ndarray:

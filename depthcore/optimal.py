@@ -193,7 +193,7 @@ def _solve(offsets, pb: _Problem):
     # (2 (mu1 - mu2) - d y) s0 s1 s2 = d (c2 - y) s0 s1 s2 with d = mu1 + mu3 - 2 mu2:
     # the factored form keeps its relative accuracy where the terms cancel (near y = c2).
     d = (pb.mu[:, 0] + pb.mu[:, 2] - 2.0 * pb.mu[:, 1])[:, None]
-    c2 = 2.0 * (pb.mu[:, 0] - pb.mu[:, 1])[:, None] / d
+    c2 = model.noise_free_depth_unchecked(pb.mu)[:, None]
     minors3 = (d * (c2 - offsets[..., 0]) * s[0] * s[1] * s[2]) ** 2
     for k, l in _MEAS_PAIRS:
         for j in range(3):

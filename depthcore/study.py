@@ -98,12 +98,7 @@ class Estimates:
 
 def valid_triples(mu) -> np.ndarray:
     """Rows of ``mu`` (N, 3) with a noise-free solution, Eq. (7), in front of the camera."""
-    mu = np.asarray(mu, dtype=float)
-    d = mu[:, 0] + mu[:, 2] - 2.0 * mu[:, 1]
-    ok = np.isfinite(mu).all(axis=1) & (np.abs(d) > _checks.DEGENERACY_TOL)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        c2 = model.noise_free_depth_unchecked(mu)  # Eq. (7)
-    return ok & (c2 > 2.0)
+    return _checks.valid_measurements(mu)
 
 
 def simulate(

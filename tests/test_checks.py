@@ -89,6 +89,33 @@ def test_behind_camera_boundary():
     assert noise_free_state([a, 0.0, b])[1] == pytest.approx(2 + 1e-9, abs=1e-12)
 
 
+def test_valid_measurements_is_what_measurements_accepts():
+    tol = _checks.DEGENERACY_TOL
+    rng = np.random.default_rng(0)
+    mu = np.concatenate(
+        [
+            rng.normal(0.0, 0.3, (200, 3)),
+            [[0.0, -tol / 2, 0.0], [4 * tol, 0.0, -2 * tol], [0.3, 0.0, 0.0]],
+            [[np.nan, 0.0, 0.2], [-0.3, np.inf, 0.2], list(MU_17)],
+        ]
+    )
+
+    def accepted(row):
+        try:
+            _checks.measurements(row)
+        except ValueError:
+            return False
+        return True
+
+    want = [accepted(row) for row in mu]
+    assert 0 < sum(want) < len(want)
+    assert _checks.valid_measurements(mu).tolist() == want
+    assert (
+        _checks.valid_measurements(mu.reshape(2, -1, 3)).tolist()
+        == np.reshape(want, (2, -1)).tolist()
+    )
+
+
 def test_spawn_gives_the_children_of_a_fresh_seed_sequence():
     fresh = [np.random.default_rng(s).random() for s in np.random.SeedSequence(5).spawn(3)]
     seq = np.random.SeedSequence(5)
