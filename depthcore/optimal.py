@@ -903,40 +903,74 @@ def _fine_velocity_mixture(pb: _Problem, grids: dict, log_normaliser, max_refine
     small noise is far narrower than the spacing of the conditional means
     ``vbar(y_j)`` at the moment quadrature's nodes: summed there, the mixture
     ``sum_j w_j N(v, vbar_j, s_v_j**2)`` ripples although its moments are
-    right. Starting from those nodes, the step in ``t`` is halved until
-    neighbouring nodes with weight above 1e-14 have means within half an SD,
-    where the ripple is below 1e-30 of the density.
+    right. Starting from those nodes, each problem's step in ``t`` is halved
+    until its neighbouring nodes with weight above 1e-14 have means within
+    half an SD, where the ripple is below 1e-30 of the density. Each problem
+    is refined on its own, so its nodes do not depend on the rest of the
+    batch, and a halving evaluates only the new midpoints.
 
-    Returns normalised weights, means and SDs, each of shape (B, n).
+    Returns normalised weights, means and SDs, each of shape (B, n) (the
+    rows padded with zero weights).
     """
+    B = len(log_normaliser)
     weights, means, sds = [], [], []
     for i, (lo, h, n, frame) in grids.items():
+        rows = [None] * B
+        active = np.arange(B)
+        u = _grid(lo, h, n, 0.0)
+        w, mean, sd = _velocity_nodes(i, u, frame, pb, log_normaliser)
         factor = 1
         while True:
-            u = _grid(lo, h / factor, (n - 1) * factor + 1, 0.0)
-            skip = np.isnan(u)
-            offsets, log_jac = _mapped_nodes(i, np.where(skip, 0.0, u), frame)
-            log_density, mean, (_, _, cvv) = _solve(offsets, pb)
-            w = np.where(
-                skip,
-                0.0,
-                np.exp(log_density + log_jac - log_normaliser[:, None]) * (h / factor)[:, None],
-            )
-            sd = np.sqrt(cvv)
+            valid = ~np.isnan(u)
             big = w > 1e-14 * np.max(w, axis=1, keepdims=True)
-            gap = np.abs(np.diff(mean[1], axis=1)) / np.minimum(sd[:, 1:], sd[:, :-1])
-            if factor >= max_refine or not np.any((big[:, 1:] | big[:, :-1]) & (gap > 0.5)):
+            with np.errstate(invalid="ignore"):
+                gap = np.abs(np.diff(mean, axis=1)) / np.minimum(sd[:, 1:], sd[:, :-1])
+            rough = (big[:, 1:] | big[:, :-1]) & valid[:, 1:] & valid[:, :-1] & (gap > 0.5)
+            refine = np.any(rough, axis=1) & (factor < max_refine)
+            for k in np.flatnonzero(~refine):
+                rows[active[k]] = (w[k] * (h[active[k]] / factor), mean[k], sd[k])
+            if not np.any(refine):
                 break
+            keep = np.flatnonzero(refine)
+            active, u, w, mean, sd = active[keep], u[keep], w[keep], mean[keep], sd[keep]
+            mid = 0.5 * (u[:, :-1] + u[:, 1:])
+            sub = _Frame(frame.t0[active], frame.sigma[active])
+            new = _velocity_nodes(i, mid, sub, pb.take(active), log_normaliser[active])
+            u, w, mean, sd = (
+                _interleave(a, b) for a, b in zip((u, w, mean, sd), (mid, *new), strict=True)
+            )
             factor *= 2
-        weights.append(w)
-        means.append(np.where(skip, 0.0, mean[1]))
-        sds.append(np.where(skip, 1.0, sd))
+        width = max(len(r[0]) for r in rows)
+        for out, k, fill in ((weights, 0, 0.0), (means, 1, 0.0), (sds, 2, 1.0)):
+            out.append(
+                np.stack([np.pad(r[k], (0, width - len(r[k])), constant_values=fill) for r in rows])
+            )
     w = np.concatenate(weights, axis=1)
     return (
         w / np.sum(w, axis=1, keepdims=True),
         np.concatenate(means, axis=1),
         np.concatenate(sds, axis=1),
     )
+
+
+def _velocity_nodes(interval: int, u, frame: _Frame, pb: _Problem, log_normaliser):
+    """Depth weights (per unit ``u``), conditional velocity means and SDs at nodes ``u`` (B, n).
+
+    NaN nodes (padding) get weight 0, mean 0 and SD 1.
+    """
+    skip = np.isnan(u)
+    offsets, log_jac = _mapped_nodes(interval, np.where(skip, 0.0, u), frame)
+    log_density, mean, (_, _, cvv) = _solve(offsets, pb)
+    w = np.where(skip, 0.0, np.exp(log_density + log_jac - log_normaliser[:, None]))
+    return w, np.where(skip, 0.0, mean[1]), np.where(skip, 1.0, np.sqrt(cvv))
+
+
+def _interleave(a, b):
+    """Columns ``a0 b0 a1 b1 ... a_n`` from ``a`` (B, n + 1) and ``b`` (B, n)."""
+    out = np.empty((a.shape[0], a.shape[1] + b.shape[1]))
+    out[:, 0::2] = a
+    out[:, 1::2] = b
+    return out
 
 
 @dataclass(frozen=True)

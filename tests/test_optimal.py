@@ -343,3 +343,40 @@ def test_depth_quantiles_reject_bad_arguments():
         optimal.depth_quantiles(optimal.marginals(s.mu, s.rho, s.prior), [0.0, 0.5])
     with pytest.raises(ValueError, match="support"):
         optimal.depth_quantiles(optimal.marginals(s.mu, s.rho, s.prior, support="all"), [0.5])
+
+
+def _uniform_velocity_cdf(batch, v, factor):
+    """The velocity CDF of the mixture on every problem's nodes refined ``factor`` times."""
+    from scipy.special import ndtr
+
+    lo, h, n, frame = batch._grids[3]
+    u = optimal._grid(lo, h / factor, (n - 1) * factor + 1, 0.0)
+    w, mean, sd = optimal._velocity_nodes(3, u, frame, batch._problem, batch.log_normaliser)
+    return np.sum(w * ndtr((v[:, None] - mean) / sd), axis=1) / np.sum(w, axis=1)
+
+
+def test_velocity_cdf_refines_each_problem_on_its_own_and_matches_a_finer_mixture():
+    # Each problem's nodes are halved until its mixture is smooth: the CDFs
+    # agree with the mixture on 64 times finer nodes everywhere, and the
+    # mixture of a problem does not depend on the others in the batch.
+    s = SCENARIOS["fig2"]
+    mu = model.simulate_measurements(model.G(s.c, -2), s.rho, np.random.default_rng(2), size=12)
+    pm = np.array([s.c[0] - 2 * s.c[2], s.c[1] - 2, 0.0])
+    batch = optimal.batch_marginals(mu, s.rho, pm, 1000 * np.eye(3))
+    sd = batch.moments.velocity_sd
+    for k in (-2.0, -0.5, 0.0, 0.7, 2.0):
+        v = batch.moments.velocity_mean + k * sd
+        assert_allclose(
+            batch.velocity_cdf(v), _uniform_velocity_cdf(batch, v, 64), rtol=0, atol=1e-12
+        )
+    rows = [3, 7]
+    lo, h, n, frame = batch._grids[3]
+    sub_grids = {3: (lo[rows], h[rows], n[rows], optimal._Frame(*(a[rows] for a in frame)))}
+    whole = optimal._fine_velocity_mixture(batch._problem, batch._grids, batch.log_normaliser)
+    part = optimal._fine_velocity_mixture(
+        batch._problem.take(rows), sub_grids, batch.log_normaliser[rows]
+    )
+    width = part[0].shape[1]
+    assert not np.any(whole[0][rows, width:])  # beyond, zero weights: padding
+    for a, b in zip(whole, part, strict=True):
+        assert_allclose(a[rows, :width], b, rtol=1e-15, atol=0)
