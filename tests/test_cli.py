@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-from depthcore import reproduce
-from depthcore.__main__ import main
+from depthcore import reproduce, study
+from depthcore.__main__ import build_parser, main
 
 
 def run(*args):
@@ -185,3 +185,7 @@ def test_study_shows_a_progress_bar_on_a_terminal_only():
     assert done.returncode == 0 and b"150/150" in shown
     quiet = subprocess.run(argv, capture_output=True, timeout=120)
     assert quiet.returncode == 0 and quiet.stderr == b""
+
+
+def test_study_particles_default_is_the_studys():
+    assert build_parser().parse_args(["study"]).particles == study.PARTICLES
