@@ -320,6 +320,21 @@ class Tally:
     ----------
     truth : array_like, shape (3,)
         True state at time 3.
+
+    Attributes
+    ----------
+    n : int
+        Trials added.
+    error, squared_error, sd : ndarray, shape (2,)
+        Sums over the trials of the depth and velocity errors, their squares,
+        and the filter's SDs.
+    covered : ndarray of int, shape (2, L)
+        Trials whose central interval holds the true depth and velocity, at
+        each of the ``L`` levels of :data:`LEVELS` and :data:`CALIBRATION_LEVELS`.
+    nees : float
+        Sum of the NEES.
+    hellinger : float or None
+        Sum of the Hellinger distances; ``None`` once a chunk has none.
     """
 
     def __init__(self, truth):
