@@ -40,6 +40,7 @@ from .gaussian import PAPER_PRIOR_SCALE, gaussian_logpdf, paper_prior_means
 from .scenarios import SCENARIOS
 
 PRIORS = ("paper", "fixed")
+#: Nominal levels of the coverage scores, those of the central 68 % and 95 % intervals.
 LEVELS = (0.68, 0.95)
 #: Nominal levels of the calibration curve, central intervals from 5 % to 99 %.
 CALIBRATION_LEVELS = tuple(np.round(np.concatenate([np.arange(0.05, 0.951, 0.05), [0.99]]), 2))
@@ -325,9 +326,12 @@ class Tally:
     ----------
     n : int
         Trials added.
-    error, squared_error, sd : ndarray, shape (2,)
-        Sums over the trials of the depth and velocity errors, their squares,
-        and the filter's SDs.
+    error : ndarray, shape (2,)
+        Sums over the trials of the depth and velocity errors.
+    squared_error : ndarray, shape (2,)
+        Sums of their squares.
+    sd : ndarray, shape (2,)
+        Sums of the filter's depth and velocity SDs.
     covered : ndarray of int, shape (2, L)
         Trials whose central interval holds the true depth and velocity, at
         each of the ``L`` levels of :data:`LEVELS` and :data:`CALIBRATION_LEVELS`.
