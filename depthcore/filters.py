@@ -279,7 +279,7 @@ def _ukf(
             mu, rho, _prior(prior_mean, prior_cov), sigma_points, allow_behind_camera
         )
     else:
-        h = ukf.run(mu, rho, prior_mean, prior_cov, sigma_points, allow_behind_camera)
+        h = ukf.run(mu, rho, prior_mean, prior_cov, 0.0, sigma_points, allow_behind_camera)
     return _gaussian_estimate(h.means[..., -1, :], h.covs[..., -1, :, :], h)
 
 
