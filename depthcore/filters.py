@@ -369,6 +369,7 @@ def _iterated(
     if _single(mu):
         _prior(prior_mean, prior_cov)
     means, covs = iterated.run(mu, rho, prior_mean, prior_cov, process_noise, max_iterations)
+    _covariance_form(covs[..., -1, :, :], "iterated EKF")
     return _gaussian_estimate(means[..., -1, :], covs[..., -1, :, :], History(means, covs))
 
 
@@ -380,7 +381,24 @@ def _inverse_depth(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -
     if _single(mu):
         _prior(prior_mean, prior_cov)
     est = inverse_depth.estimate(mu, rho, prior_mean, prior_cov, process_noise)
+    _covariance_form(est.cov, "inverse-depth EKF")
     return _gaussian_estimate(est.mean, est.cov, est)
+
+
+def _covariance_form(cov, name: str) -> None:
+    """Refuse, naming ``rho``, covariances (..., 3, 3) that rounding left not positive definite.
+
+    The filters that carry a covariance (not its square root) lose its small
+    eigenvalues to cancellation when the noise is tiny beside the prior.
+    """
+    cov = np.asarray(cov, dtype=float)
+    smallest = np.linalg.eigvalsh(cov)[..., 0]
+    if not np.all(smallest > 0):
+        raise ValueError(
+            f"rho is too small for the {name}, which carries a covariance: rounding "
+            f"left its covariance at frame N not positive definite (eigenvalue "
+            f"{float(np.min(smallest)):.3g})"
+        )
 
 
 def _resample_move(
