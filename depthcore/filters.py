@@ -19,7 +19,7 @@ covariance of the whole state, and the filter's own result (``detail``). The ent
 filter's label and plot style, the table rows it contributes to
 :func:`depthcore.reproduce.reproduce` (``variants``), and how its estimates
 are scored (``family``), and what it supports: ``any_frames`` (any
-``N >= 3`` bearings, up to :data:`depthcore._checks.MAX_FRAMES`, or only the
+``N >= 3`` bearings, up to ``depthcore._checks.MAX_FRAMES``, or only the
 paper's three) and ``with_process_noise`` (``q > 0`` or only ``q = 0``); a
 call outside them is refused with a :class:`ValueError` naming ``mu`` or
 ``process_noise``. :mod:`depthcore.reproduce`, :mod:`depthcore.study`,

@@ -224,12 +224,10 @@ def minimiser(mu) -> np.ndarray:
     ndarray, shape (B, 3)
         ``c_N``; for ``N = 3`` the noise-free state ``c`` of Eq. (7) up to rounding.
 
-    Raises
-    ------
-    ValueError
-        Naming ``mu[i]`` when the iteration does not converge in
-        :data:`MAX_ITERATIONS` steps, or when the minimiser is not determined
-        (the residual Jacobian's condition number exceeds :data:`CONDITION_LIMIT`).
+    A :class:`ValueError` names ``mu[i]`` when no start lies in front of the
+    camera, when the iteration does not converge in :data:`MAX_ITERATIONS`
+    steps, or when the minimiser is not determined (the residual Jacobian's
+    condition number, columns scaled to unit norm, exceeds :data:`CONDITION_LIMIT`).
     """
     mu = np.asarray(mu, dtype=float)
     B, n_frames = mu.shape
