@@ -47,7 +47,10 @@ from .model import f, noise_free_state, noise_free_states, residual_gradients, r
 
 __all__ = [
     "A2",
+    "CONDITION_LIMIT",
+    "MAX_ITERATIONS",
     "READINGS",
+    "STEP_TOL",
     "b2",
     "f",
     "hessian",
