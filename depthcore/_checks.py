@@ -14,6 +14,12 @@ import numpy as np
 #: collinear in time and no finite depth explains them.
 DEGENERACY_TOL = 1e-12
 
+#: The most frames (bearings per problem) the filters accept. Every filter's
+#: cost grows at least linearly with the frames, and the second-order
+#: approximation with process noise solves a dense least-squares problem over
+#: the whole trajectory, whose cost grows like the cube of the frames.
+MAX_FRAMES = 1_000
+
 
 def finite_array(value, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
     """Return ``value`` as a float array, checking shape and finiteness."""
@@ -126,19 +132,65 @@ def valid_measurements(mu) -> np.ndarray:
 
 
 def measurements_batch(mu, name: str = "mu") -> np.ndarray:
-    """Check triples of measurements, shape ``(..., 3)``, each as :func:`measurements` does.
+    """Check bearings of shape ``(..., N)``, ``3 <= N <=`` :data:`MAX_FRAMES`, row by row.
 
-    The first offending triple is named with its index, e.g. ``mu[4]``.
+    With ``N = 3`` (the paper's problem) each triple is checked as
+    :func:`measurements` does: not degenerate, and its noise-free solution,
+    Eq. (7), in front of the camera. With ``N > 3`` a row is degenerate when
+    every consecutive triple is, i.e. when every second difference
+    ``mu_k - 2 mu_{k+1} + mu_{k+2}`` is at or below :data:`DEGENERACY_TOL` in
+    magnitude: the bearings are then (numerically) affine in time, which a
+    point at a finite depth explains only by a constant bearing (the point
+    moving along its line of sight), at every depth alike. Noise may put any
+    one triple's noise-free solution behind the camera, so with ``N > 3`` no
+    row is refused for that; the filters that need a point in front of the
+    camera say so themselves.
+
+    The first offending row is named with its index, e.g. ``mu[4]``.
     """
     arr = finite_array(mu, name)
-    if arr.ndim < 1 or arr.shape[-1] != 3:
-        raise ValueError(f"{name} must have shape (..., 3), got shape {arr.shape}")
+    if arr.ndim < 1 or arr.shape[-1] < 3:
+        raise ValueError(
+            f"{name} must have shape (..., N) with N >= 3 bearings per problem, "
+            f"got shape {arr.shape}"
+        )
+    if arr.shape[-1] > MAX_FRAMES:
+        raise ValueError(
+            f"{name} has {arr.shape[-1]} bearings per problem, more than the "
+            f"{MAX_FRAMES} frames the filters accept"
+        )
     batch = arr.shape[:-1]
-    flat = arr.reshape(-1, 3)
+    n_frames = arr.shape[-1]
+    flat = arr.reshape(-1, n_frames)
+    if n_frames > 3:
+        second = flat[:, :-2] + flat[:, 2:] - 2.0 * flat[:, 1:-1]
+        degenerate = ~np.any(np.abs(second) > DEGENERACY_TOL, axis=1)
+        if np.any(degenerate):
+            i = int(np.argmax(degenerate))
+            where = name + (_index(i, batch) if batch else "")
+            raise ValueError(
+                f"{where} is degenerate: every second difference mu_k - 2*mu_(k+1) + mu_(k+2) "
+                f"is at most {DEGENERACY_TOL:g} in magnitude, so no finite depth explains "
+                "the bearings"
+            )
+        return arr
     bad = ~valid_measurements(flat)
     if np.any(bad):
         i = int(np.argmax(bad))
         measurements(flat[i], name + (_index(i, batch) if batch else ""))
+    return arr
+
+
+def three_frames(mu, name: str = "mu") -> np.ndarray:
+    """Check that ``mu`` holds the paper's three bearings per problem, shape ``(..., 3)``.
+
+    For the functions whose formulas are those of three frames (Eqs. (5)-(7), (14)-(16)).
+    """
+    arr = finite_array(mu, name)
+    if arr.ndim < 1 or arr.shape[-1] != 3:
+        raise ValueError(
+            f"{name} must have shape (..., 3), the paper's three frames, got shape {arr.shape}"
+        )
     return arr
 
 
@@ -174,9 +226,10 @@ def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
 
     Parameters
     ----------
-    mu : array_like, shape (..., 3), or (..., K) when ``triples`` is false
-        Triples checked by :func:`measurements_batch`; otherwise any finite
-        bearings, ``K >= 1``.
+    mu : array_like, shape (..., N), or (..., K) when ``triples`` is false
+        Bearings of ``N >= 3`` frames checked by :func:`measurements_batch`
+        (triples, ``N = 3``, as the paper's); otherwise any finite bearings,
+        ``K >= 1``.
     rho : float or array_like, shape ``mu.shape[:-1]``
         Finite and > 0.
     prior_mean : array_like, broadcastable to ``mu.shape``
@@ -228,7 +281,7 @@ def batch_inputs(mu, rho, prior_mean, prior_cov, triples: bool = True):
 
     Returns
     -------
-    mu : ndarray, shape (..., K)
+    mu : ndarray, shape (..., N) or (..., K)
     rho : ndarray, shape () or (...)
     prior_mean : ndarray, shape (..., 3)
     prior_cov : ndarray, shape (..., 3, 3)

@@ -1,6 +1,14 @@
-"""The extended Kalman filter p_e of the paper, Eqs. (10)-(12).
+"""The extended Kalman filter p_e of the paper, Eqs. (10)-(12), for any number of frames.
 
 Recommended import: ``from depthcore import ekf``.
+
+The paper's filter sees three bearings of a point moving with constant
+velocity. The same recursion runs over ``N >= 3`` bearings and, with process
+noise ``a_k ~ N(0, q**2)`` on the velocity (``v_{k+1} = v_k + a_k``, the model
+of :mod:`depthcore.bank`), adds ``q**2`` to the predicted velocity's variance
+(Prince, section 19.3: the prediction ``C = F P F^T + Sigma_p`` of the
+Kalman filter, textbook Eq. (19.10), with ``Sigma_p = diag(0, 0, q**2)``).
+With ``N = 3`` and ``q = 0`` it is the paper's EKF, Eqs. (10)-(12).
 
 The functions work on batches: a leading shape ``(...)`` on means, covariances
 and measurements runs independent filters side by side (one per Monte Carlo
@@ -21,13 +29,18 @@ from .gaussian import Gaussian, History, MeanAndCov
 EKFHistory = History
 
 
-def predict(m, P) -> MeanAndCov:
-    """Eq. (10): ``n = F m + e``, ``C = F P F^T``.
+def predict(m, P, process_noise: float = 0.0) -> MeanAndCov:
+    """Eq. (10): ``n = F m + e``, ``C = F P F^T``, plus ``q**2`` on the velocity's variance.
+
+    With process noise ``q`` (textbook Eq. (19.10), ``Sigma_p = diag(0, 0, q**2)``)
+    the velocity's variance grows by ``q**2``; ``q = 0`` is Eq. (10).
 
     Parameters
     ----------
     m : array_like, shape (..., 3)
     P : array_like, shape (..., 3, 3)
+    process_noise : float
+        ``q >= 0`` (not checked here).
     """
     m = np.asarray(m, dtype=float)
     P = np.asarray(P, dtype=float)
@@ -35,6 +48,8 @@ def predict(m, P) -> MeanAndCov:
     C = P.copy()
     C[..., 0, :] += P[..., 2, :]
     C[..., :, 0] += C[..., :, 2]
+    if process_noise:
+        C[..., 2, 2] += process_noise**2
     return MeanAndCov(m @ model.F.T + model.e, C)
 
 
@@ -95,35 +110,43 @@ def update(n, C, mu, rho: float) -> MeanAndCov:
     return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
 
 
-def run_gaussian_filter(update_step: Callable, mu, rho, prior_mean, prior_cov) -> History:
+def run_gaussian_filter(
+    update_step: Callable, mu, rho, prior_mean, prior_cov, process_noise: float = 0.0
+) -> History:
     """The run loop shared by the Gaussian filters (EKF, UKF), batched.
 
     Initialise ``n = m``, ``C = P`` (the prior is the density of the state at
     time 1), incorporate ``mu1``, then, for each further measurement, predict
-    with Eq. (10) (exact for the linear motion) and incorporate it.
+    with Eq. (10) (exact for the linear motion; :func:`predict`, with the
+    process noise ``q**2`` added to the velocity's variance) and incorporate it.
 
     Parameters
     ----------
     update_step : callable
         ``update_step(n, C, mu_k, rho) -> MeanAndCov``, batched; a
         :class:`ValueError` it raises is reraised naming the measurement.
-    mu : array_like, shape (..., K)
-        Measurements in time order; the leading shape runs independent filters.
+    mu : array_like, shape (..., N)
+        Bearings of ``N >= 3`` frames in time order, checked by
+        :func:`depthcore._checks.batch_inputs` (as are the other arguments);
+        the leading shape runs independent filters.
     rho : float or array_like, shape (...)
         Noise standard deviation, > 0.
     prior_mean : array_like, shape (3,) or (..., 3)
     prior_cov : array_like, shape (3, 3) or (..., 3, 3)
+    process_noise : float
+        SD ``q >= 0`` of the velocity's change per frame (0: the paper's model).
 
     Returns
     -------
     History
-        ``means`` (..., K, 3) and ``covs`` (..., K, 3, 3) after each measurement.
+        ``means`` (..., N, 3) and ``covs`` (..., N, 3, 3) after each measurement.
     """
-    mu, rho, n, C = _checks.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
+    mu, rho, n, C = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)
+    q = _checks.nonnegative_scalar(process_noise, "process_noise")
     means, covs = [], []
     for i in range(mu.shape[-1]):
         if i > 0:
-            n, C = predict(means[-1], covs[-1])
+            n, C = predict(means[-1], covs[-1], q)
         try:
             m, P = update_step(n, C, mu[..., i], rho)
         except ValueError as exc:
@@ -133,33 +156,41 @@ def run_gaussian_filter(update_step: Callable, mu, rho, prior_mean, prior_cov) -
     return History(np.stack(means, axis=-2), np.stack(covs, axis=-3))
 
 
-def run(mu, rho, prior_mean, prior_cov) -> History:
+def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     """Run the EKF over the measurements, batched: Eq. (12), then (10) and (12) per measurement.
 
-    Initialise ``n = m``, ``C = P`` (the prior), incorporate ``mu1`` with (12),
-    then predict (10) and update (12) for each further measurement. The information is carried as a
-    square root (:func:`_update_information`), which equals :func:`predict`
-    and :func:`update` algebraically and keeps the small variances accurate
-    at small noise.
+    Initialise ``n = m``, ``C = P`` (the prior, on the state at frame 1),
+    incorporate ``mu1`` with (12), then predict (10) and update (12) for each
+    further measurement; the last mean and covariance are those of the state
+    at frame ``N``. The information is carried as a square root
+    (:func:`_update_information`), which equals :func:`predict` and
+    :func:`update` algebraically and keeps the small variances accurate at
+    small noise. With process noise the prediction ``C = F P F^T + Sigma_p``
+    (textbook Eq. (19.10)) is formed as a square root too
+    (:func:`_predict_information`).
 
     Parameters
     ----------
-    mu : array_like, shape (..., 3)
-        Measurements in time order; each triple checked by
-        :func:`depthcore._checks.batch_problem`, as are the other arguments.
+    mu : array_like, shape (..., N)
+        Bearings of ``N >= 3`` frames in time order (``N = 3``: the paper's
+        triple), checked by :func:`depthcore._checks.batch_problem`, as are
+        the other arguments.
     rho : float or array_like, shape (...)
     prior_mean : array_like, shape (..., 3)
     prior_cov : array_like, shape (..., 3, 3)
         Symmetric positive definite.
+    process_noise : float
+        SD ``q >= 0`` of the velocity's change per frame (0: the paper's model).
 
     Returns
     -------
     History
-        ``means`` (..., 3, 3): ``means[..., i, :]`` is the mean after
-        measurement ``i + 1``; ``covs`` (..., 3, 3, 3). It unpacks as
+        ``means`` (..., N, 3): ``means[..., i, :]`` is the mean after
+        measurement ``i + 1``; ``covs`` (..., N, 3, 3). It unpacks as
         ``means, covs = run(...)``.
     """
     mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
+    q = _checks.nonnegative_scalar(process_noise, "process_noise")
     batch = mu.shape[:-1]
     n = np.broadcast_to(prior_mean, batch + (3,))
     # square root of the information: R^T R = P^{-1}, with P = L L^T
@@ -169,7 +200,10 @@ def run(mu, rho, prior_mean, prior_cov) -> History:
     for i in range(mu.shape[-1]):
         if i > 0:
             n = means[-1] @ model.F.T + model.e  # Eq. (10)
-            R = roots[-1] @ _F_INVERSE  # (F P F^T)^{-1} = F^{-T} P^{-1} F^{-1}
+            if q:
+                R = _predict_information(roots[-1], q)
+            else:
+                R = roots[-1] @ _F_INVERSE  # (F P F^T)^{-1} = F^{-T} P^{-1} F^{-1}
         m, R_new = _update_information(n, R, mu[..., i], rho)
         means.append(m)
         roots.append(R_new)
@@ -180,6 +214,22 @@ def run(mu, rho, prior_mean, prior_cov) -> History:
 
 #: Linear part of ``G^{-1}``, the inverse of ``F`` of Eq. (9).
 _F_INVERSE = model.G_linear(-1)
+
+
+def _predict_information(R, q: float) -> np.ndarray:
+    """The root of the predicted information with process noise, batched.
+
+    With ``P^{-1} = R^T R`` the covariance is ``P = S S^T``, ``S = R^{-1}``; the
+    prediction ``C = F P F^T + diag(0, 0, q**2)`` (textbook Eq. (19.10)) is
+    ``M^T M`` for ``M`` the rows of ``(F S)^T`` stacked on ``(0, 0, q)``, so the
+    QR factorisation ``M = Q U`` gives ``C = U^T U`` and the new root
+    ``U^{-T}`` (``C^{-1} = U^{-1} U^{-T}``), with no subtraction.
+    """
+    S = np.linalg.inv(R)
+    noise = np.broadcast_to(np.array([[0.0, 0.0, q]]), R.shape[:-2] + (1, 3))
+    M = np.concatenate([np.swapaxes(model.F @ S, -1, -2), noise], axis=-2)  # (..., 4, 3)
+    U = np.linalg.qr(M, mode="r")
+    return np.swapaxes(np.linalg.inv(U), -1, -2)
 
 
 def _update_information(n, R, mu, rho):
@@ -205,22 +255,31 @@ def _update_information(n, R, mu, rho):
     return n + delta, R_new
 
 
-def ekf(mu, rho: float, prior: Gaussian) -> History:
-    """Eqs. (10)-(12): the EKF for one triple of measurements.
+def ekf(mu, rho: float, prior: Gaussian, process_noise: float = 0.0) -> History:
+    """Eqs. (10)-(12): the EKF for one sequence of bearings (the paper's: one triple).
 
     Parameters
     ----------
-    mu : array_like, shape (3,)
-        Checked by :func:`depthcore._checks.measurements`.
+    mu : array_like, shape (N,)
+        ``N >= 3`` bearings; a triple is checked by
+        :func:`depthcore._checks.measurements`, more by
+        :func:`depthcore._checks.measurements_batch`.
     rho : float
         Noise standard deviation, > 0.
     prior : Gaussian
         Density of the state at time 1.
+    process_noise : float
+        ``q >= 0``.
 
     Returns
     -------
     History
-        Means and covariances after each measurement; ``.posterior`` is ``p_e``.
+        Means and covariances after each measurement; ``.posterior`` is ``p_e``
+        (at frame ``N``).
     """
-    mu = _checks.measurements(mu)
-    return run(mu, rho, prior.mean, prior.cov)
+    mu = _checks.finite_array(mu, "mu")
+    if mu.shape == (3,):
+        mu = _checks.measurements(mu)
+    elif mu.ndim != 1:
+        raise ValueError(f"mu must have shape (N,), got shape {mu.shape}")
+    return run(mu, rho, prior.mean, prior.cov, process_noise)

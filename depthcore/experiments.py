@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _checks, ekf, model, optimal, particle, study, ukf
-from .filters import FILTERS
+from .filters import FILTERS, NAMES
 from .gaussian import PAPER_PRIOR_SCALE, MeanAndCov, paper_prior_means
 from .scenarios import SCENARIOS, Scenario
 
@@ -46,7 +46,7 @@ CHUNK_PARTICLES = 200_000
 def _compare(mu, rho, pm, pc) -> dict:
     """Depth means, SDs and Hellinger distances to the optimal filter, for a batch.
 
-    The optimal filter and every Gaussian filter of :data:`depthcore.filters.FILTERS`.
+    The optimal filter and every Gaussian filter of :data:`depthcore.filters.NAMES`.
     """
     reference = FILTERS["optimal"](mu, rho, pm, pc)
     out = {
@@ -56,7 +56,8 @@ def _compare(mu, rho, pm, pc) -> dict:
             "hellinger": np.zeros(len(mu)),
         }
     }
-    for name, f in FILTERS.items():
+    for name in NAMES:
+        f = FILTERS[name]
         if f.family == "gaussian":
             est = f(mu, rho, pm, pc)
             out[name] = {

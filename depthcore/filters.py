@@ -4,26 +4,39 @@ Recommended import: ``from depthcore.filters import FILTERS``.
 
 Each entry of :data:`FILTERS` is a :class:`Filter`. Calling it::
 
-    estimate = FILTERS[name](mu, rho, prior_mean, prior_cov, **options)
+    estimate = FILTERS[name](mu, rho, prior_mean, prior_cov, process_noise=0.0, **options)
 
-runs the filter on one triple of measurements (``mu`` of shape ``(3,)``) or on
-a batch (``mu`` of shape ``(B, 3)``, ``rho`` a float or shape ``(B,)``, the
-prior's mean ``(3,)`` or ``(B, 3)`` and covariance ``(3, 3)``) and returns an
-:class:`Estimate`: the depth and velocity means and SDs at time 3 (floats for
-one triple, arrays of shape ``(B,)`` for a batch), their numerical or Monte
-Carlo errors where the filter has them, the mean and covariance of the whole
-state, and the filter's own result (``detail``). The entry also carries the
+runs the filter on one sequence of ``N`` bearings (``mu`` of shape ``(N,)``;
+the paper's triple is ``N = 3``) or on a batch (``mu`` of shape ``(B, N)``,
+``rho`` a float or shape ``(B,)``, the prior's mean ``(3,)`` or ``(B, 3)`` and
+covariance ``(3, 3)``), with process noise ``a_k ~ N(0, q**2)`` on the
+velocity if ``process_noise = q > 0`` (the N-frame model of
+:mod:`depthcore.bank`; the prior is on the state at frame 1), and returns an
+:class:`Estimate`: the depth and velocity means and SDs at frame ``N`` (time 3
+for a triple; floats for one sequence, arrays of shape ``(B,)`` for a batch),
+their numerical or Monte Carlo errors where the filter has them, the mean and
+covariance of the whole state, and the filter's own result (``detail``). The entry also carries the
 filter's label and plot style, the table rows it contributes to
 :func:`depthcore.reproduce.reproduce` (``variants``), and how its estimates
-are scored (``family``). :mod:`depthcore.reproduce`, :mod:`depthcore.study`,
+are scored (``family``), and what it supports: ``any_frames`` (any
+``N >= 3`` bearings, up to ``depthcore._checks.MAX_FRAMES``, or only the
+paper's three) and ``with_process_noise`` (``q > 0`` or only ``q = 0``); a
+call outside them is refused with a :class:`ValueError` naming ``mu`` or
+``process_noise``. :mod:`depthcore.reproduce`, :mod:`depthcore.study`,
 :mod:`depthcore.experiments`, the command line and :mod:`depthcore.figures`
-iterate this registry: adding a filter means adding an entry here.
+iterate the entries marked ``default`` (:data:`NAMES`), which are the five of
+the paper's problem; the N-frame filters (``iterated``, ``inverse_depth``,
+``resample_move``) are registered with ``default=False`` and run only when
+named (:data:`ALL_NAMES`). Adding a filter means adding an entry here.
 
 The filters: the paper's optimal filter (:mod:`depthcore.optimal`, Eqs.
 (6), (13)-(16)), second-order approximation (:mod:`depthcore.second_order`,
 Eq. (8)) and EKF (:mod:`depthcore.ekf`, Eqs. (10)-(12)); beyond the paper,
 the unscented Kalman filter (:mod:`depthcore.ukf`) and a particle filter
-(:mod:`depthcore.particle`).
+(:mod:`depthcore.particle`); for N frames, the iterated EKF
+(:mod:`depthcore.iterated`), the inverse-depth EKF
+(:mod:`depthcore.inverse_depth`) and the causal bootstrap particle filter with
+resample-move (:mod:`depthcore.resample_move`).
 """
 
 from __future__ import annotations
@@ -34,7 +47,17 @@ from typing import Any
 
 import numpy as np
 
-from . import _checks, ekf, optimal, particle, second_order, ukf
+from . import (
+    _checks,
+    ekf,
+    inverse_depth,
+    iterated,
+    optimal,
+    particle,
+    resample_move,
+    second_order,
+    ukf,
+)
 from .gaussian import Gaussian, History
 from .resampling import weighted_mean_and_cov
 
@@ -51,10 +74,11 @@ PARTICLES = 20_000
 
 @dataclass(frozen=True)
 class Estimate:
-    """A filter's result: moments of the depth and velocity at time 3, and the state's.
+    """A filter's result: moments of the depth and velocity at frame ``N``, and the state's.
 
-    Floats (or arrays of shape ``()``) for one triple of measurements, arrays
-    of shape ``(B,)`` for a batch.
+    Frame ``N`` is the last bearing's (time 3 for the paper's triple). Floats
+    (or arrays of shape ``()``) for one sequence of bearings, arrays of shape
+    ``(B,)`` for a batch.
 
     Attributes
     ----------
@@ -63,7 +87,7 @@ class Estimate:
         The numerical (optimal filter) or Monte Carlo (particle filter) error of
         the moments; ``None`` for a closed form.
     mean : ndarray, shape (3,) or (B, 3)
-        Mean of the state ``(x, y, v)`` at time 3.
+        Mean of the state ``(x, y, v)`` at frame ``N``.
     cov : ndarray, shape (3, 3) or (B, 3, 3)
     detail : object
         The filter's own result (:class:`~depthcore.optimal.OptimalMarginals`,
@@ -112,13 +136,22 @@ class Filter:
     in_paper : bool
         Whether the paper compares it.
     run : callable
-        ``run(mu, rho, prior_mean, prior_cov, **options) -> Estimate``.
+        ``run(mu, rho, prior_mean, prior_cov, **options) -> Estimate``, and
+        also ``process_noise=q`` when ``with_process_noise``.
     variants : tuple of (str, str, dict)
         ``(reading, support, options)`` of each row the filter contributes to
         the reproduction tables.
     random : bool
         Whether it draws random numbers: then it takes ``rng`` (a
         ``numpy.random.Generator`` or ``SeedSequence``) and ``n_particles``.
+    any_frames : bool
+        Whether it takes any ``N >= 3`` bearings per problem; if false, only
+        the paper's three.
+    with_process_noise : bool
+        Whether it takes ``process_noise > 0``; if false, only 0.
+    default : bool
+        Whether the default outputs (tables, studies, sweeps, figures, the
+        command line) include it: :data:`NAMES`.
     """
 
     name: str
@@ -129,9 +162,37 @@ class Filter:
     run: Callable[..., Estimate]
     variants: tuple
     random: bool = False
+    any_frames: bool = False
+    with_process_noise: bool = False
+    default: bool = True
 
-    def __call__(self, mu, rho, prior_mean, prior_cov, **options) -> Estimate:
-        return self.run(mu, rho, prior_mean, prior_cov, **options)
+    def __call__(self, mu, rho, prior_mean, prior_cov, process_noise=0.0, **options) -> Estimate:
+        """Run the filter; see the module docstring for the arguments and their shapes.
+
+        ``mu`` is checked by :func:`depthcore._checks.measurements_batch`
+        (and must have 3 columns unless ``any_frames``); ``process_noise``
+        must be ``>= 0``, and 0 unless ``with_process_noise``.
+        """
+        mu = _checks.measurements_batch(mu, "mu")
+        if mu.shape[-1] != 3 and not self.any_frames:
+            raise ValueError(
+                f"mu must have shape (3,) or (B, 3): the {self.name} filter takes the "
+                f"paper's three frames, got {mu.shape[-1]} bearings per problem"
+            )
+        q = _checks.nonnegative_scalar(process_noise, "process_noise")
+        if not self.with_process_noise:
+            if q > 0:
+                raise ValueError(
+                    f"process_noise must be 0 for the {self.name} filter, which supports "
+                    f"only the constant-velocity motion, got {q:g}"
+                )
+            return self.run(mu, rho, prior_mean, prior_cov, **options)
+        return self.run(mu, rho, prior_mean, prior_cov, process_noise=q, **options)
+
+    @property
+    def frames(self) -> str:
+        """``"3"`` (the paper's frames only) or ``"any"`` (``N >= 3``)."""
+        return "any" if self.any_frames else "3"
 
     @property
     def plot_style(self) -> dict:
@@ -139,7 +200,7 @@ class Filter:
         return {"label": self.label, **self.style}
 
     def density(self, estimate: Estimate, quantity: str, grid) -> np.ndarray:
-        """The marginal density of ``quantity`` on ``grid`` (one triple's estimate).
+        """The marginal density of ``quantity`` on ``grid`` (one sequence's estimate).
 
         The particle filter's is a weighted Gaussian kernel density estimate
         (Silverman's bandwidth).
@@ -161,7 +222,7 @@ def _quantity(quantity: str) -> str:
 
 
 def _single(mu) -> bool:
-    """Whether ``mu`` is one triple (shape (3,)) rather than a batch (B, 3)."""
+    """Whether ``mu`` is one sequence (shape (N,)) rather than a batch (B, N)."""
     return np.ndim(mu) == 1
 
 
@@ -243,21 +304,31 @@ def _optimal(
     )
 
 
-def _second_order(mu, rho, prior_mean, prior_cov, reading: str = "derived") -> Estimate:
-    """The second-order approximation ``p_s``, Eq. (8); ``detail`` is its Gaussian or ``None``."""
+def _second_order(
+    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, reading: str = "derived"
+) -> Estimate:
+    """The second-order approximation ``p_s``, Eq. (8); ``detail`` is its Gaussian or ``None``.
+
+    For ``N > 3`` bearings or process noise, its generalisation
+    (:func:`depthcore.second_order.second_order_batch`).
+    """
     if _single(mu):
-        g = second_order.second_order(mu, rho, _prior(prior_mean, prior_cov), reading)
+        g = second_order.second_order(
+            mu, rho, _prior(prior_mean, prior_cov), reading, process_noise
+        )
         return _gaussian_estimate(g.mean, g.cov, g)
-    mean, cov = second_order.second_order_batch(mu, rho, prior_mean, prior_cov, reading)
+    mean, cov = second_order.second_order_batch(
+        mu, rho, prior_mean, prior_cov, reading, process_noise
+    )
     return _gaussian_estimate(mean, cov, None)
 
 
-def _ekf(mu, rho, prior_mean, prior_cov) -> Estimate:
+def _ekf(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> Estimate:
     """The EKF, Eqs. (10)-(12); ``detail`` is its :class:`~depthcore.gaussian.History`."""
     if _single(mu):
-        h = ekf.ekf(mu, rho, _prior(prior_mean, prior_cov))
+        h = ekf.ekf(mu, rho, _prior(prior_mean, prior_cov), process_noise)
     else:
-        h = ekf.run(mu, rho, prior_mean, prior_cov)
+        h = ekf.run(mu, rho, prior_mean, prior_cov, process_noise)
     return _gaussian_estimate(h.means[..., -1, :], h.covs[..., -1, :, :], h)
 
 
@@ -266,6 +337,7 @@ def _ukf(
     rho,
     prior_mean,
     prior_cov,
+    process_noise: float = 0.0,
     sigma_points: ukf.SigmaPoints = ukf.SigmaPoints(),
     allow_behind_camera: bool = True,
 ) -> Estimate:
@@ -276,11 +348,103 @@ def _ukf(
     """
     if _single(mu):
         h: History = ukf.ukf(
-            mu, rho, _prior(prior_mean, prior_cov), sigma_points, allow_behind_camera
+            mu, rho, _prior(prior_mean, prior_cov), sigma_points, allow_behind_camera, process_noise
         )
     else:
-        h = ukf.run(mu, rho, prior_mean, prior_cov, sigma_points, allow_behind_camera)
+        h = ukf.run(
+            mu, rho, prior_mean, prior_cov, process_noise, sigma_points, allow_behind_camera
+        )
     return _gaussian_estimate(h.means[..., -1, :], h.covs[..., -1, :, :], h)
+
+
+def _iterated(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    max_iterations: int = iterated.MAX_ITERATIONS,
+) -> Estimate:
+    """The iterated EKF (:func:`depthcore.iterated.run`); ``detail`` is its History."""
+    if _single(mu):
+        _prior(prior_mean, prior_cov)
+    means, covs = iterated.run(mu, rho, prior_mean, prior_cov, process_noise, max_iterations)
+    _covariance_form(covs[..., -1, :, :], "iterated EKF")
+    return _gaussian_estimate(means[..., -1, :], covs[..., -1, :, :], History(means, covs))
+
+
+def _inverse_depth(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> Estimate:
+    """The inverse-depth EKF (:func:`depthcore.inverse_depth.estimate`).
+
+    ``detail`` is its mean and covariance in ``(x, y, v)`` at frame ``N``.
+    """
+    if _single(mu):
+        _prior(prior_mean, prior_cov)
+    est = inverse_depth.estimate(mu, rho, prior_mean, prior_cov, process_noise)
+    _covariance_form(est.cov, "inverse-depth EKF")
+    return _gaussian_estimate(est.mean, est.cov, est)
+
+
+def _covariance_form(cov, name: str) -> None:
+    """Refuse, naming ``rho``, covariances (..., 3, 3) that rounding left not positive definite.
+
+    The filters that carry a covariance (not its square root) lose its small
+    eigenvalues to cancellation when the noise is tiny beside the prior.
+    """
+    cov = np.asarray(cov, dtype=float)
+    smallest = np.linalg.eigvalsh(cov)[..., 0]
+    if not np.all(smallest > 0):
+        raise ValueError(
+            f"rho is too small for the {name}, which carries a covariance: rounding "
+            f"left its covariance at frame N not positive definite (eigenvalue "
+            f"{float(np.min(smallest)):.3g})"
+        )
+
+
+def _resample_move(
+    mu, rho, prior_mean, prior_cov, rng=None, n_particles: int = PARTICLES, **options
+) -> Estimate:
+    """The causal bootstrap filter with resample-move (:mod:`depthcore.resample_move`).
+
+    ``detail`` is its ResampleMoveBatch (of one trial for one sequence);
+    ``options`` are those of :func:`depthcore.resample_move.run`. No Monte
+    Carlo errors are reported: after resampling and moving, the particles are
+    not independent draws.
+    """
+    rng = _rng(rng, "resample-move")
+    if _single(mu):
+        b = resample_move.resample_move(
+            mu, rho, _prior(prior_mean, prior_cov), n_particles, rng, **options
+        )
+    else:
+        b = resample_move.run(mu, rho, prior_mean, prior_cov, n_particles, rng, **options)
+    W = np.exp(b.log_weights)
+    mean, cov = weighted_mean_and_cov(b.particles, W)
+    m = b.moments()
+    if _single(mu):
+        m = {k: float(v[0]) for k, v in m.items()}
+        mean, cov = mean[0], cov[0]
+    return Estimate(
+        m["depth_mean"],
+        m["depth_sd"],
+        m["velocity_mean"],
+        m["velocity_sd"],
+        None,
+        None,
+        mean,
+        cov,
+        b,
+    )
+
+
+def _rng(rng, name: str) -> np.random.Generator:
+    """``rng`` as a Generator; ``None`` is refused, naming ``rng``."""
+    if rng is None:
+        raise ValueError(
+            f"rng is required to run the {name} filter: pass a "
+            "numpy.random.Generator or SeedSequence"
+        )
+    return _checks.generator(rng)
 
 
 def _particle(
@@ -293,12 +457,7 @@ def _particle(
     The errors are the larger of the delta-method standard errors of the mean
     and of the SD.
     """
-    if rng is None:
-        raise ValueError(
-            "rng is required to run the particle filter: pass a "
-            "numpy.random.Generator or SeedSequence"
-        )
-    rng = _checks.generator(rng)
+    rng = _rng(rng, "particle")
     if _single(mu):
         r = particle.particle_filter(
             mu, rho, _prior(prior_mean, prior_cov), n_particles, rng, **options
@@ -357,6 +516,8 @@ FILTERS: dict[str, Filter] = {
             True,
             _second_order,
             tuple((r, "all", {"reading": r}) for r in second_order.READINGS),
+            any_frames=True,
+            with_process_noise=True,
         ),
         Filter(
             "ekf",
@@ -366,6 +527,8 @@ FILTERS: dict[str, Filter] = {
             True,
             _ekf,
             (("printed", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
         ),
         Filter(
             "ukf",
@@ -375,6 +538,8 @@ FILTERS: dict[str, Filter] = {
             False,
             _ukf,
             (("-", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
         ),
         Filter(
             "particle",
@@ -385,20 +550,60 @@ FILTERS: dict[str, Filter] = {
             _particle,
             (("-", "front", {}),),
             random=True,
+            any_frames=True,
+        ),
+        Filter(
+            "iterated",
+            "iterated EKF",
+            {"color": "tab:orange", "linestyle": "--"},
+            "gaussian",
+            False,
+            _iterated,
+            (("-", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "inverse_depth",
+            "inverse-depth EKF",
+            {"color": "tab:brown", "linestyle": ":"},
+            "gaussian",
+            False,
+            _inverse_depth,
+            (("-", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "resample_move",
+            "resample-move particle filter",
+            {"color": "tab:pink", "linestyle": "-."},
+            "particles",
+            False,
+            _resample_move,
+            (("-", "front", {}),),
+            random=True,
+            any_frames=True,
+            default=False,
         ),
     )
 }
 
 #: The paper's three filters.
 PAPER_FILTERS = tuple(name for name, f in FILTERS.items() if f.in_paper)
-#: Every filter's name.
-NAMES = tuple(FILTERS)
+#: The filters of the default outputs (tables, studies, sweeps, figures, the command line):
+#: the paper's three, the UKF and the particle filter.
+NAMES = tuple(name for name, f in FILTERS.items() if f.default)
+#: Every registered filter's name, the N-frame filters run only when named among them.
+ALL_NAMES = tuple(FILTERS)
 
 
 def get(name: str) -> Filter:
     """The filter called ``name``; a :class:`ValueError` lists the names if there is none."""
     if name not in FILTERS:
-        raise ValueError(f"filter must be one of {NAMES}, got {name!r}")
+        raise ValueError(f"filter must be one of {ALL_NAMES}, got {name!r}")
     return FILTERS[name]
 
 
@@ -407,5 +612,5 @@ def check_names(names) -> tuple:
     names = tuple(names)
     unknown = set(names) - set(FILTERS)
     if unknown:
-        raise ValueError(f"filters must be among {NAMES}, got {sorted(unknown)}")
+        raise ValueError(f"filters must be among {ALL_NAMES}, got {sorted(unknown)}")
     return names

@@ -234,4 +234,7 @@ def estimate(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> Mean
         Mean (..., 3) and covariance (..., 3, 3).
     """
     means, covs = run(mu, rho, prior_mean, prior_cov, process_noise)
-    return to_state(means[..., -1, :], covs[..., -1, :, :], means.shape[-2])
+    try:
+        return to_state(means[..., -1, :], covs[..., -1, :, :], means.shape[-2])
+    except ValueError as exc:
+        raise ValueError(f"mu: {exc}") from None

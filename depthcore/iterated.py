@@ -198,7 +198,14 @@ def run(
         if k > 0:
             n, C = predict(means[-1], covs[-1])
             C = C + Q
-        m, P, _ = update(n, C, mu[..., k], rho, max_iterations)
+        try:
+            m, P, _ = update(n, C, mu[..., k], rho, max_iterations)
+        except np.linalg.LinAlgError:
+            raise ValueError(
+                f"mu and rho lead the iterated EKF to a covariance that is not positive "
+                f"definite at bearing {k + 1}: a rho tiny beside the prior loses it to "
+                "rounding, or the linearisations drift too far apart"
+            ) from None
         means.append(m)
         covs.append(P)
     return np.stack(means, axis=-2), np.stack(covs, axis=-3)

@@ -240,22 +240,24 @@ def noise_free_depth_unchecked(mu) -> np.ndarray:
 
 
 def residuals(x, mu) -> np.ndarray:
-    """The three terms of Eq. (5) before squaring, in time order.
+    """The terms of Eq. (5) before squaring, in time order, for ``N >= 1`` bearings.
 
     Parameters
     ----------
     x : array_like, shape (..., 3)
-        States at time 3.
-    mu : array_like, shape (3,)
+        States at the last frame ``N`` (time 3 for the paper's triple).
+    mu : array_like, shape (N,) or broadcastable to ``x.shape[:-1] + (N,)``
 
     Returns
     -------
-    ndarray, shape (..., 3)
+    ndarray, shape (..., N)
+        ``r_k = project(G^{k-N} x) - mu_k``; for a triple,
         ``((x - 2v)/(y - 2) - mu1, (x - v)/(y - 1) - mu2, x/y - mu3)``.
     """
     x = np.asarray(x, dtype=float)
     mu = np.asarray(mu, dtype=float)
-    return np.stack([project(G(x, k - 2)) - mu[k] for k in range(3)], axis=-1)
+    n = mu.shape[-1]
+    return np.stack([project(G(x, k - (n - 1))) - mu[..., k] for k in range(n)], axis=-1)
 
 
 def f(x, mu) -> np.ndarray:
@@ -263,23 +265,30 @@ def f(x, mu) -> np.ndarray:
     return np.sum(residuals(x, mu) ** 2, axis=-1)
 
 
-def residual_gradients(x) -> np.ndarray:
-    """Eqs. (20)-(22): gradients of the three residuals at states ``x``, rows in time order.
+def residual_gradients(x, n_frames: int = N_MEASUREMENTS) -> np.ndarray:
+    """Eqs. (20)-(22): gradients of the residuals at states ``x``, rows in time order.
 
-    Row ``k`` is ``h(G^{k-2} x) F^{k-2}``: the observation vector (11) at the
-    state of time ``k + 1``, pulled back to time 3.
+    Row ``k`` is ``h(G^{k-N+1} x) F^{k-N+1}``: the observation vector (11) at the
+    state of frame ``k + 1``, pulled back to the last frame ``N``
+    (``N = 3``: the paper's Eqs. (20)-(22)).
 
     Parameters
     ----------
     x : array_like, shape (..., 3)
-        States at time 3.
+        States at the last frame.
+    n_frames : int
+        ``N``, the number of bearings (default 3).
 
     Returns
     -------
-    ndarray, shape (..., 3, 3)
+    ndarray, shape (..., N, 3)
     """
     x = np.asarray(x, dtype=float)
-    return np.stack([observation_vector(G(x, k - 2)) @ G_linear(k - 2) for k in range(3)], axis=-2)
+    last = n_frames - 1
+    return np.stack(
+        [observation_vector(G(x, k - last)) @ G_linear(k - last) for k in range(n_frames)],
+        axis=-2,
+    )
 
 
 def noise_free_states(mu) -> np.ndarray:

@@ -85,7 +85,7 @@ class _Problem(NamedTuple):
 def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
     if reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
-    mu = np.atleast_2d(_checks.finite_array(mu, "mu"))
+    mu = np.atleast_2d(_checks.three_frames(mu, "mu"))
     prior_cov = _checks.finite_array(prior_cov, "prior_cov")
     if prior_cov.shape != (3, 3):
         raise ValueError(f"prior_cov must have shape (3, 3), got shape {prior_cov.shape}")

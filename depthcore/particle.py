@@ -1,4 +1,4 @@
-"""A particle filter on the paper's problem.
+"""A particle filter on the paper's problem and on ``N >= 3`` frames without process noise.
 
 By default, importance sampling from a Student t proposal.
 
@@ -12,8 +12,19 @@ density, and never resampled. With ``proposal="prior"`` and
 ``ess_threshold > 0`` it is the sampling-importance-resampling (bootstrap)
 filter of Prince, section 19.5 [prince2012]_, [gordon1993]_.
 
+N frames. Everything below holds for ``N >= 3`` bearings of the constant-velocity
+model (no process noise, the model of :mod:`depthcore.bank` with ``q = 0``),
+with "time 3" read as frame ``N`` and ``p_s`` as its ``N``-frame
+generalisation (:func:`depthcore.second_order.second_order_batch`: the
+Gaussian at the minimiser ``c_N`` of the misfit of all ``N`` bearings, times
+the prior). The filter is importance sampling with a proposal built from all
+the bearings, not a causal filter (that is :mod:`depthcore.resample_move`);
+with process noise every frame's state is a new unknown and a proposal on the
+state at frame 1 alone no longer covers the posterior, so the registry
+(:mod:`depthcore.filters`) refuses ``process_noise > 0`` for it.
+
 The steps. The state at time 1 is drawn from a distribution ``q``, weighted by
-``prior / q``, and then, for ``k = 1, 2, 3``: moved deterministically by ``G``
+``prior / q``, and then, for ``k = 1 .. N``: moved deterministically by ``G``
 (Eq. (1)), reweighted by the likelihood of ``mu_k`` (Eq. (4)), and, if
 ``ess_threshold > 0``, resampled when the effective sample size falls below
 ``ess_threshold * N`` (:mod:`depthcore.resampling`). Weights are kept as
@@ -51,7 +62,11 @@ distributions may be used as long as the last is the posterior): after
 where ``Lt_j(x) = exp(-(g_j . (x3 - c))**2 / (2 rho**2))`` is the likelihood
 of ``mu_j`` linearised about the noise-free state ``c`` (Eq. (7)), ``g_j``
 the residual gradients of Eqs. (20)-(22) -- the factors whose product with the
-prior is ``p_s`` itself. So the initial log weight also carries
+prior is ``p_s`` itself. (With ``N > 3`` frames the linearisation is about the
+minimiser ``c_N``, where the residuals ``r_j`` do not vanish:
+``Lt_j(x) = exp(-(r_j + g_j . (x_N - c_N))**2 / (2 rho**2))``, whose product
+over ``j`` is the ``N``-frame ``p_s``'s likelihood factor up to a constant,
+because ``sum_j r_j g_j = 0`` at the minimiser.) So the initial log weight also carries
 ``sum_j log Lt_j``, and step ``k`` adds ``log L_k - log Lt_k``. After ``mu_3``
 every ``Lt`` has been swapped for the exact ``L`` and the weights are
 ``prior * L_1 L_2 L_3 / q``, the importance weights of the posterior; on the
@@ -106,10 +121,11 @@ from .resampling import (
     normalise,
     residual,
     systematic,
+    weighted_density,
     weighted_moments,
     weighted_standard_errors,
 )
-from .second_order import second_order_batch
+from .second_order import minimiser, second_order_batch
 
 __all__ = [
     "DEFAULT_DF",
@@ -179,9 +195,9 @@ class ParticleResult:
         States ``(x, y, v)`` at time 3.
     log_weights : ndarray, shape (N,)
         Normalised: ``logsumexp(log_weights) == 0``; ``-inf`` is weight zero.
-    ess : ndarray, shape (3,)
+    ess : ndarray, shape (N,)
         Effective sample size after each measurement.
-    resampled : ndarray of bool, shape (3,)
+    resampled : ndarray of bool, shape (N,)
         Whether the particles were resampled before measurement ``k + 1`` (never before the first).
     ancestors : ndarray of int, shape (N,)
         The time-1 draw each particle descends from; resampling duplicates
@@ -241,58 +257,15 @@ class ParticleResult:
     ) -> np.ndarray:
         """Weighted density estimate of one component's marginal on ``grid``.
 
-        Parameters
-        ----------
-        component : {"x", "y", "v"}
-        grid : array_like, shape (G,)
-            Increasing points. For ``method="histogram"`` they must be evenly
-            spaced: they are the centres of the bins.
-        method : {"kde", "histogram"}
-            ``"kde"``: a weighted Gaussian kernel density estimate;
-            ``"histogram"``: the weight in each bin over its width (weight
-            outside the bins is dropped).
-        bandwidth : float, optional
-            The kernel SD for ``"kde"``; default Silverman's rule
-            ``0.9 min(sd, IQR / 1.34) ESS**(-1/5)`` with weighted quantiles.
+        :func:`depthcore.resampling.weighted_density` of the particles' ``component``
+        (``"x"``, ``"y"`` or ``"v"``); ``method`` is ``"kde"`` or ``"histogram"``.
 
         Returns
         -------
         ndarray, shape (G,)
         """
         x = self.particles[:, _component(component)]
-        W = self.weights
-        grid = _checks.finite_array(grid, "grid")
-        if grid.ndim != 1 or grid.size < 2 or not np.all(np.diff(grid) > 0):
-            raise ValueError(
-                f"grid must be increasing with at least 2 points, got shape {grid.shape}"
-            )
-        if method == "histogram":
-            step = np.diff(grid)
-            if not np.allclose(step, step[0], rtol=1e-9, atol=0):
-                raise ValueError("grid must be evenly spaced for method='histogram'")
-            edges = np.concatenate([grid - step[0] / 2, grid[-1:] + step[0] / 2])
-            return np.histogram(x, bins=edges, weights=W)[0] / step[0]
-        if method != "kde":
-            raise ValueError(f"method must be 'kde' or 'histogram', got {method!r}")
-        if bandwidth is None:
-            h = _silverman(x, W)
-        else:
-            h = _checks.positive_scalar(bandwidth, "bandwidth")
-        keep = W > 0
-        z = (grid[:, None] - x[keep]) / h
-        return np.exp(-0.5 * z**2) @ W[keep] / (np.sqrt(2.0 * np.pi) * h)
-
-
-def _silverman(x, W) -> float:
-    """Silverman's bandwidth ``0.9 min(sd, IQR / 1.34) n**(-1/5)`` with weights (n the ESS)."""
-    order = np.argsort(x)
-    cdf = np.cumsum(W[order])
-    q1, q3 = np.interp([0.25, 0.75], cdf - W[order] / 2, x[order])
-    sd = float(weighted_moments(x, W)[1])
-    spread = min(sd, (q3 - q1) / 1.34) if q3 > q1 else sd
-    if not spread > 0:
-        raise ValueError("the particles have a single distinct value: pass bandwidth")
-    return 0.9 * spread * (1.0 / np.sum(W**2)) ** -0.2
+        return weighted_density(x, self.weights, grid, method, bandwidth)
 
 
 def _component(component: str) -> int:
@@ -310,8 +283,8 @@ class ParticleBatch:
     particles : ndarray, shape (B, N, 3)
     log_weights : ndarray, shape (B, N)
         Normalised along the last axis.
-    ess : ndarray, shape (B, 3)
-    resampled : ndarray of bool, shape (B, 3)
+    ess : ndarray, shape (B, N)
+    resampled : ndarray of bool, shape (B, N)
     ancestors : ndarray of int, shape (B, N)
     proposal : str
     """
@@ -374,13 +347,14 @@ def _degrees_of_freedom(df) -> float:
     return _checks.positive_scalar(df, "df")
 
 
-def _linearised_log_likelihood(x3, c, g, rho, k: int) -> np.ndarray:
+def _linearised_log_likelihood(x3, c, g, r0, rho, k: int) -> np.ndarray:
     """``log Lt_k``: the log likelihood of ``mu_{k+1}`` linearised about ``c``, at states ``x3``.
 
-    ``-(g_k . (x3 - c))**2 / (2 rho**2)`` with ``g_k`` (B, 3) the gradient of
-    the residual of ``mu_{k+1}`` at ``c`` (Eq. (8)); ``x3`` (B, n, 3) at time 3.
+    ``-(r0_k + g_k . (x3 - c))**2 / (2 rho**2)`` with ``g_k`` (B, 3) the gradient of
+    the residual of ``mu_{k+1}`` at ``c`` (Eq. (8)) and ``r0_k`` (B,) the residual
+    there (0 at the paper's noise-free state); ``x3`` (B, n, 3) at the last frame.
     """
-    r = np.einsum("bnj,bj->bn", x3 - c[:, None, :], g[:, k]) / rho[:, None]
+    r = (np.einsum("bnj,bj->bn", x3 - c[:, None, :], g[:, k]) + r0[:, k, None]) / rho[:, None]
     return -0.5 * r**2
 
 
@@ -390,13 +364,19 @@ def _initial(mu, rho, prior_mean, prior_cov, N, rng, proposal, df, inflation):
         L = np.linalg.cholesky(prior_cov)
         x1 = prior_mean[:, None, :] + rng.standard_normal((len(mu), N, 3)) @ L.T
         return x1, np.zeros(x1.shape[:2]), None
+    n_frames = mu.shape[1]
     mean_s, cov_s = second_order_batch(mu, rho, prior_mean, prior_cov)
     x3, log_q = student_t(mean_s, inflation**2 * cov_s, df, N, rng)
-    c = model.noise_free_states(mu)
-    g = model.residual_gradients(c)  # (B, 3, 3): rows g_k, Eqs. (20)-(22)
-    look_ahead = (c, g)
-    log_lt = sum(_linearised_log_likelihood(x3, c, g, rho, k) for k in range(3))
-    x1 = model.G(x3, -2)
+    if n_frames == 3:
+        c = model.noise_free_states(mu)
+        r0 = np.zeros(mu.shape)  # f(c) = 0, Eq. (7)
+    else:
+        c = minimiser(mu)
+        r0 = model.residuals(c, mu)
+    g = model.residual_gradients(c, n_frames)  # (B, N, 3): rows g_k, Eqs. (20)-(22)
+    look_ahead = (c, g, r0)
+    log_lt = sum(_linearised_log_likelihood(x3, c, g, r0, rho, k) for k in range(n_frames))
+    x1 = model.G(x3, 1 - n_frames)
     log_prior = gaussian_logpdf(x1, prior_mean[:, None, :], prior_cov)
     return x1, log_prior - log_q + log_lt, look_ahead
 
@@ -426,12 +406,13 @@ def run(
     df: float = DEFAULT_DF,
     inflation: float = DEFAULT_INFLATION,
 ) -> ParticleBatch:
-    """The particle filter for ``B`` triples of measurements at once, vectorised over trials.
+    """The particle filter for ``B`` problems at once, vectorised over trials.
 
     Parameters
     ----------
-    mu : array_like, shape (B, 3)
-        One triple per row, each checked as in :func:`depthcore._checks.measurements`.
+    mu : array_like, shape (B, N)
+        ``N >= 3`` bearings per row (the paper's triple for ``N = 3``), checked
+        by :func:`depthcore._checks.measurements_batch`.
     rho : float or array_like, shape (B,)
         Noise standard deviation, > 0.
     prior_mean : array_like, shape (3,) or (B, 3)
@@ -460,12 +441,10 @@ def run(
     ParticleBatch
     """
     prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
-    mu, rho, prior_mean, _ = _checks.batch_inputs(
-        mu, rho, prior_mean, prior_cov
-    )  # checks each triple
-    if mu.ndim != 2 or mu.shape[1] != 3:
-        raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
-    B = mu.shape[0]
+    mu, rho, prior_mean, _ = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)  # checks each row
+    if mu.ndim != 2:
+        raise ValueError(f"mu must have shape (B, N), got shape {mu.shape}")
+    B, n_frames = mu.shape
     rho = np.broadcast_to(rho, (B,))
     N = _checks.count(n_particles, "n_particles")
     check_rng(rng)
@@ -480,10 +459,10 @@ def run(
     inflation = _checks.positive_scalar(inflation, "inflation")
 
     x, log_w, look_ahead = _initial(mu, rho, prior_mean, prior_cov, N, rng, proposal, df, inflation)
-    ess = np.zeros((B, 3))
-    resampled = np.zeros((B, 3), dtype=bool)
+    ess = np.zeros((B, n_frames))
+    resampled = np.zeros((B, n_frames), dtype=bool)
     ancestors = np.broadcast_to(np.arange(N), (B, N))
-    for k in range(3):
+    for k in range(n_frames):
         if k > 0:
             resampled[:, k] = ess[:, k - 1] < threshold * N
             x, log_w, ancestors = _resample(
@@ -492,7 +471,9 @@ def run(
             x = model.G(x)  # Eq. (1): the deterministic motion
         log_w = log_w + model.log_likelihood(mu[:, k, None], x, rho[:, None], front=True)
         if look_ahead is not None:
-            log_w = log_w - _linearised_log_likelihood(model.G(x, 2 - k), *look_ahead, rho, k)
+            log_w = log_w - _linearised_log_likelihood(
+                model.G(x, n_frames - 1 - k), *look_ahead, rho, k
+            )
         dead = ~np.any(np.isfinite(log_w), axis=-1)
         if np.any(dead):
             raise RuntimeError(
@@ -516,12 +497,12 @@ def particle_filter(
     df: float = DEFAULT_DF,
     inflation: float = DEFAULT_INFLATION,
 ) -> ParticleResult:
-    """The particle filter for one triple of measurements.
+    """The particle filter for one sequence of bearings (the paper's: one triple).
 
     Parameters
     ----------
-    mu : array_like, shape (3,)
-        Checked by :func:`depthcore._checks.measurements`.
+    mu : array_like, shape (N,)
+        ``N >= 3`` bearings; a triple is checked by :func:`depthcore._checks.measurements`.
     rho : float
         Noise standard deviation, > 0.
     prior : Gaussian
@@ -535,10 +516,14 @@ def particle_filter(
     Returns
     -------
     ParticleResult
-        Weighted particles at time 3, the ESS after each measurement; moments
+        Weighted particles at frame ``N``, the ESS after each measurement; moments
         and densities of the depth and velocity.
     """
-    mu = _checks.measurements(mu)
+    mu = _checks.finite_array(mu, "mu")
+    if mu.shape == (3,):
+        mu = _checks.measurements(mu)
+    elif mu.ndim != 1:
+        raise ValueError(f"mu must have shape (N,), got shape {mu.shape}")
     rho = _checks.positive_scalar(rho, "rho")
     if not isinstance(prior, Gaussian):
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")

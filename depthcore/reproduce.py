@@ -2,7 +2,8 @@
 
 Recommended import: ``from depthcore import reproduce``.
 
-Everything here iterates the registry :data:`depthcore.filters.FILTERS`;
+Everything here iterates the default entries of the registry
+:data:`depthcore.filters.FILTERS` (:data:`~depthcore.filters.NAMES`);
 :mod:`depthcore.figures` only draws what :func:`curves` returns, and
 :mod:`depthcore.report` formats what :func:`reproduce` and :func:`summarize` return.
 
@@ -78,7 +79,7 @@ def summarize(mu, rho: float, prior: Gaussian, seed=PARTICLE_SEED) -> dict:
         ``prob_behind_camera_all_depths`` (with every real depth allowed).
     """
     c = noise_free_state(mu)
-    filters = {name: _moments(_run(name, mu, rho, prior, seed)) for name in FILTERS}
+    filters = {name: _moments(_run(name, mu, rho, prior, seed)) for name in NAMES}
     filters["optimal"]["prob_behind_camera_all_depths"] = float(
         _run("optimal", mu, rho, prior, seed, support="all").extras["prob_behind_camera"]
     )

@@ -21,7 +21,9 @@ leave the current filtering distribution invariant,
     pi_k(x_1) ~ N(x_1; m, P) [y_1 > 0] prod_{j <= k} p(mu_j | G^{j-1} x_1),
 
 so duplicated particles spread out again over ``pi_k``. Since the motion is
-deterministic, the time-1 state ``x_1`` is a static parameter of the model and
+deterministic (no process noise: the registry, :mod:`depthcore.filters`,
+refuses ``process_noise > 0`` for this filter, whose state is the static
+``x_1``), the time-1 state ``x_1`` is a static parameter of the model and
 ``pi_k`` is its posterior given the first ``k`` bearings; the state at frame
 ``k`` is ``G^{k-1} x_1``. Every step uses only ``mu_1 .. mu_k``: the filter is
 causal, and its effective sample size after ``mu_k`` measures how well the
@@ -59,12 +61,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _checks, model
-from .gaussian import Gaussian
+from .gaussian import INDEX, Gaussian
 from .resampling import (
     RESAMPLERS,
     check_rng,
     effective_sample_size,
     normalise,
+    weighted_density,
     weighted_mean_and_cov,
 )
 
@@ -108,6 +111,28 @@ class ResampleMoveBatch:
             out[f"{name}_mean"] = mean
             out[f"{name}_sd"] = np.sqrt(np.sum(W * (x - mean[:, None]) ** 2, axis=-1))
         return out
+
+    def density(
+        self, component: str, grid, method: str = "kde", bandwidth: float | None = None
+    ) -> np.ndarray:
+        """Weighted density estimate of one component's marginal on ``grid``, for one trial.
+
+        :func:`depthcore.resampling.weighted_density` of the particles'
+        ``component`` (``"x"``, ``"y"`` or ``"v"``) at the last frame; the
+        batch must hold one trial (as :func:`resample_move` returns).
+
+        Returns
+        -------
+        ndarray, shape (G,)
+        """
+        if component not in INDEX:
+            raise ValueError(f"component must be one of {tuple(INDEX)}, got {component!r}")
+        if self.particles.shape[0] != 1:
+            raise ValueError(
+                f"density needs a batch of one trial, got {self.particles.shape[0]} trials"
+            )
+        x = self.particles[0, :, INDEX[component]]
+        return weighted_density(x, np.exp(self.log_weights[0]), grid, method, bandwidth)
 
 
 def _log_likelihood(mu_k, x1, k: int, rho) -> np.ndarray:

@@ -12,6 +12,29 @@ at ``c``, its Hessian there is ``J = 2 sum_k g_k g_k^T`` (``g_k`` the gradient o
 
 up to a constant. The paper prints ``rho**2 J^{-1}``; ``reading="printed"``
 follows the print, ``reading="derived"`` (the default) the expansion.
+
+N frames (the model of :mod:`depthcore.bank`). With ``N > 3`` bearings and no
+process noise, ``f = sum_k r_k**2`` over all ``N`` residuals no longer vanishes
+anywhere: the Gaussian is centred on its minimiser ``c_N`` over the state at
+frame ``N`` (:func:`minimiser`, Gauss-Newton from the three-frame noise-free
+solutions of frames 1-3 and ``N-2 .. N`` and a coarse profile over depth),
+where ``J_r^T r = 0`` (``J_r`` the residuals' Jacobian, rows
+:func:`depthcore.model.residual_gradients`), so that
+``f(c_N + d) ~ f(c_N) + |J_r d|**2`` and the likelihood becomes
+``N(x, c_N, 2 rho**2 H^{-1})`` with the Gauss-Newton Hessian ``H = 2 J_r^T J_r``,
+i.e. covariance ``rho**2 (J_r^T J_r)^{-1}``. It is multiplied by the prior as
+``p_s`` is, Eq. (8). At ``N = 3`` the minimiser is ``c`` exactly (``f(c) = 0``,
+Eq. (7)), the Gauss-Newton Hessian is the Hessian ``J`` itself, and this is
+``p_s``.
+
+With process noise ``a_k ~ N(0, q**2)`` on the velocity the unknowns are the
+whole trajectory: the state at frame 1 and the accelerations
+``a_1 .. a_{N-1}``, on which every state is affine. The Laplace (Gauss-Newton)
+approximation of ``p(mu | x_1, a) p(a)`` at its maximiser (the minimiser of
+``sum_k r_k**2 / rho**2 + sum_k a_k**2 / q**2``) is multiplied by the prior on
+``x_1`` and marginalised to the state at frame ``N``
+(:func:`trajectory_laplace`). As ``q -> 0`` the penalty pins the
+accelerations at 0 and it tends to the approximation without process noise.
 """
 
 from __future__ import annotations
@@ -24,7 +47,10 @@ from .model import f, noise_free_state, noise_free_states, residual_gradients, r
 
 __all__ = [
     "A2",
+    "CONDITION_LIMIT",
+    "MAX_ITERATIONS",
     "READINGS",
+    "STEP_TOL",
     "b2",
     "f",
     "hessian",
@@ -34,8 +60,10 @@ __all__ = [
     "residual_gradients",
     "residuals",
     "second_order",
+    "minimiser",
     "second_order_batch",
     "theorem1_precision",
+    "trajectory_laplace",
 ]
 
 READINGS = ("derived", "printed")
@@ -89,49 +117,317 @@ def likelihood_covariance(mu, rho: float, reading: str = "derived") -> np.ndarra
 
 
 def second_order_batch(
-    mu, rho: float, prior_mean, prior_cov, reading: str = "derived"
+    mu, rho: float, prior_mean, prior_cov, reading: str = "derived", process_noise: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. (8) for a batch of triples: means ``(B, 3)`` and covariances ``(B, 3, 3)``.
+    """Eq. (8) for a batch: means ``(B, 3)`` and covariances ``(B, 3, 3)`` at frame ``N``.
+
+    For triples (``N = 3``, ``q = 0``) this is ``p_s``; for ``N > 3`` bearings
+    the Gaussian is centred on the minimiser of the misfit over all of them,
+    and with process noise ``q > 0`` it is the Laplace approximation of the
+    whole trajectory's likelihood (see the module docstring).
 
     Parameters
     ----------
-    mu : array_like, shape (B, 3)
+    mu : array_like, shape (B, N)
+        ``N >= 3`` bearings per row.
     rho : float or array_like, shape (B,)
     prior_mean : array_like, shape (3,) or (B, 3)
     prior_cov : array_like, shape (3, 3) or (B, 3, 3)
         Symmetric positive definite. All four are checked by
         :func:`depthcore._checks.batch_problem`.
     reading : {"derived", "printed"}
+    process_noise : float
+        SD ``q >= 0`` of the velocity's change per frame.
     """
     factor = {"derived": 2.0, "printed": 1.0}[_reading(reading)]
     mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
+    q = _checks.nonnegative_scalar(process_noise, "process_noise")
     if mu.ndim != 2:
-        raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
-    c = noise_free_states(mu)
-    g = np.stack(
-        [model.observation_vector(model.G(c, k - 2)) @ model.G_linear(k - 2) for k in range(3)],
-        axis=-2,
-    )  # (B, 3, 3), rows in time order
-    return _square_root_solve(
-        c, g, np.sqrt(2.0 / factor) / np.broadcast_to(rho, (c.shape[0],)), prior_mean, prior_cov
-    )
+        raise ValueError(f"mu must have shape (B, N), got shape {mu.shape}")
+    B, n_frames = mu.shape
+    weight = np.sqrt(2.0 / factor) / np.broadcast_to(rho, (B,))
+    if q > 0:
+        return trajectory_laplace(mu, weight, prior_mean, prior_cov, q)
+    if n_frames == 3:
+        c = noise_free_states(mu)
+        g = np.stack(
+            [model.observation_vector(model.G(c, k - 2)) @ model.G_linear(k - 2) for k in range(3)],
+            axis=-2,
+        )  # (B, 3, 3), rows in time order
+    else:
+        c = minimiser(mu)
+        g = residual_gradients(c, n_frames)  # (B, N, 3)
+    return _square_root_solve(c, g, weight, prior_mean, prior_cov)
+
+
+#: Gauss-Newton iterations of :func:`minimiser` and :func:`trajectory_laplace`.
+MAX_ITERATIONS = 200
+#: Gauss-Newton stops when no component moves by more than this, relative to ``1 + |x|``.
+STEP_TOL = 1e-11
+#: A minimiser whose scaled residual Jacobian has a larger condition number is refused.
+CONDITION_LIMIT = 1e12
+#: Depths at frame 1 of the coarse profile that starts :func:`minimiser`.
+_PROFILE_DEPTHS = np.geomspace(1e-2, 1e5, 60)
+_MAX_HALVINGS = 60
+
+
+def _frames_back(n_frames: int) -> np.ndarray:
+    """``k - N + 1`` for ``k = 0 .. N - 1``: each frame's offset from the last."""
+    return np.arange(n_frames) - (n_frames - 1.0)
+
+
+def _misfit(x, mu) -> np.ndarray:
+    """``f`` of Eq. (5) over all ``N`` bearings at last-frame states ``x`` (B, M, 3), shape (B, M).
+
+    ``inf`` where the depth at frame 1 is not positive.
+    """
+    n_frames = mu.shape[-1]
+    front = x[..., 1] - (n_frames - 1) > 0
+    safe = np.where(front[..., None], x, [0.0, float(n_frames), 0.0])
+    back = _frames_back(n_frames)
+    bearing = (safe[..., None, 0] + back * safe[..., None, 2]) / (safe[..., None, 1] + back)
+    return np.where(front, np.sum((bearing - mu[:, None, :]) ** 2, axis=-1), np.inf)
+
+
+def _starts(mu) -> np.ndarray:
+    """Candidate last-frame states (B, M, 3) for :func:`minimiser`.
+
+    The noise-free solutions, Eq. (7), of frames 1-3 and ``N-2 .. N`` moved to
+    frame ``N``, and at each depth of a coarse grid the least-squares
+    ``(x, v)`` (at a fixed depth the bearings are linear in them).
+    """
+    n_frames = mu.shape[-1]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        first = model.G(model.noise_free_states_unchecked(mu[:, :3]), n_frames - 3)
+        last = model.noise_free_states_unchecked(mu[:, -3:])
+    back = _frames_back(n_frames)
+    y_last = _PROFILE_DEPTHS + (n_frames - 1)
+    yk = y_last[:, None] + back  # (G, N) depths at each frame
+    A = np.stack([1.0 / yk, back / yk], axis=-1)  # bearings = A @ (x_N, v)
+    xv = np.einsum("gij,bj->bgi", np.linalg.pinv(A), mu)  # (B, G, 2)
+    grid = np.stack([xv[..., 0], np.broadcast_to(y_last, xv.shape[:-1]), xv[..., 1]], axis=-1)
+    out = np.concatenate([first[:, None], last[:, None], grid], axis=1)
+    return np.where(np.isfinite(out), out, 0.0)
+
+
+def minimiser(mu) -> np.ndarray:
+    """The minimiser over the state at frame ``N`` of ``f = sum_k r_k**2``, batched.
+
+    Gauss-Newton (each step a least-squares solve of ``J_r d = -r`` by QR) from
+    the best of the starts of :func:`_starts`, with the step halved until ``f``
+    decreases and the point stays in front of the camera at frame 1.
+
+    Parameters
+    ----------
+    mu : ndarray, shape (B, N)
+        Bearings, ``N >= 3``, already checked.
+
+    Returns
+    -------
+    ndarray, shape (B, 3)
+        ``c_N``; for ``N = 3`` the noise-free state ``c`` of Eq. (7) up to rounding.
+
+    A :class:`ValueError` names ``mu[i]`` when no start lies in front of the
+    camera, when the iteration does not converge in :data:`MAX_ITERATIONS`
+    steps, or when the minimiser is not determined (the residual Jacobian's
+    condition number, columns scaled to unit norm, exceeds :data:`CONDITION_LIMIT`).
+    """
+    mu = np.asarray(mu, dtype=float)
+    B, n_frames = mu.shape
+    starts = _starts(mu)
+    f0 = _misfit(starts, mu)
+    x = np.take_along_axis(starts, np.argmin(f0, axis=1)[:, None, None], axis=1)[:, 0]
+    f = np.min(f0, axis=1)
+    if not np.all(np.isfinite(f)):
+        i = int(np.argmax(~np.isfinite(f)))
+        raise ValueError(f"mu[{i}]: no start in front of the camera for the misfit's minimiser")
+    active = np.ones(B, dtype=bool)
+    for _ in range(MAX_ITERATIONS):
+        if not np.any(active):
+            break
+        r = residuals(x, mu)
+        J = residual_gradients(x, n_frames)
+        step = _lstsq(J, -r)
+        x_new, f_new = _damped(x, step, f, lambda y: _misfit(y[:, None], mu)[:, 0])
+        moved = np.max(np.abs(x_new - x) / (1.0 + np.abs(x)), axis=-1)
+        x = np.where(active[:, None], x_new, x)
+        f = np.where(active, f_new, f)
+        active = active & (moved > STEP_TOL)
+    if np.any(active):
+        raise ValueError(
+            f"mu[{int(np.argmax(active))}]: Gauss-Newton on the misfit of the bearings did not "
+            f"converge in {MAX_ITERATIONS} iterations"
+        )
+    _determined(residual_gradients(x, n_frames), "the misfit of the bearings")
+    return x
+
+
+def _lstsq(J, r) -> np.ndarray:
+    """Least-squares solutions ``d`` of ``J d = r`` by QR, batched: J (B, M, n), r (B, M)."""
+    Q, R = np.linalg.qr(J)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        d = np.linalg.solve(R, np.einsum("bmi,bm->bi", Q, r)[..., None])[..., 0]
+    return np.where(np.isfinite(d), d, 0.0)
+
+
+def _determined(J, what: str) -> None:
+    """Refuse, naming ``mu[i]``, a Jacobian whose columns are (numerically) dependent."""
+    scale = np.linalg.norm(J, axis=-2, keepdims=True)
+    scale = np.where(scale > 0, scale, 1.0)
+    cond = np.linalg.cond(J / scale)
+    bad = ~(cond < CONDITION_LIMIT)
+    if np.any(bad):
+        i = int(np.argmax(bad))
+        raise ValueError(
+            f"mu[{i}] does not determine the minimiser of {what}: the Jacobian's condition "
+            f"number is {float(cond[i]):.3g}"
+        )
+
+
+def _damped(x, step, f, objective):
+    """``x + t step`` with ``t`` halved from 1 until the objective does not increase."""
+    t = np.ones(x.shape[:-1])
+    x_new = x + step
+    f_new = objective(x_new)
+    for _ in range(_MAX_HALVINGS):
+        bad = ~(f_new <= f)
+        if not np.any(bad):
+            break
+        t = np.where(bad, 0.5 * t, t)
+        trial = x + t[..., None] * step
+        x_new = np.where(bad[..., None], trial, x_new)
+        f_new = np.where(bad, objective(trial), f_new)
+    keep = ~(f_new <= f)
+    return np.where(keep[..., None], x, x_new), np.where(keep, f, f_new)
+
+
+def _trajectory_map(n_frames: int) -> np.ndarray:
+    """``D`` (N, N - 1) with ``x_k = x_1 + (k - 1) v_1 + sum_i D[k-1, i-1] a_i``.
+
+    ``D[k-1, i-1] = max(k - 1 - i, 0)``: acceleration ``a_i`` changes ``v_{i+1}`` onwards.
+    """
+    k = np.arange(n_frames)[:, None]
+    i = np.arange(1, n_frames)[None, :]
+    return np.maximum(k - i, 0).astype(float)
+
+
+def _trajectory_residuals(z, mu, D):
+    """Bearing residuals (N,) and their Jacobian (N, N + 2) of ``z = (x_1, y_1, v_1, a)``."""
+    n_frames = mu.shape[-1]
+    j = np.arange(n_frames, dtype=float)
+    x = z[0] + j * z[2] + D @ z[3:]
+    y = z[1] + j
+    J = np.empty((n_frames, n_frames + 2))
+    J[:, 0] = 1.0 / y
+    J[:, 1] = -x / y**2
+    J[:, 2] = j / y
+    J[:, 3:] = D / y[:, None]
+    return x / y - mu, J
+
+
+def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
+    """The Laplace approximation of the trajectory's likelihood, times the prior, at frame ``N``.
+
+    For each row, with ``z = (x_1, y_1, v_1, a_1 .. a_{N-1})``, Gauss-Newton
+    minimises ``|weight r(z)|**2 + |a / q|**2`` (``r`` the ``N`` bearing
+    residuals; ``weight = 1 / rho`` for the derived reading), starting from the
+    minimiser without process noise (:func:`minimiser`, moved to frame 1,
+    ``a = 0``). At the minimiser ``z*`` the stacked Jacobian ``M`` of both
+    terms gives the Gaussian ``N(z, z*, (M^T M)^{-1})``; multiplied by the
+    prior ``N(x_1, m, P)`` (a least-squares problem solved by QR, as
+    :func:`_square_root_solve` does) and mapped to the state at frame ``N``,
+    ``x_N = x_1 + (N - 1) v_1 + sum_i (N - 1 - i) a_i``, ``y_N = y_1 + N - 1``,
+    ``v_N = v_1 + sum_i a_i``, which is linear in ``z``.
+
+    Parameters
+    ----------
+    mu : ndarray, shape (B, N)
+    weight : ndarray, shape (B,)
+    prior_mean : ndarray, shape (3,) or (B, 3)
+    prior_cov : ndarray, shape (3, 3) or (B, 3, 3)
+    q : float
+        ``> 0``.
+
+    Returns
+    -------
+    mean : ndarray, shape (B, 3)
+    cov : ndarray, shape (B, 3, 3)
+    """
+    B, n_frames = mu.shape
+    dim = n_frames + 2
+    D = _trajectory_map(n_frames)
+    L = np.broadcast_to(np.linalg.cholesky(np.asarray(prior_cov, dtype=float)), (B, 3, 3))
+    m = np.broadcast_to(np.asarray(prior_mean, dtype=float), (B, 3))
+    start = model.G(minimiser(mu), 1 - n_frames)
+    T = np.zeros((3, dim))
+    T[0, 0], T[0, 2], T[0, 3:] = 1.0, n_frames - 1.0, D[-1]
+    T[1, 1] = 1.0
+    T[2, 2], T[2, 3:] = 1.0, 1.0
+    offset = np.array([0.0, n_frames - 1.0, 0.0])
+    penalty = np.zeros((n_frames - 1, dim))
+    penalty[:, 3:] = np.eye(n_frames - 1) / q
+    means, covs = np.empty((B, 3)), np.empty((B, 3, 3))
+    for b in range(B):
+
+        def objective(z, b=b):
+            if not z[1] > 0:
+                return np.inf
+            r, _ = _trajectory_residuals(z, mu[b], D)
+            return float(np.sum((weight[b] * r) ** 2) + np.sum((z[3:] / q) ** 2))
+
+        z = np.concatenate([start[b], np.zeros(n_frames - 1)])
+        f = objective(z)
+        for _ in range(MAX_ITERATIONS):
+            r, J = _trajectory_residuals(z, mu[b], D)
+            M = np.concatenate([weight[b] * J, penalty])
+            rhs = -np.concatenate([weight[b] * r, z[3:] / q])
+            step = _lstsq(M[None], rhs[None])[0]
+            z_new, f_new = _damped(z[None], step[None], np.array([f]), _rows(objective))
+            moved = np.max(np.abs(z_new[0] - z) / (1.0 + np.abs(z)))
+            z, f = z_new[0], float(f_new[0])
+            if not moved > STEP_TOL:
+                break
+        else:
+            raise ValueError(
+                f"mu[{b}]: Gauss-Newton on the trajectory's likelihood with process_noise "
+                f"{q:g} did not converge in {MAX_ITERATIONS} iterations"
+            )
+        _, J = _trajectory_residuals(z, mu[b], D)
+        M = np.concatenate([weight[b] * J, penalty])
+        prior_rows = np.zeros((3, dim))
+        prior_rows[:, :3] = np.linalg.inv(L[b])
+        K = np.concatenate([M, prior_rows])
+        rhs = np.concatenate([M @ z, prior_rows[:, :3] @ m[b]])
+        Q, R = np.linalg.qr(K)
+        R_inv = np.linalg.inv(R)
+        post = R_inv @ (Q.T @ rhs)
+        cov = T @ R_inv @ R_inv.T @ T.T
+        means[b] = T @ post + offset
+        covs[b] = 0.5 * (cov + cov.T)
+    return means, covs
+
+
+def _rows(objective):
+    """Apply a one-row objective to an array of shape (1, dim) (for :func:`_damped`)."""
+    return lambda z: np.array([objective(z[0])])
 
 
 def _square_root_solve(c, g, weight, prior_mean, prior_cov):
-    """Eq. (8) in square-root form: the Gaussian ``N(c, S) p(G^{-2} x)`` by QR, batched.
+    """Eq. (8) in square-root form: the Gaussian ``N(c, S) p(G^{1-N} x)`` by QR, batched.
 
-    With ``S^{-1} = weight**2 g^T g`` (``g`` the residual gradients, ``weight``
-    per problem) and ``P = L L^T``, the mean is ``c + delta`` where ``delta``
-    minimises ``|weight g delta|**2 + |L^{-1} (A2 (c + delta) + b2 - m)|**2``:
-    a least-squares problem whose 6 x 3 matrix ``K`` stacks the whitened
-    residual Jacobian on the prior's whitened map. Its QR factor ``R``
-    gives ``delta = R^{-1} Q^T r`` and the covariance ``R^{-1} R^{-T}``,
-    without forming (and squaring the condition of) the information matrix.
+    With ``S^{-1} = weight**2 g^T g`` (``g`` the ``N`` residual gradients,
+    ``weight`` per problem) and ``P = L L^T``, the mean is ``c + delta`` where
+    ``delta`` minimises ``|weight g delta|**2 + |L^{-1} (A (c + delta) + b - m)|**2``
+    with ``G^{1-N} x = A x + b`` (``A2``, ``b2`` for ``N = 3``): a least-squares
+    problem whose ``(N + 3) x 3`` matrix ``K`` stacks the whitened residual
+    Jacobian on the prior's whitened map. Its QR factor ``R`` gives
+    ``delta = R^{-1} Q^T r`` and the covariance ``R^{-1} R^{-T}``, without
+    forming (and squaring the condition of) the information matrix.
 
     Parameters
     ----------
     c : ndarray, shape (B, 3)
-    g : ndarray, shape (B, 3, 3)
+    g : ndarray, shape (B, N, 3)
     weight : ndarray, shape (B,)
     prior_mean : array_like, shape (3,) or (B, 3)
     prior_cov : array_like, shape (3, 3) or (B, 3, 3)
@@ -141,40 +437,55 @@ def _square_root_solve(c, g, weight, prior_mean, prior_cov):
     mean : ndarray, shape (B, 3)
     cov : ndarray, shape (B, 3, 3)
     """
-    B = c.shape[0]
+    B, n_frames = g.shape[:2]
+    A, b = (A2, b2) if n_frames == 3 else (model.G_linear(1 - n_frames), model.e * (1 - n_frames))
     L = np.broadcast_to(np.linalg.cholesky(np.asarray(prior_cov, dtype=float)), (B, 3, 3))
-    gap = np.broadcast_to(np.asarray(prior_mean, dtype=float), (B, 3)) - b2 - c @ A2.T
+    gap = np.broadcast_to(np.asarray(prior_mean, dtype=float), (B, 3)) - b - c @ A.T
     whitened = np.linalg.solve(
-        L, np.concatenate([np.broadcast_to(A2, (B, 3, 3)), gap[..., None]], axis=-1)
+        L, np.concatenate([np.broadcast_to(A, (B, 3, 3)), gap[..., None]], axis=-1)
     )
-    K = np.concatenate([weight[:, None, None] * g, whitened[..., :3]], axis=1)  # (B, 6, 3)
+    K = np.concatenate([weight[:, None, None] * g, whitened[..., :3]], axis=1)  # (B, N + 3, 3)
     Q, R = np.linalg.qr(K)
     R_inv = np.linalg.inv(R)
-    delta = np.einsum("bij,bkj,bk->bi", R_inv, Q[:, 3:], whitened[..., 3])
+    delta = np.einsum("bij,bkj,bk->bi", R_inv, Q[:, n_frames:], whitened[..., 3])
     cov = R_inv @ np.swapaxes(R_inv, -1, -2)
     return c + delta, 0.5 * (cov + np.swapaxes(cov, -1, -2))
 
 
-def second_order(mu, rho: float, prior: Gaussian, reading: str = "derived") -> Gaussian:
-    """Eq. (8): the second-order approximation ``p_s`` at time 3.
+def second_order(
+    mu, rho: float, prior: Gaussian, reading: str = "derived", process_noise: float = 0.0
+) -> Gaussian:
+    """Eq. (8): the second-order approximation ``p_s`` at time 3 (at frame ``N``).
 
     ``p_s(x) = N(x, c, S) p(G^{-2} x)`` with ``S`` from :func:`likelihood_covariance`;
-    the product of two Gaussians is a Gaussian.
+    the product of two Gaussians is a Gaussian. For ``N > 3`` bearings or
+    process noise, the generalisation of :func:`second_order_batch`.
 
     Parameters
     ----------
-    mu : array_like, shape (3,)
+    mu : array_like, shape (N,)
+        ``N >= 3`` bearings; the paper's triple for ``N = 3``.
     rho : float
         Noise standard deviation, > 0.
     prior : Gaussian
         Density of the state at time 1.
     reading : {"derived", "printed"}
+    process_noise : float
+        ``q >= 0``.
 
     Returns
     -------
     Gaussian
-        Mean and covariance of ``p_s`` (state at time 3).
+        Mean and covariance of ``p_s`` (state at frame ``N``).
     """
+    if np.ndim(mu) == 1 and np.shape(mu)[0] != 3 or process_noise != 0.0:
+        if np.ndim(mu) != 1:
+            raise ValueError(f"mu must have shape (N,), got shape {np.shape(mu)}")
+        rho = _checks.positive_scalar(rho, "rho")
+        mean, cov = second_order_batch(
+            np.asarray(mu)[None], rho, prior.mean, prior.cov, reading, process_noise
+        )
+        return Gaussian(mean[0], cov[0])
     c = noise_free_state(mu)
     rho = _checks.positive_scalar(rho, "rho")
     factor = {"derived": 2.0, "printed": 1.0}[_reading(reading)]

@@ -1,4 +1,4 @@
-"""The unscented Kalman filter on the paper's problem (Prince, section 19.4).
+"""The unscented Kalman filter on the paper's problem and its N-frame model (Prince, section 19.4).
 
 Recommended import: ``from depthcore import ukf``.
 
@@ -10,7 +10,8 @@ cross-covariance with the state are read off the transformed points
 [julier1997]_, [wan2000]_. It runs in the same order and from the same start
 as the paper's EKF (:func:`depthcore.ekf.run`): the prior is the density of the
 state at time 1, so ``mu1`` is incorporated into it directly; then predict and
-update twice.
+update twice -- or ``N - 1`` times for ``N`` bearings, with process noise on
+the velocity if asked (the model of :mod:`depthcore.bank`).
 
 Sigma points (the scaled set of [wan2000]_, section 2; the points of
 [julier1997]_, section 3, are the case ``alpha = 1, beta = 0``). With
@@ -37,7 +38,9 @@ every covariance the transform produces is positive semi-definite. (With
 
 Prediction. The motion ``x -> F x + e`` (Eq. (9)) is linear, and the unscented
 transform is exact for linear maps, so the prediction is done in closed form,
-``n = F m + e``, ``C = F P F^T`` -- the EKF's Eq. (10), with no approximation.
+``n = F m + e``, ``C = F P F^T`` -- the EKF's Eq. (10), with no approximation;
+process noise ``a_k ~ N(0, q**2)`` on the velocity adds ``q**2`` to the
+velocity's variance (textbook Eq. (19.10), :func:`depthcore.ekf.predict`).
 
 Update for the scalar measurement ``mu = h(x) + w``, ``w ~ N(0, rho**2)``,
 with sigma points ``X_i`` of the prediction ``N(n, C)`` and ``Z_i = h(X_i)``:
@@ -300,24 +303,29 @@ def run(
     rho,
     prior_mean,
     prior_cov,
+    process_noise: float = 0.0,
     sigma_points: SigmaPoints = SigmaPoints(),
     allow_behind_camera: bool = False,
 ) -> History:
     """Run the UKF over the measurements, batched like :func:`depthcore.ekf.run`.
 
     Incorporate ``mu1`` into the prior (the density of the state at time 1),
-    then predict exactly with Eq. (10) and update, once per further measurement
-    (the loop :func:`depthcore.ekf.run_gaussian_filter`).
+    then predict exactly with Eq. (10) (plus ``q**2`` on the velocity's
+    variance) and update, once per further measurement (the loop
+    :func:`depthcore.ekf.run_gaussian_filter`).
 
     Parameters
     ----------
-    mu : array_like, shape (..., 3)
-        Measurements in time order; the leading shape runs independent filters.
+    mu : array_like, shape (..., N)
+        Bearings of ``N >= 3`` frames in time order (``N = 3``: the paper's
+        triple); the leading shape runs independent filters.
     rho : float or array_like, shape (...)
         Noise standard deviation, > 0.
     prior_mean : array_like, shape (3,) or (..., 3)
     prior_cov : array_like, shape (3, 3) or (..., 3, 3)
         Symmetric positive definite.
+    process_noise : float
+        SD ``q >= 0`` of the velocity's change per frame (0: the paper's model).
     sigma_points : SigmaPoints
     allow_behind_camera : bool
         See :func:`update`.
@@ -325,13 +333,13 @@ def run(
     Returns
     -------
     History
-        ``means`` (..., 3, 3): ``means[..., i, :]`` is the mean after
-        measurement ``i + 1``; ``covs`` (..., 3, 3, 3).
+        ``means`` (..., N, 3): ``means[..., i, :]`` is the mean after
+        measurement ``i + 1``; ``covs`` (..., N, 3, 3).
     """
     if not isinstance(sigma_points, SigmaPoints):
         raise ValueError(f"sigma_points must be a SigmaPoints, got {type(sigma_points).__name__}")
     step = partial(update, sigma_points=sigma_points, allow_behind_camera=allow_behind_camera)
-    return run_gaussian_filter(step, mu, rho, prior_mean, prior_cov)
+    return run_gaussian_filter(step, mu, rho, prior_mean, prior_cov, process_noise)
 
 
 def ukf(
@@ -340,13 +348,15 @@ def ukf(
     prior: Gaussian,
     sigma_points: SigmaPoints = SigmaPoints(),
     allow_behind_camera: bool = False,
+    process_noise: float = 0.0,
 ) -> History:
-    """The unscented Kalman filter for one triple of measurements.
+    """The unscented Kalman filter for one sequence of bearings (the paper's: one triple).
 
     Parameters
     ----------
-    mu : array_like, shape (3,)
-        Checked by :func:`depthcore._checks.measurements`.
+    mu : array_like, shape (N,)
+        ``N >= 3`` bearings; a triple is checked by
+        :func:`depthcore._checks.measurements`.
     rho : float
         Noise standard deviation, > 0.
     prior : Gaussian
@@ -355,13 +365,19 @@ def ukf(
         The sigma-point rule (default ``alpha = 1, beta = 0, kappa = 0``).
     allow_behind_camera : bool
         See :func:`update`.
+    process_noise : float
+        ``q >= 0``.
 
     Returns
     -------
     History
-        Means and covariances after each measurement; ``.posterior`` at time 3.
+        Means and covariances after each measurement; ``.posterior`` at frame ``N``.
     """
-    mu = _checks.measurements(mu)
+    mu = _checks.finite_array(mu, "mu")
+    if mu.shape == (3,):
+        mu = _checks.measurements(mu)
+    elif mu.ndim != 1:
+        raise ValueError(f"mu must have shape (N,), got shape {mu.shape}")
     if not isinstance(prior, Gaussian):
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    return run(mu, rho, prior.mean, prior.cov, sigma_points, allow_behind_camera)
+    return run(mu, rho, prior.mean, prior.cov, process_noise, sigma_points, allow_behind_camera)

@@ -26,7 +26,7 @@ FILTERS = [
         ((np.nan, 0.0, 0.2), "mu must be finite"),
         ((-0.3, np.inf, 0.2), "mu must be finite"),
         ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
-        ((-0.3, 0.0), r"mu must have shape \(3,\)"),
+        ((-0.3, 0.0), r"mu must have shape (\(3,\)|\(\.\.\., N\) with N >= 3)"),
         (("a", 0.0, 0.2), "mu must be numeric"),
     ],
 )

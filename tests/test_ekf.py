@@ -135,3 +135,76 @@ def test_a_predicted_depth_whose_gradient_eq_11_overflows_is_refused():
         run([-0.3, 0.0, 0.2], 0.005, [-1.0, 1e-300, 0.0], 1000 * np.eye(3))
     with pytest.raises(ValueError, match="prior_mean .* overflows"):
         update([-1.0, 1e-300, 0.0], np.eye(3), -0.3, 0.005)
+
+
+# --- N frames and process noise ---------------------------------------------------------
+
+X1 = np.array([-1.0, 6.0, 0.4])  # state at frame 1 of an N-frame track
+
+
+def linearised_recursion(mu, rho, m, P, q):
+    """The textbook EKF in covariance form, loop by loop (Prince 19.3, Eqs. (10)-(12)).
+
+    Predict ``n = (x + v, y + 1, v)``, ``C = F P F^T + diag(0, 0, q**2)``;
+    update with the gradient of ``x / y`` at ``n``.
+    """
+    F = np.array([[1.0, 0.0, 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    means, covs = [], []
+    for k, z in enumerate(mu):
+        if k:
+            m = np.array([m[0] + m[2], m[1] + 1.0, m[2]])
+            P = F @ P @ F.T + np.diag([0.0, 0.0, q**2])
+        h = np.array([1.0 / m[1], -m[0] / m[1] ** 2, 0.0])
+        s = rho**2 + h @ P @ h
+        K = P @ h / s
+        m = m + K * (z - m[0] / m[1])
+        P = (np.eye(3) - np.outer(K, h)) @ P
+        means.append(m)
+        covs.append(P)
+    return np.array(means), np.array(covs)
+
+
+@pytest.mark.parametrize("n_frames", [4, 6, 9])
+@pytest.mark.parametrize("q", [0.0, 0.01])
+def test_n_frame_ekf_with_process_noise_is_the_linearised_recursion(n_frames, q):
+    # A small noise and the exact prior mean keep the linearisation near the track;
+    # the recursion above is the covariance form, the EKF's the square-root information form.
+    rng = np.random.default_rng(n_frames)
+    rho = 1e-4
+    mu = model.simulate_measurements(X1, rho, rng, n=n_frames)
+    P0 = np.diag([0.5, 2.0, 0.05])
+    got = run(mu, rho, X1, P0, process_noise=q)
+    means, covs = linearised_recursion(mu, rho, X1, P0, q)
+    assert got.means.shape == (n_frames, 3) and got.covs.shape == (n_frames, 3, 3)
+    assert_allclose(got.means, means, rtol=1e-10, atol=1e-12)
+    for k in range(n_frames):
+        assert_allclose(got.covs[k], covs[k], rtol=0, atol=1e-7 * np.abs(covs[k]).max())
+
+
+def test_process_noise_zero_and_three_frames_are_the_papers_ekf():
+    s = SCENARIOS["fig2"]
+    paper = ekf(s.mu, s.rho, s.prior)
+    again = run(s.mu, s.rho, s.prior.mean, s.prior.cov, process_noise=0.0)
+    assert np.array_equal(paper.means, again.means) and np.array_equal(paper.covs, again.covs)
+
+
+def test_process_noise_widens_the_velocity_and_is_checked():
+    mu = model.simulate_measurements(X1, 1e-3, np.random.default_rng(1), n=6)
+    P0 = np.diag([0.5, 2.0, 0.05])
+    still = run(mu, 1e-3, X1, P0).covs[-1]
+    moving = run(mu, 1e-3, X1, P0, process_noise=0.05).covs[-1]
+    assert moving[2, 2] > still[2, 2]
+    for bad in (-0.1, np.nan, [0.1, 0.2]):
+        with pytest.raises(ValueError, match="process_noise"):
+            run(mu, 1e-3, X1, P0, process_noise=bad)
+
+
+def test_n_frame_ekf_is_batched_like_a_loop():
+    rng = np.random.default_rng(5)
+    mu = model.simulate_measurements(X1, 1e-3, rng, n=7, size=4)
+    P0 = np.diag([0.5, 2.0, 0.05])
+    many = run(mu, 1e-3, X1, P0, process_noise=0.02)
+    for i in range(4):
+        one = run(mu[i], 1e-3, X1, P0, process_noise=0.02)
+        assert_allclose(many.means[i], one.means, rtol=1e-13)
+        assert_allclose(many.covs[i], one.covs, rtol=1e-11, atol=1e-16)

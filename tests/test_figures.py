@@ -16,7 +16,7 @@ FIG2 = SCENARIOS["fig2"]
 
 
 @pytest.mark.parametrize("key", list(SCENARIOS))
-@pytest.mark.parametrize("filters", [reproduce.PAPER_FILTERS, reproduce.FILTERS])
+@pytest.mark.parametrize("filters", [reproduce.PAPER_FILTERS, reproduce.NAMES])
 def test_figure_draws_the_filters(key, filters):
     fig = figures.figure(key, n=101, filters=filters)
     ax = fig.axes[0]
@@ -31,7 +31,7 @@ def test_figure_draws_the_filters(key, filters):
 def test_curves_are_densities_on_a_wide_grid():
     s = SCENARIOS["fig4"]
     grid = np.linspace(-1, 4, 4001)
-    c = reproduce.curves(s, grid, filters=reproduce.FILTERS)
+    c = reproduce.curves(s, grid, filters=reproduce.NAMES)
     for name in reproduce.PAPER_FILTERS:
         assert np.trapezoid(c[name], grid) == pytest.approx(1.0, abs=1e-4)
     assert np.trapezoid(c["particle"], grid) == pytest.approx(1.0, abs=1e-3)  # kernel tails
@@ -178,11 +178,11 @@ def test_extended_figure_draws_the_curves_of_every_filter():
     from depthcore.ukf import ukf
 
     s = FIG2
-    fig = figures.figure("fig2", n=101, filters=reproduce.FILTERS)
+    fig = figures.figure("fig2", n=101, filters=reproduce.NAMES)
     lines = _lines(fig.axes[0])
     grid = np.linspace(*figures.GRIDS["fig2"], 101)
-    c = reproduce.curves(s, grid, filters=reproduce.FILTERS)
-    for name in reproduce.FILTERS:
+    c = reproduce.curves(s, grid, filters=reproduce.NAMES)
+    for name in reproduce.NAMES:
         assert_allclose(lines[figures.STYLE[name]["label"]][1], c[name], rtol=1e-12, atol=0)
     u = ukf(s.mu, s.rho, s.prior, allow_behind_camera=True).posterior.marginal("y")
     u = _normal_pdf(grid, *u)

@@ -4,8 +4,16 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import ekf, model, optimal, particle, ukf
-from depthcore.filters import FILTERS, NAMES, PAPER_FILTERS, QUANTITIES, check_names, get
+from depthcore import _checks, ekf, inverse_depth, iterated, model, optimal, particle, ukf
+from depthcore.filters import (
+    ALL_NAMES,
+    FILTERS,
+    NAMES,
+    PAPER_FILTERS,
+    QUANTITIES,
+    check_names,
+    get,
+)
 from depthcore.gaussian import paper_prior_means
 from depthcore.scenarios import SCENARIOS
 
@@ -26,6 +34,7 @@ def _options(name, seed=0):
 def test_registry_lists_the_five_filters_in_table_order():
     assert NAMES == ("optimal", "second_order", "ekf", "ukf", "particle")
     assert PAPER_FILTERS == ("optimal", "second_order", "ekf")
+    assert ALL_NAMES == NAMES + ("iterated", "inverse_depth", "resample_move")
     for name, f in FILTERS.items():
         assert f.name == name and f.family in ("exact", "gaussian", "particles")
         assert f.plot_style["label"] == f.label
@@ -92,7 +101,7 @@ def test_particle_filter_needs_an_explicit_random_source():
         FILTERS["particle"](FIG2.mu, FIG2.rho, p.mean, p.cov, rng="seed")
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", ALL_NAMES)
 def test_density_integrates_to_about_one(name):
     f = FILTERS[name]
     est = f(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, **_options(name))
@@ -111,3 +120,94 @@ def test_unknown_names_are_rejected():
     with pytest.raises(ValueError, match="filters must be among"):
         check_names(["ekf", "kalman"])
     assert check_names(["ekf"]) == ("ekf",)
+
+
+# --- N frames and process noise ---------------------------------------------------------
+
+#: What each filter supports: (any N >= 3 frames, process noise > 0).
+CAPABILITIES = {
+    "optimal": (False, False),
+    "second_order": (True, True),
+    "ekf": (True, True),
+    "ukf": (True, True),
+    "particle": (True, False),
+    "iterated": (True, True),
+    "inverse_depth": (True, True),
+    "resample_move": (True, False),
+}
+CASES = [
+    (name, n, q)
+    for name in ALL_NAMES
+    for n in (3, 5)
+    for q in (0.0, 0.01)
+    if (n == 3 or FILTERS[name].any_frames) and (q == 0 or FILTERS[name].with_process_noise)
+]
+
+
+def _frames(n_frames, size=3, seed=3):
+    x1 = model.G(FIG2.c, -2)
+    return model.simulate_measurements(
+        x1, FIG2.rho, np.random.default_rng(seed), n=n_frames, size=size
+    )
+
+
+def test_each_filter_declares_what_it_supports():
+    assert {n: (f.any_frames, f.with_process_noise) for n, f in FILTERS.items()} == CAPABILITIES
+    assert {n: f.default for n, f in FILTERS.items()} == {n: n in NAMES for n in ALL_NAMES}
+    assert FILTERS["optimal"].frames == "3" and FILTERS["ekf"].frames == "any"
+
+
+@pytest.mark.parametrize(("name", "n_frames", "q"), CASES)
+def test_every_filter_runs_on_the_frames_and_process_noise_it_supports(name, n_frames, q):
+    f = FILTERS[name]
+    mu = _frames(n_frames)
+    p = FIG2.prior
+    many = f(mu, FIG2.rho, p.mean, p.cov, process_noise=q, **_options(name))
+    assert many.mean.shape == (3, 3) and many.cov.shape == (3, 3, 3)
+    assert np.all(np.isfinite(many.mean)) and np.all(np.isfinite(many.cov))
+    for quantity in QUANTITIES:
+        assert np.shape(many.moments(quantity)["mean"]) == (3,)
+        assert np.all(many.moments(quantity)["sd"] > 0)
+    one = f(mu[1], FIG2.rho, p.mean, p.cov, process_noise=q, **_options(name))
+    assert one.mean.shape == (3,) and np.ndim(one.depth_mean) == 0
+    if not f.random:  # the batch's rows are the single results
+        assert_allclose(many.mean[1], one.mean, rtol=1e-8)
+        assert_allclose(many.cov[1], one.cov, rtol=1e-7, atol=1e-12)
+
+
+def test_the_estimate_is_of_the_state_at_frame_n():
+    mu = _frames(6, size=1)[0]
+    p = FIG2.prior
+    h = ekf.run(mu, FIG2.rho, p.mean, p.cov, process_noise=0.01)
+    e = FILTERS["ekf"](mu, FIG2.rho, p.mean, p.cov, process_noise=0.01)
+    assert np.array_equal(e.mean, h.means[-1]) and np.array_equal(e.cov, h.covs[-1])
+    means, _ = iterated.run(mu, FIG2.rho, p.mean, p.cov, 0.01)
+    assert np.array_equal(FILTERS["iterated"](mu, FIG2.rho, p.mean, p.cov, 0.01).mean, means[-1])
+    d = inverse_depth.estimate(mu, FIG2.rho, p.mean, p.cov, 0.01)
+    assert np.array_equal(FILTERS["inverse_depth"](mu, FIG2.rho, p.mean, p.cov, 0.01).mean, d.mean)
+    u = FILTERS["ukf"](mu, FIG2.rho, p.mean, p.cov)
+    assert np.array_equal(
+        u.mean, ukf.run(mu, FIG2.rho, p.mean, p.cov, 0.0, allow_behind_camera=True).means[-1]
+    )
+
+
+@pytest.mark.parametrize("name", ALL_NAMES)
+def test_the_papers_problem_is_unchanged_by_an_explicit_zero_process_noise(name):
+    p = FIG2.prior
+    a = FILTERS[name](FIG2.mu, FIG2.rho, p.mean, p.cov, **_options(name))
+    b = FILTERS[name](FIG2.mu, FIG2.rho, p.mean, p.cov, process_noise=0.0, **_options(name))
+    assert np.array_equal(a.mean, b.mean) and np.array_equal(a.cov, b.cov)
+
+
+def test_unsupported_frames_and_process_noise_are_refused_naming_the_argument():
+    p = FIG2.prior
+    mu5 = _frames(5, size=1)[0]
+    with pytest.raises(ValueError, match="mu must have shape .*three frames"):
+        FILTERS["optimal"](mu5, FIG2.rho, p.mean, p.cov)
+    for name in ("optimal", "particle", "resample_move"):
+        with pytest.raises(ValueError, match="process_noise must be 0"):
+            FILTERS[name](FIG2.mu, FIG2.rho, p.mean, p.cov, process_noise=0.01, **_options(name))
+    with pytest.raises(ValueError, match="process_noise must be >= 0"):
+        FILTERS["ekf"](FIG2.mu, FIG2.rho, p.mean, p.cov, process_noise=-0.01)
+    with pytest.raises(ValueError, match=f"more than the {_checks.MAX_FRAMES} frames"):
+        FILTERS["ekf"](np.zeros(_checks.MAX_FRAMES + 1), FIG2.rho, p.mean, p.cov)

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from depthcore.__main__ import main
-from depthcore.filters import FILTERS, NAMES
+from depthcore._checks import MAX_FRAMES
+from depthcore.filters import ALL_NAMES, FILTERS
 
 #: Seconds one case may take (a guard against hangs, not a performance target).
 BUDGET = 30.0
@@ -211,7 +212,7 @@ LIBRARY = [  # (argument, value)
     ("prior_cov", 1e9 * np.eye(3)),
     ("rho", 1e-9),
 ]
-LIBRARY_CASES = [(name, arg, value) for name in NAMES for arg, value in LIBRARY]
+LIBRARY_CASES = [(name, arg, value) for name in ALL_NAMES for arg, value in LIBRARY]
 
 
 @pytest.mark.parametrize(
@@ -236,3 +237,66 @@ def test_filters_answer_or_refuse_naming_the_argument(name, arg, value):
             return
     assert time.perf_counter() - start < BUDGET
     assert np.all(np.isfinite(est.mean)) and np.all(np.isfinite(est.cov))
+
+
+# --- N frames -------------------------------------------------------------------------
+
+SIX = np.array([-0.3, -0.2, -0.12, -0.05, 0.01, 0.06])  # six bearings of a receding point
+FRAMES = [  # (argument, value, keyword arguments beyond GOOD)
+    ("mu", np.array([-0.3, 0.0]), {}),  # N = 2
+    ("mu", np.array([[-0.3, 0.0], [0.1, 0.2]]), {}),  # N = 2, batched
+    ("mu", np.zeros((2, 0)), {}),
+    ("mu", np.array([-0.3, 0.0, np.nan, 0.2, 0.3]), {}),
+    ("mu", np.array([[*SIX], [*SIX[:5], np.inf]]), {}),
+    ("mu", np.linspace(-0.3, 0.3, 6), {}),  # affine in time: degenerate
+    ("mu", np.full(7, 0.1), {}),  # constant bearing: degenerate
+    ("mu", np.zeros(10**6), {}),  # far beyond the limit on frames
+    ("mu", np.zeros(MAX_FRAMES + 1), {}),
+    ("mu", np.zeros((2, 3, 1)), {}),
+    ("mu", SIX, {}),  # fine for the N-frame filters; the optimal filter refuses it
+    ("mu", np.stack([SIX, SIX[::-1]]), {}),
+    ("process_noise", np.nan, {"mu": SIX}),
+    ("process_noise", -0.01, {"mu": SIX}),
+    ("process_noise", np.inf, {"mu": SIX}),
+    ("process_noise", np.array([0.01, 0.02]), {"mu": SIX}),
+    ("process_noise", "x", {"mu": SIX}),
+    ("process_noise", 0.01, {"mu": SIX}),  # fine where supported, refused elsewhere
+    ("process_noise", 1e6, {"mu": SIX}),
+    ("process_noise", 1e-300, {"mu": SIX}),
+    ("rho", 1e-9, {"mu": SIX, "process_noise": 0.01}),
+    ("prior_mean", np.array([-1.0, -4.0, 0.0]), {"mu": SIX}),
+]
+FRAME_CASES = [(name, *case) for name in ALL_NAMES for case in FRAMES]
+
+
+@pytest.mark.parametrize(
+    ("name", "arg", "value", "extra"),
+    FRAME_CASES,
+    ids=[f"{n}-{a}-{i % len(FRAMES)}" for i, (n, a, _, _) in enumerate(FRAME_CASES)],
+)
+def test_n_frame_inputs_are_answered_or_refused_naming_the_argument(name, arg, value, extra):
+    kwargs = {**GOOD, **extra, arg: value}
+    options = {}
+    if FILTERS[name].random:
+        options = {"rng": np.random.default_rng(0), "n_particles": 200}
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            est = FILTERS[name](**kwargs, **options)
+        except ValueError as exc:
+            message = str(exc)
+            assert "\n" not in message
+            # a refusal names the argument, or the measurements when the other
+            # arguments make them inconsistent (e.g. a prior behind the camera)
+            assert arg in message or "mu" in message, message
+            return
+    assert time.perf_counter() - start < BUDGET
+    assert np.all(np.isfinite(est.mean)) and np.all(np.isfinite(est.cov))
+
+
+def test_the_limit_on_frames_is_one_constant():
+    assert MAX_FRAMES == 1_000
+    mu = np.linspace(0.0, 1.0, MAX_FRAMES) ** 2  # accepted at the limit
+    est = FILTERS["ekf"](mu, 0.01, [0.0, 4.0, 0.0], np.eye(3))
+    assert np.all(np.isfinite(est.mean))

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
 from scipy.optimize import minimize
 
 from depthcore import ekf, iterated, model, optimal
@@ -159,3 +160,17 @@ def test_bad_input_is_refused(kwargs, name):
     args.update(kwargs)
     with pytest.raises(ValueError, match=name):
         iterated.run(**args)
+
+
+@pytest.mark.parametrize("n_frames", [3, 5, 8])
+@pytest.mark.parametrize("q", [0.0, 0.03])
+def test_one_iteration_per_update_is_the_ekf_for_any_frames_and_process_noise(n_frames, q):
+    rng = np.random.default_rng(n_frames)
+    x1 = np.array([-1.0, 6.0, 0.4])
+    mu = model.simulate_measurements(x1, 2e-3, rng, n=n_frames, size=3)
+    prior_mean = x1 + [0.1, -0.5, 0.05]
+    prior_cov = np.diag([0.5, 2.0, 0.05])
+    means, covs = iterated.run(mu, 2e-3, prior_mean, prior_cov, q, max_iterations=1)
+    e = ekf.run(mu, 2e-3, prior_mean, prior_cov, process_noise=q)
+    assert_allclose(means, e.means, rtol=1e-9)
+    assert_allclose(covs, e.covs, rtol=1e-6, atol=1e-9 * np.abs(e.covs).max())

@@ -6,7 +6,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy import stats
 from scipy.special import logsumexp
 
-from depthcore import model, optimal
+from depthcore import bank, model, optimal
 from depthcore import particle as pf
 from depthcore.gaussian import Gaussian
 from depthcore.particle import particle_filter, run
@@ -297,7 +297,7 @@ def test_rejects_bad_n_particles(n):
         ((-0.1, 0.0, 0.1), "mu is degenerate"),
         ((np.nan, 0.0, 0.2), "mu must be finite"),
         ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
-        ((-0.3, 0.0), r"mu must have shape \(3,\)"),
+        ((-0.3, 0.0), r"mu must have shape (\(3,\)|\(\.\.\., N\) with N >= 3)"),
     ],
 )
 def test_rejects_bad_measurements(mu, message):
@@ -347,7 +347,7 @@ def test_rejects_a_bad_rng_or_prior():
 def test_run_rejects_bad_shapes():
     rng = np.random.default_rng(0)
     p = FIG2.prior
-    with pytest.raises(ValueError, match=r"mu must have shape \(B, 3\)"):
+    with pytest.raises(ValueError, match=r"mu must have shape \(B, N\)"):
         run(np.array(MU_17), 0.005, p.mean, p.cov, 10, rng)
     with pytest.raises(ValueError, match=r"rho must be a scalar or have shape \(2,\)"):
         run(np.array([MU_17, MU_17]), [0.005] * 3, p.mean, p.cov, 10, rng)
@@ -364,3 +364,31 @@ def test_prior_proposal_with_one_particle_can_lose_every_particle():
     prior = Gaussian(FIG2.prior.mean - [0.0, 60.0, 0.0], FIG2.prior.cov)
     with pytest.raises(RuntimeError, match="every particle of trial 0 has zero weight after mu_1"):
         particle_filter(FIG2.mu, FIG2.rho, prior, 1, np.random.default_rng(0), proposal="prior")
+
+
+# --- N frames ---------------------------------------------------------------------------
+
+
+def test_n_frame_importance_sampling_matches_the_bank_of_kalman_filters():
+    # The exact N-frame posterior (a bank of Kalman filters over the depth at frame 1,
+    # depthcore.bank) against the importance sample with the N-frame p_s proposal.
+    x1 = np.array([-1.0, 5.0, 0.3])
+    rho = 0.01
+    mu = model.simulate_measurements(x1, rho, np.random.default_rng(21), n=6)
+    prior = Gaussian(x1 + [0.5, 1.0, -0.1], np.diag([4.0, 9.0, 0.25]))
+    mean_s, cov_s = second_order_batch(mu[None], rho, prior.mean, prior.cov)
+    sd_y1 = np.sqrt(cov_s[0, 1, 1])
+    y1 = np.linspace(max(1e-3, mean_s[0, 1] - 5 - 15 * sd_y1), mean_s[0, 1] - 5 + 15 * sd_y1, 4001)
+    w = np.full(y1.shape, y1[1] - y1[0])
+    w[[0, -1]] /= 2
+    exact = bank.mixture(bank.filter_bank(y1, mu, rho, prior.mean, prior.cov), w)
+    r = particle_filter(mu, rho, prior, 40_000, np.random.default_rng(22))
+    assert r.particles.shape == (40_000, 3) and r.ess.shape == (6,)
+    m, se = r.moments(), r.standard_errors()
+    for got, err, want in (
+        (m.depth_mean, se.depth_mean, exact.depth_mean),
+        (m.depth_sd, se.depth_sd, exact.depth_sd),
+        (m.velocity_mean, se.velocity_mean, exact.velocity_mean),
+        (m.velocity_sd, se.velocity_sd, exact.velocity_sd),
+    ):
+        assert abs(got - want) < 5 * err, (got, want, err)

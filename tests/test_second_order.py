@@ -12,6 +12,7 @@ from depthcore.second_order import (
     f,
     hessian,
     likelihood_covariance,
+    minimiser,
     noise_free_state,
     second_order,
     second_order_batch,
@@ -113,3 +114,169 @@ def test_theorem1_precision_is_the_inverse_of_the_ekf_and_second_order_covarianc
     # inverses of matrices with condition number ~1e6: 1e-8 relative
     assert_allclose(D_inv @ P3, np.eye(3), atol=1e-8)
     assert_allclose(D_inv @ D, np.eye(3), atol=1e-8)
+
+
+# --- N frames, Eq. (8) generalised ------------------------------------------------------
+
+X1 = np.array([-1.0, 6.0, 0.4])  # state at frame 1
+PRIOR_COV = np.diag([4.0, 25.0, 0.25])
+
+
+def _problem(n_frames, rho=2e-3, size=3, seed=0):
+    rng = np.random.default_rng(seed + n_frames)
+    return model.simulate_measurements(X1, rho, rng, n=n_frames, size=size)
+
+
+def test_n3_minimiser_is_the_noise_free_state_and_the_gaussian_is_p_s():
+    mu = _problem(3, size=4)
+    c = model.noise_free_states(mu)
+    assert_allclose(minimiser(mu), c, rtol=1e-12)
+    prior_mean = X1 + [0.5, -1.0, 0.1]
+    mean, cov = second_order_batch(mu, 2e-3, prior_mean, PRIOR_COV)
+    # The N-frame construction at N = 3: the minimiser's Gaussian N(c, rho^2 (g^T g)^{-1})
+    # times the prior, written out with the information matrix.
+    for i in range(len(mu)):
+        g = model.residual_gradients(minimiser(mu[i : i + 1])[0], 3)
+        A = model.G_linear(-2)
+        info = g.T @ g / 2e-3**2 + A.T @ np.linalg.solve(PRIOR_COV, A)
+        rhs = g.T @ g @ c[i] / 2e-3**2 + A.T @ np.linalg.solve(
+            PRIOR_COV, prior_mean - np.array([0.0, -2.0, 0.0])
+        )
+        assert_allclose(mean[i], np.linalg.solve(info, rhs), rtol=1e-10)
+        assert_allclose(cov[i], np.linalg.inv(info), rtol=1e-8)
+        ps = second_order(mu[i], 2e-3, Gaussian(prior_mean, PRIOR_COV))
+        assert np.array_equal(ps.mean, mean[i]) and np.array_equal(ps.cov, cov[i])
+
+
+@pytest.mark.parametrize("n_frames", [4, 7, 12])
+def test_n_frame_minimiser_matches_scipy_least_squares(n_frames):
+    from scipy.optimize import least_squares
+
+    mu = _problem(n_frames)
+    ours = minimiser(mu)
+    for i in range(len(mu)):
+        # an independent solver from an independent start: the truth moved to frame N
+        fit = least_squares(
+            lambda x, i=i: model.residuals(x, mu[i]),
+            model.G(X1, n_frames - 1) + [0.05, 0.5, -0.02],
+            xtol=1e-15,
+            ftol=1e-15,
+            gtol=1e-15,
+        )
+        assert_allclose(ours[i], fit.x, rtol=1e-8)
+        assert model.f(ours[i], mu[i]) <= model.f(fit.x, mu[i]) * (1 + 1e-10)
+
+
+@pytest.mark.parametrize("n_frames", [4, 9])
+def test_n_frame_covariance_is_twice_rho_squared_over_the_misfit_hessian(n_frames):
+    # With the prior made negligible the Gaussian is the likelihood's:
+    # covariance 2 rho^2 H^{-1}, H the Hessian of f at the minimiser. H from central
+    # finite differences of f includes sum_k r_k grad^2 r_k, which the Gauss-Newton
+    # Hessian 2 J^T J drops: a relative O(rho) term, so the noise is small here.
+    rho = 1e-6
+    mu = _problem(n_frames, rho=rho, size=1)
+    c = minimiser(mu)[0]
+    mean, cov = second_order_batch(mu, rho, X1, 1e12 * np.eye(3))
+    h = 1e-4
+    E = np.eye(3) * h * np.maximum(1.0, np.abs(c))
+    H = np.array(
+        [
+            [
+                (
+                    model.f(c + E[a] + E[b], mu[0])
+                    - model.f(c + E[a] - E[b], mu[0])
+                    - model.f(c - E[a] + E[b], mu[0])
+                    + model.f(c - E[a] - E[b], mu[0])
+                )
+                / (4 * E[a, a] * E[b, b])
+                for b in range(3)
+            ]
+            for a in range(3)
+        ]
+    )
+    assert_allclose(mean[0], c, rtol=1e-7)
+    assert_allclose(cov[0], 2 * rho**2 * np.linalg.inv(H), rtol=1e-3)
+
+
+def dense_trajectory_laplace(mu, rho, prior_mean, prior_cov, q):
+    """An independent dense Gauss-Newton over ``(x_1, y_1, v_1, a_1 .. a_{N-1})``.
+
+    The states are built by stepping the motion frame by frame; the Jacobian by
+    central differences; the Laplace Gaussian times the prior in information
+    form; the marginal at frame N by pushing sigma-free linear maps.
+    """
+    n = len(mu)
+
+    def states(z):
+        x, y, v = z[:3]
+        out = []
+        for k in range(n):
+            out.append((x, y, v))
+            if k < n - 1:
+                x, y, v = x + v, y + 1.0, v + z[3 + k]
+        return np.array(out)
+
+    def stacked(z):
+        s = states(z)
+        return np.concatenate([(s[:, 0] / s[:, 1] - mu) / rho, z[3:] / q])
+
+    def jac(z):
+        eps = 1e-7 * np.maximum(1.0, np.abs(z))
+        return np.stack(
+            [(stacked(z + e) - stacked(z - e)) / (2 * e.sum()) for e in np.diag(eps)], axis=1
+        )
+
+    z = np.concatenate([X1, np.zeros(n - 1)])
+    for _ in range(50):
+        J = jac(z)
+        z = z - np.linalg.lstsq(J, stacked(z), rcond=None)[0]
+    J = jac(z)
+    E = np.zeros((3, n + 2))
+    E[:, :3] = np.eye(3)
+    P_inv = np.linalg.inv(prior_cov)
+    info = J.T @ J + E.T @ P_inv @ E
+    post_cov = np.linalg.inv(info)
+    post = post_cov @ (J.T @ J @ z + E.T @ P_inv @ prior_mean)
+    # the state at frame N is linear in z: its map by differences of the motion
+    base = states(np.zeros(n + 2))[-1]
+    T = np.stack([states(e)[-1] - base for e in np.eye(n + 2)], axis=1)
+    v_last = post[2] + post[3:].sum()
+    mean = T @ post + base
+    mean[2] = v_last
+    T[2] = np.r_[0.0, 0.0, 1.0, np.ones(n - 1)]
+    return mean, T @ post_cov @ T.T
+
+
+@pytest.mark.parametrize("n_frames", [3, 5, 8])
+def test_trajectory_laplace_matches_a_dense_gauss_newton(n_frames):
+    rho, q = 2e-3, 0.02
+    mu = _problem(n_frames, rho=rho, size=2)
+    prior_mean = X1 + [0.3, -0.8, 0.05]
+    mean, cov = second_order_batch(mu, rho, prior_mean, PRIOR_COV, process_noise=q)
+    for i in range(len(mu)):
+        m, c = dense_trajectory_laplace(mu[i], rho, prior_mean, PRIOR_COV, q)
+        assert_allclose(mean[i], m, rtol=1e-7)
+        assert_allclose(cov[i], c, rtol=1e-5, atol=1e-12)
+
+
+@pytest.mark.parametrize("n_frames", [3, 6])
+def test_trajectory_laplace_tends_to_the_approximation_without_process_noise(n_frames):
+    mu = _problem(n_frames)
+    still = second_order_batch(mu, 2e-3, X1, PRIOR_COV)
+    barely = second_order_batch(mu, 2e-3, X1, PRIOR_COV, process_noise=1e-9)
+    assert_allclose(barely[0], still[0], rtol=1e-9)
+    assert_allclose(barely[1], still[1], rtol=1e-6)
+
+
+def test_single_sequence_is_the_batch_row():
+    mu = _problem(6, size=1)
+    g = second_order(mu[0], 2e-3, Gaussian(X1, PRIOR_COV), process_noise=0.01)
+    mean, cov = second_order_batch(mu, 2e-3, X1, PRIOR_COV, process_noise=0.01)
+    assert np.array_equal(g.mean, mean[0]) and np.array_equal(g.cov, cov[0])
+
+
+def test_a_misfit_without_a_determined_minimiser_is_refused():
+    # constant bearings but the last: far-away points at every depth fit nearly as well
+    mu = np.array([[0.1, 0.1, 0.1, 0.1, 0.1 + 1e-10]])
+    with pytest.raises(ValueError, match=r"mu\[0\]"):
+        second_order_batch(mu, 1e-3, X1, PRIOR_COV)

@@ -271,7 +271,7 @@ def test_ukf_approaches_the_ekf_in_the_small_noise_tight_prior_limit():
         ((0.1, 0.1, 0.1), "mu is degenerate"),
         ((np.nan, 0.0, 0.2), "mu must be finite"),
         ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
-        ((-0.3, 0.0), r"mu must have shape \(3,\)"),
+        ((-0.3, 0.0), r"mu must have shape (\(3,\)|\(\.\.\., N\) with N >= 3)"),
     ],
 )
 def test_ukf_rejects_bad_measurements(mu, message):
@@ -351,3 +351,49 @@ def test_run_takes_rho_batched_like_the_ekf():
         assert_allclose(covs[i], c, rtol=1e-12, atol=1e-18)
     with pytest.raises(ValueError, match=r"rho must be a scalar or have shape \(3,\)"):
         run(mu, rho[:2], TIGHT.mean, TIGHT.cov)
+
+
+# --- N frames and process noise ---------------------------------------------------------
+
+
+def filterpy_run_with_process_noise(mu, rho, prior, rule, q):
+    """filterpy's UnscentedKalmanFilter with ``Q = diag(0, 0, q**2)``."""
+    points = MerweScaledSigmaPoints(3, alpha=rule.alpha, beta=rule.beta, kappa=rule.kappa)
+    f = UnscentedKalmanFilter(
+        dim_x=3,
+        dim_z=1,
+        dt=1.0,
+        points=points,
+        fx=lambda x, dt: model.F @ x + model.e,
+        hx=lambda x: np.array([x[0] / x[1]]),
+    )
+    f.x, f.P = prior.mean.copy(), prior.cov.copy()
+    f.Q, f.R = np.diag([0.0, 0.0, q**2]), np.array([[rho**2]])
+    f.sigmas_f = points.sigma_points(f.x, f.P)
+    means, covs = [], []
+    for k, z in enumerate(mu):
+        if k:
+            f.predict()
+        f.update(np.array([z]))
+        means.append(f.x.copy())
+        covs.append(f.P.copy())
+    return np.array(means), np.array(covs)
+
+
+@pytest.mark.parametrize("rule", RULES)
+def test_six_frame_ukf_with_process_noise_matches_filterpy(rule):
+    rng = np.random.default_rng(11)
+    mu = model.simulate_measurements(TIGHT.mean, 0.005, rng, n=6)
+    q = 0.02
+    ours = run(mu, 0.005, TIGHT.mean, TIGHT.cov, process_noise=q, sigma_points=rule)
+    means, covs = filterpy_run_with_process_noise(mu, 0.005, TIGHT, rule, q)
+    assert ours.means.shape == (6, 3)
+    assert_allclose(ours.means, means, rtol=1e-10, atol=1e-12)
+    for k in range(6):
+        assert_allclose(ours.covs[k], covs[k], rtol=0, atol=1e-10 * np.abs(covs[k]).max())
+
+
+def test_process_noise_zero_is_the_papers_ukf():
+    h = ukf(MU_17, 0.005, TIGHT)
+    again = run(MU_17, 0.005, TIGHT.mean, TIGHT.cov, process_noise=0.0)
+    assert np.array_equal(h.means, again.means) and np.array_equal(h.covs, again.covs)
