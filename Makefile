@@ -136,6 +136,7 @@ bench: $(EDITABLE)
 	$(PY) benchmarks/bench_optimal.py
 	$(PY) benchmarks/bench_ekf_filterpy.py
 	$(PY) benchmarks/bench_trials.py
+	$(PY) benchmarks/bench_rbpf.py
 	$(PY) benchmarks/bench_import.py
 
 .PHONY: lint

@@ -19,8 +19,10 @@ sampling from a second-order proposal (:mod:`~depthcore.particle`, with
 (:mod:`~depthcore.iterated`), the inverse-depth EKF
 (:mod:`~depthcore.inverse_depth`), the textbook's Kalman filter and smoothers
 (:mod:`~depthcore.kalman`), the exact filter for any number of frames as a bank
-of Kalman filters over depth (:mod:`~depthcore.bank`) and the self-calibration
-check (:mod:`~depthcore.calibration`). The
+of Kalman filters over depth (:mod:`~depthcore.bank`), the Rao-Blackwellised
+particle filter over depth with a Kalman filter per particle
+(:mod:`~depthcore.rbpf`) and the self-calibration check
+(:mod:`~depthcore.calibration`). The
 registry :mod:`~depthcore.filters` lists every filter;
 :mod:`~depthcore.reproduce`, :mod:`~depthcore.study` and
 :mod:`~depthcore.experiments` run them; :mod:`~depthcore.figures` draws and
@@ -54,6 +56,7 @@ MODULES = (
     "model",
     "optimal",
     "particle",
+    "rbpf",
     "reference",
     "report",
     "reproduce",
