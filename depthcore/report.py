@@ -14,6 +14,7 @@ Nothing here computes an estimate: the functions format what
 * :func:`moments_texts`, :func:`study_texts`, :func:`sweep_texts`,
   :func:`noise_study_texts`, :func:`rho_label`: the texts the chapters beyond
   the paper glue into their tables;
+* :func:`moments_table`, :func:`sweep_table`: tables of those texts for a notebook;
 * :class:`MarkdownTable`, :class:`GlueLog`: what a page shows when it runs as a
   plain notebook in Jupyter, which displays neither the values nor the figures
   that the page glues into the book's text.
@@ -26,7 +27,7 @@ import ast
 import numpy as np
 
 from . import _checks
-from .filters import NAMES, QUANTITIES
+from .filters import FILTERS, NAMES, QUANTITIES
 from .reproduce import scenario_rows
 from .scenarios import REPORTED_DECIMALS, SCENARIOS
 
@@ -373,6 +374,36 @@ def moments_texts(result: dict, decimals: int = 3) -> dict:
     return out
 
 
+def moments_table(result: dict, quantity: str, decimals: int = 3) -> MarkdownTable:
+    """The texts of :func:`moments_texts` for one quantity, a row per filter, a column per figure.
+
+    The last row is the particle filter's Monte Carlo standard error.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.reproduce.reproduce`.
+    quantity : {"depth", "velocity"}
+    decimals : int
+    """
+    if quantity not in QUANTITIES:
+        raise ValueError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")
+    texts = moments_texts(result, decimals)
+    keys = [sc["key"] for sc in result["scenarios"]]
+    header = ["filter", *(f"Fig. {sc['figure']}" for sc in result["scenarios"])]
+    rows = [
+        [FILTERS[name].label, *(texts[f"bf_{key}_{name}_{quantity}"] for key in keys)]
+        for name in NAMES
+    ]
+    rows.append(
+        [
+            f"{FILTERS['particle'].label}, Monte Carlo s.e.",
+            *(texts[f"bf_{key}_particle_{quantity}_se"] for key in keys),
+        ]
+    )
+    return MarkdownTable(header, rows)
+
+
 def study_texts(result: dict, prefix: str) -> dict:
     """Texts of every score of :func:`depthcore.study.study`'s result, for glue.
 
@@ -424,6 +455,29 @@ def sweep_texts(result: dict, x: str, prefix: str, decimals: int = 3) -> dict:
             out[f"{prefix}_{i}_{name}"] = _pm(r["depth_mean"][i], r["depth_sd"][i], decimals)
             out[f"{prefix}_{i}_{name}_h"] = f"{float(r['hellinger'][i]):.3f}"
     return out
+
+
+def sweep_table(result: dict, x: str, decimals: int = 3) -> MarkdownTable:
+    """The texts of :func:`sweep_texts`: a row per value of ``x``, a column per filter.
+
+    Each cell is the depth's ``"mean ± sd"``; the first column is the noise level
+    (``"1/200"``) or the prior's offset.
+
+    Parameters
+    ----------
+    result : dict
+        As for :func:`sweep_texts`.
+    x : {"rho", "offset"}
+    decimals : int
+    """
+    texts = sweep_texts(result, x, "sweep", decimals)
+    names = [n for n in NAMES if n in result]
+    header = [r"$\rho$" if x == "rho" else "offset", *(FILTERS[n].label for n in names)]
+    rows = [
+        [texts[f"sweep_{i}_x"], *(texts[f"sweep_{i}_{n}"] for n in names)]
+        for i in range(len(result[x]))
+    ]
+    return MarkdownTable(header, rows)
 
 
 def noise_study_texts(result: dict, prefix: str) -> dict:

@@ -159,3 +159,30 @@ def test_glue_log_pastes_texts_as_glue_text_does_and_needs_a_kernel():
     )
     with pytest.raises(RuntimeError, match="kernel"):
         report.GlueLog()
+
+
+def test_moments_and_sweep_tables_hold_the_glued_texts():
+    result = reproduce.reproduce(["fig2"])
+    texts = report.moments_texts(result)
+    table = report.moments_table(result, "velocity")
+    assert table.header == ["filter", "Fig. 2"]
+    assert [r[0] for r in table.rows] == [
+        "optimal $p_o$",
+        "second order $p_s$",
+        "EKF $p_e$",
+        "UKF",
+        "particle filter",
+        "particle filter, Monte Carlo s.e.",
+    ]
+    assert table.rows[1][1] == texts["bf_fig2_second_order_velocity"]
+    assert table.rows[-1][1] == texts["bf_fig2_particle_velocity_se"]
+    with pytest.raises(ValueError, match="quantity"):
+        report.moments_table(result, "speed")
+    sweep = experiments.noise_sweep([1 / 1000, 1 / 200])
+    texts = report.sweep_texts(sweep, "rho", "ns", decimals=2)
+    table = report.sweep_table(sweep, "rho", decimals=2)
+    assert table.header[:2] == [r"$\rho$", "optimal $p_o$"]
+    assert table.rows[1][:3] == [texts["ns_1_x"], texts["ns_1_optimal"], texts["ns_1_second_order"]]
+    offsets = experiments.prior_offset_sweep([-1.0, 2.0])
+    assert report.sweep_table(offsets, "offset").header[0] == "offset"
+    assert report.sweep_table(offsets, "offset").rows[0][0] == "-1"
