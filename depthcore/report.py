@@ -9,33 +9,43 @@ Nothing here computes an estimate: the functions format what
 * :func:`format_table`, :func:`format_summary`, :func:`format_study`: the
   command line's plain-text tables;
 * :func:`vec`: a vector as the book prints it;
-* :func:`comparison`, :func:`comparison_texts`: the reported-versus-reproduced
-  tables of the figure pages;
+* :func:`comparison`, :func:`comparison_texts`, :func:`comparison_table`: the
+  reported-versus-reproduced tables of the figure pages;
 * :func:`moments_texts`, :func:`study_texts`, :func:`sweep_texts`,
   :func:`noise_study_texts`, :func:`rho_label`: the texts the chapters beyond
-  the paper glue into their tables.
+  the paper glue into their tables;
+* :func:`moments_table`, :func:`sweep_table`: tables of those texts for a notebook;
+* :class:`MarkdownTable`, :class:`GlueLog`: what a page shows when it runs as a
+  plain notebook in Jupyter, which displays neither the values nor the figures
+  that the page glues into the book's text.
 """
 
 from __future__ import annotations
 
+import ast
+
 import numpy as np
 
 from . import _checks
-from .filters import NAMES, QUANTITIES
+from .filters import FILTERS, NAMES, QUANTITIES
 from .reproduce import scenario_rows
 from .scenarios import REPORTED_DECIMALS, SCENARIOS
 
 #: Rows of the figure pages' tables, as (row id, filter, reading, support, label).
 #: The optimal filter with Eq. (16) as derived and as printed; the second-order
 #: filter with the covariance ``2 rho**2 J^{-1}`` of the expansion (8) and with
-#: the printed ``rho**2 J^{-1}``; the EKF.
+#: the printed ``rho**2 J^{-1}``; the EKF. A label's ``%s`` is the quantity's
+#: letter, ``y`` or ``v``, as in the paper's marginals ``p_oy`` and ``p_ov``.
 TABLE_ROWS = (
-    ("opt", "optimal", "derived", "front", "optimal $p_o$"),
+    ("opt", "optimal", "derived", "front", "optimal $p_{o%s}$"),
     ("opt_printed", "optimal", "printed", "front", "optimal, Eq. (16) as printed"),
-    ("so", "second_order", "derived", "all", r"second order $p_s$, $2\rho^2 J^{-1}$"),
+    ("so", "second_order", "derived", "all", r"second order $p_{s%s}$, $2\rho^2 J^{-1}$"),
     ("so_printed", "second_order", "printed", "all", r"second order, $\rho^2 J^{-1}$ as printed"),
-    ("ekf", "ekf", "printed", "all", "EKF $p_e$"),
+    ("ekf", "ekf", "printed", "all", "EKF $p_{e%s}$"),
 )
+
+#: The letter of each quantity in the paper's names of the marginals.
+QUANTITY_LETTERS = {"depth": "y", "velocity": "v"}
 
 #: Decimal places of the reproduced means and SDs in the book's tables.
 DECIMALS = 4
@@ -230,7 +240,7 @@ def comparison(key: str) -> list[dict]:
         out.append(
             {
                 "id": row_id,
-                "label": label,
+                "label": label % QUANTITY_LETTERS[quantity] if "%s" in label else label,
                 "quantity": quantity,
                 **{
                     k: row[k]
@@ -278,6 +288,35 @@ def _agreement(mean_matches, sd_matches) -> str:
         (False, True): "SD only",
         (False, False): "no",
     }[(mean_matches, sd_matches)]
+
+
+def comparison_table(key: str, rows: list[dict]) -> MarkdownTable:
+    """A figure page's table of the paper's numbers beside ours, with the numbers in it.
+
+    The book writes this table in the page's text, from the glued
+    :func:`comparison_texts`; this is the same table for a notebook, built from
+    the same texts. The column ``agrees`` is left out when the paper prints no
+    number to agree with.
+
+    Parameters
+    ----------
+    key : str
+        ``"fig2"`` ... ``"fig6"``.
+    rows : list of dict
+        From :func:`comparison` with the same ``key``.
+    """
+    if key not in SCENARIOS:
+        raise ValueError(f"key must be one of {tuple(SCENARIOS)}, got {key!r}")
+    texts = comparison_texts(key, rows)
+    fields = ["paper_mean", "mean", "paper_sd", "sd"]
+    header = ["density", "paper: mean", "ours: mean", "paper: SD", "ours: SD"]
+    if any(row["mean_matches"] is not None for row in rows):
+        fields.append("agrees")
+        header.append("agrees")
+    body = [
+        [row["label"], *(texts[f"{key}_{row['id']}_{field}"] for field in fields)] for row in rows
+    ]
+    return MarkdownTable(header, body)
 
 
 def rho_label(rho: float) -> str:
@@ -339,6 +378,36 @@ def moments_texts(result: dict, decimals: int = 3) -> dict:
     return out
 
 
+def moments_table(result: dict, quantity: str, decimals: int = 3) -> MarkdownTable:
+    """The texts of :func:`moments_texts` for one quantity, a row per filter, a column per figure.
+
+    The last row is the particle filter's Monte Carlo standard error.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.reproduce.reproduce`.
+    quantity : {"depth", "velocity"}
+    decimals : int
+    """
+    if quantity not in QUANTITIES:
+        raise ValueError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")
+    texts = moments_texts(result, decimals)
+    keys = [sc["key"] for sc in result["scenarios"]]
+    header = ["filter", *(f"Fig. {sc['figure']}" for sc in result["scenarios"])]
+    rows = [
+        [FILTERS[name].label, *(texts[f"bf_{key}_{name}_{quantity}"] for key in keys)]
+        for name in NAMES
+    ]
+    rows.append(
+        [
+            f"{FILTERS['particle'].label}, Monte Carlo s.e.",
+            *(texts[f"bf_{key}_particle_{quantity}_se"] for key in keys),
+        ]
+    )
+    return MarkdownTable(header, rows)
+
+
 def study_texts(result: dict, prefix: str) -> dict:
     """Texts of every score of :func:`depthcore.study.study`'s result, for glue.
 
@@ -392,6 +461,29 @@ def sweep_texts(result: dict, x: str, prefix: str, decimals: int = 3) -> dict:
             out[f"{prefix}_{i}_{name}"] = _pm(r["depth_mean"][i], r["depth_sd"][i], decimals)
             out[f"{prefix}_{i}_{name}_h"] = f"{float(r['hellinger'][i]):.3f}"
     return out
+
+
+def sweep_table(result: dict, x: str, decimals: int = 3) -> MarkdownTable:
+    """The texts of :func:`sweep_texts`: a row per value of ``x``, a column per filter.
+
+    Each cell is the depth's ``"mean ± sd"``; the first column is the noise level
+    (``"1/200"``) or the prior's offset.
+
+    Parameters
+    ----------
+    result : dict
+        As for :func:`sweep_texts`.
+    x : {"rho", "offset"}
+    decimals : int
+    """
+    texts = sweep_texts(result, x, "sweep", decimals)
+    names = [n for n in NAMES if n in result]
+    header = [r"$\rho$" if x == "rho" else "offset", *(FILTERS[n].label for n in names)]
+    rows = [
+        [texts[f"sweep_{i}_x"], *(texts[f"sweep_{i}_{n}"] for n in names)]
+        for i in range(len(result[x]))
+    ]
+    return MarkdownTable(header, rows)
 
 
 def noise_study_texts(result: dict, prefix: str) -> dict:
@@ -487,3 +579,107 @@ def prior_study_texts(result: dict, prefix: str) -> dict:
         out[f"{prefix}_{q}_verdict"] = "passes" if r["calibrated"] else "fails"
     out[f"{prefix}_max_se"] = f"{worst:.1f}"
     return out
+
+
+# --- the book's pages as plain notebooks ---------------------------------------------------
+
+
+class MarkdownTable:
+    """A table that Jupyter shows as Markdown (with its math) and as aligned text.
+
+    Parameters
+    ----------
+    header : sequence of str, shape (n_columns,)
+    rows : sequence of sequence of str, shape (n_rows, n_columns)
+    """
+
+    def __init__(self, header, rows):
+        self.header = [str(cell) for cell in header]
+        self.rows = [[str(cell) for cell in row] for row in rows]
+        if not self.header:
+            raise ValueError("header must name at least one column")
+        for row in self.rows:
+            if len(row) != len(self.header):
+                raise ValueError(
+                    f"rows must have {len(self.header)} cells each, got a row of {len(row)}"
+                )
+
+    def _repr_markdown_(self) -> str:
+        def line(cells):
+            return "| " + " | ".join(c.replace("|", r"\|") for c in cells) + " |"
+
+        lines = [line(self.header), line(["---"] * len(self.header))]
+        return "\n".join(lines + [line(row) for row in self.rows]) + "\n"
+
+    def __repr__(self) -> str:
+        table = [self.header, *self.rows]
+        widths = [max(len(row[j]) for row in table) for j in range(len(self.header))]
+        lines = [
+            "  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip()
+            for row in table
+        ]
+        lines.insert(1, "  ".join("-" * w for w in widths))
+        return "\n".join(lines)
+
+
+class GlueLog:
+    """Shows in Jupyter what a book page glues into the book's text.
+
+    A page glues its numbers and figures with ``myst_nb.glue(name, value,
+    display=False)``: the book pastes them where its text names them
+    (``{glue:text}``, ``{glue:figure}``), but a plain notebook shows nothing of
+    them. A ``GlueLog`` created in the page's kernel keeps a copy of every such
+    record, which passes on unchanged, and :meth:`show` displays those kept
+    since its last call: each figure as the very image the book shows, and the
+    texts in a :class:`MarkdownTable` of glued name and value, as the book
+    pastes them. The book leaves the cells that create and show it out.
+
+    Raises
+    ------
+    RuntimeError
+        Outside a Jupyter kernel (ipykernel), where there is nothing to watch.
+    """
+
+    #: The prefix of the media types of a record that is not displayed (myst_nb's).
+    PREFIX = "application/papermill.record/"
+
+    def __init__(self):
+        from IPython import get_ipython
+
+        publisher = getattr(get_ipython(), "display_pub", None)
+        if not hasattr(publisher, "register_hook"):
+            raise RuntimeError("GlueLog runs in a Jupyter kernel (ipykernel) only")
+        self._kept: list[tuple[str, dict, dict]] = []
+        publisher.register_hook(self._keep)
+
+    def _keep(self, msg):
+        content = msg.get("content", {})
+        glued = content.get("metadata", {}).get("scrapbook")
+        if msg.get("msg_type") == "display_data" and glued and glued.get("mime_prefix"):
+            n = len(glued["mime_prefix"])
+            data = {k[n:]: v for k, v in content["data"].items()}
+            metadata = {k: v for k, v in content["metadata"].items() if k != "scrapbook"}
+            self._kept.append((glued["name"], data, metadata))
+        return msg
+
+    @staticmethod
+    def pasted_text(text: str) -> str:
+        """A record's ``text/plain`` as ``{glue:text}`` pastes it: a string without its quotes."""
+        try:
+            return str(ast.literal_eval(text))
+        except (SyntaxError, ValueError):
+            return text
+
+    def show(self) -> None:
+        """Display what was glued since the last call: figures, then a table of the texts."""
+        from IPython.display import display
+
+        texts = []
+        for name, data, metadata in self._kept:
+            if set(data) == {"text/plain"}:
+                texts.append([name, self.pasted_text(data["text/plain"])])
+            else:
+                display(data, raw=True, metadata=metadata)
+        if texts:
+            display(MarkdownTable(["glued name", "value"], texts))
+        self._kept.clear()

@@ -117,3 +117,72 @@ def test_noise_study_texts():
     assert set(texts) == {"mc_0_x", "mc_0_trials"} | {
         f"mc_0_second_order_{s}" for s in ("cov68", "cov95", "rmse", "nees")
     }
+
+
+def test_comparison_table_holds_the_glued_texts_of_every_row():
+    rows = report.comparison("fig2")
+    texts = report.comparison_texts("fig2", rows)
+    table = report.comparison_table("fig2", rows)
+    assert table.header[-1] == "agrees"
+    assert [r[0] for r in table.rows][0] == "optimal $p_{oy}$"
+    for row, cells in zip(rows, table.rows, strict=True):
+        fields = ("paper_mean", "mean", "paper_sd", "sd", "agrees")
+        assert cells[1:] == [texts[f"fig2_{row['id']}_{f}"] for f in fields]
+    # The paper prints no numbers for Figure 4: no column of agreement, velocity labels.
+    table4 = report.comparison_table("fig4", report.comparison("fig4"))
+    assert "agrees" not in table4.header and table4.rows[-1][0] == "EKF $p_{ev}$"
+    with pytest.raises(ValueError, match="key"):
+        report.comparison_table("fig7", rows)
+
+
+def test_markdown_table_renders_as_markdown_and_aligned_text():
+    table = report.MarkdownTable(["name", "value"], [["a_b", "1|2"], ["c", "3"]])
+    assert (
+        table._repr_markdown_() == "| name | value |\n| --- | --- |\n| a_b | 1\\|2 |\n| c | 3 |\n"
+    )
+    assert repr(table).splitlines() == ["name  value", "----  -----", "a_b   1|2", "c     3"]
+    with pytest.raises(ValueError, match="rows"):
+        report.MarkdownTable(["name", "value"], [["a"]])
+    with pytest.raises(ValueError, match="header"):
+        report.MarkdownTable([], [])
+
+
+def test_glue_log_pastes_texts_as_glue_text_does_and_needs_a_kernel():
+    from myst_nb.core.variables import format_plain_text  # what {glue:text} pastes
+
+    for text in ("'6.4660'", "'—'", "'x|y'", "3", "<Figure size 640x480 with 1 Axes>"):
+        assert report.GlueLog.pasted_text(text) == format_plain_text(text, "")
+    assert report.GlueLog.pasted_text("'6.4660'") == "6.4660"
+    assert report.GlueLog.pasted_text("'—'") == "—"
+    assert report.GlueLog.pasted_text("<Figure size 640x480 with 1 Axes>") == (
+        "<Figure size 640x480 with 1 Axes>"
+    )
+    with pytest.raises(RuntimeError, match="kernel"):
+        report.GlueLog()
+
+
+def test_moments_and_sweep_tables_hold_the_glued_texts():
+    result = reproduce.reproduce(["fig2"])
+    texts = report.moments_texts(result)
+    table = report.moments_table(result, "velocity")
+    assert table.header == ["filter", "Fig. 2"]
+    assert [r[0] for r in table.rows] == [
+        "optimal $p_o$",
+        "second order $p_s$",
+        "EKF $p_e$",
+        "UKF",
+        "particle filter",
+        "particle filter, Monte Carlo s.e.",
+    ]
+    assert table.rows[1][1] == texts["bf_fig2_second_order_velocity"]
+    assert table.rows[-1][1] == texts["bf_fig2_particle_velocity_se"]
+    with pytest.raises(ValueError, match="quantity"):
+        report.moments_table(result, "speed")
+    sweep = experiments.noise_sweep([1 / 1000, 1 / 200])
+    texts = report.sweep_texts(sweep, "rho", "ns", decimals=2)
+    table = report.sweep_table(sweep, "rho", decimals=2)
+    assert table.header[:2] == [r"$\rho$", "optimal $p_o$"]
+    assert table.rows[1][:3] == [texts["ns_1_x"], texts["ns_1_optimal"], texts["ns_1_second_order"]]
+    offsets = experiments.prior_offset_sweep([-1.0, 2.0])
+    assert report.sweep_table(offsets, "offset").header[0] == "offset"
+    assert report.sweep_table(offsets, "offset").rows[0][0] == "-1"
