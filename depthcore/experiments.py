@@ -9,11 +9,19 @@ Recommended import: ``from depthcore import experiments``.
   measurements (deterministic);
 * :func:`prior_offset_sweep` generalises Figure 6: the depth of the prior mean
   is moved by an offset and each filter's depth estimate is followed;
+* :func:`prior_velocity_sweep` moves the velocity of the prior mean instead,
+  and :func:`prior_mean_map` maps the EKF's depth SD over the prior mean's
+  depth and velocity, relative to the optimal filter's;
+* :func:`ekf_linearisation` and :func:`bearings_depth_sd`: where the EKF
+  linearises the three bearings, and the depth SD those linearised bearings allow;
 * :func:`noise_study`: the Monte Carlo study (:func:`depthcore.study.study`)
   at several noise levels;
 * :func:`particle_convergence`: the particle filter's error against the
   number of particles, for several settings;
-* :func:`first_update`: the EKF and the UKF after the first measurement.
+* :func:`first_update`: the EKF and the UKF after the first measurement;
+* :func:`truncated_bearing_moments`: why the unscented transform of the
+  paper's prior has nothing to match: the moments of ``x / y`` under a
+  Gaussian with positive density at ``y = 0`` do not exist.
 
 :mod:`depthcore.figures` draws and :mod:`depthcore.report` formats what these return.
 """
@@ -24,7 +32,7 @@ import numpy as np
 
 from . import _checks, ekf, model, optimal, particle, study, ukf
 from .filters import FILTERS, NAMES
-from .gaussian import PAPER_PRIOR_SCALE, MeanAndCov, paper_prior_means
+from .gaussian import PAPER_PRIOR_SCALE, Gaussian, MeanAndCov, paper_prior_means
 from .scenarios import SCENARIOS, Scenario
 
 #: Settings of the particle filter compared by :func:`particle_convergence`:
@@ -124,6 +132,172 @@ def prior_offset_sweep(
     pm = paper_prior_means(c, offsets)
     mus = np.tile(mu, (len(offsets), 1))
     return {"offset": offsets, **_compare(mus, rho, pm, prior_scale * np.eye(3))}
+
+
+def _prior_means(mu, offsets, velocities):
+    """Prior means ``(c1 - 2 c3, c2 - 2 + offset, velocity)``, shape (D, V, 3), and ``c``."""
+    c = model.noise_free_states(mu[None])[0]
+    if np.any(c[1] - 2 + offsets <= 0):
+        raise ValueError("offsets must keep the prior's depth at time 1, c2 - 2 + offset, positive")
+    pm = paper_prior_means(c, offsets[:, None] + np.zeros((1, len(velocities))))
+    pm[..., 2] = velocities[None, :]
+    return pm
+
+
+def _problem(mu, rho):
+    mu = np.asarray(SCENARIOS["fig2"].mu if mu is None else mu, dtype=float)
+    return mu, SCENARIOS["fig2"].rho if rho is None else rho
+
+
+def prior_velocity_sweep(
+    velocities,
+    mu=None,
+    rho: float | None = None,
+    depth_offset: float = 0.0,
+    prior_scale: float = PAPER_PRIOR_SCALE,
+) -> dict:
+    """Each filter's depth estimate as the prior mean's velocity moves.
+
+    The prior mean is ``(c1 - 2 c3, c2 - 2 + depth_offset, velocity)``: the
+    paper's rule, which sets the velocity to zero, with the velocity varied.
+    Every filter, the optimal one included, is given the same prior.
+
+    Parameters
+    ----------
+    velocities : array_like, shape (R,)
+        Velocities of the prior mean.
+    mu : array_like, shape (3,), optional
+        Default: Eq. (17).
+    rho : float, optional
+        Default: 1/200.
+    depth_offset : float
+        Added to the prior mean's depth, as in :func:`prior_offset_sweep`.
+
+    Returns
+    -------
+    dict
+        ``{"velocity": (R,), name: {"depth_mean", "depth_sd", "hellinger"}}``.
+    """
+    mu, rho = _problem(mu, rho)
+    velocities = np.atleast_1d(_checks.finite_array(velocities, "velocities"))
+    offsets = np.atleast_1d(_checks.finite_array(depth_offset, "depth_offset"))
+    pm = _prior_means(mu, offsets, velocities)[0]
+    mus = np.tile(mu, (len(velocities), 1))
+    return {"velocity": velocities, **_compare(mus, rho, pm, prior_scale * np.eye(3))}
+
+
+def prior_mean_map(
+    offsets, velocities, mu=None, rho: float | None = None, prior_scale: float = PAPER_PRIOR_SCALE
+) -> dict:
+    """The EKF's and the optimal filter's depth SDs over the prior mean's depth and velocity.
+
+    The prior mean is ``(c1 - 2 c3, c2 - 2 + offset, velocity)`` on the grid
+    of ``offsets`` by ``velocities``; each grid point gives both filters that prior.
+
+    Parameters
+    ----------
+    offsets : array_like, shape (D,)
+        Depth offsets, as in :func:`prior_offset_sweep`.
+    velocities : array_like, shape (V,)
+        Velocities of the prior mean.
+    mu : array_like, shape (3,), optional
+        Default: Eq. (17).
+    rho : float, optional
+        Default: 1/200.
+
+    Returns
+    -------
+    dict
+        ``"offset"`` (D,), ``"velocity"`` (V,), and arrays of shape (D, V):
+        ``"ekf_depth_sd"``, ``"optimal_depth_sd"`` and ``"log10_sd_ratio"``,
+        ``log10(EKF depth SD / optimal depth SD)``.
+    """
+    mu, rho = _problem(mu, rho)
+    offsets = np.atleast_1d(_checks.finite_array(offsets, "offsets"))
+    velocities = np.atleast_1d(_checks.finite_array(velocities, "velocities"))
+    pm = _prior_means(mu, offsets, velocities).reshape(-1, 3)
+    mus = np.tile(mu, (len(pm), 1))
+    cov = prior_scale * np.eye(3)
+    shape = (len(offsets), len(velocities))
+    e = FILTERS["ekf"](mus, rho, pm, cov).depth_sd.reshape(shape)
+    o = FILTERS["optimal"](mus, rho, pm, cov).depth_sd.reshape(shape)
+    return {
+        "offset": offsets,
+        "velocity": velocities,
+        "ekf_depth_sd": e,
+        "optimal_depth_sd": o,
+        "log10_sd_ratio": np.log10(e / o),
+    }
+
+
+# --- where the EKF linearises ------------------------------------------------------------------
+
+
+def bearings_depth_sd(h, rho: float) -> float:
+    """The depth SD at time 3 that three linearised bearings allow, without a prior.
+
+    The EKF's inverse covariance at time 3 is Eq. (24) with its own observation
+    vectors: ``R^T R / rho**2`` plus the prior's term, where the rows of ``R``
+    are ``h_k^T F^{k-3}``, the gradients of the linearised bearings with
+    respect to the state at time 3. Without the prior's term the covariance is
+    ``rho**2 R^{-1} R^{-T}``; this returns the square root of its depth entry,
+    which is ``rho`` times the norm of the depth row of ``R^{-1}``. It is
+    infinite when ``R`` is singular: then the three bearings leave a direction
+    of the state unresolved.
+
+    Parameters
+    ----------
+    h : array_like, shape (3, 3)
+        Observation vectors (Eq. (11)) of the bearings at times 1, 2, 3, one per row.
+    rho : float
+        Noise standard deviation, > 0.
+
+    Returns
+    -------
+    float
+    """
+    h = _checks.finite_array(h, "h", (3, 3))
+    rho = _checks.positive_scalar(rho, "rho")
+    R = np.stack([h[k] @ model.G_linear(k - 2) for k in range(3)])
+    if np.linalg.matrix_rank(R) < 3:
+        return float("inf")
+    return float(rho * np.linalg.norm(np.linalg.solve(R.T, np.eye(3)[1])))
+
+
+def ekf_linearisation(mu, rho: float, prior: Gaussian) -> dict:
+    """Where the EKF linearises the bearings (Eq. (11)), and what follows for the depth.
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+    rho : float
+    prior : Gaussian
+        Density of the state at time 1.
+
+    Returns
+    -------
+    dict
+        ``"h"`` (3, 3): the observation vectors of Eq. (11) at the EKF's
+        predicted means ``n`` before each measurement (the prior mean, then
+        Eq. (10)), one per row; ``"rows"`` (3, 3): ``h_k^T F^{k-3}``, their
+        gradients with respect to the state at time 3 (the vectors of
+        Eq. (24)); ``"det"``: the determinant of ``rows``; ``"depth_sd"``
+        (3,): the EKF's depth SD after each measurement; ``"bearings_depth_sd"``:
+        :func:`bearings_depth_sd` of ``h``.
+    """
+    if not isinstance(prior, Gaussian):
+        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
+    history = ekf.ekf(mu, rho, prior)
+    predicted = [prior.mean] + [ekf.predict(history.means[i], history.covs[i])[0] for i in (0, 1)]
+    h = model.observation_vector(np.stack(predicted))
+    rows = np.stack([h[k] @ model.G_linear(k - 2) for k in range(3)])
+    return {
+        "h": h,
+        "rows": rows,
+        "det": float(np.linalg.det(rows)),
+        "depth_sd": np.sqrt(history.covs[:, 1, 1]),
+        "bearings_depth_sd": bearings_depth_sd(h, rho),
+    }
 
 
 # --- the Monte Carlo study at several noise levels --------------------------------------------
@@ -289,4 +463,67 @@ def first_update(scenario: Scenario, sigma_points: ukf.SigmaPoints = ukf.SigmaPo
         "sigma_points": sigma_points.points(prior.mean, prior.cov),
         "ekf": MeanAndCov(e.means[0], e.covs[0]),
         "ukf": MeanAndCov(u.means[0], u.covs[0]),
+    }
+
+
+def truncated_bearing_moments(mean, cov, eps) -> dict:
+    """The prior mass near ``y = 0`` and the second moment of ``x / y`` away from it.
+
+    Under a Gaussian on ``(x, y)`` the density of ``y`` is positive at 0, so
+    ``P(|y| < eps)`` is about ``2 eps p_y(0)`` and
+    ``E[(x / y)**2 ; |y| > eps]`` grows like ``2 p_y(0) E[x**2 | y = 0] / eps``:
+    ``E[(x / y)**2]`` is infinite, and ``E[x / y]`` does not exist either
+    (``E[|x / y|]`` diverges like ``log(1 / eps)``). These are the moments the
+    unscented transform of ``h(x) = x / y`` sets out to match.
+
+    Parameters
+    ----------
+    mean : array_like, shape (2,) or (3,)
+        Mean of ``(x, y)`` (a third component, the velocity, is ignored).
+    cov : array_like, shape (2, 2) or (3, 3)
+        Covariance; its ``(x, y)`` block is used.
+    eps : array_like, shape (E,)
+        Half-widths of the excluded band ``|y| < eps``, each > 0.
+
+    Returns
+    -------
+    dict
+        ``"eps"`` (E,), ``"mass"`` (E,): ``P(|y| < eps)``, ``"second_moment"``
+        (E,): ``E[(x / y)**2 ; |y| > eps]`` (adaptive quadrature in ``log |y|``
+        of ``E[x**2 | y] p(y) / y**2``), and ``"density_at_zero"``: ``p_y(0)``.
+    """
+    from scipy.integrate import quad
+    from scipy.special import ndtr
+
+    mean = _checks.finite_array(mean, "mean")
+    cov = _checks.finite_array(cov, "cov")
+    if mean.shape not in ((2,), (3,)) or cov.shape != 2 * mean.shape:
+        raise ValueError(
+            f"mean and cov must have shapes (d,), (d, d), d = 2 or 3; got {mean.shape}, {cov.shape}"
+        )
+    eps = np.atleast_1d(_checks.positive_array(eps, "eps"))
+    mx, my = mean[:2]
+    cxx, cxy, cyy = cov[0, 0], cov[0, 1], cov[1, 1]
+    if not (cyy > 0 and cxx * cyy - cxy**2 >= 0):
+        raise ValueError("cov must be positive semi-definite with cov[1, 1] > 0")
+    sy = np.sqrt(cyy)
+    slope, residual = cxy / cyy, cxx - cxy**2 / cyy
+
+    def weight(y):  # E[x**2 | y] p(y) / y**2, times |y| for the variable log|y|
+        p = np.exp(-0.5 * ((y - my) / sy) ** 2) / (np.sqrt(2.0 * np.pi) * sy)
+        return ((mx + slope * (y - my)) ** 2 + residual) * p / np.abs(y)
+
+    top = np.log(abs(my) + 40.0 * sy)
+    moments = [
+        sum(
+            quad(lambda t, sign=sign: weight(sign * np.exp(t)), np.log(e), top, limit=200)[0]
+            for sign in (1.0, -1.0)
+        )
+        for e in eps
+    ]
+    return {
+        "eps": eps,
+        "mass": ndtr((eps - my) / sy) - ndtr((-eps - my) / sy),
+        "second_moment": np.array(moments),
+        "density_at_zero": float(np.exp(-0.5 * (my / sy) ** 2) / (np.sqrt(2.0 * np.pi) * sy)),
     }

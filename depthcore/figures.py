@@ -57,6 +57,15 @@ GRIDS = {
 }
 #: Where the paper truncates the EKF's peak, so do we (upper limit of the density axis).
 YLIM = {"fig3": 0.5}
+#: Figures on which the optimal marginal from Eq. (16) as printed (``reading="printed"``)
+#: is drawn beside the faithful one: where the two differ visibly.
+PRINTED_OVERLAY = ("fig3",)
+#: Line style of that curve.
+PRINTED_STYLE = {
+    "label": "optimal, Eq. (16) as printed",
+    "color": "tab:orange",
+    "linestyle": (0, (2, 1)),
+}
 _SYMBOL = {"depth": "y", "velocity": "v"}
 #: Leave the creation date out, so that the same figure gives the same file.
 _NO_DATE = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
@@ -85,7 +94,9 @@ def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
         Which filters to draw: the paper's three by default (its Figure 4
         omits the optimal one, which we draw), or
         :data:`depthcore.filters.NAMES` for the extended figure with the
-        UKF and the particle filter.
+        UKF and the particle filter. For the keys of :data:`PRINTED_OVERLAY`
+        the optimal depth marginal of Eq. (16) as printed is drawn first,
+        in :data:`PRINTED_STYLE`.
 
     Returns
     -------
@@ -97,6 +108,9 @@ def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
     lo, hi = GRIDS[key]
     curves = reproduce.curves(s, np.linspace(lo, hi, n), filters=filters)
     fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
+    if key in PRINTED_OVERLAY:
+        printed = _filters.optimal.marginals(s.mu, s.rho, s.prior, reading="printed")
+        ax.plot(curves["grid"], printed.depth_pdf(curves["grid"]), linewidth=1.4, **PRINTED_STYLE)
     plot_marginals(ax, curves, s.quantity, filters)
     if key in YLIM:
         peak = max(np.max(curves[f]) for f in filters)
@@ -417,17 +431,18 @@ def calibration(result: dict, quantity: str = "depth"):
     return fig
 
 
-def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False):
+def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False, log_y: bool = False):
     """One field of each filter against the swept variable.
 
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.experiments.noise_sweep` (``x="rho"``) or
-        :func:`depthcore.experiments.prior_offset_sweep` (``x="offset"``).
+        From :func:`depthcore.experiments.noise_sweep` (``x="rho"``),
+        :func:`depthcore.experiments.prior_offset_sweep` (``x="offset"``) or
+        :func:`depthcore.experiments.prior_velocity_sweep` (``x="velocity"``).
     field : {"hellinger", "depth_mean", "depth_sd"}
-    log_x : bool
-        Logarithmic horizontal axis.
+    log_x, log_y : bool
+        Logarithmic horizontal, vertical axis.
 
     Returns
     -------
@@ -435,7 +450,11 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False):
     """
     import matplotlib.pyplot as plt
 
-    labels = {"rho": "noise level rho (radians)", "offset": "offset of the prior's depth"}
+    labels = {
+        "rho": "noise level rho (radians)",
+        "offset": "offset of the prior's depth",
+        "velocity": "velocity of the prior's mean",
+    }
     ylabels = {
         "hellinger": "Hellinger distance of the depth marginal to the optimal one",
         "depth_mean": "depth mean",
@@ -447,9 +466,50 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False):
             ax.plot(result[x], result[name][field], marker="o", markersize=3, **STYLE[name])
     if log_x:
         ax.set_xscale("log")
+    if log_y:
+        ax.set_yscale("log")
     ax.set_xlabel(labels[x])
     ax.set_ylabel(ylabels[field], fontsize=9)
     ax.legend(frameon=False, fontsize=8)
+    return fig
+
+
+def prior_mean_map_figure(result: dict, marks: dict | None = None):
+    """``log10(EKF depth SD / optimal depth SD)`` over the prior mean's depth and velocity.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.experiments.prior_mean_map`.
+    marks : dict, optional
+        ``{label: (offset, velocity)}``: prior means to mark on the map.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        A diverging colour map centred on 0 (equal SDs), with the contour 0 drawn.
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import TwoSlopeNorm
+
+    r = result["log10_sd_ratio"]
+    limit = float(np.max(np.abs(r)))
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
+    mesh = ax.pcolormesh(
+        result["velocity"],
+        result["offset"],
+        r,
+        cmap="RdBu_r",
+        norm=TwoSlopeNorm(0.0, -limit, limit),
+        shading="nearest",
+    )
+    ax.contour(result["velocity"], result["offset"], r, levels=[0.0], colors="black")
+    for label, (offset, velocity) in (marks or {}).items():
+        ax.plot(velocity, offset, marker="o", color="black", linestyle="none")
+        ax.annotate(label, (velocity, offset), xytext=(5, 5), textcoords="offset points")
+    fig.colorbar(mesh, ax=ax, label="log10(EKF depth SD / optimal depth SD)")
+    ax.set_xlabel("velocity of the prior's mean")
+    ax.set_ylabel("offset of the prior's depth")
     return fig
 
 

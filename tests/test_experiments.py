@@ -170,3 +170,95 @@ def test_hellinger_is_zero_for_identical_densities_and_bounded():
 
     h = study.hellinger(ref, ref.depth_log_pdf, ref.moments.depth_mean, ref.moments.depth_sd)
     assert_allclose(h, 0.0, atol=1e-6)  # H = sqrt(1 - BC): BC to 1e-12
+
+
+# --- the prior mean's velocity, and where the EKF linearises -----------------------------------
+
+
+def _prior_with_velocity(v0, offset=0.0):
+    mean = gaussian.paper_prior_means(FIG2.c, offset)
+    mean[2] = v0
+    return gaussian.Gaussian(mean, FIG2.prior.cov)
+
+
+def test_prior_velocity_sweep_matches_direct_runs():
+    v = [-2.0, 0.0, 0.95]
+    sw = experiments.prior_velocity_sweep(v)
+    for i, v0 in enumerate(v):
+        prior = _prior_with_velocity(v0)
+        direct = ekf.ekf(FIG2.mu, FIG2.rho, prior).posterior.marginal("y")
+        assert_allclose([sw["ekf"]["depth_mean"][i], sw["ekf"]["depth_sd"][i]], direct, rtol=1e-9)
+    opt = optimal.marginals(FIG2.mu, FIG2.rho, _prior_with_velocity(-2.0))
+    assert_allclose(sw["optimal"]["depth_sd"][0], opt.depth_sd, rtol=1e-8)
+    # v0 = 0 is the paper's prior: Figure 2's EKF SD 0.16; near v0 = 0.95 the SD is the prior's
+    assert abs(sw["ekf"]["depth_sd"][1] - 0.16) < 0.005 and sw["ekf"]["depth_sd"][2] > 25
+
+
+def test_prior_velocity_sweep_at_c3_is_theorem_1():
+    # Theorem 1: with the prior mean G^-2 c (velocity c3) the EKF is p_s.
+    sw = experiments.prior_velocity_sweep([FIG2.c[2]])
+    assert_allclose(sw["ekf"]["depth_sd"], sw["second_order"]["depth_sd"], rtol=1e-8)
+
+
+def test_prior_mean_map_rows_are_velocity_sweeps_and_change_sign():
+    offsets, velocities = [0.0, 2.0], [-3.0, 0.0, 0.95, 3.0]
+    m = experiments.prior_mean_map(offsets, velocities)
+    assert m["log10_sd_ratio"].shape == (2, 4)
+    for i, offset in enumerate(offsets):
+        sw = experiments.prior_velocity_sweep(velocities, depth_offset=offset)
+        assert_allclose(m["ekf_depth_sd"][i], sw["ekf"]["depth_sd"], rtol=1e-12)
+        assert_allclose(m["optimal_depth_sd"][i], sw["optimal"]["depth_sd"], rtol=1e-8)
+    signs = np.sign(m["log10_sd_ratio"][0])
+    assert list(signs) == [-1, -1, 1, -1]  # too small, except near the pole at v0 = 0.95
+    assert np.all(m["log10_sd_ratio"][1, [0, 1, 3]] < 0)
+
+
+def test_prior_mean_map_rejects_a_prior_behind_the_camera():
+    with pytest.raises(ValueError, match="offsets"):
+        experiments.prior_mean_map([-4.5], [0.0])
+
+
+def test_ekf_linearisation_rows_give_eq24_and_the_residual_gradients():
+    for v0 in (0.0, 0.95, FIG2.c[2]):
+        prior = _prior_with_velocity(v0)
+        lin = experiments.ekf_linearisation(FIG2.mu, FIG2.rho, prior)
+        P3 = ekf.ekf(FIG2.mu, FIG2.rho, prior).posterior.cov
+        F2 = np.array([[1.0, 0.0, -2.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+        eq24 = lin["rows"].T @ lin["rows"] / FIG2.rho**2 + F2.T @ np.linalg.solve(prior.cov, F2)
+        assert np.abs(eq24 @ P3 - np.eye(3)).max() < 1e-7
+        assert_allclose(lin["depth_sd"][-1], np.sqrt(P3[1, 1]), rtol=1e-12)
+    # Theorem 1's prior: the rows are the gradients of the residuals at c (Eqs. (20)-(22)).
+    from depthcore import model
+
+    assert_allclose(lin["rows"], model.residual_gradients(FIG2.c), rtol=1e-12, atol=1e-15)
+
+
+def test_bearings_depth_sd_is_the_broad_prior_limit():
+    lin = experiments.ekf_linearisation(FIG2.mu, FIG2.rho, FIG2.prior)
+    R = lin["rows"]
+    direct = FIG2.rho * np.sqrt(np.linalg.inv(R.T @ R)[1, 1])
+    assert_allclose(lin["bearings_depth_sd"], direct, rtol=1e-8)
+    # the prior 1000 I adds little: the EKF's SD is within 0.1 % of the bearings' alone
+    assert abs(lin["bearings_depth_sd"] / lin["depth_sd"][-1] - 1) < 1e-3
+    # bearings with no depth component leave the depth unresolved
+    blind = np.array([[0.25, 0.0, 0.0], [0.2, 0.0, 0.0], [0.17, 0.0, 0.0]])
+    assert experiments.bearings_depth_sd(blind, 0.01) == np.inf
+    with pytest.raises(ValueError, match="rho"):
+        experiments.bearings_depth_sd(lin["h"], 0.0)
+
+
+def test_truncated_bearing_moments_against_monte_carlo_and_the_pole():
+    mean, cov = FIG2.prior.mean, FIG2.prior.cov
+    r = experiments.truncated_bearing_moments(mean, cov, [1.0, 1e-2, 1e-4])
+    rng = np.random.default_rng(5)
+    xy = rng.multivariate_normal(mean[:2], cov[:2, :2], 1_000_000)
+    keep = np.abs(xy[:, 1]) > 1.0
+    q = np.where(keep, (xy[:, 0] / np.where(keep, xy[:, 1], 1.0)) ** 2, 0.0)
+    assert abs(r["second_moment"][0] - q.mean()) < 5 * q.std() / np.sqrt(q.size)
+    assert abs(r["mass"][0] - np.mean(~keep)) < 5 * np.sqrt(r["mass"][0] / q.size)
+    # the mass scales like 2 eps p(0) and the moment like 2 p(0) E[x^2 | y = 0] / eps
+    p0 = r["density_at_zero"]
+    assert_allclose(r["mass"][1:] / r["eps"][1:], 2 * p0, rtol=1e-3)
+    assert_allclose(r["second_moment"][2] * 1e-4, 2 * p0 * (mean[0] ** 2 + cov[0, 0]), rtol=1e-3)
+    with pytest.raises(ValueError, match="eps"):
+        experiments.truncated_bearing_moments(mean, cov, [0.0])

@@ -20,11 +20,45 @@ FIG2 = SCENARIOS["fig2"]
 def test_figure_draws_the_filters(key, filters):
     fig = figures.figure(key, n=101, filters=filters)
     ax = fig.axes[0]
-    assert [line.get_label() for line in ax.get_lines()] == [
+    overlay = [figures.PRINTED_STYLE["label"]] if key in figures.PRINTED_OVERLAY else []
+    assert [line.get_label() for line in ax.get_lines()] == overlay + [
         figures.STYLE[f]["label"] for f in filters
     ]
     assert f"Figure {SCENARIOS[key].figure}" in ax.get_title()
     assert ("extended" in ax.get_title()) == (len(filters) == 5)
+    plt.close(fig)
+
+
+def test_figure_3_overlays_the_printed_reading_of_eq16():
+    # The curve the paper's Eq. (16) gives as printed, drawn beside the faithful one.
+    from depthcore import optimal
+
+    s = SCENARIOS["fig3"]
+    fig = figures.figure("fig3", n=101)
+    lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
+    x, y = lines[figures.PRINTED_STYLE["label"]].get_data()
+    printed = optimal.marginals(s.mu, s.rho, s.prior, reading="printed")
+    assert_allclose(y, printed.depth_pdf(x), rtol=1e-12)
+    assert_allclose(x, np.linspace(*figures.GRIDS["fig3"], 101))
+    # it differs from the faithful optimal curve drawn beside it
+    _, faithful = lines[figures.STYLE["optimal"]["label"]].get_data()
+    assert np.max(np.abs(y - faithful)) > 0.01
+    plt.close(fig)
+
+
+def test_prior_velocity_sweep_and_map_figures_draw_the_data():
+    sw = experiments.prior_velocity_sweep([0.0, 0.95, 2.0])
+    fig = figures.sweep(sw, "velocity", "depth_sd", log_y=True)
+    ax = fig.axes[0]
+    assert ax.get_yscale() == "log" and len(ax.get_lines()) == 4
+    ekf_line = [ln for ln in ax.get_lines() if ln.get_label() == figures.STYLE["ekf"]["label"]][0]
+    assert_allclose(ekf_line.get_ydata(), sw["ekf"]["depth_sd"])
+    plt.close(fig)
+    m = experiments.prior_mean_map([0.0, 1.0, 2.0], [-1.0, 0.0, 0.95, 2.0])
+    fig = figures.prior_mean_map_figure(m, {"paper": (0.0, 0.0)})
+    mesh = fig.axes[0].collections[0]
+    assert_allclose(np.asarray(mesh.get_array()).reshape(3, 4), m["log10_sd_ratio"])
+    assert [t.get_text() for t in fig.axes[0].texts] == ["paper"]
     plt.close(fig)
 
 
