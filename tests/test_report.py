@@ -117,3 +117,17 @@ def test_noise_study_texts():
     assert set(texts) == {"mc_0_x", "mc_0_trials"} | {
         f"mc_0_second_order_{s}" for s in ("cov68", "cov95", "rmse", "nees")
     }
+
+
+def test_truth_study_texts():
+    r = experiments.truth_study(
+        np.array([[2.0, 10.0, 2.0]]), 1 / 200, trials=20, seed=0, names=("second_order",)
+    )
+    texts = report.truth_study_texts(r, "st")
+    assert texts["st_0_truth"] == "(2, 10, 2)"
+    assert texts["st_0_trials"] == str(r["valid_trials"][0])
+    assert texts["st_0_second_order_bias"] == f"{r['second_order']['bias'][0]:.3f}"
+    assert texts["st_0_second_order_cov68"] == f"{r['second_order']['coverage_68'][0]:.2f}"
+    assert set(texts) == {"st_0_truth", "st_0_trials"} | {
+        f"st_0_second_order_{s}" for s in ("bias", "rmse", "mean_sd", "cov68", "cov95", "nees")
+    }
