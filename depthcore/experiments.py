@@ -16,8 +16,14 @@ Recommended import: ``from depthcore import experiments``.
   linearises the three bearings, and the depth SD those linearised bearings allow;
 * :func:`noise_study`: the Monte Carlo study (:func:`depthcore.study.study`)
   at several noise levels;
-* :func:`particle_convergence`: the particle filter's error against the
+* :func:`truth_study`: the Monte Carlo study at several true states;
+* :func:`particle_convergence`: the importance sampler's error against the
   number of particles, for several settings;
+* :func:`resample_move_runs`: the causal particle filter with resample-move
+  (:mod:`depthcore.resample_move`) run independently several times on a
+  scenario, against the optimal filter;
+* :func:`filter_cost`: the computing cost of the paper's three filters per
+  triple of measurements, and the optimal filter's quadrature nodes;
 * :func:`first_update`: the EKF and the UKF after the first measurement;
 * :func:`truncated_bearing_moments`: why the unscented transform of the
   paper's prior has nothing to match: the moments of ``x / y`` under a
@@ -28,9 +34,11 @@ Recommended import: ``from depthcore import experiments``.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
-from . import _checks, ekf, model, optimal, particle, study, ukf
+from . import _checks, ekf, model, optimal, particle, resample_move, second_order, study, ukf
 from .filters import FILTERS, NAMES
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, MeanAndCov, paper_prior_means
 from .scenarios import SCENARIOS, Scenario
@@ -346,6 +354,103 @@ def noise_study(
     return out
 
 
+def truth_study(
+    truths, rho: float, trials: int, seed, names=("optimal", "second_order", "ekf")
+) -> dict:
+    """:func:`depthcore.study.study` at each of several true states, with the paper's prior rule.
+
+    Parameters
+    ----------
+    truths : array_like, shape (T, 3)
+        True states ``(x, y, v)`` at time 3.
+    rho : float
+        Noise standard deviation, > 0.
+    trials : int
+        Trials per truth (the same seed for every truth).
+    seed : int or numpy.random.SeedSequence
+    names : sequence of str
+        Filters, from :data:`depthcore.filters.FILTERS`.
+
+    Returns
+    -------
+    dict
+        ``"truth"`` (T, 3), ``"valid_trials"`` (T,) and, per filter,
+        ``{score: (T,)}`` for :data:`NOISE_STUDY_SCORES` (of the depth) and ``"nees"``.
+    """
+    truths = _checks.finite_array(truths, "truths")
+    if truths.ndim != 2 or truths.shape[1] != 3 or truths.shape[0] < 1:
+        raise ValueError(f"truths must have shape (T, 3) with T >= 1, got shape {truths.shape}")
+    rho = _checks.positive_scalar(rho, "rho")
+    runs = [
+        study.study(t, rho=rho, trials=trials, seed=seed, prior="paper", names=tuple(names))
+        for t in truths
+    ]
+    out = {"truth": truths, "valid_trials": np.array([r["valid_trials"] for r in runs])}
+    for name in names:
+        f = [r["filters"][name] for r in runs]
+        out[name] = {s: np.array([x["depth"][s] for x in f]) for s in NOISE_STUDY_SCORES}
+        out[name]["nees"] = np.array([x["nees"] for x in f])
+    return out
+
+
+# --- the cost of the paper's filters ----------------------------------------------------------
+
+
+def _best_time(call, repeats: int) -> float:
+    """The least wall-clock time of ``repeats`` calls of ``call()``, in seconds."""
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        call()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def filter_cost(scenarios, repeats: int = 5) -> dict:
+    """Time per triple of the paper's three filters, and the optimal filter's quadrature nodes.
+
+    For each scenario, one triple of measurements: the optimal filter's depth
+    and velocity moments (:func:`depthcore.optimal.moments`, Eqs. (13)-(16)),
+    the second-order approximation (:func:`depthcore.second_order.second_order`,
+    Eqs. (7)-(8)) and the EKF (:func:`depthcore.ekf.ekf`, Eqs. (10)-(12)).
+    Each is timed as the least of ``repeats`` calls, which discards delays
+    caused by other work on the machine; the times depend on the machine,
+    their ratios much less.
+
+    Parameters
+    ----------
+    scenarios : sequence of Scenario
+    repeats : int
+        Calls timed per filter and scenario, >= 1.
+
+    Returns
+    -------
+    dict
+        ``"keys"`` (S,) of scenario keys; ``"seconds"``: ``{filter: (S,)}``
+        for ``"optimal"``, ``"second_order"`` and ``"ekf"``; ``"nodes"`` (S,),
+        the quadrature nodes of :func:`depthcore.optimal.marginals` on each
+        scenario.
+    """
+    scenarios = tuple(scenarios)
+    if not scenarios or not all(isinstance(s, Scenario) for s in scenarios):
+        raise ValueError("scenarios must be a non-empty sequence of Scenario")
+    if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:
+        raise ValueError(f"repeats must be a positive integer, got {repeats!r}")
+    calls = {
+        "optimal": lambda s: optimal.moments(np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov),
+        "second_order": lambda s: second_order.second_order(s.mu, s.rho, s.prior),
+        "ekf": lambda s: ekf.ekf(s.mu, s.rho, s.prior),
+    }
+    seconds = {
+        name: np.array(
+            [_best_time(lambda s=s, call=call: call(s), int(repeats)) for s in scenarios]
+        )
+        for name, call in calls.items()
+    }
+    nodes = np.array([optimal.marginals(s.mu, s.rho, s.prior).n_nodes for s in scenarios])
+    return {"keys": [s.key for s in scenarios], "seconds": seconds, "nodes": nodes}
+
+
 # --- convergence of the particle filter ------------------------------------------------------
 
 
@@ -429,6 +534,64 @@ def particle_convergence(
         "exact": {m: float(v) for m, v in zip(MOMENTS, exact, strict=True)},
         "rmse": rmse,
         "ess": ess,
+    }
+
+
+# --- the causal particle filter (resample-move) ----------------------------------------------
+
+
+def resample_move_runs(
+    scenario: Scenario, n_particles: int, repeats: int, seed, moves: int = 20
+) -> dict:
+    """Independent runs of the resample-move particle filter on a scenario.
+
+    The filter of :func:`depthcore.resample_move.run` sees the bearings one at
+    a time (bootstrap proposal from the prior, systematic resampling when the
+    ESS falls below ``N/2``, then ``moves`` Metropolis steps per particle).
+    The ``repeats`` runs draw from independent child streams of ``seed``;
+    their spread gives the Monte Carlo standard error of the moments.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    n_particles : int
+        Particles per run, >= 2.
+    repeats : int
+        Independent runs, >= 2.
+    seed : int or numpy.random.SeedSequence
+    moves : int
+        Metropolis steps per particle after each resampling.
+
+    Returns
+    -------
+    dict
+        ``"runs"``: ``{moment: (repeats,)}`` for :data:`MOMENTS`; ``"mean"`` and
+        ``"se"``: ``{moment: float}``, the mean over the runs and its standard
+        error (SD over the runs / sqrt(repeats)); ``"exact"``: ``{moment:
+        float}`` of the optimal filter (:func:`depthcore.optimal.marginals`,
+        in front of the camera); ``"ess"`` (repeats, 3): the ESS after each
+        bearing as a fraction of ``N``; ``"resampled"`` (repeats, 3).
+    """
+    if not isinstance(scenario, Scenario):
+        raise ValueError(f"scenario must be a Scenario, got {type(scenario).__name__}")
+    if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 2:
+        raise ValueError(f"repeats must be an integer >= 2, got {repeats!r}")
+    s, prior = scenario, scenario.prior
+    batches = [
+        resample_move.resample_move(
+            s.mu, s.rho, prior, n_particles, np.random.default_rng(stream), moves
+        )
+        for stream in _checks.spawn(seed, int(repeats))
+    ]
+    runs = {k: np.concatenate([b.moments()[k] for b in batches]) for k in MOMENTS}
+    opt = optimal.marginals(s.mu, s.rho, prior)
+    return {
+        "runs": runs,
+        "mean": {k: float(np.mean(v)) for k, v in runs.items()},
+        "se": {k: float(np.std(v, ddof=1) / np.sqrt(len(v))) for k, v in runs.items()},
+        "exact": {k: float(getattr(opt, k)) for k in MOMENTS},
+        "ess": np.concatenate([b.ess for b in batches]) / n_particles,
+        "resampled": np.concatenate([b.resampled for b in batches]),
     }
 
 

@@ -25,17 +25,17 @@ from .scenarios import SCENARIOS
 #: from the registry :data:`depthcore.filters.FILTERS`.
 STYLE = {name: f.plot_style for name, f in _filters.FILTERS.items()}
 
-#: Legend labels and line styles of the particle filter's settings,
+#: Legend labels and line styles of the importance sampler's settings,
 #: :data:`depthcore.experiments.SETTINGS`.
 SETTING_STYLE = {
     "default": {
-        "label": "t proposal from $p_s$, no resampling (default)",
+        "label": "importance sampling, t proposal from $p_s$ (default)",
         "color": "tab:purple",
         "linestyle": "-",
         "marker": "o",
     },
     "resampling": {
-        "label": "same, resampling when ESS < N/2",
+        "label": "same, resampling (no move) when ESS < N/2",
         "color": "tab:orange",
         "linestyle": "--",
         "marker": "s",
@@ -47,7 +47,8 @@ SETTING_STYLE = {
         "marker": "^",
     },
 }
-#: Axis ranges comparable with the paper's plots.
+#: Axis ranges of the figures, chosen to show the bulk of every density (the
+#: scan does not give the paper's axes).
 GRIDS = {
     "fig2": (2.5, 10.5),
     "fig3": (2.5, 30.0),

@@ -543,7 +543,7 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "particle",
-            "particle filter",
+            "importance sampling, $q$ from $p_s$",
             {"color": "tab:purple", "linestyle": (0, (5, 1, 1, 1, 1, 1))},
             "particles",
             False,

@@ -510,6 +510,33 @@ def noise_study_texts(result: dict, prefix: str) -> dict:
     return out
 
 
+def truth_study_texts(result: dict, prefix: str) -> dict:
+    """Texts of :func:`~depthcore.experiments.truth_study`'s rows, for glue.
+
+    Returns
+    -------
+    dict
+        For truth ``i``: ``"<prefix>_<i>_truth"`` (``"(2, 10, 2)"``),
+        ``"<prefix>_<i>_trials"``, and per filter ``"<prefix>_<i>_<filter>_<score>"``
+        for the depth's ``bias``, ``rmse``, ``mean_sd`` (:data:`STUDY_DECIMALS`),
+        ``cov68``, ``cov95`` (2 decimals) and ``nees`` (1 decimal).
+    """
+    out = {}
+    names = [n for n in NAMES if n in result]
+    for i, truth in enumerate(result["truth"]):
+        out[f"{prefix}_{i}_truth"] = "(" + ", ".join(f"{float(v):g}" for v in truth) + ")"
+        out[f"{prefix}_{i}_trials"] = str(int(result["valid_trials"][i]))
+        for name in names:
+            r = result[name]
+            for score in ("bias", "rmse", "mean_sd"):
+                value = float(r[score][i]) + 0.0
+                out[f"{prefix}_{i}_{name}_{score}"] = f"{value:.{STUDY_DECIMALS[score]}f}"
+            out[f"{prefix}_{i}_{name}_cov68"] = f"{r['coverage_68'][i]:.2f}"
+            out[f"{prefix}_{i}_{name}_cov95"] = f"{r['coverage_95'][i]:.2f}"
+            out[f"{prefix}_{i}_{name}_nees"] = f"{r['nees'][i]:.1f}"
+    return out
+
+
 def format_prior_study(result: dict) -> str:
     """A plain-text table of :func:`depthcore.study.prior_study`'s result."""
     alpha = result["false_alarm"]

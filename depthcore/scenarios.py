@@ -129,5 +129,19 @@ REPORTED = {
     },
 }
 
+#: The scan's literal text where it garbles a reported value, as ``(mean, sd)``
+#: strings: Figure 3's optimal mean is printed without its decimal point.
+SCAN_TEXT = {"fig3": {"optimal": {"depth": ("6745", "67.45")}}}
+
 #: Decimal places the paper prints its means and SDs with.
 REPORTED_DECIMALS = 2
+
+#: Values from the paper that the book's prose quotes in words rather than
+#: gluing (a number inside a quotation from the paper, or a setting of the
+#: paper's experiment described in words), with where the paper gives them.
+#: ``tests/test_prose_numbers.py`` allows these strings, and only these, in prose.
+PROSE_QUOTES = {
+    "512 pixels": "Experiments: the image is 512 x 512 pixels with a 30 degree field of view",
+    '"about 5 pixels"': "Experiments: rho = 1/200 rad is about 5 pixels",
+    '"about 1 pixel"': "Experiments: rho = 1/500 rad is about 1 pixel (Figure 5)",
+}

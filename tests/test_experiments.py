@@ -16,6 +16,7 @@ from depthcore import (
     figures,
     gaussian,
     optimal,
+    resample_move,
     study,
     ukf,
 )
@@ -262,3 +263,64 @@ def test_truncated_bearing_moments_against_monte_carlo_and_the_pole():
     assert_allclose(r["second_moment"][2] * 1e-4, 2 * p0 * (mean[0] ** 2 + cov[0, 0]), rtol=1e-3)
     with pytest.raises(ValueError, match="eps"):
         experiments.truncated_bearing_moments(mean, cov, [0.0])
+
+
+def test_truth_study_gathers_the_study_at_each_truth():
+    truths = np.array([FIG2.c, SCENARIOS["fig3"].c])
+    r = experiments.truth_study(truths, FIG2.rho, trials=30, seed=2, names=("optimal", "ekf"))
+    direct = study.study(truths[1], FIG2.rho, trials=30, seed=2, names=("optimal", "ekf"))
+    assert_allclose(r["truth"], truths)
+    assert r["valid_trials"][1] == direct["valid_trials"]
+    assert r["ekf"]["coverage_68"][1] == direct["filters"]["ekf"]["depth"]["coverage_68"]
+    assert r["optimal"]["bias"][1] == direct["filters"]["optimal"]["depth"]["bias"]
+    assert r["optimal"]["nees"][1] == direct["filters"]["optimal"]["nees"]
+    assert r["ekf"]["rmse"].shape == (2,)
+
+
+@pytest.mark.parametrize("bad", [np.zeros(3), np.zeros((2, 2)), np.full((1, 3), np.nan)])
+def test_truth_study_rejects_bad_truths(bad):
+    with pytest.raises(ValueError, match="truths"):
+        experiments.truth_study(bad, FIG2.rho, trials=10, seed=0)
+
+
+def test_filter_cost_counts_the_optimal_filters_nodes():
+    scenarios = [FIG2, SCENARIOS["fig3"]]
+    c = experiments.filter_cost(scenarios, repeats=1)
+    assert c["keys"] == ["fig2", "fig3"]
+    for s, n in zip(scenarios, c["nodes"], strict=True):
+        assert n == optimal.marginals(s.mu, s.rho, s.prior).n_nodes
+    for name in ("optimal", "second_order", "ekf"):
+        assert c["seconds"][name].shape == (2,) and np.all(c["seconds"][name] > 0)
+
+
+@pytest.mark.parametrize(
+    ("scenarios", "repeats", "match"),
+    [([], 1, "scenarios"), ([FIG2], 0, "repeats"), (["fig2"], 1, "scenarios")],
+)
+def test_filter_cost_rejects_bad_arguments(scenarios, repeats, match):
+    with pytest.raises(ValueError, match=match):
+        experiments.filter_cost(scenarios, repeats=repeats)
+
+
+def test_resample_move_runs_are_the_filter_run_on_independent_streams():
+    r = experiments.resample_move_runs(FIG2, 2000, 3, seed=3, moves=5)
+    exact = optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior)
+    assert r["exact"]["depth_sd"] == exact.depth_sd
+    streams = np.random.SeedSequence(3).spawn(3)
+    for i, stream in enumerate(streams):
+        one = resample_move.resample_move(
+            FIG2.mu, FIG2.rho, FIG2.prior, 2000, np.random.default_rng(stream), moves=5
+        )
+        assert r["runs"]["depth_mean"][i] == one.moments()["depth_mean"][0]
+        assert_allclose(r["ess"][i], one.ess[0] / 2000)
+    runs = r["runs"]["velocity_sd"]
+    assert np.unique(runs).size == 3
+    assert_allclose(r["mean"]["velocity_sd"], runs.mean())
+    assert_allclose(r["se"]["velocity_sd"], runs.std(ddof=1) / np.sqrt(3))
+
+
+def test_resample_move_runs_rejects_bad_arguments():
+    with pytest.raises(ValueError, match="scenario"):
+        experiments.resample_move_runs("fig2", 100, 2, seed=0)
+    with pytest.raises(ValueError, match="repeats"):
+        experiments.resample_move_runs(FIG2, 100, 1, seed=0)

@@ -56,3 +56,12 @@ def test_reported_table_is_complete():
     assert set(REPORTED) == {"fig2", "fig3"}
     for key in REPORTED:
         assert set(REPORTED[key]) == {"optimal", "second_order", "ekf"}
+
+
+def test_scan_text_is_the_reported_value_as_the_scan_garbles_it():
+    from depthcore.scenarios import SCAN_TEXT
+
+    scan_mean, scan_sd = SCAN_TEXT["fig3"]["optimal"]["depth"]
+    mean, sd = REPORTED["fig3"]["optimal"]["depth"]
+    assert scan_mean == f"{mean:.2f}".replace(".", "")  # the decimal point lost
+    assert float(scan_sd) == sd

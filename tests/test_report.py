@@ -186,3 +186,17 @@ def test_moments_and_sweep_tables_hold_the_glued_texts():
     offsets = experiments.prior_offset_sweep([-1.0, 2.0])
     assert report.sweep_table(offsets, "offset").header[0] == "offset"
     assert report.sweep_table(offsets, "offset").rows[0][0] == "-1"
+
+
+def test_truth_study_texts():
+    r = experiments.truth_study(
+        np.array([[2.0, 10.0, 2.0]]), 1 / 200, trials=20, seed=0, names=("second_order",)
+    )
+    texts = report.truth_study_texts(r, "st")
+    assert texts["st_0_truth"] == "(2, 10, 2)"
+    assert texts["st_0_trials"] == str(r["valid_trials"][0])
+    assert texts["st_0_second_order_bias"] == f"{r['second_order']['bias'][0]:.3f}"
+    assert texts["st_0_second_order_cov68"] == f"{r['second_order']['coverage_68'][0]:.2f}"
+    assert set(texts) == {"st_0_truth", "st_0_trials"} | {
+        f"st_0_second_order_{s}" for s in ("bias", "rmse", "mean_sd", "cov68", "cov95", "nees")
+    }
