@@ -54,13 +54,14 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 from scipy.special import logsumexp, ndtr
 
-from . import kalman
+from . import _checks, kalman, optimal
 
 #: The lateral state ``(x, v)`` moves by ``x <- x + v``: the transition matrix.
 PSI = np.array([[1.0, 1.0], [0.0, 1.0]])
@@ -237,6 +238,75 @@ def measurement_matrices(nodes, frames) -> np.ndarray:
     return Phi
 
 
+def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
+    """The Kalman filter of ``(x, v)`` at each depth node, in closed form: log weight and frame ``N``.
+
+    The same filter as :func:`filter_bank` (textbook 19.2.1 prediction, 19.2.2
+    update, the log likelihood from the innovations) with its 2 x 2 algebra
+    written out, elementwise over the nodes, for the depth quadrature. With
+    ``(a, b, c)`` the entries of ``Cov[(x, v)]`` and ``r_k = (rho y_k)**2``
+    (the bearing noise in units of ``x``), the update by ``mu_k`` is
+
+        e = mu_k y_k - x,   x += a e / (a + r_k),   v += b e / (a + r_k),
+        a' = a r_k / (a + r_k),   b' = b r_k / (a + r_k),
+        det' = det r_k / (a + r_k),   c' = (det' + b'**2) / a',
+
+    the log likelihood gains ``log N(mu_k; x / y_k, (a + r_k) / y_k**2)``,
+    and the prediction is ``x += v``, ``a += 2 b + c``, ``b += c``,
+    ``c += q**2``, ``det += q**2 a``. Tracking the determinant keeps ``c``
+    free of cancellation when the bearings pin ``x`` far more tightly than
+    the prior (small noise).
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (..., J)
+        Depths at frame 1, > 0.
+    mu : ndarray, shape (..., N)
+    rho, q : ndarray, shape (...) or ()
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+        Already checked (see :func:`filter_bank`).
+
+    Returns
+    -------
+    log_weight : ndarray, shape (..., J)
+        ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``, as
+        :attr:`Bank.log_weight`.
+    mean : tuple of two ndarrays, shape (..., J)
+        ``E[x_N | y_1, mu]``, ``E[v_N | y_1, mu]``.
+    cov : tuple of three ndarrays, shape (..., J)
+        ``Var[x_N]``, ``Cov[x_N, v_N]``, ``Var[v_N]`` given ``y_1`` and ``mu``.
+    """
+    start, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
+    x, v = start.mean[..., 0], start.mean[..., 1]
+    c0 = start.cov[..., 0, :, :]
+    a = c0[..., 0, 0][..., None]
+    b = c0[..., 0, 1][..., None]
+    c = c0[..., 1, 1][..., None]
+    det = a * c - b * b
+    rho2 = (np.asarray(rho, dtype=float) ** 2)[..., None]
+    q2 = (np.asarray(q, dtype=float) ** 2)[..., None]
+    for k in range(mu.shape[-1]):
+        if k:
+            x = x + v
+            a = a + 2.0 * b + c
+            b = b + c
+            det = det + q2 * a
+            c = c + q2
+        y = nodes + k
+        r = rho2 * y * y
+        s = a + r
+        e = mu[..., k, None] * y - x
+        log_weight = log_weight - 0.5 * (_LOG_2PI + np.log(s) + e * e / s) + np.log(y)
+        g = e / s
+        x = x + a * g
+        v = v + b * g
+        f = r / s
+        a, b, det = a * f, b * f, det * f
+        c = (det + b * b) / a
+    return log_weight, (x, v), (a, b, c)
+
+
 # --- the bank --------------------------------------------------------------------------
 
 
@@ -291,6 +361,21 @@ def _batch(**shapes) -> tuple:
 
 
 def _filter_bank(nodes, mu, rho, q, prior_mean, prior_cov, history) -> Bank:
+    if not history:  # the closed form, as the depth quadrature uses
+        log_weight, (x, v), (a, b, c) = lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov)
+        cov = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
+        return Bank(
+            nodes=nodes,
+            mean=np.stack([x, v], -1),
+            cov=cov,
+            log_weight=log_weight,
+            mu=mu,
+            rho=rho,
+            q=q,
+            prior_mean=prior_mean,
+            prior_cov=prior_cov,
+            history=None,
+        )
     N = mu.shape[-1]
     start, log_prior = conditional_prior(nodes, prior_mean, prior_cov)
     # per node (axis -3 of the Kalman arrays): the prior given its depth, Phi_k = (1 / y_k, 0)
@@ -473,6 +558,13 @@ class Mixture:
         Posterior mean of ``(x_N, y_N, v_N)``.
     cov : ndarray, shape (..., 3, 3)
         Posterior covariance of ``(x_N, y_N, v_N)``.
+    depth_error, velocity_error : ndarray, shape (...), or None
+        Error estimates of the depth's and the velocity's mean and SD when the
+        nodes were placed by :func:`posterior` (and kept by :func:`update`):
+        the change of those moments when every other node is dropped (the
+        step doubled), floored by roundoff; ``None`` for caller-given nodes.
+    rtol : float or None
+        The tolerance the nodes were placed for (:func:`posterior`).
     """
 
     bank: Bank
@@ -481,6 +573,9 @@ class Mixture:
     log_normaliser: np.ndarray
     mean: np.ndarray
     cov: np.ndarray
+    depth_error: np.ndarray | None = None
+    velocity_error: np.ndarray | None = None
+    rtol: float | None = None
 
     @property
     def depth_mean(self) -> np.ndarray:
@@ -685,9 +780,10 @@ def mixture(bank: Bank, weights) -> Mixture:
     ----------
     bank : Bank
     weights : array_like, shape (..., J)
-        Positive quadrature weights of the nodes for integrals over the depth
-        at frame 1 (``sum_j w_j g(y_j)`` approximates ``integral g(y) dy``),
-        broadcasting with ``bank.nodes``.
+        Quadrature weights of the nodes for integrals over the depth at frame 1
+        (``sum_j w_j g(y_j)`` approximates ``integral g(y) dy``), broadcasting
+        with ``bank.nodes``: >= 0 (a zero weight pads a batch's node sets to
+        one length), at least one positive per problem.
 
     Returns
     -------
@@ -702,8 +798,11 @@ def mixture(bank: Bank, weights) -> Mixture:
     if not isinstance(bank, Bank):
         raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")
     weights = _finite(weights, "weights")
-    if not np.all(weights > 0):
-        raise ValueError(f"weights must be positive, got minimum {float(np.min(weights)):.6g}")
+    if not (np.all(weights >= 0) and np.all(np.any(weights > 0, axis=-1))):
+        raise ValueError(
+            "weights must be >= 0 with a positive one per problem, "
+            f"got minimum {float(np.min(weights)):.6g}"
+        )
     try:
         np.broadcast_shapes(weights.shape, bank.nodes.shape)
     except ValueError:
@@ -711,13 +810,219 @@ def mixture(bank: Bank, weights) -> Mixture:
             f"weights must broadcast with the nodes' shape {bank.nodes.shape}, "
             f"got shape {weights.shape}"
         ) from None
-    log_weights = np.log(weights)
+    with np.errstate(divide="ignore"):
+        log_weights = np.log(weights)
     a = bank.log_weight + log_weights
     log_normaliser = logsumexp(a, axis=-1)
     probabilities = np.exp(a - log_normaliser[..., None])
     depth_N = bank.nodes + (bank.n_frames - 1)
     mean, cov = _mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
     return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
+
+
+# --- nodes placed by the depth quadrature ----------------------------------------------
+
+#: Most frames of a problem: each frame is a step of every node's filter.
+MAX_FRAMES = 10_000
+
+
+def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
+    """The checked inputs as :class:`depthcore.optimal` quadrature problems, and the batch shape."""
+    mu, rho, prior_mean, prior_cov = _checks.batch_inputs(
+        mu, rho, prior_mean, prior_cov, triples=False
+    )
+    if mu.shape[-1] > MAX_FRAMES:
+        raise ValueError(f"mu: at most {MAX_FRAMES} frames, got {mu.shape[-1]}")
+    batch, N = mu.shape[:-1], mu.shape[-1]
+    q = _checks.finite_array(process_noise, "process_noise")
+    if q.ndim and q.shape != batch:
+        raise ValueError(
+            f"process_noise must be a scalar or have shape {batch}, got shape {q.shape}"
+        )
+    if not np.all(q >= 0):
+        raise ValueError(f"process_noise must be >= 0, got minimum {float(np.min(q)):.6g}")
+    B = int(np.prod(batch))
+    prior_cov = np.ascontiguousarray(np.broadcast_to(prior_cov, batch + (3, 3))).reshape(B, 3, 3)
+    pb = optimal._Problem(
+        mu=mu.reshape(B, N),
+        rho=np.broadcast_to(rho, batch).reshape(B),
+        mean=np.broadcast_to(prior_mean, batch + (3,)).reshape(B, 3),
+        R=np.linalg.inv(np.linalg.cholesky(prior_cov)),
+        reading="derived",
+        q=np.broadcast_to(q, batch).reshape(B),
+        cov=prior_cov,
+        solver=_integrand,
+    )
+    return pb, batch
+
+
+def _integrand(offsets, pb):
+    """The depth quadrature's integrand: :func:`lateral_filter` at ``y_1 = offsets[..., 2]``."""
+    log_weight, mean, cov = lateral_filter(offsets[..., 2], pb.mu, pb.rho, pb.q, pb.mean, pb.cov)
+    return log_weight, np.stack(mean), cov
+
+
+def _integrate(pb, rtol: float):
+    """The quadrature of :mod:`depthcore.optimal` on ``y_1 > 0``, moments of ``y_N``.
+
+    The quadrature reports the depth as ``y_1 + 2`` (its variable is
+    ``t = log(y_1)``, as for the paper's three frames); the depth at frame
+    ``N`` is ``y_1 + N - 1``.
+    """
+    m, err_y, err_v, top, grids = optimal._integrate(pb, (3,), rtol)
+    mean = m.mean.copy()
+    mean[:, 1] += pb.mu.shape[1] - 3
+    err_y = np.maximum(err_y, 64.0 * np.finfo(float).eps * np.abs(mean[:, 1]))
+    return m._replace(mean=mean), err_y, err_v, top, grids
+
+
+def moments(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, rtol: float = 1e-10, chunk: int = 64
+) -> optimal.Moments:
+    """The exact posterior moments at frame ``N``, with the depth nodes placed by quadrature.
+
+    The depth at frame 1 is integrated by the quadrature of
+    :func:`depthcore.optimal.moments` (nodes about the posterior's own mode
+    and width in ``t = log(y_1)``, the step halved until the moments settle,
+    a node budget, a roundoff floor on the error estimate), with the
+    integrand ``N(y_1; m_y, P_yy) L(y_1)`` and the Gaussian of ``(x_N, v_N)``
+    given ``y_1`` from the Kalman filter at each node (:func:`lateral_filter`).
+
+    Parameters
+    ----------
+    mu : array_like, shape (B, N) or (N,)
+        Bearings at frames 1 .. N (any ``N >= 1``; the paper's problem is ``N = 3``).
+    rho : float or array_like, shape (B,)
+        Bearing noise SD, > 0.
+    prior_mean : array_like, shape (3,) or (B, 3)
+        Prior mean of ``(x_1, y_1, v_1)``.
+    prior_cov : array_like, shape (3, 3) or (B, 3, 3)
+        Prior covariance, symmetric positive definite.
+    process_noise : float or array_like, shape (B,)
+        SD ``q >= 0`` of the velocity's change per frame.
+    rtol : float
+        Target accuracy of each mean and SD, relative to the SD.
+    chunk : int
+        Problems integrated together (memory grows with it).
+
+    Returns
+    -------
+    depthcore.optimal.Moments
+        Arrays of shape (B,) (``(1,)`` for one problem), for the state at frame
+        ``N``; ``prob_behind_camera`` is 0 (the support is ``y_1 > 0``).
+
+    Raises
+    ------
+    ValueError
+        For invalid inputs, naming the argument, or when the tolerance is out
+        of reach within the quadrature's node budget, naming the problem.
+    """
+    pb, _ = _quadrature_problem(
+        np.atleast_2d(mu) if np.ndim(mu) == 1 else mu, rho, prior_mean, prior_cov, process_noise
+    )
+    rtol = _checks.positive_scalar(rtol, "rtol")
+    chunk = _checks.count(chunk, "chunk")
+    out, means, covs = [], [], []
+    for start in range(0, pb.mu.shape[0], chunk):
+        m, err_y, err_v, _, _ = _integrate(pb.take(slice(start, start + chunk)), rtol)
+        out.append(np.concatenate([m.key_moments(), [err_y, err_v, m.behind]]))
+        means.append(m.mean)
+        covs.append(m.cov)
+    return optimal.Moments(
+        *np.concatenate(out, axis=1), np.concatenate(means), np.concatenate(covs)
+    )
+
+
+def _grid_nodes(grid):
+    """Depths at frame 1 (B, J) and log quadrature weights (B, J) of a quadrature grid.
+
+    ``grid = (lo, h, n, frame)`` holds the trapezoid nodes ``u_j = lo + h j``,
+    ``j < n``, of each problem in the quadrature's variable ``u``, with
+    ``t = log(y_1)`` a function of ``u`` (:class:`depthcore.optimal._Frame`);
+    ``dy_1 = y_1 (dt/du) du``. Rows with fewer nodes are padded with weight 0.
+    """
+    lo, h, n, frame = grid
+    u = optimal._grid(lo, h, n, 0.0)
+    pad = np.isnan(u)
+    u = np.where(pad, lo[:, None], u)
+    t = frame.t(u)
+    log_w = np.log(np.where(h > 0, h, 1.0))[:, None] + t + frame.log_jacobian(u)
+    return np.exp(t), np.where(pad, -np.inf, log_w)
+
+
+def posterior(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, rtol: float = 1e-10, history: bool = False
+) -> Mixture:
+    """The exact posterior at frame ``N`` as a bank on nodes placed by the depth quadrature.
+
+    The nodes and weights are the last trapezoid level of :func:`moments`'s
+    quadrature, so the mixture's moments are those moments (to roundoff) and
+    carry their error estimates. :func:`update` adds frames online.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N,) or (B, N)
+    rho, prior_mean, prior_cov, process_noise, rtol
+        As for :func:`moments`.
+    history : bool
+        Keep each node's filter at every frame (for :meth:`Mixture.smoothed`).
+
+    Returns
+    -------
+    Mixture
+        Batch shape ``()`` for ``mu`` of shape ``(N,)``, ``(B,)`` otherwise.
+    """
+    single = np.ndim(mu) == 1
+    pb, _ = _quadrature_problem(
+        np.atleast_2d(mu) if single else mu, rho, prior_mean, prior_cov, process_noise
+    )
+    rtol = _checks.positive_scalar(rtol, "rtol")
+    return _place(pb, rtol, history, single)
+
+
+def _place(pb, rtol, history, single):
+    _, err_y, err_v, _, grids = _integrate(pb, rtol)
+    nodes, log_w = _grid_nodes(grids[3])
+    shift = np.max(log_w, axis=1, keepdims=True)
+    bank = _filter_bank(nodes, pb.mu, pb.rho, pb.q, pb.mean, pb.cov, history)
+    post = mixture(bank, np.exp(log_w - shift))
+    post = dataclasses.replace(
+        post,
+        log_weights=post.log_weights + shift,
+        log_normaliser=post.log_normaliser + shift[:, 0],
+        depth_error=err_y,
+        velocity_error=err_v,
+        rtol=rtol,
+    )
+    return _squeeze(post) if single else post
+
+
+def _squeeze(post: Mixture) -> Mixture:
+    """A batch of one as a single problem (batch shape ``()``)."""
+    b = post.bank
+    bank = Bank(
+        b.nodes[0],
+        b.mean[0],
+        b.cov[0],
+        b.log_weight[0],
+        b.mu[0],
+        b.rho[0],
+        b.q[0],
+        b.prior_mean[0],
+        b.prior_cov[0],
+        None if b.history is None else kalman.FilterResult(*(a[0] for a in b.history)),
+    )
+    return Mixture(
+        bank,
+        post.log_weights[0],
+        post.probabilities[0],
+        post.log_normaliser[0],
+        post.mean[0],
+        post.cov[0],
+        post.depth_error[0],
+        post.velocity_error[0],
+        post.rtol,
+    )
 
 
 # --- simulation ------------------------------------------------------------------------

@@ -36,6 +36,7 @@ the mixture over the same nodes of the Gaussian conditionals of ``v`` given
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -70,16 +71,39 @@ _NEWTON_STEPS = 8
 
 
 class _Problem(NamedTuple):
-    """A batch of ``B`` problems: measurements, noise, prior (whitened)."""
+    """A batch of ``B`` problems: measurements, noise, prior (whitened).
 
-    mu: np.ndarray  # (B, 3)
+    ``solver``, when given, replaces Eqs. (14)-(16) as the integrand: called as
+    ``solver(offsets, problem)`` it returns what :func:`_solve` returns, for
+    depths ``y_1 = offsets[..., 2]`` at frame 1 (the quadrature's variable is
+    ``t = log(y_1)`` either way). :func:`depthcore.bank.moments` uses it for
+    any number of frames; ``q`` (B,) and ``cov`` (B, 3, 3) are then the
+    process noise and the prior covariance.
+    """
+
+    mu: np.ndarray  # (B, 3), or (B, N) with a solver
     rho: np.ndarray  # (B,)
     mean: np.ndarray  # (B, 3) prior mean
     R: np.ndarray  # (B, 3, 3), P^{-1} = R^T R
     reading: str
+    q: np.ndarray | None = None
+    cov: np.ndarray | None = None
+    solver: Callable | None = None
 
     def take(self, idx) -> _Problem:
-        return _Problem(self.mu[idx], self.rho[idx], self.mean[idx], self.R[idx], self.reading)
+        def part(a):
+            return None if a is None else a[idx]
+
+        return _Problem(
+            self.mu[idx],
+            self.rho[idx],
+            self.mean[idx],
+            self.R[idx],
+            self.reading,
+            part(self.q),
+            part(self.cov),
+            self.solver,
+        )
 
 
 def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
@@ -169,6 +193,8 @@ def _solve(offsets, pb: _Problem):
     squared 2 x 2 minors, ``S det M`` that of the squared 3 x 3 minors, and
     the conditional mean follows by Cramer's rule.
     """
+    if pb.solver is not None:
+        return pb.solver(offsets, pb)
     rho = pb.rho[:, None]
     s = [1.0 / (offsets[..., k] * rho) for k in range(3)]
     s2 = [sk * sk for sk in s]
@@ -457,14 +483,15 @@ def _scan_points(interval: int, c, mean_s, sd_s, lo_t, hi_t, guessed: bool = Fal
     A scan of the whole range at about unit steps and, on ``y > 2``, 25
     points across 12 second-order SDs about the noise-free depth and about
     the second-order mean (left out when ``guessed``, the second-order frame's
-    first level being evaluated too, and both lie within an SD of each other).
+    first level being evaluated too, and both lie within an SD of each other;
+    and when ``c`` is ``None``, for problems with no noise-free solution).
     Returns the points and ``n_coarse``.
     """
     t = lo_t[:, None] + (hi_t - lo_t)[:, None] * _unit(
         int(np.ceil(np.max(hi_t - lo_t) / _SCAN_STEP)) + 1
     )
     n_coarse = t.shape[1]
-    if interval == 3:
+    if interval == 3 and c is not None:
         local = np.arange(-12.0, 12.5)
         sd_t = _clip(sd_s / (c[:, 1] - 2.0), _sigma_floor(np.log(c[:, 1] - 2.0)), 1.0)
         t_c = np.log(c[:, 1] - 2.0)
@@ -576,16 +603,21 @@ def _ranges(pb: _Problem, intervals):
     and the scan; and the second-order mean (B, 3), about which the moments
     are accumulated.
     """
-    c = noise_free_states(pb.mu)
-    cov_p = np.linalg.inv(np.swapaxes(pb.R, -1, -2) @ pb.R)
-    mean_s, cov_s = second_order_batch(pb.mu, pb.rho, pb.mean, cov_p)
-    sd_s = np.sqrt(cov_s[:, 1, 1])
+    paper = pb.solver is None
+    if paper:
+        c = noise_free_states(pb.mu)
+        cov_p = np.linalg.inv(np.swapaxes(pb.R, -1, -2) @ pb.R)
+        mean_s, cov_s = second_order_batch(pb.mu, pb.rho, pb.mean, cov_p)
+        sd_s = np.sqrt(cov_s[:, 1, 1])
+    else:  # no noise-free solution to start from: the scan alone finds the mode
+        c = mean_s = sd_s = None
+        cov_p = pb.cov
     found, tops = {}, []
     for i in intervals:
-        lo_t, hi_t = _t_limits(i, pb, c, cov_p)
+        lo_t, hi_t = _t_limits(i, pb, pb.mean if c is None else c, cov_p)
         t_scan, n_coarse = _scan_points(i, c, mean_s, sd_s, lo_t, hi_t, guessed=i == 3)
         guess = None
-        if i == 3:
+        if i == 3 and paper:
             y_s = np.where(mean_s[:, 1] > 2.0, mean_s[:, 1], c[:, 1])
             t0 = _clip(np.log(y_s - 2.0), lo_t, hi_t)
             guess = _Frame(t0, _clip(sd_s / (y_s - 2.0), _sigma_floor(t0), 1.0))
@@ -636,7 +668,13 @@ def _ranges(pb: _Problem, intervals):
         scan = (t_all[:, m:], log_t[:, m:])
         found[i] = (frame, u, values, hi_t, scan)
         tops.append(np.maximum(top_i + np.log(frame.sigma), np.max(values[1], axis=1)))
-    centre = np.where(np.isfinite(mean_s), mean_s, c)
+    if paper:
+        centre = np.where(np.isfinite(mean_s), mean_s, c)
+    else:  # the state at the mode of the depth (in the quadrature's depth, y_1 + 2)
+        t0 = found[3][0].t0
+        offsets, _ = _nodes(3, t0[:, None])
+        x_v = _solve(offsets, pb)[1][:, :, 0]
+        centre = np.stack([x_v[0], offsets[:, 0, 0], x_v[1]], axis=1)
     return np.max(tops, axis=0), found, centre
 
 
