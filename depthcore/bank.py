@@ -239,7 +239,7 @@ def measurement_matrices(nodes, frames) -> np.ndarray:
 
 
 def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
-    """The Kalman filter of ``(x, v)`` at each depth node, in closed form: log weight and frame ``N``.
+    """The Kalman filter of ``(x, v)`` at each depth node in closed form: log weight, frame ``N``.
 
     The same filter as :func:`filter_bank` (textbook 19.2.1 prediction, 19.2.2
     update, the log likelihood from the innovations) with its 2 x 2 algebra
@@ -1021,6 +1021,197 @@ def _squeeze(post: Mixture) -> Mixture:
         post.cov[0],
         post.depth_error[0],
         post.velocity_error[0],
+        post.rtol,
+    )
+
+
+#: An end node of a placed grid may carry at most this log probability below the largest
+#: before :func:`update` re-places the nodes (the quadrature cuts its range at 60).
+_END_MARGIN = 40.0
+
+
+def _resolution(post: Mixture):
+    """The error of the moments on the placed nodes, shape (2, B), and whether the ends are free.
+
+    The nodes of :func:`posterior` are a trapezoid grid in order; dropping
+    every other one (doubling the weights of the rest) doubles the step, and
+    the change of the depth's and the velocity's mean and SD estimates the
+    error, as the quadrature's own halvings do (floored by roundoff, as in
+    :func:`depthcore.optimal._roundoff`). The ends are free when the first
+    and last nodes with positive weight carry log probabilities more than
+    :data:`_END_MARGIN` below the largest.
+    """
+    b = post.bank
+    log_p = np.where(np.isfinite(post.log_weights), b.log_weight + post.log_weights, -np.inf)
+    top = np.max(log_p, axis=-1)
+    valid = np.isfinite(log_p)
+    J = log_p.shape[-1]
+    j = np.arange(J)
+    first = np.argmax(valid, axis=-1)
+    last = J - 1 - np.argmax(valid[..., ::-1], axis=-1)
+    end = np.maximum(
+        np.take_along_axis(log_p, first[..., None], -1)[..., 0],
+        np.take_along_axis(log_p, last[..., None], -1)[..., 0],
+    )
+    free = end < top - _END_MARGIN
+    even = ((j - first[..., None]) % 2 == 0) & valid
+    coarse = mixture(
+        b, np.where(even, np.exp(np.where(valid, post.log_weights - top[..., None], 0.0)), 0.0)
+    )
+    eps = np.finfo(float).eps
+    errors, floors = [], []
+    for k in (1, 2):
+        sd, sd_c = np.sqrt(post.cov[..., k, k]), np.sqrt(coarse.cov[..., k, k])
+        change = np.maximum(np.abs(post.mean[..., k] - coarse.mean[..., k]), np.abs(sd - sd_c))
+        floor = 64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top)) * sd)
+        errors.append(np.maximum(change, floor))
+        floors.append(floor)
+    return np.stack(errors), np.stack(floors), free
+
+
+def _pad(a, J: int, axis: int, value):
+    """``a`` padded with ``value`` along ``axis`` (counted from the end of the batch) to ``J``."""
+    width = [(0, 0)] * a.ndim
+    width[axis] = (0, J - a.shape[axis])
+    return np.pad(a, width, constant_values=value)
+
+
+def update(post: Mixture, mu_next) -> Mixture:
+    """Add frame ``N + 1`` to a posterior from :func:`posterior`, online.
+
+    Every node's Kalman filter and weight is updated (:func:`step`); nothing
+    earlier is recomputed while the nodes still resolve the posterior to the
+    tolerance they were placed for (:func:`_resolution`: the moments on every
+    other node agree with those on all nodes, and the end nodes carry
+    negligible probability). As the bearings accumulate, the posterior
+    narrows, and a problem whose nodes no longer resolve it has them
+    re-placed by the quadrature from all ``N + 1`` bearings (cost ``O(N)``
+    for that problem, the others untouched). Since the posterior's width
+    shrinks geometrically in the number of re-placements, they are rare and
+    the cost per frame stays flat on average.
+
+    Parameters
+    ----------
+    post : Mixture
+        After ``N`` frames, from :func:`posterior` or :func:`update`.
+    mu_next : float or array_like, shape (B,)
+        The bearing at frame ``N + 1``, one per problem.
+
+    Returns
+    -------
+    Mixture
+        After ``N + 1`` frames, with error estimates.
+    """
+    if not isinstance(post, Mixture) or post.rtol is None:
+        raise ValueError("post must be a Mixture from bank.posterior or bank.update")
+    single = post.log_normaliser.ndim == 0
+    if single:
+        post = _batch_of_one(post)
+    mu_next = _finite(mu_next, "mu_next")
+    if mu_next.ndim > 1 or (mu_next.ndim == 1 and mu_next.shape != post.log_normaliser.shape):
+        raise ValueError(
+            f"mu_next must be a scalar or have shape {post.log_normaliser.shape}, "
+            f"got shape {mu_next.shape}"
+        )
+    if post.bank.n_frames >= MAX_FRAMES:
+        raise ValueError(f"mu_next: at most {MAX_FRAMES} frames")
+    stepped = step(post.bank, np.broadcast_to(mu_next, post.log_normaliser.shape))
+    shift = np.max(np.where(np.isfinite(post.log_weights), post.log_weights, -np.inf), -1)
+    new = _shifted(mixture(stepped, np.exp(post.log_weights - shift[:, None])), shift)
+    err, floor, free = _resolution(new)
+    rtol = post.rtol
+    ok = (
+        free
+        & (err[0] <= np.maximum(rtol * new.depth_sd, floor[0]))
+        & (err[1] <= np.maximum(rtol * new.velocity_sd, floor[1]))
+    )
+    new = dataclasses.replace(new, depth_error=err[0], velocity_error=err[1], rtol=rtol)
+    if not np.all(ok):
+        new = _replace_rows(new, ~ok)
+    return _squeeze(new) if single else new
+
+
+def _shifted(post: Mixture, shift) -> Mixture:
+    """``post`` with its log quadrature weights and normaliser raised by ``shift`` (B,)."""
+    return dataclasses.replace(
+        post,
+        log_weights=post.log_weights + shift[:, None],
+        log_normaliser=post.log_normaliser + shift,
+    )
+
+
+def _replace_rows(post: Mixture, rows) -> Mixture:
+    """``post`` with the problems at ``rows`` (B,) re-placed by the quadrature."""
+    b = post.bank
+    idx = np.flatnonzero(rows)
+    pb = optimal._Problem(
+        mu=b.mu[idx],
+        rho=np.broadcast_to(b.rho, rows.shape)[idx],
+        mean=b.prior_mean[idx],
+        R=np.linalg.inv(np.linalg.cholesky(b.prior_cov[idx])),
+        reading="derived",
+        q=np.broadcast_to(b.q, rows.shape)[idx],
+        cov=b.prior_cov[idx],
+        solver=_integrand,
+    )
+    fresh = _place(pb, post.rtol, b.history is not None, False)
+    J = max(post.log_weights.shape[-1], fresh.log_weights.shape[-1])
+    fb = fresh.bank
+
+    def merge(old, new, axis, value):
+        old, new = _pad(old, J, axis, value), _pad(new, J, axis, value)
+        out = old.copy()
+        out[idx] = new
+        return out
+
+    bank = b._replace(
+        nodes=merge(np.broadcast_to(b.nodes, post.log_weights.shape), fb.nodes, 1, 1.0),
+        mean=merge(b.mean, fb.mean, 1, 0.0),
+        cov=merge(b.cov, fb.cov, 1, 1.0),
+        log_weight=merge(b.log_weight, fb.log_weight, 1, 0.0),
+        history=None,
+    )
+    log_weights = merge(post.log_weights, fresh.log_weights, 1, -np.inf)
+    shift = np.max(log_weights, axis=-1)
+    merged = _shifted(mixture(bank, np.exp(log_weights - shift[:, None])), shift)
+    return dataclasses.replace(
+        merged,
+        depth_error=np.where(rows, _full(fresh.depth_error, idx, rows), post.depth_error),
+        velocity_error=np.where(rows, _full(fresh.velocity_error, idx, rows), post.velocity_error),
+        rtol=post.rtol,
+    )
+
+
+def _full(values, idx, rows):
+    out = np.zeros(rows.shape)
+    out[idx] = values
+    return out
+
+
+def _batch_of_one(post: Mixture) -> Mixture:
+    """A single problem as a batch of one."""
+    b = post.bank
+    bank = Bank(
+        b.nodes[None],
+        b.mean[None],
+        b.cov[None],
+        b.log_weight[None],
+        b.mu[None],
+        np.reshape(b.rho, (1,)),
+        np.reshape(b.q, (1,)),
+        b.prior_mean[None],
+        b.prior_cov[None],
+        None if b.history is None else kalman.FilterResult(*(a[None] for a in b.history)),
+    )
+    return Mixture(
+        bank,
+        post.log_weights[None],
+        post.probabilities[None],
+        np.reshape(post.log_normaliser, (1,)),
+        post.mean[None],
+        post.cov[None],
+        np.reshape(post.depth_error, (1,)),
+        np.reshape(post.velocity_error, (1,)),
         post.rtol,
     )
 
