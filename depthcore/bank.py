@@ -283,28 +283,44 @@ def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
     a = c0[..., 0, 0][..., None]
     b = c0[..., 0, 1][..., None]
     c = c0[..., 1, 1][..., None]
-    det = a * c - b * b
+    state = _Lateral(x, v, a, b, c, a * c - b * b)
     rho2 = (np.asarray(rho, dtype=float) ** 2)[..., None]
     q2 = (np.asarray(q, dtype=float) ** 2)[..., None]
     for k in range(mu.shape[-1]):
         if k:
-            x = x + v
-            a = a + 2.0 * b + c
-            b = b + c
-            det = det + q2 * a
-            c = c + q2
-        y = nodes + k
-        r = rho2 * y * y
-        s = a + r
-        e = mu[..., k, None] * y - x
-        log_weight = log_weight - 0.5 * (_LOG_2PI + np.log(s) + e * e / s) + np.log(y)
-        g = e / s
-        x = x + a * g
-        v = v + b * g
-        f = r / s
-        a, b, det = a * f, b * f, det * f
-        c = (det + b * b) / a
-    return log_weight, (x, v), (a, b, c)
+            state = _predict_lateral(state, q2)
+        state, log_likelihood = _update_lateral(state, mu[..., k, None], nodes + k, rho2)
+        log_weight = log_weight + log_likelihood
+    return log_weight, (state.x, state.v), (state.a, state.b, state.c)
+
+
+class _Lateral(NamedTuple):
+    """The Gaussian of ``(x, v)`` at each node: means, covariance entries and determinant."""
+
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    det: np.ndarray
+
+
+def _predict_lateral(s: _Lateral, q2) -> _Lateral:
+    """Textbook 19.2.1 for ``x <- x + v``, ``v <- v + a_k``: see :func:`lateral_filter`."""
+    a = s.a + 2.0 * s.b + s.c
+    return _Lateral(s.x + s.v, s.v, a, s.b + s.c, s.c + q2, s.det + q2 * a)
+
+
+def _update_lateral(s: _Lateral, mu_k, y, rho2):
+    """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``: the state and the log likelihood."""
+    r = rho2 * y * y
+    total = s.a + r
+    e = mu_k * y - s.x
+    log_likelihood = -0.5 * (_LOG_2PI + np.log(total) + e * e / total) + np.log(y)
+    g = e / total
+    f = r / total
+    a, b, det = s.a * f, s.b * f, s.det * f
+    return _Lateral(s.x + s.a * g, s.v + s.b * g, a, b, (det + b * b) / a, det), log_likelihood
 
 
 # --- the bank --------------------------------------------------------------------------
@@ -426,6 +442,19 @@ def step(bank: Bank, mu_next) -> Bank:
     mu_next = _finite(mu_next, "mu_next")
     _batch(bank=bank.log_weight.shape[:-1], mu_next=mu_next.shape)
     N = bank.n_frames
+    if bank.history is None:  # the closed form of lateral_filter
+        a, b, c = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
+        state = _Lateral(bank.mean[..., 0], bank.mean[..., 1], a, b, c, a * c - b * b)
+        state = _predict_lateral(state, (np.asarray(bank.q) ** 2)[..., None])
+        state, log_likelihood = _update_lateral(
+            state, mu_next[..., None], bank.nodes + N, (np.asarray(bank.rho) ** 2)[..., None]
+        )
+        return bank._replace(
+            mean=np.stack([state.x, state.v], -1),
+            cov=np.stack([np.stack([state.a, state.b], -1), np.stack([state.b, state.c], -1)], -2),
+            mu=_extend(bank.mu, mu_next),
+            log_weight=bank.log_weight + log_likelihood,
+        )
     pred = kalman.predict(bank.mean, bank.cov, PSI, sigma_p(bank.q)[..., None, :, :])
     Phi = measurement_matrices(bank.nodes, [N + 1])[..., 0, :, :]
     upd = kalman.update(
@@ -486,15 +515,22 @@ def _mixture_moments(W, means, covs, depths):
     (..., J, 2, 2) the Gaussians of ``(x, v)`` at each node; ``depths`` (..., J)
     the node depths (known exactly given the node).
     """
-    m = np.stack(np.broadcast_arrays(means[..., 0], depths, means[..., 1]), axis=-1)
-    mean = np.einsum("...j,...ji->...i", W, m)
-    d = m - mean[..., None, :]
-    cov = np.einsum("...j,...ji,...jk->...ik", W, d, d)
-    lateral = np.einsum("...j,...jik->...ik", W, np.broadcast_to(covs, m.shape[:-1] + (2, 2)))
-    cov[..., 0, 0] += lateral[..., 0, 0]
-    cov[..., 0, 2] += lateral[..., 0, 1]
-    cov[..., 2, 0] += lateral[..., 1, 0]
-    cov[..., 2, 2] += lateral[..., 1, 1]
+    shape = np.broadcast_shapes(W.shape, means.shape[:-1], depths.shape)
+    W = np.broadcast_to(W, shape)
+    m = [np.broadcast_to(a, shape) for a in (means[..., 0], depths, means[..., 1])]
+    mean = np.stack([np.sum(W * a, axis=-1) for a in m], axis=-1)
+    d = [a - mean[..., i, None] for i, a in enumerate(m)]
+    Wd = [W * a for a in d]
+    cov = np.empty(shape[:-1] + (3, 3))
+    for i in range(3):
+        for k in range(i, 3):
+            cov[..., i, k] = cov[..., k, i] = np.sum(Wd[i] * d[k], axis=-1)
+    covs = np.broadcast_to(covs, shape + (2, 2))
+    for (i, k), (ii, kk) in (((0, 0), (0, 0)), ((0, 2), (0, 1)), ((2, 2), (1, 1))):
+        extra = np.sum(W * covs[..., ii, kk], axis=-1)
+        cov[..., i, k] += extra
+        if i != k:
+            cov[..., k, i] += extra
     return mean, cov
 
 
@@ -980,7 +1016,17 @@ def posterior(
     return _place(pb, rtol, history, single)
 
 
+#: Problems placed together by the quadrature (its memory grows with this times its nodes).
+_CHUNK = 64
+
+
 def _place(pb, rtol, history, single):
+    B = pb.mu.shape[0]
+    if B > _CHUNK:
+        parts = [
+            _place(pb.take(slice(i, i + _CHUNK)), rtol, history, False) for i in range(0, B, _CHUNK)
+        ]
+        return _concatenate(parts)
     _, err_y, err_v, _, grids = _integrate(pb, rtol)
     nodes, log_w = _grid_nodes(grids[3])
     shift = np.max(log_w, axis=1, keepdims=True)
@@ -995,6 +1041,44 @@ def _place(pb, rtol, history, single):
         rtol=rtol,
     )
     return _squeeze(post) if single else post
+
+
+def _concatenate(parts) -> Mixture:
+    """Batches of placed posteriors joined along the batch, their nodes padded to one count."""
+    J = max(p.log_weights.shape[-1] for p in parts)
+    banks = [p.bank for p in parts]
+
+    def join(get, axis, value):
+        return np.concatenate([_pad(get(b), J, axis, value) for b in banks])
+
+    bank = Bank(
+        nodes=join(lambda b: b.nodes, 1, 1.0),
+        mean=join(lambda b: b.mean, 1, 0.0),
+        cov=join(lambda b: b.cov, 1, 1.0),
+        log_weight=join(lambda b: b.log_weight, 1, 0.0),
+        mu=np.concatenate([b.mu for b in banks]),
+        rho=np.concatenate([b.rho for b in banks]),
+        q=np.concatenate([b.q for b in banks]),
+        prior_mean=np.concatenate([b.prior_mean for b in banks]),
+        prior_cov=np.concatenate([b.prior_cov for b in banks]),
+        history=None
+        if banks[0].history is None
+        else kalman.FilterResult(
+            *(
+                np.concatenate([_pad(a, J, 1, 1.0) for a in arrays])
+                for arrays in zip(*(b.history for b in banks), strict=True)
+            )
+        ),
+    )
+    log_weights = np.concatenate([_pad(p.log_weights, J, 1, -np.inf) for p in parts])
+    shift = np.max(log_weights, axis=-1)
+    joined = _shifted(mixture(bank, np.exp(log_weights - shift[:, None])), shift)
+    return dataclasses.replace(
+        joined,
+        depth_error=np.concatenate([p.depth_error for p in parts]),
+        velocity_error=np.concatenate([p.velocity_error for p in parts]),
+        rtol=parts[0].rtol,
+    )
 
 
 def _squeeze(post: Mixture) -> Mixture:

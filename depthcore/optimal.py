@@ -594,17 +594,18 @@ def _newton(interval: int, pb: _Problem, t0, f0, sigma, lo_t, hi_t):
         f1 = np.full_like(f0, -np.inf)
         for _ in range(60):  # halve the move until the log integrand does not decrease
             t1 = _clip(t0 + move, lo_t, hi_t)
-            worse = ~(f1 >= f0)
+            # (a move below a hundredth of the width is not worth the roundoff it hits)
+            worse = ~(f1 >= f0) & (np.abs(move) > 0.01 * h)
             if not np.any(worse):
                 break
             f1 = np.where(worse, _log_integrand(interval, t1[:, None], pb)[:, 0], f1)
             move = np.where(~(f1 >= f0), 0.5 * move, move)
         up = f1 >= f0
-        settled = (np.abs(np.where(up, t1 - t0, 0.0)) <= 0.01 * width) & (
-            np.abs(width - h) <= 0.05 * h
+        sigma = _clip(width, floor, 1.0)
+        settled = (np.abs(np.where(up, t1 - t0, 0.0)) <= 0.01 * sigma) & (
+            np.abs(sigma - h) <= 0.05 * h
         )
         t0, f0 = np.where(up, t1, t0), np.where(up, f1, f0)
-        sigma = _clip(width, floor, 1.0)
         if np.all(settled):
             break
     return t0, sigma, f0
