@@ -137,6 +137,7 @@ bench: $(EDITABLE)
 	$(PY) benchmarks/bench_ekf_filterpy.py
 	$(PY) benchmarks/bench_trials.py
 	$(PY) benchmarks/bench_import.py
+	$(PY) benchmarks/bench_bank.py
 
 .PHONY: lint
 lint: $(EDITABLE)
