@@ -138,6 +138,7 @@ bench: $(EDITABLE)
 	$(PY) benchmarks/bench_trials.py
 	$(PY) benchmarks/bench_rbpf.py
 	$(PY) benchmarks/bench_import.py
+	$(PY) benchmarks/bench_bank.py
 
 .PHONY: lint
 lint: $(EDITABLE)

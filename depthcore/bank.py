@@ -54,13 +54,14 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 from scipy.special import logsumexp, ndtr
 
-from . import kalman
+from . import _checks, kalman, optimal
 
 #: The lateral state ``(x, v)`` moves by ``x <- x + v``: the transition matrix.
 PSI = np.array([[1.0, 1.0], [0.0, 1.0]])
@@ -237,6 +238,91 @@ def measurement_matrices(nodes, frames) -> np.ndarray:
     return Phi
 
 
+def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
+    """The Kalman filter of ``(x, v)`` at each depth node in closed form: log weight, frame ``N``.
+
+    The same filter as :func:`filter_bank` (textbook 19.2.1 prediction, 19.2.2
+    update, the log likelihood from the innovations) with its 2 x 2 algebra
+    written out, elementwise over the nodes, for the depth quadrature. With
+    ``(a, b, c)`` the entries of ``Cov[(x, v)]`` and ``r_k = (rho y_k)**2``
+    (the bearing noise in units of ``x``), the update by ``mu_k`` is
+
+        e = mu_k y_k - x,   x += a e / (a + r_k),   v += b e / (a + r_k),
+        a' = a r_k / (a + r_k),   b' = b r_k / (a + r_k),
+        det' = det r_k / (a + r_k),   c' = (det' + b'**2) / a',
+
+    the log likelihood gains ``log N(mu_k; x / y_k, (a + r_k) / y_k**2)``,
+    and the prediction is ``x += v``, ``a += 2 b + c``, ``b += c``,
+    ``c += q**2``, ``det += q**2 a``. Tracking the determinant keeps ``c``
+    free of cancellation when the bearings pin ``x`` far more tightly than
+    the prior (small noise).
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (..., J)
+        Depths at frame 1, > 0.
+    mu : ndarray, shape (..., N)
+    rho, q : ndarray, shape (...) or ()
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+        Already checked (see :func:`filter_bank`).
+
+    Returns
+    -------
+    log_weight : ndarray, shape (..., J)
+        ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``, as
+        :attr:`Bank.log_weight`.
+    mean : tuple of two ndarrays, shape (..., J)
+        ``E[x_N | y_1, mu]``, ``E[v_N | y_1, mu]``.
+    cov : tuple of three ndarrays, shape (..., J)
+        ``Var[x_N]``, ``Cov[x_N, v_N]``, ``Var[v_N]`` given ``y_1`` and ``mu``.
+    """
+    start, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
+    x, v = start.mean[..., 0], start.mean[..., 1]
+    c0 = start.cov[..., 0, :, :]
+    a = c0[..., 0, 0][..., None]
+    b = c0[..., 0, 1][..., None]
+    c = c0[..., 1, 1][..., None]
+    state = _Lateral(x, v, a, b, c, a * c - b * b)
+    rho2 = (np.asarray(rho, dtype=float) ** 2)[..., None]
+    q2 = (np.asarray(q, dtype=float) ** 2)[..., None]
+    for k in range(mu.shape[-1]):
+        if k:
+            state = _predict_lateral(state, q2)
+        state, log_likelihood = _update_lateral(state, mu[..., k, None], nodes + k, rho2)
+        log_weight = log_weight + log_likelihood
+    return log_weight, (state.x, state.v), (state.a, state.b, state.c)
+
+
+class _Lateral(NamedTuple):
+    """The Gaussian of ``(x, v)`` at each node: means, covariance entries and determinant."""
+
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    det: np.ndarray
+
+
+def _predict_lateral(s: _Lateral, q2) -> _Lateral:
+    """Textbook 19.2.1 for ``x <- x + v``, ``v <- v + a_k``: see :func:`lateral_filter`."""
+    a = s.a + 2.0 * s.b + s.c
+    return _Lateral(s.x + s.v, s.v, a, s.b + s.c, s.c + q2, s.det + q2 * a)
+
+
+def _update_lateral(s: _Lateral, mu_k, y, rho2):
+    """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``: the state and the log likelihood."""
+    r = rho2 * y * y
+    total = s.a + r
+    e = mu_k * y - s.x
+    log_likelihood = -0.5 * (_LOG_2PI + np.log(total) + e * e / total) + np.log(y)
+    g = e / total
+    f = r / total
+    a, b, det = s.a * f, s.b * f, s.det * f
+    return _Lateral(s.x + s.a * g, s.v + s.b * g, a, b, (det + b * b) / a, det), log_likelihood
+
+
 # --- the bank --------------------------------------------------------------------------
 
 
@@ -291,6 +377,21 @@ def _batch(**shapes) -> tuple:
 
 
 def _filter_bank(nodes, mu, rho, q, prior_mean, prior_cov, history) -> Bank:
+    if not history:  # the closed form, as the depth quadrature uses
+        log_weight, (x, v), (a, b, c) = lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov)
+        cov = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
+        return Bank(
+            nodes=nodes,
+            mean=np.stack([x, v], -1),
+            cov=cov,
+            log_weight=log_weight,
+            mu=mu,
+            rho=rho,
+            q=q,
+            prior_mean=prior_mean,
+            prior_cov=prior_cov,
+            history=None,
+        )
     N = mu.shape[-1]
     start, log_prior = conditional_prior(nodes, prior_mean, prior_cov)
     # per node (axis -3 of the Kalman arrays): the prior given its depth, Phi_k = (1 / y_k, 0)
@@ -341,6 +442,19 @@ def step(bank: Bank, mu_next) -> Bank:
     mu_next = _finite(mu_next, "mu_next")
     _batch(bank=bank.log_weight.shape[:-1], mu_next=mu_next.shape)
     N = bank.n_frames
+    if bank.history is None:  # the closed form of lateral_filter
+        a, b, c = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
+        state = _Lateral(bank.mean[..., 0], bank.mean[..., 1], a, b, c, a * c - b * b)
+        state = _predict_lateral(state, (np.asarray(bank.q) ** 2)[..., None])
+        state, log_likelihood = _update_lateral(
+            state, mu_next[..., None], bank.nodes + N, (np.asarray(bank.rho) ** 2)[..., None]
+        )
+        return bank._replace(
+            mean=np.stack([state.x, state.v], -1),
+            cov=np.stack([np.stack([state.a, state.b], -1), np.stack([state.b, state.c], -1)], -2),
+            mu=_extend(bank.mu, mu_next),
+            log_weight=bank.log_weight + log_likelihood,
+        )
     pred = kalman.predict(bank.mean, bank.cov, PSI, sigma_p(bank.q)[..., None, :, :])
     Phi = measurement_matrices(bank.nodes, [N + 1])[..., 0, :, :]
     upd = kalman.update(
@@ -401,15 +515,22 @@ def _mixture_moments(W, means, covs, depths):
     (..., J, 2, 2) the Gaussians of ``(x, v)`` at each node; ``depths`` (..., J)
     the node depths (known exactly given the node).
     """
-    m = np.stack(np.broadcast_arrays(means[..., 0], depths, means[..., 1]), axis=-1)
-    mean = np.einsum("...j,...ji->...i", W, m)
-    d = m - mean[..., None, :]
-    cov = np.einsum("...j,...ji,...jk->...ik", W, d, d)
-    lateral = np.einsum("...j,...jik->...ik", W, np.broadcast_to(covs, m.shape[:-1] + (2, 2)))
-    cov[..., 0, 0] += lateral[..., 0, 0]
-    cov[..., 0, 2] += lateral[..., 0, 1]
-    cov[..., 2, 0] += lateral[..., 1, 0]
-    cov[..., 2, 2] += lateral[..., 1, 1]
+    shape = np.broadcast_shapes(W.shape, means.shape[:-1], depths.shape)
+    W = np.broadcast_to(W, shape)
+    m = [np.broadcast_to(a, shape) for a in (means[..., 0], depths, means[..., 1])]
+    mean = np.stack([np.sum(W * a, axis=-1) for a in m], axis=-1)
+    d = [a - mean[..., i, None] for i, a in enumerate(m)]
+    Wd = [W * a for a in d]
+    cov = np.empty(shape[:-1] + (3, 3))
+    for i in range(3):
+        for k in range(i, 3):
+            cov[..., i, k] = cov[..., k, i] = np.sum(Wd[i] * d[k], axis=-1)
+    covs = np.broadcast_to(covs, shape + (2, 2))
+    for (i, k), (ii, kk) in (((0, 0), (0, 0)), ((0, 2), (0, 1)), ((2, 2), (1, 1))):
+        extra = np.sum(W * covs[..., ii, kk], axis=-1)
+        cov[..., i, k] += extra
+        if i != k:
+            cov[..., k, i] += extra
     return mean, cov
 
 
@@ -473,6 +594,13 @@ class Mixture:
         Posterior mean of ``(x_N, y_N, v_N)``.
     cov : ndarray, shape (..., 3, 3)
         Posterior covariance of ``(x_N, y_N, v_N)``.
+    depth_error, velocity_error : ndarray, shape (...), or None
+        Error estimates of the depth's and the velocity's mean and SD when the
+        nodes were placed by :func:`posterior` (and kept by :func:`update`):
+        the change of those moments when every other node is dropped (the
+        step doubled), floored by roundoff; ``None`` for caller-given nodes.
+    rtol : float or None
+        The tolerance the nodes were placed for (:func:`posterior`).
     """
 
     bank: Bank
@@ -481,6 +609,9 @@ class Mixture:
     log_normaliser: np.ndarray
     mean: np.ndarray
     cov: np.ndarray
+    depth_error: np.ndarray | None = None
+    velocity_error: np.ndarray | None = None
+    rtol: float | None = None
 
     @property
     def depth_mean(self) -> np.ndarray:
@@ -685,9 +816,10 @@ def mixture(bank: Bank, weights) -> Mixture:
     ----------
     bank : Bank
     weights : array_like, shape (..., J)
-        Positive quadrature weights of the nodes for integrals over the depth
-        at frame 1 (``sum_j w_j g(y_j)`` approximates ``integral g(y) dy``),
-        broadcasting with ``bank.nodes``.
+        Quadrature weights of the nodes for integrals over the depth at frame 1
+        (``sum_j w_j g(y_j)`` approximates ``integral g(y) dy``), broadcasting
+        with ``bank.nodes``: >= 0 (a zero weight pads a batch's node sets to
+        one length), at least one positive per problem.
 
     Returns
     -------
@@ -702,8 +834,11 @@ def mixture(bank: Bank, weights) -> Mixture:
     if not isinstance(bank, Bank):
         raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")
     weights = _finite(weights, "weights")
-    if not np.all(weights > 0):
-        raise ValueError(f"weights must be positive, got minimum {float(np.min(weights)):.6g}")
+    if not (np.all(weights >= 0) and np.all(np.any(weights > 0, axis=-1))):
+        raise ValueError(
+            "weights must be >= 0 with a positive one per problem, "
+            f"got minimum {float(np.min(weights)):.6g}"
+        )
     try:
         np.broadcast_shapes(weights.shape, bank.nodes.shape)
     except ValueError:
@@ -711,13 +846,458 @@ def mixture(bank: Bank, weights) -> Mixture:
             f"weights must broadcast with the nodes' shape {bank.nodes.shape}, "
             f"got shape {weights.shape}"
         ) from None
-    log_weights = np.log(weights)
+    with np.errstate(divide="ignore"):
+        log_weights = np.log(weights)
     a = bank.log_weight + log_weights
     log_normaliser = logsumexp(a, axis=-1)
     probabilities = np.exp(a - log_normaliser[..., None])
     depth_N = bank.nodes + (bank.n_frames - 1)
     mean, cov = _mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
     return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
+
+
+# --- nodes placed by the depth quadrature ----------------------------------------------
+
+#: Most frames of a problem: each frame is a step of every node's filter.
+MAX_FRAMES = 10_000
+
+
+def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
+    """The checked inputs as :class:`depthcore.optimal` quadrature problems, and the batch shape."""
+    mu, rho, prior_mean, prior_cov = _checks.batch_inputs(
+        mu, rho, prior_mean, prior_cov, triples=False
+    )
+    if mu.shape[-1] > MAX_FRAMES:
+        raise ValueError(f"mu: at most {MAX_FRAMES} frames, got {mu.shape[-1]}")
+    batch, N = mu.shape[:-1], mu.shape[-1]
+    q = _checks.finite_array(process_noise, "process_noise")
+    if q.ndim and q.shape != batch:
+        raise ValueError(
+            f"process_noise must be a scalar or have shape {batch}, got shape {q.shape}"
+        )
+    if not np.all(q >= 0):
+        raise ValueError(f"process_noise must be >= 0, got minimum {float(np.min(q)):.6g}")
+    B = int(np.prod(batch))
+    prior_cov = np.ascontiguousarray(np.broadcast_to(prior_cov, batch + (3, 3))).reshape(B, 3, 3)
+    pb = optimal._Problem(
+        mu=mu.reshape(B, N),
+        rho=np.broadcast_to(rho, batch).reshape(B),
+        mean=np.broadcast_to(prior_mean, batch + (3,)).reshape(B, 3),
+        R=np.linalg.inv(np.linalg.cholesky(prior_cov)),
+        reading="derived",
+        q=np.broadcast_to(q, batch).reshape(B),
+        cov=prior_cov,
+        solver=_integrand,
+    )
+    return pb, batch
+
+
+def _integrand(offsets, pb):
+    """The depth quadrature's integrand: :func:`lateral_filter` at ``y_1 = offsets[..., 2]``."""
+    log_weight, mean, cov = lateral_filter(offsets[..., 2], pb.mu, pb.rho, pb.q, pb.mean, pb.cov)
+    return log_weight, np.stack(mean), cov
+
+
+def _integrate(pb, rtol: float):
+    """The quadrature of :mod:`depthcore.optimal` on ``y_1 > 0``, moments of ``y_N``.
+
+    The quadrature reports the depth as ``y_1 + 2`` (its variable is
+    ``t = log(y_1)``, as for the paper's three frames); the depth at frame
+    ``N`` is ``y_1 + N - 1``.
+    """
+    m, err_y, err_v, top, grids = optimal._integrate(pb, (3,), rtol)
+    mean = m.mean.copy()
+    mean[:, 1] += pb.mu.shape[1] - 3
+    err_y = np.maximum(err_y, 64.0 * np.finfo(float).eps * np.abs(mean[:, 1]))
+    return m._replace(mean=mean), err_y, err_v, top, grids
+
+
+def moments(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, rtol: float = 1e-10, chunk: int = 64
+) -> optimal.Moments:
+    """The exact posterior moments at frame ``N``, with the depth nodes placed by quadrature.
+
+    The depth at frame 1 is integrated by the quadrature of
+    :func:`depthcore.optimal.moments` (nodes about the posterior's own mode
+    and width in ``t = log(y_1)``, the step halved until the moments settle,
+    a node budget, a roundoff floor on the error estimate), with the
+    integrand ``N(y_1; m_y, P_yy) L(y_1)`` and the Gaussian of ``(x_N, v_N)``
+    given ``y_1`` from the Kalman filter at each node (:func:`lateral_filter`).
+
+    Parameters
+    ----------
+    mu : array_like, shape (B, N) or (N,)
+        Bearings at frames 1 .. N (any ``N >= 1``; the paper's problem is ``N = 3``).
+    rho : float or array_like, shape (B,)
+        Bearing noise SD, > 0.
+    prior_mean : array_like, shape (3,) or (B, 3)
+        Prior mean of ``(x_1, y_1, v_1)``.
+    prior_cov : array_like, shape (3, 3) or (B, 3, 3)
+        Prior covariance, symmetric positive definite.
+    process_noise : float or array_like, shape (B,)
+        SD ``q >= 0`` of the velocity's change per frame.
+    rtol : float
+        Target accuracy of each mean and SD, relative to the SD.
+    chunk : int
+        Problems integrated together (memory grows with it).
+
+    Returns
+    -------
+    depthcore.optimal.Moments
+        Arrays of shape (B,) (``(1,)`` for one problem), for the state at frame
+        ``N``; ``prob_behind_camera`` is 0 (the support is ``y_1 > 0``).
+
+    Raises
+    ------
+    ValueError
+        For invalid inputs, naming the argument, or when the tolerance is out
+        of reach within the quadrature's node budget, naming the problem.
+    """
+    pb, _ = _quadrature_problem(
+        np.atleast_2d(mu) if np.ndim(mu) == 1 else mu, rho, prior_mean, prior_cov, process_noise
+    )
+    rtol = _checks.positive_scalar(rtol, "rtol")
+    chunk = _checks.count(chunk, "chunk")
+    out, means, covs = [], [], []
+    for start in range(0, pb.mu.shape[0], chunk):
+        m, err_y, err_v, _, _ = _integrate(pb.take(slice(start, start + chunk)), rtol)
+        out.append(np.concatenate([m.key_moments(), [err_y, err_v, m.behind]]))
+        means.append(m.mean)
+        covs.append(m.cov)
+    return optimal.Moments(
+        *np.concatenate(out, axis=1), np.concatenate(means), np.concatenate(covs)
+    )
+
+
+def _grid_nodes(grid):
+    """Depths at frame 1 (B, J) and log quadrature weights (B, J) of a quadrature grid.
+
+    ``grid = (lo, h, n, frame)`` holds the trapezoid nodes ``u_j = lo + h j``,
+    ``j < n``, of each problem in the quadrature's variable ``u``, with
+    ``t = log(y_1)`` a function of ``u`` (:class:`depthcore.optimal._Frame`);
+    ``dy_1 = y_1 (dt/du) du``. Rows with fewer nodes are padded with weight 0.
+    """
+    lo, h, n, frame = grid
+    u = optimal._grid(lo, h, n, 0.0)
+    pad = np.isnan(u)
+    u = np.where(pad, lo[:, None], u)
+    t = frame.t(u)
+    log_w = np.log(np.where(h > 0, h, 1.0))[:, None] + t + frame.log_jacobian(u)
+    return np.exp(t), np.where(pad, -np.inf, log_w)
+
+
+def posterior(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, rtol: float = 1e-10, history: bool = False
+) -> Mixture:
+    """The exact posterior at frame ``N`` as a bank on nodes placed by the depth quadrature.
+
+    The nodes and weights are the last trapezoid level of :func:`moments`'s
+    quadrature, so the mixture's moments are those moments (to roundoff) and
+    carry their error estimates. :func:`update` adds frames online.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N,) or (B, N)
+    rho, prior_mean, prior_cov, process_noise, rtol
+        As for :func:`moments`.
+    history : bool
+        Keep each node's filter at every frame (for :meth:`Mixture.smoothed`).
+
+    Returns
+    -------
+    Mixture
+        Batch shape ``()`` for ``mu`` of shape ``(N,)``, ``(B,)`` otherwise.
+    """
+    single = np.ndim(mu) == 1
+    pb, _ = _quadrature_problem(
+        np.atleast_2d(mu) if single else mu, rho, prior_mean, prior_cov, process_noise
+    )
+    rtol = _checks.positive_scalar(rtol, "rtol")
+    return _place(pb, rtol, history, single)
+
+
+#: Problems placed together by the quadrature (its memory grows with this times its nodes).
+_CHUNK = 64
+
+
+def _place(pb, rtol, history, single):
+    B = pb.mu.shape[0]
+    if B > _CHUNK:
+        parts = [
+            _place(pb.take(slice(i, i + _CHUNK)), rtol, history, False) for i in range(0, B, _CHUNK)
+        ]
+        return _concatenate(parts)
+    _, err_y, err_v, _, grids = _integrate(pb, rtol)
+    nodes, log_w = _grid_nodes(grids[3])
+    shift = np.max(log_w, axis=1, keepdims=True)
+    bank = _filter_bank(nodes, pb.mu, pb.rho, pb.q, pb.mean, pb.cov, history)
+    post = mixture(bank, np.exp(log_w - shift))
+    post = dataclasses.replace(
+        post,
+        log_weights=post.log_weights + shift,
+        log_normaliser=post.log_normaliser + shift[:, 0],
+        depth_error=err_y,
+        velocity_error=err_v,
+        rtol=rtol,
+    )
+    return _squeeze(post) if single else post
+
+
+def _concatenate(parts) -> Mixture:
+    """Batches of placed posteriors joined along the batch, their nodes padded to one count."""
+    J = max(p.log_weights.shape[-1] for p in parts)
+    banks = [p.bank for p in parts]
+
+    def join(get, axis, value):
+        return np.concatenate([_pad(get(b), J, axis, value) for b in banks])
+
+    bank = Bank(
+        nodes=join(lambda b: b.nodes, 1, 1.0),
+        mean=join(lambda b: b.mean, 1, 0.0),
+        cov=join(lambda b: b.cov, 1, 1.0),
+        log_weight=join(lambda b: b.log_weight, 1, 0.0),
+        mu=np.concatenate([b.mu for b in banks]),
+        rho=np.concatenate([b.rho for b in banks]),
+        q=np.concatenate([b.q for b in banks]),
+        prior_mean=np.concatenate([b.prior_mean for b in banks]),
+        prior_cov=np.concatenate([b.prior_cov for b in banks]),
+        history=None
+        if banks[0].history is None
+        else kalman.FilterResult(
+            *(
+                np.concatenate([_pad(a, J, 1, 1.0) for a in arrays])
+                for arrays in zip(*(b.history for b in banks), strict=True)
+            )
+        ),
+    )
+    log_weights = np.concatenate([_pad(p.log_weights, J, 1, -np.inf) for p in parts])
+    shift = np.max(log_weights, axis=-1)
+    joined = _shifted(mixture(bank, np.exp(log_weights - shift[:, None])), shift)
+    return dataclasses.replace(
+        joined,
+        depth_error=np.concatenate([p.depth_error for p in parts]),
+        velocity_error=np.concatenate([p.velocity_error for p in parts]),
+        rtol=parts[0].rtol,
+    )
+
+
+def _squeeze(post: Mixture) -> Mixture:
+    """A batch of one as a single problem (batch shape ``()``)."""
+    b = post.bank
+    bank = Bank(
+        b.nodes[0],
+        b.mean[0],
+        b.cov[0],
+        b.log_weight[0],
+        b.mu[0],
+        b.rho[0],
+        b.q[0],
+        b.prior_mean[0],
+        b.prior_cov[0],
+        None if b.history is None else kalman.FilterResult(*(a[0] for a in b.history)),
+    )
+    return Mixture(
+        bank,
+        post.log_weights[0],
+        post.probabilities[0],
+        post.log_normaliser[0],
+        post.mean[0],
+        post.cov[0],
+        post.depth_error[0],
+        post.velocity_error[0],
+        post.rtol,
+    )
+
+
+#: An end node of a placed grid may carry at most this log probability below the largest
+#: before :func:`update` re-places the nodes (the quadrature cuts its range at 60).
+_END_MARGIN = 40.0
+
+
+def _resolution(post: Mixture):
+    """The error of the moments on the placed nodes, shape (2, B), and whether the ends are free.
+
+    The nodes of :func:`posterior` are a trapezoid grid in order; dropping
+    every other one (doubling the weights of the rest) doubles the step, and
+    the change of the depth's and the velocity's mean and SD estimates the
+    error, as the quadrature's own halvings do (floored by roundoff, as in
+    :func:`depthcore.optimal._roundoff`). The ends are free when the first
+    and last nodes with positive weight carry log probabilities more than
+    :data:`_END_MARGIN` below the largest.
+    """
+    b = post.bank
+    log_p = np.where(np.isfinite(post.log_weights), b.log_weight + post.log_weights, -np.inf)
+    top = np.max(log_p, axis=-1)
+    valid = np.isfinite(log_p)
+    J = log_p.shape[-1]
+    j = np.arange(J)
+    first = np.argmax(valid, axis=-1)
+    last = J - 1 - np.argmax(valid[..., ::-1], axis=-1)
+    end = np.maximum(
+        np.take_along_axis(log_p, first[..., None], -1)[..., 0],
+        np.take_along_axis(log_p, last[..., None], -1)[..., 0],
+    )
+    free = end < top - _END_MARGIN
+    even = ((j - first[..., None]) % 2 == 0) & valid
+    coarse = mixture(
+        b, np.where(even, np.exp(np.where(valid, post.log_weights - top[..., None], 0.0)), 0.0)
+    )
+    eps = np.finfo(float).eps
+    errors, floors = [], []
+    for k in (1, 2):
+        sd, sd_c = np.sqrt(post.cov[..., k, k]), np.sqrt(coarse.cov[..., k, k])
+        change = np.maximum(np.abs(post.mean[..., k] - coarse.mean[..., k]), np.abs(sd - sd_c))
+        floor = 64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top)) * sd)
+        errors.append(np.maximum(change, floor))
+        floors.append(floor)
+    return np.stack(errors), np.stack(floors), free
+
+
+def _pad(a, J: int, axis: int, value):
+    """``a`` padded with ``value`` along ``axis`` (counted from the end of the batch) to ``J``."""
+    width = [(0, 0)] * a.ndim
+    width[axis] = (0, J - a.shape[axis])
+    return np.pad(a, width, constant_values=value)
+
+
+def update(post: Mixture, mu_next) -> Mixture:
+    """Add frame ``N + 1`` to a posterior from :func:`posterior`, online.
+
+    Every node's Kalman filter and weight is updated (:func:`step`); nothing
+    earlier is recomputed while the nodes still resolve the posterior to the
+    tolerance they were placed for (:func:`_resolution`: the moments on every
+    other node agree with those on all nodes, and the end nodes carry
+    negligible probability). As the bearings accumulate, the posterior
+    narrows, and a problem whose nodes no longer resolve it has them
+    re-placed by the quadrature from all ``N + 1`` bearings (cost ``O(N)``
+    for that problem, the others untouched). Since the posterior's width
+    shrinks geometrically in the number of re-placements, they are rare and
+    the cost per frame stays flat on average.
+
+    Parameters
+    ----------
+    post : Mixture
+        After ``N`` frames, from :func:`posterior` or :func:`update`.
+    mu_next : float or array_like, shape (B,)
+        The bearing at frame ``N + 1``, one per problem.
+
+    Returns
+    -------
+    Mixture
+        After ``N + 1`` frames, with error estimates.
+    """
+    if not isinstance(post, Mixture) or post.rtol is None:
+        raise ValueError("post must be a Mixture from bank.posterior or bank.update")
+    single = post.log_normaliser.ndim == 0
+    if single:
+        post = _batch_of_one(post)
+    mu_next = _finite(mu_next, "mu_next")
+    if mu_next.ndim > 1 or (mu_next.ndim == 1 and mu_next.shape != post.log_normaliser.shape):
+        raise ValueError(
+            f"mu_next must be a scalar or have shape {post.log_normaliser.shape}, "
+            f"got shape {mu_next.shape}"
+        )
+    if post.bank.n_frames >= MAX_FRAMES:
+        raise ValueError(f"mu_next: at most {MAX_FRAMES} frames")
+    stepped = step(post.bank, np.broadcast_to(mu_next, post.log_normaliser.shape))
+    shift = np.max(np.where(np.isfinite(post.log_weights), post.log_weights, -np.inf), -1)
+    new = _shifted(mixture(stepped, np.exp(post.log_weights - shift[:, None])), shift)
+    err, floor, free = _resolution(new)
+    rtol = post.rtol
+    ok = (
+        free
+        & (err[0] <= np.maximum(rtol * new.depth_sd, floor[0]))
+        & (err[1] <= np.maximum(rtol * new.velocity_sd, floor[1]))
+    )
+    new = dataclasses.replace(new, depth_error=err[0], velocity_error=err[1], rtol=rtol)
+    if not np.all(ok):
+        new = _replace_rows(new, ~ok)
+    return _squeeze(new) if single else new
+
+
+def _shifted(post: Mixture, shift) -> Mixture:
+    """``post`` with its log quadrature weights and normaliser raised by ``shift`` (B,)."""
+    return dataclasses.replace(
+        post,
+        log_weights=post.log_weights + shift[:, None],
+        log_normaliser=post.log_normaliser + shift,
+    )
+
+
+def _replace_rows(post: Mixture, rows) -> Mixture:
+    """``post`` with the problems at ``rows`` (B,) re-placed by the quadrature."""
+    b = post.bank
+    idx = np.flatnonzero(rows)
+    pb = optimal._Problem(
+        mu=b.mu[idx],
+        rho=np.broadcast_to(b.rho, rows.shape)[idx],
+        mean=b.prior_mean[idx],
+        R=np.linalg.inv(np.linalg.cholesky(b.prior_cov[idx])),
+        reading="derived",
+        q=np.broadcast_to(b.q, rows.shape)[idx],
+        cov=b.prior_cov[idx],
+        solver=_integrand,
+    )
+    fresh = _place(pb, post.rtol, b.history is not None, False)
+    J = max(post.log_weights.shape[-1], fresh.log_weights.shape[-1])
+    fb = fresh.bank
+
+    def merge(old, new, axis, value):
+        old, new = _pad(old, J, axis, value), _pad(new, J, axis, value)
+        out = old.copy()
+        out[idx] = new
+        return out
+
+    bank = b._replace(
+        nodes=merge(np.broadcast_to(b.nodes, post.log_weights.shape), fb.nodes, 1, 1.0),
+        mean=merge(b.mean, fb.mean, 1, 0.0),
+        cov=merge(b.cov, fb.cov, 1, 1.0),
+        log_weight=merge(b.log_weight, fb.log_weight, 1, 0.0),
+        history=None,
+    )
+    log_weights = merge(post.log_weights, fresh.log_weights, 1, -np.inf)
+    shift = np.max(log_weights, axis=-1)
+    merged = _shifted(mixture(bank, np.exp(log_weights - shift[:, None])), shift)
+    return dataclasses.replace(
+        merged,
+        depth_error=np.where(rows, _full(fresh.depth_error, idx, rows), post.depth_error),
+        velocity_error=np.where(rows, _full(fresh.velocity_error, idx, rows), post.velocity_error),
+        rtol=post.rtol,
+    )
+
+
+def _full(values, idx, rows):
+    out = np.zeros(rows.shape)
+    out[idx] = values
+    return out
+
+
+def _batch_of_one(post: Mixture) -> Mixture:
+    """A single problem as a batch of one."""
+    b = post.bank
+    bank = Bank(
+        b.nodes[None],
+        b.mean[None],
+        b.cov[None],
+        b.log_weight[None],
+        b.mu[None],
+        np.reshape(b.rho, (1,)),
+        np.reshape(b.q, (1,)),
+        b.prior_mean[None],
+        b.prior_cov[None],
+        None if b.history is None else kalman.FilterResult(*(a[None] for a in b.history)),
+    )
+    return Mixture(
+        bank,
+        post.log_weights[None],
+        post.probabilities[None],
+        np.reshape(post.log_normaliser, (1,)),
+        post.mean[None],
+        post.cov[None],
+        np.reshape(post.depth_error, (1,)),
+        np.reshape(post.velocity_error, (1,)),
+        post.rtol,
+    )
 
 
 # --- simulation ------------------------------------------------------------------------

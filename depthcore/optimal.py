@@ -36,6 +36,7 @@ the mixture over the same nodes of the Gaussian conditionals of ``v`` given
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -67,19 +68,44 @@ _NODE_BUDGET = 4097
 _CORE = 4.0
 #: Newton steps locating the mode of the depth integrand.
 _NEWTON_STEPS = 8
+#: Most damped Newton steps from the scan alone (problems with a solver, :func:`_newton`).
+_SCAN_NEWTON_STEPS = 30
 
 
 class _Problem(NamedTuple):
-    """A batch of ``B`` problems: measurements, noise, prior (whitened)."""
+    """A batch of ``B`` problems: measurements, noise, prior (whitened).
 
-    mu: np.ndarray  # (B, 3)
+    ``solver``, when given, replaces Eqs. (14)-(16) as the integrand: called as
+    ``solver(offsets, problem)`` it returns what :func:`_solve` returns, for
+    depths ``y_1 = offsets[..., 2]`` at frame 1 (the quadrature's variable is
+    ``t = log(y_1)`` either way). :func:`depthcore.bank.moments` uses it for
+    any number of frames; ``q`` (B,) and ``cov`` (B, 3, 3) are then the
+    process noise and the prior covariance.
+    """
+
+    mu: np.ndarray  # (B, 3), or (B, N) with a solver
     rho: np.ndarray  # (B,)
     mean: np.ndarray  # (B, 3) prior mean
     R: np.ndarray  # (B, 3, 3), P^{-1} = R^T R
     reading: str
+    q: np.ndarray | None = None
+    cov: np.ndarray | None = None
+    solver: Callable | None = None
 
     def take(self, idx) -> _Problem:
-        return _Problem(self.mu[idx], self.rho[idx], self.mean[idx], self.R[idx], self.reading)
+        def part(a):
+            return None if a is None else a[idx]
+
+        return _Problem(
+            self.mu[idx],
+            self.rho[idx],
+            self.mean[idx],
+            self.R[idx],
+            self.reading,
+            part(self.q),
+            part(self.cov),
+            self.solver,
+        )
 
 
 def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
@@ -169,6 +195,8 @@ def _solve(offsets, pb: _Problem):
     squared 2 x 2 minors, ``S det M`` that of the squared 3 x 3 minors, and
     the conditional mean follows by Cramer's rule.
     """
+    if pb.solver is not None:
+        return pb.solver(offsets, pb)
     rho = pb.rho[:, None]
     s = [1.0 / (offsets[..., k] * rho) for k in range(3)]
     s2 = [sk * sk for sk in s]
@@ -457,14 +485,15 @@ def _scan_points(interval: int, c, mean_s, sd_s, lo_t, hi_t, guessed: bool = Fal
     A scan of the whole range at about unit steps and, on ``y > 2``, 25
     points across 12 second-order SDs about the noise-free depth and about
     the second-order mean (left out when ``guessed``, the second-order frame's
-    first level being evaluated too, and both lie within an SD of each other).
+    first level being evaluated too, and both lie within an SD of each other;
+    and when ``c`` is ``None``, for problems with no noise-free solution).
     Returns the points and ``n_coarse``.
     """
     t = lo_t[:, None] + (hi_t - lo_t)[:, None] * _unit(
         int(np.ceil(np.max(hi_t - lo_t) / _SCAN_STEP)) + 1
     )
     n_coarse = t.shape[1]
-    if interval == 3:
+    if interval == 3 and c is not None:
         local = np.arange(-12.0, 12.5)
         sd_t = _clip(sd_s / (c[:, 1] - 2.0), _sigma_floor(np.log(c[:, 1] - 2.0)), 1.0)
         t_c = np.log(c[:, 1] - 2.0)
@@ -475,6 +504,26 @@ def _scan_points(interval: int, c, mean_s, sd_s, lo_t, hi_t, guessed: bool = Fal
         t = np.concatenate([t] + [ct[:, None] + sd_t[:, None] * local for ct in centres], 1)
         t = _clip(t, lo_t[:, None], hi_t[:, None])
     return t, n_coarse
+
+
+def _local_points(pb: _Problem):
+    """Scan points (B, 27) about the depth of the first three bearings' noise-free solution.
+
+    For a solver's problems (any number of frames) the depth at frame 3 of
+    Eq. (7)'s ``c`` from ``mu_1 .. mu_3`` (in the quadrature's variable
+    ``t = log(y_1)``), or the prior mean's depth where that is undefined or
+    behind the camera, with offsets ``0, +-1, +-0.1, .., +-1e-12`` in ``t``:
+    a start for the Newton steps at every scale of the posterior's width.
+    """
+    if pb.mu.shape[1] >= 3:
+        with np.errstate(all="ignore"):
+            y = model.noise_free_states_unchecked(pb.mu[:, :3])[:, 1] - 2.0
+    else:
+        y = np.full(len(pb.mu), np.nan)
+    y = np.where(np.isfinite(y) & (y > 0), y, pb.mean[:, 1])
+    t = np.log(np.where(y > 0, y, 1.0))
+    steps = 10.0 ** -np.arange(13.0)
+    return t[:, None] + np.concatenate([[0.0], steps, -steps])
 
 
 def _frame(interval: int, pb: _Problem, t, scan, coarse_mask, lo_t, hi_t):
@@ -497,6 +546,10 @@ def _frame(interval: int, pb: _Problem, t, scan, coarse_mask, lo_t, hi_t):
         ts[rows, k - 1], ts[rows, k], ts[rows, k + 1], ss[rows, k - 1], ss[rows, k], ss[rows, k + 1]
     )
     coarse = coarse_mask[order[rows, best]]
+    if pb.solver is not None:
+        t0, sigma, top = _newton(interval, pb, ts[rows, best], ss[rows, best], sigma, lo_t, hi_t)
+        t0 = _clip(t0, lo_t, hi_t)
+        return _Frame(t0, _clip(sigma, _sigma_floor(t0), 1.0)), top
     for _ in range(_NEWTON_STEPS if np.any(coarse) else 0):
         pts = _clip(
             t0[:, None] + sigma[:, None] * np.array([-1.0, 0.0, 1.0]), lo_t[:, None], hi_t[:, None]
@@ -512,6 +565,50 @@ def _frame(interval: int, pb: _Problem, t, scan, coarse_mask, lo_t, hi_t):
     t0 = _clip(t0, lo_t, hi_t)
     sigma = _clip(sigma, _sigma_floor(t0), 1.0)
     return _Frame(t0, sigma), top
+
+
+def _newton(interval: int, pb: _Problem, t0, f0, sigma, lo_t, hi_t):
+    """Damped Newton steps to the mode of the log integrand in ``t``, from ``t0`` (B,).
+
+    For problems with no second-order guess, whose mode may lie many of its
+    own (tiny) widths from the best scan point. Each step takes the first and
+    second differences at ``t0 +- sigma``, moves by ``-d1 / d2`` (uphill by
+    ``4 sigma`` where the points are not concave), halving the move until the
+    log integrand does not decrease, and sets ``sigma`` to the curvature's
+    width ``(-d2)**-1/2``. Stops when the moves fall below a hundredth of the
+    width and the width settles, or after :data:`_SCAN_NEWTON_STEPS` steps.
+    Returns the mode, its width and the log integrand there, each (B,).
+    """
+    floor = _sigma_floor(t0)
+    for _ in range(_SCAN_NEWTON_STEPS):
+        h = _clip(sigma, floor, 1.0)
+        pts = t0[:, None] + h[:, None] * np.array([-1.0, 0.0, 1.0])
+        phi = _log_integrand(interval, _clip(pts, lo_t[:, None], hi_t[:, None]), pb)
+        with np.errstate(invalid="ignore", over="ignore"):
+            d1 = (phi[:, 2] - phi[:, 0]) / (2.0 * h)
+            d2 = (phi[:, 2] - 2.0 * phi[:, 1] + phi[:, 0]) / h**2
+            concave = np.isfinite(d1) & np.isfinite(d2) & (d2 < 0)
+            move = np.where(concave, -d1 / np.where(concave, d2, -1.0), 4.0 * h * np.sign(d1))
+            width = np.where(concave, 1.0 / np.sqrt(-np.where(concave, d2, -1.0)), 2.0 * h)
+        move = np.where(np.isfinite(move), move, 0.0)
+        f1 = np.full_like(f0, -np.inf)
+        for _ in range(60):  # halve the move until the log integrand does not decrease
+            t1 = _clip(t0 + move, lo_t, hi_t)
+            # (a move below a hundredth of the width is not worth the roundoff it hits)
+            worse = ~(f1 >= f0) & (np.abs(move) > 0.01 * h)
+            if not np.any(worse):
+                break
+            f1 = np.where(worse, _log_integrand(interval, t1[:, None], pb)[:, 0], f1)
+            move = np.where(~(f1 >= f0), 0.5 * move, move)
+        up = f1 >= f0
+        sigma = _clip(width, floor, 1.0)
+        settled = (np.abs(np.where(up, t1 - t0, 0.0)) <= 0.01 * sigma) & (
+            np.abs(sigma - h) <= 0.05 * h
+        )
+        t0, f0 = np.where(up, t1, t0), np.where(up, f1, f0)
+        if np.all(settled):
+            break
+    return t0, sigma, f0
 
 
 def _parabola(ta, tb, tc, fa, fb, fc):
@@ -576,16 +673,26 @@ def _ranges(pb: _Problem, intervals):
     and the scan; and the second-order mean (B, 3), about which the moments
     are accumulated.
     """
-    c = noise_free_states(pb.mu)
-    cov_p = np.linalg.inv(np.swapaxes(pb.R, -1, -2) @ pb.R)
-    mean_s, cov_s = second_order_batch(pb.mu, pb.rho, pb.mean, cov_p)
-    sd_s = np.sqrt(cov_s[:, 1, 1])
+    paper = pb.solver is None
+    if paper:
+        c = noise_free_states(pb.mu)
+        cov_p = np.linalg.inv(np.swapaxes(pb.R, -1, -2) @ pb.R)
+        mean_s, cov_s = second_order_batch(pb.mu, pb.rho, pb.mean, cov_p)
+        sd_s = np.sqrt(cov_s[:, 1, 1])
+    else:  # no second-order density to start from: the scan finds the mode
+        c = mean_s = sd_s = None
+        cov_p = pb.cov
     found, tops = {}, []
     for i in intervals:
-        lo_t, hi_t = _t_limits(i, pb, c, cov_p)
+        lo_t, hi_t = _t_limits(i, pb, pb.mean if c is None else c, cov_p)
         t_scan, n_coarse = _scan_points(i, c, mean_s, sd_s, lo_t, hi_t, guessed=i == 3)
+        if not paper:
+            t_scan = _clip(
+                np.concatenate([t_scan, _local_points(pb)], 1), lo_t[:, None], hi_t[:, None]
+            )
+            n_coarse = t_scan.shape[1]  # every point may start the Newton steps
         guess = None
-        if i == 3:
+        if i == 3 and paper:
             y_s = np.where(mean_s[:, 1] > 2.0, mean_s[:, 1], c[:, 1])
             t0 = _clip(np.log(y_s - 2.0), lo_t, hi_t)
             guess = _Frame(t0, _clip(sd_s / (y_s - 2.0), _sigma_floor(t0), 1.0))
@@ -636,7 +743,13 @@ def _ranges(pb: _Problem, intervals):
         scan = (t_all[:, m:], log_t[:, m:])
         found[i] = (frame, u, values, hi_t, scan)
         tops.append(np.maximum(top_i + np.log(frame.sigma), np.max(values[1], axis=1)))
-    centre = np.where(np.isfinite(mean_s), mean_s, c)
+    if paper:
+        centre = np.where(np.isfinite(mean_s), mean_s, c)
+    else:  # the state at the mode of the depth (in the quadrature's depth, y_1 + 2)
+        t0 = found[3][0].t0
+        offsets, _ = _nodes(3, t0[:, None])
+        x_v = _solve(offsets, pb)[1][:, :, 0]
+        centre = np.stack([x_v[0], offsets[:, 0, 0], x_v[1]], axis=1)
     return np.max(tops, axis=0), found, centre
 
 
@@ -723,6 +836,7 @@ def _integrate(pb: _Problem, intervals, rtol: float):
             ]
             u = np.where(valid, u, np.nan).reshape(len(lo), -1)
             values = _node_values(i, u, frame, pb)
+            _check_peak(values[1], np.isnan(u), top, pb, rtol)
             start = 0
             for lev, fr in enumerate(fractions):
                 block = slice(start * m, (start + len(fr)) * m)
@@ -761,7 +875,32 @@ def _integrate(pb: _Problem, intervals, rtol: float):
         if np.all(done):
             break
         previous, halvings = current, 1
+    narrow = ~((final.cov[:, 1, 1] > 0) & (final.cov[:, 2, 2] > 0))
+    if np.any(narrow):  # all the mass on one node: the width is below the resolution
+        k = int(np.argmax(narrow))
+        raise ValueError(
+            f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g} and prior mean "
+            f"{pb.mean[k].tolist()}: the depth marginal is too narrow to resolve in double "
+            f"precision, so its quadrature cannot reach rtol = {rtol:.3g}"
+        )
     return final, errors[0], errors[1], top, grids
+
+
+def _check_peak(log_f, skip, top, pb: _Problem, rtol: float) -> None:
+    """Refuse a problem whose refined nodes rise far above the peak found (a missed mode).
+
+    The sums are scaled by ``exp(-top)``; a node ``e^60`` above it means the
+    mode and width that placed the nodes were wrong, and the sums would overflow.
+    """
+    with np.errstate(invalid="ignore"):
+        high = np.any(np.where(skip, False, log_f > (top + _CUTOFF)[:, None]), axis=1)
+    if np.any(high):
+        k = int(np.argmax(high))
+        raise ValueError(
+            f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g} and prior mean "
+            f"{pb.mean[k].tolist()}: the depth marginal is too narrow to locate in double "
+            f"precision, so its quadrature cannot reach rtol = {rtol:.3g}"
+        )
 
 
 def _mapped_log_integrand(interval, u, frame, pb):

@@ -397,7 +397,8 @@ def test_smoothed_state_at_the_last_frame_is_the_filtered_mixture():
     hist = bk.mixture(
         bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, 0.03, history=True), w
     )
-    assert_allclose(hist.smoothed().mean, sm.mean, rtol=0, atol=0)
+    # (its filters run in the textbook's matrix form, the others in closed form)
+    assert_allclose(hist.smoothed().mean, sm.mean, rtol=1e-12, atol=1e-13)
 
 
 # --- simulation ------------------------------------------------------------------------
@@ -458,8 +459,12 @@ def test_filter_bank_refuses_bad_input_naming_the_argument(fig2_args, change, me
 
 def test_mixture_and_step_refuse_bad_input(fig2_args):
     b = bk.filter_bank(**fig2_args)
-    with pytest.raises(ValueError, match="weights must be positive"):
-        bk.mixture(b, [1.0, 0.0, 1.0])
+    with pytest.raises(ValueError, match="weights must be >= 0"):
+        bk.mixture(b, [1.0, -1.0, 1.0])
+    with pytest.raises(ValueError, match="a positive one per problem"):
+        bk.mixture(b, [0.0, 0.0, 0.0])
+    # a zero weight (padding) leaves the node out
+    assert_allclose(bk.mixture(b, [1.0, 0.0, 1.0]).probabilities[1], 0.0, atol=0)
     with pytest.raises(ValueError, match="weights must broadcast"):
         bk.mixture(b, [1.0, 1.0])
     with pytest.raises(ValueError, match="bank must be a Bank"):
@@ -490,3 +495,175 @@ def test_simulate_refuses_bad_input(kwargs, message):
     args = dict(x1=[0.0, 3.0, 0.5], n_frames=4, rho=0.01, q=0.0, rng=np.random.default_rng(0))
     with pytest.raises(ValueError, match=message):
         bk.simulate(**dict(args, **kwargs))
+
+
+# --- nodes placed by the depth quadrature ----------------------------------------------
+
+
+def key(m, i=0):
+    return np.array([m.depth_mean[i], m.depth_sd[i], m.velocity_mean[i], m.velocity_sd[i]])
+
+
+def test_eq14_16_placed_bank_moments_equal_the_one_dimensional_route(scenario):
+    s = scenario
+    prior = s.prior
+    ref = optimal.moments(np.array([s.mu]), s.rho, prior.mean, prior.cov)
+    got = bk.moments(np.array([s.mu]), s.rho, prior.mean, prior.cov)
+    assert_allclose(key(got), key(ref), rtol=1e-10, atol=0)
+    assert_allclose(got.cov, ref.cov, rtol=1e-10, atol=1e-10 * ref.cov[0, 1, 1])
+    assert got.depth_error[0] <= 1e-10 * got.depth_sd[0]
+    assert got.velocity_error[0] <= 1e-10 * got.velocity_sd[0]
+
+
+def test_eq14_16_placed_bank_equals_the_one_dimensional_route_over_noisy_batches():
+    s = SCENARIOS["fig2"]
+    prior = s.prior
+    rng = np.random.default_rng(21)
+    mu = np.array(s.mu) + 3 * s.rho * rng.standard_normal((40, 3))
+    ref = optimal.moments(mu, s.rho, prior.mean, prior.cov)
+    got = bk.moments(mu, s.rho, prior.mean, prior.cov)
+    for f in ("depth_mean", "depth_sd", "velocity_mean", "velocity_sd"):
+        assert_allclose(getattr(got, f), getattr(ref, f), rtol=1e-10, atol=0)
+    # a batch does not depend on its order
+    back = bk.moments(mu[::-1], s.rho, prior.mean, prior.cov)
+    assert_allclose(back.depth_mean[::-1], got.depth_mean, rtol=1e-15, atol=0)
+    assert_allclose(back.velocity_sd[::-1], got.velocity_sd, rtol=1e-15, atol=0)
+
+
+@pytest.mark.parametrize(("N", "q"), [(6, 0.0), (12, 0.03), (25, 0.0)])
+def test_placed_moments_match_the_dense_depth_rule_within_their_error(N, q):
+    sim, prior = long_track(N, q, seed=30 + N)
+    ref = key_moments(converged_mixture(sim.mu, RHO_200, prior.mean, prior.cov, q=q))
+    got = bk.moments(sim.mu, RHO_200, prior.mean, prior.cov, q)
+    sd = np.array([got.depth_sd[0]] * 2 + [got.velocity_sd[0]] * 2)
+    error = np.array([got.depth_error[0]] * 2 + [got.velocity_error[0]] * 2)
+    # the reference is converged to 1e-11 relative; the placed nodes to 1e-10 of the SD
+    assert np.all(error <= 1e-10 * sd)
+    assert np.all(np.abs(key(got) - ref) <= error + 1e-10 * sd + 2e-11 * np.abs(ref))
+
+
+def test_posterior_nodes_carry_the_quadrature_moments_and_errors():
+    sim, prior = long_track(10, 0.02, seed=40)
+    m = bk.moments(sim.mu, RHO_200, prior.mean, prior.cov, 0.02)
+    post = bk.posterior(sim.mu, RHO_200, prior.mean, prior.cov, 0.02)
+    assert post.log_normaliser.shape == ()
+    assert_allclose(key_moments(post), key(m), rtol=0, atol=1e-12 * m.depth_sd[0])
+    assert post.depth_error == m.depth_error[0] and post.rtol == 1e-10
+    # the marginals on the placed nodes: the depth density integrates to its CDF's limits
+    y = post.depth_mean + post.depth_sd * np.array([-30.0, 0.0, 30.0])
+    cdf = post.depth_cdf(y)
+    assert cdf[0] < 1e-12 and cdf[2] > 1 - 1e-12 and 0.3 < cdf[1] < 0.7
+    # the smoothed state at every frame: the depth advances by one, the last frame is filtered
+    sm = post.smoothed()
+    assert_allclose(sm.depth_mean, post.depth_mean - np.arange(9, -1, -1), rtol=1e-13)
+    assert_allclose(sm.mean[-1], post.mean, rtol=1e-11, atol=1e-13)
+
+
+def test_online_update_matches_the_quadrature_from_scratch_and_rarely_re_places():
+    N, q = 40, 0.0
+    sim, prior = long_track(N, q, seed=41)
+    post = bk.posterior(sim.mu[:3], RHO_200, prior.mean, prior.cov, q)
+    re_placed = 0
+    for k in range(3, N):
+        before = post.bank.nodes
+        post = bk.update(post, sim.mu[k])
+        re_placed += not np.array_equal(post.bank.nodes, before)
+        if k % 6 == 0 or k == N - 1:
+            fresh = bk.moments(sim.mu[: k + 1], RHO_200, prior.mean, prior.cov, q)
+            tol = 3 * (post.depth_error + fresh.depth_error[0]) + 1e-12 * fresh.depth_sd[0]
+            assert abs(post.depth_mean - fresh.depth_mean[0]) <= tol
+            assert abs(post.depth_sd - fresh.depth_sd[0]) <= tol
+            assert post.depth_error <= 1e-10 * post.depth_sd
+            vtol = 3 * (post.velocity_error + fresh.velocity_error[0])
+            assert abs(post.velocity_sd - fresh.velocity_sd[0]) <= vtol + 1e-12 * post.velocity_sd
+    assert post.bank.n_frames == N
+    # the posterior narrows by a factor of several over the frames; the nodes follow it
+    # in a few re-placements, not one per frame
+    assert 1 <= re_placed <= (N - 3) // 3
+
+
+def test_online_update_of_a_batch_re_places_only_the_problems_that_need_it():
+    N, q = 12, 0.0
+    tracks = [long_track(N, q, seed=50 + i) for i in range(4)]
+    mu = np.stack([t[0].mu for t in tracks])
+    prior = tracks[0][1]
+    post = bk.posterior(mu[:, :3], RHO_200, prior.mean, prior.cov, q)
+    for k in range(3, N):
+        post = bk.update(post, mu[:, k])
+    fresh = bk.moments(mu, RHO_200, prior.mean, prior.cov, q)
+    tol = 3 * (post.depth_error + fresh.depth_error) + 1e-12 * fresh.depth_sd
+    assert np.all(np.abs(post.depth_mean - fresh.depth_mean) <= tol)
+    one = bk.posterior(mu[2, :3], RHO_200, prior.mean, prior.cov, q)
+    for k in range(3, N):
+        one = bk.update(one, mu[2, k])
+    assert abs(one.depth_mean - post.depth_mean[2]) <= 3 * (one.depth_error + post.depth_error[2])
+
+
+@pytest.mark.parametrize(
+    ("truth", "N", "rho", "q", "prior_mean", "scale"),
+    [
+        ((0.0, 4.0, 1.0), 10, 1e-9, 0.0, (0.0, 4.0, 0.0), 1e3),  # tiny noise
+        ((0.0, 4.0, 1.0), 300, 1e-9, 0.0, (0.0, 4.0, 0.0), 1e3),  # and many frames
+        ((0.0, 4.0, 1.0), 10, 1.0, 0.05, (0.0, 4.0, 0.0), 1e3),  # huge noise
+        ((0.0, 1e9, 1.0), 10, 1e-9, 0.0, (0.0, 1e9, 0.0), 1e12),  # far point, huge prior
+        ((0.0, 4.0, 1.0), 30, 1 / 200, 0.05, (0.0, 4.0, 1.0), 1e-12),  # tiny prior
+        ((0.0, 0.01, 1.0), 5, 1 / 200, 0.0, (0.0, 4.0, 0.0), 1e3),  # a point at the camera
+    ],
+)
+def test_placed_bank_answers_extreme_inputs_with_finite_moments_and_errors(
+    truth, N, rho, q, prior_mean, scale
+):
+    sim = bk.simulate(np.array(truth), N, rho, q, np.random.default_rng(60))
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = bk.moments(sim.mu, rho, prior_mean, scale * np.eye(3), q)
+    values = np.concatenate([key(m), m.depth_error, m.velocity_error])
+    assert np.all(np.isfinite(values)) and m.depth_sd[0] > 0 and m.velocity_sd[0] > 0
+    # accurate to the tolerance, or to the roundoff floor where that is larger
+    eps = np.finfo(float).eps
+    assert m.depth_error[0] <= max(1e-10 * m.depth_sd[0], 1e5 * eps * abs(m.depth_mean[0]))
+
+
+def test_placed_bank_refuses_what_double_precision_cannot_resolve():
+    # a prior pinned to 1e-6 in conflict with bearings of noise 1e-9
+    sim = bk.simulate(np.array([0.0, 4.0, 1.0]), 3, 1e-9, 0.0, np.random.default_rng(61))
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=r"mu\[0\] = .* too narrow"):
+            bk.moments(sim.mu, 1e-9, [-1e3, 1e3, 1e3], 1e-12 * np.eye(3))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        (dict(process_noise=-0.1), "process_noise must be >= 0"),
+        (dict(process_noise=[0.1, 0.2]), "process_noise must be a scalar or have shape"),
+        (dict(process_noise=np.nan), "process_noise must be finite"),
+        (dict(mu=[0.1, np.inf, 0.3]), "mu must be finite"),
+        (dict(rho=0.0), "rho must be positive"),
+        (dict(prior_cov=-np.eye(3)), "prior_cov"),
+        (dict(rtol=0.0), "rtol must be"),
+        (dict(mu=np.zeros(bk.MAX_FRAMES + 1)), "at most 10000 frames"),
+    ],
+)
+def test_placed_bank_refuses_bad_input_naming_the_argument(kwargs, message):
+    args = dict(mu=list(MU_17), rho=RHO_200, prior_mean=[0.0, 4.0, 0.0], prior_cov=np.eye(3) * 1e3)
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=message):
+        bk.moments(**args)
+
+
+def test_update_refuses_bad_input():
+    post = bk.posterior(list(MU_17), RHO_200, [0.0, 4.0, 0.0], 1e3 * np.eye(3))
+    with pytest.raises(ValueError, match="mu_next must be finite"):
+        bk.update(post, np.nan)
+    with pytest.raises(ValueError, match="mu_next must be a scalar"):
+        bk.update(post, [0.1, 0.2])
+    y, w = log_depth_rule(10)
+    loose = bk.mixture(bk.filter_bank(y, list(MU_17), RHO_200, [0.0, 4.0, 0.0], 1e3 * np.eye(3)), w)
+    with pytest.raises(ValueError, match="post must be a Mixture from bank.posterior"):
+        bk.update(loose, 0.5)
