@@ -858,8 +858,8 @@ def mixture(bank: Bank, weights) -> Mixture:
 
 # --- nodes placed by the depth quadrature ----------------------------------------------
 
-#: Most frames of a problem: each frame is a step of every node's filter.
-MAX_FRAMES = 10_000
+#: Most frames of a problem (the filters' common limit).
+MAX_FRAMES = _checks.MAX_FRAMES
 
 
 def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):

@@ -49,6 +49,7 @@ import numpy as np
 
 from . import (
     _checks,
+    bank,
     ekf,
     inverse_depth,
     iterated,
@@ -261,6 +262,7 @@ def _optimal(
     rho,
     prior_mean,
     prior_cov,
+    process_noise: float = 0.0,
     reading: str = "derived",
     support: str = "front",
     rtol: float = 1e-10,
@@ -269,8 +271,31 @@ def _optimal(
 
     For a batch with the default reading and support, ``detail`` is the
     :class:`~depthcore.optimal.BatchMarginals` (with the CDFs and densities);
-    otherwise the :class:`~depthcore.optimal.Moments`.
+    otherwise the :class:`~depthcore.optimal.Moments`. For more than three
+    frames or with process noise it is the bank of Kalman filters over depth
+    nodes placed by the same quadrature (:func:`depthcore.bank.posterior`),
+    and ``detail`` its :class:`~depthcore.bank.Mixture`.
     """
+    if np.shape(mu)[-1] != 3 or process_noise > 0:
+        if (reading, support) != ("derived", "front"):
+            raise ValueError(
+                "reading and support other than 'derived' and 'front' are readings of the "
+                "paper's three-frame Eqs. (14)-(16); with more frames or process noise "
+                f"the optimal filter has neither, got {reading!r} and {support!r}"
+            )
+        m = bank.posterior(mu, rho, prior_mean, prior_cov, process_noise, rtol)
+        return Estimate(
+            m.depth_mean,
+            m.depth_sd,
+            m.velocity_mean,
+            m.velocity_sd,
+            m.depth_error,
+            m.velocity_error,
+            m.mean,
+            m.cov,
+            m,
+            {"prob_behind_camera": np.zeros_like(m.depth_mean)},
+        )
     if _single(mu):
         m = optimal.marginals(mu, rho, _prior(prior_mean, prior_cov), reading, support, rtol)
         return Estimate(
@@ -507,6 +532,8 @@ FILTERS: dict[str, Filter] = {
                 for r in optimal.READINGS
                 for s in optimal.SUPPORTS
             ),
+            any_frames=True,
+            with_process_noise=True,
         ),
         Filter(
             "second_order",

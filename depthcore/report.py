@@ -378,10 +378,12 @@ def moments_texts(result: dict, decimals: int = 3) -> dict:
     return out
 
 
-def moments_table(result: dict, quantity: str, decimals: int = 3) -> MarkdownTable:
+def moments_table(
+    result: dict, quantity: str, decimals: int = 3, labels: dict | None = None
+) -> MarkdownTable:
     """The texts of :func:`moments_texts` for one quantity, a row per filter, a column per figure.
 
-    The last row is the particle filter's Monte Carlo standard error.
+    The last row is the importance sampler's Monte Carlo standard error.
 
     Parameters
     ----------
@@ -389,19 +391,21 @@ def moments_table(result: dict, quantity: str, decimals: int = 3) -> MarkdownTab
         From :func:`depthcore.reproduce.reproduce`.
     quantity : {"depth", "velocity"}
     decimals : int
+    labels : dict, optional
+        Row labels by filter name, in place of the registry's.
     """
+    labels = {name: FILTERS[name].label for name in NAMES} | dict(labels or {})
     if quantity not in QUANTITIES:
         raise ValueError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")
     texts = moments_texts(result, decimals)
     keys = [sc["key"] for sc in result["scenarios"]]
     header = ["filter", *(f"Fig. {sc['figure']}" for sc in result["scenarios"])]
     rows = [
-        [FILTERS[name].label, *(texts[f"bf_{key}_{name}_{quantity}"] for key in keys)]
-        for name in NAMES
+        [labels[name], *(texts[f"bf_{key}_{name}_{quantity}"] for key in keys)] for name in NAMES
     ]
     rows.append(
         [
-            f"{FILTERS['particle'].label}, Monte Carlo s.e.",
+            f"{labels['particle']}, Monte Carlo s.e.",
             *(texts[f"bf_{key}_particle_{quantity}_se"] for key in keys),
         ]
     )

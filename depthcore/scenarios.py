@@ -140,6 +140,9 @@ REPORTED_DECIMALS = 2
 #: gluing (a number inside a quotation from the paper, or a setting of the
 #: paper's experiment described in words), with where the paper gives them.
 #: ``tests/test_prose_numbers.py`` allows these strings, and only these, in prose.
+#: The highest legible label on the density axis of the scanned Figure 5.
+FIG5_SCAN_DENSITY_AXIS = 0.8
+
 PROSE_QUOTES = {
     "512 pixels": "Experiments: the image is 512 x 512 pixels with a 30 degree field of view",
     '"about 5 pixels"': "Experiments: rho = 1/200 rad is about 5 pixels",

@@ -647,7 +647,7 @@ def test_placed_bank_refuses_what_double_precision_cannot_resolve():
         (dict(rho=0.0), "rho must be positive"),
         (dict(prior_cov=-np.eye(3)), "prior_cov"),
         (dict(rtol=0.0), "rtol must be"),
-        (dict(mu=np.zeros(bk.MAX_FRAMES + 1)), "at most 10000 frames"),
+        (dict(mu=np.zeros(bk.MAX_FRAMES + 1)), f"at most {bk.MAX_FRAMES} frames"),
     ],
 )
 def test_placed_bank_refuses_bad_input_naming_the_argument(kwargs, message):

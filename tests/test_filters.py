@@ -126,7 +126,7 @@ def test_unknown_names_are_rejected():
 
 #: What each filter supports: (any N >= 3 frames, process noise > 0).
 CAPABILITIES = {
-    "optimal": (False, False),
+    "optimal": (True, True),
     "second_order": (True, True),
     "ekf": (True, True),
     "ukf": (True, True),
@@ -154,7 +154,7 @@ def _frames(n_frames, size=3, seed=3):
 def test_each_filter_declares_what_it_supports():
     assert {n: (f.any_frames, f.with_process_noise) for n, f in FILTERS.items()} == CAPABILITIES
     assert {n: f.default for n, f in FILTERS.items()} == {n: n in NAMES for n in ALL_NAMES}
-    assert FILTERS["optimal"].frames == "3" and FILTERS["ekf"].frames == "any"
+    assert FILTERS["optimal"].frames == "any" and FILTERS["ekf"].frames == "any"
 
 
 @pytest.mark.parametrize(("name", "n_frames", "q"), CASES)
@@ -202,12 +202,28 @@ def test_the_papers_problem_is_unchanged_by_an_explicit_zero_process_noise(name)
 def test_unsupported_frames_and_process_noise_are_refused_naming_the_argument():
     p = FIG2.prior
     mu5 = _frames(5, size=1)[0]
-    with pytest.raises(ValueError, match="mu must have shape .*three frames"):
-        FILTERS["optimal"](mu5, FIG2.rho, p.mean, p.cov)
-    for name in ("optimal", "particle", "resample_move"):
+    # the printed reading and the "all" support are readings of the three-frame Eq. (16)
+    with pytest.raises(ValueError, match="reading and support other than"):
+        FILTERS["optimal"](mu5, FIG2.rho, p.mean, p.cov, reading="printed")
+    for name in ("particle", "resample_move"):
         with pytest.raises(ValueError, match="process_noise must be 0"):
             FILTERS[name](FIG2.mu, FIG2.rho, p.mean, p.cov, process_noise=0.01, **_options(name))
     with pytest.raises(ValueError, match="process_noise must be >= 0"):
         FILTERS["ekf"](FIG2.mu, FIG2.rho, p.mean, p.cov, process_noise=-0.01)
     with pytest.raises(ValueError, match=f"more than the {_checks.MAX_FRAMES} frames"):
         FILTERS["ekf"](np.zeros(_checks.MAX_FRAMES + 1), FIG2.rho, p.mean, p.cov)
+
+
+def test_the_optimal_entry_is_the_bank_beyond_three_frames_and_the_paper_route_at_three():
+    from depthcore import bank, optimal
+
+    p = FIG2.prior
+    mu5 = _frames(5, size=2)
+    est = FILTERS["optimal"](mu5, FIG2.rho, p.mean, p.cov, process_noise=0.01)
+    ref = bank.moments(mu5, FIG2.rho, p.mean, p.cov, 0.01)
+    assert_allclose(est.depth_mean, ref.depth_mean, rtol=1e-12)
+    assert_allclose(est.velocity_sd, ref.velocity_sd, rtol=1e-11)
+    assert np.all(est.depth_error <= 1e-10 * est.depth_sd)
+    # three frames with no process noise: Eqs. (14)-(16), as before
+    three = FILTERS["optimal"](FIG2.mu, FIG2.rho, p.mean, p.cov)
+    assert three.depth_mean == optimal.marginals(FIG2.mu, FIG2.rho, p).depth_mean

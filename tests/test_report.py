@@ -171,8 +171,8 @@ def test_moments_and_sweep_tables_hold_the_glued_texts():
         "second order $p_s$",
         "EKF $p_e$",
         "UKF",
-        "particle filter",
-        "particle filter, Monte Carlo s.e.",
+        "importance sampling, $q$ from $p_s$",
+        "importance sampling, $q$ from $p_s$, Monte Carlo s.e.",
     ]
     assert table.rows[1][1] == texts["bf_fig2_second_order_velocity"]
     assert table.rows[-1][1] == texts["bf_fig2_particle_velocity_se"]
