@@ -109,6 +109,7 @@ lab: $(EDITABLE)
 	$(VENV)/bin/jupyter lab --ServerApp.root_dir=. $(LAB_ARGS) book/intro.md
 
 test: $(EDITABLE)
+	tools/system-packages.sh
 	$(MAKE) --no-print-directory lint
 	$(MAKE) --no-print-directory test-core
 	$(MAKE) --no-print-directory notebooks

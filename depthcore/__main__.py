@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__, report, reproduce, study
+from . import __version__, _checks, report, reproduce, study
 from .filters import NAMES as _STUDY_FILTERS
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from .model import noise_free_state
@@ -34,6 +34,9 @@ RHO_RANGE = (1e-12, 1e3)
 MU_MAX = 1e6
 PRIOR_MEAN_MAX = 1e3
 PRIOR_COV_RANGE = (1e-12, 1e12)
+PROCESS_NOISE_MAX = 10.0
+#: Most bearings of ``estimate --mu``: the filters' limit.
+FRAMES_MAX = _checks.MAX_FRAMES
 
 # A negative number in any notation (-1, -.5, -1e-1, -1E+3, -inf, -nan) is a
 # value, not an option.
@@ -72,9 +75,17 @@ def _prior(mu, prior_mean, prior_cov) -> Gaussian:
         _check_limits("prior_mean", prior_mean, PRIOR_MEAN_MAX)
     if prior_cov is not None:
         _check_limits("prior_cov", prior_cov, PRIOR_COV_RANGE[1])
-    c = noise_free_state(mu)
-    default = paper_prior(c)
-    mean = default.mean if prior_mean is None else np.array(prior_mean)
+    if prior_mean is None:
+        try:
+            c = noise_free_state(mu[:3])
+        except ValueError as exc:
+            raise ValueError(
+                f"{exc}; the paper's prior rule needs the noise-free solution of the first "
+                "three bearings, so give --prior-mean"
+            ) from None
+        mean = paper_prior(c).mean
+    else:
+        mean = np.array(prior_mean)
     if prior_cov is None:
         cov = PAPER_PRIOR_SCALE * np.eye(3)
     elif len(prior_cov) == 1:
@@ -108,11 +119,18 @@ def _cmd_reproduce(args) -> str:
 
 def _cmd_estimate(args) -> str:
     mu = np.array(args.mu)
+    if len(mu) < 3:
+        raise ValueError(f"mu takes at least 3 bearings (frames 1 .. N), got {len(mu)}")
+    if len(mu) > FRAMES_MAX:
+        raise ValueError(f"mu takes at most {FRAMES_MAX} bearings, got {len(mu)}")
     _check_limits("mu", mu, MU_MAX)
     _check_rho(args.rho)
+    q = args.process_noise
+    if not (np.isfinite(q) and 0 <= q <= PROCESS_NOISE_MAX):
+        raise ValueError(f"process_noise must be from 0 to {PROCESS_NOISE_MAX:g}, got {q:g}")
     prior = _prior(mu, args.prior_mean, args.prior_cov)
     try:
-        summary = reproduce.summarize(mu, args.rho, prior)
+        summary = reproduce.summarize(mu, args.rho, prior, process_noise=q, smooth=args.smooth)
     except ValueError as exc:
         if str(exc).startswith(("mu ", "rho ", "prior_mean ", "prior_cov ")):
             raise
@@ -165,7 +183,17 @@ def _cmd_study(args) -> str:
     if args.seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {args.seed}")
     _check_rho(args.rho)
+    if not 3 <= args.frames <= FRAMES_MAX:
+        raise ValueError(f"frames must be from 3 to {FRAMES_MAX}, got {args.frames}")
+    q = args.process_noise
+    if not (np.isfinite(q) and 0 <= q <= PROCESS_NOISE_MAX):
+        raise ValueError(f"process_noise must be from 0 to {PROCESS_NOISE_MAX:g}, got {q:g}")
+    names = tuple(args.filters)
+    if q > 0 and args.filters == list(_STUDY_FILTERS):  # the default: those that can run
+        names = tuple(n for n in names if study.FILTERS[n].with_process_noise)
     if args.truth == [study.PRIOR_TRUTH]:
+        if args.frames != 3 or q > 0:
+            raise ValueError("truth: --truth prior runs the paper's three frames only")
         if args.prior == "paper":
             raise ValueError(
                 "prior: --truth prior needs a fixed prior (the paper's rule centres the prior "
@@ -195,9 +223,11 @@ def _cmd_study(args) -> str:
             trials=args.trials,
             seed=args.seed,
             prior=args.prior or "paper",
-            names=tuple(args.filters),
+            names=names,
             n_particles=args.particles,
             progress=progress,
+            frames=args.frames,
+            process_noise=q,
         )
     finally:
         if bar is not None:
@@ -215,12 +245,15 @@ examples:
   python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
   python -m depthcore estimate --mu -1e-1 0 0.2 --rho 0.01 --prior-cov 100
   python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --prior-mean -1 4 0 --json
+  python -m depthcore estimate --mu -0.3 0 0.2 0.33 0.43 --rho 0.005 --process-noise 0.01 --smooth
 
-The noise-free state c is (x, y, v) at time 3; the prior is at time 1.""",
+The noise-free state c is (x, y, v) at frame 3 (from the first three bearings);
+the prior is at frame 1; every filter reports the state at the last frame N.""",
     "study": f"""\
 examples:
   python -m depthcore study --trials 500 --seed 1
   python -m depthcore study --filters ekf ukf --rho 0.01 --json
+  python -m depthcore study --frames 10 --process-noise 0.01 --trials 200
 
 {STUDY_LEGEND}""",
     "figures": """\
@@ -274,10 +307,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument(
         "--mu",
         type=float,
-        nargs=3,
+        nargs="+",
         required=True,
-        metavar=("M1", "M2", "M3"),
-        help="the measurements mu1 mu2 mu3 (tangents of the bearings)",
+        metavar="M",
+        help="the measurements mu1 mu2 mu3 ... (tangents of the bearings at frames 1 .. N, N >= 3)",
     )
     e.add_argument("--rho", type=float, required=True, help="noise standard deviation, > 0")
     e.add_argument(
@@ -293,6 +326,18 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         metavar="S",
         help="prior covariance: S for S I (default 1000), or 9 values row by row",
+    )
+    e.add_argument(
+        "--process-noise",
+        type=float,
+        default=0.0,
+        metavar="Q",
+        help="SD of the velocity's change per frame (default 0: the paper's constant velocity)",
+    )
+    e.add_argument(
+        "--smooth",
+        action="store_true",
+        help="also the optimal filter's smoothed depth and lateral position at every frame",
     )
     e.add_argument("--json", action="store_true", help="print JSON instead of a table")
     e.set_defaults(run=_cmd_estimate)
@@ -343,6 +388,23 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=study.PARTICLES,
         help=f"particles per trial (default {study.PARTICLES})",
+    )
+    st.add_argument(
+        "--frames",
+        type=int,
+        default=3,
+        metavar="N",
+        help="frames per trial, 3 (default, the paper's) to "
+        f"{FRAMES_MAX}: the truth moves on from time 3 to frame N and every filter is scored "
+        "there",
+    )
+    st.add_argument(
+        "--process-noise",
+        type=float,
+        default=0.0,
+        metavar="Q",
+        help="SD of the velocity's change per frame (default 0); with Q > 0 the filters that "
+        "assume a constant velocity (particle) cannot be named",
     )
     st.add_argument("--json", action="store_true", help="print JSON instead of a table")
     st.set_defaults(run=_cmd_study)

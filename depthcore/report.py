@@ -133,24 +133,51 @@ def format_summary(summary: dict) -> str:
         cov_text = f"{cov[0, 0]:.4g} I"
     else:
         cov_text = "[" + "; ".join(" ".join(f"{v:.4g}" for v in row) for row in cov) + "]"
+    N = summary.get("frames", 3)
+    q = summary.get("process_noise", 0.0)
     lines = [
-        f"noise-free state c = (x, y, v) at time 3 = ({c[0]:#.4g}, {c[1]:#.4g}, {c[2]:#.4g})",
+        "noise-free state c = (x, y, v) at time 3 = "
+        + ("undefined" if c is None else f"({c[0]:#.4g}, {c[1]:#.4g}, {c[2]:#.4g})"),
         f"prior at time 1: mean (x, y, v) = ({m[0]:#.4g}, {m[1]:#.4g}, {m[2]:#.4g}), "
         f"covariance {cov_text}",
-        f"{'filter':<13} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}",
     ]
+    if N != 3 or q > 0:
+        lines.append(f"{N} frames, process noise q = {q:g}; every filter at frame {N}")
+    lines.append(
+        f"{'filter':<13} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}"
+    )
     for name in summary["filters"]:
         f = summary["filters"][name]
         lines.append(
             f"{name:<13} {f['depth']['mean']:>#11.4g} {f['depth']['sd']:>#10.4g} "
             f"{f['velocity']['mean']:>#10.4g} {f['velocity']['sd']:>#10.4g}"
         )
+    for name, reason in summary.get("not_run", {}).items():
+        lines.append(f"{name:<13} not run: {reason}")
     o = summary["filters"]["optimal"]
-    lines.append(
+    text = (
         f"optimal error estimates: depth {o['depth']['error']:.1e}, "
-        f"velocity {o['velocity']['error']:.1e}; probability behind the camera "
-        f"if depths y <= 2 are allowed: {o['prob_behind_camera_all_depths']:.3g}"
+        f"velocity {o['velocity']['error']:.1e}"
     )
+    if "prob_behind_camera_all_depths" in o:
+        text += (
+            "; probability behind the camera if depths y <= 2 are allowed: "
+            f"{o['prob_behind_camera_all_depths']:.3g}"
+        )
+    lines.append(text)
+    if "smoothed" in summary:
+        sm = summary["smoothed"]
+        lines.append(
+            f"{'frame':>5} {'depth mean':>11} {'depth sd':>10} {'x mean':>10} {'x sd':>10}"
+            "   (optimal, smoothed)"
+        )
+        for k, row in enumerate(
+            zip(
+                sm["depth_mean"], sm["depth_sd"], sm["lateral_mean"], sm["lateral_sd"], strict=True
+            ),
+            1,
+        ):
+            lines.append(f"{k:>5} " + " ".join(f"{v:>#10.4g}" for v in row).replace(" ", "  ", 1))
     return "\n".join(lines) + "\n"
 
 
@@ -162,6 +189,11 @@ def format_study(result: dict) -> str:
         f"({result['rejected_trials']} without a noise-free solution in front of the camera "
         "left out)"
     ]
+    if result.get("frames", 3) != 3 or result.get("process_noise", 0.0) > 0:
+        lines.append(
+            f"{result['frames']} frames, process noise q = {result['process_noise']:g}: "
+            f"every filter scored on the true state at frame {result['frames']}"
+        )
     head = (
         f"{'filter':<13} {'quantity':<9} {'bias':>9} {'rmse':>9} {'mean sd':>9} "
         f"{'cover 68':>8} {'cover 95':>8} {'NEES':>8} {'Hellinger':>9}"
@@ -467,7 +499,9 @@ def sweep_texts(result: dict, x: str, prefix: str, decimals: int = 3) -> dict:
     return out
 
 
-def sweep_table(result: dict, x: str, decimals: int = 3) -> MarkdownTable:
+def sweep_table(
+    result: dict, x: str, decimals: int = 3, labels: dict | None = None
+) -> MarkdownTable:
     """The texts of :func:`sweep_texts`: a row per value of ``x``, a column per filter.
 
     Each cell is the depth's ``"mean ± sd"``; the first column is the noise level
@@ -479,10 +513,13 @@ def sweep_table(result: dict, x: str, decimals: int = 3) -> MarkdownTable:
         As for :func:`sweep_texts`.
     x : {"rho", "offset"}
     decimals : int
+    labels : dict, optional
+        Column labels by filter name, in place of the registry's.
     """
     texts = sweep_texts(result, x, "sweep", decimals)
     names = [n for n in NAMES if n in result]
-    header = [r"$\rho$" if x == "rho" else "offset", *(FILTERS[n].label for n in names)]
+    labels = {n: FILTERS[n].label for n in names} | dict(labels or {})
+    header = [r"$\rho$" if x == "rho" else "offset", *(labels[n] for n in names)]
     rows = [
         [texts[f"sweep_{i}_x"], *(texts[f"sweep_{i}_{n}"] for n in names)]
         for i in range(len(result[x]))

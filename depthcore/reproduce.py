@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _checks
+from . import _checks, bank
 from .filters import FILTERS, NAMES, PAPER_FILTERS, PARTICLES, QUANTITIES, Estimate, check_names
 from .gaussian import Gaussian
-from .model import noise_free_state
+from .model import noise_free_state, noise_free_states_unchecked
 from .scenarios import REPORTED, REPORTED_DECIMALS, SCENARIOS, Scenario
 
 #: The default seed of the particle filter wherever this module runs it.
@@ -58,39 +58,88 @@ def _moments(est: Estimate) -> dict:
     return out
 
 
-def summarize(mu, rho: float, prior: Gaussian, seed=PARTICLE_SEED) -> dict:
-    """Moments of the depth and velocity marginals of every filter.
+def summarize(
+    mu,
+    rho: float,
+    prior: Gaussian,
+    seed=PARTICLE_SEED,
+    process_noise: float = 0.0,
+    smooth: bool = False,
+) -> dict:
+    """Moments of the depth and velocity marginals of every filter at the last frame.
 
     Parameters
     ----------
-    mu : array_like, shape (3,)
+    mu : array_like, shape (N,)
+        Bearings at frames 1 .. N, ``N >= 3`` (the paper's problem is ``N = 3``).
     rho : float
     prior : Gaussian
-        Density of the state at time 1.
+        Density of the state at frame 1.
     seed : int or numpy.random.SeedSequence
         Seeds the particle filter's generator (default :data:`PARTICLE_SEED`).
+    process_noise : float
+        SD ``q >= 0`` of the velocity's change per frame (0: the paper's model).
+    smooth : bool
+        Also the optimal filter's smoothed depth and lateral position at every
+        frame (:meth:`depthcore.bank.Mixture.smoothed`).
 
     Returns
     -------
     dict
-        ``{"mu", "rho", "prior_mean", "prior_cov", "c", "filters": {name: moments}}``
-        with plain floats and lists, ready for JSON. The optimal filter's
-        moments carry ``prob_behind_camera`` and
-        ``prob_behind_camera_all_depths`` (with every real depth allowed).
+        ``{"mu", "rho", "prior_mean", "prior_cov", "c", "frames", "process_noise",
+        "filters": {name: moments}}`` with plain floats and lists, ready for
+        JSON; ``c`` is the noise-free state of the first three bearings at frame
+        3. Filters that do not support the frames or the process noise are
+        listed under ``"not_run"`` with the reason. With three frames and no
+        process noise the optimal filter's moments carry ``prob_behind_camera``
+        and ``prob_behind_camera_all_depths`` (with every real depth allowed).
+        With ``smooth``, ``"smoothed"``: lists over the frames of the depth's
+        and the lateral position's mean and SD.
     """
-    c = noise_free_state(mu)
-    filters = {name: _moments(_run(name, mu, rho, prior, seed)) for name in NAMES}
-    filters["optimal"]["prob_behind_camera_all_depths"] = float(
-        _run("optimal", mu, rho, prior, seed, support="all").extras["prob_behind_camera"]
-    )
-    return {
+    mu = np.asarray(mu, dtype=float)
+    q = float(process_noise)
+    if len(mu) == 3:
+        c = noise_free_state(mu)
+    else:  # noise may put the first three bearings' solution behind the camera
+        c = noise_free_states_unchecked(mu[:3])
+        c = c if np.all(np.isfinite(c)) and c[1] > 2 else None
+    filters, not_run = {}, {}
+    for name in NAMES:
+        f = FILTERS[name]
+        if (len(mu) != 3 and not f.any_frames) or (q > 0 and not f.with_process_noise):
+            not_run[name] = "supports only " + (
+                "the paper's three frames"
+                if len(mu) != 3 and not f.any_frames
+                else "no process noise"
+            )
+            continue
+        extra = {"process_noise": q} if q > 0 else {}
+        filters[name] = _moments(_run(name, mu, rho, prior, seed, **extra))
+    if len(mu) == 3 and q == 0:
+        filters["optimal"]["prob_behind_camera_all_depths"] = float(
+            _run("optimal", mu, rho, prior, seed, support="all").extras["prob_behind_camera"]
+        )
+    out = {
         "mu": [float(v) for v in mu],
         "rho": float(rho),
         "prior_mean": prior.mean.tolist(),
         "prior_cov": prior.cov.tolist(),
-        "c": c.tolist(),
+        "c": None if c is None else c.tolist(),
+        "frames": int(len(mu)),
+        "process_noise": q,
         "filters": filters,
     }
+    if not_run:
+        out["not_run"] = not_run
+    if smooth:
+        sm = bank.posterior(mu, rho, prior.mean, prior.cov, q, history=True).smoothed()
+        out["smoothed"] = {
+            "depth_mean": sm.depth_mean.tolist(),
+            "depth_sd": sm.depth_sd.tolist(),
+            "lateral_mean": sm.lateral_mean.tolist(),
+            "lateral_sd": sm.lateral_sd.tolist(),
+        }
+    return out
 
 
 def scenario_rows(s: Scenario, names=NAMES, seed=PARTICLE_SEED) -> list[dict]:

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _checks, model, optimal
+from . import _checks, bank, model, optimal
 from .filters import FILTERS, NAMES, check_names
 from .gaussian import PAPER_PRIOR_SCALE, gaussian_logpdf, paper_prior_means
 from .scenarios import SCENARIOS
@@ -65,6 +65,11 @@ class Trials:
     prior_cov : ndarray, shape (3, 3)
     n_rejected : int
         Trials drawn but left out (no noise-free solution in front of the camera).
+    process_noise : float
+        ``q``, the SD of the velocity's change per frame (0: the paper's model).
+    states : ndarray, shape (N, 3), or None
+        The true state at the last frame of each trial, where it differs from
+        ``truth`` (more than three frames, or process noise); ``None`` otherwise.
     """
 
     truth: np.ndarray
@@ -73,6 +78,15 @@ class Trials:
     prior_mean: np.ndarray
     prior_cov: np.ndarray
     n_rejected: int
+    process_noise: float = 0.0
+    states: np.ndarray | None = None
+
+    @property
+    def truths(self) -> np.ndarray:
+        """The true state at the last frame of every trial, shape (N, 3)."""
+        if self.states is not None:
+            return self.states
+        return np.broadcast_to(self.truth, (len(self.mu), 3))
 
 
 @dataclass(frozen=True)
@@ -88,6 +102,8 @@ class Estimates:
     hellinger : ndarray, shape (N,), or None
         Hellinger distance from its depth marginal to the optimal one;
         ``None`` when the optimal filter was not run.
+    truth : ndarray, shape (N, 3), or None
+        The true state of each trial when it is not the tally's one truth.
     """
 
     mean: np.ndarray
@@ -95,6 +111,7 @@ class Estimates:
     depth_cdf: np.ndarray
     velocity_cdf: np.ndarray
     hellinger: np.ndarray | None
+    truth: np.ndarray | None = None
 
 
 def valid_triples(mu) -> np.ndarray:
@@ -109,8 +126,10 @@ def simulate(
     rng: np.random.Generator,
     prior: str = "paper",
     prior_scale: float = PAPER_PRIOR_SCALE,
+    frames: int = 3,
+    process_noise: float = 0.0,
 ) -> Trials:
-    """Draw ``n`` trials of three measurements of ``truth`` and build their priors.
+    """Draw ``n`` trials of ``frames`` measurements of ``truth`` and build their priors.
 
     Parameters
     ----------
@@ -126,8 +145,20 @@ def simulate(
         truth.
     prior_scale : float
         Prior covariance ``prior_scale * I``.
+    frames : int
+        ``N >= 3``: the point is followed on from time 3 to frame ``N``
+        (:func:`depthcore.bank.simulate`, with the velocity's change per frame
+        drawn with SD ``process_noise``); the prior rule uses the first three
+        measurements, and trials whose first three have no noise-free solution
+        in front of the camera are left out, as with three frames.
+    process_noise : float
+        ``q >= 0``.
     """
     truth = _checks.finite_array(truth, "truth", (3,))
+    frames = _checks.count(frames, "frames")
+    if not 3 <= frames <= _checks.MAX_FRAMES:
+        raise ValueError(f"frames must be from 3 to {_checks.MAX_FRAMES}, got {frames}")
+    q = _checks.nonnegative_scalar(process_noise, "process_noise")
     rho = _checks.positive_scalar(rho, "rho")
     if not (isinstance(n, (int, np.integer)) and n >= 1):
         raise ValueError(f"trials must be a positive integer, got {n!r}")
@@ -138,26 +169,40 @@ def simulate(
         raise ValueError(
             f"truth puts the point behind the camera: depth at time 1 is {truth[1] - 2:.6g}"
         )
-    mu = model.simulate_measurements(model.G(truth, -2), rho, rng, size=int(n))
-    keep = valid_triples(mu)
+    states = None
+    if frames == 3 and q == 0:
+        mu = model.simulate_measurements(model.G(truth, -2), rho, rng, size=int(n))
+    else:
+        sim = bank.simulate(model.G(truth, -2), frames, rho, q, rng, size=int(n))
+        mu, states = sim.mu, sim.states[:, -1, :]
+    keep = valid_triples(mu[:, :3])
     mu = mu[keep]
     if prior == "paper":
-        c = model.noise_free_states(mu)
+        c = model.noise_free_states(mu[:, :3])
     else:
-        c = np.broadcast_to(truth, mu.shape)
+        c = np.broadcast_to(truth, (len(mu), 3))
     mean = paper_prior_means(c)
-    return Trials(truth, rho, mu, mean, prior_scale * np.eye(3), int(np.sum(~keep)))
+    return Trials(
+        truth,
+        rho,
+        mu,
+        mean,
+        prior_scale * np.eye(3),
+        int(np.sum(~keep)),
+        q,
+        None if states is None else states[keep],
+    )
 
 
 def _gaussian_estimates(trials: Trials, mean, cov, reference) -> Estimates:
     """Scores' inputs for a Gaussian filter; no Hellinger distance without ``reference``."""
     from scipy.special import ndtr
 
-    t = trials.truth
-    depth_cdf = ndtr((t[1] - mean[:, 1]) / np.sqrt(cov[:, 1, 1]))
-    velocity_cdf = ndtr((t[2] - mean[:, 2]) / np.sqrt(cov[:, 2, 2]))
+    t = trials.truths
+    depth_cdf = ndtr((t[:, 1] - mean[:, 1]) / np.sqrt(cov[:, 1, 1]))
+    velocity_cdf = ndtr((t[:, 2] - mean[:, 2]) / np.sqrt(cov[:, 2, 2]))
     h = None if reference is None else gaussian_hellinger(reference, mean, cov)
-    return Estimates(mean, cov, depth_cdf, velocity_cdf, h)
+    return Estimates(mean, cov, depth_cdf, velocity_cdf, h, trials.states)
 
 
 def gaussian_hellinger(reference: optimal.BatchMarginals, mean, cov) -> np.ndarray:
@@ -190,17 +235,46 @@ def hellinger(
     q_mean, q_sd : ndarray, shape (N,)
         Where ``q`` lives, to place the grid.
     """
-    t_lo, t_hi, _ = reference._start
+    t_lo, t_hi, offset = _reference_range(reference)
     with np.errstate(divide="ignore"):
         lo = np.maximum(
-            np.minimum(np.log(np.maximum(q_mean - 12 * q_sd - 2, 0.0)), t_lo), t_lo - 10
+            np.minimum(np.log(np.maximum(q_mean - 12 * q_sd - offset, 0.0)), t_lo), t_lo - 10
         )
-        hi = np.maximum(np.log(np.maximum(q_mean + 12 * q_sd - 2, 1e-300)), t_hi)
+        hi = np.maximum(np.log(np.maximum(q_mean + 12 * q_sd - offset, 1e-300)), t_hi)
     t = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, n)
-    y = 2.0 + np.exp(t)
+    y = offset + np.exp(t)
     log_pq = 0.5 * (reference.depth_log_pdf(y) + log_q(y)) + t
     bc = np.trapezoid(np.exp(log_pq), t, axis=1)
     return np.sqrt(np.clip(1.0 - bc, 0.0, 1.0))
+
+
+def _reference_range(reference):
+    """Where the optimal depth marginal lives: ``t`` limits (B,) and the depth offset.
+
+    ``t = log(y - offset)`` with ``offset = N - 1`` for ``N`` frames (2 for the
+    paper's three): the quadrature's range for
+    :class:`~depthcore.optimal.BatchMarginals`, the nodes with weight for a
+    :class:`~depthcore.bank.Mixture`.
+    """
+    if isinstance(reference, bank.Mixture):
+        p = reference.probabilities
+        log_y1 = np.log(np.broadcast_to(reference.bank.nodes, p.shape))
+        used = p > 1e-300
+        t_lo = np.min(np.where(used, log_y1, np.inf), axis=-1)
+        t_hi = np.max(np.where(used, log_y1, -np.inf), axis=-1)
+        return t_lo, t_hi, reference.bank.n_frames - 1.0
+    t_lo, t_hi, _ = reference._start
+    return t_lo, t_hi, 2.0
+
+
+def _reference_cdfs(reference, truths):
+    """The optimal marginal CDFs at each trial's true depth and velocity, each (B,)."""
+    if isinstance(reference, bank.Mixture):
+        return (
+            reference.depth_cdf(truths[:, 1:2])[:, 0],
+            reference.velocity_cdf(truths[:, 2:3])[:, 0],
+        )
+    return reference.depth_cdf(truths[:, 1]), reference.velocity_cdf(truths[:, 2])
 
 
 def _particle_estimates(trials: Trials, estimate, reference) -> Estimates:
@@ -212,17 +286,17 @@ def _particle_estimates(trials: Trials, estimate, reference) -> Estimates:
     W = np.exp(batch.log_weights)
     x = batch.particles
     mean, cov = estimate.mean, estimate.cov
-    t = trials.truth
-    depth_cdf = np.sum(W * (x[..., 1] <= t[1]), axis=1)
-    velocity_cdf = np.sum(W * (x[..., 2] <= t[2]), axis=1)
+    t = trials.truths
+    depth_cdf = np.sum(W * (x[..., 1] <= t[:, 1, None]), axis=1)
+    velocity_cdf = np.sum(W * (x[..., 2] <= t[:, 2, None]), axis=1)
     if reference is None:
-        return Estimates(mean, cov, depth_cdf, velocity_cdf, None)
+        return Estimates(mean, cov, depth_cdf, velocity_cdf, None, trials.states)
     sd = np.sqrt(cov[:, 1, 1])
     ess = 1.0 / np.sum(W**2, axis=1)
     bandwidth = 1.06 * sd * ess**-0.2  # Scott's rule with the effective sample size
     log_q = _binned_kde(x[..., 1], W, bandwidth)
     h = hellinger(reference, log_q, mean[:, 1], sd)
-    return Estimates(mean, cov, depth_cdf, velocity_cdf, h)
+    return Estimates(mean, cov, depth_cdf, velocity_cdf, h, trials.states)
 
 
 def _binned_kde(samples, W, bandwidth, bins: int = 2048):
@@ -277,7 +351,8 @@ def run_filters(
     """
     names = check_names(names)
     mu, rho, pm, pc = trials.mu, trials.rho, trials.prior_mean, trials.prior_cov
-    reference = FILTERS["optimal"](mu, rho, pm, pc) if "optimal" in names else None
+    noise = {"process_noise": trials.process_noise} if trials.process_noise > 0 else {}
+    reference = FILTERS["optimal"](mu, rho, pm, pc, **noise) if "optimal" in names else None
     ref = None if reference is None else reference.detail
     out = {}
     for name in names:
@@ -286,16 +361,16 @@ def run_filters(
             out[name] = Estimates(
                 reference.mean,
                 reference.cov,
-                ref.depth_cdf(np.full(len(mu), trials.truth[1])),
-                ref.velocity_cdf(np.full(len(mu), trials.truth[2])),
+                *_reference_cdfs(ref, trials.truths),
                 np.zeros(len(mu)),
+                trials.states,
             )
             continue
-        options = {}
+        options = dict(noise)
         if f.random:
             if rng is None:
                 raise ValueError(f"rng is required to run the {name} filter")
-            options = {"rng": rng, "n_particles": n_particles}
+            options.update(rng=rng, n_particles=n_particles)
         est = f(mu, rho, pm, pc, **options)
         if f.family == "particles":
             out[name] = _particle_estimates(trials, est, ref)
@@ -320,7 +395,8 @@ class Tally:
     Parameters
     ----------
     truth : array_like, shape (3,)
-        True state at time 3.
+        True state at time 3 (each chunk's :attr:`Estimates.truth`, where
+        given, takes its place).
 
     Attributes
     ----------
@@ -356,7 +432,7 @@ class Tally:
         n = len(est.mean)
         if n == 0:
             return
-        err = est.mean - self.truth
+        err = est.mean - (self.truth if est.truth is None else est.truth)
         for k, (i, cdf) in enumerate(((1, est.depth_cdf), (2, est.velocity_cdf))):
             self.error[k] += np.sum(err[:, i])
             self.squared_error[k] += np.sum(err[:, i] ** 2)
@@ -425,6 +501,8 @@ def study(
     chunk: int = CHUNK,
     n_particles: int = PARTICLES,
     progress: Callable[[int, int], None] | None = None,
+    frames: int = 3,
+    process_noise: float = 0.0,
 ) -> dict:
     """The whole study; returns a JSON-ready dict.
 
@@ -452,6 +530,14 @@ def study(
         ``n_particles``), not with ``trials``: only running sums are kept.
     n_particles : int
         Particles per trial of the particle filter.
+    frames : int
+        ``N >= 3``: the point, at ``truth`` at time 3, moves on to frame ``N``
+        and every filter is scored on its state there (:func:`simulate`).
+    process_noise : float
+        ``q >= 0``: the velocity's change per frame, drawn in every trial, so
+        the true state at frame ``N`` differs from trial to trial (the scores
+        are against each trial's own). The named filters must support the
+        frames and the process noise (:class:`depthcore.filters.Filter`).
 
     Notes
     -----
@@ -466,12 +552,33 @@ def study(
     if not (isinstance(trials, (int, np.integer)) and trials >= 1):
         raise ValueError(f"trials must be a positive integer, got {trials!r}")
     chunk = _checks.count(chunk, "chunk")
+    q = _checks.nonnegative_scalar(process_noise, "process_noise")
+    frames = _checks.count(frames, "frames")
+    unable = [
+        n
+        for n in names
+        if (frames != 3 and not FILTERS[n].any_frames)
+        or (q > 0 and not FILTERS[n].with_process_noise)
+    ]
+    if unable:
+        raise ValueError(
+            f"names: {', '.join(unable)} cannot run on {frames} frames with process "
+            f"noise {q:g}; leave them out"
+        )
     seed = _checks.seed_sequence(seed)
     noise_rng, particle_rng = (np.random.default_rng(s) for s in _checks.spawn(seed, 2))
     tallies = None
     n_valid = n_rejected = 0
     for start in range(0, int(trials), chunk):
-        part = simulate(truth, rho, min(chunk, int(trials) - start), noise_rng, prior)
+        part = simulate(
+            truth,
+            rho,
+            min(chunk, int(trials) - start),
+            noise_rng,
+            prior,
+            frames=frames,
+            process_noise=q,
+        )
         if tallies is None:
             tallies = {name: Tally(part.truth) for name in names}
         n_rejected += part.n_rejected
@@ -495,6 +602,8 @@ def study(
         "valid_trials": n_valid,
         "rejected_trials": n_rejected,
         "particles": int(n_particles) if "particle" in names else None,
+        "frames": int(frames),
+        "process_noise": q,
         "filters": {name: tallies[name].scores() for name in names},
     }
 

@@ -100,7 +100,7 @@ def test_estimate_accepts_prior_options(capsys):
             ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-mean", "0", "-4", "0"],
             "predicted depth",
         ),
-        (["--mu", "-0.3", "0", "--rho", "0.01"], "argument --mu"),
+        (["--mu", "-0.3", "0", "--rho", "0.01"], "mu takes at least 3 bearings"),
         (["--mu", "-0.3", "0", "0.2", "--rho", "abc"], "invalid float value"),
     ],
 )
@@ -189,3 +189,63 @@ def test_study_shows_a_progress_bar_on_a_terminal_only():
 
 def test_study_particles_default_is_the_studys():
     assert build_parser().parse_args(["study"]).particles == study.PARTICLES
+
+
+def test_estimate_takes_more_frames_process_noise_and_smoothing(capsys):
+    import numpy as np
+
+    from depthcore import bank
+
+    mu = ["-0.3", "0", "0.2", "0.33", "0.43"]
+    argv = ["estimate", "--mu", *mu, "--rho", "0.005", "--process-noise", "0.01"]
+    assert main([*argv, "--smooth", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["frames"] == 5 and data["process_noise"] == 0.01
+    assert set(data["filters"]) == {"optimal", "second_order", "ekf", "ukf"}
+    assert data["not_run"] == {"particle": "supports only no process noise"}
+    # the default prior is the paper's rule on the first three bearings
+    mean = np.array([-1.2, 4.0, 0.0])
+    m = bank.moments([float(v) for v in mu], 0.005, mean, 1000 * np.eye(3), 0.01)
+    assert data["filters"]["optimal"]["depth"]["mean"] == pytest.approx(m.depth_mean[0], 1e-12)
+    sm = data["smoothed"]
+    assert len(sm["depth_mean"]) == 5
+    assert sm["depth_mean"][-1] == pytest.approx(m.depth_mean[0], rel=1e-10)
+    assert np.allclose(np.diff(sm["depth_mean"]), 1.0)
+    assert main([*argv, "--smooth"]) == 0
+    out = capsys.readouterr().out
+    assert "5 frames, process noise q = 0.01" in out and "(optimal, smoothed)" in out
+    assert "particle      not run" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (
+            ["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005", "--process-noise", "-1"],
+            "process_noise must be from 0",
+        ),
+        (
+            ["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005", "--process-noise", "1e3"],
+            "process_noise must be from 0",
+        ),
+        (["estimate", "--mu", "0.3", "0", "0.2", "0.1", "--rho", "0.005"], "give --prior-mean"),
+        (["study", "--frames", "2"], "frames must be from 3"),
+        (
+            ["study", "--frames", "5", "--process-noise", "0.01", "--filters", "particle"],
+            "names: particle cannot run",
+        ),
+        (["study", "--truth", "prior", "--prior", "fixed", "--frames", "5"], "three frames only"),
+    ],
+)
+def test_more_frames_refusals_are_one_line(args, message, capsys):
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+
+
+def test_study_runs_more_frames_with_process_noise(capsys):
+    argv = ["study", "--frames", "6", "--process-noise", "0.01", "--trials", "30", "--json"]
+    assert main(argv) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["frames"] == 6 and "particle" not in data["filters"]
+    assert data["filters"]["optimal"]["hellinger_depth"]["mean"] == 0.0

@@ -53,8 +53,8 @@ ALLOWED = {
     # figure numbers of the paper and the book: "Figure 2", "Figures 2–6", "Fig. 5"
     "figure": rf"\b(?:Figures?|Figs?\.)\s+{_LIST}",
     # sections and chapters of the textbook and the book: "Sect. 19.4", "section 19.5"
-    "section": rf"\b(?:Sects?\.|[Ss]ections?|[Cc]hapters?|§)\s*\d+(?:\.\d+)*"
-    rf"(?:\s*(?:–|-|,|and|or|to)\s*\d+(?:\.\d+)*)*",
+    "section": r"\b(?:Sects?\.|[Ss]ections?|[Cc]hapters?|§)\s*\d+(?:\.\d+)*"
+    r"(?:\s*(?:–|-|,|and|or|to)\s*\d+(?:\.\d+)*)*",
     # the paper's theorem and its reference list, "Theorem 1", "reference [6]"
     "theorem": rf"\bTheorem\s+{_NUM}",
     "paper reference": r"\[\d+\]",

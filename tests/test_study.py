@@ -336,3 +336,36 @@ def test_optimal_cdfs_at_the_truth_match_quadrature_of_its_marginals():
         v_cdf, _ = integrate.quad(m.velocity_pdf, -np.inf, s.c[2], limit=400)
         assert est.depth_cdf[i] == pytest.approx(y_cdf, abs=1e-6)
         assert est.velocity_cdf[i] == pytest.approx(v_cdf, abs=1e-6)
+
+
+def test_study_over_more_frames_with_process_noise_scores_each_trials_own_truth():
+    from depthcore import _checks, bank, ekf
+
+    fig2 = SCENARIOS["fig2"]
+    truth, rho, q, N = fig2.c, fig2.rho, 0.02, 6
+    r = study.study(truth, rho, 40, seed=4, names=("optimal", "ekf"), frames=N, process_noise=q)
+    assert r["frames"] == N and r["process_noise"] == q
+    # the same trials, drawn from the same stream, filtered directly
+    noise_rng = np.random.default_rng(_checks.spawn(_checks.seed_sequence(4), 2)[0])
+    t = study.simulate(truth, rho, 40, noise_rng, "paper", frames=N, process_noise=q)
+    assert t.mu.shape == (r["valid_trials"], N) and t.states.shape == (len(t.mu), 3)
+    # the truth moves on: depth y_3 + N - 3 at frame N; the velocity changes with q
+    assert np.allclose(t.states[:, 1], truth[1] + N - 3)
+    assert np.std(t.states[:, 2]) > 0
+    exact = bank.moments(t.mu, rho, t.prior_mean, t.prior_cov, q)
+    h = ekf.run(t.mu, rho, t.prior_mean, t.prior_cov, q)
+    for name, depth in (("optimal", exact.depth_mean), ("ekf", h.means[:, -1, 1])):
+        bias = np.mean(depth - t.states[:, 1])
+        assert r["filters"][name]["depth"]["bias"] == pytest.approx(bias, rel=1e-9, abs=1e-12)
+    sd = np.sqrt(exact.depth_sd**2)
+    z = (t.states[:, 1] - exact.depth_mean) / sd
+    assert r["filters"]["optimal"]["depth"]["coverage_95"] == pytest.approx(
+        np.mean(np.abs(z) <= 1.959963984540054), abs=1e-12
+    )
+
+
+def test_study_refuses_filters_that_cannot_run_on_the_frames_or_process_noise():
+    with pytest.raises(ValueError, match="names: particle cannot run"):
+        study.study(trials=5, names=("ekf", "particle"), frames=5, process_noise=0.01)
+    with pytest.raises(ValueError, match="frames must be from 3"):
+        study.study(trials=5, names=("ekf",), frames=2)
