@@ -517,8 +517,15 @@ def _mixture_moments(W, means, covs, depths):
     """
     shape = np.broadcast_shapes(W.shape, means.shape[:-1], depths.shape)
     W = np.broadcast_to(W, shape)
+    W = W / np.sum(W, axis=-1, keepdims=True)
     m = [np.broadcast_to(a, shape) for a in (means[..., 0], depths, means[..., 1])]
-    mean = np.stack([np.sum(W * a, axis=-1) for a in m], axis=-1)
+    # about the most probable node: the sums then carry no multiple of a large depth
+    top = np.argmax(W, axis=-1)[..., None]
+    centre = [np.take_along_axis(a, top, axis=-1) for a in m]
+    mean = np.stack(
+        [c[..., 0] + np.sum(W * (a - c), axis=-1) for a, c in zip(m, centre, strict=True)],
+        axis=-1,
+    )
     d = [a - mean[..., i, None] for i, a in enumerate(m)]
     Wd = [W * a for a in d]
     cov = np.empty(shape[:-1] + (3, 3))
@@ -1018,6 +1025,8 @@ def posterior(
 
 #: Problems placed together by the quadrature (its memory grows with this times its nodes).
 _CHUNK = 64
+#: :func:`posterior` places its nodes for this fraction of the tolerance.
+_PLACEMENT_MARGIN = 1e-3
 
 
 def _place(pb, rtol, history, single):
@@ -1027,7 +1036,9 @@ def _place(pb, rtol, history, single):
             _place(pb.take(slice(i, i + _CHUNK)), rtol, history, False) for i in range(0, B, _CHUNK)
         ]
         return _concatenate(parts)
-    _, err_y, err_v, _, grids = _integrate(pb, rtol)
+    # Nodes for a thousandth of the tolerance: the posterior narrows as frames are
+    # added, and :func:`update` keeps the nodes until they resolve it only to ``rtol``.
+    _, err_y, err_v, _, grids = _integrate(pb, rtol * _PLACEMENT_MARGIN)
     nodes, log_w = _grid_nodes(grids[3])
     shift = np.max(log_w, axis=1, keepdims=True)
     bank = _filter_bank(nodes, pb.mu, pb.rho, pb.q, pb.mean, pb.cov, history)
@@ -1139,9 +1150,9 @@ def _resolution(post: Mixture):
     )
     free = end < top - _END_MARGIN
     even = ((j - first[..., None]) % 2 == 0) & valid
-    coarse = mixture(
-        b, np.where(even, np.exp(np.where(valid, post.log_weights - top[..., None], 0.0)), 0.0)
-    )
+    lw = np.where(valid, post.log_weights, -np.inf)
+    lw_top = np.max(lw, axis=-1, keepdims=True)
+    coarse = mixture(b, np.where(even, np.exp(np.where(valid, lw - lw_top, 0.0)), 0.0))
     eps = np.finfo(float).eps
     errors, floors = [], []
     for k in (1, 2):

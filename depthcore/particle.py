@@ -1,6 +1,7 @@
-"""A particle filter on the paper's problem and on ``N >= 3`` frames without process noise.
+"""Importance sampling of the state, on the paper's problem and on ``N >= 3`` frames.
 
-By default, importance sampling from a Student t proposal.
+By default a Student t proposal built from all the bearings: a Monte Carlo
+check of the optimal filter, not a causal filter (without process noise).
 
 Recommended import: ``from depthcore import particle``.
 
