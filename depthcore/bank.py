@@ -1025,8 +1025,6 @@ def posterior(
 
 #: Problems placed together by the quadrature (its memory grows with this times its nodes).
 _CHUNK = 64
-#: :func:`posterior` places its nodes for this fraction of the tolerance.
-_PLACEMENT_MARGIN = 1e-3
 
 
 def _place(pb, rtol, history, single):
@@ -1036,9 +1034,7 @@ def _place(pb, rtol, history, single):
             _place(pb.take(slice(i, i + _CHUNK)), rtol, history, False) for i in range(0, B, _CHUNK)
         ]
         return _concatenate(parts)
-    # Nodes for a thousandth of the tolerance: the posterior narrows as frames are
-    # added, and :func:`update` keeps the nodes until they resolve it only to ``rtol``.
-    _, err_y, err_v, _, grids = _integrate(pb, rtol * _PLACEMENT_MARGIN)
+    _, err_y, err_v, _, grids = _integrate(pb, rtol)
     nodes, log_w = _grid_nodes(grids[3])
     shift = np.max(log_w, axis=1, keepdims=True)
     bank = _filter_bank(nodes, pb.mu, pb.rho, pb.q, pb.mean, pb.cov, history)
@@ -1150,14 +1146,13 @@ def _resolution(post: Mixture):
     )
     free = end < top - _END_MARGIN
     even = ((j - first[..., None]) % 2 == 0) & valid
-    lw = np.where(valid, post.log_weights, -np.inf)
-    lw_top = np.max(lw, axis=-1, keepdims=True)
-    coarse = mixture(b, np.where(even, np.exp(np.where(valid, lw - lw_top, 0.0)), 0.0))
+    W = np.where(even, np.exp(np.where(valid, log_p - top[..., None], -np.inf)), 0.0)
+    c_mean, c_cov = _mixture_moments(W, b.mean, b.cov, b.nodes + (b.n_frames - 1))
     eps = np.finfo(float).eps
     errors, floors = [], []
     for k in (1, 2):
-        sd, sd_c = np.sqrt(post.cov[..., k, k]), np.sqrt(coarse.cov[..., k, k])
-        change = np.maximum(np.abs(post.mean[..., k] - coarse.mean[..., k]), np.abs(sd - sd_c))
+        sd, sd_c = np.sqrt(post.cov[..., k, k]), np.sqrt(c_cov[..., k, k])
+        change = np.maximum(np.abs(post.mean[..., k] - c_mean[..., k]), np.abs(sd - sd_c))
         floor = 64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top)) * sd)
         errors.append(np.maximum(change, floor))
         floors.append(floor)
@@ -1266,11 +1261,15 @@ def _replace_rows(post: Mixture, rows) -> Mixture:
         log_weight=merge(b.log_weight, fb.log_weight, 1, 0.0),
         history=None,
     )
-    log_weights = merge(post.log_weights, fresh.log_weights, 1, -np.inf)
-    shift = np.max(log_weights, axis=-1)
-    merged = _shifted(mixture(bank, np.exp(log_weights - shift[:, None])), shift)
+    # the other problems' mixtures are unchanged: their fields are merged, not recomputed
     return dataclasses.replace(
-        merged,
+        post,
+        bank=bank,
+        log_weights=merge(post.log_weights, fresh.log_weights, 1, -np.inf),
+        probabilities=merge(post.probabilities, fresh.probabilities, 1, 0.0),
+        log_normaliser=np.where(rows, _full(fresh.log_normaliser, idx, rows), post.log_normaliser),
+        mean=np.where(rows[:, None], _full(fresh.mean, idx, rows), post.mean),
+        cov=np.where(rows[:, None, None], _full(fresh.cov, idx, rows), post.cov),
         depth_error=np.where(rows, _full(fresh.depth_error, idx, rows), post.depth_error),
         velocity_error=np.where(rows, _full(fresh.velocity_error, idx, rows), post.velocity_error),
         rtol=post.rtol,
@@ -1278,7 +1277,8 @@ def _replace_rows(post: Mixture, rows) -> Mixture:
 
 
 def _full(values, idx, rows):
-    out = np.zeros(rows.shape)
+    """``values`` (len(idx), ...) placed at ``idx`` in zeros of shape ``rows.shape + ...``."""
+    out = np.zeros(rows.shape + np.shape(values)[1:])
     out[idx] = values
     return out
 
