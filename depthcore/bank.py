@@ -59,7 +59,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from scipy.special import logsumexp, ndtr
+from scipy.special import ndtr
 
 from . import _checks, kalman, optimal
 
@@ -449,9 +449,14 @@ def step(bank: Bank, mu_next) -> Bank:
         state, log_likelihood = _update_lateral(
             state, mu_next[..., None], bank.nodes + N, (np.asarray(bank.rho) ** 2)[..., None]
         )
+        mean = np.empty(state.x.shape + (2,))
+        mean[..., 0], mean[..., 1] = state.x, state.v
+        cov = np.empty(state.a.shape + (2, 2))
+        cov[..., 0, 0], cov[..., 1, 1] = state.a, state.c
+        cov[..., 0, 1] = cov[..., 1, 0] = state.b
         return bank._replace(
-            mean=np.stack([state.x, state.v], -1),
-            cov=np.stack([np.stack([state.a, state.b], -1), np.stack([state.b, state.c], -1)], -2),
+            mean=mean,
+            cov=cov,
             mu=_extend(bank.mu, mu_next),
             log_weight=bank.log_weight + log_likelihood,
         )
@@ -856,8 +861,11 @@ def mixture(bank: Bank, weights) -> Mixture:
     with np.errstate(divide="ignore"):
         log_weights = np.log(weights)
     a = bank.log_weight + log_weights
-    log_normaliser = logsumexp(a, axis=-1)
-    probabilities = np.exp(a - log_normaliser[..., None])
+    top = np.max(a, axis=-1, keepdims=True)  # finite: a positive weight per problem
+    terms = np.exp(a - top)
+    total = np.sum(terms, axis=-1, keepdims=True)
+    log_normaliser = (top + np.log(total))[..., 0]
+    probabilities = terms / total
     depth_N = bank.nodes + (bank.n_frames - 1)
     mean, cov = _mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
     return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
