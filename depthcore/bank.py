@@ -245,7 +245,7 @@ def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
     update, the log likelihood from the innovations) with its 2 x 2 algebra
     written out, elementwise over the nodes, for the depth quadrature. With
     ``(a, b, c)`` the entries of ``Cov[(x, v)]`` and ``r_k = (rho y_k)**2``
-    (the bearing noise in units of ``x``), the update by ``mu_k`` is
+    (the bearing noise in units of ``x``), the update by ``mu_k`` is::
 
         e = mu_k y_k - x,   x += a e / (a + r_k),   v += b e / (a + r_k),
         a' = a r_k / (a + r_k),   b' = b r_k / (a + r_k),

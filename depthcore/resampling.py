@@ -113,6 +113,7 @@ def residual(W, rng: np.random.Generator, M: int | None = None) -> np.ndarray:
     return _indices(floor.astype(np.int64) + rng.multinomial(R, p))
 
 
+#: The resampling schemes by name (systematic is the default of the particle filters).
 RESAMPLERS = {"systematic": systematic, "multinomial": multinomial, "residual": residual}
 
 

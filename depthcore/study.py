@@ -395,8 +395,8 @@ class Tally:
     Parameters
     ----------
     truth : array_like, shape (3,)
-        True state at time 3 (each chunk's :attr:`Estimates.truth`, where
-        given, takes its place).
+        True state at time 3 (each chunk's ``Estimates.truth``, where given,
+        takes its place).
 
     Attributes
     ----------
