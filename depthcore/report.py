@@ -695,7 +695,7 @@ class GlueLog:
 
     A page glues its numbers and figures with ``myst_nb.glue(name, value,
     display=False)``: the book pastes them where its text names them
-    (``{glue:text}``, ``{glue:figure}``), but a plain notebook shows nothing of
+    (the ``glue:text`` and ``glue:figure`` roles), but a plain notebook shows nothing of
     them. A ``GlueLog`` created in the page's kernel keeps a copy of every such
     record, which passes on unchanged, and :meth:`show` displays those kept
     since its last call: each figure as the very image the book shows, and the
@@ -732,7 +732,7 @@ class GlueLog:
 
     @staticmethod
     def pasted_text(text: str) -> str:
-        """A record's ``text/plain`` as ``{glue:text}`` pastes it: a string without its quotes."""
+        """A record's ``text/plain`` as the ``glue:text`` role pastes it: a string without its quotes."""
         try:
             return str(ast.literal_eval(text))
         except (SyntaxError, ValueError):
