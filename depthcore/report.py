@@ -732,7 +732,7 @@ class GlueLog:
 
     @staticmethod
     def pasted_text(text: str) -> str:
-        """A record's ``text/plain`` as the ``glue:text`` role pastes it: a string without its quotes."""
+        """A record's ``text/plain`` as the ``glue:text`` role pastes it, without quotes."""
         try:
             return str(ast.literal_eval(text))
         except (SyntaxError, ValueError):
