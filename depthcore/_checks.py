@@ -54,6 +54,16 @@ def nonnegative_scalar(value, name: str) -> float:
     return float(arr)
 
 
+def nonnegative_batch(value, name: str, batch: tuple[int, ...]) -> np.ndarray:
+    """Return ``value`` as a float array of shape ``()`` or ``batch``, finite and >= 0."""
+    arr = finite_array(value, name)
+    if arr.ndim and arr.shape != batch:
+        raise ValueError(f"{name} must be a scalar or have shape {batch}, got shape {arr.shape}")
+    if not np.all(arr >= 0):
+        raise ValueError(f"{name} must be >= 0, got minimum {float(np.min(arr)):.6g}")
+    return arr
+
+
 def positive_array(value, name: str) -> np.ndarray:
     """Return ``value`` as a float array (scalar or 1-D), checking every entry is finite and > 0."""
     arr = finite_array(value, name)

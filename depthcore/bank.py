@@ -885,13 +885,7 @@ def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
     if mu.shape[-1] > MAX_FRAMES:
         raise ValueError(f"mu: at most {MAX_FRAMES} frames, got {mu.shape[-1]}")
     batch, N = mu.shape[:-1], mu.shape[-1]
-    q = _checks.finite_array(process_noise, "process_noise")
-    if q.ndim and q.shape != batch:
-        raise ValueError(
-            f"process_noise must be a scalar or have shape {batch}, got shape {q.shape}"
-        )
-    if not np.all(q >= 0):
-        raise ValueError(f"process_noise must be >= 0, got minimum {float(np.min(q)):.6g}")
+    q = _checks.nonnegative_batch(process_noise, "process_noise", batch)
     B = int(np.prod(batch))
     prior_cov = np.ascontiguousarray(np.broadcast_to(prior_cov, batch + (3, 3))).reshape(B, 3, 3)
     pb = optimal._Problem(

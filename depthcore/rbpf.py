@@ -508,11 +508,7 @@ def run(
         mu, rho, prior_mean, prior_cov, triples=False
     )
     batch = mu.shape[:-1]
-    q = _checks.finite_array(q, "q")
-    if q.shape not in ((), batch):
-        raise ValueError(f"q must be a scalar or have shape {batch}, got shape {q.shape}")
-    if not np.all(q >= 0):
-        raise ValueError(f"q must be >= 0, got minimum {float(np.min(q)):.6g}")
+    q = _checks.nonnegative_batch(q, "q", batch)
     if (
         isinstance(n_particles, bool)
         or not isinstance(n_particles, (int, np.integer))
