@@ -53,13 +53,12 @@ import numpy as np
 
 from . import _checks, model
 from .ekf import predict
+from .second_order import damped_step
 
 #: Largest number of Gauss-Newton iterations of one update or smoother.
 MAX_ITERATIONS = 100
 #: Iterations stop when a step changes the state by less than this, in SDs.
 STEP_TOL = 1e-12
-#: Step halvings before an iteration gives up on decreasing its objective.
-_MAX_HALVINGS = 60
 
 
 class IteratedUpdate(NamedTuple):
@@ -127,7 +126,7 @@ def update(n, C, mu, rho, max_iterations: int = MAX_ITERATIONS) -> IteratedUpdat
         s = r2 + np.einsum("...i,...i->...", h, Ch)
         residual = mu - model.project(x) - np.einsum("...i,...i->...", h, n - x)
         target = n + (residual / s)[..., None] * Ch
-        x_new, f_new = _damped(x, target - x, f, lambda y: _objective(y, n, C_chol, mu, r2))
+        x_new, f_new = damped_step(x, target - x, f, lambda y: _objective(y, n, C_chol, mu, r2))
         iterations = iterations + active
         z = np.linalg.solve(C_chol, (x_new - x)[..., None])[..., 0]
         moved = np.sqrt(np.sum(z**2, axis=-1))
@@ -141,27 +140,6 @@ def update(n, C, mu, rho, max_iterations: int = MAX_ITERATIONS) -> IteratedUpdat
     A = np.eye(3) - K[..., :, None] * h[..., None, :]
     cov = A @ C @ np.swapaxes(A, -1, -2) + r2[..., None, None] * K[..., :, None] * K[..., None, :]
     return IteratedUpdate(x, 0.5 * (cov + np.swapaxes(cov, -1, -2)), iterations)
-
-
-def _damped(x, step, f, objective):
-    """``x + t step`` with ``t`` halved from 1 until the objective does not increase.
-
-    Returns the new points and their objective values; where no halving
-    helps, ``x`` and ``f`` are kept.
-    """
-    t = np.ones(x.shape[:-1])
-    x_new = x + step
-    f_new = objective(x_new)
-    for _ in range(_MAX_HALVINGS):
-        bad = ~(f_new <= f)
-        if not np.any(bad):
-            break
-        t = np.where(bad, 0.5 * t, t)
-        trial = x + t[..., None] * step
-        x_new = np.where(bad[..., None], trial, x_new)
-        f_new = np.where(bad, objective(trial), f_new)
-    keep = ~(f_new <= f)
-    return np.where(keep[..., None], x, x_new), np.where(keep, f, f_new)
 
 
 def run(
@@ -292,7 +270,7 @@ def smoother(
             "...ki,...k->...i", Jw, (mu - h) / rho[..., None]
         )
         step = -np.linalg.solve(A, g[..., None])[..., 0]
-        x_new, f_new = _damped(x, step, f, objective)
+        x_new, f_new = damped_step(x, step, f, objective)
         iterations = iterations + active
         moved = np.sqrt(np.abs(np.einsum("...i,...ij,...j->...", x_new - x, A, x_new - x)))
         x = np.where(active[..., None], x_new, x)

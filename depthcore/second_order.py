@@ -52,6 +52,7 @@ __all__ = [
     "READINGS",
     "STEP_TOL",
     "b2",
+    "damped_step",
     "f",
     "hessian",
     "likelihood_covariance",
@@ -248,7 +249,7 @@ def minimiser(mu) -> np.ndarray:
         r = residuals(x, mu)
         J = residual_gradients(x, n_frames)
         step = _lstsq(J, -r)
-        x_new, f_new = _damped(x, step, f, lambda y: _misfit(y[:, None], mu)[:, 0])
+        x_new, f_new = damped_step(x, step, f, lambda y: _misfit(y[:, None], mu)[:, 0])
         moved = np.max(np.abs(x_new - x) / (1.0 + np.abs(x)), axis=-1)
         x = np.where(active[:, None], x_new, x)
         f = np.where(active, f_new, f)
@@ -284,8 +285,15 @@ def _determined(J, what: str) -> None:
         )
 
 
-def _damped(x, step, f, objective):
-    """``x + t step`` with ``t`` halved from 1 until the objective does not increase."""
+def damped_step(x, step, f, objective):
+    """``x + t step`` with ``t`` halved from 1 until the objective does not increase.
+
+    The line search of the Gauss-Newton iterations here and in
+    :mod:`depthcore.iterated`. ``x`` (..., d) and ``f`` (...) are the current
+    points and objective values, ``step`` (..., d) the proposed steps and
+    ``objective`` maps points (..., d) to values (...). Returns the new points
+    and their objective values; where no halving helps, ``x`` and ``f`` are kept.
+    """
     t = np.ones(x.shape[:-1])
     x_new = x + step
     f_new = objective(x_new)
@@ -382,7 +390,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
             M = np.concatenate([weight[b] * J, penalty])
             rhs = -np.concatenate([weight[b] * r, z[3:] / q])
             step = _lstsq(M[None], rhs[None])[0]
-            z_new, f_new = _damped(z[None], step[None], np.array([f]), _rows(objective))
+            z_new, f_new = damped_step(z[None], step[None], np.array([f]), _rows(objective))
             moved = np.max(np.abs(z_new[0] - z) / (1.0 + np.abs(z)))
             z, f = z_new[0], float(f_new[0])
             if not moved > STEP_TOL:
@@ -408,7 +416,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
 
 
 def _rows(objective):
-    """Apply a one-row objective to an array of shape (1, dim) (for :func:`_damped`)."""
+    """Apply a one-row objective to an array of shape (1, dim) (for :func:`damped_step`)."""
     return lambda z: np.array([objective(z[0])])
 
 
