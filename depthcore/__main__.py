@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, _checks, report, reproduce, study
+from .filters import ALL_NAMES
 from .filters import NAMES as _STUDY_FILTERS
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from .model import noise_free_state
@@ -377,9 +378,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--filters",
         nargs="+",
         default=list(_STUDY_FILTERS),
-        choices=_STUDY_FILTERS,
+        choices=ALL_NAMES,
         metavar="NAME",
-        help=f"filters to score (default all: {' '.join(_STUDY_FILTERS)}); only these run: "
+        help=f"filters to score (default: {' '.join(_STUDY_FILTERS)}; also "
+        f"{' '.join(n for n in ALL_NAMES if n not in _STUDY_FILTERS)}); only these run: "
         "the Hellinger distances need the optimal filter, their reference, so without "
         "'optimal' they are not computed (- in the table, null in JSON)",
     )

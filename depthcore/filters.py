@@ -26,7 +26,7 @@ call outside them is refused with a :class:`ValueError` naming ``mu`` or
 :mod:`depthcore.experiments`, the command line and :mod:`depthcore.figures`
 iterate the entries marked ``default`` (:data:`NAMES`), which are the five of
 the paper's problem; the N-frame filters (``iterated``, ``inverse_depth``,
-``resample_move``) are registered with ``default=False`` and run only when
+``resample_move``, ``rbpf``) are registered with ``default=False`` and run only when
 named (:data:`ALL_NAMES`). Adding a filter means adding an entry here.
 
 The filters: the paper's optimal filter (:mod:`depthcore.optimal`, Eqs.
@@ -35,8 +35,9 @@ Eq. (8)) and EKF (:mod:`depthcore.ekf`, Eqs. (10)-(12)); beyond the paper,
 the unscented Kalman filter (:mod:`depthcore.ukf`) and a particle filter
 (:mod:`depthcore.particle`); for N frames, the iterated EKF
 (:mod:`depthcore.iterated`), the inverse-depth EKF
-(:mod:`depthcore.inverse_depth`) and the causal bootstrap particle filter with
-resample-move (:mod:`depthcore.resample_move`).
+(:mod:`depthcore.inverse_depth`), the causal bootstrap particle filter with
+resample-move (:mod:`depthcore.resample_move`) and the Rao-Blackwellised
+particle filter (:mod:`depthcore.rbpf`).
 """
 
 from __future__ import annotations
@@ -55,22 +56,29 @@ from . import (
     iterated,
     optimal,
     particle,
+    rbpf,
     resample_move,
     second_order,
     ukf,
 )
 from .gaussian import Gaussian, History
-from .resampling import weighted_mean_and_cov
+from .resampling import weighted_density, weighted_mean_and_cov
 
 QUANTITIES = ("depth", "velocity")
 #: The state component of each quantity.
 COMPONENT = {"depth": "y", "velocity": "v"}
 #: How a filter's estimates are scored, one of ``"exact"`` (the optimal filter, the
 #: reference), ``"gaussian"`` (a mean and covariance), ``"particles"``
-#: (weighted particles, in ``detail``).
-FAMILIES = ("exact", "gaussian", "particles")
+#: (weighted particles, in ``detail``), ``"rao_blackwellised"`` (weighted
+#: particle depths, each with a Gaussian of the lateral state: the
+#: :class:`~depthcore.rbpf.RBPF` in ``detail``).
+FAMILIES = ("exact", "gaussian", "particles", "rao_blackwellised")
 #: Particles of the particle filter unless a caller asks for another number.
 PARTICLES = 20_000
+#: Particles per replica of the Rao-Blackwellised particle filter, by default.
+RBPF_PARTICLES = 1000
+#: Independent replicas of the Rao-Blackwellised particle filter, for its standard errors.
+RBPF_REPLICAS = 4
 
 
 @dataclass(frozen=True)
@@ -133,7 +141,7 @@ class Filter:
         Legend label (LaTeX allowed).
     style : dict
         Matplotlib line properties (colour, line style).
-    family : {"exact", "gaussian", "particles"}
+    family : {"exact", "gaussian", "particles", "rao_blackwellised"}
     in_paper : bool
         Whether the paper compares it.
     run : callable
@@ -203,8 +211,9 @@ class Filter:
     def density(self, estimate: Estimate, quantity: str, grid) -> np.ndarray:
         """The marginal density of ``quantity`` on ``grid`` (one sequence's estimate).
 
-        The particle filter's is a weighted Gaussian kernel density estimate
-        (Silverman's bandwidth).
+        The particle filters' is a weighted Gaussian kernel density estimate
+        (Silverman's bandwidth); the Rao-Blackwellised filter's velocity
+        marginal is its Gaussian mixture, its depth a kernel estimate.
         """
         _quantity(quantity)
         grid = np.asarray(grid, dtype=float)
@@ -213,6 +222,11 @@ class Filter:
             return d.depth_pdf(grid) if quantity == "depth" else d.velocity_pdf(grid)
         if self.family == "particles":
             return estimate.detail.density(COMPONENT[quantity], grid)
+        if self.family == "rao_blackwellised":
+            if quantity == "velocity":
+                return estimate.detail.velocity_pdf(grid)
+            W, depths, _, _ = estimate.detail.pooled()
+            return weighted_density(depths, W, grid)
         return Gaussian(estimate.mean, estimate.cov).marginal_pdf(COMPONENT[quantity], grid)
 
 
@@ -462,6 +476,62 @@ def _resample_move(
     )
 
 
+def _rbpf(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    rng=None,
+    n_particles: int = RBPF_PARTICLES,
+    replicas: int = RBPF_REPLICAS,
+    **options,
+) -> Estimate:
+    """The Rao-Blackwellised particle filter (:mod:`depthcore.rbpf`, textbook 19.5.3).
+
+    ``detail`` is its :class:`~depthcore.rbpf.RBPF`: ``replicas`` independent
+    clouds of ``n_particles`` depths, each carrying the Kalman filter of
+    ``(x, v)``; ``options`` are those of :func:`depthcore.rbpf.run`. The
+    moments are those of the replicas pooled into one mixture
+    (:meth:`~depthcore.rbpf.RBPF.state_moments`, the law of total variance
+    over the particles' filters); the errors are the larger of the standard
+    errors of the mean and of the SD from the replicas' spread
+    (:meth:`~depthcore.rbpf.RBPF.standard_errors`; NaN with one replica).
+    """
+    rng = _rng(rng, "Rao-Blackwellised particle")
+    if _single(mu):
+        _prior(prior_mean, prior_cov)
+    f = rbpf.run(
+        mu,
+        rho,
+        prior_mean,
+        prior_cov,
+        n_particles,
+        rng,
+        q=process_noise,
+        replicas=replicas,
+        **options,
+    )
+    mean, cov = f.state_moments()
+    se = f.standard_errors()
+    depth_error = np.maximum(se.depth_mean, se.depth_sd)
+    velocity_error = np.maximum(se.velocity_mean, se.velocity_sd)
+    if _single(mu):
+        depth_error, velocity_error = float(depth_error), float(velocity_error)
+    e = _gaussian_estimate(mean, cov, f)
+    return Estimate(
+        e.depth_mean,
+        e.depth_sd,
+        e.velocity_mean,
+        e.velocity_sd,
+        depth_error,
+        velocity_error,
+        e.mean,
+        e.cov,
+        f,
+    )
+
+
 def _rng(rng, name: str) -> np.random.Generator:
     """``rng`` as a Generator; ``None`` is refused, naming ``rng``."""
     if rng is None:
@@ -613,6 +683,19 @@ FILTERS: dict[str, Filter] = {
             (("-", "front", {}),),
             random=True,
             any_frames=True,
+            default=False,
+        ),
+        Filter(
+            "rbpf",
+            "Rao-Blackwellised particle filter",
+            {"color": "tab:olive", "linestyle": "--"},
+            "rao_blackwellised",
+            False,
+            _rbpf,
+            (("-", "front", {}),),
+            random=True,
+            any_frames=True,
+            with_process_noise=True,
             default=False,
         ),
     )

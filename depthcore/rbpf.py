@@ -95,7 +95,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import log_ndtr, ndtri_exp
+from scipy.special import log_ndtr, ndtr, ndtri_exp
 
 from . import _checks
 from . import bank as bk
@@ -195,6 +195,79 @@ class RBPF:
         return ParticleMoments(
             mean[..., 1], np.sqrt(cov[..., 1, 1]), mean[..., 2], np.sqrt(cov[..., 2, 2])
         )
+
+    def pooled(self):
+        """The replicas pooled into one mixture at frame ``K``.
+
+        Returns
+        -------
+        W : ndarray, shape (..., R J)
+            Normalised weights, each replica's over ``R``.
+        depths : ndarray, shape (..., R J)
+            The particles' depths ``y_K = y_1 + K - 1``.
+        means : ndarray, shape (..., R J, 2)
+            ``E[(x_K, v_K) | y_1, mu_1 .. mu_K]`` of each particle.
+        covs : ndarray, shape (..., R J, 2, 2)
+        """
+        b = self.bank
+        batch = self.log_weights.shape[:-2]
+        n = self.replicas * self.n_particles
+        W = np.exp(self.log_weights).reshape(batch + (n,)) / self.replicas
+        depths = np.broadcast_to(b.nodes, self.log_weights.shape).reshape(batch + (n,))
+        means = np.broadcast_to(b.mean, self.log_weights.shape + (2,))
+        covs = np.broadcast_to(b.cov, self.log_weights.shape + (2, 2))
+        return (
+            W,
+            depths + (self.n_frames - 1),
+            means.reshape(batch + (n, 2)),
+            covs.reshape(batch + (n, 2, 2)),
+        )
+
+    def state_moments(self):
+        """Mean (..., 3) and covariance (..., 3, 3) of ``(x_K, y_K, v_K)`` under :meth:`pooled`.
+
+        The law of total variance over the particles' Kalman filters: the
+        weighted covariance of their means plus their weighted covariances
+        (the depth is exact given a particle).
+        """
+        W, depths, means, covs = self.pooled()
+        return bk._mixture_moments(W, means, covs, depths)
+
+    def depth_cdf(self, y):
+        """``P(y_K <= y)`` under :meth:`pooled`, the particles' weighted step function.
+
+        ``y`` of shape (...) or (..., G); returns the same shape.
+        """
+        W, depths, _, _ = self.pooled()
+        y = np.asarray(y, dtype=float)
+        if y.ndim > W.ndim - 1:
+            W, depths = W[..., None, :], depths[..., None, :]
+        return np.sum(W * (depths <= y[..., None]), axis=-1)
+
+    def velocity_cdf(self, v):
+        """``P(v_K <= v)`` under :meth:`pooled`: the Gaussian mixture's CDF.
+
+        ``v`` of shape (...) or (..., G); returns the same shape.
+        """
+        W, _, means, covs = self.pooled()
+        v = np.asarray(v, dtype=float)
+        m, s = means[..., 1], np.sqrt(covs[..., 1, 1])
+        if v.ndim > W.ndim - 1:
+            W, m, s = W[..., None, :], m[..., None, :], s[..., None, :]
+        return np.sum(W * ndtr((v[..., None] - m) / s), axis=-1)
+
+    def velocity_pdf(self, v):
+        """The density of ``v_K`` under :meth:`pooled`, a Gaussian mixture.
+
+        Shapes as :meth:`velocity_cdf`.
+        """
+        W, _, means, covs = self.pooled()
+        v = np.asarray(v, dtype=float)
+        m, s = means[..., 1], np.sqrt(covs[..., 1, 1])
+        if v.ndim > W.ndim - 1:
+            W, m, s = W[..., None, :], m[..., None, :], s[..., None, :]
+        z = (v[..., None] - m) / s
+        return np.sum(W * np.exp(-0.5 * z**2) / (np.sqrt(2 * np.pi) * s), axis=-1)
 
     def moments(self) -> ParticleMoments:
         """The replicas' average of :meth:`replica_moments`, shape (...)."""

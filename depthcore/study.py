@@ -277,6 +277,30 @@ def _reference_cdfs(reference, truths):
     return reference.depth_cdf(truths[:, 1]), reference.velocity_cdf(truths[:, 2])
 
 
+def _rao_blackwellised_estimates(trials: Trials, estimate, reference) -> Estimates:
+    """Scores' inputs for the Rao-Blackwellised filter: its pooled mixture at frame ``N``.
+
+    The depth's CDF is the particles' weighted step function and its density
+    for the Hellinger distance a binned kernel estimate, as for the particle
+    filter; the velocity's CDF is the Gaussian mixture's
+    (:meth:`depthcore.rbpf.RBPF.velocity_cdf`). Without ``reference`` there
+    is no Hellinger distance.
+    """
+    f = estimate.detail
+    mean, cov = estimate.mean, estimate.cov
+    t = trials.truths
+    depth_cdf = f.depth_cdf(t[:, 1])
+    velocity_cdf = f.velocity_cdf(t[:, 2])
+    if reference is None:
+        return Estimates(mean, cov, depth_cdf, velocity_cdf, None, trials.states)
+    W, depths, _, _ = f.pooled()
+    sd = np.sqrt(cov[:, 1, 1])
+    ess = 1.0 / np.sum(W**2, axis=1)
+    bandwidth = 1.06 * sd * ess**-0.2  # Scott's rule with the effective sample size
+    h = hellinger(reference, _binned_kde(depths, W, bandwidth), mean[:, 1], sd)
+    return Estimates(mean, cov, depth_cdf, velocity_cdf, h, trials.states)
+
+
 def _particle_estimates(trials: Trials, estimate, reference) -> Estimates:
     """Scores' inputs for the particle filter: weighted moments, CDFs, a binned KDE.
 
@@ -374,6 +398,8 @@ def run_filters(
         est = f(mu, rho, pm, pc, **options)
         if f.family == "particles":
             out[name] = _particle_estimates(trials, est, ref)
+        elif f.family == "rao_blackwellised":
+            out[name] = _rao_blackwellised_estimates(trials, est, ref)
         else:
             out[name] = _gaussian_estimates(trials, est.mean, est.cov, ref)
     return out

@@ -7,6 +7,7 @@ from numpy.testing import assert_allclose
 from depthcore import _checks, ekf, inverse_depth, iterated, model, optimal, particle, ukf
 from depthcore.filters import (
     ALL_NAMES,
+    FAMILIES,
     FILTERS,
     NAMES,
     PAPER_FILTERS,
@@ -34,9 +35,9 @@ def _options(name, seed=0):
 def test_registry_lists_the_five_filters_in_table_order():
     assert NAMES == ("optimal", "second_order", "ekf", "ukf", "particle")
     assert PAPER_FILTERS == ("optimal", "second_order", "ekf")
-    assert ALL_NAMES == NAMES + ("iterated", "inverse_depth", "resample_move")
+    assert ALL_NAMES == NAMES + ("iterated", "inverse_depth", "resample_move", "rbpf")
     for name, f in FILTERS.items():
-        assert f.name == name and f.family in ("exact", "gaussian", "particles")
+        assert f.name == name and f.family in FAMILIES
         assert f.plot_style["label"] == f.label
         assert f.variants, name
 
@@ -134,6 +135,7 @@ CAPABILITIES = {
     "iterated": (True, True),
     "inverse_depth": (True, True),
     "resample_move": (True, False),
+    "rbpf": (True, True),
 }
 CASES = [
     (name, n, q)

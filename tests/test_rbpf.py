@@ -297,3 +297,94 @@ def test_step_and_rejuvenate_refuse_bad_input():
         rbpf.rejuvenate(f.bank, 0.0, 1, np.random.default_rng(0))
     with pytest.raises(ValueError, match="moves must be an integer >= 0"):
         rbpf.rejuvenate(f.bank, 1.0, 1.5, np.random.default_rng(0))
+
+
+# --- the registry entry ------------------------------------------------------------------
+
+
+def _registry(mu, prior, q, seed, n_particles=600, replicas=6):
+    from depthcore.filters import FILTERS
+
+    return FILTERS["rbpf"](
+        mu,
+        RHO_200,
+        prior.mean,
+        prior.cov,
+        process_noise=q,
+        rng=np.random.SeedSequence(seed),
+        n_particles=n_particles,
+        replicas=replicas,
+    )
+
+
+@pytest.mark.parametrize(("frames", "q"), [(3, 0.0), (8, 0.02)])
+def test_registry_entry_converges_to_the_bank_within_its_monte_carlo_error(frames, q):
+    """Ten independent runs of FILTERS["rbpf"]: a one-sample t test of their moments
+    against the bank's (false alarm 1e-4 per check), and their scatter agrees with the
+    replicas' standard errors (an F test of the scatter's variance against the mean
+    squared standard error, both tails)."""
+    sim, prior = long_track(frames, q, seed=5)
+    exact = converged_mixture(sim.mu, RHO_200, prior.mean, prior.cov, q=q)
+    runs = [_registry(sim.mu, prior, q, seed) for seed in range(10)]
+    t_bound = stats.t(9).ppf(1 - FALSE_ALARM / 2)
+    for quantity in ("depth", "velocity"):
+        for moment in ("mean", "sd"):
+            est = np.array([getattr(r, f"{quantity}_{moment}") for r in runs])
+            want = getattr(exact, f"{quantity}_{moment}")
+            t = (np.mean(est) - want) / (np.std(est, ddof=1) / np.sqrt(len(est)))
+            assert abs(t) < t_bound, (quantity, moment, t)
+            # the replicas' standard errors measure the scatter of independent runs
+            se = np.array(
+                [getattr(r.detail.standard_errors(), f"{quantity}_{moment}") for r in runs]
+            )
+            ratio = np.var(est, ddof=1) / np.mean(se**2)
+            f = stats.f(9, 10 * 5)
+            assert f.ppf(FALSE_ALARM) < ratio < f.ppf(1 - FALSE_ALARM), (quantity, moment, ratio)
+        # the reported error is the larger of the mean's and the SD's
+        se = runs[0].detail.standard_errors()
+        want = max(getattr(se, f"{quantity}_mean"), getattr(se, f"{quantity}_sd"))
+        assert getattr(runs[0], f"{quantity}_error") == want
+
+
+def test_registry_estimate_is_the_pooled_mixture_computed_particle_by_particle():
+    """mean and cov by the law of total variance, summed particle by particle in 3 x 3
+    matrices; the depth and velocity moments are theirs; the CDFs and the velocity
+    density are the mixture's, the density integrating to its CDF."""
+    sim, prior = long_track(6, 0.01, seed=2)
+    est = _registry(sim.mu, prior, 0.01, seed=1, n_particles=50, replicas=3)
+    f = est.detail
+    b = f.bank
+    second = np.zeros((3, 3))
+    first = np.zeros(3)
+    W = np.exp(f.log_weights) / f.replicas
+    for r in range(f.replicas):
+        for j in range(f.n_particles):
+            m = np.array([b.mean[r, j, 0], b.nodes[r, j] + 5, b.mean[r, j, 1]])
+            c = np.zeros((3, 3))
+            c[np.ix_([0, 2], [0, 2])] = b.cov[r, j]
+            first += W[r, j] * m
+            second += W[r, j] * (c + np.outer(m, m))
+    assert_allclose(est.mean, first, rtol=1e-12)
+    assert_allclose(est.cov, second - np.outer(first, first), rtol=1e-7, atol=1e-12)
+    assert_allclose([est.depth_mean, est.depth_sd], [first[1], np.sqrt(est.cov[1, 1])])
+    assert_allclose([est.velocity_mean, est.velocity_sd], [first[2], np.sqrt(est.cov[2, 2])])
+    y = first[1]
+    assert_allclose(f.depth_cdf(y), np.sum(W * (b.nodes + 5 <= y)), rtol=1e-12)
+    v = np.linspace(first[2] - 8 * est.velocity_sd, first[2] + 0.3 * est.velocity_sd, 20001)
+    integral = np.trapezoid(f.velocity_pdf(v), v)
+    assert_allclose(integral, f.velocity_cdf(v[-1]), atol=1e-6)
+    cdf = np.sum(W * stats.norm.cdf(v[-1], b.mean[..., 1], np.sqrt(b.cov[..., 1, 1])))
+    assert_allclose(f.velocity_cdf(v[-1]), cdf, rtol=1e-12)
+    assert est.depth_error > 0 and est.velocity_error > 0
+
+
+def test_registry_entry_needs_a_generator_and_refuses_in_one_line():
+    from depthcore.filters import FILTERS
+
+    s = SCENARIOS["fig2"]
+    with pytest.raises(ValueError, match="rng is required"):
+        FILTERS["rbpf"](s.mu, s.rho, s.prior.mean, s.prior.cov)
+    with pytest.raises(ValueError, match="n_particles"):
+        FILTERS["rbpf"](s.mu, s.rho, s.prior.mean, s.prior.cov, rng=0, n_particles=1)
+    with pytest.raises(ValueError, match="replicas"):
+        FILTERS["rbpf"](s.mu, s.rho, s.prior.mean, s.prior.cov, rng=0, replicas=0)

@@ -369,3 +369,48 @@ def test_study_refuses_filters_that_cannot_run_on_the_frames_or_process_noise():
         study.study(trials=5, names=("ekf", "particle"), frames=5, process_noise=0.01)
     with pytest.raises(ValueError, match="frames must be from 3"):
         study.study(trials=5, names=("ekf",), frames=2)
+
+
+def test_rao_blackwellised_filter_is_scored_by_its_mixture_and_tracks_the_optimal_filter():
+    """The RBPF's scores use its mixture: its mean and covariance, the particles' step
+    function as the depth's CDF, the Gaussian mixture's as the velocity's; they lie near
+    the optimal filter's (within its Monte Carlo error), and so does its depth density."""
+    trials = study.simulate(SCENARIOS["fig2"].c, rho=0.005, n=6, rng=np.random.default_rng(1))
+    out = study.run_filters(
+        trials, ("optimal", "rbpf"), rng=np.random.default_rng(2), n_particles=1000
+    )
+    o, r = out["optimal"], out["rbpf"]
+    again = FILTERS["rbpf"](
+        trials.mu,
+        trials.rho,
+        trials.prior_mean,
+        trials.prior_cov,
+        rng=np.random.default_rng(2),
+        n_particles=1000,
+    )
+    t = trials.truths
+    assert_allclose(r.velocity_cdf, again.detail.velocity_cdf(t[:, 2]), rtol=1e-12)
+    W, depths, _, _ = again.detail.pooled()
+    assert_allclose(r.depth_cdf, np.sum(W * (depths <= t[:, 1:2]), axis=1), rtol=1e-12)
+    assert np.array_equal(r.mean, again.mean) and np.array_equal(r.cov, again.cov)
+    # within a few of its own Monte Carlo errors (four replicas: Student t with 3 df)
+    z = (again.depth_mean - o.mean[:, 1]) / again.depth_error
+    assert np.all(np.abs(z) < 6), z
+    assert_allclose(r.depth_cdf, o.depth_cdf, atol=0.1)
+    assert_allclose(r.velocity_cdf, o.velocity_cdf, atol=0.1)
+    assert np.all(r.hellinger < 0.2) and np.median(r.hellinger) < 0.1
+
+
+def test_study_command_scores_the_rao_blackwellised_filter(capsys):
+    argv = ["study", "--trials", "5", "--particles", "300", "--json"]
+    assert main([*argv, "--filters", "optimal", "rbpf"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert list(data["filters"]) == ["optimal", "rbpf"]
+    assert 0 <= data["filters"]["rbpf"]["hellinger_depth"]["mean"] < 0.2
+    more = ["--frames", "5", "--process-noise", "0.01"]
+    assert main([*argv, *more, "--filters", "optimal", "rbpf"]) == 0
+    assert json.loads(capsys.readouterr().out)["frames"] == 5
+    # a filter that cannot take the process noise is refused in one line
+    assert main([*argv, *more, "--filters", "resample_move"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "resample_move cannot run" in err[0]
