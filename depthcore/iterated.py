@@ -31,7 +31,10 @@ textbook (Prince, section 19.3 [prince2012]_) names two remedies:
   at the mode, is a Laplace (Gauss-Newton) approximation there. The paper's
   ``p_s`` is the same kind of approximation taken at the noise-free solution
   ``c`` instead of at the mode, with the likelihood's and the prior's
-  Gaussians multiplied.
+  Gaussians multiplied. With process noise the unknowns are the whole
+  trajectory, the accelerations among them with their prior ``N(0, q**2)``
+  (:func:`smoother`), and the fixed point is the mode of the trajectory's
+  posterior.
 
 Both iterations are damped only where they must be: a step that would put the
 point behind the camera (depth ``<= 0`` at some frame), or that would increase
@@ -53,7 +56,12 @@ import numpy as np
 
 from . import _checks, model
 from .ekf import predict
-from .second_order import damped_step
+from .second_order import (
+    _final_state_map,
+    _trajectory_map,
+    _trajectory_residuals,
+    damped_step,
+)
 
 #: Largest number of Gauss-Newton iterations of one update or smoother.
 MAX_ITERATIONS = 100
@@ -203,22 +211,46 @@ def _residuals_and_jacobian(x1, K: int):
 
 
 class SmootherResult(NamedTuple):
-    """The iterated extended Kalman smoother's estimate of the state at the last frame."""
+    """The iterated extended Kalman smoother's estimate of the state at the last frame.
+
+    ``mean`` (..., 3) and ``cov`` (..., 3, 3) at frame ``K``; ``iterations``
+    and ``converged`` (...) of the Gauss-Newton passes; ``trajectory``
+    (..., K, 3), the smoothed states at every frame (the posterior's mode).
+    """
 
     mean: np.ndarray
     cov: np.ndarray
     iterations: np.ndarray
     converged: np.ndarray
+    trajectory: np.ndarray | None = None
 
 
 def smoother(
-    mu, rho, prior_mean, prior_cov, max_iterations: int = MAX_ITERATIONS
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    max_iterations: int = MAX_ITERATIONS,
 ) -> SmootherResult:
-    """The iterated extended Kalman smoother with no process noise, batched.
+    """The iterated extended Kalman smoother (textbook 19.3), batched.
 
     Gauss-Newton passes over all ``K`` bearings, each relinearising every
-    measurement about the current trajectory ``G^{k-1} x_1`` (see the module
-    docstring), starting from the prior mean.
+    measurement about the current trajectory, starting from the prior mean.
+    With no process noise the trajectory is ``G^{k-1} x_1`` (see the module
+    docstring). With process noise ``q > 0`` the unknowns are the whole
+    trajectory, ``z = (x_1, y_1, v_1, a_1 .. a_{K-1})`` with the accelerations'
+    prior ``N(0, q**2)``, and each pass is one Gauss-Newton step on
+
+        |L^{-1} (x_1 - m)|**2 + sum_k (mu_k - x_k / y_k)**2 / rho**2 + sum_k a_k**2 / q**2
+
+    (``P = L L^T``), the stacked whitened residuals of the prior, the bearings
+    and the accelerations; one such step is one linearised Rauch-Tung-Striebel
+    smoothing pass about the previous smoothed trajectory [bell1994]_. Its
+    fixed point is the mode (MAP) of the trajectory's posterior; the
+    covariance at frame ``K`` is the Gauss-Newton (Laplace) one there,
+    ``T (M^T M)^{-1} T^T`` with ``M`` the stacked Jacobian and ``T`` the
+    linear map from ``z`` to the state at frame ``K``.
 
     Parameters
     ----------
@@ -228,13 +260,21 @@ def smoother(
     prior_mean : array_like, shape (..., 3)
         Prior mean of the state at time 1; its depth must be positive.
     prior_cov : array_like, shape (3, 3)
+    process_noise : float
+        ``q >= 0``, the SD of the velocity's change per frame.
     max_iterations : int
 
     Returns
     -------
     SmootherResult
         Mean (..., 3) and covariance (..., 3, 3) of the state at frame ``K``:
-        the mode of the posterior and the Gauss-Newton covariance there.
+        the mode of the posterior and the Gauss-Newton covariance there; the
+        smoothed trajectory (..., K, 3).
+
+    References
+    ----------
+    .. [bell1994] B. M. Bell, "The iterated Kalman smoother as a Gauss-Newton
+       method", SIAM J. Optimization 4(3), 1994.
     """
     mu = _checks.finite_array(mu, "mu")
     if mu.ndim < 1 or mu.shape[-1] < 1:
@@ -246,6 +286,9 @@ def smoother(
     if not np.all(m[..., 1] > 0):
         raise ValueError("prior_mean must have a positive depth to start the smoother from it")
     P = _checks.covariance(prior_cov, "prior_cov", 3)
+    q = _checks.nonnegative_scalar(process_noise, "process_noise")
+    if q > 0:
+        return _smoother_with_noise(mu, rho, m, P, q, max_iterations)
     P_chol = np.linalg.cholesky(P)
     P_inv = np.linalg.inv(P)
 
@@ -281,6 +324,73 @@ def smoother(
     cov1 = np.linalg.inv(P_inv + np.swapaxes(Jw, -1, -2) @ Jw)
     FK = model.G_linear(K - 1)
     cov = FK @ cov1 @ FK.T
+    trajectory = np.stack([model.G(x, k) for k in range(K)], axis=-2)
     return SmootherResult(
-        model.G(x, K - 1), 0.5 * (cov + np.swapaxes(cov, -1, -2)), iterations, ~active
+        model.G(x, K - 1), 0.5 * (cov + np.swapaxes(cov, -1, -2)), iterations, ~active, trajectory
     )
+
+
+def trajectory_residuals(z, mu, rho, prior_mean, prior_cov, q):
+    """The trajectory's stacked whitened residuals (negative log posterior) and Jacobian.
+
+    ``z = (x_1, y_1, v_1, a_1 .. a_{K-1})`` (K + 2,); the residuals (2 K + 2,)
+    are ``L^{-1} (x_1 - m)``, ``(x_k / y_k - mu_k) / rho`` and ``a_k / q``
+    (:func:`smoother`, textbook 19.3): half their squared norm is the negative
+    log posterior up to a constant.
+
+    Returns
+    -------
+    r : ndarray, shape (2 K + 2,)
+    M : ndarray, shape (2 K + 2, K + 2)
+    """
+    K = mu.shape[-1]
+    L_inv = np.linalg.inv(np.linalg.cholesky(prior_cov))
+    bearing, J = _trajectory_residuals(z, mu, _trajectory_map(K))
+    M = np.zeros((2 * K + 2, K + 2))
+    M[:3, :3] = L_inv
+    M[3 : K + 3] = J / rho
+    M[K + 3 :, 3:] = np.eye(K - 1) / q
+    r = np.concatenate([L_inv @ (z[:3] - prior_mean), bearing / rho, z[3:] / q])
+    return r, M
+
+
+def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:
+    """:func:`smoother` for ``q > 0``: Gauss-Newton over the trajectory, one problem at a time."""
+    K = mu.shape[-1]
+    batch = mu.shape[:-1]
+    T, offset = _final_state_map(K)
+    D = _trajectory_map(K)
+    j = np.arange(K, dtype=float)
+    mean = np.empty(batch + (3,))
+    cov = np.empty(batch + (3, 3))
+    trajectory = np.empty(batch + (K, 3))
+    iterations = np.zeros(batch, dtype=int)
+    converged = np.zeros(batch, dtype=bool)
+    for b in np.ndindex(*batch):
+
+        def objective(z, b=b):
+            r, _ = trajectory_residuals(
+                np.where(z[..., 1:2] > 0, z, 1.0)[0], mu[b], rho[b], m[b], P, q
+            )
+            return np.where(z[..., 1] > 0, np.sum(r**2), np.inf)
+
+        z = np.concatenate([m[b], np.zeros(K - 1)])
+        f = objective(z[None])
+        for _ in range(max_iterations):
+            r, M = trajectory_residuals(z, mu[b], rho[b], m[b], P, q)
+            step = np.linalg.lstsq(M, -r, rcond=None)[0]
+            z_new, f = damped_step(z[None], step[None], f, objective)
+            iterations[b] += 1
+            moved = np.linalg.norm(M @ (z_new[0] - z))
+            z = z_new[0]
+            if not moved > STEP_TOL:
+                converged[b] = True
+                break
+        _, M = trajectory_residuals(z, mu[b], rho[b], m[b], P, q)
+        R_inv = np.linalg.inv(np.linalg.qr(M, mode="r"))
+        c = T @ R_inv @ R_inv.T @ T.T
+        mean[b] = T @ z + offset
+        cov[b] = 0.5 * (c + c.T)
+        v = z[2] + np.concatenate([[0.0], np.cumsum(z[3:])])
+        trajectory[b] = np.stack([z[0] + j * z[2] + D @ z[3:], z[1] + j, v], axis=-1)
+    return SmootherResult(mean, cov, iterations, converged, trajectory)

@@ -319,6 +319,20 @@ def _trajectory_map(n_frames: int) -> np.ndarray:
     return np.maximum(k - i, 0).astype(float)
 
 
+def _final_state_map(n_frames: int):
+    """``T`` (3, N + 2) and ``offset`` (3,) with the state at frame ``N`` equal to ``T z + offset``.
+
+    ``z = (x_1, y_1, v_1, a_1 .. a_{N-1})``: ``x_N = x_1 + (N - 1) v_1 + sum_i (N - 1 - i) a_i``,
+    ``y_N = y_1 + N - 1``, ``v_N = v_1 + sum_i a_i``.
+    """
+    D = _trajectory_map(n_frames)
+    T = np.zeros((3, n_frames + 2))
+    T[0, 0], T[0, 2], T[0, 3:] = 1.0, n_frames - 1.0, D[-1]
+    T[1, 1] = 1.0
+    T[2, 2], T[2, 3:] = 1.0, 1.0
+    return T, np.array([0.0, n_frames - 1.0, 0.0])
+
+
 def _trajectory_residuals(z, mu, D):
     """Bearing residuals (N,) and their Jacobian (N, N + 2) of ``z = (x_1, y_1, v_1, a)``."""
     n_frames = mu.shape[-1]
@@ -367,11 +381,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
     L = np.broadcast_to(np.linalg.cholesky(np.asarray(prior_cov, dtype=float)), (B, 3, 3))
     m = np.broadcast_to(np.asarray(prior_mean, dtype=float), (B, 3))
     start = model.G(minimiser(mu), 1 - n_frames)
-    T = np.zeros((3, dim))
-    T[0, 0], T[0, 2], T[0, 3:] = 1.0, n_frames - 1.0, D[-1]
-    T[1, 1] = 1.0
-    T[2, 2], T[2, 3:] = 1.0, 1.0
-    offset = np.array([0.0, n_frames - 1.0, 0.0])
+    T, offset = _final_state_map(n_frames)
     penalty = np.zeros((n_frames - 1, dim))
     penalty[:, 3:] = np.eye(n_frames - 1) / q
     means, covs = np.empty((B, 3)), np.empty((B, 3, 3))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
-from scipy.optimize import minimize
+from scipy.optimize import least_squares, minimize
 
 from depthcore import ekf, iterated, model, optimal
 from depthcore.scenarios import SCENARIOS
@@ -174,3 +174,125 @@ def test_one_iteration_per_update_is_the_ekf_for_any_frames_and_process_noise(n_
     e = ekf.run(mu, 2e-3, prior_mean, prior_cov, process_noise=q)
     assert_allclose(means, e.means, rtol=1e-9)
     assert_allclose(covs, e.covs, rtol=1e-6, atol=1e-9 * np.abs(e.covs).max())
+
+
+# --- the iterated extended Kalman smoother with process noise (textbook 19.3) ---------
+
+
+def _noisy_track(q=0.02, frames=8, seed=3):
+    from depthcore import bank
+    from depthcore.gaussian import paper_prior
+    from depthcore.scenarios import RHO_200
+
+    s = SCENARIOS["fig2"]
+    sim = bank.simulate(model.G(s.c, -2), frames, RHO_200, q, np.random.default_rng(seed))
+    return sim.mu, RHO_200, paper_prior(s.c)
+
+
+def _negative_log_posterior_residuals(z, mu, rho, prior, q):
+    """Written from the model alone: the recursion x_{k+1} = x_k + v_k, y_{k+1} = y_k + 1,
+    v_{k+1} = v_k + a_k run frame by frame, the prior whitened by its Cholesky factor."""
+    state = z[:3].copy()
+    bearings = []
+    for k in range(len(mu)):
+        bearings.append(state[0] / state[1])
+        if k < len(mu) - 1:
+            state = np.array([state[0] + state[2], state[1] + 1.0, state[2] + z[3 + k]])
+    L = np.linalg.cholesky(prior.cov)
+    return np.concatenate(
+        [
+            np.linalg.solve(L, z[:3] - prior.mean),
+            (np.array(bearings) - mu) / rho,
+            z[3:] / q,
+        ]
+    )
+
+
+def _as_z(trajectory):
+    """(x_1, y_1, v_1, a_1 .. a_{K-1}) of a trajectory (K, 3)."""
+    return np.concatenate([trajectory[0], np.diff(trajectory[:, 2])])
+
+
+@pytest.mark.parametrize("q", [0.02, 0.2])
+def test_smoother_with_process_noise_is_the_map_of_the_trajectory_gauss_newton(q):
+    """Its fixed point is the MAP of the trajectory's posterior (textbook 19.3, Gauss-Newton):
+    scipy's least_squares on independently written stacked residuals, from another start,
+    finds the same trajectory, and the finite-difference gradient vanishes there."""
+    mu, rho, prior = _noisy_track(q)
+    sm = iterated.smoother(mu, rho, prior.mean, prior.cov, process_noise=q)
+    assert sm.converged and sm.trajectory.shape == (len(mu), 3)
+    assert_allclose(sm.trajectory[-1], sm.mean, rtol=1e-12)
+    z = _as_z(sm.trajectory)
+
+    def resid(w):
+        return _negative_log_posterior_residuals(w, mu, rho, prior, q)
+
+    start = z + np.concatenate([[0.3, 0.5, -0.05], np.zeros(len(mu) - 1)])
+    best = least_squares(resid, start, xtol=1e-15, ftol=1e-15, gtol=1e-15, method="lm")
+
+    def f(w):
+        return 0.5 * np.sum(resid(w) ** 2)
+
+    # the objective is flat to rounding within about sqrt(eps) relative of the mode
+    assert f(z) <= f(best.x) * (1 + 1e-13)
+    assert_allclose(z, best.x, rtol=1e-6, atol=1e-9)
+
+    h = 1e-6
+    grad = np.array([(f(z + e) - f(z - e)) / (2 * h) for e in h * np.eye(len(z))])
+    # the scale of the terms of the gradient: |J^T| |r| with J taken by differences
+    J = np.stack([(resid(z + e) - resid(z - e)) / (2 * h) for e in h * np.eye(len(z))], axis=1)
+    assert np.max(np.abs(grad)) < 1e-6 * np.max(np.abs(J).T @ np.abs(resid(z)))
+
+
+def test_smoother_with_process_noise_covariance_is_the_gauss_newton_inverse():
+    """cov = T (M^T M)^-1 T^T at the mode, M the Jacobian of the stacked residuals taken
+    by central differences of the independently written residuals, T the map to frame K."""
+    q = 0.05
+    mu, rho, prior = _noisy_track(q, frames=6)
+    sm = iterated.smoother(mu, rho, prior.mean, prior.cov, process_noise=q)
+    z = _as_z(sm.trajectory)
+    h = 1e-6
+    M = np.stack(
+        [
+            (
+                _negative_log_posterior_residuals(z + e, mu, rho, prior, q)
+                - _negative_log_posterior_residuals(z - e, mu, rho, prior, q)
+            )
+            / (2 * h)
+            for e in h * np.eye(len(z))
+        ],
+        axis=1,
+    )
+    r, M_analytic = iterated.trajectory_residuals(z, mu, rho, prior.mean, prior.cov, q)
+    assert_allclose(M_analytic, M, rtol=1e-6, atol=1e-6)
+    assert_allclose(r, _negative_log_posterior_residuals(z, mu, rho, prior, q), rtol=1e-12)
+    K = len(mu)
+    T = np.zeros((3, K + 2))  # x_K, y_K, v_K from (x_1, y_1, v_1, a)
+    T[0, 0], T[0, 2], T[0, 3:] = 1.0, K - 1.0, K - 2.0 - np.arange(K - 1)
+    T[1, 1], T[2, 2], T[2, 3:] = 1.0, 1.0, 1.0
+    assert_allclose(sm.cov, T @ np.linalg.inv(M.T @ M) @ T.T, rtol=1e-5)
+
+
+def test_smoother_with_process_noise_reduces_to_the_one_without_as_q_vanishes():
+    mu, rho, prior = _noisy_track(0.02)
+    none = iterated.smoother(mu, rho, prior.mean, prior.cov)
+    for q, tol in ((1e-5, 1e-6), (1e-8, 1e-9)):
+        sm = iterated.smoother(mu, rho, prior.mean, prior.cov, process_noise=q)
+        assert_allclose(sm.mean, none.mean, rtol=tol)
+        assert_allclose(sm.cov, none.cov, rtol=100 * tol)
+        assert_allclose(sm.trajectory, none.trajectory, rtol=tol)
+    # and the process noise matters where it is not small
+    big = iterated.smoother(mu, rho, prior.mean, prior.cov, process_noise=0.05)
+    assert big.cov[2, 2] > 2 * none.cov[2, 2]
+
+
+def test_smoother_with_process_noise_batched_equals_looped_and_refuses_bad_noise():
+    mu, rho, prior = _noisy_track(0.02)
+    both = np.stack([mu, mu + 0.002])
+    sm = iterated.smoother(both, rho, prior.mean, prior.cov, process_noise=0.02)
+    for i in range(2):
+        one = iterated.smoother(both[i], rho, prior.mean, prior.cov, process_noise=0.02)
+        assert_allclose(sm.mean[i], one.mean, rtol=1e-12)
+        assert_allclose(sm.cov[i], one.cov, rtol=1e-12)
+    with pytest.raises(ValueError, match="process_noise must be >= 0"):
+        iterated.smoother(mu, rho, prior.mean, prior.cov, process_noise=-0.1)
