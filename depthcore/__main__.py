@@ -193,14 +193,18 @@ def _cmd_study(args) -> str:
     if q > 0 and args.filters == list(_STUDY_FILTERS):  # the default: those that can run
         names = tuple(n for n in names if study.FILTERS[n].with_process_noise)
     if args.truth == [study.PRIOR_TRUTH]:
-        if args.frames != 3 or q > 0:
-            raise ValueError("truth: --truth prior runs the paper's three frames only")
         if args.prior == "paper":
             raise ValueError(
                 "prior: --truth prior needs a fixed prior (the paper's rule centres the prior "
                 "on each trial's own measurements, which is not a prior), got paper"
             )
-        result = study.prior_study(rho=args.rho, trials=args.trials, seed=args.seed)
+        result = study.prior_study(
+            rho=args.rho,
+            trials=args.trials,
+            seed=args.seed,
+            frames=args.frames,
+            process_noise=q,
+        )
         return json.dumps(result, indent=2) if args.json else report.format_prior_study(result)
     truth = None
     if args.truth is not None:

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _checks, model, optimal
+from . import _checks, bank, model, optimal
 
 #: Nominal levels of the central intervals whose coverage is reported.
 LEVELS = (0.5, 0.68, 0.8, 0.9, 0.95, 0.99)
@@ -71,9 +71,23 @@ class PriorDraws:
 
 
 def draw_from_prior(
-    prior_mean, prior_cov, rho: float, n: int, rng: np.random.Generator, max_rounds: int = 100
+    prior_mean,
+    prior_cov,
+    rho: float,
+    n: int,
+    rng: np.random.Generator,
+    max_rounds: int = 100,
+    frames: int = 3,
+    process_noise: float = 0.0,
 ) -> PriorDraws:
     """Draw ``n`` truths from ``N(m, P)`` with ``y_1 > 0`` and simulate their bearings.
+
+    With ``frames = N > 3`` or ``process_noise = q > 0`` each truth is
+    followed from frame 1 to frame ``N`` with accelerations ``a_k ~ N(0, q**2)``
+    (:func:`depthcore.bank.simulate`), and the truth kept is the state at
+    frame ``N``; the trials kept are those whose first three bearings have a
+    noise-free solution in front of the camera, a selection by the bearings
+    alone.
 
     Parameters
     ----------
@@ -89,10 +103,16 @@ def draw_from_prior(
     max_rounds : int
         Rejection rounds before giving up (a prior with almost no mass in front
         of the camera is refused).
+    frames : int
+        ``N``, from 3 to :data:`depthcore._checks.MAX_FRAMES`.
+    process_noise : float
+        ``q >= 0``.
 
     Returns
     -------
     PriorDraws
+        ``truth`` is the state at frame ``N`` (time 3 for the paper's problem),
+        ``mu`` the ``N`` bearings of each kept trial.
     """
     mean = _checks.finite_array(prior_mean, "prior_mean", (3,))
     chol = np.linalg.cholesky(_checks.covariance(prior_cov, "prior_cov", 3))
@@ -101,6 +121,7 @@ def draw_from_prior(
         raise ValueError(f"trials must be a positive integer, got {n!r}")
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    frames, q = _frames_and_noise(frames, process_noise)
     kept, behind = [], 0
     for _ in range(max_rounds):
         x1 = mean + rng.standard_normal((n, 3)) @ chol.T
@@ -115,10 +136,24 @@ def draw_from_prior(
             f"(y_1 > 0): {behind} of {behind + sum(len(k) for k in kept)} draws behind it"
         )
     x1 = np.concatenate(kept)[:n]
-    states = np.stack([model.G(x1, k) for k in range(3)], axis=1)
-    mu = model.project(states) + rho * rng.standard_normal((n, 3))
-    ok = _checks.valid_measurements(mu)  # the noise-free solution, Eq. (7), in front
-    return PriorDraws(model.G(x1[ok], 2), mu[ok], behind, int(np.sum(~ok)))
+    if frames == 3 and q == 0:
+        states = np.stack([model.G(x1, k) for k in range(3)], axis=1)
+        mu = model.project(states) + rho * rng.standard_normal((n, 3))
+        last = model.G(x1, 2)
+    else:
+        sim = bank.simulate(x1, frames, rho, q, rng)
+        mu, last = sim.mu, sim.states[:, -1, :]
+    ok = _checks.valid_measurements(mu[:, :3])  # the noise-free solution, Eq. (7), in front
+    return PriorDraws(last[ok], mu[ok], behind, int(np.sum(~ok)))
+
+
+def _frames_and_noise(frames, process_noise) -> tuple[int, float]:
+    """``frames`` (3 to ``MAX_FRAMES``) and ``process_noise`` (>= 0), checked."""
+    if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)):
+        raise ValueError(f"frames must be an integer, got {frames!r}")
+    if not 3 <= frames <= _checks.MAX_FRAMES:
+        raise ValueError(f"frames must be from 3 to {_checks.MAX_FRAMES}, got {frames}")
+    return int(frames), _checks.nonnegative_scalar(process_noise, "process_noise")
 
 
 def coverage(pit, levels=LEVELS) -> np.ndarray:
@@ -198,8 +233,17 @@ def self_calibration(
     rng: np.random.Generator,
     filter_rho: float | None = None,
     chunk: int = 256,
+    frames: int = 3,
+    process_noise: float = 0.0,
+    filter_process_noise: float | None = None,
 ) -> SelfCalibration:
     """Simulation-based calibration of the optimal filter, Eqs. (6) and (13)-(16).
+
+    For the paper's three frames with no process noise the filter is
+    :func:`depthcore.optimal.batch_marginals`; for ``frames = N > 3`` or
+    ``process_noise > 0`` it is the exact N-frame filter, the bank of Kalman
+    filters over depth (:func:`depthcore.bank.posterior`), and the PIT values
+    are those of the depth and velocity at frame ``N``.
 
     Parameters
     ----------
@@ -216,19 +260,39 @@ def self_calibration(
         a miscalibrated filter, to show the check's power.
     chunk : int
         Trials integrated together (memory grows with it).
+    frames : int
+        ``N``, the bearings of each trial (see :func:`draw_from_prior`).
+    process_noise : float
+        ``q >= 0`` of the simulated tracks.
+    filter_process_noise : float, optional
+        Process noise the filter assumes; ``process_noise`` by default. Another
+        value makes a miscalibrated filter.
 
     Returns
     -------
     SelfCalibration
+        The PIT values are at frame ``N``.
     """
-    draws = draw_from_prior(prior_mean, prior_cov, rho, trials, rng)
+    frames, q = _frames_and_noise(frames, process_noise)
+    draws = draw_from_prior(prior_mean, prior_cov, rho, trials, rng, frames=frames, process_noise=q)
     filter_rho = rho if filter_rho is None else _checks.positive_scalar(filter_rho, "filter_rho")
+    filter_q = (
+        q
+        if filter_process_noise is None
+        else _checks.nonnegative_scalar(filter_process_noise, "filter_process_noise")
+    )
     depth, velocity = [], []
     for start in range(0, len(draws.mu), chunk):
         part = slice(start, start + chunk)
-        ref = optimal.batch_marginals(draws.mu[part], filter_rho, prior_mean, prior_cov)
-        depth.append(ref.depth_cdf(draws.truth[part, 1]))
-        velocity.append(ref.velocity_cdf(draws.truth[part, 2]))
+        truth = draws.truth[part]
+        if frames == 3 and q == 0 and filter_q == 0:
+            ref = optimal.batch_marginals(draws.mu[part], filter_rho, prior_mean, prior_cov)
+            depth.append(ref.depth_cdf(truth[:, 1]))
+            velocity.append(ref.velocity_cdf(truth[:, 2]))
+        else:
+            mx = bank.posterior(draws.mu[part], filter_rho, prior_mean, prior_cov, filter_q)
+            depth.append(mx.depth_cdf(truth[:, 1:2])[:, 0])
+            velocity.append(mx.velocity_cdf(truth[:, 2:3])[:, 0])
     return SelfCalibration(
         draws, float(rho), float(filter_rho), np.concatenate(depth), np.concatenate(velocity)
     )

@@ -578,16 +578,31 @@ def truth_study_texts(result: dict, prefix: str) -> dict:
     return out
 
 
+def _frames_text(result: dict) -> str:
+    """``"N frames, process noise q; "`` of a prior study beyond three frames, else ``""``."""
+    frames, q = result.get("frames", 3), result.get("process_noise", 0.0)
+    if frames == 3 and q == 0:
+        return ""
+    return f"{frames} frames, process noise {q:.6g}; "
+
+
+def _at_frame(result: dict) -> str:
+    """``" at frame N"`` of a prior study beyond the paper's problem, else ``""``."""
+    return f" at frame {result['frames']}" if _frames_text(result) else ""
+
+
 def format_prior_study(result: dict) -> str:
     """A plain-text table of :func:`depthcore.study.prior_study`'s result."""
     alpha = result["false_alarm"]
     lines = [
         f"truths drawn from the fixed prior N({vec(result['prior_mean'], 3)}, "
         f"{result['prior_cov'][0][0]:.6g} I) with the point in front of the camera; "
-        f"rho {result['rho']:.6g}, seed {result['seed']}: {result['valid_trials']} trials "
+        f"{_frames_text(result)}rho {result['rho']:.6g}, seed {result['seed']}: "
+        f"{result['valid_trials']} trials "
         f"({result['behind_camera_draws']} draws behind the camera redrawn, "
         f"{result['rejected_trials']} without a noise-free solution in front left out)",
-        "optimal filter: coverage of its central intervals (binomial SE in brackets)",
+        f"optimal filter{_at_frame(result)}: coverage of its central intervals "
+        "(binomial SE in brackets)",
     ]
     head = f"{'nominal':>8} {'depth':>16} {'velocity':>16}"
     lines += [head, "-" * len(head)]

@@ -646,8 +646,15 @@ def prior_study(
     seed=0,
     prior_scale: float = PAPER_PRIOR_SCALE,
     false_alarm: float = FALSE_ALARM,
+    frames: int = 3,
+    process_noise: float = 0.0,
 ) -> dict:
     """Self-calibration of the optimal filter over truths drawn from its fixed prior.
+
+    With ``frames = N > 3`` or ``process_noise = q > 0`` each truth is followed
+    from frame 1 to frame ``N`` with accelerations ``N(0, q**2)`` and the
+    exact N-frame filter (the bank of Kalman filters over depth) is checked at
+    frame ``N``.
 
     The prior is the study's ``prior="fixed"`` one: the paper's rule applied
     once to Figure 2's noise-free state ``c``, mean ``G^{-2} c = (c1 - 2 c3,
@@ -669,6 +676,10 @@ def prior_study(
     prior_scale : float
     false_alarm : float
         Rate, in (0, 1), at which the tests reject a calibrated filter.
+    frames : int
+        ``N``, from 3 to :data:`depthcore._checks.MAX_FRAMES`.
+    process_noise : float
+        ``q >= 0``.
 
     Returns
     -------
@@ -684,7 +695,15 @@ def prior_study(
     seed = _checks.seed_sequence(seed)
     mean = paper_prior_means(np.asarray(SCENARIOS["fig2"].c, dtype=float)[None])[0]
     cov = prior_scale * np.eye(3)
-    r = calibration.self_calibration(mean, cov, rho, trials, np.random.default_rng(seed))
+    r = calibration.self_calibration(
+        mean,
+        cov,
+        rho,
+        trials,
+        np.random.default_rng(seed),
+        frames=frames,
+        process_noise=process_noise,
+    )
     s = r.summary(CALIBRATION_LEVELS)
     n = s["trials"]
     levels = np.asarray(CALIBRATION_LEVELS)
@@ -696,6 +715,8 @@ def prior_study(
         "prior_cov": cov.tolist(),
         "seed": seed.entropy,
         "trials": int(trials),
+        "frames": int(frames),
+        "process_noise": float(process_noise),
         "valid_trials": n,
         "behind_camera_draws": r.draws.n_behind,
         "rejected_trials": r.draws.n_rejected,

@@ -213,3 +213,77 @@ def test_prior_calibration_texts_and_figure_show_the_result():
         [s[1, 1] - s[0, 1] for s in segs], 4 * np.asarray(r["coverage_se"]), rtol=1e-12
     )
     plt.close(fig)
+
+
+# --- N frames with process noise: the bank of Kalman filters at frame N ----------------
+
+
+def test_draws_over_n_frames_follow_the_motion_with_process_noise():
+    """The truth is the state at frame N of a track from a prior draw: its depth is
+    y_1 + N - 1 with y_1 > 0, the bearings are x_k / y_k plus noise of SD rho, and the
+    velocity has spread by q**2 per frame (N - 1 changes) beyond the prior's variance."""
+    q, frames = 0.1, 7
+    d = calibration.draw_from_prior(
+        PRIOR_MEAN,
+        PRIOR_COV,
+        RHO,
+        4000,
+        np.random.default_rng(0),
+        frames=frames,
+        process_noise=q,
+    )
+    assert d.mu.shape[1] == frames and np.all(d.truth[:, 1] > frames - 1)
+    # the velocity at frame N: N(0, 0.25 + (N - 1) q**2) truncated only through y_1
+    var = PRIOR_COV[2, 2] + (frames - 1) * q**2
+    assert abs(np.var(d.truth[:, 2]) / var - 1) < 5 * np.sqrt(2 / len(d.truth))
+    # the last bearing is the truth's projection plus noise
+    residual = d.mu[:, -1] - d.truth[:, 0] / d.truth[:, 1]
+    assert abs(np.std(residual) / RHO - 1.0) < 0.05
+
+
+def test_the_bank_is_calibrated_over_its_prior_at_frame_n_and_a_wrong_one_is_caught():
+    """Truths followed for 6 frames with q = 0.05: the bank's PIT values at frame 6 pass
+    KS and chi-square at 1e-3; a bank that assumes no process noise is caught by both."""
+    kw = dict(frames=6, process_noise=0.05)
+    r = calibration.self_calibration(
+        PRIOR_MEAN, PRIOR_COV, RHO, 150, np.random.default_rng(2), **kw
+    )
+    s = r.summary()
+    assert s["trials"] > 120
+    for q in ("depth", "velocity"):
+        assert s[q]["ks_pvalue"] > 1e-3 and s[q]["chi2_pvalue"] > 1e-3
+    wrong = calibration.self_calibration(
+        PRIOR_MEAN, PRIOR_COV, RHO, 150, np.random.default_rng(2), filter_process_noise=0.0, **kw
+    ).summary()
+    assert wrong["velocity"]["ks_pvalue"] < 1e-3 and wrong["velocity"]["chi2_pvalue"] < 1e-3
+    assert wrong["depth"]["coverage"][wrong["levels"].index(0.9)] < 0.8
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        ({"frames": 2}, "frames"),
+        ({"frames": 3.5}, "frames"),
+        ({"process_noise": -1}, "process_noise"),
+    ],
+)
+def test_frames_and_process_noise_are_checked(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        calibration.self_calibration(
+            PRIOR_MEAN, PRIOR_COV, RHO, 10, np.random.default_rng(0), **kwargs
+        )
+
+
+def test_command_line_truth_prior_over_n_frames(capsys):
+    import json
+
+    from depthcore.__main__ import main
+
+    argv = ["study", "--truth", "prior", "--trials", "30", "--frames", "5"]
+    assert main([*argv, "--process-noise", "0.02", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["frames"] == 5 and out["process_noise"] == 0.02
+    assert len(out["velocity"]["coverage"]) == len(out["levels"])
+    assert main([*argv, "--process-noise", "0.02"]) == 0
+    text = capsys.readouterr().out
+    assert "5 frames, process noise 0.02" in text and "at frame 5" in text

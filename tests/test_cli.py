@@ -234,7 +234,8 @@ def test_estimate_takes_more_frames_process_noise_and_smoothing(capsys):
             ["study", "--frames", "5", "--process-noise", "0.01", "--filters", "particle"],
             "names: particle cannot run",
         ),
-        (["study", "--truth", "prior", "--prior", "fixed", "--frames", "5"], "three frames only"),
+        (["study", "--truth", "prior", "--prior", "paper", "--frames", "5"], "needs a fixed prior"),
+        (["study", "--truth", "prior", "--frames", "5", "--process-noise", "-1"], "process_noise"),
     ],
 )
 def test_more_frames_refusals_are_one_line(args, message, capsys):
