@@ -518,32 +518,33 @@ def _mixture_moments(W, means, covs, depths):
 
     ``W`` (..., J) are probabilities; ``means`` (..., J, 2) and ``covs``
     (..., J, 2, 2) the Gaussians of ``(x, v)`` at each node; ``depths`` (..., J)
-    the node depths (known exactly given the node).
+    the node depths (known exactly given the node). The law of total
+    variance: the weighted covariance of the nodes' means plus their weighted
+    covariances.
     """
     shape = np.broadcast_shapes(W.shape, means.shape[:-1], depths.shape)
     W = np.broadcast_to(W, shape)
     W = W / np.sum(W, axis=-1, keepdims=True)
-    m = [np.broadcast_to(a, shape) for a in (means[..., 0], depths, means[..., 1])]
+    m = np.empty(shape[:-1] + (3,) + shape[-1:])  # (..., 3, J): x, y, v at each node
+    m[..., 0, :] = means[..., 0]
+    m[..., 1, :] = depths
+    m[..., 2, :] = means[..., 1]
     # about the most probable node: the sums then carry no multiple of a large depth
-    top = np.argmax(W, axis=-1)[..., None]
-    centre = [np.take_along_axis(a, top, axis=-1) for a in m]
-    mean = np.stack(
-        [c[..., 0] + np.sum(W * (a - c), axis=-1) for a, c in zip(m, centre, strict=True)],
-        axis=-1,
-    )
-    d = [a - mean[..., i, None] for i, a in enumerate(m)]
-    Wd = [W * a for a in d]
-    cov = np.empty(shape[:-1] + (3, 3))
-    for i in range(3):
-        for k in range(i, 3):
-            cov[..., i, k] = cov[..., k, i] = np.sum(Wd[i] * d[k], axis=-1)
+    top = np.argmax(W, axis=-1)[..., None, None]
+    centre = np.take_along_axis(m, top, axis=-1)  # (..., 3, 1)
+    d = m - centre
+    Wd = W[..., None, :] * d
+    shift = np.sum(Wd, axis=-1)  # (..., 3)
+    mean = centre[..., 0] + shift
+    # sum_j W_j (m_j - mean)(m_j - mean)^T = sum_j W_j d_j d_j^T - shift shift^T
+    cov = Wd @ np.swapaxes(d, -1, -2) - shift[..., :, None] * shift[..., None, :]
     covs = np.broadcast_to(covs, shape + (2, 2))
-    for (i, k), (ii, kk) in (((0, 0), (0, 0)), ((0, 2), (0, 1)), ((2, 2), (1, 1))):
-        extra = np.sum(W * covs[..., ii, kk], axis=-1)
-        cov[..., i, k] += extra
-        if i != k:
-            cov[..., k, i] += extra
-    return mean, cov
+    extra = (W[..., None, :] @ covs.reshape(shape + (4,)))[..., 0, :]  # (..., 4)
+    cov[..., 0, 0] += extra[..., 0]
+    cov[..., 0, 2] += extra[..., 1]
+    cov[..., 2, 0] += extra[..., 2]
+    cov[..., 2, 2] += extra[..., 3]
+    return mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
 
 
 class Smoothed(NamedTuple):
