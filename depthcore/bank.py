@@ -312,12 +312,17 @@ def _predict_lateral(s: _Lateral, q2) -> _Lateral:
 
 
 def _update_lateral(s: _Lateral, mu_k, y, rho2):
-    """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``: the state and the log likelihood."""
-    r = rho2 * y * y
+    """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``: the state and the log likelihood.
+
+    The log likelihood ``log N(mu_k; x / y, (a + r) / y**2)`` is computed as
+    ``-(log 2 pi + log((a + r) / y**2) + e g) / 2`` with ``g = e / (a + r)``.
+    """
+    yy = y * y
+    r = rho2 * yy
     total = s.a + r
     e = mu_k * y - s.x
-    log_likelihood = -0.5 * (_LOG_2PI + np.log(total) + e * e / total) + np.log(y)
     g = e / total
+    log_likelihood = -0.5 * (_LOG_2PI + np.log(total / yy) + e * g)
     f = r / total
     a, b, det = s.a * f, s.b * f, s.det * f
     return _Lateral(s.x + s.a * g, s.v + s.b * g, a, b, (det + b * b) / a, det), log_likelihood
