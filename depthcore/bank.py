@@ -521,15 +521,15 @@ def _append(history: kalman.FilterResult, pred, upd) -> kalman.FilterResult:
 def _mixture_moments(W, means, covs, depths):
     """Mean (..., 3) and covariance (..., 3, 3) of ``(x, y, v)`` under the node mixture.
 
-    ``W`` (..., J) are probabilities; ``means`` (..., J, 2) and ``covs``
-    (..., J, 2, 2) the Gaussians of ``(x, v)`` at each node; ``depths`` (..., J)
-    the node depths (known exactly given the node). The law of total
-    variance: the weighted covariance of the nodes' means plus their weighted
-    covariances.
+    ``W`` (..., J) are weights >= 0 (probabilities once normalised);
+    ``means`` (..., J, 2) and ``covs`` (..., J, 2, 2) the Gaussians of
+    ``(x, v)`` at each node; ``depths`` (..., J) the node depths (known
+    exactly given the node). The law of total variance: the weighted
+    covariance of the nodes' means plus their weighted covariances.
     """
     shape = np.broadcast_shapes(W.shape, means.shape[:-1], depths.shape)
     W = np.broadcast_to(W, shape)
-    W = W / np.sum(W, axis=-1, keepdims=True)
+    total = np.sum(W, axis=-1)[..., None]  # W need not be normalised: the sums are divided
     m = np.empty(shape[:-1] + (3,) + shape[-1:])  # (..., 3, J): x, y, v at each node
     m[..., 0, :] = means[..., 0]
     m[..., 1, :] = depths
@@ -539,12 +539,13 @@ def _mixture_moments(W, means, covs, depths):
     centre = np.take_along_axis(m, top, axis=-1)  # (..., 3, 1)
     d = m - centre
     Wd = W[..., None, :] * d
-    shift = np.sum(Wd, axis=-1)  # (..., 3)
+    shift = np.sum(Wd, axis=-1) / total  # (..., 3)
     mean = centre[..., 0] + shift
     # sum_j W_j (m_j - mean)(m_j - mean)^T = sum_j W_j d_j d_j^T - shift shift^T
-    cov = Wd @ np.swapaxes(d, -1, -2) - shift[..., :, None] * shift[..., None, :]
+    outer = shift[..., :, None] * shift[..., None, :]
+    cov = (Wd @ np.swapaxes(d, -1, -2)) / total[..., None] - outer
     covs = np.broadcast_to(covs, shape + (2, 2))
-    extra = (W[..., None, :] @ covs.reshape(shape + (4,)))[..., 0, :]  # (..., 4)
+    extra = (W[..., None, :] @ covs.reshape(shape + (4,)))[..., 0, :] / total  # (..., 4)
     cov[..., 0, 0] += extra[..., 0]
     cov[..., 0, 2] += extra[..., 1]
     cov[..., 2, 0] += extra[..., 2]
@@ -866,6 +867,11 @@ def mixture(bank: Bank, weights) -> Mixture:
         ) from None
     with np.errstate(divide="ignore"):
         log_weights = np.log(weights)
+    return _mixture(bank, log_weights)
+
+
+def _mixture(bank: Bank, log_weights) -> Mixture:
+    """:func:`mixture` from the checked log quadrature weights (``-inf`` for a zero weight)."""
     a = bank.log_weight + log_weights
     top = np.max(a, axis=-1, keepdims=True)  # finite: a positive weight per problem
     terms = np.exp(a - top)
@@ -1214,8 +1220,7 @@ def update(post: Mixture, mu_next) -> Mixture:
     if post.bank.n_frames >= MAX_FRAMES:
         raise ValueError(f"mu_next: at most {MAX_FRAMES} frames")
     stepped = step(post.bank, np.broadcast_to(mu_next, post.log_normaliser.shape))
-    shift = np.max(np.where(np.isfinite(post.log_weights), post.log_weights, -np.inf), -1)
-    new = _shifted(mixture(stepped, np.exp(post.log_weights - shift[:, None])), shift)
+    new = _mixture(stepped, post.log_weights)
     err, floor, free = _resolution(new)
     rtol = post.rtol
     ok = (
