@@ -1174,7 +1174,12 @@ def _resolution(post: Mixture):
 
 
 def _pad(a, J: int, axis: int, value):
-    """``a`` padded with ``value`` along ``axis`` (counted from the end of the batch) to ``J``."""
+    """``a`` padded with ``value`` along ``axis`` (counted from the end of the batch) to ``J``.
+
+    ``a`` itself, not a copy, when it has ``J`` already.
+    """
+    if a.shape[axis] == J:
+        return a
     width = [(0, 0)] * a.ndim
     width[axis] = (0, J - a.shape[axis])
     return np.pad(a, width, constant_values=value)
@@ -1262,9 +1267,9 @@ def _replace_rows(post: Mixture, rows) -> Mixture:
     fb = fresh.bank
 
     def merge(old, new, axis, value):
-        old, new = _pad(old, J, axis, value), _pad(new, J, axis, value)
-        out = old.copy()
-        out[idx] = new
+        # one copy of the old rows: padding makes one, and a copy is needed only without it
+        out = _pad(old, J, axis, value) if old.shape[axis] < J else old.copy()
+        out[idx] = _pad(new, J, axis, value)
         return out
 
     bank = b._replace(
