@@ -1102,32 +1102,31 @@ def _concatenate(parts) -> Mixture:
     )
 
 
-def _squeeze(post: Mixture) -> Mixture:
-    """A batch of one as a single problem (batch shape ``()``)."""
+def _each_array(post: Mixture, take) -> Mixture:
+    """``post`` with ``take`` applied to every per-problem array (not ``rtol``)."""
     b = post.bank
-    bank = Bank(
-        b.nodes[0],
-        b.mean[0],
-        b.cov[0],
-        b.log_weight[0],
-        b.mu[0],
-        b.rho[0],
-        b.q[0],
-        b.prior_mean[0],
-        b.prior_cov[0],
-        None if b.history is None else kalman.FilterResult(*(a[0] for a in b.history)),
-    )
+    history = None if b.history is None else kalman.FilterResult(*(take(a) for a in b.history))
     return Mixture(
-        bank,
-        post.log_weights[0],
-        post.probabilities[0],
-        post.log_normaliser[0],
-        post.mean[0],
-        post.cov[0],
-        post.depth_error[0],
-        post.velocity_error[0],
+        Bank(*(take(a) for a in b[:-1]), history),
+        *(
+            take(getattr(post, name))
+            for name in (
+                "log_weights",
+                "probabilities",
+                "log_normaliser",
+                "mean",
+                "cov",
+                "depth_error",
+                "velocity_error",
+            )
+        ),
         post.rtol,
     )
+
+
+def _squeeze(post: Mixture) -> Mixture:
+    """A batch of one as a single problem (batch shape ``()``)."""
+    return _each_array(post, lambda a: a[0])
 
 
 #: An end node of a placed grid may carry at most this log probability below the largest
@@ -1303,30 +1302,7 @@ def _full(values, idx, rows):
 
 def _batch_of_one(post: Mixture) -> Mixture:
     """A single problem as a batch of one."""
-    b = post.bank
-    bank = Bank(
-        b.nodes[None],
-        b.mean[None],
-        b.cov[None],
-        b.log_weight[None],
-        b.mu[None],
-        np.reshape(b.rho, (1,)),
-        np.reshape(b.q, (1,)),
-        b.prior_mean[None],
-        b.prior_cov[None],
-        None if b.history is None else kalman.FilterResult(*(a[None] for a in b.history)),
-    )
-    return Mixture(
-        bank,
-        post.log_weights[None],
-        post.probabilities[None],
-        np.reshape(post.log_normaliser, (1,)),
-        post.mean[None],
-        post.cov[None],
-        np.reshape(post.depth_error, (1,)),
-        np.reshape(post.velocity_error, (1,)),
-        post.rtol,
-    )
+    return _each_array(post, lambda a: np.asarray(a)[None])
 
 
 # --- simulation ------------------------------------------------------------------------
