@@ -22,7 +22,10 @@ MAX_FRAMES = 1_000
 
 
 def finite_array(value, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
-    """Return ``value`` as a float array, checking shape and finiteness."""
+    """Return ``value`` as a float array, checking shape and finiteness.
+
+    A non-finite array is refused with its values, or with their count beyond ten entries.
+    """
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -30,7 +33,11 @@ def finite_array(value, name: str, shape: tuple[int, ...] | None = None) -> np.n
     if shape is not None and arr.shape != shape:
         raise ValueError(f"{name} must have shape {shape}, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+        if arr.size <= 10:
+            raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+        raise ValueError(
+            f"{name} must be finite, got {int(np.sum(~np.isfinite(arr)))} non-finite entries"
+        )
     return arr
 
 

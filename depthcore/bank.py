@@ -124,7 +124,7 @@ class Bank(NamedTuple):
 
 
 def _nodes(nodes) -> np.ndarray:
-    nodes = _finite(nodes, "nodes")
+    nodes = _checks.finite_array(nodes, "nodes")
     if nodes.ndim < 1 or nodes.shape[-1] < 1:
         raise ValueError(f"nodes must have shape (..., J) with J >= 1, got shape {nodes.shape}")
     if not np.all(nodes > 0):
@@ -135,23 +135,11 @@ def _nodes(nodes) -> np.ndarray:
     return nodes
 
 
-def _finite(value, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric, got {type(value).__name__}") from exc
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(
-            f"{name} must be finite, got {int(np.sum(~np.isfinite(arr)))} non-finite entries"
-        )
-    return arr
-
-
 def _prior(prior_mean, prior_cov):
-    prior_mean = _finite(prior_mean, "prior_mean")
+    prior_mean = _checks.finite_array(prior_mean, "prior_mean")
     if prior_mean.ndim < 1 or prior_mean.shape[-1] != 3:
         raise ValueError(f"prior_mean must have shape (..., 3), got shape {prior_mean.shape}")
-    prior_cov = _finite(prior_cov, "prior_cov")
+    prior_cov = _checks.finite_array(prior_cov, "prior_cov")
     if prior_cov.ndim < 2 or prior_cov.shape[-2:] != (3, 3):
         raise ValueError(f"prior_cov must have shape (..., 3, 3), got shape {prior_cov.shape}")
     # kalman's check: symmetric positive definite, batched
@@ -160,17 +148,17 @@ def _prior(prior_mean, prior_cov):
 
 
 def _noise(rho, q):
-    rho = _finite(rho, "rho")
+    rho = _checks.finite_array(rho, "rho")
     if not np.all(rho > 0):
         raise ValueError(f"rho must be positive, got minimum {float(np.min(rho)):.6g}")
-    q = _finite(q, "q")
+    q = _checks.finite_array(q, "q")
     if not np.all(q >= 0):
         raise ValueError(f"q must be >= 0, got minimum {float(np.min(q)):.6g}")
     return rho, q
 
 
 def _bearings(mu) -> np.ndarray:
-    mu = _finite(mu, "mu")
+    mu = _checks.finite_array(mu, "mu")
     if mu.ndim < 1 or mu.shape[-1] < 1:
         raise ValueError(f"mu must have shape (..., N) with N >= 1, got shape {mu.shape}")
     return mu
@@ -444,7 +432,7 @@ def step(bank: Bank, mu_next) -> Bank:
     """
     if not isinstance(bank, Bank):
         raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")
-    mu_next = _finite(mu_next, "mu_next")
+    mu_next = _checks.finite_array(mu_next, "mu_next")
     _batch(bank=bank.log_weight.shape[:-1], mu_next=mu_next.shape)
     N = bank.n_frames
     if bank.history is None:  # the closed form of lateral_filter
@@ -652,7 +640,7 @@ class Mixture:
 
     def _query(self, value, name):
         """Queries as (batch..., K) and a function restoring the caller's shape."""
-        value = _finite(value, name)
+        value = _checks.finite_array(value, name)
         batch = self.log_normaliser.shape
         if batch == ():
             return value.reshape(-1), (lambda out: out.reshape(value.shape))
@@ -822,7 +810,7 @@ class Mixture:
 
 
 def _positive_scalar(value, name: str) -> float:
-    arr = _finite(value, name)
+    arr = _checks.finite_array(value, name)
     if arr.ndim != 0 or not arr > 0:
         raise ValueError(f"{name} must be a positive scalar, got {value!r}")
     return float(arr)
@@ -852,7 +840,7 @@ def mixture(bank: Bank, weights) -> Mixture:
     """
     if not isinstance(bank, Bank):
         raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")
-    weights = _finite(weights, "weights")
+    weights = _checks.finite_array(weights, "weights")
     if not (np.all(weights >= 0) and np.all(np.any(weights > 0, axis=-1))):
         raise ValueError(
             "weights must be >= 0 with a positive one per problem, "
@@ -1215,7 +1203,7 @@ def update(post: Mixture, mu_next) -> Mixture:
     single = post.log_normaliser.ndim == 0
     if single:
         post = _batch_of_one(post)
-    mu_next = _finite(mu_next, "mu_next")
+    mu_next = _checks.finite_array(mu_next, "mu_next")
     if mu_next.ndim > 1 or (mu_next.ndim == 1 and mu_next.shape != post.log_normaliser.shape):
         raise ValueError(
             f"mu_next must be a scalar or have shape {post.log_normaliser.shape}, "
@@ -1342,7 +1330,7 @@ def simulate(
     Simulation
         Leading shape ``(size,) + x1.shape[:-1]`` (without ``size`` if ``None``).
     """
-    x1 = _finite(x1, "x1")
+    x1 = _checks.finite_array(x1, "x1")
     if x1.ndim < 1 or x1.shape[-1] != 3:
         raise ValueError(f"x1 must have shape (..., 3), got shape {x1.shape}")
     if not np.all(x1[..., 1] > 0):
