@@ -14,7 +14,8 @@ Nothing here computes an estimate: the functions format what
 * :func:`moments_texts`, :func:`study_texts`, :func:`sweep_texts`,
   :func:`noise_study_texts`, :func:`rho_label`: the texts the chapters beyond
   the paper glue into their tables;
-* :func:`moments_table`, :func:`sweep_table`: tables of those texts for a notebook;
+* :func:`page_tables`, :func:`paste_table`, :class:`PastedTable`: a page's
+  tables of glued numbers, with the numbers pasted in, for a notebook;
 * :class:`MarkdownTable`, :class:`GlueLog`: what a page shows when it runs as a
   plain notebook in Jupyter, which displays neither the values nor the figures
   that the page glues into the book's text.
@@ -23,11 +24,13 @@ Nothing here computes an estimate: the functions format what
 from __future__ import annotations
 
 import ast
+import re
+from pathlib import Path
 
 import numpy as np
 
 from . import _checks
-from .filters import FILTERS, NAMES, QUANTITIES
+from .filters import NAMES, QUANTITIES
 from .reproduce import scenario_rows
 from .scenarios import REPORTED_DECIMALS, SCENARIOS
 
@@ -410,40 +413,6 @@ def moments_texts(result: dict, decimals: int = 3) -> dict:
     return out
 
 
-def moments_table(
-    result: dict, quantity: str, decimals: int = 3, labels: dict | None = None
-) -> MarkdownTable:
-    """The texts of :func:`moments_texts` for one quantity, a row per filter, a column per figure.
-
-    The last row is the importance sampler's Monte Carlo standard error.
-
-    Parameters
-    ----------
-    result : dict
-        From :func:`depthcore.reproduce.reproduce`.
-    quantity : {"depth", "velocity"}
-    decimals : int
-    labels : dict, optional
-        Row labels by filter name, in place of the registry's.
-    """
-    labels = {name: FILTERS[name].label for name in NAMES} | dict(labels or {})
-    if quantity not in QUANTITIES:
-        raise ValueError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")
-    texts = moments_texts(result, decimals)
-    keys = [sc["key"] for sc in result["scenarios"]]
-    header = ["filter", *(f"Fig. {sc['figure']}" for sc in result["scenarios"])]
-    rows = [
-        [labels[name], *(texts[f"bf_{key}_{name}_{quantity}"] for key in keys)] for name in NAMES
-    ]
-    rows.append(
-        [
-            f"{labels['particle']}, Monte Carlo s.e.",
-            *(texts[f"bf_{key}_particle_{quantity}_se"] for key in keys),
-        ]
-    )
-    return MarkdownTable(header, rows)
-
-
 def study_texts(result: dict, prefix: str) -> dict:
     """Texts of every score of :func:`depthcore.study.study`'s result, for glue.
 
@@ -497,34 +466,6 @@ def sweep_texts(result: dict, x: str, prefix: str, decimals: int = 3) -> dict:
             out[f"{prefix}_{i}_{name}"] = _pm(r["depth_mean"][i], r["depth_sd"][i], decimals)
             out[f"{prefix}_{i}_{name}_h"] = f"{float(r['hellinger'][i]):.3f}"
     return out
-
-
-def sweep_table(
-    result: dict, x: str, decimals: int = 3, labels: dict | None = None
-) -> MarkdownTable:
-    """The texts of :func:`sweep_texts`: a row per value of ``x``, a column per filter.
-
-    Each cell is the depth's ``"mean ± sd"``; the first column is the noise level
-    (``"1/200"``) or the prior's offset.
-
-    Parameters
-    ----------
-    result : dict
-        As for :func:`sweep_texts`.
-    x : {"rho", "offset"}
-    decimals : int
-    labels : dict, optional
-        Column labels by filter name, in place of the registry's.
-    """
-    texts = sweep_texts(result, x, "sweep", decimals)
-    names = [n for n in NAMES if n in result]
-    labels = {n: FILTERS[n].label for n in names} | dict(labels or {})
-    header = [r"$\rho$" if x == "rho" else "offset", *(labels[n] for n in names)]
-    rows = [
-        [texts[f"sweep_{i}_x"], *(texts[f"sweep_{i}_{n}"] for n in names)]
-        for i in range(len(result[x]))
-    ]
-    return MarkdownTable(header, rows)
 
 
 def noise_study_texts(result: dict, prefix: str) -> dict:
@@ -705,6 +646,86 @@ class MarkdownTable:
         return "\n".join(lines)
 
 
+#: A ``glue:text`` (or plain ``glue``) role in a page's text; group 1 is the glued name.
+GLUE_ROLE = re.compile(r"\{glue(?::text)?\}`([^`]+)`")
+
+
+def page_tables(text: str) -> list[list[str]]:
+    """The pipe tables of a MyST page that paste glued texts, each as its lines.
+
+    Lines inside code cells (fenced blocks) are not the page's text and are
+    passed over; a table is a run of lines that start with ``|``, stripped.
+
+    Parameters
+    ----------
+    text : str
+        The page's MyST Markdown source.
+
+    Returns
+    -------
+    list of list of str
+        The tables that hold at least one ``glue:text`` role, in page order.
+    """
+    tables, current, fence = [], [], None
+    for line in text.splitlines() + [""]:
+        stripped = line.strip()
+        marker = re.match(r"^(`{3,}|:{3,})", stripped)
+        if fence is None and marker and "{code-cell}" in stripped:
+            fence = marker.group(1)
+            continue
+        if fence is not None:
+            if stripped == fence:
+                fence = None
+            continue
+        if stripped.startswith("|"):
+            current.append(stripped)
+        elif current:
+            tables.append(current)
+            current = []
+    return [t for t in tables if any(GLUE_ROLE.search(line) for line in t)]
+
+
+def paste_table(lines: list[str], texts: dict[str, str]) -> str | None:
+    """A page's table with every glued text pasted in, as the book shows it.
+
+    Parameters
+    ----------
+    lines : list of str
+        One table of :func:`page_tables`.
+    texts : dict of str to str
+        Glued names and their texts, as ``glue:text`` pastes them.
+
+    Returns
+    -------
+    str or None
+        The table's lines joined by newlines; ``None`` while a name it pastes
+        has not been glued.
+    """
+    names = [m.group(1) for line in lines for m in GLUE_ROLE.finditer(line)]
+    if any(name not in texts for name in names):
+        return None
+    return "\n".join(GLUE_ROLE.sub(lambda m: texts[m.group(1)], line) for line in lines)
+
+
+class PastedTable:
+    """A page's table with its glued numbers, shown by Jupyter as Markdown and as text.
+
+    Parameters
+    ----------
+    text : str
+        From :func:`paste_table`.
+    """
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def _repr_markdown_(self) -> str:
+        return self.text + "\n"
+
+    def __repr__(self) -> str:
+        return self.text
+
+
 class GlueLog:
     """Shows in Jupyter what a book page glues into the book's text.
 
@@ -715,7 +736,16 @@ class GlueLog:
     record, which passes on unchanged, and :meth:`show` displays those kept
     since its last call: each figure as the very image the book shows, and the
     texts in a :class:`MarkdownTable` of glued name and value, as the book
-    pastes them. The book leaves the cells that create and show it out.
+    pastes them. Given the page's file, :meth:`show` also displays each of the
+    page's tables of glued numbers (:func:`page_tables`) whole, with its
+    numbers pasted in, once every number in it has been glued. The book leaves
+    the cells that create and show it out.
+
+    Parameters
+    ----------
+    page : str or path, optional
+        The page's MyST source (``"fig6.md"``: the kernel runs in the page's
+        folder, in Jupyter as in the book's build).
 
     Raises
     ------
@@ -726,13 +756,15 @@ class GlueLog:
     #: The prefix of the media types of a record that is not displayed (myst_nb's).
     PREFIX = "application/papermill.record/"
 
-    def __init__(self):
+    def __init__(self, page=None):
         from IPython import get_ipython
 
         publisher = getattr(get_ipython(), "display_pub", None)
         if not hasattr(publisher, "register_hook"):
             raise RuntimeError("GlueLog runs in a Jupyter kernel (ipykernel) only")
         self._kept: list[tuple[str, dict, dict]] = []
+        self._texts: dict[str, str] = {}
+        self._tables = [] if page is None else page_tables(Path(page).read_text(encoding="utf-8"))
         publisher.register_hook(self._keep)
 
     def _keep(self, msg):
@@ -754,15 +786,27 @@ class GlueLog:
             return text
 
     def show(self) -> None:
-        """Display what was glued since the last call: figures, then a table of the texts."""
+        """Display what was glued since the last call: figures, a table of the texts.
+
+        Then the page's tables whose numbers are now all glued, each once.
+        """
         from IPython.display import display
 
         texts = []
         for name, data, metadata in self._kept:
             if set(data) == {"text/plain"}:
                 texts.append([name, self.pasted_text(data["text/plain"])])
+                self._texts[name] = texts[-1][1]
             else:
                 display(data, raw=True, metadata=metadata)
         if texts:
             display(MarkdownTable(["glued name", "value"], texts))
         self._kept.clear()
+        pending = []
+        for table in self._tables:
+            pasted = paste_table(table, self._texts)
+            if pasted is None:
+                pending.append(table)
+            else:
+                display(PastedTable(pasted))
+        self._tables = pending
