@@ -6,6 +6,7 @@
 #   make test               core tests, notebook drift check, PDF and book builds, checks of both
 #   make notebooks          re-run every book page and compare its outputs with book/_nbval/
 #   make notebooks-update   re-execute every page and rewrite book/_nbval/ (deliberate update)
+#                           (PAGES="fig6 cite": only those pages, in both targets)
 #   make check-book         checks of the built book alone (equation numbers, browser)
 #   make figures            write the paper's figures to figures/
 #   make bench              print the benchmark tables
@@ -27,6 +28,8 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 EDITABLE := $(VENV)/.editable
 PYTEST_ARGS ?=
+# make notebooks / notebooks-update: only these pages (e.g. PAGES="fig6 cite"), all when empty.
+PAGES ?=
 # cffconvert (validates CITATION.cff) pins jsonschema 3: a venv of its own.
 CITE_VENV := $(VENV)/cffconvert
 CITE_STAMP := $(CITE_VENV)/.installed
@@ -121,10 +124,10 @@ test-core: $(EDITABLE) $(CITE_STAMP)
 	$(PY) -m pytest -q -rs -n 2 tests $(PYTEST_ARGS)
 
 notebooks: $(EDITABLE)
-	$(PY) tools/check_notebooks.py check
+	$(PY) tools/check_notebooks.py check $(PAGES)
 
 notebooks-update: $(EDITABLE)
-	$(PY) tools/check_notebooks.py update
+	$(PY) tools/check_notebooks.py update $(PAGES)
 
 # Checks of the built book in _build/html (run `make book` first).
 check-book: $(EDITABLE)

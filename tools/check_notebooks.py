@@ -26,6 +26,10 @@ reference notebook ``book/_nbval/<name>.ipynb``.
     deliberate update after a reviewed change of the book's outputs. It also
     deletes references whose page left the table of contents.
 
+``check PAGE ...``, ``update PAGE ...`` (``make notebooks PAGES="fig6 cite"``)
+    The same for the pages named alone; ``update`` then leaves every other
+    reference as it is.
+
 The kernel runs in the page's folder, as it does in the book build. This
 module is also loaded by pytest as a plugin (``-p check_notebooks``) to tell
 nbval which outputs not to compare.
@@ -164,7 +168,7 @@ def structural_problems(page: Path, text_nb, ref_nb) -> list[str]:
     return problems
 
 
-def check(pages: list[Path], workers: int) -> int:
+def check(pages: list[Path], workers: int, every: list[Path] | None = None) -> int:
     import jupytext
     import nbformat
     from jupytext.combine import combine_inputs_with_outputs
@@ -186,10 +190,8 @@ def check(pages: list[Path], workers: int) -> int:
             nb = combine_inputs_with_outputs(text_nb, ref_nb)
             assert all(c.execution_count is not None for c in nb.cells if c.cell_type == "code")
             combined[page] = nb
-    known = {reference_path(p) for p in pages}
-    for ref in sorted(ROOT.glob(f"book/**/{REF_DIR_NAME}/*.ipynb")):
-        if ref not in known:
-            problems.append(f"{ref.relative_to(ROOT)}: reference notebook of no page in _toc.yml")
+    for ref in stale_references(pages if every is None else every):
+        problems.append(f"{ref.relative_to(ROOT)}: reference notebook of no page in _toc.yml")
     if problems:
         print(
             "make notebooks: the committed reference outputs do not match the book:",
@@ -278,12 +280,28 @@ def update(pages: list[Path]) -> int:
         ref.parent.mkdir(exist_ok=True)
         nbformat.write(nb, ref)
         print(f"  wrote {ref.relative_to(ROOT)}")
-    known = {reference_path(p) for p in pages}
-    for ref in sorted(ROOT.glob(f"book/**/{REF_DIR_NAME}/*.ipynb")):
-        if ref not in known:
-            ref.unlink()
-            print(f"  deleted {ref.relative_to(ROOT)} (its page is not in _toc.yml)")
     return 0
+
+
+def stale_references(pages: list[Path]) -> list[Path]:
+    """The committed references whose page is not among ``pages`` (all pages of _toc.yml)."""
+    known = {reference_path(p) for p in pages}
+    return [r for r in sorted(ROOT.glob(f"book/**/{REF_DIR_NAME}/*.ipynb")) if r not in known]
+
+
+def select_pages(pages: list[Path], names: list[str]) -> list[Path]:
+    """The pages named (``fig6``, ``book/fig6.md`` or ``fig6.md``), in table-of-contents order.
+
+    No names: every page. A name that is no page of ``_toc.yml`` raises :class:`CheckError`.
+    """
+    if not names:
+        return pages
+    by_stem = {p.stem: p for p in pages}
+    wanted = {Path(name).stem for name in names}
+    unknown = sorted(wanted - set(by_stem))
+    if unknown:
+        raise CheckError(f"not a page of _toc.yml: {', '.join(unknown)}")
+    return [p for p in pages if p.stem in wanted]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -296,13 +314,26 @@ def main(argv: list[str] | None = None) -> int:
         default=2,
         help="parallel nbval workers for `check` (default 2)",
     )
+    parser.add_argument(
+        "pages",
+        nargs="*",
+        help="only these pages (e.g. fig6); `update` then leaves every other reference alone",
+    )
     args = parser.parse_args(argv)
     try:
-        pages = notebook_pages()
+        every = notebook_pages()
+        pages = select_pages(every, args.pages)
     except CheckError as err:
         print(f"make notebooks: {err}", file=sys.stderr)
         return 1
-    return check(pages, args.workers) if args.command == "check" else update(pages)
+    if args.command == "check":
+        return check(pages, args.workers, every)
+    status = update(pages)
+    if not args.pages:
+        for ref in stale_references(every):
+            ref.unlink()
+            print(f"  deleted {ref.relative_to(ROOT)} (its page is not in _toc.yml)")
+    return status
 
 
 if __name__ == "__main__":
