@@ -104,7 +104,7 @@ def draw_from_prior(
         Rejection rounds before giving up (a prior with almost no mass in front
         of the camera is refused).
     frames : int
-        ``N``, from 3 to :data:`depthcore._checks.MAX_FRAMES`.
+        ``N``, from 3 to ``depthcore._checks.MAX_FRAMES``.
     process_noise : float
         ``q >= 0``.
 

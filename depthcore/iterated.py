@@ -240,7 +240,7 @@ def smoother(
     With no process noise the trajectory is ``G^{k-1} x_1`` (see the module
     docstring). With process noise ``q > 0`` the unknowns are the whole
     trajectory, ``z = (x_1, y_1, v_1, a_1 .. a_{K-1})`` with the accelerations'
-    prior ``N(0, q**2)``, and each pass is one Gauss-Newton step on
+    prior ``N(0, q**2)``, and each pass is one Gauss-Newton step on::
 
         |L^{-1} (x_1 - m)|**2 + sum_k (mu_k - x_k / y_k)**2 / rho**2 + sum_k a_k**2 / q**2
 

@@ -677,7 +677,7 @@ def prior_study(
     false_alarm : float
         Rate, in (0, 1), at which the tests reject a calibrated filter.
     frames : int
-        ``N``, from 3 to :data:`depthcore._checks.MAX_FRAMES`.
+        ``N``, from 3 to ``depthcore._checks.MAX_FRAMES``.
     process_noise : float
         ``q >= 0``.
 
