@@ -1305,8 +1305,8 @@ def node_density(post: Mixture):
     """The posterior density of the depth at frame ``N`` at each of the bank's nodes.
 
     A node's probability is ``p_j = eta_j N(y_j; m_y, P_yy) L(y_j) / Z`` with its
-    quadrature weight ``eta_j`` (:attr:`Mixture.log_weights`) and the normaliser
-    ``Z`` (:attr:`Mixture.log_normaliser`), so ``p_j / eta_j`` is the normalised
+    quadrature weight ``eta_j`` (``Mixture.log_weights``) and the normaliser
+    ``Z`` (``Mixture.log_normaliser``), so ``p_j / eta_j`` is the normalised
     density of the depth at frame 1 at ``y_j``; the depth at frame ``N`` is
     ``y_j + N - 1`` with the same density (a shift).
 
@@ -1334,16 +1334,16 @@ class Track(NamedTuple):
     """The state at every frame of one track, filtered and smoothed (:func:`track`).
 
     Each series is a :class:`Smoothed`: means (N, 3) and covariances (N, 3, 3) of
-    ``(x_k, y_k, v_k)``, row ``k - 1`` for frame ``k``, given
+    ``(x_k, y_k, v_k)``, row ``k - 1`` for frame ``k``.
 
     Attributes
     ----------
     filtered : Smoothed
-        ``mu_1 .. mu_k`` (the filter at frame ``k``);
+        Given ``mu_1 .. mu_k`` (the filter at frame ``k``).
     interval : Smoothed
-        ``mu_1 .. mu_N`` (the fixed-interval smoother);
+        Given ``mu_1 .. mu_N`` (the fixed-interval smoother).
     lagged : Smoothed
-        ``mu_1 .. mu_min(k + lag, N)`` (the fixed-lag smoother);
+        Given ``mu_1 .. mu_min(k + lag, N)`` (the fixed-lag smoother).
     lag : int
     posteriors : tuple of Mixture
         The posterior after each frame, ``posteriors[k - 1]`` after ``mu_k``.
@@ -1364,7 +1364,7 @@ def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol:
     (online). At frame ``k``:
 
     * the filtered state is the mixture of the nodes' Kalman filters
-      (:attr:`Mixture.mean`, :attr:`Mixture.cov` after ``mu_k``);
+      (``Mixture.mean``, ``Mixture.cov`` after ``mu_k``);
     * the fixed-interval smoothed state is :meth:`Mixture.smoothed` of the
       posterior after all ``N`` bearings (each node's Rauch-Tung-Striebel
       smoother, mixed);
