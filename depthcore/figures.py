@@ -675,6 +675,7 @@ def smoothing_figure(track, states, first: int = 1):
         truth, with a band of two SDs about it.
     """
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     states = np.asarray(states, dtype=float)
     N = states.shape[0]
@@ -695,6 +696,7 @@ def smoothing_figure(track, states, first: int = 1):
             ax.plot(frames, err, linestyle=style, color=colour, marker=".", label=label)
             ax.fill_between(frames, err - 2 * sd, err + 2 * sd, color=colour, alpha=0.15)
         ax.axhline(0.0, color="black", linewidth=0.8)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("frame $k$")
         ax.set_ylabel(f"estimate minus truth: {name}")
         ax.set_title(f"{name}: mean $\\pm$ 2 SD, minus the truth", fontsize=9)
