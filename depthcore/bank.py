@@ -39,6 +39,11 @@ each node's filter and log weight (:func:`step`); the past is not revisited.
 The nodes are the depths at frame 1, which do not move as frames are added; the
 depth at frame ``N`` is ``y_N = y_1 + N - 1``.
 
+Frame by frame, :func:`track` follows one track: the filtered state at
+every frame, the fixed-interval and fixed-lag smoothed states (textbook
+19.2.6), and the posterior after each bearing; :func:`node_density` gives the
+posterior depth density at a posterior's nodes.
+
 The support is the caller's: the nodes must be positive (the point in front of
 the camera at every frame, the "front" support of
 :func:`depthcore.optimal.marginals`), and the mixture is exact up to the
@@ -1291,6 +1296,131 @@ def _full(values, idx, rows):
 def _batch_of_one(post: Mixture) -> Mixture:
     """A single problem as a batch of one."""
     return _each_array(post, lambda a: np.asarray(a)[None])
+
+
+# --- the posterior frame by frame: node densities, filtered and smoothed series ------------
+
+
+def node_density(post: Mixture):
+    """The posterior density of the depth at frame ``N`` at each of the bank's nodes.
+
+    A node's probability is ``p_j = eta_j N(y_j; m_y, P_yy) L(y_j) / Z`` with its
+    quadrature weight ``eta_j`` (``Mixture.log_weights``) and the normaliser
+    ``Z`` (``Mixture.log_normaliser``), so ``p_j / eta_j`` is the normalised
+    density of the depth at frame 1 at ``y_j``; the depth at frame ``N`` is
+    ``y_j + N - 1`` with the same density (a shift).
+
+    Parameters
+    ----------
+    post : Mixture
+
+    Returns
+    -------
+    depths : ndarray, shape (..., J)
+        ``y_j + N - 1``, the nodes as depths at frame ``N``.
+    density : ndarray, shape (..., J)
+        ``p(y_N = y_j + N - 1 | mu_1 .. mu_N)``; 0 at padding nodes (weight 0).
+    """
+    if not isinstance(post, Mixture):
+        raise ValueError(f"post must be a Mixture, got {type(post).__name__}")
+    b = post.bank
+    log_density = b.log_weight - post.log_normaliser[..., None]
+    density = np.where(np.isfinite(post.log_weights), np.exp(log_density), 0.0)
+    depths = np.broadcast_to(b.nodes, density.shape) + (b.n_frames - 1)
+    return depths, density
+
+
+class Track(NamedTuple):
+    """The state at every frame of one track, filtered and smoothed (:func:`track`).
+
+    Each series is a :class:`Smoothed`: means (N, 3) and covariances (N, 3, 3) of
+    ``(x_k, y_k, v_k)``, row ``k - 1`` for frame ``k``.
+
+    Attributes
+    ----------
+    filtered : Smoothed
+        Given ``mu_1 .. mu_k`` (the filter at frame ``k``).
+    interval : Smoothed
+        Given ``mu_1 .. mu_N`` (the fixed-interval smoother).
+    lagged : Smoothed
+        Given ``mu_1 .. mu_min(k + lag, N)`` (the fixed-lag smoother).
+    lag : int
+    posteriors : tuple of Mixture
+        The posterior after each frame, ``posteriors[k - 1]`` after ``mu_k``.
+    """
+
+    filtered: Smoothed
+    interval: Smoothed
+    lagged: Smoothed
+    lag: int
+    posteriors: tuple
+
+
+def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol: float = 1e-10):
+    """The exact filter and its smoothers (textbook 19.2.6) at every frame of one track.
+
+    The bearings arrive one at a time: the posterior after ``mu_1`` is placed
+    by :func:`posterior` and each later bearing is added by :func:`update`
+    (online). At frame ``k``:
+
+    * the filtered state is the mixture of the nodes' Kalman filters
+      (``Mixture.mean``, ``Mixture.cov`` after ``mu_k``);
+    * the fixed-interval smoothed state is :meth:`Mixture.smoothed` of the
+      posterior after all ``N`` bearings (each node's Rauch-Tung-Striebel
+      smoother, mixed);
+    * the fixed-lag smoothed state uses ``mu_1 .. mu_t``, ``t = min(k + lag, N)``:
+      on the nodes of the posterior after ``mu_t``, each node runs the
+      textbook's fixed-lag smoother (the filter on the state augmented with its
+      ``lag`` predecessors, :func:`depthcore.kalman.fixed_lag_smoother`), and
+      the nodes' Gaussians of ``(x_k, v_k)`` are mixed with that posterior's
+      probabilities, the depth being ``y_1 + k - 1`` at each node.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N,)
+        The bearings of one track, ``N >= 1``.
+    rho, prior_mean, prior_cov, process_noise, rtol
+        As for :func:`posterior` (one problem).
+    lag : int
+        The fixed-lag smoother's delay in frames, >= 0 (0: the filter).
+
+    Returns
+    -------
+    Track
+    """
+    mu = _checks.finite_array(mu, "mu")
+    if mu.ndim != 1 or mu.size < 1:
+        raise ValueError(f"mu must have shape (N,) with N >= 1 (one track), got shape {mu.shape}")
+    lag = kalman._lag(lag)
+    posts = [posterior(mu[:1], rho, prior_mean, prior_cov, process_noise, rtol)]
+    for k in range(1, mu.size):
+        posts.append(update(posts[-1], mu[k]))
+    filtered = Smoothed(np.stack([p.mean for p in posts]), np.stack([p.cov for p in posts]))
+    interval = posts[-1].smoothed()
+    N = mu.size
+    means, covs = [], []
+    for s in range(N):  # frame s + 1, read from the posterior after mu_{t + 1}
+        t = min(s + lag, N - 1)
+        p = posts[t]
+        b = p.bank
+        start, _ = conditional_prior(b.nodes, b.prior_mean, b.prior_cov)
+        sm = kalman.fixed_lag_smoother(
+            b.mu[:, None],
+            start.mean,
+            start.cov[..., 0, :, :],
+            PSI,
+            sigma_p(b.q),
+            measurement_matrices(b.nodes, np.arange(1, t + 2)),
+            (np.asarray(b.rho) ** 2).reshape(1, 1),
+            lag=t - s,
+        )
+        mean, cov = _mixture_moments(
+            p.probabilities, sm.mean[..., s, :], sm.cov[..., s, :, :], b.nodes + s
+        )
+        means.append(mean)
+        covs.append(cov)
+    lagged = Smoothed(np.stack(means), np.stack(covs))
+    return Track(filtered, interval, lagged, lag, tuple(posts))
 
 
 # --- simulation ------------------------------------------------------------------------

@@ -22,6 +22,8 @@ Recommended import: ``from depthcore import experiments``.
 * :func:`resample_move_runs`: the causal particle filter with resample-move
   (:mod:`depthcore.resample_move`) run independently several times on a
   scenario, against the optimal filter;
+* :func:`rbpf_convergence`: the Rao-Blackwellised particle filter's moments
+  against the number of particles, from the exact bank of Kalman filters;
 * :func:`filter_cost`: the computing cost of the paper's three filters per
   triple of measurements, and the optimal filter's quadrature nodes;
 * :func:`first_update`: the EKF and the UKF after the first measurement;
@@ -38,7 +40,19 @@ import time
 
 import numpy as np
 
-from . import _checks, ekf, model, optimal, particle, resample_move, second_order, study, ukf
+from . import (
+    _checks,
+    bank,
+    ekf,
+    model,
+    optimal,
+    particle,
+    rbpf,
+    resample_move,
+    second_order,
+    study,
+    ukf,
+)
 from .filters import FILTERS, NAMES
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, MeanAndCov, paper_prior_means
 from .scenarios import SCENARIOS, Scenario
@@ -592,6 +606,95 @@ def resample_move_runs(
         "exact": {k: float(getattr(opt, k)) for k in MOMENTS},
         "ess": np.concatenate([b.ess for b in batches]) / n_particles,
         "resampled": np.concatenate([b.resampled for b in batches]),
+    }
+
+
+# --- the Rao-Blackwellised particle filter against the exact bank ----------------------------
+
+
+def rbpf_convergence(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    sizes,
+    replicas: int,
+    seed,
+    process_noise=0.0,
+    moves: int = rbpf.DEFAULT_MOVES,
+) -> dict:
+    """The Rao-Blackwellised particle filter's moments at the last frame against ``J``.
+
+    For each number of particles ``J`` the filter (:func:`depthcore.rbpf.run`)
+    runs ``replicas`` independent clouds over the bearings, from its own child
+    stream of ``seed``; each cloud's moments at frame ``N`` are compared with
+    the exact posterior of the bank of Kalman filters (:func:`depthcore.bank.posterior`).
+
+    Parameters
+    ----------
+    mu : array_like, shape (N,)
+        The bearings of one track.
+    rho, prior_mean, prior_cov, process_noise
+        As for :func:`depthcore.bank.posterior`.
+    sizes : array_like of int, shape (S,)
+        Particles per cloud, each >= 2.
+    replicas : int
+        Independent clouds per size, >= 2.
+    seed : int or numpy.random.SeedSequence
+    moves : int
+        Metropolis-Hastings steps per particle after each resampling.
+
+    Returns
+    -------
+    dict
+        ``"sizes"`` (S,), ``"replicas"``, ``"frames"`` (``N``); ``"exact"``:
+        ``{moment: float}`` for :data:`MOMENTS` and ``"exact_error"``: the
+        bank's error estimates of the depth's and the velocity's moments
+        (``{"depth": float, "velocity": float}``); ``"runs"``: ``{moment: (S,
+        replicas)}``, each cloud's estimate; ``"mean"``, ``"se"`` and
+        ``"rmse"``: ``{moment: (S,)}``, the mean over the clouds, its standard
+        error (SD over the clouds / sqrt(replicas)), and the root-mean-square
+        error of one cloud from the exact value.
+    """
+    sizes = _sizes(sizes)
+    if np.any(sizes < 2):
+        raise ValueError(f"sizes must be integers >= 2, got {sizes!r}")
+    if isinstance(replicas, bool) or not isinstance(replicas, (int, np.integer)) or replicas < 2:
+        raise ValueError(f"replicas must be an integer >= 2, got {replicas!r}")
+    post = bank.posterior(mu, rho, prior_mean, prior_cov, process_noise)
+    if np.ndim(post.log_normaliser) != 0:
+        raise ValueError(f"mu must have shape (N,) (one track), got shape {np.shape(mu)}")
+    exact = {m: float(getattr(post, m)) for m in MOMENTS}
+    runs = {m: [] for m in MOMENTS}
+    for J, stream in zip(sizes, _checks.spawn(seed, len(sizes)), strict=True):
+        state = rbpf.run(
+            mu,
+            rho,
+            prior_mean,
+            prior_cov,
+            int(J),
+            np.random.default_rng(stream),
+            q=process_noise,
+            replicas=int(replicas),
+            moves=moves,
+        )
+        per_cloud = state.replica_moments()
+        for m in MOMENTS:
+            runs[m].append(getattr(per_cloud, m))
+    runs = {m: np.array(v) for m, v in runs.items()}
+    return {
+        "sizes": sizes,
+        "replicas": int(replicas),
+        "frames": int(post.bank.n_frames),
+        "exact": exact,
+        "exact_error": {
+            "depth": float(post.depth_error),
+            "velocity": float(post.velocity_error),
+        },
+        "runs": runs,
+        "mean": {m: np.mean(v, axis=1) for m, v in runs.items()},
+        "se": {m: np.std(v, axis=1, ddof=1) / np.sqrt(replicas) for m, v in runs.items()},
+        "rmse": {m: np.sqrt(np.mean((v - exact[m]) ** 2, axis=1)) for m, v in runs.items()},
     }
 
 

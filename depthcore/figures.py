@@ -607,6 +607,165 @@ def translating_point(x3=None, n: int = 3):
     return fig
 
 
+def bank_depth_figure(densities: dict, truth=None):
+    """The bank's posterior depth density at its nodes after several frames.
+
+    Parameters
+    ----------
+    densities : dict
+        ``{frame: (depths, density)}``, each from :func:`depthcore.bank.node_density`
+        of the posterior after that frame: the nodes as depths at that frame and
+        the density there (arrays of shape (J,)).
+    truth : dict, optional
+        ``{frame: depth}``, the true depth at each frame, marked on the axis.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The density against the depth at each frame (one curve per frame, the
+        nodes as dots), and the same curves against the depth minus the truth,
+        on a logarithmic density axis.
+    """
+    import matplotlib.pyplot as plt
+
+    if not densities:
+        raise ValueError("densities must hold at least one frame")
+    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.4), layout="constrained")
+    colours = plt.cm.viridis(np.linspace(0.0, 0.9, len(densities)))
+    for (frame, (depths, density)), colour in zip(densities.items(), colours, strict=True):
+        order = np.argsort(depths)
+        y, p = np.asarray(depths)[order], np.asarray(density)[order]
+        keep = p > 1e-6 * np.max(p)
+        label = f"after frame {frame}"
+        axes[0].plot(y[keep], p[keep], "-", color=colour, linewidth=1.2, label=label)
+        axes[0].plot(y[keep], p[keep], ".", color=colour, markersize=3)
+        if truth is not None:
+            axes[0].axvline(truth[frame], color=colour, linewidth=0.8, linestyle=":")
+            axes[1].semilogy(y[keep] - truth[frame], p[keep], "-", color=colour, linewidth=1.2)
+    axes[0].set_xlabel("depth $y_N$ at frame $N$ (dots: the nodes; dotted: the truth)")
+    axes[0].set_ylabel("posterior density")
+    axes[0].legend(frameon=False, fontsize=8)
+    axes[0].set_title("the bank's depth density at its nodes", fontsize=9)
+    if truth is not None:
+        axes[1].axvline(0.0, color="0.5", linewidth=0.8, linestyle=":")
+        axes[1].set_xlabel("depth minus the true depth at frame $N$")
+        axes[1].set_ylabel("posterior density (log scale)")
+        axes[1].set_title("about the truth, on a log scale", fontsize=9)
+    else:
+        axes[1].set_visible(False)
+    return fig
+
+
+def smoothing_figure(track, states, first: int = 1):
+    """The depth and lateral position at every frame: filtered, fixed-lag and fixed-interval.
+
+    Parameters
+    ----------
+    track : depthcore.bank.Track
+        From :func:`depthcore.bank.track`.
+    states : array_like, shape (N, 3)
+        The true states ``(x_k, y_k, v_k)``.
+    first : int
+        The first frame drawn (the first frames' filtered SDs can dwarf the rest).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Two panels, the depth and the lateral position: each estimate minus the
+        truth, with a band of two SDs about it.
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    states = np.asarray(states, dtype=float)
+    N = states.shape[0]
+    if not 1 <= first <= N:
+        raise ValueError(f"first must be a frame from 1 to {N}, got {first!r}")
+    frames = np.arange(first, N + 1)
+    rows = slice(first - 1, N)
+    series = (
+        ("filtered", track.filtered, "tab:blue", "-"),
+        (f"fixed-lag smoothed (lag {track.lag})", track.lagged, "tab:orange", "--"),
+        ("fixed-interval smoothed", track.interval, "tab:green", "-"),
+    )
+    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.4), layout="constrained")
+    for ax, i, name in zip(axes, (1, 0), ("depth $y_k$", "lateral position $x_k$"), strict=True):
+        for label, s, colour, style in series:
+            err = s.mean[rows, i] - states[rows, i]
+            sd = np.sqrt(s.cov[rows, i, i])
+            ax.plot(frames, err, linestyle=style, color=colour, marker=".", label=label)
+            ax.fill_between(frames, err - 2 * sd, err + 2 * sd, color=colour, alpha=0.15)
+        ax.axhline(0.0, color="black", linewidth=0.8)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_xlabel("frame $k$")
+        ax.set_ylabel(f"estimate minus truth: {name}")
+        ax.set_title(f"{name}: mean $\\pm$ 2 SD, minus the truth", fontsize=9)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=3, frameon=False, fontsize=9)
+    return fig
+
+
+def rbpf_convergence_figure(result: dict):
+    """The Rao-Blackwellised particle filter's depth moments against the number of particles.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.experiments.rbpf_convergence`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Left: the RMS error of one cloud's depth mean and SD from the exact
+        bank's, on log axes, beside the exact SD over ``sqrt(J)``. Right: each
+        cloud's depth mean, and their average with two standard errors, about
+        the exact value.
+    """
+    import matplotlib.pyplot as plt
+
+    J = np.asarray(result["sizes"])
+    exact = result["exact"]
+    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.4), layout="constrained")
+    ax = axes[0]
+    ax.plot(J, result["rmse"]["depth_mean"], "o-", color="tab:purple", label="depth mean")
+    ax.plot(J, result["rmse"]["depth_sd"], "s--", color="tab:orange", label="depth SD")
+    ax.plot(
+        J,
+        exact["depth_sd"] / np.sqrt(J),
+        color="0.7",
+        linewidth=3,
+        alpha=0.6,
+        zorder=0,
+        label=r"exact depth SD$/\sqrt{J}$",
+    )
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("particles per cloud $J$")
+    ax.set_ylabel("RMS error from the exact bank")
+    ax.set_title(f"RMS error over {result['replicas']} independent clouds", fontsize=9)
+    ax.legend(frameon=False, fontsize=8)
+    ax = axes[1]
+    runs = result["runs"]["depth_mean"] - exact["depth_mean"]
+    for k, j in enumerate(J):
+        ax.plot(np.full(runs.shape[1], j), runs[k], ".", color="0.6", markersize=4)
+    ax.errorbar(
+        J,
+        result["mean"]["depth_mean"] - exact["depth_mean"],
+        yerr=2 * result["se"]["depth_mean"],
+        fmt="o",
+        color="tab:purple",
+        capsize=3,
+        label="average of the clouds, 2 SE",
+    )
+    ax.axhline(0.0, color="black", linewidth=0.8, label="exact bank")
+    ax.set_xscale("log")
+    ax.set_xlabel("particles per cloud $J$")
+    ax.set_ylabel(f"depth mean at frame {result['frames']} minus the exact one")
+    ax.set_title("each cloud's depth mean (grey dots)", fontsize=9)
+    ax.legend(frameon=False, fontsize=8)
+    return fig
+
+
 def prior_calibration(result: dict):
     """The optimal filter's coverage over truths drawn from its prior, with binomial error bars.
 

@@ -12,7 +12,7 @@ Nothing here computes an estimate: the functions format what
 * :func:`comparison`, :func:`comparison_texts`, :func:`comparison_table`: the
   reported-versus-reproduced tables of the figure pages;
 * :func:`moments_texts`, :func:`study_texts`, :func:`sweep_texts`,
-  :func:`noise_study_texts`, :func:`rho_label`: the texts the chapters beyond
+  :func:`noise_study_texts`, :func:`rbpf_texts`, :func:`rho_label`: the texts the chapters beyond
   the paper glue into their tables;
 * :func:`page_tables`, :func:`paste_table`, :class:`PastedTable`: a page's
   tables of glued numbers, with the numbers pasted in, for a notebook;
@@ -606,6 +606,40 @@ def prior_study_texts(result: dict, prefix: str) -> dict:
 
 
 # --- the book's pages as plain notebooks ---------------------------------------------------
+
+
+def rbpf_texts(result: dict, prefix: str) -> dict:
+    """Texts of the Rao-Blackwellised particle filter's convergence table, for glue.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.experiments.rbpf_convergence`.
+    prefix : str
+
+    Returns
+    -------
+    dict
+        For row ``i`` (one number of particles): ``"<prefix>_<i>_J"``;
+        ``"<prefix>_<i>_mean"`` and ``"<prefix>_<i>_sd"``, the clouds'
+        average depth mean and SD with their standard errors (``"mean ± se"``,
+        4 decimals); ``"<prefix>_<i>_rmse_mean"`` and ``"<prefix>_<i>_rmse_sd"``,
+        one cloud's RMS errors of the depth mean and SD (2 significant digits).
+        ``"<prefix>_exact_mean"`` and ``"<prefix>_exact_sd"``: the exact bank's
+        depth mean and SD (4 decimals).
+    """
+    out = {
+        f"{prefix}_exact_mean": f"{result['exact']['depth_mean']:.4f}",
+        f"{prefix}_exact_sd": f"{result['exact']['depth_sd']:.4f}",
+    }
+    for i, J in enumerate(result["sizes"]):
+        out[f"{prefix}_{i}_J"] = f"{int(J):,}"
+        for key, moment in (("mean", "depth_mean"), ("sd", "depth_sd")):
+            out[f"{prefix}_{i}_{key}"] = (
+                f"{result['mean'][moment][i]:.4f} ± {result['se'][moment][i]:.4f}"
+            )
+            out[f"{prefix}_{i}_rmse_{key}"] = f"{result['rmse'][moment][i]:.2g}"
+    return out
 
 
 class MarkdownTable:

@@ -11,11 +11,14 @@ from numpy.testing import assert_allclose
 
 from depthcore import (
     SCENARIOS,
+    bank,
     ekf,
     experiments,
     figures,
     gaussian,
+    model,
     optimal,
+    rbpf,
     resample_move,
     study,
     ukf,
@@ -324,3 +327,48 @@ def test_resample_move_runs_rejects_bad_arguments():
         experiments.resample_move_runs("fig2", 100, 2, seed=0)
     with pytest.raises(ValueError, match="repeats"):
         experiments.resample_move_runs(FIG2, 100, 1, seed=0)
+
+
+# --- the Rao-Blackwellised particle filter against the bank ----------------------------
+
+
+def _rbpf_track():
+    s = SCENARIOS["fig2"]
+    sim = bank.simulate(model.G(s.c, -2), 6, s.rho, 0.01, np.random.default_rng(3))
+    return sim.mu, s.rho, s.prior.mean, s.prior.cov
+
+
+def test_rbpf_convergence_measures_each_cloud_from_the_exact_bank():
+    mu, rho, pm, pc = _rbpf_track()
+    r = experiments.rbpf_convergence(mu, rho, pm, pc, [20, 600], 4, seed=11, process_noise=0.01)
+    exact = bank.posterior(mu, rho, pm, pc, 0.01)
+    assert r["frames"] == 6 and r["replicas"] == 4 and list(r["sizes"]) == [20, 600]
+    assert r["exact"]["depth_mean"] == pytest.approx(float(exact.depth_mean), rel=1e-14)
+    assert r["exact_error"]["depth"] == pytest.approx(float(exact.depth_error), rel=1e-14)
+    # the runs are the filter's own clouds, from the seed's child streams
+    stream = np.random.default_rng(experiments._checks.spawn(11, 2)[1])
+    again = rbpf.run(mu, rho, pm, pc, 600, stream, q=0.01, replicas=4).replica_moments()
+    assert np.array_equal(r["runs"]["depth_sd"][1], again.depth_sd)
+    for m in experiments.MOMENTS:
+        runs = r["runs"][m]
+        assert runs.shape == (2, 4)
+        assert_allclose(r["rmse"][m], np.sqrt(np.mean((runs - r["exact"][m]) ** 2, axis=1)))
+        assert_allclose(r["se"][m], np.std(runs, axis=1, ddof=1) / 2.0)
+    # 600 particles estimate the depth mean to within a few exact SDs / sqrt(600)
+    assert r["rmse"]["depth_mean"][1] < 5 * r["exact"]["depth_sd"] / np.sqrt(600)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(sizes=[1, 10]), "sizes must be integers >= 2"),
+        (dict(sizes=[2.5]), "sizes must be positive integers"),
+        (dict(replicas=1), "replicas must be an integer >= 2"),
+        (dict(mu=np.zeros((2, 3))), r"mu must have shape \(N,\)"),
+    ],
+)
+def test_rbpf_convergence_refuses_bad_input(kwargs, message):
+    mu, rho, pm, pc = _rbpf_track()
+    args = dict(mu=mu, rho=rho, prior_mean=pm, prior_cov=pc, sizes=[10], replicas=2, seed=1)
+    with pytest.raises(ValueError, match=message):
+        experiments.rbpf_convergence(**dict(args, **kwargs))

@@ -347,3 +347,56 @@ def test_noise_study_figure_draws_coverage_and_rmse():
             assert_allclose(line.get_xdata(), r["rho"])
             assert_allclose(line.get_ydata(), r[name][field])
     plt.close(fig)
+
+
+# --- the bank of Kalman filters, its smoothers, and the RBPF ----------------------------
+
+
+@pytest.fixture(scope="module")
+def fig2_track():
+    from depthcore import bank, model
+
+    sim = bank.simulate(model.G(FIG2.c, -2), 6, FIG2.rho, 0.01, np.random.default_rng(2))
+    tr = bank.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
+    return sim, tr
+
+
+def test_bank_depth_figure_draws_one_curve_per_frame(fig2_track):
+    from depthcore import bank
+
+    sim, tr = fig2_track
+    frames = [3, 4, 6]
+    d = {k: bank.node_density(tr.posteriors[k - 1]) for k in frames}
+    fig = figures.bank_depth_figure(d, {k: sim.states[k - 1, 1] for k in frames})
+    labels = [line.get_label() for line in fig.axes[0].get_lines()]
+    assert [lab for lab in labels if lab.startswith("after")] == [
+        f"after frame {k}" for k in frames
+    ]
+    assert len(fig.axes[1].get_lines()) == len(frames) + 1  # a curve per frame and the zero
+    plt.close(fig)
+    with pytest.raises(ValueError, match="densities must hold at least one frame"):
+        figures.bank_depth_figure({})
+
+
+def test_smoothing_figure_draws_the_three_estimates_minus_the_truth(fig2_track):
+    sim, tr = fig2_track
+    fig = figures.smoothing_figure(tr, sim.states, first=2)
+    for ax, i in zip(fig.axes, (1, 0), strict=True):
+        lines = ax.get_lines()[:3]
+        assert [line.get_label() for line in lines][0] == "filtered"
+        assert_allclose(lines[2].get_ydata(), tr.interval.mean[1:, i] - sim.states[1:, i])
+    plt.close(fig)
+    with pytest.raises(ValueError, match="first must be a frame from 1 to 6"):
+        figures.smoothing_figure(tr, sim.states, first=7)
+
+
+def test_rbpf_convergence_figure_draws_the_errors(fig2_track):
+    sim, _ = fig2_track
+    r = experiments.rbpf_convergence(
+        sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, [10, 40], 3, seed=1, process_noise=0.01
+    )
+    fig = figures.rbpf_convergence_figure(r)
+    first = fig.axes[0].get_lines()[0]
+    assert_allclose(first.get_ydata(), r["rmse"]["depth_mean"])
+    assert_allclose(first.get_xdata(), [10, 40])
+    plt.close(fig)

@@ -219,3 +219,19 @@ def test_truth_study_texts():
     assert set(texts) == {"st_0_truth", "st_0_trials"} | {
         f"st_0_second_order_{s}" for s in ("bias", "rmse", "mean_sd", "cov68", "cov95", "nees")
     }
+
+
+def test_rbpf_texts_format_each_row_of_the_convergence_table():
+    result = {
+        "sizes": np.array([30, 3000]),
+        "exact": {"depth_mean": 23.03228, "depth_sd": 0.137451},
+        "mean": {"depth_mean": np.array([23.04, 23.0321]), "depth_sd": np.array([0.12, 0.1374])},
+        "se": {"depth_mean": np.array([0.0036, 0.00066]), "depth_sd": np.array([0.004, 0.0005])},
+        "rmse": {"depth_mean": np.array([0.0181, 0.00257]), "depth_sd": np.array([0.0188, 0.0021])},
+    }
+    t = report.rbpf_texts(result, "rb")
+    assert t["rb_exact_mean"] == "23.0323" and t["rb_exact_sd"] == "0.1375"
+    assert t["rb_1_J"] == "3,000" and t["rb_0_J"] == "30"
+    assert t["rb_0_mean"] == "23.0400 ± 0.0036"
+    assert t["rb_1_sd"] == "0.1374 ± 0.0005"
+    assert t["rb_0_rmse_mean"] == "0.018" and t["rb_1_rmse_sd"] == "0.0021"
