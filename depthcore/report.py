@@ -779,6 +779,10 @@ def _rbpf_bench_texts(r: dict) -> dict[str, str]:
         out[f"{p}_rm_s"] = f"{row['resample_move_time_s']:.2f}"
         out[f"{p}_rm_error"] = f"{row['resample_move_error_sd']:.4f}"
         out[f"{p}_ratio"] = f"{row['error_ratio']:.1f}"
+    times = [r["resample_move_time_s"] / r["rbpf_time_s"] for r in x["equal_cost"]]
+    out["equal_time_ratio_min"], out["equal_time_ratio_max"] = (
+        f"{f(times):.1f}" for f in (min, max)
+    )
     for i, row in enumerate(x["convergence"]):
         p = f"conv_{i}"
         out[f"{p}_problem"] = row["problem"]

@@ -146,3 +146,12 @@ def test_the_readmes_claims_on_the_optimal_filter_hold_for_the_record():
     assert m["one_d_ms"] < 5 and m["one_d_error_sd"] < 1e-8 and m["one_d_estimate_sd"] < 1e-8
     assert m["nquad_ratio"] > 1e4
     assert m["grid_ratio"] > 1e3
+
+
+def test_the_readmes_sizes_are_the_records():
+    # "The EKF over 10,000 trials", "over 10,000 Monte Carlo trials", "RMS over 10
+    # independent runs", "target: at most 0.15 s"
+    assert benchmarks.read("bench_ekf_filterpy")["sizes"]["trials"] == 10_000
+    assert benchmarks.read("bench_trials")["sizes"]["trials"] == 10_000
+    assert benchmarks.read("bench_rbpf")["sizes"]["repeats"] == 10
+    assert benchmarks.read("bench_import")["results"]["target_s"] == 0.15
