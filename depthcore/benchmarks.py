@@ -33,7 +33,7 @@ import numpy as np
 
 from . import __version__
 
-#: The repository: the benchmarks, their records and the package side by side.
+#: The repository, where the benchmarks and their records sit beside the package.
 ROOT = Path(__file__).resolve().parent.parent
 #: The committed records, one per script.
 RESULTS = ROOT / "benchmarks" / "results"
