@@ -9,7 +9,10 @@
 #                           (PAGES="fig6 cite": only those pages, in both targets)
 #   make check-book         checks of the built book alone (equation numbers, browser)
 #   make figures            write the paper's figures to figures/
-#   make bench              print the benchmark tables
+#   make bench              run every benchmark at full size, print its tables and write its
+#                           record benchmarks/results/<script>.json; then rewrite the README's
+#                           tables and the references of the pages that show the records
+#                           (BENCH="bench_bank": that benchmark alone)
 #   make lint               ruff check and ruff format --check of the package, tests, tools, benchmarks
 #   make clean              remove build outputs (make distclean also removes .venv/)
 #
@@ -136,13 +139,16 @@ check-book: $(EDITABLE)
 figures: $(EDITABLE)
 	$(PY) -m depthcore figures --out figures/
 
+# The book's pages that show the benchmarks' records (references rewritten by make bench).
+BENCH_PAGES := marginals beyond_cost
+# make bench: only these benchmarks (e.g. BENCH="bench_bank"), all when empty.
+BENCH ?= $(basename $(notdir $(wildcard benchmarks/bench_*.py)))
+
 bench: $(EDITABLE)
-	$(PY) benchmarks/bench_optimal.py
-	$(PY) benchmarks/bench_ekf_filterpy.py
-	$(PY) benchmarks/bench_trials.py
-	$(PY) benchmarks/bench_rbpf.py
-	$(PY) benchmarks/bench_import.py
-	$(PY) benchmarks/bench_bank.py
+	@for b in $(BENCH); do echo "== benchmarks/$$b.py"; \
+	  TIMEFORMAT="$$b took %R s"; time $(PY) benchmarks/$$b.py; done
+	$(PY) tools/bench_readme.py
+	$(PY) tools/check_notebooks.py update $(BENCH_PAGES)
 
 .PHONY: lint
 lint: $(EDITABLE)

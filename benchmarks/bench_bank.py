@@ -20,7 +20,9 @@ Four tables, every ratio measured side by side in this run:
    ``M``) the time, needed for an error of 1e-3 SD, against the bank's time for
    the same trials.
 
-Usage: ``python benchmarks/bench_bank.py [--quick]``.
+Usage: ``python benchmarks/bench_bank.py [--quick]``; the full run writes its
+record ``benchmarks/results/bench_bank.json`` (:mod:`depthcore.benchmarks`),
+``--quick`` (smaller sizes) writes outside the committed records.
 """
 
 from __future__ import annotations
@@ -35,10 +37,15 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import bank, model, optimal, resample_move  # noqa: E402
+from depthcore import bank, benchmarks, model, optimal, resample_move  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
 FIG2 = SCENARIOS["fig2"]
+#: The depthcore modules this benchmark measures (fingerprinted in its record).
+MEASURES = ("bank", "optimal", "resample_move")
+#: Targets of the four tables: bank / 1-D route at three frames, seconds for
+#: 10,000 trials x 30 frames, particle filter / bank at matched accuracy.
+TARGETS = {"three_frames_ratio": 2.0, "many_trials_s": 10.0, "matched_accuracy_ratio": 100.0}
 
 
 def track(n_trials: int, n_frames: int, seed: int, q: float = 0.0):
@@ -57,7 +64,7 @@ def best_of(f, repeats: int = 3) -> float:
     return min(times)
 
 
-def three_frames(n_trials: int) -> None:
+def three_frames(n_trials: int) -> dict:
     mu, prior = track(n_trials, 3, seed=1)
     args = (mu, FIG2.rho, prior.mean, prior.cov)
     t_one = best_of(lambda: optimal.moments(*args))
@@ -74,9 +81,16 @@ def three_frames(n_trials: int) -> None:
     print(f"{'1-D route, Eqs. (14)-(16)':<34}{1e3 * t_one / n_trials:>14.3f}")
     print(f"{'bank of Kalman filters':<34}{1e3 * t_bank / n_trials:>14.3f}")
     print(f"ratio bank / 1-D: {t_bank / t_one:.2f}; largest difference: {diff:.1e} SD")
+    return {
+        "trials": n_trials,
+        "one_d_ms_per_trial": 1e3 * t_one / n_trials,
+        "bank_ms_per_trial": 1e3 * t_bank / n_trials,
+        "ratio": t_bank / t_one,
+        "difference_sd": float(diff),
+    }
 
 
-def online(n_trials: int, n_frames: int) -> None:
+def online(n_trials: int, n_frames: int) -> dict:
     mu, prior = track(n_trials, n_frames, seed=2)
     post = bank.posterior(mu[:, :3], FIG2.rho, prior.mean, prior.cov)
     edges = [3, 10, 30, 100, 300, 1000, 3000]
@@ -84,6 +98,7 @@ def online(n_trials: int, n_frames: int) -> None:
     print(f"\n2. Online cost of one frame, {n_trials} trials tracked (target: flat)")
     print(f"{'frames':<14}{'ms per update':>15}{'ratio':>8}{'nodes':>8}{'depth SD':>11}")
     first = None
+    windows = []
     for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         t = time.perf_counter()
         for k in range(lo, hi):
@@ -93,9 +108,20 @@ def online(n_trials: int, n_frames: int) -> None:
         nodes = int(np.median(np.sum(post.probabilities > 0, axis=-1)))
         sd = float(np.median(post.depth_sd))
         print(f"{f'{lo + 1}-{hi}':<14}{1e3 * per:>15.2f}{per / first:>8.2f}{nodes:>8}{sd:>11.4f}")
+        windows.append(
+            {
+                "first_frame": lo + 1,
+                "last_frame": hi,
+                "ms_per_update": 1e3 * per,
+                "ratio_to_first": per / first,
+                "median_nodes": nodes,
+                "median_depth_sd": sd,
+            }
+        )
+    return {"trials": n_trials, "frames": n_frames, "windows": windows}
 
 
-def many_trials(n_trials: int, n_frames: int) -> None:
+def many_trials(n_trials: int, n_frames: int) -> dict:
     mu, prior = track(n_trials, n_frames, seed=3)
 
     def run():
@@ -110,9 +136,16 @@ def many_trials(n_trials: int, n_frames: int) -> None:
     worst = float(np.max(post.depth_error / post.depth_sd))
     print(f"\n3. {n_trials} trials x {n_frames} frames, the exact filter at every frame")
     print(f"time: {elapsed:.2f} s (target: under 10 s on one core); worst error {worst:.1e} SD")
+    return {
+        "trials": n_trials,
+        "frames": n_frames,
+        "time_s": elapsed,
+        "target_s": TARGETS["many_trials_s"],
+        "worst_error_estimate_sd": worst,
+    }
 
 
-def matched_accuracy(n_trials: int, counts, replicas: int) -> None:
+def matched_accuracy(n_trials: int, counts, replicas: int) -> dict:
     N = 10
     mu, prior = track(n_trials, N, seed=4)
     args = (mu, FIG2.rho, prior.mean, prior.cov)
@@ -142,6 +175,20 @@ def matched_accuracy(n_trials: int, counts, replicas: int) -> None:
     t_pf = D * needed
     print(f"particles for 1e-3 SD: {needed:.3g}; particle filter time {t_pf:.3g} s")
     print(f"bank: {t_bank:.3f} s; ratio particle filter / bank: {t_pf / t_bank:.3g}")
+    return {
+        "trials": n_trials,
+        "frames": N,
+        "replicas": replicas,
+        "particles": list(counts),
+        "error_sd": errors,
+        "time_per_run_s": times,
+        "target_error_sd": 1e-3,
+        "particles_needed": float(needed),
+        "particle_filter_time_s": float(t_pf),
+        "bank_time_s": t_bank,
+        "ratio": float(t_pf / t_bank),
+        "target_ratio": TARGETS["matched_accuracy_ratio"],
+    }
 
 
 def main(argv=None) -> None:
@@ -149,15 +196,29 @@ def main(argv=None) -> None:
     p.add_argument("--quick", action="store_true", help="smaller sizes (a check that it runs)")
     a = p.parse_args(argv)
     if a.quick:
-        three_frames(200)
-        online(20, 100)
-        many_trials(200, 30)
-        matched_accuracy(5, (250, 1000), replicas=2)
+        sizes = {"three_frames": 200, "online": (20, 100), "many_trials": (200, 30)}
+        sizes["matched_accuracy"] = (5, (250, 1000), 2)
     else:
-        three_frames(2000)
-        online(100, 1000)
-        many_trials(10_000, 30)
-        matched_accuracy(20, (1000, 4000, 16000), replicas=4)
+        sizes = {"three_frames": 2000, "online": (100, 1000), "many_trials": (10_000, 30)}
+        sizes["matched_accuracy"] = (20, (1000, 4000, 16000), 4)
+    n, counts, replicas = sizes["matched_accuracy"]
+    results = {
+        "three_frames": three_frames(sizes["three_frames"]),
+        "online": online(*sizes["online"]),
+        "many_trials": many_trials(*sizes["many_trials"]),
+        "matched_accuracy": matched_accuracy(n, counts, replicas=replicas),
+        "targets": TARGETS,
+    }
+    recorded = {
+        "three_frames_trials": sizes["three_frames"],
+        "online_trials_and_frames": list(sizes["online"]),
+        "many_trials_trials_and_frames": list(sizes["many_trials"]),
+        "matched_accuracy_trials": n,
+        "matched_accuracy_particles": list(counts),
+        "matched_accuracy_replicas": replicas,
+    }
+    path = benchmarks.write(__file__, MEASURES, recorded, results, full=not a.quick)
+    print(f"recorded in {path}")
 
 
 if __name__ == "__main__":

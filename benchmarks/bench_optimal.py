@@ -10,11 +10,24 @@ Measures, side by side in one run, on one core:
 * with ``--nquad``, scipy's adaptive ``nquad`` on Eq. (6) for one integral
   (the normaliser of Figure 2) at ``epsrel=1e-9``; the full set (five
   integrals per scenario, five scenarios) is that time multiplied by 25,
-  marked as extrapolated.
+  marked as extrapolated;
+
+and, per triple of measurements on Figures 2, 3, 5 and 6 (Figure 4 shares
+Figure 2's problem), the cost of the paper's three filters, each the least
+time of ``--repeat`` calls: the optimal filter's moments
+(:func:`depthcore.optimal.moments`, Eqs. (13)-(16)), the second-order
+approximation (:func:`depthcore.second_order.second_order`, Eqs. (7)-(8)) and
+the EKF (:func:`depthcore.ekf.ekf`, Eqs. (10)-(12)), with the optimal
+filter's quadrature nodes in the depth and the evaluations of Eq. (6) that
+the brute-force grid (:func:`depthcore.reference.grid_moments`, its default
+rule) spends on the same triple.
 
 Accuracy is the largest difference, over scenarios and over the depth and
 velocity means and SDs, from the 1-D route at ``rtol=1e-13``, divided by
-the SD. Usage: ``python benchmarks/bench_optimal.py [--nquad] [--repeat N]``.
+the SD. Usage: ``python benchmarks/bench_optimal.py [--quick]``; the full run
+writes its record ``benchmarks/results/bench_optimal.json``
+(:mod:`depthcore.benchmarks`), ``--quick`` (no ``nquad``, fewer repeats) writes
+outside the committed records.
 """
 
 from __future__ import annotations
@@ -32,9 +45,13 @@ import warnings  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import integrate  # noqa: E402
 
-from depthcore import optimal, reference  # noqa: E402
+from depthcore import benchmarks, ekf, optimal, reference, second_order  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
+#: The depthcore modules this benchmark measures (fingerprinted in its record).
+MEASURES = ("optimal", "reference", "second_order", "ekf")
+#: The scenarios of the per-triple table (Figure 4 shares Figure 2's problem).
+TRIPLE_KEYS = ("fig2", "fig3", "fig5", "fig6")
 LADDER = [(50, 12), (100, 16), (150, 20), (200, 24), (300, 28), (400, 32), (600, 40)]
 
 
@@ -113,11 +130,31 @@ def _nquad_normaliser():
     return abs(z / exact - 1.0)
 
 
+def per_triple(repeat):
+    """Least time of ``repeat`` calls of each filter on each scenario, nodes, brute-force cost."""
+    calls = {
+        "optimal": lambda s: optimal.moments(np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov),
+        "second_order": lambda s: second_order.second_order(s.mu, s.rho, s.prior),
+        "ekf": lambda s: ekf.ekf(s.mu, s.rho, s.prior),
+    }
+    scenarios = [SCENARIOS[k] for k in TRIPLE_KEYS]
+    out = {"keys": list(TRIPLE_KEYS)}
+    for name, call in calls.items():
+        out[f"{name}_ms"] = [
+            1e3 * _best_time(lambda s=s, call=call: call(s), repeat)[0] for s in scenarios
+        ]
+    out["nodes"] = [optimal.marginals(s.mu, s.rho, s.prior).n_nodes for s in scenarios]
+    out["brute_force_evaluations"] = [
+        reference.grid_moments(s.mu, s.rho, s.prior).n_evaluations for s in scenarios
+    ]
+    return out
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--nquad", action="store_true", help="also time scipy's nquad (minutes)")
-    p.add_argument("--repeat", type=int, default=50, help="repetitions of the fast route")
+    p.add_argument("--quick", action="store_true", help="no nquad, fewer repeats (not recorded)")
     args = p.parse_args(argv)
+    args.nquad, args.repeat = not args.quick, 5 if args.quick else 50
 
     keys, mus, rhos, means, cov = _inputs()
     truth = _as_array(optimal.moments(mus, rhos, means, cov, rtol=1e-13))
@@ -139,6 +176,16 @@ def main(argv=None):
     panels, order, vals, _ = chosen
     t_grid, vals = _best_time(lambda: _grid(keys, panels, order), 3)
     err_grid = _rel_error(vals, truth)
+    moments = {
+        "one_d_ms": 1e3 * t_ours,
+        "one_d_error_sd": err_ours,
+        "one_d_estimate_sd": est,
+        "grid_panels": panels,
+        "grid_order": order,
+        "grid_ms": 1e3 * t_grid,
+        "grid_error_sd": err_grid,
+        "grid_ratio": t_grid / t_ours,
+    }
 
     rows = [
         (
@@ -161,6 +208,13 @@ def main(argv=None):
             warnings.simplefilter("ignore", integrate.IntegrationWarning)
             t_nq, err_nq = _best_time(_nquad_normaliser, 1)
         total = 25 * t_nq
+        moments.update(
+            nquad_one_integral_s=t_nq,
+            nquad_relative_error=err_nq,
+            nquad_ratio=t_nq / t_ours,
+            nquad_all_s=total,
+            nquad_all_ratio=total / t_ours,
+        )
         rows.append(
             (
                 "scipy nquad of Eq. (6), epsrel 1e-9: 1 integral (Figure 2's normaliser)",
@@ -192,6 +246,30 @@ def main(argv=None):
     print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
     for r in rows:
         print(fmt.format(*r))
+
+    triple = per_triple(args.repeat)
+    print(
+        f"\nThe paper's filters per triple of measurements, least of {args.repeat} calls, one core"
+    )
+    print("| figure | optimal | second order | EKF | optimal / EKF | nodes | brute force |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for i, key in enumerate(triple["keys"]):
+        t_o, t_s, t_e = (triple[f"{n}_ms"][i] for n in ("optimal", "second_order", "ekf"))
+        print(
+            f"| {key} | {t_o:.3f} ms | {t_s:.3f} ms | {t_e:.3f} ms | {t_o / t_e:.1f} "
+            f"| {triple['nodes'][i]} | {triple['brute_force_evaluations'][i]:,} |"
+        )
+    sizes = {
+        "scenarios": keys,
+        "repeat": args.repeat,
+        "grid_repeat": 3,
+        "nquad": args.nquad,
+        "triple_scenarios": list(TRIPLE_KEYS),
+    }
+    path = benchmarks.write(
+        __file__, MEASURES, sizes, {"moments": moments, "per_triple": triple}, full=not args.quick
+    )
+    print(f"recorded in {path}")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,9 @@ its moments change by less than 1e-10 of themselves, in units of the exact
 posterior SD of the depth; "RMS error" is the root mean square over
 ``--repeats`` independent runs, "SE" the RBPF's standard error of the
 average of those runs from their spread (:meth:`depthcore.rbpf.RBPF.standard_errors`).
-Usage: ``python benchmarks/bench_rbpf.py [--repeats R] [--particles J]``.
+Usage: ``python benchmarks/bench_rbpf.py [--quick]``; the full run writes its
+record ``benchmarks/results/bench_rbpf.json`` (:mod:`depthcore.benchmarks`),
+``--quick`` (fewer runs and particles) writes outside the committed records.
 """
 
 from __future__ import annotations
@@ -34,12 +36,15 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import bank, model, rbpf, resample_move  # noqa: E402
+from depthcore import bank, benchmarks, model, rbpf, resample_move  # noqa: E402
 from depthcore.gaussian import paper_prior  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
+#: The depthcore modules this benchmark measures (fingerprinted in its record).
+MEASURES = ("rbpf", "resample_move", "bank")
 PILOT = 2000  # particles of the resample-move filter's pilot run
 GROWTH = (250, 1000, 4000, 16000)
+REPEATS, PARTICLES = 10, 1000
 
 
 def log_depth_rule(panels, order=20, lo=-12.0, hi=14.0):
@@ -93,10 +98,10 @@ def rms(estimates, mean, sd):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--repeats", type=int, default=10, help="independent runs of each filter")
-    p.add_argument("--particles", type=int, default=1000, help="RBPF particles (equal-cost table)")
+    p.add_argument("--quick", action="store_true", help="fewer runs and particles (not recorded)")
     args = p.parse_args(argv)
-    R = args.repeats
+    R, J0, growth = (2, 250, (100, 400)) if args.quick else (REPEATS, PARTICLES, GROWTH)
+    equal_cost, convergence = [], []
     cases = problems()
     truth = {name: exact(*case) for name, case in cases.items()}
 
@@ -109,15 +114,27 @@ def main(argv=None):
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
     for name, (mu, rho, prior) in cases.items():
         mean, sd = truth[name]
-        t_rb, f = time_rbpf(mu, rho, prior, args.particles, R, seed=1)
+        t_rb, f = time_rbpf(mu, rho, prior, J0, R, seed=1)
         e_rb = rms(f.replica_moments().depth_mean, mean, sd)
         t_pilot, _ = time_resample_move(mu, rho, prior, PILOT, R, seed=2)
         n = max(2, int(round(PILOT * t_rb / t_pilot)))
         t_pf, est = time_resample_move(mu, rho, prior, n, R, seed=3)
         e_pf = rms(est, mean, sd)
         print(
-            f"| {name} | {args.particles:,} | {t_rb:.2f} s | {e_rb:.4f} | {n:,} | {t_pf:.2f} s "
+            f"| {name} | {J0:,} | {t_rb:.2f} s | {e_rb:.4f} | {n:,} | {t_pf:.2f} s "
             f"| {e_pf:.4f} | {e_pf / e_rb:.1f} |"
+        )
+        equal_cost.append(
+            {
+                "problem": name,
+                "rbpf_particles": J0,
+                "rbpf_time_s": t_rb,
+                "rbpf_error_sd": e_rb,
+                "resample_move_particles": n,
+                "resample_move_time_s": t_pf,
+                "resample_move_error_sd": e_pf,
+                "error_ratio": e_pf / e_rb,
+            }
         )
 
     print()
@@ -126,11 +143,35 @@ def main(argv=None):
     print("|---|---:|---:|---:|---:|---:|")
     for name, (mu, rho, prior) in cases.items():
         mean, sd = truth[name]
-        for J in GROWTH:
+        for J in growth:
             t, f = time_rbpf(mu, rho, prior, J, R, seed=J)
             e = rms(f.replica_moments().depth_mean, mean, sd)
             se = float(f.standard_errors().depth_mean) / sd
             print(f"| {name} | {J:,} | {t:.2f} s | {e:.4f} | {se:.4f} | {e * np.sqrt(J):.2f} |")
+            convergence.append(
+                {
+                    "problem": name,
+                    "particles": J,
+                    "time_s": t,
+                    "error_sd": e,
+                    "standard_error_sd": se,
+                    "error_times_sqrt_particles_sd": e * float(np.sqrt(J)),
+                }
+            )
+    sizes = {
+        "repeats": R,
+        "rbpf_particles": J0,
+        "pilot_particles": PILOT,
+        "growth": list(growth),
+        "problems": list(cases),
+    }
+    results = {
+        "exact": {name: {"depth_mean": m, "depth_sd": sd} for name, (m, sd) in truth.items()},
+        "equal_cost": equal_cost,
+        "convergence": convergence,
+    }
+    path = benchmarks.write(__file__, MEASURES, sizes, results, full=not args.quick)
+    print(f"recorded in {path}")
 
 
 if __name__ == "__main__":

@@ -4,7 +4,10 @@ Draws 10,000 noisy triples of the Figure 2 scenario (each with the paper's
 prior built from its own measurements) and times, on one core,
 :func:`depthcore.optimal.moments` vectorised over the trials against
 :func:`depthcore.optimal.marginals` called trial by trial on a subset, and
-checks that the two agree. Usage: ``python benchmarks/bench_trials.py [--trials N]``.
+checks that the two agree. Usage: ``python benchmarks/bench_trials.py [--quick]``;
+the full run writes its record ``benchmarks/results/bench_trials.json``
+(:mod:`depthcore.benchmarks`), ``--quick`` (1,000 trials) writes outside the
+committed records.
 """
 
 from __future__ import annotations
@@ -19,22 +22,26 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import optimal, study  # noqa: E402
+from depthcore import benchmarks, optimal, study  # noqa: E402
 from depthcore.gaussian import Gaussian  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
+
+#: The depthcore modules this benchmark measures (fingerprinted in its record).
+MEASURES = ("optimal",)
+TRIALS, LOOP, SEED = 10_000, 200, 1
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--trials", type=int, default=10_000)
-    p.add_argument("--loop", type=int, default=200, help="trials timed one by one")
+    p.add_argument("--quick", action="store_true", help="1,000 trials (not recorded)")
     args = p.parse_args(argv)
+    n_trials, n_loop = (1000, 50) if args.quick else (TRIALS, LOOP)
     s = SCENARIOS["fig2"]
-    tr = study.simulate(s.c, s.rho, args.trials, np.random.default_rng(1))
+    tr = study.simulate(s.c, s.rho, n_trials, np.random.default_rng(SEED))
     t = time.perf_counter()
     m = optimal.moments(tr.mu, tr.rho, tr.prior_mean, tr.prior_cov)
     t_vec = time.perf_counter() - t
-    n = min(args.loop, len(tr.mu))
+    n = min(n_loop, len(tr.mu))
     t = time.perf_counter()
     single = [
         optimal.marginals(tr.mu[i], tr.rho, Gaussian(tr.prior_mean[i], tr.prior_cov))
@@ -61,6 +68,16 @@ def main(argv=None):
         f"largest error estimate {est:.1e} of the SD; "
         f"vectorised and single routes differ by {diff:.1e} SDs"
     )
+    results = {
+        "vectorised_s": t_vec,
+        "trial_by_trial_s": t_loop,
+        "ratio": t_loop / t_vec,
+        "estimate_sd": est,
+        "difference_sd": diff,
+    }
+    sizes = {"trials": len(tr.mu), "timed_one_by_one": n, "seed": SEED, "scenario": "fig2"}
+    path = benchmarks.write(__file__, MEASURES, sizes, results, full=not args.quick)
+    print(f"recorded in {path}")
 
 
 if __name__ == "__main__":

@@ -27,7 +27,8 @@ registry :mod:`~depthcore.filters` lists every filter;
 :mod:`~depthcore.reproduce`, :mod:`~depthcore.study` and
 :mod:`~depthcore.experiments` run them; :mod:`~depthcore.figures` draws and
 :mod:`~depthcore.report` formats the results; :mod:`~depthcore.reference`
-holds independent routes for checking.
+holds independent routes for checking; :mod:`~depthcore.benchmarks` writes and
+reads the benchmarks' recorded results.
 
 Every public module is an attribute of the package, imported when first used
 (``import depthcore; depthcore.study`` works).
@@ -44,6 +45,7 @@ __version__ = "0.1.0"
 #: The public modules, imported on first access as attributes of the package.
 MODULES = (
     "bank",
+    "benchmarks",
     "calibration",
     "ekf",
     "experiments",

@@ -24,8 +24,6 @@ Recommended import: ``from depthcore import experiments``.
   scenario, against the optimal filter;
 * :func:`rbpf_convergence`: the Rao-Blackwellised particle filter's moments
   against the number of particles, from the exact bank of Kalman filters;
-* :func:`filter_cost`: the computing cost of the paper's three filters per
-  triple of measurements, and the optimal filter's quadrature nodes;
 * :func:`first_update`: the EKF and the UKF after the first measurement;
 * :func:`truncated_bearing_moments`: why the unscented transform of the
   paper's prior has nothing to match: the moments of ``x / y`` under a
@@ -35,8 +33,6 @@ Recommended import: ``from depthcore import experiments``.
 """
 
 from __future__ import annotations
-
-import time
 
 import numpy as np
 
@@ -49,7 +45,6 @@ from . import (
     particle,
     rbpf,
     resample_move,
-    second_order,
     study,
     ukf,
 )
@@ -405,64 +400,6 @@ def truth_study(
         out[name] = {s: np.array([x["depth"][s] for x in f]) for s in NOISE_STUDY_SCORES}
         out[name]["nees"] = np.array([x["nees"] for x in f])
     return out
-
-
-# --- the cost of the paper's filters ----------------------------------------------------------
-
-
-def _best_time(call, repeats: int) -> float:
-    """The least wall-clock time of ``repeats`` calls of ``call()``, in seconds."""
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        call()
-        best = min(best, time.perf_counter() - start)
-    return best
-
-
-def filter_cost(scenarios, repeats: int = 5) -> dict:
-    """Time per triple of the paper's three filters, and the optimal filter's quadrature nodes.
-
-    For each scenario, one triple of measurements: the optimal filter's depth
-    and velocity moments (:func:`depthcore.optimal.moments`, Eqs. (13)-(16)),
-    the second-order approximation (:func:`depthcore.second_order.second_order`,
-    Eqs. (7)-(8)) and the EKF (:func:`depthcore.ekf.ekf`, Eqs. (10)-(12)).
-    Each is timed as the least of ``repeats`` calls, which discards delays
-    caused by other work on the machine; the times depend on the machine,
-    their ratios much less.
-
-    Parameters
-    ----------
-    scenarios : sequence of Scenario
-    repeats : int
-        Calls timed per filter and scenario, >= 1.
-
-    Returns
-    -------
-    dict
-        ``"keys"`` (S,) of scenario keys; ``"seconds"``: ``{filter: (S,)}``
-        for ``"optimal"``, ``"second_order"`` and ``"ekf"``; ``"nodes"`` (S,),
-        the quadrature nodes of :func:`depthcore.optimal.marginals` on each
-        scenario.
-    """
-    scenarios = tuple(scenarios)
-    if not scenarios or not all(isinstance(s, Scenario) for s in scenarios):
-        raise ValueError("scenarios must be a non-empty sequence of Scenario")
-    if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:
-        raise ValueError(f"repeats must be a positive integer, got {repeats!r}")
-    calls = {
-        "optimal": lambda s: optimal.moments(np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov),
-        "second_order": lambda s: second_order.second_order(s.mu, s.rho, s.prior),
-        "ekf": lambda s: ekf.ekf(s.mu, s.rho, s.prior),
-    }
-    seconds = {
-        name: np.array(
-            [_best_time(lambda s=s, call=call: call(s), int(repeats)) for s in scenarios]
-        )
-        for name, call in calls.items()
-    }
-    nodes = np.array([optimal.marginals(s.mu, s.rho, s.prior).n_nodes for s in scenarios])
-    return {"keys": [s.key for s in scenarios], "seconds": seconds, "nodes": nodes}
 
 
 # --- convergence of the particle filter ------------------------------------------------------

@@ -286,25 +286,6 @@ def test_truth_study_rejects_bad_truths(bad):
         experiments.truth_study(bad, FIG2.rho, trials=10, seed=0)
 
 
-def test_filter_cost_counts_the_optimal_filters_nodes():
-    scenarios = [FIG2, SCENARIOS["fig3"]]
-    c = experiments.filter_cost(scenarios, repeats=1)
-    assert c["keys"] == ["fig2", "fig3"]
-    for s, n in zip(scenarios, c["nodes"], strict=True):
-        assert n == optimal.marginals(s.mu, s.rho, s.prior).n_nodes
-    for name in ("optimal", "second_order", "ekf"):
-        assert c["seconds"][name].shape == (2,) and np.all(c["seconds"][name] > 0)
-
-
-@pytest.mark.parametrize(
-    ("scenarios", "repeats", "match"),
-    [([], 1, "scenarios"), ([FIG2], 0, "repeats"), (["fig2"], 1, "scenarios")],
-)
-def test_filter_cost_rejects_bad_arguments(scenarios, repeats, match):
-    with pytest.raises(ValueError, match=match):
-        experiments.filter_cost(scenarios, repeats=repeats)
-
-
 def test_resample_move_runs_are_the_filter_run_on_independent_streams():
     r = experiments.resample_move_runs(FIG2, 2000, 3, seed=3, moves=5)
     exact = optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior)

@@ -235,3 +235,35 @@ def test_rbpf_texts_format_each_row_of_the_convergence_table():
     assert t["rb_0_mean"] == "23.0400 ± 0.0036"
     assert t["rb_1_sd"] == "0.1374 ± 0.0005"
     assert t["rb_0_rmse_mean"] == "0.018" and t["rb_1_rmse_sd"] == "0.0021"
+
+
+def test_bench_texts_format_the_records_numbers():
+    from depthcore import benchmarks
+
+    r = benchmarks.read("bench_optimal")
+    t = report.bench_texts("bench_optimal", r)
+    triple = r["results"]["per_triple"]
+    i = triple["keys"].index("fig3")
+    assert t["opt_fig3_figure"] == "Figure 3"
+    assert t["opt_fig3_optimal_ekf"] == f"{triple['optimal_ms'][i] / triple['ekf_ms'][i]:.1f}"
+    assert t["opt_nodes_max"] == str(max(triple["nodes"]))
+    assert t["opt_origin"] == report.bench_origin(r)
+    assert r["date"][:10] in t["opt_origin"] and r["machine"]["cpu"] in t["opt_origin"]
+    assert report._sci(1.5e8) == "1.5e8" and report._sci(0.0287, 2) == "2.87e-2"
+    with pytest.raises(ValueError, match="name"):
+        report.bench_texts("bench_nothing", r)
+
+
+def test_bench_readme_blocks_hold_every_table_and_its_origin():
+    from depthcore import benchmarks
+
+    names = ["bench_bank", "bench_ekf_filterpy", "bench_import"]
+    names += ["bench_optimal", "bench_rbpf", "bench_trials"]
+    records = {n: benchmarks.read(n) for n in names}
+    blocks = report.bench_readme_blocks(records)
+    assert set(blocks) == set(report.bench_tables(records))
+    for key, block in blocks.items():
+        assert block.startswith("| ") and "Measured " in block, key
+    bank = records["bench_bank"]["results"]["many_trials"]
+    verdict = "met" if bank["time_s"] < bank["target_s"] else "not met"
+    assert f"({verdict})" in blocks["bank"]

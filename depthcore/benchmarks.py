@@ -1,0 +1,242 @@
+"""The benchmarks' recorded results: written by the scripts, read by the book and the README.
+
+Recommended import: ``from depthcore import benchmarks``.
+
+Each script ``benchmarks/<name>.py`` measures some of depthcore's modules and,
+besides printing its tables, writes a record ``benchmarks/results/<name>.json``
+(:func:`write`): every number its tables print, the sizes it used, the
+machine, the date, depthcore's version and a fingerprint of the code it
+measured. The book and the README show the numbers of these records
+(:func:`read`), never numbers timed while a page runs.
+
+The fingerprint (:func:`fingerprint`) is the SHA-256 of the parsed source with
+its docstrings dropped (comments never reach the parse), so editing prose
+leaves a record valid and changing code makes it stale (:func:`stale`), until
+the script is run again (:func:`command`).
+
+Keys of the results end with their unit: ``_s`` seconds, ``_ms``
+milliseconds, ``_sd`` posterior standard deviations (:data:`UNITS`); a key
+without one of these endings is a count or a ratio.
+"""
+
+from __future__ import annotations
+
+import ast
+import datetime
+import hashlib
+import json
+import os
+import platform
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+
+#: The repository, where the benchmarks and their records sit beside the package.
+ROOT = Path(__file__).resolve().parent.parent
+#: The committed records, one per script.
+RESULTS = ROOT / "benchmarks" / "results"
+#: Where a smaller run (``--quick``) writes its record, outside version control.
+QUICK_RESULTS = ROOT / "_build" / "benchmarks"
+#: The endings of the results' keys and their units.
+UNITS = {"_s": "seconds", "_ms": "milliseconds", "_sd": "posterior standard deviations"}
+#: The fields of every record.
+FIELDS = (
+    "script",
+    "command",
+    "date",
+    "machine",
+    "depthcore_version",
+    "fingerprint",
+    "units",
+    "sizes",
+    "results",
+)
+
+
+def _drop_docstrings(tree: ast.AST) -> ast.AST:
+    """``tree`` with the docstring of the module and of every class and function removed."""
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if (
+                body
+                and isinstance(body[0], ast.Expr)
+                and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)
+            ):
+                node.body = body[1:]
+    return tree
+
+
+def fingerprint(path) -> str:
+    """SHA-256 of a Python source's code: its syntax tree without docstrings or comments.
+
+    Parameters
+    ----------
+    path : str or path
+        A Python source file.
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits; the same for two sources that differ only in
+        comments, docstrings, blank lines or line breaks.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"path must be an existing Python source, got {str(path)!r}")
+    tree = _drop_docstrings(ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+    return hashlib.sha256(ast.dump(tree, include_attributes=False).encode()).hexdigest()
+
+
+def _relative(path: Path) -> str:
+    return path.resolve().relative_to(ROOT).as_posix()
+
+
+def fingerprints(script, modules) -> dict[str, str]:
+    """The fingerprints of a benchmark script and of the depthcore modules it measures.
+
+    Parameters
+    ----------
+    script : str or path
+        The script, ``benchmarks/<name>.py``.
+    modules : sequence of str
+        Names of depthcore's modules, e.g. ``("optimal", "reference")``.
+
+    Returns
+    -------
+    dict of str to str
+        Path relative to the repository -> :func:`fingerprint`.
+    """
+    paths = [Path(script)] + [ROOT / "depthcore" / f"{m}.py" for m in modules]
+    return {_relative(p): fingerprint(p) for p in paths}
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def machine() -> dict:
+    """The machine and software a benchmark runs on.
+
+    Returns
+    -------
+    dict
+        ``cores`` (logical CPUs), ``cpu``, ``system``, ``python``, ``numpy``,
+        ``scipy``.
+    """
+    import scipy
+
+    return {
+        "cores": os.cpu_count(),
+        "cpu": _cpu_model(),
+        "system": f"{platform.system()} {platform.machine()}",
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+    }
+
+
+def command(name: str) -> str:
+    """The command that measures benchmark ``name`` again and rewrites its record."""
+    return f"python benchmarks/{name}.py"
+
+
+def _plain(value):
+    """NumPy scalars and arrays as JSON's numbers and lists."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"cannot record a {type(value).__name__}")
+
+
+def write(script, modules, sizes: dict, results: dict, full: bool = True) -> Path:
+    """Write a benchmark's record; a smaller run's goes outside the committed records.
+
+    Parameters
+    ----------
+    script : str or path
+        The benchmark script, ``benchmarks/<name>.py``.
+    modules : sequence of str
+        The depthcore modules it measures (fingerprinted with the script).
+    sizes : dict
+        The sizes it ran with (trials, repeats, particles, ...).
+    results : dict
+        Every number its tables print, keys ending with their unit (:data:`UNITS`).
+    full : bool
+        True for the full sizes: the record goes to :data:`RESULTS`
+        (committed); False (``--quick``): to :data:`QUICK_RESULTS`.
+
+    Returns
+    -------
+    Path
+        The file written, ``<directory>/<name>.json``.
+    """
+    script = Path(script).resolve()
+    name = script.stem
+    record = {
+        "script": _relative(script),
+        "command": command(name),
+        "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "machine": machine(),
+        "depthcore_version": __version__,
+        "fingerprint": fingerprints(script, modules),
+        "units": UNITS,
+        "sizes": sizes,
+        "results": results,
+    }
+    directory = RESULTS if full else QUICK_RESULTS
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / f"{name}.json"
+    path.write_text(json.dumps(record, indent=1, default=_plain) + "\n", encoding="utf-8")
+    return path
+
+
+def read(name: str, directory=None) -> dict:
+    """The committed record of benchmark ``name`` (e.g. ``"bench_optimal"``).
+
+    Parameters
+    ----------
+    name : str
+    directory : str or path, optional
+        Default :data:`RESULTS`.
+
+    Returns
+    -------
+    dict
+        The record, with the fields :data:`FIELDS`.
+    """
+    path = Path(RESULTS if directory is None else directory) / f"{name}.json"
+    if not path.is_file():
+        raise ValueError(f"name must be a recorded benchmark, got {name!r} (no {path.name})")
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def stale(record: dict) -> list[str]:
+    """The measured sources whose code changed since the record was made.
+
+    Parameters
+    ----------
+    record : dict
+        From :func:`read`.
+
+    Returns
+    -------
+    list of str
+        Paths relative to the repository, empty when the record is current.
+    """
+    return [
+        path
+        for path, digest in record["fingerprint"].items()
+        if not (ROOT / path).is_file() or fingerprint(ROOT / path) != digest
+    ]

@@ -1,0 +1,157 @@
+"""Every benchmark has a committed record, complete and measured on the current code.
+
+The book and the README show the numbers of ``benchmarks/results/<name>.json``
+(:mod:`depthcore.benchmarks`). These tests never run a benchmark: they read
+the records and compare each one's fingerprint with the sources it measured,
+so that a change of the measured code names the record to measure again.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import shutil
+import sys
+
+import pytest
+
+from depthcore import __version__, benchmarks, report
+
+SCRIPTS = sorted((benchmarks.ROOT / "benchmarks").glob("bench_*.py"))
+NAMES = [p.stem for p in SCRIPTS]
+
+#: The tables of each record's results.
+TABLES = {
+    "bench_bank": {"three_frames", "online", "many_trials", "matched_accuracy", "targets"},
+    "bench_ekf_filterpy": {"depthcore_ms", "filterpy_ms", "ratio", "mean_difference_sd"},
+    "bench_import": {"numpy_s", "depthcore_after_numpy_s", "target_s"},
+    "bench_optimal": {"moments", "per_triple"},
+    "bench_rbpf": {"exact", "equal_cost", "convergence"},
+    "bench_trials": {"vectorised_s", "trial_by_trial_s", "ratio", "estimate_sd"},
+}
+
+
+def test_every_script_is_known():
+    assert NAMES == sorted(TABLES), "a benchmark script was added or removed: update TABLES"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_script_has_a_committed_record(name):
+    path = benchmarks.RESULTS / f"{name}.json"
+    assert path.is_file(), f"{name} has no record: run `make bench BENCH={name}`"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_record_has_its_fields(name):
+    r = benchmarks.read(name)
+    assert set(benchmarks.FIELDS) <= set(r), f"{name}: fields missing"
+    assert r["script"] == f"benchmarks/{name}.py"
+    assert r["command"] == benchmarks.command(name)
+    assert datetime.datetime.fromisoformat(r["date"]).tzinfo is not None
+    assert set(r["machine"]) >= {"cores", "cpu", "python", "numpy", "scipy"}
+    assert isinstance(r["machine"]["cores"], int) and r["machine"]["cores"] >= 1
+    assert r["depthcore_version"] == __version__
+    assert r["units"] == benchmarks.UNITS
+    assert f"benchmarks/{name}.py" in r["fingerprint"]
+    assert any(p.startswith("depthcore/") for p in r["fingerprint"])
+    assert r["sizes"], f"{name}: no sizes"
+    assert TABLES[name] <= set(r["results"]), f"{name}: results missing"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_record_measured_the_current_code(name):
+    r = benchmarks.read(name)
+    changed = benchmarks.stale(r)
+    assert not changed, (
+        f"benchmarks/results/{name}.json is stale: {', '.join(changed)} changed since it was "
+        f"recorded on {r['date']}; measure again with `make bench BENCH={name}` "
+        f"(`{r['command']}`)"
+    )
+
+
+def test_the_fingerprint_ignores_prose_and_sees_code(tmp_path):
+    a, b, c = tmp_path / "a.py", tmp_path / "b.py", tmp_path / "c.py"
+    a.write_text('"""Module."""\n\n\ndef f(x):\n    """Twice x."""\n    return 2 * x\n')
+    b.write_text('"""Other words."""\n# a comment\ndef f(x):\n    return 2 * x  # twice\n')
+    c.write_text('"""Module."""\n\n\ndef f(x):\n    """Twice x."""\n    return 3 * x\n')
+    assert benchmarks.fingerprint(a) == benchmarks.fingerprint(b)
+    assert benchmarks.fingerprint(a) != benchmarks.fingerprint(c)
+    with pytest.raises(ValueError, match="path"):
+        benchmarks.fingerprint(tmp_path / "missing.py")
+
+
+def test_a_changed_source_makes_a_record_stale():
+    r = benchmarks.read("bench_optimal")
+    assert benchmarks.stale(r) == []
+    path = next(p for p in r["fingerprint"] if p.startswith("depthcore/"))
+    r["fingerprint"][path] = "0" * 64
+    assert benchmarks.stale(r) == [path]
+
+
+def test_a_quick_run_leaves_the_committed_record(tmp_path, monkeypatch):
+    script = tmp_path / "bench_probe.py"
+    shutil.copy(benchmarks.ROOT / "benchmarks" / "bench_trials.py", script)
+    monkeypatch.setattr(benchmarks, "ROOT", tmp_path)
+    monkeypatch.setattr(benchmarks, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr(benchmarks, "QUICK_RESULTS", tmp_path / "quick")
+    (tmp_path / "depthcore").mkdir()
+    shutil.copy(benchmarks.Path(benchmarks.__file__).parent / "optimal.py", tmp_path / "depthcore")
+    path = benchmarks.write(script, ["optimal"], {"trials": 1}, {"x_s": 1.0}, full=False)
+    assert path == tmp_path / "quick" / "bench_probe.json"
+    assert not (tmp_path / "results").exists()
+    record = json.loads(path.read_text())
+    assert record["fingerprint"] == {
+        "bench_probe.py": benchmarks.fingerprint(script),
+        "depthcore/optimal.py": benchmarks.fingerprint(tmp_path / "depthcore" / "optimal.py"),
+    }
+    full = benchmarks.write(script, ["optimal"], {"trials": 1}, {"x_s": 1.0})
+    assert full == tmp_path / "results" / "bench_probe.json"
+    assert benchmarks.read("bench_probe", tmp_path / "results")["results"] == {"x_s": 1.0}
+
+
+def test_read_names_an_unknown_benchmark():
+    with pytest.raises(ValueError, match="name"):
+        benchmarks.read("bench_nothing")
+
+
+def _bench_readme():
+    sys.path.insert(0, str(benchmarks.ROOT / "tools"))
+    import bench_readme
+
+    return bench_readme
+
+
+def test_the_readme_shows_the_records():
+    tool = _bench_readme()
+    text = tool.README.read_text(encoding="utf-8")
+    expected = tool.regenerate(text, report.bench_readme_blocks(tool.records()))
+    assert text == expected, (
+        "README.md's benchmark tables differ from benchmarks/results/: "
+        "run `python tools/bench_readme.py`"
+    )
+
+
+def test_the_readme_tool_replaces_between_markers_and_names_a_missing_block():
+    tool = _bench_readme()
+    text = "a\n<!-- bench:x -->\nold\n<!-- /bench:x -->\nb\n"
+    assert tool.regenerate(text, {"x": "new"}) == "a\n<!-- bench:x -->\nnew\n<!-- /bench:x -->\nb\n"
+    with pytest.raises(ValueError, match="missing"):
+        tool.regenerate(text, {"x": "new", "y": "other"})
+
+
+def test_the_readmes_claims_on_the_optimal_filter_hold_for_the_record():
+    # "to 1e-8 in under 5 ms", "over 10,000 times faster than adaptive cubature",
+    # "over 1,000 times faster than the 3-D Gauss-Legendre grid"
+    m = benchmarks.read("bench_optimal")["results"]["moments"]
+    assert m["one_d_ms"] < 5 and m["one_d_error_sd"] < 1e-8 and m["one_d_estimate_sd"] < 1e-8
+    assert m["nquad_ratio"] > 1e4
+    assert m["grid_ratio"] > 1e3
+
+
+def test_the_readmes_sizes_are_the_records():
+    # "The EKF over 10,000 trials", "over 10,000 Monte Carlo trials", "RMS over 10
+    # independent runs", "target: at most 0.15 s"
+    assert benchmarks.read("bench_ekf_filterpy")["sizes"]["trials"] == 10_000
+    assert benchmarks.read("bench_trials")["sizes"]["trials"] == 10_000
+    assert benchmarks.read("bench_rbpf")["sizes"]["repeats"] == 10
+    assert benchmarks.read("bench_import")["results"]["target_s"] == 0.15
