@@ -48,6 +48,7 @@ FIELDS = (
     "date",
     "machine",
     "depthcore_version",
+    "measures",
     "fingerprint",
     "units",
     "sizes",
@@ -95,22 +96,64 @@ def _relative(path: Path) -> str:
     return path.resolve().relative_to(ROOT).as_posix()
 
 
+def _package_imports(module: str) -> set[str]:
+    """The depthcore modules that ``module`` imports: ``from . import x``, ``from .x import y``."""
+    path = ROOT / "depthcore" / f"{module}.py"
+    if not path.is_file():
+        raise ValueError(f"modules must name depthcore's modules, got {module!r}")
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+        if isinstance(node, ast.ImportFrom) and (node.level == 1 or node.module == "depthcore"):
+            if node.module and node.level == 1:
+                found.add(node.module.split(".")[0])
+            else:
+                found.update(alias.name for alias in node.names)
+    return {m for m in found if (ROOT / "depthcore" / f"{m}.py").is_file()}
+
+
+def measured_modules(modules) -> list[str]:
+    """The modules ``modules`` and every depthcore module they import, directly or not.
+
+    A benchmark's numbers depend on all the code its modules run, so its
+    record is fingerprinted on this closure: a change anywhere in it makes the
+    record stale.
+
+    Parameters
+    ----------
+    modules : sequence of str
+        Names of depthcore's modules, e.g. ``("optimal", "reference")``.
+
+    Returns
+    -------
+    list of str
+        Sorted module names, ``modules`` included.
+    """
+    seen, todo = set(), list(modules)
+    while todo:
+        m = todo.pop()
+        if m not in seen:
+            seen.add(m)
+            todo.extend(_package_imports(m) - seen)
+    return sorted(seen)
+
+
 def fingerprints(script, modules) -> dict[str, str]:
-    """The fingerprints of a benchmark script and of the depthcore modules it measures.
+    """The fingerprints of a benchmark script and of the depthcore code it measures.
 
     Parameters
     ----------
     script : str or path
         The script, ``benchmarks/<name>.py``.
     modules : sequence of str
-        Names of depthcore's modules, e.g. ``("optimal", "reference")``.
+        Names of depthcore's modules, e.g. ``("optimal", "reference")``;
+        every module they import is fingerprinted too (:func:`measured_modules`).
 
     Returns
     -------
     dict of str to str
         Path relative to the repository -> :func:`fingerprint`.
     """
-    paths = [Path(script)] + [ROOT / "depthcore" / f"{m}.py" for m in modules]
+    paths = [Path(script)] + [ROOT / "depthcore" / f"{m}.py" for m in measured_modules(modules)]
     return {_relative(p): fingerprint(p) for p in paths}
 
 
@@ -190,6 +233,7 @@ def write(script, modules, sizes: dict, results: dict, full: bool = True) -> Pat
         "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "machine": machine(),
         "depthcore_version": __version__,
+        "measures": list(modules),
         "fingerprint": fingerprints(script, modules),
         "units": UNITS,
         "sizes": sizes,
@@ -225,6 +269,10 @@ def read(name: str, directory=None) -> dict:
 def stale(record: dict) -> list[str]:
     """The measured sources whose code changed since the record was made.
 
+    A source counts as changed when its fingerprint differs from the
+    record's, when it is gone, and when it has entered the code the
+    benchmark's modules run (:func:`measured_modules`) since.
+
     Parameters
     ----------
     record : dict
@@ -235,8 +283,13 @@ def stale(record: dict) -> list[str]:
     list of str
         Paths relative to the repository, empty when the record is current.
     """
-    return [
-        path
-        for path, digest in record["fingerprint"].items()
-        if not (ROOT / path).is_file() or fingerprint(ROOT / path) != digest
-    ]
+    recorded = record["fingerprint"]
+    script = ROOT / record["script"]
+    if not script.is_file():
+        return [record["script"]]
+    paths = [script] + [ROOT / "depthcore" / f"{m}.py" for m in record["measures"]]
+    gone = [_relative(p) for p in paths if not p.is_file()]
+    if gone:
+        return gone
+    current = fingerprints(script, record["measures"])
+    return [p for p in sorted(set(current) | set(recorded)) if current.get(p) != recorded.get(p)]

@@ -155,3 +155,18 @@ def test_the_readmes_sizes_are_the_records():
     assert benchmarks.read("bench_trials")["sizes"]["trials"] == 10_000
     assert benchmarks.read("bench_rbpf")["sizes"]["repeats"] == 10
     assert benchmarks.read("bench_import")["results"]["target_s"] == 0.15
+
+
+def test_a_record_covers_every_module_its_modules_import():
+    # bank imports kalman and optimal, which imports model: all are measured with it
+    closure = benchmarks.measured_modules(["bank"])
+    assert {"bank", "kalman", "optimal", "model", "_checks"} <= set(closure)
+    assert "figures" not in closure and "report" not in closure
+    prints = benchmarks.fingerprints(benchmarks.ROOT / "benchmarks" / "bench_bank.py", ["bank"])
+    assert set(prints) == {"benchmarks/bench_bank.py"} | {f"depthcore/{m}.py" for m in closure}
+    # a module that enters the closure later makes the record stale
+    r = benchmarks.read("bench_bank")
+    del r["fingerprint"]["depthcore/kalman.py"]
+    assert benchmarks.stale(r) == ["depthcore/kalman.py"]
+    with pytest.raises(ValueError, match="modules"):
+        benchmarks.measured_modules(["no_such_module"])
