@@ -1211,9 +1211,7 @@ def update(post: Mixture, mu_next) -> Mixture:
         )
     if post.bank.n_frames >= MAX_FRAMES:
         raise ValueError(f"mu_next: at most {MAX_FRAMES} frames")
-    stepped = step(post.bank, np.broadcast_to(mu_next, post.log_normaliser.shape))
-    new = _mixture(stepped, post.log_weights)
-    err, floor, free = _resolution(new)
+    new, err, floor, free = _step_rows(post, np.broadcast_to(mu_next, post.log_normaliser.shape))
     rtol = post.rtol
     ok = (
         free
@@ -1224,6 +1222,71 @@ def update(post: Mixture, mu_next) -> Mixture:
     if not np.all(ok):
         new = _replace_rows(new, ~ok)
     return _squeeze(new) if single else new
+
+
+#: Node entries (problems times nodes) per block of :func:`_step_rows`.
+_BLOCK = 1 << 14
+
+
+def _row_blocks(rows: int, nodes: int) -> list:
+    """Slices of ``rows`` problems into blocks of about :data:`_BLOCK` node entries (at least one row)."""
+    size = max(1, _BLOCK // max(nodes, 1))
+    return [slice(i, i + size) for i in range(0, rows, size)]
+
+
+def _step_rows(post: Mixture, mu_next):
+    """:func:`step`, :func:`_mixture` and :func:`_resolution` of :func:`update`, by blocks of problems.
+
+    Each pass is elementwise or a sum over the nodes within a problem, so a
+    block of problems at a time gives the same numbers as the whole batch at
+    once, while the block's temporaries stay in the processor's cache instead
+    of being allocated (and written) at the batch's full size.
+
+    Parameters
+    ----------
+    post : Mixture
+        Batch shape (B,).
+    mu_next : ndarray, shape (B,)
+
+    Returns
+    -------
+    new : Mixture
+        After ``N + 1`` frames, without error estimates.
+    err, floor : ndarray, shape (2, B)
+    free : ndarray of bool, shape (B,)
+        As :func:`_resolution`.
+    """
+    B, J = post.log_weights.shape
+    # the history grows along the frames, not by blocks: one block
+    blocks = _row_blocks(B, J) if post.bank.history is None else [slice(None)]
+    parts = []
+    for rows in blocks:
+        part = _each_array(post, lambda a, rows=rows: a[rows])
+        new = _mixture(step(part.bank, mu_next[rows]), part.log_weights)
+        parts.append((new, *_resolution(new)))
+    if len(parts) == 1:
+        return parts[0]
+    news = [p[0] for p in parts]
+
+    def join(get):
+        return np.concatenate([get(n) for n in news])
+
+    bank = post.bank._replace(
+        mean=join(lambda n: n.bank.mean),
+        cov=join(lambda n: n.bank.cov),
+        log_weight=join(lambda n: n.bank.log_weight),
+        mu=join(lambda n: n.bank.mu),
+    )
+    new = Mixture(
+        bank,
+        post.log_weights,
+        join(lambda n: n.probabilities),
+        join(lambda n: n.log_normaliser),
+        join(lambda n: n.mean),
+        join(lambda n: n.cov),
+    )
+    err, floor = (np.concatenate([p[i] for p in parts], axis=1) for i in (1, 2))
+    return new, err, floor, np.concatenate([p[3] for p in parts])
 
 
 def _shifted(post: Mixture, shift) -> Mixture:
