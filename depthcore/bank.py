@@ -513,32 +513,73 @@ def _mixture_moments(W, means, covs, depths):
     ``means`` (..., J, 2) and ``covs`` (..., J, 2, 2) the Gaussians of
     ``(x, v)`` at each node; ``depths`` (..., J) the node depths (known
     exactly given the node). The law of total variance: the weighted
-    covariance of the nodes' means plus their weighted covariances.
+    covariance of the nodes' means plus their weighted covariances
+    (:func:`_stacked_moments` with one set of weights).
     """
-    shape = np.broadcast_shapes(W.shape, means.shape[:-1], depths.shape)
-    W = np.broadcast_to(W, shape)
-    total = np.sum(W, axis=-1)[..., None]  # W need not be normalised: the sums are divided
-    m = np.empty(shape[:-1] + (3,) + shape[-1:])  # (..., 3, J): x, y, v at each node
-    m[..., 0, :] = means[..., 0]
-    m[..., 1, :] = depths
-    m[..., 2, :] = means[..., 1]
-    # about the most probable node: the sums then carry no multiple of a large depth
-    top = np.argmax(W, axis=-1)[..., None, None]
-    centre = np.take_along_axis(m, top, axis=-1)  # (..., 3, 1)
-    d = m - centre
-    Wd = W[..., None, :] * d
-    shift = np.sum(Wd, axis=-1) / total  # (..., 3)
-    mean = centre[..., 0] + shift
-    # sum_j W_j (m_j - mean)(m_j - mean)^T = sum_j W_j d_j d_j^T - shift shift^T
-    outer = shift[..., :, None] * shift[..., None, :]
-    cov = (Wd @ np.swapaxes(d, -1, -2)) / total[..., None] - outer
-    covs = np.broadcast_to(covs, shape + (2, 2))
-    extra = (W[..., None, :] @ covs.reshape(shape + (4,)))[..., 0, :] / total  # (..., 4)
-    cov[..., 0, 0] += extra[..., 0]
-    cov[..., 0, 2] += extra[..., 1]
-    cov[..., 2, 0] += extra[..., 2]
-    cov[..., 2, 2] += extra[..., 3]
-    return mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    mean, cov = _stacked_moments(np.asarray(W)[..., None, :], means, covs, depths)
+    return mean[..., 0, :], cov[..., 0, :, :]
+
+
+#: The second moments summed by :func:`_stacked_moments`: pairs of ``(x, y, v)`` ...
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+#: ... with each node's conditional covariance ``Cov[(x, v) | y_j]`` entry added to
+#: ``(x, x)``, ``(v, v)`` and ``(x, v)``: (pair, covariance row, covariance column).
+_CONDITIONAL = ((0, 0, 0), (2, 1, 1), (4, 0, 1))
+#: Where each entry of a 3 x 3 covariance (row-major) sits in :data:`_PAIRS` order.
+_SYMMETRIC = np.array([0, 3, 4, 3, 1, 5, 4, 5, 2])
+
+
+def _stacked_moments(W, means, covs, depths):
+    """Mean and covariance of ``(x, y, v)`` under ``K`` weightings of the same node mixture.
+
+    The law of total variance, summed about the node ``c`` of largest weight
+    in the first weighting (the sums then carry no multiple of a large
+    depth): with ``d_j = m_j - c``, ``m_j = (E[x | y_j], y_j, E[v | y_j])``
+    and ``C_j`` the node's covariance of ``(x, v)`` (zero in the depth's row
+    and column),
+
+        S = sum_j W_j,   s = sum_j W_j d_j / S,   mean = c + s,
+        cov = sum_j W_j (d_j d_j^T + C_j) / S - s s^T.
+
+    The nodes' terms ``(1, d_j, d_j d_j^T + C_j)`` are formed once and summed
+    for every weighting by one matrix product.
+
+    Parameters
+    ----------
+    W : ndarray, shape (..., K, J)
+        Weights >= 0 with a positive one per row (need not be normalised).
+    means : ndarray, shape (..., J, 2)
+    covs : ndarray, shape (..., J, 2, 2)
+    depths : ndarray, shape (..., J)
+
+    Returns
+    -------
+    mean : ndarray, shape (..., K, 3)
+    cov : ndarray, shape (..., K, 3, 3)
+    """
+    batch = np.broadcast_shapes(W.shape[:-2], means.shape[:-2], covs.shape[:-3], depths.shape[:-1])
+    J = W.shape[-1]
+    W = np.broadcast_to(W, batch + W.shape[-2:])
+    top = np.argmax(W[..., 0, :], axis=-1)[..., None]  # (..., 1)
+    terms = np.empty(batch + (10, J))  # per node: 1, d (3), the second moments (6)
+    terms[..., 0, :] = 1.0
+    centre = []
+    for i, z in enumerate((means[..., 0], depths, means[..., 1])):
+        z = np.broadcast_to(z, batch + (J,))
+        centre.append(np.take_along_axis(z, top, -1))  # (..., 1)
+        np.subtract(z, centre[-1], out=terms[..., 1 + i, :])
+    d = terms[..., 1:4, :]
+    for k, (i, j) in enumerate(_PAIRS):
+        np.multiply(d[..., i, :], d[..., j, :], out=terms[..., 4 + k, :])
+    for k, i, j in _CONDITIONAL:
+        terms[..., 4 + k, :] += covs[..., i, j]
+    sums = W @ np.swapaxes(terms, -1, -2)  # (..., K, 10)
+    total = sums[..., :1]
+    shift = sums[..., 1:4] / total
+    first, second = (np.array(ix) for ix in zip(*_PAIRS, strict=True))
+    moments = sums[..., 4:] / total - shift[..., first] * shift[..., second]
+    mean = np.concatenate(centre, axis=-1)[..., None, :] + shift
+    return mean, moments[..., _SYMMETRIC].reshape(moments.shape[:-1] + (3, 3))
 
 
 class Smoothed(NamedTuple):
@@ -858,8 +899,14 @@ def mixture(bank: Bank, weights) -> Mixture:
     return _mixture(bank, log_weights)
 
 
-def _mixture(bank: Bank, log_weights) -> Mixture:
-    """:func:`mixture` from the checked log quadrature weights (``-inf`` for a zero weight)."""
+def _mixture(bank: Bank, log_weights, halved: bool = False):
+    """:func:`mixture` from the checked log quadrature weights (``-inf`` for a zero weight).
+
+    With ``halved``, also the moments on every other node and the ends'
+    freedom (:func:`_halving`), from the same pass over the nodes, for
+    :func:`_resolution`: returns the Mixture, the halved mean (..., 3) and
+    covariance (..., 3, 3), the largest log probability (..., 1) and ``free`` (...).
+    """
     a = bank.log_weight + log_weights
     top = np.max(a, axis=-1, keepdims=True)  # finite: a positive weight per problem
     terms = np.exp(a - top)
@@ -867,8 +914,16 @@ def _mixture(bank: Bank, log_weights) -> Mixture:
     log_normaliser = (top + np.log(total))[..., 0]
     probabilities = terms / total
     depth_N = bank.nodes + (bank.n_frames - 1)
-    mean, cov = _mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
-    return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
+    if not halved:
+        mean, cov = _mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
+        return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
+    every_other, free = _halving(a, top)
+    W = np.stack([probabilities, np.where(every_other, probabilities, 0.0)], axis=-2)
+    mean, cov = _stacked_moments(W, bank.mean, bank.cov, depth_N)
+    post = Mixture(
+        bank, log_weights, probabilities, log_normaliser, mean[..., 0, :], cov[..., 0, :, :]
+    )
+    return post, mean[..., 1, :], cov[..., 1, :, :], top, free
 
 
 # --- nodes placed by the depth quadrature ----------------------------------------------
@@ -1053,7 +1108,12 @@ def _place(pb, rtol, history, single):
 
 
 def _concatenate(parts) -> Mixture:
-    """Batches of placed posteriors joined along the batch, their nodes padded to one count."""
+    """Batches of placed posteriors joined along the batch, their nodes padded to one count.
+
+    A padded node has quadrature weight 0 (log weight ``-inf``) and probability
+    0, so each problem's mixture is unchanged: its fields are joined, not
+    recomputed.
+    """
     J = max(p.log_weights.shape[-1] for p in parts)
     banks = [p.bank for p in parts]
 
@@ -1079,13 +1139,21 @@ def _concatenate(parts) -> Mixture:
             )
         ),
     )
-    log_weights = np.concatenate([_pad(p.log_weights, J, 1, -np.inf) for p in parts])
-    shift = np.max(log_weights, axis=-1)
-    joined = _shifted(mixture(bank, np.exp(log_weights - shift[:, None])), shift)
-    return dataclasses.replace(
-        joined,
-        depth_error=np.concatenate([p.depth_error for p in parts]),
-        velocity_error=np.concatenate([p.velocity_error for p in parts]),
+
+    def rows(get, value=None):
+        if value is None:
+            return np.concatenate([get(p) for p in parts])
+        return np.concatenate([_pad(get(p), J, 1, value) for p in parts])
+
+    return Mixture(
+        bank,
+        log_weights=rows(lambda p: p.log_weights, -np.inf),
+        probabilities=rows(lambda p: p.probabilities, 0.0),
+        log_normaliser=rows(lambda p: p.log_normaliser),
+        mean=rows(lambda p: p.mean),
+        cov=rows(lambda p: p.cov),
+        depth_error=rows(lambda p: p.depth_error),
+        velocity_error=rows(lambda p: p.velocity_error),
         rtol=parts[0].rtol,
     )
 
@@ -1122,42 +1190,64 @@ def _squeeze(post: Mixture) -> Mixture:
 _END_MARGIN = 40.0
 
 
-def _resolution(post: Mixture):
-    """The error of the moments on the placed nodes, shape (2, B), and whether the ends are free.
+def _halving(log_p, top):
+    """Every other node of the placed grid, and whether its ends are free.
 
-    The nodes of :func:`posterior` are a trapezoid grid in order; dropping
-    every other one (doubling the weights of the rest) doubles the step, and
-    the change of the depth's and the velocity's mean and SD estimates the
-    error, as the quadrature's own halvings do (floored by roundoff, as in
-    :func:`depthcore.optimal._roundoff`). The ends are free when the first
-    and last nodes with positive weight carry log probabilities more than
-    :data:`_END_MARGIN` below the largest.
+    Parameters
+    ----------
+    log_p : ndarray, shape (..., J)
+        The nodes' log probabilities up to a constant, ``-inf`` at padding.
+    top : ndarray, shape (..., 1)
+        Their largest.
+
+    Returns
+    -------
+    every_other : ndarray of bool, shape (..., J)
+        The nodes with positive weight an even number of places from the first.
+    free : ndarray of bool, shape (...)
+        The first and last nodes with positive weight carry log probabilities
+        more than :data:`_END_MARGIN` below the largest.
     """
-    b = post.bank
-    log_p = np.where(np.isfinite(post.log_weights), b.log_weight + post.log_weights, -np.inf)
-    top = np.max(log_p, axis=-1)
     valid = np.isfinite(log_p)
     J = log_p.shape[-1]
-    j = np.arange(J)
     first = np.argmax(valid, axis=-1)
     last = J - 1 - np.argmax(valid[..., ::-1], axis=-1)
     end = np.maximum(
         np.take_along_axis(log_p, first[..., None], -1)[..., 0],
         np.take_along_axis(log_p, last[..., None], -1)[..., 0],
     )
-    free = end < top - _END_MARGIN
-    even = ((j - first[..., None]) % 2 == 0) & valid
-    W = np.where(even, np.exp(np.where(valid, log_p - top[..., None], -np.inf)), 0.0)
-    c_mean, c_cov = _mixture_moments(W, b.mean, b.cov, b.nodes + (b.n_frames - 1))
+    every_other = ((np.arange(J) - first[..., None]) % 2 == 0) & valid
+    return every_other, end < top[..., 0] - _END_MARGIN
+
+
+def _resolution(post: Mixture, halved_mean, halved_cov, top):
+    """The error of the moments on the placed nodes and its roundoff floor, each (2, B).
+
+    The nodes of :func:`posterior` are a trapezoid grid in order; dropping
+    every other one (doubling the weights of the rest, :func:`_halving`)
+    doubles the step, and the change of the depth's and the velocity's mean
+    and SD estimates the error, as the quadrature's own halvings do (floored
+    by roundoff, as in :func:`depthcore.optimal._roundoff`).
+
+    Parameters
+    ----------
+    post : Mixture
+    halved_mean : ndarray, shape (B, 3)
+    halved_cov : ndarray, shape (B, 3, 3)
+        The mixture's moments on every other node.
+    top : ndarray, shape (B, 1)
+        The largest log probability of a node, up to the constant of ``post``'s
+        log weights.
+    """
     eps = np.finfo(float).eps
     errors, floors = [], []
     for k in (1, 2):
-        sd, sd_c = np.sqrt(post.cov[..., k, k]), np.sqrt(c_cov[..., k, k])
-        change = np.maximum(np.abs(post.mean[..., k] - c_mean[..., k]), np.abs(sd - sd_c))
-        floor = 64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top)) * sd)
+        sd, sd_c = np.sqrt(post.cov[..., k, k]), np.sqrt(halved_cov[..., k, k])
+        change = np.maximum(np.abs(post.mean[..., k] - halved_mean[..., k]), np.abs(sd - sd_c))
+        floor = 64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top[..., 0])) * sd)
         errors.append(np.maximum(change, floor))
         floors.append(floor)
-    return np.stack(errors), np.stack(floors), free
+    return np.stack(errors), np.stack(floors)
 
 
 def _pad(a, J: int, axis: int, value):
@@ -1220,7 +1310,8 @@ def update(post: Mixture, mu_next) -> Mixture:
     )
     new = dataclasses.replace(new, depth_error=err[0], velocity_error=err[1], rtol=rtol)
     if not np.all(ok):
-        new = _replace_rows(new, ~ok)
+        # step and _mixture made new arrays for the nodes' filters and probabilities
+        new = _replace_rows(new, ~ok, own=post.bank.history is None)
     return _squeeze(new) if single else new
 
 
@@ -1229,13 +1320,13 @@ _BLOCK = 1 << 14
 
 
 def _row_blocks(rows: int, nodes: int) -> list:
-    """Slices of ``rows`` problems into blocks of about :data:`_BLOCK` node entries (at least one row)."""
+    """Slices of ``rows`` problems in blocks of about :data:`_BLOCK` entries (one row or more)."""
     size = max(1, _BLOCK // max(nodes, 1))
     return [slice(i, i + size) for i in range(0, rows, size)]
 
 
 def _step_rows(post: Mixture, mu_next):
-    """:func:`step`, :func:`_mixture` and :func:`_resolution` of :func:`update`, by blocks of problems.
+    """:func:`step`, :func:`_mixture` and :func:`_resolution` for :func:`update`, block by block.
 
     Each pass is elementwise or a sum over the nodes within a problem, so a
     block of problems at a time gives the same numbers as the whole batch at
@@ -1254,7 +1345,7 @@ def _step_rows(post: Mixture, mu_next):
         After ``N + 1`` frames, without error estimates.
     err, floor : ndarray, shape (2, B)
     free : ndarray of bool, shape (B,)
-        As :func:`_resolution`.
+        As :func:`_halving`.
     """
     B, J = post.log_weights.shape
     # the history grows along the frames, not by blocks: one block
@@ -1262,8 +1353,10 @@ def _step_rows(post: Mixture, mu_next):
     parts = []
     for rows in blocks:
         part = _each_array(post, lambda a, rows=rows: a[rows])
-        new = _mixture(step(part.bank, mu_next[rows]), part.log_weights)
-        parts.append((new, *_resolution(new)))
+        new, halved_mean, halved_cov, top, free = _mixture(
+            step(part.bank, mu_next[rows]), part.log_weights, halved=True
+        )
+        parts.append((new, *_resolution(new, halved_mean, halved_cov, top), free))
     if len(parts) == 1:
         return parts[0]
     news = [p[0] for p in parts]
@@ -1298,8 +1391,13 @@ def _shifted(post: Mixture, shift) -> Mixture:
     )
 
 
-def _replace_rows(post: Mixture, rows) -> Mixture:
-    """``post`` with the problems at ``rows`` (B,) re-placed by the quadrature."""
+def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
+    """``post`` with the problems at ``rows`` (B,) re-placed by the quadrature.
+
+    With ``own``, the arrays of the nodes' means, covariances, log weights and
+    probabilities belong to ``post`` alone and are overwritten where they keep
+    their shape (saving a copy of each); ``post``'s other arrays are not.
+    """
     b = post.bank
     idx = np.flatnonzero(rows)
     pb = optimal._Problem(
@@ -1316,17 +1414,20 @@ def _replace_rows(post: Mixture, rows) -> Mixture:
     J = max(post.log_weights.shape[-1], fresh.log_weights.shape[-1])
     fb = fresh.bank
 
-    def merge(old, new, axis, value):
-        # one copy of the old rows: padding makes one, and a copy is needed only without it
-        out = _pad(old, J, axis, value) if old.shape[axis] < J else old.copy()
+    def merge(old, new, axis, value, owned=False):
+        # one copy of the old rows at most: padding makes one, else only an array not owned
+        if old.shape[axis] < J:
+            out = _pad(old, J, axis, value)
+        else:
+            out = old if owned else old.copy()
         out[idx] = _pad(new, J, axis, value)
         return out
 
     bank = b._replace(
         nodes=merge(np.broadcast_to(b.nodes, post.log_weights.shape), fb.nodes, 1, 1.0),
-        mean=merge(b.mean, fb.mean, 1, 0.0),
-        cov=merge(b.cov, fb.cov, 1, 1.0),
-        log_weight=merge(b.log_weight, fb.log_weight, 1, 0.0),
+        mean=merge(b.mean, fb.mean, 1, 0.0, own),
+        cov=merge(b.cov, fb.cov, 1, 1.0, own),
+        log_weight=merge(b.log_weight, fb.log_weight, 1, 0.0, own),
         history=None,
     )
     # the other problems' mixtures are unchanged: their fields are merged, not recomputed
@@ -1334,7 +1435,7 @@ def _replace_rows(post: Mixture, rows) -> Mixture:
         post,
         bank=bank,
         log_weights=merge(post.log_weights, fresh.log_weights, 1, -np.inf),
-        probabilities=merge(post.probabilities, fresh.probabilities, 1, 0.0),
+        probabilities=merge(post.probabilities, fresh.probabilities, 1, 0.0, own),
         log_normaliser=np.where(rows, _full(fresh.log_normaliser, idx, rows), post.log_normaliser),
         mean=np.where(rows[:, None], _full(fresh.mean, idx, rows), post.mean),
         cov=np.where(rows[:, None, None], _full(fresh.cov, idx, rows), post.cov),
