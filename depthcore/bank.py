@@ -188,14 +188,14 @@ def conditional_prior(nodes, prior_mean, prior_cov):
     log_density : ndarray, shape (..., J)
         ``log N(y_1; m_y, P_yy)``.
     """
-    u = [0, 2]
+    u = slice(0, 3, 2)  # x and v
     m_u, m_y = prior_mean[..., u], prior_mean[..., 1]
     P_yy = prior_cov[..., 1, 1]
     P_uy = prior_cov[..., u, 1]
     slope = P_uy / P_yy[..., None]  # (..., 2)
     d = nodes - m_y[..., None]  # (..., J)
     mean = m_u[..., None, :] + slope[..., None, :] * d[..., None]
-    cov = prior_cov[..., u, :][..., :, u] - slope[..., :, None] * P_uy[..., None, :]
+    cov = prior_cov[..., u, u] - slope[..., :, None] * P_uy[..., None, :]
     log_density = -0.5 * (_LOG_2PI + np.log(P_yy)[..., None]) - 0.5 * d**2 / P_yy[..., None]
     return kalman.MeanAndCov(mean, cov[..., None, :, :]), log_density
 
@@ -266,54 +266,76 @@ def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
         ``Var[x_N]``, ``Cov[x_N, v_N]``, ``Var[v_N]`` given ``y_1`` and ``mu``.
     """
     start, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
-    x, v = start.mean[..., 0], start.mean[..., 1]
-    c0 = start.cov[..., 0, :, :]
-    a = c0[..., 0, 0][..., None]
-    b = c0[..., 0, 1][..., None]
-    c = c0[..., 1, 1][..., None]
-    state = _Lateral(x, v, a, b, c, a * c - b * b)
     rho2 = (np.asarray(rho, dtype=float) ** 2)[..., None]
     q2 = (np.asarray(q, dtype=float) ** 2)[..., None]
-    for k in range(mu.shape[-1]):
-        if k:
-            state = _predict_lateral(state, q2)
-        state, log_likelihood = _update_lateral(state, mu[..., k, None], nodes + k, rho2)
-        log_weight = log_weight + log_likelihood
-    return log_weight, (state.x, state.v), (state.a, state.b, state.c)
-
-
-class _Lateral(NamedTuple):
-    """The Gaussian of ``(x, v)`` at each node: means, covariance entries and determinant."""
-
-    x: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    b: np.ndarray
-    c: np.ndarray
-    det: np.ndarray
-
-
-def _predict_lateral(s: _Lateral, q2) -> _Lateral:
-    """Textbook 19.2.1 for ``x <- x + v``, ``v <- v + a_k``: see :func:`lateral_filter`."""
-    a = s.a + 2.0 * s.b + s.c
-    return _Lateral(s.x + s.v, s.v, a, s.b + s.c, s.c + q2, s.det + q2 * a)
-
-
-def _update_lateral(s: _Lateral, mu_k, y, rho2):
-    """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``: the state and the log likelihood.
-
-    The log likelihood ``log N(mu_k; x / y, (a + r) / y**2)`` is computed as
-    ``-(log 2 pi + log((a + r) / y**2) + e g) / 2`` with ``g = e / (a + r)``.
-    """
+    N = mu.shape[-1]
+    y = np.add.outer(np.arange(N, dtype=float), nodes)  # (N, ..., J): y_k = y_1 + k - 1
     yy = y * y
+    # the covariance does not depend on the bearings: its shape leaves out theirs
+    cov_shape = np.broadcast_shapes(start.cov.shape[:-2], nodes.shape, rho2.shape, q2.shape)
+    M, C = _lateral_state(
+        np.broadcast_shapes(start.mean.shape[:-1], mu.shape[:-1] + (1,)), cov_shape
+    )
+    M[_X], M[_V] = start.mean[..., 0], start.mean[..., 1]
+    c0 = start.cov[..., 0, :, :]
+    a, b, c = (c0[..., i, j][..., None] for i, j in ((0, 0), (0, 1), (1, 1)))
+    C[_A], C[_B], C[_DET], C[_C] = a, b, a * c - b * b, c
+    for k in range(N):
+        if k:
+            _predict_lateral(M, C, q2)
+        log_weight = log_weight + _update_lateral(M, C, mu[..., k, None], y[k], rho2, yy[k])
+    return log_weight, (M[_X], M[_V]), tuple(C[i].reshape(cov_shape) for i in (_A, _B, _C))
+
+
+#: Rows of the lateral state arrays of :func:`lateral_filter`: the means ``(x, v)``, and
+#: the covariance entries ``a, b``, the determinant ``det`` and ``c``, in an order that
+#: makes the paired updates single operations on slices.
+_X, _V = 0, 1
+_A, _B, _DET, _C = 0, 1, 2, 3
+
+
+def _lateral_state(mean_shape, cov_shape):
+    """Empty state arrays for :func:`lateral_filter`: ``M`` (2, ...) and ``C`` (4, ...).
+
+    ``M`` has the shape ``mean_shape`` and ``cov_shape`` broadcast to; ``C``
+    has ``cov_shape``, padded with leading ones to that rank, so that
+    ``C[_A : _B + 1]`` broadcasts against the means.
+    """
+    mean_shape = np.broadcast_shapes(mean_shape, cov_shape)
+    pad = (1,) * (len(mean_shape) - len(cov_shape))
+    return np.empty((2,) + mean_shape), np.empty((4,) + pad + tuple(cov_shape))
+
+
+def _predict_lateral(M, C, q2) -> None:
+    """Textbook 19.2.1 for ``x <- x + v``, ``v <- v + a_k``, in place: see :func:`lateral_filter`.
+
+    ``M`` (2, ...) holds ``x, v`` and ``C`` (4, ...) ``a, b, det, c``; ``q2`` is ``q**2``.
+    """
+    M[_X] += M[_V]
+    C[_A] += 2.0 * C[_B]
+    C[_A] += C[_C]  # a + 2 b + c
+    C[_B] += C[_C]
+    C[_C] += q2
+    C[_DET] += q2 * C[_A]
+
+
+def _update_lateral(M, C, mu_k, y, rho2, yy):
+    """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``, in place; the log likelihood.
+
+    ``M`` (2, ...) holds ``x, v`` and ``C`` (4, ...) ``a, b, det, c``; ``yy``
+    is ``y * y``. The log likelihood ``log N(mu_k; x / y, (a + r) / y**2)``
+    is computed as ``-(log 2 pi + log((a + r) / y**2) + e g) / 2`` with
+    ``g = e / (a + r)``.
+    """
     r = rho2 * yy
-    total = s.a + r
-    e = mu_k * y - s.x
+    total = C[_A] + r
+    e = mu_k * y - M[_X]
     g = e / total
     log_likelihood = -0.5 * (_LOG_2PI + np.log(total / yy) + e * g)
-    f = r / total
-    a, b, det = s.a * f, s.b * f, s.det * f
-    return _Lateral(s.x + s.a * g, s.v + s.b * g, a, b, (det + b * b) / a, det), log_likelihood
+    M += C[_A : _B + 1] * g  # x + a g and v + b g
+    C[_A : _DET + 1] *= r / total  # a, b and det times r / (a + r)
+    np.divide(C[_DET] + C[_B] * C[_B], C[_A], out=C[_C])
+    return log_likelihood
 
 
 # --- the bank --------------------------------------------------------------------------
@@ -436,17 +458,24 @@ def step(bank: Bank, mu_next) -> Bank:
     _batch(bank=bank.log_weight.shape[:-1], mu_next=mu_next.shape)
     N = bank.n_frames
     if bank.history is None:  # the closed form of lateral_filter
-        a, b, c = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
-        state = _Lateral(bank.mean[..., 0], bank.mean[..., 1], a, b, c, a * c - b * b)
-        state = _predict_lateral(state, (np.asarray(bank.q) ** 2)[..., None])
-        state, log_likelihood = _update_lateral(
-            state, mu_next[..., None], bank.nodes + N, (np.asarray(bank.rho) ** 2)[..., None]
+        rho2 = (np.asarray(bank.rho) ** 2)[..., None]
+        q2 = (np.asarray(bank.q) ** 2)[..., None]
+        y = bank.nodes + N
+        cov_shape = np.broadcast_shapes(bank.cov.shape[:-2], y.shape, rho2.shape, q2.shape)
+        M, C = _lateral_state(
+            np.broadcast_shapes(bank.mean.shape[:-1], mu_next.shape + (1,)), cov_shape
         )
-        mean = np.empty(state.x.shape + (2,))
-        mean[..., 0], mean[..., 1] = state.x, state.v
-        cov = np.empty(state.a.shape + (2, 2))
-        cov[..., 0, 0], cov[..., 1, 1] = state.a, state.c
-        cov[..., 0, 1] = cov[..., 1, 0] = state.b
+        M[_X], M[_V] = bank.mean[..., 0], bank.mean[..., 1]
+        C[_A], C[_B], C[_C] = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
+        np.multiply(C[_A], C[_C], out=C[_DET])
+        C[_DET] -= C[_B] * C[_B]
+        _predict_lateral(M, C, q2)
+        log_likelihood = _update_lateral(M, C, mu_next[..., None], y, rho2, y * y)
+        mean = np.empty(M.shape[1:] + (2,))
+        mean[..., 0], mean[..., 1] = M[_X], M[_V]
+        cov = np.empty(cov_shape + (2, 2))
+        cov[..., 0, 0], cov[..., 1, 1] = C[_A], C[_C]
+        cov[..., 0, 1] = cov[..., 1, 0] = C[_B]
         return bank._replace(
             mean=mean,
             cov=cov,
@@ -563,12 +592,10 @@ def _stacked_moments(W, means, covs, depths):
     top = np.argmax(W[..., 0, :], axis=-1)[..., None]  # (..., 1)
     terms = np.empty(batch + (10, J))  # per node: 1, d (3), the second moments (6)
     terms[..., 0, :] = 1.0
-    centre = []
-    for i, z in enumerate((means[..., 0], depths, means[..., 1])):
-        z = np.broadcast_to(z, batch + (J,))
-        centre.append(np.take_along_axis(z, top, -1))  # (..., 1)
-        np.subtract(z, centre[-1], out=terms[..., 1 + i, :])
+    terms[..., 1, :], terms[..., 2, :], terms[..., 3, :] = means[..., 0], depths, means[..., 1]
     d = terms[..., 1:4, :]
+    centre = np.take_along_axis(d, top[..., None, :], -1)  # (..., 3, 1)
+    d -= centre
     for k, (i, j) in enumerate(_PAIRS):
         np.multiply(d[..., i, :], d[..., j, :], out=terms[..., 4 + k, :])
     for k, i, j in _CONDITIONAL:
@@ -578,7 +605,7 @@ def _stacked_moments(W, means, covs, depths):
     shift = sums[..., 1:4] / total
     first, second = (np.array(ix) for ix in zip(*_PAIRS, strict=True))
     moments = sums[..., 4:] / total - shift[..., first] * shift[..., second]
-    mean = np.concatenate(centre, axis=-1)[..., None, :] + shift
+    mean = centre[..., None, :, 0] + shift
     return mean, moments[..., _SYMMETRIC].reshape(moments.shape[:-1] + (3, 3))
 
 
@@ -1212,10 +1239,7 @@ def _halving(log_p, top):
     J = log_p.shape[-1]
     first = np.argmax(valid, axis=-1)
     last = J - 1 - np.argmax(valid[..., ::-1], axis=-1)
-    end = np.maximum(
-        np.take_along_axis(log_p, first[..., None], -1)[..., 0],
-        np.take_along_axis(log_p, last[..., None], -1)[..., 0],
-    )
+    end = np.max(np.take_along_axis(log_p, np.stack([first, last], -1), -1), axis=-1)
     every_other = ((np.arange(J) - first[..., None]) % 2 == 0) & valid
     return every_other, end < top[..., 0] - _END_MARGIN
 
