@@ -260,8 +260,8 @@ def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
     log_weight : ndarray, shape (..., J)
         ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``, as
         :attr:`Bank.log_weight`.
-    mean : tuple of two ndarrays, shape (..., J)
-        ``E[x_N | y_1, mu]``, ``E[v_N | y_1, mu]``.
+    mean : ndarray, shape (2, ..., J)
+        ``E[x_N | y_1, mu]`` and ``E[v_N | y_1, mu]``, in rows.
     cov : tuple of three ndarrays, shape (..., J)
         ``Var[x_N]``, ``Cov[x_N, v_N]``, ``Var[v_N]`` given ``y_1`` and ``mu``.
     """
@@ -280,11 +280,12 @@ def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
     c0 = start.cov[..., 0, :, :]
     a, b, c = (c0[..., i, j][..., None] for i, j in ((0, 0), (0, 1), (1, 1)))
     C[_A], C[_B], C[_DET], C[_C] = a, b, a * c - b * b, c
+    noise = q2 if np.any(q2) else None  # None: constant velocity, Eq. (1)
     for k in range(N):
         if k:
-            _predict_lateral(M, C, q2)
+            _predict_lateral(M, C, noise)
         log_weight = log_weight + _update_lateral(M, C, mu[..., k, None], y[k], rho2, yy[k])
-    return log_weight, (M[_X], M[_V]), tuple(C[i].reshape(cov_shape) for i in (_A, _B, _C))
+    return log_weight, M, tuple(C[i].reshape(cov_shape) for i in (_A, _B, _C))
 
 
 #: Rows of the lateral state arrays of :func:`lateral_filter`: the means ``(x, v)``, and
@@ -309,14 +310,17 @@ def _lateral_state(mean_shape, cov_shape):
 def _predict_lateral(M, C, q2) -> None:
     """Textbook 19.2.1 for ``x <- x + v``, ``v <- v + a_k``, in place: see :func:`lateral_filter`.
 
-    ``M`` (2, ...) holds ``x, v`` and ``C`` (4, ...) ``a, b, det, c``; ``q2`` is ``q**2``.
+    ``M`` (2, ...) holds ``x, v`` and ``C`` (4, ...) ``a, b, det, c``; ``q2`` is
+    ``q**2``, or ``None`` for no process noise (``q = 0``), where ``c`` and
+    ``det`` are left as they are instead of adding zeros to them.
     """
     M[_X] += M[_V]
     C[_A] += 2.0 * C[_B]
     C[_A] += C[_C]  # a + 2 b + c
     C[_B] += C[_C]
-    C[_C] += q2
-    C[_DET] += q2 * C[_A]
+    if q2 is not None:
+        C[_C] += q2
+        C[_DET] += q2 * C[_A]
 
 
 def _update_lateral(M, C, mu_k, y, rho2, yy):
@@ -469,7 +473,7 @@ def step(bank: Bank, mu_next) -> Bank:
         C[_A], C[_B], C[_C] = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
         np.multiply(C[_A], C[_C], out=C[_DET])
         C[_DET] -= C[_B] * C[_B]
-        _predict_lateral(M, C, q2)
+        _predict_lateral(M, C, q2 if np.any(q2) else None)
         log_likelihood = _update_lateral(M, C, mu_next[..., None], y, rho2, y * y)
         mean = np.empty(M.shape[1:] + (2,))
         mean[..., 0], mean[..., 1] = M[_X], M[_V]
@@ -985,8 +989,7 @@ def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
 
 def _integrand(offsets, pb):
     """The depth quadrature's integrand: :func:`lateral_filter` at ``y_1 = offsets[..., 2]``."""
-    log_weight, mean, cov = lateral_filter(offsets[..., 2], pb.mu, pb.rho, pb.q, pb.mean, pb.cov)
-    return log_weight, np.stack(mean), cov
+    return lateral_filter(offsets[..., 2], pb.mu, pb.rho, pb.q, pb.mean, pb.cov)
 
 
 def _integrate(pb, rtol: float):
