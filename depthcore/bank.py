@@ -268,9 +268,6 @@ def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
     start, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
     rho2 = (np.asarray(rho, dtype=float) ** 2)[..., None]
     q2 = (np.asarray(q, dtype=float) ** 2)[..., None]
-    N = mu.shape[-1]
-    y = np.add.outer(np.arange(N, dtype=float), nodes)  # (N, ..., J): y_k = y_1 + k - 1
-    yy = y * y
     # the covariance does not depend on the bearings: its shape leaves out theirs
     cov_shape = np.broadcast_shapes(start.cov.shape[:-2], nodes.shape, rho2.shape, q2.shape)
     M, C = _lateral_state(
@@ -281,10 +278,11 @@ def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
     a, b, c = (c0[..., i, j][..., None] for i, j in ((0, 0), (0, 1), (1, 1)))
     C[_A], C[_B], C[_DET], C[_C] = a, b, a * c - b * b, c
     noise = q2 if np.any(q2) else None  # None: constant velocity, Eq. (1)
-    for k in range(N):
+    for k in range(mu.shape[-1]):
         if k:
             _predict_lateral(M, C, noise)
-        log_weight = log_weight + _update_lateral(M, C, mu[..., k, None], y[k], rho2, yy[k])
+        y = nodes + k  # y_k = y_1 + k - 1
+        log_weight = log_weight + _update_lateral(M, C, mu[..., k, None], y, rho2, y * y)
     return log_weight, M, tuple(C[i].reshape(cov_shape) for i in (_A, _B, _C))
 
 
@@ -1379,7 +1377,7 @@ def _step_rows(post: Mixture, mu_next):
     blocks = _row_blocks(B, J) if post.bank.history is None else [slice(None)]
     parts = []
     for rows in blocks:
-        part = _each_array(post, lambda a, rows=rows: a[rows])
+        part = post if len(blocks) == 1 else _each_array(post, lambda a, rows=rows: a[rows])
         new, halved_mean, halved_cov, top, free = _mixture(
             step(part.bank, mu_next[rows]), part.log_weights, halved=True
         )
