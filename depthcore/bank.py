@@ -556,6 +556,7 @@ _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 #: ... with each node's conditional covariance ``Cov[(x, v) | y_j]`` entry added to
 #: ``(x, x)``, ``(v, v)`` and ``(x, v)``: (pair, covariance row, covariance column).
 _CONDITIONAL = ((0, 0, 0), (2, 1, 1), (4, 0, 1))
+_PAIR_FIRST, _PAIR_SECOND = (np.array(ix) for ix in zip(*_PAIRS, strict=True))
 #: Where each entry of a 3 x 3 covariance (row-major) sits in :data:`_PAIRS` order.
 _SYMMETRIC = np.array([0, 3, 4, 3, 1, 5, 4, 5, 2])
 
@@ -605,8 +606,7 @@ def _stacked_moments(W, means, covs, depths):
     sums = W @ np.swapaxes(terms, -1, -2)  # (..., K, 10)
     total = sums[..., :1]
     shift = sums[..., 1:4] / total
-    first, second = (np.array(ix) for ix in zip(*_PAIRS, strict=True))
-    moments = sums[..., 4:] / total - shift[..., first] * shift[..., second]
+    moments = sums[..., 4:] / total - shift[..., _PAIR_FIRST] * shift[..., _PAIR_SECOND]
     mean = centre[..., None, :, 0] + shift
     return mean, moments[..., _SYMMETRIC].reshape(moments.shape[:-1] + (3, 3))
 
@@ -947,7 +947,9 @@ def _mixture(bank: Bank, log_weights, halved: bool = False):
         mean, cov = _mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
         return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
     every_other, free = _halving(a, top)
-    W = np.stack([probabilities, np.where(every_other, probabilities, 0.0)], axis=-2)
+    W = np.empty(probabilities.shape[:-1] + (2,) + probabilities.shape[-1:])
+    W[..., 0, :] = probabilities
+    np.multiply(probabilities, every_other, out=W[..., 1, :])  # 0 off every other node
     mean, cov = _stacked_moments(W, bank.mean, bank.cov, depth_N)
     post = Mixture(
         bank, log_weights, probabilities, log_normaliser, mean[..., 0, :], cov[..., 0, :, :]
@@ -1241,7 +1243,7 @@ def _halving(log_p, top):
     first = np.argmax(valid, axis=-1)
     last = J - 1 - np.argmax(valid[..., ::-1], axis=-1)
     end = np.max(np.take_along_axis(log_p, np.stack([first, last], -1), -1), axis=-1)
-    every_other = ((np.arange(J) - first[..., None]) % 2 == 0) & valid
+    every_other = (np.arange(J) % 2 == (first % 2)[..., None]) & valid
     return every_other, end < top[..., 0] - _END_MARGIN
 
 
