@@ -1409,15 +1409,6 @@ def _step_rows(post: Mixture, mu_next):
     return new, err, floor, np.concatenate([p[3] for p in parts])
 
 
-def _shifted(post: Mixture, shift) -> Mixture:
-    """``post`` with its log quadrature weights and normaliser raised by ``shift`` (B,)."""
-    return dataclasses.replace(
-        post,
-        log_weights=post.log_weights + shift[:, None],
-        log_normaliser=post.log_normaliser + shift,
-    )
-
-
 def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
     """``post`` with the problems at ``rows`` (B,) re-placed by the quadrature.
 
