@@ -270,20 +270,24 @@ def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
     q2 = (np.asarray(q, dtype=float) ** 2)[..., None]
     # the covariance does not depend on the bearings: its shape leaves out theirs
     cov_shape = np.broadcast_shapes(start.cov.shape[:-2], nodes.shape, rho2.shape, q2.shape)
-    M, C = _lateral_state(
+    M, C, rows = _lateral_state(
         np.broadcast_shapes(start.mean.shape[:-1], mu.shape[:-1] + (1,)), cov_shape
     )
     M[_X], M[_V] = start.mean[..., 0], start.mean[..., 1]
     c0 = start.cov[..., 0, :, :]
-    a, b, c = (c0[..., i, j][..., None] for i, j in ((0, 0), (0, 1), (1, 1)))
+    a, b, c = c0[..., 0, 0, None], c0[..., 0, 1, None], c0[..., 1, 1, None]
     C[_A], C[_B], C[_DET], C[_C] = a, b, a * c - b * b, c
     noise = q2 if np.any(q2) else None  # None: constant velocity, Eq. (1)
     for k in range(mu.shape[-1]):
         if k:
-            _predict_lateral(M, C, noise)
+            _predict_lateral(rows, noise)
         y = nodes + k  # y_k = y_1 + k - 1
-        log_weight = log_weight + _update_lateral(M, C, mu[..., k, None], y, rho2, y * y)
-    return log_weight, M, tuple(C[i].reshape(cov_shape) for i in (_A, _B, _C))
+        log_weight = log_weight + _update_lateral(rows, mu[..., k, None], y, rho2, y * y)
+    return (
+        log_weight,
+        M,
+        (rows.a.reshape(cov_shape), rows.b.reshape(cov_shape), rows.c.reshape(cov_shape)),
+    )
 
 
 #: Rows of the lateral state arrays of :func:`lateral_filter`: the means ``(x, v)``, and
@@ -293,8 +297,25 @@ _X, _V = 0, 1
 _A, _B, _DET, _C = 0, 1, 2, 3
 
 
+class _Rows(NamedTuple):
+    """Views of the lateral state arrays ``M`` (2, ...) and ``C`` (4, ...), made once.
+
+    The filter updates them in place (``out=``), so the views stay those of the state.
+    """
+
+    M: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    det: np.ndarray
+    c: np.ndarray
+    ab: np.ndarray
+    ab_det: np.ndarray
+
+
 def _lateral_state(mean_shape, cov_shape):
-    """Empty state arrays for :func:`lateral_filter`: ``M`` (2, ...) and ``C`` (4, ...).
+    """Empty state arrays for :func:`lateral_filter`, ``M`` (2, ...) and ``C`` (4, ...), and rows.
 
     ``M`` has the shape ``mean_shape`` and ``cov_shape`` broadcast to; ``C``
     has ``cov_shape``, padded with leading ones to that rank, so that
@@ -302,41 +323,41 @@ def _lateral_state(mean_shape, cov_shape):
     """
     mean_shape = np.broadcast_shapes(mean_shape, cov_shape)
     pad = (1,) * (len(mean_shape) - len(cov_shape))
-    return np.empty((2,) + mean_shape), np.empty((4,) + pad + tuple(cov_shape))
+    M, C = np.empty((2,) + mean_shape), np.empty((4,) + pad + tuple(cov_shape))
+    rows = _Rows(M, M[_X], M[_V], C[_A], C[_B], C[_DET], C[_C], C[_A : _B + 1], C[_A : _DET + 1])
+    return M, C, rows
 
 
-def _predict_lateral(M, C, q2) -> None:
+def _predict_lateral(s: _Rows, q2) -> None:
     """Textbook 19.2.1 for ``x <- x + v``, ``v <- v + a_k``, in place: see :func:`lateral_filter`.
 
-    ``M`` (2, ...) holds ``x, v`` and ``C`` (4, ...) ``a, b, det, c``; ``q2`` is
-    ``q**2``, or ``None`` for no process noise (``q = 0``), where ``c`` and
-    ``det`` are left as they are instead of adding zeros to them.
+    ``q2`` is ``q**2``, or ``None`` for no process noise (``q = 0``), where
+    ``c`` and ``det`` are left as they are instead of adding zeros to them.
     """
-    M[_X] += M[_V]
-    C[_A] += 2.0 * C[_B]
-    C[_A] += C[_C]  # a + 2 b + c
-    C[_B] += C[_C]
+    np.add(s.x, s.v, out=s.x)
+    np.add(s.a, 2.0 * s.b, out=s.a)
+    np.add(s.a, s.c, out=s.a)  # a + 2 b + c
+    np.add(s.b, s.c, out=s.b)
     if q2 is not None:
-        C[_C] += q2
-        C[_DET] += q2 * C[_A]
+        np.add(s.c, q2, out=s.c)
+        np.add(s.det, q2 * s.a, out=s.det)
 
 
-def _update_lateral(M, C, mu_k, y, rho2, yy):
+def _update_lateral(s: _Rows, mu_k, y, rho2, yy):
     """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``, in place; the log likelihood.
 
-    ``M`` (2, ...) holds ``x, v`` and ``C`` (4, ...) ``a, b, det, c``; ``yy``
-    is ``y * y``. The log likelihood ``log N(mu_k; x / y, (a + r) / y**2)``
+    ``yy`` is ``y * y``. The log likelihood ``log N(mu_k; x / y, (a + r) / y**2)``
     is computed as ``-(log 2 pi + log((a + r) / y**2) + e g) / 2`` with
     ``g = e / (a + r)``.
     """
     r = rho2 * yy
-    total = C[_A] + r
-    e = mu_k * y - M[_X]
+    total = s.a + r
+    e = mu_k * y - s.x
     g = e / total
     log_likelihood = -0.5 * (_LOG_2PI + np.log(total / yy) + e * g)
-    M += C[_A : _B + 1] * g  # x + a g and v + b g
-    C[_A : _DET + 1] *= r / total  # a, b and det times r / (a + r)
-    np.divide(C[_DET] + C[_B] * C[_B], C[_A], out=C[_C])
+    np.add(s.M, s.ab * g, out=s.M)  # x + a g and v + b g
+    np.multiply(s.ab_det, r / total, out=s.ab_det)  # a, b and det times r / (a + r)
+    np.divide(s.det + s.b * s.b, s.a, out=s.c)
     return log_likelihood
 
 
@@ -464,15 +485,15 @@ def step(bank: Bank, mu_next) -> Bank:
         q2 = (np.asarray(bank.q) ** 2)[..., None]
         y = bank.nodes + N
         cov_shape = np.broadcast_shapes(bank.cov.shape[:-2], y.shape, rho2.shape, q2.shape)
-        M, C = _lateral_state(
+        M, C, rows = _lateral_state(
             np.broadcast_shapes(bank.mean.shape[:-1], mu_next.shape + (1,)), cov_shape
         )
         M[_X], M[_V] = bank.mean[..., 0], bank.mean[..., 1]
         C[_A], C[_B], C[_C] = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
         np.multiply(C[_A], C[_C], out=C[_DET])
         C[_DET] -= C[_B] * C[_B]
-        _predict_lateral(M, C, q2 if np.any(q2) else None)
-        log_likelihood = _update_lateral(M, C, mu_next[..., None], y, rho2, y * y)
+        _predict_lateral(rows, q2 if np.any(q2) else None)
+        log_likelihood = _update_lateral(rows, mu_next[..., None], y, rho2, y * y)
         mean = np.empty(M.shape[1:] + (2,))
         mean[..., 0], mean[..., 1] = M[_X], M[_V]
         cov = np.empty(cov_shape + (2, 2))
