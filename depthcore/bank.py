@@ -193,14 +193,14 @@ def conditional_prior(nodes, prior_mean, prior_cov):
     log_density : ndarray, shape (..., J)
         ``log N(y_1; m_y, P_yy)``.
     """
-    u = [0, 2]
+    u = slice(0, 3, 2)  # x and v
     m_u, m_y = prior_mean[..., u], prior_mean[..., 1]
     P_yy = prior_cov[..., 1, 1]
     P_uy = prior_cov[..., u, 1]
     slope = P_uy / P_yy[..., None]  # (..., 2)
     d = nodes - m_y[..., None]  # (..., J)
     mean = m_u[..., None, :] + slope[..., None, :] * d[..., None]
-    cov = prior_cov[..., u, :][..., :, u] - slope[..., :, None] * P_uy[..., None, :]
+    cov = prior_cov[..., u, u] - slope[..., :, None] * P_uy[..., None, :]
     log_density = -0.5 * (_LOG_2PI + np.log(P_yy)[..., None]) - 0.5 * d**2 / P_yy[..., None]
     return kalman.MeanAndCov(mean, cov[..., None, :, :]), log_density
 
@@ -265,60 +265,105 @@ def lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov):
     log_weight : ndarray, shape (..., J)
         ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``, as
         :attr:`Bank.log_weight`.
-    mean : tuple of two ndarrays, shape (..., J)
-        ``E[x_N | y_1, mu]``, ``E[v_N | y_1, mu]``.
+    mean : ndarray, shape (2, ..., J)
+        ``E[x_N | y_1, mu]`` and ``E[v_N | y_1, mu]``, in rows.
     cov : tuple of three ndarrays, shape (..., J)
         ``Var[x_N]``, ``Cov[x_N, v_N]``, ``Var[v_N]`` given ``y_1`` and ``mu``.
     """
     start, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
-    x, v = start.mean[..., 0], start.mean[..., 1]
-    c0 = start.cov[..., 0, :, :]
-    a = c0[..., 0, 0][..., None]
-    b = c0[..., 0, 1][..., None]
-    c = c0[..., 1, 1][..., None]
-    state = _Lateral(x, v, a, b, c, a * c - b * b)
     rho2 = (np.asarray(rho, dtype=float) ** 2)[..., None]
     q2 = (np.asarray(q, dtype=float) ** 2)[..., None]
+    # the covariance does not depend on the bearings: its shape leaves out theirs
+    cov_shape = np.broadcast_shapes(start.cov.shape[:-2], nodes.shape, rho2.shape, q2.shape)
+    M, C, rows = _lateral_state(
+        np.broadcast_shapes(start.mean.shape[:-1], mu.shape[:-1] + (1,)), cov_shape
+    )
+    M[_X], M[_V] = start.mean[..., 0], start.mean[..., 1]
+    c0 = start.cov[..., 0, :, :]
+    a, b, c = c0[..., 0, 0, None], c0[..., 0, 1, None], c0[..., 1, 1, None]
+    C[_A], C[_B], C[_DET], C[_C] = a, b, a * c - b * b, c
+    noise = q2 if np.any(q2) else None  # None: constant velocity, Eq. (1)
     for k in range(mu.shape[-1]):
         if k:
-            state = _predict_lateral(state, q2)
-        state, log_likelihood = _update_lateral(state, mu[..., k, None], nodes + k, rho2)
-        log_weight = log_weight + log_likelihood
-    return log_weight, (state.x, state.v), (state.a, state.b, state.c)
+            _predict_lateral(rows, noise)
+        y = nodes + k  # y_k = y_1 + k - 1
+        log_weight = log_weight + _update_lateral(rows, mu[..., k, None], y, rho2, y * y)
+    return (
+        log_weight,
+        M,
+        (rows.a.reshape(cov_shape), rows.b.reshape(cov_shape), rows.c.reshape(cov_shape)),
+    )
 
 
-class _Lateral(NamedTuple):
-    """The Gaussian of ``(x, v)`` at each node: means, covariance entries and determinant."""
+#: Rows of the lateral state arrays of :func:`lateral_filter`: the means ``(x, v)``, and
+#: the covariance entries ``a, b``, the determinant ``det`` and ``c``, in an order that
+#: makes the paired updates single operations on slices.
+_X, _V = 0, 1
+_A, _B, _DET, _C = 0, 1, 2, 3
 
+
+class _Rows(NamedTuple):
+    """Views of the lateral state arrays ``M`` (2, ...) and ``C`` (4, ...), made once.
+
+    The filter updates them in place (``out=``), so the views stay those of the state.
+    """
+
+    M: np.ndarray
     x: np.ndarray
     v: np.ndarray
     a: np.ndarray
     b: np.ndarray
-    c: np.ndarray
     det: np.ndarray
+    c: np.ndarray
+    ab: np.ndarray
+    ab_det: np.ndarray
 
 
-def _predict_lateral(s: _Lateral, q2) -> _Lateral:
-    """Textbook 19.2.1 for ``x <- x + v``, ``v <- v + a_k``: see :func:`lateral_filter`."""
-    a = s.a + 2.0 * s.b + s.c
-    return _Lateral(s.x + s.v, s.v, a, s.b + s.c, s.c + q2, s.det + q2 * a)
+def _lateral_state(mean_shape, cov_shape):
+    """Empty state arrays for :func:`lateral_filter`, ``M`` (2, ...) and ``C`` (4, ...), and rows.
 
-
-def _update_lateral(s: _Lateral, mu_k, y, rho2):
-    """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``: the state and the log likelihood.
-
-    The log likelihood ``log N(mu_k; x / y, (a + r) / y**2)`` is computed as
-    ``-(log 2 pi + log((a + r) / y**2) + e g) / 2`` with ``g = e / (a + r)``.
+    ``M`` has the shape ``mean_shape`` and ``cov_shape`` broadcast to; ``C``
+    has ``cov_shape``, padded with leading ones to that rank, so that
+    ``C[_A : _B + 1]`` broadcasts against the means.
     """
-    yy = y * y
+    mean_shape = np.broadcast_shapes(mean_shape, cov_shape)
+    pad = (1,) * (len(mean_shape) - len(cov_shape))
+    M, C = np.empty((2,) + mean_shape), np.empty((4,) + pad + tuple(cov_shape))
+    rows = _Rows(M, M[_X], M[_V], C[_A], C[_B], C[_DET], C[_C], C[_A : _B + 1], C[_A : _DET + 1])
+    return M, C, rows
+
+
+def _predict_lateral(s: _Rows, q2) -> None:
+    """Textbook 19.2.1 for ``x <- x + v``, ``v <- v + a_k``, in place: see :func:`lateral_filter`.
+
+    ``q2`` is ``q**2``, or ``None`` for no process noise (``q = 0``), where
+    ``c`` and ``det`` are left as they are instead of adding zeros to them.
+    """
+    np.add(s.x, s.v, out=s.x)
+    np.add(s.a, 2.0 * s.b, out=s.a)
+    np.add(s.a, s.c, out=s.a)  # a + 2 b + c
+    np.add(s.b, s.c, out=s.b)
+    if q2 is not None:
+        np.add(s.c, q2, out=s.c)
+        np.add(s.det, q2 * s.a, out=s.det)
+
+
+def _update_lateral(s: _Rows, mu_k, y, rho2, yy):
+    """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``, in place; the log likelihood.
+
+    ``yy`` is ``y * y``. The log likelihood ``log N(mu_k; x / y, (a + r) / y**2)``
+    is computed as ``-(log 2 pi + log((a + r) / y**2) + e g) / 2`` with
+    ``g = e / (a + r)``.
+    """
     r = rho2 * yy
     total = s.a + r
     e = mu_k * y - s.x
     g = e / total
     log_likelihood = -0.5 * (_LOG_2PI + np.log(total / yy) + e * g)
-    f = r / total
-    a, b, det = s.a * f, s.b * f, s.det * f
-    return _Lateral(s.x + s.a * g, s.v + s.b * g, a, b, (det + b * b) / a, det), log_likelihood
+    np.add(s.M, s.ab * g, out=s.M)  # x + a g and v + b g
+    np.multiply(s.ab_det, r / total, out=s.ab_det)  # a, b and det times r / (a + r)
+    np.divide(s.det + s.b * s.b, s.a, out=s.c)
+    return log_likelihood
 
 
 # --- the bank --------------------------------------------------------------------------
@@ -441,17 +486,24 @@ def step(bank: Bank, mu_next) -> Bank:
     _batch(bank=bank.log_weight.shape[:-1], mu_next=mu_next.shape)
     N = bank.n_frames
     if bank.history is None:  # the closed form of lateral_filter
-        a, b, c = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
-        state = _Lateral(bank.mean[..., 0], bank.mean[..., 1], a, b, c, a * c - b * b)
-        state = _predict_lateral(state, (np.asarray(bank.q) ** 2)[..., None])
-        state, log_likelihood = _update_lateral(
-            state, mu_next[..., None], bank.nodes + N, (np.asarray(bank.rho) ** 2)[..., None]
+        rho2 = (np.asarray(bank.rho) ** 2)[..., None]
+        q2 = (np.asarray(bank.q) ** 2)[..., None]
+        y = bank.nodes + N
+        cov_shape = np.broadcast_shapes(bank.cov.shape[:-2], y.shape, rho2.shape, q2.shape)
+        M, C, rows = _lateral_state(
+            np.broadcast_shapes(bank.mean.shape[:-1], mu_next.shape + (1,)), cov_shape
         )
-        mean = np.empty(state.x.shape + (2,))
-        mean[..., 0], mean[..., 1] = state.x, state.v
-        cov = np.empty(state.a.shape + (2, 2))
-        cov[..., 0, 0], cov[..., 1, 1] = state.a, state.c
-        cov[..., 0, 1] = cov[..., 1, 0] = state.b
+        M[_X], M[_V] = bank.mean[..., 0], bank.mean[..., 1]
+        C[_A], C[_B], C[_C] = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
+        np.multiply(C[_A], C[_C], out=C[_DET])
+        C[_DET] -= C[_B] * C[_B]
+        _predict_lateral(rows, q2 if np.any(q2) else None)
+        log_likelihood = _update_lateral(rows, mu_next[..., None], y, rho2, y * y)
+        mean = np.empty(M.shape[1:] + (2,))
+        mean[..., 0], mean[..., 1] = M[_X], M[_V]
+        cov = np.empty(cov_shape + (2, 2))
+        cov[..., 0, 0], cov[..., 1, 1] = C[_A], C[_C]
+        cov[..., 0, 1] = cov[..., 1, 0] = C[_B]
         return bank._replace(
             mean=mean,
             cov=cov,
@@ -518,32 +570,71 @@ def _mixture_moments(W, means, covs, depths):
     ``means`` (..., J, 2) and ``covs`` (..., J, 2, 2) the Gaussians of
     ``(x, v)`` at each node; ``depths`` (..., J) the node depths (known
     exactly given the node). The law of total variance: the weighted
-    covariance of the nodes' means plus their weighted covariances.
+    covariance of the nodes' means plus their weighted covariances
+    (:func:`_stacked_moments` with one set of weights).
     """
-    shape = np.broadcast_shapes(W.shape, means.shape[:-1], depths.shape)
-    W = np.broadcast_to(W, shape)
-    total = np.sum(W, axis=-1)[..., None]  # W need not be normalised: the sums are divided
-    m = np.empty(shape[:-1] + (3,) + shape[-1:])  # (..., 3, J): x, y, v at each node
-    m[..., 0, :] = means[..., 0]
-    m[..., 1, :] = depths
-    m[..., 2, :] = means[..., 1]
-    # about the most probable node: the sums then carry no multiple of a large depth
-    top = np.argmax(W, axis=-1)[..., None, None]
-    centre = np.take_along_axis(m, top, axis=-1)  # (..., 3, 1)
-    d = m - centre
-    Wd = W[..., None, :] * d
-    shift = np.sum(Wd, axis=-1) / total  # (..., 3)
-    mean = centre[..., 0] + shift
-    # sum_j W_j (m_j - mean)(m_j - mean)^T = sum_j W_j d_j d_j^T - shift shift^T
-    outer = shift[..., :, None] * shift[..., None, :]
-    cov = (Wd @ np.swapaxes(d, -1, -2)) / total[..., None] - outer
-    covs = np.broadcast_to(covs, shape + (2, 2))
-    extra = (W[..., None, :] @ covs.reshape(shape + (4,)))[..., 0, :] / total  # (..., 4)
-    cov[..., 0, 0] += extra[..., 0]
-    cov[..., 0, 2] += extra[..., 1]
-    cov[..., 2, 0] += extra[..., 2]
-    cov[..., 2, 2] += extra[..., 3]
-    return mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    mean, cov = _stacked_moments(np.asarray(W)[..., None, :], means, covs, depths)
+    return mean[..., 0, :], cov[..., 0, :, :]
+
+
+#: The second moments summed by :func:`_stacked_moments`: pairs of ``(x, y, v)`` ...
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+#: ... with each node's conditional covariance ``Cov[(x, v) | y_j]`` entry added to
+#: ``(x, x)``, ``(v, v)`` and ``(x, v)``: (pair, covariance row, covariance column).
+_CONDITIONAL = ((0, 0, 0), (2, 1, 1), (4, 0, 1))
+_PAIR_FIRST, _PAIR_SECOND = (np.array(ix) for ix in zip(*_PAIRS, strict=True))
+#: Where each entry of a 3 x 3 covariance (row-major) sits in :data:`_PAIRS` order.
+_SYMMETRIC = np.array([0, 3, 4, 3, 1, 5, 4, 5, 2])
+
+
+def _stacked_moments(W, means, covs, depths):
+    """Mean and covariance of ``(x, y, v)`` under ``K`` weightings of the same node mixture.
+
+    The law of total variance, summed about the node ``c`` of largest weight
+    in the first weighting (the sums then carry no multiple of a large
+    depth): with ``d_j = m_j - c``, ``m_j = (E[x | y_j], y_j, E[v | y_j])``
+    and ``C_j`` the node's covariance of ``(x, v)`` (zero in the depth's row
+    and column),
+
+        S = sum_j W_j,   s = sum_j W_j d_j / S,   mean = c + s,
+        cov = sum_j W_j (d_j d_j^T + C_j) / S - s s^T.
+
+    The nodes' terms ``(1, d_j, d_j d_j^T + C_j)`` are formed once and summed
+    for every weighting by one matrix product.
+
+    Parameters
+    ----------
+    W : ndarray, shape (..., K, J)
+        Weights >= 0 with a positive one per row (need not be normalised).
+    means : ndarray, shape (..., J, 2)
+    covs : ndarray, shape (..., J, 2, 2)
+    depths : ndarray, shape (..., J)
+
+    Returns
+    -------
+    mean : ndarray, shape (..., K, 3)
+    cov : ndarray, shape (..., K, 3, 3)
+    """
+    batch = np.broadcast_shapes(W.shape[:-2], means.shape[:-2], covs.shape[:-3], depths.shape[:-1])
+    J = W.shape[-1]
+    W = np.broadcast_to(W, batch + W.shape[-2:])
+    top = np.argmax(W[..., 0, :], axis=-1)[..., None]  # (..., 1)
+    terms = np.empty(batch + (10, J))  # per node: 1, d (3), the second moments (6)
+    terms[..., 0, :] = 1.0
+    terms[..., 1, :], terms[..., 2, :], terms[..., 3, :] = means[..., 0], depths, means[..., 1]
+    d = terms[..., 1:4, :]
+    centre = np.take_along_axis(d, top[..., None, :], -1)  # (..., 3, 1)
+    d -= centre
+    for k, (i, j) in enumerate(_PAIRS):
+        np.multiply(d[..., i, :], d[..., j, :], out=terms[..., 4 + k, :])
+    for k, i, j in _CONDITIONAL:
+        terms[..., 4 + k, :] += covs[..., i, j]
+    sums = W @ np.swapaxes(terms, -1, -2)  # (..., K, 10)
+    total = sums[..., :1]
+    shift = sums[..., 1:4] / total
+    moments = sums[..., 4:] / total - shift[..., _PAIR_FIRST] * shift[..., _PAIR_SECOND]
+    mean = centre[..., None, :, 0] + shift
+    return mean, moments[..., _SYMMETRIC].reshape(moments.shape[:-1] + (3, 3))
 
 
 class Smoothed(NamedTuple):
@@ -863,8 +954,14 @@ def mixture(bank: Bank, weights) -> Mixture:
     return _mixture(bank, log_weights)
 
 
-def _mixture(bank: Bank, log_weights) -> Mixture:
-    """:func:`mixture` from the checked log quadrature weights (``-inf`` for a zero weight)."""
+def _mixture(bank: Bank, log_weights, halved: bool = False):
+    """:func:`mixture` from the checked log quadrature weights (``-inf`` for a zero weight).
+
+    With ``halved``, also the moments on every other node and the ends'
+    freedom (:func:`_halving`), from the same pass over the nodes, for
+    :func:`_resolution`: returns the Mixture, the halved mean (..., 3) and
+    covariance (..., 3, 3), the largest log probability (..., 1) and ``free`` (...).
+    """
     a = bank.log_weight + log_weights
     top = np.max(a, axis=-1, keepdims=True)  # finite: a positive weight per problem
     terms = np.exp(a - top)
@@ -872,8 +969,18 @@ def _mixture(bank: Bank, log_weights) -> Mixture:
     log_normaliser = (top + np.log(total))[..., 0]
     probabilities = terms / total
     depth_N = bank.nodes + (bank.n_frames - 1)
-    mean, cov = _mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
-    return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
+    if not halved:
+        mean, cov = _mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
+        return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
+    every_other, free = _halving(a, top)
+    W = np.empty(probabilities.shape[:-1] + (2,) + probabilities.shape[-1:])
+    W[..., 0, :] = probabilities
+    np.multiply(probabilities, every_other, out=W[..., 1, :])  # 0 off every other node
+    mean, cov = _stacked_moments(W, bank.mean, bank.cov, depth_N)
+    post = Mixture(
+        bank, log_weights, probabilities, log_normaliser, mean[..., 0, :], cov[..., 0, :, :]
+    )
+    return post, mean[..., 1, :], cov[..., 1, :, :], top, free
 
 
 # --- nodes placed by the depth quadrature ----------------------------------------------
@@ -908,8 +1015,7 @@ def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
 
 def _integrand(offsets, pb):
     """The depth quadrature's integrand: :func:`lateral_filter` at ``y_1 = offsets[..., 2]``."""
-    log_weight, mean, cov = lateral_filter(offsets[..., 2], pb.mu, pb.rho, pb.q, pb.mean, pb.cov)
-    return log_weight, np.stack(mean), cov
+    return lateral_filter(offsets[..., 2], pb.mu, pb.rho, pb.q, pb.mean, pb.cov)
 
 
 def _integrate(pb, rtol: float):
@@ -1058,7 +1164,12 @@ def _place(pb, rtol, history, single):
 
 
 def _concatenate(parts) -> Mixture:
-    """Batches of placed posteriors joined along the batch, their nodes padded to one count."""
+    """Batches of placed posteriors joined along the batch, their nodes padded to one count.
+
+    A padded node has quadrature weight 0 (log weight ``-inf``) and probability
+    0, so each problem's mixture is unchanged: its fields are joined, not
+    recomputed.
+    """
     J = max(p.log_weights.shape[-1] for p in parts)
     banks = [p.bank for p in parts]
 
@@ -1084,13 +1195,21 @@ def _concatenate(parts) -> Mixture:
             )
         ),
     )
-    log_weights = np.concatenate([_pad(p.log_weights, J, 1, -np.inf) for p in parts])
-    shift = np.max(log_weights, axis=-1)
-    joined = _shifted(mixture(bank, np.exp(log_weights - shift[:, None])), shift)
-    return dataclasses.replace(
-        joined,
-        depth_error=np.concatenate([p.depth_error for p in parts]),
-        velocity_error=np.concatenate([p.velocity_error for p in parts]),
+
+    def rows(get, value=None):
+        if value is None:
+            return np.concatenate([get(p) for p in parts])
+        return np.concatenate([_pad(get(p), J, 1, value) for p in parts])
+
+    return Mixture(
+        bank,
+        log_weights=rows(lambda p: p.log_weights, -np.inf),
+        probabilities=rows(lambda p: p.probabilities, 0.0),
+        log_normaliser=rows(lambda p: p.log_normaliser),
+        mean=rows(lambda p: p.mean),
+        cov=rows(lambda p: p.cov),
+        depth_error=rows(lambda p: p.depth_error),
+        velocity_error=rows(lambda p: p.velocity_error),
         rtol=parts[0].rtol,
     )
 
@@ -1127,42 +1246,61 @@ def _squeeze(post: Mixture) -> Mixture:
 _END_MARGIN = 40.0
 
 
-def _resolution(post: Mixture):
-    """The error of the moments on the placed nodes, shape (2, B), and whether the ends are free.
+def _halving(log_p, top):
+    """Every other node of the placed grid, and whether its ends are free.
 
-    The nodes of :func:`posterior` are a trapezoid grid in order; dropping
-    every other one (doubling the weights of the rest) doubles the step, and
-    the change of the depth's and the velocity's mean and SD estimates the
-    error, as the quadrature's own halvings do (floored by roundoff, as in
-    :func:`depthcore.optimal._roundoff`). The ends are free when the first
-    and last nodes with positive weight carry log probabilities more than
-    :data:`_END_MARGIN` below the largest.
+    Parameters
+    ----------
+    log_p : ndarray, shape (..., J)
+        The nodes' log probabilities up to a constant, ``-inf`` at padding.
+    top : ndarray, shape (..., 1)
+        Their largest.
+
+    Returns
+    -------
+    every_other : ndarray of bool, shape (..., J)
+        The nodes with positive weight an even number of places from the first.
+    free : ndarray of bool, shape (...)
+        The first and last nodes with positive weight carry log probabilities
+        more than :data:`_END_MARGIN` below the largest.
     """
-    b = post.bank
-    log_p = np.where(np.isfinite(post.log_weights), b.log_weight + post.log_weights, -np.inf)
-    top = np.max(log_p, axis=-1)
     valid = np.isfinite(log_p)
     J = log_p.shape[-1]
-    j = np.arange(J)
     first = np.argmax(valid, axis=-1)
     last = J - 1 - np.argmax(valid[..., ::-1], axis=-1)
-    end = np.maximum(
-        np.take_along_axis(log_p, first[..., None], -1)[..., 0],
-        np.take_along_axis(log_p, last[..., None], -1)[..., 0],
-    )
-    free = end < top - _END_MARGIN
-    even = ((j - first[..., None]) % 2 == 0) & valid
-    W = np.where(even, np.exp(np.where(valid, log_p - top[..., None], -np.inf)), 0.0)
-    c_mean, c_cov = _mixture_moments(W, b.mean, b.cov, b.nodes + (b.n_frames - 1))
+    end = np.max(np.take_along_axis(log_p, np.stack([first, last], -1), -1), axis=-1)
+    every_other = (np.arange(J) % 2 == (first % 2)[..., None]) & valid
+    return every_other, end < top[..., 0] - _END_MARGIN
+
+
+def _resolution(post: Mixture, halved_mean, halved_cov, top):
+    """The error of the moments on the placed nodes and its roundoff floor, each (2, B).
+
+    The nodes of :func:`posterior` are a trapezoid grid in order; dropping
+    every other one (doubling the weights of the rest, :func:`_halving`)
+    doubles the step, and the change of the depth's and the velocity's mean
+    and SD estimates the error, as the quadrature's own halvings do (floored
+    by roundoff, as in :func:`depthcore.optimal._roundoff`).
+
+    Parameters
+    ----------
+    post : Mixture
+    halved_mean : ndarray, shape (B, 3)
+    halved_cov : ndarray, shape (B, 3, 3)
+        The mixture's moments on every other node.
+    top : ndarray, shape (B, 1)
+        The largest log probability of a node, up to the constant of ``post``'s
+        log weights.
+    """
     eps = np.finfo(float).eps
     errors, floors = [], []
     for k in (1, 2):
-        sd, sd_c = np.sqrt(post.cov[..., k, k]), np.sqrt(c_cov[..., k, k])
-        change = np.maximum(np.abs(post.mean[..., k] - c_mean[..., k]), np.abs(sd - sd_c))
-        floor = 64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top)) * sd)
+        sd, sd_c = np.sqrt(post.cov[..., k, k]), np.sqrt(halved_cov[..., k, k])
+        change = np.maximum(np.abs(post.mean[..., k] - halved_mean[..., k]), np.abs(sd - sd_c))
+        floor = 64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top[..., 0])) * sd)
         errors.append(np.maximum(change, floor))
         floors.append(floor)
-    return np.stack(errors), np.stack(floors), free
+    return np.stack(errors), np.stack(floors)
 
 
 def _pad(a, J: int, axis: int, value):
@@ -1216,9 +1354,7 @@ def update(post: Mixture, mu_next) -> Mixture:
         )
     if post.bank.n_frames >= MAX_FRAMES:
         raise ValueError(f"mu_next: at most {MAX_FRAMES} frames")
-    stepped = step(post.bank, np.broadcast_to(mu_next, post.log_normaliser.shape))
-    new = _mixture(stepped, post.log_weights)
-    err, floor, free = _resolution(new)
+    new, err, floor, free = _step_rows(post, np.broadcast_to(mu_next, post.log_normaliser.shape))
     rtol = post.rtol
     ok = (
         free
@@ -1227,21 +1363,85 @@ def update(post: Mixture, mu_next) -> Mixture:
     )
     new = dataclasses.replace(new, depth_error=err[0], velocity_error=err[1], rtol=rtol)
     if not np.all(ok):
-        new = _replace_rows(new, ~ok)
+        # step and _mixture made new arrays for the nodes' filters and probabilities
+        new = _replace_rows(new, ~ok, own=post.bank.history is None)
     return _squeeze(new) if single else new
 
 
-def _shifted(post: Mixture, shift) -> Mixture:
-    """``post`` with its log quadrature weights and normaliser raised by ``shift`` (B,)."""
-    return dataclasses.replace(
-        post,
-        log_weights=post.log_weights + shift[:, None],
-        log_normaliser=post.log_normaliser + shift,
+#: Node entries (problems times nodes) per block of :func:`_step_rows`.
+_BLOCK = 1 << 14
+
+
+def _row_blocks(rows: int, nodes: int) -> list:
+    """Slices of ``rows`` problems in blocks of about :data:`_BLOCK` entries (one row or more)."""
+    size = max(1, _BLOCK // max(nodes, 1))
+    return [slice(i, i + size) for i in range(0, rows, size)]
+
+
+def _step_rows(post: Mixture, mu_next):
+    """:func:`step`, :func:`_mixture` and :func:`_resolution` for :func:`update`, block by block.
+
+    Each pass is elementwise or a sum over the nodes within a problem, so a
+    block of problems at a time gives the same numbers as the whole batch at
+    once, while the block's temporaries stay in the processor's cache instead
+    of being allocated (and written) at the batch's full size.
+
+    Parameters
+    ----------
+    post : Mixture
+        Batch shape (B,).
+    mu_next : ndarray, shape (B,)
+
+    Returns
+    -------
+    new : Mixture
+        After ``N + 1`` frames, without error estimates.
+    err, floor : ndarray, shape (2, B)
+    free : ndarray of bool, shape (B,)
+        As :func:`_halving`.
+    """
+    B, J = post.log_weights.shape
+    # the history grows along the frames, not by blocks: one block
+    blocks = _row_blocks(B, J) if post.bank.history is None else [slice(None)]
+    parts = []
+    for rows in blocks:
+        part = post if len(blocks) == 1 else _each_array(post, lambda a, rows=rows: a[rows])
+        new, halved_mean, halved_cov, top, free = _mixture(
+            step(part.bank, mu_next[rows]), part.log_weights, halved=True
+        )
+        parts.append((new, *_resolution(new, halved_mean, halved_cov, top), free))
+    if len(parts) == 1:
+        return parts[0]
+    news = [p[0] for p in parts]
+
+    def join(get):
+        return np.concatenate([get(n) for n in news])
+
+    bank = post.bank._replace(
+        mean=join(lambda n: n.bank.mean),
+        cov=join(lambda n: n.bank.cov),
+        log_weight=join(lambda n: n.bank.log_weight),
+        mu=join(lambda n: n.bank.mu),
     )
+    new = Mixture(
+        bank,
+        post.log_weights,
+        join(lambda n: n.probabilities),
+        join(lambda n: n.log_normaliser),
+        join(lambda n: n.mean),
+        join(lambda n: n.cov),
+    )
+    err, floor = (np.concatenate([p[i] for p in parts], axis=1) for i in (1, 2))
+    return new, err, floor, np.concatenate([p[3] for p in parts])
 
 
-def _replace_rows(post: Mixture, rows) -> Mixture:
-    """``post`` with the problems at ``rows`` (B,) re-placed by the quadrature."""
+def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
+    """``post`` with the problems at ``rows`` (B,) re-placed by the quadrature.
+
+    With ``own``, the arrays of the nodes' means, covariances, log weights and
+    probabilities belong to ``post`` alone and are overwritten where they keep
+    their shape (saving a copy of each); ``post``'s other arrays are not.
+    """
     b = post.bank
     idx = np.flatnonzero(rows)
     pb = optimal._Problem(
@@ -1258,17 +1458,20 @@ def _replace_rows(post: Mixture, rows) -> Mixture:
     J = max(post.log_weights.shape[-1], fresh.log_weights.shape[-1])
     fb = fresh.bank
 
-    def merge(old, new, axis, value):
-        # one copy of the old rows: padding makes one, and a copy is needed only without it
-        out = _pad(old, J, axis, value) if old.shape[axis] < J else old.copy()
+    def merge(old, new, axis, value, owned=False):
+        # one copy of the old rows at most: padding makes one, else only an array not owned
+        if old.shape[axis] < J:
+            out = _pad(old, J, axis, value)
+        else:
+            out = old if owned else old.copy()
         out[idx] = _pad(new, J, axis, value)
         return out
 
     bank = b._replace(
         nodes=merge(np.broadcast_to(b.nodes, post.log_weights.shape), fb.nodes, 1, 1.0),
-        mean=merge(b.mean, fb.mean, 1, 0.0),
-        cov=merge(b.cov, fb.cov, 1, 1.0),
-        log_weight=merge(b.log_weight, fb.log_weight, 1, 0.0),
+        mean=merge(b.mean, fb.mean, 1, 0.0, own),
+        cov=merge(b.cov, fb.cov, 1, 1.0, own),
+        log_weight=merge(b.log_weight, fb.log_weight, 1, 0.0, own),
         history=None,
     )
     # the other problems' mixtures are unchanged: their fields are merged, not recomputed
@@ -1276,7 +1479,7 @@ def _replace_rows(post: Mixture, rows) -> Mixture:
         post,
         bank=bank,
         log_weights=merge(post.log_weights, fresh.log_weights, 1, -np.inf),
-        probabilities=merge(post.probabilities, fresh.probabilities, 1, 0.0),
+        probabilities=merge(post.probabilities, fresh.probabilities, 1, 0.0, own),
         log_normaliser=np.where(rows, _full(fresh.log_normaliser, idx, rows), post.log_normaliser),
         mean=np.where(rows[:, None], _full(fresh.mean, idx, rows), post.mean),
         cov=np.where(rows[:, None, None], _full(fresh.cov, idx, rows), post.cov),

@@ -688,3 +688,133 @@ def test_online_update_stays_exact_over_hundreds_of_frames():
     assert np.all(np.abs(post.depth_mean - fresh.depth_mean) <= tol)
     assert np.all(np.abs(post.depth_sd - fresh.depth_sd) <= tol)
     assert re_placed <= 15  # a few re-placements early, none once the nodes have margin
+
+
+# --- the online update's passes: closed forms and blocks ------------------------------
+
+
+def test_closed_form_filter_with_shared_nodes_equals_the_kalman_route():
+    # textbook 19.2.1-19.2.2 as 2 x 2 algebra (lateral_filter, step) against kalman.run
+    # (history=True), with nodes, noise and prior shared by a batch of bearings
+    rng = np.random.default_rng(80)
+    sim, prior = long_track(9, 0.0, seed=80)
+    mu = sim.mu + 1e-3 * rng.standard_normal((3, 9))
+    y = np.array([0.3, 2.0, 3.7, 5.5, 20.0])
+    for q in (0.0, 0.03):
+        closed = bk.filter_bank(y, mu[:, :7], RHO_200, prior.mean, prior.cov, q)
+        closed = bk.step(bk.step(closed, mu[:, 7]), mu[:, 8])
+        route = bk.filter_bank(y, mu, RHO_200, prior.mean, prior.cov, q, history=True)
+        # the covariance does not depend on the bearings: one per node, not per trial
+        assert closed.cov.shape == (y.size, 2, 2) and closed.mean.shape == (3, y.size, 2)
+        # the Joseph update's rounding at small depths, as in the batch least squares test
+        sd = np.sqrt(np.diagonal(route.cov, axis1=-2, axis2=-1))
+        assert_allclose(closed.log_weight, route.log_weight, rtol=1e-9, atol=1e-11)
+        assert np.all(np.abs(closed.mean - route.mean) <= 1e-7 * sd)
+        assert_allclose(np.broadcast_to(closed.cov, route.cov.shape), route.cov, rtol=1e-8)
+
+
+EPS = np.finfo(float).eps
+
+
+def naive_mixture_moments(W, means, covs, depths):
+    """The law of total variance node by node, in two passes (mean, then deviations)."""
+    p = W / W.sum()
+    m = np.column_stack([means[:, 0], depths, means[:, 1]])
+    mean = p @ m
+    cov = np.zeros((3, 3))
+    for j in range(len(p)):
+        c = np.zeros((3, 3))
+        c[np.ix_([0, 2], [0, 2])] = covs[j]
+        cov += p[j] * (c + np.outer(m[j] - mean, m[j] - mean))
+    return mean, cov
+
+
+@pytest.mark.parametrize("depth", [5.0, 3e3])
+def test_stacked_mixture_moments_equal_the_naive_sum_node_by_node(depth):
+    rng = np.random.default_rng(81)
+    B, J = 3, 40
+    W = np.exp(-0.5 * np.linspace(-6, 6, J) ** 2) * rng.uniform(0.5, 1.5, (B, 2, J))
+    W[:, 1, ::2] = 0.0  # the second weighting: every other node
+    means = rng.standard_normal((B, J, 2)) * [0.1, 0.01] + [0.3, 0.7]
+    A = 1e-3 * rng.standard_normal((B, J, 2, 2))
+    covs = A @ np.swapaxes(A, -1, -2)
+    depths = depth + 0.02 * np.linspace(-1, 1, J) * rng.uniform(0.5, 1.5, (B, 1))
+    mean, cov = bk._stacked_moments(W, means, covs, depths)
+    assert mean.shape == (B, 2, 3) and cov.shape == (B, 2, 3, 3)
+    for i in range(B):
+        for k in range(2):
+            m, c = naive_mixture_moments(W[i, k], means[i], covs[i], depths[i])
+            scale = np.sqrt(np.diag(c))
+            # (the naive sum's own rounding: a few units of the depth's last place)
+            assert np.all(np.abs(mean[i, k] - m) <= 1e-12 * scale + 8 * EPS * np.abs(m))
+            assert np.all(np.abs(cov[i, k] - c) <= 1e-12 * np.outer(scale, scale))
+        one = bk._mixture_moments(W[i, 0], means[i], covs[i], depths[i])  # one weighting
+        assert_allclose(one[0], mean[i, 0], rtol=1e-14)
+        assert_allclose(one[1], cov[i, 0], rtol=1e-13, atol=1e-16)
+
+
+def test_online_update_by_blocks_equals_the_whole_batch_and_leaves_its_input_alone(
+    monkeypatch,
+):
+    # update's passes by blocks of problems give the same numbers as the whole batch at
+    # once, across re-placements (which overwrite update's own new arrays, never the input)
+    N = 12
+    tracks = [long_track(N, 0.0, seed=90 + i) for i in range(5)]
+    mu = np.stack([t[0].mu for t in tracks])
+    prior = tracks[0][1]
+    start = bk.posterior(mu[:, :3], RHO_200, prior.mean, prior.cov)
+    runs = {}
+    for block in (1, 10**9):  # one problem per block, and one block
+        monkeypatch.setattr(bk, "_BLOCK", block)
+        post, re_placed = start, 0
+        for k in range(3, N):
+            before = post
+            kept = {
+                name: np.copy(a)
+                for name, a in [
+                    ("nodes", post.bank.nodes),
+                    ("mean", post.bank.mean),
+                    ("cov", post.bank.cov),
+                    ("log_weight", post.bank.log_weight),
+                    ("log_weights", post.log_weights),
+                    ("probabilities", post.probabilities),
+                    ("moments", post.mean),
+                ]
+            }
+            post = bk.update(post, mu[:, k])
+            re_placed += not np.array_equal(post.bank.nodes, before.bank.nodes)
+            assert_allclose(before.bank.nodes, kept["nodes"], rtol=0, atol=0)
+            assert_allclose(before.bank.mean, kept["mean"], rtol=0, atol=0)
+            assert_allclose(before.bank.cov, kept["cov"], rtol=0, atol=0)
+            assert_allclose(before.bank.log_weight, kept["log_weight"], rtol=0, atol=0)
+            assert_allclose(before.log_weights, kept["log_weights"], rtol=0, atol=0)
+            assert_allclose(before.probabilities, kept["probabilities"], rtol=0, atol=0)
+            assert_allclose(before.mean, kept["moments"], rtol=0, atol=0)
+        assert re_placed >= 1
+        runs[block] = post
+    a, b = runs.values()
+    for field in ("log_weights", "probabilities", "log_normaliser", "mean", "cov"):
+        assert_allclose(getattr(a, field), getattr(b, field), rtol=0, atol=0)
+    for field in ("depth_error", "velocity_error"):
+        assert_allclose(getattr(a, field), getattr(b, field), rtol=0, atol=0)
+    for field in ("nodes", "mean", "cov", "log_weight", "mu"):
+        assert_allclose(getattr(a.bank, field), getattr(b.bank, field), rtol=0, atol=0)
+
+
+def test_placed_batches_joined_keep_each_problems_mixture():
+    # more problems than the quadrature places together: the chunks' mixtures are joined
+    # (their node counts padded with zero weights), not recomputed; recomputing agrees
+    rng = np.random.default_rng(91)
+    B = bk._CHUNK + 6
+    sim, prior = long_track(3, 0.0, seed=91)
+    mu = sim.mu + 2e-3 * rng.standard_normal((B, 3))
+    post = bk.posterior(mu, RHO_200, prior.mean, prior.cov)
+    assert np.any(~np.isfinite(post.log_weights))  # some rows padded
+    shift = np.max(post.log_weights, axis=-1, keepdims=True)
+    again = bk.mixture(post.bank, np.exp(post.log_weights - shift))
+    assert_allclose(post.probabilities, again.probabilities, rtol=1e-12, atol=1e-300)
+    assert_allclose(post.log_normaliser, again.log_normaliser + shift[:, 0], rtol=1e-14)
+    assert_allclose(post.mean, again.mean, rtol=1e-13)
+    assert_allclose(post.cov, again.cov, rtol=1e-11, atol=1e-16)
+    one = bk.posterior(mu[B - 1], RHO_200, prior.mean, prior.cov)
+    assert_allclose(post.mean[B - 1], one.mean, rtol=1e-14)
