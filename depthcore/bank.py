@@ -605,7 +605,8 @@ def _stacked_moments(W, means, covs, depths):
     Parameters
     ----------
     W : ndarray, shape (..., K, J)
-        Weights >= 0 with a positive one per row (need not be normalised).
+        Weights >= 0 (need not be normalised); a row with no positive weight
+        gets NaN moments.
     means : ndarray, shape (..., J, 2)
     covs : ndarray, shape (..., J, 2, 2)
     depths : ndarray, shape (..., J)
@@ -631,8 +632,11 @@ def _stacked_moments(W, means, covs, depths):
         terms[..., 4 + k, :] += covs[..., i, j]
     sums = W @ np.swapaxes(terms, -1, -2)  # (..., K, 10)
     total = sums[..., :1]
-    shift = sums[..., 1:4] / total
-    moments = sums[..., 4:] / total - shift[..., _PAIR_FIRST] * shift[..., _PAIR_SECOND]
+    # a weighting with no positive weight (every other node of a posterior that
+    # sits on one node, in :func:`update`) has no moments: NaN, without a warning
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shift = sums[..., 1:4] / total
+        moments = sums[..., 4:] / total - shift[..., _PAIR_FIRST] * shift[..., _PAIR_SECOND]
     mean = centre[..., None, :, 0] + shift
     return mean, moments[..., _SYMMETRIC].reshape(moments.shape[:-1] + (3, 3))
 
@@ -1297,6 +1301,8 @@ def _resolution(post: Mixture, halved_mean, halved_cov, top):
     for k in (1, 2):
         sd, sd_c = np.sqrt(post.cov[..., k, k]), np.sqrt(halved_cov[..., k, k])
         change = np.maximum(np.abs(post.mean[..., k] - halved_mean[..., k]), np.abs(sd - sd_c))
+        # no weight on every other node (NaN moments there): the nodes do not resolve it
+        change = np.where(np.isnan(change), np.inf, change)
         floor = 64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top[..., 0])) * sd)
         errors.append(np.maximum(change, floor))
         floors.append(floor)

@@ -9,6 +9,8 @@ brute-force three-dimensional quadrature of the posterior (q = 0, N = 5) and
 importance sampling of the depth (q > 0).
 """
 
+import warnings
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
@@ -818,3 +820,19 @@ def test_placed_batches_joined_keep_each_problems_mixture():
     assert_allclose(post.cov, again.cov, rtol=1e-11, atol=1e-16)
     one = bk.posterior(mu[B - 1], RHO_200, prior.mean, prior.cov)
     assert_allclose(post.mean[B - 1], one.mean, rtol=1e-14)
+
+
+def test_update_of_a_posterior_on_one_node_re_places_it_without_warnings():
+    # rho = 1e-12: after the second bearing the posterior sits on one node, so every
+    # other node carries no weight and the halved moments are undefined; the update
+    # must re-place the nodes (not divide by zero) and answer with finite moments
+    fig2 = SCENARIOS["fig2"]
+    mu = np.asarray(fig2.mu)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        post = bk.posterior(mu[:1], 1e-12, fig2.prior.mean, fig2.prior.cov)
+        for m in mu[1:]:
+            post = bk.update(post, m)
+    direct = bk.posterior(mu, 1e-12, fig2.prior.mean, fig2.prior.cov)
+    assert np.isfinite(post.depth_sd) and post.depth_sd < 1e-9
+    assert abs(post.depth_mean - direct.depth_mean) < 1e-6 * direct.depth_mean
