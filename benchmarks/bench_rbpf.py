@@ -44,7 +44,10 @@ from depthcore.scenarios import SCENARIOS  # noqa: E402
 MEASURES = ("rbpf", "resample_move", "bank")
 PILOT = 2000  # particles of the resample-move filter's pilot run
 GROWTH = (250, 1000, 4000, 16000)
-REPEATS, PARTICLES = 10, 8000  # RBPF particles at equal cost: enough that the plain filter does not collapse
+REPEATS, PARTICLES = (
+    10,
+    8000,
+)  # RBPF particles at equal cost: enough that the plain filter does not collapse
 
 
 def log_depth_rule(panels, order=20, lo=-12.0, hi=14.0):

@@ -96,106 +96,9 @@ def covariance(value, name: str, dim: int) -> np.ndarray:
     return 0.5 * (arr + arr.T)
 
 
-def _noise_free_depth(mu) -> np.ndarray:
-    """``c2`` of Eq. (7): :func:`depthcore.model.noise_free_depth_unchecked`.
-
-    Imported when called: :mod:`depthcore.model` imports this module.
-    """
-    from .model import noise_free_depth_unchecked
-
-    return noise_free_depth_unchecked(mu)
-
-
-def measurements(mu, name: str = "mu") -> np.ndarray:
-    """Check a triple ``(mu1, mu2, mu3)`` of image measurements.
-
-    The triple must be finite, not degenerate (see :data:`DEGENERACY_TOL`), and
-    its noise-free solution, Eq. (7), must lie in front of the camera at all
-    three times: depth ``c2 - 2 > 0`` at the first frame.
-    """
-    arr = finite_array(mu, name, (3,))
-    second_difference = arr[0] + arr[2] - 2.0 * arr[1]
-    if abs(second_difference) <= DEGENERACY_TOL:
-        raise ValueError(
-            f"{name} is degenerate: mu1 + mu3 - 2*mu2 = {second_difference:.3g}, "
-            "so no finite depth explains the three measurements"
-        )
-    depth_first = _noise_free_depth(arr) - 2.0
-    if not depth_first > 0:
-        raise ValueError(
-            f"{name} puts the point behind the camera: its noise-free depth at the "
-            f"first frame is c2 - 2 = {depth_first:.6g}, which is not positive"
-        )
-    return arr
-
-
 def _index(flat_index: int, batch: tuple[int, ...]) -> str:
     """``[i]`` or ``[i, j]``: the position of a flat row in a batch of shape ``batch``."""
     return "[" + ", ".join(str(int(i)) for i in np.unravel_index(flat_index, batch)) + "]"
-
-
-def valid_measurements(mu) -> np.ndarray:
-    """Which triples of ``mu`` (..., 3) :func:`measurements` accepts, without raising.
-
-    Finite, not degenerate, and with the noise-free depth ``c2`` of Eq. (7)
-    above 2 (in front of the camera at all three times); returns a boolean
-    array of shape ``mu.shape[:-1]``.
-    """
-    arr = np.asarray(mu, dtype=float)
-    d = arr[..., 0] + arr[..., 2] - 2.0 * arr[..., 1]
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        depth_first = _noise_free_depth(arr) - 2.0
-    return np.all(np.isfinite(arr), axis=-1) & (np.abs(d) > DEGENERACY_TOL) & (depth_first > 0)
-
-
-def measurements_batch(mu, name: str = "mu") -> np.ndarray:
-    """Check bearings of shape ``(..., N)``, ``3 <= N <=`` :data:`MAX_FRAMES`, row by row.
-
-    With ``N = 3`` (the paper's problem) each triple is checked as
-    :func:`measurements` does: not degenerate, and its noise-free solution,
-    Eq. (7), in front of the camera. With ``N > 3`` a row is degenerate when
-    every consecutive triple is, i.e. when every second difference
-    ``mu_k - 2 mu_{k+1} + mu_{k+2}`` is at or below :data:`DEGENERACY_TOL` in
-    magnitude: the bearings are then (numerically) affine in time, which a
-    point at a finite depth explains only by a constant bearing (the point
-    moving along its line of sight), at every depth alike. Noise may put any
-    one triple's noise-free solution behind the camera, so with ``N > 3`` no
-    row is refused for that; the filters that need a point in front of the
-    camera say so themselves.
-
-    The first offending row is named with its index, e.g. ``mu[4]``.
-    """
-    arr = finite_array(mu, name)
-    if arr.ndim < 1 or arr.shape[-1] < 3:
-        raise ValueError(
-            f"{name} must have shape (..., N) with N >= 3 bearings per problem, "
-            f"got shape {arr.shape}"
-        )
-    if arr.shape[-1] > MAX_FRAMES:
-        raise ValueError(
-            f"{name} has {arr.shape[-1]} bearings per problem, more than the "
-            f"{MAX_FRAMES} frames the filters accept"
-        )
-    batch = arr.shape[:-1]
-    n_frames = arr.shape[-1]
-    flat = arr.reshape(-1, n_frames)
-    if n_frames > 3:
-        second = flat[:, :-2] + flat[:, 2:] - 2.0 * flat[:, 1:-1]
-        degenerate = ~np.any(np.abs(second) > DEGENERACY_TOL, axis=1)
-        if np.any(degenerate):
-            i = int(np.argmax(degenerate))
-            where = name + (_index(i, batch) if batch else "")
-            raise ValueError(
-                f"{where} is degenerate: every second difference mu_k - 2*mu_(k+1) + mu_(k+2) "
-                f"is at most {DEGENERACY_TOL:g} in magnitude, so no finite depth explains "
-                "the bearings"
-            )
-        return arr
-    bad = ~valid_measurements(flat)
-    if np.any(bad):
-        i = int(np.argmax(bad))
-        measurements(flat[i], name + (_index(i, batch) if batch else ""))
-    return arr
 
 
 def three_frames(mu, name: str = "mu") -> np.ndarray:
@@ -238,80 +141,11 @@ def covariances(value, name: str, dim: int = 3) -> np.ndarray:
     return sym.reshape(arr.shape)
 
 
-def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
-    """The checks shared by the batched filters: measurements, noise and prior.
-
-    Parameters
-    ----------
-    mu : array_like, shape (..., N), or (..., K) when ``triples`` is false
-        Bearings of ``N >= 3`` frames checked by :func:`measurements_batch`
-        (triples, ``N = 3``, as the paper's); otherwise any finite bearings,
-        ``K >= 1``.
-    rho : float or array_like, shape ``mu.shape[:-1]``
-        Finite and > 0.
-    prior_mean : array_like, broadcastable to ``mu.shape``
-        Finite.
-    prior_cov : array_like, broadcastable to ``mu.shape + (3,)``
-        Symmetric positive definite, checked by :func:`covariances`.
-
-    Returns
-    -------
-    mu, rho, prior_mean, prior_cov : ndarray
-        As float arrays (the covariances symmetrised), not broadcast.
-    """
-    if triples:
-        mu = measurements_batch(mu, "mu")
-    else:
-        mu = finite_array(mu, "mu")
-        if mu.ndim < 1 or mu.shape[-1] < 1:
-            raise ValueError(f"mu must have shape (..., n_measurements), got shape {mu.shape}")
-    batch = mu.shape[:-1]
-    rho = finite_array(rho, "rho")
-    if rho.ndim and rho.shape != batch:
-        raise ValueError(f"rho must be a scalar or have shape {batch}, got shape {rho.shape}")
-    if not np.all(rho > 0):
-        raise ValueError(f"rho must be positive, got {rho.tolist()}")
-    prior_mean = finite_array(prior_mean, "prior_mean")
-    if (
-        prior_mean.ndim < 1
-        or prior_mean.shape[-1] != 3
-        or not _broadcasts(prior_mean.shape, batch + (3,))
-    ):
-        allowed = "(3,)" + (f" or {batch + (3,)}" if batch else "")
-        raise ValueError(f"prior_mean must have shape {allowed}, got {prior_mean.shape}")
-    prior_cov = covariances(prior_cov, "prior_cov", 3)
-    if not _broadcasts(prior_cov.shape, batch + (3, 3)):
-        allowed = "(3, 3)" + (f" or {batch + (3, 3)}" if batch else "")
-        raise ValueError(f"prior_cov must have shape {allowed}, got {prior_cov.shape}")
-    return mu, rho, prior_mean, prior_cov
-
-
 def _broadcasts(shape: tuple[int, ...], target: tuple[int, ...]) -> bool:
     try:
         return np.broadcast_shapes(shape, target) == target
     except ValueError:
         return False
-
-
-def batch_inputs(mu, rho, prior_mean, prior_cov, triples: bool = True):
-    """:func:`batch_problem`, with the priors broadcast to the batch.
-
-    Returns
-    -------
-    mu : ndarray, shape (..., N) or (..., K)
-    rho : ndarray, shape () or (...)
-    prior_mean : ndarray, shape (..., 3)
-    prior_cov : ndarray, shape (..., 3, 3)
-        Read-only broadcast views of the priors.
-    """
-    mu, rho, prior_mean, prior_cov = batch_problem(mu, rho, prior_mean, prior_cov, triples)
-    batch = mu.shape[:-1]
-    return (
-        mu,
-        rho,
-        np.broadcast_to(prior_mean, batch + (3,)),
-        np.broadcast_to(prior_cov, batch + (3, 3)),
-    )
 
 
 def seed_sequence(seed, name: str = "seed") -> np.random.SeedSequence:

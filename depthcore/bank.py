@@ -66,7 +66,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import ndtr
 
-from . import _checks, kalman, optimal
+from . import _checks, kalman, model, optimal
 
 #: The lateral state ``(x, v)`` moves by ``x <- x + v``: the transition matrix.
 PSI = np.array([[1.0, 1.0], [0.0, 1.0]])
@@ -995,7 +995,7 @@ MAX_FRAMES = _checks.MAX_FRAMES
 
 def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
     """The checked inputs as :class:`depthcore.optimal` quadrature problems, and the batch shape."""
-    mu, rho, prior_mean, prior_cov = _checks.batch_inputs(
+    mu, rho, prior_mean, prior_cov = model.batch_inputs(
         mu, rho, prior_mean, prior_cov, triples=False
     )
     if mu.shape[-1] > MAX_FRAMES:

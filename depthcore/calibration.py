@@ -143,7 +143,7 @@ def draw_from_prior(
     else:
         sim = bank.simulate(x1, frames, rho, q, rng)
         mu, last = sim.mu, sim.states[:, -1, :]
-    ok = _checks.valid_measurements(mu[:, :3])  # the noise-free solution, Eq. (7), in front
+    ok = model.valid_measurements(mu[:, :3])  # the noise-free solution, Eq. (7), in front
     return PriorDraws(last[ok], mu[ok], behind, int(np.sum(~ok)))
 
 

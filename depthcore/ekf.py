@@ -127,7 +127,7 @@ def run_gaussian_filter(
         :class:`ValueError` it raises is reraised naming the measurement.
     mu : array_like, shape (..., N)
         Bearings of ``N >= 3`` frames in time order, checked by
-        :func:`depthcore._checks.batch_inputs` (as are the other arguments);
+        :func:`depthcore.model.batch_inputs` (as are the other arguments);
         the leading shape runs independent filters.
     rho : float or array_like, shape (...)
         Noise standard deviation, > 0.
@@ -141,7 +141,7 @@ def run_gaussian_filter(
     History
         ``means`` (..., N, 3) and ``covs`` (..., N, 3, 3) after each measurement.
     """
-    mu, rho, n, C = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)
+    mu, rho, n, C = model.batch_inputs(mu, rho, prior_mean, prior_cov)
     q = _checks.nonnegative_scalar(process_noise, "process_noise")
     means, covs = [], []
     for i in range(mu.shape[-1]):
@@ -173,7 +173,7 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     ----------
     mu : array_like, shape (..., N)
         Bearings of ``N >= 3`` frames in time order (``N = 3``: the paper's
-        triple), checked by :func:`depthcore._checks.batch_problem`, as are
+        triple), checked by :func:`depthcore.model.batch_problem`, as are
         the other arguments.
     rho : float or array_like, shape (...)
     prior_mean : array_like, shape (..., 3)
@@ -189,7 +189,7 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
         measurement ``i + 1``; ``covs`` (..., N, 3, 3). It unpacks as
         ``means, covs = run(...)``.
     """
-    mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
+    mu, rho, prior_mean, prior_cov = model.batch_problem(mu, rho, prior_mean, prior_cov)
     q = _checks.nonnegative_scalar(process_noise, "process_noise")
     batch = mu.shape[:-1]
     n = np.broadcast_to(prior_mean, batch + (3,))
@@ -262,8 +262,8 @@ def ekf(mu, rho: float, prior: Gaussian, process_noise: float = 0.0) -> History:
     ----------
     mu : array_like, shape (N,)
         ``N >= 3`` bearings; a triple is checked by
-        :func:`depthcore._checks.measurements`, more by
-        :func:`depthcore._checks.measurements_batch`.
+        :func:`depthcore.model.measurements`, more by
+        :func:`depthcore.model.measurements_batch`.
     rho : float
         Noise standard deviation, > 0.
     prior : Gaussian
@@ -279,7 +279,7 @@ def ekf(mu, rho: float, prior: Gaussian, process_noise: float = 0.0) -> History:
     """
     mu = _checks.finite_array(mu, "mu")
     if mu.shape == (3,):
-        mu = _checks.measurements(mu)
+        mu = model.measurements(mu)
     elif mu.ndim != 1:
         raise ValueError(f"mu must have shape (N,), got shape {mu.shape}")
     return run(mu, rho, prior.mean, prior.cov, process_noise)

@@ -54,6 +54,7 @@ from . import (
     ekf,
     inverse_depth,
     iterated,
+    model,
     optimal,
     particle,
     rbpf,
@@ -178,11 +179,11 @@ class Filter:
     def __call__(self, mu, rho, prior_mean, prior_cov, process_noise=0.0, **options) -> Estimate:
         """Run the filter; see the module docstring for the arguments and their shapes.
 
-        ``mu`` is checked by :func:`depthcore._checks.measurements_batch`
+        ``mu`` is checked by :func:`depthcore.model.measurements_batch`
         (and must have 3 columns unless ``any_frames``); ``process_noise``
         must be ``>= 0``, and 0 unless ``with_process_noise``.
         """
-        mu = _checks.measurements_batch(mu, "mu")
+        mu = model.measurements_batch(mu, "mu")
         if mu.shape[-1] != 3 and not self.any_frames:
             raise ValueError(
                 f"mu must have shape (3,) or (B, 3): the {self.name} filter takes the "

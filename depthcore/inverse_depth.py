@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _checks
+from . import _checks, model
 from .gaussian import MeanAndCov
 
 
@@ -210,7 +210,7 @@ def run(
     --------
     estimate : the last frame's estimate in ``(x, y, v)``.
     """
-    mu, rho, m, P = _checks.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
+    mu, rho, m, P = model.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
     q = _checks.nonnegative_scalar(process_noise, "process_noise")
     z, S = prior(m, P)
     means, covs = [], []

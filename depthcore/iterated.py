@@ -176,7 +176,7 @@ def run(
         ``means[..., k, :]`` is the mean after bearing ``k + 1``.
     covs : ndarray, shape (..., K, 3, 3)
     """
-    mu, rho, n, C = _checks.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
+    mu, rho, n, C = model.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
     q = _checks.nonnegative_scalar(process_noise, "process_noise")
     Q = np.diag([0.0, 0.0, q**2])
     means, covs = [], []

@@ -10,7 +10,12 @@ All functions act on the last axis of arrays of states, so ``x`` may have shape
 ``(3,)`` or ``(..., 3)``. Besides the motion ``G`` (1), (9), the projection and
 its gradient ``h`` (11) and the likelihood (4), the module holds the misfit
 ``f`` of three measurements (5), its residuals and their gradients (20)-(22),
-the noise-free state ``c`` (7), and the least misfit at each depth.
+the noise-free state ``c`` (7), and the least misfit at each depth. It also
+checks the bearings against the model (:func:`measurements`,
+:func:`measurements_batch`, :func:`valid_measurements`: finite, not
+degenerate, the noise-free solution in front of the camera) and a filter's
+inputs as a whole (:func:`batch_problem`, :func:`batch_inputs`), with the
+generic checks of ``depthcore._checks``.
 """
 
 from __future__ import annotations
@@ -204,14 +209,14 @@ def noise_free_state(mu) -> np.ndarray:
     Parameters
     ----------
     mu : array_like, shape (3,)
-        Measurements ``(mu1, mu2, mu3)``; checked by :func:`depthcore._checks.measurements`.
+        Measurements ``(mu1, mu2, mu3)``; checked by :func:`measurements`.
 
     Returns
     -------
     ndarray, shape (3,)
         ``c = (c1, c2, c3)``: position ``(c1, c2)``, velocity ``(c3, 1)``.
     """
-    return noise_free_states_unchecked(_checks.measurements(mu))
+    return noise_free_states_unchecked(measurements(mu))
 
 
 def noise_free_states_unchecked(mu) -> np.ndarray:
@@ -302,12 +307,12 @@ def noise_free_states(mu) -> np.ndarray:
     d = mu[:, 2] + mu[:, 0] - 2.0 * mu[:, 1]
     bad = np.abs(d) <= _checks.DEGENERACY_TOL
     if np.any(bad):
-        _checks.measurements(mu[np.argmax(bad)], f"mu[{int(np.argmax(bad))}]")
+        measurements(mu[np.argmax(bad)], f"mu[{int(np.argmax(bad))}]")
     c = noise_free_states_unchecked(mu)
     behind = ~(c[:, 1] > 2.0)
     if np.any(behind):
         i = int(np.argmax(behind))
-        _checks.measurements(mu[i], f"mu[{i}]")
+        measurements(mu[i], f"mu[{i}]")
     return c
 
 
@@ -334,7 +339,7 @@ def profile_misfit(mu, depths) -> np.ndarray:
     -------
     ndarray, shape (n,)
     """
-    mu = _checks.measurements(mu)
+    mu = measurements(mu)
     y3 = np.atleast_1d(_checks.finite_array(depths, "depths"))
     if y3.ndim != 1 or np.any(y3 <= 2.0):
         raise ValueError("depths must be a 1-D array of depths > 2 at time 3")
@@ -355,5 +360,168 @@ def far_misfit(mu) -> float:
     linearly in time, ``a + b (i - 1)``, and the least misfit of three
     measurements by such a line is their component along ``(1, -2, 1) / sqrt(6)``.
     """
-    mu = _checks.measurements(mu)
+    mu = measurements(mu)
     return float((mu[0] - 2.0 * mu[1] + mu[2]) ** 2 / 6.0)
+
+
+# --- checks of the bearings ---------------------------------------------------------
+
+
+def measurements(mu, name: str = "mu") -> np.ndarray:
+    """Check a triple ``(mu1, mu2, mu3)`` of image measurements.
+
+    The triple must be finite, not degenerate (see ``depthcore._checks.DEGENERACY_TOL``), and
+    its noise-free solution, Eq. (7), must lie in front of the camera at all
+    three times: depth ``c2 - 2 > 0`` at the first frame.
+    """
+    arr = _checks.finite_array(mu, name, (3,))
+    second_difference = arr[0] + arr[2] - 2.0 * arr[1]
+    if abs(second_difference) <= _checks.DEGENERACY_TOL:
+        raise ValueError(
+            f"{name} is degenerate: mu1 + mu3 - 2*mu2 = {second_difference:.3g}, "
+            "so no finite depth explains the three measurements"
+        )
+    depth_first = noise_free_depth_unchecked(arr) - 2.0
+    if not depth_first > 0:
+        raise ValueError(
+            f"{name} puts the point behind the camera: its noise-free depth at the "
+            f"first frame is c2 - 2 = {depth_first:.6g}, which is not positive"
+        )
+    return arr
+
+
+def valid_measurements(mu) -> np.ndarray:
+    """Which triples of ``mu`` (..., 3) :func:`measurements` accepts, without raising.
+
+    Finite, not degenerate, and with the noise-free depth ``c2`` of Eq. (7)
+    above 2 (in front of the camera at all three times); returns a boolean
+    array of shape ``mu.shape[:-1]``.
+    """
+    arr = np.asarray(mu, dtype=float)
+    d = arr[..., 0] + arr[..., 2] - 2.0 * arr[..., 1]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        depth_first = noise_free_depth_unchecked(arr) - 2.0
+    return (
+        np.all(np.isfinite(arr), axis=-1) & (np.abs(d) > _checks.DEGENERACY_TOL) & (depth_first > 0)
+    )
+
+
+def measurements_batch(mu, name: str = "mu") -> np.ndarray:
+    """Check bearings of shape ``(..., N)``, ``3 <= N <= MAX_FRAMES``, row by row.
+
+    ``MAX_FRAMES`` is ``depthcore._checks.MAX_FRAMES``.
+
+    With ``N = 3`` (the paper's problem) each triple is checked as
+    :func:`measurements` does: not degenerate, and its noise-free solution,
+    Eq. (7), in front of the camera. With ``N > 3`` a row is degenerate when
+    every consecutive triple is, i.e. when every second difference
+    ``mu_k - 2 mu_{k+1} + mu_{k+2}`` is at or below ``depthcore._checks.DEGENERACY_TOL`` in
+    magnitude: the bearings are then (numerically) affine in time, which a
+    point at a finite depth explains only by a constant bearing (the point
+    moving along its line of sight), at every depth alike. Noise may put any
+    one triple's noise-free solution behind the camera, so with ``N > 3`` no
+    row is refused for that; the filters that need a point in front of the
+    camera say so themselves.
+
+    The first offending row is named with its index, e.g. ``mu[4]``.
+    """
+    arr = _checks.finite_array(mu, name)
+    if arr.ndim < 1 or arr.shape[-1] < 3:
+        raise ValueError(
+            f"{name} must have shape (..., N) with N >= 3 bearings per problem, "
+            f"got shape {arr.shape}"
+        )
+    if arr.shape[-1] > _checks.MAX_FRAMES:
+        raise ValueError(
+            f"{name} has {arr.shape[-1]} bearings per problem, more than the "
+            f"{_checks.MAX_FRAMES} frames the filters accept"
+        )
+    batch = arr.shape[:-1]
+    n_frames = arr.shape[-1]
+    flat = arr.reshape(-1, n_frames)
+    if n_frames > 3:
+        second = flat[:, :-2] + flat[:, 2:] - 2.0 * flat[:, 1:-1]
+        degenerate = ~np.any(np.abs(second) > _checks.DEGENERACY_TOL, axis=1)
+        if np.any(degenerate):
+            i = int(np.argmax(degenerate))
+            where = name + (_checks._index(i, batch) if batch else "")
+            raise ValueError(
+                f"{where} is degenerate: every second difference mu_k - 2*mu_(k+1) + mu_(k+2) "
+                f"is at most {_checks.DEGENERACY_TOL:g} in magnitude, so no finite depth explains "
+                "the bearings"
+            )
+        return arr
+    bad = ~valid_measurements(flat)
+    if np.any(bad):
+        i = int(np.argmax(bad))
+        measurements(flat[i], name + (_checks._index(i, batch) if batch else ""))
+    return arr
+
+
+def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
+    """The checks shared by the batched filters: measurements, noise and prior.
+
+    Parameters
+    ----------
+    mu : array_like, shape (..., N), or (..., K) when ``triples`` is false
+        Bearings of ``N >= 3`` frames checked by :func:`measurements_batch`
+        (triples, ``N = 3``, as the paper's); otherwise any finite bearings,
+        ``K >= 1``.
+    rho : float or array_like, shape ``mu.shape[:-1]``
+        Finite and > 0.
+    prior_mean : array_like, broadcastable to ``mu.shape``
+        Finite.
+    prior_cov : array_like, broadcastable to ``mu.shape + (3,)``
+        Symmetric positive definite, checked by :func:`depthcore._checks.covariances`.
+
+    Returns
+    -------
+    mu, rho, prior_mean, prior_cov : ndarray
+        As float arrays (the covariances symmetrised), not broadcast.
+    """
+    if triples:
+        mu = measurements_batch(mu, "mu")
+    else:
+        mu = _checks.finite_array(mu, "mu")
+        if mu.ndim < 1 or mu.shape[-1] < 1:
+            raise ValueError(f"mu must have shape (..., n_measurements), got shape {mu.shape}")
+    batch = mu.shape[:-1]
+    rho = _checks.finite_array(rho, "rho")
+    if rho.ndim and rho.shape != batch:
+        raise ValueError(f"rho must be a scalar or have shape {batch}, got shape {rho.shape}")
+    if not np.all(rho > 0):
+        raise ValueError(f"rho must be positive, got {rho.tolist()}")
+    prior_mean = _checks.finite_array(prior_mean, "prior_mean")
+    if (
+        prior_mean.ndim < 1
+        or prior_mean.shape[-1] != 3
+        or not _checks._broadcasts(prior_mean.shape, batch + (3,))
+    ):
+        allowed = "(3,)" + (f" or {batch + (3,)}" if batch else "")
+        raise ValueError(f"prior_mean must have shape {allowed}, got {prior_mean.shape}")
+    prior_cov = _checks.covariances(prior_cov, "prior_cov", 3)
+    if not _checks._broadcasts(prior_cov.shape, batch + (3, 3)):
+        allowed = "(3, 3)" + (f" or {batch + (3, 3)}" if batch else "")
+        raise ValueError(f"prior_cov must have shape {allowed}, got {prior_cov.shape}")
+    return mu, rho, prior_mean, prior_cov
+
+
+def batch_inputs(mu, rho, prior_mean, prior_cov, triples: bool = True):
+    """:func:`batch_problem`, with the priors broadcast to the batch.
+
+    Returns
+    -------
+    mu : ndarray, shape (..., N) or (..., K)
+    rho : ndarray, shape () or (...)
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+        Read-only broadcast views of the priors.
+    """
+    mu, rho, prior_mean, prior_cov = batch_problem(mu, rho, prior_mean, prior_cov, triples)
+    batch = mu.shape[:-1]
+    return (
+        mu,
+        rho,
+        np.broadcast_to(prior_mean, batch + (3,)),
+        np.broadcast_to(prior_cov, batch + (3, 3)),
+    )

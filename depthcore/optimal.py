@@ -115,7 +115,7 @@ def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
     prior_cov = _checks.finite_array(prior_cov, "prior_cov")
     if prior_cov.shape != (3, 3):
         raise ValueError(f"prior_cov must have shape (3, 3), got shape {prior_cov.shape}")
-    mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
+    mu, rho, prior_mean, prior_cov = model.batch_problem(mu, rho, prior_mean, prior_cov)
     B = mu.shape[0]
     prior_mean = np.broadcast_to(prior_mean, (B, 3))
     R = np.linalg.inv(np.linalg.cholesky(prior_cov))
@@ -141,7 +141,7 @@ def log_posterior(x, mu, rho: float, prior: Gaussian) -> np.ndarray:
     ndarray, shape x.shape[:-1]
     """
     rho = _checks.positive_scalar(rho, "rho")
-    mu = _checks.measurements(mu)
+    mu = model.measurements(mu)
     x = np.asarray(x, dtype=float)
     return -f(x, mu) / (2.0 * rho**2) + prior.logpdf(model.G(x, -2))
 
@@ -282,7 +282,7 @@ def quadratic_coefficients(y, mu, rho: float, prior: Gaussian) -> np.ndarray:
         of Eq. (15).
     """
     y = np.atleast_1d(np.asarray(y, dtype=float))
-    pb = _problem(_checks.measurements(mu), rho, prior.mean, prior.cov, "derived")
+    pb = _problem(model.measurements(mu), rho, prior.mean, prior.cov, "derived")
     gx, gv, z = (a[:, 0] for a in _terms(np.stack([y, y - 1, y - 2], -1)[None], pb))
     A, B, C = np.sum(gx * gx, 0), 2.0 * np.sum(gx * gv, 0), np.sum(gv * gv, 0)
     D, E = -2.0 * np.sum(gx * z, 0), -2.0 * np.sum(gv * z, 0)
@@ -313,7 +313,7 @@ def conditional(y, mu, rho: float, prior: Gaussian, reading: str = "derived"):
     y = np.atleast_1d(_checks.finite_array(y, "y"))
     if np.any(np.isin(y, (0.0, 1.0, 2.0))):
         raise ValueError("y must avoid the poles 0, 1, 2 of Eq. (5)")
-    pb = _problem(_checks.measurements(mu), rho, prior.mean, prior.cov, reading)
+    pb = _problem(model.measurements(mu), rho, prior.mean, prior.cov, reading)
     log_density, mean, (cxx, cxv, cvv) = _solve(np.stack([y, y - 1, y - 2], -1)[None], pb)
     cov = np.stack([np.stack([cxx, cxv], -1), np.stack([cxv, cvv], -1)], -2)
     return log_density[0], mean[:, 0].T, cov[0]
@@ -996,7 +996,7 @@ def moments(
     ----------
     mu : array_like, shape (B, 3)
         One triple of measurements per row, each checked as in
-        :func:`depthcore._checks.measurements`.
+        :func:`depthcore.model.measurements`.
     rho : float or array_like, shape (B,)
         Noise standard deviation, > 0.
     prior_mean : array_like, shape (3,) or (B, 3)
@@ -1206,7 +1206,7 @@ def marginals(
     Parameters
     ----------
     mu : array_like, shape (3,)
-        Measurements; checked by :func:`depthcore._checks.measurements`.
+        Measurements; checked by :func:`depthcore.model.measurements`.
     rho : float
         Noise standard deviation, > 0.
     prior : Gaussian
@@ -1225,7 +1225,7 @@ def marginals(
     -------
     OptimalMarginals
     """
-    mu = _checks.measurements(mu)
+    mu = model.measurements(mu)
     if not isinstance(prior, Gaussian):
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
     pb = _problem(mu, rho, prior.mean, prior.cov, reading)

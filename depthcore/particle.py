@@ -413,7 +413,7 @@ def run(
     ----------
     mu : array_like, shape (B, N)
         ``N >= 3`` bearings per row (the paper's triple for ``N = 3``), checked
-        by :func:`depthcore._checks.measurements_batch`.
+        by :func:`depthcore.model.measurements_batch`.
     rho : float or array_like, shape (B,)
         Noise standard deviation, > 0.
     prior_mean : array_like, shape (3,) or (B, 3)
@@ -442,7 +442,7 @@ def run(
     ParticleBatch
     """
     prior_cov = _checks.covariance(prior_cov, "prior_cov", 3)
-    mu, rho, prior_mean, _ = _checks.batch_inputs(mu, rho, prior_mean, prior_cov)  # checks each row
+    mu, rho, prior_mean, _ = model.batch_inputs(mu, rho, prior_mean, prior_cov)  # checks each row
     if mu.ndim != 2:
         raise ValueError(f"mu must have shape (B, N), got shape {mu.shape}")
     B, n_frames = mu.shape
@@ -503,7 +503,7 @@ def particle_filter(
     Parameters
     ----------
     mu : array_like, shape (N,)
-        ``N >= 3`` bearings; a triple is checked by :func:`depthcore._checks.measurements`.
+        ``N >= 3`` bearings; a triple is checked by :func:`depthcore.model.measurements`.
     rho : float
         Noise standard deviation, > 0.
     prior : Gaussian
@@ -522,7 +522,7 @@ def particle_filter(
     """
     mu = _checks.finite_array(mu, "mu")
     if mu.shape == (3,):
-        mu = _checks.measurements(mu)
+        mu = model.measurements(mu)
     elif mu.ndim != 1:
         raise ValueError(f"mu must have shape (N,), got shape {mu.shape}")
     rho = _checks.positive_scalar(rho, "rho")

@@ -97,7 +97,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import log_ndtr, ndtr, ndtri_exp
 
-from . import _checks
+from . import _checks, model
 from . import bank as bk
 from .particle import ParticleMoments
 from .resampling import RESAMPLERS, effective_sample_size, normalise, weighted_moments
@@ -577,7 +577,7 @@ def run(
     -------
     RBPF
     """
-    mu, rho, prior_mean, prior_cov = _checks.batch_inputs(
+    mu, rho, prior_mean, prior_cov = model.batch_inputs(
         mu, rho, prior_mean, prior_cov, triples=False
     )
     batch = mu.shape[:-1]

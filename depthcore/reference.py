@@ -113,7 +113,7 @@ def grid_moments(
     panels, order, uv_order, width
         Resolution of the grid.
     """
-    mu = _checks.measurements(mu)
+    mu = model.measurements(mu)
     rho = _checks.positive_scalar(rho, "rho")
     lo, hi = y_range
     if hi is None:
@@ -164,7 +164,7 @@ def importance_moments(
     standard_errors : ndarray, shape (2,)
         Delta-method standard errors of the two means.
     """
-    mu = _checks.measurements(mu)
+    mu = model.measurements(mu)
     ps = second_order(mu, rho, prior)
     draws, log_q = student_t(ps.mean[None], inflate**2 * ps.cov[None], df, n, rng)
     x, log_q = draws[0], log_q[0]

@@ -223,7 +223,7 @@ def run(
     -------
     ResampleMoveBatch
     """
-    mu, rho, prior_mean, prior_cov = _checks.batch_problem(
+    mu, rho, prior_mean, prior_cov = model.batch_problem(
         mu, rho, prior_mean, prior_cov, triples=False
     )
     if mu.ndim != 2 or mu.shape[0] < 1:

@@ -135,13 +135,13 @@ def second_order_batch(
     prior_mean : array_like, shape (3,) or (B, 3)
     prior_cov : array_like, shape (3, 3) or (B, 3, 3)
         Symmetric positive definite. All four are checked by
-        :func:`depthcore._checks.batch_problem`.
+        :func:`depthcore.model.batch_problem`.
     reading : {"derived", "printed"}
     process_noise : float
         SD ``q >= 0`` of the velocity's change per frame.
     """
     factor = {"derived": 2.0, "printed": 1.0}[_reading(reading)]
-    mu, rho, prior_mean, prior_cov = _checks.batch_problem(mu, rho, prior_mean, prior_cov)
+    mu, rho, prior_mean, prior_cov = model.batch_problem(mu, rho, prior_mean, prior_cov)
     q = _checks.nonnegative_scalar(process_noise, "process_noise")
     if mu.ndim != 2:
         raise ValueError(f"mu must have shape (B, N), got shape {mu.shape}")

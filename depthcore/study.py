@@ -116,7 +116,7 @@ class Estimates:
 
 def valid_triples(mu) -> np.ndarray:
     """Rows of ``mu`` (N, 3) with a noise-free solution, Eq. (7), in front of the camera."""
-    return _checks.valid_measurements(mu)
+    return model.valid_measurements(mu)
 
 
 def simulate(

@@ -365,7 +365,7 @@ def ukf(
     ----------
     mu : array_like, shape (N,)
         ``N >= 3`` bearings; a triple is checked by
-        :func:`depthcore._checks.measurements`.
+        :func:`depthcore.model.measurements`.
     rho : float
         Noise standard deviation, > 0.
     prior : Gaussian
@@ -384,7 +384,7 @@ def ukf(
     """
     mu = _checks.finite_array(mu, "mu")
     if mu.shape == (3,):
-        mu = _checks.measurements(mu)
+        mu = model.measurements(mu)
     elif mu.ndim != 1:
         raise ValueError(f"mu must have shape (N,), got shape {mu.shape}")
     if not isinstance(prior, Gaussian):

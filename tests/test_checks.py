@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from depthcore import _checks, optimal, paper_prior
+from depthcore import _checks, model, optimal, paper_prior
 from depthcore.ekf import ekf
 from depthcore.gaussian import Gaussian
 from depthcore.scenarios import MU_17
@@ -74,15 +74,15 @@ def test_degeneracy_boundary():
     # |mu1 + mu3 - 2 mu2| <= 1e-12 is degenerate; just above it is accepted.
     tol = _checks.DEGENERACY_TOL
     with pytest.raises(ValueError, match="degenerate"):
-        _checks.measurements([0.0, -tol / 2, 0.0])
-    mu = _checks.measurements([4 * tol, 0.0, -2 * tol])  # second difference 2e-12, c2 = 4
+        model.measurements([0.0, -tol / 2, 0.0])
+    mu = model.measurements([4 * tol, 0.0, -2 * tol])  # second difference 2e-12, c2 = 4
     assert noise_free_state(mu)[1] == pytest.approx(4.0)
 
 
 def test_behind_camera_boundary():
     # c2 = 2 exactly (depth 0 at the first frame) is rejected; c2 slightly above 2 is not.
     with pytest.raises(ValueError, match="behind the camera"):
-        _checks.measurements([0.3, 0.0, 0.0])  # mu = (a, 0, b) gives c2 = 2 a / (a + b) = 2
+        model.measurements([0.3, 0.0, 0.0])  # mu = (a, 0, b) gives c2 = 2 a / (a + b) = 2
     # c2 = 2 + 1e-9 needs b = -a * 1e-9 / (2 + 1e-9)
     a = 0.3
     b = -a * 1e-9 / (2 + 1e-9)
@@ -102,16 +102,16 @@ def test_valid_measurements_is_what_measurements_accepts():
 
     def accepted(row):
         try:
-            _checks.measurements(row)
+            model.measurements(row)
         except ValueError:
             return False
         return True
 
     want = [accepted(row) for row in mu]
     assert 0 < sum(want) < len(want)
-    assert _checks.valid_measurements(mu).tolist() == want
+    assert model.valid_measurements(mu).tolist() == want
     assert (
-        _checks.valid_measurements(mu.reshape(2, -1, 3)).tolist()
+        model.valid_measurements(mu.reshape(2, -1, 3)).tolist()
         == np.reshape(want, (2, -1)).tolist()
     )
 
@@ -131,15 +131,15 @@ def test_seed_sequence_rejects_what_is_not_a_seed(seed):
 
 
 def test_batch_inputs_broadcast_the_prior_and_check_shapes():
-    mu, rho, pm, pc = _checks.batch_inputs(
+    mu, rho, pm, pc = model.batch_inputs(
         np.zeros((4, 3)), 0.1, np.ones(3), np.eye(3), triples=False
     )
     assert pm.shape == (4, 3) and pc.shape == (4, 3, 3) and rho.shape == ()
     with pytest.raises(ValueError, match=r"rho must be a scalar or have shape \(4,\)"):
-        _checks.batch_inputs(np.zeros((4, 3)), [0.1, 0.2], np.ones(3), np.eye(3), triples=False)
+        model.batch_inputs(np.zeros((4, 3)), [0.1, 0.2], np.ones(3), np.eye(3), triples=False)
     with pytest.raises(ValueError, match=r"prior_mean must have shape \(3,\) or \(4, 3\)"):
-        _checks.batch_inputs(np.zeros((4, 3)), 0.1, np.ones((2, 3)), np.eye(3), triples=False)
+        model.batch_inputs(np.zeros((4, 3)), 0.1, np.ones((2, 3)), np.eye(3), triples=False)
     with pytest.raises(ValueError, match="rho must be positive"):
-        _checks.batch_inputs(
+        model.batch_inputs(
             np.zeros((2, 2, 3)), [[0.1, -0.2]] * 2, np.ones(3), np.eye(3), triples=False
         )

@@ -4,7 +4,7 @@ ValueError naming the argument, and no RuntimeWarning escapes."""
 import numpy as np
 import pytest
 
-from depthcore import _checks, ekf, optimal, particle, second_order, ukf
+from depthcore import ekf, model, optimal, particle, second_order, ukf
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -111,7 +111,7 @@ def test_checked_batch_gives_the_same_answer_as_the_single_entry_point():
 def test_batch_problem_returns_the_symmetrised_covariance_and_keeps_shapes():
     cov = COV.copy()
     cov[0, 1] += 1e-12
-    mu, rho, mean, sym = _checks.batch_problem(MU[None], 0.1, MEAN, cov)
+    mu, rho, mean, sym = model.batch_problem(MU[None], 0.1, MEAN, cov)
     assert mu.shape == (1, 3) and rho.shape == () and mean.shape == (3,)
     np.testing.assert_array_equal(sym, sym.T)
 
