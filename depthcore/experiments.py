@@ -820,7 +820,9 @@ def coverage_test(coverage, level: float, trials, z: float = COVERAGE_Z) -> dict
     level = float(level)
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must lie in (0, 1), got {level!r}")
-    trials = _checks.positive_array(trials, "trials")
+    trials = _checks.finite_array(trials, "trials")
+    if np.any(trials < 1):
+        raise ValueError("trials must each be at least 1")
     z = _checks.positive_scalar(z, "z")
     se = np.sqrt(level * (1 - level) / trials)
     score = (coverage - level) / se
@@ -962,5 +964,41 @@ def conjecture_study(
     for name in names:
         out[name] = {
             s: np.array([[run[name][s] for run in row] for row in runs]) for s in runs[0][0][name]
+        }
+    return out
+
+
+def conjecture_wins(result: dict, z: float = COVERAGE_Z) -> dict:
+    """Where the second-order filter beats the EKF, cell by cell of :func:`conjecture_study`.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`conjecture_study`; its arrays have shape (R, D, F).
+    z : float
+        Critical value of :func:`coverage_test`.
+
+    Returns
+    -------
+    dict
+        Boolean arrays of shape (R, D, F): ``"hellinger"`` (the second-order
+        depth marginal is nearer the optimal one), ``"rmse"`` (its depth mean
+        has the smaller RMSE), and for each level ``"coverage_68"``,
+        ``"coverage_95"`` (its coverage lies fewer standard errors from the
+        level); ``"calibrated_<level>"`` ``{name: (R, D, F)}``, the verdicts of
+        :func:`coverage_test` for ``"optimal"``, ``"second_order"`` and ``"ekf"``.
+    """
+    so, ekf = result["second_order"], result["ekf"]
+    out = {"hellinger": so["hellinger"] < ekf["hellinger"], "rmse": so["rmse"] < ekf["rmse"]}
+    for level in (68, 95):
+        tests = {
+            name: coverage_test(
+                result[name][f"coverage_{level}"], level / 100, result[name]["trials"], z
+            )
+            for name in ("optimal", "second_order", "ekf")
+        }
+        out[f"coverage_{level}"] = np.abs(tests["second_order"]["z"]) < np.abs(tests["ekf"]["z"])
+        out[f"calibrated_{level}"] = {
+            name: t["verdict"] == "calibrated" for name, t in tests.items()
         }
     return out

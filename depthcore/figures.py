@@ -764,3 +764,67 @@ def frames_study_figure(results: dict, names=None):
                 labels.append(lab)
     fig.legend(handles, labels, loc="outside lower center", ncol=4, frameon=False, fontsize=8)
     return fig
+
+
+def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse")):
+    """The second-order filter (solid) and the EKF (dotted) against ``rho``, per depth and ``N``.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.experiments.conjecture_study`.
+    scores : sequence of str
+        Rows: ``"hellinger"``, ``"coverage_68"``, ``"coverage_95"``, ``"rmse"``, ``"nees"``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    labels = {
+        "hellinger": "Hellinger distance\nto the optimal filter",
+        "coverage_68": "coverage of the\ncentral 68 % interval",
+        "coverage_95": "coverage of the\ncentral 95 % interval",
+        "rmse": "RMSE of the depth mean",
+        "nees": "mean NEES",
+    }
+    nominal = {"coverage_68": 0.68, "coverage_95": 0.95, "nees": 3.0}
+    frames = result["frames"]
+    fig, axes = plt.subplots(
+        len(scores),
+        len(frames),
+        figsize=(3.3 * len(frames) + 0.6, 2.3 * len(scores) + 0.8),
+        sharex=True,
+        sharey="row",
+        layout="constrained",
+        squeeze=False,
+    )
+    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(result["depth"])))
+    for j, n in enumerate(frames):
+        axes[0, j].set_title(f"N = {int(n)}", fontsize=9)
+        for i, score in enumerate(scores):
+            ax = axes[i, j]
+            for d, (depth, colour) in enumerate(zip(result["depth"], colours, strict=True)):
+                for name, style in (("second_order", "-"), ("ekf", ":")):
+                    ax.plot(
+                        result["rho"],
+                        result[name][score][:, d, j],
+                        color=colour,
+                        linestyle=style,
+                        marker="o",
+                        markersize=2.5,
+                        label=f"{_filters.FILTERS[name].label}, depth {depth:g}",
+                    )
+            if score in nominal:
+                ax.axhline(nominal[score], color="0.6", linewidth=1)
+            if score in ("rmse", "nees"):
+                ax.set_yscale("log")
+            ax.set_xscale("log")
+            if j == 0:
+                ax.set_ylabel(labels[score], fontsize=8)
+            ax.tick_params(labelsize=7)
+        axes[-1, j].set_xlabel("noise level rho (radians)", fontsize=8)
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncol=4, frameon=False, fontsize=7)
+    return fig

@@ -857,3 +857,28 @@ def frames_study_texts(result: dict, prefix: str) -> dict:
                 f"{float(r[s][i]) + 0.0:.3g}" for s in ("bias", "mean_sd", "rmse")
             )
     return out
+
+
+def conjecture_texts(result: dict, wins: dict, prefix: str) -> dict:
+    """Counts of the cells of :func:`~depthcore.experiments.conjecture_wins`, for glue.
+
+    Returns
+    -------
+    dict
+        ``"<prefix>_cells"`` (cells per ``N``: noise levels times depths) and,
+        for the ``j``-th ``N``: ``"<prefix>_<j>_x"`` (``N``),
+        ``"<prefix>_<j>_<score>"`` (cells where the second-order filter wins,
+        for ``"hellinger"``, ``"rmse"``, ``"coverage_68"``, ``"coverage_95"``)
+        and ``"<prefix>_<j>_cal<level>_<filter>"`` (cells where the filter's
+        coverage passes the test) for ``"optimal"``, ``"second_order"``, ``"ekf"``.
+    """
+    n_rho, n_depth = len(result["rho"]), len(result["depth"])
+    out = {f"{prefix}_cells": str(n_rho * n_depth)}
+    for j, n in enumerate(result["frames"]):
+        out[f"{prefix}_{j}_x"] = str(int(n))
+        for score in ("hellinger", "rmse", "coverage_68", "coverage_95"):
+            out[f"{prefix}_{j}_{score}"] = str(int(np.sum(wins[score][..., j])))
+        for level in (68, 95):
+            for name, ok in wins[f"calibrated_{level}"].items():
+                out[f"{prefix}_{j}_cal{level}_{name}"] = str(int(np.sum(ok[..., j])))
+    return out

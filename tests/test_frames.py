@@ -171,3 +171,26 @@ def test_conjecture_study_entries_are_frames_study_entries():
         assert_allclose(c[name]["nees"][1, 1], direct[name]["nees"], rtol=0, atol=0)
     with pytest.raises(ValueError, match="depths"):
         experiments.conjecture_study([3], [0.01], [2.0], 5, 0)
+
+
+def test_conjecture_wins_compare_cell_by_cell():
+    c = experiments.conjecture_study([3, 5], [1 / 500, 1 / 100], [6.0, 12.0], 40, 4)
+    w = experiments.conjecture_wins(c)
+    so, ekf = c["second_order"], c["ekf"]
+    for idx in np.ndindex(so["rmse"].shape):
+        assert w["hellinger"][idx] == (so["hellinger"][idx] < ekf["hellinger"][idx])
+        assert w["rmse"][idx] == (so["rmse"][idx] < ekf["rmse"][idx])
+        se = np.sqrt(0.68 * 0.32 / so["trials"][idx])
+        z_so = abs(so["coverage_68"][idx] - 0.68) / se
+        z_ekf = abs(ekf["coverage_68"][idx] - 0.68) / np.sqrt(0.68 * 0.32 / ekf["trials"][idx])
+        assert w["coverage_68"][idx] == (z_so < z_ekf)
+        assert w["calibrated_68"]["ekf"][idx] == (
+            abs(ekf["coverage_68"][idx] - 0.68) <= experiments.COVERAGE_Z * se
+        )
+    texts = report.conjecture_texts(c, w, "cj")
+    assert texts["cj_cells"] == "4" and texts["cj_1_x"] == "5"
+    assert texts["cj_0_hellinger"] == str(int(w["hellinger"][..., 0].sum()))
+    fig = figures.conjecture_figure(c)
+    assert len(fig.axes) == 6
+    assert len(fig.axes[0].get_lines()) == 2 * 2  # two depths, two filters
+    plt.close(fig)
