@@ -700,7 +700,7 @@ def truncated_bearing_moments(mean, cov, eps) -> dict:
 
 #: Depth scores gathered per filter by :func:`frames_study`, from :func:`depthcore.study.study`.
 FRAMES_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
-#: Two-sided 1 % critical value of the standard normal: :func:`coverage_test`'s default.
+#: The default critical value of :func:`coverage_test`, the standard normal's two-sided 1 % point.
 COVERAGE_Z = 2.5758293035489004
 
 

@@ -697,7 +697,7 @@ def frame_marginals_figure(result: list, names=None):
     return fig
 
 
-#: Rows of :func:`frames_study_figure`: score, axis label, logarithmic axis, nominal level.
+#: The rows of :func:`frames_study_figure`, each (score, label, logarithmic axis, nominal level).
 FRAMES_ROWS = (
     ("rmse", "RMSE of the depth mean", True, None),
     ("mean_sd", "mean depth SD", True, None),

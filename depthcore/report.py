@@ -814,8 +814,8 @@ class GlueLog:
 
 # --- more frames ----------------------------------------------------------------------------
 
-#: Marks of :func:`frames_study_texts` for the verdicts of
-#: :func:`depthcore.experiments.coverage_test`: below (too narrow) or above the level.
+#: The marks of :func:`frames_study_texts` for the verdicts of
+#: :func:`depthcore.experiments.coverage_test`, below (too narrow) or above the level.
 VERDICT_MARKS = {"calibrated": "", "overconfident": "↓", "underconfident": "↑"}
 
 
