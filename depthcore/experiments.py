@@ -27,7 +27,11 @@ Recommended import: ``from depthcore import experiments``.
 * :func:`first_update`: the EKF and the UKF after the first measurement;
 * :func:`truncated_bearing_moments`: why the unscented transform of the
   paper's prior has nothing to match: the moments of ``x / y`` under a
-  Gaussian with positive density at ``y = 0`` do not exist.
+  Gaussian with positive density at ``y = 0`` do not exist;
+* :func:`frames_study`, :func:`frame_marginals` and :func:`conjecture_study`:
+  the study and the depth marginals as the frames accumulate (``N`` from 3
+  on, with or without process noise), :func:`coverage_test` the binomial test
+  of a coverage, and the paper's conjecture over frames, noise levels and depths.
 
 :mod:`depthcore.figures` draws and :mod:`depthcore.report` formats what these return.
 """
@@ -48,7 +52,7 @@ from . import (
     study,
     ukf,
 )
-from .filters import FILTERS, NAMES
+from .filters import FILTERS, NAMES, check_names
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, MeanAndCov, paper_prior_means
 from .scenarios import SCENARIOS, Scenario
 
@@ -730,3 +734,311 @@ def truncated_bearing_moments(mean, cov, eps) -> dict:
         "second_moment": np.array(moments),
         "density_at_zero": float(np.exp(-0.5 * (my / sy) ** 2) / (np.sqrt(2.0 * np.pi) * sy)),
     }
+
+
+# --- more frames ----------------------------------------------------------------------------
+
+#: Depth scores gathered per filter by :func:`frames_study`, from :func:`depthcore.study.study`.
+FRAMES_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
+#: The default critical value of :func:`coverage_test`, the standard normal's two-sided 1 % point.
+COVERAGE_Z = 2.5758293035489004
+
+
+def frames_study(
+    frames,
+    trials: int,
+    seed,
+    names=("optimal", "second_order", "ekf"),
+    prior: str = "paper",
+    process_noise: float = 0.0,
+    truth=None,
+    rho: float = SCENARIOS["fig2"].rho,
+    particle_trials: int | None = None,
+    n_particles: int = study.PARTICLES,
+) -> dict:
+    """:func:`depthcore.study.study` at each number of frames, its depth scores gathered.
+
+    The point, at ``truth`` at time 3, is followed on to frame ``N`` (with
+    velocity changes of SD ``process_noise``) and every filter is scored on its
+    state there. The filters that draw random numbers (``Filter.random``) run
+    in a second study of ``particle_trials`` trials with ``n_particles``
+    particles; the optimal filter, the reference of the Hellinger distances,
+    runs in both. Both studies use ``seed``, so their first trials are the same.
+
+    Parameters
+    ----------
+    frames : sequence of int, shape (F,)
+        Numbers of frames ``N``, each from 3 to ``depthcore._checks.MAX_FRAMES``.
+    trials : int
+        Trials per ``N`` of the deterministic filters.
+    seed : int or numpy.random.SeedSequence
+        The same at every ``N``.
+    names : sequence of str
+        Filters, from :data:`depthcore.filters.FILTERS`; ``"optimal"`` is run
+        whether named or not.
+    prior : {"paper", "fixed"}
+    process_noise : float
+        ``q >= 0``.
+    truth : array_like, shape (3,), optional
+        State at time 3; default Figure 2's ``c``.
+    rho : float
+    particle_trials : int, optional
+        Trials per ``N`` of the random filters; default ``trials``.
+    n_particles : int
+
+    Returns
+    -------
+    dict
+        ``"frames"`` (F,), ``"process_noise"``, ``"prior"`` and, per filter
+        (the optimal filter first), ``{score: (F,)}`` for :data:`FRAMES_SCORES`
+        (of the depth), ``"nees"``, ``"hellinger"`` (mean Hellinger distance of
+        the depth marginal to the optimal one) and ``"trials"`` (valid trials
+        scored).
+    """
+    frames = [_checks.count(n, "frames") for n in np.atleast_1d(frames)]
+    names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
+    random = tuple(n for n in names if FILTERS[n].random)
+    plain = tuple(n for n in names if not FILTERS[n].random)
+    particle_trials = trials if particle_trials is None else particle_trials
+    groups = [(plain, trials)] + ([(("optimal",) + random, particle_trials)] if random else [])
+    rows = {name: [] for name in names}
+    for n in frames:
+        for group, t in groups:
+            r = study.study(
+                truth,
+                rho,
+                trials=t,
+                seed=seed,
+                prior=prior,
+                names=group,
+                n_particles=n_particles,
+                frames=n,
+                process_noise=process_noise,
+            )
+            for name in group[1:] if group is not plain else group:
+                rows[name].append((r["filters"][name], r["valid_trials"]))
+    out = {"frames": np.array(frames), "process_noise": float(process_noise), "prior": prior}
+    for name, runs in rows.items():
+        f = [x for x, _ in runs]
+        out[name] = {s: np.array([x["depth"][s] for x in f]) for s in FRAMES_SCORES}
+        out[name]["nees"] = np.array([x["nees"] for x in f])
+        out[name]["hellinger"] = np.array([x["hellinger_depth"]["mean"] for x in f])
+        out[name]["trials"] = np.array([v for _, v in runs])
+    return out
+
+
+def coverage_test(coverage, level: float, trials, z: float = COVERAGE_Z) -> dict:
+    """The binomial test of a coverage against its nominal level, normal approximation.
+
+    A filter whose central ``level`` interval holds the truth with probability
+    ``level`` covers it in a fraction of ``n`` independent trials with standard
+    error ``sqrt(level (1 - level) / n)``. The coverage is called
+    ``"calibrated"`` when it lies within ``z`` standard errors of the level
+    (a two-sided test at 1 % for the default ``z``), ``"overconfident"`` when
+    below (intervals too narrow), ``"underconfident"`` when above.
+
+    Parameters
+    ----------
+    coverage : array_like, shape (...)
+        Fractions of trials covered, in [0, 1].
+    level : float
+        Nominal level, in (0, 1).
+    trials : array_like of int, shape (...)
+        Trials behind each coverage, >= 1.
+    z : float
+        Critical value, > 0.
+
+    Returns
+    -------
+    dict
+        ``"se"``, ``"z"`` (the standardised deviation) and ``"verdict"``
+        (array of str), each of the broadcast shape.
+    """
+    coverage = _checks.finite_array(coverage, "coverage")
+    if np.any((coverage < 0) | (coverage > 1)):
+        raise ValueError("coverage must lie in [0, 1]")
+    level = float(level)
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    trials = _checks.finite_array(trials, "trials")
+    if np.any(trials < 1):
+        raise ValueError("trials must each be at least 1")
+    z = _checks.positive_scalar(z, "z")
+    se = np.sqrt(level * (1 - level) / trials)
+    score = (coverage - level) / se
+    verdict = np.where(
+        np.abs(score) <= z, "calibrated", np.where(score < 0, "overconfident", "underconfident")
+    )
+    return {"se": se, "z": score, "verdict": verdict}
+
+
+def frame_marginals(
+    mu,
+    rho: float,
+    frames,
+    names=("optimal", "second_order", "ekf"),
+    rng=None,
+    n_particles: int | None = None,
+    n_points: int = 601,
+    width: float = 6.0,
+    prior_scale: float = PAPER_PRIOR_SCALE,
+) -> list[dict]:
+    """Each filter's depth marginal after the first ``N`` of one sequence of bearings.
+
+    The prior is the paper's rule applied to the first three bearings (mean
+    ``(c1 - 2 c3, c2 - 2, 0)``, covariance ``prior_scale * I``), the same at
+    every ``N``; there is no process noise.
+
+    Parameters
+    ----------
+    mu : array_like, shape (M,)
+        Bearings of frames 1 .. M.
+    rho : float
+    frames : sequence of int, shape (F,)
+        Numbers of frames, each from 3 to ``M``.
+    names : sequence of str
+        Filters; ``"optimal"`` is always run.
+    rng : numpy.random.Generator or SeedSequence, optional
+        Required when a random filter is named.
+    n_particles : int, optional
+        Particles of the random filters; default each filter's own.
+    n_points : int
+        Points of the depth grid.
+    width : float
+        The grid spans the optimal depth mean ± ``width`` optimal SDs (cut at 0).
+
+    Returns
+    -------
+    list of dict, one per ``N``
+        ``"frames"``, ``"grid"`` (G,), ``"density"`` ``{name: (G,)}``,
+        ``"depth_mean"`` and ``"depth_sd"`` ``{name: float}``.
+    """
+    mu = _checks.finite_array(mu, "mu")
+    if mu.ndim != 1 or len(mu) < 3:
+        raise ValueError(f"mu must have shape (M,) with M >= 3, got shape {mu.shape}")
+    frames = [_checks.count(n, "frames") for n in np.atleast_1d(frames)]
+    if any(not 3 <= n <= len(mu) for n in frames):
+        raise ValueError(f"frames must each be from 3 to {len(mu)}, got {frames}")
+    names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
+    n_points = _checks.count(n_points, "n_points")
+    width = _checks.positive_scalar(width, "width")
+    pm = paper_prior_means(model.noise_free_states(mu[None, :3]))[0]
+    pc = _checks.positive_scalar(prior_scale, "prior_scale") * np.eye(3)
+    out = []
+    for n in frames:
+        estimates = {}
+        for name in names:
+            f = FILTERS[name]
+            options = {}
+            if f.random:
+                if rng is None:
+                    raise ValueError(f"rng is required to run the {name} filter")
+                options["rng"] = rng
+                if n_particles is not None:
+                    options["n_particles"] = n_particles
+            estimates[name] = f(mu[:n], rho, pm, pc, **options)
+        ref = estimates["optimal"]
+        lo = max(float(ref.depth_mean) - width * float(ref.depth_sd), 1e-9)
+        grid = np.linspace(lo, float(ref.depth_mean) + width * float(ref.depth_sd), n_points)
+        out.append(
+            {
+                "frames": n,
+                "grid": grid,
+                "density": {k: FILTERS[k].density(e, "depth", grid) for k, e in estimates.items()},
+                "depth_mean": {k: float(e.depth_mean) for k, e in estimates.items()},
+                "depth_sd": {k: float(e.depth_sd) for k, e in estimates.items()},
+            }
+        )
+    return out
+
+
+def conjecture_study(
+    frames,
+    rhos,
+    depths,
+    trials: int,
+    seed,
+    prior: str = "fixed",
+    bearing: float = 0.2,
+) -> dict:
+    """The second-order filter against the EKF, scored against the optimal filter and the truth.
+
+    For every number of frames, noise level and depth, :func:`frames_study`
+    of the optimal, second-order and EKF filters, the truth at time 3 being
+    ``(bearing * y, y, bearing * y)``: Figure 2's ``c = (1.2, 6, 1.2)`` scaled
+    to depth ``y`` (its bearings at times 1-3 are nearly those of Eq. (17)).
+
+    Parameters
+    ----------
+    frames : sequence of int, shape (F,)
+    rhos : array_like, shape (R,)
+        Noise levels, each > 0.
+    depths : array_like, shape (D,)
+        Depths at time 3, each > 2 (the point in front of the camera at time 1).
+    trials : int
+        Trials per setting (the same seed in each).
+    seed : int or numpy.random.SeedSequence
+    prior : {"paper", "fixed"}
+    bearing : float
+        Bearing at time 3, and lateral velocity per unit of depth.
+
+    Returns
+    -------
+    dict
+        ``"frames"`` (F,), ``"rho"`` (R,), ``"depth"`` (D,), ``"truth"`` (D, 3)
+        and per filter (``"optimal"``, ``"second_order"``, ``"ekf"``) the
+        scores of :func:`frames_study` as arrays of shape (R, D, F).
+    """
+    rhos = np.atleast_1d(_checks.positive_array(rhos, "rhos"))
+    depths = np.atleast_1d(_checks.positive_array(depths, "depths"))
+    if np.any(depths <= 2):
+        raise ValueError("depths must each exceed 2 (the point in front of the camera at time 1)")
+    bearing = float(_checks.finite_array(bearing, "bearing"))
+    truths = np.stack([bearing * depths, depths, bearing * depths], axis=1)
+    names = ("optimal", "second_order", "ekf")
+    runs = [
+        [frames_study(frames, trials, seed, names, prior, truth=t, rho=float(r)) for t in truths]
+        for r in rhos
+    ]
+    out = {"frames": runs[0][0]["frames"], "rho": rhos, "depth": depths, "truth": truths}
+    for name in names:
+        out[name] = {
+            s: np.array([[run[name][s] for run in row] for row in runs]) for s in runs[0][0][name]
+        }
+    return out
+
+
+def conjecture_wins(result: dict, z: float = COVERAGE_Z) -> dict:
+    """Where the second-order filter beats the EKF, cell by cell of :func:`conjecture_study`.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`conjecture_study`; its arrays have shape (R, D, F).
+    z : float
+        Critical value of :func:`coverage_test`.
+
+    Returns
+    -------
+    dict
+        Boolean arrays of shape (R, D, F): ``"hellinger"`` (the second-order
+        depth marginal is nearer the optimal one), ``"rmse"`` (its depth mean
+        has the smaller RMSE), and for each level ``"coverage_68"``,
+        ``"coverage_95"`` (its coverage lies fewer standard errors from the
+        level); ``"calibrated_<level>"`` ``{name: (R, D, F)}``, the verdicts of
+        :func:`coverage_test` for ``"optimal"``, ``"second_order"`` and ``"ekf"``.
+    """
+    so, ekf = result["second_order"], result["ekf"]
+    out = {"hellinger": so["hellinger"] < ekf["hellinger"], "rmse": so["rmse"] < ekf["rmse"]}
+    for level in (68, 95):
+        tests = {
+            name: coverage_test(
+                result[name][f"coverage_{level}"], level / 100, result[name]["trials"], z
+            )
+            for name in ("optimal", "second_order", "ekf")
+        }
+        out[f"coverage_{level}"] = np.abs(tests["second_order"]["z"]) < np.abs(tests["ekf"]["z"])
+        out[f"calibrated_{level}"] = {
+            name: t["verdict"] == "calibrated" for name, t in tests.items()
+        }
+    return out

@@ -811,3 +811,179 @@ def prior_calibration(result: dict):
         fontsize=9,
     )
     return fig
+
+
+def frame_marginals_figure(result: list, names=None):
+    """Each filter's depth marginal beside the optimal one, one column per number of frames.
+
+    Parameters
+    ----------
+    result : list of dict
+        From :func:`depthcore.experiments.frame_marginals`.
+    names : sequence of str, optional
+        Filters, one row each; default every filter in ``result`` but the optimal.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    if names is None:
+        names = [n for n in result[0]["density"] if n != "optimal"]
+    fig, axes = plt.subplots(
+        len(names),
+        len(result),
+        figsize=(2.4 * len(result), 1.35 * len(names) + 0.6),
+        sharex="col",
+        layout="constrained",
+        squeeze=False,
+    )
+    exact = {**STYLE["optimal"], "color": "black", "linestyle": "-", "linewidth": 1.0}
+    for j, r in enumerate(result):
+        for i, name in enumerate(names):
+            ax = axes[i, j]
+            ax.fill_between(r["grid"], r["density"]["optimal"], color="0.85", linewidth=0)
+            ax.plot(r["grid"], r["density"]["optimal"], **exact)
+            ax.plot(r["grid"], r["density"][name], **STYLE[name])
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title(f"N = {r['frames']}", fontsize=9)
+            if j == 0:
+                ax.set_ylabel(_filters.FILTERS[name].label, fontsize=7, rotation=0, ha="right")
+            ax.tick_params(labelsize=7)
+        axes[-1, j].set_xlabel(f"depth at frame {r['frames']}", fontsize=8)
+    return fig
+
+
+#: The rows of :func:`frames_study_figure`, each (score, label, logarithmic axis, nominal level).
+FRAMES_ROWS = (
+    ("rmse", "RMSE of the depth mean", True, None),
+    ("mean_sd", "mean depth SD", True, None),
+    ("hellinger", "Hellinger distance\nto the optimal filter", False, None),
+    ("coverage_68", "coverage of the\ncentral 68 % interval", False, 0.68),
+    ("coverage_95", "coverage of the\ncentral 95 % interval", False, 0.95),
+    ("nees", "mean NEES", True, 3.0),
+)
+
+
+def frames_study_figure(results: dict, names=None):
+    """Scores of :func:`depthcore.experiments.frames_study` against ``N``, one column per run.
+
+    Parameters
+    ----------
+    results : dict
+        ``{column title: frames_study result}``.
+    names : sequence of str, optional
+        Filters to draw; default those of the first result.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    first = next(iter(results.values()))
+    if names is None:
+        names = [k for k, v in first.items() if isinstance(v, dict)]
+    fig, axes = plt.subplots(
+        len(FRAMES_ROWS),
+        len(results),
+        figsize=(3.4 * len(results) + 0.6, 2.0 * len(FRAMES_ROWS) + 0.8),
+        sharex=True,
+        sharey="row",
+        layout="constrained",
+        squeeze=False,
+    )
+    for j, (title, r) in enumerate(results.items()):
+        axes[0, j].set_title(title, fontsize=9)
+        for i, (score, label, log, nominal) in enumerate(FRAMES_ROWS):
+            ax = axes[i, j]
+            for name in names:
+                if name in r and not (score == "hellinger" and name == "optimal"):
+                    ax.plot(r["frames"], r[name][score], marker="o", markersize=3, **STYLE[name])
+            if nominal is not None:
+                ax.axhline(nominal, color="0.6", linewidth=1)
+            if log:
+                ax.set_yscale("log")
+            if score.startswith("coverage"):
+                ax.set_ylim(-0.02, 1.02)
+            if j == 0:
+                ax.set_ylabel(label, fontsize=8)
+            ax.set_xscale("log")
+            ax.set_xticks(r["frames"], [str(int(n)) for n in r["frames"]])
+            ax.set_xticks([], minor=True)
+            ax.tick_params(labelsize=7)
+        axes[-1, j].set_xlabel("frames N", fontsize=8)
+    handles, labels = [], []
+    for ax in axes.ravel():
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(handles, labels, loc="outside lower center", ncol=4, frameon=False, fontsize=8)
+    return fig
+
+
+def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse")):
+    """The second-order filter (solid) and the EKF (dotted) against ``rho``, per depth and ``N``.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.experiments.conjecture_study`.
+    scores : sequence of str
+        Rows: ``"hellinger"``, ``"coverage_68"``, ``"coverage_95"``, ``"rmse"``, ``"nees"``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    labels = {
+        "hellinger": "Hellinger distance\nto the optimal filter",
+        "coverage_68": "coverage of the\ncentral 68 % interval",
+        "coverage_95": "coverage of the\ncentral 95 % interval",
+        "rmse": "RMSE of the depth mean",
+        "nees": "mean NEES",
+    }
+    nominal = {"coverage_68": 0.68, "coverage_95": 0.95, "nees": 3.0}
+    frames = result["frames"]
+    fig, axes = plt.subplots(
+        len(scores),
+        len(frames),
+        figsize=(3.3 * len(frames) + 0.6, 2.3 * len(scores) + 0.8),
+        sharex=True,
+        sharey="row",
+        layout="constrained",
+        squeeze=False,
+    )
+    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(result["depth"])))
+    for j, n in enumerate(frames):
+        axes[0, j].set_title(f"N = {int(n)}", fontsize=9)
+        for i, score in enumerate(scores):
+            ax = axes[i, j]
+            for d, (depth, colour) in enumerate(zip(result["depth"], colours, strict=True)):
+                for name, style in (("second_order", "-"), ("ekf", ":")):
+                    ax.plot(
+                        result["rho"],
+                        result[name][score][:, d, j],
+                        color=colour,
+                        linestyle=style,
+                        marker="o",
+                        markersize=2.5,
+                        label=f"{_filters.FILTERS[name].label}, depth {depth:g}",
+                    )
+            if score in nominal:
+                ax.axhline(nominal[score], color="0.6", linewidth=1)
+            if score in ("rmse", "nees"):
+                ax.set_yscale("log")
+            ax.set_xscale("log")
+            if j == 0:
+                ax.set_ylabel(labels[score], fontsize=8)
+            ax.tick_params(labelsize=7)
+        axes[-1, j].set_xlabel("noise level rho (radians)", fontsize=8)
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside lower center", ncol=4, frameon=False, fontsize=7)
+    return fig

@@ -1291,3 +1291,75 @@ class GlueLog:
             else:
                 display(PastedTable(pasted))
         self._tables = pending
+
+
+# --- more frames ----------------------------------------------------------------------------
+
+#: The marks of :func:`frames_study_texts` for the verdicts of
+#: :func:`depthcore.experiments.coverage_test`, below (too narrow) or above the level.
+VERDICT_MARKS = {"calibrated": "", "overconfident": "↓", "underconfident": "↑"}
+
+
+def frames_study_texts(result: dict, prefix: str) -> dict:
+    """Texts of :func:`~depthcore.experiments.frames_study`'s scores, for glue.
+
+    Each coverage carries the mark of :data:`VERDICT_MARKS` for the verdict of
+    :func:`depthcore.experiments.coverage_test` (two-sided, 1 %) against its
+    nominal level over the filter's trials.
+
+    Returns
+    -------
+    dict
+        For the ``i``-th number of frames: ``"<prefix>_<i>_x"`` (``N``) and
+        per filter ``"<prefix>_<i>_<filter>_cov"`` (``"0.66 / 0.95"``, the
+        68 % and 95 % coverages), ``"..._hn"`` (``"0.012 / 3.1"``, Hellinger
+        distance and NEES), ``"..._msr"`` (``"0.01 / 0.045 / 0.047"``: bias,
+        mean SD, RMSE of the depth, 3 significant digits); per filter
+        ``"<prefix>_<filter>_trials"`` (the trials of its first ``N``).
+    """
+    from .experiments import coverage_test
+
+    out = {}
+    names = [k for k, v in result.items() if isinstance(v, dict)]
+    for name in names:
+        out[f"{prefix}_{name}_trials"] = str(int(result[name]["trials"][0]))
+    for i, n in enumerate(result["frames"]):
+        out[f"{prefix}_{i}_x"] = str(int(n))
+        for name in names:
+            r = result[name]
+            cov = []
+            for level in (68, 95):
+                c = r[f"coverage_{level}"][i]
+                verdict = coverage_test(c, level / 100, r["trials"][i])["verdict"]
+                cov.append(f"{c:.2f}{VERDICT_MARKS[str(verdict)]}")
+            out[f"{prefix}_{i}_{name}_cov"] = " / ".join(cov)
+            out[f"{prefix}_{i}_{name}_hn"] = f"{r['hellinger'][i]:.3f} / {r['nees'][i]:.3g}"
+            out[f"{prefix}_{i}_{name}_msr"] = " / ".join(
+                f"{float(r[s][i]) + 0.0:.3g}" for s in ("bias", "mean_sd", "rmse")
+            )
+    return out
+
+
+def conjecture_texts(result: dict, wins: dict, prefix: str) -> dict:
+    """Counts of the cells of :func:`~depthcore.experiments.conjecture_wins`, for glue.
+
+    Returns
+    -------
+    dict
+        ``"<prefix>_cells"`` (cells per ``N``: noise levels times depths) and,
+        for the ``j``-th ``N``: ``"<prefix>_<j>_x"`` (``N``),
+        ``"<prefix>_<j>_<score>"`` (cells where the second-order filter wins,
+        for ``"hellinger"``, ``"rmse"``, ``"coverage_68"``, ``"coverage_95"``)
+        and ``"<prefix>_<j>_cal<level>_<filter>"`` (cells where the filter's
+        coverage passes the test) for ``"optimal"``, ``"second_order"``, ``"ekf"``.
+    """
+    n_rho, n_depth = len(result["rho"]), len(result["depth"])
+    out = {f"{prefix}_cells": str(n_rho * n_depth)}
+    for j, n in enumerate(result["frames"]):
+        out[f"{prefix}_{j}_x"] = str(int(n))
+        for score in ("hellinger", "rmse", "coverage_68", "coverage_95"):
+            out[f"{prefix}_{j}_{score}"] = str(int(np.sum(wins[score][..., j])))
+        for level in (68, 95):
+            for name, ok in wins[f"calibrated_{level}"].items():
+                out[f"{prefix}_{j}_cal{level}_{name}"] = str(int(np.sum(ok[..., j])))
+    return out

@@ -1,0 +1,196 @@
+"""More frames: the study at each N, the coverage test, the marginals, the conjecture."""
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy import stats
+
+from depthcore import SCENARIOS, bank, experiments, figures, model, report, study
+from depthcore.filters import FILTERS
+from depthcore.gaussian import paper_prior_means
+
+FIG2 = SCENARIOS["fig2"]
+
+
+@pytest.fixture(scope="module")
+def frames_run():
+    return experiments.frames_study(
+        [3, 6],
+        40,
+        5,
+        ("ekf", "second_order", "particle"),
+        prior="fixed",
+        particle_trials=20,
+        n_particles=300,
+    )
+
+
+def test_frames_study_entries_are_the_direct_studies(frames_run):
+    r = frames_run
+    assert list(r["frames"]) == [3, 6]
+    assert list(r)[3] == "optimal"  # the reference first, then the named filters
+    for j, n in enumerate((3, 6)):
+        plain = study.study(
+            trials=40, seed=5, prior="fixed", names=("optimal", "ekf", "second_order"), frames=n
+        )
+        for name in ("optimal", "ekf", "second_order"):
+            f = plain["filters"][name]
+            assert r[name]["rmse"][j] == f["depth"]["rmse"]
+            assert r[name]["coverage_95"][j] == f["depth"]["coverage_95"]
+            assert r[name]["nees"][j] == f["nees"]
+            assert r[name]["hellinger"][j] == f["hellinger_depth"]["mean"]
+            assert r[name]["trials"][j] == plain["valid_trials"]
+        rand = study.study(
+            trials=20,
+            seed=5,
+            prior="fixed",
+            names=("optimal", "particle"),
+            frames=n,
+            n_particles=300,
+        )
+        assert r["particle"]["bias"][j] == rand["filters"]["particle"]["depth"]["bias"]
+        assert r["particle"]["trials"][j] == rand["valid_trials"]
+
+
+def test_frames_study_with_process_noise_refuses_a_filter_without_it():
+    with pytest.raises(ValueError, match="particle"):
+        experiments.frames_study([4], 5, 0, ("particle",), process_noise=0.01)
+
+
+def test_coverage_test_is_the_normal_approximation_to_the_binomial():
+    n = np.array([100, 400, 2000])
+    k = np.array([60, 240, 1420])
+    t = experiments.coverage_test(k / n, 0.68, n)
+    # independent route: the two-sided p-value of the standardised count
+    z = (k - n * 0.68) / np.sqrt(n * 0.68 * 0.32)
+    p = 2 * stats.norm.sf(np.abs(z))
+    assert_allclose(t["z"], z, rtol=1e-12)
+    assert_allclose(t["se"], np.sqrt(0.68 * 0.32 / n), rtol=1e-12)
+    expected = np.where(p >= 0.01, "calibrated", np.where(z < 0, "overconfident", "underconfident"))
+    assert list(t["verdict"]) == list(expected)
+    assert list(t["verdict"]) == ["calibrated", "overconfident", "underconfident"]
+    assert experiments.coverage_test(0.99, 0.95, 1000)["verdict"] == "underconfident"
+
+
+def test_coverage_test_flags_a_calibrated_filter_at_its_false_alarm_rate():
+    rng = np.random.default_rng(0)
+    n, level = 500, 0.95
+    coverage = rng.binomial(n, level, size=20_000) / n
+    flagged = np.mean(experiments.coverage_test(coverage, level, n)["verdict"] != "calibrated")
+    # the normal approximation at 1 %, within a few Monte Carlo SEs (and the lattice)
+    assert 0.004 < flagged < 0.02
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"coverage": 1.2}, "coverage"),
+        ({"level": 1.0}, "level"),
+        ({"trials": 0}, "trials"),
+        ({"z": -1.0}, "z"),
+    ],
+)
+def test_coverage_test_rejects_bad_input(kwargs, match):
+    args = {"coverage": 0.5, "level": 0.68, "trials": 10, **kwargs}
+    with pytest.raises(ValueError, match=match):
+        experiments.coverage_test(**args)
+
+
+@pytest.fixture(scope="module")
+def track():
+    rng = np.random.default_rng(3)
+    return bank.simulate(model.G(FIG2.c, -2), 8, FIG2.rho, 0.0, rng).mu
+
+
+def test_frame_marginals_are_the_filters_on_the_first_frames(track):
+    m = experiments.frame_marginals(track, FIG2.rho, [3, 8], ("ekf", "second_order"))
+    pm = paper_prior_means(model.noise_free_states(track[None, :3]))[0]
+    for r, n in zip(m, (3, 8), strict=True):
+        assert r["frames"] == n
+        e = FILTERS["ekf"](track[:n], FIG2.rho, pm, 1000 * np.eye(3))
+        assert r["depth_mean"]["ekf"] == float(e.depth_mean)
+        # the exact density integrates to one over its grid of mean +- 6 SD
+        mass = np.trapezoid(r["density"]["optimal"], r["grid"])
+        assert abs(mass - 1) < 2e-3
+        o = r["depth_mean"]["optimal"]
+        # its mean is the filter's, up to the heavy right tail beyond the grid at N = 3
+        tol = 1e-2 if n == 3 else 1e-4
+        assert_allclose(np.trapezoid(r["grid"] * r["density"]["optimal"], r["grid"]), o, rtol=tol)
+    fig = figures.frame_marginals_figure(m)
+    assert fig.axes[0].get_title() == "N = 3"
+    assert len(fig.axes) == 4
+    plt.close(fig)
+
+
+def test_frame_marginals_reject_bad_input(track):
+    with pytest.raises(ValueError, match="frames"):
+        experiments.frame_marginals(track, FIG2.rho, [9])
+    with pytest.raises(ValueError, match="rng"):
+        experiments.frame_marginals(track, FIG2.rho, [3], ("particle",))
+    with pytest.raises(ValueError, match="mu"):
+        experiments.frame_marginals(track[:2], FIG2.rho, [3])
+
+
+def test_frames_study_texts_mark_the_verdicts(frames_run):
+    texts = report.frames_study_texts(frames_run, "f")
+    assert texts["f_0_x"] == "3"
+    assert texts["f_particle_trials"] == str(frames_run["particle"]["trials"][0])
+    r = frames_run["ekf"]
+    c68, c95 = r["coverage_68"][1], r["coverage_95"][1]
+    marks = [
+        report.VERDICT_MARKS[str(experiments.coverage_test(c, lv, r["trials"][1])["verdict"])]
+        for c, lv in ((c68, 0.68), (c95, 0.95))
+    ]
+    assert texts["f_1_ekf_cov"] == f"{c68:.2f}{marks[0]} / {c95:.2f}{marks[1]}"
+    assert texts["f_1_ekf_hn"].endswith(f"{r['nees'][1]:.3g}")
+
+
+def test_frames_study_figure_draws_every_filter(frames_run):
+    fig = figures.frames_study_figure({"a": frames_run, "b": frames_run})
+    assert len(fig.axes) == 2 * len(figures.FRAMES_ROWS)
+    # the Hellinger row leaves the reference out
+    assert len(fig.axes[2 * 2].get_lines()) == 3
+    assert len(fig.axes[0].get_lines()) == 4
+    plt.close(fig)
+
+
+def test_conjecture_study_entries_are_frames_study_entries():
+    c = experiments.conjecture_study([3, 5], [1 / 200, 1 / 100], [6.0, 12.0], 30, 2)
+    assert c["ekf"]["hellinger"].shape == (2, 2, 2)
+    assert_allclose(c["truth"], [FIG2.c, 2 * FIG2.c], rtol=1e-12)
+    direct = experiments.frames_study(
+        [3, 5], 30, 2, ("second_order", "ekf"), "fixed", truth=c["truth"][1], rho=1 / 100
+    )
+    for name in ("second_order", "ekf"):
+        assert_allclose(c[name]["rmse"][1, 1], direct[name]["rmse"], rtol=0, atol=0)
+        assert_allclose(c[name]["nees"][1, 1], direct[name]["nees"], rtol=0, atol=0)
+    with pytest.raises(ValueError, match="depths"):
+        experiments.conjecture_study([3], [0.01], [2.0], 5, 0)
+
+
+def test_conjecture_wins_compare_cell_by_cell():
+    c = experiments.conjecture_study([3, 5], [1 / 500, 1 / 100], [6.0, 12.0], 40, 4)
+    w = experiments.conjecture_wins(c)
+    so, ekf = c["second_order"], c["ekf"]
+    for idx in np.ndindex(so["rmse"].shape):
+        assert w["hellinger"][idx] == (so["hellinger"][idx] < ekf["hellinger"][idx])
+        assert w["rmse"][idx] == (so["rmse"][idx] < ekf["rmse"][idx])
+        se = np.sqrt(0.68 * 0.32 / so["trials"][idx])
+        z_so = abs(so["coverage_68"][idx] - 0.68) / se
+        z_ekf = abs(ekf["coverage_68"][idx] - 0.68) / np.sqrt(0.68 * 0.32 / ekf["trials"][idx])
+        assert w["coverage_68"][idx] == (z_so < z_ekf)
+        assert w["calibrated_68"]["ekf"][idx] == (
+            abs(ekf["coverage_68"][idx] - 0.68) <= experiments.COVERAGE_Z * se
+        )
+    texts = report.conjecture_texts(c, w, "cj")
+    assert texts["cj_cells"] == "4" and texts["cj_1_x"] == "5"
+    assert texts["cj_0_hellinger"] == str(int(w["hellinger"][..., 0].sum()))
+    fig = figures.conjecture_figure(c)
+    assert len(fig.axes) == 6
+    assert len(fig.axes[0].get_lines()) == 2 * 2  # two depths, two filters
+    plt.close(fig)
