@@ -1578,11 +1578,26 @@ def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol:
       posterior after all ``N`` bearings (each node's Rauch-Tung-Striebel
       smoother, mixed);
     * the fixed-lag smoothed state uses ``mu_1 .. mu_t``, ``t = min(k + lag, N)``:
-      on the nodes of the posterior after ``mu_t``, each node runs the
-      textbook's fixed-lag smoother (the filter on the state augmented with its
-      ``lag`` predecessors, :func:`depthcore.kalman.fixed_lag_smoother`), and
-      the nodes' Gaussians of ``(x_k, v_k)`` are mixed with that posterior's
-      probabilities, the depth being ``y_1 + k - 1`` at each node.
+      on the nodes of the posterior after ``mu_t``, each node's Gaussian of
+      ``(x_k, v_k)`` given ``mu_1 .. mu_t`` is that of the textbook's
+      fixed-lag smoother (the filter on the state augmented with its ``lag``
+      predecessors, :func:`depthcore.kalman.fixed_lag_smoother`), and the
+      nodes' Gaussians are mixed with that posterior's probabilities, the
+      depth being ``y_1 + k - 1`` at each node.
+
+    Cost. Given the depth the lateral state is Markov, so a node's Gaussian
+    of ``(x_k, v_k)`` given ``mu_1 .. mu_t`` depends on ``mu_1 .. mu_{k-1}``
+    only through the node's filter at frame ``k``. The frames whose ``t``
+    share a set of nodes (:func:`update` keeps them until it re-places them)
+    are therefore smoothed together: each node's Kalman filter is run once
+    over the bearings, and the augmented filter is started from a node's
+    prediction at frame ``k`` (before ``mu_k``) and run over
+    ``mu_k .. mu_t``, in blocks of consecutive frames, each block's last
+    ``lag`` bearings read again by the next. The cost is ``O(N)`` per set of
+    nodes (and so per re-placement, as in :func:`update`) and, per frame,
+    grows with the lag alone (the augmented covariance has side
+    ``2 (lag + 1)``); rerunning the augmented filter from frame 1 for every
+    frame would cost ``O(N**2)``.
 
     Parameters
     ----------
@@ -1606,30 +1621,56 @@ def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol:
         posts.append(update(posts[-1], mu[k]))
     filtered = Smoothed(np.stack([p.mean for p in posts]), np.stack([p.cov for p in posts]))
     interval = posts[-1].smoothed()
-    N = mu.size
-    means, covs = [], []
-    for s in range(N):  # frame s + 1, read from the posterior after mu_{t + 1}
-        t = min(s + lag, N - 1)
-        p = posts[t]
-        b = p.bank
-        start, _ = conditional_prior(b.nodes, b.prior_mean, b.prior_cov)
-        sm = kalman.fixed_lag_smoother(
-            b.mu[:, None],
-            start.mean,
-            start.cov[..., 0, :, :],
-            PSI,
-            sigma_p(b.q),
-            measurement_matrices(b.nodes, np.arange(1, t + 2)),
-            (np.asarray(b.rho) ** 2).reshape(1, 1),
-            lag=t - s,
-        )
-        mean, cov = _mixture_moments(
-            p.probabilities, sm.mean[..., s, :], sm.cov[..., s, :, :], b.nodes + s
-        )
-        means.append(mean)
-        covs.append(cov)
-    lagged = Smoothed(np.stack(means), np.stack(covs))
-    return Track(filtered, interval, lagged, lag, tuple(posts))
+    return Track(filtered, interval, _lagged(posts, lag), lag, tuple(posts))
+
+
+#: Bytes of augmented covariances the fixed-lag smoother of :func:`track` holds at once.
+_LAG_BYTES = 2**26
+
+
+def _lagged(posts, lag: int) -> Smoothed:
+    """The fixed-lag smoothed state at every frame of :func:`track` (see there), 0-based.
+
+    Frame ``s + 1`` is read from the posterior after ``mu_{t + 1}``,
+    ``t = min(s + lag, N - 1)``. The frames ``t`` are split into runs whose
+    posteriors share their nodes; the frames ``s`` read from a run are smoothed
+    from that run's nodes' filters.
+    """
+    N = len(posts)
+    cuts = [
+        t for t in range(1, N) if not np.array_equal(posts[t].bank.nodes, posts[t - 1].bank.nodes)
+    ]
+    means, covs = np.empty((N, 3)), np.empty((N, 3, 3))
+    for r, e in zip([0, *cuts], [*cuts, N], strict=True):  # the frames t in [r, e)
+        first, last = max(r - lag, 0), (N if e == N else e - lag)  # the frames s read there
+        if last <= first:
+            continue
+        b = posts[e - 1].bank
+        filt = _filter_bank(b.nodes, b.mu[:last], b.rho, b.q, b.prior_mean, b.prior_cov, True)
+        n_a = 2 * (min(lag, N - 1) + 1)  # the side of the augmented covariance
+        block = max(1, _LAG_BYTES // (32 * b.nodes.size * n_a**2) - lag)
+        for c in range(first, last, block):
+            d = min(c + block, last)  # the frames s in [c, d)
+            w = min(d - 1 + lag, e - 1)  # the last bearing the block reads
+            sm = kalman.fixed_lag_smoother(
+                b.mu[c : w + 1, None],
+                filt.history.predicted_means[..., c, :],
+                filt.history.predicted_covs[..., c, :, :],
+                PSI,
+                sigma_p(b.q),
+                measurement_matrices(b.nodes, np.arange(c + 1, w + 2)),
+                (np.asarray(b.rho) ** 2).reshape(1, 1),
+                lag=lag,
+            )
+            s = np.arange(c, d)
+            W = np.stack([posts[min(k + lag, N - 1)].probabilities for k in s])
+            means[c:d], covs[c:d] = _mixture_moments(
+                W,
+                np.swapaxes(sm.mean[..., : d - c, :], 0, 1),
+                np.swapaxes(sm.cov[..., : d - c, :, :], 0, 1),
+                b.nodes + s[:, None],
+            )
+    return Smoothed(means, covs)
 
 
 # --- simulation ------------------------------------------------------------------------

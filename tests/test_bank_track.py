@@ -5,7 +5,8 @@ N = 3 (:func:`depthcore.optimal.marginals`); the filtered series against a
 bank on a fixed dense rule in log depth rerun from scratch at each frame; the
 fixed-lag smoother (the textbook's augmented-state filter, 19.2.6) against the
 fixed-interval (Rauch-Tung-Striebel) smoother of the posterior after the
-bearings it uses.
+bearings it uses, and against the augmented filter rerun from frame 1 for
+every frame, mixed by hand.
 """
 
 import numpy as np
@@ -13,7 +14,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from depthcore import bank as bk
-from depthcore import model, optimal
+from depthcore import kalman, model, optimal
 from depthcore.scenarios import RHO_200, SCENARIOS
 
 ORDER = 20
@@ -88,6 +89,60 @@ def test_textbook_19_2_6_fixed_lag_is_the_fixed_interval_smoother_of_the_prefix(
     # smoothing never loses information: the lateral SD is at most the filtered one
     assert np.all(tr.lagged.lateral_sd <= tr.filtered.lateral_sd * (1 + 1e-9))
     assert np.all(tr.interval.lateral_sd <= tr.lagged.lateral_sd * (1 + 1e-9))
+
+
+def rerun_lagged(tr):
+    """The fixed-lag states with the augmented filter rerun from frame 1 for every frame.
+
+    Frame ``s + 1`` from the posterior after ``mu_{t + 1}``, ``t = min(s + lag, N - 1)``:
+    every node's augmented filter (textbook 19.2.6) over ``mu_1 .. mu_{t + 1}`` from the
+    prior given its depth, the nodes' Gaussians mixed by the law of total variance.
+    """
+    N = len(tr.posteriors)
+    means, covs = [], []
+    for s in range(N):
+        t = min(s + tr.lag, N - 1)
+        post = tr.posteriors[t]
+        b = post.bank
+        start, _ = bk.conditional_prior(b.nodes, b.prior_mean, b.prior_cov)
+        sm = kalman.fixed_lag_smoother(
+            b.mu[:, None],
+            start.mean,
+            start.cov[0],  # shared by the nodes
+            bk.PSI,
+            bk.sigma_p(b.q),
+            bk.measurement_matrices(b.nodes, np.arange(1, t + 2)),
+            np.reshape(b.rho**2, (1, 1)),
+            lag=t - s,
+        )
+        x, v = sm.mean[:, s, 0], sm.mean[:, s, 1]
+        m = np.stack([x, b.nodes + s, v], axis=-1)  # (J, 3)
+        C = np.zeros((m.shape[0], 3, 3))  # the depth is exact given the node
+        C[:, [[0], [2]], [0, 2]] = sm.cov[:, s]  # rows and columns x and v
+        p = post.probabilities
+        mean = p @ m
+        d = m - mean
+        means.append(mean)
+        covs.append(np.einsum("j,jab->ab", p, C + d[:, :, None] * d[:, None, :]))
+    return np.array(means), np.array(covs)
+
+
+@pytest.mark.parametrize("q", [0.0, 0.02])
+def test_textbook_19_2_6_fixed_lag_is_the_augmented_filter_rerun_for_every_frame(q, monkeypatch):
+    N = 20
+    sim, prior = fig2_track(N, q, seed=1)
+    for lag, blocks in ((0, 1), (1, 1), (2, 1), (5, 1), (N + 3, 1), (2, N), (5, N)):
+        if blocks > 1:  # every frame in a block of its own: the blocks' overlaps
+            monkeypatch.setattr(bk, "_LAG_BYTES", 0)
+        tr = bk.track(sim.mu, RHO_200, prior.mean, prior.cov, q, lag=lag)
+        nodes = [p.bank.nodes for p in tr.posteriors]
+        # the nodes are re-placed along the track: the frames are smoothed on several sets
+        assert sum(not np.array_equal(a, b) for a, b in zip(nodes, nodes[1:], strict=False)) >= 1
+        mean, cov = rerun_lagged(tr)
+        sd = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))  # (N, 3)
+        assert_allclose(tr.lagged.mean, mean, rtol=0, atol=1e-12 * sd.max())
+        err = np.abs(tr.lagged.cov - cov) / (sd[:, :, None] * sd[:, None, :])
+        assert np.max(err) < 1e-10, (lag, np.max(err))
 
 
 def test_lag_zero_is_the_filter_and_a_long_lag_is_the_fixed_interval_smoother():
