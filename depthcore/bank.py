@@ -1606,7 +1606,8 @@ def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol:
     rho, prior_mean, prior_cov, process_noise, rtol
         As for :func:`posterior` (one problem).
     lag : int
-        The fixed-lag smoother's delay in frames, >= 0 (0: the filter).
+        The fixed-lag smoother's delay in frames, >= 0 (0: the filter; from
+        ``N - 1`` on, the fixed-interval smoother, which is what it then is).
 
     Returns
     -------
@@ -1621,7 +1622,11 @@ def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol:
         posts.append(update(posts[-1], mu[k]))
     filtered = Smoothed(np.stack([p.mean for p in posts]), np.stack([p.cov for p in posts]))
     interval = posts[-1].smoothed()
-    return Track(filtered, interval, _lagged(posts, lag), lag, tuple(posts))
+    # a delay reaching the last bearing from every frame: each frame is read from the
+    # posterior after all N bearings, i.e. the fixed-interval smoother (an augmented
+    # state of 2 (lag + 1) entries would cost O(lag^3) per frame for the same numbers)
+    lagged = interval if lag >= mu.size - 1 else _lagged(posts, lag)
+    return Track(filtered, interval, lagged, lag, tuple(posts))
 
 
 #: Bytes of augmented covariances the fixed-lag smoother of :func:`track` holds at once.
