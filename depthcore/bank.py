@@ -792,7 +792,11 @@ class Mixture:
         y : array_like
             Depths at frame ``N``: any shape for one problem; ``(..., K)`` for a batch.
         rtol : float
-            Absolute tolerance of the CDF, > 0.
+            Absolute tolerance of the CDF, > 0, or its roundoff floor
+            ``64 eps (1 + |t|) / sd_t`` where that is larger (``t`` the
+            mixture's mean of ``log(y_1)``, ``sd_t`` its SD): at a tiny noise
+            level the posterior is so narrow that the depths themselves, as
+            floats, cannot resolve it further.
         """
         rtol = _positive_scalar(rtol, "rtol")
         y, restore = self._query(y, "y")
@@ -811,6 +815,15 @@ class Mixture:
         centre = np.sum(self.probabilities * log_nodes, axis=-1, keepdims=True)
         sd_t = np.sqrt(np.sum(self.probabilities * (log_nodes - centre) ** 2, axis=-1))
         panels = int(np.clip(np.ceil(np.max(width) / np.min(0.5 * sd_t + 1e-3)), 4, 4096))
+        # Roundoff: a depth is a float, rounded to eps (1 + |t|) in t, which moves the
+        # log density by that times its slope, about z / sd_t at z SDs (|z| ~ 1 on
+        # average); the CDF, an average of the density's relative errors, cannot
+        # settle below 64 eps (1 + |t|) / sd_t (the safety factor of the package's
+        # other roundoff floors), which matters only for posteriors narrower than
+        # about 1e-5 of the depth in relative terms.
+        eps = np.finfo(float).eps
+        floor = 64.0 * eps * (1.0 + np.abs(centre)) / np.maximum(sd_t[..., None], eps)
+        tol = np.maximum(rtol, floor)
         x, w = _GAUSS_LEGENDRE
         previous = None
         for _ in range(_MAX_DOUBLINGS):
@@ -822,11 +835,14 @@ class Mixture:
             log_w = _filter_bank(y1, b.mu, b.rho, b.q, b.prior_mean, b.prior_cov, False).log_weight
             dens = np.exp(log_w - self.log_normaliser[..., None] + np.log(y1))  # dy = y dt
             cdf = np.sum(dens.reshape(shape) * half * w, axis=(-2, -1))
-            if previous is not None and np.all(np.abs(cdf - previous) <= rtol):
+            if previous is not None and np.all(np.abs(cdf - previous) <= tol):
                 break
             previous, panels = cdf, 2 * panels
         else:
-            raise RuntimeError("the depth CDF's quadrature did not converge")
+            raise ValueError(
+                f"y: the depth CDF did not settle to rtol = {rtol:.3g} (or its roundoff "
+                f"floor) within {panels // 2} panels"
+            )
         cdf = np.where(t >= hi, 1.0, np.where(t <= lo, 0.0, np.clip(cdf, 0.0, 1.0)))
         return restore(cdf)
 

@@ -836,3 +836,19 @@ def test_update_of_a_posterior_on_one_node_re_places_it_without_warnings():
     direct = bk.posterior(mu, 1e-12, fig2.prior.mean, fig2.prior.cov)
     assert np.isfinite(post.depth_sd) and post.depth_sd < 1e-9
     assert abs(post.depth_mean - direct.depth_mean) < 1e-6 * direct.depth_mean
+
+
+@pytest.mark.parametrize("rho", [1e-12, 1e-10])
+def test_depth_cdf_at_a_tiny_noise_level_settles_at_its_roundoff_floor(rho):
+    # the problem scales with rho: the truth's offset from the mean is a fixed number of
+    # SDs, so the CDF at the truth is the same as at rho = 1e-8, where the quadrature
+    # reaches its tolerance; at rho = 1e-12 the floor is about 1e-5
+    fig2 = SCENARIOS["fig2"]
+    x1 = model.G(np.asarray(fig2.c), -2)
+
+    def cdf_at_truth(r):
+        sim = bk.simulate(x1, 4, r, 0.0, np.random.default_rng(1), size=3)
+        post = bk.posterior(sim.mu, r, fig2.prior.mean, fig2.prior.cov)
+        return post.depth_cdf(sim.states[:, -1, 1:2])[:, 0]
+
+    assert_allclose(cdf_at_truth(rho), cdf_at_truth(1e-8), rtol=0, atol=1e-4)

@@ -250,3 +250,15 @@ def test_study_runs_more_frames_with_process_noise(capsys):
     data = json.loads(capsys.readouterr().out)
     assert data["frames"] == 6 and "particle" not in data["filters"]
     assert data["filters"]["optimal"]["hellinger_depth"]["mean"] == 0.0
+
+
+def test_study_of_more_frames_answers_at_the_smallest_noise(capsys):
+    # rho = 1e-12: the exact filter's depth CDF at the truth settles at its roundoff
+    # floor (the depths, as floats, resolve the posterior to about 1e-6 of its SD)
+    argv = ["study", "--frames", "4", "--rho", "1e-12", "--trials", "20", "--json"]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert captured.err == ""
+    data = json.loads(captured.out)
+    scores = data["filters"]["optimal"]["depth"]
+    assert 0.0 <= scores["coverage_68"] <= scores["coverage_95"] <= 1.0
