@@ -134,7 +134,10 @@ def normalise(log_w) -> np.ndarray:
     top = np.max(log_w, axis=-1, keepdims=True)
     if not np.all(np.isfinite(top)):
         raise ValueError("log_w has a row with no positive, finite weight")
-    return log_w - (top + np.log(np.sum(np.exp(log_w - top), axis=-1, keepdims=True)))
+    # shift first: the weights exp(shifted) then sum to one to rounding, however large
+    # |log w| is (top + log(sum) would round to eps |top|, far from one at |top| ~ 1e10)
+    shifted = log_w - top
+    return shifted - np.log(np.sum(np.exp(shifted), axis=-1, keepdims=True))
 
 
 def effective_sample_size(log_w) -> np.ndarray:

@@ -169,3 +169,13 @@ def test_particle_standard_errors_are_those_of_their_weighted_particles():
         want = weighted_standard_errors(r.particles[..., i], W)
         assert_allclose(getattr(se, f"{comp}_mean"), want[0], rtol=1e-12)
         assert_allclose(getattr(se, f"{comp}_sd"), want[1], rtol=1e-12)
+
+
+def test_normalise_sums_to_one_when_the_log_weights_are_huge():
+    # log weights near -1e10 (a particle filter's far particles after many frames):
+    # the weights must still sum to one to rounding, as the resamplers require
+    rng = np.random.default_rng(8)
+    log_w = -1e10 + rng.normal(scale=5.0, size=(50, 200))
+    W = np.exp(normalise(log_w))
+    assert_allclose(W.sum(axis=-1), 1.0, rtol=0, atol=1e-13)
+    systematic(W, np.random.default_rng(9))  # accepted: rows sum to one within 1e-9
