@@ -1635,8 +1635,9 @@ def _lagged(posts, lag: int) -> Smoothed:
     posteriors share their nodes; the frames ``s`` read from a run are smoothed
     from that run's nodes' filters: every chain starts at the filtered
     Gaussian at its own ``t`` and takes the backward steps of textbook 19.2.6
-    (:func:`depthcore.kalman._smoother_step`) with the others, stopping at its
-    ``s``: at most ``lag`` steps, each over all the run's frames and nodes.
+    (:func:`depthcore.kalman._smoother_step`, each frame's gain computed once)
+    with the others, stopping at its ``s``: at most ``lag`` steps, each over
+    all the run's frames and nodes.
     """
     N = len(posts)
     cuts = [
@@ -1652,14 +1653,16 @@ def _lagged(posts, lag: int) -> Smoothed:
         s = np.arange(first, last)
         t = np.minimum(s + lag, N - 1)
         mean, cov = h.means[:, t, :], h.covs[:, t, :, :]  # (J, frames, ...): at each t
+        # the gain at frame k serves every chain through k: one per frame and node
+        gain = kalman._smoother_gain(h.covs[:, :-1], h.predicted_covs[:, 1:], PSI)
         for i in range(1, int(np.max(t - s)) + 1):  # w_{k} from w_{k + 1}, k = t - i
             k = np.maximum(t - i, np.minimum(s, t - 1))  # a finished chain: any frame, dropped
             step = kalman._smoother_step(
+                gain[:, k],
                 h.means[:, k, :],
                 h.covs[:, k, :, :],
                 h.predicted_means[:, k + 1, :],
                 h.predicted_covs[:, k + 1, :, :],
-                PSI,
                 mean,
                 cov,
             )
