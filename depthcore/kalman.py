@@ -481,9 +481,8 @@ def _smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
     -------
     ndarray, shape (..., n, n)
     """
-    return np.swapaxes(
-        _solve_or_pinv(predicted_cov, Psi @ cov), -1, -2
-    )  # C^T = Sigma_+^-1 Psi Sigma
+    # C_t^T = Sigma_{+|t+1}^{-1} Psi Sigma_t
+    return np.swapaxes(_solve_or_pinv(predicted_cov, Psi @ cov), -1, -2)
 
 
 def _smoother_step(
