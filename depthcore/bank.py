@@ -1595,25 +1595,24 @@ def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol:
       smoother, mixed);
     * the fixed-lag smoothed state uses ``mu_1 .. mu_t``, ``t = min(k + lag, N)``:
       on the nodes of the posterior after ``mu_t``, each node's Gaussian of
-      ``(x_k, v_k)`` given ``mu_1 .. mu_t`` is that of the textbook's
-      fixed-lag smoother (the filter on the state augmented with its ``lag``
-      predecessors, :func:`depthcore.kalman.fixed_lag_smoother`), and the
-      nodes' Gaussians are mixed with that posterior's probabilities, the
-      depth being ``y_1 + k - 1`` at each node.
+      ``(x_k, v_k)`` given ``mu_1 .. mu_t`` is the Rauch-Tung-Striebel backward
+      recursion (textbook 19.2.6) over the window, run from the node's filtered
+      Gaussian at frame ``t`` back to frame ``k``; it equals the textbook's
+      fixed-lag smoother in its state-augmentation form (the filter on the
+      state augmented with its ``lag`` predecessors,
+      :func:`depthcore.kalman.fixed_lag_smoother`). The nodes' Gaussians are
+      mixed with that posterior's probabilities, the depth being
+      ``y_1 + k - 1`` at each node.
 
-    Cost. Given the depth the lateral state is Markov, so a node's Gaussian
-    of ``(x_k, v_k)`` given ``mu_1 .. mu_t`` depends on ``mu_1 .. mu_{k-1}``
-    only through the node's filter at frame ``k``. The frames whose ``t``
-    share a set of nodes (:func:`update` keeps them until it re-places them)
-    are therefore smoothed together: each node's Kalman filter is run once
-    over the bearings, and the augmented filter is started from a node's
-    prediction at frame ``k`` (before ``mu_k``) and run over
-    ``mu_k .. mu_t``, in blocks of consecutive frames, each block's last
-    ``lag`` bearings read again by the next. The cost is ``O(N)`` per set of
-    nodes (and so per re-placement, as in :func:`update`) and, per frame,
-    grows with the lag alone (the augmented covariance has side
-    ``2 (lag + 1)``); rerunning the augmented filter from frame 1 for every
-    frame would cost ``O(N**2)``.
+    Cost. The frames whose ``t`` share a set of nodes (:func:`update` keeps
+    them until it re-places them) are smoothed together: each node's Kalman
+    filter is run once over the bearings, keeping its filtered and predicted
+    Gaussians at every frame, and the backward steps are taken for all those
+    frames and nodes at once, each frame's chain starting at its own ``t`` and
+    stopping at ``k``. The cost is ``O(N)`` per set of nodes (and so per
+    re-placement, as in :func:`update`) and ``O(lag)`` per frame (at most
+    ``lag`` steps on 2 x 2 covariances); the augmented filter would cost
+    ``O(lag**3)`` per frame (its covariance has side ``2 (lag + 1)``).
 
     Parameters
     ----------
@@ -1639,14 +1638,9 @@ def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol:
     filtered = Smoothed(np.stack([p.mean for p in posts]), np.stack([p.cov for p in posts]))
     interval = posts[-1].smoothed()
     # a delay reaching the last bearing from every frame: each frame is read from the
-    # posterior after all N bearings, i.e. the fixed-interval smoother (an augmented
-    # state of 2 (lag + 1) entries would cost O(lag^3) per frame for the same numbers)
+    # posterior after all N bearings, i.e. the fixed-interval smoother
     lagged = interval if lag >= mu.size - 1 else _lagged(posts, lag)
     return Track(filtered, interval, lagged, lag, tuple(posts))
-
-
-#: Bytes of augmented covariances the fixed-lag smoother of :func:`track` holds at once.
-_LAG_BYTES = 2**26
 
 
 def _lagged(posts, lag: int) -> Smoothed:
@@ -1655,7 +1649,11 @@ def _lagged(posts, lag: int) -> Smoothed:
     Frame ``s + 1`` is read from the posterior after ``mu_{t + 1}``,
     ``t = min(s + lag, N - 1)``. The frames ``t`` are split into runs whose
     posteriors share their nodes; the frames ``s`` read from a run are smoothed
-    from that run's nodes' filters.
+    from that run's nodes' filters: every chain starts at the filtered
+    Gaussian at its own ``t`` and takes the backward steps of textbook 19.2.6
+    (:func:`depthcore.kalman._smoother_step`, each frame's gain computed once)
+    with the others, stopping at its ``s``: at most ``lag`` steps, each over
+    all the run's frames and nodes.
     """
     N = len(posts)
     cuts = [
@@ -1667,30 +1665,30 @@ def _lagged(posts, lag: int) -> Smoothed:
         if last <= first:
             continue
         b = posts[e - 1].bank
-        filt = _filter_bank(b.nodes, b.mu[:last], b.rho, b.q, b.prior_mean, b.prior_cov, True)
-        n_a = 2 * (min(lag, N - 1) + 1)  # the side of the augmented covariance
-        block = max(1, _LAG_BYTES // (32 * b.nodes.size * n_a**2) - lag)
-        for c in range(first, last, block):
-            d = min(c + block, last)  # the frames s in [c, d)
-            w = min(d - 1 + lag, e - 1)  # the last bearing the block reads
-            sm = kalman.fixed_lag_smoother(
-                b.mu[c : w + 1, None],
-                filt.history.predicted_means[..., c, :],
-                filt.history.predicted_covs[..., c, :, :],
-                PSI,
-                sigma_p(b.q),
-                measurement_matrices(b.nodes, np.arange(c + 1, w + 2)),
-                (np.asarray(b.rho) ** 2).reshape(1, 1),
-                lag=lag,
+        h = _filter_bank(b.nodes, b.mu, b.rho, b.q, b.prior_mean, b.prior_cov, True).history
+        s = np.arange(first, last)
+        t = np.minimum(s + lag, N - 1)
+        mean, cov = h.means[:, t, :], h.covs[:, t, :, :]  # (J, frames, ...): at each t
+        # the gain at frame k serves every chain through k: one per frame and node
+        gain = kalman._smoother_gain(h.covs[:, :-1], h.predicted_covs[:, 1:], PSI)
+        for i in range(1, int(np.max(t - s)) + 1):  # w_{k} from w_{k + 1}, k = t - i
+            k = np.maximum(t - i, np.minimum(s, t - 1))  # a finished chain: any frame, dropped
+            step = kalman._smoother_step(
+                gain[:, k],
+                h.means[:, k, :],
+                h.covs[:, k, :, :],
+                h.predicted_means[:, k + 1, :],
+                h.predicted_covs[:, k + 1, :, :],
+                mean,
+                cov,
             )
-            s = np.arange(c, d)
-            W = np.stack([posts[min(k + lag, N - 1)].probabilities for k in s])
-            means[c:d], covs[c:d] = _mixture_moments(
-                W,
-                np.swapaxes(sm.mean[..., : d - c, :], 0, 1),
-                np.swapaxes(sm.cov[..., : d - c, :, :], 0, 1),
-                b.nodes + s[:, None],
-            )
+            going = (t - i >= s)[:, None]
+            mean = np.where(going, step.mean, mean)
+            cov = np.where(going[..., None], step.cov, cov)
+        W = np.stack([posts[k].probabilities for k in t])
+        means[first:last], covs[first:last] = _mixture_moments(
+            W, np.swapaxes(mean, 0, 1), np.swapaxes(cov, 0, 1), b.nodes + s[:, None]
+        )
     return Smoothed(means, covs)
 
 

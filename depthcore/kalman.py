@@ -442,17 +442,77 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     _time_axis(Psi, "Psi", 2, T - 1)
     means, covs = [filtered.means[..., -1, :]], [filtered.covs[..., -1, :, :]]
     for t in range(T - 2, -1, -1):
-        P_pred = filtered.predicted_covs[..., t + 1, :, :]
-        PsiP = _at(Psi, t, 2) @ filtered.covs[..., t, :, :]
-        C = np.swapaxes(_solve_or_pinv(P_pred, PsiP), -1, -2)  # C_t^T = Sigma_+^{-1} Psi Sigma_t
-        mean = filtered.means[..., t, :] + np.einsum(
-            "...ij,...j->...i", C, means[-1] - filtered.predicted_means[..., t + 1, :]
+        mean, cov = _smoother_step(
+            _smoother_gain(
+                filtered.covs[..., t, :, :],
+                filtered.predicted_covs[..., t + 1, :, :],
+                _at(Psi, t, 2),
+            ),
+            filtered.means[..., t, :],
+            filtered.covs[..., t, :, :],
+            filtered.predicted_means[..., t + 1, :],
+            filtered.predicted_covs[..., t + 1, :, :],
+            means[-1],
+            covs[-1],
         )
-        cov = filtered.covs[..., t, :, :] + C @ (covs[-1] - P_pred) @ np.swapaxes(C, -1, -2)
         means.append(mean)
-        covs.append(0.5 * (cov + np.swapaxes(cov, -1, -2)))
+        covs.append(cov)
     means, covs = np.broadcast_arrays(*means[::-1]), np.broadcast_arrays(*covs[::-1])
     return MeanAndCov(np.stack(means, axis=-2), np.stack(covs, axis=-3))
+
+
+def _smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
+    """Textbook 19.2.6: the Rauch-Tung-Striebel gain ``C_t = Sigma_t Psi^T Sigma_{+|t+1}^{-1}``.
+
+    ``C_t`` depends on the filter alone (not on the later measurements), so
+    one gain serves every backward recursion that passes through ``t``. A
+    singular ``Sigma_{+|t+1}`` is handled as in :func:`fixed_interval_smoother`.
+
+    Parameters
+    ----------
+    cov : ndarray, shape (..., n, n)
+        The filtered covariance ``Sigma_t``.
+    predicted_cov : ndarray, shape (..., n, n)
+        The prediction ``Sigma_{+|t+1}`` made from it.
+    Psi : ndarray, shape (..., n, n)
+        The transition from ``t`` to ``t + 1``.
+
+    Returns
+    -------
+    ndarray, shape (..., n, n)
+    """
+    # C_t^T = Sigma_{+|t+1}^{-1} Psi Sigma_t
+    return np.swapaxes(_solve_or_pinv(predicted_cov, Psi @ cov), -1, -2)
+
+
+def _smoother_step(
+    gain, mean, cov, predicted_mean, predicted_cov, next_mean, next_cov
+) -> MeanAndCov:
+    """Textbook 19.2.6: one backward step of the Rauch-Tung-Striebel smoother.
+
+    From the filtered Gaussian ``(mu_t, Sigma_t)`` of ``w_t`` given ``x_1 .. x_t``,
+    the prediction ``(mu_{+|t+1}, Sigma_{+|t+1})`` made from it, its gain
+    ``C_t`` (:func:`_smoother_gain`) and a Gaussian ``(mu_{t+1|T}, Sigma_{t+1|T})``
+    of ``w_{t+1}`` given ``x_1 .. x_T``, ``T > t``:
+    ``mu_{t|T} = mu_t + C_t (mu_{t+1|T} - mu_{+|t+1})``,
+    ``Sigma_{t|T} = Sigma_t + C_t (Sigma_{t+1|T} - Sigma_{+|t+1}) C_t^T``.
+    :func:`fixed_interval_smoother` is this step from ``T`` back to 1.
+
+    Parameters
+    ----------
+    gain, cov, predicted_cov, next_cov : ndarray, shape (..., n, n)
+    mean, predicted_mean, next_mean : ndarray, shape (..., n)
+
+    Returns
+    -------
+    MeanAndCov
+        The mean (..., n) and (symmetrised) covariance (..., n, n) of ``w_t``
+        given ``x_1 .. x_T``.
+    """
+    C = gain
+    smoothed_mean = mean + np.einsum("...ij,...j->...i", C, next_mean - predicted_mean)
+    smoothed_cov = cov + C @ (next_cov - predicted_cov) @ np.swapaxes(C, -1, -2)
+    return MeanAndCov(smoothed_mean, 0.5 * (smoothed_cov + np.swapaxes(smoothed_cov, -1, -2)))
 
 
 def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):
