@@ -209,7 +209,7 @@ def noise_free_state(mu) -> np.ndarray:
     Parameters
     ----------
     mu : array_like, shape (3,)
-        Measurements ``(mu1, mu2, mu3)``; checked by :func:`measurements`.
+        Measurements ``(mu1, mu2, mu3)``; checked by :func:`depthcore.model.measurements`.
 
     Returns
     -------
@@ -412,7 +412,7 @@ def measurements_batch(mu, name: str = "mu") -> np.ndarray:
     ``MAX_FRAMES`` is ``depthcore._checks.MAX_FRAMES``.
 
     With ``N = 3`` (the paper's problem) each triple is checked as
-    :func:`measurements` does: not degenerate, and its noise-free solution,
+    :func:`depthcore.model.measurements` does: not degenerate, and its noise-free solution,
     Eq. (7), in front of the camera. With ``N > 3`` a row is degenerate when
     every consecutive triple is, i.e. when every second difference
     ``mu_k - 2 mu_{k+1} + mu_{k+2}`` is at or below ``depthcore._checks.DEGENERACY_TOL`` in
@@ -464,7 +464,7 @@ def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
     Parameters
     ----------
     mu : array_like, shape (..., N), or (..., K) when ``triples`` is false
-        Bearings of ``N >= 3`` frames checked by :func:`measurements_batch`
+        Bearings of ``N >= 3`` frames checked by :func:`depthcore.model.measurements_batch`
         (triples, ``N = 3``, as the paper's); otherwise any finite bearings,
         ``K >= 1``.
     rho : float or array_like, shape ``mu.shape[:-1]``
@@ -507,7 +507,7 @@ def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
 
 
 def batch_inputs(mu, rho, prior_mean, prior_cov, triples: bool = True):
-    """:func:`batch_problem`, with the priors broadcast to the batch.
+    """:func:`depthcore.model.batch_problem`, with the priors broadcast to the batch.
 
     Returns
     -------

@@ -12,7 +12,9 @@ Recommended import: ``from depthcore import reference``.
 * :func:`log_gaussian_integral_brute`: the Gaussian integral behind Eq. (16)
   by brute force;
 * :func:`trapezoid_depth_moments`: the depth moments by one trapezoid rule of
-  a fixed step.
+  a fixed step;
+* :func:`track_fixed_lag`: a track's fixed-lag smoothed states by the
+  textbook's state augmentation (19.2.6), rerun from frame 1 for every frame.
 
 They are slow by design; :mod:`depthcore.optimal` is the route to use.
 """
@@ -24,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import _checks, model, optimal
+from . import _checks, bank, kalman, model, optimal
 from .gaussian import Gaussian, student_t
 from .optimal import log_posterior
 from .resampling import weighted_moments, weighted_standard_errors
@@ -361,3 +363,54 @@ def trapezoid_depth_moments(
     w = np.exp(log_w - np.max(log_w))
     mean = float(np.sum(w * y) / np.sum(w))
     return mean, float(np.sqrt(np.sum(w * (y - mean) ** 2) / np.sum(w))), int(t.size)
+
+
+def track_fixed_lag(track) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed-lag smoothed states of a track by state augmentation, textbook 19.2.6.
+
+    An independent route to ``track.lagged`` (:func:`depthcore.bank.track`,
+    which runs the backward recursions over each window): frame ``s + 1`` is
+    read from the posterior after ``mu_{t + 1}``, ``t = min(s + lag, N - 1)``;
+    every node's filter on the state augmented with its ``t - s``
+    predecessors (:func:`depthcore.kalman.fixed_lag_smoother`) runs over
+    ``mu_1 .. mu_{t + 1}`` from the prior given its depth, and the nodes'
+    Gaussians are mixed with that posterior's probabilities by the law of
+    total variance. Its cost grows like ``N^2``.
+
+    Parameters
+    ----------
+    track : depthcore.bank.Track
+
+    Returns
+    -------
+    mean : ndarray, shape (N, 3)
+    cov : ndarray, shape (N, 3, 3)
+        Of ``(x, y, v)`` at every frame.
+    """
+    N = len(track.posteriors)
+    means, covs = [], []
+    for s in range(N):
+        t = min(s + track.lag, N - 1)
+        post = track.posteriors[t]
+        b = post.bank
+        start, _ = bank.conditional_prior(b.nodes, b.prior_mean, b.prior_cov)
+        sm = kalman.fixed_lag_smoother(
+            b.mu[:, None],
+            start.mean,
+            start.cov[0],  # shared by the nodes
+            bank.PSI,
+            bank.sigma_p(b.q),
+            bank.measurement_matrices(b.nodes, np.arange(1, t + 2)),
+            np.reshape(b.rho**2, (1, 1)),
+            lag=t - s,
+        )
+        x, v = sm.mean[:, s, 0], sm.mean[:, s, 1]
+        m = np.stack([x, b.nodes + s, v], axis=-1)  # (J, 3)
+        C = np.zeros((m.shape[0], 3, 3))  # the depth is exact given the node
+        C[:, [[0], [2]], [0, 2]] = sm.cov[:, s]  # rows and columns x and v
+        p = post.probabilities
+        mean = p @ m
+        d = m - mean
+        means.append(mean)
+        covs.append(np.einsum("j,jab->ab", p, C + d[:, :, None] * d[:, None, :]))
+    return np.array(means), np.array(covs)

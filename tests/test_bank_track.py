@@ -14,7 +14,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from depthcore import bank as bk
-from depthcore import kalman, model, optimal
+from depthcore import model, optimal, reference
 from depthcore.scenarios import RHO_200, SCENARIOS
 
 ORDER = 20
@@ -91,42 +91,6 @@ def test_textbook_19_2_6_fixed_lag_is_the_fixed_interval_smoother_of_the_prefix(
     assert np.all(tr.interval.lateral_sd <= tr.lagged.lateral_sd * (1 + 1e-9))
 
 
-def rerun_lagged(tr):
-    """The fixed-lag states with the augmented filter rerun from frame 1 for every frame.
-
-    Frame ``s + 1`` from the posterior after ``mu_{t + 1}``, ``t = min(s + lag, N - 1)``:
-    every node's augmented filter (textbook 19.2.6) over ``mu_1 .. mu_{t + 1}`` from the
-    prior given its depth, the nodes' Gaussians mixed by the law of total variance.
-    """
-    N = len(tr.posteriors)
-    means, covs = [], []
-    for s in range(N):
-        t = min(s + tr.lag, N - 1)
-        post = tr.posteriors[t]
-        b = post.bank
-        start, _ = bk.conditional_prior(b.nodes, b.prior_mean, b.prior_cov)
-        sm = kalman.fixed_lag_smoother(
-            b.mu[:, None],
-            start.mean,
-            start.cov[0],  # shared by the nodes
-            bk.PSI,
-            bk.sigma_p(b.q),
-            bk.measurement_matrices(b.nodes, np.arange(1, t + 2)),
-            np.reshape(b.rho**2, (1, 1)),
-            lag=t - s,
-        )
-        x, v = sm.mean[:, s, 0], sm.mean[:, s, 1]
-        m = np.stack([x, b.nodes + s, v], axis=-1)  # (J, 3)
-        C = np.zeros((m.shape[0], 3, 3))  # the depth is exact given the node
-        C[:, [[0], [2]], [0, 2]] = sm.cov[:, s]  # rows and columns x and v
-        p = post.probabilities
-        mean = p @ m
-        d = m - mean
-        means.append(mean)
-        covs.append(np.einsum("j,jab->ab", p, C + d[:, :, None] * d[:, None, :]))
-    return np.array(means), np.array(covs)
-
-
 @pytest.mark.parametrize("q", [0.0, 0.02])
 def test_textbook_19_2_6_fixed_lag_is_the_augmented_filter_rerun_for_every_frame(q):
     N = 20
@@ -136,7 +100,7 @@ def test_textbook_19_2_6_fixed_lag_is_the_augmented_filter_rerun_for_every_frame
         nodes = [p.bank.nodes for p in tr.posteriors]
         # the nodes are re-placed along the track: the frames are smoothed on several sets
         assert sum(not np.array_equal(a, b) for a, b in zip(nodes, nodes[1:], strict=False)) >= 1
-        mean, cov = rerun_lagged(tr)
+        mean, cov = reference.track_fixed_lag(tr)
         sd = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))  # (N, 3)
         # the track's fixed-lag states are the backward (Rauch-Tung-Striebel) recursions
         # over each window, as the fixed-interval smoother is: equal to rounding
