@@ -71,6 +71,13 @@ def nonnegative_batch(value, name: str, batch: tuple[int, ...]) -> np.ndarray:
     return arr
 
 
+def nonempty(values: np.ndarray, name: str) -> np.ndarray:
+    """``values`` (an array) itself, refused when it holds nothing."""
+    if np.size(values) == 0:
+        raise ValueError(f"{name} must hold at least one value, got none")
+    return values
+
+
 def positive_array(value, name: str) -> np.ndarray:
     """Return ``value`` as a float array (scalar or 1-D), checking every entry is finite and > 0."""
     arr = finite_array(value, name)

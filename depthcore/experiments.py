@@ -795,7 +795,7 @@ def frames_study(
         the depth marginal to the optimal one) and ``"trials"`` (valid trials
         scored).
     """
-    frames = [_checks.count(n, "frames") for n in np.atleast_1d(frames)]
+    frames = [_checks.count(n, "frames") for n in _checks.nonempty(np.atleast_1d(frames), "frames")]
     names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
     random = tuple(n for n in names if FILTERS[n].random)
     plain = tuple(n for n in names if not FILTERS[n].random)
@@ -916,7 +916,7 @@ def frame_marginals(
     mu = _checks.finite_array(mu, "mu")
     if mu.ndim != 1 or len(mu) < 3:
         raise ValueError(f"mu must have shape (M,) with M >= 3, got shape {mu.shape}")
-    frames = [_checks.count(n, "frames") for n in np.atleast_1d(frames)]
+    frames = [_checks.count(n, "frames") for n in _checks.nonempty(np.atleast_1d(frames), "frames")]
     if any(not 3 <= n <= len(mu) for n in frames):
         raise ValueError(f"frames must each be from 3 to {len(mu)}, got {frames}")
     names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
@@ -989,8 +989,8 @@ def conjecture_study(
         and per filter (``"optimal"``, ``"second_order"``, ``"ekf"``) the
         scores of :func:`frames_study` as arrays of shape (R, D, F).
     """
-    rhos = np.atleast_1d(_checks.positive_array(rhos, "rhos"))
-    depths = np.atleast_1d(_checks.positive_array(depths, "depths"))
+    rhos = _checks.nonempty(np.atleast_1d(_checks.positive_array(rhos, "rhos")), "rhos")
+    depths = _checks.nonempty(np.atleast_1d(_checks.positive_array(depths, "depths")), "depths")
     if np.any(depths <= 2):
         raise ValueError("depths must each exceed 2 (the point in front of the camera at time 1)")
     bearing = float(_checks.finite_array(bearing, "bearing"))

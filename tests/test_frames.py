@@ -194,3 +194,36 @@ def test_conjecture_wins_compare_cell_by_cell():
     assert len(fig.axes) == 6
     assert len(fig.axes[0].get_lines()) == 2 * 2  # two depths, two filters
     plt.close(fig)
+
+
+FIG2 = SCENARIOS["fig2"]
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda: experiments.frames_study([], 10, 1), "frames must hold at least one"),
+        (lambda: experiments.frames_study([2], 10, 1), "frames must be from 3"),
+        (lambda: experiments.frames_study([5000], 10, 1), "frames must be from 3"),
+        (lambda: experiments.frames_study([3.5], 10, 1), "frames must be an integer"),
+        (lambda: experiments.frames_study([3], 0, 1), "trials"),
+        (lambda: experiments.frames_study([3], 10, 1, prior="x"), "prior"),
+        (lambda: experiments.frames_study([4], 10, 1, process_noise=np.nan), "process_noise"),
+        (lambda: experiments.frames_study([4], 10, 1, rho=0.0), "rho"),
+        (lambda: experiments.frames_study([4], 10, 1, truth=[1, -5, 0]), "truth"),
+        (lambda: experiments.frame_marginals(FIG2.mu, FIG2.rho, []), "frames must hold"),
+        (lambda: experiments.frame_marginals(FIG2.mu, FIG2.rho, [4]), "frames must each be"),
+        (lambda: experiments.frame_marginals(FIG2.mu, FIG2.rho, [3], width=np.nan), "width"),
+        (lambda: experiments.coverage_test(0.5, 1.5, 100), "level"),
+        (lambda: experiments.coverage_test(np.nan, 0.68, 10), "coverage"),
+        (lambda: experiments.conjecture_study([3], [], [6], 10, 1), "rhos must hold"),
+        (lambda: experiments.conjecture_study([3], [0.005], [], 10, 1), "depths must hold"),
+        (lambda: experiments.conjecture_study([], [0.005], [6], 10, 1), "frames must hold"),
+        (lambda: experiments.conjecture_study([3], [0.005], [-1], 10, 1), "depths"),
+        (lambda: experiments.conjecture_study([3], [0.005], [6], 10, 1, bearing=np.nan), "bearing"),
+    ],
+)
+def test_odd_arguments_are_refused_in_one_line_naming_them(call, message):
+    with pytest.raises(ValueError, match=message) as info:
+        call()
+    assert "\n" not in str(info.value)
