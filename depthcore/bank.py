@@ -1337,6 +1337,12 @@ def _pad(a, J: int, axis: int, value):
     return np.pad(a, width, constant_values=value)
 
 
+#: A node holding this much of the probability or more does not resolve the posterior
+#: (a step of h carries about h / (2.5 sd) of a Gaussian's mass; the quadrature's
+#: tolerances need h well below the SD).
+_ONE_NODE = 0.5
+
+
 def update(post: Mixture, mu_next) -> Mixture:
     """Add frame ``N + 1`` to a posterior from :func:`posterior`, online.
 
@@ -1382,6 +1388,10 @@ def update(post: Mixture, mu_next) -> Mixture:
         free
         & (err[0] <= np.maximum(rtol * new.depth_sd, floor[0]))
         & (err[1] <= np.maximum(rtol * new.velocity_sd, floor[1]))
+        # a posterior that has narrowed below the nodes' step sits on one node, whose
+        # moments every other node reproduces when it is among them: a trapezoid rule
+        # that resolves a density puts well under half its mass on any one node
+        & (np.max(new.probabilities, axis=-1) < _ONE_NODE)
     )
     new = dataclasses.replace(new, depth_error=err[0], velocity_error=err[1], rtol=rtol)
     if not np.all(ok):

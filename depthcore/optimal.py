@@ -453,15 +453,23 @@ class _Totals(NamedTuple):
 
 
 def _moments(totals: np.ndarray, centre: np.ndarray) -> _Totals:
-    """Mean, covariance, P(y < 2) and normaliser from summed trapezoid totals."""
+    """Mean, covariance, P(y < 2) and normaliser from summed trapezoid totals.
+
+    A problem whose nodes all carry zero weight (a coarse level that misses a
+    posterior narrower than its step) gets NaN moments, without a warning: its
+    change between levels is then NaN, which never passes the tolerance, so
+    the quadrature refines it or refuses it as too narrow.
+    """
     Z = totals[0]
-    m = (totals[1:4] / Z).T  # (B, 3), centred
-    second = (totals[4:10] / Z).T - m[:, _FIRST_INDEX] * m[
-        :, _SECOND_INDEX
-    ]  # (B, 6) in _SECOND order
+    with np.errstate(invalid="ignore", divide="ignore"):
+        m = (totals[1:4] / Z).T  # (B, 3), centred
+        second = (totals[4:10] / Z).T - m[:, _FIRST_INDEX] * m[
+            :, _SECOND_INDEX
+        ]  # (B, 6) in _SECOND order
+        behind = totals[10] / Z
     second[:, :3] = np.maximum(second[:, :3], 0.0)
     cov = second[:, _SYMMETRIC].reshape(-1, 3, 3)
-    return _Totals(centre + m, cov, totals[10] / Z, Z)
+    return _Totals(centre + m, cov, behind, Z)
 
 
 def _t_limits(interval: int, pb: _Problem, c: np.ndarray, cov_p: np.ndarray):
@@ -808,6 +816,11 @@ def _integrate(pb: _Problem, intervals, rtol: float):
     halvings = 2  # the first pass adds two levels in one evaluation
     while True:
         growth = 2**halvings
+        # a problem with no interval left to refine (its scan kept at most one node in
+        # each: a posterior narrower than the scan's step) would loop here for ever
+        stuck = ~done & np.all([g[1] == 0 for g in grids.values()], axis=0)
+        if np.any(stuck):
+            raise _too_narrow(pb, int(np.argmax(stuck)), rtol)
         if (
             max(np.max(np.where(done, 0, growth * (g[2] - 1) + 1)) for g in grids.values())
             > _NODE_BUDGET
@@ -877,13 +890,17 @@ def _integrate(pb: _Problem, intervals, rtol: float):
         previous, halvings = current, 1
     narrow = ~((final.cov[:, 1, 1] > 0) & (final.cov[:, 2, 2] > 0))
     if np.any(narrow):  # all the mass on one node: the width is below the resolution
-        k = int(np.argmax(narrow))
-        raise ValueError(
-            f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g} and prior mean "
-            f"{pb.mean[k].tolist()}: the depth marginal is too narrow to resolve in double "
-            f"precision, so its quadrature cannot reach rtol = {rtol:.3g}"
-        )
+        raise _too_narrow(pb, int(np.argmax(narrow)), rtol)
     return final, errors[0], errors[1], top, grids
+
+
+def _too_narrow(pb: _Problem, k: int, rtol: float) -> ValueError:
+    """The refusal of problem ``k``, whose depth marginal no float grid can resolve."""
+    return ValueError(
+        f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g} and prior mean "
+        f"{pb.mean[k].tolist()}: the depth marginal is too narrow to resolve in double "
+        f"precision, so its quadrature cannot reach rtol = {rtol:.3g}"
+    )
 
 
 def _check_peak(log_f, skip, top, pb: _Problem, rtol: float) -> None:

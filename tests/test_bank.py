@@ -852,3 +852,20 @@ def test_depth_cdf_at_a_tiny_noise_level_settles_at_its_roundoff_floor(rho):
         return post.depth_cdf(sim.states[:, -1, 1:2])[:, 0]
 
     assert_allclose(cdf_at_truth(rho), cdf_at_truth(1e-8), rtol=0, atol=1e-4)
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e12])
+def test_update_re_places_a_posterior_that_narrowed_onto_one_node(scale):
+    # rho = 1e-12: the third bearing narrows the depth from about 1 to 1e-10, far below
+    # the nodes' step, so all the mass falls on one node; the halved mixture reproduces
+    # it when that node is kept, so only the one-node rule catches it (before it, the
+    # online posterior was 5.97 with SD 0 against the exact 6.0 with SD 1.2e-10)
+    fig2 = SCENARIOS["fig2"]
+    mu = np.asarray(fig2.mu)
+    post = bk.posterior(mu[:1], 1e-12, fig2.prior.mean, scale * np.eye(3))
+    for m in mu[1:]:
+        post = bk.update(post, m)
+    direct = bk.posterior(mu, 1e-12, fig2.prior.mean, scale * np.eye(3))
+    assert_allclose(post.depth_mean, direct.depth_mean, rtol=1e-12)
+    assert_allclose(post.depth_sd, direct.depth_sd, rtol=1e-6)
+    assert np.max(post.probabilities) < 0.5

@@ -9,6 +9,8 @@ bearings it uses, and against the augmented filter rerun from frame 1 for
 every frame, mixed by hand.
 """
 
+import warnings
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
@@ -137,3 +139,40 @@ def test_track_and_node_density_refuse_bad_input():
         bk.track(s.mu, -1.0, s.prior.mean, s.prior.cov)
     with pytest.raises(ValueError, match="post must be a Mixture"):
         bk.node_density(s.mu)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"mu": [-0.3, 0.0, np.nan]}, "mu must be finite"),
+        ({"mu": [[-0.3, 0.0, 0.2]]}, "mu must have shape"),
+        ({"rho": 0.0}, "rho must be positive"),
+        ({"process_noise": -1.0}, "process_noise"),
+        ({"lag": -1}, "lag"),
+        ({"lag": 1.5}, "lag"),
+        ({"rtol": 0.0}, "rtol"),
+    ],
+)
+def test_track_refuses_odd_arguments_in_one_line(change, message):
+    s = SCENARIOS["fig2"]
+    args = {"mu": s.mu, "rho": s.rho, "prior_mean": s.prior.mean, "prior_cov": s.prior.cov}
+    with pytest.raises(ValueError, match=message) as info:
+        bk.track(**{**args, **change})
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("rho", [1e-12, 1e3])
+@pytest.mark.parametrize("scale", [1e-12, 1e12])
+def test_track_answers_at_extreme_noise_and_priors_without_warnings(rho, scale):
+    s = SCENARIOS["fig2"]
+    # finite states, or (rho = 1e-12: the later bearings are billions of SDs off the
+    # constant-velocity track) a one-line refusal of a marginal no float grid resolves
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            tr = bk.track(np.r_[s.mu, 0.33, 0.43], rho, s.prior.mean, scale * np.eye(3), lag=2)
+        except ValueError as e:
+            assert rho == 1e-12 and "too narrow" in str(e) and "\n" not in str(e)
+            return
+    for part in (tr.filtered, tr.interval, tr.lagged):
+        assert np.all(np.isfinite(part.mean)) and np.all(np.isfinite(part.cov))
