@@ -864,7 +864,7 @@ def coverage_test(coverage, level: float, trials, z: float = COVERAGE_Z) -> dict
     if np.any(trials < 1):
         raise ValueError("trials must each be at least 1")
     z = _checks.positive_scalar(z, "z")
-    se = np.sqrt(level * (1 - level) / trials)
+    se = study.coverage_se(level, trials)
     score = (coverage - level) / se
     verdict = np.where(
         np.abs(score) <= z, "calibrated", np.where(score < 0, "overconfident", "underconfident")

@@ -504,6 +504,25 @@ class Tally:
         return out
 
 
+def coverage_se(level, trials) -> np.ndarray:
+    """Binomial standard error ``sqrt(p (1 - p) / n)`` of a coverage at level ``p``, ``n`` trials.
+
+    Parameters
+    ----------
+    level : float or array_like
+        Nominal levels ``p`` in (0, 1).
+    trials : int or array_like
+        Independent trials ``n >= 1``, broadcast against ``level``.
+
+    Returns
+    -------
+    ndarray
+        The standard error of a calibrated filter's coverage.
+    """
+    level = np.asarray(level, dtype=float)
+    return np.sqrt(level * (1 - level) / trials)
+
+
 def scores(trials: Trials, est: Estimates) -> dict:
     """Bias, RMSE, coverage, NEES and Hellinger distance of one filter.
 
@@ -722,7 +741,7 @@ def prior_study(
         "rejected_trials": r.draws.n_rejected,
         "false_alarm": false_alarm,
         "levels": s["levels"],
-        "coverage_se": np.sqrt(levels * (1 - levels) / max(n, 1)).tolist(),
+        "coverage_se": coverage_se(levels, max(n, 1)).tolist(),
     }
     for q in ("depth", "velocity"):
         t = s[q]

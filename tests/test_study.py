@@ -414,3 +414,12 @@ def test_study_command_scores_the_rao_blackwellised_filter(capsys):
     assert main([*argv, *more, "--filters", "resample_move"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "resample_move cannot run" in err[0]
+
+
+def test_coverage_se_is_the_binomial_standard_error():
+    # a coverage of n Bernoulli(p) trials: its SD by simulation matches sqrt(p (1 - p) / n)
+    rng = np.random.default_rng(11)
+    p, n = 0.68, 400
+    sim = rng.binomial(n, p, size=20_000) / n
+    assert study.coverage_se(p, n) == pytest.approx(np.std(sim), rel=0.03)
+    assert_allclose(study.coverage_se([0.68, 0.95], 100), np.sqrt([0.2176, 0.0475]) / 10)
