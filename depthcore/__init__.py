@@ -46,6 +46,7 @@ __version__ = "0.1.0"
 MODULES = (
     "bank",
     "benchmarks",
+    "bound",
     "calibration",
     "ekf",
     "experiments",
