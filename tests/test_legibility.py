@@ -109,10 +109,16 @@ def _rbpf_convergence():
 
 
 def _frame_marginals():
-    sim = bank.simulate(model.G(FIG2.c, -2), 10, FIG2.rho, 0.0, np.random.default_rng(3))
+    sim = bank.simulate(model.G(FIG2.c, -2), 6, FIG2.rho, 0.0, np.random.default_rng(3))
     names = FRAMES_NAMES[:5] + ("particle", "resample_move", "rbpf")
     m = experiments.frame_marginals(
-        sim.mu, FIG2.rho, [3, 5, 8, 10], names, rng=np.random.default_rng(4)
+        sim.mu,
+        FIG2.rho,
+        [3, 4, 5, 6],
+        names,
+        rng=np.random.default_rng(4),
+        n_particles=200,
+        n_points=101,
     )
     return figures.frame_marginals_figure(m, names)
 
