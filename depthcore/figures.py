@@ -67,9 +67,27 @@ PRINTED_STYLE = {
     "color": "tab:orange",
     "linestyle": (0, (2, 1)),
 }
+#: The book's plot style, shared by every figure: at most :data:`WIDTH` inches
+#: wide, rendered at :data:`DPI` dots per inch (Jupyter and the book draw the
+#: PNG at ``fig.dpi``), no text smaller than :data:`MIN_FONT` points (tick
+#: labels, legends and titles at matplotlib's 10 points unless stated). At the
+#: book's content width a figure is shrunk by at most ``WIDTH`` inches to that
+#: width, so the smallest text stays legible on screen and on an A4 page.
+WIDTH = 7.2
+DPI = 150
+MIN_FONT = 9.0
 _SYMBOL = {"depth": "y", "velocity": "v"}
 #: Leave the creation date out, so that the same figure gives the same file.
 _NO_DATE = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
+
+
+def _subplots(nrows: int = 1, ncols: int = 1, *, figsize, **kwargs):
+    """``plt.subplots`` in the book's style: constrained layout at :data:`DPI`."""
+    import matplotlib.pyplot as plt
+
+    if figsize[0] > WIDTH + 1e-9:
+        raise ValueError(f"figsize: at most {WIDTH} inches wide, got {figsize[0]}")
+    return plt.subplots(nrows, ncols, figsize=figsize, dpi=DPI, layout="constrained", **kwargs)
 
 
 def plot_marginals(ax, curves: dict, quantity: str, filters=_filters.PAPER_FILTERS):
@@ -103,12 +121,11 @@ def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib.pyplot as plt
 
     s = SCENARIOS[key]
     lo, hi = GRIDS[key]
     curves = reproduce.curves(s, np.linspace(lo, hi, n), filters=filters)
-    fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
+    fig, ax = _subplots(figsize=(6.4, 4.0))
     if key in PRINTED_OVERLAY:
         printed = _filters.optimal.marginals(s.mu, s.rho, s.prior, reading="printed")
         ax.plot(curves["grid"], printed.depth_pdf(curves["grid"]), linewidth=1.4, **PRINTED_STYLE)
@@ -123,11 +140,11 @@ def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
                 xycoords="axes fraction",
                 ha="right",
                 va="top",
-                fontsize=9,
+                fontsize=MIN_FONT,
             )
     extended = "extended " if set(filters) - set(_filters.PAPER_FILTERS) else ""
     ax.set_title(
-        f"Figure {s.figure} ({extended}reproduction): {caption(key)}", fontsize=9, wrap=True
+        f"Figure {s.figure} ({extended}reproduction): {caption(key)}", fontsize=MIN_FONT, wrap=True
     )
     return fig
 
@@ -186,12 +203,11 @@ def readings_figure(key: str, y_max: float = 150.0, n: int = 1201):
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib.pyplot as plt
 
     s = SCENARIOS[key]
     y_max = _checks.positive_scalar(y_max - 2.0, "y_max - 2") + 2.0
     y = np.linspace(2.0, y_max, n)[1:]
-    fig, ax = plt.subplots(figsize=(6.4, 3.6), layout="constrained")
+    fig, ax = _subplots(figsize=(6.4, 3.6))
     styles = {
         "derived": ("black", "-", "from Eq. (6)"),
         "printed": ("tab:orange", "--", "Eq. (16) as printed"),
@@ -240,9 +256,8 @@ def first_update_figure(update: dict, extent: float = 70.0):
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 7.0), layout="constrained")
+    fig, ax = _subplots(figsize=(6.4, 7.0))
     y = np.array([-extent, extent])
     ax.plot(
         update["mu1"] * y, y, color="0.6", linewidth=1, label=r"bearing of $\mu_1$: $x = \mu_1 y$"
@@ -279,7 +294,7 @@ def first_update_figure(update: dict, extent: float = 70.0):
     ax.set_box_aspect(1)  # square box and equal limits: equal scales
     ax.set_xlabel("$x$ at time 1")
     ax.set_ylabel("depth $y$ at time 1")
-    fig.legend(loc="outside lower center", ncol=2, frameon=False, fontsize=9)
+    fig.legend(loc="outside lower center", ncol=2, frameon=False, fontsize=MIN_FONT)
     return fig
 
 
@@ -299,13 +314,12 @@ def convergence_figure(result: dict, quantity: str = "depth"):
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib.pyplot as plt
 
     if quantity not in _filters.QUANTITIES:
         raise ValueError(f"quantity must be one of {_filters.QUANTITIES}, got {quantity!r}")
     N = result["sizes"]
     ideal = result["exact"][f"{quantity}_sd"] / np.sqrt(N)
-    fig, axes = plt.subplots(1, 2, figsize=(9.6, 4.8), layout="constrained", sharey=True)
+    fig, axes = _subplots(1, 2, figsize=(WIDTH, 4.4), sharey=True)
     for ax, moment, title in zip(axes, ("mean", "sd"), ("mean", "SD"), strict=True):
         for name, err in result["rmse"].items():
             ax.plot(
@@ -326,10 +340,14 @@ def convergence_figure(result: dict, quantity: str = "depth"):
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("number of particles $N$")
-        ax.set_title(f"{quantity} {title}: RMS error over {result['repeats']} runs", fontsize=9)
+        ax.set_title(
+            f"{quantity} {title}: RMS error over {result['repeats']} runs", fontsize=MIN_FONT
+        )
     axes[0].set_ylabel("RMS error from the optimal filter")
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncol=2, frameon=False, fontsize=9)
+    fig.legend(
+        handles, labels, loc="outside lower center", ncol=2, frameon=False, fontsize=MIN_FONT
+    )
     return fig
 
 
@@ -345,9 +363,8 @@ def noise_study_figure(result: dict):
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(9.6, 4.0), layout="constrained")
+    fig, axes = _subplots(1, 2, figsize=(WIDTH, 4.0))
     names = [n for n in _filters.NAMES if n in result]
     for name in names:
         axes[0].plot(
@@ -362,7 +379,7 @@ def noise_study_figure(result: dict):
     for ax in axes:
         ax.set_xscale("log")
         ax.set_xlabel("noise level rho (radians)")
-    axes[0].legend(frameon=False, fontsize=8)
+    axes[0].legend(frameon=False, fontsize=MIN_FONT)
     return fig
 
 
@@ -380,10 +397,9 @@ def profile_figure(mu, rhos, depths):
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib.pyplot as plt
 
     f = model.profile_misfit(mu, depths)
-    fig, ax = plt.subplots(figsize=(6.4, 4.0), layout="constrained")
+    fig, ax = _subplots(figsize=(6.4, 4.0))
     for rho in np.atleast_1d(_checks.positive_array(rhos, "rhos")):
         ax.plot(
             depths,
@@ -395,7 +411,7 @@ def profile_figure(mu, rhos, depths):
     ax.set_xlabel("depth $y$ at time 3")
     ax.set_ylabel("profile likelihood of the depth\n(relative to its maximum)")
     ax.set_ylim(0, 1.05)
-    ax.legend(frameon=False, fontsize=8)
+    ax.legend(frameon=False, fontsize=MIN_FONT)
     return fig
 
 
@@ -412,9 +428,8 @@ def calibration(result: dict, quantity: str = "depth"):
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(5.2, 4.6), layout="constrained")
+    fig, ax = _subplots(figsize=(5.2, 4.6))
     ax.plot([0, 1], [0, 1], color="0.7", linewidth=1, label="calibrated")
     for name, f in result["filters"].items():
         cal = f["calibration"]
@@ -423,11 +438,11 @@ def calibration(result: dict, quantity: str = "depth"):
     ax.set_ylabel(f"fraction of trials whose true {quantity} it covers")
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1)
-    ax.legend(frameon=False, fontsize=8)
+    ax.legend(frameon=False, fontsize=MIN_FONT)
     ax.set_title(
         f"{quantity}: {result['valid_trials']} trials, rho = {result['rho']:.4g}, "
         f"{result['prior']} prior",
-        fontsize=9,
+        fontsize=MIN_FONT,
     )
     return fig
 
@@ -449,7 +464,6 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False, l
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib.pyplot as plt
 
     labels = {
         "rho": "noise level rho (radians)",
@@ -461,7 +475,7 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False, l
         "depth_mean": "depth mean",
         "depth_sd": "depth SD",
     }
-    fig, ax = plt.subplots(figsize=(6.0, 4.0), layout="constrained")
+    fig, ax = _subplots(figsize=(6.0, 4.0))
     for name in _filters.NAMES:
         if name in result and not (field == "hellinger" and name == "optimal"):
             ax.plot(result[x], result[name][field], marker="o", markersize=3, **STYLE[name])
@@ -470,8 +484,8 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False, l
     if log_y:
         ax.set_yscale("log")
     ax.set_xlabel(labels[x])
-    ax.set_ylabel(ylabels[field], fontsize=9)
-    ax.legend(frameon=False, fontsize=8)
+    ax.set_ylabel(ylabels[field], fontsize=MIN_FONT)
+    ax.legend(frameon=False, fontsize=MIN_FONT)
     return fig
 
 
@@ -490,12 +504,11 @@ def prior_mean_map_figure(result: dict, marks: dict | None = None):
     matplotlib.figure.Figure
         A diverging colour map centred on 0 (equal SDs), with the contour 0 drawn.
     """
-    import matplotlib.pyplot as plt
     from matplotlib.colors import TwoSlopeNorm
 
     r = result["log10_sd_ratio"]
     limit = float(np.max(np.abs(r)))
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
+    fig, ax = _subplots(figsize=(6.4, 4.4))
     mesh = ax.pcolormesh(
         result["velocity"],
         result["offset"],
@@ -534,7 +547,6 @@ def translating_point(x3=None, n: int = 3):
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib.pyplot as plt
 
     from . import model
 
@@ -548,7 +560,7 @@ def translating_point(x3=None, n: int = 3):
         raise ValueError("x3: the point must be beyond the image line (y > 1) at every frame drawn")
     mu = model.project(states)
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
+    fig, ax = _subplots(figsize=(6.4, 4.4))
     reach = float(np.max(states[:, 1])) + 0.8
     wide = max(float(np.max(np.abs(states[:, 0]))), float(np.max(np.abs(mu)))) + 0.8
     ax.plot(states[:, 0], states[:, 1], color="0.55", linewidth=1, linestyle="--", zorder=1)
@@ -563,7 +575,7 @@ def translating_point(x3=None, n: int = 3):
         xy=states[-1, :2] + 0.45 * np.array([states[-1, 2], 1.0]),
         xytext=(6, 0),
         textcoords="offset points",
-        fontsize=9,
+        fontsize=MIN_FONT,
         va="center",
     )
     ax.axhline(1.0, color="tab:blue", linewidth=1)
@@ -572,7 +584,7 @@ def translating_point(x3=None, n: int = 3):
         xy=(wide, 1.0),
         xytext=(-2, 4),
         textcoords="offset points",
-        fontsize=9,
+        fontsize=MIN_FONT,
         color="tab:blue",
         ha="right",
     )
@@ -584,7 +596,7 @@ def translating_point(x3=None, n: int = 3):
             xy=state[:2],
             xytext=(-8, 6),
             textcoords="offset points",
-            fontsize=9,
+            fontsize=MIN_FONT,
             ha="right",
         )
         ax.plot(m, 1.0, "|", color="tab:red", markersize=10, markeredgewidth=1.5, zorder=3)
@@ -593,17 +605,21 @@ def translating_point(x3=None, n: int = 3):
             xy=(m, 1.0),
             xytext=(0, -16),
             textcoords="offset points",
-            fontsize=9,
+            fontsize=MIN_FONT,
             color="tab:red",
             ha="center",
         )
     ax.plot(0.0, 0.0, marker="^", color="black", markersize=9)
-    ax.annotate("camera", xy=(0.0, 0.0), xytext=(8, -4), textcoords="offset points", fontsize=9)
+    ax.annotate(
+        "camera", xy=(0.0, 0.0), xytext=(8, -4), textcoords="offset points", fontsize=MIN_FONT
+    )
     ax.set_xlim(-wide, wide)
     ax.set_ylim(-0.4, reach)
     ax.set_xlabel("lateral position $x$")
     ax.set_ylabel("depth $y$")
-    ax.set_title(f"Figure 1 (reproduction): a translating point seen at times 1 to {n}", fontsize=9)
+    ax.set_title(
+        f"Figure 1 (reproduction): a translating point seen at times 1 to {n}", fontsize=MIN_FONT
+    )
     return fig
 
 
@@ -630,7 +646,7 @@ def bank_depth_figure(densities: dict, truth=None):
 
     if not densities:
         raise ValueError("densities must hold at least one frame")
-    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.4), layout="constrained")
+    fig, axes = _subplots(1, 2, figsize=(WIDTH, 4.2))
     colours = plt.cm.viridis(np.linspace(0.0, 0.9, len(densities)))
     for (frame, (depths, density)), colour in zip(densities.items(), colours, strict=True):
         order = np.argsort(depths)
@@ -644,13 +660,13 @@ def bank_depth_figure(densities: dict, truth=None):
             axes[1].semilogy(y[keep] - truth[frame], p[keep], "-", color=colour, linewidth=1.2)
     axes[0].set_xlabel("depth $y_N$ at frame $N$ (dots: the nodes; dotted: the truth)")
     axes[0].set_ylabel("posterior density")
-    axes[0].legend(frameon=False, fontsize=8)
-    axes[0].set_title("the bank's depth density at its nodes", fontsize=9)
+    axes[0].legend(frameon=False, fontsize=MIN_FONT)
+    axes[0].set_title("the bank's depth density at its nodes", fontsize=MIN_FONT)
     if truth is not None:
         axes[1].axvline(0.0, color="0.5", linewidth=0.8, linestyle=":")
         axes[1].set_xlabel("depth minus the true depth at frame $N$")
         axes[1].set_ylabel("posterior density (log scale)")
-        axes[1].set_title("about the truth, on a log scale", fontsize=9)
+        axes[1].set_title("about the truth, on a log scale", fontsize=MIN_FONT)
     else:
         axes[1].set_visible(False)
     return fig
@@ -674,7 +690,6 @@ def smoothing_figure(track, states, first: int = 1):
         Two panels, the depth and the lateral position: each estimate minus the
         truth, with a band of two SDs about it.
     """
-    import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 
     states = np.asarray(states, dtype=float)
@@ -688,7 +703,7 @@ def smoothing_figure(track, states, first: int = 1):
         (f"fixed-lag smoothed (lag {track.lag})", track.lagged, "tab:orange", "--"),
         ("fixed-interval smoothed", track.interval, "tab:green", "-"),
     )
-    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.4), layout="constrained")
+    fig, axes = _subplots(1, 2, figsize=(WIDTH, 4.2))
     for ax, i, name in zip(axes, (1, 0), ("depth $y_k$", "lateral position $x_k$"), strict=True):
         for label, s, colour, style in series:
             err = s.mean[rows, i] - states[rows, i]
@@ -699,9 +714,11 @@ def smoothing_figure(track, states, first: int = 1):
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("frame $k$")
         ax.set_ylabel(f"estimate minus truth: {name}")
-        ax.set_title(f"{name}: mean $\\pm$ 2 SD, minus the truth", fontsize=9)
+        ax.set_title(f"{name}: mean $\\pm$ 2 SD, minus the truth", fontsize=MIN_FONT)
     handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncol=3, frameon=False, fontsize=9)
+    fig.legend(
+        handles, labels, loc="outside lower center", ncol=3, frameon=False, fontsize=MIN_FONT
+    )
     return fig
 
 
@@ -721,11 +738,10 @@ def rbpf_convergence_figure(result: dict):
         cloud's depth mean, and their average with two standard errors, about
         the exact value.
     """
-    import matplotlib.pyplot as plt
 
     J = np.asarray(result["sizes"])
     exact = result["exact"]
-    fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.4), layout="constrained")
+    fig, axes = _subplots(1, 2, figsize=(WIDTH, 4.2))
     ax = axes[0]
     ax.plot(J, result["rmse"]["depth_mean"], "o-", color="tab:purple", label="depth mean")
     ax.plot(J, result["rmse"]["depth_sd"], "s--", color="tab:orange", label="depth SD")
@@ -742,8 +758,8 @@ def rbpf_convergence_figure(result: dict):
     ax.set_yscale("log")
     ax.set_xlabel("particles per cloud $J$")
     ax.set_ylabel("RMS error from the exact bank")
-    ax.set_title(f"RMS error over {result['replicas']} independent clouds", fontsize=9)
-    ax.legend(frameon=False, fontsize=8)
+    ax.set_title(f"RMS error over {result['replicas']} independent clouds", fontsize=MIN_FONT)
+    ax.legend(frameon=False, fontsize=MIN_FONT)
     ax = axes[1]
     runs = result["runs"]["depth_mean"] - exact["depth_mean"]
     for k, j in enumerate(J):
@@ -761,8 +777,8 @@ def rbpf_convergence_figure(result: dict):
     ax.set_xscale("log")
     ax.set_xlabel("particles per cloud $J$")
     ax.set_ylabel(f"depth mean at frame {result['frames']} minus the exact one")
-    ax.set_title("each cloud's depth mean (grey dots)", fontsize=9)
-    ax.legend(frameon=False, fontsize=8)
+    ax.set_title("each cloud's depth mean (grey dots)", fontsize=MIN_FONT)
+    ax.legend(frameon=False, fontsize=MIN_FONT)
     return fig
 
 
@@ -781,11 +797,10 @@ def prior_calibration(result: dict):
         the velocity, with bars of two binomial standard errors
         ``sqrt(p (1 - p) / n)`` about the nominal level.
     """
-    import matplotlib.pyplot as plt
 
     levels = np.asarray(result["levels"])
     se = np.asarray(result["coverage_se"])
-    fig, ax = plt.subplots(figsize=(5.2, 4.6), layout="constrained")
+    fig, ax = _subplots(figsize=(5.2, 4.6))
     ax.plot([0, 1], [0, 1], color="0.7", linewidth=1, label="calibrated")
     ax.fill_between(
         levels, levels - 2 * se, levels + 2 * se, color="0.85", label="two binomial SEs"
@@ -805,10 +820,10 @@ def prior_calibration(result: dict):
     ax.set_ylabel("fraction of trials whose truth it covers")
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1)
-    ax.legend(frameon=False, fontsize=8)
+    ax.legend(frameon=False, fontsize=MIN_FONT)
     ax.set_title(
         f"truths from the prior: {result['valid_trials']} trials, rho = {result['rho']:.4g}",
-        fontsize=9,
+        fontsize=MIN_FONT,
     )
     return fig
 
@@ -826,17 +841,20 @@ def frame_marginals_figure(result: list, names=None):
     Returns
     -------
     matplotlib.figure.Figure
+        One row per filter (its label, wrapped, at the left), one column per
+        number of frames (its depth axis at the bottom).
     """
-    import matplotlib.pyplot as plt
+    import textwrap
+
+    from matplotlib.ticker import MaxNLocator
 
     if names is None:
         names = [n for n in result[0]["density"] if n != "optimal"]
-    fig, axes = plt.subplots(
+    fig, axes = _subplots(
         len(names),
         len(result),
-        figsize=(2.4 * len(result), 1.35 * len(names) + 0.6),
+        figsize=(WIDTH, 0.8 * len(names) + 1.1),
         sharex="col",
-        layout="constrained",
         squeeze=False,
     )
     exact = {**STYLE["optimal"], "color": "black", "linestyle": "-", "linewidth": 1.0}
@@ -845,83 +863,94 @@ def frame_marginals_figure(result: list, names=None):
             ax = axes[i, j]
             ax.fill_between(r["grid"], r["density"]["optimal"], color="0.85", linewidth=0)
             ax.plot(r["grid"], r["density"]["optimal"], **exact)
-            ax.plot(r["grid"], r["density"][name], **STYLE[name])
+            ax.plot(r["grid"], r["density"][name], **{**STYLE[name], "linewidth": 1.4})
             ax.set_yticks([])
             if i == 0:
-                ax.set_title(f"N = {r['frames']}", fontsize=9)
+                ax.set_title(f"N = {r['frames']}")
             if j == 0:
-                ax.set_ylabel(_filters.FILTERS[name].label, fontsize=7, rotation=0, ha="right")
-            ax.tick_params(labelsize=7)
-        axes[-1, j].set_xlabel(f"depth at frame {r['frames']}", fontsize=8)
+                label = textwrap.fill(_filters.FILTERS[name].label, 14)
+                ax.set_ylabel(label, fontsize=MIN_FONT, rotation=0, ha="right", va="center")
+        axes[-1, j].xaxis.set_major_locator(MaxNLocator(3))
+        axes[-1, j].tick_params(labelsize=MIN_FONT)
+        axes[-1, j].set_xlabel(f"depth at frame {r['frames']}", fontsize=MIN_FONT)
     return fig
 
 
-#: The rows of :func:`frames_study_figure`, each (score, label, logarithmic axis, nominal level).
+#: The panels of :func:`frames_study_figure`, each (score, label, logarithmic axis, nominal level).
 FRAMES_ROWS = (
     ("rmse", "RMSE of the depth mean", True, None),
     ("mean_sd", "mean depth SD", True, None),
-    ("hellinger", "Hellinger distance\nto the optimal filter", False, None),
+    ("hellinger", "Hellinger distance\nto the exact filter", False, None),
+    ("nees", "mean NEES", True, 3.0),
     ("coverage_68", "coverage of the\ncentral 68 % interval", False, 0.68),
     ("coverage_95", "coverage of the\ncentral 95 % interval", False, 0.95),
-    ("nees", "mean NEES", True, 3.0),
 )
 
 
-def frames_study_figure(results: dict, names=None):
-    """Scores of :func:`depthcore.experiments.frames_study` against ``N``, one column per run.
+def _coverage_bands(ax, frames, level: float, trials) -> None:
+    """Shade where a coverage over each number of ``trials`` passes the coverage test."""
+    from .experiments import COVERAGE_Z, coverage_test
+
+    for n in sorted(set(int(t) for t in trials)):
+        half = COVERAGE_Z * float(coverage_test(level, level, n)["se"])
+        ax.axhspan(level - half, level + half, color="0.5", alpha=0.15, linewidth=0)
+
+
+def frames_study_figure(result: dict, names=None, title: str | None = None):
+    """The scores of :func:`depthcore.experiments.frames_study` against ``N``, one panel each.
 
     Parameters
     ----------
-    results : dict
-        ``{column title: frames_study result}``.
+    result : dict
+        One ``frames_study`` result.
     names : sequence of str, optional
-        Filters to draw; default those of the first result.
+        Filters to draw; default every filter of ``result``.
+    title : str, optional
+        Drawn above the panels.
 
     Returns
     -------
     matplotlib.figure.Figure
+        Six panels, :data:`FRAMES_ROWS`, two to a row. The coverage panels shade
+        where a coverage passes :func:`depthcore.experiments.coverage_test`
+        (within :data:`depthcore.experiments.COVERAGE_Z` binomial standard errors
+        of the nominal level) over each filter's number of trials, one band per
+        number of trials: they overlap, darkest in the narrowest, of the most
+        trials.
     """
-    import matplotlib.pyplot as plt
-
-    first = next(iter(results.values()))
     if names is None:
-        names = [k for k, v in first.items() if isinstance(v, dict)]
-    fig, axes = plt.subplots(
-        len(FRAMES_ROWS),
-        len(results),
-        figsize=(3.4 * len(results) + 0.6, 2.0 * len(FRAMES_ROWS) + 0.8),
-        sharex=True,
-        sharey="row",
-        layout="constrained",
-        squeeze=False,
-    )
-    for j, (title, r) in enumerate(results.items()):
-        axes[0, j].set_title(title, fontsize=9)
-        for i, (score, label, log, nominal) in enumerate(FRAMES_ROWS):
-            ax = axes[i, j]
-            for name in names:
-                if name in r and not (score == "hellinger" and name == "optimal"):
-                    ax.plot(r["frames"], r[name][score], marker="o", markersize=3, **STYLE[name])
-            if nominal is not None:
-                ax.axhline(nominal, color="0.6", linewidth=1)
-            if log:
-                ax.set_yscale("log")
-            if score.startswith("coverage"):
-                ax.set_ylim(-0.02, 1.02)
-            if j == 0:
-                ax.set_ylabel(label, fontsize=8)
-            ax.set_xscale("log")
-            ax.set_xticks(r["frames"], [str(int(n)) for n in r["frames"]])
-            ax.set_xticks([], minor=True)
-            ax.tick_params(labelsize=7)
-        axes[-1, j].set_xlabel("frames N", fontsize=8)
+        names = [k for k, v in result.items() if isinstance(v, dict)]
+    names = [n for n in names if n in result]
+    fig, axes = _subplots(3, 2, figsize=(WIDTH, 8.0), sharex=True)
+    frames = np.asarray(result["frames"])
+    for ax, (score, label, log, nominal) in zip(axes.ravel(), FRAMES_ROWS, strict=True):
+        for name in names:
+            if not (score == "hellinger" and name == "optimal"):
+                ax.plot(frames, result[name][score], marker="o", markersize=3, **STYLE[name])
+        if score.startswith("coverage"):
+            _coverage_bands(ax, frames, nominal, [result[n]["trials"][0] for n in names])
+            ax.set_ylim(-0.02, 1.02)
+        if nominal is not None:
+            ax.axhline(nominal, color="0.45", linewidth=1)
+        if log:
+            ax.set_yscale("log")
+        ax.set_ylabel(label)
+        ax.set_xscale("log")
+        ax.set_xticks(frames, [str(int(n)) for n in frames])
+        ax.set_xticks([], minor=True)
+    for ax in axes[-1]:
+        ax.set_xlabel("frames N")
+    if title is not None:
+        fig.suptitle(title)
     handles, labels = [], []
     for ax in axes.ravel():
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
-    fig.legend(handles, labels, loc="outside lower center", ncol=4, frameon=False, fontsize=8)
+    fig.legend(
+        handles, labels, loc="outside lower center", ncol=3, frameon=False, fontsize=MIN_FONT
+    )
     return fig
 
 
@@ -938,8 +967,11 @@ def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse"))
     Returns
     -------
     matplotlib.figure.Figure
+        One row per score, one column per number of frames; the legend gives the
+        depths' colours and the filters' line styles once each.
     """
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     labels = {
         "hellinger": "Hellinger distance\nto the optimal filter",
@@ -950,22 +982,22 @@ def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse"))
     }
     nominal = {"coverage_68": 0.68, "coverage_95": 0.95, "nees": 3.0}
     frames = result["frames"]
-    fig, axes = plt.subplots(
+    fig, axes = _subplots(
         len(scores),
         len(frames),
-        figsize=(3.3 * len(frames) + 0.6, 2.3 * len(scores) + 0.8),
+        figsize=(WIDTH, 2.2 * len(scores) + 1.2),
         sharex=True,
         sharey="row",
-        layout="constrained",
         squeeze=False,
     )
     colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(result["depth"])))
+    styles = (("second_order", "-"), ("ekf", ":"))
     for j, n in enumerate(frames):
-        axes[0, j].set_title(f"N = {int(n)}", fontsize=9)
+        axes[0, j].set_title(f"N = {int(n)}")
         for i, score in enumerate(scores):
             ax = axes[i, j]
-            for d, (depth, colour) in enumerate(zip(result["depth"], colours, strict=True)):
-                for name, style in (("second_order", "-"), ("ekf", ":")):
+            for d, colour in enumerate(colours):
+                for name, style in styles:
                     ax.plot(
                         result["rho"],
                         result[name][score][:, d, j],
@@ -973,17 +1005,24 @@ def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse"))
                         linestyle=style,
                         marker="o",
                         markersize=2.5,
-                        label=f"{_filters.FILTERS[name].label}, depth {depth:g}",
                     )
             if score in nominal:
                 ax.axhline(nominal[score], color="0.6", linewidth=1)
             if score in ("rmse", "nees"):
                 ax.set_yscale("log")
             ax.set_xscale("log")
+            rho = np.asarray(result["rho"])[::2]
+            ax.set_xticks(rho, [report.rho_label(r) for r in rho])
+            ax.set_xticks([], minor=True)
             if j == 0:
-                ax.set_ylabel(labels[score], fontsize=8)
-            ax.tick_params(labelsize=7)
-        axes[-1, j].set_xlabel("noise level rho (radians)", fontsize=8)
-    handles, names = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, names, loc="outside lower center", ncol=4, frameon=False, fontsize=7)
+                ax.set_ylabel(labels[score])
+        axes[-1, j].set_xlabel("noise level rho")
+    handles = [
+        Line2D([], [], color=colour, marker="o", markersize=3, label=f"depth {depth:g}")
+        for depth, colour in zip(result["depth"], colours, strict=True)
+    ] + [
+        Line2D([], [], color="0.3", linestyle=style, label=_filters.FILTERS[name].label)
+        for name, style in styles
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, frameon=False)
     return fig

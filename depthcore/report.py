@@ -1295,48 +1295,34 @@ class GlueLog:
 
 # --- more frames ----------------------------------------------------------------------------
 
-#: The marks of :func:`frames_study_texts` for the verdicts of
-#: :func:`depthcore.experiments.coverage_test`, below (too narrow) or above the level.
-VERDICT_MARKS = {"calibrated": "", "overconfident": "↓", "underconfident": "↑"}
-
 
 def frames_study_texts(result: dict, prefix: str) -> dict:
-    """Texts of :func:`~depthcore.experiments.frames_study`'s scores, for glue.
+    """Counts of :func:`~depthcore.experiments.frames_study`'s failed coverage tests, for glue.
 
-    Each coverage carries the mark of :data:`VERDICT_MARKS` for the verdict of
-    :func:`depthcore.experiments.coverage_test` (two-sided, 1 %) against its
-    nominal level over the filter's trials.
+    Each filter's coverages of the central 68 % and 95 % intervals at every
+    ``N`` are tested by :func:`depthcore.experiments.coverage_test`
+    (two-sided, 1 %) against their nominal levels over the filter's trials.
 
     Returns
     -------
     dict
-        For the ``i``-th number of frames: ``"<prefix>_<i>_x"`` (``N``) and
-        per filter ``"<prefix>_<i>_<filter>_cov"`` (``"0.66 / 0.95"``, the
-        68 % and 95 % coverages), ``"..._hn"`` (``"0.012 / 3.1"``, Hellinger
-        distance and NEES), ``"..._msr"`` (``"0.01 / 0.045 / 0.047"``: bias,
-        mean SD, RMSE of the depth, 3 significant digits); per filter
-        ``"<prefix>_<filter>_trials"`` (the trials of its first ``N``).
+        ``"<prefix>_tests"`` (tests per filter: two levels at every ``N``) and
+        per filter ``"<prefix>_<filter>_fails"`` (the tests it fails, as
+        overconfident or as underconfident).
     """
     from .experiments import coverage_test
 
-    out = {}
-    names = [k for k, v in result.items() if isinstance(v, dict)]
-    for name in names:
-        out[f"{prefix}_{name}_trials"] = str(int(result[name]["trials"][0]))
-    for i, n in enumerate(result["frames"]):
-        out[f"{prefix}_{i}_x"] = str(int(n))
-        for name in names:
-            r = result[name]
-            cov = []
-            for level in (68, 95):
-                c = r[f"coverage_{level}"][i]
-                verdict = coverage_test(c, level / 100, r["trials"][i])["verdict"]
-                cov.append(f"{c:.2f}{VERDICT_MARKS[str(verdict)]}")
-            out[f"{prefix}_{i}_{name}_cov"] = " / ".join(cov)
-            out[f"{prefix}_{i}_{name}_hn"] = f"{r['hellinger'][i]:.3f} / {r['nees'][i]:.3g}"
-            out[f"{prefix}_{i}_{name}_msr"] = " / ".join(
-                f"{float(r[s][i]) + 0.0:.3g}" for s in ("bias", "mean_sd", "rmse")
-            )
+    out = {f"{prefix}_tests": str(2 * len(result["frames"]))}
+    for name, r in result.items():
+        if not isinstance(r, dict):
+            continue
+        verdicts = np.concatenate(
+            [
+                np.atleast_1d(coverage_test(r[f"coverage_{lv}"], lv / 100, r["trials"])["verdict"])
+                for lv in (68, 95)
+            ]
+        )
+        out[f"{prefix}_{name}_fails"] = str(int(np.sum(verdicts != "calibrated")))
     return out
 
 

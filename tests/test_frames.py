@@ -136,26 +136,35 @@ def test_frame_marginals_reject_bad_input(track):
         experiments.frame_marginals(track[:2], FIG2.rho, [3])
 
 
-def test_frames_study_texts_mark_the_verdicts(frames_run):
+def test_frames_study_texts_count_the_failed_coverage_tests(frames_run):
     texts = report.frames_study_texts(frames_run, "f")
-    assert texts["f_0_x"] == "3"
-    assert texts["f_particle_trials"] == str(frames_run["particle"]["trials"][0])
-    r = frames_run["ekf"]
-    c68, c95 = r["coverage_68"][1], r["coverage_95"][1]
-    marks = [
-        report.VERDICT_MARKS[str(experiments.coverage_test(c, lv, r["trials"][1])["verdict"])]
-        for c, lv in ((c68, 0.68), (c95, 0.95))
-    ]
-    assert texts["f_1_ekf_cov"] == f"{c68:.2f}{marks[0]} / {c95:.2f}{marks[1]}"
-    assert texts["f_1_ekf_hn"].endswith(f"{r['nees'][1]:.3g}")
+    assert texts["f_tests"] == "4"
+    assert set(texts) == {"f_tests"} | {f"f_{n}_fails" for n in frames_run if n in FILTERS}
+    for name in ("optimal", "ekf", "second_order", "particle"):
+        r = frames_run[name]
+        fails = sum(
+            experiments.coverage_test(r[f"coverage_{lv}"][i], lv / 100, r["trials"][i])["verdict"]
+            != "calibrated"
+            for lv in (68, 95)
+            for i in range(2)
+        )
+        assert texts[f"f_{name}_fails"] == str(fails)
 
 
 def test_frames_study_figure_draws_every_filter(frames_run):
-    fig = figures.frames_study_figure({"a": frames_run, "b": frames_run})
-    assert len(fig.axes) == 2 * len(figures.FRAMES_ROWS)
-    # the Hellinger row leaves the reference out
-    assert len(fig.axes[2 * 2].get_lines()) == 3
+    fig = figures.frames_study_figure(frames_run, title="a")
+    assert len(fig.axes) == len(figures.FRAMES_ROWS)
+    assert fig.get_suptitle() == "a"
+    # the Hellinger panel leaves the reference out
+    assert len(fig.axes[2].get_lines()) == 3
     assert len(fig.axes[0].get_lines()) == 4
+    # the coverage panels shade the test's acceptance band for each number of trials
+    trials = sorted({int(frames_run[k]["trials"][0]) for k in ("optimal", "particle")})
+    assert len(trials) == 2
+    for ax, level in zip(fig.axes[4:], (0.68, 0.95), strict=True):
+        bands = sorted((p.get_y(), p.get_y() + p.get_height()) for p in ax.patches)
+        half = experiments.COVERAGE_Z * np.sqrt(level * (1 - level) / np.array(trials))
+        assert_allclose(bands, np.stack([level - half, level + half], axis=1), rtol=1e-12)
     plt.close(fig)
 
 
@@ -193,6 +202,12 @@ def test_conjecture_wins_compare_cell_by_cell():
     fig = figures.conjecture_figure(c)
     assert len(fig.axes) == 6
     assert len(fig.axes[0].get_lines()) == 2 * 2  # two depths, two filters
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == [
+        "depth 6",
+        "depth 12",
+        "second order $p_s$",
+        "EKF $p_e$",
+    ]
     plt.close(fig)
 
 
