@@ -37,3 +37,7 @@ def test_convert_rewrites_the_text_and_leaves_code_cells():
 def test_convert_refuses_what_the_kernel_cannot_evaluate(role):
     with pytest.raises(ValueError, match=r"page:3: .* is not a Python name"):
         myst_roles.convert(f"# A page\n\n{role}\n")
+
+
+def test_every_page_pastes_its_numbers_with_eval(capsys):
+    assert myst_roles.main(["--check"]) == 0, capsys.readouterr().out
