@@ -1127,8 +1127,10 @@ class MarkdownTable:
         return "\n".join(lines)
 
 
-#: A ``glue:text`` (or plain ``glue``) role in a page's text; group 1 is the glued name.
-GLUE_ROLE = re.compile(r"\{glue(?::text)?\}`([^`]+)`")
+#: A role that pastes a glued text into a page's text: ``eval`` (which the book
+#: resolves to the text glued under its name, and JupyterLab evaluates in the
+#: page's kernel), ``glue:text`` or plain ``glue``; group 1 is the glued name.
+GLUE_ROLE = re.compile(r"\{(?:eval|glue(?::text)?)\}`([^`]+)`")
 
 
 def page_tables(text: str) -> list[list[str]]:
@@ -1207,6 +1209,19 @@ class PastedTable:
         return self.text
 
 
+class GluedText(str):
+    """A glued text, bound to its name in the kernel by :class:`GlueLog`.
+
+    Its ``repr`` is the text itself, so Jupyter shows it as the book pastes it
+    (``0.25``, not ``'0.25'``) where an ``{eval}`` role of the page names it.
+    """
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return str(self)
+
+
 class GlueLog:
     """Shows in Jupyter what a book page glues into the book's text.
 
@@ -1222,6 +1237,11 @@ class GlueLog:
     numbers pasted in, once every number in it has been glued. The book leaves
     the cells that create and show it out.
 
+    Every glued text is also bound, as a :class:`GluedText`, to its name in the
+    kernel's namespace, where JupyterLab's MyST renderer (jupyterlab-myst)
+    evaluates the page's ``{eval}`name``` roles: the prose shows each number
+    where the book pastes it, once the cell that glues it has run.
+
     Parameters
     ----------
     page : str or path, optional
@@ -1232,6 +1252,9 @@ class GlueLog:
     ------
     RuntimeError
         Outside a Jupyter kernel (ipykernel), where there is nothing to watch.
+    ValueError
+        From ``glue``, when a text is glued under a name that the page's code
+        uses for something else (it would be overwritten).
     """
 
     #: The prefix of the media types of a record that is not displayed (myst_nb's).
@@ -1240,9 +1263,11 @@ class GlueLog:
     def __init__(self, page=None):
         from IPython import get_ipython
 
-        publisher = getattr(get_ipython(), "display_pub", None)
+        shell = get_ipython()
+        publisher = getattr(shell, "display_pub", None)
         if not hasattr(publisher, "register_hook"):
             raise RuntimeError("GlueLog runs in a Jupyter kernel (ipykernel) only")
+        self._namespace = shell.user_ns
         self._kept: list[tuple[str, dict, dict]] = []
         self._texts: dict[str, str] = {}
         self._tables = [] if page is None else page_tables(Path(page).read_text(encoding="utf-8"))
@@ -1256,7 +1281,18 @@ class GlueLog:
             data = {k[n:]: v for k, v in content["data"].items()}
             metadata = {k: v for k, v in content["metadata"].items() if k != "scrapbook"}
             self._kept.append((glued["name"], data, metadata))
+            if set(data) == {"text/plain"}:
+                self._bind(glued["name"], self.pasted_text(data["text/plain"]))
         return msg
+
+    def _bind(self, name: str, text: str) -> None:
+        current = self._namespace.get(name)
+        if name in self._namespace and not isinstance(current, GluedText):
+            raise ValueError(
+                f"name {name!r} is glued but also names a {type(current).__name__} "
+                "of the page's code: glue the text under another name"
+            )
+        self._namespace[name] = GluedText(text)
 
     @staticmethod
     def pasted_text(text: str) -> str:

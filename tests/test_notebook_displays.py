@@ -2,7 +2,7 @@
 
 The book pastes what a page glues (``myst_nb.glue(..., display=False)``) into
 its text: figures (``{glue:figure}``, ``{glue}``) and numbers
-(``{glue:text}``) in tables and prose. Jupyter displays none of these records,
+(``{eval}``, ``{glue:text}``) in tables and prose. Jupyter displays none of these records,
 so each page also displays them in cells that the book leaves out
 (:class:`depthcore.report.GlueLog`, :func:`depthcore.report.comparison_table`).
 
@@ -12,7 +12,7 @@ notebooks-update``), which ``make notebooks`` checks against a fresh run of
 the page. For each page:
 
 * every glued figure is displayed as the same PNG image that the book shows;
-* every name pasted with ``{glue:text}`` or ``{glue}`` is displayed on one line
+* every name pasted with ``{eval}``, ``{glue:text}`` or ``{glue}`` is displayed on one line
   with its value, as the book pastes it;
 * every table of the page that pastes glued numbers is displayed whole, with
   the numbers that the book puts in it (the figure pages' tables of the
@@ -38,7 +38,7 @@ import check_notebooks  # noqa: E402  (the one reader of _toc.yml)
 PREFIX = "application/papermill.record/"
 SHOWN = ("text/plain", "text/markdown", "text/html")
 FIGURE_DIRECTIVE = re.compile(r"^(?:```|:::)\{glue(?::figure)?\}\s+(\S+)\s*$", re.MULTILINE)
-TEXT_ROLE = re.compile(r"\{glue(?::text)?\}`([^`]+)`")
+TEXT_ROLE = re.compile(r"\{(?:eval|glue(?::text)?)\}`([^`]+)`")
 # The figure pages' tables of the paper's numbers beside ours.
 COMPARISON_HEADER = "| density | paper: mean | ours: mean | paper: SD | ours: SD |"
 PAGES = check_notebooks.notebook_pages()

@@ -267,3 +267,48 @@ def test_bench_readme_blocks_hold_every_table_and_its_origin():
     bank = records["bench_bank"]["results"]["many_trials"]
     verdict = "met" if bank["time_s"] < bank["target_s"] else "not met"
     assert f"({verdict})" in blocks["bank"]
+
+
+def test_glue_log_binds_each_glued_text_to_its_name(monkeypatch):
+    import IPython
+
+    class Publisher:
+        def register_hook(self, hook):
+            self.hook = hook
+
+    class Shell:
+        display_pub = Publisher()
+        user_ns = {"rho": 0.005}
+
+    monkeypatch.setattr(IPython, "get_ipython", Shell)
+    report.GlueLog()
+    prefix = report.GlueLog.PREFIX
+
+    def glue(name, data):
+        record = {"name": name, "mime_prefix": prefix}
+        msg = {
+            "msg_type": "display_data",
+            "content": {
+                "data": {prefix + k: v for k, v in data.items()},
+                "metadata": {"scrapbook": record},
+            },
+        }
+        assert Shell.display_pub.hook(msg) is msg
+
+    glue("fig2_mean", {"text/plain": "'6.4660'"})
+    glue("fig2_count", {"text/plain": "3"})
+    glue("fig2_figure", {"text/plain": "<Figure>", "image/png": "iVBOR"})
+    bound = Shell.user_ns["fig2_mean"]
+    assert isinstance(bound, report.GluedText) and bound == "6.4660"
+    assert repr(bound) == "6.4660" and repr(Shell.user_ns["fig2_count"]) == "3"
+    assert "fig2_figure" not in Shell.user_ns
+    glue("fig2_mean", {"text/plain": "'6.47'"})  # glued again: bound again
+    assert Shell.user_ns["fig2_mean"] == "6.47"
+    with pytest.raises(ValueError, match="'rho' is glued but also names a float"):
+        glue("rho", {"text/plain": "'1/200'"})
+    assert Shell.user_ns["rho"] == 0.005
+
+
+def test_page_tables_reads_eval_roles_as_glue_text():
+    tables = report.page_tables("| a | b |\n|---|---|\n| {eval}`x` | {glue:text}`y` |\n")
+    assert report.paste_table(tables[0], {"x": "1", "y": "2"}).endswith("| 1 | 2 |")

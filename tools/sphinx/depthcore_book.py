@@ -1,4 +1,4 @@
-"""Sphinx extension of the book: what a reader can download from the HTML book.
+"""Sphinx extension of the book: what a reader can download, and the numbers of the text.
 
 Each page's executed notebook
 -----------------------------
@@ -9,6 +9,18 @@ with its outputs, to ``_sources/<page>.ipynb`` in the HTML build and tells
 sphinx-book-theme about it, so that the page's download menu offers
 ``.ipynb`` beside ``.md`` (the theme does so itself only when a launch
 service such as Binder is configured).
+
+The numbers of the text: ``{eval}`name```
+-----------------------------------------
+The pages write each number of their text as ``{eval}`name```, where
+``name`` is the name under which the page glues the number's text
+(``myst_nb.glue(name, text, display=False)``). In JupyterLab, jupyterlab-myst
+evaluates ``name`` in the page's kernel, where ``depthcore.report.GlueLog``
+binds each glued text to its name. The book executes its pages with myst-nb
+(not in myst-nb's ``inline`` mode, the only one in which its own ``eval``
+role works): this extension makes ``eval`` paste the text glued under the
+name, exactly as myst-nb's ``glue:text`` role does, so the book shows what it
+showed with ``glue:text``, and a name that is not glued fails the strict build.
 
 The downloads folder
 --------------------
@@ -69,7 +81,19 @@ def drop_repeated_citations(app, what, name, obj, options, lines):
     lines[:] = kept
 
 
+def paste_eval_as_glue(app, config):
+    """Make ``{eval}`name``` paste the text glued under ``name`` (myst-nb's ``glue:text``).
+
+    Connected to ``config-inited``, after every extension's ``setup``: it
+    replaces the ``eval`` role that myst-nb registers.
+    """
+    from myst_nb.ext.glue.roles import PasteTextRole
+
+    app.add_role("eval", PasteTextRole(), override=True)
+
+
 def setup(app):
+    app.connect("config-inited", paste_eval_as_glue)
     app.connect("autodoc-process-docstring", drop_repeated_citations)
     app.add_config_value("depthcore_downloads", "_build/extra/downloads", "html")
     # Before sphinx-book-theme builds its header buttons (priority 501).

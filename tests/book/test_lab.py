@@ -1,0 +1,274 @@
+"""The book's pages render in JupyterLab as in the book: numbers and mathematics.
+
+Starts JupyterLab (with jupyterlab-myst, pinned in requirements.txt) on
+127.0.0.1 over a copy of ``book/`` in a temporary folder (so that nothing the
+session saves reaches the pages), opens each page of ``PAGES`` as a notebook
+(jupytext) in headless Chromium, runs all its cells, runs its text cells once
+more (as a reader does after "Run All" for the few numbers that a page's text
+quotes above the cell that computes them), and checks in the rendered page
+that
+
+* every ``{eval}`name``` of its text shows the text that the book pastes there:
+  the value glued under ``name`` in the page's reference outputs
+  (``book/_nbval/<page>.ipynb``, which ``make notebooks`` checks against a fresh
+  run), with no error and no role left as source;
+* no ``{eval}`` or ``{glue:text}`` role is shown as source (but for those in
+  the captions of glued figures, ``{glue:figure}``, a directive of myst-nb's
+  that jupyterlab-myst shows as its source in a box), and the
+  mathematics of every text cell is typeset (by KaTeX, as jupyterlab-myst
+  does), without errors.
+
+It needs no built book; without Chromium it is skipped (failed under CI).
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+import re
+import secrets
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+import nbformat
+import pytest
+from test_browser import CHROMEDRIVER, CHROMIUM, CHROMIUM_FLAGS
+
+ROOT = Path(__file__).resolve().parents[2]
+PAGES = ("fig2", "beyond_filters")
+EVAL_ROLE = re.compile(r"\{eval\}`([^`]+)`")
+# A glued figure with its caption: jupyterlab-myst shows its source in a box
+# "glue:figure - Unknown Directive" (the figure itself is an output of the page).
+GLUE_FIGURE = re.compile(r"^(`{3,}|:{3,})\{glue:figure\}.*?^\1\s*$", re.S | re.M)
+START_TIMEOUT = 120  # seconds for JupyterLab to answer
+RUN_TIMEOUT = 900  # seconds for a page's cells to run
+SCREENSHOTS = os.environ.get("DEPTHCORE_LAB_SCREENSHOTS")  # a folder, to look at the pages
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def lab(missing_prerequisite, tmp_path_factory):
+    """(base URL with token, the served folder) of a JupyterLab started for the test."""
+    if CHROMIUM is None or CHROMEDRIVER is None:
+        missing_prerequisite(
+            "Chromium or ChromeDriver not found (apt-get install chromium "
+            "chromium-driver): the pages are not checked in JupyterLab"
+        )
+    home = tmp_path_factory.mktemp("lab")
+    # Every cell rendered, not only those scrolled into view.
+    tracker = (
+        home / "settings" / "@jupyterlab" / "notebook-extension" / "tracker.jupyterlab-settings"
+    )
+    tracker.parent.mkdir(parents=True)
+    tracker.write_text('{"windowingMode": "none"}')
+    served = home / "served"
+    shutil.copytree(ROOT / "book", served / "book", ignore=shutil.ignore_patterns("_nbval"))
+    token, port = secrets.token_hex(16), free_port()
+    env = dict(
+        os.environ,
+        JUPYTER_PATH=str(ROOT / "tools" / "jupyter"),
+        JUPYTER_PREFER_ENV_PATH="1",
+        JUPYTER_CONFIG_DIR=str(home / "config"),
+        JUPYTER_RUNTIME_DIR=str(home / "runtime"),
+        JUPYTER_DATA_DIR=str(home / "data"),
+        JUPYTERLAB_SETTINGS_DIR=str(home / "settings"),
+        JUPYTERLAB_WORKSPACES_DIR=str(home / "workspaces"),
+    )
+    command = [
+        sys.executable,
+        "-m",
+        "jupyterlab",
+        "--no-browser",
+        "--allow-root",
+        "--ServerApp.ip=127.0.0.1",
+        f"--ServerApp.port={port}",
+        "--ServerApp.port_retries=0",
+        f"--IdentityProvider.token={token}",
+        f"--ServerApp.root_dir={served}",
+        "--LabApp.expose_app_in_browser=True",
+    ]
+    log = (home / "lab.log").open("w")
+    server = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + START_TIMEOUT
+        while True:
+            assert server.poll() is None, f"JupyterLab stopped: {(home / 'lab.log').read_text()}"
+            try:
+                with urllib.request.urlopen(f"{base}/api/status?token={token}", timeout=5):
+                    break
+            except OSError:
+                assert time.monotonic() < deadline, f"JupyterLab not up in {START_TIMEOUT} s"
+                time.sleep(1)
+        yield base, token, served
+    finally:
+        server.terminate()
+        try:
+            server.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            server.kill()
+        log.close()
+
+
+@pytest.fixture(scope="module")
+def driver(lab):
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    profile = tempfile.mkdtemp(prefix="depthcore-chromium-")
+    flags = [f for f in CHROMIUM_FLAGS if not f.startswith("--host-resolver-rules")]
+    # Only the loopback JupyterLab is reachable: nothing is fetched from a network.
+    flags.append("--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1")
+    for flag in [*flags, f"--user-data-dir={profile}"]:
+        options.add_argument(flag)
+    browser = webdriver.Chrome(service=Service(executable_path=CHROMEDRIVER), options=options)
+    browser.set_script_timeout(START_TIMEOUT)
+    try:
+        yield browser
+    finally:
+        browser.quit()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+def glued_texts(page: str) -> dict[str, str]:
+    """The texts glued by the page's reference run, as the book pastes them."""
+    nb = nbformat.read(ROOT / "book" / "_nbval" / f"{page}.ipynb", as_version=4)
+    texts = {}
+    for cell in nb.cells:
+        for out in cell.get("outputs", []) if cell.cell_type == "code" else []:
+            record = out.get("metadata", {}).get("scrapbook")
+            if record and record.get("mime_prefix"):
+                plain = out["data"].get(record["mime_prefix"] + "text/plain")
+                if plain is not None:
+                    try:
+                        texts[record["name"]] = str(ast.literal_eval(plain))
+                    except (SyntaxError, ValueError):
+                        texts[record["name"]] = plain
+    return texts
+
+
+# Opens the page with jupytext's notebook view, runs all cells, waits for the
+# kernel, runs the text cells again, and leaves in window.depthcoreResult each
+# text cell's source, its rendered text, and what it shows of the inline
+# expressions and the math (polled: a call to the browser must not last minutes).
+RUN_PAGE = """
+const path = arguments[0];
+window.depthcoreResult = null;
+const done = result => { window.depthcoreResult = result; };
+const sleep = ms => new Promise(r => setTimeout(r, ms));
+(async () => {
+  const app = window.jupyterapp;
+  const panel = await app.commands.execute('docmanager:open',
+                                           {path, factory: 'Jupytext Notebook'});
+  await panel.context.ready;
+  await panel.sessionContext.ready;
+  const kernelIdle = async () => {
+    while (!panel.sessionContext.session?.kernel ||
+           panel.sessionContext.session.kernel.status !== 'idle') await sleep(250);
+  };
+  await kernelIdle();
+  await app.commands.execute('notebook:run-all-cells');
+  const running = () => panel.content.widgets.some(
+    c => c.model.type === 'code' && c.promptNode && c.promptNode.textContent.includes('*'));
+  do { await sleep(1000); await kernelIdle(); } while (running());
+  const errors = panel.content.widgets
+    .filter(c => c.model.type === 'code')
+    .flatMap(c => c.model.outputs.toJSON())
+    .filter(o => o.output_type === 'error')
+    .map(o => o.ename + ': ' + o.evalue);
+  // Run the text cells again, one by one: the few numbers quoted above their
+  // cell now evaluate.
+  for (const [i, c] of panel.content.widgets.entries()) {
+    if (c.model.type !== 'markdown') continue;
+    panel.content.activeCellIndex = i;
+    panel.content.deselectAll();
+    await panel.content.scrollToItem(i);
+    await app.commands.execute('notebook:run-cell');
+    await kernelIdle();
+  }
+  await sleep(3000);
+  await kernelIdle();
+  await sleep(3000);
+  const cells = panel.content.widgets.filter(c => c.model.type === 'markdown').map(c => {
+    const node = c.node.querySelector('.myst');  // jupyterlab-myst's rendering
+    if (!node) return {source: c.model.sharedModel.getSource(), rendered: false};
+    // The text without the math's own text and without the boxes of the
+    // directives jupyterlab-myst does not know (glue:figure), which hold their source.
+    const prose = node.cloneNode(true);
+    prose.querySelectorAll('.katex').forEach(e => e.remove());
+    const unknown = [...prose.querySelectorAll('details')].filter(
+      e => (e.querySelector('summary')?.textContent || '').includes('Unknown Directive'));
+    unknown.forEach(e => e.remove());
+    return {
+      unknown: unknown.map(e => e.querySelector('summary').textContent),
+      source: c.model.sharedModel.getSource(),
+      rendered: c.rendered,
+      text: prose.textContent,
+      codes: [...node.querySelectorAll('code')].map(e => e.textContent),
+      errors: [...node.querySelectorAll('[data-mime-type="application/vnd.jupyter.stderr"]')]
+        .map(e => e.textContent),
+      math: node.querySelectorAll('.katex').length,
+      mathErrors: node.querySelectorAll('.katex-error').length,
+    };
+  });
+  done({cells, errors});
+})().catch(e => done({failed: String(e)}));
+"""
+
+
+@pytest.mark.parametrize("page", PAGES)
+def test_page_renders_its_numbers_and_math_in_jupyterlab(lab, driver, page):
+    base, token, served = lab
+    driver.get(f"{base}/lab?token={token}&reset")
+    deadline = time.monotonic() + START_TIMEOUT
+    while not driver.execute_script("return !!(window.jupyterapp && window.jupyterapp.started)"):
+        assert time.monotonic() < deadline, f"JupyterLab's page not ready in {START_TIMEOUT} s"
+        time.sleep(0.5)
+    driver.execute_async_script("window.jupyterapp.started.then(arguments[0])")
+    driver.execute_script(RUN_PAGE, f"book/{page}.md")
+    deadline = time.monotonic() + RUN_TIMEOUT
+    while (result := driver.execute_script("return window.depthcoreResult")) is None:
+        assert time.monotonic() < deadline, f"{page}: not run in JupyterLab in {RUN_TIMEOUT} s"
+        time.sleep(2)
+    if SCREENSHOTS:
+        driver.save_screenshot(str(Path(SCREENSHOTS) / f"lab-{page}.png"))
+    assert "failed" not in result, f"{page}: {result.get('failed')}"
+    assert not result["errors"], f"{page}: cells failed in JupyterLab: {result['errors']}"
+
+    texts = glued_texts(page)
+    cells = result["cells"]
+    assert cells and all(c["rendered"] for c in cells), f"{page}: a text cell is not rendered"
+    shown, missing = 0, []
+    for cell in cells:
+        assert not cell["errors"], f"{page}: expressions failed: {cell['errors']}"
+        assert "{eval}" not in cell["text"] and "{glue" not in cell["text"], (
+            f"{page}: a role is shown as source: {cell['text'][:200]!r}"
+        )
+        assert all(box.startswith("glue:figure") for box in cell["unknown"]), (
+            f"{page}: directives not rendered: {cell['unknown']}"
+        )
+        for name in EVAL_ROLE.findall(GLUE_FIGURE.sub("", cell["source"])):
+            assert name in texts, f"{page}: {name!r} is evaluated but never glued"
+            assert name not in cell["codes"], f"{page}: {{eval}}`{name}` is not evaluated"
+            if texts[name] in cell["text"]:
+                shown += 1
+            else:
+                missing.append(f"{name} = {texts[name]}")
+        if "$" in cell["source"]:
+            assert cell["math"] > 0, f"{page}: math not typeset in {cell['source'][:80]!r}"
+        assert cell["mathErrors"] == 0, f"{page}: MathJax errors in {cell['source'][:80]!r}"
+    assert not missing, f"{page}: numbers not shown: {missing}"
+    assert shown >= 10, f"{page}: only {shown} numbers shown in the text"
