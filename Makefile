@@ -101,7 +101,8 @@ $(ALONE_STAMP): requirements.txt $(STAMP)
 	touch $(ALONE_STAMP)
 
 # The HTML book ships, under _build/html/downloads/, what a reader takes away:
-# Figures 2-6 as PDF, SVG and PNG, depthcore's source archive with the pinned
+# Figures 2-6 as PDF, SVG and PNG, depthcore's source archive (with CITATION.cff
+# inside the package, for the page "Cite this work" run alone) with the pinned
 # requirements, and the PDF of the book when `make pdf` has built it (as
 # `make test` does first). The pages' executed notebooks are offered on each page.
 DOWNLOADS := _build/extra/downloads
@@ -120,8 +121,10 @@ book: $(EDITABLE) $(FIGURES)/.written
 	mkdir -p $(DOWNLOADS)
 	cp -r $(FIGURES) $(DOWNLOADS)/figures
 	rm -f $(DOWNLOADS)/figures/.written
+	cp CITATION.cff depthcore/CITATION.cff
 	$(PY) -c 'from setuptools import build_meta; import sys; sys.stdout = sys.stderr; \
-	  print(build_meta.build_sdist("$(DOWNLOADS)"))' 2>/dev/null
+	  print(build_meta.build_sdist("$(DOWNLOADS)"))' 2>/dev/null || { rm -f depthcore/CITATION.cff; exit 1; }
+	rm -f depthcore/CITATION.cff
 	mv $(DOWNLOADS)/depthcore-*.tar.gz $(DOWNLOADS)/depthcore.tar.gz
 	cp requirements.txt CITATION.cff $(DOWNLOADS)/
 	@if [[ -f $(PDF) ]]; then cp $(PDF) $(DOWNLOADS)/depthcore.pdf; else \

@@ -115,3 +115,12 @@ def test_source_archive_holds_the_benchmark_records(html_dir):
         names = tar.getnames()
     missing = [r for r in records if f"{top}/depthcore/benchmark_records/{r}" not in names]
     assert not missing, f"the source archive lacks the records {missing}"
+
+
+def test_source_archive_installs_the_citation_file(html_dir):
+    # The page "Cite this work", downloaded and run alone, reads it from the package.
+    top = f"depthcore-{depthcore.__version__}"
+    with tarfile.open(html_dir / "downloads" / "depthcore.tar.gz") as tar:
+        cff = tar.extractfile(f"{top}/depthcore/CITATION.cff").read()
+    assert cff == (ROOT / "CITATION.cff").read_bytes()
+    assert not (ROOT / "depthcore" / "CITATION.cff").exists(), "left in the package by make book"
