@@ -28,8 +28,9 @@
 # The HTML and the PDF builds execute each page once between them: Jupyter
 # Book's execution cache (_build/.jupyter_cache) keeps each page's outputs,
 # emptied when depthcore, requirements.txt, pyproject.toml or CITATION.cff
-# change and dropped for a page whose text changes (tools/check_notebooks.py
-# cache). `make book` after `make test` on an unchanged tree executes nothing.
+# change and dropped for a page whose text changes; the pages it lacks are
+# executed two at a time before the build (tools/check_notebooks.py cache
+# --execute). `make book` after `make test` on an unchanged tree executes nothing.
 
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
@@ -129,7 +130,7 @@ book: $(EDITABLE) $(FIGURES)/.written
 	cp requirements.txt CITATION.cff $(DOWNLOADS)/
 	@if [[ -f $(PDF) ]]; then cp $(PDF) $(DOWNLOADS)/depthcore.pdf; else \
 	  echo "make book: NOTE: $(PDF) not found, so the book links a PDF it does not ship: run \`make pdf\` first" >&2; fi
-	$(PY) tools/check_notebooks.py cache
+	$(PY) tools/check_notebooks.py cache --execute
 	$(VENV)/bin/jupyter-book build . --all -W -n --keep-going 2>&1 | tee _build/book.log
 
 # Sphinx's LaTeX builder, then xelatex (Debian: texlive-xetex texlive-latex-extra
@@ -140,7 +141,7 @@ pdf: $(EDITABLE)
 	    "texlive-latex-extra texlive-fonts-recommended lmodern latexmk fonts-freefont-otf)" >&2; exit 1; }; done
 	rm -rf _build/latex
 	mkdir -p _build/latex
-	$(PY) tools/check_notebooks.py cache
+	$(PY) tools/check_notebooks.py cache --execute
 	$(VENV)/bin/jupyter-book build . --builder latex --all -W -n --keep-going 2>&1 | tee _build/latex.log
 	cd _build/latex && latexmk -xelatex -interaction=nonstopmode -halt-on-error depthcore.tex \
 	  > latexmk.log 2>&1 || { tail -n 40 latexmk.log >&2; echo "make pdf: xelatex failed, see _build/latex/depthcore.log" >&2; exit 1; }

@@ -128,6 +128,45 @@ def test_bytecode_does_not_change_the_fingerprint(tmp_path):
     assert check_notebooks.environment_fingerprint(root) != before
 
 
+PAGE_HEAD = """---
+jupytext:
+  text_representation:
+    extension: .md
+    format_name: myst
+kernelspec:
+  display_name: Python 3
+  language: python
+  name: python3
+---
+
+# A page
+
+```{code-cell} ipython3
+"""
+
+
+def test_the_pages_the_cache_lacks_are_executed_and_found_by_the_build(tmp_path, monkeypatch):
+    from jupyter_cache import get_cache
+
+    monkeypatch.setenv("JUPYTER_PATH", str(check_notebooks.KERNELS))
+    good, bad = tmp_path / "good.md", tmp_path / "bad.md"
+    good.write_text(
+        PAGE_HEAD + "from pathlib import Path\nprint(sorted(Path().glob('*.md')))\n```\n"
+    )
+    bad.write_text(PAGE_HEAD + "1 / 0\n```\n")
+    cache = tmp_path / "cache"
+    assert check_notebooks.fill_cache([good, bad], 2, cache) == [good]
+    # What myst-nb's cache mode looks up: the page as it reads it.
+    store = get_cache(cache)
+    record = store.match_cache_notebook(check_notebooks.read_as_the_book(good))
+    (cell,) = [c for c in store.get_cache_bundle(record.pk).nb.cells if c.cell_type == "code"]
+    # run in the page's folder, as the build runs it
+    assert cell.outputs[0]["text"] == "[PosixPath('bad.md'), PosixPath('good.md')]\n"
+    assert check_notebooks.fill_cache([good], 2, cache) == []  # nothing left to execute
+    with pytest.raises(KeyError):
+        store.match_cache_notebook(check_notebooks.read_as_the_book(bad))
+
+
 def test_the_config_uses_the_cache_that_make_keys():
     import yaml
 
@@ -140,7 +179,7 @@ def test_the_config_uses_the_cache_that_make_keys():
     for target in ("book", "pdf"):
         recipe = makefile.split(f"\n{target}: ", 1)[1].split("\n\n", 1)[0]
         build = recipe.index("jupyter-book build")
-        assert 0 <= recipe.find("tools/check_notebooks.py cache") < build, target
+        assert 0 <= recipe.find("tools/check_notebooks.py cache --execute") < build, target
 
 
 # --- the downloaded notebooks, run alone ---------------------------------------------------

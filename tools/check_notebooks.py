@@ -47,7 +47,9 @@ reference notebook ``book/_nbval/<name>.ipynb``.
     jupyter-cache's records: the cache is emptied when depthcore (its source
     and data), ``requirements.txt``, ``pyproject.toml`` or ``CITATION.cff``
     changed, and a page's record is dropped when the page's text changed (its
-    tables of glued numbers are shown by its cells).
+    tables of glued numbers are shown by its cells). With ``--execute``, the
+    pages it then lacks are executed, two at a time (``-n``), and cached as
+    the build would, which would execute them one after the other.
 
 The kernel runs in the page's folder, as it does in the book build. This
 module is also loaded by pytest as a plugin (``-p check_notebooks``) to tell
@@ -500,6 +502,69 @@ def prepare_cache(pages: list[Path], cache: Path = CACHE, root: Path = ROOT) -> 
     return dropped
 
 
+def read_as_the_book(page: Path):
+    """The page as myst-nb reads it in the book's build (its cache key is this notebook's)."""
+    from myst_nb.core.read import read_myst_markdown_notebook
+
+    return read_myst_markdown_notebook(
+        page.read_text(encoding="utf-8"), add_source_map=True, path=page
+    )
+
+
+def execute_for_cache(page: Path):
+    """Execute ``page`` as myst-nb's cache mode does: (page, notebook, seconds, error text)."""
+    from jupyter_cache.executors.utils import single_nb_execution
+
+    nb = read_as_the_book(page)
+    result = single_nb_execution(nb, cwd=str(page.parent), timeout=TIMEOUT, allow_errors=False)
+    return page, nb, result.time, None if result.err is None else result.exc_string
+
+
+def fill_cache(pages: list[Path], workers: int, cache: Path = CACHE) -> list[Path]:
+    """Execute the pages the cache lacks, ``workers`` at a time, and cache their outputs.
+
+    The book's build executes its pages one after the other; run first, this
+    spreads them over the cores, and the build then finds every page cached.
+    A page that fails is left out of the cache: the build runs it again and
+    reports its error.
+
+    Returns
+    -------
+    list of Path
+        The pages executed and cached.
+    """
+    from concurrent.futures import ProcessPoolExecutor
+
+    from jupyter_cache import get_cache
+    from jupyter_cache.base import CacheBundleIn
+
+    store = get_cache(cache)
+    missing = []
+    for page in pages:
+        try:
+            store.match_cache_notebook(read_as_the_book(page))
+        except KeyError:
+            missing.append(page)
+    done = []
+    if not missing:
+        return done
+    print(f"execution cache: executing {len(missing)} pages, {workers} at a time", flush=True)
+    with ProcessPoolExecutor(max_workers=max(1, min(workers, len(missing)))) as pool:
+        for page, nb, seconds, error in pool.map(execute_for_cache, missing):
+            name = page.relative_to(ROOT) if page.is_relative_to(ROOT) else page
+            if error is not None:
+                print(f"  {name}: failed, left to the build to report", flush=True)
+                continue
+            store.cache_notebook_bundle(
+                CacheBundleIn(nb, str(page), data={"execution_seconds": seconds}),
+                check_validity=False,
+                overwrite=True,
+            )
+            print(f"  {name}: executed in {seconds:.1f} s", flush=True)
+            done.append(page)
+    return done
+
+
 def stable_cell_ids(nb) -> None:
     """Give cells ids derived from their content, so that an unchanged page
     rewrites to an unchanged reference (jupytext draws random ids)."""
@@ -570,6 +635,11 @@ def main(argv: list[str] | None = None) -> int:
         help="parallel nbval workers for `check` (default 2)",
     )
     parser.add_argument(
+        "--execute",
+        action="store_true",
+        help="`cache`: then execute the pages it lacks, --workers at a time",
+    )
+    parser.add_argument(
         "pages",
         nargs="*",
         help="only these pages (e.g. fig6); `update` then leaves every other reference alone",
@@ -598,6 +668,8 @@ def main(argv: list[str] | None = None) -> int:
         dropped = prepare_cache(every)
         if dropped:
             print(f"execution cache: dropped {', '.join(dropped)} (changed since executed)")
+        if args.execute:
+            fill_cache(every, args.workers)
         return 0
     status = update(pages)
     if not args.pages:
