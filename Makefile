@@ -27,10 +27,10 @@
 #
 # The HTML and the PDF builds execute each page once between them: Jupyter
 # Book's execution cache (_build/.jupyter_cache) keeps each page's outputs,
-# emptied when depthcore, requirements.txt, pyproject.toml or CITATION.cff
-# change and dropped for a page whose text changes; the pages it lacks are
-# executed two at a time before the build (tools/check_notebooks.py cache
-# --execute). `make book` after `make test` on an unchanged tree executes nothing.
+# emptied when depthcore, requirements.txt or CITATION.cff change and dropped
+# for a page whose text changes; the pages it lacks are executed two at a time
+# before the build (tools/check_notebooks.py cache --execute). `make book`
+# after `make test` on an unchanged tree executes nothing.
 
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c

@@ -45,9 +45,9 @@ reference notebook ``book/_nbval/<name>.ipynb``.
     ``execute_notebooks: cache``, shared by the HTML and the PDF builds) on
     what a page's outputs depend on beyond its code cells, which alone key
     jupyter-cache's records: the cache is emptied when depthcore (its source
-    and data), ``requirements.txt``, ``pyproject.toml`` or ``CITATION.cff``
-    changed, and a page's record is dropped when the page's text changed (its
-    tables of glued numbers are shown by its cells). With ``--execute``, the
+    and data), ``requirements.txt`` or ``CITATION.cff`` changed, and a page's
+    record is dropped when the page's text changed (its tables of glued
+    numbers are shown by its cells). With ``--execute``, the
     pages it then lacks are executed, two at a time (``-n``), and cached as
     the build would, which would execute them one after the other.
 
@@ -438,7 +438,7 @@ def standalone(
 #: Jupyter Book's execution cache (``execute.cache`` unset: ``_build/.jupyter_cache``).
 CACHE = ROOT / "_build" / ".jupyter_cache"
 #: What every page's outputs may depend on besides its own text.
-ENVIRONMENT = ("depthcore", "requirements.txt", "pyproject.toml", "CITATION.cff")
+ENVIRONMENT = ("depthcore", "requirements.txt", "CITATION.cff")
 #: The key of the cache's contents, beside them.
 CACHE_KEY = "depthcore-key.json"
 
