@@ -256,7 +256,13 @@ def check(pages: list[Path], workers: int, every: list[Path] | None = None) -> i
 
 
 def run_nbval(
-    notebooks: list[Path], workers: int, python: str, cwd: Path, env: dict, plugin: bool = False
+    notebooks: list[Path],
+    workers: int,
+    python: str,
+    cwd: Path,
+    env: dict,
+    plugin: bool = False,
+    sanitize: Path = SANITIZE,
 ) -> int:
     """Run nbval on ``notebooks`` with the pytest of ``python``; its return code.
 
@@ -271,10 +277,11 @@ def run_nbval(
         "pytest",
         "--nbval",
         *(["-p", "check_notebooks"] if plugin else ["-p", "no:cacheprovider"]),
-        "--nbval-sanitize-with",
-        str(SANITIZE),
-        "--nbval-cell-timeout",
-        str(TIMEOUT),
+        # one argument each: pytest takes a path given apart for a test path, and
+        # finds the root of the notebooks' test ids from the paths it is given
+        f"--nbval-sanitize-with={sanitize}",
+        f"--nbval-cell-timeout={TIMEOUT}",
+        f"--rootdir={cwd}",
         "-q",
         "-o",
         "console_output_style=classic",
@@ -413,6 +420,8 @@ def standalone(
     with tempfile.TemporaryDirectory(prefix="depthcore-notebooks-") as tmp:
         root = Path(tmp)
         (root / "conftest.py").write_text(conftest_text(), encoding="utf-8")
+        sanitize = root / SANITIZE.name
+        sanitize.write_bytes(SANITIZE.read_bytes())
         copies = []
         for page, nb in runs.items():
             folder = root / page.stem
@@ -424,7 +433,7 @@ def standalone(
             f"{root}, with {python}",
             flush=True,
         )
-        status = run_nbval(copies, workers, python, root, env)
+        status = run_nbval(copies, workers, python, root, env, sanitize=sanitize.relative_to(root))
     if status != 0:
         print(
             "make notebooks-standalone: a downloaded notebook fails alone, or its outputs "
