@@ -226,16 +226,18 @@ def test_the_standalone_conftest_skips_what_the_drift_check_skips():
     assert collector.skip_compare == ("metadata",) + check_notebooks.SKIP_COMPARE
 
 
-def test_only_pinned_packages_count_as_the_environment(tmp_path, monkeypatch):
+def test_the_environment_is_the_pins_and_depthcore_alone(tmp_path, monkeypatch):
     import subprocess
 
     requirements = tmp_path / "requirements.txt"
-    requirements.write_text("# pins\nNumPy==2.4.6\njupyter_client==8.10.0\n")
-    listed = "numpy==2.4.6\njupyter-client==8.10.0\npip==24.0\ndepthcore==1.0\nrequests==2.0\n"
+    requirements.write_text("# pins\nNumPy==2.4.6\njupyter_client==8.10.0\nscipy==1.17.1\n")
+    listed = "numpy==2.4.6\njupyter-client==8.9.0\npip==24.0\ndepthcore==1.0\nrequests==2.0\n"
     monkeypatch.setattr(
         subprocess, "run", lambda *a, **k: subprocess.CompletedProcess(a, 0, stdout=listed)
     )
-    assert check_notebooks.foreign_packages("python", requirements) == ["requests"]
+    unmet, foreign = check_notebooks.environment_mismatch("python", requirements)
+    assert unmet == ["jupyter-client==8.10.0", "scipy==1.17.1"]
+    assert foreign == ["requests"]
 
 
 def test_standalone_refuses_to_run_without_a_built_book(tmp_path, capsys):

@@ -327,8 +327,16 @@ def conftest_text() -> str:
     )
 
 
-def foreign_packages(python: str, requirements: Path) -> list[str]:
-    """Distributions installed for ``python`` that are neither pinned nor depthcore nor pip."""
+def environment_mismatch(python: str, requirements: Path) -> tuple[list[str], list[str]]:
+    """How the packages installed for ``python`` differ from the pins of ``requirements``.
+
+    Returns
+    -------
+    unmet : list of str
+        The pins (``name==version``) not installed at their version.
+    foreign : list of str
+        Installed distributions that are neither pinned nor depthcore nor pip.
+    """
     listed = subprocess.run(
         [python, "-m", "pip", "list", "--format=freeze", "--disable-pip-version-check"],
         capture_output=True,
@@ -336,16 +344,19 @@ def foreign_packages(python: str, requirements: Path) -> list[str]:
         check=True,
     ).stdout
 
-    def norm(name: str) -> str:
-        return re.sub(r"[-_.]+", "-", name).lower()
+    def pins(lines) -> dict[str, str]:
+        out = {}
+        for line in lines:
+            if "==" in line and not line.lstrip().startswith("#"):
+                name, version = line.split("#")[0].strip().split("==", 1)
+                out[re.sub(r"[-_.]+", "-", name).lower()] = version.strip()
+        return out
 
-    pinned = {
-        norm(line.split("==")[0])
-        for line in requirements.read_text(encoding="utf-8").splitlines()
-        if "==" in line and not line.lstrip().startswith("#")
-    }
-    installed = [norm(line.split("==")[0]) for line in listed.splitlines() if "==" in line]
-    return sorted(set(installed) - pinned - {"depthcore", "pip"})
+    pinned = pins(requirements.read_text(encoding="utf-8").splitlines())
+    installed = pins(listed.splitlines())
+    unmet = [f"{n}=={v}" for n, v in sorted(pinned.items()) if installed.get(n) != v]
+    foreign = sorted(set(installed) - set(pinned) - {"depthcore", "pip"})
+    return unmet, foreign
 
 
 def standalone(
@@ -402,16 +413,20 @@ def standalone(
 
     # The environment: the book's requirements and its source archive, nothing else.
     install = [python, "-m", "pip", "install", "-q", "--disable-pip-version-check"]
-    subprocess.run(install + ["-r", str(requirements)], check=True)
+    if environment_mismatch(python, requirements)[0]:
+        subprocess.run(install + ["-r", str(requirements)], check=True)
     subprocess.run(
         install + ["--no-build-isolation", "--force-reinstall", "--no-deps", str(archive)],
         check=True,
     )
-    foreign = foreign_packages(python, requirements)
-    if foreign:
+    unmet, foreign = environment_mismatch(python, requirements)
+    if unmet or foreign:
         print(
-            f"make notebooks-standalone: {python} has packages that requirements.txt does not "
-            f"pin: {', '.join(foreign)}",
+            f"make notebooks-standalone: {python} is not the book's environment: "
+            + "; ".join(
+                ([f"not installed: {', '.join(unmet)}"] if unmet else [])
+                + ([f"not pinned: {', '.join(foreign)}"] if foreign else [])
+            ),
             file=sys.stderr,
         )
         return 1
