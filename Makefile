@@ -10,7 +10,7 @@
 #                           empty folder with only requirements.txt and the book's source
 #                           archive installed, and compare its outputs with book/_nbval/
 #   make notebooks-update   re-execute every page and rewrite book/_nbval/ (deliberate update)
-#                           (PAGES="fig6 cite": only those pages, in both targets)
+#                           (PAGES="fig6 cite": only those pages, in these three targets)
 #   make check-book         checks of the built book alone (equation numbers, browser)
 #   make figures            write the paper's figures to figures/
 #   make bench              run every benchmark at full size, print its tables and write its
