@@ -3,14 +3,18 @@
 #   make book               clean, strict build of the book into _build/html, with its downloads
 #   make pdf                the book as a PDF, _build/latex/depthcore.pdf (needs TeX Live's xelatex)
 #   make lab                JupyterLab on the book's pages (MyST .md files open as notebooks)
-#   make test               core tests, notebook drift check, PDF and book builds, checks of both
+#   make test               core tests, PDF and book builds, each page's downloaded notebook
+#                           run alone and compared with book/_nbval/, checks of the built book
 #   make notebooks          re-run every book page and compare its outputs with book/_nbval/
+#   make notebooks-standalone  run the notebook each page of the built book offers, alone in an
+#                           empty folder with only requirements.txt and the book's source
+#                           archive installed, and compare its outputs with book/_nbval/
 #   make notebooks-update   re-execute every page and rewrite book/_nbval/ (deliberate update)
-#                           (PAGES="fig6 cite": only those pages, in both targets)
+#                           (PAGES="fig6 cite": only those pages, in these three targets)
 #   make check-book         checks of the built book alone (equation numbers, browser)
 #   make figures            write the paper's figures to figures/
 #   make bench              run every benchmark at full size, print its tables and write its
-#                           record benchmarks/results/<script>.json; then rewrite the README's
+#                           record depthcore/benchmark_records/<script>.json; then rewrite the README's
 #                           tables and the references of the pages that show the records
 #                           (BENCH="bench_bank": that benchmark alone)
 #   make lint               ruff check and ruff format --check of the package, tests, tools, benchmarks
@@ -20,6 +24,13 @@
 # requirements.txt and rebuilt from scratch whenever requirements.txt changes;
 # depthcore is (re)installed into it in editable mode when pyproject.toml or
 # its version (depthcore/__init__.py) changes.
+#
+# The HTML and the PDF builds execute each page once between them: Jupyter
+# Book's execution cache (_build/.jupyter_cache) keeps each page's outputs,
+# emptied when depthcore, requirements.txt or CITATION.cff change and dropped
+# for a page whose text changes; the pages it lacks are executed two at a time
+# before the build (tools/check_notebooks.py cache --execute). `make book`
+# after `make test` on an unchanged tree executes nothing.
 
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
@@ -36,16 +47,22 @@ PAGES ?=
 # cffconvert (validates CITATION.cff) pins jsonschema 3: a venv of its own.
 CITE_VENV := $(VENV)/cffconvert
 CITE_STAMP := $(CITE_VENV)/.installed
+# make notebooks-standalone: a venv with requirements.txt alone, into which the
+# book's source archive is installed before each run.
+ALONE_VENV := $(VENV)/standalone
+ALONE_STAMP := $(ALONE_VENV)/.installed
 
 # Kernels and tools run from .venv/ even where a user-wide Jupyter setup exists.
 export JUPYTER_PREFER_ENV_PATH := 1
 export PYDEVD_DISABLE_FILE_VALIDATION := 1
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 # The book's pages run with the python3 kernel of tools/jupyter/kernels/ (ipykernel
-# without its notice about local TCP, which would repeat once per page in the logs).
+# without its notice about local TCP, which would repeat once per page in the logs),
+# also installed into .venv/ for Jupyter run from .venv/ outside make.
 export JUPYTER_PATH := $(CURDIR)/tools/jupyter$(if $(JUPYTER_PATH),:$(JUPYTER_PATH))
+KERNEL := $(VENV)/share/jupyter/kernels/python3
 
-.PHONY: help venv cite-venv book pdf lab test test-core notebooks notebooks-update check-book figures bench clean distclean
+.PHONY: help venv cite-venv book pdf lab test test-core notebooks notebooks-update notebooks-standalone check-book figures bench clean distclean
 
 help:
 	@sed -n '3,/^#$$/p' Makefile | sed -e 's/^# \{0,1\}//' -e '/^$$/d'
@@ -59,7 +76,12 @@ $(STAMP): requirements.txt
 	$(PY) -m pip install -q -r requirements.txt
 	touch $(STAMP)
 
-$(EDITABLE): $(STAMP) pyproject.toml depthcore/__init__.py
+$(KERNEL)/.installed: $(STAMP) $(wildcard tools/jupyter/kernels/python3/*)
+	mkdir -p $(KERNEL)
+	cp tools/jupyter/kernels/python3/kernel.json tools/jupyter/kernels/python3/launch.py $(KERNEL)/
+	touch $@
+
+$(EDITABLE): $(STAMP) $(KERNEL)/.installed pyproject.toml depthcore/__init__.py
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e .
 	touch $(EDITABLE)
 
@@ -73,23 +95,42 @@ $(CITE_STAMP): requirements-cite.txt $(STAMP)
 
 cite-venv: $(CITE_STAMP)
 
+$(ALONE_STAMP): requirements.txt $(STAMP)
+	rm -rf $(ALONE_VENV)
+	$(PYTHON) -m venv $(ALONE_VENV)
+	$(ALONE_VENV)/bin/python -m pip install -q -r requirements.txt
+	touch $(ALONE_STAMP)
+
 # The HTML book ships, under _build/html/downloads/, what a reader takes away:
-# Figures 2-6 as PDF, SVG and PNG, depthcore's source archive with the pinned
+# Figures 2-6 as PDF, SVG and PNG, depthcore's source archive (with CITATION.cff
+# inside the package, for the page "Cite this work" run alone) with the pinned
 # requirements, and the PDF of the book when `make pdf` has built it (as
 # `make test` does first). The pages' executed notebooks are offered on each page.
 DOWNLOADS := _build/extra/downloads
 PDF := _build/latex/depthcore.pdf
 
-book: $(EDITABLE)
-	find _build -mindepth 1 -maxdepth 1 ! -name latex -exec rm -rf {} + 2>/dev/null || true
+# The paper's figures for the downloads, written again when depthcore changes.
+FIGURES := _build/figures
+$(FIGURES)/.written: $(EDITABLE) $(shell find depthcore -type f ! -path '*/__pycache__/*')
+	rm -rf $(FIGURES)
+	$(PY) -m depthcore figures --out $(FIGURES)
+	touch $@
+
+book: $(EDITABLE) $(FIGURES)/.written
+	find _build -mindepth 1 -maxdepth 1 ! -name latex ! -name .jupyter_cache ! -name figures \
+	  -exec rm -rf {} + 2>/dev/null || true
 	mkdir -p $(DOWNLOADS)
-	$(PY) -m depthcore figures --out $(DOWNLOADS)/figures
+	cp -r $(FIGURES) $(DOWNLOADS)/figures
+	rm -f $(DOWNLOADS)/figures/.written
+	cp CITATION.cff depthcore/CITATION.cff
 	$(PY) -c 'from setuptools import build_meta; import sys; sys.stdout = sys.stderr; \
-	  print(build_meta.build_sdist("$(DOWNLOADS)"))' 2>/dev/null
+	  print(build_meta.build_sdist("$(DOWNLOADS)"))' 2>/dev/null || { rm -f depthcore/CITATION.cff; exit 1; }
+	rm -f depthcore/CITATION.cff
 	mv $(DOWNLOADS)/depthcore-*.tar.gz $(DOWNLOADS)/depthcore.tar.gz
 	cp requirements.txt CITATION.cff $(DOWNLOADS)/
 	@if [[ -f $(PDF) ]]; then cp $(PDF) $(DOWNLOADS)/depthcore.pdf; else \
 	  echo "make book: NOTE: $(PDF) not found, so the book links a PDF it does not ship: run \`make pdf\` first" >&2; fi
+	$(PY) tools/check_notebooks.py cache --execute
 	$(VENV)/bin/jupyter-book build . --all -W -n --keep-going 2>&1 | tee _build/book.log
 
 # Sphinx's LaTeX builder, then xelatex (Debian: texlive-xetex texlive-latex-extra
@@ -100,6 +141,7 @@ pdf: $(EDITABLE)
 	    "texlive-latex-extra texlive-fonts-recommended lmodern latexmk fonts-freefont-otf)" >&2; exit 1; }; done
 	rm -rf _build/latex
 	mkdir -p _build/latex
+	$(PY) tools/check_notebooks.py cache --execute
 	$(VENV)/bin/jupyter-book build . --builder latex --all -W -n --keep-going 2>&1 | tee _build/latex.log
 	cd _build/latex && latexmk -xelatex -interaction=nonstopmode -halt-on-error depthcore.tex \
 	  > latexmk.log 2>&1 || { tail -n 40 latexmk.log >&2; echo "make pdf: xelatex failed, see _build/latex/depthcore.log" >&2; exit 1; }
@@ -107,20 +149,23 @@ pdf: $(EDITABLE)
 
 # JupyterLab from .venv/; jupytext opens the book's MyST pages (book/*.md) as
 # notebooks with one click (tools/jupyter/lab/settings/overrides.json, copied
-# into .venv/ where JupyterLab reads its defaults). LAB_ARGS, e.g. --no-browser.
+# into .venv/ where JupyterLab reads its defaults); jupytext.toml keeps a saved,
+# unchanged page byte for byte. As root (many containers) with --allow-root,
+# which JupyterLab otherwise refuses. LAB_ARGS, e.g. --no-browser.
 LAB_ARGS ?=
 lab: $(EDITABLE)
 	mkdir -p $(VENV)/share/jupyter/lab/settings
 	cp tools/jupyter/lab/settings/overrides.json $(VENV)/share/jupyter/lab/settings/overrides.json
-	$(VENV)/bin/jupyter lab --ServerApp.root_dir=. $(LAB_ARGS) book/intro.md
+	$(VENV)/bin/jupyter lab --ServerApp.root_dir=. $(if $(filter 0,$(shell id -u)),--allow-root) \
+	  $(LAB_ARGS) book/intro.md
 
 test: $(EDITABLE)
 	tools/system-packages.sh
 	$(MAKE) --no-print-directory lint
 	$(MAKE) --no-print-directory test-core
-	$(MAKE) --no-print-directory notebooks
 	$(MAKE) --no-print-directory pdf
 	$(MAKE) --no-print-directory book
+	$(MAKE) --no-print-directory notebooks-standalone
 	$(MAKE) --no-print-directory check-book
 
 test-core: $(EDITABLE) $(CITE_STAMP)
@@ -131,6 +176,10 @@ notebooks: $(EDITABLE)
 
 notebooks-update: $(EDITABLE)
 	$(PY) tools/check_notebooks.py update $(PAGES)
+
+# The drift check of `make test`, on the built book's downloads (run `make book` first).
+notebooks-standalone: $(EDITABLE) $(ALONE_STAMP)
+	$(PY) tools/check_notebooks.py standalone --python $(ALONE_VENV)/bin/python $(PAGES)
 
 # Checks of the built book in _build/html (run `make book` first).
 check-book: $(EDITABLE)

@@ -21,7 +21,7 @@ Four tables, every ratio measured side by side in this run:
    the same trials.
 
 Usage: ``python benchmarks/bench_bank.py [--quick]``; the full run writes its
-record ``benchmarks/results/bench_bank.json`` (:mod:`depthcore.benchmarks`),
+record ``depthcore/benchmark_records/bench_bank.json`` (:mod:`depthcore.benchmarks`),
 ``--quick`` (smaller sizes) writes outside the committed records.
 """
 

@@ -9,7 +9,7 @@ measurements and the paper's prior built from them) through
 
 checks that both give the same means and covariances, and prints the times
 and their ratio. Usage: ``python benchmarks/bench_ekf_filterpy.py [--quick]``;
-the full run writes its record ``benchmarks/results/bench_ekf_filterpy.json``
+the full run writes its record ``depthcore/benchmark_records/bench_ekf_filterpy.json``
 (:mod:`depthcore.benchmarks`), ``--quick`` (1,000 trials) writes outside the
 committed records.
 """

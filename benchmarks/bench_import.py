@@ -3,7 +3,7 @@
 Prints the median wall time of each over several runs and the difference,
 the cost of the package on top of NumPy (target: at most 0.15 s). Usage:
 ``python benchmarks/bench_import.py [--quick]``; the full run writes its record
-``benchmarks/results/bench_import.json`` (:mod:`depthcore.benchmarks`),
+``depthcore/benchmark_records/bench_import.json`` (:mod:`depthcore.benchmarks`),
 ``--quick`` (3 runs each) writes outside the committed records.
 """
 

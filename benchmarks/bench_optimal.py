@@ -25,7 +25,7 @@ rule) spends on the same triple.
 Accuracy is the largest difference, over scenarios and over the depth and
 velocity means and SDs, from the 1-D route at ``rtol=1e-13``, divided by
 the SD. Usage: ``python benchmarks/bench_optimal.py [--quick]``; the full run
-writes its record ``benchmarks/results/bench_optimal.json``
+writes its record ``depthcore/benchmark_records/bench_optimal.json``
 (:mod:`depthcore.benchmarks`), ``--quick`` (no ``nquad``, fewer repeats) writes
 outside the committed records.
 """

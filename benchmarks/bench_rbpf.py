@@ -20,7 +20,7 @@ posterior SD of the depth; "RMS error" is the root mean square over
 ``--repeats`` independent runs, "SE" the RBPF's standard error of the
 average of those runs from their spread (:meth:`depthcore.rbpf.RBPF.standard_errors`).
 Usage: ``python benchmarks/bench_rbpf.py [--quick]``; the full run writes its
-record ``benchmarks/results/bench_rbpf.json`` (:mod:`depthcore.benchmarks`),
+record ``depthcore/benchmark_records/bench_rbpf.json`` (:mod:`depthcore.benchmarks`),
 ``--quick`` (fewer runs and particles) writes outside the committed records.
 """
 

@@ -5,7 +5,7 @@ prior built from its own measurements) and times, on one core,
 :func:`depthcore.optimal.moments` vectorised over the trials against
 :func:`depthcore.optimal.marginals` called trial by trial on a subset, and
 checks that the two agree. Usage: ``python benchmarks/bench_trials.py [--quick]``;
-the full run writes its record ``benchmarks/results/bench_trials.json``
+the full run writes its record ``depthcore/benchmark_records/bench_trials.json``
 (:mod:`depthcore.benchmarks`), ``--quick`` (1,000 trials) writes outside the
 committed records.
 """

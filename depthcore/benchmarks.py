@@ -3,7 +3,7 @@
 Recommended import: ``from depthcore import benchmarks``.
 
 Each script ``benchmarks/<name>.py`` measures some of depthcore's modules and,
-besides printing its tables, writes a record ``benchmarks/results/<name>.json``
+besides printing its tables, writes a record ``depthcore/benchmark_records/<name>.json``
 (:func:`write`): every number its tables print, the sizes it used, the
 machine, the date, depthcore's version and a fingerprint of the code it
 measured. The book and the README show the numbers of these records
@@ -33,10 +33,11 @@ import numpy as np
 
 from . import __version__
 
-#: The repository, where the benchmarks and their records sit beside the package.
+#: The repository, where the benchmark scripts sit beside the package.
 ROOT = Path(__file__).resolve().parent.parent
-#: The committed records, one per script.
-RESULTS = ROOT / "benchmarks" / "results"
+#: The committed records, one per script: package data, so that an installed
+#: depthcore (from the source archive or a wheel) reads them as the repository does.
+RESULTS = Path(__file__).resolve().parent / "benchmark_records"
 #: Where a smaller run (``--quick``) writes its record, outside version control.
 QUICK_RESULTS = ROOT / "_build" / "benchmarks"
 #: The endings of the results' keys and their units.

@@ -14,8 +14,8 @@ Nothing here computes an estimate: the functions format what
 * :func:`moments_texts`, :func:`study_texts`, :func:`sweep_texts`,
   :func:`noise_study_texts`, :func:`rbpf_texts`, :func:`rho_label`: the texts the chapters beyond
   the paper glue into their tables;
-* :func:`page_tables`, :func:`paste_table`, :class:`PastedTable`: a page's
-  tables of glued numbers, with the numbers pasted in, for a notebook;
+* :func:`page_text`, :func:`page_tables`, :func:`paste_table`, :class:`PastedTable`:
+  a page's tables of glued numbers, with the numbers pasted in, for a notebook;
 * :func:`bench_texts`, :func:`bench_tables`, :func:`bench_readme_blocks`,
   :func:`bench_origin`: the benchmarks' recorded numbers
   (:mod:`depthcore.benchmarks`) as the book and the README print them;
@@ -1046,7 +1046,7 @@ def bench_readme_blocks(records: dict) -> dict[str, str]:
         if key in notes:
             lines += [notes[key], ""]
         lines.append(
-            f"Measured {t[prefixes[name] + '_origin']} (`benchmarks/results/{name}.json`)."
+            f"Measured {t[prefixes[name] + '_origin']} (`depthcore/benchmark_records/{name}.json`)."
         )
         blocks[key] = "\n".join(lines)
     return blocks
@@ -1168,6 +1168,38 @@ def page_tables(text: str) -> list[list[str]]:
     return [t for t in tables if any(GLUE_ROLE.search(line) for line in t)]
 
 
+def page_text(page) -> str:
+    """The text of a book page outside its code cells, from its source or its notebook.
+
+    Parameters
+    ----------
+    page : str or path
+        ``"fig6"``, ``"fig6.md"`` or ``"fig6.ipynb"``: the page's MyST source
+        ``fig6.md`` is read if it exists, else the notebook ``fig6.ipynb`` (the
+        page as the book offers it for download), whose markdown cells are
+        joined.
+
+    Returns
+    -------
+    str
+        The page's text; empty when neither file exists.
+    """
+    import json
+
+    path = Path(page)
+    source, notebook = path.with_suffix(".md"), path.with_suffix(".ipynb")
+    if source.is_file():
+        return source.read_text(encoding="utf-8")
+    if notebook.is_file():
+        cells = json.loads(notebook.read_text(encoding="utf-8")).get("cells", [])
+        return "\n\n".join(
+            "".join(cell["source"]) if isinstance(cell["source"], list) else cell["source"]
+            for cell in cells
+            if cell.get("cell_type") == "markdown"
+        )
+    return ""
+
+
 def paste_table(lines: list[str], texts: dict[str, str]) -> str | None:
     """A page's table with every glued text pasted in, as the book shows it.
 
@@ -1232,10 +1264,17 @@ class GlueLog:
     record, which passes on unchanged, and :meth:`show` displays those kept
     since its last call: each figure as the very image the book shows, and the
     texts in a :class:`MarkdownTable` of glued name and value, as the book
-    pastes them. Given the page's file, :meth:`show` also displays each of the
+    pastes them. Given the page's name, :meth:`show` also displays each of the
     page's tables of glued numbers (:func:`page_tables`) whole, with its
     numbers pasted in, once every number in it has been glued. The book leaves
     the cells that create and show it out.
+
+    The tables are read from the page's own file in the kernel's working
+    folder (:func:`page_text`): its MyST source (``fig6.md``) where the book's
+    pages are, else the notebook that the book offers for download
+    (``fig6.ipynb``), which runs alone in any folder. Where neither is found
+    (a renamed download), the values are still shown, in the table of glued
+    names, and the page's tables are not.
 
     Every glued text is also bound, as a :class:`GluedText`, to its name in the
     kernel's namespace, where JupyterLab's MyST renderer (jupyterlab-myst)
@@ -1245,8 +1284,9 @@ class GlueLog:
     Parameters
     ----------
     page : str or path, optional
-        The page's MyST source (``"fig6.md"``: the kernel runs in the page's
-        folder, in Jupyter as in the book's build).
+        The page's name or source, ``"fig6"`` or ``"fig6.md"`` (relative to the
+        kernel's working folder, the page's folder in Jupyter as in the book's
+        build).
 
     Raises
     ------
@@ -1270,7 +1310,7 @@ class GlueLog:
         self._namespace = shell.user_ns
         self._kept: list[tuple[str, dict, dict]] = []
         self._texts: dict[str, str] = {}
-        self._tables = [] if page is None else page_tables(Path(page).read_text(encoding="utf-8"))
+        self._tables = [] if page is None else page_tables(page_text(page))
         publisher.register_hook(self._keep)
 
     def _keep(self, msg):

@@ -95,9 +95,10 @@ def test_textbook_19_2_6_fixed_lag_is_the_fixed_interval_smoother_of_the_prefix(
 
 @pytest.mark.parametrize("q", [0.0, 0.02])
 def test_textbook_19_2_6_fixed_lag_is_the_augmented_filter_rerun_for_every_frame(q):
-    N = 20
+    N = 12
     sim, prior = fig2_track(N, q, seed=1)
-    for lag in (0, 1, 2, 5, 10, N - 3, N - 2, N - 1, N + 3):
+    # no lag, short ones, a window of half the track, and lags that reach its end and beyond
+    for lag in (0, 1, 2, 6, N - 2, N - 1, N + 3):
         tr = bk.track(sim.mu, RHO_200, prior.mean, prior.cov, q, lag=lag)
         nodes = [p.bank.nodes for p in tr.posteriors]
         # the nodes are re-placed along the track: the frames are smoothed on several sets

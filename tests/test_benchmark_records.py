@@ -1,6 +1,6 @@
 """Every benchmark has a committed record, complete and measured on the current code.
 
-The book and the README show the numbers of ``benchmarks/results/<name>.json``
+The book and the README show the numbers of ``depthcore/benchmark_records/<name>.json``
 (:mod:`depthcore.benchmarks`). These tests never run a benchmark: they read
 the records and compare each one's fingerprint with the sources it measured,
 so that a change of the measured code names the record to measure again.
@@ -63,8 +63,8 @@ def test_every_record_measured_the_current_code(name):
     r = benchmarks.read(name)
     changed = benchmarks.stale(r)
     assert not changed, (
-        f"benchmarks/results/{name}.json is stale: {', '.join(changed)} changed since it was "
-        f"recorded on {r['date']}; measure again with `make bench BENCH={name}` "
+        f"depthcore/benchmark_records/{name}.json is stale: {', '.join(changed)} changed "
+        f"since it was recorded on {r['date']}; measure again with `make bench BENCH={name}` "
         f"(`{r['command']}`)"
     )
 
@@ -126,7 +126,7 @@ def test_the_readme_shows_the_records():
     text = tool.README.read_text(encoding="utf-8")
     expected = tool.regenerate(text, report.bench_readme_blocks(tool.records()))
     assert text == expected, (
-        "README.md's benchmark tables differ from benchmarks/results/: "
+        "README.md's benchmark tables differ from depthcore/benchmark_records/: "
         "run `python tools/bench_readme.py`"
     )
 

@@ -43,3 +43,236 @@ def test_update_of_named_pages_leaves_the_other_references(monkeypatch):
     assert check_notebooks.main(["update", "fig6"]) == 0
     assert [p.stem for p in executed] == ["fig6"] and deleted == []
     assert check_notebooks.main(["update", "nosuch"]) == 1
+
+
+# --- the execution cache's key -------------------------------------------------------------
+
+
+def small_project(tmp_path: Path) -> tuple[Path, list[Path]]:
+    (tmp_path / "depthcore").mkdir()
+    (tmp_path / "depthcore" / "model.py").write_text("X = 1\n")
+    (tmp_path / "requirements.txt").write_text("numpy==2.4.6\n")
+    (tmp_path / "book").mkdir()
+    pages = [tmp_path / "book" / f"{name}.md" for name in ("one", "two")]
+    for page in pages:
+        page.write_text(f"# {page.stem}\n")
+    return tmp_path, pages
+
+
+def cache_page(cache: Path, page: Path) -> None:
+    """Store an executed notebook for ``page`` in a jupyter-cache, as myst-nb does."""
+    import nbformat
+    from jupyter_cache import get_cache
+    from jupyter_cache.base import CacheBundleIn
+
+    nb = nbformat.v4.new_notebook(
+        cells=[nbformat.v4.new_code_cell(f"print({page.stem!r})", execution_count=1)]
+    )
+    nb.metadata.kernelspec = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    get_cache(cache).cache_notebook_bundle(
+        CacheBundleIn(nb, str(page)), check_validity=False, overwrite=True
+    )
+
+
+def cached_uris(cache: Path) -> list[str]:
+    from jupyter_cache import get_cache
+
+    return sorted(Path(r.uri).name for r in get_cache(cache).list_cache_records())
+
+
+def test_the_cache_is_kept_while_nothing_changes(tmp_path):
+    root, pages = small_project(tmp_path)
+    cache = root / "_build" / ".jupyter_cache"
+    assert check_notebooks.prepare_cache(pages, cache, root) == []
+    for page in pages:
+        cache_page(cache, page)
+    assert check_notebooks.prepare_cache(pages, cache, root) == []
+    assert cached_uris(cache) == ["one.md", "two.md"]
+
+
+def test_a_changed_page_loses_its_cached_outputs_alone(tmp_path):
+    root, pages = small_project(tmp_path)
+    cache = root / "_build" / ".jupyter_cache"
+    check_notebooks.prepare_cache(pages, cache, root)
+    for page in pages:
+        cache_page(cache, page)
+    # Only prose changed (a table of glued numbers, say): the code cells key jupyter-cache.
+    pages[1].write_text("# two\n\n| {glue:text}`x` |\n")
+    assert check_notebooks.prepare_cache(pages, cache, root) == ["book/two.md"]
+    assert cached_uris(cache) == ["one.md"]
+
+
+@pytest.mark.parametrize(
+    "change", ["depthcore/model.py", "depthcore/benchmark_records/bench_x.json", "requirements.txt"]
+)
+def test_a_change_of_the_package_or_its_environment_empties_the_cache(tmp_path, change):
+    root, pages = small_project(tmp_path)
+    cache = root / "_build" / ".jupyter_cache"
+    check_notebooks.prepare_cache(pages, cache, root)
+    for page in pages:
+        cache_page(cache, page)
+    (root / change).parent.mkdir(parents=True, exist_ok=True)
+    (root / change).write_text("changed\n")
+    assert check_notebooks.prepare_cache(pages, cache, root) == ["all"]
+    assert cached_uris(cache) == []
+    assert (cache / check_notebooks.CACHE_KEY).is_file()
+
+
+def test_bytecode_does_not_change_the_fingerprint(tmp_path):
+    root, _ = small_project(tmp_path)
+    before = check_notebooks.environment_fingerprint(root)
+    (root / "depthcore" / "__pycache__").mkdir()
+    (root / "depthcore" / "__pycache__" / "model.cpython-311.pyc").write_bytes(b"\0")
+    assert check_notebooks.environment_fingerprint(root) == before
+    (root / "depthcore" / "model.py").write_text("X = 2\n")
+    assert check_notebooks.environment_fingerprint(root) != before
+
+
+PAGE_HEAD = """---
+jupytext:
+  text_representation:
+    extension: .md
+    format_name: myst
+kernelspec:
+  display_name: Python 3
+  language: python
+  name: python3
+---
+
+# A page
+
+```{code-cell} ipython3
+"""
+
+
+def test_the_pages_the_cache_lacks_are_executed_and_found_by_the_build(tmp_path, monkeypatch):
+    from jupyter_cache import get_cache
+
+    monkeypatch.setenv("JUPYTER_PATH", str(check_notebooks.KERNELS))
+    good, bad = tmp_path / "good.md", tmp_path / "bad.md"
+    good.write_text(
+        PAGE_HEAD + "from pathlib import Path\nprint(sorted(Path().glob('*.md')))\n```\n"
+    )
+    bad.write_text(PAGE_HEAD + "1 / 0\n```\n")
+    cache = tmp_path / "cache"
+    assert check_notebooks.fill_cache([good, bad], 2, cache) == [good]
+    # What myst-nb's cache mode looks up: the page as it reads it.
+    store = get_cache(cache)
+    record = store.match_cache_notebook(check_notebooks.read_as_the_book(good))
+    (cell,) = [c for c in store.get_cache_bundle(record.pk).nb.cells if c.cell_type == "code"]
+    # run in the page's folder, as the build runs it
+    assert cell.outputs[0]["text"] == "[PosixPath('bad.md'), PosixPath('good.md')]\n"
+    assert check_notebooks.fill_cache([good], 2, cache) == []  # nothing left to execute
+    with pytest.raises(KeyError):
+        store.match_cache_notebook(check_notebooks.read_as_the_book(bad))
+
+
+def test_the_config_uses_the_cache_that_make_keys():
+    import yaml
+
+    config = yaml.safe_load((ROOT / "_config.yml").read_text(encoding="utf-8"))
+    assert config["execute"]["execute_notebooks"] == "cache"
+    # No other cache path: myst-nb's default, _build/.jupyter_cache, is the one keyed.
+    assert "cache" not in config["execute"]
+    assert check_notebooks.CACHE == ROOT / "_build" / ".jupyter_cache"
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    for target in ("book", "pdf"):
+        recipe = makefile.split(f"\n{target}: ", 1)[1].split("\n\n", 1)[0]
+        build = recipe.index("jupyter-book build")
+        assert 0 <= recipe.find("tools/check_notebooks.py cache --execute") < build, target
+
+
+# --- the downloaded notebooks, run alone ---------------------------------------------------
+
+
+def test_the_downloaded_notebook_of_a_page():
+    page = ROOT / "book" / "fig6.md"
+    assert check_notebooks.downloaded_notebook(page) == (
+        ROOT / "_build" / "html" / "_sources" / "book" / "fig6.ipynb"
+    )
+
+
+def test_the_reference_outputs_replace_the_downloaded_ones():
+    import nbformat
+
+    v4 = nbformat.v4
+    nb = v4.new_notebook(
+        cells=[v4.new_markdown_cell("text"), v4.new_code_cell("1 + 1", execution_count=3)]
+    )
+    ref = v4.new_notebook(
+        cells=[
+            v4.new_code_cell(
+                "1 + 1",
+                execution_count=1,
+                outputs=[v4.new_output("execute_result", {"text/plain": "2"}, execution_count=1)],
+            )
+        ]
+    )
+    out = check_notebooks.with_reference_outputs(nb, ref)
+    assert out.cells[0].source == "text"
+    assert out.cells[1].execution_count == 1
+    assert out.cells[1].outputs[0]["data"]["text/plain"] == "2"
+
+
+def test_the_standalone_conftest_skips_what_the_drift_check_skips():
+    namespace: dict = {}
+    exec(check_notebooks.conftest_text(), namespace)
+
+    class Collector:
+        skip_compare = ("metadata",)
+
+    collector = Collector()
+    namespace["pytest_collectstart"](collector)
+    assert collector.skip_compare == ("metadata",) + check_notebooks.SKIP_COMPARE
+
+
+def test_the_environment_is_the_pins_and_depthcore_alone(tmp_path, monkeypatch):
+    import subprocess
+
+    requirements = tmp_path / "requirements.txt"
+    requirements.write_text("# pins\nNumPy==2.4.6\njupyter_client==8.10.0\nscipy==1.17.1\n")
+    listed = "numpy==2.4.6\njupyter-client==8.9.0\npip==24.0\ndepthcore==1.0\nrequests==2.0\n"
+    monkeypatch.setattr(
+        subprocess, "run", lambda *a, **k: subprocess.CompletedProcess(a, 0, stdout=listed)
+    )
+    unmet, foreign = check_notebooks.environment_mismatch("python", requirements)
+    assert unmet == ["jupyter-client==8.10.0", "scipy==1.17.1"]
+    assert foreign == ["requests"]
+
+
+def test_standalone_refuses_to_run_without_a_built_book(tmp_path, capsys):
+    page = check_notebooks.select_pages(PAGES, ["fig6"])
+    status = check_notebooks.standalone(
+        page, "python", 1, PAGES, sources=tmp_path / "_sources", downloads=tmp_path / "downloads"
+    )
+    err = capsys.readouterr().err
+    assert status == 1
+    assert "depthcore.tar.gz not found" in err and "offers no notebook" in err
+
+
+# --- JupyterLab ----------------------------------------------------------------------------
+
+
+def kernelspec() -> dict:
+    import json
+
+    spec = json.loads(
+        (ROOT / "tools" / "jupyter" / "kernels" / "python3" / "kernel.json").read_text()
+    )
+    return {"display_name": spec["display_name"], "language": spec["language"], "name": "python3"}
+
+
+@pytest.mark.parametrize("page", sorted((ROOT / "book").glob("*.md")), ids=lambda p: p.stem)
+def test_a_page_saved_unchanged_from_jupyterlab_keeps_its_bytes(page):
+    import jupytext
+    from jupytext.config import load_jupytext_configuration_file
+
+    if not check_notebooks.has_notebook_front_matter(page.read_text(encoding="utf-8")):
+        pytest.skip("not a notebook page: JupyterLab opens it as Markdown")
+    config = load_jupytext_configuration_file(str(ROOT / "jupytext.toml"))
+    text = page.read_text(encoding="utf-8")
+    nb = jupytext.reads(text, fmt="md:myst", config=config)
+    # What JupyterLab adds when the page's kernel (the book's, make lab) starts.
+    nb.metadata["kernelspec"] = kernelspec()
+    nb.metadata["language_info"] = {"name": "python", "version": "3.11.7"}
+    assert jupytext.writes(nb, fmt="md:myst", config=config) == text

@@ -153,3 +153,20 @@ def test_the_tables_of_numbers_are_displayed_whole(page):
     assert not missing, f"{page.name}: tables not displayed whole in the notebook: {missing}"
     if page.stem in ("fig2", "fig3", "fig4", "fig5"):
         assert whole[0].startswith(COMPARISON_HEADER)
+
+
+def test_a_downloaded_notebook_gives_the_page_its_tables(page, tmp_path, monkeypatch):
+    """GlueLog("fig6.md") run where only the page's notebook is (a download) finds its tables."""
+    import jupytext
+
+    from depthcore.report import page_tables as tables_of
+    from depthcore.report import page_text
+
+    expected = tables_of(page.read_text(encoding="utf-8"))
+    monkeypatch.chdir(tmp_path)
+    assert page_text(page.name) == ""  # an empty folder: no tables, and no error
+    jupytext.write(jupytext.read(page), tmp_path / f"{page.stem}.ipynb")
+    assert tables_of(page_text(page.name)) == expected
+    assert tables_of(page_text(page.stem)) == expected
+    (tmp_path / page.name).write_text(page.read_text(encoding="utf-8"), encoding="utf-8")
+    assert page_text(page.name) == page.read_text(encoding="utf-8")

@@ -3,7 +3,7 @@
 The README's section "Benchmark" holds, between the marker comments
 ``<!-- bench:KEY -->`` and ``<!-- /bench:KEY -->``, the blocks of
 :func:`depthcore.report.bench_readme_blocks`: each a table made from the
-records ``benchmarks/results/<script>.json`` (:mod:`depthcore.benchmarks`), with
+records ``depthcore/benchmark_records/<script>.json`` (:mod:`depthcore.benchmarks`), with
 the date and machine they were measured on. ``make bench`` runs this after
 measuring; ``tests/test_benchmark_records.py`` checks that the README equals
 what this writes.
@@ -68,7 +68,7 @@ def main(argv=None) -> int:
         return 0
     if new != text:
         README.write_text(new, encoding="utf-8")
-        print("README.md: benchmark tables rewritten from benchmarks/results/")
+        print("README.md: benchmark tables rewritten from depthcore/benchmark_records/")
     return 0
 
 

@@ -30,6 +30,27 @@ reference notebook ``book/_nbval/<name>.ipynb``.
     The same for the pages named alone; ``update`` then leaves every other
     reference as it is.
 
+``python tools/check_notebooks.py standalone --python PY`` (``make notebooks-standalone``)
+    The drift check of ``make test``, on the notebooks the built book offers
+    (``_build/html/_sources/book/<name>.ipynb``, each page's download): each
+    runs alone, in an empty folder of its own, with the kernel of ``PY``, a
+    Python environment where only the book's ``requirements.txt`` and source
+    archive (``_build/html/downloads/``) are installed; nbval compares every
+    cell's outputs with the reference, as ``check`` does. A page that needs a
+    file of the repository, or a cell that fails, fails the check. Run after
+    ``make book``, whose execution of the pages it does not repeat.
+
+``python tools/check_notebooks.py cache`` (before each book build)
+    Keys the book's execution cache (``_build/.jupyter_cache``, Jupyter Book's
+    ``execute_notebooks: cache``, shared by the HTML and the PDF builds) on
+    what a page's outputs depend on beyond its code cells, which alone key
+    jupyter-cache's records: the cache is emptied when depthcore (its source
+    and data), ``requirements.txt`` or ``CITATION.cff`` changed, and a page's
+    record is dropped when the page's text changed (its tables of glued
+    numbers are shown by its cells). With ``--execute``, the
+    pages it then lacks are executed, two at a time (``-n``), and cached as
+    the build would, which would execute them one after the other.
+
 The kernel runs in the page's folder, as it does in the book build. This
 module is also loaded by pytest as a plugin (``-p check_notebooks``) to tell
 nbval which outputs not to compare.
@@ -52,6 +73,9 @@ REF_DIR_NAME = "_nbval"
 TMP_PREFIX = ".nbval-check-"
 SANITIZE = ROOT / "tests" / "nbval_sanitize.cfg"
 TIMEOUT = 600  # seconds per cell, as `execute.timeout` in _config.yml
+#: The book's kernel, ``kernels/python3``: ipykernel, run by the Python that starts it,
+#: without its notice about plain TCP on the loopback interface.
+KERNELS = ROOT / "tools" / "jupyter"
 
 # Outputs nbval must not compare: stderr (warnings carry installation paths;
 # matplotlib's one-off font-cache message), SVG (random element ids) and glued
@@ -214,40 +238,355 @@ def check(pages: list[Path], workers: int, every: list[Path] | None = None) -> i
     try:
         for copy, nb in zip(copies, combined.values(), strict=True):
             nbformat.write(nb, copy)
-        cmd = [
-            sys.executable,
-            "-m",
-            "pytest",
-            "--nbval",
-            "--nbval-current-env",
-            "--nbval-sanitize-with",
-            str(SANITIZE),
-            "--nbval-cell-timeout",
-            str(TIMEOUT),
-            "-p",
-            "check_notebooks",
-            "-q",
-            "-o",
-            "console_output_style=classic",
-        ]
-        if workers > 1 and len(copies) > 1:
-            cmd += ["-n", str(min(workers, len(copies))), "--dist", "loadfile"]
-        cmd += [str(c.relative_to(ROOT)) for c in copies]
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(
             filter(None, [str(Path(__file__).parent), env.get("PYTHONPATH")])
         )
-        result = subprocess.run(cmd, cwd=ROOT, env=env)
+        returncode = run_nbval(copies, workers, sys.executable, ROOT, env, plugin=True)
     finally:
         for copy in copies:
             copy.unlink(missing_ok=True)
-    if result.returncode != 0:
+    if returncode != 0:
         print(
             "make notebooks: outputs differ from the committed references (see above). "
             "If the change is intended, run `make notebooks-update` and commit book/_nbval/.",
             file=sys.stderr,
         )
-    return result.returncode
+    return returncode
+
+
+def run_nbval(
+    notebooks: list[Path],
+    workers: int,
+    python: str,
+    cwd: Path,
+    env: dict,
+    plugin: bool = False,
+    sanitize: Path = SANITIZE,
+) -> int:
+    """Run nbval on ``notebooks`` with the pytest of ``python``; its return code.
+
+    The kernel is the book's ``python3`` (:data:`KERNELS`, put first on
+    ``JUPYTER_PATH`` by :func:`main`), run by ``python``.
+    ``plugin``: this module is pytest's plugin (in the repository's
+    environment); else ``cwd`` holds a conftest.py (:func:`conftest_text`).
+    """
+    cmd = [
+        python,
+        "-m",
+        "pytest",
+        "--nbval",
+        *(["-p", "check_notebooks"] if plugin else ["-p", "no:cacheprovider"]),
+        # one argument each: pytest takes a path given apart for a test path, and
+        # finds the root of the notebooks' test ids from the paths it is given
+        f"--nbval-sanitize-with={sanitize}",
+        f"--nbval-cell-timeout={TIMEOUT}",
+        f"--rootdir={cwd}",
+        "-q",
+        "-o",
+        "console_output_style=classic",
+    ]
+    if workers > 1 and len(notebooks) > 1:
+        cmd += ["-n", str(min(workers, len(notebooks))), "--dist", "loadfile"]
+    cmd += [str(nb.relative_to(cwd)) for nb in notebooks]
+    return subprocess.run(cmd, cwd=cwd, env=env).returncode
+
+
+#: Where the HTML book offers each page's executed notebook (tools/sphinx).
+BOOK_SOURCES = ROOT / "_build" / "html" / "_sources"
+#: What the HTML book offers to install: the pinned requirements and the source archive.
+BOOK_DOWNLOADS = ROOT / "_build" / "html" / "downloads"
+
+
+def shown(path: Path) -> str:
+    """``path`` relative to the repository when inside it, as messages name files."""
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
+def downloaded_notebook(page: Path, sources: Path = BOOK_SOURCES) -> Path:
+    """``book/fig6.md`` -> the notebook the built book offers, ``_sources/book/fig6.ipynb``."""
+    return sources / page.relative_to(ROOT).with_suffix(".ipynb")
+
+
+def with_reference_outputs(nb, ref_nb):
+    """``nb`` with the outputs of the reference's code cells (same code, checked before)."""
+    refs = [c for c in ref_nb.cells if c.cell_type == "code"]
+    cells = [c for c in nb.cells if c.cell_type == "code"]
+    for cell, ref in zip(cells, refs, strict=True):
+        cell.outputs = ref.outputs
+        cell.execution_count = ref.execution_count
+    return nb
+
+
+def conftest_text() -> str:
+    """A conftest.py for nbval's run outside the repository: :data:`SKIP_COMPARE`."""
+    return (
+        "def pytest_collectstart(collector):\n"
+        '    if getattr(collector, "skip_compare", None) is not None:\n'
+        f"        collector.skip_compare = tuple(collector.skip_compare) + {SKIP_COMPARE!r}\n"
+    )
+
+
+def environment_mismatch(python: str, requirements: Path) -> tuple[list[str], list[str]]:
+    """How the packages installed for ``python`` differ from the pins of ``requirements``.
+
+    Returns
+    -------
+    unmet : list of str
+        The pins (``name==version``) not installed at their version.
+    foreign : list of str
+        Installed distributions that are neither pinned nor depthcore nor pip.
+    """
+    listed = subprocess.run(
+        [python, "-m", "pip", "list", "--format=freeze", "--disable-pip-version-check"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+
+    def pins(lines) -> dict[str, str]:
+        out = {}
+        for line in lines:
+            if "==" in line and not line.lstrip().startswith("#"):
+                name, version = line.split("#")[0].strip().split("==", 1)
+                out[re.sub(r"[-_.]+", "-", name).lower()] = version.strip()
+        return out
+
+    pinned = pins(requirements.read_text(encoding="utf-8").splitlines())
+    installed = pins(listed.splitlines())
+    unmet = [f"{n}=={v}" for n, v in sorted(pinned.items()) if installed.get(n) != v]
+    foreign = sorted(set(installed) - set(pinned) - {"depthcore", "pip"})
+    return unmet, foreign
+
+
+def standalone(
+    pages: list[Path],
+    python: str,
+    workers: int,
+    every: list[Path] | None = None,
+    sources: Path = BOOK_SOURCES,
+    downloads: Path = BOOK_DOWNLOADS,
+) -> int:
+    """Run each page's downloaded notebook alone with ``python`` and compare its outputs."""
+    import tempfile
+
+    import jupytext
+    import nbformat
+
+    problems: list[str] = []
+    archive, requirements = downloads / "depthcore.tar.gz", downloads / "requirements.txt"
+    for needed in (archive, requirements):
+        if not needed.is_file():
+            problems.append(f"{shown(needed)} not found: run `make book` first")
+    runs = {}
+    for page in pages:
+        ref, offered = reference_path(page), downloaded_notebook(page, sources)
+        if not ref.exists():
+            problems.append(
+                f"{page.relative_to(ROOT)}: no reference notebook {ref.relative_to(ROOT)}"
+            )
+            continue
+        if not offered.exists():
+            problems.append(
+                f"{page.relative_to(ROOT)}: the book offers no notebook "
+                f"{shown(offered)}: run `make book` first"
+            )
+            continue
+        ref_nb = nbformat.read(ref, as_version=4)
+        nb = nbformat.read(offered, as_version=4)
+        found = structural_problems(page, jupytext.read(page), ref_nb)
+        if not found and code_sources(nb) != code_sources(ref_nb):
+            found.append(
+                f"{shown(offered)}: code cells differ from the page's: "
+                "the book is older than the page, run `make book`"
+            )
+        problems += found
+        if not found:
+            runs[page] = with_reference_outputs(nb, ref_nb)
+    for ref in stale_references(pages if every is None else every):
+        problems.append(f"{ref.relative_to(ROOT)}: reference notebook of no page in _toc.yml")
+    if problems:
+        print("make notebooks-standalone: cannot check the downloaded notebooks:", file=sys.stderr)
+        for p in problems:
+            print(f"  - {p}", file=sys.stderr)
+        return 1
+
+    # The environment: the book's requirements and its source archive, nothing else.
+    install = [python, "-m", "pip", "install", "-q", "--disable-pip-version-check"]
+    if environment_mismatch(python, requirements)[0]:
+        subprocess.run(install + ["-r", str(requirements)], check=True)
+    subprocess.run(
+        install + ["--no-build-isolation", "--force-reinstall", "--no-deps", str(archive)],
+        check=True,
+    )
+    unmet, foreign = environment_mismatch(python, requirements)
+    if unmet or foreign:
+        print(
+            f"make notebooks-standalone: {python} is not the book's environment: "
+            + "; ".join(
+                ([f"not installed: {', '.join(unmet)}"] if unmet else [])
+                + ([f"not pinned: {', '.join(foreign)}"] if foreign else [])
+            ),
+            file=sys.stderr,
+        )
+        return 1
+
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    with tempfile.TemporaryDirectory(prefix="depthcore-notebooks-") as tmp:
+        root = Path(tmp)
+        (root / "conftest.py").write_text(conftest_text(), encoding="utf-8")
+        sanitize = root / SANITIZE.name
+        sanitize.write_bytes(SANITIZE.read_bytes())
+        copies = []
+        for page, nb in runs.items():
+            folder = root / page.stem
+            folder.mkdir()
+            copies.append(folder / f"{page.stem}.ipynb")
+            nbformat.write(nb, copies[-1])
+        print(
+            f"running {len(copies)} downloaded notebooks, each alone in an empty folder of "
+            f"{root}, with {python}",
+            flush=True,
+        )
+        status = run_nbval(copies, workers, python, root, env, sanitize=sanitize.relative_to(root))
+    if status != 0:
+        print(
+            "make notebooks-standalone: a downloaded notebook fails alone, or its outputs "
+            "differ from the committed references (see above). If the change is intended, "
+            "run `make notebooks-update` and commit book/_nbval/.",
+            file=sys.stderr,
+        )
+    return status
+
+
+#: Jupyter Book's execution cache (``execute.cache`` unset: ``_build/.jupyter_cache``).
+CACHE = ROOT / "_build" / ".jupyter_cache"
+#: What every page's outputs may depend on besides its own text.
+ENVIRONMENT = ("depthcore", "requirements.txt", "CITATION.cff")
+#: The key of the cache's contents, beside them.
+CACHE_KEY = "depthcore-key.json"
+
+
+def environment_fingerprint(root: Path = ROOT, inputs=ENVIRONMENT) -> str:
+    """SHA-256 of the files of :data:`ENVIRONMENT` (paths and bytes, no bytecode)."""
+    digest = hashlib.sha256()
+    for name in inputs:
+        path = root / name
+        files = sorted(path.rglob("*")) if path.is_dir() else [path]
+        for f in files:
+            if not f.is_file() or "__pycache__" in f.parts or f.suffix == ".pyc":
+                continue
+            digest.update(f.relative_to(root).as_posix().encode() + b"\0")
+            digest.update(hashlib.sha256(f.read_bytes()).digest())
+    return digest.hexdigest()
+
+
+def page_fingerprints(pages: list[Path], root: Path = ROOT) -> dict[str, str]:
+    """SHA-256 of each page's text, by its path relative to ``root``."""
+    return {
+        p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest() for p in pages
+    }
+
+
+def prepare_cache(pages: list[Path], cache: Path = CACHE, root: Path = ROOT) -> list[str]:
+    """Drop what the execution cache holds that is older than depthcore or a page's text.
+
+    Returns
+    -------
+    list of str
+        What was dropped: ``"all"``, or the pages whose records were dropped.
+    """
+    import json
+    import shutil
+
+    key = {"environment": environment_fingerprint(root), "pages": page_fingerprints(pages, root)}
+    key_path = cache / CACHE_KEY
+    old = json.loads(key_path.read_text(encoding="utf-8")) if key_path.is_file() else None
+    dropped: list[str] = []
+    if old is None or old.get("environment") != key["environment"]:
+        if cache.exists():
+            shutil.rmtree(cache)
+            dropped.append("all")
+    else:
+        changed = {
+            str((root / name).resolve())
+            for name, digest in key["pages"].items()
+            if old.get("pages", {}).get(name) != digest
+        }
+        if changed:
+            from jupyter_cache import get_cache
+
+            store = get_cache(cache)
+            for record in store.list_cache_records():
+                if str(Path(record.uri).resolve()) in changed:
+                    store.remove_cache(record.pk)
+                    dropped.append(Path(record.uri).resolve().relative_to(root).as_posix())
+    cache.mkdir(parents=True, exist_ok=True)
+    key_path.write_text(json.dumps(key, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    return dropped
+
+
+def read_as_the_book(page: Path):
+    """The page as myst-nb reads it in the book's build (its cache key is this notebook's)."""
+    from myst_nb.core.read import read_myst_markdown_notebook
+
+    return read_myst_markdown_notebook(
+        page.read_text(encoding="utf-8"), add_source_map=True, path=page
+    )
+
+
+def execute_for_cache(page: Path):
+    """Execute ``page`` as myst-nb's cache mode does: (page, notebook, seconds, error text)."""
+    from jupyter_cache.executors.utils import single_nb_execution
+
+    nb = read_as_the_book(page)
+    result = single_nb_execution(nb, cwd=str(page.parent), timeout=TIMEOUT, allow_errors=False)
+    return page, nb, result.time, None if result.err is None else result.exc_string
+
+
+def fill_cache(pages: list[Path], workers: int, cache: Path = CACHE) -> list[Path]:
+    """Execute the pages the cache lacks, ``workers`` at a time, and cache their outputs.
+
+    The book's build executes its pages one after the other; run first, this
+    spreads them over the cores, and the build then finds every page cached.
+    A page that fails is left out of the cache: the build runs it again and
+    reports its error.
+
+    Returns
+    -------
+    list of Path
+        The pages executed and cached.
+    """
+    from concurrent.futures import ProcessPoolExecutor
+
+    from jupyter_cache import get_cache
+    from jupyter_cache.base import CacheBundleIn
+
+    store = get_cache(cache)
+    missing = []
+    for page in pages:
+        try:
+            store.match_cache_notebook(read_as_the_book(page))
+        except KeyError:
+            missing.append(page)
+    done = []
+    if not missing:
+        return done
+    print(f"execution cache: executing {len(missing)} pages, {workers} at a time", flush=True)
+    with ProcessPoolExecutor(max_workers=max(1, min(workers, len(missing)))) as pool:
+        for page, nb, seconds, error in pool.map(execute_for_cache, missing):
+            name = page.relative_to(ROOT) if page.is_relative_to(ROOT) else page
+            if error is not None:
+                print(f"  {name}: failed, left to the build to report", flush=True)
+                continue
+            store.cache_notebook_bundle(
+                CacheBundleIn(nb, str(page), data={"execution_seconds": seconds}),
+                check_validity=False,
+                overwrite=True,
+            )
+            print(f"  {name}: executed in {seconds:.1f} s", flush=True)
+            done.append(page)
+    return done
 
 
 def stable_cell_ids(nb) -> None:
@@ -306,7 +645,12 @@ def select_pages(pages: list[Path], names: list[str]) -> list[Path]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("command", choices=["check", "update"])
+    parser.add_argument("command", choices=["check", "update", "standalone", "cache"])
+    parser.add_argument(
+        "--python",
+        default=None,
+        help="`standalone`: the Python of the environment that runs the downloaded notebooks",
+    )
     parser.add_argument(
         "-n",
         "--workers",
@@ -315,11 +659,22 @@ def main(argv: list[str] | None = None) -> int:
         help="parallel nbval workers for `check` (default 2)",
     )
     parser.add_argument(
+        "--execute",
+        action="store_true",
+        help="`cache`: then execute the pages it lacks, --workers at a time",
+    )
+    parser.add_argument(
         "pages",
         nargs="*",
         help="only these pages (e.g. fig6); `update` then leaves every other reference alone",
     )
     args = parser.parse_args(argv)
+    # Every kernel this module starts is the book's, also when run outside make.
+    os.environ["JUPYTER_PATH"] = os.pathsep.join(
+        dict.fromkeys(
+            filter(None, [str(KERNELS), *os.environ.get("JUPYTER_PATH", "").split(os.pathsep)])
+        )
+    )
     try:
         every = notebook_pages()
         pages = select_pages(every, args.pages)
@@ -328,6 +683,18 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     if args.command == "check":
         return check(pages, args.workers, every)
+    if args.command == "standalone":
+        if args.python is None:
+            print("make notebooks-standalone: --python is required", file=sys.stderr)
+            return 1
+        return standalone(pages, args.python, args.workers, every)
+    if args.command == "cache":
+        dropped = prepare_cache(every)
+        if dropped:
+            print(f"execution cache: dropped {', '.join(dropped)} (changed since executed)")
+        if args.execute:
+            fill_cache(every, args.workers)
+        return 0
     status = update(pages)
     if not args.pages:
         for ref in stale_references(every):

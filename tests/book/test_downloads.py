@@ -5,8 +5,8 @@
 * the pages of Figures 2-6 link the figure as PDF, SVG and PNG under
   ``downloads/figures/``, and the files are the formats they claim;
 * the intro links the PDF of the book, ``depthcore``'s source archive (an
-  sdist of the package's current version with every module) and the pinned
-  requirements;
+  sdist of the package's current version with every module and the
+  benchmarks' records) and the pinned requirements;
 * every link into ``downloads/`` resolves to a file of the built book.
 """
 
@@ -104,3 +104,23 @@ def test_source_archive_is_an_sdist_of_this_version(html_dir):
         assert not missing, f"the source archive lacks {missing}"
         info = tar.extractfile(f"{top}/PKG-INFO").read().decode()
     assert f"\nVersion: {depthcore.__version__}\n" in info
+
+
+def test_source_archive_holds_the_benchmark_records(html_dir):
+    # The pages that show the benchmarks read them from the installed package.
+    records = sorted(p.name for p in (ROOT / "depthcore" / "benchmark_records").glob("*.json"))
+    assert records
+    top = f"depthcore-{depthcore.__version__}"
+    with tarfile.open(html_dir / "downloads" / "depthcore.tar.gz") as tar:
+        names = tar.getnames()
+    missing = [r for r in records if f"{top}/depthcore/benchmark_records/{r}" not in names]
+    assert not missing, f"the source archive lacks the records {missing}"
+
+
+def test_source_archive_installs_the_citation_file(html_dir):
+    # The page "Cite this work", downloaded and run alone, reads it from the package.
+    top = f"depthcore-{depthcore.__version__}"
+    with tarfile.open(html_dir / "downloads" / "depthcore.tar.gz") as tar:
+        cff = tar.extractfile(f"{top}/depthcore/CITATION.cff").read()
+    assert cff == (ROOT / "CITATION.cff").read_bytes()
+    assert not (ROOT / "depthcore" / "CITATION.cff").exists(), "left in the package by make book"
