@@ -232,18 +232,18 @@ def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
 
 
 def _update(mean, cov, x, Phi, Sigma_m, mu_m) -> Update:
-    PhiT = Phi.mT
-    S = Sigma_m + Phi @ cov @ PhiT  # innovation covariance (..., m, m)
-    S = 0.5 * (S + S.mT)
+    CPt = cov @ Phi.mT
+    S = Sigma_m + Phi @ CPt  # innovation covariance (..., m, m)
     r = x - mu_m - (Phi @ mean[..., None])[..., 0]  # the innovation (..., m)
     if S.shape[-1] == 1:  # a scalar measurement: divide instead of solving
         s = S[..., 0, 0]
-        K = (cov @ PhiT) / s[..., None, None]
+        K = CPt / s[..., None, None]
         log_det = np.log(s)
         quad = r[..., 0] ** 2 / s
     else:
         # S is symmetric, so K^T = S^-1 Phi Sigma_+
-        K = np.linalg.solve(S, Phi @ cov).mT
+        S = 0.5 * (S + S.mT)
+        K = np.linalg.solve(S, CPt.mT).mT
         chol = np.linalg.cholesky(S)
         log_det = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
         z = np.linalg.solve(chol, r[..., None])[..., 0]
