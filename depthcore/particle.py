@@ -357,7 +357,7 @@ def _linearised_log_likelihood(x3, c, g, r0, rho, k) -> np.ndarray:
     ``k`` (K,) frames from 0: returns shape (B, n, K).
     """
     d = x3 - c[:, None, :]
-    r = (np.einsum("bnj,bkj->bnk", d, g[:, k]) + r0[:, None, k]) / rho[:, None, None]
+    r = (d @ np.swapaxes(g[:, k], -1, -2) + r0[:, None, k]) / rho[:, None, None]
     return -0.5 * r**2
 
 
@@ -401,7 +401,8 @@ def _initial(mu, rho, prior_mean, prior_cov, N, rng, proposal, df, inflation):
 def _dead(log_w, k) -> None:
     """Refuse a trial none of whose particles (axis 1 of ``log_w``) has a positive weight.
 
-    ``log_w`` (B, N, K) after the frames ``k`` (K,); names the first frame and trial.
+    ``log_w`` (B, N, K) after the frames ``k`` (K,) (``N`` may be 1: the largest of
+    each trial's log weights); names the first frame and trial.
     """
     dead = ~np.any(np.isfinite(log_w), axis=1)  # (B, K)
     if np.any(dead):
@@ -438,14 +439,16 @@ def _without_resampling(x1, log_w, look_ahead, mu, rho):
     n_frames = mu.shape[1]
     ess = np.empty((B, n_frames))
     x3 = model.G(x1, n_frames - 1)
+    # the depth grows with the frames: a particle in front at frame 1 stays in front
+    front = not np.all(x1[..., 1] > 0)
     for k in _blocks(n_frames, 4 * B * N):
         states = model.G(x1[:, :, None, :], k)  # (B, N, K, 3)
-        increments = model.log_likelihood(mu[:, None, k], states, rho[:, None, None], front=True)
+        increments = model.log_likelihood(mu[:, None, k], states, rho[:, None, None], front)
         if look_ahead is not None:
             increments = increments - _linearised_log_likelihood(x3, *look_ahead, rho, k)
         block = log_w[..., None] + np.cumsum(increments, axis=-1)  # (B, N, K)
-        _dead(block, k)
         top = np.max(block, axis=1, keepdims=True)
+        _dead(top, k)  # no particle of positive weight: the largest weight is 0
         w = np.exp(block - top)
         ess[:, k] = np.sum(w, axis=1) ** 2 / np.sum(w**2, axis=1)
         log_w = block[..., -1]
