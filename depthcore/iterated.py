@@ -57,10 +57,12 @@ import numpy as np
 from . import _checks, model
 from .ekf import predict
 from .second_order import (
-    _final_state_map,
     _trajectory_map,
     _trajectory_residuals,
+    bearing_rows,
     damped_step,
+    trajectory_solve,
+    trajectory_states,
 )
 
 #: Largest number of Gauss-Newton iterations of one update or smoother.
@@ -355,42 +357,76 @@ def trajectory_residuals(z, mu, rho, prior_mean, prior_cov, q):
 
 
 def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:
-    """:func:`smoother` for ``q > 0``: Gauss-Newton over the trajectory, one problem at a time."""
+    """:func:`smoother` for ``q > 0``: Gauss-Newton over the trajectory, problems side by side.
+
+    Each step solves the linearised least-squares problem through the
+    trajectory's block-tridiagonal structure
+    (:func:`depthcore.second_order.trajectory_solve`), so its cost grows
+    linearly with the frames; :func:`depthcore.reference.iterated_smoother_dense`
+    solves the same problems densely.
+    """
     K = mu.shape[-1]
     batch = mu.shape[:-1]
-    T, offset = _final_state_map(K)
-    D = _trajectory_map(K)
-    j = np.arange(K, dtype=float)
-    mean = np.empty(batch + (3,))
-    cov = np.empty(batch + (3, 3))
-    trajectory = np.empty(batch + (K, 3))
-    iterations = np.zeros(batch, dtype=int)
-    converged = np.zeros(batch, dtype=bool)
-    for b in np.ndindex(*batch):
+    mu = mu.reshape(-1, K)
+    B = mu.shape[0]
+    rho = np.broadcast_to(rho, batch).reshape(B)
+    m = np.broadcast_to(m, batch + (3,)).reshape(B, 3)
+    L_inv = np.broadcast_to(np.linalg.inv(np.linalg.cholesky(P)), (B, 3, 3))
+    weight = 1.0 / rho
 
-        def objective(z, b=b):
-            r, _ = trajectory_residuals(
-                np.where(z[..., 1:2] > 0, z, 1.0)[0], mu[b], rho[b], m[b], P, q
-            )
-            return np.where(z[..., 1] > 0, np.sum(r**2), np.inf)
+    def objective(z, rows):
+        front = z[:, 1] > 0
+        safe = np.where(front[:, None], z, 1.0)
+        s = trajectory_states(safe)
+        prior = np.einsum("bij,bj->bi", L_inv[rows], safe[:, :3] - m[rows])
+        bearing = (s[..., 0] / s[..., 1] - mu[rows]) * weight[rows, None]
+        value = (
+            np.sum(prior**2, axis=-1)
+            + np.sum(bearing**2, axis=-1)
+            + np.sum((safe[:, 3:] / q) ** 2, axis=-1)
+        )
+        return np.where(front, value, np.inf)
 
-        z = np.concatenate([m[b], np.zeros(K - 1)])
-        f = objective(z[None])
-        for _ in range(max_iterations):
-            r, M = trajectory_residuals(z, mu[b], rho[b], m[b], P, q)
-            step = np.linalg.lstsq(M, -r, rcond=None)[0]
-            z_new, f = damped_step(z[None], step[None], f, objective)
-            iterations[b] += 1
-            moved = np.linalg.norm(M @ (z_new[0] - z))
-            z = z_new[0]
-            if not moved > STEP_TOL:
-                converged[b] = True
-                break
-        _, M = trajectory_residuals(z, mu[b], rho[b], m[b], P, q)
-        R_inv = np.linalg.inv(np.linalg.qr(M, mode="r"))
-        c = T @ R_inv @ R_inv.T @ T.T
-        mean[b] = T @ z + offset
-        cov[b] = 0.5 * (c + c.T)
-        v = z[2] + np.concatenate([[0.0], np.cumsum(z[3:])])
-        trajectory[b] = np.stack([z[0] + j * z[2] + D @ z[3:], z[1] + j, v], axis=-1)
-    return SmootherResult(mean, cov, iterations, converged, trajectory)
+    z = np.concatenate([m, np.zeros((B, K - 1))], axis=-1)
+    f = objective(z, np.arange(B))
+    iterations = np.zeros(B, dtype=int)
+    converged = np.zeros(B, dtype=bool)
+    for _ in range(max_iterations):
+        rows = np.flatnonzero(~converged)
+        if rows.size == 0:
+            break
+        za = z[rows]
+        s = trajectory_states(za)
+        H = bearing_rows(s, weight[rows])
+        step, _ = trajectory_solve(
+            H,
+            -(s[..., 0] / s[..., 1] - mu[rows]) * weight[rows, None],
+            -za[:, 3:] / q,
+            q,
+            L_inv[rows],
+            -np.einsum("bij,bj->bi", L_inv[rows], za[:, :3] - m[rows]),
+        )
+        step = np.where(np.isfinite(step), step, 0.0)
+        z_new, f_new = damped_step(za, step, f[rows], lambda y, rows=rows: objective(y, rows))
+        iterations[rows] += 1
+        dz = z_new - za
+        d = trajectory_states(dz, offset=False)
+        moved = np.sqrt(
+            np.sum(np.einsum("bij,bj->bi", L_inv[rows], dz[:, :3]) ** 2, axis=-1)
+            + np.sum(np.einsum("bki,bki->bk", H, d) ** 2, axis=-1)
+            + np.sum((dz[:, 3:] / q) ** 2, axis=-1)
+        )
+        z[rows], f[rows] = z_new, f_new
+        converged[rows] = ~(moved > STEP_TOL)
+    s = trajectory_states(z)
+    zero = np.zeros((B, K))
+    _, R = trajectory_solve(bearing_rows(s, weight), zero, zero[:, 1:], q, L_inv, np.zeros((B, 3)))
+    R_inv = np.linalg.inv(R)
+    cov = R_inv @ np.swapaxes(R_inv, -1, -2)
+    return SmootherResult(
+        s[:, -1].reshape(batch + (3,)),
+        (0.5 * (cov + np.swapaxes(cov, -1, -2))).reshape(batch + (3, 3)),
+        iterations.reshape(batch),
+        converged.reshape(batch),
+        s.reshape(batch + (K, 3)),
+    )

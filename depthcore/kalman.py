@@ -183,10 +183,21 @@ def _model(Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m, n: int):
 # --- the two steps ---------------------------------------------------------------------
 
 
+def _eye(n: int) -> np.ndarray:
+    """The identity of size ``n``, read-only and made once per size."""
+    if n not in _EYES:
+        _EYES[n] = np.eye(n)
+        _EYES[n].setflags(write=False)
+    return _EYES[n]
+
+
+_EYES: dict[int, np.ndarray] = {}
+
+
 def _predict(mean, cov, Psi, Sigma_p, mu_p) -> MeanAndCov:
-    mean = mu_p + np.einsum("...ij,...j->...i", Psi, mean)
-    cov = Sigma_p + Psi @ cov @ np.swapaxes(Psi, -1, -2)
-    return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    mean = mu_p + (Psi @ mean[..., None])[..., 0]
+    cov = Sigma_p + Psi @ cov @ Psi.mT
+    return MeanAndCov(mean, 0.5 * (cov + cov.mT))
 
 
 def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
@@ -221,27 +232,27 @@ def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
 
 
 def _update(mean, cov, x, Phi, Sigma_m, mu_m) -> Update:
-    PhiT = np.swapaxes(Phi, -1, -2)
-    S = Sigma_m + Phi @ cov @ PhiT  # innovation covariance (..., m, m)
-    S = 0.5 * (S + np.swapaxes(S, -1, -2))
-    r = x - mu_m - np.einsum("...ij,...j->...i", Phi, mean)  # the innovation (..., m)
+    CPt = cov @ Phi.mT
+    S = Sigma_m + Phi @ CPt  # innovation covariance (..., m, m)
+    r = x - mu_m - (Phi @ mean[..., None])[..., 0]  # the innovation (..., m)
     if S.shape[-1] == 1:  # a scalar measurement: divide instead of solving
         s = S[..., 0, 0]
-        K = (cov @ PhiT) / s[..., None, None]
+        K = CPt / s[..., None, None]
         log_det = np.log(s)
         quad = r[..., 0] ** 2 / s
     else:
         # S is symmetric, so K^T = S^-1 Phi Sigma_+
-        K = np.swapaxes(np.linalg.solve(S, Phi @ cov), -1, -2)
+        S = 0.5 * (S + S.mT)
+        K = np.linalg.solve(S, CPt.mT).mT
         chol = np.linalg.cholesky(S)
         log_det = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
         z = np.linalg.solve(chol, r[..., None])[..., 0]
         quad = np.sum(z**2, axis=-1)
-    new_mean = mean + np.einsum("...ij,...j->...i", K, r)
-    A = np.eye(mean.shape[-1]) - K @ Phi
-    new_cov = A @ cov @ np.swapaxes(A, -1, -2) + K @ Sigma_m @ np.swapaxes(K, -1, -2)
+    new_mean = mean + (K @ r[..., None])[..., 0]
+    A = _eye(mean.shape[-1]) - K @ Phi
+    new_cov = A @ cov @ A.mT + K @ Sigma_m @ K.mT
     log_likelihood = -0.5 * (S.shape[-1] * _LOG_2PI + log_det + quad)
-    return Update(new_mean, 0.5 * (new_cov + np.swapaxes(new_cov, -1, -2)), log_likelihood)
+    return Update(new_mean, 0.5 * (new_cov + new_cov.mT), log_likelihood)
 
 
 def update(mean, cov, x, Phi, Sigma_m, mu_m=None) -> Update:
@@ -305,29 +316,39 @@ def _time_axis(arr: np.ndarray, name: str, core: int, steps: int) -> None:
         )
 
 
+def _batch_shape(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> tuple:
+    """The leading axes that every step's output broadcasts to (the model's time axes dropped)."""
+    shapes = [x.shape[:-2], mean.shape[:-1], cov.shape[:-2]]
+    for arr, core in ((Psi, 2), (Sigma_p, 2), (Phi, 2), (Sigma_m, 2), (mu_p, 1), (mu_m, 1)):
+        if arr.ndim > core:
+            shapes.append(arr.shape[: arr.ndim - core - 1])
+    return np.broadcast_shapes(*shapes)
+
+
 def _run(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> FilterResult:
-    T = x.shape[-2]
-    out = {k: [] for k in FilterResult._fields}
+    T, n = x.shape[-2], mean.shape[-1]
+    batch = _batch_shape(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m)
+    out = FilterResult(
+        np.empty(batch + (T, n)),
+        np.empty(batch + (T, n, n)),
+        np.empty(batch + (T, n)),
+        np.empty(batch + (T, n, n)),
+        np.empty(batch + (T,)),
+    )
     for t in range(T):
         if t > 0:
             mean, cov = _predict(
                 mean, cov, _at(Psi, t - 1, 2), _at(Sigma_p, t - 1, 2), _at(mu_p, t - 1, 1)
             )
-        out["predicted_means"].append(mean)
-        out["predicted_covs"].append(cov)
+        out.predicted_means[..., t, :] = mean
+        out.predicted_covs[..., t, :, :] = cov
         mean, cov, ll = _update(
             mean, cov, x[..., t, :], _at(Phi, t, 2), _at(Sigma_m, t, 2), _at(mu_m, t, 1)
         )
-        out["means"].append(mean)
-        out["covs"].append(cov)
-        out["log_likelihoods"].append(ll)
-    core = {"means": 1, "predicted_means": 1, "covs": 2, "predicted_covs": 2, "log_likelihoods": 0}
-    batch = np.broadcast_shapes(*(a.shape[: a.ndim - core[k]] for k, v in out.items() for a in v))
-    stacked = {}
-    for k, v in out.items():
-        full = [np.broadcast_to(a, batch + a.shape[a.ndim - core[k] :]) for a in v]
-        stacked[k] = np.stack(full, axis=-1 - core[k])
-    return FilterResult(**stacked)
+        out.means[..., t, :] = mean
+        out.covs[..., t, :, :] = cov
+        out.log_likelihoods[..., t] = ll
+    return out
 
 
 def _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m):
@@ -440,25 +461,27 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     T, n = filtered.means.shape[-2:]
     Psi = _matrix(Psi, "Psi", n, n)
     _time_axis(Psi, "Psi", 2, T - 1)
-    means, covs = [filtered.means[..., -1, :]], [filtered.covs[..., -1, :, :]]
+    # Every gain depends on the filter alone: all T - 1 of them in one batched solve,
+    # with one batched check of the predicted covariances' conditioning.
+    gains = _smoother_gain(
+        filtered.covs[..., :-1, :, :], filtered.predicted_covs[..., 1:, :, :], Psi
+    )
+    batch = np.broadcast_shapes(filtered.means.shape[:-2], gains.shape[:-3])
+    means = np.empty(batch + (T, n))
+    covs = np.empty(batch + (T, n, n))
+    means[..., -1, :] = filtered.means[..., -1, :]
+    covs[..., -1, :, :] = filtered.covs[..., -1, :, :]
     for t in range(T - 2, -1, -1):
-        mean, cov = _smoother_step(
-            _smoother_gain(
-                filtered.covs[..., t, :, :],
-                filtered.predicted_covs[..., t + 1, :, :],
-                _at(Psi, t, 2),
-            ),
+        means[..., t, :], covs[..., t, :, :] = _smoother_step(
+            gains[..., t, :, :],
             filtered.means[..., t, :],
             filtered.covs[..., t, :, :],
             filtered.predicted_means[..., t + 1, :],
             filtered.predicted_covs[..., t + 1, :, :],
-            means[-1],
-            covs[-1],
+            means[..., t + 1, :],
+            covs[..., t + 1, :, :],
         )
-        means.append(mean)
-        covs.append(cov)
-    means, covs = np.broadcast_arrays(*means[::-1]), np.broadcast_arrays(*covs[::-1])
-    return MeanAndCov(np.stack(means, axis=-2), np.stack(covs, axis=-3))
+    return MeanAndCov(means, covs)
 
 
 def _smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
@@ -510,9 +533,9 @@ def _smoother_step(
         given ``x_1 .. x_T``.
     """
     C = gain
-    smoothed_mean = mean + np.einsum("...ij,...j->...i", C, next_mean - predicted_mean)
-    smoothed_cov = cov + C @ (next_cov - predicted_cov) @ np.swapaxes(C, -1, -2)
-    return MeanAndCov(smoothed_mean, 0.5 * (smoothed_cov + np.swapaxes(smoothed_cov, -1, -2)))
+    smoothed_mean = mean + (C @ (next_mean - predicted_mean)[..., None])[..., 0]
+    smoothed_cov = cov + C @ (next_cov - predicted_cov) @ C.mT
+    return MeanAndCov(smoothed_mean, 0.5 * (smoothed_cov + smoothed_cov.mT))
 
 
 def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):

@@ -52,8 +52,9 @@ def G(x, k: int = 1) -> np.ndarray:
     ----------
     x : array_like, shape (..., 3)
         States ``(x, y, v)``.
-    k : int
-        Number of time steps; ``G(x, -2)`` is the paper's ``G^{-2} x``.
+    k : int or array_like
+        Number of time steps; ``G(x, -2)`` is the paper's ``G^{-2} x``. An
+        array of steps broadcasts with ``x.shape[:-1]``.
 
     Returns
     -------
@@ -61,7 +62,10 @@ def G(x, k: int = 1) -> np.ndarray:
         ``(x + k v, y + k, v)``.
     """
     x = np.asarray(x, dtype=float)
-    return np.stack([x[..., 0] + k * x[..., 2], x[..., 1] + k, x[..., 2]], axis=-1)
+    if np.ndim(k) == 0:
+        return np.stack([x[..., 0] + k * x[..., 2], x[..., 1] + k, x[..., 2]], axis=-1)
+    moved = np.broadcast_arrays(x[..., 0] + k * x[..., 2], x[..., 1] + k, x[..., 2])
+    return np.stack(moved, axis=-1)
 
 
 def project(x) -> np.ndarray:
@@ -261,8 +265,8 @@ def residuals(x, mu) -> np.ndarray:
     """
     x = np.asarray(x, dtype=float)
     mu = np.asarray(mu, dtype=float)
-    n = mu.shape[-1]
-    return np.stack([project(G(x, k - (n - 1))) - mu[..., k] for k in range(n)], axis=-1)
+    back = np.arange(mu.shape[-1]) - (mu.shape[-1] - 1.0)  # k - N for frames k = 1 .. N
+    return project(G(x[..., None, :], back)) - mu
 
 
 def f(x, mu) -> np.ndarray:
@@ -289,11 +293,10 @@ def residual_gradients(x, n_frames: int = N_MEASUREMENTS) -> np.ndarray:
     ndarray, shape (..., N, 3)
     """
     x = np.asarray(x, dtype=float)
-    last = n_frames - 1
-    return np.stack(
-        [observation_vector(G(x, k - last)) @ G_linear(k - last) for k in range(n_frames)],
-        axis=-2,
-    )
+    back = np.arange(n_frames) - (n_frames - 1.0)  # k - N for frames k = 1 .. N
+    h = observation_vector(G(x[..., None, :], back))  # (..., N, 3), third column 0
+    h[..., 2] = back * h[..., 0]  # times F^{k-N}: d(x + (k - N) v)/dv = k - N
+    return h
 
 
 def noise_free_states(mu) -> np.ndarray:

@@ -348,15 +348,28 @@ def _degrees_of_freedom(df) -> float:
     return _checks.positive_scalar(df, "df")
 
 
-def _linearised_log_likelihood(x3, c, g, r0, rho, k: int) -> np.ndarray:
-    """``log Lt_k``: the log likelihood of ``mu_{k+1}`` linearised about ``c``, at states ``x3``.
+def _linearised_log_likelihood(x3, c, g, r0, rho, k) -> np.ndarray:
+    """``log Lt_k``: the log likelihoods of ``mu_{k+1}`` linearised about ``c``, at states ``x3``.
 
     ``-(r0_k + g_k . (x3 - c))**2 / (2 rho**2)`` with ``g_k`` (B, 3) the gradient of
     the residual of ``mu_{k+1}`` at ``c`` (Eq. (8)) and ``r0_k`` (B,) the residual
-    there (0 at the paper's noise-free state); ``x3`` (B, n, 3) at the last frame.
+    there (0 at the paper's noise-free state); ``x3`` (B, n, 3) at the last frame,
+    ``k`` (K,) frames from 0: returns shape (B, n, K).
     """
-    r = (np.einsum("bnj,bj->bn", x3 - c[:, None, :], g[:, k]) + r0[:, k, None]) / rho[:, None]
+    d = x3 - c[:, None, :]
+    r = (d @ np.swapaxes(g[:, k], -1, -2) + r0[:, None, k]) / rho[:, None, None]
     return -0.5 * r**2
+
+
+#: Floats per array of one block of frames (trials x particles x frames) of the loops over
+#: the frames that take several frames at once: about 16 MB.
+_BLOCK_FLOATS = 2**21
+
+
+def _blocks(n_frames: int, per_frame: int):
+    """Consecutive frame indices (arrays) in blocks of at most ``_BLOCK_FLOATS`` floats."""
+    size = max(1, min(n_frames, _BLOCK_FLOATS // max(1, per_frame)))
+    return [np.arange(k, min(k + size, n_frames)) for k in range(0, n_frames, size)]
 
 
 def _initial(mu, rho, prior_mean, prior_cov, N, rng, proposal, df, inflation):
@@ -376,10 +389,70 @@ def _initial(mu, rho, prior_mean, prior_cov, N, rng, proposal, df, inflation):
         r0 = model.residuals(c, mu)
     g = model.residual_gradients(c, n_frames)  # (B, N, 3): rows g_k, Eqs. (20)-(22)
     look_ahead = (c, g, r0)
-    log_lt = sum(_linearised_log_likelihood(x3, c, g, r0, rho, k) for k in range(n_frames))
+    log_lt = sum(
+        np.sum(_linearised_log_likelihood(x3, c, g, r0, rho, k), axis=-1)
+        for k in _blocks(n_frames, x3.shape[0] * N)
+    )
     x1 = model.G(x3, 1 - n_frames)
     log_prior = gaussian_logpdf(x1, prior_mean[:, None, :], prior_cov)
     return x1, log_prior - log_q + log_lt, look_ahead
+
+
+def _dead(log_w, k) -> None:
+    """Refuse a trial none of whose particles (axis 1 of ``log_w``) has a positive weight.
+
+    ``log_w`` (B, N, K) after the frames ``k`` (K,) (``N`` may be 1: the largest of
+    each trial's log weights); names the first frame and trial.
+    """
+    dead = ~np.any(np.isfinite(log_w), axis=1)  # (B, K)
+    if np.any(dead):
+        j = int(np.argmax(np.any(dead, axis=0)))
+        raise RuntimeError(
+            f"every particle of trial {int(np.argmax(dead[:, j]))} has zero weight after "
+            f"mu_{int(k[j]) + 1} (behind the camera); increase n_particles or use "
+            "proposal='second_order'"
+        )
+
+
+def _without_resampling(x1, log_w, look_ahead, mu, rho):
+    """The weights after every frame of a run that never resamples, several frames at once.
+
+    Without resampling every particle moves by Eq. (1) alone: its state at
+    frame ``k`` is ``G^{k-1} x_1``, and its log weight after ``mu_k`` is the
+    initial one plus, over the frames ``j <= k``, the log likelihood (4) of
+    ``mu_j`` less the look-ahead term of frame ``j`` (the terms the initial
+    weight holds, so that at the last frame they cancel). These sums are taken a
+    block of frames at a time, the ESS after each frame from them (it does not
+    depend on the normalisation), and the weights normalised once, at the end:
+    the per-frame loop of :func:`run`, which normalises and moves the particles
+    at every frame, gives the same to rounding.
+
+    Returns
+    -------
+    particles : ndarray, shape (B, N, 3)
+        At the last frame.
+    log_w : ndarray, shape (B, N)
+        Normalised.
+    ess : ndarray, shape (B, n_frames)
+    """
+    B, N = log_w.shape
+    n_frames = mu.shape[1]
+    ess = np.empty((B, n_frames))
+    x3 = model.G(x1, n_frames - 1)
+    # the depth grows with the frames: a particle in front at frame 1 stays in front
+    front = not np.all(x1[..., 1] > 0)
+    for k in _blocks(n_frames, 4 * B * N):
+        states = model.G(x1[:, :, None, :], k)  # (B, N, K, 3)
+        increments = model.log_likelihood(mu[:, None, k], states, rho[:, None, None], front)
+        if look_ahead is not None:
+            increments = increments - _linearised_log_likelihood(x3, *look_ahead, rho, k)
+        block = log_w[..., None] + np.cumsum(increments, axis=-1)  # (B, N, K)
+        top = np.max(block, axis=1, keepdims=True)
+        _dead(top, k)  # no particle of positive weight: the largest weight is 0
+        w = np.exp(block - top)
+        ess[:, k] = np.sum(w, axis=1) ** 2 / np.sum(w**2, axis=1)
+        log_w = block[..., -1]
+    return x3, normalise(log_w), ess
 
 
 def _resample(x, log_w, ancestors, need, N, rng, resampler):
@@ -460,9 +533,12 @@ def run(
     inflation = _checks.positive_scalar(inflation, "inflation")
 
     x, log_w, look_ahead = _initial(mu, rho, prior_mean, prior_cov, N, rng, proposal, df, inflation)
-    ess = np.zeros((B, n_frames))
-    resampled = np.zeros((B, n_frames), dtype=bool)
     ancestors = np.broadcast_to(np.arange(N), (B, N))
+    resampled = np.zeros((B, n_frames), dtype=bool)
+    if threshold == 0.0:  # never resamples: no per-frame normalisation or moves needed
+        x, log_w, ess = _without_resampling(x, log_w, look_ahead, mu, rho)
+        return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal)
+    ess = np.zeros((B, n_frames))
     for k in range(n_frames):
         if k > 0:
             resampled[:, k] = ess[:, k - 1] < threshold * N
@@ -472,15 +548,13 @@ def run(
             x = model.G(x)  # Eq. (1): the deterministic motion
         log_w = log_w + model.log_likelihood(mu[:, k, None], x, rho[:, None], front=True)
         if look_ahead is not None:
-            log_w = log_w - _linearised_log_likelihood(
-                model.G(x, n_frames - 1 - k), *look_ahead, rho, k
+            log_w = (
+                log_w
+                - _linearised_log_likelihood(
+                    model.G(x, n_frames - 1 - k), *look_ahead, rho, np.array([k])
+                )[..., 0]
             )
-        dead = ~np.any(np.isfinite(log_w), axis=-1)
-        if np.any(dead):
-            raise RuntimeError(
-                f"every particle of trial {int(np.argmax(dead))} has zero weight after mu_{k + 1} "
-                "(behind the camera); increase n_particles or use proposal='second_order'"
-            )
+        _dead(log_w[..., None], np.array([k]))
         log_w = normalise(log_w)
         ess[:, k] = effective_sample_size(log_w)
     return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal)

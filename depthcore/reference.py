@@ -14,7 +14,10 @@ Recommended import: ``from depthcore import reference``.
 * :func:`trapezoid_depth_moments`: the depth moments by one trapezoid rule of
   a fixed step;
 * :func:`track_fixed_lag`: a track's fixed-lag smoothed states by the
-  textbook's state augmentation (19.2.6), rerun from frame 1 for every frame.
+  textbook's state augmentation (19.2.6), rerun from frame 1 for every frame;
+* :func:`trajectory_laplace_dense`, :func:`iterated_smoother_dense`: the
+  trajectory's Gauss-Newton problems with process noise solved densely, over
+  the whole trajectory at once.
 
 They are slow by design; :mod:`depthcore.optimal` is the route to use.
 """
@@ -30,7 +33,7 @@ from . import _checks, bank, kalman, model, optimal
 from .gaussian import Gaussian, student_t
 from .optimal import log_posterior
 from .resampling import weighted_moments, weighted_standard_errors
-from .second_order import second_order
+from .second_order import minimiser, second_order
 
 LogDensity = Callable[[np.ndarray], np.ndarray]
 
@@ -414,3 +417,168 @@ def track_fixed_lag(track) -> tuple[np.ndarray, np.ndarray]:
         means.append(mean)
         covs.append(np.einsum("j,jab->ab", p, C + d[:, :, None] * d[:, None, :]))
     return np.array(means), np.array(covs)
+
+
+def _dense_trajectory(z, mu):
+    """Bearing residuals (N,) and their Jacobian (N, N + 2) of ``z = (x_1, y_1, v_1, a)``.
+
+    The states are ``x_k = x_1 + (k - 1) v_1 + sum_i max(k - 1 - i, 0) a_i``,
+    ``y_k = y_1 + k - 1``, built with the dense ``N x (N - 1)`` map of the
+    accelerations.
+    """
+    n_frames = mu.shape[-1]
+    j = np.arange(n_frames, dtype=float)
+    D = np.maximum(j[:, None] - np.arange(1, n_frames)[None, :], 0.0)
+    x = z[0] + j * z[2] + D @ z[3:]
+    y = z[1] + j
+    J = np.empty((n_frames, n_frames + 2))
+    J[:, 0] = 1.0 / y
+    J[:, 1] = -x / y**2
+    J[:, 2] = j / y
+    J[:, 3:] = D / y[:, None]
+    return x / y - mu, J
+
+
+def _dense_final_state_map(n_frames: int):
+    """``T`` (3, N + 2) and ``offset`` (3,): the state at frame ``N`` is ``T z + offset``."""
+    T = np.zeros((3, n_frames + 2))
+    T[0, 0], T[0, 2], T[0, 3:] = 1.0, n_frames - 1.0, n_frames - 2.0 - np.arange(n_frames - 1)
+    T[1, 1] = 1.0
+    T[2, 2], T[2, 3:] = 1.0, 1.0
+    return T, np.array([0.0, n_frames - 1.0, 0.0])
+
+
+def _dense_gauss_newton(z, stacked, objective, max_iterations, step_tol, moved):
+    """Gauss-Newton with the step halved until the objective does not increase.
+
+    ``stacked(z)`` gives the residuals and their dense Jacobian, each step a
+    least-squares solve of the whole problem by :func:`numpy.linalg.lstsq`;
+    ``moved(z_new, z, M)`` the size of a step. Returns the last ``z``, the
+    iterations and whether it converged.
+    """
+    f = objective(z)
+    for i in range(max_iterations):
+        r, M = stacked(z)
+        step = np.linalg.lstsq(M, -r, rcond=None)[0]
+        t, z_new = 1.0, z + step
+        f_new = objective(z_new)
+        for _ in range(60):
+            if f_new <= f:
+                break
+            t *= 0.5
+            z_new = z + t * step
+            f_new = objective(z_new)
+        if not f_new <= f:
+            z_new, f_new = z, f
+        size = moved(z_new, z, M)
+        z, f = z_new, f_new
+        if not size > step_tol:
+            return z, i + 1, True
+    return z, max_iterations, False
+
+
+def trajectory_laplace_dense(mu, rho: float, prior_mean, prior_cov, q: float):
+    """:func:`depthcore.second_order.trajectory_laplace` for one sequence, densely.
+
+    Gauss-Newton on ``|r(z) / rho|**2 + |a / q|**2`` over the whole trajectory
+    ``z = (x_1, y_1, v_1, a_1 .. a_{N-1})``, each step a least-squares solve of
+    the full ``(2 N - 1) x (N + 2)`` Jacobian, from ``start`` (the state at frame
+    1 given by the minimiser without process noise, ``a = 0``); then the
+    Laplace Gaussian times the prior by a QR factorisation of the stacked
+    ``(2 N + 2) x (N + 2)`` system, mapped to frame ``N``. Its cost grows like
+    ``N**3``: the independent route that the block-tridiagonal solver is
+    checked against.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N,)
+    rho : float
+    prior_mean : array_like, shape (3,)
+    prior_cov : array_like, shape (3, 3)
+    q : float
+
+    Returns
+    -------
+    mean : ndarray, shape (3,)
+    cov : ndarray, shape (3, 3)
+    """
+    mu = np.asarray(mu, dtype=float)
+    n_frames = mu.shape[-1]
+    penalty = np.zeros((n_frames - 1, n_frames + 2))
+    penalty[:, 3:] = np.eye(n_frames - 1) / q
+
+    def stacked(z):
+        r, J = _dense_trajectory(z, mu)
+        return np.concatenate([r / rho, z[3:] / q]), np.concatenate([J / rho, penalty])
+
+    def objective(z):
+        return float(np.sum(stacked(z)[0] ** 2)) if z[1] > 0 else np.inf
+
+    start = model.G(minimiser(mu[None])[0], 1 - n_frames)
+    z, _, converged = _dense_gauss_newton(
+        np.concatenate([start, np.zeros(n_frames - 1)]),
+        stacked,
+        objective,
+        200,
+        1e-11,
+        lambda new, old, M: np.max(np.abs(new - old) / (1.0 + np.abs(old))),
+    )
+    if not converged:
+        raise ValueError("the dense Gauss-Newton did not converge")
+    _, M = stacked(z)
+    prior_rows = np.zeros((3, n_frames + 2))
+    prior_rows[:, :3] = np.linalg.inv(np.linalg.cholesky(prior_cov))
+    K = np.concatenate([M, prior_rows])
+    rhs = np.concatenate([M @ z, prior_rows[:, :3] @ np.asarray(prior_mean, dtype=float)])
+    Q, R = np.linalg.qr(K)
+    R_inv = np.linalg.inv(R)
+    T, offset = _dense_final_state_map(n_frames)
+    cov = T @ R_inv @ R_inv.T @ T.T
+    return T @ (R_inv @ (Q.T @ rhs)) + offset, 0.5 * (cov + cov.T)
+
+
+def iterated_smoother_dense(mu, rho: float, prior_mean, prior_cov, q: float):
+    """:func:`depthcore.iterated.smoother` with process noise for one sequence, densely.
+
+    Gauss-Newton on the stacked whitened residuals of the prior, the bearings
+    and the accelerations over ``z = (x_1, y_1, v_1, a_1 .. a_{K-1})`` from
+    ``(m, 0)``, each step a least-squares solve of the full Jacobian, stopped
+    when ``|M step| <= 1e-12``; the covariance at frame ``K`` is
+    ``T (M^T M)^{-1} T^T`` from a QR factorisation of ``M``. Its cost grows like
+    ``K**3``.
+
+    Returns
+    -------
+    mean : ndarray, shape (3,)
+    cov : ndarray, shape (3, 3)
+    iterations : int
+    """
+    mu = np.asarray(mu, dtype=float)
+    m = np.asarray(prior_mean, dtype=float)
+    K = mu.shape[-1]
+    L_inv = np.linalg.inv(np.linalg.cholesky(prior_cov))
+
+    def stacked(z):
+        bearing, J = _dense_trajectory(z, mu)
+        M = np.zeros((2 * K + 2, K + 2))
+        M[:3, :3] = L_inv
+        M[3 : K + 3] = J / rho
+        M[K + 3 :, 3:] = np.eye(K - 1) / q
+        return np.concatenate([L_inv @ (z[:3] - m), bearing / rho, z[3:] / q]), M
+
+    def objective(z):
+        return float(np.sum(stacked(z)[0] ** 2)) if z[1] > 0 else np.inf
+
+    z, iterations, _ = _dense_gauss_newton(
+        np.concatenate([m, np.zeros(K - 1)]),
+        stacked,
+        objective,
+        100,
+        1e-12,
+        lambda new, old, M: np.linalg.norm(M @ (new - old)),
+    )
+    _, M = stacked(z)
+    R_inv = np.linalg.inv(np.linalg.qr(M, mode="r"))
+    T, offset = _dense_final_state_map(K)
+    cov = T @ R_inv @ R_inv.T @ T.T
+    return T @ z + offset, 0.5 * (cov + cov.T), iterations

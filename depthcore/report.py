@@ -701,10 +701,49 @@ def _ekf_bench_texts(r: dict) -> dict[str, str]:
         "depthcore_ms": f"{x['depthcore_ms']:.1f}",
         "filterpy_ms": f"{x['filterpy_ms']:,.0f}",
         "ratio": f"{x['ratio']:,.0f}",
+        "ratio_min": f"{x['ratio_min']:,.0f}",
+        "ratio_max": f"{x['ratio_max']:,.0f}",
+        "pairs": f"{r['sizes']['pairs']}",
         "mean_difference": _sci(x["mean_difference_sd"]),
         "cov_max": _sci(x["covariance_difference_max"]),
         "cov_median": _sci(x["covariance_difference_median"]),
     }
+
+
+def _kalman_bench_texts(r: dict) -> dict[str, str]:
+    x = r["results"]
+    return {
+        "steps": f"{r['sizes']['steps']:,}",
+        "pairs": f"{r['sizes']['pairs']}",
+        "depthcore_ms": f"{x['depthcore_ms']:.1f}",
+        "filterpy_ms": f"{x['filterpy_ms']:.1f}",
+        "ratio": f"{x['ratio']:.2f}",
+        "ratio_min": f"{x['ratio_min']:.2f}",
+        "ratio_max": f"{x['ratio_max']:.2f}",
+        "mean_difference": _sci(x["mean_difference_sd"]),
+        "cov_max": _sci(x["covariance_difference_max"]),
+    }
+
+
+def _frames_bench_texts(r: dict) -> dict[str, str]:
+    x = r["results"]
+    out = {
+        "trials": f"{r['sizes']['trials']}",
+        "q": f"{r['sizes']['process_noise']:g}",
+        "n_filters": f"{len(x['filters'])}",
+        "growth_max": f"{max(row['growth'] for row in x['filters']):.2f}",
+    }
+    for j, n in enumerate(x["frames"]):
+        out[f"n_{j}"] = f"{n:,}"
+    for i, row in enumerate(x["filters"]):
+        out[f"{i}_filter"] = row["filter"] + (
+            f" ({row['options']['n_particles']:,} particles)" if row["options"] else ""
+        )
+        out[f"{i}_q"] = f"{row['process_noise']:g}"
+        for j, t in enumerate(row["ms_per_trial"]):
+            out[f"{i}_{j}_ms"] = f"{t:,.1f}"
+        out[f"{i}_growth"] = f"{row['growth']:.2f}"
+    return out
 
 
 def _import_bench_texts(r: dict) -> dict[str, str]:
@@ -741,13 +780,16 @@ def _bank_bench_texts(r: dict) -> dict[str, str]:
         "matched_trials": f"{matched['trials']}",
         "matched_frames": f"{matched['frames']}",
         "matched_replicas": f"{matched['replicas']}",
-        "matched_target_error": _sci(matched["target_error_sd"], 0),
-        "matched_needed": _sci(matched["particles_needed"]),
-        "matched_pf_s": _sci(matched["particle_filter_time_s"]),
         "matched_bank_s": f"{matched['bank_time_s']:.3f}",
-        "matched_ratio": _sci(matched["ratio"]),
+        "matched_ratio": f"{matched['ratio']:,.0f}",
         "matched_target_ratio": f"{matched['target_ratio']:g}",
         "matched_largest": f"{matched['particles'][-1]:,}",
+        "matched_largest_s": f"{matched['time_per_run_s'][-1]:.2f}",
+        "matched_largest_error": _sci(matched["error_sd"][-1], 2),
+        "matched_target_error": _sci(matched["target_error_sd"], 0),
+        "matched_extrapolated_needed": _sci(matched["extrapolated_particles_needed"]),
+        "matched_extrapolated_s": _sci(matched["extrapolated_time_s"]),
+        "matched_extrapolated_ratio": _sci(matched["extrapolated_ratio"]),
     }
     per = np.array([w["ms_per_update"] for w in online["windows"]])
     for i, w in enumerate(online["windows"]):
@@ -802,6 +844,8 @@ _BENCH_TEXTS = {
     "bench_import": ("import", _import_bench_texts),
     "bench_bank": ("bank", _bank_bench_texts),
     "bench_rbpf": ("rbpf", _rbpf_bench_texts),
+    "bench_kalman": ("kalmanpy", _kalman_bench_texts),
+    "bench_frames": ("frames", _frames_bench_texts),
 }
 
 
@@ -819,8 +863,9 @@ def bench_texts(name: str, record: dict) -> dict[str, str]:
     -------
     dict of str to str
         ``"<prefix>_<quantity>"`` -> text, the prefix ``opt``, ``trials``,
-        ``ekfpy``, ``import``, ``bank`` or ``rbpf``; ``"<prefix>_origin"`` is
-        :func:`bench_origin`. Times are in the unit their record's key ends with.
+        ``ekfpy``, ``import``, ``bank``, ``rbpf``, ``kalmanpy`` or ``frames``;
+        ``"<prefix>_origin"`` is :func:`bench_origin`. Times are in the unit that
+        their record's key ends with.
     """
     if name not in _BENCH_TEXTS:
         raise ValueError(f"name must be one of {sorted(_BENCH_TEXTS)}, got {name!r}")
@@ -842,7 +887,8 @@ def bench_tables(records: dict) -> dict[str, MarkdownTable]:
     -------
     dict of str to MarkdownTable
         ``"optimal"``, ``"per_triple"``, ``"ekf"``, ``"trials"``, ``"bank"``,
-        ``"rbpf_equal_cost"``, ``"rbpf_convergence"``, ``"import"``.
+        ``"rbpf_equal_cost"``, ``"rbpf_convergence"``, ``"kalman"``, ``"frames"``,
+        ``"import"``.
     """
     t = {}
     for name, record in records.items():
@@ -943,13 +989,17 @@ def bench_tables(records: dict) -> dict[str, MarkdownTable]:
                 f"under {t['bank_many_target_s']} s ({t['bank_many_met']})",
             ],
             [
-                "causal particle filter (resample-move) at a depth-mean error of "
-                f"{t['bank_matched_target_error']} SD, {t['bank_matched_trials']} trials of "
-                f"{t['bank_matched_frames']} frames",
-                f"{t['bank_matched_needed']} particles, {t['bank_matched_pf_s']} s, "
-                f"extrapolated as C/sqrt(M) from {t['bank_matched_largest']} particles; "
-                f"the bank: {t['bank_matched_bank_s']} s (ratio {t['bank_matched_ratio']})",
-                f"bank at least {t['bank_matched_target_ratio']}x faster",
+                "causal particle filter (resample-move), "
+                f"{t['bank_matched_largest']} particles, {t['bank_matched_trials']} trials of "
+                f"{t['bank_matched_frames']} frames, against the bank on the same trials",
+                f"measured: {t['bank_matched_largest_s']} s at a depth-mean error of "
+                f"{t['bank_matched_largest_error']} SD; the bank: {t['bank_matched_bank_s']} s, "
+                f"exact (ratio {t['bank_matched_ratio']}). Extrapolated as C/sqrt(M) to "
+                f"{t['bank_matched_target_error']} SD, not measured: "
+                f"{t['bank_matched_extrapolated_needed']} particles, "
+                f"{t['bank_matched_extrapolated_s']} s "
+                f"(ratio {t['bank_matched_extrapolated_ratio']})",
+                f"bank at least {t['bank_matched_target_ratio']}x faster (measured)",
             ],
         ],
     )
@@ -993,6 +1043,33 @@ def bench_tables(records: dict) -> dict[str, MarkdownTable]:
             for i in range(n_conv)
         ],
     )
+    tables["kalman"] = MarkdownTable(
+        ["route", "time", "ratio"],
+        [
+            [
+                "depthcore kalman.run and fixed_interval_smoother",
+                t["kalmanpy_depthcore_ms"] + ms,
+                "1",
+            ],
+            [
+                "filterpy KalmanFilter and rts_smoother",
+                t["kalmanpy_filterpy_ms"] + ms,
+                t["kalmanpy_ratio"],
+            ],
+        ],
+    )
+    frames = records["bench_frames"]["results"]
+    tables["frames"] = MarkdownTable(
+        ["filter", "q"]
+        + [f"N = {t[f'frames_n_{j}']}" for j in range(len(frames["frames"]))]
+        + ["growth per frame"],
+        [
+            [t[f"frames_{i}_filter"], t[f"frames_{i}_q"]]
+            + [t[f"frames_{i}_{j}_ms"] + ms for j in range(len(frames["frames"]))]
+            + [t[f"frames_{i}_growth"]]
+            for i in range(len(frames["filters"]))
+        ],
+    )
     tables["import"] = MarkdownTable(
         ["import", "median time"],
         [
@@ -1022,11 +1099,21 @@ def bench_readme_blocks(records: dict) -> dict[str, str]:
     for name, record in records.items():
         t.update(bench_texts(name, record))
     notes = {
-        "ekf": f"The two agree to {t['ekfpy_mean_difference']} posterior SDs in the means; "
+        "ekf": f"Times and ratio are medians over {t['ekfpy_pairs']} pairs timed alternately "
+        f"(the pairs' ratios from {t['ekfpy_ratio_min']} to {t['ekfpy_ratio_max']}). "
+        f"The two agree to {t['ekfpy_mean_difference']} posterior SDs in the means; "
         f"the covariances agree to {t['ekfpy_cov_median']} of their norm in the median "
         f"trial and {t['ekfpy_cov_max']} in the worst.",
         "trials": f"The largest error estimate is {t['trials_estimate']} of the SD; the "
         f"vectorised and single routes differ by {t['trials_difference']} SDs.",
+        "kalman": f"Times and ratio are medians over {t['kalmanpy_pairs']} pairs timed "
+        f"alternately (the pairs' ratios from {t['kalmanpy_ratio_min']} to "
+        f"{t['kalmanpy_ratio_max']}); the smoothed means agree to "
+        f"{t['kalmanpy_mean_difference']} SDs, the covariances to {t['kalmanpy_cov_max']} of "
+        "their norm.",
+        "frames": f"Milliseconds per trial, the least of repeated calls on "
+        f"{t['frames_trials']} trials; growth per frame: the cost per frame at the largest N "
+        "over that at the smallest (1: linear growth).",
     }
     sources = {
         "optimal": "bench_optimal",
@@ -1036,6 +1123,8 @@ def bench_readme_blocks(records: dict) -> dict[str, str]:
         "bank": "bench_bank",
         "rbpf_equal_cost": "bench_rbpf",
         "rbpf_convergence": "bench_rbpf",
+        "kalman": "bench_kalman",
+        "frames": "bench_frames",
         "import": "bench_import",
     }
     prefixes = {name: prefix for name, (prefix, _) in _BENCH_TEXTS.items()}

@@ -52,6 +52,7 @@ __all__ = [
     "READINGS",
     "STEP_TOL",
     "b2",
+    "bearing_rows",
     "damped_step",
     "f",
     "hessian",
@@ -65,6 +66,8 @@ __all__ = [
     "second_order_batch",
     "theorem1_precision",
     "trajectory_laplace",
+    "trajectory_solve",
+    "trajectory_states",
 ]
 
 READINGS = ("derived", "printed")
@@ -319,20 +322,6 @@ def _trajectory_map(n_frames: int) -> np.ndarray:
     return np.maximum(k - i, 0).astype(float)
 
 
-def _final_state_map(n_frames: int):
-    """``T`` (3, N + 2) and ``offset`` (3,) with the state at frame ``N`` equal to ``T z + offset``.
-
-    ``z = (x_1, y_1, v_1, a_1 .. a_{N-1})``: ``x_N = x_1 + (N - 1) v_1 + sum_i (N - 1 - i) a_i``,
-    ``y_N = y_1 + N - 1``, ``v_N = v_1 + sum_i a_i``.
-    """
-    D = _trajectory_map(n_frames)
-    T = np.zeros((3, n_frames + 2))
-    T[0, 0], T[0, 2], T[0, 3:] = 1.0, n_frames - 1.0, D[-1]
-    T[1, 1] = 1.0
-    T[2, 2], T[2, 3:] = 1.0, 1.0
-    return T, np.array([0.0, n_frames - 1.0, 0.0])
-
-
 def _trajectory_residuals(z, mu, D):
     """Bearing residuals (N,) and their Jacobian (N, N + 2) of ``z = (x_1, y_1, v_1, a)``."""
     n_frames = mu.shape[-1]
@@ -347,6 +336,140 @@ def _trajectory_residuals(z, mu, D):
     return x / y - mu, J
 
 
+def trajectory_states(z, offset: bool = True) -> np.ndarray:
+    """The states ``(x_k, y_k, v_k)`` of a trajectory ``z = (x_1, y_1, v_1, a_1 .. a_{N-1})``.
+
+    ``v_k = v_1 + sum_{i < k} a_i``, ``x_{k+1} = x_k + v_k``, ``y_k = y_1 + k - 1``
+    (Eq. (1) with the accelerations added to the velocity), by cumulative sums:
+    ``O(N)``. With ``offset=False`` the ``+ k - 1`` of the depth is left out,
+    which maps increments of ``z`` to increments of the states.
+
+    Parameters
+    ----------
+    z : ndarray, shape (..., N + 2)
+    offset : bool
+
+    Returns
+    -------
+    ndarray, shape (..., N, 3)
+    """
+    z = np.asarray(z, dtype=float)
+    n_frames = z.shape[-1] - 2
+    zero = np.zeros(z.shape[:-1] + (1,))
+    v = z[..., 2:3] + np.concatenate([zero, np.cumsum(z[..., 3:], axis=-1)], axis=-1)
+    x = z[..., 0:1] + np.concatenate([zero, np.cumsum(v[..., :-1], axis=-1)], axis=-1)
+    y = np.broadcast_to(z[..., 1:2], v.shape)
+    if offset:
+        y = y + np.arange(n_frames)
+    return np.stack([x, y, v], axis=-1)
+
+
+def trajectory_solve(H, y, t, q: float, U=None, u=None):
+    """Least squares over a trajectory, frame by frame: a square-root information smoother.
+
+    Minimises, over increments ``d_k`` (3,) of the states at frames
+    ``k = 1 .. N`` and ``b_k`` of the accelerations, tied by the motion
+    ``d_{k+1} = F d_k + (0, 0, b_k)`` (Eq. (1), ``F`` its linear part),
+
+        sum_k (H_k . d_k - y_k)**2 + sum_k (b_k / q - t_k)**2 + |U d_1 - u|**2
+
+    (the last term only when ``U`` is given). The normal equations of this
+    problem are block tridiagonal in the states; it is solved without forming
+    them, as the square-root information filter does (textbook 19.2, in
+    information form): at each frame one QR factorisation of a 5 x 5 matrix
+    eliminates the acceleration and the previous state, then a back
+    substitution through the motion recovers every increment. The cost is
+    ``O(N)``, against ``O(N**3)`` for a QR factorisation of the whole
+    ``(2 N - 1 + 3) x (N + 2)`` Jacobian, with the same least-squares solution.
+
+    Parameters
+    ----------
+    H : ndarray, shape (B, N, 3)
+        The rows of the measurement terms.
+    y : ndarray, shape (B, N)
+        Their targets.
+    t : ndarray, shape (B, N - 1)
+        The targets of the acceleration terms.
+    q : float
+        ``> 0``, the accelerations' scale.
+    U : ndarray, shape (B, 3, 3), optional
+        Rows on ``d_1`` (a whitened prior); ``None`` for none.
+    u : ndarray, shape (B, 3), optional
+        Their targets.
+
+    Returns
+    -------
+    dz : ndarray, shape (B, N + 2)
+        ``(d_1, b_1 .. b_{N-1})``; the increments of the states follow from
+        :func:`trajectory_states` with ``offset=False``.
+    R : ndarray, shape (B, 3, 3)
+        Upper triangular: the square-root information of ``d_N`` given every
+        term, so that its covariance is ``R^{-1} R^{-T}``. Entries of ``dz``
+        that the terms do not determine are not finite.
+    """
+    B, n_frames = y.shape
+    R = np.zeros((B, 3, 3)) if U is None else np.array(U, dtype=float)
+    r = np.zeros((B, 3)) if u is None else np.array(u, dtype=float)
+    first = np.concatenate(
+        [
+            np.concatenate([R, r[..., None]], axis=-1),
+            np.concatenate([H[:, :1], y[:, :1, None]], -1),
+        ],
+        axis=1,
+    )
+    top = np.linalg.qr(first, mode="r")
+    R, r = top[:, :3, :3], top[:, :3, 3]
+    rows = np.empty((B, max(n_frames - 1, 0), 5))
+    A = np.zeros((B, 5, 5))
+    for k in range(1, n_frames):
+        # R d_{k-1} = r with d_{k-1} = F^{-1} (d_k - (0, 0, b)): the columns of R F^{-1}
+        # are R's, with the third less the first; the term in b is R F^{-1} (0, 0, 1).
+        A[:, 0, :] = 0.0
+        A[:, 0, 0] = 1.0 / q
+        A[:, 0, 4] = t[:, k - 1]
+        A[:, 1:4, 1:3] = R[..., :2]
+        A[:, 1:4, 3] = R[..., 2] - R[..., 0]
+        A[:, 1:4, 0] = -A[:, 1:4, 3]
+        A[:, 1:4, 4] = r
+        A[:, 4, 0] = 0.0
+        A[:, 4, 1:4] = H[:, k]
+        A[:, 4, 4] = y[:, k]
+        top = np.linalg.qr(A, mode="r")
+        rows[:, k - 1] = top[:, 0]
+        R, r = top[:, 1:4, 1:4], top[:, 1:4, 4]
+    dz = np.empty((B, n_frames + 2))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        d = _upper_solve(R, r)
+        for k in range(n_frames - 1, 0, -1):
+            row = rows[:, k - 1]
+            b = (row[:, 4] - np.einsum("bi,bi->b", row[:, 1:4], d)) / row[:, 0]
+            dz[:, k + 2] = b
+            w = d[:, 2] - b  # d_{k-1} = F^{-1} (d_k - (0, 0, b))
+            d = np.stack([d[:, 0] - w, d[:, 1], w], axis=-1)
+    dz[:, :3] = d
+    return dz, R
+
+
+def _upper_solve(R, r) -> np.ndarray:
+    """``R^{-1} r`` for upper triangular ``R`` (B, 3, 3) by back substitution, r (B, 3)."""
+    x2 = r[:, 2] / R[:, 2, 2]
+    x1 = (r[:, 1] - R[:, 1, 2] * x2) / R[:, 1, 1]
+    x0 = (r[:, 0] - R[:, 0, 1] * x1 - R[:, 0, 2] * x2) / R[:, 0, 0]
+    return np.stack([x0, x1, x2], axis=-1)
+
+
+def bearing_rows(states, weight) -> np.ndarray:
+    """The rows of the bearings' terms in :func:`trajectory_solve`, shape (B, N, 3).
+
+    ``weight`` (B,) times the gradients ``(1 / y, -x / y**2, 0)`` of ``x / y``,
+    Eq. (11), at ``states`` (B, N, 3).
+    """
+    inv_y = 1.0 / states[..., 1]
+    return weight[:, None, None] * np.stack(
+        [inv_y, -states[..., 0] * inv_y**2, np.zeros_like(inv_y)], axis=-1
+    )
+
+
 def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
     """The Laplace approximation of the trajectory's likelihood, times the prior, at frame ``N``.
 
@@ -356,10 +479,14 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
     minimiser without process noise (:func:`minimiser`, moved to frame 1,
     ``a = 0``). At the minimiser ``z*`` the stacked Jacobian ``M`` of both
     terms gives the Gaussian ``N(z, z*, (M^T M)^{-1})``; multiplied by the
-    prior ``N(x_1, m, P)`` (a least-squares problem solved by QR, as
-    :func:`_square_root_solve` does) and mapped to the state at frame ``N``,
+    prior ``N(x_1, m, P)`` and mapped to the state at frame ``N``,
     ``x_N = x_1 + (N - 1) v_1 + sum_i (N - 1 - i) a_i``, ``y_N = y_1 + N - 1``,
-    ``v_N = v_1 + sum_i a_i``, which is linear in ``z``.
+    ``v_N = v_1 + sum_i a_i``, which is linear in ``z``. Every least-squares
+    problem, the Gauss-Newton steps and the product with the prior, is solved
+    through the trajectory's block-tridiagonal structure
+    (:func:`trajectory_solve`), so the cost grows linearly with ``N``; the
+    rows run side by side. :func:`depthcore.reference.trajectory_laplace_dense`
+    solves the same problems densely.
 
     Parameters
     ----------
@@ -376,58 +503,47 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
     cov : ndarray, shape (B, 3, 3)
     """
     B, n_frames = mu.shape
-    dim = n_frames + 2
-    D = _trajectory_map(n_frames)
     L = np.broadcast_to(np.linalg.cholesky(np.asarray(prior_cov, dtype=float)), (B, 3, 3))
     m = np.broadcast_to(np.asarray(prior_mean, dtype=float), (B, 3))
-    start = model.G(minimiser(mu), 1 - n_frames)
-    T, offset = _final_state_map(n_frames)
-    penalty = np.zeros((n_frames - 1, dim))
-    penalty[:, 3:] = np.eye(n_frames - 1) / q
-    means, covs = np.empty((B, 3)), np.empty((B, 3, 3))
-    for b in range(B):
+    z = np.concatenate([model.G(minimiser(mu), 1 - n_frames), np.zeros((B, n_frames - 1))], -1)
 
-        def objective(z, b=b):
-            if not z[1] > 0:
-                return np.inf
-            r, _ = _trajectory_residuals(z, mu[b], D)
-            return float(np.sum((weight[b] * r) ** 2) + np.sum((z[3:] / q) ** 2))
+    def objective(z, rows):
+        s = trajectory_states(z)
+        front = z[:, 1] > 0
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            r = weight[rows, None] * (s[..., 0] / s[..., 1] - mu[rows])
+            value = np.sum(r**2, axis=-1) + np.sum((z[:, 3:] / q) ** 2, axis=-1)
+        return np.where(front, value, np.inf)
 
-        z = np.concatenate([start[b], np.zeros(n_frames - 1)])
-        f = objective(z)
-        for _ in range(MAX_ITERATIONS):
-            r, J = _trajectory_residuals(z, mu[b], D)
-            M = np.concatenate([weight[b] * J, penalty])
-            rhs = -np.concatenate([weight[b] * r, z[3:] / q])
-            step = _lstsq(M[None], rhs[None])[0]
-            z_new, f_new = damped_step(z[None], step[None], np.array([f]), _rows(objective))
-            moved = np.max(np.abs(z_new[0] - z) / (1.0 + np.abs(z)))
-            z, f = z_new[0], float(f_new[0])
-            if not moved > STEP_TOL:
-                break
-        else:
-            raise ValueError(
-                f"mu[{b}]: Gauss-Newton on the trajectory's likelihood with process_noise "
-                f"{q:g} did not converge in {MAX_ITERATIONS} iterations"
-            )
-        _, J = _trajectory_residuals(z, mu[b], D)
-        M = np.concatenate([weight[b] * J, penalty])
-        prior_rows = np.zeros((3, dim))
-        prior_rows[:, :3] = np.linalg.inv(L[b])
-        K = np.concatenate([M, prior_rows])
-        rhs = np.concatenate([M @ z, prior_rows[:, :3] @ m[b]])
-        Q, R = np.linalg.qr(K)
-        R_inv = np.linalg.inv(R)
-        post = R_inv @ (Q.T @ rhs)
-        cov = T @ R_inv @ R_inv.T @ T.T
-        means[b] = T @ post + offset
-        covs[b] = 0.5 * (cov + cov.T)
-    return means, covs
-
-
-def _rows(objective):
-    """Apply a one-row objective to an array of shape (1, dim) (for :func:`damped_step`)."""
-    return lambda z: np.array([objective(z[0])])
+    f = objective(z, np.arange(B))
+    active = np.ones(B, dtype=bool)
+    for _ in range(MAX_ITERATIONS):
+        rows = np.flatnonzero(active)
+        if rows.size == 0:
+            break
+        za = z[rows]
+        s = trajectory_states(za)
+        r = weight[rows, None] * (s[..., 0] / s[..., 1] - mu[rows])
+        step, _ = trajectory_solve(bearing_rows(s, weight[rows]), -r, -za[:, 3:] / q, q)
+        step = np.where(np.isfinite(step), step, 0.0)
+        z_new, f_new = damped_step(za, step, f[rows], lambda y, rows=rows: objective(y, rows))
+        moved = np.max(np.abs(z_new - za) / (1.0 + np.abs(za)), axis=-1)
+        z[rows], f[rows] = z_new, f_new
+        active[rows] = moved > STEP_TOL
+    if np.any(active):
+        raise ValueError(
+            f"mu[{int(np.argmax(active))}]: Gauss-Newton on the trajectory's likelihood with "
+            f"process_noise {q:g} did not converge in {MAX_ITERATIONS} iterations"
+        )
+    s = trajectory_states(z)
+    L_inv = np.linalg.inv(L)
+    gap = np.einsum("bij,bj->bi", L_inv, m - s[:, 0])
+    zero = np.zeros((B, n_frames))
+    dz, R = trajectory_solve(bearing_rows(s, weight), zero, zero[:, 1:], q, L_inv, gap)
+    R_inv = np.linalg.inv(R)
+    cov = R_inv @ np.swapaxes(R_inv, -1, -2)
+    mean = s[:, -1] + trajectory_states(dz, offset=False)[:, -1]
+    return mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
 
 
 def _square_root_solve(c, g, weight, prior_mean, prior_cov):

@@ -23,8 +23,17 @@ NAMES = [p.stem for p in SCRIPTS]
 #: The tables of each record's results.
 TABLES = {
     "bench_bank": {"three_frames", "online", "many_trials", "matched_accuracy", "targets"},
-    "bench_ekf_filterpy": {"depthcore_ms", "filterpy_ms", "ratio", "mean_difference_sd"},
+    "bench_ekf_filterpy": {
+        "depthcore_ms",
+        "filterpy_ms",
+        "ratio",
+        "ratio_min",
+        "ratio_max",
+        "mean_difference_sd",
+    },
+    "bench_frames": {"frames", "filters"},
     "bench_import": {"numpy_s", "depthcore_after_numpy_s", "target_s"},
+    "bench_kalman": {"depthcore_ms", "filterpy_ms", "ratio", "ratio_min", "ratio_max"},
     "bench_optimal": {"moments", "per_triple"},
     "bench_rbpf": {"exact", "equal_cost", "convergence"},
     "bench_trials": {"vectorised_s", "trial_by_trial_s", "ratio", "estimate_sd"},
@@ -170,3 +179,27 @@ def test_a_record_covers_every_module_its_modules_import():
     assert benchmarks.stale(r) == ["depthcore/kalman.py"]
     with pytest.raises(ValueError, match="modules"):
         benchmarks.measured_modules(["no_such_module"])
+
+
+def test_the_bank_records_a_measured_ratio_and_labels_its_extrapolation():
+    # the ratio against the particle filter is its measured time over the bank's; the
+    # extrapolation to the bank's accuracy sits beside it under its own name
+    m = benchmarks.read("bench_bank")["results"]["matched_accuracy"]
+    assert m["ratio"] == pytest.approx(m["time_per_run_s"][-1] / m["bank_time_s"])
+    assert {"extrapolated_ratio", "extrapolated_particles_needed"} <= set(m)
+    row = report.bench_tables({n: benchmarks.read(n) for n in NAMES})["bank"]
+    text = row._repr_markdown_()
+    assert "measured" in text and "Extrapolated" in text and "not measured" in text
+
+
+def test_the_kalman_and_frames_records_are_what_the_readme_claims():
+    # 1,000 steps, agreeing with filterpy; "linear growth": a cost per frame at the
+    # largest N no more than twice that at the smallest
+    k = benchmarks.read("bench_kalman")
+    assert k["sizes"]["steps"] == 1000 and k["results"]["mean_difference_sd"] < 1e-9
+    frames = benchmarks.read("bench_frames")["results"]
+    assert frames["frames"] == [30, 100, 300, 1000]
+    for row in frames["filters"]:
+        assert len(row["ms_per_trial"]) == len(frames["frames"])
+        if row["filter"] in ("second_order", "iterated", "iterated smoother", "ekf", "ukf"):
+            assert row["growth"] < 2, row["filter"]

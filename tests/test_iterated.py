@@ -296,3 +296,20 @@ def test_smoother_with_process_noise_batched_equals_looped_and_refuses_bad_noise
         assert_allclose(sm.cov[i], one.cov, rtol=1e-12)
     with pytest.raises(ValueError, match="process_noise must be >= 0"):
         iterated.smoother(mu, rho, prior.mean, prior.cov, process_noise=-0.1)
+
+
+@pytest.mark.parametrize("frames", [3, 8, 20])
+def test_smoother_with_process_noise_equals_the_dense_route(frames):
+    """The linear-cost Gauss-Newton against :func:`depthcore.reference.iterated_smoother_dense`
+    (every step a dense least-squares solve over the whole trajectory), to the resolution of
+    their line searches, which stop where the objective no longer decreases in floating point."""
+    from depthcore import reference
+
+    q = 0.02
+    mu, rho, prior = _noisy_track(q, frames=frames)
+    sm = iterated.smoother(mu, rho, prior.mean, prior.cov, process_noise=q)
+    mean, cov, _ = reference.iterated_smoother_dense(mu, rho, prior.mean, prior.cov, q)
+    sd = np.sqrt(np.diag(cov))
+    assert sm.converged
+    assert np.max(np.abs(sm.mean - mean) / sd) < 1e-6
+    assert np.max(np.abs(sm.cov - cov) / np.outer(sd, sd)) < 1e-6

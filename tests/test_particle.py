@@ -392,3 +392,26 @@ def test_n_frame_importance_sampling_matches_the_bank_of_kalman_filters():
         (m.velocity_sd, se.velocity_sd, exact.velocity_sd),
     ):
         assert abs(got - want) < 5 * err, (got, want, err)
+
+
+@pytest.mark.parametrize("proposal", ["second_order", "prior"])
+@pytest.mark.parametrize("n_frames", [3, 8])
+def test_a_run_without_resampling_is_the_frame_by_frame_loop(proposal, n_frames, monkeypatch):
+    """``ess_threshold = 0`` takes several frames at once and normalises once; the per-frame
+    loop (forced here by a threshold so small that it never fires) gives the same particles,
+    weights and ESS after every frame to rounding, from the same draws."""
+    rng = np.random.default_rng(11)
+    x1 = np.array([-1.2, 4.0, 0.3])
+    mu = model.simulate_measurements(x1, 5e-3, rng, n=n_frames, size=3)
+    args = (mu, 5e-3, x1 + [0.1, -0.3, 0.0], 0.5 * np.eye(3), 500)
+    fast = run(*args, np.random.default_rng(2), proposal=proposal)
+    slow = run(*args, np.random.default_rng(2), proposal=proposal, ess_threshold=1e-300)
+    assert not slow.resampled.any()
+    assert_allclose(fast.particles, slow.particles, rtol=1e-12, atol=1e-12)
+    assert_allclose(np.exp(fast.log_weights), np.exp(slow.log_weights), rtol=1e-9, atol=1e-15)
+    assert_allclose(fast.ess, slow.ess, rtol=1e-9)
+    # blocks of one frame each give the same as one block of all of them
+    monkeypatch.setattr(pf, "_BLOCK_FLOATS", 1)
+    tiny = run(*args, np.random.default_rng(2), proposal=proposal)
+    assert_allclose(tiny.ess, fast.ess, rtol=1e-12)
+    assert_allclose(tiny.log_weights, fast.log_weights, rtol=1e-12, atol=1e-12)

@@ -257,8 +257,8 @@ def test_bench_texts_format_the_records_numbers():
 def test_bench_readme_blocks_hold_every_table_and_its_origin():
     from depthcore import benchmarks
 
-    names = ["bench_bank", "bench_ekf_filterpy", "bench_import"]
-    names += ["bench_optimal", "bench_rbpf", "bench_trials"]
+    names = ["bench_bank", "bench_ekf_filterpy", "bench_import", "bench_kalman"]
+    names += ["bench_optimal", "bench_rbpf", "bench_trials", "bench_frames"]
     records = {n: benchmarks.read(n) for n in names}
     blocks = report.bench_readme_blocks(records)
     assert set(blocks) == set(report.bench_tables(records))
