@@ -55,6 +55,7 @@ MODULES = (
     "inverse_depth",
     "iterated",
     "kalman",
+    "live",
     "model",
     "optimal",
     "particle",
