@@ -181,19 +181,34 @@ class DropHiddenCellsWithoutOutput(SphinxPostTransform):
 #: Pages of the HTML book that the PDF leaves out: the API reference's page per
 #: module (the PDF prints the summaries of ``book/api`` instead).
 HTML_ONLY_PAGES = re.compile(r"^book/api/")
-
+#: Pages whose title the PDF drops, keeping their content: the references, which
+#: the LaTeX builder gathers into the book's closing bibliography anyway (the
+#: page's own chapter would be left empty).
+UNTITLED_IN_PRINT = ("book/bibliography",)
 
 #: The title of the PDF's first chapter, the root page's own text.
 INTRODUCTION = "Introduction"
 
 
-def drop_html_only_pages(app, doctree, docname):
-    """In the PDF's single document, remove the pages of :data:`HTML_ONLY_PAGES`."""
-    if app.builder.format != "latex":
-        return
-    for node in list(doctree.findall(addnodes.start_of_file)):
-        if HTML_ONLY_PAGES.match(node["docname"]):
-            node.parent.remove(node)
+class DropHtmlOnlyPages(SphinxPostTransform):
+    """In the PDF's single document, remove :data:`HTML_ONLY_PAGES` and untitle the others.
+
+    Runs before the LaTeX builder gathers the citations, so that the removed
+    pages' citations are not printed.
+    """
+
+    default_priority = 5
+    formats = ("latex",)
+
+    def run(self, **kwargs):
+        for node in list(self.document.findall(addnodes.start_of_file)):
+            if HTML_ONLY_PAGES.match(node["docname"]):
+                node.parent.remove(node)
+            elif node["docname"] in UNTITLED_IN_PRINT:
+                for section in [c for c in node.children if isinstance(c, nodes.section)]:
+                    section.replace_self(
+                        [c for c in section.children if not isinstance(c, nodes.title)]
+                    )
 
 
 def root_page_as_one_chapter(app, doctree, docname):
@@ -286,7 +301,7 @@ def setup(app):
     app.connect("env-merge-info", merge_citation_owners)
     app.connect("autodoc-process-docstring", docmath.typeset_docstring)
     app.add_directive("depthcore-module-summaries", ModuleSummaries)
-    app.connect("doctree-resolved", drop_html_only_pages)
+    app.add_post_transform(DropHtmlOnlyPages)
     app.connect("doctree-resolved", root_page_as_one_chapter)
     app.add_post_transform(DropHiddenCellsWithoutOutput)
     app.add_config_value("depthcore_downloads", "_build/extra/downloads", "env")
