@@ -56,6 +56,7 @@ MODULES = (
     "inverse_depth",
     "iterated",
     "kalman",
+    "live",
     "model",
     "optimal",
     "particle",

@@ -10,9 +10,11 @@ uniform on [0, 1] [cook2006]_, [talts2018]_. Every central interval then
 covers the truth at exactly its nominal rate. The check below draws truths
 from the filter's prior ``N(m, P)`` restricted to the front support (the point
 in front of the camera at every frame: depth ``y_1 > 0`` at the first frame),
-simulates three bearings of each, runs the optimal filter
-(:func:`depthcore.optimal.batch_marginals`) and tests the PIT values of the
-depth and velocity at time 3 for uniformity.
+simulates its bearings (the paper's three, or ``N`` frames with process noise
+``q``, :func:`draw_from_prior`), runs the optimal filter
+(:func:`depthcore.optimal.batch_marginals`, or the bank of
+:mod:`depthcore.bank` beyond three frames) and tests the PIT values of the
+depth and velocity at the last frame for uniformity.
 
 Trials whose bearings have no noise-free solution in front of the camera
 (Eq. (7) degenerate or ``c2 <= 2``) are left out, as in the Monte Carlo study.

@@ -9,8 +9,9 @@ Recommended import: ``from depthcore import model``.
 All functions act on the last axis of arrays of states, so ``x`` may have shape
 ``(3,)`` or ``(..., 3)``. Besides the motion ``G`` (1), (9), the projection and
 its gradient ``h`` (11) and the likelihood (4), the module holds the misfit
-``f`` of three measurements (5), its residuals and their gradients (20)-(22),
-the noise-free state ``c`` (7), and the least misfit at each depth. It also
+``f`` of the bearings (5) (the paper's three, or any ``N``), its residuals
+and their gradients (20)-(22), the noise-free state ``c`` of three bearings
+(7), and the least misfit at each depth. It also
 checks the bearings against the model (:func:`measurements`,
 :func:`measurements_batch`, :func:`valid_measurements`: finite, not
 degenerate, the noise-free solution in front of the camera) and a filter's

@@ -37,7 +37,7 @@ does with ``support="front"``.
 The bootstrap filter. The motion is deterministic: nothing ever spreads the
 particles again, so the filter can only reweight (and duplicate) the particles
 it drew at time 1. With ``proposal="prior"`` they come from the paper's broad
-prior, of which only a thin wedge is compatible with the three bearings, so
+prior, of which only a thin wedge is compatible with the bearings, so
 the effective sample size collapses. (After a resampling step ``ess`` counts
 the copies of a particle separately; :meth:`ParticleResult.distinct_ess`
 pools them.)
@@ -53,7 +53,7 @@ initial log weight is ``log prior - log q``. The heavy tails and the inflation
 cover the parts of the optimal posterior that ``p_s`` misses (its depth
 marginal is skewed and, with a broad prior, heavy-tailed).
 
-Because ``q`` already anticipates all three measurements, the intermediate
+Because ``q`` already anticipates all the measurements, the intermediate
 targets are chosen to match it ([delmoral2006]_: any sequence of intermediate
 distributions may be used as long as the last is the posterior): after
 ``mu_k`` the particles target

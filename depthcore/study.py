@@ -3,10 +3,13 @@
 Recommended import: ``from depthcore import study``.
 
 For a true state at time 3 (by default the noise-free state ``c`` of the
-paper's Figure 2), each trial draws the three measurements afresh, builds the
-prior by the paper's rule from that trial's measurements (``prior="paper"``,
-as the paper does) or once from the truth's noise-free measurements
-(``prior="fixed"``), runs every filter, and scores it:
+paper's Figure 2), each trial draws the bearings afresh: the paper's three,
+or ``N`` with ``frames=N`` (up to ``depthcore._checks.MAX_FRAMES``), the point
+moving on from time 3 to frame ``N``, with process noise ``q`` on its velocity
+if ``process_noise=q``. It builds the prior by the paper's rule from that
+trial's first three bearings (``prior="paper"``, as the paper does) or once
+from the truth's noise-free bearings (``prior="fixed"``), runs every filter,
+and scores its estimate of the state at the last frame:
 
 * bias and RMSE of its depth and velocity means;
 * coverage of its central 68 % and 95 % intervals: the truth lies in the

@@ -1,40 +1,70 @@
-"""The book's API reference documents every public module of depthcore.
+"""The book's API reference documents every public module of depthcore, one page each.
 
-``book/api.md`` renders, through Sphinx autodoc, one section per module of
-``depthcore.MODULES``; each section is a ``py:module`` target
-(``id="module-depthcore.<name>"``) followed by that module's documented
-functions and classes. The page's mathematics (``.. math::`` and ``:math:``
-in the docstrings) is rendered, not shown as raw markup.
+``book/api.md`` lists the modules with the first paragraph of each docstring,
+and ``book/api/<name>.md`` renders, through Sphinx autodoc, one module: a
+``py:module`` target (``id="module-depthcore.<name>"``) followed by the
+module's documented functions and classes. The pages follow the order of the
+README's module map ("The package, module by module"). The docstrings'
+formulas are typeset (MathJax), and no reST markup is shown raw.
 """
 
 from __future__ import annotations
 
 import re
 
+from conftest import ROOT, toc_pages
+
 import depthcore
 
 RAW_ROLE_RE = re.compile(r":(math|func|class|mod|data|meth|attr):`")
+MAP_ROW_RE = re.compile(r"^\| ((?:`\w+`(?:, )?)+) \|", re.MULTILINE)
 
 
-def api_html(html_dir) -> str:
-    path = html_dir / "book" / "api.html"
-    assert path.exists(), "book/api.html is missing from the built book"
+def readme_module_map() -> list[str]:
+    """The modules of README.md's module map, in its order."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text.split("## The package, module by module", 1)[1].split("\n## ", 1)[0]
+    return [name for row in MAP_ROW_RE.findall(section) for name in re.findall(r"`(\w+)`", row)]
+
+
+def page_html(html_dir, page: str) -> str:
+    path = html_dir / f"{page}.html"
+    assert path.exists(), f"{page}.html is missing from the built book"
     return path.read_text(encoding="utf-8")
 
 
-def test_api_page_documents_every_public_module(html_dir):
-    html = api_html(html_dir)
+def test_module_pages_follow_the_readme_module_map():
+    pages = [p.removeprefix("book/api/") for p in toc_pages() if p.startswith("book/api/")]
+    assert sorted(readme_module_map()) == sorted(depthcore.MODULES)
+    assert pages == readme_module_map()
+
+
+def test_each_module_page_documents_its_module_and_members(html_dir):
     for name in depthcore.MODULES:
+        html = page_html(html_dir, f"book/api/{name}")
         assert f'id="module-depthcore.{name}"' in html, f"depthcore.{name} is not documented"
-        # At least one documented member of the module (a function, class or data).
         assert re.search(rf'<dt class="sig[^"]*" id="depthcore\.{name}\.\w+', html), (
             f"depthcore.{name} is documented without any of its members"
         )
 
 
-def test_api_page_renders_its_markup(html_dir):
-    html = api_html(html_dir)
-    text = re.sub(r"<[^>]+>", "", html)
-    raw = sorted(set(RAW_ROLE_RE.findall(text)))
-    assert not raw, f"book/api.html shows raw Sphinx roles: {raw}"
-    assert 'id="depthcore.gaussian.paper_prior"' in html
+def test_the_api_page_lists_every_module_with_its_summary(html_dir):
+    html = page_html(html_dir, "book/api")
+    for name in depthcore.MODULES:
+        assert f'href="api/{name}.html#module-depthcore.{name}"' in html, (
+            f"book/api.html does not link depthcore.{name}"
+        )
+
+
+def test_api_pages_render_their_markup_and_mathematics(html_dir):
+    typeset = 0
+    for page in ["book/api"] + [f"book/api/{name}" for name in depthcore.MODULES]:
+        html = page_html(html_dir, page)
+        text = re.sub(r"<[^>]+>", "", html)
+        raw = sorted(set(RAW_ROLE_RE.findall(text)))
+        assert not raw, f"{page}.html shows raw Sphinx roles: {raw}"
+        typeset += html.count('<span class="math notranslate nohighlight">')
+    assert 'id="depthcore.gaussian.paper_prior"' in page_html(html_dir, "book/api/gaussian")
+    # the docstrings' formulas: hundreds of them, typeset
+    assert typeset > 300, f"only {typeset} formulas typeset on the API pages"
+    assert r"\rho ^{2} J^{-1}" in page_html(html_dir, "book/api/second_order")

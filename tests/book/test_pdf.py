@@ -10,7 +10,11 @@ and checks that
   every other captioned figure of the book has a number above 6;
 * no LaTeX or MyST source leaks into the text (``\\mathbf``, ``$``, ``{glue``,
   ``??`` for an unresolved reference);
-* the HTML book ships the same PDF.
+* the HTML book ships the same PDF;
+* the title page names the paper, the package's version and the build's date;
+  no page is blank; the intro is one chapter, its opening paragraph on the
+  page of its title; the list of downloads is printed with their addresses;
+  the API reference is a short list of module summaries.
 
 Without the PDF or pdftotext the checks are skipped with a message, and fail
 under CI (``CI=true``).
@@ -24,6 +28,8 @@ import subprocess
 
 import pytest
 from conftest import HTML_DIR, ROOT
+
+import depthcore
 
 PDF = ROOT / "_build" / "latex" / "depthcore.pdf"
 FIGURE_RE = re.compile(
@@ -135,4 +141,63 @@ def test_the_html_book_ships_this_pdf(pdf):
     )
     assert shipped.read_bytes() == pdf.read_bytes(), (
         "the HTML book ships another PDF than _build/latex's"
+    )
+
+
+@pytest.fixture(scope="module")
+def pages(pdf) -> list[str]:
+    """The PDF's text page by page (pdftotext separates pages by form feeds)."""
+    return [" ".join(page.split()) for page in pdftotext("-layout").split("\f")][:-1]
+
+
+def test_the_title_page_names_the_paper_the_version_and_the_date(pages):
+    title = pages[0]
+    for words in (
+        "Filter Based Estimates of Depth",
+        "Maybank",
+        "British Machine Vision Conference",
+        "1990",
+        f"depthcore version {depthcore.__version__}",
+    ):
+        assert words in title, f"the title page does not name {words!r}: {title!r}"
+    assert re.search(r"built \w+ \d{1,2}, \d{4}", title), (
+        f"no build date on the title page: {title}"
+    )
+
+
+def test_no_page_is_blank(pages):
+    # every page but the title page carries a running head or a chapter's opening, and text
+    blank = [i + 1 for i, page in enumerate(pages) if len(page.split()) < 12]
+    assert not blank, f"pages with (almost) no text: {blank}"
+
+
+def test_the_intro_is_one_chapter_that_opens_with_its_first_paragraph(plain_text, pages):
+    assert re.search(r"1\.1 The problem .*1\.2 Three filters", plain_text), (
+        "the intro's sections are not sections 1.1, 1.2, ... of one chapter"
+    )
+    opening = [i for i, page in enumerate(pages) if "This book is an executable account" in page]
+    assert len(opening) == 1, "the intro's opening paragraph is not on one page"
+    page = pages[opening[0]]
+    assert "INTRODUCTION" in page.upper() and "The problem" in page, (
+        "the intro's opening paragraph is not on the page of its chapter's title and first section"
+    )
+
+
+def test_the_downloads_are_printed_with_their_addresses(plain_text):
+    for name in ("depthcore.pdf", "depthcore.tar.gz", "requirements.txt", "CITATION.cff"):
+        assert f"downloads/{name}" in plain_text, f"the PDF does not list downloads/{name}"
+
+
+def test_the_api_reference_is_a_short_list_of_module_summaries(pages, plain_text):
+    start = [i for i, page in enumerate(pages) if "API REFERENCE" in page.upper()]
+    assert start, "no API reference in the PDF"
+    first = start[-1]  # the chapter (the table of contents names it first)
+    rest = " ".join(pages[first:])
+    for name in depthcore.MODULES:
+        assert f"depthcore.{name}:" in rest, f"the PDF's API reference omits depthcore.{name}"
+    # summaries only: no module's functions are documented in print
+    assert "depthcore.gaussian.paper_prior" not in plain_text
+    assert "Python Module Index" not in plain_text
+    assert len(pages) - first <= 8, (
+        f"the API reference and what follows fill {len(pages) - first} pages"
     )

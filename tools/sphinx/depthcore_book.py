@@ -29,6 +29,16 @@ The downloads folder
 requirements, CITATION.cff and the PDF; at the end of an HTML build this
 extension copies that folder to ``_build/html/downloads/``, where the pages
 link them. A build without it (``jupyter-book build .`` alone) has none.
+
+The list of downloads
+---------------------
+The directive ``depthcore-downloads`` lists files of that folder, one per
+line of its content, ``file: what it is`` (MyST inline markup allowed in the
+description). In HTML each description links its file, and only a file that
+the folder holds when the book is built: ``make book`` without ``make pdf``
+lists the PDF as not built, without a link that would lead nowhere. In the
+PDF the list is printed with each file's address, under ``html_baseurl``
+when the config sets one, else relative to the HTML book's root.
 """
 
 from __future__ import annotations
@@ -36,6 +46,12 @@ from __future__ import annotations
 import re
 import shutil
 from pathlib import Path
+
+import docmath
+from docutils import nodes
+from sphinx import addnodes
+from sphinx.transforms.post_transforms import SphinxPostTransform
+from sphinx.util.docutils import SphinxDirective
 
 CITATION_RE = re.compile(r"^\.\. \[(\w+)\]")
 
@@ -61,19 +77,22 @@ def copy_downloads(app, exception):
 
 
 def drop_repeated_citations(app, what, name, obj, options, lines):
-    """Keep one definition of each citation of the docstrings (the API page).
+    """Keep one definition of each citation of the docstrings (the API pages).
 
-    Several modules cite the same work (``.. [prince2012] ...``); on one page
-    the repeated definitions would be duplicate targets. The first module's
-    definition is kept and the later references (``[prince2012]_``) link to it.
+    Several modules cite the same work (``.. [prince2012] ...``); the API
+    reference's pages would define it several times, and citations are
+    targets of the whole book. The first module whose docstring is read with
+    a citation keeps its definition (on that module's page); the others drop
+    theirs, and their references (``[prince2012]_``) link to it.
     """
-    seen = app.env.temp_data.setdefault("depthcore_citations", set())
+    owners = citation_owners(app.env)
+    docname = app.env.docname
     kept, skipping = [], False
     for line in lines:
         match = CITATION_RE.match(line)
         if match:
-            skipping = match.group(1) in seen
-            seen.add(match.group(1))
+            _, owner = owners.setdefault(match.group(1), (docname, name))
+            skipping = owner != name
         elif skipping and not line.startswith(" "):
             skipping = False
         if not skipping:
@@ -92,10 +111,226 @@ def paste_eval_as_glue(app, config):
     app.add_role("eval", PasteTextRole(), override=True)
 
 
+
+def citation_owners(env) -> dict:
+    """``{citation: (page read, object)}``: which docstring defines each citation."""
+    if not hasattr(env, "depthcore_citation_owners"):
+        env.depthcore_citation_owners = {}
+    return env.depthcore_citation_owners
+
+
+def purge_citation_owners(app, env, docname):
+    owners = citation_owners(env)
+    for key in [key for key, (page, _) in owners.items() if page == docname]:
+        del owners[key]
+
+
+def merge_citation_owners(app, env, docnames, other):
+    for key, owner in citation_owners(other).items():
+        citation_owners(env).setdefault(key, owner)
+
+
+def parse_downloads(lines) -> list[tuple[str, str]]:
+    """``(file, description)`` of each non-empty line ``file: description``."""
+    items = []
+    for line in lines:
+        if not line.strip():
+            continue
+        name, sep, text = line.partition(":")
+        if not sep or not name.strip() or "/" in name.strip() or not text.strip():
+            raise ValueError(f"a download is written 'file: what it is', got {line!r}")
+        items.append((name.strip(), text.strip()))
+    return items
+
+
+class DownloadsDirective(SphinxDirective):
+    """The list of downloads: linked in HTML where built, printed with addresses in the PDF."""
+
+    has_content = True
+
+    def run(self):
+        try:
+            items = parse_downloads(self.content)
+        except ValueError as error:
+            raise self.error(str(error)) from error
+        folder = Path(self.env.app.confdir) / self.config.depthcore_downloads
+        up = "../" * self.env.docname.count("/")
+        base = (self.config.html_baseurl or "").rstrip("/")
+        html, latex = nodes.bullet_list(), nodes.bullet_list()
+        for name, text in items:
+            described, messages = self.state.inline_text(text, self.lineno)
+            shipped = (folder / name).is_file()
+            item = nodes.list_item()
+            para = nodes.paragraph()
+            if shipped:
+                para += nodes.reference("", "", *described, refuri=f"{up}downloads/{name}")
+            else:
+                para += described
+                para += nodes.Text(" (not shipped by this build of the book)")
+            item += para
+            html += item
+            address = f"{base}/downloads/{name}" if base else f"downloads/{name}"
+            item = nodes.list_item()
+            para = nodes.paragraph()
+            para += [node.deepcopy() for node in described]
+            para += nodes.Text(": ")
+            para += nodes.literal(address, address)
+            item += para
+            latex += item
+        only_html = addnodes.only(expr="html")
+        only_html += html
+        only_latex = addnodes.only(expr="latex")
+        only_latex += latex
+        return [only_html, only_latex, *messages]
+
+
+class DropHiddenCellsWithoutOutput(SphinxPostTransform):
+    """Remove the ``hide-input`` code cells that show no output (before myst-nb wraps them)."""
+
+    default_priority = 198  # myst-nb's HideInputCells, which makes the toggles, runs at 199
+
+    def run(self, **kwargs):
+        for node in list(self.document.findall(nodes.container)):
+            if node.get("nb_element") != "cell_code" or node.get("hide_mode") != "input":
+                continue
+            shown = [
+                child
+                for child in node.children
+                if child.get("nb_element") == "cell_code_output" and child.children
+            ]
+            if not shown:
+                node.parent.remove(node)
+
+
+#: Pages of the HTML book that the PDF leaves out: the API reference's page per
+#: module (the PDF prints the summaries of ``book/api`` instead).
+HTML_ONLY_PAGES = re.compile(r"^book/api/")
+#: Pages whose title the PDF drops, keeping their content: the references, which
+#: the LaTeX builder gathers into the book's closing bibliography anyway (the
+#: page's own chapter would be left empty).
+UNTITLED_IN_PRINT = ("book/bibliography",)
+
+#: The title of the PDF's first chapter, the root page's own text.
+INTRODUCTION = "Introduction"
+
+
+class DropHtmlOnlyPages(SphinxPostTransform):
+    """In the PDF's single document, remove :data:`HTML_ONLY_PAGES` and untitle the others.
+
+    Runs before the LaTeX builder gathers the citations, so that the removed
+    pages' citations are not printed.
+    """
+
+    default_priority = 5
+    formats = ("latex",)
+
+    def run(self, **kwargs):
+        for node in list(self.document.findall(addnodes.start_of_file)):
+            if HTML_ONLY_PAGES.match(node["docname"]):
+                node.parent.remove(node)
+            elif node["docname"] in UNTITLED_IN_PRINT:
+                for section in [c for c in node.children if isinstance(c, nodes.section)]:
+                    section.replace_self(
+                        [c for c in section.children if not isinstance(c, nodes.title)]
+                    )
+
+
+def root_page_as_one_chapter(app, doctree, docname):
+    """In the PDF, make the root page's own text one chapter, :data:`INTRODUCTION`.
+
+    The LaTeX builder takes the root page's title for the book's and makes each
+    of its sections a chapter, like the chapters of the other pages it includes
+    after them; its opening paragraphs would stand alone before the first.
+    Here they and its sections become one chapter, the sections its sections.
+    """
+    if app.builder.format != "latex" or docname != app.config.root_doc:
+        return
+    root = doctree.next_node(nodes.section)
+    if root is None or not root.children or not isinstance(root[0], nodes.title):
+        return
+    own = []
+    for child in root.children[1:]:
+        if isinstance(child, addnodes.start_of_file) or child.next_node(addnodes.start_of_file):
+            break
+        own.append(child)
+    if not own:
+        return
+    chapter = nodes.section(ids=["depthcore-introduction"], names=[INTRODUCTION.lower()])
+    chapter += nodes.title(INTRODUCTION, INTRODUCTION)
+    for child in own:
+        root.remove(child)
+        chapter += child
+    root.insert(1, chapter)
+
+
+def module_summary(module) -> str:
+    """The first paragraph of a module's docstring, on one line."""
+    doc = (module.__doc__ or "").strip()
+    return " ".join(doc.split("\n\n", 1)[0].split())
+
+
+RST_ROLE_RE = re.compile(r":(?:py:)?(\w+):`([^`]+)`")
+RST_LITERAL_RE = re.compile(r"``([^`]+)``")
+
+
+def rst_to_myst(text: str) -> str:
+    """A docstring line's reST inline markup (roles, literals) in MyST, for a MyST page."""
+    text = RST_ROLE_RE.sub(
+        lambda m: f"{{{'math' if m[1] == 'math' else 'py:' + m[1]}}}`{m[2]}`", text
+    )
+    return RST_LITERAL_RE.sub(r"`\1`", text)
+
+
+class ModuleSummaries(SphinxDirective):
+    """A list of modules (one ``depthcore.<name>`` per line), each with its summary.
+
+    Each item links the module's page (in HTML) and gives the first paragraph
+    of its docstring, its formulas typeset (:mod:`docmath`).
+    """
+
+    has_content = True
+
+    def run(self):
+        import importlib
+
+        from docutils.statemachine import StringList
+
+        lines = []
+        for name in (line.strip() for line in self.content):
+            if not name:
+                continue
+            try:
+                module = importlib.import_module(name)
+            except ImportError as error:
+                raise self.error(f"no module {name!r}: {error}") from error
+            summary = rst_to_myst(docmath.convert_line(module_summary(module)))
+            lines.append(f"* {{py:mod}}`{name}`: {summary}")
+        container = nodes.container(classes=["module-summaries"])
+        self.state.nested_parse(StringList(lines, source=self.get_source_info()[0]), 0, container)
+        return container.children
+
+
+def set_release(app, config):
+    """The book's release is the package's version (the PDF's title page shows it)."""
+    import depthcore
+
+    if not config.release:
+        config.release = config.version = depthcore.__version__
+
+
 def setup(app):
     app.connect("config-inited", paste_eval_as_glue)
+    app.connect("config-inited", set_release)
     app.connect("autodoc-process-docstring", drop_repeated_citations)
-    app.add_config_value("depthcore_downloads", "_build/extra/downloads", "html")
+    app.connect("env-purge-doc", purge_citation_owners)
+    app.connect("env-merge-info", merge_citation_owners)
+    app.connect("autodoc-process-docstring", docmath.typeset_docstring)
+    app.add_directive("depthcore-module-summaries", ModuleSummaries)
+    app.add_post_transform(DropHtmlOnlyPages)
+    app.connect("doctree-resolved", root_page_as_one_chapter)
+    app.add_post_transform(DropHiddenCellsWithoutOutput)
+    app.add_config_value("depthcore_downloads", "_build/extra/downloads", "env")
+    app.add_directive("depthcore-downloads", DownloadsDirective)
     # Before sphinx-book-theme builds its header buttons (priority 501).
     app.connect("html-page-context", add_executed_notebook, priority=450)
     app.connect("build-finished", copy_downloads)
