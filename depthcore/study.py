@@ -68,8 +68,8 @@ class Trials:
     process_noise : float
         ``q``, the SD of the velocity's change per frame (0: the paper's model).
     states : ndarray, shape (N, 3), or None
-        The true state at the last frame of each trial, where it differs from
-        ``truth`` (more than three frames, or process noise); ``None`` otherwise.
+        The true state at the last frame of each trial, where it is not
+        ``truth`` (more than three frames); ``None`` otherwise.
     """
 
     truth: np.ndarray
@@ -147,10 +147,13 @@ def simulate(
         Prior covariance ``prior_scale * I``.
     frames : int
         ``N >= 3``: the point is followed on from time 3 to frame ``N``
-        (:func:`depthcore.bank.simulate`, with the velocity's change per frame
-        drawn with SD ``process_noise``); the prior rule uses the first three
-        measurements, and trials whose first three have no noise-free solution
-        in front of the camera are left out, as with three frames.
+        (:func:`depthcore.model.simulate` with ``frame=3``). The state at
+        time 3 is ``truth`` in every trial: frames 1-3 are the noise-free
+        motion through it, as for three frames, and the velocity's changes per
+        frame, drawn with SD ``process_noise``, act between frames 3 .. N. The
+        prior rule uses the first three measurements, and trials whose first
+        three have no noise-free solution in front of the camera are left out,
+        as with three frames (a selection by the measurement noise alone).
     process_noise : float
         ``q >= 0``.
     """
@@ -169,12 +172,9 @@ def simulate(
         raise ValueError(
             f"truth puts the point behind the camera: depth at time 1 is {truth[1] - 2:.6g}"
         )
-    states = None
-    if frames == 3 and q == 0:
-        mu = model.simulate_measurements(model.G(truth, -2), rho, rng, size=int(n))
-    else:
-        sim = bank.simulate(model.G(truth, -2), frames, rho, q, rng, size=int(n))
-        mu, states = sim.mu, sim.states[:, -1, :]
+    sim = model.simulate(truth, frames, rho, q, rng, size=int(n), frame=3)
+    mu = sim.mu
+    states = None if frames == 3 else sim.states[:, -1, :]
     keep = valid_triples(mu[:, :3])
     mu = mu[keep]
     if prior == "paper":
@@ -579,9 +579,10 @@ def study(
         ``N >= 3``: the point, at ``truth`` at time 3, moves on to frame ``N``
         and every filter is scored on its state there (:func:`simulate`).
     process_noise : float
-        ``q >= 0``: the velocity's change per frame, drawn in every trial, so
-        the true state at frame ``N`` differs from trial to trial (the scores
-        are against each trial's own). The named filters must support the
+        ``q >= 0``: the velocity's change per frame from time 3 on, drawn in
+        every trial, so the true state at frame ``N`` differs from trial to
+        trial (the scores are against each trial's own); the state at time 3
+        is ``truth`` in every trial. The named filters must support the
         frames and the process noise (:class:`depthcore.filters.Filter`).
 
     Notes

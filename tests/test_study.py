@@ -8,7 +8,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from depthcore import _checks, optimal, study
+from depthcore import _checks, model, optimal, study
 from depthcore.__main__ import main
 from depthcore.filters import FILTERS, NAMES
 from depthcore.scenarios import SCENARIOS
@@ -362,6 +362,31 @@ def test_study_over_more_frames_with_process_noise_scores_each_trials_own_truth(
     assert r["filters"]["optimal"]["depth"]["coverage_95"] == pytest.approx(
         np.mean(np.abs(z) <= 1.959963984540054), abs=1e-12
     )
+
+
+@pytest.mark.parametrize("q", [0.02, 10.0])
+def test_with_process_noise_the_state_at_time_3_is_the_truth_given(q):
+    """The velocity changes act between frames 3 .. N: frames 1-3 are the noise-free
+    motion through the truth, so the first three bearings are those of three frames."""
+    truth, rho, N = np.array([1.2, 6.0, 1.2]), 1 / 200, 10
+    rng = np.random.default_rng(8)
+    sim = model.simulate(truth, N, rho, q, rng, size=300)
+    assert np.array_equal(sim.states[:, 2], np.broadcast_to(truth, (300, 3)))
+    # the first three bearings are distributed as the three-frame study's: no rejection
+    # beyond those of the measurement noise (none here, the noise-free solution is far)
+    t = study.simulate(truth, rho, 300, np.random.default_rng(8), frames=N, process_noise=q)
+    three = study.simulate(truth, rho, 300, np.random.default_rng(9))
+    assert t.n_rejected == three.n_rejected == 0
+    assert np.all(t.states[:, 1] == truth[1] + N - 3)
+    # the velocity at frame N spreads with SD q sqrt(N - 3) about the truth's (5 SE)
+    assert np.std(t.states[:, 2]) == pytest.approx(q * np.sqrt(N - 3), rel=5 / np.sqrt(600))
+
+
+def test_study_with_large_process_noise_keeps_its_trials():
+    r = study.study(
+        [1.2, 6.0, 1.2], 1 / 200, 20, seed=1, names=("ekf",), frames=10, process_noise=10.0
+    )
+    assert r["valid_trials"] == 20 and r["rejected_trials"] == 0
 
 
 def test_study_refuses_filters_that_cannot_run_on_the_frames_or_process_noise():
