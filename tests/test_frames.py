@@ -119,8 +119,11 @@ def test_frame_marginals_are_the_filters_on_the_first_frames(track):
         mass = np.trapezoid(r["density"]["optimal"], r["grid"])
         assert abs(mass - 1) < (1e-2 if n == 3 else 2e-3)
         o = r["depth_mean"]["optimal"]
-        tol = 1e-2 if n == 3 else 1e-4
-        assert_allclose(np.trapezoid(r["grid"] * r["density"]["optimal"], r["grid"]), o, rtol=tol)
+        on_grid = np.trapezoid(r["grid"] * r["density"]["optimal"], r["grid"])
+        if n == 3:  # the right tail the grid leaves out (mass < 1e-2) lowers the mean
+            assert o * (1 - 3e-2) < on_grid < o
+        else:
+            assert_allclose(on_grid, o, rtol=1e-4)
     fig = figures.frame_marginals_figure(m)
     assert fig.axes[0].get_title() == "N = 3"
     assert len(fig.axes) == 4
