@@ -418,9 +418,12 @@ def test_rao_blackwellised_filter_is_scored_by_its_mixture_and_tracks_the_optima
     W, depths, _, _ = again.detail.pooled()
     assert_allclose(r.depth_cdf, np.sum(W * (depths <= t[:, 1:2]), axis=1), rtol=1e-12)
     assert np.array_equal(r.mean, again.mean) and np.array_equal(r.cov, again.cov)
-    # within a few of its own Monte Carlo errors (four replicas: Student t with 3 df)
+    # within a few of its own Monte Carlo errors where it has not collapsed (a replica
+    # worth fewer than ten draws of the posterior: no error, NaN), and most have not
+    ok = ~again.collapsed
+    assert np.array_equal(np.isnan(again.depth_error), again.collapsed) and ok.sum() >= 4
     z = (again.depth_mean - o.mean[:, 1]) / again.depth_error
-    assert np.all(np.abs(z) < 6), z
+    assert np.all(np.abs(z[ok]) < 6), z
     assert_allclose(r.depth_cdf, o.depth_cdf, atol=0.1)
     assert_allclose(r.velocity_cdf, o.velocity_cdf, atol=0.1)
     assert np.all(r.hellinger < 0.2) and np.median(r.hellinger) < 0.1
