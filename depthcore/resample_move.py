@@ -197,9 +197,10 @@ class Replicated:
         """Monte Carlo errors of :meth:`moments` and the collapse flag, shape (B,).
 
         :func:`depthcore.resampling.replica_errors` of each moment over the
-        replicas (the pool's mean is the replicas' average; its SD their
-        average to ``O(1 / N)``). ``collapsed`` is true where either the depth
-        or the velocity has collapsed; the errors are NaN there.
+        replicas (the pool's mean is the replicas' average; its variance their
+        average variance plus the spread of their means, at most a tenth of it
+        where they have not collapsed). ``collapsed`` is true where either the
+        depth or the velocity has collapsed; the errors are NaN there.
 
         Returns
         -------
