@@ -54,7 +54,9 @@ TARGETS = {"three_frames_ratio": 2.0, "many_trials_s": 10.0, "matched_accuracy_r
 def track(n_trials: int, n_frames: int, seed: int, q: float = 0.0):
     """Figure 2's point continued for ``n_frames`` frames: bearings (B, N) and the prior."""
     x1 = model.G(np.array(FIG2.c), -2)
-    sim = bank.simulate(x1, n_frames, FIG2.rho, q, np.random.default_rng(seed), size=n_trials)
+    sim = model.simulate(
+        x1, n_frames, FIG2.rho, q, np.random.default_rng(seed), size=n_trials, frame=1
+    )
     return sim.mu, FIG2.prior
 
 

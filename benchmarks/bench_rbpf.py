@@ -74,7 +74,7 @@ def exact(mu, rho, prior):
 def problems():
     s = SCENARIOS["fig2"]
     x1 = model.G(s.c, -2)
-    sim = bank.simulate(x1, 10, s.rho, 0.0, np.random.default_rng(2024))
+    sim = model.simulate(x1, 10, s.rho, 0.0, np.random.default_rng(2024), frame=1)
     return {
         "Figure 2, N = 3": (np.asarray(s.mu), s.rho, s.prior),
         "Figure 2's point, N = 10": (sim.mu, s.rho, paper_prior(s.c)),

@@ -86,7 +86,9 @@ def draw_from_prior(
 
     With ``frames = N > 3`` or ``process_noise = q > 0`` each truth is
     followed from frame 1 to frame ``N`` with accelerations ``a_k ~ N(0, q**2)``
-    (:func:`depthcore.bank.simulate`), and the truth kept is the state at
+    from frame 1 on (:func:`depthcore.model.simulate` with ``frame=1``: the
+    filter's own model, whose prior is on the state at frame 1, as drawing
+    truths from the prior needs), and the truth kept is the state at
     frame ``N``; the trials kept are those whose first three bearings have a
     noise-free solution in front of the camera, a selection by the bearings
     alone.
@@ -138,13 +140,8 @@ def draw_from_prior(
             f"(y_1 > 0): {behind} of {behind + sum(len(k) for k in kept)} draws behind it"
         )
     x1 = np.concatenate(kept)[:n]
-    if frames == 3 and q == 0:
-        states = np.stack([model.G(x1, k) for k in range(3)], axis=1)
-        mu = model.project(states) + rho * rng.standard_normal((n, 3))
-        last = model.G(x1, 2)
-    else:
-        sim = bank.simulate(x1, frames, rho, q, rng)
-        mu, last = sim.mu, sim.states[:, -1, :]
+    sim = model.simulate(x1, frames, rho, q, rng, frame=1)
+    mu, last = sim.mu, sim.states[:, -1, :]
     ok = model.valid_measurements(mu[:, :3])  # the noise-free solution, Eq. (7), in front
     return PriorDraws(last[ok], mu[ok], behind, int(np.sum(~ok)))
 

@@ -76,6 +76,9 @@ COMPONENT = {"depth": "y", "velocity": "v"}
 FAMILIES = ("exact", "gaussian", "particles", "rao_blackwellised")
 #: Particles of the particle filter unless a caller asks for another number.
 PARTICLES = 20_000
+#: Particles per replica of the resample-move filter, by default (``resample_move.REPLICAS``
+#: replicas: the same 20,000 particles in all as the importance sampler).
+RESAMPLE_MOVE_PARTICLES = 5000
 #: Particles per replica of the Rao-Blackwellised particle filter, by default.
 RBPF_PARTICLES = 1000
 #: Independent replicas of the Rao-Blackwellised particle filter, for its standard errors.
@@ -105,6 +108,11 @@ class Estimate:
     extras : dict
         Further numbers the filter reports (the optimal filter's probability
         that the point is behind the camera).
+    collapsed : bool or ndarray of bool, shape (B,), or None
+        For a sampler: whether its particles collapsed (worth fewer than
+        :data:`depthcore.resampling.MIN_EFFECTIVE_DRAWS` independent draws of
+        the posterior), so that neither its spread nor its error can be
+        trusted; its errors are then NaN. ``None`` for the other filters.
     """
 
     depth_mean: Any
@@ -117,6 +125,7 @@ class Estimate:
     cov: np.ndarray
     detail: Any = None
     extras: dict = field(default_factory=dict)
+    collapsed: Any = None
 
     def moments(self, quantity: str) -> dict:
         """``{"mean", "sd"}`` of ``"depth"`` or ``"velocity"``.
@@ -442,38 +451,58 @@ def _covariance_form(cov, name: str) -> None:
 
 
 def _resample_move(
-    mu, rho, prior_mean, prior_cov, rng=None, n_particles: int = PARTICLES, **options
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    rng=None,
+    n_particles: int = RESAMPLE_MOVE_PARTICLES,
+    replicas: int = resample_move.REPLICAS,
+    **options,
 ) -> Estimate:
     """The causal bootstrap filter with resample-move (:mod:`depthcore.resample_move`).
 
-    ``detail`` is its ResampleMoveBatch (of one trial for one sequence);
-    ``options`` are those of :func:`depthcore.resample_move.run`. No Monte
-    Carlo errors are reported: after resampling and moving, the particles are
-    not independent draws.
+    ``detail`` is its :class:`~depthcore.resample_move.Replicated`:
+    ``replicas`` independent filters of ``n_particles`` each, pooled;
+    ``options`` are those of :func:`depthcore.resample_move.run`. The moments
+    are the pool's; the errors the larger of those of the mean and of the SD
+    from the replicas' spread (Student-t widened), NaN where the replicas
+    collapsed (``collapsed``, :meth:`~depthcore.resample_move.Replicated.errors`).
     """
     rng = _rng(rng, "resample-move")
-    if _single(mu):
-        b = resample_move.resample_move(
-            mu, rho, _prior(prior_mean, prior_cov), n_particles, rng, **options
-        )
-    else:
-        b = resample_move.run(mu, rho, prior_mean, prior_cov, n_particles, rng, **options)
-    W = np.exp(b.log_weights)
-    mean, cov = weighted_mean_and_cov(b.particles, W)
-    m = b.moments()
-    if _single(mu):
+    single = _single(mu)
+    if single:
+        prior = _prior(prior_mean, prior_cov)
+        mu = _checks.finite_array(mu, "mu")
+        prior_mean, prior_cov = prior.mean, prior.cov
+        rho = _checks.positive_scalar(rho, "rho")
+        if mu.ndim != 1:
+            raise ValueError(f"mu must have shape (K,), got shape {mu.shape}")
+        mu = mu[None]
+    r = resample_move.replicated(
+        mu, rho, prior_mean, prior_cov, n_particles, rng, replicas, **options
+    )
+    mean, cov = weighted_mean_and_cov(r.particles, np.exp(r.log_weights))
+    m = r.moments()
+    errors, collapsed = r.errors()
+    depth_error = np.maximum(errors["depth_mean"], errors["depth_sd"])
+    velocity_error = np.maximum(errors["velocity_mean"], errors["velocity_sd"])
+    if single:
         m = {k: float(v[0]) for k, v in m.items()}
         mean, cov = mean[0], cov[0]
+        depth_error, velocity_error = float(depth_error[0]), float(velocity_error[0])
+        collapsed = bool(collapsed[0])
     return Estimate(
         m["depth_mean"],
         m["depth_sd"],
         m["velocity_mean"],
         m["velocity_sd"],
-        None,
-        None,
+        depth_error,
+        velocity_error,
         mean,
         cov,
-        b,
+        r,
+        collapsed=collapsed,
     )
 
 
@@ -495,9 +524,10 @@ def _rbpf(
     ``(x, v)``; ``options`` are those of :func:`depthcore.rbpf.run`. The
     moments are those of the replicas pooled into one mixture
     (:meth:`~depthcore.rbpf.RBPF.state_moments`, the law of total variance
-    over the particles' filters); the errors are the larger of the standard
-    errors of the mean and of the SD from the replicas' spread
-    (:meth:`~depthcore.rbpf.RBPF.standard_errors`; NaN with one replica).
+    over the particles' filters); the errors are the larger of the errors of
+    the mean and of the SD from the replicas' spread, Student-t widened, NaN
+    with one replica or where the replicas collapsed (``collapsed``,
+    :meth:`~depthcore.rbpf.RBPF.errors`).
     """
     rng = _rng(rng, "Rao-Blackwellised particle")
     if _single(mu):
@@ -514,11 +544,12 @@ def _rbpf(
         **options,
     )
     mean, cov = f.state_moments()
-    se = f.standard_errors()
+    se, collapsed = f.errors()
     depth_error = np.maximum(se.depth_mean, se.depth_sd)
     velocity_error = np.maximum(se.velocity_mean, se.velocity_sd)
     if _single(mu):
         depth_error, velocity_error = float(depth_error), float(velocity_error)
+        collapsed = bool(collapsed)
     e = _gaussian_estimate(mean, cov, f)
     return Estimate(
         e.depth_mean,
@@ -530,6 +561,7 @@ def _rbpf(
         e.mean,
         e.cov,
         f,
+        collapsed=collapsed,
     )
 
 
@@ -551,39 +583,44 @@ def _particle(
     ``rng``, a ``numpy.random.Generator`` or a ``SeedSequence`` (or an int
     seed), is required; ``options`` are those of :func:`depthcore.particle.run`.
     The errors are the larger of the delta-method standard errors of the mean
-    and of the SD.
+    and of the SD; NaN where the weight sits on fewer than
+    ``resampling.MIN_EFFECTIVE_DRAWS`` distinct particles (``collapsed``,
+    :meth:`~depthcore.particle.ParticleResult.collapsed`).
     """
     rng = _rng(rng, "particle")
     if _single(mu):
         r = particle.particle_filter(
             mu, rho, _prior(prior_mean, prior_cov), n_particles, rng, **options
         )
-        m, se = r.moments(), r.standard_errors()
+        m, se, collapsed = r.moments(), r.standard_errors(), r.collapsed()
         mean, cov = weighted_mean_and_cov(r.particles, r.weights)
+        nan = np.nan if collapsed else 0.0
         return Estimate(
             float(m.depth_mean),
             float(m.depth_sd),
             float(m.velocity_mean),
             float(m.velocity_sd),
-            float(max(se.depth_mean, se.depth_sd)),
-            float(max(se.velocity_mean, se.velocity_sd)),
+            float(max(se.depth_mean, se.depth_sd)) + nan,
+            float(max(se.velocity_mean, se.velocity_sd)) + nan,
             mean,
             cov,
             r,
+            collapsed=collapsed,
         )
     b = particle.run(mu, rho, prior_mean, prior_cov, n_particles, rng, **options)
-    m, se = b.moments(), b.standard_errors()
+    m, se, collapsed = b.moments(), b.standard_errors(), b.collapsed()
     mean, cov = weighted_mean_and_cov(b.particles, np.exp(b.log_weights))
     return Estimate(
         m.depth_mean,
         m.depth_sd,
         m.velocity_mean,
         m.velocity_sd,
-        np.maximum(se.depth_mean, se.depth_sd),
-        np.maximum(se.velocity_mean, se.velocity_sd),
+        np.where(collapsed, np.nan, np.maximum(se.depth_mean, se.depth_sd)),
+        np.where(collapsed, np.nan, np.maximum(se.velocity_mean, se.velocity_sd)),
         mean,
         cov,
         b,
+        collapsed=collapsed,
     )
 
 

@@ -11,7 +11,9 @@ All functions act on the last axis of arrays of states, so ``x`` may have shape
 its gradient ``h`` (11) and the likelihood (4), the module holds the misfit
 ``f`` of the bearings (5) (the paper's three, or any ``N``), its residuals
 and their gradients (20)-(22), the noise-free state ``c`` of three bearings
-(7), and the least misfit at each depth. It also
+(7), and the least misfit at each depth, and it draws tracks of any number of
+frames, with or without process noise, and their bearings (:func:`simulate`,
+the one simulator of the package). It also
 checks the bearings against the model (:func:`measurements`,
 :func:`measurements_batch`, :func:`valid_measurements`: finite, not
 degenerate, the noise-free solution in front of the camera) and a filter's
@@ -20,6 +22,8 @@ generic checks of ``depthcore._checks``.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -135,38 +139,103 @@ def trajectory(x1, n: int = N_MEASUREMENTS) -> np.ndarray:
     return np.stack([G(x1, k) for k in range(n)])
 
 
-def simulate_measurements(
-    x1, rho: float, rng: np.random.Generator, n: int = N_MEASUREMENTS, size: int | None = None
-) -> np.ndarray:
-    """Draw noisy measurements ``mu_i = x_i / y_i + w_i`` along a trajectory.
+class Simulation(NamedTuple):
+    """A simulated track: states (..., N, 3) ``(x_k, y_k, v_k)`` and bearings (..., N)."""
+
+    states: np.ndarray
+    mu: np.ndarray
+
+
+def simulate(
+    state,
+    n_frames: int,
+    rho,
+    q,
+    rng: np.random.Generator,
+    size: int | None = None,
+    *,
+    frame: int = N_MEASUREMENTS,
+) -> Simulation:
+    """Draw a track of ``N`` frames through a given state, and its noisy bearings, Eqs. (1), (4).
+
+    The given ``state`` is the state at frame ``frame`` (by default time 3,
+    the time of the paper's estimates). Up to that frame the motion is the
+    noise-free one of Eq. (1), ``G**(k - frame) state`` at frame ``k``; from it
+    on the velocity changes by a random acceleration at every frame:
+
+        y_{k+1} = y_k + 1,   x_{k+1} = x_k + v_k,   v_{k+1} = v_k + a_k,
+        a_k ~ N(0, q**2) for k >= frame,
+
+    and every frame's bearing is ``mu_k = x_k / y_k + w_k``, ``w_k ~ N(0, rho**2)``
+    (Eq. (4)). So with ``frame=3`` the state at time 3 is ``state`` in every
+    draw, frames 1-3 are the paper's three noise-free positions and the
+    accelerations act between frames 3 .. N; with ``frame=1`` the accelerations
+    act from frame 1 on, the model of :mod:`depthcore.bank` with the prior on
+    the state at frame 1 (what drawing truths from that prior needs). With
+    ``q = 0`` no acceleration is drawn and the track is the noise-free motion.
 
     Parameters
     ----------
-    x1 : array_like, shape (3,)
-        True state at time 1. Its depth must be positive at every time.
+    state : array_like, shape (..., 3)
+        The state ``(x, y, v)`` at frame ``frame``; the depth at frame 1,
+        ``y - frame + 1``, must be > 0 (then it is at every frame).
+    n_frames : int
+        ``N >= 1``, the frames ``1 .. N`` simulated.
     rho : float
-        Noise standard deviation, > 0.
+        Bearing noise SD, > 0.
+    q : float
+        Acceleration SD, >= 0.
     rng : numpy.random.Generator
-        Source of the noise.
-    n : int
-        Number of measurements.
+        Draws the accelerations (of shape ``lead + (N - frame,)``, when
+        ``q > 0`` and ``N > frame``), then the bearing noise (``lead + (N,)``).
     size : int, optional
-        Number of independent noise draws; ``None`` for a single triple.
+        Number of independent tracks from each ``state``; ``None`` for one.
+    frame : int
+        ``>= 1``: the frame at which the track passes through ``state``.
 
     Returns
     -------
-    ndarray, shape (n,) or (size, n)
-        The measurements ``mu_1 .. mu_n`` in time order.
+    Simulation
+        ``states`` of shape ``lead + (N, 3)`` and ``mu`` of shape ``lead + (N,)``,
+        with ``lead = (size,) + state.shape[:-1]`` (without ``size`` if ``None``).
     """
-    rho = _checks.positive_scalar(rho, "rho")
-    states = trajectory(x1, n)
-    if not np.all(states[:, 1] > 0):
+    state = _checks.finite_array(state, "state")
+    if state.ndim < 1 or state.shape[-1] != 3:
+        raise ValueError(f"state must have shape (..., 3), got shape {state.shape}")
+    frame = _checks.count(frame, "frame")
+    n_frames = _checks.count(n_frames, "n_frames")
+    depth_1 = state[..., 1] - (frame - 1)
+    if not np.all(depth_1 > 0):
         raise ValueError(
-            f"x1 puts the point behind the camera: depths {states[:, 1].tolist()} "
-            "are not all positive"
+            f"state puts the point behind the camera: the depth at frame 1 must be > 0, "
+            f"got minimum {float(np.min(depth_1)):.6g}"
         )
-    shape = (n,) if size is None else (size, n)
-    return project(states) + rho * rng.standard_normal(shape)
+    rho = _checks.positive_scalar(rho, "rho")
+    q = _checks.nonnegative_scalar(q, "q")
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    if size is not None:
+        size = _checks.count(size, "size")
+    lead = ((size,) if size is not None else ()) + state.shape[:-1]
+    k = np.arange(1, n_frames + 1) - frame  # frames from the given one
+    n_noisy = max(n_frames - frame, 0)
+    v = np.broadcast_to(state[..., 2, None], lead + (n_frames,))
+    x = state[..., 0, None] + np.minimum(k, 0) * state[..., 2, None] + np.zeros(lead + (1,))
+    if q > 0 and n_noisy:
+        a = q * rng.standard_normal(lead + (n_noisy,))
+        dv = np.cumsum(a, axis=-1)  # v_{frame + j} - v_frame, j = 1 .. n_noisy
+        v_after = state[..., 2, None] + dv
+        v = np.concatenate([v[..., : n_frames - n_noisy], v_after], axis=-1)
+        # x_{frame + j} = x_frame + sum_{i < j} v_{frame + i}
+        steps = np.concatenate([v[..., frame - 1 : frame], v_after[..., :-1]], axis=-1)
+        x_after = state[..., 0, None] + np.cumsum(steps, axis=-1)
+        x = np.concatenate([x[..., : n_frames - n_noisy], x_after], axis=-1)
+    else:
+        x = state[..., 0, None] + k * state[..., 2, None] + np.zeros(lead + (1,))
+    y = np.broadcast_to(state[..., 1, None] + k, x.shape)
+    states = np.stack([x, np.asarray(y, dtype=float), np.broadcast_to(v, x.shape)], axis=-1)
+    mu = x / y + rho * rng.standard_normal(lead + (n_frames,))
+    return Simulation(states, mu)
 
 
 def noise_in_pixels(

@@ -88,7 +88,11 @@ Gaussian tails of the prior, ``E_q[(p_o / q)**2]`` is finite and the error
 falls as ``1 / sqrt(N)`` (delta method for the SDs). With resampling the
 limits still hold, each resampling step being an unbiased selection
 [douc2005]_. :meth:`ParticleResult.standard_errors` estimates the Monte Carlo
-standard errors of the moments.
+standard errors of the moments. They rest on many distinct particles carrying
+the weight: where the distinct ESS (identical particles pooled) falls below
+:data:`depthcore.resampling.MIN_EFFECTIVE_DRAWS`, :meth:`ParticleResult.collapsed`
+says so, and the registry reports the errors there as NaN, not as the
+vanishing spread of a few particles.
 
 References
 ----------
@@ -115,6 +119,7 @@ import numpy as np
 from . import _checks, model
 from .gaussian import INDEX, Gaussian, gaussian_logpdf, student_t
 from .resampling import (
+    MIN_EFFECTIVE_DRAWS,
     RESAMPLERS,
     check_rng,
     effective_sample_size,
@@ -224,6 +229,14 @@ class ParticleResult:
         """
         return float(_distinct_ess(self.ancestors, self.weights))
 
+    def collapsed(self) -> bool:
+        """Whether the weight sits on fewer than ``MIN_EFFECTIVE_DRAWS`` distinct particles.
+
+        Then the weighted spread and :meth:`standard_errors` describe those few
+        particles, not the posterior, and cannot be trusted.
+        """
+        return bool(self.distinct_ess() < MIN_EFFECTIVE_DRAWS)
+
     @property
     def n_particles(self) -> int:
         """``N``."""
@@ -303,6 +316,10 @@ class ParticleBatch:
     def distinct_ess(self) -> np.ndarray:
         """:meth:`ParticleResult.distinct_ess` for each trial, shape (B,)."""
         return _distinct_ess(self.ancestors, np.exp(self.log_weights))
+
+    def collapsed(self) -> np.ndarray:
+        """:meth:`ParticleResult.collapsed` for each trial, shape (B,)."""
+        return self.distinct_ess() < MIN_EFFECTIVE_DRAWS
 
     def __len__(self) -> int:
         return self.log_weights.shape[0]

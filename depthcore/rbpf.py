@@ -71,8 +71,12 @@ its estimates. The filter therefore runs ``replicas`` independent clouds
 (independent draws from the one generator): :meth:`RBPF.moments` averages
 their estimates and :meth:`RBPF.standard_errors` is the SD of the replicas'
 estimates over ``sqrt(replicas)``, the standard error of that average (NaN
-with one replica). The self-normalised estimates also carry a bias of order
-``1 / J``, which this does not measure.
+with one replica). :meth:`RBPF.errors` widens it by the Student t factor for
+``replicas - 1`` degrees of freedom, so that the estimate lies within 1.96
+errors of the exact value in 95 % of runs, and flags a collapse (replicas that
+disagree by more than the posterior's width), where the error is NaN
+(:func:`depthcore.resampling.replica_errors`). The self-normalised estimates
+also carry a bias of order ``1 / J``, which this does not measure.
 
 References
 ----------
@@ -100,7 +104,13 @@ from scipy.special import log_ndtr, ndtr, ndtri_exp
 from . import _checks, model
 from . import bank as bk
 from .particle import ParticleMoments
-from .resampling import RESAMPLERS, effective_sample_size, normalise, weighted_moments
+from .resampling import (
+    RESAMPLERS,
+    effective_sample_size,
+    normalise,
+    replica_errors,
+    weighted_moments,
+)
 
 #: Metropolis-Hastings steps per particle after each resampling, by default.
 DEFAULT_MOVES = 20
@@ -286,6 +296,29 @@ class RBPF:
         return ParticleMoments(
             *(np.std(m, axis=-1, ddof=1) / np.sqrt(R) for m in self.replica_moments())
         )
+
+    def errors(self) -> tuple[ParticleMoments, np.ndarray]:
+        """Monte Carlo errors of the moments and the collapse flag, shape (...).
+
+        :func:`depthcore.resampling.replica_errors` of each of
+        :meth:`replica_moments` over the replicas: the standard error of
+        :meth:`standard_errors` widened by the Student t factor for ``R - 1``
+        degrees of freedom, NaN where the replicas collapsed (each worth fewer
+        than ``MIN_EFFECTIVE_DRAWS`` independent draws of the posterior) or
+        ``R < 2``. ``collapsed`` is true where the depth or the velocity has.
+        """
+        m = self.replica_moments()
+        out, collapsed = [], np.zeros(m.depth_mean.shape[:-1], dtype=bool)
+        for value, sd in (
+            (m.depth_mean, m.depth_sd),
+            (m.depth_sd, m.depth_sd),
+            (m.velocity_mean, m.velocity_sd),
+            (m.velocity_sd, m.velocity_sd),
+        ):
+            e, c = replica_errors(value, sd)
+            out.append(e)
+            collapsed |= c
+        return ParticleMoments(*(np.where(collapsed, np.nan, e) for e in out)), collapsed
 
 
 # --- the prior of the depth ------------------------------------------------------------

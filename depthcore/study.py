@@ -71,8 +71,8 @@ class Trials:
     process_noise : float
         ``q``, the SD of the velocity's change per frame (0: the paper's model).
     states : ndarray, shape (N, 3), or None
-        The true state at the last frame of each trial, where it differs from
-        ``truth`` (more than three frames, or process noise); ``None`` otherwise.
+        The true state at the last frame of each trial, where it is not
+        ``truth`` (more than three frames); ``None`` otherwise.
     """
 
     truth: np.ndarray
@@ -150,10 +150,13 @@ def simulate(
         Prior covariance ``prior_scale * I``.
     frames : int
         ``N >= 3``: the point is followed on from time 3 to frame ``N``
-        (:func:`depthcore.bank.simulate`, with the velocity's change per frame
-        drawn with SD ``process_noise``); the prior rule uses the first three
-        measurements, and trials whose first three have no noise-free solution
-        in front of the camera are left out, as with three frames.
+        (:func:`depthcore.model.simulate` with ``frame=3``). The state at
+        time 3 is ``truth`` in every trial: frames 1-3 are the noise-free
+        motion through it, as for three frames, and the velocity's changes per
+        frame, drawn with SD ``process_noise``, act between frames 3 .. N. The
+        prior rule uses the first three measurements, and trials whose first
+        three have no noise-free solution in front of the camera are left out,
+        as with three frames (a selection by the measurement noise alone).
     process_noise : float
         ``q >= 0``.
     """
@@ -172,12 +175,9 @@ def simulate(
         raise ValueError(
             f"truth puts the point behind the camera: depth at time 1 is {truth[1] - 2:.6g}"
         )
-    states = None
-    if frames == 3 and q == 0:
-        mu = model.simulate_measurements(model.G(truth, -2), rho, rng, size=int(n))
-    else:
-        sim = bank.simulate(model.G(truth, -2), frames, rho, q, rng, size=int(n))
-        mu, states = sim.mu, sim.states[:, -1, :]
+    sim = model.simulate(truth, frames, rho, q, rng, size=int(n), frame=3)
+    mu = sim.mu
+    states = None if frames == 3 else sim.states[:, -1, :]
     keep = valid_triples(mu[:, :3])
     mu = mu[keep]
     if prior == "paper":
@@ -582,9 +582,10 @@ def study(
         ``N >= 3``: the point, at ``truth`` at time 3, moves on to frame ``N``
         and every filter is scored on its state there (:func:`simulate`).
     process_noise : float
-        ``q >= 0``: the velocity's change per frame, drawn in every trial, so
-        the true state at frame ``N`` differs from trial to trial (the scores
-        are against each trial's own). The named filters must support the
+        ``q >= 0``: the velocity's change per frame from time 3 on, drawn in
+        every trial, so the true state at frame ``N`` differs from trial to
+        trial (the scores are against each trial's own); the state at time 3
+        is ``truth`` in every trial. The named filters must support the
         frames and the process noise (:class:`depthcore.filters.Filter`).
 
     Notes
@@ -750,4 +751,90 @@ def prior_study(
         t = s[q]
         t["calibrated"] = bool(min(t["ks_pvalue"], t["chi2_pvalue"]) > false_alarm / 2)
         out[q] = t
+    return out
+
+
+#: The samplers whose Monte Carlo errors :func:`error_coverage` checks.
+SAMPLERS = ("particle", "resample_move", "rbpf")
+#: The moments whose errors :func:`error_coverage` checks.
+ERROR_MOMENTS = ("depth_mean", "depth_sd", "velocity_mean", "velocity_sd")
+
+
+def error_coverage(
+    name: str,
+    mu,
+    rho: float,
+    prior_mean,
+    prior_cov,
+    runs: int = 100,
+    seed=0,
+    process_noise: float = 0.0,
+    **options,
+) -> dict:
+    """How often a sampler's reported error covers its actual error.
+
+    The sampler ``name`` of the registry runs ``runs`` times, independently,
+    on one problem (the runs are the rows of one batch, drawn from one
+    generator seeded by ``seed``); each moment's error, estimate minus the
+    exact value of the optimal filter (the bank of Kalman filters beyond
+    three frames or with process noise), is compared with the error the
+    sampler reports for it (``depth_error`` for the depth's moments,
+    ``velocity_error`` for the velocity's). An honest error puts about 95 %
+    of the runs within two reported errors; a run flagged ``collapsed``
+    reports no error (NaN) and is counted apart.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`SAMPLERS`.
+    mu : array_like, shape (K,)
+        One sequence of bearings.
+    rho, prior_mean, prior_cov, process_noise
+        The problem, as for every filter of the registry.
+    runs : int
+        Independent runs, >= 1.
+    seed : int or numpy.random.SeedSequence
+    **options
+        For the sampler (``n_particles``, ``replicas``, ...); its defaults otherwise.
+
+    Returns
+    -------
+    dict
+        ``"runs"``, ``"collapsed"`` (the number of runs flagged), and for each
+        of :data:`ERROR_MOMENTS` ``{"within_two": fraction of the runs not
+        collapsed whose error is within two reported errors, "max_z": the
+        largest |error| / reported error, "se": the binomial standard error of
+        the fraction}``; ``"worst_collapsed_z"``: the largest |error| of a
+        collapsed run's depth mean over the exact depth SD (how far off the
+        flag was right to be).
+    """
+    if name not in SAMPLERS:
+        raise ValueError(f"name must be one of {SAMPLERS}, got {name!r}")
+    runs = _checks.count(runs, "runs")
+    mu = _checks.finite_array(mu, "mu")
+    if mu.ndim != 1:
+        raise ValueError(f"mu must have shape (K,), got shape {mu.shape}")
+    batch = np.tile(mu, (runs, 1))
+    noise = {"process_noise": process_noise} if process_noise else {}
+    exact = FILTERS["optimal"](mu, rho, prior_mean, prior_cov, **noise)
+    rng = np.random.default_rng(_checks.seed_sequence(seed))
+    est = FILTERS[name](batch, rho, prior_mean, prior_cov, rng=rng, **noise, **options)
+    collapsed = np.broadcast_to(np.asarray(est.collapsed, dtype=bool), (runs,))
+    out = {"runs": runs, "collapsed": int(np.sum(collapsed))}
+    ok = ~collapsed
+    for moment in ERROR_MOMENTS:
+        quantity = moment.split("_")[0]
+        err = np.asarray(getattr(est, moment)) - getattr(exact, moment)
+        reported = np.asarray(getattr(est, f"{quantity}_error"))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.abs(err[ok]) / reported[ok]
+        n = int(np.sum(ok))
+        frac = float(np.mean(z <= 2.0)) if n else float("nan")
+        out[moment] = {
+            "within_two": frac,
+            "max_z": float(np.max(z)) if n else float("nan"),
+            "se": float(np.sqrt(frac * (1 - frac) / n)) if n else float("nan"),
+        }
+    depth_err = np.abs(np.asarray(est.depth_mean) - exact.depth_mean) / exact.depth_sd
+    out["worst_collapsed_z"] = float(np.max(depth_err[collapsed])) if np.any(collapsed) else None
     return out

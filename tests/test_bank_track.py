@@ -33,7 +33,7 @@ def log_depth_rule(panels, lo=-12.0, hi=14.0):
 
 def fig2_track(N, q, seed):
     s = SCENARIOS["fig2"]
-    sim = bk.simulate(model.G(s.c, -2), N, RHO_200, q, np.random.default_rng(seed))
+    sim = model.simulate(model.G(s.c, -2), N, RHO_200, q, np.random.default_rng(seed), frame=1)
     return sim, s.prior
 
 

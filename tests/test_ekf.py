@@ -55,7 +55,7 @@ def test_eq12_update_matches_the_joseph_form():
 def test_run_is_batched_like_a_loop():
     rng = np.random.default_rng(7)
     x1 = np.array([-1.2, 4.0, 1.2])
-    mu = model.simulate_measurements(x1, 0.005, rng, size=5)
+    mu = model.simulate(x1, 3, 0.005, 0.0, rng, size=5, frame=1).mu
     prior = paper_prior(noise_free_state(MU_17))
     means, covs = run(mu, 0.005, prior.mean, prior.cov)
     for i in range(5):
@@ -115,7 +115,7 @@ def test_ekf_matches_filterpy_trial_by_trial():
 
     s = SCENARIOS["fig2"]
     rng = np.random.default_rng(4)
-    mu = model.simulate_measurements(model.G(s.c, -2), s.rho, rng, size=20)
+    mu = model.simulate(s.c, 3, s.rho, 0.0, rng, size=20).mu
     prior = paper_prior(noise_free_state(MU_17))
     means, covs = run(mu, s.rho, prior.mean, prior.cov)
     for i in range(20):
@@ -171,7 +171,7 @@ def test_n_frame_ekf_with_process_noise_is_the_linearised_recursion(n_frames, q)
     # the recursion above is the covariance form, the EKF's the square-root information form.
     rng = np.random.default_rng(n_frames)
     rho = 1e-4
-    mu = model.simulate_measurements(X1, rho, rng, n=n_frames)
+    mu = model.simulate(X1, n_frames, rho, 0.0, rng, frame=1).mu
     P0 = np.diag([0.5, 2.0, 0.05])
     got = run(mu, rho, X1, P0, process_noise=q)
     means, covs = linearised_recursion(mu, rho, X1, P0, q)
@@ -189,7 +189,7 @@ def test_process_noise_zero_and_three_frames_are_the_papers_ekf():
 
 
 def test_process_noise_widens_the_velocity_and_is_checked():
-    mu = model.simulate_measurements(X1, 1e-3, np.random.default_rng(1), n=6)
+    mu = model.simulate(X1, 6, 1e-3, 0.0, np.random.default_rng(1), frame=1).mu
     P0 = np.diag([0.5, 2.0, 0.05])
     still = run(mu, 1e-3, X1, P0).covs[-1]
     moving = run(mu, 1e-3, X1, P0, process_noise=0.05).covs[-1]
@@ -201,7 +201,7 @@ def test_process_noise_widens_the_velocity_and_is_checked():
 
 def test_n_frame_ekf_is_batched_like_a_loop():
     rng = np.random.default_rng(5)
-    mu = model.simulate_measurements(X1, 1e-3, rng, n=7, size=4)
+    mu = model.simulate(X1, 7, 1e-3, 0.0, rng, size=4, frame=1).mu
     P0 = np.diag([0.5, 2.0, 0.05])
     many = run(mu, 1e-3, X1, P0, process_noise=0.02)
     for i in range(4):

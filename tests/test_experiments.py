@@ -315,7 +315,7 @@ def test_resample_move_runs_rejects_bad_arguments():
 
 def _rbpf_track():
     s = SCENARIOS["fig2"]
-    sim = bank.simulate(model.G(s.c, -2), 6, s.rho, 0.01, np.random.default_rng(3))
+    sim = model.simulate(model.G(s.c, -2), 6, s.rho, 0.01, np.random.default_rng(3), frame=1)
     return sim.mu, s.rho, s.prior.mean, s.prior.cov
 
 

@@ -356,7 +356,7 @@ def test_noise_study_figure_draws_coverage_and_rmse():
 def fig2_track():
     from depthcore import bank, model
 
-    sim = bank.simulate(model.G(FIG2.c, -2), 6, FIG2.rho, 0.01, np.random.default_rng(2))
+    sim = model.simulate(model.G(FIG2.c, -2), 6, FIG2.rho, 0.01, np.random.default_rng(2), frame=1)
     tr = bank.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
     return sim, tr
 

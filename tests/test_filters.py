@@ -22,9 +22,7 @@ FIG2 = SCENARIOS["fig2"]
 
 
 def _batch(n=4, seed=3):
-    mu = model.simulate_measurements(
-        model.G(FIG2.c, -2), FIG2.rho, np.random.default_rng(seed), size=n
-    )
+    mu = model.simulate(FIG2.c, 3, FIG2.rho, 0.0, np.random.default_rng(seed), size=n).mu
     return mu, paper_prior_means(model.noise_free_states(mu)), FIG2.prior.cov
 
 
@@ -147,10 +145,8 @@ CASES = [
 
 
 def _frames(n_frames, size=3, seed=3):
-    x1 = model.G(FIG2.c, -2)
-    return model.simulate_measurements(
-        x1, FIG2.rho, np.random.default_rng(seed), n=n_frames, size=size
-    )
+    rng = np.random.default_rng(seed)
+    return model.simulate(FIG2.c, n_frames, FIG2.rho, 0.0, rng, size=size).mu
 
 
 def test_each_filter_declares_what_it_supports():

@@ -10,7 +10,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import stats
 
-from depthcore import SCENARIOS, bank, experiments, figures, model, report, study
+from depthcore import SCENARIOS, experiments, figures, model, report, study
 from depthcore.filters import FILTERS
 from depthcore.gaussian import paper_prior_means
 
@@ -104,7 +104,7 @@ def test_coverage_test_rejects_bad_input(kwargs, match):
 @pytest.fixture(scope="module")
 def track():
     rng = np.random.default_rng(3)
-    return bank.simulate(model.G(FIG2.c, -2), 8, FIG2.rho, 0.0, rng).mu
+    return model.simulate(FIG2.c, 8, FIG2.rho, 0.0, rng).mu
 
 
 def test_frame_marginals_are_the_filters_on_the_first_frames(track):
@@ -114,13 +114,16 @@ def test_frame_marginals_are_the_filters_on_the_first_frames(track):
         assert r["frames"] == n
         e = FILTERS["ekf"](track[:n], FIG2.rho, pm, 1000 * np.eye(3))
         assert r["depth_mean"]["ekf"] == float(e.depth_mean)
-        # the exact density integrates to one over its grid of mean +- 6 SD
+        # the exact density integrates to one over its grid of mean +- 6 SD, up to the
+        # heavy right tail beyond the grid at N = 3; its mean is the filter's, likewise
         mass = np.trapezoid(r["density"]["optimal"], r["grid"])
-        assert abs(mass - 1) < 2e-3
+        assert abs(mass - 1) < (1e-2 if n == 3 else 2e-3)
         o = r["depth_mean"]["optimal"]
-        # its mean is the filter's, up to the heavy right tail beyond the grid at N = 3
-        tol = 1e-2 if n == 3 else 1e-4
-        assert_allclose(np.trapezoid(r["grid"] * r["density"]["optimal"], r["grid"]), o, rtol=tol)
+        on_grid = np.trapezoid(r["grid"] * r["density"]["optimal"], r["grid"])
+        if n == 3:  # the right tail the grid leaves out (mass < 1e-2) lowers the mean
+            assert o * (1 - 3e-2) < on_grid < o
+        else:
+            assert_allclose(on_grid, o, rtol=1e-4)
     fig = figures.frame_marginals_figure(m)
     assert fig.axes[0].get_title() == "N = 3"
     assert len(fig.axes) == 4

@@ -167,7 +167,7 @@ def test_bad_input_is_refused(kwargs, name):
 def test_one_iteration_per_update_is_the_ekf_for_any_frames_and_process_noise(n_frames, q):
     rng = np.random.default_rng(n_frames)
     x1 = np.array([-1.0, 6.0, 0.4])
-    mu = model.simulate_measurements(x1, 2e-3, rng, n=n_frames, size=3)
+    mu = model.simulate(x1, n_frames, 2e-3, 0.0, rng, size=3, frame=1).mu
     prior_mean = x1 + [0.1, -0.5, 0.05]
     prior_cov = np.diag([0.5, 2.0, 0.05])
     means, covs = iterated.run(mu, 2e-3, prior_mean, prior_cov, q, max_iterations=1)
@@ -180,12 +180,11 @@ def test_one_iteration_per_update_is_the_ekf_for_any_frames_and_process_noise(n_
 
 
 def _noisy_track(q=0.02, frames=8, seed=3):
-    from depthcore import bank
     from depthcore.gaussian import paper_prior
     from depthcore.scenarios import RHO_200
 
     s = SCENARIOS["fig2"]
-    sim = bank.simulate(model.G(s.c, -2), frames, RHO_200, q, np.random.default_rng(seed))
+    sim = model.simulate(model.G(s.c, -2), frames, RHO_200, q, np.random.default_rng(seed), frame=1)
     return sim.mu, RHO_200, paper_prior(s.c)
 
 

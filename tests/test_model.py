@@ -45,20 +45,94 @@ def test_eq4_likelihood_integrates_to_one_over_mu():
 
 
 def test_simulate_measurements_statistics_and_repeatability():
+    """Eq. (4): bearings x_i / y_i plus noise of SD rho along the motion of Eq. (1)."""
     x1 = np.array([-1.2, 4.0, 1.2])
-    mu = model.simulate_measurements(x1, 0.01, np.random.default_rng(5), size=20000)
+    mu = model.simulate(x1, 3, 0.01, 0.0, np.random.default_rng(5), size=20000, frame=1).mu
     truth = [-0.3, 0.0, 0.2]
     # standard error of a mean of 20000 draws with sd 0.01 is 7e-5: allow 5 of them
     assert_allclose(mu.mean(axis=0), truth, atol=3.5e-4)
     assert_allclose(mu.std(axis=0), 0.01, rtol=0.03)
-    again = model.simulate_measurements(x1, 0.01, np.random.default_rng(5), size=20000)
+    again = model.simulate(x1, 3, 0.01, 0.0, np.random.default_rng(5), size=20000, frame=1).mu
     assert np.array_equal(mu, again)
+    # the same track given through its state at time 3 (the default frame)
+    at3 = model.simulate(model.G(x1, 2), 3, 0.01, 0.0, np.random.default_rng(5), size=20000)
+    assert_allclose(at3.mu, mu, rtol=0, atol=1e-15)
 
 
-@pytest.mark.parametrize("x1", [[0.0, -1.0, 0.0], [0.0, -2.0, 0.0], [0.0, -0.5, 0.0]])
-def test_simulate_rejects_point_behind_camera(x1):
-    with pytest.raises(ValueError, match="x1 puts the point behind the camera"):
-        model.simulate_measurements(x1, 0.01, np.random.default_rng(0))
+def test_simulate_follows_the_motion_and_is_repeatable():
+    """Process noise from frame 1 on (``frame=1``): the bank's model."""
+    x1 = np.array([-1.2, 4.0, 1.2])
+    a = model.simulate(x1, 12, 0.01, 0.1, np.random.default_rng(1), size=500, frame=1)
+    b = model.simulate(x1, 12, 0.01, 0.1, np.random.default_rng(1), size=500, frame=1)
+    assert a.states.shape == (500, 12, 3) and a.mu.shape == (500, 12)
+    assert np.array_equal(a.mu, b.mu) and np.array_equal(a.states, b.states)
+    x, y, v = np.moveaxis(a.states, -1, 0)
+    assert_allclose(y, 4.0 + np.arange(12) + 0 * x, rtol=0, atol=0)
+    assert_allclose(x[:, 1:], x[:, :-1] + v[:, :-1], rtol=1e-14, atol=1e-14)
+    assert_allclose(a.states[:, 0], np.broadcast_to(x1, (500, 3)))
+    # accelerations have SD q, bearing errors SD rho (chi-square: 5500 and 6000 draws, 5%)
+    assert np.std(np.diff(v, axis=-1)) == pytest.approx(0.1, rel=0.05)
+    assert np.std(a.mu - x / y) == pytest.approx(0.01, rel=0.05)
+    still = model.simulate(x1, 5, 0.01, 0.0, np.random.default_rng(2), frame=1)
+    assert_allclose(still.states, model.trajectory(x1, 5), rtol=1e-15)
+
+
+@pytest.mark.parametrize("frame", [1, 3, 5])
+def test_simulate_passes_through_the_given_state_at_its_frame(frame):
+    """Noise-free motion (Eq. (1)) up to ``frame``, accelerations of SD q after it."""
+    state = np.array([1.2, 6.0, 1.2])
+    n, q = 10, 10.0
+    sim = model.simulate(state, n, 0.005, q, np.random.default_rng(7), size=2000, frame=frame)
+    x, y, v = np.moveaxis(sim.states, -1, 0)
+    # the given state at its frame in every draw, exactly
+    assert np.array_equal(sim.states[:, frame - 1], np.broadcast_to(state, (2000, 3)))
+    # before it, the noise-free motion through it
+    back = np.stack([model.G(state, k - frame) for k in range(1, frame + 1)])
+    assert_allclose(sim.states[:, :frame], np.broadcast_to(back, (2000, frame, 3)), atol=1e-12)
+    assert_allclose(y, state[1] + np.arange(1, n + 1) - frame + 0 * x, rtol=0, atol=0)
+    assert_allclose(x[:, 1:], x[:, :-1] + v[:, :-1], rtol=1e-13, atol=1e-12)
+    # after it, velocity changes of SD q: 2000 (n - frame) draws, chi-square at 5 SE
+    dv = np.diff(v[:, frame - 1 :], axis=-1)
+    se = np.sqrt(2.0 / (2 * dv.size))
+    assert np.std(dv) == pytest.approx(q, rel=5 * se)
+    # the bearings' noise has SD rho about the states' projections
+    assert np.std(sim.mu - x / y) == pytest.approx(0.005, rel=5 * np.sqrt(1.0 / (2 * x.size)))
+
+
+def test_simulate_draws_nothing_for_the_motion_without_process_noise():
+    rng = np.random.default_rng(3)
+    sim = model.simulate([1.2, 6.0, 1.2], 7, 0.005, 0.0, rng, size=4)
+    noise = np.random.default_rng(3).standard_normal((4, 7))
+    assert_allclose(sim.mu - model.project(sim.states), 0.005 * noise, rtol=0, atol=1e-15)
+
+
+def test_simulate_batches_states():
+    states = np.array([[1.2, 6.0, 1.2], [0.0, 4.0, -0.5]])
+    sim = model.simulate(states, 5, 0.01, 0.1, np.random.default_rng(0), size=3)
+    assert sim.states.shape == (3, 2, 5, 3) and sim.mu.shape == (3, 2, 5)
+    assert_allclose(sim.states[:, :, 2], np.broadcast_to(states, (3, 2, 3)), rtol=0, atol=0)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(state=[0.0, -1.0, 0.0]), "state puts the point behind the camera"),
+        (dict(state=[0.0, 2.0, 0.0]), "state puts the point behind the camera"),
+        (dict(state=[0.0, 2.0, 0.0, 1.0]), r"state must have shape \(..., 3\)"),
+        (dict(state=[0.0, np.nan, 0.0]), "state must be finite"),
+        (dict(n_frames=0), "n_frames must be an integer >= 1"),
+        (dict(n_frames=2.5), "n_frames must be an integer >= 1"),
+        (dict(frame=0), "frame must be an integer >= 1"),
+        (dict(rho=0.0), "rho must be"),
+        (dict(q=-1.0), "q must be"),
+        (dict(size=0), "size must be an integer >= 1"),
+        (dict(rng=1), "rng must be a numpy.random.Generator"),
+    ],
+)
+def test_simulate_refuses_bad_input(kwargs, message):
+    args = dict(state=[0.0, 5.0, 0.5], n_frames=4, rho=0.01, q=0.0, rng=np.random.default_rng(0))
+    with pytest.raises(ValueError, match=message):
+        model.simulate(**dict(args, **kwargs))
 
 
 @pytest.mark.parametrize("rho", [0.0, -1.0, np.nan, np.inf])

@@ -361,7 +361,7 @@ def test_velocity_cdf_refines_each_problem_on_its_own_and_matches_a_finer_mixtur
     # agree with the mixture on 64 times finer nodes everywhere, and the
     # mixture of a problem does not depend on the others in the batch.
     s = SCENARIOS["fig2"]
-    mu = model.simulate_measurements(model.G(s.c, -2), s.rho, np.random.default_rng(2), size=12)
+    mu = model.simulate(s.c, 3, s.rho, 0.0, np.random.default_rng(2), size=12).mu
     pm = np.array([s.c[0] - 2 * s.c[2], s.c[1] - 2, 0.0])
     batch = optimal.batch_marginals(mu, s.rho, pm, 1000 * np.eye(3))
     sd = batch.moments.velocity_sd

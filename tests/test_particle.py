@@ -113,7 +113,7 @@ def test_single_is_the_batch_of_one():
 
 def test_batch_of_different_triples():
     rng = np.random.default_rng(13)
-    mu = model.simulate_measurements(model.G(FIG2.c, -2), FIG2.rho, rng, size=8)
+    mu = model.simulate(FIG2.c, 3, FIG2.rho, 0.0, rng, size=8).mu
     b = run(mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 1000, rng)
     assert b.particles.shape == (8, 1000, 3) and b.ess.shape == (8, 3)
     assert_allclose(logsumexp(b.log_weights, axis=-1), 0.0, atol=1e-12)
@@ -374,7 +374,7 @@ def test_n_frame_importance_sampling_matches_the_bank_of_kalman_filters():
     # depthcore.bank) against the importance sample with the N-frame p_s proposal.
     x1 = np.array([-1.0, 5.0, 0.3])
     rho = 0.01
-    mu = model.simulate_measurements(x1, rho, np.random.default_rng(21), n=6)
+    mu = model.simulate(x1, 6, rho, 0.0, np.random.default_rng(21), frame=1).mu
     prior = Gaussian(x1 + [0.5, 1.0, -0.1], np.diag([4.0, 9.0, 0.25]))
     mean_s, cov_s = second_order_batch(mu[None], rho, prior.mean, prior.cov)
     sd_y1 = np.sqrt(cov_s[0, 1, 1])

@@ -340,10 +340,14 @@ def test_registry_entry_converges_to_the_bank_within_its_monte_carlo_error(frame
             ratio = np.var(est, ddof=1) / np.mean(se**2)
             f = stats.f(9, 10 * 5)
             assert f.ppf(FALSE_ALARM) < ratio < f.ppf(1 - FALSE_ALARM), (quantity, moment, ratio)
-        # the reported error is the larger of the mean's and the SD's
-        se = runs[0].detail.standard_errors()
-        want = max(getattr(se, f"{quantity}_mean"), getattr(se, f"{quantity}_sd"))
-        assert getattr(runs[0], f"{quantity}_error") == want
+        # the reported error is the larger of the mean's and the SD's, each the standard
+        # error widened by the Student t factor for R - 1 degrees of freedom
+        r = runs[0]
+        se = r.detail.standard_errors()
+        factor = stats.t(r.detail.replicas - 1).ppf(0.975) / stats.norm.ppf(0.975)
+        want = factor * max(getattr(se, f"{quantity}_mean"), getattr(se, f"{quantity}_sd"))
+        assert r.collapsed is False
+        assert getattr(r, f"{quantity}_error") == pytest.approx(want, rel=1e-12)
 
 
 def test_registry_estimate_is_the_pooled_mixture_computed_particle_by_particle():

@@ -157,3 +157,31 @@ def test_every_particle_behind_the_camera_is_refused():
         resample_move.run(
             [[0.0, 0.1, 0.2]], 0.01, [0.0, -1e6, 0.0], np.eye(3), 10, np.random.default_rng(0)
         )
+
+
+def test_replicas_are_independent_runs_pooled():
+    """replicated: R rows of one batch; the pool's weights are each replica's over R,
+    its depth mean the replicas' average, and its errors those of replica_errors."""
+    from depthcore.resampling import replica_errors
+
+    s = SCENARIOS["fig3"]
+    mu = np.stack([s.mu, np.asarray(s.mu) + 1e-3])
+    r = resample_move.replicated(
+        mu, s.rho, s.prior.mean, s.prior.cov, 300, np.random.default_rng(2), replicas=3
+    )
+    alone = resample_move.run(
+        np.repeat(mu, 3, axis=0), s.rho, s.prior.mean, s.prior.cov, 300, np.random.default_rng(2)
+    )
+    np.testing.assert_array_equal(r.runs.particles, alone.particles)
+    assert r.particles.shape == (2, 900, 3) and r.log_weights.shape == (2, 900)
+    np.testing.assert_allclose(np.exp(r.log_weights).sum(axis=1), 1.0, rtol=1e-12)
+    each = r.replica_moments()
+    assert each["depth_mean"].shape == (2, 3)
+    np.testing.assert_allclose(r.moments()["depth_mean"], each["depth_mean"].mean(axis=1))
+    errors, collapsed = r.errors()
+    want, c = replica_errors(each["depth_mean"], each["depth_sd"])
+    assert np.array_equal(collapsed | c, collapsed)
+    np.testing.assert_array_equal(np.isnan(errors["depth_mean"]), collapsed)
+    np.testing.assert_allclose(errors["depth_mean"][~collapsed], want[~collapsed])
+    with pytest.raises(ValueError, match="replicas must be an integer >= 1"):
+        resample_move.replicated(mu, s.rho, s.prior.mean, s.prior.cov, 300, None, replicas=0)

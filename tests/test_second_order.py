@@ -126,7 +126,7 @@ PRIOR_COV = np.diag([4.0, 25.0, 0.25])
 
 def _problem(n_frames, rho=2e-3, size=3, seed=0):
     rng = np.random.default_rng(seed + n_frames)
-    return model.simulate_measurements(X1, rho, rng, n=n_frames, size=size)
+    return model.simulate(X1, n_frames, rho, 0.0, rng, size=size, frame=1).mu
 
 
 def test_n3_minimiser_is_the_noise_free_state_and_the_gaussian_is_p_s():

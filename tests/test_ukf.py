@@ -195,7 +195,7 @@ def filterpy_run(mu, rho, prior, rule):
 @pytest.mark.parametrize("rule", RULES)
 def test_ukf_matches_filterpy(rule):
     rng = np.random.default_rng(7)
-    mu = model.simulate_measurements(model.G(C_17, -2), 0.005, rng)
+    mu = model.simulate(C_17, 3, 0.005, 0.0, rng).mu
     ours = ukf(mu, 0.005, TIGHT, rule)
     means, covs = filterpy_run(mu, 0.005, TIGHT, rule)
     # Same arithmetic up to the order of summation; the covariances lose about
@@ -216,7 +216,7 @@ def test_ukf_matches_filterpy_on_the_paper_prior_across_the_pole():
 
 def test_run_is_batched_like_a_loop():
     rng = np.random.default_rng(8)
-    mu = model.simulate_measurements(model.G(C_17, -2), 0.005, rng, size=6)
+    mu = model.simulate(C_17, 3, 0.005, 0.0, rng, size=6).mu
     means, covs = run(mu, 0.005, TIGHT.mean, TIGHT.cov)
     assert means.shape == (6, 3, 3) and covs.shape == (6, 3, 3, 3)
     for i in range(6):
@@ -227,7 +227,7 @@ def test_run_is_batched_like_a_loop():
 
 def test_run_takes_two_batch_dimensions():
     rng = np.random.default_rng(9)
-    mu = model.simulate_measurements(model.G(C_17, -2), 0.005, rng, size=6).reshape(2, 3, 3)
+    mu = model.simulate(C_17, 3, 0.005, 0.0, rng, size=6).mu.reshape(2, 3, 3)
     means, covs = run(mu, 0.005, TIGHT.mean, TIGHT.cov)
     flat = run(mu.reshape(6, 3), 0.005, TIGHT.mean, TIGHT.cov)
     assert_allclose(means.reshape(6, 3, 3), flat[0], rtol=1e-15)
@@ -383,7 +383,7 @@ def filterpy_run_with_process_noise(mu, rho, prior, rule, q):
 @pytest.mark.parametrize("rule", RULES)
 def test_six_frame_ukf_with_process_noise_matches_filterpy(rule):
     rng = np.random.default_rng(11)
-    mu = model.simulate_measurements(TIGHT.mean, 0.005, rng, n=6)
+    mu = model.simulate(TIGHT.mean, 6, 0.005, 0.0, rng, frame=1).mu
     q = 0.02
     ours = run(mu, 0.005, TIGHT.mean, TIGHT.cov, process_noise=q, sigma_points=rule)
     means, covs = filterpy_run_with_process_noise(mu, 0.005, TIGHT, rule, q)
