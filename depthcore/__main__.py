@@ -558,6 +558,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=raw,
         epilog=EXAMPLES["reproduce"],
         help="moments of every filter for Figures 2-6, beside the paper's",
+        description="Moments of every filter for Figures 2-6, beside the paper's.",
     )
     r.add_argument("--json", action="store_true", help="print JSON instead of a table")
     r.set_defaults(run=_cmd_reproduce)
@@ -568,6 +569,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=raw,
         epilog=EXAMPLES["estimate"],
         help=f"moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames)",
+        description=f"Moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames).",
     )
     e.add_argument(
         "--mu",
@@ -575,9 +577,15 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         required=True,
         metavar="M",
-        help="the measurements mu1 mu2 mu3 ... (tangents of the bearings at frames 1 .. N, N >= 3)",
+        help="the measurements mu1 mu2 mu3 ... (tangents of the bearings at frames 1 .. N, "
+        f"3 <= N <= {FRAMES_MAX}; magnitudes up to {MU_MAX:g})",
     )
-    e.add_argument("--rho", type=float, required=True, help="noise standard deviation, > 0")
+    e.add_argument(
+        "--rho",
+        type=float,
+        required=True,
+        help=f"noise standard deviation, from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g}",
+    )
     e.add_argument(
         "--prior-mean",
         type=float,
@@ -613,6 +621,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=raw,
         epilog=EXAMPLES["study"],
         help="Monte Carlo study of every filter's error and calibration",
+        description="Monte Carlo study of every filter's error and calibration.",
     )
     st.add_argument(
         "--trials",
@@ -683,6 +692,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=raw,
         epilog=EXAMPLES["figures"],
         help="write Figures 2-6 as PDF, PNG and SVG",
+        description="Write Figures 2-6 as PDF, PNG and SVG.",
     )
     f.add_argument("--out", default="figures", help="output folder (default: figures)")
     f.set_defaults(run=_cmd_figures)

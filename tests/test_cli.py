@@ -266,3 +266,34 @@ def test_study_of_more_frames_answers_at_the_smallest_noise(capsys):
     data = json.loads(captured.out)
     scores = data["filters"]["optimal"]["depth"]
     assert 0.0 <= scores["coverage_68"] <= scores["coverage_95"] <= 1.0
+
+
+def test_the_long_commands_report_their_progress():
+    calls = []
+    reproduce.reproduce(keys=["fig2"], progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(1, 1)]
+    calls.clear()
+    study.prior_study(trials=5, progress=lambda done, total: calls.append((done, total)))
+    assert calls and calls[-1] == (5, 5)
+
+
+def test_every_table_has_a_legend_of_its_columns(capsys):
+    assert main(["estimate", "--mu", "-0.3", "0", "0.2", "0.33", "--rho", "0.005", "--smooth"]) == 0
+    out = capsys.readouterr().out
+    assert "legend: depth mean, depth sd" in out and "vel. mean, vel. sd" in out
+    assert "frame                 1 .. N" in out
+    assert main(["study", "--truth", "prior", "--trials", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "legend: nominal" in out and "KS p, chi-square p" in out
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["estimate", "--help"]])
+def test_help_speaks_of_n_frames_not_three_measurements(argv, capsys):
+    import depthcore
+
+    with pytest.raises(SystemExit):
+        main(argv)
+    out = capsys.readouterr().out
+    assert "three measurements" not in out and "any three" not in out
+    assert "N >= 3 bearings (up to 1000 frames)" in " ".join(out.split())
+    assert "three noisy image" not in depthcore.__doc__
