@@ -203,7 +203,6 @@ for argv, names in (
     (["study", "--filters", "ekf", "--particles", "10", "--json"], ("--particles: not used",)),
     (["study", "--filters", "ekf", "ekf", "--json"], ("--filters names ekf more than once",)),
     (["study", "--truth", "prior", "--trials", "3", "--json"], ()),  # answered
-    (["study", "--truth", "prior", "--prior", "fixed", "--trials", "3", "--json"], ()),
 ):
     CLI.append((argv, names))
 
