@@ -310,7 +310,9 @@ def _chunk(names, particles: int) -> int:
 
 def _cmd_study(args) -> str:
     if not 1 <= args.trials <= MAX_TRIALS:
-        raise ValueError(f"--trials must be from 1 to {MAX_TRIALS}, got {args.trials}")
+        raise ValueError(
+            f"--trials must be a positive integer at most {MAX_TRIALS}, got {args.trials}"
+        )
     if not MIN_PARTICLES <= args.particles <= MAX_PARTICLES:
         raise ValueError(
             f"--particles must be from {MIN_PARTICLES} (a covariance of the state (x, y, v) "
