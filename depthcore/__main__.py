@@ -256,9 +256,9 @@ def _check_out(out: str) -> Path:
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise _WriteError(f"--out: cannot make the folder {out!r}: {exc.strerror}") from None
+        raise ValueError(f"--out: cannot make the folder {out!r}: {exc.strerror}") from None
     if not os.access(path, os.W_OK):
-        raise _WriteError(f"--out: cannot write into the folder {out!r}: permission denied")
+        raise ValueError(f"--out: cannot write into the folder {out!r}: permission denied")
     return path
 
 
