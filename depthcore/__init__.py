@@ -1,11 +1,14 @@
 """depthcore: the filters of "Filter Based Estimates of Depth", computed exactly.
 
-A point translates in the (x, y) plane and is seen through three noisy image
-measurements ``mu_i = x_i / y_i + w_i``. The package computes the three
-estimates of its state that the paper compares: the optimal Bayes filter
-(:mod:`depthcore.optimal`), the second-order Gaussian approximation
-(:mod:`depthcore.second_order`) and the extended Kalman filter
-(:mod:`depthcore.ekf`), with their depth and velocity marginals.
+A point translates in the (x, y) plane and is seen through noisy image
+measurements ``mu_i = x_i / y_i + w_i``: the paper's three, or any ``N >= 3``
+frames up to ``depthcore._checks.MAX_FRAMES`` (1,000), with or without process
+noise on the velocity. The package computes the three estimates of its state
+that the paper compares: the optimal Bayes filter (:mod:`depthcore.optimal`;
+for more frames the bank of Kalman filters over depth, :mod:`depthcore.bank`),
+the second-order Gaussian approximation (:mod:`depthcore.second_order`) and
+the extended Kalman filter (:mod:`depthcore.ekf`), with their depth and
+velocity marginals.
 
 Modules, by concept: :mod:`~depthcore.model` (Eqs. (1)-(5), (7), (9), (11),
 (20)-(22)), :mod:`~depthcore.gaussian` (Eq. (13), the paper's prior),

@@ -1,16 +1,24 @@
 """The command line: ``python -m depthcore {reproduce,estimate,study,figures} ...``.
 
-Bad input ends with a one-line message on stderr naming the argument and exit
-status 2. Any other failure (out of memory, an overflow, a bug) ends with a
-one-line message asking to rerun with ``--debug`` (which shows the traceback)
-and exit status 1. Warnings never reach stderr: inside the command line they
-are errors, reported like any other failure.
+Bad input ends with a one-line message on stderr naming the argument as the
+user gave it (``--rho``, ``--prior-cov``) and exit status 2: a value out of
+range (printed exactly as given), a flag given twice, a flag the chosen mode
+would ignore. A failure to write the output (a closed standard output, a full
+disk, a folder that cannot be made) ends with one line and exit status 1, as
+does any other failure (out of memory, a bug), which asks to rerun with
+``--debug`` (which shows the traceback). Warnings never reach stderr: inside
+the command line they are errors, reported like any other failure. The JSON
+output is strict: a number that cannot be estimated is ``null``, with a
+``<key>_reason`` beside it saying why. Commands that run longer than a few
+seconds show a progress bar on stderr when it is a terminal.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import re
 import sys
 import traceback
@@ -20,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, _checks, report, reproduce, study
-from .filters import ALL_NAMES
+from .filters import ALL_NAMES, FILTERS, RBPF_REPLICAS
 from .filters import NAMES as _STUDY_FILTERS
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from .model import noise_free_state
@@ -30,12 +38,32 @@ from .report import STUDY_LEGEND
 #: chunks, so its memory does not grow with their number).
 MAX_TRIALS = 100_000
 
+#: Most particles held in memory at once by ``study``: the trials of a chunk times
+#: the particles per trial (times the Rao-Blackwellised filter's replicas). Measured
+#: on five frames, 10**6 particles in flight take about 0.2 GB in the importance
+#: sampler and 0.6 GB in the Rao-Blackwellised filter, so the study's memory stays
+#: below about 1 GB whatever ``--particles`` is: with many particles a chunk holds
+#: fewer trials.
+PARTICLES_IN_FLIGHT = 1_000_000
+#: Largest ``study --particles``: one trial alone must fit in
+#: :data:`PARTICLES_IN_FLIGHT` with the Rao-Blackwellised filter's replicas. Time
+#: grows linearly with trials times particles (about 1 s per 10**6 particle-trials
+#: for the importance sampler on five frames, 10 times that for the
+#: Rao-Blackwellised filter), shown by the progress bar.
+MAX_PARTICLES = PARTICLES_IN_FLIGHT // RBPF_REPLICAS
+#: Smallest ``study --particles``: the weighted covariance of the three-dimensional
+#: state, which the study scores, is singular with fewer.
+MIN_PARTICLES = 4
+
 #: Numeric limits of the command line (the library itself accepts more).
 RHO_RANGE = (1e-12, 1e3)
 MU_MAX = 1e6
 PRIOR_MEAN_MAX = 1e3
 PRIOR_COV_RANGE = (1e-12, 1e12)
 PROCESS_NOISE_MAX = 10.0
+#: Smallest positive ``--process-noise``: the smallest normal double, below which
+#: the inverse of the noise overflows.
+PROCESS_NOISE_MIN = _checks.MIN_PROCESS_NOISE
 #: Most bearings of ``estimate --mu``: the filters' limit.
 FRAMES_MAX = _checks.MAX_FRAMES
 
@@ -44,38 +72,86 @@ FRAMES_MAX = _checks.MAX_FRAMES
 _NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.I)
 
 
+class _Once:
+    """Mixed into every option's action: refuses a second use and records the first.
+
+    ``namespace._given`` holds the destinations of the options the user gave,
+    so a flag that the chosen mode would ignore can be refused.
+    """
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        given = namespace.__dict__.setdefault("_given", set())
+        if self.dest in given:
+            raise argparse.ArgumentError(self, "given more than once; give it once")
+        given.add(self.dest)
+        super().__call__(parser, namespace, values, option_string)
+
+
 class _Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = _NEGATIVE
         self._has_negative_number_optionals = []
 
+    def _add_action(self, action):
+        if action.option_strings and not isinstance(
+            action, (_Once, argparse._HelpAction, argparse._VersionAction)
+        ):
+            action.__class__ = type(f"Once{type(action).__name__}", (_Once, type(action)), {})
+        return super()._add_action(action)
+
     def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        self.exit(2, f"{self.prog}: error: {_one_line(message)}\n")
+
+    def _print_message(self, message, file=None):
+        # argparse drops a failed write of --help or --version silently; report it
+        if message and (file is None or file is sys.stdout):
+            _write(message)
+        else:
+            super()._print_message(message, file)
+
+
+def _exact(value) -> str:
+    """A number as the user gave it: every digit, never rounded to a limit."""
+    return repr(float(value))
 
 
 def _check_limits(name: str, values, largest: float) -> None:
     """Refuse a value that is not finite or whose magnitude exceeds ``largest``."""
     v = np.asarray(values, dtype=float)
-    if not np.all(np.isfinite(v)):
-        raise ValueError(f"{name} must be finite, got {v.tolist()}")
-    big = np.isfinite(v) & (np.abs(v) > largest)
+    bad = ~np.isfinite(v)
+    if np.any(bad):
+        raise ValueError(f"{name} must be finite, got {_exact(v[bad][0])}")
+    big = np.abs(v) > largest
     if np.any(big):
-        raise ValueError(f"{name} must be at most {largest:g} in magnitude, got {v[big][0]:g}")
+        raise ValueError(
+            f"{name} must be at most {largest:g} in magnitude, got {_exact(v[big][0])}"
+        )
 
 
 def _check_rho(rho: float) -> None:
     lo, hi = RHO_RANGE
-    if np.isfinite(rho) and rho > 0 and not lo <= rho <= hi:
-        raise ValueError(f"rho must be from {lo:g} to {hi:g}, got {rho:g}")
+    if not (math.isfinite(rho) and lo <= rho <= hi):
+        raise ValueError(f"--rho must be from {lo:g} to {hi:g}, got {_exact(rho)}")
+
+
+def _check_process_noise(q: float) -> float:
+    """``--process-noise``: 0, or from :data:`PROCESS_NOISE_MIN` to :data:`PROCESS_NOISE_MAX`."""
+    if not (math.isfinite(q) and (q == 0 or PROCESS_NOISE_MIN <= q <= PROCESS_NOISE_MAX)):
+        raise ValueError(
+            f"--process-noise must be 0 or from {PROCESS_NOISE_MIN:g} to "
+            f"{PROCESS_NOISE_MAX:g}, got {_exact(q)}"
+        )
+    return q
 
 
 def _prior(mu, prior_mean, prior_cov) -> Gaussian:
     """The prior from the command line, defaulting to the paper's rule."""
     if prior_mean is not None:
-        _check_limits("prior_mean", prior_mean, PRIOR_MEAN_MAX)
+        _check_limits("--prior-mean", prior_mean, PRIOR_MEAN_MAX)
     if prior_cov is not None:
-        _check_limits("prior_cov", prior_cov, PRIOR_COV_RANGE[1])
+        _check_limits("--prior-cov", prior_cov, PRIOR_COV_RANGE[1])
     if prior_mean is None:
         try:
             c = noise_free_state(mu[:3])
@@ -91,64 +167,98 @@ def _prior(mu, prior_mean, prior_cov) -> Gaussian:
         cov = PAPER_PRIOR_SCALE * np.eye(3)
     elif len(prior_cov) == 1:
         if not prior_cov[0] > 0:
-            raise ValueError(f"prior_cov must be positive definite; S = {prior_cov[0]} is not > 0")
+            raise ValueError(
+                f"--prior-cov must be positive definite; S = {_exact(prior_cov[0])} is not > 0"
+            )
         cov = prior_cov[0] * np.eye(3)
     elif len(prior_cov) == 9:
         cov = np.array(prior_cov).reshape(3, 3)
     else:
         raise ValueError(
-            f"prior_cov takes 1 value (S I) or 9 (a 3 x 3 matrix), got {len(prior_cov)}"
+            f"--prior-cov takes 1 value (S I) or 9 (a 3 x 3 matrix), got {len(prior_cov)}"
         )
     try:
         prior = Gaussian(mean, cov)
     except ValueError as exc:
         raise ValueError(
-            str(exc).replace("cov ", "prior_cov ", 1).replace("mean ", "prior_mean ", 1)
+            str(exc).replace("cov ", "--prior-cov ", 1).replace("mean ", "--prior-mean ", 1)
         ) from None
     smallest = np.linalg.eigvalsh(prior.cov)[0]
     if smallest < PRIOR_COV_RANGE[0]:
         raise ValueError(
-            f"prior_cov must have eigenvalues of at least {PRIOR_COV_RANGE[0]:g}, got {smallest:g}"
+            f"--prior-cov must have eigenvalues of at least {PRIOR_COV_RANGE[0]:g}, "
+            f"got {smallest!r}"
         )
     return prior
 
 
+def _bar(total: int, desc: str, unit: str):
+    """A progress bar on stderr when it is a terminal, else ``None``."""
+    if not sys.stderr.isatty():
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr)
+
+
+def _progress(bar):
+    """``progress(done, total)`` moving ``bar`` (or doing nothing without one)."""
+
+    def progress(done, total):
+        if bar is not None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+    return progress
+
+
+def _with_bar(desc: str, unit: str, run):
+    """``run(progress)`` with a progress bar named ``desc`` on stderr."""
+    bar = _bar(None, desc, unit)
+    try:
+        return run(_progress(bar))
+    finally:
+        if bar is not None:
+            bar.close()
+
+
 def _cmd_reproduce(args) -> str:
-    result = reproduce.reproduce()
-    return json.dumps(result, indent=2) if args.json else report.format_table(result)
+    result = _with_bar(
+        "reproduce", "figure", lambda progress: reproduce.reproduce(progress=progress)
+    )
+    return _json(result) if args.json else report.format_table(result)
 
 
 def _cmd_estimate(args) -> str:
     mu = np.array(args.mu)
     if len(mu) < 3:
-        raise ValueError(f"mu takes at least 3 bearings (frames 1 .. N), got {len(mu)}")
+        raise ValueError(f"--mu takes at least 3 bearings (frames 1 .. N), got {len(mu)}")
     if len(mu) > FRAMES_MAX:
-        raise ValueError(f"mu takes at most {FRAMES_MAX} bearings, got {len(mu)}")
-    _check_limits("mu", mu, MU_MAX)
+        raise ValueError(f"--mu takes at most {FRAMES_MAX} bearings, got {len(mu)}")
+    _check_limits("--mu", mu, MU_MAX)
     _check_rho(args.rho)
-    q = args.process_noise
-    if not (np.isfinite(q) and 0 <= q <= PROCESS_NOISE_MAX):
-        raise ValueError(f"process_noise must be from 0 to {PROCESS_NOISE_MAX:g}, got {q:g}")
+    q = _check_process_noise(args.process_noise)
     prior = _prior(mu, args.prior_mean, args.prior_cov)
-    try:
-        summary = reproduce.summarize(mu, args.rho, prior, process_noise=q, smooth=args.smooth)
-    except ValueError as exc:
-        if str(exc).startswith(("mu ", "rho ", "prior_mean ", "prior_cov ")):
-            raise
-        raise ValueError(f"mu, rho and the prior have no answer: {exc}") from None
-    return json.dumps(summary, indent=2) if args.json else report.format_summary(summary)
+    summary = reproduce.summarize(mu, args.rho, prior, process_noise=q, smooth=args.smooth)
+    return _json(summary) if args.json else report.format_summary(summary)
 
 
 def _check_out(out: str) -> Path:
     """The folder of ``figures --out``: refuses an empty path, a file, a path below a file."""
     if not out.strip():
-        raise ValueError("out must be a folder, got an empty path")
+        raise ValueError("--out must be a folder, got an empty path")
     path = Path(out)
     if path.exists() and not path.is_dir():
-        raise ValueError(f"out must be a folder, but {out!r} is an existing file")
+        raise ValueError(f"--out must be a folder, but {out!r} is an existing file")
     for parent in path.parents:
         if parent.exists() and not parent.is_dir():
-            raise ValueError(f"out must be a folder, but {str(parent)!r} in {out!r} is a file")
+            raise ValueError(f"--out must be a folder, but {str(parent)!r} in {out!r} is a file")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--out: cannot make the folder {out!r}: {exc.strerror}") from None
+    if not os.access(path, os.W_OK):
+        raise ValueError(f"--out: cannot write into the folder {out!r}: permission denied")
     return path
 
 
@@ -159,7 +269,13 @@ def _cmd_figures(args) -> str:
     matplotlib.use("Agg")
     from . import figures
 
-    paths = figures.save_all(out)
+    try:
+        paths = _with_bar(
+            "figures", "figure", lambda progress: figures.save_all(out, progress=progress)
+        )
+    except OSError as exc:
+        where = exc.filename or args.out
+        raise _WriteError(f"--out: cannot write {str(where)!r}: {exc.strerror}") from None
     return "\n".join(str(p) for p in paths) + "\n"
 
 
@@ -170,59 +286,89 @@ def _truth(values) -> np.ndarray:
     except ValueError:
         truth = None
     if truth is None or truth.shape != (3,):
-        raise ValueError(f"truth must be 'prior' or three numbers X Y V, got {' '.join(values)}")
+        raise ValueError(
+            f"--truth must be 'prior' or three numbers X Y V, got {' '.join(values)!r}"
+        )
     return truth
+
+
+def _refuse_ignored(args, mode: str, flags: dict) -> None:
+    """Refuse the flags of ``flags`` (dest: flag) that the user gave but ``mode`` ignores."""
+    given = [flag for dest, flag in flags.items() if dest in getattr(args, "_given", ())]
+    if given:
+        raise ValueError(
+            f"{' and '.join(given)}: not used by {mode}; "
+            f"leave {'them' if len(given) > 1 else 'it'} out"
+        )
+
+
+def _chunk(names, particles: int) -> int:
+    """Trials per chunk of the study: :data:`study.CHUNK`, fewer with many particles."""
+    held = particles * max(RBPF_REPLICAS if n == "rbpf" else 1 for n in names)
+    return max(1, min(study.CHUNK, PARTICLES_IN_FLIGHT // held))
 
 
 def _cmd_study(args) -> str:
     if not 1 <= args.trials <= MAX_TRIALS:
         raise ValueError(
-            f"trials must be a positive integer at most {MAX_TRIALS}, got {args.trials}"
+            f"--trials must be a positive integer at most {MAX_TRIALS}, got {args.trials}"
         )
-    if args.particles < 1:
-        raise ValueError(f"particles must be a positive integer, got {args.particles}")
+    if not MIN_PARTICLES <= args.particles <= MAX_PARTICLES:
+        raise ValueError(
+            f"--particles must be from {MIN_PARTICLES} (a covariance of the state (x, y, v) "
+            f"needs 4) to {MAX_PARTICLES} (the study holds at most {PARTICLES_IN_FLIGHT} "
+            f"particles in memory, about 1 GB), got {args.particles}"
+        )
     if args.seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {args.seed}")
+        raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
     _check_rho(args.rho)
     if not 3 <= args.frames <= FRAMES_MAX:
-        raise ValueError(f"frames must be from 3 to {FRAMES_MAX}, got {args.frames}")
-    q = args.process_noise
-    if not (np.isfinite(q) and 0 <= q <= PROCESS_NOISE_MAX):
-        raise ValueError(f"process_noise must be from 0 to {PROCESS_NOISE_MAX:g}, got {q:g}")
-    names = tuple(args.filters)
-    if q > 0 and args.filters == list(_STUDY_FILTERS):  # the default: those that can run
+        raise ValueError(f"--frames must be from 3 to {FRAMES_MAX}, got {args.frames}")
+    q = _check_process_noise(args.process_noise)
+    names = tuple(dict.fromkeys(args.filters))
+    if len(names) < len(args.filters):
+        repeated = sorted({n for n in args.filters if args.filters.count(n) > 1})
+        raise ValueError(f"--filters names {', '.join(repeated)} more than once")
+    if q > 0 and "filters" not in getattr(args, "_given", ()):  # the default: those that can run
         names = tuple(n for n in names if study.FILTERS[n].with_process_noise)
     if args.truth == [study.PRIOR_TRUTH]:
+        _refuse_ignored(
+            args,
+            "--truth prior (it checks the optimal filter alone)",
+            {"filters": "--filters", "particles": "--particles"},
+        )
         if args.prior == "paper":
             raise ValueError(
-                "prior: --truth prior needs a fixed prior (the paper's rule centres the prior "
+                "--prior: --truth prior needs a fixed prior (the paper's rule centres the prior "
                 "on each trial's own measurements, which is not a prior), got paper"
             )
-        result = study.prior_study(
-            rho=args.rho,
-            trials=args.trials,
-            seed=args.seed,
-            frames=args.frames,
-            process_noise=q,
+        result = _with_bar(
+            "study",
+            "trial",
+            lambda progress: study.prior_study(
+                rho=args.rho,
+                trials=args.trials,
+                seed=args.seed,
+                frames=args.frames,
+                process_noise=q,
+                progress=progress,
+            ),
         )
-        return json.dumps(result, indent=2) if args.json else report.format_prior_study(result)
+        return _json(result) if args.json else report.format_prior_study(result)
+    if not any(FILTERS[n].random for n in names):
+        _refuse_ignored(
+            args,
+            f"the filters {' '.join(names)}, which draw no particles",
+            {"particles": "--particles"},
+        )
     truth = None
     if args.truth is not None:
         truth = _truth(args.truth)
-        _check_limits("truth", truth, MU_MAX)
-    bar = None
-    if sys.stderr.isatty():
-        from tqdm import tqdm
-
-        bar = tqdm(total=args.trials, desc="study", unit="trial", file=sys.stderr)
-
-    def progress(done, total):
-        if bar is not None:
-            bar.total = total
-            bar.update(done - bar.n)
-
-    try:
-        result = study.study(
+        _check_limits("--truth", truth, MU_MAX)
+    result = _with_bar(
+        "study",
+        "trial",
+        lambda progress: study.study(
             truth=truth,
             rho=args.rho,
             trials=args.trials,
@@ -230,14 +376,130 @@ def _cmd_study(args) -> str:
             prior=args.prior or "paper",
             names=names,
             n_particles=args.particles,
+            chunk=_chunk(names, args.particles),
             progress=progress,
             frames=args.frames,
             process_noise=q,
+        ),
+    )
+    return _json(result) if args.json else report.format_study(result)
+
+
+# --- strict JSON -----------------------------------------------------------------------
+
+#: Why a number of the output is not finite, by its key.
+_REASONS = {
+    "error": "the Monte Carlo error cannot be estimated from this run: the weights "
+    "collapsed onto too few particles (or too few replicas)",
+}
+
+
+def _strict(value, key: str = ""):
+    """``value`` with every non-finite float made ``None``; returns (value, reason or None)."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            v, reason = _strict(v, k)
+            out[k] = v
+            if reason is not None and f"{k}_reason" not in value:
+                out[f"{k}_reason"] = reason
+        return out, None
+    if isinstance(value, (list, tuple)):
+        items = [_strict(v, key) for v in value]
+        reasons = [r for _, r in items if r is not None]
+        return [v for v, _ in items], (reasons[0] if reasons else None)
+    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
+        return None, _REASONS.get(
+            key, f"not a finite number ({float(value)}): cannot be estimated from this run"
         )
-    finally:
-        if bar is not None:
-            bar.close()
-    return json.dumps(result, indent=2) if args.json else report.format_study(result)
+    if isinstance(value, np.generic):
+        return value.item(), None
+    return value, None
+
+
+def _json(result) -> str:
+    """``result`` as strict JSON: no NaN or Infinity (see :func:`_strict`)."""
+    return json.dumps(_strict(result)[0], indent=2, allow_nan=False) + "\n"
+
+
+# --- refusals in the user's words -------------------------------------------------------
+
+#: The library's names of the command line's arguments.
+_FLAGS = {
+    "mu": "--mu",
+    "rho": "--rho",
+    "prior_mean": "--prior-mean",
+    "prior_cov": "--prior-cov",
+    "process_noise": "--process-noise",
+    "q": "--process-noise",
+    "truth": "--truth",
+    "trials": "--trials",
+    "seed": "--seed",
+    "prior": "--prior",
+    "names": "--filters",
+    "filters": "--filters",
+    "n_particles": "--particles",
+    "particles": "--particles",
+    "frames": "--frames",
+    "out": "--out",
+}
+
+#: The arguments a refusal blames when the library names none of them.
+_INPUTS = {
+    "reproduce": "the paper's scenarios",
+    "estimate": "--mu, --rho and the prior",
+    "study": "--truth, --rho, --frames and --process-noise",
+    "figures": "--out",
+}
+
+#: A refusal when a filter's covariance turns out singular.
+_SINGULAR = {
+    "reproduce": "a filter's covariance is singular in double precision",
+    "estimate": "--mu, --rho and the prior have no answer: a filter's covariance is singular "
+    "in double precision; try a larger --rho or a broader --prior-cov",
+    "study": "--particles and --rho have no answer: a filter's covariance is singular (too few "
+    "particles carry weight, or the noise is too small to resolve); try more --particles or "
+    "a larger --rho",
+    "figures": "a filter's covariance is singular in double precision",
+}
+
+_LEADING = re.compile(r"^([A-Za-z_][A-Za-z_0-9]*)(\[[^\]]*\])?(?=[\s:,])")
+
+
+def _users_words(command: str, message: str) -> str:
+    """A refusal naming the argument as the user gave it (``--prior-cov``, not ``prior_cov``)."""
+    message = _one_line(message)
+    if message.startswith("-"):
+        return message
+    m = _LEADING.match(message)
+    if m and m.group(1) in _FLAGS:
+        return _FLAGS[m.group(1)] + (m.group(2) or "") + message[m.end() :]
+    if m and message[m.end() :].startswith(":"):  # an internal name: drop it
+        message = message[m.end() + 1 :].strip()
+    return f"{_INPUTS[command]} have no answer: {message}"
+
+
+class _WriteError(Exception):
+    """The output could not be written: one line, exit status 1."""
+
+
+def _write(text: str) -> None:
+    """Write ``text`` to standard output, raising :class:`_WriteError` if it cannot."""
+    stream = sys.stdout
+    if stream is None:
+        raise _WriteError("cannot write the output: standard output is closed")
+    try:
+        stream.write(text)
+        stream.flush()
+    except (OSError, ValueError) as exc:
+        # nothing more may reach the broken stream, not even at exit
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, stream.fileno())
+        except (OSError, ValueError):
+            pass
+        reason = getattr(exc, "strerror", None) or str(exc)
+        raise _WriteError(f"cannot write the output to standard output: {reason}") from None
 
 
 EXAMPLES = {
@@ -281,7 +543,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(
         prog="python -m depthcore",
         description="Filter based estimates of depth (Maybank 1990): the paper's filters "
-        "on any three bearings.",
+        f"on N >= 3 bearings (up to {FRAMES_MAX} frames).",
         epilog=EXAMPLES["all"],
         formatter_class=raw,
     )
@@ -298,6 +560,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=raw,
         epilog=EXAMPLES["reproduce"],
         help="moments of every filter for Figures 2-6, beside the paper's",
+        description="Moments of every filter for Figures 2-6, beside the paper's.",
     )
     r.add_argument("--json", action="store_true", help="print JSON instead of a table")
     r.set_defaults(run=_cmd_reproduce)
@@ -307,7 +570,8 @@ def build_parser() -> argparse.ArgumentParser:
         parents=[common],
         formatter_class=raw,
         epilog=EXAMPLES["estimate"],
-        help="moments of every filter for any three measurements",
+        help=f"moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames)",
+        description=f"Moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames).",
     )
     e.add_argument(
         "--mu",
@@ -315,9 +579,15 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         required=True,
         metavar="M",
-        help="the measurements mu1 mu2 mu3 ... (tangents of the bearings at frames 1 .. N, N >= 3)",
+        help="the measurements mu1 mu2 mu3 ... (tangents of the bearings at frames 1 .. N, "
+        f"3 <= N <= {FRAMES_MAX}; magnitudes up to {MU_MAX:g})",
     )
-    e.add_argument("--rho", type=float, required=True, help="noise standard deviation, > 0")
+    e.add_argument(
+        "--rho",
+        type=float,
+        required=True,
+        help=f"noise standard deviation, from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g}",
+    )
     e.add_argument(
         "--prior-mean",
         type=float,
@@ -353,6 +623,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=raw,
         epilog=EXAMPLES["study"],
         help="Monte Carlo study of every filter's error and calibration",
+        description="Monte Carlo study of every filter's error and calibration.",
     )
     st.add_argument(
         "--trials",
@@ -393,7 +664,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--particles",
         type=int,
         default=study.PARTICLES,
-        help=f"particles per trial (default {study.PARTICLES})",
+        help=f"particles per trial of the filters that draw them, {MIN_PARTICLES} to "
+        f"{MAX_PARTICLES} "
+        f"(default {study.PARTICLES})",
     )
     st.add_argument(
         "--frames",
@@ -421,6 +694,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=raw,
         epilog=EXAMPLES["figures"],
         help="write Figures 2-6 as PDF, PNG and SVG",
+        description="Write Figures 2-6 as PDF, PNG and SVG.",
     )
     f.add_argument("--out", default="figures", help="output folder (default: figures)")
     f.set_defaults(run=_cmd_figures)
@@ -431,9 +705,21 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+def _parse(argv) -> argparse.Namespace:
+    """The parsed arguments; ``--help``, ``--version`` and refusals raise SystemExit.
+
+    A help text that cannot be written raises :class:`_WriteError` instead.
+    """
+    return build_parser().parse_args(argv)
+
+
 def main(argv=None) -> int:
     """Run the command line; returns the exit status (0, 1 or 2)."""
-    args = build_parser().parse_args(argv)
+    try:
+        args = _parse(argv)
+    except _WriteError as exc:
+        sys.stderr.write(f"python -m depthcore: error: {exc}\n")
+        return 1
     prog = f"python -m depthcore {args.command}"
     try:
         # Warnings become errors here only: the warning filters are restored on
@@ -441,11 +727,23 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             text = args.run(args)
+        _write(text)
+    except np.linalg.LinAlgError:
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(f"{prog}: error: {_SINGULAR[args.command]}\n")
+        return 2
     except ValueError as exc:
         if args.debug:
             traceback.print_exc()
-        sys.stderr.write(f"{prog}: error: {_one_line(exc)}\n")
+        sys.stderr.write(f"{prog}: error: {_users_words(args.command, str(exc))}\n")
         return 2
+    except _WriteError as exc:
+        sys.stderr.write(f"{prog}: error: {exc}\n")
+        return 1
+    except KeyboardInterrupt:
+        sys.stderr.write(f"{prog}: interrupted\n")
+        return 130
     except Exception as exc:  # noqa: BLE001 - every failure is one line
         if args.debug:
             traceback.print_exc()
@@ -454,7 +752,6 @@ def main(argv=None) -> int:
             " (rerun with --debug to see the traceback)\n"
         )
         return 1
-    sys.stdout.write(text)
     return 0
 
 

@@ -21,15 +21,59 @@ DEGENERACY_TOL = 1e-12
 MAX_FRAMES = 1_000
 
 
+#: The dtype kinds a numeric argument may have: booleans are refused with the rest
+#: (``True`` is not a noise level), as are complex, object, text, bytes and times.
+_NUMERIC_KINDS = "iuf"
+
+_KIND_NAMES = {
+    "b": "boolean",
+    "c": "complex",
+    "O": "object",
+    "U": "text",
+    "S": "bytes",
+    "V": "structured",
+    "M": "datetime",
+    "m": "timedelta",
+}
+
+
+def as_float(value, name: str) -> np.ndarray:
+    """``value`` as a float array: the one conversion of every public function's numbers.
+
+    Accepts a number, a 0-d array, a (nested) list or an array of integers or
+    floats. Refuses, naming ``name`` and the kind, complex numbers (whose
+    imaginary part would be dropped), booleans, objects (``None``, ``Decimal``,
+    ragged lists), text and bytes (``"0.1"`` is not a number here) and times.
+
+    Returns
+    -------
+    ndarray of float, the shape of ``value``
+    """
+    if isinstance(value, np.ndarray):
+        arr = value
+    else:
+        try:
+            arr = np.asarray(value)
+        except (TypeError, ValueError):  # ragged nested lists
+            raise ValueError(
+                f"{name} must be numeric, got a ragged or mixed {type(value).__name__}"
+            ) from None
+    kind = arr.dtype.kind
+    if kind not in _NUMERIC_KINDS:
+        what = _KIND_NAMES.get(kind, str(arr.dtype))
+        raise ValueError(
+            f"{name} must be numeric (real integers or floats), got {what} values "
+            f"(dtype {arr.dtype})"
+        )
+    return arr.astype(float, copy=False)
+
+
 def finite_array(value, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
-    """Return ``value`` as a float array, checking shape and finiteness.
+    """Return ``value`` as a float array (:func:`as_float`), checking shape and finiteness.
 
     A non-finite array is refused with its values, or with their count beyond ten entries.
     """
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric, got {value!r}") from exc
+    arr = as_float(value, name)
     if shape is not None and arr.shape != shape:
         raise ValueError(f"{name} must have shape {shape}, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -41,24 +85,44 @@ def finite_array(value, name: str, shape: tuple[int, ...] | None = None) -> np.n
     return arr
 
 
-def positive_scalar(value, name: str) -> float:
-    """Return ``value`` as a float, checking that it is finite and > 0."""
+def number(value, name: str) -> float:
+    """A finite number given as a number, a 0-d array or a list or array of one value."""
     arr = finite_array(value, name)
-    if arr.ndim != 0:
-        raise ValueError(f"{name} must be a scalar, got shape {arr.shape}")
-    if not arr > 0:
-        raise ValueError(f"{name} must be positive, got {float(arr)}")
-    return float(arr)
+    if arr.size != 1:
+        raise ValueError(f"{name} must be a number, got shape {arr.shape}")
+    return float(arr.reshape(()))
+
+
+def positive_scalar(value, name: str) -> float:
+    """Return ``value`` (a :func:`number`) as a float, checking that it is finite and > 0."""
+    x = number(value, name)
+    if not x > 0:
+        raise ValueError(f"{name} must be positive, got {x!r}")
+    return x
 
 
 def nonnegative_scalar(value, name: str) -> float:
-    """Return ``value`` as a float, checking that it is finite and >= 0."""
-    arr = finite_array(value, name)
-    if arr.ndim != 0:
-        raise ValueError(f"{name} must be a scalar, got shape {arr.shape}")
-    if not arr >= 0:
-        raise ValueError(f"{name} must be >= 0, got {float(arr)}")
-    return float(arr)
+    """Return ``value`` (a :func:`number`) as a float, checking that it is finite and >= 0."""
+    x = number(value, name)
+    if not x >= 0:
+        raise ValueError(f"{name} must be >= 0, got {x!r}")
+    return x
+
+
+#: The smallest positive process noise: the smallest normal double. Below it the
+#: noise's inverse, which the filters' information forms hold, overflows.
+MIN_PROCESS_NOISE = float(np.finfo(float).tiny)
+
+
+def process_noise(value, name: str = "process_noise") -> float:
+    """A process noise SD (a :func:`number`): 0, or from :data:`MIN_PROCESS_NOISE` on."""
+    q = nonnegative_scalar(value, name)
+    if 0.0 < q < MIN_PROCESS_NOISE:
+        raise ValueError(
+            f"{name} must be 0 or at least {MIN_PROCESS_NOISE!r} (the smallest normal "
+            f"double: the inverse of a smaller noise overflows), got {q!r}"
+        )
+    return q
 
 
 def nonnegative_batch(value, name: str, batch: tuple[int, ...]) -> np.ndarray:

@@ -130,7 +130,7 @@ class Bank(NamedTuple):
 
 def _nodes(nodes) -> np.ndarray:
     nodes = _checks.finite_array(nodes, "nodes")
-    if nodes.ndim < 1 or nodes.shape[-1] < 1:
+    if nodes.ndim < 1 or nodes.shape[-1] < 1 or nodes.size == 0:
         raise ValueError(f"nodes must have shape (..., J) with J >= 1, got shape {nodes.shape}")
     if not np.all(nodes > 0):
         raise ValueError(
@@ -166,6 +166,8 @@ def _bearings(mu) -> np.ndarray:
     mu = _checks.finite_array(mu, "mu")
     if mu.ndim < 1 or mu.shape[-1] < 1:
         raise ValueError(f"mu must have shape (..., N) with N >= 1, got shape {mu.shape}")
+    if mu.size == 0:
+        raise ValueError(f"mu must hold at least one problem, got an empty batch {mu.shape}")
     return mu
 
 
@@ -394,6 +396,9 @@ def filter_bank(nodes, mu, rho, prior_mean, prior_cov, q=0.0, history: bool = Fa
     Returns
     -------
     Bank
+        Finite: nodes so near 0 or so far that the filters' numbers overflow
+        the doubles (the model holds ``1 / y`` and ``y**2``) are refused with a
+        ValueError naming ``nodes``, never answered with NaN.
     """
     nodes = _nodes(nodes)
     mu = _bearings(mu)
@@ -407,7 +412,20 @@ def filter_bank(nodes, mu, rho, prior_mean, prior_cov, q=0.0, history: bool = Fa
         prior_mean=prior_mean.shape[:-1],
         prior_cov=prior_cov.shape[:-2],
     )
-    return _filter_bank(nodes, mu, rho, q, prior_mean, prior_cov, history)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        try:
+            bank = _filter_bank(nodes, mu, rho, q, prior_mean, prior_cov, history)
+        except ValueError:  # the Kalman filters' own refusal of an overflow
+            bank = None
+    if bank is None or not all(
+        np.all(np.isfinite(a)) for a in (bank.mean, bank.cov, bank.log_weight)
+    ):
+        raise ValueError(
+            f"nodes from {float(np.min(nodes))!r} to {float(np.max(nodes))!r} overflow the "
+            "Kalman filters over depth (the model holds 1 / y and y**2) with these mu, rho "
+            "and prior; give depths nearer the prior's"
+        )
+    return bank
 
 
 def _batch(**shapes) -> tuple:

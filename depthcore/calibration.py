@@ -235,6 +235,7 @@ def self_calibration(
     frames: int = 3,
     process_noise: float = 0.0,
     filter_process_noise: float | None = None,
+    progress=None,
 ) -> SelfCalibration:
     """Simulation-based calibration of the optimal filter, Eqs. (6) and (13)-(16).
 
@@ -263,6 +264,9 @@ def self_calibration(
         ``N``, the bearings of each trial (see :func:`draw_from_prior`).
     process_noise : float
         ``q >= 0`` of the simulated tracks.
+    progress : callable, optional
+        ``progress(done, total)``, called after each chunk with the truths
+        filtered so far and their number.
     filter_process_noise : float, optional
         Process noise the filter assumes; ``process_noise`` by default. Another
         value makes a miscalibrated filter.
@@ -292,6 +296,8 @@ def self_calibration(
             mx = bank.posterior(draws.mu[part], filter_rho, prior_mean, prior_cov, filter_q)
             depth.append(mx.depth_cdf(truth[:, 1:2])[:, 0])
             velocity.append(mx.velocity_cdf(truth[:, 2:3])[:, 0])
+        if progress is not None:
+            progress(min(start + chunk, len(draws.mu)), len(draws.mu))
     return SelfCalibration(
         draws, float(rho), float(filter_rho), np.concatenate(depth), np.concatenate(velocity)
     )

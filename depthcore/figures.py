@@ -160,11 +160,12 @@ def caption(key: str) -> str:
     )
 
 
-def save_all(out_dir, formats=("pdf", "png", "svg")) -> list[Path]:
+def save_all(out_dir, formats=("pdf", "png", "svg"), progress=None) -> list[Path]:
     """Write Figures 2-6 into ``out_dir``; returns the paths.
 
     ``figure<N>.<fmt>`` has the paper's three filters, ``figure<N>-extended.<fmt>``
-    adds the UKF and the particle filter.
+    adds the UKF and the particle filter. ``progress(done, total)``, if given,
+    is called after each figure is written.
     """
     import matplotlib.pyplot as plt
 
@@ -179,6 +180,8 @@ def save_all(out_dir, formats=("pdf", "png", "svg")) -> list[Path]:
                 fig.savefig(path, dpi=200, metadata=_NO_DATE.get(fmt))
                 paths.append(path)
             plt.close(fig)
+            if progress is not None:
+                progress(len(paths) // len(formats), 2 * len(SCENARIOS))
     return paths
 
 

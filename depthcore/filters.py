@@ -188,9 +188,14 @@ class Filter:
     def __call__(self, mu, rho, prior_mean, prior_cov, process_noise=0.0, **options) -> Estimate:
         """Run the filter; see the module docstring for the arguments and their shapes.
 
-        ``mu`` is checked by :func:`depthcore.model.measurements_batch`
-        (and must have 3 columns unless ``any_frames``); ``process_noise``
-        must be ``>= 0``, and 0 unless ``with_process_noise``.
+        Every number goes through one conversion, :func:`depthcore._checks.as_float`
+        (lists and arrays of integers or floats; complex, boolean, object and
+        text values are refused by name). ``mu`` is checked by
+        :func:`depthcore.model.measurements_batch` (and must have 3 columns
+        unless ``any_frames``); for one sequence ``rho`` is a number (a float,
+        a 0-d array or a list of one); ``process_noise`` is checked by
+        :func:`depthcore._checks.process_noise`, and must be 0 unless
+        ``with_process_noise``.
         """
         mu = model.measurements_batch(mu, "mu")
         if mu.shape[-1] != 3 and not self.any_frames:
@@ -198,7 +203,12 @@ class Filter:
                 f"mu must have shape (3,) or (B, 3): the {self.name} filter takes the "
                 f"paper's three frames, got {mu.shape[-1]} bearings per problem"
             )
-        q = _checks.nonnegative_scalar(process_noise, "process_noise")
+        rho = _checks.as_float(rho, "rho")
+        if mu.ndim == 1:
+            rho = _checks.number(rho, "rho")
+        prior_mean = _checks.as_float(prior_mean, "prior_mean")
+        prior_cov = _checks.as_float(prior_cov, "prior_cov")
+        q = _checks.process_noise(process_noise, "process_noise")
         if not self.with_process_noise:
             if q > 0:
                 raise ValueError(

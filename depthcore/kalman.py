@@ -57,6 +57,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import _checks
+
 _LOG_2PI = float(np.log(2.0 * np.pi))
 #: Relative asymmetry tolerated in a covariance matrix.
 _SYMMETRY_TOL = 1e-10
@@ -119,12 +121,11 @@ class FilterResult(NamedTuple):
 
 
 def _array(value, name: str, min_ndim: int) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric, got {type(value).__name__}") from exc
+    arr = _checks.as_float(value, name)
     if arr.ndim < min_ndim:
         raise ValueError(f"{name} must have at least {min_ndim} dimensions, got shape {arr.shape}")
+    if arr.size == 0:
+        raise ValueError(f"{name} must not be empty, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(
             f"{name} must be finite, got {int(np.sum(~np.isfinite(arr)))} non-finite entries"
@@ -404,9 +405,21 @@ def run(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p=None, mu_m=No
     -------
     FilterResult
         Filtered and predicted means and covariances at every time, and the log
-        likelihood of each measurement given the earlier ones.
+        likelihood of each measurement given the earlier ones. A run whose
+        numbers overflow the doubles (covariances or measurements near 1e154
+        and beyond, whose squares do) is refused with a ValueError naming the
+        model's scales, never returned with NaN or infinities.
     """
-    return _run(*_sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m))
+    args = _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        res = _run(*args)
+    if not all(np.all(np.isfinite(a)) for a in res):
+        raise ValueError(
+            "x, prior_cov, Psi, Sigma_p and Sigma_m are too large together: the filter's "
+            "covariances or likelihoods overflowed the doubles; rescale the state or "
+            "the measurements"
+        )
+    return res
 
 
 # --- smoothers -------------------------------------------------------------------------

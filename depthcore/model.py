@@ -297,14 +297,15 @@ def noise_free_states_unchecked(mu) -> np.ndarray:
     """Eq. (7) for triples ``mu`` of shape (..., 3), unchecked (NaN or inf where degenerate)."""
     mu1, mu2, mu3 = np.moveaxis(np.asarray(mu, dtype=float), -1, 0)
     d = mu3 + mu1 - 2.0 * mu2
-    return np.stack(
-        [
-            2.0 * mu3 * (mu1 - mu2) / d,
-            noise_free_depth_unchecked(mu),
-            (2.0 * mu1 * mu3 - mu2 * mu3 - mu1 * mu2) / d,
-        ],
-        axis=-1,
-    )
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # documented NaN, inf
+        return np.stack(
+            [
+                2.0 * mu3 * (mu1 - mu2) / d,
+                noise_free_depth_unchecked(mu),
+                (2.0 * mu1 * mu3 - mu2 * mu3 - mu1 * mu2) / d,
+            ],
+            axis=-1,
+        )
 
 
 def noise_free_depth_unchecked(mu) -> np.ndarray:
@@ -315,7 +316,8 @@ def noise_free_depth_unchecked(mu) -> np.ndarray:
     in front of the camera at all three times when ``c2 - 2 > 0``.
     """
     mu1, mu2, mu3 = np.moveaxis(np.asarray(mu, dtype=float), -1, 0)
-    return 2.0 * (mu1 - mu2) / (mu3 + mu1 - 2.0 * mu2)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # documented NaN, inf
+        return 2.0 * (mu1 - mu2) / (mu3 + mu1 - 2.0 * mu2)
 
 
 def residuals(x, mu) -> np.ndarray:
@@ -504,6 +506,8 @@ def measurements_batch(mu, name: str = "mu") -> np.ndarray:
             f"{name} must have shape (..., N) with N >= 3 bearings per problem, "
             f"got shape {arr.shape}"
         )
+    if arr.size == 0:
+        raise ValueError(f"{name} must hold at least one problem, got an empty batch {arr.shape}")
     if arr.shape[-1] > _checks.MAX_FRAMES:
         raise ValueError(
             f"{name} has {arr.shape[-1]} bearings per problem, more than the "
@@ -558,6 +562,8 @@ def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
         mu = _checks.finite_array(mu, "mu")
         if mu.ndim < 1 or mu.shape[-1] < 1:
             raise ValueError(f"mu must have shape (..., n_measurements), got shape {mu.shape}")
+        if mu.size == 0:
+            raise ValueError(f"mu must hold at least one problem, got an empty batch {mu.shape}")
     batch = mu.shape[:-1]
     rho = _checks.finite_array(rho, "rho")
     if rho.ndim and rho.shape != batch:

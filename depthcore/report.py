@@ -65,13 +65,38 @@ STUDY_DECIMALS = {"bias": 3, "rmse": 3, "mean_sd": 3, "coverage_68": 2, "coverag
 
 #: The key of :func:`format_table`'s columns.
 TABLE_KEY = """\
-key: reading  derived = Eq. (16) or the second-order covariance as derived;
+key: fig      the paper's figure (its scenario: bearings, noise and prior)
+     filter   the filter (python -m depthcore study --help lists them)
+     reading  derived = Eq. (16) or the second-order covariance as derived;
               printed = as printed in the paper
      support  front = the optimal filter's depth restricted to y > 2 (in front of
               the camera at every frame); all = no restriction
+     quantity depth y or velocity v of the state at time 3
+     mean, sd the filter's posterior mean and standard deviation of the quantity
      error    error estimate of the optimal filter's quadrature, standard error of the
               particle filter's Monte Carlo estimate; 0 for the Gaussian filters
+     paper mean, paper sd  the numbers printed in the paper (blank where it prints none)
      agrees   whether the mean and the SD round to the paper's printed numbers"""
+
+#: The legend of :func:`format_summary`'s columns.
+SUMMARY_LEGEND = """\
+legend: depth mean, depth sd  the filter's posterior mean and SD of the depth y at frame N
+        vel. mean, vel. sd    the same of the velocity v (the x-velocity; the y-velocity is 1)
+        error estimates       the optimal filter's numerical error of its mean and SD"""
+
+#: The legend of :func:`format_summary`'s smoothed columns.
+SMOOTHED_LEGEND = """\
+        frame                 1 .. N; depth mean, depth sd and x mean, x sd: the optimal
+                              filter's mean and SD of the depth y and the lateral position x
+                              at that frame given all N bearings"""
+
+#: The legend of :func:`format_prior_study`'s columns.
+PRIOR_STUDY_LEGEND = """\
+legend: nominal     probability of the central interval of the optimal filter's marginal
+        depth, velocity  fraction of trials whose interval holds the true value (its
+                    binomial standard error in brackets); equal to nominal if calibrated
+        KS p, chi-square p  p-values of the Kolmogorov-Smirnov and chi-square tests of
+                    uniformity of the PIT values (the marginal CDF at the truth)"""
 
 #: The legend of :func:`format_study`'s columns.
 STUDY_LEGEND = """\
@@ -162,8 +187,8 @@ def format_summary(summary: dict) -> str:
         lines.append(f"{name:<13} not run: {reason}")
     o = summary["filters"]["optimal"]
     text = (
-        f"optimal error estimates: depth {o['depth']['error']:.1e}, "
-        f"velocity {o['velocity']['error']:.1e}"
+        f"optimal error estimates: depth {_error(o['depth'].get('error'))}, "
+        f"velocity {_error(o['velocity'].get('error'))}"
     )
     if "prob_behind_camera_all_depths" in o:
         text += (
@@ -184,7 +209,15 @@ def format_summary(summary: dict) -> str:
             1,
         ):
             lines.append(f"{k:>5} " + " ".join(f"{v:>#10.4g}" for v in row).replace(" ", "  ", 1))
+    lines.append(SUMMARY_LEGEND)
+    if "smoothed" in summary:
+        lines.append(SMOOTHED_LEGEND)
     return "\n".join(lines) + "\n"
+
+
+def _error(value) -> str:
+    """An error estimate in a table: ``n/a`` where there is none or it is not finite."""
+    return "n/a" if value is None or not np.isfinite(value) else f"{value:.1e}"
 
 
 def format_study(result: dict) -> str:
@@ -566,6 +599,7 @@ def format_prior_study(result: dict) -> str:
         lines.append(
             f"{q:<9} KS p {r['ks_pvalue']:.3g}, chi-square p {r['chi2_pvalue']:.3g}: {verdict}"
         )
+    lines.append(PRIOR_STUDY_LEGEND)
     return "\n".join(lines) + "\n"
 
 

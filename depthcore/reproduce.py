@@ -181,7 +181,7 @@ def _agrees(value: float, printed: float) -> bool:
     return bool(abs(value - printed) <= 0.5 * 10.0**-REPORTED_DECIMALS + 1e-12)
 
 
-def reproduce(keys=None, seed=PARTICLE_SEED) -> dict:
+def reproduce(keys=None, seed=PARTICLE_SEED, progress=None) -> dict:
     """The paper's Figures 2-6: every filter's moments beside the reported numbers.
 
     For the optimal filter both readings of Eq. (16) (``"derived"``,
@@ -197,6 +197,8 @@ def reproduce(keys=None, seed=PARTICLE_SEED) -> dict:
     seed : int or numpy.random.SeedSequence
         Seeds the particle filter's generator afresh for each scenario
         (default :data:`PARTICLE_SEED`).
+    progress : callable, optional
+        ``progress(done, total)``, called after each scenario.
 
     Returns
     -------
@@ -205,7 +207,8 @@ def reproduce(keys=None, seed=PARTICLE_SEED) -> dict:
         "prior_mean", "c", "rows": [...]}, ...]}``.
     """
     out = []
-    for key in keys or SCENARIOS:
+    keys = list(keys or SCENARIOS)
+    for key in keys:
         s = SCENARIOS[key]
         out.append(
             {
@@ -219,6 +222,8 @@ def reproduce(keys=None, seed=PARTICLE_SEED) -> dict:
                 "rows": scenario_rows(s, seed=seed),
             }
         )
+        if progress is not None:
+            progress(len(out), len(keys))
     return {"scenarios": out}
 
 

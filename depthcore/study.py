@@ -650,7 +650,7 @@ def study(
         "trials": int(trials),
         "valid_trials": n_valid,
         "rejected_trials": n_rejected,
-        "particles": int(n_particles) if "particle" in names else None,
+        "particles": int(n_particles) if any(FILTERS[n].random for n in names) else None,
         "frames": int(frames),
         "process_noise": q,
         "filters": {name: tallies[name].scores() for name in names},
@@ -671,6 +671,7 @@ def prior_study(
     false_alarm: float = FALSE_ALARM,
     frames: int = 3,
     process_noise: float = 0.0,
+    progress: Callable[[int, int], None] | None = None,
 ) -> dict:
     """Self-calibration of the optimal filter over truths drawn from its fixed prior.
 
@@ -703,6 +704,8 @@ def prior_study(
         ``N``, from 3 to ``depthcore._checks.MAX_FRAMES``.
     process_noise : float
         ``q >= 0``.
+    progress : callable, optional
+        ``progress(done, total)``, called as the trials are filtered.
 
     Returns
     -------
@@ -726,6 +729,7 @@ def prior_study(
         np.random.default_rng(seed),
         frames=frames,
         process_noise=process_noise,
+        progress=progress,
     )
     s = r.summary(CALIBRATION_LEVELS)
     n = s["trials"]

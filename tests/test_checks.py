@@ -143,3 +143,39 @@ def test_batch_inputs_broadcast_the_prior_and_check_shapes():
         model.batch_inputs(
             np.zeros((2, 2, 3)), [[0.1, -0.2]] * 2, np.ones(3), np.eye(3), triples=False
         )
+
+
+@pytest.mark.parametrize(
+    ("value", "kind"),
+    [
+        (1 + 2j, "complex"),
+        (np.array([1.0, 2.0], dtype=complex), "complex"),
+        (True, "boolean"),
+        ("0.1", "text"),
+        (b"0.1", "bytes"),
+        ([None, 1.0], "object"),
+        (np.array([1.0, 2.0], dtype=object), "object"),
+        (np.datetime64("2020-01-01"), "datetime"),
+    ],
+)
+def test_as_float_refuses_what_is_not_a_real_number_by_name(value, kind):
+    with pytest.raises(ValueError, match=rf"^rho must be numeric .*got {kind} values"):
+        _checks.as_float(value, "rho")
+
+
+def test_as_float_refuses_ragged_lists_and_takes_integers_lists_and_0d_arrays():
+    with pytest.raises(ValueError, match="^mu must be numeric, got a ragged"):
+        _checks.as_float([[1, 2], [3]], "mu")
+    assert _checks.as_float([1, 2], "mu").dtype == float
+    assert _checks.as_float(np.array(3), "mu").shape == ()
+    assert _checks.number([0.5], "rho") == _checks.number(np.array(0.5), "rho") == 0.5
+    with pytest.raises(ValueError, match=r"rho must be a number, got shape \(2,\)"):
+        _checks.number([0.5, 0.6], "rho")
+
+
+def test_process_noise_is_zero_or_a_normal_double():
+    tiny = np.finfo(float).tiny
+    assert _checks.process_noise(0.0) == 0.0 and _checks.process_noise(tiny) == tiny
+    for q in (1e-320, 5e-324, tiny / 2):
+        with pytest.raises(ValueError, match="process_noise must be 0 or at least"):
+            _checks.process_noise(q)

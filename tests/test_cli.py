@@ -73,34 +73,35 @@ def test_estimate_accepts_prior_options(capsys):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--mu", "0.1", "0.1", "0.1", "--rho", "0.01"], "mu is degenerate"),
-        (["--mu", "-0.3", "0", "0.2", "--rho", "0"], "rho must be positive"),
-        (["--mu", "-0.3", "0", "0.2", "--rho", "-1"], "rho must be positive"),
-        (["--mu", "-0.3", "0", "0.2", "--rho", "nan"], "rho must be finite"),
-        (["--mu", "-0.3", "nan", "0.2", "--rho", "0.01"], "mu must be finite"),
+        (["--mu", "0.1", "0.1", "0.1", "--rho", "0.01"], "--mu is degenerate"),
+        (["--mu", "-0.3", "0", "0.2", "--rho", "0"], "--rho must be from 1e-12 to 1000, got 0.0"),
+        (["--mu", "-0.3", "0", "0.2", "--rho", "-1"], "--rho must be from 1e-12 to 1000, got -1.0"),
+        (["--mu", "-0.3", "0", "0.2", "--rho", "nan"], "--rho must be from 1e-12 to 1000, got nan"),
+        (["--mu", "-0.3", "0", "0.2", "--rho", "1000.0001"], "got 1000.0001"),
+        (["--mu", "-0.3", "nan", "0.2", "--rho", "0.01"], "--mu must be finite"),
         (["--mu", "0.2", "0", "-0.3", "--rho", "0.01"], "behind the camera"),
         (
             ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov", "-5"],
-            "prior_cov must be positive definite",
+            "--prior-cov must be positive definite",
         ),
         (
             ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov", "1", "2"],
-            "prior_cov takes 1 value",
+            "--prior-cov takes 1 value",
         ),
         (
             ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov"]
             + "1 0 0 0 -1 0 0 0 1".split(),
-            "prior_cov must be positive definite",
+            "--prior-cov must be positive definite",
         ),
         (
             ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-mean", "0", "inf", "0"],
-            "prior_mean must be finite",
+            "--prior-mean must be finite",
         ),
         (
             ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-mean", "0", "-4", "0"],
             "predicted depth",
         ),
-        (["--mu", "-0.3", "0", "--rho", "0.01"], "mu takes at least 3 bearings"),
+        (["--mu", "-0.3", "0", "--rho", "0.01"], "--mu takes at least 3 bearings"),
         (["--mu", "-0.3", "0", "0.2", "--rho", "abc"], "invalid float value"),
     ],
 )
@@ -147,7 +148,7 @@ def test_reproduce_counts_the_matched_numbers(capsys):
     compared = [r for r in rows if r["mean_matches"] is not None]
     matched = sum(r["mean_matches"] + r["sd_matches"] for r in compared)
     assert f"{matched} of the paper's {2 * len(compared)} printed means and SDs" in out
-    assert "key: reading" in out
+    assert "reading  derived" in out and "support  front" in out
 
 
 def test_debug_shows_the_traceback_of_an_unexpected_failure(capsys, monkeypatch):
@@ -222,20 +223,23 @@ def test_estimate_takes_more_frames_process_noise_and_smoothing(capsys):
     [
         (
             ["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005", "--process-noise", "-1"],
-            "process_noise must be from 0",
+            "--process-noise must be 0 or from",
         ),
         (
             ["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005", "--process-noise", "1e3"],
-            "process_noise must be from 0",
+            "--process-noise must be 0 or from",
         ),
         (["estimate", "--mu", "0.3", "0", "0.2", "0.1", "--rho", "0.005"], "give --prior-mean"),
-        (["study", "--frames", "2"], "frames must be from 3"),
+        (["study", "--frames", "2"], "--frames must be from 3"),
         (
             ["study", "--frames", "5", "--process-noise", "0.01", "--filters", "particle"],
-            "names: particle cannot run",
+            "--filters: particle cannot run",
         ),
         (["study", "--truth", "prior", "--prior", "paper", "--frames", "5"], "needs a fixed prior"),
-        (["study", "--truth", "prior", "--frames", "5", "--process-noise", "-1"], "process_noise"),
+        (
+            ["study", "--truth", "prior", "--frames", "5", "--process-noise", "-1"],
+            "--process-noise",
+        ),
     ],
 )
 def test_more_frames_refusals_are_one_line(args, message, capsys):
@@ -262,3 +266,34 @@ def test_study_of_more_frames_answers_at_the_smallest_noise(capsys):
     data = json.loads(captured.out)
     scores = data["filters"]["optimal"]["depth"]
     assert 0.0 <= scores["coverage_68"] <= scores["coverage_95"] <= 1.0
+
+
+def test_the_long_commands_report_their_progress():
+    calls = []
+    reproduce.reproduce(keys=["fig2"], progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(1, 1)]
+    calls.clear()
+    study.prior_study(trials=5, progress=lambda done, total: calls.append((done, total)))
+    assert calls and calls[-1] == (5, 5)
+
+
+def test_every_table_has_a_legend_of_its_columns(capsys):
+    assert main(["estimate", "--mu", "-0.3", "0", "0.2", "0.33", "--rho", "0.005", "--smooth"]) == 0
+    out = capsys.readouterr().out
+    assert "legend: depth mean, depth sd" in out and "vel. mean, vel. sd" in out
+    assert "frame                 1 .. N" in out
+    assert main(["study", "--truth", "prior", "--trials", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "legend: nominal" in out and "KS p, chi-square p" in out
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["estimate", "--help"]])
+def test_help_speaks_of_n_frames_not_three_measurements(argv, capsys):
+    import depthcore
+
+    with pytest.raises(SystemExit):
+        main(argv)
+    out = capsys.readouterr().out
+    assert "three measurements" not in out and "any three" not in out
+    assert "N >= 3 bearings (up to 1000 frames)" in " ".join(out.split())
+    assert "three noisy image" not in depthcore.__doc__

@@ -10,6 +10,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
+import sys
 import time
 import warnings
 
@@ -28,6 +31,15 @@ RHO = "0.005"
 ODD = ["nan", "inf", "-inf", "1e300", "-1e300", "1e-300", "-1e-300", "1e7", "abc", "1e", ""]
 
 
+def _strict_json(text: str):
+    """``json.loads`` refusing NaN and Infinity, which are not JSON."""
+
+    def refuse(constant):
+        raise AssertionError(f"not strict JSON: {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
 def _finite(value) -> bool:
     if isinstance(value, dict):
         return all(_finite(v) for v in value.values())
@@ -43,7 +55,7 @@ def _estimate(mu=MU, rho=RHO, extra=()):
 
 
 def _study(extra=()):
-    base = {"--trials": "3", "--particles": "20", "--filters": "ekf"}
+    base = {"--trials": "3", "--filters": "ekf"}
     extra = list(extra)
     for key in list(base):
         if key in extra:
@@ -77,7 +89,7 @@ for v in ["nan", "inf", "-inf", "0", "-1", "1e-300", "1e300", "1e-12", "1e12", "
 EYE = ["1000", "0", "0", "0", "1000", "0", "0", "0", "1000"]
 for i in range(9):
     for v in ["nan", "-inf", "1e300"]:
-        CLI.append((_estimate(extra=["--prior-cov", *_replace(EYE, i, v)]), ("prior_cov",)))
+        CLI.append((_estimate(extra=["--prior-cov", *_replace(EYE, i, v)]), ("prior-cov",)))
 for cov in (
     _replace(EYE, 1, "5"),  # not symmetric
     ["1", "2", "0", "2", "1", "0", "0", "0", "1"],  # indefinite
@@ -130,6 +142,71 @@ for extra in (
     CLI.append((_study(extra), ("truth", "particles", "seed", "filters", "prior", "NAME", "rho")))
 
 
+# --- N-frame bearings, process noise, particle counts, repeated and ignored flags ---------
+FIVE = ["-0.3", "0", "0.2", "0.33", "0.43"]
+for i in (0, 2, 4):
+    for v in ["nan", "inf", "1e300", "1e7", "x"]:
+        CLI.append((_estimate(mu=_replace(FIVE, i, v)), ("mu",)))
+for mu in (
+    ["0.1", "0.2", "0.3", "0.4", "0.5"],  # affine in time: degenerate
+    ["0.1"] * 6,  # constant bearing: degenerate
+    ["-0.3", "0", "0.2"] + ["0.2"] * 20,
+    [str(1e-4 * k * k) for k in range(MAX_FRAMES + 1)],  # one frame beyond the limit
+    [str(-0.3 + 0.01 * k + 1e-4 * k * k) for k in range(30)],
+    ["0.1", "0.2", "0.3", "0.35", "0.38"],  # no noise-free solution: give --prior-mean
+):
+    CLI.append((_estimate(mu=mu), ("mu",)))
+# the hint followed: answered
+CLI.append(
+    (_estimate(mu=["0.1", "0.2", "0.3", "0.35", "0.38"], extra=["--prior-mean", "0", "5", "0"]), ())
+)
+for v in [
+    "1e-320",  # subnormal: its inverse overflows
+    "4.9e-324",
+    "2.2250738585072014e-308",  # the smallest normal double: accepted
+    "1e-308",
+    "1e-300",
+    "-0",
+    "10.000001",
+    "1e308",
+    "nan",
+    "inf",
+    "-inf",
+    "-1e-300",
+]:
+    CLI.append((_estimate(mu=FIVE, extra=["--process-noise", v]), ("process-noise",)))
+for v in ["1e-320", "10.5", "nan", "-0.1"]:
+    CLI.append((_study(["--frames", "4", "--process-noise", v]), ("process-noise",)))
+for name in ("particle", "rbpf", "resample_move"):
+    for v in ["0", "3", "250001", "1000000000", "99999999999999999999", "1e3", "x"]:
+        CLI.append((_study(["--filters", name, "--particles", v, "--frames", "4"]), ("particles",)))
+    CLI.append(
+        (
+            _study(["--filters", name, "--particles", "4", "--frames", "4", "--trials", "2"]),
+            ("--particles",),
+        )
+    )
+for argv, names in (
+    (_estimate(extra=["--rho", "0.01"]), ("--rho: given more than once",)),
+    (_estimate(extra=["--rho=0.01"]), ("--rho: given more than once",)),
+    (_estimate(extra=["--prior-cov", "10", "--prior-cov", "20"]), ("--prior-cov: given",)),
+    (_estimate(extra=["--json"]), ("--json: given more than once",)),
+    (_estimate(extra=["--smooth", "--smooth"]), ("--smooth: given more than once",)),
+    (_estimate(extra=["--rh", "0.01"]), ("unrecognized",)),  # no abbreviations
+    (["estimate", "--mu", *MU, "--mu", *MU, "--rho", RHO], ("--mu: given more than once",)),
+    (_study(["--seed", "1", "--seed", "2"]), ("--seed: given more than once",)),
+    (_study(["--frames", "4", "--frames", "5"]), ("--frames: given more than once",)),
+    (["study", "--filters", "ekf", "--filters", "ukf", "--json"], ("--filters: given more",)),
+    (["study", "--truth", "prior", "--filters", "ekf", "--json"], ("--filters: not used",)),
+    (["study", "--truth", "prior", "--particles", "10", "--json"], ("--particles: not used",)),
+    (["study", "--truth", "prior", "--prior", "paper", "--json"], ("--prior",)),
+    (["study", "--filters", "ekf", "--particles", "10", "--json"], ("--particles: not used",)),
+    (["study", "--filters", "ekf", "ekf", "--json"], ("--filters names ekf more than once",)),
+    (["study", "--truth", "prior", "--trials", "3", "--json"], ()),  # answered
+):
+    CLI.append((argv, names))
+
+
 # Library bugs these inputs expose: the EKF accepts a predicted depth n2 > 0 so
 # small that its observation vector overflows.
 #: Cases known to fail, with the reason (none at present).
@@ -137,7 +214,8 @@ XFAIL: dict[str, str] = {}
 
 
 def _case_id(argv):
-    return " ".join(a if a else "''" for a in argv)
+    text = " ".join(a if a else "''" for a in argv)
+    return text if len(text) < 200 else f"{text[:150]} ... ({len(argv)} arguments)"
 
 
 def _marks(argv):
@@ -163,11 +241,12 @@ def test_command_line_answers_or_refuses_in_one_line(argv, names, capsys):
     assert elapsed < BUDGET, f"took {elapsed:.1f} s"
     if status == 0:
         assert err == ""
-        assert _finite(json.loads(out)), out
+        assert _finite(_strict_json(out)), out
     else:
         assert status == 2, err
         assert out == ""
         assert err.count("\n") == 1 and err.endswith("\n"), err
+        assert "Traceback" not in err and "Warning" not in err, err
         assert any(n in err for n in names), err
 
 
@@ -300,3 +379,251 @@ def test_the_limit_on_frames_is_one_constant():
     mu = np.linspace(0.0, 1.0, MAX_FRAMES) ** 2  # accepted at the limit
     est = FILTERS["ekf"](mu, 0.01, [0.0, 4.0, 0.0], np.eye(3))
     assert np.all(np.isfinite(est.mean))
+
+
+# --- output that cannot be written ------------------------------------------------------
+
+QUICK = [
+    _estimate(),
+    _estimate()[:-1],  # the table
+    _study(["--trials", "2"]),
+    ["--version"],
+    ["estimate", "--help"],
+    ["study", "--help"],
+]
+
+
+def _sink(kind):
+    """A standard output that fails: a full disk, a closed stream or a pipe nobody reads."""
+    if kind == "closed":
+        return None
+    if kind == "full":
+        return open("/dev/full", "w")  # noqa: SIM115 - closed by the test
+    read, write = os.pipe()
+    os.close(read)
+    return os.fdopen(write, "w")
+
+
+@pytest.mark.parametrize("kind", ["full", "closed", "broken pipe"])
+@pytest.mark.parametrize("argv", QUICK, ids=_case_id)
+def test_output_that_cannot_be_written_ends_in_one_line(argv, kind, capsys, monkeypatch):
+    sink = _sink(kind)
+    monkeypatch.setattr(sys, "stdout", sink)
+    try:
+        status = main(argv)
+    finally:
+        if sink is not None:
+            sink.close()
+    err = capsys.readouterr().err
+    assert status == 1
+    assert err.count("\n") == 1 and "cannot write the output" in err, err
+
+
+@pytest.mark.parametrize(
+    "out", ["/proc/depthcore-figures", "/proc/self/a/b", "/proc/self", "/dev/null/x", "/dev/full/x"]
+)
+def test_figures_out_that_cannot_be_made_ends_in_one_line(out, capsys):
+    status = main(["figures", "--out", out])
+    captured = capsys.readouterr()
+    assert status in (1, 2) and captured.out == ""
+    assert captured.err.count("\n") == 1 and "--out" in captured.err, captured.err
+
+
+@pytest.mark.parametrize("kind", ["full", "closed"])
+def test_a_real_process_with_unwritable_output_ends_in_one_line(kind):
+    argv = [sys.executable, "-m", "depthcore", *_estimate()]
+    if kind == "full":
+        with open("/dev/full", "w") as full:
+            done = subprocess.run(argv, stdout=full, stderr=subprocess.PIPE, text=True)
+    else:
+        done = subprocess.run(
+            argv, stderr=subprocess.PIPE, text=True, preexec_fn=lambda: os.close(1)
+        )
+    assert done.returncode == 1
+    assert done.stderr.count("\n") == 1 and "cannot write the output" in done.stderr
+
+
+# --- strict JSON ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "value",
+    [math.inf, -math.inf, math.nan, np.float64(np.inf)],
+    ids=["inf", "-inf", "nan", "numpy inf"],
+)
+def test_json_output_has_null_with_a_reason_for_what_cannot_be_estimated(value):
+    from depthcore.__main__ import _json
+
+    result = {"filters": {"particle": {"depth": {"mean": 6.5, "sd": 0.0, "error": value}}}}
+    data = _strict_json(_json(result))
+    depth = data["filters"]["particle"]["depth"]
+    assert depth["error"] is None and "cannot be estimated" in depth["error_reason"]
+    assert depth["mean"] == 6.5 and depth["sd"] == 0.0
+    listed = _strict_json(_json({"depth_mean": [1.0, value, 3.0]}))
+    assert listed["depth_mean"] == [1.0, None, 3.0] and "depth_mean_reason" in listed
+
+
+def test_the_json_of_a_particle_study_records_its_particles(capsys):
+    for name in ("rbpf", "resample_move", "particle"):
+        argv = ["study", "--filters", name, "--particles", "7", "--trials", "2", "--frames", "4"]
+        assert main([*argv, "--json"]) == 0
+        assert _strict_json(capsys.readouterr().out)["particles"] == 7
+
+
+# --- library inputs: one conversion, refusing what is not a real number -------------------
+
+DTYPES = [  # (argument, value): refused naming the argument
+    ("mu", GOOD["mu"] + 0j),
+    ("mu", ["-0.3", "0", "0.2"]),
+    ("mu", [[-0.3, 0.0, 0.2], [-0.3, 0.0]]),  # ragged
+    ("mu", np.zeros((0, 3))),  # an empty batch
+    ("mu", np.array([-0.3, 0.0, 0.2], dtype=object)),
+    ("rho", 0.005 + 0j),
+    ("rho", True),
+    ("rho", "0.005"),
+    ("rho", [0.005, 0.005]),  # two noise levels for one sequence
+    ("prior_mean", np.array([-1.0, 4.0, 0.0]) + 0j),
+    ("prior_mean", [None, 4.0, 0.0]),
+    ("prior_cov", (1000 * np.eye(3)).astype(object)),
+    ("prior_cov", 1000 * np.eye(3) + 0j),
+    ("process_noise", 0.01j),
+]
+DTYPE_CASES = [(name, arg, value) for name in ALL_NAMES for arg, value in DTYPES]
+
+
+@pytest.mark.parametrize(
+    ("name", "arg", "value"),
+    DTYPE_CASES,
+    ids=[f"{n}-{a}-{i % len(DTYPES)}" for i, (n, a, _) in enumerate(DTYPE_CASES)],
+)
+def test_filters_refuse_what_is_not_a_real_number_naming_it(name, arg, value):
+    options = {"rng": np.random.default_rng(0), "n_particles": 200} if FILTERS[name].random else {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError) as info:
+            FILTERS[name](**{**GOOD, arg: value}, **options)
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(arg), message
+
+
+NUMBERS = [  # the same number in other forms: the same answer
+    ("rho", [0.005]),
+    ("rho", np.array(0.005)),
+    ("rho", np.array([0.005])),
+    ("prior_mean", [-1, 4, 0]),
+    ("mu", [[-0.3, 0.0, 0.2]]),  # a batch of one
+]
+NUMBER_CASES = [(name, arg, value) for name in ALL_NAMES for arg, value in NUMBERS]
+
+
+@pytest.mark.parametrize(
+    ("name", "arg", "value"),
+    NUMBER_CASES,
+    ids=[f"{n}-{a}-{i % len(NUMBERS)}" for i, (n, a, _) in enumerate(NUMBER_CASES)],
+)
+def test_filters_take_lists_and_0d_arrays_where_a_number_is_meant(name, arg, value):
+    def run(**kwargs):
+        options = {}
+        if FILTERS[name].random:
+            options = {"rng": np.random.default_rng(0), "n_particles": 200}
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            return FILTERS[name](**{**GOOD, **kwargs}, **options)
+
+    plain, other = run(), run(**{arg: value})
+    assert np.ravel(other.depth_mean)[0] == pytest.approx(float(plain.depth_mean), rel=1e-12)
+    assert np.ravel(other.depth_sd)[0] == pytest.approx(float(plain.depth_sd), rel=1e-12)
+
+
+BANK_NODES = [
+    [1e-300],
+    [1e300],
+    [1e-300, 5.0],
+    [5.0, 1e300],
+    [1e-200],
+    [1e200],
+    [5.0 + 0j],
+    [],
+    np.zeros((2, 0)),
+    [5.0, np.nan],
+]
+
+
+@pytest.mark.parametrize("history", [False, True])
+@pytest.mark.parametrize("nodes", BANK_NODES, ids=str)
+def test_the_bank_answers_finite_or_refuses_naming_the_nodes(nodes, history):
+    from depthcore import bank
+
+    mu = [-0.3, 0.0, 0.2, 0.33]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            b = bank.filter_bank(
+                nodes, mu, 0.005, [-1.0, 4.0, 0.0], 1000 * np.eye(3), 0.01, history
+            )
+        except ValueError as exc:
+            assert "\n" not in str(exc) and str(exc).startswith("nodes"), exc
+            return
+    for a in (b.mean, b.cov, b.log_weight):
+        assert np.all(np.isfinite(a))
+
+
+KALMAN = [  # (scale of the prior and the process noise, transition, measurements)
+    (1e300, 1e10, 1.0),
+    (1e300, 1.0, 1e200),
+    (1e300, 1.0, 1e300),
+    (1e-300, 1.0, 1.0),
+    (1e300, 1.0, 1.0),
+    (1e150, 1e3, 1e150),
+]
+
+
+@pytest.mark.parametrize(("scale", "psi", "x"), KALMAN)
+def test_the_kalman_filter_answers_finite_or_refuses_an_overflow(scale, psi, x):
+    from depthcore import kalman
+
+    eye = np.eye(2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            r = kalman.run(
+                x * np.ones((5, 1)),
+                [0.0, 0.0],
+                scale * eye,
+                psi * eye,
+                scale * eye,
+                [[1.0, 0.0]],
+                [[1.0]],
+            )
+        except ValueError as exc:
+            assert "\n" not in str(exc) and "overflowed" in str(exc), exc
+            return
+    for a in r:
+        assert np.all(np.isfinite(a))
+
+
+@pytest.mark.parametrize(
+    ("arg", "value"),
+    [
+        ("x", np.ones((5, 1)) + 0j),
+        ("x", np.ones((0, 1))),
+        ("prior_mean", ["0", "0"]),
+        ("prior_cov", np.eye(2, dtype=object)),
+        ("Sigma_m", [[True]]),
+    ],
+    ids=["complex x", "empty x", "text prior_mean", "object prior_cov", "boolean Sigma_m"],
+)
+def test_the_kalman_filter_refuses_what_is_not_a_real_number(arg, value):
+    from depthcore import kalman
+
+    args = dict(
+        x=np.ones((5, 1)),
+        prior_mean=[0.0, 0.0],
+        prior_cov=np.eye(2),
+        Psi=np.eye(2),
+        Sigma_p=np.eye(2),
+        Phi=[[1.0, 0.0]],
+        Sigma_m=[[1.0]],
+    )
+    with pytest.raises(ValueError, match=f"^{arg} "):
+        kalman.run(**{**args, arg: value})
