@@ -1,7 +1,7 @@
 """Benchmark: the cost per trial of every N-frame filter against the number of frames N.
 
 Figure 2's point followed from time 1 for N frames with lateral process
-noise ``q`` (:func:`depthcore.bank.simulate`), with Figure 2's prior. Every
+noise ``q`` (:func:`depthcore.model.simulate`, from frame 1), with Figure 2's prior. Every
 filter of the registry that takes N frames (:mod:`depthcore.filters`, with
 ``q`` where it supports process noise and 0 where it does not) and the
 iterated extended Kalman smoother (:func:`depthcore.iterated.smoother`, not a
@@ -30,7 +30,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import bank, benchmarks, iterated, model  # noqa: E402
+from depthcore import benchmarks, iterated, model  # noqa: E402
 from depthcore.filters import FILTERS  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
@@ -54,7 +54,7 @@ def problems(n_trials: int, n_frames: int):
     """Bearings (B, N) of Figure 2's point followed for N frames, and Figure 2's prior."""
     x1 = model.G(np.array(FIG2.c), -2)
     rng = np.random.default_rng(SEED)
-    sim = bank.simulate(x1, n_frames, FIG2.rho, Q, rng, size=n_trials)
+    sim = model.simulate(x1, n_frames, FIG2.rho, Q, rng, size=n_trials, frame=1)
     return sim.mu, FIG2.prior.mean, FIG2.prior.cov
 
 

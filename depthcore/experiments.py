@@ -1136,7 +1136,7 @@ def bound_study(
     n_max = max(frames)
     early = model.project(np.stack([model.G(truth, -2), model.G(truth, -1)]))
     mu_early = early + rho * noise_rng.standard_normal((trials, 2))
-    later = bank.simulate(truth, n_max - 2, rho, q, noise_rng, size=trials)
+    later = model.simulate(truth, n_max - 2, rho, q, noise_rng, size=trials, frame=1)
     mu = np.concatenate([mu_early, later.mu], axis=1)
     states = np.concatenate(
         [

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import SCENARIOS, bank, bound, experiments, model
+from depthcore import SCENARIOS, bound, experiments, model
 
 FIG2 = SCENARIOS["fig2"]
 RHO = FIG2.rho
@@ -204,7 +204,7 @@ def test_expected_information_against_monte_carlo_over_the_accelerations():
     exact = bound.expected_measurement_information(
         t.mean[:, 1], t.mean[:, [0, 2]], t.lateral_cov, RHO
     )
-    sim = bank.simulate(FIG2.c, n - 2, RHO, q, np.random.default_rng(7), size=20_000)
+    sim = model.simulate(FIG2.c, n - 2, RHO, q, np.random.default_rng(7), size=20_000, frame=1)
     early = np.broadcast_to(t.mean[:2], (20_000, 2, 3))
     states = np.concatenate([early, sim.states], axis=1)
     draws = bound.measurement_information(states, RHO)
@@ -256,7 +256,7 @@ def test_the_posterior_bound_lies_below_the_average_conditional_bound():
     the gap in the depth exceeds 10 Monte Carlo standard errors of the average."""
     n, q = 25, 0.05
     post = bound.posterior_bound(FIG2.c, 3, n, RHO, P, q)[-1]
-    sim = bank.simulate(FIG2.c, n - 2, RHO, q, np.random.default_rng(11), size=2000)
+    sim = model.simulate(FIG2.c, n - 2, RHO, q, np.random.default_rng(11), size=2000, frame=1)
     t = bound.track_moments(FIG2.c, 3, n, q)
     states = np.concatenate([np.broadcast_to(t.mean[:2], (2000, 2, 3)), sim.states], axis=1)
     cond = bound.conditional_bound(states, RHO, P, t.process_noise)[:, -1]

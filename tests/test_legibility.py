@@ -83,7 +83,7 @@ def _frames_run():
 
 
 def _track():
-    sim = bank.simulate(model.G(FIG2.c, -2), 6, FIG2.rho, 0.01, np.random.default_rng(2))
+    sim = model.simulate(FIG2.c, 6, FIG2.rho, 0.01, np.random.default_rng(2), frame=3)
     tr = bank.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
     return sim, tr
 
@@ -109,7 +109,7 @@ def _rbpf_convergence():
 
 
 def _frame_marginals():
-    sim = bank.simulate(model.G(FIG2.c, -2), 6, FIG2.rho, 0.0, np.random.default_rng(3))
+    sim = model.simulate(FIG2.c, 6, FIG2.rho, 0.0, np.random.default_rng(3))
     names = FRAMES_NAMES[:5] + ("particle", "resample_move", "rbpf")
     m = experiments.frame_marginals(
         sim.mu,

@@ -402,7 +402,7 @@ def test_a_run_without_resampling_is_the_frame_by_frame_loop(proposal, n_frames,
     weights and ESS after every frame to rounding, from the same draws."""
     rng = np.random.default_rng(11)
     x1 = np.array([-1.2, 4.0, 0.3])
-    mu = model.simulate_measurements(x1, 5e-3, rng, n=n_frames, size=3)
+    mu = model.simulate(x1, n_frames, 5e-3, 0.0, rng, size=3, frame=1).mu
     args = (mu, 5e-3, x1 + [0.1, -0.3, 0.0], 0.5 * np.eye(3), 500)
     fast = run(*args, np.random.default_rng(2), proposal=proposal)
     slow = run(*args, np.random.default_rng(2), proposal=proposal, ess_threshold=1e-300)

@@ -111,7 +111,6 @@ def paste_eval_as_glue(app, config):
     app.add_role("eval", PasteTextRole(), override=True)
 
 
-
 def citation_owners(env) -> dict:
     """``{citation: (page read, object)}``: which docstring defines each citation."""
     if not hasattr(env, "depthcore_citation_owners"):
