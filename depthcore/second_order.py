@@ -246,39 +246,57 @@ def minimiser(mu) -> np.ndarray:
         i = int(np.argmax(~np.isfinite(f)))
         raise ValueError(f"mu[{i}]: no start in front of the camera for the misfit's minimiser")
     active = np.ones(B, dtype=bool)
-    for _ in range(MAX_ITERATIONS):
-        if not np.any(active):
-            break
-        r = residuals(x, mu)
-        J = residual_gradients(x, n_frames)
-        step = _lstsq(J, -r)
-        x_new, f_new = damped_step(x, step, f, lambda y: _misfit(y[:, None], mu)[:, 0])
-        moved = np.max(np.abs(x_new - x) / (1.0 + np.abs(x)), axis=-1)
-        x = np.where(active[:, None], x_new, x)
-        f = np.where(active, f_new, f)
-        active = active & (moved > STEP_TOL)
+    # Bearings that no track explains well (a large process noise) can send the
+    # iteration far out, where the gradients overflow: such a run does not
+    # converge, and is refused below, not warned about.
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        for _ in range(MAX_ITERATIONS):
+            if not np.any(active):
+                break
+            r = residuals(x, mu)
+            J = residual_gradients(x, n_frames)
+            step = _lstsq(J, -r)
+            x_new, f_new = damped_step(x, step, f, lambda y: _misfit(y[:, None], mu)[:, 0])
+            moved = np.max(np.abs(x_new - x) / (1.0 + np.abs(x)), axis=-1)
+            x = np.where(active[:, None], x_new, x)
+            f = np.where(active, f_new, f)
+            active = active & ~(moved <= STEP_TOL)
+    active |= ~np.all(np.isfinite(x), axis=-1)
     if np.any(active):
         raise ValueError(
             f"mu[{int(np.argmax(active))}]: Gauss-Newton on the misfit of the bearings did not "
             f"converge in {MAX_ITERATIONS} iterations"
         )
-    _determined(residual_gradients(x, n_frames), "the misfit of the bearings")
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        J = residual_gradients(x, n_frames)
+    _determined(J, "the misfit of the bearings")
     return x
 
 
 def _lstsq(J, r) -> np.ndarray:
     """Least-squares solutions ``d`` of ``J d = r`` by QR, batched: J (B, M, n), r (B, M)."""
+    finite = np.all(np.isfinite(J), axis=(-2, -1)) & np.all(np.isfinite(r), axis=-1)
+    J = np.where(finite[:, None, None], J, 0.0)
+    r = np.where(finite[:, None], r, 0.0)
     Q, R = np.linalg.qr(J)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        d = np.linalg.solve(R, np.einsum("bmi,bm->bi", Q, r)[..., None])[..., 0]
-    return np.where(np.isfinite(d), d, 0.0)
+        try:
+            d = np.linalg.solve(R, np.einsum("bmi,bm->bi", Q, r)[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            # an exactly singular R (a run gone where the gradients vanish or
+            # overflowed): the pseudo-inverse, whose step such a run cannot use
+            d = np.einsum("bim,bm->bi", np.linalg.pinv(J), r)
+    return np.where(finite[:, None] & np.isfinite(d), d, 0.0)
 
 
 def _determined(J, what: str) -> None:
     """Refuse, naming ``mu[i]``, a Jacobian whose columns are (numerically) dependent."""
-    scale = np.linalg.norm(J, axis=-2, keepdims=True)
-    scale = np.where(scale > 0, scale, 1.0)
-    cond = np.linalg.cond(J / scale)
+    finite = np.all(np.isfinite(J), axis=(-2, -1))
+    J = np.where(finite[..., None, None], J, 1.0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        scale = np.linalg.norm(J, axis=-2, keepdims=True)
+        scale = np.where((scale > 0) & np.isfinite(scale), scale, 1.0)
+        cond = np.where(finite, np.linalg.cond(J / scale), np.inf)
     bad = ~(cond < CONDITION_LIMIT)
     if np.any(bad):
         i = int(np.argmax(bad))

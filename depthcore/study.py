@@ -398,7 +398,14 @@ def run_filters(
             if rng is None:
                 raise ValueError(f"rng is required to run the {name} filter")
             options.update(rng=rng, n_particles=n_particles)
-        est = f(mu, rho, pm, pc, **options)
+        try:
+            est = f(mu, rho, pm, pc, **options)
+        except ValueError as exc:
+            # the bearings were drawn here, so no bearing is the user's to mend
+            raise ValueError(
+                f"filters: the {name} filter has no answer for a simulated trial ({exc}); "
+                f"leave {name} out, or lower the process noise or the noise level"
+            ) from None
         if f.family == "particles":
             out[name] = _particle_estimates(trials, est, ref)
         elif f.family == "rao_blackwellised":

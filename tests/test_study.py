@@ -389,6 +389,16 @@ def test_study_with_large_process_noise_keeps_its_trials():
     assert r["valid_trials"] == 20 and r["rejected_trials"] == 0
 
 
+def test_a_filter_without_answer_for_a_simulated_trial_is_named_not_its_bearings():
+    """At q = 10 the velocity swings by 10 a frame: the second-order filter's start (the
+    least misfit without process noise) is not determined on some trials. The refusal
+    names the filter and what the user can change, not the bearings it drew itself."""
+    with pytest.raises(ValueError, match=r"^filters: the second_order filter has no answer"):
+        study.study(
+            [1.2, 6.0, 1.2], 1 / 200, 50, names=("second_order",), frames=10, process_noise=10.0
+        )
+
+
 def test_study_refuses_filters_that_cannot_run_on_the_frames_or_process_noise():
     with pytest.raises(ValueError, match="names: particle cannot run"):
         study.study(trials=5, names=("ekf", "particle"), frames=5, process_noise=0.01)
