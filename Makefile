@@ -129,7 +129,7 @@ book: $(EDITABLE) $(FIGURES)/.written
 	mv $(DOWNLOADS)/depthcore-*.tar.gz $(DOWNLOADS)/depthcore.tar.gz
 	cp requirements.txt CITATION.cff $(DOWNLOADS)/
 	@if [[ -f $(PDF) ]]; then cp $(PDF) $(DOWNLOADS)/depthcore.pdf; else \
-	  echo "make book: NOTE: $(PDF) not found, so the book links a PDF it does not ship: run \`make pdf\` first" >&2; fi
+	  echo "make book: NOTE: $(PDF) not found, so the book does not offer the PDF: run \`make pdf\` first" >&2; fi
 	$(PY) tools/check_notebooks.py cache --execute
 	$(VENV)/bin/jupyter-book build . --all -W -n --keep-going 2>&1 | tee _build/book.log
 
