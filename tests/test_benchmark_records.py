@@ -149,10 +149,10 @@ def test_the_readme_tool_replaces_between_markers_and_names_a_missing_block():
 
 
 def test_the_readmes_claims_on_the_optimal_filter_hold_for_the_record():
-    # "to 1e-8 in under 5 ms", "over 10,000 times faster than adaptive cubature",
+    # "to 1e-8 in milliseconds", "over 10,000 times faster than adaptive cubature",
     # "over 1,000 times faster than the 3-D Gauss-Legendre grid"
     m = benchmarks.read("bench_optimal")["results"]["moments"]
-    assert m["one_d_ms"] < 5 and m["one_d_error_sd"] < 1e-8 and m["one_d_estimate_sd"] < 1e-8
+    assert m["one_d_ms"] < 100 and m["one_d_error_sd"] < 1e-8 and m["one_d_estimate_sd"] < 1e-8
     assert m["nquad_ratio"] > 1e4
     assert m["grid_ratio"] > 1e3
 
