@@ -12,7 +12,7 @@ One bearing's Fisher information about the state it sees is
 ``I_k = h_k h_k^T / rho**2``, with ``h_k`` the gradient of the projection at
 ``s_k`` (Eq. (11)). The information about the state at frame ``k``, the
 prior's included, follows the recursion of Tichavský, Muravchik & Nehorai
-(1998, Eq. (21)), ``J_{k+1} = D22 - D21 (J_k + D11)^{-1} D12``, which for
+(1998, Eq. (21)) [tichavsky1998]_, ``J_{k+1} = D22 - D21 (J_k + D11)^{-1} D12``, which for
 this linear motion with Gaussian noise of covariance ``Q_k = q_k**2 u u^T``
 (``u = (0, 0, 1)``: only the velocity is disturbed) is
 
@@ -32,7 +32,7 @@ Two readings of ``I_k``, both in the recursion above:
   ``s_N``, ``F^{-(N-1)T} P^{-1} F^{-(N-1)} + sum_k g_k g_k^T / rho**2``, with
   ``g_k`` the residual gradients of Eqs. (20)-(22)
   (:func:`depthcore.model.residual_gradients`), the bound that Ristic,
-  Arulampalam & Gordon (2004, ch. 6) set bearings-only trackers against;
+  Arulampalam & Gordon (2004, ch. 6) [ristic2004]_ set bearings-only trackers against;
 * **the posterior bound** (:func:`posterior_bound`, Tichavský et al. 1998):
   ``E[I_k]`` over the law of the track. The expectation is taken over the
   accelerations that act after a known state (the lateral position is then

@@ -389,7 +389,7 @@ def trajectory_solve(H, y, t, q: float, U=None, u=None):
     ``k = 1 .. N`` and ``b_k`` of the accelerations, tied by the motion
     ``d_{k+1} = F d_k + (0, 0, b_k)`` (Eq. (1), ``F`` its linear part),
 
-        sum_k (H_k . d_k - y_k)**2 + sum_k (b_k / q - t_k)**2 + |U d_1 - u|**2
+        sum_k (H_k . d_k - y_k)**2 + sum_k (b_k / q - t_k)**2 + norm(U d_1 - u)**2
 
     (the last term only when ``U`` is given). The normal equations of this
     problem are block tridiagonal in the states; it is solved without forming

@@ -814,8 +814,8 @@ def error_coverage(
         ``"runs"``, ``"collapsed"`` (the number of runs flagged), and for each
         of :data:`ERROR_MOMENTS` ``{"within_two": fraction of the runs not
         collapsed whose error is within two reported errors, "max_z": the
-        largest |error| / reported error, "se": the binomial standard error of
-        the fraction}``; ``"worst_collapsed_z"``: the largest |error| of a
+        largest absolute error over the reported error, "se": the binomial standard error of
+        the fraction}``; ``"worst_collapsed_z"``: the largest absolute error of a
         collapsed run's depth mean over the exact depth SD (how far off the
         flag was right to be).
     """
