@@ -35,7 +35,7 @@ from . import __version__
 
 #: The repository, where the benchmark scripts sit beside the package.
 ROOT = Path(__file__).resolve().parent.parent
-#: The committed records, one per script: package data, so that an installed
+#: The committed records, one per script, kept as package data so that an installed
 #: depthcore (from the source archive or a wheel) reads them as the repository does.
 RESULTS = Path(__file__).resolve().parent / "benchmark_records"
 #: Where a smaller run (``--quick``) writes its record, outside version control.

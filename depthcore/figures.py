@@ -67,14 +67,17 @@ PRINTED_STYLE = {
     "color": "tab:orange",
     "linestyle": (0, (2, 1)),
 }
-#: The book's plot style, shared by every figure: at most :data:`WIDTH` inches
-#: wide, rendered at :data:`DPI` dots per inch (Jupyter and the book draw the
-#: PNG at ``fig.dpi``), no text smaller than :data:`MIN_FONT` points (tick
-#: labels, legends and titles at matplotlib's 10 points unless stated). At the
-#: book's content width a figure is shrunk by at most ``WIDTH`` inches to that
-#: width, so the smallest text stays legible on screen and on an A4 page.
+#: The widest figure of the book's plot style, in inches. Every figure is at
+#: most ``WIDTH`` inches wide, rendered at ``DPI`` dots per inch (Jupyter and
+#: the book draw the PNG at ``fig.dpi``), with no text smaller than ``MIN_FONT``
+#: points (tick labels, legends and titles at matplotlib's 10 points unless
+#: stated). At the book's content width a figure is shrunk by at most ``WIDTH``
+#: inches to that width, so the smallest text stays legible on screen and on an
+#: A4 page.
 WIDTH = 7.2
+#: The dots per inch of every figure's PNG.
 DPI = 150
+#: The smallest font size of any text of a figure, in points.
 MIN_FONT = 9.0
 _SYMBOL = {"depth": "y", "velocity": "v"}
 #: Leave the creation date out, so that the same figure gives the same file.

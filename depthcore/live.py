@@ -31,7 +31,7 @@ from . import _checks, model
 from .figures import STYLE
 from .filters import FILTERS, check_names
 
-#: The filters drawn by default: the paper's three.
+#: The filters drawn by default, the paper's three.
 NAMES = ("optimal", "second_order", "ekf")
 #: The largest number of frames the frame slider offers.
 MAX_SLIDER_FRAMES = 30
@@ -157,7 +157,7 @@ def figure(mu, rho: float, prior_mean, prior_cov, frames: int = 3, names=NAMES, 
 class Controls:
     """Sliders for ``rho``, the prior's mean and SDs and the frames, and the figure they redraw.
 
-    Made by :func:`controls`; :attr:`widget` is what a notebook displays.
+    Made by :func:`controls`; its ``widget`` is what a notebook displays.
 
     Attributes
     ----------

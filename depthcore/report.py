@@ -1250,7 +1250,7 @@ class MarkdownTable:
         return "\n".join(lines)
 
 
-#: A role that pastes a glued text into a page's text: ``eval`` (which the book
+#: A role that pastes a glued text into a page's text, ``eval`` (which the book
 #: resolves to the text glued under its name, and JupyterLab evaluates in the
 #: page's kernel), ``glue:text`` or plain ``glue``; group 1 is the glued name.
 GLUE_ROLE = re.compile(r"\{(?:eval|glue(?::text)?)\}`([^`]+)`")
