@@ -370,6 +370,11 @@ def standalone(
     """Run each page's downloaded notebook alone with ``python`` and compare its outputs."""
     import tempfile
 
+    # The notebooks run in a temporary folder: a relative path to the interpreter
+    # (the Makefile's .venv/standalone/bin/python) is made absolute, not resolved,
+    # which would leave the venv for the interpreter it links to.
+    python = os.path.abspath(python)
+
     import jupytext
     import nbformat
 
