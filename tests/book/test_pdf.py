@@ -33,7 +33,7 @@ import depthcore
 
 PDF = ROOT / "_build" / "latex" / "depthcore.pdf"
 FIGURE_RE = re.compile(
-    r"^```\{glue:figure\}\s*\S+\s*\n:name:\s*(\S+)\s*\n(?::\w+:.*\n)*\s*\n(.*?)\n```",
+    r"^```\{glue:figure\}[ \t]*\S+[ \t]*\n:name:[ \t]*(\S+)[ \t]*\n(?::\w+:[^\n]*\n)*[ \t]*\n(.*?)\n```",
     re.MULTILINE | re.DOTALL,
 )
 EQNO_RE = re.compile(r"\S.* {6,}\((\d+)\)\s*$", re.MULTILINE)

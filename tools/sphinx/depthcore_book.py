@@ -4,8 +4,10 @@ Each page's executed notebook
 -----------------------------
 
 The book's pages are MyST Markdown notebooks; myst-nb executes each one into
-``_build/jupyter_execute/<page>.ipynb``. This extension copies that notebook,
-with its outputs, to ``_sources/<page>.ipynb`` in the HTML build and tells
+``_build/jupyter_execute/<page>.ipynb`` (without outputs when they come from
+the execution cache: this extension then merges them in from the cache). This
+extension copies that notebook, with its outputs, to
+``_sources/<page>.ipynb`` in the HTML build and tells
 sphinx-book-theme about it, so that the page's download menu offers
 ``.ipynb`` beside ``.md`` (the theme does so itself only when a launch
 service such as Binder is configured).
@@ -64,7 +66,18 @@ def add_executed_notebook(app, pagename, templatename, context, doctree):
         return
     target = Path(app.outdir) / "_sources" / f"{pagename}.ipynb"
     target.parent.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(executed, target)
+    config = app.env.mystnb_config
+    if config.execution_mode == "cache":
+        # myst-nb writes the page's notebook without the outputs it took from
+        # the cache: merge them in from the cache, as myst-nb did for the page.
+        import nbformat
+        from jupyter_cache import get_cache
+
+        notebook = nbformat.read(executed, as_version=4)
+        _, notebook = get_cache(config.execution_cache_path).merge_match_into_notebook(notebook)
+        nbformat.write(notebook, target)
+    else:
+        shutil.copy2(executed, target)
     context["ipynb_source"] = f"{pagename}.ipynb"
 
 
