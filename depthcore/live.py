@@ -170,6 +170,8 @@ class Controls:
     message : str
         ``""`` after a redraw, else the one-line refusal of the setting (a
         filter's :class:`ValueError`), shown in place of the densities.
+    output : ipywidgets.Output
+        Holds the figure as drawn last (:func:`figure_output`).
     widget : ipywidgets.VBox
         The sliders above the figure's output.
     """
@@ -249,13 +251,39 @@ class Controls:
             self.ax.clear()
             self.message = str(error).splitlines()[0]
             self.ax.set_title(self.message, fontsize=8, wrap=True)
-        from IPython import get_ipython
-        from IPython.display import display
+        self.output.outputs = (figure_output(self.figure),)
 
-        if get_ipython() is not None:  # in a kernel: into the output below the sliders
-            with self.output:
-                self.output.clear_output(wait=True)
-                display(self.figure)
+
+def figure_output(figure) -> dict:
+    """``figure`` as one PNG display output of a notebook (nbformat's ``display_data``).
+
+    The controls put it in their ``ipywidgets.Output`` by setting the
+    widget's state, not by displaying into it: the figure then goes wherever
+    the widget is shown, and never into the outputs of the cell that made it.
+
+    Parameters
+    ----------
+    figure : matplotlib.figure.Figure
+
+    Returns
+    -------
+    dict
+        ``{"output_type": "display_data", "data": {"image/png": base64 text,
+        "text/plain": ...}, "metadata": {}}``.
+    """
+    import base64
+    import io
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png")
+    return {
+        "output_type": "display_data",
+        "data": {
+            "image/png": base64.b64encode(buffer.getvalue()).decode("ascii"),
+            "text/plain": repr(figure),
+        },
+        "metadata": {},
+    }
 
 
 def controls(mu, rho: float, prior_mean, prior_cov, frames: int = 3, names=NAMES) -> Controls:

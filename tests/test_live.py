@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import base64
+
 import numpy as np
 import pytest
 
@@ -87,6 +89,9 @@ def test_controls_redraw_the_marginals_of_the_sliders_values():
     np.testing.assert_allclose(setting["prior_cov"], s.prior.cov)
     assert setting["rho"] == pytest.approx(s.rho) and setting["frames"] == 3
     before = panel.ax.lines[0].get_ydata().copy()
+    (shown,) = panel.output.outputs
+    assert shown["output_type"] == "display_data"
+    assert base64.b64decode(shown["data"]["image/png"]).startswith(b"\x89PNG")
 
     panel.sliders["frames"].value = 6
     panel.sliders["mean_y"].value = s.prior.mean[1] + 1.0
@@ -97,6 +102,8 @@ def test_controls_redraw_the_marginals_of_the_sliders_values():
         np.testing.assert_array_equal(line.get_ydata(), drawn["density"][name])
     assert not np.array_equal(panel.ax.lines[0].get_ydata(), before)
     assert len(panel.widget.children) == 4
+    (redrawn,) = panel.output.outputs  # the output holds the redrawn figure, not both
+    assert redrawn["data"]["image/png"] != shown["data"]["image/png"]
 
 
 def test_controls_show_a_refusal_instead_of_a_traceback():
