@@ -1118,42 +1118,18 @@ def bound_study(
             f"names: {', '.join(unable)} cannot run on {max(frames)} frames with process "
             f"noise {q:g}; leave them out"
         )
-    if prior not in study.PRIORS:
-        raise ValueError(f"prior must be one of {study.PRIORS}, got {prior!r}")
-    truth = np.asarray(SCENARIOS["fig2"].c if truth is None else truth, dtype=float)
-    truth = _checks.finite_array(truth, "truth", (3,))
-    if not truth[1] - 2 > 0:
-        raise ValueError(
-            f"truth puts the point behind the camera: depth at time 1 is {truth[1] - 2:.6g}"
-        )
-    rho = _checks.positive_scalar(rho, "rho")
+    truth = SCENARIOS["fig2"].c if truth is None else truth
     particle_trials = (
         trials if particle_trials is None else _checks.count(particle_trials, "particle_trials")
     )
     noise_rng, particle_rng = (
         np.random.default_rng(s) for s in _checks.spawn(_checks.seed_sequence(seed), 2)
     )
-    n_max = max(frames)
-    early = model.project(np.stack([model.G(truth, -2), model.G(truth, -1)]))
-    mu_early = early + rho * noise_rng.standard_normal((trials, 2))
-    later = model.simulate(truth, n_max - 2, rho, q, noise_rng, size=trials, frame=1)
-    mu = np.concatenate([mu_early, later.mu], axis=1)
-    states = np.concatenate(
-        [
-            np.broadcast_to(np.stack([model.G(truth, -2), model.G(truth, -1)]), (trials, 2, 3)),
-            later.states,
-        ],
-        axis=1,
+    drawn = study.simulate(
+        truth, rho, trials, noise_rng, prior, PAPER_PRIOR_SCALE, max(frames), q, tracks=True
     )
-    keep = model.valid_measurements(mu[:, :3])
-    mu, states = mu[keep], states[keep]
-    c = (
-        model.noise_free_states(mu[:, :3])
-        if prior == "paper"
-        else np.broadcast_to(truth, (len(mu), 3))
-    )
-    pm = paper_prior_means(c)
-    pc = PAPER_PRIOR_SCALE * np.eye(3)
+    mu, pm, pc, states = drawn.mu, drawn.prior_mean, drawn.prior_cov, drawn.tracks
+    truth, rho = drawn.truth, drawn.rho
     noise = {"process_noise": q} if q > 0 else {}
     out = {
         "frames": np.array(frames),
@@ -1163,7 +1139,7 @@ def bound_study(
         "prior": prior,
         "prior_cov": pc,
         "states": states[:, np.array(frames) - 1, :],
-        "rejected_trials": int(np.sum(~keep)),
+        "rejected_trials": drawn.n_rejected,
     }
     for name in names:
         f = FILTERS[name]

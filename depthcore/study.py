@@ -73,6 +73,9 @@ class Trials:
     states : ndarray, shape (N, 3), or None
         The true state at the last frame of each trial, where it is not
         ``truth`` (more than three frames); ``None`` otherwise.
+    tracks : ndarray, shape (N, K, 3), or None
+        The true state at every frame ``1 .. K`` of each trial, where asked
+        for (:func:`simulate`'s ``tracks``); ``None`` otherwise.
     """
 
     truth: np.ndarray
@@ -83,6 +86,7 @@ class Trials:
     n_rejected: int
     process_noise: float = 0.0
     states: np.ndarray | None = None
+    tracks: np.ndarray | None = None
 
     @property
     def truths(self) -> np.ndarray:
@@ -131,6 +135,7 @@ def simulate(
     prior_scale: float = PAPER_PRIOR_SCALE,
     frames: int = 3,
     process_noise: float = 0.0,
+    tracks: bool = False,
 ) -> Trials:
     """Draw ``n`` trials of ``frames`` measurements of ``truth`` and build their priors.
 
@@ -159,6 +164,9 @@ def simulate(
         as with three frames (a selection by the measurement noise alone).
     process_noise : float
         ``q >= 0``.
+    tracks : bool
+        Keep every trial's true state at every frame (``Trials.tracks``,
+        ``n * frames * 3`` numbers).
     """
     truth = _checks.finite_array(truth, "truth", (3,))
     frames = _checks.count(frames, "frames")
@@ -194,6 +202,7 @@ def simulate(
         int(np.sum(~keep)),
         q,
         None if states is None else states[keep],
+        sim.states[keep] if tracks else None,
     )
 
 
