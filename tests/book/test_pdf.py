@@ -33,7 +33,8 @@ import depthcore
 
 PDF = ROOT / "_build" / "latex" / "depthcore.pdf"
 FIGURE_RE = re.compile(
-    r"^```\{glue:figure\}[ \t]*\S+[ \t]*\n:name:[ \t]*(\S+)[ \t]*\n(?::\w+:[^\n]*\n)*[ \t]*\n(.*?)\n```",
+    r"^```\{glue:figure\}[ \t]*\S+[ \t]*\n:name:[ \t]*(\S+)[ \t]*\n"
+    r"(?::\w+:[^\n]*\n)*[ \t]*\n(.*?)\n```",
     re.MULTILINE | re.DOTALL,
 )
 EQNO_RE = re.compile(r"\S.* {6,}\((\d+)\)\s*$", re.MULTILINE)
