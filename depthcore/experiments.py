@@ -327,6 +327,32 @@ def ekf_linearisation(mu, rho: float, prior: Gaussian) -> dict:
 NOISE_STUDY_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
 
 
+def gather_scores(filter_results, scores) -> dict:
+    """One filter's depth scores over several studies, each with its standard error.
+
+    Parameters
+    ----------
+    filter_results : sequence of dict, length S
+        The filter's entry of :func:`depthcore.study.study`'s ``"filters"``,
+        one per study.
+    scores : sequence of str
+        Depth scores of :func:`depthcore.study.scores`.
+
+    Returns
+    -------
+    dict
+        ``{score: (S,), score + "_se": (S,)}`` for each score, and ``"nees"``,
+        ``"nees_se"`` (S,).
+    """
+    out = {}
+    for score in scores:
+        out[score] = np.array([x["depth"][score] for x in filter_results])
+        out[f"{score}_se"] = np.array([x["depth"][f"{score}_se"] for x in filter_results])
+    out["nees"] = np.array([x["nees"] for x in filter_results])
+    out["nees_se"] = np.array([x["nees_se"] for x in filter_results])
+    return out
+
+
 def noise_study(
     rhos, trials: int, seed, names=("optimal", "second_order", "ekf", "ukf"), prior: str = "paper"
 ) -> dict:
@@ -347,8 +373,9 @@ def noise_study(
     -------
     dict
         ``"rho"`` (R,), ``"valid_trials"`` (R,) and, per filter,
-        ``{score: (R,)}`` for :data:`NOISE_STUDY_SCORES` (of the depth), ``"nees"``
-        and ``"hellinger"`` (the mean Hellinger distance of the depth marginal; NaN
+        ``{score: (R,)}`` for :data:`NOISE_STUDY_SCORES` (of the depth) and
+        ``"nees"``, each with its standard error (:func:`gather_scores`), and
+        ``"hellinger"`` (the mean Hellinger distance of the depth marginal; NaN
         unless ``"optimal"``, the reference, is among ``names``).
     """
     rhos = np.atleast_1d(_checks.positive_array(rhos, "rhos"))
@@ -359,8 +386,7 @@ def noise_study(
     out = {"rho": rhos, "valid_trials": np.array([r["valid_trials"] for r in runs])}
     for name in names:
         f = [r["filters"][name] for r in runs]
-        out[name] = {s: np.array([x["depth"][s] for x in f]) for s in NOISE_STUDY_SCORES}
-        out[name]["nees"] = np.array([x["nees"] for x in f])
+        out[name] = gather_scores(f, NOISE_STUDY_SCORES)
         out[name]["hellinger"] = np.array(
             [np.nan if x["hellinger_depth"] is None else x["hellinger_depth"]["mean"] for x in f]
         )
@@ -388,7 +414,8 @@ def truth_study(
     -------
     dict
         ``"truth"`` (T, 3), ``"valid_trials"`` (T,) and, per filter,
-        ``{score: (T,)}`` for :data:`NOISE_STUDY_SCORES` (of the depth) and ``"nees"``.
+        ``{score: (T,)}`` for :data:`NOISE_STUDY_SCORES` (of the depth) and ``"nees"``,
+        each with its standard error (:func:`gather_scores`).
     """
     truths = _checks.finite_array(truths, "truths")
     if truths.ndim != 2 or truths.shape[1] != 3 or truths.shape[0] < 1:
@@ -400,9 +427,7 @@ def truth_study(
     ]
     out = {"truth": truths, "valid_trials": np.array([r["valid_trials"] for r in runs])}
     for name in names:
-        f = [r["filters"][name] for r in runs]
-        out[name] = {s: np.array([x["depth"][s] for x in f]) for s in NOISE_STUDY_SCORES}
-        out[name]["nees"] = np.array([x["nees"] for x in f])
+        out[name] = gather_scores([r["filters"][name] for r in runs], NOISE_STUDY_SCORES)
     return out
 
 
@@ -791,7 +816,8 @@ def frames_study(
     dict
         ``"frames"`` (F,), ``"process_noise"``, ``"prior"`` and, per filter
         (the optimal filter first), ``{score: (F,)}`` for :data:`FRAMES_SCORES`
-        (of the depth), ``"nees"``, ``"hellinger"`` (mean Hellinger distance of
+        (of the depth) and ``"nees"``, each with its standard error
+        (:func:`gather_scores`), ``"hellinger"`` (mean Hellinger distance of
         the depth marginal to the optimal one) and ``"trials"`` (valid trials
         scored).
     """
@@ -820,8 +846,7 @@ def frames_study(
     out = {"frames": np.array(frames), "process_noise": float(process_noise), "prior": prior}
     for name, runs in rows.items():
         f = [x for x, _ in runs]
-        out[name] = {s: np.array([x["depth"][s] for x in f]) for s in FRAMES_SCORES}
-        out[name]["nees"] = np.array([x["nees"] for x in f])
+        out[name] = gather_scores(f, FRAMES_SCORES)
         out[name]["hellinger"] = np.array([x["hellinger_depth"]["mean"] for x in f])
         out[name]["trials"] = np.array([v for _, v in runs])
     return out

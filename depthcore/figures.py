@@ -360,6 +360,8 @@ def convergence_figure(result: dict, quantity: str = "depth"):
 def noise_study_figure(result: dict):
     """Coverage of the central 68 % depth interval, and the depth RMSE, against ``rho``.
 
+    Each point has bars of two Monte Carlo standard errors either side.
+
     Parameters
     ----------
     result : dict
@@ -373,10 +375,18 @@ def noise_study_figure(result: dict):
     fig, axes = _subplots(1, 2, figsize=(WIDTH, 4.0))
     names = [n for n in _filters.NAMES if n in result]
     for name in names:
-        axes[0].plot(
-            result["rho"], result[name]["coverage_68"], marker="o", markersize=3, **STYLE[name]
-        )
-        axes[1].plot(result["rho"], result[name]["rmse"], marker="o", markersize=3, **STYLE[name])
+        r = result[name]
+        for ax, score in zip(axes, ("coverage_68", "rmse"), strict=True):
+            # bars: two Monte Carlo standard errors either side
+            ax.errorbar(
+                result["rho"],
+                r[score],
+                yerr=2 * r[f"{score}_se"],
+                marker="o",
+                markersize=3,
+                capsize=2,
+                **STYLE[name],
+            )
     axes[0].axhline(0.68, color="0.7", linewidth=1, label="calibrated: 0.68")
     axes[0].set_ylim(0, 1.02)
     axes[0].set_ylabel("fraction of trials whose true depth\nthe central 68 % interval covers")

@@ -59,6 +59,15 @@ DECIMALS = 4
 
 #: Scores of :func:`depthcore.study.scores` per quantity, with their decimals in the book's tables.
 STUDY_DECIMALS = {"bias": 3, "rmse": 3, "mean_sd": 3, "coverage_68": 2, "coverage_95": 2}
+#: (text key, score, decimals) of the rows of several studies' texts.
+SCORE_TEXTS = (
+    ("bias", "bias", 3),
+    ("rmse", "rmse", 3),
+    ("mean_sd", "mean_sd", 3),
+    ("cov68", "coverage_68", 2),
+    ("cov95", "coverage_95", 2),
+    ("nees", "nees", 1),
+)
 
 
 # --- the command line's tables ------------------------------------------------------------
@@ -106,7 +115,8 @@ legend: bias, rmse  mean and root mean square of estimate - truth over the trial
         NEES        mean normalized estimation error squared of (x, y, v); 3 if calibrated
         Hellinger   mean Hellinger distance from the depth marginal to the optimal one
                     (0 = the same density, 1 = disjoint); a dash: not computed, as the
-                    optimal filter, the reference, runs only when it is among the filters"""
+                    optimal filter, the reference, runs only when it is among the filters
+        (se)        under each row: the Monte Carlo standard error of each number above it"""
 
 
 def format_table(result: dict) -> str:
@@ -250,6 +260,16 @@ def format_study(result: dict) -> str:
             lines.append(
                 f"{name:<13} {q:<9} {r['bias']:>9.4f} {r['rmse']:>9.4f} {r['mean_sd']:>9.4f} "
                 f"{r['coverage_68']:>8.3f} {r['coverage_95']:>8.3f} {extra}".rstrip()
+            )
+            extra_se = (
+                f"{f['nees_se']:>8.2f} " + ("".rjust(9) if h is None else f"{h['se']:>9.3f}")
+                if q == "depth"
+                else ""
+            )
+            lines.append(
+                f"{'':<13} {'(se)':<9} {r['bias_se']:>9.4f} {r['rmse_se']:>9.4f} "
+                f"{r['mean_sd_se']:>9.4f} {r['coverage_68_se']:>8.3f} {r['coverage_95_se']:>8.3f} "
+                f"{extra_se}".rstrip()
             )
     lines.append(STUDY_LEGEND)
     return "\n".join(lines) + "\n"
@@ -458,17 +478,46 @@ def study_texts(result: dict, prefix: str) -> dict:
         ``"<prefix>_<filter>_<quantity>_<score>"`` for the scores of
         :data:`STUDY_DECIMALS`, and ``"<prefix>_<filter>_nees"`` (1 decimal),
         ``"<prefix>_<filter>_hellinger"`` (3 decimals, ``"-"`` when not
-        computed); ``"<prefix>_trials"``.
+        computed); ``"<prefix>_trials"``. Beside each, the same key with
+        ``_pm`` appended: ``"value ± standard error"``, the standard error to
+        the value's decimals (one more where it would round to zero).
     """
     out = {f"{prefix}_trials": str(result["valid_trials"])}
     for name, f in result["filters"].items():
         for q in QUANTITIES:
             for score, d in STUDY_DECIMALS.items():
-                out[f"{prefix}_{name}_{q}_{score}"] = f"{f[q][score] + 0.0:.{d}f}"
+                key = f"{prefix}_{name}_{q}_{score}"
+                out[key] = f"{f[q][score] + 0.0:.{d}f}"
+                out[f"{key}_pm"] = value_se(f[q][score], f[q][f"{score}_se"], d)
         out[f"{prefix}_{name}_nees"] = f"{f['nees']:.1f}"
+        out[f"{prefix}_{name}_nees_pm"] = value_se(f["nees"], f["nees_se"], 1)
         h = f["hellinger_depth"]
         out[f"{prefix}_{name}_hellinger"] = "-" if h is None else f"{h['mean']:.3f}"
+        out[f"{prefix}_{name}_hellinger_pm"] = "-" if h is None else value_se(h["mean"], h["se"], 3)
     return out
+
+
+def value_se(value: float, se: float, decimals: int) -> str:
+    """``"value ± se"``, both to ``decimals`` places, or more while the SE rounds to zero.
+
+    Up to three more places are used, so a tiny but nonzero SE reads as such
+    (``0.900 ± 0.0004``); an SE of exactly 0 is printed as 0.
+
+    Parameters
+    ----------
+    value, se : float
+        A Monte Carlo estimate and its standard error (>= 0).
+    decimals : int
+        Places of the value, >= 0.
+
+    Returns
+    -------
+    str
+    """
+    d_se = decimals
+    while se > 0 and round(se, d_se) == 0 and d_se < decimals + 3:
+        d_se += 1
+    return f"{value + 0.0:.{decimals}f} ± {se:.{d_se}f}"
 
 
 def sweep_texts(result: dict, x: str, prefix: str, decimals: int = 3) -> dict:
@@ -512,7 +561,9 @@ def noise_study_texts(result: dict, prefix: str) -> dict:
     dict
         For row ``i``: ``"<prefix>_<i>_x"`` (``"1/200"``), ``"<prefix>_<i>_trials"``,
         and per filter ``"<prefix>_<i>_<filter>_cov68"``, ``"..._cov95"`` (2
-        decimals), ``"..._rmse"`` (3 decimals), ``"..._nees"`` (1 decimal).
+        decimals), ``"..._rmse"`` (3 decimals), ``"..._nees"`` (1 decimal),
+        each also with ``_pm`` appended: ``"value ± standard error"``
+        (:func:`value_se`).
     """
     out = {}
     names = [n for n in NAMES if n in result]
@@ -521,10 +572,12 @@ def noise_study_texts(result: dict, prefix: str) -> dict:
         out[f"{prefix}_{i}_trials"] = str(int(result["valid_trials"][i]))
         for name in names:
             r = result[name]
-            out[f"{prefix}_{i}_{name}_cov68"] = f"{r['coverage_68'][i]:.2f}"
-            out[f"{prefix}_{i}_{name}_cov95"] = f"{r['coverage_95'][i]:.2f}"
-            out[f"{prefix}_{i}_{name}_rmse"] = f"{r['rmse'][i]:.3f}"
-            out[f"{prefix}_{i}_{name}_nees"] = f"{r['nees'][i]:.1f}"
+            row = f"{prefix}_{i}_{name}"
+            for key, score, d in SCORE_TEXTS:
+                if score in ("bias", "mean_sd"):
+                    continue
+                out[f"{row}_{key}"] = f"{float(r[score][i]) + 0.0:.{d}f}"
+                out[f"{row}_{key}_pm"] = value_se(r[score][i], r[f"{score}_se"][i], d)
     return out
 
 
@@ -537,7 +590,8 @@ def truth_study_texts(result: dict, prefix: str) -> dict:
         For truth ``i``: ``"<prefix>_<i>_truth"`` (``"(2, 10, 2)"``),
         ``"<prefix>_<i>_trials"``, and per filter ``"<prefix>_<i>_<filter>_<score>"``
         for the depth's ``bias``, ``rmse``, ``mean_sd`` (:data:`STUDY_DECIMALS`),
-        ``cov68``, ``cov95`` (2 decimals) and ``nees`` (1 decimal).
+        ``cov68``, ``cov95`` (2 decimals) and ``nees`` (1 decimal), each also
+        with ``_pm`` appended: ``"value ± standard error"`` (:func:`value_se`).
     """
     out = {}
     names = [n for n in NAMES if n in result]
@@ -546,12 +600,10 @@ def truth_study_texts(result: dict, prefix: str) -> dict:
         out[f"{prefix}_{i}_trials"] = str(int(result["valid_trials"][i]))
         for name in names:
             r = result[name]
-            for score in ("bias", "rmse", "mean_sd"):
-                value = float(r[score][i]) + 0.0
-                out[f"{prefix}_{i}_{name}_{score}"] = f"{value:.{STUDY_DECIMALS[score]}f}"
-            out[f"{prefix}_{i}_{name}_cov68"] = f"{r['coverage_68'][i]:.2f}"
-            out[f"{prefix}_{i}_{name}_cov95"] = f"{r['coverage_95'][i]:.2f}"
-            out[f"{prefix}_{i}_{name}_nees"] = f"{r['nees'][i]:.1f}"
+            row = f"{prefix}_{i}_{name}"
+            for key, score, d in SCORE_TEXTS:
+                out[f"{row}_{key}"] = f"{float(r[score][i]) + 0.0:.{d}f}"
+                out[f"{row}_{key}_pm"] = value_se(r[score][i], r[f"{score}_se"][i], d)
     return out
 
 

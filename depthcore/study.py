@@ -453,6 +453,12 @@ class Tally:
         Sums of their squares.
     sd : ndarray, shape (2,)
         Sums of the filter's depth and velocity SDs.
+    spread : dict of ndarray or float
+        For the standard errors: the sums of squared deviations from their
+        mean (:func:`pooled_squares`) of the errors (``"error"``), their
+        squares (``"squared_error"``), the SDs (``"sd"``), the NEES
+        (``"nees"``) and the Hellinger distances (``"hellinger"``, absent once
+        a chunk has none).
     covered : ndarray of int, shape (2, L)
         Trials whose central interval holds the true depth and velocity, at
         each of the ``L`` levels of :data:`LEVELS` and :data:`CALIBRATION_LEVELS`.
@@ -471,20 +477,43 @@ class Tally:
         self.covered = np.zeros((2, len(_COVERAGE_LEVELS)), dtype=np.int64)
         self.nees = 0.0
         self.hellinger: float | None = 0.0
+        self.spread: dict = {
+            "error": np.zeros(2),
+            "squared_error": np.zeros(2),
+            "sd": np.zeros(2),
+            "nees": 0.0,
+            "hellinger": 0.0,
+        }
 
     def add(self, est: Estimates) -> None:
         """Add the scores of one chunk of trials (an empty chunk adds nothing)."""
         n = len(est.mean)
         if n == 0:
             return
-        err = est.mean - (self.truth if est.truth is None else est.truth)
-        for k, (i, cdf) in enumerate(((1, est.depth_cdf), (2, est.velocity_cdf))):
-            self.error[k] += np.sum(err[:, i])
-            self.squared_error[k] += np.sum(err[:, i] ** 2)
-            self.sd[k] += np.sum(np.sqrt(est.cov[:, i, i]))
+        full = est.mean - (self.truth if est.truth is None else est.truth)
+        nees = np.einsum("ni,ni->n", full, np.linalg.solve(est.cov, full[..., None])[..., 0])
+        err = full[:, 1:]  # depth and velocity
+        sd = np.sqrt(est.cov[:, (1, 2), (1, 2)])
+        chunk = {"error": err, "squared_error": err**2, "sd": sd, "nees": nees}
+        if est.hellinger is not None and self.hellinger is not None:
+            chunk["hellinger"] = np.asarray(est.hellinger, dtype=float)
+        else:
+            self.spread.pop("hellinger", None)
+        sums = {
+            "error": self.error,
+            "squared_error": self.squared_error,
+            "sd": self.sd,
+            "nees": self.nees,
+            "hellinger": self.hellinger,
+        }
+        for key, values in chunk.items():
+            self.spread[key] = pooled_squares(self.n, sums[key], self.spread[key], values)
+        for k, cdf in enumerate((est.depth_cdf, est.velocity_cdf)):
+            self.error[k] += np.sum(err[:, k])
+            self.squared_error[k] += np.sum(err[:, k] ** 2)
+            self.sd[k] += np.sum(sd[:, k])
             off = np.abs(cdf - 0.5)
             self.covered[k] += [np.count_nonzero(off <= p / 2) for p in _COVERAGE_LEVELS]
-        nees = np.einsum("ni,ni->n", err, np.linalg.solve(est.cov, err[..., None])[..., 0])
         self.nees += np.sum(nees)
         if est.hellinger is None or self.hellinger is None:
             self.hellinger = None
@@ -493,23 +522,31 @@ class Tally:
         self.n += n
 
     def scores(self) -> dict:
-        """The scores of :func:`scores` over every trial added."""
+        """The scores of :func:`scores` over every trial added, with their standard errors."""
         if self.n == 0:
             raise ValueError("trials: no trial was added to the tally")
         n = self.n
         level = {p: j for j, p in enumerate(_COVERAGE_LEVELS)}
         out = {}
+        spread = self.spread
         for k, q in enumerate(("depth", "velocity")):
+            rmse = float(np.sqrt(self.squared_error[k] / n))
+            mse_se = mean_se(spread["squared_error"][k], n)
             out[q] = {
                 "bias": float(self.error[k] / n),
-                "rmse": float(np.sqrt(self.squared_error[k] / n)),
+                "bias_se": mean_se(spread["error"][k], n),
+                "rmse": rmse,
+                # the delta method: d sqrt(m) = dm / (2 sqrt(m))
+                "rmse_se": mse_se / (2.0 * rmse) if rmse > 0 else 0.0,
                 "mean_sd": float(self.sd[k] / n),
-                **{
-                    f"coverage_{round(100 * p)}": float(self.covered[k, level[p]] / n)
-                    for p in LEVELS
-                },
+                "mean_sd_se": mean_se(spread["sd"][k], n),
             }
+            for p in LEVELS:
+                c = float(self.covered[k, level[p]] / n)
+                out[q][f"coverage_{round(100 * p)}"] = c
+                out[q][f"coverage_{round(100 * p)}_se"] = float(np.sqrt(c * (1.0 - c) / n))
         out["nees"] = float(self.nees / n)
+        out["nees_se"] = mean_se(spread["nees"], n)
         out["calibration"] = {
             "levels": list(CALIBRATION_LEVELS),
             **{
@@ -518,9 +555,70 @@ class Tally:
             },
         }
         out["hellinger_depth"] = (
-            None if self.hellinger is None else {"mean": float(self.hellinger / n)}
+            None
+            if self.hellinger is None
+            else {
+                "mean": float(self.hellinger / n),
+                "se": mean_se(spread["hellinger"], n),
+            }
         )
         return out
+
+
+def pooled_squares(n, total, squares, values):
+    """The sum of squared deviations from the mean, with one more chunk of values pooled in.
+
+    Chan, Golub and LeVeque's pairwise update: with ``n`` earlier values of
+    sum ``total`` and sum of squared deviations ``squares``, and a chunk of
+    ``m`` values of mean ``b`` and sum of squared deviations ``s_b``,
+    ``squares + s_b + (b - total / n)**2 n m / (n + m)``. Unlike the sum of
+    squares less ``n`` times the squared mean, no two large numbers are
+    subtracted, so the result does not depend on the chunks beyond rounding.
+
+    Parameters
+    ----------
+    n : int
+        Earlier values, >= 0.
+    total : float or ndarray, shape (...)
+        Their sum (ignored when ``n`` is 0).
+    squares : float or ndarray, shape (...)
+        Their sum of squared deviations from their mean.
+    values : ndarray, shape (m, ...)
+        The chunk, ``m >= 1``.
+
+    Returns
+    -------
+    float or ndarray, shape (...)
+    """
+    m = len(values)
+    b = np.mean(values, axis=0)
+    s_b = np.sum((values - b) ** 2, axis=0)
+    if n == 0:
+        return s_b
+    return squares + s_b + (b - total / n) ** 2 * (n * m / (n + m))
+
+
+def mean_se(squares, n: int) -> float:
+    """Standard error ``sqrt(s**2 / n)`` of a mean over ``n`` independent trials.
+
+    ``s**2 = squares / (n - 1)`` is the trials' sample variance, from the sum
+    of squared deviations from their mean (:func:`pooled_squares`); 0 for one
+    trial (no spread to estimate).
+
+    Parameters
+    ----------
+    squares : float
+        Sum of squared deviations from the mean, >= 0.
+    n : int
+        Trials, >= 1.
+
+    Returns
+    -------
+    float
+    """
+    if n < 2:
+        return 0.0
+    return float(np.sqrt(float(squares) / (n - 1) / n))
 
 
 def coverage_se(level, trials) -> np.ndarray:
@@ -542,8 +640,50 @@ def coverage_se(level, trials) -> np.ndarray:
     return np.sqrt(level * (1 - level) / trials)
 
 
+def detectable_difference(level, trials, false_alarm: float = 0.01, power: float = 0.8):
+    """The smallest coverage error that a two-sided binomial test finds with a given power.
+
+    A coverage ``c`` of ``n`` trials is tested against its nominal level
+    ``p`` by ``|c - p| > z_a sqrt(p (1 - p) / n)``, ``z_a`` the standard
+    normal's upper ``false_alarm / 2`` point. In the normal approximation a
+    filter whose true coverage is ``p ± d`` fails the test with probability
+    ``power`` (ignoring the far tail) when
+    ``d = (z_a + z_b) sqrt(p (1 - p) / n)``, ``z_b`` the standard normal's
+    ``power`` quantile.
+
+    Parameters
+    ----------
+    level : float or array_like
+        Nominal levels ``p`` in (0, 1).
+    trials : int or array_like
+        ``n >= 1``, broadcast against ``level``.
+    false_alarm : float
+        The test's size, in (0, 1).
+    power : float
+        In (0, 1).
+
+    Returns
+    -------
+    ndarray
+        ``d``, of the broadcast shape.
+    """
+    from scipy.special import ndtri
+
+    for value, name in ((false_alarm, "false_alarm"), (power, "power")):
+        if not 0.0 < float(value) < 1.0:
+            raise ValueError(f"{name} must lie in (0, 1), got {value!r}")
+    z = ndtri(1.0 - float(false_alarm) / 2.0) + ndtri(float(power))
+    return z * coverage_se(level, trials)
+
+
 def scores(trials: Trials, est: Estimates) -> dict:
-    """Bias, RMSE, coverage, NEES and Hellinger distance of one filter.
+    """Bias, RMSE, coverage, NEES and Hellinger distance of one filter, each with its SE.
+
+    Every score ``s`` has its Monte Carlo standard error beside it as
+    ``s_se`` (the Hellinger distance's as ``hellinger_depth["se"]``): the
+    sample SD over the trials divided by ``sqrt(n)`` for the means (bias, mean
+    SD, NEES, Hellinger distance), ``sqrt(c (1 - c) / n)`` for a coverage
+    ``c``, and the delta method's ``se(MSE) / (2 RMSE)`` for the RMSE.
 
     ``calibration`` holds the coverage of the central intervals at every level
     of :data:`CALIBRATION_LEVELS`: a calibrated filter's curve is the diagonal.

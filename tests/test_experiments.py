@@ -125,8 +125,11 @@ def test_noise_study_gathers_the_study_at_each_level():
     assert r["optimal"]["nees"][1] == direct["filters"]["optimal"]["nees"]
     assert r["ekf"]["hellinger"][1] == direct["filters"]["ekf"]["hellinger_depth"]["mean"]
     assert r["ekf"]["rmse"].shape == (2,)
+    assert r["ekf"]["coverage_68_se"][1] == direct["filters"]["ekf"]["depth"]["coverage_68_se"]
+    assert r["optimal"]["nees_se"][1] == direct["filters"]["optimal"]["nees_se"]
     fig = figures.noise_study_figure(r)
-    assert len(fig.axes[0].get_lines()) == 3  # two filters and the 0.68 line
+    _, labels = fig.axes[0].get_legend_handles_labels()
+    assert len(labels) == 3  # two filters and the 0.68 line
     plt.close(fig)
 
 

@@ -341,11 +341,16 @@ def test_noise_study_figure_draws_coverage_and_rmse():
     r = experiments.noise_study([1 / 400, 1 / 100], trials=20, seed=1, names=("optimal", "ekf"))
     fig = figures.noise_study_figure(r)
     for ax, field in zip(fig.axes, ("coverage_68", "rmse"), strict=True):
-        drawn = {line.get_label(): line for line in ax.get_lines()}
+        drawn = {bar.get_label(): bar for bar in ax.containers}
         for name in ("optimal", "ekf"):
-            line = drawn[figures.STYLE[name]["label"]]
+            bar = drawn[figures.STYLE[name]["label"]]
+            line, _, (segments,) = bar.lines
             assert_allclose(line.get_xdata(), r["rho"])
             assert_allclose(line.get_ydata(), r[name][field])
+            # each point's bar spans two standard errors either side
+            ends = np.array(segments.get_segments())[:, :, 1]
+            assert_allclose(ends[:, 0], r[name][field] - 2 * r[name][f"{field}_se"])
+            assert_allclose(ends[:, 1], r[name][field] + 2 * r[name][f"{field}_se"])
     plt.close(fig)
 
 

@@ -92,7 +92,20 @@ def test_study_texts_have_every_score():
     assert texts["s_trials"] == str(r["valid_trials"])
     assert texts["s_ekf_depth_coverage_68"] == f"{r['filters']['ekf']['depth']['coverage_68']:.2f}"
     assert texts["s_ekf_nees"] == f"{r['filters']['ekf']['nees']:.1f}"
-    assert len(texts) == 1 + 2 * (2 * len(report.STUDY_DECIMALS) + 2)
+    assert len(texts) == 1 + 2 * 2 * (2 * len(report.STUDY_DECIMALS) + 2)
+    ekf = r["filters"]["ekf"]
+    assert texts["s_ekf_depth_coverage_68_pm"] == (
+        f"{ekf['depth']['coverage_68']:.2f} ± {ekf['depth']['coverage_68_se']:.2f}"
+    )
+    assert texts["s_ekf_hellinger_pm"].startswith(texts["s_ekf_hellinger"] + " ± ")
+
+
+def test_a_value_and_its_standard_error_are_printed_to_the_values_places():
+    assert report.value_se(0.9021, 0.0133, 2) == "0.90 ± 0.01"
+    # a standard error that would round to zero gets the places that show it
+    assert report.value_se(0.9021, 0.0004, 2) == "0.90 ± 0.0004"
+    assert report.value_se(12.5, 0.0, 1) == "12.5 ± 0.0"
+    assert report.value_se(-0.0, 1e-9, 1) == "0.0 ± 0.0000"  # at most three more places
 
 
 def test_sweep_texts_label_the_rows():
@@ -116,8 +129,12 @@ def test_noise_study_texts():
     assert texts["mc_0_trials"] == str(r["valid_trials"][0])
     assert texts["mc_0_second_order_cov68"] == f"{r['second_order']['coverage_68'][0]:.2f}"
     assert set(texts) == {"mc_0_x", "mc_0_trials"} | {
-        f"mc_0_second_order_{s}" for s in ("cov68", "cov95", "rmse", "nees")
+        f"mc_0_second_order_{s}{pm}"
+        for s in ("cov68", "cov95", "rmse", "nees")
+        for pm in ("", "_pm")
     }
+    r = r["second_order"]
+    assert texts["mc_0_second_order_rmse_pm"] == report.value_se(r["rmse"][0], r["rmse_se"][0], 3)
 
 
 def test_comparison_table_holds_the_glued_texts_of_every_row():
@@ -217,7 +234,9 @@ def test_truth_study_texts():
     assert texts["st_0_second_order_bias"] == f"{r['second_order']['bias'][0]:.3f}"
     assert texts["st_0_second_order_cov68"] == f"{r['second_order']['coverage_68'][0]:.2f}"
     assert set(texts) == {"st_0_truth", "st_0_trials"} | {
-        f"st_0_second_order_{s}" for s in ("bias", "rmse", "mean_sd", "cov68", "cov95", "nees")
+        f"st_0_second_order_{s}{pm}"
+        for s in ("bias", "rmse", "mean_sd", "cov68", "cov95", "nees")
+        for pm in ("", "_pm")
     }
 
 

@@ -252,9 +252,10 @@ def test_study_command_json(capsys):
     assert data["valid_trials"] == 30
     assert set(data["filters"]) == {"optimal", "second_order", "ekf", "ukf", "particle"}
     for f in data["filters"].values():
-        assert set(f) == {"depth", "velocity", "nees", "hellinger_depth", "calibration"}
+        assert set(f) == {"depth", "velocity", "nees", "nees_se", "hellinger_depth", "calibration"}
         assert len(f["calibration"]["depth"]) == len(f["calibration"]["levels"])
-        assert set(f["depth"]) == {"bias", "rmse", "mean_sd", "coverage_68", "coverage_95"}
+        scores = {"bias", "rmse", "mean_sd", "coverage_68", "coverage_95"}
+        assert set(f["depth"]) == scores | {f"{s}_se" for s in scores}
 
 
 def test_study_command_rejects_bad_trials(capsys):
@@ -461,3 +462,73 @@ def test_coverage_se_is_the_binomial_standard_error():
     sim = rng.binomial(n, p, size=20_000) / n
     assert study.coverage_se(p, n) == pytest.approx(np.std(sim), rel=0.03)
     assert_allclose(study.coverage_se([0.68, 0.95], 100), np.sqrt([0.2176, 0.0475]) / 10)
+
+
+def test_standard_errors_follow_their_definitions():
+    trials = study.simulate(SCENARIOS["fig2"].c, 1 / 200, 60, np.random.default_rng(3))
+    est = study.run_filters(trials, ("optimal", "ekf"))
+    s = study.scores(trials, est["ekf"])
+    n = len(trials.mu)
+    for i, q in ((1, "depth"), (2, "velocity")):
+        err = est["ekf"].mean[:, i] - trials.truth[i]
+        sd = np.sqrt(est["ekf"].cov[:, i, i])
+        rmse = np.sqrt(np.mean(err**2))
+        assert s[q]["bias_se"] == pytest.approx(np.std(err, ddof=1) / np.sqrt(n), rel=1e-9)
+        assert s[q]["mean_sd_se"] == pytest.approx(np.std(sd, ddof=1) / np.sqrt(n), rel=1e-6)
+        # the delta method for the square root of the mean squared error
+        assert s[q]["rmse_se"] == pytest.approx(
+            np.std(err**2, ddof=1) / np.sqrt(n) / (2 * rmse), rel=1e-9
+        )
+        for level in (68, 95):
+            c = s[q][f"coverage_{level}"]
+            assert s[q][f"coverage_{level}_se"] == pytest.approx(np.sqrt(c * (1 - c) / n))
+    t = trials.truth
+    err = est["ekf"].mean - t
+    nees = np.einsum("ni,ni->n", err, np.linalg.solve(est["ekf"].cov, err[..., None])[..., 0])
+    assert s["nees_se"] == pytest.approx(np.std(nees, ddof=1) / np.sqrt(n), rel=1e-9)
+    h = est["ekf"].hellinger
+    assert s["hellinger_depth"]["se"] == pytest.approx(np.std(h, ddof=1) / np.sqrt(n), rel=1e-9)
+
+
+def test_standard_errors_match_the_spread_of_replicated_studies():
+    # 40 independent studies of 150 trials: the SD of each score over the
+    # studies estimates its standard error to about 1/sqrt(2 * 39) = 11 %, and
+    # the mean of the reported SEs must agree with it to 3.5 times that.
+    runs = [
+        study.study(trials=150, seed=s, names=("ekf",), prior="fixed")["filters"]["ekf"]
+        for s in range(40)
+    ]
+    for q in ("depth", "velocity"):
+        for score in ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95"):
+            spread = np.std([r[q][score] for r in runs], ddof=1)
+            reported = np.mean([r[q][f"{score}_se"] for r in runs])
+            assert reported == pytest.approx(spread, rel=0.4), (q, score, reported, spread)
+    spread = np.std([r["nees"] for r in runs], ddof=1)
+    assert np.mean([r["nees_se"] for r in runs]) == pytest.approx(spread, rel=0.4)
+
+
+def test_pooled_squares_do_not_depend_on_the_chunks():
+    # values with a large mean and a small spread, where the sum of squares
+    # less n times the squared mean would lose most digits
+    x = 1e4 + np.random.default_rng(1).normal(0.0, 1e-3, 1000)
+    want = np.sum((x - np.mean(x)) ** 2)
+    squares, total, n = 0.0, 0.0, 0
+    for chunk in np.array_split(x, 7):
+        squares = study.pooled_squares(n, total, squares, chunk)
+        total, n = total + np.sum(chunk), n + len(chunk)
+    assert squares == pytest.approx(want, rel=1e-6)
+    assert study.mean_se(squares, n) == pytest.approx(np.std(x, ddof=1) / np.sqrt(n), rel=1e-6)
+    assert study.mean_se(0.0, 1) == 0.0  # one trial: no spread to estimate
+
+
+def test_the_detectable_difference_is_found_with_the_stated_power():
+    # Simulate the test: a coverage whose true value is 0.68 - d, over n trials,
+    # fails the 1 % test against 0.68 in about 80 % of repetitions.
+    n = 2000
+    d = float(study.detectable_difference(0.68, n))
+    assert d == pytest.approx((2.5758293035489 + 0.8416212335729) * np.sqrt(0.68 * 0.32 / n))
+    counts = np.random.default_rng(0).binomial(n, 0.68 - d, size=20000) / n
+    fails = np.abs(counts - 0.68) > 2.5758293035489 * study.coverage_se(0.68, n)
+    assert np.mean(fails) == pytest.approx(0.8, abs=0.02)  # binomial SE of 20,000 tests: 0.003
+    with pytest.raises(ValueError, match="power must lie in"):
+        study.detectable_difference(0.68, n, power=1.0)
