@@ -57,10 +57,10 @@ import numpy as np
 from . import _checks, model
 from .ekf import predict
 from .second_order import (
-    _trajectory_map,
-    _trajectory_residuals,
+    bearing_residuals,
     bearing_rows,
     damped_step,
+    trajectory_map,
     trajectory_solve,
     trajectory_states,
 )
@@ -347,7 +347,7 @@ def trajectory_residuals(z, mu, rho, prior_mean, prior_cov, q):
     """
     K = mu.shape[-1]
     L_inv = np.linalg.inv(np.linalg.cholesky(prior_cov))
-    bearing, J = _trajectory_residuals(z, mu, _trajectory_map(K))
+    bearing, J = bearing_residuals(z, mu, trajectory_map(K))
     M = np.zeros((2 * K + 2, K + 2))
     M[:3, :3] = L_inv
     M[3 : K + 3] = J / rho
@@ -425,7 +425,7 @@ def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:
     cov = R_inv @ np.swapaxes(R_inv, -1, -2)
     return SmootherResult(
         s[:, -1].reshape(batch + (3,)),
-        (0.5 * (cov + np.swapaxes(cov, -1, -2))).reshape(batch + (3, 3)),
+        0.5 * (cov + np.swapaxes(cov, -1, -2)).reshape(batch + (3, 3)),
         iterations.reshape(batch),
         converged.reshape(batch),
         s.reshape(batch + (K, 3)),

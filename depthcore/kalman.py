@@ -476,7 +476,7 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     _time_axis(Psi, "Psi", 2, T - 1)
     # Every gain depends on the filter alone: all T - 1 of them in one batched solve,
     # with one batched check of the predicted covariances' conditioning.
-    gains = _smoother_gain(
+    gains = smoother_gain(
         filtered.covs[..., :-1, :, :], filtered.predicted_covs[..., 1:, :, :], Psi
     )
     batch = np.broadcast_shapes(filtered.means.shape[:-2], gains.shape[:-3])
@@ -485,7 +485,7 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     means[..., -1, :] = filtered.means[..., -1, :]
     covs[..., -1, :, :] = filtered.covs[..., -1, :, :]
     for t in range(T - 2, -1, -1):
-        means[..., t, :], covs[..., t, :, :] = _smoother_step(
+        means[..., t, :], covs[..., t, :, :] = smoother_step(
             gains[..., t, :, :],
             filtered.means[..., t, :],
             filtered.covs[..., t, :, :],
@@ -497,7 +497,7 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     return MeanAndCov(means, covs)
 
 
-def _smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
+def smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
     """Textbook 19.2.6: the Rauch-Tung-Striebel gain ``C_t = Sigma_t Psi^T Sigma_{+|t+1}^{-1}``.
 
     ``C_t`` depends on the filter alone (not on the later measurements), so
@@ -521,14 +521,14 @@ def _smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
     return np.swapaxes(_solve_or_pinv(predicted_cov, Psi @ cov), -1, -2)
 
 
-def _smoother_step(
+def smoother_step(
     gain, mean, cov, predicted_mean, predicted_cov, next_mean, next_cov
 ) -> MeanAndCov:
     """Textbook 19.2.6: one backward step of the Rauch-Tung-Striebel smoother.
 
     From the filtered Gaussian ``(mu_t, Sigma_t)`` of ``w_t`` given ``x_1 .. x_t``,
     the prediction ``(mu_{+|t+1}, Sigma_{+|t+1})`` made from it, its gain
-    ``C_t`` (:func:`_smoother_gain`) and a Gaussian ``(mu_{t+1|T}, Sigma_{t+1|T})``
+    ``C_t`` (:func:`smoother_gain`) and a Gaussian ``(mu_{t+1|T}, Sigma_{t+1|T})``
     of ``w_{t+1}`` given ``x_1 .. x_T``, ``T > t``:
     ``mu_{t|T} = mu_t + C_t (mu_{t+1|T} - mu_{+|t+1})``,
     ``Sigma_{t|T} = Sigma_t + C_t (Sigma_{t+1|T} - Sigma_{+|t+1}) C_t^T``.
@@ -574,7 +574,7 @@ def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):
     Phi_a : ndarray, shape (..., m, n (lag + 1))
     mu_pa : ndarray, shape (..., n (lag + 1))
     """
-    lag = _lag(lag)
+    lag = _checks.nonnegative_count(lag, "lag")
     Psi, Sigma_p, Phi = (np.asarray(a, dtype=float) for a in (Psi, Sigma_p, Phi))
     n = Psi.shape[-1]
     mu_p = np.zeros(n) if mu_p is None else np.asarray(mu_p, dtype=float)
@@ -590,12 +590,6 @@ def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):
     mu_pa = np.zeros(mu_p.shape[:-1] + (N,))
     mu_pa[..., :n] = mu_p
     return Psi_a, Sigma_pa, Phi_a, mu_pa
-
-
-def _lag(lag) -> int:
-    if isinstance(lag, bool) or not isinstance(lag, (int, np.integer)) or lag < 0:
-        raise ValueError(f"lag must be an integer >= 0, got {lag!r}")
-    return int(lag)
 
 
 def fixed_lag_smoother(
@@ -630,7 +624,7 @@ def fixed_lag_smoother(
         x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
     )
     T, n = x.shape[-2], prior_mean.shape[-1]
-    lag = min(_lag(lag), T - 1)  # a longer lag changes nothing
+    lag = min(_checks.nonnegative_count(lag, "lag"), T - 1)  # a longer lag changes nothing
     Psi_a, Sigma_pa, Phi_a, mu_pa = augment(Psi, Sigma_p, Phi, lag, mu_p)
     res = _run(
         x,

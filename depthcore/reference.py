@@ -33,7 +33,7 @@ from . import _checks, bank, kalman, model, optimal
 from .gaussian import Gaussian, student_t
 from .optimal import log_posterior
 from .resampling import weighted_moments, weighted_standard_errors
-from .second_order import minimiser, second_order
+from .second_order import bearing_residuals, minimiser, second_order, trajectory_map
 
 LogDensity = Callable[[np.ndarray], np.ndarray]
 
@@ -419,26 +419,6 @@ def track_fixed_lag(track) -> tuple[np.ndarray, np.ndarray]:
     return np.array(means), np.array(covs)
 
 
-def _dense_trajectory(z, mu):
-    """Bearing residuals (N,) and their Jacobian (N, N + 2) of ``z = (x_1, y_1, v_1, a)``.
-
-    The states are ``x_k = x_1 + (k - 1) v_1 + sum_i max(k - 1 - i, 0) a_i``,
-    ``y_k = y_1 + k - 1``, built with the dense ``N x (N - 1)`` map of the
-    accelerations.
-    """
-    n_frames = mu.shape[-1]
-    j = np.arange(n_frames, dtype=float)
-    D = np.maximum(j[:, None] - np.arange(1, n_frames)[None, :], 0.0)
-    x = z[0] + j * z[2] + D @ z[3:]
-    y = z[1] + j
-    J = np.empty((n_frames, n_frames + 2))
-    J[:, 0] = 1.0 / y
-    J[:, 1] = -x / y**2
-    J[:, 2] = j / y
-    J[:, 3:] = D / y[:, None]
-    return x / y - mu, J
-
-
 def _dense_final_state_map(n_frames: int):
     """``T`` (3, N + 2) and ``offset`` (3,): the state at frame ``N`` is ``T z + offset``."""
     T = np.zeros((3, n_frames + 2))
@@ -508,7 +488,7 @@ def trajectory_laplace_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     penalty[:, 3:] = np.eye(n_frames - 1) / q
 
     def stacked(z):
-        r, J = _dense_trajectory(z, mu)
+        r, J = bearing_residuals(z, mu, trajectory_map(mu.shape[-1]))
         return np.concatenate([r / rho, z[3:] / q]), np.concatenate([J / rho, penalty])
 
     def objective(z):
@@ -559,7 +539,7 @@ def iterated_smoother_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     L_inv = np.linalg.inv(np.linalg.cholesky(prior_cov))
 
     def stacked(z):
-        bearing, J = _dense_trajectory(z, mu)
+        bearing, J = bearing_residuals(z, mu, trajectory_map(mu.shape[-1]))
         M = np.zeros((2 * K + 2, K + 2))
         M[:3, :3] = L_inv
         M[3 : K + 3] = J / rho

@@ -85,7 +85,7 @@ from functools import partial
 import numpy as np
 
 from . import _checks, model
-from .ekf import predict, run_gaussian_filter  # noqa: F401 (the prediction, Eq. (10), is exact)
+from .ekf import run_gaussian_filter
 from .gaussian import Gaussian, History, MeanAndCov
 
 #: The UKF's estimates after each measurement (the type of :func:`depthcore.ekf.run`).
