@@ -66,7 +66,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import ndtr
 
-from . import _checks, kalman, model, optimal, quadrature
+from . import _checks, kalman, model, optimal, quadrature, resampling
 
 #: The lateral state ``(x, v)`` moves by ``x <- x + v``: the transition matrix.
 PSI = np.array([[1.0, 1.0], [0.0, 1.0]])
@@ -1009,15 +1009,12 @@ def _mixture(bank: Bank, log_weights, halved: bool = False):
     covariance (..., 3, 3), the largest log probability (..., 1) and ``free`` (...).
     """
     a = bank.log_weight + log_weights
-    top = np.max(a, axis=-1, keepdims=True)  # finite: a positive weight per problem
-    terms = np.exp(a - top)
-    total = np.sum(terms, axis=-1, keepdims=True)
-    log_normaliser = (top + np.log(total))[..., 0]
-    probabilities = terms / total
+    probabilities, log_normaliser = resampling.normalised(a)
     depth_N = bank.nodes + (bank.n_frames - 1)
     if not halved:
         mean, cov = mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
         return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
+    top = np.max(a, axis=-1, keepdims=True)
     every_other, free = _halving(a, top)
     W = np.empty(probabilities.shape[:-1] + (2,) + probabilities.shape[-1:])
     W[..., 0, :] = probabilities

@@ -58,6 +58,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _checks
+from .gaussian import symmetric
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 #: Relative asymmetry tolerated in a covariance matrix.
@@ -153,7 +154,7 @@ def _covariance(value, name: str, n: int, definite: bool) -> np.ndarray:
     scale = np.max(np.abs(arr), axis=(-2, -1), keepdims=True)
     if np.any(np.abs(arr - np.swapaxes(arr, -1, -2)) > _SYMMETRY_TOL * scale):
         raise ValueError(f"{name} must be symmetric")
-    arr = 0.5 * (arr + np.swapaxes(arr, -1, -2))
+    arr = symmetric(arr)
     if definite:
         try:
             np.linalg.cholesky(arr)
@@ -198,7 +199,7 @@ _EYES: dict[int, np.ndarray] = {}
 def _predict(mean, cov, Psi, Sigma_p, mu_p) -> MeanAndCov:
     mean = mu_p + (Psi @ mean[..., None])[..., 0]
     cov = Sigma_p + Psi @ cov @ Psi.mT
-    return MeanAndCov(mean, 0.5 * (cov + cov.mT))
+    return MeanAndCov(mean, symmetric(cov))
 
 
 def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
@@ -232,6 +233,33 @@ def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
     return _predict(mean, cov, Psi, Sigma_p, mu_p)
 
 
+def joseph(cov, gain, Phi, Sigma_m) -> np.ndarray:
+    """Textbook 19.2.2: the updated covariance in the Joseph form, symmetrised.
+
+    ``(I - K Phi) Sigma_+ (I - K Phi)^T + K Sigma_m K^T``: for the optimal gain
+    ``K`` it equals ``(I - K Phi) Sigma_+`` in exact arithmetic, and it stays
+    symmetric positive semi-definite in floating point. The EKF's Eq. (12) is
+    the case of one scalar measurement, ``Phi = h^T`` and ``Sigma_m = rho**2``.
+
+    Parameters
+    ----------
+    cov : ndarray, shape (..., n, n)
+        The predicted covariance ``Sigma_+``.
+    gain : ndarray, shape (..., n, m)
+        The gain ``K``.
+    Phi : ndarray, shape (..., m, n)
+        The measurement matrix (the linearised measurement).
+    Sigma_m : ndarray, shape (..., m, m)
+        The measurement noise covariance.
+
+    Returns
+    -------
+    ndarray, shape (..., n, n)
+    """
+    A = _eye(cov.shape[-1]) - gain @ Phi
+    return symmetric(A @ cov @ A.mT + gain @ Sigma_m @ gain.mT)
+
+
 def _update(mean, cov, x, Phi, Sigma_m, mu_m) -> Update:
     CPt = cov @ Phi.mT
     S = Sigma_m + Phi @ CPt  # innovation covariance (..., m, m)
@@ -243,17 +271,15 @@ def _update(mean, cov, x, Phi, Sigma_m, mu_m) -> Update:
         quad = r[..., 0] ** 2 / s
     else:
         # S is symmetric, so K^T = S^-1 Phi Sigma_+
-        S = 0.5 * (S + S.mT)
+        S = symmetric(S)
         K = np.linalg.solve(S, CPt.mT).mT
         chol = np.linalg.cholesky(S)
         log_det = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
         z = np.linalg.solve(chol, r[..., None])[..., 0]
         quad = np.sum(z**2, axis=-1)
     new_mean = mean + (K @ r[..., None])[..., 0]
-    A = _eye(mean.shape[-1]) - K @ Phi
-    new_cov = A @ cov @ A.mT + K @ Sigma_m @ K.mT
     log_likelihood = -0.5 * (S.shape[-1] * _LOG_2PI + log_det + quad)
-    return Update(new_mean, 0.5 * (new_cov + new_cov.mT), log_likelihood)
+    return Update(new_mean, joseph(cov, K, Phi, Sigma_m), log_likelihood)
 
 
 def update(mean, cov, x, Phi, Sigma_m, mu_m=None) -> Update:
@@ -548,7 +574,7 @@ def smoother_step(
     C = gain
     smoothed_mean = mean + (C @ (next_mean - predicted_mean)[..., None])[..., 0]
     smoothed_cov = cov + C @ (next_cov - predicted_cov) @ C.mT
-    return MeanAndCov(smoothed_mean, 0.5 * (smoothed_cov + smoothed_cov.mT))
+    return MeanAndCov(smoothed_mean, symmetric(smoothed_cov))
 
 
 def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):

@@ -30,9 +30,9 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _checks, bank, kalman, model, optimal
-from .gaussian import Gaussian, student_t
+from .gaussian import Gaussian, student_t, symmetric
 from .optimal import log_posterior
-from .resampling import weighted_moments, weighted_standard_errors
+from .resampling import normalised, weighted_moments, weighted_standard_errors
 from .second_order import bearing_residuals, minimiser, second_order, trajectory_map
 
 LogDensity = Callable[[np.ndarray], np.ndarray]
@@ -288,7 +288,7 @@ def numerical_hessian(fun: Callable, x, step: float = 1e-4) -> np.ndarray:
             for a in eye
         ]
     )
-    return 0.5 * (H + H.T)
+    return symmetric(H)
 
 
 def log_gaussian_integral_brute(M, l, n: int = 801, width: float = 12.0) -> float:
@@ -363,9 +363,9 @@ def trapezoid_depth_moments(
     t = np.arange(t_lo, t_hi + step / 2, step)
     y = 2.0 + np.exp(t)
     log_w = optimal.conditional(y, mu, rho, prior, reading)[0] + t
-    w = np.exp(log_w - np.max(log_w))
-    mean = float(np.sum(w * y) / np.sum(w))
-    return mean, float(np.sqrt(np.sum(w * (y - mean) ** 2) / np.sum(w))), int(t.size)
+    W, _ = normalised(log_w)
+    mean = float(np.sum(W * y))
+    return mean, float(np.sqrt(np.sum(W * (y - mean) ** 2))), int(t.size)
 
 
 def track_fixed_lag(track) -> tuple[np.ndarray, np.ndarray]:
@@ -514,7 +514,7 @@ def trajectory_laplace_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     R_inv = np.linalg.inv(R)
     T, offset = _dense_final_state_map(n_frames)
     cov = T @ R_inv @ R_inv.T @ T.T
-    return T @ (R_inv @ (Q.T @ rhs)) + offset, 0.5 * (cov + cov.T)
+    return T @ (R_inv @ (Q.T @ rhs)) + offset, symmetric(cov)
 
 
 def iterated_smoother_dense(mu, rho: float, prior_mean, prior_cov, q: float):
@@ -561,4 +561,4 @@ def iterated_smoother_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     R_inv = np.linalg.inv(np.linalg.qr(M, mode="r"))
     T, offset = _dense_final_state_map(K)
     cov = T @ R_inv @ R_inv.T @ T.T
-    return T @ z + offset, 0.5 * (cov + cov.T), iterations
+    return T @ z + offset, symmetric(cov), iterations

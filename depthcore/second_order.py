@@ -42,7 +42,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _checks, model
-from .gaussian import Gaussian
+from .gaussian import Gaussian, symmetric
 from .model import noise_free_state, noise_free_states, residual_gradients, residuals
 
 __all__ = [
@@ -550,7 +550,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
         s = trajectory_states(z)
         front = z[:, 1] > 0
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            r = weight[rows, None] * (s[..., 0] / s[..., 1] - mu[rows])
+            r = weight[rows, None] * (model.project(s) - mu[rows])
             value = np.sum(r**2, axis=-1) + np.sum((z[:, 3:] / q) ** 2, axis=-1)
         return np.where(front, value, np.inf)
 
@@ -562,7 +562,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
             break
         za = z[rows]
         s = trajectory_states(za)
-        r = weight[rows, None] * (s[..., 0] / s[..., 1] - mu[rows])
+        r = weight[rows, None] * (model.project(s) - mu[rows])
         step, _ = trajectory_solve(bearing_rows(s, weight[rows]), -r, -za[:, 3:] / q, q)
         step = np.where(np.isfinite(step), step, 0.0)
         z_new, f_new = damped_step(za, step, f[rows], lambda y, rows=rows: objective(y, rows))
@@ -582,7 +582,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
     R_inv = np.linalg.inv(R)
     cov = R_inv @ np.swapaxes(R_inv, -1, -2)
     mean = s[:, -1] + trajectory_states(dz, offset=False)[:, -1]
-    return mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    return mean, symmetric(cov)
 
 
 def _square_root_solve(c, g, weight, prior_mean, prior_cov):
@@ -622,7 +622,7 @@ def _square_root_solve(c, g, weight, prior_mean, prior_cov):
     R_inv = np.linalg.inv(R)
     delta = np.einsum("bij,bkj,bk->bi", R_inv, Q[:, n_frames:], whitened[..., 3])
     cov = R_inv @ np.swapaxes(R_inv, -1, -2)
-    return c + delta, 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    return c + delta, symmetric(cov)
 
 
 def second_order(
