@@ -52,6 +52,27 @@ def defined_private(source: str) -> set[str]:
 DEFINED = {m: defined_private((PACKAGE / f"{m}.py").read_text(encoding="utf-8")) for m in MODULES}
 
 
+def bound_modules(tree: ast.AST, modules) -> dict[str, str]:
+    """The local names bound to ``depthcore`` modules: ``from depthcore import x as y``, ...
+
+    Returns
+    -------
+    dict mapping each local name to the module (one of ``modules``) it stands for
+    """
+    bound = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and _owner(node) == "":
+            for alias in node.names:
+                if alias.name in modules:
+                    bound[alias.asname or alias.name] = alias.name
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                parts = alias.name.split(".")
+                if parts[0] == "depthcore" and len(parts) == 2 and alias.asname:
+                    bound[alias.asname] = parts[1]
+    return bound
+
+
 def private_uses(source: str, own: str, defined: dict[str, set[str]] | None = None) -> list[str]:
     """Every use, in ``source`` (the module ``own``), of another module's underscore name.
 
@@ -67,30 +88,13 @@ def private_uses(source: str, own: str, defined: dict[str, set[str]] | None = No
     others = set().union(*(names for m, names in defined.items() if m != own))
     mine = defined_private(source)
     tree = ast.parse(source)
-    modules: dict[str, str] = {}  # local name -> depthcore module it is bound to
+    modules = bound_modules(tree, MODULES)
     found = []
     for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom):
-            owner = _owner(node)
-            if owner is None:
-                continue
+        if isinstance(node, ast.ImportFrom) and _owner(node) not in (None, "", own):
             for alias in node.names:
-                local = alias.asname or alias.name
-                if owner == "":  # from . import model [as m]
-                    if alias.name in MODULES:
-                        modules[local] = alias.name
-                    continue
-                if owner == own:
-                    continue
                 if _private(alias.name):
-                    found.append(f"{node.lineno}: imports {alias.name} from {owner}")
-                elif alias.name in MODULES and owner == "":
-                    modules[local] = alias.name
-        elif isinstance(node, ast.Import):
-            for alias in node.names:
-                parts = alias.name.split(".")
-                if parts[0] == "depthcore" and len(parts) == 2 and alias.asname:
-                    modules[alias.asname] = parts[1]
+                    found.append(f"{node.lineno}: imports {alias.name} from {_owner(node)}")
     for node in ast.walk(tree):
         if (
             isinstance(node, ast.Attribute)
@@ -188,24 +192,14 @@ def borrowed_uses(source: str, defines: dict[str, set[str]] | None = None) -> li
     """
     defines = DEFINES if defines is None else defines
     tree = ast.parse(source)
-    modules: dict[str, str] = {}
+    modules = bound_modules(tree, defines)
     found = []
     for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom):
+        if isinstance(node, ast.ImportFrom) and _owner(node) in defines:
             owner = _owner(node)
-            if owner is None:
-                continue
             for alias in node.names:
-                if owner == "":
-                    if alias.name in defines:
-                        modules[alias.asname or alias.name] = alias.name
-                elif owner in defines and alias.name not in defines[owner] | set(defines):
+                if alias.name not in defines[owner] | set(defines):
                     found.append(f"{node.lineno}: imports {alias.name} from {owner}")
-        elif isinstance(node, ast.Import):
-            for alias in node.names:
-                parts = alias.name.split(".")
-                if parts[0] == "depthcore" and len(parts) == 2 and alias.asname:
-                    modules[alias.asname] = parts[1]
     for node in ast.walk(tree):
         if (
             isinstance(node, ast.Attribute)
