@@ -143,7 +143,7 @@ def normalised(log_w):
     Parameters
     ----------
     log_w : array_like, shape (..., N)
-        Unnormalised log weights; ``-inf`` is weight zero.
+        As for :func:`normalise`.
 
     Returns
     -------

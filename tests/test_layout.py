@@ -73,6 +73,28 @@ def bound_modules(tree: ast.AST, modules) -> dict[str, str]:
     return bound
 
 
+def taken_names(tree: ast.AST, modules, own: str | None = None):
+    """Every name taken from a ``depthcore`` module other than ``own``, imported or read.
+
+    Yields
+    ------
+    tuple of (line, owner, name, description)
+    """
+    bound = bound_modules(tree, modules)
+    for node in ast.walk(tree):
+        owner = _owner(node) if isinstance(node, ast.ImportFrom) else None
+        if owner in modules and owner != own:
+            for alias in node.names:
+                yield node.lineno, owner, alias.name, f"imports {alias.name} from {owner}"
+        elif (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and bound.get(node.value.id, own) != own
+        ):
+            owner = bound[node.value.id]
+            yield node.lineno, owner, node.attr, f"uses {node.value.id}.{node.attr}"
+
+
 def private_uses(source: str, own: str, defined: dict[str, set[str]] | None = None) -> list[str]:
     """Every use, in ``source`` (the module ``own``), of another module's underscore name.
 
@@ -89,22 +111,11 @@ def private_uses(source: str, own: str, defined: dict[str, set[str]] | None = No
     mine = defined_private(source)
     tree = ast.parse(source)
     modules = bound_modules(tree, MODULES)
-    found = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and _owner(node) not in (None, "", own):
-            for alias in node.names:
-                if _private(alias.name):
-                    found.append(f"{node.lineno}: imports {alias.name} from {_owner(node)}")
+    found = [
+        f"{line}: {how}" for line, _, name, how in taken_names(tree, MODULES, own) if _private(name)
+    ]
     for node in ast.walk(tree):
         if (
-            isinstance(node, ast.Attribute)
-            and isinstance(node.value, ast.Name)
-            and node.value.id in modules
-            and modules[node.value.id] != own
-            and _private(node.attr)
-        ):
-            found.append(f"{node.lineno}: uses {node.value.id}.{node.attr}")
-        elif (
             isinstance(node, ast.Attribute)
             and isinstance(node.ctx, ast.Load)
             and _private(node.attr)
@@ -192,24 +203,12 @@ def borrowed_uses(source: str, defines: dict[str, set[str]] | None = None) -> li
     """
     defines = DEFINES if defines is None else defines
     tree = ast.parse(source)
-    modules = bound_modules(tree, defines)
-    found = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and _owner(node) in defines:
-            owner = _owner(node)
-            for alias in node.names:
-                if alias.name not in defines[owner] | set(defines):
-                    found.append(f"{node.lineno}: imports {alias.name} from {owner}")
-    for node in ast.walk(tree):
-        if (
-            isinstance(node, ast.Attribute)
-            and isinstance(node.value, ast.Name)
-            and node.value.id in modules
-        ):
-            owner = modules[node.value.id]
-            # a module's modules (``filters.optimal``) are the package's: not counted
-            if node.attr not in defines[owner] | set(defines) and not node.attr.startswith("__"):
-                found.append(f"{node.lineno}: uses {node.value.id}.{node.attr}")
+    # a module's modules (``filters.optimal``) are the package's: not counted
+    found = [
+        f"{line}: {how}"
+        for line, owner, name, how in taken_names(tree, defines)
+        if name not in defines[owner] | set(defines) and not name.startswith("__")
+    ]
     return sorted(found, key=lambda u: int(u.split(":")[0]))
 
 
