@@ -131,7 +131,7 @@ class Frame(NamedTuple):
     """Where one interval's integrand lives, per problem: ``t = t0 + sigma L sinh(u / L)``.
 
     ``t0`` (B,) is the mode of the integrand in ``t`` and ``sigma`` (B,) its
-    width there (from the curvature); ``L`` is :data:`_CORE`. Within ``L``
+    width there (from the curvature); ``L = 4`` (``_CORE``). Within ``L``
     widths of the mode ``u`` is the standardised variable ``(t - t0) /
     sigma``, where the trapezoid rule converges as fast as on a Gaussian;
     beyond, the node spacing in ``t`` grows in proportion to the distance
@@ -575,7 +575,7 @@ def integrate(pb: Problem, intervals, rtol: float):
     """Integrate the depth marginal of a batch by the trapezoid rule; moments, errors, grids.
 
     The first level of the trapezoid rule spans each interval's whole ``u``
-    range at step :data:`_U_STEP`; the nodes where the integrand is above
+    range at step 0.5 (``_U_STEP``); the nodes where the integrand is above
     ``e^-60`` of its maximum (and the unit-step scan's) set the range
     ``[lo, hi]`` that later levels refine by halving the step. Each problem's
     step is halved until its means and SDs change by at most ``rtol`` of the
