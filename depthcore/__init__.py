@@ -14,7 +14,8 @@ Modules, by concept: :mod:`~depthcore.model` (Eqs. (1)-(5), (7), (9), (11),
 (20)-(22)), :mod:`~depthcore.gaussian` (Eq. (13), the paper's prior),
 :mod:`~depthcore.scenarios` (Figures 2-6 and the reported numbers),
 :mod:`~depthcore.second_order` (Eqs. (8), (24)), :mod:`~depthcore.ekf`
-(Eqs. (10)-(12)), :mod:`~depthcore.optimal` (Eqs. (6), (13)-(16)); beyond the
+(Eqs. (10)-(12)), :mod:`~depthcore.optimal` (Eqs. (6), (13)-(16)), integrated by
+the depth quadrature :mod:`~depthcore.quadrature`; beyond the
 paper, the unscented Kalman filter (:mod:`~depthcore.ukf`), importance
 sampling from a second-order proposal (:mod:`~depthcore.particle`, with
 :mod:`~depthcore.resampling`), the causal bootstrap filter with resample-move
@@ -63,6 +64,7 @@ MODULES = (
     "model",
     "optimal",
     "particle",
+    "quadrature",
     "rbpf",
     "reference",
     "report",

@@ -330,7 +330,7 @@ def _cmd_study(args) -> str:
         repeated = sorted({n for n in args.filters if args.filters.count(n) > 1})
         raise ValueError(f"--filters names {', '.join(repeated)} more than once")
     if q > 0 and "filters" not in getattr(args, "_given", ()):  # the default: those that can run
-        names = tuple(n for n in names if study.FILTERS[n].with_process_noise)
+        names = tuple(n for n in names if FILTERS[n].with_process_noise)
     if args.truth == [study.PRIOR_TRUTH]:
         _refuse_ignored(
             args,

@@ -167,7 +167,7 @@ def covariance(value, name: str, dim: int) -> np.ndarray:
     return 0.5 * (arr + arr.T)
 
 
-def _index(flat_index: int, batch: tuple[int, ...]) -> str:
+def batch_index(flat_index: int, batch: tuple[int, ...]) -> str:
     """``[i]`` or ``[i, j]``: the position of a flat row in a batch of shape ``batch``."""
     return "[" + ", ".join(str(int(i)) for i in np.unravel_index(flat_index, batch)) + "]"
 
@@ -204,15 +204,16 @@ def covariances(value, name: str, dim: int = 3) -> np.ndarray:
     bad = asymmetric | ~definite
     if np.any(bad):
         i = int(np.argmax(bad))
-        covariance(flat[i], name + (_index(i, batch) if batch else ""), dim)
+        covariance(flat[i], name + (batch_index(i, batch) if batch else ""), dim)
         raise ValueError(
-            f"{name}{_index(i, batch) if batch else ''} must be positive definite; "
+            f"{name}{batch_index(i, batch) if batch else ''} must be positive definite; "
             f"eigenvalues are {np.linalg.eigvalsh(sym[i]).tolist()}"
         )
     return sym.reshape(arr.shape)
 
 
-def _broadcasts(shape: tuple[int, ...], target: tuple[int, ...]) -> bool:
+def broadcasts(shape: tuple[int, ...], target: tuple[int, ...]) -> bool:
+    """Whether an array of ``shape`` broadcasts to ``target`` (and to nothing larger)."""
     try:
         return np.broadcast_shapes(shape, target) == target
     except ValueError:
@@ -250,6 +251,13 @@ def spawn(seed, n: int) -> list[np.random.SeedSequence]:
         )
         for i in range(n)
     ]
+
+
+def nonnegative_count(value, name: str) -> int:
+    """Return ``value`` as an int, checking that it is an integer >= 0."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+    return int(value)
 
 
 def count(value, name: str) -> int:

@@ -66,7 +66,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import ndtr
 
-from . import _checks, kalman, model, optimal
+from . import _checks, kalman, model, optimal, quadrature, resampling
 
 #: The lateral state ``(x, v)`` moves by ``x <- x + v``: the transition matrix.
 PSI = np.array([[1.0, 1.0], [0.0, 1.0]])
@@ -75,7 +75,6 @@ PSI.setflags(write=False)
 _LOG_2PI = float(np.log(2.0 * np.pi))
 #: Nodes whose log probability is this far below the largest are ignored by the CDF.
 _CUTOFF = 60.0
-_GAUSS_LEGENDRE = np.polynomial.legendre.leggauss(8)
 _MAX_DOUBLINGS = 12
 
 
@@ -147,8 +146,7 @@ def _prior(prior_mean, prior_cov):
     prior_cov = _checks.finite_array(prior_cov, "prior_cov")
     if prior_cov.ndim < 2 or prior_cov.shape[-2:] != (3, 3):
         raise ValueError(f"prior_cov must have shape (..., 3, 3), got shape {prior_cov.shape}")
-    # kalman's check: symmetric positive definite, batched
-    prior_cov = kalman._covariance(prior_cov, "prior_cov", 3, definite=True)
+    prior_cov = _checks.covariances(prior_cov, "prior_cov", 3)
     return prior_mean, prior_cov
 
 
@@ -581,15 +579,27 @@ def _append(history: kalman.FilterResult, pred, upd) -> kalman.FilterResult:
 # --- the mixture over the nodes --------------------------------------------------------
 
 
-def _mixture_moments(W, means, covs, depths):
-    """Mean (..., 3) and covariance (..., 3, 3) of ``(x, y, v)`` under the node mixture.
+def mixture_moments(W, means, covs, depths):
+    """Mean and covariance of ``(x, y, v)`` under a mixture over depth nodes.
 
-    ``W`` (..., J) are weights >= 0 (probabilities once normalised);
-    ``means`` (..., J, 2) and ``covs`` (..., J, 2, 2) the Gaussians of
-    ``(x, v)`` at each node; ``depths`` (..., J) the node depths (known
-    exactly given the node). The law of total variance: the weighted
-    covariance of the nodes' means plus their weighted covariances
-    (:func:`_stacked_moments` with one set of weights).
+    The law of total variance: the weighted covariance of the nodes' means
+    plus their weighted covariances (:func:`_stacked_moments` with one set
+    of weights); the depth is known exactly given the node.
+
+    Parameters
+    ----------
+    W : array_like, shape (..., J)
+        Weights >= 0 (probabilities once normalised).
+    means : ndarray, shape (..., J, 2)
+    covs : ndarray, shape (..., J, 2, 2)
+        The Gaussians of ``(x, v)`` at each node.
+    depths : ndarray, shape (..., J)
+        The node depths.
+
+    Returns
+    -------
+    mean : ndarray, shape (..., 3)
+    cov : ndarray, shape (..., 3, 3)
     """
     mean, cov = _stacked_moments(np.asarray(W)[..., None, :], means, covs, depths)
     return mean[..., 0, :], cov[..., 0, :, :]
@@ -803,7 +813,8 @@ class Mixture:
         is within ``e**-60`` of the largest; the CDF is 0 below and 1 above them.
         In between, the density is integrated from the lower end by composite
         8-point Gauss-Legendre panels in ``t = log(y_1)``, the panels halved
-        until the CDF changes by at most ``rtol``.
+        until the CDF changes by at most ``rtol``
+        (:func:`depthcore.quadrature.gauss_legendre_cdf`).
 
         Parameters
         ----------
@@ -842,24 +853,21 @@ class Mixture:
         eps = np.finfo(float).eps
         floor = 64.0 * eps * (1.0 + np.abs(centre)) / np.maximum(sd_t[..., None], eps)
         tol = np.maximum(rtol, floor)
-        x, w = _GAUSS_LEGENDRE
-        previous = None
-        for _ in range(_MAX_DOUBLINGS):
-            edges = lo[..., None] + width[..., None] * np.linspace(0.0, 1.0, panels + 1)
-            half = 0.5 * np.diff(edges, axis=-1)[..., None]  # (..., K, P, 1)
-            tt = 0.5 * (edges[..., 1:] + edges[..., :-1])[..., None] + half * x
+
+        def density(tt):
             shape = tt.shape
             y1 = np.exp(tt.reshape(shape[:-3] + (-1,)))
             log_w = _filter_bank(y1, b.mu, b.rho, b.q, b.prior_mean, b.prior_cov, False).log_weight
             dens = np.exp(log_w - self.log_normaliser[..., None] + np.log(y1))  # dy = y dt
-            cdf = np.sum(dens.reshape(shape) * half * w, axis=(-2, -1))
-            if previous is not None and np.all(np.abs(cdf - previous) <= tol):
-                break
-            previous, panels = cdf, 2 * panels
-        else:
+            return dens.reshape(shape)
+
+        cdf, settled, panels = quadrature.gauss_legendre_cdf(
+            density, lo, width, panels, tol, max_levels=_MAX_DOUBLINGS
+        )
+        if not settled:
             raise ValueError(
                 f"y: the depth CDF did not settle to rtol = {rtol:.3g} (or its roundoff "
-                f"floor) within {panels // 2} panels"
+                f"floor) within {panels} panels"
             )
         cdf = np.where(t >= hi, 1.0, np.where(t <= lo, 0.0, np.clip(cdf, 0.0, 1.0)))
         return restore(cdf)
@@ -934,7 +942,7 @@ class Mixture:
             res = _filter_bank(b.nodes, b.mu, b.rho, b.q, b.prior_mean, b.prior_cov, True).history
         s = kalman.fixed_interval_smoother(res, PSI)  # (..., J, N, 2), (..., J, N, 2, 2)
         frames = np.arange(b.n_frames)
-        mean, cov = _mixture_moments(
+        mean, cov = mixture_moments(
             self.probabilities[..., None, :],
             np.swapaxes(s.mean, -2, -3),
             np.swapaxes(s.cov, -3, -4),
@@ -1001,15 +1009,12 @@ def _mixture(bank: Bank, log_weights, halved: bool = False):
     covariance (..., 3, 3), the largest log probability (..., 1) and ``free`` (...).
     """
     a = bank.log_weight + log_weights
-    top = np.max(a, axis=-1, keepdims=True)  # finite: a positive weight per problem
-    terms = np.exp(a - top)
-    total = np.sum(terms, axis=-1, keepdims=True)
-    log_normaliser = (top + np.log(total))[..., 0]
-    probabilities = terms / total
+    probabilities, log_normaliser = resampling.normalised(a)
     depth_N = bank.nodes + (bank.n_frames - 1)
     if not halved:
-        mean, cov = _mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
+        mean, cov = mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
         return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
+    top = np.max(a, axis=-1, keepdims=True)
     every_other, free = _halving(a, top)
     W = np.empty(probabilities.shape[:-1] + (2,) + probabilities.shape[-1:])
     W[..., 0, :] = probabilities
@@ -1028,7 +1033,7 @@ MAX_FRAMES = _checks.MAX_FRAMES
 
 
 def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
-    """The checked inputs as :class:`depthcore.optimal` quadrature problems, and the batch shape."""
+    """The checked inputs as :class:`depthcore.quadrature.Problem`, and the batch shape."""
     mu, rho, prior_mean, prior_cov = model.batch_inputs(
         mu, rho, prior_mean, prior_cov, triples=False
     )
@@ -1038,7 +1043,7 @@ def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
     q = _checks.nonnegative_batch(process_noise, "process_noise", batch)
     B = int(np.prod(batch))
     prior_cov = np.ascontiguousarray(np.broadcast_to(prior_cov, batch + (3, 3))).reshape(B, 3, 3)
-    pb = optimal._Problem(
+    pb = quadrature.Problem(
         mu=mu.reshape(B, N),
         rho=np.broadcast_to(rho, batch).reshape(B),
         mean=np.broadcast_to(prior_mean, batch + (3,)).reshape(B, 3),
@@ -1046,7 +1051,7 @@ def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
         reading="derived",
         q=np.broadcast_to(q, batch).reshape(B),
         cov=prior_cov,
-        solver=_integrand,
+        integrand=_integrand,
     )
     return pb, batch
 
@@ -1057,13 +1062,13 @@ def _integrand(offsets, pb):
 
 
 def _integrate(pb, rtol: float):
-    """The quadrature of :mod:`depthcore.optimal` on ``y_1 > 0``, moments of ``y_N``.
+    """The quadrature of :mod:`depthcore.quadrature` on ``y_1 > 0``, moments of ``y_N``.
 
     The quadrature reports the depth as ``y_1 + 2`` (its variable is
     ``t = log(y_1)``, as for the paper's three frames); the depth at frame
     ``N`` is ``y_1 + N - 1``.
     """
-    m, err_y, err_v, top, grids = optimal._integrate(pb, (3,), rtol)
+    m, err_y, err_v, top, grids = quadrature.integrate(pb, (3,), rtol)
     mean = m.mean.copy()
     mean[:, 1] += pb.mu.shape[1] - 3
     err_y = np.maximum(err_y, 64.0 * np.finfo(float).eps * np.abs(mean[:, 1]))
@@ -1132,11 +1137,11 @@ def _grid_nodes(grid):
 
     ``grid = (lo, h, n, frame)`` holds the trapezoid nodes ``u_j = lo + h j``,
     ``j < n``, of each problem in the quadrature's variable ``u``, with
-    ``t = log(y_1)`` a function of ``u`` (:class:`depthcore.optimal._Frame`);
+    ``t = log(y_1)`` a function of ``u`` (:class:`depthcore.quadrature.Frame`);
     ``dy_1 = y_1 (dt/du) du``. Rows with fewer nodes are padded with weight 0.
     """
     lo, h, n, frame = grid
-    u = optimal._grid(lo, h, n, 0.0)
+    u = quadrature.grid(lo, h, n, 0.0)
     pad = np.isnan(u)
     u = np.where(pad, lo[:, None], u)
     t = frame.t(u)
@@ -1317,8 +1322,8 @@ def _resolution(post: Mixture, halved_mean, halved_cov, top):
     The nodes of :func:`posterior` are a trapezoid grid in order; dropping
     every other one (doubling the weights of the rest, :func:`_halving`)
     doubles the step, and the change of the depth's and the velocity's mean
-    and SD estimates the error, as the quadrature's own halvings do (floored
-    by roundoff, as in :func:`depthcore.optimal._roundoff`).
+    and SD estimates the error, as the quadrature's own halvings do
+    (:func:`depthcore.quadrature.halving_error`, floored by roundoff).
 
     Parameters
     ----------
@@ -1331,16 +1336,14 @@ def _resolution(post: Mixture, halved_mean, halved_cov, top):
         log weights.
     """
     eps = np.finfo(float).eps
-    errors, floors = [], []
+    floors = []
     for k in (1, 2):
-        sd, sd_c = np.sqrt(post.cov[..., k, k]), np.sqrt(halved_cov[..., k, k])
-        change = np.maximum(np.abs(post.mean[..., k] - halved_mean[..., k]), np.abs(sd - sd_c))
-        # no weight on every other node (NaN moments there): the nodes do not resolve it
-        change = np.where(np.isnan(change), np.inf, change)
-        floor = 64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top[..., 0])) * sd)
-        errors.append(np.maximum(change, floor))
-        floors.append(floor)
-    return np.stack(errors), np.stack(floors)
+        sd = np.sqrt(post.cov[..., k, k])
+        floors.append(
+            64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top[..., 0])) * sd)
+        )
+    floors = np.stack(floors)
+    return quadrature.halving_error(post.mean, post.cov, halved_mean, halved_cov, floors), floors
 
 
 def _pad(a, J: int, axis: int, value):
@@ -1494,7 +1497,7 @@ def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
     """
     b = post.bank
     idx = np.flatnonzero(rows)
-    pb = optimal._Problem(
+    pb = quadrature.Problem(
         mu=b.mu[idx],
         rho=np.broadcast_to(b.rho, rows.shape)[idx],
         mean=b.prior_mean[idx],
@@ -1502,7 +1505,7 @@ def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
         reading="derived",
         q=np.broadcast_to(b.q, rows.shape)[idx],
         cov=b.prior_cov[idx],
-        solver=_integrand,
+        integrand=_integrand,
     )
     fresh = _place(pb, post.rtol, b.history is not None, False)
     J = max(post.log_weights.shape[-1], fresh.log_weights.shape[-1])
@@ -1659,7 +1662,7 @@ def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol:
     mu = _checks.finite_array(mu, "mu")
     if mu.ndim != 1 or mu.size < 1:
         raise ValueError(f"mu must have shape (N,) with N >= 1 (one track), got shape {mu.shape}")
-    lag = kalman._lag(lag)
+    lag = _checks.nonnegative_count(lag, "lag")
     posts = [posterior(mu[:1], rho, prior_mean, prior_cov, process_noise, rtol)]
     for k in range(1, mu.size):
         posts.append(update(posts[-1], mu[k]))
@@ -1679,7 +1682,7 @@ def _lagged(posts, lag: int) -> Smoothed:
     posteriors share their nodes; the frames ``s`` read from a run are smoothed
     from that run's nodes' filters: every chain starts at the filtered
     Gaussian at its own ``t`` and takes the backward steps of textbook 19.2.6
-    (:func:`depthcore.kalman._smoother_step`, each frame's gain computed once)
+    (:func:`depthcore.kalman.smoother_step`, each frame's gain computed once)
     with the others, stopping at its ``s``: at most ``lag`` steps, each over
     all the run's frames and nodes.
     """
@@ -1698,10 +1701,10 @@ def _lagged(posts, lag: int) -> Smoothed:
         t = np.minimum(s + lag, N - 1)
         mean, cov = h.means[:, t, :], h.covs[:, t, :, :]  # (J, frames, ...): at each t
         # the gain at frame k serves every chain through k: one per frame and node
-        gain = kalman._smoother_gain(h.covs[:, :-1], h.predicted_covs[:, 1:], PSI)
+        gain = kalman.smoother_gain(h.covs[:, :-1], h.predicted_covs[:, 1:], PSI)
         for i in range(1, int(np.max(t - s)) + 1):  # w_{k} from w_{k + 1}, k = t - i
             k = np.maximum(t - i, np.minimum(s, t - 1))  # a finished chain: any frame, dropped
-            step = kalman._smoother_step(
+            step = kalman.smoother_step(
                 gain[:, k],
                 h.means[:, k, :],
                 h.covs[:, k, :, :],
@@ -1714,7 +1717,7 @@ def _lagged(posts, lag: int) -> Smoothed:
             mean = np.where(going, step.mean, mean)
             cov = np.where(going[..., None], step.cov, cov)
         W = np.stack([posts[k].probabilities for k in t])
-        means[first:last], covs[first:last] = _mixture_moments(
+        means[first:last], covs[first:last] = mixture_moments(
             W, np.swapaxes(mean, 0, 1), np.swapaxes(cov, 0, 1), b.nodes + s[:, None]
         )
     return Smoothed(means, covs)

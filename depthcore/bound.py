@@ -62,6 +62,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _checks, model
+from .gaussian import symmetric
 
 #: The direction of the process noise in ``(x, y, v)``: only the velocity changes.
 U = np.array([0.0, 0.0, 1.0])
@@ -196,7 +197,7 @@ def information(measurement_info, prior_cov=None, process_noise=0.0) -> np.ndarr
                 / (1.0 + q2[k] * (Mu @ U))[..., None, None]
             )
         J = M + info[..., k + 1, :, :]
-        J = 0.5 * (J + np.swapaxes(J, -1, -2))
+        J = symmetric(J)
         out[..., k + 1, :, :] = J
     return out
 

@@ -21,8 +21,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from . import _checks, model
-from .gaussian import Gaussian, History, MeanAndCov
+from . import _checks, kalman, model
+from .gaussian import Gaussian, History, MeanAndCov, symmetric
 
 #: The EKF's estimates after each measurement: ``means[i]`` is ``m_{i+1}``,
 #: ``covs[i]`` is ``P_{i+1}``; ``.posterior`` is ``p_e = N(x, m_3, P_3)``.
@@ -66,7 +66,7 @@ def _gradient(n) -> np.ndarray:
         )
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
         h = model.observation_vector(n)
-        finite = np.all(np.isfinite(h)) and np.all(np.isfinite(n[..., 0] / n[..., 1]))
+        finite = np.all(np.isfinite(h)) and np.all(np.isfinite(model.project(n)))
     if not finite:
         raise ValueError(
             "prior_mean leads the EKF to a predicted depth n2 so close to the camera "
@@ -100,14 +100,13 @@ def update(n, C, mu, rho: float) -> MeanAndCov:
     r2 = np.asarray(rho, dtype=float) ** 2
     Ch = np.einsum("...ij,...j->...i", C, h)
     s = r2 + np.einsum("...i,...i->...", h, Ch)
-    innovation = np.asarray(mu, dtype=float) - n[..., 0] / n[..., 1]
+    innovation = np.asarray(mu, dtype=float) - model.project(n)
     K = Ch / s[..., None]  # the Kalman gain
     mean = n + innovation[..., None] * K
     # C - C h h^T C / s of Eq. (12), in the Joseph form (I - K h^T) C (I - K h^T)^T + rho^2 K K^T,
     # which equals it algebraically and keeps P symmetric positive definite in floating point.
-    A = np.eye(3) - K[..., :, None] * h[..., None, :]
-    cov = A @ C @ np.swapaxes(A, -1, -2) + r2[..., None, None] * K[..., :, None] * K[..., None, :]
-    return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    cov = kalman.joseph(C, K[..., :, None], h[..., None, :], r2[..., None, None])
+    return MeanAndCov(mean, cov)
 
 
 def run_gaussian_filter(
@@ -209,7 +208,7 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
         roots.append(R_new)
     R_inv = np.linalg.inv(np.stack(roots, axis=-3))
     covs = R_inv @ np.swapaxes(R_inv, -1, -2)
-    return History(np.stack(means, axis=-2), 0.5 * (covs + np.swapaxes(covs, -1, -2)))
+    return History(np.stack(means, axis=-2), symmetric(covs))
 
 
 #: Linear part of ``G^{-1}``, the inverse of ``F`` of Eq. (9).
@@ -246,7 +245,7 @@ def _update_information(n, R, mu, rho):
     small noise.
     """
     h = _gradient(n)  # Eq. (11)
-    innovation = np.asarray(mu, dtype=float) - n[..., 0] / n[..., 1]
+    innovation = np.asarray(mu, dtype=float) - model.project(n)
     stacked = np.concatenate([R, (h / rho[..., None])[..., None, :]], axis=-2)  # (..., 4, 3)
     Q, R_new = np.linalg.qr(stacked)
     delta = np.linalg.solve(R_new, (Q[..., 3, :] * (innovation / rho)[..., None])[..., None])[

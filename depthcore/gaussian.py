@@ -65,6 +65,23 @@ class Gaussian:
         return gaussian_logpdf(x, self.mean, self.cov)
 
 
+def symmetric(cov) -> np.ndarray:
+    """The symmetric part ``(C + C^T) / 2`` of a stack of square matrices.
+
+    A covariance computed in floating point is symmetric only to roundoff;
+    this makes it exactly so, changing it by no more than that roundoff.
+
+    Parameters
+    ----------
+    cov : ndarray, shape (..., n, n)
+
+    Returns
+    -------
+    ndarray, shape (..., n, n)
+    """
+    return 0.5 * (cov + np.swapaxes(cov, -1, -2))
+
+
 def gaussian_logpdf(x, mean, cov) -> np.ndarray:
     """Log density of ``N(mean, cov)`` at ``x``.
 

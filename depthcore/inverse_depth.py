@@ -43,12 +43,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _checks, model
-from .gaussian import MeanAndCov
-
-
-def _symmetric(cov):
-    return 0.5 * (cov + np.swapaxes(cov, -1, -2))
+from . import _checks, kalman, model
+from .gaussian import MeanAndCov, symmetric
 
 
 def prior(mean, cov) -> MeanAndCov:
@@ -82,7 +78,7 @@ def prior(mean, cov) -> MeanAndCov:
     J[..., 2, 1] = -v / y**2
     J[..., 2, 2] = 1.0 / y
     return MeanAndCov(
-        np.stack([x / y, 1.0 / y, v / y], axis=-1), _symmetric(J @ P @ np.swapaxes(J, -1, -2))
+        np.stack([x / y, 1.0 / y, v / y], axis=-1), symmetric(J @ P @ np.swapaxes(J, -1, -2))
     )
 
 
@@ -144,12 +140,7 @@ def update(z, S, mu, rho, k: int) -> MeanAndCov:
     s = r2 + np.einsum("...i,...i->...", h, Sh)
     K = Sh / s[..., None]
     mean = z + (np.asarray(mu, dtype=float) - z[..., 0] / D)[..., None] * K
-    A = np.eye(3) - K[..., :, None] * h[..., None, :]
-    cov = (
-        A @ S @ np.swapaxes(A, -1, -2)
-        + np.asarray(r2)[..., None, None] * K[..., :, None] * K[..., None, :]
-    )
-    return MeanAndCov(mean, _symmetric(cov))
+    return MeanAndCov(mean, kalman.joseph(S, K[..., :, None], h[..., None, :], r2[..., None, None]))
 
 
 def to_state(z, S, k: int) -> MeanAndCov:
@@ -180,7 +171,7 @@ def to_state(z, S, k: int) -> MeanAndCov:
     J[..., 2, 1] = -s / w**2
     J[..., 2, 2] = 1.0 / w
     mean = np.stack([a / w, 1.0 / w + (k - 1), s / w], axis=-1)
-    return MeanAndCov(mean, _symmetric(J @ S @ np.swapaxes(J, -1, -2)))
+    return MeanAndCov(mean, symmetric(J @ S @ np.swapaxes(J, -1, -2)))
 
 
 def run(

@@ -54,13 +54,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import _checks, model
+from . import _checks, kalman, model
 from .ekf import predict
+from .gaussian import symmetric
 from .second_order import (
-    _trajectory_map,
-    _trajectory_residuals,
+    bearing_residuals,
     bearing_rows,
     damped_step,
+    trajectory_map,
     trajectory_solve,
     trajectory_states,
 )
@@ -147,9 +148,8 @@ def update(n, C, mu, rho, max_iterations: int = MAX_ITERATIONS) -> IteratedUpdat
     h = model.observation_vector(linearised_at)
     Ch = np.einsum("...ij,...j->...i", C, h)
     K = Ch / (r2 + np.einsum("...i,...i->...", h, Ch))[..., None]
-    A = np.eye(3) - K[..., :, None] * h[..., None, :]
-    cov = A @ C @ np.swapaxes(A, -1, -2) + r2[..., None, None] * K[..., :, None] * K[..., None, :]
-    return IteratedUpdate(x, 0.5 * (cov + np.swapaxes(cov, -1, -2)), iterations)
+    cov = kalman.joseph(C, K[..., :, None], h[..., None, :], r2[..., None, None])
+    return IteratedUpdate(x, cov, iterations)
 
 
 def run(
@@ -327,9 +327,7 @@ def smoother(
     FK = model.G_linear(K - 1)
     cov = FK @ cov1 @ FK.T
     trajectory = np.stack([model.G(x, k) for k in range(K)], axis=-2)
-    return SmootherResult(
-        model.G(x, K - 1), 0.5 * (cov + np.swapaxes(cov, -1, -2)), iterations, ~active, trajectory
-    )
+    return SmootherResult(model.G(x, K - 1), symmetric(cov), iterations, ~active, trajectory)
 
 
 def trajectory_residuals(z, mu, rho, prior_mean, prior_cov, q):
@@ -347,7 +345,7 @@ def trajectory_residuals(z, mu, rho, prior_mean, prior_cov, q):
     """
     K = mu.shape[-1]
     L_inv = np.linalg.inv(np.linalg.cholesky(prior_cov))
-    bearing, J = _trajectory_residuals(z, mu, _trajectory_map(K))
+    bearing, J = bearing_residuals(z, mu, trajectory_map(K))
     M = np.zeros((2 * K + 2, K + 2))
     M[:3, :3] = L_inv
     M[3 : K + 3] = J / rho
@@ -379,7 +377,7 @@ def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:
         safe = np.where(front[:, None], z, 1.0)
         s = trajectory_states(safe)
         prior = np.einsum("bij,bj->bi", L_inv[rows], safe[:, :3] - m[rows])
-        bearing = (s[..., 0] / s[..., 1] - mu[rows]) * weight[rows, None]
+        bearing = (model.project(s) - mu[rows]) * weight[rows, None]
         value = (
             np.sum(prior**2, axis=-1)
             + np.sum(bearing**2, axis=-1)
@@ -400,7 +398,7 @@ def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:
         H = bearing_rows(s, weight[rows])
         step, _ = trajectory_solve(
             H,
-            -(s[..., 0] / s[..., 1] - mu[rows]) * weight[rows, None],
+            -(model.project(s) - mu[rows]) * weight[rows, None],
             -za[:, 3:] / q,
             q,
             L_inv[rows],
@@ -425,7 +423,7 @@ def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:
     cov = R_inv @ np.swapaxes(R_inv, -1, -2)
     return SmootherResult(
         s[:, -1].reshape(batch + (3,)),
-        (0.5 * (cov + np.swapaxes(cov, -1, -2))).reshape(batch + (3, 3)),
+        symmetric(cov).reshape(batch + (3, 3)),
         iterations.reshape(batch),
         converged.reshape(batch),
         s.reshape(batch + (K, 3)),

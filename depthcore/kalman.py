@@ -58,6 +58,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _checks
+from .gaussian import symmetric
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 #: Relative asymmetry tolerated in a covariance matrix.
@@ -153,7 +154,7 @@ def _covariance(value, name: str, n: int, definite: bool) -> np.ndarray:
     scale = np.max(np.abs(arr), axis=(-2, -1), keepdims=True)
     if np.any(np.abs(arr - np.swapaxes(arr, -1, -2)) > _SYMMETRY_TOL * scale):
         raise ValueError(f"{name} must be symmetric")
-    arr = 0.5 * (arr + np.swapaxes(arr, -1, -2))
+    arr = symmetric(arr)
     if definite:
         try:
             np.linalg.cholesky(arr)
@@ -198,7 +199,7 @@ _EYES: dict[int, np.ndarray] = {}
 def _predict(mean, cov, Psi, Sigma_p, mu_p) -> MeanAndCov:
     mean = mu_p + (Psi @ mean[..., None])[..., 0]
     cov = Sigma_p + Psi @ cov @ Psi.mT
-    return MeanAndCov(mean, 0.5 * (cov + cov.mT))
+    return MeanAndCov(mean, symmetric(cov))
 
 
 def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
@@ -232,6 +233,33 @@ def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
     return _predict(mean, cov, Psi, Sigma_p, mu_p)
 
 
+def joseph(cov, gain, Phi, Sigma_m) -> np.ndarray:
+    """Textbook 19.2.2: the updated covariance in the Joseph form, symmetrised.
+
+    ``(I - K Phi) Sigma_+ (I - K Phi)^T + K Sigma_m K^T``: for the optimal gain
+    ``K`` it equals ``(I - K Phi) Sigma_+`` in exact arithmetic, and it stays
+    symmetric positive semi-definite in floating point. The EKF's Eq. (12) is
+    the case of one scalar measurement, ``Phi = h^T`` and ``Sigma_m = rho**2``.
+
+    Parameters
+    ----------
+    cov : ndarray, shape (..., n, n)
+        The predicted covariance ``Sigma_+``.
+    gain : ndarray, shape (..., n, m)
+        The gain ``K``.
+    Phi : ndarray, shape (..., m, n)
+        The measurement matrix (the linearised measurement).
+    Sigma_m : ndarray, shape (..., m, m)
+        The measurement noise covariance.
+
+    Returns
+    -------
+    ndarray, shape (..., n, n)
+    """
+    A = _eye(cov.shape[-1]) - gain @ Phi
+    return symmetric(A @ cov @ A.mT + gain @ Sigma_m @ gain.mT)
+
+
 def _update(mean, cov, x, Phi, Sigma_m, mu_m) -> Update:
     CPt = cov @ Phi.mT
     S = Sigma_m + Phi @ CPt  # innovation covariance (..., m, m)
@@ -243,17 +271,15 @@ def _update(mean, cov, x, Phi, Sigma_m, mu_m) -> Update:
         quad = r[..., 0] ** 2 / s
     else:
         # S is symmetric, so K^T = S^-1 Phi Sigma_+
-        S = 0.5 * (S + S.mT)
+        S = symmetric(S)
         K = np.linalg.solve(S, CPt.mT).mT
         chol = np.linalg.cholesky(S)
         log_det = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
         z = np.linalg.solve(chol, r[..., None])[..., 0]
         quad = np.sum(z**2, axis=-1)
     new_mean = mean + (K @ r[..., None])[..., 0]
-    A = _eye(mean.shape[-1]) - K @ Phi
-    new_cov = A @ cov @ A.mT + K @ Sigma_m @ K.mT
     log_likelihood = -0.5 * (S.shape[-1] * _LOG_2PI + log_det + quad)
-    return Update(new_mean, 0.5 * (new_cov + new_cov.mT), log_likelihood)
+    return Update(new_mean, joseph(cov, K, Phi, Sigma_m), log_likelihood)
 
 
 def update(mean, cov, x, Phi, Sigma_m, mu_m=None) -> Update:
@@ -476,7 +502,7 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     _time_axis(Psi, "Psi", 2, T - 1)
     # Every gain depends on the filter alone: all T - 1 of them in one batched solve,
     # with one batched check of the predicted covariances' conditioning.
-    gains = _smoother_gain(
+    gains = smoother_gain(
         filtered.covs[..., :-1, :, :], filtered.predicted_covs[..., 1:, :, :], Psi
     )
     batch = np.broadcast_shapes(filtered.means.shape[:-2], gains.shape[:-3])
@@ -485,7 +511,7 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     means[..., -1, :] = filtered.means[..., -1, :]
     covs[..., -1, :, :] = filtered.covs[..., -1, :, :]
     for t in range(T - 2, -1, -1):
-        means[..., t, :], covs[..., t, :, :] = _smoother_step(
+        means[..., t, :], covs[..., t, :, :] = smoother_step(
             gains[..., t, :, :],
             filtered.means[..., t, :],
             filtered.covs[..., t, :, :],
@@ -497,7 +523,7 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     return MeanAndCov(means, covs)
 
 
-def _smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
+def smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
     """Textbook 19.2.6: the Rauch-Tung-Striebel gain ``C_t = Sigma_t Psi^T Sigma_{+|t+1}^{-1}``.
 
     ``C_t`` depends on the filter alone (not on the later measurements), so
@@ -521,14 +547,14 @@ def _smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
     return np.swapaxes(_solve_or_pinv(predicted_cov, Psi @ cov), -1, -2)
 
 
-def _smoother_step(
+def smoother_step(
     gain, mean, cov, predicted_mean, predicted_cov, next_mean, next_cov
 ) -> MeanAndCov:
     """Textbook 19.2.6: one backward step of the Rauch-Tung-Striebel smoother.
 
     From the filtered Gaussian ``(mu_t, Sigma_t)`` of ``w_t`` given ``x_1 .. x_t``,
     the prediction ``(mu_{+|t+1}, Sigma_{+|t+1})`` made from it, its gain
-    ``C_t`` (:func:`_smoother_gain`) and a Gaussian ``(mu_{t+1|T}, Sigma_{t+1|T})``
+    ``C_t`` (:func:`smoother_gain`) and a Gaussian ``(mu_{t+1|T}, Sigma_{t+1|T})``
     of ``w_{t+1}`` given ``x_1 .. x_T``, ``T > t``:
     ``mu_{t|T} = mu_t + C_t (mu_{t+1|T} - mu_{+|t+1})``,
     ``Sigma_{t|T} = Sigma_t + C_t (Sigma_{t+1|T} - Sigma_{+|t+1}) C_t^T``.
@@ -548,7 +574,7 @@ def _smoother_step(
     C = gain
     smoothed_mean = mean + (C @ (next_mean - predicted_mean)[..., None])[..., 0]
     smoothed_cov = cov + C @ (next_cov - predicted_cov) @ C.mT
-    return MeanAndCov(smoothed_mean, 0.5 * (smoothed_cov + smoothed_cov.mT))
+    return MeanAndCov(smoothed_mean, symmetric(smoothed_cov))
 
 
 def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):
@@ -574,7 +600,7 @@ def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):
     Phi_a : ndarray, shape (..., m, n (lag + 1))
     mu_pa : ndarray, shape (..., n (lag + 1))
     """
-    lag = _lag(lag)
+    lag = _checks.nonnegative_count(lag, "lag")
     Psi, Sigma_p, Phi = (np.asarray(a, dtype=float) for a in (Psi, Sigma_p, Phi))
     n = Psi.shape[-1]
     mu_p = np.zeros(n) if mu_p is None else np.asarray(mu_p, dtype=float)
@@ -590,12 +616,6 @@ def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):
     mu_pa = np.zeros(mu_p.shape[:-1] + (N,))
     mu_pa[..., :n] = mu_p
     return Psi_a, Sigma_pa, Phi_a, mu_pa
-
-
-def _lag(lag) -> int:
-    if isinstance(lag, bool) or not isinstance(lag, (int, np.integer)) or lag < 0:
-        raise ValueError(f"lag must be an integer >= 0, got {lag!r}")
-    return int(lag)
 
 
 def fixed_lag_smoother(
@@ -630,7 +650,7 @@ def fixed_lag_smoother(
         x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
     )
     T, n = x.shape[-2], prior_mean.shape[-1]
-    lag = min(_lag(lag), T - 1)  # a longer lag changes nothing
+    lag = min(_checks.nonnegative_count(lag, "lag"), T - 1)  # a longer lag changes nothing
     Psi_a, Sigma_pa, Phi_a, mu_pa = augment(Psi, Sigma_p, Phi, lag, mu_p)
     res = _run(
         x,

@@ -521,7 +521,7 @@ def measurements_batch(mu, name: str = "mu") -> np.ndarray:
         degenerate = ~np.any(np.abs(second) > _checks.DEGENERACY_TOL, axis=1)
         if np.any(degenerate):
             i = int(np.argmax(degenerate))
-            where = name + (_checks._index(i, batch) if batch else "")
+            where = name + (_checks.batch_index(i, batch) if batch else "")
             raise ValueError(
                 f"{where} is degenerate: every second difference mu_k - 2*mu_(k+1) + mu_(k+2) "
                 f"is at most {_checks.DEGENERACY_TOL:g} in magnitude, so no finite depth explains "
@@ -531,7 +531,7 @@ def measurements_batch(mu, name: str = "mu") -> np.ndarray:
     bad = ~valid_measurements(flat)
     if np.any(bad):
         i = int(np.argmax(bad))
-        measurements(flat[i], name + (_checks._index(i, batch) if batch else ""))
+        measurements(flat[i], name + (_checks.batch_index(i, batch) if batch else ""))
     return arr
 
 
@@ -574,12 +574,12 @@ def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
     if (
         prior_mean.ndim < 1
         or prior_mean.shape[-1] != 3
-        or not _checks._broadcasts(prior_mean.shape, batch + (3,))
+        or not _checks.broadcasts(prior_mean.shape, batch + (3,))
     ):
         allowed = "(3,)" + (f" or {batch + (3,)}" if batch else "")
         raise ValueError(f"prior_mean must have shape {allowed}, got {prior_mean.shape}")
     prior_cov = _checks.covariances(prior_cov, "prior_cov", 3)
-    if not _checks._broadcasts(prior_cov.shape, batch + (3, 3)):
+    if not _checks.broadcasts(prior_cov.shape, batch + (3, 3)):
         allowed = "(3, 3)" + (f" or {batch + (3, 3)}" if batch else "")
         raise ValueError(f"prior_cov must have shape {allowed}, got {prior_cov.shape}")
     return mu, rho, prior_mean, prior_cov

@@ -27,24 +27,24 @@ det[g z]_{ijk}**2``), so neither suffers cancellation near the poles
 
 The depth marginal is then a one-dimensional integral, done on each of the
 intervals ``(-inf, 0)``, ``(0, 1)``, ``(1, 2)``, ``(2, inf)`` by the trapezoid
-rule after a change of variable that sends the interval to the real line;
-the step is halved until the moments agree to the requested tolerance, and
-the last change is reported as the error estimate. The velocity marginal is
+rule of :mod:`depthcore.quadrature` after a change of variable that sends the
+interval to the real line; the step is halved until the moments agree to the
+requested tolerance, and the last change is reported as the error estimate. The velocity marginal is
 the mixture over the same nodes of the Gaussian conditionals of ``v`` given
 ``y``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
-from . import _checks, model
+from . import _checks, model, quadrature
 from .gaussian import Gaussian
-from .second_order import A2, f, noise_free_states, second_order_batch
+from .model import f
+from .second_order import A2
 
 READINGS = ("derived", "printed")
 #: ``"front"``: depths ``y > 2``, the point in front of the camera at all three
@@ -53,62 +53,9 @@ SUPPORTS = ("front", "all")
 
 #: ``G^{-2} x`` as a function of ``u = (x, v)`` for fixed ``y``: ``L u + (0, y - 2, 0)``.
 _L = A2[:, [0, 2]]
-#: Nodes whose log integrand is this far below the maximum are cut off (e^-60 ~ 1e-26).
-_CUTOFF = 60.0
-#: The intervals (k, k + 1) are mapped from t in [-_T_MAX, _T_MAX].
-_T_MAX = 60.0
-_SCAN_STEP = 1.0
-_MAX_HALVINGS = 12
-#: Starting step of the quadrature in its standardised variable ``u`` (see :class:`_Frame`).
-_U_STEP = 0.5
-#: Most nodes of one interval for one problem; beyond it the tolerance is declared out of reach.
-_NODE_BUDGET = 4097
-#: Widths of the mode within which the quadrature's variable is linear in ``t``
-#: (see :class:`_Frame`).
-_CORE = 4.0
-#: Newton steps locating the mode of the depth integrand.
-_NEWTON_STEPS = 8
-#: Most damped Newton steps from the scan alone (problems with a solver, :func:`_newton`).
-_SCAN_NEWTON_STEPS = 30
 
 
-class _Problem(NamedTuple):
-    """A batch of ``B`` problems: measurements, noise, prior (whitened).
-
-    ``solver``, when given, replaces Eqs. (14)-(16) as the integrand: called as
-    ``solver(offsets, problem)`` it returns what :func:`_solve` returns, for
-    depths ``y_1 = offsets[..., 2]`` at frame 1 (the quadrature's variable is
-    ``t = log(y_1)`` either way). :func:`depthcore.bank.moments` uses it for
-    any number of frames; ``q`` (B,) and ``cov`` (B, 3, 3) are then the
-    process noise and the prior covariance.
-    """
-
-    mu: np.ndarray  # (B, 3), or (B, N) with a solver
-    rho: np.ndarray  # (B,)
-    mean: np.ndarray  # (B, 3) prior mean
-    R: np.ndarray  # (B, 3, 3), P^{-1} = R^T R
-    reading: str
-    q: np.ndarray | None = None
-    cov: np.ndarray | None = None
-    solver: Callable | None = None
-
-    def take(self, idx) -> _Problem:
-        def part(a):
-            return None if a is None else a[idx]
-
-        return _Problem(
-            self.mu[idx],
-            self.rho[idx],
-            self.mean[idx],
-            self.R[idx],
-            self.reading,
-            part(self.q),
-            part(self.cov),
-            self.solver,
-        )
-
-
-def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
+def _problem(mu, rho, prior_mean, prior_cov, reading) -> quadrature.Problem:
     if reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
     mu = np.atleast_2d(_checks.three_frames(mu, "mu"))
@@ -119,7 +66,9 @@ def _problem(mu, rho, prior_mean, prior_cov, reading) -> _Problem:
     B = mu.shape[0]
     prior_mean = np.broadcast_to(prior_mean, (B, 3))
     R = np.linalg.inv(np.linalg.cholesky(prior_cov))
-    return _Problem(mu, np.full(B, rho), prior_mean, np.broadcast_to(R, (B, 3, 3)), reading)
+    return quadrature.Problem(
+        mu, np.full(B, rho), prior_mean, np.broadcast_to(R, (B, 3, 3)), _solve, True, reading
+    )
 
 
 def log_posterior(x, mu, rho: float, prior: Gaussian) -> np.ndarray:
@@ -146,7 +95,7 @@ def log_posterior(x, mu, rho: float, prior: Gaussian) -> np.ndarray:
     return -f(x, mu) / (2.0 * rho**2) + prior.logpdf(model.G(x, -2))
 
 
-def _terms(offsets, pb: _Problem):
+def _terms(offsets, pb: quadrature.Problem):
     """The six linear terms ``g_i . u - z_i`` of Eq. (6) at fixed depths.
 
     ``offsets`` has shape (B, n, 3): ``(y, y - 1, y - 2)``. Returns ``gx``,
@@ -178,7 +127,7 @@ def _terms(offsets, pb: _Problem):
 _MEAS_PAIRS = ((0, 1), (0, 2), (1, 2))
 
 
-def _solve(offsets, pb: _Problem):
+def _solve(offsets, pb: quadrature.Problem):
     """Log depth marginal and the Gaussian of ``(x, v)`` given ``y``, batched.
 
     ``offsets`` has shape (B, n, 3): ``(y, y - 1, y - 2)``. Returns
@@ -195,8 +144,6 @@ def _solve(offsets, pb: _Problem):
     squared 2 x 2 minors, ``S det M`` that of the squared 3 x 3 minors, and
     the conditional mean follows by Cramer's rule.
     """
-    if pb.solver is not None:
-        return pb.solver(offsets, pb)
     rho = pb.rho[:, None]
     s = [1.0 / (offsets[..., k] * rho) for k in range(3)]
     s2 = [sk * sk for sk in s]
@@ -319,660 +266,6 @@ def conditional(y, mu, rho: float, prior: Gaussian, reading: str = "derived"):
     return log_density[0], mean[:, 0].T, cov[0]
 
 
-def _nodes(interval: int, t: np.ndarray):
-    """Map ``t`` (any shape) to depths in one interval between the poles.
-
-    Returns the offsets ``(y, y - 1, y - 2)`` (shape ``t.shape + (3,)``) and
-    ``log |dy/dt|``.
-    """
-    if interval == 0:  # (-inf, 0): y = -exp(t)
-        y = -np.exp(t)
-        return np.stack([y, y - 1, y - 2], -1), t
-    if interval == 3:  # (2, inf): y - 2 = exp(t)
-        d = np.exp(t)
-        return np.stack([d + 2, d + 1, d], -1), t
-    # (k, k + 1): y - k = 1 / (1 + exp(-t)), y - k - 1 = -1 / (1 + exp(t))
-    lo, hi = 1.0 / (1.0 + np.exp(-t)), -1.0 / (1.0 + np.exp(t))
-    log_jac = -np.logaddexp(0.0, -t) - np.logaddexp(0.0, t)
-    if interval == 1:
-        return np.stack([lo, hi, hi - 1], -1), log_jac
-    return np.stack([lo + 1, lo, hi], -1), log_jac
-
-
-class _Frame(NamedTuple):
-    """Where one interval's integrand lives, per problem: ``t = t0 + sigma L sinh(u / L)``.
-
-    ``t0`` (B,) is the mode of the integrand in ``t`` and ``sigma`` (B,) its
-    width there (from the curvature); ``L`` is :data:`_CORE`. Within ``L``
-    widths of the mode ``u`` is the standardised variable ``(t - t0) /
-    sigma``, where the trapezoid rule converges as fast as on a Gaussian;
-    beyond, the node spacing in ``t`` grows in proportion to the distance
-    from the mode, so that tails reaching any multiple of the width cost
-    only a logarithmic number of nodes.
-    """
-
-    t0: np.ndarray
-    sigma: np.ndarray
-
-    def t(self, u):
-        """``t`` at ``u`` of shape (B, n)."""
-        return self.t0[:, None] + (self.sigma * _CORE)[:, None] * np.sinh(u / _CORE)
-
-    def u(self, t):
-        """Inverse of :meth:`t` for ``t`` of shape (B,) or (B, n)."""
-        t = np.asarray(t)
-        if t.ndim == 2:
-            return _CORE * np.arcsinh((t - self.t0[:, None]) / (self.sigma * _CORE)[:, None])
-        return _CORE * np.arcsinh((t - self.t0) / (self.sigma * _CORE))
-
-    def log_jacobian(self, u):
-        """``log |dt/du|`` at ``u`` of shape (B, n)."""
-        return np.log(self.sigma)[:, None] + _log_cosh(u / _CORE)
-
-
-def _log_cosh(u):
-    a = np.abs(u)
-    return a + np.log1p(np.exp(-2.0 * a)) - np.log(2.0)
-
-
-def _mapped_nodes(interval: int, u: np.ndarray, frame: _Frame):
-    """Offsets ``(y, y - 1, y - 2)`` and ``log |dy/du|`` at nodes ``u`` (B, n)."""
-    offsets, log_jac = _nodes(interval, frame.t(u))
-    return offsets, log_jac + frame.log_jacobian(u)
-
-
-def _log_integrand(interval: int, t: np.ndarray, pb: _Problem) -> np.ndarray:
-    """``log p_oy(y(t)) + log |dy/dt|`` at ``t`` of shape (B, n)."""
-    offsets, log_jac = _nodes(interval, t)
-    return _solve(offsets, pb)[0] + log_jac
-
-
-#: Index pairs (i, j) of the second moments accumulated, in (x, y, v) order.
-_SECOND = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (0, 2))
-_FIRST_INDEX, _SECOND_INDEX = (np.array(ix) for ix in zip(*_SECOND, strict=True))
-#: Where each entry of a 3 x 3 covariance (row-major) sits in :data:`_SECOND` order.
-_SYMMETRIC = np.array([0, 3, 5, 3, 1, 4, 5, 4, 2])
-
-
-def _evaluate(interval, u, frame, pb, shift, centre):
-    """Trapezoid sums (without the step) over nodes ``u`` (B, n) of one interval.
-
-    The sums, shape (11, B), are of the weight, of the first moments of
-    ``(x, y, v) - centre`` and of the second moments in :data:`_SECOND` order
-    (the conditional covariance of ``(x, v)`` given ``y`` included), and of
-    the weight below ``y = 2``. Nodes at ``u = nan`` count for nothing.
-    """
-    return _sums(_node_values(interval, u, frame, pb), np.isnan(u), shift, centre)
-
-
-def _node_values(interval, u, frame, pb):
-    """Offsets, ``log`` integrand in ``u`` and the conditional Gaussian at nodes ``u`` (B, n)."""
-    offsets, log_jac = _mapped_nodes(interval, np.where(np.isnan(u), 0.0, u), frame)
-    log_density, mean, cov = _solve(offsets, pb)
-    return offsets, log_density + log_jac, mean, cov
-
-
-def _sums(values, skip, shift, centre):
-    """The sums of :func:`_evaluate` from :func:`_node_values`, leaving out nodes where ``skip``."""
-    offsets, log_f, mean, (cxx, cxv, cvv) = values
-    w = np.exp(np.where(skip, -np.inf, log_f - shift[:, None]))
-    d = np.stack(
-        [mean[0] - centre[:, 0:1], offsets[..., 0] - centre[:, 1:2], mean[1] - centre[:, 2:3]]
-    )
-    zero = np.zeros_like(cxx)
-    conditional = np.stack([cxx, zero, cvv, zero, zero, cxv])  # in _SECOND order
-    second = d[_FIRST_INDEX] * d[_SECOND_INDEX] + conditional
-    return np.concatenate(
-        [
-            w.sum(-1)[None],
-            np.einsum("kbn,bn->kb", d, w),
-            np.einsum("kbn,bn->kb", second, w),
-            (w * (offsets[..., 0] < 2)).sum(-1)[None],
-        ]
-    )
-
-
-class _Totals(NamedTuple):
-    """Posterior mean (B, 3), covariance (B, 3, 3), P(y < 2) (B,), normaliser (B,)."""
-
-    mean: np.ndarray
-    cov: np.ndarray
-    behind: np.ndarray
-    Z: np.ndarray
-
-    def key_moments(self) -> np.ndarray:
-        """``(E y, sd y, E v, sd v)``, shape (4, B)."""
-        return np.stack(
-            [
-                self.mean[:, 1],
-                np.sqrt(self.cov[:, 1, 1]),
-                self.mean[:, 2],
-                np.sqrt(self.cov[:, 2, 2]),
-            ]
-        )
-
-
-def _moments(totals: np.ndarray, centre: np.ndarray) -> _Totals:
-    """Mean, covariance, P(y < 2) and normaliser from summed trapezoid totals.
-
-    A problem whose nodes all carry zero weight (a coarse level that misses a
-    posterior narrower than its step) gets NaN moments, without a warning: its
-    change between levels is then NaN, which never passes the tolerance, so
-    the quadrature refines it or refuses it as too narrow.
-    """
-    Z = totals[0]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        m = (totals[1:4] / Z).T  # (B, 3), centred
-        second = (totals[4:10] / Z).T - m[:, _FIRST_INDEX] * m[
-            :, _SECOND_INDEX
-        ]  # (B, 6) in _SECOND order
-        behind = totals[10] / Z
-    second[:, :3] = np.maximum(second[:, :3], 0.0)
-    cov = second[:, _SYMMETRIC].reshape(-1, 3, 3)
-    return _Totals(centre + m, cov, behind, Z)
-
-
-def _t_limits(interval: int, pb: _Problem, c: np.ndarray, cov_p: np.ndarray):
-    """The ``t`` range searched in one interval, per problem: two arrays (B,).
-
-    On the unbounded intervals the far end lies 1e4 times beyond the largest
-    of the prior's scale, the prior mean and the noise-free depth, where the
-    integrand has long decayed (checked by :func:`_ranges`).
-    """
-    B = len(c)
-    if interval in (1, 2):
-        return np.full(B, -_T_MAX), np.full(B, _T_MAX)
-    scale = np.sqrt(np.trace(cov_p, axis1=-2, axis2=-1))
-    far = np.log(1e4 * (scale + np.max(np.abs(pb.mean), axis=1) + np.abs(c[:, 1]) + 10.0))
-    return np.full(B, -_T_MAX), far
-
-
-def _scan_points(interval: int, c, mean_s, sd_s, lo_t, hi_t, guessed: bool = False):
-    """Where to look for the mode in ``t``: (B, n) points, the first ``n_coarse`` of them coarse.
-
-    A scan of the whole range at about unit steps and, on ``y > 2``, 25
-    points across 12 second-order SDs about the noise-free depth and about
-    the second-order mean (left out when ``guessed``, the second-order frame's
-    first level being evaluated too, and both lie within an SD of each other;
-    and when ``c`` is ``None``, for problems with no noise-free solution).
-    Returns the points and ``n_coarse``.
-    """
-    t = lo_t[:, None] + (hi_t - lo_t)[:, None] * _unit(
-        int(np.ceil(np.max(hi_t - lo_t) / _SCAN_STEP)) + 1
-    )
-    n_coarse = t.shape[1]
-    if interval == 3 and c is not None:
-        local = np.arange(-12.0, 12.5)
-        sd_t = _clip(sd_s / (c[:, 1] - 2.0), _sigma_floor(np.log(c[:, 1] - 2.0)), 1.0)
-        t_c = np.log(c[:, 1] - 2.0)
-        t_s = np.log(np.where(mean_s[:, 1] > 2.0, mean_s[:, 1] - 2.0, c[:, 1] - 2.0))
-        centres = [t_c, t_s]
-        if guessed and np.all(np.abs(t_c - t_s) <= sd_t):
-            centres = []  # the first level in the second-order frame covers both densely
-        t = np.concatenate([t] + [ct[:, None] + sd_t[:, None] * local for ct in centres], 1)
-        t = _clip(t, lo_t[:, None], hi_t[:, None])
-    return t, n_coarse
-
-
-def _local_points(pb: _Problem):
-    """Scan points (B, 27) about the depth of the first three bearings' noise-free solution.
-
-    For a solver's problems (any number of frames) the depth at frame 3 of
-    Eq. (7)'s ``c`` from ``mu_1 .. mu_3`` (in the quadrature's variable
-    ``t = log(y_1)``), or the prior mean's depth where that is undefined or
-    behind the camera, with offsets ``0, +-1, +-0.1, .., +-1e-12`` in ``t``:
-    a start for the Newton steps at every scale of the posterior's width.
-    """
-    if pb.mu.shape[1] >= 3:
-        with np.errstate(all="ignore"):
-            y = model.noise_free_states_unchecked(pb.mu[:, :3])[:, 1] - 2.0
-    else:
-        y = np.full(len(pb.mu), np.nan)
-    y = np.where(np.isfinite(y) & (y > 0), y, pb.mean[:, 1])
-    t = np.log(np.where(y > 0, y, 1.0))
-    steps = 10.0 ** -np.arange(13.0)
-    return t[:, None] + np.concatenate([[0.0], steps, -steps])
-
-
-def _frame(interval: int, pb: _Problem, t, scan, coarse_mask, lo_t, hi_t):
-    """Locate the mode of one interval's integrand in ``t`` and its width, per problem.
-
-    From the integrand ``scan`` at points ``t`` (B, n): a parabola through
-    the best point and its neighbours gives the mode and the width ``(-d2
-    log f / dt2) ** -1/2``; where the best point is one of the coarse ones
-    (``coarse_mask``, (n,)), Newton steps on parabolas one width wide refine
-    both. Returns the :class:`_Frame` and the largest log integrand seen (B,).
-    """
-    B = t.shape[0]
-    order = np.argsort(t, axis=1, kind="stable")
-    ts = np.take_along_axis(t, order, 1)
-    ss = np.take_along_axis(scan, order, 1)
-    rows = np.arange(B)
-    best = np.argmax(ss, axis=1)
-    k = _clip(best, 1, ts.shape[1] - 2)
-    t0, sigma, top = _parabola(
-        ts[rows, k - 1], ts[rows, k], ts[rows, k + 1], ss[rows, k - 1], ss[rows, k], ss[rows, k + 1]
-    )
-    coarse = coarse_mask[order[rows, best]]
-    if pb.solver is not None:
-        t0, sigma, top = _newton(interval, pb, ts[rows, best], ss[rows, best], sigma, lo_t, hi_t)
-        t0 = _clip(t0, lo_t, hi_t)
-        return _Frame(t0, _clip(sigma, _sigma_floor(t0), 1.0)), top
-    for _ in range(_NEWTON_STEPS if np.any(coarse) else 0):
-        pts = _clip(
-            t0[:, None] + sigma[:, None] * np.array([-1.0, 0.0, 1.0]), lo_t[:, None], hi_t[:, None]
-        )
-        phi = _log_integrand(interval, pts, pb)
-        t1, s1, top1 = _parabola(*pts.T, *phi.T)
-        better = coarse & (top1 >= top)
-        t0, sigma, top = (
-            np.where(better, t1, t0),
-            np.where(coarse, s1, sigma),
-            np.maximum(top, np.where(coarse, top1, top)),
-        )
-    t0 = _clip(t0, lo_t, hi_t)
-    sigma = _clip(sigma, _sigma_floor(t0), 1.0)
-    return _Frame(t0, sigma), top
-
-
-def _newton(interval: int, pb: _Problem, t0, f0, sigma, lo_t, hi_t):
-    """Damped Newton steps to the mode of the log integrand in ``t``, from ``t0`` (B,).
-
-    For problems with no second-order guess, whose mode may lie many of its
-    own (tiny) widths from the best scan point. Each step takes the first and
-    second differences at ``t0 +- sigma``, moves by ``-d1 / d2`` (uphill by
-    ``4 sigma`` where the points are not concave), halving the move until the
-    log integrand does not decrease, and sets ``sigma`` to the curvature's
-    width ``(-d2)**-1/2``. Stops when the moves fall below a hundredth of the
-    width and the width settles, or after :data:`_SCAN_NEWTON_STEPS` steps.
-    Returns the mode, its width and the log integrand there, each (B,).
-    """
-    floor = _sigma_floor(t0)
-    for _ in range(_SCAN_NEWTON_STEPS):
-        h = _clip(sigma, floor, 1.0)
-        pts = t0[:, None] + h[:, None] * np.array([-1.0, 0.0, 1.0])
-        phi = _log_integrand(interval, _clip(pts, lo_t[:, None], hi_t[:, None]), pb)
-        with np.errstate(invalid="ignore", over="ignore"):
-            d1 = (phi[:, 2] - phi[:, 0]) / (2.0 * h)
-            d2 = (phi[:, 2] - 2.0 * phi[:, 1] + phi[:, 0]) / h**2
-            concave = np.isfinite(d1) & np.isfinite(d2) & (d2 < 0)
-            move = np.where(concave, -d1 / np.where(concave, d2, -1.0), 4.0 * h * np.sign(d1))
-            width = np.where(concave, 1.0 / np.sqrt(-np.where(concave, d2, -1.0)), 2.0 * h)
-        move = np.where(np.isfinite(move), move, 0.0)
-        f1 = np.full_like(f0, -np.inf)
-        for _ in range(60):  # halve the move until the log integrand does not decrease
-            t1 = _clip(t0 + move, lo_t, hi_t)
-            # (a move below a hundredth of the width is not worth the roundoff it hits)
-            worse = ~(f1 >= f0) & (np.abs(move) > 0.01 * h)
-            if not np.any(worse):
-                break
-            f1 = np.where(worse, _log_integrand(interval, t1[:, None], pb)[:, 0], f1)
-            move = np.where(~(f1 >= f0), 0.5 * move, move)
-        up = f1 >= f0
-        sigma = _clip(width, floor, 1.0)
-        settled = (np.abs(np.where(up, t1 - t0, 0.0)) <= 0.01 * sigma) & (
-            np.abs(sigma - h) <= 0.05 * h
-        )
-        t0, f0 = np.where(up, t1, t0), np.where(up, f1, f0)
-        if np.all(settled):
-            break
-    return t0, sigma, f0
-
-
-def _parabola(ta, tb, tc, fa, fb, fc):
-    """Vertex, width and value of the parabola through three points (B,) with ``tb`` in the middle.
-
-    Where the points are not concave the middle point is kept and the width
-    is the wider gap.
-    """
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        d1 = (fb - fa) / (tb - ta)
-        d2 = (fc - fb) / (tc - tb)
-        curv = 2.0 * (d2 - d1) / (tc - ta)  # second derivative
-        concave = np.isfinite(curv) & (curv < 0) & np.isfinite(fa) & np.isfinite(fc)
-        safe = np.where(concave, curv, -1.0)
-        vertex = 0.5 * (ta + tb) - d1 / safe + 0.5 * (tb - ta)
-        vertex = np.where(concave, _clip(vertex, ta, tc), tb)
-        gap = np.maximum(tb - ta, tc - tb)
-        width = np.where(concave, _clip(1.0 / np.sqrt(-safe), 0.25 * gap, 4.0 * gap), gap)
-        value = np.where(
-            concave, fb + d1 * (vertex - tb) + 0.5 * curv * (vertex - ta) * (vertex - tb), fb
-        )
-    return vertex, width, np.maximum(value, fb)
-
-
-def _unit(n: int) -> np.ndarray:
-    """``n`` equally spaced points from 0 to 1."""
-    return np.arange(n) / (n - 1)
-
-
-def _clip(a, lo, hi):
-    """``np.clip`` without its overhead on small arrays."""
-    return np.minimum(np.maximum(a, lo), hi)
-
-
-def _sigma_floor(t0):
-    """The narrowest width resolved in ``t`` near ``t0``: a thousand roundoffs."""
-    return 1e3 * np.finfo(float).eps * np.maximum(1.0, np.abs(t0))
-
-
-def _level0(frame: _Frame, lo_t, hi_t):
-    """The first trapezoid level: the whole ``u`` range at step :data:`_U_STEP`, (B, n)."""
-    u_lo, u_hi = frame.u(lo_t), frame.u(hi_t)
-    n = int(np.ceil(np.max(u_hi - u_lo) / _U_STEP)) + 1
-    return u_lo[:, None] + (u_hi - u_lo)[:, None] * _unit(n)
-
-
-def _ranges(pb: _Problem, intervals):
-    """Place each interval's nodes relative to its own mode and width.
-
-    On ``y > 2`` the second-order density gives a first frame (its mean and
-    SD in ``t``), and the first trapezoid level in that frame is evaluated
-    together with the scan of :func:`_scan_points`. If the best node is not
-    one of the first level's, or the parabola through it and its neighbours
-    disagrees with the first frame (mode more than three widths away, width
-    off by more than a factor 3), the mode and width are found from all
-    nodes (:func:`_frame`) and the first level is evaluated again in that
-    frame. Elsewhere the scan comes first.
-
-    Returns the log-integrand maximum found in ``t`` (B,), per interval
-    ``(frame, u, values, hi_t, (t, log f))``: the :class:`_Frame`, the first
-    level's nodes ``u`` and :func:`_node_values` there, the far end in ``t``
-    and the scan; and the second-order mean (B, 3), about which the moments
-    are accumulated.
-    """
-    paper = pb.solver is None
-    if paper:
-        c = noise_free_states(pb.mu)
-        cov_p = np.linalg.inv(np.swapaxes(pb.R, -1, -2) @ pb.R)
-        mean_s, cov_s = second_order_batch(pb.mu, pb.rho, pb.mean, cov_p)
-        sd_s = np.sqrt(cov_s[:, 1, 1])
-    else:  # no second-order density to start from: the scan finds the mode
-        c = mean_s = sd_s = None
-        cov_p = pb.cov
-    found, tops = {}, []
-    for i in intervals:
-        lo_t, hi_t = _t_limits(i, pb, pb.mean if c is None else c, cov_p)
-        t_scan, n_coarse = _scan_points(i, c, mean_s, sd_s, lo_t, hi_t, guessed=i == 3)
-        if not paper:
-            t_scan = _clip(
-                np.concatenate([t_scan, _local_points(pb)], 1), lo_t[:, None], hi_t[:, None]
-            )
-            n_coarse = t_scan.shape[1]  # every point may start the Newton steps
-        guess = None
-        if i == 3 and paper:
-            y_s = np.where(mean_s[:, 1] > 2.0, mean_s[:, 1], c[:, 1])
-            t0 = _clip(np.log(y_s - 2.0), lo_t, hi_t)
-            guess = _Frame(t0, _clip(sd_s / (y_s - 2.0), _sigma_floor(t0), 1.0))
-            u = _level0(guess, lo_t, hi_t)
-            t_all = np.concatenate([guess.t(u), t_scan], axis=1)
-        else:
-            t_all = t_scan
-        offsets, log_jac = _nodes(i, t_all)
-        log_density, mean, cov = _solve(offsets, pb)
-        log_t = log_density + log_jac
-        m = t_all.shape[1] - t_scan.shape[1]
-        coarse_mask = np.arange(t_all.shape[1]) - m < n_coarse
-        coarse_mask[:m] = False
-        if guess is not None:
-            # the mode and width from the first level's nodes about its best one
-            rows = np.arange(len(c))
-            best = np.argmax(log_t, axis=1)
-            k = _clip(best, 1, m - 2)
-            t0, sigma, top_i = _parabola(
-                *(t_all[rows, k + o] for o in (-1, 0, 1)), *(log_t[rows, k + o] for o in (-1, 0, 1))
-            )
-            good = (
-                (best < m)
-                & (np.abs(t0 - guess.t0) <= 3.0 * guess.sigma)
-                & (sigma <= 3.0 * guess.sigma)
-                & (3.0 * sigma >= guess.sigma)
-            )
-            if not np.all(good):
-                frame, top_i = _frame(i, pb, t_all, log_t, coarse_mask, lo_t, hi_t)
-            if np.all(good):
-                frame = guess
-                values = (
-                    offsets[:, :m],
-                    log_t[:, :m] + guess.log_jacobian(u),
-                    mean[:, :, :m],
-                    tuple(a[:, :m] for a in cov),
-                )
-            else:
-                frame = _Frame(
-                    np.where(good, guess.t0, frame.t0), np.where(good, guess.sigma, frame.sigma)
-                )
-                guess = None
-        else:
-            frame, top_i = _frame(i, pb, t_all, log_t, coarse_mask, lo_t, hi_t)
-        if guess is None:
-            u = _level0(frame, lo_t, hi_t)
-            values = _node_values(i, u, frame, pb)
-        scan = (t_all[:, m:], log_t[:, m:])
-        found[i] = (frame, u, values, hi_t, scan)
-        tops.append(np.maximum(top_i + np.log(frame.sigma), np.max(values[1], axis=1)))
-    if paper:
-        centre = np.where(np.isfinite(mean_s), mean_s, c)
-    else:  # the state at the mode of the depth (in the quadrature's depth, y_1 + 2)
-        t0 = found[3][0].t0
-        offsets, _ = _nodes(3, t0[:, None])
-        x_v = _solve(offsets, pb)[1][:, :, 0]
-        centre = np.stack([x_v[0], offsets[:, 0, 0], x_v[1]], axis=1)
-    return np.max(tops, axis=0), found, centre
-
-
-def _integrate(pb: _Problem, intervals, rtol: float):
-    """Integrate the depth marginal of a batch; returns moments, errors, shift, grids.
-
-    The first level of the trapezoid rule spans each interval's whole ``u``
-    range at step :data:`_U_STEP`; the nodes where the integrand is above
-    ``e^-60`` of its maximum (and the unit-step scan's) set the range
-    ``[lo, hi]`` that later levels refine by halving the step. Each problem's
-    step is halved until its means and SDs change by at most ``rtol`` of the
-    SD (or by the roundoff floor of :func:`_roundoff`); a problem that has
-    converged keeps its result, so it does not depend on the other rows of
-    the batch. More than :data:`_NODE_BUDGET` nodes in an interval is a
-    ``ValueError`` naming the problem.
-    """
-    top, found, centre = _ranges(pb, intervals)
-    B = len(top)
-    grids, totals = {}, {}
-    for i, (frame, u, values, hi_t, (t_c, scan_c)) in found.items():
-        n0 = u.shape[1]
-        u_lo, h0 = u[:, 0], u[:, 1] - u[:, 0]
-        keep = values[1] > (top - _CUTOFF)[:, None]
-        keep_t = scan_c + np.log(frame.sigma)[:, None] > (top - _CUTOFF)[:, None]
-        if i in (0, 3):
-            at_end = keep[:, -1] | np.any(keep_t & (t_c >= hi_t[:, None]), axis=1)
-            if np.any(at_end):
-                k = int(np.argmax(at_end))
-                raise ValueError(
-                    f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g}: the depth marginal "
-                    f"does not decay by |y| = {np.exp(hi_t[k]):.3g}; "
-                    "its moments do not exist in this reading"
-                )
-        u_c = frame.u(t_c)
-        first = np.minimum(
-            np.min(np.where(keep, u, np.inf), axis=1), np.min(np.where(keep_t, u_c, np.inf), axis=1)
-        )
-        last = np.maximum(
-            np.max(np.where(keep, u, -np.inf), axis=1),
-            np.max(np.where(keep_t, u_c, -np.inf), axis=1),
-        )
-        active = np.isfinite(first)
-        j_lo = _clip(np.where(active, np.floor((first - u_lo) / h0) - 1, 0), 0, n0 - 1)
-        j_hi = _clip(np.where(active, np.ceil((last - u_lo) / h0) + 1, 0), 0, n0 - 1)
-        lo = u_lo + j_lo * h0
-        n = (j_hi - j_lo).astype(int) + 1
-        h = np.where(active & (n > 1), h0, 0.0)
-        grids[i] = (lo, h, n, frame)
-        inside = (
-            (np.arange(n0) >= j_lo[:, None]) & (np.arange(n0) <= j_hi[:, None]) & active[:, None]
-        )
-        totals[i] = _sums(values, ~inside, top, centre)
-    done = np.zeros(B, dtype=bool)
-    final = previous = None
-    errors = np.zeros((2, B))
-    halvings = 2  # the first pass adds two levels in one evaluation
-    while True:
-        growth = 2**halvings
-        # a problem with no interval left to refine (its scan kept at most one node in
-        # each: a posterior narrower than the scan's step) would loop here for ever
-        stuck = ~done & np.all([g[1] == 0 for g in grids.values()], axis=0)
-        if np.any(stuck):
-            raise _too_narrow(pb, int(np.argmax(stuck)), rtol)
-        if (
-            max(np.max(np.where(done, 0, growth * (g[2] - 1) + 1)) for g in grids.values())
-            > _NODE_BUDGET
-        ):
-            k = int(np.argmin(done))
-            raise ValueError(
-                f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g} and prior mean "
-                f"{pb.mean[k].tolist()}: the optimal marginal's quadrature did not reach "
-                f"rtol = {rtol:.3g} within {_NODE_BUDGET} nodes per interval"
-            )
-        levels = [dict() for _ in range(halvings)]
-        for i, (lo, h, n, frame) in grids.items():
-            hh = np.where(done, 0.0, h)
-            # the new nodes of each level, as fractions of the current step, in one evaluation
-            fractions = [
-                [(2 * j + 1) / 2 ** (lev + 1) for j in range(2**lev)] for lev in range(halvings)
-            ]
-            flat = np.concatenate([np.array(f) for f in fractions])
-            m = int(np.max(n)) - 1
-            j = np.arange(m)
-            u = (
-                lo[:, None, None] + hh[:, None, None] * (j[None, :] + flat[:, None])[None]
-            )  # (B, f, m)
-            valid = (j < (np.broadcast_to(n, lo.shape) - 1)[:, None])[:, None, :] & (hh > 0)[
-                :, None, None
-            ]
-            u = np.where(valid, u, np.nan).reshape(len(lo), -1)
-            values = _node_values(i, u, frame, pb)
-            _check_peak(values[1], np.isnan(u), top, pb, rtol)
-            start = 0
-            for lev, fr in enumerate(fractions):
-                block = slice(start * m, (start + len(fr)) * m)
-                totals[i] = totals[i] + _sums(
-                    _take(values, block), np.isnan(u[:, block]), top, centre
-                )
-                start += len(fr)
-                levels[lev][i] = (totals[i], np.where(done, h, h / 2 ** (lev + 1)))
-            grids[i] = (
-                lo,
-                np.where(done, h, h / growth),
-                np.where(done | (h == 0), n, growth * (n - 1) + 1),
-                frame,
-            )
-        if halvings == 2:
-            previous = _moments(sum(tot * step for tot, step in levels[0].values()), centre)
-        current = _moments(sum(tot * step for tot, step in levels[-1].values()), centre)
-        now = current.key_moments()
-        change = np.abs(now - previous.key_moments())
-        floor = _roundoff(current, top, centre)
-        err = np.maximum(
-            np.stack([np.maximum(change[0], change[1]), np.maximum(change[2], change[3])]), floor
-        )
-        ok = (err[0] <= np.maximum(rtol * now[1], floor[0])) & (
-            err[1] <= np.maximum(rtol * now[3], floor[1])
-        )
-        newly = ok & ~done
-        if final is None or np.all(newly):
-            final = current
-        else:
-            final = _Totals(
-                *(np.where(_expand(newly, a), a, b) for a, b in zip(current, final, strict=True))
-            )
-        errors = np.where(newly, err, errors)
-        done = done | ok
-        if np.all(done):
-            break
-        previous, halvings = current, 1
-    narrow = ~((final.cov[:, 1, 1] > 0) & (final.cov[:, 2, 2] > 0))
-    if np.any(narrow):  # all the mass on one node: the width is below the resolution
-        raise _too_narrow(pb, int(np.argmax(narrow)), rtol)
-    return final, errors[0], errors[1], top, grids
-
-
-def _too_narrow(pb: _Problem, k: int, rtol: float) -> ValueError:
-    """The refusal of problem ``k``, whose depth marginal no float grid can resolve."""
-    return ValueError(
-        f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g} and prior mean "
-        f"{pb.mean[k].tolist()}: the depth marginal is too narrow to resolve in double "
-        f"precision, so its quadrature cannot reach rtol = {rtol:.3g}"
-    )
-
-
-def _check_peak(log_f, skip, top, pb: _Problem, rtol: float) -> None:
-    """Refuse a problem whose refined nodes rise far above the peak found (a missed mode).
-
-    The sums are scaled by ``exp(-top)``; a node ``e^60`` above it means the
-    mode and width that placed the nodes were wrong, and the sums would overflow.
-    """
-    with np.errstate(invalid="ignore"):
-        high = np.any(np.where(skip, False, log_f > (top + _CUTOFF)[:, None]), axis=1)
-    if np.any(high):
-        k = int(np.argmax(high))
-        raise ValueError(
-            f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g} and prior mean "
-            f"{pb.mean[k].tolist()}: the depth marginal is too narrow to locate in double "
-            f"precision, so its quadrature cannot reach rtol = {rtol:.3g}"
-        )
-
-
-def _mapped_log_integrand(interval, u, frame, pb):
-    offsets, log_jac = _mapped_nodes(interval, u, frame)
-    return _solve(offsets, pb)[0] + log_jac
-
-
-def _take(values, columns):
-    """The node values of :func:`_node_values` at a slice of the node axis."""
-    offsets, log_f, mean, cov = values
-    return (
-        offsets[:, columns],
-        log_f[:, columns],
-        mean[:, :, columns],
-        tuple(c[:, columns] for c in cov),
-    )
-
-
-def _expand(mask, a):
-    return mask.reshape(mask.shape + (1,) * (np.ndim(a) - 1))
-
-
-def _grid(lo, h, n, offset):
-    """Nodes ``lo + h (j + offset)``, ``j < n`` (n per problem).
-
-    Padded with NaN, shape (B, max n).
-    """
-    n = np.broadcast_to(n, lo.shape)
-    j = np.arange(int(np.max(n)))
-    u = lo[:, None] + h[:, None] * (j + offset)
-    return np.where((j < n[:, None]) & (h[:, None] > 0), u, np.nan)
-
-
-def _roundoff(totals: _Totals, top: np.ndarray, centre: np.ndarray) -> np.ndarray:
-    """A floor (2, B) on the error of the depth and velocity moments from roundoff.
-
-    Three sources are counted, each with a safety factor of 64: the depths at
-    the nodes are rounded to ``eps |y|``, which moves the moments by up to
-    ``eps (|E y| + sd y)`` (likewise for the velocity); the log integrand, a
-    difference of terms as large as its maximum ``top``, carries an absolute
-    error of about ``eps |top|``, which perturbs the weights and so moves a
-    mean or SD by up to ``eps |top|`` times the SD; and the variance, a
-    difference of second moments about ``centre``, loses ``eps (E y -
-    centre)**2``, which moves the SD by that over the SD.
-    """
-    eps = np.finfo(float).eps
-    noise = 1.0 + np.abs(top)
-    sd = np.sqrt(totals.cov[:, [1, 2], [1, 2]].T)
-    mean = totals.mean[:, 1:].T
-    offset = (mean - centre[:, 1:].T) ** 2 + sd**2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cancel = np.where(sd > 0, offset / sd, 0.0)
-    return 64.0 * eps * (np.abs(mean) + sd + noise * sd + cancel)
-
-
 class Moments(NamedTuple):
     """Moments of the optimal depth and velocity marginals for a batch of problems.
 
@@ -1039,7 +332,9 @@ def moments(
     rtol = _checks.positive_scalar(rtol, "rtol")
     out, means, covs = [], [], []
     for start in range(0, pb.mu.shape[0], chunk):
-        m, err_y, err_v, _, _ = _integrate(pb.take(slice(start, start + chunk)), intervals, rtol)
+        m, err_y, err_v, _, _ = quadrature.integrate(
+            pb.take(slice(start, start + chunk)), intervals, rtol
+        )
         out.append(np.concatenate([m.key_moments(), [err_y, err_v, m.behind]]))
         means.append(m.mean)
         covs.append(m.cov)
@@ -1052,7 +347,9 @@ def _intervals(support: str):
     return (3,) if support == "front" else (0, 1, 2, 3)
 
 
-def _fine_velocity_mixture(pb: _Problem, grids: dict, log_normaliser, max_refine: int = 256):
+def _fine_velocity_mixture(
+    pb: quadrature.Problem, grids: dict, log_normaliser, max_refine: int = 256
+):
     """The velocity mixture on nodes close enough for a smooth curve, batched.
 
     Given the depth, the velocity is Gaussian with SD ``s_v(y)``, which at
@@ -1073,7 +370,7 @@ def _fine_velocity_mixture(pb: _Problem, grids: dict, log_normaliser, max_refine
     for i, (lo, h, n, frame) in grids.items():
         rows = [None] * B
         active = np.arange(B)
-        u = _grid(lo, h, n, 0.0)
+        u = quadrature.grid(lo, h, n, 0.0)
         w, mean, sd = _velocity_nodes(i, u, frame, pb, log_normaliser)
         factor = 1
         while True:
@@ -1090,7 +387,7 @@ def _fine_velocity_mixture(pb: _Problem, grids: dict, log_normaliser, max_refine
             keep = np.flatnonzero(refine)
             active, u, w, mean, sd = active[keep], u[keep], w[keep], mean[keep], sd[keep]
             mid = 0.5 * (u[:, :-1] + u[:, 1:])
-            sub = _Frame(frame.t0[active], frame.sigma[active])
+            sub = quadrature.Frame(frame.t0[active], frame.sigma[active])
             new = _velocity_nodes(i, mid, sub, pb.take(active), log_normaliser[active])
             u, w, mean, sd = (
                 _interleave(a, b) for a, b in zip((u, w, mean, sd), (mid, *new), strict=True)
@@ -1109,13 +406,15 @@ def _fine_velocity_mixture(pb: _Problem, grids: dict, log_normaliser, max_refine
     )
 
 
-def _velocity_nodes(interval: int, u, frame: _Frame, pb: _Problem, log_normaliser):
+def _velocity_nodes(
+    interval: int, u, frame: quadrature.Frame, pb: quadrature.Problem, log_normaliser
+):
     """Depth weights (per unit ``u``), conditional velocity means and SDs at nodes ``u`` (B, n).
 
     NaN nodes (padding) get weight 0, mean 0 and SD 1.
     """
     skip = np.isnan(u)
-    offsets, log_jac = _mapped_nodes(interval, np.where(skip, 0.0, u), frame)
+    offsets, log_jac = quadrature.mapped_nodes(interval, np.where(skip, 0.0, u), frame)
     log_density, mean, (_, _, cvv) = _solve(offsets, pb)
     w = np.where(skip, 0.0, np.exp(log_density + log_jac - log_normaliser[:, None]))
     return w, np.where(skip, 0.0, mean[1]), np.where(skip, 1.0, np.sqrt(cvv))
@@ -1168,7 +467,7 @@ class OptimalMarginals:
     n_nodes: int
     mean: np.ndarray
     cov: np.ndarray
-    _problem: _Problem
+    _problem: quadrature.Problem
     _grids: dict
 
     def depth_pdf(self, y) -> np.ndarray:
@@ -1247,7 +546,7 @@ def marginals(
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
     pb = _problem(mu, rho, prior.mean, prior.cov, reading)
     rtol = _checks.positive_scalar(rtol, "rtol")
-    m, err_y, err_v, top, grids = _integrate(pb, _intervals(support), rtol)
+    m, err_y, err_v, top, grids = quadrature.integrate(pb, _intervals(support), rtol)
     log_z = float(np.log(m.Z[0]) + top[0])
     n_nodes = sum(int(g[2][0]) for g in grids.values())
     return OptimalMarginals(
@@ -1284,15 +583,19 @@ class BatchMarginals:
     ----------
     moments : Moments
     log_normaliser : ndarray, shape (B,)
+    rtol : float
+        The tolerance of the moments and of :meth:`depth_cdf`.
+    log_depth_range : tuple of ndarray
+        The lower and upper ends (B,) of the quadrature's range in ``t = log(y - 2)``,
+        and a panel width (B,) in its variable ``u``.
     """
 
     moments: Moments
     log_normaliser: np.ndarray
     rtol: float
-    _problem: _Problem
+    _problem: quadrature.Problem
     _grids: dict  # the quadrature's u grids: {interval: (lo, h, n, frame)}
-    # lower and upper ends (B,) of the range in t = log(y - 2) and a panel width in u (B,)
-    _start: tuple
+    log_depth_range: tuple
 
     def depth_log_pdf(self, y) -> np.ndarray:
         """``log p_oy`` at depths ``y`` of shape (B, m); ``-inf`` at ``y <= 2``."""
@@ -1307,7 +610,8 @@ class BatchMarginals:
 
         Integrated afresh from the lower end of the quadrature range up to
         ``y`` by composite 8-point Gauss-Legendre panels in ``t = log(y - 2)``,
-        doubling the panels until the mass changes by at most ``rtol``.
+        doubling the panels until the mass changes by at most ``rtol``
+        (:func:`depthcore.quadrature.gauss_legendre_cdf`).
         """
         y = _checks.finite_array(y, "y")
         lo, h, _, frame = self._grids[3]
@@ -1317,24 +621,22 @@ class BatchMarginals:
         u_up = frame.u(t_up)
         inside = u_up > lo
         hi = np.where(inside, u_up, lo + 1.0)
-        x, w = np.polynomial.legendre.leggauss(8)
-        panels = max(1, int(np.ceil(np.max((hi - lo) / step))))
-        previous = None
-        while True:
-            edges = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, panels + 1)
-            half = 0.5 * np.diff(edges, axis=1)[..., None]
-            u = (0.5 * (edges[:, 1:] + edges[:, :-1]))[..., None] + half * x
-            offsets, log_jac = _mapped_nodes(3, u.reshape(len(y), -1), frame)
+
+        def density(u):
+            offsets, log_jac = quadrature.mapped_nodes(3, u.reshape(len(y), -1), frame)
             log_f = _solve(offsets, self._problem)[0] + log_jac - self.log_normaliser[:, None]
-            cdf = np.sum(np.exp(log_f) * (half * w).reshape(len(y), -1), axis=1)
-            if previous is not None and np.all(np.abs(cdf - previous) <= self.rtol):
-                break
-            if 8 * panels > 4 * _NODE_BUDGET:
-                raise ValueError(
-                    f"y: the depth CDF did not reach rtol = {self.rtol:.3g} "
-                    f"within {4 * _NODE_BUDGET} nodes"
-                )
-            previous, panels = cdf, 2 * panels
+            return np.exp(log_f).reshape(u.shape)
+
+        width = hi - lo
+        panels = max(1, int(np.ceil(np.max(width / step))))
+        cdf, settled, _ = quadrature.gauss_legendre_cdf(
+            density, lo, width, panels, self.rtol, max_nodes=4 * quadrature.NODE_BUDGET
+        )
+        if not settled:
+            raise ValueError(
+                f"y: the depth CDF did not reach rtol = {self.rtol:.3g} "
+                f"within {4 * quadrature.NODE_BUDGET} nodes"
+            )
         return np.where(inside, np.clip(cdf, 0.0, 1.0), 0.0)
 
     def velocity_cdf(self, v) -> np.ndarray:
@@ -1359,7 +661,7 @@ def batch_marginals(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> Batc
     """
     pb = _problem(mu, rho, prior_mean, prior_cov, "derived")
     rtol = _checks.positive_scalar(rtol, "rtol")
-    m, err_y, err_v, top, grids = _integrate(pb, (3,), rtol)
+    m, err_y, err_v, top, grids = quadrature.integrate(pb, (3,), rtol)
     log_z = np.log(m.Z) + top
     moments_ = Moments(*m.key_moments(), err_y, err_v, m.behind, m.mean, m.cov)
     lo, h, n, frame = grids[3]

@@ -123,10 +123,7 @@ from .resampling import (
     RESAMPLERS,
     check_rng,
     effective_sample_size,
-    multinomial,
     normalise,
-    residual,
-    systematic,
     weighted_density,
     weighted_moments,
     weighted_standard_errors,
@@ -137,17 +134,11 @@ __all__ = [
     "DEFAULT_DF",
     "DEFAULT_INFLATION",
     "PROPOSALS",
-    "RESAMPLERS",
     "ParticleBatch",
     "ParticleMoments",
     "ParticleResult",
-    "effective_sample_size",
-    "multinomial",
-    "normalise",
     "particle_filter",
-    "residual",
     "run",
-    "systematic",
 ]
 
 PROPOSALS = ("second_order", "prior")

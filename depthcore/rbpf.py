@@ -199,7 +199,7 @@ class RBPF:
         Gaussian given its depth.
         """
         b = self.bank
-        mean, cov = bk._mixture_moments(
+        mean, cov = bk.mixture_moments(
             np.exp(self.log_weights), b.mean, b.cov, b.nodes + (self.n_frames - 1)
         )
         return ParticleMoments(
@@ -241,7 +241,7 @@ class RBPF:
         (the depth is exact given a particle).
         """
         W, depths, means, covs = self.pooled()
-        return bk._mixture_moments(W, means, covs, depths)
+        return bk.mixture_moments(W, means, covs, depths)
 
     def depth_cdf(self, y):
         """``P(y_K <= y)`` under :meth:`pooled`, the particles' weighted step function.

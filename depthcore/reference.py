@@ -30,10 +30,10 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _checks, bank, kalman, model, optimal
-from .gaussian import Gaussian, student_t
+from .gaussian import Gaussian, student_t, symmetric
 from .optimal import log_posterior
-from .resampling import weighted_moments, weighted_standard_errors
-from .second_order import minimiser, second_order
+from .resampling import normalised, weighted_moments, weighted_standard_errors
+from .second_order import bearing_residuals, minimiser, second_order, trajectory_map
 
 LogDensity = Callable[[np.ndarray], np.ndarray]
 
@@ -288,7 +288,7 @@ def numerical_hessian(fun: Callable, x, step: float = 1e-4) -> np.ndarray:
             for a in eye
         ]
     )
-    return 0.5 * (H + H.T)
+    return symmetric(H)
 
 
 def log_gaussian_integral_brute(M, l, n: int = 801, width: float = 12.0) -> float:
@@ -363,9 +363,9 @@ def trapezoid_depth_moments(
     t = np.arange(t_lo, t_hi + step / 2, step)
     y = 2.0 + np.exp(t)
     log_w = optimal.conditional(y, mu, rho, prior, reading)[0] + t
-    w = np.exp(log_w - np.max(log_w))
-    mean = float(np.sum(w * y) / np.sum(w))
-    return mean, float(np.sqrt(np.sum(w * (y - mean) ** 2) / np.sum(w))), int(t.size)
+    W, _ = normalised(log_w)
+    mean = float(np.sum(W * y))
+    return mean, float(np.sqrt(np.sum(W * (y - mean) ** 2))), int(t.size)
 
 
 def track_fixed_lag(track) -> tuple[np.ndarray, np.ndarray]:
@@ -417,26 +417,6 @@ def track_fixed_lag(track) -> tuple[np.ndarray, np.ndarray]:
         means.append(mean)
         covs.append(np.einsum("j,jab->ab", p, C + d[:, :, None] * d[:, None, :]))
     return np.array(means), np.array(covs)
-
-
-def _dense_trajectory(z, mu):
-    """Bearing residuals (N,) and their Jacobian (N, N + 2) of ``z = (x_1, y_1, v_1, a)``.
-
-    The states are ``x_k = x_1 + (k - 1) v_1 + sum_i max(k - 1 - i, 0) a_i``,
-    ``y_k = y_1 + k - 1``, built with the dense ``N x (N - 1)`` map of the
-    accelerations.
-    """
-    n_frames = mu.shape[-1]
-    j = np.arange(n_frames, dtype=float)
-    D = np.maximum(j[:, None] - np.arange(1, n_frames)[None, :], 0.0)
-    x = z[0] + j * z[2] + D @ z[3:]
-    y = z[1] + j
-    J = np.empty((n_frames, n_frames + 2))
-    J[:, 0] = 1.0 / y
-    J[:, 1] = -x / y**2
-    J[:, 2] = j / y
-    J[:, 3:] = D / y[:, None]
-    return x / y - mu, J
 
 
 def _dense_final_state_map(n_frames: int):
@@ -508,7 +488,7 @@ def trajectory_laplace_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     penalty[:, 3:] = np.eye(n_frames - 1) / q
 
     def stacked(z):
-        r, J = _dense_trajectory(z, mu)
+        r, J = bearing_residuals(z, mu, trajectory_map(mu.shape[-1]))
         return np.concatenate([r / rho, z[3:] / q]), np.concatenate([J / rho, penalty])
 
     def objective(z):
@@ -534,7 +514,7 @@ def trajectory_laplace_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     R_inv = np.linalg.inv(R)
     T, offset = _dense_final_state_map(n_frames)
     cov = T @ R_inv @ R_inv.T @ T.T
-    return T @ (R_inv @ (Q.T @ rhs)) + offset, 0.5 * (cov + cov.T)
+    return T @ (R_inv @ (Q.T @ rhs)) + offset, symmetric(cov)
 
 
 def iterated_smoother_dense(mu, rho: float, prior_mean, prior_cov, q: float):
@@ -559,7 +539,7 @@ def iterated_smoother_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     L_inv = np.linalg.inv(np.linalg.cholesky(prior_cov))
 
     def stacked(z):
-        bearing, J = _dense_trajectory(z, mu)
+        bearing, J = bearing_residuals(z, mu, trajectory_map(mu.shape[-1]))
         M = np.zeros((2 * K + 2, K + 2))
         M[:3, :3] = L_inv
         M[3 : K + 3] = J / rho
@@ -581,4 +561,4 @@ def iterated_smoother_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     R_inv = np.linalg.inv(np.linalg.qr(M, mode="r"))
     T, offset = _dense_final_state_map(K)
     cov = T @ R_inv @ R_inv.T @ T.T
-    return T @ z + offset, 0.5 * (cov + cov.T), iterations
+    return T @ z + offset, symmetric(cov), iterations

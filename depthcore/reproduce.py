@@ -26,12 +26,7 @@ from .scenarios import REPORTED, REPORTED_DECIMALS, SCENARIOS, Scenario
 PARTICLE_SEED = 1990
 
 __all__ = [
-    "FILTERS",
-    "NAMES",
-    "PAPER_FILTERS",
-    "PARTICLES",
     "PARTICLE_SEED",
-    "QUANTITIES",
     "curves",
     "filter_moments",
     "reproduce",

@@ -80,6 +80,7 @@ from .resampling import (
     effective_sample_size,
     normalise,
     replica_errors,
+    state_moments,
     weighted_density,
     weighted_mean_and_cov,
 )
@@ -118,14 +119,7 @@ class ResampleMoveBatch:
 
     def moments(self) -> dict:
         """Weighted depth and velocity means and SDs at the last frame, each of shape (B,)."""
-        W = np.exp(self.log_weights)
-        out = {}
-        for name, i in (("depth", 1), ("velocity", 2)):
-            x = self.particles[..., i]
-            mean = np.sum(W * x, axis=-1)
-            out[f"{name}_mean"] = mean
-            out[f"{name}_sd"] = np.sqrt(np.sum(W * (x - mean[:, None]) ** 2, axis=-1))
-        return out
+        return state_moments(self.particles, self.log_weights)
 
     def density(
         self, component: str, grid, method: str = "kde", bandwidth: float | None = None
@@ -184,14 +178,7 @@ class Replicated:
 
     def moments(self) -> dict:
         """Depth and velocity means and SDs of the pool, shape (B,)."""
-        W = np.exp(self.log_weights)
-        out = {}
-        for name, i in (("depth", 1), ("velocity", 2)):
-            x = self.particles[..., i]
-            mean = np.sum(W * x, axis=-1)
-            out[f"{name}_mean"] = mean
-            out[f"{name}_sd"] = np.sqrt(np.sum(W * (x - mean[:, None]) ** 2, axis=-1))
-        return out
+        return state_moments(self.particles, self.log_weights)
 
     def errors(self) -> tuple[dict, np.ndarray]:
         """Monte Carlo errors of :meth:`moments` and the collapse flag, shape (B,).

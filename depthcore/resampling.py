@@ -130,6 +130,34 @@ def normalise(log_w) -> np.ndarray:
     ndarray, shape (..., N)
         ``logsumexp`` of each row is 0.
     """
+    shifted, _, total = _shifted(log_w)
+    return shifted - np.log(total)
+
+
+def normalised(log_w):
+    """Normalised weights and the log of their sum, by log-sum-exp along the last axis.
+
+    ``W = w / sum w`` and ``log sum w = m + log sum exp(log w - m)``,
+    ``m = max log w``, with no overflow or underflow of the largest weights.
+
+    Parameters
+    ----------
+    log_w : array_like, shape (..., N)
+        As for :func:`normalise`.
+
+    Returns
+    -------
+    W : ndarray, shape (..., N)
+        The normalised weights, summing to one along the last axis.
+    log_normaliser : ndarray, shape (...)
+        ``log sum w``.
+    """
+    shifted, top, total = _shifted(log_w)
+    return np.exp(shifted) / total, (top + np.log(total))[..., 0]
+
+
+def _shifted(log_w):
+    """``log w - m``, ``m = max log w`` (..., 1) and ``sum exp(log w - m)`` (..., 1)."""
     log_w = np.asarray(log_w, dtype=float)
     top = np.max(log_w, axis=-1, keepdims=True)
     if not np.all(np.isfinite(top)):
@@ -137,7 +165,7 @@ def normalise(log_w) -> np.ndarray:
     # shift first: the weights exp(shifted) then sum to one to rounding, however large
     # |log w| is (top + log(sum) would round to eps |top|, far from one at |top| ~ 1e10)
     shifted = log_w - top
-    return shifted - np.log(np.sum(np.exp(shifted), axis=-1, keepdims=True))
+    return shifted, top, np.sum(np.exp(shifted), axis=-1, keepdims=True)
 
 
 def effective_sample_size(log_w) -> np.ndarray:
@@ -164,6 +192,28 @@ def weighted_moments(x, W) -> tuple[np.ndarray, np.ndarray]:
     """Weighted means and SDs of ``x`` (..., N) with weights ``W`` (..., N)."""
     mean = np.sum(W * x, axis=-1)
     return mean, np.sqrt(np.sum(W * (x - mean[..., None]) ** 2, axis=-1))
+
+
+def state_moments(particles, log_weights) -> dict:
+    """Weighted depth and velocity means and SDs of particles of the state ``(x, y, v)``.
+
+    Parameters
+    ----------
+    particles : ndarray, shape (..., N, 3)
+    log_weights : ndarray, shape (..., N)
+        Normalised log weights.
+
+    Returns
+    -------
+    dict
+        ``depth_mean``, ``depth_sd``, ``velocity_mean`` and ``velocity_sd``,
+        each of shape (...): :func:`weighted_moments` of ``y`` and ``v``.
+    """
+    W = np.exp(log_weights)
+    out = {}
+    for name, i in (("depth", 1), ("velocity", 2)):
+        out[f"{name}_mean"], out[f"{name}_sd"] = weighted_moments(particles[..., i], W)
+    return out
 
 
 def weighted_standard_errors(x, W) -> tuple[np.ndarray, np.ndarray]:

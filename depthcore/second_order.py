@@ -42,8 +42,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import _checks, model
-from .gaussian import Gaussian
-from .model import f, noise_free_state, noise_free_states, residual_gradients, residuals
+from .gaussian import Gaussian, symmetric
+from .model import noise_free_state, noise_free_states, residual_gradients, residuals
 
 __all__ = [
     "A2",
@@ -54,13 +54,8 @@ __all__ = [
     "b2",
     "bearing_rows",
     "damped_step",
-    "f",
     "hessian",
     "likelihood_covariance",
-    "noise_free_state",
-    "noise_free_states",
-    "residual_gradients",
-    "residuals",
     "second_order",
     "minimiser",
     "second_order_batch",
@@ -330,18 +325,44 @@ def damped_step(x, step, f, objective):
     return np.where(keep[..., None], x, x_new), np.where(keep, f, f_new)
 
 
-def _trajectory_map(n_frames: int) -> np.ndarray:
-    """``D`` (N, N - 1) with ``x_k = x_1 + (k - 1) v_1 + sum_i D[k-1, i-1] a_i``.
+def trajectory_map(n_frames: int) -> np.ndarray:
+    """The map of the accelerations to the lateral positions, Eq. (1) with process noise.
 
+    ``x_k = x_1 + (k - 1) v_1 + sum_i D[k-1, i-1] a_i`` with
     ``D[k-1, i-1] = max(k - 1 - i, 0)``: acceleration ``a_i`` changes ``v_{i+1}`` onwards.
+
+    Parameters
+    ----------
+    n_frames : int
+        ``N``.
+
+    Returns
+    -------
+    ndarray, shape (N, N - 1)
     """
     k = np.arange(n_frames)[:, None]
     i = np.arange(1, n_frames)[None, :]
     return np.maximum(k - i, 0).astype(float)
 
 
-def _trajectory_residuals(z, mu, D):
-    """Bearing residuals (N,) and their Jacobian (N, N + 2) of ``z = (x_1, y_1, v_1, a)``."""
+def bearing_residuals(z, mu, D):
+    """The bearings' residuals ``x_k / y_k - mu_k`` of a trajectory and their Jacobian, Eq. (4).
+
+    Parameters
+    ----------
+    z : ndarray, shape (N + 2,)
+        The trajectory ``(x_1, y_1, v_1, a_1 .. a_{N-1})``.
+    mu : ndarray, shape (N,)
+        The bearings.
+    D : ndarray, shape (N, N - 1)
+        :func:`trajectory_map` of ``N``.
+
+    Returns
+    -------
+    residuals : ndarray, shape (N,)
+    jacobian : ndarray, shape (N, N + 2)
+        Their derivatives with respect to ``z``.
+    """
     n_frames = mu.shape[-1]
     j = np.arange(n_frames, dtype=float)
     x = z[0] + j * z[2] + D @ z[3:]
@@ -529,7 +550,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
         s = trajectory_states(z)
         front = z[:, 1] > 0
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            r = weight[rows, None] * (s[..., 0] / s[..., 1] - mu[rows])
+            r = weight[rows, None] * (model.project(s) - mu[rows])
             value = np.sum(r**2, axis=-1) + np.sum((z[:, 3:] / q) ** 2, axis=-1)
         return np.where(front, value, np.inf)
 
@@ -541,7 +562,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
             break
         za = z[rows]
         s = trajectory_states(za)
-        r = weight[rows, None] * (s[..., 0] / s[..., 1] - mu[rows])
+        r = weight[rows, None] * (model.project(s) - mu[rows])
         step, _ = trajectory_solve(bearing_rows(s, weight[rows]), -r, -za[:, 3:] / q, q)
         step = np.where(np.isfinite(step), step, 0.0)
         z_new, f_new = damped_step(za, step, f[rows], lambda y, rows=rows: objective(y, rows))
@@ -561,7 +582,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
     R_inv = np.linalg.inv(R)
     cov = R_inv @ np.swapaxes(R_inv, -1, -2)
     mean = s[:, -1] + trajectory_states(dz, offset=False)[:, -1]
-    return mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    return mean, symmetric(cov)
 
 
 def _square_root_solve(c, g, weight, prior_mean, prior_cov):
@@ -601,7 +622,7 @@ def _square_root_solve(c, g, weight, prior_mean, prior_cov):
     R_inv = np.linalg.inv(R)
     delta = np.einsum("bij,bkj,bk->bi", R_inv, Q[:, n_frames:], whitened[..., 3])
     cov = R_inv @ np.swapaxes(R_inv, -1, -2)
-    return c + delta, 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    return c + delta, symmetric(cov)
 
 
 def second_order(

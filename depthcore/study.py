@@ -275,7 +275,7 @@ def _reference_range(reference):
         t_lo = np.min(np.where(used, log_y1, np.inf), axis=-1)
         t_hi = np.max(np.where(used, log_y1, -np.inf), axis=-1)
         return t_lo, t_hi, reference.bank.n_frames - 1.0
-    t_lo, t_hi, _ = reference._start
+    t_lo, t_hi, _ = reference.log_depth_range
     return t_lo, t_hi, 2.0
 
 

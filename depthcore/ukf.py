@@ -85,8 +85,8 @@ from functools import partial
 import numpy as np
 
 from . import _checks, model
-from .ekf import predict, run_gaussian_filter  # noqa: F401 (the prediction, Eq. (10), is exact)
-from .gaussian import Gaussian, History, MeanAndCov
+from .ekf import run_gaussian_filter
+from .gaussian import Gaussian, History, MeanAndCov, symmetric
 
 #: The UKF's estimates after each measurement (the type of :func:`depthcore.ekf.run`).
 UKFHistory = History
@@ -215,7 +215,7 @@ def unscented_transform(points, Wm, Wc, noise_cov=None) -> MeanAndCov:
     cov = np.einsum("i,...ij,...ik->...jk", Wc, d, d)
     if noise_cov is not None:
         cov = cov + np.asarray(noise_cov, dtype=float)
-    return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    return MeanAndCov(mean, symmetric(cov))
 
 
 def measurement_update(
@@ -257,7 +257,7 @@ def measurement_update(
     innovation = np.asarray(mu, dtype=float) - z
     mean = n + (innovation / s)[..., None] * c
     cov = np.asarray(C, dtype=float) - c[..., :, None] * c[..., None, :] / s[..., None, None]
-    return MeanAndCov(mean, 0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    return MeanAndCov(mean, symmetric(cov))
 
 
 def update(

@@ -20,8 +20,8 @@ from scipy.special import logsumexp
 from depthcore import bank as bk
 from depthcore import kalman, model, optimal
 from depthcore.gaussian import paper_prior
+from depthcore.model import noise_free_state
 from depthcore.scenarios import MU_17, RHO_200, SCENARIOS
-from depthcore.second_order import noise_free_state
 
 ORDER = 20  # Gauss-Legendre points per panel
 
@@ -717,7 +717,7 @@ def test_stacked_mixture_moments_equal_the_naive_sum_node_by_node(depth):
             # (the naive sum's own rounding: a few units of the depth's last place)
             assert np.all(np.abs(mean[i, k] - m) <= 1e-12 * scale + 8 * EPS * np.abs(m))
             assert np.all(np.abs(cov[i, k] - c) <= 1e-12 * np.outer(scale, scale))
-        one = bk._mixture_moments(W[i, 0], means[i], covs[i], depths[i])  # one weighting
+        one = bk.mixture_moments(W[i, 0], means[i], covs[i], depths[i])  # one weighting
         assert_allclose(one[0], mean[i, 0], rtol=1e-14)
         assert_allclose(one[1], cov[i, 0], rtol=1e-13, atol=1e-16)
 

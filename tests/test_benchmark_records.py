@@ -12,6 +12,7 @@ import datetime
 import json
 import shutil
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -104,7 +105,7 @@ def test_a_quick_run_leaves_the_committed_record(tmp_path, monkeypatch):
     monkeypatch.setattr(benchmarks, "RESULTS", tmp_path / "results")
     monkeypatch.setattr(benchmarks, "QUICK_RESULTS", tmp_path / "quick")
     (tmp_path / "depthcore").mkdir()
-    shutil.copy(benchmarks.Path(benchmarks.__file__).parent / "optimal.py", tmp_path / "depthcore")
+    shutil.copy(Path(benchmarks.__file__).parent / "optimal.py", tmp_path / "depthcore")
     path = benchmarks.write(script, ["optimal"], {"trials": 1}, {"x_s": 1.0}, full=False)
     assert path == tmp_path / "quick" / "bench_probe.json"
     assert not (tmp_path / "results").exists()

@@ -6,8 +6,9 @@ import pytest
 from depthcore import _checks, model, optimal, paper_prior
 from depthcore.ekf import ekf
 from depthcore.gaussian import Gaussian
+from depthcore.model import noise_free_state
 from depthcore.scenarios import MU_17
-from depthcore.second_order import noise_free_state, second_order
+from depthcore.second_order import second_order
 
 PRIOR = paper_prior(noise_free_state(MU_17))
 FILTERS = [

@@ -9,8 +9,9 @@ from depthcore import ekf as ekf_module
 from depthcore import model, paper_prior
 from depthcore.ekf import ekf, predict, run, update
 from depthcore.gaussian import Gaussian
+from depthcore.model import noise_free_state
 from depthcore.scenarios import MU_17, SCENARIOS
-from depthcore.second_order import noise_free_state, second_order
+from depthcore.second_order import second_order
 
 from helpers import bearings, states
 

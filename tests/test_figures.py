@@ -10,13 +10,14 @@ import pytest  # noqa: E402
 from numpy.testing import assert_allclose  # noqa: E402
 
 from depthcore import experiments, figures, reproduce  # noqa: E402
+from depthcore.filters import NAMES, PAPER_FILTERS  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
 FIG2 = SCENARIOS["fig2"]
 
 
 @pytest.mark.parametrize("key", list(SCENARIOS))
-@pytest.mark.parametrize("filters", [reproduce.PAPER_FILTERS, reproduce.NAMES])
+@pytest.mark.parametrize("filters", [PAPER_FILTERS, NAMES])
 def test_figure_draws_the_filters(key, filters):
     fig = figures.figure(key, n=101, filters=filters)
     ax = fig.axes[0]
@@ -65,8 +66,8 @@ def test_prior_velocity_sweep_and_map_figures_draw_the_data():
 def test_curves_are_densities_on_a_wide_grid():
     s = SCENARIOS["fig4"]
     grid = np.linspace(-1, 4, 4001)
-    c = reproduce.curves(s, grid, filters=reproduce.NAMES)
-    for name in reproduce.PAPER_FILTERS:
+    c = reproduce.curves(s, grid, filters=NAMES)
+    for name in PAPER_FILTERS:
         assert np.trapezoid(c[name], grid) == pytest.approx(1.0, abs=1e-4)
     assert np.trapezoid(c["particle"], grid) == pytest.approx(1.0, abs=1e-3)  # kernel tails
 
@@ -212,11 +213,11 @@ def test_extended_figure_draws_the_curves_of_every_filter():
     from depthcore.ukf import ukf
 
     s = FIG2
-    fig = figures.figure("fig2", n=101, filters=reproduce.NAMES)
+    fig = figures.figure("fig2", n=101, filters=NAMES)
     lines = _lines(fig.axes[0])
     grid = np.linspace(*figures.GRIDS["fig2"], 101)
-    c = reproduce.curves(s, grid, filters=reproduce.NAMES)
-    for name in reproduce.NAMES:
+    c = reproduce.curves(s, grid, filters=NAMES)
+    for name in NAMES:
         assert_allclose(lines[figures.STYLE[name]["label"]][1], c[name], rtol=1e-12, atol=0)
     u = ukf(s.mu, s.rho, s.prior, allow_behind_camera=True).posterior.marginal("y")
     u = _normal_pdf(grid, *u)
@@ -326,7 +327,7 @@ def test_calibration_and_sweep_figures_draw_their_results():
     for field in ("hellinger", "depth_mean", "depth_sd"):
         fig = figures.sweep(sw, "offset", field)
         drawn = {line.get_label(): line for line in fig.axes[0].get_lines()}
-        names = [n for n in reproduce.NAMES if n in sw]
+        names = [n for n in NAMES if n in sw]
         if field == "hellinger":
             names.remove("optimal")
         assert len(drawn) == len(names)

@@ -5,10 +5,10 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from depthcore import model, optimal, reference
+from depthcore import model, optimal, quadrature, reference
 from depthcore.gaussian import Gaussian
+from depthcore.model import f, noise_free_state
 from depthcore.scenarios import MU_17, SCENARIOS
-from depthcore.second_order import f, noise_free_state
 
 
 def test_eq6_log_posterior_is_likelihood_times_prior():
@@ -351,7 +351,7 @@ def _uniform_velocity_cdf(batch, v, factor):
     from scipy.special import ndtr
 
     lo, h, n, frame = batch._grids[3]
-    u = optimal._grid(lo, h / factor, (n - 1) * factor + 1, 0.0)
+    u = quadrature.grid(lo, h / factor, (n - 1) * factor + 1, 0.0)
     w, mean, sd = optimal._velocity_nodes(3, u, frame, batch._problem, batch.log_normaliser)
     return np.sum(w * ndtr((v[:, None] - mean) / sd), axis=1) / np.sum(w, axis=1)
 
@@ -372,7 +372,7 @@ def test_velocity_cdf_refines_each_problem_on_its_own_and_matches_a_finer_mixtur
         )
     rows = [3, 7]
     lo, h, n, frame = batch._grids[3]
-    sub_grids = {3: (lo[rows], h[rows], n[rows], optimal._Frame(*(a[rows] for a in frame)))}
+    sub_grids = {3: (lo[rows], h[rows], n[rows], quadrature.Frame(*(a[rows] for a in frame)))}
     whole = optimal._fine_velocity_mixture(batch._problem, batch._grids, batch.log_normaliser)
     part = optimal._fine_velocity_mixture(
         batch._problem.take(rows), sub_grids, batch.log_normaliser[rows]

@@ -4,14 +4,15 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import optimal, reference
+from depthcore import optimal, quadrature, reference
 from depthcore.gaussian import Gaussian
-from depthcore.second_order import noise_free_state, second_order
+from depthcore.model import noise_free_state
+from depthcore.second_order import second_order
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
 #: Most nodes the quadrature may use for one problem on y > 2.
-NODE_BOUND = 2 * optimal._NODE_BUDGET
+NODE_BOUND = 2 * quadrature.NODE_BUDGET
 
 
 def _prior(mu, scale=1000.0):
@@ -157,7 +158,7 @@ def test_batch_of_extremes_matches_single_calls():
 
 
 def test_budget_exhausted_is_a_value_error_naming_the_input(monkeypatch):
-    monkeypatch.setattr(optimal, "_NODE_BUDGET", 20)
+    monkeypatch.setattr(quadrature, "NODE_BUDGET", 20)
     mu, rho, scale = EXTREMES["prior scale 1e6"]
     with pytest.raises(ValueError, match=r"mu\[0\] = .*did not reach rtol"):
         optimal.marginals(mu, rho, _prior(mu, scale))

@@ -10,8 +10,9 @@ from depthcore import (
     optimal,
     reference,
 )
+from depthcore.model import f, noise_free_state
 from depthcore.scenarios import MU_17, MU_18
-from depthcore.second_order import f, hessian, noise_free_state
+from depthcore.second_order import hessian
 
 
 def random_states(rng, c, n=50):

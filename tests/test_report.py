@@ -15,6 +15,7 @@ from depthcore import (
     reproduce,
     study,
 )
+from depthcore.filters import NAMES
 from depthcore.scenarios import REPORTED
 
 FIG2 = SCENARIOS["fig2"]
@@ -69,7 +70,7 @@ PM = re.compile(r"^-?\d+\.\d{3} ± \d+\.\d{3}$")
 def test_moments_texts_cover_every_filter_and_scenario():
     result = reproduce.reproduce()
     texts = report.moments_texts(result)
-    n = len(SCENARIOS) * len(reproduce.NAMES) * 2 + len(SCENARIOS) * 2
+    n = len(SCENARIOS) * len(NAMES) * 2 + len(SCENARIOS) * 2
     assert len(texts) == n
     assert all(PM.match(v) for k, v in texts.items() if not k.endswith("_se"))
     m = optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior)

@@ -7,13 +7,12 @@ from numpy.testing import assert_allclose
 from depthcore import model, optimal, paper_prior, reference
 from depthcore.ekf import ekf
 from depthcore.gaussian import Gaussian
+from depthcore.model import f, noise_free_state
 from depthcore.scenarios import MU_17, MU_18
 from depthcore.second_order import (
-    f,
     hessian,
     likelihood_covariance,
     minimiser,
-    noise_free_state,
     second_order,
     second_order_batch,
     theorem1_precision,
@@ -93,7 +92,7 @@ def test_reading_must_be_known():
 
 def test_eq23_second_order_density_is_the_linearised_posterior():
     from depthcore import model
-    from depthcore.second_order import residual_gradients
+    from depthcore.model import residual_gradients
 
     mu, rho = MU_17, 1 / 200
     c = noise_free_state(mu)

@@ -11,6 +11,7 @@ from scipy import integrate
 from depthcore import _checks, model, optimal, study
 from depthcore.__main__ import main
 from depthcore.filters import FILTERS, NAMES
+from depthcore.gaussian import Gaussian
 from depthcore.scenarios import SCENARIOS
 
 
@@ -192,9 +193,7 @@ def test_hellinger_matches_adaptive_quadrature():
     est = study.run_filters(trials, ("optimal", "ekf"))
     ref = optimal.batch_marginals(trials.mu, trials.rho, trials.prior_mean, trials.prior_cov)
     for i in range(3):
-        m = optimal.marginals(
-            trials.mu[i], s.rho, optimal.Gaussian(trials.prior_mean[i], trials.prior_cov)
-        )
+        m = optimal.marginals(trials.mu[i], s.rho, Gaussian(trials.prior_mean[i], trials.prior_cov))
         mean, sd = est["ekf"].mean[i, 1], np.sqrt(est["ekf"].cov[i, 1, 1])
 
         def q(y, mean=mean, sd=sd):
@@ -330,9 +329,7 @@ def test_optimal_cdfs_at_the_truth_match_quadrature_of_its_marginals():
     trials = study.simulate(s.c, s.rho, 2, np.random.default_rng(4))
     est = study.run_filters(trials, ("optimal",))["optimal"]
     for i in range(2):
-        m = optimal.marginals(
-            trials.mu[i], s.rho, optimal.Gaussian(trials.prior_mean[i], trials.prior_cov)
-        )
+        m = optimal.marginals(trials.mu[i], s.rho, Gaussian(trials.prior_mean[i], trials.prior_cov))
         y_cdf, _ = integrate.quad(m.depth_pdf, 2, s.c[1], limit=400)
         v_cdf, _ = integrate.quad(m.velocity_pdf, -np.inf, s.c[2], limit=400)
         assert est.depth_cdf[i] == pytest.approx(y_cdf, abs=1e-6)

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from depthcore import ekf, second_order
+from depthcore import ekf, model, second_order
 from depthcore.gaussian import Gaussian
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -51,7 +51,7 @@ def test_theorem1_small_noise_ekf_equals_p_s_and_the_exact_covariance(mu, log_rh
     mean (c, Eq. (19)) and covariance, the D of Eq. (24) from a 50-digit solve, to 1e-9
     relative."""
     rho, scale = float(np.exp(log_rho)), float(np.exp(log_scale))
-    c = second_order.noise_free_state(mu)
+    c = model.noise_free_state(mu)
     prior = Gaussian(second_order.A2 @ c + second_order.b2, scale * np.eye(3))
     p_s = second_order.second_order(mu, rho, prior)
     p_e = ekf.ekf(mu, rho, prior).posterior

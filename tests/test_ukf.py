@@ -7,12 +7,12 @@ from filterpy.kalman import unscented_transform as filterpy_unscented_transform
 from numpy.testing import assert_allclose
 
 from depthcore import model
-from depthcore import ukf as ukf_module
 from depthcore.ekf import ekf
+from depthcore.ekf import predict as ekf_predict
 from depthcore.ekf import update as ekf_update
 from depthcore.gaussian import Gaussian
+from depthcore.model import noise_free_state
 from depthcore.scenarios import MU_17, SCENARIOS
-from depthcore.second_order import noise_free_state
 from depthcore.ukf import SigmaPoints, measurement_update, run, ukf, unscented_transform, update
 
 #: Sigma-point rules exercised throughout: the default, Wan and van der
@@ -141,7 +141,7 @@ def test_ukf_ekf_comparison():
     m_k, P_k = m_u, P_u
     for k in range(3):
         if k:
-            m_u, P_u = ukf_module.predict(m_u, P_u)
+            m_u, P_u = ekf_predict(m_u, P_u)
             m_k, P_k = model.F @ m_k + model.e, model.F @ P_k @ model.F.T
         m_u, P_u = measurement_update(m_u, P_u, mu[k], rho, lambda x: x @ a, RULES[1])
         m_k, P_k = kalman_update(m_k, P_k, mu[k], rho, a, 0.0)
