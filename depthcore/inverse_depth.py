@@ -31,7 +31,14 @@ map's Jacobian at ``m`` (:func:`prior`). This needs ``m_y > 0``.
 **The estimate.** The filter's Gaussian on ``(a_K, w, s_K)`` is reported in the
 paper's coordinates at the last frame, ``x_K = a_K / w``, ``y_K = 1 / w + K - 1``,
 ``v_K = s_K / w``, by the same linearisation at its mean (:func:`to_state`),
-which needs a positive mean inverse depth.
+which needs a positive mean inverse depth. That is the delta method: the
+depth's moments under the filter's Gaussian on ``w`` do not exist
+(``E[1 / w]`` diverges, as the Gaussian's density is positive at ``w = 0``),
+so the mean and SD it reports are those of the linearised map. What carries
+over exactly are the Gaussian's quantiles: ``y = 1 / w + K - 1`` decreases
+with ``w > 0``, so the median and a central interval of ``w`` map to a
+median and an interval of the depth with the same probability
+(:func:`depth_interval`).
 
 References
 ----------
@@ -172,6 +179,52 @@ def to_state(z, S, k: int) -> MeanAndCov:
     J[..., 2, 2] = 1.0 / w
     mean = np.stack([a / w, 1.0 / w + (k - 1), s / w], axis=-1)
     return MeanAndCov(mean, symmetric(J @ S @ np.swapaxes(J, -1, -2)))
+
+
+def depth_interval(z, S, k: int, level: float = 0.68) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The depth's median and central interval under the filter's Gaussian on ``w``, exactly.
+
+    The depth at frame ``k`` is ``y_k = 1 / w + k - 1``, decreasing in
+    ``w > 0``: the Gaussian's median ``m_w`` and central interval
+    ``[w_lo, w_hi]`` (probability ``level``) map to the median
+    ``1 / m_w + k - 1`` and the interval ``[1 / w_hi + k - 1, 1 / w_lo + k - 1]``
+    of the depth, with the same probabilities, the exact transformation of the
+    filter's own distribution that :func:`to_state`'s delta method
+    approximates. Where ``w_lo <= 0`` the interval reaches beyond infinity:
+    its upper end is ``inf``.
+
+    Parameters
+    ----------
+    z : array_like, shape (..., 3)
+        Mean of ``(a_k, w, s_k)``; its inverse depth must be positive.
+    S : array_like, shape (..., 3, 3)
+    k : int
+        The frame, ``>= 1``.
+    level : float
+        In (0, 1).
+
+    Returns
+    -------
+    median, low, high : ndarray, shape (...)
+    """
+    from scipy.special import ndtri
+
+    z = np.asarray(z, dtype=float)
+    S = np.asarray(S, dtype=float)
+    level = float(level)
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    w, sd = z[..., 1], np.sqrt(S[..., 1, 1])
+    if not np.all(w > 0):
+        raise ValueError(
+            "the inverse-depth EKF's mean inverse depth is not positive "
+            f"(min {float(np.min(w)):.6g}): its depth's median lies at or beyond infinity"
+        )
+    half = ndtri(0.5 + level / 2.0) * sd
+    low_w, high_w = w - half, w + half
+    with np.errstate(divide="ignore"):
+        high = np.where(low_w > 0, 1.0 / np.where(low_w > 0, low_w, 1.0) + (k - 1), np.inf)
+    return 1.0 / w + (k - 1), 1.0 / high_w + (k - 1), high
 
 
 def run(

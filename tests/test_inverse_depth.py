@@ -120,3 +120,26 @@ def test_an_estimate_at_infinity_is_refused():
     """Bearings that drive the mean inverse depth below zero get a one-line refusal, not a NaN."""
     with pytest.raises(ValueError, match="inverse depth"):
         inverse_depth.to_state(np.array([0.1, -0.01, 0.0]), np.eye(3), 3)
+
+
+def test_the_depth_interval_is_the_exact_image_of_the_inverse_depths():
+    # Monte Carlo of the filter's own Gaussian on w: the depth 1/w + k - 1 lies
+    # below the median with probability 1/2 and inside the interval with the
+    # level's probability (200,000 draws: binomial SE about 0.001).
+    s = SCENARIOS["fig2"]
+    means, covs = inverse_depth.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
+    z, S = means[-1], covs[-1]
+    median, low, high = inverse_depth.depth_interval(z, S, 3, 0.68)
+    w = np.random.default_rng(0).normal(z[1], np.sqrt(S[1, 1]), 200_000)
+    y = np.where(w > 0, 1.0 / np.where(w > 0, w, 1.0) + 2, np.inf)
+    assert np.mean(y < median) == pytest.approx(0.5, abs=0.005)
+    assert np.mean((low <= y) & (y <= high)) == pytest.approx(0.68, abs=0.005)
+    # the delta method's mean lies at the median's depth: both are 1/w + 2 at the mean w
+    delta = inverse_depth.to_state(z, S, 3)
+    assert delta.mean[1] == pytest.approx(median, rel=1e-14)
+    # a wide Gaussian whose interval reaches w = 0: the depth's interval is unbounded
+    wide = S.copy()
+    wide[1, 1] = (2 * z[1]) ** 2
+    assert inverse_depth.depth_interval(z, wide, 3)[2] == np.inf
+    with pytest.raises(ValueError, match="level must lie in"):
+        inverse_depth.depth_interval(z, S, 3, 1.0)
