@@ -64,7 +64,7 @@ def runner(name: str, mu, pm, pc):
         return lambda: iterated.smoother(mu, FIG2.rho, pm, pc, process_noise=Q)
     f = FILTERS[name]
     q = Q if f.with_process_noise else 0.0
-    options = {} if f.family in ("exact", "gaussian") else {"rng": np.random.default_rng(1)}
+    options = {"rng": np.random.default_rng(1)} if f.random else {}
     options.update(OPTIONS.get(name, {}))
     return lambda: f(mu, FIG2.rho, pm, pc, process_noise=q, **options)
 

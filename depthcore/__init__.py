@@ -27,7 +27,9 @@ of Kalman filters over depth (:mod:`~depthcore.bank`), the Rao-Blackwellised
 particle filter over depth with a Kalman filter per particle
 (:mod:`~depthcore.rbpf`) and the self-calibration check
 (:mod:`~depthcore.calibration`). The
-registry :mod:`~depthcore.filters` lists every filter;
+registry :mod:`~depthcore.filters` lists every filter, and its
+:func:`~depthcore.filters.track` (``depthcore.track``) filters and smooths one
+track at every frame;
 :mod:`~depthcore.reproduce`, :mod:`~depthcore.study` and
 :mod:`~depthcore.experiments` run them; :mod:`~depthcore.figures` draws and
 :mod:`~depthcore.report` formats the results; :mod:`~depthcore.reference`
@@ -41,7 +43,7 @@ Every public module is an attribute of the package, imported when first used
 import importlib
 
 from .gaussian import Gaussian, paper_prior
-from .model import noise_free_state
+from .model import bearings_from_pixels, noise_free_state
 from .scenarios import SCENARIOS
 
 __version__ = "0.1.0"
@@ -82,9 +84,11 @@ __all__ = [
     "MODULES",
     "SCENARIOS",
     "__version__",
+    "bearings_from_pixels",
     "noise_free_state",
     "optimal_marginals",
     "paper_prior",
+    "track",
     *MODULES,
 ]
 
@@ -94,8 +98,10 @@ def __getattr__(name):
         return importlib.import_module(f"{__name__}.{name}")
     if name == "optimal_marginals":
         return importlib.import_module(f"{__name__}.optimal").marginals
+    if name == "track":
+        return importlib.import_module(f"{__name__}.filters").track
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(MODULES) | {"optimal_marginals"})
+    return sorted(set(globals()) | set(MODULES) | {"optimal_marginals", "track"})

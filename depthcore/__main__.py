@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, _checks, report, reproduce, study
-from .filters import ALL_NAMES, FILTERS, RBPF_REPLICAS
+from .filters import ALL_NAMES, FILTERS, PROCESS_NOISE_MAX, RBPF_REPLICAS, RHO_RANGE
 from .filters import NAMES as _STUDY_FILTERS
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from .model import noise_free_state
@@ -55,12 +55,11 @@ MAX_PARTICLES = PARTICLES_IN_FLIGHT // RBPF_REPLICAS
 #: state, which the study scores, is singular with fewer.
 MIN_PARTICLES = 4
 
-#: Numeric limits of the command line (the library itself accepts more).
-RHO_RANGE = (1e-12, 1e3)
+#: Numeric limits of the command line (the library itself accepts more); ``RHO_RANGE``
+#: and ``PROCESS_NOISE_MAX`` are those of :func:`depthcore.filters.track`.
 MU_MAX = 1e6
 PRIOR_MEAN_MAX = 1e3
 PRIOR_COV_RANGE = (1e-12, 1e12)
-PROCESS_NOISE_MAX = 10.0
 #: Smallest positive ``--process-noise``: the smallest normal double, below which
 #: the inverse of the noise overflows.
 PROCESS_NOISE_MIN = _checks.MIN_PROCESS_NOISE

@@ -87,7 +87,7 @@ def _compare(mu, rho, pm, pc) -> dict:
     }
     for name in NAMES:
         f = FILTERS[name]
-        if f.family == "gaussian":
+        if f.scoring.gaussian:
             est = f(mu, rho, pm, pc)
             out[name] = {
                 "depth_mean": est.depth_mean,

@@ -17,8 +17,12 @@ for a triple; floats for one sequence, arrays of shape ``(B,)`` for a batch),
 their numerical or Monte Carlo errors where the filter has them, the mean and
 covariance of the whole state, and the filter's own result (``detail``). The entry also carries the
 filter's label and plot style, the table rows it contributes to
-:func:`depthcore.reproduce.reproduce` (``variants``), and how its estimates
-are scored (``family``), and what it supports: ``any_frames`` (any
+:func:`depthcore.reproduce.reproduce` (``variants``), how its estimates
+are scored (``family``, whose :class:`Family` in :data:`FAMILY`, the entry's
+``scoring``, holds what a study reads of its results: whether it is the exact
+reference, a Gaussian, or weighted draws of the depth, and its CDFs and
+densities), its smoother if it has one (``smoother``, which :func:`track`
+runs over one track), and what it supports: ``any_frames`` (any
 ``N >= 3`` bearings, up to ``depthcore._checks.MAX_FRAMES``, or only the
 paper's three) and ``with_process_noise`` (``q > 0`` or only ``q = 0``); a
 call outside them is refused with a :class:`ValueError` naming ``mu`` or
@@ -54,6 +58,7 @@ from . import (
     ekf,
     inverse_depth,
     iterated,
+    kalman,
     model,
     optimal,
     particle,
@@ -62,7 +67,7 @@ from . import (
     second_order,
     ukf,
 )
-from .gaussian import Gaussian, History
+from .gaussian import Gaussian, History, paper_prior
 from .resampling import weighted_density, weighted_mean_and_cov
 
 QUANTITIES = ("depth", "velocity")
@@ -140,6 +145,154 @@ class Estimate:
         return out
 
 
+def _exact_cdfs(estimate: Estimate, truths) -> tuple:
+    """The exact posterior's marginal CDFs at each problem's true depth and velocity, (B,) each.
+
+    Three frames without process noise give the one-dimensional route's
+    :class:`~depthcore.optimal.BatchMarginals` (queries of shape (B,)); more
+    frames or process noise the bank's :class:`~depthcore.bank.Mixture`
+    (queries of shape (B, 1)).
+    """
+    d = estimate.detail
+    if isinstance(d, bank.Mixture):
+        return d.depth_cdf(truths[:, 1:2])[:, 0], d.velocity_cdf(truths[:, 2:3])[:, 0]
+    return d.depth_cdf(truths[:, 1]), d.velocity_cdf(truths[:, 2])
+
+
+def exact_depth_range(detail) -> tuple:
+    """Where the exact depth marginal lives: ``t`` limits (B,) and the depth offset.
+
+    ``t = log(y - offset)`` with ``offset = N - 1`` for ``N`` frames (2 for the
+    paper's three): the quadrature's range for
+    :class:`~depthcore.optimal.BatchMarginals`, the nodes with weight for a
+    :class:`~depthcore.bank.Mixture` (the exact filter's ``detail``).
+    """
+    if isinstance(detail, bank.Mixture):
+        p = detail.probabilities
+        log_y1 = np.log(np.broadcast_to(detail.bank.nodes, p.shape))
+        used = p > 1e-300
+        t_lo = np.min(np.where(used, log_y1, np.inf), axis=-1)
+        t_hi = np.max(np.where(used, log_y1, -np.inf), axis=-1)
+        return t_lo, t_hi, detail.bank.n_frames - 1.0
+    t_lo, t_hi, _ = detail.log_depth_range
+    return t_lo, t_hi, 2.0
+
+
+def _exact_density(estimate: Estimate, quantity: str, grid) -> np.ndarray:
+    d = estimate.detail
+    return d.depth_pdf(grid) if quantity == "depth" else d.velocity_pdf(grid)
+
+
+def _gaussian_cdfs(estimate: Estimate, truths) -> tuple:
+    """Eq. (13)'s Gaussian marginal CDFs at the true depth and velocity, (B,) each."""
+    from scipy.special import ndtr
+
+    mean, cov = estimate.mean, estimate.cov
+    return (
+        ndtr((truths[:, 1] - mean[:, 1]) / np.sqrt(cov[:, 1, 1])),
+        ndtr((truths[:, 2] - mean[:, 2]) / np.sqrt(cov[:, 2, 2])),
+    )
+
+
+def _gaussian_density(estimate: Estimate, quantity: str, grid) -> np.ndarray:
+    return Gaussian(estimate.mean, estimate.cov).marginal_pdf(COMPONENT[quantity], grid)
+
+
+def _particle_cdfs(estimate: Estimate, truths) -> tuple:
+    """The weighted particles' step-function CDFs at the true depth and velocity, (B,) each."""
+    batch = estimate.detail
+    W = np.exp(batch.log_weights)
+    x = batch.particles
+    return (
+        np.sum(W * (x[..., 1] <= truths[:, 1, None]), axis=1),
+        np.sum(W * (x[..., 2] <= truths[:, 2, None]), axis=1),
+    )
+
+
+def _particle_depths(estimate: Estimate) -> tuple:
+    """The particles' depths (B, M) and normalised weights (B, M)."""
+    batch = estimate.detail
+    return batch.particles[..., 1], np.exp(batch.log_weights)
+
+
+def _particle_density(estimate: Estimate, quantity: str, grid) -> np.ndarray:
+    return estimate.detail.density(COMPONENT[quantity], grid)
+
+
+def _rao_blackwellised_cdfs(estimate: Estimate, truths) -> tuple:
+    """The particles' depth CDF (a step function) and the Gaussian mixture's velocity CDF."""
+    f = estimate.detail
+    return f.depth_cdf(truths[:, 1]), f.velocity_cdf(truths[:, 2])
+
+
+def _rao_blackwellised_depths(estimate: Estimate) -> tuple:
+    """The pooled particles' depths (B, M) and normalised weights (B, M)."""
+    W, depths, _, _ = estimate.detail.pooled()
+    return depths, W
+
+
+def _rao_blackwellised_density(estimate: Estimate, quantity: str, grid) -> np.ndarray:
+    if quantity == "velocity":
+        return estimate.detail.velocity_pdf(grid)
+    depths, W = _rao_blackwellised_depths(estimate)
+    return weighted_density(depths, W, grid)
+
+
+@dataclass(frozen=True)
+class Family:
+    """What scoring a filter's result needs: one entry of :data:`FAMILY` per kind of result.
+
+    The functions take a batch's :class:`Estimate` (``B`` problems) and the
+    true states ``truths`` of shape (B, 3); :meth:`Filter.density` takes one
+    problem's.
+
+    Attributes
+    ----------
+    name : {"exact", "gaussian", "particles", "rao_blackwellised"}
+    exact : bool
+        The exact posterior: the reference of every Hellinger distance (its
+        distance to itself is 0).
+    gaussian : bool
+        The result is the Gaussian with the estimate's mean and covariance,
+        whose depth density has a closed form.
+    cdfs : callable
+        ``cdfs(estimate, truths) -> (depth_cdf, velocity_cdf)``, each (B,): the
+        filter's marginal CDFs at the true depth and velocity.
+    depth_draws : callable or None
+        ``depth_draws(estimate) -> (depths, weights)``, each (B, M): weighted
+        draws of the depth, from which a kernel estimate gives its density;
+        ``None`` where the density is given (exact or Gaussian).
+    density : callable
+        ``density(estimate, quantity, grid)``: the marginal density of
+        ``"depth"`` or ``"velocity"`` on ``grid`` (one problem).
+    """
+
+    name: str
+    exact: bool
+    gaussian: bool
+    cdfs: Callable
+    depth_draws: Callable | None
+    density: Callable
+
+
+#: How each family of results is scored: :class:`Family` by name, one for each of :data:`FAMILIES`.
+FAMILY: dict[str, Family] = {
+    "exact": Family("exact", True, False, _exact_cdfs, None, _exact_density),
+    "gaussian": Family("gaussian", False, True, _gaussian_cdfs, None, _gaussian_density),
+    "particles": Family(
+        "particles", False, False, _particle_cdfs, _particle_depths, _particle_density
+    ),
+    "rao_blackwellised": Family(
+        "rao_blackwellised",
+        False,
+        False,
+        _rao_blackwellised_cdfs,
+        _rao_blackwellised_depths,
+        _rao_blackwellised_density,
+    ),
+}
+
+
 @dataclass(frozen=True)
 class Filter:
     """One filter of the registry.
@@ -171,6 +324,14 @@ class Filter:
     default : bool
         Whether the default outputs (tables, studies, sweeps, figures, the
         command line) include it: :data:`NAMES`.
+    smoother : callable or None
+        ``smoother(mu, rho, prior_mean, prior_cov, process_noise)`` of one
+        track of ``N`` bearings, checked by :func:`track` (which calls it):
+        ``(filtered, smoothed, detail)``, the state at every frame given the
+        bearings up to it and given all of them, each a
+        :class:`~depthcore.bank.Smoothed` of means (N, 3) and covariances
+        (N, 3, 3), and the filter's own result. ``None`` for a filter
+        without a smoother.
     """
 
     name: str
@@ -184,6 +345,7 @@ class Filter:
     any_frames: bool = False
     with_process_noise: bool = False
     default: bool = True
+    smoother: Callable | None = None
 
     def __call__(self, mu, rho, prior_mean, prior_cov, process_noise=0.0, **options) -> Estimate:
         """Run the filter; see the module docstring for the arguments and their shapes.
@@ -236,18 +398,12 @@ class Filter:
         marginal is its Gaussian mixture, its depth a kernel estimate.
         """
         _quantity(quantity)
-        grid = np.asarray(grid, dtype=float)
-        if self.family == "exact":
-            d = estimate.detail
-            return d.depth_pdf(grid) if quantity == "depth" else d.velocity_pdf(grid)
-        if self.family == "particles":
-            return estimate.detail.density(COMPONENT[quantity], grid)
-        if self.family == "rao_blackwellised":
-            if quantity == "velocity":
-                return estimate.detail.velocity_pdf(grid)
-            W, depths, _, _ = estimate.detail.pooled()
-            return weighted_density(depths, W, grid)
-        return Gaussian(estimate.mean, estimate.cov).marginal_pdf(COMPONENT[quantity], grid)
+        return self.scoring.density(estimate, quantity, np.asarray(grid, dtype=float))
+
+    @property
+    def scoring(self) -> Family:
+        """How its results are scored: the :class:`Family` of its ``family``."""
+        return FAMILY[self.family]
 
 
 def _quantity(quantity: str) -> str:
@@ -634,6 +790,46 @@ def _particle(
     )
 
 
+def _optimal_smoother(mu, rho, prior_mean, prior_cov, process_noise):
+    """The exact filter and its fixed-interval smoother: :func:`depthcore.bank.track`.
+
+    The bearings are added online (:func:`depthcore.bank.update`); the smoothed
+    state is each depth node's Rauch-Tung-Striebel smoother mixed over the
+    nodes (textbook 19.2.6, :meth:`depthcore.bank.Mixture.smoothed`).
+    """
+    t = bank.track(mu, rho, prior_mean, prior_cov, process_noise, lag=mu.size - 1)
+    return t.filtered, t.interval, t
+
+
+def _gaussian_smoother(name: str):
+    """The Gaussian filter ``name`` at every frame and the Rauch-Tung-Striebel smoother over it.
+
+    The motion, Eq. (1) with the process noise on the velocity, is linear
+    (``x_{k+1} = F x_k + e``), so every Gaussian filter predicts exactly
+    (Eq. (10)): the predicted Gaussian at frame ``k + 1`` is ``F m_k + e``,
+    ``F P_k F^T + diag(0, 0, q**2)``, and the backward recursions of textbook
+    19.2.6 (:func:`depthcore.kalman.fixed_interval_smoother`) run over the
+    filter's own Gaussians: for the EKF this is the extended Kalman smoother
+    (textbook 19.3), for the UKF the unscented one.
+    """
+
+    def smoother(mu, rho, prior_mean, prior_cov, process_noise):
+        h = FILTERS[name](mu, rho, prior_mean, prior_cov, process_noise=process_noise).detail
+        means, covs = h.means, h.covs
+        predicted = ekf.predict(means[:-1], covs[:-1], process_noise)
+        filtered = kalman.FilterResult(
+            means,
+            covs,
+            np.concatenate([prior_mean[None], predicted.mean]),
+            np.concatenate([prior_cov[None], predicted.cov]),
+            np.zeros(means.shape[0]),
+        )
+        s = kalman.fixed_interval_smoother(filtered, model.F)
+        return bank.Smoothed(means, covs), bank.Smoothed(s.mean, s.cov), h
+
+    return smoother
+
+
 #: Every filter, in the order of the tables and legends.
 FILTERS: dict[str, Filter] = {
     f.name: f
@@ -652,6 +848,7 @@ FILTERS: dict[str, Filter] = {
             ),
             any_frames=True,
             with_process_noise=True,
+            smoother=_optimal_smoother,
         ),
         Filter(
             "second_order",
@@ -674,6 +871,7 @@ FILTERS: dict[str, Filter] = {
             (("printed", "all", {}),),
             any_frames=True,
             with_process_noise=True,
+            smoother=_gaussian_smoother("ekf"),
         ),
         Filter(
             "ukf",
@@ -685,6 +883,7 @@ FILTERS: dict[str, Filter] = {
             (("-", "all", {}),),
             any_frames=True,
             with_process_noise=True,
+            smoother=_gaussian_smoother("ukf"),
         ),
         Filter(
             "particle",
@@ -772,3 +971,150 @@ def check_names(names) -> tuple:
     if unknown:
         raise ValueError(f"filters must be among {ALL_NAMES}, got {sorted(unknown)}")
     return names
+
+
+#: The noise levels ``rho`` that :func:`track` answers for (and the command line's ``--rho``).
+RHO_RANGE = (1e-12, 1e3)
+#: The largest process noise that :func:`track` answers for (and the command line's).
+PROCESS_NOISE_MAX = 10.0
+#: The names a message refusing :func:`track`'s inputs may start with.
+_TRACK_ARGUMENTS = ("mu", "rho", "prior", "process_noise", "filter")
+
+#: The filters with a smoother, which :func:`track` runs.
+SMOOTHED = tuple(name for name, f in FILTERS.items() if f.smoother is not None)
+
+
+@dataclass(frozen=True)
+class Track:
+    """One track's state at every frame, filtered and smoothed (:func:`track`).
+
+    Frame ``k`` is row ``k - 1`` of every array; ``N`` is the number of bearings.
+    Depths are in units of the camera's forward motion per frame (the depth
+    grows by 1 from frame to frame, Eq. (1)); the lateral position ``x`` in
+    the same units; the velocity ``v`` is ``x``'s change per frame.
+
+    Attributes
+    ----------
+    filter : str
+        The registry's name of the filter.
+    filtered : depthcore.bank.Smoothed
+        The state at frame ``k`` given ``mu_1 .. mu_k``: a
+        :class:`~depthcore.bank.Smoothed` of means (N, 3) and covariances
+        (N, 3, 3) of ``(x_k, y_k, v_k)``, whose ``depth_mean``, ``depth_sd``,
+        ``lateral_mean``, ``lateral_sd``, ``velocity_mean`` and
+        ``velocity_sd`` have shape (N,).
+    smoothed : depthcore.bank.Smoothed
+        The state at frame ``k`` given all ``N`` bearings (the fixed-interval
+        smoother, textbook 19.2.6); at frame ``N`` it is the filtered state.
+    prior : depthcore.gaussian.Gaussian
+        The prior of the state at frame 1 that the filter used.
+    process_noise : float
+    detail : object
+        The filter's own result: the exact filter's :class:`~depthcore.bank.Track`,
+        a Gaussian filter's :class:`~depthcore.gaussian.History`.
+    """
+
+    filter: str
+    filtered: Any
+    smoothed: Any
+    prior: Gaussian
+    process_noise: float
+    detail: Any = None
+
+    @property
+    def frames(self) -> np.ndarray:
+        """The frame numbers ``1 .. N``, shape (N,)."""
+        return np.arange(1, self.filtered.mean.shape[0] + 1)
+
+
+def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal") -> Track:
+    """Filter and smooth one track: depth, lateral position and velocity at every frame.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N,)
+        The bearings of frames ``1 .. N``, ``3 <= N <= depthcore._checks.MAX_FRAMES``:
+        ``mu_k = x_k / y_k``, the tangent of the angle between the point and the
+        camera's direction of motion (from pixel columns,
+        :func:`depthcore.model.bearings_from_pixels`); checked by
+        :func:`depthcore.model.measurements_batch`.
+    rho : float
+        The SD of the bearings' noise, in :data:`RHO_RANGE` (in the units of
+        ``mu``: a pixel noise of SD ``s`` is ``rho = s / f`` for a focal
+        length of ``f`` pixels).
+    prior : depthcore.gaussian.Gaussian, optional
+        The prior of the state ``(x_1, y_1, v_1)`` at frame 1; by default the
+        paper's rule applied to the first three bearings
+        (:func:`depthcore.gaussian.paper_prior` of their noise-free state,
+        Eq. (7)), refused when those bearings put the point behind the camera
+        or are degenerate.
+    process_noise : float
+        ``q``, the SD of the velocity's change per frame: 0 (constant velocity)
+        or from ``depthcore._checks.MIN_PROCESS_NOISE`` to :data:`PROCESS_NOISE_MAX`.
+    filter : str
+        A filter with a smoother, one of :data:`SMOOTHED`: ``"optimal"`` (the
+        exact filter, a bank of Kalman filters over depth, and its
+        smoother), ``"ekf"`` (the extended Kalman filter and smoother),
+        ``"ukf"`` (the unscented ones). The others, without a smoother, are
+        refused, naming ``filter``.
+
+    Returns
+    -------
+    Track
+        ``filtered`` and ``smoothed`` means and SDs of ``x``, ``y`` (the depth)
+        and ``v`` at every frame, arrays of shape (N,).
+
+    Examples
+    --------
+    >>> import depthcore
+    >>> t = depthcore.track([0.1, 0.2, 0.28, 0.35], rho=0.002)
+    >>> t.smoothed.depth_mean.shape
+    (4,)
+    """
+    if not isinstance(filter, str) or filter not in FILTERS:
+        raise ValueError(f"filter must be one of {SMOOTHED}, got {filter!r}")
+    entry = FILTERS[filter]
+    if entry.smoother is None:
+        raise ValueError(
+            f"filter must be one of {SMOOTHED}, the filters with a smoother; {filter!r} has none"
+        )
+    mu = model.measurements_batch(mu, "mu")
+    if mu.ndim != 1:
+        raise ValueError(f"mu must have shape (N,), one track, got shape {mu.shape}")
+    rho = _checks.positive_scalar(rho, "rho")
+    if not RHO_RANGE[0] <= rho <= RHO_RANGE[1]:
+        raise ValueError(f"rho must be from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g}, got {rho!r}")
+    q = _checks.process_noise(process_noise, "process_noise")
+    if q > PROCESS_NOISE_MAX:
+        raise ValueError(f"process_noise must be at most {PROCESS_NOISE_MAX:g}, got {q!r}")
+    if prior is None:
+        try:
+            c = model.noise_free_state(mu[:3])
+        except ValueError as exc:
+            raise ValueError(
+                f"prior is needed: the paper's rule cannot use the first three bearings ({exc})"
+            ) from None
+        prior = paper_prior(c)
+    elif not isinstance(prior, Gaussian):
+        raise ValueError(
+            f"prior must be a depthcore.Gaussian of the state at frame 1 or None, "
+            f"got {type(prior).__name__}"
+        )
+    try:
+        filtered, smoothed, detail = entry.smoother(mu, rho, prior.mean, prior.cov, q)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        message = str(exc)
+        if isinstance(exc, ValueError) and message.startswith(_TRACK_ARGUMENTS):
+            raise
+        raise ValueError(
+            f"mu, rho and prior have no answer from the {filter} filter ({message}); "
+            "try another filter, a larger rho or a broader prior"
+        ) from None
+    for series in (filtered, smoothed):
+        variances = np.diagonal(series.cov, axis1=-2, axis2=-1)
+        if not (np.all(np.isfinite(series.mean)) and np.all(variances >= 0)):
+            raise ValueError(
+                f"rho is too small beside the prior for the {filter} filter's "
+                f"smoother: its moments are not finite (rho = {rho!r})"
+            )
+    return Track(filter, filtered, smoothed, prior, q, detail)

@@ -274,6 +274,42 @@ def noise_in_pixels(
     return float(size / 2 / np.tan(fov / 2) * np.tan(rho))
 
 
+def bearings_from_pixels(u, cx, focal) -> np.ndarray:
+    """The bearings ``mu = x / y`` of image columns ``u`` seen by a pinhole camera.
+
+    ``mu = (u - cx) / focal``: the tangent of the angle between the ray
+    through column ``u`` and the optical axis, which points along the
+    camera's motion (Eq. (4) without its noise). A pixel noise of SD ``s`` is
+    a bearing noise ``rho = s / focal``.
+
+    Parameters
+    ----------
+    u : array_like, shape (N,)
+        Image columns of the point in frames ``1 .. N``, in pixels; finite.
+    cx : float
+        The principal point's column (where the optical axis meets the
+        image), in pixels; finite.
+    focal : float
+        The focal length in pixels, > 0.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    u = _checks.finite_array(u, "u")
+    if u.ndim != 1 or u.size == 0:
+        raise ValueError(f"u must have shape (N,) with N >= 1, got shape {u.shape}")
+    cx = _checks.number(cx, "cx")
+    focal = _checks.positive_scalar(focal, "focal")
+    with np.errstate(over="ignore", invalid="ignore"):
+        mu = (u - cx) / focal
+    if not np.all(np.isfinite(mu)):
+        raise ValueError(
+            f"focal is too small for these columns: (u - cx) / focal overflows, got {focal!r}"
+        )
+    return mu
+
+
 # --- the misfit of three measurements, Eqs. (5), (7), (20)-(22) ---------------------------------
 
 

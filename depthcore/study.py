@@ -37,8 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _checks, bank, model, optimal
-from .filters import FILTERS, NAMES, check_names
+from . import _checks, model, optimal
+from .filters import FILTERS, NAMES, check_names, exact_depth_range
 from .gaussian import PAPER_PRIOR_SCALE, gaussian_logpdf, paper_prior_means
 from .scenarios import SCENARIOS
 
@@ -206,17 +206,6 @@ def simulate(
     )
 
 
-def _gaussian_estimates(trials: Trials, mean, cov, reference) -> Estimates:
-    """Scores' inputs for a Gaussian filter; no Hellinger distance without ``reference``."""
-    from scipy.special import ndtr
-
-    t = trials.truths
-    depth_cdf = ndtr((t[:, 1] - mean[:, 1]) / np.sqrt(cov[:, 1, 1]))
-    velocity_cdf = ndtr((t[:, 2] - mean[:, 2]) / np.sqrt(cov[:, 2, 2]))
-    h = None if reference is None else gaussian_hellinger(reference, mean, cov)
-    return Estimates(mean, cov, depth_cdf, velocity_cdf, h, trials.states)
-
-
 def gaussian_hellinger(reference: optimal.BatchMarginals, mean, cov) -> np.ndarray:
     """:func:`hellinger` for Gaussian filters: means (N, 3) and covariances (N, 3, 3).
 
@@ -247,7 +236,7 @@ def hellinger(
     q_mean, q_sd : ndarray, shape (N,)
         Where ``q`` lives, to place the grid.
     """
-    t_lo, t_hi, offset = _reference_range(reference)
+    t_lo, t_hi, offset = exact_depth_range(reference)
     with np.errstate(divide="ignore"):
         lo = np.maximum(
             np.minimum(np.log(np.maximum(q_mean - 12 * q_sd - offset, 0.0)), t_lo), t_lo - 10
@@ -260,78 +249,27 @@ def hellinger(
     return np.sqrt(np.clip(1.0 - bc, 0.0, 1.0))
 
 
-def _reference_range(reference):
-    """Where the optimal depth marginal lives: ``t`` limits (B,) and the depth offset.
+def _estimates(trials: Trials, estimate, family, reference) -> Estimates:
+    """Scores' inputs for a filter's batch ``estimate``, read from its family's scoring.
 
-    ``t = log(y - offset)`` with ``offset = N - 1`` for ``N`` frames (2 for the
-    paper's three): the quadrature's range for
-    :class:`~depthcore.optimal.BatchMarginals`, the nodes with weight for a
-    :class:`~depthcore.bank.Mixture`.
+    The CDFs at the truths are the family's (:attr:`depthcore.filters.Family.cdfs`).
+    The Hellinger distance to ``reference`` is in closed form for a Gaussian
+    result; for weighted depth draws (the particle filters) it is taken from
+    a binned kernel density estimate with Scott's bandwidth for the effective
+    sample size. Without ``reference`` there is no Hellinger distance.
     """
-    if isinstance(reference, bank.Mixture):
-        p = reference.probabilities
-        log_y1 = np.log(np.broadcast_to(reference.bank.nodes, p.shape))
-        used = p > 1e-300
-        t_lo = np.min(np.where(used, log_y1, np.inf), axis=-1)
-        t_hi = np.max(np.where(used, log_y1, -np.inf), axis=-1)
-        return t_lo, t_hi, reference.bank.n_frames - 1.0
-    t_lo, t_hi, _ = reference.log_depth_range
-    return t_lo, t_hi, 2.0
-
-
-def _reference_cdfs(reference, truths):
-    """The optimal marginal CDFs at each trial's true depth and velocity, each (B,)."""
-    if isinstance(reference, bank.Mixture):
-        return (
-            reference.depth_cdf(truths[:, 1:2])[:, 0],
-            reference.velocity_cdf(truths[:, 2:3])[:, 0],
-        )
-    return reference.depth_cdf(truths[:, 1]), reference.velocity_cdf(truths[:, 2])
-
-
-def _rao_blackwellised_estimates(trials: Trials, estimate, reference) -> Estimates:
-    """Scores' inputs for the Rao-Blackwellised filter: its pooled mixture at frame ``N``.
-
-    The depth's CDF is the particles' weighted step function and its density
-    for the Hellinger distance a binned kernel estimate, as for the particle
-    filter; the velocity's CDF is the Gaussian mixture's
-    (:meth:`depthcore.rbpf.RBPF.velocity_cdf`). Without ``reference`` there
-    is no Hellinger distance.
-    """
-    f = estimate.detail
     mean, cov = estimate.mean, estimate.cov
-    t = trials.truths
-    depth_cdf = f.depth_cdf(t[:, 1])
-    velocity_cdf = f.velocity_cdf(t[:, 2])
+    depth_cdf, velocity_cdf = family.cdfs(estimate, trials.truths)
     if reference is None:
         return Estimates(mean, cov, depth_cdf, velocity_cdf, None, trials.states)
-    W, depths, _, _ = f.pooled()
-    sd = np.sqrt(cov[:, 1, 1])
-    ess = 1.0 / np.sum(W**2, axis=1)
-    bandwidth = 1.06 * sd * ess**-0.2  # Scott's rule with the effective sample size
-    h = hellinger(reference, _binned_kde(depths, W, bandwidth), mean[:, 1], sd)
-    return Estimates(mean, cov, depth_cdf, velocity_cdf, h, trials.states)
-
-
-def _particle_estimates(trials: Trials, estimate, reference) -> Estimates:
-    """Scores' inputs for the particle filter: weighted moments, CDFs, a binned KDE.
-
-    Without ``reference`` there is no Hellinger distance, and no KDE.
-    """
-    batch = estimate.detail
-    W = np.exp(batch.log_weights)
-    x = batch.particles
-    mean, cov = estimate.mean, estimate.cov
-    t = trials.truths
-    depth_cdf = np.sum(W * (x[..., 1] <= t[:, 1, None]), axis=1)
-    velocity_cdf = np.sum(W * (x[..., 2] <= t[:, 2, None]), axis=1)
-    if reference is None:
-        return Estimates(mean, cov, depth_cdf, velocity_cdf, None, trials.states)
-    sd = np.sqrt(cov[:, 1, 1])
-    ess = 1.0 / np.sum(W**2, axis=1)
-    bandwidth = 1.06 * sd * ess**-0.2  # Scott's rule with the effective sample size
-    log_q = _binned_kde(x[..., 1], W, bandwidth)
-    h = hellinger(reference, log_q, mean[:, 1], sd)
+    if family.gaussian:
+        h = gaussian_hellinger(reference, mean, cov)
+    else:
+        depths, W = family.depth_draws(estimate)
+        sd = np.sqrt(cov[:, 1, 1])
+        ess = 1.0 / np.sum(W**2, axis=1)
+        bandwidth = 1.06 * sd * ess**-0.2  # Scott's rule with the effective sample size
+        h = hellinger(reference, _binned_kde(depths, W, bandwidth), mean[:, 1], sd)
     return Estimates(mean, cov, depth_cdf, velocity_cdf, h, trials.states)
 
 
@@ -393,11 +331,11 @@ def run_filters(
     out = {}
     for name in names:
         f = FILTERS[name]
-        if f.family == "exact":
+        if f.scoring.exact:
             out[name] = Estimates(
                 reference.mean,
                 reference.cov,
-                *_reference_cdfs(ref, trials.truths),
+                *f.scoring.cdfs(reference, trials.truths),
                 np.zeros(len(mu)),
                 trials.states,
             )
@@ -415,12 +353,7 @@ def run_filters(
                 f"filters: the {name} filter has no answer for a simulated trial ({exc}); "
                 f"leave {name} out, or lower the process noise or the noise level"
             ) from None
-        if f.family == "particles":
-            out[name] = _particle_estimates(trials, est, ref)
-        elif f.family == "rao_blackwellised":
-            out[name] = _rao_blackwellised_estimates(trials, est, ref)
-        else:
-            out[name] = _gaussian_estimates(trials, est.mean, est.cov, ref)
+        out[name] = _estimates(trials, est, f.scoring, ref)
     return out
 
 

@@ -8,6 +8,7 @@ from depthcore import _checks, ekf, inverse_depth, iterated, model, optimal, par
 from depthcore.filters import (
     ALL_NAMES,
     FAMILIES,
+    FAMILY,
     FILTERS,
     NAMES,
     PAPER_FILTERS,
@@ -111,6 +112,56 @@ def test_density_integrates_to_about_one(name):
     assert mass == pytest.approx(1.0, abs=0.02)
     with pytest.raises(ValueError, match="quantity must be one of"):
         f.density(est, "position", grid)
+
+
+def test_every_family_says_what_a_study_reads():
+    assert set(FAMILY) == set(FAMILIES)
+    assert [n for n, f in FILTERS.items() if f.scoring.exact] == ["optimal"]
+    for name, fam in FAMILY.items():
+        assert fam.name == name
+        # a result is the exact reference, a Gaussian, or weighted draws of the depth
+        assert fam.exact + fam.gaussian + (fam.depth_draws is not None) == 1, name
+
+
+@pytest.mark.parametrize("frames", [3, 5])
+@pytest.mark.parametrize("name", ALL_NAMES)
+def test_a_familys_cdfs_are_its_distribution_at_the_truths(name, frames):
+    """The CDFs a study reads, against routes of their own.
+
+    The exact and Gaussian families' CDFs against the trapezoid integral of their
+    densities (the Gaussian's against scipy's normal CDF as well); the samplers'
+    against the weighted count of their draws below the truth, from
+    ``depth_draws`` (depths) and from the particles (velocities).
+    """
+    from scipy import stats
+
+    f = FILTERS[name]
+    if frames != 3 and not f.any_frames:
+        return
+    rng = np.random.default_rng(5)
+    sim = model.simulate(FIG2.c, frames, FIG2.rho, 0.0, rng, size=3)
+    pm = paper_prior_means(model.noise_free_states(sim.mu[:, :3]))
+    est = f(sim.mu, FIG2.rho, pm, FIG2.prior.cov, **_options(name))
+    truths = sim.states[:, -1, :]
+    depth_cdf, velocity_cdf = f.scoring.cdfs(est, truths)
+    assert depth_cdf.shape == velocity_cdf.shape == (3,)
+    assert np.all((0 <= depth_cdf) & (depth_cdf <= 1))
+    if f.scoring.gaussian:
+        expected = stats.norm.cdf(truths[:, 1], est.depth_mean, est.depth_sd)
+        assert_allclose(depth_cdf, expected, rtol=1e-12, atol=1e-15)
+    if f.scoring.exact or f.scoring.gaussian:
+        for i in range(3):
+            one = f(sim.mu[i], FIG2.rho, pm[i], FIG2.prior.cov)
+            lo = one.depth_mean - 40 * one.depth_sd  # the exact one lives beyond N - 1
+            lo = lo if f.scoring.gaussian else max(lo, frames - 1 + 1e-9)
+            grid = np.linspace(lo, truths[i, 1], 20001)
+            mass = np.trapezoid(f.density(one, "depth", grid), grid)
+            assert mass == pytest.approx(depth_cdf[i], abs=2e-4)
+    else:
+        depths, W = f.scoring.depth_draws(est)
+        assert_allclose(np.sum(W, axis=1), 1.0, rtol=1e-12)
+        counted = np.sum(W * (depths <= truths[:, 1:2]), axis=1)
+        assert_allclose(depth_cdf, counted, rtol=1e-10, atol=1e-12)
 
 
 def test_unknown_names_are_rejected():
