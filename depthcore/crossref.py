@@ -34,6 +34,7 @@ only its references are then not resolved (a :class:`ValueError` that says why).
 
 from __future__ import annotations
 
+import html
 import posixpath
 import re
 from pathlib import Path
@@ -67,6 +68,22 @@ class Resolved(str):
 
     def __repr__(self) -> str:
         return str(self)
+
+
+class PageLink(Resolved):
+    """A reference to a page: its text, and in HTML a link to the page's source.
+
+    Jupyter shows it as a link to ``href`` (relative to the page's folder),
+    which JupyterLab opens as it opens the book's pages.
+    """
+
+    def __new__(cls, text: str, href: str):
+        link = super().__new__(cls, text)
+        link.href = href
+        return link
+
+    def _repr_html_(self) -> str:
+        return f'<a href="{html.escape(self.href)}">{html.escape(str(self))}</a>'
 
 
 def find_book(folder=None) -> Path:
@@ -287,15 +304,16 @@ class BookReferences:
             raise ValueError(f"label {label!r}: no section of the book has this label")
         return Resolved(sections[label] if explicit is None else explicit)
 
-    def doc(self, text: str) -> Resolved:
-        """``{doc}`page``` or ``{doc}`text <page>```: the page's title, or the text."""
+    def doc(self, text: str) -> PageLink:
+        """``{doc}`page``` or ``{doc}`text <page>```: the page's title, or the text, as a link."""
         explicit, target = split_target(text)
         index = self._load()
         page = target.lstrip("/") if target.startswith("/") else f"{index['page']}/{target}"
         page = posixpath.normpath(re.sub(r"\.md$", "", page)).lstrip("/")
         if page not in index["titles"]:
             raise ValueError(f"page {target!r}: no page of the book has this name")
-        return Resolved(index["titles"][page] if explicit is None else explicit)
+        href = posixpath.relpath(f"{page}.md", index["page"] or ".")
+        return PageLink(index["titles"][page] if explicit is None else explicit, href)
 
     def functions(self) -> dict:
         """``{name: function}`` of the roles' expressions (:data:`ROLES`), to bind in a kernel."""

@@ -79,6 +79,9 @@ def test_citations_pages_and_sections_resolve_as_the_book_writes_them(book):
     assert book.cite_t("tichavsky1998") == "Tichavský et al. [1998]"
     assert book.doc("fig5") == "Figure 5: depth, lower noise"
     assert book.doc("the introduction <intro>") == "the introduction"
+    # In Jupyter a link to the page's source, beside the page's own.
+    assert book.doc("fig5")._repr_html_() == '<a href="fig5.md">Figure 5: depth, lower noise</a>'
+    assert crossref.BookReferences(ROOT / "book" / "api").doc("/book/fig5").href == "../fig5.md"
     assert book.ref("sec-cost") == "What the optimal filter costs"
     assert book.ref("below <sec-resample-move>") == "below"
 

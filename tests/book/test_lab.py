@@ -18,7 +18,7 @@ them), and checks in the rendered page that
   paper its number in the paper (``tests/data/equation_labels.json``), a
   figure of the paper its number there (``tests/data/figure_numbers.json``),
   a citation its author-year text (as sphinxcontrib-bibtex writes it,
-  ``tests/test_sphinx_eval.py``), a page its title;
+  ``tests/test_sphinx_eval.py``), a page its title, as a link;
 * every glued figure (``{figure}`` of ``{eval}`name```) shows its image with
   its caption;
 * no role or directive is left unknown ("Unknown Directive", "Unknown Role")
@@ -226,6 +226,7 @@ const sleep = ms => new Promise(r => setTimeout(r, ms));
     prose.querySelectorAll('.katex').forEach(e => e.remove());
     return {
       unknown: node.textContent.match(/Unknown (Directive|Role).{0,60}/g) || [],
+      links: [...node.querySelectorAll('a[href]')].map(e => e.textContent),
       unresolved: [...node.querySelectorAll('[title$="Not Found"]')].map(
         e => e.title + ': ' + e.textContent),
       figures: [...node.querySelectorAll('figure')].map(f => ({
@@ -294,6 +295,8 @@ def test_page_renders_its_numbers_and_math_in_jupyterlab(lab, driver, page):
         for call, function, content in REFERENCE.findall(source):
             text = expected(function, content)
             assert text in cell["text"], f"{page}: {call} does not show {text!r}"
+            if function == "doc":  # a link to the page, as in the book
+                assert text in cell["links"], f"{page}: {call} is not a link"
             references += 1
         assert len(cell["figures"]) == len(glued_figures), (
             f"{page}: {len(glued_figures)} glued figures, {len(cell['figures'])} shown"
