@@ -32,7 +32,8 @@ registry :mod:`~depthcore.filters` lists every filter, and its
 track at every frame;
 :mod:`~depthcore.reproduce`, :mod:`~depthcore.study` and
 :mod:`~depthcore.experiments` run them; :mod:`~depthcore.figures` draws and
-:mod:`~depthcore.report` formats the results; :mod:`~depthcore.reference`
+:mod:`~depthcore.report` formats the results, whose references to the book
+:mod:`~depthcore.crossref` resolves in Jupyter; :mod:`~depthcore.reference`
 holds independent routes for checking; :mod:`~depthcore.benchmarks` writes and
 reads the benchmarks' recorded results.
 
@@ -54,6 +55,7 @@ MODULES = (
     "benchmarks",
     "bound",
     "calibration",
+    "crossref",
     "ekf",
     "experiments",
     "figures",

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from . import _checks
+from .crossref import BookReferences
 from .filters import NAMES, QUANTITIES
 from .reproduce import scenario_rows
 from .scenarios import REPORTED_DECIMALS, SCENARIOS
@@ -1305,7 +1306,7 @@ class MarkdownTable:
 #: A role that pastes a glued text into a page's text, ``eval`` (which the book
 #: resolves to the text glued under its name, and JupyterLab evaluates in the
 #: page's kernel), ``glue:text`` or plain ``glue``; group 1 is the glued name.
-GLUE_ROLE = re.compile(r"\{(?:eval|glue(?::text)?)\}`([^`]+)`")
+GLUE_ROLE = re.compile(r"\{(?:eval|glue(?::text)?)\}`([A-Za-z_][A-Za-z0-9_]*)`")
 
 
 def page_tables(text: str) -> list[list[str]]:
@@ -1429,6 +1430,35 @@ class GluedText(str):
         return str(self)
 
 
+class GluedOutput:
+    """A glued figure (or other display), bound to its name in the kernel by :class:`GlueLog`.
+
+    Displayed, it shows the very output that the book pastes (its media types
+    and their metadata, as glued), where an ``{eval}`` role of the page names
+    it: the figure of a ``{figure}`` directive whose content is
+    ``{eval}`name```.
+
+    Parameters
+    ----------
+    data : dict
+        The glued output's data by media type (``image/png``, ``text/plain``, ...).
+    metadata : dict
+        Its metadata by media type.
+    """
+
+    __slots__ = ("data", "metadata")
+
+    def __init__(self, data: dict, metadata: dict):
+        self.data = dict(data)
+        self.metadata = dict(metadata)
+
+    def _repr_mimebundle_(self, include=None, exclude=None):
+        return self.data, self.metadata
+
+    def __repr__(self) -> str:
+        return str(self.data.get("text/plain", "<glued output>"))
+
+
 class GlueLog:
     """Shows in Jupyter what a book page glues into the book's text.
 
@@ -1454,7 +1484,13 @@ class GlueLog:
     Every glued text is also bound, as a :class:`GluedText`, to its name in the
     kernel's namespace, where JupyterLab's MyST renderer (jupyterlab-myst)
     evaluates the page's ``{eval}`name``` roles: the prose shows each number
-    where the book pastes it, once the cell that glues it has run.
+    where the book pastes it, once the cell that glues it has run; every
+    other glued output (a figure) as a :class:`GluedOutput`, which the
+    ``{eval}`` role of a ``{figure}`` directive shows with its caption. The
+    functions of a :class:`depthcore.crossref.BookReferences` (``cite_t``,
+    ``cite_p``, ``eq``, ``numref``, ``ref``, ``doc``) are bound too: the
+    page's references, written as ``{eval}`` roles, show the book's numbers,
+    titles and citations.
 
     Parameters
     ----------
@@ -1486,6 +1522,7 @@ class GlueLog:
         self._kept: list[tuple[str, dict, dict]] = []
         self._texts: dict[str, str] = {}
         self._tables = [] if page is None else page_tables(page_text(page))
+        self._namespace.update(BookReferences().functions())
         publisher.register_hook(self._keep)
 
     def _keep(self, msg):
@@ -1497,17 +1534,19 @@ class GlueLog:
             metadata = {k: v for k, v in content["metadata"].items() if k != "scrapbook"}
             self._kept.append((glued["name"], data, metadata))
             if set(data) == {"text/plain"}:
-                self._bind(glued["name"], self.pasted_text(data["text/plain"]))
+                self._bind(glued["name"], GluedText(self.pasted_text(data["text/plain"])))
+            else:
+                self._bind(glued["name"], GluedOutput(data, metadata))
         return msg
 
-    def _bind(self, name: str, text: str) -> None:
+    def _bind(self, name: str, value) -> None:
         current = self._namespace.get(name)
-        if name in self._namespace and not isinstance(current, GluedText):
+        if name in self._namespace and not isinstance(current, (GluedText, GluedOutput)):
             raise ValueError(
                 f"name {name!r} is glued but also names a {type(current).__name__} "
-                "of the page's code: glue the text under another name"
+                "of the page's code: glue the value under another name"
             )
-        self._namespace[name] = GluedText(text)
+        self._namespace[name] = value
 
     @staticmethod
     def pasted_text(text: str) -> str:

@@ -41,3 +41,42 @@ def test_convert_refuses_what_the_kernel_cannot_evaluate(role):
 
 def test_every_page_pastes_its_numbers_with_eval(capsys):
     assert myst_roles.main(["--check"]) == 0, capsys.readouterr().out
+
+
+KERNEL_PAGE = """# A page
+
+```{code-cell} ipython3
+glued = GlueLog()
+```
+
+As {cite:t}`maybank1990` shows {cite:p}`a2001,b2002`, Eq. {eq}`eq-7`, {numref}`fig-2`,
+{ref}`below <sec-x>` and {doc}`the introduction <intro>`.
+
+```{glue:figure} fig2_figure
+:name: fig-2
+:width: 100%
+
+The caption, {eval}`a_mean` and {eq}`eq-17`.
+```
+"""
+
+
+def test_convert_writes_references_and_glued_figures_for_the_kernel():
+    out = myst_roles.convert(KERNEL_PAGE)
+    assert (
+        'As {eval}`cite_t("maybank1990")` shows {eval}`cite_p("a2001,b2002")`, '
+        'Eq. {eval}`eq("eq-7")`, {eval}`numref("fig-2")`,\n'
+        '{eval}`ref("below <sec-x>")` and {eval}`doc("the introduction <intro>")`.'
+    ) in out
+    assert out.endswith(
+        "```{figure}\n:name: fig-2\n:width: 100%\n:enumerated: false\n\n"
+        "{eval}`fig2_figure`\n\n"
+        'The caption, {eval}`a_mean` and {eval}`eq("eq-17")`.\n```\n'
+    )
+    assert "glue:figure" not in out and "{cite:" not in out
+    assert myst_roles.convert(out) == out  # idempotent
+
+
+def test_convert_leaves_the_references_of_a_page_without_a_kernel():
+    page = KERNEL_PAGE.replace("glued = GlueLog()", "x = 1")
+    assert myst_roles.convert(page) == page

@@ -38,7 +38,7 @@ import check_notebooks  # noqa: E402  (the one reader of _toc.yml)
 PREFIX = "application/papermill.record/"
 SHOWN = ("text/plain", "text/markdown", "text/html")
 FIGURE_DIRECTIVE = re.compile(r"^(?:```|:::)\{glue(?::figure)?\}\s+(\S+)\s*$", re.MULTILINE)
-TEXT_ROLE = re.compile(r"\{(?:eval|glue(?::text)?)\}`([^`]+)`")
+TEXT_ROLE = re.compile(r"\{(?:eval|glue(?::text)?)\}`([A-Za-z_][A-Za-z0-9_]*)`")
 # The figure pages' tables of the paper's numbers beside ours.
 COMPARISON_HEADER = "| density | paper: mean | ours: mean | paper: SD | ours: SD |"
 PAGES = check_notebooks.notebook_pages()

@@ -321,7 +321,11 @@ def test_glue_log_binds_each_glued_text_to_its_name(monkeypatch):
     bound = Shell.user_ns["fig2_mean"]
     assert isinstance(bound, report.GluedText) and bound == "6.4660"
     assert repr(bound) == "6.4660" and repr(Shell.user_ns["fig2_count"]) == "3"
-    assert "fig2_figure" not in Shell.user_ns
+    figure = Shell.user_ns["fig2_figure"]  # shown by {eval} as the very output glued
+    assert isinstance(figure, report.GluedOutput)
+    assert figure._repr_mimebundle_() == ({"text/plain": "<Figure>", "image/png": "iVBOR"}, {})
+    # The references of the page's text, resolved as the book resolves them.
+    assert {"cite_t", "cite_p", "eq", "numref", "ref", "doc"} <= set(Shell.user_ns)
     glue("fig2_mean", {"text/plain": "'6.47'"})  # glued again: bound again
     assert Shell.user_ns["fig2_mean"] == "6.47"
     with pytest.raises(ValueError, match="'rho' is glued but also names a float"):

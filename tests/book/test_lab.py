@@ -1,22 +1,29 @@
-"""The book's pages render in JupyterLab as in the book: numbers and mathematics.
+"""The book's pages render in JupyterLab as in the book.
 
 Starts JupyterLab (with jupyterlab-myst, pinned in requirements.txt) on
-127.0.0.1 over a copy of ``book/`` in a temporary folder (so that nothing the
-session saves reaches the pages), opens each page of ``PAGES`` as a notebook
-(jupytext) in headless Chromium, runs all its cells, runs its text cells once
-more (as a reader does after "Run All" for the few numbers that a page's text
-quotes above the cell that computes them), and checks in the rendered page
-that
+127.0.0.1 over a copy of ``book/`` (with ``_toc.yml`` and ``_config.yml``) in a
+temporary folder (so that nothing the session saves reaches the pages), opens
+each page of ``PAGES`` as a notebook (jupytext) in headless Chromium, runs all
+its cells, runs its text cells once more (as a reader does after "Run All"
+for the few numbers that a page's text quotes above the cell that computes
+them), and checks in the rendered page that
 
 * every ``{eval}`name``` of its text shows the text that the book pastes there:
   the value glued under ``name`` in the page's reference outputs
   (``book/_nbval/<page>.ipynb``, which ``make notebooks`` checks against a fresh
   run), with no error and no role left as source;
-* no ``{eval}`` or ``{glue:text}`` role is shown as source (but for those in
-  the captions of glued figures, ``{glue:figure}``, a directive of myst-nb's
-  that jupyterlab-myst shows as its source in a box), and the
-  mathematics of every text cell is typeset (by KaTeX, as jupyterlab-myst
-  does), without errors.
+* every reference, written ``{eval}`cite_t("key")```, ``{eval}`eq("eq-7")```,
+  ``{eval}`numref("fig-2")```, ``{eval}`doc("fig5")``` (see
+  :mod:`depthcore.crossref`), shows what the book shows: an equation of the
+  paper its number in the paper (``tests/data/equation_labels.json``), a
+  figure of the paper its number there (``tests/data/figure_numbers.json``),
+  a citation its author-year text (as sphinxcontrib-bibtex writes it,
+  ``tests/test_sphinx_eval.py``), a page its title, as a link;
+* every glued figure (``{figure}`` of ``{eval}`name```) shows its image with
+  its caption;
+* no role or directive is left unknown ("Unknown Directive", "Unknown Role")
+  and no citation or cross-reference unresolved, and the mathematics of every
+  text cell is typeset (by KaTeX, as jupyterlab-myst does), without errors.
 
 It needs no built book; without Chromium it is skipped (failed under CI).
 """
@@ -41,11 +48,18 @@ import pytest
 from test_browser import CHROMEDRIVER, CHROMIUM, CHROMIUM_FLAGS
 
 ROOT = Path(__file__).resolve().parents[2]
+# fig2: a citation, references to equations and pages, a glued figure;
+# beyond_filters: citations of every kind, equations and figures of other pages,
+# seven glued figures.
 PAGES = ("fig2", "beyond_filters")
-EVAL_ROLE = re.compile(r"\{eval\}`([^`]+)`")
-# A glued figure with its caption: jupyterlab-myst shows its source in a box
-# "glue:figure - Unknown Directive" (the figure itself is an output of the page).
-GLUE_FIGURE = re.compile(r"^(`{3,}|:{3,})\{glue:figure\}.*?^\1\s*$", re.S | re.M)
+EVAL_ROLE = re.compile(r"\{eval\}`([A-Za-z_][A-Za-z0-9_]*)`")
+REFERENCE = re.compile(r"\{eval\}`((\w+)\(\"([^\"`]*)\"\))`")
+# A glued figure: ```{figure}, its options, {eval}`name`, a blank line, its caption.
+FIGURE = re.compile(
+    r"^(`{3,})\{figure\}[ \t]*\n(?::[\w-]+:[^\n]*\n)*[ \t]*\n\{eval\}`(\w+)`[ \t]*\n"
+    r"(?:[ \t]*\n(.*?)\n)?^\1[ \t]*$",
+    re.S | re.M,
+)
 START_TIMEOUT = 120  # seconds for JupyterLab to answer
 RUN_TIMEOUT = 900  # seconds for a page's cells to run
 SCREENSHOTS = os.environ.get("DEPTHCORE_LAB_SCREENSHOTS")  # a folder, to look at the pages
@@ -74,6 +88,8 @@ def lab(missing_prerequisite, tmp_path_factory):
     tracker.write_text('{"windowingMode": "none"}')
     served = home / "served"
     shutil.copytree(ROOT / "book", served / "book", ignore=shutil.ignore_patterns("_nbval"))
+    for name in ("_toc.yml", "_config.yml"):  # read by the pages' references
+        shutil.copy2(ROOT / name, served / name)
     token, port = secrets.token_hex(16), free_port()
     env = dict(
         os.environ,
@@ -150,7 +166,7 @@ def glued_texts(page: str) -> dict[str, str]:
     for cell in nb.cells:
         for out in cell.get("outputs", []) if cell.cell_type == "code" else []:
             record = out.get("metadata", {}).get("scrapbook")
-            if record and record.get("mime_prefix"):
+            if record and record.get("mime_prefix") and len(out["data"]) == 1:
                 plain = out["data"].get(record["mime_prefix"] + "text/plain")
                 if plain is not None:
                     try:
@@ -205,15 +221,20 @@ const sleep = ms => new Promise(r => setTimeout(r, ms));
   const cells = panel.content.widgets.filter(c => c.model.type === 'markdown').map(c => {
     const node = c.node.querySelector('.myst');  // jupyterlab-myst's rendering
     if (!node) return {source: c.model.sharedModel.getSource(), rendered: false};
-    // The text without the math's own text and without the boxes of the
-    // directives jupyterlab-myst does not know (glue:figure), which hold their source.
+    // The text without the math's own text.
     const prose = node.cloneNode(true);
     prose.querySelectorAll('.katex').forEach(e => e.remove());
-    const unknown = [...prose.querySelectorAll('details')].filter(
-      e => (e.querySelector('summary')?.textContent || '').includes('Unknown Directive'));
-    unknown.forEach(e => e.remove());
     return {
-      unknown: unknown.map(e => e.querySelector('summary').textContent),
+      unknown: node.textContent.match(/Unknown (Directive|Role).{0,60}/g) || [],
+      links: [...node.querySelectorAll('a[href]')].map(e => e.textContent),
+      unresolved: [...node.querySelectorAll('[title$="Not Found"]')].map(
+        e => e.title + ': ' + e.textContent),
+      figures: [...node.querySelectorAll('figure')].map(f => ({
+        images: [...f.querySelectorAll('img')].filter(i => i.naturalWidth > 100).length,
+        // jupyterlab-myst puts the image in a caption of its own, before the caption
+        caption: [...f.querySelectorAll('figcaption')].map(e => e.textContent).join(' ')
+          .replace(/\\s+/g, ' '),
+      })),
       source: c.model.sharedModel.getSource(),
       rendered: c.rendered,
       text: prose.textContent,
@@ -249,26 +270,80 @@ def test_page_renders_its_numbers_and_math_in_jupyterlab(lab, driver, page):
     assert not result["errors"], f"{page}: cells failed in JupyterLab: {result['errors']}"
 
     texts = glued_texts(page)
+    expected = expected_references()
     cells = result["cells"]
     assert cells and all(c["rendered"] for c in cells), f"{page}: a text cell is not rendered"
-    shown, missing = 0, []
+    shown, missing, references, figures = 0, [], 0, 0
     for cell in cells:
+        source = cell["source"]
         assert not cell["errors"], f"{page}: expressions failed: {cell['errors']}"
         assert "{eval}" not in cell["text"] and "{glue" not in cell["text"], (
             f"{page}: a role is shown as source: {cell['text'][:200]!r}"
         )
-        assert all(box.startswith("glue:figure") for box in cell["unknown"]), (
-            f"{page}: directives not rendered: {cell['unknown']}"
-        )
-        for name in EVAL_ROLE.findall(GLUE_FIGURE.sub("", cell["source"])):
+        assert not cell["unknown"], f"{page}: not rendered: {cell['unknown']}"
+        assert not cell["unresolved"], f"{page}: unresolved: {cell['unresolved']}"
+        glued_figures = FIGURE.findall(source)
+        for name in EVAL_ROLE.findall(source):
+            if any(name == figure for _, figure, _ in glued_figures):
+                continue
             assert name in texts, f"{page}: {name!r} is evaluated but never glued"
             assert name not in cell["codes"], f"{page}: {{eval}}`{name}` is not evaluated"
             if texts[name] in cell["text"]:
                 shown += 1
             else:
                 missing.append(f"{name} = {texts[name]}")
-        if "$" in cell["source"]:
-            assert cell["math"] > 0, f"{page}: math not typeset in {cell['source'][:80]!r}"
-        assert cell["mathErrors"] == 0, f"{page}: MathJax errors in {cell['source'][:80]!r}"
+        for call, function, content in REFERENCE.findall(source):
+            text = expected(function, content)
+            assert text in cell["text"], f"{page}: {call} does not show {text!r}"
+            if function == "doc":  # a link to the page, as in the book
+                assert text in cell["links"], f"{page}: {call} is not a link"
+            references += 1
+        assert len(cell["figures"]) == len(glued_figures), (
+            f"{page}: {len(glued_figures)} glued figures, {len(cell['figures'])} shown"
+        )
+        for (_, name, caption), figure in zip(glued_figures, cell["figures"], strict=True):
+            assert figure["images"] == 1, f"{page}: figure {name!r} shows no image"
+            words = " ".join(re.split(r"[${]", caption, maxsplit=1)[0].split())
+            # (typographic apostrophes, as the book's too)
+            assert words in figure["caption"].replace("\u2019", "'"), (
+                f"{page}: figure {name!r} without its caption {words!r}: {figure['caption']!r}"
+            )
+            figures += 1
+        if "$" in source:
+            assert cell["math"] > 0, f"{page}: math not typeset in {source[:80]!r}"
+        assert cell["mathErrors"] == 0, f"{page}: MathJax errors in {source[:80]!r}"
     assert not missing, f"{page}: numbers not shown: {missing}"
     assert shown >= 10, f"{page}: only {shown} numbers shown in the text"
+    assert references >= 10, f"{page}: only {references} references shown"
+    assert figures >= 1, f"{page}: no glued figure shown"
+
+
+def expected_references():
+    """``expected(function, content)``: the text that the book shows for a reference.
+
+    The paper's equations and figures by the tables of tests/data (their
+    numbers in the paper, which the built book is checked to show); the
+    rest as :mod:`depthcore.crossref` resolves them, which
+    ``tests/test_sphinx_eval.py`` checks against Sphinx's own rendering.
+    """
+    import json
+
+    from depthcore.crossref import BookReferences, split_target
+
+    data = ROOT / "tests" / "data"
+    equations = json.loads((data / "equation_labels.json").read_text())
+    figures = {
+        label: f["number"]
+        for label, f in json.loads((data / "figure_numbers.json").read_text()).items()
+    }
+    book = BookReferences(ROOT / "book")
+
+    def expected(function, content):
+        if function == "eq" and content in equations:
+            return f"({equations[content]})"
+        if function == "numref" and split_target(content)[1] in figures:
+            explicit, label = split_target(content)
+            return (explicit or "Figure %s").replace("%s", str(figures[label]))
+        return getattr(book, function)(content)
+
+    return expected

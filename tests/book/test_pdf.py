@@ -32,16 +32,17 @@ from conftest import HTML_DIR, ROOT
 import depthcore
 
 PDF = ROOT / "_build" / "latex" / "depthcore.pdf"
+# A glued figure: ```{figure}, its options (:name: first), {eval}`name`, its caption.
 FIGURE_RE = re.compile(
-    r"^```\{glue:figure\}[ \t]*\S+[ \t]*\n:name:[ \t]*(\S+)[ \t]*\n"
-    r"(?::\w+:[^\n]*\n)*[ \t]*\n(.*?)\n```",
+    r"^```\{figure\}[ \t]*\n:name:[ \t]*(\S+)[ \t]*\n(?::\w+:[^\n]*\n)*[ \t]*\n"
+    r"\{eval\}`\w+`[ \t]*\n[ \t]*\n(.*?)\n```",
     re.MULTILINE | re.DOTALL,
 )
 EQNO_RE = re.compile(r"\S.* {6,}\((\d+)\)\s*$", re.MULTILINE)
 RAW_RES = (
     re.compile(r"\\[A-Za-z]{2,}"),  # a LaTeX command
     re.compile(r"\$"),  # MyST/LaTeX math delimiters
-    re.compile(r"\{(glue|eq|doc|cite|numref|math|ref)[:}]"),  # MyST roles
+    re.compile(r"\{(glue|eq|doc|cite|numref|math|ref|eval)[:}]"),  # MyST roles
     re.compile(r"\?\?"),  # an unresolved reference
 )
 

@@ -45,15 +45,18 @@ when the config sets one, else relative to the HTML book's root.
 
 from __future__ import annotations
 
+import ast
 import re
 import shutil
 from pathlib import Path
 
 import docmath
 from docutils import nodes
+from docutils.parsers.rst import directives
 from sphinx import addnodes
+from sphinx.directives import patches
 from sphinx.transforms.post_transforms import SphinxPostTransform
-from sphinx.util.docutils import SphinxDirective
+from sphinx.util.docutils import SphinxDirective, SphinxRole
 
 CITATION_RE = re.compile(r"^\.\. \[(\w+)\]")
 
@@ -113,15 +116,137 @@ def drop_repeated_citations(app, what, name, obj, options, lines):
     lines[:] = kept
 
 
+def reference_call(text: str) -> tuple[str, str] | None:
+    """``(role, content)`` of an ``{eval}`` expression ``cite_t("maybank1990")``, else ``None``.
+
+    The expression is a call of one of the functions of
+    :data:`depthcore.crossref.ROLES` with one string literal, the content of
+    the role it stands for; any other expression is ``None`` (a glued name).
+
+    Raises
+    ------
+    ValueError
+        A call of another function, or with other arguments.
+    """
+    from depthcore.crossref import ROLES
+
+    try:
+        tree = ast.parse(text.strip(), mode="eval").body
+    except SyntaxError:
+        return None
+    if not isinstance(tree, ast.Call):
+        return None
+    name = tree.func.id if isinstance(tree.func, ast.Name) else None
+    args = tree.args
+    if (
+        name not in ROLES
+        or tree.keywords
+        or len(args) != 1
+        or not isinstance(args[0], ast.Constant)
+        or not isinstance(args[0].value, str)
+    ):
+        raise ValueError(
+            f"{{eval}}`{text}`: a reference is written as one of "
+            f"{', '.join(ROLES)} called with one string, the role's content"
+        )
+    return ROLES[name], args[0].value
+
+
+class EvalRole(SphinxRole):
+    """``{eval}`name```: the text glued under ``name``; ``{eval}`cite_t("key")```: the citation.
+
+    A glued name is pasted as myst-nb's ``glue:text`` role pastes it. A
+    reference written as an expression (:func:`reference_call`) is rendered by
+    the role it names, with the same content: ``{eval}`eq("eq-7")``` as
+    ``{eq}`eq-7```, resolved and printed (HTML and LaTeX) exactly as that role.
+    """
+
+    def run(self):
+        from docutils.parsers.rst import roles
+        from myst_nb.ext.glue.roles import PasteTextRole
+
+        try:
+            call = reference_call(self.text)
+        except ValueError as error:
+            message = self.inliner.reporter.error(str(error), line=self.lineno)
+            problem = self.inliner.problematic(self.rawtext, self.rawtext, message)
+            return [problem], [message]
+        if call is None:
+            return PasteTextRole()(
+                self.name, self.rawtext, self.text, self.lineno, self.inliner, self.options, []
+            )
+        name, content = call
+        role, messages = roles.role(name, self.inliner.language, self.lineno, self.inliner.reporter)
+        if role is None:
+            message = self.inliner.reporter.error(f"unknown role {name!r}", line=self.lineno)
+            problem = self.inliner.problematic(self.rawtext, self.rawtext, message)
+            return [problem], [*messages, message]
+        result, more = role(
+            name, f"{{{name}}}`{content}`", content, self.lineno, self.inliner, {}, []
+        )
+        return result, [*messages, *more]
+
+
 def paste_eval_as_glue(app, config):
-    """Make ``{eval}`name``` paste the text glued under ``name`` (myst-nb's ``glue:text``).
+    """Make ``{eval}`` paste glued texts and render references (:class:`EvalRole`).
 
     Connected to ``config-inited``, after every extension's ``setup``: it
     replaces the ``eval`` role that myst-nb registers.
     """
-    from myst_nb.ext.glue.roles import PasteTextRole
+    app.add_role("eval", EvalRole(), override=True)
 
-    app.add_role("eval", PasteTextRole(), override=True)
+
+#: A figure's content that names its glued figure: ``{eval}`name```.
+EVAL_FIGURE = re.compile(r"\{eval\}`([A-Za-z_][A-Za-z0-9_]*)`")
+
+
+class Figure(patches.Figure):
+    """``{figure}``, also of a glued figure: ``{eval}`name``` as its content's first paragraph.
+
+    With an image's path as its argument it is Sphinx's figure. Without one,
+    its content is ``{eval}`name```, a blank line and the caption: the figure
+    that the page glues under ``name``, pasted with its caption exactly as
+    myst-nb's ``glue:figure`` directive pastes it (and with its options).
+    JupyterLab's MyST renderer (jupyterlab-myst) knows ``figure`` but not
+    ``glue:figure``, and shows the same figure, evaluated in the page's kernel
+    (:class:`depthcore.report.GluedOutput`), with the caption. The option
+    ``:enumerated: false`` is for JupyterLab, which numbers a notebook's
+    figures from 1 (the book numbers them across its pages, and
+    ``{eval}`numref("name")``` shows that number in JupyterLab too); the book
+    numbers every named figure, whatever it says.
+    """
+
+    required_arguments = 0
+    optional_arguments = 1
+    option_spec = {**patches.Figure.option_spec, "enumerated": directives.unchanged}
+
+    def run(self):
+        self.options.pop("enumerated", None)
+        if self.arguments:
+            return super().run()
+        from myst_nb.ext.glue.directives import PasteFigureDirective
+
+        first = self.content[0].strip() if self.content else ""
+        match = EVAL_FIGURE.fullmatch(first)
+        if match is None or (len(self.content) > 1 and self.content[1].strip()):
+            raise self.error(
+                "a figure without an image's path pastes a glued figure: its content "
+                "is {eval}`name` alone on its first line, a blank line, then the caption"
+            )
+        unknown = set(self.options) - set(PasteFigureDirective.option_spec)
+        if unknown:
+            raise self.error(f"options of a glued figure: not {', '.join(sorted(unknown))}")
+        return PasteFigureDirective(
+            "glue:figure",
+            [match.group(1)],
+            self.options,
+            self.content[2:],
+            self.lineno,
+            self.content_offset + 2,
+            self.block_text,
+            self.state,
+            self.state_machine,
+        ).run()
 
 
 def citation_owners(env) -> dict:
@@ -338,6 +463,7 @@ def setup(app):
     app.connect("env-merge-info", merge_citation_owners)
     app.connect("autodoc-process-docstring", docmath.typeset_docstring)
     app.add_directive("depthcore-module-summaries", ModuleSummaries)
+    app.add_directive("figure", Figure, override=True)
     app.add_post_transform(DropHtmlOnlyPages)
     app.connect("doctree-resolved", root_page_as_one_chapter)
     app.add_post_transform(DropHiddenCellsWithoutOutput)
