@@ -573,7 +573,14 @@ def coverage_se(level, trials) -> np.ndarray:
     return np.sqrt(level * (1 - level) / trials)
 
 
-def detectable_difference(level, trials, false_alarm: float = 0.01, power: float = 0.8):
+#: The size and power at which :func:`detectable_difference` states a coverage test's reach.
+TEST_FALSE_ALARM = 0.01
+TEST_POWER = 0.8
+
+
+def detectable_difference(
+    level, trials, false_alarm: float = TEST_FALSE_ALARM, power: float = TEST_POWER
+):
     """The smallest coverage error that a two-sided binomial test finds with a given power.
 
     A coverage ``c`` of ``n`` trials is tested against its nominal level
