@@ -49,6 +49,8 @@ TABLE_ROWS = (
     ("so", "second_order", "derived", "all", r"second order $p_{s%s}$, $2\rho^2 J^{-1}$"),
     ("so_printed", "second_order", "printed", "all", r"second order, $\rho^2 J^{-1}$ as printed"),
     ("ekf", "ekf", "printed", "all", "EKF $p_{e%s}$"),
+    ("iter", "iterated", "-", "all", "iterated EKF"),
+    ("inv", "inverse_depth", "-", "all", "inverse-depth EKF, delta method"),
 )
 
 #: The letter of each quantity in the paper's names of the marginals.
