@@ -20,9 +20,11 @@ sampling from a second-order proposal (:mod:`~depthcore.particle`, with
 :mod:`~depthcore.resampling`), the causal bootstrap filter with resample-move
 (:mod:`~depthcore.resample_move`), the iterated EKF and smoother
 (:mod:`~depthcore.iterated`), the inverse-depth EKF
-(:mod:`~depthcore.inverse_depth`), the textbook's Kalman filter and smoothers
-(:mod:`~depthcore.kalman`), the exact filter for any number of frames as a bank
-of Kalman filters over depth (:mod:`~depthcore.bank`), the Rao-Blackwellised
+(:mod:`~depthcore.inverse_depth`), the range-parametrised EKF, a Gaussian sum
+of EKFs over depth intervals (:mod:`~depthcore.range_ekf`), the textbook's
+Kalman filter and smoothers (:mod:`~depthcore.kalman`), the exact filter for
+any number of frames as a bank of Kalman filters over depth
+(:mod:`~depthcore.bank`), the Rao-Blackwellised
 particle filter over depth with a Kalman filter per particle
 (:mod:`~depthcore.rbpf`) and the self-calibration check
 (:mod:`~depthcore.calibration`). The
@@ -63,6 +65,7 @@ MODULES = (
     "model",
     "optimal",
     "particle",
+    "range_ekf",
     "rbpf",
     "reference",
     "report",

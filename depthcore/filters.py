@@ -36,8 +36,9 @@ the unscented Kalman filter (:mod:`depthcore.ukf`) and a particle filter
 (:mod:`depthcore.particle`); for N frames, the iterated EKF
 (:mod:`depthcore.iterated`), the inverse-depth EKF
 (:mod:`depthcore.inverse_depth`), the causal bootstrap particle filter with
-resample-move (:mod:`depthcore.resample_move`) and the Rao-Blackwellised
-particle filter (:mod:`depthcore.rbpf`).
+resample-move (:mod:`depthcore.resample_move`), the Rao-Blackwellised
+particle filter (:mod:`depthcore.rbpf`) and the range-parametrised EKF
+(:mod:`depthcore.range_ekf`).
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ from . import (
     model,
     optimal,
     particle,
+    range_ekf,
     rbpf,
     resample_move,
     second_order,
@@ -444,6 +446,30 @@ def _inverse_depth(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -
     return _gaussian_estimate(est.mean, est.cov, est)
 
 
+def _range_parametrised(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    n_components: int = range_ekf.N_COMPONENTS,
+    depth_range=None,
+) -> Estimate:
+    """The range-parametrised EKF (:func:`depthcore.range_ekf.posterior`, Peach 1995).
+
+    ``detail`` is its :class:`~depthcore.range_ekf.GaussianSum`; the estimate's
+    mean and covariance are the sum's (law of total variance), so that a study
+    scores it, as the other Gaussian filters, by these two moments.
+    """
+    if _single(mu):
+        _prior(prior_mean, prior_cov)
+    g = range_ekf.posterior(
+        mu, rho, prior_mean, prior_cov, process_noise, n_components, depth_range
+    )
+    _covariance_form(g.cov, "range-parametrised EKF")
+    return _gaussian_estimate(g.mean, g.cov, g)
+
+
 def _covariance_form(cov, name: str) -> None:
     """Refuse, naming ``rho``, covariances (..., 3, 3) that rounding left not positive definite.
 
@@ -742,6 +768,18 @@ FILTERS: dict[str, Filter] = {
             _rbpf,
             (("-", "front", {}),),
             random=True,
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "range_parametrised",
+            "range-parametrised EKF",
+            {"color": "tab:cyan", "linestyle": "-."},
+            "gaussian",
+            False,
+            _range_parametrised,
+            (("-", "front", {}),),
             any_frames=True,
             with_process_noise=True,
             default=False,
