@@ -20,7 +20,8 @@ sampling from a second-order proposal (:mod:`~depthcore.particle`, with
 :mod:`~depthcore.resampling`), the causal bootstrap filter with resample-move
 (:mod:`~depthcore.resample_move`), the iterated EKF and smoother
 (:mod:`~depthcore.iterated`), the inverse-depth EKF
-(:mod:`~depthcore.inverse_depth`), the range-parametrised EKF, a Gaussian sum
+(:mod:`~depthcore.inverse_depth`) and UKF (:mod:`~depthcore.inverse_depth_ukf`),
+the range-parametrised EKF, a Gaussian sum
 of EKFs over depth intervals (:mod:`~depthcore.range_ekf`), the textbook's
 Kalman filter and smoothers (:mod:`~depthcore.kalman`), the exact filter for
 any number of frames as a bank of Kalman filters over depth
@@ -59,6 +60,7 @@ MODULES = (
     "filters",
     "gaussian",
     "inverse_depth",
+    "inverse_depth_ukf",
     "iterated",
     "kalman",
     "live",

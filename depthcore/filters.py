@@ -37,8 +37,9 @@ the unscented Kalman filter (:mod:`depthcore.ukf`) and a particle filter
 (:mod:`depthcore.iterated`), the inverse-depth EKF
 (:mod:`depthcore.inverse_depth`), the causal bootstrap particle filter with
 resample-move (:mod:`depthcore.resample_move`), the Rao-Blackwellised
-particle filter (:mod:`depthcore.rbpf`) and the range-parametrised EKF
-(:mod:`depthcore.range_ekf`).
+particle filter (:mod:`depthcore.rbpf`), the range-parametrised EKF
+(:mod:`depthcore.range_ekf`) and the inverse-depth UKF
+(:mod:`depthcore.inverse_depth_ukf`).
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ from . import (
     bank,
     ekf,
     inverse_depth,
+    inverse_depth_ukf,
     iterated,
     model,
     optimal,
@@ -470,6 +472,30 @@ def _range_parametrised(
     return _gaussian_estimate(g.mean, g.cov, g)
 
 
+def _inverse_depth_ukf(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    sigma_points: ukf.SigmaPoints = ukf.SigmaPoints(),
+    allow_behind_camera: bool = True,
+) -> Estimate:
+    """The UKF in inverse-depth coordinates (:func:`depthcore.inverse_depth_ukf.estimate`).
+
+    ``detail`` is its mean and covariance in ``(x, y, v)`` at frame ``N``. As
+    the UKF's entry, it runs by default even where sigma points lie behind the
+    camera (``allow_behind_camera``).
+    """
+    if _single(mu):
+        _prior(prior_mean, prior_cov)
+    est = inverse_depth_ukf.estimate(
+        mu, rho, prior_mean, prior_cov, process_noise, sigma_points, allow_behind_camera
+    )
+    _covariance_form(est.cov, "inverse-depth UKF")
+    return _gaussian_estimate(est.mean, est.cov, est)
+
+
 def _covariance_form(cov, name: str) -> None:
     """Refuse, naming ``rho``, covariances (..., 3, 3) that rounding left not positive definite.
 
@@ -780,6 +806,18 @@ FILTERS: dict[str, Filter] = {
             False,
             _range_parametrised,
             (("-", "front", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "inverse_depth_ukf",
+            "inverse-depth UKF",
+            {"color": "tab:gray", "linestyle": "--"},
+            "gaussian",
+            False,
+            _inverse_depth_ukf,
+            (("-", "all", {}),),
             any_frames=True,
             with_process_noise=True,
             default=False,

@@ -141,6 +141,7 @@ CAPABILITIES = {
     "resample_move": (True, False),
     "rbpf": (True, True),
     "range_parametrised": (True, True),
+    "inverse_depth_ukf": (True, True),
 }
 CASES = [
     (name, n, q)
