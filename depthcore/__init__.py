@@ -21,6 +21,7 @@ sampling from a second-order proposal (:mod:`~depthcore.particle`, with
 (:mod:`~depthcore.resample_move`), the iterated EKF and smoother
 (:mod:`~depthcore.iterated`), the inverse-depth EKF
 (:mod:`~depthcore.inverse_depth`) and UKF (:mod:`~depthcore.inverse_depth_ukf`),
+the EKF in modified polar coordinates (:mod:`~depthcore.modified_polar`),
 the range-parametrised EKF, a Gaussian sum
 of EKFs over depth intervals (:mod:`~depthcore.range_ekf`), the textbook's
 Kalman filter and smoothers (:mod:`~depthcore.kalman`), the exact filter for
@@ -65,6 +66,7 @@ MODULES = (
     "kalman",
     "live",
     "model",
+    "modified_polar",
     "optimal",
     "particle",
     "range_ekf",

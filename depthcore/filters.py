@@ -38,8 +38,9 @@ the unscented Kalman filter (:mod:`depthcore.ukf`) and a particle filter
 (:mod:`depthcore.inverse_depth`), the causal bootstrap particle filter with
 resample-move (:mod:`depthcore.resample_move`), the Rao-Blackwellised
 particle filter (:mod:`depthcore.rbpf`), the range-parametrised EKF
-(:mod:`depthcore.range_ekf`) and the inverse-depth UKF
-(:mod:`depthcore.inverse_depth_ukf`).
+(:mod:`depthcore.range_ekf`), the inverse-depth UKF
+(:mod:`depthcore.inverse_depth_ukf`) and the EKF in modified polar coordinates
+(:mod:`depthcore.modified_polar`).
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ from . import (
     inverse_depth_ukf,
     iterated,
     model,
+    modified_polar,
     optimal,
     particle,
     range_ekf,
@@ -496,6 +498,18 @@ def _inverse_depth_ukf(
     return _gaussian_estimate(est.mean, est.cov, est)
 
 
+def _modified_polar(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> Estimate:
+    """The EKF in modified polar coordinates (:func:`depthcore.modified_polar.estimate`).
+
+    ``detail`` is its mean and covariance in ``(x, y, v)`` at frame ``N``.
+    """
+    if _single(mu):
+        _prior(prior_mean, prior_cov)
+    est = modified_polar.estimate(mu, rho, prior_mean, prior_cov, process_noise)
+    _covariance_form(est.cov, "modified-polar EKF")
+    return _gaussian_estimate(est.mean, est.cov, est)
+
+
 def _covariance_form(cov, name: str) -> None:
     """Refuse, naming ``rho``, covariances (..., 3, 3) that rounding left not positive definite.
 
@@ -817,6 +831,18 @@ FILTERS: dict[str, Filter] = {
             "gaussian",
             False,
             _inverse_depth_ukf,
+            (("-", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "modified_polar",
+            "modified-polar EKF",
+            {"color": "tab:blue", "linestyle": (0, (1, 1))},
+            "gaussian",
+            False,
+            _modified_polar,
             (("-", "all", {}),),
             any_frames=True,
             with_process_noise=True,

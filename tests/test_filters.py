@@ -142,6 +142,7 @@ CAPABILITIES = {
     "rbpf": (True, True),
     "range_parametrised": (True, True),
     "inverse_depth_ukf": (True, True),
+    "modified_polar": (True, True),
 }
 CASES = [
     (name, n, q)
