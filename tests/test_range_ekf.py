@@ -143,6 +143,14 @@ def test_few_components_miss_figure_2():
     assert abs(g.mean[1] / exact.depth_mean - 1) > 1.0
 
 
+def test_the_default_matches_figure_2_to_1e_2():
+    exact = bank.posterior(MU, FIG2.rho, PRIOR.mean, PRIOR.cov)
+    g = range_ekf.posterior(MU, FIG2.rho, PRIOR.mean, PRIOR.cov)
+    assert g.weight.shape == (range_ekf.N_COMPONENTS,)
+    assert abs(g.mean[1] / exact.depth_mean - 1) < 1e-2
+    assert abs(np.sqrt(g.cov[1, 1]) / exact.depth_sd - 1) < 1e-2
+
+
 def test_registry_entry():
     f = FILTERS["range_parametrised"]
     assert f.family == "gaussian" and f.any_frames and f.with_process_noise and not f.default
