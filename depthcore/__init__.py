@@ -21,9 +21,13 @@ sampling from a second-order proposal (:mod:`~depthcore.particle`, with
 :mod:`~depthcore.resampling`), the causal bootstrap filter with resample-move
 (:mod:`~depthcore.resample_move`), the iterated EKF and smoother
 (:mod:`~depthcore.iterated`), the inverse-depth EKF
-(:mod:`~depthcore.inverse_depth`), the textbook's Kalman filter and smoothers
-(:mod:`~depthcore.kalman`), the exact filter for any number of frames as a bank
-of Kalman filters over depth (:mod:`~depthcore.bank`), the Rao-Blackwellised
+(:mod:`~depthcore.inverse_depth`) and UKF (:mod:`~depthcore.inverse_depth_ukf`),
+the EKF in modified polar coordinates (:mod:`~depthcore.modified_polar`),
+the range-parametrised EKF, a Gaussian sum
+of EKFs over depth intervals (:mod:`~depthcore.range_ekf`), the textbook's
+Kalman filter and smoothers (:mod:`~depthcore.kalman`), the exact filter for
+any number of frames as a bank of Kalman filters over depth
+(:mod:`~depthcore.bank`), the Rao-Blackwellised
 particle filter over depth with a Kalman filter per particle
 (:mod:`~depthcore.rbpf`) and the self-calibration check
 (:mod:`~depthcore.calibration`). The
@@ -62,13 +66,16 @@ MODULES = (
     "filters",
     "gaussian",
     "inverse_depth",
+    "inverse_depth_ukf",
     "iterated",
     "kalman",
     "live",
     "model",
+    "modified_polar",
     "optimal",
     "particle",
     "quadrature",
+    "range_ekf",
     "rbpf",
     "reference",
     "report",

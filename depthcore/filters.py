@@ -40,8 +40,11 @@ the unscented Kalman filter (:mod:`depthcore.ukf`) and a particle filter
 (:mod:`depthcore.particle`); for N frames, the iterated EKF
 (:mod:`depthcore.iterated`), the inverse-depth EKF
 (:mod:`depthcore.inverse_depth`), the causal bootstrap particle filter with
-resample-move (:mod:`depthcore.resample_move`) and the Rao-Blackwellised
-particle filter (:mod:`depthcore.rbpf`).
+resample-move (:mod:`depthcore.resample_move`), the Rao-Blackwellised
+particle filter (:mod:`depthcore.rbpf`), the range-parametrised EKF
+(:mod:`depthcore.range_ekf`), the inverse-depth UKF
+(:mod:`depthcore.inverse_depth_ukf`) and the EKF in modified polar coordinates
+(:mod:`depthcore.modified_polar`).
 """
 
 from __future__ import annotations
@@ -57,11 +60,14 @@ from . import (
     bank,
     ekf,
     inverse_depth,
+    inverse_depth_ukf,
     iterated,
     kalman,
     model,
+    modified_polar,
     optimal,
     particle,
+    range_ekf,
     rbpf,
     resample_move,
     second_order,
@@ -600,6 +606,66 @@ def _inverse_depth(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -
     return _gaussian_estimate(est.mean, est.cov, est)
 
 
+def _range_parametrised(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    n_components: int = range_ekf.N_COMPONENTS,
+    depth_range=None,
+) -> Estimate:
+    """The range-parametrised EKF (:func:`depthcore.range_ekf.posterior`, Peach 1995).
+
+    ``detail`` is its :class:`~depthcore.range_ekf.GaussianSum`; the estimate's
+    mean and covariance are the sum's (law of total variance), so that a study
+    scores it, as the other Gaussian filters, by these two moments.
+    """
+    if _single(mu):
+        _prior(prior_mean, prior_cov)
+    g = range_ekf.posterior(
+        mu, rho, prior_mean, prior_cov, process_noise, n_components, depth_range
+    )
+    _covariance_form(g.cov, "range-parametrised EKF")
+    return _gaussian_estimate(g.mean, g.cov, g)
+
+
+def _inverse_depth_ukf(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    sigma_points: ukf.SigmaPoints = ukf.SigmaPoints(),
+    allow_behind_camera: bool = True,
+) -> Estimate:
+    """The UKF in inverse-depth coordinates (:func:`depthcore.inverse_depth_ukf.estimate`).
+
+    ``detail`` is its mean and covariance in ``(x, y, v)`` at frame ``N``. As
+    the UKF's entry, it runs by default even where sigma points lie behind the
+    camera (``allow_behind_camera``).
+    """
+    if _single(mu):
+        _prior(prior_mean, prior_cov)
+    est = inverse_depth_ukf.estimate(
+        mu, rho, prior_mean, prior_cov, process_noise, sigma_points, allow_behind_camera
+    )
+    _covariance_form(est.cov, "inverse-depth UKF")
+    return _gaussian_estimate(est.mean, est.cov, est)
+
+
+def _modified_polar(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> Estimate:
+    """The EKF in modified polar coordinates (:func:`depthcore.modified_polar.estimate`).
+
+    ``detail`` is its mean and covariance in ``(x, y, v)`` at frame ``N``.
+    """
+    if _single(mu):
+        _prior(prior_mean, prior_cov)
+    est = modified_polar.estimate(mu, rho, prior_mean, prior_cov, process_noise)
+    _covariance_form(est.cov, "modified-polar EKF")
+    return _gaussian_estimate(est.mean, est.cov, est)
+
+
 def _covariance_form(cov, name: str) -> None:
     """Refuse, naming ``rho``, covariances (..., 3, 3) that rounding left not positive definite.
 
@@ -941,6 +1007,42 @@ FILTERS: dict[str, Filter] = {
             _rbpf,
             (("-", "front", {}),),
             random=True,
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "range_parametrised",
+            "range-parametrised EKF",
+            {"color": "tab:cyan", "linestyle": "-."},
+            "gaussian",
+            False,
+            _range_parametrised,
+            (("-", "front", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "inverse_depth_ukf",
+            "inverse-depth UKF",
+            {"color": "tab:gray", "linestyle": "--"},
+            "gaussian",
+            False,
+            _inverse_depth_ukf,
+            (("-", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "modified_polar",
+            "modified-polar EKF",
+            {"color": "tab:blue", "linestyle": (0, (1, 1))},
+            "gaussian",
+            False,
+            _modified_polar,
+            (("-", "all", {}),),
             any_frames=True,
             with_process_noise=True,
             default=False,

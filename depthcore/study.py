@@ -19,7 +19,16 @@ and scores its estimate of the state at the last frame:
   filter whose covariance matches its error);
 * the mean Hellinger distance from its depth marginal to the optimal one,
   when the optimal filter is among the filters run (it is run only when
-  asked for; otherwise the distance is not computed and reported as ``None``).
+  asked for; otherwise the distance is not computed and reported as ``None``);
+* the fraction of lost tracks, counted beside the RMSE as the bearings-only
+  tracking literature does (e.g. [ristic2004]_, chapter 6): a trial's track is
+  lost when the error of its estimated position ``(x, y)`` at the last frame
+  exceeds :data:`TRACK_LOSS` times the true distance of the point from the
+  camera, ``|(x_est - x, y_est - y)| > TRACK_LOSS |(x, y)|`` (a relative
+  threshold, the problem having no natural unit of length), or when the
+  estimate is not finite. Reported with its binomial standard error
+  ``sqrt(p (1 - p) / n)`` and, since that is 0 when no track is lost, the
+  exact (Clopper-Pearson) one-sided 95 % upper bound on the loss probability.
 
 Trials whose measurements have no noise-free solution in front of the camera
 (Eq. (7) degenerate or ``c2 <= 2``) cannot run the second-order filter or the
@@ -28,6 +37,12 @@ paper's prior rule; they are counted and left out of every score.
 :func:`study` streams the trials: it draws and filters them in chunks of at
 most :data:`CHUNK` and keeps only running sums (:class:`Tally`), so its memory
 does not grow with the number of trials.
+
+References
+----------
+.. [ristic2004] B. Ristic, S. Arulampalam and N. Gordon, *Beyond the Kalman
+   Filter: Particle Filters for Tracking Applications*, Artech House, 2004,
+   chapter 6 (bearings-only tracking).
 """
 
 from __future__ import annotations
@@ -36,6 +51,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import beta
 
 from . import _checks, model, optimal
 from .filters import FILTERS, NAMES, check_names, exact_depth_range
@@ -51,6 +67,10 @@ CALIBRATION_LEVELS = tuple(np.round(np.concatenate([np.arange(0.05, 0.951, 0.05)
 PARTICLES = 2000
 #: Trials drawn and filtered together by :func:`study`: its memory is that of one chunk.
 CHUNK = 100
+#: A track is lost when its position error exceeds this fraction of the point's true distance.
+TRACK_LOSS = 0.5
+#: Confidence of the upper bound on the track-loss probability.
+TRACK_LOSS_CONFIDENCE = 0.95
 
 
 @dataclass(frozen=True)
@@ -399,6 +419,8 @@ class Tally:
         Sum of the NEES.
     hellinger : float or None
         Sum of the Hellinger distances; ``None`` once a chunk has none.
+    lost : int
+        Trials whose track is lost (:func:`lost_tracks`).
     """
 
     def __init__(self, truth):
@@ -417,6 +439,7 @@ class Tally:
             "nees": 0.0,
             "hellinger": 0.0,
         }
+        self.lost = 0
 
     def add(self, est: Estimates) -> None:
         """Add the scores of one chunk of trials (an empty chunk adds nothing)."""
@@ -452,7 +475,11 @@ class Tally:
             self.hellinger = None
         else:
             self.hellinger += np.sum(est.hellinger)
+        self.lost += int(np.count_nonzero(lost_tracks(est.mean, self._truths(est, n))))
         self.n += n
+
+    def _truths(self, est: Estimates, n: int) -> np.ndarray:
+        return np.broadcast_to(self.truth if est.truth is None else est.truth, (n, 3))
 
     def scores(self) -> dict:
         """The scores of :func:`scores` over every trial added, with their standard errors."""
@@ -495,6 +522,7 @@ class Tally:
                 "se": mean_se(spread["hellinger"], n),
             }
         )
+        out["track_loss"] = track_loss(self.lost, n)
         return out
 
 
@@ -552,6 +580,68 @@ def mean_se(squares, n: int) -> float:
     if n < 2:
         return 0.0
     return float(np.sqrt(float(squares) / (n - 1) / n))
+
+
+def lost_tracks(mean, truth, threshold: float = TRACK_LOSS) -> np.ndarray:
+    """Whether each trial's track is lost: its position error beyond ``threshold`` times the range.
+
+    A track is lost when ``|(x_est - x, y_est - y)| > threshold |(x, y)|`` at the
+    last frame (or the estimate is not finite); see the module docstring.
+
+    Parameters
+    ----------
+    mean : array_like, shape (..., 3)
+        Estimated states ``(x, y, v)``.
+    truth : array_like, shape (..., 3)
+        True states.
+    threshold : float
+        > 0.
+
+    Returns
+    -------
+    ndarray of bool, shape (...)
+    """
+    threshold = _checks.positive_scalar(threshold, "threshold")
+    mean = np.asarray(mean, dtype=float)
+    truth = np.asarray(truth, dtype=float)
+    error = np.hypot(mean[..., 0] - truth[..., 0], mean[..., 1] - truth[..., 1])
+    return ~(error <= threshold * np.hypot(truth[..., 0], truth[..., 1]))
+
+
+def track_loss(lost: int, trials: int, confidence: float = TRACK_LOSS_CONFIDENCE) -> dict:
+    """The fraction of lost tracks, its standard error and an exact upper confidence bound.
+
+    Parameters
+    ----------
+    lost : int
+        Tracks lost, ``0 <= lost <= trials``.
+    trials : int
+        ``n >= 1``.
+    confidence : float
+        Of the one-sided upper bound, in (0, 1).
+
+    Returns
+    -------
+    dict
+        ``fraction`` ``p = lost / n``; ``se``, the binomial ``sqrt(p (1 - p) / n)``;
+        ``upper`` the Clopper-Pearson bound, the ``confidence`` quantile of
+        ``Beta(lost + 1, n - lost)`` (1 when every track is lost);
+        ``threshold`` and ``confidence``.
+    """
+    n = _checks.count(trials, "trials")
+    if isinstance(lost, bool) or not isinstance(lost, (int, np.integer)) or not 0 <= lost <= n:
+        raise ValueError(f"lost must be an integer from 0 to trials = {n}, got {lost!r}")
+    if not 0 < confidence < 1:
+        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
+    p = lost / n
+    upper = 1.0 if lost == n else float(beta.ppf(confidence, lost + 1, n - lost))
+    return {
+        "fraction": float(p),
+        "se": float(np.sqrt(p * (1 - p) / n)),
+        "upper": upper,
+        "threshold": TRACK_LOSS,
+        "confidence": float(confidence),
+    }
 
 
 def coverage_se(level, trials) -> np.ndarray:

@@ -36,6 +36,7 @@ TABLES = {
     "bench_import": {"numpy_s", "depthcore_after_numpy_s", "target_s"},
     "bench_kalman": {"depthcore_ms", "filterpy_ms", "ratio", "ratio_min", "ratio_max"},
     "bench_optimal": {"moments", "per_triple"},
+    "bench_range_ekf": {"fig2", "ten_frames"},
     "bench_rbpf": {"exact", "equal_cost", "convergence"},
     "bench_trials": {"vectorised_s", "trial_by_trial_s", "ratio", "estimate_sd"},
 }

@@ -34,7 +34,13 @@ def _options(name, seed=0):
 def test_registry_lists_the_five_filters_in_table_order():
     assert NAMES == ("optimal", "second_order", "ekf", "ukf", "particle")
     assert PAPER_FILTERS == ("optimal", "second_order", "ekf")
-    assert ALL_NAMES == NAMES + ("iterated", "inverse_depth", "resample_move", "rbpf")
+    assert ALL_NAMES[: len(NAMES) + 4] == NAMES + (
+        "iterated",
+        "inverse_depth",
+        "resample_move",
+        "rbpf",
+    )
+    assert "range_parametrised" in ALL_NAMES
     for name, f in FILTERS.items():
         assert f.name == name and f.family in FAMILIES
         assert f.plot_style["label"] == f.label
@@ -185,6 +191,9 @@ CAPABILITIES = {
     "inverse_depth": (True, True),
     "resample_move": (True, False),
     "rbpf": (True, True),
+    "range_parametrised": (True, True),
+    "inverse_depth_ukf": (True, True),
+    "modified_polar": (True, True),
 }
 CASES = [
     (name, n, q)

@@ -251,7 +251,15 @@ def test_study_command_json(capsys):
     assert data["valid_trials"] == 30
     assert set(data["filters"]) == {"optimal", "second_order", "ekf", "ukf", "particle"}
     for f in data["filters"].values():
-        assert set(f) == {"depth", "velocity", "nees", "nees_se", "hellinger_depth", "calibration"}
+        assert set(f) == {
+            "depth",
+            "velocity",
+            "nees",
+            "nees_se",
+            "hellinger_depth",
+            "calibration",
+            "track_loss",
+        }
         assert len(f["calibration"]["depth"]) == len(f["calibration"]["levels"])
         scores = {"bias", "rmse", "mean_sd", "coverage_68", "coverage_95"}
         assert set(f["depth"]) == scores | {f"{s}_se" for s in scores}
