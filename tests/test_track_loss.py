@@ -5,6 +5,7 @@ import pytest
 from scipy import stats
 
 from depthcore import study
+from depthcore.scenarios import SCENARIOS
 
 
 def test_the_rule_on_hand_made_tracks():
@@ -63,7 +64,7 @@ def test_the_study_reports_it_and_chunks_agree():
     for name in ("ekf", "optimal"):
         assert one["filters"][name]["track_loss"] == many["filters"][name]["track_loss"]
     # the count is that of the rule on the same trials
-    trials = study.simulate(study.SCENARIOS["fig2"].c, 0.005, 40, np.random.default_rng(0))
+    trials = study.simulate(SCENARIOS["fig2"].c, 0.005, 40, np.random.default_rng(0))
     est = study.run_filters(trials, ("ekf",))["ekf"]
     lost = int(np.sum(study.lost_tracks(est.mean, trials.truths)))
     tally = study.Tally(trials.truth)
