@@ -238,7 +238,12 @@ def _cmd_estimate(args) -> str:
     _check_rho(args.rho)
     q = _check_process_noise(args.process_noise)
     prior = _prior(mu, args.prior_mean, args.prior_cov)
-    summary = reproduce.summarize(mu, args.rho, prior, process_noise=q, smooth=args.smooth)
+    names = tuple(dict.fromkeys(args.filters))
+    if len(names) != len(args.filters):
+        raise ValueError("--filters: a filter is named more than once")
+    summary = reproduce.summarize(
+        mu, args.rho, prior, process_noise=q, smooth=args.smooth, names=names
+    )
     return _json(summary) if args.json else report.format_summary(summary)
 
 
@@ -512,6 +517,7 @@ examples:
   python -m depthcore estimate --mu -1e-1 0 0.2 --rho 0.01 --prior-cov 100
   python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --prior-mean -1 4 0 --json
   python -m depthcore estimate --mu -0.3 0 0.2 0.33 0.43 --rho 0.005 --process-noise 0.01 --smooth
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --filters optimal iterated inverse_depth
 
 The noise-free state c is (x, y, v) at frame 3 (from the first three bearings);
 the prior is at frame 1; every filter reports the state at the last frame N.""",
@@ -612,6 +618,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--smooth",
         action="store_true",
         help="also the optimal filter's smoothed depth and lateral position at every frame",
+    )
+    e.add_argument(
+        "--filters",
+        nargs="+",
+        default=list(_STUDY_FILTERS),
+        choices=ALL_NAMES,
+        metavar="NAME",
+        help=f"filters to run, in this order (default: {' '.join(_STUDY_FILTERS)}; also "
+        f"{' '.join(n for n in ALL_NAMES if n not in _STUDY_FILTERS)})",
     )
     e.add_argument("--json", action="store_true", help="print JSON instead of a table")
     e.set_defaults(run=_cmd_estimate)

@@ -187,28 +187,30 @@ def format_summary(summary: dict) -> str:
     ]
     if N != 3 or q > 0:
         lines.append(f"{N} frames, process noise q = {q:g}; every filter at frame {N}")
+    w = max([13, *(len(n) + 1 for n in [*summary["filters"], *summary.get("not_run", {})])])
     lines.append(
-        f"{'filter':<13} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}"
+        f"{'filter':<{w}} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}"
     )
     for name in summary["filters"]:
         f = summary["filters"][name]
         lines.append(
-            f"{name:<13} {f['depth']['mean']:>#11.4g} {f['depth']['sd']:>#10.4g} "
+            f"{name:<{w}} {f['depth']['mean']:>#11.4g} {f['depth']['sd']:>#10.4g} "
             f"{f['velocity']['mean']:>#10.4g} {f['velocity']['sd']:>#10.4g}"
         )
     for name, reason in summary.get("not_run", {}).items():
-        lines.append(f"{name:<13} not run: {reason}")
-    o = summary["filters"]["optimal"]
-    text = (
-        f"optimal error estimates: depth {_error(o['depth'].get('error'))}, "
-        f"velocity {_error(o['velocity'].get('error'))}"
-    )
-    if "prob_behind_camera_all_depths" in o:
-        text += (
-            "; probability behind the camera if depths y <= 2 are allowed: "
-            f"{o['prob_behind_camera_all_depths']:.3g}"
+        lines.append(f"{name:<{w}} not run: {reason}")
+    o = summary["filters"].get("optimal")
+    if o is not None:
+        text = (
+            f"optimal error estimates: depth {_error(o['depth'].get('error'))}, "
+            f"velocity {_error(o['velocity'].get('error'))}"
         )
-    lines.append(text)
+        if "prob_behind_camera_all_depths" in o:
+            text += (
+                "; probability behind the camera if depths y <= 2 are allowed: "
+                f"{o['prob_behind_camera_all_depths']:.3g}"
+            )
+        lines.append(text)
     if "smoothed" in summary:
         sm = summary["smoothed"]
         lines.append(

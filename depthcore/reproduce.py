@@ -60,8 +60,9 @@ def summarize(
     seed=PARTICLE_SEED,
     process_noise: float = 0.0,
     smooth: bool = False,
+    names=NAMES,
 ) -> dict:
-    """Moments of the depth and velocity marginals of every filter at the last frame.
+    """Moments of the depth and velocity marginals of the named filters at the last frame.
 
     Parameters
     ----------
@@ -77,6 +78,9 @@ def summarize(
     smooth : bool
         Also the optimal filter's smoothed depth and lateral position at every
         frame (:meth:`depthcore.bank.Mixture.smoothed`).
+    names : sequence of str
+        Filters of :data:`depthcore.filters.FILTERS`, run in this order
+        (default :data:`depthcore.filters.NAMES`).
 
     Returns
     -------
@@ -99,7 +103,7 @@ def summarize(
         c = noise_free_states_unchecked(mu[:3])
         c = c if np.all(np.isfinite(c)) and c[1] > 2 else None
     filters, not_run = {}, {}
-    for name in NAMES:
+    for name in check_names(names):
         f = FILTERS[name]
         if (len(mu) != 3 and not f.any_frames) or (q > 0 and not f.with_process_noise):
             not_run[name] = "supports only " + (
@@ -110,7 +114,7 @@ def summarize(
             continue
         extra = {"process_noise": q} if q > 0 else {}
         filters[name] = _moments(_run(name, mu, rho, prior, seed, **extra))
-    if len(mu) == 3 and q == 0:
+    if len(mu) == 3 and q == 0 and "optimal" in filters:
         filters["optimal"]["prob_behind_camera_all_depths"] = float(
             _run("optimal", mu, rho, prior, seed, support="all").extras["prob_behind_camera"]
         )

@@ -8,6 +8,10 @@ import pytest
 
 from depthcore import reproduce, study
 from depthcore.__main__ import build_parser, main
+from depthcore.filters import FILTERS
+from depthcore.scenarios import SCENARIOS
+
+FIG2 = SCENARIOS["fig2"]
 
 
 def run(*args):
@@ -44,6 +48,30 @@ def test_estimate_matches_the_library(capsys):
     assert data["prior_mean"] == pytest.approx([-1.2, 4.0, 0.0])
     assert data["filters"]["optimal"]["depth"]["mean"] == pytest.approx(6.4659786, abs=1e-6)
     assert data["filters"]["ekf"]["depth"]["sd"] == pytest.approx(0.16, abs=5e-4)
+
+
+@pytest.mark.parametrize("names", [("iterated", "inverse_depth"), ("modified_polar", "ekf")])
+def test_estimate_runs_the_named_filters_of_the_registry(capsys, names):
+    mu, rho = ["-0.3", "0", "0.2"], 0.005
+    assert main(["estimate", "--mu", *mu, "--rho", str(rho), "--filters", *names, "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert list(data["filters"]) == list(names)
+    prior = FIG2.prior
+    for name in names:
+        est = FILTERS[name]([-0.3, 0.0, 0.2], rho, prior.mean, prior.cov)
+        assert data["filters"][name]["depth"]["mean"] == pytest.approx(est.depth_mean)
+        assert data["filters"][name]["depth"]["sd"] == pytest.approx(est.depth_sd)
+    assert main(["estimate", "--mu", *mu, "--rho", str(rho), "--filters", *names]) == 0
+    table = capsys.readouterr().out
+    assert all(f"\n{name} " in table for name in names) and "\noptimal " not in table
+
+
+def test_estimate_refuses_a_filter_named_twice_or_unknown():
+    twice = run("estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005", "--filters", "ekf", "ekf")
+    assert twice.returncode == 2 and "named more than once" in twice.stderr
+    assert "Traceback" not in twice.stderr
+    unknown = run("estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005", "--filters", "kf")
+    assert unknown.returncode == 2 and "invalid choice" in unknown.stderr
 
 
 def test_estimate_accepts_prior_options(capsys):
