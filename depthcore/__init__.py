@@ -56,6 +56,7 @@ MODULES = (
     "figures",
     "filters",
     "gaussian",
+    "hardness",
     "inverse_depth",
     "iterated",
     "kalman",
