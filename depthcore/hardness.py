@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _checks, bound, calibration, model, study
+from . import _checks, bank, bound, calibration, model, study
 from .filters import FILTERS, check_names
 from .gaussian import paper_prior_means
 
@@ -169,11 +169,14 @@ def depth_estimates(name: str, mu, rho: float, prior_mean, prior_cov, true_depth
     name : str
         A filter of :data:`depthcore.filters.FILTERS` of the ``"exact"`` or
         ``"gaussian"`` family.
-    mu : ndarray, shape (T, 3)
+    mu : ndarray, shape (T, N)
+        Bearings of frames 1 .. N (the optimal filter beyond three frames is
+        the bank of Kalman filters, :func:`depthcore.bank.posterior`).
     rho : float
     prior_mean : array_like, shape (3,)
     prior_cov : array_like, shape (3, 3)
     true_depth : ndarray, shape (T,)
+        The true depth at frame ``N``.
 
     Returns
     -------
@@ -190,6 +193,8 @@ def depth_estimates(name: str, mu, rho: float, prior_mean, prior_cov, true_depth
     def run(rows):
         est = f(mu[rows], rho, prior_mean, prior_cov)
         m, s = np.asarray(est.depth_mean), np.asarray(est.depth_sd)
+        if f.family == "exact" and isinstance(est.detail, bank.Mixture):  # beyond three frames
+            return m, s, est.detail.depth_cdf(true_depth[rows][:, None])[:, 0]
         if f.family == "exact":
             return m, s, est.detail.depth_cdf(true_depth[rows])
         return m, s, ndtr((true_depth[rows] - m) / s)
@@ -238,6 +243,7 @@ def hard_cell(
     trials: int,
     seed,
     names=NAMES,
+    frames: int = 3,
 ) -> dict:
     """Every filter's depth scores in one setting, at the fixed truth and averaged over the prior.
 
@@ -255,14 +261,21 @@ def hard_cell(
         Spawns the two readings' generators.
     names : sequence of str
         Filters of the ``"exact"`` or ``"gaussian"`` family.
+    frames : int
+        ``N``, from 3 to ``depthcore._checks.MAX_FRAMES``: the point moves on
+        from ``truth`` at time 3 to frame ``N`` (Eq. (1), no process noise),
+        and the filters are scored on its depth there; the truths drawn from
+        the prior are followed from frame 1 to frame ``N``
+        (:func:`depthcore.calibration.draw_from_prior`).
 
     Returns
     -------
     dict
-        ``"truth"``, ``"rho"``, ``"prior_mean"``, ``"prior_cov"``,
+        ``"truth"``, ``"frames"``, ``"rho"``, ``"prior_mean"``, ``"prior_cov"``,
         ``"second_difference"`` (over ``rho``: the bearings' curvature in
-        units of their noise), ``"bound_sd"`` (the depth SD of the Cramér–Rao
-        bound at the truth, the prior's information included,
+        units of their noise, of the first three frames), ``"bound_sd"`` (the
+        depth SD at frame ``N`` of the Cramér–Rao bound at the truth, the
+        prior's information included,
         :func:`depthcore.bound.posterior_bound`), and for each reading of
         :data:`READINGS` ``{"valid": trials kept, "filters": {name: scores}}``.
     """
@@ -275,22 +288,26 @@ def hard_cell(
     fixed_rng, prior_rng = (
         np.random.default_rng(s) for s in _checks.spawn(_checks.seed_sequence(seed), 2)
     )
-    b = bound.posterior_bound(truth, 3, 3, rho, pc)
+    frames = _checks.count(frames, "frames")
+    if not 3 <= frames <= _checks.MAX_FRAMES:
+        raise ValueError(f"frames must be from 3 to {_checks.MAX_FRAMES}, got {frames}")
+    b = bound.posterior_bound(truth, 3, frames, rho, pc)
     out = {
         "truth": truth,
+        "frames": frames,
         "rho": rho,
         "prior_mean": pm,
         "prior_cov": pc,
         "second_difference": float(second_difference(truth)) / rho,
         "bound_sd": float(np.sqrt(b[-1, 1, 1])),
     }
-    drawn = study.simulate(truth, rho, trials, fixed_rng, "fixed", prior_scale)
-    depth = np.full(len(drawn.mu), truth[1])
+    drawn = study.simulate(truth, rho, trials, fixed_rng, "fixed", prior_scale, frames)
+    depth = drawn.truths[:, 1]
     out["fixed"] = {
         "valid": len(drawn.mu),
         "filters": score_filters(drawn.mu, rho, pm, pc, depth, names),
     }
-    draws = calibration.draw_from_prior(pm, pc, rho, trials, prior_rng)
+    draws = calibration.draw_from_prior(pm, pc, rho, trials, prior_rng, frames=frames)
     out["prior"] = {
         "valid": len(draws.mu),
         "filters": score_filters(draws.mu, rho, pm, pc, draws.truth[:, 1], names),
@@ -298,13 +315,13 @@ def hard_cell(
     return out
 
 
-def hard_study(cells, rho: float, trials: int, seed, names=NAMES) -> list[dict]:
+def hard_study(cells, rho: float, trials: int, seed, names=NAMES, frames: int = 3) -> list[dict]:
     """:func:`hard_cell` for each setting, with independent streams spawned from ``seed``.
 
     Parameters
     ----------
     cells : sequence of (truth, prior_scale, prior_velocity)
-    rho, trials, seed, names
+    rho, trials, seed, names, frames
         As for :func:`hard_cell`.
 
     Returns
@@ -316,7 +333,7 @@ def hard_study(cells, rho: float, trials: int, seed, names=NAMES) -> list[dict]:
         raise ValueError("cells must not be empty")
     seeds = _checks.spawn(_checks.seed_sequence(seed), len(cells))
     return [
-        hard_cell(t, rho, s, v, trials, sd, names)
+        hard_cell(t, rho, s, v, trials, sd, names, frames)
         for (t, s, v), sd in zip(cells, seeds, strict=True)
     ]
 

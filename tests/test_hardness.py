@@ -161,3 +161,21 @@ def test_hard_study_texts_and_figure():
     assert len(fig.axes) == 2
     with pytest.raises(ValueError, match="cells"):
         hardness.hard_study([], RHO, 8, 1)
+
+
+def test_hard_cell_beyond_three_frames_scores_the_depth_at_frame_n():
+    # The exact N-frame filter (the bank) over truths drawn from its prior: calibrated;
+    # the bound is the posterior bound at frame N.
+    cell = hardness.hard_cell([1.2, 6.0, 0.0], RHO, 10.0, 0.0, 400, 4, ("optimal",), 10)
+    assert cell["frames"] == 10
+    pc = 10.0 * np.eye(3)
+    b = bound.posterior_bound([1.2, 6.0, 0.0], 3, 10, RHO, pc)[-1, 1, 1]
+    assert cell["bound_sd"] == pytest.approx(np.sqrt(b))
+    s = cell["prior"]["filters"]["optimal"]
+    for p in (0.68, 0.95):
+        assert abs(s[f"coverage_{round(100 * p)}"] - p) < 3 * study.coverage_se(p, s["trials"])
+    # at the fixed truth the point has moved on to depth 6 + 7 = 13 (Eq. (1))
+    e = cell["fixed"]["filters"]["optimal"]
+    assert abs(e["bias"]) < 13.0 and e["failed"] == 0
+    with pytest.raises(ValueError, match="frames"):
+        hardness.hard_cell(FIG2.c, RHO, 1.0, 0.0, 4, 1, ("optimal",), 2)
