@@ -65,6 +65,7 @@ MODULES = (
     "figures",
     "filters",
     "gaussian",
+    "hardness",
     "inverse_depth",
     "inverse_depth_ukf",
     "iterated",

@@ -1042,3 +1042,63 @@ def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse"))
     ]
     fig.legend(handles=handles, loc="outside lower center", ncol=3, frameon=False)
     return fig
+
+
+def hard_figure(cells: list, groups: list, level: int = 68):
+    """Each filter's coverage at the fixed truth and over the prior, along axes of settings.
+
+    Parameters
+    ----------
+    cells : list of dict
+        From :func:`depthcore.hardness.hard_study`.
+    groups : list of (str, list of int, array_like, bool)
+        One column each: the x-axis label, the indices of its cells, their
+        x values and whether the x-axis is logarithmic.
+    level : int
+        The central interval's level in percent, 68 or 95.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Two rows (at the fixed truth; truths drawn from the prior), one column
+        per group; each filter's coverage with two-standard-error bars, the
+        nominal level in grey.
+    """
+    key = f"coverage_{int(level)}"
+    names = list(cells[0]["fixed"]["filters"])
+    fig, axes = _subplots(2, len(groups), figsize=(WIDTH, 5.4), sharey=True, squeeze=False)
+    rows = (("fixed", "at the fixed truth"), ("prior", "truths from the prior"))
+    for i, (reading, title) in enumerate(rows):
+        for j, (xlabel, indices, xs, log_x) in enumerate(groups):
+            ax = axes[i, j]
+            xs = np.asarray(xs, dtype=float)
+            for k, name in enumerate(names):
+                s = [cells[c][reading]["filters"][name] for c in indices]
+                # a small offset per filter keeps the error bars apart
+                shift = (k - (len(names) - 1) / 2) * 0.012
+                x = xs * (1 + shift) if log_x else xs + shift * (np.ptp(xs) or 1.0)
+                style = {
+                    a: STYLE[name][a] for a in ("color", "marker", "label") if a in STYLE[name]
+                }
+                ax.errorbar(
+                    x,
+                    [v[key] for v in s],
+                    yerr=[2 * v[f"{key}_se"] for v in s],
+                    linewidth=1.2,
+                    markersize=3.5,
+                    capsize=2,
+                    **style,
+                )
+            ax.axhline(level / 100, color="0.6", linewidth=1)
+            if log_x:
+                ax.set_xscale("log")
+            ax.set_xticks(xs, [f"{v:g}" for v in xs])
+            ax.set_xticks([], minor=True)
+            ax.set_ylim(-0.03, 1.03)
+            if i == 1:
+                ax.set_xlabel(xlabel)
+            if j == 0:
+                ax.set_ylabel(f"{level} % coverage,\n{title}")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=3, frameon=False)
+    return fig

@@ -1643,3 +1643,46 @@ def conjecture_texts(result: dict, wins: dict, prefix: str) -> dict:
             for name, ok in wins[f"calibrated_{level}"].items():
                 out[f"{prefix}_{j}_cal{level}_{name}"] = str(int(np.sum(ok[..., j])))
     return out
+
+
+#: The depth scores of every filter that :func:`hard_texts` formats.
+HARD_SCORES = ("rmse", "mean_sd", "coverage_68", "coverage_95")
+
+
+def hard_label(cell: dict) -> str:
+    """A setting of :func:`depthcore.hardness.hard_cell`: truth, prior covariance, its velocity."""
+    x, y, v = (float(a) for a in cell["truth"])
+    s = float(cell["prior_cov"][0, 0])
+    return f"({x:g}, {y:g}, {v:g}); {s:g} I; v₀ = {float(cell['prior_mean'][2]):g}"
+
+
+def hard_texts(cells: list, prefix: str) -> dict:
+    """Texts of :func:`depthcore.hardness.hard_study`'s cells, for glue.
+
+    Returns
+    -------
+    dict
+        For the ``i``-th cell: ``"<prefix>_<i>_x"`` (:func:`hard_label`),
+        ``"<prefix>_<i>_d2"`` (the bearings' second difference over ``rho``),
+        ``"<prefix>_<i>_bound"`` (the bound's depth SD), and for each reading
+        ``r`` (``"fixed"``, ``"prior"``), filter and score of
+        :data:`HARD_SCORES` ``"<prefix>_<i>_<r>_<filter>_<score>"``:
+        ``"value ± standard error"`` (:func:`value_se`; two decimals for the
+        coverages, three significant figures' worth for the depths).
+    """
+    out = {}
+    for i, c in enumerate(cells):
+        out[f"{prefix}_{i}_x"] = hard_label(c)
+        out[f"{prefix}_{i}_d2"] = f"{round(c['second_difference'], 1) + 0.0:.1f}"
+        out[f"{prefix}_{i}_bound"] = f"{c['bound_sd']:.3g}"
+        for reading in ("fixed", "prior"):
+            for name, s in c[reading]["filters"].items():
+                for score in HARD_SCORES:
+                    if score.startswith("coverage"):
+                        decimals = 2
+                    else:
+                        decimals = max(0, 2 - int(np.floor(np.log10(max(abs(s[score]), 1e-3)))))
+                    out[f"{prefix}_{i}_{reading}_{name}_{score}"] = value_se(
+                        s[score], s[f"{score}_se"], decimals
+                    )
+    return out

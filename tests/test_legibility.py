@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.text import Text  # noqa: E402
 
-from depthcore import bank, experiments, figures, model, study  # noqa: E402
+from depthcore import bank, experiments, figures, hardness, model, study  # noqa: E402
 from depthcore.filters import NAMES as FILTER_NAMES  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
@@ -153,6 +153,19 @@ BUILDERS = {
     "frame_marginals_figure": _frame_marginals,
     "frames_study_figure": lambda: figures.frames_study_figure(
         _frames_run(), title="the paper's prior rule, q = 0.02"
+    ),
+    "hard_figure": lambda: figures.hard_figure(
+        hardness.hard_study(
+            [((1.2, 6.0, v), 1000.0, 0.0) for v in (0.0, 1.2)] + [(FIG2.c, 1.0, 0.0)],
+            FIG2.rho,
+            6,
+            1,
+            ("optimal", "second_order", "ekf"),
+        ),
+        [
+            ("lateral velocity v of (1.2, 6, v)", [0, 1], [0.0, 1.2], False),
+            ("prior covariance s (s I)", [2, 1], [1.0, 1000.0], True),
+        ],
     ),
     "conjecture_figure": lambda: figures.conjecture_figure(
         experiments.conjecture_study(

@@ -1,0 +1,376 @@
+"""Where the problem is hard: every filter and the bound across parallax, prior and depth.
+
+Recommended import: ``from depthcore import hardness``.
+
+Three bearings of a point moving by Eq. (1) say where it is only through the
+curvature of their sequence: the noise-free bearings ``b_k = x_k / y_k`` of a
+truth ``(x, y, v)`` at time 3 are ``b(t) = v + (x - v y) / (y + t)`` at
+``t = -2, -1, 0``, whose second difference (:func:`second_difference`) is
+
+    b_1 - 2 b_2 + b_3 = 2 (x - v y) / (y (y - 1) (y - 2)).
+
+It vanishes when ``x = v y``: the point then moves along its own ray, every
+bearing equals ``v``, and every state ``(v y', y', v)`` gives the same bearings,
+so the depth is not observable from bearings alone (Nardone and Aidala 1981,
+on bearings-only tracking). Measured in units of the noise ``rho`` it is the
+signal the bearings carry about the depth.
+
+:func:`hard_cell` scores every filter's depth estimate in one setting (a truth,
+a prior covariance ``s I`` and a prior velocity) in two ways:
+
+* **at the fixed truth**: bearings drawn afresh around one truth;
+* **averaged over the prior** (simulation-based calibration, Talts et al.
+  2018): truths drawn from the filter's own prior, each with its bearings.
+  A Bayesian posterior is calibrated in this sense, exactly, whatever the
+  geometry (:mod:`depthcore.calibration`); at one fixed truth it need not be,
+  and its posterior mean minimises the mean squared error averaged over the
+  prior, not at each truth. This is the fair arbiter of the exact posterior.
+
+The prior must not depend on the bearings for the second reading to hold, so
+the paper's rule (a prior centred on each trial's own noise-free solution) is
+replaced here by that rule applied once, to the truth's noise-free bearings:
+the mean ``G^{-2}`` of the truth (Eq. (1)) with the velocity replaced by a
+chosen prior velocity (the paper's rule sets it to 0), covariance ``s I``
+(:func:`prior_for`). Truths of the second reading are drawn from that prior.
+
+Trials whose first three bearings have no noise-free solution in front of the
+camera are left out in both readings, as in :mod:`depthcore.study`; a filter
+that has no answer for a trial (the EKF's predicted depth behind the camera,
+for instance) is scored on the trials it answers, and the number it does not
+is reported.
+
+References
+----------
+.. [nardone1981] S. C. Nardone and V. J. Aidala, "Observability criteria for
+   bearings-only target motion analysis", IEEE Trans. Aerospace and
+   Electronic Systems AES-17(2), 162-166, 1981.
+.. [talts2018b] S. Talts, M. Betancourt, D. Simpson, A. Vehtari and A. Gelman,
+   "Validating Bayesian inference algorithms with simulation-based
+   calibration", arXiv:1804.06788, 2018.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _checks, bank, bound, calibration, model, study
+from .filters import FILTERS, check_names
+from .gaussian import paper_prior_means
+
+#: The filters scored by :func:`hard_cell`: the exact posterior and the Gaussian approximations.
+NAMES = ("optimal", "second_order", "ekf", "ukf", "iterated", "inverse_depth")
+#: The two readings of :func:`hard_cell`: at the fixed truth, and over truths drawn from the prior.
+READINGS = ("fixed", "prior")
+#: Nominal levels of the central intervals scored.
+LEVELS = (0.68, 0.95)
+
+
+def second_difference(truths) -> np.ndarray:
+    """The second difference ``b_1 - 2 b_2 + b_3`` of the noise-free bearings of truths at time 3.
+
+    The bearings are ``x_k / y_k`` (Eq. (4) without noise) of the states
+    ``G^{k-3}`` of the truth (Eq. (1)), ``k = 1, 2, 3``; in closed form
+    ``2 (x - v y) / (y (y - 1) (y - 2))`` (module docstring). Zero means the
+    depth is unobservable from the bearings (Nardone and Aidala 1981).
+
+    Parameters
+    ----------
+    truths : array_like, shape (..., 3)
+        States ``(x, y, v)`` at time 3 with depth ``y > 2`` (in front of the
+        camera at time 1).
+
+    Returns
+    -------
+    ndarray, shape (...)
+    """
+    s = _checks.finite_array(truths, "truths")
+    if s.ndim < 1 or s.shape[-1] != 3:
+        raise ValueError(f"truths must have shape (..., 3), got {s.shape}")
+    if not np.all(s[..., 1] > 2):
+        raise ValueError("truths must have depth > 2: the point in front of the camera at time 1")
+    b = [model.project(model.G(s, k - 3)) for k in (1, 2, 3)]
+    return b[0] - 2.0 * b[1] + b[2]
+
+
+def prior_for(truth, prior_scale: float, prior_velocity: float = 0.0):
+    """The fixed prior of a setting: the paper's rule applied to the truth's noise-free bearings.
+
+    Mean ``G^{-2}`` of the truth (Eq. (1); the paper's ``(c1 - 2 c3, c2 - 2,
+    0)``, Eq. (13), with ``c`` the truth) with its velocity set to
+    ``prior_velocity``, covariance ``prior_scale * I``.
+
+    Parameters
+    ----------
+    truth : array_like, shape (3,)
+    prior_scale : float
+        > 0.
+    prior_velocity : float
+
+    Returns
+    -------
+    tuple of ndarray
+        The mean (3,) and the covariance (3, 3).
+    """
+    truth = _checks.finite_array(truth, "truth", (3,))
+    scale = _checks.positive_scalar(prior_scale, "prior_scale")
+    mean = paper_prior_means(truth[None])[0]
+    mean[2] = float(_checks.finite_array(prior_velocity, "prior_velocity"))
+    return mean, scale * np.eye(3)
+
+
+def depth_scores(errors, sds, pit) -> dict:
+    """Bias, RMSE, mean stated SD and coverage of depth estimates, each with its standard error.
+
+    Parameters
+    ----------
+    errors : array_like, shape (T,)
+        Estimate minus true depth, ``T >= 2`` trials.
+    sds : array_like, shape (T,)
+        The SDs the estimates state.
+    pit : array_like, shape (T,)
+        The estimate's CDF at the true depth: the truth lies in the central
+        ``p`` interval when ``|pit - 1/2| <= p / 2``.
+
+    Returns
+    -------
+    dict
+        ``"bias"``, ``"rmse"``, ``"mean_sd"`` (the RMSE's error by the delta
+        method, :func:`depthcore.bound.against_bound`), ``"coverage_68"``,
+        ``"coverage_95"`` (binomial errors), each with ``"<score>_se"``, and
+        ``"trials"``.
+    """
+    e = _checks.finite_array(errors, "errors")
+    pit = _checks.finite_array(pit, "pit")
+    if pit.shape != e.shape:
+        raise ValueError(f"pit must have the shape of errors, {e.shape}, got {pit.shape}")
+    a = bound.against_bound(e, sds, 1.0)
+    n = len(e)
+    out = {
+        "bias": float(np.mean(e)),
+        "bias_se": float(np.std(e, ddof=1) / np.sqrt(n)),
+        "rmse": float(a["rmse"]),
+        "rmse_se": float(a["rmse_se"]),
+        "mean_sd": float(a["mean_sd"]),
+        "mean_sd_se": float(a["mean_sd_se"]),
+        "trials": n,
+    }
+    for p, c in zip(LEVELS, calibration.coverage(pit, LEVELS), strict=True):
+        key = f"coverage_{round(100 * p)}"
+        out[key] = float(c)
+        out[f"{key}_se"] = float(np.sqrt(c * (1.0 - c) / n))
+    return out
+
+
+def depth_estimates(name: str, mu, rho: float, prior_mean, prior_cov, true_depth):
+    """One filter's depth means, SDs and CDFs at the true depths, over a batch of trials.
+
+    Parameters
+    ----------
+    name : str
+        A filter of :data:`depthcore.filters.FILTERS` of the ``"exact"`` or
+        ``"gaussian"`` family.
+    mu : ndarray, shape (T, N)
+        Bearings of frames 1 .. N (the optimal filter beyond three frames is
+        the bank of Kalman filters, :func:`depthcore.bank.posterior`).
+    rho : float
+    prior_mean : array_like, shape (3,)
+    prior_cov : array_like, shape (3, 3)
+    true_depth : ndarray, shape (T,)
+        The true depth at frame ``N``.
+
+    Returns
+    -------
+    tuple of ndarray, each shape (T,)
+        Mean, SD and CDF at the true depth; NaN for a trial the filter has no
+        answer for (a batch that fails is halved until such trials are isolated).
+    """
+    from scipy.special import ndtr
+
+    f = FILTERS[check_names((name,))[0]]
+    if f.family not in ("exact", "gaussian"):
+        raise ValueError(f"name: {name} is not the exact filter nor a Gaussian one")
+
+    def run(rows):
+        est = f(mu[rows], rho, prior_mean, prior_cov)
+        m, s = np.asarray(est.depth_mean), np.asarray(est.depth_sd)
+        if f.family == "exact" and isinstance(est.detail, bank.Mixture):  # beyond three frames
+            return m, s, est.detail.depth_cdf(true_depth[rows][:, None])[:, 0]
+        if f.family == "exact":
+            return m, s, est.detail.depth_cdf(true_depth[rows])
+        return m, s, ndtr((true_depth[rows] - m) / s)
+
+    out = np.full((3, len(mu)), np.nan)
+
+    def fill(rows):
+        # a failing batch is halved until the trials without an answer are isolated
+        try:
+            out[:, rows] = run(rows)
+        except ValueError:
+            if len(rows) > 1:
+                fill(rows[: len(rows) // 2])
+                fill(rows[len(rows) // 2 :])
+
+    fill(np.arange(len(mu)))
+    return out[0], out[1], out[2]
+
+
+def score_filters(mu, rho: float, prior_mean, prior_cov, true_depth, names=NAMES) -> dict:
+    """:func:`depth_scores` of each named filter over a batch of trials.
+
+    Each filter's scores also hold ``"failed"``, the trials it had no answer
+    for (left out of its scores); a filter that answers fewer than two is refused.
+    """
+    out = {}
+    for name in check_names(names):
+        m, s, cdf = depth_estimates(name, mu, rho, prior_mean, prior_cov, true_depth)
+        ok = np.isfinite(m) & np.isfinite(s) & np.isfinite(cdf)
+        if np.sum(ok) < 2:
+            raise ValueError(
+                f"names: the {name} filter answers fewer than two trials; leave it out"
+            )
+        out[name] = {
+            **depth_scores(m[ok] - true_depth[ok], s[ok], cdf[ok]),
+            "failed": int(np.sum(~ok)),
+        }
+    return out
+
+
+def hard_cell(
+    truth,
+    rho: float,
+    prior_scale: float,
+    prior_velocity: float,
+    trials: int,
+    seed,
+    names=NAMES,
+    frames: int = 3,
+) -> dict:
+    """Every filter's depth scores in one setting, at the fixed truth and averaged over the prior.
+
+    Parameters
+    ----------
+    truth : array_like, shape (3,)
+        The state at time 3, depth > 2.
+    rho : float
+        Bearing noise SD, > 0.
+    prior_scale, prior_velocity : float
+        The prior of :func:`prior_for`.
+    trials : int
+        Trials drawn in each reading, >= 2.
+    seed : int or numpy.random.SeedSequence
+        Spawns the two readings' generators.
+    names : sequence of str
+        Filters of the ``"exact"`` or ``"gaussian"`` family.
+    frames : int
+        ``N``, from 3 to ``depthcore._checks.MAX_FRAMES``: the point moves on
+        from ``truth`` at time 3 to frame ``N`` (Eq. (1), no process noise),
+        and the filters are scored on its depth there; the truths drawn from
+        the prior are followed from frame 1 to frame ``N``
+        (:func:`depthcore.calibration.draw_from_prior`).
+
+    Returns
+    -------
+    dict
+        ``"truth"``, ``"frames"``, ``"rho"``, ``"prior_mean"``, ``"prior_cov"``,
+        ``"second_difference"`` (over ``rho``: the bearings' curvature in
+        units of their noise, of the first three frames), ``"bound_sd"`` (the
+        depth SD at frame ``N`` of the Cramér–Rao bound at the truth, the
+        prior's information included,
+        :func:`depthcore.bound.posterior_bound`), and for each reading of
+        :data:`READINGS` ``{"valid": trials kept, "filters": {name: scores}}``.
+    """
+    truth = _checks.finite_array(truth, "truth", (3,))
+    rho = _checks.positive_scalar(rho, "rho")
+    trials = _checks.count(trials, "trials")
+    if trials < 2:
+        raise ValueError(f"trials must be at least 2, got {trials}")
+    pm, pc = prior_for(truth, prior_scale, prior_velocity)
+    fixed_rng, prior_rng = (
+        np.random.default_rng(s) for s in _checks.spawn(_checks.seed_sequence(seed), 2)
+    )
+    frames = _checks.count(frames, "frames")
+    if not 3 <= frames <= _checks.MAX_FRAMES:
+        raise ValueError(f"frames must be from 3 to {_checks.MAX_FRAMES}, got {frames}")
+    b = bound.posterior_bound(truth, 3, frames, rho, pc)
+    out = {
+        "truth": truth,
+        "frames": frames,
+        "rho": rho,
+        "prior_mean": pm,
+        "prior_cov": pc,
+        "second_difference": float(second_difference(truth)) / rho,
+        "bound_sd": float(np.sqrt(b[-1, 1, 1])),
+    }
+    drawn = study.simulate(truth, rho, trials, fixed_rng, "fixed", prior_scale, frames)
+    depth = drawn.truths[:, 1]
+    out["fixed"] = {
+        "valid": len(drawn.mu),
+        "filters": score_filters(drawn.mu, rho, pm, pc, depth, names),
+    }
+    draws = calibration.draw_from_prior(pm, pc, rho, trials, prior_rng, frames=frames)
+    out["prior"] = {
+        "valid": len(draws.mu),
+        "filters": score_filters(draws.mu, rho, pm, pc, draws.truth[:, 1], names),
+    }
+    return out
+
+
+def hard_study(cells, rho: float, trials: int, seed, names=NAMES, frames: int = 3) -> list[dict]:
+    """:func:`hard_cell` for each setting, with independent streams spawned from ``seed``.
+
+    Parameters
+    ----------
+    cells : sequence of (truth, prior_scale, prior_velocity)
+    rho, trials, seed, names, frames
+        As for :func:`hard_cell`.
+
+    Returns
+    -------
+    list of dict, one per cell
+    """
+    cells = list(cells)
+    if not cells:
+        raise ValueError("cells must not be empty")
+    seeds = _checks.spawn(_checks.seed_sequence(seed), len(cells))
+    return [
+        hard_cell(t, rho, s, v, trials, sd, names, frames)
+        for (t, s, v), sd in zip(cells, seeds, strict=True)
+    ]
+
+
+def verdicts(cell: dict, reading: str, z: float = bound.Z) -> dict:
+    """Each filter's coverage tests and the conjecture's duel in one cell and reading.
+
+    Parameters
+    ----------
+    cell : dict
+        From :func:`hard_cell`.
+    reading : {"fixed", "prior"}
+    z : float
+        Critical value of the binomial test (default the two-sided 1 % point).
+
+    Returns
+    -------
+    dict
+        ``"calibrated_68"``, ``"calibrated_95"``: ``{name: bool}``, the
+        coverage within ``z`` binomial standard errors of its level (the
+        nominal level's error, :func:`depthcore.study.coverage_se`);
+        ``"so_nearer_68"``: the second-order filter's 68 % coverage nearer
+        nominal than the EKF's; ``"so_rmse"``: its RMSE the smaller.
+    """
+    if reading not in READINGS:
+        raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
+    z = _checks.positive_scalar(z, "z")
+    f = cell[reading]["filters"]
+    out = {}
+    for p in LEVELS:
+        key = f"coverage_{round(100 * p)}"
+        out[f"calibrated_{round(100 * p)}"] = {
+            name: bool(abs(s[key] - p) <= z * study.coverage_se(p, s["trials"]))
+            for name, s in f.items()
+        }
+    if "second_order" in f and "ekf" in f:
+        so, ekf = f["second_order"], f["ekf"]
+        out["so_nearer_68"] = bool(abs(so["coverage_68"] - 0.68) < abs(ekf["coverage_68"] - 0.68))
+        out["so_rmse"] = bool(so["rmse"] < ekf["rmse"])
+    return out

@@ -1,0 +1,181 @@
+"""Where the problem is hard (depthcore.hardness): the bearings' second difference
+against its closed form, the bound where it vanishes, the scores against direct
+computation, and the exact posterior's calibration over its prior (Talts et al. 2018)."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from depthcore import SCENARIOS, bound, figures, hardness, model, report, study
+from depthcore.filters import FILTERS
+
+FIG2 = SCENARIOS["fig2"]
+RHO = FIG2.rho
+
+
+def test_second_difference_is_its_closed_form():
+    # b(t) = v + (x - v y) / (y + t), t = -2, -1, 0: 2 (x - v y) / (y (y - 1) (y - 2))
+    rng = np.random.default_rng(0)
+    s = np.column_stack([rng.normal(0, 3, 50), rng.uniform(2.5, 40, 50), rng.normal(0, 2, 50)])
+    x, y, v = s.T
+    assert_allclose(
+        hardness.second_difference(s), 2 * (x - v * y) / (y * (y - 1) * (y - 2)), rtol=1e-9
+    )
+    # the paper's c and the point with no lateral motion
+    assert hardness.second_difference(FIG2.c) / RHO == pytest.approx(-20.0, rel=0.05)
+    assert hardness.second_difference([1.2, 6.0, 0.0]) == pytest.approx(2 * 1.2 / 120)
+
+
+def test_second_difference_vanishes_on_a_ray_and_refuses_points_behind():
+    assert hardness.second_difference([1.2, 6.0, 0.2]) == pytest.approx(0.0, abs=1e-15)
+    # every state (v y', y', v) gives the same bearings: constant, equal to v
+    for depth in (3.0, 6.0, 30.0):
+        track = [model.G([0.2 * depth, depth, 0.2], k) for k in (-2, -1, 0)]
+        assert_allclose(model.project(np.array(track)), 0.2, rtol=1e-12)
+    with pytest.raises(ValueError, match="depth > 2"):
+        hardness.second_difference([1.0, 1.5, 0.0])
+    with pytest.raises(ValueError, match="shape"):
+        hardness.second_difference([1.0, 6.0])
+
+
+def test_bound_where_the_second_difference_vanishes_is_the_priors():
+    # The bearings carry no information along (v, 1, 0): without a prior the bound
+    # is refused; with the prior s I the depth variance grows in proportion to s.
+    truth = np.array([1.2, 6.0, 0.2])
+    with pytest.raises(ValueError, match="singular"):
+        bound.posterior_bound(truth, 3, 3, RHO)
+    var = [bound.posterior_bound(truth, 3, 3, RHO, s * np.eye(3))[-1, 1, 1] for s in (1e2, 1e4)]
+    assert var[1] / var[0] == pytest.approx(100.0, rel=0.01)
+    # where it does not vanish the prior's share vanishes as s grows
+    no_prior = bound.posterior_bound(FIG2.c, 3, 3, RHO)[-1, 1, 1]
+    broad = bound.posterior_bound(FIG2.c, 3, 3, RHO, 1e8 * np.eye(3))[-1, 1, 1]
+    assert broad == pytest.approx(no_prior, rel=1e-5)
+
+
+def test_prior_for_is_the_papers_rule_at_the_truth():
+    m, P = hardness.prior_for(FIG2.c, 10.0)
+    assert_allclose(m, [FIG2.c[0] - 2 * FIG2.c[2], FIG2.c[1] - 2, 0.0])
+    assert_allclose(P, 10.0 * np.eye(3))
+    m, _ = hardness.prior_for(FIG2.c, 10.0, prior_velocity=1.2)
+    assert_allclose(m, model.G(FIG2.c, -2))
+    with pytest.raises(ValueError, match="prior_scale"):
+        hardness.prior_for(FIG2.c, 0.0)
+
+
+def test_depth_scores_against_direct_computation():
+    rng = np.random.default_rng(1)
+    e, s = rng.normal(0.1, 1.0, 400), rng.uniform(0.5, 1.5, 400)
+    pit = rng.uniform(0, 1, 400)
+    r = hardness.depth_scores(e, s, pit)
+    assert r["rmse"] == pytest.approx(np.sqrt(np.mean(e**2)))
+    assert r["bias"] == pytest.approx(np.mean(e))
+    assert r["bias_se"] == pytest.approx(np.std(e, ddof=1) / 20)
+    assert r["mean_sd"] == pytest.approx(np.mean(s))
+    c = np.mean(np.abs(pit - 0.5) <= 0.34)
+    assert r["coverage_68"] == pytest.approx(c)
+    assert r["coverage_68_se"] == pytest.approx(np.sqrt(c * (1 - c) / 400))
+    assert r["trials"] == 400
+    with pytest.raises(ValueError, match="pit"):
+        hardness.depth_scores(e, s, pit[:-1])
+
+
+def test_depth_estimates_isolate_the_trials_a_filter_cannot_answer():
+    # Truths from the broad prior: the EKF has no answer for some of their bearings.
+    from depthcore import calibration
+
+    pm, pc = hardness.prior_for(FIG2.c, 1000.0)
+    d = calibration.draw_from_prior(pm, pc, RHO, 40, np.random.default_rng(3))
+    m, s, cdf = hardness.depth_estimates("ekf", d.mu, RHO, pm, pc, d.truth[:, 1])
+    failed = ~np.isfinite(m)
+    assert 0 < failed.sum() < len(m)
+    for i in range(len(m)):
+        if failed[i]:
+            with pytest.raises(ValueError):
+                FILTERS["ekf"](d.mu[i : i + 1], RHO, pm, pc)
+        else:
+            alone = FILTERS["ekf"](d.mu[i : i + 1], RHO, pm, pc)
+            assert m[i] == pytest.approx(float(np.ravel(alone.depth_mean)[0]), rel=1e-10)
+    with pytest.raises(ValueError, match="not the exact filter"):
+        hardness.depth_estimates("particle", d.mu, RHO, pm, pc, d.truth[:, 1])
+
+
+@pytest.fixture(scope="module")
+def cell():
+    return hardness.hard_cell(FIG2.c, RHO, 1.0, 0.0, 600, 7, ("optimal", "second_order", "ekf"))
+
+
+def test_hard_cell_exact_posterior_is_calibrated_over_its_prior(cell):
+    # Simulation-based calibration: over truths drawn from the prior the exact
+    # posterior's central intervals cover at their nominal rates, within 3 SE.
+    s = cell["prior"]["filters"]["optimal"]
+    for p in (0.68, 0.95):
+        se = study.coverage_se(p, s["trials"])
+        assert abs(s[f"coverage_{round(100 * p)}"] - p) < 3 * se
+    assert hardness.verdicts(cell, "prior")["calibrated_68"]["optimal"]
+
+
+def test_hard_cell_reports_the_bound_and_the_second_difference(cell):
+    pc = 1.0 * np.eye(3)
+    assert cell["bound_sd"] == pytest.approx(
+        np.sqrt(bound.posterior_bound(FIG2.c, 3, 3, RHO, pc)[-1, 1, 1])
+    )
+    assert cell["second_difference"] == pytest.approx(hardness.second_difference(FIG2.c) / RHO)
+    assert cell["fixed"]["valid"] <= 600 and cell["prior"]["valid"] <= 600
+    for reading in hardness.READINGS:
+        assert set(cell[reading]["filters"]) == {"optimal", "second_order", "ekf"}
+        assert cell[reading]["filters"]["optimal"]["failed"] == 0
+
+
+def test_verdicts_read_the_coverages():
+    def scores(c68, c95, rmse):
+        return {"coverage_68": c68, "coverage_95": c95, "rmse": rmse, "trials": 400}
+
+    cell = {
+        "fixed": {
+            "filters": {
+                "optimal": scores(0.68, 0.95, 1.0),
+                "second_order": scores(0.60, 0.95, 2.0),
+                "ekf": scores(0.20, 0.40, 1.5),
+            }
+        }
+    }
+    v = hardness.verdicts(cell, "fixed")
+    assert v["calibrated_68"] == {"optimal": True, "second_order": False, "ekf": False}
+    assert v["calibrated_95"]["second_order"] and not v["calibrated_95"]["ekf"]
+    assert v["so_nearer_68"] and not v["so_rmse"]
+    with pytest.raises(ValueError, match="reading"):
+        hardness.verdicts(cell, "truth")
+
+
+def test_hard_study_texts_and_figure():
+    cells = hardness.hard_study(
+        [(FIG2.c, 1.0, 0.0), (FIG2.c, 10.0, 0.0)], RHO, 8, 1, ("optimal", "ekf")
+    )
+    t = report.hard_texts(cells, "h")
+    assert t["h_0_x"] == "(1.2, 6, 1.2); 1 I; v₀ = 0"
+    assert " ± " in t["h_1_prior_ekf_coverage_68"]
+    assert t["h_0_d2"] == f"{cells[0]['second_difference']:.1f}"
+    flat = [dict(cells[0], second_difference=-1e-12)]
+    assert report.hard_texts(flat, "h")["h_0_d2"] == "0.0"
+    fig = figures.hard_figure(cells, [("prior scale s", [0, 1], [1.0, 10.0], True)])
+    assert len(fig.axes) == 2
+    with pytest.raises(ValueError, match="cells"):
+        hardness.hard_study([], RHO, 8, 1)
+
+
+def test_hard_cell_beyond_three_frames_scores_the_depth_at_frame_n():
+    # The exact N-frame filter (the bank) over truths drawn from its prior: calibrated;
+    # the bound is the posterior bound at frame N.
+    cell = hardness.hard_cell([1.2, 6.0, 0.0], RHO, 10.0, 0.0, 400, 4, ("optimal",), 10)
+    assert cell["frames"] == 10
+    pc = 10.0 * np.eye(3)
+    b = bound.posterior_bound([1.2, 6.0, 0.0], 3, 10, RHO, pc)[-1, 1, 1]
+    assert cell["bound_sd"] == pytest.approx(np.sqrt(b))
+    s = cell["prior"]["filters"]["optimal"]
+    for p in (0.68, 0.95):
+        assert abs(s[f"coverage_{round(100 * p)}"] - p) < 3 * study.coverage_se(p, s["trials"])
+    # at the fixed truth the point has moved on to depth 6 + 7 = 13 (Eq. (1))
+    e = cell["fixed"]["filters"]["optimal"]
+    assert abs(e["bias"]) < 13.0 and e["failed"] == 0
+    with pytest.raises(ValueError, match="frames"):
+        hardness.hard_cell(FIG2.c, RHO, 1.0, 0.0, 4, 1, ("optimal",), 2)
