@@ -927,8 +927,29 @@ def _rbpf_bench_texts(r: dict) -> dict[str, str]:
     return out
 
 
+#: The problems of ``bench_range_ekf`` and how the README names them.
+_RANGE_EKF_PROBLEMS = {"fig2": "Figure 2 (3 frames)", "ten_frames": "a 10-frame track"}
+
+
+def _range_ekf_bench_texts(record: dict) -> dict[str, str]:
+    out = {}
+    for key, label in _RANGE_EKF_PROBLEMS.items():
+        r = record["results"][key]
+        for tol in ("1e-02", "1e-03"):
+            row = r[tol]
+            p = f"{key}_{tol}"
+            out[f"{p}_problem"] = label
+            out[f"{p}_tolerance"] = f"{float(tol):g}"
+            out[f"{p}_components"] = f"{row['components']:,}"
+            out[f"{p}_range_ms"] = f"{row['range_ekf_ms']:.1f}"
+            out[f"{p}_bank_ms"] = f"{row['bank_ms']:.1f}"
+            out[f"{p}_ratio"] = f"{row['ratio']:.1f}"
+    return out
+
+
 #: Each benchmark's prefix of glued names and the function that formats its record.
 _BENCH_TEXTS = {
+    "bench_range_ekf": ("rekf", _range_ekf_bench_texts),
     "bench_optimal": ("opt", _optimal_bench_texts),
     "bench_trials": ("trials", _trials_bench_texts),
     "bench_ekf_filterpy": ("ekfpy", _ekf_bench_texts),
@@ -954,7 +975,8 @@ def bench_texts(name: str, record: dict) -> dict[str, str]:
     -------
     dict of str to str
         ``"<prefix>_<quantity>"`` -> text, the prefix ``opt``, ``trials``,
-        ``ekfpy``, ``import``, ``bank``, ``rbpf``, ``kalmanpy`` or ``frames``;
+        ``ekfpy``, ``import``, ``bank``, ``rbpf``, ``kalmanpy``, ``frames`` or
+        ``rekf``;
         ``"<prefix>_origin"`` is :func:`bench_origin`. Times are in the unit that
         their record's key ends with.
     """
@@ -979,7 +1001,7 @@ def bench_tables(records: dict) -> dict[str, MarkdownTable]:
     dict of str to MarkdownTable
         ``"optimal"``, ``"per_triple"``, ``"ekf"``, ``"trials"``, ``"bank"``,
         ``"rbpf_equal_cost"``, ``"rbpf_convergence"``, ``"kalman"``, ``"frames"``,
-        ``"import"``.
+        ``"range_ekf"``, ``"import"``.
     """
     t = {}
     for name, record in records.items():
@@ -1161,6 +1183,21 @@ def bench_tables(records: dict) -> dict[str, MarkdownTable]:
             for i in range(len(frames["filters"]))
         ],
     )
+    tables["range_ekf"] = MarkdownTable(
+        ["problem", "depth mean and SD within", "components", "range EKF", "bank", "ratio"],
+        [
+            [
+                t[f"rekf_{key}_{tol}_problem"],
+                t[f"rekf_{key}_{tol}_tolerance"],
+                t[f"rekf_{key}_{tol}_components"],
+                t[f"rekf_{key}_{tol}_range_ms"] + ms,
+                t[f"rekf_{key}_{tol}_bank_ms"] + ms,
+                t[f"rekf_{key}_{tol}_ratio"],
+            ]
+            for key in _RANGE_EKF_PROBLEMS
+            for tol in ("1e-02", "1e-03")
+        ],
+    )
     tables["import"] = MarkdownTable(
         ["import", "median time"],
         [
@@ -1202,6 +1239,9 @@ def bench_readme_blocks(records: dict) -> dict[str, str]:
         f"{t['kalmanpy_ratio_max']}); the smoothed means agree to "
         f"{t['kalmanpy_mean_difference']} SDs, the covariances to {t['kalmanpy_cov_max']} of "
         "their norm.",
+        "range_ekf": "The fewest components (of a grid of four per doubling) whose mixture's "
+        "depth mean and SD are within the tolerance, relative to the exact filter's, and the "
+        "time of one call of each filter, the least of repeated calls, measured side by side.",
         "frames": f"Milliseconds per trial, the least of repeated calls on "
         f"{t['frames_trials']} trials; growth per frame: the cost per frame at the largest N "
         "over that at the smallest (1: linear growth).",
@@ -1216,6 +1256,7 @@ def bench_readme_blocks(records: dict) -> dict[str, str]:
         "rbpf_convergence": "bench_rbpf",
         "kalman": "bench_kalman",
         "frames": "bench_frames",
+        "range_ekf": "bench_range_ekf",
         "import": "bench_import",
     }
     prefixes = {name: prefix for name, (prefix, _) in _BENCH_TEXTS.items()}

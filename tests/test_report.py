@@ -283,7 +283,7 @@ def test_bench_readme_blocks_hold_every_table_and_its_origin():
     from depthcore import benchmarks
 
     names = ["bench_bank", "bench_ekf_filterpy", "bench_import", "bench_kalman"]
-    names += ["bench_optimal", "bench_rbpf", "bench_trials", "bench_frames"]
+    names += ["bench_optimal", "bench_rbpf", "bench_trials", "bench_frames", "bench_range_ekf"]
     records = {n: benchmarks.read(n) for n in names}
     blocks = report.bench_readme_blocks(records)
     assert set(blocks) == set(report.bench_tables(records))
@@ -292,6 +292,9 @@ def test_bench_readme_blocks_hold_every_table_and_its_origin():
     bank = records["bench_bank"]["results"]["many_trials"]
     verdict = "met" if bank["time_s"] < bank["target_s"] else "not met"
     assert f"({verdict})" in blocks["bank"]
+    # the range EKF's rows: the components the record found, its times and their ratio
+    rows = records["bench_range_ekf"]["results"]["fig2"]["1e-03"]
+    assert f"| {rows['components']:,} | {rows['range_ekf_ms']:.1f} ms |" in blocks["range_ekf"]
 
 
 def test_glue_log_binds_each_glued_text_to_its_name(monkeypatch):
