@@ -12,7 +12,7 @@ truth ``(x, y, v)`` at time 3 are ``b(t) = v + (x - v y) / (y + t)`` at
 It vanishes when ``x = v y``: the point then moves along its own ray, every
 bearing equals ``v``, and every state ``(v y', y', v)`` gives the same bearings,
 so the depth is not observable from bearings alone (Nardone and Aidala 1981,
-on bearings-only tracking). Measured in units of the noise ``rho`` it is the
+on bearings-only tracking [nardone1981]_). Measured in units of the noise ``rho`` it is the
 signal the bearings carry about the depth.
 
 :func:`hard_cell` scores every filter's depth estimate in one setting (a truth,
@@ -20,7 +20,7 @@ a prior covariance ``s I`` and a prior velocity) in two ways:
 
 * **at the fixed truth**: bearings drawn afresh around one truth;
 * **averaged over the prior** (simulation-based calibration, Talts et al.
-  2018): truths drawn from the filter's own prior, each with its bearings.
+  2018 [talts2018b]_): truths drawn from the filter's own prior, each with its bearings.
   A Bayesian posterior is calibrated in this sense, exactly, whatever the
   geometry (:mod:`depthcore.calibration`); at one fixed truth it need not be,
   and its posterior mean minimises the mean squared error averaged over the
