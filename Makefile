@@ -189,7 +189,7 @@ figures: $(EDITABLE)
 	$(PY) -m depthcore figures --out figures/
 
 # The book's pages that show the benchmarks' records (references rewritten by make bench).
-BENCH_PAGES := marginals beyond_cost
+BENCH_PAGES := marginals beyond_cost beyond_frames
 # make bench: only these benchmarks (e.g. BENCH="bench_bank"), all when empty.
 BENCH ?= $(basename $(notdir $(wildcard benchmarks/bench_*.py)))
 

@@ -148,3 +148,24 @@ PROSE_QUOTES = {
     '"about 5 pixels"': "Experiments: rho = 1/200 rad is about 5 pixels",
     '"about 1 pixel"': "Experiments: rho = 1/500 rad is about 1 pixel (Figure 5)",
 }
+
+#: Values quoted from the paper (and one from the literature) inside
+#: mathematics, as the pages write them in LaTeX, with where they come from.
+#: ``tests/test_prose_numbers.py`` allows these strings, and only these (beside
+#: single digits, exponents and indices), to hold numbers in the mathematics.
+MATH_QUOTES = {
+    "1/200": "Experiments: the noise level of Figures 2-4 and 6, rho = 1/200",
+    "1/500": "Figure 5: the noise level rho = 1/500",
+    "1000\\,I": "Experiments: the prior covariance 1000 I",
+    "512 \\times 512": "Experiments: the image is 512 x 512 pixels",
+    "256": "Experiments: half the image's 512 pixels, over tan 15 degrees",
+    "512 / (\\pi/6)": "Experiments: 512 pixels across the 30 degree (pi/6) field of view",
+    "15°": "Experiments: the 30 degree field of view, 15 degrees either side",
+    "30°": "Experiments: the 30 degree field of view",
+    "6/5": "Measurements (17): the noise-free state c = (6/5, 6, 6/5)",
+    "\\tfrac{3}{10}": "Measurements (17): mu_1 = -3/10",
+    "c_2 = 10": "Measurements (18): the noise-free depth of Figure 3",
+    "(2, 10, 2)": "Measurements (18): the noise-free state c = (2, 10, 2) of Figure 3",
+    "2.38/\\sqrt{3}": "Roberts, Gelman and Gilks (1997): a random-walk proposal's scale "
+    "2.38/sqrt(d), here d = 3",
+}

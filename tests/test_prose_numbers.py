@@ -7,7 +7,9 @@ matter, code cells and other fenced blocks' options, math (``$...$`` and
 ``$$...$$``), roles (``{glue:text}`...```, ``{eq}`...```, ``{cite:p}`...```
 and the like), inline code, labels and anchors (``(sec-x)=``, ``:name:``),
 link targets and HTML comments. Every digit left must belong to an allowed
-pattern below.
+pattern below. The mathematics is read too: a number in it must be structure
+(a single digit, an exponent or index), a number of frames, or a value quoted
+from the paper and listed in :data:`depthcore.scenarios.MATH_QUOTES`.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from depthcore import calibration, study
-from depthcore.scenarios import PROSE_QUOTES
+from depthcore.scenarios import MATH_QUOTES, PROSE_QUOTES
 
 BOOK = Path(__file__).resolve().parent.parent / "book"
 PAGES = sorted(BOOK.glob("*.md"))
@@ -64,7 +66,7 @@ ALLOWED = {
     "pages": rf"\bpp\.\s*{_NUM}\s*(?:–|-)\s*{_NUM}",
     # the model's time indices (the paper's frames 1, 2, 3): "time 3", "times 1, 2 and 3",
     # "time-1 state", "at the first frame"
-    "time": rf"\b(?:times?|frames?)[\s-]+{_LIST}",
+    "time": rf"\b(?:[Tt]imes?|[Ff]rames?)[\s-]+{_LIST}",
     # numbered headings of a page, "## 3. ..."
     "heading": r"^#+\s+\d+\.",
     # the Python version the environment is built with
@@ -75,18 +77,38 @@ ALLOWED = {
 }
 
 
+def fences(text: str, keep_directives: bool = True) -> str:
+    """``text`` without its code cells and fenced blocks, line by line.
+
+    A code cell or a plain fenced block (```` ``` ````, ```` ```text ````) is
+    dropped whole. A directive (```` ```{figure} ````, ```` ```{math} ````)
+    keeps its body, the caption a reader sees, without its opening line, its
+    ``:option:`` lines and its closing fence (or is dropped whole when
+    ``keep_directives`` is false).
+    """
+    out, closing, keep = [], None, False
+    for line in text.splitlines():
+        if closing is not None:
+            if re.fullmatch(closing, line):
+                closing = None
+            elif keep and not re.match(r"^:[\w-]+:", line):
+                out.append(line)
+            continue
+        opening = re.match(r"^(`{3,}|~{3,})\s*(\{[^}]*\})?", line)
+        if opening:
+            closing = re.escape(opening.group(1)) + r"\s*"
+            directive = opening.group(2)
+            keep = bool(directive) and directive != "{code-cell}" and keep_directives
+            continue
+        out.append(line)
+    return "\n".join(out)
+
+
 def prose(text: str) -> str:
     """The prose of a MyST page: everything that is not code, math, role or label."""
     text = re.sub(r"\A---\n.*?\n---\n", "", text, flags=re.S)  # front matter
     text = re.sub(r"<!--.*?-->", "", text, flags=re.S)
-    # code cells and fenced blocks without a caption: dropped whole
-    text = re.sub(r"^(`{3,})\{code-cell\}.*?^\1\s*$", "", text, flags=re.S | re.M)
-    text = re.sub(r"^(`{3,})(?!\{).*?^\1\s*$", "", text, flags=re.S | re.M)
-    # directives (glue:figure, bibliography, ...): keep their body, drop the
-    # opening line with its argument and their ":option:" lines
-    text = re.sub(r"^`{3,}\{[^}]*\}.*$", "", text, flags=re.M)
-    text = re.sub(r"^:[\w-]+:.*$", "", text, flags=re.M)
-    text = re.sub(r"^`{3,}\s*$", "", text, flags=re.M)
+    text = fences(text)  # code cells and fenced blocks; directives keep their body
     text = re.sub(r"\$\$.*?\$\$(?:\s*\([\w-]+\))?", "", text, flags=re.S)  # display math
     text = re.sub(r"\{[\w:+-]+\}`[^`]*`", "", text)  # roles
     text = re.sub(r"``.*?``|`[^`]*`", "", text)  # inline code
@@ -127,4 +149,65 @@ def test_every_quote_is_in_some_page_and_has_a_source():
     text = "\n".join(prose(p.read_text(encoding="utf-8")) for p in PAGES)
     for quote, source in PROSE_QUOTES.items():
         assert quote in text, f"{quote!r} is no longer quoted: drop it from PROSE_QUOTES"
+        assert source.strip(), f"{quote!r} has no source"
+
+
+def mathematics(text: str) -> list[str]:
+    """The pages' mathematics: the content of every ``$...$`` and ``$$...$$``, outside code."""
+    text = re.sub(r"\A---\n.*?\n---\n", "", text, flags=re.S)
+    text = re.sub(r"<!--.*?-->", "", text, flags=re.S)
+    text = fences(text)
+    display = re.findall(r"\$\$(.*?)\$\$", text, flags=re.S)
+    text = re.sub(r"\$\$.*?\$\$", "", text, flags=re.S)
+    text = re.sub(r"``.*?``|`[^`]*`", "", text)  # inline code and roles' content
+    return display + re.findall(r"(?<!\\)\$([^$]+?)(?<!\\)\$", text, flags=re.S)
+
+
+def math_numbers(math: str) -> list[str]:
+    """The numbers of one piece of mathematics that no allowed use accounts for.
+
+    Structure is not checked: single digits and their fractions (coefficients,
+    frame indices, the small integers of the formulas), exponents and indices
+    (``^{-2}``, ``_3``), the base of a power of ten and the digits of
+    ``\\tfrac12``. A number of frames ``N = 30`` is allowed as ``frames 30``
+    is in prose. Values quoted from the paper (:data:`MATH_QUOTES`) are
+    removed first; any other number must be glued.
+    """
+    s = math
+    for quote in MATH_QUOTES:
+        s = s.replace(quote, " ")
+    s = re.sub(r"\\(?:label|tag|text|mathrm|operatorname)\{[^}]*\}", " ", s)
+    s = re.sub(r"\\[td]?frac\s*\d\d", " ", s)
+    s = re.sub(r"10\s*\^\s*(?:\{[^{}]*\}|-?\d)", " ", s)  # a power of ten
+    s = re.sub(r"[_^]\{[^{}]*\}|[_^]\\?\w", " ", s)  # indices and exponents
+    s = re.sub(r"\\[A-Za-z]+", " ", s)
+    s = re.sub(r"\bN\s*=\s*\d+", " ", s)  # a number of frames
+    found = re.findall(r"\d+(?:\.\d+)?(?:/\d+)?", s)
+    return [n for n in found if not re.fullmatch(r"\d(?:/\d)?", n)]
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.stem for p in PAGES])
+def test_no_typed_numbers_in_mathematics(page):
+    stray = [
+        (n, " ".join(m.split())[:60])
+        for m in mathematics(page.read_text(encoding="utf-8"))
+        for n in math_numbers(m)
+    ]
+    assert not stray, f"{page.name}: numbers typed in mathematics (glue them): {stray}"
+
+
+def test_the_mathematics_scan_catches_a_typed_number_and_spares_the_structure():
+    page = (
+        "A result $\\hat y = 5.70$ and $c = (6/5, 6, 6/5)^\\top$, $G^{-2}\\mathbf{c}$,\n"
+        "$\\rho = 1/200$, $10^{-8}$, $\\tfrac12$, $N = 30$, $x_{12}$.\n"
+        "$$\nP = 1000\\,I + 42\n$$\n"
+    )
+    found = [n for m in mathematics(page) for n in math_numbers(m)]
+    assert sorted(found) == ["42", "5.70"]
+
+
+def test_every_math_quote_is_in_some_page_and_has_a_source():
+    text = " ".join(" ".join(mathematics(p.read_text(encoding="utf-8"))) for p in PAGES)
+    for quote, source in MATH_QUOTES.items():
+        assert quote in text, f"{quote!r} is no longer in the mathematics: drop it from MATH_QUOTES"
         assert source.strip(), f"{quote!r} has no source"

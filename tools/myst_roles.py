@@ -132,8 +132,20 @@ def convert_line(line: str, where: str, kernel: bool) -> str:
 
 
 def main(argv: list[str]) -> int:
-    check = "--check" in argv
-    pages = [Path(a) for a in argv if a != "--check"] or sorted((ROOT / "book").glob("*.md"))
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog="tools/myst_roles.py",
+        description="Write the pages' pasted numbers, references and glued figures as the "
+        "{eval} forms that the book and JupyterLab both render (idempotent).",
+    )
+    parser.add_argument(
+        "--check", action="store_true", help="change nothing; exit 1 if a page would change"
+    )
+    parser.add_argument("pages", nargs="*", type=Path, help="pages (default: book/*.md)")
+    args = parser.parse_args(argv)
+    check = args.check
+    pages = args.pages or sorted((ROOT / "book").glob("*.md"))
     changed = []
     for page in pages:
         text = page.read_text(encoding="utf-8")
