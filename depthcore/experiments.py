@@ -72,10 +72,11 @@ CHUNK_PARTICLES = 200_000
 # --- sweeps --------------------------------------------------------------------------------
 
 
-def _compare(mu, rho, pm, pc) -> dict:
+def _compare(mu, rho, pm, pc, names=NAMES) -> dict:
     """Depth means, SDs and Hellinger distances to the optimal filter, for a batch.
 
-    The optimal filter and every Gaussian filter of :data:`depthcore.filters.NAMES`.
+    The optimal filter and every Gaussian filter of ``names`` (default
+    :data:`depthcore.filters.NAMES`).
     """
     reference = FILTERS["optimal"](mu, rho, pm, pc)
     out = {
@@ -85,7 +86,7 @@ def _compare(mu, rho, pm, pc) -> dict:
             "hellinger": np.zeros(len(mu)),
         }
     }
-    for name in NAMES:
+    for name in check_names(names):
         f = FILTERS[name]
         if f.scoring.gaussian:
             est = f(mu, rho, pm, pc)
@@ -176,6 +177,7 @@ def prior_velocity_sweep(
     rho: float | None = None,
     depth_offset: float = 0.0,
     prior_scale: float = PAPER_PRIOR_SCALE,
+    names=NAMES,
 ) -> dict:
     """Each filter's depth estimate as the prior mean's velocity moves.
 
@@ -193,6 +195,11 @@ def prior_velocity_sweep(
         Default: 1/200.
     depth_offset : float
         Added to the prior mean's depth, as in :func:`prior_offset_sweep`.
+    prior_scale : float
+    names : sequence of str
+        Filters of :data:`depthcore.filters.FILTERS`; the Gaussian ones among
+        them run beside the optimal filter (default
+        :data:`depthcore.filters.NAMES`).
 
     Returns
     -------
@@ -204,7 +211,7 @@ def prior_velocity_sweep(
     offsets = np.atleast_1d(_checks.finite_array(depth_offset, "depth_offset"))
     pm = _prior_means(mu, offsets, velocities)[0]
     mus = np.tile(mu, (len(velocities), 1))
-    return {"velocity": velocities, **_compare(mus, rho, pm, prior_scale * np.eye(3))}
+    return {"velocity": velocities, **_compare(mus, rho, pm, prior_scale * np.eye(3), names)}
 
 
 def prior_mean_map(

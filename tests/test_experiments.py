@@ -23,6 +23,7 @@ from depthcore import (
     study,
     ukf,
 )
+from depthcore.filters import FILTERS
 from depthcore.second_order import second_order
 
 FIG2 = SCENARIOS["fig2"]
@@ -199,6 +200,16 @@ def test_prior_velocity_sweep_matches_direct_runs():
     assert_allclose(sw["optimal"]["depth_sd"][0], opt.depth_sd, rtol=1e-8)
     # v0 = 0 is the paper's prior: Figure 2's EKF SD 0.16; near v0 = 0.95 the SD is the prior's
     assert abs(sw["ekf"]["depth_sd"][1] - 0.16) < 0.005 and sw["ekf"]["depth_sd"][2] > 25
+
+
+def test_prior_velocity_sweep_runs_the_named_filters():
+    v = [-2.0, 0.0, 0.95]
+    sw = experiments.prior_velocity_sweep(v, names=("ekf", "inverse_depth"))
+    assert set(sw) == {"velocity", "optimal", "ekf", "inverse_depth"}
+    for i, v0 in enumerate(v):
+        prior = _prior_with_velocity(v0)
+        direct = FILTERS["inverse_depth"](FIG2.mu, FIG2.rho, prior.mean, prior.cov)
+        assert_allclose(sw["inverse_depth"]["depth_sd"][i], direct.depth_sd, rtol=1e-12)
 
 
 def test_prior_velocity_sweep_at_c3_is_theorem_1():
