@@ -281,7 +281,7 @@ class Family:
     density: Callable
 
 
-#: How each family of results is scored: :class:`Family` by name, one for each of :data:`FAMILIES`.
+#: How each family of results is scored, as a :class:`Family` by name (one per :data:`FAMILIES`).
 FAMILY: dict[str, Family] = {
     "exact": Family("exact", True, False, _exact_cdfs, None, _exact_density),
     "gaussian": Family("gaussian", False, True, _gaussian_cdfs, None, _gaussian_density),
@@ -408,7 +408,7 @@ class Filter:
 
     @property
     def scoring(self) -> Family:
-        """How its results are scored: the :class:`Family` of its ``family``."""
+        """The :class:`Family` of its ``family``, which says how its results are scored."""
         return FAMILY[self.family]
 
 

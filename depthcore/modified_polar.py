@@ -70,7 +70,7 @@ import numpy as np
 from . import _checks, inverse_depth, kalman, model
 from .gaussian import MeanAndCov
 
-#: The measurement matrix: the bearing is the first coordinate.
+#: The measurement matrix (the bearing is the first coordinate).
 H = np.array([[1.0, 0.0, 0.0]])
 H.setflags(write=False)
 

@@ -58,13 +58,13 @@ from scipy.special import log_ndtr
 
 from . import _checks, ekf, model
 
-#: Components by default: enough for Figure 2's depth mean and SD to agree with the
+#: Components by default, enough for Figure 2's depth mean and SD to agree with the
 #: exact filter's to 1e-2 relative (far fewer leave the EKFs' linearisation over broad
 #: depth intervals in charge, and the sum far off).
 N_COMPONENTS = 1024
 #: The most components a call may ask for (bounds the memory per problem).
 MAX_COMPONENTS = 4096
-#: The default interval's top: the prior's depth mean plus this many prior depth SDs.
+#: The default interval's top is the prior's depth mean plus this many prior depth SDs.
 DEPTH_SPAN = 10.0
 #: The default interval's bottom, as a fraction of its top.
 NEAREST = 1e-3
