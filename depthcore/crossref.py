@@ -213,16 +213,16 @@ def cite_authors(entry) -> str:
 class BookReferences:
     """The book's references and citations, resolved from its sources.
 
+    Each method takes the text of the role it stands for and returns a
+    :class:`Resolved` text; an unknown target is a :class:`ValueError` that
+    names it.
+
     Parameters
     ----------
     folder : str or path, optional
         A folder of the book's sources (default: the working folder, the page's
         folder in Jupyter); the book's root is the nearest folder at or above it
         that holds ``_toc.yml``.
-
-    Each method takes the text of the role it stands for and returns a
-    :class:`Resolved` text; an unknown target is a :class:`ValueError` that
-    names it.
     """
 
     def __init__(self, folder=None):
