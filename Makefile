@@ -3,12 +3,16 @@
 #   make book               clean, strict build of the book into _build/html, with its downloads
 #   make pdf                the book as a PDF, _build/latex/depthcore.pdf (needs TeX Live's xelatex)
 #   make lab                JupyterLab on the book's pages (MyST .md files open as notebooks)
-#   make test               core tests, PDF and book builds, each page's downloaded notebook
-#                           run alone and compared with book/_nbval/, checks of the built book
+#   make test               core tests; every page executed once, alone, and compared with
+#                           book/_nbval/; the PDF and the book built from that execution;
+#                           checks of the built book
 #   make notebooks          re-run every book page and compare its outputs with book/_nbval/
-#   make notebooks-standalone  run the notebook each page of the built book offers, alone in an
-#                           empty folder with only requirements.txt and the book's source
-#                           archive installed, and compare its outputs with book/_nbval/
+#   make notebooks-alone    execute every page once, alone in an empty folder with only
+#                           requirements.txt and the book's source archive installed (as a
+#                           reader runs its download), into the execution cache the PDF and
+#                           book builds read, and compare its outputs with book/_nbval/
+#   make notebooks-standalone  run the notebook each page of the built book offers, alone in the
+#                           same way, and compare its outputs with book/_nbval/
 #   make notebooks-update   re-execute every page and rewrite book/_nbval/ (deliberate update)
 #                           (PAGES="fig6 cite": only those pages, in these three targets)
 #   make check-book         checks of the built book alone (equation numbers, browser)
@@ -29,8 +33,9 @@
 # Book's execution cache (_build/.jupyter_cache) keeps each page's outputs,
 # emptied when depthcore, requirements.txt or CITATION.cff change and dropped
 # for a page whose text changes; the pages it lacks are executed two at a time
-# before the build (tools/check_notebooks.py cache --execute). `make book`
-# after `make test` on an unchanged tree executes nothing.
+# before the build (tools/check_notebooks.py cache --execute). In `make test`
+# that execution is the drift check's (`make notebooks-alone`), so that each
+# page runs once; `make book` after `make test` on an unchanged tree executes nothing.
 
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c
@@ -47,7 +52,7 @@ PAGES ?=
 # cffconvert (validates CITATION.cff) pins jsonschema 3: a venv of its own.
 CITE_VENV := $(VENV)/cffconvert
 CITE_STAMP := $(CITE_VENV)/.installed
-# make notebooks-standalone: a venv with requirements.txt alone, into which the
+# make notebooks-alone, notebooks-standalone: a venv with requirements.txt alone, into which the
 # book's source archive is installed before each run.
 ALONE_VENV := $(VENV)/standalone
 ALONE_STAMP := $(ALONE_VENV)/.installed
@@ -62,7 +67,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 export JUPYTER_PATH := $(CURDIR)/tools/jupyter$(if $(JUPYTER_PATH),:$(JUPYTER_PATH))
 KERNEL := $(VENV)/share/jupyter/kernels/python3
 
-.PHONY: help venv cite-venv book pdf lab test test-core notebooks notebooks-update notebooks-standalone check-book figures bench clean distclean
+.PHONY: help venv cite-venv downloads book pdf lab test test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book figures bench clean distclean
 
 help:
 	@sed -n '3,/^#$$/p' Makefile | sed -e 's/^# \{0,1\}//' -e '/^$$/d'
@@ -116,9 +121,9 @@ $(FIGURES)/.written: $(EDITABLE) $(shell find depthcore -type f ! -path '*/__pyc
 	$(PY) -m depthcore figures --out $(FIGURES)
 	touch $@
 
-book: $(EDITABLE) $(FIGURES)/.written
-	find _build -mindepth 1 -maxdepth 1 ! -name latex ! -name .jupyter_cache ! -name figures \
-	  -exec rm -rf {} + 2>/dev/null || true
+# What the book offers for download, except the PDF (copied by `make book` when built).
+downloads: $(EDITABLE) $(FIGURES)/.written
+	rm -rf $(DOWNLOADS)
 	mkdir -p $(DOWNLOADS)
 	cp -r $(FIGURES) $(DOWNLOADS)/figures
 	rm -f $(DOWNLOADS)/figures/.written
@@ -128,10 +133,20 @@ book: $(EDITABLE) $(FIGURES)/.written
 	rm -f depthcore/CITATION.cff
 	mv $(DOWNLOADS)/depthcore-*.tar.gz $(DOWNLOADS)/depthcore.tar.gz
 	cp requirements.txt CITATION.cff $(DOWNLOADS)/
+
+book: downloads
+	find _build -mindepth 1 -maxdepth 1 ! -name latex ! -name .jupyter_cache ! -name figures \
+	  ! -name extra -exec rm -rf {} + 2>/dev/null || true
 	@if [[ -f $(PDF) ]]; then cp $(PDF) $(DOWNLOADS)/depthcore.pdf; else \
 	  echo "make book: NOTE: $(PDF) not found, so the book does not offer the PDF: run \`make pdf\` first" >&2; fi
 	$(PY) tools/check_notebooks.py cache --execute
 	$(VENV)/bin/jupyter-book build . --all -W -n --keep-going 2>&1 | tee _build/book.log
+
+# Every page executed once, alone (an empty folder, .venv/standalone/ with only the
+# book's requirements.txt and source archive), into the execution cache that the
+# PDF and HTML builds then read; its outputs compared with book/_nbval/.
+notebooks-alone: $(EDITABLE) $(ALONE_STAMP) downloads
+	$(PY) tools/check_notebooks.py cache --execute --python $(ALONE_VENV)/bin/python
 
 # Sphinx's LaTeX builder, then xelatex (Debian: texlive-xetex texlive-latex-extra
 # texlive-fonts-recommended lmodern latexmk fonts-freefont-otf; .ci/run installs them).
@@ -163,9 +178,9 @@ test: $(EDITABLE)
 	tools/system-packages.sh
 	$(MAKE) --no-print-directory lint
 	$(MAKE) --no-print-directory test-core
+	$(MAKE) --no-print-directory notebooks-alone
 	$(MAKE) --no-print-directory pdf
 	$(MAKE) --no-print-directory book
-	$(MAKE) --no-print-directory notebooks-standalone
 	$(MAKE) --no-print-directory check-book
 
 test-core: $(EDITABLE) $(CITE_STAMP)

@@ -250,6 +250,150 @@ def test_standalone_refuses_to_run_without_a_built_book(tmp_path, capsys):
     assert "depthcore.tar.gz not found" in err and "offers no notebook" in err
 
 
+# --- one execution of each page, alone, for the drift check and the builds ----------------
+
+
+def output(kind: str, text: str):
+    import nbformat
+
+    if kind in ("stdout", "stderr"):
+        return nbformat.v4.new_output("stream", name=kind, text=text)
+    return nbformat.v4.new_output("execute_result", {"text/plain": text}, execution_count=1)
+
+
+@pytest.mark.parametrize(
+    "new, same",
+    [
+        ([output("result", "0.5")], True),
+        ([output("result", "np.float64(0.5)")], True),  # NumPy 2's repr, sanitised
+        ([output("result", "0.5"), output("stderr", "a warning\n")], True),  # stderr skipped
+        ([output("result", "0.51")], False),  # a number the page shows
+        ([output("result", "0.5"), output("stdout", "more\n")], False),  # an output more
+        ([], False),  # an output less
+    ],
+)
+def test_outputs_compare_as_nbval_compares_them(tmp_path, new, same):
+    """The comparison of the cached outputs gives nbval's verdict, run on the same cells."""
+    import subprocess
+
+    import nbformat
+
+    ref = [output("result", "0.5")]
+    patterns = check_notebooks.sanitize_patterns()
+    assert (check_notebooks.output_difference(new, ref, patterns) is None) == same
+    # nbval itself: a cell that prints what `new` holds, against the reference outputs.
+    lines = []
+    for out in new:
+        if out.output_type == "stream":
+            lines.append(f"print({out.text[:-1]!r}, file=sys.{out.name})")
+        else:
+            lines.append(f"display(Text({out.data['text/plain']!r}))")
+    source = "import sys\nfrom IPython.display import display\n"
+    source += "class Text:\n    def __init__(self, t): self.t = t\n"
+    source += "    def __repr__(self): return self.t\n"
+    source += "\n".join(lines)
+    reference = [nbformat.v4.new_output("display_data", {"text/plain": "0.5"})]
+    nb = nbformat.v4.new_notebook(
+        cells=[nbformat.v4.new_code_cell(source, execution_count=1, outputs=reference)]
+    )
+    nb.metadata.kernelspec = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nbformat.write(nb, tmp_path / "cell.ipynb")
+    (tmp_path / "conftest.py").write_text(check_notebooks.conftest_text())
+    nbval = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            "--nbval",
+            f"--nbval-sanitize-with={check_notebooks.SANITIZE}",
+            "cell.ipynb",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env={**__import__("os").environ, "JUPYTER_PATH": str(check_notebooks.KERNELS)},
+    )
+    assert (nbval.returncode == 0) == same, nbval.stdout[-2000:]
+
+
+def test_pages_executed_alone_run_in_an_empty_folder_off_the_repository(tmp_path, monkeypatch):
+    from jupyter_cache import get_cache
+
+    monkeypatch.setenv("JUPYTER_PATH", str(check_notebooks.KERNELS))
+    monkeypatch.setenv("PYTHONPATH", str(ROOT / "tools"))
+    alone = tmp_path / "alone.md"
+    alone.write_text(
+        PAGE_HEAD
+        + "import os, sys\nfrom pathlib import Path\n"
+        + "print(sorted(Path().iterdir()), os.environ.get('PYTHONPATH'), sys.executable)\n```\n"
+    )
+    reads = tmp_path / "reads.md"
+    reads.write_text(PAGE_HEAD + "open('reads.md').read()\n```\n")
+    cache = tmp_path / "cache"
+    # Executed beside the page (as `make book` alone does), the page that reads its file runs.
+    assert check_notebooks.fill_cache([reads], 1, cache) == [reads]
+    store = get_cache(cache)
+    assert check_notebooks.executed_alone(store, reads) is False
+    done = check_notebooks.fill_cache([alone, reads], 2, cache, python=sys.executable)
+    # ... alone, it fails, and its record from the page's folder is not taken for one alone.
+    assert done == [alone]
+    assert check_notebooks.executed_alone(store, alone) is True
+    assert check_notebooks.executed_alone(store, reads) is False
+    record = store.match_cache_notebook(check_notebooks.read_as_the_book(alone))
+    (cell,) = [c for c in store.get_cache_bundle(record.pk).nb.cells if c.cell_type == "code"]
+    assert cell.outputs[0]["text"] == f"[] None {sys.executable}\n"
+    # Nothing left to execute alone: a record executed alone is kept.
+    assert check_notebooks.fill_cache([alone], 2, cache, python=sys.executable) == []
+
+
+def test_the_cached_outputs_are_compared_with_the_references(tmp_path, monkeypatch):
+    import nbformat
+
+    monkeypatch.setenv("JUPYTER_PATH", str(check_notebooks.KERNELS))
+    monkeypatch.setattr(check_notebooks, "ROOT", tmp_path)
+    pages = []
+    for name, shows, reference in (("same", "0.5", "0.5"), ("drifted", "0.51", "0.5")):
+        page = tmp_path / f"{name}.md"
+        page.write_text(PAGE_HEAD + f"print({shows})\n```\n")
+        ref = check_notebooks.reference_path(page)
+        ref.parent.mkdir(exist_ok=True)
+        nb = nbformat.v4.new_notebook(
+            cells=[
+                nbformat.v4.new_markdown_cell("# A page"),
+                nbformat.v4.new_code_cell(
+                    f"print({shows})",
+                    execution_count=1,
+                    outputs=[
+                        nbformat.v4.new_output("stream", name="stdout", text=reference + "\n")
+                    ],
+                ),
+            ]
+        )
+        nbformat.write(nb, ref)
+        pages.append(page)
+    cache = tmp_path / "cache"
+    missing = tmp_path / "missing.md"
+    missing.write_text(PAGE_HEAD + "print(1)\n```\n")
+    assert check_notebooks.fill_cache(pages, 2, cache, python=sys.executable) == pages
+    problems = check_notebooks.cached_drift([*pages, missing], cache)
+    assert len(problems) == 2, problems
+    assert problems[0].startswith("drifted.md: code cell 1: 'stdout' differs")
+    assert problems[1].startswith("missing.md: no reference notebook")
+
+
+def test_make_test_executes_each_page_once_alone_before_the_builds():
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    recipe = makefile.split("\ntest: ", 1)[1].split("\n\n", 1)[0]
+    steps = [line.split()[-1] for line in recipe.splitlines() if "$(MAKE)" in line]
+    assert steps.index("notebooks-alone") < steps.index("pdf") < steps.index("book")
+    assert "notebooks-standalone" not in steps  # a second execution of every page
+    alone = makefile.split("\nnotebooks-alone: ", 1)[1].split("\n\n", 1)[0]
+    assert "cache --execute --python $(ALONE_VENV)/bin/python" in alone
+
+
 # --- JupyterLab ----------------------------------------------------------------------------
 
 

@@ -296,6 +296,9 @@ def run_nbval(
 BOOK_SOURCES = ROOT / "_build" / "html" / "_sources"
 #: What the HTML book offers to install: the pinned requirements and the source archive.
 BOOK_DOWNLOADS = ROOT / "_build" / "html" / "downloads"
+#: The same, as ``make downloads`` writes them, before the book is built.
+BOOK_SOURCE_ARCHIVE = ROOT / "_build" / "extra" / "downloads" / "depthcore.tar.gz"
+BOOK_REQUIREMENTS = BOOK_SOURCE_ARCHIVE.parent / "requirements.txt"
 
 
 def shown(path: Path) -> str:
@@ -359,6 +362,36 @@ def environment_mismatch(python: str, requirements: Path) -> tuple[list[str], li
     return unmet, foreign
 
 
+def install_book_environment(python: str, downloads: Path = BOOK_DOWNLOADS) -> str | None:
+    """Install into ``python``'s environment the book's requirements and source archive.
+
+    The environment a reader makes from the downloads: ``requirements.txt``
+    (installed only when a pin is unmet) and ``depthcore.tar.gz`` (always
+    reinstalled, as the archive changes with the tree).
+
+    Returns
+    -------
+    str or None
+        Why the environment is not the book's (a pin unmet, a package not
+        pinned), or None when it is.
+    """
+    archive, requirements = downloads / "depthcore.tar.gz", downloads / "requirements.txt"
+    install = [python, "-m", "pip", "install", "-q", "--disable-pip-version-check"]
+    if environment_mismatch(python, requirements)[0]:
+        subprocess.run(install + ["-r", str(requirements)], check=True)
+    subprocess.run(
+        install + ["--no-build-isolation", "--force-reinstall", "--no-deps", str(archive)],
+        check=True,
+    )
+    unmet, foreign = environment_mismatch(python, requirements)
+    if not (unmet or foreign):
+        return None
+    return f"{python} is not the book's environment: " + "; ".join(
+        ([f"not installed: {', '.join(unmet)}"] if unmet else [])
+        + ([f"not pinned: {', '.join(foreign)}"] if foreign else [])
+    )
+
+
 def standalone(
     pages: list[Path],
     python: str,
@@ -416,24 +449,9 @@ def standalone(
             print(f"  - {p}", file=sys.stderr)
         return 1
 
-    # The environment: the book's requirements and its source archive, nothing else.
-    install = [python, "-m", "pip", "install", "-q", "--disable-pip-version-check"]
-    if environment_mismatch(python, requirements)[0]:
-        subprocess.run(install + ["-r", str(requirements)], check=True)
-    subprocess.run(
-        install + ["--no-build-isolation", "--force-reinstall", "--no-deps", str(archive)],
-        check=True,
-    )
-    unmet, foreign = environment_mismatch(python, requirements)
-    if unmet or foreign:
-        print(
-            f"make notebooks-standalone: {python} is not the book's environment: "
-            + "; ".join(
-                ([f"not installed: {', '.join(unmet)}"] if unmet else [])
-                + ([f"not pinned: {', '.join(foreign)}"] if foreign else [])
-            ),
-            file=sys.stderr,
-        )
+    mismatch = install_book_environment(python, downloads)
+    if mismatch is not None:
+        print(f"make notebooks-standalone: {mismatch}", file=sys.stderr)
         return 1
 
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
@@ -540,16 +558,68 @@ def read_as_the_book(page: Path):
     )
 
 
-def execute_for_cache(page: Path):
-    """Execute ``page`` as myst-nb's cache mode does: (page, notebook, seconds, error text)."""
+def execute_for_cache(page: Path, alone: bool = False):
+    """Execute ``page`` as myst-nb's cache mode does: (page, notebook, seconds, error text).
+
+    ``alone``: in an empty folder of its own (made and removed here) rather than
+    in the page's folder, as a reader runs the page's downloaded notebook.
+    """
+    import tempfile
+
     from jupyter_cache.executors.utils import single_nb_execution
 
     nb = read_as_the_book(page)
-    result = single_nb_execution(nb, cwd=str(page.parent), timeout=TIMEOUT, allow_errors=False)
+    with tempfile.TemporaryDirectory(prefix=f"depthcore-{page.stem}-") as empty:
+        cwd = empty if alone else str(page.parent)
+        result = single_nb_execution(nb, cwd=cwd, timeout=TIMEOUT, allow_errors=False)
     return page, nb, result.time, None if result.err is None else result.exc_string
 
 
-def fill_cache(pages: list[Path], workers: int, cache: Path = CACHE) -> list[Path]:
+def book_kernel(python: str, folder: Path) -> Path:
+    """Write into ``folder`` the book's kernel run by ``python``; the folder for ``JUPYTER_PATH``.
+
+    The kernel of :data:`KERNELS` names ``python``, which jupyter_client
+    replaces by the Python that starts it; this copy names ``python`` itself,
+    so that the kernel runs in that environment whoever starts it.
+    """
+    import json
+
+    spec = KERNELS / "kernels" / "python3"
+    target = folder / "kernels" / "python3"
+    target.mkdir(parents=True, exist_ok=True)
+    kernel = json.loads((spec / "kernel.json").read_text(encoding="utf-8"))
+    kernel["argv"] = [os.path.abspath(python), *kernel["argv"][1:]]
+    (target / "kernel.json").write_text(json.dumps(kernel, indent=1) + "\n", encoding="utf-8")
+    (target / "launch.py").write_bytes((spec / "launch.py").read_bytes())
+    return folder
+
+
+def isolate(jupyter_path: str) -> None:
+    """Start kernels from ``jupyter_path`` only, without the repository on their path.
+
+    Run in each worker before it executes a page alone.
+    """
+    os.environ["JUPYTER_PATH"] = jupyter_path
+    for name in ("PYTHONPATH", "VIRTUAL_ENV"):
+        os.environ.pop(name, None)
+
+
+#: The mark of a cache record executed alone (``data`` of the record).
+ALONE = "alone"
+
+
+def executed_alone(store, page: Path) -> bool | None:
+    """Whether ``page``'s cached record was executed alone; None when it has none."""
+    try:
+        record = store.match_cache_notebook(read_as_the_book(page))
+    except KeyError:
+        return None
+    return bool((record.data or {}).get(ALONE))
+
+
+def fill_cache(
+    pages: list[Path], workers: int, cache: Path = CACHE, python: str | None = None
+) -> list[Path]:
     """Execute the pages the cache lacks, ``workers`` at a time, and cache their outputs.
 
     The book's build executes its pages one after the other; run first, this
@@ -557,41 +627,177 @@ def fill_cache(pages: list[Path], workers: int, cache: Path = CACHE) -> list[Pat
     A page that fails is left out of the cache: the build runs it again and
     reports its error.
 
+    ``python``: execute each page alone, as a reader runs its download: in an
+    empty folder, with the kernel of ``python`` (an environment holding only
+    the book's requirements and source archive, see
+    :func:`install_book_environment`), and the repository off the path. The
+    pages then executed are those the cache lacks or holds from an execution
+    that was not alone; their records are marked :data:`ALONE`.
+
     Returns
     -------
     list of Path
         The pages executed and cached.
     """
+    import tempfile
     from concurrent.futures import ProcessPoolExecutor
+    from functools import partial
 
     from jupyter_cache import get_cache
     from jupyter_cache.base import CacheBundleIn
 
     store = get_cache(cache)
-    missing = []
-    for page in pages:
-        try:
-            store.match_cache_notebook(read_as_the_book(page))
-        except KeyError:
-            missing.append(page)
+    missing = [
+        page
+        for page in pages
+        if executed_alone(store, page) in ((None, False) if python is not None else (None,))
+    ]
     done = []
     if not missing:
         return done
-    print(f"execution cache: executing {len(missing)} pages, {workers} at a time", flush=True)
-    with ProcessPoolExecutor(max_workers=max(1, min(workers, len(missing)))) as pool:
-        for page, nb, seconds, error in pool.map(execute_for_cache, missing):
-            name = page.relative_to(ROOT) if page.is_relative_to(ROOT) else page
-            if error is not None:
-                print(f"  {name}: failed, left to the build to report", flush=True)
-                continue
-            store.cache_notebook_bundle(
-                CacheBundleIn(nb, str(page), data={"execution_seconds": seconds}),
-                check_validity=False,
-                overwrite=True,
-            )
-            print(f"  {name}: executed in {seconds:.1f} s", flush=True)
-            done.append(page)
+    how = "" if python is None else f", each alone in an empty folder with {python}"
+    print(f"execution cache: executing {len(missing)} pages, {workers} at a time{how}", flush=True)
+    with tempfile.TemporaryDirectory(prefix="depthcore-kernels-") as kernels:
+        pool = ProcessPoolExecutor(
+            max_workers=max(1, min(workers, len(missing))),
+            **(
+                {}
+                if python is None
+                else {
+                    "initializer": isolate,
+                    "initargs": (str(book_kernel(python, Path(kernels))),),
+                }
+            ),
+        )
+        with pool:
+            run = partial(execute_for_cache, alone=python is not None)
+            for page, nb, seconds, error in pool.map(run, missing):
+                name = page.relative_to(ROOT) if page.is_relative_to(ROOT) else page
+                if error is not None:
+                    print(f"  {name}: failed, left to the build to report", flush=True)
+                    if python is not None:
+                        print(error, flush=True)
+                    continue
+                data = {"execution_seconds": seconds, ALONE: python is not None}
+                store.cache_notebook_bundle(
+                    CacheBundleIn(nb, str(page), data=data),
+                    check_validity=False,
+                    overwrite=True,
+                )
+                print(f"  {name}: executed in {seconds:.1f} s", flush=True)
+                done.append(page)
     return done
+
+
+def sanitize_patterns(path: Path = SANITIZE) -> dict[str, str]:
+    """The regex replacements of nbval's sanitize file ``path``."""
+    from nbval.plugin import get_sanitize_patterns
+
+    return dict(get_sanitize_patterns(path.read_text(encoding="utf-8")))
+
+
+#: What nbval leaves out of a comparison by default (``IPyNbFile.skip_compare``,
+#: without --nbdime), and then :data:`SKIP_COMPARE`.
+NBVAL_SKIP = (
+    "metadata",
+    "traceback",
+    "prompt_number",
+    "output_type",
+    "name",
+    "execution_count",
+    "application/vnd.jupyter.widget-view+json",
+    "image/png",
+    "image/jpeg",
+)
+
+
+def output_difference(test: list, ref: list, patterns: dict[str, str]) -> str | None:
+    """Compare one cell's outputs as nbval does; the first difference, or None.
+
+    nbval's rule (``IPyNbCell.compare_outputs``): streams coalesced, then every
+    output's fields and MIME types outside :data:`NBVAL_SKIP` and
+    :data:`SKIP_COMPARE`, sanitised, compared in order within each field
+    (the order across fields is free).
+    """
+    from collections import defaultdict
+
+    from nbval.plugin import coalesce_streams, transform_streams_for_comparison
+
+    skip = NBVAL_SKIP + SKIP_COMPARE
+
+    def clean(value):
+        if not isinstance(value, str):
+            return value
+        for regex, replace in patterns.items():
+            value = re.sub(regex, replace, value)
+        return value
+
+    def flat(outputs) -> dict[str, list]:
+        out = defaultdict(list)
+        for output in transform_streams_for_comparison(coalesce_streams(list(outputs))):
+            for key, value in output.items():
+                if key in skip:
+                    continue
+                if key == "data":
+                    for mime, content in value.items():
+                        if mime not in skip:
+                            out[mime].append(clean(content))
+                else:
+                    out[key].append(clean(value))
+        return out
+
+    new, old = flat(test), flat(ref)
+    if set(old) - set(new):
+        return f"missing output fields {sorted(set(old) - set(new))}"
+    if set(new) - set(old):
+        return f"unexpected output fields {sorted(set(new) - set(old))}"
+    for key, values in old.items():
+        if len(values) != len(new[key]):
+            return f"{len(new[key])} outputs of {key!r}, the reference has {len(values)}"
+        for was, now in zip(values, new[key], strict=True):
+            if was != now:
+                return f"{key!r} differs: reference {str(was)[:200]!r}, now {str(now)[:200]!r}"
+    return None
+
+
+def cached_drift(pages: list[Path], cache: Path = CACHE) -> list[str]:
+    """How the cached outputs of ``pages`` differ from their references (empty if they do not).
+
+    The drift check of :func:`check` on the execution the book builds from,
+    without executing again: each page's code cells against its reference's
+    (:func:`structural_problems`), then each cell's outputs as nbval compares
+    them (:func:`output_difference`).
+    """
+    import jupytext
+    import nbformat
+    from jupyter_cache import get_cache
+
+    store = get_cache(cache)
+    patterns = sanitize_patterns()
+    problems: list[str] = []
+    for page in pages:
+        name, ref = shown(page), reference_path(page)
+        if not ref.exists():
+            problems.append(f"{name}: no reference notebook {ref.relative_to(ROOT)}")
+            continue
+        ref_nb = nbformat.read(ref, as_version=4)
+        found = structural_problems(page, jupytext.read(page), ref_nb)
+        problems += found
+        if found:
+            continue
+        try:
+            record = store.match_cache_notebook(read_as_the_book(page))
+        except KeyError:
+            problems.append(f"{name}: not executed (it failed, see above)")
+            continue
+        nb = store.get_cache_bundle(record.pk).nb
+        cells = [c for c in nb.cells if c.cell_type == "code"]
+        refs = [c for c in ref_nb.cells if c.cell_type == "code"]
+        for i, (cell, was) in enumerate(zip(cells, refs, strict=True)):
+            difference = output_difference(cell.outputs, was.outputs, patterns)
+            if difference is not None:
+                problems.append(f"{name}: code cell {i + 1}: {difference}")
+    return problems
 
 
 def stable_cell_ids(nb) -> None:
@@ -648,13 +854,54 @@ def select_pages(pages: list[Path], names: list[str]) -> list[Path]:
     return [p for p in pages if p.stem in wanted]
 
 
+def execute_alone(pages: list[Path], python: str, workers: int) -> int:
+    """``cache --execute --python PY``: the one execution of each page in ``make test``.
+
+    Installs the book's requirements and source archive into ``python``'s
+    environment, executes alone every page the cache lacks (:func:`fill_cache`),
+    and compares every page's cached outputs with its reference
+    (:func:`cached_drift`). The PDF and the HTML builds then take every page
+    from the cache.
+    """
+    problems = [
+        f"{shown(needed)} not found: run `make downloads` first"
+        for needed in (BOOK_SOURCE_ARCHIVE, BOOK_REQUIREMENTS)
+        if not needed.is_file()
+    ]
+    mismatch = None if problems else install_book_environment(python, BOOK_SOURCE_ARCHIVE.parent)
+    if problems or mismatch is not None:
+        for problem in problems or [mismatch]:
+            print(f"make notebooks-alone: {problem}", file=sys.stderr)
+        return 1
+    fill_cache(pages, workers, python=python)
+    problems = cached_drift(pages) + [
+        f"{ref.relative_to(ROOT)}: reference notebook of no page in _toc.yml"
+        for ref in stale_references(pages)
+    ]
+    if problems:
+        print(
+            "make notebooks-alone: the pages, executed alone, do not show what book/_nbval/ holds:",
+            file=sys.stderr,
+        )
+        for p in problems:
+            print(f"  - {p}", file=sys.stderr)
+        print(
+            "If the change is intended, run `make notebooks-update` and commit book/_nbval/.",
+            file=sys.stderr,
+        )
+        return 1
+    print(f"make notebooks-alone: {len(pages)} pages executed alone show their references")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("command", choices=["check", "update", "standalone", "cache"])
     parser.add_argument(
         "--python",
         default=None,
-        help="`standalone`: the Python of the environment that runs the downloaded notebooks",
+        help="`standalone`, `cache --execute`: the Python of the environment that runs the "
+        "notebooks alone (the book's requirements and source archive are installed into it)",
     )
     parser.add_argument(
         "-n",
@@ -697,9 +944,12 @@ def main(argv: list[str] | None = None) -> int:
         dropped = prepare_cache(every)
         if dropped:
             print(f"execution cache: dropped {', '.join(dropped)} (changed since executed)")
-        if args.execute:
+        if not args.execute:
+            return 0
+        if args.python is None:
             fill_cache(every, args.workers)
-        return 0
+            return 0
+        return execute_alone(every, args.python, args.workers)
     status = update(pages)
     if not args.pages:
         for ref in stale_references(every):
