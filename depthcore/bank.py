@@ -839,11 +839,13 @@ class Mixture:
             t = np.log(np.maximum(y - (b.n_frames - 1), 0.0))
         top = np.minimum(t, hi)
         width = np.maximum(top - lo, 0.0)
-        # Start with panels of half the SD of log(y_1) under the mixture.
+        # Start with panels of half the SD of log(y_1) under each problem's mixture: as
+        # many as the widest range in units of its own SD needs (in a batch of
+        # problems, not the widest range over the narrowest SD).
         log_nodes = np.log(nodes)
         centre = np.sum(self.probabilities * log_nodes, axis=-1, keepdims=True)
         sd_t = np.sqrt(np.sum(self.probabilities * (log_nodes - centre) ** 2, axis=-1))
-        panels = int(np.clip(np.ceil(np.max(width) / np.min(0.5 * sd_t + 1e-3)), 4, 4096))
+        panels = int(np.clip(np.ceil(np.max(width / (0.5 * sd_t[..., None] + 1e-3))), 4, 4096))
         # Roundoff: a depth is a float, rounded to eps (1 + |t|) in t, which moves the
         # log density by that times its slope, about z / sd_t at z SDs (|z| ~ 1 on
         # average); the CDF, an average of the density's relative errors, cannot
