@@ -261,62 +261,64 @@ def output(kind: str, text: str):
     return nbformat.v4.new_output("execute_result", {"text/plain": text}, execution_count=1)
 
 
-@pytest.mark.parametrize(
-    "new, same",
-    [
-        ([output("result", "0.5")], True),
-        ([output("result", "np.float64(0.5)")], True),  # NumPy 2's repr, sanitised
-        ([output("result", "0.5"), output("stderr", "a warning\n")], True),  # stderr skipped
-        ([output("result", "0.51")], False),  # a number the page shows
-        ([output("result", "0.5"), output("stdout", "more\n")], False),  # an output more
-        ([], False),  # an output less
-    ],
-)
-def test_outputs_compare_as_nbval_compares_them(tmp_path, new, same):
+#: Outputs of a cell against the reference ``0.5``, and whether nbval takes them for it.
+CASES = [
+    ([output("result", "0.5")], True),
+    ([output("result", "np.float64(0.5)")], True),  # NumPy 2's repr, sanitised
+    ([output("result", "0.5"), output("stderr", "a warning\n")], True),  # stderr skipped
+    ([output("result", "0.51")], False),  # a number the page shows
+    ([output("result", "0.5"), output("stdout", "more\n")], False),  # an output more
+    ([], False),  # an output less
+]
+
+
+def test_outputs_compare_as_nbval_compares_them(tmp_path):
     """The comparison of the cached outputs gives nbval's verdict, run on the same cells."""
+    import os
     import subprocess
+    import xml.etree.ElementTree as ET
 
     import nbformat
 
-    ref = [output("result", "0.5")]
     patterns = check_notebooks.sanitize_patterns()
-    assert (check_notebooks.output_difference(new, ref, patterns) is None) == same
-    # nbval itself: a cell that prints what `new` holds, against the reference outputs.
-    lines = []
-    for out in new:
-        if out.output_type == "stream":
-            lines.append(f"print({out.text[:-1]!r}, file=sys.{out.name})")
-        else:
-            lines.append(f"display(Text({out.data['text/plain']!r}))")
-    source = "import sys\nfrom IPython.display import display\n"
-    source += "class Text:\n    def __init__(self, t): self.t = t\n"
-    source += "    def __repr__(self): return self.t\n"
-    source += "\n".join(lines)
-    reference = [nbformat.v4.new_output("display_data", {"text/plain": "0.5"})]
-    nb = nbformat.v4.new_notebook(
-        cells=[nbformat.v4.new_code_cell(source, execution_count=1, outputs=reference)]
+    ref = [output("result", "0.5")]
+    assert [check_notebooks.output_difference(new, ref, patterns) is None for new, _ in CASES] == [
+        same for _, same in CASES
+    ]
+    # nbval itself, one cell per case: each shows what the case holds, against the reference.
+    v4 = nbformat.v4
+    head = (
+        "import sys\nfrom IPython.display import display\n\n"
+        "class Text:\n    def __init__(self, t):\n        self.t = t\n\n"
+        "    def __repr__(self):\n        return self.t\n"
     )
+    cells = [v4.new_code_cell(head, execution_count=1)]
+    for new, _ in CASES:
+        lines = [
+            f"print({out.text[:-1]!r}, file=sys.{out.name})"
+            if out.output_type == "stream"
+            else f"display(Text({out.data['text/plain']!r}))"
+            for out in new
+        ]
+        reference = [v4.new_output("display_data", {"text/plain": "0.5"})]
+        cells.append(v4.new_code_cell("\n".join(lines), execution_count=1, outputs=reference))
+    nb = v4.new_notebook(cells=cells)
     nb.metadata.kernelspec = {"name": "python3", "display_name": "Python 3", "language": "python"}
-    nbformat.write(nb, tmp_path / "cell.ipynb")
+    nbformat.write(nb, tmp_path / "cells.ipynb")
     (tmp_path / "conftest.py").write_text(check_notebooks.conftest_text())
-    nbval = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pytest",
-            "-q",
-            "-p",
-            "no:cacheprovider",
-            "--nbval",
-            f"--nbval-sanitize-with={check_notebooks.SANITIZE}",
-            "cell.ipynb",
-        ],
+    subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--nbval",
+         f"--nbval-sanitize-with={check_notebooks.SANITIZE}", "--junitxml=nbval.xml",
+         "cells.ipynb"],
         cwd=tmp_path,
         capture_output=True,
-        text=True,
-        env={**__import__("os").environ, "JUPYTER_PATH": str(check_notebooks.KERNELS)},
-    )
-    assert (nbval.returncode == 0) == same, nbval.stdout[-2000:]
+        env={**os.environ, "JUPYTER_PATH": str(check_notebooks.KERNELS)},
+    )  # fmt: skip
+    verdicts = {
+        case.get("name"): case.find("failure") is None and case.find("error") is None
+        for case in ET.parse(tmp_path / "nbval.xml").getroot().iter("testcase")
+    }
+    assert [verdicts[f"Cell {i}"] for i in range(1, len(CASES) + 1)] == [s for _, s in CASES]
 
 
 def test_pages_executed_alone_run_in_an_empty_folder_off_the_repository(tmp_path, monkeypatch):
