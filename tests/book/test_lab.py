@@ -29,7 +29,8 @@ Each page with displayed equations, opened (without running it), numbers them
 as the book does: a labelled one by its number in the paper
 (``tests/data/equation_labels.json``), however many unlabelled displays
 precede it on its page, and an unlabelled one not at all
-(``tools/myst_roles.py`` writes the pages so).
+(``tools/myst_roles.py`` writes the pages so); saved unchanged, it is the
+same file.
 
 It needs no built book; without Chromium it is skipped (failed under CI).
 """
@@ -99,7 +100,8 @@ def lab(missing_prerequisite, tmp_path_factory):
     tracker.write_text('{"windowingMode": "none"}')
     served = home / "served"
     shutil.copytree(ROOT / "book", served / "book", ignore=shutil.ignore_patterns("_nbval"))
-    for name in ("_toc.yml", "_config.yml"):  # read by the pages' references
+    # read by the pages' references, and by jupytext when JupyterLab saves a page
+    for name in ("_toc.yml", "_config.yml", "jupytext.toml"):
         shutil.copy2(ROOT / name, served / name)
     token, port = secrets.token_hex(16), free_port()
     env = dict(
@@ -263,7 +265,8 @@ const sleep = ms => new Promise(r => setTimeout(r, ms));
 
 # Opens the page with jupytext's notebook view and leaves in
 # window.depthcoreResult, once every text cell shows its rendering, each
-# displayed equation's id and the number shown beside it (null if none).
+# displayed equation's id and the number shown beside it (null if none); then
+# saves the page.
 SHOW_EQUATIONS = """
 const path = arguments[0];
 window.depthcoreResult = null;
@@ -288,6 +291,7 @@ const sleep = ms => new Promise(r => setTimeout(r, ms));
     stable = now === last ? stable + 1 : 0;
     last = now;
   }
+  await panel.context.save();  // saved unchanged, as a reader may
   done({equations});
 })().catch(e => done({failed: String(e)}));
 """
@@ -328,6 +332,9 @@ def test_page_numbers_its_equations_as_the_book_in_jupyterlab(lab, driver, page)
     assert len(shown) == displays, f"{page}: {len(shown)} displays shown of {displays}"
     if page == "beyond_linear":
         assert not labels and len(shown) >= 5, f"{page}: {len(shown)} unnumbered displays"
+    # Saved unchanged, the page is the same file (jupytext.toml), front matter and all.
+    saved = (served / "book" / f"{page}.md").read_text(encoding="utf-8")
+    assert saved == source, f"{page}: saving the unchanged page in JupyterLab changed it"
 
 
 @pytest.mark.parametrize("page", PAGES)
