@@ -238,13 +238,21 @@ class BookReferences:
         root = find_book(self._folder)
         config = yaml.safe_load((root / "_config.yml").read_text(encoding="utf-8")) or {}
         toc = yaml.safe_load((root / "_toc.yml").read_text(encoding="utf-8"))
-        index = {"equations": {}, "figures": {}, "sections": {}, "titles": {}, "entries": {}}
+        index = {
+            "equations": {},
+            "figures": {},
+            "sections": {},
+            "titles": {},
+            "entries": {},
+            "page_equations": {},
+        }
         for page in toc_pages(toc):
             source = root / f"{page}.md"
             if not source.is_file():
                 continue
             found = scan_page(source.read_text(encoding="utf-8"))
             index["titles"][page] = found["title"]
+            index["page_equations"][page] = found["equations"]
             index["sections"].update(found["sections"])
             for kind in ("equations", "figures"):
                 for label in found[kind]:
@@ -286,6 +294,22 @@ class BookReferences:
         if label.strip() not in numbers:
             raise ValueError(f"equation {label!r}: no numbered equation of the book has this label")
         return Resolved(f"({numbers[label.strip()]})")
+
+    def page_equations(self, page: str) -> list[tuple[str, int]]:
+        """``[(label, number), ...]``: a page's numbered equations, in the order of its text.
+
+        ``page`` is named as in ``_toc.yml`` (``"book/fig2"``); a page without
+        numbered equations has none (``[]``).
+
+        Raises
+        ------
+        ValueError
+            No page of the book has this name.
+        """
+        index = self._load()
+        if page not in index["page_equations"]:
+            raise ValueError(f"page {page!r}: no page of the book has this name")
+        return [(label, int(index["equations"][label])) for label in index["page_equations"][page]]
 
     def numref(self, text: str) -> Resolved:
         """``{numref}`name``` or ``{numref}`text <name>```: "Figure 2" (``%s`` in the text)."""

@@ -119,6 +119,14 @@ def test_a_page_uses_only_what_jupyterlab_renders(page):
     )
 
 
+def test_page_equations_numbers_a_page_s_equations_as_the_book(book):
+    assert book.page_equations("book/fig2") == [("eq-17", 17)]
+    assert [n for _, n in book.page_equations("book/filters")] == list(range(5, 13))
+    assert book.page_equations("book/intro") == []
+    with pytest.raises(ValueError, match="page 'book/nowhere': no page of the book"):
+        book.page_equations("book/nowhere")
+
+
 def test_the_toc_order_numbers_a_figure_or_equation_once_each():
     text = "# T\n\n$$\nx\n$$ (eq-a)\n\n```{figure}\n:name: fig-a\n\n{eval}`f`\n\nC.\n```\n"
     text += "\n(sec-a)=\n## S\n\n```{math}\n:label: eq-b\ny\n```\n\n$$\nz\n$$\n"

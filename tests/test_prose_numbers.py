@@ -80,11 +80,12 @@ ALLOWED = {
 def fences(text: str, keep_directives: bool = True) -> str:
     """``text`` without its code cells and fenced blocks, line by line.
 
-    A code cell or a plain fenced block (```` ``` ````, ```` ```text ````) is
-    dropped whole. A directive (```` ```{figure} ````, ```` ```{math} ````)
-    keeps its body, the caption a reader sees, without its opening line, its
-    ``:option:`` lines and its closing fence (or is dropped whole when
-    ``keep_directives`` is false).
+    A code cell, a plain fenced block (```` ``` ````, ```` ```text ````, the
+    front matter for JupyterLab ```` ```yaml ````) or a display equation
+    (```` ```{math} ````, read by :func:`mathematics`) is dropped whole. A
+    directive (```` ```{figure} ````) keeps its body, the caption a reader
+    sees, without its opening line, its ``:option:`` lines and its closing
+    fence (or is dropped whole when ``keep_directives`` is false).
     """
     out, closing, keep = [], None, False
     for line in text.splitlines():
@@ -98,7 +99,9 @@ def fences(text: str, keep_directives: bool = True) -> str:
         if opening:
             closing = re.escape(opening.group(1)) + r"\s*"
             directive = opening.group(2)
-            keep = bool(directive) and directive != "{code-cell}" and keep_directives
+            keep = (
+                bool(directive) and directive not in ("{code-cell}", "{math}") and keep_directives
+            )
             continue
         out.append(line)
     return "\n".join(out)
@@ -143,6 +146,9 @@ def test_the_scan_catches_a_typed_number_and_spares_the_allowed():
         "```{code-cell} ipython3\nx = 42\n```\n"
     )
     assert stray_numbers(page) == ["Some text with 31 units."]
+    # The front matter for JupyterLab is no prose either.
+    frontmatter = "```yaml\nnumbering:\n  equation:\n    start: 17\n```\n\n"
+    assert stray_numbers(frontmatter + page) == ["Some text with 31 units."]
 
 
 def test_every_quote_is_in_some_page_and_has_a_source():
@@ -152,15 +158,22 @@ def test_every_quote_is_in_some_page_and_has_a_source():
         assert source.strip(), f"{quote!r} has no source"
 
 
+def math_directives(text: str) -> list[str]:
+    """The content of every ``{math}`` directive, without its ``:option:`` lines."""
+    found = re.findall(r"^[ \t]*(`{3,})\{math\}[^\n]*\n(.*?)^[ \t]*\1[ \t]*$", text, re.S | re.M)
+    return [re.sub(r"^[ \t]*:[\w-]+:.*$", "", body, flags=re.M) for _, body in found]
+
+
 def mathematics(text: str) -> list[str]:
-    """The pages' mathematics: the content of every ``$...$`` and ``$$...$$``, outside code."""
+    """The pages' mathematics: every ``$...$``, ``$$...$$`` and ``{math}``, outside code."""
     text = re.sub(r"\A---\n.*?\n---\n", "", text, flags=re.S)
     text = re.sub(r"<!--.*?-->", "", text, flags=re.S)
+    directives = math_directives(text)
     text = fences(text)
     display = re.findall(r"\$\$(.*?)\$\$", text, flags=re.S)
     text = re.sub(r"\$\$.*?\$\$", "", text, flags=re.S)
     text = re.sub(r"``.*?``|`[^`]*`", "", text)  # inline code and roles' content
-    return display + re.findall(r"(?<!\\)\$([^$]+?)(?<!\\)\$", text, flags=re.S)
+    return directives + display + re.findall(r"(?<!\\)\$([^$]+?)(?<!\\)\$", text, flags=re.S)
 
 
 def math_numbers(math: str) -> list[str]:
@@ -201,9 +214,11 @@ def test_the_mathematics_scan_catches_a_typed_number_and_spares_the_structure():
         "A result $\\hat y = 5.70$ and $c = (6/5, 6, 6/5)^\\top$, $G^{-2}\\mathbf{c}$,\n"
         "$\\rho = 1/200$, $10^{-8}$, $\\tfrac12$, $N = 30$, $x_{12}$.\n"
         "$$\nP = 1000\\,I + 42\n$$\n"
+        "```{math}\n:enumerated: false\nQ = 77\n```\n"
     )
     found = [n for m in mathematics(page) for n in math_numbers(m)]
-    assert sorted(found) == ["42", "5.70"]
+    assert sorted(found) == ["42", "5.70", "77"]
+    assert stray_numbers(page) == []  # the mathematics is not prose
 
 
 def test_every_math_quote_is_in_some_page_and_has_a_source():

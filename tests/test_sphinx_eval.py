@@ -26,7 +26,7 @@ def glued(name: str, text_plain: str) -> dict:
     )
 
 
-def build(tmp_path: Path, text: str) -> str:
+def build(tmp_path: Path, text: str, conf: str = "") -> str:
     from sphinx.application import Sphinx
     from sphinx.util.docutils import docutils_namespace
 
@@ -36,7 +36,7 @@ def build(tmp_path: Path, text: str) -> str:
         "import sys\n"
         f"sys.path.insert(0, {str(ROOT / 'tools' / 'sphinx')!r})\n"
         "extensions = ['myst_nb', 'sphinx.ext.autodoc', 'depthcore_book']\n"
-        "nb_execution_mode = 'off'\n"
+        "nb_execution_mode = 'off'\n" + conf
     )
     code = nbformat.v4.new_code_cell("glue(...)")
     code.outputs = [glued("mean", "'6.4660'"), glued("count", "3")]
@@ -78,6 +78,34 @@ def test_eval_of_a_name_not_glued_fails_the_strict_build(tmp_path):
 
     with pytest.raises(SphinxWarning, match="No key 'nope' found in glue data"):
         build(tmp_path, "# Page\n\nA {eval}`nope` E\n")
+
+
+def test_the_front_matter_and_unnumbered_displays_for_jupyterlab_leave_the_book_as_it_was(
+    tmp_path,
+):
+    """A page's front matter for JupyterLab is not shown, and ``:enumerated: false`` is accepted.
+
+    The labelled display keeps the book's number and the ``{math}`` display
+    with ``:enumerated: false`` is shown as an unlabelled ``$$`` display is,
+    unnumbered (``tools/myst_roles.py`` writes both for jupyterlab-myst), in a
+    strict build.
+    """
+    frontmatter = "```yaml\nnumbering:\n  equation:\n    start: 17\n```\n\n"
+    displays = (
+        "$$\nx = 1\n$$ (eq-a)\n\n```{math}\n:enumerated: false\ny = 2\n```\n\n$$\nz = 3\n$$\n"
+    )
+    conf = "myst_enable_extensions = ['dollarmath']\nnumfig = True\n"  # as the book's
+    html = build(tmp_path, frontmatter + "# Page\n\n" + displays, conf)
+    assert "numbering" not in html and "start: 17" not in html and "highlight-yaml" not in html
+    assert re.search(r'id="equation-eq-a">\s*<span class="eqno">\(1\)', html)
+    assert html.count('class="eqno"') == 1
+    unnumbered = re.findall(r'<div class="math notranslate nohighlight">\s*\\\[\s*(\w) = ', html)
+    assert unnumbered == ["y", "z"]
+
+
+def test_a_yaml_block_that_is_not_front_matter_for_jupyterlab_is_shown(tmp_path):
+    html = build(tmp_path, "```yaml\nkept: 1\n```\n\n# Page\n\nText.\n")
+    assert "highlight-yaml" in html and "kept" in html
 
 
 # --- references written as {eval} expressions, and figures of glued images ----------------

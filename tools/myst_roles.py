@@ -20,9 +20,32 @@ whose content is ``{eval}`name``` and the caption, which the book renders as
 ``:enumerated: false``: JupyterLab numbers a notebook's figures from 1, the
 book across its pages).
 
+The displayed equations are numbered for JupyterLab as in the book. The
+book numbers a labelled display (``$$ ... $$ (eq-17)``) in one count across
+its pages and leaves an unlabelled one unnumbered; jupyterlab-myst numbers
+every display of a notebook from 1, unless the display says
+``:enumerated: false`` (a ``{math}`` directive, which the book renders as it
+renders ``$$ ... $$``: ``tools/sphinx/depthcore_book.py`` accepts the
+option), and starts its count where the notebook's front matter says. So
+each unlabelled display is written as a ``{math}`` directive with
+``:enumerated: false``, and a page with labelled equations opens its first
+text cell with its front matter, a YAML block::
+
+    ```yaml
+    numbering:
+      equation:
+        start: 17
+    ```
+
+whose number is that of the page's first labelled equation in the book
+(:meth:`depthcore.crossref.BookReferences.page_equations`, which numbers
+them as the book does); the page's others follow it, as in the book. The
+book does not show this block (``tools/sphinx/depthcore_book.py`` drops it).
+
 This script rewrites every ``{glue:text}`name``` of the pages' text,
 outside their code cells, to ``{eval}`name```, and the references and glued
-figures as above. A role with a format
+figures as above, the unlabelled displays as above, and writes (or
+corrects, or removes) each page's front matter of equation numbers. A role with a format
 (``name:.2f``) or another page's name (``page::name``) would not evaluate in
 the kernel: the script refuses it, names it and changes nothing.
 It is idempotent: run again, it changes nothing.
@@ -40,7 +63,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from depthcore.crossref import ROLES  # noqa: E402
+from depthcore.crossref import ROLES, BookReferences  # noqa: E402
 
 ROLE = re.compile(r"\{glue:text\}`([^`]+)`")
 NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -53,6 +76,14 @@ REFERENCE_ROLES = {role: function for function, role in ROLES.items()}
 REFERENCE = re.compile(r"\{(" + "|".join(map(re.escape, REFERENCE_ROLES)) + r")\}`([^`]+)`")
 KERNEL = re.compile(r"^\w+ = GlueLog\(", re.M)
 GLUE_FIGURE = re.compile(r"^(\s*)(`{3,}|:{3,})\{glue:figure\}\s+(\S+)\s*$")
+DISPLAY_OPEN = re.compile(r"^([ \t]*)\$\$\s*$")
+DISPLAY_CLOSE = re.compile(r"^[ \t]*\$\$\s*(?:\(([^)\s]+)\))?\s*$")
+#: A page's front matter for JupyterLab: where its count of equations starts.
+LAB_FRONTMATTER = "```yaml\nnumbering:\n  equation:\n    start: {start}\n```\n"
+LAB_FRONTMATTER_FOUND = re.compile(
+    r"\A```yaml\nnumbering:\n  equation:\n    start: (\d+)\n```\n(?:[ \t]*\n)*"
+)
+HEADER = re.compile(r"\A---\n.*?^---\n(?:[ \t]*\n)*", re.S | re.M)
 
 
 def reference(match: re.Match, where: str) -> str:
@@ -85,6 +116,53 @@ def glue_figure(lines: list[str], start: int, where: str) -> tuple[list[str], in
     return [*head, *(["\n", *caption] if caption else []), lines[end]], end + 1
 
 
+def display_math(lines: list[str], start: int, where: str) -> tuple[list[str], int]:
+    """A display ``$$ ... $$`` at ``lines[start]``, if unlabelled as ``{math}``, not enumerated.
+
+    A labelled display (``$$ (label)`` closing it) is kept as it is. Returns
+    the new lines and the index of the line after the display.
+    """
+    indent = DISPLAY_OPEN.match(lines[start]).group(1)
+    end = next((j for j in range(start + 1, len(lines)) if DISPLAY_CLOSE.match(lines[j])), None)
+    if end is None:
+        raise ValueError(f"{where}: the display equation ($$) is not closed")
+    if DISPLAY_CLOSE.match(lines[end]).group(1) is not None:
+        return lines[start : end + 1], end + 1
+    body = lines[start + 1 : end]
+    return [
+        f"{indent}```{{math}}\n",
+        f"{indent}:enumerated: false\n",
+        *body,
+        f"{indent}```\n",
+    ], end + 1
+
+
+def lab_numbering(text: str, start: int | None) -> str:
+    """``text`` whose first text cell opens with the front matter ``start`` (none if ``None``).
+
+    The front matter follows the page's jupytext header, before its title,
+    separated from both by a blank line.
+    """
+    header = HEADER.match(text)
+    head = "" if header is None else text[: header.end()]
+    body = text[len(head) :]
+    found = LAB_FRONTMATTER_FOUND.match(body)
+    if found is not None:
+        body = body[found.end() :]
+    if start is not None:
+        body = LAB_FRONTMATTER.format(start=start) + "\n" + body
+    return head + body
+
+
+def page_numbering(book: BookReferences, page: str) -> int | None:
+    """Where a page's count of equations starts in JupyterLab: its first one's number in the book.
+
+    ``None`` for a page without labelled equations.
+    """
+    equations = book.page_equations(page)
+    return equations[0][1] if equations else None
+
+
 def convert(text: str, source: str = "page") -> str:
     """``text`` with each pasted number of its prose written as an ``{eval}`` role.
 
@@ -109,6 +187,10 @@ def convert(text: str, source: str = "page") -> str:
         elif kernel and GLUE_FIGURE.match(line):
             figure, index = glue_figure(lines, index, where)
             out += [convert_line(text, where, kernel) for text in figure]  # the caption's roles
+            continue
+        elif DISPLAY_OPEN.match(line):
+            display, index = display_math(lines, index, where)
+            out += display
             continue
         else:
             line = convert_line(line, where, kernel)
@@ -146,11 +228,14 @@ def main(argv: list[str]) -> int:
     args = parser.parse_args(argv)
     check = args.check
     pages = args.pages or sorted((ROOT / "book").glob("*.md"))
+    book = BookReferences(ROOT)
     changed = []
     for page in pages:
         text = page.read_text(encoding="utf-8")
         try:
             new = convert(text, page.name)
+            name = page.resolve().relative_to(ROOT).with_suffix("").as_posix()
+            new = lab_numbering(new, page_numbering(book, name))
         except ValueError as error:
             print(f"myst_roles: {error}", file=sys.stderr)
             return 2

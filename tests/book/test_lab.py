@@ -25,6 +25,13 @@ them), and checks in the rendered page that
   and no citation or cross-reference unresolved, and the mathematics of every
   text cell is typeset (by KaTeX, as jupyterlab-myst does), without errors.
 
+Each page with displayed equations, opened (without running it), numbers them
+as the book does: a labelled one by its number in the paper
+(``tests/data/equation_labels.json``), however many unlabelled displays
+precede it on its page, and an unlabelled one not at all
+(``tools/myst_roles.py`` writes the pages so); saved unchanged, it is the
+same file.
+
 It needs no built book; without Chromium it is skipped (failed under CI).
 """
 
@@ -60,6 +67,11 @@ FIGURE = re.compile(
     r"(?:[ \t]*\n(.*?)\n)?^\1[ \t]*$",
     re.S | re.M,
 )
+# The pages with labelled equations (model and filters with unlabelled displays
+# between them, marginals with unlabelled ones after them) and a page with
+# unlabelled displays only.
+EQUATION_PAGES = ("model", "filters", "marginals", "fig2", "fig3", "appendix", "beyond_linear")
+DISPLAY = re.compile(r"^[ \t]*(?:\$\$[ \t]*$|`{3,}\{math\})", re.M)
 START_TIMEOUT = 120  # seconds for JupyterLab to answer
 RUN_TIMEOUT = 900  # seconds for a page's cells to run
 SCREENSHOTS = os.environ.get("DEPTHCORE_LAB_SCREENSHOTS")  # a folder, to look at the pages
@@ -88,7 +100,8 @@ def lab(missing_prerequisite, tmp_path_factory):
     tracker.write_text('{"windowingMode": "none"}')
     served = home / "served"
     shutil.copytree(ROOT / "book", served / "book", ignore=shutil.ignore_patterns("_nbval"))
-    for name in ("_toc.yml", "_config.yml"):  # read by the pages' references
+    # read by the pages' references, and by jupytext when JupyterLab saves a page
+    for name in ("_toc.yml", "_config.yml", "jupytext.toml"):
         shutil.copy2(ROOT / name, served / name)
     token, port = secrets.token_hex(16), free_port()
     env = dict(
@@ -250,15 +263,84 @@ const sleep = ms => new Promise(r => setTimeout(r, ms));
 """
 
 
-@pytest.mark.parametrize("page", PAGES)
-def test_page_renders_its_numbers_and_math_in_jupyterlab(lab, driver, page):
-    base, token, served = lab
+# Opens the page with jupytext's notebook view and leaves in
+# window.depthcoreResult, once every text cell shows its rendering, each
+# displayed equation's id and the number shown beside it (null if none); then
+# saves the page.
+SHOW_EQUATIONS = """
+const path = arguments[0];
+window.depthcoreResult = null;
+const done = result => { window.depthcoreResult = result; };
+const sleep = ms => new Promise(r => setTimeout(r, ms));
+(async () => {
+  const app = window.jupyterapp;
+  const panel = await app.commands.execute('docmanager:open',
+                                           {path, factory: 'Jupytext Notebook'});
+  await panel.context.ready;
+  const text = () => panel.content.widgets.filter(c => c.model.type === 'markdown');
+  while (!text().every(c => c.node.querySelector('.myst'))) await sleep(250);
+  let last = '', equations = [];
+  for (let stable = 0; stable < 4; ) {  // the numbers, once they stop changing
+    await sleep(500);
+    equations = text().flatMap(c => [...c.node.querySelectorAll('.katex-display')].map(e => {
+      const display = e.parentElement.parentElement;  // jupyterlab-myst: its box, with the number
+      const number = display.children[1];
+      return {id: display.id, number: number ? number.textContent.trim() : null};
+    }));
+    const now = JSON.stringify(equations);
+    stable = now === last ? stable + 1 : 0;
+    last = now;
+  }
+  await panel.context.save();  // saved unchanged, as a reader may
+  done({equations});
+})().catch(e => done({failed: String(e)}));
+"""
+
+
+def open_lab(driver, base, token):
+    """Load JupyterLab afresh in the browser and wait until it has started."""
     driver.get(f"{base}/lab?token={token}&reset")
     deadline = time.monotonic() + START_TIMEOUT
     while not driver.execute_script("return !!(window.jupyterapp && window.jupyterapp.started)"):
         assert time.monotonic() < deadline, f"JupyterLab's page not ready in {START_TIMEOUT} s"
         time.sleep(0.5)
     driver.execute_async_script("window.jupyterapp.started.then(arguments[0])")
+
+
+@pytest.mark.parametrize("page", EQUATION_PAGES)
+def test_page_numbers_its_equations_as_the_book_in_jupyterlab(lab, driver, page):
+    import json
+
+    base, token, served = lab
+    open_lab(driver, base, token)
+    driver.execute_script(SHOW_EQUATIONS, f"book/{page}.md")
+    deadline = time.monotonic() + START_TIMEOUT
+    while (result := driver.execute_script("return window.depthcoreResult")) is None:
+        assert time.monotonic() < deadline, f"{page}: not rendered in {START_TIMEOUT} s"
+        time.sleep(1)
+    assert "failed" not in result, f"{page}: {result.get('failed')}"
+    paper = json.loads((ROOT / "tests" / "data" / "equation_labels.json").read_text())
+    source = (ROOT / "book" / f"{page}.md").read_text(encoding="utf-8")
+    labels = re.findall(r"^\$\$[ \t]*\(([^)\s]+)\)[ \t]*$", source, re.M)
+    # A display opens with "$$" alone (closed by "$$ (label)") or a {math} fence.
+    displays = len(DISPLAY.findall(source))
+    shown = result["equations"]
+    numbered = {e["id"]: e["number"] for e in shown if e["number"] is not None}
+    assert numbered == {label: f"({paper[label]})" for label in labels}, (
+        f"{page}: equations numbered {numbered} in JupyterLab"
+    )
+    assert len(shown) == displays, f"{page}: {len(shown)} displays shown of {displays}"
+    if page == "beyond_linear":
+        assert not labels and len(shown) >= 5, f"{page}: {len(shown)} unnumbered displays"
+    # Saved unchanged, the page is the same file (jupytext.toml), front matter and all.
+    saved = (served / "book" / f"{page}.md").read_text(encoding="utf-8")
+    assert saved == source, f"{page}: saving the unchanged page in JupyterLab changed it"
+
+
+@pytest.mark.parametrize("page", PAGES)
+def test_page_renders_its_numbers_and_math_in_jupyterlab(lab, driver, page):
+    base, token, served = lab
+    open_lab(driver, base, token)
     driver.execute_script(RUN_PAGE, f"book/{page}.md")
     deadline = time.monotonic() + RUN_TIMEOUT
     while (result := driver.execute_script("return window.depthcoreResult")) is None:

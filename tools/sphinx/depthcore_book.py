@@ -24,6 +24,18 @@ role works): this extension makes ``eval`` paste the text glued under the
 name, exactly as myst-nb's ``glue:text`` role does, so the book shows what it
 showed with ``glue:text``, and a name that is not glued fails the strict build.
 
+The equations' numbers in JupyterLab
+------------------------------------
+The book numbers a labelled display equation in one count across its pages
+and leaves an unlabelled one unnumbered; jupyterlab-myst numbers every
+display of a notebook from 1. ``tools/myst_roles.py`` therefore writes each
+unlabelled display as a ``{math}`` directive with ``:enumerated: false``
+(this extension accepts the option, and the book renders the display as
+before, unnumbered), and opens the first text cell of a page with labelled
+equations with its front matter for jupyterlab-myst, a YAML block that sets
+where the notebook's count starts (``numbering: equation: start: 17``).
+The book does not show that block: this extension drops it.
+
 The downloads folder
 --------------------
 ``make book`` writes into ``_build/extra/downloads/`` (the config value
@@ -55,6 +67,7 @@ from docutils import nodes
 from docutils.parsers.rst import directives
 from sphinx import addnodes
 from sphinx.directives import patches
+from sphinx.transforms import SphinxTransform
 from sphinx.transforms.post_transforms import SphinxPostTransform
 from sphinx.util.docutils import SphinxDirective, SphinxRole
 
@@ -247,6 +260,51 @@ class Figure(patches.Figure):
             self.state,
             self.state_machine,
         ).run()
+
+
+class Math(patches.MathDirective):
+    """``{math}``, also with the option ``:enumerated: false``, which is for JupyterLab.
+
+    jupyterlab-myst numbers every display of a notebook unless it says
+    ``:enumerated: false``; the book numbers a display by its ``:label:``
+    alone, whatever it says.
+    """
+
+    option_spec = {**patches.MathDirective.option_spec, "enumerated": directives.unchanged}
+
+    def run(self):
+        self.options.pop("enumerated", None)
+        return super().run()
+
+
+#: The keys of a page's front matter for jupyterlab-myst (``tools/myst_roles.py``).
+LAB_FRONTMATTER_KEYS = {"numbering"}
+
+
+class DropLabFrontmatter(SphinxTransform):
+    """Remove a page's front matter for jupyterlab-myst: a YAML block before its title.
+
+    The block opens the page's first text cell, where jupyterlab-myst reads a
+    notebook's front matter (``numbering: ...``, see ``tools/myst_roles.py``);
+    a YAML block there with other keys is kept, as text of the page.
+    """
+
+    default_priority = 200
+
+    def apply(self, **kwargs):
+        for node in list(self.document.children):
+            if isinstance(node, nodes.section):
+                return
+            if not isinstance(node, nodes.literal_block) or node.get("language") != "yaml":
+                continue
+            import yaml
+
+            try:
+                data = yaml.safe_load(node.astext())
+            except yaml.YAMLError:
+                continue
+            if isinstance(data, dict) and data and set(data) <= LAB_FRONTMATTER_KEYS:
+                node.parent.remove(node)
 
 
 def citation_owners(env) -> dict:
@@ -464,6 +522,8 @@ def setup(app):
     app.connect("autodoc-process-docstring", docmath.typeset_docstring)
     app.add_directive("depthcore-module-summaries", ModuleSummaries)
     app.add_directive("figure", Figure, override=True)
+    app.add_directive("math", Math, override=True)
+    app.add_transform(DropLabFrontmatter)
     app.add_post_transform(DropHtmlOnlyPages)
     app.connect("doctree-resolved", root_page_as_one_chapter)
     app.add_post_transform(DropHiddenCellsWithoutOutput)
