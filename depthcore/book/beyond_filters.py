@@ -48,6 +48,21 @@ CHUNK_PARTICLES = 200_000
 
 
 def check_sizes(sizes) -> np.ndarray:
+    """Numbers of particles, checked: positive integers, at least one.
+
+    Parameters
+    ----------
+    sizes : int or array_like of int, shape (S,)
+
+    Returns
+    -------
+    ndarray of int, shape (S,)
+
+    Raises
+    ------
+    ValueError
+        Naming ``sizes`` when they are not positive integers.
+    """
     sizes = np.atleast_1d(np.asarray(sizes))
     if (
         sizes.ndim != 1

@@ -65,6 +65,19 @@ def rho_label(rho: float) -> str:
 
 
 def plus_minus(mean: float, sd: float, decimals: int) -> str:
+    """A mean and an SD as the book prints them, ``"6.466 ± 0.799"``.
+
+    Parameters
+    ----------
+    mean, sd : float
+        The mean and the standard deviation.
+    decimals : int
+        Decimal places of both; a mean of ``-0.0`` is printed as ``0.0``.
+
+    Returns
+    -------
+    str
+    """
     return f"{float(mean) + 0.0:.{decimals}f} ± {float(sd):.{decimals}f}"
 
 
