@@ -34,12 +34,16 @@ particle filter over depth with a Kalman filter per particle
 registry :mod:`~depthcore.filters` lists every filter, and its
 :func:`~depthcore.filters.track` (``depthcore.track``) filters and smooths one
 track at every frame;
-:mod:`~depthcore.reproduce`, :mod:`~depthcore.study` and
-:mod:`~depthcore.experiments` run them; :mod:`~depthcore.figures` draws and
-:mod:`~depthcore.report` formats the results, whose references to the book
-:mod:`~depthcore.crossref` resolves in Jupyter; :mod:`~depthcore.reference`
-holds independent routes for checking; :mod:`~depthcore.benchmarks` writes and
-reads the benchmarks' recorded results.
+:mod:`~depthcore.reproduce` and :mod:`~depthcore.study` run them;
+:mod:`~depthcore.cli_text` holds the command line's tables;
+:mod:`~depthcore.reference` holds independent routes for checking;
+:mod:`~depthcore.benchmarks` writes and reads the benchmarks' recorded results
+and :mod:`~depthcore.benchmark_tables` renders them. The book's wing,
+:mod:`depthcore.book`, holds each chapter's experiments, figures and glued
+texts, one module per chapter, with what the chapters share (the plot style,
+the number formatting, the notebook helpers and the book's cross-references);
+no module outside it imports it but the command line, for the paper's figures,
+and :mod:`~depthcore.benchmark_tables`, for its tables.
 
 Every public module is an attribute of the package, imported when first used
 (``import depthcore; depthcore.study`` works).
@@ -56,13 +60,13 @@ __version__ = "0.1.0"
 #: The public modules, imported on first access as attributes of the package.
 MODULES = (
     "bank",
+    "benchmark_tables",
     "benchmarks",
+    "book",
     "bound",
     "calibration",
-    "crossref",
+    "cli_text",
     "ekf",
-    "experiments",
-    "figures",
     "filters",
     "gaussian",
     "hardness",
@@ -79,7 +83,6 @@ MODULES = (
     "range_ekf",
     "rbpf",
     "reference",
-    "report",
     "reproduce",
     "resample_move",
     "resampling",

@@ -27,12 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__, _checks, report, reproduce, study
+from . import __version__, _checks, cli_text, reproduce, study
+from .cli_text import STUDY_LEGEND
 from .filters import ALL_NAMES, FILTERS, PROCESS_NOISE_MAX, RBPF_REPLICAS, RHO_RANGE
 from .filters import NAMES as _STUDY_FILTERS
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from .model import noise_free_state
-from .report import STUDY_LEGEND
 
 #: Largest ``study --trials``: a limit on run time (the study streams its trials in
 #: chunks, so its memory does not grow with their number).
@@ -225,7 +225,7 @@ def _cmd_reproduce(args) -> str:
     result = _with_bar(
         "reproduce", "figure", lambda progress: reproduce.reproduce(progress=progress)
     )
-    return _json(result) if args.json else report.format_table(result)
+    return _json(result) if args.json else cli_text.format_table(result)
 
 
 def _cmd_estimate(args) -> str:
@@ -244,7 +244,7 @@ def _cmd_estimate(args) -> str:
     summary = reproduce.summarize(
         mu, args.rho, prior, process_noise=q, smooth=args.smooth, names=names
     )
-    return _json(summary) if args.json else report.format_summary(summary)
+    return _json(summary) if args.json else cli_text.format_summary(summary)
 
 
 def _check_out(out: str) -> Path:
@@ -271,11 +271,12 @@ def _cmd_figures(args) -> str:
     import matplotlib
 
     matplotlib.use("Agg")
-    from . import figures
+
+    from .book import paper
 
     try:
         paths = _with_bar(
-            "figures", "figure", lambda progress: figures.save_all(out, progress=progress)
+            "figures", "figure", lambda progress: paper.save_all(out, progress=progress)
         )
     except OSError as exc:
         where = exc.filename or args.out
@@ -358,7 +359,7 @@ def _cmd_study(args) -> str:
                 progress=progress,
             ),
         )
-        return _json(result) if args.json else report.format_prior_study(result)
+        return _json(result) if args.json else cli_text.format_prior_study(result)
     if not any(FILTERS[n].random for n in names):
         _refuse_ignored(
             args,
@@ -386,7 +387,7 @@ def _cmd_study(args) -> str:
             process_noise=q,
         ),
     )
-    return _json(result) if args.json else report.format_study(result)
+    return _json(result) if args.json else cli_text.format_study(result)
 
 
 # --- strict JSON -----------------------------------------------------------------------

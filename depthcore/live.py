@@ -28,7 +28,6 @@ from __future__ import annotations
 import numpy as np
 
 from . import _checks, model
-from .figures import STYLE
 from .filters import FILTERS, check_names
 
 #: The filters drawn by default, the paper's three.
@@ -127,7 +126,7 @@ def draw(ax, marginals: dict) -> None:
     """Draw the densities of :func:`depth_marginals` on the Matplotlib axes ``ax``, afresh."""
     ax.clear()
     for name, density in marginals["density"].items():
-        ax.plot(marginals["grid"], density, linewidth=1.6, **STYLE[name])
+        ax.plot(marginals["grid"], density, linewidth=1.6, **FILTERS[name].plot_style)
     ax.set_xlabel(f"depth $y$ at frame {marginals['frames']}")
     ax.set_ylabel("marginal density of $y$")
     ax.set_ylim(bottom=0)

@@ -4,8 +4,10 @@ Recommended import: ``from depthcore import reproduce``.
 
 Everything here iterates the default entries of the registry
 :data:`depthcore.filters.FILTERS` (:data:`~depthcore.filters.NAMES`);
-:mod:`depthcore.figures` only draws what :func:`curves` returns, and
-:mod:`depthcore.report` formats what :func:`reproduce` and :func:`summarize` return.
+:func:`comparison` sets each filter's numbers beside the paper's for one
+figure (:data:`TABLE_ROWS`). The book's :mod:`depthcore.book.paper` only draws
+what :func:`curves` returns and shows what :func:`comparison` returns, and
+:mod:`depthcore.cli_text` formats what :func:`reproduce` and :func:`summarize` return.
 
 The particle filter is the one random filter: every call here that runs it
 seeds a fresh ``numpy.random.Generator`` from the ``seed`` argument (default
@@ -27,6 +29,9 @@ PARTICLE_SEED = 1990
 
 __all__ = [
     "PARTICLE_SEED",
+    "QUANTITY_LETTERS",
+    "TABLE_ROWS",
+    "comparison",
     "curves",
     "filter_moments",
     "reproduce",
@@ -288,4 +293,74 @@ def filter_moments(s: Scenario, quantity: str | None = None, names=PAPER_FILTERS
     for name in check_names(names):
         m = FILTERS[name](s.mu, s.rho, prior.mean, prior.cov).moments(quantity)
         out[name] = (m["mean"], m["sd"])
+    return out
+
+
+#: Rows of the figure pages' tables, as (row id, filter, reading, support, label).
+#: The optimal filter with Eq. (16) as derived and as printed; the second-order
+#: filter with the covariance ``2 rho**2 J^{-1}`` of the expansion (8) and with
+#: the printed ``rho**2 J^{-1}``; the EKF. A label's ``%s`` is the quantity's
+#: letter, ``y`` or ``v``, as in the paper's marginals ``p_oy`` and ``p_ov``.
+TABLE_ROWS = (
+    ("opt", "optimal", "derived", "front", "optimal $p_{o%s}$"),
+    ("opt_printed", "optimal", "printed", "front", "optimal, Eq. (16) as printed"),
+    ("so", "second_order", "derived", "all", r"second order $p_{s%s}$, $2\rho^2 J^{-1}$"),
+    ("so_printed", "second_order", "printed", "all", r"second order, $\rho^2 J^{-1}$ as printed"),
+    ("ekf", "ekf", "printed", "all", "EKF $p_{e%s}$"),
+    ("iter", "iterated", "-", "all", "iterated EKF"),
+    ("inv", "inverse_depth", "-", "all", "inverse-depth EKF, delta method"),
+)
+
+
+#: The letter of each quantity in the paper's names of the marginals.
+QUANTITY_LETTERS = {"depth": "y", "velocity": "v"}
+
+
+def comparison(key: str) -> list[dict]:
+    """The rows of a figure page's table: the paper's numbers beside ours.
+
+    Parameters
+    ----------
+    key : str
+        ``"fig2"`` ... ``"fig6"``.
+
+    Returns
+    -------
+    list of dict
+        One per entry of :data:`TABLE_ROWS`, with ``id``, ``label``,
+        ``quantity``, ``mean``, ``sd``, ``reported_mean``, ``reported_sd``
+        (``None`` where the paper prints nothing), ``mean_matches`` and
+        ``sd_matches`` (agreement at the paper's printed precision, or ``None``).
+    """
+    if key not in SCENARIOS:
+        raise ValueError(f"key must be one of {tuple(SCENARIOS)}, got {key!r}")
+    s = SCENARIOS[key]
+    quantity = s.quantity
+    rows = scenario_rows(s, names=tuple(dict.fromkeys(row[1] for row in TABLE_ROWS)))
+    out = []
+    for row_id, filt, reading, support, label in TABLE_ROWS:
+        (row,) = [
+            r
+            for r in rows
+            if (r["filter"], r["reading"], r["support"], r["quantity"])
+            == (filt, reading, support, quantity)
+        ]
+        out.append(
+            {
+                "id": row_id,
+                "label": label % QUANTITY_LETTERS[quantity] if "%s" in label else label,
+                "quantity": quantity,
+                **{
+                    k: row[k]
+                    for k in (
+                        "mean",
+                        "sd",
+                        "reported_mean",
+                        "reported_sd",
+                        "mean_matches",
+                        "sd_matches",
+                    )
+                },
+            }
+        )
     return out

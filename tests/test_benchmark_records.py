@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from depthcore import __version__, benchmarks, report
+from depthcore import __version__, benchmark_tables, benchmarks
 
 SCRIPTS = sorted((benchmarks.ROOT / "benchmarks").glob("bench_*.py"))
 NAMES = [p.stem for p in SCRIPTS]
@@ -135,7 +135,7 @@ def _bench_readme():
 def test_the_readme_shows_the_records():
     tool = _bench_readme()
     text = tool.README.read_text(encoding="utf-8")
-    expected = tool.regenerate(text, report.bench_readme_blocks(tool.records()))
+    expected = tool.regenerate(text, benchmark_tables.bench_readme_blocks(tool.records()))
     assert text == expected, (
         "README.md's benchmark tables differ from depthcore/benchmark_records/: "
         "run `python tools/bench_readme.py`"
@@ -189,7 +189,7 @@ def test_the_bank_records_a_measured_ratio_and_labels_its_extrapolation():
     m = benchmarks.read("bench_bank")["results"]["matched_accuracy"]
     assert m["ratio"] == pytest.approx(m["time_per_run_s"][-1] / m["bank_time_s"])
     assert {"extrapolated_ratio", "extrapolated_particles_needed"} <= set(m)
-    row = report.bench_tables({n: benchmarks.read(n) for n in NAMES})["bank"]
+    row = benchmark_tables.bench_tables({n: benchmarks.read(n) for n in NAMES})["bank"]
     text = row._repr_markdown_()
     assert "measured" in text and "Extrapolated" in text and "not measured" in text
 

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import SCENARIOS, bound, experiments, model
+from depthcore import SCENARIOS, bound, model
+from depthcore.book import beyond_bound
 
 FIG2 = SCENARIOS["fig2"]
 RHO = FIG2.rho
@@ -311,13 +312,13 @@ def test_refusals_name_the_argument():
 def test_bound_study_simulates_the_truth_at_time_three():
     """Frames 1-3 are the truth's by G; accelerations act from time 3 on; the filters'
     errors are against the track's own state at frame N."""
-    r = experiments.bound_study([3, 6], 30, 2, ("optimal", "ekf"), "fixed", 0.05)
+    r = beyond_bound.bound_study([3, 6], 30, 2, ("optimal", "ekf"), "fixed", 0.05)
     s = r["states"]
     assert_allclose(s[:, 0], np.broadcast_to(FIG2.c, s[:, 0].shape), rtol=0, atol=0)
     assert_allclose(s[:, 1, 1], FIG2.c[1] + 3)
     assert s[:, 1, 2].std() > 0  # the velocity has changed by frame 6
     assert r["ekf"]["depth_error"].shape == (2, 30 - r["rejected_trials"])
     with pytest.raises(ValueError, match="names: particle"):
-        experiments.bound_study([3, 6], 10, 2, ("particle",), "fixed", 0.05)
-    again = experiments.bound_study([6], 30, 2, ("ekf",), "fixed", 0.05)
+        beyond_bound.bound_study([3, 6], 10, 2, ("particle",), "fixed", 0.05)
+    again = beyond_bound.bound_study([6], 30, 2, ("ekf",), "fixed", 0.05)
     assert_allclose(again["ekf"]["depth_error"][0], r["ekf"]["depth_error"][1])

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from depthcore import calibration, model
+from depthcore import calibration, cli_text, model
+from depthcore.book import beyond_study
 
 PRIOR_MEAN = np.array([-1.2, 4.0, 0.0])
 PRIOR_COV = np.diag([1.0, 1.0, 0.25])
@@ -188,18 +189,16 @@ def test_prior_calibration_texts_and_figure_show_the_result():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from depthcore import figures, report
-
     r = _fake_prior_study()
-    t = report.prior_study_texts(r, "x")
+    t = beyond_study.prior_study_texts(r, "x")
     assert t["x_depth_coverage_50"] == "0.45" and t["x_velocity_coverage_95"] == "0.95"
     assert t["x_depth_verdict"] == "fails" and t["x_velocity_verdict"] == "passes"
     assert t["x_false_alarm"] == "1 %" and t["x_test_level"] == "0.5 %"
     assert t["x_max_se"] == f"{0.05 / np.sqrt(0.25 / 100):.1f}"
     assert t["x_prior_mean"] == "(-1.2, 4.0, 0.0)" and t["x_prior_scale"] == "1000"
-    text = report.format_prior_study(r)
+    text = cli_text.format_prior_study(r)
     assert "NOT calibrated" in text and "chi-square p 0.004" in text
-    fig = figures.prior_calibration(r)
+    fig = beyond_study.prior_calibration(r)
     ax = fig.axes[0]
     depth, velocity = ax.containers
     np.testing.assert_allclose(

@@ -11,10 +11,9 @@ from numpy.testing import assert_allclose
 
 from depthcore import (
     SCENARIOS,
+    _checks,
     bank,
     ekf,
-    experiments,
-    figures,
     gaussian,
     model,
     optimal,
@@ -23,6 +22,7 @@ from depthcore import (
     study,
     ukf,
 )
+from depthcore.book import beyond_filters, beyond_linear, beyond_study, beyond_sweeps, paper
 from depthcore.filters import FILTERS
 from depthcore.second_order import second_order
 
@@ -30,7 +30,7 @@ FIG2 = SCENARIOS["fig2"]
 
 
 def test_first_update_is_the_filters_first_step():
-    u = experiments.first_update(FIG2)
+    u = beyond_filters.first_update(FIG2)
     e = ekf.ekf(FIG2.mu, FIG2.rho, FIG2.prior)
     k = ukf.ukf(FIG2.mu, FIG2.rho, FIG2.prior, allow_behind_camera=True)
     assert_allclose(u["ekf"].mean, e.means[0], rtol=0, atol=0)
@@ -39,7 +39,7 @@ def test_first_update_is_the_filters_first_step():
 
 
 def test_first_update_sigma_points_reach_behind_the_camera():
-    u = experiments.first_update(FIG2)
+    u = beyond_filters.first_update(FIG2)
     X = u["sigma_points"]
     assert X.shape == (7, 3)
     # depth points at the prior depth +- sqrt(3 * 1000): one lies behind the camera
@@ -51,27 +51,27 @@ def test_first_update_sigma_points_reach_behind_the_camera():
 def test_first_update_ekf_keeps_the_ray_and_ukf_does_not():
     # The documented behaviour (depthcore/ukf.py): correlation of x and y after
     # mu1 is -1.00 for the EKF, 0.09 for the UKF.
-    u = experiments.first_update(FIG2)
+    u = beyond_filters.first_update(FIG2)
     assert gaussian.correlation(u["ekf"].cov) == pytest.approx(-1.0, abs=1e-4)
     assert abs(gaussian.correlation(u["ukf"].cov)) < 0.2
 
 
 def test_first_update_rejects_a_non_scenario():
     with pytest.raises(ValueError, match="scenario must be a Scenario"):
-        experiments.first_update("fig2")
+        beyond_filters.first_update("fig2")
 
 
 @pytest.fixture(scope="module")
 def convergence():
-    return experiments.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
+    return beyond_filters.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
 
 
 def test_particle_convergence_shapes(convergence):
     r = convergence
     assert_allclose(r["sizes"], [300, 600])
-    assert set(r["rmse"]) == set(experiments.SETTINGS)
-    for name in experiments.SETTINGS:
-        assert set(r["rmse"][name]) == set(experiments.MOMENTS)
+    assert set(r["rmse"]) == set(beyond_filters.SETTINGS)
+    for name in beyond_filters.SETTINGS:
+        assert set(r["rmse"][name]) == set(beyond_filters.MOMENTS)
         assert r["rmse"][name]["depth_mean"].shape == (2,)
         assert r["ess"][name].shape == (2, 3)
     m = optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior)
@@ -90,18 +90,20 @@ def test_particle_convergence_default_is_close_and_bootstrap_collapses(convergen
 
 
 def test_particle_convergence_streams_are_per_setting_and_repeatable(convergence):
-    alone = experiments.particle_convergence(
+    alone = beyond_filters.particle_convergence(
         FIG2, [300, 600], repeats=4, seed=3, settings={"default": {}}
     )
-    for m in experiments.MOMENTS:
+    for m in beyond_filters.MOMENTS:
         assert_allclose(
             alone["rmse"]["default"][m], convergence["rmse"]["default"][m], rtol=0, atol=0
         )
 
 
 def test_particle_convergence_chunks_repeats(monkeypatch):
-    monkeypatch.setattr(experiments, "CHUNK_PARTICLES", 500)  # one run of N = 300 per call
-    r = experiments.particle_convergence(FIG2, [300], repeats=3, seed=0, settings={"default": {}})
+    monkeypatch.setattr(beyond_filters, "CHUNK_PARTICLES", 500)  # one run of N = 300 per call
+    r = beyond_filters.particle_convergence(
+        FIG2, [300], repeats=3, seed=0, settings={"default": {}}
+    )
     assert r["rmse"]["default"]["depth_mean"].shape == (1,)
     assert np.isfinite(r["rmse"]["default"]["depth_mean"]).all()
 
@@ -109,17 +111,17 @@ def test_particle_convergence_chunks_repeats(monkeypatch):
 @pytest.mark.parametrize("bad", [[0], [1.5], [[10, 20]], []])
 def test_particle_convergence_rejects_bad_sizes(bad):
     with pytest.raises(ValueError, match="sizes must be positive integers"):
-        experiments.particle_convergence(FIG2, bad, repeats=2, seed=0)
+        beyond_filters.particle_convergence(FIG2, bad, repeats=2, seed=0)
 
 
 def test_particle_convergence_rejects_bad_repeats():
     with pytest.raises(ValueError, match="repeats must be a positive integer"):
-        experiments.particle_convergence(FIG2, [100], repeats=0, seed=0)
+        beyond_filters.particle_convergence(FIG2, [100], repeats=0, seed=0)
 
 
 def test_noise_study_gathers_the_study_at_each_level():
     rhos = [1 / 500, 1 / 200]
-    r = experiments.noise_study(rhos, trials=30, seed=2, names=("optimal", "ekf"))
+    r = beyond_sweeps.noise_study(rhos, trials=30, seed=2, names=("optimal", "ekf"))
     direct = study.study(rho=1 / 200, trials=30, seed=2, names=("optimal", "ekf"))
     assert r["valid_trials"][1] == direct["valid_trials"]
     assert r["ekf"]["coverage_68"][1] == direct["filters"]["ekf"]["depth"]["coverage_68"]
@@ -128,7 +130,7 @@ def test_noise_study_gathers_the_study_at_each_level():
     assert r["ekf"]["rmse"].shape == (2,)
     assert r["ekf"]["coverage_68_se"][1] == direct["filters"]["ekf"]["depth"]["coverage_68_se"]
     assert r["optimal"]["nees_se"][1] == direct["filters"]["optimal"]["nees_se"]
-    fig = figures.noise_study_figure(r)
+    fig = beyond_sweeps.noise_study_figure(r)
     _, labels = fig.axes[0].get_legend_handles_labels()
     assert len(labels) == 3  # two filters and the 0.68 line
     plt.close(fig)
@@ -136,7 +138,7 @@ def test_noise_study_gathers_the_study_at_each_level():
 
 def test_noise_sweep_at_the_papers_noise_matches_figure2():
     s = SCENARIOS["fig2"]
-    r = experiments.noise_sweep([s.rho])
+    r = beyond_sweeps.noise_sweep([s.rho])
     m = optimal.marginals(s.mu, s.rho, s.prior)
     assert r["optimal"]["depth_mean"][0] == pytest.approx(m.depth_mean, rel=1e-9)
     assert r["ekf"]["depth_sd"][0] == pytest.approx(
@@ -145,7 +147,7 @@ def test_noise_sweep_at_the_papers_noise_matches_figure2():
 
 
 def test_second_order_approaches_the_optimal_filter_as_noise_falls():
-    r = experiments.noise_sweep(1 / np.array([50.0, 200.0, 1000.0]))
+    r = beyond_sweeps.noise_sweep(1 / np.array([50.0, 200.0, 1000.0]))
     h = r["second_order"]["hellinger"]
     assert h[0] > h[1] > h[2]
     # the EKF's distance stays large: its error comes from the prior mean
@@ -154,7 +156,7 @@ def test_second_order_approaches_the_optimal_filter_as_noise_falls():
 
 def test_prior_offset_sweep_matches_figure6():
     s6 = SCENARIOS["fig6"]
-    r = experiments.prior_offset_sweep([0.0, 2.0])
+    r = beyond_sweeps.prior_offset_sweep([0.0, 2.0])
     assert r["ekf"]["depth_mean"][1] == pytest.approx(
         ekf.ekf(s6.mu, s6.rho, s6.prior).posterior.mean[1]
     )
@@ -168,7 +170,7 @@ def test_prior_offset_sweep_matches_figure6():
 
 def test_prior_offset_sweep_rejects_a_prior_behind_the_camera():
     with pytest.raises(ValueError, match="offsets must keep the prior's depth"):
-        experiments.prior_offset_sweep([-4.5])
+        beyond_sweeps.prior_offset_sweep([-4.5])
 
 
 def test_hellinger_is_zero_for_identical_densities_and_bounded():
@@ -191,7 +193,7 @@ def _prior_with_velocity(v0, offset=0.0):
 
 def test_prior_velocity_sweep_matches_direct_runs():
     v = [-2.0, 0.0, 0.95]
-    sw = experiments.prior_velocity_sweep(v)
+    sw = beyond_sweeps.prior_velocity_sweep(v)
     for i, v0 in enumerate(v):
         prior = _prior_with_velocity(v0)
         direct = ekf.ekf(FIG2.mu, FIG2.rho, prior).posterior.marginal("y")
@@ -204,7 +206,7 @@ def test_prior_velocity_sweep_matches_direct_runs():
 
 def test_prior_velocity_sweep_runs_the_named_filters():
     v = [-2.0, 0.0, 0.95]
-    sw = experiments.prior_velocity_sweep(v, names=("ekf", "inverse_depth"))
+    sw = beyond_sweeps.prior_velocity_sweep(v, names=("ekf", "inverse_depth"))
     assert set(sw) == {"velocity", "optimal", "ekf", "inverse_depth"}
     for i, v0 in enumerate(v):
         prior = _prior_with_velocity(v0)
@@ -214,16 +216,16 @@ def test_prior_velocity_sweep_runs_the_named_filters():
 
 def test_prior_velocity_sweep_at_c3_is_theorem_1():
     # Theorem 1: with the prior mean G^-2 c (velocity c3) the EKF is p_s.
-    sw = experiments.prior_velocity_sweep([FIG2.c[2]])
+    sw = beyond_sweeps.prior_velocity_sweep([FIG2.c[2]])
     assert_allclose(sw["ekf"]["depth_sd"], sw["second_order"]["depth_sd"], rtol=1e-8)
 
 
 def test_prior_mean_map_rows_are_velocity_sweeps_and_change_sign():
     offsets, velocities = [0.0, 2.0], [-3.0, 0.0, 0.95, 3.0]
-    m = experiments.prior_mean_map(offsets, velocities)
+    m = beyond_sweeps.prior_mean_map(offsets, velocities)
     assert m["log10_sd_ratio"].shape == (2, 4)
     for i, offset in enumerate(offsets):
-        sw = experiments.prior_velocity_sweep(velocities, depth_offset=offset)
+        sw = beyond_sweeps.prior_velocity_sweep(velocities, depth_offset=offset)
         assert_allclose(m["ekf_depth_sd"][i], sw["ekf"]["depth_sd"], rtol=1e-12)
         assert_allclose(m["optimal_depth_sd"][i], sw["optimal"]["depth_sd"], rtol=1e-8)
     signs = np.sign(m["log10_sd_ratio"][0])
@@ -233,13 +235,13 @@ def test_prior_mean_map_rows_are_velocity_sweeps_and_change_sign():
 
 def test_prior_mean_map_rejects_a_prior_behind_the_camera():
     with pytest.raises(ValueError, match="offsets"):
-        experiments.prior_mean_map([-4.5], [0.0])
+        beyond_sweeps.prior_mean_map([-4.5], [0.0])
 
 
 def test_ekf_linearisation_rows_give_eq24_and_the_residual_gradients():
     for v0 in (0.0, 0.95, FIG2.c[2]):
         prior = _prior_with_velocity(v0)
-        lin = experiments.ekf_linearisation(FIG2.mu, FIG2.rho, prior)
+        lin = paper.ekf_linearisation(FIG2.mu, FIG2.rho, prior)
         P3 = ekf.ekf(FIG2.mu, FIG2.rho, prior).posterior.cov
         F2 = np.array([[1.0, 0.0, -2.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
         eq24 = lin["rows"].T @ lin["rows"] / FIG2.rho**2 + F2.T @ np.linalg.solve(prior.cov, F2)
@@ -252,7 +254,7 @@ def test_ekf_linearisation_rows_give_eq24_and_the_residual_gradients():
 
 
 def test_bearings_depth_sd_is_the_broad_prior_limit():
-    lin = experiments.ekf_linearisation(FIG2.mu, FIG2.rho, FIG2.prior)
+    lin = paper.ekf_linearisation(FIG2.mu, FIG2.rho, FIG2.prior)
     R = lin["rows"]
     direct = FIG2.rho * np.sqrt(np.linalg.inv(R.T @ R)[1, 1])
     assert_allclose(lin["bearings_depth_sd"], direct, rtol=1e-8)
@@ -260,14 +262,14 @@ def test_bearings_depth_sd_is_the_broad_prior_limit():
     assert abs(lin["bearings_depth_sd"] / lin["depth_sd"][-1] - 1) < 1e-3
     # bearings with no depth component leave the depth unresolved
     blind = np.array([[0.25, 0.0, 0.0], [0.2, 0.0, 0.0], [0.17, 0.0, 0.0]])
-    assert experiments.bearings_depth_sd(blind, 0.01) == np.inf
+    assert paper.bearings_depth_sd(blind, 0.01) == np.inf
     with pytest.raises(ValueError, match="rho"):
-        experiments.bearings_depth_sd(lin["h"], 0.0)
+        paper.bearings_depth_sd(lin["h"], 0.0)
 
 
 def test_truncated_bearing_moments_against_monte_carlo_and_the_pole():
     mean, cov = FIG2.prior.mean, FIG2.prior.cov
-    r = experiments.truncated_bearing_moments(mean, cov, [1.0, 1e-2, 1e-4])
+    r = beyond_filters.truncated_bearing_moments(mean, cov, [1.0, 1e-2, 1e-4])
     rng = np.random.default_rng(5)
     xy = rng.multivariate_normal(mean[:2], cov[:2, :2], 1_000_000)
     keep = np.abs(xy[:, 1]) > 1.0
@@ -279,12 +281,12 @@ def test_truncated_bearing_moments_against_monte_carlo_and_the_pole():
     assert_allclose(r["mass"][1:] / r["eps"][1:], 2 * p0, rtol=1e-3)
     assert_allclose(r["second_moment"][2] * 1e-4, 2 * p0 * (mean[0] ** 2 + cov[0, 0]), rtol=1e-3)
     with pytest.raises(ValueError, match="eps"):
-        experiments.truncated_bearing_moments(mean, cov, [0.0])
+        beyond_filters.truncated_bearing_moments(mean, cov, [0.0])
 
 
 def test_truth_study_gathers_the_study_at_each_truth():
     truths = np.array([FIG2.c, SCENARIOS["fig3"].c])
-    r = experiments.truth_study(truths, FIG2.rho, trials=30, seed=2, names=("optimal", "ekf"))
+    r = beyond_study.truth_study(truths, FIG2.rho, trials=30, seed=2, names=("optimal", "ekf"))
     direct = study.study(truths[1], FIG2.rho, trials=30, seed=2, names=("optimal", "ekf"))
     assert_allclose(r["truth"], truths)
     assert r["valid_trials"][1] == direct["valid_trials"]
@@ -297,11 +299,11 @@ def test_truth_study_gathers_the_study_at_each_truth():
 @pytest.mark.parametrize("bad", [np.zeros(3), np.zeros((2, 2)), np.full((1, 3), np.nan)])
 def test_truth_study_rejects_bad_truths(bad):
     with pytest.raises(ValueError, match="truths"):
-        experiments.truth_study(bad, FIG2.rho, trials=10, seed=0)
+        beyond_study.truth_study(bad, FIG2.rho, trials=10, seed=0)
 
 
 def test_resample_move_runs_are_the_filter_run_on_independent_streams():
-    r = experiments.resample_move_runs(FIG2, 2000, 3, seed=3, moves=5)
+    r = beyond_filters.resample_move_runs(FIG2, 2000, 3, seed=3, moves=5)
     exact = optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior)
     assert r["exact"]["depth_sd"] == exact.depth_sd
     streams = np.random.SeedSequence(3).spawn(3)
@@ -319,9 +321,9 @@ def test_resample_move_runs_are_the_filter_run_on_independent_streams():
 
 def test_resample_move_runs_rejects_bad_arguments():
     with pytest.raises(ValueError, match="scenario"):
-        experiments.resample_move_runs("fig2", 100, 2, seed=0)
+        beyond_filters.resample_move_runs("fig2", 100, 2, seed=0)
     with pytest.raises(ValueError, match="repeats"):
-        experiments.resample_move_runs(FIG2, 100, 1, seed=0)
+        beyond_filters.resample_move_runs(FIG2, 100, 1, seed=0)
 
 
 # --- the Rao-Blackwellised particle filter against the bank ----------------------------
@@ -335,16 +337,16 @@ def _rbpf_track():
 
 def test_rbpf_convergence_measures_each_cloud_from_the_exact_bank():
     mu, rho, pm, pc = _rbpf_track()
-    r = experiments.rbpf_convergence(mu, rho, pm, pc, [20, 600], 4, seed=11, process_noise=0.01)
+    r = beyond_linear.rbpf_convergence(mu, rho, pm, pc, [20, 600], 4, seed=11, process_noise=0.01)
     exact = bank.posterior(mu, rho, pm, pc, 0.01)
     assert r["frames"] == 6 and r["replicas"] == 4 and list(r["sizes"]) == [20, 600]
     assert r["exact"]["depth_mean"] == pytest.approx(float(exact.depth_mean), rel=1e-14)
     assert r["exact_error"]["depth"] == pytest.approx(float(exact.depth_error), rel=1e-14)
     # the runs are the filter's own clouds, from the seed's child streams
-    stream = np.random.default_rng(experiments._checks.spawn(11, 2)[1])
+    stream = np.random.default_rng(_checks.spawn(11, 2)[1])
     again = rbpf.run(mu, rho, pm, pc, 600, stream, q=0.01, replicas=4).replica_moments()
     assert np.array_equal(r["runs"]["depth_sd"][1], again.depth_sd)
-    for m in experiments.MOMENTS:
+    for m in beyond_filters.MOMENTS:
         runs = r["runs"][m]
         assert runs.shape == (2, 4)
         assert_allclose(r["rmse"][m], np.sqrt(np.mean((runs - r["exact"][m]) ** 2, axis=1)))
@@ -366,4 +368,4 @@ def test_rbpf_convergence_refuses_bad_input(kwargs, message):
     mu, rho, pm, pc = _rbpf_track()
     args = dict(mu=mu, rho=rho, prior_mean=pm, prior_cov=pc, sizes=[10], replicas=2, seed=1)
     with pytest.raises(ValueError, match=message):
-        experiments.rbpf_convergence(**dict(args, **kwargs))
+        beyond_linear.rbpf_convergence(**dict(args, **kwargs))

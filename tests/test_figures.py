@@ -9,7 +9,8 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from numpy.testing import assert_allclose  # noqa: E402
 
-from depthcore import experiments, figures, reproduce  # noqa: E402
+from depthcore import reproduce  # noqa: E402
+from depthcore.book import beyond_filters, beyond_linear, beyond_study, beyond_sweeps, paper, style
 from depthcore.filters import NAMES, PAPER_FILTERS  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
@@ -19,11 +20,11 @@ FIG2 = SCENARIOS["fig2"]
 @pytest.mark.parametrize("key", list(SCENARIOS))
 @pytest.mark.parametrize("filters", [PAPER_FILTERS, NAMES])
 def test_figure_draws_the_filters(key, filters):
-    fig = figures.figure(key, n=101, filters=filters)
+    fig = paper.figure(key, n=101, filters=filters)
     ax = fig.axes[0]
-    overlay = [figures.PRINTED_STYLE["label"]] if key in figures.PRINTED_OVERLAY else []
+    overlay = [paper.PRINTED_STYLE["label"]] if key in paper.PRINTED_OVERLAY else []
     assert [line.get_label() for line in ax.get_lines()] == overlay + [
-        figures.STYLE[f]["label"] for f in filters
+        style.STYLE[f]["label"] for f in filters
     ]
     assert f"Figure {SCENARIOS[key].figure}" in ax.get_title()
     assert ("extended" in ax.get_title()) == (len(filters) == 5)
@@ -33,30 +34,31 @@ def test_figure_draws_the_filters(key, filters):
 def test_figure_3_overlays_the_printed_reading_of_eq16():
     # The curve the paper's Eq. (16) gives as printed, drawn beside the faithful one.
     from depthcore import optimal
+    from depthcore.book import paper, style
 
     s = SCENARIOS["fig3"]
-    fig = figures.figure("fig3", n=101)
+    fig = paper.figure("fig3", n=101)
     lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
-    x, y = lines[figures.PRINTED_STYLE["label"]].get_data()
+    x, y = lines[paper.PRINTED_STYLE["label"]].get_data()
     printed = optimal.marginals(s.mu, s.rho, s.prior, reading="printed")
     assert_allclose(y, printed.depth_pdf(x), rtol=1e-12)
-    assert_allclose(x, np.linspace(*figures.GRIDS["fig3"], 101))
+    assert_allclose(x, np.linspace(*paper.GRIDS["fig3"], 101))
     # it differs from the faithful optimal curve drawn beside it
-    _, faithful = lines[figures.STYLE["optimal"]["label"]].get_data()
+    _, faithful = lines[style.STYLE["optimal"]["label"]].get_data()
     assert np.max(np.abs(y - faithful)) > 0.01
     plt.close(fig)
 
 
 def test_prior_velocity_sweep_and_map_figures_draw_the_data():
-    sw = experiments.prior_velocity_sweep([0.0, 0.95, 2.0])
-    fig = figures.sweep(sw, "velocity", "depth_sd", log_y=True)
+    sw = beyond_sweeps.prior_velocity_sweep([0.0, 0.95, 2.0])
+    fig = beyond_sweeps.sweep(sw, "velocity", "depth_sd", log_y=True)
     ax = fig.axes[0]
     assert ax.get_yscale() == "log" and len(ax.get_lines()) == 4
-    ekf_line = [ln for ln in ax.get_lines() if ln.get_label() == figures.STYLE["ekf"]["label"]][0]
+    ekf_line = [ln for ln in ax.get_lines() if ln.get_label() == style.STYLE["ekf"]["label"]][0]
     assert_allclose(ekf_line.get_ydata(), sw["ekf"]["depth_sd"])
     plt.close(fig)
-    m = experiments.prior_mean_map([0.0, 1.0, 2.0], [-1.0, 0.0, 0.95, 2.0])
-    fig = figures.prior_mean_map_figure(m, {"paper": (0.0, 0.0)})
+    m = beyond_sweeps.prior_mean_map([0.0, 1.0, 2.0], [-1.0, 0.0, 0.95, 2.0])
+    fig = beyond_sweeps.prior_mean_map_figure(m, {"paper": (0.0, 0.0)})
     mesh = fig.axes[0].collections[0]
     assert_allclose(np.asarray(mesh.get_array()).reshape(3, 4), m["log10_sd_ratio"])
     assert [t.get_text() for t in fig.axes[0].texts] == ["paper"]
@@ -80,17 +82,18 @@ def test_curves_reject_unknown_quantity_or_filter():
 
 
 def test_calibration_and_sweep_figures():
-    from depthcore import experiments, study
+    from depthcore import study
+    from depthcore.book import beyond_sweeps
 
     r = study.study(trials=20, seed=0, n_particles=200)
-    fig = figures.calibration(r)
+    fig = beyond_study.calibration(r)
     assert len(fig.axes[0].get_lines()) == 1 + len(r["filters"])
     plt.close(fig)
-    sw = experiments.noise_sweep([1 / 500, 1 / 200])
-    fig = figures.sweep(sw, "rho", log_x=True)
+    sw = beyond_sweeps.noise_sweep([1 / 500, 1 / 200])
+    fig = beyond_sweeps.sweep(sw, "rho", log_x=True)
     assert len(fig.axes[0].get_lines()) == 3  # the optimal filter is the reference
     plt.close(fig)
-    fig = figures.sweep(experiments.prior_offset_sweep([0.0, 2.0]), "offset", "depth_mean")
+    fig = beyond_sweeps.sweep(beyond_sweeps.prior_offset_sweep([0.0, 2.0]), "offset", "depth_mean")
     assert len(fig.axes[0].get_lines()) == 4
     plt.close(fig)
 
@@ -101,47 +104,47 @@ def test_readings_figure_draws_both_readings():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig = figures.readings_figure("fig3", n=101)
+    fig = paper.readings_figure("fig3", n=101)
     labels = [line.get_label() for line in fig.axes[0].get_lines()]
     assert labels[0].startswith("from Eq. (6) (mean 20.74")
     assert any(label.startswith("Eq. (16) as printed (mean 67.45") for label in labels)
     plt.close(fig)
     with pytest.raises(ValueError, match="y_max"):
-        figures.readings_figure("fig3", y_max=1.0)
+        paper.readings_figure("fig3", y_max=1.0)
 
 
 def test_ellipse_lies_at_two_mahalanobis_units():
     mean, cov = np.array([1.0, -2.0]), np.array([[2.0, 0.6], [0.6, 1.0]])
-    pts = figures._ellipse(mean, cov)
+    pts = beyond_filters._ellipse(mean, cov)
     d = pts - mean
     assert_allclose(np.einsum("ni,ni->n", d, np.linalg.solve(cov, d.T).T), 4.0, rtol=1e-12)
 
 
 def test_first_update_figure_draws_both_filters():
-    fig = figures.first_update_figure(experiments.first_update(FIG2))
+    fig = beyond_filters.first_update_figure(beyond_filters.first_update(FIG2))
     labels = [line.get_label() for line in fig.axes[0].get_lines()]
     for name in ("ekf", "ukf"):
-        assert any(label.startswith(figures.STYLE[name]["label"]) for label in labels)
+        assert any(label.startswith(style.STYLE[name]["label"]) for label in labels)
     plt.close(fig)
 
 
 @pytest.fixture(scope="module")
 def convergence():
-    return experiments.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
+    return beyond_filters.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
 
 
 def test_convergence_figure_draws_each_setting_and_the_reference(convergence):
-    fig = figures.convergence_figure(convergence)
+    fig = beyond_filters.convergence_figure(convergence)
     assert len(fig.axes) == 2
-    assert len(fig.axes[0].get_lines()) == len(experiments.SETTINGS) + 1
+    assert len(fig.axes[0].get_lines()) == len(beyond_filters.SETTINGS) + 1
     assert fig.axes[0].get_xscale() == "log" and fig.axes[0].get_yscale() == "log"
     plt.close(fig)
     with pytest.raises(ValueError, match="quantity must be one of"):
-        figures.convergence_figure(convergence, "position")
+        beyond_filters.convergence_figure(convergence, "position")
 
 
 def test_profile_figure_draws_each_noise_level():
-    fig = figures.profile_figure(FIG2.mu, [1 / 200, 1 / 50], np.geomspace(2.5, 100, 50))
+    fig = beyond_sweeps.profile_figure(FIG2.mu, [1 / 200, 1 / 50], np.geomspace(2.5, 100, 50))
     assert [line.get_label() for line in fig.axes[0].get_lines()] == ["rho = 1/200", "rho = 1/50"]
     plt.close(fig)
 
@@ -150,7 +153,7 @@ def test_figure_1_draws_the_bearings_of_figure_2s_measurements():
     # Figure 1 draws the noise-free state c of Figure 2 at times 1-3: each ray
     # runs from the camera at the origin to (x_i, y_i), and crosses the image
     # line y = 1 at the measurement mu_i of Eq. (17), (-3/10, 0, 1/5).
-    fig = figures.translating_point()
+    fig = paper.translating_point()
     ax = fig.axes[0]
     lines = [line.get_xydata() for line in ax.get_lines()]
     rays = [xy for xy in lines if len(xy) == 2 and np.allclose(xy[0], 0.0)]
@@ -166,11 +169,11 @@ def test_figure_1_draws_the_bearings_of_figure_2s_measurements():
 
 def test_figure_1_rejects_a_point_at_or_behind_the_image_line():
     with pytest.raises(ValueError, match="^x3: the point must be beyond"):
-        figures.translating_point([0.0, 2.5, 0.0])
+        paper.translating_point([0.0, 2.5, 0.0])
     with pytest.raises(ValueError, match="^x3: expected a state"):
-        figures.translating_point([1.0, 6.0])
+        paper.translating_point([1.0, 6.0])
     with pytest.raises(ValueError, match="^n: at least 2"):
-        figures.translating_point(n=1)
+        paper.translating_point(n=1)
 
 
 def _lines(ax):
@@ -187,13 +190,14 @@ def test_figure_draws_the_densities_of_each_filter(key):
     # The drawn curves, against the filters' own marginals computed here:
     # the optimal filter's quadrature density and the Gaussian ones of Eq. (13).
     from depthcore import optimal
+    from depthcore.book import paper, style
     from depthcore.ekf import ekf
     from depthcore.second_order import second_order
 
     s = SCENARIOS[key]
-    fig = figures.figure(key, n=201)
+    fig = paper.figure(key, n=201)
     lines = _lines(fig.axes[0])
-    grid = np.linspace(*figures.GRIDS[key], 201)
+    grid = np.linspace(*paper.GRIDS[key], 201)
     comp = {"depth": "y", "velocity": "v"}[s.quantity]
     m = optimal.marginals(s.mu, s.rho, s.prior)
     pdf = m.depth_pdf if s.quantity == "depth" else m.velocity_pdf
@@ -203,7 +207,7 @@ def test_figure_draws_the_densities_of_each_filter(key):
         "ekf": _normal_pdf(grid, *ekf(s.mu, s.rho, s.prior).posterior.marginal(comp)),
     }
     for name, y in want.items():
-        x_drawn, y_drawn = lines[figures.STYLE[name]["label"]]
+        x_drawn, y_drawn = lines[style.STYLE[name]["label"]]
         assert_allclose(x_drawn, grid, rtol=1e-15)
         assert_allclose(y_drawn, y, rtol=1e-9, atol=1e-12 * np.max(y))
     plt.close(fig)
@@ -213,26 +217,27 @@ def test_extended_figure_draws_the_curves_of_every_filter():
     from depthcore.ukf import ukf
 
     s = FIG2
-    fig = figures.figure("fig2", n=101, filters=NAMES)
+    fig = paper.figure("fig2", n=101, filters=NAMES)
     lines = _lines(fig.axes[0])
-    grid = np.linspace(*figures.GRIDS["fig2"], 101)
+    grid = np.linspace(*paper.GRIDS["fig2"], 101)
     c = reproduce.curves(s, grid, filters=NAMES)
     for name in NAMES:
-        assert_allclose(lines[figures.STYLE[name]["label"]][1], c[name], rtol=1e-12, atol=0)
+        assert_allclose(lines[style.STYLE[name]["label"]][1], c[name], rtol=1e-12, atol=0)
     u = ukf(s.mu, s.rho, s.prior, allow_behind_camera=True).posterior.marginal("y")
     u = _normal_pdf(grid, *u)
-    assert_allclose(lines[figures.STYLE["ukf"]["label"]][1], u, rtol=1e-9)
+    assert_allclose(lines[style.STYLE["ukf"]["label"]][1], u, rtol=1e-9)
     # the particle filter's kernel estimate integrates to one and sits on the optimal curve
-    p, o = lines[figures.STYLE["particle"]["label"]][1], lines[figures.STYLE["optimal"]["label"]][1]
+    p, o = lines[style.STYLE["particle"]["label"]][1], lines[style.STYLE["optimal"]["label"]][1]
     assert np.max(np.abs(p - o)) < 0.1 * np.max(o)
     plt.close(fig)
 
 
 def test_readings_figure_draws_both_densities_and_their_means():
     from depthcore import optimal
+    from depthcore.book import paper
 
     s = SCENARIOS["fig3"]
-    fig = figures.readings_figure("fig3", y_max=60.0, n=301)
+    fig = paper.readings_figure("fig3", y_max=60.0, n=301)
     ax = fig.axes[0]
     y = np.linspace(2.0, 60.0, 301)[1:]
     drawn = [line for line in ax.get_lines() if len(line.get_xdata()) == len(y)]
@@ -250,8 +255,8 @@ def test_readings_figure_draws_both_densities_and_their_means():
 
 
 def test_first_update_figure_draws_the_ellipses_and_sigma_points():
-    u = experiments.first_update(FIG2)
-    fig = figures.first_update_figure(u, extent=50.0)
+    u = beyond_filters.first_update(FIG2)
+    fig = beyond_filters.first_update_figure(u, extent=50.0)
     lines = _lines(fig.axes[0])
     x, y = lines[r"bearing of $\mu_1$: $x = \mu_1 y$"]
     assert_allclose(x, u["mu1"] * np.asarray(y), rtol=1e-15)
@@ -261,8 +266,8 @@ def test_first_update_figure_draws_the_ellipses_and_sigma_points():
     assert_allclose(np.column_stack([sx, sy]), X[:, :2], rtol=1e-15)
     for label, (mean, cov) in (
         ("prior, 2 SD", (u["prior"].mean, u["prior"].cov)),
-        (f"{figures.STYLE['ekf']['label']} after $\\mu_1$, 2 SD", u["ekf"]),
-        (f"{figures.STYLE['ukf']['label']} after $\\mu_1$, 2 SD", u["ukf"]),
+        (f"{style.STYLE['ekf']['label']} after $\\mu_1$, 2 SD", u["ekf"]),
+        (f"{style.STYLE['ukf']['label']} after $\\mu_1$, 2 SD", u["ukf"]),
     ):
         pts = np.column_stack(lines[label]) - mean[:2]
         c = cov[:2, :2]
@@ -276,7 +281,7 @@ def test_first_update_figure_draws_the_ellipses_and_sigma_points():
 
 def test_convergence_figure_draws_the_errors_and_the_ideal_line(convergence):
     for quantity in ("depth", "velocity"):
-        fig = figures.convergence_figure(convergence, quantity)
+        fig = beyond_filters.convergence_figure(convergence, quantity)
         N = np.asarray(convergence["sizes"])
         for ax, moment in zip(fig.axes, ("mean", "sd"), strict=True):
             lines = ax.get_lines()
@@ -294,7 +299,7 @@ def test_profile_figure_draws_the_profile_likelihood():
 
     depths = np.array([3.0, 4.0, 5.0, 8.0, 20.0])
     rhos = [1 / 200, 1 / 50]
-    fig = figures.profile_figure(FIG2.mu, rhos, depths)
+    fig = beyond_sweeps.profile_figure(FIG2.mu, rhos, depths)
     mu = np.asarray(FIG2.mu)
     back = np.array([2.0, 1.0, 0.0])
     for line, rho in zip(fig.axes[0].get_lines(), rhos, strict=True):
@@ -313,38 +318,39 @@ def test_profile_figure_draws_the_profile_likelihood():
 
 def test_calibration_and_sweep_figures_draw_their_results():
     from depthcore import study
+    from depthcore.book import beyond_sweeps, style
 
     r = study.study(trials=20, seed=0, names=("optimal", "ekf"))
     for quantity in ("depth", "velocity"):
-        fig = figures.calibration(r, quantity)
+        fig = beyond_study.calibration(r, quantity)
         lines = fig.axes[0].get_lines()
         assert_allclose(lines[0].get_xydata(), [[0, 0], [1, 1]])
         for line, f in zip(lines[1:], r["filters"].values(), strict=True):
             assert_allclose(line.get_xdata(), f["calibration"]["levels"])
             assert_allclose(line.get_ydata(), f["calibration"][quantity])
         plt.close(fig)
-    sw = experiments.prior_offset_sweep([0.0, 1.0, 2.0])
+    sw = beyond_sweeps.prior_offset_sweep([0.0, 1.0, 2.0])
     for field in ("hellinger", "depth_mean", "depth_sd"):
-        fig = figures.sweep(sw, "offset", field)
+        fig = beyond_sweeps.sweep(sw, "offset", field)
         drawn = {line.get_label(): line for line in fig.axes[0].get_lines()}
         names = [n for n in NAMES if n in sw]
         if field == "hellinger":
             names.remove("optimal")
         assert len(drawn) == len(names)
         for name in names:
-            line = drawn[figures.STYLE[name]["label"]]
+            line = drawn[style.STYLE[name]["label"]]
             assert_allclose(line.get_xdata(), sw["offset"])
             assert_allclose(line.get_ydata(), sw[name][field])
         plt.close(fig)
 
 
 def test_noise_study_figure_draws_coverage_and_rmse():
-    r = experiments.noise_study([1 / 400, 1 / 100], trials=20, seed=1, names=("optimal", "ekf"))
-    fig = figures.noise_study_figure(r)
+    r = beyond_sweeps.noise_study([1 / 400, 1 / 100], trials=20, seed=1, names=("optimal", "ekf"))
+    fig = beyond_sweeps.noise_study_figure(r)
     for ax, field in zip(fig.axes, ("coverage_68", "rmse"), strict=True):
         drawn = {bar.get_label(): bar for bar in ax.containers}
         for name in ("optimal", "ekf"):
-            bar = drawn[figures.STYLE[name]["label"]]
+            bar = drawn[style.STYLE[name]["label"]]
             line, _, (segments,) = bar.lines
             assert_allclose(line.get_xdata(), r["rho"])
             assert_allclose(line.get_ydata(), r[name][field])
@@ -369,11 +375,12 @@ def fig2_track():
 
 def test_bank_depth_figure_draws_one_curve_per_frame(fig2_track):
     from depthcore import bank
+    from depthcore.book import beyond_linear
 
     sim, tr = fig2_track
     frames = [3, 4, 6]
     d = {k: bank.node_density(tr.posteriors[k - 1]) for k in frames}
-    fig = figures.bank_depth_figure(d, {k: sim.states[k - 1, 1] for k in frames})
+    fig = beyond_linear.bank_depth_figure(d, {k: sim.states[k - 1, 1] for k in frames})
     labels = [line.get_label() for line in fig.axes[0].get_lines()]
     assert [lab for lab in labels if lab.startswith("after")] == [
         f"after frame {k}" for k in frames
@@ -381,27 +388,27 @@ def test_bank_depth_figure_draws_one_curve_per_frame(fig2_track):
     assert len(fig.axes[1].get_lines()) == len(frames) + 1  # a curve per frame and the zero
     plt.close(fig)
     with pytest.raises(ValueError, match="densities must hold at least one frame"):
-        figures.bank_depth_figure({})
+        beyond_linear.bank_depth_figure({})
 
 
 def test_smoothing_figure_draws_the_three_estimates_minus_the_truth(fig2_track):
     sim, tr = fig2_track
-    fig = figures.smoothing_figure(tr, sim.states, first=2)
+    fig = beyond_linear.smoothing_figure(tr, sim.states, first=2)
     for ax, i in zip(fig.axes, (1, 0), strict=True):
         lines = ax.get_lines()[:3]
         assert [line.get_label() for line in lines][0] == "filtered"
         assert_allclose(lines[2].get_ydata(), tr.interval.mean[1:, i] - sim.states[1:, i])
     plt.close(fig)
     with pytest.raises(ValueError, match="first must be a frame from 1 to 6"):
-        figures.smoothing_figure(tr, sim.states, first=7)
+        beyond_linear.smoothing_figure(tr, sim.states, first=7)
 
 
 def test_rbpf_convergence_figure_draws_the_errors(fig2_track):
     sim, _ = fig2_track
-    r = experiments.rbpf_convergence(
+    r = beyond_linear.rbpf_convergence(
         sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, [10, 40], 3, seed=1, process_noise=0.01
     )
-    fig = figures.rbpf_convergence_figure(r)
+    fig = beyond_linear.rbpf_convergence_figure(r)
     first = fig.axes[0].get_lines()[0]
     assert_allclose(first.get_ydata(), r["rmse"]["depth_mean"])
     assert_allclose(first.get_xdata(), [10, 40])

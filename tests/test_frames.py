@@ -10,7 +10,8 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import stats
 
-from depthcore import SCENARIOS, experiments, figures, model, report, study
+from depthcore import SCENARIOS, model, study
+from depthcore.book import beyond_conjecture, beyond_frames
 from depthcore.filters import FILTERS
 from depthcore.gaussian import paper_prior_means
 
@@ -19,7 +20,7 @@ FIG2 = SCENARIOS["fig2"]
 
 @pytest.fixture(scope="module")
 def frames_run():
-    return experiments.frames_study(
+    return beyond_frames.frames_study(
         [3, 6],
         40,
         5,
@@ -59,13 +60,13 @@ def test_frames_study_entries_are_the_direct_studies(frames_run):
 
 def test_frames_study_with_process_noise_refuses_a_filter_without_it():
     with pytest.raises(ValueError, match="particle"):
-        experiments.frames_study([4], 5, 0, ("particle",), process_noise=0.01)
+        beyond_frames.frames_study([4], 5, 0, ("particle",), process_noise=0.01)
 
 
 def test_coverage_test_is_the_normal_approximation_to_the_binomial():
     n = np.array([100, 400, 2000])
     k = np.array([60, 240, 1420])
-    t = experiments.coverage_test(k / n, 0.68, n)
+    t = beyond_frames.coverage_test(k / n, 0.68, n)
     # independent route: the two-sided p-value of the standardised count
     z = (k - n * 0.68) / np.sqrt(n * 0.68 * 0.32)
     p = 2 * stats.norm.sf(np.abs(z))
@@ -74,14 +75,14 @@ def test_coverage_test_is_the_normal_approximation_to_the_binomial():
     expected = np.where(p >= 0.01, "calibrated", np.where(z < 0, "overconfident", "underconfident"))
     assert list(t["verdict"]) == list(expected)
     assert list(t["verdict"]) == ["calibrated", "overconfident", "underconfident"]
-    assert experiments.coverage_test(0.99, 0.95, 1000)["verdict"] == "underconfident"
+    assert beyond_frames.coverage_test(0.99, 0.95, 1000)["verdict"] == "underconfident"
 
 
 def test_coverage_test_flags_a_calibrated_filter_at_its_false_alarm_rate():
     rng = np.random.default_rng(0)
     n, level = 500, 0.95
     coverage = rng.binomial(n, level, size=20_000) / n
-    flagged = np.mean(experiments.coverage_test(coverage, level, n)["verdict"] != "calibrated")
+    flagged = np.mean(beyond_frames.coverage_test(coverage, level, n)["verdict"] != "calibrated")
     # the normal approximation at 1 %, within a few Monte Carlo SEs (and the lattice)
     assert 0.004 < flagged < 0.02
 
@@ -98,7 +99,7 @@ def test_coverage_test_flags_a_calibrated_filter_at_its_false_alarm_rate():
 def test_coverage_test_rejects_bad_input(kwargs, match):
     args = {"coverage": 0.5, "level": 0.68, "trials": 10, **kwargs}
     with pytest.raises(ValueError, match=match):
-        experiments.coverage_test(**args)
+        beyond_frames.coverage_test(**args)
 
 
 @pytest.fixture(scope="module")
@@ -108,7 +109,7 @@ def track():
 
 
 def test_frame_marginals_are_the_filters_on_the_first_frames(track):
-    m = experiments.frame_marginals(track, FIG2.rho, [3, 8], ("ekf", "second_order"))
+    m = beyond_frames.frame_marginals(track, FIG2.rho, [3, 8], ("ekf", "second_order"))
     pm = paper_prior_means(model.noise_free_states(track[None, :3]))[0]
     for r, n in zip(m, (3, 8), strict=True):
         assert r["frames"] == n
@@ -124,7 +125,7 @@ def test_frame_marginals_are_the_filters_on_the_first_frames(track):
             assert o * (1 - 3e-2) < on_grid < o
         else:
             assert_allclose(on_grid, o, rtol=1e-4)
-    fig = figures.frame_marginals_figure(m)
+    fig = beyond_frames.frame_marginals_figure(m)
     assert fig.axes[0].get_title() == "N = 3"
     assert len(fig.axes) == 4
     plt.close(fig)
@@ -132,21 +133,21 @@ def test_frame_marginals_are_the_filters_on_the_first_frames(track):
 
 def test_frame_marginals_reject_bad_input(track):
     with pytest.raises(ValueError, match="frames"):
-        experiments.frame_marginals(track, FIG2.rho, [9])
+        beyond_frames.frame_marginals(track, FIG2.rho, [9])
     with pytest.raises(ValueError, match="rng"):
-        experiments.frame_marginals(track, FIG2.rho, [3], ("particle",))
+        beyond_frames.frame_marginals(track, FIG2.rho, [3], ("particle",))
     with pytest.raises(ValueError, match="mu"):
-        experiments.frame_marginals(track[:2], FIG2.rho, [3])
+        beyond_frames.frame_marginals(track[:2], FIG2.rho, [3])
 
 
 def test_frames_study_texts_count_the_failed_coverage_tests(frames_run):
-    texts = report.frames_study_texts(frames_run, "f")
+    texts = beyond_frames.frames_study_texts(frames_run, "f")
     assert texts["f_tests"] == "4"
     assert set(texts) == {"f_tests"} | {f"f_{n}_fails" for n in frames_run if n in FILTERS}
     for name in ("optimal", "ekf", "second_order", "particle"):
         r = frames_run[name]
         fails = sum(
-            experiments.coverage_test(r[f"coverage_{lv}"][i], lv / 100, r["trials"][i])["verdict"]
+            beyond_frames.coverage_test(r[f"coverage_{lv}"][i], lv / 100, r["trials"][i])["verdict"]
             != "calibrated"
             for lv in (68, 95)
             for i in range(2)
@@ -155,8 +156,8 @@ def test_frames_study_texts_count_the_failed_coverage_tests(frames_run):
 
 
 def test_frames_study_figure_draws_every_filter(frames_run):
-    fig = figures.frames_study_figure(frames_run, title="a")
-    assert len(fig.axes) == len(figures.FRAMES_ROWS)
+    fig = beyond_frames.frames_study_figure(frames_run, title="a")
+    assert len(fig.axes) == len(beyond_frames.FRAMES_ROWS)
     assert fig.get_suptitle() == "a"
     # the Hellinger panel leaves the reference out
     assert len(fig.axes[2].get_lines()) == 3
@@ -166,28 +167,28 @@ def test_frames_study_figure_draws_every_filter(frames_run):
     assert len(trials) == 2
     for ax, level in zip(fig.axes[4:], (0.68, 0.95), strict=True):
         bands = sorted((p.get_y(), p.get_y() + p.get_height()) for p in ax.patches)
-        half = experiments.COVERAGE_Z * np.sqrt(level * (1 - level) / np.array(trials))
+        half = beyond_frames.COVERAGE_Z * np.sqrt(level * (1 - level) / np.array(trials))
         assert_allclose(bands, np.stack([level - half, level + half], axis=1), rtol=1e-12)
     plt.close(fig)
 
 
 def test_conjecture_study_entries_are_frames_study_entries():
-    c = experiments.conjecture_study([3, 5], [1 / 200, 1 / 100], [6.0, 12.0], 30, 2)
+    c = beyond_conjecture.conjecture_study([3, 5], [1 / 200, 1 / 100], [6.0, 12.0], 30, 2)
     assert c["ekf"]["hellinger"].shape == (2, 2, 2)
     assert_allclose(c["truth"], [FIG2.c, 2 * FIG2.c], rtol=1e-12)
-    direct = experiments.frames_study(
+    direct = beyond_frames.frames_study(
         [3, 5], 30, 2, ("second_order", "ekf"), "fixed", truth=c["truth"][1], rho=1 / 100
     )
     for name in ("second_order", "ekf"):
         assert_allclose(c[name]["rmse"][1, 1], direct[name]["rmse"], rtol=0, atol=0)
         assert_allclose(c[name]["nees"][1, 1], direct[name]["nees"], rtol=0, atol=0)
     with pytest.raises(ValueError, match="depths"):
-        experiments.conjecture_study([3], [0.01], [2.0], 5, 0)
+        beyond_conjecture.conjecture_study([3], [0.01], [2.0], 5, 0)
 
 
 def test_conjecture_wins_compare_cell_by_cell():
-    c = experiments.conjecture_study([3, 5], [1 / 500, 1 / 100], [6.0, 12.0], 40, 4)
-    w = experiments.conjecture_wins(c)
+    c = beyond_conjecture.conjecture_study([3, 5], [1 / 500, 1 / 100], [6.0, 12.0], 40, 4)
+    w = beyond_conjecture.conjecture_wins(c)
     so, ekf = c["second_order"], c["ekf"]
     for idx in np.ndindex(so["rmse"].shape):
         assert w["hellinger"][idx] == (so["hellinger"][idx] < ekf["hellinger"][idx])
@@ -197,12 +198,12 @@ def test_conjecture_wins_compare_cell_by_cell():
         z_ekf = abs(ekf["coverage_68"][idx] - 0.68) / np.sqrt(0.68 * 0.32 / ekf["trials"][idx])
         assert w["coverage_68"][idx] == (z_so < z_ekf)
         assert w["calibrated_68"]["ekf"][idx] == (
-            abs(ekf["coverage_68"][idx] - 0.68) <= experiments.COVERAGE_Z * se
+            abs(ekf["coverage_68"][idx] - 0.68) <= beyond_frames.COVERAGE_Z * se
         )
-    texts = report.conjecture_texts(c, w, "cj")
+    texts = beyond_conjecture.conjecture_texts(c, w, "cj")
     assert texts["cj_cells"] == "4" and texts["cj_1_x"] == "5"
     assert texts["cj_0_hellinger"] == str(int(w["hellinger"][..., 0].sum()))
-    fig = figures.conjecture_figure(c)
+    fig = beyond_conjecture.conjecture_figure(c)
     assert len(fig.axes) == 6
     assert len(fig.axes[0].get_lines()) == 2 * 2  # two depths, two filters
     assert [t.get_text() for t in fig.legends[0].get_texts()] == [
@@ -220,25 +221,28 @@ FIG2 = SCENARIOS["fig2"]
 @pytest.mark.parametrize(
     "call, message",
     [
-        (lambda: experiments.frames_study([], 10, 1), "frames must hold at least one"),
-        (lambda: experiments.frames_study([2], 10, 1), "frames must be from 3"),
-        (lambda: experiments.frames_study([5000], 10, 1), "frames must be from 3"),
-        (lambda: experiments.frames_study([3.5], 10, 1), "frames must be an integer"),
-        (lambda: experiments.frames_study([3], 0, 1), "trials"),
-        (lambda: experiments.frames_study([3], 10, 1, prior="x"), "prior"),
-        (lambda: experiments.frames_study([4], 10, 1, process_noise=np.nan), "process_noise"),
-        (lambda: experiments.frames_study([4], 10, 1, rho=0.0), "rho"),
-        (lambda: experiments.frames_study([4], 10, 1, truth=[1, -5, 0]), "truth"),
-        (lambda: experiments.frame_marginals(FIG2.mu, FIG2.rho, []), "frames must hold"),
-        (lambda: experiments.frame_marginals(FIG2.mu, FIG2.rho, [4]), "frames must each be"),
-        (lambda: experiments.frame_marginals(FIG2.mu, FIG2.rho, [3], width=np.nan), "width"),
-        (lambda: experiments.coverage_test(0.5, 1.5, 100), "level"),
-        (lambda: experiments.coverage_test(np.nan, 0.68, 10), "coverage"),
-        (lambda: experiments.conjecture_study([3], [], [6], 10, 1), "rhos must hold"),
-        (lambda: experiments.conjecture_study([3], [0.005], [], 10, 1), "depths must hold"),
-        (lambda: experiments.conjecture_study([], [0.005], [6], 10, 1), "frames must hold"),
-        (lambda: experiments.conjecture_study([3], [0.005], [-1], 10, 1), "depths"),
-        (lambda: experiments.conjecture_study([3], [0.005], [6], 10, 1, bearing=np.nan), "bearing"),
+        (lambda: beyond_frames.frames_study([], 10, 1), "frames must hold at least one"),
+        (lambda: beyond_frames.frames_study([2], 10, 1), "frames must be from 3"),
+        (lambda: beyond_frames.frames_study([5000], 10, 1), "frames must be from 3"),
+        (lambda: beyond_frames.frames_study([3.5], 10, 1), "frames must be an integer"),
+        (lambda: beyond_frames.frames_study([3], 0, 1), "trials"),
+        (lambda: beyond_frames.frames_study([3], 10, 1, prior="x"), "prior"),
+        (lambda: beyond_frames.frames_study([4], 10, 1, process_noise=np.nan), "process_noise"),
+        (lambda: beyond_frames.frames_study([4], 10, 1, rho=0.0), "rho"),
+        (lambda: beyond_frames.frames_study([4], 10, 1, truth=[1, -5, 0]), "truth"),
+        (lambda: beyond_frames.frame_marginals(FIG2.mu, FIG2.rho, []), "frames must hold"),
+        (lambda: beyond_frames.frame_marginals(FIG2.mu, FIG2.rho, [4]), "frames must each be"),
+        (lambda: beyond_frames.frame_marginals(FIG2.mu, FIG2.rho, [3], width=np.nan), "width"),
+        (lambda: beyond_frames.coverage_test(0.5, 1.5, 100), "level"),
+        (lambda: beyond_frames.coverage_test(np.nan, 0.68, 10), "coverage"),
+        (lambda: beyond_conjecture.conjecture_study([3], [], [6], 10, 1), "rhos must hold"),
+        (lambda: beyond_conjecture.conjecture_study([3], [0.005], [], 10, 1), "depths must hold"),
+        (lambda: beyond_conjecture.conjecture_study([], [0.005], [6], 10, 1), "frames must hold"),
+        (lambda: beyond_conjecture.conjecture_study([3], [0.005], [-1], 10, 1), "depths"),
+        (
+            lambda: beyond_conjecture.conjecture_study([3], [0.005], [6], 10, 1, bearing=np.nan),
+            "bearing",
+        ),
     ],
 )
 def test_odd_arguments_are_refused_in_one_line_naming_them(call, message):

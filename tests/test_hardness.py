@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import SCENARIOS, bound, figures, hardness, model, report, study
+from depthcore import SCENARIOS, bound, hardness, model, study
+from depthcore.book import beyond_hard
 from depthcore.filters import FILTERS
 
 FIG2 = SCENARIOS["fig2"]
@@ -151,13 +152,13 @@ def test_hard_study_texts_and_figure():
     cells = hardness.hard_study(
         [(FIG2.c, 1.0, 0.0), (FIG2.c, 10.0, 0.0)], RHO, 8, 1, ("optimal", "ekf")
     )
-    t = report.hard_texts(cells, "h")
+    t = beyond_hard.hard_texts(cells, "h")
     assert t["h_0_x"] == "(1.2, 6, 1.2); 1 I; v₀ = 0"
     assert " ± " in t["h_1_prior_ekf_coverage_68"]
     assert t["h_0_d2"] == f"{cells[0]['second_difference']:.1f}"
     flat = [dict(cells[0], second_difference=-1e-12)]
-    assert report.hard_texts(flat, "h")["h_0_d2"] == "0.0"
-    fig = figures.hard_figure(cells, [("prior scale s", [0, 1], [1.0, 10.0], True)])
+    assert beyond_hard.hard_texts(flat, "h")["h_0_d2"] == "0.0"
+    fig = beyond_hard.hard_figure(cells, [("prior scale s", [0, 1], [1.0, 10.0], True)])
     assert len(fig.axes) == 2
     with pytest.raises(ValueError, match="cells"):
         hardness.hard_study([], RHO, 8, 1)

@@ -16,17 +16,40 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "depthcore"
-MODULES = sorted(p.stem for p in PACKAGE.glob("*.py"))
+
+
+def _module_name(path: Path) -> str:
+    """A source's module name below ``depthcore``: ``model``, ``book.paper``, ``book``."""
+    parts = path.relative_to(PACKAGE).with_suffix("").parts
+    if parts[-1] == "__init__" and len(parts) > 1:
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+#: Every module of the package by its name below ``depthcore``; a subpackage by its own name.
+PATHS = {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+MODULES = sorted(PATHS)
+#: The package's subpackages (their ``__init__``), where relative imports start from.
+SUBPACKAGES = {_module_name(p) for p in PACKAGE.rglob("__init__.py") if p.parent != PACKAGE}
+
+
+def _package(own: str | None) -> str:
+    """The package in which the module ``own`` resolves its relative imports."""
+    if own is None or own in SUBPACKAGES:
+        return own or ""
+    return own.rpartition(".")[0]
 
 
 def _private(name: str) -> bool:
     return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
 
 
-def _owner(node: ast.ImportFrom) -> str | None:
-    """The depthcore module an ``import from`` names, ``""`` for the package, else None."""
-    if node.level == 1:
-        return node.module or ""
+def _owner(node: ast.ImportFrom, package: str = "") -> str | None:
+    """The depthcore module that an ``import from`` in ``package`` names (``""``: the package)."""
+    if node.level >= 1:
+        base = package.split(".") if package else []
+        base = base[: len(base) - (node.level - 1)]
+        return ".".join(base + ([node.module] if node.module else []))
     if node.level == 0 and node.module is not None:
         parts = node.module.split(".")
         if parts[0] == "depthcore":
@@ -49,10 +72,10 @@ def defined_private(source: str) -> set[str]:
     return {n for n in names if _private(n)}
 
 
-DEFINED = {m: defined_private((PACKAGE / f"{m}.py").read_text(encoding="utf-8")) for m in MODULES}
+DEFINED = {m: defined_private(PATHS[m].read_text(encoding="utf-8")) for m in MODULES}
 
 
-def bound_modules(tree: ast.AST, modules) -> dict[str, str]:
+def bound_modules(tree: ast.AST, modules, package: str = "") -> dict[str, str]:
     """The local names bound to ``depthcore`` modules: ``from depthcore import x as y``, ...
 
     Returns
@@ -61,15 +84,18 @@ def bound_modules(tree: ast.AST, modules) -> dict[str, str]:
     """
     bound = {}
     for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and _owner(node) == "":
+        owner = _owner(node, package) if isinstance(node, ast.ImportFrom) else None
+        if owner is not None:
             for alias in node.names:
-                if alias.name in modules:
-                    bound[alias.asname or alias.name] = alias.name
+                full = f"{owner}.{alias.name}" if owner else alias.name
+                if full in modules:
+                    bound[alias.asname or alias.name] = full
         elif isinstance(node, ast.Import):
             for alias in node.names:
                 parts = alias.name.split(".")
-                if parts[0] == "depthcore" and len(parts) == 2 and alias.asname:
-                    bound[alias.asname] = parts[1]
+                name = ".".join(parts[1:])
+                if parts[0] == "depthcore" and name in modules and alias.asname:
+                    bound[alias.asname] = name
     return bound
 
 
@@ -80,9 +106,10 @@ def taken_names(tree: ast.AST, modules, own: str | None = None):
     ------
     tuple of (line, owner, name, description)
     """
-    bound = bound_modules(tree, modules)
+    package = _package(own)
+    bound = bound_modules(tree, modules, package)
     for node in ast.walk(tree):
-        owner = _owner(node) if isinstance(node, ast.ImportFrom) else None
+        owner = _owner(node, package) if isinstance(node, ast.ImportFrom) else None
         if owner in modules and owner != own:
             for alias in node.names:
                 yield node.lineno, owner, alias.name, f"imports {alias.name} from {owner}"
@@ -110,7 +137,7 @@ def private_uses(source: str, own: str, defined: dict[str, set[str]] | None = No
     others = set().union(*(names for m, names in defined.items() if m != own))
     mine = defined_private(source)
     tree = ast.parse(source)
-    modules = bound_modules(tree, MODULES)
+    modules = bound_modules(tree, MODULES, _package(own))
     found = [
         f"{line}: {how}" for line, _, name, how in taken_names(tree, MODULES, own) if _private(name)
     ]
@@ -152,7 +179,7 @@ def test_finds_what_it_looks_for():
 
 @pytest.mark.parametrize("module", MODULES)
 def test_no_module_uses_another_modules_private_names(module):
-    source = (PACKAGE / f"{module}.py").read_text(encoding="utf-8")
+    source = PATHS[module].read_text(encoding="utf-8")
     assert private_uses(source, module) == []
 
 
@@ -187,10 +214,12 @@ def _bound(statements) -> set[str]:
     return names
 
 
-DEFINES = {m: defined_names((PACKAGE / f"{m}.py").read_text(encoding="utf-8")) for m in MODULES}
+DEFINES = {m: defined_names(PATHS[m].read_text(encoding="utf-8")) for m in MODULES}
 
 
-def borrowed_uses(source: str, defines: dict[str, set[str]] | None = None) -> list[str]:
+def borrowed_uses(
+    source: str, defines: dict[str, set[str]] | None = None, own: str | None = None
+) -> list[str]:
     """Every name taken from a ``depthcore`` module that only imports it from another.
 
     ``from depthcore.particle import systematic`` and ``particle.systematic``
@@ -206,8 +235,10 @@ def borrowed_uses(source: str, defines: dict[str, set[str]] | None = None) -> li
     # a module's modules (``filters.optimal``) are the package's: not counted
     found = [
         f"{line}: {how}"
-        for line, owner, name, how in taken_names(tree, defines)
-        if name not in defines[owner] | set(defines) and not name.startswith("__")
+        for line, owner, name, how in taken_names(tree, defines, own)
+        if name not in defines[owner] | set(defines)
+        and f"{owner}.{name}" not in defines
+        and not name.startswith("__")
     ]
     return sorted(found, key=lambda u: int(u.split(":")[0]))
 
@@ -240,7 +271,7 @@ def test_finds_borrowed_names():
 
 
 SOURCES = (
-    [p for p in sorted(PACKAGE.glob("*.py")) if p.stem != "__init__"]
+    [p for p in sorted(PACKAGE.rglob("*.py")) if p.stem != "__init__"]
     + sorted((ROOT / "tests").glob("*.py"))
     + sorted((ROOT / "benchmarks").glob("*.py"))
     + sorted((ROOT / "book").glob("*.md"))
@@ -250,12 +281,13 @@ SOURCES = (
 @pytest.mark.parametrize("path", SOURCES, ids=lambda p: str(p.relative_to(ROOT)))
 def test_every_name_is_imported_from_the_module_that_defines_it(path):
     source = code_cells(path) if path.suffix == ".md" else path.read_text(encoding="utf-8")
-    assert borrowed_uses(source) == []
+    own = _module_name(path) if path.is_relative_to(PACKAGE) else None
+    assert borrowed_uses(source, own=own) == []
 
 
-@pytest.mark.parametrize("module", [m for m in MODULES if m != "__init__"])
+@pytest.mark.parametrize("module", [m for m in MODULES if m != "__init__" and m not in SUBPACKAGES])
 def test_all_lists_only_names_the_module_defines(module):
-    tree = ast.parse((PACKAGE / f"{module}.py").read_text(encoding="utf-8"))
+    tree = ast.parse(PATHS[module].read_text(encoding="utf-8"))
     listed = [
         ast.literal_eval(node.value)
         for node in tree.body
@@ -264,3 +296,36 @@ def test_all_lists_only_names_the_module_defines(module):
     ]
     for names in listed:
         assert set(names) <= DEFINES[module]
+
+
+# --- the mathematics knows nothing of the book ----------------------------------------
+
+#: The modules outside the book's wing that show its work: the command line draws the
+#: paper's figures and prints vectors as the book does, the benchmarks' tables are
+#: shown as the book's tables.
+BOOK_USERS = {"__main__", "cli_text", "benchmark_tables"}
+
+
+def imported_modules(source: str, own: str) -> set[str]:
+    """The ``depthcore`` modules and packages that the module ``own`` imports from."""
+    tree = ast.parse(source)
+    package = _package(own)
+    found = set(bound_modules(tree, MODULES, package).values())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and _owner(node, package):
+            found.add(_owner(node, package))
+    return found
+
+
+def test_finds_imports_of_the_book():
+    source = "from .book import paper\nfrom .book.style import STYLE\nfrom . import model\n"
+    assert imported_modules(source, "x") == {"book", "book.paper", "book.style", "model"}
+    assert imported_modules("from ..filters import FILTERS\n", "book.style") == {"filters"}
+
+
+@pytest.mark.parametrize(
+    "module", [m for m in MODULES if "." not in m and m not in SUBPACKAGES | BOOK_USERS]
+)
+def test_no_module_outside_the_book_imports_it(module):
+    imported = imported_modules(PATHS[module].read_text(encoding="utf-8"), module)
+    assert not [m for m in imported if m == "book" or m.startswith("book.")]

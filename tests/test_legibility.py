@@ -1,6 +1,6 @@
 """Every figure the book shows is legible at the book's width, on screen and on paper.
 
-For each plotting function of :mod:`depthcore.figures` that a page of the book
+For each plotting function of the book's wing (:mod:`depthcore.book`) that a page
 calls, drawn here on small inputs of the same shape: the figure's size in
 inches as the book saves it (``bbox_inches="tight"``, as Jupyter and the book
 render it), its resolution, and the smallest font of any text it draws
@@ -30,7 +30,18 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.text import Text  # noqa: E402
 
-from depthcore import bank, experiments, figures, hardness, model, study  # noqa: E402
+from depthcore import bank, hardness, model, study  # noqa: E402
+from depthcore.book import (
+    beyond_conjecture,
+    beyond_filters,
+    beyond_frames,
+    beyond_hard,
+    beyond_linear,
+    beyond_study,
+    beyond_sweeps,
+    paper,
+    style,
+)
 from depthcore.filters import NAMES as FILTER_NAMES  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
@@ -77,7 +88,7 @@ FRAMES_NAMES = ("second_order", "ekf", "inverse_depth", "iterated", "ukf", "part
 
 
 def _frames_run():
-    return experiments.frames_study(
+    return beyond_frames.frames_study(
         [3, 5, 10], 12, 5, FRAMES_NAMES, "paper", particle_trials=4, n_particles=100
     )
 
@@ -92,26 +103,26 @@ def _bank_depth():
     sim, tr = _track()
     frames = (3, 4, 6)
     densities = {k: bank.node_density(tr.posteriors[k - 1]) for k in frames}
-    return figures.bank_depth_figure(densities, {k: sim.states[k - 1, 1] for k in frames})
+    return beyond_linear.bank_depth_figure(densities, {k: sim.states[k - 1, 1] for k in frames})
 
 
 def _smoothing():
     sim, tr = _track()
-    return figures.smoothing_figure(tr, sim.states, first=2)
+    return beyond_linear.smoothing_figure(tr, sim.states, first=2)
 
 
 def _rbpf_convergence():
     sim, _ = _track()
-    r = experiments.rbpf_convergence(
+    r = beyond_linear.rbpf_convergence(
         sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, [10, 40], 3, seed=1, process_noise=0.01
     )
-    return figures.rbpf_convergence_figure(r)
+    return beyond_linear.rbpf_convergence_figure(r)
 
 
 def _frame_marginals():
     sim = model.simulate(FIG2.c, 6, FIG2.rho, 0.0, np.random.default_rng(3))
     names = FRAMES_NAMES[:5] + ("particle", "resample_move", "rbpf")
-    m = experiments.frame_marginals(
+    m = beyond_frames.frame_marginals(
         sim.mu,
         FIG2.rho,
         [3, 4, 5, 6],
@@ -120,41 +131,47 @@ def _frame_marginals():
         n_particles=200,
         n_points=101,
     )
-    return figures.frame_marginals_figure(m, names)
+    return beyond_frames.frame_marginals_figure(m, names)
 
 
 #: One builder per plotting function the book calls, on small inputs of the book's shape.
 BUILDERS = {
-    "figure": lambda: figures.figure("fig3", n=101),
-    "figure, extended": lambda: figures.figure("fig2", n=101, filters=FILTER_NAMES),
-    "translating_point": lambda: figures.translating_point(),
-    "readings_figure": lambda: figures.readings_figure("fig3", n=201),
-    "first_update_figure": lambda: figures.first_update_figure(experiments.first_update(FIG2)),
-    "convergence_figure": lambda: figures.convergence_figure(
-        experiments.particle_convergence(FIG2, [100, 200], repeats=2, seed=3)
+    "figure": lambda: paper.figure("fig3", n=101),
+    "figure, extended": lambda: paper.figure("fig2", n=101, filters=FILTER_NAMES),
+    "translating_point": lambda: paper.translating_point(),
+    "readings_figure": lambda: paper.readings_figure("fig3", n=201),
+    "first_update_figure": lambda: beyond_filters.first_update_figure(
+        beyond_filters.first_update(FIG2)
     ),
-    "calibration": lambda: figures.calibration(study.study(trials=20, seed=0, n_particles=100)),
-    "prior_calibration": lambda: figures.prior_calibration(study.prior_study(trials=40, seed=1)),
-    "sweep": lambda: figures.sweep(
-        experiments.noise_sweep([1 / 500, 1 / 200]), "rho", "hellinger", log_x=True
+    "convergence_figure": lambda: beyond_filters.convergence_figure(
+        beyond_filters.particle_convergence(FIG2, [100, 200], repeats=2, seed=3)
     ),
-    "profile_figure": lambda: figures.profile_figure(
+    "calibration": lambda: beyond_study.calibration(
+        study.study(trials=20, seed=0, n_particles=100)
+    ),
+    "prior_calibration": lambda: beyond_study.prior_calibration(
+        study.prior_study(trials=40, seed=1)
+    ),
+    "sweep": lambda: beyond_sweeps.sweep(
+        beyond_sweeps.noise_sweep([1 / 500, 1 / 200]), "rho", "hellinger", log_x=True
+    ),
+    "profile_figure": lambda: beyond_sweeps.profile_figure(
         FIG2.mu, [1 / 200, 1 / 50], np.geomspace(2.5, 100, 50)
     ),
-    "noise_study_figure": lambda: figures.noise_study_figure(
-        experiments.noise_study([1 / 400, 1 / 100], trials=10, seed=1)
+    "noise_study_figure": lambda: beyond_sweeps.noise_study_figure(
+        beyond_sweeps.noise_study([1 / 400, 1 / 100], trials=10, seed=1)
     ),
-    "prior_mean_map_figure": lambda: figures.prior_mean_map_figure(
-        experiments.prior_mean_map([0.0, 2.0], [0.0, 1.0]), {"paper": (0.0, 0.0)}
+    "prior_mean_map_figure": lambda: beyond_sweeps.prior_mean_map_figure(
+        beyond_sweeps.prior_mean_map([0.0, 2.0], [0.0, 1.0]), {"paper": (0.0, 0.0)}
     ),
     "bank_depth_figure": _bank_depth,
     "smoothing_figure": _smoothing,
     "rbpf_convergence_figure": _rbpf_convergence,
     "frame_marginals_figure": _frame_marginals,
-    "frames_study_figure": lambda: figures.frames_study_figure(
+    "frames_study_figure": lambda: beyond_frames.frames_study_figure(
         _frames_run(), title="the paper's prior rule, q = 0.02"
     ),
-    "hard_figure": lambda: figures.hard_figure(
+    "hard_figure": lambda: beyond_hard.hard_figure(
         hardness.hard_study(
             [((1.2, 6.0, v), 1000.0, 0.0) for v in (0.0, 1.2)] + [(FIG2.c, 1.0, 0.0)],
             FIG2.rho,
@@ -167,8 +184,8 @@ BUILDERS = {
             ("prior covariance s (s I)", [2, 1], [1.0, 1000.0], True),
         ],
     ),
-    "conjecture_figure": lambda: figures.conjecture_figure(
-        experiments.conjecture_study(
+    "conjecture_figure": lambda: beyond_conjecture.conjecture_figure(
+        beyond_conjecture.conjecture_study(
             [3, 10, 30], 1 / np.array([1000, 500, 200, 100, 50]), [4.0, 6.0, 12.0, 24.0], 4, 2
         )
     ),
@@ -222,4 +239,4 @@ def test_the_measure_sees_small_text_and_wide_figures():
 
 def test_figures_refuse_a_width_beyond_the_books():
     with pytest.raises(ValueError, match="figsize: at most"):
-        figures._subplots(figsize=(figures.WIDTH + 1.0, 3.0))
+        style.subplots(figsize=(style.WIDTH + 1.0, 3.0))

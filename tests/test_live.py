@@ -7,7 +7,8 @@ import base64
 import numpy as np
 import pytest
 
-from depthcore import SCENARIOS, _checks, experiments, live, model
+from depthcore import SCENARIOS, _checks, live, model
+from depthcore.book import beyond_frames
 from depthcore.filters import FILTERS
 
 FIG2 = SCENARIOS["fig2"]
@@ -48,11 +49,11 @@ def test_three_frames_give_the_registry_filters_on_the_page():
 
 @pytest.mark.parametrize("frames", [5, 12])
 def test_more_frames_agree_with_the_frame_marginals_of_the_experiments(frames):
-    # experiments.frame_marginals applies the paper's prior rule to the first three
+    # beyond_frames.frame_marginals applies the paper's prior rule to the first three
     # bearings, as Figure 2's prior is: the same filters on the same bearings.
     mu = live.bearings(FIG2.mu, frames)
     drawn = live.depth_marginals(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, frames)
-    (ref,) = experiments.frame_marginals(mu, FIG2.rho, [frames], names=live.NAMES)
+    (ref,) = beyond_frames.frame_marginals(mu, FIG2.rho, [frames], names=live.NAMES)
     np.testing.assert_array_equal(drawn["mu"], mu)
     for name in live.NAMES:
         assert drawn["depth_mean"][name] == pytest.approx(ref["depth_mean"][name], rel=1e-10)

@@ -4,7 +4,7 @@ The book pastes what a page glues (``myst_nb.glue(..., display=False)``) into
 its text: figures (``{glue:figure}``, ``{glue}``) and numbers
 (``{eval}``, ``{glue:text}``) in tables and prose. Jupyter displays none of these records,
 so each page also displays them in cells that the book leaves out
-(:class:`depthcore.report.GlueLog`, :func:`depthcore.report.comparison_table`).
+(:class:`depthcore.book.notebook.GlueLog`, :func:`depthcore.book.paper.comparison_table`).
 
 The outputs checked are those of ``book/_nbval/<page>.ipynb``: the page
 converted by jupytext and executed as a plain notebook with nbclient (``make
@@ -16,8 +16,8 @@ the page. For each page:
   with its value, as the book pastes it;
 * every table of the page that pastes glued numbers is displayed whole, with
   the numbers that the book puts in it (the figure pages' tables of the
-  paper's numbers beside ours by :func:`depthcore.report.comparison_table`,
-  the others by :class:`depthcore.report.GlueLog` from the page's own text).
+  paper's numbers beside ours by :func:`depthcore.book.paper.comparison_table`,
+  the others by :class:`depthcore.book.notebook.GlueLog` from the page's own text).
 """
 
 from __future__ import annotations
@@ -159,8 +159,8 @@ def test_a_downloaded_notebook_gives_the_page_its_tables(page, tmp_path, monkeyp
     """GlueLog("fig6.md") run where only the page's notebook is (a download) finds its tables."""
     import jupytext
 
-    from depthcore.report import page_tables as tables_of
-    from depthcore.report import page_text
+    from depthcore.book.notebook import page_tables as tables_of
+    from depthcore.book.notebook import page_text
 
     expected = tables_of(page.read_text(encoding="utf-8"))
     monkeypatch.chdir(tmp_path)

@@ -1,4 +1,4 @@
-"""The texts of depthcore.report: tables, vectors and glued numbers."""
+"""The texts the book and the README show: tables, vectors, glued numbers, benchmark tables."""
 
 import re
 from pathlib import Path
@@ -6,14 +6,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from depthcore import (
-    SCENARIOS,
-    ekf,
-    experiments,
-    optimal,
-    report,
-    reproduce,
-    study,
+from depthcore import SCENARIOS, benchmark_tables, ekf, optimal, reproduce, study
+from depthcore.book import (
+    beyond_filters,
+    beyond_linear,
+    beyond_study,
+    beyond_sweeps,
+    formatting,
+    notebook,
+    paper,
 )
 from depthcore.filters import FILTERS, NAMES
 from depthcore.scenarios import REPORTED
@@ -22,13 +23,13 @@ FIG2 = SCENARIOS["fig2"]
 
 
 def test_comparison_rows_of_figure_2():
-    rows = {r["id"]: r for r in report.comparison("fig2")}
-    assert list(rows) == [r[0] for r in report.TABLE_ROWS]
+    rows = {r["id"]: r for r in reproduce.comparison("fig2")}
+    assert list(rows) == [r[0] for r in reproduce.TABLE_ROWS]
     assert rows["opt"]["reported_mean"] == REPORTED["fig2"]["optimal"]["depth"][0]
     assert rows["so"]["sd"] == pytest.approx(0.6163, abs=1e-4)
     assert rows["so_printed"]["sd"] == pytest.approx(0.4358, abs=1e-4)
     assert rows["so"]["sd_matches"] and not rows["so_printed"]["sd_matches"]
-    texts = report.comparison_texts("fig2", list(rows.values()))
+    texts = paper.comparison_texts("fig2", list(rows.values()))
     assert texts["fig2_opt_mean"] == "6.4660"
     assert texts["fig2_opt_paper_mean"] == "6.47"
     assert texts["fig2_so_printed_agrees"] == "mean only"
@@ -41,32 +42,32 @@ def test_comparison_rows_of_figure_2():
 
 
 def test_comparison_rows_of_figure_3_and_4():
-    rows = {r["id"]: r for r in report.comparison("fig3")}
-    texts = report.comparison_texts("fig3", list(rows.values()))
+    rows = {r["id"]: r for r in reproduce.comparison("fig3")}
+    texts = paper.comparison_texts("fig3", list(rows.values()))
     assert texts["fig3_opt_agrees"] == "no"
     assert texts["fig3_opt_printed_mean"] == "67.4516"
     assert texts["fig3_opt_printed_agrees"] == "mean only"
-    rows4 = report.comparison("fig4")
+    rows4 = reproduce.comparison("fig4")
     assert {r["quantity"] for r in rows4} == {"velocity"}
-    texts4 = report.comparison_texts("fig4", rows4)
+    texts4 = paper.comparison_texts("fig4", rows4)
     assert texts4["fig4_opt_paper_mean"] == "—" and texts4["fig4_opt_agrees"] == "—"
 
 
 def test_vec_formats_and_never_prints_negative_zero():
-    assert report.vec([1.2, 6, -1.2]) == "(1.2000, 6.0000, -1.2000)"
-    assert report.vec([-0.0, -1e-9, 0.25], 2) == "(0.00, 0.00, 0.25)"
-    assert report.vec(np.array([2.0]), 0) == "(2)"
+    assert formatting.vec([1.2, 6, -1.2]) == "(1.2000, 6.0000, -1.2000)"
+    assert formatting.vec([-0.0, -1e-9, 0.25], 2) == "(0.00, 0.00, 0.25)"
+    assert formatting.vec(np.array([2.0]), 0) == "(2)"
     with pytest.raises(ValueError, match="1-D"):
-        report.vec(np.eye(2))
+        formatting.vec(np.eye(2))
     with pytest.raises(ValueError, match="decimals"):
-        report.vec([1.0], -1)
+        formatting.vec([1.0], -1)
 
 
 def test_rho_label():
-    assert report.rho_label(1 / 200) == "1/200"
-    assert report.rho_label(0.001) == "1/1000"
+    assert formatting.rho_label(1 / 200) == "1/200"
+    assert formatting.rho_label(0.001) == "1/1000"
     with pytest.raises(ValueError):
-        report.rho_label(0.0)
+        formatting.rho_label(0.0)
 
 
 PM = re.compile(r"^-?\d+\.\d{3} ± \d+\.\d{3}$")
@@ -74,7 +75,7 @@ PM = re.compile(r"^-?\d+\.\d{3} ± \d+\.\d{3}$")
 
 def test_moments_texts_cover_every_filter_and_scenario():
     result = reproduce.reproduce()
-    texts = report.moments_texts(result)
+    texts = beyond_filters.moments_texts(result)
     n = len(SCENARIOS) * len(NAMES) * 2 + len(SCENARIOS) * 2
     assert len(texts) == n
     assert all(PM.match(v) for k, v in texts.items() if not k.endswith("_se"))
@@ -89,16 +90,16 @@ def test_moments_texts_reject_ambiguous_rows():
     rows = result["scenarios"][0]["rows"]
     rows.append(dict(rows[-1]))  # a second particle row
     with pytest.raises(ValueError, match="expected one row of 'particle'"):
-        report.moments_texts(result)
+        beyond_filters.moments_texts(result)
 
 
 def test_study_texts_have_every_score():
     r = study.study(trials=20, seed=0, names=("optimal", "ekf"))
-    texts = report.study_texts(r, "s")
+    texts = formatting.study_texts(r, "s")
     assert texts["s_trials"] == str(r["valid_trials"])
     assert texts["s_ekf_depth_coverage_68"] == f"{r['filters']['ekf']['depth']['coverage_68']:.2f}"
     assert texts["s_ekf_nees"] == f"{r['filters']['ekf']['nees']:.1f}"
-    assert len(texts) == 1 + 2 * 2 * (2 * len(report.STUDY_DECIMALS) + 2)
+    assert len(texts) == 1 + 2 * 2 * (2 * len(formatting.STUDY_DECIMALS) + 2)
     ekf = r["filters"]["ekf"]
     assert texts["s_ekf_depth_coverage_68_pm"] == (
         f"{ekf['depth']['coverage_68']:.2f} ± {ekf['depth']['coverage_68_se']:.2f}"
@@ -107,30 +108,30 @@ def test_study_texts_have_every_score():
 
 
 def test_a_value_and_its_standard_error_are_printed_to_the_values_places():
-    assert report.value_se(0.9021, 0.0133, 2) == "0.90 ± 0.01"
+    assert formatting.value_se(0.9021, 0.0133, 2) == "0.90 ± 0.01"
     # a standard error that would round to zero gets the places that show it
-    assert report.value_se(0.9021, 0.0004, 2) == "0.90 ± 0.0004"
-    assert report.value_se(12.5, 0.0, 1) == "12.5 ± 0.0"
-    assert report.value_se(-0.0, 1e-9, 1) == "0.0 ± 0.0000"  # at most three more places
+    assert formatting.value_se(0.9021, 0.0004, 2) == "0.90 ± 0.0004"
+    assert formatting.value_se(12.5, 0.0, 1) == "12.5 ± 0.0"
+    assert formatting.value_se(-0.0, 1e-9, 1) == "0.0 ± 0.0000"  # at most three more places
 
 
 def test_sweep_texts_label_the_rows():
-    r = experiments.noise_sweep([1 / 1000, 1 / 200])
-    texts = report.sweep_texts(r, "rho", "ns")
+    r = beyond_sweeps.noise_sweep([1 / 1000, 1 / 200])
+    texts = beyond_sweeps.sweep_texts(r, "rho", "ns")
     assert texts["ns_0_x"] == "1/1000" and texts["ns_1_x"] == "1/200"
     assert texts["ns_1_optimal"] == (
         f"{r['optimal']['depth_mean'][1]:.3f} ± {r['optimal']['depth_sd'][1]:.3f}"
     )
     assert texts["ns_0_ekf_h"] == f"{r['ekf']['hellinger'][0]:.3f}"
-    off = report.sweep_texts(experiments.prior_offset_sweep([-1.0, 2.0]), "offset", "po")
+    off = beyond_sweeps.sweep_texts(beyond_sweeps.prior_offset_sweep([-1.0, 2.0]), "offset", "po")
     assert off["po_0_x"] == "-1" and off["po_1_x"] == "2"
     with pytest.raises(ValueError, match="x must be"):
-        report.sweep_texts(r, "noise", "ns")
+        beyond_sweeps.sweep_texts(r, "noise", "ns")
 
 
 def test_noise_study_texts():
-    r = experiments.noise_study([1 / 200], trials=20, seed=0, names=("second_order",))
-    texts = report.noise_study_texts(r, "mc")
+    r = beyond_sweeps.noise_study([1 / 200], trials=20, seed=0, names=("second_order",))
+    texts = beyond_sweeps.noise_study_texts(r, "mc")
     assert texts["mc_0_x"] == "1/200"
     assert texts["mc_0_trials"] == str(r["valid_trials"][0])
     assert texts["mc_0_second_order_cov68"] == f"{r['second_order']['coverage_68'][0]:.2f}"
@@ -140,49 +141,51 @@ def test_noise_study_texts():
         for pm in ("", "_pm")
     }
     r = r["second_order"]
-    assert texts["mc_0_second_order_rmse_pm"] == report.value_se(r["rmse"][0], r["rmse_se"][0], 3)
+    assert texts["mc_0_second_order_rmse_pm"] == formatting.value_se(
+        r["rmse"][0], r["rmse_se"][0], 3
+    )
 
 
 def test_comparison_table_holds_the_glued_texts_of_every_row():
-    rows = report.comparison("fig2")
-    texts = report.comparison_texts("fig2", rows)
-    table = report.comparison_table("fig2", rows)
+    rows = reproduce.comparison("fig2")
+    texts = paper.comparison_texts("fig2", rows)
+    table = paper.comparison_table("fig2", rows)
     assert table.header[-1] == "agrees"
     assert [r[0] for r in table.rows][0] == "optimal $p_{oy}$"
     for row, cells in zip(rows, table.rows, strict=True):
         fields = ("paper_mean", "mean", "paper_sd", "sd", "agrees")
         assert cells[1:] == [texts[f"fig2_{row['id']}_{f}"] for f in fields]
     # The paper prints no numbers for Figure 4: no column of agreement, velocity labels.
-    table4 = report.comparison_table("fig4", report.comparison("fig4"))
+    table4 = paper.comparison_table("fig4", reproduce.comparison("fig4"))
     assert "agrees" not in table4.header and "EKF $p_{ev}$" in [r[0] for r in table4.rows]
     with pytest.raises(ValueError, match="key"):
-        report.comparison_table("fig7", rows)
+        paper.comparison_table("fig7", rows)
 
 
 def test_markdown_table_renders_as_markdown_and_aligned_text():
-    table = report.MarkdownTable(["name", "value"], [["a_b", "1|2"], ["c", "3"]])
+    table = notebook.MarkdownTable(["name", "value"], [["a_b", "1|2"], ["c", "3"]])
     assert (
         table._repr_markdown_() == "| name | value |\n| --- | --- |\n| a_b | 1\\|2 |\n| c | 3 |\n"
     )
     assert repr(table).splitlines() == ["name  value", "----  -----", "a_b   1|2", "c     3"]
     with pytest.raises(ValueError, match="rows"):
-        report.MarkdownTable(["name", "value"], [["a"]])
+        notebook.MarkdownTable(["name", "value"], [["a"]])
     with pytest.raises(ValueError, match="header"):
-        report.MarkdownTable([], [])
+        notebook.MarkdownTable([], [])
 
 
 def test_glue_log_pastes_texts_as_glue_text_does_and_needs_a_kernel():
     from myst_nb.core.variables import format_plain_text  # what {glue:text} pastes
 
     for text in ("'6.4660'", "'—'", "'x|y'", "3", "<Figure size 640x480 with 1 Axes>"):
-        assert report.GlueLog.pasted_text(text) == format_plain_text(text, "")
-    assert report.GlueLog.pasted_text("'6.4660'") == "6.4660"
-    assert report.GlueLog.pasted_text("'—'") == "—"
-    assert report.GlueLog.pasted_text("<Figure size 640x480 with 1 Axes>") == (
+        assert notebook.GlueLog.pasted_text(text) == format_plain_text(text, "")
+    assert notebook.GlueLog.pasted_text("'6.4660'") == "6.4660"
+    assert notebook.GlueLog.pasted_text("'—'") == "—"
+    assert notebook.GlueLog.pasted_text("<Figure size 640x480 with 1 Axes>") == (
         "<Figure size 640x480 with 1 Axes>"
     )
     with pytest.raises(RuntimeError, match="kernel"):
-        report.GlueLog()
+        notebook.GlueLog()
 
 
 def test_page_tables_finds_the_tables_that_paste_glued_texts():
@@ -205,36 +208,36 @@ print("| {glue:text}`c` |")
 | z |
 |---|
 | {glue:text}`c` |"""
-    tables = report.page_tables(page)
+    tables = notebook.page_tables(page)
     assert tables == [
         ["| x | y |", "|---|---:|", "| {glue:text}`a` | {glue}`b` |"],
         ["| z |", "|---|", "| {glue:text}`c` |"],
     ]
-    assert report.paste_table(tables[0], {"a": "1.5"}) is None  # b not glued yet
-    pasted = report.paste_table(tables[0], {"a": "1.5", "b": "—"})
+    assert notebook.paste_table(tables[0], {"a": "1.5"}) is None  # b not glued yet
+    pasted = notebook.paste_table(tables[0], {"a": "1.5", "b": "—"})
     assert pasted == "| x | y |\n|---|---:|\n| 1.5 | — |"
-    shown = report.PastedTable(pasted)
+    shown = notebook.PastedTable(pasted)
     assert repr(shown) == pasted and shown._repr_markdown_() == pasted + "\n"
 
 
 def test_every_glued_table_of_a_book_page_is_found():
     # The moments tables of beyond_filters: a row per filter, a column per figure.
     text = (Path(__file__).resolve().parents[1] / "book" / "beyond_filters.md").read_text()
-    tables = report.page_tables(text)
+    tables = notebook.page_tables(text)
     moments = [t for t in tables if t[0].startswith("| filter | Fig. 2 |")]
     assert len(moments) == 2
-    names = report.GLUE_ROLE.findall("\n".join(moments[1]))
+    names = notebook.GLUE_ROLE.findall("\n".join(moments[1]))
     assert "bf_fig2_second_order_velocity" in names and "bf_fig6_particle_velocity_se" in names
     result = reproduce.reproduce(["fig2"])
-    texts = report.moments_texts(result)
+    texts = beyond_filters.moments_texts(result)
     assert "bf_fig2_second_order_velocity" in texts
 
 
 def test_truth_study_texts():
-    r = experiments.truth_study(
+    r = beyond_study.truth_study(
         np.array([[2.0, 10.0, 2.0]]), 1 / 200, trials=20, seed=0, names=("second_order",)
     )
-    texts = report.truth_study_texts(r, "st")
+    texts = beyond_study.truth_study_texts(r, "st")
     assert texts["st_0_truth"] == "(2, 10, 2)"
     assert texts["st_0_trials"] == str(r["valid_trials"][0])
     assert texts["st_0_second_order_bias"] == f"{r['second_order']['bias'][0]:.3f}"
@@ -254,7 +257,7 @@ def test_rbpf_texts_format_each_row_of_the_convergence_table():
         "se": {"depth_mean": np.array([0.0036, 0.00066]), "depth_sd": np.array([0.004, 0.0005])},
         "rmse": {"depth_mean": np.array([0.0181, 0.00257]), "depth_sd": np.array([0.0188, 0.0021])},
     }
-    t = report.rbpf_texts(result, "rb")
+    t = beyond_linear.rbpf_texts(result, "rb")
     assert t["rb_exact_mean"] == "23.0323" and t["rb_exact_sd"] == "0.1375"
     assert t["rb_1_J"] == "3,000" and t["rb_0_J"] == "30"
     assert t["rb_0_mean"] == "23.0400 ± 0.0036"
@@ -266,17 +269,17 @@ def test_bench_texts_format_the_records_numbers():
     from depthcore import benchmarks
 
     r = benchmarks.read("bench_optimal")
-    t = report.bench_texts("bench_optimal", r)
+    t = benchmark_tables.bench_texts("bench_optimal", r)
     triple = r["results"]["per_triple"]
     i = triple["keys"].index("fig3")
     assert t["opt_fig3_figure"] == "Figure 3"
     assert t["opt_fig3_optimal_ekf"] == f"{triple['optimal_ms'][i] / triple['ekf_ms'][i]:.1f}"
     assert t["opt_nodes_max"] == str(max(triple["nodes"]))
-    assert t["opt_origin"] == report.bench_origin(r)
+    assert t["opt_origin"] == benchmark_tables.bench_origin(r)
     assert r["date"][:10] in t["opt_origin"] and r["machine"]["cpu"] in t["opt_origin"]
-    assert report._sci(1.5e8) == "1.5e8" and report._sci(0.0287, 2) == "2.87e-2"
+    assert benchmark_tables._sci(1.5e8) == "1.5e8" and benchmark_tables._sci(0.0287, 2) == "2.87e-2"
     with pytest.raises(ValueError, match="name"):
-        report.bench_texts("bench_nothing", r)
+        benchmark_tables.bench_texts("bench_nothing", r)
 
 
 def test_bench_readme_blocks_hold_every_table_and_its_origin():
@@ -285,8 +288,8 @@ def test_bench_readme_blocks_hold_every_table_and_its_origin():
     names = ["bench_bank", "bench_ekf_filterpy", "bench_import", "bench_kalman"]
     names += ["bench_optimal", "bench_rbpf", "bench_trials", "bench_frames", "bench_range_ekf"]
     records = {n: benchmarks.read(n) for n in names}
-    blocks = report.bench_readme_blocks(records)
-    assert set(blocks) == set(report.bench_tables(records))
+    blocks = benchmark_tables.bench_readme_blocks(records)
+    assert set(blocks) == set(benchmark_tables.bench_tables(records))
     for key, block in blocks.items():
         assert block.startswith("| ") and "Measured " in block, key
     bank = records["bench_bank"]["results"]["many_trials"]
@@ -309,8 +312,8 @@ def test_glue_log_binds_each_glued_text_to_its_name(monkeypatch):
         user_ns = {"rho": 0.005}
 
     monkeypatch.setattr(IPython, "get_ipython", Shell)
-    report.GlueLog()
-    prefix = report.GlueLog.PREFIX
+    notebook.GlueLog()
+    prefix = notebook.GlueLog.PREFIX
 
     def glue(name, data):
         record = {"name": name, "mime_prefix": prefix}
@@ -327,10 +330,10 @@ def test_glue_log_binds_each_glued_text_to_its_name(monkeypatch):
     glue("fig2_count", {"text/plain": "3"})
     glue("fig2_figure", {"text/plain": "<Figure>", "image/png": "iVBOR"})
     bound = Shell.user_ns["fig2_mean"]
-    assert isinstance(bound, report.GluedText) and bound == "6.4660"
+    assert isinstance(bound, notebook.GluedText) and bound == "6.4660"
     assert repr(bound) == "6.4660" and repr(Shell.user_ns["fig2_count"]) == "3"
     figure = Shell.user_ns["fig2_figure"]  # shown by {eval} as the very output glued
-    assert isinstance(figure, report.GluedOutput)
+    assert isinstance(figure, notebook.GluedOutput)
     assert figure._repr_mimebundle_() == ({"text/plain": "<Figure>", "image/png": "iVBOR"}, {})
     # The references of the page's text, resolved as the book resolves them.
     assert {"cite_t", "cite_p", "eq", "numref", "ref", "doc"} <= set(Shell.user_ns)
@@ -342,5 +345,5 @@ def test_glue_log_binds_each_glued_text_to_its_name(monkeypatch):
 
 
 def test_page_tables_reads_eval_roles_as_glue_text():
-    tables = report.page_tables("| a | b |\n|---|---|\n| {eval}`x` | {glue:text}`y` |\n")
-    assert report.paste_table(tables[0], {"x": "1", "y": "2"}).endswith("| 1 | 2 |")
+    tables = notebook.page_tables("| a | b |\n|---|---|\n| {eval}`x` | {glue:text}`y` |\n")
+    assert notebook.paste_table(tables[0], {"x": "1", "y": "2"}).endswith("| 1 | 2 |")

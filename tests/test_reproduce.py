@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from depthcore import SCENARIOS, optimal, report, reproduce
+from depthcore import SCENARIOS, optimal, reproduce
 from depthcore.ekf import ekf
 from depthcore.second_order import second_order
 
@@ -38,7 +38,7 @@ def test_the_particle_filters_seed_is_an_argument():
 
 
 def test_comparison_runs_only_the_filters_of_its_table(monkeypatch):
-    from depthcore import filters
+    from depthcore import filters, reproduce
 
     def refuse(*args, **kwargs):
         raise AssertionError("the particle filter is not in the figure pages' tables")
@@ -50,7 +50,7 @@ def test_comparison_runs_only_the_filters_of_its_table(monkeypatch):
             **{**vars(filters.FILTERS["particle"]), "run": refuse}
         ),
     )
-    rows = report.comparison("fig4")
+    rows = reproduce.comparison("fig4")
     assert {r["quantity"] for r in rows} == {"velocity"}
 
 

@@ -2,7 +2,7 @@
 
 The README's section "Benchmark" holds, between the marker comments
 ``<!-- bench:KEY -->`` and ``<!-- /bench:KEY -->``, the blocks of
-:func:`depthcore.report.bench_readme_blocks`: each a table made from the
+:func:`depthcore.benchmark_tables.bench_readme_blocks`: each a table made from the
 records ``depthcore/benchmark_records/<script>.json`` (:mod:`depthcore.benchmarks`), with
 the date and machine they were measured on. ``make bench`` runs this after
 measuring; ``tests/test_benchmark_records.py`` checks that the README equals
@@ -19,7 +19,7 @@ import re
 import sys
 from pathlib import Path
 
-from depthcore import benchmarks, report
+from depthcore import benchmark_tables, benchmarks
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
@@ -56,7 +56,7 @@ def main(argv=None) -> int:
     p.add_argument("--check", action="store_true", help="fail if the README is not up to date")
     args = p.parse_args(argv)
     text = README.read_text(encoding="utf-8")
-    new = regenerate(text, report.bench_readme_blocks(records()))
+    new = regenerate(text, benchmark_tables.bench_readme_blocks(records()))
     if args.check:
         if new != text:
             print(

@@ -95,7 +95,8 @@ def test_intro_links_the_pdf_the_source_archive_and_the_requirements(html_pages)
 
 
 def test_source_archive_is_an_sdist_of_this_version(html_dir):
-    modules = sorted(p.name for p in (ROOT / "depthcore").glob("*.py"))
+    package = ROOT / "depthcore"
+    modules = sorted(p.relative_to(package).as_posix() for p in package.rglob("*.py"))
     with tarfile.open(html_dir / "downloads" / "depthcore.tar.gz") as tar:
         names = tar.getnames()
         top = f"depthcore-{depthcore.__version__}"

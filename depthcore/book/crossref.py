@@ -9,7 +9,7 @@ and ``{eval}`doc("fig5")``` (``"text <target>"`` as in the roles). The book
 (``{cite:t}``, ``{cite:p}``, ``{eq}``, ``{numref}``, ``{ref}``, ``{doc}``),
 resolved by Sphinx; in JupyterLab, whose MyST renderer (jupyterlab-myst)
 knows one notebook at a time and no bibliography, the expression is
-evaluated in the page's kernel, where :class:`depthcore.report.GlueLog`
+evaluated in the page's kernel, where :class:`depthcore.book.notebook.GlueLog`
 binds the functions of a :class:`BookReferences`. They read the book's
 sources as Sphinx does:
 

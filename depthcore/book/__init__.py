@@ -1,0 +1,56 @@
+"""The book's wing: each chapter's experiments, figures and glued texts, one module per chapter.
+
+The mathematics (the model, the quadrature, the filters and their registry,
+the studies) knows nothing of the book; the modules here run it for the book's
+pages and show what it returns. A chapter's module holds its experiment, its
+figures and the texts its page glues, in that order:
+
+* :mod:`~depthcore.book.paper`: the paper's own chapters, the model, the
+  filters, the marginals, Figures 2-6 and the appendix;
+* :mod:`~depthcore.book.beyond_filters`, :mod:`~depthcore.book.beyond_study`,
+  :mod:`~depthcore.book.beyond_sweeps`, :mod:`~depthcore.book.beyond_linear`,
+  :mod:`~depthcore.book.beyond_frames`, :mod:`~depthcore.book.beyond_bound`,
+  :mod:`~depthcore.book.beyond_hard`, :mod:`~depthcore.book.beyond_conjecture`:
+  the chapters beyond the paper, one each, in the book's order (the costs
+  chapter's tables are :mod:`depthcore.benchmark_tables`).
+
+What several chapters share has one place each: :mod:`~depthcore.book.style`
+the plots' style, :mod:`~depthcore.book.formatting` the numbers as the book
+prints them, :mod:`~depthcore.book.notebook` what a page shows when it runs as
+a plain notebook, and :mod:`~depthcore.book.crossref` the book's references
+resolved in Jupyter.
+
+Every module is an attribute of the package, imported when first used
+(``import depthcore; depthcore.book.paper`` works).
+"""
+
+import importlib
+
+#: The wing's modules, in the book's order, imported on first access as attributes.
+MODULES = (
+    "paper",
+    "beyond_filters",
+    "beyond_study",
+    "beyond_sweeps",
+    "beyond_linear",
+    "beyond_frames",
+    "beyond_bound",
+    "beyond_hard",
+    "beyond_conjecture",
+    "style",
+    "formatting",
+    "notebook",
+    "crossref",
+)
+
+__all__ = ["MODULES", *MODULES]
+
+
+def __getattr__(name):
+    if name in MODULES:
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(MODULES))

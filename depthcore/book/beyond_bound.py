@@ -1,0 +1,130 @@
+"""The chapter on the bound: the filters' errors at frame ``N`` against the Cramér-Rao bound.
+
+Recommended import: ``from depthcore.book import beyond_bound``.
+
+:func:`bound_study` runs every named filter over the trials and returns the
+errors and claimed SDs that the chapter holds against :mod:`depthcore.bound`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import _checks, study
+from ..filters import FILTERS, check_names
+from ..gaussian import PAPER_PRIOR_SCALE
+from ..scenarios import SCENARIOS
+
+# --- the Cramér-Rao bound --------------------------------------------------------------
+
+
+def bound_study(
+    frames,
+    trials: int,
+    seed,
+    names=("optimal", "second_order", "ekf"),
+    prior: str = "paper",
+    process_noise: float = 0.0,
+    truth=None,
+    rho: float = SCENARIOS["fig2"].rho,
+    particle_trials: int | None = None,
+    n_particles: int = study.PARTICLES,
+) -> dict:
+    """Every named filter's depth and velocity errors and claimed SDs at frame ``N``, by trial.
+
+    The truth is ``truth`` at time 3 (default Figure 2's ``c``): frames 1 and 2
+    are ``G^{-2}`` and ``G^{-1}`` of it (Eq. (1)), and from time 3 on the
+    velocity changes by ``a_k ~ N(0, process_noise**2)`` at every step. Each
+    trial draws one track of ``max(frames)`` frames and its bearings; every
+    filter runs on its first ``N`` bearings for each ``N`` of ``frames`` and is
+    scored against the track's state at frame ``N``. The prior is the paper's
+    rule (``"paper"``: from each trial's first three bearings) or the same rule
+    applied once to ``truth`` (``"fixed"``), covariance 1000 I; trials whose
+    first three bearings have no noise-free solution in front of the camera
+    are left out, as in :func:`depthcore.study.simulate`. The filters that
+    draw random numbers run on the first ``particle_trials`` valid trials.
+    Set the results against :func:`depthcore.bound.posterior_bound` with
+    :func:`depthcore.bound.against_bound`.
+
+    Parameters
+    ----------
+    frames : sequence of int, shape (F,)
+        Numbers of frames ``N``, each from 3 to ``depthcore._checks.MAX_FRAMES``.
+    trials : int
+        Trials drawn, >= 2.
+    seed : int or numpy.random.SeedSequence
+    names : sequence of str
+        Filters of :data:`depthcore.filters.FILTERS`; each must support the
+        frames and the process noise asked for.
+    prior : {"paper", "fixed"}
+    process_noise : float
+        ``q >= 0``.
+    truth : array_like, shape (3,), optional
+    rho : float
+    particle_trials : int, optional
+        Default ``trials``.
+    n_particles : int
+
+    Returns
+    -------
+    dict
+        ``"frames"`` (F,), ``"truth"``, ``"rho"``, ``"process_noise"``,
+        ``"prior"``, ``"prior_cov"`` (3, 3), ``"states"`` (T, F, 3) (the true
+        state at each ``N``), and per filter ``{"depth_error", "depth_sd",
+        "velocity_error", "velocity_sd"}``, each of shape (F, T_f), ``T_f``
+        the trials it ran on.
+    """
+    frames = [_checks.count(n, "frames") for n in _checks.nonempty(np.atleast_1d(frames), "frames")]
+    if any(not 3 <= n <= _checks.MAX_FRAMES for n in frames):
+        raise ValueError(f"frames must each be from 3 to {_checks.MAX_FRAMES}, got {frames}")
+    trials = _checks.count(trials, "trials")
+    if trials < 2:
+        raise ValueError(f"trials must be at least 2, got {trials}")
+    names = check_names(names)
+    q = _checks.nonnegative_scalar(process_noise, "process_noise")
+    unable = [n for n in names if q > 0 and not FILTERS[n].with_process_noise]
+    unable += [n for n in names if max(frames) > 3 and not FILTERS[n].any_frames]
+    if unable:
+        raise ValueError(
+            f"names: {', '.join(unable)} cannot run on {max(frames)} frames with process "
+            f"noise {q:g}; leave them out"
+        )
+    truth = SCENARIOS["fig2"].c if truth is None else truth
+    particle_trials = (
+        trials if particle_trials is None else _checks.count(particle_trials, "particle_trials")
+    )
+    noise_rng, particle_rng = (
+        np.random.default_rng(s) for s in _checks.spawn(_checks.seed_sequence(seed), 2)
+    )
+    drawn = study.simulate(
+        truth, rho, trials, noise_rng, prior, PAPER_PRIOR_SCALE, max(frames), q, tracks=True
+    )
+    mu, pm, pc, states = drawn.mu, drawn.prior_mean, drawn.prior_cov, drawn.tracks
+    truth, rho = drawn.truth, drawn.rho
+    noise = {"process_noise": q} if q > 0 else {}
+    out = {
+        "frames": np.array(frames),
+        "truth": truth,
+        "rho": rho,
+        "process_noise": q,
+        "prior": prior,
+        "prior_cov": pc,
+        "states": states[:, np.array(frames) - 1, :],
+        "rejected_trials": drawn.n_rejected,
+    }
+    for name in names:
+        f = FILTERS[name]
+        rows = slice(None) if not f.random else slice(0, particle_trials)
+        options = dict(noise) if f.with_process_noise else {}
+        if f.random:
+            options.update(rng=particle_rng, n_particles=n_particles)
+        r = {k: [] for k in ("depth_error", "depth_sd", "velocity_error", "velocity_sd")}
+        for n in frames:
+            est = f(mu[rows, :n], rho, pm[rows], pc, **options)
+            true = states[rows, n - 1]
+            r["depth_error"].append(np.asarray(est.depth_mean) - true[:, 1])
+            r["depth_sd"].append(np.asarray(est.depth_sd))
+            r["velocity_error"].append(np.asarray(est.velocity_mean) - true[:, 2])
+            r["velocity_sd"].append(np.asarray(est.velocity_sd))
+        out[name] = {k: np.array(v) for k, v in r.items()}
+    return out

@@ -1,0 +1,212 @@
+"""The chapter on the paper's conjecture: the second-order filter against the EKF.
+
+Recommended import: ``from depthcore.book import beyond_conjecture``.
+
+:func:`conjecture_study` scores both filters against the optimal filter and
+the truth over frames, noise levels and depths, :func:`conjecture_wins` says
+where one beats the other by more than chance, :func:`conjecture_figure`
+draws it and :func:`conjecture_texts` gives the texts the chapter glues.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import _checks
+from .. import filters as _filters
+from .beyond_frames import COVERAGE_Z, coverage_test, frames_study
+from .formatting import rho_label
+from .style import WIDTH, subplots
+
+
+def conjecture_study(
+    frames,
+    rhos,
+    depths,
+    trials: int,
+    seed,
+    prior: str = "fixed",
+    bearing: float = 0.2,
+) -> dict:
+    """The second-order filter against the EKF, scored against the optimal filter and the truth.
+
+    For every number of frames, noise level and depth,
+    :func:`~depthcore.book.beyond_frames.frames_study`
+    of the optimal, second-order and EKF filters, the truth at time 3 being
+    ``(bearing * y, y, bearing * y)``: Figure 2's ``c = (1.2, 6, 1.2)`` scaled
+    to depth ``y`` (its bearings at times 1-3 are nearly those of Eq. (17)).
+
+    Parameters
+    ----------
+    frames : sequence of int, shape (F,)
+    rhos : array_like, shape (R,)
+        Noise levels, each > 0.
+    depths : array_like, shape (D,)
+        Depths at time 3, each > 2 (the point in front of the camera at time 1).
+    trials : int
+        Trials per setting (the same seed in each).
+    seed : int or numpy.random.SeedSequence
+    prior : {"paper", "fixed"}
+    bearing : float
+        Bearing at time 3, and lateral velocity per unit of depth.
+
+    Returns
+    -------
+    dict
+        ``"frames"`` (F,), ``"rho"`` (R,), ``"depth"`` (D,), ``"truth"`` (D, 3)
+        and per filter (``"optimal"``, ``"second_order"``, ``"ekf"``) the
+        scores of :func:`~depthcore.book.beyond_frames.frames_study` as arrays of shape (R, D, F).
+    """
+    rhos = _checks.nonempty(np.atleast_1d(_checks.positive_array(rhos, "rhos")), "rhos")
+    depths = _checks.nonempty(np.atleast_1d(_checks.positive_array(depths, "depths")), "depths")
+    if np.any(depths <= 2):
+        raise ValueError("depths must each exceed 2 (the point in front of the camera at time 1)")
+    bearing = float(_checks.finite_array(bearing, "bearing"))
+    truths = np.stack([bearing * depths, depths, bearing * depths], axis=1)
+    names = ("optimal", "second_order", "ekf")
+    runs = [
+        [frames_study(frames, trials, seed, names, prior, truth=t, rho=float(r)) for t in truths]
+        for r in rhos
+    ]
+    out = {"frames": runs[0][0]["frames"], "rho": rhos, "depth": depths, "truth": truths}
+    for name in names:
+        out[name] = {
+            s: np.array([[run[name][s] for run in row] for row in runs]) for s in runs[0][0][name]
+        }
+    return out
+
+
+def conjecture_wins(result: dict, z: float = COVERAGE_Z) -> dict:
+    """Where the second-order filter beats the EKF, cell by cell of :func:`conjecture_study`.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`conjecture_study`; its arrays have shape (R, D, F).
+    z : float
+        Critical value of :func:`~depthcore.book.beyond_frames.coverage_test`.
+
+    Returns
+    -------
+    dict
+        Boolean arrays of shape (R, D, F): ``"hellinger"`` (the second-order
+        depth marginal is nearer the optimal one), ``"rmse"`` (its depth mean
+        has the smaller RMSE), and for each level ``"coverage_68"``,
+        ``"coverage_95"`` (its coverage lies fewer standard errors from the
+        level); ``"calibrated_<level>"`` ``{name: (R, D, F)}``, the verdicts of
+        :func:`~depthcore.book.beyond_frames.coverage_test` for ``"optimal"``, ``"second_order"``
+        and ``"ekf"``.
+    """
+    so, ekf = result["second_order"], result["ekf"]
+    out = {"hellinger": so["hellinger"] < ekf["hellinger"], "rmse": so["rmse"] < ekf["rmse"]}
+    for level in (68, 95):
+        tests = {
+            name: coverage_test(
+                result[name][f"coverage_{level}"], level / 100, result[name]["trials"], z
+            )
+            for name in ("optimal", "second_order", "ekf")
+        }
+        out[f"coverage_{level}"] = np.abs(tests["second_order"]["z"]) < np.abs(tests["ekf"]["z"])
+        out[f"calibrated_{level}"] = {
+            name: t["verdict"] == "calibrated" for name, t in tests.items()
+        }
+    return out
+
+
+def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse")):
+    """The second-order filter (solid) and the EKF (dotted) against ``rho``, per depth and ``N``.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.book.beyond_conjecture.conjecture_study`.
+    scores : sequence of str
+        Rows: ``"hellinger"``, ``"coverage_68"``, ``"coverage_95"``, ``"rmse"``, ``"nees"``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One row per score, one column per number of frames; the legend gives the
+        depths' colours and the filters' line styles once each.
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    labels = {
+        "hellinger": "Hellinger distance\nto the optimal filter",
+        "coverage_68": "coverage of the\ncentral 68 % interval",
+        "coverage_95": "coverage of the\ncentral 95 % interval",
+        "rmse": "RMSE of the depth mean",
+        "nees": "mean NEES",
+    }
+    nominal = {"coverage_68": 0.68, "coverage_95": 0.95, "nees": 3.0}
+    frames = result["frames"]
+    fig, axes = subplots(
+        len(scores),
+        len(frames),
+        figsize=(WIDTH, 2.2 * len(scores) + 1.2),
+        sharex=True,
+        sharey="row",
+        squeeze=False,
+    )
+    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(result["depth"])))
+    styles = (("second_order", "-"), ("ekf", ":"))
+    for j, n in enumerate(frames):
+        axes[0, j].set_title(f"N = {int(n)}")
+        for i, score in enumerate(scores):
+            ax = axes[i, j]
+            for d, colour in enumerate(colours):
+                for name, style in styles:
+                    ax.plot(
+                        result["rho"],
+                        result[name][score][:, d, j],
+                        color=colour,
+                        linestyle=style,
+                        marker="o",
+                        markersize=2.5,
+                    )
+            if score in nominal:
+                ax.axhline(nominal[score], color="0.6", linewidth=1)
+            if score in ("rmse", "nees"):
+                ax.set_yscale("log")
+            ax.set_xscale("log")
+            rho = np.asarray(result["rho"])[::2]
+            ax.set_xticks(rho, [rho_label(r) for r in rho])
+            ax.set_xticks([], minor=True)
+            if j == 0:
+                ax.set_ylabel(labels[score])
+        axes[-1, j].set_xlabel("noise level rho")
+    handles = [
+        Line2D([], [], color=colour, marker="o", markersize=3, label=f"depth {depth:g}")
+        for depth, colour in zip(result["depth"], colours, strict=True)
+    ] + [
+        Line2D([], [], color="0.3", linestyle=style, label=_filters.FILTERS[name].label)
+        for name, style in styles
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, frameon=False)
+    return fig
+
+
+def conjecture_texts(result: dict, wins: dict, prefix: str) -> dict:
+    """Counts of the cells of :func:`~depthcore.book.beyond_conjecture.conjecture_wins`, for glue.
+
+    Returns
+    -------
+    dict
+        ``"<prefix>_cells"`` (cells per ``N``: noise levels times depths) and,
+        for the ``j``-th ``N``: ``"<prefix>_<j>_x"`` (``N``),
+        ``"<prefix>_<j>_<score>"`` (cells where the second-order filter wins,
+        for ``"hellinger"``, ``"rmse"``, ``"coverage_68"``, ``"coverage_95"``)
+        and ``"<prefix>_<j>_cal<level>_<filter>"`` (cells where the filter's
+        coverage passes the test) for ``"optimal"``, ``"second_order"``, ``"ekf"``.
+    """
+    n_rho, n_depth = len(result["rho"]), len(result["depth"])
+    out = {f"{prefix}_cells": str(n_rho * n_depth)}
+    for j, n in enumerate(result["frames"]):
+        out[f"{prefix}_{j}_x"] = str(int(n))
+        for score in ("hellinger", "rmse", "coverage_68", "coverage_95"):
+            out[f"{prefix}_{j}_{score}"] = str(int(np.sum(wins[score][..., j])))
+        for level in (68, 95):
+            for name, ok in wins[f"calibrated_{level}"].items():
+                out[f"{prefix}_{j}_cal{level}_{name}"] = str(int(np.sum(ok[..., j])))
+    return out

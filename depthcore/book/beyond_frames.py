@@ -1,0 +1,399 @@
+"""The chapter on more frames: the study and the depth marginals as the frames accumulate.
+
+Recommended import: ``from depthcore.book import beyond_frames``.
+
+* :func:`frames_study`: the study at the last frame ``N`` for ``N`` from 3 on,
+  with or without process noise; :func:`frames_study_figure` draws it and
+  :func:`frames_study_texts` gives its texts;
+* :func:`coverage_test`: the binomial test of a coverage (also the conjecture
+  chapter's);
+* :func:`frame_marginals` and :func:`frame_marginals_figure`: every filter's
+  depth marginal at several frames of one track.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import _checks, model, study
+from .. import filters as _filters
+from ..filters import FILTERS, check_names
+from ..gaussian import PAPER_PRIOR_SCALE, paper_prior_means
+from ..scenarios import SCENARIOS
+from .beyond_study import gather_scores
+from .style import MIN_FONT, STYLE, WIDTH, subplots
+
+# --- more frames ----------------------------------------------------------------------------
+
+#: Depth scores gathered per filter by :func:`frames_study`, from :func:`depthcore.study.study`.
+FRAMES_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
+
+
+#: The default critical value of :func:`coverage_test`, the standard normal's two-sided 1 % point.
+COVERAGE_Z = 2.5758293035489004
+
+
+def frames_study(
+    frames,
+    trials: int,
+    seed,
+    names=("optimal", "second_order", "ekf"),
+    prior: str = "paper",
+    process_noise: float = 0.0,
+    truth=None,
+    rho: float = SCENARIOS["fig2"].rho,
+    particle_trials: int | None = None,
+    n_particles: int = study.PARTICLES,
+) -> dict:
+    """:func:`depthcore.study.study` at each number of frames, its depth scores gathered.
+
+    The point, at ``truth`` at time 3, is followed on to frame ``N`` (with
+    velocity changes of SD ``process_noise``) and every filter is scored on its
+    state there. The filters that draw random numbers (``Filter.random``) run
+    in a second study of ``particle_trials`` trials with ``n_particles``
+    particles; the optimal filter, the reference of the Hellinger distances,
+    runs in both. Both studies use ``seed``, so their first trials are the same.
+
+    Parameters
+    ----------
+    frames : sequence of int, shape (F,)
+        Numbers of frames ``N``, each from 3 to ``depthcore._checks.MAX_FRAMES``.
+    trials : int
+        Trials per ``N`` of the deterministic filters.
+    seed : int or numpy.random.SeedSequence
+        The same at every ``N``.
+    names : sequence of str
+        Filters, from :data:`depthcore.filters.FILTERS`; ``"optimal"`` is run
+        whether named or not.
+    prior : {"paper", "fixed"}
+    process_noise : float
+        ``q >= 0``.
+    truth : array_like, shape (3,), optional
+        State at time 3; default Figure 2's ``c``.
+    rho : float
+    particle_trials : int, optional
+        Trials per ``N`` of the random filters; default ``trials``.
+    n_particles : int
+
+    Returns
+    -------
+    dict
+        ``"frames"`` (F,), ``"process_noise"``, ``"prior"`` and, per filter
+        (the optimal filter first), ``{score: (F,)}`` for :data:`FRAMES_SCORES`
+        (of the depth) and ``"nees"``, each with its standard error
+        (:func:`~depthcore.book.beyond_study.gather_scores`), ``"hellinger"`` (mean Hellinger
+        distance of
+        the depth marginal to the optimal one) and ``"trials"`` (valid trials
+        scored).
+    """
+    frames = [_checks.count(n, "frames") for n in _checks.nonempty(np.atleast_1d(frames), "frames")]
+    names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
+    random = tuple(n for n in names if FILTERS[n].random)
+    plain = tuple(n for n in names if not FILTERS[n].random)
+    particle_trials = trials if particle_trials is None else particle_trials
+    groups = [(plain, trials)] + ([(("optimal",) + random, particle_trials)] if random else [])
+    rows = {name: [] for name in names}
+    for n in frames:
+        for group, t in groups:
+            r = study.study(
+                truth,
+                rho,
+                trials=t,
+                seed=seed,
+                prior=prior,
+                names=group,
+                n_particles=n_particles,
+                frames=n,
+                process_noise=process_noise,
+            )
+            for name in group[1:] if group is not plain else group:
+                rows[name].append((r["filters"][name], r["valid_trials"]))
+    out = {"frames": np.array(frames), "process_noise": float(process_noise), "prior": prior}
+    for name, runs in rows.items():
+        f = [x for x, _ in runs]
+        out[name] = gather_scores(f, FRAMES_SCORES)
+        out[name]["hellinger"] = np.array([x["hellinger_depth"]["mean"] for x in f])
+        out[name]["trials"] = np.array([v for _, v in runs])
+    return out
+
+
+def coverage_test(coverage, level: float, trials, z: float = COVERAGE_Z) -> dict:
+    """The binomial test of a coverage against its nominal level, normal approximation.
+
+    A filter whose central ``level`` interval holds the truth with probability
+    ``level`` covers it in a fraction of ``n`` independent trials with standard
+    error ``sqrt(level (1 - level) / n)``. The coverage is called
+    ``"calibrated"`` when it lies within ``z`` standard errors of the level
+    (a two-sided test at 1 % for the default ``z``), ``"overconfident"`` when
+    below (intervals too narrow), ``"underconfident"`` when above.
+
+    Parameters
+    ----------
+    coverage : array_like, shape (...)
+        Fractions of trials covered, in [0, 1].
+    level : float
+        Nominal level, in (0, 1).
+    trials : array_like of int, shape (...)
+        Trials behind each coverage, >= 1.
+    z : float
+        Critical value, > 0.
+
+    Returns
+    -------
+    dict
+        ``"se"``, ``"z"`` (the standardised deviation) and ``"verdict"``
+        (array of str), each of the broadcast shape.
+    """
+    coverage = _checks.finite_array(coverage, "coverage")
+    if np.any((coverage < 0) | (coverage > 1)):
+        raise ValueError("coverage must lie in [0, 1]")
+    level = float(level)
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    trials = _checks.finite_array(trials, "trials")
+    if np.any(trials < 1):
+        raise ValueError("trials must each be at least 1")
+    z = _checks.positive_scalar(z, "z")
+    se = study.coverage_se(level, trials)
+    score = (coverage - level) / se
+    verdict = np.where(
+        np.abs(score) <= z, "calibrated", np.where(score < 0, "overconfident", "underconfident")
+    )
+    return {"se": se, "z": score, "verdict": verdict}
+
+
+def frame_marginals(
+    mu,
+    rho: float,
+    frames,
+    names=("optimal", "second_order", "ekf"),
+    rng=None,
+    n_particles: int | None = None,
+    n_points: int = 601,
+    width: float = 6.0,
+    prior_scale: float = PAPER_PRIOR_SCALE,
+) -> list[dict]:
+    """Each filter's depth marginal after the first ``N`` of one sequence of bearings.
+
+    The prior is the paper's rule applied to the first three bearings (mean
+    ``(c1 - 2 c3, c2 - 2, 0)``, covariance ``prior_scale * I``), the same at
+    every ``N``; there is no process noise.
+
+    Parameters
+    ----------
+    mu : array_like, shape (M,)
+        Bearings of frames 1 .. M.
+    rho : float
+    frames : sequence of int, shape (F,)
+        Numbers of frames, each from 3 to ``M``.
+    names : sequence of str
+        Filters; ``"optimal"`` is always run.
+    rng : numpy.random.Generator or SeedSequence, optional
+        Required when a random filter is named.
+    n_particles : int, optional
+        Particles of the random filters; default each filter's own.
+    n_points : int
+        Points of the depth grid.
+    width : float
+        The grid spans the optimal depth mean ± ``width`` optimal SDs (cut at 0).
+
+    Returns
+    -------
+    list of dict, one per ``N``
+        ``"frames"``, ``"grid"`` (G,), ``"density"`` ``{name: (G,)}``,
+        ``"depth_mean"`` and ``"depth_sd"`` ``{name: float}``.
+    """
+    mu = _checks.finite_array(mu, "mu")
+    if mu.ndim != 1 or len(mu) < 3:
+        raise ValueError(f"mu must have shape (M,) with M >= 3, got shape {mu.shape}")
+    frames = [_checks.count(n, "frames") for n in _checks.nonempty(np.atleast_1d(frames), "frames")]
+    if any(not 3 <= n <= len(mu) for n in frames):
+        raise ValueError(f"frames must each be from 3 to {len(mu)}, got {frames}")
+    names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
+    n_points = _checks.count(n_points, "n_points")
+    width = _checks.positive_scalar(width, "width")
+    pm = paper_prior_means(model.noise_free_states(mu[None, :3]))[0]
+    pc = _checks.positive_scalar(prior_scale, "prior_scale") * np.eye(3)
+    out = []
+    for n in frames:
+        estimates = {}
+        for name in names:
+            f = FILTERS[name]
+            options = {}
+            if f.random:
+                if rng is None:
+                    raise ValueError(f"rng is required to run the {name} filter")
+                options["rng"] = rng
+                if n_particles is not None:
+                    options["n_particles"] = n_particles
+            estimates[name] = f(mu[:n], rho, pm, pc, **options)
+        ref = estimates["optimal"]
+        lo = max(float(ref.depth_mean) - width * float(ref.depth_sd), 1e-9)
+        grid = np.linspace(lo, float(ref.depth_mean) + width * float(ref.depth_sd), n_points)
+        out.append(
+            {
+                "frames": n,
+                "grid": grid,
+                "density": {k: FILTERS[k].density(e, "depth", grid) for k, e in estimates.items()},
+                "depth_mean": {k: float(e.depth_mean) for k, e in estimates.items()},
+                "depth_sd": {k: float(e.depth_sd) for k, e in estimates.items()},
+            }
+        )
+    return out
+
+
+def frame_marginals_figure(result: list, names=None):
+    """Each filter's depth marginal beside the optimal one, one column per number of frames.
+
+    Parameters
+    ----------
+    result : list of dict
+        From :func:`frame_marginals`.
+    names : sequence of str, optional
+        Filters, one row each; default every filter in ``result`` but the optimal.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One row per filter (its label, wrapped, at the left), one column per
+        number of frames (its depth axis at the bottom).
+    """
+    import textwrap
+
+    from matplotlib.ticker import MaxNLocator
+
+    if names is None:
+        names = [n for n in result[0]["density"] if n != "optimal"]
+    fig, axes = subplots(
+        len(names),
+        len(result),
+        figsize=(WIDTH, 0.8 * len(names) + 1.1),
+        sharex="col",
+        squeeze=False,
+    )
+    exact = {**STYLE["optimal"], "color": "black", "linestyle": "-", "linewidth": 1.0}
+    for j, r in enumerate(result):
+        for i, name in enumerate(names):
+            ax = axes[i, j]
+            ax.fill_between(r["grid"], r["density"]["optimal"], color="0.85", linewidth=0)
+            ax.plot(r["grid"], r["density"]["optimal"], **exact)
+            ax.plot(r["grid"], r["density"][name], **{**STYLE[name], "linewidth": 1.4})
+            ax.set_yticks([])
+            if i == 0:
+                ax.set_title(f"N = {r['frames']}")
+            if j == 0:
+                label = textwrap.fill(_filters.FILTERS[name].label, 14)
+                ax.set_ylabel(label, fontsize=MIN_FONT, rotation=0, ha="right", va="center")
+        axes[-1, j].xaxis.set_major_locator(MaxNLocator(3))
+        axes[-1, j].tick_params(labelsize=MIN_FONT)
+        axes[-1, j].set_xlabel(f"depth at frame {r['frames']}", fontsize=MIN_FONT)
+    return fig
+
+
+#: The panels of :func:`frames_study_figure`, each (score, label, logarithmic axis, nominal level).
+FRAMES_ROWS = (
+    ("rmse", "RMSE of the depth mean", True, None),
+    ("mean_sd", "mean depth SD", True, None),
+    ("hellinger", "Hellinger distance\nto the exact filter", False, None),
+    ("nees", "mean NEES", True, 3.0),
+    ("coverage_68", "coverage of the\ncentral 68 % interval", False, 0.68),
+    ("coverage_95", "coverage of the\ncentral 95 % interval", False, 0.95),
+)
+
+
+def _coverage_bands(ax, frames, level: float, trials) -> None:
+    """Shade where a coverage over each number of ``trials`` passes the coverage test."""
+
+    for n in sorted(set(int(t) for t in trials)):
+        half = COVERAGE_Z * float(coverage_test(level, level, n)["se"])
+        ax.axhspan(level - half, level + half, color="0.5", alpha=0.15, linewidth=0)
+
+
+def frames_study_figure(result: dict, names=None, title: str | None = None):
+    """The scores of :func:`frames_study` against ``N``, one panel each.
+
+    Parameters
+    ----------
+    result : dict
+        One ``frames_study`` result.
+    names : sequence of str, optional
+        Filters to draw; default every filter of ``result``.
+    title : str, optional
+        Drawn above the panels.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Six panels, :data:`FRAMES_ROWS`, two to a row. The coverage panels shade
+        where a coverage passes :func:`coverage_test`
+        (within :data:`COVERAGE_Z` binomial standard errors
+        of the nominal level) over each filter's number of trials, one band per
+        number of trials: they overlap, darkest in the narrowest, of the most
+        trials.
+    """
+    if names is None:
+        names = [k for k, v in result.items() if isinstance(v, dict)]
+    names = [n for n in names if n in result]
+    fig, axes = subplots(3, 2, figsize=(WIDTH, 8.0), sharex=True)
+    frames = np.asarray(result["frames"])
+    for ax, (score, label, log, nominal) in zip(axes.ravel(), FRAMES_ROWS, strict=True):
+        for name in names:
+            if not (score == "hellinger" and name == "optimal"):
+                ax.plot(frames, result[name][score], marker="o", markersize=3, **STYLE[name])
+        if score.startswith("coverage"):
+            _coverage_bands(ax, frames, nominal, [result[n]["trials"][0] for n in names])
+            ax.set_ylim(-0.02, 1.02)
+        if nominal is not None:
+            ax.axhline(nominal, color="0.45", linewidth=1)
+        if log:
+            ax.set_yscale("log")
+        ax.set_ylabel(label)
+        ax.set_xscale("log")
+        ax.set_xticks(frames, [str(int(n)) for n in frames])
+        ax.set_xticks([], minor=True)
+    for ax in axes[-1]:
+        ax.set_xlabel("frames N")
+    if title is not None:
+        fig.suptitle(title)
+    handles, labels = [], []
+    for ax in axes.ravel():
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(
+        handles, labels, loc="outside lower center", ncol=3, frameon=False, fontsize=MIN_FONT
+    )
+    return fig
+
+
+# --- more frames ----------------------------------------------------------------------------
+
+
+def frames_study_texts(result: dict, prefix: str) -> dict:
+    """Counts of :func:`frames_study`'s failed coverage tests, for glue.
+
+    Each filter's coverages of the central 68 % and 95 % intervals at every
+    ``N`` are tested by :func:`coverage_test`
+    (two-sided, 1 %) against their nominal levels over the filter's trials.
+
+    Returns
+    -------
+    dict
+        ``"<prefix>_tests"`` (tests per filter: two levels at every ``N``) and
+        per filter ``"<prefix>_<filter>_fails"`` (the tests it fails, as
+        overconfident or as underconfident).
+    """
+
+    out = {f"{prefix}_tests": str(2 * len(result["frames"]))}
+    for name, r in result.items():
+        if not isinstance(r, dict):
+            continue
+        verdicts = np.concatenate(
+            [
+                np.atleast_1d(coverage_test(r[f"coverage_{lv}"], lv / 100, r["trials"])["verdict"])
+                for lv in (68, 95)
+            ]
+        )
+        out[f"{prefix}_{name}_fails"] = str(int(np.sum(verdicts != "calibrated")))
+    return out

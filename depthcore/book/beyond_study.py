@@ -1,0 +1,236 @@
+"""The chapter on the Monte Carlo study: calibration, the truths, the prior study.
+
+Recommended import: ``from depthcore.book import beyond_study``.
+
+* :func:`truth_study`: the study (:func:`depthcore.study.study`) at several
+  true states, and :func:`gather_scores`, one filter's scores over several
+  studies (also the noise-level and frames chapters');
+* :func:`calibration` and :func:`prior_calibration`: the calibration plots of
+  :func:`depthcore.study.study` and :func:`depthcore.study.prior_study`;
+* :func:`truth_study_texts` and :func:`prior_study_texts`: the texts the
+  chapter glues (the study's own, :func:`depthcore.book.formatting.study_texts`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import _checks, study
+from ..filters import NAMES, QUANTITIES
+from .formatting import SCORE_TEXTS, value_se, vec
+from .style import MIN_FONT, STYLE, subplots
+
+# --- the Monte Carlo study at several noise levels --------------------------------------------
+
+#: Depth scores of :func:`~depthcore.book.beyond_sweeps.noise_study`, from
+#: :func:`depthcore.study.scores`.
+NOISE_STUDY_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
+
+
+def gather_scores(filter_results, scores) -> dict:
+    """One filter's depth scores over several studies, each with its standard error.
+
+    Parameters
+    ----------
+    filter_results : sequence of dict, length S
+        The filter's entry of :func:`depthcore.study.study`'s ``"filters"``,
+        one per study.
+    scores : sequence of str
+        Depth scores of :func:`depthcore.study.scores`.
+
+    Returns
+    -------
+    dict
+        ``{score: (S,), score + "_se": (S,)}`` for each score, and ``"nees"``,
+        ``"nees_se"`` (S,).
+    """
+    out = {}
+    for score in scores:
+        out[score] = np.array([x["depth"][score] for x in filter_results])
+        out[f"{score}_se"] = np.array([x["depth"][f"{score}_se"] for x in filter_results])
+    out["nees"] = np.array([x["nees"] for x in filter_results])
+    out["nees_se"] = np.array([x["nees_se"] for x in filter_results])
+    return out
+
+
+def truth_study(
+    truths, rho: float, trials: int, seed, names=("optimal", "second_order", "ekf")
+) -> dict:
+    """:func:`depthcore.study.study` at each of several true states, with the paper's prior rule.
+
+    Parameters
+    ----------
+    truths : array_like, shape (T, 3)
+        True states ``(x, y, v)`` at time 3.
+    rho : float
+        Noise standard deviation, > 0.
+    trials : int
+        Trials per truth (the same seed for every truth).
+    seed : int or numpy.random.SeedSequence
+    names : sequence of str
+        Filters, from :data:`depthcore.filters.FILTERS`.
+
+    Returns
+    -------
+    dict
+        ``"truth"`` (T, 3), ``"valid_trials"`` (T,) and, per filter,
+        ``{score: (T,)}`` for :data:`NOISE_STUDY_SCORES` (of the depth) and ``"nees"``,
+        each with its standard error (:func:`gather_scores`).
+    """
+    truths = _checks.finite_array(truths, "truths")
+    if truths.ndim != 2 or truths.shape[1] != 3 or truths.shape[0] < 1:
+        raise ValueError(f"truths must have shape (T, 3) with T >= 1, got shape {truths.shape}")
+    rho = _checks.positive_scalar(rho, "rho")
+    runs = [
+        study.study(t, rho=rho, trials=trials, seed=seed, prior="paper", names=tuple(names))
+        for t in truths
+    ]
+    out = {"truth": truths, "valid_trials": np.array([r["valid_trials"] for r in runs])}
+    for name in names:
+        out[name] = gather_scores([r["filters"][name] for r in runs], NOISE_STUDY_SCORES)
+    return out
+
+
+def calibration(result: dict, quantity: str = "depth"):
+    """Coverage of each filter's central intervals against their nominal level.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.study.study`.
+    quantity : {"depth", "velocity"}
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+
+    fig, ax = subplots(figsize=(5.2, 4.6))
+    ax.plot([0, 1], [0, 1], color="0.7", linewidth=1, label="calibrated")
+    for name, f in result["filters"].items():
+        cal = f["calibration"]
+        ax.plot(cal["levels"], cal[quantity], marker="o", markersize=3, **STYLE[name])
+    ax.set_xlabel("nominal level of the central interval")
+    ax.set_ylabel(f"fraction of trials whose true {quantity} it covers")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.legend(frameon=False, fontsize=MIN_FONT)
+    ax.set_title(
+        f"{quantity}: {result['valid_trials']} trials, rho = {result['rho']:.4g}, "
+        f"{result['prior']} prior",
+        fontsize=MIN_FONT,
+    )
+    return fig
+
+
+def prior_calibration(result: dict):
+    """The optimal filter's coverage over truths drawn from its prior, with binomial error bars.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.study.prior_study`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Nominal level against the fraction of trials covered, for the depth and
+        the velocity, with bars of two binomial standard errors
+        ``sqrt(p (1 - p) / n)`` about the nominal level.
+    """
+
+    levels = np.asarray(result["levels"])
+    se = np.asarray(result["coverage_se"])
+    fig, ax = subplots(figsize=(5.2, 4.6))
+    ax.plot([0, 1], [0, 1], color="0.7", linewidth=1, label="calibrated")
+    ax.fill_between(
+        levels, levels - 2 * se, levels + 2 * se, color="0.85", label="two binomial SEs"
+    )
+    for quantity, marker, shift in (("depth", "o", -0.004), ("velocity", "s", 0.004)):
+        ax.errorbar(
+            levels + shift,
+            result[quantity]["coverage"],
+            yerr=2 * se,
+            marker=marker,
+            markersize=3,
+            linestyle="none",
+            capsize=2,
+            label=f"optimal filter, {quantity}",
+        )
+    ax.set_xlabel("nominal level of the central interval")
+    ax.set_ylabel("fraction of trials whose truth it covers")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.legend(frameon=False, fontsize=MIN_FONT)
+    ax.set_title(
+        f"truths from the prior: {result['valid_trials']} trials, rho = {result['rho']:.4g}",
+        fontsize=MIN_FONT,
+    )
+    return fig
+
+
+def truth_study_texts(result: dict, prefix: str) -> dict:
+    """Texts of :func:`~depthcore.book.beyond_study.truth_study`'s rows, for glue.
+
+    Returns
+    -------
+    dict
+        For truth ``i``: ``"<prefix>_<i>_truth"`` (``"(2, 10, 2)"``),
+        ``"<prefix>_<i>_trials"``, and per filter ``"<prefix>_<i>_<filter>_<score>"``
+        for the depth's ``bias``, ``rmse``, ``mean_sd``
+        (:data:`~depthcore.book.formatting.STUDY_DECIMALS`),
+        ``cov68``, ``cov95`` (2 decimals) and ``nees`` (1 decimal), each also
+        with ``_pm`` appended: ``"value ± standard error"``
+        (:func:`~depthcore.book.formatting.value_se`).
+    """
+    out = {}
+    names = [n for n in NAMES if n in result]
+    for i, truth in enumerate(result["truth"]):
+        out[f"{prefix}_{i}_truth"] = "(" + ", ".join(f"{float(v):g}" for v in truth) + ")"
+        out[f"{prefix}_{i}_trials"] = str(int(result["valid_trials"][i]))
+        for name in names:
+            r = result[name]
+            row = f"{prefix}_{i}_{name}"
+            for key, score, d in SCORE_TEXTS:
+                out[f"{row}_{key}"] = f"{float(r[score][i]) + 0.0:.{d}f}"
+                out[f"{row}_{key}_pm"] = value_se(r[score][i], r[f"{score}_se"][i], d)
+    return out
+
+
+def prior_study_texts(result: dict, prefix: str) -> dict:
+    """Texts of :func:`depthcore.study.prior_study`'s result, for glue.
+
+    Returns
+    -------
+    dict
+        ``"<prefix>_trials"``, ``"<prefix>_prior_mean"``, ``"<prefix>_prior_scale"``,
+        ``"<prefix>_false_alarm"`` and ``"<prefix>_test_level"`` (percent),
+        ``"<prefix>_max_se"`` (largest deviation of a coverage from nominal, in
+        binomial standard errors, 1 decimal), and per quantity ``q``:
+        ``"<prefix>_<q>_coverage_50"``, ``_90`` and ``_95`` (2 decimals, when
+        those levels are reported),
+        ``"<prefix>_<q>_ks"``, ``"<prefix>_<q>_chi2"`` (p-values, 2 decimals) and
+        ``"<prefix>_<q>_verdict"``.
+    """
+    levels = list(result["levels"])
+    se = np.asarray(result["coverage_se"])
+    out = {
+        f"{prefix}_trials": str(result["valid_trials"]),
+        f"{prefix}_prior_mean": vec(result["prior_mean"], 1),
+        f"{prefix}_prior_scale": f"{result['prior_cov'][0][0]:g}",
+        f"{prefix}_false_alarm": f"{100 * result['false_alarm']:g} %",
+        f"{prefix}_test_level": f"{50 * result['false_alarm']:g} %",
+    }
+    worst = 0.0
+    for q in QUANTITIES:
+        r = result[q]
+        cov = np.asarray(r["coverage"])
+        worst = max(worst, float(np.max(np.abs(cov - np.asarray(levels)) / se)))
+        for p in (0.5, 0.9, 0.95):
+            if p in levels:
+                out[f"{prefix}_{q}_coverage_{round(100 * p)}"] = f"{cov[levels.index(p)]:.2f}"
+        out[f"{prefix}_{q}_ks"] = f"{r['ks_pvalue']:.2f}"
+        out[f"{prefix}_{q}_chi2"] = f"{r['chi2_pvalue']:.2f}"
+        out[f"{prefix}_{q}_verdict"] = "passes" if r["calibrated"] else "fails"
+    out[f"{prefix}_max_se"] = f"{worst:.1f}"
+    return out
