@@ -56,6 +56,9 @@ __version__ = "0.1.0"
 #: The public modules, imported on first access as attributes of the package.
 MODULES = (
     "bank",
+    "bank_mixture",
+    "bank_posterior",
+    "bank_track",
     "benchmarks",
     "bound",
     "calibration",

@@ -645,7 +645,7 @@ def bank_depth_figure(densities: dict, truth=None):
     Parameters
     ----------
     densities : dict
-        ``{frame: (depths, density)}``, each from :func:`depthcore.bank.node_density`
+        ``{frame: (depths, density)}``, each from :func:`depthcore.bank_posterior.node_density`
         of the posterior after that frame: the nodes as depths at that frame and
         the density there (arrays of shape (J,)).
     truth : dict, optional
@@ -693,8 +693,8 @@ def smoothing_figure(track, states, first: int = 1):
 
     Parameters
     ----------
-    track : depthcore.bank.Track
-        From :func:`depthcore.bank.track`.
+    track : depthcore.bank_track.Track
+        From :func:`depthcore.bank_track.track`.
     states : array_like, shape (N, 3)
         The true states ``(x_k, y_k, v_k)``.
     first : int

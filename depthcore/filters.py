@@ -57,7 +57,9 @@ import numpy as np
 
 from . import (
     _checks,
-    bank,
+    bank_mixture,
+    bank_posterior,
+    bank_track,
     ekf,
     inverse_depth,
     inverse_depth_ukf,
@@ -156,11 +158,11 @@ def _exact_cdfs(estimate: Estimate, truths) -> tuple:
 
     Three frames without process noise give the one-dimensional route's
     :class:`~depthcore.optimal.BatchMarginals` (queries of shape (B,)); more
-    frames or process noise the bank's :class:`~depthcore.bank.Mixture`
+    frames or process noise the bank's :class:`~depthcore.bank_mixture.Mixture`
     (queries of shape (B, 1)).
     """
     d = estimate.detail
-    if isinstance(d, bank.Mixture):
+    if isinstance(d, bank_mixture.Mixture):
         return d.depth_cdf(truths[:, 1:2])[:, 0], d.velocity_cdf(truths[:, 2:3])[:, 0]
     return d.depth_cdf(truths[:, 1]), d.velocity_cdf(truths[:, 2])
 
@@ -171,15 +173,15 @@ def exact_depth_range(detail) -> tuple:
     ``t = log(y - offset)`` with ``offset = N - 1`` for ``N`` frames (2 for the
     paper's three): the quadrature's range for
     :class:`~depthcore.optimal.BatchMarginals`, the nodes with weight for a
-    :class:`~depthcore.bank.Mixture` (the exact filter's ``detail``).
+    :class:`~depthcore.bank_mixture.Mixture` (the exact filter's ``detail``).
     """
-    if isinstance(detail, bank.Mixture):
+    if isinstance(detail, bank_mixture.Mixture):
         p = detail.probabilities
         log_y1 = np.log(np.broadcast_to(detail.bank.nodes, p.shape))
         used = p > 1e-300
         t_lo = np.min(np.where(used, log_y1, np.inf), axis=-1)
         t_hi = np.max(np.where(used, log_y1, -np.inf), axis=-1)
-        return t_lo, t_hi, detail.bank.n_frames - 1.0
+        return t_lo, t_hi, detail.bank.frames - 1.0
     t_lo, t_hi, _ = detail.log_depth_range
     return t_lo, t_hi, 2.0
 
@@ -335,7 +337,7 @@ class Filter:
         track of ``N`` bearings, checked by :func:`track` (which calls it):
         ``(filtered, smoothed, detail)``, the state at every frame given the
         bearings up to it and given all of them, each a
-        :class:`~depthcore.bank.Smoothed` of means (N, 3) and covariances
+        :class:`~depthcore.bank_mixture.Smoothed` of means (N, 3) and covariances
         (N, 3, 3), and the filter's own result. ``None`` for a filter
         without a smoother.
     """
@@ -469,8 +471,8 @@ def _optimal(
     :class:`~depthcore.optimal.BatchMarginals` (with the CDFs and densities);
     otherwise the :class:`~depthcore.optimal.Moments`. For more than three
     frames or with process noise it is the bank of Kalman filters over depth
-    nodes placed by the same quadrature (:func:`depthcore.bank.posterior`),
-    and ``detail`` its :class:`~depthcore.bank.Mixture`.
+    nodes placed by the same quadrature (:func:`depthcore.bank_posterior.posterior`),
+    and ``detail`` its :class:`~depthcore.bank_mixture.Mixture`.
     """
     if np.shape(mu)[-1] != 3 or process_noise > 0:
         if (reading, support) != ("derived", "front"):
@@ -479,7 +481,7 @@ def _optimal(
                 "paper's three-frame Eqs. (14)-(16); with more frames or process noise "
                 f"the optimal filter has neither, got {reading!r} and {support!r}"
             )
-        m = bank.posterior(mu, rho, prior_mean, prior_cov, process_noise, rtol)
+        m = bank_posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise, rtol)
         return Estimate(
             m.depth_mean,
             m.depth_sd,
@@ -771,7 +773,7 @@ def _rbpf(
         prior_cov,
         n_particles,
         rng,
-        q=process_noise,
+        process_noise=process_noise,
         replicas=replicas,
         **options,
     )
@@ -857,13 +859,13 @@ def _particle(
 
 
 def _optimal_smoother(mu, rho, prior_mean, prior_cov, process_noise):
-    """The exact filter and its fixed-interval smoother: :func:`depthcore.bank.track`.
+    """The exact filter and its fixed-interval smoother: :func:`depthcore.bank_track.track`.
 
-    The bearings are added online (:func:`depthcore.bank.update`); the smoothed
+    The bearings are added online (:func:`depthcore.bank_posterior.update`); the smoothed
     state is each depth node's Rauch-Tung-Striebel smoother mixed over the
-    nodes (textbook 19.2.6, :meth:`depthcore.bank.Mixture.smoothed`).
+    nodes (textbook 19.2.6, :meth:`depthcore.bank_mixture.Mixture.smoothed`).
     """
-    t = bank.track(mu, rho, prior_mean, prior_cov, process_noise, lag=mu.size - 1)
+    t = bank_track.track(mu, rho, prior_mean, prior_cov, process_noise, lag=mu.size - 1)
     return t.filtered, t.interval, t
 
 
@@ -891,7 +893,7 @@ def _gaussian_smoother(name: str):
             np.zeros(means.shape[0]),
         )
         s = kalman.fixed_interval_smoother(filtered, model.F)
-        return bank.Smoothed(means, covs), bank.Smoothed(s.mean, s.cov), h
+        return bank_mixture.Smoothed(means, covs), bank_mixture.Smoothed(s.mean, s.cov), h
 
     return smoother
 
@@ -1099,20 +1101,20 @@ class Track:
     ----------
     filter : str
         The registry's name of the filter.
-    filtered : depthcore.bank.Smoothed
+    filtered : depthcore.bank_mixture.Smoothed
         The state at frame ``k`` given ``mu_1 .. mu_k``: a
-        :class:`~depthcore.bank.Smoothed` of means (N, 3) and covariances
+        :class:`~depthcore.bank_mixture.Smoothed` of means (N, 3) and covariances
         (N, 3, 3) of ``(x_k, y_k, v_k)``, whose ``depth_mean``, ``depth_sd``,
         ``lateral_mean``, ``lateral_sd``, ``velocity_mean`` and
         ``velocity_sd`` have shape (N,).
-    smoothed : depthcore.bank.Smoothed
+    smoothed : depthcore.bank_mixture.Smoothed
         The state at frame ``k`` given all ``N`` bearings (the fixed-interval
         smoother, textbook 19.2.6); at frame ``N`` it is the filtered state.
     prior : depthcore.gaussian.Gaussian
         The prior of the state at frame 1 that the filter used.
     process_noise : float
     detail : object
-        The filter's own result: the exact filter's :class:`~depthcore.bank.Track`,
+        The filter's own result: the exact filter's :class:`~depthcore.bank_track.Track`,
         a Gaussian filter's :class:`~depthcore.gaussian.History`.
     """
 

@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _checks, bank, bound, calibration, model, study
+from . import _checks, bank_mixture, bound, calibration, model, study
 from .filters import FILTERS, check_names
 from .gaussian import paper_prior_means
 
@@ -171,7 +171,7 @@ def depth_estimates(name: str, mu, rho: float, prior_mean, prior_cov, true_depth
         ``"gaussian"`` family.
     mu : ndarray, shape (T, N)
         Bearings of frames 1 .. N (the optimal filter beyond three frames is
-        the bank of Kalman filters, :func:`depthcore.bank.posterior`).
+        the bank of Kalman filters, :func:`depthcore.bank_posterior.posterior`).
     rho : float
     prior_mean : array_like, shape (3,)
     prior_cov : array_like, shape (3, 3)
@@ -193,7 +193,9 @@ def depth_estimates(name: str, mu, rho: float, prior_mean, prior_cov, true_depth
     def run(rows):
         est = f(mu[rows], rho, prior_mean, prior_cov)
         m, s = np.asarray(est.depth_mean), np.asarray(est.depth_sd)
-        if f.family == "exact" and isinstance(est.detail, bank.Mixture):  # beyond three frames
+        if f.family == "exact" and isinstance(
+            est.detail, bank_mixture.Mixture
+        ):  # beyond three frames
             return m, s, est.detail.depth_cdf(true_depth[rows][:, None])[:, 0]
         if f.family == "exact":
             return m, s, est.detail.depth_cdf(true_depth[rows])

@@ -11,7 +11,7 @@ from numpy.testing import assert_allclose
 
 from depthcore import (
     SCENARIOS,
-    bank,
+    bank_posterior,
     ekf,
     experiments,
     figures,
@@ -336,13 +336,13 @@ def _rbpf_track():
 def test_rbpf_convergence_measures_each_cloud_from_the_exact_bank():
     mu, rho, pm, pc = _rbpf_track()
     r = experiments.rbpf_convergence(mu, rho, pm, pc, [20, 600], 4, seed=11, process_noise=0.01)
-    exact = bank.posterior(mu, rho, pm, pc, 0.01)
+    exact = bank_posterior.posterior(mu, rho, pm, pc, 0.01)
     assert r["frames"] == 6 and r["replicas"] == 4 and list(r["sizes"]) == [20, 600]
     assert r["exact"]["depth_mean"] == pytest.approx(float(exact.depth_mean), rel=1e-14)
     assert r["exact_error"]["depth"] == pytest.approx(float(exact.depth_error), rel=1e-14)
     # the runs are the filter's own clouds, from the seed's child streams
     stream = np.random.default_rng(experiments._checks.spawn(11, 2)[1])
-    again = rbpf.run(mu, rho, pm, pc, 600, stream, q=0.01, replicas=4).replica_moments()
+    again = rbpf.run(mu, rho, pm, pc, 600, stream, process_noise=0.01, replicas=4).replica_moments()
     assert np.array_equal(r["runs"]["depth_sd"][1], again.depth_sd)
     for m in experiments.MOMENTS:
         runs = r["runs"][m]

@@ -8,7 +8,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from depthcore import _checks, model, optimal, study
+from depthcore import _checks, bank_posterior, model, optimal, study
 from depthcore.__main__ import main
 from depthcore.filters import FILTERS, NAMES
 from depthcore.gaussian import Gaussian
@@ -345,7 +345,7 @@ def test_optimal_cdfs_at_the_truth_match_quadrature_of_its_marginals():
 
 
 def test_study_over_more_frames_with_process_noise_scores_each_trials_own_truth():
-    from depthcore import _checks, bank, ekf
+    from depthcore import _checks, ekf
 
     fig2 = SCENARIOS["fig2"]
     truth, rho, q, N = fig2.c, fig2.rho, 0.02, 6
@@ -358,7 +358,7 @@ def test_study_over_more_frames_with_process_noise_scores_each_trials_own_truth(
     # the truth moves on: depth y_3 + N - 3 at frame N; the velocity changes with q
     assert np.allclose(t.states[:, 1], truth[1] + N - 3)
     assert np.std(t.states[:, 2]) > 0
-    exact = bank.moments(t.mu, rho, t.prior_mean, t.prior_cov, q)
+    exact = bank_posterior.moments(t.mu, rho, t.prior_mean, t.prior_cov, q)
     h = ekf.run(t.mu, rho, t.prior_mean, t.prior_cov, q)
     for name, depth in (("optimal", exact.depth_mean), ("ekf", h.means[:, -1, 1])):
         bias = np.mean(depth - t.states[:, 1])

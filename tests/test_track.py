@@ -22,7 +22,7 @@ from filterpy.kalman import rts_smoother
 from numpy.testing import assert_allclose, assert_array_equal
 
 import depthcore
-from depthcore import _checks, bank, model
+from depthcore import _checks, bank_track, model
 from depthcore.filters import FILTERS, PROCESS_NOISE_MAX, RHO_RANGE, SMOOTHED, track
 from depthcore.gaussian import Gaussian
 
@@ -48,7 +48,7 @@ def test_the_registry_says_which_filters_smooth():
 def test_the_exact_filter_is_the_banks_track(q):
     mu = _mu(8, q)
     t = track(mu, RHO, PRIOR, q, "optimal")
-    direct = bank.track(mu, RHO, PRIOR.mean, PRIOR.cov, q)
+    direct = bank_track.track(mu, RHO, PRIOR.mean, PRIOR.cov, q)
     assert_array_equal(t.filtered.mean, direct.filtered.mean)
     assert_array_equal(t.filtered.cov, direct.filtered.cov)
     assert_array_equal(t.smoothed.mean, direct.interval.mean)
