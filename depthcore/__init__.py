@@ -31,8 +31,8 @@ any number of frames as a bank of Kalman filters over depth
 particle filter over depth with a Kalman filter per particle
 (:mod:`~depthcore.rbpf`) and the self-calibration check
 (:mod:`~depthcore.calibration`). The
-registry :mod:`~depthcore.filters` lists every filter, and its
-:func:`~depthcore.filters.track` (``depthcore.track``) filters and smooths one
+registry :mod:`~depthcore.filters` lists every filter,
+and :func:`~depthcore.tracking.track` (``depthcore.track``) filters and smooths one
 track at every frame;
 :mod:`~depthcore.reproduce`, :mod:`~depthcore.study` and
 :mod:`~depthcore.experiments` run them; :mod:`~depthcore.figures` draws and
@@ -55,6 +55,7 @@ __version__ = "0.1.0"
 
 #: The public modules, imported on first access as attributes of the package.
 MODULES = (
+    "adapters",
     "bank",
     "bank_mixture",
     "bank_posterior",
@@ -64,6 +65,7 @@ MODULES = (
     "calibration",
     "crossref",
     "ekf",
+    "estimates",
     "experiments",
     "figures",
     "filters",
@@ -89,6 +91,7 @@ MODULES = (
     "scenarios",
     "second_order",
     "study",
+    "tracking",
     "ukf",
 )
 
@@ -112,7 +115,7 @@ def __getattr__(name):
     if name == "optimal_marginals":
         return importlib.import_module(f"{__name__}.optimal").marginals
     if name == "track":
-        return importlib.import_module(f"{__name__}.filters").track
+        return importlib.import_module(f"{__name__}.tracking").track
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _checks, model, report, reproduce
+from . import _checks, estimates, model, report, reproduce
 from . import filters as _filters
 from .scenarios import SCENARIOS
 
@@ -321,8 +321,8 @@ def convergence_figure(result: dict, quantity: str = "depth"):
     matplotlib.figure.Figure
     """
 
-    if quantity not in _filters.QUANTITIES:
-        raise ValueError(f"quantity must be one of {_filters.QUANTITIES}, got {quantity!r}")
+    if quantity not in estimates.QUANTITIES:
+        raise ValueError(f"quantity must be one of {estimates.QUANTITIES}, got {quantity!r}")
     N = result["sizes"]
     ideal = result["exact"][f"{quantity}_sd"] / np.sqrt(N)
     fig, axes = _subplots(1, 2, figsize=(WIDTH, 4.4), sharey=True)

@@ -34,7 +34,8 @@ import numpy as np
 
 from . import _checks
 from .crossref import BookReferences
-from .filters import NAMES, QUANTITIES
+from .estimates import QUANTITIES
+from .filters import NAMES
 from .reproduce import scenario_rows
 from .scenarios import REPORTED_DECIMALS, SCENARIOS
 

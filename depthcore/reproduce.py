@@ -17,7 +17,9 @@ from __future__ import annotations
 import numpy as np
 
 from . import _checks, bank_posterior
-from .filters import FILTERS, NAMES, PAPER_FILTERS, PARTICLES, QUANTITIES, Estimate, check_names
+from .adapters import PARTICLES
+from .estimates import QUANTITIES, Estimate
+from .filters import FILTERS, NAMES, PAPER_FILTERS, check_names
 from .gaussian import Gaussian
 from .model import noise_free_state, noise_free_states_unchecked
 from .scenarios import REPORTED, REPORTED_DECIMALS, SCENARIOS, Scenario

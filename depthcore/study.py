@@ -54,7 +54,8 @@ import numpy as np
 from scipy.stats import beta
 
 from . import _checks, model, optimal
-from .filters import FILTERS, NAMES, check_names, exact_depth_range
+from .estimates import exact_depth_range
+from .filters import FILTERS, NAMES, check_names
 from .gaussian import PAPER_PRIOR_SCALE, gaussian_logpdf, paper_prior_means
 from .scenarios import SCENARIOS
 
@@ -272,7 +273,7 @@ def hellinger(
 def _estimates(trials: Trials, estimate, family, reference) -> Estimates:
     """Scores' inputs for a filter's batch ``estimate``, read from its family's scoring.
 
-    The CDFs at the truths are the family's (:attr:`depthcore.filters.Family.cdfs`).
+    The CDFs at the truths are the family's (:attr:`depthcore.estimates.Family.cdfs`).
     The Hellinger distance to ``reference`` is in closed form for a Gaussian
     result; for weighted depth draws (the particle filters) it is taken from
     a binned kernel density estimate with Scott's bandwidth for the effective

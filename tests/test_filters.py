@@ -15,17 +15,8 @@ from depthcore import (
     particle,
     ukf,
 )
-from depthcore.filters import (
-    ALL_NAMES,
-    FAMILIES,
-    FAMILY,
-    FILTERS,
-    NAMES,
-    PAPER_FILTERS,
-    QUANTITIES,
-    check_names,
-    get,
-)
+from depthcore.estimates import FAMILIES, FAMILY, QUANTITIES
+from depthcore.filters import ALL_NAMES, FILTERS, NAMES, PAPER_FILTERS, check_names, get
 from depthcore.gaussian import paper_prior_means
 from depthcore.scenarios import SCENARIOS
 

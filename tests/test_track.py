@@ -1,4 +1,4 @@
-"""One track in one call: :func:`depthcore.filters.track` and the pixels' bearings.
+"""One track in one call: :func:`depthcore.tracking.track` and the pixels' bearings.
 
 The function's outputs are checked against the routes it calls (the bank's
 track, the registry's Gaussian filters), the Gaussian smoother against
@@ -23,8 +23,9 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 import depthcore
 from depthcore import _checks, bank_track, model
-from depthcore.filters import FILTERS, PROCESS_NOISE_MAX, RHO_RANGE, SMOOTHED, track
+from depthcore.filters import FILTERS, SMOOTHED
 from depthcore.gaussian import Gaussian
+from depthcore.tracking import PROCESS_NOISE_MAX, RHO_RANGE, track
 
 ROOT = Path(__file__).resolve().parents[1]
 #: A point at depth 10 at frame 1, seen with a bearing noise of 0.002 (one pixel at f = 500).
