@@ -91,6 +91,8 @@ MODULES = (
     "scenarios",
     "second_order",
     "study",
+    "study_scores",
+    "study_trials",
     "tracking",
     "ukf",
 )

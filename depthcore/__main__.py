@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__, _checks, report, reproduce, study
+from . import __version__, _checks, report, reproduce, study, study_trials
 from .adapters import RBPF_REPLICAS
 from .filters import ALL_NAMES, FILTERS
 from .filters import NAMES as _STUDY_FILTERS
@@ -679,10 +679,10 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument(
         "--particles",
         type=int,
-        default=study.PARTICLES,
+        default=study_trials.PARTICLES,
         help=f"particles per trial of the filters that draw them, {MIN_PARTICLES} to "
         f"{MAX_PARTICLES} "
-        f"(default {study.PARTICLES})",
+        f"(default {study_trials.PARTICLES})",
     )
     st.add_argument(
         "--frames",

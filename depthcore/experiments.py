@@ -50,6 +50,8 @@ from . import (
     rbpf,
     resample_move,
     study,
+    study_scores,
+    study_trials,
     ukf,
 )
 from .filters import FILTERS, NAMES, check_names
@@ -93,7 +95,7 @@ def _compare(mu, rho, pm, pc, names=NAMES) -> dict:
             out[name] = {
                 "depth_mean": est.depth_mean,
                 "depth_sd": est.depth_sd,
-                "hellinger": study.gaussian_hellinger(reference.detail, est.mean, est.cov),
+                "hellinger": study_trials.gaussian_hellinger(reference.detail, est.mean, est.cov),
             }
     return out
 
@@ -330,7 +332,7 @@ def ekf_linearisation(mu, rho: float, prior: Gaussian) -> dict:
 
 # --- the Monte Carlo study at several noise levels --------------------------------------------
 
-#: Depth scores of :func:`noise_study`, from :func:`depthcore.study.scores`.
+#: Depth scores of :func:`noise_study`, from :func:`depthcore.study_scores.scores`.
 NOISE_STUDY_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
 
 
@@ -343,7 +345,7 @@ def gather_scores(filter_results, scores) -> dict:
         The filter's entry of :func:`depthcore.study.study`'s ``"filters"``,
         one per study.
     scores : sequence of str
-        Depth scores of :func:`depthcore.study.scores`.
+        Depth scores of :func:`depthcore.study_scores.scores`.
 
     Returns
     -------
@@ -786,7 +788,7 @@ def frames_study(
     truth=None,
     rho: float = SCENARIOS["fig2"].rho,
     particle_trials: int | None = None,
-    n_particles: int = study.PARTICLES,
+    n_particles: int = study_trials.PARTICLES,
 ) -> dict:
     """:func:`depthcore.study.study` at each number of frames, its depth scores gathered.
 
@@ -896,7 +898,7 @@ def coverage_test(coverage, level: float, trials, z: float = COVERAGE_Z) -> dict
     if np.any(trials < 1):
         raise ValueError("trials must each be at least 1")
     z = _checks.positive_scalar(z, "z")
-    se = study.coverage_se(level, trials)
+    se = study_scores.coverage_se(level, trials)
     score = (coverage - level) / se
     verdict = np.where(
         np.abs(score) <= z, "calibrated", np.where(score < 0, "overconfident", "underconfident")
@@ -1089,7 +1091,7 @@ def bound_study(
     truth=None,
     rho: float = SCENARIOS["fig2"].rho,
     particle_trials: int | None = None,
-    n_particles: int = study.PARTICLES,
+    n_particles: int = study_trials.PARTICLES,
 ) -> dict:
     """Every named filter's depth and velocity errors and claimed SDs at frame ``N``, by trial.
 
@@ -1102,7 +1104,7 @@ def bound_study(
     rule (``"paper"``: from each trial's first three bearings) or the same rule
     applied once to ``truth`` (``"fixed"``), covariance 1000 I; trials whose
     first three bearings have no noise-free solution in front of the camera
-    are left out, as in :func:`depthcore.study.simulate`. The filters that
+    are left out, as in :func:`depthcore.study_trials.simulate`. The filters that
     draw random numbers run on the first ``particle_trials`` valid trials.
     Set the results against :func:`depthcore.bound.posterior_bound` with
     :func:`depthcore.bound.against_bound`.
@@ -1157,7 +1159,7 @@ def bound_study(
     noise_rng, particle_rng = (
         np.random.default_rng(s) for s in _checks.spawn(_checks.seed_sequence(seed), 2)
     )
-    drawn = study.simulate(
+    drawn = study_trials.simulate(
         truth, rho, trials, noise_rng, prior, PAPER_PRIOR_SCALE, max(frames), q, tracks=True
     )
     mu, pm, pc, states = drawn.mu, drawn.prior_mean, drawn.prior_cov, drawn.tracks

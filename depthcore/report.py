@@ -61,7 +61,8 @@ QUANTITY_LETTERS = {"depth": "y", "velocity": "v"}
 DECIMALS = 4
 
 
-#: Scores of :func:`depthcore.study.scores` per quantity, with their decimals in the book's tables.
+#: Scores of :func:`depthcore.study_scores.scores` per quantity, with their decimals in the book's
+#: tables.
 STUDY_DECIMALS = {"bias": 3, "rmse": 3, "mean_sd": 3, "coverage_68": 2, "coverage_95": 2}
 #: (text key, score, decimals) of the rows of several studies' texts.
 SCORE_TEXTS = (

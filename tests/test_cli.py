@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from depthcore import bank_posterior, reproduce, study
+from depthcore import bank_posterior, reproduce, study, study_trials
 from depthcore.__main__ import build_parser, main
 from depthcore.filters import FILTERS
 from depthcore.scenarios import SCENARIOS
@@ -217,7 +217,7 @@ def test_study_shows_a_progress_bar_on_a_terminal_only():
 
 
 def test_study_particles_default_is_the_studys():
-    assert build_parser().parse_args(["study"]).particles == study.PARTICLES
+    assert build_parser().parse_args(["study"]).particles == study_trials.PARTICLES
 
 
 def test_estimate_takes_more_frames_process_noise_and_smoothing(capsys):

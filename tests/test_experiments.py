@@ -21,6 +21,7 @@ from depthcore import (
     rbpf,
     resample_move,
     study,
+    study_trials,
     ukf,
 )
 from depthcore.filters import FILTERS
@@ -174,9 +175,8 @@ def test_prior_offset_sweep_rejects_a_prior_behind_the_camera():
 def test_hellinger_is_zero_for_identical_densities_and_bounded():
     s = SCENARIOS["fig2"]
     ref = optimal.batch_marginals(np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov)
-    from depthcore import study
 
-    h = study.hellinger(ref, ref.depth_log_pdf, ref.moments.depth_mean, ref.moments.depth_sd)
+    h = study_trials.hellinger(ref, ref.depth_log_pdf, ref.moments.depth_mean, ref.moments.depth_sd)
     assert_allclose(h, 0.0, atol=1e-6)  # H = sqrt(1 - BC): BC to 1e-12
 
 
