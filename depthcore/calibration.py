@@ -140,7 +140,7 @@ def draw_from_prior(
             f"(y_1 > 0): {behind} of {behind + sum(len(k) for k in kept)} draws behind it"
         )
     x1 = np.concatenate(kept)[:n]
-    sim = model.simulate(x1, frames, rho, q, rng, frame=1)
+    sim = model.draw_track(x1, frames, rho, q, rng, x1.shape[:-1], 1)  # checked above
     mu, last = sim.mu, sim.states[:, -1, :]
     ok = model.valid_measurements(mu[:, :3])  # the noise-free solution, Eq. (7), in front
     return PriorDraws(last[ok], mu[ok], behind, int(np.sum(~ok)))

@@ -217,6 +217,31 @@ def simulate(
     if size is not None:
         size = _checks.count(size, "size")
     lead = ((size,) if size is not None else ()) + state.shape[:-1]
+    return draw_track(state, frames, rho, process_noise, rng, lead, frame)
+
+
+def draw_track(state, frames: int, rho: float, process_noise: float, rng, lead, frame: int):
+    """:func:`simulate` on checked inputs, which its callers have checked as it checks them.
+
+    Parameters
+    ----------
+    state : ndarray, shape (..., 3)
+        Finite, in front of the camera at frame 1.
+    frames, frame : int
+        ``>= 1``.
+    rho : float
+        ``> 0``.
+    process_noise : float
+        ``>= 0``.
+    rng : numpy.random.Generator
+    lead : tuple of int
+        The leading shape of the tracks, ``(size,) + state.shape[:-1]`` or
+        ``state.shape[:-1]``.
+
+    Returns
+    -------
+    Simulation
+    """
     k = np.arange(1, frames + 1) - frame  # frames from the given one
     n_noisy = max(frames - frame, 0)
     v = np.broadcast_to(state[..., 2, None], lead + (frames,))

@@ -161,7 +161,9 @@ def simulate(
         raise ValueError(
             f"truth puts the point behind the camera: depth at time 1 is {truth[1] - 2:.6g}"
         )
-    sim = model.simulate(truth, frames, rho, q, rng, size=int(n), frame=3)
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    sim = model.draw_track(truth, frames, rho, q, rng, (int(n),), 3)
     mu = sim.mu
     states = None if frames == 3 else sim.states[:, -1, :]
     keep = valid_triples(mu[:, :3])
