@@ -31,7 +31,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from filterpy.kalman import ExtendedKalmanFilter  # noqa: E402
 
-from depthcore import benchmarks, ekf, model, study  # noqa: E402
+from depthcore import benchmarks, ekf, model, study_trials  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
@@ -73,7 +73,7 @@ def main(argv=None):
     args = p.parse_args(argv)
     n_trials, pairs = (1000, 3) if args.quick else (TRIALS, PAIRS)
     s = SCENARIOS["fig2"]
-    trials = study.simulate(s.c, s.rho, n_trials, np.random.default_rng(SEED))
+    trials = study_trials.simulate(s.c, s.rho, n_trials, np.random.default_rng(SEED))
     mu, pm, pc = trials.mu, trials.prior_mean, trials.prior_cov
 
     # Alternate the two routes, pair by pair, so that a change of the machine's load

@@ -5,7 +5,7 @@ For two problems, Figure 2's triple and Figure 2's point continued to a
 (:func:`depthcore.range_ekf.posterior`, Peach 1995) runs with a growing number
 of components ``n`` on a geometric grid (four per doubling, 1 to
 :data:`depthcore.range_ekf.MAX_COMPONENTS`), and its depth mean and SD at the
-last frame are compared with the exact filter's (:func:`depthcore.bank.posterior`).
+last frame are compared with the exact filter's (:func:`depthcore.bank_posterior.posterior`).
 A tolerance is met from ``n`` on when the relative error of both moments is
 below it at ``n`` and at every larger ``n`` of the grid. For each tolerance
 (1e-2 and 1e-3) the table gives that ``n`` and the time of one call with it,
@@ -30,7 +30,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import bank, benchmarks, model, range_ekf  # noqa: E402
+from depthcore import bank_posterior, benchmarks, model, range_ekf  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
 FIG2 = SCENARIOS["fig2"]
@@ -65,7 +65,7 @@ def best_of(f, repeats: int) -> float:
 def compare(mu, repeats: int) -> dict:
     prior = FIG2.prior
     args = (mu, FIG2.rho, prior.mean, prior.cov)
-    exact = bank.posterior(*args)
+    exact = bank_posterior.posterior(*args)
     errors = []
     for n in GRID:
         g = range_ekf.posterior(*args, n_components=n)
@@ -92,7 +92,7 @@ def compare(mu, repeats: int) -> dict:
             out[key] = {"components": None}
             continue
         n = GRID[first]
-        t_bank = best_of(lambda: bank.posterior(*args), repeats)
+        t_bank = best_of(lambda: bank_posterior.posterior(*args), repeats)
         t_range = best_of(lambda n=n: range_ekf.posterior(*args, n_components=n), repeats)
         out[key] = {
             "components": n,

@@ -36,7 +36,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import bank, benchmarks, model, rbpf, resample_move  # noqa: E402
+from depthcore import bank, bank_mixture, benchmarks, model, rbpf, resample_move  # noqa: E402
 from depthcore.gaussian import paper_prior  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
@@ -64,7 +64,7 @@ def exact(mu, rho, prior):
     panels, previous = 20, None
     while True:
         y, w = log_depth_rule(panels)
-        mx = bank.mixture(bank.filter_bank(y, mu, rho, prior.mean, prior.cov), w)
+        mx = bank_mixture.mixture(bank.filter_bank(y, mu, rho, prior.mean, prior.cov), w)
         now = np.array([mx.depth_mean, mx.depth_sd])
         if previous is not None and np.all(np.abs(now - previous) <= 1e-10 * np.abs(now)):
             return float(now[0]), float(now[1])

@@ -22,7 +22,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import benchmarks, optimal, study  # noqa: E402
+from depthcore import benchmarks, optimal, study_trials  # noqa: E402
 from depthcore.gaussian import Gaussian  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
@@ -37,7 +37,7 @@ def main(argv=None):
     args = p.parse_args(argv)
     n_trials, n_loop = (1000, 50) if args.quick else (TRIALS, LOOP)
     s = SCENARIOS["fig2"]
-    tr = study.simulate(s.c, s.rho, n_trials, np.random.default_rng(SEED))
+    tr = study_trials.simulate(s.c, s.rho, n_trials, np.random.default_rng(SEED))
     t = time.perf_counter()
     m = optimal.moments(tr.mu, tr.rho, tr.prior_mean, tr.prior_cov)
     t_vec = time.perf_counter() - t

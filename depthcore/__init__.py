@@ -31,8 +31,8 @@ any number of frames as a bank of Kalman filters over depth
 particle filter over depth with a Kalman filter per particle
 (:mod:`~depthcore.rbpf`) and the self-calibration check
 (:mod:`~depthcore.calibration`). The
-registry :mod:`~depthcore.filters` lists every filter, and its
-:func:`~depthcore.filters.track` (``depthcore.track``) filters and smooths one
+registry :mod:`~depthcore.filters` lists every filter,
+and :func:`~depthcore.tracking.track` (``depthcore.track``) filters and smooths one
 track at every frame;
 :mod:`~depthcore.reproduce` and :mod:`~depthcore.study` run them;
 :mod:`~depthcore.cli_text` holds the command line's tables;
@@ -59,7 +59,11 @@ __version__ = "0.1.0"
 
 #: The public modules, imported on first access as attributes of the package.
 MODULES = (
+    "adapters",
     "bank",
+    "bank_mixture",
+    "bank_posterior",
+    "bank_track",
     "benchmark_tables",
     "benchmarks",
     "book",
@@ -67,6 +71,7 @@ MODULES = (
     "calibration",
     "cli_text",
     "ekf",
+    "estimates",
     "filters",
     "gaussian",
     "hardness",
@@ -89,6 +94,9 @@ MODULES = (
     "scenarios",
     "second_order",
     "study",
+    "study_scores",
+    "study_trials",
+    "tracking",
     "ukf",
 )
 
@@ -112,7 +120,7 @@ def __getattr__(name):
     if name == "optimal_marginals":
         return importlib.import_module(f"{__name__}.optimal").marginals
     if name == "track":
-        return importlib.import_module(f"{__name__}.filters").track
+        return importlib.import_module(f"{__name__}.tracking").track
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

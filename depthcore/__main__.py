@@ -27,12 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__, _checks, cli_text, reproduce, study
+from . import __version__, _checks, cli_text, reproduce, study, study_trials
+from .adapters import RBPF_REPLICAS
 from .cli_text import STUDY_LEGEND
-from .filters import ALL_NAMES, FILTERS, PROCESS_NOISE_MAX, RBPF_REPLICAS, RHO_RANGE
+from .filters import ALL_NAMES, FILTERS
 from .filters import NAMES as _STUDY_FILTERS
 from .gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from .model import noise_free_state
+from .tracking import PROCESS_NOISE_MAX, RHO_RANGE
 
 #: Largest ``study --trials``: a limit on run time (the study streams its trials in
 #: chunks, so its memory does not grow with their number).
@@ -56,7 +58,7 @@ MAX_PARTICLES = PARTICLES_IN_FLIGHT // RBPF_REPLICAS
 MIN_PARTICLES = 4
 
 #: Numeric limits of the command line (the library itself accepts more); ``RHO_RANGE``
-#: and ``PROCESS_NOISE_MAX`` are those of :func:`depthcore.filters.track`.
+#: and ``PROCESS_NOISE_MAX`` are those of :func:`depthcore.tracking.track`.
 MU_MAX = 1e6
 PRIOR_MEAN_MAX = 1e3
 PRIOR_COV_RANGE = (1e-12, 1e12)
@@ -678,10 +680,10 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument(
         "--particles",
         type=int,
-        default=study.PARTICLES,
+        default=study_trials.PARTICLES,
         help=f"particles per trial of the filters that draw them, {MIN_PARTICLES} to "
         f"{MAX_PARTICLES} "
-        f"(default {study.PARTICLES})",
+        f"(default {study_trials.PARTICLES})",
     )
     st.add_argument(
         "--frames",

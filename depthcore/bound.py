@@ -129,7 +129,7 @@ def expected_measurement_information(depth, lateral_mean, lateral_cov, rho) -> n
     return out / rho**2
 
 
-def process_noise_steps(process_noise, n_frames: int) -> np.ndarray:
+def process_noise_steps(process_noise, frames: int) -> np.ndarray:
     """The SD ``q_k`` of the velocity's change over each step ``k -> k + 1``, shape (N - 1,).
 
     ``process_noise`` is a float (the same at every step) or an array of
@@ -139,10 +139,10 @@ def process_noise_steps(process_noise, n_frames: int) -> np.ndarray:
     if np.any(q < 0):
         raise ValueError("process_noise must be >= 0")
     if q.ndim == 0:
-        return np.full(n_frames - 1, float(q))
-    if q.shape != (n_frames - 1,):
+        return np.full(frames - 1, float(q))
+    if q.shape != (frames - 1,):
         raise ValueError(
-            f"process_noise must be a float or have shape ({n_frames - 1},), one SD per step, "
+            f"process_noise must be a float or have shape ({frames - 1},), one SD per step, "
             f"got shape {q.shape}"
         )
     return q
@@ -297,7 +297,7 @@ class TrackMoments(NamedTuple):
     process_noise: np.ndarray
 
 
-def track_moments(state, frame: int, n_frames: int, process_noise: float) -> TrackMoments:
+def track_moments(state, frame: int, frames: int, process_noise: float) -> TrackMoments:
     """The law of the track when the state at ``frame`` is known and accelerations act after it.
 
     Before ``frame`` the point moves by ``G`` (Eq. (1)), exactly; from
@@ -311,17 +311,17 @@ def track_moments(state, frame: int, n_frames: int, process_noise: float) -> Tra
     state : array_like, shape (3,)
         The state at ``frame``, with positive depth at frame 1.
     frame : int
-        From 1 to ``n_frames``.
-    n_frames : int
+        From 1 to ``frames``.
+    frames : int
         ``N >= 1``.
     process_noise : float
         ``q >= 0``.
     """
     state = _checks.finite_array(state, "state", (3,))
-    n = _checks.count(n_frames, "n_frames")
+    n = _checks.count(frames, "frames")
     frame = _checks.count(frame, "frame")
     if not 1 <= frame <= n:
-        raise ValueError(f"frame must be from 1 to n_frames = {n}, got {frame}")
+        raise ValueError(f"frame must be from 1 to frames = {n}, got {frame}")
     q = _checks.nonnegative_scalar(process_noise, "process_noise")
     if not state[1] - (frame - 1) > 0:
         raise ValueError("state puts the point behind the camera at frame 1")
@@ -334,7 +334,7 @@ def track_moments(state, frame: int, n_frames: int, process_noise: float) -> Tra
     return TrackMoments(mean, cov, steps)
 
 
-def posterior_bound(state, frame: int, n_frames: int, rho, prior_cov=None, process_noise=0.0):
+def posterior_bound(state, frame: int, frames: int, rho, prior_cov=None, process_noise=0.0):
     """The posterior bound on the state at every frame, over the accelerations after ``frame``.
 
     Tichavský et al. (1998), Eq. (21) (:func:`information`) with the expected
@@ -349,7 +349,7 @@ def posterior_bound(state, frame: int, n_frames: int, rho, prior_cov=None, proce
     state : array_like, shape (3,)
         The true state at ``frame``.
     frame : int
-    n_frames : int
+    frames : int
     rho : float
     prior_cov : array_like, shape (3, 3), optional
     process_noise : float
@@ -359,7 +359,7 @@ def posterior_bound(state, frame: int, n_frames: int, rho, prior_cov=None, proce
     ndarray, shape (N, 3, 3)
         As :func:`conditional_bound`.
     """
-    t = track_moments(state, frame, n_frames, process_noise)
+    t = track_moments(state, frame, frames, process_noise)
     lateral = t.mean[:, [0, 2]]
     info = expected_measurement_information(t.mean[:, 1], lateral, t.lateral_cov, rho)
     return _frame_bounds(information(info, prior_cov, t.process_noise))

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _checks, bank, model, optimal
+from . import _checks, bank_posterior, model, optimal
 
 #: Nominal levels of the central intervals whose coverage is reported.
 LEVELS = (0.5, 0.68, 0.8, 0.9, 0.95, 0.99)
@@ -140,7 +140,7 @@ def draw_from_prior(
             f"(y_1 > 0): {behind} of {behind + sum(len(k) for k in kept)} draws behind it"
         )
     x1 = np.concatenate(kept)[:n]
-    sim = model.simulate(x1, frames, rho, q, rng, frame=1)
+    sim = model.draw_track(x1, frames, rho, q, rng, x1.shape[:-1], 1)  # checked above
     mu, last = sim.mu, sim.states[:, -1, :]
     ok = model.valid_measurements(mu[:, :3])  # the noise-free solution, Eq. (7), in front
     return PriorDraws(last[ok], mu[ok], behind, int(np.sum(~ok)))
@@ -242,7 +242,7 @@ def self_calibration(
     For the paper's three frames with no process noise the filter is
     :func:`depthcore.optimal.batch_marginals`; for ``frames = N > 3`` or
     ``process_noise > 0`` it is the exact N-frame filter, the bank of Kalman
-    filters over depth (:func:`depthcore.bank.posterior`), and the PIT values
+    filters over depth (:func:`depthcore.bank_posterior.posterior`), and the PIT values
     are those of the depth and velocity at frame ``N``.
 
     Parameters
@@ -293,7 +293,9 @@ def self_calibration(
             depth.append(ref.depth_cdf(truth[:, 1]))
             velocity.append(ref.velocity_cdf(truth[:, 2]))
         else:
-            mx = bank.posterior(draws.mu[part], filter_rho, prior_mean, prior_cov, filter_q)
+            mx = bank_posterior.posterior(
+                draws.mu[part], filter_rho, prior_mean, prior_cov, filter_q
+            )
             depth.append(mx.depth_cdf(truth[:, 1:2])[:, 0])
             velocity.append(mx.velocity_cdf(truth[:, 2:3])[:, 0])
         if progress is not None:

@@ -22,7 +22,7 @@ from collections.abc import Callable
 import numpy as np
 
 from . import _checks, kalman, model
-from .gaussian import Gaussian, History, MeanAndCov, symmetric
+from .gaussian import Gaussian, History, MeanAndCov, run_recursion, symmetric
 
 #: The EKF's estimates after each measurement: ``means[i]`` is ``m_{i+1}``,
 #: ``covs[i]`` is ``P_{i+1}``; ``.posterior`` is ``p_e = N(x, m_3, P_3)``.
@@ -142,17 +142,14 @@ def run_gaussian_filter(
     """
     mu, rho, n, C = model.batch_inputs(mu, rho, prior_mean, prior_cov)
     q = _checks.nonnegative_scalar(process_noise, "process_noise")
-    means, covs = [], []
-    for i in range(mu.shape[-1]):
-        if i > 0:
-            n, C = predict(means[-1], covs[-1], q)
+
+    def update(n, C, mu_k, k):
         try:
-            m, P = update_step(n, C, mu[..., i], rho)
+            return update_step(n, C, mu_k, rho)
         except ValueError as exc:
-            raise ValueError(f"update with measurement {i + 1}: {exc}") from None
-        means.append(m)
-        covs.append(P)
-    return History(np.stack(means, axis=-2), np.stack(covs, axis=-3))
+            raise ValueError(f"update with measurement {k}: {exc}") from None
+
+    return run_recursion(n, C, mu, lambda m, P, k: predict(m, P, q), update)
 
 
 def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:

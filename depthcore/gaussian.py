@@ -137,6 +137,43 @@ class History(NamedTuple):
         return Gaussian(self.means[-1], self.covs[-1])
 
 
+def run_recursion(mean, cov, mu, predict, update) -> History:
+    """The predict-update loop of the recursive Gaussian filters, batched, on checked inputs.
+
+    From ``N(mean, cov)``, the Gaussian of the state at frame 1, incorporate
+    ``mu_1``; then, for each frame ``k = 2 .. K``, predict the state at frame
+    ``k`` and incorporate ``mu_k`` (textbook 19.3). The filter's own
+    coordinates, prediction and update are the caller's, as are the checks of
+    the inputs and the wording of a refusal.
+
+    Parameters
+    ----------
+    mean : ndarray, shape (..., d)
+    cov : ndarray, shape (..., d, d)
+    mu : ndarray, shape (..., K)
+        Bearings in time order, ``K >= 1``.
+    predict : callable
+        ``predict(mean, cov, k) -> (mean, cov)``: the state at frame ``k`` from
+        the state at frame ``k - 1``.
+    update : callable
+        ``update(mean, cov, mu_k, k) -> (mean, cov)``: incorporate the bearing of
+        frame ``k``.
+
+    Returns
+    -------
+    History
+        ``means`` (..., K, d) and ``covs`` (..., K, d, d) after each bearing.
+    """
+    means, covs = [], []
+    for k in range(1, mu.shape[-1] + 1):
+        if k > 1:
+            mean, cov = predict(mean, cov, k)
+        mean, cov = update(mean, cov, mu[..., k - 1], k)
+        means.append(mean)
+        covs.append(cov)
+    return History(np.stack(means, axis=-2), np.stack(covs, axis=-3))
+
+
 def paper_prior(c, depth_offset: float = 0.0, scale: float = PAPER_PRIOR_SCALE) -> Gaussian:
     """The paper's prior for the state at time 1, built from the noise-free state ``c``.
 

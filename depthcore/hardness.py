@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _checks, bank, bound, calibration, model, study
+from . import _checks, bank_mixture, bound, calibration, model, study_scores, study_trials
 from .filters import FILTERS, check_names
 from .gaussian import paper_prior_means
 
@@ -171,7 +171,7 @@ def depth_estimates(name: str, mu, rho: float, prior_mean, prior_cov, true_depth
         ``"gaussian"`` family.
     mu : ndarray, shape (T, N)
         Bearings of frames 1 .. N (the optimal filter beyond three frames is
-        the bank of Kalman filters, :func:`depthcore.bank.posterior`).
+        the bank of Kalman filters, :func:`depthcore.bank_posterior.posterior`).
     rho : float
     prior_mean : array_like, shape (3,)
     prior_cov : array_like, shape (3, 3)
@@ -193,7 +193,9 @@ def depth_estimates(name: str, mu, rho: float, prior_mean, prior_cov, true_depth
     def run(rows):
         est = f(mu[rows], rho, prior_mean, prior_cov)
         m, s = np.asarray(est.depth_mean), np.asarray(est.depth_sd)
-        if f.family == "exact" and isinstance(est.detail, bank.Mixture):  # beyond three frames
+        if f.family == "exact" and isinstance(
+            est.detail, bank_mixture.Mixture
+        ):  # beyond three frames
             return m, s, est.detail.depth_cdf(true_depth[rows][:, None])[:, 0]
         if f.family == "exact":
             return m, s, est.detail.depth_cdf(true_depth[rows])
@@ -301,7 +303,7 @@ def hard_cell(
         "second_difference": float(second_difference(truth)) / rho,
         "bound_sd": float(np.sqrt(b[-1, 1, 1])),
     }
-    drawn = study.simulate(truth, rho, trials, fixed_rng, "fixed", prior_scale, frames)
+    drawn = study_trials.simulate(truth, rho, trials, fixed_rng, "fixed", prior_scale, frames)
     depth = drawn.truths[:, 1]
     out["fixed"] = {
         "valid": len(drawn.mu),
@@ -354,7 +356,7 @@ def verdicts(cell: dict, reading: str, z: float = bound.Z) -> dict:
     dict
         ``"calibrated_68"``, ``"calibrated_95"``: ``{name: bool}``, the
         coverage within ``z`` binomial standard errors of its level (the
-        nominal level's error, :func:`depthcore.study.coverage_se`);
+        nominal level's error, :func:`depthcore.study_scores.coverage_se`);
         ``"so_nearer_68"``: the second-order filter's 68 % coverage nearer
         nominal than the EKF's; ``"so_rmse"``: its RMSE the smaller.
     """
@@ -366,7 +368,7 @@ def verdicts(cell: dict, reading: str, z: float = bound.Z) -> dict:
     for p in LEVELS:
         key = f"coverage_{round(100 * p)}"
         out[f"calibrated_{round(100 * p)}"] = {
-            name: bool(abs(s[key] - p) <= z * study.coverage_se(p, s["trials"]))
+            name: bool(abs(s[key] - p) <= z * study_scores.coverage_se(p, s["trials"]))
             for name, s in f.items()
         }
     if "second_order" in f and "ekf" in f:

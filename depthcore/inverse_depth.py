@@ -51,7 +51,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _checks, kalman, model
-from .gaussian import MeanAndCov, symmetric
+from .gaussian import History, MeanAndCov, run_recursion, symmetric
 
 
 def prior(mean, cov) -> MeanAndCov:
@@ -227,9 +227,7 @@ def depth_interval(z, S, k: int, level: float = 0.68) -> tuple[np.ndarray, np.nd
     return 1.0 / w + (k - 1), 1.0 / high_w + (k - 1), high
 
 
-def run(
-    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0
-) -> tuple[np.ndarray, np.ndarray]:
+def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     """The inverse-depth EKF over ``K`` bearings, batched, in its own coordinates.
 
     Parameters
@@ -257,14 +255,9 @@ def run(
     mu, rho, m, P = model.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
     q = _checks.nonnegative_scalar(process_noise, "process_noise")
     z, S = prior(m, P)
-    means, covs = [], []
-    for k in range(1, mu.shape[-1] + 1):
-        if k > 1:
-            z, S = predict(z, S, q)
-        z, S = update(z, S, mu[..., k - 1], rho, k)
-        means.append(z)
-        covs.append(S)
-    return np.stack(means, axis=-2), np.stack(covs, axis=-3)
+    return run_recursion(
+        z, S, mu, lambda z, S, k: predict(z, S, q), lambda z, S, mu_k, k: update(z, S, mu_k, rho, k)
+    )
 
 
 def estimate(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> MeanAndCov:

@@ -45,7 +45,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _checks, inverse_depth, model, ukf
-from .gaussian import MeanAndCov
+from .gaussian import History, MeanAndCov, run_recursion
 
 
 def bearing(z, k: int) -> np.ndarray:
@@ -103,14 +103,17 @@ def update(
         If true, only a sigma point at the pole ``1 + (k - 1) w = 0`` is refused,
         as :func:`depthcore.ukf.update` does.
     """
-    X = sigma_points.points(z, S)
-    D = 1.0 + (k - 1) * X[..., 1]
-    if np.any(D == 0) or not (allow_behind_camera or np.all(D > 0)):
-        raise ValueError(
-            f"a sigma point of the inverse-depth UKF lies behind the camera at frame {k} "
-            "(1 + (k - 1) w <= 0), where its bearing is not defined"
-        )
-    return ukf.measurement_update(z, S, mu, rho, lambda x: bearing(x, k), sigma_points)
+
+    def h(X):  # the bearing at the sigma points, refused behind the camera
+        D = 1.0 + (k - 1) * X[..., 1]
+        if np.any(D == 0) or not (allow_behind_camera or np.all(D > 0)):
+            raise ValueError(
+                f"a sigma point of the inverse-depth UKF lies behind the camera at frame {k} "
+                "(1 + (k - 1) w <= 0), where its bearing is not defined"
+            )
+        return bearing(X, k)
+
+    return ukf.measurement_update(z, S, mu, rho, h, sigma_points)
 
 
 def to_state(
@@ -159,7 +162,7 @@ def run(
     process_noise: float = 0.0,
     sigma_points: ukf.SigmaPoints = ukf.SigmaPoints(),
     allow_behind_camera: bool = False,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> History:
     """The inverse-depth UKF over ``K`` bearings, batched, in its own coordinates.
 
     Parameters
@@ -188,12 +191,10 @@ def run(
     mu, rho, m, P = model.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
     q = _checks.process_noise(process_noise, "process_noise")
     z, S = inverse_depth.prior(m, P)
-    means, covs = [], []
-    for k in range(1, mu.shape[-1] + 1):
-        if k > 1:
-            z, S = predict(z, S, q)
+
+    def update_k(z, S, mu_k, k):
         try:
-            z, S = update(z, S, mu[..., k - 1], rho, k, sigma_points, allow_behind_camera)
+            return update(z, S, mu_k, rho, k, sigma_points, allow_behind_camera)
         except ValueError as exc:
             if "positive definite" in str(exc):
                 raise ValueError(
@@ -201,9 +202,8 @@ def run(
                     f"rounding left its covariance at frame {k} not positive definite"
                 ) from None
             raise ValueError(f"mu: {exc}") from None
-        means.append(z)
-        covs.append(S)
-    return np.stack(means, axis=-2), np.stack(covs, axis=-3)
+
+    return run_recursion(z, S, mu, lambda z, S, k: predict(z, S, q), update_k)
 
 
 def estimate(

@@ -330,7 +330,7 @@ def smoother(
     return SmootherResult(model.G(x, K - 1), symmetric(cov), iterations, ~active, trajectory)
 
 
-def trajectory_residuals(z, mu, rho, prior_mean, prior_cov, q):
+def trajectory_residuals(z, mu, rho, prior_mean, prior_cov, process_noise):
     """The trajectory's stacked whitened residuals (negative log posterior) and Jacobian.
 
     ``z = (x_1, y_1, v_1, a_1 .. a_{K-1})`` (K + 2,); the residuals (2 K + 2,)
@@ -349,8 +349,8 @@ def trajectory_residuals(z, mu, rho, prior_mean, prior_cov, q):
     M = np.zeros((2 * K + 2, K + 2))
     M[:3, :3] = L_inv
     M[3 : K + 3] = J / rho
-    M[K + 3 :, 3:] = np.eye(K - 1) / q
-    r = np.concatenate([L_inv @ (z[:3] - prior_mean), bearing / rho, z[3:] / q])
+    M[K + 3 :, 3:] = np.eye(K - 1) / process_noise
+    r = np.concatenate([L_inv @ (z[:3] - prior_mean), bearing / rho, z[3:] / process_noise])
     return r, M
 
 

@@ -128,15 +128,15 @@ def log_likelihood(mu, x, rho, front: bool = False) -> np.ndarray:
     return np.where(inside, log_l, -np.inf) if front else log_l
 
 
-def trajectory(x1, n: int = N_MEASUREMENTS) -> np.ndarray:
-    """States at times ``1 .. n`` of a point whose state at time 1 is ``x1``.
+def trajectory(x1, frames: int = N_MEASUREMENTS) -> np.ndarray:
+    """States at times ``1 .. frames`` of a point whose state at time 1 is ``x1``.
 
     Returns
     -------
-    ndarray, shape (n, 3)
+    ndarray, shape (frames, 3)
     """
     x1 = _checks.finite_array(x1, "x1", (3,))
-    return np.stack([G(x1, k) for k in range(n)])
+    return np.stack([G(x1, k) for k in range(frames)])
 
 
 class Simulation(NamedTuple):
@@ -148,9 +148,9 @@ class Simulation(NamedTuple):
 
 def simulate(
     state,
-    n_frames: int,
+    frames: int,
     rho,
-    q,
+    process_noise,
     rng: np.random.Generator,
     size: int | None = None,
     *,
@@ -179,11 +179,11 @@ def simulate(
     state : array_like, shape (..., 3)
         The state ``(x, y, v)`` at frame ``frame``; the depth at frame 1,
         ``y - frame + 1``, must be > 0 (then it is at every frame).
-    n_frames : int
+    frames : int
         ``N >= 1``, the frames ``1 .. N`` simulated.
     rho : float
         Bearing noise SD, > 0.
-    q : float
+    process_noise : float
         Acceleration SD, >= 0.
     rng : numpy.random.Generator
         Draws the accelerations (of shape ``lead + (N - frame,)``, when
@@ -203,7 +203,7 @@ def simulate(
     if state.ndim < 1 or state.shape[-1] != 3:
         raise ValueError(f"state must have shape (..., 3), got shape {state.shape}")
     frame = _checks.count(frame, "frame")
-    n_frames = _checks.count(n_frames, "n_frames")
+    frames = _checks.count(frames, "frames")
     depth_1 = state[..., 1] - (frame - 1)
     if not np.all(depth_1 > 0):
         raise ValueError(
@@ -211,30 +211,55 @@ def simulate(
             f"got minimum {float(np.min(depth_1)):.6g}"
         )
     rho = _checks.positive_scalar(rho, "rho")
-    q = _checks.nonnegative_scalar(q, "q")
+    process_noise = _checks.nonnegative_scalar(process_noise, "process_noise")
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
     if size is not None:
         size = _checks.count(size, "size")
     lead = ((size,) if size is not None else ()) + state.shape[:-1]
-    k = np.arange(1, n_frames + 1) - frame  # frames from the given one
-    n_noisy = max(n_frames - frame, 0)
-    v = np.broadcast_to(state[..., 2, None], lead + (n_frames,))
+    return draw_track(state, frames, rho, process_noise, rng, lead, frame)
+
+
+def draw_track(state, frames: int, rho: float, process_noise: float, rng, lead, frame: int):
+    """:func:`simulate` on checked inputs, which its callers have checked as it checks them.
+
+    Parameters
+    ----------
+    state : ndarray, shape (..., 3)
+        Finite, in front of the camera at frame 1.
+    frames, frame : int
+        ``>= 1``.
+    rho : float
+        ``> 0``.
+    process_noise : float
+        ``>= 0``.
+    rng : numpy.random.Generator
+    lead : tuple of int
+        The leading shape of the tracks, ``(size,) + state.shape[:-1]`` or
+        ``state.shape[:-1]``.
+
+    Returns
+    -------
+    Simulation
+    """
+    k = np.arange(1, frames + 1) - frame  # frames from the given one
+    n_noisy = max(frames - frame, 0)
+    v = np.broadcast_to(state[..., 2, None], lead + (frames,))
     x = state[..., 0, None] + np.minimum(k, 0) * state[..., 2, None] + np.zeros(lead + (1,))
-    if q > 0 and n_noisy:
-        a = q * rng.standard_normal(lead + (n_noisy,))
+    if process_noise > 0 and n_noisy:
+        a = process_noise * rng.standard_normal(lead + (n_noisy,))
         dv = np.cumsum(a, axis=-1)  # v_{frame + j} - v_frame, j = 1 .. n_noisy
         v_after = state[..., 2, None] + dv
-        v = np.concatenate([v[..., : n_frames - n_noisy], v_after], axis=-1)
+        v = np.concatenate([v[..., : frames - n_noisy], v_after], axis=-1)
         # x_{frame + j} = x_frame + sum_{i < j} v_{frame + i}
         steps = np.concatenate([v[..., frame - 1 : frame], v_after[..., :-1]], axis=-1)
         x_after = state[..., 0, None] + np.cumsum(steps, axis=-1)
-        x = np.concatenate([x[..., : n_frames - n_noisy], x_after], axis=-1)
+        x = np.concatenate([x[..., : frames - n_noisy], x_after], axis=-1)
     else:
         x = state[..., 0, None] + k * state[..., 2, None] + np.zeros(lead + (1,))
     y = np.broadcast_to(state[..., 1, None] + k, x.shape)
     states = np.stack([x, np.asarray(y, dtype=float), np.broadcast_to(v, x.shape)], axis=-1)
-    mu = x / y + rho * rng.standard_normal(lead + (n_frames,))
+    mu = x / y + rho * rng.standard_normal(lead + (frames,))
     return Simulation(states, mu)
 
 
@@ -382,7 +407,7 @@ def f(x, mu) -> np.ndarray:
     return np.sum(residuals(x, mu) ** 2, axis=-1)
 
 
-def residual_gradients(x, n_frames: int = N_MEASUREMENTS) -> np.ndarray:
+def residual_gradients(x, frames: int = N_MEASUREMENTS) -> np.ndarray:
     """Eqs. (20)-(22): gradients of the residuals at states ``x``, rows in time order.
 
     Row ``k`` is ``h(G^{k-N+1} x) F^{k-N+1}``: the observation vector (11) at the
@@ -393,7 +418,7 @@ def residual_gradients(x, n_frames: int = N_MEASUREMENTS) -> np.ndarray:
     ----------
     x : array_like, shape (..., 3)
         States at the last frame.
-    n_frames : int
+    frames : int
         ``N``, the number of bearings (default 3).
 
     Returns
@@ -401,7 +426,7 @@ def residual_gradients(x, n_frames: int = N_MEASUREMENTS) -> np.ndarray:
     ndarray, shape (..., N, 3)
     """
     x = np.asarray(x, dtype=float)
-    back = np.arange(n_frames) - (n_frames - 1.0)  # k - N for frames k = 1 .. N
+    back = np.arange(frames) - (frames - 1.0)  # k - N for frames k = 1 .. N
     h = observation_vector(G(x[..., None, :], back))  # (..., N, 3), third column 0
     h[..., 2] = back * h[..., 0]  # times F^{k-N}: d(x + (k - N) v)/dv = k - N
     return h

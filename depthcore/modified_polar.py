@@ -68,7 +68,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _checks, inverse_depth, kalman, model
-from .gaussian import MeanAndCov
+from .gaussian import History, MeanAndCov, run_recursion
 
 #: The measurement matrix (the bearing is the first coordinate).
 H = np.array([[1.0, 0.0, 0.0]])
@@ -177,9 +177,7 @@ def anchor_jacobian(z, k: int) -> np.ndarray:
     return J
 
 
-def run(
-    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0
-) -> tuple[np.ndarray, np.ndarray]:
+def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     """The modified-polar EKF over ``K`` bearings, batched, in its own coordinates.
 
     Parameters
@@ -204,17 +202,14 @@ def run(
     q = _checks.process_noise(process_noise, "process_noise")
     u, U = inverse_depth.prior(m, P)  # at frame 1 the two coordinates coincide
     rho = np.broadcast_to(rho, mu.shape[:-1])
-    means, covs = [], []
-    for k in range(mu.shape[-1]):
-        if k:
-            try:
-                u, U = predict(u, U, q)
-            except ValueError as exc:
-                raise ValueError(f"mu: {exc}") from None
-        u, U = update(u, U, mu[..., k], rho)
-        means.append(u)
-        covs.append(U)
-    return np.stack(means, axis=-2), np.stack(covs, axis=-3)
+
+    def predict_k(u, U, k):
+        try:
+            return predict(u, U, q)
+        except ValueError as exc:
+            raise ValueError(f"mu: {exc}") from None
+
+    return run_recursion(u, U, mu, predict_k, lambda u, U, mu_k, k: update(u, U, mu_k, rho))
 
 
 def estimate(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> MeanAndCov:

@@ -59,7 +59,7 @@ class Problem(NamedTuple):
     nodes on ``y > 2`` start from the second-order density of Eq. (24);
     without it (:mod:`depthcore.bank`, any number of frames, the depth
     ``y_1 = offsets[..., 2]`` at frame 1), a scan and Newton steps find the
-    mode. ``q`` (B,) and ``cov`` (B, 3, 3) are then the process noise and the
+    mode. ``process_noise`` (B,) and ``cov`` (B, 3, 3) are then the process noise and the
     prior covariance.
 
     Attributes
@@ -74,7 +74,7 @@ class Problem(NamedTuple):
     second_order : bool
     reading : str
         The reading of Eq. (16) (see :func:`depthcore.optimal.marginals`).
-    q : ndarray, shape (B,), or None
+    process_noise : ndarray, shape (B,), or None
     cov : ndarray, shape (B, 3, 3), or None
     """
 
@@ -85,7 +85,7 @@ class Problem(NamedTuple):
     integrand: Callable
     second_order: bool = False
     reading: str = "derived"
-    q: np.ndarray | None = None
+    process_noise: np.ndarray | None = None
     cov: np.ndarray | None = None
 
     def take(self, idx) -> Problem:
@@ -102,7 +102,7 @@ class Problem(NamedTuple):
             self.integrand,
             self.second_order,
             self.reading,
-            part(self.q),
+            part(self.process_noise),
             part(self.cov),
         )
 

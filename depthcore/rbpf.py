@@ -103,6 +103,7 @@ from scipy.special import log_ndtr, ndtr, ndtri_exp
 
 from . import _checks, model
 from . import bank as bk
+from . import bank_mixture as bmix
 from .particle import ParticleMoments
 from .resampling import (
     RESAMPLERS,
@@ -176,9 +177,9 @@ class RBPF:
     settings: Settings
 
     @property
-    def n_frames(self) -> int:
+    def frames(self) -> int:
         """``K``, the number of bearings seen."""
-        return self.bank.n_frames
+        return self.bank.frames
 
     @property
     def n_particles(self) -> int:
@@ -194,13 +195,13 @@ class RBPF:
         """Depth and velocity means and SDs at frame ``K`` of each replica, shape (..., R).
 
         The moments of the mixture of the particles' Gaussians
-        (:func:`depthcore.bank.mixture`'s formula with the particles' weights):
+        (:func:`depthcore.bank_mixture.mixture`'s formula with the particles' weights):
         the depth ``y_1 + K - 1`` is exact given a particle, the velocity
         Gaussian given its depth.
         """
         b = self.bank
-        mean, cov = bk.mixture_moments(
-            np.exp(self.log_weights), b.mean, b.cov, b.nodes + (self.n_frames - 1)
+        mean, cov = bmix.mixture_moments(
+            np.exp(self.log_weights), b.mean, b.cov, b.nodes + (self.frames - 1)
         )
         return ParticleMoments(
             mean[..., 1], np.sqrt(cov[..., 1, 1]), mean[..., 2], np.sqrt(cov[..., 2, 2])
@@ -228,7 +229,7 @@ class RBPF:
         covs = np.broadcast_to(b.cov, self.log_weights.shape + (2, 2))
         return (
             W,
-            depths + (self.n_frames - 1),
+            depths + (self.frames - 1),
             means.reshape(batch + (n, 2)),
             covs.reshape(batch + (n, 2, 2)),
         )
@@ -241,7 +242,7 @@ class RBPF:
         (the depth is exact given a particle).
         """
         W, depths, means, covs = self.pooled()
-        return bk.mixture_moments(W, means, covs, depths)
+        return bmix.mixture_moments(W, means, covs, depths)
 
     def depth_cdf(self, y):
         """``P(y_K <= y)`` under :meth:`pooled`, the particles' weighted step function.
@@ -413,7 +414,7 @@ def rejuvenate(bank: bk.Bank, scale, moves: int, rng: np.random.Generator):
                 bank.rho,
                 bank.prior_mean,
                 bank.prior_cov,
-                bank.q,
+                bank.process_noise,
             )
         candidate = np.where(inside, _finite_or_minus_inf(rerun.log_weight), -np.inf)
         with np.errstate(invalid="ignore"):
@@ -485,7 +486,7 @@ def _reweighted(state: RBPF, bank: bk.Bank, log_w, rng) -> RBPF:
     if not np.all(np.any(np.isfinite(log_w), axis=-1)):
         raise ValueError(
             f"n_particles is too small: every particle of a replica has weight zero "
-            f"after mu_{bank.n_frames}"
+            f"after mu_{bank.frames}"
         )
     log_w = normalise(log_w)
     ess = effective_sample_size(log_w)
@@ -569,7 +570,7 @@ def run(
     prior_cov,
     n_particles: int,
     rng: np.random.Generator,
-    q=0.0,
+    process_noise=0.0,
     replicas: int = 1,
     moves: int = DEFAULT_MOVES,
     ess_threshold: float = 0.5,
@@ -594,7 +595,7 @@ def run(
         ``J >= 2`` particles (depths) per replica.
     rng : numpy.random.Generator or numpy.random.SeedSequence
         The only source of randomness.
-    q : float or array_like, shape (...)
+    process_noise : float or array_like, shape (...)
         SD of the lateral acceleration, >= 0 (0: constant velocity).
     replicas : int
         ``R >= 1`` independent clouds of ``J`` particles, for standard errors
@@ -614,7 +615,7 @@ def run(
         mu, rho, prior_mean, prior_cov, triples=False
     )
     batch = mu.shape[:-1]
-    q = _checks.nonnegative_batch(q, "q", batch)
+    process_noise = _checks.nonnegative_batch(process_noise, "process_noise", batch)
     if (
         isinstance(n_particles, bool)
         or not isinstance(n_particles, (int, np.integer))
@@ -624,8 +625,10 @@ def run(
     R = _checks.count(replicas, "replicas")
     settings = _settings(moves, ess_threshold, resampler)
     rng = _checks.generator(rng)
-    rho, q = np.broadcast_to(rho, batch), np.broadcast_to(q, batch)
-    state = _start(mu[..., 0], rho, q, prior_mean, prior_cov, int(n_particles), R, settings, rng)
+    rho, process_noise = np.broadcast_to(rho, batch), np.broadcast_to(process_noise, batch)
+    state = _start(
+        mu[..., 0], rho, process_noise, prior_mean, prior_cov, int(n_particles), R, settings, rng
+    )
     for k in range(1, mu.shape[-1]):
         state = step(state, mu[..., k], rng)
     return state

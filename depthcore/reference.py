@@ -371,7 +371,7 @@ def trapezoid_depth_moments(
 def track_fixed_lag(track) -> tuple[np.ndarray, np.ndarray]:
     """The fixed-lag smoothed states of a track by state augmentation, textbook 19.2.6.
 
-    An independent route to ``track.lagged`` (:func:`depthcore.bank.track`,
+    An independent route to ``track.lagged`` (:func:`depthcore.bank_track.track`,
     which runs the backward recursions over each window): frame ``s + 1`` is
     read from the posterior after ``mu_{t + 1}``, ``t = min(s + lag, N - 1)``;
     every node's filter on the state augmented with its ``t - s``
@@ -382,7 +382,7 @@ def track_fixed_lag(track) -> tuple[np.ndarray, np.ndarray]:
 
     Parameters
     ----------
-    track : depthcore.bank.Track
+    track : depthcore.bank_track.Track
 
     Returns
     -------
@@ -402,7 +402,7 @@ def track_fixed_lag(track) -> tuple[np.ndarray, np.ndarray]:
             start.mean,
             start.cov[0],  # shared by the nodes
             bank.PSI,
-            bank.sigma_p(b.q),
+            bank.sigma_p(b.process_noise),
             bank.measurement_matrices(b.nodes, np.arange(1, t + 2)),
             np.reshape(b.rho**2, (1, 1)),
             lag=t - s,
@@ -457,7 +457,7 @@ def _dense_gauss_newton(z, stacked, objective, max_iterations, step_tol, moved):
     return z, max_iterations, False
 
 
-def trajectory_laplace_dense(mu, rho: float, prior_mean, prior_cov, q: float):
+def trajectory_laplace_dense(mu, rho: float, prior_mean, prior_cov, process_noise: float):
     """:func:`depthcore.second_order.trajectory_laplace` for one sequence, densely.
 
     Gauss-Newton on ``|r(z) / rho|**2 + |a / q|**2`` over the whole trajectory
@@ -475,7 +475,7 @@ def trajectory_laplace_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     rho : float
     prior_mean : array_like, shape (3,)
     prior_cov : array_like, shape (3, 3)
-    q : float
+    process_noise : float
 
     Returns
     -------
@@ -485,11 +485,11 @@ def trajectory_laplace_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     mu = np.asarray(mu, dtype=float)
     n_frames = mu.shape[-1]
     penalty = np.zeros((n_frames - 1, n_frames + 2))
-    penalty[:, 3:] = np.eye(n_frames - 1) / q
+    penalty[:, 3:] = np.eye(n_frames - 1) / process_noise
 
     def stacked(z):
         r, J = bearing_residuals(z, mu, trajectory_map(mu.shape[-1]))
-        return np.concatenate([r / rho, z[3:] / q]), np.concatenate([J / rho, penalty])
+        return np.concatenate([r / rho, z[3:] / process_noise]), np.concatenate([J / rho, penalty])
 
     def objective(z):
         return float(np.sum(stacked(z)[0] ** 2)) if z[1] > 0 else np.inf
@@ -517,7 +517,7 @@ def trajectory_laplace_dense(mu, rho: float, prior_mean, prior_cov, q: float):
     return T @ (R_inv @ (Q.T @ rhs)) + offset, symmetric(cov)
 
 
-def iterated_smoother_dense(mu, rho: float, prior_mean, prior_cov, q: float):
+def iterated_smoother_dense(mu, rho: float, prior_mean, prior_cov, process_noise: float):
     """:func:`depthcore.iterated.smoother` with process noise for one sequence, densely.
 
     Gauss-Newton on the stacked whitened residuals of the prior, the bearings
@@ -543,8 +543,8 @@ def iterated_smoother_dense(mu, rho: float, prior_mean, prior_cov, q: float):
         M = np.zeros((2 * K + 2, K + 2))
         M[:3, :3] = L_inv
         M[3 : K + 3] = J / rho
-        M[K + 3 :, 3:] = np.eye(K - 1) / q
-        return np.concatenate([L_inv @ (z[:3] - m), bearing / rho, z[3:] / q]), M
+        M[K + 3 :, 3:] = np.eye(K - 1) / process_noise
+        return np.concatenate([L_inv @ (z[:3] - m), bearing / rho, z[3:] / process_noise]), M
 
     def objective(z):
         return float(np.sum(stacked(z)[0] ** 2)) if z[1] > 0 else np.inf

@@ -18,8 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _checks, bank
-from .filters import FILTERS, NAMES, PAPER_FILTERS, PARTICLES, QUANTITIES, Estimate, check_names
+from . import _checks, bank_posterior
+from .adapters import PARTICLES
+from .estimates import QUANTITIES, Estimate
+from .filters import FILTERS, NAMES, PAPER_FILTERS, check_names
 from .gaussian import Gaussian
 from .model import noise_free_state, noise_free_states_unchecked
 from .scenarios import REPORTED, REPORTED_DECIMALS, SCENARIOS, Scenario
@@ -82,7 +84,7 @@ def summarize(
         SD ``q >= 0`` of the velocity's change per frame (0: the paper's model).
     smooth : bool
         Also the optimal filter's smoothed depth and lateral position at every
-        frame (:meth:`depthcore.bank.Mixture.smoothed`).
+        frame (:meth:`depthcore.bank_mixture.Mixture.smoothed`).
     names : sequence of str
         Filters of :data:`depthcore.filters.FILTERS`, run in this order
         (default :data:`depthcore.filters.NAMES`).
@@ -136,7 +138,7 @@ def summarize(
     if not_run:
         out["not_run"] = not_run
     if smooth:
-        sm = bank.posterior(mu, rho, prior.mean, prior.cov, q, history=True).smoothed()
+        sm = bank_posterior.posterior(mu, rho, prior.mean, prior.cov, q, history=True).smoothed()
         out["smoothed"] = {
             "depth_mean": sm.depth_mean.tolist(),
             "depth_sd": sm.depth_sd.tolist(),

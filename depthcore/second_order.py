@@ -325,7 +325,7 @@ def damped_step(x, step, f, objective):
     return np.where(keep[..., None], x, x_new), np.where(keep, f, f_new)
 
 
-def trajectory_map(n_frames: int) -> np.ndarray:
+def trajectory_map(frames: int) -> np.ndarray:
     """The map of the accelerations to the lateral positions, Eq. (1) with process noise.
 
     ``x_k = x_1 + (k - 1) v_1 + sum_i D[k-1, i-1] a_i`` with
@@ -333,15 +333,15 @@ def trajectory_map(n_frames: int) -> np.ndarray:
 
     Parameters
     ----------
-    n_frames : int
+    frames : int
         ``N``.
 
     Returns
     -------
     ndarray, shape (N, N - 1)
     """
-    k = np.arange(n_frames)[:, None]
-    i = np.arange(1, n_frames)[None, :]
+    k = np.arange(frames)[:, None]
+    i = np.arange(1, frames)[None, :]
     return np.maximum(k - i, 0).astype(float)
 
 
@@ -403,7 +403,7 @@ def trajectory_states(z, offset: bool = True) -> np.ndarray:
     return np.stack([x, y, v], axis=-1)
 
 
-def trajectory_solve(H, y, t, q: float, U=None, u=None):
+def trajectory_solve(H, y, t, process_noise: float, U=None, u=None):
     """Least squares over a trajectory, frame by frame: a square-root information smoother.
 
     Minimises, over increments ``d_k`` (3,) of the states at frames
@@ -429,7 +429,7 @@ def trajectory_solve(H, y, t, q: float, U=None, u=None):
         Their targets.
     t : ndarray, shape (B, N - 1)
         The targets of the acceleration terms.
-    q : float
+    process_noise : float
         ``> 0``, the accelerations' scale.
     U : ndarray, shape (B, 3, 3), optional
         Rows on ``d_1`` (a whitened prior); ``None`` for none.
@@ -464,7 +464,7 @@ def trajectory_solve(H, y, t, q: float, U=None, u=None):
         # R d_{k-1} = r with d_{k-1} = F^{-1} (d_k - (0, 0, b)): the columns of R F^{-1}
         # are R's, with the third less the first; the term in b is R F^{-1} (0, 0, 1).
         A[:, 0, :] = 0.0
-        A[:, 0, 0] = 1.0 / q
+        A[:, 0, 0] = 1.0 / process_noise
         A[:, 0, 4] = t[:, k - 1]
         A[:, 1:4, 1:3] = R[..., :2]
         A[:, 1:4, 3] = R[..., 2] - R[..., 0]
@@ -509,7 +509,7 @@ def bearing_rows(states, weight) -> np.ndarray:
     )
 
 
-def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
+def trajectory_laplace(mu, weight, prior_mean, prior_cov, process_noise: float):
     """The Laplace approximation of the trajectory's likelihood, times the prior, at frame ``N``.
 
     For each row, with ``z = (x_1, y_1, v_1, a_1 .. a_{N-1})``, Gauss-Newton
@@ -533,7 +533,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
     weight : ndarray, shape (B,)
     prior_mean : ndarray, shape (3,) or (B, 3)
     prior_cov : ndarray, shape (3, 3) or (B, 3, 3)
-    q : float
+    process_noise : float
         ``> 0``.
 
     Returns
@@ -551,7 +551,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
         front = z[:, 1] > 0
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             r = weight[rows, None] * (model.project(s) - mu[rows])
-            value = np.sum(r**2, axis=-1) + np.sum((z[:, 3:] / q) ** 2, axis=-1)
+            value = np.sum(r**2, axis=-1) + np.sum((z[:, 3:] / process_noise) ** 2, axis=-1)
         return np.where(front, value, np.inf)
 
     f = objective(z, np.arange(B))
@@ -563,7 +563,9 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
         za = z[rows]
         s = trajectory_states(za)
         r = weight[rows, None] * (model.project(s) - mu[rows])
-        step, _ = trajectory_solve(bearing_rows(s, weight[rows]), -r, -za[:, 3:] / q, q)
+        step, _ = trajectory_solve(
+            bearing_rows(s, weight[rows]), -r, -za[:, 3:] / process_noise, process_noise
+        )
         step = np.where(np.isfinite(step), step, 0.0)
         z_new, f_new = damped_step(za, step, f[rows], lambda y, rows=rows: objective(y, rows))
         moved = np.max(np.abs(z_new - za) / (1.0 + np.abs(za)), axis=-1)
@@ -572,13 +574,13 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, q: float):
     if np.any(active):
         raise ValueError(
             f"mu[{int(np.argmax(active))}]: Gauss-Newton on the trajectory's likelihood with "
-            f"process_noise {q:g} did not converge in {MAX_ITERATIONS} iterations"
+            f"process_noise {process_noise:g} did not converge in {MAX_ITERATIONS} iterations"
         )
     s = trajectory_states(z)
     L_inv = np.linalg.inv(L)
     gap = np.einsum("bij,bj->bi", L_inv, m - s[:, 0])
     zero = np.zeros((B, n_frames))
-    dz, R = trajectory_solve(bearing_rows(s, weight), zero, zero[:, 1:], q, L_inv, gap)
+    dz, R = trajectory_solve(bearing_rows(s, weight), zero, zero[:, 1:], process_noise, L_inv, gap)
     R_inv = np.linalg.inv(R)
     cov = R_inv @ np.swapaxes(R_inv, -1, -2)
     mean = s[:, -1] + trajectory_states(dz, offset=False)[:, -1]

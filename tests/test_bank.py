@@ -18,6 +18,8 @@ from scipy import stats
 from scipy.special import logsumexp
 
 from depthcore import bank as bk
+from depthcore import bank_mixture as bmix
+from depthcore import bank_posterior as bpost
 from depthcore import kalman, model, optimal
 from depthcore.gaussian import paper_prior
 from depthcore.model import noise_free_state
@@ -48,7 +50,7 @@ def converged_mixture(mu, rho, prior_mean, prior_cov, q=0.0, tol=1e-11, v_probe=
     panels, previous = 20, None
     while True:
         y, w = log_depth_rule(panels)
-        mx = bk.mixture(bk.filter_bank(y, mu, rho, prior_mean, prior_cov, q), w)
+        mx = bmix.mixture(bk.filter_bank(y, mu, rho, prior_mean, prior_cov, q), w)
         now = key_moments(mx)
         if v_probe is not None:
             now = np.concatenate([now, mx.velocity_cdf(v_probe)])
@@ -187,7 +189,9 @@ def test_velocity_gap_tells_when_the_nodes_resolve_the_velocity():
     mixtures = {}
     for panels in (40, 160, 320):
         y, w = log_depth_rule(panels)
-        mixtures[panels] = bk.mixture(bk.filter_bank(y, s.mu, s.rho, s.prior.mean, s.prior.cov), w)
+        mixtures[panels] = bmix.mixture(
+            bk.filter_bank(y, s.mu, s.rho, s.prior.mean, s.prior.cov), w
+        )
     coarse, fine, finer = mixtures[40], mixtures[160], mixtures[320]
     assert_allclose(key_moments(coarse), key_moments(finer), rtol=1e-11)
     # gaps of 3.2 and 0.8 SD: relative ripples 2 exp(-2 pi^2 / h^2) of 0.3 and 9e-14
@@ -244,7 +248,7 @@ def test_textbook_19_2_6_smoothed_single_node_is_the_batch_least_squares(q):
     N = 7
     sim, prior = long_track(N, q, seed=6)
     y = 4.2
-    mx = bk.mixture(bk.filter_bank([y], sim.mu, RHO_200, prior.mean, prior.cov, q), [1.0])
+    mx = bmix.mixture(bk.filter_bank([y], sim.mu, RHO_200, prior.mean, prior.cov, q), [1.0])
     sm = mx.smoothed()
     _, mean, cov = batch_least_squares(y, sim.mu, RHO_200, q, prior.mean, prior.cov)
     assert_allclose(sm.lateral_mean, mean[:, 0], rtol=1e-8, atol=1e-12)
@@ -344,7 +348,7 @@ def test_textbook_19_2_3_online_step_equals_recomputing_from_scratch(q):
     for k in range(3, N):
         b = bk.step(b, sim.mu[k])
     fresh = bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, q, history=True)
-    assert b.n_frames == N
+    assert b.frames == N
     assert_allclose(b.mu, sim.mu, rtol=0, atol=0)
     assert_allclose(b.log_weight, fresh.log_weight, rtol=1e-13, atol=1e-11)
     assert_allclose(b.mean, fresh.mean, rtol=1e-13, atol=1e-14)
@@ -369,9 +373,9 @@ def test_batched_bank_equals_a_loop_over_trials():
     nodes = y[None, :] * (1.0 + 0.01 * np.arange(B))[:, None]
     b = bk.filter_bank(nodes, mu[:, :4], rho, prior.mean, prior.cov, q)
     b = bk.step(bk.step(b, mu[:, 4]), mu[:, 5])
-    mx = bk.mixture(b, w[None, :] * (1.0 + 0.01 * np.arange(B))[:, None])
+    mx = bmix.mixture(b, w[None, :] * (1.0 + 0.01 * np.arange(B))[:, None])
     for i in range(B):
-        one = bk.mixture(
+        one = bmix.mixture(
             bk.filter_bank(nodes[i], mu[i], rho[i], prior.mean, prior.cov, q[i]),
             w * (1.0 + 0.01 * i),
         )
@@ -388,7 +392,7 @@ def test_smoothed_state_at_the_last_frame_is_the_filtered_mixture():
     sim, prior = long_track(6, 0.03, seed=12)
     y, w = log_depth_rule(40)
     b = bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, 0.03)
-    mx = bk.mixture(b, w)
+    mx = bmix.mixture(b, w)
     sm = mx.smoothed()
     assert_allclose(sm.mean[-1], mx.mean, rtol=1e-12)
     assert_allclose(sm.cov[-1], mx.cov, rtol=1e-9, atol=1e-14)
@@ -396,7 +400,7 @@ def test_smoothed_state_at_the_last_frame_is_the_filtered_mixture():
     assert_allclose(np.diff(sm.depth_mean), 1.0, rtol=1e-12)
     assert_allclose(sm.depth_sd, mx.depth_sd, rtol=1e-9)
     # with history kept, the smoother reuses it
-    hist = bk.mixture(
+    hist = bmix.mixture(
         bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, 0.03, history=True), w
     )
     # (its filters run in the textbook's matrix form, the others in closed form)
@@ -424,7 +428,7 @@ def fig2_args():
         (dict(mu=np.zeros((3, 0))), r"mu must have shape \(..., N\) with N >= 1"),
         (dict(rho=0.0), "rho must be positive"),
         (dict(rho=-0.1), "rho must be positive"),
-        (dict(q=-0.01), "q must be >= 0"),
+        (dict(process_noise=-0.01), "process_noise must be >= 0"),
         (dict(prior_cov=np.diag([1.0, -1.0, 1.0])), "prior_cov must be positive definite"),
         (dict(prior_cov=np.eye(2)), r"prior_cov must have shape \(..., 3, 3\)"),
         (dict(prior_mean=[0.0, 1.0]), r"prior_mean must have shape \(..., 3\)"),
@@ -442,15 +446,15 @@ def test_filter_bank_refuses_bad_input_naming_the_argument(fig2_args, change, me
 def test_mixture_and_step_refuse_bad_input(fig2_args):
     b = bk.filter_bank(**fig2_args)
     with pytest.raises(ValueError, match="weights must be >= 0"):
-        bk.mixture(b, [1.0, -1.0, 1.0])
+        bmix.mixture(b, [1.0, -1.0, 1.0])
     with pytest.raises(ValueError, match="a positive one per problem"):
-        bk.mixture(b, [0.0, 0.0, 0.0])
+        bmix.mixture(b, [0.0, 0.0, 0.0])
     # a zero weight (padding) leaves the node out
-    assert_allclose(bk.mixture(b, [1.0, 0.0, 1.0]).probabilities[1], 0.0, atol=0)
+    assert_allclose(bmix.mixture(b, [1.0, 0.0, 1.0]).probabilities[1], 0.0, atol=0)
     with pytest.raises(ValueError, match="weights must broadcast"):
-        bk.mixture(b, [1.0, 1.0])
+        bmix.mixture(b, [1.0, 1.0])
     with pytest.raises(ValueError, match="bank must be a Bank"):
-        bk.mixture(tuple(b), [1.0, 1.0, 1.0])
+        bmix.mixture(tuple(b), [1.0, 1.0, 1.0])
     with pytest.raises(ValueError, match="mu_next must be finite"):
         bk.step(b, np.nan)
     with pytest.raises(ValueError, match="bank must be a Bank"):
@@ -459,7 +463,7 @@ def test_mixture_and_step_refuse_bad_input(fig2_args):
     with pytest.raises(ValueError, match=r"do not broadcast: bank \(2,\), mu_next \(3,\)"):
         bk.step(two, [0.1, 0.2, 0.3])
     with pytest.raises(ValueError, match="rtol must be a positive scalar"):
-        bk.mixture(b, [1.0, 1.0, 1.0]).depth_cdf([5.0], rtol=0.0)
+        bmix.mixture(b, [1.0, 1.0, 1.0]).depth_cdf([5.0], rtol=0.0)
 
 
 # --- nodes placed by the depth quadrature ----------------------------------------------
@@ -473,7 +477,7 @@ def test_eq14_16_placed_bank_moments_equal_the_one_dimensional_route(scenario):
     s = scenario
     prior = s.prior
     ref = optimal.moments(np.array([s.mu]), s.rho, prior.mean, prior.cov)
-    got = bk.moments(np.array([s.mu]), s.rho, prior.mean, prior.cov)
+    got = bpost.moments(np.array([s.mu]), s.rho, prior.mean, prior.cov)
     assert_allclose(key(got), key(ref), rtol=1e-10, atol=0)
     assert_allclose(got.cov, ref.cov, rtol=1e-10, atol=1e-10 * ref.cov[0, 1, 1])
     assert got.depth_error[0] <= 1e-10 * got.depth_sd[0]
@@ -486,11 +490,11 @@ def test_eq14_16_placed_bank_equals_the_one_dimensional_route_over_noisy_batches
     rng = np.random.default_rng(21)
     mu = np.array(s.mu) + 3 * s.rho * rng.standard_normal((40, 3))
     ref = optimal.moments(mu, s.rho, prior.mean, prior.cov)
-    got = bk.moments(mu, s.rho, prior.mean, prior.cov)
+    got = bpost.moments(mu, s.rho, prior.mean, prior.cov)
     for f in ("depth_mean", "depth_sd", "velocity_mean", "velocity_sd"):
         assert_allclose(getattr(got, f), getattr(ref, f), rtol=1e-10, atol=0)
     # a batch does not depend on its order
-    back = bk.moments(mu[::-1], s.rho, prior.mean, prior.cov)
+    back = bpost.moments(mu[::-1], s.rho, prior.mean, prior.cov)
     assert_allclose(back.depth_mean[::-1], got.depth_mean, rtol=1e-15, atol=0)
     assert_allclose(back.velocity_sd[::-1], got.velocity_sd, rtol=1e-15, atol=0)
 
@@ -499,7 +503,7 @@ def test_eq14_16_placed_bank_equals_the_one_dimensional_route_over_noisy_batches
 def test_placed_moments_match_the_dense_depth_rule_within_their_error(N, q):
     sim, prior = long_track(N, q, seed=30 + N)
     ref = key_moments(converged_mixture(sim.mu, RHO_200, prior.mean, prior.cov, q=q))
-    got = bk.moments(sim.mu, RHO_200, prior.mean, prior.cov, q)
+    got = bpost.moments(sim.mu, RHO_200, prior.mean, prior.cov, q)
     sd = np.array([got.depth_sd[0]] * 2 + [got.velocity_sd[0]] * 2)
     error = np.array([got.depth_error[0]] * 2 + [got.velocity_error[0]] * 2)
     # the reference is converged to 1e-11 relative; the placed nodes to 1e-10 of the SD
@@ -509,8 +513,8 @@ def test_placed_moments_match_the_dense_depth_rule_within_their_error(N, q):
 
 def test_posterior_nodes_carry_the_quadrature_moments_and_errors():
     sim, prior = long_track(10, 0.02, seed=40)
-    m = bk.moments(sim.mu, RHO_200, prior.mean, prior.cov, 0.02)
-    post = bk.posterior(sim.mu, RHO_200, prior.mean, prior.cov, 0.02)
+    m = bpost.moments(sim.mu, RHO_200, prior.mean, prior.cov, 0.02)
+    post = bpost.posterior(sim.mu, RHO_200, prior.mean, prior.cov, 0.02)
     assert post.log_normaliser.shape == ()
     assert_allclose(key_moments(post), key(m), rtol=0, atol=1e-12 * m.depth_sd[0])
     assert post.depth_error == m.depth_error[0] and post.rtol == 1e-10
@@ -527,21 +531,21 @@ def test_posterior_nodes_carry_the_quadrature_moments_and_errors():
 def test_online_update_matches_the_quadrature_from_scratch_and_rarely_re_places():
     N, q = 40, 0.0
     sim, prior = long_track(N, q, seed=41)
-    post = bk.posterior(sim.mu[:3], RHO_200, prior.mean, prior.cov, q)
+    post = bpost.posterior(sim.mu[:3], RHO_200, prior.mean, prior.cov, q)
     re_placed = 0
     for k in range(3, N):
         before = post.bank.nodes
-        post = bk.update(post, sim.mu[k])
+        post = bpost.update(post, sim.mu[k])
         re_placed += not np.array_equal(post.bank.nodes, before)
         if k % 6 == 0 or k == N - 1:
-            fresh = bk.moments(sim.mu[: k + 1], RHO_200, prior.mean, prior.cov, q)
+            fresh = bpost.moments(sim.mu[: k + 1], RHO_200, prior.mean, prior.cov, q)
             tol = 3 * (post.depth_error + fresh.depth_error[0]) + 1e-12 * fresh.depth_sd[0]
             assert abs(post.depth_mean - fresh.depth_mean[0]) <= tol
             assert abs(post.depth_sd - fresh.depth_sd[0]) <= tol
             assert post.depth_error <= 1e-10 * post.depth_sd
             vtol = 3 * (post.velocity_error + fresh.velocity_error[0])
             assert abs(post.velocity_sd - fresh.velocity_sd[0]) <= vtol + 1e-12 * post.velocity_sd
-    assert post.bank.n_frames == N
+    assert post.bank.frames == N
     # the posterior narrows by a factor of several over the frames; the nodes follow it
     # in a few re-placements, not one per frame
     assert 1 <= re_placed <= (N - 3) // 3
@@ -552,15 +556,15 @@ def test_online_update_of_a_batch_re_places_only_the_problems_that_need_it():
     tracks = [long_track(N, q, seed=50 + i) for i in range(4)]
     mu = np.stack([t[0].mu for t in tracks])
     prior = tracks[0][1]
-    post = bk.posterior(mu[:, :3], RHO_200, prior.mean, prior.cov, q)
+    post = bpost.posterior(mu[:, :3], RHO_200, prior.mean, prior.cov, q)
     for k in range(3, N):
-        post = bk.update(post, mu[:, k])
-    fresh = bk.moments(mu, RHO_200, prior.mean, prior.cov, q)
+        post = bpost.update(post, mu[:, k])
+    fresh = bpost.moments(mu, RHO_200, prior.mean, prior.cov, q)
     tol = 3 * (post.depth_error + fresh.depth_error) + 1e-12 * fresh.depth_sd
     assert np.all(np.abs(post.depth_mean - fresh.depth_mean) <= tol)
-    one = bk.posterior(mu[2, :3], RHO_200, prior.mean, prior.cov, q)
+    one = bpost.posterior(mu[2, :3], RHO_200, prior.mean, prior.cov, q)
     for k in range(3, N):
-        one = bk.update(one, mu[2, k])
+        one = bpost.update(one, mu[2, k])
     assert abs(one.depth_mean - post.depth_mean[2]) <= 3 * (one.depth_error + post.depth_error[2])
 
 
@@ -583,7 +587,7 @@ def test_placed_bank_answers_extreme_inputs_with_finite_moments_and_errors(
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        m = bk.moments(sim.mu, rho, prior_mean, scale * np.eye(3), q)
+        m = bpost.moments(sim.mu, rho, prior_mean, scale * np.eye(3), q)
     values = np.concatenate([key(m), m.depth_error, m.velocity_error])
     assert np.all(np.isfinite(values)) and m.depth_sd[0] > 0 and m.velocity_sd[0] > 0
     # accurate to the tolerance, or to the roundoff floor where that is larger
@@ -601,7 +605,7 @@ def test_placed_bank_refuses_what_double_precision_cannot_resolve():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match=r"mu\[0\] = .* too narrow"):
-            bk.moments(sim.mu, 1e-9, [-1e3, 1e3, 1e3], 1e-12 * np.eye(3))
+            bpost.moments(sim.mu, 1e-9, [-1e3, 1e3, 1e3], 1e-12 * np.eye(3))
 
 
 @pytest.mark.parametrize(
@@ -614,26 +618,28 @@ def test_placed_bank_refuses_what_double_precision_cannot_resolve():
         (dict(rho=0.0), "rho must be positive"),
         (dict(prior_cov=-np.eye(3)), "prior_cov"),
         (dict(rtol=0.0), "rtol must be"),
-        (dict(mu=np.zeros(bk.MAX_FRAMES + 1)), f"at most {bk.MAX_FRAMES} frames"),
+        (dict(mu=np.zeros(bpost.MAX_FRAMES + 1)), f"at most {bpost.MAX_FRAMES} frames"),
     ],
 )
 def test_placed_bank_refuses_bad_input_naming_the_argument(kwargs, message):
     args = dict(mu=list(MU_17), rho=RHO_200, prior_mean=[0.0, 4.0, 0.0], prior_cov=np.eye(3) * 1e3)
     args.update(kwargs)
     with pytest.raises(ValueError, match=message):
-        bk.moments(**args)
+        bpost.moments(**args)
 
 
 def test_update_refuses_bad_input():
-    post = bk.posterior(list(MU_17), RHO_200, [0.0, 4.0, 0.0], 1e3 * np.eye(3))
+    post = bpost.posterior(list(MU_17), RHO_200, [0.0, 4.0, 0.0], 1e3 * np.eye(3))
     with pytest.raises(ValueError, match="mu_next must be finite"):
-        bk.update(post, np.nan)
+        bpost.update(post, np.nan)
     with pytest.raises(ValueError, match="mu_next must be a scalar"):
-        bk.update(post, [0.1, 0.2])
+        bpost.update(post, [0.1, 0.2])
     y, w = log_depth_rule(10)
-    loose = bk.mixture(bk.filter_bank(y, list(MU_17), RHO_200, [0.0, 4.0, 0.0], 1e3 * np.eye(3)), w)
-    with pytest.raises(ValueError, match="post must be a Mixture from bank.posterior"):
-        bk.update(loose, 0.5)
+    loose = bmix.mixture(
+        bk.filter_bank(y, list(MU_17), RHO_200, [0.0, 4.0, 0.0], 1e3 * np.eye(3)), w
+    )
+    with pytest.raises(ValueError, match="post must be a Mixture from bank_posterior.posterior"):
+        bpost.update(loose, 0.5)
 
 
 def test_online_update_stays_exact_over_hundreds_of_frames():
@@ -644,13 +650,13 @@ def test_online_update_stays_exact_over_hundreds_of_frames():
     tracks = [long_track(N, 0.0, seed=70 + i) for i in range(3)]
     mu = np.stack([t[0].mu for t in tracks])
     prior = tracks[0][1]
-    post = bk.posterior(mu[:, :3], RHO_200, prior.mean, prior.cov)
+    post = bpost.posterior(mu[:, :3], RHO_200, prior.mean, prior.cov)
     re_placed = 0
     for k in range(3, N):
         before = post.bank.nodes
-        post = bk.update(post, mu[:, k])
+        post = bpost.update(post, mu[:, k])
         re_placed += not np.array_equal(post.bank.nodes, before)
-    fresh = bk.moments(mu, RHO_200, prior.mean, prior.cov)
+    fresh = bpost.moments(mu, RHO_200, prior.mean, prior.cov)
     tol = post.depth_error + fresh.depth_error
     assert np.all(np.abs(post.depth_mean - fresh.depth_mean) <= tol)
     assert np.all(np.abs(post.depth_sd - fresh.depth_sd) <= tol)
@@ -708,7 +714,7 @@ def test_stacked_mixture_moments_equal_the_naive_sum_node_by_node(depth):
     A = 1e-3 * rng.standard_normal((B, J, 2, 2))
     covs = A @ np.swapaxes(A, -1, -2)
     depths = depth + 0.02 * np.linspace(-1, 1, J) * rng.uniform(0.5, 1.5, (B, 1))
-    mean, cov = bk._stacked_moments(W, means, covs, depths)
+    mean, cov = bmix._stacked_moments(W, means, covs, depths)
     assert mean.shape == (B, 2, 3) and cov.shape == (B, 2, 3, 3)
     for i in range(B):
         for k in range(2):
@@ -717,7 +723,7 @@ def test_stacked_mixture_moments_equal_the_naive_sum_node_by_node(depth):
             # (the naive sum's own rounding: a few units of the depth's last place)
             assert np.all(np.abs(mean[i, k] - m) <= 1e-12 * scale + 8 * EPS * np.abs(m))
             assert np.all(np.abs(cov[i, k] - c) <= 1e-12 * np.outer(scale, scale))
-        one = bk.mixture_moments(W[i, 0], means[i], covs[i], depths[i])  # one weighting
+        one = bmix.mixture_moments(W[i, 0], means[i], covs[i], depths[i])  # one weighting
         assert_allclose(one[0], mean[i, 0], rtol=1e-14)
         assert_allclose(one[1], cov[i, 0], rtol=1e-13, atol=1e-16)
 
@@ -731,10 +737,10 @@ def test_online_update_by_blocks_equals_the_whole_batch_and_leaves_its_input_alo
     tracks = [long_track(N, 0.0, seed=90 + i) for i in range(5)]
     mu = np.stack([t[0].mu for t in tracks])
     prior = tracks[0][1]
-    start = bk.posterior(mu[:, :3], RHO_200, prior.mean, prior.cov)
+    start = bpost.posterior(mu[:, :3], RHO_200, prior.mean, prior.cov)
     runs = {}
     for block in (1, 10**9):  # one problem per block, and one block
-        monkeypatch.setattr(bk, "_BLOCK", block)
+        monkeypatch.setattr(bpost, "_BLOCK", block)
         post, re_placed = start, 0
         for k in range(3, N):
             before = post
@@ -750,7 +756,7 @@ def test_online_update_by_blocks_equals_the_whole_batch_and_leaves_its_input_alo
                     ("moments", post.mean),
                 ]
             }
-            post = bk.update(post, mu[:, k])
+            post = bpost.update(post, mu[:, k])
             re_placed += not np.array_equal(post.bank.nodes, before.bank.nodes)
             assert_allclose(before.bank.nodes, kept["nodes"], rtol=0, atol=0)
             assert_allclose(before.bank.mean, kept["mean"], rtol=0, atol=0)
@@ -774,18 +780,18 @@ def test_placed_batches_joined_keep_each_problems_mixture():
     # more problems than the quadrature places together: the chunks' mixtures are joined
     # (their node counts padded with zero weights), not recomputed; recomputing agrees
     rng = np.random.default_rng(91)
-    B = bk._CHUNK + 6
+    B = bpost._CHUNK + 6
     sim, prior = long_track(3, 0.0, seed=91)
     mu = sim.mu + 2e-3 * rng.standard_normal((B, 3))
-    post = bk.posterior(mu, RHO_200, prior.mean, prior.cov)
+    post = bpost.posterior(mu, RHO_200, prior.mean, prior.cov)
     assert np.any(~np.isfinite(post.log_weights))  # some rows padded
     shift = np.max(post.log_weights, axis=-1, keepdims=True)
-    again = bk.mixture(post.bank, np.exp(post.log_weights - shift))
+    again = bmix.mixture(post.bank, np.exp(post.log_weights - shift))
     assert_allclose(post.probabilities, again.probabilities, rtol=1e-12, atol=1e-300)
     assert_allclose(post.log_normaliser, again.log_normaliser + shift[:, 0], rtol=1e-14)
     assert_allclose(post.mean, again.mean, rtol=1e-13)
     assert_allclose(post.cov, again.cov, rtol=1e-11, atol=1e-16)
-    one = bk.posterior(mu[B - 1], RHO_200, prior.mean, prior.cov)
+    one = bpost.posterior(mu[B - 1], RHO_200, prior.mean, prior.cov)
     assert_allclose(post.mean[B - 1], one.mean, rtol=1e-14)
 
 
@@ -797,10 +803,10 @@ def test_update_of_a_posterior_on_one_node_re_places_it_without_warnings():
     mu = np.asarray(fig2.mu)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        post = bk.posterior(mu[:1], 1e-12, fig2.prior.mean, fig2.prior.cov)
+        post = bpost.posterior(mu[:1], 1e-12, fig2.prior.mean, fig2.prior.cov)
         for m in mu[1:]:
-            post = bk.update(post, m)
-    direct = bk.posterior(mu, 1e-12, fig2.prior.mean, fig2.prior.cov)
+            post = bpost.update(post, m)
+    direct = bpost.posterior(mu, 1e-12, fig2.prior.mean, fig2.prior.cov)
     assert np.isfinite(post.depth_sd) and post.depth_sd < 1e-9
     assert abs(post.depth_mean - direct.depth_mean) < 1e-6 * direct.depth_mean
 
@@ -815,7 +821,7 @@ def test_depth_cdf_at_a_tiny_noise_level_settles_at_its_roundoff_floor(rho):
 
     def cdf_at_truth(r):
         sim = model.simulate(x1, 4, r, 0.0, np.random.default_rng(1), size=3, frame=1)
-        post = bk.posterior(sim.mu, r, fig2.prior.mean, fig2.prior.cov)
+        post = bpost.posterior(sim.mu, r, fig2.prior.mean, fig2.prior.cov)
         return post.depth_cdf(sim.states[:, -1, 1:2])[:, 0]
 
     assert_allclose(cdf_at_truth(rho), cdf_at_truth(1e-8), rtol=0, atol=1e-4)
@@ -829,10 +835,10 @@ def test_update_re_places_a_posterior_that_narrowed_onto_one_node(scale):
     # online posterior was 5.97 with SD 0 against the exact 6.0 with SD 1.2e-10)
     fig2 = SCENARIOS["fig2"]
     mu = np.asarray(fig2.mu)
-    post = bk.posterior(mu[:1], 1e-12, fig2.prior.mean, scale * np.eye(3))
+    post = bpost.posterior(mu[:1], 1e-12, fig2.prior.mean, scale * np.eye(3))
     for m in mu[1:]:
-        post = bk.update(post, m)
-    direct = bk.posterior(mu, 1e-12, fig2.prior.mean, scale * np.eye(3))
+        post = bpost.update(post, m)
+    direct = bpost.posterior(mu, 1e-12, fig2.prior.mean, scale * np.eye(3))
     assert_allclose(post.depth_mean, direct.depth_mean, rtol=1e-12)
     assert_allclose(post.depth_sd, direct.depth_sd, rtol=1e-6)
     assert np.max(post.probabilities) < 0.5

@@ -16,6 +16,9 @@ import pytest
 from numpy.testing import assert_allclose
 
 from depthcore import bank as bk
+from depthcore import bank_mixture as bmix
+from depthcore import bank_posterior as bpost
+from depthcore import bank_track as btrack
 from depthcore import model, optimal, reference
 from depthcore.scenarios import RHO_200, SCENARIOS
 
@@ -39,8 +42,8 @@ def fig2_track(N, q, seed):
 
 def test_eq16_node_density_is_the_one_dimensional_depth_density(scenario):
     s = scenario
-    post = bk.posterior(s.mu, s.rho, s.prior.mean, s.prior.cov)
-    depths, density = bk.node_density(post)
+    post = bpost.posterior(s.mu, s.rho, s.prior.mean, s.prior.cov)
+    depths, density = bpost.node_density(post)
     opt = optimal.marginals(s.mu, s.rho, s.prior)
     assert depths.shape == density.shape == post.probabilities.shape
     assert_allclose(depths, post.bank.nodes + 2.0, rtol=0, atol=0)
@@ -51,8 +54,8 @@ def test_eq16_node_density_is_the_one_dimensional_depth_density(scenario):
 
 def test_node_density_at_later_frames_is_the_depth_pdf():
     sim, prior = fig2_track(9, 0.02, seed=4)
-    post = bk.posterior(sim.mu, RHO_200, prior.mean, prior.cov, 0.02)
-    depths, density = bk.node_density(post)
+    post = bpost.posterior(sim.mu, RHO_200, prior.mean, prior.cov, 0.02)
+    depths, density = bpost.node_density(post)
     assert np.min(depths) > 8.0  # nodes are depths at frame 1 > 0, shifted by N - 1 = 8
     assert_allclose(density, post.depth_pdf(depths), rtol=1e-10, atol=1e-12 * density.max())
 
@@ -61,17 +64,17 @@ def test_node_density_at_later_frames_is_the_depth_pdf():
 def test_textbook_19_2_3_filtered_series_is_the_bank_rerun_at_each_frame(q):
     N = 7
     sim, prior = fig2_track(N, q, seed=5)
-    tr = bk.track(sim.mu, RHO_200, prior.mean, prior.cov, q, lag=2)
+    tr = btrack.track(sim.mu, RHO_200, prior.mean, prior.cov, q, lag=2)
     y, w = log_depth_rule(160)
     assert tr.filtered.mean.shape == (N, 3) and tr.filtered.cov.shape == (N, 3, 3)
     assert len(tr.posteriors) == N and tr.lag == 2
     for k in range(1, N + 1):
-        ref = bk.mixture(bk.filter_bank(y, sim.mu[:k], RHO_200, prior.mean, prior.cov, q), w)
+        ref = bmix.mixture(bk.filter_bank(y, sim.mu[:k], RHO_200, prior.mean, prior.cov, q), w)
         sd = np.sqrt(np.diag(ref.cov))
         assert_allclose(tr.filtered.mean[k - 1], ref.mean, rtol=0, atol=1e-8 * sd.max())
         assert_allclose(tr.filtered.cov[k - 1], ref.cov, rtol=0, atol=1e-8 * np.outer(sd, sd).max())
     # the fixed-interval smoother: the dense rule's mixture smoothed
-    ref = bk.mixture(bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, q), w).smoothed()
+    ref = bmix.mixture(bk.filter_bank(y, sim.mu, RHO_200, prior.mean, prior.cov, q), w).smoothed()
     sd = np.sqrt(np.max(ref.cov[:, [0, 1, 2], [0, 1, 2]]))
     assert_allclose(tr.interval.mean, ref.mean, rtol=0, atol=1e-8 * sd)
     assert_allclose(tr.interval.cov, ref.cov, rtol=0, atol=1e-8 * sd**2)
@@ -81,7 +84,7 @@ def test_textbook_19_2_3_filtered_series_is_the_bank_rerun_at_each_frame(q):
 def test_textbook_19_2_6_fixed_lag_is_the_fixed_interval_smoother_of_the_prefix(lag):
     N = 8
     sim, prior = fig2_track(N, 0.03, seed=6)
-    tr = bk.track(sim.mu, RHO_200, prior.mean, prior.cov, 0.03, lag=lag)
+    tr = btrack.track(sim.mu, RHO_200, prior.mean, prior.cov, 0.03, lag=lag)
     for s in range(N):
         t = min(s + lag, N - 1)
         ref = tr.posteriors[t].smoothed()  # the Rauch-Tung-Striebel route on the same nodes
@@ -99,7 +102,7 @@ def test_textbook_19_2_6_fixed_lag_is_the_augmented_filter_rerun_for_every_frame
     sim, prior = fig2_track(N, q, seed=1)
     # no lag, short ones, a window of half the track, and lags that reach its end and beyond
     for lag in (0, 1, 2, 6, N - 2, N - 1, N + 3):
-        tr = bk.track(sim.mu, RHO_200, prior.mean, prior.cov, q, lag=lag)
+        tr = btrack.track(sim.mu, RHO_200, prior.mean, prior.cov, q, lag=lag)
         nodes = [p.bank.nodes for p in tr.posteriors]
         # the nodes are re-placed along the track: the frames are smoothed on several sets
         assert sum(not np.array_equal(a, b) for a, b in zip(nodes, nodes[1:], strict=False)) >= 1
@@ -116,8 +119,8 @@ def test_textbook_19_2_6_fixed_lag_is_the_augmented_filter_rerun_for_every_frame
 def test_lag_zero_is_the_filter_and_a_long_lag_is_the_fixed_interval_smoother():
     N = 6
     sim, prior = fig2_track(N, 0.01, seed=7)
-    zero = bk.track(sim.mu, RHO_200, prior.mean, prior.cov, 0.01, lag=0)
-    long = bk.track(sim.mu, RHO_200, prior.mean, prior.cov, 0.01, lag=N + 3)
+    zero = btrack.track(sim.mu, RHO_200, prior.mean, prior.cov, 0.01, lag=0)
+    long = btrack.track(sim.mu, RHO_200, prior.mean, prior.cov, 0.01, lag=N + 3)
     scale = np.sqrt(np.max(zero.filtered.cov[:, [0, 1, 2], [0, 1, 2]], axis=1))
     assert_allclose(zero.lagged.mean, zero.filtered.mean, rtol=0, atol=1e-9 * scale.max())
     assert_allclose(long.lagged.mean, long.interval.mean, rtol=0, atol=1e-9 * scale.max())
@@ -131,15 +134,15 @@ def test_track_and_node_density_refuse_bad_input():
     s = SCENARIOS["fig2"]
     args = (s.rho, s.prior.mean, s.prior.cov)
     with pytest.raises(ValueError, match=r"mu must have shape \(N,\)"):
-        bk.track(np.zeros((2, 3)), *args)
+        btrack.track(np.zeros((2, 3)), *args)
     with pytest.raises(ValueError, match="mu must be finite"):
-        bk.track([0.1, np.nan], *args)
+        btrack.track([0.1, np.nan], *args)
     with pytest.raises(ValueError, match="lag must be an integer >= 0"):
-        bk.track(s.mu, *args, lag=-1)
+        btrack.track(s.mu, *args, lag=-1)
     with pytest.raises(ValueError, match="rho must be"):
-        bk.track(s.mu, -1.0, s.prior.mean, s.prior.cov)
+        btrack.track(s.mu, -1.0, s.prior.mean, s.prior.cov)
     with pytest.raises(ValueError, match="post must be a Mixture"):
-        bk.node_density(s.mu)
+        bpost.node_density(s.mu)
 
 
 @pytest.mark.parametrize(
@@ -158,7 +161,7 @@ def test_track_refuses_odd_arguments_in_one_line(change, message):
     s = SCENARIOS["fig2"]
     args = {"mu": s.mu, "rho": s.rho, "prior_mean": s.prior.mean, "prior_cov": s.prior.cov}
     with pytest.raises(ValueError, match=message) as info:
-        bk.track(**{**args, **change})
+        btrack.track(**{**args, **change})
     assert "\n" not in str(info.value)
 
 
@@ -171,7 +174,7 @@ def test_track_answers_at_extreme_noise_and_priors_without_warnings(rho, scale):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         try:
-            tr = bk.track(np.r_[s.mu, 0.33, 0.43], rho, s.prior.mean, scale * np.eye(3), lag=2)
+            tr = btrack.track(np.r_[s.mu, 0.33, 0.43], rho, s.prior.mean, scale * np.eye(3), lag=2)
         except ValueError as e:
             assert rho == 1e-12 and "too narrow" in str(e) and "\n" not in str(e)
             return

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from depthcore import calibration, cli_text, model
+from depthcore import calibration, cli_text, model, study_scores
 from depthcore.book import beyond_study
 
 PRIOR_MEAN = np.array([-1.2, 4.0, 0.0])
@@ -104,7 +104,7 @@ def test_prior_study_reports_coverage_at_every_level_and_the_tests():
     n = r["valid_trials"]
     assert n + r["rejected_trials"] == 60
     p = np.asarray(r["levels"])
-    assert len(p) == len(study.CALIBRATION_LEVELS)
+    assert len(p) == len(study_scores.CALIBRATION_LEVELS)
     np.testing.assert_allclose(r["coverage_se"], np.sqrt(p * (1 - p) / n))
     # The same seed reproduces the PIT values: recompute them through the calibration module.
     prior_mean, prior_cov = np.array(r["prior_mean"]), np.array(r["prior_cov"])

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from depthcore import reproduce, study
+from depthcore import bank_posterior, reproduce, study, study_trials
 from depthcore.__main__ import build_parser, main
 from depthcore.filters import FILTERS
 from depthcore.scenarios import SCENARIOS
@@ -217,13 +217,11 @@ def test_study_shows_a_progress_bar_on_a_terminal_only():
 
 
 def test_study_particles_default_is_the_studys():
-    assert build_parser().parse_args(["study"]).particles == study.PARTICLES
+    assert build_parser().parse_args(["study"]).particles == study_trials.PARTICLES
 
 
 def test_estimate_takes_more_frames_process_noise_and_smoothing(capsys):
     import numpy as np
-
-    from depthcore import bank
 
     mu = ["-0.3", "0", "0.2", "0.33", "0.43"]
     argv = ["estimate", "--mu", *mu, "--rho", "0.005", "--process-noise", "0.01"]
@@ -234,7 +232,7 @@ def test_estimate_takes_more_frames_process_noise_and_smoothing(capsys):
     assert data["not_run"] == {"particle": "supports only no process noise"}
     # the default prior is the paper's rule on the first three bearings
     mean = np.array([-1.2, 4.0, 0.0])
-    m = bank.moments([float(v) for v in mu], 0.005, mean, 1000 * np.eye(3), 0.01)
+    m = bank_posterior.moments([float(v) for v in mu], 0.005, mean, 1000 * np.eye(3), 0.01)
     assert data["filters"]["optimal"]["depth"]["mean"] == pytest.approx(m.depth_mean[0], 1e-12)
     sm = data["smoothed"]
     assert len(sm["depth_mean"]) == 5

@@ -12,7 +12,7 @@ from numpy.testing import assert_allclose
 from depthcore import (
     SCENARIOS,
     _checks,
-    bank,
+    bank_posterior,
     ekf,
     gaussian,
     model,
@@ -20,6 +20,7 @@ from depthcore import (
     rbpf,
     resample_move,
     study,
+    study_trials,
     ukf,
 )
 from depthcore.book import beyond_filters, beyond_linear, beyond_study, beyond_sweeps, paper
@@ -176,9 +177,8 @@ def test_prior_offset_sweep_rejects_a_prior_behind_the_camera():
 def test_hellinger_is_zero_for_identical_densities_and_bounded():
     s = SCENARIOS["fig2"]
     ref = optimal.batch_marginals(np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov)
-    from depthcore import study
 
-    h = study.hellinger(ref, ref.depth_log_pdf, ref.moments.depth_mean, ref.moments.depth_sd)
+    h = study_trials.hellinger(ref, ref.depth_log_pdf, ref.moments.depth_mean, ref.moments.depth_sd)
     assert_allclose(h, 0.0, atol=1e-6)  # H = sqrt(1 - BC): BC to 1e-12
 
 
@@ -338,13 +338,13 @@ def _rbpf_track():
 def test_rbpf_convergence_measures_each_cloud_from_the_exact_bank():
     mu, rho, pm, pc = _rbpf_track()
     r = beyond_linear.rbpf_convergence(mu, rho, pm, pc, [20, 600], 4, seed=11, process_noise=0.01)
-    exact = bank.posterior(mu, rho, pm, pc, 0.01)
+    exact = bank_posterior.posterior(mu, rho, pm, pc, 0.01)
     assert r["frames"] == 6 and r["replicas"] == 4 and list(r["sizes"]) == [20, 600]
     assert r["exact"]["depth_mean"] == pytest.approx(float(exact.depth_mean), rel=1e-14)
     assert r["exact_error"]["depth"] == pytest.approx(float(exact.depth_error), rel=1e-14)
     # the runs are the filter's own clouds, from the seed's child streams
     stream = np.random.default_rng(_checks.spawn(11, 2)[1])
-    again = rbpf.run(mu, rho, pm, pc, 600, stream, q=0.01, replicas=4).replica_moments()
+    again = rbpf.run(mu, rho, pm, pc, 600, stream, process_noise=0.01, replicas=4).replica_moments()
     assert np.array_equal(r["runs"]["depth_sd"][1], again.depth_sd)
     for m in beyond_filters.MOMENTS:
         runs = r["runs"][m]

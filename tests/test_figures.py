@@ -9,7 +9,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from numpy.testing import assert_allclose  # noqa: E402
 
-from depthcore import reproduce  # noqa: E402
+from depthcore import bank_posterior, bank_track, reproduce  # noqa: E402
 from depthcore.book import beyond_filters, beyond_linear, beyond_study, beyond_sweeps, paper, style
 from depthcore.filters import NAMES, PAPER_FILTERS  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
@@ -366,20 +366,19 @@ def test_noise_study_figure_draws_coverage_and_rmse():
 
 @pytest.fixture(scope="module")
 def fig2_track():
-    from depthcore import bank, model
+    from depthcore import model
 
     sim = model.simulate(model.G(FIG2.c, -2), 6, FIG2.rho, 0.01, np.random.default_rng(2), frame=1)
-    tr = bank.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
+    tr = bank_track.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
     return sim, tr
 
 
 def test_bank_depth_figure_draws_one_curve_per_frame(fig2_track):
-    from depthcore import bank
     from depthcore.book import beyond_linear
 
     sim, tr = fig2_track
     frames = [3, 4, 6]
-    d = {k: bank.node_density(tr.posteriors[k - 1]) for k in frames}
+    d = {k: bank_posterior.node_density(tr.posteriors[k - 1]) for k in frames}
     fig = beyond_linear.bank_depth_figure(d, {k: sim.states[k - 1, 1] for k in frames})
     labels = [line.get_label() for line in fig.axes[0].get_lines()]
     assert [lab for lab in labels if lab.startswith("after")] == [

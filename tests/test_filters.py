@@ -4,18 +4,19 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import _checks, ekf, inverse_depth, iterated, model, optimal, particle, ukf
-from depthcore.filters import (
-    ALL_NAMES,
-    FAMILIES,
-    FAMILY,
-    FILTERS,
-    NAMES,
-    PAPER_FILTERS,
-    QUANTITIES,
-    check_names,
-    get,
+from depthcore import (
+    _checks,
+    bank_posterior,
+    ekf,
+    inverse_depth,
+    iterated,
+    model,
+    optimal,
+    particle,
+    ukf,
 )
+from depthcore.estimates import FAMILIES, FAMILY, QUANTITIES
+from depthcore.filters import ALL_NAMES, FILTERS, NAMES, PAPER_FILTERS, check_names, get
 from depthcore.gaussian import paper_prior_means
 from depthcore.scenarios import SCENARIOS
 
@@ -273,12 +274,12 @@ def test_unsupported_frames_and_process_noise_are_refused_naming_the_argument():
 
 
 def test_the_optimal_entry_is_the_bank_beyond_three_frames_and_the_paper_route_at_three():
-    from depthcore import bank, optimal
+    from depthcore import optimal
 
     p = FIG2.prior
     mu5 = _frames(5, size=2)
     est = FILTERS["optimal"](mu5, FIG2.rho, p.mean, p.cov, process_noise=0.01)
-    ref = bank.moments(mu5, FIG2.rho, p.mean, p.cov, 0.01)
+    ref = bank_posterior.moments(mu5, FIG2.rho, p.mean, p.cov, 0.01)
     assert_allclose(est.depth_mean, ref.depth_mean, rtol=1e-12)
     assert_allclose(est.velocity_sd, ref.velocity_sd, rtol=1e-11)
     assert np.all(est.depth_error <= 1e-10 * est.depth_sd)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import SCENARIOS, bound, hardness, model, study
+from depthcore import SCENARIOS, bound, hardness, model, study_scores
 from depthcore.book import beyond_hard
 from depthcore.filters import FILTERS
 
@@ -110,7 +110,7 @@ def test_hard_cell_exact_posterior_is_calibrated_over_its_prior(cell):
     # posterior's central intervals cover at their nominal rates, within 3 SE.
     s = cell["prior"]["filters"]["optimal"]
     for p in (0.68, 0.95):
-        se = study.coverage_se(p, s["trials"])
+        se = study_scores.coverage_se(p, s["trials"])
         assert abs(s[f"coverage_{round(100 * p)}"] - p) < 3 * se
     assert hardness.verdicts(cell, "prior")["calibrated_68"]["optimal"]
 
@@ -174,7 +174,9 @@ def test_hard_cell_beyond_three_frames_scores_the_depth_at_frame_n():
     assert cell["bound_sd"] == pytest.approx(np.sqrt(b))
     s = cell["prior"]["filters"]["optimal"]
     for p in (0.68, 0.95):
-        assert abs(s[f"coverage_{round(100 * p)}"] - p) < 3 * study.coverage_se(p, s["trials"])
+        assert abs(s[f"coverage_{round(100 * p)}"] - p) < 3 * study_scores.coverage_se(
+            p, s["trials"]
+        )
     # at the fixed truth the point has moved on to depth 6 + 7 = 13 (Eq. (1))
     e = cell["fixed"]["filters"]["optimal"]
     assert abs(e["bias"]) < 13.0 and e["failed"] == 0

@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.text import Text  # noqa: E402
 
-from depthcore import bank, hardness, model, study  # noqa: E402
+from depthcore import bank_posterior, bank_track, hardness, model, study  # noqa: E402
 from depthcore.book import (
     beyond_conjecture,
     beyond_filters,
@@ -95,14 +95,14 @@ def _frames_run():
 
 def _track():
     sim = model.simulate(FIG2.c, 6, FIG2.rho, 0.01, np.random.default_rng(2), frame=3)
-    tr = bank.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
+    tr = bank_track.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
     return sim, tr
 
 
 def _bank_depth():
     sim, tr = _track()
     frames = (3, 4, 6)
-    densities = {k: bank.node_density(tr.posteriors[k - 1]) for k in frames}
+    densities = {k: bank_posterior.node_density(tr.posteriors[k - 1]) for k in frames}
     return beyond_linear.bank_depth_figure(densities, {k: sim.states[k - 1, 1] for k in frames})
 
 

@@ -120,17 +120,19 @@ def test_simulate_batches_states():
         (dict(state=[0.0, 2.0, 0.0]), "state puts the point behind the camera"),
         (dict(state=[0.0, 2.0, 0.0, 1.0]), r"state must have shape \(..., 3\)"),
         (dict(state=[0.0, np.nan, 0.0]), "state must be finite"),
-        (dict(n_frames=0), "n_frames must be an integer >= 1"),
-        (dict(n_frames=2.5), "n_frames must be an integer >= 1"),
+        (dict(frames=0), "frames must be an integer >= 1"),
+        (dict(frames=2.5), "frames must be an integer >= 1"),
         (dict(frame=0), "frame must be an integer >= 1"),
         (dict(rho=0.0), "rho must be"),
-        (dict(q=-1.0), "q must be"),
+        (dict(process_noise=-1.0), "process_noise must be"),
         (dict(size=0), "size must be an integer >= 1"),
         (dict(rng=1), "rng must be a numpy.random.Generator"),
     ],
 )
 def test_simulate_refuses_bad_input(kwargs, message):
-    args = dict(state=[0.0, 5.0, 0.5], n_frames=4, rho=0.01, q=0.0, rng=np.random.default_rng(0))
+    args = dict(
+        state=[0.0, 5.0, 0.5], frames=4, rho=0.01, process_noise=0.0, rng=np.random.default_rng(0)
+    )
     with pytest.raises(ValueError, match=message):
         model.simulate(**dict(args, **kwargs))
 

@@ -6,7 +6,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy import stats
 from scipy.special import logsumexp
 
-from depthcore import bank, model, optimal
+from depthcore import bank, bank_mixture, model, optimal
 from depthcore import particle as pf
 from depthcore.gaussian import Gaussian
 from depthcore.particle import particle_filter, run
@@ -381,7 +381,7 @@ def test_n_frame_importance_sampling_matches_the_bank_of_kalman_filters():
     y1 = np.linspace(max(1e-3, mean_s[0, 1] - 5 - 15 * sd_y1), mean_s[0, 1] - 5 + 15 * sd_y1, 4001)
     w = np.full(y1.shape, y1[1] - y1[0])
     w[[0, -1]] /= 2
-    exact = bank.mixture(bank.filter_bank(y1, mu, rho, prior.mean, prior.cov), w)
+    exact = bank_mixture.mixture(bank.filter_bank(y1, mu, rho, prior.mean, prior.cov), w)
     r = particle_filter(mu, rho, prior, 40_000, np.random.default_rng(22))
     assert r.particles.shape == (40_000, 3) and r.ess.shape == (6,)
     m, se = r.moments(), r.standard_errors()

@@ -19,29 +19,29 @@ from pathlib import Path
 
 import pytest
 
-from depthcore import calibration, study
+from depthcore import calibration, study_scores
 from depthcore.scenarios import MATH_QUOTES, PROSE_QUOTES
 
 BOOK = Path(__file__).resolve().parent.parent / "book"
 PAGES = sorted(BOOK.glob("*.md"))
 
 #: Nominal interval levels defined in code: the study's central intervals
-#: (``study.LEVELS``, also written as probabilities, "0.68"), the coverage levels
+#: (``study_scores.LEVELS``, also written as probabilities, "0.68"), the coverage levels
 #: of ``calibration.LEVELS``, and the ends of the calibration curves'
-#: ``study.CALIBRATION_LEVELS`` ("from 5 % to 99 %").
+#: ``study_scores.CALIBRATION_LEVELS`` ("from 5 % to 99 %").
 _PERCENT = sorted(
     {
         round(100 * float(p))
         for p in (
-            *study.LEVELS,
+            *study_scores.LEVELS,
             *calibration.LEVELS,
-            study.CALIBRATION_LEVELS[0],
-            study.CALIBRATION_LEVELS[-1],
+            study_scores.CALIBRATION_LEVELS[0],
+            study_scores.CALIBRATION_LEVELS[-1],
         )
     }
 )
 NOMINAL = [rf"(?<![\d.]){p}\s*%" for p in _PERCENT] + [
-    r"(?<![\d.])" + re.escape(f"{float(p):.2f}") + r"(?!\d)" for p in study.LEVELS
+    r"(?<![\d.])" + re.escape(f"{float(p):.2f}") + r"(?!\d)" for p in study_scores.LEVELS
 ]
 #: A number: digits with an optional decimal part.
 _NUM = r"\d+(?:\.\d+)?"

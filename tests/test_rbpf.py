@@ -55,7 +55,14 @@ def test_textbook_19_5_2_weights_are_the_marginal_likelihoods_at_each_depth(q):
     N = 6
     sim, prior = long_track(N, q, seed=2)
     f = rbpf.run(
-        sim.mu, RHO_200, prior.mean, prior.cov, 8, np.random.default_rng(1), q=q, ess_threshold=0
+        sim.mu,
+        RHO_200,
+        prior.mean,
+        prior.cov,
+        8,
+        np.random.default_rng(1),
+        process_noise=q,
+        ess_threshold=0,
     )
     assert not f.resampled.any()
     y = f.bank.nodes[0]
@@ -119,7 +126,14 @@ def test_textbook_19_5_3_n10_moments_agree_with_the_bank_within_standard_errors(
     sim, prior = long_track(N, q, seed=4)
     exact = converged_mixture(sim.mu, RHO_200, prior.mean, prior.cov, q=q)
     f = rbpf.run(
-        sim.mu, RHO_200, prior.mean, prior.cov, 500, np.random.default_rng(5), q=q, replicas=R
+        sim.mu,
+        RHO_200,
+        prior.mean,
+        prior.cov,
+        500,
+        np.random.default_rng(5),
+        process_noise=q,
+        replicas=R,
     )
     assert f.resampled.any(axis=-1).all()  # the moves were exercised
     m, se = f.moments(), f.standard_errors()
@@ -137,9 +151,9 @@ def exact_draws(mx, n, rng):
     """Inverse-CDF draws of y_1 from the bank's depth mixture.
 
     The CDF is the cumulative trapezoid rule, in t = log(y_1), of the mixture's density
-    (:meth:`depthcore.bank.Mixture.depth_pdf`) on 40001 points spanning the depths where the
+    (:meth:`depthcore.bank_mixture.Mixture.depth_pdf`) on 40001 points spanning the depths where the
     converged nodes hold their mass; it is inverted by linear interpolation."""
-    N = mx.bank.n_frames
+    N = mx.bank.frames
     big = mx.probabilities > 1e-20 * mx.probabilities.max()
     t = np.linspace(np.log(mx.bank.nodes[big].min()), np.log(mx.bank.nodes[big].max()), 40_001)
     dens = mx.depth_pdf(np.exp(t) + N - 1) * np.exp(t)  # dy = y dt
@@ -201,13 +215,15 @@ def test_online_steps_equal_one_run():
     sim, prior = long_track(7, 0.02, seed=3)
     args = (RHO_200, prior.mean, prior.cov, 300)
     rng = np.random.default_rng(11)
-    online = rbpf.step(rbpf.run(sim.mu[:6], *args, rng, q=0.02, replicas=2), sim.mu[6], rng)
-    whole = rbpf.run(sim.mu, *args, np.random.default_rng(11), q=0.02, replicas=2)
+    online = rbpf.step(
+        rbpf.run(sim.mu[:6], *args, rng, process_noise=0.02, replicas=2), sim.mu[6], rng
+    )
+    whole = rbpf.run(sim.mu, *args, np.random.default_rng(11), process_noise=0.02, replicas=2)
     for a, b in zip(online.bank[:4], whole.bank[:4], strict=True):
         assert_array_equal(a, b)
     assert_array_equal(online.log_weights, whole.log_weights)
     assert_array_equal(online.ess, whole.ess)
-    assert online.n_frames == 7 and online.replicas == 2 and online.n_particles == 300
+    assert online.frames == 7 and online.replicas == 2 and online.n_particles == 300
 
 
 def test_batch_shapes_and_per_trial_noise():
@@ -216,7 +232,9 @@ def test_batch_shapes_and_per_trial_noise():
     sim, prior = long_track(5, 0.0, seed=9)
     mu = np.stack([sim.mu, sim.mu + 0.001])
     rho, q = np.array([RHO_200, 2 * RHO_200]), np.array([0.0, 0.02])
-    f = rbpf.run(mu, rho, prior.mean, prior.cov, 400, np.random.default_rng(2), q=q, replicas=6)
+    f = rbpf.run(
+        mu, rho, prior.mean, prior.cov, 400, np.random.default_rng(2), process_noise=q, replicas=6
+    )
     m, se = f.moments(), f.standard_errors()
     assert m.depth_mean.shape == (2,) and se.velocity_sd.shape == (2,)
     assert f.ess.shape == (2, 6, 5) and f.bank.nodes.shape == (2, 6, 400)
@@ -264,8 +282,8 @@ def test_without_moves_the_depths_degenerate():
         (dict(rho=[1.0, 2.0]), "rho must be a scalar or have shape"),
         (dict(prior_mean=[0.0, 1.0]), "prior_mean must have shape"),
         (dict(prior_cov=-np.eye(3)), "prior_cov must be positive definite"),
-        (dict(q=-0.1), "q must be >= 0"),
-        (dict(q=[0.1, 0.2]), "q must be a scalar or have shape"),
+        (dict(process_noise=-0.1), "process_noise must be >= 0"),
+        (dict(process_noise=[0.1, 0.2]), "process_noise must be a scalar or have shape"),
         (dict(n_particles=1), "n_particles must be an integer >= 2"),
         (dict(n_particles=100.0), "n_particles must be an integer >= 2"),
         (dict(replicas=0), "replicas must be an integer >= 1"),

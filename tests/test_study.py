@@ -8,7 +8,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from depthcore import _checks, model, optimal, study
+from depthcore import _checks, bank_posterior, model, optimal, study, study_scores, study_trials
 from depthcore.__main__ import main
 from depthcore.filters import FILTERS, NAMES
 from depthcore.gaussian import Gaussian
@@ -45,7 +45,7 @@ def test_binned_kde_matches_direct_kde():
             for i in range(2)
         ]
     )
-    assert_allclose(np.exp(study._binned_kde(x, W, bw)(y)), direct, rtol=1e-3, atol=1e-6)
+    assert_allclose(np.exp(study_trials._binned_kde(x, W, bw)(y)), direct, rtol=1e-3, atol=1e-6)
 
 
 def test_unknown_filter_is_rejected():
@@ -95,8 +95,8 @@ def test_streamed_scores_equal_those_of_all_trials_at_once():
     # of the seed: redo it without chunks and score every trial at once.
     seed, n = 9, 40
     noise, particles = (np.random.default_rng(s) for s in _checks.spawn(seed, 2))
-    trials = study.simulate(SCENARIOS["fig2"].c, 1 / 200, n, noise)
-    est = study.run_filters(trials, NAMES, particles, 300)
+    trials = study_trials.simulate(SCENARIOS["fig2"].c, 1 / 200, n, noise)
+    est = study_trials.run_filters(trials, NAMES, particles, 300)
     one = study.study(trials=n, seed=seed, chunk=n, n_particles=300)
     several = study.study(trials=n, seed=seed, chunk=9, n_particles=300)
     for name in NAMES:
@@ -175,9 +175,9 @@ def test_study_command_without_the_optimal_filter_shows_no_hellinger(capsys):
 
 
 def test_scores_follow_their_definitions():
-    trials = study.simulate(SCENARIOS["fig2"].c, 1 / 200, 25, np.random.default_rng(0))
-    est = study.run_filters(trials, ("optimal", "ekf"))  # no particle filter: no rng needed
-    s = study.scores(trials, est["ekf"])
+    trials = study_trials.simulate(SCENARIOS["fig2"].c, 1 / 200, 25, np.random.default_rng(0))
+    est = study_trials.run_filters(trials, ("optimal", "ekf"))  # no particle filter: no rng needed
+    s = study_scores.scores(trials, est["ekf"])
     err = est["ekf"].mean[:, 1] - trials.truth[1]
     assert s["depth"]["bias"] == pytest.approx(np.mean(err))
     assert s["depth"]["rmse"] == pytest.approx(np.sqrt(np.mean(err**2)))
@@ -189,8 +189,8 @@ def test_scores_follow_their_definitions():
 
 def test_hellinger_matches_adaptive_quadrature():
     s = SCENARIOS["fig2"]
-    trials = study.simulate(s.c, s.rho, 3, np.random.default_rng(5))
-    est = study.run_filters(trials, ("optimal", "ekf"))
+    trials = study_trials.simulate(s.c, s.rho, 3, np.random.default_rng(5))
+    est = study_trials.run_filters(trials, ("optimal", "ekf"))
     ref = optimal.batch_marginals(trials.mu, trials.rho, trials.prior_mean, trials.prior_cov)
     for i in range(3):
         m = optimal.marginals(trials.mu[i], s.rho, Gaussian(trials.prior_mean[i], trials.prior_cov))
@@ -217,15 +217,15 @@ def test_ekf_is_overconfident_and_second_order_is_not():
 
 def test_rejected_trials_are_counted():
     # Noise so large that some triples have no solution in front of the camera.
-    t = study.simulate(SCENARIOS["fig3"].c, 0.05, 200, np.random.default_rng(0))
+    t = study_trials.simulate(SCENARIOS["fig3"].c, 0.05, 200, np.random.default_rng(0))
     assert t.n_rejected > 0
     assert len(t.mu) + t.n_rejected == 200
-    assert study.valid_triples(t.mu).all()
+    assert study_trials.valid_triples(t.mu).all()
 
 
 def test_fixed_prior_is_built_from_the_truth():
     c = SCENARIOS["fig2"].c
-    t = study.simulate(c, 1 / 200, 5, np.random.default_rng(0), prior="fixed")
+    t = study_trials.simulate(c, 1 / 200, 5, np.random.default_rng(0), prior="fixed")
     assert_allclose(t.prior_mean, np.tile([c[0] - 2 * c[2], c[1] - 2, 0.0], (5, 1)))
 
 
@@ -242,7 +242,7 @@ def test_simulate_rejects_bad_input(kwargs, message):
     args = {"truth": SCENARIOS["fig2"].c, "rho": 0.005, "n": 10, "rng": np.random.default_rng(0)}
     args.update(kwargs)
     with pytest.raises(ValueError, match=message):
-        study.simulate(**args)
+        study_trials.simulate(**args)
 
 
 def test_study_command_json(capsys):
@@ -284,7 +284,7 @@ def test_a_seed_sequence_and_its_integer_give_the_same_study():
 def _estimates_with_cdfs(cdf):
     """Estimates of a fictitious filter whose marginal CDFs at the truth are ``cdf``."""
     n = len(cdf)
-    return study.Estimates(
+    return study_trials.Estimates(
         np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)), cdf, cdf[::-1].copy(), np.zeros(n)
     )
 
@@ -295,22 +295,28 @@ def test_coverage_of_exactly_uniform_cdfs_is_the_nominal_level():
     # exactly 10,000 p of them at every level (no midpoint is an end point).
     n = 10_000
     cdf = (np.arange(n) + 0.5) / n
-    trials = study.Trials(np.zeros(3), 0.01, np.zeros((n, 3)), np.zeros((n, 3)), np.eye(3), 0)
-    s = study.scores(trials, _estimates_with_cdfs(cdf))
+    trials = study_trials.Trials(
+        np.zeros(3), 0.01, np.zeros((n, 3)), np.zeros((n, 3)), np.eye(3), 0
+    )
+    s = study_scores.scores(trials, _estimates_with_cdfs(cdf))
     for q in ("depth", "velocity"):
         assert s[q]["coverage_68"] == 0.68
         assert s[q]["coverage_95"] == 0.95
-        assert s["calibration"][q] == pytest.approx(list(study.CALIBRATION_LEVELS), abs=1e-12)
+        assert s["calibration"][q] == pytest.approx(
+            list(study_scores.CALIBRATION_LEVELS), abs=1e-12
+        )
 
 
 def test_coverage_counts_a_small_hand_computed_case():
     # Central 68 % interval of the CDF: [0.16, 0.84]; central 95 %: [0.025, 0.975].
     cdf = np.array([0.5, 0.17, 0.83, 0.15, 0.85, 0.03, 0.97, 0.02, 0.98, 0.0])
-    trials = study.Trials(np.zeros(3), 0.01, np.zeros((10, 3)), np.zeros((10, 3)), np.eye(3), 0)
-    s = study.scores(trials, _estimates_with_cdfs(cdf))
+    trials = study_trials.Trials(
+        np.zeros(3), 0.01, np.zeros((10, 3)), np.zeros((10, 3)), np.eye(3), 0
+    )
+    s = study_scores.scores(trials, _estimates_with_cdfs(cdf))
     assert s["depth"]["coverage_68"] == 3 / 10
     assert s["depth"]["coverage_95"] == 7 / 10
-    levels = list(study.CALIBRATION_LEVELS)
+    levels = list(study_scores.CALIBRATION_LEVELS)
     assert s["calibration"]["depth"][levels.index(0.7)] == 5 / 10  # [0.15, 0.85]
     assert s["calibration"]["depth"][levels.index(0.05)] == 1 / 10
 
@@ -321,21 +327,23 @@ def test_gaussian_filters_cdfs_at_the_truth_are_normal_cdfs_of_their_marginals(n
     # CDF with the filter's own mean and SD of that component.
     from scipy.stats import norm
 
-    trials = study.simulate(SCENARIOS["fig2"].c, 1 / 200, 20, np.random.default_rng(11))
-    est = study.run_filters(trials, ("optimal", name))[name]
+    trials = study_trials.simulate(SCENARIOS["fig2"].c, 1 / 200, 20, np.random.default_rng(11))
+    est = study_trials.run_filters(trials, ("optimal", name))[name]
     for i, cdf in ((1, est.depth_cdf), (2, est.velocity_cdf)):
         want = norm.cdf(trials.truth[i], loc=est.mean[:, i], scale=np.sqrt(est.cov[:, i, i]))
         assert_allclose(cdf, want, rtol=1e-12, atol=1e-300)
     # and hence the 68 % coverage of the velocity counts |m - v| <= z sd
     z = norm.ppf(0.84)
     inside = np.abs(est.mean[:, 2] - trials.truth[2]) <= z * np.sqrt(est.cov[:, 2, 2])
-    assert study.scores(trials, est)["velocity"]["coverage_68"] == pytest.approx(np.mean(inside))
+    assert study_scores.scores(trials, est)["velocity"]["coverage_68"] == pytest.approx(
+        np.mean(inside)
+    )
 
 
 def test_optimal_cdfs_at_the_truth_match_quadrature_of_its_marginals():
     s = SCENARIOS["fig2"]
-    trials = study.simulate(s.c, s.rho, 2, np.random.default_rng(4))
-    est = study.run_filters(trials, ("optimal",))["optimal"]
+    trials = study_trials.simulate(s.c, s.rho, 2, np.random.default_rng(4))
+    est = study_trials.run_filters(trials, ("optimal",))["optimal"]
     for i in range(2):
         m = optimal.marginals(trials.mu[i], s.rho, Gaussian(trials.prior_mean[i], trials.prior_cov))
         y_cdf, _ = integrate.quad(m.depth_pdf, 2, s.c[1], limit=400)
@@ -345,7 +353,7 @@ def test_optimal_cdfs_at_the_truth_match_quadrature_of_its_marginals():
 
 
 def test_study_over_more_frames_with_process_noise_scores_each_trials_own_truth():
-    from depthcore import _checks, bank, ekf
+    from depthcore import _checks, ekf
 
     fig2 = SCENARIOS["fig2"]
     truth, rho, q, N = fig2.c, fig2.rho, 0.02, 6
@@ -353,12 +361,12 @@ def test_study_over_more_frames_with_process_noise_scores_each_trials_own_truth(
     assert r["frames"] == N and r["process_noise"] == q
     # the same trials, drawn from the same stream, filtered directly
     noise_rng = np.random.default_rng(_checks.spawn(_checks.seed_sequence(4), 2)[0])
-    t = study.simulate(truth, rho, 40, noise_rng, "paper", frames=N, process_noise=q)
+    t = study_trials.simulate(truth, rho, 40, noise_rng, "paper", frames=N, process_noise=q)
     assert t.mu.shape == (r["valid_trials"], N) and t.states.shape == (len(t.mu), 3)
     # the truth moves on: depth y_3 + N - 3 at frame N; the velocity changes with q
     assert np.allclose(t.states[:, 1], truth[1] + N - 3)
     assert np.std(t.states[:, 2]) > 0
-    exact = bank.moments(t.mu, rho, t.prior_mean, t.prior_cov, q)
+    exact = bank_posterior.moments(t.mu, rho, t.prior_mean, t.prior_cov, q)
     h = ekf.run(t.mu, rho, t.prior_mean, t.prior_cov, q)
     for name, depth in (("optimal", exact.depth_mean), ("ekf", h.means[:, -1, 1])):
         bias = np.mean(depth - t.states[:, 1])
@@ -380,8 +388,8 @@ def test_with_process_noise_the_state_at_time_3_is_the_truth_given(q):
     assert np.array_equal(sim.states[:, 2], np.broadcast_to(truth, (300, 3)))
     # the first three bearings are distributed as the three-frame study's: no rejection
     # beyond those of the measurement noise (none here, the noise-free solution is far)
-    t = study.simulate(truth, rho, 300, np.random.default_rng(8), frames=N, process_noise=q)
-    three = study.simulate(truth, rho, 300, np.random.default_rng(9))
+    t = study_trials.simulate(truth, rho, 300, np.random.default_rng(8), frames=N, process_noise=q)
+    three = study_trials.simulate(truth, rho, 300, np.random.default_rng(9))
     assert t.n_rejected == three.n_rejected == 0
     assert np.all(t.states[:, 1] == truth[1] + N - 3)
     # the velocity at frame N spreads with SD q sqrt(N - 3) about the truth's (5 SE)
@@ -416,8 +424,10 @@ def test_rao_blackwellised_filter_is_scored_by_its_mixture_and_tracks_the_optima
     """The RBPF's scores use its mixture: its mean and covariance, the particles' step
     function as the depth's CDF, the Gaussian mixture's as the velocity's; they lie near
     the optimal filter's (within its Monte Carlo error), and so does its depth density."""
-    trials = study.simulate(SCENARIOS["fig2"].c, rho=0.005, n=6, rng=np.random.default_rng(1))
-    out = study.run_filters(
+    trials = study_trials.simulate(
+        SCENARIOS["fig2"].c, rho=0.005, n=6, rng=np.random.default_rng(1)
+    )
+    out = study_trials.run_filters(
         trials, ("optimal", "rbpf"), rng=np.random.default_rng(2), n_particles=1000
     )
     o, r = out["optimal"], out["rbpf"]
@@ -465,14 +475,14 @@ def test_coverage_se_is_the_binomial_standard_error():
     rng = np.random.default_rng(11)
     p, n = 0.68, 400
     sim = rng.binomial(n, p, size=20_000) / n
-    assert study.coverage_se(p, n) == pytest.approx(np.std(sim), rel=0.03)
-    assert_allclose(study.coverage_se([0.68, 0.95], 100), np.sqrt([0.2176, 0.0475]) / 10)
+    assert study_scores.coverage_se(p, n) == pytest.approx(np.std(sim), rel=0.03)
+    assert_allclose(study_scores.coverage_se([0.68, 0.95], 100), np.sqrt([0.2176, 0.0475]) / 10)
 
 
 def test_standard_errors_follow_their_definitions():
-    trials = study.simulate(SCENARIOS["fig2"].c, 1 / 200, 60, np.random.default_rng(3))
-    est = study.run_filters(trials, ("optimal", "ekf"))
-    s = study.scores(trials, est["ekf"])
+    trials = study_trials.simulate(SCENARIOS["fig2"].c, 1 / 200, 60, np.random.default_rng(3))
+    est = study_trials.run_filters(trials, ("optimal", "ekf"))
+    s = study_scores.scores(trials, est["ekf"])
     n = len(trials.mu)
     for i, q in ((1, "depth"), (2, "velocity")):
         err = est["ekf"].mean[:, i] - trials.truth[i]
@@ -519,21 +529,23 @@ def test_pooled_squares_do_not_depend_on_the_chunks():
     want = np.sum((x - np.mean(x)) ** 2)
     squares, total, n = 0.0, 0.0, 0
     for chunk in np.array_split(x, 7):
-        squares = study.pooled_squares(n, total, squares, chunk)
+        squares = study_scores.pooled_squares(n, total, squares, chunk)
         total, n = total + np.sum(chunk), n + len(chunk)
     assert squares == pytest.approx(want, rel=1e-6)
-    assert study.mean_se(squares, n) == pytest.approx(np.std(x, ddof=1) / np.sqrt(n), rel=1e-6)
-    assert study.mean_se(0.0, 1) == 0.0  # one trial: no spread to estimate
+    assert study_scores.mean_se(squares, n) == pytest.approx(
+        np.std(x, ddof=1) / np.sqrt(n), rel=1e-6
+    )
+    assert study_scores.mean_se(0.0, 1) == 0.0  # one trial: no spread to estimate
 
 
 def test_the_detectable_difference_is_found_with_the_stated_power():
     # Simulate the test: a coverage whose true value is 0.68 - d, over n trials,
     # fails the 1 % test against 0.68 in about 80 % of repetitions.
     n = 2000
-    d = float(study.detectable_difference(0.68, n))
+    d = float(study_scores.detectable_difference(0.68, n))
     assert d == pytest.approx((2.5758293035489 + 0.8416212335729) * np.sqrt(0.68 * 0.32 / n))
     counts = np.random.default_rng(0).binomial(n, 0.68 - d, size=20000) / n
-    fails = np.abs(counts - 0.68) > 2.5758293035489 * study.coverage_se(0.68, n)
+    fails = np.abs(counts - 0.68) > 2.5758293035489 * study_scores.coverage_se(0.68, n)
     assert np.mean(fails) == pytest.approx(0.8, abs=0.02)  # binomial SE of 20,000 tests: 0.003
     with pytest.raises(ValueError, match="power must lie in"):
-        study.detectable_difference(0.68, n, power=1.0)
+        study_scores.detectable_difference(0.68, n, power=1.0)

@@ -1,4 +1,4 @@
-"""One track in one call: :func:`depthcore.filters.track` and the pixels' bearings.
+"""One track in one call: :func:`depthcore.tracking.track` and the pixels' bearings.
 
 The function's outputs are checked against the routes it calls (the bank's
 track, the registry's Gaussian filters), the Gaussian smoother against
@@ -22,9 +22,10 @@ from filterpy.kalman import rts_smoother
 from numpy.testing import assert_allclose, assert_array_equal
 
 import depthcore
-from depthcore import _checks, bank, model
-from depthcore.filters import FILTERS, PROCESS_NOISE_MAX, RHO_RANGE, SMOOTHED, track
+from depthcore import _checks, bank_track, model
+from depthcore.filters import FILTERS, SMOOTHED
 from depthcore.gaussian import Gaussian
+from depthcore.tracking import PROCESS_NOISE_MAX, RHO_RANGE, track
 
 ROOT = Path(__file__).resolve().parents[1]
 #: A point at depth 10 at frame 1, seen with a bearing noise of 0.002 (one pixel at f = 500).
@@ -48,7 +49,7 @@ def test_the_registry_says_which_filters_smooth():
 def test_the_exact_filter_is_the_banks_track(q):
     mu = _mu(8, q)
     t = track(mu, RHO, PRIOR, q, "optimal")
-    direct = bank.track(mu, RHO, PRIOR.mean, PRIOR.cov, q)
+    direct = bank_track.track(mu, RHO, PRIOR.mean, PRIOR.cov, q)
     assert_array_equal(t.filtered.mean, direct.filtered.mean)
     assert_array_equal(t.filtered.cov, direct.filtered.cov)
     assert_array_equal(t.smoothed.mean, direct.interval.mean)

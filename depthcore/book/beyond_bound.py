@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, study
+from .. import _checks, study_trials
 from ..filters import FILTERS, check_names
 from ..gaussian import PAPER_PRIOR_SCALE
 from ..scenarios import SCENARIOS
@@ -28,7 +28,7 @@ def bound_study(
     truth=None,
     rho: float = SCENARIOS["fig2"].rho,
     particle_trials: int | None = None,
-    n_particles: int = study.PARTICLES,
+    n_particles: int = study_trials.PARTICLES,
 ) -> dict:
     """Every named filter's depth and velocity errors and claimed SDs at frame ``N``, by trial.
 
@@ -41,7 +41,7 @@ def bound_study(
     rule (``"paper"``: from each trial's first three bearings) or the same rule
     applied once to ``truth`` (``"fixed"``), covariance 1000 I; trials whose
     first three bearings have no noise-free solution in front of the camera
-    are left out, as in :func:`depthcore.study.simulate`. The filters that
+    are left out, as in :func:`depthcore.study_trials.simulate`. The filters that
     draw random numbers run on the first ``particle_trials`` valid trials.
     Set the results against :func:`depthcore.bound.posterior_bound` with
     :func:`depthcore.bound.against_bound`.
@@ -96,7 +96,7 @@ def bound_study(
     noise_rng, particle_rng = (
         np.random.default_rng(s) for s in _checks.spawn(_checks.seed_sequence(seed), 2)
     )
-    drawn = study.simulate(
+    drawn = study_trials.simulate(
         truth, rho, trials, noise_rng, prior, PAPER_PRIOR_SCALE, max(frames), q, tracks=True
     )
     mu, pm, pc, states = drawn.mu, drawn.prior_mean, drawn.prior_cov, drawn.tracks

@@ -20,8 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _checks, ekf, optimal, particle, resample_move, ukf
-from .. import filters as _filters
-from ..filters import NAMES, QUANTITIES
+from ..estimates import QUANTITIES
+from ..filters import NAMES
 from ..gaussian import MeanAndCov
 from ..scenarios import Scenario
 from .formatting import plus_minus
@@ -405,8 +405,8 @@ def convergence_figure(result: dict, quantity: str = "depth"):
     matplotlib.figure.Figure
     """
 
-    if quantity not in _filters.QUANTITIES:
-        raise ValueError(f"quantity must be one of {_filters.QUANTITIES}, got {quantity!r}")
+    if quantity not in QUANTITIES:
+        raise ValueError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")
     N = result["sizes"]
     ideal = result["exact"][f"{quantity}_sd"] / np.sqrt(N)
     fig, axes = subplots(1, 2, figsize=(WIDTH, 4.4), sharey=True)

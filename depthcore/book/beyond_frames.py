@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, model, study
+from .. import _checks, model, study, study_scores, study_trials
 from .. import filters as _filters
 from ..filters import FILTERS, check_names
 from ..gaussian import PAPER_PRIOR_SCALE, paper_prior_means
@@ -43,7 +43,7 @@ def frames_study(
     truth=None,
     rho: float = SCENARIOS["fig2"].rho,
     particle_trials: int | None = None,
-    n_particles: int = study.PARTICLES,
+    n_particles: int = study_trials.PARTICLES,
 ) -> dict:
     """:func:`depthcore.study.study` at each number of frames, its depth scores gathered.
 
@@ -154,7 +154,7 @@ def coverage_test(coverage, level: float, trials, z: float = COVERAGE_Z) -> dict
     if np.any(trials < 1):
         raise ValueError("trials must each be at least 1")
     z = _checks.positive_scalar(z, "z")
-    se = study.coverage_se(level, trials)
+    se = study_scores.coverage_se(level, trials)
     score = (coverage - level) / se
     verdict = np.where(
         np.abs(score) <= z, "calibrated", np.where(score < 0, "overconfident", "underconfident")

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, bank, rbpf
+from .. import _checks, bank_posterior, rbpf
 from .beyond_filters import MOMENTS, check_sizes
 from .style import MIN_FONT, WIDTH, subplots
 
@@ -37,14 +37,14 @@ def rbpf_convergence(
     For each number of particles ``J`` the filter (:func:`depthcore.rbpf.run`)
     runs ``replicas`` independent clouds over the bearings, from its own child
     stream of ``seed``; each cloud's moments at frame ``N`` are compared with
-    the exact posterior of the bank of Kalman filters (:func:`depthcore.bank.posterior`).
+    the exact posterior of the bank of Kalman filters (:func:`depthcore.bank_posterior.posterior`).
 
     Parameters
     ----------
     mu : array_like, shape (N,)
         The bearings of one track.
     rho, prior_mean, prior_cov, process_noise
-        As for :func:`depthcore.bank.posterior`.
+        As for :func:`depthcore.bank_posterior.posterior`.
     sizes : array_like of int, shape (S,)
         Particles per cloud, each >= 2.
     replicas : int
@@ -71,7 +71,7 @@ def rbpf_convergence(
         raise ValueError(f"sizes must be integers >= 2, got {sizes!r}")
     if isinstance(replicas, bool) or not isinstance(replicas, (int, np.integer)) or replicas < 2:
         raise ValueError(f"replicas must be an integer >= 2, got {replicas!r}")
-    post = bank.posterior(mu, rho, prior_mean, prior_cov, process_noise)
+    post = bank_posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise)
     if np.ndim(post.log_normaliser) != 0:
         raise ValueError(f"mu must have shape (N,) (one track), got shape {np.shape(mu)}")
     exact = {m: float(getattr(post, m)) for m in MOMENTS}
@@ -84,7 +84,7 @@ def rbpf_convergence(
             prior_cov,
             int(J),
             np.random.default_rng(stream),
-            q=process_noise,
+            process_noise=process_noise,
             replicas=int(replicas),
             moves=moves,
         )
@@ -95,7 +95,7 @@ def rbpf_convergence(
     return {
         "sizes": sizes,
         "replicas": int(replicas),
-        "frames": int(post.bank.n_frames),
+        "frames": int(post.bank.frames),
         "exact": exact,
         "exact_error": {
             "depth": float(post.depth_error),
@@ -114,7 +114,7 @@ def bank_depth_figure(densities: dict, truth=None):
     Parameters
     ----------
     densities : dict
-        ``{frame: (depths, density)}``, each from :func:`depthcore.bank.node_density`
+        ``{frame: (depths, density)}``, each from :func:`depthcore.bank_posterior.node_density`
         of the posterior after that frame: the nodes as depths at that frame and
         the density there (arrays of shape (J,)).
     truth : dict, optional
@@ -162,8 +162,8 @@ def smoothing_figure(track, states, first: int = 1):
 
     Parameters
     ----------
-    track : depthcore.bank.Track
-        From :func:`depthcore.bank.track`.
+    track : depthcore.bank_track.Track
+        From :func:`depthcore.bank_track.track`.
     states : array_like, shape (N, 3)
         The true states ``(x_k, y_k, v_k)``.
     first : int

@@ -16,7 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _checks, study
-from ..filters import NAMES, QUANTITIES
+from ..estimates import QUANTITIES
+from ..filters import NAMES
 from .formatting import SCORE_TEXTS, value_se, vec
 from .style import MIN_FONT, STYLE, subplots
 

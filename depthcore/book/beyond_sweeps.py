@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, model, study
+from .. import _checks, model, study, study_trials
 from .. import filters as _filters
 from ..filters import FILTERS, NAMES, check_names
 from ..gaussian import PAPER_PRIOR_SCALE, paper_prior_means
@@ -56,7 +56,7 @@ def _compare(mu, rho, pm, pc, names=NAMES) -> dict:
             out[name] = {
                 "depth_mean": est.depth_mean,
                 "depth_sd": est.depth_sd,
-                "hellinger": study.gaussian_hellinger(reference.detail, est.mean, est.cov),
+                "hellinger": study_trials.gaussian_hellinger(reference.detail, est.mean, est.cov),
             }
     return out
 

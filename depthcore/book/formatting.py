@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import _checks
-from ..filters import QUANTITIES
+from ..estimates import QUANTITIES
 
 #: Decimal places of the reproduced means and SDs in the book's tables.
 DECIMALS = 4
