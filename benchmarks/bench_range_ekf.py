@@ -35,7 +35,7 @@ from depthcore.scenarios import SCENARIOS  # noqa: E402
 
 FIG2 = SCENARIOS["fig2"]
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("bank", "range_ekf")
+MEASURES = ("bank_posterior", "range_ekf")
 #: The relative tolerances on the depth mean and SD.
 TOLERANCES = (1e-2, 1e-3)
 #: The numbers of components tried: four per doubling, 1 to MAX_COMPONENTS.

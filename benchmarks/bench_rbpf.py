@@ -41,7 +41,7 @@ from depthcore.gaussian import paper_prior  # noqa: E402
 from depthcore.scenarios import SCENARIOS  # noqa: E402
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("rbpf", "resample_move", "bank")
+MEASURES = ("rbpf", "resample_move", "bank", "bank_mixture")
 PILOT = 2000  # particles of the resample-move filter's pilot run
 GROWTH = (250, 1000, 4000, 16000)
 REPEATS, PARTICLES = (
