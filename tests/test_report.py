@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from depthcore import SCENARIOS, benchmark_tables, ekf, optimal, reproduce, study
+from depthcore import SCENARIOS, benchmark_tables, ekf, iterated, optimal, reproduce, study
 from depthcore.book import (
     beyond_filters,
     beyond_linear,
@@ -38,6 +38,25 @@ def test_comparison_rows_of_figure_2():
     assert texts["fig2_inv_paper_mean"] == "—" and rows["inv"]["mean_matches"] is None
     assert rows["iter"]["sd"] == pytest.approx(
         FILTERS["iterated"](FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov).depth_sd
+    )
+
+
+def test_comparison_row_of_the_iterated_smoother_is_its_state_at_the_last_frame():
+    # Every figure's table ends with the iterated smoother: the MAP of the
+    # trajectory at time 3 with its Laplace SD, as a direct call gives it.
+    for key, s in SCENARIOS.items():
+        rows = {r["id"]: r for r in reproduce.comparison(key)}
+        r = iterated.smoother(s.mu, s.rho, s.prior.mean, s.prior.cov)
+        i = 1 if s.quantity == "depth" else 2
+        row = rows["ismooth"]
+        assert row["mean"] == pytest.approx(r.mean[i], abs=1e-12), key
+        assert row["sd"] == pytest.approx(np.sqrt(r.cov[i, i]), rel=1e-12), key
+        assert row["reported_mean"] is None and row["mean_matches"] is None
+        # the mode is the centre of p_s (to 1e-5 of its SD), the Laplace SD p_s's to 1 %
+        assert row["mean"] == pytest.approx(rows["so"]["mean"], abs=1e-5 * rows["so"]["sd"]), key
+        assert row["sd"] == pytest.approx(rows["so"]["sd"], rel=0.01), key
+    assert reproduce.iterated_smoother_moments(FIG2)["velocity"][0] == pytest.approx(
+        iterated.smoother(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov).mean[2]
     )
 
 
