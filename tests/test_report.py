@@ -158,7 +158,18 @@ def test_noise_study_texts():
         f"mc_0_second_order_{s}{pm}"
         for s in ("cov68", "cov95", "rmse", "nees")
         for pm in ("", "_pm")
+    } | {
+        f"mc_second_order_{s}_{which}_pm"
+        for s in ("cov68", "cov95", "rmse", "nees")
+        for which in ("min", "max")
     }
+    # over two noise levels the extremes are the rows' texts with their SEs
+    r2 = beyond_sweeps.noise_study([1 / 500, 1 / 100], trials=20, seed=0, names=("ekf",))
+    t2 = beyond_sweeps.noise_study_texts(r2, "mc")
+    cov = r2["ekf"]["coverage_68"]
+    assert t2["mc_ekf_cov68_max_pm"] == t2[f"mc_{int(np.argmax(cov))}_ekf_cov68_pm"]
+    assert t2["mc_ekf_cov68_min_pm"] == t2[f"mc_{int(np.argmin(cov))}_ekf_cov68_pm"]
+    assert " ± " in t2["mc_ekf_nees_min_pm"]
     r = r["second_order"]
     assert texts["mc_0_second_order_rmse_pm"] == formatting.value_se(
         r["rmse"][0], r["rmse_se"][0], 3
@@ -265,7 +276,14 @@ def test_truth_study_texts():
         f"st_0_second_order_{s}{pm}"
         for s in ("bias", "rmse", "mean_sd", "cov68", "cov95", "nees")
         for pm in ("", "_pm")
+    } | {
+        f"st_second_order_{s}_{which}_pm"
+        for s in ("rmse", "cov68", "cov95", "nees")
+        for which in ("min", "max")
     }
+    # one truth: its row is both extremes, with its standard error
+    assert texts["st_second_order_cov68_min_pm"] == texts["st_0_second_order_cov68_pm"]
+    assert " ± " in texts["st_second_order_cov68_max_pm"]
 
 
 def test_rbpf_texts_format_each_row_of_the_convergence_table():
