@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _checks, bank_posterior
+from . import _checks, bank_posterior, iterated
 from .adapters import PARTICLES
 from .estimates import QUANTITIES, Estimate
 from .filters import FILTERS, NAMES, PAPER_FILTERS, check_names
@@ -36,6 +36,7 @@ __all__ = [
     "comparison",
     "curves",
     "filter_moments",
+    "iterated_smoother_moments",
     "reproduce",
     "scenario_rows",
     "summarize",
@@ -301,7 +302,9 @@ def filter_moments(s: Scenario, quantity: str | None = None, names=PAPER_FILTERS
 #: Rows of the figure pages' tables, as (row id, filter, reading, support, label).
 #: The optimal filter with Eq. (16) as derived and as printed; the second-order
 #: filter with the covariance ``2 rho**2 J^{-1}`` of the expansion (8) and with
-#: the printed ``rho**2 J^{-1}``; the EKF. A label's ``%s`` is the quantity's
+#: the printed ``rho**2 J^{-1}``; the EKF; the iterated EKF; the inverse-depth
+#: EKF; and the iterated extended Kalman smoother's state at the last frame
+#: (reading ``"smoother"``, :func:`iterated_smoother_moments`). A label's ``%s`` is the quantity's
 #: letter, ``y`` or ``v``, as in the paper's marginals ``p_oy`` and ``p_ov``.
 TABLE_ROWS = (
     ("opt", "optimal", "derived", "front", "optimal $p_{o%s}$"),
@@ -311,7 +314,56 @@ TABLE_ROWS = (
     ("ekf", "ekf", "printed", "all", "EKF $p_{e%s}$"),
     ("iter", "iterated", "-", "all", "iterated EKF"),
     ("inv", "inverse_depth", "-", "all", "inverse-depth EKF, delta method"),
+    ("ismooth", "iterated", "smoother", "all", "iterated smoother at time 3 (MAP, Laplace SD)"),
 )
+
+
+def iterated_smoother_moments(s: Scenario) -> dict:
+    """Depth and velocity of the iterated extended Kalman smoother at the scenario's last frame.
+
+    :func:`depthcore.iterated.smoother` over all the scenario's bearings: its
+    state at the last frame is the mode (MAP) of the trajectory's posterior,
+    with the Gauss-Newton (Laplace) covariance there.
+
+    Parameters
+    ----------
+    s : Scenario
+
+    Returns
+    -------
+    dict
+        ``{"depth": (mean, sd), "velocity": (mean, sd)}`` as plain floats.
+
+    Raises
+    ------
+    ValueError
+        If the Gauss-Newton passes do not converge.
+    """
+    r = iterated.smoother(s.mu, s.rho, s.prior.mean, s.prior.cov)
+    if not bool(r.converged):
+        raise ValueError(f"the iterated smoother does not converge for scenario {s.key!r}")
+    index = {"depth": 1, "velocity": 2}
+    return {q: (float(r.mean[i]), float(np.sqrt(r.cov[i, i]))) for q, i in index.items()}
+
+
+def _smoother_rows(s: Scenario) -> list[dict]:
+    """The iterated smoother's rows in the form of :func:`scenario_rows` (the paper has none)."""
+    return [
+        {
+            "filter": "iterated",
+            "reading": "smoother",
+            "support": "all",
+            "quantity": q,
+            "mean": mean,
+            "sd": sd,
+            "error": 0.0,
+            "reported_mean": None,
+            "reported_sd": None,
+            "mean_matches": None,
+            "sd_matches": None,
+        }
+        for q, (mean, sd) in iterated_smoother_moments(s).items()
+    ]
 
 
 #: The letter of each quantity in the paper's names of the marginals.
@@ -339,6 +391,7 @@ def comparison(key: str) -> list[dict]:
     s = SCENARIOS[key]
     quantity = s.quantity
     rows = scenario_rows(s, names=tuple(dict.fromkeys(row[1] for row in TABLE_ROWS)))
+    rows += _smoother_rows(s)
     out = []
     for row_id, filt, reading, support, label in TABLE_ROWS:
         (row,) = [

@@ -192,6 +192,8 @@ def test_prior_calibration_texts_and_figure_show_the_result():
     r = _fake_prior_study()
     t = beyond_study.prior_study_texts(r, "x")
     assert t["x_depth_coverage_50"] == "0.45" and t["x_velocity_coverage_95"] == "0.95"
+    # each coverage also with the binomial SE of a calibrated filter's, sqrt(p (1 - p) / n)
+    assert t["x_depth_coverage_50_pm"] == "0.45 ± 0.05"
     assert t["x_depth_verdict"] == "fails" and t["x_velocity_verdict"] == "passes"
     assert t["x_false_alarm"] == "1 %" and t["x_test_level"] == "0.5 %"
     assert t["x_max_se"] == f"{0.05 / np.sqrt(0.25 / 100):.1f}"

@@ -200,9 +200,20 @@ def test_conjecture_wins_compare_cell_by_cell():
         assert w["calibrated_68"]["ekf"][idx] == (
             abs(ekf["coverage_68"][idx] - 0.68) <= beyond_frames.COVERAGE_Z * se
         )
+    # each mean Hellinger distance with its standard error, positive where trials differ
+    h, h_se = so["hellinger"], so["hellinger_se"]
+    assert h_se.shape == h.shape and (h_se > 0).all() and (h_se < h).all()
     texts = beyond_conjecture.conjecture_texts(c, w, "cj")
     assert texts["cj_cells"] == "4" and texts["cj_1_x"] == "5"
     assert texts["cj_0_hellinger"] == str(int(w["hellinger"][..., 0].sum()))
+    # the verdicts' power: a 1 % test at the fewest trials of a cell, 80 % power
+    # against the difference (2.576 + 0.842) sqrt(p (1 - p) / n)
+    n = min(int(c[name]["trials"].min()) for name in ("optimal", "second_order", "ekf"))
+    assert n <= 40 and texts["cj_test_trials_min"] == str(n) and texts["cj_test_trials"] == "40"
+    assert texts["cj_test_size"] == "1 %" and texts["cj_test_power"] == "80 %"
+    for trials, suffix in ((n, "_min"), (40, "")):
+        d68 = (2.5758 + 0.8416) * np.sqrt(0.68 * 0.32 / trials)
+        assert texts[f"cj_detect_68{suffix}"] == f"{100 * d68:.1f} points"
     fig = beyond_conjecture.conjecture_figure(c)
     assert len(fig.axes) == 6
     assert len(fig.axes[0].get_lines()) == 2 * 2  # two depths, two filters

@@ -158,6 +158,20 @@ def test_hard_study_texts_and_figure():
     assert t["h_0_d2"] == f"{cells[0]['second_difference']:.1f}"
     flat = [dict(cells[0], second_difference=-1e-12)]
     assert beyond_hard.hard_texts(flat, "h")["h_0_d2"] == "0.0"
+    # the extremes the prose names: the cell, and its score with its standard error
+    cov = [c["prior"]["filters"]["ekf"]["coverage_68"] for c in cells]
+    i, text = beyond_hard.extreme_text(cells, "prior", "ekf", "coverage_68", "max")
+    assert i == int(np.argmax(cov)) and text == t[f"h_{i}_prior_ekf_coverage_68"]
+    j, text = beyond_hard.extreme_text(cells, "prior", "ekf", "coverage_68", "max", [False, True])
+    assert j == 1 and text == t["h_1_prior_ekf_coverage_68"]
+    assert (
+        beyond_hard.score_text(cells[0]["fixed"]["filters"]["optimal"], "rmse")
+        == (t["h_0_fixed_optimal_rmse"])
+    )
+    with pytest.raises(ValueError, match="which"):
+        beyond_hard.extreme_text(cells, "prior", "ekf", "coverage_68", "median")
+    with pytest.raises(ValueError, match="where"):
+        beyond_hard.extreme_text(cells, "prior", "ekf", "coverage_68", "min", [False, False])
     fig = beyond_hard.hard_figure(cells, [("prior scale s", [0, 1], [1.0, 10.0], True)])
     assert len(fig.axes) == 2
     with pytest.raises(ValueError, match="cells"):

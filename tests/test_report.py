@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from depthcore import SCENARIOS, benchmark_tables, ekf, optimal, reproduce, study
+from depthcore import SCENARIOS, benchmark_tables, ekf, iterated, optimal, reproduce, study
 from depthcore.book import (
     beyond_filters,
     beyond_linear,
@@ -38,6 +38,25 @@ def test_comparison_rows_of_figure_2():
     assert texts["fig2_inv_paper_mean"] == "—" and rows["inv"]["mean_matches"] is None
     assert rows["iter"]["sd"] == pytest.approx(
         FILTERS["iterated"](FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov).depth_sd
+    )
+
+
+def test_comparison_row_of_the_iterated_smoother_is_its_state_at_the_last_frame():
+    # Every figure's table ends with the iterated smoother: the MAP of the
+    # trajectory at time 3 with its Laplace SD, as a direct call gives it.
+    for key, s in SCENARIOS.items():
+        rows = {r["id"]: r for r in reproduce.comparison(key)}
+        r = iterated.smoother(s.mu, s.rho, s.prior.mean, s.prior.cov)
+        i = 1 if s.quantity == "depth" else 2
+        row = rows["ismooth"]
+        assert row["mean"] == pytest.approx(r.mean[i], abs=1e-12), key
+        assert row["sd"] == pytest.approx(np.sqrt(r.cov[i, i]), rel=1e-12), key
+        assert row["reported_mean"] is None and row["mean_matches"] is None
+        # the mode is the centre of p_s (to 1e-5 of its SD), the Laplace SD p_s's to 1 %
+        assert row["mean"] == pytest.approx(rows["so"]["mean"], abs=1e-5 * rows["so"]["sd"]), key
+        assert row["sd"] == pytest.approx(rows["so"]["sd"], rel=0.01), key
+    assert reproduce.iterated_smoother_moments(FIG2)["velocity"][0] == pytest.approx(
+        iterated.smoother(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov).mean[2]
     )
 
 
@@ -139,7 +158,18 @@ def test_noise_study_texts():
         f"mc_0_second_order_{s}{pm}"
         for s in ("cov68", "cov95", "rmse", "nees")
         for pm in ("", "_pm")
+    } | {
+        f"mc_second_order_{s}_{which}_pm"
+        for s in ("cov68", "cov95", "rmse", "nees")
+        for which in ("min", "max")
     }
+    # over two noise levels the extremes are the rows' texts with their SEs
+    r2 = beyond_sweeps.noise_study([1 / 500, 1 / 100], trials=20, seed=0, names=("ekf",))
+    t2 = beyond_sweeps.noise_study_texts(r2, "mc")
+    cov = r2["ekf"]["coverage_68"]
+    assert t2["mc_ekf_cov68_max_pm"] == t2[f"mc_{int(np.argmax(cov))}_ekf_cov68_pm"]
+    assert t2["mc_ekf_cov68_min_pm"] == t2[f"mc_{int(np.argmin(cov))}_ekf_cov68_pm"]
+    assert " ± " in t2["mc_ekf_nees_min_pm"]
     r = r["second_order"]
     assert texts["mc_0_second_order_rmse_pm"] == formatting.value_se(
         r["rmse"][0], r["rmse_se"][0], 3
@@ -246,7 +276,14 @@ def test_truth_study_texts():
         f"st_0_second_order_{s}{pm}"
         for s in ("bias", "rmse", "mean_sd", "cov68", "cov95", "nees")
         for pm in ("", "_pm")
+    } | {
+        f"st_second_order_{s}_{which}_pm"
+        for s in ("rmse", "cov68", "cov95", "nees")
+        for which in ("min", "max")
     }
+    # one truth: its row is both extremes, with its standard error
+    assert texts["st_second_order_cov68_min_pm"] == texts["st_0_second_order_cov68_pm"]
+    assert " ± " in texts["st_second_order_cov68_max_pm"]
 
 
 def test_rbpf_texts_format_each_row_of_the_convergence_table():

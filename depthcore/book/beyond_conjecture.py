@@ -14,6 +14,7 @@ import numpy as np
 
 from .. import _checks
 from .. import filters as _filters
+from ..study_scores import TEST_POWER, detectable_difference
 from .beyond_frames import COVERAGE_Z, coverage_test, frames_study
 from .formatting import rho_label
 from .style import WIDTH, subplots
@@ -187,7 +188,7 @@ def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse"))
     return fig
 
 
-def conjecture_texts(result: dict, wins: dict, prefix: str) -> dict:
+def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_Z) -> dict:
     """Counts of the cells of :func:`~depthcore.book.beyond_conjecture.conjecture_wins`, for glue.
 
     Returns
@@ -199,9 +200,32 @@ def conjecture_texts(result: dict, wins: dict, prefix: str) -> dict:
         for ``"hellinger"``, ``"rmse"``, ``"coverage_68"``, ``"coverage_95"``)
         and ``"<prefix>_<j>_cal<level>_<filter>"`` (cells where the filter's
         coverage passes the test) for ``"optimal"``, ``"second_order"``, ``"ekf"``.
+        The power of those verdicts: ``"<prefix>_test_size"`` (the test's
+        false alarm rate at ``z``, in percent), ``"<prefix>_test_trials"``
+        (the most trials behind a coverage), ``"<prefix>_test_power"``
+        (:data:`~depthcore.study_scores.TEST_POWER`, in percent) and
+        ``"<prefix>_detect_<level>"``, the coverage error that the test finds
+        with that power at that many trials
+        (:func:`~depthcore.study_scores.detectable_difference`), in percentage
+        points; the same with ``_min`` appended for the fewest trials behind a
+        coverage (trials without a noise-free solution in front of the camera are left out).
     """
+    from scipy.special import ndtr
+
     n_rho, n_depth = len(result["rho"]), len(result["depth"])
     out = {f"{prefix}_cells": str(n_rho * n_depth)}
+    size = 2.0 * float(ndtr(-abs(z)))
+    counts = [result[name]["trials"] for name in ("optimal", "second_order", "ekf")]
+    out[f"{prefix}_test_size"] = f"{100 * size:.0f} %"
+    out[f"{prefix}_test_power"] = f"{100 * TEST_POWER:.0f} %"
+    for suffix, trials in (
+        ("", int(max(np.max(c) for c in counts))),
+        ("_min", int(min(np.min(c) for c in counts))),
+    ):
+        out[f"{prefix}_test_trials{suffix}"] = str(trials)
+        for level in (68, 95):
+            d = float(detectable_difference(level / 100, trials, size, TEST_POWER))
+            out[f"{prefix}_detect_{level}{suffix}"] = f"{100 * d:.1f} points"
     for j, n in enumerate(result["frames"]):
         out[f"{prefix}_{j}_x"] = str(int(n))
         for score in ("hellinger", "rmse", "coverage_68", "coverage_95"):

@@ -82,9 +82,8 @@ def frames_study(
         (the optimal filter first), ``{score: (F,)}`` for :data:`FRAMES_SCORES`
         (of the depth) and ``"nees"``, each with its standard error
         (:func:`~depthcore.book.beyond_study.gather_scores`), ``"hellinger"`` (mean Hellinger
-        distance of
-        the depth marginal to the optimal one) and ``"trials"`` (valid trials
-        scored).
+        distance of the depth marginal to the optimal one) with ``"hellinger_se"``,
+        and ``"trials"`` (valid trials scored).
     """
     frames = [_checks.count(n, "frames") for n in _checks.nonempty(np.atleast_1d(frames), "frames")]
     names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
@@ -113,6 +112,7 @@ def frames_study(
         f = [x for x, _ in runs]
         out[name] = gather_scores(f, FRAMES_SCORES)
         out[name]["hellinger"] = np.array([x["hellinger_depth"]["mean"] for x in f])
+        out[name]["hellinger_se"] = np.array([x["hellinger_depth"]["se"] for x in f])
         out[name]["trials"] = np.array([v for _, v in runs])
     return out
 

@@ -4,7 +4,7 @@ Recommended import: ``from depthcore.book import beyond_hard``.
 
 :func:`hard_figure` draws each filter's coverage over the cells of
 :func:`depthcore.hardness.hard_study`; :func:`hard_label` and
-:func:`hard_texts` give the texts the chapter glues.
+:func:`hard_texts`, :func:`score_text` and :func:`extreme_text` give the texts the chapter glues.
 """
 
 from __future__ import annotations
@@ -109,11 +109,51 @@ def hard_texts(cells: list, prefix: str) -> dict:
         for reading in ("fixed", "prior"):
             for name, s in c[reading]["filters"].items():
                 for score in HARD_SCORES:
-                    if score.startswith("coverage"):
-                        decimals = 2
-                    else:
-                        decimals = max(0, 2 - int(np.floor(np.log10(max(abs(s[score]), 1e-3)))))
-                    out[f"{prefix}_{i}_{reading}_{name}_{score}"] = value_se(
-                        s[score], s[f"{score}_se"], decimals
-                    )
+                    out[f"{prefix}_{i}_{reading}_{name}_{score}"] = score_text(s, score)
     return out
+
+
+def score_text(scores: dict, score: str) -> str:
+    """One score of one filter as :func:`hard_texts` shows it: ``"value ± standard error"``.
+
+    Two decimals for a coverage, three significant figures' worth for a depth
+    (:func:`~depthcore.book.formatting.value_se`).
+    """
+    value = scores[score]
+    if score.startswith("coverage"):
+        decimals = 2
+    else:
+        decimals = max(0, 2 - int(np.floor(np.log10(max(abs(value), 1e-3)))))
+    return value_se(value, scores[f"{score}_se"], decimals)
+
+
+def extreme_text(cells: list, reading: str, name: str, score: str, which: str, where=None):
+    """The cell where a filter's score is least or greatest, and that score with its SE.
+
+    Parameters
+    ----------
+    cells : list of dict
+        From :func:`depthcore.hardness.hard_study`.
+    reading : {"fixed", "prior"}
+    name : str
+        A filter of the cells.
+    score : str
+        One of :data:`HARD_SCORES`.
+    which : {"min", "max"}
+    where : array_like of bool, shape (len(cells),), optional
+        The cells to search (default all).
+
+    Returns
+    -------
+    (int, str)
+        The cell's index and :func:`score_text` of its score.
+    """
+    if which not in ("min", "max"):
+        raise ValueError(f"which must be 'min' or 'max', got {which!r}")
+    values = np.array([c[reading]["filters"][name][score] for c in cells], dtype=float)
+    where = np.ones(len(cells), dtype=bool) if where is None else np.asarray(where, dtype=bool)
+    if where.shape != values.shape or not where.any():
+        raise ValueError("where must be a boolean per cell, true for at least one")
+    masked = np.where(where, values, np.inf if which == "min" else -np.inf)
+    i = int(np.argmin(masked) if which == "min" else np.argmax(masked))
+    return i, score_text(cells[i][reading]["filters"][name], score)

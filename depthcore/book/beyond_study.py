@@ -18,7 +18,7 @@ import numpy as np
 from .. import _checks, study
 from ..estimates import QUANTITIES
 from ..filters import NAMES
-from .formatting import SCORE_TEXTS, value_se, vec
+from .formatting import SCORE_TEXTS, row_extremes, value_se, vec
 from .style import MIN_FONT, STYLE, subplots
 
 # --- the Monte Carlo study at several noise levels --------------------------------------------
@@ -182,7 +182,9 @@ def truth_study_texts(result: dict, prefix: str) -> dict:
         (:data:`~depthcore.book.formatting.STUDY_DECIMALS`),
         ``cov68``, ``cov95`` (2 decimals) and ``nees`` (1 decimal), each also
         with ``_pm`` appended: ``"value ± standard error"``
-        (:func:`~depthcore.book.formatting.value_se`).
+        (:func:`~depthcore.book.formatting.value_se`); the least and greatest
+        of each score over the truths, ``"<prefix>_<filter>_<key>_min_pm"``
+        and ``"..._max_pm"`` (:func:`~depthcore.book.formatting.row_extremes`).
     """
     out = {}
     names = [n for n in NAMES if n in result]
@@ -195,6 +197,7 @@ def truth_study_texts(result: dict, prefix: str) -> dict:
             for key, score, d in SCORE_TEXTS:
                 out[f"{row}_{key}"] = f"{float(r[score][i]) + 0.0:.{d}f}"
                 out[f"{row}_{key}_pm"] = value_se(r[score][i], r[f"{score}_se"][i], d)
+    out.update(row_extremes(out, result, names, prefix))
     return out
 
 
@@ -209,7 +212,8 @@ def prior_study_texts(result: dict, prefix: str) -> dict:
         ``"<prefix>_max_se"`` (largest deviation of a coverage from nominal, in
         binomial standard errors, 1 decimal), and per quantity ``q``:
         ``"<prefix>_<q>_coverage_50"``, ``_90`` and ``_95`` (2 decimals, when
-        those levels are reported),
+        those levels are reported; with ``_pm`` appended, ``"value ± standard
+        error"``, the binomial SE of a calibrated filter's coverage at that level),
         ``"<prefix>_<q>_ks"``, ``"<prefix>_<q>_chi2"`` (p-values, 2 decimals) and
         ``"<prefix>_<q>_verdict"``.
     """
@@ -229,7 +233,9 @@ def prior_study_texts(result: dict, prefix: str) -> dict:
         worst = max(worst, float(np.max(np.abs(cov - np.asarray(levels)) / se)))
         for p in (0.5, 0.9, 0.95):
             if p in levels:
-                out[f"{prefix}_{q}_coverage_{round(100 * p)}"] = f"{cov[levels.index(p)]:.2f}"
+                j = levels.index(p)
+                out[f"{prefix}_{q}_coverage_{round(100 * p)}"] = f"{cov[j]:.2f}"
+                out[f"{prefix}_{q}_coverage_{round(100 * p)}_pm"] = value_se(cov[j], se[j], 2)
         out[f"{prefix}_{q}_ks"] = f"{r['ks_pvalue']:.2f}"
         out[f"{prefix}_{q}_chi2"] = f"{r['chi2_pvalue']:.2f}"
         out[f"{prefix}_{q}_verdict"] = "passes" if r["calibrated"] else "fails"

@@ -29,7 +29,7 @@ from ..filters import FILTERS, NAMES, check_names
 from ..gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from ..scenarios import SCENARIOS
 from .beyond_study import NOISE_STUDY_SCORES, gather_scores
-from .formatting import SCORE_TEXTS, plus_minus, rho_label, value_se
+from .formatting import SCORE_TEXTS, plus_minus, rho_label, row_extremes, value_se
 from .style import MIN_FONT, STYLE, WIDTH, subplots
 
 # --- sweeps --------------------------------------------------------------------------------
@@ -460,7 +460,9 @@ def noise_study_texts(result: dict, prefix: str) -> dict:
         and per filter ``"<prefix>_<i>_<filter>_cov68"``, ``"..._cov95"`` (2
         decimals), ``"..._rmse"`` (3 decimals), ``"..._nees"`` (1 decimal),
         each also with ``_pm`` appended: ``"value ± standard error"``
-        (:func:`~depthcore.book.formatting.value_se`).
+        (:func:`~depthcore.book.formatting.value_se`). Per filter and score,
+        ``"<prefix>_<filter>_<key>_min_pm"`` and ``"..._max_pm"``: the ``_pm``
+        text of the row where the score is least, and greatest.
     """
     out = {}
     names = [n for n in NAMES if n in result]
@@ -475,4 +477,5 @@ def noise_study_texts(result: dict, prefix: str) -> dict:
                     continue
                 out[f"{row}_{key}"] = f"{float(r[score][i]) + 0.0:.{d}f}"
                 out[f"{row}_{key}_pm"] = value_se(r[score][i], r[f"{score}_se"][i], d)
+    out.update(row_extremes(out, result, names, prefix))
     return out

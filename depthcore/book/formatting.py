@@ -109,6 +109,36 @@ def study_texts(result: dict, prefix: str) -> dict:
     return out
 
 
+def row_extremes(texts: dict, result: dict, names, prefix: str) -> dict:
+    """The ``_pm`` texts of the rows where each score of :data:`SCORE_TEXTS` is least and greatest.
+
+    Parameters
+    ----------
+    texts : dict
+        Row texts ``"<prefix>_<i>_<filter>_<key>_pm"`` of a study with one row per setting.
+    result : dict
+        That study's result: ``result[filter][score]`` of shape (rows,).
+    names : sequence of str
+        The filters.
+    prefix : str
+
+    Returns
+    -------
+    dict
+        ``"<prefix>_<filter>_<key>_min_pm"`` and ``"..._max_pm"`` for the
+        scores other than the bias and the mean SD.
+    """
+    out = {}
+    for name in names:
+        for key, score, _ in SCORE_TEXTS:
+            if score in ("bias", "mean_sd"):
+                continue
+            values = np.asarray(result[name][score], dtype=float)
+            for which, i in (("min", np.argmin(values)), ("max", np.argmax(values))):
+                out[f"{prefix}_{name}_{key}_{which}_pm"] = texts[f"{prefix}_{i}_{name}_{key}_pm"]
+    return out
+
+
 def value_se(value: float, se: float, decimals: int) -> str:
     """``"value ± se"``, both to ``decimals`` places, or more while the SE rounds to zero.
 
