@@ -157,7 +157,7 @@ def depth_scores(errors, sds, pit) -> dict:
     for p, c in zip(LEVELS, calibration.coverage(pit, LEVELS), strict=True):
         key = f"coverage_{round(100 * p)}"
         out[key] = float(c)
-        out[f"{key}_se"] = float(np.sqrt(c * (1.0 - c) / n))
+        out[f"{key}_se"] = float(study_scores.proportion_se(round(c * n), n))
     return out
 
 

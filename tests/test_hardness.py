@@ -74,7 +74,7 @@ def test_depth_scores_against_direct_computation():
     assert r["mean_sd"] == pytest.approx(np.mean(s))
     c = np.mean(np.abs(pit - 0.5) <= 0.34)
     assert r["coverage_68"] == pytest.approx(c)
-    assert r["coverage_68_se"] == pytest.approx(np.sqrt(c * (1 - c) / 400))
+    assert r["coverage_68_se"] == study_scores.proportion_se(round(c * 400), 400)
     assert r["trials"] == 400
     with pytest.raises(ValueError, match="pit"):
         hardness.depth_scores(e, s, pit[:-1])

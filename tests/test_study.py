@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
-from scipy import integrate
+from scipy import integrate, stats
 
 from depthcore import _checks, bank_posterior, model, optimal, study, study_scores, study_trials
 from depthcore.__main__ import main
@@ -496,7 +496,14 @@ def test_standard_errors_follow_their_definitions():
         )
         for level in (68, 95):
             c = s[q][f"coverage_{level}"]
-            assert s[q][f"coverage_{level}_se"] == pytest.approx(np.sqrt(c * (1 - c) / n))
+            k = round(c * n)
+            assert s[q][f"coverage_{level}_se"] == study_scores.proportion_se(k, n)
+            # inside the range, the plug-in binomial error to a relative O(1 / n)
+            if 0 < k < n:
+                plug_in = np.sqrt(c * (1 - c) / n)
+                assert s[q][f"coverage_{level}_se"] == pytest.approx(
+                    plug_in, rel=10 / n / min(c, 1 - c)
+                )
     t = trials.truth
     err = est["ekf"].mean - t
     nees = np.einsum("ni,ni->n", err, np.linalg.solve(est["ekf"].cov, err[..., None])[..., 0])
@@ -536,6 +543,24 @@ def test_pooled_squares_do_not_depend_on_the_chunks():
         np.std(x, ddof=1) / np.sqrt(n), rel=1e-6
     )
     assert study_scores.mean_se(0.0, 1) == 0.0  # one trial: no spread to estimate
+
+
+def test_a_coverage_error_is_the_binomial_one_and_never_zero():
+    # against the exact SD of k / n at the true p: within 10 % wherever n p (1 - p) >= 5
+    for n in (50, 150, 300, 2000):
+        for p in (0.05, 0.2, 0.5, 0.68, 0.95):
+            if n * p * (1 - p) < 5:
+                continue
+            k = np.arange(n + 1)
+            pmf = stats.binom.pmf(k, n, p)
+            expected = np.sum(pmf * study_scores.proportion_se(k, n))
+            assert expected == pytest.approx(np.sqrt(p * (1 - p) / n), rel=0.1), (n, p)
+    # no trial or every trial covered: positive, below the rule of three's 95 % bound 3 / n
+    for n in (20, 150, 1000):
+        for k in (0, n):
+            se = float(study_scores.proportion_se(k, n))
+            assert 0 < se < 3 / n
+    assert study_scores.proportion_se(0, 150) == pytest.approx(study_scores.proportion_se(150, 150))
 
 
 def test_the_detectable_difference_is_found_with_the_stated_power():
