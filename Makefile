@@ -7,7 +7,7 @@
 #                           book/_nbval/; the PDF and the book built from that execution;
 #                           checks of the built book
 #   make notebooks          re-run every book page and compare its outputs with book/_nbval/
-#   make notebooks-alone    execute every page once, alone in an empty folder with only
+#   make notebooks-alone    execute every page once, alone in a folder of its own with only
 #                           requirements.txt and the book's source archive installed (as a
 #                           reader runs its download), into the execution cache the PDF and
 #                           book builds read, and compare its outputs with book/_nbval/
@@ -142,7 +142,7 @@ book: downloads
 	$(PY) tools/check_notebooks.py cache --execute
 	$(VENV)/bin/jupyter-book build . --all -W -n --keep-going 2>&1 | tee _build/book.log
 
-# Every page executed once, alone (an empty folder, .venv/standalone/ with only the
+# Every page executed once, alone (a folder holding only its notebook, .venv/standalone/ with only the
 # book's requirements.txt and source archive), into the execution cache that the
 # PDF and HTML builds then read; its outputs compared with book/_nbval/.
 notebooks-alone: $(EDITABLE) $(ALONE_STAMP) downloads

@@ -321,7 +321,9 @@ def test_outputs_compare_as_nbval_compares_them(tmp_path):
     assert [verdicts[f"Cell {i}"] for i in range(1, len(CASES) + 1)] == [s for _, s in CASES]
 
 
-def test_pages_executed_alone_run_in_an_empty_folder_off_the_repository(tmp_path, monkeypatch):
+def test_pages_executed_alone_run_beside_their_notebook_alone_off_the_repository(
+    tmp_path, monkeypatch
+):
     from jupyter_cache import get_cache
 
     monkeypatch.setenv("JUPYTER_PATH", str(check_notebooks.KERNELS))
@@ -346,7 +348,8 @@ def test_pages_executed_alone_run_in_an_empty_folder_off_the_repository(tmp_path
     assert check_notebooks.executed_alone(store, reads) is False
     record = store.match_cache_notebook(check_notebooks.read_as_the_book(alone))
     (cell,) = [c for c in store.get_cache_bundle(record.pk).nb.cells if c.cell_type == "code"]
-    assert cell.outputs[0]["text"] == f"[] None {sys.executable}\n"
+    # the folder holds the page's notebook alone, as a reader's download folder
+    assert cell.outputs[0]["text"] == f"[PosixPath('alone.ipynb')] None {sys.executable}\n"
     # Nothing left to execute alone: a record executed alone is kept.
     assert check_notebooks.fill_cache([alone], 2, cache, python=sys.executable) == []
 

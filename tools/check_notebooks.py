@@ -561,16 +561,20 @@ def read_as_the_book(page: Path):
 def execute_for_cache(page: Path, alone: bool = False):
     """Execute ``page`` as myst-nb's cache mode does: (page, notebook, seconds, error text).
 
-    ``alone``: in an empty folder of its own (made and removed here) rather than
-    in the page's folder, as a reader runs the page's downloaded notebook.
+    ``alone``: in a folder of its own (made and removed here) that holds only
+    the page's notebook, ``<page>.ipynb`` as the book offers it for download,
+    rather than in the page's folder: as a reader runs the downloaded notebook.
     """
     import tempfile
 
+    import nbformat
     from jupyter_cache.executors.utils import single_nb_execution
 
     nb = read_as_the_book(page)
-    with tempfile.TemporaryDirectory(prefix=f"depthcore-{page.stem}-") as empty:
-        cwd = empty if alone else str(page.parent)
+    with tempfile.TemporaryDirectory(prefix=f"depthcore-{page.stem}-") as folder:
+        if alone:
+            nbformat.write(nb, Path(folder) / f"{page.stem}.ipynb")
+        cwd = folder if alone else str(page.parent)
         result = single_nb_execution(nb, cwd=cwd, timeout=TIMEOUT, allow_errors=False)
     return page, nb, result.time, None if result.err is None else result.exc_string
 
@@ -627,8 +631,8 @@ def fill_cache(
     A page that fails is left out of the cache: the build runs it again and
     reports its error.
 
-    ``python``: execute each page alone, as a reader runs its download: in an
-    empty folder, with the kernel of ``python`` (an environment holding only
+    ``python``: execute each page alone, as a reader runs its download: in a
+    folder holding only its notebook, with the kernel of ``python`` (an environment holding only
     the book's requirements and source archive, see
     :func:`install_book_environment`), and the repository off the path. The
     pages then executed are those the cache lacks or holds from an execution
@@ -655,7 +659,9 @@ def fill_cache(
     done = []
     if not missing:
         return done
-    how = "" if python is None else f", each alone in an empty folder with {python}"
+    how = (
+        "" if python is None else f", each alone in a folder with its notebook only, with {python}"
+    )
     print(f"execution cache: executing {len(missing)} pages, {workers} at a time{how}", flush=True)
     with tempfile.TemporaryDirectory(prefix="depthcore-kernels-") as kernels:
         pool = ProcessPoolExecutor(
