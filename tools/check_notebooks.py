@@ -73,6 +73,11 @@ REF_DIR_NAME = "_nbval"
 TMP_PREFIX = ".nbval-check-"
 SANITIZE = ROOT / "tests" / "nbval_sanitize.cfg"
 TIMEOUT = 600  # seconds per cell, as `execute.timeout` in _config.yml
+#: Seconds to wait, once a cell has finished, for its last outputs (nbclient's
+#: ``iopub_timeout``, 4 s by default, after which it drops them with a mere warning:
+#: on a loaded machine a cell that glues hundreds of numbers loses its last ones).
+#: Every execution here waits this long and fails, rather than truncate, beyond it.
+IOPUB_TIMEOUT = 120
 #: The book's kernel, ``kernels/python3``: ipykernel, run by the Python that starts it,
 #: without its notice about plain TCP on the loopback interface.
 KERNELS = ROOT / "tools" / "jupyter"
@@ -575,7 +580,14 @@ def execute_for_cache(page: Path, alone: bool = False):
         if alone:
             nbformat.write(nb, Path(folder) / f"{page.stem}.ipynb")
         cwd = folder if alone else str(page.parent)
-        result = single_nb_execution(nb, cwd=cwd, timeout=TIMEOUT, allow_errors=False)
+        result = single_nb_execution(
+            nb,
+            cwd=cwd,
+            timeout=TIMEOUT,
+            allow_errors=False,
+            iopub_timeout=IOPUB_TIMEOUT,
+            raise_on_iopub_timeout=True,
+        )
     return page, nb, result.time, None if result.err is None else result.exc_string
 
 
@@ -827,6 +839,8 @@ def update(pages: list[Path]) -> int:
         NotebookClient(
             nb,
             timeout=TIMEOUT,
+            iopub_timeout=IOPUB_TIMEOUT,
+            raise_on_iopub_timeout=True,
             kernel_name="python3",
             record_timing=False,
             resources={"metadata": {"path": str(page.parent)}},
