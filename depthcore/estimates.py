@@ -1,4 +1,5 @@
-"""A filter's result and how a study scores it: the :class:`Estimate` and the filters' families.
+"""A filter's result and how a study scores it: the :class:`~depthcore.estimates.Estimate`
+and the filters' families.
 
 Recommended import: ``from depthcore import estimates``.
 
