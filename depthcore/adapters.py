@@ -6,7 +6,7 @@ Recommended import: ``from depthcore import adapters``.
 ``name`` of :mod:`depthcore.filters` and returns an
 :class:`~depthcore.estimates.Estimate`; the filters with process noise also
 take ``process_noise``. The functions take checked inputs: the registry's
-:meth:`Filter.__call__ <depthcore.filters.Filter.__call__>` has converted and
+:class:`Filter <depthcore.filters.Filter>`, when called, has converted and
 checked ``mu``, ``rho``, the prior and ``process_noise`` (and whether the
 filter supports the frames and the process noise given); each function checks
 only what is its own (a filter's options, a covariance that rounding left not

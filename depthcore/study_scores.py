@@ -357,6 +357,7 @@ def proportion_se(covered, trials) -> np.ndarray:
 TEST_FALSE_ALARM = 0.01
 
 
+#: The power at which :func:`detectable_difference` states a coverage test's reach.
 TEST_POWER = 0.8
 
 

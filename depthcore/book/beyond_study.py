@@ -24,7 +24,7 @@ from .style import MIN_FONT, STYLE, subplots
 # --- the Monte Carlo study at several noise levels --------------------------------------------
 
 #: Depth scores of :func:`~depthcore.book.beyond_sweeps.noise_study`, from
-#: :func:`depthcore.study.scores`.
+#: :func:`depthcore.study_scores.scores`.
 NOISE_STUDY_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
 
 
@@ -37,7 +37,7 @@ def gather_scores(filter_results, scores) -> dict:
         The filter's entry of :func:`depthcore.study.study`'s ``"filters"``,
         one per study.
     scores : sequence of str
-        Depth scores of :func:`depthcore.study.scores`.
+        Depth scores of :func:`depthcore.study_scores.scores`.
 
     Returns
     -------

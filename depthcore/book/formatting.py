@@ -19,7 +19,8 @@ from ..estimates import QUANTITIES
 DECIMALS = 4
 
 
-#: Scores of :func:`depthcore.study.scores` per quantity, with their decimals in the book's tables.
+#: Scores of :func:`depthcore.study_scores.scores` per quantity, with their decimals in the
+#: book's tables.
 STUDY_DECIMALS = {"bias": 3, "rmse": 3, "mean_sd": 3, "coverage_68": 2, "coverage_95": 2}
 
 
