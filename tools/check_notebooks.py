@@ -219,8 +219,7 @@ def check(pages: list[Path], workers: int, every: list[Path] | None = None) -> i
             nb = combine_inputs_with_outputs(text_nb, ref_nb)
             assert all(c.execution_count is not None for c in nb.cells if c.cell_type == "code")
             combined[page] = nb
-    for ref in stale_references(pages if every is None else every):
-        problems.append(f"{ref.relative_to(ROOT)}: reference notebook of no page in _toc.yml")
+    problems += stale_problems(pages if every is None else every)
     if problems:
         print(
             "make notebooks: the committed reference outputs do not match the book:",
@@ -446,8 +445,7 @@ def standalone(
         problems += found
         if not found:
             runs[page] = with_reference_outputs(nb, ref_nb)
-    for ref in stale_references(pages if every is None else every):
-        problems.append(f"{ref.relative_to(ROOT)}: reference notebook of no page in _toc.yml")
+    problems += stale_problems(pages if every is None else every)
     if problems:
         print("make notebooks-standalone: cannot check the downloaded notebooks:", file=sys.stderr)
         for p in problems:
@@ -859,6 +857,14 @@ def stale_references(pages: list[Path]) -> list[Path]:
     return [r for r in sorted(ROOT.glob(f"book/**/{REF_DIR_NAME}/*.ipynb")) if r not in known]
 
 
+def stale_problems(pages: list[Path]) -> list[str]:
+    """A message for each reference of :func:`stale_references`, as the checks report them."""
+    return [
+        f"{ref.relative_to(ROOT)}: reference notebook of no page in _toc.yml"
+        for ref in stale_references(pages)
+    ]
+
+
 def select_pages(pages: list[Path], names: list[str]) -> list[Path]:
     """The pages named (``fig6``, ``book/fig6.md`` or ``fig6.md``), in table-of-contents order.
 
@@ -894,10 +900,7 @@ def execute_alone(pages: list[Path], python: str, workers: int) -> int:
             print(f"make notebooks-alone: {problem}", file=sys.stderr)
         return 1
     fill_cache(pages, workers, python=python)
-    problems = cached_drift(pages) + [
-        f"{ref.relative_to(ROOT)}: reference notebook of no page in _toc.yml"
-        for ref in stale_references(pages)
-    ]
+    problems = cached_drift(pages) + stale_problems(pages)
     if problems:
         print(
             "make notebooks-alone: the pages, executed alone, do not show what book/_nbval/ holds:",
