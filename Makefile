@@ -174,14 +174,14 @@ lab: $(EDITABLE)
 	$(VENV)/bin/jupyter lab --ServerApp.root_dir=. $(if $(filter 0,$(shell id -u)),--allow-root) \
 	  $(LAB_ARGS) book/intro.md
 
+# Each stage's time is printed as it ends, and all of them at the end.
+TEST_STAGES := lint test-core notebooks-alone pdf book check-book
 test: $(EDITABLE)
 	tools/system-packages.sh
-	$(MAKE) --no-print-directory lint
-	$(MAKE) --no-print-directory test-core
-	$(MAKE) --no-print-directory notebooks-alone
-	$(MAKE) --no-print-directory pdf
-	$(MAKE) --no-print-directory book
-	$(MAKE) --no-print-directory check-book
+	@times=(); for stage in $(TEST_STAGES); do start=$$SECONDS; \
+	  $(MAKE) --no-print-directory $$stage; \
+	  times+=("$$stage $$((SECONDS - start)) s"); echo "make test: $$stage took $$((SECONDS - start)) s"; \
+	done; echo "make test: passed ($$(IFS=,; echo "$${times[*]}" | sed 's/,/, /g'))"
 
 test-core: $(EDITABLE) $(CITE_STAMP)
 	$(PY) -m pytest -q -rs -n 2 tests $(PYTEST_ARGS)

@@ -307,12 +307,32 @@ def open_lab(driver, base, token):
     driver.execute_async_script("window.jupyterapp.started.then(arguments[0])")
 
 
+# Closes every document of a JupyterLab already started, unless one has unsaved
+# changes (closing it would ask a question); returns whether it could.
+CLOSE_ALL = """
+const done = arguments[0];
+const app = window.jupyterapp;
+if (!app) { done(false); return; }
+app.started.then(() => {
+  const widgets = [...app.shell.widgets('main')];
+  if (widgets.some(w => w.context && w.context.model.dirty)) { done(false); return; }
+  app.commands.execute('application:close-all').then(() => done(true), () => done(false));
+});
+"""
+
+
+def reuse_lab(driver, base, token):
+    """JupyterLab with no document open: the one already loaded, else loaded afresh."""
+    if not driver.execute_async_script(CLOSE_ALL):
+        open_lab(driver, base, token)
+
+
 @pytest.mark.parametrize("page", EQUATION_PAGES)
 def test_page_numbers_its_equations_as_the_book_in_jupyterlab(lab, driver, page):
     import json
 
     base, token, served = lab
-    open_lab(driver, base, token)
+    reuse_lab(driver, base, token)
     driver.execute_script(SHOW_EQUATIONS, f"book/{page}.md")
     deadline = time.monotonic() + START_TIMEOUT
     while (result := driver.execute_script("return window.depthcoreResult")) is None:
