@@ -238,11 +238,13 @@ def run_inverse_depth(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0
 
     ``detail`` is its mean and covariance in ``(x, y, v)`` at frame ``N``.
     """
-    if _single(mu):
-        _prior(prior_mean, prior_cov)
-    est = inverse_depth.estimate(mu, rho, prior_mean, prior_cov, process_noise)
-    _covariance_form(est.cov, "inverse-depth EKF")
-    return _gaussian_estimate(est.mean, est.cov, est)
+    return _moments_estimate(
+        mu,
+        prior_mean,
+        prior_cov,
+        "inverse-depth EKF",
+        lambda: inverse_depth.estimate(mu, rho, prior_mean, prior_cov, process_noise),
+    )
 
 
 def run_range_parametrised(
@@ -260,13 +262,15 @@ def run_range_parametrised(
     mean and covariance are the sum's (law of total variance), so that a study
     scores it, as the other Gaussian filters, by these two moments.
     """
-    if _single(mu):
-        _prior(prior_mean, prior_cov)
-    g = range_ekf.posterior(
-        mu, rho, prior_mean, prior_cov, process_noise, n_components, depth_range
+    return _moments_estimate(
+        mu,
+        prior_mean,
+        prior_cov,
+        "range-parametrised EKF",
+        lambda: range_ekf.posterior(
+            mu, rho, prior_mean, prior_cov, process_noise, n_components, depth_range
+        ),
     )
-    _covariance_form(g.cov, "range-parametrised EKF")
-    return _gaussian_estimate(g.mean, g.cov, g)
 
 
 def run_inverse_depth_ukf(
@@ -284,13 +288,15 @@ def run_inverse_depth_ukf(
     the UKF's entry, it runs by default even where sigma points lie behind the
     camera (``allow_behind_camera``).
     """
-    if _single(mu):
-        _prior(prior_mean, prior_cov)
-    est = inverse_depth_ukf.estimate(
-        mu, rho, prior_mean, prior_cov, process_noise, sigma_points, allow_behind_camera
+    return _moments_estimate(
+        mu,
+        prior_mean,
+        prior_cov,
+        "inverse-depth UKF",
+        lambda: inverse_depth_ukf.estimate(
+            mu, rho, prior_mean, prior_cov, process_noise, sigma_points, allow_behind_camera
+        ),
     )
-    _covariance_form(est.cov, "inverse-depth UKF")
-    return _gaussian_estimate(est.mean, est.cov, est)
 
 
 def run_modified_polar(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> Estimate:
@@ -298,10 +304,26 @@ def run_modified_polar(mu, rho, prior_mean, prior_cov, process_noise: float = 0.
 
     ``detail`` is its mean and covariance in ``(x, y, v)`` at frame ``N``.
     """
+    return _moments_estimate(
+        mu,
+        prior_mean,
+        prior_cov,
+        "modified-polar EKF",
+        lambda: modified_polar.estimate(mu, rho, prior_mean, prior_cov, process_noise),
+    )
+
+
+def _moments_estimate(mu, prior_mean, prior_cov, name: str, run) -> Estimate:
+    """The :class:`Estimate` of a filter whose ``run()`` returns its mean and covariance.
+
+    ``run()`` returns an object with ``mean`` (..., 3) and ``cov`` (..., 3, 3)
+    at frame ``N``, kept as the estimate's ``detail``; the prior is checked
+    first for one track, and the covariance after (:func:`_covariance_form`).
+    """
     if _single(mu):
         _prior(prior_mean, prior_cov)
-    est = modified_polar.estimate(mu, rho, prior_mean, prior_cov, process_noise)
-    _covariance_form(est.cov, "modified-polar EKF")
+    est = run()
+    _covariance_form(est.cov, name)
     return _gaussian_estimate(est.mean, est.cov, est)
 
 
