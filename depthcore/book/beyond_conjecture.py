@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks
+from .. import _checks, study_scores
 from .. import filters as _filters
-from ..study_scores import TEST_POWER, detectable_difference
+from ..study_scores import TEST_POWER, detectable_difference, detectable_shift
 from .beyond_frames import COVERAGE_Z, coverage_test, frames_study
 from .formatting import rho_label
 from .style import WIDTH, subplots
@@ -74,32 +74,107 @@ def conjecture_study(
         out[name] = {
             s: np.array([[run[name][s] for run in row] for row in runs]) for s in runs[0][0][name]
         }
+    cells = [[[comparisons(p) for p in run["paired"]] for run in row] for row in runs]
+    out["paired"] = {
+        k: np.array([[[c[k] for c in cell] for cell in row] for row in cells])
+        for k in cells[0][0][0]
+    }
     return out
+
+
+def comparisons(summary: dict) -> dict:
+    """The second-order filter against the EKF over the same trials, each with its paired SE.
+
+    Parameters
+    ----------
+    summary : dict
+        The co-moments of the filters' per-trial depth scores,
+        ``study(..., paired=True)["paired"]`` with the optimal, second-order
+        and EKF filters.
+
+    Returns
+    -------
+    dict of float
+        ``"hellinger_difference"`` (second-order less EKF mean Hellinger
+        distance to the optimal filter, :func:`~depthcore.study_scores.paired_difference_se`),
+        ``"hellinger_ratio"`` (EKF over second-order,
+        :func:`~depthcore.study_scores.mean_ratio_se`), ``"rmse_ratio"``
+        (second-order RMSE over the EKF's) and ``"ekf_rmse_ratio"`` (its
+        inverse, :func:`~depthcore.study_scores.rmse_ratio_se`),
+        ``"coverage_68_gap"`` and ``"coverage_95_gap"`` (how much farther the
+        second-order coverage is from its level than the EKF's,
+        :func:`~depthcore.study_scores.coverage_gap_difference`), each with
+        ``"<key>_se"``, and ``"trials"``.
+    """
+    so, ekf = "second_order", "ekf"
+    out = {}
+    m, c, n = study_scores.pair_of(summary, (so, "hellinger"), (ekf, "hellinger"))
+    out["hellinger_difference"] = float(m[0] - m[1])
+    out["hellinger_difference_se"] = float(study_scores.paired_difference_se(c, n))
+    m, c, n = study_scores.pair_of(summary, (ekf, "hellinger"), (so, "hellinger"))
+    out["hellinger_ratio"] = float(m[0] / m[1])
+    out["hellinger_ratio_se"] = float(study_scores.mean_ratio_se(m, c, n))
+    for key, pair in (("rmse_ratio", (so, ekf)), ("ekf_rmse_ratio", (ekf, so))):
+        m, c, n = study_scores.pair_of(summary, *((f, "squared_error") for f in pair))
+        out[key] = float(np.sqrt(m[0] / m[1]))
+        out[f"{key}_se"] = float(study_scores.rmse_ratio_se(m, c, n))
+    for level in (68, 95):
+        key = f"coverage_{level}"
+        m, c, n = study_scores.pair_of(summary, (so, key), (ekf, key))
+        gap, se = study_scores.coverage_gap_difference(m, c, n, level / 100)
+        out[f"{key}_gap"], out[f"{key}_gap_se"] = float(gap), float(se)
+    out["trials"] = n
+    return out
+
+
+#: The duels of :func:`conjecture_wins`: each score's paired difference (positive where the
+#: second-order filter does worse) and its SE, from :func:`comparisons`.
+DUELS = {
+    "hellinger": "hellinger_difference",
+    "coverage_68": "coverage_68_gap",
+    "coverage_95": "coverage_95_gap",
+}
 
 
 def conjecture_wins(result: dict, z: float = COVERAGE_Z) -> dict:
     """Where the second-order filter beats the EKF, cell by cell of :func:`conjecture_study`.
+
+    Each duel is a paired two-sided test at critical value ``z``
+    (:func:`~depthcore.study_scores.difference_verdict`) over the trials both
+    filters ran on, with three outcomes per cell: ``1`` the second-order filter
+    significantly better, ``-1`` the EKF significantly better, ``0`` no
+    detectable difference.
 
     Parameters
     ----------
     result : dict
         From :func:`conjecture_study`; its arrays have shape (R, D, F).
     z : float
-        Critical value of :func:`~depthcore.book.beyond_frames.coverage_test`.
+        Critical value of the tests and of
+        :func:`~depthcore.book.beyond_frames.coverage_test`.
 
     Returns
     -------
     dict
-        Boolean arrays of shape (R, D, F): ``"hellinger"`` (the second-order
-        depth marginal is nearer the optimal one), ``"rmse"`` (its depth mean
-        has the smaller RMSE), and for each level ``"coverage_68"``,
-        ``"coverage_95"`` (its coverage lies fewer standard errors from the
-        level); ``"calibrated_<level>"`` ``{name: (R, D, F)}``, the verdicts of
-        :func:`~depthcore.book.beyond_frames.coverage_test` for ``"optimal"``, ``"second_order"``
-        and ``"ekf"``.
+        Integer arrays of shape (R, D, F): ``"hellinger"`` (the second-order
+        depth marginal nearer the optimal one: the paired difference of the
+        mean Hellinger distances), ``"rmse"`` (its depth mean's RMSE smaller:
+        the logarithm of the ratio of the RMSEs against 0), and for each level
+        ``"coverage_68"``, ``"coverage_95"`` (its coverage nearer the level:
+        the paired difference of the distances from it); the same with
+        ``"_se"`` appended, the SE (R, D, F) each test used (the RMSE
+        ratio's relative SE for ``"rmse"``); ``"calibrated_<level>"`` ``{name: (R, D, F)}``,
+        the verdicts of :func:`~depthcore.book.beyond_frames.coverage_test`
+        for ``"optimal"``, ``"second_order"`` and ``"ekf"``.
     """
-    so, ekf = result["second_order"], result["ekf"]
-    out = {"hellinger": so["hellinger"] < ekf["hellinger"], "rmse": so["rmse"] < ekf["rmse"]}
+    pairs = result["paired"]
+    out = {}
+    for score, key in DUELS.items():
+        out[score] = -study_scores.difference_verdict(pairs[key], pairs[f"{key}_se"], z)
+        out[f"{score}_se"] = pairs[f"{key}_se"]
+    # the ratio's logarithm against 0: its SE is the ratio's relative SE
+    out["rmse_se"] = pairs["rmse_ratio_se"] / pairs["rmse_ratio"]
+    out["rmse"] = study_scores.difference_verdict(-np.log(pairs["rmse_ratio"]), out["rmse_se"], z)
     for level in (68, 95):
         tests = {
             name: coverage_test(
@@ -107,7 +182,6 @@ def conjecture_wins(result: dict, z: float = COVERAGE_Z) -> dict:
             )
             for name in ("optimal", "second_order", "ekf")
         }
-        out[f"coverage_{level}"] = np.abs(tests["second_order"]["z"]) < np.abs(tests["ekf"]["z"])
         out[f"calibrated_{level}"] = {
             name: t["verdict"] == "calibrated" for name, t in tests.items()
         }
@@ -196,8 +270,17 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
     dict
         ``"<prefix>_cells"`` (cells per ``N``: noise levels times depths) and,
         for the ``j``-th ``N``: ``"<prefix>_<j>_x"`` (``N``),
-        ``"<prefix>_<j>_<score>"`` (cells where the second-order filter wins,
-        for ``"hellinger"``, ``"rmse"``, ``"coverage_68"``, ``"coverage_95"``)
+        ``"<prefix>_<j>_<score>"`` (cells where the second-order filter wins
+        its paired test, for ``"hellinger"``, ``"rmse"``, ``"coverage_68"``,
+        ``"coverage_95"``), ``"<prefix>_<j>_<score>_ties"`` (cells where the
+        test detects no difference), ``"<prefix>_<j>_<score>_losses"`` (cells
+        where the EKF wins) and ``"<prefix>_<j>_<score>_table"`` (the three
+        as ``"wins / ties / losses"``); ``"<prefix>_detect_<score>"``, the
+        largest over the cells of the difference the paired test finds with
+        power :data:`~depthcore.study_scores.TEST_POWER`
+        (:func:`~depthcore.study_scores.detectable_shift`): of the mean
+        Hellinger distances, of the RMSE ratio's logarithm (in percent), of the
+        coverages' distances from their levels (in percentage points);
         and ``"<prefix>_<j>_cal<level>_<filter>"`` (cells where the filter's
         coverage passes the test) for ``"optimal"``, ``"second_order"``, ``"ekf"``.
         The power of those verdicts: ``"<prefix>_test_size"`` (the test's
@@ -214,6 +297,7 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
 
     n_rho, n_depth = len(result["rho"]), len(result["depth"])
     out = {f"{prefix}_cells": str(n_rho * n_depth)}
+    unit = {"rmse": "%", "coverage_68": "points", "coverage_95": "points"}
     size = 2.0 * float(ndtr(-abs(z)))
     counts = [result[name]["trials"] for name in ("optimal", "second_order", "ekf")]
     out[f"{prefix}_test_size"] = f"{100 * size:.0f} %"
@@ -226,10 +310,20 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
         for level in (68, 95):
             d = float(detectable_difference(level / 100, trials, size, TEST_POWER))
             out[f"{prefix}_detect_{level}{suffix}"] = f"{100 * d:.1f} points"
+    for score in ("hellinger", "rmse", "coverage_68", "coverage_95"):
+        d = float(np.max(detectable_shift(wins[f"{score}_se"], size, TEST_POWER)))
+        out[f"{prefix}_detect_{score}"] = (
+            f"{d:.3f}" if score == "hellinger" else f"{100 * d:.1f} {unit[score]}"
+        )
     for j, n in enumerate(result["frames"]):
         out[f"{prefix}_{j}_x"] = str(int(n))
         for score in ("hellinger", "rmse", "coverage_68", "coverage_95"):
-            out[f"{prefix}_{j}_{score}"] = str(int(np.sum(wins[score][..., j])))
+            w = wins[score][..., j]
+            counts = [int(np.sum(w == v)) for v in (1, 0, -1)]
+            out[f"{prefix}_{j}_{score}"] = str(counts[0])
+            out[f"{prefix}_{j}_{score}_ties"] = str(counts[1])
+            out[f"{prefix}_{j}_{score}_losses"] = str(counts[2])
+            out[f"{prefix}_{j}_{score}_table"] = " / ".join(str(c) for c in counts)
         for level in (68, 95):
             for name, ok in wins[f"calibrated_{level}"].items():
                 out[f"{prefix}_{j}_cal{level}_{name}"] = str(int(np.sum(ok[..., j])))
