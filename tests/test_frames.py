@@ -230,7 +230,7 @@ def test_conjecture_wins_compare_cell_by_cell():
     d_h = (2.5758 + 0.8416) * w["hellinger_se"].max()
     assert float(texts["cj_detect_hellinger"]) == pytest.approx(d_h, abs=1e-3)
     d_r = (2.5758 + 0.8416) * w["rmse_se"].max()
-    assert float(texts["cj_detect_rmse"].split()[0]) == pytest.approx(100 * d_r, abs=0.1)
+    assert float(texts["cj_detect_rmse"]) == pytest.approx(np.exp(d_r), abs=0.01)
     # the verdicts' power: a 1 % test at the fewest trials of a cell, 80 % power
     # against the difference (2.576 + 0.842) sqrt(p (1 - p) / n)
     n = min(int(c[name]["trials"].min()) for name in ("optimal", "second_order", "ekf"))
@@ -285,3 +285,16 @@ def test_odd_arguments_are_refused_in_one_line_naming_them(call, message):
     with pytest.raises(ValueError, match=message) as info:
         call()
     assert "\n" not in str(info.value)
+
+
+def test_conjecture_extreme_text_gives_the_extreme_cell_with_its_own_se():
+    result = {
+        "paired": {
+            "rmse_ratio": np.array([[[1.5, 0.9]], [[2.5, 0.8]]]),  # (R, D, F) = (2, 1, 2)
+            "rmse_ratio_se": np.array([[[0.1, 0.02]], [[0.3, 0.04]]]),
+        }
+    }
+    assert beyond_conjecture.extreme_text(result, "rmse_ratio", "min") == "0.80 ± 0.04"
+    assert beyond_conjecture.extreme_text(result, "rmse_ratio", "max", (..., 0), 1) == "2.5 ± 0.3"
+    with pytest.raises(ValueError, match="which"):
+        beyond_conjecture.extreme_text(result, "rmse_ratio", "least")

@@ -242,3 +242,10 @@ def test_hard_cell_beyond_three_frames_scores_the_depth_at_frame_n():
     assert abs(e["bias"]) < 13.0 and e["failed"] == 0
     with pytest.raises(ValueError, match="frames"):
         hardness.hard_cell(FIG2.c, RHO, 1.0, 0.0, 4, 1, ("optimal",), 2)
+
+
+def test_outcome_counts_count_wins_ties_and_losses():
+    assert beyond_hard.outcome_counts([1, 0, -1, 1, 1]) == (3, 1, 1)
+    assert beyond_hard.outcome_counts(np.zeros((2, 3), dtype=int)) == (0, 6, 0)
+    with pytest.raises(ValueError, match="outcomes"):
+        beyond_hard.outcome_counts([1, 2])

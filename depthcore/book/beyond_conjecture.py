@@ -3,9 +3,11 @@
 Recommended import: ``from depthcore.book import beyond_conjecture``.
 
 :func:`conjecture_study` scores both filters against the optimal filter and
-the truth over frames, noise levels and depths, :func:`conjecture_wins` says
-where one beats the other by more than chance, :func:`conjecture_figure`
-draws it and :func:`conjecture_texts` gives the texts the chapter glues.
+the truth over frames, noise levels and depths, with their paired
+:func:`comparisons` over the same trials; :func:`conjecture_wins` says where
+one beats the other by more than chance (a paired test per cell),
+:func:`conjecture_figure` draws it and :func:`conjecture_texts` and
+:func:`extreme_text` give the texts the chapter glues.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from .. import _checks, study_scores
 from .. import filters as _filters
 from ..study_scores import TEST_POWER, detectable_difference, detectable_shift
 from .beyond_frames import COVERAGE_Z, coverage_test, frames_study
-from .formatting import rho_label
+from .formatting import rho_label, value_se
 from .style import WIDTH, subplots
 
 
@@ -56,7 +58,9 @@ def conjecture_study(
     dict
         ``"frames"`` (F,), ``"rho"`` (R,), ``"depth"`` (D,), ``"truth"`` (D, 3)
         and per filter (``"optimal"``, ``"second_order"``, ``"ekf"``) the
-        scores of :func:`~depthcore.book.beyond_frames.frames_study` as arrays of shape (R, D, F).
+        scores of :func:`~depthcore.book.beyond_frames.frames_study` as arrays of shape (R, D, F);
+        ``"paired"``: the :func:`comparisons` of the second-order filter and
+        the EKF over the same trials, each an array (R, D, F).
     """
     rhos = _checks.nonempty(np.atleast_1d(_checks.positive_array(rhos, "rhos")), "rhos")
     depths = _checks.nonempty(np.atleast_1d(_checks.positive_array(depths, "depths")), "depths")
@@ -279,8 +283,9 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
         largest over the cells of the difference the paired test finds with
         power :data:`~depthcore.study_scores.TEST_POWER`
         (:func:`~depthcore.study_scores.detectable_shift`): of the mean
-        Hellinger distances, of the RMSE ratio's logarithm (in percent), of the
-        coverages' distances from their levels (in percentage points);
+        Hellinger distances, of the RMSEs (the factor by which they differ,
+        from the shift of their ratio's logarithm), of the coverages'
+        distances from their levels (in percentage points);
         and ``"<prefix>_<j>_cal<level>_<filter>"`` (cells where the filter's
         coverage passes the test) for ``"optimal"``, ``"second_order"``, ``"ekf"``.
         The power of those verdicts: ``"<prefix>_test_size"`` (the test's
@@ -297,7 +302,6 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
 
     n_rho, n_depth = len(result["rho"]), len(result["depth"])
     out = {f"{prefix}_cells": str(n_rho * n_depth)}
-    unit = {"rmse": "%", "coverage_68": "points", "coverage_95": "points"}
     size = 2.0 * float(ndtr(-abs(z)))
     counts = [result[name]["trials"] for name in ("optimal", "second_order", "ekf")]
     out[f"{prefix}_test_size"] = f"{100 * size:.0f} %"
@@ -312,9 +316,12 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
             out[f"{prefix}_detect_{level}{suffix}"] = f"{100 * d:.1f} points"
     for score in ("hellinger", "rmse", "coverage_68", "coverage_95"):
         d = float(np.max(detectable_shift(wins[f"{score}_se"], size, TEST_POWER)))
-        out[f"{prefix}_detect_{score}"] = (
-            f"{d:.3f}" if score == "hellinger" else f"{100 * d:.1f} {unit[score]}"
-        )
+        if score == "hellinger":
+            out[f"{prefix}_detect_{score}"] = f"{d:.3f}"
+        elif score == "rmse":  # a shift of the log-ratio, as a factor
+            out[f"{prefix}_detect_{score}"] = f"{np.exp(d):.2f}"
+        else:
+            out[f"{prefix}_detect_{score}"] = f"{100 * d:.1f} points"
     for j, n in enumerate(result["frames"]):
         out[f"{prefix}_{j}_x"] = str(int(n))
         for score in ("hellinger", "rmse", "coverage_68", "coverage_95"):
@@ -328,3 +335,31 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
             for name, ok in wins[f"calibrated_{level}"].items():
                 out[f"{prefix}_{j}_cal{level}_{name}"] = str(int(np.sum(ok[..., j])))
     return out
+
+
+def extreme_text(result: dict, key: str, which: str, cells=(...,), decimals: int = 2) -> str:
+    """The least or greatest of a paired comparison over some cells, ``"value ± SE"``.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`conjecture_study`.
+    key : str
+        A ratio of :func:`comparisons`, e.g. ``"rmse_ratio"``, whose SE is ``"<key>_se"``.
+    which : {"min", "max"}
+    cells : tuple
+        An index into the (R, D, F) arrays: the cells searched (default all).
+    decimals : int
+        Of :func:`~depthcore.book.formatting.value_se`.
+
+    Returns
+    -------
+    str
+        The extreme cell's value with its own SE.
+    """
+    if which not in ("min", "max"):
+        raise ValueError(f"which must be 'min' or 'max', got {which!r}")
+    values = np.asarray(result["paired"][key])[cells].ravel()
+    ses = np.asarray(result["paired"][f"{key}_se"])[cells].ravel()
+    i = int(np.argmin(values) if which == "min" else np.argmax(values))
+    return value_se(values[i], ses[i], decimals)
