@@ -33,6 +33,12 @@ the mean ``G^{-2}`` of the truth (Eq. (1)) with the velocity replaced by a
 chosen prior velocity (the paper's rule sets it to 0), covariance ``s I``
 (:func:`prior_for`). Truths of the second reading are drawn from that prior.
 
+Two filters are compared over the trials both answer (:func:`paired_comparison`,
+from the co-moments of their per-trial scores, :func:`paired_scores`): the
+ratio of their RMSEs and the difference of their coverages' distances from
+nominal, each with its delta-method error, tested by :func:`verdicts` with
+three outcomes (significantly better, significantly worse, undecided).
+
 Trials whose first three bearings have no noise-free solution in front of the
 camera are left out in both readings, as in :mod:`depthcore.study`; a filter
 that has no answer for a trial (the EKF's predicted depth behind the camera,

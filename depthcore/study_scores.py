@@ -495,7 +495,7 @@ class CoMoments:
 
     Holds a mean (K,) and a co-moment matrix (K, K) whatever the number of
     trials (:func:`pooled_comoments`): :meth:`add` each chunk's scores, one
-    row per trial, then read :attr:`mean` and :meth:`covariance`. The
+    row per trial, then read ``mean`` and :meth:`covariance`. The
     columns are named (``columns``) so that a pair of them can be picked out
     (:func:`pair_of` of its :meth:`summary`) for the delta-method errors of
     ratios and differences of means over the same trials (:func:`ratio_se`,
