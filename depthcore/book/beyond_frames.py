@@ -113,18 +113,14 @@ def frames_study(
                 rows[name].append((r["filters"][name], r["valid_trials"]))
             if group is plain:
                 paired.append(r["paired"])
-    out = {
-        "frames": np.array(frames),
-        "process_noise": float(process_noise),
-        "prior": prior,
-        "paired": paired,
-    }
+    out = {"frames": np.array(frames), "process_noise": float(process_noise), "prior": prior}
     for name, runs in rows.items():
         f = [x for x, _ in runs]
         out[name] = gather_scores(f, FRAMES_SCORES)
         out[name]["hellinger"] = np.array([x["hellinger_depth"]["mean"] for x in f])
         out[name]["hellinger_se"] = np.array([x["hellinger_depth"]["se"] for x in f])
         out[name]["trials"] = np.array([v for _, v in runs])
+    out["paired"] = paired
     return out
 
 
