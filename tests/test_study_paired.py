@@ -318,3 +318,20 @@ def test_study_keeps_the_paired_comoments_without_changing_its_scores():
         assert c68 == pytest.approx(d["coverage_68"], abs=1e-12)
         h = study_scores.pair_of(p, (name, "hellinger"), (name, "sd"))[0][0]
         assert h == pytest.approx(paired["filters"][name]["hellinger_depth"]["mean"], rel=1e-12)
+
+
+def test_the_paired_study_keeps_only_running_co_moments():
+    """Memory of a chunk, not of the trials: the peak of 16 chunks is that of 2, paired or not."""
+    import tracemalloc
+
+    def peak(n):
+        study.study(trials=10, seed=0, chunk=10, names=("ekf",), paired=True)  # warm the imports
+        tracemalloc.start()
+        study.study(trials=n, seed=0, chunk=50, names=("ekf", "ukf"), paired=True)
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        return peak
+
+    small, large = peak(100), peak(800)
+    # keeping each trial's 4 paired scores per filter would add 8 bytes each
+    assert large < small + 8 * (800 - 100) * 4 * 2 / 2
