@@ -33,6 +33,12 @@ the mean ``G^{-2}`` of the truth (Eq. (1)) with the velocity replaced by a
 chosen prior velocity (the paper's rule sets it to 0), covariance ``s I``
 (:func:`prior_for`). Truths of the second reading are drawn from that prior.
 
+Two filters are compared over the trials both answer (:func:`paired_comparison`,
+from the co-moments of their per-trial scores, :func:`paired_scores`): the
+ratio of their RMSEs and the difference of their coverages' distances from
+nominal, each with its delta-method error, tested by :func:`verdicts` with
+three outcomes (significantly better, significantly worse, undecided).
+
 Trials whose first three bearings have no noise-free solution in front of the
 camera are left out in both readings, as in :mod:`depthcore.study`; a filter
 that has no answer for a trial (the EKF's predicted depth behind the camera,
@@ -216,16 +222,27 @@ def depth_estimates(name: str, mu, rho: float, prior_mean, prior_cov, true_depth
     return out[0], out[1], out[2]
 
 
-def score_filters(mu, rho: float, prior_mean, prior_cov, true_depth, names=NAMES) -> dict:
-    """:func:`depth_scores` of each named filter over a batch of trials.
+def filter_estimates(mu, rho: float, prior_mean, prior_cov, true_depth, names=NAMES) -> dict:
+    """:func:`depth_estimates` of each named filter: ``{name: (mean, sd, cdf)}``, each (T,)."""
+    return {
+        name: depth_estimates(name, mu, rho, prior_mean, prior_cov, true_depth)
+        for name in check_names(names)
+    }
+
+
+def _answered(estimate) -> np.ndarray:
+    return np.all(np.isfinite(np.asarray(estimate)), axis=0)
+
+
+def score_estimates(estimates: dict, true_depth) -> dict:
+    """:func:`depth_scores` of each filter's :func:`filter_estimates` over the trials it answers.
 
     Each filter's scores also hold ``"failed"``, the trials it had no answer
     for (left out of its scores); a filter that answers fewer than two is refused.
     """
     out = {}
-    for name in check_names(names):
-        m, s, cdf = depth_estimates(name, mu, rho, prior_mean, prior_cov, true_depth)
-        ok = np.isfinite(m) & np.isfinite(s) & np.isfinite(cdf)
+    for name, (m, s, cdf) in estimates.items():
+        ok = _answered((m, s, cdf))
         if np.sum(ok) < 2:
             raise ValueError(
                 f"names: the {name} filter answers fewer than two trials; leave it out"
@@ -234,6 +251,54 @@ def score_filters(mu, rho: float, prior_mean, prior_cov, true_depth, names=NAMES
             **depth_scores(m[ok] - true_depth[ok], s[ok], cdf[ok]),
             "failed": int(np.sum(~ok)),
         }
+    return out
+
+
+def score_filters(mu, rho: float, prior_mean, prior_cov, true_depth, names=NAMES) -> dict:
+    """:func:`depth_scores` of each named filter over a batch of trials.
+
+    :func:`filter_estimates` scored by :func:`score_estimates`.
+    """
+    return score_estimates(
+        filter_estimates(mu, rho, prior_mean, prior_cov, true_depth, names), true_depth
+    )
+
+
+#: The per-trial depth scores whose co-moments :func:`paired_scores` keeps.
+PAIRED_SCORES = ("squared_error", "sd", "coverage_68", "coverage_95")
+
+
+def paired_scores(estimates: dict, true_depth) -> dict:
+    """The co-moments of every pair of filters' per-trial depth scores, over the trials both answer.
+
+    Parameters
+    ----------
+    estimates : dict
+        :func:`filter_estimates`.
+    true_depth : ndarray, shape (T,)
+
+    Returns
+    -------
+    dict
+        ``{(a, b): summary}`` for each pair of filters, ``a`` before ``b`` in
+        ``estimates``: :meth:`depthcore.study_scores.CoMoments.summary` with
+        columns ``[filter, score]`` for each score of :data:`PAIRED_SCORES`
+        (the squared error, the stated SD and whether the central 68 % and
+        95 % intervals hold the truth, :func:`depthcore.study_scores.interval_holds`),
+        for the paired comparisons of :func:`paired_comparison`.
+    """
+    names = list(estimates)
+    out = {}
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            ok = _answered(estimates[a]) & _answered(estimates[b])
+            moments = study_scores.CoMoments([(f, k) for f in (a, b) for k in PAIRED_SCORES])
+            values = []
+            for m, sd, cdf in (estimates[a], estimates[b]):
+                values += [(m[ok] - true_depth[ok]) ** 2, sd[ok]]
+                values += [study_scores.interval_holds(cdf[ok], p).astype(float) for p in LEVELS]
+            moments.add(np.column_stack(values))
+            out[(a, b)] = moments.summary()
     return out
 
 
@@ -279,7 +344,9 @@ def hard_cell(
         depth SD at frame ``N`` of the Cramér–Rao bound at the truth, the
         prior's information included,
         :func:`depthcore.bound.posterior_bound`), and for each reading of
-        :data:`READINGS` ``{"valid": trials kept, "filters": {name: scores}}``.
+        :data:`READINGS` ``{"valid": trials kept, "filters": {name: scores},
+        "paired": co-moments of each pair of filters' per-trial scores}``
+        (:func:`paired_scores`).
     """
     truth = _checks.finite_array(truth, "truth", (3,))
     rho = _checks.positive_scalar(rho, "rho")
@@ -304,16 +371,17 @@ def hard_cell(
         "bound_sd": float(np.sqrt(b[-1, 1, 1])),
     }
     drawn = study_trials.simulate(truth, rho, trials, fixed_rng, "fixed", prior_scale, frames)
-    depth = drawn.truths[:, 1]
-    out["fixed"] = {
-        "valid": len(drawn.mu),
-        "filters": score_filters(drawn.mu, rho, pm, pc, depth, names),
-    }
     draws = calibration.draw_from_prior(pm, pc, rho, trials, prior_rng, frames=frames)
-    out["prior"] = {
-        "valid": len(draws.mu),
-        "filters": score_filters(draws.mu, rho, pm, pc, draws.truth[:, 1], names),
-    }
+    for reading, mu, depth in (
+        ("fixed", drawn.mu, drawn.truths[:, 1]),
+        ("prior", draws.mu, draws.truth[:, 1]),
+    ):
+        estimates = filter_estimates(mu, rho, pm, pc, depth, names)
+        out[reading] = {
+            "valid": len(mu),
+            "filters": score_estimates(estimates, depth),
+            "paired": paired_scores(estimates, depth),
+        }
     return out
 
 
@@ -340,8 +408,48 @@ def hard_study(cells, rho: float, trials: int, seed, names=NAMES, frames: int = 
     ]
 
 
+def paired_comparison(cell: dict, reading: str, a: str, b: str) -> dict:
+    """Filter ``a`` against filter ``b`` over the trials of one reading both answer.
+
+    Parameters
+    ----------
+    cell : dict
+        From :func:`hard_cell`.
+    reading : {"fixed", "prior"}
+    a, b : str
+        Filters of the cell.
+
+    Returns
+    -------
+    dict of float
+        ``"rmse_ratio"`` (``a``'s depth RMSE over ``b``'s,
+        :func:`depthcore.study_scores.rmse_ratio_se`), ``"coverage_68_gap"``,
+        ``"coverage_95_gap"`` (how much farther ``a``'s coverage lies from its
+        level than ``b``'s, :func:`depthcore.study_scores.coverage_gap_difference`),
+        each with ``"<key>_se"``, and ``"trials"``.
+    """
+    if reading not in READINGS:
+        raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
+    if a == b:
+        raise ValueError(f"b: a filter is not compared with itself, got {a!r} twice")
+    pairs = cell[reading]["paired"]
+    summary = pairs[(a, b)] if (a, b) in pairs else pairs[(b, a)]
+    m, c, n = study_scores.pair_of(summary, (a, "squared_error"), (b, "squared_error"))
+    out = {
+        "rmse_ratio": float(np.sqrt(m[0] / m[1])),
+        "rmse_ratio_se": float(study_scores.rmse_ratio_se(m, c, n)),
+    }
+    for p in LEVELS:
+        key = f"coverage_{round(100 * p)}"
+        m, c, n = study_scores.pair_of(summary, (a, key), (b, key))
+        gap, se = study_scores.coverage_gap_difference(m, c, n, p)
+        out[f"{key}_gap"], out[f"{key}_gap_se"] = float(gap), float(se)
+    out["trials"] = n
+    return out
+
+
 def verdicts(cell: dict, reading: str, z: float = bound.Z) -> dict:
-    """Each filter's coverage tests and the conjecture's duel in one cell and reading.
+    """Each filter's coverage tests and the paired tests of the conjecture in one cell and reading.
 
     Parameters
     ----------
@@ -349,16 +457,34 @@ def verdicts(cell: dict, reading: str, z: float = bound.Z) -> dict:
         From :func:`hard_cell`.
     reading : {"fixed", "prior"}
     z : float
-        Critical value of the binomial test (default the two-sided 1 % point).
+        Critical value of the tests (default the two-sided 1 % point).
 
     Returns
     -------
     dict
         ``"calibrated_68"``, ``"calibrated_95"``: ``{name: bool}``, the
         coverage within ``z`` binomial standard errors of its level (the
-        nominal level's error, :func:`depthcore.study_scores.coverage_se`);
-        ``"so_nearer_68"``: the second-order filter's 68 % coverage nearer
-        nominal than the EKF's; ``"so_rmse"``: its RMSE the smaller.
+        nominal level's error, :func:`depthcore.study_scores.coverage_se`).
+        Where the cell holds the paired co-moments (:func:`paired_scores`),
+        the outcomes (``1``, ``0``, ``-1``) of two-sided paired tests
+        (:func:`depthcore.study_scores.difference_verdict`), each with the SE
+        it used as ``"<key>_se"``:
+
+        * ``"so_nearer_68"``: ``1`` where the second-order filter's 68 %
+          coverage is significantly nearer its level than the EKF's, ``-1``
+          where significantly farther, ``0`` where the test detects no
+          difference;
+        * ``"so_rmse"``: ``1`` where its RMSE is significantly the smaller
+          (the logarithm of the ratio of the two RMSEs against 0, with the
+          ratio's relative SE), ``-1`` significantly the larger;
+        * ``"po_best"`` (with the optimal filter and another): ``1`` where
+          the optimal filter's RMSE is significantly smaller than every other
+          filter's, ``-1`` where some filter's is significantly smaller than
+          it, ``0`` otherwise (five tests, each at the size of ``z``); its SE
+          the largest of the log-ratios';
+        * ``"ekf_below"`` (with the EKF, at the ``"fixed"`` truth): ``1``
+          where the EKF's RMSE lies significantly below the cell's bound SD
+          (a one-sample test with the RMSE's SE), ``-1`` significantly above.
     """
     if reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
@@ -371,8 +497,26 @@ def verdicts(cell: dict, reading: str, z: float = bound.Z) -> dict:
             name: bool(abs(s[key] - p) <= z * study_scores.coverage_se(p, s["trials"]))
             for name, s in f.items()
         }
+    if "paired" not in cell[reading]:
+        return out
+    verdict = study_scores.difference_verdict
     if "second_order" in f and "ekf" in f:
-        so, ekf = f["second_order"], f["ekf"]
-        out["so_nearer_68"] = bool(abs(so["coverage_68"] - 0.68) < abs(ekf["coverage_68"] - 0.68))
-        out["so_rmse"] = bool(so["rmse"] < ekf["rmse"])
+        d = paired_comparison(cell, reading, "second_order", "ekf")
+        out["so_nearer_68"] = int(-verdict(d["coverage_68_gap"], d["coverage_68_gap_se"], z))
+        out["so_nearer_68_se"] = d["coverage_68_gap_se"]
+        out["so_rmse_se"] = d["rmse_ratio_se"] / d["rmse_ratio"]
+        out["so_rmse"] = int(verdict(-np.log(d["rmse_ratio"]), out["so_rmse_se"], z))
+    others = [name for name in f if name != "optimal"]
+    if "optimal" in f and others:
+        duels = [paired_comparison(cell, reading, "optimal", name) for name in others]
+        ses = [d["rmse_ratio_se"] / d["rmse_ratio"] for d in duels]
+        wins = [
+            int(verdict(-np.log(d["rmse_ratio"]), se, z)) for d, se in zip(duels, ses, strict=True)
+        ]
+        out["po_best"] = 1 if min(wins) == 1 else (-1 if min(wins) == -1 else 0)
+        out["po_best_se"] = max(ses)
+    if "ekf" in f and reading == "fixed":
+        ekf = f["ekf"]
+        out["ekf_below"] = int(verdict(cell["bound_sd"] - ekf["rmse"], ekf["rmse_se"], z))
+        out["ekf_below_se"] = ekf["rmse_se"]
     return out

@@ -56,7 +56,7 @@ from . import _checks
 from .filters import FILTERS, NAMES, check_names
 from .gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from .scenarios import SCENARIOS
-from .study_scores import CALIBRATION_LEVELS, Tally, coverage_se
+from .study_scores import CALIBRATION_LEVELS, CoMoments, Tally, coverage_se, trial_scores
 from .study_trials import PARTICLES, run_filters, simulate
 
 #: Trials drawn and filtered together by :func:`study`: its memory is that of one chunk.
@@ -75,6 +75,7 @@ def study(
     progress: Callable[[int, int], None] | None = None,
     frames: int = 3,
     process_noise: float = 0.0,
+    paired: bool = False,
 ) -> dict:
     """The whole study; returns a JSON-ready dict.
 
@@ -111,6 +112,18 @@ def study(
         trial (the scores are against each trial's own); the state at time 3
         is ``truth`` in every trial. The named filters must support the
         frames and the process noise (:class:`depthcore.filters.Filter`).
+    paired : bool
+        Also keep, over the same chunks, the running mean and covariance of
+        every filter's per-trial depth scores
+        (:func:`~depthcore.study_scores.trial_scores`, a
+        :class:`~depthcore.study_scores.CoMoments`), returned as
+        ``"paired"`` (:meth:`~depthcore.study_scores.CoMoments.summary`,
+        columns ``[filter, score]``), from which the errors of ratios and
+        differences of two scores over the same trials follow
+        (:func:`~depthcore.study_scores.pair_of`,
+        :func:`~depthcore.study_scores.ratio_se`,
+        :func:`~depthcore.study_scores.paired_difference_se`). Its memory
+        grows with the square of the number of filters, not with ``trials``.
 
     Notes
     -----
@@ -140,7 +153,7 @@ def study(
         )
     seed = _checks.seed_sequence(seed)
     noise_rng, particle_rng = (np.random.default_rng(s) for s in _checks.spawn(seed, 2))
-    tallies = None
+    tallies = comoments = None
     n_valid = n_rejected = 0
     for start in range(0, int(trials), chunk):
         part = simulate(
@@ -157,8 +170,14 @@ def study(
         n_rejected += part.n_rejected
         if len(part.mu):
             n_valid += len(part.mu)
-            for name, est in run_filters(part, names, particle_rng, n_particles).items():
+            estimates = run_filters(part, names, particle_rng, n_particles)
+            for name, est in estimates.items():
                 tallies[name].add(est)
+            if paired:
+                per_trial = {n: trial_scores(e, part.truth) for n, e in estimates.items()}
+                if comoments is None:
+                    comoments = CoMoments([(n, k) for n in names for k in per_trial[n]])
+                comoments.add(np.column_stack([per_trial[n][k] for n, k in comoments.columns]))
         if progress is not None:
             progress(min(start + chunk, int(trials)), int(trials))
     if n_valid == 0:
@@ -166,7 +185,7 @@ def study(
             f"truth and rho leave no valid trial: all {trials} noisy triples are degenerate "
             "or put the point behind the camera"
         )
-    return {
+    out = {
         "truth": [float(v) for v in part.truth],
         "rho": float(rho),
         "prior": prior,
@@ -179,6 +198,9 @@ def study(
         "process_noise": q,
         "filters": {name: tallies[name].scores() for name in names},
     }
+    if paired:
+        out["paired"] = comoments.summary()
+    return out
 
 
 #: The ``truth`` that asks for truths drawn from the prior (:func:`prior_study`).

@@ -189,23 +189,48 @@ def test_conjecture_study_entries_are_frames_study_entries():
 def test_conjecture_wins_compare_cell_by_cell():
     c = beyond_conjecture.conjecture_study([3, 5], [1 / 500, 1 / 100], [6.0, 12.0], 40, 4)
     w = beyond_conjecture.conjecture_wins(c)
-    so, ekf = c["second_order"], c["ekf"]
+    so, ekf, pairs = c["second_order"], c["ekf"], c["paired"]
+    z = beyond_frames.COVERAGE_Z
+    # the paired comparisons are of the scores the study reports, over the same trials
+    assert_allclose(pairs["rmse_ratio"], so["rmse"] / ekf["rmse"], rtol=1e-12)
+    assert_allclose(pairs["ekf_rmse_ratio"] * pairs["rmse_ratio"], 1.0, rtol=1e-12)
+    assert_allclose(pairs["hellinger_ratio"], ekf["hellinger"] / so["hellinger"], rtol=1e-12)
+    assert_allclose(pairs["hellinger_difference"], so["hellinger"] - ekf["hellinger"], atol=1e-14)
+    gap = np.abs(so["coverage_68"] - 0.68) - np.abs(ekf["coverage_68"] - 0.68)
+    assert_allclose(pairs["coverage_68_gap"], gap, atol=1e-14)
+    assert (pairs["trials"] == so["trials"]).all()
     for idx in np.ndindex(so["rmse"].shape):
-        assert w["hellinger"][idx] == (so["hellinger"][idx] < ekf["hellinger"][idx])
-        assert w["rmse"][idx] == (so["rmse"][idx] < ekf["rmse"][idx])
+        # three outcomes: 1 the second-order filter significantly better, -1 worse, 0 neither
+        d, se = pairs["hellinger_difference"][idx], pairs["hellinger_difference_se"][idx]
+        assert w["hellinger"][idx] == (1 if d < -z * se else -1 if d > z * se else 0)
+        r, se = pairs["rmse_ratio"][idx], pairs["rmse_ratio_se"][idx] / pairs["rmse_ratio"][idx]
+        assert w["rmse"][idx] == (1 if np.log(r) < -z * se else -1 if np.log(r) > z * se else 0)
+        d, se = pairs["coverage_68_gap"][idx], pairs["coverage_68_gap_se"][idx]
+        assert w["coverage_68"][idx] == (1 if d < -z * se else -1 if d > z * se else 0)
         se = np.sqrt(0.68 * 0.32 / so["trials"][idx])
-        z_so = abs(so["coverage_68"][idx] - 0.68) / se
-        z_ekf = abs(ekf["coverage_68"][idx] - 0.68) / np.sqrt(0.68 * 0.32 / ekf["trials"][idx])
-        assert w["coverage_68"][idx] == (z_so < z_ekf)
         assert w["calibrated_68"]["ekf"][idx] == (
             abs(ekf["coverage_68"][idx] - 0.68) <= beyond_frames.COVERAGE_Z * se
         )
+    assert set(np.unique(w["hellinger"])) <= {-1, 0, 1}
+    # the EKF is never nearer the optimal filter, and at the lower noise p_s is, significantly
+    assert (w["hellinger"] >= 0).all() and (w["hellinger"][0] == 1).all()
     # each mean Hellinger distance with its standard error, positive where trials differ
     h, h_se = so["hellinger"], so["hellinger_se"]
     assert h_se.shape == h.shape and (h_se > 0).all() and (h_se < h).all()
     texts = beyond_conjecture.conjecture_texts(c, w, "cj")
     assert texts["cj_cells"] == "4" and texts["cj_1_x"] == "5"
-    assert texts["cj_0_hellinger"] == str(int(w["hellinger"][..., 0].sum()))
+    for score in ("hellinger", "rmse", "coverage_68"):
+        v = w[score][..., 0]
+        counts = [int(np.sum(v == k)) for k in (1, 0, -1)]
+        assert texts[f"cj_0_{score}"] == str(counts[0])
+        assert texts[f"cj_0_{score}_ties"] == str(counts[1])
+        assert texts[f"cj_0_{score}_losses"] == str(counts[2])
+        assert texts[f"cj_0_{score}_table"] == " / ".join(map(str, counts)) and sum(counts) == 4
+    # the paired tests' power: the largest over the cells of (2.576 + 0.842) SE
+    d_h = (2.5758 + 0.8416) * w["hellinger_se"].max()
+    assert float(texts["cj_detect_hellinger"]) == pytest.approx(d_h, abs=1e-3)
+    d_r = (2.5758 + 0.8416) * w["rmse_se"].max()
+    assert float(texts["cj_detect_rmse"]) == pytest.approx(np.exp(d_r), abs=0.01)
     # the verdicts' power: a 1 % test at the fewest trials of a cell, 80 % power
     # against the difference (2.576 + 0.842) sqrt(p (1 - p) / n)
     n = min(int(c[name]["trials"].min()) for name in ("optimal", "second_order", "ekf"))
@@ -260,3 +285,16 @@ def test_odd_arguments_are_refused_in_one_line_naming_them(call, message):
     with pytest.raises(ValueError, match=message) as info:
         call()
     assert "\n" not in str(info.value)
+
+
+def test_conjecture_extreme_text_gives_the_extreme_cell_with_its_own_se():
+    result = {
+        "paired": {
+            "rmse_ratio": np.array([[[1.5, 0.9]], [[2.5, 0.8]]]),  # (R, D, F) = (2, 1, 2)
+            "rmse_ratio_se": np.array([[[0.1, 0.02]], [[0.3, 0.04]]]),
+        }
+    }
+    assert beyond_conjecture.extreme_text(result, "rmse_ratio", "min") == "0.80 ± 0.04"
+    assert beyond_conjecture.extreme_text(result, "rmse_ratio", "max", (..., 0), 1) == "2.5 ± 0.3"
+    with pytest.raises(ValueError, match="which"):
+        beyond_conjecture.extreme_text(result, "rmse_ratio", "least")

@@ -127,25 +127,71 @@ def test_hard_cell_reports_the_bound_and_the_second_difference(cell):
         assert cell[reading]["filters"]["optimal"]["failed"] == 0
 
 
-def test_verdicts_read_the_coverages():
-    def scores(c68, c95, rmse):
-        return {"coverage_68": c68, "coverage_95": c95, "rmse": rmse, "trials": 400}
+def constructed_cell(bound_sd):
+    """A cell of 400 trials, every filter's depth error a multiple of one shared error ``e``.
 
-    cell = {
-        "fixed": {
-            "filters": {
-                "optimal": scores(0.68, 0.95, 1.0),
-                "second_order": scores(0.60, 0.95, 2.0),
-                "ekf": scores(0.20, 0.40, 1.5),
-            }
-        }
+    The optimal filter errs by ``e`` and states SD 1 (68 % coverage 0.68); the
+    second-order filter by ``2 e`` with SD 2.6 (coverage 0.80), the EKF by
+    ``1.5 e`` with SD 0.3 (coverage 0.16): RMSEs 1, 2 and 1.5.
+    """
+    from scipy.special import ndtr
+
+    rng = np.random.default_rng(11)
+    e = rng.standard_normal(400)
+    depth = np.full(400, 6.0)
+    estimates = {
+        name: (depth + k * e, np.full(400, sd), ndtr(-k * e / sd))
+        for name, k, sd in (("optimal", 1.0, 1.0), ("second_order", 2.0, 2.6), ("ekf", 1.5, 0.3))
     }
+    reading = {
+        "filters": hardness.score_estimates(estimates, depth),
+        "paired": hardness.paired_scores(estimates, depth),
+    }
+    return {"fixed": reading, "prior": reading, "bound_sd": bound_sd}
+
+
+def test_verdicts_read_the_coverages_and_test_the_paired_differences():
+    cell = constructed_cell(bound_sd=2.0)
+    f = cell["fixed"]["filters"]
+    assert f["second_order"]["coverage_68"] == pytest.approx(0.80, abs=0.05)
+    assert f["ekf"]["coverage_68"] == pytest.approx(0.16, abs=0.05)
     v = hardness.verdicts(cell, "fixed")
     assert v["calibrated_68"] == {"optimal": True, "second_order": False, "ekf": False}
-    assert v["calibrated_95"]["second_order"] and not v["calibrated_95"]["ekf"]
-    assert v["so_nearer_68"] and not v["so_rmse"]
+    assert not v["calibrated_95"]["ekf"]
+    # p_s's coverage significantly nearer nominal; its RMSE (2) significantly above the EKF's (1.5)
+    assert v["so_nearer_68"] == 1 and v["so_rmse"] == -1
+    # a log-ratio of proportional errors is exact: SE 0 but for rounding
+    assert v["so_rmse_se"] < 1e-6
+    assert v["po_best"] == 1  # RMSE 1 against 2 and 1.5
+    assert v["ekf_below"] == 1  # 1.5 +- 0.05 below 2
+    assert "ekf_below" not in hardness.verdicts(cell, "prior")
+    near = hardness.verdicts(constructed_cell(bound_sd=f["ekf"]["rmse"]), "fixed")
+    assert near["ekf_below"] == 0 and near["ekf_below_se"] == f["ekf"]["rmse_se"]
+    above = hardness.verdicts(constructed_cell(bound_sd=1.0), "fixed")
+    assert above["ekf_below"] == -1
+    d = hardness.paired_comparison(cell, "fixed", "ekf", "second_order")
+    assert d["rmse_ratio"] == pytest.approx(0.75, rel=1e-12)
+    assert d["coverage_68_gap"] == pytest.approx(
+        abs(f["ekf"]["coverage_68"] - 0.68) - abs(f["second_order"]["coverage_68"] - 0.68)
+    )
     with pytest.raises(ValueError, match="reading"):
         hardness.verdicts(cell, "truth")
+    with pytest.raises(ValueError, match="itself"):
+        hardness.paired_comparison(cell, "fixed", "ekf", "ekf")
+
+
+def test_a_pair_is_compared_over_the_trials_both_filters_answer():
+    cell = hardness.hard_cell(FIG2.c, RHO, 1000.0, 0.0, 60, 3, ("optimal", "second_order", "ekf"))
+    for reading in hardness.READINGS:
+        f = cell[reading]["filters"]
+        failed = f["ekf"]["failed"]
+        pair = cell[reading]["paired"][("second_order", "ekf")]
+        assert pair["trials"] == cell[reading]["valid"] - failed
+        if failed == 0:
+            d = hardness.paired_comparison(cell, reading, "second_order", "ekf")
+            assert d["rmse_ratio"] == pytest.approx(
+                f["second_order"]["rmse"] / f["ekf"]["rmse"], rel=1e-12
+            )
 
 
 def test_hard_study_texts_and_figure():
@@ -196,3 +242,10 @@ def test_hard_cell_beyond_three_frames_scores_the_depth_at_frame_n():
     assert abs(e["bias"]) < 13.0 and e["failed"] == 0
     with pytest.raises(ValueError, match="frames"):
         hardness.hard_cell(FIG2.c, RHO, 1.0, 0.0, 4, 1, ("optimal",), 2)
+
+
+def test_outcome_counts_count_wins_ties_and_losses():
+    assert beyond_hard.outcome_counts([1, 0, -1, 1, 1]) == (3, 1, 1)
+    assert beyond_hard.outcome_counts(np.zeros((2, 3), dtype=int)) == (0, 6, 0)
+    with pytest.raises(ValueError, match="outcomes"):
+        beyond_hard.outcome_counts([1, 2])

@@ -3,20 +3,22 @@
 Recommended import: ``from depthcore.book import beyond_conjecture``.
 
 :func:`conjecture_study` scores both filters against the optimal filter and
-the truth over frames, noise levels and depths, :func:`conjecture_wins` says
-where one beats the other by more than chance, :func:`conjecture_figure`
-draws it and :func:`conjecture_texts` gives the texts the chapter glues.
+the truth over frames, noise levels and depths, with their paired
+:func:`comparisons` over the same trials; :func:`conjecture_wins` says where
+one beats the other by more than chance (a paired test per cell),
+:func:`conjecture_figure` draws it and :func:`conjecture_texts` and
+:func:`extreme_text` give the texts the chapter glues.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks
+from .. import _checks, study_scores
 from .. import filters as _filters
-from ..study_scores import TEST_POWER, detectable_difference
+from ..study_scores import TEST_POWER, detectable_difference, detectable_shift
 from .beyond_frames import COVERAGE_Z, coverage_test, frames_study
-from .formatting import rho_label
+from .formatting import rho_label, value_se
 from .style import WIDTH, subplots
 
 
@@ -56,7 +58,9 @@ def conjecture_study(
     dict
         ``"frames"`` (F,), ``"rho"`` (R,), ``"depth"`` (D,), ``"truth"`` (D, 3)
         and per filter (``"optimal"``, ``"second_order"``, ``"ekf"``) the
-        scores of :func:`~depthcore.book.beyond_frames.frames_study` as arrays of shape (R, D, F).
+        scores of :func:`~depthcore.book.beyond_frames.frames_study` as arrays of shape (R, D, F);
+        ``"paired"``: the :func:`comparisons` of the second-order filter and
+        the EKF over the same trials, each an array (R, D, F).
     """
     rhos = _checks.nonempty(np.atleast_1d(_checks.positive_array(rhos, "rhos")), "rhos")
     depths = _checks.nonempty(np.atleast_1d(_checks.positive_array(depths, "depths")), "depths")
@@ -74,32 +78,107 @@ def conjecture_study(
         out[name] = {
             s: np.array([[run[name][s] for run in row] for row in runs]) for s in runs[0][0][name]
         }
+    cells = [[[comparisons(p) for p in run["paired"]] for run in row] for row in runs]
+    out["paired"] = {
+        k: np.array([[[c[k] for c in cell] for cell in row] for row in cells])
+        for k in cells[0][0][0]
+    }
     return out
+
+
+def comparisons(summary: dict) -> dict:
+    """The second-order filter against the EKF over the same trials, each with its paired SE.
+
+    Parameters
+    ----------
+    summary : dict
+        The co-moments of the filters' per-trial depth scores,
+        ``study(..., paired=True)["paired"]`` with the optimal, second-order
+        and EKF filters.
+
+    Returns
+    -------
+    dict of float
+        ``"hellinger_difference"`` (second-order less EKF mean Hellinger
+        distance to the optimal filter, :func:`~depthcore.study_scores.paired_difference_se`),
+        ``"hellinger_ratio"`` (EKF over second-order,
+        :func:`~depthcore.study_scores.mean_ratio_se`), ``"rmse_ratio"``
+        (second-order RMSE over the EKF's) and ``"ekf_rmse_ratio"`` (its
+        inverse, :func:`~depthcore.study_scores.rmse_ratio_se`),
+        ``"coverage_68_gap"`` and ``"coverage_95_gap"`` (how much farther the
+        second-order coverage is from its level than the EKF's,
+        :func:`~depthcore.study_scores.coverage_gap_difference`), each with
+        ``"<key>_se"``, and ``"trials"``.
+    """
+    so, ekf = "second_order", "ekf"
+    out = {}
+    m, c, n = study_scores.pair_of(summary, (so, "hellinger"), (ekf, "hellinger"))
+    out["hellinger_difference"] = float(m[0] - m[1])
+    out["hellinger_difference_se"] = float(study_scores.paired_difference_se(c, n))
+    m, c, n = study_scores.pair_of(summary, (ekf, "hellinger"), (so, "hellinger"))
+    out["hellinger_ratio"] = float(m[0] / m[1])
+    out["hellinger_ratio_se"] = float(study_scores.mean_ratio_se(m, c, n))
+    for key, pair in (("rmse_ratio", (so, ekf)), ("ekf_rmse_ratio", (ekf, so))):
+        m, c, n = study_scores.pair_of(summary, *((f, "squared_error") for f in pair))
+        out[key] = float(np.sqrt(m[0] / m[1]))
+        out[f"{key}_se"] = float(study_scores.rmse_ratio_se(m, c, n))
+    for level in (68, 95):
+        key = f"coverage_{level}"
+        m, c, n = study_scores.pair_of(summary, (so, key), (ekf, key))
+        gap, se = study_scores.coverage_gap_difference(m, c, n, level / 100)
+        out[f"{key}_gap"], out[f"{key}_gap_se"] = float(gap), float(se)
+    out["trials"] = n
+    return out
+
+
+#: The duels of :func:`conjecture_wins`: each score's paired difference (positive where the
+#: second-order filter does worse) and its SE, from :func:`comparisons`.
+DUELS = {
+    "hellinger": "hellinger_difference",
+    "coverage_68": "coverage_68_gap",
+    "coverage_95": "coverage_95_gap",
+}
 
 
 def conjecture_wins(result: dict, z: float = COVERAGE_Z) -> dict:
     """Where the second-order filter beats the EKF, cell by cell of :func:`conjecture_study`.
+
+    Each duel is a paired two-sided test at critical value ``z``
+    (:func:`~depthcore.study_scores.difference_verdict`) over the trials both
+    filters ran on, with three outcomes per cell: ``1`` the second-order filter
+    significantly better, ``-1`` the EKF significantly better, ``0`` no
+    detectable difference.
 
     Parameters
     ----------
     result : dict
         From :func:`conjecture_study`; its arrays have shape (R, D, F).
     z : float
-        Critical value of :func:`~depthcore.book.beyond_frames.coverage_test`.
+        Critical value of the tests and of
+        :func:`~depthcore.book.beyond_frames.coverage_test`.
 
     Returns
     -------
     dict
-        Boolean arrays of shape (R, D, F): ``"hellinger"`` (the second-order
-        depth marginal is nearer the optimal one), ``"rmse"`` (its depth mean
-        has the smaller RMSE), and for each level ``"coverage_68"``,
-        ``"coverage_95"`` (its coverage lies fewer standard errors from the
-        level); ``"calibrated_<level>"`` ``{name: (R, D, F)}``, the verdicts of
-        :func:`~depthcore.book.beyond_frames.coverage_test` for ``"optimal"``, ``"second_order"``
-        and ``"ekf"``.
+        Integer arrays of shape (R, D, F): ``"hellinger"`` (the second-order
+        depth marginal nearer the optimal one: the paired difference of the
+        mean Hellinger distances), ``"rmse"`` (its depth mean's RMSE smaller:
+        the logarithm of the ratio of the RMSEs against 0), and for each level
+        ``"coverage_68"``, ``"coverage_95"`` (its coverage nearer the level:
+        the paired difference of the distances from it); the same with
+        ``"_se"`` appended, the SE (R, D, F) each test used (the RMSE
+        ratio's relative SE for ``"rmse"``); ``"calibrated_<level>"`` ``{name: (R, D, F)}``,
+        the verdicts of :func:`~depthcore.book.beyond_frames.coverage_test`
+        for ``"optimal"``, ``"second_order"`` and ``"ekf"``.
     """
-    so, ekf = result["second_order"], result["ekf"]
-    out = {"hellinger": so["hellinger"] < ekf["hellinger"], "rmse": so["rmse"] < ekf["rmse"]}
+    pairs = result["paired"]
+    out = {}
+    for score, key in DUELS.items():
+        out[score] = -study_scores.difference_verdict(pairs[key], pairs[f"{key}_se"], z)
+        out[f"{score}_se"] = pairs[f"{key}_se"]
+    # the ratio's logarithm against 0: its SE is the ratio's relative SE
+    out["rmse_se"] = pairs["rmse_ratio_se"] / pairs["rmse_ratio"]
+    out["rmse"] = study_scores.difference_verdict(-np.log(pairs["rmse_ratio"]), out["rmse_se"], z)
     for level in (68, 95):
         tests = {
             name: coverage_test(
@@ -107,7 +186,6 @@ def conjecture_wins(result: dict, z: float = COVERAGE_Z) -> dict:
             )
             for name in ("optimal", "second_order", "ekf")
         }
-        out[f"coverage_{level}"] = np.abs(tests["second_order"]["z"]) < np.abs(tests["ekf"]["z"])
         out[f"calibrated_{level}"] = {
             name: t["verdict"] == "calibrated" for name, t in tests.items()
         }
@@ -196,8 +274,18 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
     dict
         ``"<prefix>_cells"`` (cells per ``N``: noise levels times depths) and,
         for the ``j``-th ``N``: ``"<prefix>_<j>_x"`` (``N``),
-        ``"<prefix>_<j>_<score>"`` (cells where the second-order filter wins,
-        for ``"hellinger"``, ``"rmse"``, ``"coverage_68"``, ``"coverage_95"``)
+        ``"<prefix>_<j>_<score>"`` (cells where the second-order filter wins
+        its paired test, for ``"hellinger"``, ``"rmse"``, ``"coverage_68"``,
+        ``"coverage_95"``), ``"<prefix>_<j>_<score>_ties"`` (cells where the
+        test detects no difference), ``"<prefix>_<j>_<score>_losses"`` (cells
+        where the EKF wins) and ``"<prefix>_<j>_<score>_table"`` (the three
+        as ``"wins / ties / losses"``); ``"<prefix>_detect_<score>"``, the
+        largest over the cells of the difference the paired test finds with
+        power :data:`~depthcore.study_scores.TEST_POWER`
+        (:func:`~depthcore.study_scores.detectable_shift`): of the mean
+        Hellinger distances, of the RMSEs (the factor by which they differ,
+        from the shift of their ratio's logarithm), of the coverages'
+        distances from their levels (in percentage points);
         and ``"<prefix>_<j>_cal<level>_<filter>"`` (cells where the filter's
         coverage passes the test) for ``"optimal"``, ``"second_order"``, ``"ekf"``.
         The power of those verdicts: ``"<prefix>_test_size"`` (the test's
@@ -226,11 +314,52 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
         for level in (68, 95):
             d = float(detectable_difference(level / 100, trials, size, TEST_POWER))
             out[f"{prefix}_detect_{level}{suffix}"] = f"{100 * d:.1f} points"
+    for score in ("hellinger", "rmse", "coverage_68", "coverage_95"):
+        d = float(np.max(detectable_shift(wins[f"{score}_se"], size, TEST_POWER)))
+        if score == "hellinger":
+            out[f"{prefix}_detect_{score}"] = f"{d:.3f}"
+        elif score == "rmse":  # a shift of the log-ratio, as a factor
+            out[f"{prefix}_detect_{score}"] = f"{np.exp(d):.2f}"
+        else:
+            out[f"{prefix}_detect_{score}"] = f"{100 * d:.1f} points"
     for j, n in enumerate(result["frames"]):
         out[f"{prefix}_{j}_x"] = str(int(n))
         for score in ("hellinger", "rmse", "coverage_68", "coverage_95"):
-            out[f"{prefix}_{j}_{score}"] = str(int(np.sum(wins[score][..., j])))
+            w = wins[score][..., j]
+            counts = [int(np.sum(w == v)) for v in (1, 0, -1)]
+            out[f"{prefix}_{j}_{score}"] = str(counts[0])
+            out[f"{prefix}_{j}_{score}_ties"] = str(counts[1])
+            out[f"{prefix}_{j}_{score}_losses"] = str(counts[2])
+            out[f"{prefix}_{j}_{score}_table"] = " / ".join(str(c) for c in counts)
         for level in (68, 95):
             for name, ok in wins[f"calibrated_{level}"].items():
                 out[f"{prefix}_{j}_cal{level}_{name}"] = str(int(np.sum(ok[..., j])))
     return out
+
+
+def extreme_text(result: dict, key: str, which: str, cells=(...,), decimals: int = 2) -> str:
+    """The least or greatest of a paired comparison over some cells, ``"value ± SE"``.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`conjecture_study`.
+    key : str
+        A ratio of :func:`comparisons`, e.g. ``"rmse_ratio"``, whose SE is ``"<key>_se"``.
+    which : {"min", "max"}
+    cells : tuple
+        An index into the (R, D, F) arrays: the cells searched (default all).
+    decimals : int
+        Of :func:`~depthcore.book.formatting.value_se`.
+
+    Returns
+    -------
+    str
+        The extreme cell's value with its own SE.
+    """
+    if which not in ("min", "max"):
+        raise ValueError(f"which must be 'min' or 'max', got {which!r}")
+    values = np.asarray(result["paired"][key])[cells].ravel()
+    ses = np.asarray(result["paired"][f"{key}_se"])[cells].ravel()
+    i = int(np.argmin(values) if which == "min" else np.argmax(values))
+    return value_se(values[i], ses[i], decimals)

@@ -83,7 +83,9 @@ def frames_study(
         (of the depth) and ``"nees"``, each with its standard error
         (:func:`~depthcore.book.beyond_study.gather_scores`), ``"hellinger"`` (mean Hellinger
         distance of the depth marginal to the optimal one) with ``"hellinger_se"``,
-        and ``"trials"`` (valid trials scored).
+        and ``"trials"`` (valid trials scored); ``"paired"``, a list (F,) of
+        the per-trial depth scores' co-moments of the filters that draw no
+        random numbers, over their common trials (``study(..., paired=True)``).
     """
     frames = [_checks.count(n, "frames") for n in _checks.nonempty(np.atleast_1d(frames), "frames")]
     names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
@@ -92,6 +94,7 @@ def frames_study(
     particle_trials = trials if particle_trials is None else particle_trials
     groups = [(plain, trials)] + ([(("optimal",) + random, particle_trials)] if random else [])
     rows = {name: [] for name in names}
+    paired = []
     for n in frames:
         for group, t in groups:
             r = study.study(
@@ -104,9 +107,12 @@ def frames_study(
                 n_particles=n_particles,
                 frames=n,
                 process_noise=process_noise,
+                paired=group is plain,
             )
             for name in group[1:] if group is not plain else group:
                 rows[name].append((r["filters"][name], r["valid_trials"]))
+            if group is plain:
+                paired.append(r["paired"])
     out = {"frames": np.array(frames), "process_noise": float(process_noise), "prior": prior}
     for name, runs in rows.items():
         f = [x for x, _ in runs]
@@ -114,6 +120,7 @@ def frames_study(
         out[name]["hellinger"] = np.array([x["hellinger_depth"]["mean"] for x in f])
         out[name]["hellinger_se"] = np.array([x["hellinger_depth"]["se"] for x in f])
         out[name]["trials"] = np.array([v for _, v in runs])
+    out["paired"] = paired
     return out
 
 

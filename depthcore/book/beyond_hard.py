@@ -4,7 +4,8 @@ Recommended import: ``from depthcore.book import beyond_hard``.
 
 :func:`hard_figure` draws each filter's coverage over the cells of
 :func:`depthcore.hardness.hard_study`; :func:`hard_label` and
-:func:`hard_texts`, :func:`score_text` and :func:`extreme_text` give the texts the chapter glues.
+:func:`hard_texts`, :func:`score_text` and :func:`extreme_text` give the texts the chapter glues;
+:func:`outcome_counts` counts the outcomes of its paired tests.
 """
 
 from __future__ import annotations
@@ -157,3 +158,23 @@ def extreme_text(cells: list, reading: str, name: str, score: str, which: str, w
     masked = np.where(where, values, np.inf if which == "min" else -np.inf)
     i = int(np.argmin(masked) if which == "min" else np.argmax(masked))
     return i, score_text(cells[i][reading]["filters"][name], score)
+
+
+def outcome_counts(outcomes) -> tuple:
+    """How many paired tests came out ``1``, ``0`` and ``-1``.
+
+    Parameters
+    ----------
+    outcomes : array_like of int, shape (...)
+        Outcomes of :func:`depthcore.study_scores.difference_verdict` (or of
+        :func:`depthcore.hardness.verdicts`).
+
+    Returns
+    -------
+    (int, int, int)
+        Significantly above (a win), undecided, significantly below.
+    """
+    v = np.asarray(outcomes)
+    if not np.isin(v, (-1, 0, 1)).all():
+        raise ValueError("outcomes must each be 1, 0 or -1")
+    return tuple(int(np.sum(v == k)) for k in (1, 0, -1))
