@@ -392,7 +392,8 @@ def test_the_cached_outputs_are_compared_with_the_references(tmp_path, monkeypat
 def test_make_test_executes_each_page_once_alone_before_the_builds():
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
     recipe = makefile.split("\ntest: ", 1)[1].split("\n\n", 1)[0]
-    assert "for stage in $(TEST_STAGES)" in recipe and "$(MAKE) --no-print-directory $$stage" in recipe
+    assert "for stage in $(TEST_STAGES)" in recipe
+    assert "$(MAKE) --no-print-directory $$stage" in recipe
     steps = makefile.split("\nTEST_STAGES := ", 1)[1].split("\n", 1)[0].split()
     assert steps.index("notebooks-alone") < steps.index("pdf") < steps.index("book")
     assert "notebooks-standalone" not in steps  # a second execution of every page
