@@ -78,7 +78,7 @@ $(STAMP): requirements.txt
 	  { echo "make: Python 3.11 is required, $(PYTHON) is $$($(PYTHON) --version 2>&1); set PYTHON=/path/to/python3.11" >&2; exit 1; }
 	rm -rf $(VENV)
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q -r requirements.txt
+	$(PY) -m pip install -q --no-compile -r requirements.txt
 	touch $(STAMP)
 
 $(KERNEL)/.installed: $(STAMP) $(wildcard tools/jupyter/kernels/python3/*)
@@ -103,7 +103,7 @@ cite-venv: $(CITE_STAMP)
 $(ALONE_STAMP): requirements.txt $(STAMP)
 	rm -rf $(ALONE_VENV)
 	$(PYTHON) -m venv $(ALONE_VENV)
-	$(ALONE_VENV)/bin/python -m pip install -q -r requirements.txt
+	$(ALONE_VENV)/bin/python -m pip install -q --no-compile -r requirements.txt
 	touch $(ALONE_STAMP)
 
 # The HTML book ships, under _build/html/downloads/, what a reader takes away:

@@ -645,7 +645,7 @@ def ratio_se(means, cov, trials, powers=(1.0, 1.0)) -> np.ndarray:
         The means ``a`` and ``b``, each > 0.
     cov : array_like, shape (..., 2, 2)
         Sample covariance of the per-trial scores whose means they are
-        (:meth:`CoMoments.pair`).
+        (:func:`pair_of`).
     trials : int or array_like, shape (...)
         Trials ``n >= 2`` behind the means.
     powers : (float, float)
