@@ -94,6 +94,7 @@ MODULES = (
     "scenarios",
     "second_order",
     "study",
+    "study_pairs",
     "study_scores",
     "study_trials",
     "tracking",

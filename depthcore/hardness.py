@@ -59,7 +59,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _checks, bank_mixture, bound, calibration, model, study_scores, study_trials
+from . import (
+    _checks,
+    bank_mixture,
+    bound,
+    calibration,
+    model,
+    study_pairs,
+    study_scores,
+    study_trials,
+)
 from .filters import FILTERS, check_names
 from .gaussian import paper_prior_means
 
@@ -281,7 +290,7 @@ def paired_scores(estimates: dict, true_depth) -> dict:
     -------
     dict
         ``{(a, b): summary}`` for each pair of filters, ``a`` before ``b`` in
-        ``estimates``: :meth:`depthcore.study_scores.CoMoments.summary` with
+        ``estimates``: :meth:`depthcore.study_pairs.CoMoments.summary` with
         columns ``[filter, score]`` for each score of :data:`PAIRED_SCORES`
         (the squared error, the stated SD and whether the central 68 % and
         95 % intervals hold the truth, :func:`depthcore.study_scores.interval_holds`),
@@ -292,7 +301,7 @@ def paired_scores(estimates: dict, true_depth) -> dict:
     for i, a in enumerate(names):
         for b in names[i + 1 :]:
             ok = _answered(estimates[a]) & _answered(estimates[b])
-            moments = study_scores.CoMoments([(f, k) for f in (a, b) for k in PAIRED_SCORES])
+            moments = study_pairs.CoMoments([(f, k) for f in (a, b) for k in PAIRED_SCORES])
             values = []
             for m, sd, cdf in (estimates[a], estimates[b]):
                 values += [(m[ok] - true_depth[ok]) ** 2, sd[ok]]
@@ -423,9 +432,9 @@ def paired_comparison(cell: dict, reading: str, a: str, b: str) -> dict:
     -------
     dict of float
         ``"rmse_ratio"`` (``a``'s depth RMSE over ``b``'s,
-        :func:`depthcore.study_scores.rmse_ratio_se`), ``"coverage_68_gap"``,
+        :func:`depthcore.study_pairs.rmse_ratio_se`), ``"coverage_68_gap"``,
         ``"coverage_95_gap"`` (how much farther ``a``'s coverage lies from its
-        level than ``b``'s, :func:`depthcore.study_scores.coverage_gap_difference`),
+        level than ``b``'s, :func:`depthcore.study_pairs.coverage_gap_difference`),
         each with ``"<key>_se"``, and ``"trials"``.
     """
     if reading not in READINGS:
@@ -434,15 +443,15 @@ def paired_comparison(cell: dict, reading: str, a: str, b: str) -> dict:
         raise ValueError(f"b: a filter is not compared with itself, got {a!r} twice")
     pairs = cell[reading]["paired"]
     summary = pairs[(a, b)] if (a, b) in pairs else pairs[(b, a)]
-    m, c, n = study_scores.pair_of(summary, (a, "squared_error"), (b, "squared_error"))
+    m, c, n = study_pairs.pair_of(summary, (a, "squared_error"), (b, "squared_error"))
     out = {
         "rmse_ratio": float(np.sqrt(m[0] / m[1])),
-        "rmse_ratio_se": float(study_scores.rmse_ratio_se(m, c, n)),
+        "rmse_ratio_se": float(study_pairs.rmse_ratio_se(m, c, n)),
     }
     for p in LEVELS:
         key = f"coverage_{round(100 * p)}"
-        m, c, n = study_scores.pair_of(summary, (a, key), (b, key))
-        gap, se = study_scores.coverage_gap_difference(m, c, n, p)
+        m, c, n = study_pairs.pair_of(summary, (a, key), (b, key))
+        gap, se = study_pairs.coverage_gap_difference(m, c, n, p)
         out[f"{key}_gap"], out[f"{key}_gap_se"] = float(gap), float(se)
     out["trials"] = n
     return out

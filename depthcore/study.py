@@ -56,7 +56,8 @@ from . import _checks
 from .filters import FILTERS, NAMES, check_names
 from .gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from .scenarios import SCENARIOS
-from .study_scores import CALIBRATION_LEVELS, CoMoments, Tally, coverage_se, trial_scores
+from .study_pairs import CoMoments, trial_scores
+from .study_scores import CALIBRATION_LEVELS, Tally, coverage_se
 from .study_trials import PARTICLES, run_filters, simulate
 
 #: Trials drawn and filtered together by :func:`study`: its memory is that of one chunk.
@@ -115,14 +116,14 @@ def study(
     paired : bool
         Also keep, over the same chunks, the running mean and covariance of
         every filter's per-trial depth scores
-        (:func:`~depthcore.study_scores.trial_scores`, a
-        :class:`~depthcore.study_scores.CoMoments`), returned as
-        ``"paired"`` (:meth:`~depthcore.study_scores.CoMoments.summary`,
+        (:func:`~depthcore.study_pairs.trial_scores`, a
+        :class:`~depthcore.study_pairs.CoMoments`), returned as
+        ``"paired"`` (:meth:`~depthcore.study_pairs.CoMoments.summary`,
         columns ``[filter, score]``), from which the errors of ratios and
         differences of two scores over the same trials follow
-        (:func:`~depthcore.study_scores.pair_of`,
-        :func:`~depthcore.study_scores.ratio_se`,
-        :func:`~depthcore.study_scores.paired_difference_se`). Its memory
+        (:func:`~depthcore.study_pairs.pair_of`,
+        :func:`~depthcore.study_pairs.ratio_se`,
+        :func:`~depthcore.study_pairs.paired_difference_se`). Its memory
         grows with the square of the number of filters, not with ``trials``.
 
     Notes

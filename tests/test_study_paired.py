@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import study, study_scores
+from depthcore import study, study_pairs, study_scores
 
 RNG_SEED = 20261125
 
@@ -30,9 +30,9 @@ def moments(values):
 def test_pooled_comoments_over_many_chunks_equal_one_chunk_and_numpy_cov():
     rng = np.random.default_rng(RNG_SEED)
     values = rng.standard_normal((1000, 4)) @ rng.standard_normal((4, 4)) + [1e3, -5.0, 0.0, 2.0]
-    whole = study_scores.CoMoments(["a", "b", "c", "d"])
+    whole = study_pairs.CoMoments(["a", "b", "c", "d"])
     whole.add(values)
-    chunked = study_scores.CoMoments(["a", "b", "c", "d"])
+    chunked = study_pairs.CoMoments(["a", "b", "c", "d"])
     for part in np.array_split(values, [1, 3, 100, 101, 640]):
         chunked.add(part)
     assert chunked.n == whole.n == 1000
@@ -42,7 +42,7 @@ def test_pooled_comoments_over_many_chunks_equal_one_chunk_and_numpy_cov():
 
 
 def test_an_empty_chunk_adds_nothing_and_a_covariance_needs_two_trials():
-    m = study_scores.CoMoments([("ekf", "sd"), ("ekf", "squared_error")])
+    m = study_pairs.CoMoments([("ekf", "sd"), ("ekf", "squared_error")])
     m.add(np.zeros((0, 2)))
     assert m.n == 0 and m.summary()["cov"] is None
     m.add([[1.0, 2.0]])
@@ -56,24 +56,24 @@ def test_an_empty_chunk_adds_nothing_and_a_covariance_needs_two_trials():
 
 @pytest.mark.parametrize("shape", [(3,), (2, 3), (2, 1, 2)])
 def test_comoments_refuse_values_of_the_wrong_shape(shape):
-    m = study_scores.CoMoments(["a", "b"])
+    m = study_pairs.CoMoments(["a", "b"])
     with pytest.raises(ValueError, match="values"):
         m.add(np.zeros(shape))
 
 
 def test_comoments_refuse_repeated_or_no_columns_and_pair_of_names_its_missing_column():
     with pytest.raises(ValueError, match="columns"):
-        study_scores.CoMoments(["a", "a"])
+        study_pairs.CoMoments(["a", "a"])
     with pytest.raises(ValueError, match="columns"):
-        study_scores.CoMoments([])
-    m = study_scores.CoMoments([("x", "sd"), ("y", "sd")])
+        study_pairs.CoMoments([])
+    m = study_pairs.CoMoments([("x", "sd"), ("y", "sd")])
     m.add(np.arange(6.0).reshape(3, 2))
-    means, cov, n = study_scores.pair_of(m.summary(), ["y", "sd"], ("x", "sd"))
+    means, cov, n = study_pairs.pair_of(m.summary(), ["y", "sd"], ("x", "sd"))
     assert n == 3
     assert_allclose(means, [3.0, 2.0], rtol=1e-15)
     assert_allclose(cov, [[4.0, 4.0], [4.0, 4.0]], rtol=1e-15)
     with pytest.raises(ValueError, match="b: the summary has no column"):
-        study_scores.pair_of(m.summary(), ("x", "sd"), ("z", "sd"))
+        study_pairs.pair_of(m.summary(), ("x", "sd"), ("z", "sd"))
 
 
 # --- the delta-method errors against the spread of replicated studies -------------------------
@@ -102,9 +102,9 @@ def test_mean_ratio_se_delta_method_matches_the_spread_of_replications_and_needs
     def ratio(m):
         return m[..., 0] / m[..., 1]
 
-    spread, se = spread_and_se(ratio, lambda m, c: study_scores.mean_ratio_se(m, c, TRIALS), values)
+    spread, se = spread_and_se(ratio, lambda m, c: study_pairs.mean_ratio_se(m, c, TRIALS), values)
     assert abs(se / spread - 1) < 0.06
-    independent = lambda m, c: study_scores.mean_ratio_se(m, c * np.eye(2), TRIALS)  # noqa: E731
+    independent = lambda m, c: study_pairs.mean_ratio_se(m, c * np.eye(2), TRIALS)  # noqa: E731
     _, wrong = spread_and_se(ratio, independent, values)
     assert wrong / spread > 2.0
 
@@ -123,10 +123,10 @@ def test_rmse_ratio_se_delta_method_matches_the_spread_of_replications_and_needs
     def ratio(m):
         return np.sqrt(m[..., 0] / m[..., 1])
 
-    spread, se = spread_and_se(ratio, lambda m, c: study_scores.rmse_ratio_se(m, c, TRIALS), values)
+    spread, se = spread_and_se(ratio, lambda m, c: study_pairs.rmse_ratio_se(m, c, TRIALS), values)
     assert abs(se / spread - 1) < 0.06
     _, wrong = spread_and_se(
-        ratio, lambda m, c: study_scores.rmse_ratio_se(m, c * np.eye(2), TRIALS), values
+        ratio, lambda m, c: study_pairs.rmse_ratio_se(m, c * np.eye(2), TRIALS), values
     )
     assert wrong / spread > 2.0
 
@@ -141,7 +141,7 @@ def test_rmse_over_mean_sd_ratio_se_matches_the_spread_of_replications():
         return np.sqrt(m[..., 0]) / m[..., 1]
 
     def se(m, c):
-        return study_scores.ratio_se(m, c, TRIALS, (0.5, 1.0))
+        return study_pairs.ratio_se(m, c, TRIALS, (0.5, 1.0))
 
     spread, delta = spread_and_se(ratio, se, values)
     assert abs(delta / spread - 1) < 0.06
@@ -157,7 +157,7 @@ def test_paired_difference_se_matches_the_spread_of_replications_and_needs_the_c
         return m[..., 0] - m[..., 1]
 
     def se(m, c):
-        return study_scores.paired_difference_se(c, TRIALS)
+        return study_pairs.paired_difference_se(c, TRIALS)
 
     spread, delta = spread_and_se(difference, se, values)
     assert abs(delta / spread - 1) < 0.06
@@ -178,10 +178,10 @@ def test_coverage_gap_difference_se_matches_the_spread_of_paired_indicators():
     values = np.stack([np.abs(z[..., 0]) < 0.9945, np.abs(z[..., 1]) < 1.96], axis=-1)
     values = values.astype(float)
     mean, cov = moments(values)
-    gap, se = study_scores.coverage_gap_difference(mean, cov, TRIALS, 0.9)
+    gap, se = study_pairs.coverage_gap_difference(mean, cov, TRIALS, 0.9)
     spread = np.std(gap, ddof=1)
     assert abs(np.median(se) / spread - 1) < 0.06
-    plain = study_scores.paired_difference_se(cov, TRIALS)
+    plain = study_pairs.paired_difference_se(cov, TRIALS)
     assert np.median(plain) / spread < 1 - 0.15
 
 
@@ -192,36 +192,34 @@ def test_with_independent_scores_the_ratio_se_is_that_of_the_separate_ses():
     n = 50
     se_a, se_b = np.sqrt(np.diag(cov) / n)
     assert_allclose(
-        study_scores.mean_ratio_se(means, cov, n),
+        study_pairs.mean_ratio_se(means, cov, n),
         4 / 9 * np.hypot(se_a / 4, se_b / 9),
         rtol=1e-14,
     )
     rmse_se_a, rmse_se_b = se_a / (2 * 2.0), se_b / (2 * 3.0)  # Tally's delta method per RMSE
     assert_allclose(
-        study_scores.rmse_ratio_se(means, cov, n),
+        study_pairs.rmse_ratio_se(means, cov, n),
         2 / 3 * np.hypot(rmse_se_a / 2, rmse_se_b / 3),
         rtol=1e-14,
     )
-    assert_allclose(study_scores.paired_difference_se(cov, n), np.hypot(se_a, se_b), rtol=1e-14)
+    assert_allclose(study_pairs.paired_difference_se(cov, n), np.hypot(se_a, se_b), rtol=1e-14)
 
 
 def test_identical_filters_have_ratio_one_with_se_zero():
     """Limiting case of two identical scores: every ratio 1 and every paired SE exactly 0."""
     rng = np.random.default_rng(RNG_SEED + 5)
     x = rng.exponential(size=200)
-    m = study_scores.CoMoments(["a", "b"])
+    m = study_pairs.CoMoments(["a", "b"])
     m.add(np.column_stack([x, x]))
-    means, cov, n = study_scores.pair_of(m.summary(), "a", "b")
+    means, cov, n = study_pairs.pair_of(m.summary(), "a", "b")
     assert means[0] / means[1] == 1.0
     for se in (
-        study_scores.mean_ratio_se(means, cov, n),
-        study_scores.rmse_ratio_se(means, cov, n),
-        study_scores.paired_difference_se(cov, n),
+        study_pairs.mean_ratio_se(means, cov, n),
+        study_pairs.rmse_ratio_se(means, cov, n),
+        study_pairs.paired_difference_se(cov, n),
     ):
         assert se == 0.0
-    gap, se = study_scores.coverage_gap_difference(
-        [0.5, 0.5], [[0.25, 0.25], [0.25, 0.25]], n, 0.68
-    )
+    gap, se = study_pairs.coverage_gap_difference([0.5, 0.5], [[0.25, 0.25], [0.25, 0.25]], n, 0.68)
     assert gap == 0.0 and se == 0.0
 
 
@@ -237,18 +235,18 @@ def test_identical_filters_have_ratio_one_with_se_zero():
 def test_ratio_se_refuses_bad_input(kwargs, message):
     args = {"means": [1.0, 2.0], "cov": np.eye(2), "trials": 10, **kwargs}
     with pytest.raises(ValueError, match=message):
-        study_scores.ratio_se(**args)
+        study_pairs.ratio_se(**args)
 
 
 # --- the paired test ---------------------------------------------------------------------------
 
 
 def paired_rmse_verdict(errors_a, errors_b):
-    m = study_scores.CoMoments(["a", "b"])
+    m = study_pairs.CoMoments(["a", "b"])
     m.add(np.column_stack([errors_a**2, errors_b**2]))
-    means, cov, n = study_scores.pair_of(m.summary(), "a", "b")
+    means, cov, n = study_pairs.pair_of(m.summary(), "a", "b")
     ratio = np.sqrt(means[0] / means[1])
-    se = study_scores.rmse_ratio_se(means, cov, n) / ratio  # of the ratio's logarithm
+    se = study_pairs.rmse_ratio_se(means, cov, n) / ratio  # of the ratio's logarithm
     return study_scores.difference_verdict(-np.log(ratio), se)
 
 
@@ -304,19 +302,19 @@ def test_study_keeps_the_paired_comoments_without_changing_its_scores():
     assert_allclose(p["cov"], one["paired"]["cov"], rtol=1e-10, atol=1e-15)
     for name in names:
         d = paired["filters"][name]["depth"]
-        means, cov, n = study_scores.pair_of(p, (name, "squared_error"), (name, "sd"))
+        means, cov, n = study_pairs.pair_of(p, (name, "squared_error"), (name, "sd"))
         assert_allclose(np.sqrt(means[0]), d["rmse"], rtol=1e-12)
         assert_allclose(means[1], d["mean_sd"], rtol=1e-12)
         assert_allclose(np.sqrt(cov[1, 1] / n), d["mean_sd_se"], rtol=1e-10)
         # the RMSE's own SE is the ratio SE's limit against a constant
         assert_allclose(
-            study_scores.ratio_se(means, cov * [[1, 0], [0, 0]], n, (0.5, 0.0)),
+            study_pairs.ratio_se(means, cov * [[1, 0], [0, 0]], n, (0.5, 0.0)),
             d["rmse_se"],
             rtol=1e-10,
         )
-        c68 = study_scores.pair_of(p, (name, "coverage_68"), (name, "hellinger"))[0][0]
+        c68 = study_pairs.pair_of(p, (name, "coverage_68"), (name, "hellinger"))[0][0]
         assert c68 == pytest.approx(d["coverage_68"], abs=1e-12)
-        h = study_scores.pair_of(p, (name, "hellinger"), (name, "sd"))[0][0]
+        h = study_pairs.pair_of(p, (name, "hellinger"), (name, "sd"))[0][0]
         assert h == pytest.approx(paired["filters"][name]["hellinger_depth"]["mean"], rel=1e-12)
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, study_scores
+from .. import _checks, study_pairs, study_scores
 from .. import filters as _filters
 from ..study_scores import TEST_POWER, detectable_difference, detectable_shift
 from .beyond_frames import COVERAGE_Z, coverage_test, frames_study
@@ -100,32 +100,32 @@ def comparisons(summary: dict) -> dict:
     -------
     dict of float
         ``"hellinger_difference"`` (second-order less EKF mean Hellinger
-        distance to the optimal filter, :func:`~depthcore.study_scores.paired_difference_se`),
+        distance to the optimal filter, :func:`~depthcore.study_pairs.paired_difference_se`),
         ``"hellinger_ratio"`` (EKF over second-order,
-        :func:`~depthcore.study_scores.mean_ratio_se`), ``"rmse_ratio"``
+        :func:`~depthcore.study_pairs.mean_ratio_se`), ``"rmse_ratio"``
         (second-order RMSE over the EKF's) and ``"ekf_rmse_ratio"`` (its
-        inverse, :func:`~depthcore.study_scores.rmse_ratio_se`),
+        inverse, :func:`~depthcore.study_pairs.rmse_ratio_se`),
         ``"coverage_68_gap"`` and ``"coverage_95_gap"`` (how much farther the
         second-order coverage is from its level than the EKF's,
-        :func:`~depthcore.study_scores.coverage_gap_difference`), each with
+        :func:`~depthcore.study_pairs.coverage_gap_difference`), each with
         ``"<key>_se"``, and ``"trials"``.
     """
     so, ekf = "second_order", "ekf"
     out = {}
-    m, c, n = study_scores.pair_of(summary, (so, "hellinger"), (ekf, "hellinger"))
+    m, c, n = study_pairs.pair_of(summary, (so, "hellinger"), (ekf, "hellinger"))
     out["hellinger_difference"] = float(m[0] - m[1])
-    out["hellinger_difference_se"] = float(study_scores.paired_difference_se(c, n))
-    m, c, n = study_scores.pair_of(summary, (ekf, "hellinger"), (so, "hellinger"))
+    out["hellinger_difference_se"] = float(study_pairs.paired_difference_se(c, n))
+    m, c, n = study_pairs.pair_of(summary, (ekf, "hellinger"), (so, "hellinger"))
     out["hellinger_ratio"] = float(m[0] / m[1])
-    out["hellinger_ratio_se"] = float(study_scores.mean_ratio_se(m, c, n))
+    out["hellinger_ratio_se"] = float(study_pairs.mean_ratio_se(m, c, n))
     for key, pair in (("rmse_ratio", (so, ekf)), ("ekf_rmse_ratio", (ekf, so))):
-        m, c, n = study_scores.pair_of(summary, *((f, "squared_error") for f in pair))
+        m, c, n = study_pairs.pair_of(summary, *((f, "squared_error") for f in pair))
         out[key] = float(np.sqrt(m[0] / m[1]))
-        out[f"{key}_se"] = float(study_scores.rmse_ratio_se(m, c, n))
+        out[f"{key}_se"] = float(study_pairs.rmse_ratio_se(m, c, n))
     for level in (68, 95):
         key = f"coverage_{level}"
-        m, c, n = study_scores.pair_of(summary, (so, key), (ekf, key))
-        gap, se = study_scores.coverage_gap_difference(m, c, n, level / 100)
+        m, c, n = study_pairs.pair_of(summary, (so, key), (ekf, key))
+        gap, se = study_pairs.coverage_gap_difference(m, c, n, level / 100)
         out[f"{key}_gap"], out[f"{key}_gap_se"] = float(gap), float(se)
     out["trials"] = n
     return out
