@@ -97,19 +97,72 @@ def _relative(path: Path) -> str:
     return path.resolve().relative_to(ROOT).as_posix()
 
 
+def module_path(module: str) -> str:
+    """The source of depthcore's module ``module``, relative to the repository.
+
+    Parameters
+    ----------
+    module : str
+        A module's name inside the package, dotted for a subpackage's:
+        ``"optimal"``, ``"book.beyond_frames"``, ``"book"`` (its ``__init__``).
+
+    Returns
+    -------
+    str
+        ``depthcore/optimal.py``, ``depthcore/book/beyond_frames.py``,
+        ``depthcore/book/__init__.py``.
+
+    Raises
+    ------
+    ValueError
+        When no such module exists.
+    """
+    parts = module.split(".")
+    for path in (
+        Path("depthcore", *parts[:-1], f"{parts[-1]}.py"),
+        Path("depthcore", *parts, "__init__.py"),
+    ):
+        if (ROOT / path).is_file():
+            return path.as_posix()
+    raise ValueError(f"modules must name depthcore's modules, got {module!r}")
+
+
+def _exists(module: str) -> bool:
+    try:
+        module_path(module)
+    except ValueError:
+        return False
+    return True
+
+
 def _package_imports(module: str) -> set[str]:
-    """The depthcore modules that ``module`` imports: ``from . import x``, ``from .x import y``."""
-    path = ROOT / "depthcore" / f"{module}.py"
-    if not path.is_file():
-        raise ValueError(f"modules must name depthcore's modules, got {module!r}")
+    """The depthcore modules that ``module`` imports: ``from . import x``, ``from .x import y``.
+
+    Relative imports are resolved from the module's own package (``from ..
+    import study`` in ``book.beyond_frames`` is ``study``), as are absolute
+    ones of ``depthcore``.
+    """
+    path = ROOT / module_path(module)
+    package = [] if module == "__init__" else module.split(".")
+    if path.name != "__init__.py":
+        package = package[:-1]
     found = set()
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
-        if isinstance(node, ast.ImportFrom) and (node.level == 1 or node.module == "depthcore"):
-            if node.module and node.level == 1:
-                found.add(node.module.split(".")[0])
-            else:
-                found.update(alias.name for alias in node.names)
-    return {m for m in found if (ROOT / "depthcore" / f"{m}.py").is_file()}
+        if not isinstance(node, ast.ImportFrom):
+            continue
+        if node.level >= 1:
+            if node.level - 1 > len(package):
+                continue
+            parts = package[: len(package) - (node.level - 1)] + (node.module or "").split(".")
+        elif node.module == "depthcore" or (node.module or "").startswith("depthcore."):
+            parts = node.module.split(".")[1:]
+        else:
+            continue
+        parts = [p for p in parts if p]
+        if parts:
+            found.add(".".join(parts))
+        found.update(".".join(parts + [alias.name]) for alias in node.names)
+    return {m for m in found if m and _exists(m)}
 
 
 def measured_modules(modules) -> list[str]:
@@ -154,7 +207,7 @@ def fingerprints(script, modules) -> dict[str, str]:
     dict of str to str
         Path relative to the repository -> :func:`fingerprint`.
     """
-    paths = [Path(script)] + [ROOT / "depthcore" / f"{m}.py" for m in measured_modules(modules)]
+    paths = [Path(script)] + [ROOT / module_path(m) for m in measured_modules(modules)]
     return {_relative(p): fingerprint(p) for p in paths}
 
 
@@ -288,8 +341,7 @@ def stale(record: dict) -> list[str]:
     script = ROOT / record["script"]
     if not script.is_file():
         return [record["script"]]
-    paths = [script] + [ROOT / "depthcore" / f"{m}.py" for m in record["measures"]]
-    gone = [_relative(p) for p in paths if not p.is_file()]
+    gone = [f"depthcore/{m.replace('.', '/')}.py" for m in record["measures"] if not _exists(m)]
     if gone:
         return gone
     current = fingerprints(script, record["measures"])
