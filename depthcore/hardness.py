@@ -71,13 +71,12 @@ from . import (
 )
 from .filters import FILTERS, check_names
 from .gaussian import paper_prior_means
+from .study_scores import LEVELS
 
 #: The filters scored by :func:`hard_cell`: the exact posterior and the Gaussian approximations.
 NAMES = ("optimal", "second_order", "ekf", "ukf", "iterated", "inverse_depth")
 #: The two readings of :func:`hard_cell`: at the fixed truth, and over truths drawn from the prior.
 READINGS = ("fixed", "prior")
-#: Nominal levels of the central intervals scored.
-LEVELS = (0.68, 0.95)
 
 
 def second_difference(truths) -> np.ndarray:
@@ -304,8 +303,7 @@ def paired_scores(estimates: dict, true_depth) -> dict:
             moments = study_pairs.CoMoments([(f, k) for f in (a, b) for k in PAIRED_SCORES])
             values = []
             for m, sd, cdf in (estimates[a], estimates[b]):
-                values += [(m[ok] - true_depth[ok]) ** 2, sd[ok]]
-                values += [study_scores.interval_holds(cdf[ok], p).astype(float) for p in LEVELS]
+                values += study_pairs.depth_scores(m[ok] - true_depth[ok], sd[ok], cdf[ok]).values()
             moments.add(np.column_stack(values))
             out[(a, b)] = moments.summary()
     return out
@@ -435,26 +433,14 @@ def paired_comparison(cell: dict, reading: str, a: str, b: str) -> dict:
         :func:`depthcore.study_pairs.rmse_ratio_se`), ``"coverage_68_gap"``,
         ``"coverage_95_gap"`` (how much farther ``a``'s coverage lies from its
         level than ``b``'s, :func:`depthcore.study_pairs.coverage_gap_difference`),
-        each with ``"<key>_se"``, and ``"trials"``.
+        each with ``"<key>_se"``, and ``"trials"`` (:func:`depthcore.study_pairs.compare`).
     """
     if reading not in READINGS:
         raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
     if a == b:
         raise ValueError(f"b: a filter is not compared with itself, got {a!r} twice")
     pairs = cell[reading]["paired"]
-    summary = pairs[(a, b)] if (a, b) in pairs else pairs[(b, a)]
-    m, c, n = study_pairs.pair_of(summary, (a, "squared_error"), (b, "squared_error"))
-    out = {
-        "rmse_ratio": float(np.sqrt(m[0] / m[1])),
-        "rmse_ratio_se": float(study_pairs.rmse_ratio_se(m, c, n)),
-    }
-    for p in LEVELS:
-        key = f"coverage_{round(100 * p)}"
-        m, c, n = study_pairs.pair_of(summary, (a, key), (b, key))
-        gap, se = study_pairs.coverage_gap_difference(m, c, n, p)
-        out[f"{key}_gap"], out[f"{key}_gap_se"] = float(gap), float(se)
-    out["trials"] = n
-    return out
+    return study_pairs.compare(pairs[(a, b)] if (a, b) in pairs else pairs[(b, a)], a, b)
 
 
 def verdicts(cell: dict, reading: str, z: float = bound.Z) -> dict:

@@ -14,8 +14,9 @@ gives the errors of any ratio of powers of two means (:func:`ratio_se`), of
 which a ratio of two means (:func:`mean_ratio_se`) and of two RMSEs
 (:func:`rmse_ratio_se`) are cases, of a paired difference
 (:func:`paired_difference_se`) and of how much nearer its level one coverage
-is than another (:func:`coverage_gap_difference`). Such a difference is tested
-by :func:`depthcore.study_scores.difference_verdict`.
+is than another (:func:`coverage_gap_difference`); :func:`compare` gives the
+RMSE ratio and the coverage gaps of two filters at once. Such a difference is
+tested by :func:`depthcore.study_scores.difference_verdict`.
 """
 
 from __future__ import annotations
@@ -164,6 +165,32 @@ def pair_of(summary: dict, a, b) -> tuple:
     return np.asarray(summary["mean"], dtype=float)[j], cov, int(summary["trials"])
 
 
+def depth_scores(error, sd, cdf) -> dict:
+    """Each trial's depth scores from plain arrays: squared error, stated SD, interval indicators.
+
+    Parameters
+    ----------
+    error : array_like, shape (m,)
+        The depth mean less the true depth, per trial.
+    sd : array_like, shape (m,)
+        The stated depth SD.
+    cdf : array_like, shape (m,)
+        The filter's depth CDF at the true depth.
+
+    Returns
+    -------
+    dict of ndarray, each shape (m,)
+        ``"squared_error"``, ``"sd"``, and for each level ``p`` of
+        :data:`depthcore.study_scores.LEVELS` ``"coverage_<100 p>"``: 1 when the
+        central interval holds the truth (:func:`depthcore.study_scores.interval_holds`),
+        else 0; in the order of :data:`PAIRED_SCORES`.
+    """
+    out = {"squared_error": np.asarray(error, dtype=float) ** 2, "sd": np.asarray(sd, dtype=float)}
+    for p in LEVELS:
+        out[f"coverage_{round(100 * p)}"] = interval_holds(cdf, p).astype(float)
+    return out
+
+
 def trial_scores(est: Estimates, truth) -> dict:
     """Each trial's depth scores of :data:`PAIRED_SCORES`, counted as a Tally counts them.
 
@@ -182,9 +209,7 @@ def trial_scores(est: Estimates, truth) -> dict:
         (absent when ``est.hellinger`` is ``None``).
     """
     err, sd = errors_and_sds(est, truth)
-    out = {"squared_error": err[:, 0] ** 2, "sd": sd[:, 0]}
-    for p in LEVELS:
-        out[f"coverage_{round(100 * p)}"] = interval_holds(est.depth_cdf, p).astype(float)
+    out = depth_scores(err[:, 0], sd[:, 0], est.depth_cdf)
     if est.hellinger is not None:
         out["hellinger"] = np.asarray(est.hellinger, dtype=float)
     return out
@@ -340,3 +365,41 @@ def coverage_gap_difference(means, cov, trials, level) -> tuple:
     off = means - level
     gap = np.abs(off[..., 0]) - np.abs(off[..., 1])
     return gap, paired_difference_se(cov, n, (np.sign(off[..., 0]), np.sign(off[..., 1])))
+
+
+def compare(summary: dict, a: str, b: str, levels=LEVELS) -> dict:
+    """Filter ``a`` against filter ``b`` over the same trials: RMSE ratio and coverage gaps.
+
+    Parameters
+    ----------
+    summary : dict
+        The co-moments of the filters' per-trial depth scores (``"names"``,
+        ``"scores"``, ``"mean"``, ``"cov"``, ``"trials"``), as
+        ``study(..., paired=True)["paired"]`` gives them; it must hold ``a``
+        and ``b`` with the scores ``"squared_error"`` and ``"coverage_<100 p>"``.
+    a, b : str
+        Two filters of the summary.
+    levels : sequence of float
+        The coverages' nominal levels, each in (0, 1); default
+        :data:`depthcore.study_scores.LEVELS`.
+
+    Returns
+    -------
+    dict of float
+        ``"rmse_ratio"`` (``a``'s depth RMSE over ``b``'s, :func:`rmse_ratio_se`)
+        and, for each level ``p``, ``"coverage_<100 p>_gap"`` (how much farther
+        ``a``'s coverage lies from ``p`` than ``b``'s,
+        :func:`coverage_gap_difference`), each with ``"<key>_se"``; and ``"trials"``.
+    """
+    m, c, n = pair_of(summary, (a, "squared_error"), (b, "squared_error"))
+    out = {
+        "rmse_ratio": float(np.sqrt(m[0] / m[1])),
+        "rmse_ratio_se": float(rmse_ratio_se(m, c, n)),
+    }
+    for p in levels:
+        key = f"coverage_{round(100 * p)}"
+        m, c, n = pair_of(summary, (a, key), (b, key))
+        gap, se = coverage_gap_difference(m, c, n, p)
+        out[f"{key}_gap"], out[f"{key}_gap_se"] = float(gap), float(se)
+    out["trials"] = n
+    return out

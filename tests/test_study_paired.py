@@ -318,6 +318,36 @@ def test_study_keeps_the_paired_comoments_without_changing_its_scores():
         assert h == pytest.approx(paired["filters"][name]["hellinger_depth"]["mean"], rel=1e-12)
 
 
+def test_compare_gives_the_rmse_ratio_and_coverage_gaps_of_two_filters_of_a_study():
+    names = ("optimal", "second_order", "ekf")
+    r = study.study(trials=150, seed=6, names=names, paired=True)
+    p, f = r["paired"], r["filters"]
+    duel, back = (
+        study_pairs.compare(p, "second_order", "ekf"),
+        study_pairs.compare(p, "ekf", "second_order"),
+    )
+    rmse = {n: f[n]["depth"]["rmse"] for n in names}
+    assert duel["rmse_ratio"] == pytest.approx(rmse["second_order"] / rmse["ekf"], rel=1e-12)
+    assert duel["rmse_ratio"] * back["rmse_ratio"] == pytest.approx(1.0, rel=1e-12)
+    # the SE of a ratio's inverse is the SE over the ratio squared (delta method)
+    assert back["rmse_ratio_se"] == pytest.approx(
+        duel["rmse_ratio_se"] / duel["rmse_ratio"] ** 2, rel=1e-9
+    )
+    for level in (68, 95):
+        gap = [
+            abs(f[n]["depth"][f"coverage_{level}"] - level / 100) for n in ("second_order", "ekf")
+        ]
+        assert duel[f"coverage_{level}_gap"] == pytest.approx(gap[0] - gap[1], abs=1e-12)
+        assert back[f"coverage_{level}_gap"] == pytest.approx(gap[1] - gap[0], abs=1e-12)
+        assert duel[f"coverage_{level}_gap_se"] == back[f"coverage_{level}_gap_se"] >= 0
+    assert duel["trials"] == r["valid_trials"]
+    assert set(study_pairs.compare(p, "ekf", "optimal", ())) == {
+        "rmse_ratio",
+        "rmse_ratio_se",
+        "trials",
+    }
+
+
 def test_the_paired_study_keeps_only_running_co_moments():
     """Memory of a chunk, not of the trials: the peak of 16 chunks is that of 2, paired or not."""
     import tracemalloc

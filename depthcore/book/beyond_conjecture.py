@@ -118,17 +118,12 @@ def comparisons(summary: dict) -> dict:
     m, c, n = study_pairs.pair_of(summary, (ekf, "hellinger"), (so, "hellinger"))
     out["hellinger_ratio"] = float(m[0] / m[1])
     out["hellinger_ratio_se"] = float(study_pairs.mean_ratio_se(m, c, n))
-    for key, pair in (("rmse_ratio", (so, ekf)), ("ekf_rmse_ratio", (ekf, so))):
-        m, c, n = study_pairs.pair_of(summary, *((f, "squared_error") for f in pair))
-        out[key] = float(np.sqrt(m[0] / m[1]))
-        out[f"{key}_se"] = float(study_pairs.rmse_ratio_se(m, c, n))
-    for level in (68, 95):
-        key = f"coverage_{level}"
-        m, c, n = study_pairs.pair_of(summary, (so, key), (ekf, key))
-        gap, se = study_pairs.coverage_gap_difference(m, c, n, level / 100)
-        out[f"{key}_gap"], out[f"{key}_gap_se"] = float(gap), float(se)
-    out["trials"] = n
-    return out
+    duel = study_pairs.compare(summary, so, ekf, (0.68, 0.95))
+    inverse = study_pairs.compare(summary, ekf, so, ())
+    out["rmse_ratio"], out["rmse_ratio_se"] = duel.pop("rmse_ratio"), duel.pop("rmse_ratio_se")
+    out["ekf_rmse_ratio"] = inverse["rmse_ratio"]
+    out["ekf_rmse_ratio_se"] = inverse["rmse_ratio_se"]
+    return out | duel
 
 
 #: The duels of :func:`conjecture_wins`: each score's paired difference (positive where the
