@@ -16,6 +16,9 @@
 #   make notebooks-update   re-execute every page and rewrite book/_nbval/ (deliberate update)
 #                           (PAGES="fig6 cite": only those pages, in these three targets)
 #   make check-book         checks of the built book alone (equation numbers, browser)
+#   make records            compute again every study the book reads from its record
+#                           (depthcore/book/study_records/), then rewrite the references of
+#                           the pages that read them
 #   make figures            write the paper's figures to figures/
 #   make bench              run every benchmark at full size, print its tables and write its
 #                           record depthcore/benchmark_records/<script>.json; then rewrite the README's
@@ -67,7 +70,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 export JUPYTER_PATH := $(CURDIR)/tools/jupyter$(if $(JUPYTER_PATH),:$(JUPYTER_PATH))
 KERNEL := $(VENV)/share/jupyter/kernels/python3
 
-.PHONY: help venv cite-venv downloads book pdf lab test test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book figures bench clean distclean
+.PHONY: help venv cite-venv downloads book pdf lab test test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book figures records bench clean distclean
 
 help:
 	@sed -n '3,/^#$$/p' Makefile | sed -e 's/^# \{0,1\}//' -e '/^$$/d'
@@ -145,8 +148,9 @@ book: downloads
 # Every page executed once, alone (a folder holding only its notebook, .venv/standalone/ with only the
 # book's requirements.txt and source archive), into the execution cache that the
 # PDF and HTML builds then read; its outputs compared with book/_nbval/.
+# Every study a page reads must come from its record there (DEPTHCORE_RECORDS=require).
 notebooks-alone: $(EDITABLE) $(ALONE_STAMP) downloads
-	$(PY) tools/check_notebooks.py cache --execute --python $(ALONE_VENV)/bin/python
+	DEPTHCORE_RECORDS=require $(PY) tools/check_notebooks.py cache --execute --python $(ALONE_VENV)/bin/python
 
 # Sphinx's LaTeX builder, then xelatex (Debian: texlive-xetex texlive-latex-extra
 # texlive-fonts-recommended lmodern latexmk fonts-freefont-otf; .ci/run installs them).
@@ -202,6 +206,16 @@ check-book: $(EDITABLE)
 
 figures: $(EDITABLE)
 	$(PY) -m depthcore figures --out figures/
+
+# The pages whose Monte Carlo studies are read from their records (depthcore.book.records):
+# `make records` removes every record, executes these pages once writing the records of the
+# studies they compute (DEPTHCORE_RECORDS=write), then once more reading them, to rewrite
+# their references. tests/test_study_records.py fails when a record is stale.
+RECORD_PAGES := beyond_filters beyond_study beyond_frames beyond_bound beyond_hard beyond_conjecture
+records: $(EDITABLE)
+	rm -f depthcore/book/study_records/*.json
+	DEPTHCORE_RECORDS=write $(PY) tools/check_notebooks.py update $(RECORD_PAGES)
+	$(PY) tools/check_notebooks.py update $(RECORD_PAGES)
 
 # The book's pages that show the benchmarks' records (references rewritten by make bench).
 BENCH_PAGES := marginals beyond_cost beyond_frames

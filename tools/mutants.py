@@ -192,6 +192,27 @@ MUTANTS = [
         'ax.plot(result[x], result["optimal"][field], marker="o"',
         "tests/test_figures.py",
     ),
+    (
+        "a stale study record is read",
+        "depthcore/book/records.py",
+        'if not stale(record) and record["function"] == name:',
+        'if record["function"] == name:',
+        "tests/test_study_records.py",
+    ),
+    (
+        "a recorded array loses its dtype",
+        "depthcore/book/records.py",
+        'dtype = np.dtype(value["__array__"])',
+        "dtype = np.dtype(float)",
+        "tests/test_study_records.py",
+    ),
+    (
+        "the paired coverage gap of compare at one level only",
+        "depthcore/study_pairs.py",
+        "gap, se = coverage_gap_difference(m, c, n, p)",
+        "gap, se = coverage_gap_difference(m, c, n, levels[0])",
+        "tests/test_study_paired.py",
+    ),
 ]
 
 

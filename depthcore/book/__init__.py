@@ -17,8 +17,9 @@ figures and the texts its page glues, in that order:
 What several chapters share has one place each: :mod:`~depthcore.book.style`
 the plots' style, :mod:`~depthcore.book.formatting` the numbers as the book
 prints them, :mod:`~depthcore.book.notebook` what a page shows when it runs as
-a plain notebook, and :mod:`~depthcore.book.crossref` the book's references
-resolved in Jupyter.
+a plain notebook, :mod:`~depthcore.book.crossref` the book's references
+resolved in Jupyter, and :mod:`~depthcore.book.records` the records of the
+chapters' Monte Carlo studies, which their pages read rather than compute.
 
 Every module is an attribute of the package, imported when first used
 (``import depthcore; depthcore.book.paper`` works).
@@ -41,6 +42,7 @@ MODULES = (
     "formatting",
     "notebook",
     "crossref",
+    "records",
 )
 
 __all__ = ["MODULES", *MODULES]

@@ -1,0 +1,249 @@
+"""The book's studies read from their records: the encoding, the modes, and every record current.
+
+The pages call their Monte Carlo studies through ``depthcore.book.records.recorded``,
+which reads ``depthcore/book/study_records/<function>-<key>.json`` when it was made
+by the current code. These tests never run a page's study: they check that every
+committed record names a function and its arguments, that its key is the key of
+that call, and that the code it ran has not changed since (`make records`
+computes them again); and, on small calls, that reading a record gives back
+what the computation returned, bit for bit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from depthcore import SCENARIOS, benchmarks, gaussian, study
+from depthcore.book import beyond_frames, records
+
+ROOT = Path(__file__).resolve().parent.parent
+COMMITTED = records.committed()
+
+
+def same(a, b, path="value"):
+    """Assert ``a`` and ``b`` are equal in type, dtype, shape and every bit of every float."""
+    assert type(a) is type(b), (path, type(a), type(b))
+    if isinstance(a, np.ndarray):
+        assert a.dtype == b.dtype and a.shape == b.shape, path
+        assert a.tobytes() == b.tobytes(), path
+    elif isinstance(a, np.generic):
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), path
+    elif isinstance(a, dict):
+        assert list(a) == list(b), path
+        for k in a:
+            same(a[k], b[k], f"{path}[{k!r}]")
+    elif isinstance(a, (list, tuple)):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            same(x, y, f"{path}[{i}]")
+    elif isinstance(a, float):
+        assert np.float64(a).tobytes() == np.float64(b).tobytes(), (path, a, b)
+    elif isinstance(a, np.random.SeedSequence):
+        for name in ("entropy", "spawn_key", "pool_size", "n_children_spawned"):
+            assert getattr(a, name) == getattr(b, name), (path, name)
+    elif dataclasses.is_dataclass(a):
+        for f in dataclasses.fields(a):
+            same(getattr(a, f.name), getattr(b, f.name), f"{path}.{f.name}")
+    else:
+        assert a == b, (path, a, b)
+
+
+def round_trip(value):
+    return records.decode(json.loads(json.dumps(records.encode(value), allow_nan=True)))
+
+
+# --- the encoding ---------------------------------------------------------------------------
+
+VALUES = {
+    "floats": [
+        0.1,
+        -0.0,
+        float("nan"),
+        float("inf"),
+        -float("inf"),
+        5e-324,
+        1.7976931348623157e308,
+    ],
+    "arrays": {
+        "f8": np.array([[0.1, np.nan], [-0.0, 1e-300]]),
+        "f4": np.array([1 / 3], dtype=np.float32),
+        "i8": np.arange(6).reshape(2, 3, 1),
+        "bool": np.array([True, False]),
+        "str": np.array(["ekf", "optimal"]),
+        "empty": np.zeros((0, 3)),
+    },
+    "scalars": [np.float64(0.1), np.int64(-3), np.bool_(True), np.float32(0.25)],
+    "containers": ({"a": (1, [2, "x"])}, {3: "int key", (1, 2): "tuple key", "__x": None}),
+    "seed": np.random.SeedSequence(1).spawn(3)[2],
+    "spawned": (lambda s: (s.spawn(2), s)[1])(np.random.SeedSequence(5)),
+    "scenario": SCENARIOS["fig2"],
+    "dataclass": gaussian.MeanAndCov(np.array([1.0, 2.0]), np.eye(2)),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(VALUES))
+def test_a_value_reads_back_bit_for_bit(kind):
+    same(VALUES[kind], round_trip(VALUES[kind]))
+
+
+@pytest.mark.parametrize("kind", ["seed", "spawned"])
+def test_a_seed_sequence_reads_back_with_its_streams(kind):
+    seed = VALUES[kind]
+    back = round_trip(seed)
+    assert np.array_equal(seed.generate_state(4), back.generate_state(4))
+    assert [s.generate_state(2).tolist() for s in seed.spawn(2)] == [
+        s.generate_state(2).tolist() for s in back.spawn(2)
+    ]
+
+
+@pytest.mark.parametrize(
+    "value, named",
+    [
+        (object(), "object"),
+        (np.array([object()]), "dtype object"),
+        (1 + 2j, "complex"),
+        ({1, 2}, "set"),
+        (np.random.default_rng(0), "Generator"),
+    ],
+)
+def test_what_cannot_be_recorded_is_refused_by_its_type(value, named):
+    with pytest.raises(TypeError, match=named):
+        records.encode(value)
+
+
+def test_only_depthcore_classes_are_rebuilt():
+    with pytest.raises(ValueError, match="only depthcore's classes"):
+        records.decode({"__dataclass__": "os:PathLike", "fields": {}})
+
+
+def test_a_study_reads_back_bit_for_bit():
+    fig2 = SCENARIOS["fig2"]
+    result = study.study(fig2.c, fig2.rho, trials=30, seed=2, prior="paper", paired=True)
+    same(result, round_trip(result))
+
+
+# --- recorded, in its three modes -----------------------------------------------------------
+
+
+@pytest.fixture
+def record_dir(tmp_path, monkeypatch):
+    monkeypatch.setattr(records, "RECORDS", tmp_path)
+    monkeypatch.delenv(records.ENVIRONMENT, raising=False)
+    return tmp_path
+
+
+def small_study(seed=1):
+    return records.recorded(beyond_frames.frames_study, [3, 4], 12, seed, ("optimal", "ekf"))
+
+
+def test_read_computes_a_call_without_a_record_and_writes_nothing(record_dir):
+    run = small_study()
+    assert not run.read and run.date is None and list(record_dir.iterdir()) == []
+    same(run.result, beyond_frames.frames_study([3, 4], 12, 1, ("optimal", "ekf")))
+    assert "no current record" in str(run)
+
+
+def test_write_records_a_call_and_read_reads_it_back_bit_for_bit(record_dir, monkeypatch):
+    monkeypatch.setenv(records.ENVIRONMENT, "write")
+    written = small_study()
+    assert not written.read and written.path.is_file() and "recorded in" in str(written)
+    monkeypatch.setenv(records.ENVIRONMENT, "read")
+    calls = []
+    monkeypatch.setattr(beyond_frames, "frames_study", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(
+        records, "function_name", lambda f: "depthcore.book.beyond_frames:frames_study"
+    )
+    read = small_study()
+    assert read.read and calls == [], "a current record must be read, not computed"
+    same(written.result, read.result)
+    assert read.date == written.date and "read from its record" in str(read)
+
+
+def test_another_argument_is_another_record(record_dir, monkeypatch):
+    monkeypatch.setenv(records.ENVIRONMENT, "write")
+    a, b = small_study(1), small_study(2)
+    assert a.path != b.path and len(list(record_dir.iterdir())) == 2
+    assert not np.array_equal(a.result["ekf"]["rmse"], b.result["ekf"]["rmse"])
+
+
+def test_require_refuses_a_call_without_a_current_record(record_dir, monkeypatch):
+    monkeypatch.setenv(records.ENVIRONMENT, "require")
+    with pytest.raises(ValueError, match=r"no current record .* run `make records`"):
+        small_study()
+    monkeypatch.setenv(records.ENVIRONMENT, "write")
+    path = small_study().path
+    monkeypatch.setenv(records.ENVIRONMENT, "require")
+    assert small_study().read
+    record = json.loads(path.read_text())
+    record["fingerprint"]["depthcore/model.py"] = "0" * 64  # as if model.py had changed
+    path.write_text(json.dumps(record))
+    assert records.stale(record) == ["depthcore/model.py"]
+    with pytest.raises(ValueError, match="no current record"):
+        small_study()
+
+
+def test_an_unknown_mode_is_refused_by_the_variables_name(record_dir, monkeypatch):
+    monkeypatch.setenv(records.ENVIRONMENT, "always")
+    with pytest.raises(ValueError, match="DEPTHCORE_RECORDS must be one of read, write, require"):
+        small_study()
+
+
+def test_only_depthcore_functions_are_recorded():
+    with pytest.raises(ValueError, match="function must be one of depthcore's"):
+        records.recorded(np.mean, [1.0, 2.0])
+
+
+def test_the_fingerprint_covers_every_module_the_function_imports():
+    prints = records.code_fingerprint("depthcore.book.beyond_frames:frames_study")
+    for module in ("book/beyond_frames", "study", "optimal", "quadrature", "bank", "model"):
+        assert f"depthcore/{module}.py" in prints
+    assert all(len(v) == 64 for v in prints.values())
+    assert benchmarks.module_path("book") == "depthcore/book/__init__.py"
+
+
+# --- the committed records ------------------------------------------------------------------
+
+
+def test_every_function_a_page_records_has_records():
+    called = set()
+    for page in (ROOT / "book").glob("*.md"):
+        called |= set(re.findall(r"records\.recorded\(\s*([\w.]+)", page.read_text()))
+    assert len(called) >= 8, called
+    recorded = {records.read(p)["function"].rpartition(":")[2] for p in COMMITTED}
+    named = {c.rpartition(".")[2] for c in called}
+    assert named <= recorded, f"no record of {sorted(named - recorded)}: run `make records`"
+
+
+@pytest.mark.parametrize("path", COMMITTED, ids=[p.stem for p in COMMITTED])
+def test_every_record_is_of_the_current_code_and_its_own_call(path):
+    record = records.read(path)
+    assert set(records.FIELDS) <= set(record), f"{path.name}: fields missing"
+    changed = records.stale(record)
+    assert not changed, (
+        f"{path.name} is stale: {', '.join(changed)} changed since it was recorded on "
+        f"{record['date']}; compute it again with `{records.COMMAND}`"
+    )
+    args = records.decode(record["arguments"]["args"])
+    kwargs = records.decode(record["arguments"]["kwargs"])
+    assert records.call_key(record["function"], args, kwargs) == record["key"]
+    assert path == records.record_path(record["function"], record["key"])
+    assert record["seconds"] >= 0 and record["machine"]["cores"] >= 1
+    records.decode(record["result"])
+
+
+def test_every_page_that_reads_a_record_is_recomputed_by_make_records():
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    listed = set(re.search(r"^RECORD_PAGES := (.*)$", makefile, re.M).group(1).split())
+    reading = {p.stem for p in (ROOT / "book").glob("*.md") if "records.recorded(" in p.read_text()}
+    assert reading == listed
+
+
+def test_the_source_archive_carries_the_records():
+    pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    assert '"book/study_records/*.json"' in pyproject
