@@ -178,11 +178,18 @@ lab: $(EDITABLE)
 	$(VENV)/bin/jupyter lab --ServerApp.root_dir=. $(if $(filter 0,$(shell id -u)),--allow-root) \
 	  $(LAB_ARGS) book/intro.md
 
-# Each stage's time is printed as it ends, and all of them at the end.
+# Each stage's time is printed as it ends, and all of them at the end. The reader's
+# environment (.venv/standalone/) and the figures of the downloads are made in the
+# background from the start, while the first stages run; notebooks-alone waits for them.
 TEST_STAGES := lint test-core notebooks-alone pdf book check-book
+BACKGROUND_LOG := _build/test-background.log
 test: $(EDITABLE)
 	tools/system-packages.sh
-	@times=(); for stage in $(TEST_STAGES); do start=$$SECONDS; \
+	@mkdir -p _build; ($(MAKE) --no-print-directory $(ALONE_STAMP) $(FIGURES)/.written \
+	  > $(BACKGROUND_LOG) 2>&1) & background=$$!; \
+	times=(); for stage in $(TEST_STAGES); do start=$$SECONDS; \
+	  if [[ $$stage == notebooks-alone ]]; then wait $$background || { cat $(BACKGROUND_LOG) >&2; \
+	    echo "make test: the reader's environment or the figures failed" >&2; exit 1; }; fi; \
 	  $(MAKE) --no-print-directory $$stage; \
 	  times+=("$$stage $$((SECONDS - start)) s"); echo "make test: $$stage took $$((SECONDS - start)) s"; \
 	done; echo "make test: passed ($$(IFS=,; echo "$${times[*]}" | sed 's/,/, /g'))"
@@ -202,7 +209,7 @@ notebooks-standalone: $(EDITABLE) $(ALONE_STAMP)
 
 # Checks of the built book in _build/html (run `make book` first).
 check-book: $(EDITABLE)
-	$(PY) -m pytest -q -rs tests/book $(PYTEST_ARGS)
+	$(PY) -m pytest -q -rs -n 2 --dist loadfile tests/book $(PYTEST_ARGS)
 
 figures: $(EDITABLE)
 	$(PY) -m depthcore figures --out figures/

@@ -38,7 +38,9 @@ def test_only_references_of_pages_outside_the_toc_are_stale():
 
 def test_update_of_named_pages_leaves_the_other_references(monkeypatch):
     executed, deleted = [], []
-    monkeypatch.setattr(check_notebooks, "update", lambda pages: executed.extend(pages) or 0)
+    monkeypatch.setattr(
+        check_notebooks, "update", lambda pages, workers: executed.extend(pages) or 0
+    )
     monkeypatch.setattr(Path, "unlink", lambda self, *a, **k: deleted.append(self))
     assert check_notebooks.main(["update", "fig6"]) == 0
     assert [p.stem for p in executed] == ["fig6"] and deleted == []

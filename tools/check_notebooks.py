@@ -826,28 +826,37 @@ def stable_cell_ids(nb) -> None:
         cell.id = digest if seen[digest] == 1 else f"{digest}-{seen[digest]}"
 
 
-def update(pages: list[Path]) -> int:
+def update_page(page: Path) -> Path:
+    """Execute ``page`` in a fresh kernel and write its outputs as its reference; return that."""
     import jupytext
     import nbformat
     from nbclient import NotebookClient
 
-    for page in pages:
-        nb = jupytext.read(page)
-        print(f"executing {page.relative_to(ROOT)}", flush=True)
-        NotebookClient(
-            nb,
-            timeout=TIMEOUT,
-            iopub_timeout=IOPUB_TIMEOUT,
-            raise_on_iopub_timeout=True,
-            kernel_name="python3",
-            record_timing=False,
-            resources={"metadata": {"path": str(page.parent)}},
-        ).execute()
-        stable_cell_ids(nb)
-        ref = reference_path(page)
-        ref.parent.mkdir(exist_ok=True)
-        nbformat.write(nb, ref)
-        print(f"  wrote {ref.relative_to(ROOT)}")
+    nb = jupytext.read(page)
+    NotebookClient(
+        nb,
+        timeout=TIMEOUT,
+        iopub_timeout=IOPUB_TIMEOUT,
+        raise_on_iopub_timeout=True,
+        kernel_name="python3",
+        record_timing=False,
+        resources={"metadata": {"path": str(page.parent)}},
+    ).execute()
+    stable_cell_ids(nb)
+    ref = reference_path(page)
+    ref.parent.mkdir(exist_ok=True)
+    nbformat.write(nb, ref)
+    return ref
+
+
+def update(pages: list[Path], workers: int = 1) -> int:
+    """Rewrite the references of ``pages``, executing ``workers`` of them at a time."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    print(f"executing {len(pages)} pages, {workers} at a time", flush=True)
+    with ProcessPoolExecutor(max_workers=max(1, workers)) as pool:
+        for ref in pool.map(update_page, pages):
+            print(f"  wrote {ref.relative_to(ROOT)}", flush=True)
     return 0
 
 
@@ -931,7 +940,7 @@ def main(argv: list[str] | None = None) -> int:
         "--workers",
         type=int,
         default=2,
-        help="parallel nbval workers for `check` (default 2)",
+        help="pages executed at a time by `check`, `update`, `standalone` and `cache` (default 2)",
     )
     parser.add_argument(
         "--execute",
@@ -973,7 +982,7 @@ def main(argv: list[str] | None = None) -> int:
             fill_cache(every, args.workers)
             return 0
         return execute_alone(every, args.python, args.workers)
-    status = update(pages)
+    status = update(pages, args.workers)
     if not args.pages:
         for ref in stale_references(every):
             ref.unlink()

@@ -73,7 +73,9 @@ def pytest_generate_tests(metafunc):
         labels = sorted({label for label, _ in source_labels()}, key=lambda s: (len(s), s))
         metafunc.parametrize("equation_label", labels)
     if "toc_page" in metafunc.fixturenames:
-        metafunc.parametrize("toc_page", toc_pages())
+        # Module scope: pytest runs a module's checks of one page one after the other,
+        # so that a check may read the page the previous one loaded (test_browser).
+        metafunc.parametrize("toc_page", toc_pages(), scope="module")
     if "figure_page" in metafunc.fixturenames:
         metafunc.parametrize("figure_page", figure_pages())
 

@@ -89,9 +89,12 @@ def browser(missing_prerequisite):
         shutil.rmtree(profile, ignore_errors=True)
 
 
-def open_page(driver, html_dir: Path, page: str) -> None:
+def open_page(driver, html_dir: Path, page: str, reuse: bool = False) -> None:
+    """Load ``page`` in ``driver``; with ``reuse``, keep it when it is the page already shown."""
     path = html_dir / f"{page}.html"
     assert path.exists(), f"{path} not built"
+    if reuse and driver.current_url == path.as_uri():
+        return
     driver.get_log("performance")  # drop the previous page's events
     driver.get(path.as_uri())
 
@@ -178,8 +181,9 @@ def test_figure_page_shows_images_and_a_table(browser, html_dir, figure_page):
 
 def test_equations_fit_or_scroll_in_their_own_box(browser, html_dir, toc_page):
     # At 1280 px (CHROMIUM_FLAGS), a display equation wider than the text
-    # column scrolls inside its own box, so that none is cut off.
-    open_page(browser, html_dir, toc_page)
+    # column scrolls inside its own box, so that none is cut off. The page
+    # test_page_typesets_its_math_offline loaded at that width is read again.
+    open_page(browser, html_dir, toc_page, reuse=True)
     wait_for_mathjax(browser)
     cut = browser.execute_script(
         """
