@@ -39,6 +39,7 @@ import hashlib
 import importlib
 import json
 import os
+import pathlib
 import time
 from pathlib import Path
 
@@ -48,8 +49,9 @@ from .. import __version__, benchmarks
 
 #: The committed records, kept as package data so that the book's source archive carries them.
 RECORDS = Path(__file__).resolve().parent / "study_records"
-#: The environment variable that sets how :func:`recorded` treats records, and its values.
+#: The environment variable that sets how :func:`recorded` treats records.
 ENVIRONMENT = "DEPTHCORE_RECORDS"
+#: Its values: read a current record (the default), also write new ones, or require them.
 MODES = ("read", "write", "require")
 #: The fields of every record.
 FIELDS = (
@@ -321,7 +323,7 @@ class Recorded:
     ----------
     result : object
         What the function returns.
-    path : Path
+    path : pathlib.Path
         The record's file (read, written, or that would be written).
     date : str or None
         When the record was made; None when computed now and not written.
@@ -332,7 +334,7 @@ class Recorded:
     """
 
     result: object
-    path: Path
+    path: pathlib.Path
     date: str | None
     seconds: float
     read: bool
