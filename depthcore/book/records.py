@@ -51,7 +51,8 @@ from .. import __version__, benchmarks
 RECORDS = Path(__file__).resolve().parent / "study_records"
 #: The environment variable that sets how :func:`recorded` treats records.
 ENVIRONMENT = "DEPTHCORE_RECORDS"
-#: Its values: read a current record (the default), also write new ones, or require them.
+#: The values of :data:`ENVIRONMENT`, in this order: read a current record (the default),
+#: also write the record of each computation, or require a current record.
 MODES = ("read", "write", "require")
 #: The fields of every record.
 FIELDS = (
