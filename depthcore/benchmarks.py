@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import ast
 import datetime
+import functools
 import hashlib
 import json
 import os
@@ -89,7 +90,19 @@ def fingerprint(path) -> str:
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"path must be an existing Python source, got {str(path)!r}")
-    tree = _drop_docstrings(ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+    return _source_fingerprint(*_version_of(path))
+
+
+def _version_of(path: Path) -> tuple[str, int, int]:
+    """A source file by its path, modification time and size: the key of the caches below."""
+    stat = path.stat()
+    return str(path.resolve()), stat.st_mtime_ns, stat.st_size
+
+
+@functools.lru_cache(maxsize=1024)
+def _source_fingerprint(path: str, mtime_ns: int, size: int) -> str:
+    """:func:`fingerprint` of one version of a source, computed once per process."""
+    tree = _drop_docstrings(ast.parse(Path(path).read_text(encoding="utf-8"), filename=path))
     return hashlib.sha256(ast.dump(tree, include_attributes=False).encode()).hexdigest()
 
 
@@ -142,7 +155,13 @@ def _package_imports(module: str) -> set[str]:
     import study`` in ``book.beyond_frames`` is ``study``), as are absolute
     ones of ``depthcore``.
     """
-    path = ROOT / module_path(module)
+    return set(_imports_of(module, *_version_of(ROOT / module_path(module))))
+
+
+@functools.lru_cache(maxsize=1024)
+def _imports_of(module: str, path: str, mtime_ns: int, size: int) -> frozenset[str]:
+    """:func:`_package_imports` of one version of a module's source, computed once per process."""
+    path = Path(path)
     package = [] if module == "__init__" else module.split(".")
     if path.name != "__init__.py":
         package = package[:-1]
@@ -162,7 +181,7 @@ def _package_imports(module: str) -> set[str]:
         if parts:
             found.add(".".join(parts))
         found.update(".".join(parts + [alias.name]) for alias in node.names)
-    return {m for m in found if m and _exists(m)}
+    return frozenset(m for m in found if m and _exists(m))
 
 
 def measured_modules(modules) -> list[str]:
