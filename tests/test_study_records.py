@@ -247,3 +247,24 @@ def test_every_page_that_reads_a_record_is_recomputed_by_make_records():
 def test_the_source_archive_carries_the_records():
     pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
     assert '"book/study_records/*.json"' in pyproject
+
+
+def test_an_argument_that_cannot_be_recorded_is_named(record_dir):
+    rng = np.random.default_rng(0)
+    with pytest.raises(TypeError, match=r"argument 2: cannot record a numpy\.random.*Generator"):
+        records.recorded(beyond_frames.frames_study, [3], 5, rng)
+    with pytest.raises(TypeError, match=r"argument seed: cannot record a .*Generator"):
+        records.recorded(beyond_frames.frames_study, [3], 5, seed=rng)
+    assert list(record_dir.iterdir()) == []
+
+
+def test_a_result_that_cannot_be_recorded_is_named_when_writing(record_dir, monkeypatch):
+    import matplotlib.pyplot as plt
+
+    from depthcore.book import style
+
+    monkeypatch.setenv(records.ENVIRONMENT, "write")
+    with pytest.raises(TypeError, match=r"the result of depthcore\.book\.style:subplots"):
+        records.recorded(style.subplots, 1, 1, figsize=(2.0, 2.0))
+    plt.close("all")
+    assert list(record_dir.iterdir()) == []

@@ -211,9 +211,26 @@ def _module_name(name: str) -> str:
     return module.removeprefix("depthcore").removeprefix(".") or "__init__"
 
 
+def _encode_named(value, what: str):
+    """:func:`encode`, its TypeError naming ``what`` was being encoded."""
+    try:
+        return encode(value)
+    except TypeError as err:
+        raise TypeError(f"{what}: {err}; a record keeps only values it can write") from None
+
+
 def arguments(args=(), kwargs=None) -> dict:
-    """The encoded arguments of a call, as its record keeps them."""
-    return {"args": encode(list(args)), "kwargs": encode(dict(kwargs or {}))}
+    """The encoded arguments of a call, as its record keeps them.
+
+    Raises
+    ------
+    TypeError
+        Naming the argument (by position or by name) that cannot be recorded.
+    """
+    return {
+        "args": [_encode_named(a, f"argument {i}") for i, a in enumerate(args)],
+        "kwargs": {k: _encode_named(v, f"argument {k}") for k, v in dict(kwargs or {}).items()},
+    }
 
 
 def call_key(name: str, args=(), kwargs=None) -> str:
@@ -300,7 +317,7 @@ def write(name: str, args, kwargs, result, seconds: float, directory=None) -> Pa
         "machine": benchmarks.machine(),
         "depthcore_version": __version__,
         "fingerprint": code_fingerprint(name),
-        "result": encode(result),
+        "result": _encode_named(result, f"the result of {name}"),
     }
     path = record_path(name, key, directory)
     path.parent.mkdir(parents=True, exist_ok=True)
