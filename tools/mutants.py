@@ -34,8 +34,8 @@ MUTANTS = [
     (
         "coverage threshold (every level)",
         "depthcore/study_scores.py",
-        "self.covered[k] += [np.count_nonzero(off <= p / 2) for p in _COVERAGE_LEVELS]",
-        "self.covered[k] += [np.count_nonzero(off <= p / 2.1) for p in _COVERAGE_LEVELS]",
+        "return np.abs(np.asarray(cdf, dtype=float) - 0.5) <= level / 2",
+        "return np.abs(np.asarray(cdf, dtype=float) - 0.5) <= level / 2.1",
         "tests/test_study.py",
     ),
     (
@@ -48,8 +48,8 @@ MUTANTS = [
     (
         "coverage centre",
         "depthcore/study_scores.py",
-        "off = np.abs(cdf - 0.5)",
-        "off = np.abs(cdf - 0.49)",
+        "return np.abs(np.asarray(cdf, dtype=float) - 0.5) <= level / 2",
+        "return np.abs(np.asarray(cdf, dtype=float) - 0.49) <= level / 2",
         "tests/test_study.py",
     ),
     (
