@@ -226,8 +226,34 @@ def fingerprints(script, modules) -> dict[str, str]:
     dict of str to str
         Path relative to the repository -> :func:`fingerprint`.
     """
-    paths = [Path(script)] + [ROOT / module_path(m) for m in measured_modules(modules)]
-    return {_relative(p): fingerprint(p) for p in paths}
+    return {_relative(Path(script)): fingerprint(script)} | module_fingerprints(modules)
+
+
+def module_fingerprints(modules) -> dict[str, str]:
+    """The fingerprints of depthcore's modules ``modules`` and of every module they import.
+
+    Parameters
+    ----------
+    modules : sequence of str
+        Names inside the package (:func:`module_path`), e.g. ``("optimal",)``.
+
+    Returns
+    -------
+    dict of str to str
+        Path relative to the repository (``depthcore/...``) -> :func:`fingerprint`,
+        for every module of :func:`measured_modules`.
+    """
+    paths = (module_path(m) for m in measured_modules(modules))
+    return {path: fingerprint(ROOT / path) for path in paths}
+
+
+def changed_sources(recorded: dict, current: dict) -> list[str]:
+    """The sources whose fingerprints differ between two fingerprint maps, sorted.
+
+    A source in one map and not in the other counts as changed (gone, or
+    newly imported).
+    """
+    return [p for p in sorted(set(current) | set(recorded)) if current.get(p) != recorded.get(p)]
 
 
 def _cpu_model() -> str:
@@ -363,5 +389,4 @@ def stale(record: dict) -> list[str]:
     gone = [f"depthcore/{m.replace('.', '/')}.py" for m in record["measures"] if not _exists(m)]
     if gone:
         return gone
-    current = fingerprints(script, record["measures"])
-    return [p for p in sorted(set(current) | set(recorded)) if current.get(p) != recorded.get(p)]
+    return changed_sources(recorded, fingerprints(script, record["measures"]))
