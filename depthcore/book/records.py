@@ -235,7 +235,11 @@ def arguments(args=(), kwargs=None) -> dict:
 
 def call_key(name: str, args=(), kwargs=None) -> str:
     """The first 16 hex digits of the SHA-256 of a call: function name and encoded arguments."""
-    text = json.dumps([name, arguments(args, kwargs)], sort_keys=True, allow_nan=True)
+    return _hash_call(name, arguments(args, kwargs))
+
+
+def _hash_call(name: str, encoded: dict) -> str:
+    text = json.dumps([name, encoded], sort_keys=True, allow_nan=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -258,13 +262,7 @@ def code_fingerprint(name: str) -> dict[str, str]:
     dict of str to str
         Path relative to the repository (``depthcore/...``) -> fingerprint.
     """
-    modules = benchmarks.measured_modules([_module_name(name)])
-    return {
-        benchmarks.module_path(m): benchmarks.fingerprint(
-            benchmarks.ROOT / benchmarks.module_path(m)
-        )
-        for m in modules
-    }
+    return benchmarks.module_fingerprints([_module_name(name)])
 
 
 def stale(record: dict) -> list[str]:
@@ -280,16 +278,11 @@ def stale(record: dict) -> list[str]:
     list of str
         Paths relative to the repository: changed, gone, or newly imported.
     """
-    recorded_prints = record["fingerprint"]
     try:
         current = code_fingerprint(record["function"])
     except ValueError:
-        return sorted(recorded_prints)
-    return [
-        p
-        for p in sorted(set(current) | set(recorded_prints))
-        if current.get(p) != recorded_prints.get(p)
-    ]
+        return sorted(record["fingerprint"])
+    return benchmarks.changed_sources(record["fingerprint"], current)
 
 
 def read(path) -> dict:
@@ -305,12 +298,13 @@ def committed(directory=None) -> list[Path]:
     return sorted(Path(RECORDS if directory is None else directory).glob("*.json"))
 
 
-def write(name: str, args, kwargs, result, seconds: float, directory=None) -> Path:
-    """Write the record of one call of function ``name``; return its path."""
-    key = call_key(name, args, kwargs)
+def write(name: str, args, kwargs, result, seconds: float, directory=None) -> dict:
+    """Write the record of one call of function ``name`` to :func:`record_path`; return it."""
+    encoded = arguments(args, kwargs)
+    key = _hash_call(name, encoded)
     record = {
         "function": name,
-        "arguments": arguments(args, kwargs),
+        "arguments": encoded,
         "key": key,
         "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "seconds": round(float(seconds), 1),
@@ -322,7 +316,7 @@ def write(name: str, args, kwargs, result, seconds: float, directory=None) -> Pa
     path = record_path(name, key, directory)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(record, indent=None, allow_nan=True) + "\n", encoding="utf-8")
-    return path
+    return record
 
 
 def mode() -> str:
@@ -407,7 +401,6 @@ def recorded(function, /, *args, **kwargs) -> Recorded:
     result = function(*args, **kwargs)
     seconds = time.perf_counter() - start
     if how == "write":
-        path = write(name, args, kwargs, result, seconds)
-        date = read(path)["date"]
-        return Recorded(decode(encode(result)), path, date, seconds, False)
+        record = write(name, args, kwargs, result, seconds)
+        return Recorded(decode(record["result"]), path, record["date"], seconds, False)
     return Recorded(result, path, None, seconds, False)
