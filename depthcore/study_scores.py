@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.special import ndtri
-from scipy.stats import beta
 
 from . import _checks
 from .study_trials import Estimates, Trials
@@ -326,6 +325,8 @@ def track_loss(lost: int, trials: int, confidence: float = TRACK_LOSS_CONFIDENCE
         raise ValueError(f"lost must be an integer from 0 to trials = {n}, got {lost!r}")
     if not 0 < confidence < 1:
         raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
+    from scipy.stats import beta  # imported here: scipy.stats takes a second to import
+
     p = lost / n
     upper = 1.0 if lost == n else float(beta.ppf(confidence, lost + 1, n - lost))
     return {
