@@ -2,6 +2,7 @@
 #
 #   make book               clean, strict build of the book into _build/html, with its downloads
 #   make pdf                the book as a PDF, _build/latex/depthcore.pdf (needs TeX Live's xelatex)
+#   make books              the PDF and the book side by side (make test's build of both)
 #   make lab                JupyterLab on the book's pages (MyST .md files open as notebooks)
 #   make test               core tests; every page executed once, alone, and compared with
 #                           book/_nbval/; the PDF and the book built from that execution;
@@ -70,7 +71,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 export JUPYTER_PATH := $(CURDIR)/tools/jupyter$(if $(JUPYTER_PATH),:$(JUPYTER_PATH))
 KERNEL := $(VENV)/share/jupyter/kernels/python3
 
-.PHONY: help venv cite-venv downloads book pdf lab test test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book figures records bench clean distclean
+.PHONY: help venv cite-venv downloads book html-build pdf pdf-build books lab test test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book figures records bench clean distclean
 
 help:
 	@sed -n '3,/^#$$/p' Makefile | sed -e 's/^# \{0,1\}//' -e '/^$$/d'
@@ -144,11 +145,21 @@ downloads: $(EDITABLE) $(FIGURES)/.written
 	cp requirements.txt CITATION.cff $(DOWNLOADS)/
 
 book: downloads
-	find _build -mindepth 1 -maxdepth 1 ! -name latex ! -name .jupyter_cache ! -name figures \
-	  ! -name extra -exec rm -rf {} + 2>/dev/null || true
+	$(clear-book)
 	@if [[ -f $(PDF) ]]; then cp $(PDF) $(DOWNLOADS)/depthcore.pdf; else \
 	  echo "make book: NOTE: $(PDF) not found, so the book does not offer the PDF: run \`make pdf\` first" >&2; fi
 	$(PY) tools/check_notebooks.py cache --execute
+	$(MAKE) --no-print-directory html-build
+
+# What a build of the HTML book starts from: _build/ without the previous HTML build (the
+# LaTeX build, the execution cache, the figures and the downloads are kept).
+define clear-book
+find _build -mindepth 1 -maxdepth 1 ! -name latex ! -name pdf ! -name .jupyter_cache ! -name figures \
+  ! -name extra -exec rm -rf {} + 2>/dev/null || true
+endef
+
+# Sphinx's HTML build, from the execution cache (filled first by make book, make books).
+html-build:
 	$(VENV)/bin/jupyter-book build . --all -W -n --keep-going 2>&1 | tee _build/book.log
 
 # Every page executed once, alone (a folder holding only its notebook, .venv/standalone/ with only the
@@ -161,16 +172,43 @@ notebooks-alone: $(EDITABLE) $(ALONE_STAMP) downloads
 # Sphinx's LaTeX builder, then xelatex (Debian: texlive-xetex texlive-latex-extra
 # texlive-fonts-recommended lmodern latexmk fonts-freefont-otf; .ci/run installs them).
 pdf: $(EDITABLE)
-	@for tool in xelatex latexmk; do command -v $$tool >/dev/null || { \
-	  echo "make pdf: $$tool not found: the PDF needs TeX Live (Debian: apt-get install texlive-xetex" \
-	    "texlive-latex-extra texlive-fonts-recommended lmodern latexmk fonts-freefont-otf)" >&2; exit 1; }; done
-	rm -rf _build/latex
-	mkdir -p _build/latex
+	$(check-tex)
 	$(PY) tools/check_notebooks.py cache --execute
-	$(VENV)/bin/jupyter-book build . --builder latex --all -W -n --keep-going 2>&1 | tee _build/latex.log
+	$(MAKE) --no-print-directory pdf-build
+
+define check-tex
+@for tool in xelatex latexmk; do command -v $$tool >/dev/null || { \
+  echo "make pdf: $$tool not found: the PDF needs TeX Live (Debian: apt-get install texlive-xetex" \
+    "texlive-latex-extra texlive-fonts-recommended lmodern latexmk fonts-freefont-otf)" >&2; exit 1; }; done
+endef
+
+# The LaTeX build keeps its doctrees and executed notebooks in _build/pdf/ (Jupyter Book puts
+# them beside its output), apart from the HTML build's, so that the two can run side by side;
+# its output then moves to _build/latex/, where xelatex writes the PDF.
+LATEX_BUILD := _build/pdf
+pdf-build:
+	rm -rf _build/latex $(LATEX_BUILD)
+	mkdir -p _build
+	$(VENV)/bin/jupyter-book build . --builder latex --path-output $(LATEX_BUILD) --all -W -n \
+	  --keep-going 2>&1 | tee _build/latex.log
+	mv $(LATEX_BUILD)/_build/latex _build/latex
 	cd _build/latex && latexmk -xelatex -interaction=nonstopmode -halt-on-error depthcore.tex \
 	  > latexmk.log 2>&1 || { tail -n 40 latexmk.log >&2; echo "make pdf: xelatex failed, see _build/latex/depthcore.log" >&2; exit 1; }
 	@echo "make pdf: wrote $(PDF)"
+
+# make test: the PDF and the HTML book built side by side, one Sphinx build per core, from
+# the execution cache that make notebooks-alone filled. The book links the PDF
+# (DEPTHCORE_DOWNLOADS_PENDING, read by tools/sphinx/depthcore_book.py), which is copied
+# into its downloads once xelatex has written it.
+books: downloads
+	$(check-tex)
+	$(PY) tools/check_notebooks.py cache --execute
+	$(clear-book)
+	rm -f $(DOWNLOADS)/depthcore.pdf
+	DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf $(MAKE) -j2 --no-print-directory --output-sync=target \
+	  pdf-build html-build
+	cp $(PDF) $(DOWNLOADS)/depthcore.pdf
+	cp $(PDF) _build/html/downloads/depthcore.pdf
 
 # JupyterLab from .venv/; jupytext opens the book's MyST pages (book/*.md) as
 # notebooks with one click (tools/jupyter/lab/settings/overrides.json, copied
@@ -185,7 +223,7 @@ lab: $(EDITABLE)
 	  $(LAB_ARGS) book/intro.md
 
 # Each stage's time is printed as it ends, and all of them at the end.
-TEST_STAGES := lint test-core notebooks-alone pdf book check-book
+TEST_STAGES := lint test-core notebooks-alone books check-book
 test: $(EDITABLE)
 	tools/system-packages.sh
 	@times=(); for stage in $(TEST_STAGES); do start=$$SECONDS; \

@@ -174,14 +174,39 @@ def test_the_config_uses_the_cache_that_make_keys():
 
     config = yaml.safe_load((ROOT / "_config.yml").read_text(encoding="utf-8"))
     assert config["execute"]["execute_notebooks"] == "cache"
-    # No other cache path: myst-nb's default, _build/.jupyter_cache, is the one keyed.
-    assert "cache" not in config["execute"]
+    # One cache for both builds, the one keyed, though the LaTeX build's output is elsewhere.
+    assert check_notebooks.CACHE == ROOT / config["execute"]["cache"]
     assert check_notebooks.CACHE == ROOT / "_build" / ".jupyter_cache"
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
-    for target in ("book", "pdf"):
-        recipe = makefile.split(f"\n{target}: ", 1)[1].split("\n\n", 1)[0]
-        build = recipe.index("jupyter-book build")
-        assert 0 <= recipe.find("tools/check_notebooks.py cache --execute") < build, target
+
+    def recipe(target: str) -> str:
+        return makefile.split(f"\n{target}:", 1)[1].split("\n\n", 1)[0]
+
+    for target, builds in (
+        ("book", ["html-build"]),
+        ("pdf", ["pdf-build"]),
+        ("books", ["pdf-build", "html-build"]),
+    ):
+        text = recipe(target)
+        cached = text.find("tools/check_notebooks.py cache --execute")
+        for build in builds:
+            assert 0 <= cached < text.index(f" {build}"), (target, build)
+    assert "jupyter-book build . --all" in recipe("html-build")
+    latex = "jupyter-book build . --builder latex --path-output $(LATEX_BUILD)"
+    assert latex in recipe("pdf-build")
+
+
+def test_make_test_builds_the_pdf_and_the_book_side_by_side_and_ships_the_pdf():
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    books = makefile.split("\nbooks:", 1)[1].split("\n\n", 1)[0]
+    side_by_side = books.index("$(MAKE) -j2")
+    assert "DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf" in books[:side_by_side]
+    after = books[side_by_side:]
+    assert "cp $(PDF) $(DOWNLOADS)/depthcore.pdf" in after
+    assert "cp $(PDF) _build/html/downloads/depthcore.pdf" in after
+    # The LaTeX build's doctrees are not the HTML build's, and the HTML build keeps them.
+    assert "LATEX_BUILD := _build/pdf" in makefile
+    assert "! -name pdf" in makefile.split("define clear-book", 1)[1].split("endef", 1)[0]
 
 
 # --- the downloaded notebooks, run alone ---------------------------------------------------
@@ -397,7 +422,7 @@ def test_make_test_executes_each_page_once_alone_before_the_builds():
     assert "for stage in $(TEST_STAGES)" in recipe
     assert "$(MAKE) --no-print-directory $$stage" in recipe
     steps = makefile.split("\nTEST_STAGES := ", 1)[1].split("\n", 1)[0].split()
-    assert steps.index("notebooks-alone") < steps.index("pdf") < steps.index("book")
+    assert steps.index("notebooks-alone") < steps.index("books") < steps.index("check-book")
     assert "notebooks-standalone" not in steps  # a second execution of every page
     alone = makefile.split("\nnotebooks-alone: ", 1)[1].split("\n\n", 1)[0]
     assert "cache --execute --python $(ALONE_VENV)/bin/python" in alone

@@ -292,3 +292,27 @@ def test_a_figure_without_a_glued_name_fails_the_strict_build(tmp_path):
 def test_an_eval_call_of_another_function_fails_the_strict_build(tmp_path):
     with pytest.raises(Exception, match="a reference is written as one of"):
         build_book(tmp_path, '# Page\n\nA {eval}`cite("alpha2001")` B\n')
+
+
+def test_the_downloads_link_what_the_folder_holds_and_what_is_pending(tmp_path, monkeypatch):
+    folder = tmp_path / "downloads"
+    folder.mkdir()
+    (folder / "requirements.txt").write_text("numpy\n")
+    listing = (
+        "# Page\n\n```{depthcore-downloads}\nrequirements.txt: the pins\n"
+        "depthcore.pdf: the book\nnotes.txt: the notes\n```\n"
+    )
+    conf = f"depthcore_downloads = {str(folder)!r}\n"
+    monkeypatch.delenv("DEPTHCORE_DOWNLOADS_PENDING", raising=False)
+    (tmp_path / "alone").mkdir()
+    page = build(tmp_path / "alone", listing, conf)
+    assert '<a class="reference external" href="downloads/requirements.txt">the pins</a>' in page
+    assert "the book (not shipped by this build of the book)" in page
+    assert "the notes (not shipped by this build of the book)" in page
+    # make test: the PDF is written beside the HTML build and copied in when both end.
+    monkeypatch.setenv("DEPTHCORE_DOWNLOADS_PENDING", "depthcore.pdf")
+    (tmp_path / "beside").mkdir()
+    page = build(tmp_path / "beside", listing, conf)
+    assert '<a class="reference external" href="downloads/depthcore.pdf">the book</a>' in page
+    assert "the notes (not shipped by this build of the book)" in page
+    assert "the book (not shipped" not in page

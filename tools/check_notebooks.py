@@ -485,7 +485,7 @@ def standalone(
     return status
 
 
-#: Jupyter Book's execution cache (``execute.cache`` unset: ``_build/.jupyter_cache``).
+#: Jupyter Book's execution cache, ``execute.cache`` of _config.yml (``_build/.jupyter_cache``).
 CACHE = ROOT / "_build" / ".jupyter_cache"
 #: What every page's outputs may depend on besides its own text.
 ENVIRONMENT = ("depthcore", "requirements.txt", "CITATION.cff")

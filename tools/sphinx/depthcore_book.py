@@ -52,12 +52,17 @@ description). In HTML each description links its file, and only a file that
 the folder holds when the book is built: ``make book`` without ``make pdf``
 lists the PDF as not built, without a link that would lead nowhere. In the
 PDF the list is printed with each file's address, under ``html_baseurl``
-when the config sets one, else relative to the HTML book's root.
+when the config sets one, else relative to the HTML book's root. A file that
+a build running beside this one is still writing, and that is copied into
+the downloads when both end, is named in the environment variable
+``DEPTHCORE_DOWNLOADS_PENDING`` (space-separated names; ``make test`` builds
+the PDF and the HTML book side by side) and is linked as shipped.
 """
 
 from __future__ import annotations
 
 import ast
+import os
 import re
 import shutil
 from pathlib import Path
@@ -338,6 +343,15 @@ def parse_downloads(lines) -> list[tuple[str, str]]:
     return items
 
 
+#: The environment variable naming the downloads another build is writing.
+PENDING = "DEPTHCORE_DOWNLOADS_PENDING"
+
+
+def pending_downloads() -> set[str]:
+    """The names of :data:`PENDING`: downloads copied in once a build beside this one ends."""
+    return set(os.environ.get(PENDING, "").split())
+
+
 class DownloadsDirective(SphinxDirective):
     """The list of downloads: linked in HTML where built, printed with addresses in the PDF."""
 
@@ -354,7 +368,7 @@ class DownloadsDirective(SphinxDirective):
         html, latex = nodes.bullet_list(), nodes.bullet_list()
         for name, text in items:
             described, messages = self.state.inline_text(text, self.lineno)
-            shipped = (folder / name).is_file()
+            shipped = (folder / name).is_file() or name in pending_downloads()
             item = nodes.list_item()
             para = nodes.paragraph()
             if shipped:
