@@ -180,6 +180,14 @@ def test_require_refuses_a_call_without_a_current_record(record_dir, monkeypatch
     path = small_study().path
     monkeypatch.setenv(records.ENVIRONMENT, "require")
     assert small_study().read
+    # The call is shown in one short line, whatever its arguments hold.
+    with pytest.raises(ValueError) as refused:
+        records.recorded(beyond_frames.frames_study, np.arange(3, 1003), 12, 1)
+    assert str(refused.value).startswith(
+        "depthcore.book.beyond_frames:frames_study(array([   3, ..., 1001, 1002]), 12, 1) has no "
+        "current record"
+    )
+    assert len(str(refused.value)) < 240
     record = json.loads(path.read_text())
     record["fingerprint"]["depthcore/model.py"] = "0" * 64  # as if model.py had changed
     path.write_text(json.dumps(record))

@@ -40,6 +40,7 @@ import importlib
 import json
 import os
 import pathlib
+import reprlib
 import time
 from pathlib import Path
 
@@ -394,8 +395,8 @@ def recorded(function, /, *args, **kwargs) -> Recorded:
             return Recorded(decode(record["result"]), path, record["date"], record["seconds"], True)
     if how == "require":
         raise ValueError(
-            f"{name}{tuple(args)!r} has no current record ({path.name}): run `{COMMAND}` "
-            f"(or unset {ENVIRONMENT} to compute it)"
+            f"{name}{reprlib.repr(tuple(args))} has no current record ({path.name}): "
+            f"run `{COMMAND}` (or unset {ENVIRONMENT} to compute it)"
         )
     start = time.perf_counter()
     result = function(*args, **kwargs)
