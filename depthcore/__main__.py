@@ -329,8 +329,7 @@ def _cmd_study(args) -> str:
     if args.seed < 0:
         raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
     _check_rho(args.rho)
-    if not 3 <= args.frames <= FRAMES_MAX:
-        raise ValueError(f"--frames must be from 3 to {FRAMES_MAX}, got {args.frames}")
+    _checks.frames(args.frames, "--frames")
     q = _check_process_noise(args.process_noise)
     names = tuple(dict.fromkeys(args.filters))
     if len(names) < len(args.filters):

@@ -265,3 +265,15 @@ def count(value, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     return int(value)
+
+
+def frames(value, name: str = "frames") -> int:
+    """Return ``value`` as an int, checking that it is a number of frames, 3 to MAX_FRAMES."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, np.integer))
+        or not 3 <= value <= MAX_FRAMES
+    ):
+        shown = value.item() if isinstance(value, np.generic) else value
+        raise ValueError(f"{name} must be an integer from 3 to {MAX_FRAMES}, got {shown!r}")
+    return int(value)

@@ -148,11 +148,7 @@ def draw_from_prior(
 
 def _frames_and_noise(frames, process_noise) -> tuple[int, float]:
     """``frames`` (3 to ``MAX_FRAMES``) and ``process_noise`` (>= 0), checked."""
-    if isinstance(frames, bool) or not isinstance(frames, (int, np.integer)):
-        raise ValueError(f"frames must be an integer, got {frames!r}")
-    if not 3 <= frames <= _checks.MAX_FRAMES:
-        raise ValueError(f"frames must be from 3 to {_checks.MAX_FRAMES}, got {frames}")
-    return int(frames), _checks.nonnegative_scalar(process_noise, "process_noise")
+    return _checks.frames(frames), _checks.nonnegative_scalar(process_noise, "process_noise")
 
 
 def coverage(pit, levels=LEVELS) -> np.ndarray:

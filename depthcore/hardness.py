@@ -364,9 +364,7 @@ def hard_cell(
     fixed_rng, prior_rng = (
         np.random.default_rng(s) for s in _checks.spawn(_checks.seed_sequence(seed), 2)
     )
-    frames = _checks.count(frames, "frames")
-    if not 3 <= frames <= _checks.MAX_FRAMES:
-        raise ValueError(f"frames must be from 3 to {_checks.MAX_FRAMES}, got {frames}")
+    frames = _checks.frames(frames)
     b = bound.posterior_bound(truth, 3, frames, rho, pc)
     out = {
         "truth": truth,

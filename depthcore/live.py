@@ -54,9 +54,7 @@ def bearings(mu, frames: int) -> np.ndarray:
         3 (Eq. (7)) and ``G`` the motion (Eq. (1)).
     """
     mu = _checks.finite_array(mu, "mu", (3,))
-    frames = _checks.count(frames, "frames")
-    if not 3 <= frames <= _checks.MAX_FRAMES:
-        raise ValueError(f"frames must be from 3 to {_checks.MAX_FRAMES}, got {frames}")
+    frames = _checks.frames(frames)
     c = model.noise_free_state(mu)
     later = [model.project(model.G(c, k)) for k in range(1, frames - 2)]
     return np.concatenate([mu, np.asarray(later, dtype=float).reshape(-1)])

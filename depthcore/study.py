@@ -140,7 +140,7 @@ def study(
         raise ValueError(f"trials must be a positive integer, got {trials!r}")
     chunk = _checks.count(chunk, "chunk")
     q = _checks.nonnegative_scalar(process_noise, "process_noise")
-    frames = _checks.count(frames, "frames")
+    frames = _checks.frames(frames)
     unable = [
         n
         for n in names

@@ -147,9 +147,7 @@ def simulate(
         ``n * frames * 3`` numbers).
     """
     truth = _checks.finite_array(truth, "truth", (3,))
-    frames = _checks.count(frames, "frames")
-    if not 3 <= frames <= _checks.MAX_FRAMES:
-        raise ValueError(f"frames must be from 3 to {_checks.MAX_FRAMES}, got {frames}")
+    frames = _checks.frames(frames)
     q = _checks.nonnegative_scalar(process_noise, "process_noise")
     rho = _checks.positive_scalar(rho, "rho")
     if not (isinstance(n, (int, np.integer)) and n >= 1):

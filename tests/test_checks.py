@@ -1,5 +1,7 @@
 """Bad input gets a ValueError that names the argument and the problem."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -180,3 +182,39 @@ def test_process_noise_is_zero_or_a_normal_double():
     for q in (1e-320, 5e-324, tiny / 2):
         with pytest.raises(ValueError, match="process_noise must be 0 or at least"):
             _checks.process_noise(q)
+
+
+@pytest.mark.parametrize("value", [3, 10, _checks.MAX_FRAMES, np.int64(4), np.uint16(7)])
+def test_frames_takes_integers_from_3_to_the_most_frames(value):
+    assert _checks.frames(value) == int(value)
+    assert type(_checks.frames(value)) is int
+
+
+@pytest.mark.parametrize(
+    "value, shown",
+    [
+        (0, "0"),
+        (2, "2"),
+        (-5, "-5"),
+        (_checks.MAX_FRAMES + 1, str(_checks.MAX_FRAMES + 1)),
+        (2.5, "2.5"),
+        (np.float64(3.0), "3.0"),
+        (np.int64(2), "2"),
+        (True, "True"),
+        ("3", "'3'"),
+        (None, "None"),
+    ],
+)
+def test_frames_refuses_what_is_not_a_number_of_frames_and_shows_it(value, shown):
+    message = f"N must be an integer from 3 to {_checks.MAX_FRAMES}, got {shown}"
+    with pytest.raises(ValueError, match=f"^{re.escape(message)}$"):
+        _checks.frames(value, "N")
+
+
+def test_a_list_of_frames_names_the_value_refused():
+    from depthcore.book import beyond_frames
+
+    with pytest.raises(ValueError, match=r"got 2\.5$"):
+        beyond_frames.frames_study([3, 2.5], 10, 1)
+    with pytest.raises(ValueError, match=r"from 3 to 1000, got 0$"):
+        beyond_frames.frames_study(0, 10, 1)

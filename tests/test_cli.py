@@ -256,7 +256,7 @@ def test_estimate_takes_more_frames_process_noise_and_smoothing(capsys):
             "--process-noise must be 0 or from",
         ),
         (["estimate", "--mu", "0.3", "0", "0.2", "0.1", "--rho", "0.005"], "give --prior-mean"),
-        (["study", "--frames", "2"], "--frames must be from 3"),
+        (["study", "--frames", "2"], "--frames must be an integer from 3 to 1000, got 2"),
         (
             ["study", "--frames", "5", "--process-noise", "0.01", "--filters", "particle"],
             "--filters: particle cannot run",

@@ -258,8 +258,8 @@ FIG2 = SCENARIOS["fig2"]
     "call, message",
     [
         (lambda: beyond_frames.frames_study([], 10, 1), "frames must hold at least one"),
-        (lambda: beyond_frames.frames_study([2], 10, 1), "frames must be from 3"),
-        (lambda: beyond_frames.frames_study([5000], 10, 1), "frames must be from 3"),
+        (lambda: beyond_frames.frames_study([2], 10, 1), "frames must be an integer from 3"),
+        (lambda: beyond_frames.frames_study([5000], 10, 1), "frames must be an integer from 3"),
         (lambda: beyond_frames.frames_study([3.5], 10, 1), "frames must be an integer"),
         (lambda: beyond_frames.frames_study([3], 0, 1), "trials"),
         (lambda: beyond_frames.frames_study([3], 10, 1, prior="x"), "prior"),

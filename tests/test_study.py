@@ -416,7 +416,7 @@ def test_a_filter_without_answer_for_a_simulated_trial_is_named_not_its_bearings
 def test_study_refuses_filters_that_cannot_run_on_the_frames_or_process_noise():
     with pytest.raises(ValueError, match="names: particle cannot run"):
         study.study(trials=5, names=("ekf", "particle"), frames=5, process_noise=0.01)
-    with pytest.raises(ValueError, match="frames must be from 3"):
+    with pytest.raises(ValueError, match="frames must be an integer from 3"):
         study.study(trials=5, names=("ekf",), frames=2)
 
 

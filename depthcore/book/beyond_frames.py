@@ -87,7 +87,8 @@ def frames_study(
         the per-trial depth scores' co-moments of the filters that draw no
         random numbers, over their common trials (``study(..., paired=True)``).
     """
-    frames = [_checks.count(n, "frames") for n in _checks.nonempty(np.atleast_1d(frames), "frames")]
+    values = list(frames) if np.ndim(frames) else [frames]
+    frames = [_checks.frames(n) for n in _checks.nonempty(values, "frames")]
     names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
     random = tuple(n for n in names if FILTERS[n].random)
     plain = tuple(n for n in names if not FILTERS[n].random)
