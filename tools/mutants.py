@@ -207,6 +207,13 @@ MUTANTS = [
         "tests/test_study_records.py",
     ),
     (
+        "two frames taken as a number of frames",
+        "depthcore/_checks.py",
+        "or not 3 <= value <= MAX_FRAMES",
+        "or not 2 <= value <= MAX_FRAMES",
+        "tests/test_checks.py",
+    ),
+    (
         "the paired coverage gap of compare at one level only",
         "depthcore/study_pairs.py",
         "gap, se = coverage_gap_difference(m, c, n, p)",
