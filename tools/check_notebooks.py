@@ -485,8 +485,16 @@ def standalone(
     return status
 
 
-#: Jupyter Book's execution cache, ``execute.cache`` of _config.yml (``_build/.jupyter_cache``).
-CACHE = ROOT / "_build" / ".jupyter_cache"
+def execution_cache(config_path: Path = ROOT / "_config.yml") -> Path:
+    """Jupyter Book's execution cache, ``execute.cache`` of ``_config.yml``, under :data:`ROOT`."""
+    import yaml
+
+    config = yaml.safe_load(config_path.read_text(encoding="utf-8"))
+    return ROOT / config["execute"]["cache"]
+
+
+#: The execution cache that the HTML and the PDF builds share (``_build/.jupyter_cache``).
+CACHE = execution_cache()
 #: What every page's outputs may depend on besides its own text.
 ENVIRONMENT = ("depthcore", "requirements.txt", "CITATION.cff")
 #: The key of the cache's contents, beside them.
