@@ -83,7 +83,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 export JUPYTER_PATH := $(CURDIR)/tools/jupyter$(if $(JUPYTER_PATH),:$(JUPYTER_PATH))
 KERNEL := $(VENV)/share/jupyter/kernels/python3
 
-.PHONY: help venv cite-venv downloads book html-build pdf pdf-build books lab test test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book figures records bench clean distclean
+.PHONY: help venv cite-venv downloads book html-build pdf pdf-build books lab test core test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book figures records bench clean distclean
 
 help:
 	@sed -n '3,/^#$$/p' Makefile | sed -e 's/^# \{0,1\}//' -e '/^$$/d'
@@ -236,7 +236,7 @@ lab: $(EDITABLE)
 	  $(LAB_ARGS) book/intro.md
 
 # Each stage's time is printed as it ends, and all of them at the end.
-TEST_STAGES := lint test-core notebooks-alone books check-book
+TEST_STAGES := lint core notebooks-alone books check-book
 test: $(EDITABLE)
 	tools/system-packages.sh
 	@times=(); for stage in $(TEST_STAGES); do start=$$SECONDS; \
@@ -246,6 +246,12 @@ test: $(EDITABLE)
 
 test-core: $(EDITABLE) $(CITE_STAMP)
 	$(PY) -m pytest -q -rs -n 2 tests $(PYTEST_ARGS)
+
+# make test's first stage: the core tests and, beside them, the figures for the book's
+# downloads and the venv that runs the pages alone (one process each, which would
+# otherwise leave a core idle while the next stage waits for them).
+core: $(EDITABLE)
+	$(MAKE) -j2 --no-print-directory --output-sync=line test-core $(FIGURES)/.written $(ALONE_STAMP)
 
 notebooks: $(EDITABLE)
 	$(PY) tools/check_notebooks.py check $(PAGES)

@@ -8,7 +8,11 @@ checks that
   its mathematics typeset by MathJax (served from the book's own
   ``_static/mathjax``, see ``sphinx-mathjax-offline`` in ``_config.yml``);
 * each page of ``tests/data/figure_pages.json`` shows its images and at least
-  one table.
+  one table;
+* at 1280 px no display equation is cut off, and, narrowed to a phone's width,
+  no page is wider than the phone and every table too wide scrolls in its own
+  box (a page narrowed is laid out as one loaded on a phone: checked on three
+  pages with wide tables).
 
 Without Chromium the browser tests are skipped, except under CI, where a
 missing browser is a failure. The check that the HTML asks no CDN for MathJax
@@ -198,31 +202,70 @@ def test_equations_fit_or_scroll_in_their_own_box(browser, html_dir, toc_page):
     assert not cut, f"{toc_page}.html: equations cut off at 1280 px: {cut}"
 
 
-def test_tables_scroll_inside_themselves_on_a_phone(browser, html_dir, toc_page):
-    size = browser.get_window_size()
-    browser.set_window_size(390, 844)
+PHONE = (390, 844)  # a phone's window, in CSS pixels
+# What a narrow window shows of each page: its width, and each table too wide for its box
+# that neither it nor its parent scrolls (or that is wider than the window).
+PHONE_LAYOUT = """
+const done = arguments[arguments.length - 1];
+requestAnimationFrame(() => requestAnimationFrame(() => {  // the layout after a resize
+  const scrolls = el => ['auto', 'scroll'].includes(getComputedStyle(el).overflowX);
+  const tables = Array.from(document.querySelectorAll('article table'));
+  const wide = tables
+    .filter(t => t.scrollWidth > t.clientWidth + 1
+                 || t.getBoundingClientRect().right > window.innerWidth)
+    .filter(t => !(scrolls(t) || scrolls(t.parentElement))
+                 || t.clientWidth > window.innerWidth)
+    .map(t => t.textContent.trim().slice(0, 40));
+  done({
+    page: document.documentElement.scrollWidth, window: window.innerWidth, wide: wide,
+    boxes: tables.map(t => [
+      t.clientWidth, t.scrollWidth, Math.round(t.getBoundingClientRect().right)]),
+  });
+}));
+"""
+
+
+def narrowed_to_a_phone(driver) -> dict:
+    """The phone's layout of the page shown (``PHONE_LAYOUT``), the window then restored."""
+    size = driver.get_window_size()
+    driver.set_window_size(*PHONE)
     try:
-        open_page(browser, html_dir, toc_page)
-        wait_for_mathjax(browser)
-        widths = browser.execute_script(
-            """
-            const scrolls = el => ['auto', 'scroll'].includes(getComputedStyle(el).overflowX);
-            const wide = Array.from(document.querySelectorAll('article table'))
-              .filter(t => t.scrollWidth > t.clientWidth + 1
-                           || t.getBoundingClientRect().right > window.innerWidth)
-              .filter(t => !(scrolls(t) || scrolls(t.parentElement))
-                           || t.clientWidth > window.innerWidth)
-              .map(t => t.textContent.trim().slice(0, 40));
-            return {
-              page: document.documentElement.scrollWidth, window: window.innerWidth, wide: wide
-            };
-            """
-        )
+        return driver.execute_async_script(PHONE_LAYOUT)
     finally:
-        browser.set_window_size(size["width"], size["height"])
+        driver.set_window_size(size["width"], size["height"])
+
+
+def test_tables_scroll_inside_themselves_on_a_phone(browser, html_dir, toc_page):
+    # The page that test_page_typesets_its_math_offline loaded and typeset, narrowed to a
+    # phone's width (laid out as loaded there: test_a_page_narrowed_to_a_phone_...).
+    open_page(browser, html_dir, toc_page, reuse=True)
+    wait_for_mathjax(browser)
+    widths = narrowed_to_a_phone(browser)
     assert widths["page"] <= widths["window"], (
         f"{toc_page}.html is wider than a phone's screen: {widths}"
     )
     assert not widths["wide"], (
         f"{toc_page}.html: tables that run off a phone's screen: {widths['wide']}"
+    )
+
+
+# Pages with tables wider than a phone, and their mathematics.
+@pytest.mark.parametrize("page", ["book/fig2", "book/beyond_filters", "book/beyond_hard"])
+def test_a_page_narrowed_to_a_phone_is_laid_out_as_one_loaded_there(browser, html_dir, page):
+    # Media queries apply to the narrowed window as to a page loaded in it, and MathJax 3
+    # breaks no line by the width: the phone check of every page narrows the page loaded.
+    open_page(browser, html_dir, page)
+    wait_for_mathjax(browser)
+    narrowed = narrowed_to_a_phone(browser)
+    size = browser.get_window_size()
+    browser.set_window_size(*PHONE)
+    try:
+        open_page(browser, html_dir, page)
+        wait_for_mathjax(browser)
+        loaded = browser.execute_async_script(PHONE_LAYOUT)
+    finally:
+        browser.set_window_size(size["width"], size["height"])
+    assert narrowed["boxes"], f"{page}.html: no table"
+    assert narrowed == loaded, (
+        f"{page}.html narrowed to a phone: {narrowed}; loaded on one: {loaded}"
     )

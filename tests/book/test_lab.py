@@ -228,9 +228,16 @@ const sleep = ms => new Promise(r => setTimeout(r, ms));
     await app.commands.execute('notebook:run-cell');
     await kernelIdle();
   }
-  await sleep(3000);
-  await kernelIdle();
-  await sleep(3000);
+  // Until the text cells show the same for 2 s with the kernel idle: the numbers have landed.
+  const shown = () => panel.content.widgets.filter(c => c.model.type === 'markdown')
+    .map(c => (c.node.querySelector('.myst') || c.node).textContent).join('\u0000');
+  for (let last = null, stable = 0; stable < 8; ) {
+    await sleep(250);
+    await kernelIdle();
+    const now = shown();
+    stable = now === last ? stable + 1 : 0;
+    last = now;
+  }
   const cells = panel.content.widgets.filter(c => c.model.type === 'markdown').map(c => {
     const node = c.node.querySelector('.myst');  // jupyterlab-myst's rendering
     if (!node) return {source: c.model.sharedModel.getSource(), rendered: false};
@@ -280,8 +287,8 @@ const sleep = ms => new Promise(r => setTimeout(r, ms));
   const text = () => panel.content.widgets.filter(c => c.model.type === 'markdown');
   while (!text().every(c => c.node.querySelector('.myst'))) await sleep(250);
   let last = '', equations = [];
-  for (let stable = 0; stable < 4; ) {  // the numbers, once they stop changing
-    await sleep(500);
+  for (let stable = 0; stable < 6; ) {  // the numbers, once they stop changing (1.5 s)
+    await sleep(250);
     equations = text().flatMap(c => [...c.node.querySelectorAll('.katex-display')].map(e => {
       const display = e.parentElement.parentElement;  // jupyterlab-myst: its box, with the number
       const number = display.children[1];
