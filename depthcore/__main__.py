@@ -270,6 +270,9 @@ def _check_out(out: str) -> Path:
 
 def _cmd_figures(args) -> str:
     out = _check_out(args.out)
+    if args.formats and len(set(args.formats)) < len(args.formats):
+        repeated = sorted({f for f in args.formats if args.formats.count(f) > 1})
+        raise ValueError(f"--format names {', '.join(repeated)} more than once")
     import matplotlib
 
     matplotlib.use("Agg")
@@ -277,8 +280,9 @@ def _cmd_figures(args) -> str:
     from .book import paper
 
     try:
+        formats = {"formats": tuple(args.formats)} if args.formats else {}  # else all three
         paths = _with_bar(
-            "figures", "figure", lambda progress: paper.save_all(out, progress=progress)
+            "figures", "figure", lambda progress: paper.save_all(out, progress=progress, **formats)
         )
     except OSError as exc:
         where = exc.filename or args.out
@@ -508,6 +512,10 @@ def _write(text: str) -> None:
         raise _WriteError(f"cannot write the output to standard output: {reason}") from None
 
 
+#: The formats ``figures --format`` accepts: those :func:`depthcore.book.paper.save_all`
+#: writes by default (its module is imported only when the figures are drawn).
+FIGURE_FORMATS = ("pdf", "png", "svg")
+
 EXAMPLES = {
     "reproduce": """\
 examples:
@@ -532,7 +540,8 @@ examples:
 {STUDY_LEGEND}""",
     "figures": """\
 examples:
-  python -m depthcore figures --out figures""",
+  python -m depthcore figures --out figures
+  python -m depthcore figures --out figures --format svg""",
 }
 EXAMPLES["all"] = """\
 examples:
@@ -713,6 +722,14 @@ def build_parser() -> argparse.ArgumentParser:
         description="Write Figures 2-6 as PDF, PNG and SVG.",
     )
     f.add_argument("--out", default="figures", help="output folder (default: figures)")
+    f.add_argument(
+        "--format",
+        dest="formats",
+        nargs="+",
+        choices=FIGURE_FORMATS,
+        metavar="FORMAT",
+        help="write these formats only, of pdf, png and svg (default: all three)",
+    )
     f.set_defaults(run=_cmd_figures)
     return p
 

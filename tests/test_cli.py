@@ -142,15 +142,35 @@ def test_estimate_rejects_bad_input_with_one_line(args, message):
     assert "Traceback" not in result.stderr
 
 
-def test_figures_command_writes_files(tmp_path):
-    assert main(["figures", "--out", str(tmp_path)]) == 0
-    names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == sorted(
-        f"figure{n}{x}.{ext}"
-        for n in range(2, 7)
-        for x in ("", "-extended")
-        for ext in ("pdf", "png", "svg")
-    )
+def test_figures_command_writes_each_figure_in_the_formats_named(tmp_path, capsys):
+    # (all three by default: `make downloads` writes them, tests/book/test_downloads.py checks)
+    assert main(["figures", "--out", str(tmp_path), "--format", "svg"]) == 0
+    expected = [f"figure{n}{x}.svg" for n in range(2, 7) for x in ("", "-extended")]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(expected)
+    assert capsys.readouterr().out.split() == [str(tmp_path / name) for name in expected]
+
+
+def test_figures_formats_are_those_the_figures_are_written_in_by_default():
+    import inspect
+
+    from depthcore.__main__ import FIGURE_FORMATS
+    from depthcore.book import paper
+
+    assert inspect.signature(paper.save_all).parameters["formats"].default == FIGURE_FORMATS
+    assert build_parser().parse_args(["figures"]).formats is None  # save_all's default
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["figures", "--format", "jpg"])
+
+
+def test_figures_refuses_a_format_named_twice_or_unknown(tmp_path):
+    twice = run("figures", "--out", str(tmp_path), "--format", "svg", "png", "svg")
+    assert twice.returncode == 2 and twice.stdout == "" and not any(tmp_path.iterdir())
+    assert twice.stderr.strip().splitlines() == [
+        "python -m depthcore figures: error: --format names svg more than once"
+    ]
+    unknown = run("figures", "--out", str(tmp_path), "--format", "jpg")
+    assert unknown.returncode == 2 and "invalid choice: 'jpg'" in unknown.stderr
+    assert "Traceback" not in twice.stderr + unknown.stderr
 
 
 @pytest.mark.parametrize("command", ["reproduce", "estimate", "study", "figures"])

@@ -88,6 +88,21 @@ def test_figure_page_links_the_figure_in_three_formats(html_dir, html_pages, num
             assert b"<svg" in data[:2000], f"figure{number}.svg is not an SVG file"
 
 
+def test_the_downloads_hold_every_figure_the_figures_command_writes_by_default(html_dir):
+    # `make downloads` runs `python -m depthcore figures` with its default formats.
+    written = sorted(p.name for p in (html_dir / "downloads" / "figures").iterdir())
+    assert written == sorted(
+        f"figure{n}{x}.{fmt}"
+        for n in range(2, 7)
+        for x in ("", "-extended")
+        for fmt in ("pdf", "png", "svg")
+    )
+    for name in written:
+        data = (html_dir / "downloads" / "figures" / name).read_bytes()
+        fmt = name.rsplit(".", 1)[1]
+        assert data.startswith(MAGIC[fmt]) if fmt in MAGIC else b"<svg" in data[:2000], name
+
+
 def test_intro_links_the_pdf_the_source_archive_and_the_requirements(html_pages):
     hrefs = set(HREF_RE.findall(html_pages["book/intro.html"]))
     for name in ("depthcore.pdf", "depthcore.tar.gz", "requirements.txt"):
