@@ -197,7 +197,8 @@ endef
 
 # The LaTeX build keeps its doctrees and executed notebooks in _build/pdf/ (Jupyter Book puts
 # them beside its output), apart from the HTML build's, so that the two can run side by side;
-# its output then moves to _build/latex/, where xelatex writes the PDF.
+# its output then moves to _build/latex/, where xelatex writes the PDF (its images compressed
+# at zlib's level 6, not 9: 3 s instead of 7, for a PDF 3 % larger).
 LATEX_BUILD := _build/pdf
 pdf-build:
 	rm -rf _build/latex $(LATEX_BUILD)
@@ -205,8 +206,8 @@ pdf-build:
 	$(VENV)/bin/jupyter-book build . --builder latex --path-output $(LATEX_BUILD) --all -W -n \
 	  --keep-going 2>&1 | tee _build/latex.log
 	mv $(LATEX_BUILD)/_build/latex _build/latex
-	cd _build/latex && latexmk -xelatex -interaction=nonstopmode -halt-on-error depthcore.tex \
-	  > latexmk.log 2>&1 || { tail -n 40 latexmk.log >&2; echo "make pdf: xelatex failed, see _build/latex/depthcore.log" >&2; exit 1; }
+	cd _build/latex && latexmk -xelatex -interaction=nonstopmode -halt-on-error \
+	  -e '$$xdvipdfmx = "xdvipdfmx -z 6 -E -o %D %O %S"' depthcore.tex > latexmk.log 2>&1 || { tail -n 40 latexmk.log >&2; echo "make pdf: xelatex failed, see _build/latex/depthcore.log" >&2; exit 1; }
 	@echo "make pdf: wrote $(PDF)"
 
 # make test: the PDF and the HTML book built side by side, one Sphinx build per core, from
