@@ -268,11 +268,17 @@ def _check_out(out: str) -> Path:
     return path
 
 
+def _named_once(values, option: str) -> tuple:
+    """``values`` as a tuple; a ``ValueError`` naming those the option ``option`` repeats."""
+    repeated = sorted({v for v in values if values.count(v) > 1})
+    if repeated:
+        raise ValueError(f"{option} names {', '.join(repeated)} more than once")
+    return tuple(values)
+
+
 def _cmd_figures(args) -> str:
     out = _check_out(args.out)
-    if args.formats and len(set(args.formats)) < len(args.formats):
-        repeated = sorted({f for f in args.formats if args.formats.count(f) > 1})
-        raise ValueError(f"--format names {', '.join(repeated)} more than once")
+    formats = _named_once(args.formats or FIGURE_FORMATS, "--format")
     import matplotlib
 
     matplotlib.use("Agg")
@@ -280,9 +286,8 @@ def _cmd_figures(args) -> str:
     from .book import paper
 
     try:
-        formats = {"formats": tuple(args.formats)} if args.formats else {}  # else all three
         paths = _with_bar(
-            "figures", "figure", lambda progress: paper.save_all(out, progress=progress, **formats)
+            "figures", "figure", lambda progress: paper.save_all(out, formats, progress=progress)
         )
     except OSError as exc:
         where = exc.filename or args.out
@@ -335,10 +340,7 @@ def _cmd_study(args) -> str:
     _check_rho(args.rho)
     _checks.frames(args.frames, "--frames")
     q = _check_process_noise(args.process_noise)
-    names = tuple(dict.fromkeys(args.filters))
-    if len(names) < len(args.filters):
-        repeated = sorted({n for n in args.filters if args.filters.count(n) > 1})
-        raise ValueError(f"--filters names {', '.join(repeated)} more than once")
+    names = _named_once(args.filters, "--filters")
     if q > 0 and "filters" not in getattr(args, "_given", ()):  # the default: those that can run
         names = tuple(n for n in names if FILTERS[n].with_process_noise)
     if args.truth == [study.PRIOR_TRUTH]:
@@ -512,8 +514,8 @@ def _write(text: str) -> None:
         raise _WriteError(f"cannot write the output to standard output: {reason}") from None
 
 
-#: The formats ``figures --format`` accepts: those :func:`depthcore.book.paper.save_all`
-#: writes by default (its module is imported only when the figures are drawn).
+#: The formats ``figures --format`` accepts, all written when it is not given: those
+#: :func:`depthcore.book.paper.save_all` writes by default (a module imported only to draw).
 FIGURE_FORMATS = ("pdf", "png", "svg")
 
 EXAMPLES = {

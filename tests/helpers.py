@@ -32,3 +32,13 @@ def _second_difference(c) -> float:
 def bearings(c):
     """The noise-free measurements (mu1, mu2, mu3) of a state ``c`` at time 3."""
     return np.array([model.project(model.G(c, k - 2)) for k in range(3)])
+
+
+def exit_status(argv) -> int:
+    """The exit status of ``python -m depthcore *argv``, run in this process."""
+    from depthcore.__main__ import main
+
+    try:
+        return main(argv)
+    except SystemExit as exc:  # argparse's refusals
+        return exc.code

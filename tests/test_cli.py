@@ -11,6 +11,8 @@ from depthcore.__main__ import build_parser, main
 from depthcore.filters import FILTERS
 from depthcore.scenarios import SCENARIOS
 
+from helpers import exit_status
+
 FIG2 = SCENARIOS["fig2"]
 
 
@@ -22,10 +24,7 @@ def run(*args):
 
 def refusal(args, capsys):
     """(exit status, standard output, standard error) of ``main(args)`` in this process."""
-    try:
-        status = main(args)
-    except SystemExit as exc:  # argparse's refusals
-        status = exc.code
+    status = exit_status(args)
     out, err = capsys.readouterr()
     return status, out, err
 
@@ -182,7 +181,7 @@ def test_figures_formats_are_those_the_figures_are_written_in_by_default():
     from depthcore.book import paper
 
     assert inspect.signature(paper.save_all).parameters["formats"].default == FIGURE_FORMATS
-    assert build_parser().parse_args(["figures"]).formats is None  # save_all's default
+    assert build_parser().parse_args(["figures"]).formats is None  # then FIGURE_FORMATS
     with pytest.raises(SystemExit):
         build_parser().parse_args(["figures", "--format", "jpg"])
 

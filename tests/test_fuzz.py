@@ -23,6 +23,8 @@ from depthcore.__main__ import main
 from depthcore._checks import MAX_FRAMES
 from depthcore.filters import ALL_NAMES, FILTERS
 
+from helpers import exit_status
+
 #: Seconds one case may take (a guard against hangs, not a performance target).
 BUDGET = 30.0
 
@@ -232,10 +234,7 @@ CLI_PARAMS = [pytest.param(a, n, marks=_marks(a), id=_case_id(a)) for a, n in CL
 @pytest.mark.parametrize(("argv", "names"), CLI_PARAMS)
 def test_command_line_answers_or_refuses_in_one_line(argv, names, capsys):
     start = time.perf_counter()
-    try:
-        status = main(argv)
-    except SystemExit as exc:  # argparse's refusals
-        status = exc.code
+    status = exit_status(argv)
     elapsed = time.perf_counter() - start
     out, err = capsys.readouterr()
     assert elapsed < BUDGET, f"took {elapsed:.1f} s"
