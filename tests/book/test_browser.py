@@ -21,6 +21,7 @@ needs no browser.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import shutil
@@ -225,14 +226,21 @@ requestAnimationFrame(() => requestAnimationFrame(() => {  // the layout after a
 """
 
 
-def narrowed_to_a_phone(driver) -> dict:
-    """The phone's layout of the page shown (``PHONE_LAYOUT``), the window then restored."""
+@contextlib.contextmanager
+def phone_window(driver):
+    """The browser's window at a phone's size (``PHONE``), then restored."""
     size = driver.get_window_size()
     driver.set_window_size(*PHONE)
     try:
-        return driver.execute_async_script(PHONE_LAYOUT)
+        yield
     finally:
         driver.set_window_size(size["width"], size["height"])
+
+
+def narrowed_to_a_phone(driver) -> dict:
+    """The phone's layout of the page shown (``PHONE_LAYOUT``), the window then restored."""
+    with phone_window(driver):
+        return driver.execute_async_script(PHONE_LAYOUT)
 
 
 def test_tables_scroll_inside_themselves_on_a_phone(browser, html_dir, toc_page):
@@ -257,14 +265,10 @@ def test_a_page_narrowed_to_a_phone_is_laid_out_as_one_loaded_there(browser, htm
     open_page(browser, html_dir, page)
     wait_for_mathjax(browser)
     narrowed = narrowed_to_a_phone(browser)
-    size = browser.get_window_size()
-    browser.set_window_size(*PHONE)
-    try:
+    with phone_window(browser):
         open_page(browser, html_dir, page)
         wait_for_mathjax(browser)
         loaded = browser.execute_async_script(PHONE_LAYOUT)
-    finally:
-        browser.set_window_size(size["width"], size["height"])
     assert narrowed["boxes"], f"{page}.html: no table"
     assert narrowed == loaded, (
         f"{page}.html narrowed to a phone: {narrowed}; loaded on one: {loaded}"

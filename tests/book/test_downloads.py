@@ -26,6 +26,11 @@ HREF_RE = re.compile(r'href="([^"#?]*downloads/[^"#?]+)"')
 MAGIC = {"pdf": b"%PDF-", "png": b"\x89PNG\r\n\x1a\n"}
 
 
+def is_format(data: bytes, fmt: str) -> bool:
+    """Whether ``data`` is a file of ``fmt`` (pdf, png: its magic number; svg: an ``<svg`` tag)."""
+    return data.startswith(MAGIC[fmt]) if fmt in MAGIC else b"<svg" in data[:2000]
+
+
 def visible_outputs(nb: dict) -> int:
     """Number of outputs of a notebook's code cells that Jupyter displays (not glue records)."""
     count = 0
@@ -82,10 +87,7 @@ def test_figure_page_links_the_figure_in_three_formats(html_dir, html_pages, num
         href = f"../downloads/figures/figure{number}.{fmt}"
         assert href in hrefs, f"book/fig{number}.html does not link {href}"
         data = (html_dir / "downloads" / "figures" / f"figure{number}.{fmt}").read_bytes()
-        if fmt in MAGIC:
-            assert data.startswith(MAGIC[fmt]), f"figure{number}.{fmt} is not a {fmt.upper()} file"
-        else:
-            assert b"<svg" in data[:2000], f"figure{number}.svg is not an SVG file"
+        assert is_format(data, fmt), f"figure{number}.{fmt} is not a {fmt.upper()} file"
 
 
 def test_the_downloads_hold_every_figure_the_figures_command_writes_by_default(html_dir):
@@ -99,8 +101,7 @@ def test_the_downloads_hold_every_figure_the_figures_command_writes_by_default(h
     )
     for name in written:
         data = (html_dir / "downloads" / "figures" / name).read_bytes()
-        fmt = name.rsplit(".", 1)[1]
-        assert data.startswith(MAGIC[fmt]) if fmt in MAGIC else b"<svg" in data[:2000], name
+        assert is_format(data, name.rsplit(".", 1)[1]), f"{name} is not the format it names"
 
 
 def test_intro_links_the_pdf_the_source_archive_and_the_requirements(html_pages):

@@ -189,15 +189,34 @@ def glued_texts(page: str) -> dict[str, str]:
     return texts
 
 
+# What the scripts below share: sleep(ms), and settled(read, polls), what read() returns
+# once it has returned the same (as JSON) at `polls` polls in a row, 250 ms apart.
+WAITING = """
+const sleep = ms => new Promise(r => setTimeout(r, ms));
+const settled = async (read, polls) => {
+  let last = null, value;
+  for (let stable = 0; stable < polls; ) {
+    await sleep(250);
+    value = await read();
+    const now = JSON.stringify(value);
+    stable = now === last ? stable + 1 : 0;
+    last = now;
+  }
+  return value;
+};
+"""
+
+
 # Opens the page with jupytext's notebook view, runs all cells, waits for the
 # kernel, runs the text cells again, and leaves in window.depthcoreResult each
 # text cell's source, its rendered text, and what it shows of the inline
 # expressions and the math (polled: a call to the browser must not last minutes).
-RUN_PAGE = """
+RUN_PAGE = (
+    WAITING
+    + """
 const path = arguments[0];
 window.depthcoreResult = null;
 const done = result => { window.depthcoreResult = result; };
-const sleep = ms => new Promise(r => setTimeout(r, ms));
 (async () => {
   const app = window.jupyterapp;
   const panel = await app.commands.execute('docmanager:open',
@@ -229,15 +248,11 @@ const sleep = ms => new Promise(r => setTimeout(r, ms));
     await kernelIdle();
   }
   // Until the text cells show the same for 2 s with the kernel idle: the numbers have landed.
-  const shown = () => panel.content.widgets.filter(c => c.model.type === 'markdown')
-    .map(c => (c.node.querySelector('.myst') || c.node).textContent).join('\u0000');
-  for (let last = null, stable = 0; stable < 8; ) {
-    await sleep(250);
+  await settled(async () => {
     await kernelIdle();
-    const now = shown();
-    stable = now === last ? stable + 1 : 0;
-    last = now;
-  }
+    return panel.content.widgets.filter(c => c.model.type === 'markdown')
+      .map(c => (c.node.querySelector('.myst') || c.node).textContent);
+  }, 8);
   const cells = panel.content.widgets.filter(c => c.model.type === 'markdown').map(c => {
     const node = c.node.querySelector('.myst');  // jupyterlab-myst's rendering
     if (!node) return {source: c.model.sharedModel.getSource(), rendered: false};
@@ -268,17 +283,19 @@ const sleep = ms => new Promise(r => setTimeout(r, ms));
   done({cells, errors});
 })().catch(e => done({failed: String(e)}));
 """
+)
 
 
 # Opens the page with jupytext's notebook view and leaves in
 # window.depthcoreResult, once every text cell shows its rendering, each
 # displayed equation's id and the number shown beside it (null if none); then
 # saves the page.
-SHOW_EQUATIONS = """
+SHOW_EQUATIONS = (
+    WAITING
+    + """
 const path = arguments[0];
 window.depthcoreResult = null;
 const done = result => { window.depthcoreResult = result; };
-const sleep = ms => new Promise(r => setTimeout(r, ms));
 (async () => {
   const app = window.jupyterapp;
   const panel = await app.commands.execute('docmanager:open',
@@ -286,22 +303,18 @@ const sleep = ms => new Promise(r => setTimeout(r, ms));
   await panel.context.ready;
   const text = () => panel.content.widgets.filter(c => c.model.type === 'markdown');
   while (!text().every(c => c.node.querySelector('.myst'))) await sleep(250);
-  let last = '', equations = [];
-  for (let stable = 0; stable < 6; ) {  // the numbers, once they stop changing (1.5 s)
-    await sleep(250);
-    equations = text().flatMap(c => [...c.node.querySelectorAll('.katex-display')].map(e => {
+  // the numbers, once they stop changing (1.5 s)
+  const equations = await settled(() => text().flatMap(
+    c => [...c.node.querySelectorAll('.katex-display')].map(e => {
       const display = e.parentElement.parentElement;  // jupyterlab-myst: its box, with the number
       const number = display.children[1];
       return {id: display.id, number: number ? number.textContent.trim() : null};
-    }));
-    const now = JSON.stringify(equations);
-    stable = now === last ? stable + 1 : 0;
-    last = now;
-  }
+    })), 6);
   await panel.context.save();  // saved unchanged, as a reader may
   done({equations});
 })().catch(e => done({failed: String(e)}));
 """
+)
 
 
 def open_lab(driver, base, token):
