@@ -66,7 +66,6 @@ ALONE_STAMP := $(ALONE_VENV)/.installed
 UV_PIN := uv==0.13.9
 UV_HOME := $(VENV)/uv
 UV := $(UV_HOME)/bin/uv
-export UV_NO_PROGRESS := 1
 # Python caches the bytecode it compiles in .venv/pycache/, even where PYTHONDONTWRITEBYTECODE
 # is set: otherwise every process (each page's kernel, each Sphinx build, each test worker)
 # compiles NumPy, SciPy, Matplotlib and Sphinx again, some 3 s each.
