@@ -5,8 +5,8 @@
 #   make books              the PDF and the book side by side (make test's build of both)
 #   make lab                JupyterLab on the book's pages (MyST .md files open as notebooks)
 #   make test               core tests; every page executed once, alone, and compared with
-#                           book/_nbval/; the PDF and the book built from that execution;
-#                           checks of the built book
+#                           book/_nbval/; the PDF and the book built from that execution,
+#                           with the checks in JupyterLab beside them; checks of the built book
 #   make notebooks          re-run every book page and compare its outputs with book/_nbval/
 #   make notebooks-alone    execute every page once, alone in a folder of its own with only
 #                           requirements.txt and the book's source archive installed (as a
@@ -17,6 +17,7 @@
 #   make notebooks-update   re-execute every page and rewrite book/_nbval/ (deliberate update)
 #                           (PAGES="fig6 cite": only those pages, in these three targets)
 #   make check-book         checks of the built book alone (equation numbers, browser)
+#   make check-lab          checks of the pages in JupyterLab (needs no built book)
 #   make records            compute again every study the book reads from its record
 #                           (depthcore/book/study_records/), then rewrite the references of
 #                           the pages that read them
@@ -82,7 +83,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 export JUPYTER_PATH := $(CURDIR)/tools/jupyter$(if $(JUPYTER_PATH),:$(JUPYTER_PATH))
 KERNEL := $(VENV)/share/jupyter/kernels/python3
 
-.PHONY: help venv cite-venv downloads book html-build pdf pdf-build books lab test core test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book figures records bench clean distclean
+.PHONY: help venv cite-venv downloads book html-build pdf pdf-build books lab test core pages test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book check-lab figures records bench clean distclean
 
 help:
 	@sed -n '3,/^#$$/p' Makefile | sed -e 's/^# \{0,1\}//' -e '/^$$/d'
@@ -236,7 +237,7 @@ lab: $(EDITABLE)
 	  $(LAB_ARGS) book/intro.md
 
 # Each stage's time is printed as it ends, and all of them at the end.
-TEST_STAGES := lint core notebooks-alone books check-book
+TEST_STAGES := lint core pages check-book
 test: $(EDITABLE)
 	tools/system-packages.sh
 	@times=(); for stage in $(TEST_STAGES); do start=$$SECONDS; \
@@ -253,6 +254,20 @@ test-core: $(EDITABLE) $(CITE_STAMP)
 core: $(EDITABLE)
 	$(MAKE) -j2 --no-print-directory --output-sync=line test-core $(FIGURES)/.written $(ALONE_STAMP)
 
+# make test's third stage: every page executed once, alone (notebooks-alone), then the PDF
+# and the book built from that execution (books); beside them from the start, the checks in
+# JupyterLab, which need no built book (one browser and one kernel at a time: alone after the
+# build, they would leave a core idle). Their output is shown once both are done.
+pages: $(EDITABLE)
+	@lab_log=$$(mktemp); \
+	{ start=$$SECONDS; if $(MAKE) --no-print-directory check-lab > $$lab_log 2>&1; then status=0; \
+	  else status=$$?; fi; echo "make test: check-lab took $$((SECONDS - start)) s" >> $$lab_log; \
+	  exit $$status; } & lab=$$!; \
+	status=0; for stage in notebooks-alone books; do start=$$SECONDS; \
+	  if ! $(MAKE) --no-print-directory $$stage; then status=1; break; fi; \
+	  echo "make test: $$stage took $$((SECONDS - start)) s"; done; \
+	wait $$lab || status=1; cat $$lab_log; rm -f $$lab_log; exit $$status
+
 notebooks: $(EDITABLE)
 	$(PY) tools/check_notebooks.py check $(PAGES)
 
@@ -263,9 +278,15 @@ notebooks-update: $(EDITABLE)
 notebooks-standalone: $(EDITABLE) $(ALONE_STAMP)
 	$(PY) tools/check_notebooks.py standalone --python $(ALONE_VENV)/bin/python $(PAGES)
 
-# Checks of the built book in _build/html (run `make book` first).
+# Checks of the built book in _build/html (run `make book` first); the browser's checks of
+# a page one after the other in one browser, every other page in each of two (test_browser.py).
 check-book: $(EDITABLE)
-	$(PY) -m pytest -q -rs -n 2 --dist loadfile tests/book $(PYTEST_ARGS)
+	$(PY) -m pytest -q -rs -n 2 --dist loadscope tests/book --ignore=$(LAB_TESTS) $(PYTEST_ARGS)
+
+# The pages run and opened in JupyterLab, in headless Chromium (no built book needed).
+LAB_TESTS := tests/book/test_lab.py
+check-lab: $(EDITABLE)
+	$(PY) -m pytest -q -rs $(LAB_TESTS) $(PYTEST_ARGS)
 
 figures: $(EDITABLE)
 	$(PY) -m depthcore figures --out figures/

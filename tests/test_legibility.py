@@ -14,7 +14,7 @@ content width of ``W`` pixels, and ``s * T / w`` points on a page whose text is
 shows a figure at a window 1280 CSS pixels wide (its text column, 676 pixels,
 less the figure's margins), measured in headless Chromium on a built page; a
 wider window, or a narrower one that hides the side bars, shows figures wider
-(``tests/book/test_figure_legibility.py`` checks it again on the built book).
+(``tests/book/test_browser.py`` checks it again on the built book).
 :data:`TEXT_WIDTH_IN` is the text width of the PDF's A4 pages (Sphinx's LaTeX
 default margins of one inch).
 """

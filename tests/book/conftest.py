@@ -7,8 +7,8 @@ this folder (``norecursedirs`` in pyproject.toml).
 Parametrised arguments, filled in by ``pytest_generate_tests``:
 
 * ``equation_label``: each equation label ``eq-N`` written in ``book/**/*.md``;
-* ``toc_page``: each page of ``_toc.yml``, as ``book/<name>``;
-* ``figure_page``: each page listed in ``tests/data/figure_pages.json``.
+* ``toc_page``: each page of ``_toc.yml``, as ``book/<name>`` (only those of
+  its class's ``pages``, a slice, when it has one: ``test_browser.py``).
 """
 
 from __future__ import annotations
@@ -73,11 +73,17 @@ def pytest_generate_tests(metafunc):
         labels = sorted({label for label, _ in source_labels()}, key=lambda s: (len(s), s))
         metafunc.parametrize("equation_label", labels)
     if "toc_page" in metafunc.fixturenames:
-        # Module scope: pytest runs a module's checks of one page one after the other,
-        # so that a check may read the page the previous one loaded (test_browser).
-        metafunc.parametrize("toc_page", toc_pages(), scope="module")
-    if "figure_page" in metafunc.fixturenames:
-        metafunc.parametrize("figure_page", figure_pages())
+        # Class scope: pytest runs a class's checks of one page one after the other, so
+        # that a check may read the page the previous one loaded (test_browser); a class
+        # with ``pages`` (a slice of the table of contents) checks only those.
+        pages = toc_pages()[getattr(metafunc.cls, "pages", slice(None))]
+        metafunc.parametrize("toc_page", pages, scope="class")
+
+
+@pytest.fixture(scope="session")
+def figure_page_names() -> set[str]:
+    """The pages of tests/data/figure_pages.json, as ``book/<name>``."""
+    return set(figure_pages())
 
 
 @pytest.fixture(scope="session")

@@ -7,8 +7,11 @@ checks that
 * each page of ``_toc.yml`` loads, fetches nothing over the network, and has
   its mathematics typeset by MathJax (served from the book's own
   ``_static/mathjax``, see ``sphinx-mathjax-offline`` in ``_config.yml``);
-* each page of ``tests/data/figure_pages.json`` shows its images and at least
-  one table;
+* every image of each page is shown, and each page of
+  ``tests/data/figure_pages.json`` shows images and at least one table;
+* every figure image fills its figure, at least as wide as the width
+  ``tests/test_legibility.py`` assumes when it measures the figures' smallest
+  text, from an image at least that wide (never enlarged from a smaller one);
 * at 1280 px no display equation is cut off, and, narrowed to a phone's width,
   no page is wider than the phone and every table too wide scrolls in its own
   box (a page narrowed is laid out as one loaded on a phone: checked on three
@@ -25,10 +28,14 @@ import contextlib
 import json
 import re
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
 import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from test_legibility import CONTENT_WIDTH_PX  # noqa: E402
 
 CHROMIUM = next(
     (
@@ -154,55 +161,6 @@ def test_mathjax_is_served_from_the_book(html_pages, html_dir):
             assert target.resolve().is_file(), f"{src} (from {page}) is not in the built book"
 
 
-def test_page_typesets_its_math_offline(browser, html_dir, toc_page):
-    open_page(browser, html_dir, toc_page)
-    counts = wait_for_mathjax(browser)
-    if counts["math"]:
-        assert counts["loaded"], f"MathJax did not load on {toc_page}.html"
-        assert counts["typeset"] >= counts["math"], (
-            f"{toc_page}.html: {counts['typeset']} MathJax outputs "
-            f"for {counts['math']} math elements"
-        )
-        assert counts["errors"] == 0, f"{toc_page}.html: {counts['errors']} MathJax errors"
-    assert network_requests(browser) == []
-
-
-def test_figure_page_shows_images_and_a_table(browser, html_dir, figure_page):
-    open_page(browser, html_dir, figure_page)
-    wait_for_mathjax(browser)
-    images = browser.execute_script(
-        "return Array.from(document.querySelectorAll('main img, article img'))"
-        ".map(img => [img.getAttribute('src').slice(0, 80), img.complete, img.naturalWidth]);"
-    )
-    assert images, f"{figure_page}.html has no image"
-    broken = [src for src, complete, width in images if not complete or width == 0]
-    assert not broken, f"{figure_page}.html: images not shown: {broken}"
-    tables = browser.execute_script(
-        "return document.querySelectorAll('main table, article table').length;"
-    )
-    assert tables >= 1, f"{figure_page}.html has no table"
-    assert network_requests(browser) == []
-
-
-def test_equations_fit_or_scroll_in_their_own_box(browser, html_dir, toc_page):
-    # At 1280 px (CHROMIUM_FLAGS), a display equation wider than the text
-    # column scrolls inside its own box, so that none is cut off. The page
-    # test_page_typesets_its_math_offline loaded at that width is read again.
-    open_page(browser, html_dir, toc_page, reuse=True)
-    wait_for_mathjax(browser)
-    cut = browser.execute_script(
-        """
-        const scrolls = el => ['auto', 'scroll'].includes(getComputedStyle(el).overflowX);
-        const selector = 'article div.math mjx-container[display="true"]';
-        return Array.from(document.querySelectorAll(selector))
-          .filter(c => c.scrollWidth > c.clientWidth + 1
-                       && !scrolls(c) && !scrolls(c.parentElement))
-          .map(c => c.parentElement.id || c.textContent.slice(0, 40));
-        """
-    )
-    assert not cut, f"{toc_page}.html: equations cut off at 1280 px: {cut}"
-
-
 PHONE = (390, 844)  # a phone's window, in CSS pixels
 # What a narrow window shows of each page: its width, and each table too wide for its box
 # that neither it nor its parent scrolls (or that is wider than the window).
@@ -243,18 +201,117 @@ def narrowed_to_a_phone(driver) -> dict:
         return driver.execute_async_script(PHONE_LAYOUT)
 
 
-def test_tables_scroll_inside_themselves_on_a_phone(browser, html_dir, toc_page):
-    # The page that test_page_typesets_its_math_offline loaded and typeset, narrowed to a
-    # phone's width (laid out as loaded there: test_a_page_narrowed_to_a_phone_...).
-    open_page(browser, html_dir, toc_page, reuse=True)
-    wait_for_mathjax(browser)
-    widths = narrowed_to_a_phone(browser)
-    assert widths["page"] <= widths["window"], (
-        f"{toc_page}.html is wider than a phone's screen: {widths}"
-    )
-    assert not widths["wide"], (
-        f"{toc_page}.html: tables that run off a phone's screen: {widths['wide']}"
-    )
+class PageChecks:
+    """The browser's checks of one page, one after the other in one browser.
+
+    The first loads the page at 1280 px (``CHROMIUM_FLAGS``); the others read
+    the page it loaded (``open_page(..., reuse=True)``), the last narrowed to
+    a phone's width. ``TestPagesA`` and ``TestPagesB`` run them on every other
+    page of ``_toc.yml`` each (``pages``, read by ``conftest.py``), so that
+    ``pytest -n 2 --dist loadscope`` runs the two halves side by side, each in
+    a browser of its own.
+    """
+
+    def test_page_typesets_its_math_offline(self, browser, html_dir, toc_page):
+        open_page(browser, html_dir, toc_page)
+        counts = wait_for_mathjax(browser)
+        if counts["math"]:
+            assert counts["loaded"], f"MathJax did not load on {toc_page}.html"
+            assert counts["typeset"] >= counts["math"], (
+                f"{toc_page}.html: {counts['typeset']} MathJax outputs "
+                f"for {counts['math']} math elements"
+            )
+            assert counts["errors"] == 0, f"{toc_page}.html: {counts['errors']} MathJax errors"
+        assert network_requests(browser) == []
+
+    def test_page_shows_its_images_and_a_figure_page_a_table(
+        self, browser, html_dir, toc_page, figure_page_names
+    ):
+        # The page test_page_typesets_its_math_offline loaded (and checked for network requests).
+        open_page(browser, html_dir, toc_page, reuse=True)
+        wait_for_mathjax(browser)
+        images = browser.execute_script(
+            "return Array.from(document.querySelectorAll('main img, article img'))"
+            ".map(img => [img.getAttribute('src').slice(0, 80), img.complete, img.naturalWidth]);"
+        )
+        broken = [src for src, complete, width in images if not complete or width == 0]
+        assert not broken, f"{toc_page}.html: images not shown: {broken}"
+        if toc_page in figure_page_names:
+            assert images, f"{toc_page}.html has no image"
+            tables = browser.execute_script(
+                "return document.querySelectorAll('main table, article table').length;"
+            )
+            assert tables >= 1, f"{toc_page}.html has no table"
+
+    def test_figures_fill_the_text_column(self, browser, html_dir, toc_page, figure_page_names):
+        # Every figure image fills its figure, at least as wide as the width
+        # tests/test_legibility.py assumes when it measures the figures' smallest text, from an
+        # image at least that wide (never enlarged from a smaller one).
+        open_page(browser, html_dir, toc_page, reuse=True)
+        wait_for_mathjax(browser)
+        images = browser.execute_script(
+            """
+            return Array.from(document.querySelectorAll('article figure img')).map(img => {
+                const figure = img.closest('figure');
+                const style = getComputedStyle(figure);
+                return {
+                    src: img.getAttribute('src').slice(-20),
+                    width: img.getBoundingClientRect().width,
+                    figure: figure.clientWidth - parseFloat(style.paddingLeft)
+                            - parseFloat(style.paddingRight),
+                    natural: img.naturalWidth,
+                };
+            });
+            """
+        )
+        if toc_page in figure_page_names:
+            assert images, f"{toc_page}.html shows no figure"
+        for image in images:
+            assert image["width"] == pytest.approx(image["figure"], abs=1.5), (toc_page, image)
+            assert image["width"] >= CONTENT_WIDTH_PX - 1, (
+                f"{toc_page}.html: a figure shown {image['width']:.0f} px wide, narrower than "
+                f"the {CONTENT_WIDTH_PX:g} px the legibility test assumes: {image}"
+            )
+            assert image["natural"] >= image["width"], (toc_page, image)
+
+    def test_equations_fit_or_scroll_in_their_own_box(self, browser, html_dir, toc_page):
+        # At 1280 px (CHROMIUM_FLAGS), a display equation wider than the text
+        # column scrolls inside its own box, so that none is cut off. The page
+        # test_page_typesets_its_math_offline loaded at that width is read again.
+        open_page(browser, html_dir, toc_page, reuse=True)
+        wait_for_mathjax(browser)
+        cut = browser.execute_script(
+            """
+            const scrolls = el => ['auto', 'scroll'].includes(getComputedStyle(el).overflowX);
+            const selector = 'article div.math mjx-container[display="true"]';
+            return Array.from(document.querySelectorAll(selector))
+              .filter(c => c.scrollWidth > c.clientWidth + 1
+                           && !scrolls(c) && !scrolls(c.parentElement))
+              .map(c => c.parentElement.id || c.textContent.slice(0, 40));
+            """
+        )
+        assert not cut, f"{toc_page}.html: equations cut off at 1280 px: {cut}"
+
+    def test_tables_scroll_inside_themselves_on_a_phone(self, browser, html_dir, toc_page):
+        # The page that test_page_typesets_its_math_offline loaded and typeset, narrowed to a
+        # phone's width (laid out as loaded there: test_a_page_narrowed_to_a_phone_...).
+        open_page(browser, html_dir, toc_page, reuse=True)
+        wait_for_mathjax(browser)
+        widths = narrowed_to_a_phone(browser)
+        assert widths["page"] <= widths["window"], (
+            f"{toc_page}.html is wider than a phone's screen: {widths}"
+        )
+        assert not widths["wide"], (
+            f"{toc_page}.html: tables that run off a phone's screen: {widths['wide']}"
+        )
+
+
+class TestPagesA(PageChecks):
+    pages = slice(0, None, 2)
+
+
+class TestPagesB(PageChecks):
+    pages = slice(1, None, 2)
 
 
 # Pages with tables wider than a phone, and their mathematics.

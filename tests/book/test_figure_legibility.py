@@ -1,30 +1,19 @@
-"""The built book's figures can be read: described, enlarged with a click, shown full width.
+"""The built book's figures can be read: described, and enlarged with a click.
 
 In ``_build/html``, every image of a figure in a page's text
 
 * has alt text that describes it (words, not a file name);
 * is a link to the image file itself, so that a click shows it at full size
-  (Sphinx wraps an image given a ``:width:`` in such a link);
+  (Sphinx wraps an image given a ``:width:`` in such a link).
 
-and in headless Chromium, at a window 1280 pixels wide, every figure image on
-the pages of ``tests/data/figure_pages.json`` fills its figure, at least as
-wide as the width ``tests/test_legibility.py`` assumes when it measures the
-figures' smallest text, from an image at least that wide (never enlarged from
-a smaller one).
+That each is shown full width, in a browser, is checked with the page's other
+browser checks (``test_browser.py::test_figures_fill_the_text_column``).
 """
 
 from __future__ import annotations
 
 import html as html_lib
 import re
-import sys
-from pathlib import Path
-
-import pytest
-from test_browser import browser, open_page, wait_for_mathjax  # noqa: F401  (fixture)
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from test_legibility import CONTENT_WIDTH_PX  # noqa: E402
 
 FIGURE_RE = re.compile(r"<figure\b[^>]*>(.*?)</figure>", re.DOTALL)
 IMG_RE = re.compile(r"<img\b([^>]*)>")
@@ -65,31 +54,3 @@ def test_every_figure_image_links_to_its_full_size_file(html_pages, html_dir):
                 if href is None or href != src or not target.resolve().is_file():
                     bad.append((page, src, href))
     assert not bad, f"figure images not linked to their full-size file: {bad}"
-
-
-def test_figures_fill_the_text_column(browser, html_dir, figure_page):  # noqa: F811
-    open_page(browser, html_dir, figure_page)
-    wait_for_mathjax(browser)
-    images = browser.execute_script(
-        """
-        return Array.from(document.querySelectorAll('article figure img')).map(img => {
-            const figure = img.closest('figure');
-            const style = getComputedStyle(figure);
-            return {
-                src: img.getAttribute('src').slice(-20),
-                width: img.getBoundingClientRect().width,
-                figure: figure.clientWidth - parseFloat(style.paddingLeft)
-                        - parseFloat(style.paddingRight),
-                natural: img.naturalWidth,
-            };
-        });
-        """
-    )
-    assert images, f"{figure_page}.html shows no figure"
-    for image in images:
-        assert image["width"] == pytest.approx(image["figure"], abs=1.5), (figure_page, image)
-        assert image["width"] >= CONTENT_WIDTH_PX - 1, (
-            f"{figure_page}.html: a figure shown {image['width']:.0f} px wide, narrower than "
-            f"the {CONTENT_WIDTH_PX:g} px the legibility test assumes: {image}"
-        )
-        assert image["natural"] >= image["width"], (figure_page, image)

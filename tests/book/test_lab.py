@@ -74,6 +74,7 @@ EQUATION_PAGES = ("model", "filters", "marginals", "fig2", "fig3", "appendix", "
 DISPLAY = re.compile(r"^[ \t]*(?:\$\$[ \t]*$|`{3,}\{math\})", re.M)
 START_TIMEOUT = 120  # seconds for JupyterLab to answer
 RUN_TIMEOUT = 900  # seconds for a page's cells to run
+POLL = 0.25  # seconds between two looks at JupyterLab or at the browser
 SCREENSHOTS = os.environ.get("DEPTHCORE_LAB_SCREENSHOTS")  # a folder, to look at the pages
 
 
@@ -139,7 +140,7 @@ def lab(missing_prerequisite, tmp_path_factory):
                     break
             except OSError:
                 assert time.monotonic() < deadline, f"JupyterLab not up in {START_TIMEOUT} s"
-                time.sleep(1)
+                time.sleep(POLL)
         yield base, token, served
     finally:
         server.terminate()
@@ -231,7 +232,7 @@ const done = result => { window.depthcoreResult = result; };
   await app.commands.execute('notebook:run-all-cells');
   const running = () => panel.content.widgets.some(
     c => c.model.type === 'code' && c.promptNode && c.promptNode.textContent.includes('*'));
-  do { await sleep(1000); await kernelIdle(); } while (running());
+  do { await sleep(250); await kernelIdle(); } while (running());
   const errors = panel.content.widgets
     .filter(c => c.model.type === 'code')
     .flatMap(c => c.model.outputs.toJSON())
@@ -323,7 +324,7 @@ def open_lab(driver, base, token):
     deadline = time.monotonic() + START_TIMEOUT
     while not driver.execute_script("return !!(window.jupyterapp && window.jupyterapp.started)"):
         assert time.monotonic() < deadline, f"JupyterLab's page not ready in {START_TIMEOUT} s"
-        time.sleep(0.5)
+        time.sleep(POLL)
     driver.execute_async_script("window.jupyterapp.started.then(arguments[0])")
 
 
@@ -357,7 +358,7 @@ def test_page_numbers_its_equations_as_the_book_in_jupyterlab(lab, driver, page)
     deadline = time.monotonic() + START_TIMEOUT
     while (result := driver.execute_script("return window.depthcoreResult")) is None:
         assert time.monotonic() < deadline, f"{page}: not rendered in {START_TIMEOUT} s"
-        time.sleep(1)
+        time.sleep(POLL)
     assert "failed" not in result, f"{page}: {result.get('failed')}"
     paper = json.loads((ROOT / "tests" / "data" / "equation_labels.json").read_text())
     source = (ROOT / "book" / f"{page}.md").read_text(encoding="utf-8")
@@ -380,12 +381,12 @@ def test_page_numbers_its_equations_as_the_book_in_jupyterlab(lab, driver, page)
 @pytest.mark.parametrize("page", PAGES)
 def test_page_renders_its_numbers_and_math_in_jupyterlab(lab, driver, page):
     base, token, served = lab
-    open_lab(driver, base, token)
+    reuse_lab(driver, base, token)
     driver.execute_script(RUN_PAGE, f"book/{page}.md")
     deadline = time.monotonic() + RUN_TIMEOUT
     while (result := driver.execute_script("return window.depthcoreResult")) is None:
         assert time.monotonic() < deadline, f"{page}: not run in JupyterLab in {RUN_TIMEOUT} s"
-        time.sleep(2)
+        time.sleep(POLL)
     if SCREENSHOTS:
         driver.save_screenshot(str(Path(SCREENSHOTS) / f"lab-{page}.png"))
     assert "failed" not in result, f"{page}: {result.get('failed')}"
