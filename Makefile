@@ -18,7 +18,7 @@
 #                           (PAGES="fig6 cite": only those pages, in these three targets)
 #   make check-book         checks of the built book alone (equation numbers, browser)
 #   make check-lab          checks of the pages in JupyterLab (needs no built book)
-#   make records            compute again every study the book reads from its record
+#   make records            compute again every study (and brute-force sum) the book reads from its record
 #                           (depthcore/book/study_records/), then rewrite the references of
 #                           the pages that read them
 #   make figures            write the paper's figures to figures/
@@ -291,11 +291,12 @@ check-lab: $(EDITABLE)
 figures: $(EDITABLE)
 	$(PY) -m depthcore figures --out figures/
 
-# The pages whose Monte Carlo studies are read from their records (depthcore.book.records):
+# The pages whose Monte Carlo studies and brute-force sums are read from their records
+# (depthcore.book.records):
 # `make records` removes every record, executes these pages once writing the records of the
 # studies they compute (DEPTHCORE_RECORDS=write), then once more reading them, to rewrite
 # their references. tests/test_study_records.py fails when a record is stale.
-RECORD_PAGES := beyond_filters beyond_study beyond_frames beyond_bound beyond_hard beyond_conjecture
+RECORD_PAGES := marginals discrepancies beyond_filters beyond_study beyond_frames beyond_bound beyond_hard beyond_conjecture
 records: $(EDITABLE)
 	rm -f depthcore/book/study_records/*.json
 	DEPTHCORE_RECORDS=write $(PY) tools/check_notebooks.py update $(RECORD_PAGES)

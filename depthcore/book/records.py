@@ -2,7 +2,8 @@
 
 Recommended import: ``from depthcore.book import records``.
 
-A page calls its Monte Carlo study through :func:`recorded`:
+A page calls its Monte Carlo study, or a brute-force sum
+(:func:`depthcore.reference.grid_moments`), through :func:`recorded`:
 ``recorded(frames_study, [3, 5], 300, 1)`` returns what ``frames_study([3, 5],
 300, 1)`` returns. When the book's records hold a record of that call (the
 same function, the same arguments) made by the current code, the result is
