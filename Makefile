@@ -296,7 +296,7 @@ figures: $(EDITABLE)
 # `make records` removes every record, executes these pages once writing the records of the
 # studies they compute (DEPTHCORE_RECORDS=write), then once more reading them, to rewrite
 # their references. tests/test_study_records.py fails when a record is stale.
-RECORD_PAGES := marginals discrepancies beyond_filters beyond_study beyond_frames beyond_bound beyond_hard beyond_conjecture
+RECORD_PAGES := marginals discrepancies beyond_filters beyond_study beyond_sweeps beyond_frames beyond_bound beyond_hard beyond_conjecture
 records: $(EDITABLE)
 	rm -f depthcore/book/study_records/*.json
 	DEPTHCORE_RECORDS=write $(PY) tools/check_notebooks.py update $(RECORD_PAGES)

@@ -170,6 +170,43 @@ def coverage_test(coverage, level: float, trials, z: float = COVERAGE_Z) -> dict
     return {"se": se, "z": score, "verdict": verdict}
 
 
+def track_marginals(
+    seed, frames: int, panel_frames, names, scenario: str = "fig2", n_points: int = 601
+) -> dict:
+    """One track of a scenario's point and each filter's depth marginals along it.
+
+    The track (:func:`depthcore.model.simulate`, no process noise) and the
+    random filters (:func:`frame_marginals`) draw from one generator, in that
+    order, so that a seed gives the same track and the same panels.
+
+    Parameters
+    ----------
+    seed : int or numpy.random.SeedSequence
+    frames : int
+        Frames of the track, >= 3.
+    panel_frames : sequence of int, shape (F,)
+        Numbers of frames of the panels, each from 3 to ``frames``.
+    names : sequence of str
+        Filters, as :func:`frame_marginals` takes them.
+    scenario : str
+        The key of :data:`depthcore.scenarios.SCENARIOS` whose noise-free
+        state at time 3 and noise level are taken.
+    n_points : int
+        Grid points of each density.
+
+    Returns
+    -------
+    dict
+        ``"mu"``, the track's bearings, shape (frames,), and ``"panels"``,
+        what :func:`frame_marginals` returns for them.
+    """
+    s = SCENARIOS[scenario]
+    rng = np.random.default_rng(seed)
+    track = model.simulate(s.c, frames, s.rho, 0.0, rng)
+    panels = frame_marginals(track.mu, s.rho, panel_frames, names, rng=rng, n_points=n_points)
+    return {"mu": track.mu, "panels": panels}
+
+
 def frame_marginals(
     mu,
     rho: float,
