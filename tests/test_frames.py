@@ -140,6 +140,36 @@ def test_frame_marginals_reject_bad_input(track):
         beyond_frames.frame_marginals(track[:2], FIG2.rho, [3])
 
 
+def test_track_marginals_draw_the_track_then_the_random_filters_from_one_generator():
+    panels_names = ("ekf", "particle")
+    got = beyond_frames.track_marginals(7, 6, [3, 6], panels_names, n_points=101)
+    rng = np.random.default_rng(7)
+    mu = model.simulate(FIG2.c, 6, FIG2.rho, 0.0, rng).mu
+    want = beyond_frames.frame_marginals(mu, FIG2.rho, [3, 6], panels_names, rng=rng, n_points=101)
+    assert_allclose(got["mu"], mu, rtol=0, atol=0)
+    for g, w in zip(got["panels"], want, strict=True):
+        assert g["frames"] == w["frames"]
+        for name in ("optimal", *panels_names):  # the particle filter's draws follow the track's
+            assert g["depth_mean"][name] == w["depth_mean"][name]
+            assert_allclose(g["density"][name], w["density"][name], rtol=0, atol=0)
+    other = beyond_frames.track_marginals(7, 6, [3], ("ekf",), scenario="fig3", n_points=101)
+    assert not np.allclose(other["mu"][:3], got["mu"][:3])  # Figure 3's point, not Figure 2's
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"scenario": "fig9"}, "scenario must be one of fig2"),
+        ({"frames": 2}, "frames must be an integer from 3"),
+        ({"panel_frames": [7]}, "frames"),
+    ],
+)
+def test_track_marginals_refuse_bad_input(kwargs, match):
+    args = {"seed": 1, "frames": 6, "panel_frames": [3], "names": ("ekf",), **kwargs}
+    with pytest.raises(ValueError, match=match):
+        beyond_frames.track_marginals(**args)
+
+
 def test_frames_study_texts_count_the_failed_coverage_tests(frames_run):
     texts = beyond_frames.frames_study_texts(frames_run, "f")
     assert texts["f_tests"] == "4"

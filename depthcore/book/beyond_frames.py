@@ -8,7 +8,8 @@ Recommended import: ``from depthcore.book import beyond_frames``.
 * :func:`coverage_test`: the binomial test of a coverage (also the conjecture
   chapter's);
 * :func:`frame_marginals` and :func:`frame_marginals_figure`: every filter's
-  depth marginal at several frames of one track.
+  depth marginal at several frames of one track; :func:`track_marginals`
+  draws the track and runs them from one seed.
 """
 
 from __future__ import annotations
@@ -199,7 +200,16 @@ def track_marginals(
     dict
         ``"mu"``, the track's bearings, shape (frames,), and ``"panels"``,
         what :func:`frame_marginals` returns for them.
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``scenario``, and as :func:`depthcore.model.simulate`
+        and :func:`frame_marginals` refuse their arguments.
     """
+    if scenario not in SCENARIOS:
+        raise ValueError(f"scenario must be one of {', '.join(SCENARIOS)}, got {scenario!r}")
+    frames = _checks.frames(frames)
     s = SCENARIOS[scenario]
     rng = np.random.default_rng(seed)
     track = model.simulate(s.c, frames, s.rho, 0.0, rng)
