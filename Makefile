@@ -63,7 +63,9 @@ ALONE_VENV := $(VENV)/standalone
 ALONE_STAMP := $(ALONE_VENV)/.installed
 
 # uv installs the pinned sets into the venvs (in seconds, where pip takes a minute); pip puts
-# it, at this version, in a folder of its own, so that .venv/ holds requirements.txt alone.
+# it, at this version, in a folder of its own, so that .venv/ holds requirements.txt alone:
+# the pip of the Python that makes .venv/ when it has one, else one that ensurepip first
+# installs into .venv/ (some 7 s more).
 UV_PIN := uv==0.13.9
 UV_HOME := $(VENV)/uv
 UV := $(UV_HOME)/bin/uv
@@ -93,8 +95,9 @@ $(STAMP): requirements.txt
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' || \
 	  { echo "make: Python 3.11 is required, $(PYTHON) is $$($(PYTHON) --version 2>&1); set PYTHON=/path/to/python3.11" >&2; exit 1; }
 	rm -rf $(VENV)
-	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --target $(UV_HOME) $(UV_PIN)
+	$(PYTHON) -m venv --without-pip $(VENV)
+	$(PYTHON) -m pip install -q --target $(UV_HOME) $(UV_PIN) 2>/dev/null || { rm -rf $(UV_HOME); \
+	  $(PY) -m ensurepip -q && $(PY) -m pip install -q --target $(UV_HOME) $(UV_PIN); }
 	$(UV) pip install -q --python $(PY) -r requirements.txt
 	touch $(STAMP)
 
