@@ -183,7 +183,20 @@ html-build:
 # PDF and HTML builds then read; its outputs compared with book/_nbval/.
 # Every study a page reads must come from its record there (DEPTHCORE_RECORDS=require).
 notebooks-alone: $(EDITABLE) $(ALONE_STAMP) downloads
-	DEPTHCORE_RECORDS=require $(PY) tools/check_notebooks.py cache --execute --python $(ALONE_VENV)/bin/python
+	$(link-bytecode)
+	DEPTHCORE_RECORDS=require $(PY) tools/check_notebooks.py cache --execute --python $(ALONE_VENV)/bin/python \
+	  --uv $(UV)
+
+# The bytecode Python has compiled for .venv/'s packages (in .venv/pycache/, under each source's
+# path), linked for their copies in .venv/standalone/: the pages run alone then do not compile
+# again what the tests before them compiled. Python checks each file against the size and time
+# of its source, which the copy kept, and compiles again one whose source differs.
+SITE_BYTECODE := $(PYTHONPYCACHEPREFIX)$(CURDIR)/$(VENV)/$(SITE)
+ALONE_BYTECODE := $(PYTHONPYCACHEPREFIX)$(CURDIR)/$(ALONE_VENV)/$(SITE)
+define link-bytecode
+if [[ -d $(SITE_BYTECODE) ]]; then mkdir -p $(ALONE_BYTECODE); \
+  cp -al --remove-destination $(SITE_BYTECODE)/. $(ALONE_BYTECODE)/; fi
+endef
 
 # Sphinx's LaTeX builder, then xelatex (Debian: texlive-xetex texlive-latex-extra
 # texlive-fonts-recommended lmodern latexmk fonts-freefont-otf; .ci/run installs them).
@@ -279,7 +292,8 @@ notebooks-update: $(EDITABLE)
 
 # The drift check of `make test`, on the built book's downloads (run `make book` first).
 notebooks-standalone: $(EDITABLE) $(ALONE_STAMP)
-	$(PY) tools/check_notebooks.py standalone --python $(ALONE_VENV)/bin/python $(PAGES)
+	$(link-bytecode)
+	$(PY) tools/check_notebooks.py standalone --python $(ALONE_VENV)/bin/python --uv $(UV) $(PAGES)
 
 # Checks of the built book in _build/html (run `make book` first); the browser's checks of
 # a page one after the other in one browser, every other page in each of two (test_browser.py).

@@ -81,6 +81,9 @@ IOPUB_TIMEOUT = 120
 #: The book's kernel, ``kernels/python3``: ipykernel, run by the Python that starts it,
 #: without its notice about plain TCP on the loopback interface.
 KERNELS = ROOT / "tools" / "jupyter"
+#: The uv that installs the book's environment for the pages run alone: the one ``make``
+#: puts in ``.venv/uv/`` (``--uv``).
+UV = str(ROOT / ".venv" / "uv" / "bin" / "uv")
 
 # Outputs nbval must not compare: stderr (warnings carry installation paths;
 # matplotlib's one-off font-cache message), SVG (random element ids) and glued
@@ -334,8 +337,12 @@ def conftest_text() -> str:
     )
 
 
-def environment_mismatch(python: str, requirements: Path) -> tuple[list[str], list[str]]:
+def environment_mismatch(
+    python: str, requirements: Path, uv: str = UV
+) -> tuple[list[str], list[str]]:
     """How the packages installed for ``python`` differ from the pins of ``requirements``.
+
+    The installed distributions as ``uv pip list`` (``uv``) lists them.
 
     Returns
     -------
@@ -345,7 +352,7 @@ def environment_mismatch(python: str, requirements: Path) -> tuple[list[str], li
         Installed distributions that are neither pinned nor depthcore nor pip.
     """
     listed = subprocess.run(
-        [python, "-m", "pip", "list", "--format=freeze", "--disable-pip-version-check"],
+        [uv, "pip", "list", "--quiet", "--python", python, "--format", "freeze"],
         capture_output=True,
         text=True,
         check=True,
@@ -366,12 +373,15 @@ def environment_mismatch(python: str, requirements: Path) -> tuple[list[str], li
     return unmet, foreign
 
 
-def install_book_environment(python: str, downloads: Path = BOOK_DOWNLOADS) -> str | None:
+def install_book_environment(
+    python: str, downloads: Path = BOOK_DOWNLOADS, uv: str = UV
+) -> str | None:
     """Install into ``python``'s environment the book's requirements and source archive.
 
     The environment a reader makes from the downloads: ``requirements.txt``
     (installed only when a pin is unmet) and ``depthcore.tar.gz`` (always
-    reinstalled, as the archive changes with the tree).
+    reinstalled, as the archive changes with the tree), installed by ``uv``
+    (``uv pip install``, as ``pip install`` would, in a second rather than five).
 
     Returns
     -------
@@ -380,14 +390,14 @@ def install_book_environment(python: str, downloads: Path = BOOK_DOWNLOADS) -> s
         pinned), or None when it is.
     """
     archive, requirements = downloads / "depthcore.tar.gz", downloads / "requirements.txt"
-    install = [python, "-m", "pip", "install", "-q", "--disable-pip-version-check"]
-    if environment_mismatch(python, requirements)[0]:
+    install = [uv, "pip", "install", "--quiet", "--python", python]
+    if environment_mismatch(python, requirements, uv)[0]:
         subprocess.run(install + ["-r", str(requirements)], check=True)
     subprocess.run(
-        install + ["--no-build-isolation", "--force-reinstall", "--no-deps", str(archive)],
+        install + ["--no-build-isolation", "--reinstall", "--no-deps", str(archive)],
         check=True,
     )
-    unmet, foreign = environment_mismatch(python, requirements)
+    unmet, foreign = environment_mismatch(python, requirements, uv)
     if not (unmet or foreign):
         return None
     return f"{python} is not the book's environment: " + "; ".join(
@@ -403,6 +413,7 @@ def standalone(
     every: list[Path] | None = None,
     sources: Path = BOOK_SOURCES,
     downloads: Path = BOOK_DOWNLOADS,
+    uv: str = UV,
 ) -> int:
     """Run each page's downloaded notebook alone with ``python`` and compare its outputs."""
     import tempfile
@@ -452,7 +463,7 @@ def standalone(
             print(f"  - {p}", file=sys.stderr)
         return 1
 
-    mismatch = install_book_environment(python, downloads)
+    mismatch = install_book_environment(python, downloads, uv)
     if mismatch is not None:
         print(f"make notebooks-standalone: {mismatch}", file=sys.stderr)
         return 1
@@ -897,7 +908,7 @@ def select_pages(pages: list[Path], names: list[str]) -> list[Path]:
     return [p for p in pages if p.stem in wanted]
 
 
-def execute_alone(pages: list[Path], python: str, workers: int) -> int:
+def execute_alone(pages: list[Path], python: str, workers: int, uv: str = UV) -> int:
     """``cache --execute --python PY``: the one execution of each page in ``make test``.
 
     Installs the book's requirements and source archive into ``python``'s
@@ -911,7 +922,9 @@ def execute_alone(pages: list[Path], python: str, workers: int) -> int:
         for needed in (BOOK_SOURCE_ARCHIVE, BOOK_REQUIREMENTS)
         if not needed.is_file()
     ]
-    mismatch = None if problems else install_book_environment(python, BOOK_SOURCE_ARCHIVE.parent)
+    mismatch = (
+        None if problems else install_book_environment(python, BOOK_SOURCE_ARCHIVE.parent, uv)
+    )
     if problems or mismatch is not None:
         for problem in problems or [mismatch]:
             print(f"make notebooks-alone: {problem}", file=sys.stderr)
@@ -942,6 +955,11 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="`standalone`, `cache --execute`: the Python of the environment that runs the "
         "notebooks alone (the book's requirements and source archive are installed into it)",
+    )
+    parser.add_argument(
+        "--uv",
+        default=UV,
+        help="`standalone`, `cache --execute`: the uv that installs them (default: %(default)s)",
     )
     parser.add_argument(
         "-n",
@@ -979,7 +997,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.python is None:
             print("make notebooks-standalone: --python is required", file=sys.stderr)
             return 1
-        return standalone(pages, args.python, args.workers, every)
+        return standalone(pages, args.python, args.workers, every, uv=args.uv)
     if args.command == "cache":
         dropped = prepare_cache(every)
         if dropped:
@@ -989,7 +1007,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.python is None:
             fill_cache(every, args.workers)
             return 0
-        return execute_alone(every, args.python, args.workers)
+        return execute_alone(every, args.python, args.workers, args.uv)
     status = update(pages, args.workers)
     if not args.pages:
         for ref in stale_references(every):
