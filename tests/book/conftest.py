@@ -8,7 +8,8 @@ Parametrised arguments, filled in by ``pytest_generate_tests``:
 
 * ``equation_label``: each equation label ``eq-N`` written in ``book/**/*.md``;
 * ``toc_page``: each page of ``_toc.yml``, as ``book/<name>`` (only those of
-  its class's ``pages``, a slice, when it has one: ``test_browser.py``).
+  its class's ``pages``, a slice, when it has one: ``test_browser.py``);
+* ``phone_page``: each page of its module's ``PHONE_PAGES`` (sliced in the same way).
 """
 
 from __future__ import annotations
@@ -78,6 +79,10 @@ def pytest_generate_tests(metafunc):
         # with ``pages`` (a slice of the table of contents) checks only those.
         pages = toc_pages()[getattr(metafunc.cls, "pages", slice(None))]
         metafunc.parametrize("toc_page", pages, scope="class")
+    if "phone_page" in metafunc.fixturenames:
+        # test_browser.py's PHONE_PAGES, as its class's ``pages`` slices the table of contents.
+        pages = metafunc.module.PHONE_PAGES[getattr(metafunc.cls, "pages", slice(None))]
+        metafunc.parametrize("phone_page", pages)
 
 
 @pytest.fixture(scope="session")

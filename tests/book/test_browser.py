@@ -201,15 +201,20 @@ def narrowed_to_a_phone(driver) -> dict:
         return driver.execute_async_script(PHONE_LAYOUT)
 
 
+#: Pages with tables wider than a phone, and their mathematics.
+PHONE_PAGES = ("book/fig2", "book/beyond_filters", "book/beyond_hard")
+
+
 class PageChecks:
     """The browser's checks of one page, one after the other in one browser.
 
     The first loads the page at 1280 px (``CHROMIUM_FLAGS``); the others read
     the page it loaded (``open_page(..., reuse=True)``), the last narrowed to
     a phone's width. ``TestPagesA`` and ``TestPagesB`` run them on every other
-    page of ``_toc.yml`` each (``pages``, read by ``conftest.py``), so that
-    ``pytest -n 2 --dist loadscope`` runs the two halves side by side, each in
-    a browser of its own.
+    page of ``_toc.yml`` each (``pages``, read by ``conftest.py``), and the
+    comparison of a narrowed page with one loaded on a phone on every other
+    page of :data:`PHONE_PAGES`, so that ``pytest -n 2 --dist loadscope``
+    runs the two halves side by side, each in a browser of its own.
     """
 
     def test_page_typesets_its_math_offline(self, browser, html_dir, toc_page):
@@ -305,6 +310,23 @@ class PageChecks:
             f"{toc_page}.html: tables that run off a phone's screen: {widths['wide']}"
         )
 
+    def test_a_page_narrowed_to_a_phone_is_laid_out_as_one_loaded_there(
+        self, browser, html_dir, phone_page
+    ):
+        # Media queries apply to the narrowed window as to a page loaded in it, and MathJax 3
+        # breaks no line by the width: the phone check of every page narrows the page loaded.
+        open_page(browser, html_dir, phone_page)
+        wait_for_mathjax(browser)
+        narrowed = narrowed_to_a_phone(browser)
+        with phone_window(browser):
+            open_page(browser, html_dir, phone_page)
+            wait_for_mathjax(browser)
+            loaded = browser.execute_async_script(PHONE_LAYOUT)
+        assert narrowed["boxes"], f"{phone_page}.html: no table"
+        assert narrowed == loaded, (
+            f"{phone_page}.html narrowed to a phone: {narrowed}; loaded on one: {loaded}"
+        )
+
 
 class TestPagesA(PageChecks):
     pages = slice(0, None, 2)
@@ -312,21 +334,3 @@ class TestPagesA(PageChecks):
 
 class TestPagesB(PageChecks):
     pages = slice(1, None, 2)
-
-
-# Pages with tables wider than a phone, and their mathematics.
-@pytest.mark.parametrize("page", ["book/fig2", "book/beyond_filters", "book/beyond_hard"])
-def test_a_page_narrowed_to_a_phone_is_laid_out_as_one_loaded_there(browser, html_dir, page):
-    # Media queries apply to the narrowed window as to a page loaded in it, and MathJax 3
-    # breaks no line by the width: the phone check of every page narrows the page loaded.
-    open_page(browser, html_dir, page)
-    wait_for_mathjax(browser)
-    narrowed = narrowed_to_a_phone(browser)
-    with phone_window(browser):
-        open_page(browser, html_dir, page)
-        wait_for_mathjax(browser)
-        loaded = browser.execute_async_script(PHONE_LAYOUT)
-    assert narrowed["boxes"], f"{page}.html: no table"
-    assert narrowed == loaded, (
-        f"{page}.html narrowed to a phone: {narrowed}; loaded on one: {loaded}"
-    )
