@@ -64,7 +64,8 @@ ALONE_STAMP := $(ALONE_VENV)/.installed
 
 # uv installs the pinned sets into the venvs (in seconds, where pip takes a minute); pip puts
 # it, at this version, in a folder of its own, so that .venv/ holds requirements.txt alone:
-# the pip of the Python that makes .venv/ when it has one, else one that ensurepip first
+# the pip of the Python that makes .venv/ when it has one (run with the bytecode that Python
+# keeps beside it, not compiled again into .venv/pycache/), else one that ensurepip first
 # installs into .venv/ (some 7 s more).
 UV_PIN := uv==0.13.9
 UV_HOME := $(VENV)/uv
@@ -96,8 +97,9 @@ $(STAMP): requirements.txt
 	  { echo "make: Python 3.11 is required, $(PYTHON) is $$($(PYTHON) --version 2>&1); set PYTHON=/path/to/python3.11" >&2; exit 1; }
 	rm -rf $(VENV)
 	$(PYTHON) -m venv --without-pip $(VENV)
-	$(PYTHON) -m pip install -q --target $(UV_HOME) $(UV_PIN) 2>/dev/null || { rm -rf $(UV_HOME); \
-	  $(PY) -m ensurepip -q && $(PY) -m pip install -q --target $(UV_HOME) $(UV_PIN); }
+	env -u PYTHONPYCACHEPREFIX $(PYTHON) -m pip install -q --no-compile --no-deps --target $(UV_HOME) \
+	  $(UV_PIN) 2>/dev/null || { rm -rf $(UV_HOME); \
+	  $(PY) -m ensurepip > /dev/null && $(PY) -m pip install -q --target $(UV_HOME) $(UV_PIN); }
 	$(UV) pip install -q --python $(PY) -r requirements.txt
 	touch $(STAMP)
 
