@@ -5,8 +5,8 @@
 #   make books              the PDF and the book side by side (make test's build of both)
 #   make lab                JupyterLab on the book's pages (MyST .md files open as notebooks)
 #   make test               core tests; every page executed once, alone, and compared with
-#                           book/_nbval/; the PDF and the book built from that execution,
-#                           with the checks in JupyterLab beside them; checks of the built book
+#                           book/_nbval/; the PDF and the book built from that execution;
+#                           checks of the built book; the checks in JupyterLab beside the last two
 #   make notebooks          re-run every book page and compare its outputs with book/_nbval/
 #   make notebooks-alone    execute every page once, alone in a folder of its own with only
 #                           requirements.txt and the book's source archive installed (as a
@@ -86,7 +86,7 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 export JUPYTER_PATH := $(CURDIR)/tools/jupyter$(if $(JUPYTER_PATH),:$(JUPYTER_PATH))
 KERNEL := $(VENV)/share/jupyter/kernels/python3
 
-.PHONY: help venv cite-venv downloads book html-build pdf pdf-build books lab test core pages test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book check-lab figures records bench clean distclean
+.PHONY: help venv cite-venv downloads book html-build pdf pdf-build books lab test core test-core notebooks notebooks-update notebooks-standalone notebooks-alone check-book check-lab figures records bench clean distclean
 
 help:
 	@sed -n '3,/^#$$/p' Makefile | sed -e 's/^# \{0,1\}//' -e '/^$$/d'
@@ -254,14 +254,27 @@ lab: $(EDITABLE)
 	$(VENV)/bin/jupyter lab --ServerApp.root_dir=. $(if $(filter 0,$(shell id -u)),--allow-root) \
 	  $(LAB_ARGS) book/intro.md
 
-# Each stage's time is printed as it ends, and all of them at the end.
-TEST_STAGES := lint core pages check-book
+# make test's stages, one after the other, each one's time printed as it ends and all of them
+# at the end. From the start of LAB_BESIDE on, the checks in JupyterLab (make check-lab: one
+# browser and one kernel, no built book needed) run beside the stages that remain, filling
+# the core that the PDF's xelatex and the last checks of the built book leave idle; their
+# output is shown at the end.
+TEST_STAGES := lint core notebooks-alone books check-book
+LAB_BESIDE := books
 test: $(EDITABLE)
 	tools/system-packages.sh
-	@times=(); for stage in $(TEST_STAGES); do start=$$SECONDS; \
-	  $(MAKE) --no-print-directory $$stage; \
+	@lab_log=$$(mktemp); lab=; status=0; times=(); \
+	for stage in $(TEST_STAGES); do \
+	  if [[ $$stage == $(LAB_BESIDE) ]]; then \
+	    { start=$$SECONDS; if $(MAKE) --no-print-directory check-lab > $$lab_log 2>&1; then s=0; \
+	      else s=$$?; fi; echo "make test: check-lab took $$((SECONDS - start)) s" >> $$lab_log; \
+	      exit $$s; } & lab=$$!; fi; \
+	  start=$$SECONDS; if ! $(MAKE) --no-print-directory $$stage; then status=1; break; fi; \
 	  times+=("$$stage $$((SECONDS - start)) s"); echo "make test: $$stage took $$((SECONDS - start)) s"; \
-	done; echo "make test: passed ($$(IFS=,; echo "$${times[*]}" | sed 's/,/, /g'))"
+	done; \
+	if [[ -n $$lab ]]; then wait $$lab || status=1; cat $$lab_log; fi; rm -f $$lab_log; \
+	if [[ $$status != 0 ]]; then echo "make test: failed" >&2; exit 1; fi; \
+	echo "make test: passed ($$(IFS=,; echo "$${times[*]}" | sed 's/,/, /g'); check-lab beside from $(LAB_BESIDE) on)"
 
 test-core: $(EDITABLE) $(CITE_STAMP)
 	$(PY) -m pytest -q -rs -n 2 tests $(PYTEST_ARGS)
@@ -271,20 +284,6 @@ test-core: $(EDITABLE) $(CITE_STAMP)
 # otherwise leave a core idle while the next stage waits for them).
 core: $(EDITABLE)
 	$(MAKE) -j2 --no-print-directory --output-sync=line test-core $(FIGURES)/.written $(ALONE_STAMP)
-
-# make test's third stage: every page executed once, alone (notebooks-alone), then the PDF
-# and the book built from that execution (books); beside them from the start, the checks in
-# JupyterLab, which need no built book (one browser and one kernel at a time: alone after the
-# build, they would leave a core idle). Their output is shown once both are done.
-pages: $(EDITABLE)
-	@lab_log=$$(mktemp); \
-	{ start=$$SECONDS; if $(MAKE) --no-print-directory check-lab > $$lab_log 2>&1; then status=0; \
-	  else status=$$?; fi; echo "make test: check-lab took $$((SECONDS - start)) s" >> $$lab_log; \
-	  exit $$status; } & lab=$$!; \
-	status=0; for stage in notebooks-alone books; do start=$$SECONDS; \
-	  if ! $(MAKE) --no-print-directory $$stage; then status=1; break; fi; \
-	  echo "make test: $$stage took $$((SECONDS - start)) s"; done; \
-	wait $$lab || status=1; cat $$lab_log; rm -f $$lab_log; exit $$status
 
 notebooks: $(EDITABLE)
 	$(PY) tools/check_notebooks.py check $(PAGES)

@@ -422,12 +422,12 @@ def test_make_test_executes_each_page_once_alone_before_the_builds():
     assert "for stage in $(TEST_STAGES)" in recipe
     assert "$(MAKE) --no-print-directory $$stage" in recipe
     steps = makefile.split("\nTEST_STAGES := ", 1)[1].split("\n", 1)[0].split()
-    assert steps.index("core") < steps.index("pages") < steps.index("check-book")
-    # pages: notebooks-alone, then books, one after the other; check-lab beside them.
-    pages = makefile.split("\npages: ", 1)[1].split("\n\n", 1)[0]
-    assert "for stage in notebooks-alone books; do" in pages
-    assert "$(MAKE) --no-print-directory check-lab" in pages
-    assert "notebooks-standalone" not in steps + pages.split()  # a second execution of every page
+    assert steps.index("core") < steps.index("notebooks-alone") < steps.index("books")
+    assert steps.index("books") < steps.index("check-book")
+    # check-lab beside the stages from one of them on, waited for at the end.
+    assert makefile.split("\nLAB_BESIDE := ", 1)[1].split("\n", 1)[0] in steps
+    assert "$(MAKE) --no-print-directory check-lab" in recipe and "wait $$lab" in recipe
+    assert "notebooks-standalone" not in steps + recipe.split()  # a second execution of every page
     alone = makefile.split("\nnotebooks-alone: ", 1)[1].split("\n\n", 1)[0]
     assert "cache --execute --python $(ALONE_VENV)/bin/python" in alone
 
