@@ -2,7 +2,7 @@
 #
 #   make book               clean, strict build of the book into _build/html, with its downloads
 #   make pdf                the book as a PDF, _build/latex/depthcore.pdf (needs TeX Live's xelatex)
-#   make books              the PDF and the book side by side (make test's build of both)
+#   make books              the book, then the PDF from what its build read (make test's build)
 #   make lab                JupyterLab on the book's pages (MyST .md files open as notebooks)
 #   make test               core tests; every page executed once, alone, and compared with
 #                           book/_nbval/; the PDF and the book built from that execution;
@@ -213,10 +213,9 @@ define check-tex
     "texlive-latex-extra texlive-fonts-recommended lmodern latexmk fonts-freefont-otf)" >&2; exit 1; }; done
 endef
 
-# The LaTeX build keeps its doctrees and executed notebooks in _build/pdf/ (Jupyter Book puts
-# them beside its output), apart from the HTML build's, so that the two can run side by side;
-# its output then moves to _build/latex/, where xelatex writes the PDF (its images compressed
-# at zlib's level 6, not 9: 3 s instead of 7, for a PDF 3 % larger).
+# make pdf: the LaTeX build reads every page itself (--all), keeping its doctrees and executed
+# notebooks in _build/pdf/ (Jupyter Book puts them beside its output), apart from an HTML
+# build's; its output then moves to _build/latex/, where xelatex writes the PDF.
 LATEX_BUILD := _build/pdf
 pdf-build:
 	rm -rf _build/latex $(LATEX_BUILD)
@@ -224,21 +223,32 @@ pdf-build:
 	$(VENV)/bin/jupyter-book build . --builder latex --path-output $(LATEX_BUILD) --all -W -n \
 	  --keep-going 2>&1 | tee _build/latex.log
 	mv $(LATEX_BUILD)/_build/latex _build/latex
-	cd _build/latex && latexmk -xelatex -interaction=nonstopmode -halt-on-error \
-	  -e '$$xdvipdfmx = "xdvipdfmx -z 6 -E -o %D %O %S"' depthcore.tex > latexmk.log 2>&1 || { tail -n 40 latexmk.log >&2; echo "make pdf: xelatex failed, see _build/latex/depthcore.log" >&2; exit 1; }
-	@echo "make pdf: wrote $(PDF)"
+	$(xelatex)
 
-# make test: the PDF and the HTML book built side by side, one Sphinx build per core, from
-# the execution cache that make notebooks-alone filled. The book links the PDF
-# (DEPTHCORE_DOWNLOADS_PENDING, read by tools/sphinx/depthcore_book.py), which is copied
-# into its downloads once xelatex has written it.
+# xelatex, through latexmk, on _build/latex/depthcore.tex (its images compressed at zlib's
+# level 6, not 9: 3 s instead of 7, for a PDF 3 % larger).
+define xelatex
+cd _build/latex && latexmk -xelatex -interaction=nonstopmode -halt-on-error \
+  -e '$$xdvipdfmx = "xdvipdfmx -z 6 -E -o %D %O %S"' depthcore.tex > latexmk.log 2>&1 || { tail -n 40 latexmk.log >&2; echo "make pdf: xelatex failed, see _build/latex/depthcore.log" >&2; exit 1; }
+@echo "make pdf: wrote $(PDF)"
+endef
+
+# make books (make test's build of both): the HTML book, which reads every page (--all) from the
+# execution cache that make notebooks-alone filled, then the PDF from what that build read:
+# Sphinx's LaTeX builder, run on the HTML build's doctrees (_build/.doctrees), finds every page
+# up to date and only writes the LaTeX (in half the time of a build that reads them again),
+# then xelatex. The book links the PDF (DEPTHCORE_DOWNLOADS_PENDING, read by
+# tools/sphinx/depthcore_book.py), which is copied into its downloads once xelatex has written it.
 books: downloads
 	$(check-tex)
 	$(PY) tools/check_notebooks.py cache --execute
 	$(clear-book)
+	rm -rf _build/latex
 	rm -f $(DOWNLOADS)/depthcore.pdf
-	DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf $(MAKE) -j2 --no-print-directory --output-sync=target \
-	  pdf-build html-build
+	DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf $(MAKE) --no-print-directory html-build
+	DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf $(VENV)/bin/jupyter-book build . --builder latex -W -n \
+	  --keep-going 2>&1 | tee _build/latex.log
+	$(xelatex)
 	cp $(PDF) $(DOWNLOADS)/depthcore.pdf
 	cp $(PDF) _build/html/downloads/depthcore.pdf
 

@@ -185,7 +185,7 @@ def test_the_config_uses_the_cache_that_make_keys():
     for target, builds in (
         ("book", ["html-build"]),
         ("pdf", ["pdf-build"]),
-        ("books", ["pdf-build", "html-build"]),
+        ("books", ["html-build", "--builder latex"]),
     ):
         text = recipe(target)
         cached = text.find("tools/check_notebooks.py cache --execute")
@@ -196,15 +196,27 @@ def test_the_config_uses_the_cache_that_make_keys():
     assert latex in recipe("pdf-build")
 
 
-def test_make_test_builds_the_pdf_and_the_book_side_by_side_and_ships_the_pdf():
+def test_make_books_writes_the_pdf_from_what_the_html_build_read_and_ships_the_pdf():
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
     books = makefile.split("\nbooks:", 1)[1].split("\n\n", 1)[0]
-    side_by_side = books.index("$(MAKE) -j2")
-    assert "DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf" in books[:side_by_side]
-    after = books[side_by_side:]
+    html = books.index(
+        "DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf $(MAKE) --no-print-directory html-build"
+    )
+    latex_build = (
+        "DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf $(VENV)/bin/jupyter-book build . --builder latex"
+    )
+    latex = books.index(latex_build)
+    # html-build reads every page afresh (--all); the LaTeX build that follows reads the
+    # doctrees it left (no --all, no other output path, so no doctrees of its own).
+    assert "jupyter-book build . --all" in makefile.split("\nhtml-build:", 1)[1].split("\n\n")[0]
+    command = books[latex:].split("|", 1)[0]
+    assert "--all" not in command and "--path-output" not in command
+    after = books[books.index("$(xelatex)", latex) :]
+    assert html < latex
     assert "cp $(PDF) $(DOWNLOADS)/depthcore.pdf" in after
     assert "cp $(PDF) _build/html/downloads/depthcore.pdf" in after
-    # The LaTeX build's doctrees are not the HTML build's, and the HTML build keeps them.
+    # make pdf reads every page itself, into doctrees apart from an HTML build's, which
+    # a build of the book keeps.
     assert "LATEX_BUILD := _build/pdf" in makefile
     assert "! -name pdf" in makefile.split("define clear-book", 1)[1].split("endef", 1)[0]
 

@@ -53,10 +53,10 @@ the folder holds when the book is built: ``make book`` without ``make pdf``
 lists the PDF as not built, without a link that would lead nowhere. In the
 PDF the list is printed with each file's address, under ``html_baseurl``
 when the config sets one, else relative to the HTML book's root. A file that
-a build running beside this one is still writing, and that is copied into
-the downloads when both end, is named in the environment variable
+a build after this one (or beside it) writes, and that is copied into the
+downloads when both end, is named in the environment variable
 ``DEPTHCORE_DOWNLOADS_PENDING`` (space-separated names; ``make test`` builds
-the PDF and the HTML book side by side) and is linked as shipped.
+the PDF after the HTML book) and is linked as shipped.
 """
 
 from __future__ import annotations
