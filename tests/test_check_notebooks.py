@@ -185,7 +185,7 @@ def test_the_config_uses_the_cache_that_make_keys():
     for target, builds in (
         ("book", ["html-build"]),
         ("pdf", ["pdf-build"]),
-        ("books", ["html-build", "--builder latex"]),
+        ("books", ["--builder latex", "books-html"]),
     ):
         text = recipe(target)
         cached = text.find("tools/check_notebooks.py cache --execute")
@@ -196,23 +196,24 @@ def test_the_config_uses_the_cache_that_make_keys():
     assert latex in recipe("pdf-build")
 
 
-def test_make_books_writes_the_pdf_from_what_the_html_build_read_and_ships_the_pdf():
+def test_make_books_reads_the_pages_once_for_the_pdf_and_the_book_and_ships_the_pdf():
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
-    books = makefile.split("\nbooks:", 1)[1].split("\n\n", 1)[0]
-    html = books.index(
-        "DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf $(MAKE) --no-print-directory html-build"
-    )
-    latex_build = (
-        "DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf $(VENV)/bin/jupyter-book build . --builder latex"
-    )
-    latex = books.index(latex_build)
-    # html-build reads every page afresh (--all); the LaTeX build that follows reads the
-    # doctrees it left (no --all, no other output path, so no doctrees of its own).
-    assert "jupyter-book build . --all" in makefile.split("\nhtml-build:", 1)[1].split("\n\n")[0]
-    command = books[latex:].split("|", 1)[0]
-    assert "--all" not in command and "--path-output" not in command
-    after = books[books.index("$(xelatex)", latex) :]
-    assert html < latex
+
+    def recipe(target: str) -> str:
+        return makefile.split(f"\n{target}:", 1)[1].split("\n\n", 1)[0]
+
+    books = recipe("books")
+    pending = "DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf "
+    latex = books.index(pending + "$(VENV)/bin/jupyter-book build . --builder latex --all")
+    # The LaTeX build reads every page afresh into the default doctrees (no other output
+    # path); the HTML build that follows, beside xelatex, writes from them (no --all).
+    assert "--path-output" not in books[latex:].split("|", 1)[0]
+    side_by_side = books.index(pending + "$(MAKE) -j2")
+    assert latex < side_by_side and "books-html books-xelatex" in books[side_by_side:]
+    html = recipe("books-html")
+    assert "jupyter-book build . " in html and "--all" not in html and "--builder" not in html
+    assert "$(xelatex)" in recipe("books-xelatex")
+    after = books[side_by_side:]
     assert "cp $(PDF) $(DOWNLOADS)/depthcore.pdf" in after
     assert "cp $(PDF) _build/html/downloads/depthcore.pdf" in after
     # make pdf reads every page itself, into doctrees apart from an HTML build's, which
