@@ -118,7 +118,7 @@ def batch_least_squares(y, mu, rho, q, prior_mean, prior_cov):
         - 0.5 * np.linalg.slogdet(M)[1]
         - 0.5 * residual @ residual
     )
-    log_weight = stats.norm(prior_mean[1], np.sqrt(P_yy)).logpdf(y) + log_like
+    log_weight = stats.norm.logpdf(y, prior_mean[1], np.sqrt(P_yy)) + log_like
     mean = (A @ z).reshape(N, 2)
     cov = A @ np.linalg.inv(M) @ A.T
     return log_weight, mean, np.stack([cov[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] for k in range(N)])

@@ -244,7 +244,7 @@ def test_study_shows_a_progress_bar_on_a_terminal_only():
     import struct
     import termios
 
-    argv = [sys.executable, "-m", "depthcore", "study", "--trials", "150", "--filters", "ekf"]
+    argv = [sys.executable, "-m", "depthcore", "study", "--trials", "30", "--filters", "ekf"]
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
     done = subprocess.run(argv, stdout=subprocess.DEVNULL, stderr=slave, timeout=120)
@@ -256,7 +256,7 @@ def test_study_shows_a_progress_bar_on_a_terminal_only():
     except OSError:  # the terminal closed
         pass
     os.close(master)
-    assert done.returncode == 0 and b"150/150" in shown
+    assert done.returncode == 0 and b"30/30" in shown
     quiet = subprocess.run(argv, capture_output=True, timeout=120)
     assert quiet.returncode == 0 and quiet.stderr == b""
 

