@@ -293,8 +293,10 @@ test: $(EDITABLE)
 	if [[ $$status != 0 ]]; then echo "make test: failed" >&2; exit 1; fi; \
 	echo "make test: passed ($$(IFS=,; echo "$${times[*]}" | sed 's/,/, /g'); check-lab beside from $(LAB_BESIDE) on)"
 
+# Two workers; one that runs out of tests takes the other's pending ones (worksteal), so that
+# neither waits for the other at the end.
 test-core: $(EDITABLE) $(CITE_STAMP)
-	$(PY) -m pytest -q -rs -n 2 tests $(PYTEST_ARGS)
+	$(PY) -m pytest -q -rs -n 2 --dist worksteal tests $(PYTEST_ARGS)
 
 # make test's first stage: the core tests and, beside them, the figures for the book's
 # downloads and the venv that runs the pages alone (one process each, which would
