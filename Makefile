@@ -192,12 +192,14 @@ notebooks-alone: $(EDITABLE) $(ALONE_STAMP) downloads
 # The bytecode Python has compiled for .venv/'s packages (in .venv/pycache/, under each source's
 # path), linked for their copies in .venv/standalone/: the pages run alone then do not compile
 # again what the tests before them compiled. Python checks each file against the size and time
-# of its source, which the copy kept, and compiles again one whose source differs.
+# of its source, which the copy kept, and compiles again one whose source differs. (Copied
+# where the file system makes no hard links.)
 SITE_BYTECODE := $(PYTHONPYCACHEPREFIX)$(CURDIR)/$(VENV)/$(SITE)
 ALONE_BYTECODE := $(PYTHONPYCACHEPREFIX)$(CURDIR)/$(ALONE_VENV)/$(SITE)
 define link-bytecode
 if [[ -d $(SITE_BYTECODE) ]]; then mkdir -p $(ALONE_BYTECODE); \
-  cp -al --remove-destination $(SITE_BYTECODE)/. $(ALONE_BYTECODE)/; fi
+  cp -al --remove-destination $(SITE_BYTECODE)/. $(ALONE_BYTECODE)/ 2>/dev/null || \
+  cp -a --remove-destination $(SITE_BYTECODE)/. $(ALONE_BYTECODE)/; fi
 endef
 
 # Sphinx's LaTeX builder, then xelatex (Debian: texlive-xetex texlive-latex-extra
