@@ -169,6 +169,12 @@ def test_the_pages_the_cache_lacks_are_executed_and_found_by_the_build(tmp_path,
         store.match_cache_notebook(check_notebooks.read_as_the_book(bad))
 
 
+def makefile_recipe(target: str) -> str:
+    """The Makefile's rule for ``target``: its prerequisites and recipe, to the next blank line."""
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    return makefile.split(f"\n{target}:", 1)[1].split("\n\n", 1)[0]
+
+
 def test_the_config_uses_the_cache_that_make_keys():
     import yaml
 
@@ -177,32 +183,23 @@ def test_the_config_uses_the_cache_that_make_keys():
     # One cache for both builds, the one keyed, though the LaTeX build's output is elsewhere.
     assert check_notebooks.CACHE == ROOT / config["execute"]["cache"]
     assert check_notebooks.CACHE == ROOT / "_build" / ".jupyter_cache"
-    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
-
-    def recipe(target: str) -> str:
-        return makefile.split(f"\n{target}:", 1)[1].split("\n\n", 1)[0]
-
     for target, builds in (
         ("book", ["html-build"]),
         ("pdf", ["pdf-build"]),
         ("books", ["--builder latex", "books-html"]),
     ):
-        text = recipe(target)
+        text = makefile_recipe(target)
         cached = text.find("tools/check_notebooks.py cache --execute")
         for build in builds:
             assert 0 <= cached < text.index(f" {build}"), (target, build)
-    assert "jupyter-book build . --all" in recipe("html-build")
+    assert "jupyter-book build . --all" in makefile_recipe("html-build")
     latex = "jupyter-book build . --builder latex --path-output $(LATEX_BUILD)"
-    assert latex in recipe("pdf-build")
+    assert latex in makefile_recipe("pdf-build")
 
 
 def test_make_books_reads_the_pages_once_for_the_pdf_and_the_book_and_ships_the_pdf():
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
-
-    def recipe(target: str) -> str:
-        return makefile.split(f"\n{target}:", 1)[1].split("\n\n", 1)[0]
-
-    books = recipe("books")
+    books = makefile_recipe("books")
     pending = "DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf "
     latex = books.index(pending + "$(VENV)/bin/jupyter-book build . --builder latex --all")
     # The LaTeX build reads every page afresh into the default doctrees (no other output
@@ -210,9 +207,9 @@ def test_make_books_reads_the_pages_once_for_the_pdf_and_the_book_and_ships_the_
     assert "--path-output" not in books[latex:].split("|", 1)[0]
     side_by_side = books.index(pending + "$(MAKE) -j2")
     assert latex < side_by_side and "books-html books-xelatex" in books[side_by_side:]
-    html = recipe("books-html")
+    html = makefile_recipe("books-html")
     assert "jupyter-book build . " in html and "--all" not in html and "--builder" not in html
-    assert "$(xelatex)" in recipe("books-xelatex")
+    assert "$(xelatex)" in makefile_recipe("books-xelatex")
     after = books[side_by_side:]
     assert "cp $(PDF) $(DOWNLOADS)/depthcore.pdf" in after
     assert "cp $(PDF) _build/html/downloads/depthcore.pdf" in after
@@ -431,7 +428,7 @@ def test_the_cached_outputs_are_compared_with_the_references(tmp_path, monkeypat
 
 def test_make_test_executes_each_page_once_alone_before_the_builds():
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
-    recipe = makefile.split("\ntest: ", 1)[1].split("\n\n", 1)[0]
+    recipe = makefile_recipe("test")
     assert "for stage in $(TEST_STAGES)" in recipe
     assert "$(MAKE) --no-print-directory $$stage" in recipe
     steps = makefile.split("\nTEST_STAGES := ", 1)[1].split("\n", 1)[0].split()
@@ -441,7 +438,7 @@ def test_make_test_executes_each_page_once_alone_before_the_builds():
     assert makefile.split("\nLAB_BESIDE := ", 1)[1].split("\n", 1)[0] in steps
     assert "$(MAKE) --no-print-directory check-lab" in recipe and "wait $$lab" in recipe
     assert "notebooks-standalone" not in steps + recipe.split()  # a second execution of every page
-    alone = makefile.split("\nnotebooks-alone: ", 1)[1].split("\n\n", 1)[0]
+    alone = makefile_recipe("notebooks-alone")
     assert "cache --execute --python $(ALONE_VENV)/bin/python" in alone
 
 
