@@ -276,8 +276,8 @@ lab: $(EDITABLE)
 # make test's stages, one after the other, each one's time printed as it ends and all of them
 # at the end. From the start of LAB_BESIDE on, the checks in JupyterLab (make check-lab: one
 # browser and one kernel, no built book needed) run beside the stages that remain, filling
-# the core that the PDF's xelatex and the last checks of the built book leave idle; their
-# output is shown at the end.
+# the core that the builds leave idle (the LaTeX build reads the pages in one process, and
+# the HTML build ends alone); their output is shown at the end.
 TEST_STAGES := lint core notebooks-alone books check-book
 LAB_BESIDE := books
 test: $(EDITABLE)

@@ -55,8 +55,8 @@ PDF the list is printed with each file's address, under ``html_baseurl``
 when the config sets one, else relative to the HTML book's root. A file that
 a build after this one (or beside it) writes, and that is copied into the
 downloads when both end, is named in the environment variable
-``DEPTHCORE_DOWNLOADS_PENDING`` (space-separated names; ``make test`` builds
-the PDF after the HTML book) and is linked as shipped.
+``DEPTHCORE_DOWNLOADS_PENDING`` (space-separated names; in ``make test``
+xelatex writes the PDF beside the HTML build) and is linked as shipped.
 """
 
 from __future__ import annotations
