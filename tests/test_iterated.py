@@ -279,7 +279,9 @@ def test_smoother_with_process_noise_reduces_to_the_one_without_as_q_vanishes():
         sm = iterated.smoother(mu, rho, prior.mean, prior.cov, process_noise=q)
         assert_allclose(sm.mean, none.mean, rtol=tol)
         assert_allclose(sm.cov, none.cov, rtol=100 * tol)
-        assert_allclose(sm.trajectory, none.trajectory, rtol=tol)
+        # relative to each coordinate's scale along the track: x passes near 0
+        scale = np.abs(none.trajectory).max(axis=0)
+        assert_allclose((sm.trajectory - none.trajectory) / scale, 0.0, atol=tol)
     # and the process noise matters where it is not small
     big = iterated.smoother(mu, rho, prior.mean, prior.cov, process_noise=0.05)
     assert big.cov[2, 2] > 2 * none.cov[2, 2]
