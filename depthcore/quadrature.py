@@ -629,17 +629,7 @@ def integrate(pb: Problem, intervals, rtol: float):
                     f"does not decay by |y| = {np.exp(hi_t[k]):.3g}; "
                     "its moments do not exist in this reading"
                 )
-        u_c = frame.u(t_c)
-        first = np.minimum(
-            np.min(np.where(keep, u, np.inf), axis=1), np.min(np.where(keep_t, u_c, np.inf), axis=1)
-        )
-        last = np.maximum(
-            np.max(np.where(keep, u, -np.inf), axis=1),
-            np.max(np.where(keep_t, u_c, -np.inf), axis=1),
-        )
-        active = np.isfinite(first)
-        j_lo = _clip(np.where(active, np.floor((first - u_lo) / h0) - 1, 0), 0, n0 - 1)
-        j_hi = _clip(np.where(active, np.ceil((last - u_lo) / h0) + 1, 0), 0, n0 - 1)
+        j_lo, j_hi, active = kept_range(keep, (frame.u(t_c) - u_lo[:, None]) / h0[:, None], keep_t)
         lo = u_lo + j_lo * h0
         n = (j_hi - j_lo).astype(int) + 1
         h = np.where(active & (n > 1), h0, 0.0)
@@ -727,6 +717,47 @@ def integrate(pb: Problem, intervals, rtol: float):
     if np.any(narrow):  # all the mass on one node: the width is below the resolution
         raise _too_narrow(pb, int(np.argmax(narrow)), rtol)
     return final, errors[0], errors[1], top, grids
+
+
+def kept_range(keep, scan_index, keep_scan):
+    """The nodes of the first level that later levels refine: those kept, one more each side.
+
+    A node of the first level is named by its index, an exact integer; a point
+    of the scan, which lies between nodes, by its position in units of the
+    step from the first node. The range runs from the node before the first
+    node or scan point kept to the node after the last, clipped to the level:
+    which nodes it holds does not depend on how the nodes' coordinates round.
+
+    Parameters
+    ----------
+    keep : ndarray of bool, shape (B, n)
+        The first level's nodes kept (integrand above the cutoff).
+    scan_index : ndarray, shape (B, m)
+        The scan's points as positions on the first level's nodes ``0 .. n - 1``.
+    keep_scan : ndarray of bool, shape (B, m)
+        The scan's points kept.
+
+    Returns
+    -------
+    j_lo, j_hi : ndarray, shape (B,)
+        The range's first and last node (0 where nothing is kept), as floats.
+    active : ndarray of bool, shape (B,)
+        Whether anything is kept.
+    """
+    n = keep.shape[1]
+    index = np.arange(n, dtype=float)
+    first = np.minimum(
+        np.min(np.where(keep, index, np.inf), axis=1),
+        np.floor(np.min(np.where(keep_scan, scan_index, np.inf), axis=1)),
+    )
+    last = np.maximum(
+        np.max(np.where(keep, index, -np.inf), axis=1),
+        np.ceil(np.max(np.where(keep_scan, scan_index, -np.inf), axis=1)),
+    )
+    active = np.isfinite(first)
+    j_lo = _clip(np.where(active, first - 1, 0), 0, n - 1)
+    j_hi = _clip(np.where(active, last + 1, 0), 0, n - 1)
+    return j_lo, j_hi, active
 
 
 def _too_narrow(pb: Problem, k: int, rtol: float) -> ValueError:

@@ -225,6 +225,27 @@ def test_batch_rejects_bad_rows():
         optimal.moments(np.array([s.mu]), [0.1, 0.2], s.prior.mean, s.prior.cov)
 
 
+def test_kept_range_names_the_first_levels_nodes_by_index():
+    # Nodes 3..15 of 20 kept; the range adds a node each side. Their coordinates
+    # u = u_lo + h j, taken back to positions (u - u_lo) / h, round to 2.9999999999999996
+    # and 15.000000000000002, which floor and ceil would widen by a node each.
+    u_lo, h, n = 0.1, 0.7, 20
+    positions = (u_lo + h * np.arange(float(n)) - u_lo) / h
+    assert positions[3] < 3.0 and positions[15] > 15.0
+    keep = ((np.arange(n) >= 3) & (np.arange(n) <= 15))[None]
+    j_lo, j_hi, active = quadrature.kept_range(keep, np.array([[5.5]]), np.ones((1, 1), bool))
+    assert (j_lo[0], j_hi[0], active[0]) == (2, 16, True)
+    # scan points kept between nodes widen the range to the nodes about them, clipped
+    scan = np.array([[1.3, 18.2]])
+    j_lo, j_hi, _ = quadrature.kept_range(keep, scan, np.ones((1, 2), bool))
+    assert (j_lo[0], j_hi[0]) == (0, 19)
+    j_lo, j_hi, _ = quadrature.kept_range(keep, scan, np.array([[True, False]]))
+    assert (j_lo[0], j_hi[0]) == (0, 16)
+    # nothing kept: an empty row
+    j_lo, j_hi, active = quadrature.kept_range(~keep & False, scan, np.zeros((1, 2), bool))
+    assert (j_lo[0], j_hi[0], active[0]) == (0, 0, False)
+
+
 def test_batch_marginals_cdfs_and_density_match_quadrature():
     s = SCENARIOS["fig3"]
     b = optimal.batch_marginals(np.array([s.mu, s.mu]), s.rho, s.prior.mean, s.prior.cov)
