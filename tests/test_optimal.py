@@ -1,5 +1,11 @@
 """Eqs. (6), (13)-(16): the optimal filter and its exact marginals."""
 
+import json
+import os
+import platform
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
@@ -244,6 +250,45 @@ def test_kept_range_names_the_first_levels_nodes_by_index():
     # nothing kept: an empty row
     j_lo, j_hi, active = quadrature.kept_range(~keep & False, scan, np.zeros((1, 2), bool))
     assert (j_lo[0], j_hi[0], active[0]) == (0, 0, False)
+
+
+SCENARIO_NODES = """
+import json
+from depthcore import optimal
+from depthcore.scenarios import SCENARIOS
+out = {}
+for key, s in SCENARIOS.items():
+    m = optimal.marginals(s.mu, s.rho, s.prior)
+    out[key] = [m.n_nodes, m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd]
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.skipif(platform.machine() != "x86_64", reason="x86-64 kernels are named")
+def test_nodes_and_moments_do_not_depend_on_the_processors_kernels():
+    # The scenarios with OpenBLAS's kernels of an SSE4.2 processor and NumPy's SIMD
+    # beyond its baseline turned off, beside those this processor picks: the same
+    # nodes (rounding in the nodes' coordinates once moved the range by one on an
+    # AVX-512 processor) and the same moments to rounding.
+    env = dict(
+        os.environ,
+        OPENBLAS_CORETYPE="Nehalem",
+        NPY_DISABLE_CPU_FEATURES="X86_V3 X86_V4 AVX512_ICL AVX512_SPR",
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", SCENARIO_NODES], env=env, capture_output=True, text=True
+    )
+    assert run.returncode == 0, run.stderr
+    other = json.loads(run.stdout)
+    for key, s in SCENARIOS.items():
+        m = optimal.marginals(s.mu, s.rho, s.prior)
+        assert other[key][0] == m.n_nodes, key
+        assert_allclose(
+            other[key][1:],
+            [m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd],
+            rtol=1e-12,
+            err_msg=key,
+        )
 
 
 def test_batch_marginals_cdfs_and_density_match_quadrature():
