@@ -727,6 +727,7 @@ def kept_range(keep, scan_index, keep_scan):
     step from the first node. The range runs from the node before the first
     node or scan point kept to the node after the last, clipped to the level:
     which nodes it holds does not depend on how the nodes' coordinates round.
+    It takes :func:`integrate`'s own arrays, unchecked.
 
     Parameters
     ----------

@@ -220,6 +220,20 @@ MUTANTS = [
         "gap, se = coverage_gap_difference(m, c, n, levels[0])",
         "tests/test_study_paired.py",
     ),
+    (
+        "quadrature range: no node before the first kept",
+        "depthcore/quadrature.py",
+        "j_lo = _clip(np.where(active, first - 1, 0), 0, n - 1)",
+        "j_lo = _clip(np.where(active, first, 0), 0, n - 1)",
+        "tests/test_optimal.py",
+    ),
+    (
+        "quadrature range: a scan point rounded inward",
+        "depthcore/quadrature.py",
+        "np.floor(np.min(np.where(keep_scan, scan_index, np.inf), axis=1)),",
+        "np.ceil(np.min(np.where(keep_scan, scan_index, np.inf), axis=1)),",
+        "tests/test_optimal.py",
+    ),
 ]
 
 
