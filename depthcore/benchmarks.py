@@ -256,15 +256,62 @@ def changed_sources(recorded: dict, current: dict) -> list[str]:
     return [p for p in sorted(set(current) | set(recorded)) if current.get(p) != recorded.get(p)]
 
 
-def _cpu_model() -> str:
+def _cpuinfo() -> dict[str, str]:
+    """The first processor's fields of ``/proc/cpuinfo`` (empty where there is none)."""
+    fields: dict[str, str] = {}
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as f:
             for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
+                if not line.strip():
+                    break
+                key, _, value = line.partition(":")
+                fields[key.strip()] = value.strip()
     except OSError:
         pass
-    return platform.processor() or platform.machine()
+    return fields
+
+
+def _cpu_model() -> str:
+    return _cpuinfo().get("model name") or platform.processor() or platform.machine()
+
+
+def _processor() -> str:
+    """The processor's family and model, which a model name such as "AMD EPYC" may hide."""
+    info = _cpuinfo()
+    if "cpu family" in info and "model" in info:
+        return f"family {info['cpu family']}, model {info['model']}"
+    return platform.machine()
+
+
+def _blas() -> str:
+    """The BLAS library NumPy runs and, for OpenBLAS, the kernels it picked for this processor.
+
+    OpenBLAS chooses its kernels when loaded (``OPENBLAS_CORETYPE`` overrides the
+    choice), and different kernels round differently. The name is asked of the
+    library NumPy loaded; where that cannot be done, the build's BLAS and version.
+    """
+    import ctypes
+
+    built = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
+    name = f"{built.get('name', 'unknown')} {built.get('version', '')}".strip()
+    try:
+        with open("/proc/self/maps", encoding="utf-8") as f:
+            paths = sorted({line.split()[-1] for line in f if "openblas" in line.lower()})
+        for path in paths:
+            lib = ctypes.CDLL(path)
+            for symbol in (
+                "scipy_openblas_get_corename64_",
+                "scipy_openblas_get_corename",
+                "openblas_get_corename64_",
+                "openblas_get_corename",
+            ):
+                get = getattr(lib, symbol, None)
+                if get is not None:
+                    get.restype = ctypes.c_char_p
+                    return f"{name}, {get().decode()} kernels"
+    except (OSError, IndexError, AttributeError, UnicodeDecodeError):
+        pass
+    return name
 
 
 def machine() -> dict:
@@ -273,18 +320,26 @@ def machine() -> dict:
     Returns
     -------
     dict
-        ``cores`` (logical CPUs), ``cpu``, ``system``, ``python``, ``numpy``,
-        ``scipy``.
+        ``cores`` (logical CPUs), ``cpu`` (the model name), ``processor``
+        (family and model), ``system``, ``python``, ``numpy``, ``scipy``,
+        ``simd`` (NumPy's SIMD extensions found on this processor) and
+        ``blas`` (the BLAS library and the kernels it runs): a record's
+        numbers may differ in their rounding, and a Monte Carlo study's
+        beyond it, between processors that share a model name.
     """
     import scipy
 
+    simd = np.show_config(mode="dicts").get("SIMD Extensions", {})
     return {
         "cores": os.cpu_count(),
         "cpu": _cpu_model(),
+        "processor": _processor(),
         "system": f"{platform.system()} {platform.machine()}",
         "python": platform.python_version(),
         "numpy": np.__version__,
         "scipy": scipy.__version__,
+        "simd": " ".join(simd.get("baseline", []) + simd.get("found", [])),
+        "blas": _blas(),
     }
 
 

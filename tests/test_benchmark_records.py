@@ -10,10 +10,14 @@ from __future__ import annotations
 
 import datetime
 import json
+import os
+import platform
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from depthcore import __version__, benchmark_tables, benchmarks
@@ -52,6 +56,27 @@ def test_every_script_has_a_committed_record(name):
     assert path.is_file(), f"{name} has no record: run `make bench BENCH={name}`"
 
 
+#: What a record says of the machine it was measured on (depthcore.benchmarks.machine).
+MACHINE_FIELDS = ("cores", "cpu", "processor", "system", "python", "numpy", "scipy", "simd", "blas")
+
+
+def test_the_machine_names_the_blas_kernels_the_processor_runs():
+    # OpenBLAS picks its kernels when loaded; OPENBLAS_CORETYPE overrides the choice,
+    # and a record names the kernels its numbers were computed with.
+    here = benchmarks.machine()
+    assert tuple(here) == MACHINE_FIELDS
+    built = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
+    assert here["blas"].startswith(built["name"])
+    if "openblas" not in built["name"] or platform.machine() != "x86_64":
+        return
+    assert here["blas"].endswith(" kernels")
+    code = "from depthcore import benchmarks; print(benchmarks.machine()['blas'])"
+    env = dict(os.environ, OPENBLAS_CORETYPE="Nehalem")
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip().endswith(", Nehalem kernels")
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_every_record_has_its_fields(name):
     r = benchmarks.read(name)
@@ -59,7 +84,7 @@ def test_every_record_has_its_fields(name):
     assert r["script"] == f"benchmarks/{name}.py"
     assert r["command"] == benchmarks.command(name)
     assert datetime.datetime.fromisoformat(r["date"]).tzinfo is not None
-    assert set(r["machine"]) >= {"cores", "cpu", "python", "numpy", "scipy"}
+    assert set(r["machine"]) >= set(MACHINE_FIELDS)
     assert isinstance(r["machine"]["cores"], int) and r["machine"]["cores"] >= 1
     assert r["depthcore_version"] == __version__
     assert r["units"] == benchmarks.UNITS

@@ -242,6 +242,7 @@ def test_every_record_is_of_the_current_code_and_its_own_call(path):
     assert records.call_key(record["function"], args, kwargs) == record["key"]
     assert path == records.record_path(record["function"], record["key"])
     assert record["seconds"] >= 0 and record["machine"]["cores"] >= 1
+    assert set(record["machine"]) == set(benchmarks.machine())
     records.decode(record["result"])
 
 
