@@ -37,13 +37,11 @@ def bench_origin(record: dict) -> str:
     str
         E.g. ``"2026-11-26 on 2 cores (AMD EPYC, family 25, model 17; scipy-openblas
         0.3.31.188.0, SkylakeX kernels), Python 3.11.7, NumPy 2.4.6, SciPy 1.17.1"``
-        (the family, model and BLAS where the record has them).
     """
     m = record["machine"]
-    cpu = ", ".join([m["cpu"]] + ([m["processor"]] if "processor" in m else []))
-    cpu += f"; {m['blas']}" if "blas" in m else ""
     return (
-        f"{record['date'][:10]} on {m['cores']} cores ({cpu}), Python {m['python']}, "
+        f"{record['date'][:10]} on {m['cores']} cores ({m['cpu']}, {m['processor']}; "
+        f"{m['blas']}), Python {m['python']}, "
         f"NumPy {m['numpy']}, SciPy {m['scipy']}"
     )
 

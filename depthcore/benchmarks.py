@@ -271,28 +271,28 @@ def _cpuinfo() -> dict[str, str]:
     return fields
 
 
-def _cpu_model() -> str:
-    return _cpuinfo().get("model name") or platform.processor() or platform.machine()
+def _cpu_model(info: dict[str, str]) -> str:
+    return info.get("model name") or platform.processor() or platform.machine()
 
 
-def _processor() -> str:
+def _processor(info: dict[str, str]) -> str:
     """The processor's family and model, which a model name such as "AMD EPYC" may hide."""
-    info = _cpuinfo()
     if "cpu family" in info and "model" in info:
         return f"family {info['cpu family']}, model {info['model']}"
     return platform.machine()
 
 
-def _blas() -> str:
+def _blas(config: dict) -> str:
     """The BLAS library NumPy runs and, for OpenBLAS, the kernels it picked for this processor.
 
     OpenBLAS chooses its kernels when loaded (``OPENBLAS_CORETYPE`` overrides the
     choice), and different kernels round differently. The name is asked of the
-    library NumPy loaded; where that cannot be done, the build's BLAS and version.
+    library NumPy loaded; where that cannot be done, the build's BLAS and version
+    (from ``config``, NumPy's ``show_config(mode="dicts")``).
     """
     import ctypes
 
-    built = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
+    built = config["Build Dependencies"]["blas"]
     name = f"{built.get('name', 'unknown')} {built.get('version', '')}".strip()
     try:
         with open("/proc/self/maps", encoding="utf-8") as f:
@@ -329,17 +329,18 @@ def machine() -> dict:
     """
     import scipy
 
-    simd = np.show_config(mode="dicts").get("SIMD Extensions", {})
+    info, config = _cpuinfo(), np.show_config(mode="dicts")
+    simd = config.get("SIMD Extensions", {})
     return {
         "cores": os.cpu_count(),
-        "cpu": _cpu_model(),
-        "processor": _processor(),
+        "cpu": _cpu_model(info),
+        "processor": _processor(info),
         "system": f"{platform.system()} {platform.machine()}",
         "python": platform.python_version(),
         "numpy": np.__version__,
         "scipy": scipy.__version__,
         "simd": " ".join(simd.get("baseline", []) + simd.get("found", [])),
-        "blas": _blas(),
+        "blas": _blas(config),
     }
 
 
