@@ -42,3 +42,11 @@ def exit_status(argv) -> int:
         return main(argv)
     except SystemExit as exc:  # argparse's refusals
         return exc.code
+
+
+#: The environment of a subprocess that runs an older x86-64 processor's kernels:
+#: OpenBLAS's for an SSE4.2 processor, and NumPy's SIMD cut to its baseline.
+OLDER_KERNELS = {
+    "OPENBLAS_CORETYPE": "Nehalem",
+    "NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR",
+}

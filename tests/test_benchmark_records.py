@@ -22,6 +22,8 @@ import pytest
 
 from depthcore import __version__, benchmark_tables, benchmarks
 
+from helpers import OLDER_KERNELS
+
 SCRIPTS = sorted((benchmarks.ROOT / "benchmarks").glob("bench_*.py"))
 NAMES = [p.stem for p in SCRIPTS]
 
@@ -71,7 +73,7 @@ def test_the_machine_names_the_blas_kernels_the_processor_runs():
         return
     assert here["blas"].endswith(" kernels")
     code = "from depthcore import benchmarks; print(benchmarks.machine()['blas'])"
-    env = dict(os.environ, OPENBLAS_CORETYPE="Nehalem")
+    env = dict(os.environ, **OLDER_KERNELS)
     run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip().endswith(", Nehalem kernels")

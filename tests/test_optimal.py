@@ -16,6 +16,8 @@ from depthcore.gaussian import Gaussian
 from depthcore.model import f, noise_free_state
 from depthcore.scenarios import MU_17, SCENARIOS
 
+from helpers import OLDER_KERNELS
+
 
 def test_eq6_log_posterior_is_likelihood_times_prior():
     s = SCENARIOS["fig2"]
@@ -266,15 +268,10 @@ print(json.dumps(out))
 
 @pytest.mark.skipif(platform.machine() != "x86_64", reason="x86-64 kernels are named")
 def test_nodes_and_moments_do_not_depend_on_the_processors_kernels():
-    # The scenarios with OpenBLAS's kernels of an SSE4.2 processor and NumPy's SIMD
-    # beyond its baseline turned off, beside those this processor picks: the same
-    # nodes (rounding in the nodes' coordinates once moved the range by one on an
-    # AVX-512 processor) and the same moments to rounding.
-    env = dict(
-        os.environ,
-        OPENBLAS_CORETYPE="Nehalem",
-        NPY_DISABLE_CPU_FEATURES="X86_V3 X86_V4 AVX512_ICL AVX512_SPR",
-    )
+    # The scenarios with an older processor's kernels (OLDER_KERNELS), beside those this
+    # processor picks: the same nodes (a range set from the nodes' coordinates rounded
+    # back to positions moves by a node between kernels) and the same moments to rounding.
+    env = dict(os.environ, **OLDER_KERNELS)
     run = subprocess.run(
         [sys.executable, "-c", SCENARIO_NODES], env=env, capture_output=True, text=True
     )
