@@ -19,11 +19,11 @@
 #   make check-book         checks of the built book alone (equation numbers, browser)
 #   make check-lab          checks of the pages in JupyterLab (needs no built book)
 #   make records            compute again every study (and brute-force sum) the book reads from its record
-#                           (depthcore/book/study_records/), then rewrite the references of
+#                           (depthcore/provenance/study_records/), then rewrite the references of
 #                           the pages that read them
 #   make figures            write the paper's figures to figures/
 #   make bench              run every benchmark at full size, print its tables and write its
-#                           record depthcore/benchmark_records/<script>.json; then rewrite the README's
+#                           record depthcore/provenance/benchmark_records/<script>.json; then rewrite the README's
 #                           tables and the references of the pages that show the records
 #                           (BENCH="bench_bank": that benchmark alone)
 #   make lint               ruff check and ruff format --check of the package, tests, tools, benchmarks
@@ -331,13 +331,13 @@ figures: $(EDITABLE)
 	$(PY) -m depthcore figures --out figures/
 
 # The pages whose Monte Carlo studies and brute-force sums are read from their records
-# (depthcore.book.records):
+# (depthcore.provenance.records):
 # `make records` removes every record, executes these pages once writing the records of the
 # studies they compute (DEPTHCORE_RECORDS=write), then once more reading them, to rewrite
 # their references. tests/test_study_records.py fails when a record is stale.
 RECORD_PAGES := marginals discrepancies beyond_filters beyond_study beyond_sweeps beyond_frames beyond_bound beyond_hard beyond_conjecture
 records: $(EDITABLE)
-	rm -f depthcore/book/study_records/*.json
+	rm -f depthcore/provenance/study_records/*.json
 	DEPTHCORE_RECORDS=write $(PY) tools/check_notebooks.py update $(RECORD_PAGES)
 	$(PY) tools/check_notebooks.py update $(RECORD_PAGES)
 

@@ -3,18 +3,18 @@
 Four tables, every ratio measured side by side in this run (one extrapolation,
 recorded as such beside the measured ratio):
 
-1. **Three frames.** :func:`depthcore.bank_posterior.moments` (a Kalman filter at each
-   quadrature node) against :func:`depthcore.optimal.moments` (the closed form
+1. **Three frames.** :func:`depthcore.exact.posterior.moments` (a Kalman filter at each
+   quadrature node) against :func:`depthcore.exact.optimal.moments` (the closed form
    of Eqs. (14)-(16) at the same nodes) on the same Monte Carlo trials of
    Figure 2; the largest difference of the moments in units of the SD.
 2. **Online cost per frame.** Figure 2's point tracked for many frames by
-   :func:`depthcore.bank_posterior.update`, a batch of trials at once; the mean time of
+   :func:`depthcore.exact.posterior.update`, a batch of trials at once; the mean time of
    one update in windows of frames, re-placements of the nodes included.
-3. **Many trials.** 10,000 trials of 30 frames: :func:`depthcore.bank_posterior.posterior`
-   at frame 3 and :func:`depthcore.bank_posterior.update` for each later frame (the
+3. **Many trials.** 10,000 trials of 30 frames: :func:`depthcore.exact.posterior.posterior`
+   at frame 3 and :func:`depthcore.exact.posterior.update` for each later frame (the
    exact filter at every frame), against the target of 10 s on one core.
 4. **Against particles.** The causal particle filter with resample-move
-   (:mod:`depthcore.resample_move`) on 10 frames: the root-mean-square error
+   (:mod:`depthcore.particles.resample_move`) on 10 frames: the root-mean-square error
    of its depth mean against the bank's, in units of the exact SD, over
    independent runs, for growing particle counts, and its time per run. The
    ratio recorded is measured: the particle filter's time at the largest count
@@ -24,7 +24,8 @@ recorded as such beside the measured ratio):
    the particle filter would need for an error of 1e-3 SD.
 
 Usage: ``python benchmarks/bench_bank.py [--quick]``; the full run writes its
-record ``depthcore/benchmark_records/bench_bank.json`` (:mod:`depthcore.benchmarks`),
+record ``depthcore/provenance/benchmark_records/bench_bank.json``
+(:mod:`depthcore.provenance.benchmarks`),
 ``--quick`` (smaller sizes) writes outside the committed records.
 """
 
@@ -40,8 +41,11 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import bank_posterior, benchmarks, model, optimal, resample_move  # noqa: E402
-from depthcore.scenarios import SCENARIOS  # noqa: E402
+from depthcore.exact import optimal, posterior
+from depthcore.particles import resample_move
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.provenance import benchmarks
 
 FIG2 = SCENARIOS["fig2"]
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
@@ -73,8 +77,8 @@ def three_frames(n_trials: int) -> dict:
     mu, prior = track(n_trials, 3, seed=1)
     args = (mu, FIG2.rho, prior.mean, prior.cov)
     t_one = best_of(lambda: optimal.moments(*args))
-    t_bank = best_of(lambda: bank_posterior.moments(*args))
-    a, b = optimal.moments(*args), bank_posterior.moments(*args)
+    t_bank = best_of(lambda: posterior.moments(*args))
+    a, b = optimal.moments(*args), posterior.moments(*args)
     diff = max(
         np.max(np.abs(a.depth_mean - b.depth_mean) / a.depth_sd),
         np.max(np.abs(a.depth_sd - b.depth_sd) / a.depth_sd),
@@ -97,7 +101,7 @@ def three_frames(n_trials: int) -> dict:
 
 def online(n_trials: int, n_frames: int) -> dict:
     mu, prior = track(n_trials, n_frames, seed=2)
-    post = bank_posterior.posterior(mu[:, :3], FIG2.rho, prior.mean, prior.cov)
+    post = posterior.posterior(mu[:, :3], FIG2.rho, prior.mean, prior.cov)
     edges = [3, 10, 30, 100, 300, 1000, 3000]
     edges = [e for e in edges if e < n_frames] + [n_frames]
     print(f"\n2. Online cost of one frame, {n_trials} trials tracked (target: flat)")
@@ -107,7 +111,7 @@ def online(n_trials: int, n_frames: int) -> dict:
     for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         t = time.perf_counter()
         for k in range(lo, hi):
-            post = bank_posterior.update(post, mu[:, k])
+            post = posterior.update(post, mu[:, k])
         per = (time.perf_counter() - t) / (hi - lo)
         first = first or per
         nodes = int(np.median(np.sum(post.probabilities > 0, axis=-1)))
@@ -130,9 +134,9 @@ def many_trials(n_trials: int, n_frames: int) -> dict:
     mu, prior = track(n_trials, n_frames, seed=3)
 
     def run():
-        post = bank_posterior.posterior(mu[:, :3], FIG2.rho, prior.mean, prior.cov)
+        post = posterior.posterior(mu[:, :3], FIG2.rho, prior.mean, prior.cov)
         for k in range(3, n_frames):
-            post = bank_posterior.update(post, mu[:, k])
+            post = posterior.update(post, mu[:, k])
         return post
 
     t = time.perf_counter()
@@ -154,8 +158,8 @@ def matched_accuracy(n_trials: int, counts, replicas: int) -> dict:
     N = 10
     mu, prior = track(n_trials, N, seed=4)
     args = (mu, FIG2.rho, prior.mean, prior.cov)
-    t_bank = best_of(lambda: bank_posterior.moments(*args))
-    exact = bank_posterior.moments(*args)
+    t_bank = best_of(lambda: posterior.moments(*args))
+    exact = posterior.moments(*args)
     print(f"\n4. Matched accuracy, {n_trials} trials of {N} frames (target: bank >= 100x faster)")
     print(f"{'particles':>10}{'RMSE / SD':>12}{'s per run':>11}")
     seeds = np.random.SeedSequence(5).spawn(len(counts) * replicas)

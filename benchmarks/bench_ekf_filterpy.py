@@ -3,7 +3,7 @@
 Runs 10,000 Monte Carlo trials of the Figure 2 scenario (each with its own
 measurements and the paper's prior built from them) through
 
-* :func:`depthcore.ekf.run`, vectorised over the trials, and
+* :func:`depthcore.kalman.ekf.run`, vectorised over the trials, and
 * filterpy's ``ExtendedKalmanFilter``, one trial at a time (filterpy
   updates the covariance in Joseph form; the two agree algebraically),
 
@@ -13,8 +13,8 @@ over the pairs of their ratio (each pair measured back to back, so that a
 change of the machine's load between pairs changes both).
 
 Usage: ``python benchmarks/bench_ekf_filterpy.py [--quick]``; the full run
-writes its record ``depthcore/benchmark_records/bench_ekf_filterpy.json``
-(:mod:`depthcore.benchmarks`), ``--quick`` (1,000 trials, 3 pairs) writes
+writes its record ``depthcore/provenance/benchmark_records/bench_ekf_filterpy.json``
+(:mod:`depthcore.provenance.benchmarks`), ``--quick`` (1,000 trials, 3 pairs) writes
 outside the committed records.
 """
 
@@ -31,8 +31,11 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from filterpy.kalman import ExtendedKalmanFilter  # noqa: E402
 
-from depthcore import benchmarks, ekf, model, study_trials  # noqa: E402
-from depthcore.scenarios import SCENARIOS  # noqa: E402
+from depthcore.kalman import ekf
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.provenance import benchmarks
+from depthcore.studies import trials as study_trials
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
 MEASURES = ("ekf",)
@@ -106,7 +109,7 @@ def main(argv=None):
     print(f"{pairs} pairs timed alternately; median times, median of the pairs' ratios")
     print("| route | time | ratio |")
     print("|---|---:|---:|")
-    print(f"| depthcore.ekf.run, vectorised | {t_ours * 1e3:.1f} ms | 1 |")
+    print(f"| depthcore.kalman.ekf.run, vectorised | {t_ours * 1e3:.1f} ms | 1 |")
     print(
         f"| filterpy ExtendedKalmanFilter, trial by trial | {t_theirs * 1e3:,.0f} ms "
         f"| {ratio:,.0f} |"

@@ -1,10 +1,10 @@
 """Benchmark: the cost per trial of every N-frame filter against the number of frames N.
 
 Figure 2's point followed from time 1 for N frames with lateral process
-noise ``q`` (:func:`depthcore.model.simulate`, from frame 1), with Figure 2's prior. Every
-filter of the registry that takes N frames (:mod:`depthcore.filters`, with
+noise ``q`` (:func:`depthcore.problem.model.simulate`, from frame 1), with Figure 2's prior. Every
+filter of the registry that takes N frames (:mod:`depthcore.registry.filters`, with
 ``q`` where it supports process noise and 0 where it does not) and the
-iterated extended Kalman smoother (:func:`depthcore.iterated.smoother`, not a
+iterated extended Kalman smoother (:func:`depthcore.kalman.iterated.smoother`, not a
 registry entry), each at its defaults, runs on the same trials at N = 30,
 100, 300 and 1,000. Each time is the least of repeated calls on one batch of
 trials, per trial; the growth column is the cost per frame at the largest N
@@ -14,7 +14,8 @@ relative to that at the smallest, 1 where the cost grows linearly with N
 like N**2.
 
 Usage: ``python benchmarks/bench_frames.py [--quick]``; the full run writes its
-record ``depthcore/benchmark_records/bench_frames.json`` (:mod:`depthcore.benchmarks`),
+record ``depthcore/provenance/benchmark_records/bench_frames.json``
+(:mod:`depthcore.provenance.benchmarks`),
 ``--quick`` (N = 10, 20, 40) writes outside the committed records.
 """
 
@@ -30,9 +31,11 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import benchmarks, iterated, model  # noqa: E402
-from depthcore.filters import FILTERS  # noqa: E402
-from depthcore.scenarios import SCENARIOS  # noqa: E402
+from depthcore.kalman import iterated
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.provenance import benchmarks
+from depthcore.registry.filters import FILTERS
 
 FIG2 = SCENARIOS["fig2"]
 #: The depthcore modules this benchmark measures (fingerprinted in its record).

@@ -4,8 +4,8 @@ A constant-velocity model (position and velocity, the position measured),
 with process noise on the velocity alone (a singular ``Sigma_p``, as in the
 bank's lateral filters), simulated for 1,000 steps; then
 
-* :func:`depthcore.kalman.run` followed by
-  :func:`depthcore.kalman.fixed_interval_smoother` (textbook 19.2.3, 19.2.6), and
+* :func:`depthcore.kalman.linear.run` followed by
+  :func:`depthcore.kalman.linear.fixed_interval_smoother` (textbook 19.2.3, 19.2.6), and
 * filterpy's ``KalmanFilter`` (``update`` for the first measurement, then
   ``predict`` and ``update`` for each later one) followed by its
   ``rts_smoother``,
@@ -16,7 +16,8 @@ change of the machine's load between pairs changes both). The two routes'
 smoothed means and covariances are compared.
 
 Usage: ``python benchmarks/bench_kalman.py [--quick]``; the full run writes its
-record ``depthcore/benchmark_records/bench_kalman.json`` (:mod:`depthcore.benchmarks`),
+record ``depthcore/provenance/benchmark_records/bench_kalman.json``
+(:mod:`depthcore.provenance.benchmarks`),
 ``--quick`` (200 steps, 3 pairs) writes outside the committed records.
 """
 
@@ -33,7 +34,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from filterpy.kalman import KalmanFilter, rts_smoother  # noqa: E402
 
-from depthcore import benchmarks, kalman  # noqa: E402
+from depthcore.kalman import linear
+from depthcore.provenance import benchmarks
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
 MEASURES = ("kalman",)
@@ -57,8 +59,8 @@ def sequence(steps: int) -> np.ndarray:
 
 
 def depthcore_route(x):
-    filtered = kalman.run(x, PRIOR_MEAN, PRIOR_COV, PSI, SIGMA_P, PHI, SIGMA_M)
-    return kalman.fixed_interval_smoother(filtered, PSI)
+    filtered = linear.run(x, PRIOR_MEAN, PRIOR_COV, PSI, SIGMA_P, PHI, SIGMA_M)
+    return linear.fixed_interval_smoother(filtered, PSI)
 
 
 def filterpy_route(x):

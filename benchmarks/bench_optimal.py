@@ -2,10 +2,10 @@
 
 Measures, side by side in one run, on one core:
 
-* the 1-D route of :func:`depthcore.optimal.moments` (Eqs. (14)-(16)), all five
+* the 1-D route of :func:`depthcore.exact.optimal.moments` (Eqs. (14)-(16)), all five
   scenarios in one batch, at the default tolerance;
 * a dense 3-D Gauss-Legendre grid over Eq. (6) itself
-  (:func:`depthcore.reference.grid_moments`), refined until it agrees with
+  (:func:`depthcore.analysis.reference.grid_moments`), refined until it agrees with
   its next refinement to 1e-8 of each SD;
 * with ``--nquad``, scipy's adaptive ``nquad`` on Eq. (6) for one integral
   (the normaliser of Figure 2) at ``epsrel=1e-9``; the full set (five
@@ -16,18 +16,18 @@ and, per triple of measurements on Figures 2, 3, 5 and 6 (Figure 4 shares
 Figure 2's problem), the cost of the paper's three filters, each the least
 time of ``--repeat`` calls, made in five rounds that interleave the filters and
 the scenarios: the optimal filter's moments
-(:func:`depthcore.optimal.moments`, Eqs. (13)-(16)), the second-order
-approximation (:func:`depthcore.second_order.second_order`, Eqs. (7)-(8)) and
-the EKF (:func:`depthcore.ekf.ekf`, Eqs. (10)-(12)), with the optimal
+(:func:`depthcore.exact.optimal.moments`, Eqs. (13)-(16)), the second-order
+approximation (:func:`depthcore.kalman.second_order.second_order`, Eqs. (7)-(8)) and
+the EKF (:func:`depthcore.kalman.ekf.ekf`, Eqs. (10)-(12)), with the optimal
 filter's quadrature nodes in the depth and the evaluations of Eq. (6) that
-the brute-force grid (:func:`depthcore.reference.grid_moments`, its default
+the brute-force grid (:func:`depthcore.analysis.reference.grid_moments`, its default
 rule) spends on the same triple.
 
 Accuracy is the largest difference, over scenarios and over the depth and
 velocity means and SDs, from the 1-D route at ``rtol=1e-13``, divided by
 the SD. Usage: ``python benchmarks/bench_optimal.py [--quick]``; the full run
-writes its record ``depthcore/benchmark_records/bench_optimal.json``
-(:mod:`depthcore.benchmarks`), ``--quick`` (no ``nquad``, fewer repeats) writes
+writes its record ``depthcore/provenance/benchmark_records/bench_optimal.json``
+(:mod:`depthcore.provenance.benchmarks`), ``--quick`` (no ``nquad``, fewer repeats) writes
 outside the committed records.
 """
 
@@ -46,8 +46,11 @@ import warnings  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import integrate  # noqa: E402
 
-from depthcore import benchmarks, ekf, optimal, reference, second_order  # noqa: E402
-from depthcore.scenarios import SCENARIOS  # noqa: E402
+from depthcore.analysis import reference
+from depthcore.exact import optimal
+from depthcore.kalman import ekf, second_order
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.provenance import benchmarks
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
 MEASURES = ("optimal", "reference", "second_order", "ekf")

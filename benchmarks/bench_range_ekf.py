@@ -2,10 +2,10 @@
 
 For two problems, Figure 2's triple and Figure 2's point continued to a
 10-frame track (one noisy track, seed 4), the range-parametrised EKF
-(:func:`depthcore.range_ekf.posterior`, Peach 1995) runs with a growing number
+(:func:`depthcore.kalman.range_ekf.posterior`, Peach 1995) runs with a growing number
 of components ``n`` on a geometric grid (four per doubling, 1 to
-:data:`depthcore.range_ekf.MAX_COMPONENTS`), and its depth mean and SD at the
-last frame are compared with the exact filter's (:func:`depthcore.bank_posterior.posterior`).
+:data:`depthcore.kalman.range_ekf.MAX_COMPONENTS`), and its depth mean and SD at the
+last frame are compared with the exact filter's (:func:`depthcore.exact.posterior.posterior`).
 A tolerance is met from ``n`` on when the relative error of both moments is
 below it at ``n`` and at every larger ``n`` of the grid. For each tolerance
 (1e-2 and 1e-3) the table gives that ``n`` and the time of one call with it,
@@ -13,8 +13,8 @@ measured side by side with the bank's time of one call on the same problem in
 this run (the least of repeated calls), and their ratio.
 
 Usage: ``python benchmarks/bench_range_ekf.py [--quick]``; the full run
-writes its record ``depthcore/benchmark_records/bench_range_ekf.json``
-(:mod:`depthcore.benchmarks`), ``--quick`` (fewer repeats) writes outside the
+writes its record ``depthcore/provenance/benchmark_records/bench_range_ekf.json``
+(:mod:`depthcore.provenance.benchmarks`), ``--quick`` (fewer repeats) writes outside the
 committed records.
 """
 
@@ -30,8 +30,11 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import bank_posterior, benchmarks, model, range_ekf  # noqa: E402
-from depthcore.scenarios import SCENARIOS  # noqa: E402
+from depthcore.exact import posterior
+from depthcore.kalman import range_ekf
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.provenance import benchmarks
 
 FIG2 = SCENARIOS["fig2"]
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
@@ -65,7 +68,7 @@ def best_of(f, repeats: int) -> float:
 def compare(mu, repeats: int) -> dict:
     prior = FIG2.prior
     args = (mu, FIG2.rho, prior.mean, prior.cov)
-    exact = bank_posterior.posterior(*args)
+    exact = posterior.posterior(*args)
     errors = []
     for n in GRID:
         g = range_ekf.posterior(*args, n_components=n)
@@ -92,7 +95,7 @@ def compare(mu, repeats: int) -> dict:
             out[key] = {"components": None}
             continue
         n = GRID[first]
-        t_bank = best_of(lambda: bank_posterior.posterior(*args), repeats)
+        t_bank = best_of(lambda: posterior.posterior(*args), repeats)
         t_range = best_of(lambda n=n: range_ekf.posterior(*args, n_components=n), repeats)
         out[key] = {
             "components": n,

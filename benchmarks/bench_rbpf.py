@@ -6,21 +6,22 @@ bootstrap filter's deterministic motion; bearings simulated with a fixed
 seed, the paper's prior):
 
 * at equal wall-clock cost, the error of the depth mean at the last frame of
-  :func:`depthcore.rbpf.run` (particles over depth, a Kalman filter each) and
-  of :func:`depthcore.resample_move.run` (particles over the whole state,
+  :func:`depthcore.particles.rbpf.run` (particles over depth, a Kalman filter each) and
+  of :func:`depthcore.particles.resample_move.run` (particles over the whole state,
   resample-move), each with its default moves: the particles of the
   resample-move filter are scaled from a pilot run so that its time matches
   the RBPF's;
 * the RBPF's error as its particles grow.
 
 Errors are relative to the exact filter, the bank of Kalman filters
-(:mod:`depthcore.bank`) on a Gauss-Legendre rule in log depth refined until
+(:mod:`depthcore.exact.bank`) on a Gauss-Legendre rule in log depth refined until
 its moments change by less than 1e-10 of themselves, in units of the exact
 posterior SD of the depth; "RMS error" is the root mean square over
 ``--repeats`` independent runs, "SE" the RBPF's standard error of the
-average of those runs from their spread (:meth:`depthcore.rbpf.RBPF.standard_errors`).
+average of those runs from their spread (:meth:`depthcore.particles.rbpf.RBPF.standard_errors`).
 Usage: ``python benchmarks/bench_rbpf.py [--quick]``; the full run writes its
-record ``depthcore/benchmark_records/bench_rbpf.json`` (:mod:`depthcore.benchmarks`),
+record ``depthcore/provenance/benchmark_records/bench_rbpf.json``
+(:mod:`depthcore.provenance.benchmarks`),
 ``--quick`` (fewer runs and particles) writes outside the committed records.
 """
 
@@ -36,9 +37,12 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import bank, bank_mixture, benchmarks, model, rbpf, resample_move  # noqa: E402
-from depthcore.gaussian import paper_prior  # noqa: E402
-from depthcore.scenarios import SCENARIOS  # noqa: E402
+from depthcore.exact import bank, mixture
+from depthcore.particles import rbpf, resample_move
+from depthcore.problem import model
+from depthcore.problem.gaussian import paper_prior
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.provenance import benchmarks
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
 MEASURES = ("rbpf", "resample_move", "bank", "bank_mixture")
@@ -64,7 +68,7 @@ def exact(mu, rho, prior):
     panels, previous = 20, None
     while True:
         y, w = log_depth_rule(panels)
-        mx = bank_mixture.mixture(bank.filter_bank(y, mu, rho, prior.mean, prior.cov), w)
+        mx = mixture.mixture(bank.filter_bank(y, mu, rho, prior.mean, prior.cov), w)
         now = np.array([mx.depth_mean, mx.depth_sd])
         if previous is not None and np.all(np.abs(now - previous) <= 1e-10 * np.abs(now)):
             return float(now[0]), float(now[1])

@@ -2,11 +2,11 @@
 
 Draws 10,000 noisy triples of the Figure 2 scenario (each with the paper's
 prior built from its own measurements) and times, on one core,
-:func:`depthcore.optimal.moments` vectorised over the trials against
-:func:`depthcore.optimal.marginals` called trial by trial on a subset, and
+:func:`depthcore.exact.optimal.moments` vectorised over the trials against
+:func:`depthcore.exact.optimal.marginals` called trial by trial on a subset, and
 checks that the two agree. Usage: ``python benchmarks/bench_trials.py [--quick]``;
-the full run writes its record ``depthcore/benchmark_records/bench_trials.json``
-(:mod:`depthcore.benchmarks`), ``--quick`` (1,000 trials) writes outside the
+the full run writes its record ``depthcore/provenance/benchmark_records/bench_trials.json``
+(:mod:`depthcore.provenance.benchmarks`), ``--quick`` (1,000 trials) writes outside the
 committed records.
 """
 
@@ -22,9 +22,11 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from depthcore import benchmarks, optimal, study_trials  # noqa: E402
-from depthcore.gaussian import Gaussian  # noqa: E402
-from depthcore.scenarios import SCENARIOS  # noqa: E402
+from depthcore.exact import optimal
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.provenance import benchmarks
+from depthcore.studies import trials
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
 MEASURES = ("optimal",)
@@ -37,7 +39,7 @@ def main(argv=None):
     args = p.parse_args(argv)
     n_trials, n_loop = (1000, 50) if args.quick else (TRIALS, LOOP)
     s = SCENARIOS["fig2"]
-    tr = study_trials.simulate(s.c, s.rho, n_trials, np.random.default_rng(SEED))
+    tr = trials.simulate(s.c, s.rho, n_trials, np.random.default_rng(SEED))
     t = time.perf_counter()
     m = optimal.moments(tr.mu, tr.rho, tr.prior_mean, tr.prior_cov)
     t_vec = time.perf_counter() - t

@@ -2,108 +2,95 @@
 
 A point translates in the (x, y) plane and is seen through noisy image
 measurements ``mu_i = x_i / y_i + w_i``: the paper's three, or any ``N >= 3``
-frames up to ``depthcore._checks.MAX_FRAMES`` (1,000), with or without process
-noise on the velocity. The package computes the three estimates of its state
-that the paper compares: the optimal Bayes filter (:mod:`depthcore.optimal`;
-for more frames the bank of Kalman filters over depth, :mod:`depthcore.bank`),
-the second-order Gaussian approximation (:mod:`depthcore.second_order`) and
-the extended Kalman filter (:mod:`depthcore.ekf`), with their depth and
-velocity marginals.
+frames up to ``depthcore.problem.checks.MAX_FRAMES`` (1,000), with or without
+process noise on the velocity. The package computes the estimates of its state
+that the paper compares (the optimal Bayes filter, the second-order
+approximation and the extended Kalman filter) and those of the tracking
+literature and the textbook beside them, each against the exact answer.
 
-Modules, by concept: :mod:`~depthcore.model` (Eqs. (1)-(5), (7), (9), (11),
-(20)-(22)), :mod:`~depthcore.gaussian` (Eq. (13), the paper's prior),
-:mod:`~depthcore.scenarios` (Figures 2-6 and the reported numbers),
-:mod:`~depthcore.second_order` (Eqs. (8), (24)), :mod:`~depthcore.ekf`
-(Eqs. (10)-(12)), :mod:`~depthcore.optimal` (Eqs. (6), (13)-(16)), integrated by
-the depth quadrature :mod:`~depthcore.quadrature`; beyond the
-paper, the unscented Kalman filter (:mod:`~depthcore.ukf`), importance
-sampling from a second-order proposal (:mod:`~depthcore.particle`, with
-:mod:`~depthcore.resampling`), the causal bootstrap filter with resample-move
-(:mod:`~depthcore.resample_move`), the iterated EKF and smoother
-(:mod:`~depthcore.iterated`), the inverse-depth EKF
-(:mod:`~depthcore.inverse_depth`) and UKF (:mod:`~depthcore.inverse_depth_ukf`),
-the EKF in modified polar coordinates (:mod:`~depthcore.modified_polar`),
-the range-parametrised EKF, a Gaussian sum
-of EKFs over depth intervals (:mod:`~depthcore.range_ekf`), the textbook's
-Kalman filter and smoothers (:mod:`~depthcore.kalman`), the exact filter for
-any number of frames as a bank of Kalman filters over depth
-(:mod:`~depthcore.bank`), the Rao-Blackwellised
-particle filter over depth with a Kalman filter per particle
-(:mod:`~depthcore.rbpf`) and the self-calibration check
-(:mod:`~depthcore.calibration`). The
-registry :mod:`~depthcore.filters` lists every filter,
-and :func:`~depthcore.tracking.track` (``depthcore.track``) filters and smooths one
-track at every frame;
-:mod:`~depthcore.reproduce` and :mod:`~depthcore.study` run them;
-:mod:`~depthcore.cli_text` holds the command line's tables;
-:mod:`~depthcore.reference` holds independent routes for checking;
-:mod:`~depthcore.benchmarks` writes and reads the benchmarks' recorded results
-and :mod:`~depthcore.benchmark_tables` renders them. The book's wing,
-:mod:`depthcore.book`, holds each chapter's experiments, figures and glued
-texts, one module per chapter, with what the chapters share (the plot style,
-the number formatting, the notebook helpers and the book's cross-references);
-no module outside it imports it but the command line, for the paper's figures,
-and :mod:`~depthcore.benchmark_tables`, for its tables.
+The package by families, from the bottom up; each subpackage's docstring says
+what lives there and where a new thing of its kind goes, and no module imports
+from a family above its own:
 
-Every public module is an attribute of the package, imported when first used
-(``import depthcore; depthcore.study`` works).
+* :mod:`depthcore.problem`: the paper's model, the Gaussian type and the prior,
+  the scenarios of Figures 2-6, the input checks;
+* :mod:`depthcore.kalman`: the Gaussian filters, from the linear Kalman filter
+  and its smoothers to the second-order filter, the EKF, the UKF and the
+  tracking literature's reparametrised EKFs;
+* :mod:`depthcore.exact`: the exact filter, by quadrature over depth for three
+  frames and as a bank of Kalman filters over depth for any number;
+* :mod:`depthcore.particles`: resampling and the particle filters;
+* :mod:`depthcore.analysis`: the Cramér-Rao bound, self-calibration and the
+  independent routes that check the filters;
+* :mod:`depthcore.registry`: every filter under one calling convention
+  (:data:`FILTERS`), their results, and :func:`track`;
+* :mod:`depthcore.studies`: Monte Carlo studies and the reproduction of the
+  paper's tables;
+* :mod:`depthcore.provenance`: the benchmarks' and the studies' records;
+* :mod:`depthcore.formatting`: numbers as the book and the command line print them;
+* :mod:`depthcore.cli`: the command line, ``python -m depthcore``;
+* :mod:`depthcore.book`: each chapter's experiments, figures and glued texts.
+  Nothing outside it imports it.
+
+The names below are the package's front door; everything else is imported from
+its subpackage (``from depthcore.exact import optimal``). Subpackages are
+attributes of the package, imported when first used. The modules' paths before
+0.2 (``depthcore.optimal``) still import, with a :class:`DeprecationWarning`
+naming the new path, until 0.3 (:mod:`depthcore._moved`).
 """
 
 import importlib
+import pkgutil
 
-from .gaussian import Gaussian, paper_prior
-from .model import bearings_from_pixels, noise_free_state
-from .scenarios import SCENARIOS
+from depthcore import _moved
+from depthcore.problem.gaussian import Gaussian, paper_prior
+from depthcore.problem.model import bearings_from_pixels, noise_free_state
+from depthcore.problem.scenarios import SCENARIOS
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
-#: The public modules, imported on first access as attributes of the package.
-MODULES = (
-    "adapters",
-    "bank",
-    "bank_mixture",
-    "bank_posterior",
-    "bank_track",
-    "benchmark_tables",
-    "benchmarks",
-    "book",
-    "bound",
-    "calibration",
-    "cli_text",
-    "ekf",
-    "estimates",
-    "filters",
-    "gaussian",
-    "hardness",
-    "inverse_depth",
-    "inverse_depth_ukf",
-    "iterated",
+#: The subpackages, from the bottom of the house up, imported on first access.
+SUBPACKAGES = (
+    "problem",
     "kalman",
-    "live",
-    "model",
-    "modified_polar",
-    "optimal",
-    "particle",
-    "quadrature",
-    "range_ekf",
-    "rbpf",
-    "reference",
-    "reproduce",
-    "resample_move",
-    "resampling",
-    "scenarios",
-    "second_order",
-    "study",
-    "study_pairs",
-    "study_scores",
-    "study_trials",
-    "tracking",
-    "ukf",
+    "exact",
+    "particles",
+    "analysis",
+    "registry",
+    "studies",
+    "provenance",
+    "cli",
+    "book",
 )
 
+
+def _modules() -> tuple[str, ...]:
+    """Every public module's path, read from the package's folders without importing them."""
+    found = ["depthcore.formatting"]
+    for package in SUBPACKAGES:
+        path = [f"{__path__[0]}/{package}"]
+        found.append(f"depthcore.{package}")
+        found += [
+            f"depthcore.{package}.{m.name}"
+            for m in pkgutil.iter_modules(path)
+            if not m.name.startswith("_") and not m.ispkg
+        ]
+    return tuple(found)
+
+
+#: Every public module, subpackages first in the order of :data:`SUBPACKAGES`.
+MODULES = _modules()
+
+#: The names a caller reaches through the package itself.
+_LAZY = {
+    "FILTERS": ("depthcore.registry.filters", "FILTERS"),
+    "track": ("depthcore.registry.tracking", "track"),
+    "optimal_marginals": ("depthcore.exact.optimal", "marginals"),
+}
+
 __all__ = [
+    "FILTERS",
     "Gaussian",
-    "MODULES",
     "SCENARIOS",
     "__version__",
     "bearings_from_pixels",
@@ -111,19 +98,21 @@ __all__ = [
     "optimal_marginals",
     "paper_prior",
     "track",
-    *MODULES,
 ]
+
+_moved.install()
 
 
 def __getattr__(name):
-    if name in MODULES:
+    if name in SUBPACKAGES or name == "formatting":
         return importlib.import_module(f"{__name__}.{name}")
-    if name == "optimal_marginals":
-        return importlib.import_module(f"{__name__}.optimal").marginals
-    if name == "track":
-        return importlib.import_module(f"{__name__}.tracking").track
+    if name in _LAZY:
+        module, attribute = _LAZY[name]
+        return getattr(importlib.import_module(module), attribute)
+    if f"{__name__}.{name}" in _moved.MOVED:
+        return _moved.moved_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(MODULES) | {"optimal_marginals", "track"})
+    return sorted(set(globals()) | set(SUBPACKAGES) | set(_LAZY) | {"formatting"})

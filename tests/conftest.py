@@ -2,7 +2,7 @@
 
 import pytest
 
-from depthcore.scenarios import SCENARIOS
+from depthcore.problem.scenarios import SCENARIOS
 
 
 @pytest.fixture(params=list(SCENARIOS))

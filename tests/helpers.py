@@ -4,7 +4,7 @@ import numpy as np
 from hypothesis import assume
 from hypothesis import strategies as st
 
-from depthcore import model
+from depthcore.problem import model
 
 
 @st.composite
@@ -36,7 +36,7 @@ def bearings(c):
 
 def exit_status(argv) -> int:
     """The exit status of ``python -m depthcore *argv``, run in this process."""
-    from depthcore.__main__ import main
+    from depthcore.cli.main import main
 
     try:
         return main(argv)

@@ -3,7 +3,7 @@
 It is computed as a bank of Kalman filters over depth.
 
 Independent routes: at N = 3, q = 0, the one-dimensional route of Eqs. (14)-(16)
-(:func:`depthcore.optimal.moments`); at a fixed depth, the batch least-squares
+(:func:`depthcore.exact.optimal.moments`); at a fixed depth, the batch least-squares
 solution for the whole lateral trajectory given all bearings; overall, a
 brute-force three-dimensional quadrature of the posterior (q = 0, N = 5) and
 importance sampling of the depth (q > 0).
@@ -17,13 +17,15 @@ from numpy.testing import assert_allclose
 from scipy import stats
 from scipy.special import logsumexp
 
-from depthcore import bank as bk
-from depthcore import bank_mixture as bmix
-from depthcore import bank_posterior as bpost
-from depthcore import kalman, model, optimal
-from depthcore.gaussian import paper_prior
-from depthcore.model import noise_free_state
-from depthcore.scenarios import MU_17, RHO_200, SCENARIOS
+from depthcore.exact import bank as bk
+from depthcore.exact import mixture as bmix
+from depthcore.exact import optimal
+from depthcore.exact import posterior as bpost
+from depthcore.kalman import linear
+from depthcore.problem import model
+from depthcore.problem.gaussian import paper_prior
+from depthcore.problem.model import noise_free_state
+from depthcore.problem.scenarios import MU_17, RHO_200, SCENARIOS
 
 ORDER = 20  # Gauss-Legendre points per panel
 
@@ -353,7 +355,7 @@ def test_textbook_19_2_3_online_step_equals_recomputing_from_scratch(q):
     assert_allclose(b.log_weight, fresh.log_weight, rtol=1e-13, atol=1e-11)
     assert_allclose(b.mean, fresh.mean, rtol=1e-13, atol=1e-14)
     assert_allclose(b.cov, fresh.cov, rtol=1e-13, atol=1e-18)
-    for field in kalman.FilterResult._fields:
+    for field in linear.FilterResult._fields:
         assert_allclose(
             getattr(b.history, field), getattr(fresh.history, field), rtol=1e-13, atol=1e-13
         )

@@ -1,7 +1,7 @@
 """The bank's posterior frame by frame: node densities, filtered and smoothed series.
 
 Independent routes: the depth density at the nodes against Eqs. (14)-(16) at
-N = 3 (:func:`depthcore.optimal.marginals`); the filtered series against a
+N = 3 (:func:`depthcore.exact.optimal.marginals`); the filtered series against a
 bank on a fixed dense rule in log depth rerun from scratch at each frame; the
 fixed-lag smoother (the textbook's augmented-state filter, 19.2.6) against the
 fixed-interval (Rauch-Tung-Striebel) smoother of the posterior after the
@@ -15,12 +15,14 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import bank as bk
-from depthcore import bank_mixture as bmix
-from depthcore import bank_posterior as bpost
-from depthcore import bank_track as btrack
-from depthcore import model, optimal, reference
-from depthcore.scenarios import RHO_200, SCENARIOS
+from depthcore.analysis import reference
+from depthcore.exact import bank as bk
+from depthcore.exact import mixture as bmix
+from depthcore.exact import optimal
+from depthcore.exact import posterior as bpost
+from depthcore.exact import smoother as btrack
+from depthcore.problem import model
+from depthcore.problem.scenarios import RHO_200, SCENARIOS
 
 ORDER = 20
 

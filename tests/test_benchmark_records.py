@@ -1,7 +1,7 @@
 """Every benchmark has a committed record, complete and measured on the current code.
 
-The book and the README show the numbers of ``depthcore/benchmark_records/<name>.json``
-(:mod:`depthcore.benchmarks`). These tests never run a benchmark: they read
+The book and the README show the numbers of ``depthcore/provenance/benchmark_records/<name>.json``
+(:mod:`depthcore.provenance.benchmarks`). These tests never run a benchmark: they read
 the records and compare each one's fingerprint with the sources it measured,
 so that a change of the measured code names the record to measure again.
 """
@@ -20,7 +20,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from depthcore import __version__, benchmark_tables, benchmarks
+from depthcore import __version__
+from depthcore.book import benchmark_tables
+from depthcore.provenance import benchmarks
 
 from helpers import OLDER_KERNELS
 
@@ -58,7 +60,7 @@ def test_every_script_has_a_committed_record(name):
     assert path.is_file(), f"{name} has no record: run `make bench BENCH={name}`"
 
 
-#: What a record says of the machine it was measured on (depthcore.benchmarks.machine).
+#: What a record says of the machine it was measured on (depthcore.provenance.benchmarks.machine).
 MACHINE_FIELDS = ("cores", "cpu", "processor", "system", "python", "numpy", "scipy", "simd", "blas")
 
 
@@ -101,7 +103,8 @@ def test_every_record_measured_the_current_code(name):
     r = benchmarks.read(name)
     changed = benchmarks.stale(r)
     assert not changed, (
-        f"depthcore/benchmark_records/{name}.json is stale: {', '.join(changed)} changed "
+        f"depthcore/provenance/benchmark_records/{name}.json is stale: "
+        f"{', '.join(changed)} changed "
         f"since it was recorded on {r['date']}; measure again with `make bench BENCH={name}` "
         f"(`{r['command']}`)"
     )
@@ -140,7 +143,7 @@ def test_a_quick_run_leaves_the_committed_record(tmp_path, monkeypatch):
     record = json.loads(path.read_text())
     assert record["fingerprint"] == {
         "bench_probe.py": benchmarks.fingerprint(script),
-        "depthcore/optimal.py": benchmarks.fingerprint(tmp_path / "depthcore" / "optimal.py"),
+        "depthcore/exact/optimal.py": benchmarks.fingerprint(tmp_path / "depthcore" / "optimal.py"),
     }
     full = benchmarks.write(script, ["optimal"], {"trials": 1}, {"x_s": 1.0})
     assert full == tmp_path / "results" / "bench_probe.json"
@@ -164,7 +167,7 @@ def test_the_readme_shows_the_records():
     text = tool.README.read_text(encoding="utf-8")
     expected = tool.regenerate(text, benchmark_tables.bench_readme_blocks(tool.records()))
     assert text == expected, (
-        "README.md's benchmark tables differ from depthcore/benchmark_records/: "
+        "README.md's benchmark tables differ from depthcore/provenance/benchmark_records/: "
         "run `python tools/bench_readme.py`"
     )
 
@@ -207,8 +210,8 @@ def test_a_record_covers_every_module_its_modules_import():
     assert set(prints) == {"benchmarks/bench_bank.py"} | {f"depthcore/{m}.py" for m in closure}
     # a module that enters the closure later makes the record stale
     r = benchmarks.read("bench_bank")
-    del r["fingerprint"]["depthcore/kalman.py"]
-    assert benchmarks.stale(r) == ["depthcore/kalman.py"]
+    del r["fingerprint"]["depthcore/kalman/linear.py"]
+    assert benchmarks.stale(r) == ["depthcore/kalman/linear.py"]
     with pytest.raises(ValueError, match="modules"):
         benchmarks.measured_modules(["no_such_module"])
 

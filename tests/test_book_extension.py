@@ -52,7 +52,7 @@ def test_formulas_become_latex(text, latex):
         "n_particles",
         "ess_threshold * N",
         "1e-300",
-        "depthcore._checks.MAX_FRAMES",
+        "depthcore.problem.checks.MAX_FRAMES",
         "focal * tan(rho)",
         "log_ndtr",
     ],
@@ -84,13 +84,13 @@ def test_every_converted_formula_of_the_package_has_balanced_braces():
 
 
 def test_module_summaries_are_the_first_paragraph_in_myst():
-    summary = book_ext.module_summary(depthcore.live)
+    summary = book_ext.module_summary(depthcore.book.live)
     assert summary.startswith("Live controls for the figure pages") and "\n" not in summary
     assert (
         book_ext.rst_to_myst(
-            r"on :math:`N \ge 3` frames, :func:`depthcore.model.f` and ``x.shape``"
+            r"on :math:`N \ge 3` frames, :func:`depthcore.problem.model.f` and ``x.shape``"
         )
-        == r"on {math}`N \ge 3` frames, {py:func}`depthcore.model.f` and `x.shape`"
+        == r"on {math}`N \ge 3` frames, {py:func}`depthcore.problem.model.f` and `x.shape`"
     )
 
 

@@ -5,8 +5,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import SCENARIOS, bound, model
+from depthcore import SCENARIOS
+from depthcore.analysis import bound
 from depthcore.book import beyond_bound
+from depthcore.problem import model
 
 FIG2 = SCENARIOS["fig2"]
 RHO = FIG2.rho

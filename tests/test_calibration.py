@@ -3,8 +3,11 @@
 import numpy as np
 import pytest
 
-from depthcore import calibration, cli_text, model, study_scores
+from depthcore.analysis import calibration
 from depthcore.book import beyond_study
+from depthcore.cli import text as cli_text
+from depthcore.problem import model
+from depthcore.studies import scores
 
 PRIOR_MEAN = np.array([-1.2, 4.0, 0.0])
 PRIOR_COV = np.diag([1.0, 1.0, 0.25])
@@ -95,16 +98,16 @@ def test_prior_study_reports_coverage_at_every_level_and_the_tests():
     interval, with the binomial standard error sqrt(p (1 - p) / n); the verdict
     is the Bonferroni rule at the stated false-alarm rate.
     """
-    from depthcore import study
+    from depthcore.studies import monte_carlo
 
-    r = study.prior_study(trials=60, seed=3, false_alarm=0.05)
+    r = monte_carlo.prior_study(trials=60, seed=3, false_alarm=0.05)
     np.testing.assert_allclose(r["prior_mean"], [-1.2, 4.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(r["prior_cov"], 1000.0 * np.eye(3))
     assert r["prior"] == "fixed" and r["truth"] == "prior"
     n = r["valid_trials"]
     assert n + r["rejected_trials"] == 60
     p = np.asarray(r["levels"])
-    assert len(p) == len(study_scores.CALIBRATION_LEVELS)
+    assert len(p) == len(scores.CALIBRATION_LEVELS)
     np.testing.assert_allclose(r["coverage_se"], np.sqrt(p * (1 - p) / n))
     # The same seed reproduces the PIT values: recompute them through the calibration module.
     prior_mean, prior_cov = np.array(r["prior_mean"]), np.array(r["prior_cov"])
@@ -127,17 +130,17 @@ def test_prior_study_reports_coverage_at_every_level_and_the_tests():
     ],
 )
 def test_prior_study_refuses_bad_input(kwargs, name):
-    from depthcore import study
+    from depthcore.studies import monte_carlo
 
     with pytest.raises(ValueError, match=name):
-        study.prior_study(**kwargs)
+        monte_carlo.prior_study(**kwargs)
 
 
 def test_command_line_truth_prior(capsys):
     """``study --truth prior`` prints the table or JSON; ``--prior paper`` is refused, status 2."""
     import json
 
-    from depthcore.__main__ import main
+    from depthcore.cli.main import main
 
     assert main(["study", "--truth", "prior", "--trials", "20", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
@@ -278,7 +281,7 @@ def test_frames_and_process_noise_are_checked(kwargs, name):
 def test_command_line_truth_prior_over_n_frames(capsys):
     import json
 
-    from depthcore.__main__ import main
+    from depthcore.cli.main import main
 
     argv = ["study", "--truth", "prior", "--trials", "30", "--frames", "5"]
     assert main([*argv, "--process-noise", "0.02", "--json"]) == 0

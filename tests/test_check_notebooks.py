@@ -105,7 +105,12 @@ def test_a_changed_page_loses_its_cached_outputs_alone(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "change", ["depthcore/model.py", "depthcore/benchmark_records/bench_x.json", "requirements.txt"]
+    "change",
+    [
+        "depthcore/problem/model.py",
+        "depthcore/provenance/benchmark_records/bench_x.json",
+        "requirements.txt",
+    ],
 )
 def test_a_change_of_the_package_or_its_environment_empties_the_cache(tmp_path, change):
     root, pages = small_project(tmp_path)

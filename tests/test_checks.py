@@ -5,12 +5,15 @@ import re
 import numpy as np
 import pytest
 
-from depthcore import _checks, model, optimal, paper_prior
-from depthcore.ekf import ekf
-from depthcore.gaussian import Gaussian
-from depthcore.model import noise_free_state
-from depthcore.scenarios import MU_17
-from depthcore.second_order import second_order
+from depthcore import paper_prior
+from depthcore.exact import optimal
+from depthcore.kalman.ekf import ekf
+from depthcore.kalman.second_order import second_order
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.model import noise_free_state
+from depthcore.problem.scenarios import MU_17
+from depthcore.studies import frames
 
 PRIOR = paper_prior(noise_free_state(MU_17))
 FILTERS = [
@@ -75,7 +78,7 @@ def test_bad_prior_mean():
 
 def test_degeneracy_boundary():
     # |mu1 + mu3 - 2 mu2| <= 1e-12 is degenerate; just above it is accepted.
-    tol = _checks.DEGENERACY_TOL
+    tol = checks.DEGENERACY_TOL
     with pytest.raises(ValueError, match="degenerate"):
         model.measurements([0.0, -tol / 2, 0.0])
     mu = model.measurements([4 * tol, 0.0, -2 * tol])  # second difference 2e-12, c2 = 4
@@ -93,7 +96,7 @@ def test_behind_camera_boundary():
 
 
 def test_valid_measurements_is_what_measurements_accepts():
-    tol = _checks.DEGENERACY_TOL
+    tol = checks.DEGENERACY_TOL
     rng = np.random.default_rng(0)
     mu = np.concatenate(
         [
@@ -123,14 +126,14 @@ def test_spawn_gives_the_children_of_a_fresh_seed_sequence():
     fresh = [np.random.default_rng(s).random() for s in np.random.SeedSequence(5).spawn(3)]
     seq = np.random.SeedSequence(5)
     for _ in range(2):
-        assert [np.random.default_rng(s).random() for s in _checks.spawn(seq, 3)] == fresh
+        assert [np.random.default_rng(s).random() for s in checks.spawn(seq, 3)] == fresh
     assert seq.n_children_spawned == 0
 
 
 @pytest.mark.parametrize("seed", [-1, 1.5, True, "1"])
 def test_seed_sequence_rejects_what_is_not_a_seed(seed):
     with pytest.raises(ValueError, match="seed must be a non-negative integer"):
-        _checks.seed_sequence(seed)
+        checks.seed_sequence(seed)
 
 
 def test_batch_inputs_broadcast_the_prior_and_check_shapes():
@@ -163,31 +166,31 @@ def test_batch_inputs_broadcast_the_prior_and_check_shapes():
 )
 def test_as_float_refuses_what_is_not_a_real_number_by_name(value, kind):
     with pytest.raises(ValueError, match=rf"^rho must be numeric .*got {kind} values"):
-        _checks.as_float(value, "rho")
+        checks.as_float(value, "rho")
 
 
 def test_as_float_refuses_ragged_lists_and_takes_integers_lists_and_0d_arrays():
     with pytest.raises(ValueError, match="^mu must be numeric, got a ragged"):
-        _checks.as_float([[1, 2], [3]], "mu")
-    assert _checks.as_float([1, 2], "mu").dtype == float
-    assert _checks.as_float(np.array(3), "mu").shape == ()
-    assert _checks.number([0.5], "rho") == _checks.number(np.array(0.5), "rho") == 0.5
+        checks.as_float([[1, 2], [3]], "mu")
+    assert checks.as_float([1, 2], "mu").dtype == float
+    assert checks.as_float(np.array(3), "mu").shape == ()
+    assert checks.number([0.5], "rho") == checks.number(np.array(0.5), "rho") == 0.5
     with pytest.raises(ValueError, match=r"rho must be a number, got shape \(2,\)"):
-        _checks.number([0.5, 0.6], "rho")
+        checks.number([0.5, 0.6], "rho")
 
 
 def test_process_noise_is_zero_or_a_normal_double():
     tiny = np.finfo(float).tiny
-    assert _checks.process_noise(0.0) == 0.0 and _checks.process_noise(tiny) == tiny
+    assert checks.process_noise(0.0) == 0.0 and checks.process_noise(tiny) == tiny
     for q in (1e-320, 5e-324, tiny / 2):
         with pytest.raises(ValueError, match="process_noise must be 0 or at least"):
-            _checks.process_noise(q)
+            checks.process_noise(q)
 
 
-@pytest.mark.parametrize("value", [3, 10, _checks.MAX_FRAMES, np.int64(4), np.uint16(7)])
+@pytest.mark.parametrize("value", [3, 10, checks.MAX_FRAMES, np.int64(4), np.uint16(7)])
 def test_frames_takes_integers_from_3_to_the_most_frames(value):
-    assert _checks.frames(value) == int(value)
-    assert type(_checks.frames(value)) is int
+    assert checks.frames(value) == int(value)
+    assert type(checks.frames(value)) is int
 
 
 @pytest.mark.parametrize(
@@ -196,7 +199,7 @@ def test_frames_takes_integers_from_3_to_the_most_frames(value):
         (0, "0"),
         (2, "2"),
         (-5, "-5"),
-        (_checks.MAX_FRAMES + 1, str(_checks.MAX_FRAMES + 1)),
+        (checks.MAX_FRAMES + 1, str(checks.MAX_FRAMES + 1)),
         (2.5, "2.5"),
         (np.float64(3.0), "3.0"),
         (np.int64(2), "2"),
@@ -206,15 +209,14 @@ def test_frames_takes_integers_from_3_to_the_most_frames(value):
     ],
 )
 def test_frames_refuses_what_is_not_a_number_of_frames_and_shows_it(value, shown):
-    message = f"N must be an integer from 3 to {_checks.MAX_FRAMES}, got {shown}"
+    message = f"N must be an integer from 3 to {checks.MAX_FRAMES}, got {shown}"
     with pytest.raises(ValueError, match=f"^{re.escape(message)}$"):
-        _checks.frames(value, "N")
+        checks.frames(value, "N")
 
 
 def test_a_list_of_frames_names_the_value_refused():
-    from depthcore.book import beyond_frames
 
     with pytest.raises(ValueError, match=r"got 2\.5$"):
-        beyond_frames.frames_study([3, 2.5], 10, 1)
+        frames.frames_study([3, 2.5], 10, 1)
     with pytest.raises(ValueError, match=r"from 3 to 1000, got 0$"):
-        beyond_frames.frames_study(0, 10, 1)
+        frames.frames_study(0, 10, 1)

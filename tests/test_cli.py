@@ -6,10 +6,12 @@ import sys
 
 import pytest
 
-from depthcore import bank_posterior, reproduce, study, study_trials
-from depthcore.__main__ import build_parser, main
-from depthcore.filters import FILTERS
-from depthcore.scenarios import SCENARIOS
+from depthcore.cli.main import build_parser, main
+from depthcore.exact import posterior
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.filters import FILTERS
+from depthcore.studies import monte_carlo, reproduce
+from depthcore.studies import trials as study_trials
 
 from helpers import exit_status
 
@@ -177,8 +179,8 @@ def test_figures_command_writes_each_figure_in_the_formats_named(tmp_path, capsy
 def test_figures_formats_are_those_the_figures_are_written_in_by_default():
     import inspect
 
-    from depthcore.__main__ import FIGURE_FORMATS
     from depthcore.book import paper
+    from depthcore.cli.main import FIGURE_FORMATS
 
     assert inspect.signature(paper.save_all).parameters["formats"].default == FIGURE_FORMATS
     assert build_parser().parse_args(["figures"]).formats is None  # then FIGURE_FORMATS
@@ -277,7 +279,7 @@ def test_estimate_takes_more_frames_process_noise_and_smoothing(capsys):
     assert data["not_run"] == {"particle": "supports only no process noise"}
     # the default prior is the paper's rule on the first three bearings
     mean = np.array([-1.2, 4.0, 0.0])
-    m = bank_posterior.moments([float(v) for v in mu], 0.005, mean, 1000 * np.eye(3), 0.01)
+    m = posterior.moments([float(v) for v in mu], 0.005, mean, 1000 * np.eye(3), 0.01)
     assert data["filters"]["optimal"]["depth"]["mean"] == pytest.approx(m.depth_mean[0], 1e-12)
     sm = data["smoothed"]
     assert len(sm["depth_mean"]) == 5
@@ -348,7 +350,7 @@ def test_the_long_commands_report_their_progress():
     reproduce.reproduce(keys=["fig2"], progress=lambda done, total: calls.append((done, total)))
     assert calls == [(1, 1)]
     calls.clear()
-    study.prior_study(trials=5, progress=lambda done, total: calls.append((done, total)))
+    monte_carlo.prior_study(trials=5, progress=lambda done, total: calls.append((done, total)))
     assert calls and calls[-1] == (5, 5)
 
 

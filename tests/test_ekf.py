@@ -5,13 +5,14 @@ import pytest
 from hypothesis import given, settings
 from numpy.testing import assert_allclose
 
-from depthcore import ekf as ekf_module
-from depthcore import model, paper_prior
-from depthcore.ekf import ekf, predict, run, update
-from depthcore.gaussian import Gaussian
-from depthcore.model import noise_free_state
-from depthcore.scenarios import MU_17, SCENARIOS
-from depthcore.second_order import second_order
+from depthcore import paper_prior
+from depthcore.kalman import ekf as ekf_module
+from depthcore.kalman.ekf import ekf, predict, run, update
+from depthcore.kalman.second_order import second_order
+from depthcore.problem import model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.model import noise_free_state
+from depthcore.problem.scenarios import MU_17, SCENARIOS
 
 from helpers import bearings, states
 

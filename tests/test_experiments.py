@@ -9,23 +9,17 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import (
-    SCENARIOS,
-    _checks,
-    bank_posterior,
-    ekf,
-    gaussian,
-    model,
-    optimal,
-    rbpf,
-    resample_move,
-    study,
-    study_trials,
-    ukf,
-)
+from depthcore import SCENARIOS
 from depthcore.book import beyond_filters, beyond_linear, beyond_study, beyond_sweeps, paper
-from depthcore.filters import FILTERS
-from depthcore.second_order import second_order
+from depthcore.exact import optimal, posterior
+from depthcore.kalman import ekf, ukf
+from depthcore.kalman.second_order import second_order
+from depthcore.particles import rbpf, resample_move
+from depthcore.problem import checks, gaussian, model
+from depthcore.registry import estimates
+from depthcore.registry.filters import FILTERS
+from depthcore.studies import monte_carlo
+from depthcore.studies import trials as study_trials
 
 FIG2 = SCENARIOS["fig2"]
 
@@ -50,7 +44,7 @@ def test_first_update_sigma_points_reach_behind_the_camera():
 
 
 def test_first_update_ekf_keeps_the_ray_and_ukf_does_not():
-    # The documented behaviour (depthcore/ukf.py): correlation of x and y after
+    # The documented behaviour (depthcore/kalman/ukf.py): correlation of x and y after
     # mu1 is -1.00 for the EKF, 0.09 for the UKF.
     u = beyond_filters.first_update(FIG2)
     assert gaussian.correlation(u["ekf"].cov) == pytest.approx(-1.0, abs=1e-4)
@@ -72,7 +66,7 @@ def test_particle_convergence_shapes(convergence):
     assert_allclose(r["sizes"], [300, 600])
     assert set(r["rmse"]) == set(beyond_filters.SETTINGS)
     for name in beyond_filters.SETTINGS:
-        assert set(r["rmse"][name]) == set(beyond_filters.MOMENTS)
+        assert set(r["rmse"][name]) == set(estimates.MOMENTS)
         assert r["rmse"][name]["depth_mean"].shape == (2,)
         assert r["ess"][name].shape == (2, 3)
     m = optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior)
@@ -94,7 +88,7 @@ def test_particle_convergence_streams_are_per_setting_and_repeatable(convergence
     alone = beyond_filters.particle_convergence(
         FIG2, [300, 600], repeats=4, seed=3, settings={"default": {}}
     )
-    for m in beyond_filters.MOMENTS:
+    for m in estimates.MOMENTS:
         assert_allclose(
             alone["rmse"]["default"][m], convergence["rmse"]["default"][m], rtol=0, atol=0
         )
@@ -123,7 +117,7 @@ def test_particle_convergence_rejects_bad_repeats():
 def test_noise_study_gathers_the_study_at_each_level():
     rhos = [1 / 500, 1 / 200]
     r = beyond_sweeps.noise_study(rhos, trials=30, seed=2, names=("optimal", "ekf"))
-    direct = study.study(rho=1 / 200, trials=30, seed=2, names=("optimal", "ekf"))
+    direct = monte_carlo.study(rho=1 / 200, trials=30, seed=2, names=("optimal", "ekf"))
     assert r["valid_trials"][1] == direct["valid_trials"]
     assert r["ekf"]["coverage_68"][1] == direct["filters"]["ekf"]["depth"]["coverage_68"]
     assert r["optimal"]["nees"][1] == direct["filters"]["optimal"]["nees"]
@@ -248,7 +242,7 @@ def test_ekf_linearisation_rows_give_eq24_and_the_residual_gradients():
         assert np.abs(eq24 @ P3 - np.eye(3)).max() < 1e-7
         assert_allclose(lin["depth_sd"][-1], np.sqrt(P3[1, 1]), rtol=1e-12)
     # Theorem 1's prior: the rows are the gradients of the residuals at c (Eqs. (20)-(22)).
-    from depthcore import model
+    from depthcore.problem import model
 
     assert_allclose(lin["rows"], model.residual_gradients(FIG2.c), rtol=1e-12, atol=1e-15)
 
@@ -287,7 +281,7 @@ def test_truncated_bearing_moments_against_monte_carlo_and_the_pole():
 def test_truth_study_gathers_the_study_at_each_truth():
     truths = np.array([FIG2.c, SCENARIOS["fig3"].c])
     r = beyond_study.truth_study(truths, FIG2.rho, trials=30, seed=2, names=("optimal", "ekf"))
-    direct = study.study(truths[1], FIG2.rho, trials=30, seed=2, names=("optimal", "ekf"))
+    direct = monte_carlo.study(truths[1], FIG2.rho, trials=30, seed=2, names=("optimal", "ekf"))
     assert_allclose(r["truth"], truths)
     assert r["valid_trials"][1] == direct["valid_trials"]
     assert r["ekf"]["coverage_68"][1] == direct["filters"]["ekf"]["depth"]["coverage_68"]
@@ -338,15 +332,15 @@ def _rbpf_track():
 def test_rbpf_convergence_measures_each_cloud_from_the_exact_bank():
     mu, rho, pm, pc = _rbpf_track()
     r = beyond_linear.rbpf_convergence(mu, rho, pm, pc, [20, 600], 4, seed=11, process_noise=0.01)
-    exact = bank_posterior.posterior(mu, rho, pm, pc, 0.01)
+    exact = posterior.posterior(mu, rho, pm, pc, 0.01)
     assert r["frames"] == 6 and r["replicas"] == 4 and list(r["sizes"]) == [20, 600]
     assert r["exact"]["depth_mean"] == pytest.approx(float(exact.depth_mean), rel=1e-14)
     assert r["exact_error"]["depth"] == pytest.approx(float(exact.depth_error), rel=1e-14)
     # the runs are the filter's own clouds, from the seed's child streams
-    stream = np.random.default_rng(_checks.spawn(11, 2)[1])
+    stream = np.random.default_rng(checks.spawn(11, 2)[1])
     again = rbpf.run(mu, rho, pm, pc, 600, stream, process_noise=0.01, replicas=4).replica_moments()
     assert np.array_equal(r["runs"]["depth_sd"][1], again.depth_sd)
-    for m in beyond_filters.MOMENTS:
+    for m in estimates.MOMENTS:
         runs = r["runs"][m]
         assert runs.shape == (2, 4)
         assert_allclose(r["rmse"][m], np.sqrt(np.mean((runs - r["exact"][m]) ** 2, axis=1)))

@@ -9,10 +9,11 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from numpy.testing import assert_allclose  # noqa: E402
 
-from depthcore import bank_posterior, bank_track, reproduce  # noqa: E402
 from depthcore.book import beyond_filters, beyond_linear, beyond_study, beyond_sweeps, paper, style
-from depthcore.filters import NAMES, PAPER_FILTERS  # noqa: E402
-from depthcore.scenarios import SCENARIOS  # noqa: E402
+from depthcore.exact import posterior, smoother
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.filters import NAMES, PAPER_FILTERS
+from depthcore.studies import reproduce
 
 FIG2 = SCENARIOS["fig2"]
 
@@ -33,8 +34,8 @@ def test_figure_draws_the_filters(key, filters):
 
 def test_figure_3_overlays_the_printed_reading_of_eq16():
     # The curve the paper's Eq. (16) gives as printed, drawn beside the faithful one.
-    from depthcore import optimal
     from depthcore.book import paper, style
+    from depthcore.exact import optimal
 
     s = SCENARIOS["fig3"]
     fig = paper.figure("fig3", n=101)
@@ -82,10 +83,10 @@ def test_curves_reject_unknown_quantity_or_filter():
 
 
 def test_calibration_and_sweep_figures():
-    from depthcore import study
     from depthcore.book import beyond_sweeps
+    from depthcore.studies import monte_carlo
 
-    r = study.study(trials=20, seed=0, n_particles=200)
+    r = monte_carlo.study(trials=20, seed=0, n_particles=200)
     fig = beyond_study.calibration(r)
     assert len(fig.axes[0].get_lines()) == 1 + len(r["filters"])
     plt.close(fig)
@@ -189,10 +190,10 @@ def _normal_pdf(x, mean, sd):
 def test_figure_draws_the_densities_of_each_filter(key):
     # The drawn curves, against the filters' own marginals computed here:
     # the optimal filter's quadrature density and the Gaussian ones of Eq. (13).
-    from depthcore import optimal
     from depthcore.book import paper, style
-    from depthcore.ekf import ekf
-    from depthcore.second_order import second_order
+    from depthcore.exact import optimal
+    from depthcore.kalman.ekf import ekf
+    from depthcore.kalman.second_order import second_order
 
     s = SCENARIOS[key]
     fig = paper.figure(key, n=201)
@@ -214,7 +215,7 @@ def test_figure_draws_the_densities_of_each_filter(key):
 
 
 def test_extended_figure_draws_the_curves_of_every_filter():
-    from depthcore.ukf import ukf
+    from depthcore.kalman.ukf import ukf
 
     s = FIG2
     fig = paper.figure("fig2", n=101, filters=NAMES)
@@ -233,8 +234,8 @@ def test_extended_figure_draws_the_curves_of_every_filter():
 
 
 def test_readings_figure_draws_both_densities_and_their_means():
-    from depthcore import optimal
     from depthcore.book import paper
+    from depthcore.exact import optimal
 
     s = SCENARIOS["fig3"]
     fig = paper.readings_figure("fig3", y_max=60.0, n=301)
@@ -317,10 +318,10 @@ def test_profile_figure_draws_the_profile_likelihood():
 
 
 def test_calibration_and_sweep_figures_draw_their_results():
-    from depthcore import study
     from depthcore.book import beyond_sweeps, style
+    from depthcore.studies import monte_carlo
 
-    r = study.study(trials=20, seed=0, names=("optimal", "ekf"))
+    r = monte_carlo.study(trials=20, seed=0, names=("optimal", "ekf"))
     for quantity in ("depth", "velocity"):
         fig = beyond_study.calibration(r, quantity)
         lines = fig.axes[0].get_lines()
@@ -366,10 +367,10 @@ def test_noise_study_figure_draws_coverage_and_rmse():
 
 @pytest.fixture(scope="module")
 def fig2_track():
-    from depthcore import model
+    from depthcore.problem import model
 
     sim = model.simulate(model.G(FIG2.c, -2), 6, FIG2.rho, 0.01, np.random.default_rng(2), frame=1)
-    tr = bank_track.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
+    tr = smoother.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
     return sim, tr
 
 
@@ -378,7 +379,7 @@ def test_bank_depth_figure_draws_one_curve_per_frame(fig2_track):
 
     sim, tr = fig2_track
     frames = [3, 4, 6]
-    d = {k: bank_posterior.node_density(tr.posteriors[k - 1]) for k in frames}
+    d = {k: posterior.node_density(tr.posteriors[k - 1]) for k in frames}
     fig = beyond_linear.bank_depth_figure(d, {k: sim.states[k - 1, 1] for k in frames})
     labels = [line.get_label() for line in fig.axes[0].get_lines()]
     assert [lab for lab in labels if lab.startswith("after")] == [

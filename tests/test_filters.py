@@ -4,21 +4,14 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import (
-    _checks,
-    bank_posterior,
-    ekf,
-    inverse_depth,
-    iterated,
-    model,
-    optimal,
-    particle,
-    ukf,
-)
-from depthcore.estimates import FAMILIES, FAMILY, QUANTITIES
-from depthcore.filters import ALL_NAMES, FILTERS, NAMES, PAPER_FILTERS, check_names, get
-from depthcore.gaussian import paper_prior_means
-from depthcore.scenarios import SCENARIOS
+from depthcore.exact import optimal, posterior
+from depthcore.kalman import ekf, inverse_depth, iterated, ukf
+from depthcore.particles import importance
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import paper_prior_means
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.estimates import FAMILIES, FAMILY, QUANTITIES
+from depthcore.registry.filters import ALL_NAMES, FILTERS, NAMES, PAPER_FILTERS, check_names, get
 
 FIG2 = SCENARIOS["fig2"]
 
@@ -92,7 +85,7 @@ def test_estimates_are_those_of_each_filters_module():
     r = FILTERS["particle"](
         FIG2.mu, FIG2.rho, p.mean, p.cov, rng=np.random.SeedSequence(4), n_particles=800
     )
-    direct = particle.particle_filter(FIG2.mu, FIG2.rho, p, 800, np.random.default_rng(4))
+    direct = importance.particle_filter(FIG2.mu, FIG2.rho, p, 800, np.random.default_rng(4))
     assert r.depth_mean == direct.moments().depth_mean
     se = direct.standard_errors()
     assert r.depth_error == max(se.depth_mean, se.depth_sd)
@@ -269,17 +262,17 @@ def test_unsupported_frames_and_process_noise_are_refused_naming_the_argument():
             FILTERS[name](FIG2.mu, FIG2.rho, p.mean, p.cov, process_noise=0.01, **_options(name))
     with pytest.raises(ValueError, match="process_noise must be >= 0"):
         FILTERS["ekf"](FIG2.mu, FIG2.rho, p.mean, p.cov, process_noise=-0.01)
-    with pytest.raises(ValueError, match=f"more than the {_checks.MAX_FRAMES} frames"):
-        FILTERS["ekf"](np.zeros(_checks.MAX_FRAMES + 1), FIG2.rho, p.mean, p.cov)
+    with pytest.raises(ValueError, match=f"more than the {checks.MAX_FRAMES} frames"):
+        FILTERS["ekf"](np.zeros(checks.MAX_FRAMES + 1), FIG2.rho, p.mean, p.cov)
 
 
 def test_the_optimal_entry_is_the_bank_beyond_three_frames_and_the_paper_route_at_three():
-    from depthcore import optimal
+    from depthcore.exact import optimal
 
     p = FIG2.prior
     mu5 = _frames(5, size=2)
     est = FILTERS["optimal"](mu5, FIG2.rho, p.mean, p.cov, process_noise=0.01)
-    ref = bank_posterior.moments(mu5, FIG2.rho, p.mean, p.cov, 0.01)
+    ref = posterior.moments(mu5, FIG2.rho, p.mean, p.cov, 0.01)
     assert_allclose(est.depth_mean, ref.depth_mean, rtol=1e-12)
     assert_allclose(est.velocity_sd, ref.velocity_sd, rtol=1e-11)
     assert np.all(est.depth_error <= 1e-10 * est.depth_sd)

@@ -10,17 +10,19 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import stats
 
-from depthcore import SCENARIOS, model, study
+from depthcore import SCENARIOS
 from depthcore.book import beyond_conjecture, beyond_frames
-from depthcore.filters import FILTERS
-from depthcore.gaussian import paper_prior_means
+from depthcore.problem import model
+from depthcore.problem.gaussian import paper_prior_means
+from depthcore.registry.filters import FILTERS
+from depthcore.studies import frames, monte_carlo, scores
 
 FIG2 = SCENARIOS["fig2"]
 
 
 @pytest.fixture(scope="module")
 def frames_run():
-    return beyond_frames.frames_study(
+    return frames.frames_study(
         [3, 6],
         40,
         5,
@@ -36,7 +38,7 @@ def test_frames_study_entries_are_the_direct_studies(frames_run):
     assert list(r["frames"]) == [3, 6]
     assert list(r)[3] == "optimal"  # the reference first, then the named filters
     for j, n in enumerate((3, 6)):
-        plain = study.study(
+        plain = monte_carlo.study(
             trials=40, seed=5, prior="fixed", names=("optimal", "ekf", "second_order"), frames=n
         )
         for name in ("optimal", "ekf", "second_order"):
@@ -46,7 +48,7 @@ def test_frames_study_entries_are_the_direct_studies(frames_run):
             assert r[name]["nees"][j] == f["nees"]
             assert r[name]["hellinger"][j] == f["hellinger_depth"]["mean"]
             assert r[name]["trials"][j] == plain["valid_trials"]
-        rand = study.study(
+        rand = monte_carlo.study(
             trials=20,
             seed=5,
             prior="fixed",
@@ -60,13 +62,13 @@ def test_frames_study_entries_are_the_direct_studies(frames_run):
 
 def test_frames_study_with_process_noise_refuses_a_filter_without_it():
     with pytest.raises(ValueError, match="particle"):
-        beyond_frames.frames_study([4], 5, 0, ("particle",), process_noise=0.01)
+        frames.frames_study([4], 5, 0, ("particle",), process_noise=0.01)
 
 
 def test_coverage_test_is_the_normal_approximation_to_the_binomial():
     n = np.array([100, 400, 2000])
     k = np.array([60, 240, 1420])
-    t = beyond_frames.coverage_test(k / n, 0.68, n)
+    t = scores.coverage_test(k / n, 0.68, n)
     # independent route: the two-sided p-value of the standardised count
     z = (k - n * 0.68) / np.sqrt(n * 0.68 * 0.32)
     p = 2 * stats.norm.sf(np.abs(z))
@@ -75,14 +77,14 @@ def test_coverage_test_is_the_normal_approximation_to_the_binomial():
     expected = np.where(p >= 0.01, "calibrated", np.where(z < 0, "overconfident", "underconfident"))
     assert list(t["verdict"]) == list(expected)
     assert list(t["verdict"]) == ["calibrated", "overconfident", "underconfident"]
-    assert beyond_frames.coverage_test(0.99, 0.95, 1000)["verdict"] == "underconfident"
+    assert scores.coverage_test(0.99, 0.95, 1000)["verdict"] == "underconfident"
 
 
 def test_coverage_test_flags_a_calibrated_filter_at_its_false_alarm_rate():
     rng = np.random.default_rng(0)
     n, level = 500, 0.95
     coverage = rng.binomial(n, level, size=20_000) / n
-    flagged = np.mean(beyond_frames.coverage_test(coverage, level, n)["verdict"] != "calibrated")
+    flagged = np.mean(scores.coverage_test(coverage, level, n)["verdict"] != "calibrated")
     # the normal approximation at 1 %, within a few Monte Carlo SEs (and the lattice)
     assert 0.004 < flagged < 0.02
 
@@ -99,7 +101,7 @@ def test_coverage_test_flags_a_calibrated_filter_at_its_false_alarm_rate():
 def test_coverage_test_rejects_bad_input(kwargs, match):
     args = {"coverage": 0.5, "level": 0.68, "trials": 10, **kwargs}
     with pytest.raises(ValueError, match=match):
-        beyond_frames.coverage_test(**args)
+        scores.coverage_test(**args)
 
 
 @pytest.fixture(scope="module")
@@ -177,7 +179,7 @@ def test_frames_study_texts_count_the_failed_coverage_tests(frames_run):
     for name in ("optimal", "ekf", "second_order", "particle"):
         r = frames_run[name]
         fails = sum(
-            beyond_frames.coverage_test(r[f"coverage_{lv}"][i], lv / 100, r["trials"][i])["verdict"]
+            scores.coverage_test(r[f"coverage_{lv}"][i], lv / 100, r["trials"][i])["verdict"]
             != "calibrated"
             for lv in (68, 95)
             for i in range(2)
@@ -197,7 +199,7 @@ def test_frames_study_figure_draws_every_filter(frames_run):
     assert len(trials) == 2
     for ax, level in zip(fig.axes[4:], (0.68, 0.95), strict=True):
         bands = sorted((p.get_y(), p.get_y() + p.get_height()) for p in ax.patches)
-        half = beyond_frames.COVERAGE_Z * np.sqrt(level * (1 - level) / np.array(trials))
+        half = scores.COVERAGE_Z * np.sqrt(level * (1 - level) / np.array(trials))
         assert_allclose(bands, np.stack([level - half, level + half], axis=1), rtol=1e-12)
     plt.close(fig)
 
@@ -206,7 +208,7 @@ def test_conjecture_study_entries_are_frames_study_entries():
     c = beyond_conjecture.conjecture_study([3, 5], [1 / 200, 1 / 100], [6.0, 12.0], 30, 2)
     assert c["ekf"]["hellinger"].shape == (2, 2, 2)
     assert_allclose(c["truth"], [FIG2.c, 2 * FIG2.c], rtol=1e-12)
-    direct = beyond_frames.frames_study(
+    direct = frames.frames_study(
         [3, 5], 30, 2, ("second_order", "ekf"), "fixed", truth=c["truth"][1], rho=1 / 100
     )
     for name in ("second_order", "ekf"):
@@ -220,7 +222,7 @@ def test_conjecture_wins_compare_cell_by_cell():
     c = beyond_conjecture.conjecture_study([3, 5], [1 / 500, 1 / 100], [6.0, 12.0], 40, 4)
     w = beyond_conjecture.conjecture_wins(c)
     so, ekf, pairs = c["second_order"], c["ekf"], c["paired"]
-    z = beyond_frames.COVERAGE_Z
+    z = scores.COVERAGE_Z
     # the paired comparisons are of the scores the study reports, over the same trials
     assert_allclose(pairs["rmse_ratio"], so["rmse"] / ekf["rmse"], rtol=1e-12)
     assert_allclose(pairs["ekf_rmse_ratio"] * pairs["rmse_ratio"], 1.0, rtol=1e-12)
@@ -239,7 +241,7 @@ def test_conjecture_wins_compare_cell_by_cell():
         assert w["coverage_68"][idx] == (1 if d < -z * se else -1 if d > z * se else 0)
         se = np.sqrt(0.68 * 0.32 / so["trials"][idx])
         assert w["calibrated_68"]["ekf"][idx] == (
-            abs(ekf["coverage_68"][idx] - 0.68) <= beyond_frames.COVERAGE_Z * se
+            abs(ekf["coverage_68"][idx] - 0.68) <= scores.COVERAGE_Z * se
         )
     assert set(np.unique(w["hellinger"])) <= {-1, 0, 1}
     # the EKF is never nearer the optimal filter, and at the lower noise p_s is, significantly
@@ -287,20 +289,20 @@ FIG2 = SCENARIOS["fig2"]
 @pytest.mark.parametrize(
     "call, message",
     [
-        (lambda: beyond_frames.frames_study([], 10, 1), "frames must hold at least one"),
-        (lambda: beyond_frames.frames_study([2], 10, 1), "frames must be an integer from 3"),
-        (lambda: beyond_frames.frames_study([5000], 10, 1), "frames must be an integer from 3"),
-        (lambda: beyond_frames.frames_study([3.5], 10, 1), "frames must be an integer"),
-        (lambda: beyond_frames.frames_study([3], 0, 1), "trials"),
-        (lambda: beyond_frames.frames_study([3], 10, 1, prior="x"), "prior"),
-        (lambda: beyond_frames.frames_study([4], 10, 1, process_noise=np.nan), "process_noise"),
-        (lambda: beyond_frames.frames_study([4], 10, 1, rho=0.0), "rho"),
-        (lambda: beyond_frames.frames_study([4], 10, 1, truth=[1, -5, 0]), "truth"),
+        (lambda: frames.frames_study([], 10, 1), "frames must hold at least one"),
+        (lambda: frames.frames_study([2], 10, 1), "frames must be an integer from 3"),
+        (lambda: frames.frames_study([5000], 10, 1), "frames must be an integer from 3"),
+        (lambda: frames.frames_study([3.5], 10, 1), "frames must be an integer"),
+        (lambda: frames.frames_study([3], 0, 1), "trials"),
+        (lambda: frames.frames_study([3], 10, 1, prior="x"), "prior"),
+        (lambda: frames.frames_study([4], 10, 1, process_noise=np.nan), "process_noise"),
+        (lambda: frames.frames_study([4], 10, 1, rho=0.0), "rho"),
+        (lambda: frames.frames_study([4], 10, 1, truth=[1, -5, 0]), "truth"),
         (lambda: beyond_frames.frame_marginals(FIG2.mu, FIG2.rho, []), "frames must hold"),
         (lambda: beyond_frames.frame_marginals(FIG2.mu, FIG2.rho, [4]), "frames must each be"),
         (lambda: beyond_frames.frame_marginals(FIG2.mu, FIG2.rho, [3], width=np.nan), "width"),
-        (lambda: beyond_frames.coverage_test(0.5, 1.5, 100), "level"),
-        (lambda: beyond_frames.coverage_test(np.nan, 0.68, 10), "coverage"),
+        (lambda: scores.coverage_test(0.5, 1.5, 100), "level"),
+        (lambda: scores.coverage_test(np.nan, 0.68, 10), "coverage"),
         (lambda: beyond_conjecture.conjecture_study([3], [], [6], 10, 1), "rhos must hold"),
         (lambda: beyond_conjecture.conjecture_study([3], [0.005], [], 10, 1), "depths must hold"),
         (lambda: beyond_conjecture.conjecture_study([], [0.005], [6], 10, 1), "frames must hold"),

@@ -19,9 +19,9 @@ import warnings
 import numpy as np
 import pytest
 
-from depthcore.__main__ import main
-from depthcore._checks import MAX_FRAMES
-from depthcore.filters import ALL_NAMES, FILTERS
+from depthcore.cli.main import main
+from depthcore.problem.checks import MAX_FRAMES
+from depthcore.registry.filters import ALL_NAMES, FILTERS
 
 from helpers import exit_status
 
@@ -451,7 +451,7 @@ def test_a_real_process_with_unwritable_output_ends_in_one_line(kind):
     ids=["inf", "-inf", "nan", "numpy inf"],
 )
 def test_json_output_has_null_with_a_reason_for_what_cannot_be_estimated(value):
-    from depthcore.__main__ import _json
+    from depthcore.cli.main import _json
 
     result = {"filters": {"particle": {"depth": {"mean": 6.5, "sd": 0.0, "error": value}}}}
     data = _strict_json(_json(result))
@@ -551,7 +551,7 @@ BANK_NODES = [
 @pytest.mark.parametrize("history", [False, True])
 @pytest.mark.parametrize("nodes", BANK_NODES, ids=str)
 def test_the_bank_answers_finite_or_refuses_naming_the_nodes(nodes, history):
-    from depthcore import bank
+    from depthcore.exact import bank
 
     mu = [-0.3, 0.0, 0.2, 0.33]
     with warnings.catch_warnings():
@@ -579,13 +579,13 @@ KALMAN = [  # (scale of the prior and the process noise, transition, measurement
 
 @pytest.mark.parametrize(("scale", "psi", "x"), KALMAN)
 def test_the_kalman_filter_answers_finite_or_refuses_an_overflow(scale, psi, x):
-    from depthcore import kalman
+    from depthcore.kalman import linear
 
     eye = np.eye(2)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         try:
-            r = kalman.run(
+            r = linear.run(
                 x * np.ones((5, 1)),
                 [0.0, 0.0],
                 scale * eye,
@@ -613,7 +613,7 @@ def test_the_kalman_filter_answers_finite_or_refuses_an_overflow(scale, psi, x):
     ids=["complex x", "empty x", "text prior_mean", "object prior_cov", "boolean Sigma_m"],
 )
 def test_the_kalman_filter_refuses_what_is_not_a_real_number(arg, value):
-    from depthcore import kalman
+    from depthcore.kalman import linear
 
     args = dict(
         x=np.ones((5, 1)),
@@ -625,4 +625,4 @@ def test_the_kalman_filter_refuses_what_is_not_a_real_number(arg, value):
         Sigma_m=[[1.0]],
     )
     with pytest.raises(ValueError, match=f"^{arg} "):
-        kalman.run(**{**args, arg: value})
+        linear.run(**{**args, arg: value})

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import gaussian
-from depthcore.gaussian import Gaussian, paper_prior
-from depthcore.scenarios import SCENARIOS
+from depthcore.problem import gaussian
+from depthcore.problem.gaussian import Gaussian, paper_prior
+from depthcore.problem.scenarios import SCENARIOS
 
 
 def test_eq13_marginals_match_samples():

@@ -1,4 +1,4 @@
-"""Where the problem is hard (depthcore.hardness): the bearings' second difference
+"""Where the problem is hard (depthcore.studies.hardness): the bearings' second difference
 against its closed form, the bound where it vanishes, the scores against direct
 computation, and the exact posterior's calibration over its prior (Talts et al. 2018)."""
 
@@ -6,9 +6,12 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import SCENARIOS, bound, hardness, model, study_scores
+from depthcore import SCENARIOS
+from depthcore.analysis import bound
 from depthcore.book import beyond_hard
-from depthcore.filters import FILTERS
+from depthcore.problem import model
+from depthcore.registry.filters import FILTERS
+from depthcore.studies import hardness, scores
 
 FIG2 = SCENARIOS["fig2"]
 RHO = FIG2.rho
@@ -74,7 +77,7 @@ def test_depth_scores_against_direct_computation():
     assert r["mean_sd"] == pytest.approx(np.mean(s))
     c = np.mean(np.abs(pit - 0.5) <= 0.34)
     assert r["coverage_68"] == pytest.approx(c)
-    assert r["coverage_68_se"] == study_scores.proportion_se(round(c * 400), 400)
+    assert r["coverage_68_se"] == scores.proportion_se(round(c * 400), 400)
     assert r["trials"] == 400
     with pytest.raises(ValueError, match="pit"):
         hardness.depth_scores(e, s, pit[:-1])
@@ -82,7 +85,7 @@ def test_depth_scores_against_direct_computation():
 
 def test_depth_estimates_isolate_the_trials_a_filter_cannot_answer():
     # Truths from the broad prior: the EKF has no answer for some of their bearings.
-    from depthcore import calibration
+    from depthcore.analysis import calibration
 
     pm, pc = hardness.prior_for(FIG2.c, 1000.0)
     d = calibration.draw_from_prior(pm, pc, RHO, 40, np.random.default_rng(3))
@@ -110,7 +113,7 @@ def test_hard_cell_exact_posterior_is_calibrated_over_its_prior(cell):
     # posterior's central intervals cover at their nominal rates, within 3 SE.
     s = cell["prior"]["filters"]["optimal"]
     for p in (0.68, 0.95):
-        se = study_scores.coverage_se(p, s["trials"])
+        se = scores.coverage_se(p, s["trials"])
         assert abs(s[f"coverage_{round(100 * p)}"] - p) < 3 * se
     assert hardness.verdicts(cell, "prior")["calibrated_68"]["optimal"]
 
@@ -234,9 +237,7 @@ def test_hard_cell_beyond_three_frames_scores_the_depth_at_frame_n():
     assert cell["bound_sd"] == pytest.approx(np.sqrt(b))
     s = cell["prior"]["filters"]["optimal"]
     for p in (0.68, 0.95):
-        assert abs(s[f"coverage_{round(100 * p)}"] - p) < 3 * study_scores.coverage_se(
-            p, s["trials"]
-        )
+        assert abs(s[f"coverage_{round(100 * p)}"] - p) < 3 * scores.coverage_se(p, s["trials"])
     # at the fixed truth the point has moved on to depth 6 + 7 = 13 (Eq. (1))
     e = cell["fixed"]["filters"]["optimal"]
     assert abs(e["bias"]) < 13.0 and e["failed"] == 0

@@ -1,38 +1,137 @@
-"""The package's namespace: every public module is an attribute, imported when first used."""
+"""The package's front door: its names, its subpackages, and the old paths of moved modules."""
 
+import importlib
+import pkgutil
 import subprocess
 import sys
+import warnings
+from pathlib import Path
 
 import pytest
 
 import depthcore
+from depthcore import _moved
+
+PACKAGE = Path(depthcore.__file__).parent
 
 
 def _run(code: str) -> str:
     return subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+        [sys.executable, "-W", "error::DeprecationWarning", "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
     ).stdout.strip()
 
 
 def test_import_leaves_scipy_and_the_heavy_modules_unloaded():
     out = _run(
         "import sys, depthcore; "
-        "print(sorted(m for m in ('scipy', 'matplotlib', 'depthcore.study', "
-        "'depthcore.optimal') if m in sys.modules))"
+        "print(sorted(m for m in ('scipy', 'matplotlib', 'depthcore.studies.monte_carlo', "
+        "'depthcore.exact.optimal', 'depthcore.registry.filters', 'depthcore.book') "
+        "if m in sys.modules))"
     )
     assert out == "[]"
 
 
-def test_every_public_module_is_an_attribute():
+def test_the_front_door_names_resolve_without_a_warning():
     out = _run(
-        "import depthcore; print(depthcore.study.__name__, depthcore.optimal_marginals.__name__)"
+        "import depthcore; "
+        "print(depthcore.optimal_marginals.__name__, depthcore.track.__name__, "
+        "len(depthcore.FILTERS) > 5, depthcore.exact.optimal.__name__)"
     )
-    assert out == "depthcore.study marginals"
+    assert out == "marginals track True depthcore.exact.optimal"
+
+
+def test_star_import_imports_neither_the_book_nor_every_module():
+    out = _run(
+        "import sys; from depthcore import *; "
+        "print(sorted(n for n in ('Gaussian', 'FILTERS', 'track', 'SCENARIOS') if n in globals()), "
+        "'depthcore.book' in sys.modules, 'depthcore.studies.monte_carlo' in sys.modules)"
+    )
+    assert out == "['FILTERS', 'Gaussian', 'SCENARIOS', 'track'] False False"
+
+
+def _modules_on_disk() -> set[str]:
+    found = {"depthcore.formatting"}
+    for sub in depthcore.SUBPACKAGES:
+        found.add(f"depthcore.{sub}")
+        for m in pkgutil.iter_modules([str(PACKAGE / sub)]):
+            if not m.name.startswith("_"):
+                found.add(f"depthcore.{sub}.{m.name}")
+    return found
+
+
+def test_modules_lists_every_module_of_the_subpackages_and_each_imports():
+    assert set(depthcore.MODULES) == _modules_on_disk()
     for name in depthcore.MODULES:
+        assert importlib.import_module(name).__name__ == name
+
+
+def test_every_subpackage_is_an_attribute_and_in_dir():
+    for name in depthcore.SUBPACKAGES:
         assert getattr(depthcore, name).__name__ == f"depthcore.{name}"
-    assert set(depthcore.MODULES) <= set(dir(depthcore))
+    assert set(depthcore.SUBPACKAGES) <= set(dir(depthcore))
+
+
+def test_every_folder_of_the_package_is_a_listed_subpackage():
+    folders = {p.name for p in PACKAGE.iterdir() if p.is_dir() and (p / "__init__.py").is_file()}
+    assert folders == set(depthcore.SUBPACKAGES)
 
 
 def test_an_unknown_attribute_raises_attribute_error():
     with pytest.raises(AttributeError, match="no attribute 'walkthrough'"):
         depthcore.walkthrough  # noqa: B018
+
+
+# --- the paths before 0.2 -------------------------------------------------------------
+
+
+@pytest.mark.parametrize("old", sorted(_moved.MOVED))
+def test_an_old_path_imports_the_new_module_with_a_warning_naming_it(old):
+    new = _moved.MOVED[old]
+    code = (
+        "import warnings, sys\n"
+        "warnings.simplefilter('always')\n"
+        "with warnings.catch_warnings(record=True) as caught:\n"
+        f"    import {old} as m\n"
+        f"import {new} as n\n"
+        "print(m is n, n.__spec__.name, sys.modules[n.__name__] is n)\n"
+        "print(caught[0].category.__name__, caught[0].filename == '<string>')\n"
+        "print(caught[0].message)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.splitlines()
+    assert out[0] == f"True {new} True"
+    # the warning points at the line that imported the old path, not at the import machinery
+    assert out[1] == "DeprecationWarning True"
+    assert out[2] == f"{old} has moved to {new}; the old path stops working in depthcore 0.3"
+
+
+def test_the_old_from_imports_work_with_a_warning():
+    # run as text, so that the checks of the package's own imports do not read them
+    found = {}
+    with pytest.warns(DeprecationWarning, match="depthcore.optimal has moved to depthcore.exact"):
+        exec("from depthcore import optimal", found)
+    assert found["optimal"] is importlib.import_module("depthcore.exact.optimal")
+    with pytest.warns(DeprecationWarning, match="depthcore.book.records has moved to"):
+        exec("from depthcore.book import records", found)
+    assert found["records"].__name__ == "depthcore.provenance.records"
+
+
+def test_the_old_linear_kalman_module_reads_through_the_subpackage_with_a_warning():
+    from depthcore.kalman import linear
+
+    with pytest.warns(DeprecationWarning, match=r"depthcore.kalman.run has moved to .*linear.run"):
+        run = depthcore.kalman.run
+    assert run is linear.run
+    with pytest.raises(AttributeError, match="has no attribute 'nothing'"):
+        depthcore.kalman.nothing  # noqa: B018
+
+
+def test_the_new_paths_never_warn():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for name in depthcore.MODULES:
+            importlib.import_module(name)

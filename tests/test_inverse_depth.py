@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from depthcore import ekf, inverse_depth, model
-from depthcore.scenarios import SCENARIOS
+from depthcore.kalman import ekf, inverse_depth
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
 
 
 def _map(x):

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from depthcore import inverse_depth, inverse_depth_ukf, model, ukf
-from depthcore.filters import FILTERS
-from depthcore.scenarios import SCENARIOS
+from depthcore.kalman import inverse_depth, inverse_depth_ukf, ukf
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.filters import FILTERS
 
 FIG2 = SCENARIOS["fig2"]
 Z = np.array([0.2, 0.15, 0.05])

@@ -5,8 +5,10 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy.optimize import least_squares, minimize
 
-from depthcore import ekf, iterated, model, optimal
-from depthcore.scenarios import SCENARIOS
+from depthcore.exact import optimal
+from depthcore.kalman import ekf, iterated
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
 
 
 def _one_step_objective(x, n, C, mu, rho):
@@ -180,8 +182,8 @@ def test_one_iteration_per_update_is_the_ekf_for_any_frames_and_process_noise(n_
 
 
 def _noisy_track(q=0.02, frames=8, seed=3):
-    from depthcore.gaussian import paper_prior
-    from depthcore.scenarios import RHO_200
+    from depthcore.problem.gaussian import paper_prior
+    from depthcore.problem.scenarios import RHO_200
 
     s = SCENARIOS["fig2"]
     sim = model.simulate(model.G(s.c, -2), frames, RHO_200, q, np.random.default_rng(seed), frame=1)
@@ -301,10 +303,11 @@ def test_smoother_with_process_noise_batched_equals_looped_and_refuses_bad_noise
 
 @pytest.mark.parametrize("frames", [3, 8, 20])
 def test_smoother_with_process_noise_equals_the_dense_route(frames):
-    """The linear-cost Gauss-Newton against :func:`depthcore.reference.iterated_smoother_dense`
+    """The linear-cost Gauss-Newton against
+    :func:`depthcore.analysis.reference.iterated_smoother_dense`
     (every step a dense least-squares solve over the whole trajectory), to the resolution of
     their line searches, which stop where the objective no longer decreases in floating point."""
-    from depthcore import reference
+    from depthcore.analysis import reference
 
     q = 0.02
     mu, rho, prior = _noisy_track(q, frames=frames)

@@ -22,8 +22,8 @@ from filterpy.kalman import KalmanFilter, rts_smoother
 from numpy.testing import assert_allclose
 from scipy import stats
 
-from depthcore import kalman
-from depthcore.kalman import (
+from depthcore.kalman import linear
+from depthcore.kalman.linear import (
     FilterResult,
     MeanAndCov,
     augment,
@@ -510,4 +510,4 @@ def test_textbook_19_2_6_fixed_interval_smoother_with_a_singular_prediction():
 
 
 def test_module_docstring_cites_the_textbook():
-    assert "19.2.2" in kalman.__doc__ and "19.2.6" in kalman.__doc__
+    assert "19.2.2" in linear.__doc__ and "19.2.6" in linear.__doc__

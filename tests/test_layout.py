@@ -156,25 +156,30 @@ def private_uses(source: str, own: str, defined: dict[str, set[str]] | None = No
 
 def test_finds_what_it_looks_for():
     source = (
-        "from . import optimal, _checks\n"
-        "from .bank import _halving, moments\n"
-        "from depthcore.kalman import _joseph\n"
-        "x = optimal._integrate(1) + _checks.as_float(2, 'a') + optimal.moments\n"
+        "from depthcore.exact import optimal\n"
+        "from depthcore.problem import checks\n"
+        "from depthcore.exact.bank import _halving, moments\n"
+        "from depthcore.kalman.linear import _joseph\n"
+        "x = optimal._integrate(1) + checks.as_float(2, 'a') + optimal.moments\n"
         "def _own():\n    return _halving\n"
     )
-    defined = {"optimal": {"_integrate", "_start"}, "study": set()}
-    assert private_uses(source, "study", defined) == [
-        "2: imports _halving from bank",
-        "3: imports _joseph from kalman",
-        "4: uses optimal._integrate",
+    defined = {
+        "exact.optimal": {"_integrate", "_start"},
+        "studies.monte_carlo": set(),
+        "exact.bank": {"_halving"},
+        "kalman.linear": {"_joseph"},
+        "problem.checks": set(),
+    }
+    assert private_uses(source, "studies.monte_carlo", defined) == [
+        "3: imports _halving from exact.bank",
+        "4: imports _joseph from kalman.linear",
+        "5: uses optimal._integrate",
     ]
-    assert private_uses("def g(m):\n    return m._start\n", "study", defined) == [
+    assert private_uses("def g(m):\n    return m._start\n", "studies.monte_carlo", defined) == [
         "2: reads ._start, private to another module"
     ]
     own = "def g(m):\n    m._start = 1\n    return m._start\n"
-    assert private_uses(own, "study", defined) == []
-    helper = "from . import _checks\nfrom ._checks import as_float\n"
-    assert private_uses(helper, "x", defined) == []
+    assert private_uses(own, "studies.monte_carlo", defined) == []
 
 
 @pytest.mark.parametrize("module", MODULES)
@@ -222,8 +227,8 @@ def borrowed_uses(
 ) -> list[str]:
     """Every name taken from a ``depthcore`` module that only imports it from another.
 
-    ``from depthcore.particle import systematic`` and ``particle.systematic``
-    both count when :mod:`depthcore.particle` does not define ``systematic``:
+    ``from depthcore.particles.importance import systematic`` and ``particle.systematic``
+    both count when :mod:`depthcore.particles.importance` does not define ``systematic``:
     a name is imported from the module that defines it.
 
     Returns
@@ -257,16 +262,16 @@ def code_cells(page: Path) -> str:
 
 
 def test_finds_borrowed_names():
-    defines = {"particle": {"run"}, "resampling": {"systematic"}}
+    defines = {"particles.importance": {"run"}, "particles.resampling": {"systematic"}}
     source = (
-        "from depthcore import particle\n"
-        "from depthcore.particle import run, systematic\n"
-        "from depthcore.resampling import systematic as s\n"
-        "x = particle.systematic(1) + particle.run(2)\n"
+        "from depthcore.particles import importance\n"
+        "from depthcore.particles.importance import run, systematic\n"
+        "from depthcore.particles.resampling import systematic as s\n"
+        "x = importance.systematic(1) + importance.run(2)\n"
     )
     assert borrowed_uses(source, defines) == [
-        "2: imports systematic from particle",
-        "4: uses particle.systematic",
+        "2: imports systematic from particles.importance",
+        "4: uses importance.systematic",
     ]
 
 
@@ -298,12 +303,36 @@ def test_all_lists_only_names_the_module_defines(module):
         assert set(names) <= DEFINES[module]
 
 
-# --- the mathematics knows nothing of the book ----------------------------------------
+# --- the house by families -------------------------------------------------------------
 
-#: The modules outside the book's wing that show its work: the command line draws the
-#: paper's figures and prints vectors as the book does, the benchmarks' tables are
-#: shown as the book's tables.
-BOOK_USERS = {"__main__", "cli_text", "benchmark_tables"}
+#: The families, from the bottom of the house up: a module imports from its own family and
+#: from those below it, never from one above (the package's front door, ``depthcore``
+#: itself, is read by all).
+LAYERS = (
+    "problem",
+    "kalman",
+    "exact",
+    "particles",
+    "analysis",
+    "registry",
+    "studies",
+    "provenance",
+    "formatting",
+    "cli",
+    "book",
+)
+#: The modules directly in ``depthcore/`` that belong to no family: the front door.
+TOP_LEVEL = {"__init__", "__main__", "_moved"}
+#: The most modules directly in ``depthcore/``.
+MAX_TOP_LEVEL = 8
+#: The most lines a module may have.
+MAX_LINES = 900
+
+
+def family(module: str) -> str | None:
+    """The family of a module below ``depthcore`` (its first part), None for the front door."""
+    first = module.split(".")[0]
+    return first if first in LAYERS else None
 
 
 def imported_modules(source: str, own: str) -> set[str]:
@@ -317,15 +346,75 @@ def imported_modules(source: str, own: str) -> set[str]:
     return found
 
 
-def test_finds_imports_of_the_book():
-    source = "from .book import paper\nfrom .book.style import STYLE\nfrom . import model\n"
-    assert imported_modules(source, "x") == {"book", "book.paper", "book.style", "model"}
-    assert imported_modules("from ..filters import FILTERS\n", "book.style") == {"filters"}
+def upward_imports(source: str, own: str) -> list[str]:
+    """The imports of ``own`` from a family above its own."""
+    mine = LAYERS.index(family(own))
+    return sorted(
+        m
+        for m in imported_modules(source, own)
+        if family(m) is not None and LAYERS.index(family(m)) > mine
+    )
 
 
-@pytest.mark.parametrize(
-    "module", [m for m in MODULES if "." not in m and m not in SUBPACKAGES | BOOK_USERS]
-)
+def test_finds_imports_of_the_families_above():
+    source = (
+        "from depthcore.book import paper\n"
+        "from depthcore.book.style import STYLE\n"
+        "from depthcore.problem import model\n"
+        "from depthcore.registry.filters import FILTERS\n"
+    )
+    assert imported_modules(source, "kalman.ekf") == {
+        "book",
+        "book.paper",
+        "book.style",
+        "problem",
+        "problem.model",
+        "registry.filters",
+    }
+    assert upward_imports(source, "exact.bank") == [
+        "book",
+        "book.paper",
+        "book.style",
+        "registry.filters",
+    ]
+    assert upward_imports(source, "book.paper") == []
+
+
+def test_every_module_belongs_to_a_family_or_stands_at_the_top():
+    assert {m for m in MODULES if family(m) is None} == TOP_LEVEL
+    assert len(list(PACKAGE.glob("*.py"))) <= MAX_TOP_LEVEL
+
+
+@pytest.mark.parametrize("module", [m for m in MODULES if family(m) is not None])
+def test_no_module_imports_from_a_family_above_its_own(module):
+    assert upward_imports(PATHS[module].read_text(encoding="utf-8"), module) == []
+
+
+@pytest.mark.parametrize("module", [m for m in MODULES if family(m) != "book"])
 def test_no_module_outside_the_book_imports_it(module):
     imported = imported_modules(PATHS[module].read_text(encoding="utf-8"), module)
     assert not [m for m in imported if m == "book" or m.startswith("book.")]
+
+
+#: The book's chapter modules: what one chapter alone needs.
+CHAPTERS = [m for m in MODULES if m.startswith(("book.beyond_", "book.paper"))]
+
+
+@pytest.mark.parametrize("module", CHAPTERS)
+def test_no_chapter_module_imports_another(module):
+    imported = imported_modules(PATHS[module].read_text(encoding="utf-8"), module)
+    assert not [m for m in imported if m in CHAPTERS and m != module]
+
+
+@pytest.mark.parametrize("module", MODULES)
+def test_no_module_is_over_the_line_limit(module):
+    assert len(PATHS[module].read_text(encoding="utf-8").splitlines()) <= MAX_LINES
+
+
+def test_every_subpackage_says_what_lives_there_and_where_a_new_thing_goes():
+    for name in SUBPACKAGES:
+        doc = ast.get_docstring(ast.parse(PATHS[name].read_text(encoding="utf-8"))) or ""
+        listed = {p.stem for p in PATHS[name].parent.glob("*.py") if not p.stem.startswith("_")}
+        for module in listed:
+            assert f"depthcore.{name}.{module}" in doc, (name, module)
+        assert "Where a new thing goes" in doc or name == "book", name

@@ -30,7 +30,6 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.text import Text  # noqa: E402
 
-from depthcore import bank_posterior, bank_track, hardness, model, study  # noqa: E402
 from depthcore.book import (
     beyond_conjecture,
     beyond_filters,
@@ -42,8 +41,11 @@ from depthcore.book import (
     paper,
     style,
 )
-from depthcore.filters import NAMES as FILTER_NAMES  # noqa: E402
-from depthcore.scenarios import SCENARIOS  # noqa: E402
+from depthcore.exact import posterior, smoother
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.filters import NAMES as FILTER_NAMES
+from depthcore.studies import frames, hardness, monte_carlo
 
 #: Width in CSS pixels at which the book shows a figure at a 1280-pixel window.
 CONTENT_WIDTH_PX = 660.0
@@ -88,22 +90,22 @@ FRAMES_NAMES = ("second_order", "ekf", "inverse_depth", "iterated", "ukf", "part
 
 
 def _frames_run():
-    return beyond_frames.frames_study(
+    return frames.frames_study(
         [3, 5, 10], 12, 5, FRAMES_NAMES, "paper", particle_trials=4, n_particles=100
     )
 
 
 def _track():
     sim = model.simulate(FIG2.c, 6, FIG2.rho, 0.01, np.random.default_rng(2), frame=3)
-    tr = bank_track.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
+    tr = smoother.track(sim.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 0.01, lag=1)
     return sim, tr
 
 
 def _bank_depth():
     sim, tr = _track()
-    frames = (3, 4, 6)
-    densities = {k: bank_posterior.node_density(tr.posteriors[k - 1]) for k in frames}
-    return beyond_linear.bank_depth_figure(densities, {k: sim.states[k - 1, 1] for k in frames})
+    shown = (3, 4, 6)
+    densities = {k: posterior.node_density(tr.posteriors[k - 1]) for k in shown}
+    return beyond_linear.bank_depth_figure(densities, {k: sim.states[k - 1, 1] for k in shown})
 
 
 def _smoothing():
@@ -147,10 +149,10 @@ BUILDERS = {
         beyond_filters.particle_convergence(FIG2, [100, 200], repeats=2, seed=3)
     ),
     "calibration": lambda: beyond_study.calibration(
-        study.study(trials=20, seed=0, n_particles=100)
+        monte_carlo.study(trials=20, seed=0, n_particles=100)
     ),
     "prior_calibration": lambda: beyond_study.prior_calibration(
-        study.prior_study(trials=40, seed=1)
+        monte_carlo.prior_study(trials=40, seed=1)
     ),
     "sweep": lambda: beyond_sweeps.sweep(
         beyond_sweeps.noise_sweep([1 / 500, 1 / 200]), "rho", "hellinger", log_x=True

@@ -1,4 +1,4 @@
-"""The live controls of the figure pages (depthcore.live): bearings, marginals, redraw."""
+"""The live controls of the figure pages (depthcore.book.live): bearings, marginals, redraw."""
 
 from __future__ import annotations
 
@@ -7,9 +7,10 @@ import base64
 import numpy as np
 import pytest
 
-from depthcore import SCENARIOS, _checks, live, model
-from depthcore.book import beyond_frames
-from depthcore.filters import FILTERS
+from depthcore import SCENARIOS
+from depthcore.book import beyond_frames, live
+from depthcore.problem import checks, model
+from depthcore.registry.filters import FILTERS
 
 FIG2 = SCENARIOS["fig2"]
 
@@ -26,7 +27,7 @@ def test_bearings_continue_the_noise_free_track_of_c():
     np.testing.assert_array_equal(live.bearings(mu, 3), mu)
 
 
-@pytest.mark.parametrize("frames", [2, 0, _checks.MAX_FRAMES + 1, 3.5])
+@pytest.mark.parametrize("frames", [2, 0, checks.MAX_FRAMES + 1, 3.5])
 def test_bearings_refuse_a_number_of_frames_out_of_range(frames):
     with pytest.raises(ValueError, match="frames"):
         live.bearings(FIG2.mu, frames)

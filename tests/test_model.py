@@ -6,9 +6,15 @@ from hypothesis import given, settings
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from depthcore import model
-from depthcore.model import f, noise_free_state, noise_free_states, residual_gradients, residuals
-from depthcore.scenarios import MU_17, MU_18, SCENARIOS
+from depthcore.problem import model
+from depthcore.problem.model import (
+    f,
+    noise_free_state,
+    noise_free_states,
+    residual_gradients,
+    residuals,
+)
+from depthcore.problem.scenarios import MU_17, MU_18, SCENARIOS
 
 from helpers import bearings, states
 
@@ -174,7 +180,7 @@ def test_profile_misfit_vanishes_at_the_noise_free_depth():
 def test_profile_misfit_is_the_least_misfit_at_that_depth():
     # Independent route: least squares by numpy's lstsq, then the misfit of the
     # states moved by model.G and projected; rounding only (1e-12 relative).
-    from depthcore import model
+    from depthcore.problem import model
 
     mu = np.asarray(FIG2.mu)
     for y3 in (2.5, 6.0, 40.0):

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from depthcore import inverse_depth, model, modified_polar
-from depthcore.filters import FILTERS
-from depthcore.scenarios import SCENARIOS
+from depthcore.kalman import inverse_depth, modified_polar
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.filters import FILTERS
 
 FIG2 = SCENARIOS["fig2"]
 TRUTH = np.array([1.2, 4.0, -0.2])

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from depthcore import study
-from depthcore.filters import FILTERS
-from depthcore.scenarios import SCENARIOS
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.filters import FILTERS
+from depthcore.studies import monte_carlo
 
 FIG2 = SCENARIOS["fig2"]
 #: Independent runs of each sampler: fewer for the slower resample-move filter.
@@ -40,17 +40,19 @@ def test_the_threshold_has_the_stated_false_alarm_rate_and_power():
     assert stats.binom.cdf(least - 1, 50, 0.80) > 0.8  # power against 80 % coverage
 
 
-@pytest.mark.parametrize("name", study.SAMPLERS)
+@pytest.mark.parametrize("name", monte_carlo.SAMPLERS)
 def test_reported_errors_cover_the_actual_errors_on_figure_2(name):
     runs = RUNS[name]
-    r = study.error_coverage(name, FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, runs, 5)
+    r = monte_carlo.error_coverage(
+        name, FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, runs, 5
+    )
     if name != "resample_move":
         assert r["collapsed"] == 0
     # the resample-move filter's 5,000 particles per replica collapse in about half the
     # runs on Figure 2 (its ESS falls to a few particles at mu_3): those say so
     n = runs - r["collapsed"]
     assert n >= 8, r
-    for moment in study.ERROR_MOMENTS:
+    for moment in monte_carlo.ERROR_MOMENTS:
         assert r[moment]["within_two"] * n >= least_within_two(n), (moment, r[moment])
         # and they are errors, not bounds too wide to be wrong: some run comes near two
         assert r[moment]["max_z"] > 1.0, (moment, r[moment])
@@ -59,7 +61,7 @@ def test_reported_errors_cover_the_actual_errors_on_figure_2(name):
 def test_resample_move_with_few_particles_says_it_collapsed():
     """200 particles per replica on Figure 2: every replica settles on a narrow, wrong
     piece of the posterior (depth means near 40 for an exact 6.5, SDs near 0)."""
-    r = study.error_coverage(
+    r = monte_carlo.error_coverage(
         "resample_move",
         FIG2.mu,
         FIG2.rho,
@@ -104,7 +106,7 @@ def test_deterministic_filters_have_no_collapse_flag():
 def test_replica_errors_cover_95_percent_with_four_normal_replicas():
     """The Student t factor: 20,000 averages of four N(0, 1) replicas lie within 1.96
     errors of 0 in 95 % of cases (binomial SE 0.15 %; +/- 2 SD without it gives 86 %)."""
-    from depthcore.resampling import replica_errors
+    from depthcore.particles.resampling import replica_errors
 
     x = np.random.default_rng(3).standard_normal((20_000, 4))
     error, collapsed = replica_errors(x, np.full(x.shape, 100.0))
@@ -116,7 +118,7 @@ def test_replica_errors_cover_95_percent_with_four_normal_replicas():
 
 
 def test_replicas_that_disagree_by_more_than_their_width_have_collapsed():
-    from depthcore.resampling import MIN_EFFECTIVE_DRAWS, replica_errors
+    from depthcore.particles.resampling import MIN_EFFECTIVE_DRAWS, replica_errors
 
     est = np.array([[0.0, 1.0, 2.0, 3.0]])  # variance 5/3 between the replicas
     wide = np.sqrt(MIN_EFFECTIVE_DRAWS * 5 / 3) * 1.01

@@ -11,10 +11,12 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from depthcore import model, optimal, quadrature, reference
-from depthcore.gaussian import Gaussian
-from depthcore.model import f, noise_free_state
-from depthcore.scenarios import MU_17, SCENARIOS
+from depthcore.analysis import reference
+from depthcore.exact import optimal, quadrature
+from depthcore.problem import model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.model import f, noise_free_state
+from depthcore.problem.scenarios import MU_17, SCENARIOS
 
 from helpers import OLDER_KERNELS
 
@@ -257,7 +259,7 @@ def test_kept_range_names_the_first_levels_nodes_by_index():
 SCENARIO_NODES = """
 import json
 from depthcore import optimal
-from depthcore.scenarios import SCENARIOS
+from depthcore.problem.scenarios import SCENARIOS
 out = {}
 for key, s in SCENARIOS.items():
     m = optimal.marginals(s.mu, s.rho, s.prior)

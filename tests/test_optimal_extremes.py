@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import optimal, quadrature, reference
-from depthcore.gaussian import Gaussian
-from depthcore.model import noise_free_state
-from depthcore.second_order import second_order
+from depthcore.analysis import reference
+from depthcore.exact import optimal, quadrature
+from depthcore.kalman.second_order import second_order
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.model import noise_free_state
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

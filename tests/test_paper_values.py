@@ -2,8 +2,8 @@
 
 import pytest
 
-from depthcore import reproduce
-from depthcore.scenarios import REPORTED
+from depthcore.problem.scenarios import REPORTED
+from depthcore.studies import reproduce
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_reported_table_is_complete():
 
 
 def test_scan_text_is_the_reported_value_as_the_scan_garbles_it():
-    from depthcore.scenarios import SCAN_TEXT
+    from depthcore.problem.scenarios import SCAN_TEXT
 
     scan_mean, scan_sd = SCAN_TEXT["fig3"]["optimal"]["depth"]
     mean, sd = REPORTED["fig3"]["optimal"]["depth"]

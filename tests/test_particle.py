@@ -6,12 +6,13 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy import stats
 from scipy.special import logsumexp
 
-from depthcore import bank, bank_mixture, model, optimal
-from depthcore import particle as pf
-from depthcore.gaussian import Gaussian
-from depthcore.particle import particle_filter, run
-from depthcore.scenarios import MU_17, SCENARIOS
-from depthcore.second_order import second_order_batch
+from depthcore.exact import bank, mixture, optimal
+from depthcore.kalman.second_order import second_order_batch
+from depthcore.particles import importance as pf
+from depthcore.particles.importance import particle_filter, run
+from depthcore.problem import model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.scenarios import MU_17, SCENARIOS
 
 FIG2 = SCENARIOS["fig2"]
 
@@ -371,7 +372,7 @@ def test_prior_proposal_with_one_particle_can_lose_every_particle():
 
 def test_n_frame_importance_sampling_matches_the_bank_of_kalman_filters():
     # The exact N-frame posterior (a bank of Kalman filters over the depth at frame 1,
-    # depthcore.bank) against the importance sample with the N-frame p_s proposal.
+    # depthcore.exact.bank) against the importance sample with the N-frame p_s proposal.
     x1 = np.array([-1.0, 5.0, 0.3])
     rho = 0.01
     mu = model.simulate(x1, 6, rho, 0.0, np.random.default_rng(21), frame=1).mu
@@ -381,7 +382,7 @@ def test_n_frame_importance_sampling_matches_the_bank_of_kalman_filters():
     y1 = np.linspace(max(1e-3, mean_s[0, 1] - 5 - 15 * sd_y1), mean_s[0, 1] - 5 + 15 * sd_y1, 4001)
     w = np.full(y1.shape, y1[1] - y1[0])
     w[[0, -1]] /= 2
-    exact = bank_mixture.mixture(bank.filter_bank(y1, mu, rho, prior.mean, prior.cov), w)
+    exact = mixture.mixture(bank.filter_bank(y1, mu, rho, prior.mean, prior.cov), w)
     r = particle_filter(mu, rho, prior, 40_000, np.random.default_rng(22))
     assert r.particles.shape == (40_000, 3) and r.ess.shape == (6,)
     m, se = r.moments(), r.standard_errors()

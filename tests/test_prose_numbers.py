@@ -1,6 +1,6 @@
 """No number is typed in the book's prose: each is glued from the code, or is
 an equation, figure or section number, a year of a citation, or a value quoted
-from the paper and listed in :data:`depthcore.scenarios.PROSE_QUOTES`.
+from the paper and listed in :data:`depthcore.problem.scenarios.PROSE_QUOTES`.
 
 The scan strips from every page (``book/*.md``) what is not prose: the front
 matter, code cells and other fenced blocks' options, math (``$...$`` and
@@ -9,7 +9,7 @@ and the like), inline code, labels and anchors (``(sec-x)=``, ``:name:``),
 link targets and HTML comments. Every digit left must belong to an allowed
 pattern below. The mathematics is read too: a number in it must be structure
 (a single digit, an exponent or index), a number of frames, or a value quoted
-from the paper and listed in :data:`depthcore.scenarios.MATH_QUOTES`.
+from the paper and listed in :data:`depthcore.problem.scenarios.MATH_QUOTES`.
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ from pathlib import Path
 
 import pytest
 
-from depthcore import calibration, study_scores
-from depthcore.scenarios import MATH_QUOTES, PROSE_QUOTES
+from depthcore.analysis import calibration
+from depthcore.problem.scenarios import MATH_QUOTES, PROSE_QUOTES
+from depthcore.studies import scores
 
 BOOK = Path(__file__).resolve().parent.parent / "book"
 PAGES = sorted(BOOK.glob("*.md"))
@@ -33,15 +34,15 @@ _PERCENT = sorted(
     {
         round(100 * float(p))
         for p in (
-            *study_scores.LEVELS,
+            *scores.LEVELS,
             *calibration.LEVELS,
-            study_scores.CALIBRATION_LEVELS[0],
-            study_scores.CALIBRATION_LEVELS[-1],
+            scores.CALIBRATION_LEVELS[0],
+            scores.CALIBRATION_LEVELS[-1],
         )
     }
 )
 NOMINAL = [rf"(?<![\d.]){p}\s*%" for p in _PERCENT] + [
-    r"(?<![\d.])" + re.escape(f"{float(p):.2f}") + r"(?!\d)" for p in study_scores.LEVELS
+    r"(?<![\d.])" + re.escape(f"{float(p):.2f}") + r"(?!\d)" for p in scores.LEVELS
 ]
 #: A number: digits with an optional decimal part.
 _NUM = r"\d+(?:\.\d+)?"
@@ -71,8 +72,8 @@ ALLOWED = {
     "heading": r"^#+\s+\d+\.",
     # the Python version the environment is built with
     "python": r"\bPython\s+3\.\d+",
-    # the nominal levels of the intervals scored by depthcore.study and
-    # depthcore.calibration, as percentages ("68 %") or probabilities ("0.68")
+    # the nominal levels of the intervals scored by depthcore.studies.monte_carlo and
+    # depthcore.analysis.calibration, as percentages ("68 %") or probabilities ("0.68")
     "level": "|".join(sorted(NOMINAL, key=len, reverse=True)),
 }
 

@@ -4,9 +4,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from depthcore import bank_posterior, ekf, model, range_ekf
-from depthcore.filters import FILTERS
-from depthcore.scenarios import SCENARIOS
+from depthcore.exact import posterior
+from depthcore.kalman import ekf, range_ekf
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.filters import FILTERS
 
 FIG2 = SCENARIOS["fig2"]
 MU = np.array(FIG2.mu)
@@ -130,7 +132,7 @@ def test_batch_equals_one_at_a_time():
 )
 def test_converges_to_the_exact_bank(mu, n, rtol):
     """The bank of Kalman filters is the limit of many narrow components."""
-    exact = bank_posterior.posterior(mu, FIG2.rho, PRIOR.mean, PRIOR.cov)
+    exact = posterior.posterior(mu, FIG2.rho, PRIOR.mean, PRIOR.cov)
     g = range_ekf.posterior(mu, FIG2.rho, PRIOR.mean, PRIOR.cov, n_components=n)
     assert abs(g.mean[1] / exact.depth_mean - 1) < rtol
     assert abs(np.sqrt(g.cov[1, 1]) / exact.depth_sd - 1) < rtol
@@ -138,13 +140,13 @@ def test_converges_to_the_exact_bank(mu, n, rtol):
 
 def test_few_components_miss_figure_2():
     """The EKFs' linearisation over broad intervals: 64 components are far off on Figure 2."""
-    exact = bank_posterior.posterior(MU, FIG2.rho, PRIOR.mean, PRIOR.cov)
+    exact = posterior.posterior(MU, FIG2.rho, PRIOR.mean, PRIOR.cov)
     g = range_ekf.posterior(MU, FIG2.rho, PRIOR.mean, PRIOR.cov, n_components=64)
     assert abs(g.mean[1] / exact.depth_mean - 1) > 1.0
 
 
 def test_the_default_matches_figure_2_to_1e_2():
-    exact = bank_posterior.posterior(MU, FIG2.rho, PRIOR.mean, PRIOR.cov)
+    exact = posterior.posterior(MU, FIG2.rho, PRIOR.mean, PRIOR.cov)
     g = range_ekf.posterior(MU, FIG2.rho, PRIOR.mean, PRIOR.cov)
     assert g.weight.shape == (range_ekf.N_COMPONENTS,)
     assert abs(g.mean[1] / exact.depth_mean - 1) < 1e-2

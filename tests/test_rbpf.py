@@ -1,7 +1,7 @@
 """The Rao-Blackwellised particle filter (textbook 19.5.3) against the exact bank of Kalman filters.
 
 Independent routes: the one-dimensional quadrature of Eqs. (14)-(16)
-(:func:`depthcore.optimal.moments`) at N = 3, q = 0; the bank of Kalman
+(:func:`depthcore.exact.optimal.moments`) at N = 3, q = 0; the bank of Kalman
 filters on a converged log-depth rule (tests/test_bank.py) for N = 10,
 q > 0; batch least squares at a fixed depth for the weights; scipy's
 truncated normal for the draws from the prior. Tolerances are quantiles of the
@@ -15,10 +15,11 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy import stats
 from test_bank import batch_least_squares, converged_mixture, long_track
 
-from depthcore import bank as bk
-from depthcore import optimal, rbpf
-from depthcore.resampling import weighted_standard_errors
-from depthcore.scenarios import RHO_200, SCENARIOS
+from depthcore.exact import bank as bk
+from depthcore.exact import optimal
+from depthcore.particles import rbpf
+from depthcore.particles.resampling import weighted_standard_errors
+from depthcore.problem.scenarios import RHO_200, SCENARIOS
 
 FALSE_ALARM = 1e-4
 
@@ -151,7 +152,8 @@ def exact_draws(mx, n, rng):
     """Inverse-CDF draws of y_1 from the bank's depth mixture.
 
     The CDF is the cumulative trapezoid rule, in t = log(y_1), of the mixture's density
-    (:meth:`depthcore.bank_mixture.Mixture.depth_pdf`) on 40001 points spanning the depths where the
+    (:meth:`depthcore.exact.mixture.Mixture.depth_pdf`) on 40001 points spanning the depths where
+    the
     converged nodes hold their mass; it is inverted by linear interpolation."""
     N = mx.bank.frames
     big = mx.probabilities > 1e-20 * mx.probabilities.max()
@@ -321,7 +323,7 @@ def test_step_and_rejuvenate_refuse_bad_input():
 
 
 def _registry(mu, prior, q, seed, n_particles=600, replicas=6):
-    from depthcore.filters import FILTERS
+    from depthcore.registry.filters import FILTERS
 
     return FILTERS["rbpf"](
         mu,
@@ -401,7 +403,7 @@ def test_registry_estimate_is_the_pooled_mixture_computed_particle_by_particle()
 
 
 def test_registry_entry_needs_a_generator_and_refuses_in_one_line():
-    from depthcore.filters import FILTERS
+    from depthcore.registry.filters import FILTERS
 
     s = SCENARIOS["fig2"]
     with pytest.raises(ValueError, match="rng is required"):

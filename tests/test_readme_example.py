@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from depthcore import filters, optimal
+from depthcore.exact import optimal
+from depthcore.registry import filters
 
 ROOT = Path(__file__).resolve().parents[1]
 

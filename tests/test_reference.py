@@ -1,18 +1,16 @@
-"""The independent routes of depthcore.reference, each against the closed form it checks."""
+"""The independent routes of :mod:`depthcore.analysis.reference`, each against its closed form."""
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import (
-    SCENARIOS,
-    model,
-    optimal,
-    reference,
-)
-from depthcore.model import f, noise_free_state
-from depthcore.scenarios import MU_17, MU_18
-from depthcore.second_order import hessian
+from depthcore import SCENARIOS
+from depthcore.analysis import reference
+from depthcore.exact import optimal
+from depthcore.kalman.second_order import hessian
+from depthcore.problem import model
+from depthcore.problem.model import f, noise_free_state
+from depthcore.problem.scenarios import MU_17, MU_18
 
 
 def random_states(rng, c, n=50):

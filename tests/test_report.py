@@ -6,18 +6,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from depthcore import SCENARIOS, benchmark_tables, ekf, iterated, optimal, reproduce, study
+from depthcore import SCENARIOS, formatting
 from depthcore.book import (
+    benchmark_tables,
     beyond_filters,
     beyond_linear,
     beyond_study,
     beyond_sweeps,
-    formatting,
     notebook,
     paper,
 )
-from depthcore.filters import FILTERS, NAMES
-from depthcore.scenarios import REPORTED
+from depthcore.exact import optimal
+from depthcore.kalman import ekf, iterated
+from depthcore.problem.scenarios import REPORTED
+from depthcore.registry.filters import FILTERS, NAMES
+from depthcore.studies import monte_carlo, reproduce
 
 FIG2 = SCENARIOS["fig2"]
 
@@ -113,7 +116,7 @@ def test_moments_texts_reject_ambiguous_rows():
 
 
 def test_study_texts_have_every_score():
-    r = study.study(trials=20, seed=0, names=("optimal", "ekf"))
+    r = monte_carlo.study(trials=20, seed=0, names=("optimal", "ekf"))
     texts = formatting.study_texts(r, "s")
     assert texts["s_trials"] == str(r["valid_trials"])
     assert texts["s_ekf_depth_coverage_68"] == f"{r['filters']['ekf']['depth']['coverage_68']:.2f}"
@@ -303,7 +306,7 @@ def test_rbpf_texts_format_each_row_of_the_convergence_table():
 
 
 def test_bench_texts_format_the_records_numbers():
-    from depthcore import benchmarks
+    from depthcore.provenance import benchmarks
 
     r = benchmarks.read("bench_optimal")
     t = benchmark_tables.bench_texts("bench_optimal", r)
@@ -320,7 +323,7 @@ def test_bench_texts_format_the_records_numbers():
 
 
 def test_bench_readme_blocks_hold_every_table_and_its_origin():
-    from depthcore import benchmarks
+    from depthcore.provenance import benchmarks
 
     names = ["bench_bank", "bench_ekf_filterpy", "bench_import", "bench_kalman"]
     names += ["bench_optimal", "bench_rbpf", "bench_trials", "bench_frames", "bench_range_ekf"]

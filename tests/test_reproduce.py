@@ -1,11 +1,13 @@
-"""The reproduction tables and moments of depthcore.reproduce, against each filter."""
+"""The reproduction tables and moments of depthcore.studies.reproduce, against each filter."""
 
 import numpy as np
 import pytest
 
-from depthcore import SCENARIOS, optimal, reproduce
-from depthcore.ekf import ekf
-from depthcore.second_order import second_order
+from depthcore import SCENARIOS
+from depthcore.exact import optimal
+from depthcore.kalman.ekf import ekf
+from depthcore.kalman.second_order import second_order
+from depthcore.studies import reproduce
 
 
 @pytest.mark.parametrize("key", list(SCENARIOS))
@@ -38,7 +40,8 @@ def test_the_particle_filters_seed_is_an_argument():
 
 
 def test_comparison_runs_only_the_filters_of_its_table(monkeypatch):
-    from depthcore import filters, reproduce
+    from depthcore.registry import filters
+    from depthcore.studies import reproduce
 
     def refuse(*args, **kwargs):
         raise AssertionError("the particle filter is not in the figure pages' tables")
@@ -57,7 +60,7 @@ def test_comparison_runs_only_the_filters_of_its_table(monkeypatch):
 def test_agreement_with_the_paper_is_rounding_to_its_printed_precision():
     # The paper prints two decimals: a value agrees when it lies within half a
     # unit of the last printed digit, i.e. when it would be printed the same.
-    from depthcore.scenarios import REPORTED_DECIMALS
+    from depthcore.problem.scenarios import REPORTED_DECIMALS
 
     assert REPORTED_DECIMALS == 2
     for printed in (20.74, 0.0, -1.23, 5.1):

@@ -3,8 +3,10 @@
 import numpy as np
 import pytest
 
-from depthcore import model, optimal, resample_move
-from depthcore.scenarios import SCENARIOS
+from depthcore.exact import optimal
+from depthcore.particles import resample_move
+from depthcore.problem import model
+from depthcore.problem.scenarios import SCENARIOS
 
 
 def _run(key, n, repeats, seed, **kwargs):
@@ -162,7 +164,7 @@ def test_every_particle_behind_the_camera_is_refused():
 def test_replicas_are_independent_runs_pooled():
     """replicated: R rows of one batch; the pool's weights are each replica's over R,
     its depth mean the replicas' average, and its errors those of replica_errors."""
-    from depthcore.resampling import replica_errors
+    from depthcore.particles.resampling import replica_errors
 
     s = SCENARIOS["fig3"]
     mu = np.stack([s.mu, np.asarray(s.mu) + 1e-3])

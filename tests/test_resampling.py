@@ -1,18 +1,21 @@
-"""Weights of a particle sample (depthcore.resampling): normalising, ESS, resamplers, moments."""
+"""Weights of a particle sample: normalising, ESS, resamplers, moments.
+
+:mod:`depthcore.particles.resampling` and :mod:`depthcore.problem.weights`.
+"""
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy.special import logsumexp
 
-from depthcore.resampling import (
+from depthcore.particles.resampling import (
     RESAMPLERS,
     effective_sample_size,
-    normalise,
     residual,
     systematic,
     weighted_standard_errors,
 )
+from depthcore.problem.weights import normalise
 
 
 def random_weights(rng, shape):
@@ -133,7 +136,7 @@ def test_weighted_standard_errors_of_a_hand_computed_case():
     # x = 0, 1, 2, 3 with equal weights: mean 3/2, variance 5/4;
     # se(mean)^2 = sum W^2 (x - m)^2 = (9/4 + 1/4 + 1/4 + 9/4) / 16 = 5/16;
     # se(var)^2 = sum W^2 ((x - m)^2 - 5/4)^2 = 4 * 1 / 16; se(sd) = se(var) / (2 sd).
-    from depthcore.resampling import weighted_standard_errors
+    from depthcore.particles.resampling import weighted_standard_errors
 
     se_mean, se_sd = weighted_standard_errors(np.arange(4.0), np.full(4, 0.25))
     assert se_mean == pytest.approx(np.sqrt(5 / 16), rel=1e-14)
@@ -144,7 +147,7 @@ def test_weighted_standard_errors_match_the_spread_over_repeated_runs():
     # Self-normalised importance sampling of N(0, 1) from N(0, 1.5^2): the SD
     # over 4,000 independent runs of the weighted mean and SD is the standard
     # error the delta method should predict (relative MC error ~ 1/sqrt(8000)).
-    from depthcore.resampling import weighted_moments, weighted_standard_errors
+    from depthcore.particles.resampling import weighted_moments, weighted_standard_errors
 
     rng = np.random.default_rng(2024)
     x = rng.normal(0.0, 1.5, size=(4000, 500))
@@ -157,12 +160,14 @@ def test_weighted_standard_errors_match_the_spread_over_repeated_runs():
 
 
 def test_particle_standard_errors_are_those_of_their_weighted_particles():
-    from depthcore import particle
-    from depthcore.resampling import weighted_standard_errors
-    from depthcore.scenarios import SCENARIOS
+    from depthcore.particles import importance
+    from depthcore.particles.resampling import weighted_standard_errors
+    from depthcore.problem.scenarios import SCENARIOS
 
     s = SCENARIOS["fig2"]
-    r = particle.run([s.mu, s.mu], s.rho, s.prior.mean, s.prior.cov, 500, np.random.default_rng(3))
+    r = importance.run(
+        [s.mu, s.mu], s.rho, s.prior.mean, s.prior.cov, 500, np.random.default_rng(3)
+    )
     se = r.standard_errors()
     W = np.exp(r.log_weights)
     for comp, i in (("depth", 1), ("velocity", 2)):

@@ -4,12 +4,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import model, optimal, paper_prior, reference
-from depthcore.ekf import ekf
-from depthcore.gaussian import Gaussian
-from depthcore.model import f, noise_free_state
-from depthcore.scenarios import MU_17, MU_18
-from depthcore.second_order import (
+from depthcore import paper_prior
+from depthcore.analysis import reference
+from depthcore.exact import optimal
+from depthcore.kalman.ekf import ekf
+from depthcore.kalman.second_order import (
     hessian,
     likelihood_covariance,
     minimiser,
@@ -19,6 +18,10 @@ from depthcore.second_order import (
     trajectory_solve,
     trajectory_states,
 )
+from depthcore.problem import model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.model import f, noise_free_state
+from depthcore.problem.scenarios import MU_17, MU_18
 
 from helpers import bearings
 
@@ -68,7 +71,7 @@ def test_eq8_second_order_is_the_product_of_its_two_gaussians():
     lik = Gaussian(c, likelihood_covariance(mu, rho))
     rng = np.random.default_rng(3)
     x = ps.mean + rng.normal(scale=0.3, size=(50, 3))
-    from depthcore import model
+    from depthcore.problem import model
 
     diff = ps.logpdf(x) - lik.logpdf(x) - prior.logpdf(model.G(x, -2))
     assert np.ptp(diff) < 1e-9  # a constant: the log normaliser
@@ -91,8 +94,8 @@ def test_reading_must_be_known():
 
 
 def test_eq23_second_order_density_is_the_linearised_posterior():
-    from depthcore import model
-    from depthcore.model import residual_gradients
+    from depthcore.problem import model
+    from depthcore.problem.model import residual_gradients
 
     mu, rho = MU_17, 1 / 200
     c = noise_free_state(mu)
@@ -347,7 +350,7 @@ def test_trajectory_states_follow_the_motion_frame_by_frame():
 
 @pytest.mark.parametrize("n_frames", [3, 5, 12, 30])
 def test_trajectory_laplace_equals_the_dense_route(n_frames):
-    """The linear-cost route against :func:`depthcore.reference.trajectory_laplace_dense`,
+    """The linear-cost route against :func:`depthcore.analysis.reference.trajectory_laplace_dense`,
     the same Gauss-Newton with every step a dense solve, to the resolution of their line
     searches (which stop where the objective no longer decreases in floating point)."""
     rho, q = 2e-3, 0.02

@@ -8,22 +8,26 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate, stats
 
-from depthcore import _checks, bank_posterior, model, optimal, study, study_scores, study_trials
-from depthcore.__main__ import main
-from depthcore.filters import FILTERS, NAMES
-from depthcore.gaussian import Gaussian
-from depthcore.scenarios import SCENARIOS
+from depthcore.cli.main import main
+from depthcore.exact import optimal, posterior
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.filters import FILTERS, NAMES
+from depthcore.studies import monte_carlo
+from depthcore.studies import scores as study_scores
+from depthcore.studies import trials as study_trials
 
 
 def test_same_seed_same_result():
-    a = study.study(trials=40, seed=3, n_particles=300)
-    b = study.study(trials=40, seed=3, n_particles=300)
+    a = monte_carlo.study(trials=40, seed=3, n_particles=300)
+    b = monte_carlo.study(trials=40, seed=3, n_particles=300)
     assert a == b
-    assert study.study(trials=40, seed=4, n_particles=300) != a
+    assert monte_carlo.study(trials=40, seed=4, n_particles=300) != a
 
 
 def test_particle_filter_tracks_the_optimal_filter():
-    r = study.study(trials=60, seed=5, n_particles=4000)
+    r = monte_carlo.study(trials=60, seed=5, n_particles=4000)
     o, p = r["filters"]["optimal"], r["filters"]["particle"]
     # averaged over 60 trials, the Monte Carlo error of the means is ~0.01 SD
     assert abs(o["depth"]["bias"] - p["depth"]["bias"]) < 0.05 * o["depth"]["mean_sd"]
@@ -50,7 +54,7 @@ def test_binned_kde_matches_direct_kde():
 
 def test_unknown_filter_is_rejected():
     with pytest.raises(ValueError, match="filters must be among"):
-        study.study(trials=5, names=("kalman",))
+        monte_carlo.study(trials=5, names=("kalman",))
 
 
 def _assert_same_scores(a, b, rel=1e-12):
@@ -67,8 +71,8 @@ def _assert_same_scores(a, b, rel=1e-12):
 
 def test_chunk_size_does_not_change_the_deterministic_filters():
     names = ("optimal", "second_order", "ekf", "ukf")
-    a = study.study(trials=30, seed=2, chunk=7, names=names)
-    b = study.study(trials=30, seed=2, chunk=30, names=names)
+    a = monte_carlo.study(trials=30, seed=2, chunk=7, names=names)
+    b = monte_carlo.study(trials=30, seed=2, chunk=30, names=names)
     assert a["filters"] != {}
     _assert_same_scores(a["filters"], b["filters"])
 
@@ -94,11 +98,11 @@ def test_streamed_scores_equal_those_of_all_trials_at_once():
     # The study draws the noise and the particles from the first two children
     # of the seed: redo it without chunks and score every trial at once.
     seed, n = 9, 40
-    noise, particles = (np.random.default_rng(s) for s in _checks.spawn(seed, 2))
+    noise, particles = (np.random.default_rng(s) for s in checks.spawn(seed, 2))
     trials = study_trials.simulate(SCENARIOS["fig2"].c, 1 / 200, n, noise)
     est = study_trials.run_filters(trials, NAMES, particles, 300)
-    one = study.study(trials=n, seed=seed, chunk=n, n_particles=300)
-    several = study.study(trials=n, seed=seed, chunk=9, n_particles=300)
+    one = monte_carlo.study(trials=n, seed=seed, chunk=n, n_particles=300)
+    several = monte_carlo.study(trials=n, seed=seed, chunk=9, n_particles=300)
     for name in NAMES:
         want = _direct_scores(trials.truth, est[name])
         for got, rel in ((one, 1e-15), (several, 1e-12)):
@@ -118,9 +122,9 @@ def test_study_keeps_only_running_sums():
     import tracemalloc
 
     def peak(n):
-        study.study(trials=10, seed=0, chunk=10, names=("ekf",))  # warm the imports
+        monte_carlo.study(trials=10, seed=0, chunk=10, names=("ekf",))  # warm the imports
         tracemalloc.start()
-        study.study(trials=n, seed=0, chunk=50, names=("ekf", "ukf"))
+        monte_carlo.study(trials=n, seed=0, chunk=50, names=("ekf", "ukf"))
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         return peak
@@ -131,7 +135,9 @@ def test_study_keeps_only_running_sums():
 
 def test_progress_is_reported_after_each_chunk():
     calls = []
-    study.study(trials=25, seed=0, chunk=10, names=("ekf",), progress=lambda *a: calls.append(a))
+    monte_carlo.study(
+        trials=25, seed=0, chunk=10, names=("ekf",), progress=lambda *a: calls.append(a)
+    )
     assert calls == [(10, 25), (20, 25), (25, 25)]
 
 
@@ -140,7 +146,7 @@ def test_only_the_named_filters_run(monkeypatch):
     # may run, the Hellinger distances are not computed, and every other score
     # is what a run including the optimal filter gives with the same seed.
     names = ("second_order", "ekf", "ukf", "particle")
-    full = study.study(trials=25, seed=4, chunk=10, n_particles=200)
+    full = monte_carlo.study(trials=25, seed=4, chunk=10, n_particles=200)
 
     def refuse(*args, **kwargs):
         raise AssertionError("the optimal filter ran")
@@ -148,7 +154,7 @@ def test_only_the_named_filters_run(monkeypatch):
     monkeypatch.setitem(FILTERS, "optimal", dataclasses.replace(FILTERS["optimal"], run=refuse))
     monkeypatch.setattr(optimal, "batch_marginals", refuse)
     monkeypatch.setattr(optimal, "moments", refuse)
-    part = study.study(trials=25, seed=4, chunk=10, n_particles=200, names=names)
+    part = monte_carlo.study(trials=25, seed=4, chunk=10, n_particles=200, names=names)
     assert list(part["filters"]) == list(names)
     for name in names:
         got, want = dict(part["filters"][name]), dict(full["filters"][name])
@@ -156,7 +162,7 @@ def test_only_the_named_filters_run(monkeypatch):
         assert want.pop("hellinger_depth")["mean"] >= 0
         assert got == want
     with pytest.raises(AssertionError, match="the optimal filter ran"):
-        study.study(trials=5, seed=4, names=("optimal",))
+        monte_carlo.study(trials=5, seed=4, names=("optimal",))
 
 
 def test_study_command_without_the_optimal_filter_shows_no_hellinger(capsys):
@@ -207,7 +213,7 @@ def test_hellinger_matches_adaptive_quadrature():
 
 
 def test_ekf_is_overconfident_and_second_order_is_not():
-    r = study.study(trials=200, seed=1)
+    r = monte_carlo.study(trials=200, seed=1)
     ekf, so = r["filters"]["ekf"], r["filters"]["second_order"]
     # 200 trials: the binomial SD of a coverage near 0.68 is 0.033
     assert ekf["depth"]["coverage_68"] < 0.4
@@ -272,13 +278,13 @@ def test_study_command_rejects_bad_trials(capsys):
 
 def test_a_seed_sequence_and_its_integer_give_the_same_study():
     seq = np.random.SeedSequence(7)
-    a = study.study(trials=12, seed=7, names=("ekf", "particle"), n_particles=100)
-    b = study.study(trials=12, seed=seq, names=("ekf", "particle"), n_particles=100)
-    c = study.study(trials=12, seed=seq, names=("ekf", "particle"), n_particles=100)
+    a = monte_carlo.study(trials=12, seed=7, names=("ekf", "particle"), n_particles=100)
+    b = monte_carlo.study(trials=12, seed=seq, names=("ekf", "particle"), n_particles=100)
+    c = monte_carlo.study(trials=12, seed=seq, names=("ekf", "particle"), n_particles=100)
     assert a == b == c  # the study spawns its streams without changing the seed
     assert a["seed"] == 7
     with pytest.raises(ValueError, match="seed must be a non-negative integer"):
-        study.study(trials=12, seed=-1)
+        monte_carlo.study(trials=12, seed=-1)
 
 
 def _estimates_with_cdfs(cdf):
@@ -353,20 +359,23 @@ def test_optimal_cdfs_at_the_truth_match_quadrature_of_its_marginals():
 
 
 def test_study_over_more_frames_with_process_noise_scores_each_trials_own_truth():
-    from depthcore import _checks, ekf
+    from depthcore.kalman import ekf
+    from depthcore.problem import checks
 
     fig2 = SCENARIOS["fig2"]
     truth, rho, q, N = fig2.c, fig2.rho, 0.02, 6
-    r = study.study(truth, rho, 40, seed=4, names=("optimal", "ekf"), frames=N, process_noise=q)
+    r = monte_carlo.study(
+        truth, rho, 40, seed=4, names=("optimal", "ekf"), frames=N, process_noise=q
+    )
     assert r["frames"] == N and r["process_noise"] == q
     # the same trials, drawn from the same stream, filtered directly
-    noise_rng = np.random.default_rng(_checks.spawn(_checks.seed_sequence(4), 2)[0])
+    noise_rng = np.random.default_rng(checks.spawn(checks.seed_sequence(4), 2)[0])
     t = study_trials.simulate(truth, rho, 40, noise_rng, "paper", frames=N, process_noise=q)
     assert t.mu.shape == (r["valid_trials"], N) and t.states.shape == (len(t.mu), 3)
     # the truth moves on: depth y_3 + N - 3 at frame N; the velocity changes with q
     assert np.allclose(t.states[:, 1], truth[1] + N - 3)
     assert np.std(t.states[:, 2]) > 0
-    exact = bank_posterior.moments(t.mu, rho, t.prior_mean, t.prior_cov, q)
+    exact = posterior.moments(t.mu, rho, t.prior_mean, t.prior_cov, q)
     h = ekf.run(t.mu, rho, t.prior_mean, t.prior_cov, q)
     for name, depth in (("optimal", exact.depth_mean), ("ekf", h.means[:, -1, 1])):
         bias = np.mean(depth - t.states[:, 1])
@@ -397,7 +406,7 @@ def test_with_process_noise_the_state_at_time_3_is_the_truth_given(q):
 
 
 def test_study_with_large_process_noise_keeps_its_trials():
-    r = study.study(
+    r = monte_carlo.study(
         [1.2, 6.0, 1.2], 1 / 200, 20, seed=1, names=("ekf",), frames=10, process_noise=10.0
     )
     assert r["valid_trials"] == 20 and r["rejected_trials"] == 0
@@ -408,16 +417,16 @@ def test_a_filter_without_answer_for_a_simulated_trial_is_named_not_its_bearings
     least misfit without process noise) is not determined on some trials. The refusal
     names the filter and what the user can change, not the bearings it drew itself."""
     with pytest.raises(ValueError, match=r"^filters: the second_order filter has no answer"):
-        study.study(
+        monte_carlo.study(
             [1.2, 6.0, 1.2], 1 / 200, 50, names=("second_order",), frames=10, process_noise=10.0
         )
 
 
 def test_study_refuses_filters_that_cannot_run_on_the_frames_or_process_noise():
     with pytest.raises(ValueError, match="names: particle cannot run"):
-        study.study(trials=5, names=("ekf", "particle"), frames=5, process_noise=0.01)
+        monte_carlo.study(trials=5, names=("ekf", "particle"), frames=5, process_noise=0.01)
     with pytest.raises(ValueError, match="frames must be an integer from 3"):
-        study.study(trials=5, names=("ekf",), frames=2)
+        monte_carlo.study(trials=5, names=("ekf",), frames=2)
 
 
 def test_rao_blackwellised_filter_is_scored_by_its_mixture_and_tracks_the_optimal_filter():
@@ -517,7 +526,7 @@ def test_standard_errors_match_the_spread_of_replicated_studies():
     # studies estimates its standard error to about 1/sqrt(2 * 39) = 11 %, and
     # the mean of the reported SEs must agree with it to 3.5 times that.
     runs = [
-        study.study(trials=150, seed=s, names=("ekf",), prior="fixed")["filters"]["ekf"]
+        monte_carlo.study(trials=150, seed=s, names=("ekf",), prior="fixed")["filters"]["ekf"]
         for s in range(40)
     ]
     for q in ("depth", "velocity"):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import study, study_pairs, study_scores
+from depthcore.studies import monte_carlo, pairs, scores
 
 RNG_SEED = 20261125
 
@@ -30,9 +30,9 @@ def moments(values):
 def test_pooled_comoments_over_many_chunks_equal_one_chunk_and_numpy_cov():
     rng = np.random.default_rng(RNG_SEED)
     values = rng.standard_normal((1000, 4)) @ rng.standard_normal((4, 4)) + [1e3, -5.0, 0.0, 2.0]
-    whole = study_pairs.CoMoments(["a", "b", "c", "d"])
+    whole = pairs.CoMoments(["a", "b", "c", "d"])
     whole.add(values)
-    chunked = study_pairs.CoMoments(["a", "b", "c", "d"])
+    chunked = pairs.CoMoments(["a", "b", "c", "d"])
     for part in np.array_split(values, [1, 3, 100, 101, 640]):
         chunked.add(part)
     assert chunked.n == whole.n == 1000
@@ -42,7 +42,7 @@ def test_pooled_comoments_over_many_chunks_equal_one_chunk_and_numpy_cov():
 
 
 def test_an_empty_chunk_adds_nothing_and_a_covariance_needs_two_trials():
-    m = study_pairs.CoMoments([("ekf", "sd"), ("ekf", "squared_error")])
+    m = pairs.CoMoments([("ekf", "sd"), ("ekf", "squared_error")])
     m.add(np.zeros((0, 2)))
     assert m.n == 0 and m.summary()["cov"] is None
     m.add([[1.0, 2.0]])
@@ -56,24 +56,24 @@ def test_an_empty_chunk_adds_nothing_and_a_covariance_needs_two_trials():
 
 @pytest.mark.parametrize("shape", [(3,), (2, 3), (2, 1, 2)])
 def test_comoments_refuse_values_of_the_wrong_shape(shape):
-    m = study_pairs.CoMoments(["a", "b"])
+    m = pairs.CoMoments(["a", "b"])
     with pytest.raises(ValueError, match="values"):
         m.add(np.zeros(shape))
 
 
 def test_comoments_refuse_repeated_or_no_columns_and_pair_of_names_its_missing_column():
     with pytest.raises(ValueError, match="columns"):
-        study_pairs.CoMoments(["a", "a"])
+        pairs.CoMoments(["a", "a"])
     with pytest.raises(ValueError, match="columns"):
-        study_pairs.CoMoments([])
-    m = study_pairs.CoMoments([("x", "sd"), ("y", "sd")])
+        pairs.CoMoments([])
+    m = pairs.CoMoments([("x", "sd"), ("y", "sd")])
     m.add(np.arange(6.0).reshape(3, 2))
-    means, cov, n = study_pairs.pair_of(m.summary(), ["y", "sd"], ("x", "sd"))
+    means, cov, n = pairs.pair_of(m.summary(), ["y", "sd"], ("x", "sd"))
     assert n == 3
     assert_allclose(means, [3.0, 2.0], rtol=1e-15)
     assert_allclose(cov, [[4.0, 4.0], [4.0, 4.0]], rtol=1e-15)
     with pytest.raises(ValueError, match="b: the summary has no column"):
-        study_pairs.pair_of(m.summary(), ("x", "sd"), ("z", "sd"))
+        pairs.pair_of(m.summary(), ("x", "sd"), ("z", "sd"))
 
 
 # --- the delta-method errors against the spread of replicated studies -------------------------
@@ -102,9 +102,9 @@ def test_mean_ratio_se_delta_method_matches_the_spread_of_replications_and_needs
     def ratio(m):
         return m[..., 0] / m[..., 1]
 
-    spread, se = spread_and_se(ratio, lambda m, c: study_pairs.mean_ratio_se(m, c, TRIALS), values)
+    spread, se = spread_and_se(ratio, lambda m, c: pairs.mean_ratio_se(m, c, TRIALS), values)
     assert abs(se / spread - 1) < 0.06
-    independent = lambda m, c: study_pairs.mean_ratio_se(m, c * np.eye(2), TRIALS)  # noqa: E731
+    independent = lambda m, c: pairs.mean_ratio_se(m, c * np.eye(2), TRIALS)  # noqa: E731
     _, wrong = spread_and_se(ratio, independent, values)
     assert wrong / spread > 2.0
 
@@ -123,10 +123,10 @@ def test_rmse_ratio_se_delta_method_matches_the_spread_of_replications_and_needs
     def ratio(m):
         return np.sqrt(m[..., 0] / m[..., 1])
 
-    spread, se = spread_and_se(ratio, lambda m, c: study_pairs.rmse_ratio_se(m, c, TRIALS), values)
+    spread, se = spread_and_se(ratio, lambda m, c: pairs.rmse_ratio_se(m, c, TRIALS), values)
     assert abs(se / spread - 1) < 0.06
     _, wrong = spread_and_se(
-        ratio, lambda m, c: study_pairs.rmse_ratio_se(m, c * np.eye(2), TRIALS), values
+        ratio, lambda m, c: pairs.rmse_ratio_se(m, c * np.eye(2), TRIALS), values
     )
     assert wrong / spread > 2.0
 
@@ -141,7 +141,7 @@ def test_rmse_over_mean_sd_ratio_se_matches_the_spread_of_replications():
         return np.sqrt(m[..., 0]) / m[..., 1]
 
     def se(m, c):
-        return study_pairs.ratio_se(m, c, TRIALS, (0.5, 1.0))
+        return pairs.ratio_se(m, c, TRIALS, (0.5, 1.0))
 
     spread, delta = spread_and_se(ratio, se, values)
     assert abs(delta / spread - 1) < 0.06
@@ -157,7 +157,7 @@ def test_paired_difference_se_matches_the_spread_of_replications_and_needs_the_c
         return m[..., 0] - m[..., 1]
 
     def se(m, c):
-        return study_pairs.paired_difference_se(c, TRIALS)
+        return pairs.paired_difference_se(c, TRIALS)
 
     spread, delta = spread_and_se(difference, se, values)
     assert abs(delta / spread - 1) < 0.06
@@ -178,10 +178,10 @@ def test_coverage_gap_difference_se_matches_the_spread_of_paired_indicators():
     values = np.stack([np.abs(z[..., 0]) < 0.9945, np.abs(z[..., 1]) < 1.96], axis=-1)
     values = values.astype(float)
     mean, cov = moments(values)
-    gap, se = study_pairs.coverage_gap_difference(mean, cov, TRIALS, 0.9)
+    gap, se = pairs.coverage_gap_difference(mean, cov, TRIALS, 0.9)
     spread = np.std(gap, ddof=1)
     assert abs(np.median(se) / spread - 1) < 0.06
-    plain = study_pairs.paired_difference_se(cov, TRIALS)
+    plain = pairs.paired_difference_se(cov, TRIALS)
     assert np.median(plain) / spread < 1 - 0.15
 
 
@@ -192,34 +192,34 @@ def test_with_independent_scores_the_ratio_se_is_that_of_the_separate_ses():
     n = 50
     se_a, se_b = np.sqrt(np.diag(cov) / n)
     assert_allclose(
-        study_pairs.mean_ratio_se(means, cov, n),
+        pairs.mean_ratio_se(means, cov, n),
         4 / 9 * np.hypot(se_a / 4, se_b / 9),
         rtol=1e-14,
     )
     rmse_se_a, rmse_se_b = se_a / (2 * 2.0), se_b / (2 * 3.0)  # Tally's delta method per RMSE
     assert_allclose(
-        study_pairs.rmse_ratio_se(means, cov, n),
+        pairs.rmse_ratio_se(means, cov, n),
         2 / 3 * np.hypot(rmse_se_a / 2, rmse_se_b / 3),
         rtol=1e-14,
     )
-    assert_allclose(study_pairs.paired_difference_se(cov, n), np.hypot(se_a, se_b), rtol=1e-14)
+    assert_allclose(pairs.paired_difference_se(cov, n), np.hypot(se_a, se_b), rtol=1e-14)
 
 
 def test_identical_filters_have_ratio_one_with_se_zero():
     """Limiting case of two identical scores: every ratio 1 and every paired SE exactly 0."""
     rng = np.random.default_rng(RNG_SEED + 5)
     x = rng.exponential(size=200)
-    m = study_pairs.CoMoments(["a", "b"])
+    m = pairs.CoMoments(["a", "b"])
     m.add(np.column_stack([x, x]))
-    means, cov, n = study_pairs.pair_of(m.summary(), "a", "b")
+    means, cov, n = pairs.pair_of(m.summary(), "a", "b")
     assert means[0] / means[1] == 1.0
     for se in (
-        study_pairs.mean_ratio_se(means, cov, n),
-        study_pairs.rmse_ratio_se(means, cov, n),
-        study_pairs.paired_difference_se(cov, n),
+        pairs.mean_ratio_se(means, cov, n),
+        pairs.rmse_ratio_se(means, cov, n),
+        pairs.paired_difference_se(cov, n),
     ):
         assert se == 0.0
-    gap, se = study_pairs.coverage_gap_difference([0.5, 0.5], [[0.25, 0.25], [0.25, 0.25]], n, 0.68)
+    gap, se = pairs.coverage_gap_difference([0.5, 0.5], [[0.25, 0.25], [0.25, 0.25]], n, 0.68)
     assert gap == 0.0 and se == 0.0
 
 
@@ -235,19 +235,19 @@ def test_identical_filters_have_ratio_one_with_se_zero():
 def test_ratio_se_refuses_bad_input(kwargs, message):
     args = {"means": [1.0, 2.0], "cov": np.eye(2), "trials": 10, **kwargs}
     with pytest.raises(ValueError, match=message):
-        study_pairs.ratio_se(**args)
+        pairs.ratio_se(**args)
 
 
 # --- the paired test ---------------------------------------------------------------------------
 
 
 def paired_rmse_verdict(errors_a, errors_b):
-    m = study_pairs.CoMoments(["a", "b"])
+    m = pairs.CoMoments(["a", "b"])
     m.add(np.column_stack([errors_a**2, errors_b**2]))
-    means, cov, n = study_pairs.pair_of(m.summary(), "a", "b")
+    means, cov, n = pairs.pair_of(m.summary(), "a", "b")
     ratio = np.sqrt(means[0] / means[1])
-    se = study_pairs.rmse_ratio_se(means, cov, n) / ratio  # of the ratio's logarithm
-    return study_scores.difference_verdict(-np.log(ratio), se)
+    se = pairs.rmse_ratio_se(means, cov, n) / ratio  # of the ratio's logarithm
+    return scores.difference_verdict(-np.log(ratio), se)
 
 
 def test_the_paired_test_of_an_rmse_ratio_finds_a_clear_win_a_clear_loss_and_a_tie():
@@ -264,27 +264,27 @@ def test_the_paired_test_of_an_rmse_ratio_finds_a_clear_win_a_clear_loss_and_a_t
 
 def test_difference_verdict_has_three_outcomes_and_refuses_bad_input():
     """``1`` above ``z se``, ``-1`` below ``-z se``, ``0`` between, at the 1 % point 2.5758."""
-    assert study_scores.TEST_Z == pytest.approx(2.5758293035489004, rel=1e-15)
-    v = study_scores.difference_verdict([3.0, -3.0, 2.5, -2.5, 0.0], 1.0)
+    assert scores.TEST_Z == pytest.approx(2.5758293035489004, rel=1e-15)
+    v = scores.difference_verdict([3.0, -3.0, 2.5, -2.5, 0.0], 1.0)
     assert v.tolist() == [1, -1, 0, 0, 0]
     with pytest.raises(ValueError, match="se"):
-        study_scores.difference_verdict(1.0, -1.0)
+        scores.difference_verdict(1.0, -1.0)
     with pytest.raises(ValueError, match="z"):
-        study_scores.difference_verdict(1.0, 1.0, z=0.0)
+        scores.difference_verdict(1.0, 1.0, z=0.0)
 
 
 def test_detectable_shift_is_found_with_the_stated_power():
     """``(z_a + z_b) se``: a true shift of that size passes the 1 % test in 80 % of replications."""
     assert_allclose(
-        study_scores.detectable_shift(study_scores.coverage_se(0.68, 150)),
-        study_scores.detectable_difference(0.68, 150),
+        scores.detectable_shift(scores.coverage_se(0.68, 150)),
+        scores.detectable_difference(0.68, 150),
         rtol=1e-15,
     )
     rng = np.random.default_rng(RNG_SEED + 7)
     se = 0.1
-    d = float(study_scores.detectable_shift(se))
-    found = study_scores.difference_verdict(d + se * rng.standard_normal(20000), se) == 1
-    assert abs(found.mean() - study_scores.TEST_POWER) < 0.01
+    d = float(scores.detectable_shift(se))
+    found = scores.difference_verdict(d + se * rng.standard_normal(20000), se) == 1
+    assert abs(found.mean() - scores.TEST_POWER) < 0.01
 
 
 # --- the study keeps the co-moments beside its tallies ------------------------------------------
@@ -292,9 +292,9 @@ def test_detectable_shift_is_found_with_the_stated_power():
 
 def test_study_keeps_the_paired_comoments_without_changing_its_scores():
     names = ("optimal", "second_order", "ekf")
-    plain = study.study(trials=120, seed=4, names=names, chunk=50)
-    paired = study.study(trials=120, seed=4, names=names, chunk=50, paired=True)
-    one = study.study(trials=120, seed=4, names=names, chunk=120, paired=True)
+    plain = monte_carlo.study(trials=120, seed=4, names=names, chunk=50)
+    paired = monte_carlo.study(trials=120, seed=4, names=names, chunk=50, paired=True)
+    one = monte_carlo.study(trials=120, seed=4, names=names, chunk=120, paired=True)
     assert "paired" not in plain and paired["filters"] == plain["filters"]
     p = paired["paired"]
     assert p["trials"] == paired["valid_trials"]
@@ -302,29 +302,29 @@ def test_study_keeps_the_paired_comoments_without_changing_its_scores():
     assert_allclose(p["cov"], one["paired"]["cov"], rtol=1e-10, atol=1e-15)
     for name in names:
         d = paired["filters"][name]["depth"]
-        means, cov, n = study_pairs.pair_of(p, (name, "squared_error"), (name, "sd"))
+        means, cov, n = pairs.pair_of(p, (name, "squared_error"), (name, "sd"))
         assert_allclose(np.sqrt(means[0]), d["rmse"], rtol=1e-12)
         assert_allclose(means[1], d["mean_sd"], rtol=1e-12)
         assert_allclose(np.sqrt(cov[1, 1] / n), d["mean_sd_se"], rtol=1e-10)
         # the RMSE's own SE is the ratio SE's limit against a constant
         assert_allclose(
-            study_pairs.ratio_se(means, cov * [[1, 0], [0, 0]], n, (0.5, 0.0)),
+            pairs.ratio_se(means, cov * [[1, 0], [0, 0]], n, (0.5, 0.0)),
             d["rmse_se"],
             rtol=1e-10,
         )
-        c68 = study_pairs.pair_of(p, (name, "coverage_68"), (name, "hellinger"))[0][0]
+        c68 = pairs.pair_of(p, (name, "coverage_68"), (name, "hellinger"))[0][0]
         assert c68 == pytest.approx(d["coverage_68"], abs=1e-12)
-        h = study_pairs.pair_of(p, (name, "hellinger"), (name, "sd"))[0][0]
+        h = pairs.pair_of(p, (name, "hellinger"), (name, "sd"))[0][0]
         assert h == pytest.approx(paired["filters"][name]["hellinger_depth"]["mean"], rel=1e-12)
 
 
 def test_compare_gives_the_rmse_ratio_and_coverage_gaps_of_two_filters_of_a_study():
     names = ("optimal", "second_order", "ekf")
-    r = study.study(trials=150, seed=6, names=names, paired=True)
+    r = monte_carlo.study(trials=150, seed=6, names=names, paired=True)
     p, f = r["paired"], r["filters"]
     duel, back = (
-        study_pairs.compare(p, "second_order", "ekf"),
-        study_pairs.compare(p, "ekf", "second_order"),
+        pairs.compare(p, "second_order", "ekf"),
+        pairs.compare(p, "ekf", "second_order"),
     )
     rmse = {n: f[n]["depth"]["rmse"] for n in names}
     assert duel["rmse_ratio"] == pytest.approx(rmse["second_order"] / rmse["ekf"], rel=1e-12)
@@ -341,7 +341,7 @@ def test_compare_gives_the_rmse_ratio_and_coverage_gaps_of_two_filters_of_a_stud
         assert back[f"coverage_{level}_gap"] == pytest.approx(gap[1] - gap[0], abs=1e-12)
         assert duel[f"coverage_{level}_gap_se"] == back[f"coverage_{level}_gap_se"] >= 0
     assert duel["trials"] == r["valid_trials"]
-    assert set(study_pairs.compare(p, "ekf", "optimal", ())) == {
+    assert set(pairs.compare(p, "ekf", "optimal", ())) == {
         "rmse_ratio",
         "rmse_ratio_se",
         "trials",
@@ -353,9 +353,11 @@ def test_the_paired_study_keeps_only_running_co_moments():
     import tracemalloc
 
     def peak(n):
-        study.study(trials=10, seed=0, chunk=10, names=("ekf",), paired=True)  # warm the imports
+        monte_carlo.study(
+            trials=10, seed=0, chunk=10, names=("ekf",), paired=True
+        )  # warm the imports
         tracemalloc.start()
-        study.study(trials=n, seed=0, chunk=50, names=("ekf", "ukf"), paired=True)
+        monte_carlo.study(trials=n, seed=0, chunk=50, names=("ekf", "ukf"), paired=True)
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         return peak

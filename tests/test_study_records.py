@@ -1,7 +1,7 @@
 """The book's studies read from their records: the encoding, the modes, and every record current.
 
-The pages call their Monte Carlo studies through ``depthcore.book.records.recorded``,
-which reads ``depthcore/book/study_records/<function>-<key>.json`` when it was made
+The pages call their Monte Carlo studies through ``depthcore.provenance.records.recorded``,
+which reads ``depthcore/provenance/study_records/<function>-<key>.json`` when it was made
 by the current code. These tests never run a page's study: they check that every
 committed record names a function and its arguments, that its key is the key of
 that call, and that the code it ran has not changed since (`make records`
@@ -19,8 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from depthcore import SCENARIOS, benchmarks, gaussian, study
-from depthcore.book import beyond_frames, records
+from depthcore import SCENARIOS
+from depthcore.book import beyond_frames
+from depthcore.problem import gaussian
+from depthcore.provenance import benchmarks, records
+from depthcore.studies import frames, monte_carlo
 
 ROOT = Path(__file__).resolve().parent.parent
 COMMITTED = records.committed()
@@ -124,7 +127,7 @@ def test_only_depthcore_classes_are_rebuilt():
 
 def test_a_study_reads_back_bit_for_bit():
     fig2 = SCENARIOS["fig2"]
-    result = study.study(fig2.c, fig2.rho, trials=30, seed=2, prior="paper", paired=True)
+    result = monte_carlo.study(fig2.c, fig2.rho, trials=30, seed=2, prior="paper", paired=True)
     same(result, round_trip(result))
 
 
@@ -139,13 +142,13 @@ def record_dir(tmp_path, monkeypatch):
 
 
 def small_study(seed=1):
-    return records.recorded(beyond_frames.frames_study, [3, 4], 12, seed, ("optimal", "ekf"))
+    return records.recorded(frames.frames_study, [3, 4], 12, seed, ("optimal", "ekf"))
 
 
 def test_read_computes_a_call_without_a_record_and_writes_nothing(record_dir):
     run = small_study()
     assert not run.read and run.date is None and list(record_dir.iterdir()) == []
-    same(run.result, beyond_frames.frames_study([3, 4], 12, 1, ("optimal", "ekf")))
+    same(run.result, frames.frames_study([3, 4], 12, 1, ("optimal", "ekf")))
     assert "no current record" in str(run)
 
 
@@ -182,16 +185,16 @@ def test_require_refuses_a_call_without_a_current_record(record_dir, monkeypatch
     assert small_study().read
     # The call is shown in one short line, whatever its arguments hold.
     with pytest.raises(ValueError) as refused:
-        records.recorded(beyond_frames.frames_study, np.arange(3, 1003), 12, 1)
+        records.recorded(frames.frames_study, np.arange(3, 1003), 12, 1)
     assert str(refused.value).startswith(
         "depthcore.book.beyond_frames:frames_study(array([   3, ..., 1001, 1002]), 12, 1) has no "
         "current record"
     )
     assert len(str(refused.value)) < 240
     record = json.loads(path.read_text())
-    record["fingerprint"]["depthcore/model.py"] = "0" * 64  # as if model.py had changed
+    record["fingerprint"]["depthcore/problem/model.py"] = "0" * 64  # as if model.py had changed
     path.write_text(json.dumps(record))
-    assert records.stale(record) == ["depthcore/model.py"]
+    assert records.stale(record) == ["depthcore/problem/model.py"]
     with pytest.raises(ValueError, match="no current record"):
         small_study()
 
@@ -261,9 +264,9 @@ def test_the_source_archive_carries_the_records():
 def test_an_argument_that_cannot_be_recorded_is_named(record_dir):
     rng = np.random.default_rng(0)
     with pytest.raises(TypeError, match=r"argument 2: cannot record a numpy\.random.*Generator"):
-        records.recorded(beyond_frames.frames_study, [3], 5, rng)
+        records.recorded(frames.frames_study, [3], 5, rng)
     with pytest.raises(TypeError, match=r"argument seed: cannot record a .*Generator"):
-        records.recorded(beyond_frames.frames_study, [3], 5, seed=rng)
+        records.recorded(frames.frames_study, [3], 5, seed=rng)
     assert list(record_dir.iterdir()) == []
 
 

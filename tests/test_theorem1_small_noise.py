@@ -5,8 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from depthcore import ekf, model, second_order
-from depthcore.gaussian import Gaussian
+from depthcore.kalman import ekf, second_order
+from depthcore.problem import model
+from depthcore.problem.gaussian import Gaussian
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

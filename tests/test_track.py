@@ -1,4 +1,4 @@
-"""One track in one call: :func:`depthcore.tracking.track` and the pixels' bearings.
+"""One track in one call: :func:`depthcore.registry.tracking.track` and the pixels' bearings.
 
 The function's outputs are checked against the routes it calls (the bank's
 track, the registry's Gaussian filters), the Gaussian smoother against
@@ -22,10 +22,11 @@ from filterpy.kalman import rts_smoother
 from numpy.testing import assert_allclose, assert_array_equal
 
 import depthcore
-from depthcore import _checks, bank_track, model
-from depthcore.filters import FILTERS, SMOOTHED
-from depthcore.gaussian import Gaussian
-from depthcore.tracking import PROCESS_NOISE_MAX, RHO_RANGE, track
+from depthcore.exact import smoother
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.registry.filters import FILTERS, SMOOTHED
+from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE, track
 
 ROOT = Path(__file__).resolve().parents[1]
 #: A point at depth 10 at frame 1, seen with a bearing noise of 0.002 (one pixel at f = 500).
@@ -49,7 +50,7 @@ def test_the_registry_says_which_filters_smooth():
 def test_the_exact_filter_is_the_banks_track(q):
     mu = _mu(8, q)
     t = track(mu, RHO, PRIOR, q, "optimal")
-    direct = bank_track.track(mu, RHO, PRIOR.mean, PRIOR.cov, q)
+    direct = smoother.track(mu, RHO, PRIOR.mean, PRIOR.cov, q)
     assert_array_equal(t.filtered.mean, direct.filtered.mean)
     assert_array_equal(t.filtered.cov, direct.filtered.cov)
     assert_array_equal(t.smoothed.mean, direct.interval.mean)
@@ -184,7 +185,7 @@ def _refused(match, *args, **kwargs):
         [[0.1, 0.2, 0.25], [0.1, 0.2, 0.25]],
         "0.1 0.2 0.25",
         [0.1, 0.2, 0.3, 0.4],  # every second difference 0: degenerate
-        np.zeros(_checks.MAX_FRAMES + 1),
+        np.zeros(checks.MAX_FRAMES + 1),
     ],
 )
 def test_bad_bearings_are_refused_by_name(mu):
@@ -219,7 +220,7 @@ def test_without_a_prior_bearings_behind_the_camera_ask_for_one():
 
 @pytest.mark.parametrize("name", SMOOTHED)
 @pytest.mark.parametrize("rho", [RHO_RANGE[0], 1e-9, 1e-6, 10.0, RHO_RANGE[1]])
-@pytest.mark.parametrize("q", [0.0, _checks.MIN_PROCESS_NOISE, 1.0, PROCESS_NOISE_MAX])
+@pytest.mark.parametrize("q", [0.0, checks.MIN_PROCESS_NOISE, 1.0, PROCESS_NOISE_MAX])
 def test_every_noise_in_range_gets_an_answer_or_a_refusal(name, rho, q):
     """Finite moments and SDs at every frame, or a ValueError naming an argument; no warning."""
     mu = _mu(8, seed=3)
@@ -239,9 +240,9 @@ def test_every_noise_in_range_gets_an_answer_or_a_refusal(name, rho, q):
 @pytest.mark.parametrize("name", SMOOTHED)
 def test_a_thousand_frames_and_three_frames(name):
     rng = np.random.default_rng(4)
-    mu = model.simulate(STATE_1, _checks.MAX_FRAMES, RHO, 0.01, rng, frame=1).mu
+    mu = model.simulate(STATE_1, checks.MAX_FRAMES, RHO, 0.01, rng, frame=1).mu
     t = track(mu, RHO, PRIOR, 0.01, name)
-    assert t.smoothed.mean.shape == (_checks.MAX_FRAMES, 3)
+    assert t.smoothed.mean.shape == (checks.MAX_FRAMES, 3)
     assert np.all(np.isfinite(t.smoothed.cov))
     t3 = track([-0.3, 0.0, 0.2], 0.005, filter=name)  # the paper's three (Figure 2)
     assert t3.filtered.mean.shape == (3, 3) and t3.smoothed.cov.shape == (3, 3, 3)

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from depthcore import study, study_scores, study_trials
-from depthcore.scenarios import SCENARIOS
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.studies import monte_carlo, scores
+from depthcore.studies import trials as study_trials
 
 
 def test_the_rule_on_hand_made_tracks():
@@ -19,15 +20,15 @@ def test_the_rule_on_hand_made_tracks():
             [np.nan, 4.0, 0.0],  # no estimate: lost
         ]
     )
-    assert study_scores.lost_tracks(mean, truth).tolist() == [False, False, True, True, True]
-    assert study_scores.lost_tracks(mean, truth, threshold=10.0).tolist() == [False] * 4 + [True]
+    assert scores.lost_tracks(mean, truth).tolist() == [False, False, True, True, True]
+    assert scores.lost_tracks(mean, truth, threshold=10.0).tolist() == [False] * 4 + [True]
     with pytest.raises(ValueError, match="threshold"):
-        study_scores.lost_tracks(mean, truth, threshold=0.0)
+        scores.lost_tracks(mean, truth, threshold=0.0)
 
 
 @pytest.mark.parametrize(("lost", "n"), [(0, 50), (3, 50), (49, 50), (17, 1000)])
 def test_error_and_upper_bound(lost, n):
-    r = study_scores.track_loss(lost, n)
+    r = scores.track_loss(lost, n)
     p = lost / n
     assert r["fraction"] == p and r["se"] == pytest.approx(np.sqrt(p * (1 - p) / n), rel=1e-15)
     # the Clopper-Pearson bound: at p = upper, seeing <= lost losses has probability 5 %
@@ -37,12 +38,12 @@ def test_error_and_upper_bound(lost, n):
 
 
 def test_every_track_lost_and_refusals():
-    assert study_scores.track_loss(10, 10)["upper"] == 1.0
+    assert scores.track_loss(10, 10)["upper"] == 1.0
     for lost, n, match in ((-1, 5, "lost"), (6, 5, "lost"), (1.0, 5, "lost"), (0, 0, "trials")):
         with pytest.raises(ValueError, match=match):
-            study_scores.track_loss(lost, n)
+            scores.track_loss(lost, n)
     with pytest.raises(ValueError, match="confidence"):
-        study_scores.track_loss(1, 5, confidence=1.0)
+        scores.track_loss(1, 5, confidence=1.0)
 
 
 def test_the_upper_bound_covers_at_its_confidence():
@@ -53,20 +54,20 @@ def test_the_upper_bound_covers_at_its_confidence():
     """
     rng = np.random.default_rng(3)
     counts = rng.binomial(200, 0.02, size=20_000)
-    upper = {k: study_scores.track_loss(int(k), 200)["upper"] for k in np.unique(counts)}
+    upper = {k: scores.track_loss(int(k), 200)["upper"] for k in np.unique(counts)}
     covered = np.mean([upper[k] >= 0.02 for k in counts])
     assert covered > 0.95 - 5 * np.sqrt(0.95 * 0.05 / 20_000)
 
 
 def test_the_study_reports_it_and_chunks_agree():
-    one = study.study(trials=40, seed=2, names=("ekf", "optimal"), chunk=40)
-    many = study.study(trials=40, seed=2, names=("ekf", "optimal"), chunk=7)
+    one = monte_carlo.study(trials=40, seed=2, names=("ekf", "optimal"), chunk=40)
+    many = monte_carlo.study(trials=40, seed=2, names=("ekf", "optimal"), chunk=7)
     for name in ("ekf", "optimal"):
         assert one["filters"][name]["track_loss"] == many["filters"][name]["track_loss"]
     # the count is that of the rule on the same trials
     trials = study_trials.simulate(SCENARIOS["fig2"].c, 0.005, 40, np.random.default_rng(0))
     est = study_trials.run_filters(trials, ("ekf",))["ekf"]
-    lost = int(np.sum(study_scores.lost_tracks(est.mean, trials.truths)))
-    tally = study_scores.Tally(trials.truth)
+    lost = int(np.sum(scores.lost_tracks(est.mean, trials.truths)))
+    tally = scores.Tally(trials.truth)
     tally.add(est)
-    assert tally.scores()["track_loss"] == study_scores.track_loss(lost, len(trials.mu))
+    assert tally.scores()["track_loss"] == scores.track_loss(lost, len(trials.mu))

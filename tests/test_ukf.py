@@ -6,14 +6,21 @@ from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 from filterpy.kalman import unscented_transform as filterpy_unscented_transform
 from numpy.testing import assert_allclose
 
-from depthcore import model
-from depthcore.ekf import ekf
-from depthcore.ekf import predict as ekf_predict
-from depthcore.ekf import update as ekf_update
-from depthcore.gaussian import Gaussian
-from depthcore.model import noise_free_state
-from depthcore.scenarios import MU_17, SCENARIOS
-from depthcore.ukf import SigmaPoints, measurement_update, run, ukf, unscented_transform, update
+from depthcore.kalman.ekf import ekf
+from depthcore.kalman.ekf import predict as ekf_predict
+from depthcore.kalman.ekf import update as ekf_update
+from depthcore.kalman.ukf import (
+    SigmaPoints,
+    measurement_update,
+    run,
+    ukf,
+    unscented_transform,
+    update,
+)
+from depthcore.problem import model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.model import noise_free_state
+from depthcore.problem.scenarios import MU_17, SCENARIOS
 
 #: Sigma-point rules exercised throughout: the default, Wan and van der
 #: Merwe's usual (alpha = 1e-3 is too extreme for the checks at 1e-12, so 0.1),

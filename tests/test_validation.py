@@ -4,7 +4,10 @@ ValueError naming the argument, and no RuntimeWarning escapes."""
 import numpy as np
 import pytest
 
-from depthcore import ekf, model, optimal, particle, second_order, ukf
+from depthcore.exact import optimal
+from depthcore.kalman import ekf, second_order, ukf
+from depthcore.particles import importance
+from depthcore.problem import model
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -80,7 +83,7 @@ def test_optimal_moments_refuses_bad_input(case):
 def test_particle_run_refuses_bad_input(case):
     mu, rho, mean, cov, message = BAD[case]
     with pytest.raises(ValueError, match=message):
-        particle.run(_batched(mu), rho, mean, cov, 100, np.random.default_rng(0))
+        importance.run(_batched(mu), rho, mean, cov, 100, np.random.default_rng(0))
 
 
 def test_ukf_run_refuses_a_covariance_that_is_not_positive_definite():
@@ -103,7 +106,7 @@ def test_a_two_dimensional_batch_names_the_triple_by_both_indices():
 
 def test_checked_batch_gives_the_same_answer_as_the_single_entry_point():
     means, covs = ekf.run(np.tile(MU, (2, 1)), 1 / 200, MEAN, COV)
-    single = ekf.ekf(MU, 1 / 200, __import__("depthcore").gaussian.Gaussian(MEAN, COV))
+    single = ekf.ekf(MU, 1 / 200, __import__("depthcore").Gaussian(MEAN, COV))
     np.testing.assert_array_equal(means[0], single.means)
     np.testing.assert_array_equal(covs[1], single.covs)
 

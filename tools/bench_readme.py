@@ -2,8 +2,9 @@
 
 The README's section "Benchmark" holds, between the marker comments
 ``<!-- bench:KEY -->`` and ``<!-- /bench:KEY -->``, the blocks of
-:func:`depthcore.benchmark_tables.bench_readme_blocks`: each a table made from the
-records ``depthcore/benchmark_records/<script>.json`` (:mod:`depthcore.benchmarks`), with
+:func:`depthcore.book.benchmark_tables.bench_readme_blocks`: each a table made from the
+records ``depthcore/provenance/benchmark_records/<script>.json``
+(:mod:`depthcore.provenance.benchmarks`), with
 the date and machine they were measured on. ``make bench`` runs this after
 measuring; ``tests/test_benchmark_records.py`` checks that the README equals
 what this writes.
@@ -19,7 +20,8 @@ import re
 import sys
 from pathlib import Path
 
-from depthcore import benchmark_tables, benchmarks
+from depthcore.book import benchmark_tables
+from depthcore.provenance import benchmarks
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
@@ -68,7 +70,7 @@ def main(argv=None) -> int:
         return 0
     if new != text:
         README.write_text(new, encoding="utf-8")
-        print("README.md: benchmark tables rewritten from depthcore/benchmark_records/")
+        print("README.md: benchmark tables rewritten from depthcore/provenance/benchmark_records/")
     return 0
 
 

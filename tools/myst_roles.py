@@ -63,7 +63,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from depthcore.book.crossref import ROLES, BookReferences  # noqa: E402
+from depthcore.book.crossref import ROLES, BookReferences
 
 ROLE = re.compile(r"\{glue:text\}`([^`]+)`")
 NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")

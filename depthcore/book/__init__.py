@@ -11,21 +11,31 @@ figures and the texts its page glues, in that order:
   :mod:`~depthcore.book.beyond_sweeps`, :mod:`~depthcore.book.beyond_linear`,
   :mod:`~depthcore.book.beyond_frames`, :mod:`~depthcore.book.beyond_bound`,
   :mod:`~depthcore.book.beyond_hard`, :mod:`~depthcore.book.beyond_conjecture`:
-  the chapters beyond the paper, one each, in the book's order (the costs
-  chapter's tables are :mod:`depthcore.benchmark_tables`).
+  the chapters beyond the paper, one each, in the book's order.
 
 What several chapters share has one place each: :mod:`~depthcore.book.style`
-the plots' style, :mod:`~depthcore.book.formatting` the numbers as the book
-prints them, :mod:`~depthcore.book.notebook` what a page shows when it runs as
-a plain notebook, :mod:`~depthcore.book.crossref` the book's references
-resolved in Jupyter, and :mod:`~depthcore.book.records` the records of the
-chapters' Monte Carlo studies, which their pages read rather than compute.
+the plots' style, :mod:`~depthcore.book.notebook` what a page shows when it
+runs as a plain notebook, :mod:`~depthcore.book.crossref` the book's
+references resolved in Jupyter, :mod:`~depthcore.book.live` the live controls
+of the figure pages and :mod:`~depthcore.book.benchmark_tables` the
+benchmarks' tables. What they share with the rest of the package lives below
+it: the numbers as the book prints them (:mod:`depthcore.formatting`), the
+records of the chapters' Monte Carlo studies, which their pages read rather
+than compute (:mod:`depthcore.provenance.records`), the studies two chapters
+run (:mod:`depthcore.studies`).
+
+Where a new thing goes: a new chapter's experiment, figures and texts are one
+module here, ``beyond_<topic>.py``, and its page ``book/beyond_<topic>.md``.
+A chapter module imports no other chapter's: what two chapters need moves down
+into the package. Nothing outside this wing imports it.
 
 Every module is an attribute of the package, imported when first used
 (``import depthcore; depthcore.book.paper`` works).
 """
 
 import importlib
+
+from depthcore import _moved
 
 #: The wing's modules, in the book's order, imported on first access as attributes.
 MODULES = (
@@ -39,10 +49,10 @@ MODULES = (
     "beyond_hard",
     "beyond_conjecture",
     "style",
-    "formatting",
     "notebook",
     "crossref",
-    "records",
+    "live",
+    "benchmark_tables",
 )
 
 __all__ = ["MODULES", *MODULES]
@@ -51,6 +61,8 @@ __all__ = ["MODULES", *MODULES]
 def __getattr__(name):
     if name in MODULES:
         return importlib.import_module(f"{__name__}.{name}")
+    if f"{__name__}.{name}" in _moved.MOVED:
+        return _moved.moved_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

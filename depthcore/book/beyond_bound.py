@@ -3,17 +3,18 @@
 Recommended import: ``from depthcore.book import beyond_bound``.
 
 :func:`bound_study` runs every named filter over the trials and returns the
-errors and claimed SDs that the chapter holds against :mod:`depthcore.bound`.
+errors and claimed SDs that the chapter holds against :mod:`depthcore.analysis.bound`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, study_trials
-from ..filters import FILTERS, check_names
-from ..gaussian import PAPER_PRIOR_SCALE
-from ..scenarios import SCENARIOS
+from depthcore.problem import checks
+from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.filters import FILTERS, check_names
+from depthcore.studies import trials as study_trials
 
 # --- the Cramér-Rao bound --------------------------------------------------------------
 
@@ -41,20 +42,20 @@ def bound_study(
     rule (``"paper"``: from each trial's first three bearings) or the same rule
     applied once to ``truth`` (``"fixed"``), covariance 1000 I; trials whose
     first three bearings have no noise-free solution in front of the camera
-    are left out, as in :func:`depthcore.study_trials.simulate`. The filters that
+    are left out, as in :func:`depthcore.studies.trials.simulate`. The filters that
     draw random numbers run on the first ``particle_trials`` valid trials.
-    Set the results against :func:`depthcore.bound.posterior_bound` with
-    :func:`depthcore.bound.against_bound`.
+    Set the results against :func:`depthcore.analysis.bound.posterior_bound` with
+    :func:`depthcore.analysis.bound.against_bound`.
 
     Parameters
     ----------
     frames : sequence of int, shape (F,)
-        Numbers of frames ``N``, each from 3 to ``depthcore._checks.MAX_FRAMES``.
+        Numbers of frames ``N``, each from 3 to ``depthcore.problem.checks.MAX_FRAMES``.
     trials : int
         Trials drawn, >= 2.
     seed : int or numpy.random.SeedSequence
     names : sequence of str
-        Filters of :data:`depthcore.filters.FILTERS`; each must support the
+        Filters of :data:`depthcore.registry.filters.FILTERS`; each must support the
         frames and the process noise asked for.
     prior : {"paper", "fixed"}
     process_noise : float
@@ -74,14 +75,14 @@ def bound_study(
         "velocity_error", "velocity_sd"}``, each of shape (F, T_f), ``T_f``
         the trials it ran on.
     """
-    frames = [_checks.count(n, "frames") for n in _checks.nonempty(np.atleast_1d(frames), "frames")]
-    if any(not 3 <= n <= _checks.MAX_FRAMES for n in frames):
-        raise ValueError(f"frames must each be from 3 to {_checks.MAX_FRAMES}, got {frames}")
-    trials = _checks.count(trials, "trials")
+    frames = [checks.count(n, "frames") for n in checks.nonempty(np.atleast_1d(frames), "frames")]
+    if any(not 3 <= n <= checks.MAX_FRAMES for n in frames):
+        raise ValueError(f"frames must each be from 3 to {checks.MAX_FRAMES}, got {frames}")
+    trials = checks.count(trials, "trials")
     if trials < 2:
         raise ValueError(f"trials must be at least 2, got {trials}")
     names = check_names(names)
-    q = _checks.nonnegative_scalar(process_noise, "process_noise")
+    q = checks.nonnegative_scalar(process_noise, "process_noise")
     unable = [n for n in names if q > 0 and not FILTERS[n].with_process_noise]
     unable += [n for n in names if max(frames) > 3 and not FILTERS[n].any_frames]
     if unable:
@@ -91,10 +92,10 @@ def bound_study(
         )
     truth = SCENARIOS["fig2"].c if truth is None else truth
     particle_trials = (
-        trials if particle_trials is None else _checks.count(particle_trials, "particle_trials")
+        trials if particle_trials is None else checks.count(particle_trials, "particle_trials")
     )
     noise_rng, particle_rng = (
-        np.random.default_rng(s) for s in _checks.spawn(_checks.seed_sequence(seed), 2)
+        np.random.default_rng(s) for s in checks.spawn(checks.seed_sequence(seed), 2)
     )
     drawn = study_trials.simulate(
         truth, rho, trials, noise_rng, prior, PAPER_PRIOR_SCALE, max(frames), q, tracks=True

@@ -14,12 +14,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, study_pairs, study_scores
-from .. import filters as _filters
-from ..study_scores import TEST_POWER, detectable_difference, detectable_shift
-from .beyond_frames import COVERAGE_Z, coverage_test, frames_study
-from .formatting import rho_label, value_se
-from .style import WIDTH, subplots
+from depthcore.book.style import WIDTH, subplots
+from depthcore.formatting import rho_label, value_se
+from depthcore.problem import checks
+from depthcore.registry import filters as _filters
+from depthcore.studies import pairs as study_pairs
+from depthcore.studies import scores as study_scores
+from depthcore.studies.frames import frames_study
+from depthcore.studies.scores import (
+    COVERAGE_Z,
+    TEST_POWER,
+    coverage_test,
+    detectable_difference,
+    detectable_shift,
+)
 
 
 def conjecture_study(
@@ -34,7 +42,7 @@ def conjecture_study(
     """The second-order filter against the EKF, scored against the optimal filter and the truth.
 
     For every number of frames, noise level and depth,
-    :func:`~depthcore.book.beyond_frames.frames_study`
+    :func:`~depthcore.studies.frames.frames_study`
     of the optimal, second-order and EKF filters, the truth at time 3 being
     ``(bearing * y, y, bearing * y)``: Figure 2's ``c = (1.2, 6, 1.2)`` scaled
     to depth ``y`` (its bearings at times 1-3 are nearly those of Eq. (17)).
@@ -58,15 +66,15 @@ def conjecture_study(
     dict
         ``"frames"`` (F,), ``"rho"`` (R,), ``"depth"`` (D,), ``"truth"`` (D, 3)
         and per filter (``"optimal"``, ``"second_order"``, ``"ekf"``) the
-        scores of :func:`~depthcore.book.beyond_frames.frames_study` as arrays of shape (R, D, F);
+        scores of :func:`~depthcore.studies.frames.frames_study` as arrays of shape (R, D, F);
         ``"paired"``: the :func:`comparisons` of the second-order filter and
         the EKF over the same trials, each an array (R, D, F).
     """
-    rhos = _checks.nonempty(np.atleast_1d(_checks.positive_array(rhos, "rhos")), "rhos")
-    depths = _checks.nonempty(np.atleast_1d(_checks.positive_array(depths, "depths")), "depths")
+    rhos = checks.nonempty(np.atleast_1d(checks.positive_array(rhos, "rhos")), "rhos")
+    depths = checks.nonempty(np.atleast_1d(checks.positive_array(depths, "depths")), "depths")
     if np.any(depths <= 2):
         raise ValueError("depths must each exceed 2 (the point in front of the camera at time 1)")
-    bearing = float(_checks.finite_array(bearing, "bearing"))
+    bearing = float(checks.finite_array(bearing, "bearing"))
     truths = np.stack([bearing * depths, depths, bearing * depths], axis=1)
     names = ("optimal", "second_order", "ekf")
     runs = [
@@ -100,14 +108,14 @@ def comparisons(summary: dict) -> dict:
     -------
     dict of float
         ``"hellinger_difference"`` (second-order less EKF mean Hellinger
-        distance to the optimal filter, :func:`~depthcore.study_pairs.paired_difference_se`),
+        distance to the optimal filter, :func:`~depthcore.studies.pairs.paired_difference_se`),
         ``"hellinger_ratio"`` (EKF over second-order,
-        :func:`~depthcore.study_pairs.mean_ratio_se`), ``"rmse_ratio"``
+        :func:`~depthcore.studies.pairs.mean_ratio_se`), ``"rmse_ratio"``
         (second-order RMSE over the EKF's) and ``"ekf_rmse_ratio"`` (its
-        inverse, :func:`~depthcore.study_pairs.rmse_ratio_se`),
+        inverse, :func:`~depthcore.studies.pairs.rmse_ratio_se`),
         ``"coverage_68_gap"`` and ``"coverage_95_gap"`` (how much farther the
         second-order coverage is from its level than the EKF's,
-        :func:`~depthcore.study_pairs.coverage_gap_difference`), each with
+        :func:`~depthcore.studies.pairs.coverage_gap_difference`), each with
         ``"<key>_se"``, and ``"trials"``.
     """
     so, ekf = "second_order", "ekf"
@@ -139,7 +147,7 @@ def conjecture_wins(result: dict, z: float = COVERAGE_Z) -> dict:
     """Where the second-order filter beats the EKF, cell by cell of :func:`conjecture_study`.
 
     Each duel is a paired two-sided test at critical value ``z``
-    (:func:`~depthcore.study_scores.difference_verdict`) over the trials both
+    (:func:`~depthcore.studies.scores.difference_verdict`) over the trials both
     filters ran on, with three outcomes per cell: ``1`` the second-order filter
     significantly better, ``-1`` the EKF significantly better, ``0`` no
     detectable difference.
@@ -150,7 +158,7 @@ def conjecture_wins(result: dict, z: float = COVERAGE_Z) -> dict:
         From :func:`conjecture_study`; its arrays have shape (R, D, F).
     z : float
         Critical value of the tests and of
-        :func:`~depthcore.book.beyond_frames.coverage_test`.
+        :func:`~depthcore.studies.scores.coverage_test`.
 
     Returns
     -------
@@ -163,7 +171,7 @@ def conjecture_wins(result: dict, z: float = COVERAGE_Z) -> dict:
         the paired difference of the distances from it); the same with
         ``"_se"`` appended, the SE (R, D, F) each test used (the RMSE
         ratio's relative SE for ``"rmse"``); ``"calibrated_<level>"`` ``{name: (R, D, F)}``,
-        the verdicts of :func:`~depthcore.book.beyond_frames.coverage_test`
+        the verdicts of :func:`~depthcore.studies.scores.coverage_test`
         for ``"optimal"``, ``"second_order"`` and ``"ekf"``.
     """
     pairs = result["paired"]
@@ -276,8 +284,8 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
         where the EKF wins) and ``"<prefix>_<j>_<score>_table"`` (the three
         as ``"wins / ties / losses"``); ``"<prefix>_detect_<score>"``, the
         largest over the cells of the difference the paired test finds with
-        power :data:`~depthcore.study_scores.TEST_POWER`
-        (:func:`~depthcore.study_scores.detectable_shift`): of the mean
+        power :data:`~depthcore.studies.scores.TEST_POWER`
+        (:func:`~depthcore.studies.scores.detectable_shift`): of the mean
         Hellinger distances, of the RMSEs (the factor by which they differ,
         from the shift of their ratio's logarithm), of the coverages'
         distances from their levels (in percentage points);
@@ -286,10 +294,10 @@ def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_
         The power of those verdicts: ``"<prefix>_test_size"`` (the test's
         false alarm rate at ``z``, in percent), ``"<prefix>_test_trials"``
         (the most trials behind a coverage), ``"<prefix>_test_power"``
-        (:data:`~depthcore.study_scores.TEST_POWER`, in percent) and
+        (:data:`~depthcore.studies.scores.TEST_POWER`, in percent) and
         ``"<prefix>_detect_<level>"``, the coverage error that the test finds
         with that power at that many trials
-        (:func:`~depthcore.study_scores.detectable_difference`), in percentage
+        (:func:`~depthcore.studies.scores.detectable_difference`), in percentage
         points; the same with ``_min`` appended for the fewest trials behind a
         coverage (trials without a noise-free solution in front of the camera are left out).
     """
@@ -345,7 +353,7 @@ def extreme_text(result: dict, key: str, which: str, cells=(...,), decimals: int
     cells : tuple
         An index into the (R, D, F) arrays: the cells searched (default all).
     decimals : int
-        Of :func:`~depthcore.book.formatting.value_se`.
+        Of :func:`~depthcore.formatting.value_se`.
 
     Returns
     -------

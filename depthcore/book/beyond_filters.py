@@ -10,7 +10,7 @@ Recommended import: ``from depthcore.book import beyond_filters``.
   sampler's error against the number of particles, for the settings
   :data:`SETTINGS`;
 * :func:`resample_move_runs`: the causal particle filter with resample-move
-  (:mod:`depthcore.resample_move`) run independently several times on a
+  (:mod:`depthcore.particles.resample_move`) run independently several times on a
   scenario, against the optimal filter;
 * :func:`moments_texts`: every filter's moments as the chapter's table glues them.
 """
@@ -19,16 +19,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, ekf, optimal, particle, resample_move, ukf
-from ..estimates import QUANTITIES
-from ..filters import NAMES
-from ..gaussian import MeanAndCov
-from ..scenarios import Scenario
-from .formatting import plus_minus
-from .style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.exact import optimal
+from depthcore.formatting import plus_minus
+from depthcore.kalman import ekf, ukf
+from depthcore.particles import importance, resample_move
+from depthcore.problem import checks
+from depthcore.problem.gaussian import MeanAndCov
+from depthcore.problem.scenarios import Scenario
+from depthcore.registry.estimates import MOMENTS, QUANTITIES
+from depthcore.registry.filters import NAMES
 
 #: Settings of the particle filter compared by :func:`particle_convergence`:
-#: keyword arguments of :func:`depthcore.particle.run`.
+#: keyword arguments of :func:`depthcore.particles.importance.run`.
 SETTINGS = {
     "default": {},
     "resampling": {"ess_threshold": 0.5},
@@ -36,42 +39,12 @@ SETTINGS = {
 }
 
 
-#: The moments whose errors :func:`particle_convergence` measures.
-MOMENTS = ("depth_mean", "depth_sd", "velocity_mean", "velocity_sd")
-
-
-#: Particles per call of :func:`depthcore.particle.run` (bounds the memory, about 200 bytes each).
+#: Particles per call of :func:`depthcore.particles.importance.run` (bounds the memory, about 200
+#: bytes each).
 CHUNK_PARTICLES = 200_000
 
 
 # --- convergence of the particle filter ------------------------------------------------------
-
-
-def check_sizes(sizes) -> np.ndarray:
-    """Numbers of particles, checked: positive integers, at least one.
-
-    Parameters
-    ----------
-    sizes : int or array_like of int, shape (S,)
-
-    Returns
-    -------
-    ndarray of int, shape (S,)
-
-    Raises
-    ------
-    ValueError
-        Naming ``sizes`` when they are not positive integers.
-    """
-    sizes = np.atleast_1d(np.asarray(sizes))
-    if (
-        sizes.ndim != 1
-        or sizes.size < 1
-        or not np.issubdtype(sizes.dtype, np.integer)
-        or np.any(sizes < 1)
-    ):
-        raise ValueError(f"sizes must be positive integers, got {sizes!r}")
-    return sizes.astype(int)
 
 
 def _run_repeats(scenario: Scenario, n: int, repeats: int, rng, kwargs: dict):
@@ -81,7 +54,9 @@ def _run_repeats(scenario: Scenario, n: int, repeats: int, rng, kwargs: dict):
     moments, ess = [], []
     for start in range(0, repeats, per_call):
         b = min(per_call, repeats - start)
-        batch = particle.run(np.tile(s.mu, (b, 1)), s.rho, prior.mean, prior.cov, n, rng, **kwargs)
+        batch = importance.run(
+            np.tile(s.mu, (b, 1)), s.rho, prior.mean, prior.cov, n, rng, **kwargs
+        )
         moments.append(np.stack(batch.moments(), axis=-1))
         ess.append(batch.ess)
     return np.concatenate(moments), np.concatenate(ess)
@@ -94,7 +69,7 @@ def particle_convergence(
 
     Each setting runs ``repeats`` independent filters on the scenario's
     measurements for each number of particles; the errors are measured from
-    the optimal filter's exact moments (:func:`depthcore.optimal.marginals`).
+    the optimal filter's exact moments (:func:`depthcore.exact.optimal.marginals`).
 
     Parameters
     ----------
@@ -112,19 +87,19 @@ def particle_convergence(
     -------
     dict
         ``"sizes"`` (S,), ``"repeats"``, ``"exact"``: ``{moment: float}`` for
-        :data:`MOMENTS`, ``"rmse"``: ``{setting: {moment: (S,)}}`` and
+        :data:`~depthcore.registry.estimates.MOMENTS`, ``"rmse"``: ``{setting: {moment: (S,)}}`` and
         ``"ess"``: ``{setting: (S, 3)}``, the mean ESS after each measurement
         as a fraction of ``N``.
     """
     if not isinstance(scenario, Scenario):
         raise ValueError(f"scenario must be a Scenario, got {type(scenario).__name__}")
-    sizes = check_sizes(sizes)
+    sizes = checks.sizes(sizes)
     if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:
         raise ValueError(f"repeats must be a positive integer, got {repeats!r}")
     settings = SETTINGS if settings is None else settings
     opt = optimal.marginals(scenario.mu, scenario.rho, scenario.prior)
     exact = np.array([getattr(opt, m) for m in MOMENTS])
-    streams = _checks.spawn(seed, len(settings))
+    streams = checks.spawn(seed, len(settings))
     rmse, ess = {}, {}
     for (name, kwargs), stream in zip(settings.items(), streams, strict=True):
         rng = np.random.default_rng(stream)
@@ -153,7 +128,7 @@ def resample_move_runs(
 ) -> dict:
     """Independent runs of the resample-move particle filter on a scenario.
 
-    The filter of :func:`depthcore.resample_move.run` sees the bearings one at
+    The filter of :func:`depthcore.particles.resample_move.run` sees the bearings one at
     a time (bootstrap proposal from the prior, systematic resampling when the
     ESS falls below ``N/2``, then ``moves`` Metropolis steps per particle).
     The ``repeats`` runs draw from independent child streams of ``seed``;
@@ -173,10 +148,11 @@ def resample_move_runs(
     Returns
     -------
     dict
-        ``"runs"``: ``{moment: (repeats,)}`` for :data:`MOMENTS`; ``"mean"`` and
+        ``"runs"``: ``{moment: (repeats,)}`` for :data:`~depthcore.registry.estimates.MOMENTS`;
+        ``"mean"`` and
         ``"se"``: ``{moment: float}``, the mean over the runs and its standard
         error (SD over the runs / sqrt(repeats)); ``"exact"``: ``{moment:
-        float}`` of the optimal filter (:func:`depthcore.optimal.marginals`,
+        float}`` of the optimal filter (:func:`depthcore.exact.optimal.marginals`,
         in front of the camera); ``"ess"`` (repeats, 3): the ESS after each
         bearing as a fraction of ``N``; ``"resampled"`` (repeats, 3).
     """
@@ -189,7 +165,7 @@ def resample_move_runs(
         resample_move.resample_move(
             s.mu, s.rho, prior, n_particles, np.random.default_rng(stream), moves
         )
-        for stream in _checks.spawn(seed, int(repeats))
+        for stream in checks.spawn(seed, int(repeats))
     ]
     runs = {k: np.concatenate([b.moments()[k] for b in batches]) for k in MOMENTS}
     opt = optimal.marginals(s.mu, s.rho, prior)
@@ -266,13 +242,13 @@ def truncated_bearing_moments(mean, cov, eps) -> dict:
     from scipy.integrate import quad
     from scipy.special import ndtr
 
-    mean = _checks.finite_array(mean, "mean")
-    cov = _checks.finite_array(cov, "cov")
+    mean = checks.finite_array(mean, "mean")
+    cov = checks.finite_array(cov, "cov")
     if mean.shape not in ((2,), (3,)) or cov.shape != 2 * mean.shape:
         raise ValueError(
             f"mean and cov must have shapes (d,), (d, d), d = 2 or 3; got {mean.shape}, {cov.shape}"
         )
-    eps = np.atleast_1d(_checks.positive_array(eps, "eps"))
+    eps = np.atleast_1d(checks.positive_array(eps, "eps"))
     mx, my = mean[:2]
     cxx, cxy, cyy = cov[0, 0], cov[0, 1], cov[1, 1]
     if not (cyy > 0 and cxx * cyy - cxy**2 >= 0):
@@ -444,7 +420,7 @@ def convergence_figure(result: dict, quantity: str = "depth"):
 def _row(rows: list[dict], name: str, quantity: str) -> dict:
     """The row of ``name`` for ``quantity``.
 
-    The row is taken from :func:`depthcore.reproduce.reproduce`'s scenario rows.
+    The row is taken from :func:`depthcore.studies.reproduce.reproduce`'s scenario rows.
 
     The optimal filter as derived, restricted to the front of the camera; the
     second-order filter with the covariance ``2 rho**2 J^-1``; the others' only row.
@@ -468,14 +444,14 @@ def moments_texts(result: dict, decimals: int = 3) -> dict:
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.reproduce.reproduce`.
+        From :func:`depthcore.studies.reproduce.reproduce`.
     decimals : int
 
     Returns
     -------
     dict
         ``"bf_<key>_<filter>_<quantity>"``: ``"6.466 ± 0.799"`` for each
-        scenario key, filter of :data:`depthcore.filters.FILTERS` and
+        scenario key, filter of :data:`depthcore.registry.filters.FILTERS` and
         quantity; ``"bf_<key>_particle_<quantity>_se"``: the particle filter's
         Monte Carlo standard error (the larger of its mean's and SD's).
     """

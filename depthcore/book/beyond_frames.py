@@ -2,11 +2,10 @@
 
 Recommended import: ``from depthcore.book import beyond_frames``.
 
-* :func:`frames_study`: the study at the last frame ``N`` for ``N`` from 3 on,
-  with or without process noise; :func:`frames_study_figure` draws it and
-  :func:`frames_study_texts` gives its texts;
-* :func:`coverage_test`: the binomial test of a coverage (also the conjecture
-  chapter's);
+* :func:`frames_study_figure` draws the study at the last frame ``N``
+  (:func:`depthcore.studies.frames.frames_study`) and :func:`frames_study_texts`
+  gives its texts, the coverages tested by
+  :func:`depthcore.studies.scores.coverage_test`;
 * :func:`frame_marginals` and :func:`frame_marginals_figure`: every filter's
   depth marginal at several frames of one track; :func:`track_marginals`
   draws the track and runs them from one seed.
@@ -16,159 +15,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, model, study, study_scores, study_trials
-from .. import filters as _filters
-from ..filters import FILTERS, check_names
-from ..gaussian import PAPER_PRIOR_SCALE, paper_prior_means
-from ..scenarios import SCENARIOS
-from .beyond_study import gather_scores
-from .style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, paper_prior_means
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry import filters as _filters
+from depthcore.registry.filters import FILTERS, check_names
+from depthcore.studies.scores import COVERAGE_Z, coverage_test
 
 # --- more frames ----------------------------------------------------------------------------
-
-#: Depth scores gathered per filter by :func:`frames_study`, from :func:`depthcore.study.study`.
-FRAMES_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
-
-
-#: The default critical value of :func:`coverage_test`, the standard normal's two-sided 1 % point.
-COVERAGE_Z = 2.5758293035489004
-
-
-def frames_study(
-    frames,
-    trials: int,
-    seed,
-    names=("optimal", "second_order", "ekf"),
-    prior: str = "paper",
-    process_noise: float = 0.0,
-    truth=None,
-    rho: float = SCENARIOS["fig2"].rho,
-    particle_trials: int | None = None,
-    n_particles: int = study_trials.PARTICLES,
-) -> dict:
-    """:func:`depthcore.study.study` at each number of frames, its depth scores gathered.
-
-    The point, at ``truth`` at time 3, is followed on to frame ``N`` (with
-    velocity changes of SD ``process_noise``) and every filter is scored on its
-    state there. The filters that draw random numbers (``Filter.random``) run
-    in a second study of ``particle_trials`` trials with ``n_particles``
-    particles; the optimal filter, the reference of the Hellinger distances,
-    runs in both. Both studies use ``seed``, so their first trials are the same.
-
-    Parameters
-    ----------
-    frames : sequence of int, shape (F,)
-        Numbers of frames ``N``, each from 3 to ``depthcore._checks.MAX_FRAMES``.
-    trials : int
-        Trials per ``N`` of the deterministic filters.
-    seed : int or numpy.random.SeedSequence
-        The same at every ``N``.
-    names : sequence of str
-        Filters, from :data:`depthcore.filters.FILTERS`; ``"optimal"`` is run
-        whether named or not.
-    prior : {"paper", "fixed"}
-    process_noise : float
-        ``q >= 0``.
-    truth : array_like, shape (3,), optional
-        State at time 3; default Figure 2's ``c``.
-    rho : float
-    particle_trials : int, optional
-        Trials per ``N`` of the random filters; default ``trials``.
-    n_particles : int
-
-    Returns
-    -------
-    dict
-        ``"frames"`` (F,), ``"process_noise"``, ``"prior"`` and, per filter
-        (the optimal filter first), ``{score: (F,)}`` for :data:`FRAMES_SCORES`
-        (of the depth) and ``"nees"``, each with its standard error
-        (:func:`~depthcore.book.beyond_study.gather_scores`), ``"hellinger"`` (mean Hellinger
-        distance of the depth marginal to the optimal one) with ``"hellinger_se"``,
-        and ``"trials"`` (valid trials scored); ``"paired"``, a list (F,) of
-        the per-trial depth scores' co-moments of the filters that draw no
-        random numbers, over their common trials (``study(..., paired=True)``).
-    """
-    values = list(frames) if np.ndim(frames) else [frames]
-    frames = [_checks.frames(n) for n in _checks.nonempty(values, "frames")]
-    names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
-    random = tuple(n for n in names if FILTERS[n].random)
-    plain = tuple(n for n in names if not FILTERS[n].random)
-    particle_trials = trials if particle_trials is None else particle_trials
-    groups = [(plain, trials)] + ([(("optimal",) + random, particle_trials)] if random else [])
-    rows = {name: [] for name in names}
-    paired = []
-    for n in frames:
-        for group, t in groups:
-            r = study.study(
-                truth,
-                rho,
-                trials=t,
-                seed=seed,
-                prior=prior,
-                names=group,
-                n_particles=n_particles,
-                frames=n,
-                process_noise=process_noise,
-                paired=group is plain,
-            )
-            for name in group[1:] if group is not plain else group:
-                rows[name].append((r["filters"][name], r["valid_trials"]))
-            if group is plain:
-                paired.append(r["paired"])
-    out = {"frames": np.array(frames), "process_noise": float(process_noise), "prior": prior}
-    for name, runs in rows.items():
-        f = [x for x, _ in runs]
-        out[name] = gather_scores(f, FRAMES_SCORES)
-        out[name]["hellinger"] = np.array([x["hellinger_depth"]["mean"] for x in f])
-        out[name]["hellinger_se"] = np.array([x["hellinger_depth"]["se"] for x in f])
-        out[name]["trials"] = np.array([v for _, v in runs])
-    out["paired"] = paired
-    return out
-
-
-def coverage_test(coverage, level: float, trials, z: float = COVERAGE_Z) -> dict:
-    """The binomial test of a coverage against its nominal level, normal approximation.
-
-    A filter whose central ``level`` interval holds the truth with probability
-    ``level`` covers it in a fraction of ``n`` independent trials with standard
-    error ``sqrt(level (1 - level) / n)``. The coverage is called
-    ``"calibrated"`` when it lies within ``z`` standard errors of the level
-    (a two-sided test at 1 % for the default ``z``), ``"overconfident"`` when
-    below (intervals too narrow), ``"underconfident"`` when above.
-
-    Parameters
-    ----------
-    coverage : array_like, shape (...)
-        Fractions of trials covered, in [0, 1].
-    level : float
-        Nominal level, in (0, 1).
-    trials : array_like of int, shape (...)
-        Trials behind each coverage, >= 1.
-    z : float
-        Critical value, > 0.
-
-    Returns
-    -------
-    dict
-        ``"se"``, ``"z"`` (the standardised deviation) and ``"verdict"``
-        (array of str), each of the broadcast shape.
-    """
-    coverage = _checks.finite_array(coverage, "coverage")
-    if np.any((coverage < 0) | (coverage > 1)):
-        raise ValueError("coverage must lie in [0, 1]")
-    level = float(level)
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level!r}")
-    trials = _checks.finite_array(trials, "trials")
-    if np.any(trials < 1):
-        raise ValueError("trials must each be at least 1")
-    z = _checks.positive_scalar(z, "z")
-    se = study_scores.coverage_se(level, trials)
-    score = (coverage - level) / se
-    verdict = np.where(
-        np.abs(score) <= z, "calibrated", np.where(score < 0, "overconfident", "underconfident")
-    )
-    return {"se": se, "z": score, "verdict": verdict}
 
 
 def track_marginals(
@@ -176,7 +31,7 @@ def track_marginals(
 ) -> dict:
     """One track of a scenario's point and each filter's depth marginals along it.
 
-    The track (:func:`depthcore.model.simulate`, no process noise) and the
+    The track (:func:`depthcore.problem.model.simulate`, no process noise) and the
     random filters (:func:`frame_marginals`) draw from one generator, in that
     order, so that a seed gives the same track and the same panels.
 
@@ -190,7 +45,7 @@ def track_marginals(
     names : sequence of str
         Filters, as :func:`frame_marginals` takes them.
     scenario : str
-        The key of :data:`depthcore.scenarios.SCENARIOS` whose noise-free
+        The key of :data:`depthcore.problem.scenarios.SCENARIOS` whose noise-free
         state at time 3 and noise level are taken.
     n_points : int
         Grid points of each density.
@@ -204,12 +59,12 @@ def track_marginals(
     Raises
     ------
     ValueError
-        For an unknown ``scenario``, and as :func:`depthcore.model.simulate`
+        For an unknown ``scenario``, and as :func:`depthcore.problem.model.simulate`
         and :func:`frame_marginals` refuse their arguments.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"scenario must be one of {', '.join(SCENARIOS)}, got {scenario!r}")
-    frames = _checks.frames(frames)
+    frames = checks.frames(frames)
     s = SCENARIOS[scenario]
     rng = np.random.default_rng(seed)
     track = model.simulate(s.c, frames, s.rho, 0.0, rng)
@@ -258,17 +113,17 @@ def frame_marginals(
         ``"frames"``, ``"grid"`` (G,), ``"density"`` ``{name: (G,)}``,
         ``"depth_mean"`` and ``"depth_sd"`` ``{name: float}``.
     """
-    mu = _checks.finite_array(mu, "mu")
+    mu = checks.finite_array(mu, "mu")
     if mu.ndim != 1 or len(mu) < 3:
         raise ValueError(f"mu must have shape (M,) with M >= 3, got shape {mu.shape}")
-    frames = [_checks.count(n, "frames") for n in _checks.nonempty(np.atleast_1d(frames), "frames")]
+    frames = [checks.count(n, "frames") for n in checks.nonempty(np.atleast_1d(frames), "frames")]
     if any(not 3 <= n <= len(mu) for n in frames):
         raise ValueError(f"frames must each be from 3 to {len(mu)}, got {frames}")
     names = ("optimal",) + tuple(n for n in check_names(names) if n != "optimal")
-    n_points = _checks.count(n_points, "n_points")
-    width = _checks.positive_scalar(width, "width")
+    n_points = checks.count(n_points, "n_points")
+    width = checks.positive_scalar(width, "width")
     pm = paper_prior_means(model.noise_free_states(mu[None, :3]))[0]
-    pc = _checks.positive_scalar(prior_scale, "prior_scale") * np.eye(3)
+    pc = checks.positive_scalar(prior_scale, "prior_scale") * np.eye(3)
     out = []
     for n in frames:
         estimates = {}
@@ -365,7 +220,7 @@ def _coverage_bands(ax, frames, level: float, trials) -> None:
 
 
 def frames_study_figure(result: dict, names=None, title: str | None = None):
-    """The scores of :func:`frames_study` against ``N``, one panel each.
+    """The scores of :func:`~depthcore.studies.frames.frames_study` against ``N``, one panel each.
 
     Parameters
     ----------
@@ -380,8 +235,8 @@ def frames_study_figure(result: dict, names=None, title: str | None = None):
     -------
     matplotlib.figure.Figure
         Six panels, :data:`FRAMES_ROWS`, two to a row. The coverage panels shade
-        where a coverage passes :func:`coverage_test`
-        (within :data:`COVERAGE_Z` binomial standard errors
+        where a coverage passes :func:`~depthcore.studies.scores.coverage_test`
+        (within :data:`~depthcore.studies.scores.COVERAGE_Z` binomial standard errors
         of the nominal level) over each filter's number of trials, one band per
         number of trials: they overlap, darkest in the narrowest, of the most
         trials.
@@ -426,10 +281,10 @@ def frames_study_figure(result: dict, names=None, title: str | None = None):
 
 
 def frames_study_texts(result: dict, prefix: str) -> dict:
-    """Counts of :func:`frames_study`'s failed coverage tests, for glue.
+    """Counts of :func:`~depthcore.studies.frames.frames_study`'s failed coverage tests, for glue.
 
     Each filter's coverages of the central 68 % and 95 % intervals at every
-    ``N`` are tested by :func:`coverage_test`
+    ``N`` are tested by :func:`~depthcore.studies.scores.coverage_test`
     (two-sided, 1 %) against their nominal levels over the filter's trials.
 
     Returns

@@ -3,7 +3,7 @@
 Recommended import: ``from depthcore.book import beyond_hard``.
 
 :func:`hard_figure` draws each filter's coverage over the cells of
-:func:`depthcore.hardness.hard_study`; :func:`hard_label` and
+:func:`depthcore.studies.hardness.hard_study`; :func:`hard_label` and
 :func:`hard_texts`, :func:`score_text` and :func:`extreme_text` give the texts the chapter glues;
 :func:`outcome_counts` counts the outcomes of its paired tests.
 """
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .formatting import value_se
-from .style import STYLE, WIDTH, subplots
+from depthcore.book.style import STYLE, WIDTH, subplots
+from depthcore.formatting import value_se
 
 
 def hard_figure(cells: list, groups: list, level: int = 68):
@@ -22,7 +22,7 @@ def hard_figure(cells: list, groups: list, level: int = 68):
     Parameters
     ----------
     cells : list of dict
-        From :func:`depthcore.hardness.hard_study`.
+        From :func:`depthcore.studies.hardness.hard_study`.
     groups : list of (str, list of int, array_like, bool)
         One column each: the x-axis label, the indices of its cells, their
         x values and whether the x-axis is logarithmic.
@@ -81,14 +81,14 @@ HARD_SCORES = ("rmse", "mean_sd", "coverage_68", "coverage_95")
 
 
 def hard_label(cell: dict) -> str:
-    """A setting of :func:`depthcore.hardness.hard_cell`: truth, prior covariance, its velocity."""
+    """A setting of :func:`~depthcore.studies.hardness.hard_cell`: truth, prior, velocity."""
     x, y, v = (float(a) for a in cell["truth"])
     s = float(cell["prior_cov"][0, 0])
     return f"({x:g}, {y:g}, {v:g}); {s:g} I; v₀ = {float(cell['prior_mean'][2]):g}"
 
 
 def hard_texts(cells: list, prefix: str) -> dict:
-    """Texts of :func:`depthcore.hardness.hard_study`'s cells, for glue.
+    """Texts of :func:`depthcore.studies.hardness.hard_study`'s cells, for glue.
 
     Returns
     -------
@@ -98,7 +98,7 @@ def hard_texts(cells: list, prefix: str) -> dict:
         ``"<prefix>_<i>_bound"`` (the bound's depth SD), and for each reading
         ``r`` (``"fixed"``, ``"prior"``), filter and score of
         :data:`HARD_SCORES` ``"<prefix>_<i>_<r>_<filter>_<score>"``:
-        ``"value ± standard error"`` (:func:`~depthcore.book.formatting.value_se`; two decimals for
+        ``"value ± standard error"`` (:func:`~depthcore.formatting.value_se`; two decimals for
         the
         coverages, three significant figures' worth for the depths).
     """
@@ -118,7 +118,7 @@ def score_text(scores: dict, score: str) -> str:
     """One score of one filter as :func:`hard_texts` shows it: ``"value ± standard error"``.
 
     Two decimals for a coverage, three significant figures' worth for a depth
-    (:func:`~depthcore.book.formatting.value_se`).
+    (:func:`~depthcore.formatting.value_se`).
     """
     value = scores[score]
     if score.startswith("coverage"):
@@ -134,7 +134,7 @@ def extreme_text(cells: list, reading: str, name: str, score: str, which: str, w
     Parameters
     ----------
     cells : list of dict
-        From :func:`depthcore.hardness.hard_study`.
+        From :func:`depthcore.studies.hardness.hard_study`.
     reading : {"fixed", "prior"}
     name : str
         A filter of the cells.
@@ -166,8 +166,8 @@ def outcome_counts(outcomes) -> tuple:
     Parameters
     ----------
     outcomes : array_like of int, shape (...)
-        Outcomes of :func:`depthcore.study_scores.difference_verdict` (or of
-        :func:`depthcore.hardness.verdicts`).
+        Outcomes of :func:`depthcore.studies.scores.difference_verdict` (or of
+        :func:`depthcore.studies.hardness.verdicts`).
 
     Returns
     -------

@@ -14,9 +14,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, bank_posterior, rbpf
-from .beyond_filters import MOMENTS, check_sizes
-from .style import MIN_FONT, WIDTH, subplots
+from depthcore.book.style import MIN_FONT, WIDTH, subplots
+from depthcore.exact import posterior
+from depthcore.particles import rbpf
+from depthcore.problem import checks
+from depthcore.registry.estimates import MOMENTS
 
 # --- the Rao-Blackwellised particle filter against the exact bank ----------------------------
 
@@ -34,17 +36,17 @@ def rbpf_convergence(
 ) -> dict:
     """The Rao-Blackwellised particle filter's moments at the last frame against ``J``.
 
-    For each number of particles ``J`` the filter (:func:`depthcore.rbpf.run`)
+    For each number of particles ``J`` the filter (:func:`depthcore.particles.rbpf.run`)
     runs ``replicas`` independent clouds over the bearings, from its own child
     stream of ``seed``; each cloud's moments at frame ``N`` are compared with
-    the exact posterior of the bank of Kalman filters (:func:`depthcore.bank_posterior.posterior`).
+    the exact posterior of the bank of Kalman filters (:func:`depthcore.exact.posterior.posterior`).
 
     Parameters
     ----------
     mu : array_like, shape (N,)
         The bearings of one track.
     rho, prior_mean, prior_cov, process_noise
-        As for :func:`depthcore.bank_posterior.posterior`.
+        As for :func:`depthcore.exact.posterior.posterior`.
     sizes : array_like of int, shape (S,)
         Particles per cloud, each >= 2.
     replicas : int
@@ -57,7 +59,7 @@ def rbpf_convergence(
     -------
     dict
         ``"sizes"`` (S,), ``"replicas"``, ``"frames"`` (``N``); ``"exact"``:
-        ``{moment: float}`` for :data:`~depthcore.book.beyond_filters.MOMENTS` and
+        ``{moment: float}`` for :data:`~depthcore.registry.estimates.MOMENTS` and
         ``"exact_error"``: the
         bank's error estimates of the depth's and the velocity's moments
         (``{"depth": float, "velocity": float}``); ``"runs"``: ``{moment: (S,
@@ -66,17 +68,17 @@ def rbpf_convergence(
         error (SD over the clouds / sqrt(replicas)), and the root-mean-square
         error of one cloud from the exact value.
     """
-    sizes = check_sizes(sizes)
+    sizes = checks.sizes(sizes)
     if np.any(sizes < 2):
         raise ValueError(f"sizes must be integers >= 2, got {sizes!r}")
     if isinstance(replicas, bool) or not isinstance(replicas, (int, np.integer)) or replicas < 2:
         raise ValueError(f"replicas must be an integer >= 2, got {replicas!r}")
-    post = bank_posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise)
+    post = posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise)
     if np.ndim(post.log_normaliser) != 0:
         raise ValueError(f"mu must have shape (N,) (one track), got shape {np.shape(mu)}")
     exact = {m: float(getattr(post, m)) for m in MOMENTS}
     runs = {m: [] for m in MOMENTS}
-    for J, stream in zip(sizes, _checks.spawn(seed, len(sizes)), strict=True):
+    for J, stream in zip(sizes, checks.spawn(seed, len(sizes)), strict=True):
         state = rbpf.run(
             mu,
             rho,
@@ -114,7 +116,7 @@ def bank_depth_figure(densities: dict, truth=None):
     Parameters
     ----------
     densities : dict
-        ``{frame: (depths, density)}``, each from :func:`depthcore.bank_posterior.node_density`
+        ``{frame: (depths, density)}``, each from :func:`depthcore.exact.posterior.node_density`
         of the posterior after that frame: the nodes as depths at that frame and
         the density there (arrays of shape (J,)).
     truth : dict, optional
@@ -162,8 +164,8 @@ def smoothing_figure(track, states, first: int = 1):
 
     Parameters
     ----------
-    track : depthcore.bank_track.Track
-        From :func:`depthcore.bank_track.track`.
+    track : depthcore.exact.smoother.Track
+        From :func:`depthcore.exact.smoother.track`.
     states : array_like, shape (N, 3)
         The true states ``(x_k, y_k, v_k)``.
     first : int

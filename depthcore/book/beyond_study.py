@@ -2,62 +2,35 @@
 
 Recommended import: ``from depthcore.book import beyond_study``.
 
-* :func:`truth_study`: the study (:func:`depthcore.study.study`) at several
-  true states, and :func:`gather_scores`, one filter's scores over several
-  studies (also the noise-level and frames chapters');
+* :func:`truth_study`: the study (:func:`depthcore.studies.monte_carlo.study`) at several
+  true states, each filter's scores gathered over the truths by
+  :func:`depthcore.studies.monte_carlo.gather_scores`;
 * :func:`calibration` and :func:`prior_calibration`: the calibration plots of
-  :func:`depthcore.study.study` and :func:`depthcore.study.prior_study`;
+  :func:`depthcore.studies.monte_carlo.study` and :func:`depthcore.studies.monte_carlo.prior_study`;
 * :func:`truth_study_texts` and :func:`prior_study_texts`: the texts the
-  chapter glues (the study's own, :func:`depthcore.book.formatting.study_texts`).
+  chapter glues (the study's own, :func:`depthcore.formatting.study_texts`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, study
-from ..estimates import QUANTITIES
-from ..filters import NAMES
-from .formatting import SCORE_TEXTS, row_extremes, value_se, vec
-from .style import MIN_FONT, STYLE, subplots
+from depthcore.book.style import MIN_FONT, STYLE, subplots
+from depthcore.formatting import SCORE_TEXTS, row_extremes, value_se, vec
+from depthcore.problem import checks
+from depthcore.registry.estimates import QUANTITIES
+from depthcore.registry.filters import NAMES
+from depthcore.studies import monte_carlo
+from depthcore.studies.monte_carlo import DEPTH_SCORES, gather_scores
 
 # --- the Monte Carlo study at several noise levels --------------------------------------------
-
-#: Depth scores of :func:`~depthcore.book.beyond_sweeps.noise_study`, from
-#: :func:`depthcore.study_scores.scores`.
-NOISE_STUDY_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
-
-
-def gather_scores(filter_results, scores) -> dict:
-    """One filter's depth scores over several studies, each with its standard error.
-
-    Parameters
-    ----------
-    filter_results : sequence of dict, length S
-        The filter's entry of :func:`depthcore.study.study`'s ``"filters"``,
-        one per study.
-    scores : sequence of str
-        Depth scores of :func:`depthcore.study_scores.scores`.
-
-    Returns
-    -------
-    dict
-        ``{score: (S,), score + "_se": (S,)}`` for each score, and ``"nees"``,
-        ``"nees_se"`` (S,).
-    """
-    out = {}
-    for score in scores:
-        out[score] = np.array([x["depth"][score] for x in filter_results])
-        out[f"{score}_se"] = np.array([x["depth"][f"{score}_se"] for x in filter_results])
-    out["nees"] = np.array([x["nees"] for x in filter_results])
-    out["nees_se"] = np.array([x["nees_se"] for x in filter_results])
-    return out
 
 
 def truth_study(
     truths, rho: float, trials: int, seed, names=("optimal", "second_order", "ekf")
 ) -> dict:
-    """:func:`depthcore.study.study` at each of several true states, with the paper's prior rule.
+    """:func:`depthcore.studies.monte_carlo.study` at each of several true states, with the paper's
+    prior rule.
 
     Parameters
     ----------
@@ -69,26 +42,27 @@ def truth_study(
         Trials per truth (the same seed for every truth).
     seed : int or numpy.random.SeedSequence
     names : sequence of str
-        Filters, from :data:`depthcore.filters.FILTERS`.
+        Filters, from :data:`depthcore.registry.filters.FILTERS`.
 
     Returns
     -------
     dict
         ``"truth"`` (T, 3), ``"valid_trials"`` (T,) and, per filter,
-        ``{score: (T,)}`` for :data:`NOISE_STUDY_SCORES` (of the depth) and ``"nees"``,
-        each with its standard error (:func:`gather_scores`).
+        ``{score: (T,)}`` for :data:`~depthcore.studies.monte_carlo.DEPTH_SCORES` (of the depth)
+        and ``"nees"``,
+        each with its standard error (:func:`~depthcore.studies.monte_carlo.gather_scores`).
     """
-    truths = _checks.finite_array(truths, "truths")
+    truths = checks.finite_array(truths, "truths")
     if truths.ndim != 2 or truths.shape[1] != 3 or truths.shape[0] < 1:
         raise ValueError(f"truths must have shape (T, 3) with T >= 1, got shape {truths.shape}")
-    rho = _checks.positive_scalar(rho, "rho")
+    rho = checks.positive_scalar(rho, "rho")
     runs = [
-        study.study(t, rho=rho, trials=trials, seed=seed, prior="paper", names=tuple(names))
+        monte_carlo.study(t, rho=rho, trials=trials, seed=seed, prior="paper", names=tuple(names))
         for t in truths
     ]
     out = {"truth": truths, "valid_trials": np.array([r["valid_trials"] for r in runs])}
     for name in names:
-        out[name] = gather_scores([r["filters"][name] for r in runs], NOISE_STUDY_SCORES)
+        out[name] = gather_scores([r["filters"][name] for r in runs], DEPTH_SCORES)
     return out
 
 
@@ -98,7 +72,7 @@ def calibration(result: dict, quantity: str = "depth"):
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.study.study`.
+        From :func:`depthcore.studies.monte_carlo.study`.
     quantity : {"depth", "velocity"}
 
     Returns
@@ -130,7 +104,7 @@ def prior_calibration(result: dict):
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.study.prior_study`.
+        From :func:`depthcore.studies.monte_carlo.prior_study`.
 
     Returns
     -------
@@ -179,12 +153,12 @@ def truth_study_texts(result: dict, prefix: str) -> dict:
         For truth ``i``: ``"<prefix>_<i>_truth"`` (``"(2, 10, 2)"``),
         ``"<prefix>_<i>_trials"``, and per filter ``"<prefix>_<i>_<filter>_<score>"``
         for the depth's ``bias``, ``rmse``, ``mean_sd``
-        (:data:`~depthcore.book.formatting.STUDY_DECIMALS`),
+        (:data:`~depthcore.formatting.STUDY_DECIMALS`),
         ``cov68``, ``cov95`` (2 decimals) and ``nees`` (1 decimal), each also
         with ``_pm`` appended: ``"value ± standard error"``
-        (:func:`~depthcore.book.formatting.value_se`); the least and greatest
+        (:func:`~depthcore.formatting.value_se`); the least and greatest
         of each score over the truths, ``"<prefix>_<filter>_<key>_min_pm"``
-        and ``"..._max_pm"`` (:func:`~depthcore.book.formatting.row_extremes`).
+        and ``"..._max_pm"`` (:func:`~depthcore.formatting.row_extremes`).
     """
     out = {}
     names = [n for n in NAMES if n in result]
@@ -202,7 +176,7 @@ def truth_study_texts(result: dict, prefix: str) -> dict:
 
 
 def prior_study_texts(result: dict, prefix: str) -> dict:
-    """Texts of :func:`depthcore.study.prior_study`'s result, for glue.
+    """Texts of :func:`depthcore.studies.monte_carlo.prior_study`'s result, for glue.
 
     Returns
     -------

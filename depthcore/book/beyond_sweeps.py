@@ -12,7 +12,7 @@ Recommended import: ``from depthcore.book import beyond_sweeps``.
   :func:`prior_velocity_sweep` moves the velocity of the prior mean instead,
   and :func:`prior_mean_map` maps the EKF's depth SD over the prior mean's
   depth and velocity, relative to the optimal filter's;
-* :func:`noise_study`: the Monte Carlo study (:func:`depthcore.study.study`)
+* :func:`noise_study`: the Monte Carlo study (:func:`depthcore.studies.monte_carlo.study`)
   at several noise levels;
 * :func:`sweep`, :func:`profile_figure`, :func:`prior_mean_map_figure`,
   :func:`noise_study_figure` draw them, :func:`sweep_texts` and
@@ -23,14 +23,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import _checks, model, study, study_trials
-from .. import filters as _filters
-from ..filters import FILTERS, NAMES, check_names
-from ..gaussian import PAPER_PRIOR_SCALE, paper_prior_means
-from ..scenarios import SCENARIOS
-from .beyond_study import NOISE_STUDY_SCORES, gather_scores
-from .formatting import SCORE_TEXTS, plus_minus, rho_label, row_extremes, value_se
-from .style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.formatting import SCORE_TEXTS, plus_minus, rho_label, row_extremes, value_se
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, paper_prior_means
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry import filters as _filters
+from depthcore.registry.filters import FILTERS, NAMES, check_names
+from depthcore.studies import monte_carlo
+from depthcore.studies import trials as study_trials
+from depthcore.studies.monte_carlo import DEPTH_SCORES, gather_scores
 
 # --- sweeps --------------------------------------------------------------------------------
 
@@ -39,7 +41,7 @@ def _compare(mu, rho, pm, pc, names=NAMES) -> dict:
     """Depth means, SDs and Hellinger distances to the optimal filter, for a batch.
 
     The optimal filter and every Gaussian filter of ``names`` (default
-    :data:`depthcore.filters.NAMES`).
+    :data:`depthcore.registry.filters.NAMES`).
     """
     reference = FILTERS["optimal"](mu, rho, pm, pc)
     out = {
@@ -160,9 +162,9 @@ def prior_velocity_sweep(
         Added to the prior mean's depth, as in :func:`prior_offset_sweep`.
     prior_scale : float
     names : sequence of str
-        Filters of :data:`depthcore.filters.FILTERS`; the Gaussian ones among
+        Filters of :data:`depthcore.registry.filters.FILTERS`; the Gaussian ones among
         them run beside the optimal filter (default
-        :data:`depthcore.filters.NAMES`).
+        :data:`depthcore.registry.filters.NAMES`).
 
     Returns
     -------
@@ -170,8 +172,8 @@ def prior_velocity_sweep(
         ``{"velocity": (R,), name: {"depth_mean", "depth_sd", "hellinger"}}``.
     """
     mu, rho = _problem(mu, rho)
-    velocities = np.atleast_1d(_checks.finite_array(velocities, "velocities"))
-    offsets = np.atleast_1d(_checks.finite_array(depth_offset, "depth_offset"))
+    velocities = np.atleast_1d(checks.finite_array(velocities, "velocities"))
+    offsets = np.atleast_1d(checks.finite_array(depth_offset, "depth_offset"))
     pm = _prior_means(mu, offsets, velocities)[0]
     mus = np.tile(mu, (len(velocities), 1))
     return {"velocity": velocities, **_compare(mus, rho, pm, prior_scale * np.eye(3), names)}
@@ -204,8 +206,8 @@ def prior_mean_map(
         ``log10(EKF depth SD / optimal depth SD)``.
     """
     mu, rho = _problem(mu, rho)
-    offsets = np.atleast_1d(_checks.finite_array(offsets, "offsets"))
-    velocities = np.atleast_1d(_checks.finite_array(velocities, "velocities"))
+    offsets = np.atleast_1d(checks.finite_array(offsets, "offsets"))
+    velocities = np.atleast_1d(checks.finite_array(velocities, "velocities"))
     pm = _prior_means(mu, offsets, velocities).reshape(-1, 3)
     mus = np.tile(mu, (len(pm), 1))
     cov = prior_scale * np.eye(3)
@@ -224,7 +226,7 @@ def prior_mean_map(
 def noise_study(
     rhos, trials: int, seed, names=("optimal", "second_order", "ekf", "ukf"), prior: str = "paper"
 ) -> dict:
-    """:func:`depthcore.study.study` at each noise level, its depth scores gathered.
+    """:func:`depthcore.studies.monte_carlo.study` at each noise level, its depth scores gathered.
 
     Parameters
     ----------
@@ -234,29 +236,29 @@ def noise_study(
         Trials per noise level (the same seed at every level).
     seed : int or numpy.random.SeedSequence
     names : sequence of str
-        Filters, from :data:`depthcore.filters.FILTERS`.
+        Filters, from :data:`depthcore.registry.filters.FILTERS`.
     prior : {"paper", "fixed"}
 
     Returns
     -------
     dict
         ``"rho"`` (R,), ``"valid_trials"`` (R,) and, per filter,
-        ``{score: (R,)}`` for :data:`~depthcore.book.beyond_study.NOISE_STUDY_SCORES` (of the
+        ``{score: (R,)}`` for :data:`~depthcore.studies.monte_carlo.DEPTH_SCORES` (of the
         depth) and
         ``"nees"``, each with its standard error
-        (:func:`~depthcore.book.beyond_study.gather_scores`), and
+        (:func:`~depthcore.studies.monte_carlo.gather_scores`), and
         ``"hellinger"`` (the mean Hellinger distance of the depth marginal; NaN
         unless ``"optimal"``, the reference, is among ``names``).
     """
-    rhos = np.atleast_1d(_checks.positive_array(rhos, "rhos"))
+    rhos = np.atleast_1d(checks.positive_array(rhos, "rhos"))
     runs = [
-        study.study(rho=float(r), trials=trials, seed=seed, prior=prior, names=tuple(names))
+        monte_carlo.study(rho=float(r), trials=trials, seed=seed, prior=prior, names=tuple(names))
         for r in rhos
     ]
     out = {"rho": rhos, "valid_trials": np.array([r["valid_trials"] for r in runs])}
     for name in names:
         f = [r["filters"][name] for r in runs]
-        out[name] = gather_scores(f, NOISE_STUDY_SCORES)
+        out[name] = gather_scores(f, DEPTH_SCORES)
         out[name]["hellinger"] = np.array(
             [np.nan if x["hellinger_depth"] is None else x["hellinger_depth"]["mean"] for x in f]
         )
@@ -322,7 +324,7 @@ def profile_figure(mu, rhos, depths):
 
     f = model.profile_misfit(mu, depths)
     fig, ax = subplots(figsize=(6.4, 4.0))
-    for rho in np.atleast_1d(_checks.positive_array(rhos, "rhos")):
+    for rho in np.atleast_1d(checks.positive_array(rhos, "rhos")):
         ax.plot(
             depths,
             np.exp(-f / (2.0 * rho**2)),
@@ -460,7 +462,7 @@ def noise_study_texts(result: dict, prefix: str) -> dict:
         and per filter ``"<prefix>_<i>_<filter>_cov68"``, ``"..._cov95"`` (2
         decimals), ``"..._rmse"`` (3 decimals), ``"..._nees"`` (1 decimal),
         each also with ``_pm`` appended: ``"value ± standard error"``
-        (:func:`~depthcore.book.formatting.value_se`). Per filter and score,
+        (:func:`~depthcore.formatting.value_se`). Per filter and score,
         ``"<prefix>_<filter>_<key>_min_pm"`` and ``"..._max_pm"``: the ``_pm``
         text of the row where the score is least, and greatest.
     """

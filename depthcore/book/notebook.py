@@ -15,7 +15,7 @@ import ast
 import re
 from pathlib import Path
 
-from .crossref import BookReferences
+from depthcore.book.crossref import BookReferences
 
 
 class MarkdownTable:

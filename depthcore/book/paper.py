@@ -3,12 +3,12 @@
 Recommended import: ``from depthcore.book import paper``.
 
 * :func:`figure` draws the paper's Figures 2-6 from the curves of
-  :func:`depthcore.reproduce.curves`, :func:`caption` captions them and
+  :func:`depthcore.studies.reproduce.curves`, :func:`caption` captions them and
   :func:`save_all` writes them all (the command line's ``figures``);
   :func:`readings_figure` draws the readings of Eq. (16) (the marginals page)
   and :func:`translating_point` the translating point (the model page);
 * :func:`comparison_texts` and :func:`comparison_table`: the figure pages'
-  reported-versus-reproduced tables, from :func:`depthcore.reproduce.comparison`;
+  reported-versus-reproduced tables, from :func:`depthcore.studies.reproduce.comparison`;
 * :func:`ekf_linearisation` and :func:`bearings_depth_sd`: where the EKF
   linearises the three bearings, and the depth SD those linearised bearings
   allow (the filters page and the appendix).
@@ -24,13 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import _checks, ekf, model, reproduce
-from .. import filters as _filters
-from ..gaussian import Gaussian
-from ..scenarios import REPORTED_DECIMALS, SCENARIOS
-from .formatting import DECIMALS
-from .notebook import MarkdownTable
-from .style import MIN_FONT, STYLE, subplots
+from depthcore.book.notebook import MarkdownTable
+from depthcore.book.style import MIN_FONT, STYLE, subplots
+from depthcore.exact import optimal
+from depthcore.formatting import DECIMALS
+from depthcore.kalman import ekf
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.scenarios import REPORTED_DECIMALS, SCENARIOS
+from depthcore.registry import filters as _filters
+from depthcore.studies import reproduce
 
 #: Axis ranges of the figures, chosen to show the bulk of every density (the
 #: scan does not give the paper's axes).
@@ -89,7 +92,7 @@ def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
     filters : sequence of str
         Which filters to draw: the paper's three by default (its Figure 4
         omits the optimal one, which we draw), or
-        :data:`depthcore.filters.NAMES` for the extended figure with the
+        :data:`depthcore.registry.filters.NAMES` for the extended figure with the
         UKF and the particle filter. For the keys of :data:`PRINTED_OVERLAY`
         the optimal depth marginal of Eq. (16) as printed is drawn first,
         in :data:`PRINTED_STYLE`.
@@ -104,7 +107,7 @@ def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
     curves = reproduce.curves(s, np.linspace(lo, hi, n), filters=filters)
     fig, ax = subplots(figsize=(6.4, 4.0))
     if key in PRINTED_OVERLAY:
-        printed = _filters.optimal.marginals(s.mu, s.rho, s.prior, reading="printed")
+        printed = optimal.marginals(s.mu, s.rho, s.prior, reading="printed")
         ax.plot(curves["grid"], printed.depth_pdf(curves["grid"]), linewidth=1.4, **PRINTED_STYLE)
     plot_marginals(ax, curves, s.quantity, filters)
     if key in YLIM:
@@ -185,7 +188,7 @@ def readings_figure(key: str, y_max: float = 150.0, n: int = 1201):
     """
 
     s = SCENARIOS[key]
-    y_max = _checks.positive_scalar(y_max - 2.0, "y_max - 2") + 2.0
+    y_max = checks.positive_scalar(y_max - 2.0, "y_max - 2") + 2.0
     y = np.linspace(2.0, y_max, n)[1:]
     fig, ax = subplots(figsize=(6.4, 3.6))
     styles = {
@@ -193,7 +196,7 @@ def readings_figure(key: str, y_max: float = 150.0, n: int = 1201):
         "printed": ("tab:orange", "--", "Eq. (16) as printed"),
     }
     for reading, (color, linestyle, label) in styles.items():
-        m = _filters.optimal.marginals(s.mu, s.rho, s.prior, reading=reading)
+        m = optimal.marginals(s.mu, s.rho, s.prior, reading=reading)
         ax.plot(
             y,
             m.depth_pdf(y),
@@ -309,10 +312,11 @@ def translating_point(x3=None, n: int = 3):
 
 
 def comparison_texts(key: str, rows: list[dict]) -> dict[str, str]:
-    """The numbers of :func:`~depthcore.reproduce.comparison` as the book shows them, for glue.
+    """The numbers of :func:`~depthcore.studies.reproduce.comparison` as the book shows them, for
+    glue.
 
     Keys are ``f"{key}_{row id}_{field}"`` with fields ``mean``, ``sd`` (ours,
-    :data:`~depthcore.book.formatting.DECIMALS` places), ``paper_mean``, ``paper_sd`` (the paper's
+    :data:`~depthcore.formatting.DECIMALS` places), ``paper_mean``, ``paper_sd`` (the paper's
     precision, or an em dash where it prints nothing) and ``agrees``.
     """
     texts = {}
@@ -353,7 +357,7 @@ def comparison_table(key: str, rows: list[dict]) -> MarkdownTable:
     key : str
         ``"fig2"`` ... ``"fig6"``.
     rows : list of dict
-        From :func:`~depthcore.reproduce.comparison` with the same ``key``.
+        From :func:`~depthcore.studies.reproduce.comparison` with the same ``key``.
     """
     if key not in SCENARIOS:
         raise ValueError(f"key must be one of {tuple(SCENARIOS)}, got {key!r}")
@@ -395,8 +399,8 @@ def bearings_depth_sd(h, rho: float) -> float:
     -------
     float
     """
-    h = _checks.finite_array(h, "h", (3, 3))
-    rho = _checks.positive_scalar(rho, "rho")
+    h = checks.finite_array(h, "h", (3, 3))
+    rho = checks.positive_scalar(rho, "rho")
     R = np.stack([h[k] @ model.G_linear(k - 2) for k in range(3)])
     if np.linalg.matrix_rank(R) < 3:
         return float("inf")

@@ -3,17 +3,17 @@
 Recommended import: ``from depthcore.book import style``.
 
 :data:`STYLE` is one vocabulary for every plot, from the registry
-:data:`depthcore.filters.FILTERS`; :func:`subplots` makes a figure in the
+:data:`depthcore.registry.filters.FILTERS`; :func:`subplots` makes a figure in the
 book's style, at most :data:`WIDTH` inches wide, at :data:`DPI`, with no
 font smaller than :data:`MIN_FONT` points where the chapters set one.
 """
 
 from __future__ import annotations
 
-from ..filters import FILTERS
+from depthcore.registry.filters import FILTERS
 
 #: One vocabulary for every plot, the label, colour and line style of each filter,
-#: from the registry :data:`depthcore.filters.FILTERS`.
+#: from the registry :data:`depthcore.registry.filters.FILTERS`.
 STYLE = {name: f.plot_style for name, f in FILTERS.items()}
 
 

@@ -64,7 +64,7 @@ def test_api_pages_render_their_markup_and_mathematics(html_dir):
         raw = sorted(set(RAW_ROLE_RE.findall(text)))
         assert not raw, f"{page}.html shows raw Sphinx roles: {raw}"
         typeset += html.count('<span class="math notranslate nohighlight">')
-    assert 'id="depthcore.gaussian.paper_prior"' in page_html(html_dir, "book/api/gaussian")
+    assert 'id="depthcore.problem.gaussian.paper_prior"' in page_html(html_dir, "book/api/gaussian")
     # the docstrings' formulas: hundreds of them, typeset
     assert typeset > 300, f"only {typeset} formulas typeset on the API pages"
     assert r"\rho ^{2} J^{-1}" in page_html(html_dir, "book/api/second_order")

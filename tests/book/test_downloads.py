@@ -130,7 +130,9 @@ def test_source_archive_holds_the_benchmark_records(html_dir):
     top = f"depthcore-{depthcore.__version__}"
     with tarfile.open(html_dir / "downloads" / "depthcore.tar.gz") as tar:
         names = tar.getnames()
-    missing = [r for r in records if f"{top}/depthcore/benchmark_records/{r}" not in names]
+    missing = [
+        r for r in records if f"{top}/depthcore/provenance/benchmark_records/{r}" not in names
+    ]
     assert not missing, f"the source archive lacks the records {missing}"
 
 

@@ -198,7 +198,7 @@ def test_the_api_reference_is_a_short_list_of_module_summaries(pages, plain_text
     for name in depthcore.MODULES:
         assert f"depthcore.{name}:" in rest, f"the PDF's API reference omits depthcore.{name}"
     # summaries only: no module's functions are documented in print
-    assert "depthcore.gaussian.paper_prior" not in plain_text
+    assert "depthcore.problem.gaussian.paper_prior" not in plain_text
     assert "Python Module Index" not in plain_text
     assert len(pages) - first <= 8, (
         f"the API reference and what follows fill {len(pages) - first} pages"

@@ -1,0 +1,14 @@
+"""What the filters are measured against: the bound, self-calibration, independent routes.
+
+* :mod:`~depthcore.analysis.bound`: the Cramér-Rao bound on the state at
+  frame ``N``, conditional on the truth and averaged over the prior;
+* :mod:`~depthcore.analysis.calibration`: simulation-based calibration of the
+  exact filter;
+* :mod:`~depthcore.analysis.reference`: independent routes (dense grids,
+  brute-force sums, closed forms) to what the package computes otherwise,
+  for its tests and the book's checks.
+
+Where a new thing goes: a new yardstick for the filters, or a new independent
+route for checking one, goes here. It may import every family of filters,
+never the registry or the studies, which use it.
+"""

@@ -1,0 +1,812 @@
+"""The command line: ``python -m depthcore {reproduce,estimate,study,figures} ...``.
+
+``depthcore/__main__.py`` calls :func:`main`.
+
+Bad input ends with a one-line message on stderr naming the argument as the
+user gave it (``--rho``, ``--prior-cov``) and exit status 2: a value out of
+range (printed exactly as given), a flag given twice, a flag the chosen mode
+would ignore. A failure to write the output (a closed standard output, a full
+disk, a folder that cannot be made) ends with one line and exit status 1, as
+does any other failure (out of memory, a bug), which asks to rerun with
+``--debug`` (which shows the traceback). Warnings never reach stderr: inside
+the command line they are errors, reported like any other failure. The JSON
+output is strict: a number that cannot be estimated is ``null``, with a
+``<key>_reason`` beside it saying why. Commands that run longer than a few
+seconds show a progress bar on stderr when it is a terminal.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import json
+import math
+import os
+import re
+import sys
+import traceback
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from depthcore import __version__
+from depthcore.cli import text as cli_text
+from depthcore.cli.text import STUDY_LEGEND
+from depthcore.problem import checks
+from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
+from depthcore.problem.model import noise_free_state
+from depthcore.registry.adapters import RBPF_REPLICAS
+from depthcore.registry.filters import ALL_NAMES, FILTERS
+from depthcore.registry.filters import NAMES as _STUDY_FILTERS
+from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE
+from depthcore.studies import monte_carlo, reproduce
+from depthcore.studies import trials as study_trials
+
+#: Largest ``study --trials``: a limit on run time (the study streams its trials in
+#: chunks, so its memory does not grow with their number).
+MAX_TRIALS = 100_000
+
+#: Most particles held in memory at once by ``study``: the trials of a chunk times
+#: the particles per trial (times the Rao-Blackwellised filter's replicas). Measured
+#: on five frames, 10**6 particles in flight take about 0.2 GB in the importance
+#: sampler and 0.6 GB in the Rao-Blackwellised filter, so the study's memory stays
+#: below about 1 GB whatever ``--particles`` is: with many particles a chunk holds
+#: fewer trials.
+PARTICLES_IN_FLIGHT = 1_000_000
+#: Largest ``study --particles``: one trial alone must fit in
+#: :data:`PARTICLES_IN_FLIGHT` with the Rao-Blackwellised filter's replicas. Time
+#: grows linearly with trials times particles (about 1 s per 10**6 particle-trials
+#: for the importance sampler on five frames, 10 times that for the
+#: Rao-Blackwellised filter), shown by the progress bar.
+MAX_PARTICLES = PARTICLES_IN_FLIGHT // RBPF_REPLICAS
+#: Smallest ``study --particles``: the weighted covariance of the three-dimensional
+#: state, which the study scores, is singular with fewer.
+MIN_PARTICLES = 4
+
+#: Numeric limits of the command line (the library itself accepts more); ``RHO_RANGE``
+#: and ``PROCESS_NOISE_MAX`` are those of :func:`depthcore.registry.tracking.track`.
+MU_MAX = 1e6
+PRIOR_MEAN_MAX = 1e3
+PRIOR_COV_RANGE = (1e-12, 1e12)
+#: Smallest positive ``--process-noise``: the smallest normal double, below which
+#: the inverse of the noise overflows.
+PROCESS_NOISE_MIN = checks.MIN_PROCESS_NOISE
+#: Most bearings of ``estimate --mu``: the filters' limit.
+FRAMES_MAX = checks.MAX_FRAMES
+
+# A negative number in any notation (-1, -.5, -1e-1, -1E+3, -inf, -nan) is a
+# value, not an option.
+_NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.I)
+
+
+class _Once:
+    """Mixed into every option's action: refuses a second use and records the first.
+
+    ``namespace._given`` holds the destinations of the options the user gave,
+    so a flag that the chosen mode would ignore can be refused.
+    """
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        given = namespace.__dict__.setdefault("_given", set())
+        if self.dest in given:
+            raise argparse.ArgumentError(self, "given more than once; give it once")
+        given.add(self.dest)
+        super().__call__(parser, namespace, values, option_string)
+
+
+class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE
+        self._has_negative_number_optionals = []
+
+    def _add_action(self, action):
+        if action.option_strings and not isinstance(
+            action, (_Once, argparse._HelpAction, argparse._VersionAction)
+        ):
+            action.__class__ = type(f"Once{type(action).__name__}", (_Once, type(action)), {})
+        return super()._add_action(action)
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {_one_line(message)}\n")
+
+    def _print_message(self, message, file=None):
+        # argparse drops a failed write of --help or --version silently; report it
+        if message and (file is None or file is sys.stdout):
+            _write(message)
+        else:
+            super()._print_message(message, file)
+
+
+def _exact(value) -> str:
+    """A number as the user gave it: every digit, never rounded to a limit."""
+    return repr(float(value))
+
+
+def _check_limits(name: str, values, largest: float) -> None:
+    """Refuse a value that is not finite or whose magnitude exceeds ``largest``."""
+    v = np.asarray(values, dtype=float)
+    bad = ~np.isfinite(v)
+    if np.any(bad):
+        raise ValueError(f"{name} must be finite, got {_exact(v[bad][0])}")
+    big = np.abs(v) > largest
+    if np.any(big):
+        raise ValueError(
+            f"{name} must be at most {largest:g} in magnitude, got {_exact(v[big][0])}"
+        )
+
+
+def _check_rho(rho: float) -> None:
+    lo, hi = RHO_RANGE
+    if not (math.isfinite(rho) and lo <= rho <= hi):
+        raise ValueError(f"--rho must be from {lo:g} to {hi:g}, got {_exact(rho)}")
+
+
+def _check_process_noise(q: float) -> float:
+    """``--process-noise``: 0, or from :data:`PROCESS_NOISE_MIN` to :data:`PROCESS_NOISE_MAX`."""
+    if not (math.isfinite(q) and (q == 0 or PROCESS_NOISE_MIN <= q <= PROCESS_NOISE_MAX)):
+        raise ValueError(
+            f"--process-noise must be 0 or from {PROCESS_NOISE_MIN:g} to "
+            f"{PROCESS_NOISE_MAX:g}, got {_exact(q)}"
+        )
+    return q
+
+
+def _prior(mu, prior_mean, prior_cov) -> Gaussian:
+    """The prior from the command line, defaulting to the paper's rule."""
+    if prior_mean is not None:
+        _check_limits("--prior-mean", prior_mean, PRIOR_MEAN_MAX)
+    if prior_cov is not None:
+        _check_limits("--prior-cov", prior_cov, PRIOR_COV_RANGE[1])
+    if prior_mean is None:
+        try:
+            c = noise_free_state(mu[:3])
+        except ValueError as exc:
+            raise ValueError(
+                f"{exc}; the paper's prior rule needs the noise-free solution of the first "
+                "three bearings, so give --prior-mean"
+            ) from None
+        mean = paper_prior(c).mean
+    else:
+        mean = np.array(prior_mean)
+    if prior_cov is None:
+        cov = PAPER_PRIOR_SCALE * np.eye(3)
+    elif len(prior_cov) == 1:
+        if not prior_cov[0] > 0:
+            raise ValueError(
+                f"--prior-cov must be positive definite; S = {_exact(prior_cov[0])} is not > 0"
+            )
+        cov = prior_cov[0] * np.eye(3)
+    elif len(prior_cov) == 9:
+        cov = np.array(prior_cov).reshape(3, 3)
+    else:
+        raise ValueError(
+            f"--prior-cov takes 1 value (S I) or 9 (a 3 x 3 matrix), got {len(prior_cov)}"
+        )
+    try:
+        prior = Gaussian(mean, cov)
+    except ValueError as exc:
+        raise ValueError(
+            str(exc).replace("cov ", "--prior-cov ", 1).replace("mean ", "--prior-mean ", 1)
+        ) from None
+    smallest = np.linalg.eigvalsh(prior.cov)[0]
+    if smallest < PRIOR_COV_RANGE[0]:
+        raise ValueError(
+            f"--prior-cov must have eigenvalues of at least {PRIOR_COV_RANGE[0]:g}, "
+            f"got {smallest!r}"
+        )
+    return prior
+
+
+def _bar(total: int, desc: str, unit: str):
+    """A progress bar on stderr when it is a terminal, else ``None``."""
+    if not sys.stderr.isatty():
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr)
+
+
+def _progress(bar):
+    """``progress(done, total)`` moving ``bar`` (or doing nothing without one)."""
+
+    def progress(done, total):
+        if bar is not None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+    return progress
+
+
+def _with_bar(desc: str, unit: str, run):
+    """``run(progress)`` with a progress bar named ``desc`` on stderr."""
+    bar = _bar(None, desc, unit)
+    try:
+        return run(_progress(bar))
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _cmd_reproduce(args) -> str:
+    result = _with_bar(
+        "reproduce", "figure", lambda progress: reproduce.reproduce(progress=progress)
+    )
+    return _json(result) if args.json else cli_text.format_table(result)
+
+
+def _cmd_estimate(args) -> str:
+    mu = np.array(args.mu)
+    if len(mu) < 3:
+        raise ValueError(f"--mu takes at least 3 bearings (frames 1 .. N), got {len(mu)}")
+    if len(mu) > FRAMES_MAX:
+        raise ValueError(f"--mu takes at most {FRAMES_MAX} bearings, got {len(mu)}")
+    _check_limits("--mu", mu, MU_MAX)
+    _check_rho(args.rho)
+    q = _check_process_noise(args.process_noise)
+    prior = _prior(mu, args.prior_mean, args.prior_cov)
+    names = tuple(dict.fromkeys(args.filters))
+    if len(names) != len(args.filters):
+        raise ValueError("--filters: a filter is named more than once")
+    summary = reproduce.summarize(
+        mu, args.rho, prior, process_noise=q, smooth=args.smooth, names=names
+    )
+    return _json(summary) if args.json else cli_text.format_summary(summary)
+
+
+def _check_out(out: str) -> Path:
+    """The folder of ``figures --out``: refuses an empty path, a file, a path below a file."""
+    if not out.strip():
+        raise ValueError("--out must be a folder, got an empty path")
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"--out must be a folder, but {out!r} is an existing file")
+    for parent in path.parents:
+        if parent.exists() and not parent.is_dir():
+            raise ValueError(f"--out must be a folder, but {str(parent)!r} in {out!r} is a file")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--out: cannot make the folder {out!r}: {exc.strerror}") from None
+    if not os.access(path, os.W_OK):
+        raise ValueError(f"--out: cannot write into the folder {out!r}: permission denied")
+    return path
+
+
+def _named_once(values, option: str) -> tuple:
+    """``values`` as a tuple; a ``ValueError`` naming those the option ``option`` repeats."""
+    repeated = sorted({v for v in values if values.count(v) > 1})
+    if repeated:
+        raise ValueError(f"{option} names {', '.join(repeated)} more than once")
+    return tuple(values)
+
+
+#: The entry-point group (``pyproject.toml``) of the function that draws the paper's
+#: figures: the book's :func:`depthcore.book.paper.save_all`, which the command line
+#: finds there rather than importing the book.
+FIGURE_WRITERS = "depthcore.figures"
+
+
+def _figure_writer():
+    """The installed figure writer of :data:`FIGURE_WRITERS`; a ValueError when there is none."""
+    found = sorted(importlib.metadata.entry_points(group=FIGURE_WRITERS), key=lambda e: e.name)
+    if not found:
+        raise ValueError(
+            f"figures: no figure writer is installed (entry point group {FIGURE_WRITERS}); "
+            "install depthcore again"
+        )
+    return found[0].load()
+
+
+def _cmd_figures(args) -> str:
+    out = _check_out(args.out)
+    formats = _named_once(args.formats or FIGURE_FORMATS, "--format")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    save_all = _figure_writer()
+    try:
+        paths = _with_bar(
+            "figures", "figure", lambda progress: save_all(out, formats, progress=progress)
+        )
+    except OSError as exc:
+        where = exc.filename or args.out
+        raise _WriteError(f"--out: cannot write {str(where)!r}: {exc.strerror}") from None
+    return "\n".join(str(p) for p in paths) + "\n"
+
+
+def _truth(values) -> np.ndarray:
+    """``--truth``'s three numbers X Y V."""
+    try:
+        truth = np.array([float(v) for v in values])
+    except ValueError:
+        truth = None
+    if truth is None or truth.shape != (3,):
+        raise ValueError(
+            f"--truth must be 'prior' or three numbers X Y V, got {' '.join(values)!r}"
+        )
+    return truth
+
+
+def _refuse_ignored(args, mode: str, flags: dict) -> None:
+    """Refuse the flags of ``flags`` (dest: flag) that the user gave but ``mode`` ignores."""
+    given = [flag for dest, flag in flags.items() if dest in getattr(args, "_given", ())]
+    if given:
+        raise ValueError(
+            f"{' and '.join(given)}: not used by {mode}; "
+            f"leave {'them' if len(given) > 1 else 'it'} out"
+        )
+
+
+def _chunk(names, particles: int) -> int:
+    """Trials per chunk of the study: :data:`study.CHUNK`, fewer with many particles."""
+    held = particles * max(RBPF_REPLICAS if n == "rbpf" else 1 for n in names)
+    return max(1, min(monte_carlo.CHUNK, PARTICLES_IN_FLIGHT // held))
+
+
+def _cmd_study(args) -> str:
+    if not 1 <= args.trials <= MAX_TRIALS:
+        raise ValueError(
+            f"--trials must be a positive integer at most {MAX_TRIALS}, got {args.trials}"
+        )
+    if not MIN_PARTICLES <= args.particles <= MAX_PARTICLES:
+        raise ValueError(
+            f"--particles must be from {MIN_PARTICLES} (a covariance of the state (x, y, v) "
+            f"needs 4) to {MAX_PARTICLES} (the study holds at most {PARTICLES_IN_FLIGHT} "
+            f"particles in memory, about 1 GB), got {args.particles}"
+        )
+    if args.seed < 0:
+        raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
+    _check_rho(args.rho)
+    checks.frames(args.frames, "--frames")
+    q = _check_process_noise(args.process_noise)
+    names = _named_once(args.filters, "--filters")
+    if q > 0 and "filters" not in getattr(args, "_given", ()):  # the default: those that can run
+        names = tuple(n for n in names if FILTERS[n].with_process_noise)
+    if args.truth == [monte_carlo.PRIOR_TRUTH]:
+        _refuse_ignored(
+            args,
+            "--truth prior (it checks the optimal filter alone)",
+            {"filters": "--filters", "particles": "--particles"},
+        )
+        if args.prior == "paper":
+            raise ValueError(
+                "--prior: --truth prior needs a fixed prior (the paper's rule centres the prior "
+                "on each trial's own measurements, which is not a prior), got paper"
+            )
+        result = _with_bar(
+            "study",
+            "trial",
+            lambda progress: monte_carlo.prior_study(
+                rho=args.rho,
+                trials=args.trials,
+                seed=args.seed,
+                frames=args.frames,
+                process_noise=q,
+                progress=progress,
+            ),
+        )
+        return _json(result) if args.json else cli_text.format_prior_study(result)
+    if not any(FILTERS[n].random for n in names):
+        _refuse_ignored(
+            args,
+            f"the filters {' '.join(names)}, which draw no particles",
+            {"particles": "--particles"},
+        )
+    truth = None
+    if args.truth is not None:
+        truth = _truth(args.truth)
+        _check_limits("--truth", truth, MU_MAX)
+    result = _with_bar(
+        "study",
+        "trial",
+        lambda progress: monte_carlo.study(
+            truth=truth,
+            rho=args.rho,
+            trials=args.trials,
+            seed=args.seed,
+            prior=args.prior or "paper",
+            names=names,
+            n_particles=args.particles,
+            chunk=_chunk(names, args.particles),
+            progress=progress,
+            frames=args.frames,
+            process_noise=q,
+        ),
+    )
+    return _json(result) if args.json else cli_text.format_study(result)
+
+
+# --- strict JSON -----------------------------------------------------------------------
+
+#: Why a number of the output is not finite, by its key.
+_REASONS = {
+    "error": "the Monte Carlo error cannot be estimated from this run: the weights "
+    "collapsed onto too few particles (or too few replicas)",
+}
+
+
+def _strict(value, key: str = ""):
+    """``value`` with every non-finite float made ``None``; returns (value, reason or None)."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            v, reason = _strict(v, k)
+            out[k] = v
+            if reason is not None and f"{k}_reason" not in value:
+                out[f"{k}_reason"] = reason
+        return out, None
+    if isinstance(value, (list, tuple)):
+        items = [_strict(v, key) for v in value]
+        reasons = [r for _, r in items if r is not None]
+        return [v for v, _ in items], (reasons[0] if reasons else None)
+    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
+        return None, _REASONS.get(
+            key, f"not a finite number ({float(value)}): cannot be estimated from this run"
+        )
+    if isinstance(value, np.generic):
+        return value.item(), None
+    return value, None
+
+
+def _json(result) -> str:
+    """``result`` as strict JSON: no NaN or Infinity (see :func:`_strict`)."""
+    return json.dumps(_strict(result)[0], indent=2, allow_nan=False) + "\n"
+
+
+# --- refusals in the user's words -------------------------------------------------------
+
+#: The library's names of the command line's arguments.
+_FLAGS = {
+    "mu": "--mu",
+    "rho": "--rho",
+    "prior_mean": "--prior-mean",
+    "prior_cov": "--prior-cov",
+    "process_noise": "--process-noise",
+    "q": "--process-noise",
+    "truth": "--truth",
+    "trials": "--trials",
+    "seed": "--seed",
+    "prior": "--prior",
+    "names": "--filters",
+    "filters": "--filters",
+    "n_particles": "--particles",
+    "particles": "--particles",
+    "frames": "--frames",
+    "out": "--out",
+}
+
+#: The arguments a refusal blames when the library names none of them.
+_INPUTS = {
+    "reproduce": "the paper's scenarios",
+    "estimate": "--mu, --rho and the prior",
+    "study": "--truth, --rho, --frames and --process-noise",
+    "figures": "--out",
+}
+
+#: A refusal when a filter's covariance turns out singular.
+_SINGULAR = {
+    "reproduce": "a filter's covariance is singular in double precision",
+    "estimate": "--mu, --rho and the prior have no answer: a filter's covariance is singular "
+    "in double precision; try a larger --rho or a broader --prior-cov",
+    "study": "--particles and --rho have no answer: a filter's covariance is singular (too few "
+    "particles carry weight, or the noise is too small to resolve); try more --particles or "
+    "a larger --rho",
+    "figures": "a filter's covariance is singular in double precision",
+}
+
+_LEADING = re.compile(r"^([A-Za-z_][A-Za-z_0-9]*)(\[[^\]]*\])?(?=[\s:,])")
+
+
+def _users_words(command: str, message: str) -> str:
+    """A refusal naming the argument as the user gave it (``--prior-cov``, not ``prior_cov``)."""
+    message = _one_line(message)
+    if message.startswith("-"):
+        return message
+    m = _LEADING.match(message)
+    if m and m.group(1) in _FLAGS:
+        return _FLAGS[m.group(1)] + (m.group(2) or "") + message[m.end() :]
+    if m and message[m.end() :].startswith(":"):  # an internal name: drop it
+        message = message[m.end() + 1 :].strip()
+    return f"{_INPUTS[command]} have no answer: {message}"
+
+
+class _WriteError(Exception):
+    """The output could not be written: one line, exit status 1."""
+
+
+def _write(text: str) -> None:
+    """Write ``text`` to standard output, raising :class:`_WriteError` if it cannot."""
+    stream = sys.stdout
+    if stream is None:
+        raise _WriteError("cannot write the output: standard output is closed")
+    try:
+        stream.write(text)
+        stream.flush()
+    except (OSError, ValueError) as exc:
+        # nothing more may reach the broken stream, not even at exit
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, stream.fileno())
+        except (OSError, ValueError):
+            pass
+        reason = getattr(exc, "strerror", None) or str(exc)
+        raise _WriteError(f"cannot write the output to standard output: {reason}") from None
+
+
+#: The formats ``figures --format`` accepts, all written when it is not given: those
+#: :func:`depthcore.book.paper.save_all` writes by default (a module imported only to draw).
+FIGURE_FORMATS = ("pdf", "png", "svg")
+
+EXAMPLES = {
+    "reproduce": """\
+examples:
+  python -m depthcore reproduce          the table of Figures 2-6 beside the paper
+  python -m depthcore reproduce --json   the same as JSON""",
+    "estimate": """\
+examples:
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
+  python -m depthcore estimate --mu -1e-1 0 0.2 --rho 0.01 --prior-cov 100
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --prior-mean -1 4 0 --json
+  python -m depthcore estimate --mu -0.3 0 0.2 0.33 0.43 --rho 0.005 --process-noise 0.01 --smooth
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --filters optimal iterated inverse_depth
+
+The noise-free state c is (x, y, v) at frame 3 (from the first three bearings);
+the prior is at frame 1; every filter reports the state at the last frame N.""",
+    "study": f"""\
+examples:
+  python -m depthcore study --trials 500 --seed 1
+  python -m depthcore study --filters ekf ukf --rho 0.01 --json
+  python -m depthcore study --frames 10 --process-noise 0.01 --trials 200
+
+{STUDY_LEGEND}""",
+    "figures": """\
+examples:
+  python -m depthcore figures --out figures
+  python -m depthcore figures --out figures --format svg""",
+}
+EXAMPLES["all"] = """\
+examples:
+  python -m depthcore reproduce
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
+  python -m depthcore study --trials 500 --seed 1
+  python -m depthcore figures --out figures
+
+`python -m depthcore COMMAND --help` shows each command's options and examples."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``python -m depthcore``."""
+    raw = argparse.RawDescriptionHelpFormatter
+    p = _Parser(
+        prog="python -m depthcore",
+        description="Filter based estimates of depth (Maybank 1990): the paper's filters "
+        f"on N >= 3 bearings (up to {FRAMES_MAX} frames).",
+        epilog=EXAMPLES["all"],
+        formatter_class=raw,
+    )
+    p.add_argument("--version", action="version", version=f"depthcore {__version__}")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--debug", action="store_true", help="show the traceback of an unexpected failure"
+    )
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    r = sub.add_parser(
+        "reproduce",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["reproduce"],
+        help="moments of every filter for Figures 2-6, beside the paper's",
+        description="Moments of every filter for Figures 2-6, beside the paper's.",
+    )
+    r.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    r.set_defaults(run=_cmd_reproduce)
+
+    e = sub.add_parser(
+        "estimate",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["estimate"],
+        help=f"moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames)",
+        description=f"Moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames).",
+    )
+    e.add_argument(
+        "--mu",
+        type=float,
+        nargs="+",
+        required=True,
+        metavar="M",
+        help="the measurements mu1 mu2 mu3 ... (tangents of the bearings at frames 1 .. N, "
+        f"3 <= N <= {FRAMES_MAX}; magnitudes up to {MU_MAX:g})",
+    )
+    e.add_argument(
+        "--rho",
+        type=float,
+        required=True,
+        help=f"noise standard deviation, from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g}",
+    )
+    e.add_argument(
+        "--prior-mean",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "V"),
+        help="prior mean at time 1 (default: the paper's (c1 - 2 c3, c2 - 2, 0))",
+    )
+    e.add_argument(
+        "--prior-cov",
+        type=float,
+        nargs="+",
+        metavar="S",
+        help="prior covariance: S for S I (default 1000), or 9 values row by row",
+    )
+    e.add_argument(
+        "--process-noise",
+        type=float,
+        default=0.0,
+        metavar="Q",
+        help="SD of the velocity's change per frame (default 0: the paper's constant velocity)",
+    )
+    e.add_argument(
+        "--smooth",
+        action="store_true",
+        help="also the optimal filter's smoothed depth and lateral position at every frame",
+    )
+    e.add_argument(
+        "--filters",
+        nargs="+",
+        default=list(_STUDY_FILTERS),
+        choices=ALL_NAMES,
+        metavar="NAME",
+        help=f"filters to run, in this order (default: {' '.join(_STUDY_FILTERS)}; also "
+        f"{' '.join(n for n in ALL_NAMES if n not in _STUDY_FILTERS)})",
+    )
+    e.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    e.set_defaults(run=_cmd_estimate)
+
+    st = sub.add_parser(
+        "study",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["study"],
+        help="Monte Carlo study of every filter's error and calibration",
+        description="Monte Carlo study of every filter's error and calibration.",
+    )
+    st.add_argument(
+        "--trials",
+        type=int,
+        default=500,
+        help=f"number of noise draws, 1 to {MAX_TRIALS} (default 500)",
+    )
+    st.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    st.add_argument(
+        "--rho", type=float, default=1 / 200, help="noise standard deviation (default 1/200)"
+    )
+    st.add_argument(
+        "--truth",
+        nargs="+",
+        metavar="X Y V | prior",
+        help="true state at time 3 (default: Figure 2's c = (1.2, 6, 1.2)); 'prior': truths "
+        "drawn from the fixed prior, N((-1.2, 4, 0), 1000 I) at time 1, to check the optimal "
+        "filter's calibration",
+    )
+    st.add_argument(
+        "--prior",
+        choices=("paper", "fixed"),
+        help="paper (default): the paper's rule on each trial's measurements; fixed: on the "
+        "truth (the only choice with --truth prior)",
+    )
+    st.add_argument(
+        "--filters",
+        nargs="+",
+        default=list(_STUDY_FILTERS),
+        choices=ALL_NAMES,
+        metavar="NAME",
+        help=f"filters to score (default: {' '.join(_STUDY_FILTERS)}; also "
+        f"{' '.join(n for n in ALL_NAMES if n not in _STUDY_FILTERS)}); only these run: "
+        "the Hellinger distances need the optimal filter, their reference, so without "
+        "'optimal' they are not computed (- in the table, null in JSON)",
+    )
+    st.add_argument(
+        "--particles",
+        type=int,
+        default=study_trials.PARTICLES,
+        help=f"particles per trial of the filters that draw them, {MIN_PARTICLES} to "
+        f"{MAX_PARTICLES} "
+        f"(default {study_trials.PARTICLES})",
+    )
+    st.add_argument(
+        "--frames",
+        type=int,
+        default=3,
+        metavar="N",
+        help="frames per trial, 3 (default, the paper's) to "
+        f"{FRAMES_MAX}: the truth moves on from time 3 to frame N and every filter is scored "
+        "there",
+    )
+    st.add_argument(
+        "--process-noise",
+        type=float,
+        default=0.0,
+        metavar="Q",
+        help="SD of the velocity's change per frame (default 0); with Q > 0 the filters that "
+        "assume a constant velocity (particle) cannot be named",
+    )
+    st.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    st.set_defaults(run=_cmd_study)
+
+    f = sub.add_parser(
+        "figures",
+        parents=[common],
+        formatter_class=raw,
+        epilog=EXAMPLES["figures"],
+        help="write Figures 2-6 as PDF, PNG and SVG",
+        description="Write Figures 2-6 as PDF, PNG and SVG.",
+    )
+    f.add_argument("--out", default="figures", help="output folder (default: figures)")
+    f.add_argument(
+        "--format",
+        dest="formats",
+        nargs="+",
+        choices=FIGURE_FORMATS,
+        metavar="FORMAT",
+        help="write these formats only, of pdf, png and svg (default: all three)",
+    )
+    f.set_defaults(run=_cmd_figures)
+    return p
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _parse(argv) -> argparse.Namespace:
+    """The parsed arguments; ``--help``, ``--version`` and refusals raise SystemExit.
+
+    A help text that cannot be written raises :class:`_WriteError` instead.
+    """
+    return build_parser().parse_args(argv)
+
+
+def main(argv=None) -> int:
+    """Run the command line; returns the exit status (0, 1 or 2)."""
+    try:
+        args = _parse(argv)
+    except _WriteError as exc:
+        sys.stderr.write(f"python -m depthcore: error: {exc}\n")
+        return 1
+    prog = f"python -m depthcore {args.command}"
+    try:
+        # Warnings become errors here only: the warning filters are restored on
+        # return, so library users are not affected.
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            text = args.run(args)
+        _write(text)
+    except np.linalg.LinAlgError:
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(f"{prog}: error: {_SINGULAR[args.command]}\n")
+        return 2
+    except ValueError as exc:
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(f"{prog}: error: {_users_words(args.command, str(exc))}\n")
+        return 2
+    except _WriteError as exc:
+        sys.stderr.write(f"{prog}: error: {exc}\n")
+        return 1
+    except KeyboardInterrupt:
+        sys.stderr.write(f"{prog}: interrupted\n")
+        return 130
+    except Exception as exc:  # noqa: BLE001 - every failure is one line
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(
+            f"{prog}: error: unexpected {type(exc).__name__}: {_one_line(exc)[:200]}"
+            " (rerun with --debug to see the traceback)\n"
+        )
+        return 1
+    return 0

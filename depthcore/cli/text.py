@@ -1,0 +1,274 @@
+"""The command line's plain-text tables and their legends.
+
+Recommended import: ``from depthcore.cli import text``.
+
+Nothing here computes: :func:`format_table` formats what
+:func:`depthcore.studies.reproduce.reproduce` returns, :func:`format_summary` what
+:func:`depthcore.studies.reproduce.summarize` returns, :func:`format_study` and
+:func:`format_prior_study` what :func:`depthcore.studies.monte_carlo.study` and
+:func:`depthcore.studies.monte_carlo.prior_study` return (the study chapter prints them too).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from depthcore.formatting import vec
+
+# --- the command line's tables ------------------------------------------------------------
+
+#: The key of :func:`format_table`'s columns.
+TABLE_KEY = """\
+key: fig      the paper's figure (its scenario: bearings, noise and prior)
+     filter   the filter (python -m depthcore study --help lists them)
+     reading  derived = Eq. (16) or the second-order covariance as derived;
+              printed = as printed in the paper
+     support  front = the optimal filter's depth restricted to y > 2 (in front of
+              the camera at every frame); all = no restriction
+     quantity depth y or velocity v of the state at time 3
+     mean, sd the filter's posterior mean and standard deviation of the quantity
+     error    error estimate of the optimal filter's quadrature, standard error of the
+              particle filter's Monte Carlo estimate; 0 for the Gaussian filters
+     paper mean, paper sd  the numbers printed in the paper (blank where it prints none)
+     agrees   whether the mean and the SD round to the paper's printed numbers"""
+
+
+#: The legend of :func:`format_summary`'s columns.
+SUMMARY_LEGEND = """\
+legend: depth mean, depth sd  the filter's posterior mean and SD of the depth y at frame N
+        vel. mean, vel. sd    the same of the velocity v (the x-velocity; the y-velocity is 1)
+        error estimates       the optimal filter's numerical error of its mean and SD"""
+
+
+#: The legend of :func:`format_summary`'s smoothed columns.
+SMOOTHED_LEGEND = """\
+        frame                 1 .. N; depth mean, depth sd and x mean, x sd: the optimal
+                              filter's mean and SD of the depth y and the lateral position x
+                              at that frame given all N bearings"""
+
+
+#: The legend of :func:`format_prior_study`'s columns.
+PRIOR_STUDY_LEGEND = """\
+legend: nominal     probability of the central interval of the optimal filter's marginal
+        depth, velocity  fraction of trials whose interval holds the true value (its
+                    binomial standard error in brackets); equal to nominal if calibrated
+        KS p, chi-square p  p-values of the Kolmogorov-Smirnov and chi-square tests of
+                    uniformity of the PIT values (the marginal CDF at the truth)"""
+
+
+#: The legend of :func:`format_study`'s columns.
+STUDY_LEGEND = """\
+legend: bias, rmse  mean and root mean square of estimate - truth over the trials
+        mean sd     mean of the filter's reported standard deviation
+        cover 68/95 fraction of trials whose central 68% / 95% interval holds the truth
+        NEES        mean normalized estimation error squared of (x, y, v); 3 if calibrated
+        Hellinger   mean Hellinger distance from the depth marginal to the optimal one
+                    (0 = the same density, 1 = disjoint); a dash: not computed, as the
+                    optimal filter, the reference, runs only when it is among the filters
+        (se)        under each row: the Monte Carlo standard error of each number above it"""
+
+
+def format_table(result: dict) -> str:
+    """A plain-text table of :func:`~depthcore.studies.reproduce.reproduce`'s result."""
+    head = (
+        f"{'fig':>3}  {'filter':<12} {'reading':<8} {'support':<7} {'quantity':<8} "
+        f"{'mean':>10} {'sd':>10} {'error':>8}  {'paper mean':>10} {'paper sd':>9}  agrees"
+    )
+    lines = [head, "-" * len(head)]
+    for sc in result["scenarios"]:
+        for r in sc["rows"]:
+            rep_m = "" if r["reported_mean"] is None else f"{r['reported_mean']:.2f}"
+            rep_s = "" if r["reported_sd"] is None else f"{r['reported_sd']:.2f}"
+            match = (
+                ""
+                if r["mean_matches"] is None
+                else (
+                    f"mean {'yes' if r['mean_matches'] else 'no'}, "
+                    f"sd {'yes' if r['sd_matches'] else 'no'}"
+                )
+            )
+            lines.append(
+                f"{sc['figure']:>3}  {r['filter']:<12} {r['reading']:<8} {r['support']:<7} "
+                f"{r['quantity']:<8} {r['mean']:>10.4f} {r['sd']:>10.4f} {r['error']:>8.1e}  "
+                f"{rep_m:>10} {rep_s:>9}  {match}"
+            )
+        lines.append("")
+    compared = [
+        (sc["figure"], r)
+        for sc in result["scenarios"]
+        for r in sc["rows"]
+        if r["mean_matches"] is not None
+    ]
+    matched = sum(bool(r["mean_matches"]) + bool(r["sd_matches"]) for _, r in compared)
+    differ = [
+        f"Fig. {fig} {r['filter']} {r['reading']} {r['support']} {r['quantity']}"
+        for fig, r in compared
+        if not (r["mean_matches"] and r["sd_matches"])
+    ]
+    lines += [
+        TABLE_KEY,
+        "",
+        f"{matched} of the paper's {2 * len(compared)} printed means and SDs are matched"
+        + (f"; differing: {', '.join(differ)}" if differ else "")
+        + " (the book's page on the discrepancies explains each).",
+    ]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def format_summary(summary: dict) -> str:
+    """A plain-text rendering of :func:`~depthcore.studies.reproduce.summarize`'s result."""
+    c = summary["c"]
+    m, cov = summary["prior_mean"], np.asarray(summary["prior_cov"])
+    if np.array_equal(cov, cov[0, 0] * np.eye(3)):
+        cov_text = f"{cov[0, 0]:.4g} I"
+    else:
+        cov_text = "[" + "; ".join(" ".join(f"{v:.4g}" for v in row) for row in cov) + "]"
+    N = summary.get("frames", 3)
+    q = summary.get("process_noise", 0.0)
+    lines = [
+        "noise-free state c = (x, y, v) at time 3 = "
+        + ("undefined" if c is None else f"({c[0]:#.4g}, {c[1]:#.4g}, {c[2]:#.4g})"),
+        f"prior at time 1: mean (x, y, v) = ({m[0]:#.4g}, {m[1]:#.4g}, {m[2]:#.4g}), "
+        f"covariance {cov_text}",
+    ]
+    if N != 3 or q > 0:
+        lines.append(f"{N} frames, process noise q = {q:g}; every filter at frame {N}")
+    w = max([13, *(len(n) + 1 for n in [*summary["filters"], *summary.get("not_run", {})])])
+    lines.append(
+        f"{'filter':<{w}} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}"
+    )
+    for name in summary["filters"]:
+        f = summary["filters"][name]
+        lines.append(
+            f"{name:<{w}} {f['depth']['mean']:>#11.4g} {f['depth']['sd']:>#10.4g} "
+            f"{f['velocity']['mean']:>#10.4g} {f['velocity']['sd']:>#10.4g}"
+        )
+    for name, reason in summary.get("not_run", {}).items():
+        lines.append(f"{name:<{w}} not run: {reason}")
+    o = summary["filters"].get("optimal")
+    if o is not None:
+        text = (
+            f"optimal error estimates: depth {_error(o['depth'].get('error'))}, "
+            f"velocity {_error(o['velocity'].get('error'))}"
+        )
+        if "prob_behind_camera_all_depths" in o:
+            text += (
+                "; probability behind the camera if depths y <= 2 are allowed: "
+                f"{o['prob_behind_camera_all_depths']:.3g}"
+            )
+        lines.append(text)
+    if "smoothed" in summary:
+        sm = summary["smoothed"]
+        lines.append(
+            f"{'frame':>5} {'depth mean':>11} {'depth sd':>10} {'x mean':>10} {'x sd':>10}"
+            "   (optimal, smoothed)"
+        )
+        for k, row in enumerate(
+            zip(
+                sm["depth_mean"], sm["depth_sd"], sm["lateral_mean"], sm["lateral_sd"], strict=True
+            ),
+            1,
+        ):
+            lines.append(f"{k:>5} " + " ".join(f"{v:>#10.4g}" for v in row).replace(" ", "  ", 1))
+    lines.append(SUMMARY_LEGEND)
+    if "smoothed" in summary:
+        lines.append(SMOOTHED_LEGEND)
+    return "\n".join(lines) + "\n"
+
+
+def _error(value) -> str:
+    """An error estimate in a table: ``n/a`` where there is none or it is not finite."""
+    return "n/a" if value is None or not np.isfinite(value) else f"{value:.1e}"
+
+
+def format_study(result: dict) -> str:
+    """A plain-text table of :func:`~depthcore.studies.monte_carlo.study`'s result."""
+    lines = [
+        f"truth {tuple(round(v, 6) for v in result['truth'])}, rho {result['rho']:.6g}, "
+        f"prior {result['prior']}, seed {result['seed']}: {result['valid_trials']} trials "
+        f"({result['rejected_trials']} without a noise-free solution in front of the camera "
+        "left out)"
+    ]
+    if result.get("frames", 3) != 3 or result.get("process_noise", 0.0) > 0:
+        lines.append(
+            f"{result['frames']} frames, process noise q = {result['process_noise']:g}: "
+            f"every filter scored on the true state at frame {result['frames']}"
+        )
+    head = (
+        f"{'filter':<13} {'quantity':<9} {'bias':>9} {'rmse':>9} {'mean sd':>9} "
+        f"{'cover 68':>8} {'cover 95':>8} {'NEES':>8} {'Hellinger':>9}"
+    )
+    lines += [head, "-" * len(head)]
+    for name, f in result["filters"].items():
+        for q in ("depth", "velocity"):
+            r = f[q]
+            h = f["hellinger_depth"]
+            extra = (
+                f"{f['nees']:>8.2f} " + ("-".rjust(9) if h is None else f"{h['mean']:>9.3f}")
+                if q == "depth"
+                else ""
+            )
+            lines.append(
+                f"{name:<13} {q:<9} {r['bias']:>9.4f} {r['rmse']:>9.4f} {r['mean_sd']:>9.4f} "
+                f"{r['coverage_68']:>8.3f} {r['coverage_95']:>8.3f} {extra}".rstrip()
+            )
+            extra_se = (
+                f"{f['nees_se']:>8.2f} " + ("".rjust(9) if h is None else f"{h['se']:>9.3f}")
+                if q == "depth"
+                else ""
+            )
+            lines.append(
+                f"{'':<13} {'(se)':<9} {r['bias_se']:>9.4f} {r['rmse_se']:>9.4f} "
+                f"{r['mean_sd_se']:>9.4f} {r['coverage_68_se']:>8.3f} {r['coverage_95_se']:>8.3f} "
+                f"{extra_se}".rstrip()
+            )
+    lines.append(STUDY_LEGEND)
+    return "\n".join(lines) + "\n"
+
+
+def _frames_text(result: dict) -> str:
+    """``"N frames, process noise q; "`` of a prior study beyond three frames, else ``""``."""
+    frames, q = result.get("frames", 3), result.get("process_noise", 0.0)
+    if frames == 3 and q == 0:
+        return ""
+    return f"{frames} frames, process noise {q:.6g}; "
+
+
+def _at_frame(result: dict) -> str:
+    """``" at frame N"`` of a prior study beyond the paper's problem, else ``""``."""
+    return f" at frame {result['frames']}" if _frames_text(result) else ""
+
+
+def format_prior_study(result: dict) -> str:
+    """A plain-text table of :func:`depthcore.studies.monte_carlo.prior_study`'s result."""
+    alpha = result["false_alarm"]
+    lines = [
+        f"truths drawn from the fixed prior N({vec(result['prior_mean'], 3)}, "
+        f"{result['prior_cov'][0][0]:.6g} I) with the point in front of the camera; "
+        f"{_frames_text(result)}rho {result['rho']:.6g}, seed {result['seed']}: "
+        f"{result['valid_trials']} trials "
+        f"({result['behind_camera_draws']} draws behind the camera redrawn, "
+        f"{result['rejected_trials']} without a noise-free solution in front left out)",
+        f"optimal filter{_at_frame(result)}: coverage of its central intervals "
+        "(binomial SE in brackets)",
+    ]
+    head = f"{'nominal':>8} {'depth':>16} {'velocity':>16}"
+    lines += [head, "-" * len(head)]
+    for i, p in enumerate(result["levels"]):
+        se = result["coverage_se"][i]
+        cells = " ".join(
+            f"{result[q]['coverage'][i]:>7.3f} ({se:.3f})".rjust(16) for q in ("depth", "velocity")
+        )
+        lines.append(f"{p:>8.2f} {cells}")
+    lines.append(
+        f"uniformity of the PIT values (each test at {alpha / 2:.3g}: "
+        f"false-alarm rate {alpha:.3g} per quantity)"
+    )
+    for q in ("depth", "velocity"):
+        r = result[q]
+        verdict = "calibrated" if r["calibrated"] else "NOT calibrated"
+        lines.append(
+            f"{q:<9} KS p {r['ks_pvalue']:.3g}, chi-square p {r['chi2_pvalue']:.3g}: {verdict}"
+        )
+    lines.append(PRIOR_STUDY_LEGEND)
+    return "\n".join(lines) + "\n"

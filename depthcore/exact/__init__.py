@@ -1,0 +1,20 @@
+"""The exact filter: the posterior computed to stated accuracy, with its error estimate.
+
+* :mod:`~depthcore.exact.quadrature`: the log-depth trapezoid rule with its
+  error estimate;
+* :mod:`~depthcore.exact.cdf`: a marginal's CDF by Gauss-Legendre panels;
+* :mod:`~depthcore.exact.optimal`: the paper's optimal filter for three
+  frames and its exact marginals, Eqs. (6), (13)-(16);
+* :mod:`~depthcore.exact.bank`: for any number of frames, a bank of Kalman
+  filters over depth (given the depth, the model is linear);
+* :mod:`~depthcore.exact.mixture`: the bank's Gaussians mixed over the depth
+  nodes, the exact posterior at frame ``N``;
+* :mod:`~depthcore.exact.posterior`: the bank with its depth nodes placed by
+  the quadrature, the exact N-frame filter;
+* :mod:`~depthcore.exact.smoother`: one track frame by frame, filtered,
+  fixed-lag and fixed-interval smoothed.
+
+Where a new thing goes: another way to compute the exact posterior, or a new
+use of the bank (an online form, a likelihood), goes here. It may import
+:mod:`depthcore.problem` and :mod:`depthcore.kalman`, nothing above.
+"""

@@ -1,0 +1,583 @@
+"""The exact optimal filter for any number of frames: a bank of Kalman filters over depth.
+
+Recommended import: ``from depthcore.exact import bank``.
+
+The model for ``N`` frames. The state at frame ``k = 1 .. N`` is
+``(x_k, y_k, v_k)``; it moves by
+
+    y_{k+1} = y_k + 1,   x_{k+1} = x_k + v_k,   v_{k+1} = v_k + a_k,   a_k ~ N(0, q**2),
+
+(``q = 0`` is the paper's constant velocity, Eq. (1)), the camera sees the
+bearings ``mu_k = x_k / y_k + w_k``, ``w_k ~ N(0, rho**2)`` (Eq. (4)), and the
+state at frame 1 has the Gaussian prior ``N(m, P)`` (Eq. (13)). With ``N = 3``
+and ``q = 0`` this is the paper's problem.
+
+Why a bank of Kalman filters is exact. The depth advances deterministically,
+so fixing the depth at frame 1, ``y_1 = y``, fixes it at every frame,
+``y_k = y + k - 1``. Given ``y`` the lateral state ``u_k = (x_k, v_k)`` is
+linear-Gaussian (Prince, section 19.2, textbook Eqs. (19.5), (19.7)):
+
+* its prior is the prior ``N(m, P)`` conditioned on ``y_1 = y``, a Gaussian in
+  ``(x_1, v_1)`` with mean ``m_u + P_uy (y - m_y) / P_yy`` and covariance
+  ``P_uu - P_uy P_yu / P_yy``;
+* it moves by ``Psi = [[1, 1], [0, 1]]`` with noise ``Sigma_p = diag(0, q**2)``;
+* each bearing is a linear observation of it, ``Phi_k = (1 / y_k, 0)``, with
+  noise variance ``rho**2``.
+
+So the Kalman filter (:mod:`depthcore.kalman.linear`) gives the exact posterior of
+``(x_N, v_N)`` given ``y`` and the marginal likelihood ``L(y) = p(mu_1 .. mu_N | y)``
+from its innovations, and
+
+    p(y_1 = y | mu_1 .. mu_N)  proportional to  N(y; m_y, P_yy) L(y).
+
+The exact posterior of the state at frame ``N`` is the mixture over depth of
+the Kalman filters' Gaussians weighted by this density. Given depth nodes
+``y_j`` and quadrature weights ``w_j`` (``sum_j w_j g(y_j)`` approximates
+``integral g(y) dy``), the mixture's probabilities are proportional to
+``w_j N(y_j; m_y, P_yy) L(y_j)``, summed in log space. Adding a frame updates
+each node's filter and log weight (:func:`step`); the past is not revisited.
+The nodes are the depths at frame 1, which do not move as frames are added; the
+depth at frame ``N`` is ``y_N = y_1 + N - 1``.
+
+This module holds the bank over given nodes (:func:`filter_bank`, one frame
+more by :func:`step`). Built on it: the mixture over the nodes and its
+marginals (:mod:`depthcore.exact.mixture`), the nodes placed by the depth
+quadrature and updated online (:mod:`depthcore.exact.posterior`), and one track
+filtered and smoothed frame by frame (:mod:`depthcore.exact.smoother`).
+
+The support is the caller's: the nodes must be positive (the point in front of
+the camera at every frame, the "front" support of
+:func:`depthcore.exact.optimal.marginals`), and the mixture is exact up to the
+quadrature error of the nodes, which the caller controls. At ``N = 3``,
+``q = 0`` the unnormalised depth density is that of Eqs. (14)-(16)
+(:func:`depthcore.exact.optimal.conditional`) up to a constant factor.
+
+References
+----------
+.. [prince2012] S. J. D. Prince, *Computer Vision: Models, Learning, and
+   Inference*, chapter 19, section 19.2 (the Kalman filter and its smoothers).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from depthcore.kalman import linear
+from depthcore.problem import checks
+
+#: The lateral state ``(x, v)`` moves by ``x <- x + v``: the transition matrix.
+PSI = np.array([[1.0, 1.0], [0.0, 1.0]])
+PSI.setflags(write=False)
+
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+class Bank(NamedTuple):
+    """The bank of Kalman filters over depth nodes after ``N`` frames.
+
+    Built by :func:`filter_bank`, extended by :func:`step`. The batch shape
+    ``(...)`` is that of the trials (empty for one problem); ``J`` is the
+    number of nodes.
+
+    Attributes
+    ----------
+    nodes : ndarray, shape (..., J)
+        Depths at frame 1, ``y_1 > 0``.
+    mean : ndarray, shape (..., J, 2)
+        ``E[(x_N, v_N) | y_1, mu_1 .. mu_N]`` for each node.
+    cov : ndarray, shape (..., J, 2, 2)
+        ``Cov[(x_N, v_N) | y_1, mu_1 .. mu_N]``.
+    log_weight : ndarray, shape (..., J)
+        ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``: the unnormalised log
+        posterior density of the depth at frame 1.
+    mu : ndarray, shape (..., N)
+        The bearings so far.
+    rho : ndarray, shape (...) or ()
+    process_noise : ndarray, shape (...) or ()
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+    history : kalman.FilterResult or None
+        With ``history=True``: each node's filter at every frame, arrays of shape
+        ``(..., J, N, ...)``.
+    """
+
+    nodes: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+    log_weight: np.ndarray
+    mu: np.ndarray
+    rho: np.ndarray
+    process_noise: np.ndarray
+    prior_mean: np.ndarray
+    prior_cov: np.ndarray
+    history: linear.FilterResult | None
+
+    @property
+    def frames(self) -> int:
+        """``N``, the number of bearings seen."""
+        return self.mu.shape[-1]
+
+
+# --- checks ----------------------------------------------------------------------------
+
+
+def _nodes(nodes) -> np.ndarray:
+    nodes = checks.finite_array(nodes, "nodes")
+    if nodes.ndim < 1 or nodes.shape[-1] < 1 or nodes.size == 0:
+        raise ValueError(f"nodes must have shape (..., J) with J >= 1, got shape {nodes.shape}")
+    if not np.all(nodes > 0):
+        raise ValueError(
+            f"nodes must be positive (depths at frame 1 in front of the camera), "
+            f"got minimum {float(np.min(nodes)):.6g}"
+        )
+    return nodes
+
+
+def _prior(prior_mean, prior_cov):
+    prior_mean = checks.finite_array(prior_mean, "prior_mean")
+    if prior_mean.ndim < 1 or prior_mean.shape[-1] != 3:
+        raise ValueError(f"prior_mean must have shape (..., 3), got shape {prior_mean.shape}")
+    prior_cov = checks.finite_array(prior_cov, "prior_cov")
+    if prior_cov.ndim < 2 or prior_cov.shape[-2:] != (3, 3):
+        raise ValueError(f"prior_cov must have shape (..., 3, 3), got shape {prior_cov.shape}")
+    prior_cov = checks.covariances(prior_cov, "prior_cov", 3)
+    return prior_mean, prior_cov
+
+
+def _noise(rho, q):
+    rho = checks.finite_array(rho, "rho")
+    if not np.all(rho > 0):
+        raise ValueError(f"rho must be positive, got minimum {float(np.min(rho)):.6g}")
+    q = checks.finite_array(q, "process_noise")
+    if not np.all(q >= 0):
+        raise ValueError(f"process_noise must be >= 0, got minimum {float(np.min(q)):.6g}")
+    return rho, q
+
+
+def _bearings(mu) -> np.ndarray:
+    mu = checks.finite_array(mu, "mu")
+    if mu.ndim < 1 or mu.shape[-1] < 1:
+        raise ValueError(f"mu must have shape (..., N) with N >= 1, got shape {mu.shape}")
+    if mu.size == 0:
+        raise ValueError(f"mu must hold at least one problem, got an empty batch {mu.shape}")
+    return mu
+
+
+# --- the model given the depth ---------------------------------------------------------
+
+
+def conditional_prior(nodes, prior_mean, prior_cov):
+    """The prior of ``(x_1, v_1)`` given the depth ``y_1``, and the prior depth density.
+
+    Gaussian conditioning of ``N(m, P)`` on ``(x_1, y_1, v_1)``:
+    ``E[u | y] = m_u + P_uy (y - m_y) / P_yy``, ``Cov[u | y] = P_uu - P_uy P_yu / P_yy``
+    with ``u = (x_1, v_1)``.
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (..., J)
+        Depths at frame 1.
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+
+    Returns
+    -------
+    prior : kalman.MeanAndCov
+        Mean (..., J, 2) and covariance (..., 1, 2, 2) of ``(x_1, v_1)`` given ``y_1``.
+    log_density : ndarray, shape (..., J)
+        ``log N(y_1; m_y, P_yy)``.
+    """
+    u = slice(0, 3, 2)  # x and v
+    m_u, m_y = prior_mean[..., u], prior_mean[..., 1]
+    P_yy = prior_cov[..., 1, 1]
+    P_uy = prior_cov[..., u, 1]
+    slope = P_uy / P_yy[..., None]  # (..., 2)
+    d = nodes - m_y[..., None]  # (..., J)
+    mean = m_u[..., None, :] + slope[..., None, :] * d[..., None]
+    cov = prior_cov[..., u, u] - slope[..., :, None] * P_uy[..., None, :]
+    log_density = -0.5 * (_LOG_2PI + np.log(P_yy)[..., None]) - 0.5 * d**2 / P_yy[..., None]
+    return linear.MeanAndCov(mean, cov[..., None, :, :]), log_density
+
+
+def sigma_p(process_noise) -> np.ndarray:
+    """The lateral motion noise ``diag(0, q**2)``: shape ``q.shape + (2, 2)``."""
+    process_noise = np.asarray(process_noise, dtype=float)
+    out = np.zeros(process_noise.shape + (2, 2))
+    out[..., 1, 1] = process_noise**2
+    return out
+
+
+def measurement_matrices(nodes, frames) -> np.ndarray:
+    """``Phi_k = (1 / y_k, 0)`` with ``y_k = y_1 + k - 1``, for frames ``k`` (1-based).
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (..., J)
+    frames : array_like of int, shape (K,)
+
+    Returns
+    -------
+    ndarray, shape (..., J, K, 1, 2)
+    """
+    depth = nodes[..., None] + (np.asarray(frames, dtype=float) - 1.0)
+    Phi = np.zeros(depth.shape + (1, 2))
+    Phi[..., 0, 0] = 1.0 / depth
+    return Phi
+
+
+def lateral_filter(nodes, mu, rho, process_noise, prior_mean, prior_cov):
+    """The Kalman filter of ``(x, v)`` at each depth node in closed form: log weight, frame ``N``.
+
+    The same filter as :func:`filter_bank` (textbook 19.2.1 prediction, 19.2.2
+    update, the log likelihood from the innovations) with its 2 x 2 algebra
+    written out, elementwise over the nodes, for the depth quadrature. With
+    ``(a, b, c)`` the entries of ``Cov[(x, v)]`` and ``r_k = (rho y_k)**2``
+    (the bearing noise in units of ``x``), the update by ``mu_k`` is::
+
+        e = mu_k y_k - x,   x += a e / (a + r_k),   v += b e / (a + r_k),
+        a' = a r_k / (a + r_k),   b' = b r_k / (a + r_k),
+        det' = det r_k / (a + r_k),   c' = (det' + b'**2) / a',
+
+    the log likelihood gains ``log N(mu_k; x / y_k, (a + r_k) / y_k**2)``,
+    and the prediction is ``x += v``, ``a += 2 b + c``, ``b += c``,
+    ``c += q**2``, ``det += q**2 a``. Tracking the determinant keeps ``c``
+    free of cancellation when the bearings pin ``x`` far more tightly than
+    the prior (small noise).
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (..., J)
+        Depths at frame 1, > 0.
+    mu : ndarray, shape (..., N)
+    rho, process_noise : ndarray, shape (...) or ()
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+        Already checked (see :func:`filter_bank`).
+
+    Returns
+    -------
+    log_weight : ndarray, shape (..., J)
+        ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``, as
+        :attr:`Bank.log_weight`.
+    mean : ndarray, shape (2, ..., J)
+        ``E[x_N | y_1, mu]`` and ``E[v_N | y_1, mu]``, in rows.
+    cov : tuple of three ndarrays, shape (..., J)
+        ``Var[x_N]``, ``Cov[x_N, v_N]``, ``Var[v_N]`` given ``y_1`` and ``mu``.
+    """
+    start, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
+    rho2 = (np.asarray(rho, dtype=float) ** 2)[..., None]
+    q2 = (np.asarray(process_noise, dtype=float) ** 2)[..., None]
+    # the covariance does not depend on the bearings: its shape leaves out theirs
+    cov_shape = np.broadcast_shapes(start.cov.shape[:-2], nodes.shape, rho2.shape, q2.shape)
+    M, C, rows = _lateral_state(
+        np.broadcast_shapes(start.mean.shape[:-1], mu.shape[:-1] + (1,)), cov_shape
+    )
+    M[_X], M[_V] = start.mean[..., 0], start.mean[..., 1]
+    c0 = start.cov[..., 0, :, :]
+    a, b, c = c0[..., 0, 0, None], c0[..., 0, 1, None], c0[..., 1, 1, None]
+    C[_A], C[_B], C[_DET], C[_C] = a, b, a * c - b * b, c
+    noise = q2 if np.any(q2) else None  # None: constant velocity, Eq. (1)
+    for k in range(mu.shape[-1]):
+        if k:
+            _predict_lateral(rows, noise)
+        y = nodes + k  # y_k = y_1 + k - 1
+        log_weight = log_weight + _update_lateral(rows, mu[..., k, None], y, rho2, y * y)
+    return (
+        log_weight,
+        M,
+        (rows.a.reshape(cov_shape), rows.b.reshape(cov_shape), rows.c.reshape(cov_shape)),
+    )
+
+
+#: Rows of the lateral state arrays of :func:`lateral_filter`: the means ``(x, v)``, and
+#: the covariance entries ``a, b``, the determinant ``det`` and ``c``, in an order that
+#: makes the paired updates single operations on slices.
+_X, _V = 0, 1
+_A, _B, _DET, _C = 0, 1, 2, 3
+
+
+class _Rows(NamedTuple):
+    """Views of the lateral state arrays ``M`` (2, ...) and ``C`` (4, ...), made once.
+
+    The filter updates them in place (``out=``), so the views stay those of the state.
+    """
+
+    M: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    det: np.ndarray
+    c: np.ndarray
+    ab: np.ndarray
+    ab_det: np.ndarray
+
+
+def _lateral_state(mean_shape, cov_shape):
+    """Empty state arrays for :func:`lateral_filter`, ``M`` (2, ...) and ``C`` (4, ...), and rows.
+
+    ``M`` has the shape ``mean_shape`` and ``cov_shape`` broadcast to; ``C``
+    has ``cov_shape``, padded with leading ones to that rank, so that
+    ``C[_A : _B + 1]`` broadcasts against the means.
+    """
+    mean_shape = np.broadcast_shapes(mean_shape, cov_shape)
+    pad = (1,) * (len(mean_shape) - len(cov_shape))
+    M, C = np.empty((2,) + mean_shape), np.empty((4,) + pad + tuple(cov_shape))
+    rows = _Rows(M, M[_X], M[_V], C[_A], C[_B], C[_DET], C[_C], C[_A : _B + 1], C[_A : _DET + 1])
+    return M, C, rows
+
+
+def _predict_lateral(s: _Rows, q2) -> None:
+    """Textbook 19.2.1 for ``x <- x + v``, ``v <- v + a_k``, in place: see :func:`lateral_filter`.
+
+    ``q2`` is ``q**2``, or ``None`` for no process noise (``q = 0``), where
+    ``c`` and ``det`` are left as they are instead of adding zeros to them.
+    """
+    np.add(s.x, s.v, out=s.x)
+    np.add(s.a, 2.0 * s.b, out=s.a)
+    np.add(s.a, s.c, out=s.a)  # a + 2 b + c
+    np.add(s.b, s.c, out=s.b)
+    if q2 is not None:
+        np.add(s.c, q2, out=s.c)
+        np.add(s.det, q2 * s.a, out=s.det)
+
+
+def _update_lateral(s: _Rows, mu_k, y, rho2, yy):
+    """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``, in place; the log likelihood.
+
+    ``yy`` is ``y * y``. The log likelihood ``log N(mu_k; x / y, (a + r) / y**2)``
+    is computed as ``-(log 2 pi + log((a + r) / y**2) + e g) / 2`` with
+    ``g = e / (a + r)``.
+    """
+    r = rho2 * yy
+    total = s.a + r
+    e = mu_k * y - s.x
+    g = e / total
+    log_likelihood = -0.5 * (_LOG_2PI + np.log(total / yy) + e * g)
+    np.add(s.M, s.ab * g, out=s.M)  # x + a g and v + b g
+    np.multiply(s.ab_det, r / total, out=s.ab_det)  # a, b and det times r / (a + r)
+    np.divide(s.det + s.b * s.b, s.a, out=s.c)
+    return log_likelihood
+
+
+# --- the bank --------------------------------------------------------------------------
+
+
+def filter_bank(
+    nodes, mu, rho, prior_mean, prior_cov, process_noise=0.0, history: bool = False
+) -> Bank:
+    """Run one Kalman filter (textbook 19.2.3) per depth node over the bearings ``mu_1 .. mu_N``.
+
+    Parameters
+    ----------
+    nodes : array_like, shape (..., J)
+        Depths at frame 1, all > 0. Leading axes broadcast with those of the
+        other arguments (one set of nodes per trial, or shared).
+    mu : array_like, shape (..., N)
+        Bearings at frames 1 .. N, ``N >= 1``.
+    rho : float or array_like, shape (...)
+        Bearing noise SD, > 0.
+    prior_mean : array_like, shape (..., 3)
+        Prior mean of ``(x_1, y_1, v_1)``.
+    prior_cov : array_like, shape (..., 3, 3)
+        Prior covariance, symmetric positive definite.
+    process_noise : float or array_like, shape (...)
+        SD of the lateral acceleration ``a_k``, >= 0 (0: constant velocity).
+    history : bool
+        Keep every node's filter at every frame (:meth:`~depthcore.exact.mixture.Mixture.smoothed`
+        reuses
+        it, and reruns the filters without it).
+
+    Returns
+    -------
+    Bank
+        Finite: nodes so near 0 or so far that the filters' numbers overflow
+        the doubles (the model holds ``1 / y`` and ``y**2``) are refused with a
+        ValueError naming ``nodes``, never answered with NaN.
+    """
+    nodes = _nodes(nodes)
+    mu = _bearings(mu)
+    rho, process_noise = _noise(rho, process_noise)
+    prior_mean, prior_cov = _prior(prior_mean, prior_cov)
+    _batch(
+        nodes=nodes.shape[:-1],
+        mu=mu.shape[:-1],
+        rho=rho.shape,
+        process_noise=process_noise.shape,
+        prior_mean=prior_mean.shape[:-1],
+        prior_cov=prior_cov.shape[:-2],
+    )
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        try:
+            bank = run_bank(nodes, mu, rho, process_noise, prior_mean, prior_cov, history)
+        except ValueError:  # the Kalman filters' own refusal of an overflow
+            bank = None
+    if bank is None or not all(
+        np.all(np.isfinite(a)) for a in (bank.mean, bank.cov, bank.log_weight)
+    ):
+        raise ValueError(
+            f"nodes from {float(np.min(nodes))!r} to {float(np.max(nodes))!r} overflow the "
+            "Kalman filters over depth (the model holds 1 / y and y**2) with these mu, rho "
+            "and prior; give depths nearer the prior's"
+        )
+    return bank
+
+
+def _batch(**shapes) -> tuple:
+    """The shape the leading (batch) shapes broadcast to, or a ValueError naming them."""
+    try:
+        return np.broadcast_shapes(*shapes.values())
+    except ValueError:
+        listed = ", ".join(f"{k} {v}" for k, v in shapes.items())
+        raise ValueError(f"the leading (batch) shapes do not broadcast: {listed}") from None
+
+
+def run_bank(nodes, mu, rho, process_noise, prior_mean, prior_cov, history) -> Bank:
+    """:func:`filter_bank` on checked inputs, which its callers in the package have checked.
+
+    The arguments are :func:`filter_bank`'s (``process_noise`` after ``rho``),
+    checked as it checks them: positive finite nodes and ``rho``,
+    ``process_noise >= 0``, a symmetric positive definite prior, batch shapes
+    that broadcast. The result is not checked for overflow.
+    """
+    q = process_noise
+    if not history:  # the closed form, as the depth quadrature uses
+        log_weight, (x, v), (a, b, c) = lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov)
+        cov = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
+        return Bank(
+            nodes=nodes,
+            mean=np.stack([x, v], -1),
+            cov=cov,
+            log_weight=log_weight,
+            mu=mu,
+            rho=rho,
+            process_noise=q,
+            prior_mean=prior_mean,
+            prior_cov=prior_cov,
+            history=None,
+        )
+    N = mu.shape[-1]
+    start, log_prior = conditional_prior(nodes, prior_mean, prior_cov)
+    # per node (axis -3 of the Kalman arrays): the prior given its depth, Phi_k = (1 / y_k, 0)
+    Phi = measurement_matrices(nodes, np.arange(1, N + 1))
+    res = linear.run(
+        mu[..., None, :, None],
+        start.mean,
+        start.cov,
+        PSI,
+        sigma_p(q)[..., None, None, :, :],
+        Phi,
+        (rho**2)[..., None, None, None, None],
+    )
+    return Bank(
+        nodes=nodes,
+        mean=res.means[..., -1, :],
+        cov=res.covs[..., -1, :, :],
+        log_weight=log_prior + res.log_likelihood,
+        mu=mu,
+        rho=rho,
+        process_noise=q,
+        prior_mean=prior_mean,
+        prior_cov=prior_cov,
+        history=res if history else None,
+    )
+
+
+def step(bank: Bank, mu_next) -> Bank:
+    """Add frame ``N + 1``: predict (textbook 19.2.1) and update (19.2.2) every node's filter.
+
+    Each node's log weight gains the log density of ``mu_{N+1}`` given the
+    earlier bearings and its depth; nothing earlier is recomputed.
+
+    Parameters
+    ----------
+    bank : Bank
+        The bank after ``N`` frames.
+    mu_next : float or array_like, shape (...)
+        The bearing at frame ``N + 1``, one per trial.
+
+    Returns
+    -------
+    Bank
+        The bank after ``N + 1`` frames (with its history extended if it has one).
+    """
+    if not isinstance(bank, Bank):
+        raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")
+    mu_next = checks.finite_array(mu_next, "mu_next")
+    _batch(bank=bank.log_weight.shape[:-1], mu_next=mu_next.shape)
+    N = bank.frames
+    if bank.history is None:  # the closed form of lateral_filter
+        rho2 = (np.asarray(bank.rho) ** 2)[..., None]
+        q2 = (np.asarray(bank.process_noise) ** 2)[..., None]
+        y = bank.nodes + N
+        cov_shape = np.broadcast_shapes(bank.cov.shape[:-2], y.shape, rho2.shape, q2.shape)
+        M, C, rows = _lateral_state(
+            np.broadcast_shapes(bank.mean.shape[:-1], mu_next.shape + (1,)), cov_shape
+        )
+        M[_X], M[_V] = bank.mean[..., 0], bank.mean[..., 1]
+        C[_A], C[_B], C[_C] = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
+        np.multiply(C[_A], C[_C], out=C[_DET])
+        C[_DET] -= C[_B] * C[_B]
+        _predict_lateral(rows, q2 if np.any(q2) else None)
+        log_likelihood = _update_lateral(rows, mu_next[..., None], y, rho2, y * y)
+        mean = np.empty(M.shape[1:] + (2,))
+        mean[..., 0], mean[..., 1] = M[_X], M[_V]
+        cov = np.empty(cov_shape + (2, 2))
+        cov[..., 0, 0], cov[..., 1, 1] = C[_A], C[_C]
+        cov[..., 0, 1] = cov[..., 1, 0] = C[_B]
+        return bank._replace(
+            mean=mean,
+            cov=cov,
+            mu=_extend(bank.mu, mu_next),
+            log_weight=bank.log_weight + log_likelihood,
+        )
+    pred = linear.predict(bank.mean, bank.cov, PSI, sigma_p(bank.process_noise)[..., None, :, :])
+    Phi = measurement_matrices(bank.nodes, [N + 1])[..., 0, :, :]
+    upd = linear.update(
+        pred.mean, pred.cov, mu_next[..., None, None], Phi, (bank.rho**2)[..., None, None, None]
+    )
+    mu = _extend(bank.mu, mu_next)
+    history = bank.history
+    if history is not None:
+        history = _append(history, pred, upd)
+    return bank._replace(
+        mean=upd.mean,
+        cov=upd.cov,
+        mu=mu,
+        history=history,
+        log_weight=bank.log_weight + upd.log_likelihood,
+    )
+
+
+def _extend(mu, mu_next):
+    shape = np.broadcast_shapes(mu.shape[:-1], mu_next.shape)
+    return np.concatenate(
+        [np.broadcast_to(mu, shape + mu.shape[-1:]), np.broadcast_to(mu_next, shape)[..., None]],
+        axis=-1,
+    )
+
+
+def _append(history: linear.FilterResult, pred, upd) -> linear.FilterResult:
+    new = {
+        "means": upd.mean,
+        "covs": upd.cov,
+        "predicted_means": pred.mean,
+        "predicted_covs": pred.cov,
+        "log_likelihoods": upd.log_likelihood,
+    }
+    core = {"means": 1, "predicted_means": 1, "covs": 2, "predicted_covs": 2, "log_likelihoods": 0}
+    out = {}
+    for k, old in zip(history._fields, history, strict=True):
+        c = core[k]
+        item = np.expand_dims(new[k], axis=-1 - c)
+        batch = np.broadcast_shapes(old.shape[: old.ndim - c - 1], item.shape[: item.ndim - c - 1])
+        out[k] = np.concatenate(
+            [
+                np.broadcast_to(old, batch + old.shape[old.ndim - c - 1 :]),
+                np.broadcast_to(item, batch + item.shape[item.ndim - c - 1 :]),
+            ],
+            axis=-1 - c,
+        )
+    return linear.FilterResult(**out)

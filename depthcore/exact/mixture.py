@@ -1,0 +1,533 @@
+"""The exact posterior at frame ``N``: the filter bank's Gaussians mixed over the depth nodes.
+
+Recommended import: ``from depthcore.exact import mixture``.
+
+Given a :class:`~depthcore.exact.bank.Bank` (one Kalman filter per depth node) and
+the nodes' quadrature weights ``w_j``, the posterior of the state at frame
+``N`` is the mixture over the nodes of the filters' Gaussians with
+probabilities proportional to ``w_j N(y_j; m_y, P_yy) L(y_j)``
+(:func:`mixture`, summed in log space). A :class:`Mixture` gives the
+mixture's moments, the depth's and the velocity's marginal densities and
+CDFs, and the fixed-interval smoothed states (:meth:`Mixture.smoothed`,
+textbook 19.2.6), each a :class:`Smoothed`.
+
+References
+----------
+.. [prince2012] S. J. D. Prince, *Computer Vision: Models, Learning, and
+   Inference*, chapter 19, section 19.2 (the Kalman filter and its smoothers).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from scipy.special import ndtr
+
+from depthcore.exact.bank import PSI, Bank, run_bank
+from depthcore.exact.cdf import gauss_legendre_cdf
+from depthcore.kalman import linear
+from depthcore.problem import checks
+from depthcore.problem.weights import normalised
+
+#: Nodes whose log probability is this far below the largest are ignored by the CDF.
+_CUTOFF = 60.0
+_MAX_DOUBLINGS = 12
+
+
+# --- the mixture over the nodes --------------------------------------------------------
+
+
+def mixture_moments(W, means, covs, depths):
+    """Mean and covariance of ``(x, y, v)`` under a mixture over depth nodes.
+
+    The law of total variance: the weighted covariance of the nodes' means
+    plus their weighted covariances (:func:`_stacked_moments` with one set
+    of weights); the depth is known exactly given the node.
+
+    Parameters
+    ----------
+    W : array_like, shape (..., J)
+        Weights >= 0 (probabilities once normalised).
+    means : ndarray, shape (..., J, 2)
+    covs : ndarray, shape (..., J, 2, 2)
+        The Gaussians of ``(x, v)`` at each node.
+    depths : ndarray, shape (..., J)
+        The node depths.
+
+    Returns
+    -------
+    mean : ndarray, shape (..., 3)
+    cov : ndarray, shape (..., 3, 3)
+    """
+    mean, cov = _stacked_moments(np.asarray(W)[..., None, :], means, covs, depths)
+    return mean[..., 0, :], cov[..., 0, :, :]
+
+
+#: The second moments summed by :func:`_stacked_moments`: pairs of ``(x, y, v)`` ...
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+#: ... with each node's conditional covariance ``Cov[(x, v) | y_j]`` entry added to
+#: ``(x, x)``, ``(v, v)`` and ``(x, v)``: (pair, covariance row, covariance column).
+_CONDITIONAL = ((0, 0, 0), (2, 1, 1), (4, 0, 1))
+_PAIR_FIRST, _PAIR_SECOND = (np.array(ix) for ix in zip(*_PAIRS, strict=True))
+#: Where each entry of a 3 x 3 covariance (row-major) sits in :data:`_PAIRS` order.
+_SYMMETRIC = np.array([0, 3, 4, 3, 1, 5, 4, 5, 2])
+
+
+def _stacked_moments(W, means, covs, depths):
+    """Mean and covariance of ``(x, y, v)`` under ``K`` weightings of the same node mixture.
+
+    The law of total variance, summed about the node ``c`` of largest weight
+    in the first weighting (the sums then carry no multiple of a large
+    depth): with ``d_j = m_j - c``, ``m_j = (E[x | y_j], y_j, E[v | y_j])``
+    and ``C_j`` the node's covariance of ``(x, v)`` (zero in the depth's row
+    and column),
+
+        S = sum_j W_j,   s = sum_j W_j d_j / S,   mean = c + s,
+        cov = sum_j W_j (d_j d_j^T + C_j) / S - s s^T.
+
+    The nodes' terms ``(1, d_j, d_j d_j^T + C_j)`` are formed once and summed
+    for every weighting by one matrix product.
+
+    Parameters
+    ----------
+    W : ndarray, shape (..., K, J)
+        Weights >= 0 (need not be normalised); a row with no positive weight
+        gets NaN moments.
+    means : ndarray, shape (..., J, 2)
+    covs : ndarray, shape (..., J, 2, 2)
+    depths : ndarray, shape (..., J)
+
+    Returns
+    -------
+    mean : ndarray, shape (..., K, 3)
+    cov : ndarray, shape (..., K, 3, 3)
+    """
+    batch = np.broadcast_shapes(W.shape[:-2], means.shape[:-2], covs.shape[:-3], depths.shape[:-1])
+    J = W.shape[-1]
+    W = np.broadcast_to(W, batch + W.shape[-2:])
+    top = np.argmax(W[..., 0, :], axis=-1)[..., None]  # (..., 1)
+    terms = np.empty(batch + (10, J))  # per node: 1, d (3), the second moments (6)
+    terms[..., 0, :] = 1.0
+    terms[..., 1, :], terms[..., 2, :], terms[..., 3, :] = means[..., 0], depths, means[..., 1]
+    d = terms[..., 1:4, :]
+    centre = np.take_along_axis(d, top[..., None, :], -1)  # (..., 3, 1)
+    d -= centre
+    for k, (i, j) in enumerate(_PAIRS):
+        np.multiply(d[..., i, :], d[..., j, :], out=terms[..., 4 + k, :])
+    for k, i, j in _CONDITIONAL:
+        terms[..., 4 + k, :] += covs[..., i, j]
+    sums = W @ np.swapaxes(terms, -1, -2)  # (..., K, 10)
+    total = sums[..., :1]
+    # a weighting with no positive weight (every other node of a posterior that
+    # sits on one node, in :func:`~depthcore.exact.posterior.update`) has no moments: NaN, without a
+    # warning
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shift = sums[..., 1:4] / total
+        moments = sums[..., 4:] / total - shift[..., _PAIR_FIRST] * shift[..., _PAIR_SECOND]
+    mean = centre[..., None, :, 0] + shift
+    return mean, moments[..., _SYMMETRIC].reshape(moments.shape[:-1] + (3, 3))
+
+
+class Smoothed(NamedTuple):
+    """The state at every frame given all ``N`` bearings (the mixture of the nodes' smoothers).
+
+    Attributes
+    ----------
+    mean : ndarray, shape (..., N, 3)
+        ``E[(x_k, y_k, v_k) | mu_1 .. mu_N]``, row ``k - 1`` for frame ``k``.
+    cov : ndarray, shape (..., N, 3, 3)
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+    @property
+    def depth_mean(self) -> np.ndarray:
+        """``E[y_k]`` at every frame, shape (..., N)."""
+        return self.mean[..., 1]
+
+    @property
+    def depth_sd(self) -> np.ndarray:
+        return np.sqrt(self.cov[..., 1, 1])
+
+    @property
+    def lateral_mean(self) -> np.ndarray:
+        """``E[x_k]`` at every frame, shape (..., N)."""
+        return self.mean[..., 0]
+
+    @property
+    def lateral_sd(self) -> np.ndarray:
+        return np.sqrt(self.cov[..., 0, 0])
+
+    @property
+    def velocity_mean(self) -> np.ndarray:
+        return self.mean[..., 2]
+
+    @property
+    def velocity_sd(self) -> np.ndarray:
+        return np.sqrt(self.cov[..., 2, 2])
+
+
+@dataclass(frozen=True)
+class Mixture:
+    """The optimal posterior at frame ``N``: the bank's Gaussians mixed over the depth nodes.
+
+    Built by :func:`mixture`. ``(...)`` is the batch shape.
+
+    Attributes
+    ----------
+    bank : Bank
+    log_weights : ndarray, shape (..., J)
+        Log quadrature weights of the nodes.
+    probabilities : ndarray, shape (..., J)
+        ``w_j N(y_j; m_y, P_yy) L(y_j)``, normalised over the nodes.
+    log_normaliser : ndarray, shape (...)
+        ``log sum_j w_j N(y_j; m_y, P_yy) L(y_j)``: the log density of the bearings
+        with the depth integrated over the nodes' support.
+    mean : ndarray, shape (..., 3)
+        Posterior mean of ``(x_N, y_N, v_N)``.
+    cov : ndarray, shape (..., 3, 3)
+        Posterior covariance of ``(x_N, y_N, v_N)``.
+    depth_error, velocity_error : ndarray, shape (...), or None
+        Error estimates of the depth's and the velocity's mean and SD when the
+        nodes were placed by :func:`~depthcore.exact.posterior.posterior` (and kept by
+        :func:`~depthcore.exact.posterior.update`):
+        the change of those moments when every other node is dropped (the
+        step doubled), floored by roundoff; ``None`` for caller-given nodes.
+    rtol : float or None
+        The tolerance the nodes were placed for (:func:`~depthcore.exact.posterior.posterior`).
+    """
+
+    bank: Bank
+    log_weights: np.ndarray
+    probabilities: np.ndarray
+    log_normaliser: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+    depth_error: np.ndarray | None = None
+    velocity_error: np.ndarray | None = None
+    rtol: float | None = None
+
+    @property
+    def depth_mean(self) -> np.ndarray:
+        """``E[y_N]``, shape (...)."""
+        return self.mean[..., 1]
+
+    @property
+    def depth_sd(self) -> np.ndarray:
+        return np.sqrt(self.cov[..., 1, 1])
+
+    @property
+    def velocity_mean(self) -> np.ndarray:
+        """``E[v_N]``, shape (...)."""
+        return self.mean[..., 2]
+
+    @property
+    def velocity_sd(self) -> np.ndarray:
+        return np.sqrt(self.cov[..., 2, 2])
+
+    def _query(self, value, name):
+        """Queries as (batch..., K) and a function restoring the caller's shape."""
+        value = checks.finite_array(value, name)
+        batch = self.log_normaliser.shape
+        if batch == ():
+            return value.reshape(-1), (lambda out: out.reshape(value.shape))
+        if value.ndim < 1:
+            raise ValueError(f"{name} must have shape (..., K) for a batch, got a scalar")
+        try:
+            np.broadcast_shapes(value.shape[:-1], batch)
+        except ValueError:
+            raise ValueError(
+                f"{name} must have shape (..., K) with leading axes broadcasting "
+                f"with {batch}, got shape {value.shape}"
+            ) from None
+        return value, (lambda out: out)
+
+    def depth_log_pdf(self, y) -> np.ndarray:
+        """Log posterior density of the depth at frame ``N``, ``y_N``; ``-inf`` at ``y_N <= N - 1``.
+
+        Each query depth gets its own Kalman filter over all ``N`` bearings.
+
+        Parameters
+        ----------
+        y : array_like
+            Any shape for one problem; ``(..., K)`` for a batch.
+        """
+        y, restore = self._query(y, "y")
+        b = self.bank
+        y1 = y - (b.frames - 1)
+        inside = y1 > 0
+        log_w = run_bank(
+            np.where(inside, y1, 1.0),
+            b.mu,
+            b.rho,
+            b.process_noise,
+            b.prior_mean,
+            b.prior_cov,
+            False,
+        ).log_weight
+        return restore(np.where(inside, log_w - self.log_normaliser[..., None], -np.inf))
+
+    def depth_pdf(self, y) -> np.ndarray:
+        """Posterior density of the depth at frame ``N`` (see :meth:`depth_log_pdf`)."""
+        return np.exp(self.depth_log_pdf(y))
+
+    def depth_cdf(self, y, rtol: float = 1e-10) -> np.ndarray:
+        """``P(y_N <= y)``, integrated from the density.
+
+        The mass lies between the smallest and largest nodes whose probability
+        is within ``e**-60`` of the largest; the CDF is 0 below and 1 above them.
+        In between, the density is integrated from the lower end by composite
+        8-point Gauss-Legendre panels in ``t = log(y_1)``, the panels halved
+        until the CDF changes by at most ``rtol``
+        (:func:`depthcore.exact.cdf.gauss_legendre_cdf`).
+
+        Parameters
+        ----------
+        y : array_like
+            Depths at frame ``N``: any shape for one problem; ``(..., K)`` for a batch.
+        rtol : float
+            Absolute tolerance of the CDF, > 0, or its roundoff floor
+            ``64 eps (1 + |t|) / sd_t`` where that is larger (``t`` the
+            mixture's mean of ``log(y_1)``, ``sd_t`` its SD): at a tiny noise
+            level the posterior is so narrow that the depths themselves, as
+            floats, cannot resolve it further.
+        """
+        rtol = _positive_scalar(rtol, "rtol")
+        y, restore = self._query(y, "y")
+        b = self.bank
+        log_p = b.log_weight + self.log_weights - self.log_normaliser[..., None]
+        big = log_p > np.max(log_p, axis=-1, keepdims=True) - _CUTOFF
+        nodes = np.broadcast_to(b.nodes, big.shape)
+        lo = np.log(np.min(np.where(big, nodes, np.inf), axis=-1))[..., None]
+        hi = np.log(np.max(np.where(big, nodes, 0.0), axis=-1))[..., None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.log(np.maximum(y - (b.frames - 1), 0.0))
+        top = np.minimum(t, hi)
+        width = np.maximum(top - lo, 0.0)
+        # Start with panels of half the SD of log(y_1) under each problem's mixture: as
+        # many as the widest range in units of its own SD needs (in a batch of
+        # problems, not the widest range over the narrowest SD).
+        log_nodes = np.log(nodes)
+        centre = np.sum(self.probabilities * log_nodes, axis=-1, keepdims=True)
+        sd_t = np.sqrt(np.sum(self.probabilities * (log_nodes - centre) ** 2, axis=-1))
+        panels = int(np.clip(np.ceil(np.max(width / (0.5 * sd_t[..., None] + 1e-3))), 4, 4096))
+        # Roundoff: a depth is a float, rounded to eps (1 + |t|) in t, which moves the
+        # log density by that times its slope, about z / sd_t at z SDs (|z| ~ 1 on
+        # average); the CDF, an average of the density's relative errors, cannot
+        # settle below 64 eps (1 + |t|) / sd_t (the safety factor of the package's
+        # other roundoff floors), which matters only for posteriors narrower than
+        # about 1e-5 of the depth in relative terms.
+        eps = np.finfo(float).eps
+        floor = 64.0 * eps * (1.0 + np.abs(centre)) / np.maximum(sd_t[..., None], eps)
+        tol = np.maximum(rtol, floor)
+
+        def density(tt):
+            shape = tt.shape
+            y1 = np.exp(tt.reshape(shape[:-3] + (-1,)))
+            log_w = run_bank(
+                y1, b.mu, b.rho, b.process_noise, b.prior_mean, b.prior_cov, False
+            ).log_weight
+            dens = np.exp(log_w - self.log_normaliser[..., None] + np.log(y1))  # dy = y dt
+            return dens.reshape(shape)
+
+        cdf, settled, panels = gauss_legendre_cdf(
+            density, lo, width, panels, tol, max_levels=_MAX_DOUBLINGS
+        )
+        if not settled:
+            raise ValueError(
+                f"y: the depth CDF did not settle to rtol = {rtol:.3g} (or its roundoff "
+                f"floor) within {panels} panels"
+            )
+        cdf = np.where(t >= hi, 1.0, np.where(t <= lo, 0.0, np.clip(cdf, 0.0, 1.0)))
+        return restore(cdf)
+
+    @property
+    def velocity_gap(self) -> np.ndarray:
+        """The resolution of the velocity mixture, shape (...).
+
+        The largest difference between the conditional means ``E[v_N | y_j]``
+        of neighbouring nodes (in depth order), in units of the smaller
+        conditional SD, over the pairs where either node has probability above
+        ``1e-14`` of the largest. :meth:`velocity_pdf` and :meth:`velocity_cdf`
+        sum one Gaussian per node; for Gaussians of equal SD spaced ``h`` SDs
+        apart the sum ripples with relative amplitude ``2 exp(-2 pi**2 / h**2)``
+        (Poisson summation): about ``5e-9`` at ``h = 1`` and ``1e-34`` at
+        ``h = 0.5``, but ``0.2`` at ``h = 3``. The moments need no such
+        resolution.
+        """
+        b = self.bank
+        order = np.argsort(np.broadcast_to(b.nodes, self.probabilities.shape), axis=-1)
+        p = np.take_along_axis(self.probabilities, order, axis=-1)
+        m = np.take_along_axis(np.broadcast_to(b.mean[..., 1], p.shape), order, axis=-1)
+        sd = np.take_along_axis(np.broadcast_to(np.sqrt(b.cov[..., 1, 1]), p.shape), order, axis=-1)
+        big = p > 1e-14 * np.max(p, axis=-1, keepdims=True)
+        gap = np.abs(np.diff(m, axis=-1)) / np.minimum(sd[..., 1:], sd[..., :-1])
+        return np.max(np.where(big[..., 1:] | big[..., :-1], gap, 0.0), axis=-1, initial=0.0)
+
+    def _velocity_terms(self):
+        b = self.bank
+        sd = np.sqrt(b.cov[..., 1, 1])
+        return self.probabilities[..., None, :], b.mean[..., None, :, 1], sd[..., None, :]
+
+    def velocity_pdf(self, v) -> np.ndarray:
+        """Posterior density of ``v_N``: ``sum_j p_j N(v; E[v_N | y_j], Var[v_N | y_j])``.
+
+        The nodes must be close enough that neighbouring conditional means
+        differ by less than about a conditional SD (:attr:`velocity_gap`), or
+        the sum ripples.
+
+        Parameters
+        ----------
+        v : array_like
+            Any shape for one problem; ``(..., K)`` for a batch.
+        """
+        v, restore = self._query(v, "v")
+        W, m, sd = self._velocity_terms()
+        z = (v[..., :, None] - m) / sd
+        return restore(np.sum(W * np.exp(-0.5 * z**2) / (np.sqrt(2.0 * np.pi) * sd), axis=-1))
+
+    def velocity_cdf(self, v) -> np.ndarray:
+        """``P(v_N <= v)``: the mixture of the nodes' Gaussian CDFs.
+
+        Converged only when the nodes resolve the velocity (:attr:`velocity_gap`
+        below about 1), as for :meth:`velocity_pdf`.
+        """
+        v, restore = self._query(v, "v")
+        W, m, sd = self._velocity_terms()
+        return restore(np.sum(W * ndtr((v[..., :, None] - m) / sd), axis=-1))
+
+    def smoothed(self) -> Smoothed:
+        """Textbook 19.2.6: the state at every frame given all bearings.
+
+        Each node's filter history (the bank's, or from a rerun of the filters
+        if the bank kept none) is smoothed by the fixed-interval smoother
+        (:func:`depthcore.kalman.linear.fixed_interval_smoother`);
+        the smoothed Gaussians of ``(x_k, v_k)`` are mixed with the nodes'
+        probabilities, and the depth at frame ``k`` is ``y_1 + k - 1``.
+        """
+        b = self.bank
+        res = b.history
+        if res is None:
+            res = run_bank(
+                b.nodes, b.mu, b.rho, b.process_noise, b.prior_mean, b.prior_cov, True
+            ).history
+        s = linear.fixed_interval_smoother(res, PSI)  # (..., J, N, 2), (..., J, N, 2, 2)
+        frames = np.arange(b.frames)
+        mean, cov = mixture_moments(
+            self.probabilities[..., None, :],
+            np.swapaxes(s.mean, -2, -3),
+            np.swapaxes(s.cov, -3, -4),
+            b.nodes[..., None, :] + frames[:, None],
+        )
+        return Smoothed(mean, cov)
+
+
+def _positive_scalar(value, name: str) -> float:
+    arr = checks.finite_array(value, name)
+    if arr.ndim != 0 or not arr > 0:
+        raise ValueError(f"{name} must be a positive scalar, got {value!r}")
+    return float(arr)
+
+
+def mixture(bank: Bank, weights) -> Mixture:
+    """The optimal posterior at frame ``N`` from the bank and the nodes' quadrature weights.
+
+    Parameters
+    ----------
+    bank : Bank
+    weights : array_like, shape (..., J)
+        Quadrature weights of the nodes for integrals over the depth at frame 1
+        (``sum_j w_j g(y_j)`` approximates ``integral g(y) dy``), broadcasting
+        with ``bank.nodes``: >= 0 (a zero weight pads a batch's node sets to
+        one length), at least one positive per problem.
+
+    Returns
+    -------
+    Mixture
+        The probabilities ``p_j`` proportional to ``w_j N(y_j; m_y, P_yy) L(y_j)``
+        (in log space, the largest subtracted), the log normaliser, and the
+        mixture's mean and covariance of ``(x_N, y_N, v_N)``: with
+        ``m_j = (E[x_N | y_j], y_j + N - 1, E[v_N | y_j])``,
+        ``mean = sum_j p_j m_j`` and
+        ``cov = sum_j p_j (Cov[(x_N, v_N) | y_j] + (m_j - mean)(m_j - mean)^T)``.
+    """
+    if not isinstance(bank, Bank):
+        raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")
+    weights = checks.finite_array(weights, "weights")
+    if not (np.all(weights >= 0) and np.all(np.any(weights > 0, axis=-1))):
+        raise ValueError(
+            "weights must be >= 0 with a positive one per problem, "
+            f"got minimum {float(np.min(weights)):.6g}"
+        )
+    try:
+        np.broadcast_shapes(weights.shape, bank.nodes.shape)
+    except ValueError:
+        raise ValueError(
+            f"weights must broadcast with the nodes' shape {bank.nodes.shape}, "
+            f"got shape {weights.shape}"
+        ) from None
+    with np.errstate(divide="ignore"):
+        log_weights = np.log(weights)
+    return mixture_of_log_weights(bank, log_weights)
+
+
+def mixture_of_log_weights(bank: Bank, log_weights, halved: bool = False):
+    """:func:`mixture` from the checked log quadrature weights (``-inf`` for a zero weight).
+
+    With ``halved``, also the moments on every other node and the ends'
+    freedom (:func:`_halving`), from the same pass over the nodes, for
+    ``_resolution``: returns the Mixture, the halved mean (..., 3) and
+    covariance (..., 3, 3), the largest log probability (..., 1) and ``free`` (...).
+    """
+    a = bank.log_weight + log_weights
+    probabilities, log_normaliser = normalised(a)
+    depth_N = bank.nodes + (bank.frames - 1)
+    if not halved:
+        mean, cov = mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
+        return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)
+    top = np.max(a, axis=-1, keepdims=True)
+    every_other, free = _halving(a, top)
+    W = np.empty(probabilities.shape[:-1] + (2,) + probabilities.shape[-1:])
+    W[..., 0, :] = probabilities
+    np.multiply(probabilities, every_other, out=W[..., 1, :])  # 0 off every other node
+    mean, cov = _stacked_moments(W, bank.mean, bank.cov, depth_N)
+    post = Mixture(
+        bank, log_weights, probabilities, log_normaliser, mean[..., 0, :], cov[..., 0, :, :]
+    )
+    return post, mean[..., 1, :], cov[..., 1, :, :], top, free
+
+
+#: An end node of a placed grid may carry at most this log probability below the largest
+#: before :func:`~depthcore.exact.posterior.update` re-places the nodes (the quadrature cuts its
+#: range at 60).
+_END_MARGIN = 40.0
+
+
+def _halving(log_p, top):
+    """Every other node of the placed grid, and whether its ends are free.
+
+    Parameters
+    ----------
+    log_p : ndarray, shape (..., J)
+        The nodes' log probabilities up to a constant, ``-inf`` at padding.
+    top : ndarray, shape (..., 1)
+        Their largest.
+
+    Returns
+    -------
+    every_other : ndarray of bool, shape (..., J)
+        The nodes with positive weight an even number of places from the first.
+    free : ndarray of bool, shape (...)
+        The first and last nodes with positive weight carry log probabilities
+        more than :data:`_END_MARGIN` below the largest.
+    """
+    valid = np.isfinite(log_p)
+    J = log_p.shape[-1]
+    first = np.argmax(valid, axis=-1)
+    last = J - 1 - np.argmax(valid[..., ::-1], axis=-1)
+    end = np.max(np.take_along_axis(log_p, np.stack([first, last], -1), -1), axis=-1)
+    every_other = (np.arange(J) % 2 == (first % 2)[..., None]) & valid
+    return every_other, end < top[..., 0] - _END_MARGIN

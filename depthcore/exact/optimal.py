@@ -1,0 +1,752 @@
+"""The optimal filter p_o and its exact marginals, Eqs. (2)-(6) and (13)-(16).
+
+Recommended import: ``from depthcore.exact import optimal``.
+
+For a fixed depth ``y`` the log posterior (6) is quadratic in ``u = (x, v)``:
+each measurement term of ``f`` is linear in ``u`` and so is the prior's
+argument ``G^{-2} x = (x - 2v, y - 2, v)``. Writing all six terms (three
+measurements, three whitened prior components) as ``g_i . u - z_i``,
+
+    log p_o(x, y, v) = -1/2 sum_i (g_i(y) . u - z_i(y))**2 + const,
+
+so the inner integral over ``u`` is Gaussian (Eqs. (14)-(16)) with precision
+``M = sum_i g_i g_i^T`` and
+
+    log p_oy(y) = -1/2 log det M(y) - 1/2 S(y) + const,
+
+where ``S(y) = min_u sum_i (g_i . u - z_i)**2``. The paper's Eq. (16) keeps
+only ``-1/2 log det M + l^T M^{-1} l / 8`` and calls the rest a constant
+"independent of y"; it is not: ``S = |z|**2 - l^T M^{-1} l / 4`` and ``|z|**2``
+contains the prior's depth term ``(y - 2 - m2)**2 / P22``. ``reading="printed"``
+drops it as the print does; ``reading="derived"`` (the default) keeps it.
+
+Both ``det M`` and ``S`` are computed as sums of squares by the Cauchy-Binet
+formula (``det M = sum_{i<j} (g_i x g_j)**2``, ``S det M = sum_{i<j<k}
+det[g z]_{ijk}**2``), so neither suffers cancellation near the poles
+``y = 0, 1, 2`` or at small noise.
+
+The depth marginal is then a one-dimensional integral, done on each of the
+intervals ``(-inf, 0)``, ``(0, 1)``, ``(1, 2)``, ``(2, inf)`` by the trapezoid
+rule of :mod:`depthcore.exact.quadrature` after a change of variable that sends the
+interval to the real line; the step is halved until the moments agree to the
+requested tolerance, and the last change is reported as the error estimate. The velocity marginal is
+the mixture over the same nodes of the Gaussian conditionals of ``v`` given
+``y``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from depthcore.exact import quadrature
+from depthcore.exact.cdf import gauss_legendre_cdf
+from depthcore.kalman.second_order import A2
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.problem.model import f
+
+READINGS = ("derived", "printed")
+#: ``"front"``: depths ``y > 2``, the point in front of the camera at all three
+#: frames; ``"all"``: every real ``y`` but the poles, Eq. (6) taken literally.
+SUPPORTS = ("front", "all")
+
+#: ``G^{-2} x`` as a function of ``u = (x, v)`` for fixed ``y``: ``L u + (0, y - 2, 0)``.
+_L = A2[:, [0, 2]]
+
+
+def _problem(mu, rho, prior_mean, prior_cov, reading) -> quadrature.Problem:
+    if reading not in READINGS:
+        raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
+    mu = np.atleast_2d(checks.three_frames(mu, "mu"))
+    prior_cov = checks.finite_array(prior_cov, "prior_cov")
+    if prior_cov.shape != (3, 3):
+        raise ValueError(f"prior_cov must have shape (3, 3), got shape {prior_cov.shape}")
+    mu, rho, prior_mean, prior_cov = model.batch_problem(mu, rho, prior_mean, prior_cov)
+    B = mu.shape[0]
+    prior_mean = np.broadcast_to(prior_mean, (B, 3))
+    R = np.linalg.inv(np.linalg.cholesky(prior_cov))
+    return quadrature.Problem(
+        mu, np.full(B, rho), prior_mean, np.broadcast_to(R, (B, 3, 3)), _solve, True, reading
+    )
+
+
+def log_posterior(x, mu, rho: float, prior: Gaussian) -> np.ndarray:
+    """Eq. (6): unnormalised log density of the optimal filter at time 3.
+
+    ``-f(x) / (2 rho**2) + log p(G^{-2} x)``, with ``f`` from Eq. (5).
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 3)
+        States at time 3.
+    mu : array_like, shape (3,)
+    rho : float
+    prior : Gaussian
+        Density of the state at time 1.
+
+    Returns
+    -------
+    ndarray, shape x.shape[:-1]
+    """
+    rho = checks.positive_scalar(rho, "rho")
+    mu = model.measurements(mu)
+    x = np.asarray(x, dtype=float)
+    return -f(x, mu) / (2.0 * rho**2) + prior.logpdf(model.G(x, -2))
+
+
+def _terms(offsets, pb: quadrature.Problem):
+    """The six linear terms ``g_i . u - z_i`` of Eq. (6) at fixed depths.
+
+    ``offsets`` has shape (B, n, 3): ``(y, y - 1, y - 2)``. Returns ``gx``,
+    ``gv`` and ``z``, each of shape (6, B, n): rows 0-2 are the measurement
+    terms at times 3, 2, 1 (``((x - k v) / (y - k) - mu_{3-k}) / rho`` for
+    ``k = 0, 1, 2``), rows 3-5 the prior's argument ``G^{-2} x - m``
+    whitened by ``R``.
+    """
+    B, n, _ = offsets.shape
+    s = np.moveaxis(offsets, -1, 0) * pb.rho[:, None]
+    np.reciprocal(s, out=s)
+    RL = pb.R @ _L  # (B, 3, 2)
+    gx = np.empty((6, B, n))
+    gv = np.empty((6, B, n))
+    z = np.empty((6, B, n))
+    gx[:3] = s
+    gv[:3] = -np.array([0.0, 1.0, 2.0])[:, None, None] * s
+    gx[3:] = RL[:, :, 0].T[:, :, None]
+    gv[3:] = RL[:, :, 1].T[:, :, None]
+    z[:3] = (pb.mu[:, ::-1] / pb.rho[:, None]).T[:, :, None]
+    # G^{-2} x - m = L u + b with b = (-m1, (y - 2) - m2, -m3), and z = -R b.
+    z[3:] = (
+        np.einsum("bij,bj->bi", pb.R, pb.mean).T[:, :, None]
+        - pb.R[:, :, 1].T[:, :, None] * offsets[None, ..., 2]
+    )
+    return gx, gv, z
+
+
+_MEAS_PAIRS = ((0, 1), (0, 2), (1, 2))
+
+
+def _solve(offsets, pb: quadrature.Problem):
+    """Log depth marginal and the Gaussian of ``(x, v)`` given ``y``, batched.
+
+    ``offsets`` has shape (B, n, 3): ``(y, y - 1, y - 2)``. Returns
+    ``log_density`` (B, n), ``mean`` (2, B, n) and the covariance entries
+    ``(cxx, cxv, cvv)``, each (B, n).
+
+    The six terms of :func:`_terms` have a structure that the Cauchy-Binet
+    sums exploit: measurement row ``k`` is ``g = s_k (1, -k)``, ``z = w_k``
+    with ``s_k = 1 / ((y - k) rho)`` and ``w_k = mu_{3-k} / rho``; prior row
+    ``j`` is ``g = q_j`` (constant), ``z = zeta_j = alpha_j - beta_j (y - 2)``.
+    So every 2 x 2 minor of ``g`` is ``s_k s_l (k - l)``, ``s_k K_kj`` with
+    ``K_kj = q_jv + k q_jx``, or a constant ``P_jj'``; every 3 x 3 minor of
+    ``[g z]`` expands along ``z`` into those. ``det M`` is the sum of the
+    squared 2 x 2 minors, ``S det M`` that of the squared 3 x 3 minors, and
+    the conditional mean follows by Cramer's rule.
+    """
+    rho = pb.rho[:, None]
+    s = [1.0 / (offsets[..., k] * rho) for k in range(3)]
+    s2 = [sk * sk for sk in s]
+    RL = pb.R @ _L
+    qx, qv = RL[:, :, 0], RL[:, :, 1]  # (B, 3)
+    K = [[(qv[:, j] + k * qx[:, j])[:, None] for j in range(3)] for k in range(3)]
+    P = {p: (qx[:, p[0]] * qv[:, p[1]] - qv[:, p[0]] * qx[:, p[1]])[:, None] for p in _MEAS_PAIRS}
+    w = [(pb.mu[:, 2 - k] / pb.rho)[:, None] for k in range(3)]
+    alpha = np.einsum("bij,bj->bi", pb.R, pb.mean)
+    zeta = [alpha[:, j : j + 1] - pb.R[:, j, 1:2] * offsets[..., 2] for j in range(3)]
+    qxc = [qx[:, j : j + 1] for j in range(3)]
+    qvc = [qv[:, j : j + 1] for j in range(3)]
+
+    det_M = (
+        s2[0] * s2[1]
+        + 4.0 * s2[0] * s2[2]
+        + s2[1] * s2[2]
+        + sum(s2[k] * sum(K[k][j] ** 2 for j in range(3)) for k in range(3))
+        + sum(P[p] ** 2 for p in _MEAS_PAIRS)
+    )
+    # The three measurement rows' minor, -w0 s1 s2 + 2 w1 s0 s2 - w2 s0 s1, equals
+    # (2 (mu1 - mu2) - d y) s0 s1 s2 = d (c2 - y) s0 s1 s2 with d = mu1 + mu3 - 2 mu2:
+    # the factored form keeps its relative accuracy where the terms cancel (near y = c2).
+    d = (pb.mu[:, 0] + pb.mu[:, 2] - 2.0 * pb.mu[:, 1])[:, None]
+    c2 = model.noise_free_depth_unchecked(pb.mu)[:, None]
+    minors3 = (d * (c2 - offsets[..., 0]) * s[0] * s[1] * s[2]) ** 2
+    for k, l in _MEAS_PAIRS:
+        for j in range(3):
+            minors3 = (
+                minors3
+                + (w[k] * s[l] * K[l][j] - w[l] * s[k] * K[k][j] + (k - l) * zeta[j] * s[k] * s[l])
+                ** 2
+            )
+    for k in range(3):
+        for j, jj in _MEAS_PAIRS:
+            minors3 = (
+                minors3
+                + (w[k] * P[(j, jj)] - zeta[j] * s[k] * K[k][jj] + zeta[jj] * s[k] * K[k][j]) ** 2
+            )
+    minors3 = minors3 + (zeta[0] * P[(1, 2)] - zeta[1] * P[(0, 2)] + zeta[2] * P[(0, 1)]) ** 2
+    S = minors3 / det_M
+
+    nx = nv = 0.0
+    for k, l in _MEAS_PAIRS:
+        D = (k - l) * s[k] * s[l]
+        nx = nx + D * (k * w[l] * s[k] - l * w[k] * s[l])
+        nv = nv + D * (w[l] * s[k] - w[k] * s[l])
+    for k in range(3):
+        for j in range(3):
+            D = s[k] * K[k][j]
+            nx = nx + D * (w[k] * qvc[j] + k * s[k] * zeta[j])
+            nv = nv + D * (s[k] * zeta[j] - w[k] * qxc[j])
+    for j, jj in _MEAS_PAIRS:
+        D = P[(j, jj)]
+        nx = nx + D * (zeta[j] * qvc[jj] - qvc[j] * zeta[jj])
+        nv = nv + D * (qxc[j] * zeta[jj] - zeta[j] * qxc[jj])
+    mean = np.stack([nx / det_M, nv / det_M])
+    cxx = (s2[1] + 4.0 * s2[2] + np.sum(qv**2, 1)[:, None]) / det_M
+    cvv = (s2[0] + s2[1] + s2[2] + np.sum(qx**2, 1)[:, None]) / det_M
+    cxv = (s2[1] + 2.0 * s2[2] - np.sum(qx * qv, 1)[:, None]) / det_M
+    log_density = -0.5 * np.log(det_M) - 0.5 * S
+    if pb.reading == "printed":
+        # Eq. (16) keeps only l^T M^{-1} l / 8 = (|z|^2 - S) / 2 beside the determinant.
+        log_density = log_density + 0.5 * (sum(wk**2 for wk in w) + sum(zj**2 for zj in zeta))
+    return log_density, mean, (cxx, cxv, cvv)
+
+
+def quadratic_coefficients(y, mu, rho: float, prior: Gaussian) -> np.ndarray:
+    """Eq. (14): the coefficients ``A, B, C, D, E`` of ``p_o`` at fixed depths.
+
+    ``log p_o = -1/2 (A x**2 + B x v + C v**2 + D x + E v) + terms in y only``.
+
+    Parameters
+    ----------
+    y : array_like, shape (n,)
+    mu, rho, prior
+        As in :func:`log_posterior`.
+
+    Returns
+    -------
+    ndarray, shape (n, 5)
+        Columns ``A, B, C, D, E``; ``M = [[A, B/2], [B/2, C]]`` and ``l = (D, E)``
+        of Eq. (15).
+    """
+    y = np.atleast_1d(np.asarray(y, dtype=float))
+    pb = _problem(model.measurements(mu), rho, prior.mean, prior.cov, "derived")
+    gx, gv, z = (a[:, 0] for a in _terms(np.stack([y, y - 1, y - 2], -1)[None], pb))
+    A, B, C = np.sum(gx * gx, 0), 2.0 * np.sum(gx * gv, 0), np.sum(gv * gv, 0)
+    D, E = -2.0 * np.sum(gx * z, 0), -2.0 * np.sum(gv * z, 0)
+    return np.stack([A, B, C, D, E], -1)
+
+
+def conditional(y, mu, rho: float, prior: Gaussian, reading: str = "derived"):
+    """Eqs. (14)-(16): log depth marginal and the Gaussian of ``(x, v)`` given ``y``.
+
+    Parameters
+    ----------
+    y : array_like, shape (n,)
+        Depths at time 3, none at a pole ``0, 1, 2``.
+    mu, rho, prior
+        As in :func:`log_posterior`.
+    reading : {"derived", "printed"}
+        See the module docstring.
+
+    Returns
+    -------
+    log_density : ndarray, shape (n,)
+        Unnormalised ``log p_oy(y)`` (the Gaussian integral's ``2 pi`` dropped).
+    mean : ndarray, shape (n, 2)
+        ``E[(x, v) | y]``.
+    cov : ndarray, shape (n, 2, 2)
+        ``Cov[(x, v) | y] = M^{-1}``.
+    """
+    y = np.atleast_1d(checks.finite_array(y, "y"))
+    if np.any(np.isin(y, (0.0, 1.0, 2.0))):
+        raise ValueError("y must avoid the poles 0, 1, 2 of Eq. (5)")
+    pb = _problem(model.measurements(mu), rho, prior.mean, prior.cov, reading)
+    log_density, mean, (cxx, cxv, cvv) = _solve(np.stack([y, y - 1, y - 2], -1)[None], pb)
+    cov = np.stack([np.stack([cxx, cxv], -1), np.stack([cxv, cvv], -1)], -2)
+    return log_density[0], mean[:, 0].T, cov[0]
+
+
+class Moments(NamedTuple):
+    """Moments of the optimal depth and velocity marginals for a batch of problems.
+
+    Every field is an array of shape (B,). ``depth_error`` and
+    ``velocity_error`` are absolute error estimates of the means and SDs: the
+    largest change at the last halving of the quadrature step, an upper bound
+    in practice since the trapezoid rule converges geometrically here.
+    ``prob_behind_camera`` is the posterior probability that the depth at the
+    first frame, ``y - 2``, is not positive (zero for ``support="front"``).
+    ``mean`` (B, 3) and ``cov`` (B, 3, 3) are the posterior mean and covariance
+    of the whole state ``(x, y, v)`` at time 3.
+    """
+
+    depth_mean: np.ndarray
+    depth_sd: np.ndarray
+    velocity_mean: np.ndarray
+    velocity_sd: np.ndarray
+    depth_error: np.ndarray
+    velocity_error: np.ndarray
+    prob_behind_camera: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+
+
+def moments(
+    mu,
+    rho: float,
+    prior_mean,
+    prior_cov,
+    reading: str = "derived",
+    support: str = "front",
+    rtol: float = 1e-10,
+    chunk: int = 64,
+) -> Moments:
+    """Eqs. (13)-(16) for a batch: the optimal depth and velocity moments.
+
+    Parameters
+    ----------
+    mu : array_like, shape (B, 3)
+        One triple of measurements per row, each checked as in
+        :func:`depthcore.problem.model.measurements`.
+    rho : float or array_like, shape (B,)
+        Noise standard deviation, > 0.
+    prior_mean : array_like, shape (3,) or (B, 3)
+        Prior mean of the state at time 1.
+    prior_cov : array_like, shape (3, 3)
+        Prior covariance, symmetric positive definite.
+    reading : {"derived", "printed"}
+    support : {"front", "all"}
+        See :func:`marginals`.
+    rtol : float
+        Target accuracy of each mean and SD, relative to the SD.
+    chunk : int
+        Problems integrated together (memory grows with it).
+
+    Returns
+    -------
+    Moments
+    """
+    pb = _problem(mu, rho, prior_mean, prior_cov, reading)
+    if pb.mu.shape[1] != 3:
+        raise ValueError(f"mu must have shape (B, 3), got shape {pb.mu.shape}")
+    intervals = _intervals(support)
+    rtol = checks.positive_scalar(rtol, "rtol")
+    out, means, covs = [], [], []
+    for start in range(0, pb.mu.shape[0], chunk):
+        m, err_y, err_v, _, _ = quadrature.integrate(
+            pb.take(slice(start, start + chunk)), intervals, rtol
+        )
+        out.append(np.concatenate([m.key_moments(), [err_y, err_v, m.behind]]))
+        means.append(m.mean)
+        covs.append(m.cov)
+    return Moments(*np.concatenate(out, axis=1), np.concatenate(means), np.concatenate(covs))
+
+
+def _intervals(support: str):
+    if support not in SUPPORTS:
+        raise ValueError(f"support must be one of {SUPPORTS}, got {support!r}")
+    return (3,) if support == "front" else (0, 1, 2, 3)
+
+
+def _fine_velocity_mixture(
+    pb: quadrature.Problem, grids: dict, log_normaliser, max_refine: int = 256
+):
+    """The velocity mixture on nodes close enough for a smooth curve, batched.
+
+    Given the depth, the velocity is Gaussian with SD ``s_v(y)``, which at
+    small noise is far narrower than the spacing of the conditional means
+    ``vbar(y_j)`` at the moment quadrature's nodes: summed there, the mixture
+    ``sum_j w_j N(v, vbar_j, s_v_j**2)`` ripples although its moments are
+    right. Starting from those nodes, each problem's step in ``t`` is halved
+    until its neighbouring nodes with weight above 1e-14 have means within
+    half an SD, where the ripple is below 1e-30 of the density. Each problem
+    is refined on its own, so its nodes do not depend on the rest of the
+    batch, and a halving evaluates only the new midpoints.
+
+    Returns normalised weights, means and SDs, each of shape (B, n) (the
+    rows padded with zero weights).
+    """
+    B = len(log_normaliser)
+    weights, means, sds = [], [], []
+    for i, (lo, h, n, frame) in grids.items():
+        rows = [None] * B
+        active = np.arange(B)
+        u = quadrature.grid(lo, h, n, 0.0)
+        w, mean, sd = _velocity_nodes(i, u, frame, pb, log_normaliser)
+        factor = 1
+        while True:
+            valid = ~np.isnan(u)
+            big = w > 1e-14 * np.max(w, axis=1, keepdims=True)
+            with np.errstate(invalid="ignore"):
+                gap = np.abs(np.diff(mean, axis=1)) / np.minimum(sd[:, 1:], sd[:, :-1])
+            rough = (big[:, 1:] | big[:, :-1]) & valid[:, 1:] & valid[:, :-1] & (gap > 0.5)
+            refine = np.any(rough, axis=1) & (factor < max_refine)
+            for k in np.flatnonzero(~refine):
+                rows[active[k]] = (w[k] * (h[active[k]] / factor), mean[k], sd[k])
+            if not np.any(refine):
+                break
+            keep = np.flatnonzero(refine)
+            active, u, w, mean, sd = active[keep], u[keep], w[keep], mean[keep], sd[keep]
+            mid = 0.5 * (u[:, :-1] + u[:, 1:])
+            sub = quadrature.Frame(frame.t0[active], frame.sigma[active])
+            new = _velocity_nodes(i, mid, sub, pb.take(active), log_normaliser[active])
+            u, w, mean, sd = (
+                _interleave(a, b) for a, b in zip((u, w, mean, sd), (mid, *new), strict=True)
+            )
+            factor *= 2
+        width = max(len(r[0]) for r in rows)
+        for out, k, fill in ((weights, 0, 0.0), (means, 1, 0.0), (sds, 2, 1.0)):
+            out.append(
+                np.stack([np.pad(r[k], (0, width - len(r[k])), constant_values=fill) for r in rows])
+            )
+    w = np.concatenate(weights, axis=1)
+    return (
+        w / np.sum(w, axis=1, keepdims=True),
+        np.concatenate(means, axis=1),
+        np.concatenate(sds, axis=1),
+    )
+
+
+def _velocity_nodes(
+    interval: int, u, frame: quadrature.Frame, pb: quadrature.Problem, log_normaliser
+):
+    """Depth weights (per unit ``u``), conditional velocity means and SDs at nodes ``u`` (B, n).
+
+    NaN nodes (padding) get weight 0, mean 0 and SD 1.
+    """
+    skip = np.isnan(u)
+    offsets, log_jac = quadrature.mapped_nodes(interval, np.where(skip, 0.0, u), frame)
+    log_density, mean, (_, _, cvv) = _solve(offsets, pb)
+    w = np.where(skip, 0.0, np.exp(log_density + log_jac - log_normaliser[:, None]))
+    return w, np.where(skip, 0.0, mean[1]), np.where(skip, 1.0, np.sqrt(cvv))
+
+
+def _interleave(a, b):
+    """Columns ``a0 b0 a1 b1 ... a_n`` from ``a`` (B, n + 1) and ``b`` (B, n)."""
+    out = np.empty((a.shape[0], a.shape[1] + b.shape[1]))
+    out[:, 0::2] = a
+    out[:, 1::2] = b
+    return out
+
+
+@dataclass(frozen=True)
+class OptimalMarginals:
+    """The optimal filter's depth and velocity marginals, Eqs. (13)-(16).
+
+    Built by :func:`marginals`.
+
+    Attributes
+    ----------
+    depth_mean, depth_sd, velocity_mean, velocity_sd : float
+    depth_error, velocity_error : float
+        Absolute error estimates of the means and SDs (see :class:`Moments`).
+    prob_behind_camera : float
+        Posterior probability that the depth at the first frame is not positive.
+    log_normaliser : float
+        ``log`` of the integral of the unnormalised depth marginal of :func:`conditional`.
+    n_nodes : int
+        Number of quadrature nodes used.
+    mean : ndarray, shape (3,)
+        Posterior mean of ``(x, y, v)`` at time 3.
+    cov : ndarray, shape (3, 3)
+        Posterior covariance of ``(x, y, v)`` at time 3.
+    """
+
+    mu: np.ndarray
+    rho: float
+    prior: Gaussian
+    reading: str
+    support: str
+    depth_mean: float
+    depth_sd: float
+    velocity_mean: float
+    velocity_sd: float
+    depth_error: float
+    velocity_error: float
+    prob_behind_camera: float
+    log_normaliser: float
+    n_nodes: int
+    mean: np.ndarray
+    cov: np.ndarray
+    _problem: quadrature.Problem
+    _grids: dict
+
+    def depth_pdf(self, y) -> np.ndarray:
+        """Normalised depth marginal ``p_oy`` at depths ``y`` (any shape).
+
+        Zero at the poles ``y = 0, 1, 2`` and, for ``support="front"``, at ``y <= 2``.
+        """
+        y = np.asarray(y, dtype=float)
+        flat = y.ravel()
+        outside = np.isin(flat, (0.0, 1.0, 2.0))
+        if self.support == "front":
+            outside |= flat <= 2
+        safe = np.where(outside, 3.0, flat)
+        log_density, _, _ = conditional(safe, self.mu, self.rho, self.prior, self.reading)
+        pdf = np.where(outside, 0.0, np.exp(log_density - self.log_normaliser))
+        return pdf.reshape(y.shape)
+
+    def velocity_pdf(self, v) -> np.ndarray:
+        """Normalised velocity marginal ``p_ov`` at velocities ``v`` (any shape).
+
+        The mixture over depths ``y_j`` of the Gaussian conditionals of ``v``
+        given ``y``, weighted by the depth marginal, on nodes fine enough for a
+        smooth curve (see :func:`_fine_velocity_mixture`).
+        """
+        v = np.asarray(v, dtype=float)
+        w, m, sd = (
+            a[0]
+            for a in _fine_velocity_mixture(
+                self._problem, self._grids, np.array([self.log_normaliser])
+            )
+        )
+        keep = w > 1e-17 * np.max(w)
+        w, m, sd = w[keep], m[keep], sd[keep]
+        flat = v.ravel()
+        pdf = np.empty(flat.size)
+        for start in range(0, flat.size, 512):  # bounded memory: 512 velocities at a time
+            z = (flat[start : start + 512, None] - m) / sd
+            pdf[start : start + 512] = (np.exp(-0.5 * z**2) / (np.sqrt(2.0 * np.pi) * sd)) @ w
+        return pdf.reshape(v.shape)
+
+
+def marginals(
+    mu,
+    rho: float,
+    prior: Gaussian,
+    reading: str = "derived",
+    support: str = "front",
+    rtol: float = 1e-10,
+) -> OptimalMarginals:
+    """Eqs. (13)-(16): the optimal depth and velocity marginals and their moments.
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+        Measurements; checked by :func:`depthcore.problem.model.measurements`.
+    rho : float
+        Noise standard deviation, > 0.
+    prior : Gaussian
+        Density of the state at time 1.
+    reading : {"derived", "printed"}
+        ``"printed"`` drops the y-dependent factor that Eq. (16) calls constant.
+    support : {"front", "all"}
+        ``"front"`` (default) conditions on the point being in front of the
+        camera at every frame (``y > 2``), as a camera that sees the point
+        implies; ``"all"`` integrates Eq. (6) over every depth, behind the
+        camera too, and reports that mass as ``prob_behind_camera``.
+    rtol : float
+        Target accuracy of each mean and SD, relative to the SD.
+
+    Returns
+    -------
+    OptimalMarginals
+    """
+    mu = model.measurements(mu)
+    if not isinstance(prior, Gaussian):
+        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
+    pb = _problem(mu, rho, prior.mean, prior.cov, reading)
+    rtol = checks.positive_scalar(rtol, "rtol")
+    m, err_y, err_v, top, grids = quadrature.integrate(pb, _intervals(support), rtol)
+    log_z = float(np.log(m.Z[0]) + top[0])
+    n_nodes = sum(int(g[2][0]) for g in grids.values())
+    return OptimalMarginals(
+        mu=mu,
+        rho=float(rho),
+        prior=prior,
+        reading=reading,
+        support=support,
+        depth_mean=float(m.mean[0, 1]),
+        depth_sd=float(np.sqrt(m.cov[0, 1, 1])),
+        velocity_mean=float(m.mean[0, 2]),
+        velocity_sd=float(np.sqrt(m.cov[0, 2, 2])),
+        depth_error=float(err_y[0]),
+        velocity_error=float(err_v[0]),
+        prob_behind_camera=float(m.behind[0]),
+        log_normaliser=log_z,
+        n_nodes=int(n_nodes),
+        mean=m.mean[0],
+        cov=m.cov[0],
+        _problem=pb,
+        _grids=grids,
+    )
+
+
+@dataclass(frozen=True)
+class BatchMarginals:
+    """Optimal depth and velocity marginals for a batch of ``B`` problems (``y > 2``).
+
+    Built by :func:`batch_marginals`; used for Monte Carlo studies, where each
+    trial needs more than moments: the marginal CDFs at the truth and the
+    depth density.
+
+    Attributes
+    ----------
+    moments : Moments
+    log_normaliser : ndarray, shape (B,)
+    rtol : float
+        The tolerance of the moments and of :meth:`depth_cdf`.
+    log_depth_range : tuple of ndarray
+        The lower and upper ends (B,) of the quadrature's range in ``t = log(y - 2)``,
+        and a panel width (B,) in its variable ``u``.
+    """
+
+    moments: Moments
+    log_normaliser: np.ndarray
+    rtol: float
+    _problem: quadrature.Problem
+    _grids: dict  # the quadrature's u grids: {interval: (lo, h, n, frame)}
+    log_depth_range: tuple
+
+    def depth_log_pdf(self, y) -> np.ndarray:
+        """``log p_oy`` at depths ``y`` of shape (B, m); ``-inf`` at ``y <= 2``."""
+        y = np.asarray(y, dtype=float)
+        inside = y > 2
+        safe = np.where(inside, y, 3.0)
+        log_density = _solve(np.stack([safe, safe - 1, safe - 2], -1), self._problem)[0]
+        return np.where(inside, log_density - self.log_normaliser[:, None], -np.inf)
+
+    def depth_cdf(self, y) -> np.ndarray:
+        """``P(depth <= y)`` for one depth per problem, ``y`` of shape (B,).
+
+        Integrated afresh from the lower end of the quadrature range up to
+        ``y`` by composite 8-point Gauss-Legendre panels in ``t = log(y - 2)``,
+        doubling the panels until the mass changes by at most ``rtol``
+        (:func:`depthcore.exact.cdf.gauss_legendre_cdf`).
+        """
+        y = checks.finite_array(y, "y")
+        lo, h, _, frame = self._grids[3]
+        step = 2.0 * h
+        with np.errstate(divide="ignore"):
+            t_up = np.log(np.maximum(y - 2.0, 0.0))
+        u_up = frame.u(t_up)
+        inside = u_up > lo
+        hi = np.where(inside, u_up, lo + 1.0)
+
+        def density(u):
+            offsets, log_jac = quadrature.mapped_nodes(3, u.reshape(len(y), -1), frame)
+            log_f = _solve(offsets, self._problem)[0] + log_jac - self.log_normaliser[:, None]
+            return np.exp(log_f).reshape(u.shape)
+
+        width = hi - lo
+        panels = max(1, int(np.ceil(np.max(width / step))))
+        cdf, settled, _ = gauss_legendre_cdf(
+            density, lo, width, panels, self.rtol, max_nodes=4 * quadrature.NODE_BUDGET
+        )
+        if not settled:
+            raise ValueError(
+                f"y: the depth CDF did not reach rtol = {self.rtol:.3g} "
+                f"within {4 * quadrature.NODE_BUDGET} nodes"
+            )
+        return np.where(inside, np.clip(cdf, 0.0, 1.0), 0.0)
+
+    def velocity_cdf(self, v) -> np.ndarray:
+        """``P(velocity <= v)`` for one velocity per problem, ``v`` of shape (B,).
+
+        The mixture over depths of the Gaussian CDFs of ``v`` given ``y``, on
+        the nodes of :func:`_fine_velocity_mixture`.
+        """
+        from scipy.special import ndtr
+
+        v = checks.finite_array(v, "v")
+        w, m, sd = _fine_velocity_mixture(self._problem, self._grids, self.log_normaliser)
+        return np.sum(w * ndtr((v[:, None] - m) / sd), axis=1)
+
+
+def batch_marginals(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> BatchMarginals:
+    """Eqs. (13)-(16) for a batch, keeping what CDFs and densities need.
+
+    Parameters are as for :func:`moments` (``reading="derived"``,
+    ``support="front"``). Memory grows with ``B`` times the number of nodes
+    (a few hundred): split very large batches.
+    """
+    pb = _problem(mu, rho, prior_mean, prior_cov, "derived")
+    rtol = checks.positive_scalar(rtol, "rtol")
+    m, err_y, err_v, top, grids = quadrature.integrate(pb, (3,), rtol)
+    log_z = np.log(m.Z) + top
+    moments_ = Moments(*m.key_moments(), err_y, err_v, m.behind, m.mean, m.cov)
+    lo, h, n, frame = grids[3]
+    t_ends = frame.t(np.stack([lo, lo + (n - 1) * h], 1))
+    return BatchMarginals(moments_, log_z, rtol, pb, grids, (t_ends[:, 0], t_ends[:, 1], 2.0 * h))
+
+
+# --- pieces of the derivation of Eq. (16), and quantiles --------------------------------------
+
+
+def eq16_printed(coefficients) -> np.ndarray:
+    """Eq. (16) as printed: ``log(exp(l^T M^{-1} l / 8) / sqrt(det M))`` from ``A .. E``.
+
+    Parameters
+    ----------
+    coefficients : array_like, shape (n, 5)
+        Columns ``A, B, C, D, E`` of Eq. (14) at ``n`` depths
+        (:func:`depthcore.exact.optimal.quadratic_coefficients`).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        The log of the printed ``p_oy`` without its constant ``c``.
+    """
+    A, B, C, D, E = np.asarray(coefficients, dtype=float).T
+    det_M = A * C - B**2 / 4.0  # Eq. (15): M = [[A, B/2], [B/2, C]]
+    # l^T M^{-1} l with M^{-1} = [[C, -B/2], [-B/2, A]] / det M, l = (D, E)
+    quad = (C * D**2 - B * D * E + A * E**2) / det_M
+    return quad / 8.0 - 0.5 * np.log(det_M)
+
+
+def prior_exponent(y, mu, rho: float, prior: Gaussian) -> np.ndarray:
+    """``K(y)``: the part of the exponent of (6) at depth ``y`` free of ``x`` and ``v``.
+
+    At fixed ``y`` the log posterior (6) is
+    ``-1/2 (A x**2 + B x v + C v**2 + D x + E v) - 1/2 K(y)`` up to a constant;
+    ``K(y)`` is minus twice its value at ``x = v = 0``. Eq. (14) leaves it out.
+
+    Parameters
+    ----------
+    y : array_like, shape (n,)
+    mu, rho, prior
+        As in :func:`depthcore.exact.optimal.log_posterior`.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``K(y)``, up to an additive constant.
+    """
+    y = np.atleast_1d(checks.finite_array(y, "y"))
+    x = np.stack([np.zeros_like(y), y, np.zeros_like(y)], -1)
+    return -2.0 * log_posterior(x, mu, rho, prior)
+
+
+def depth_quantiles(m: OptimalMarginals, probs, n: int = 20001) -> np.ndarray:
+    """Quantiles of the optimal depth marginal ``p_oy`` (support ``y > 2``).
+
+    The cumulative distribution is the trapezoid rule on a grid uniform in
+    ``t = log(y - 2)`` from ``y - 2 = 1e-4`` to ``50 * (E y + 10 sd)``,
+    inverted by linear interpolation.
+
+    Parameters
+    ----------
+    m : OptimalMarginals
+        From :func:`depthcore.exact.optimal.marginals` with ``support="front"``.
+    probs : array_like
+        Probabilities in (0, 1).
+    n : int
+        Grid points.
+
+    Returns
+    -------
+    ndarray, shape of ``probs``
+    """
+    if m.support != "front":
+        raise ValueError(f"depth_quantiles needs support='front', got {m.support!r}")
+    probs = checks.finite_array(probs, "probs")
+    if np.any((probs <= 0) | (probs >= 1)):
+        raise ValueError(f"probs must lie in (0, 1), got {probs.tolist()}")
+    t = np.linspace(np.log(1e-4), np.log(50.0 * (m.depth_mean + 10.0 * m.depth_sd)), n)
+    d = np.exp(t)
+    integrand = m.depth_pdf(2.0 + d) * d
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (integrand[1:] + integrand[:-1]) * np.diff(t))])
+    if not abs(cdf[-1] - 1.0) < 1e-6:
+        raise RuntimeError(f"the depth marginal integrates to {cdf[-1]:.8f} on the grid, not 1")
+    return np.interp(probs, cdf / cdf[-1], 2.0 + d)

@@ -1,0 +1,560 @@
+"""The exact filter for ``N`` frames with its depth nodes placed by the quadrature.
+
+Recommended import: ``from depthcore.exact import posterior``.
+
+The filter bank (:mod:`depthcore.exact.bank`) is exact given its depth nodes; here
+the nodes are placed by the optimal filter's robust depth quadrature
+(:mod:`depthcore.exact.quadrature`, Eqs. (14)-(16) generalised to ``N`` frames and
+process noise): :func:`moments` integrates the posterior moments with error
+estimates, :func:`posterior` returns the mixture
+(:class:`~depthcore.exact.mixture.Mixture`) on the placed nodes, and
+:func:`update` adds one bearing online, re-placing the nodes only when the
+posterior has moved off them. :func:`node_density` gives the posterior depth
+density at a posterior's nodes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from depthcore.exact import optimal, quadrature
+from depthcore.exact.bank import Bank, lateral_filter, run_bank, step
+from depthcore.exact.mixture import Mixture, mixture, mixture_of_log_weights
+from depthcore.kalman import linear
+from depthcore.problem import checks, model
+
+# --- nodes placed by the depth quadrature ----------------------------------------------
+
+#: Most frames of a problem (the filters' common limit).
+MAX_FRAMES = checks.MAX_FRAMES
+
+
+def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
+    """The checked inputs as :class:`depthcore.exact.quadrature.Problem`, and the batch shape."""
+    mu, rho, prior_mean, prior_cov = model.batch_inputs(
+        mu, rho, prior_mean, prior_cov, triples=False
+    )
+    if mu.shape[-1] > MAX_FRAMES:
+        raise ValueError(f"mu: at most {MAX_FRAMES} frames, got {mu.shape[-1]}")
+    batch, N = mu.shape[:-1], mu.shape[-1]
+    q = checks.nonnegative_batch(process_noise, "process_noise", batch)
+    B = int(np.prod(batch))
+    prior_cov = np.ascontiguousarray(np.broadcast_to(prior_cov, batch + (3, 3))).reshape(B, 3, 3)
+    pb = quadrature.Problem(
+        mu=mu.reshape(B, N),
+        rho=np.broadcast_to(rho, batch).reshape(B),
+        mean=np.broadcast_to(prior_mean, batch + (3,)).reshape(B, 3),
+        R=np.linalg.inv(np.linalg.cholesky(prior_cov)),
+        reading="derived",
+        process_noise=np.broadcast_to(q, batch).reshape(B),
+        cov=prior_cov,
+        integrand=_integrand,
+    )
+    return pb, batch
+
+
+def _integrand(offsets, pb):
+    """The depth quadrature's integrand: :func:`~depthcore.exact.bank.lateral_filter` at ``y_1 =
+    offsets[..., 2]``."""
+    return lateral_filter(offsets[..., 2], pb.mu, pb.rho, pb.process_noise, pb.mean, pb.cov)
+
+
+def _integrate(pb, rtol: float):
+    """The quadrature of :mod:`depthcore.exact.quadrature` on ``y_1 > 0``, moments of ``y_N``.
+
+    The quadrature reports the depth as ``y_1 + 2`` (its variable is
+    ``t = log(y_1)``, as for the paper's three frames); the depth at frame
+    ``N`` is ``y_1 + N - 1``.
+    """
+    m, err_y, err_v, top, grids = quadrature.integrate(pb, (3,), rtol)
+    mean = m.mean.copy()
+    mean[:, 1] += pb.mu.shape[1] - 3
+    err_y = np.maximum(err_y, 64.0 * np.finfo(float).eps * np.abs(mean[:, 1]))
+    return m._replace(mean=mean), err_y, err_v, top, grids
+
+
+def moments(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, rtol: float = 1e-10, chunk: int = 64
+) -> optimal.Moments:
+    """The exact posterior moments at frame ``N``, with the depth nodes placed by quadrature.
+
+    The depth at frame 1 is integrated by the quadrature of
+    :func:`depthcore.exact.optimal.moments` (nodes about the posterior's own mode
+    and width in ``t = log(y_1)``, the step halved until the moments settle,
+    a node budget, a roundoff floor on the error estimate), with the
+    integrand ``N(y_1; m_y, P_yy) L(y_1)`` and the Gaussian of ``(x_N, v_N)``
+    given ``y_1`` from the Kalman filter at each node
+    (:func:`~depthcore.exact.bank.lateral_filter`).
+
+    Parameters
+    ----------
+    mu : array_like, shape (B, N) or (N,)
+        Bearings at frames 1 .. N (any ``N >= 1``; the paper's problem is ``N = 3``).
+    rho : float or array_like, shape (B,)
+        Bearing noise SD, > 0.
+    prior_mean : array_like, shape (3,) or (B, 3)
+        Prior mean of ``(x_1, y_1, v_1)``.
+    prior_cov : array_like, shape (3, 3) or (B, 3, 3)
+        Prior covariance, symmetric positive definite.
+    process_noise : float or array_like, shape (B,)
+        SD ``q >= 0`` of the velocity's change per frame.
+    rtol : float
+        Target accuracy of each mean and SD, relative to the SD.
+    chunk : int
+        Problems integrated together (memory grows with it).
+
+    Returns
+    -------
+    depthcore.exact.optimal.Moments
+        Arrays of shape (B,) (``(1,)`` for one problem), for the state at frame
+        ``N``; ``prob_behind_camera`` is 0 (the support is ``y_1 > 0``).
+
+    Raises
+    ------
+    ValueError
+        For invalid inputs, naming the argument, or when the tolerance is out
+        of reach within the quadrature's node budget, naming the problem.
+    """
+    pb, _ = _quadrature_problem(
+        np.atleast_2d(mu) if np.ndim(mu) == 1 else mu, rho, prior_mean, prior_cov, process_noise
+    )
+    rtol = checks.positive_scalar(rtol, "rtol")
+    chunk = checks.count(chunk, "chunk")
+    out, means, covs = [], [], []
+    for start in range(0, pb.mu.shape[0], chunk):
+        m, err_y, err_v, _, _ = _integrate(pb.take(slice(start, start + chunk)), rtol)
+        out.append(np.concatenate([m.key_moments(), [err_y, err_v, m.behind]]))
+        means.append(m.mean)
+        covs.append(m.cov)
+    return optimal.Moments(
+        *np.concatenate(out, axis=1), np.concatenate(means), np.concatenate(covs)
+    )
+
+
+def _grid_nodes(grid):
+    """Depths at frame 1 (B, J) and log quadrature weights (B, J) of a quadrature grid.
+
+    ``grid = (lo, h, n, frame)`` holds the trapezoid nodes ``u_j = lo + h j``,
+    ``j < n``, of each problem in the quadrature's variable ``u``, with
+    ``t = log(y_1)`` a function of ``u`` (:class:`depthcore.exact.quadrature.Frame`);
+    ``dy_1 = y_1 (dt/du) du``. Rows with fewer nodes are padded with weight 0.
+    """
+    lo, h, n, frame = grid
+    u = quadrature.grid(lo, h, n, 0.0)
+    pad = np.isnan(u)
+    u = np.where(pad, lo[:, None], u)
+    t = frame.t(u)
+    log_w = np.log(np.where(h > 0, h, 1.0))[:, None] + t + frame.log_jacobian(u)
+    return np.exp(t), np.where(pad, -np.inf, log_w)
+
+
+def posterior(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, rtol: float = 1e-10, history: bool = False
+) -> Mixture:
+    """The exact posterior at frame ``N`` as a bank on nodes placed by the depth quadrature.
+
+    The nodes and weights are the last trapezoid level of :func:`moments`'s
+    quadrature, so the mixture's moments are those moments (to roundoff) and
+    carry their error estimates. :func:`update` adds frames online.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N,) or (B, N)
+    rho, prior_mean, prior_cov, process_noise, rtol
+        As for :func:`moments`.
+    history : bool
+        Keep each node's filter at every frame (for
+        :meth:`~depthcore.exact.mixture.Mixture.smoothed`).
+
+    Returns
+    -------
+    Mixture
+        Batch shape ``()`` for ``mu`` of shape ``(N,)``, ``(B,)`` otherwise.
+    """
+    single = np.ndim(mu) == 1
+    pb, _ = _quadrature_problem(
+        np.atleast_2d(mu) if single else mu, rho, prior_mean, prior_cov, process_noise
+    )
+    rtol = checks.positive_scalar(rtol, "rtol")
+    return _place(pb, rtol, history, single)
+
+
+#: Problems placed together by the quadrature (its memory grows with this times its nodes).
+_CHUNK = 64
+
+
+def _place(pb, rtol, history, single):
+    B = pb.mu.shape[0]
+    if B > _CHUNK:
+        parts = [
+            _place(pb.take(slice(i, i + _CHUNK)), rtol, history, False) for i in range(0, B, _CHUNK)
+        ]
+        return _concatenate(parts)
+    _, err_y, err_v, _, grids = _integrate(pb, rtol)
+    nodes, log_w = _grid_nodes(grids[3])
+    shift = np.max(log_w, axis=1, keepdims=True)
+    bank = run_bank(nodes, pb.mu, pb.rho, pb.process_noise, pb.mean, pb.cov, history)
+    post = mixture(bank, np.exp(log_w - shift))
+    post = dataclasses.replace(
+        post,
+        log_weights=post.log_weights + shift,
+        log_normaliser=post.log_normaliser + shift[:, 0],
+        depth_error=err_y,
+        velocity_error=err_v,
+        rtol=rtol,
+    )
+    return _squeeze(post) if single else post
+
+
+def _concatenate(parts) -> Mixture:
+    """Batches of placed posteriors joined along the batch, their nodes padded to one count.
+
+    A padded node has quadrature weight 0 (log weight ``-inf``) and probability
+    0, so each problem's mixture is unchanged: its fields are joined, not
+    recomputed.
+    """
+    J = max(p.log_weights.shape[-1] for p in parts)
+    banks = [p.bank for p in parts]
+
+    def join(get, axis, value):
+        return np.concatenate([_pad(get(b), J, axis, value) for b in banks])
+
+    bank = Bank(
+        nodes=join(lambda b: b.nodes, 1, 1.0),
+        mean=join(lambda b: b.mean, 1, 0.0),
+        cov=join(lambda b: b.cov, 1, 1.0),
+        log_weight=join(lambda b: b.log_weight, 1, 0.0),
+        mu=np.concatenate([b.mu for b in banks]),
+        rho=np.concatenate([b.rho for b in banks]),
+        process_noise=np.concatenate([b.process_noise for b in banks]),
+        prior_mean=np.concatenate([b.prior_mean for b in banks]),
+        prior_cov=np.concatenate([b.prior_cov for b in banks]),
+        history=None
+        if banks[0].history is None
+        else linear.FilterResult(
+            *(
+                np.concatenate([_pad(a, J, 1, 1.0) for a in arrays])
+                for arrays in zip(*(b.history for b in banks), strict=True)
+            )
+        ),
+    )
+
+    def rows(get, value=None):
+        if value is None:
+            return np.concatenate([get(p) for p in parts])
+        return np.concatenate([_pad(get(p), J, 1, value) for p in parts])
+
+    return Mixture(
+        bank,
+        log_weights=rows(lambda p: p.log_weights, -np.inf),
+        probabilities=rows(lambda p: p.probabilities, 0.0),
+        log_normaliser=rows(lambda p: p.log_normaliser),
+        mean=rows(lambda p: p.mean),
+        cov=rows(lambda p: p.cov),
+        depth_error=rows(lambda p: p.depth_error),
+        velocity_error=rows(lambda p: p.velocity_error),
+        rtol=parts[0].rtol,
+    )
+
+
+def _each_array(post: Mixture, take) -> Mixture:
+    """``post`` with ``take`` applied to every per-problem array (not ``rtol``)."""
+    b = post.bank
+    history = None if b.history is None else linear.FilterResult(*(take(a) for a in b.history))
+    return Mixture(
+        Bank(*(take(a) for a in b[:-1]), history),
+        *(
+            take(getattr(post, name))
+            for name in (
+                "log_weights",
+                "probabilities",
+                "log_normaliser",
+                "mean",
+                "cov",
+                "depth_error",
+                "velocity_error",
+            )
+        ),
+        post.rtol,
+    )
+
+
+def _squeeze(post: Mixture) -> Mixture:
+    """A batch of one as a single problem (batch shape ``()``)."""
+    return _each_array(post, lambda a: a[0])
+
+
+def _resolution(post: Mixture, halved_mean, halved_cov, top):
+    """The error of the moments on the placed nodes and its roundoff floor, each (2, B).
+
+    The nodes of :func:`posterior` are a trapezoid grid in order; dropping
+    every other one (doubling the weights of the rest, ``_halving``)
+    doubles the step, and the change of the depth's and the velocity's mean
+    and SD estimates the error, as the quadrature's own halvings do
+    (:func:`depthcore.exact.quadrature.halving_error`, floored by roundoff).
+
+    Parameters
+    ----------
+    post : Mixture
+    halved_mean : ndarray, shape (B, 3)
+    halved_cov : ndarray, shape (B, 3, 3)
+        The mixture's moments on every other node.
+    top : ndarray, shape (B, 1)
+        The largest log probability of a node, up to the constant of ``post``'s
+        log weights.
+    """
+    eps = np.finfo(float).eps
+    floors = []
+    for k in (1, 2):
+        sd = np.sqrt(post.cov[..., k, k])
+        floors.append(
+            64.0 * eps * (np.abs(post.mean[..., k]) + sd + (1.0 + np.abs(top[..., 0])) * sd)
+        )
+    floors = np.stack(floors)
+    return quadrature.halving_error(post.mean, post.cov, halved_mean, halved_cov, floors), floors
+
+
+def _pad(a, J: int, axis: int, value):
+    """``a`` padded with ``value`` along ``axis`` (counted from the end of the batch) to ``J``.
+
+    ``a`` itself, not a copy, when it has ``J`` already.
+    """
+    if a.shape[axis] == J:
+        return a
+    width = [(0, 0)] * a.ndim
+    width[axis] = (0, J - a.shape[axis])
+    return np.pad(a, width, constant_values=value)
+
+
+#: A node holding this much of the probability or more does not resolve the posterior
+#: (a step of h carries about h / (2.5 sd) of a Gaussian's mass; the quadrature's
+#: tolerances need h well below the SD).
+_ONE_NODE = 0.5
+
+
+def update(post: Mixture, mu_next) -> Mixture:
+    """Add frame ``N + 1`` to a posterior from :func:`posterior`, online.
+
+    Every node's Kalman filter and weight is updated (:func:`~depthcore.exact.bank.step`); nothing
+    earlier is recomputed while the nodes still resolve the posterior to the
+    tolerance they were placed for (:func:`_resolution`: the moments on every
+    other node agree with those on all nodes, and the end nodes carry
+    negligible probability). As the bearings accumulate, the posterior
+    narrows, and a problem whose nodes no longer resolve it has them
+    re-placed by the quadrature from all ``N + 1`` bearings (cost ``O(N)``
+    for that problem, the others untouched). Since the posterior's width
+    shrinks geometrically in the number of re-placements, they are rare and
+    the cost per frame stays flat on average.
+
+    Parameters
+    ----------
+    post : Mixture
+        After ``N`` frames, from :func:`posterior` or :func:`update`.
+    mu_next : float or array_like, shape (B,)
+        The bearing at frame ``N + 1``, one per problem.
+
+    Returns
+    -------
+    Mixture
+        After ``N + 1`` frames, with error estimates.
+    """
+    if not isinstance(post, Mixture) or post.rtol is None:
+        raise ValueError(
+            "post must be a Mixture from bank_posterior.posterior or bank_posterior.update"
+        )
+    single = post.log_normaliser.ndim == 0
+    if single:
+        post = _batch_of_one(post)
+    mu_next = checks.finite_array(mu_next, "mu_next")
+    if mu_next.ndim > 1 or (mu_next.ndim == 1 and mu_next.shape != post.log_normaliser.shape):
+        raise ValueError(
+            f"mu_next must be a scalar or have shape {post.log_normaliser.shape}, "
+            f"got shape {mu_next.shape}"
+        )
+    if post.bank.frames >= MAX_FRAMES:
+        raise ValueError(f"mu_next: at most {MAX_FRAMES} frames")
+    new, err, floor, free = _step_rows(post, np.broadcast_to(mu_next, post.log_normaliser.shape))
+    rtol = post.rtol
+    ok = (
+        free
+        & (err[0] <= np.maximum(rtol * new.depth_sd, floor[0]))
+        & (err[1] <= np.maximum(rtol * new.velocity_sd, floor[1]))
+        # a posterior that has narrowed below the nodes' step sits on one node, whose
+        # moments every other node reproduces when it is among them: a trapezoid rule
+        # that resolves a density puts well under half its mass on any one node
+        & (np.max(new.probabilities, axis=-1) < _ONE_NODE)
+    )
+    new = dataclasses.replace(new, depth_error=err[0], velocity_error=err[1], rtol=rtol)
+    if not np.all(ok):
+        # step and _mixture made new arrays for the nodes' filters and probabilities
+        new = _replace_rows(new, ~ok, own=post.bank.history is None)
+    return _squeeze(new) if single else new
+
+
+#: Node entries (problems times nodes) per block of :func:`_step_rows`.
+_BLOCK = 1 << 14
+
+
+def _row_blocks(rows: int, nodes: int) -> list:
+    """Slices of ``rows`` problems in blocks of about :data:`_BLOCK` entries (one row or more)."""
+    size = max(1, _BLOCK // max(nodes, 1))
+    return [slice(i, i + size) for i in range(0, rows, size)]
+
+
+def _step_rows(post: Mixture, mu_next):
+    """:func:`~depthcore.exact.bank.step`, :func:`~depthcore.exact.mixture.mixture_of_log_weights`
+    and
+    :func:`_resolution`, block by block.
+
+    Each pass is elementwise or a sum over the nodes within a problem, so a
+    block of problems at a time gives the same numbers as the whole batch at
+    once, while the block's temporaries stay in the processor's cache instead
+    of being allocated (and written) at the batch's full size.
+
+    Parameters
+    ----------
+    post : Mixture
+        Batch shape (B,).
+    mu_next : ndarray, shape (B,)
+
+    Returns
+    -------
+    new : Mixture
+        After ``N + 1`` frames, without error estimates.
+    err, floor : ndarray, shape (2, B)
+    free : ndarray of bool, shape (B,)
+        As ``_halving``.
+    """
+    B, J = post.log_weights.shape
+    # the history grows along the frames, not by blocks: one block
+    blocks = _row_blocks(B, J) if post.bank.history is None else [slice(None)]
+    parts = []
+    for rows in blocks:
+        part = post if len(blocks) == 1 else _each_array(post, lambda a, rows=rows: a[rows])
+        new, halved_mean, halved_cov, top, free = mixture_of_log_weights(
+            step(part.bank, mu_next[rows]), part.log_weights, halved=True
+        )
+        parts.append((new, *_resolution(new, halved_mean, halved_cov, top), free))
+    if len(parts) == 1:
+        return parts[0]
+    news = [p[0] for p in parts]
+
+    def join(get):
+        return np.concatenate([get(n) for n in news])
+
+    bank = post.bank._replace(
+        mean=join(lambda n: n.bank.mean),
+        cov=join(lambda n: n.bank.cov),
+        log_weight=join(lambda n: n.bank.log_weight),
+        mu=join(lambda n: n.bank.mu),
+    )
+    new = Mixture(
+        bank,
+        post.log_weights,
+        join(lambda n: n.probabilities),
+        join(lambda n: n.log_normaliser),
+        join(lambda n: n.mean),
+        join(lambda n: n.cov),
+    )
+    err, floor = (np.concatenate([p[i] for p in parts], axis=1) for i in (1, 2))
+    return new, err, floor, np.concatenate([p[3] for p in parts])
+
+
+def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
+    """``post`` with the problems at ``rows`` (B,) re-placed by the quadrature.
+
+    With ``own``, the arrays of the nodes' means, covariances, log weights and
+    probabilities belong to ``post`` alone and are overwritten where they keep
+    their shape (saving a copy of each); ``post``'s other arrays are not.
+    """
+    b = post.bank
+    idx = np.flatnonzero(rows)
+    pb = quadrature.Problem(
+        mu=b.mu[idx],
+        rho=np.broadcast_to(b.rho, rows.shape)[idx],
+        mean=b.prior_mean[idx],
+        R=np.linalg.inv(np.linalg.cholesky(b.prior_cov[idx])),
+        reading="derived",
+        process_noise=np.broadcast_to(b.process_noise, rows.shape)[idx],
+        cov=b.prior_cov[idx],
+        integrand=_integrand,
+    )
+    fresh = _place(pb, post.rtol, b.history is not None, False)
+    J = max(post.log_weights.shape[-1], fresh.log_weights.shape[-1])
+    fb = fresh.bank
+
+    def merge(old, new, axis, value, owned=False):
+        # one copy of the old rows at most: padding makes one, else only an array not owned
+        if old.shape[axis] < J:
+            out = _pad(old, J, axis, value)
+        else:
+            out = old if owned else old.copy()
+        out[idx] = _pad(new, J, axis, value)
+        return out
+
+    bank = b._replace(
+        nodes=merge(np.broadcast_to(b.nodes, post.log_weights.shape), fb.nodes, 1, 1.0),
+        mean=merge(b.mean, fb.mean, 1, 0.0, own),
+        cov=merge(b.cov, fb.cov, 1, 1.0, own),
+        log_weight=merge(b.log_weight, fb.log_weight, 1, 0.0, own),
+        history=None,
+    )
+    # the other problems' mixtures are unchanged: their fields are merged, not recomputed
+    return dataclasses.replace(
+        post,
+        bank=bank,
+        log_weights=merge(post.log_weights, fresh.log_weights, 1, -np.inf),
+        probabilities=merge(post.probabilities, fresh.probabilities, 1, 0.0, own),
+        log_normaliser=np.where(rows, _full(fresh.log_normaliser, idx, rows), post.log_normaliser),
+        mean=np.where(rows[:, None], _full(fresh.mean, idx, rows), post.mean),
+        cov=np.where(rows[:, None, None], _full(fresh.cov, idx, rows), post.cov),
+        depth_error=np.where(rows, _full(fresh.depth_error, idx, rows), post.depth_error),
+        velocity_error=np.where(rows, _full(fresh.velocity_error, idx, rows), post.velocity_error),
+        rtol=post.rtol,
+    )
+
+
+def _full(values, idx, rows):
+    """``values`` (len(idx), ...) placed at ``idx`` in zeros of shape ``rows.shape + ...``."""
+    out = np.zeros(rows.shape + np.shape(values)[1:])
+    out[idx] = values
+    return out
+
+
+def _batch_of_one(post: Mixture) -> Mixture:
+    """A single problem as a batch of one."""
+    return _each_array(post, lambda a: np.asarray(a)[None])
+
+
+# --- the posterior frame by frame: node densities, filtered and smoothed series ------------
+
+
+def node_density(post: Mixture):
+    """The posterior density of the depth at frame ``N`` at each of the bank's nodes.
+
+    A node's probability is ``p_j = eta_j N(y_j; m_y, P_yy) L(y_j) / Z`` with its
+    quadrature weight ``eta_j`` (``Mixture.log_weights``) and the normaliser
+    ``Z`` (``Mixture.log_normaliser``), so ``p_j / eta_j`` is the normalised
+    density of the depth at frame 1 at ``y_j``; the depth at frame ``N`` is
+    ``y_j + N - 1`` with the same density (a shift).
+
+    Parameters
+    ----------
+    post : Mixture
+
+    Returns
+    -------
+    depths : ndarray, shape (..., J)
+        ``y_j + N - 1``, the nodes as depths at frame ``N``.
+    density : ndarray, shape (..., J)
+        ``p(y_N = y_j + N - 1 | mu_1 .. mu_N)``; 0 at padding nodes (weight 0).
+    """
+    if not isinstance(post, Mixture):
+        raise ValueError(f"post must be a Mixture, got {type(post).__name__}")
+    b = post.bank
+    log_density = b.log_weight - post.log_normaliser[..., None]
+    density = np.where(np.isfinite(post.log_weights), np.exp(log_density), 0.0)
+    depths = np.broadcast_to(b.nodes, density.shape) + (b.frames - 1)
+    return depths, density

@@ -1,0 +1,34 @@
+"""The Gaussian filters: every filter whose state is one Gaussian, one predict-update loop.
+
+* :mod:`~depthcore.kalman.linear`: the Kalman filter and its smoothers for a
+  linear-Gaussian model (textbook 19.2);
+* :mod:`~depthcore.kalman.second_order`: the paper's second-order
+  approximation, Eqs. (8), (24);
+* :mod:`~depthcore.kalman.ekf`: the paper's extended Kalman filter, Eqs.
+  (10)-(12), and the predict-update recursion the other Gaussian filters share
+  (:func:`~depthcore.kalman.ekf.run_gaussian_filter`);
+* :mod:`~depthcore.kalman.ukf`: the unscented Kalman filter (textbook 19.4);
+* :mod:`~depthcore.kalman.iterated`: the iterated EKF and its smoother;
+* :mod:`~depthcore.kalman.inverse_depth`,
+  :mod:`~depthcore.kalman.inverse_depth_ukf`,
+  :mod:`~depthcore.kalman.modified_polar`,
+  :mod:`~depthcore.kalman.range_ekf`: the tracking literature's
+  reparametrised filters.
+
+Where a new thing goes: a new Gaussian filter is one module here, with one
+batched function in the registry's calling convention, then its entry in
+:mod:`depthcore.registry.filters` and its test. It imports from
+:mod:`depthcore.problem` only (and from this family).
+
+Before 0.2 the linear Kalman filter was the module ``depthcore.kalman``; its
+names read from this package still work, with a :class:`DeprecationWarning`
+naming :mod:`depthcore.kalman.linear`, until 0.3.
+"""
+
+from depthcore import _moved
+
+
+def __getattr__(name):
+    if name.startswith("__"):
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return _moved.moved_attribute(__name__, f"{__name__}.linear", name)

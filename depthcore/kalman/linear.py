@@ -1,0 +1,672 @@
+"""The Kalman filter and its smoothers for a linear-Gaussian model (Prince, section 19.2).
+
+Recommended import: ``from depthcore.kalman import linear``.
+
+The model of [prince2012]_, section 19.2, in its notation: the state ``w_t``
+(dimension ``n``) and the measurement ``x_t`` (dimension ``m``; a scalar
+measurement is ``m = 1``) at times ``t = 1 .. T`` obey
+
+    w_t = mu_p + Psi w_{t-1} + eps_p,   eps_p ~ N(0, Sigma_p)    (textbook Eq. (19.5))
+    x_t = mu_m + Phi w_t + eps_m,       eps_m ~ N(0, Sigma_m)    (textbook Eq. (19.7))
+
+with a Gaussian prior ``N(mu_0, Sigma_0)`` on the state at the first
+measurement, ``w_1``. The filter alternates two steps:
+
+* prediction, textbook 19.2.1 (the Chapman-Kolmogorov integral):
+  ``mu_+ = mu_p + Psi mu_{t-1}``, ``Sigma_+ = Sigma_p + Psi Sigma_{t-1} Psi^T``;
+* measurement incorporation in the gain form of textbook 19.2.2 (the rewriting
+  of Eq. (19.10) by the matrix inversion lemma):
+  ``K = Sigma_+ Phi^T (Sigma_m + Phi Sigma_+ Phi^T)^{-1}``,
+  ``mu_t = mu_+ + K (x_t - mu_m - Phi mu_+)``, ``Sigma_t = (I - K Phi) Sigma_+``.
+  The covariance is computed in the Joseph form
+  ``(I - K Phi) Sigma_+ (I - K Phi)^T + K Sigma_m K^T``, equal to it in exact
+  arithmetic and symmetric positive semi-definite in floating point.
+
+The innovation ``x_t - mu_m - Phi mu_+`` has the Gaussian density
+``N(0, S_t)``, ``S_t = Sigma_m + Phi Sigma_+ Phi^T``, given the earlier
+measurements, so the log marginal likelihood of all measurements is the sum of
+the innovations' log densities (the prediction-error decomposition).
+
+Smoothing, textbook 19.2.6: the fixed-interval smoother runs the backward
+recursions (the Rauch-Tung-Striebel smoother)
+
+    C_t = Sigma_t Psi^T Sigma_{+|t+1}^{-1}
+    mu_{t|T} = mu_t + C_t (mu_{t+1|T} - mu_{+|t+1})
+    Sigma_{t|T} = Sigma_t + C_t (Sigma_{t+1|T} - Sigma_{+|t+1}) C_t^T
+
+over the filter's output; the fixed-lag smoother augments the state with its
+``tau`` predecessors, ``(w_t, w_{t-1}, .., w_{t-tau})``, whose temporal model
+applies ``Psi`` to the first block and copies the others down, and whose
+measurement model sees the first block alone, and runs the filter on it.
+
+Every function is batched: leading axes ``(...)`` of the means, covariances,
+measurements and model matrices broadcast together (NumPy rules), so
+independent filters (one per Monte Carlo trial, one per depth, ...) run side by
+side without a Python loop over them.
+
+References
+----------
+.. [prince2012] S. J. D. Prince, *Computer Vision: Models, Learning, and
+   Inference*, chapter 19, section 19.2 (the Kalman filter, 19.2.1-19.2.3;
+   smoothing, 19.2.6).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from depthcore.problem import checks
+from depthcore.problem.gaussian import symmetric
+
+_LOG_2PI = float(np.log(2.0 * np.pi))
+#: Relative asymmetry tolerated in a covariance matrix.
+_SYMMETRY_TOL = 1e-10
+#: Eigenvalues of a positive semi-definite matrix may fall this far (relative) below 0.
+_PSD_TOL = 1e-12
+
+
+class MeanAndCov(NamedTuple):
+    """A Gaussian: mean of shape ``(..., n)``, covariance of shape ``(..., n, n)``."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+
+class Update(NamedTuple):
+    """The result of one measurement incorporation (textbook 19.2.2).
+
+    Attributes
+    ----------
+    mean : ndarray, shape (..., n)
+    cov : ndarray, shape (..., n, n)
+    log_likelihood : ndarray, shape (...)
+        Log density of the measurement given the earlier ones: the innovation's
+        ``log N(x - mu_m - Phi mu_+; 0, Sigma_m + Phi Sigma_+ Phi^T)``.
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+    log_likelihood: np.ndarray
+
+
+class FilterResult(NamedTuple):
+    """The Kalman filter's output over ``T`` measurements.
+
+    Attributes
+    ----------
+    means : ndarray, shape (..., T, n)
+        ``means[..., t, :]`` is the filtered mean after measurement ``t + 1``.
+    covs : ndarray, shape (..., T, n, n)
+    predicted_means : ndarray, shape (..., T, n)
+        The mean before measurement ``t + 1`` (the prior's at ``t = 0``).
+    predicted_covs : ndarray, shape (..., T, n, n)
+    log_likelihoods : ndarray, shape (..., T)
+        Log density of each measurement given the earlier ones.
+    """
+
+    means: np.ndarray
+    covs: np.ndarray
+    predicted_means: np.ndarray
+    predicted_covs: np.ndarray
+    log_likelihoods: np.ndarray
+
+    @property
+    def log_likelihood(self) -> np.ndarray:
+        """Log marginal likelihood of all measurements, shape (...)."""
+        return np.sum(self.log_likelihoods, axis=-1)
+
+
+# --- input checks ----------------------------------------------------------------------
+
+
+def _array(value, name: str, min_ndim: int) -> np.ndarray:
+    arr = checks.as_float(value, name)
+    if arr.ndim < min_ndim:
+        raise ValueError(f"{name} must have at least {min_ndim} dimensions, got shape {arr.shape}")
+    if arr.size == 0:
+        raise ValueError(f"{name} must not be empty, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(
+            f"{name} must be finite, got {int(np.sum(~np.isfinite(arr)))} non-finite entries"
+        )
+    return arr
+
+
+def _last(arr: np.ndarray, name: str, shape: tuple) -> np.ndarray:
+    if arr.shape[arr.ndim - len(shape) :] != shape:
+        raise ValueError(f"{name} must have trailing shape {shape}, got shape {arr.shape}")
+    return arr
+
+
+def _vector(value, name: str, n: int) -> np.ndarray:
+    return _last(_array(value, name, 1), name, (n,))
+
+
+def _matrix(value, name: str, rows: int, cols: int) -> np.ndarray:
+    return _last(_array(value, name, 2), name, (rows, cols))
+
+
+def _covariance(value, name: str, n: int, definite: bool) -> np.ndarray:
+    """A symmetric positive definite (or, with ``definite=False``, semi-definite) stack."""
+    arr = _matrix(value, name, n, n)
+    scale = np.max(np.abs(arr), axis=(-2, -1), keepdims=True)
+    if np.any(np.abs(arr - np.swapaxes(arr, -1, -2)) > _SYMMETRY_TOL * scale):
+        raise ValueError(f"{name} must be symmetric")
+    arr = symmetric(arr)
+    if definite:
+        try:
+            np.linalg.cholesky(arr)
+            return arr
+        except np.linalg.LinAlgError:
+            pass
+    low = np.min(np.linalg.eigvalsh(arr))
+    if (definite and not low > 0) or low < -_PSD_TOL * np.max(scale):
+        kind = "definite" if definite else "semi-definite"
+        raise ValueError(f"{name} must be positive {kind}, got smallest eigenvalue {low:.6g}")
+    return arr
+
+
+def _model(Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m, n: int):
+    """Check the model's matrices against the state dimension ``n``; return them and ``m``."""
+    Psi = _matrix(Psi, "Psi", n, n)
+    Sigma_p = _covariance(Sigma_p, "Sigma_p", n, definite=False)
+    Phi = _array(Phi, "Phi", 2)
+    if Phi.shape[-1] != n:
+        raise ValueError(f"Phi must have trailing shape (m, {n}), got shape {Phi.shape}")
+    m = Phi.shape[-2]
+    Sigma_m = _covariance(Sigma_m, "Sigma_m (the measurement noise covariance)", m, definite=True)
+    mu_p = np.zeros(n) if mu_p is None else _vector(mu_p, "mu_p", n)
+    mu_m = np.zeros(m) if mu_m is None else _vector(mu_m, "mu_m", m)
+    return Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
+
+
+# --- the two steps ---------------------------------------------------------------------
+
+
+def _eye(n: int) -> np.ndarray:
+    """The identity of size ``n``, read-only and made once per size."""
+    if n not in _EYES:
+        _EYES[n] = np.eye(n)
+        _EYES[n].setflags(write=False)
+    return _EYES[n]
+
+
+_EYES: dict[int, np.ndarray] = {}
+
+
+def _predict(mean, cov, Psi, Sigma_p, mu_p) -> MeanAndCov:
+    mean = mu_p + (Psi @ mean[..., None])[..., 0]
+    cov = Sigma_p + Psi @ cov @ Psi.mT
+    return MeanAndCov(mean, symmetric(cov))
+
+
+def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
+    """Textbook 19.2.1: predict ``mu_+ = mu_p + Psi mu``, ``Sigma_+ = Sigma_p + Psi Sigma Psi^T``.
+
+    Parameters
+    ----------
+    mean : array_like, shape (..., n)
+        Filtered mean at time ``t - 1``.
+    cov : array_like, shape (..., n, n)
+        Filtered covariance at time ``t - 1``, symmetric positive semi-definite.
+    Psi : array_like, shape (..., n, n)
+        Transition matrix.
+    Sigma_p : array_like, shape (..., n, n)
+        Transition noise covariance, symmetric positive semi-definite (zero for
+        a deterministic motion).
+    mu_p : array_like, shape (..., n), optional
+        Mean change of the state; zero by default.
+
+    Returns
+    -------
+    MeanAndCov
+        The prediction of the state at time ``t``, leading axes broadcast.
+    """
+    mean = _array(mean, "mean", 1)
+    n = mean.shape[-1]
+    cov = _covariance(cov, "cov", n, definite=False)
+    Psi = _matrix(Psi, "Psi", n, n)
+    Sigma_p = _covariance(Sigma_p, "Sigma_p", n, definite=False)
+    mu_p = np.zeros(n) if mu_p is None else _vector(mu_p, "mu_p", n)
+    return _predict(mean, cov, Psi, Sigma_p, mu_p)
+
+
+def joseph(cov, gain, Phi, Sigma_m) -> np.ndarray:
+    """Textbook 19.2.2: the updated covariance in the Joseph form, symmetrised.
+
+    ``(I - K Phi) Sigma_+ (I - K Phi)^T + K Sigma_m K^T``: for the optimal gain
+    ``K`` it equals ``(I - K Phi) Sigma_+`` in exact arithmetic, and it stays
+    symmetric positive semi-definite in floating point. The EKF's Eq. (12) is
+    the case of one scalar measurement, ``Phi = h^T`` and ``Sigma_m = rho**2``.
+
+    Parameters
+    ----------
+    cov : ndarray, shape (..., n, n)
+        The predicted covariance ``Sigma_+``.
+    gain : ndarray, shape (..., n, m)
+        The gain ``K``.
+    Phi : ndarray, shape (..., m, n)
+        The measurement matrix (the linearised measurement).
+    Sigma_m : ndarray, shape (..., m, m)
+        The measurement noise covariance.
+
+    Returns
+    -------
+    ndarray, shape (..., n, n)
+    """
+    A = _eye(cov.shape[-1]) - gain @ Phi
+    return symmetric(A @ cov @ A.mT + gain @ Sigma_m @ gain.mT)
+
+
+def _update(mean, cov, x, Phi, Sigma_m, mu_m) -> Update:
+    CPt = cov @ Phi.mT
+    S = Sigma_m + Phi @ CPt  # innovation covariance (..., m, m)
+    r = x - mu_m - (Phi @ mean[..., None])[..., 0]  # the innovation (..., m)
+    if S.shape[-1] == 1:  # a scalar measurement: divide instead of solving
+        s = S[..., 0, 0]
+        K = CPt / s[..., None, None]
+        log_det = np.log(s)
+        quad = r[..., 0] ** 2 / s
+    else:
+        # S is symmetric, so K^T = S^-1 Phi Sigma_+
+        S = symmetric(S)
+        K = np.linalg.solve(S, CPt.mT).mT
+        chol = np.linalg.cholesky(S)
+        log_det = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
+        z = np.linalg.solve(chol, r[..., None])[..., 0]
+        quad = np.sum(z**2, axis=-1)
+    new_mean = mean + (K @ r[..., None])[..., 0]
+    log_likelihood = -0.5 * (S.shape[-1] * _LOG_2PI + log_det + quad)
+    return Update(new_mean, joseph(cov, K, Phi, Sigma_m), log_likelihood)
+
+
+def update(mean, cov, x, Phi, Sigma_m, mu_m=None) -> Update:
+    """Textbook 19.2.2: incorporate the measurement ``x`` in the gain form, Joseph covariance.
+
+    ``K = Sigma_+ Phi^T S^{-1}`` with ``S = Sigma_m + Phi Sigma_+ Phi^T``;
+    ``mu = mu_+ + K (x - mu_m - Phi mu_+)``;
+    ``Sigma = (I - K Phi) Sigma_+ (I - K Phi)^T + K Sigma_m K^T`` (the Joseph
+    form of ``(I - K Phi) Sigma_+``).
+
+    Parameters
+    ----------
+    mean : array_like, shape (..., n)
+        Predicted mean ``mu_+``.
+    cov : array_like, shape (..., n, n)
+        Predicted covariance ``Sigma_+``, symmetric positive semi-definite.
+    x : array_like, shape (..., m)
+        The measurement (``m = 1`` for a scalar one).
+    Phi : array_like, shape (..., m, n)
+        Measurement matrix.
+    Sigma_m : array_like, shape (..., m, m)
+        Measurement noise covariance, symmetric positive definite (for
+        ``m = 1``, a variance > 0).
+    mu_m : array_like, shape (..., m), optional
+        Measurement offset; zero by default.
+
+    Returns
+    -------
+    Update
+        Filtered mean and covariance and the measurement's log likelihood given
+        the earlier ones, leading axes broadcast.
+    """
+    mean = _array(mean, "mean", 1)
+    n = mean.shape[-1]
+    cov = _covariance(cov, "cov", n, definite=False)
+    Phi = _array(Phi, "Phi", 2)
+    if Phi.shape[-1] != n:
+        raise ValueError(f"Phi must have trailing shape (m, {n}), got shape {Phi.shape}")
+    m = Phi.shape[-2]
+    x = _vector(x, "x", m)
+    Sigma_m = _covariance(Sigma_m, "Sigma_m (the measurement noise covariance)", m, definite=True)
+    mu_m = np.zeros(m) if mu_m is None else _vector(mu_m, "mu_m", m)
+    return _update(mean, cov, x, Phi, Sigma_m, mu_m)
+
+
+# --- the filter over a sequence --------------------------------------------------------
+
+
+def _at(arr: np.ndarray, t: int, core: int) -> np.ndarray:
+    """Step ``t`` of a model array: itself if it has only its ``core`` axes, else its time slice."""
+    if arr.ndim == core:
+        return arr
+    return arr[(..., min(t, arr.shape[-core - 1] - 1)) + (slice(None),) * core]
+
+
+def _time_axis(arr: np.ndarray, name: str, core: int, steps: int) -> None:
+    if arr.ndim > core and arr.shape[-core - 1] not in (1, steps):
+        raise ValueError(
+            f"{name} must have {steps} (or 1) entries on its time axis "
+            f"{-core - 1}, got shape {arr.shape}"
+        )
+
+
+def _batch_shape(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> tuple:
+    """The leading axes that every step's output broadcasts to (the model's time axes dropped)."""
+    shapes = [x.shape[:-2], mean.shape[:-1], cov.shape[:-2]]
+    for arr, core in ((Psi, 2), (Sigma_p, 2), (Phi, 2), (Sigma_m, 2), (mu_p, 1), (mu_m, 1)):
+        if arr.ndim > core:
+            shapes.append(arr.shape[: arr.ndim - core - 1])
+    return np.broadcast_shapes(*shapes)
+
+
+def _run(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> FilterResult:
+    T, n = x.shape[-2], mean.shape[-1]
+    batch = _batch_shape(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m)
+    out = FilterResult(
+        np.empty(batch + (T, n)),
+        np.empty(batch + (T, n, n)),
+        np.empty(batch + (T, n)),
+        np.empty(batch + (T, n, n)),
+        np.empty(batch + (T,)),
+    )
+    for t in range(T):
+        if t > 0:
+            mean, cov = _predict(
+                mean, cov, _at(Psi, t - 1, 2), _at(Sigma_p, t - 1, 2), _at(mu_p, t - 1, 1)
+            )
+        out.predicted_means[..., t, :] = mean
+        out.predicted_covs[..., t, :, :] = cov
+        mean, cov, ll = _update(
+            mean, cov, x[..., t, :], _at(Phi, t, 2), _at(Sigma_m, t, 2), _at(mu_m, t, 1)
+        )
+        out.means[..., t, :] = mean
+        out.covs[..., t, :, :] = cov
+        out.log_likelihoods[..., t] = ll
+    return out
+
+
+def _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m):
+    """Check the inputs of a run over a sequence; return them as arrays."""
+    prior_mean = _array(prior_mean, "prior_mean", 1)
+    n = prior_mean.shape[-1]
+    prior_cov = _covariance(prior_cov, "prior_cov", n, definite=True)
+    Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m = _model(Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m, n)
+    x = _array(x, "x", 2)
+    T, m = x.shape[-2:]
+    if m != Phi.shape[-2]:
+        raise ValueError(f"x must have trailing shape (T, {Phi.shape[-2]}), got shape {x.shape}")
+    for arr, name, core, steps in (
+        (Psi, "Psi", 2, T - 1),
+        (Sigma_p, "Sigma_p", 2, T - 1),
+        (mu_p, "mu_p", 1, T - 1),
+        (Phi, "Phi", 2, T),
+        (Sigma_m, "Sigma_m", 2, T),
+        (mu_m, "mu_m", 1, T),
+    ):
+        _time_axis(arr, name, core, steps)
+    return x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
+
+
+def run(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p=None, mu_m=None) -> FilterResult:
+    """Textbook 19.2.3: the Kalman filter over ``T`` measurements, with the log marginal likelihood.
+
+    The prior is the density of the state at the first measurement: ``x_1`` is
+    incorporated into it (textbook 19.2.2), then each later measurement after a
+    prediction (textbook 19.2.1).
+
+    Parameters
+    ----------
+    x : array_like, shape (..., T, m)
+        Measurements in time order.
+    prior_mean : array_like, shape (..., n)
+    prior_cov : array_like, shape (..., n, n)
+        Symmetric positive definite.
+    Psi, Sigma_p : array_like, shape (n, n) or (..., T - 1, n, n)
+        Transition matrix and noise covariance (positive semi-definite). A
+        two-dimensional array applies at every step; otherwise axis ``-3`` is
+        time (length ``T - 1``, or 1 to broadcast), entry ``t`` taking the state
+        from time ``t + 1`` to ``t + 2``.
+    Phi : array_like, shape (m, n) or (..., T, m, n)
+        Measurement matrix, constant or with time on axis ``-3``.
+    Sigma_m : array_like, shape (m, m) or (..., T, m, m)
+        Measurement noise covariance, positive definite.
+    mu_p : array_like, shape (n,) or (..., T - 1, n), optional
+    mu_m : array_like, shape (m,) or (..., T, m), optional
+        Offsets, zero by default; time on axis ``-2`` when not one-dimensional.
+
+    Returns
+    -------
+    FilterResult
+        Filtered and predicted means and covariances at every time, and the log
+        likelihood of each measurement given the earlier ones. A run whose
+        numbers overflow the doubles (covariances or measurements near 1e154
+        and beyond, whose squares do) is refused with a ValueError naming the
+        model's scales, never returned with NaN or infinities.
+    """
+    args = _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        res = _run(*args)
+    if not all(np.all(np.isfinite(a)) for a in res):
+        raise ValueError(
+            "x, prior_cov, Psi, Sigma_p and Sigma_m are too large together: the filter's "
+            "covariances or likelihoods overflowed the doubles; rescale the state or "
+            "the measurements"
+        )
+    return res
+
+
+# --- smoothers -------------------------------------------------------------------------
+
+
+def _solve_or_pinv(A, B):
+    """``A^{-1} B`` for symmetric positive semi-definite ``A`` (..., n, n), matrix by matrix.
+
+    Where ``A`` is singular to working precision (condition number above
+    ``1 / eps``) its pseudo-inverse takes the place of the inverse; the choice
+    is made for each matrix alone, so a batch gives what a loop gives.
+    """
+    singular = ~(np.linalg.cond(A) < 1.0 / np.finfo(float).eps)
+    if not np.any(singular):
+        return np.linalg.solve(A, B)
+    eye = np.broadcast_to(np.eye(A.shape[-1]), A.shape)
+    safe = np.where(singular[..., None, None], eye, A)
+    return np.where(
+        singular[..., None, None], np.linalg.pinv(A, hermitian=True) @ B, np.linalg.solve(safe, B)
+    )
+
+
+def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
+    """Textbook 19.2.6: the fixed-interval (Rauch-Tung-Striebel) smoother's backward recursions.
+
+    ``C_t = Sigma_t Psi^T Sigma_{+|t+1}^{-1}``,
+    ``mu_{t|T} = mu_t + C_t (mu_{t+1|T} - mu_{+|t+1})``,
+    ``Sigma_{t|T} = Sigma_t + C_t (Sigma_{t+1|T} - Sigma_{+|t+1}) C_t^T``.
+
+    ``C_t`` is the regression coefficient of ``w_t`` on ``w_{t+1}`` given
+    ``x_1 .. x_t``. Where a predicted covariance ``Sigma_{+|t+1}`` is singular
+    (a direction the motion moves without noise, with no prior uncertainty
+    left), its pseudo-inverse takes the place of the inverse: ``w_{t+1} -
+    mu_{+|t+1}`` lies in its range, where every generalised inverse gives the
+    same conditional mean and covariance.
+
+    Parameters
+    ----------
+    filtered : FilterResult
+        The output of :func:`run` over ``T`` measurements.
+    Psi : array_like, shape (n, n) or (..., T - 1, n, n)
+        The transition matrices the filter used.
+
+    Returns
+    -------
+    MeanAndCov
+        Means (..., T, n) and covariances (..., T, n, n) of the state at every
+        time given all ``T`` measurements.
+    """
+    if not isinstance(filtered, FilterResult):
+        raise ValueError(f"filtered must be a FilterResult, got {type(filtered).__name__}")
+    T, n = filtered.means.shape[-2:]
+    Psi = _matrix(Psi, "Psi", n, n)
+    _time_axis(Psi, "Psi", 2, T - 1)
+    # Every gain depends on the filter alone: all T - 1 of them in one batched solve,
+    # with one batched check of the predicted covariances' conditioning.
+    gains = smoother_gain(
+        filtered.covs[..., :-1, :, :], filtered.predicted_covs[..., 1:, :, :], Psi
+    )
+    batch = np.broadcast_shapes(filtered.means.shape[:-2], gains.shape[:-3])
+    means = np.empty(batch + (T, n))
+    covs = np.empty(batch + (T, n, n))
+    means[..., -1, :] = filtered.means[..., -1, :]
+    covs[..., -1, :, :] = filtered.covs[..., -1, :, :]
+    for t in range(T - 2, -1, -1):
+        means[..., t, :], covs[..., t, :, :] = smoother_step(
+            gains[..., t, :, :],
+            filtered.means[..., t, :],
+            filtered.covs[..., t, :, :],
+            filtered.predicted_means[..., t + 1, :],
+            filtered.predicted_covs[..., t + 1, :, :],
+            means[..., t + 1, :],
+            covs[..., t + 1, :, :],
+        )
+    return MeanAndCov(means, covs)
+
+
+def smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
+    """Textbook 19.2.6: the Rauch-Tung-Striebel gain ``C_t = Sigma_t Psi^T Sigma_{+|t+1}^{-1}``.
+
+    ``C_t`` depends on the filter alone (not on the later measurements), so
+    one gain serves every backward recursion that passes through ``t``. A
+    singular ``Sigma_{+|t+1}`` is handled as in :func:`fixed_interval_smoother`.
+
+    Parameters
+    ----------
+    cov : ndarray, shape (..., n, n)
+        The filtered covariance ``Sigma_t``.
+    predicted_cov : ndarray, shape (..., n, n)
+        The prediction ``Sigma_{+|t+1}`` made from it.
+    Psi : ndarray, shape (..., n, n)
+        The transition from ``t`` to ``t + 1``.
+
+    Returns
+    -------
+    ndarray, shape (..., n, n)
+    """
+    # C_t^T = Sigma_{+|t+1}^{-1} Psi Sigma_t
+    return np.swapaxes(_solve_or_pinv(predicted_cov, Psi @ cov), -1, -2)
+
+
+def smoother_step(
+    gain, mean, cov, predicted_mean, predicted_cov, next_mean, next_cov
+) -> MeanAndCov:
+    """Textbook 19.2.6: one backward step of the Rauch-Tung-Striebel smoother.
+
+    From the filtered Gaussian ``(mu_t, Sigma_t)`` of ``w_t`` given ``x_1 .. x_t``,
+    the prediction ``(mu_{+|t+1}, Sigma_{+|t+1})`` made from it, its gain
+    ``C_t`` (:func:`smoother_gain`) and a Gaussian ``(mu_{t+1|T}, Sigma_{t+1|T})``
+    of ``w_{t+1}`` given ``x_1 .. x_T``, ``T > t``:
+    ``mu_{t|T} = mu_t + C_t (mu_{t+1|T} - mu_{+|t+1})``,
+    ``Sigma_{t|T} = Sigma_t + C_t (Sigma_{t+1|T} - Sigma_{+|t+1}) C_t^T``.
+    :func:`fixed_interval_smoother` is this step from ``T`` back to 1.
+
+    Parameters
+    ----------
+    gain, cov, predicted_cov, next_cov : ndarray, shape (..., n, n)
+    mean, predicted_mean, next_mean : ndarray, shape (..., n)
+
+    Returns
+    -------
+    MeanAndCov
+        The mean (..., n) and (symmetrised) covariance (..., n, n) of ``w_t``
+        given ``x_1 .. x_T``.
+    """
+    C = gain
+    smoothed_mean = mean + (C @ (next_mean - predicted_mean)[..., None])[..., 0]
+    smoothed_cov = cov + C @ (next_cov - predicted_cov) @ C.mT
+    return MeanAndCov(smoothed_mean, symmetric(smoothed_cov))
+
+
+def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):
+    """Textbook 19.2.6: the fixed-lag smoother's augmented temporal and measurement models.
+
+    The augmented state ``(w_t, w_{t-1}, .., w_{t-lag})`` moves by
+    ``Psi_a = [[Psi, 0, .., 0], [I, 0, .., 0], [0, I, .., 0], ..]``, with noise
+    ``Sigma_p`` and offset ``mu_p`` on the first block alone, and is measured
+    by ``Phi_a = [Phi, 0, .., 0]``: the delayed copies play no part in the
+    measurement.
+
+    Parameters
+    ----------
+    Psi, Sigma_p : array_like, shape (..., n, n)
+    Phi : array_like, shape (..., m, n)
+    lag : int
+        Number of delayed copies ``tau >= 0``.
+    mu_p : array_like, shape (..., n), optional
+
+    Returns
+    -------
+    Psi_a, Sigma_pa : ndarray, shape (..., n (lag + 1), n (lag + 1))
+    Phi_a : ndarray, shape (..., m, n (lag + 1))
+    mu_pa : ndarray, shape (..., n (lag + 1))
+    """
+    lag = checks.nonnegative_count(lag, "lag")
+    Psi, Sigma_p, Phi = (np.asarray(a, dtype=float) for a in (Psi, Sigma_p, Phi))
+    n = Psi.shape[-1]
+    mu_p = np.zeros(n) if mu_p is None else np.asarray(mu_p, dtype=float)
+    N = n * (lag + 1)
+    Psi_a = np.zeros(Psi.shape[:-2] + (N, N))
+    Psi_a[..., :n, :n] = Psi
+    for j in range(lag):
+        Psi_a[..., n * (j + 1) : n * (j + 2), n * j : n * (j + 1)] = np.eye(n)
+    Sigma_pa = np.zeros(Sigma_p.shape[:-2] + (N, N))
+    Sigma_pa[..., :n, :n] = Sigma_p
+    Phi_a = np.zeros(Phi.shape[:-1] + (N,))
+    Phi_a[..., :n] = Phi
+    mu_pa = np.zeros(mu_p.shape[:-1] + (N,))
+    mu_pa[..., :n] = mu_p
+    return Psi_a, Sigma_pa, Phi_a, mu_pa
+
+
+def fixed_lag_smoother(
+    x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, lag: int, mu_p=None, mu_m=None
+) -> MeanAndCov:
+    """Textbook 19.2.6: the fixed-lag smoother, by running the filter on the augmented state.
+
+    At time ``t`` the augmented filter (:func:`augment`) holds the state at
+    times ``t, t - 1, .., t - lag`` given ``x_1 .. x_t``. The augmented prior
+    is that of ``w_1`` copied into every block (the copies older than ``w_1``
+    are never read). The estimate of ``w_s`` is read off at time
+    ``min(s + lag, T)``: it uses the measurements up to ``lag`` steps after
+    ``s`` (all of them near the end), so it is the fixed-interval smoother's
+    marginal over the first ``min(s + lag, T)`` measurements. ``lag = 0`` is the
+    filter itself.
+
+    Parameters
+    ----------
+    x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
+        As for :func:`run`.
+    lag : int
+        The delay ``tau >= 0``, in time steps.
+
+    Returns
+    -------
+    MeanAndCov
+        Means (..., T, n) and covariances (..., T, n, n): entry ``s`` is the
+        state at time ``s + 1`` given the measurements up to time
+        ``min(s + 1 + lag, T)``.
+    """
+    x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m = _sequence(
+        x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
+    )
+    T, n = x.shape[-2], prior_mean.shape[-1]
+    lag = min(checks.nonnegative_count(lag, "lag"), T - 1)  # a longer lag changes nothing
+    Psi_a, Sigma_pa, Phi_a, mu_pa = augment(Psi, Sigma_p, Phi, lag, mu_p)
+    res = _run(
+        x,
+        np.tile(prior_mean, lag + 1),
+        np.tile(prior_cov, (lag + 1, lag + 1)),
+        Psi_a,
+        Sigma_pa,
+        Phi_a,
+        Sigma_m,
+        mu_pa,
+        mu_m,
+    )
+    means, covs = [], []
+    for s in range(T):
+        t = min(s + lag, T - 1)  # read at time t, block t - s
+        block = slice(n * (t - s), n * (t - s + 1))
+        means.append(res.means[..., t, block])
+        covs.append(res.covs[..., t, block, block])
+    return MeanAndCov(np.stack(means, axis=-2), np.stack(covs, axis=-3))

@@ -1,0 +1,17 @@
+"""The particle filters and what they share: weights, resampling, replicas.
+
+* :mod:`~depthcore.particles.resampling`: the effective sample size, the resamplers (one
+signature), weighted moments;
+* :mod:`~depthcore.particles.importance`: importance sampling of the state
+  from a second-order (Student t) proposal;
+* :mod:`~depthcore.particles.resample_move`: the causal bootstrap filter with
+  resample-move;
+* :mod:`~depthcore.particles.rbpf`: the Rao-Blackwellised particle filter over
+  depth, a Kalman filter per particle (textbook 19.5.3).
+
+Where a new thing goes: a new particle filter is a module here that takes its
+randomness from a ``numpy.random.Generator`` or ``SeedSequence`` argument and
+resamples through :mod:`~depthcore.particles.resampling`; then its registry
+entry and its test. It may import the families below: the problem, the
+Gaussian filters (for a proposal) and the exact filter (for a bank).
+"""

@@ -1,0 +1,458 @@
+"""A causal particle filter on the paper's problem: bootstrap with resample-move.
+
+Recommended import: ``from depthcore.particles import resample_move``.
+
+The textbook's particle filter (Prince, section 19.5 [prince2012]_; the
+bootstrap filter of [gordon1993]_) sees the bearings one at a time and uses
+nothing else: the time-1 state is drawn from the prior, and after each bearing
+``mu_k`` the particles are reweighted by its likelihood, Eq. (4). The point's
+motion, Eq. (1), is deterministic, so a filter that only reweights and
+duplicates particles can never place a particle where none was drawn: after
+``mu_1`` the prior ``N(m, 1000 I)`` leaves a handful of particles on the thin
+wedge of states whose bearing is ``mu_1``, and the estimate after ``mu_3`` is
+whichever of them fits best.
+
+The resample-move algorithm of [gilks2001]_ adds what the motion lacks: after
+resampling at step ``k`` every particle takes ``moves`` Metropolis steps
+(random walk, Gaussian increments with covariance ``(2.38**2 / 3)`` times the
+weighted covariance of the particles before resampling [roberts1997]_) that
+leave the current filtering distribution invariant,
+
+    pi_k(x_1) ~ N(x_1; m, P) [y_1 > 0] prod_{j <= k} p(mu_j | G^{j-1} x_1),
+
+so duplicated particles spread out again over ``pi_k``. Since the motion is
+deterministic (no process noise: the registry, :mod:`depthcore.registry.filters`,
+refuses ``process_noise > 0`` for this filter, whose state is the static
+``x_1``), the time-1 state ``x_1`` is a static parameter of the model and
+``pi_k`` is its posterior given the first ``k`` bearings; the state at frame
+``k`` is ``G^{k-1} x_1``. Every step uses only ``mu_1 .. mu_k``: the filter is
+causal, and its effective sample size after ``mu_k`` measures how well the
+particles drawn so far explain the bearings seen so far. The point is in front
+of the camera at every frame (``y_1 > 0``), the support of
+:func:`depthcore.exact.optimal.marginals` with ``support="front"``.
+
+Resampling happens when the ESS falls below ``ess_threshold * N`` (default
+``0.5``, the usual rule [kong1994]_), with systematic resampling by default
+([douc2005]_ compares the schemes; all share one signature).
+
+Monte Carlo errors. After resampling and moving, the particles are correlated
+and one cloud's spread does not measure the error of its estimates.
+:func:`replicated` runs ``R`` independent filters on the same bearings (rows of
+one batch, drawn from the one generator) and pools them: its moments are the
+replicas' average, its errors the Student-t-widened standard error of that
+average from their spread, and it flags a collapse
+(:func:`depthcore.particles.resampling.replica_errors`): on Figure 2 the ESS after
+``mu_3`` falls to a few particles, and with a few hundred particles every
+replica settles on a narrow, wrong piece of the posterior (depth means near 40
+for an exact 6.5, SDs near 0), which the flag reports and the error (NaN)
+does not hide.
+
+References
+----------
+.. [prince2012] S. J. D. Prince, *Computer Vision: Models, Learning, and
+   Inference*, chapter 19, section 19.5.
+.. [gordon1993] N. J. Gordon, D. J. Salmond and A. F. M. Smith, "Novel
+   approach to nonlinear/non-Gaussian Bayesian state estimation", IEE
+   Proceedings F 140(2), 1993.
+.. [gilks2001] W. R. Gilks and C. Berzuini, "Following a moving target: Monte
+   Carlo inference for dynamic Bayesian models", J. R. Statist. Soc. B 63(1),
+   2001.
+.. [roberts1997] G. O. Roberts, A. Gelman and W. R. Gilks, "Weak convergence
+   and optimal scaling of random walk Metropolis algorithms", Ann. Appl.
+   Probab. 7(1), 1997.
+.. [kong1994] A. Kong, J. S. Liu and W. H. Wong, "Sequential imputations and
+   Bayesian missing data problems", J. Am. Statist. Assoc. 89(425), 1994.
+.. [douc2005] R. Douc, O. Cappe and E. Moulines, "Comparison of resampling
+   schemes for particle filtering", ISPA 2005.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from depthcore.particles.resampling import (
+    RESAMPLERS,
+    check_rng,
+    effective_sample_size,
+    replica_errors,
+    state_moments,
+    weighted_density,
+    weighted_mean_and_cov,
+)
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import INDEX, Gaussian
+from depthcore.problem.weights import normalise
+
+#: Random-walk scale for a three-dimensional target [roberts1997]_.
+_RW_SCALE = 2.38 / np.sqrt(3.0)
+#: Independent replicas of the filter, for its Monte Carlo errors (:func:`replicated`).
+REPLICAS = 4
+
+
+@dataclass(frozen=True)
+class ResampleMoveBatch:
+    """Weighted particles at the last frame for ``B`` trials.
+
+    Attributes
+    ----------
+    particles : ndarray, shape (B, N, 3)
+        States ``(x, y, v)`` at frame ``K``, the frame of the last bearing.
+    log_weights : ndarray, shape (B, N)
+        Normalised log weights.
+    ess : ndarray, shape (B, K)
+        Effective sample size after reweighting by ``mu_k``, before any
+        resampling at that step.
+    resampled : ndarray of bool, shape (B, K)
+        Whether step ``k`` resampled and moved the particles.
+    acceptance : ndarray, shape (B, K)
+        Mean Metropolis acceptance rate of the moves at step ``k`` (NaN where
+        the step did not move).
+    """
+
+    particles: np.ndarray
+    log_weights: np.ndarray
+    ess: np.ndarray
+    resampled: np.ndarray
+    acceptance: np.ndarray
+
+    def moments(self) -> dict:
+        """Weighted depth and velocity means and SDs at the last frame, each of shape (B,)."""
+        return state_moments(self.particles, self.log_weights)
+
+    def density(
+        self, component: str, grid, method: str = "kde", bandwidth: float | None = None
+    ) -> np.ndarray:
+        """Weighted density estimate of one component's marginal on ``grid``, for one trial.
+
+        :func:`depthcore.particles.resampling.weighted_density` of the particles'
+        ``component`` (``"x"``, ``"y"`` or ``"v"``) at the last frame; the
+        batch must hold one trial (as :func:`resample_move` returns).
+
+        Returns
+        -------
+        ndarray, shape (G,)
+        """
+        if component not in INDEX:
+            raise ValueError(f"component must be one of {tuple(INDEX)}, got {component!r}")
+        if self.particles.shape[0] != 1:
+            raise ValueError(
+                f"density needs a batch of one trial, got {self.particles.shape[0]} trials"
+            )
+        x = self.particles[0, :, INDEX[component]]
+        return weighted_density(x, np.exp(self.log_weights[0]), grid, method, bandwidth)
+
+
+@dataclass(frozen=True)
+class Replicated:
+    """``R`` independent resample-move filters on each of ``B`` sequences of bearings.
+
+    Attributes
+    ----------
+    runs : ResampleMoveBatch
+        The ``B R`` filters as one batch, row ``b R + r`` the ``r``-th replica
+        of trial ``b``.
+    replicas : int
+        ``R``.
+    """
+
+    runs: ResampleMoveBatch
+    replicas: int
+
+    @property
+    def particles(self) -> np.ndarray:
+        """The replicas' particles pooled, shape (B, R N, 3)."""
+        p = self.runs.particles
+        return p.reshape(p.shape[0] // self.replicas, -1, 3)
+
+    @property
+    def log_weights(self) -> np.ndarray:
+        """Normalised log weights of the pool (each replica's over ``R``), shape (B, R N)."""
+        lw = self.runs.log_weights - np.log(self.replicas)
+        return lw.reshape(lw.shape[0] // self.replicas, -1)
+
+    def replica_moments(self) -> dict:
+        """Each replica's depth and velocity means and SDs, shape (B, R)."""
+        return {k: v.reshape(-1, self.replicas) for k, v in self.runs.moments().items()}
+
+    def moments(self) -> dict:
+        """Depth and velocity means and SDs of the pool, shape (B,)."""
+        return state_moments(self.particles, self.log_weights)
+
+    def errors(self) -> tuple[dict, np.ndarray]:
+        """Monte Carlo errors of :meth:`moments` and the collapse flag, shape (B,).
+
+        :func:`depthcore.particles.resampling.replica_errors` of each moment over the
+        replicas (the pool's mean is the replicas' average; its variance their
+        average variance plus the spread of their means, at most a tenth of it
+        where they have not collapsed). ``collapsed`` is true where either the
+        depth or the velocity has collapsed; the errors are NaN there.
+
+        Returns
+        -------
+        errors : dict
+            ``{"depth_mean", "depth_sd", "velocity_mean", "velocity_sd"}``.
+        collapsed : ndarray of bool, shape (B,)
+        """
+        m = self.replica_moments()
+        errors, collapsed = {}, np.zeros(m["depth_mean"].shape[0], dtype=bool)
+        for name in ("depth", "velocity"):
+            sd = m[f"{name}_sd"]
+            for moment in ("mean", "sd"):
+                e, c = replica_errors(m[f"{name}_{moment}"], sd)
+                errors[f"{name}_{moment}"] = e
+                collapsed |= c
+        errors = {k: np.where(collapsed, np.nan, v) for k, v in errors.items()}
+        return errors, collapsed
+
+    def density(
+        self, component: str, grid, method: str = "kde", bandwidth: float | None = None
+    ) -> np.ndarray:
+        """:meth:`ResampleMoveBatch.density` of the pool, for one trial."""
+        if self.particles.shape[0] != 1:
+            raise ValueError(
+                f"density needs a batch of one trial, got {self.particles.shape[0]} trials"
+            )
+        pool = ResampleMoveBatch(
+            self.particles,
+            self.log_weights,
+            self.runs.ess,
+            self.runs.resampled,
+            self.runs.acceptance,
+        )
+        return pool.density(component, grid, method, bandwidth)
+
+
+def _log_likelihood(mu_k, x1, k: int, rho) -> np.ndarray:
+    """Eq. (4) for bearing ``mu_k`` (B,) of the states ``G^k x1`` (B, N, 3).
+
+    ``k`` counts frames after the first (``mu_1`` has ``k = 0``). States with
+    ``y_1 <= 0`` get ``-inf``: the point is in front of the camera at every frame.
+    """
+    inside = x1[..., 1] > 0
+    xk = model.G(np.where(inside[..., None], x1, 1.0), k)
+    log_l = model.log_likelihood(mu_k[:, None], xk, rho[:, None])
+    return np.where(inside, log_l, -np.inf)
+
+
+def log_target(x1, mu, rho, prior_mean, prior_chol) -> np.ndarray:
+    """``log pi_k(x_1)`` up to a constant: the prior, the front support and ``k`` likelihoods.
+
+    Parameters
+    ----------
+    x1 : ndarray, shape (B, N, 3)
+        Time-1 states.
+    mu : ndarray, shape (B, k)
+        The bearings seen so far.
+    rho : ndarray, shape (B,)
+    prior_mean : ndarray, shape (B, 3)
+    prior_chol : ndarray, shape (3, 3)
+        Lower Cholesky factor of the prior covariance.
+
+    Returns
+    -------
+    ndarray, shape (B, N)
+    """
+    d = (x1 - prior_mean[:, None, :]).reshape(-1, 3).T
+    z = np.linalg.solve(prior_chol, d).T.reshape(x1.shape)
+    total = -0.5 * np.sum(z**2, axis=-1)
+    for k in range(mu.shape[1]):
+        total = total + _log_likelihood(mu[:, k], x1, k, rho)
+    return total
+
+
+def _increment_chol(x1, W, prior_chol) -> np.ndarray:
+    """Cholesky factors (B, 3, 3) of the weighted covariance of ``x1`` (B, N, 3) under ``W`` (B, N).
+
+    A collapsed cloud (one distinct particle) has no spread: ``1e-12`` times
+    the prior covariance is added so the chain can still move.
+    """
+    _, cov = weighted_mean_and_cov(x1, W)
+    return np.linalg.cholesky(cov + 1e-12 * (prior_chol @ prior_chol.T))
+
+
+def run(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    n_particles: int,
+    rng: np.random.Generator,
+    moves: int = 20,
+    ess_threshold: float = 0.5,
+    resampler: str = "systematic",
+) -> ResampleMoveBatch:
+    """The bootstrap filter with resample-move for ``B`` sequences of bearings, vectorised.
+
+    Parameters
+    ----------
+    mu : array_like, shape (B, K)
+        Bearings ``mu_1 .. mu_K`` of each trial, ``K >= 1``, in the order
+        they arrive; any finite values.
+    rho : float or array_like, shape (B,)
+        Noise standard deviation, > 0.
+    prior_mean : array_like, shape (3,) or (B, 3)
+        Prior mean of the state at time 1.
+    prior_cov : array_like, shape (3, 3)
+        Prior covariance, symmetric positive definite.
+    n_particles : int
+        ``N >= 2`` particles per trial; memory grows like ``B * N``.
+    rng : numpy.random.Generator
+        The only source of randomness.
+    moves : int
+        Metropolis steps per particle after each resampling, ``>= 0``
+        (``0`` is the plain bootstrap filter).
+    ess_threshold : float
+        Resample and move at step ``k`` when the ESS after ``mu_k`` is below
+        ``ess_threshold * N``; in [0, 1].
+    resampler : {"systematic", "multinomial", "residual"}
+
+    Returns
+    -------
+    ResampleMoveBatch
+    """
+    mu, rho, prior_mean, prior_cov = model.batch_problem(
+        mu, rho, prior_mean, prior_cov, triples=False
+    )
+    if mu.ndim != 2 or mu.shape[0] < 1:
+        raise ValueError(f"mu must have shape (B, K) with B, K >= 1, got shape {mu.shape}")
+    if prior_cov.shape != (3, 3):
+        raise ValueError(f"prior_cov must have shape (3, 3), got shape {prior_cov.shape}")
+    B, K = mu.shape
+    rho = np.broadcast_to(rho, (B,))
+    prior_mean = np.broadcast_to(prior_mean, (B, 3))
+    prior_chol = np.linalg.cholesky(prior_cov)
+    if (
+        isinstance(n_particles, bool)
+        or not isinstance(n_particles, (int, np.integer))
+        or n_particles < 2
+    ):
+        raise ValueError(f"n_particles must be an integer >= 2, got {n_particles!r}")
+    N = int(n_particles)
+    check_rng(rng)
+    if isinstance(moves, bool) or not isinstance(moves, (int, np.integer)) or moves < 0:
+        raise ValueError(f"moves must be an integer >= 0, got {moves!r}")
+    threshold = float(checks.finite_array(ess_threshold, "ess_threshold"))
+    if not 0.0 <= threshold <= 1.0:
+        raise ValueError(f"ess_threshold must lie in [0, 1], got {threshold}")
+    if resampler not in RESAMPLERS:
+        raise ValueError(f"resampler must be one of {tuple(RESAMPLERS)}, got {resampler!r}")
+
+    x1 = prior_mean[:, None, :] + rng.standard_normal((B, N, 3)) @ prior_chol.T
+    log_w = np.zeros((B, N))
+    ess = np.zeros((B, K))
+    resampled = np.zeros((B, K), dtype=bool)
+    acceptance = np.full((B, K), np.nan)
+    for k in range(K):
+        log_w = log_w + _log_likelihood(mu[:, k], x1, k, rho)
+        dead = ~np.any(np.isfinite(log_w), axis=-1)
+        if np.any(dead):
+            raise ValueError(
+                f"n_particles is too small: every particle of trial {int(np.argmax(dead))} "
+                f"lies behind the camera after mu_{k + 1}"
+            )
+        log_w = normalise(log_w)
+        ess[:, k] = effective_sample_size(log_w)
+        need = ess[:, k] < threshold * N
+        if not np.any(need):
+            continue
+        resampled[:, k] = need
+        x1, log_w, acceptance[need, k] = _resample_move(
+            x1,
+            log_w,
+            need,
+            mu[:, : k + 1],
+            rho,
+            prior_mean,
+            prior_chol,
+            moves,
+            rng,
+            RESAMPLERS[resampler],
+        )
+    return ResampleMoveBatch(model.G(x1, K - 1), log_w, ess, resampled, acceptance)
+
+
+def _resample_move(x1, log_w, need, mu, rho, prior_mean, prior_chol, moves, rng, resampler):
+    """Resample the trials ``need`` (B,) and move their particles.
+
+    Returns ``x1, log_w, acceptance``.
+    """
+    W = np.exp(log_w[need])
+    sub = x1[need]
+    chol = _increment_chol(sub, W, prior_chol)
+    idx = resampler(W, rng)
+    sub = np.take_along_axis(sub, idx[..., None], axis=1)
+    args = (mu[need], rho[need], prior_mean[need], prior_chol)
+    current = log_target(sub, *args)
+    accepted = np.zeros(sub.shape[0])
+    for _ in range(moves):
+        proposal = sub + _RW_SCALE * np.einsum("bij,bnj->bni", chol, rng.standard_normal(sub.shape))
+        candidate = log_target(proposal, *args)
+        with np.errstate(invalid="ignore"):
+            ok = np.log(rng.random(current.shape)) < candidate - current
+        sub = np.where(ok[..., None], proposal, sub)
+        current = np.where(ok, candidate, current)
+        accepted += ok.mean(axis=-1)
+    x1, log_w = x1.copy(), log_w.copy()
+    x1[need] = sub
+    log_w[need] = -np.log(x1.shape[1])
+    return x1, log_w, accepted / moves if moves else np.full(sub.shape[0], np.nan)
+
+
+def resample_move(
+    mu,
+    rho: float,
+    prior: Gaussian,
+    n_particles: int,
+    rng: np.random.Generator,
+    moves: int = 20,
+    ess_threshold: float = 0.5,
+    resampler: str = "systematic",
+) -> ResampleMoveBatch:
+    """The resample-move filter for one sequence of bearings ``mu`` (shape (K,)); a batch of one.
+
+    Parameters are as for :func:`run`, with ``prior`` the density of the state
+    at time 1.
+    """
+    mu = checks.finite_array(mu, "mu")
+    if mu.ndim != 1:
+        raise ValueError(f"mu must have shape (K,), got shape {mu.shape}")
+    rho = checks.positive_scalar(rho, "rho")
+    if not isinstance(prior, Gaussian):
+        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
+    return run(
+        mu[None], rho, prior.mean, prior.cov, n_particles, rng, moves, ess_threshold, resampler
+    )
+
+
+def replicated(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    n_particles: int,
+    rng: np.random.Generator,
+    replicas: int = REPLICAS,
+    **options,
+) -> Replicated:
+    """``replicas`` independent runs of :func:`run` on each sequence of bearings.
+
+    Parameters are as for :func:`run` (``mu`` of shape (B, K), ``prior_mean``
+    (3,) or (B, 3)), with ``n_particles`` per replica and ``options`` those of
+    :func:`run`; the replicas are rows of one batch, drawn from ``rng``.
+
+    Returns
+    -------
+    Replicated
+    """
+    R = checks.count(replicas, "replicas")
+    mu = np.asarray(mu)
+    if mu.ndim != 2:
+        raise ValueError(f"mu must have shape (B, K), got shape {mu.shape}")
+    rho = np.asarray(rho)
+    prior_mean = np.asarray(prior_mean)
+    rho = np.repeat(rho, R, axis=0) if rho.ndim else rho
+    prior_mean = np.repeat(prior_mean, R, axis=0) if prior_mean.ndim == 2 else prior_mean
+    runs = run(np.repeat(mu, R, axis=0), rho, prior_mean, prior_cov, n_particles, rng, **options)
+    return Replicated(runs, R)

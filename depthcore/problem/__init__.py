@@ -1,0 +1,21 @@
+"""The problem: the paper's model, its Gaussians and prior, its experiments, the input checks.
+
+The bottom of the house: the model and the primitives every family shares;
+nothing here imports another family.
+
+* :mod:`~depthcore.problem.model`: the motion and the bearings, Eqs. (1)-(5),
+  (7), (9), (11), (20)-(22), and the N-frame model with process noise;
+* :mod:`~depthcore.problem.gaussian`: Gaussian densities on the state, the
+  Gaussian filters' results and the paper's prior (Eq. (13));
+* :mod:`~depthcore.problem.scenarios`: Figures 2-6 and the numbers the paper
+  reports;
+* :mod:`~depthcore.problem.checks`: the checks every public function runs on
+  its arguments, each refusal one line naming the argument;
+* :mod:`~depthcore.problem.weights`: log weights normalised in log space, for
+  the particle filters' samples and the exact filter's mixture alike.
+
+Where a new thing goes: a new motion or measurement model, or a new way to
+describe a track's frames, goes here, beside :mod:`~depthcore.problem.model`;
+a new experiment of the paper's kind is an entry of
+:data:`~depthcore.problem.scenarios.SCENARIOS`.
+"""

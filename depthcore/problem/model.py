@@ -1,0 +1,667 @@
+"""The motion and measurement model of the paper, Eqs. (1), (3)-(5), (7), (9), (11), (20)-(22).
+
+A point moves in the (x, y) plane with constant velocity ``(v, 1)``; its state
+at time ``i`` is ``(x_i, y_i, v_i)``, with ``y`` the depth. The camera sees the
+bearing ``x / y`` plus white Gaussian noise of standard deviation ``rho``.
+
+Recommended import: ``from depthcore.problem import model``.
+
+All functions act on the last axis of arrays of states, so ``x`` may have shape
+``(3,)`` or ``(..., 3)``. Besides the motion ``G`` (1), (9), the projection and
+its gradient ``h`` (11) and the likelihood (4), the module holds the misfit
+``f`` of the bearings (5) (the paper's three, or any ``N``), its residuals
+and their gradients (20)-(22), the noise-free state ``c`` of three bearings
+(7), and the least misfit at each depth, and it draws tracks of any number of
+frames, with or without process noise, and their bearings (:func:`simulate`,
+the one simulator of the package). It also
+checks the bearings against the model (:func:`measurements`,
+:func:`measurements_batch`, :func:`valid_measurements`: finite, not
+degenerate, the noise-free solution in front of the camera) and a filter's
+inputs as a whole (:func:`batch_problem`, :func:`batch_inputs`), with the
+generic checks of ``depthcore.problem.checks``.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from depthcore.problem import checks
+
+#: The linear part of the motion G, Eq. (9).
+F = np.array([[1.0, 0.0, 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+F.setflags(write=False)
+
+#: The constant part of the motion G, Eq. (9).
+e = np.array([0.0, 1.0, 0.0])
+e.setflags(write=False)
+
+#: Number of measurements the paper's filters use.
+N_MEASUREMENTS = 3
+
+
+def G_linear(k: int) -> np.ndarray:
+    """Linear part of ``G**k`` (``k`` may be negative), a ``(3, 3)`` array.
+
+    Eqs. (1), (9): ``G**k x = (x + k v, y + k, v)``, so the linear part is ``F**k``
+    with ``F**k = [[1, 0, k], [0, 1, 0], [0, 0, 1]]``.
+    """
+    return np.array([[1.0, 0.0, float(k)], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def G(x, k: int = 1) -> np.ndarray:
+    """Eq. (1): move states ``k`` steps forward (backward for ``k < 0``).
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 3)
+        States ``(x, y, v)``.
+    k : int or array_like
+        Number of time steps; ``G(x, -2)`` is the paper's ``G^{-2} x``. An
+        array of steps broadcasts with ``x.shape[:-1]``.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``(x + k v, y + k, v)``.
+    """
+    x = np.asarray(x, dtype=float)
+    if np.ndim(k) == 0:
+        return np.stack([x[..., 0] + k * x[..., 2], x[..., 1] + k, x[..., 2]], axis=-1)
+    moved = np.broadcast_arrays(x[..., 0] + k * x[..., 2], x[..., 1] + k, x[..., 2])
+    return np.stack(moved, axis=-1)
+
+
+def project(x) -> np.ndarray:
+    """The noise-free image measurement ``x / y`` of states ``x`` (shape (..., 3))."""
+    x = np.asarray(x, dtype=float)
+    return x[..., 0] / x[..., 1]
+
+
+def observation_vector(n) -> np.ndarray:
+    """Eq. (11): gradient of the projection ``x / y`` at the state ``n``.
+
+    Parameters
+    ----------
+    n : array_like, shape (..., 3)
+        The state at which the projection is linearised (the EKF's predicted mean).
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``h = (1 / n2, -n1 / n2**2, 0)``.
+    """
+    n = np.asarray(n, dtype=float)
+    return np.stack([1.0 / n[..., 1], -n[..., 0] / n[..., 1] ** 2, np.zeros(n.shape[:-1])], axis=-1)
+
+
+def log_likelihood(mu, x, rho, front: bool = False) -> np.ndarray:
+    """Eq. (4): log density of one measurement ``mu`` given states ``x``.
+
+    Parameters
+    ----------
+    mu : float or array_like broadcastable to ``x.shape[:-1]``
+        Measured bearing (radians, as a tangent).
+    x : array_like, shape (..., 3)
+        States at the time of the measurement.
+    rho : float or array_like broadcastable to ``x.shape[:-1]``
+        Noise standard deviation, > 0.
+    front : bool
+        If true, states with depth ``y <= 0`` (behind the camera) get ``-inf``,
+        the log of the support's indicator.
+
+    Returns
+    -------
+    ndarray, shape x.shape[:-1]
+        ``-log(sqrt(2 pi) rho) - (x / y - mu)**2 / (2 rho**2)``.
+    """
+    rho = checks.positive_array(rho, "rho") if np.ndim(rho) <= 1 else np.asarray(rho, float)
+    if not np.all(rho > 0):
+        raise ValueError(f"rho must be positive, got minimum {float(np.min(rho))}")
+    x = np.asarray(x, dtype=float)
+    if front:
+        inside = x[..., 1] > 0
+        x = np.where(inside[..., None], x, 1.0)
+    r = project(x) - np.asarray(mu, dtype=float)
+    log_l = -0.5 * np.log(2.0 * np.pi) - np.log(rho) - 0.5 * (r / rho) ** 2
+    return np.where(inside, log_l, -np.inf) if front else log_l
+
+
+def trajectory(x1, frames: int = N_MEASUREMENTS) -> np.ndarray:
+    """States at times ``1 .. frames`` of a point whose state at time 1 is ``x1``.
+
+    Returns
+    -------
+    ndarray, shape (frames, 3)
+    """
+    x1 = checks.finite_array(x1, "x1", (3,))
+    return np.stack([G(x1, k) for k in range(frames)])
+
+
+class Simulation(NamedTuple):
+    """A simulated track: states (..., N, 3) ``(x_k, y_k, v_k)`` and bearings (..., N)."""
+
+    states: np.ndarray
+    mu: np.ndarray
+
+
+def simulate(
+    state,
+    frames: int,
+    rho,
+    process_noise,
+    rng: np.random.Generator,
+    size: int | None = None,
+    *,
+    frame: int = N_MEASUREMENTS,
+) -> Simulation:
+    """Draw a track of ``N`` frames through a given state, and its noisy bearings, Eqs. (1), (4).
+
+    The given ``state`` is the state at frame ``frame`` (by default time 3,
+    the time of the paper's estimates). Up to that frame the motion is the
+    noise-free one of Eq. (1), ``G**(k - frame) state`` at frame ``k``; from it
+    on the velocity changes by a random acceleration at every frame:
+
+        y_{k+1} = y_k + 1,   x_{k+1} = x_k + v_k,   v_{k+1} = v_k + a_k,
+        a_k ~ N(0, q**2) for k >= frame,
+
+    and every frame's bearing is ``mu_k = x_k / y_k + w_k``, ``w_k ~ N(0, rho**2)``
+    (Eq. (4)). So with ``frame=3`` the state at time 3 is ``state`` in every
+    draw, frames 1-3 are the paper's three noise-free positions and the
+    accelerations act between frames 3 .. N; with ``frame=1`` the accelerations
+    act from frame 1 on, the model of :mod:`depthcore.exact.bank` with the prior on
+    the state at frame 1 (what drawing truths from that prior needs). With
+    ``q = 0`` no acceleration is drawn and the track is the noise-free motion.
+
+    Parameters
+    ----------
+    state : array_like, shape (..., 3)
+        The state ``(x, y, v)`` at frame ``frame``; the depth at frame 1,
+        ``y - frame + 1``, must be > 0 (then it is at every frame).
+    frames : int
+        ``N >= 1``, the frames ``1 .. N`` simulated.
+    rho : float
+        Bearing noise SD, > 0.
+    process_noise : float
+        Acceleration SD, >= 0.
+    rng : numpy.random.Generator
+        Draws the accelerations (of shape ``lead + (N - frame,)``, when
+        ``q > 0`` and ``N > frame``), then the bearing noise (``lead + (N,)``).
+    size : int, optional
+        Number of independent tracks from each ``state``; ``None`` for one.
+    frame : int
+        ``>= 1``: the frame at which the track passes through ``state``.
+
+    Returns
+    -------
+    Simulation
+        ``states`` of shape ``lead + (N, 3)`` and ``mu`` of shape ``lead + (N,)``,
+        with ``lead = (size,) + state.shape[:-1]`` (without ``size`` if ``None``).
+    """
+    state = checks.finite_array(state, "state")
+    if state.ndim < 1 or state.shape[-1] != 3:
+        raise ValueError(f"state must have shape (..., 3), got shape {state.shape}")
+    frame = checks.count(frame, "frame")
+    frames = checks.count(frames, "frames")
+    depth_1 = state[..., 1] - (frame - 1)
+    if not np.all(depth_1 > 0):
+        raise ValueError(
+            f"state puts the point behind the camera: the depth at frame 1 must be > 0, "
+            f"got minimum {float(np.min(depth_1)):.6g}"
+        )
+    rho = checks.positive_scalar(rho, "rho")
+    process_noise = checks.nonnegative_scalar(process_noise, "process_noise")
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    if size is not None:
+        size = checks.count(size, "size")
+    lead = ((size,) if size is not None else ()) + state.shape[:-1]
+    return draw_track(state, frames, rho, process_noise, rng, lead, frame)
+
+
+def draw_track(state, frames: int, rho: float, process_noise: float, rng, lead, frame: int):
+    """:func:`simulate` on checked inputs, which its callers have checked as it checks them.
+
+    Parameters
+    ----------
+    state : ndarray, shape (..., 3)
+        Finite, in front of the camera at frame 1.
+    frames, frame : int
+        ``>= 1``.
+    rho : float
+        ``> 0``.
+    process_noise : float
+        ``>= 0``.
+    rng : numpy.random.Generator
+    lead : tuple of int
+        The leading shape of the tracks, ``(size,) + state.shape[:-1]`` or
+        ``state.shape[:-1]``.
+
+    Returns
+    -------
+    Simulation
+    """
+    k = np.arange(1, frames + 1) - frame  # frames from the given one
+    n_noisy = max(frames - frame, 0)
+    v = np.broadcast_to(state[..., 2, None], lead + (frames,))
+    x = state[..., 0, None] + np.minimum(k, 0) * state[..., 2, None] + np.zeros(lead + (1,))
+    if process_noise > 0 and n_noisy:
+        a = process_noise * rng.standard_normal(lead + (n_noisy,))
+        dv = np.cumsum(a, axis=-1)  # v_{frame + j} - v_frame, j = 1 .. n_noisy
+        v_after = state[..., 2, None] + dv
+        v = np.concatenate([v[..., : frames - n_noisy], v_after], axis=-1)
+        # x_{frame + j} = x_frame + sum_{i < j} v_{frame + i}
+        steps = np.concatenate([v[..., frame - 1 : frame], v_after[..., :-1]], axis=-1)
+        x_after = state[..., 0, None] + np.cumsum(steps, axis=-1)
+        x = np.concatenate([x[..., : frames - n_noisy], x_after], axis=-1)
+    else:
+        x = state[..., 0, None] + k * state[..., 2, None] + np.zeros(lead + (1,))
+    y = np.broadcast_to(state[..., 1, None] + k, x.shape)
+    states = np.stack([x, np.asarray(y, dtype=float), np.broadcast_to(v, x.shape)], axis=-1)
+    mu = x / y + rho * rng.standard_normal(lead + (frames,))
+    return Simulation(states, mu)
+
+
+def noise_in_pixels(
+    rho: float, image_size: int = 512, fov_deg: float = 30.0, small_angle: bool = True
+) -> float:
+    """The image error, in pixels, of a bearing error ``rho`` (radians).
+
+    With ``small_angle`` (the paper's arithmetic) the image's ``image_size``
+    pixels span ``fov_deg`` degrees uniformly: ``rho * image_size / fov``.
+    Without it, a pinhole camera whose image spans the field of view has focal
+    length ``(image_size / 2) / tan(fov / 2)`` pixels, and a bearing error
+    ``rho`` at the image centre moves the image by ``focal * tan(rho)``.
+
+    Parameters
+    ----------
+    rho : float
+        Bearing noise (radians), > 0.
+    image_size : int
+        Image width in pixels.
+    fov_deg : float
+        Horizontal field of view in degrees, in (0, 180).
+    small_angle : bool
+
+    Returns
+    -------
+    float
+    """
+    rho = checks.positive_scalar(rho, "rho")
+    size = checks.positive_scalar(image_size, "image_size")
+    fov = checks.positive_scalar(fov_deg, "fov_deg")
+    if fov >= 180:
+        raise ValueError(f"fov_deg must be below 180, got {fov}")
+    fov = np.deg2rad(fov)
+    if small_angle:
+        return float(rho * size / fov)
+    return float(size / 2 / np.tan(fov / 2) * np.tan(rho))
+
+
+def bearings_from_pixels(u, cx, focal) -> np.ndarray:
+    """The bearings ``mu = x / y`` of image columns ``u`` seen by a pinhole camera.
+
+    ``mu = (u - cx) / focal``: the tangent of the angle between the ray
+    through column ``u`` and the optical axis, which points along the
+    camera's motion (Eq. (4) without its noise). A pixel noise of SD ``s`` is
+    a bearing noise ``rho = s / focal``.
+
+    Parameters
+    ----------
+    u : array_like, shape (N,)
+        Image columns of the point in frames ``1 .. N``, in pixels; finite.
+    cx : float
+        The principal point's column (where the optical axis meets the
+        image), in pixels; finite.
+    focal : float
+        The focal length in pixels, > 0.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    u = checks.finite_array(u, "u")
+    if u.ndim != 1 or u.size == 0:
+        raise ValueError(f"u must have shape (N,) with N >= 1, got shape {u.shape}")
+    cx = checks.number(cx, "cx")
+    focal = checks.positive_scalar(focal, "focal")
+    with np.errstate(over="ignore", invalid="ignore"):
+        mu = (u - cx) / focal
+    if not np.all(np.isfinite(mu)):
+        raise ValueError(
+            f"focal is too small for these columns: (u - cx) / focal overflows, got {focal!r}"
+        )
+    return mu
+
+
+# --- the misfit of three measurements, Eqs. (5), (7), (20)-(22) ---------------------------------
+
+
+def noise_free_state(mu) -> np.ndarray:
+    """Eq. (7): the state ``c`` at time 3 with ``f(c) = 0``.
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+        Measurements ``(mu1, mu2, mu3)``; checked by :func:`depthcore.problem.model.measurements`.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        ``c = (c1, c2, c3)``: position ``(c1, c2)``, velocity ``(c3, 1)``.
+    """
+    return noise_free_states_unchecked(measurements(mu))
+
+
+def noise_free_states_unchecked(mu) -> np.ndarray:
+    """Eq. (7) for triples ``mu`` of shape (..., 3), unchecked (NaN or inf where degenerate)."""
+    mu1, mu2, mu3 = np.moveaxis(np.asarray(mu, dtype=float), -1, 0)
+    d = mu3 + mu1 - 2.0 * mu2
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # documented NaN, inf
+        return np.stack(
+            [
+                2.0 * mu3 * (mu1 - mu2) / d,
+                noise_free_depth_unchecked(mu),
+                (2.0 * mu1 * mu3 - mu2 * mu3 - mu1 * mu2) / d,
+            ],
+            axis=-1,
+        )
+
+
+def noise_free_depth_unchecked(mu) -> np.ndarray:
+    """``c2`` of Eq. (7), the noise-free depth at time 3, for triples ``mu`` of shape (..., 3).
+
+    ``c2 = 2 (mu1 - mu2) / (mu1 + mu3 - 2 mu2)``, unchecked (NaN or inf where
+    the triple is degenerate); returns shape ``mu.shape[:-1]``. The point is
+    in front of the camera at all three times when ``c2 - 2 > 0``.
+    """
+    mu1, mu2, mu3 = np.moveaxis(np.asarray(mu, dtype=float), -1, 0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # documented NaN, inf
+        return 2.0 * (mu1 - mu2) / (mu3 + mu1 - 2.0 * mu2)
+
+
+def residuals(x, mu) -> np.ndarray:
+    """The terms of Eq. (5) before squaring, in time order, for ``N >= 1`` bearings.
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 3)
+        States at the last frame ``N`` (time 3 for the paper's triple).
+    mu : array_like, shape (N,) or broadcastable to ``x.shape[:-1] + (N,)``
+
+    Returns
+    -------
+    ndarray, shape (..., N)
+        ``r_k = project(G^{k-N} x) - mu_k``; for a triple,
+        ``((x - 2v)/(y - 2) - mu1, (x - v)/(y - 1) - mu2, x/y - mu3)``.
+    """
+    x = np.asarray(x, dtype=float)
+    mu = np.asarray(mu, dtype=float)
+    back = np.arange(mu.shape[-1]) - (mu.shape[-1] - 1.0)  # k - N for frames k = 1 .. N
+    return project(G(x[..., None, :], back)) - mu
+
+
+def f(x, mu) -> np.ndarray:
+    """Eq. (5): the sum of squared residuals, shape ``x.shape[:-1]``."""
+    return np.sum(residuals(x, mu) ** 2, axis=-1)
+
+
+def residual_gradients(x, frames: int = N_MEASUREMENTS) -> np.ndarray:
+    """Eqs. (20)-(22): gradients of the residuals at states ``x``, rows in time order.
+
+    Row ``k`` is ``h(G^{k-N+1} x) F^{k-N+1}``: the observation vector (11) at the
+    state of frame ``k + 1``, pulled back to the last frame ``N``
+    (``N = 3``: the paper's Eqs. (20)-(22)).
+
+    Parameters
+    ----------
+    x : array_like, shape (..., 3)
+        States at the last frame.
+    frames : int
+        ``N``, the number of bearings (default 3).
+
+    Returns
+    -------
+    ndarray, shape (..., N, 3)
+    """
+    x = np.asarray(x, dtype=float)
+    back = np.arange(frames) - (frames - 1.0)  # k - N for frames k = 1 .. N
+    h = observation_vector(G(x[..., None, :], back))  # (..., N, 3), third column 0
+    h[..., 2] = back * h[..., 0]  # times F^{k-N}: d(x + (k - N) v)/dv = k - N
+    return h
+
+
+def noise_free_states(mu) -> np.ndarray:
+    """Eq. (7) for a batch of triples ``mu`` of shape ``(B, 3)``; returns ``(B, 3)``.
+
+    Each row is checked as in :func:`noise_free_state`.
+    """
+    mu = checks.finite_array(mu, "mu")
+    if mu.ndim != 2 or mu.shape[1] != 3:
+        raise ValueError(f"mu must have shape (B, 3), got shape {mu.shape}")
+    d = mu[:, 2] + mu[:, 0] - 2.0 * mu[:, 1]
+    bad = np.abs(d) <= checks.DEGENERACY_TOL
+    if np.any(bad):
+        measurements(mu[np.argmax(bad)], f"mu[{int(np.argmax(bad))}]")
+    c = noise_free_states_unchecked(mu)
+    behind = ~(c[:, 1] > 2.0)
+    if np.any(behind):
+        i = int(np.argmax(behind))
+        measurements(mu[i], f"mu[{i}]")
+    return c
+
+
+# --- the least misfit at each depth ----------------------------------------------------------
+
+
+def profile_misfit(mu, depths) -> np.ndarray:
+    """The least misfit ``f`` (Eq. (5)) of the measurements over states with a given depth.
+
+    At a fixed depth ``y3`` at time 3 the bearings
+    ``(x3 - (3 - i) v) / (y3 - 3 + i)`` are linear in ``(x3, v)``, so
+    ``min_{x3, v} sum_i (mu_i - x_i / y_i)**2`` is a linear least-squares
+    problem, solved here for each depth. ``exp(-f / (2 rho**2))`` at the
+    minimum is the profile likelihood of the depth, relative to its value at
+    the noise-free solution (where the misfit is 0).
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+    depths : array_like, shape (n,)
+        Depths ``y3 > 2`` at time 3 (the point in front of the camera at times 1-3).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    mu = measurements(mu)
+    y3 = np.atleast_1d(checks.finite_array(depths, "depths"))
+    if y3.ndim != 1 or np.any(y3 <= 2.0):
+        raise ValueError("depths must be a 1-D array of depths > 2 at time 3")
+    back = np.array([2.0, 1.0, 0.0])  # 3 - i for i = 1, 2, 3
+    yi = y3[:, None] - back  # (n, 3): depth at times 1..3
+    A = np.stack([1.0 / yi, -back / yi], axis=-1)  # (n, 3, 2): bearings = A @ (x3, v)
+    AtA = np.einsum("nij,nik->njk", A, A)
+    Atb = np.einsum("nij,i->nj", A, mu)
+    xv = np.linalg.solve(AtA, Atb[..., None])[..., 0]
+    r = mu - np.einsum("nij,nj->ni", A, xv)
+    return np.sum(r**2, axis=-1)
+
+
+def far_misfit(mu) -> float:
+    """The limit of :func:`profile_misfit` at infinite depth, ``(mu1 - 2 mu2 + mu3)**2 / 6``.
+
+    Far away the bearings of a point moving with constant velocity change
+    linearly in time, ``a + b (i - 1)``, and the least misfit of three
+    measurements by such a line is their component along ``(1, -2, 1) / sqrt(6)``.
+    """
+    mu = measurements(mu)
+    return float((mu[0] - 2.0 * mu[1] + mu[2]) ** 2 / 6.0)
+
+
+# --- checks of the bearings ---------------------------------------------------------
+
+
+def measurements(mu, name: str = "mu") -> np.ndarray:
+    """Check a triple ``(mu1, mu2, mu3)`` of image measurements.
+
+    The triple must be finite, not degenerate (see ``depthcore.problem.checks.DEGENERACY_TOL``), and
+    its noise-free solution, Eq. (7), must lie in front of the camera at all
+    three times: depth ``c2 - 2 > 0`` at the first frame.
+    """
+    arr = checks.finite_array(mu, name, (3,))
+    second_difference = arr[0] + arr[2] - 2.0 * arr[1]
+    if abs(second_difference) <= checks.DEGENERACY_TOL:
+        raise ValueError(
+            f"{name} is degenerate: mu1 + mu3 - 2*mu2 = {second_difference:.3g}, "
+            "so no finite depth explains the three measurements"
+        )
+    depth_first = noise_free_depth_unchecked(arr) - 2.0
+    if not depth_first > 0:
+        raise ValueError(
+            f"{name} puts the point behind the camera: its noise-free depth at the "
+            f"first frame is c2 - 2 = {depth_first:.6g}, which is not positive"
+        )
+    return arr
+
+
+def valid_measurements(mu) -> np.ndarray:
+    """Which triples of ``mu`` (..., 3) :func:`measurements` accepts, without raising.
+
+    Finite, not degenerate, and with the noise-free depth ``c2`` of Eq. (7)
+    above 2 (in front of the camera at all three times); returns a boolean
+    array of shape ``mu.shape[:-1]``.
+    """
+    arr = np.asarray(mu, dtype=float)
+    d = arr[..., 0] + arr[..., 2] - 2.0 * arr[..., 1]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        depth_first = noise_free_depth_unchecked(arr) - 2.0
+    return (
+        np.all(np.isfinite(arr), axis=-1) & (np.abs(d) > checks.DEGENERACY_TOL) & (depth_first > 0)
+    )
+
+
+def measurements_batch(mu, name: str = "mu") -> np.ndarray:
+    """Check bearings of shape ``(..., N)``, ``3 <= N <= MAX_FRAMES``, row by row.
+
+    ``MAX_FRAMES`` is ``depthcore.problem.checks.MAX_FRAMES``.
+
+    With ``N = 3`` (the paper's problem) each triple is checked as
+    :func:`depthcore.problem.model.measurements` does: not degenerate, and its noise-free solution,
+    Eq. (7), in front of the camera. With ``N > 3`` a row is degenerate when
+    every consecutive triple is, i.e. when every second difference
+    ``mu_k - 2 mu_{k+1} + mu_{k+2}`` is at or below ``depthcore.problem.checks.DEGENERACY_TOL`` in
+    magnitude: the bearings are then (numerically) affine in time, which a
+    point at a finite depth explains only by a constant bearing (the point
+    moving along its line of sight), at every depth alike. Noise may put any
+    one triple's noise-free solution behind the camera, so with ``N > 3`` no
+    row is refused for that; the filters that need a point in front of the
+    camera say so themselves.
+
+    The first offending row is named with its index, e.g. ``mu[4]``.
+    """
+    arr = checks.finite_array(mu, name)
+    if arr.ndim < 1 or arr.shape[-1] < 3:
+        raise ValueError(
+            f"{name} must have shape (..., N) with N >= 3 bearings per problem, "
+            f"got shape {arr.shape}"
+        )
+    if arr.size == 0:
+        raise ValueError(f"{name} must hold at least one problem, got an empty batch {arr.shape}")
+    if arr.shape[-1] > checks.MAX_FRAMES:
+        raise ValueError(
+            f"{name} has {arr.shape[-1]} bearings per problem, more than the "
+            f"{checks.MAX_FRAMES} frames the filters accept"
+        )
+    batch = arr.shape[:-1]
+    n_frames = arr.shape[-1]
+    flat = arr.reshape(-1, n_frames)
+    if n_frames > 3:
+        second = flat[:, :-2] + flat[:, 2:] - 2.0 * flat[:, 1:-1]
+        degenerate = ~np.any(np.abs(second) > checks.DEGENERACY_TOL, axis=1)
+        if np.any(degenerate):
+            i = int(np.argmax(degenerate))
+            where = name + (checks.batch_index(i, batch) if batch else "")
+            raise ValueError(
+                f"{where} is degenerate: every second difference mu_k - 2*mu_(k+1) + mu_(k+2) "
+                f"is at most {checks.DEGENERACY_TOL:g} in magnitude, so no finite depth explains "
+                "the bearings"
+            )
+        return arr
+    bad = ~valid_measurements(flat)
+    if np.any(bad):
+        i = int(np.argmax(bad))
+        measurements(flat[i], name + (checks.batch_index(i, batch) if batch else ""))
+    return arr
+
+
+def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
+    """The checks shared by the batched filters: measurements, noise and prior.
+
+    Parameters
+    ----------
+    mu : array_like, shape (..., N), or (..., K) when ``triples`` is false
+        Bearings of ``N >= 3`` frames checked by :func:`depthcore.problem.model.measurements_batch`
+        (triples, ``N = 3``, as the paper's); otherwise any finite bearings,
+        ``K >= 1``.
+    rho : float or array_like, shape ``mu.shape[:-1]``
+        Finite and > 0.
+    prior_mean : array_like, broadcastable to ``mu.shape``
+        Finite.
+    prior_cov : array_like, broadcastable to ``mu.shape + (3,)``
+        Symmetric positive definite, checked by :func:`depthcore.problem.checks.covariances`.
+
+    Returns
+    -------
+    mu, rho, prior_mean, prior_cov : ndarray
+        As float arrays (the covariances symmetrised), not broadcast.
+    """
+    if triples:
+        mu = measurements_batch(mu, "mu")
+    else:
+        mu = checks.finite_array(mu, "mu")
+        if mu.ndim < 1 or mu.shape[-1] < 1:
+            raise ValueError(f"mu must have shape (..., n_measurements), got shape {mu.shape}")
+        if mu.size == 0:
+            raise ValueError(f"mu must hold at least one problem, got an empty batch {mu.shape}")
+    batch = mu.shape[:-1]
+    rho = checks.finite_array(rho, "rho")
+    if rho.ndim and rho.shape != batch:
+        raise ValueError(f"rho must be a scalar or have shape {batch}, got shape {rho.shape}")
+    if not np.all(rho > 0):
+        raise ValueError(f"rho must be positive, got {rho.tolist()}")
+    prior_mean = checks.finite_array(prior_mean, "prior_mean")
+    if (
+        prior_mean.ndim < 1
+        or prior_mean.shape[-1] != 3
+        or not checks.broadcasts(prior_mean.shape, batch + (3,))
+    ):
+        allowed = "(3,)" + (f" or {batch + (3,)}" if batch else "")
+        raise ValueError(f"prior_mean must have shape {allowed}, got {prior_mean.shape}")
+    prior_cov = checks.covariances(prior_cov, "prior_cov", 3)
+    if not checks.broadcasts(prior_cov.shape, batch + (3, 3)):
+        allowed = "(3, 3)" + (f" or {batch + (3, 3)}" if batch else "")
+        raise ValueError(f"prior_cov must have shape {allowed}, got {prior_cov.shape}")
+    return mu, rho, prior_mean, prior_cov
+
+
+def batch_inputs(mu, rho, prior_mean, prior_cov, triples: bool = True):
+    """:func:`depthcore.problem.model.batch_problem`, with the priors broadcast to the batch.
+
+    Returns
+    -------
+    mu : ndarray, shape (..., N) or (..., K)
+    rho : ndarray, shape () or (...)
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+        Read-only broadcast views of the priors.
+    """
+    mu, rho, prior_mean, prior_cov = batch_problem(mu, rho, prior_mean, prior_cov, triples)
+    batch = mu.shape[:-1]
+    return (
+        mu,
+        rho,
+        np.broadcast_to(prior_mean, batch + (3,)),
+        np.broadcast_to(prior_cov, batch + (3, 3)),
+    )

@@ -1,0 +1,12 @@
+"""Where the recorded numbers come from: benchmark and study records, fingerprinted.
+
+* :mod:`~depthcore.provenance.benchmarks`: the benchmarks' records, the code
+  fingerprints that make a record stale, and the machine a record was made on;
+* :mod:`~depthcore.provenance.records`: the book's heavy studies, computed once
+  and read back from their records while the pages run.
+
+The records themselves are package data beside these modules
+(``benchmark_records/``, ``study_records/``). Where a new thing goes: a new
+kind of record, or a new field of the environment a record states, goes here.
+It imports no filter: it fingerprints their sources.
+"""

@@ -1,0 +1,17 @@
+"""Every filter under one name, one calling convention and one result.
+
+* :mod:`~depthcore.registry.estimates`: a filter's result,
+  :class:`~depthcore.registry.estimates.Estimate`, and how each family of
+  filters is scored;
+* :mod:`~depthcore.registry.adapters`: each filter in the calling convention
+  ``(mu, rho, prior_mean, prior_cov, process_noise, **options)``, and the
+  smoothers;
+* :mod:`~depthcore.registry.filters`: the table :data:`FILTERS`, by name;
+* :mod:`~depthcore.registry.tracking`: :func:`~depthcore.registry.tracking.track`,
+  one track filtered and smoothed at every frame.
+
+Where a new thing goes: a new filter, once its module exists in its family,
+gets one entry in :data:`~depthcore.registry.filters.FILTERS`; the command
+line, the studies, the API reference and the README's list of filters follow
+from the table.
+"""

@@ -1,0 +1,380 @@
+"""The filters, in one registry: every filter by name, one calling convention, one result shape.
+
+Recommended import: ``from depthcore.registry.filters import FILTERS``.
+
+Each entry of :data:`FILTERS` is a :class:`Filter`. Calling it::
+
+    estimate = FILTERS[name](mu, rho, prior_mean, prior_cov, process_noise=0.0, **options)
+
+runs the filter on one sequence of ``N`` bearings (``mu`` of shape ``(N,)``;
+the paper's triple is ``N = 3``) or on a batch (``mu`` of shape ``(B, N)``,
+``rho`` a float or shape ``(B,)``, the prior's mean ``(3,)`` or ``(B, 3)`` and
+covariance ``(3, 3)``), with process noise ``a_k ~ N(0, q**2)`` on the
+velocity if ``process_noise = q > 0`` (the N-frame model of
+:mod:`depthcore.exact.bank`; the prior is on the state at frame 1), and returns an
+:class:`~depthcore.registry.estimates.Estimate`: the depth and velocity means and SDs at frame
+``N`` (time 3
+for a triple; floats for one sequence, arrays of shape ``(B,)`` for a batch),
+their numerical or Monte Carlo errors where the filter has them, the mean and
+covariance of the whole state, and the filter's own result (``detail``). The entry also carries the
+filter's label and plot style, the table rows it contributes to
+:func:`depthcore.studies.reproduce.reproduce` (``variants``), how its estimates
+are scored (``family``, whose :class:`~depthcore.registry.estimates.Family` in
+:data:`~depthcore.registry.estimates.FAMILY`, the entry's
+``scoring``, holds what a study reads of its results: whether it is the exact
+reference, a Gaussian, or weighted draws of the depth, and its CDFs and
+densities), its smoother if it has one (``smoother``, which
+:func:`~depthcore.registry.tracking.track`
+runs over one track), and what it supports: ``any_frames`` (any
+``N >= 3`` bearings, up to ``depthcore.problem.checks.MAX_FRAMES``, or only the
+paper's three) and ``with_process_noise`` (``q > 0`` or only ``q = 0``); a
+call outside them is refused with a :class:`ValueError` naming ``mu`` or
+``process_noise``. :mod:`depthcore.studies.reproduce`, :mod:`depthcore.studies.monte_carlo`,
+the command line and the book's chapters (:mod:`depthcore.book`)
+iterate the entries marked ``default`` (:data:`NAMES`), which are the five of
+the paper's problem; the N-frame filters (``iterated``, ``inverse_depth``,
+``resample_move``, ``rbpf``) are registered with ``default=False`` and run only when
+named (:data:`ALL_NAMES`). Adding a filter means adding an entry here.
+
+The filters: the paper's optimal filter (:mod:`depthcore.exact.optimal`, Eqs.
+(6), (13)-(16)), second-order approximation (:mod:`depthcore.kalman.second_order`,
+Eq. (8)) and EKF (:mod:`depthcore.kalman.ekf`, Eqs. (10)-(12)); beyond the paper,
+the unscented Kalman filter (:mod:`depthcore.kalman.ukf`) and a particle filter
+(:mod:`depthcore.particles.importance`); for N frames, the iterated EKF
+(:mod:`depthcore.kalman.iterated`), the inverse-depth EKF
+(:mod:`depthcore.kalman.inverse_depth`), the causal bootstrap particle filter with
+resample-move (:mod:`depthcore.particles.resample_move`), the Rao-Blackwellised
+particle filter (:mod:`depthcore.particles.rbpf`), the range-parametrised EKF
+(:mod:`depthcore.kalman.range_ekf`), the inverse-depth UKF
+(:mod:`depthcore.kalman.inverse_depth_ukf`) and the EKF in modified polar coordinates
+(:mod:`depthcore.kalman.modified_polar`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from depthcore.exact import optimal
+from depthcore.kalman import second_order
+from depthcore.problem import checks, model
+from depthcore.registry.adapters import (
+    gaussian_smoother,
+    run_ekf,
+    run_inverse_depth,
+    run_inverse_depth_ukf,
+    run_iterated,
+    run_modified_polar,
+    run_optimal,
+    run_particle,
+    run_range_parametrised,
+    run_rbpf,
+    run_resample_move,
+    run_second_order,
+    run_ukf,
+    smooth_optimal,
+)
+from depthcore.registry.estimates import FAMILY, Estimate, Family, check_quantity
+
+
+@dataclass(frozen=True)
+class Filter:
+    """One filter of the registry.
+
+    Attributes
+    ----------
+    name : str
+    label : str
+        Legend label (LaTeX allowed).
+    style : dict
+        Matplotlib line properties (colour, line style).
+    family : {"exact", "gaussian", "particles", "rao_blackwellised"}
+    in_paper : bool
+        Whether the paper compares it.
+    run : callable
+        ``run(mu, rho, prior_mean, prior_cov, **options) -> Estimate``, and
+        also ``process_noise=q`` when ``with_process_noise``.
+    variants : tuple of (str, str, dict)
+        ``(reading, support, options)`` of each row the filter contributes to
+        the reproduction tables.
+    random : bool
+        Whether it draws random numbers: then it takes ``rng`` (a
+        ``numpy.random.Generator`` or ``SeedSequence``) and ``n_particles``.
+    any_frames : bool
+        Whether it takes any ``N >= 3`` bearings per problem; if false, only
+        the paper's three.
+    with_process_noise : bool
+        Whether it takes ``process_noise > 0``; if false, only 0.
+    default : bool
+        Whether the default outputs (tables, studies, sweeps, figures, the
+        command line) include it: :data:`NAMES`.
+    smoother : callable or None
+        ``smoother(mu, rho, prior_mean, prior_cov, process_noise)`` of one
+        track of ``N`` bearings, checked by :func:`~depthcore.registry.tracking.track` (which calls
+        it):
+        ``(filtered, smoothed, detail)``, the state at every frame given the
+        bearings up to it and given all of them, each a
+        :class:`~depthcore.exact.mixture.Smoothed` of means (N, 3) and covariances
+        (N, 3, 3), and the filter's own result. ``None`` for a filter
+        without a smoother.
+    """
+
+    name: str
+    label: str
+    style: dict
+    family: str
+    in_paper: bool
+    run: Callable[..., Estimate]
+    variants: tuple
+    random: bool = False
+    any_frames: bool = False
+    with_process_noise: bool = False
+    default: bool = True
+    smoother: Callable | None = None
+
+    def __call__(self, mu, rho, prior_mean, prior_cov, process_noise=0.0, **options) -> Estimate:
+        """Run the filter; see the module docstring for the arguments and their shapes.
+
+        Every number goes through one conversion, :func:`depthcore.problem.checks.as_float`
+        (lists and arrays of integers or floats; complex, boolean, object and
+        text values are refused by name). ``mu`` is checked by
+        :func:`depthcore.problem.model.measurements_batch` (and must have 3 columns
+        unless ``any_frames``); for one sequence ``rho`` is a number (a float,
+        a 0-d array or a list of one); ``process_noise`` is checked by
+        :func:`depthcore.problem.checks.process_noise`, and must be 0 unless
+        ``with_process_noise``.
+        """
+        mu = model.measurements_batch(mu, "mu")
+        if mu.shape[-1] != 3 and not self.any_frames:
+            raise ValueError(
+                f"mu must have shape (3,) or (B, 3): the {self.name} filter takes the "
+                f"paper's three frames, got {mu.shape[-1]} bearings per problem"
+            )
+        rho = checks.as_float(rho, "rho")
+        if mu.ndim == 1:
+            rho = checks.number(rho, "rho")
+        prior_mean = checks.as_float(prior_mean, "prior_mean")
+        prior_cov = checks.as_float(prior_cov, "prior_cov")
+        q = checks.process_noise(process_noise, "process_noise")
+        if not self.with_process_noise:
+            if q > 0:
+                raise ValueError(
+                    f"process_noise must be 0 for the {self.name} filter, which supports "
+                    f"only the constant-velocity motion, got {q:g}"
+                )
+            return self.run(mu, rho, prior_mean, prior_cov, **options)
+        return self.run(mu, rho, prior_mean, prior_cov, process_noise=q, **options)
+
+    @property
+    def frames(self) -> str:
+        """``"3"`` (the paper's frames only) or ``"any"`` (``N >= 3``)."""
+        return "any" if self.any_frames else "3"
+
+    @property
+    def plot_style(self) -> dict:
+        """Keyword arguments of ``Axes.plot``: the label and the style."""
+        return {"label": self.label, **self.style}
+
+    def density(self, estimate: Estimate, quantity: str, grid) -> np.ndarray:
+        """The marginal density of ``quantity`` on ``grid`` (one sequence's estimate).
+
+        The particle filters' is a weighted Gaussian kernel density estimate
+        (Silverman's bandwidth); the Rao-Blackwellised filter's velocity
+        marginal is its Gaussian mixture, its depth a kernel estimate.
+        """
+        check_quantity(quantity)
+        return self.scoring.density(estimate, quantity, np.asarray(grid, dtype=float))
+
+    @property
+    def scoring(self) -> Family:
+        """The :class:`~depthcore.registry.estimates.Family` of its ``family``, which says how its
+        results
+        are scored."""
+        return FAMILY[self.family]
+
+
+#: Every filter, in the order of the tables and legends.
+FILTERS: dict[str, Filter] = {
+    f.name: f
+    for f in (
+        Filter(
+            "optimal",
+            "optimal $p_o$",
+            {"color": "black", "linestyle": "-"},
+            "exact",
+            True,
+            run_optimal,
+            tuple(
+                (r, s, {"reading": r, "support": s})
+                for r in optimal.READINGS
+                for s in optimal.SUPPORTS
+            ),
+            any_frames=True,
+            with_process_noise=True,
+            smoother=smooth_optimal,
+        ),
+        Filter(
+            "second_order",
+            "second order $p_s$",
+            {"color": "tab:blue", "linestyle": "--"},
+            "gaussian",
+            True,
+            run_second_order,
+            tuple((r, "all", {"reading": r}) for r in second_order.READINGS),
+            any_frames=True,
+            with_process_noise=True,
+        ),
+        Filter(
+            "ekf",
+            "EKF $p_e$",
+            {"color": "tab:red", "linestyle": ":"},
+            "gaussian",
+            True,
+            run_ekf,
+            (("printed", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            smoother=gaussian_smoother(run_ekf),
+        ),
+        Filter(
+            "ukf",
+            "UKF",
+            {"color": "tab:green", "linestyle": "-."},
+            "gaussian",
+            False,
+            run_ukf,
+            (("-", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            smoother=gaussian_smoother(run_ukf),
+        ),
+        Filter(
+            "particle",
+            "importance sampling, $q$ from $p_s$",
+            {"color": "tab:purple", "linestyle": (0, (5, 1, 1, 1, 1, 1))},
+            "particles",
+            False,
+            run_particle,
+            (("-", "front", {}),),
+            random=True,
+            any_frames=True,
+        ),
+        Filter(
+            "iterated",
+            "iterated EKF",
+            {"color": "tab:orange", "linestyle": "--"},
+            "gaussian",
+            False,
+            run_iterated,
+            (("-", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "inverse_depth",
+            "inverse-depth EKF",
+            {"color": "tab:brown", "linestyle": ":"},
+            "gaussian",
+            False,
+            run_inverse_depth,
+            (("-", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "resample_move",
+            "resample-move particle filter",
+            {"color": "tab:pink", "linestyle": "-."},
+            "particles",
+            False,
+            run_resample_move,
+            (("-", "front", {}),),
+            random=True,
+            any_frames=True,
+            default=False,
+        ),
+        Filter(
+            "rbpf",
+            "Rao-Blackwellised particle filter",
+            {"color": "tab:olive", "linestyle": "--"},
+            "rao_blackwellised",
+            False,
+            run_rbpf,
+            (("-", "front", {}),),
+            random=True,
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "range_parametrised",
+            "range-parametrised EKF",
+            {"color": "tab:cyan", "linestyle": "-."},
+            "gaussian",
+            False,
+            run_range_parametrised,
+            (("-", "front", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "inverse_depth_ukf",
+            "inverse-depth UKF",
+            {"color": "tab:gray", "linestyle": "--"},
+            "gaussian",
+            False,
+            run_inverse_depth_ukf,
+            (("-", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+        Filter(
+            "modified_polar",
+            "modified-polar EKF",
+            {"color": "tab:blue", "linestyle": (0, (1, 1))},
+            "gaussian",
+            False,
+            run_modified_polar,
+            (("-", "all", {}),),
+            any_frames=True,
+            with_process_noise=True,
+            default=False,
+        ),
+    )
+}
+
+#: The paper's three filters.
+PAPER_FILTERS = tuple(name for name, f in FILTERS.items() if f.in_paper)
+
+#: The filters of the default outputs (tables, studies, sweeps, figures, the command line):
+#: the paper's three, the UKF and the particle filter.
+NAMES = tuple(name for name, f in FILTERS.items() if f.default)
+
+#: Every registered filter's name, the N-frame filters run only when named among them.
+ALL_NAMES = tuple(FILTERS)
+
+
+def get(name: str) -> Filter:
+    """The filter called ``name``; a :class:`ValueError` lists the names if there is none."""
+    if name not in FILTERS:
+        raise ValueError(f"filter must be one of {ALL_NAMES}, got {name!r}")
+    return FILTERS[name]
+
+
+def check_names(names) -> tuple:
+    """Return ``names`` as a tuple after checking each is in the registry."""
+    names = tuple(names)
+    unknown = set(names) - set(FILTERS)
+    if unknown:
+        raise ValueError(f"filters must be among {ALL_NAMES}, got {sorted(unknown)}")
+    return names
+
+
+#: The filters with a smoother, which :func:`~depthcore.registry.tracking.track` runs.
+SMOOTHED = tuple(name for name, f in FILTERS.items() if f.smoother is not None)

@@ -1,0 +1,167 @@
+"""One track filtered and smoothed at every frame, by any filter of the registry with a smoother.
+
+Recommended import: ``import depthcore; depthcore.track(...)``.
+
+:func:`track` takes a point's bearings over ``N`` frames (from a user's own
+data: :func:`depthcore.problem.model.bearings_from_pixels`), checks them once, runs a
+filter of :data:`depthcore.registry.filters.SMOOTHED` and its fixed-interval smoother,
+and returns a :class:`Track`: the depth, the lateral position and the
+velocity at every frame with their SDs, filtered and smoothed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import Gaussian, paper_prior
+from depthcore.registry.filters import FILTERS, SMOOTHED
+
+#: The noise levels ``rho`` that :func:`track` answers for (and the command line's ``--rho``).
+RHO_RANGE = (1e-12, 1e3)
+
+#: The largest process noise that :func:`track` answers for (and the command line's).
+PROCESS_NOISE_MAX = 10.0
+
+#: The names a message refusing :func:`track`'s inputs may start with.
+_TRACK_ARGUMENTS = ("mu", "rho", "prior", "process_noise", "filter")
+
+
+@dataclass(frozen=True)
+class Track:
+    """One track's state at every frame, filtered and smoothed (:func:`track`).
+
+    Frame ``k`` is row ``k - 1`` of every array; ``N`` is the number of bearings.
+    Depths are in units of the camera's forward motion per frame (the depth
+    grows by 1 from frame to frame, Eq. (1)); the lateral position ``x`` in
+    the same units; the velocity ``v`` is ``x``'s change per frame.
+
+    Attributes
+    ----------
+    filter : str
+        The registry's name of the filter.
+    filtered : depthcore.exact.mixture.Smoothed
+        The state at frame ``k`` given ``mu_1 .. mu_k``: a
+        :class:`~depthcore.exact.mixture.Smoothed` of means (N, 3) and covariances
+        (N, 3, 3) of ``(x_k, y_k, v_k)``, whose ``depth_mean``, ``depth_sd``,
+        ``lateral_mean``, ``lateral_sd``, ``velocity_mean`` and
+        ``velocity_sd`` have shape (N,).
+    smoothed : depthcore.exact.mixture.Smoothed
+        The state at frame ``k`` given all ``N`` bearings (the fixed-interval
+        smoother, textbook 19.2.6); at frame ``N`` it is the filtered state.
+    prior : depthcore.problem.gaussian.Gaussian
+        The prior of the state at frame 1 that the filter used.
+    process_noise : float
+    detail : object
+        The filter's own result: the exact filter's :class:`~depthcore.exact.smoother.Track`,
+        a Gaussian filter's :class:`~depthcore.problem.gaussian.History`.
+    """
+
+    filter: str
+    filtered: Any
+    smoothed: Any
+    prior: Gaussian
+    process_noise: float
+    detail: Any = None
+
+    @property
+    def frames(self) -> np.ndarray:
+        """The frame numbers ``1 .. N``, shape (N,)."""
+        return np.arange(1, self.filtered.mean.shape[0] + 1)
+
+
+def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal") -> Track:
+    """Filter and smooth one track: depth, lateral position and velocity at every frame.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N,)
+        The bearings of frames ``1 .. N``, ``3 <= N <= depthcore.problem.checks.MAX_FRAMES``:
+        ``mu_k = x_k / y_k``, the tangent of the angle between the point and the
+        camera's direction of motion (from pixel columns,
+        :func:`depthcore.problem.model.bearings_from_pixels`); checked by
+        :func:`depthcore.problem.model.measurements_batch`.
+    rho : float
+        The SD of the bearings' noise, in :data:`RHO_RANGE` (in the units of
+        ``mu``: a pixel noise of SD ``s`` is ``rho = s / f`` for a focal
+        length of ``f`` pixels).
+    prior : depthcore.problem.gaussian.Gaussian, optional
+        The prior of the state ``(x_1, y_1, v_1)`` at frame 1; by default the
+        paper's rule applied to the first three bearings
+        (:func:`depthcore.problem.gaussian.paper_prior` of their noise-free state,
+        Eq. (7)), refused when those bearings put the point behind the camera
+        or are degenerate.
+    process_noise : float
+        ``q``, the SD of the velocity's change per frame: 0 (constant velocity)
+        or from ``depthcore.problem.checks.MIN_PROCESS_NOISE`` to :data:`PROCESS_NOISE_MAX`.
+    filter : str
+        A filter with a smoother, one of :data:`~depthcore.registry.filters.SMOOTHED`:
+        ``"optimal"`` (the
+        exact filter, a bank of Kalman filters over depth, and its
+        smoother), ``"ekf"`` (the extended Kalman filter and smoother),
+        ``"ukf"`` (the unscented ones). The others, without a smoother, are
+        refused, naming ``filter``.
+
+    Returns
+    -------
+    Track
+        ``filtered`` and ``smoothed`` means and SDs of ``x``, ``y`` (the depth)
+        and ``v`` at every frame, arrays of shape (N,).
+
+    Examples
+    --------
+    >>> import depthcore
+    >>> t = depthcore.track([0.1, 0.2, 0.28, 0.35], rho=0.002)
+    >>> t.smoothed.depth_mean.shape
+    (4,)
+    """
+    if not isinstance(filter, str) or filter not in FILTERS:
+        raise ValueError(f"filter must be one of {SMOOTHED}, got {filter!r}")
+    entry = FILTERS[filter]
+    if entry.smoother is None:
+        raise ValueError(
+            f"filter must be one of {SMOOTHED}, the filters with a smoother; {filter!r} has none"
+        )
+    mu = model.measurements_batch(mu, "mu")
+    if mu.ndim != 1:
+        raise ValueError(f"mu must have shape (N,), one track, got shape {mu.shape}")
+    rho = checks.positive_scalar(rho, "rho")
+    if not RHO_RANGE[0] <= rho <= RHO_RANGE[1]:
+        raise ValueError(f"rho must be from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g}, got {rho!r}")
+    q = checks.process_noise(process_noise, "process_noise")
+    if q > PROCESS_NOISE_MAX:
+        raise ValueError(f"process_noise must be at most {PROCESS_NOISE_MAX:g}, got {q!r}")
+    if prior is None:
+        try:
+            c = model.noise_free_state(mu[:3])
+        except ValueError as exc:
+            raise ValueError(
+                f"prior is needed: the paper's rule cannot use the first three bearings ({exc})"
+            ) from None
+        prior = paper_prior(c)
+    elif not isinstance(prior, Gaussian):
+        raise ValueError(
+            f"prior must be a depthcore.Gaussian of the state at frame 1 or None, "
+            f"got {type(prior).__name__}"
+        )
+    try:
+        filtered, smoothed, detail = entry.smoother(mu, rho, prior.mean, prior.cov, q)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        message = str(exc)
+        if isinstance(exc, ValueError) and message.startswith(_TRACK_ARGUMENTS):
+            raise
+        raise ValueError(
+            f"mu, rho and prior have no answer from the {filter} filter ({message}); "
+            "try another filter, a larger rho or a broader prior"
+        ) from None
+    for series in (filtered, smoothed):
+        variances = np.diagonal(series.cov, axis1=-2, axis2=-1)
+        if not (np.all(np.isfinite(series.mean)) and np.all(variances >= 0)):
+            raise ValueError(
+                f"rho is too small beside the prior for the {filter} filter's "
+                f"smoother: its moments are not finite (rho = {rho!r})"
+            )
+    return Track(filter, filtered, smoothed, prior, q, detail)

@@ -1,0 +1,425 @@
+"""A Monte Carlo study: which filter's estimate, and which stated uncertainty, to trust.
+
+Recommended import: ``from depthcore.studies import monte_carlo``.
+
+For a true state at time 3 (by default the noise-free state ``c`` of the
+paper's Figure 2), each trial draws the bearings afresh: the paper's three,
+or ``N`` with ``frames=N`` (up to ``depthcore.problem.checks.MAX_FRAMES``), the point
+moving on from time 3 to frame ``N``, with process noise ``q`` on its velocity
+if ``process_noise=q``. It builds the prior by the paper's rule from that
+trial's first three bearings (``prior="paper"``, as the paper does) or once
+from the truth's noise-free bearings (``prior="fixed"``), runs every filter,
+and scores its estimate of the state at the last frame:
+
+* bias and RMSE of its depth and velocity means;
+* coverage of its central 68 % and 95 % intervals: the truth lies in the
+  central ``p`` interval when its marginal CDF at the truth is within
+  ``p / 2`` of one half;
+* mean NEES, ``(m - x)^T P^{-1} (m - x)`` over the whole state (3 for a
+  filter whose covariance matches its error);
+* the mean Hellinger distance from its depth marginal to the optimal one,
+  when the optimal filter is among the filters run (it is run only when
+  asked for; otherwise the distance is not computed and reported as ``None``);
+* the fraction of lost tracks, counted beside the RMSE as the bearings-only
+  tracking literature does (e.g. [ristic2004]_, chapter 6): a trial's track is
+  lost when the error of its estimated position ``(x, y)`` at the last frame
+  exceeds :data:`~depthcore.studies.scores.TRACK_LOSS` times the true distance of the point from the
+  camera, ``|(x_est - x, y_est - y)| > TRACK_LOSS |(x, y)|`` (a relative
+  threshold, the problem having no natural unit of length), or when the
+  estimate is not finite. Reported with its binomial standard error
+  ``sqrt(p (1 - p) / n)`` and, since that is 0 when no track is lost, the
+  exact (Clopper-Pearson) one-sided 95 % upper bound on the loss probability.
+
+Trials whose measurements have no noise-free solution in front of the camera
+(Eq. (7) degenerate or ``c2 <= 2``) cannot run the second-order filter or the
+paper's prior rule; they are counted and left out of every score.
+
+:func:`study` streams the trials: it draws and filters them in chunks of at
+most :data:`CHUNK` and keeps only running sums (:class:`~depthcore.studies.scores.Tally`), so its
+memory
+does not grow with the number of trials.
+
+References
+----------
+.. [ristic2004] B. Ristic, S. Arulampalam and N. Gordon, *Beyond the Kalman
+   Filter: Particle Filters for Tracking Applications*, Artech House, 2004,
+   chapter 6 (bearings-only tracking).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from depthcore.problem import checks
+from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, paper_prior_means
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry.filters import FILTERS, NAMES, check_names
+from depthcore.studies.pairs import CoMoments, trial_scores
+from depthcore.studies.scores import CALIBRATION_LEVELS, Tally, coverage_se
+from depthcore.studies.trials import PARTICLES, run_filters, simulate
+
+#: Trials drawn and filtered together by :func:`study`: its memory is that of one chunk.
+CHUNK = 100
+
+
+def study(
+    truth=None,
+    rho: float = SCENARIOS["fig2"].rho,
+    trials: int = 500,
+    seed=0,
+    prior: str = "paper",
+    names=NAMES,
+    chunk: int = CHUNK,
+    n_particles: int = PARTICLES,
+    progress: Callable[[int, int], None] | None = None,
+    frames: int = 3,
+    process_noise: float = 0.0,
+    paired: bool = False,
+) -> dict:
+    """The whole study; returns a JSON-ready dict.
+
+    Parameters
+    ----------
+    truth : array_like, shape (3,), optional
+        True state at time 3; default the noise-free state of Figure 2.
+    rho : float
+    trials : int
+        Trials drawn, >= 1 (those without a noise-free solution in front of
+        the camera are counted and left out).
+    seed : int or numpy.random.SeedSequence
+        Seeds the ``numpy.random.Generator`` streams that draw the noise and
+        the particles (default 0).
+    prior : {"paper", "fixed"}
+    names : sequence of str
+        Filters to score, from :data:`depthcore.registry.filters.FILTERS`; only these
+        run. The Hellinger distances need the optimal filter: when
+        ``"optimal"`` is not among ``names`` it is not run and every
+        filter's ``hellinger_depth`` is ``None``.
+    chunk : int
+        Trials drawn and filtered together (default :data:`CHUNK`);
+        ``progress(done, total)`` is called after each chunk with the trials
+        drawn so far and ``trials``. Memory grows with ``chunk`` (and
+        ``n_particles``), not with ``trials``: only running sums are kept.
+    n_particles : int
+        Particles per trial of the particle filter.
+    frames : int
+        ``N >= 3``: the point, at ``truth`` at time 3, moves on to frame ``N``
+        and every filter is scored on its state there (:func:`~depthcore.studies.trials.simulate`).
+    process_noise : float
+        ``q >= 0``: the velocity's change per frame from time 3 on, drawn in
+        every trial, so the true state at frame ``N`` differs from trial to
+        trial (the scores are against each trial's own); the state at time 3
+        is ``truth`` in every trial. The named filters must support the
+        frames and the process noise (:class:`depthcore.registry.filters.Filter`).
+    paired : bool
+        Also keep, over the same chunks, the running mean and covariance of
+        every filter's per-trial depth scores
+        (:func:`~depthcore.studies.pairs.trial_scores`, a
+        :class:`~depthcore.studies.pairs.CoMoments`), returned as
+        ``"paired"`` (:meth:`~depthcore.studies.pairs.CoMoments.summary`,
+        columns ``[filter, score]``), from which the errors of ratios and
+        differences of two scores over the same trials follow
+        (:func:`~depthcore.studies.pairs.pair_of`,
+        :func:`~depthcore.studies.pairs.ratio_se`,
+        :func:`~depthcore.studies.pairs.paired_difference_se`). Its memory
+        grows with the square of the number of filters, not with ``trials``.
+
+    Notes
+    -----
+    The noise and the particle filter draw from two streams spawned from the
+    one seed, whichever filters run: a filter's results do not depend on
+    which other filters are named. The noise does not depend on ``chunk``
+    either, so the scores of the deterministic filters agree across chunk
+    sizes to rounding; the particle filter's draws do depend on ``chunk``.
+    """
+    truth = SCENARIOS["fig2"].c if truth is None else truth
+    names = check_names(names)
+    if not (isinstance(trials, (int, np.integer)) and trials >= 1):
+        raise ValueError(f"trials must be a positive integer, got {trials!r}")
+    chunk = checks.count(chunk, "chunk")
+    q = checks.nonnegative_scalar(process_noise, "process_noise")
+    frames = checks.frames(frames)
+    unable = [
+        n
+        for n in names
+        if (frames != 3 and not FILTERS[n].any_frames)
+        or (q > 0 and not FILTERS[n].with_process_noise)
+    ]
+    if unable:
+        raise ValueError(
+            f"names: {', '.join(unable)} cannot run on {frames} frames with process "
+            f"noise {q:g}; leave them out"
+        )
+    seed = checks.seed_sequence(seed)
+    noise_rng, particle_rng = (np.random.default_rng(s) for s in checks.spawn(seed, 2))
+    tallies = comoments = None
+    n_valid = n_rejected = 0
+    for start in range(0, int(trials), chunk):
+        part = simulate(
+            truth,
+            rho,
+            min(chunk, int(trials) - start),
+            noise_rng,
+            prior,
+            frames=frames,
+            process_noise=q,
+        )
+        if tallies is None:
+            tallies = {name: Tally(part.truth) for name in names}
+        n_rejected += part.n_rejected
+        if len(part.mu):
+            n_valid += len(part.mu)
+            estimates = run_filters(part, names, particle_rng, n_particles)
+            for name, est in estimates.items():
+                tallies[name].add(est)
+            if paired:
+                per_trial = {n: trial_scores(e, part.truth) for n, e in estimates.items()}
+                if comoments is None:
+                    comoments = CoMoments([(n, k) for n in names for k in per_trial[n]])
+                comoments.add(np.column_stack([per_trial[n][k] for n, k in comoments.columns]))
+        if progress is not None:
+            progress(min(start + chunk, int(trials)), int(trials))
+    if n_valid == 0:
+        raise ValueError(
+            f"truth and rho leave no valid trial: all {trials} noisy triples are degenerate "
+            "or put the point behind the camera"
+        )
+    out = {
+        "truth": [float(v) for v in part.truth],
+        "rho": float(rho),
+        "prior": prior,
+        "seed": seed.entropy,
+        "trials": int(trials),
+        "valid_trials": n_valid,
+        "rejected_trials": n_rejected,
+        "particles": int(n_particles) if any(FILTERS[n].random for n in names) else None,
+        "frames": int(frames),
+        "process_noise": q,
+        "filters": {name: tallies[name].scores() for name in names},
+    }
+    if paired:
+        out["paired"] = comoments.summary()
+    return out
+
+
+#: The ``truth`` that asks for truths drawn from the prior (:func:`prior_study`).
+PRIOR_TRUTH = "prior"
+
+
+#: False-alarm rate of the uniformity tests reported by :func:`prior_study`.
+FALSE_ALARM = 0.01
+
+
+def prior_study(
+    rho: float = SCENARIOS["fig2"].rho,
+    trials: int = 500,
+    seed=0,
+    prior_scale: float = PAPER_PRIOR_SCALE,
+    false_alarm: float = FALSE_ALARM,
+    frames: int = 3,
+    process_noise: float = 0.0,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict:
+    """Self-calibration of the optimal filter over truths drawn from its fixed prior.
+
+    With ``frames = N > 3`` or ``process_noise = q > 0`` each truth is followed
+    from frame 1 to frame ``N`` with accelerations ``N(0, q**2)`` and the
+    exact N-frame filter (the bank of Kalman filters over depth) is checked at
+    frame ``N``.
+
+    The prior is the study's ``prior="fixed"`` one: the paper's rule applied
+    once to Figure 2's noise-free state ``c``, mean ``G^{-2} c = (c1 - 2 c3,
+    c2 - 2, 0)`` and covariance ``prior_scale * I``; it does not depend on
+    the measurements. Truths are drawn from it with the point in front of the
+    camera (:func:`depthcore.analysis.calibration.self_calibration`). The coverage of
+    the central intervals at every level of :data:`~depthcore.studies.scores.CALIBRATION_LEVELS` is
+    reported with its binomial standard error, and the KS and chi-square
+    tests of the PIT values with a verdict per quantity: ``calibrated`` is
+    false when either test's p-value falls below ``false_alarm / 2``
+    (Bonferroni), so a calibrated filter is flagged with probability at most
+    ``false_alarm`` per quantity.
+
+    Parameters
+    ----------
+    rho : float
+    trials : int
+    seed : int or numpy.random.SeedSequence
+    prior_scale : float
+    false_alarm : float
+        Rate, in (0, 1), at which the tests reject a calibrated filter.
+    frames : int
+        ``N``, from 3 to ``depthcore.problem.checks.MAX_FRAMES``.
+    process_noise : float
+        ``q >= 0``.
+    progress : callable, optional
+        ``progress(done, total)``, called as the trials are filtered.
+
+    Returns
+    -------
+    dict
+        JSON-ready.
+    """
+    from depthcore.analysis import calibration
+
+    prior_scale = checks.positive_scalar(prior_scale, "prior_scale")
+    false_alarm = float(false_alarm)
+    if not 0.0 < false_alarm < 1.0:
+        raise ValueError(f"false_alarm must lie in (0, 1), got {false_alarm!r}")
+    seed = checks.seed_sequence(seed)
+    mean = paper_prior_means(np.asarray(SCENARIOS["fig2"].c, dtype=float)[None])[0]
+    cov = prior_scale * np.eye(3)
+    r = calibration.self_calibration(
+        mean,
+        cov,
+        rho,
+        trials,
+        np.random.default_rng(seed),
+        frames=frames,
+        process_noise=process_noise,
+        progress=progress,
+    )
+    s = r.summary(CALIBRATION_LEVELS)
+    n = s["trials"]
+    levels = np.asarray(CALIBRATION_LEVELS)
+    out = {
+        "truth": PRIOR_TRUTH,
+        "rho": float(rho),
+        "prior": "fixed",
+        "prior_mean": [float(v) for v in mean],
+        "prior_cov": cov.tolist(),
+        "seed": seed.entropy,
+        "trials": int(trials),
+        "frames": int(frames),
+        "process_noise": float(process_noise),
+        "valid_trials": n,
+        "behind_camera_draws": r.draws.n_behind,
+        "rejected_trials": r.draws.n_rejected,
+        "false_alarm": false_alarm,
+        "levels": s["levels"],
+        "coverage_se": coverage_se(levels, max(n, 1)).tolist(),
+    }
+    for q in ("depth", "velocity"):
+        t = s[q]
+        t["calibrated"] = bool(min(t["ks_pvalue"], t["chi2_pvalue"]) > false_alarm / 2)
+        out[q] = t
+    return out
+
+
+#: The samplers whose Monte Carlo errors :func:`error_coverage` checks.
+SAMPLERS = ("particle", "resample_move", "rbpf")
+
+
+#: The moments whose errors :func:`error_coverage` checks.
+ERROR_MOMENTS = ("depth_mean", "depth_sd", "velocity_mean", "velocity_sd")
+
+
+def error_coverage(
+    name: str,
+    mu,
+    rho: float,
+    prior_mean,
+    prior_cov,
+    runs: int = 100,
+    seed=0,
+    process_noise: float = 0.0,
+    **options,
+) -> dict:
+    """How often a sampler's reported error covers its actual error.
+
+    The sampler ``name`` of the registry runs ``runs`` times, independently,
+    on one problem (the runs are the rows of one batch, drawn from one
+    generator seeded by ``seed``); each moment's error, estimate minus the
+    exact value of the optimal filter (the bank of Kalman filters beyond
+    three frames or with process noise), is compared with the error the
+    sampler reports for it (``depth_error`` for the depth's moments,
+    ``velocity_error`` for the velocity's). An honest error puts about 95 %
+    of the runs within two reported errors; a run flagged ``collapsed``
+    reports no error (NaN) and is counted apart.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`SAMPLERS`.
+    mu : array_like, shape (K,)
+        One sequence of bearings.
+    rho, prior_mean, prior_cov, process_noise
+        The problem, as for every filter of the registry.
+    runs : int
+        Independent runs, >= 1.
+    seed : int or numpy.random.SeedSequence
+    **options
+        For the sampler (``n_particles``, ``replicas``, ...); its defaults otherwise.
+
+    Returns
+    -------
+    dict
+        ``"runs"``, ``"collapsed"`` (the number of runs flagged), and for each
+        of :data:`ERROR_MOMENTS` ``{"within_two": fraction of the runs not
+        collapsed whose error is within two reported errors, "max_z": the
+        largest absolute error over the reported error, "se": the binomial standard error of
+        the fraction}``; ``"worst_collapsed_z"``: the largest absolute error of a
+        collapsed run's depth mean over the exact depth SD (how far off the
+        flag was right to be).
+    """
+    if name not in SAMPLERS:
+        raise ValueError(f"name must be one of {SAMPLERS}, got {name!r}")
+    runs = checks.count(runs, "runs")
+    mu = checks.finite_array(mu, "mu")
+    if mu.ndim != 1:
+        raise ValueError(f"mu must have shape (K,), got shape {mu.shape}")
+    batch = np.tile(mu, (runs, 1))
+    noise = {"process_noise": process_noise} if process_noise else {}
+    exact = FILTERS["optimal"](mu, rho, prior_mean, prior_cov, **noise)
+    rng = np.random.default_rng(checks.seed_sequence(seed))
+    est = FILTERS[name](batch, rho, prior_mean, prior_cov, rng=rng, **noise, **options)
+    collapsed = np.broadcast_to(np.asarray(est.collapsed, dtype=bool), (runs,))
+    out = {"runs": runs, "collapsed": int(np.sum(collapsed))}
+    ok = ~collapsed
+    for moment in ERROR_MOMENTS:
+        quantity = moment.split("_")[0]
+        err = np.asarray(getattr(est, moment)) - getattr(exact, moment)
+        reported = np.asarray(getattr(est, f"{quantity}_error"))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.abs(err[ok]) / reported[ok]
+        n = int(np.sum(ok))
+        frac = float(np.mean(z <= 2.0)) if n else float("nan")
+        out[moment] = {
+            "within_two": frac,
+            "max_z": float(np.max(z)) if n else float("nan"),
+            "se": float(np.sqrt(frac * (1 - frac) / n)) if n else float("nan"),
+        }
+    depth_err = np.abs(np.asarray(est.depth_mean) - exact.depth_mean) / exact.depth_sd
+    out["worst_collapsed_z"] = float(np.max(depth_err[collapsed])) if np.any(collapsed) else None
+    return out
+
+
+#: The depth scores :func:`gather_scores` gathers for the book's studies over several settings.
+DEPTH_SCORES = ("bias", "rmse", "mean_sd", "coverage_68", "coverage_95")
+
+
+def gather_scores(filter_results, scores) -> dict:
+    """One filter's depth scores over several studies, each with its standard error.
+
+    Parameters
+    ----------
+    filter_results : sequence of dict, length S
+        The filter's entry of :func:`depthcore.studies.monte_carlo.study`'s ``"filters"``,
+        one per study.
+    scores : sequence of str
+        Depth scores of :func:`depthcore.studies.scores.scores`.
+
+    Returns
+    -------
+    dict
+        ``{score: (S,), score + "_se": (S,)}`` for each score, and ``"nees"``,
+        ``"nees_se"`` (S,).
+    """
+    out = {}
+    for score in scores:
+        out[score] = np.array([x["depth"][score] for x in filter_results])
+        out[f"{score}_se"] = np.array([x["depth"][f"{score}_se"] for x in filter_results])
+    out["nees"] = np.array([x["nees"] for x in filter_results])
+    out["nees_se"] = np.array([x["nees_se"] for x in filter_results])
+    return out
