@@ -49,7 +49,7 @@ from depthcore.provenance import benchmarks
 
 FIG2 = SCENARIOS["fig2"]
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("bank_posterior", "optimal", "resample_move")
+MEASURES = ("exact.posterior", "exact.optimal", "particles.resample_move")
 #: Targets of the four tables: bank / 1-D route at three frames, seconds for
 #: 10,000 trials x 30 frames, particle filter / bank at matched accuracy.
 TARGETS = {"three_frames_ratio": 2.0, "many_trials_s": 10.0, "matched_accuracy_ratio": 100.0}

@@ -38,7 +38,7 @@ from depthcore.provenance import benchmarks
 from depthcore.studies import trials as study_trials
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("ekf",)
+MEASURES = ("kalman.ekf",)
 TRIALS, SEED = 10_000, 1
 #: The pairs of runs (depthcore, then filterpy) timed alternately.
 PAIRS = 7

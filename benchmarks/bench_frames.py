@@ -39,7 +39,7 @@ from depthcore.registry.filters import FILTERS
 
 FIG2 = SCENARIOS["fig2"]
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("filters", "iterated")
+MEASURES = ("registry.filters", "kalman.iterated")
 #: The process noise of the tracks (the SD of the velocity's change per frame).
 Q = 0.005
 SEED = 7

@@ -19,7 +19,15 @@ from depthcore.provenance import benchmarks
 
 RUNS = 15
 #: The depthcore modules that ``import depthcore`` loads (fingerprinted in the record).
-MEASURES = ("__init__", "gaussian", "model", "scenarios", "_checks")
+MEASURES = (
+    "__init__",
+    "_moved",
+    "problem",
+    "problem.gaussian",
+    "problem.model",
+    "problem.scenarios",
+    "problem.checks",
+)
 CODE = "import time; t = time.perf_counter(); import {module}; print(time.perf_counter() - t)"
 
 

@@ -38,7 +38,7 @@ from depthcore.kalman import linear
 from depthcore.provenance import benchmarks
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("kalman",)
+MEASURES = ("kalman.linear",)
 STEPS, PAIRS, SEED = 1000, 11, 3
 PSI = np.array([[1.0, 1.0], [0.0, 1.0]])
 SIGMA_P = np.diag([0.0, 1e-4])

@@ -53,7 +53,7 @@ from depthcore.problem.scenarios import SCENARIOS
 from depthcore.provenance import benchmarks
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("optimal", "reference", "second_order", "ekf")
+MEASURES = ("exact.optimal", "analysis.reference", "kalman.second_order", "kalman.ekf")
 #: The scenarios of the per-triple table (Figure 4 shares Figure 2's problem).
 TRIPLE_KEYS = ("fig2", "fig3", "fig5", "fig6")
 LADDER = [(50, 12), (100, 16), (150, 20), (200, 24), (300, 28), (400, 32), (600, 40)]

@@ -38,7 +38,7 @@ from depthcore.provenance import benchmarks
 
 FIG2 = SCENARIOS["fig2"]
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("bank_posterior", "range_ekf")
+MEASURES = ("exact.posterior", "kalman.range_ekf")
 #: The relative tolerances on the depth mean and SD.
 TOLERANCES = (1e-2, 1e-3)
 #: The numbers of components tried: four per doubling, 1 to MAX_COMPONENTS.

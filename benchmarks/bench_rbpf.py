@@ -45,7 +45,7 @@ from depthcore.problem.scenarios import SCENARIOS
 from depthcore.provenance import benchmarks
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("rbpf", "resample_move", "bank", "bank_mixture")
+MEASURES = ("particles.rbpf", "particles.resample_move", "exact.bank", "exact.mixture")
 PILOT = 2000  # particles of the resample-move filter's pilot run
 GROWTH = (250, 1000, 4000, 16000)
 REPEATS, PARTICLES = (

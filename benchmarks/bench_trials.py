@@ -29,7 +29,7 @@ from depthcore.provenance import benchmarks
 from depthcore.studies import trials
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("optimal",)
+MEASURES = ("exact.optimal",)
 TRIALS, LOOP, SEED = 10_000, 200, 1
 
 

@@ -40,7 +40,6 @@ naming the new path, until 0.3 (:mod:`depthcore._moved`).
 """
 
 import importlib
-import pkgutil
 
 from depthcore import _moved
 from depthcore.problem.gaussian import Gaussian, paper_prior
@@ -65,21 +64,23 @@ SUBPACKAGES = (
 
 
 def _modules() -> tuple[str, ...]:
-    """Every public module's path, read from the package's folders without importing them."""
+    """Every public module's path, read from the package's folders without importing them.
+
+    :data:`MODULES`, computed when first read: each subpackage, in the order of
+    :data:`SUBPACKAGES`, followed by its modules in alphabetical order.
+    """
+    import pkgutil
+
     found = ["depthcore.formatting"]
     for package in SUBPACKAGES:
         path = [f"{__path__[0]}/{package}"]
         found.append(f"depthcore.{package}")
         found += [
             f"depthcore.{package}.{m.name}"
-            for m in pkgutil.iter_modules(path)
+            for m in sorted(pkgutil.iter_modules(path), key=lambda m: m.name)
             if not m.name.startswith("_") and not m.ispkg
         ]
     return tuple(found)
-
-
-#: Every public module, subpackages first in the order of :data:`SUBPACKAGES`.
-MODULES = _modules()
 
 #: The names a caller reaches through the package itself.
 _LAZY = {
@@ -104,6 +105,10 @@ _moved.install()
 
 
 def __getattr__(name):
+    if name == "MODULES":
+        # every public module, from the folders (not imported): computed once, when first read
+        globals()["MODULES"] = _modules()
+        return globals()["MODULES"]
     if name in SUBPACKAGES or name == "formatting":
         return importlib.import_module(f"{__name__}.{name}")
     if name in _LAZY:
@@ -115,4 +120,4 @@ def __getattr__(name):
 
 
 def __dir__():
-    return sorted(set(globals()) | set(SUBPACKAGES) | set(_LAZY) | {"formatting"})
+    return sorted(set(globals()) | set(SUBPACKAGES) | set(_LAZY) | {"formatting", "MODULES"})

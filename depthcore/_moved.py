@@ -11,8 +11,7 @@ naming that path. The linear Kalman filter's module ``depthcore.kalman`` is now
 from __future__ import annotations
 
 import importlib
-import importlib.abc
-import importlib.util
+import importlib.machinery
 import sys
 import warnings
 
@@ -109,7 +108,7 @@ def moved_attribute(package: str, module: str, name: str):
     return getattr(target, name)
 
 
-class _Alias(importlib.abc.Loader):
+class _Alias:
     """Loads an old path as the module at its new path."""
 
     def __init__(self, old: str):
@@ -124,13 +123,13 @@ class _Alias(importlib.abc.Loader):
         sys.modules[self.old] = moved_module(self.old)
 
 
-class MovedFinder(importlib.abc.MetaPathFinder):
+class MovedFinder:
     """Finds the old paths of :data:`MOVED` for ``import depthcore.optimal`` and its kind."""
 
     def find_spec(self, fullname, path=None, target=None):
         if fullname not in MOVED:
             return None
-        return importlib.util.spec_from_loader(fullname, _Alias(fullname))
+        return importlib.machinery.ModuleSpec(fullname, _Alias(fullname))
 
 
 def install() -> None:

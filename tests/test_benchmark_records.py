@@ -135,17 +135,20 @@ def test_a_quick_run_leaves_the_committed_record(tmp_path, monkeypatch):
     monkeypatch.setattr(benchmarks, "ROOT", tmp_path)
     monkeypatch.setattr(benchmarks, "RESULTS", tmp_path / "results")
     monkeypatch.setattr(benchmarks, "QUICK_RESULTS", tmp_path / "quick")
-    (tmp_path / "depthcore").mkdir()
-    shutil.copy(Path(benchmarks.__file__).parent / "optimal.py", tmp_path / "depthcore")
-    path = benchmarks.write(script, ["optimal"], {"trials": 1}, {"x_s": 1.0}, full=False)
+    (tmp_path / "depthcore" / "exact").mkdir(parents=True)
+    optimal = Path(benchmarks.__file__).parents[1] / "exact" / "optimal.py"
+    shutil.copy(optimal, tmp_path / "depthcore" / "exact")
+    path = benchmarks.write(script, ["exact.optimal"], {"trials": 1}, {"x_s": 1.0}, full=False)
     assert path == tmp_path / "quick" / "bench_probe.json"
     assert not (tmp_path / "results").exists()
     record = json.loads(path.read_text())
     assert record["fingerprint"] == {
         "bench_probe.py": benchmarks.fingerprint(script),
-        "depthcore/exact/optimal.py": benchmarks.fingerprint(tmp_path / "depthcore" / "optimal.py"),
+        "depthcore/exact/optimal.py": benchmarks.fingerprint(
+            tmp_path / "depthcore" / "exact" / "optimal.py"
+        ),
     }
-    full = benchmarks.write(script, ["optimal"], {"trials": 1}, {"x_s": 1.0})
+    full = benchmarks.write(script, ["exact.optimal"], {"trials": 1}, {"x_s": 1.0})
     assert full == tmp_path / "results" / "bench_probe.json"
     assert benchmarks.read("bench_probe", tmp_path / "results")["results"] == {"x_s": 1.0}
 
@@ -199,15 +202,24 @@ def test_the_readmes_sizes_are_the_records():
 
 
 def test_a_record_covers_every_module_its_modules_import():
-    # bank_posterior imports bank (which imports kalman) and optimal, which imports model:
-    # all are measured with it; the book's modules are not
-    closure = benchmarks.measured_modules(["bank_posterior"])
-    assert {"bank_posterior", "bank", "kalman", "optimal", "model", "_checks"} <= set(closure)
-    assert "book" not in closure and "cli_text" not in closure
+    # the exact posterior imports the bank (which imports the linear Kalman filter) and the
+    # optimal filter, which imports the model: all are measured with it; the book is not
+    closure = benchmarks.measured_modules(["exact.posterior"])
+    assert {
+        "exact.posterior",
+        "exact.bank",
+        "kalman.linear",
+        "exact.optimal",
+        "problem.model",
+        "problem.checks",
+    } <= set(closure)
+    assert not [m for m in closure if m.startswith(("book", "cli"))]
     prints = benchmarks.fingerprints(
-        benchmarks.ROOT / "benchmarks" / "bench_bank.py", ["bank_posterior"]
+        benchmarks.ROOT / "benchmarks" / "bench_bank.py", ["exact.posterior"]
     )
-    assert set(prints) == {"benchmarks/bench_bank.py"} | {f"depthcore/{m}.py" for m in closure}
+    assert set(prints) == {"benchmarks/bench_bank.py"} | {
+        benchmarks.module_path(m) for m in closure
+    }
     # a module that enters the closure later makes the record stale
     r = benchmarks.read("bench_bank")
     del r["fingerprint"]["depthcore/kalman/linear.py"]

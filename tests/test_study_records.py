@@ -20,7 +20,6 @@ import numpy as np
 import pytest
 
 from depthcore import SCENARIOS
-from depthcore.book import beyond_frames
 from depthcore.problem import gaussian
 from depthcore.provenance import benchmarks, records
 from depthcore.studies import frames, monte_carlo
@@ -158,10 +157,8 @@ def test_write_records_a_call_and_read_reads_it_back_bit_for_bit(record_dir, mon
     assert not written.read and written.path.is_file() and "recorded in" in str(written)
     monkeypatch.setenv(records.ENVIRONMENT, "read")
     calls = []
-    monkeypatch.setattr(beyond_frames, "frames_study", lambda *a, **k: calls.append(a))
-    monkeypatch.setattr(
-        records, "function_name", lambda f: "depthcore.book.beyond_frames:frames_study"
-    )
+    monkeypatch.setattr(frames, "frames_study", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(records, "function_name", lambda f: "depthcore.studies.frames:frames_study")
     read = small_study()
     assert read.read and calls == [], "a current record must be read, not computed"
     same(written.result, read.result)
@@ -187,7 +184,7 @@ def test_require_refuses_a_call_without_a_current_record(record_dir, monkeypatch
     with pytest.raises(ValueError) as refused:
         records.recorded(frames.frames_study, np.arange(3, 1003), 12, 1)
     assert str(refused.value).startswith(
-        "depthcore.book.beyond_frames:frames_study(array([   3, ..., 1001, 1002]), 12, 1) has no "
+        "depthcore.studies.frames:frames_study(array([   3, ..., 1001, 1002]), 12, 1) has no "
         "current record"
     )
     assert len(str(refused.value)) < 240
@@ -211,8 +208,15 @@ def test_only_depthcore_functions_are_recorded():
 
 
 def test_the_fingerprint_covers_every_module_the_function_imports():
-    prints = records.code_fingerprint("depthcore.book.beyond_frames:frames_study")
-    for module in ("book/beyond_frames", "study", "optimal", "quadrature", "bank", "model"):
+    prints = records.code_fingerprint("depthcore.studies.frames:frames_study")
+    for module in (
+        "studies/frames",
+        "studies/monte_carlo",
+        "exact/optimal",
+        "exact/quadrature",
+        "exact/bank",
+        "problem/model",
+    ):
         assert f"depthcore/{module}.py" in prints
     assert all(len(v) == 64 for v in prints.values())
     assert benchmarks.module_path("book") == "depthcore/book/__init__.py"
@@ -258,7 +262,7 @@ def test_every_page_that_reads_a_record_is_recomputed_by_make_records():
 
 def test_the_source_archive_carries_the_records():
     pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
-    assert '"book/study_records/*.json"' in pyproject
+    assert '"provenance/study_records/*.json"' in pyproject
 
 
 def test_an_argument_that_cannot_be_recorded_is_named(record_dir):

@@ -7,6 +7,7 @@
 * :mod:`~depthcore.studies.pairs`: two filters compared over the same trials;
 * :mod:`~depthcore.studies.monte_carlo`: the studies the command line runs
   (which estimate, and which stated uncertainty, to trust);
+* :mod:`~depthcore.studies.frames`: the study at several numbers of frames;
 * :mod:`~depthcore.studies.hardness`: where the problem is hard, across
   parallax, prior and depth;
 * :mod:`~depthcore.studies.reproduce`: the paper's tables reproduced, and the
