@@ -23,7 +23,8 @@ from a family above its own:
 * :mod:`depthcore.analysis`: the Cramér-Rao bound, self-calibration and the
   independent routes that check the filters;
 * :mod:`depthcore.registry`: every filter under one calling convention
-  (:data:`FILTERS`), their results, and :func:`track`;
+  (:data:`~depthcore.registry.filters.FILTERS`), their results, and
+  :func:`~depthcore.registry.tracking.track`;
 * :mod:`depthcore.studies`: Monte Carlo studies and the reproduction of the
   paper's tables;
 * :mod:`depthcore.provenance`: the benchmarks' and the studies' records;
@@ -36,7 +37,7 @@ The names below are the package's front door; everything else is imported from
 its subpackage (``from depthcore.exact import optimal``). Subpackages are
 attributes of the package, imported when first used. The modules' paths before
 0.2 (``depthcore.optimal``) still import, with a :class:`DeprecationWarning`
-naming the new path, until 0.3 (:mod:`depthcore._moved`).
+naming the new path, until 0.3 (``depthcore._moved``).
 """
 
 import importlib
@@ -67,11 +68,12 @@ def _modules() -> tuple[str, ...]:
     """Every public module's path, read from the package's folders without importing them.
 
     :data:`MODULES`, computed when first read: each subpackage, in the order of
-    :data:`SUBPACKAGES`, followed by its modules in alphabetical order.
+    :data:`SUBPACKAGES`, followed by its modules in alphabetical order, and
+    :mod:`depthcore.formatting` between the provenance and the command line.
     """
     import pkgutil
 
-    found = ["depthcore.formatting"]
+    found = []
     for package in SUBPACKAGES:
         path = [f"{__path__[0]}/{package}"]
         found.append(f"depthcore.{package}")
@@ -80,6 +82,8 @@ def _modules() -> tuple[str, ...]:
             for m in sorted(pkgutil.iter_modules(path), key=lambda m: m.name)
             if not m.name.startswith("_") and not m.ispkg
         ]
+        if package == "provenance":
+            found.append("depthcore.formatting")
     return tuple(found)
 
 #: The names a caller reaches through the package itself.

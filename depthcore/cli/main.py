@@ -37,8 +37,7 @@ from depthcore.problem import checks
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from depthcore.problem.model import noise_free_state
 from depthcore.registry.adapters import RBPF_REPLICAS
-from depthcore.registry.filters import ALL_NAMES, FILTERS
-from depthcore.registry.filters import NAMES as _STUDY_FILTERS
+from depthcore.registry.filters import FILTERS, names
 from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE
 from depthcore.studies import monte_carlo, reproduce
 from depthcore.studies import trials as study_trials
@@ -578,8 +577,13 @@ examples:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``python -m depthcore``."""
+    """The argument parser of ``python -m depthcore``.
+
+    Its filters are the registry's when it is built, a filter added by
+    :func:`depthcore.registry.filters.register` among them.
+    """
     raw = argparse.RawDescriptionHelpFormatter
+    every, defaults = names(), names(default=True)
     p = _Parser(
         prog="python -m depthcore",
         description="Filter based estimates of depth (Maybank 1990): the paper's filters "
@@ -657,11 +661,11 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument(
         "--filters",
         nargs="+",
-        default=list(_STUDY_FILTERS),
-        choices=ALL_NAMES,
+        default=list(defaults),
+        choices=every,
         metavar="NAME",
-        help=f"filters to run, in this order (default: {' '.join(_STUDY_FILTERS)}; also "
-        f"{' '.join(n for n in ALL_NAMES if n not in _STUDY_FILTERS)})",
+        help=f"filters to run, in this order (default: {' '.join(defaults)}; also "
+        f"{' '.join(n for n in every if n not in defaults)})",
     )
     e.add_argument("--json", action="store_true", help="print JSON instead of a table")
     e.set_defaults(run=_cmd_estimate)
@@ -701,11 +705,11 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument(
         "--filters",
         nargs="+",
-        default=list(_STUDY_FILTERS),
-        choices=ALL_NAMES,
+        default=list(defaults),
+        choices=every,
         metavar="NAME",
-        help=f"filters to score (default: {' '.join(_STUDY_FILTERS)}; also "
-        f"{' '.join(n for n in ALL_NAMES if n not in _STUDY_FILTERS)}); only these run: "
+        help=f"filters to score (default: {' '.join(defaults)}; also "
+        f"{' '.join(n for n in every if n not in defaults)}); only these run: "
         "the Hellinger distances need the optimal filter, their reference, so without "
         "'optimal' they are not computed (- in the table, null in JSON)",
     )

@@ -98,7 +98,7 @@ class Bank(NamedTuple):
     process_noise : ndarray, shape (...) or ()
     prior_mean : ndarray, shape (..., 3)
     prior_cov : ndarray, shape (..., 3, 3)
-    history : kalman.FilterResult or None
+    history : depthcore.kalman.linear.FilterResult or None
         With ``history=True``: each node's filter at every frame, arrays of shape
         ``(..., J, N, ...)``.
     """
@@ -184,7 +184,7 @@ def conditional_prior(nodes, prior_mean, prior_cov):
 
     Returns
     -------
-    prior : kalman.MeanAndCov
+    prior : depthcore.kalman.linear.MeanAndCov
         Mean (..., J, 2) and covariance (..., 1, 2, 2) of ``(x_1, v_1)`` given ``y_1``.
     log_density : ndarray, shape (..., J)
         ``log N(y_1; m_y, P_yy)``.

@@ -1,7 +1,7 @@
 """The particle filters and what they share: weights, resampling, replicas.
 
-* :mod:`~depthcore.particles.resampling`: the effective sample size, the resamplers (one
-signature), weighted moments;
+* :mod:`~depthcore.particles.resampling`: the effective sample size, the
+  resamplers (one signature), weighted moments;
 * :mod:`~depthcore.particles.importance`: importance sampling of the state
   from a second-order (Student t) proposal;
 * :mod:`~depthcore.particles.resample_move`: the causal bootstrap filter with

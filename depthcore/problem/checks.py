@@ -109,7 +109,7 @@ def nonnegative_scalar(value, name: str) -> float:
     return x
 
 
-#: The smallest positive process noise: the smallest normal double. Below it the
+#: The smallest positive process noise, the smallest normal double. Below it the
 #: noise's inverse, which the filters' information forms hold, overflows.
 MIN_PROCESS_NOISE = float(np.finfo(float).tiny)
 

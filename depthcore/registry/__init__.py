@@ -6,7 +6,8 @@
 * :mod:`~depthcore.registry.adapters`: each filter in the calling convention
   ``(mu, rho, prior_mean, prior_cov, process_noise, **options)``, and the
   smoothers;
-* :mod:`~depthcore.registry.filters`: the table :data:`FILTERS`, by name;
+* :mod:`~depthcore.registry.filters`: the table
+  :data:`~depthcore.registry.filters.FILTERS`, by name;
 * :mod:`~depthcore.registry.tracking`: :func:`~depthcore.registry.tracking.track`,
   one track filtered and smoothed at every frame.
 

@@ -34,7 +34,14 @@ the command line and the book's chapters (:mod:`depthcore.book`)
 iterate the entries marked ``default`` (:data:`NAMES`), which are the five of
 the paper's problem; the N-frame filters (``iterated``, ``inverse_depth``,
 ``resample_move``, ``rbpf``) are registered with ``default=False`` and run only when
-named (:data:`ALL_NAMES`). Adding a filter means adding an entry here.
+named (:data:`ALL_NAMES`).
+
+Adding a filter to the package means three things: its module in its family
+(:mod:`depthcore.kalman`, :mod:`depthcore.exact`, :mod:`depthcore.particles`),
+its entry in :data:`FILTERS` below, and its test; the command line, the
+studies and the API reference then list it. A filter of one's own, outside the
+package, joins the registry with :func:`register`, and the command line run in
+the same process takes it by name.
 
 The filters: the paper's optimal filter (:mod:`depthcore.exact.optimal`, Eqs.
 (6), (13)-(16)), second-order approximation (:mod:`depthcore.kalman.second_order`,
@@ -360,10 +367,66 @@ NAMES = tuple(name for name, f in FILTERS.items() if f.default)
 ALL_NAMES = tuple(FILTERS)
 
 
+def register(entry: Filter) -> Filter:
+    """Add a filter to :data:`FILTERS`, where the command line and the studies find it by name.
+
+    Parameters
+    ----------
+    entry : Filter
+        The new filter. Its name must be a Python identifier not yet taken, its
+        family one of :data:`~depthcore.registry.estimates.FAMILY`; its ``run``
+        follows the registry's calling convention (the module docstring).
+
+    Returns
+    -------
+    Filter
+        ``entry``, registered.
+
+    Raises
+    ------
+    ValueError
+        Naming ``entry`` when it is not a :class:`Filter`, its name is taken or
+        not an identifier, or its family is unknown.
+
+    Notes
+    -----
+    :data:`NAMES`, :data:`ALL_NAMES`, :data:`PAPER_FILTERS` and :data:`SMOOTHED`
+    list the package's own filters, fixed when the module is imported; a
+    registered filter is read from :data:`FILTERS` (:func:`names`).
+    """
+    if not isinstance(entry, Filter):
+        raise ValueError(f"entry must be a Filter, got {type(entry).__name__}")
+    if not entry.name.isidentifier():
+        raise ValueError(f"entry's name must be a Python identifier, got {entry.name!r}")
+    if entry.name in FILTERS:
+        raise ValueError(f"entry's name {entry.name!r} is taken: a filter of that name exists")
+    if entry.family not in FAMILY:
+        raise ValueError(f"entry's family must be one of {tuple(FAMILY)}, got {entry.family!r}")
+    FILTERS[entry.name] = entry
+    return entry
+
+
+def names(default: bool = False, smoothed: bool = False) -> tuple:
+    """The registered filters' names, in the registry's order, registered ones included.
+
+    Parameters
+    ----------
+    default : bool
+        Only those of the default outputs (``Filter.default``).
+    smoothed : bool
+        Only those with a smoother (``Filter.smoother``).
+    """
+    return tuple(
+        n
+        for n, f in FILTERS.items()
+        if (f.default or not default) and (f.smoother is not None or not smoothed)
+    )
+
+
 def get(name: str) -> Filter:
     """The filter called ``name``; a :class:`ValueError` lists the names if there is none."""
     if name not in FILTERS:
-        raise ValueError(f"filter must be one of {ALL_NAMES}, got {name!r}")
+        raise ValueError(f"filter must be one of {names()}, got {name!r}")
     return FILTERS[name]
 
 
@@ -372,7 +435,7 @@ def check_names(names) -> tuple:
     names = tuple(names)
     unknown = set(names) - set(FILTERS)
     if unknown:
-        raise ValueError(f"filters must be among {ALL_NAMES}, got {sorted(unknown)}")
+        raise ValueError(f"filters must be among {names()}, got {sorted(unknown)}")
     return names
 
 

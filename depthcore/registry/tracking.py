@@ -18,7 +18,7 @@ import numpy as np
 
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import Gaussian, paper_prior
-from depthcore.registry.filters import FILTERS, SMOOTHED
+from depthcore.registry.filters import FILTERS, names
 
 #: The noise levels ``rho`` that :func:`track` answers for (and the command line's ``--rho``).
 RHO_RANGE = (1e-12, 1e3)
@@ -119,11 +119,12 @@ def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal") -> Tr
     (4,)
     """
     if not isinstance(filter, str) or filter not in FILTERS:
-        raise ValueError(f"filter must be one of {SMOOTHED}, got {filter!r}")
+        raise ValueError(f"filter must be one of {names(smoothed=True)}, got {filter!r}")
     entry = FILTERS[filter]
     if entry.smoother is None:
         raise ValueError(
-            f"filter must be one of {SMOOTHED}, the filters with a smoother; {filter!r} has none"
+            f"filter must be one of {names(smoothed=True)}, the filters with a smoother; "
+            f"{filter!r} has none"
         )
     mu = model.measurements_batch(mu, "mu")
     if mu.ndim != 1:

@@ -1,30 +1,34 @@
-"""The book's API reference documents every public module of depthcore, one page each.
+"""The book's API reference documents every public module of depthcore, a page per family.
 
-``book/api.md`` lists the modules with the first paragraph of each docstring,
-and ``book/api/<name>.md`` renders, through Sphinx autodoc, one module: a
-``py:module`` target (``id="module-depthcore.<name>"``) followed by the
-module's documented functions and classes. The pages follow the order of the
-README's module map ("The package, module by module"). The docstrings'
-formulas are typeset (MathJax), and no reST markup is shown raw.
+``book/api.md`` lists every module of ``depthcore.MODULES`` (read from the
+package's folders) with the first paragraph of its docstring, and
+``book/api/<family>.md`` renders, through Sphinx autodoc, the family's package
+and each of its modules: a ``py:module`` target (``id="module-depthcore.<path>"``)
+followed by the module's documented functions and classes. Nothing is listed by
+hand: the pages follow the package. The docstrings' formulas are typeset
+(MathJax), and no reST markup is shown raw.
 """
 
 from __future__ import annotations
 
 import re
 
-from conftest import ROOT, toc_pages
+from conftest import toc_pages
 
 import depthcore
 
 RAW_ROLE_RE = re.compile(r":(math|func|class|mod|data|meth|attr):`")
-MAP_ROW_RE = re.compile(r"^\| ((?:`\w+`(?:, )?)+) \|", re.MULTILINE)
+#: The families' pages, in the house's order: the subpackages and the one shared module.
+FAMILIES = [
+    *depthcore.SUBPACKAGES[: depthcore.SUBPACKAGES.index("provenance") + 1],
+    "formatting",
+    *depthcore.SUBPACKAGES[depthcore.SUBPACKAGES.index("provenance") + 1 :],
+]
 
 
-def readme_module_map() -> list[str]:
-    """The modules of README.md's module map, in its order."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = text.split("## The package, module by module", 1)[1].split("\n## ", 1)[0]
-    return [name for row in MAP_ROW_RE.findall(section) for name in re.findall(r"`(\w+)`", row)]
+def family_of(module: str) -> str:
+    """``depthcore.exact.optimal`` -> ``exact``."""
+    return module.split(".")[1]
 
 
 def page_html(html_dir, page: str) -> str:
@@ -33,38 +37,39 @@ def page_html(html_dir, page: str) -> str:
     return path.read_text(encoding="utf-8")
 
 
-def test_module_pages_follow_the_readme_module_map():
+def test_family_pages_follow_the_house():
     pages = [p.removeprefix("book/api/") for p in toc_pages() if p.startswith("book/api/")]
-    assert sorted(readme_module_map()) == sorted(depthcore.MODULES)
-    assert pages == readme_module_map()
+    assert pages == FAMILIES
+    assert {family_of(m) for m in depthcore.MODULES} == set(FAMILIES)
 
 
-def test_each_module_page_documents_its_module_and_members(html_dir):
+def test_each_module_is_documented_with_its_members_on_its_familys_page(html_dir):
     for name in depthcore.MODULES:
-        html = page_html(html_dir, f"book/api/{name}")
-        assert f'id="module-depthcore.{name}"' in html, f"depthcore.{name} is not documented"
-        assert re.search(rf'<dt class="sig[^"]*" id="depthcore\.{name}\.\w+', html), (
-            f"depthcore.{name} is documented without any of its members"
-        )
+        html = page_html(html_dir, f"book/api/{family_of(name)}")
+        assert f'id="module-{name}"' in html, f"{name} is not documented"
+        if name.count(".") > 1 or name == "depthcore.formatting":
+            assert re.search(rf'<dt class="sig[^"]*" id="{re.escape(name)}\.\w+', html), (
+                f"{name} is documented without any of its members"
+            )
 
 
 def test_the_api_page_lists_every_module_with_its_summary(html_dir):
     html = page_html(html_dir, "book/api")
     for name in depthcore.MODULES:
-        assert f'href="api/{name}.html#module-depthcore.{name}"' in html, (
-            f"book/api.html does not link depthcore.{name}"
+        assert f'href="api/{family_of(name)}.html#module-{name}"' in html, (
+            f"book/api.html does not link {name}"
         )
 
 
 def test_api_pages_render_their_markup_and_mathematics(html_dir):
     typeset = 0
-    for page in ["book/api"] + [f"book/api/{name}" for name in depthcore.MODULES]:
+    for page in ["book/api"] + [f"book/api/{name}" for name in FAMILIES]:
         html = page_html(html_dir, page)
         text = re.sub(r"<[^>]+>", "", html)
         raw = sorted(set(RAW_ROLE_RE.findall(text)))
         assert not raw, f"{page}.html shows raw Sphinx roles: {raw}"
         typeset += html.count('<span class="math notranslate nohighlight">')
-    assert 'id="depthcore.problem.gaussian.paper_prior"' in page_html(html_dir, "book/api/gaussian")
+    assert 'id="depthcore.problem.gaussian.paper_prior"' in page_html(html_dir, "book/api/problem")
     # the docstrings' formulas: hundreds of them, typeset
     assert typeset > 300, f"only {typeset} formulas typeset on the API pages"
-    assert r"\rho ^{2} J^{-1}" in page_html(html_dir, "book/api/second_order")
+    assert r"\rho ^{2} J^{-1}" in page_html(html_dir, "book/api/kalman")

@@ -412,7 +412,7 @@ class DropHiddenCellsWithoutOutput(SphinxPostTransform):
 
 
 #: Pages of the HTML book that the PDF leaves out: the API reference's page per
-#: module (the PDF prints the summaries of ``book/api`` instead).
+#: family (the PDF prints the summaries of ``book/api`` instead).
 HTML_ONLY_PAGES = re.compile(r"^book/api/")
 #: Pages whose title the PDF drops, keeping their content: the references, which
 #: the LaTeX builder gathers into the book's closing bibliography anyway (the
@@ -491,32 +491,79 @@ def rst_to_myst(text: str) -> str:
 
 
 class ModuleSummaries(SphinxDirective):
-    """A list of modules (one ``depthcore.<name>`` per line), each with its summary.
+    """Every module of the package (``depthcore.MODULES``), each with its summary.
 
-    Each item links the module's page (in HTML) and gives the first paragraph
-    of its docstring, its formulas typeset (:mod:`docmath`).
+    A list per family, in the order of ``depthcore.SUBPACKAGES``: the family's
+    package, then its modules, each linking its documentation (in HTML) and
+    giving the first paragraph of its docstring, its formulas typeset
+    (:mod:`docmath`). Nothing is typed: a module added to a family's folder is
+    listed here at the next build.
     """
 
-    has_content = True
+    has_content = False
 
     def run(self):
         import importlib
 
+        import depthcore
         from docutils.statemachine import StringList
 
         lines = []
-        for name in (line.strip() for line in self.content):
-            if not name:
-                continue
-            try:
-                module = importlib.import_module(name)
-            except ImportError as error:
-                raise self.error(f"no module {name!r}: {error}") from error
+        for name in depthcore.MODULES:
+            module = importlib.import_module(name)
             summary = rst_to_myst(docmath.convert_line(module_summary(module)))
-            lines.append(f"* {{py:mod}}`{name}`: {summary}")
+            indent = "  " if name.count(".") > 1 else ""
+            lines.append(f"{indent}* {{py:mod}}`{name}`: {summary}")
         container = nodes.container(classes=["module-summaries"])
         self.state.nested_parse(StringList(lines, source=self.get_source_info()[0]), 0, container)
         return container.children
+
+
+def family_modules(package: str) -> list[str]:
+    """The modules a family's API page documents: the package, then its modules.
+
+    Parameters
+    ----------
+    package : str
+        ``depthcore.<family>`` (one of ``depthcore.SUBPACKAGES``), or a module
+        directly in ``depthcore/`` (``depthcore.formatting``).
+
+    Returns
+    -------
+    list of str
+        ``package`` and, for a family, the names in ``depthcore.MODULES`` below it.
+    """
+    import depthcore
+
+    if package not in depthcore.MODULES:
+        raise ValueError(f"package must be one of depthcore.MODULES, got {package!r}")
+    return [package] + [m for m in depthcore.MODULES if m.startswith(f"{package}.")]
+
+
+class PackageReference(SphinxDirective):
+    """The API reference of one family: its package's docstring, then each module's.
+
+    Each module is a section of the page titled by its name, rendered by autodoc
+    (``automodule`` with its members); the list comes from the package's folder
+    (:func:`family_modules`), so a new module needs no page of its own.
+    """
+
+    required_arguments = 1
+
+    def run(self):
+        from docutils.statemachine import StringList
+
+        names = family_modules(self.arguments[0])
+        options = ":members:" if len(names) == 1 else ":no-members:"
+        lines = ["```{eval-rst}", f".. automodule:: {names[0]}", f"   {options}", "```", ""]
+        for name in names[1:]:
+            lines += [f"## `{name}`", "", "```{eval-rst}", f".. automodule:: {name}"]
+            lines += ["   :members:", "```", ""]
+        node = nodes.section()
+        node.document = self.state.document
+        source = self.get_source_info()[0]
+        self.state.nested_parse(StringList(lines, source), 0, node, match_titles=True)
+        return node.children
 
 
 def set_release(app, config):
@@ -535,6 +582,7 @@ def setup(app):
     app.connect("env-merge-info", merge_citation_owners)
     app.connect("autodoc-process-docstring", docmath.typeset_docstring)
     app.add_directive("depthcore-module-summaries", ModuleSummaries)
+    app.add_directive("depthcore-package", PackageReference)
     app.add_directive("figure", Figure, override=True)
     app.add_directive("math", Math, override=True)
     app.add_transform(DropLabFrontmatter)
