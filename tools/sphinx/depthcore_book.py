@@ -505,8 +505,9 @@ class ModuleSummaries(SphinxDirective):
     def run(self):
         import importlib
 
-        import depthcore
         from docutils.statemachine import StringList
+
+        import depthcore
 
         lines = []
         for name in depthcore.MODULES:
