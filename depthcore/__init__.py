@@ -86,6 +86,7 @@ def _modules() -> tuple[str, ...]:
             found.append("depthcore.formatting")
     return tuple(found)
 
+
 #: The names a caller reaches through the package itself.
 _LAZY = {
     "FILTERS": ("depthcore.registry.filters", "FILTERS"),
