@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -214,7 +216,7 @@ def test_make_books_reads_the_pages_once_for_the_pdf_and_the_book_and_ships_the_
     assert latex < side_by_side and "books-html books-xelatex" in books[side_by_side:]
     html = makefile_recipe("books-html")
     assert "jupyter-book build . " in html and "--all" not in html and "--builder" not in html
-    assert "$(xelatex)" in makefile_recipe("books-xelatex")
+    assert "tools/xelatex.sh _build/latex" in makefile_recipe("books-xelatex")
     after = books[side_by_side:]
     assert "cp $(PDF) $(DOWNLOADS)/depthcore.pdf" in after
     assert "cp $(PDF) _build/html/downloads/depthcore.pdf" in after
@@ -434,17 +436,58 @@ def test_the_cached_outputs_are_compared_with_the_references(tmp_path, monkeypat
 def test_make_test_executes_each_page_once_alone_before_the_builds():
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
     recipe = makefile_recipe("test")
-    assert "for stage in $(TEST_STAGES)" in recipe
-    assert "$(MAKE) --no-print-directory $$stage" in recipe
+    assert "tools/run-stages.sh check-lab $(LAB_BESIDE) $(TEST_STAGES)" in recipe
     steps = makefile.split("\nTEST_STAGES := ", 1)[1].split("\n", 1)[0].split()
     assert steps.index("core") < steps.index("notebooks-alone") < steps.index("books")
     assert steps.index("books") < steps.index("check-book")
     # check-lab beside the stages from one of them on, waited for at the end.
     assert makefile.split("\nLAB_BESIDE := ", 1)[1].split("\n", 1)[0] in steps
-    assert "$(MAKE) --no-print-directory check-lab" in recipe and "wait $$lab" in recipe
     assert "notebooks-standalone" not in steps + recipe.split()  # a second execution of every page
     alone = makefile_recipe("notebooks-alone")
     assert "cache --execute --python $(ALONE_VENV)/bin/python" in alone
+
+
+STAGES_MAKEFILE = """\
+one:
+\t@echo one ran
+two:
+\t@sleep 0.2; echo two ran
+three:
+\t@echo three ran
+beside:
+\t@echo beside ran
+broken:
+\t@exit 3
+"""
+
+
+def _stages(tmp_path, *args):
+    (tmp_path / "Makefile").write_text(STAGES_MAKEFILE, encoding="utf-8")
+    return subprocess.run(
+        [str(ROOT / "tools" / "run-stages.sh"), *args],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "MAKE": "make"},
+    )
+
+
+def test_the_stage_runner_runs_in_order_times_each_and_runs_one_beside(tmp_path):
+    out = _stages(tmp_path, "beside", "two", "one", "two", "three")
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    ran = [line for line in lines if line.endswith(" ran")]
+    # the stages in order; the one beside, started with "two", printed at the end
+    assert ran == ["one ran", "two ran", "three ran", "beside ran"]
+    assert "make test: beside took" in lines[-2]
+    assert lines[-1].startswith("make test: passed (one 0 s, two 0 s, three 0 s;")
+
+
+def test_the_stage_runner_stops_at_the_first_failing_stage_and_fails(tmp_path):
+    out = _stages(tmp_path, "beside", "one", "one", "broken", "three")
+    assert out.returncode == 1
+    assert "three ran" not in out.stdout and "beside ran" in out.stdout
+    assert out.stderr.strip().endswith("make test: failed")
 
 
 # --- JupyterLab ----------------------------------------------------------------------------
