@@ -30,6 +30,19 @@ is missing or stale.
 Results are stored by :func:`encode`: dicts, lists, tuples, strings,
 numbers, None, NumPy arrays and scalars, and depthcore's dataclasses and
 named tuples.
+
+Why not ``joblib.Memory``: it is the right tool for a local cache, but these
+records are something else, committed provenance that ships in the source
+archive and is read on the reader's machine. ``joblib.Memory`` keys a result
+on the cached function's own code only: with joblib 1.6.0, a result stays in
+use after a change to a function that the cached one calls (checked: ``f``
+calling ``g``, ``g`` changed from ``x + 1`` to ``x + 100``, ``f(1)`` still
+returns the stored 2), where a record here is stale as soon as any depthcore
+module the function imports changes (:func:`stale`). Its results are pickles,
+which a review cannot read in a diff and which depend on the classes'
+module paths and the library versions that wrote them; a record is JSON, with
+the date, machine, duration and code fingerprint beside the result, and is read
+without unpickling anything.
 """
 
 from __future__ import annotations
