@@ -34,25 +34,13 @@ Every module is an attribute of the package, imported when first used
 """
 
 import importlib
+from pathlib import Path
 
 from depthcore import _moved
 
-#: The wing's modules, in the book's order, imported on first access as attributes.
-MODULES = (
-    "paper",
-    "beyond_filters",
-    "beyond_study",
-    "beyond_sweeps",
-    "beyond_linear",
-    "beyond_frames",
-    "beyond_bound",
-    "beyond_hard",
-    "beyond_conjecture",
-    "style",
-    "notebook",
-    "crossref",
-    "live",
-    "benchmark_tables",
+#: The wing's modules, read from its folder (not imported), each imported on first access.
+MODULES = tuple(
+    sorted(p.stem for p in Path(__file__).parent.glob("*.py") if not p.stem.startswith("_"))
 )
 
 __all__ = ["MODULES", *MODULES]

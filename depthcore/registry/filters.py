@@ -435,7 +435,7 @@ def check_names(names) -> tuple:
     names = tuple(names)
     unknown = set(names) - set(FILTERS)
     if unknown:
-        raise ValueError(f"filters must be among {names()}, got {sorted(unknown)}")
+        raise ValueError(f"filters must be among {tuple(FILTERS)}, got {sorted(unknown)}")
     return names
 
 
