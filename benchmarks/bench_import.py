@@ -21,7 +21,7 @@ RUNS = 15
 #: The depthcore modules that ``import depthcore`` loads (fingerprinted in the record).
 MEASURES = (
     "__init__",
-    "_moved",
+    "_paths",
     "problem",
     "problem.gaussian",
     "problem.model",

@@ -37,12 +37,12 @@ The names below are the package's front door; everything else is imported from
 its subpackage (``from depthcore.exact import optimal``). Subpackages are
 attributes of the package, imported when first used. The modules' paths before
 0.2 (``depthcore.optimal``) still import, with a :class:`DeprecationWarning`
-naming the new path, until 0.3 (``depthcore._moved``).
+naming the new path, until 0.3 (``depthcore._paths``).
 """
 
 import importlib
 
-from depthcore import _moved
+from depthcore import _paths
 from depthcore.problem.gaussian import Gaussian, paper_prior
 from depthcore.problem.model import bearings_from_pixels, noise_free_state
 from depthcore.problem.scenarios import SCENARIOS
@@ -106,7 +106,7 @@ __all__ = [
     "track",
 ]
 
-_moved.install()
+_paths.install()
 
 
 def __getattr__(name):
@@ -119,8 +119,8 @@ def __getattr__(name):
     if name in _LAZY:
         module, attribute = _LAZY[name]
         return getattr(importlib.import_module(module), attribute)
-    if f"{__name__}.{name}" in _moved.MOVED:
-        return _moved.moved_module(f"{__name__}.{name}")
+    if f"{__name__}.{name}" in _paths.MOVED:
+        return _paths.moved_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import depthcore
-from depthcore import _moved
+from depthcore import _paths
 
 PACKAGE = Path(depthcore.__file__).parent
 
@@ -41,6 +41,24 @@ def test_the_front_door_names_resolve_without_a_warning():
         "len(depthcore.FILTERS) > 5, depthcore.exact.optimal.__name__)"
     )
     assert out == "marginals track True depthcore.exact.optimal"
+
+
+def test_every_module_is_an_attribute_of_its_package_after_import_depthcore():
+    out = _run(
+        "import functools, depthcore\n"
+        "for name in depthcore.MODULES:\n"
+        "    got = functools.reduce(getattr, name.split('.')[1:], depthcore)\n"
+        "    assert got.__name__ == name, name\n"
+        "print(len(depthcore.MODULES))"
+    )
+    assert int(out) == len(depthcore.MODULES)
+
+
+def test_a_missing_module_of_a_subpackage_is_an_attribute_error():
+    with pytest.raises(AttributeError, match="'depthcore.exact' has no attribute 'nothing'"):
+        depthcore.exact.nothing  # noqa: B018
+    with pytest.raises(AttributeError, match="has no attribute '_private'"):
+        depthcore.studies._private  # noqa: B018
 
 
 def test_star_import_imports_neither_the_book_nor_every_module():
@@ -87,9 +105,9 @@ def test_an_unknown_attribute_raises_attribute_error():
 # --- the paths before 0.2 -------------------------------------------------------------
 
 
-@pytest.mark.parametrize("old", sorted(_moved.MOVED))
+@pytest.mark.parametrize("old", sorted(_paths.MOVED))
 def test_an_old_path_imports_the_new_module_with_a_warning_naming_it(old):
-    new = _moved.MOVED[old]
+    new = _paths.MOVED[old]
     code = (
         "import warnings, sys\n"
         "warnings.simplefilter('always')\n"

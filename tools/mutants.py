@@ -139,8 +139,8 @@ MUTANTS = [
     (
         "readings figure draws one reading twice",
         "depthcore/book/paper.py",
-        "m = _filters.optimal.marginals(s.mu, s.rho, s.prior, reading=reading)",
-        'm = _filters.optimal.marginals(s.mu, s.rho, s.prior, reading="derived")',
+        "m = optimal.marginals(s.mu, s.rho, s.prior, reading=reading)",
+        'm = optimal.marginals(s.mu, s.rho, s.prior, reading="derived")',
         "tests/test_figures.py",
     ),
     (

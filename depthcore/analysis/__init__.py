@@ -12,3 +12,9 @@ Where a new thing goes: a new yardstick for the filters, or a new independent
 route for checking one, goes here. It may import every family of filters,
 never the registry or the studies, which use it.
 """
+
+from depthcore import _paths
+
+
+def __getattr__(name):
+    return _paths.submodule(__name__, name)

@@ -36,7 +36,7 @@ Every module is an attribute of the package, imported when first used
 import importlib
 from pathlib import Path
 
-from depthcore import _moved
+from depthcore import _paths
 
 #: The wing's modules, read from its folder (not imported), each imported on first access.
 MODULES = tuple(
@@ -49,8 +49,8 @@ __all__ = ["MODULES", *MODULES]
 def __getattr__(name):
     if name in MODULES:
         return importlib.import_module(f"{__name__}.{name}")
-    if f"{__name__}.{name}" in _moved.MOVED:
-        return _moved.moved_module(f"{__name__}.{name}")
+    if f"{__name__}.{name}" in _paths.MOVED:
+        return _paths.moved_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

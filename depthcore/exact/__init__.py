@@ -18,3 +18,9 @@ Where a new thing goes: another way to compute the exact posterior, or a new
 use of the bank (an online form, a likelihood), goes here. It may import
 :mod:`depthcore.problem` and :mod:`depthcore.kalman`, nothing above.
 """
+
+from depthcore import _paths
+
+
+def __getattr__(name):
+    return _paths.submodule(__name__, name)

@@ -25,10 +25,13 @@ names read from this package still work, with a :class:`DeprecationWarning`
 naming :mod:`depthcore.kalman.linear`, until 0.3.
 """
 
-from depthcore import _moved
+from depthcore import _paths
 
 
 def __getattr__(name):
     if name.startswith("__"):
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return _moved.moved_attribute(__name__, f"{__name__}.linear", name)
+    try:
+        return _paths.submodule(__name__, name)
+    except AttributeError:
+        return _paths.moved_attribute(__name__, f"{__name__}.linear", name)

@@ -15,3 +15,9 @@ resamples through :mod:`~depthcore.particles.resampling`; then its registry
 entry and its test. It may import the families below: the problem, the
 Gaussian filters (for a proposal) and the exact filter (for a bank).
 """
+
+from depthcore import _paths
+
+
+def __getattr__(name):
+    return _paths.submodule(__name__, name)

@@ -19,3 +19,9 @@ describe a track's frames, goes here, beside :mod:`~depthcore.problem.model`;
 a new experiment of the paper's kind is an entry of
 :data:`~depthcore.problem.scenarios.SCENARIOS`.
 """
+
+from depthcore import _paths
+
+
+def __getattr__(name):
+    return _paths.submodule(__name__, name)

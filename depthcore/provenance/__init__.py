@@ -10,3 +10,9 @@ The records themselves are package data beside these modules
 kind of record, or a new field of the environment a record states, goes here.
 It imports no filter: it fingerprints their sources.
 """
+
+from depthcore import _paths
+
+
+def __getattr__(name):
+    return _paths.submodule(__name__, name)

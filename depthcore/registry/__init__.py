@@ -16,3 +16,9 @@ gets one entry in :data:`~depthcore.registry.filters.FILTERS`; the command
 line, the studies, the API reference and the README's list of filters follow
 from the table.
 """
+
+from depthcore import _paths
+
+
+def __getattr__(name):
+    return _paths.submodule(__name__, name)

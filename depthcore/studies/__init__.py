@@ -17,3 +17,9 @@ Where a new thing goes: a new study, or a new score, goes here; a study one
 chapter of the book alone runs goes with that chapter in :mod:`depthcore.book`.
 It may import every family below it, through the registry.
 """
+
+from depthcore import _paths
+
+
+def __getattr__(name):
+    return _paths.submodule(__name__, name)

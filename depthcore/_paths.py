@@ -1,6 +1,11 @@
-"""The modules that moved in depthcore 0.2, still importable by their old paths until 0.3.
+"""How the package's modules are reached: as attributes of their package, and by old paths.
 
-Importing a module by its old path (``import depthcore.optimal``, ``from
+A subpackage's modules are attributes of it, imported when first read
+(``import depthcore; depthcore.exact.optimal``): each subpackage's
+``__getattr__`` calls :func:`submodule`.
+
+The modules that moved in depthcore 0.2 are still importable by their old
+paths until 0.3. Importing a module by its old path (``import depthcore.optimal``, ``from
 depthcore import optimal``, ``from depthcore.book import records``) returns the
 module at its new path and warns once, with a :class:`DeprecationWarning`
 naming that path. The linear Kalman filter's module ``depthcore.kalman`` is now
@@ -14,6 +19,7 @@ import importlib
 import importlib.machinery
 import sys
 import warnings
+from pathlib import Path
 
 #: The release in which the old paths stop working.
 REMOVED_IN = "0.3"
@@ -62,6 +68,27 @@ MOVED = {
     "depthcore.book.formatting": "depthcore.formatting",
     "depthcore.live": "depthcore.book.live",
 }
+
+
+def submodule(package: str, name: str):
+    """The module ``name`` of ``package`` (a folder of the package), imported when first read.
+
+    Parameters
+    ----------
+    package : str
+        The subpackage, e.g. ``"depthcore.exact"``.
+    name : str
+        The attribute read, e.g. ``"optimal"``.
+
+    Raises
+    ------
+    AttributeError
+        When ``package`` has no public module ``name``.
+    """
+    folder = Path(sys.modules[package].__file__).parent
+    if name.startswith("_") or not (folder / f"{name}.py").is_file():
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+    return importlib.import_module(f"{package}.{name}")
 
 
 def message(old: str, new: str) -> str:
