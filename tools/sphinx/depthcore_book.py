@@ -542,11 +542,14 @@ def family_modules(package: str) -> list[str]:
 
 
 class PackageReference(SphinxDirective):
-    """The API reference of one family: its package's docstring, then each module's.
+    """The API reference of one family's modules, each a section of the page.
 
-    Each module is a section of the page titled by its name, rendered by autodoc
+    Each module is a section titled by its name, rendered by autodoc
     (``automodule`` with its members); the list comes from the package's folder
-    (:func:`family_modules`), so a new module needs no page of its own.
+    (:func:`family_modules`), so a new module needs no page of its own. The
+    page itself shows the family's own docstring above (the sections are
+    attached to the page as they are parsed, so that text comes first there);
+    a module directly in ``depthcore/`` is rendered whole, members included.
     """
 
     required_arguments = 1
@@ -555,8 +558,9 @@ class PackageReference(SphinxDirective):
         from docutils.statemachine import StringList
 
         names = family_modules(self.arguments[0])
-        options = ":members:" if len(names) == 1 else ":no-members:"
-        lines = ["```{eval-rst}", f".. automodule:: {names[0]}", f"   {options}", "```", ""]
+        lines = []
+        if len(names) == 1:
+            lines += ["```{eval-rst}", f".. automodule:: {names[0]}", "   :members:", "```", ""]
         for name in names[1:]:
             lines += [f"## `{name}`", "", "```{eval-rst}", f".. automodule:: {name}"]
             lines += ["   :members:", "```", ""]
