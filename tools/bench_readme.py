@@ -2,7 +2,7 @@
 
 The README's section "Benchmark" holds, between the marker comments
 ``<!-- bench:KEY -->`` and ``<!-- /bench:KEY -->``, the blocks of
-:func:`depthcore.book.benchmark_tables.bench_readme_blocks`: each a table made from the
+:func:`depthcore.book.benchmark_tables.bench_blocks`: each a table made from the
 records ``depthcore/provenance/benchmark_records/<script>.json``
 (:mod:`depthcore.provenance.benchmarks`), with
 the date and machine they were measured on. ``make bench`` runs this after
@@ -58,7 +58,7 @@ def main(argv=None) -> int:
     p.add_argument("--check", action="store_true", help="fail if the README is not up to date")
     args = p.parse_args(argv)
     text = README.read_text(encoding="utf-8")
-    new = regenerate(text, benchmark_tables.bench_readme_blocks(records()))
+    new = regenerate(text, benchmark_tables.bench_blocks(records()))
     if args.check:
         if new != text:
             print(
