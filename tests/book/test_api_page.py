@@ -3,9 +3,10 @@
 ``book/api.md`` lists the modules with the first paragraph of each docstring,
 and ``book/api/<name>.md`` renders, through Sphinx autodoc, one module: a
 ``py:module`` target (``id="module-depthcore.<name>"``) followed by the
-module's documented functions and classes. The pages follow the order of the
-README's module map ("The package, module by module"). The docstrings'
-formulas are typeset (MathJax), and no reST markup is shown raw.
+module's documented functions and classes. The pages document the modules of
+``depthcore.MODULES``, in its order: the package's module map, family by family,
+which the page "Using depthcore" (``book/using.md``) generates from the same list.
+The docstrings' formulas are typeset (MathJax), and no reST markup is shown raw.
 """
 
 from __future__ import annotations
@@ -17,14 +18,17 @@ from conftest import ROOT, toc_pages
 import depthcore
 
 RAW_ROLE_RE = re.compile(r":(math|func|class|mod|data|meth|attr):`")
-MAP_ROW_RE = re.compile(r"^\| ((?:`\w+`(?:, )?)+) \|", re.MULTILINE)
+AUTOMODULE_RE = re.compile(r"^\.\. automodule:: (\S+)$", re.MULTILINE)
 
 
-def readme_module_map() -> list[str]:
-    """The modules of README.md's module map, in its order."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = text.split("## The package, module by module", 1)[1].split("\n## ", 1)[0]
-    return [name for row in MAP_ROW_RE.findall(section) for name in re.findall(r"`(\w+)`", row)]
+def api_modules() -> list[str]:
+    """The modules the API pages document (their ``automodule`` directives), in TOC order."""
+    pages = [p for p in toc_pages() if p.startswith("book/api/")]
+    return [
+        name
+        for page in pages
+        for name in AUTOMODULE_RE.findall((ROOT / f"{page}.md").read_text(encoding="utf-8"))
+    ]
 
 
 def page_html(html_dir, page: str) -> str:
@@ -33,10 +37,13 @@ def page_html(html_dir, page: str) -> str:
     return path.read_text(encoding="utf-8")
 
 
-def test_module_pages_follow_the_readme_module_map():
-    pages = [p.removeprefix("book/api/") for p in toc_pages() if p.startswith("book/api/")]
-    assert sorted(readme_module_map()) == sorted(depthcore.MODULES)
-    assert pages == readme_module_map()
+def test_module_pages_follow_the_packages_module_map():
+    documented = api_modules()
+    missing = [name for name in depthcore.MODULES if name not in documented]
+    assert not missing, f"the API pages do not document {missing}"
+    assert documented == list(depthcore.MODULES), (
+        "the API pages are not in depthcore.MODULES' order"
+    )
 
 
 def test_each_module_page_documents_its_module_and_members(html_dir):
