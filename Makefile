@@ -191,7 +191,7 @@ BENCH ?= $(basename $(notdir $(wildcard benchmarks/bench_*.py)))
 bench: $(EDITABLE) ## every benchmark and its record (BENCH="bench_bank": one)
 	@for b in $(BENCH); do echo "== benchmarks/$$b.py"; \
 	  TIMEFORMAT="$$b took %R s"; time $(PY) benchmarks/$$b.py; done
-	$(PY) tools/bench_readme.py
+	$(PY) tools/readme.py
 	$(PY) tools/check_notebooks.py update $(BENCH_PAGES)
 
 clean: ## remove the build outputs (make distclean also removes .venv/)

@@ -1,8 +1,8 @@
-"""The README's "Use it from Python" example runs, and the book's intro shows the same code.
+"""The README's "Use it from Python" example runs, and the book shows the same code.
 
-The intro runs the example as a code cell, whose output ``make notebooks``
-checks against book/_nbval/; here the README's copy is run and compared with
-the registry called directly.
+The book's intro and its page "Using depthcore" run the example as a code
+cell, whose output ``make notebooks`` checks against book/_nbval/; here the
+README's copy is run and compared with the registry called directly.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from depthcore.exact import optimal
 from depthcore.registry import filters
@@ -26,9 +27,10 @@ def readme_example() -> str:
     return re.search(r"```python\n(.*?)```", section, re.DOTALL).group(1)
 
 
-def test_readme_example_is_the_intros_code_cell():
-    intro = (ROOT / "book" / "intro.md").read_text(encoding="utf-8")
-    assert "```{code-cell} ipython3\n" + readme_example() + "```" in intro
+@pytest.mark.parametrize("page", ["intro", "using"])
+def test_readme_example_is_a_code_cell_of_the_book(page):
+    text = (ROOT / "book" / f"{page}.md").read_text(encoding="utf-8")
+    assert "```{code-cell} ipython3\n" + readme_example() + "```" in text
 
 
 def test_readme_example_runs_and_prints_each_filters_depth():

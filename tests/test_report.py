@@ -322,13 +322,13 @@ def test_bench_texts_format_the_records_numbers():
         benchmark_tables.bench_texts("bench_nothing", r)
 
 
-def test_bench_readme_blocks_hold_every_table_and_its_origin():
+def test_bench_blocks_hold_every_table_and_its_origin():
     from depthcore.provenance import benchmarks
 
     names = ["bench_bank", "bench_ekf_filterpy", "bench_import", "bench_kalman"]
     names += ["bench_optimal", "bench_rbpf", "bench_trials", "bench_frames", "bench_range_ekf"]
     records = {n: benchmarks.read(n) for n in names}
-    blocks = benchmark_tables.bench_readme_blocks(records)
+    blocks = benchmark_tables.bench_blocks(records)
     assert set(blocks) == set(benchmark_tables.bench_tables(records))
     for key, block in blocks.items():
         assert block.startswith("| ") and "Measured " in block, key

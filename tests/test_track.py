@@ -280,22 +280,25 @@ def test_bad_pixels_are_refused_by_name(args, name):
         depthcore.bearings_from_pixels(*args)
 
 
-# --- the README ------------------------------------------------------------------------------
+# --- the page "Using depthcore" ----------------------------------------------------------------
 
 
-def readme_track_example() -> str:
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = text.split("### One track, every frame\n", 1)[1].split("\n## ", 1)[0]
-    return re.search(r"```python\n(.*?)```", section, re.DOTALL).group(1)
+def using_track_example() -> str:
+    """The code cell of book/using.md's section "One track, every frame" that runs ``track``."""
+    text = (ROOT / "book" / "using.md").read_text(encoding="utf-8")
+    section = text.split("## One track, every frame\n", 1)[1].split("\n## ", 1)[0]
+    cells = re.findall(r"```\{code-cell\} ipython3\n(.*?)```", section, re.DOTALL)
+    (code,) = [cell for cell in cells if "depthcore.track(" in cell and not cell.startswith(":")]
+    return code
 
 
-def test_the_readme_example_prints_the_track_of_eight_frames():
-    code = readme_track_example()
+def test_the_using_pages_example_prints_the_track_of_eight_frames():
+    code = using_track_example()
     assert "bearings_from_pixels" in code and "depthcore.track(" in code
     out = io.StringIO()
     namespace: dict = {}
     with contextlib.redirect_stdout(out):
-        exec(compile(code, "README.md", "exec"), namespace)
+        exec(compile(code, "book/using.md", "exec"), namespace)
     lines = out.getvalue().splitlines()
     t = namespace["track"]
     assert t.filtered.mean.shape == (8, 3) and len(lines) == 8
@@ -310,20 +313,25 @@ def test_the_readme_example_prints_the_track_of_eight_frames():
         assert_allclose(numbers, expected, atol=0.006)
 
 
-def test_the_readmes_quoted_depths_are_the_examples():
-    """The README's sentence on the example quotes the exact and the EKF's smoothed depth."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = text.split("### One track, every frame\n", 1)[1].split("```python", 1)[0]
-    section = " ".join(section.split())
-    quoted = re.search(
-        r"smoothed depth at frame 1 is (\d+\.\d+) ± (\d+\.\d+) .*? with `filter=\"ekf\"` "
-        r"it is (\d+\.\d+) ± (\d+\.\d+)",
-        section,
-    ).groups()
+def test_the_using_pages_quoted_depths_are_the_examples():
+    """The page's sentence on the example pastes the exact and the EKF's smoothed depth,
+    glued from the example's track and the EKF's run on the same bearings."""
+    text = (ROOT / "book" / "using.md").read_text(encoding="utf-8")
+    section = " ".join(text.split("## One track, every frame\n", 1)[1].split("\n## ", 1)[0].split())
+    assert (
+        "frame 1 is {eval}`use_exact` (the truth is {eval}`use_truth`" in section
+        and 'with `filter="ekf"` it is {eval}`use_ekf`' in section
+    )
+    assert 'glue("use_exact", f"{s.depth_mean[0]:.2f} ± {s.depth_sd[0]:.2f}"' in section
+    assert 'ekf = depthcore.track(mu, rho, prior=prior, filter="ekf").smoothed' in section
+    assert 'glue("use_ekf", f"{ekf.depth_mean[0]:.2f} ± {ekf.depth_sd[0]:.2f}"' in section
     namespace: dict = {}
     with contextlib.redirect_stdout(io.StringIO()):
-        exec(compile(readme_track_example(), "README.md", "exec"), namespace)
+        exec(compile(using_track_example(), "book/using.md", "exec"), namespace)
     exact = namespace["track"].smoothed
     ekf = track(namespace["mu"], namespace["rho"], namespace["prior"], filter="ekf").smoothed
-    computed = (exact.depth_mean[0], exact.depth_sd[0], ekf.depth_mean[0], ekf.depth_sd[0])
-    assert list(quoted) == [f"{v:.2f}" for v in computed]
+    truth = namespace["truth"][1]
+    # what the page asserts: the exact depth within two of its SDs of the truth, the EKF's
+    # more than ten of its SDs from it
+    assert abs(exact.depth_mean[0] - truth) < 2 * exact.depth_sd[0]
+    assert abs(ekf.depth_mean[0] - truth) > 10 * ekf.depth_sd[0]

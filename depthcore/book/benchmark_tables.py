@@ -4,8 +4,8 @@ Recommended import: ``from depthcore.book import benchmark_tables``.
 
 :func:`bench_texts` gives one benchmark record's (:mod:`depthcore.provenance.benchmarks`)
 numbers as texts, :func:`bench_tables` the tables of the costs chapter,
-:func:`bench_readme_blocks` the README's tables and :func:`bench_origin` the
-machine and date a record was measured on.
+:func:`bench_blocks` every table with its notes (the page "Reproducing this book") and
+:func:`bench_origin` the machine and date a record was measured on.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ def _sci(x: float, digits: int = 1) -> str:
 
 
 def bench_origin(record: dict) -> str:
-    """When and where a benchmark's record was measured, as the book and the README state it.
+    """When and where a benchmark's record was measured, as the book states it.
 
     Parameters
     ----------
@@ -245,7 +245,7 @@ def _rbpf_bench_texts(r: dict) -> dict[str, str]:
     return out
 
 
-#: The problems of ``bench_range_ekf`` and how the README names them.
+#: The problems of ``bench_range_ekf`` and how the tables name them.
 _RANGE_EKF_PROBLEMS = {"fig2": "Figure 2 (3 frames)", "ten_frames": "a 10-frame track"}
 
 
@@ -307,7 +307,7 @@ def bench_texts(name: str, record: dict) -> dict[str, str]:
 
 
 def bench_tables(records: dict) -> dict[str, MarkdownTable]:
-    """The README's benchmark tables, from the records.
+    """The benchmarks' tables, from the records.
 
     Parameters
     ----------
@@ -526,8 +526,8 @@ def bench_tables(records: dict) -> dict[str, MarkdownTable]:
     return tables
 
 
-def bench_readme_blocks(records: dict) -> dict[str, str]:
-    """The README's benchmark blocks: each table of :func:`bench_tables` with its notes.
+def bench_blocks(records: dict) -> dict[str, str]:
+    """Every benchmark table with its notes: each table of :func:`bench_tables` as a block.
 
     Parameters
     ----------
