@@ -181,12 +181,13 @@ figures: $(EDITABLE) ## the paper's figures into figures/
 
 # The pages that read studies from their records: executed writing them, then reading them.
 RECORD_PAGES := marginals discrepancies beyond_filters beyond_study beyond_sweeps beyond_frames beyond_bound beyond_hard beyond_conjecture
-records: $(EDITABLE) ## every study the book reads from a record, again
+records: $(EDITABLE) ## every study the book reads from a record, again (and the README)
 	rm -f depthcore/provenance/study_records/*.json
 	DEPTHCORE_RECORDS=write $(PY) tools/check_notebooks.py update $(RECORD_PAGES)
 	$(PY) tools/check_notebooks.py update $(RECORD_PAGES)
+	$(PY) tools/readme.py
 
-BENCH_PAGES := marginals beyond_cost beyond_frames
+BENCH_PAGES := marginals beyond_cost beyond_frames reproducing
 BENCH ?= $(basename $(notdir $(wildcard benchmarks/bench_*.py)))
 bench: $(EDITABLE) ## every benchmark and its record (BENCH="bench_bank": one)
 	@for b in $(BENCH); do echo "== benchmarks/$$b.py"; \

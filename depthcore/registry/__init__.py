@@ -13,8 +13,8 @@
 
 Where a new thing goes: a new filter, once its module exists in its family,
 gets one entry in :data:`~depthcore.registry.filters.FILTERS`; the command
-line, the studies, the API reference and the README's list of filters follow
-from the table.
+line, the studies, the API reference and the table of filters of the page
+"Using depthcore" follow from the table.
 """
 
 from depthcore import _paths
