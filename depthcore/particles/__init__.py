@@ -1,4 +1,4 @@
-"""The particle filters and what they share: weights, resampling, replicas.
+"""The particle filters and what they share: resampling, weighted moments, replicas.
 
 * :mod:`~depthcore.particles.resampling`: the effective sample size, the
   resamplers (one signature), weighted moments;

@@ -1,4 +1,4 @@
-"""The problem: the paper's model, its Gaussians and prior, its experiments, the input checks.
+"""The problem: the model, its Gaussians and prior, its experiments, checks and log weights.
 
 The bottom of the house: the model and the primitives every family shares;
 nothing here imports another family.

@@ -125,7 +125,9 @@ def test_source_archive_is_an_sdist_of_this_version(html_dir):
 
 def test_source_archive_holds_the_benchmark_records(html_dir):
     # The pages that show the benchmarks read them from the installed package.
-    records = sorted(p.name for p in (ROOT / "depthcore" / "benchmark_records").glob("*.json"))
+    records = sorted(
+        p.name for p in (ROOT / "depthcore" / "provenance" / "benchmark_records").glob("*.json")
+    )
     assert records
     top = f"depthcore-{depthcore.__version__}"
     with tarfile.open(html_dir / "downloads" / "depthcore.tar.gz") as tar:

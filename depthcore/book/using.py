@@ -1,0 +1,76 @@
+"""The page "Using depthcore": the package's module map and its tables, from the package.
+
+Recommended import: ``from depthcore.book import using``.
+
+:func:`module_map` lists every module of ``depthcore.MODULES`` by family with
+the first paragraph of its docstring (:func:`module_summary`), and
+:func:`filter_table` every filter of the registry, so that the page's tables
+follow the package rather than a copy of it; :func:`limit` prints a limit of
+the inputs as the page's table of limits does.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import re
+
+import depthcore
+from depthcore.book.notebook import MarkdownTable
+from depthcore.registry.filters import FILTERS
+
+
+def family(module: str) -> str:
+    """The family of a module: ``depthcore.exact.optimal`` -> ``exact``; a top module's name."""
+    parts = module.split(".")
+    if len(parts) < 2 or parts[0] != "depthcore":
+        raise ValueError(f"module must be one of depthcore's modules, got {module!r}")
+    return parts[1]
+
+
+def module_summary(module: str) -> str:
+    """The first paragraph of a module's docstring on one line, its reST markup made Markdown.
+
+    Roles become code (``:class:`~a.b.C``` gives ```C```, ``:mod:`a.b``` gives
+    ```a.b```), double backquotes single ones, and a citation (``[aidala1983]_``)
+    is left to the module's own page.
+    """
+    doc = inspect.getdoc(importlib.import_module(module)) or ""
+    text = " ".join(doc.split("\n\n")[0].split())
+    text = re.sub(r":\w+:`~[\w.]*?(\w+)`", r"`\1`", text)
+    text = re.sub(r":\w+:`([\w.]+)`", r"`\1`", text)
+    text = re.sub(r"\s*\[\w+\]_", "", text)
+    return text.replace("``", "`")
+
+
+def module_map() -> MarkdownTable:
+    """Every module of ``depthcore.MODULES``: its family (named once), its path, its summary."""
+    rows = []
+    for name in depthcore.MODULES:
+        heading = name.count(".") == 1
+        rows.append([f"**{family(name)}**" if heading else "", f"`{name}`", module_summary(name)])
+    return MarkdownTable(["family", "module", "what it holds"], rows)
+
+
+def filter_table() -> MarkdownTable:
+    """Every filter of the registry: name, label, family, frames, noise, default, smoother."""
+    return MarkdownTable(
+        ["name", "label", "family", "frames", "process noise", "default", "smoother"],
+        [
+            [
+                f"`{name}`",
+                f.label,
+                f.family.replace("_", "-"),
+                "any $N \\geq 3$" if f.any_frames else "the paper's three",
+                "$q \\geq 0$" if f.with_process_noise else "$q = 0$ only",
+                "yes" if f.default else "when named",
+                "yes" if f.smoother is not None else "",
+            ]
+            for name, f in FILTERS.items()
+        ],
+    )
+
+
+def limit(x: float) -> str:
+    """A limit as the page's table prints it: ``1e6`` rather than ``1e+06``, ``1e-9``."""
+    return re.sub(r"e\+?0*(\d)", r"e\1", f"{x:g}").replace("e-0", "e-")

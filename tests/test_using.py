@@ -1,0 +1,43 @@
+"""The page "Using depthcore": its module map and tables come from the package itself."""
+
+import pytest
+
+import depthcore
+from depthcore.book import using
+from depthcore.registry.filters import FILTERS
+
+
+def test_family_names_each_modules_family_and_refuses_another_package():
+    assert using.family("depthcore.exact.optimal") == "exact"
+    assert using.family("depthcore.formatting") == "formatting"
+    with pytest.raises(ValueError, match="depthcore's modules"):
+        using.family("numpy.linalg")
+
+
+def test_module_summary_is_the_first_paragraph_with_markdown_for_rest():
+    summary = using.module_summary("depthcore.kalman.modified_polar")
+    assert summary.startswith("The EKF in modified polar coordinates")
+    assert "[aidala1983]_" not in summary and ":mod:" not in summary
+    assert "``" not in using.module_summary("depthcore.problem.weights")
+    assert using.module_summary("depthcore.registry").endswith("and one result.")
+
+
+def test_the_module_map_has_a_row_per_module_and_names_each_family_once():
+    table = using.module_map()
+    rows = table.rows
+    assert [r[1] for r in rows] == [f"`{m}`" for m in depthcore.MODULES]
+    named = [r[0] for r in rows if r[0]]
+    assert named == [f"**{using.family(m)}**" for m in depthcore.MODULES if m.count(".") == 1]
+
+
+def test_the_filter_table_has_a_row_per_registered_filter():
+    rows = using.filter_table().rows
+    assert [r[0] for r in rows] == [f"`{n}`" for n in FILTERS]
+    assert sum(r[5] == "yes" for r in rows) == sum(f.default for f in FILTERS.values())
+
+
+@pytest.mark.parametrize(
+    ("x", "text"), [(1e6, "1e6"), (1e-9, "1e-9"), (0.5, "0.5"), (1e-12, "1e-12"), (1e15, "1e15")]
+)
+def test_limit_prints_exponents_without_plus_signs_or_zeros(x, text):
+    assert using.limit(x) == text
