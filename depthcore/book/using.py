@@ -31,9 +31,9 @@ def family(module: str) -> str:
 def module_summary(module: str) -> str:
     """The first paragraph of a module's docstring on one line, its reST markup made Markdown.
 
-    Roles become code (``:class:`~a.b.C``` gives ```C```, ``:mod:`a.b``` gives
-    ```a.b```), double backquotes single ones, and a citation (``[aidala1983]_``)
-    is left to the module's own page.
+    A cross-reference role becomes code with the name it shows (the last part
+    of the name when it is abbreviated with a tilde), double backquotes become
+    single ones, and a citation is left to the module's own page.
     """
     doc = inspect.getdoc(importlib.import_module(module)) or ""
     text = " ".join(doc.split("\n\n")[0].split())
