@@ -261,36 +261,35 @@ def blocks(bench: dict | None = None) -> dict[str, str]:
     """The README's generated blocks, by key: ``findings``, ``figure`` and ``citation``."""
     bench = bench_records() if bench is None else bench
     p, b, c = paper_texts(), bound_texts(), cost_texts(bench)
-    findings = (
-        f"Computed as derived, the paper's three filters reproduce {p['matched']} of the "
-        f"{p['printed']} depth means and SDs that it prints with {p['printed_figures']}, at "
-        f"its {p['decimals']}, and Theorem 1 holds on the measurements of both (with the "
-        "theorem's prior the second-order filter's covariance is the EKF's, to "
-        f"{p['theorem_tol']} relative); the book redraws {p['all_figures']} with these "
-        "filters. The two numbers not reproduced, the optimal filter's with Figure 3, are "
-        "the print's: Eq. (16) drops a factor of the prior (as printed it gives the "
-        f"paper's mean, {p['fig3_paper_mean']}, where Eq. (6) itself gives "
-        f"{p['fig3_derived_mean']}), and the SD repeats the mean's digits; the covariance of "
-        "Eq. (8) must be 2ρ²J⁻¹, not the printed ρ²J⁻¹, and Figure 5's noise "
-        f'ρ = {p["rho5"]} is {p["pixels"]} pixels, not "about 1 pixel". With the paper\'s '
-        f"prior the EKF's depth SD on Figure 2 is {p['ekf_ratio']} times smaller than the "
-        f"optimal filter's; and over {b['trials']} tracks of Figure 2's point at "
-        f"ρ = {b['rho2']}, followed for {b['n_first']} to {b['n_last']} frames without "
-        "process noise and with the paper's prior rule, the EKF claims a depth SD below the "
-        f"Cramér–Rao bound at every number of frames ({b['ekf_sd3']} of it at "
-        f"{b['n_first']} frames) and from {b['n_second']} frames on its error is at least "
-        f"{b['ekf_rmse']} times the bound, while the second-order filter and the iterated "
-        f"EKF sit on the bound (their errors within {b['z']} standard errors of it, their "
-        f"stated SDs within {b['near']}). In the benchmarks' records (measured "
-        f"{c['date']}), the optimal filter costs {c['optimal_ekf_min']} to "
-        f"{c['optimal_ekf_max']} times the EKF per triple of bearings ({c['figures']}), "
-        "where brute-force quadrature of Eq. (6) on a three-dimensional grid would cost "
-        f"{c['grid_ratio']} times as much; and on {c['bank_trials']} tracks of "
-        f"{c['bank_frames']} frames the exact filter, a bank of Kalman filters over the "
-        f"depth, runs {c['bank_ratio']} times faster than a causal particle filter of "
-        f"{c['bank_particles']} particles, whose depth mean is still {c['bank_error']} posterior "
-        "SDs from the bank's."
-    )
+    findings = [
+        f"**Reproduced.** Computed as derived, the paper's three filters reproduce "
+        f"{p['matched']} of the {p['printed']} depth means and SDs printed with "
+        f"{p['printed_figures']}, at its {p['decimals']}, and Theorem 1 holds on both "
+        f"(the second-order covariance is the EKF's to {p['theorem_tol']} relative); the book "
+        f"redraws {p['all_figures']} with these filters.",
+        "**The paper's errors.** The two numbers not reproduced, the optimal filter's with "
+        "Figure 3, are the print's: Eq. (16) drops a factor of the prior (as printed it gives "
+        f"the paper's mean, {p['fig3_paper_mean']}, where Eq. (6) gives "
+        f"{p['fig3_derived_mean']}) and the SD repeats the mean's digits; Eq. (8)'s "
+        "covariance must be 2ρ²J⁻¹, not the printed ρ²J⁻¹; and Figure 5's "
+        f'ρ = {p["rho5"]} is {p["pixels"]} pixels, not "about 1 pixel".',
+        f"**The EKF, on Figure 2's point.** There its depth SD is {p['ekf_ratio']} times "
+        f"smaller than the optimal filter's; over {b['trials']} tracks of Figure 2's point "
+        f"(ρ = {b['rho2']}, {b['n_first']} to {b['n_last']} frames, no process noise, the "
+        "paper's prior rule) it claims an SD below the Cramér–Rao bound at every number of "
+        f"frames ({b['ekf_sd3']} of it at {b['n_first']}) and from {b['n_second']} frames on "
+        f"its error is at least {b['ekf_rmse']} times the bound, while the second-order "
+        f"filter and the iterated EKF sit on it (errors within {b['z']} standard errors, "
+        f"stated SDs within {b['near']}).",
+        f"**Cost.** In the benchmarks' records (measured {c['date']}) the optimal "
+        f"filter costs {c['optimal_ekf_min']} to {c['optimal_ekf_max']} times the EKF per "
+        f"triple of bearings ({c['figures']}), where brute-force quadrature of Eq. (6) on a "
+        f"three-dimensional grid would cost {c['grid_ratio']} times as much; on "
+        f"{c['bank_trials']} tracks of {c['bank_frames']} frames the exact filter, a bank of "
+        f"Kalman filters over the depth, runs {c['bank_ratio']} times faster than a causal "
+        f"particle filter of {c['bank_particles']} particles, whose depth mean is still "
+        f"{c['bank_error']} posterior SDs from the bank's.",
+    ]
     s = SCENARIOS["fig2"]
     figure = (
         f"![The paper's Figure 2 reproduced: {paper.caption('fig2')}]"
@@ -301,7 +300,8 @@ def blocks(bench: dict | None = None) -> dict[str, str]:
         f"ρ = {_rho(s.rho)}."
     )
     figure = figure.split("\n\n")[0] + "\n\n" + _wrap(figure.split("\n\n")[1])
-    return {"findings": _wrap(findings), "figure": figure, "citation": citation()}
+    listed = "\n".join(_item(text) for text in findings)
+    return {"findings": listed, "figure": figure, "citation": citation()}
 
 
 def _wrap(text: str, width: int = 80) -> str:
@@ -314,6 +314,12 @@ def _wrap(text: str, width: int = 80) -> str:
         else:
             line = f"{line} {word}" if line else word
     return "\n".join(lines + [line])
+
+
+def _item(text: str, width: int = 80) -> str:
+    """``text`` as an item of a Markdown list, its lines wrapped at ``width`` and indented."""
+    lines = _wrap(text, width - 2).splitlines()
+    return "\n".join(["* " + lines[0]] + ["  " + line for line in lines[1:]])
 
 
 def figure_svg() -> bytes:
