@@ -356,17 +356,6 @@ FILTERS: dict[str, Filter] = {
     )
 }
 
-#: The paper's three filters.
-PAPER_FILTERS = tuple(name for name, f in FILTERS.items() if f.in_paper)
-
-#: The filters of the default outputs (tables, studies, sweeps, figures, the command line):
-#: the paper's three, the UKF and the particle filter.
-NAMES = tuple(name for name, f in FILTERS.items() if f.default)
-
-#: Every registered filter's name, the N-frame filters run only when named among them.
-ALL_NAMES = tuple(FILTERS)
-
-
 def register(entry: Filter) -> Filter:
     """Add a filter to :data:`FILTERS`, where the command line and the studies find it by name.
 
@@ -423,10 +412,24 @@ def names(default: bool = False, smoothed: bool = False) -> tuple:
     )
 
 
+#: The paper's three filters.
+PAPER_FILTERS = tuple(name for name, f in FILTERS.items() if f.in_paper)
+
+#: The filters of the default outputs (tables, studies, sweeps, figures, the command line):
+#: the paper's three, the UKF and the particle filter.
+NAMES = names(default=True)
+
+#: Every registered filter's name, the N-frame filters run only when named among them.
+ALL_NAMES = names()
+
+#: The filters with a smoother, which :func:`~depthcore.registry.tracking.track` runs.
+SMOOTHED = names(smoothed=True)
+
+
 def get(name: str) -> Filter:
     """The filter called ``name``; a :class:`ValueError` lists the names if there is none."""
     if name not in FILTERS:
-        raise ValueError(f"filter must be one of {names()}, got {name!r}")
+        raise ValueError(f"filter must be one of {tuple(FILTERS)}, got {name!r}")
     return FILTERS[name]
 
 
@@ -437,7 +440,3 @@ def check_names(names) -> tuple:
     if unknown:
         raise ValueError(f"filters must be among {tuple(FILTERS)}, got {sorted(unknown)}")
     return names
-
-
-#: The filters with a smoother, which :func:`~depthcore.registry.tracking.track` runs.
-SMOOTHED = tuple(name for name, f in FILTERS.items() if f.smoother is not None)
