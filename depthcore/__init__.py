@@ -71,17 +71,10 @@ def _modules() -> tuple[str, ...]:
     :data:`SUBPACKAGES`, followed by its modules in alphabetical order, and
     :mod:`depthcore.formatting` between the provenance and the command line.
     """
-    import pkgutil
-
     found = []
     for package in SUBPACKAGES:
-        path = [f"{__path__[0]}/{package}"]
         found.append(f"depthcore.{package}")
-        found += [
-            f"depthcore.{package}.{m.name}"
-            for m in sorted(pkgutil.iter_modules(path), key=lambda m: m.name)
-            if not m.name.startswith("_") and not m.ispkg
-        ]
+        found += [f"depthcore.{package}.{m}" for m in _paths.modules_in(f"{__path__[0]}/{package}")]
         if package == "provenance":
             found.append("depthcore.formatting")
     return tuple(found)

@@ -70,6 +70,18 @@ MOVED = {
 }
 
 
+def modules_in(folder) -> tuple[str, ...]:
+    """The public modules of a package's folder, by name, sorted; subpackages left out.
+
+    Read from the folder, nothing imported: :data:`depthcore.MODULES`, the
+    book's ``MODULES`` and :func:`submodule` all list modules this way.
+    """
+    import pkgutil
+
+    found = pkgutil.iter_modules([str(folder)])
+    return tuple(sorted(m.name for m in found if not m.ispkg and not m.name.startswith("_")))
+
+
 def submodule(package: str, name: str):
     """The module ``name`` of ``package`` (a folder of the package), imported when first read.
 
@@ -85,8 +97,7 @@ def submodule(package: str, name: str):
     AttributeError
         When ``package`` has no public module ``name``.
     """
-    folder = Path(sys.modules[package].__file__).parent
-    if name.startswith("_") or not (folder / f"{name}.py").is_file():
+    if name not in modules_in(Path(sys.modules[package].__file__).parent):
         raise AttributeError(f"module {package!r} has no attribute {name!r}")
     return importlib.import_module(f"{package}.{name}")
 

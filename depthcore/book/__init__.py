@@ -35,25 +35,20 @@ Every module is an attribute of the package, imported when first used
 (``import depthcore; depthcore.book.paper`` works).
 """
 
-import importlib
 from pathlib import Path
 
 from depthcore import _paths
 
 #: The wing's modules, read from its folder (not imported), each imported on first access.
-MODULES = tuple(
-    sorted(p.stem for p in Path(__file__).parent.glob("*.py") if not p.stem.startswith("_"))
-)
+MODULES = _paths.modules_in(Path(__file__).parent)
 
 __all__ = ["MODULES", *MODULES]
 
 
 def __getattr__(name):
-    if name in MODULES:
-        return importlib.import_module(f"{__name__}.{name}")
     if f"{__name__}.{name}" in _paths.MOVED:
         return _paths.moved_module(f"{__name__}.{name}")
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return _paths.submodule(__name__, name)
 
 
 def __dir__():

@@ -356,6 +356,7 @@ FILTERS: dict[str, Filter] = {
     )
 }
 
+
 def register(entry: Filter) -> Filter:
     """Add a filter to :data:`FILTERS`, where the command line and the studies find it by name.
 
