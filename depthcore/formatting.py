@@ -65,6 +65,19 @@ def rho_label(rho: float) -> str:
     return f"1/{1.0 / rho:.0f}"
 
 
+def sci(x: float, digits: int = 1) -> str:
+    """``x`` in scientific notation without a plus sign or leading zeros: ``"1.5e8"``, ``"1e-8"``.
+
+    Parameters
+    ----------
+    x : float
+    digits : int
+        Digits after the point of the mantissa (0: ``"1e-8"``).
+    """
+    mantissa, exponent = f"{x:.{digits}e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
 def plus_minus(mean: float, sd: float, decimals: int) -> str:
     """A mean and an SD as the book prints them, ``"6.466 ± 0.799"``.
 

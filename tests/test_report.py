@@ -317,7 +317,8 @@ def test_bench_texts_format_the_records_numbers():
     assert t["opt_nodes_max"] == str(max(triple["nodes"]))
     assert t["opt_origin"] == benchmark_tables.bench_origin(r)
     assert r["date"][:10] in t["opt_origin"] and r["machine"]["cpu"] in t["opt_origin"]
-    assert benchmark_tables._sci(1.5e8) == "1.5e8" and benchmark_tables._sci(0.0287, 2) == "2.87e-2"
+    assert formatting.sci(1.5e8) == "1.5e8" and formatting.sci(0.0287, 2) == "2.87e-2"
+    assert formatting.sci(1e-8, 0) == "1e-8"
     with pytest.raises(ValueError, match="name"):
         benchmark_tables.bench_texts("bench_nothing", r)
 

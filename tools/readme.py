@@ -34,6 +34,7 @@ import numpy as np
 from depthcore import SCENARIOS, Gaussian
 from depthcore.analysis import bound
 from depthcore.book import benchmark_tables, beyond_bound, paper
+from depthcore.formatting import rho_label, sci
 from depthcore.kalman import ekf, second_order
 from depthcore.problem import model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
@@ -79,17 +80,6 @@ def bench_records() -> dict:
     """Every benchmark's committed record, by script name."""
     names = sorted(p.stem for p in (ROOT / "benchmarks").glob("bench_*.py"))
     return {name: benchmarks.read(name) for name in names}
-
-
-def _rho(rho: float) -> str:
-    """A noise level as the paper gives it: ``1/200``."""
-    return f"1/{1 / rho:.0f}"
-
-
-def _sci(x: float) -> str:
-    """A power of ten as the book writes it: ``1e-8``."""
-    mantissa, exponent = f"{x:.0e}".split("e")
-    return f"{mantissa}e{int(exponent)}"
 
 
 def _figures(numbers) -> str:
@@ -156,11 +146,11 @@ def paper_texts() -> dict[str, str]:
         "all_figures": f"Figures {min(s.figure for s in SCENARIOS.values())}–"
         f"{max(s.figure for s in SCENARIOS.values())}",
         "decimals": {1: "one decimal", 2: "two decimals"}[REPORTED_DECIMALS],
-        "theorem_tol": _sci(THEOREM_TOL),
+        "theorem_tol": sci(THEOREM_TOL, 0),
         "fig3_paper_mean": f"{fig3['opt']['reported_mean']:.{REPORTED_DECIMALS}f}",
         "fig3_printed_mean": f"{fig3['opt_printed']['mean']:.2f}",
         "fig3_derived_mean": f"{fig3['opt']['mean']:.2f}",
-        "rho5": _rho(rho5),
+        "rho5": rho_label(rho5),
         "pixels": f"{pixels:.2f}",
         "ekf_ratio": f"{ekf_ratio:.1f}",
     }
@@ -204,7 +194,7 @@ def bound_texts() -> dict[str, str]:
         assert np.all(np.abs(x["sd_ratio"] - 1) < NEAR), name
     return {
         "trials": f"{run.result['ekf']['depth_error'].shape[-1]}",
-        "rho2": _rho(fig2.rho),
+        "rho2": rho_label(fig2.rho),
         "n_first": f"{BOUND_FRAMES[0]}",
         "n_second": f"{BOUND_FRAMES[1]}",
         "n_last": f"{BOUND_FRAMES[-1]}",
@@ -297,7 +287,7 @@ def blocks(bench: dict | None = None) -> dict[str, str]:
         f'The paper\'s Figure 2, drawn by `depthcore.book.paper.figure("fig2")`: the '
         f"{s.quantity} marginals of the optimal filter, the second-order approximation and "
         f"the EKF at time 3, for the bearings ({', '.join(f'{m:g}' for m in s.mu)}) at "
-        f"ρ = {_rho(s.rho)}."
+        f"ρ = {rho_label(s.rho)}."
     )
     figure = figure.split("\n\n")[0] + "\n\n" + _wrap(figure.split("\n\n")[1])
     listed = "\n".join(_item(text) for text in findings)

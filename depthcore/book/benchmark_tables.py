@@ -13,15 +13,10 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore.book.notebook import MarkdownTable
+from depthcore.formatting import sci
 from depthcore.problem.scenarios import SCENARIOS
 
 # --- the benchmarks' records -----------------------------------------------------------------
-
-
-def _sci(x: float, digits: int = 1) -> str:
-    """``x`` in scientific notation without a plus sign or leading zeros: ``"1.5e8"``."""
-    mantissa, exponent = f"{x:.{digits}e}".split("e")
-    return f"{mantissa}e{int(exponent)}"
 
 
 def bench_origin(record: dict) -> str:
@@ -50,17 +45,17 @@ def _optimal_bench_texts(r: dict) -> dict[str, str]:
     m, t = r["results"]["moments"], r["results"]["per_triple"]
     out = {
         "one_d_ms": f"{m['one_d_ms']:.2f}",
-        "one_d_error": _sci(m["one_d_error_sd"]),
-        "one_d_estimate": _sci(m["one_d_estimate_sd"]),
+        "one_d_error": sci(m["one_d_error_sd"]),
+        "one_d_estimate": sci(m["one_d_estimate_sd"]),
         "grid_rule": f"{m['grid_panels']} x 8 depth, {m['grid_order']}^2 (x, v) nodes",
         "grid_ms": f"{m['grid_ms']:.0f}",
-        "grid_error": _sci(m["grid_error_sd"]),
+        "grid_error": sci(m["grid_error_sd"]),
         "grid_ratio": f"{m['grid_ratio']:,.0f}",
     }
     if "nquad_one_integral_s" in m:
         out.update(
             nquad_s=f"{m['nquad_one_integral_s']:.1f}",
-            nquad_error=_sci(m["nquad_relative_error"]),
+            nquad_error=sci(m["nquad_relative_error"]),
             nquad_ratio=f"{m['nquad_ratio']:,.0f}",
             nquad_all_s=f"{m['nquad_all_s']:.0f}",
             nquad_all_ratio=f"{m['nquad_all_ratio']:,.0f}",
@@ -98,8 +93,8 @@ def _trials_bench_texts(r: dict) -> dict[str, str]:
         "per_trial_ms": f"{1e3 * x['vectorised_s'] / s['trials']:.3f}",
         "loop_s": f"{x['trial_by_trial_s']:.2f}",
         "ratio": f"{x['ratio']:.1f}",
-        "estimate": _sci(x["estimate_sd"]),
-        "difference": _sci(x["difference_sd"]),
+        "estimate": sci(x["estimate_sd"]),
+        "difference": sci(x["difference_sd"]),
     }
 
 
@@ -113,9 +108,9 @@ def _ekf_bench_texts(r: dict) -> dict[str, str]:
         "ratio_min": f"{x['ratio_min']:,.0f}",
         "ratio_max": f"{x['ratio_max']:,.0f}",
         "pairs": f"{r['sizes']['pairs']}",
-        "mean_difference": _sci(x["mean_difference_sd"]),
-        "cov_max": _sci(x["covariance_difference_max"]),
-        "cov_median": _sci(x["covariance_difference_median"]),
+        "mean_difference": sci(x["mean_difference_sd"]),
+        "cov_max": sci(x["covariance_difference_max"]),
+        "cov_median": sci(x["covariance_difference_median"]),
     }
 
 
@@ -129,8 +124,8 @@ def _kalman_bench_texts(r: dict) -> dict[str, str]:
         "ratio": f"{x['ratio']:.2f}",
         "ratio_min": f"{x['ratio_min']:.2f}",
         "ratio_max": f"{x['ratio_max']:.2f}",
-        "mean_difference": _sci(x["mean_difference_sd"]),
-        "cov_max": _sci(x["covariance_difference_max"]),
+        "mean_difference": sci(x["mean_difference_sd"]),
+        "cov_max": sci(x["covariance_difference_max"]),
     }
 
 
@@ -175,7 +170,7 @@ def _bank_bench_texts(r: dict) -> dict[str, str]:
         "three_one_d_ms": f"{three['one_d_ms_per_trial']:.3f}",
         "three_bank_ms": f"{three['bank_ms_per_trial']:.3f}",
         "three_ratio": f"{three['ratio']:.2f}",
-        "three_difference": _sci(three["difference_sd"]),
+        "three_difference": sci(three["difference_sd"]),
         "three_target": f"{x['targets']['three_frames_ratio']:g}",
         "online_trials": f"{online['trials']:,}",
         "online_frames": f"{online['frames']:,}",
@@ -185,7 +180,7 @@ def _bank_bench_texts(r: dict) -> dict[str, str]:
         "many_s": f"{many['time_s']:.1f}",
         "many_target_s": f"{many['target_s']:g}",
         "many_met": "met" if many["time_s"] < many["target_s"] else "not met",
-        "many_worst": _sci(many["worst_error_estimate_sd"]),
+        "many_worst": sci(many["worst_error_estimate_sd"]),
         "matched_trials": f"{matched['trials']}",
         "matched_frames": f"{matched['frames']}",
         "matched_replicas": f"{matched['replicas']}",
@@ -194,11 +189,11 @@ def _bank_bench_texts(r: dict) -> dict[str, str]:
         "matched_target_ratio": f"{matched['target_ratio']:g}",
         "matched_largest": f"{matched['particles'][-1]:,}",
         "matched_largest_s": f"{matched['time_per_run_s'][-1]:.2f}",
-        "matched_largest_error": _sci(matched["error_sd"][-1], 2),
-        "matched_target_error": _sci(matched["target_error_sd"], 0),
-        "matched_extrapolated_needed": _sci(matched["extrapolated_particles_needed"]),
-        "matched_extrapolated_s": _sci(matched["extrapolated_time_s"]),
-        "matched_extrapolated_ratio": _sci(matched["extrapolated_ratio"]),
+        "matched_largest_error": sci(matched["error_sd"][-1], 2),
+        "matched_target_error": sci(matched["target_error_sd"], 0),
+        "matched_extrapolated_needed": sci(matched["extrapolated_particles_needed"]),
+        "matched_extrapolated_s": sci(matched["extrapolated_time_s"]),
+        "matched_extrapolated_ratio": sci(matched["extrapolated_ratio"]),
     }
     per = np.array([w["ms_per_update"] for w in online["windows"]])
     for i, w in enumerate(online["windows"]):
@@ -212,7 +207,7 @@ def _bank_bench_texts(r: dict) -> dict[str, str]:
         zip(matched["particles"], matched["error_sd"], matched["time_per_run_s"], strict=True)
     ):
         out[f"matched_{i}_particles"] = f"{m:,}"
-        out[f"matched_{i}_error"] = _sci(e, 2)
+        out[f"matched_{i}_error"] = sci(e, 2)
         out[f"matched_{i}_s"] = f"{t:.2f}"
     return out
 
