@@ -17,8 +17,8 @@ Figure 2's problem), the cost of the paper's three filters, each the least
 time of ``--repeat`` calls, made in five rounds that interleave the filters and
 the scenarios: the optimal filter's moments
 (:func:`depthcore.exact.optimal.moments`, Eqs. (13)-(16)), the second-order
-approximation (:func:`depthcore.kalman.second_order.second_order`, Eqs. (7)-(8)) and
-the EKF (:func:`depthcore.kalman.ekf.ekf`, Eqs. (10)-(12)), with the optimal
+approximation (:func:`depthcore.kalman.second_order.run`, Eqs. (7)-(8)) and
+the EKF (:func:`depthcore.kalman.ekf.run`, Eqs. (10)-(12)), with the optimal
 filter's quadrature nodes in the depth and the evaluations of Eq. (6) that
 the brute-force grid (:func:`depthcore.analysis.reference.grid_moments`, its default
 rule) spends on the same triple.
@@ -130,7 +130,11 @@ def _nquad_normaliser():
     )
     # The same integral from the 1-D route: 2 pi exp(log_normaliser), since the
     # inner Gaussian integral over (x, v) is 2 pi / sqrt(det M) exp(-S / 2).
-    exact = 2 * math.pi * math.exp(optimal.marginals(s.mu, s.rho, s.prior).log_normaliser - shift)
+    exact = (
+        2
+        * math.pi
+        * math.exp(optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov).log_normaliser - shift)
+    )
     return abs(z / exact - 1.0)
 
 
@@ -142,8 +146,8 @@ def per_triple(repeat, rounds=5):
     """
     calls = {
         "optimal": lambda s: optimal.moments(np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov),
-        "second_order": lambda s: second_order.second_order(s.mu, s.rho, s.prior),
-        "ekf": lambda s: ekf.ekf(s.mu, s.rho, s.prior),
+        "second_order": lambda s: second_order.run(s.mu, s.rho, s.prior.mean, s.prior.cov),
+        "ekf": lambda s: ekf.run(s.mu, s.rho, s.prior.mean, s.prior.cov),
     }
     scenarios = [SCENARIOS[k] for k in TRIPLE_KEYS]
     out = {"keys": list(TRIPLE_KEYS)}
@@ -155,7 +159,7 @@ def per_triple(repeat, rounds=5):
                 best[name][i] = min(best[name][i], t)
     for name in calls:
         out[f"{name}_ms"] = [1e3 * t for t in best[name]]
-    out["nodes"] = [optimal.marginals(s.mu, s.rho, s.prior).n_nodes for s in scenarios]
+    out["nodes"] = [optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov).n_nodes for s in scenarios]
     out["brute_force_evaluations"] = [
         reference.grid_moments(s.mu, s.rho, s.prior).n_evaluations for s in scenarios
     ]

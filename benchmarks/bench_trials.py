@@ -3,7 +3,7 @@
 Draws 10,000 noisy triples of the Figure 2 scenario (each with the paper's
 prior built from its own measurements) and times, on one core,
 :func:`depthcore.exact.optimal.moments` vectorised over the trials against
-:func:`depthcore.exact.optimal.marginals` called trial by trial on a subset, and
+:func:`depthcore.exact.optimal.run` called trial by trial on a subset, and
 checks that the two agree. Usage: ``python benchmarks/bench_trials.py [--quick]``;
 the full run writes its record ``depthcore/provenance/benchmark_records/bench_trials.json``
 (:mod:`depthcore.provenance.benchmarks`), ``--quick`` (1,000 trials) writes outside the
@@ -23,7 +23,6 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from depthcore.exact import optimal
-from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.provenance import benchmarks
 from depthcore.studies import trials
@@ -45,10 +44,7 @@ def main(argv=None):
     t_vec = time.perf_counter() - t
     n = min(n_loop, len(tr.mu))
     t = time.perf_counter()
-    single = [
-        optimal.marginals(tr.mu[i], tr.rho, Gaussian(tr.prior_mean[i], tr.prior_cov))
-        for i in range(n)
-    ]
+    single = [optimal.run(tr.mu[i], tr.rho, tr.prior_mean[i], tr.prior_cov) for i in range(n)]
     t_loop = (time.perf_counter() - t) * len(tr.mu) / n
     diff = max(
         max(

@@ -15,6 +15,7 @@ naming that path. The linear Kalman filter's module ``depthcore.kalman`` is now
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.machinery
 import sys
@@ -105,6 +106,33 @@ def submodule(package: str, name: str):
 def message(old: str, new: str) -> str:
     """The warning's text: ``old`` has moved to ``new``."""
     return f"{old} has moved to {new}; the old path stops working in depthcore {REMOVED_IN}"
+
+
+def replaced(old: str, new: str):
+    """Decorate a function kept until :data:`REMOVED_IN` in favour of ``new``: it warns, naming it.
+
+    Parameters
+    ----------
+    old : str
+        The kept function's full name, e.g. ``"depthcore.kalman.ekf.ekf"``.
+    new : str
+        The call that replaces it, e.g. ``"depthcore.kalman.ekf.run(mu, rho, prior.mean,
+        prior.cov)"``.
+    """
+
+    def decorate(function):
+        @functools.wraps(function)
+        def warned(*args, **kwargs):
+            warnings.warn(
+                f"{old} is replaced by {new}; it stops working in depthcore {REMOVED_IN}",
+                DeprecationWarning,
+                stacklevel=2,
+            )
+            return function(*args, **kwargs)
+
+        return warned
+
+    return decorate
 
 
 def moved_module(old: str):

@@ -173,7 +173,7 @@ def test_eq13_16_densities_and_cdfs_match_the_one_dimensional_route():
     mx = converged_mixture(s.mu, s.rho, prior.mean, prior.cov, v_probe=v[1:])
     assert mx.velocity_gap < 1.0  # converged nodes resolve the velocity
     ref = optimal.batch_marginals(np.array([s.mu]), s.rho, prior.mean, prior.cov)
-    opt = optimal.marginals(s.mu, s.rho, prior)
+    opt = optimal.run(s.mu, s.rho, prior.mean, prior.cov)
     y = np.array([2.5, 5.0, 10.0, 20.0, 45.0, 120.0])
     assert_allclose(mx.depth_pdf(y), opt.depth_pdf(y), rtol=1e-9, atol=1e-15)
     assert_allclose(mx.depth_cdf(y), ref.depth_cdf(y), rtol=0, atol=1e-9)

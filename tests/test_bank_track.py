@@ -46,7 +46,7 @@ def test_eq16_node_density_is_the_one_dimensional_depth_density(scenario):
     s = scenario
     post = bpost.posterior(s.mu, s.rho, s.prior.mean, s.prior.cov)
     depths, density = bpost.node_density(post)
-    opt = optimal.marginals(s.mu, s.rho, s.prior)
+    opt = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     assert depths.shape == density.shape == post.probabilities.shape
     assert_allclose(depths, post.bank.nodes + 2.0, rtol=0, atol=0)
     assert_allclose(density, opt.depth_pdf(depths), rtol=0, atol=1e-9 * density.max())

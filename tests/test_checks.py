@@ -17,7 +17,7 @@ from depthcore.studies import frames
 
 PRIOR = paper_prior(noise_free_state(MU_17))
 FILTERS = [
-    lambda mu, rho, prior: optimal.marginals(mu, rho, prior),
+    lambda mu, rho, prior: optimal.run(mu, rho, prior.mean, prior.cov),
     lambda mu, rho, prior: second_order(mu, rho, prior),
     lambda mu, rho, prior: ekf(mu, rho, prior),
 ]

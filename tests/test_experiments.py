@@ -26,8 +26,8 @@ FIG2 = SCENARIOS["fig2"]
 
 def test_first_update_is_the_filters_first_step():
     u = beyond_filters.first_update(FIG2)
-    e = ekf.ekf(FIG2.mu, FIG2.rho, FIG2.prior)
-    k = ukf.ukf(FIG2.mu, FIG2.rho, FIG2.prior, allow_behind_camera=True)
+    e = ekf.run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
+    k = ukf.run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, allow_behind_camera=True)
     assert_allclose(u["ekf"].mean, e.means[0], rtol=0, atol=0)
     assert_allclose(u["ukf"].cov, k.covs[0], rtol=0, atol=0)
     assert u["mu1"] == FIG2.mu[0]
@@ -69,7 +69,7 @@ def test_particle_convergence_shapes(convergence):
         assert set(r["rmse"][name]) == set(estimates.MOMENTS)
         assert r["rmse"][name]["depth_mean"].shape == (2,)
         assert r["ess"][name].shape == (2, 3)
-    m = optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior)
+    m = optimal.run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     assert r["exact"]["depth_sd"] == m.depth_sd
 
 
@@ -134,10 +134,10 @@ def test_noise_study_gathers_the_study_at_each_level():
 def test_noise_sweep_at_the_papers_noise_matches_figure2():
     s = SCENARIOS["fig2"]
     r = beyond_sweeps.noise_sweep([s.rho])
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     assert r["optimal"]["depth_mean"][0] == pytest.approx(m.depth_mean, rel=1e-9)
     assert r["ekf"]["depth_sd"][0] == pytest.approx(
-        ekf.ekf(s.mu, s.rho, s.prior).posterior.marginal("y")[1]
+        ekf.run(s.mu, s.rho, s.prior.mean, s.prior.cov).posterior.marginal("y")[1]
     )
 
 
@@ -153,7 +153,7 @@ def test_prior_offset_sweep_matches_figure6():
     s6 = SCENARIOS["fig6"]
     r = beyond_sweeps.prior_offset_sweep([0.0, 2.0])
     assert r["ekf"]["depth_mean"][1] == pytest.approx(
-        ekf.ekf(s6.mu, s6.rho, s6.prior).posterior.mean[1]
+        ekf.run(s6.mu, s6.rho, s6.prior.mean, s6.prior.cov).posterior.mean[1]
     )
     assert r["second_order"]["depth_mean"][1] == pytest.approx(
         second_order(s6.mu, s6.rho, s6.prior).mean[1]
@@ -190,7 +190,7 @@ def test_prior_velocity_sweep_matches_direct_runs():
     sw = beyond_sweeps.prior_velocity_sweep(v)
     for i, v0 in enumerate(v):
         prior = _prior_with_velocity(v0)
-        direct = ekf.ekf(FIG2.mu, FIG2.rho, prior).posterior.marginal("y")
+        direct = ekf.run(FIG2.mu, FIG2.rho, prior.mean, prior.cov).posterior.marginal("y")
         assert_allclose([sw["ekf"]["depth_mean"][i], sw["ekf"]["depth_sd"][i]], direct, rtol=1e-9)
     opt = optimal.marginals(FIG2.mu, FIG2.rho, _prior_with_velocity(-2.0))
     assert_allclose(sw["optimal"]["depth_sd"][0], opt.depth_sd, rtol=1e-8)
@@ -236,7 +236,7 @@ def test_ekf_linearisation_rows_give_eq24_and_the_residual_gradients():
     for v0 in (0.0, 0.95, FIG2.c[2]):
         prior = _prior_with_velocity(v0)
         lin = paper.ekf_linearisation(FIG2.mu, FIG2.rho, prior)
-        P3 = ekf.ekf(FIG2.mu, FIG2.rho, prior).posterior.cov
+        P3 = ekf.run(FIG2.mu, FIG2.rho, prior.mean, prior.cov).posterior.cov
         F2 = np.array([[1.0, 0.0, -2.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
         eq24 = lin["rows"].T @ lin["rows"] / FIG2.rho**2 + F2.T @ np.linalg.solve(prior.cov, F2)
         assert np.abs(eq24 @ P3 - np.eye(3)).max() < 1e-7
@@ -298,7 +298,7 @@ def test_truth_study_rejects_bad_truths(bad):
 
 def test_resample_move_runs_are_the_filter_run_on_independent_streams():
     r = beyond_filters.resample_move_runs(FIG2, 2000, 3, seed=3, moves=5)
-    exact = optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior)
+    exact = optimal.run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     assert r["exact"]["depth_sd"] == exact.depth_sd
     streams = np.random.SeedSequence(3).spawn(3)
     for i, stream in enumerate(streams):

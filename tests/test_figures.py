@@ -41,7 +41,7 @@ def test_figure_3_overlays_the_printed_reading_of_eq16():
     fig = paper.figure("fig3", n=101)
     lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
     x, y = lines[paper.PRINTED_STYLE["label"]].get_data()
-    printed = optimal.marginals(s.mu, s.rho, s.prior, reading="printed")
+    printed = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, reading="printed")
     assert_allclose(y, printed.depth_pdf(x), rtol=1e-12)
     assert_allclose(x, np.linspace(*paper.GRIDS["fig3"], 101))
     # it differs from the faithful optimal curve drawn beside it
@@ -200,7 +200,7 @@ def test_figure_draws_the_densities_of_each_filter(key):
     lines = _lines(fig.axes[0])
     grid = np.linspace(*paper.GRIDS[key], 201)
     comp = {"depth": "y", "velocity": "v"}[s.quantity]
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     pdf = m.depth_pdf if s.quantity == "depth" else m.velocity_pdf
     want = {
         "optimal": pdf(grid),
@@ -245,7 +245,7 @@ def test_readings_figure_draws_both_densities_and_their_means():
     means = [line.get_xdata()[0] for line in ax.get_lines() if len(line.get_xdata()) == 2]
     assert len(drawn) == 2
     for line, mean, reading in zip(drawn, means, ("derived", "printed"), strict=True):
-        m = optimal.marginals(s.mu, s.rho, s.prior, reading=reading)
+        m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, reading=reading)
         assert_allclose(line.get_xdata(), y, rtol=1e-15)
         assert_allclose(line.get_ydata(), m.depth_pdf(y), rtol=1e-12)
         assert mean == pytest.approx(m.depth_mean, rel=1e-12)

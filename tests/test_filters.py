@@ -73,19 +73,21 @@ def test_batch_rows_are_the_single_results(name):
 def test_estimates_are_those_of_each_filters_module():
     p = FIG2.prior
     o = FILTERS["optimal"](FIG2.mu, FIG2.rho, p.mean, p.cov)
-    m = optimal.marginals(FIG2.mu, FIG2.rho, p)
+    m = optimal.run(FIG2.mu, FIG2.rho, p.mean, p.cov)
     assert (o.depth_mean, o.depth_sd, o.depth_error) == (m.depth_mean, m.depth_sd, m.depth_error)
     assert o.extras["prob_behind_camera"] == m.prob_behind_camera
     e = FILTERS["ekf"](FIG2.mu, FIG2.rho, p.mean, p.cov)
     assert e.depth_error is None and "error" not in e.moments("depth")
-    assert (e.depth_mean, e.depth_sd) == ekf.ekf(FIG2.mu, FIG2.rho, p).posterior.marginal("y")
+    assert (e.depth_mean, e.depth_sd) == ekf.run(
+        FIG2.mu, FIG2.rho, p.mean, p.cov
+    ).posterior.marginal("y")
     u = FILTERS["ukf"](FIG2.mu, FIG2.rho, p.mean, p.cov)
-    h = ukf.ukf(FIG2.mu, FIG2.rho, p, allow_behind_camera=True)
+    h = ukf.run(FIG2.mu, FIG2.rho, p.mean, p.cov, allow_behind_camera=True)
     assert (u.velocity_mean, u.velocity_sd) == h.posterior.marginal("v")
     r = FILTERS["particle"](
         FIG2.mu, FIG2.rho, p.mean, p.cov, rng=np.random.SeedSequence(4), n_particles=800
     )
-    direct = importance.particle_filter(FIG2.mu, FIG2.rho, p, 800, np.random.default_rng(4))
+    direct = importance.run(FIG2.mu, FIG2.rho, p.mean, p.cov, 800, np.random.default_rng(4))
     assert r.depth_mean == direct.moments().depth_mean
     se = direct.standard_errors()
     assert r.depth_error == max(se.depth_mean, se.depth_sd)
@@ -278,4 +280,4 @@ def test_the_optimal_entry_is_the_bank_beyond_three_frames_and_the_paper_route_a
     assert np.all(est.depth_error <= 1e-10 * est.depth_sd)
     # three frames with no process noise: Eqs. (14)-(16), as before
     three = FILTERS["optimal"](FIG2.mu, FIG2.rho, p.mean, p.cov)
-    assert three.depth_mean == optimal.marginals(FIG2.mu, FIG2.rho, p).depth_mean
+    assert three.depth_mean == optimal.run(FIG2.mu, FIG2.rho, p.mean, p.cov).depth_mean

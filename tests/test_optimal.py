@@ -93,7 +93,7 @@ def test_eq16_printed_reading_drops_the_prior_depth_factor():
 
 
 def test_depth_and_velocity_marginals_integrate_to_one(scenario):
-    m = optimal.marginals(scenario.mu, scenario.rho, scenario.prior)
+    m = optimal.run(scenario.mu, scenario.rho, scenario.prior.mean, scenario.prior.cov)
     total, _ = integrate.quad(m.depth_pdf, 2, np.inf, limit=400, points=None)
     assert total == pytest.approx(1.0, abs=1e-8)
     # +-40 SDs at a step of 0.02 SD; the rule on every other point (step 0.04 SD) agrees
@@ -113,16 +113,16 @@ def test_depth_and_velocity_marginals_integrate_to_one(scenario):
 
 def test_depth_marginal_is_zero_at_and_below_the_poles():
     s = SCENARIOS["fig2"]
-    m = optimal.marginals(s.mu, s.rho, s.prior, support="all")
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, support="all")
     assert np.all(m.depth_pdf(np.array([0.0, 1.0, 2.0])) == 0)
-    front = optimal.marginals(s.mu, s.rho, s.prior)
+    front = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     assert np.all(front.depth_pdf(np.array([-3.0, 1.5, 2.0])) == 0)
 
 
 @pytest.mark.parametrize("key", ["fig2", "fig3", "fig5"])
 def test_moments_match_brute_force_3d_quadrature(key):
     s = SCENARIOS[key]
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     b = reference.grid_moments(s.mu, s.rho, s.prior, panels=300, uv_order=32)
     # the grid route converges to ~1e-12 here; 1e-8 relative leaves room
     assert_allclose(
@@ -136,7 +136,7 @@ def test_moments_match_brute_force_3d_quadrature(key):
 
 def test_moments_match_importance_sampling():
     s = SCENARIOS["fig2"]
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     means, sds, se = reference.importance_moments(
         s.mu, s.rho, s.prior, np.random.default_rng(11), n=100_000
     )
@@ -148,8 +148,8 @@ def test_moments_match_importance_sampling():
 
 def test_error_estimate_bounds_the_actual_error():
     s = SCENARIOS["fig3"]
-    coarse = optimal.marginals(s.mu, s.rho, s.prior, rtol=1e-4)
-    fine = optimal.marginals(s.mu, s.rho, s.prior, rtol=1e-13)
+    coarse = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, rtol=1e-4)
+    fine = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, rtol=1e-13)
     assert abs(coarse.depth_mean - fine.depth_mean) <= coarse.depth_error + 1e-12
     assert abs(coarse.velocity_sd - fine.velocity_sd) <= coarse.velocity_error + 1e-12
     assert fine.depth_error <= 1e-13 * fine.depth_sd * 10
@@ -158,7 +158,7 @@ def test_error_estimate_bounds_the_actual_error():
 def test_batch_moments_match_single(scenario):
     s = scenario
     batch = optimal.moments(np.array([s.mu] * 2), s.rho, s.prior.mean, s.prior.cov)
-    single = optimal.marginals(s.mu, s.rho, s.prior)
+    single = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     assert_allclose(batch.depth_mean, single.depth_mean, rtol=1e-12)
     assert_allclose(batch.velocity_sd, single.velocity_sd, rtol=1e-10)
 
@@ -171,15 +171,15 @@ def test_batch_mixes_scenarios():
     batch = optimal.moments(mus, rhos, means, 1000 * np.eye(3))
     for i, k in enumerate(keys):
         s = SCENARIOS[k]
-        m = optimal.marginals(s.mu, s.rho, s.prior)
+        m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
         assert_allclose(batch.depth_sd[i], m.depth_sd, rtol=1e-9)
         assert_allclose(batch.velocity_mean[i], m.velocity_mean, rtol=1e-9)
 
 
 def test_support_all_adds_the_mass_behind_the_camera():
     s = SCENARIOS["fig3"]
-    front = optimal.marginals(s.mu, s.rho, s.prior)
-    every = optimal.marginals(s.mu, s.rho, s.prior, support="all")
+    front = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
+    every = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, support="all")
     assert front.prob_behind_camera == 0
     assert 1e-5 < every.prob_behind_camera < 1e-3
     # Conditioning on y > 2 removes mass at low depths and so raises the mean.
@@ -193,7 +193,7 @@ def test_small_noise_limit_the_optimal_mean_tends_to_c():
     c = noise_free_state(MU_17)
     prior = Gaussian(model.G(c, -2), 1000 * np.eye(3))
     for rho, tol in [(1e-3, 2e-2), (1e-4, 2e-3)]:
-        m = optimal.marginals(MU_17, rho, prior)
+        m = optimal.run(MU_17, rho, prior.mean, prior.cov)
         assert abs(m.depth_mean - c[1]) < tol  # the bias shrinks like rho
 
 
@@ -213,7 +213,7 @@ def test_log_posterior_zero_residual_at_c():
 def test_marginals_reject_bad_options(kwargs, message):
     s = SCENARIOS["fig2"]
     with pytest.raises(ValueError, match=message):
-        optimal.marginals(s.mu, s.rho, s.prior, **kwargs)
+        optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, **kwargs)
 
 
 def test_marginals_reject_a_prior_that_is_not_gaussian():
@@ -262,7 +262,7 @@ from depthcore import optimal
 from depthcore.problem.scenarios import SCENARIOS
 out = {}
 for key, s in SCENARIOS.items():
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     out[key] = [m.n_nodes, m.depth_mean, m.depth_sd, m.velocity_mean, m.velocity_sd]
 print(json.dumps(out))
 """
@@ -280,7 +280,7 @@ def test_nodes_and_moments_do_not_depend_on_the_processors_kernels():
     assert run.returncode == 0, run.stderr
     other = json.loads(run.stdout)
     for key, s in SCENARIOS.items():
-        m = optimal.marginals(s.mu, s.rho, s.prior)
+        m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
         assert other[key][0] == m.n_nodes, key
         assert_allclose(
             other[key][1:],
@@ -293,7 +293,7 @@ def test_nodes_and_moments_do_not_depend_on_the_processors_kernels():
 def test_batch_marginals_cdfs_and_density_match_quadrature():
     s = SCENARIOS["fig3"]
     b = optimal.batch_marginals(np.array([s.mu, s.mu]), s.rho, s.prior.mean, s.prior.cov)
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     y = np.array([10.0, 50.0])
     ref = [integrate.quad(m.depth_pdf, 2, yk, limit=200, epsabs=1e-13, epsrel=1e-12)[0] for yk in y]
     assert_allclose(b.depth_cdf(y), ref, atol=1e-10)
@@ -331,7 +331,7 @@ def test_velocity_marginal_is_a_smooth_curve():
     # velocity given the depth is known to a few hundredths); refined, Figure 4's
     # optimal curve is unimodal.
     s = SCENARIOS["fig4"]
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     pdf = m.velocity_pdf(np.linspace(0.4, 2.2, 3601))
     assert np.sum(np.diff(np.sign(np.diff(pdf))) != 0) == 1
     v = np.linspace(-2.0, 20.0, 11001)
@@ -387,7 +387,7 @@ def test_prior_exponent_drops_what_eq14_keeps():
 @pytest.mark.parametrize("key", ["fig2", "fig3", "fig5"])
 def test_depth_quantiles_are_consistent_with_the_moments(key):
     s = SCENARIOS[key]
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     q = optimal.depth_quantiles(m, [0.001, 0.25, 0.5, 0.75, 0.999])
     assert np.all(np.diff(q) > 0)
     assert q[0] > 2.0
@@ -399,7 +399,7 @@ def test_depth_quantiles_are_consistent_with_the_moments(key):
 def test_depth_quantiles_of_a_near_gaussian_marginal():
     # Figure 5 (rho = 1/500) is close to Gaussian: median near mean, quartiles near +-0.674 sd
     s = SCENARIOS["fig5"]
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     q1, q2, q3 = optimal.depth_quantiles(m, [0.25, 0.5, 0.75])
     assert q2 == pytest.approx(m.depth_mean, abs=0.1 * m.depth_sd)
     assert (q3 - q1) / 2 == pytest.approx(0.674 * m.depth_sd, rel=0.05)
@@ -407,7 +407,7 @@ def test_depth_quantiles_of_a_near_gaussian_marginal():
 
 def test_depth_quantiles_invert_the_cdf():
     s = SCENARIOS["fig2"]
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     (median,) = optimal.depth_quantiles(m, [0.5])
     y = np.linspace(2.0 + 1e-6, median, 200001)
     below = np.trapezoid(m.depth_pdf(y), y)
@@ -417,9 +417,11 @@ def test_depth_quantiles_invert_the_cdf():
 def test_depth_quantiles_reject_bad_arguments():
     s = SCENARIOS["fig2"]
     with pytest.raises(ValueError, match="probs"):
-        optimal.depth_quantiles(optimal.marginals(s.mu, s.rho, s.prior), [0.0, 0.5])
+        optimal.depth_quantiles(optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov), [0.0, 0.5])
     with pytest.raises(ValueError, match="support"):
-        optimal.depth_quantiles(optimal.marginals(s.mu, s.rho, s.prior, support="all"), [0.5])
+        optimal.depth_quantiles(
+            optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, support="all"), [0.5]
+        )
 
 
 def _uniform_velocity_cdf(batch, v, factor):

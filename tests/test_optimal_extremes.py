@@ -79,7 +79,7 @@ def test_extremes_run_within_the_node_bound_with_finite_moments(name):
 def test_extremes_match_a_fixed_gauss_legendre_rule_in_log_depth(name):
     mu, rho, scale = EXTREMES[name]
     prior = _prior(mu, scale)
-    m = optimal.marginals(mu, rho, prior)
+    m = optimal.run(mu, rho, prior.mean, prior.cov)
     got = _key(m)
     brute = _brute_1d(mu, rho, prior, -30.0, np.log(m.depth_mean + 1e4 * m.depth_sd))
     assert_allclose(got, brute, rtol=0, atol=1e-9 * got[[1, 1, 3, 3]].max())
@@ -89,7 +89,7 @@ def test_extremes_match_a_fixed_gauss_legendre_rule_in_log_depth(name):
 def test_far_depth_matches_a_rule_centred_on_it():
     mu, rho, scale = EXTREMES["depth 6e5"]
     prior = _prior(mu, scale)
-    m = optimal.marginals(mu, rho, prior)
+    m = optimal.run(mu, rho, prior.mean, prior.cov)
     t0, w = np.log(m.depth_mean - 2), 60 * m.depth_sd / m.depth_mean
     brute = _brute_1d(mu, rho, prior, t0 - w, t0 + 3 * w, panels=4000)
     sd = _key(m)[[1, 1, 3, 3]]
@@ -102,7 +102,7 @@ def test_far_depth_matches_a_rule_centred_on_it():
 def test_moderate_extreme_matches_the_3d_grid_of_eq6():
     mu, rho, scale = [-0.3, 0, 0.2], 0.02, 1e3
     prior = _prior(mu, scale)
-    m = optimal.marginals(mu, rho, prior)
+    m = optimal.run(mu, rho, prior.mean, prior.cov)
     b = reference.grid_moments(mu, rho, prior, panels=300, uv_order=32)
     assert_allclose(
         _key(m),
@@ -119,7 +119,7 @@ def test_small_noise_limit_is_p_s_plus_a_term_linear_in_rho():
     prior = _prior(mu)
     ratios, shift_errors = [], []
     for rho in (1e-7, 1e-8, 1e-9):
-        m = optimal.marginals(mu, rho, prior)
+        m = optimal.run(mu, rho, prior.mean, prior.cov)
         s = second_order(mu, rho, prior)
         sd = np.sqrt(np.diag(s.cov))
         assert m.depth_sd == pytest.approx(sd[1], rel=1e-7)

@@ -9,7 +9,7 @@ from scipy.special import logsumexp
 from depthcore.exact import bank, mixture, optimal
 from depthcore.kalman.second_order import second_order_batch
 from depthcore.particles import importance as pf
-from depthcore.particles.importance import particle_filter, run
+from depthcore.particles.importance import ParticleResult, particle_filter, run
 from depthcore.problem import model
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.scenarios import MU_17, SCENARIOS
@@ -19,7 +19,7 @@ FIG2 = SCENARIOS["fig2"]
 
 @pytest.fixture(scope="module")
 def fig2_optimal():
-    return optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior, support="front")
+    return optimal.run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, support="front")
 
 
 def reference(opt):
@@ -225,7 +225,7 @@ def test_error_shrinks_like_one_over_root_N(fig2_optimal):
 @pytest.mark.parametrize("key", ["fig5", "fig6"])
 def test_other_scenarios_agree_with_the_optimal_filter(key):
     s = SCENARIOS[key]
-    opt = optimal.marginals(s.mu, s.rho, s.prior, support="front")
+    opt = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, support="front")
     b = replicates(8000, 8, seed=20, scenario=s)
     est, se = np.array(b.moments()), np.array(b.standard_errors())
     assert np.all(np.abs(est - reference(opt)[:, None]) < 5 * se)
@@ -236,7 +236,7 @@ def test_fig3_converges_without_resampling_but_not_with_it():
     # Fig. 3's posterior (depth 20.7 +- 13.7) is far from the second-order
     # Gaussian (10.0 +- 2.2): the hard case for the proposal.
     s = SCENARIOS["fig3"]
-    ref = reference(optimal.marginals(s.mu, s.rho, s.prior, support="front"))[:, None]
+    ref = reference(optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, support="front"))[:, None]
     b = replicates(50000, 8, seed=24, scenario=s)
     est, se = np.array(b.moments()), np.array(b.standard_errors())
     assert np.all(np.abs(est - ref) < 5 * se)
@@ -348,8 +348,11 @@ def test_rejects_a_bad_rng_or_prior():
 def test_run_rejects_bad_shapes():
     rng = np.random.default_rng(0)
     p = FIG2.prior
-    with pytest.raises(ValueError, match=r"mu must have shape \(B, N\)"):
-        run(np.array(MU_17), 0.005, p.mean, p.cov, 10, rng)
+    one = run(np.array(MU_17), 0.005, p.mean, p.cov, 10, np.random.default_rng(1))
+    batch = run(np.array([MU_17]), 0.005, p.mean, p.cov, 10, np.random.default_rng(1))
+    assert isinstance(one, ParticleResult) and np.array_equal(one.particles, batch.particles[0])
+    with pytest.raises(ValueError, match=r"mu must have shape"):
+        run(np.array([[MU_17]]), 0.005, p.mean, p.cov, 10, rng)
     with pytest.raises(ValueError, match=r"rho must be a scalar or have shape \(2,\)"):
         run(np.array([MU_17, MU_17]), [0.005] * 3, p.mean, p.cov, 10, rng)
     with pytest.raises(ValueError, match=r"prior_mean must have shape \(3,\) or \(2, 3\)"):

@@ -45,7 +45,7 @@ def test_readme_example_runs_and_prints_each_filters_depth():
     from depthcore import noise_free_state, paper_prior
 
     prior = paper_prior(noise_free_state(mu))
-    direct = optimal.marginals(mu, rho, prior)
+    direct = optimal.run(mu, rho, prior.mean, prior.cov)
     mean, sd = map(float, re.findall(r"-?\d+\.\d+", lines[0]))
     assert abs(mean - direct.depth_mean) < 5e-4
     assert abs(sd - direct.depth_sd) < 5e-4

@@ -96,7 +96,7 @@ def test_log_gaussian_integral_brute_rejects_an_indefinite_M():
 @pytest.mark.parametrize("key", ["fig2", "fig3"])
 def test_trapezoid_depth_moments_converge_to_the_marginals(key):
     s = SCENARIOS[key]
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     mean, sd, n = reference.trapezoid_depth_moments(s.mu, s.rho, s.prior, 1 / 16)
     assert n == 257
     # the geometric convergence of the rule leaves rounding only at this step

@@ -101,9 +101,9 @@ def test_moments_texts_cover_every_filter_and_scenario():
     n = len(SCENARIOS) * len(NAMES) * 2 + len(SCENARIOS) * 2
     assert len(texts) == n
     assert all(PM.match(v) for k, v in texts.items() if not k.endswith("_se"))
-    m = optimal.marginals(FIG2.mu, FIG2.rho, FIG2.prior)
+    m = optimal.run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     assert texts["bf_fig2_optimal_depth"] == f"{m.depth_mean:.3f} ± {m.depth_sd:.3f}"
-    ekf_y = ekf.ekf(FIG2.mu, FIG2.rho, FIG2.prior).posterior.marginal("y")
+    ekf_y = ekf.run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov).posterior.marginal("y")
     assert texts["bf_fig2_ekf_depth"] == f"{ekf_y[0]:.3f} ± {ekf_y[1]:.3f}"
 
 

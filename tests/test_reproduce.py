@@ -14,7 +14,7 @@ from depthcore.studies import reproduce
 def test_filter_moments_agree_with_each_filter(key):
     s = SCENARIOS[key]
     got = reproduce.filter_moments(s)
-    m = optimal.marginals(s.mu, s.rho, s.prior)
+    m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     comp = {"depth": "y", "velocity": "v"}[s.quantity]
     opt = (m.depth_mean, m.depth_sd) if s.quantity == "depth" else (m.velocity_mean, m.velocity_sd)
     assert got["optimal"] == pytest.approx(opt, rel=1e-12)

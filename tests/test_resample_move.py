@@ -25,7 +25,7 @@ def test_converges_to_the_optimal_marginals_eq_13_16(key):
     bound leaves five times that for one run.
     """
     s = SCENARIOS[key]
-    exact = optimal.marginals(s.mu, s.rho, s.prior)
+    exact = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     m = _run(key, 20_000, 2, seed=11).moments()
     for q in ("depth", "velocity"):
         sd = getattr(exact, f"{q}_sd")
@@ -36,7 +36,7 @@ def test_converges_to_the_optimal_marginals_eq_13_16(key):
 def test_error_falls_as_particles_grow():
     """The RMS error of the depth mean over repeats falls from N = 1000 to N = 20000 (Fig. 2)."""
     s = SCENARIOS["fig2"]
-    exact = optimal.marginals(s.mu, s.rho, s.prior)
+    exact = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     errors = []
     for n in (1000, 20_000):
         m = _run("fig2", n, 6, seed=3).moments()

@@ -56,7 +56,7 @@ def test_eq8_derived_covariance_is_the_small_noise_limit_of_the_optimal_filter()
     c = noise_free_state(mu)
     prior = Gaussian(paper_prior(c).mean, 1e8 * np.eye(3))
     rho = 1e-5
-    exact = optimal.marginals(mu, rho, prior)
+    exact = optimal.run(mu, rho, prior.mean, prior.cov)
     derived = np.sqrt(likelihood_covariance(mu, rho, "derived")[1, 1])
     printed = np.sqrt(likelihood_covariance(mu, rho, "printed")[1, 1])
     assert exact.depth_sd == pytest.approx(derived, rel=1e-3)  # O(rho) skew corrections

@@ -11,7 +11,6 @@ from scipy import integrate, stats
 from depthcore.cli.main import main
 from depthcore.exact import optimal, posterior
 from depthcore.problem import checks, model
-from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry.filters import FILTERS, NAMES
 from depthcore.studies import monte_carlo
@@ -199,7 +198,7 @@ def test_hellinger_matches_adaptive_quadrature():
     est = study_trials.run_filters(trials, ("optimal", "ekf"))
     ref = optimal.batch_marginals(trials.mu, trials.rho, trials.prior_mean, trials.prior_cov)
     for i in range(3):
-        m = optimal.marginals(trials.mu[i], s.rho, Gaussian(trials.prior_mean[i], trials.prior_cov))
+        m = optimal.run(trials.mu[i], s.rho, trials.prior_mean[i], trials.prior_cov)
         mean, sd = est["ekf"].mean[i, 1], np.sqrt(est["ekf"].cov[i, 1, 1])
 
         def q(y, mean=mean, sd=sd):
@@ -351,7 +350,7 @@ def test_optimal_cdfs_at_the_truth_match_quadrature_of_its_marginals():
     trials = study_trials.simulate(s.c, s.rho, 2, np.random.default_rng(4))
     est = study_trials.run_filters(trials, ("optimal",))["optimal"]
     for i in range(2):
-        m = optimal.marginals(trials.mu[i], s.rho, Gaussian(trials.prior_mean[i], trials.prior_cov))
+        m = optimal.run(trials.mu[i], s.rho, trials.prior_mean[i], trials.prior_cov)
         y_cdf, _ = integrate.quad(m.depth_pdf, 2, s.c[1], limit=400)
         v_cdf, _ = integrate.quad(m.velocity_pdf, -np.inf, s.c[2], limit=400)
         assert est.depth_cdf[i] == pytest.approx(y_cdf, abs=1e-6)

@@ -54,8 +54,8 @@ def test_theorem1_small_noise_ekf_equals_p_s_and_the_exact_covariance(mu, log_rh
     rho, scale = float(np.exp(log_rho)), float(np.exp(log_scale))
     c = model.noise_free_state(mu)
     prior = Gaussian(second_order.A2 @ c + second_order.b2, scale * np.eye(3))
-    p_s = second_order.second_order(mu, rho, prior)
-    p_e = ekf.ekf(mu, rho, prior).posterior
+    p_s = second_order.run(mu, rho, prior.mean, prior.cov)
+    p_e = ekf.run(mu, rho, prior.mean, prior.cov).posterior
     assert np.linalg.norm(p_s.mean - p_e.mean) <= 1e-9 * np.linalg.norm(p_e.mean)
     assert np.linalg.norm(p_s.mean - c) <= 1e-9 * np.linalg.norm(c)
     assert np.linalg.norm(p_s.cov - p_e.cov) <= 1e-9 * np.linalg.norm(p_e.cov)
@@ -86,7 +86,7 @@ def test_p_s_matches_a_50_digit_information_solve_at_rho_1e_5():
     D = np.array(D.tolist(), dtype=float)
     cf = np.array([float(v) for v in c])
     prior = Gaussian(second_order.A2 @ cf + second_order.b2, 1000 * np.eye(3))
-    p_s = second_order.second_order(np.array([-0.3, 0, 0.2]), 1e-5, prior)
+    p_s = second_order.run(np.array([-0.3, 0, 0.2]), 1e-5, prior.mean, prior.cov)
     scale = np.sqrt(np.outer(np.diag(D), np.diag(D)))
     assert np.max(np.abs(p_s.cov - D) / scale) < 1e-12
     batch_mean, batch_cov = second_order.second_order_batch(

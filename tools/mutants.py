@@ -139,8 +139,8 @@ MUTANTS = [
     (
         "readings figure draws one reading twice",
         "depthcore/book/paper.py",
-        "m = optimal.marginals(s.mu, s.rho, s.prior, reading=reading)",
-        'm = optimal.marginals(s.mu, s.rho, s.prior, reading="derived")',
+        "m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, reading=reading)",
+        'm = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, reading="derived")',
         "tests/test_figures.py",
     ),
     (

@@ -128,8 +128,8 @@ def paper_texts() -> dict[str, str]:
     for key in ("fig2", "fig3"):
         s = SCENARIOS[key]
         prior = Gaussian(model.G(s.c, -2), s.prior.cov)  # Theorem 1's prior mean, G^-2 c
-        p3 = ekf.ekf(s.mu, s.rho, prior).posterior.cov
-        d = second_order.second_order(s.mu, s.rho, prior).cov
+        p3 = ekf.run(s.mu, s.rho, prior.mean, prior.cov).posterior.cov
+        d = second_order.run(s.mu, s.rho, prior.mean, prior.cov).cov
         theorem = max(theorem, np.abs(np.linalg.solve(p3, d) - np.eye(3)).max())
     assert theorem < THEOREM_TOL
 

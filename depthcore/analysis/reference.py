@@ -346,7 +346,7 @@ def trapezoid_depth_moments(
     The rule is applied in ``t = log(y - 2)`` (support ``y > 2``) on the nodes
     ``t_lo, t_lo + step, ...`` up to ``t_hi``, to the closed form of
     :func:`depthcore.exact.optimal.conditional` times the Jacobian ``dy/dt = e^t``.
-    This is the rule :func:`depthcore.exact.optimal.marginals` refines by halving
+    This is the rule :func:`depthcore.exact.optimal.run` refines by halving
     its step; with a fixed step it shows how fast the rule converges.
 
     Parameters

@@ -69,7 +69,7 @@ def particle_convergence(
 
     Each setting runs ``repeats`` independent filters on the scenario's
     measurements for each number of particles; the errors are measured from
-    the optimal filter's exact moments (:func:`depthcore.exact.optimal.marginals`).
+    the optimal filter's exact moments (:func:`depthcore.exact.optimal.run`).
 
     Parameters
     ----------
@@ -97,7 +97,7 @@ def particle_convergence(
     if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:
         raise ValueError(f"repeats must be a positive integer, got {repeats!r}")
     settings = SETTINGS if settings is None else settings
-    opt = optimal.marginals(scenario.mu, scenario.rho, scenario.prior)
+    opt = optimal.run(scenario.mu, scenario.rho, scenario.prior.mean, scenario.prior.cov)
     exact = np.array([getattr(opt, m) for m in MOMENTS])
     streams = checks.spawn(seed, len(settings))
     rmse, ess = {}, {}
@@ -152,7 +152,7 @@ def resample_move_runs(
         ``"mean"`` and
         ``"se"``: ``{moment: float}``, the mean over the runs and its standard
         error (SD over the runs / sqrt(repeats)); ``"exact"``: ``{moment:
-        float}`` of the optimal filter (:func:`depthcore.exact.optimal.marginals`,
+        float}`` of the optimal filter (:func:`depthcore.exact.optimal.run`,
         in front of the camera); ``"ess"`` (repeats, 3): the ESS after each
         bearing as a fraction of ``N``; ``"resampled"`` (repeats, 3).
     """
@@ -162,13 +162,19 @@ def resample_move_runs(
         raise ValueError(f"repeats must be an integer >= 2, got {repeats!r}")
     s, prior = scenario, scenario.prior
     batches = [
-        resample_move.resample_move(
-            s.mu, s.rho, prior, n_particles, np.random.default_rng(stream), moves
+        resample_move.run(
+            [s.mu],
+            s.rho,
+            prior.mean,
+            prior.cov,
+            n_particles,
+            np.random.default_rng(stream),
+            moves,
         )
         for stream in checks.spawn(seed, int(repeats))
     ]
     runs = {k: np.concatenate([b.moments()[k] for b in batches]) for k in MOMENTS}
-    opt = optimal.marginals(s.mu, s.rho, prior)
+    opt = optimal.run(s.mu, s.rho, prior.mean, prior.cov)
     return {
         "runs": runs,
         "mean": {k: float(np.mean(v)) for k, v in runs.items()},
@@ -202,8 +208,15 @@ def first_update(scenario: Scenario, sigma_points: ukf.SigmaPoints = ukf.SigmaPo
     if not isinstance(scenario, Scenario):
         raise ValueError(f"scenario must be a Scenario, got {type(scenario).__name__}")
     prior = scenario.prior
-    e = ekf.ekf(scenario.mu, scenario.rho, prior)
-    u = ukf.ukf(scenario.mu, scenario.rho, prior, sigma_points, allow_behind_camera=True)
+    e = ekf.run(scenario.mu, scenario.rho, prior.mean, prior.cov)
+    u = ukf.run(
+        scenario.mu,
+        scenario.rho,
+        prior.mean,
+        prior.cov,
+        sigma_points=sigma_points,
+        allow_behind_camera=True,
+    )
     return {
         "mu1": float(scenario.mu[0]),
         "prior": prior,

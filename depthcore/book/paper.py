@@ -107,7 +107,7 @@ def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
     curves = reproduce.curves(s, np.linspace(lo, hi, n), filters=filters)
     fig, ax = subplots(figsize=(6.4, 4.0))
     if key in PRINTED_OVERLAY:
-        printed = optimal.marginals(s.mu, s.rho, s.prior, reading="printed")
+        printed = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, reading="printed")
         ax.plot(curves["grid"], printed.depth_pdf(curves["grid"]), linewidth=1.4, **PRINTED_STYLE)
     plot_marginals(ax, curves, s.quantity, filters)
     if key in YLIM:
@@ -196,7 +196,7 @@ def readings_figure(key: str, y_max: float = 150.0, n: int = 1201):
         "printed": ("tab:orange", "--", "Eq. (16) as printed"),
     }
     for reading, (color, linestyle, label) in styles.items():
-        m = optimal.marginals(s.mu, s.rho, s.prior, reading=reading)
+        m = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, reading=reading)
         ax.plot(
             y,
             m.depth_pdf(y),
@@ -430,7 +430,7 @@ def ekf_linearisation(mu, rho: float, prior: Gaussian) -> dict:
     """
     if not isinstance(prior, Gaussian):
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    history = ekf.ekf(mu, rho, prior)
+    history = ekf.run(mu, rho, prior.mean, prior.cov)
     predicted = [prior.mean] + [ekf.predict(history.means[i], history.covs[i])[0] for i in (0, 1)]
     h = model.observation_vector(np.stack(predicted))
     rows = np.stack([h[k] @ model.G_linear(k - 2) for k in range(3)])

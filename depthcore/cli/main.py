@@ -36,8 +36,7 @@ from depthcore.cli.text import STUDY_LEGEND
 from depthcore.problem import checks
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from depthcore.problem.model import noise_free_state
-from depthcore.registry.adapters import RBPF_REPLICAS
-from depthcore.registry.filters import FILTERS, names
+from depthcore.registry.filters import FILTERS, RBPF_REPLICAS, names
 from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE
 from depthcore.studies import monte_carlo, reproduce
 from depthcore.studies import trials as study_trials

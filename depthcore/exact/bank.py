@@ -47,7 +47,7 @@ filtered and smoothed frame by frame (:mod:`depthcore.exact.smoother`).
 
 The support is the caller's: the nodes must be positive (the point in front of
 the camera at every frame, the "front" support of
-:func:`depthcore.exact.optimal.marginals`), and the mixture is exact up to the
+:func:`depthcore.exact.optimal.run`), and the mixture is exact up to the
 quadrature error of the nodes, which the caller controls. At ``N = 3``,
 ``q = 0`` the unnormalised depth density is that of Eqs. (14)-(16)
 (:func:`depthcore.exact.optimal.conditional`) up to a constant factor.

@@ -41,6 +41,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from depthcore import _paths
 from depthcore.exact import quadrature
 from depthcore.exact.cdf import gauss_legendre_cdf
 from depthcore.kalman.second_order import A2
@@ -317,7 +318,7 @@ def moments(
         Prior covariance, symmetric positive definite.
     reading : {"derived", "printed"}
     support : {"front", "all"}
-        See :func:`marginals`.
+        See :func:`run`.
     rtol : float
         Target accuracy of each mean and SD, relative to the SD.
     chunk : int
@@ -434,7 +435,7 @@ def _interleave(a, b):
 class OptimalMarginals:
     """The optimal filter's depth and velocity marginals, Eqs. (13)-(16).
 
-    Built by :func:`marginals`.
+    Built by :func:`run` (one triple).
 
     Attributes
     ----------
@@ -511,7 +512,73 @@ class OptimalMarginals:
         return pdf.reshape(v.shape)
 
 
-def marginals(
+def run(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    reading: str = "derived",
+    support: str = "front",
+    rtol: float = 1e-10,
+):
+    """The optimal filter, Eqs. (6), (13)-(16), of one sequence or a batch: the exact filter's door.
+
+    For the paper's three frames without process noise, the one-dimensional
+    quadrature of Eqs. (14)-(16) (:class:`OptimalMarginals`,
+    :func:`batch_marginals`, :func:`moments`); for more frames or with process noise, the bank of
+    Kalman filters over depth nodes placed by the same quadrature
+    (:func:`depthcore.exact.posterior.posterior`).
+
+    Parameters
+    ----------
+    mu : array_like, shape (N,) or (B, N)
+        ``N >= 3`` bearings per problem.
+    rho : float or array_like, shape (B,)
+        Noise standard deviation, > 0.
+    prior_mean : array_like, shape (3,) or (B, 3)
+    prior_cov : array_like, shape (3, 3)
+        The prior on the state at frame 1.
+    process_noise : float
+        ``q >= 0``.
+    reading : {"derived", "printed"}
+        ``"printed"`` drops the y-dependent factor that Eq. (16) calls constant
+        (the paper's three frames only).
+    support : {"front", "all"}
+        ``"front"`` (default) conditions on the point being in front of the camera
+        at every frame (``y > 2``); ``"all"`` integrates Eq. (6) over every depth,
+        behind the camera too, and reports that mass as ``prob_behind_camera``
+        (the paper's three frames only).
+    rtol : float
+        Target accuracy of each mean and SD, relative to the SD.
+
+    Returns
+    -------
+    OptimalMarginals, BatchMarginals, Moments or Mixture
+        One triple: its :class:`OptimalMarginals`; a batch of triples: the
+        :class:`BatchMarginals` (derived reading, front support) or the
+        :class:`Moments`; more frames or process noise: the
+        :class:`~depthcore.exact.mixture.Mixture`.
+    """
+    mu = model.measurements_batch(mu, "mu")
+    if mu.shape[-1] != 3 or process_noise > 0:
+        from depthcore.exact import posterior  # it builds on this module
+
+        if (reading, support) != ("derived", "front"):
+            raise ValueError(
+                "reading and support other than 'derived' and 'front' are readings of the "
+                "paper's three-frame Eqs. (14)-(16); with more frames or process noise "
+                f"the optimal filter has neither, got {reading!r} and {support!r}"
+            )
+        return posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise, rtol)
+    if np.ndim(mu) == 1:
+        return _triple(mu, rho, Gaussian.prior(prior_mean, prior_cov), reading, support, rtol)
+    if (reading, support) == ("derived", "front"):
+        return batch_marginals(mu, rho, prior_mean, prior_cov, rtol)
+    return moments(mu, rho, prior_mean, prior_cov, reading, support, rtol)
+
+
+def _triple(
     mu,
     rho: float,
     prior: Gaussian,
@@ -544,8 +611,6 @@ def marginals(
     OptimalMarginals
     """
     mu = model.measurements(mu)
-    if not isinstance(prior, Gaussian):
-        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
     pb = _problem(mu, rho, prior.mean, prior.cov, reading)
     rtol = checks.positive_scalar(rtol, "rtol")
     m, err_y, err_v, top, grids = quadrature.integrate(pb, _intervals(support), rtol)
@@ -571,6 +636,38 @@ def marginals(
         _problem=pb,
         _grids=grids,
     )
+
+
+@_paths.replaced(
+    "depthcore.exact.optimal.marginals",
+    "depthcore.exact.optimal.run(mu, rho, prior.mean, prior.cov, reading=..., support=...)",
+)
+def marginals(
+    mu,
+    rho: float,
+    prior: Gaussian,
+    reading: str = "derived",
+    support: str = "front",
+    rtol: float = 1e-10,
+) -> OptimalMarginals:
+    """:func:`run` on one triple, with the prior as a :class:`Gaussian`; kept until 0.3.
+
+    Parameters
+    ----------
+    mu : array_like, shape (3,)
+    rho : float
+    prior : Gaussian
+    reading : {"derived", "printed"}
+    support : {"front", "all"}
+    rtol : float
+
+    Returns
+    -------
+    OptimalMarginals
+    """
+    if not isinstance(prior, Gaussian):
+        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
+    return _triple(mu, rho, prior, reading, support, rtol)
 
 
 @dataclass(frozen=True)
@@ -728,7 +825,7 @@ def depth_quantiles(m: OptimalMarginals, probs, n: int = 20001) -> np.ndarray:
     Parameters
     ----------
     m : OptimalMarginals
-        From :func:`depthcore.exact.optimal.marginals` with ``support="front"``.
+        From :func:`depthcore.exact.optimal.run` with ``support="front"``.
     probs : array_like
         Probabilities in (0, 1).
     n : int

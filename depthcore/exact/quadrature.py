@@ -72,7 +72,7 @@ class Problem(NamedTuple):
     integrand : callable
     second_order : bool
     reading : str
-        The reading of Eq. (16) (see :func:`depthcore.exact.optimal.marginals`).
+        The reading of Eq. (16) (see :func:`depthcore.exact.optimal.run`).
     process_noise : ndarray, shape (B,), or None
     cov : ndarray, shape (B, 3, 3), or None
     """

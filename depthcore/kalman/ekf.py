@@ -21,6 +21,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from depthcore import _paths
 from depthcore.kalman import linear
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import Gaussian, History, MeanAndCov, run_recursion, symmetric
@@ -252,31 +253,24 @@ def _update_information(n, R, mu, rho):
     return n + delta, R_new
 
 
+@_paths.replaced(
+    "depthcore.kalman.ekf.ekf", "depthcore.kalman.ekf.run(mu, rho, prior.mean, prior.cov)"
+)
 def ekf(mu, rho: float, prior: Gaussian, process_noise: float = 0.0) -> History:
-    """Eqs. (10)-(12): the EKF for one sequence of bearings (the paper's: one triple).
+    """:func:`run` on one sequence, with the prior as a :class:`Gaussian`; kept until 0.3.
 
     Parameters
     ----------
     mu : array_like, shape (N,)
-        ``N >= 3`` bearings; a triple is checked by
-        :func:`depthcore.problem.model.measurements`, more by
-        :func:`depthcore.problem.model.measurements_batch`.
     rho : float
-        Noise standard deviation, > 0.
     prior : Gaussian
         Density of the state at time 1.
     process_noise : float
-        ``q >= 0``.
 
     Returns
     -------
     History
-        Means and covariances after each measurement; ``.posterior`` is ``p_e``
-        (at frame ``N``).
     """
-    mu = checks.finite_array(mu, "mu")
-    if mu.shape == (3,):
-        mu = model.measurements(mu)
-    elif mu.ndim != 1:
-        raise ValueError(f"mu must have shape (N,), got shape {mu.shape}")
+    if not isinstance(prior, Gaussian):
+        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
     return run(mu, rho, prior.mean, prior.cov, process_noise)

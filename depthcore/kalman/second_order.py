@@ -41,8 +41,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from depthcore import _paths
 from depthcore.problem import checks, model
-from depthcore.problem.gaussian import Gaussian, symmetric
+from depthcore.problem.gaussian import Gaussian, MeanAndCov, symmetric
 from depthcore.problem.model import (
     noise_free_state,
     noise_free_states,
@@ -632,35 +633,39 @@ def _square_root_solve(c, g, weight, prior_mean, prior_cov):
     return c + delta, symmetric(cov)
 
 
-def second_order(
-    mu, rho: float, prior: Gaussian, reading: str = "derived", process_noise: float = 0.0
-) -> Gaussian:
-    """Eq. (8): the second-order approximation ``p_s`` at time 3 (at frame ``N``).
+def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, reading: str = "derived"):
+    """Eq. (8): the second-order approximation ``p_s`` at frame ``N``, of one sequence or a batch.
 
     ``p_s(x) = N(x, c, S) p(G^{-2} x)`` with ``S`` from :func:`likelihood_covariance`;
     the product of two Gaussians is a Gaussian. For ``N > 3`` bearings or
-    process noise, the generalisation of :func:`second_order_batch`.
+    process noise, its generalisation (:func:`second_order_batch`, the module docstring).
 
     Parameters
     ----------
-    mu : array_like, shape (N,)
+    mu : array_like, shape (N,) or (B, N)
         ``N >= 3`` bearings; the paper's triple for ``N = 3``.
-    rho : float
+    rho : float or array_like, shape (B,)
         Noise standard deviation, > 0.
-    prior : Gaussian
-        Density of the state at time 1.
-    reading : {"derived", "printed"}
+    prior_mean : array_like, shape (3,) or (B, 3)
+        Mean of the state at time 1.
+    prior_cov : array_like, shape (3, 3) or (B, 3, 3)
+        Symmetric positive definite.
     process_noise : float
         ``q >= 0``.
+    reading : {"derived", "printed"}
 
     Returns
     -------
-    Gaussian
-        Mean and covariance of ``p_s`` (state at frame ``N``).
+    Gaussian or MeanAndCov
+        For one sequence the Gaussian ``p_s`` (state at frame ``N``); for a batch
+        its means (B, 3) and covariances (B, 3, 3).
     """
-    if np.ndim(mu) == 1 and np.shape(mu)[0] != 3 or process_noise != 0.0:
-        if np.ndim(mu) != 1:
-            raise ValueError(f"mu must have shape (N,), got shape {np.shape(mu)}")
+    if np.ndim(mu) != 1:
+        return MeanAndCov(
+            *second_order_batch(mu, rho, prior_mean, prior_cov, reading, process_noise)
+        )
+    prior = Gaussian.prior(prior_mean, prior_cov)
+    if np.shape(mu)[0] != 3 or process_noise != 0.0:
         rho = checks.positive_scalar(rho, "rho")
         mean, cov = second_order_batch(
             np.asarray(mu)[None], rho, prior.mean, prior.cov, reading, process_noise
@@ -674,6 +679,32 @@ def second_order(
         c[None], g[None], np.array([np.sqrt(2.0 / factor) / rho]), prior.mean, prior.cov
     )
     return Gaussian(mean[0], cov[0])
+
+
+@_paths.replaced(
+    "depthcore.kalman.second_order.second_order",
+    "depthcore.kalman.second_order.run(mu, rho, prior.mean, prior.cov, process_noise, reading)",
+)
+def second_order(
+    mu, rho: float, prior: Gaussian, reading: str = "derived", process_noise: float = 0.0
+) -> Gaussian:
+    """:func:`run` on one sequence, with the prior as a :class:`Gaussian`; kept until 0.3.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N,)
+    rho : float
+    prior : Gaussian
+    reading : {"derived", "printed"}
+    process_noise : float
+
+    Returns
+    -------
+    Gaussian
+    """
+    if not isinstance(prior, Gaussian):
+        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
+    return run(mu, rho, prior.mean, prior.cov, process_noise, reading)
 
 
 def _reading(reading: str) -> str:

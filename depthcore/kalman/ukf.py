@@ -84,6 +84,7 @@ from functools import partial
 
 import numpy as np
 
+from depthcore import _paths
 from depthcore.kalman.ekf import run_gaussian_filter
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import Gaussian, History, MeanAndCov, symmetric
@@ -351,6 +352,11 @@ def run(
     return run_gaussian_filter(step, mu, rho, prior_mean, prior_cov, process_noise)
 
 
+@_paths.replaced(
+    "depthcore.kalman.ukf.ukf",
+    "depthcore.kalman.ukf.run(mu, rho, prior.mean, prior.cov, process_noise, sigma_points, "
+    "allow_behind_camera)",
+)
 def ukf(
     mu,
     rho: float,
@@ -359,34 +365,21 @@ def ukf(
     allow_behind_camera: bool = False,
     process_noise: float = 0.0,
 ) -> History:
-    """The unscented Kalman filter for one sequence of bearings (the paper's: one triple).
+    """:func:`run` on one sequence, with the prior as a :class:`Gaussian`; kept until 0.3.
 
     Parameters
     ----------
     mu : array_like, shape (N,)
-        ``N >= 3`` bearings; a triple is checked by
-        :func:`depthcore.problem.model.measurements`.
     rho : float
-        Noise standard deviation, > 0.
     prior : Gaussian
-        Density of the state at time 1.
     sigma_points : SigmaPoints
-        The sigma-point rule (default ``alpha = 1, beta = 0, kappa = 0``).
     allow_behind_camera : bool
-        See :func:`update`.
     process_noise : float
-        ``q >= 0``.
 
     Returns
     -------
     History
-        Means and covariances after each measurement; ``.posterior`` at frame ``N``.
     """
-    mu = checks.finite_array(mu, "mu")
-    if mu.shape == (3,):
-        mu = model.measurements(mu)
-    elif mu.ndim != 1:
-        raise ValueError(f"mu must have shape (N,), got shape {mu.shape}")
     if not isinstance(prior, Gaussian):
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
     return run(mu, rho, prior.mean, prior.cov, process_noise, sigma_points, allow_behind_camera)

@@ -31,7 +31,7 @@ The steps. The state at time 1 is drawn from a distribution ``q``, weighted by
 ``ess_threshold * N`` (:mod:`depthcore.particles.resampling`). Weights are kept as
 logarithms. A particle whose depth is ``<= 0`` at any frame gets weight zero:
 the point is in front of the camera, so the filter targets the optimal
-posterior restricted to ``y3 > 2``, as :func:`depthcore.exact.optimal.marginals`
+posterior restricted to ``y3 > 2``, as :func:`depthcore.exact.optimal.run`
 does with ``support="front"``.
 
 The bootstrap filter. The motion is deterministic: nothing ever spreads the
@@ -116,6 +116,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from depthcore import _paths
 from depthcore.kalman.second_order import minimiser, second_order_batch
 from depthcore.particles.resampling import (
     MIN_EFFECTIVE_DRAWS,
@@ -137,7 +138,6 @@ __all__ = [
     "ParticleBatch",
     "ParticleMoments",
     "ParticleResult",
-    "particle_filter",
     "run",
 ]
 
@@ -184,7 +184,7 @@ def _distinct_ess(ancestors, W) -> np.ndarray:
 class ParticleResult:
     """The particle filter's weighted particles at time 3, for one triple.
 
-    Built by :func:`particle_filter`.
+    Built by :func:`run` (one sequence).
 
     Attributes
     ----------
@@ -488,11 +488,11 @@ def run(
     df: float = DEFAULT_DF,
     inflation: float = DEFAULT_INFLATION,
 ) -> ParticleBatch:
-    """The particle filter for ``B`` problems at once, vectorised over trials.
+    """The particle filter for one sequence or ``B`` of them at once, vectorised over trials.
 
     Parameters
     ----------
-    mu : array_like, shape (B, N)
+    mu : array_like, shape (N,) or (B, N)
         ``N >= 3`` bearings per row (the paper's triple for ``N = 3``), checked
         by :func:`depthcore.problem.model.measurements_batch`.
     rho : float or array_like, shape (B,)
@@ -520,8 +520,18 @@ def run(
 
     Returns
     -------
-    ParticleBatch
+    ParticleResult or ParticleBatch
+        For one sequence its :class:`ParticleResult`, for a batch the
+        :class:`ParticleBatch`.
     """
+    if np.ndim(mu) == 1:
+        mu = checks.finite_array(mu, "mu")
+        if mu.shape == (3,):
+            mu = model.measurements(mu)
+        Gaussian.prior(prior_mean, prior_cov)
+        rho = checks.positive_scalar(rho, "rho")
+        options = (n_particles, rng, proposal, resampler, ess_threshold, df, inflation)
+        return run(np.asarray(mu)[None], rho, prior_mean, prior_cov, *options).trial(0)
     prior_cov = checks.covariance(prior_cov, "prior_cov", 3)
     mu, rho, prior_mean, _ = model.batch_inputs(mu, rho, prior_mean, prior_cov)  # checks each row
     if mu.ndim != 2:
@@ -568,6 +578,10 @@ def run(
     return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal)
 
 
+@_paths.replaced(
+    "depthcore.particles.importance.particle_filter",
+    "depthcore.particles.importance.run(mu, rho, prior.mean, prior.cov, n_particles, rng)",
+)
 def particle_filter(
     mu,
     rho: float,
@@ -580,18 +594,14 @@ def particle_filter(
     df: float = DEFAULT_DF,
     inflation: float = DEFAULT_INFLATION,
 ) -> ParticleResult:
-    """The particle filter for one sequence of bearings (the paper's: one triple).
+    """:func:`run` on one sequence, with the prior as a :class:`Gaussian`; kept until 0.3.
 
     Parameters
     ----------
     mu : array_like, shape (N,)
-        ``N >= 3`` bearings; a triple is checked by :func:`depthcore.problem.model.measurements`.
     rho : float
-        Noise standard deviation, > 0.
     prior : Gaussian
-        Density of the state at time 1.
     n_particles : int
-        ``N >= 1``.
     rng : numpy.random.Generator
     proposal, resampler, ess_threshold, df, inflation
         As for :func:`run`.
@@ -599,28 +609,8 @@ def particle_filter(
     Returns
     -------
     ParticleResult
-        Weighted particles at frame ``N``, the ESS after each measurement; moments
-        and densities of the depth and velocity.
     """
-    mu = checks.finite_array(mu, "mu")
-    if mu.shape == (3,):
-        mu = model.measurements(mu)
-    elif mu.ndim != 1:
-        raise ValueError(f"mu must have shape (N,), got shape {mu.shape}")
-    rho = checks.positive_scalar(rho, "rho")
     if not isinstance(prior, Gaussian):
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    batch = run(
-        mu[None],
-        rho,
-        prior.mean,
-        prior.cov,
-        n_particles,
-        rng,
-        proposal,
-        resampler,
-        ess_threshold,
-        df,
-        inflation,
-    )
-    return batch.trial(0)
+    options = (proposal, resampler, ess_threshold, df, inflation)
+    return run(mu, rho, prior.mean, prior.cov, n_particles, rng, *options)

@@ -18,7 +18,7 @@ The steps, for ``J`` particles and bearings ``mu_1, mu_2, ..`` seen one at a tim
 
 * Frame 1. The depths are drawn from the prior's depth marginal
   ``N(m_y, P_yy)`` restricted to ``y > 0`` (the point in front of the camera
-  at every frame, the "front" support of :func:`depthcore.exact.optimal.marginals`).
+  at every frame, the "front" support of :func:`depthcore.exact.optimal.run`).
   The truncation is handled exactly, by inverse-CDF sampling of the truncated
   Gaussian in log space (:func:`prior_depths`); its normaliser
   ``P(y_1 > 0)`` is the same for every particle and cancels when the weights

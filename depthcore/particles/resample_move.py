@@ -29,7 +29,7 @@ refuses ``process_noise > 0`` for this filter, whose state is the static
 causal, and its effective sample size after ``mu_k`` measures how well the
 particles drawn so far explain the bearings seen so far. The point is in front
 of the camera at every frame (``y_1 > 0``), the support of
-:func:`depthcore.exact.optimal.marginals` with ``support="front"``.
+:func:`depthcore.exact.optimal.run` with ``support="front"``.
 
 Resampling happens when the ESS falls below ``ess_threshold * N`` (default
 ``0.5``, the usual rule [kong1994]_), with systematic resampling by default
@@ -72,6 +72,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from depthcore import _paths
 from depthcore.particles.resampling import (
     RESAMPLERS,
     check_rng,
@@ -400,6 +401,11 @@ def _resample_move(x1, log_w, need, mu, rho, prior_mean, prior_chol, moves, rng,
     return x1, log_w, accepted / moves if moves else np.full(sub.shape[0], np.nan)
 
 
+@_paths.replaced(
+    "depthcore.particles.resample_move.resample_move",
+    "depthcore.particles.resample_move.replicated(mu, rho, prior.mean, prior.cov, n_particles, "
+    "rng, replicas=1).runs",
+)
 def resample_move(
     mu,
     rho: float,
@@ -410,20 +416,18 @@ def resample_move(
     ess_threshold: float = 0.5,
     resampler: str = "systematic",
 ) -> ResampleMoveBatch:
-    """The resample-move filter for one sequence of bearings ``mu`` (shape (K,)); a batch of one.
+    """:func:`run` on one sequence, with the prior as a :class:`Gaussian`; kept until 0.3.
 
-    Parameters are as for :func:`run`, with ``prior`` the density of the state
-    at time 1.
+    Parameters are as for :func:`run`, with ``mu`` of shape (K,) and ``prior``
+    the density of the state at time 1; a batch of one.
     """
-    mu = checks.finite_array(mu, "mu")
+    mu = np.asarray(mu)
     if mu.ndim != 1:
         raise ValueError(f"mu must have shape (K,), got shape {mu.shape}")
-    rho = checks.positive_scalar(rho, "rho")
     if not isinstance(prior, Gaussian):
         raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    return run(
-        mu[None], rho, prior.mean, prior.cov, n_particles, rng, moves, ess_threshold, resampler
-    )
+    options = (moves, ess_threshold, resampler)
+    return run(mu[None], rho, prior.mean, prior.cov, n_particles, rng, *options)
 
 
 def replicated(
@@ -438,9 +442,10 @@ def replicated(
 ) -> Replicated:
     """``replicas`` independent runs of :func:`run` on each sequence of bearings.
 
-    Parameters are as for :func:`run` (``mu`` of shape (B, K), ``prior_mean``
-    (3,) or (B, 3)), with ``n_particles`` per replica and ``options`` those of
-    :func:`run`; the replicas are rows of one batch, drawn from ``rng``.
+    The filter's door: parameters are as for :func:`run`, with ``mu`` of shape
+    (K,) (one sequence, a batch of one) or (B, K), ``prior_mean`` (3,) or
+    (B, 3), ``n_particles`` per replica and ``options`` those of :func:`run`;
+    the replicas are rows of one batch, drawn from ``rng``.
 
     Returns
     -------
@@ -448,8 +453,12 @@ def replicated(
     """
     R = checks.count(replicas, "replicas")
     mu = np.asarray(mu)
+    if mu.ndim == 1:
+        Gaussian.prior(prior_mean, prior_cov)
+        rho = checks.positive_scalar(rho, "rho")
+        mu = checks.finite_array(mu, "mu")[None]
     if mu.ndim != 2:
-        raise ValueError(f"mu must have shape (B, K), got shape {mu.shape}")
+        raise ValueError(f"mu must have shape (K,) or (B, K), got shape {mu.shape}")
     rho = np.asarray(rho)
     prior_mean = np.asarray(prior_mean)
     rho = np.repeat(rho, R, axis=0) if rho.ndim else rho

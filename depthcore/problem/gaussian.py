@@ -49,6 +49,25 @@ class Gaussian:
         object.__setattr__(self, "mean", mean)
         object.__setattr__(self, "cov", cov)
 
+    @classmethod
+    def prior(cls, prior_mean, prior_cov, names=("prior_mean", "prior_cov")) -> Gaussian:
+        """The prior ``N(prior_mean, prior_cov)``, its refusals naming the two arguments.
+
+        Parameters
+        ----------
+        prior_mean : array_like, shape (3,)
+        prior_cov : array_like, shape (3, 3)
+            Symmetric positive definite.
+        names : tuple of str
+            The arguments' names in the refusals (the command line's are its options').
+        """
+        try:
+            return cls(prior_mean, prior_cov)
+        except ValueError as exc:
+            raise ValueError(
+                str(exc).replace("cov ", f"{names[1]} ", 1).replace("mean ", f"{names[0]} ", 1)
+            ) from None
+
     def marginal(self, component: str) -> tuple[float, float]:
         """Eq. (13): mean and standard deviation of one component (``"x"``, ``"y"``, ``"v"``)."""
         i = INDEX[component]

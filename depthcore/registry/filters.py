@@ -60,29 +60,26 @@ particle filter (:mod:`depthcore.particles.rbpf`), the range-parametrised EKF
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from depthcore.exact import optimal
-from depthcore.kalman import second_order
-from depthcore.problem import checks, model
-from depthcore.registry.adapters import (
-    gaussian_smoother,
-    run_ekf,
-    run_inverse_depth,
-    run_inverse_depth_ukf,
-    run_iterated,
-    run_modified_polar,
-    run_optimal,
-    run_particle,
-    run_range_parametrised,
-    run_rbpf,
-    run_resample_move,
-    run_second_order,
-    run_ukf,
-    smooth_optimal,
+from depthcore.kalman import (
+    ekf,
+    inverse_depth,
+    inverse_depth_ukf,
+    iterated,
+    modified_polar,
+    range_ekf,
+    second_order,
+    ukf,
 )
+from depthcore.particles import importance, rbpf, resample_move
+from depthcore.problem import checks, model
+from depthcore.problem.gaussian import Gaussian
+from depthcore.registry import adapters
+from depthcore.registry.adapters import checked_gaussian, gaussian_smoother
 from depthcore.registry.estimates import FAMILY, Estimate, Family, check_quantity
 
 
@@ -101,8 +98,10 @@ class Filter:
     in_paper : bool
         Whether the paper compares it.
     run : callable
-        ``run(mu, rho, prior_mean, prior_cov, **options) -> Estimate``, and
-        also ``process_noise=q`` when ``with_process_noise``.
+        The filter's door, a batched function of its module:
+        ``run(mu, rho, prior_mean, prior_cov, **options)``, and also
+        ``process_noise=q`` when ``with_process_noise``, with ``mu`` of shape
+        ``(N,)`` or ``(B, N)``; it returns the filter's own result.
     variants : tuple of (str, str, dict)
         ``(reading, support, options)`` of each row the filter contributes to
         the reproduction tables.
@@ -126,6 +125,13 @@ class Filter:
         :class:`~depthcore.exact.mixture.Smoothed` of means (N, 3) and covariances
         (N, 3, 3), and the filter's own result. ``None`` for a filter
         without a smoother.
+    estimate : callable or None
+        ``estimate(result, single) -> Estimate``: reads ``run``'s result (of one
+        sequence if ``single``), one of :mod:`depthcore.registry.adapters`;
+        ``None`` when ``run`` returns an :class:`Estimate` itself.
+    options : dict
+        The registry's defaults of ``run``'s options (the number of particles,
+        say), which a call's own options override.
     """
 
     name: str
@@ -140,6 +146,8 @@ class Filter:
     with_process_noise: bool = False
     default: bool = True
     smoother: Callable | None = None
+    estimate: Callable | None = None
+    options: dict = field(default_factory=dict)
 
     def __call__(self, mu, rho, prior_mean, prior_cov, process_noise=0.0, **options) -> Estimate:
         """Run the filter; see the module docstring for the arguments and their shapes.
@@ -160,19 +168,26 @@ class Filter:
                 f"paper's three frames, got {mu.shape[-1]} bearings per problem"
             )
         rho = checks.as_float(rho, "rho")
-        if mu.ndim == 1:
+        single = mu.ndim == 1
+        if single:
             rho = checks.number(rho, "rho")
         prior_mean = checks.as_float(prior_mean, "prior_mean")
         prior_cov = checks.as_float(prior_cov, "prior_cov")
+        if single:
+            Gaussian.prior(prior_mean, prior_cov)
         q = checks.process_noise(process_noise, "process_noise")
-        if not self.with_process_noise:
-            if q > 0:
-                raise ValueError(
-                    f"process_noise must be 0 for the {self.name} filter, which supports "
-                    f"only the constant-velocity motion, got {q:g}"
-                )
-            return self.run(mu, rho, prior_mean, prior_cov, **options)
-        return self.run(mu, rho, prior_mean, prior_cov, process_noise=q, **options)
+        options = {**self.options, **options}
+        if self.random:
+            options["rng"] = adapters.required_rng(options.get("rng"), f"{self.name} filter")
+        if self.with_process_noise:
+            options["process_noise"] = q
+        elif q > 0:
+            raise ValueError(
+                f"process_noise must be 0 for the {self.name} filter, which supports "
+                f"only the constant-velocity motion, got {q:g}"
+            )
+        result = self.run(mu, rho, prior_mean, prior_cov, **options)
+        return result if self.estimate is None else self.estimate(result, single)
 
     @property
     def frames(self) -> str:
@@ -202,6 +217,19 @@ class Filter:
         return FAMILY[self.family]
 
 
+#: Particles of the importance sampler unless a caller asks for another number.
+PARTICLES = 20_000
+
+#: Particles per replica of the resample-move filter, by default (``resample_move.REPLICAS``
+#: replicas: the same 20,000 particles in all as the importance sampler).
+RESAMPLE_MOVE_PARTICLES = 5000
+
+#: Particles per replica of the Rao-Blackwellised particle filter, by default.
+RBPF_PARTICLES = 1000
+
+#: Independent replicas of the Rao-Blackwellised particle filter, for its standard errors.
+RBPF_REPLICAS = 4
+
 #: Every filter, in the order of the tables and legends.
 FILTERS: dict[str, Filter] = {
     f.name: f
@@ -212,7 +240,7 @@ FILTERS: dict[str, Filter] = {
             {"color": "black", "linestyle": "-"},
             "exact",
             True,
-            run_optimal,
+            optimal.run,
             tuple(
                 (r, s, {"reading": r, "support": s})
                 for r in optimal.READINGS
@@ -220,7 +248,8 @@ FILTERS: dict[str, Filter] = {
             ),
             any_frames=True,
             with_process_noise=True,
-            smoother=smooth_optimal,
+            smoother=adapters.smooth_optimal,
+            estimate=adapters.exact,
         ),
         Filter(
             "second_order",
@@ -228,10 +257,11 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:blue", "linestyle": "--"},
             "gaussian",
             True,
-            run_second_order,
+            second_order.run,
             tuple((r, "all", {"reading": r}) for r in second_order.READINGS),
             any_frames=True,
             with_process_noise=True,
+            estimate=adapters.gaussian,
         ),
         Filter(
             "ekf",
@@ -239,11 +269,12 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:red", "linestyle": ":"},
             "gaussian",
             True,
-            run_ekf,
+            ekf.run,
             (("printed", "all", {}),),
             any_frames=True,
             with_process_noise=True,
-            smoother=gaussian_smoother(run_ekf),
+            smoother=gaussian_smoother(ekf.run),
+            estimate=adapters.gaussian,
         ),
         Filter(
             "ukf",
@@ -251,11 +282,13 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:green", "linestyle": "-."},
             "gaussian",
             False,
-            run_ukf,
+            ukf.run,
             (("-", "all", {}),),
             any_frames=True,
             with_process_noise=True,
-            smoother=gaussian_smoother(run_ukf),
+            smoother=gaussian_smoother(ukf.run, allow_behind_camera=True),
+            estimate=adapters.gaussian,
+            options={"allow_behind_camera": True},
         ),
         Filter(
             "particle",
@@ -263,10 +296,12 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:purple", "linestyle": (0, (5, 1, 1, 1, 1, 1))},
             "particles",
             False,
-            run_particle,
+            importance.run,
             (("-", "front", {}),),
             random=True,
             any_frames=True,
+            estimate=adapters.particles,
+            options={"n_particles": PARTICLES},
         ),
         Filter(
             "iterated",
@@ -274,11 +309,12 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:orange", "linestyle": "--"},
             "gaussian",
             False,
-            run_iterated,
+            iterated.run,
             (("-", "all", {}),),
             any_frames=True,
             with_process_noise=True,
             default=False,
+            estimate=checked_gaussian("iterated EKF"),
         ),
         Filter(
             "inverse_depth",
@@ -286,11 +322,12 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:brown", "linestyle": ":"},
             "gaussian",
             False,
-            run_inverse_depth,
+            inverse_depth.estimate,
             (("-", "all", {}),),
             any_frames=True,
             with_process_noise=True,
             default=False,
+            estimate=checked_gaussian("inverse-depth EKF"),
         ),
         Filter(
             "resample_move",
@@ -298,11 +335,13 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:pink", "linestyle": "-."},
             "particles",
             False,
-            run_resample_move,
+            resample_move.replicated,
             (("-", "front", {}),),
             random=True,
             any_frames=True,
             default=False,
+            estimate=adapters.replicas,
+            options={"n_particles": RESAMPLE_MOVE_PARTICLES, "replicas": resample_move.REPLICAS},
         ),
         Filter(
             "rbpf",
@@ -310,12 +349,14 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:olive", "linestyle": "--"},
             "rao_blackwellised",
             False,
-            run_rbpf,
+            rbpf.run,
             (("-", "front", {}),),
             random=True,
             any_frames=True,
             with_process_noise=True,
             default=False,
+            estimate=adapters.rao_blackwellised,
+            options={"n_particles": RBPF_PARTICLES, "replicas": RBPF_REPLICAS},
         ),
         Filter(
             "range_parametrised",
@@ -323,11 +364,12 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:cyan", "linestyle": "-."},
             "gaussian",
             False,
-            run_range_parametrised,
+            range_ekf.posterior,
             (("-", "front", {}),),
             any_frames=True,
             with_process_noise=True,
             default=False,
+            estimate=checked_gaussian("range-parametrised EKF"),
         ),
         Filter(
             "inverse_depth_ukf",
@@ -335,11 +377,13 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:gray", "linestyle": "--"},
             "gaussian",
             False,
-            run_inverse_depth_ukf,
+            inverse_depth_ukf.estimate,
             (("-", "all", {}),),
             any_frames=True,
             with_process_noise=True,
             default=False,
+            estimate=checked_gaussian("inverse-depth UKF"),
+            options={"allow_behind_camera": True},
         ),
         Filter(
             "modified_polar",
@@ -347,11 +391,12 @@ FILTERS: dict[str, Filter] = {
             {"color": "tab:blue", "linestyle": (0, (1, 1))},
             "gaussian",
             False,
-            run_modified_polar,
+            modified_polar.estimate,
             (("-", "all", {}),),
             any_frames=True,
             with_process_noise=True,
             default=False,
+            estimate=checked_gaussian("modified-polar EKF"),
         ),
     )
 }

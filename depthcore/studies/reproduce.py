@@ -24,9 +24,8 @@ from depthcore.problem import checks
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import noise_free_state, noise_free_states_unchecked
 from depthcore.problem.scenarios import REPORTED, REPORTED_DECIMALS, SCENARIOS, Scenario
-from depthcore.registry.adapters import PARTICLES
 from depthcore.registry.estimates import QUANTITIES, Estimate
-from depthcore.registry.filters import FILTERS, NAMES, PAPER_FILTERS, check_names
+from depthcore.registry.filters import FILTERS, NAMES, PAPER_FILTERS, PARTICLES, check_names
 
 #: The default seed of the particle filter wherever this module runs it.
 PARTICLE_SEED = 1990
