@@ -15,7 +15,6 @@ naming that path. The linear Kalman filter's module ``depthcore.kalman`` is now
 
 from __future__ import annotations
 
-import functools
 import importlib
 import importlib.machinery
 import sys
@@ -108,31 +107,49 @@ def message(old: str, new: str) -> str:
     return f"{old} has moved to {new}; the old path stops working in depthcore {REMOVED_IN}"
 
 
-def replaced(old: str, new: str):
-    """Decorate a function kept until :data:`REMOVED_IN` in favour of ``new``: it warns, naming it.
+def kept(old: str, door, positional: tuple = (), one_row: bool = False):
+    """A 0.1 function that took the prior as a Gaussian, kept until :data:`REMOVED_IN`.
+
+    ``old(mu, rho, prior, *args, **options)`` warns, naming ``door``, and returns
+    ``door(mu, rho, prior.mean, prior.cov, **options)`` with ``args`` named by
+    ``positional`` (the old function's order).
 
     Parameters
     ----------
     old : str
         The kept function's full name, e.g. ``"depthcore.kalman.ekf.ekf"``.
-    new : str
-        The call that replaces it, e.g. ``"depthcore.kalman.ekf.run(mu, rho, prior.mean,
-        prior.cov)"``.
+    door : callable
+        The filter's door that replaces it.
+    positional : tuple of str
+        The names of the old function's arguments after ``prior``, in order.
+    one_row : bool
+        Whether ``door`` is called with ``mu`` as a batch of one row (the old
+        function returned the door's batch of one).
     """
+    new = f"{door.__module__}.{door.__name__}(mu, rho, prior.mean, prior.cov, ...)"
 
-    def decorate(function):
-        @functools.wraps(function)
-        def warned(*args, **kwargs):
-            warnings.warn(
-                f"{old} is replaced by {new}; it stops working in depthcore {REMOVED_IN}",
-                DeprecationWarning,
-                stacklevel=2,
-            )
-            return function(*args, **kwargs)
+    def function(mu, rho, prior, *args, **options):
+        warnings.warn(
+            f"{old} is replaced by {new}; it stops working in depthcore {REMOVED_IN}",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        if not (hasattr(prior, "mean") and hasattr(prior, "cov")):
+            raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
+        if len(args) > len(positional):
+            raise TypeError(f"{old} takes at most {3 + len(positional)} positional arguments")
+        options.update(zip(positional, args, strict=False))
+        if one_row:
+            mu = [mu]
+        return door(mu, rho, prior.mean, prior.cov, **options)
 
-        return warned
-
-    return decorate
+    function.__name__ = function.__qualname__ = old.rsplit(".", 1)[1]
+    function.__module__ = old.rsplit(".", 1)[0]
+    function.__doc__ = (
+        f":func:`{door.__module__}.{door.__name__}` with the prior as a Gaussian "
+        f"``prior`` (its ``mean`` and ``cov``); kept until {REMOVED_IN}."
+    )
+    return function
 
 
 def moved_module(old: str):

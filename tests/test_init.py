@@ -7,10 +7,12 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import depthcore
 from depthcore import _paths
+from depthcore.kalman import ukf
 
 PACKAGE = Path(depthcore.__file__).parent
 
@@ -153,3 +155,66 @@ def test_the_new_paths_never_warn():
         warnings.simplefilter("error")
         for name in depthcore.MODULES:
             importlib.import_module(name)
+
+
+KEPT = [
+    ("depthcore.kalman.ekf", "ekf", "run", (), lambda r: r.means),
+    ("depthcore.kalman.ukf", "ukf", "run", (ukf.SigmaPoints(), True), lambda r: r.means),
+    ("depthcore.kalman.second_order", "second_order", "run", ("printed",), lambda r: r.cov),
+    ("depthcore.exact.optimal", "marginals", "run", ("derived", "all"), lambda r: r.mean),
+]
+
+
+@pytest.mark.parametrize("module, old, door, args, read", KEPT, ids=[k[1] for k in KEPT])
+def test_a_kept_function_warns_naming_its_door_and_answers_as_the_door(
+    module, old, door, args, read
+):
+    from depthcore.problem.scenarios import SCENARIOS
+
+    m = importlib.import_module(module)
+    s = SCENARIOS["fig2"]
+    with pytest.warns(
+        DeprecationWarning, match=rf"{module}\.{old} is replaced by {module}\.{door}"
+    ):
+        kept = getattr(m, old)(s.mu, s.rho, s.prior, *args)
+    names = {
+        "second_order": ("reading",),
+        "marginals": ("reading", "support"),
+        "ukf": ("sigma_points", "allow_behind_camera"),
+    }.get(old, ())
+    direct = getattr(m, door)(
+        s.mu, s.rho, s.prior.mean, s.prior.cov, **dict(zip(names, args, strict=False))
+    )
+    assert np.array_equal(read(kept), read(direct))
+    with (
+        pytest.warns(DeprecationWarning),
+        pytest.raises(ValueError, match="prior must be a Gaussian"),
+    ):
+        getattr(m, old)(s.mu, s.rho, {"mean": s.prior.mean})
+
+
+def test_the_kept_particle_filters_answer_as_their_doors():
+    from depthcore.particles import importance, resample_move
+    from depthcore.problem.scenarios import SCENARIOS
+
+    s = SCENARIOS["fig2"]
+    with pytest.warns(DeprecationWarning, match="importance.run"):
+        kept = importance.particle_filter(s.mu, s.rho, s.prior, 50, np.random.default_rng(3))
+    direct = importance.run(s.mu, s.rho, s.prior.mean, s.prior.cov, 50, np.random.default_rng(3))
+    assert np.array_equal(kept.particles, direct.particles)
+    with pytest.warns(DeprecationWarning, match="resample_move.run"):
+        kept = resample_move.resample_move(s.mu, s.rho, s.prior, 50, np.random.default_rng(3), 2)
+    direct = resample_move.run(
+        [s.mu], s.rho, s.prior.mean, s.prior.cov, 50, np.random.default_rng(3), 2
+    )
+    assert np.array_equal(kept.particles, direct.particles)
+
+
+def test_the_registrys_old_run_functions_are_its_entries():
+    from depthcore.registry import adapters
+    from depthcore.registry.filters import FILTERS
+
+    with pytest.warns(DeprecationWarning, match=r"FILTERS\['ekf'\]"):
+        assert adapters.run_ekf is FILTERS["ekf"]
+    with pytest.raises(AttributeError):
+        adapters.run_nothing  # noqa: B018

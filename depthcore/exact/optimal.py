@@ -638,36 +638,9 @@ def _triple(
     )
 
 
-@_paths.replaced(
-    "depthcore.exact.optimal.marginals",
-    "depthcore.exact.optimal.run(mu, rho, prior.mean, prior.cov, reading=..., support=...)",
-)
-def marginals(
-    mu,
-    rho: float,
-    prior: Gaussian,
-    reading: str = "derived",
-    support: str = "front",
-    rtol: float = 1e-10,
-) -> OptimalMarginals:
-    """:func:`run` on one triple, with the prior as a :class:`Gaussian`; kept until 0.3.
-
-    Parameters
-    ----------
-    mu : array_like, shape (3,)
-    rho : float
-    prior : Gaussian
-    reading : {"derived", "printed"}
-    support : {"front", "all"}
-    rtol : float
-
-    Returns
-    -------
-    OptimalMarginals
-    """
-    if not isinstance(prior, Gaussian):
-        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    return _triple(mu, rho, prior, reading, support, rtol)
+#: :func:`run` on one triple with the prior as a Gaussian, ``marginals(mu, rho, prior,
+#: reading, support, rtol)``; kept until 0.3.
+marginals = _paths.kept("depthcore.exact.optimal.marginals", run, ("reading", "support", "rtol"))
 
 
 @dataclass(frozen=True)

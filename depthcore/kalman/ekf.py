@@ -24,7 +24,7 @@ import numpy as np
 from depthcore import _paths
 from depthcore.kalman import linear
 from depthcore.problem import checks, model
-from depthcore.problem.gaussian import Gaussian, History, MeanAndCov, run_recursion, symmetric
+from depthcore.problem.gaussian import History, MeanAndCov, run_recursion, symmetric
 
 #: The EKF's estimates after each measurement: ``means[i]`` is ``m_{i+1}``,
 #: ``covs[i]`` is ``P_{i+1}``; ``.posterior`` is ``p_e = N(x, m_3, P_3)``.
@@ -253,24 +253,5 @@ def _update_information(n, R, mu, rho):
     return n + delta, R_new
 
 
-@_paths.replaced(
-    "depthcore.kalman.ekf.ekf", "depthcore.kalman.ekf.run(mu, rho, prior.mean, prior.cov)"
-)
-def ekf(mu, rho: float, prior: Gaussian, process_noise: float = 0.0) -> History:
-    """:func:`run` on one sequence, with the prior as a :class:`Gaussian`; kept until 0.3.
-
-    Parameters
-    ----------
-    mu : array_like, shape (N,)
-    rho : float
-    prior : Gaussian
-        Density of the state at time 1.
-    process_noise : float
-
-    Returns
-    -------
-    History
-    """
-    if not isinstance(prior, Gaussian):
-        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    return run(mu, rho, prior.mean, prior.cov, process_noise)
+#: :func:`run` with the prior as a Gaussian, ``ekf(mu, rho, prior, process_noise)``; until 0.3.
+ekf = _paths.kept("depthcore.kalman.ekf.ekf", run, ("process_noise",))

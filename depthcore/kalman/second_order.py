@@ -681,30 +681,11 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, reading: str
     return Gaussian(mean[0], cov[0])
 
 
-@_paths.replaced(
-    "depthcore.kalman.second_order.second_order",
-    "depthcore.kalman.second_order.run(mu, rho, prior.mean, prior.cov, process_noise, reading)",
+#: :func:`run` with the prior as a Gaussian, ``second_order(mu, rho, prior, reading,
+#: process_noise)``; kept until 0.3.
+second_order = _paths.kept(
+    "depthcore.kalman.second_order.second_order", run, ("reading", "process_noise")
 )
-def second_order(
-    mu, rho: float, prior: Gaussian, reading: str = "derived", process_noise: float = 0.0
-) -> Gaussian:
-    """:func:`run` on one sequence, with the prior as a :class:`Gaussian`; kept until 0.3.
-
-    Parameters
-    ----------
-    mu : array_like, shape (N,)
-    rho : float
-    prior : Gaussian
-    reading : {"derived", "printed"}
-    process_noise : float
-
-    Returns
-    -------
-    Gaussian
-    """
-    if not isinstance(prior, Gaussian):
-        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    return run(mu, rho, prior.mean, prior.cov, process_noise, reading)
 
 
 def _reading(reading: str) -> str:

@@ -87,7 +87,7 @@ import numpy as np
 from depthcore import _paths
 from depthcore.kalman.ekf import run_gaussian_filter
 from depthcore.problem import checks, model
-from depthcore.problem.gaussian import Gaussian, History, MeanAndCov, symmetric
+from depthcore.problem.gaussian import History, MeanAndCov, symmetric
 
 #: The UKF's estimates after each measurement (the type of :func:`depthcore.kalman.ekf.run`).
 UKFHistory = History
@@ -352,34 +352,8 @@ def run(
     return run_gaussian_filter(step, mu, rho, prior_mean, prior_cov, process_noise)
 
 
-@_paths.replaced(
-    "depthcore.kalman.ukf.ukf",
-    "depthcore.kalman.ukf.run(mu, rho, prior.mean, prior.cov, process_noise, sigma_points, "
-    "allow_behind_camera)",
+#: :func:`run` with the prior as a Gaussian, ``ukf(mu, rho, prior, sigma_points,
+#: allow_behind_camera, process_noise)``; kept until 0.3.
+ukf = _paths.kept(
+    "depthcore.kalman.ukf.ukf", run, ("sigma_points", "allow_behind_camera", "process_noise")
 )
-def ukf(
-    mu,
-    rho: float,
-    prior: Gaussian,
-    sigma_points: SigmaPoints = SigmaPoints(),
-    allow_behind_camera: bool = False,
-    process_noise: float = 0.0,
-) -> History:
-    """:func:`run` on one sequence, with the prior as a :class:`Gaussian`; kept until 0.3.
-
-    Parameters
-    ----------
-    mu : array_like, shape (N,)
-    rho : float
-    prior : Gaussian
-    sigma_points : SigmaPoints
-    allow_behind_camera : bool
-    process_noise : float
-
-    Returns
-    -------
-    History
-    """
-    if not isinstance(prior, Gaussian):
-        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    return run(mu, rho, prior.mean, prior.cov, process_noise, sigma_points, allow_behind_camera)

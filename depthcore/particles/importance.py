@@ -578,39 +578,10 @@ def run(
     return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal)
 
 
-@_paths.replaced(
+#: :func:`run` with the prior as a Gaussian, ``particle_filter(mu, rho, prior, n_particles,
+#: rng, proposal, resampler, ess_threshold, df, inflation)``; kept until 0.3.
+particle_filter = _paths.kept(
     "depthcore.particles.importance.particle_filter",
-    "depthcore.particles.importance.run(mu, rho, prior.mean, prior.cov, n_particles, rng)",
+    run,
+    ("n_particles", "rng", "proposal", "resampler", "ess_threshold", "df", "inflation"),
 )
-def particle_filter(
-    mu,
-    rho: float,
-    prior: Gaussian,
-    n_particles: int,
-    rng: np.random.Generator,
-    proposal: str = "second_order",
-    resampler: str = "systematic",
-    ess_threshold: float = 0.0,
-    df: float = DEFAULT_DF,
-    inflation: float = DEFAULT_INFLATION,
-) -> ParticleResult:
-    """:func:`run` on one sequence, with the prior as a :class:`Gaussian`; kept until 0.3.
-
-    Parameters
-    ----------
-    mu : array_like, shape (N,)
-    rho : float
-    prior : Gaussian
-    n_particles : int
-    rng : numpy.random.Generator
-    proposal, resampler, ess_threshold, df, inflation
-        As for :func:`run`.
-
-    Returns
-    -------
-    ParticleResult
-    """
-    if not isinstance(prior, Gaussian):
-        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    options = (proposal, resampler, ess_threshold, df, inflation)
-    return run(mu, rho, prior.mean, prior.cov, n_particles, rng, *options)

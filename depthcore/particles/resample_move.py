@@ -401,33 +401,15 @@ def _resample_move(x1, log_w, need, mu, rho, prior_mean, prior_chol, moves, rng,
     return x1, log_w, accepted / moves if moves else np.full(sub.shape[0], np.nan)
 
 
-@_paths.replaced(
+#: :func:`run` on one sequence (a batch of one) with the prior as a Gaussian,
+#: ``resample_move(mu, rho, prior, n_particles, rng, moves, ess_threshold, resampler)``;
+#: kept until 0.3.
+resample_move = _paths.kept(
     "depthcore.particles.resample_move.resample_move",
-    "depthcore.particles.resample_move.replicated(mu, rho, prior.mean, prior.cov, n_particles, "
-    "rng, replicas=1).runs",
+    run,
+    ("n_particles", "rng", "moves", "ess_threshold", "resampler"),
+    one_row=True,
 )
-def resample_move(
-    mu,
-    rho: float,
-    prior: Gaussian,
-    n_particles: int,
-    rng: np.random.Generator,
-    moves: int = 20,
-    ess_threshold: float = 0.5,
-    resampler: str = "systematic",
-) -> ResampleMoveBatch:
-    """:func:`run` on one sequence, with the prior as a :class:`Gaussian`; kept until 0.3.
-
-    Parameters are as for :func:`run`, with ``mu`` of shape (K,) and ``prior``
-    the density of the state at time 1; a batch of one.
-    """
-    mu = np.asarray(mu)
-    if mu.ndim != 1:
-        raise ValueError(f"mu must have shape (K,), got shape {mu.shape}")
-    if not isinstance(prior, Gaussian):
-        raise ValueError(f"prior must be a Gaussian, got {type(prior).__name__}")
-    options = (moves, ess_threshold, resampler)
-    return run(mu[None], rho, prior.mean, prior.cov, n_particles, rng, *options)
 
 
 def replicated(
