@@ -29,6 +29,7 @@ from depthcore.exact.bank import PSI, Bank, run_bank
 from depthcore.exact.cdf import gauss_legendre_cdf
 from depthcore.kalman import linear
 from depthcore.problem import checks
+from depthcore.problem.gaussian import component_mean, component_sd
 from depthcore.problem.weights import normalised
 
 #: Nodes whose log probability is this far below the largest are ignored by the CDF.
@@ -143,31 +144,12 @@ class Smoothed(NamedTuple):
     mean: np.ndarray
     cov: np.ndarray
 
-    @property
-    def depth_mean(self) -> np.ndarray:
-        """``E[y_k]`` at every frame, shape (..., N)."""
-        return self.mean[..., 1]
-
-    @property
-    def depth_sd(self) -> np.ndarray:
-        return np.sqrt(self.cov[..., 1, 1])
-
-    @property
-    def lateral_mean(self) -> np.ndarray:
-        """``E[x_k]`` at every frame, shape (..., N)."""
-        return self.mean[..., 0]
-
-    @property
-    def lateral_sd(self) -> np.ndarray:
-        return np.sqrt(self.cov[..., 0, 0])
-
-    @property
-    def velocity_mean(self) -> np.ndarray:
-        return self.mean[..., 2]
-
-    @property
-    def velocity_sd(self) -> np.ndarray:
-        return np.sqrt(self.cov[..., 2, 2])
+    depth_mean = component_mean(1, "``E[y_k]`` at every frame, shape (..., N).")
+    depth_sd = component_sd(1, "The SD of ``y_k`` at every frame, shape (..., N).")
+    lateral_mean = component_mean(0, "``E[x_k]`` at every frame, shape (..., N).")
+    lateral_sd = component_sd(0, "The SD of ``x_k`` at every frame, shape (..., N).")
+    velocity_mean = component_mean(2, "``E[v_k]`` at every frame, shape (..., N).")
+    velocity_sd = component_sd(2, "The SD of ``v_k`` at every frame, shape (..., N).")
 
 
 @dataclass(frozen=True)
@@ -210,23 +192,10 @@ class Mixture:
     velocity_error: np.ndarray | None = None
     rtol: float | None = None
 
-    @property
-    def depth_mean(self) -> np.ndarray:
-        """``E[y_N]``, shape (...)."""
-        return self.mean[..., 1]
-
-    @property
-    def depth_sd(self) -> np.ndarray:
-        return np.sqrt(self.cov[..., 1, 1])
-
-    @property
-    def velocity_mean(self) -> np.ndarray:
-        """``E[v_N]``, shape (...)."""
-        return self.mean[..., 2]
-
-    @property
-    def velocity_sd(self) -> np.ndarray:
-        return np.sqrt(self.cov[..., 2, 2])
+    depth_mean = component_mean(1, "``E[y_N]``, shape (...).")
+    depth_sd = component_sd(1, "The SD of ``y_N``, shape (...).")
+    velocity_mean = component_mean(2, "``E[v_N]``, shape (...).")
+    velocity_sd = component_sd(2, "The SD of ``v_N``, shape (...).")
 
     def _query(self, value, name):
         """Queries as (batch..., K) and a function restoring the caller's shape."""

@@ -45,7 +45,7 @@ from depthcore import _paths
 from depthcore.exact import quadrature
 from depthcore.exact.cdf import gauss_legendre_cdf
 from depthcore.kalman.second_order import A2
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import f
 
@@ -512,6 +512,7 @@ class OptimalMarginals:
         return pdf.reshape(v.shape)
 
 
+@signature.documented
 def run(
     mu,
     rho,
@@ -532,15 +533,8 @@ def run(
 
     Parameters
     ----------
-    mu : array_like, shape (N,) or (B, N)
-        ``N >= 3`` bearings per problem.
-    rho : float or array_like, shape (B,)
-        Noise standard deviation, > 0.
-    prior_mean : array_like, shape (3,) or (B, 3)
-    prior_cov : array_like, shape (3, 3)
-        The prior on the state at frame 1.
-    process_noise : float
-        ``q >= 0``.
+    {problem}
+    {process_noise}
     reading : {"derived", "printed"}
         ``"printed"`` drops the y-dependent factor that Eq. (16) calls constant
         (the paper's three frames only).

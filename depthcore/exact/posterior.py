@@ -23,7 +23,7 @@ from depthcore.exact import optimal, quadrature
 from depthcore.exact.bank import Bank, lateral_filter, run_bank, step
 from depthcore.exact.mixture import Mixture, mixture, mixture_of_log_weights
 from depthcore.kalman import linear
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 
 # --- nodes placed by the depth quadrature ----------------------------------------------
 
@@ -75,6 +75,7 @@ def _integrate(pb, rtol: float):
     return m._replace(mean=mean), err_y, err_v, top, grids
 
 
+@signature.documented
 def moments(
     mu, rho, prior_mean, prior_cov, process_noise=0.0, rtol: float = 1e-10, chunk: int = 64
 ) -> optimal.Moments:
@@ -90,16 +91,8 @@ def moments(
 
     Parameters
     ----------
-    mu : array_like, shape (B, N) or (N,)
-        Bearings at frames 1 .. N (any ``N >= 1``; the paper's problem is ``N = 3``).
-    rho : float or array_like, shape (B,)
-        Bearing noise SD, > 0.
-    prior_mean : array_like, shape (3,) or (B, 3)
-        Prior mean of ``(x_1, y_1, v_1)``.
-    prior_cov : array_like, shape (3, 3) or (B, 3, 3)
-        Prior covariance, symmetric positive definite.
-    process_noise : float or array_like, shape (B,)
-        SD ``q >= 0`` of the velocity's change per frame.
+    {problem}
+    {process_noise}
     rtol : float
         Target accuracy of each mean and SD, relative to the SD.
     chunk : int

@@ -23,7 +23,7 @@ import numpy as np
 
 from depthcore import _paths
 from depthcore.kalman import linear
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import History, MeanAndCov, run_recursion, symmetric
 
 #: The EKF's estimates after each measurement: ``means[i]`` is ``m_{i+1}``,
@@ -154,6 +154,7 @@ def run_gaussian_filter(
     return run_recursion(n, C, mu, lambda m, P, k: predict(m, P, q), update)
 
 
+@signature.documented
 def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     """Run the EKF over the measurements, batched: Eq. (12), then (10) and (12) per measurement.
 
@@ -169,16 +170,8 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
 
     Parameters
     ----------
-    mu : array_like, shape (..., N)
-        Bearings of ``N >= 3`` frames in time order (``N = 3``: the paper's
-        triple), checked by :func:`depthcore.problem.model.batch_problem`, as are
-        the other arguments.
-    rho : float or array_like, shape (...)
-    prior_mean : array_like, shape (..., 3)
-    prior_cov : array_like, shape (..., 3, 3)
-        Symmetric positive definite.
-    process_noise : float
-        SD ``q >= 0`` of the velocity's change per frame (0: the paper's model).
+    {problem}
+    {process_noise}
 
     Returns
     -------

@@ -51,7 +51,7 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore.kalman import linear
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import History, MeanAndCov, run_recursion, symmetric
 
 
@@ -228,20 +228,14 @@ def depth_interval(z, S, k: int, level: float = 0.68) -> tuple[np.ndarray, np.nd
     return 1.0 / w + (k - 1), 1.0 / high_w + (k - 1), high
 
 
+@signature.documented
 def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     """The inverse-depth EKF over ``K`` bearings, batched, in its own coordinates.
 
     Parameters
     ----------
-    mu : array_like, shape (..., K)
-        Bearings in time order, ``K >= 1``.
-    rho : float or array_like, shape (...)
-        Noise standard deviation, > 0.
-    prior_mean : array_like, shape (..., 3)
-        Prior mean of ``(x_1, y_1, v)``, with positive depth.
-    prior_cov : array_like, shape (..., 3, 3)
-    process_noise : float
-        ``q >= 0``.
+    {problem}
+    {process_noise}
 
     Returns
     -------

@@ -45,7 +45,7 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore.kalman import inverse_depth, ukf
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import History, MeanAndCov, run_recursion
 
 
@@ -156,6 +156,7 @@ def to_state(
     return ukf.unscented_transform(Y, Wm, Wc)
 
 
+@signature.documented
 def run(
     mu,
     rho,
@@ -169,15 +170,8 @@ def run(
 
     Parameters
     ----------
-    mu : array_like, shape (..., K)
-        Bearings in time order, ``K >= 1``.
-    rho : float or array_like, shape (...)
-        Noise SD, > 0.
-    prior_mean : array_like, shape (..., 3)
-        Prior mean of ``(x_1, y_1, v)``, with positive depth.
-    prior_cov : array_like, shape (..., 3, 3)
-    process_noise : float
-        ``q >= 0``.
+    {problem}
+    {process_noise}
     sigma_points : depthcore.kalman.ukf.SigmaPoints
     allow_behind_camera : bool
         See :func:`update`.

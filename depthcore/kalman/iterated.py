@@ -64,7 +64,7 @@ from depthcore.kalman.second_order import (
     trajectory_solve,
     trajectory_states,
 )
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import symmetric
 
 #: Largest number of Gauss-Newton iterations of one update or smoother.
@@ -153,6 +153,7 @@ def update(n, C, mu, rho, max_iterations: int = MAX_ITERATIONS) -> IteratedUpdat
     return IteratedUpdate(x, cov, iterations)
 
 
+@signature.documented
 def run(
     mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, max_iterations: int = MAX_ITERATIONS
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -164,13 +165,8 @@ def run(
 
     Parameters
     ----------
-    mu : array_like, shape (..., K)
-        Bearings in time order, ``K >= 1``.
-    rho : float or array_like, shape (...)
-    prior_mean : array_like, shape (..., 3)
-    prior_cov : array_like, shape (..., 3, 3)
-    process_noise : float
-        SD ``q >= 0`` of the velocity's change per frame (0: the paper's model).
+    {problem}
+    {process_noise}
     max_iterations : int
 
     Returns

@@ -68,7 +68,7 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore.kalman import inverse_depth, linear
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import History, MeanAndCov, run_recursion
 
 #: The measurement matrix (the bearing is the first coordinate).
@@ -178,20 +178,14 @@ def anchor_jacobian(z, k: int) -> np.ndarray:
     return J
 
 
+@signature.documented
 def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     """The modified-polar EKF over ``K`` bearings, batched, in its own coordinates.
 
     Parameters
     ----------
-    mu : array_like, shape (..., K)
-        Bearings in time order, ``K >= 1``.
-    rho : float or array_like, shape (...)
-        Noise SD, > 0.
-    prior_mean : array_like, shape (..., 3)
-        Prior mean of ``(x_1, y_1, v)``, with positive depth.
-    prior_cov : array_like, shape (..., 3, 3)
-    process_noise : float
-        ``q >= 0``.
+    {problem}
+    {process_noise}
 
     Returns
     -------

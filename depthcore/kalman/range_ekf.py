@@ -57,7 +57,7 @@ import numpy as np
 from scipy.special import log_ndtr
 
 from depthcore.kalman import ekf
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 
 #: Components by default, enough for Figure 2's depth mean and SD to agree with the
 #: exact filter's to 1e-2 relative (far fewer leave the EKFs' linearisation over broad
@@ -274,6 +274,7 @@ def mixture_moments(weight, means, covs) -> tuple[np.ndarray, np.ndarray]:
     return mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
 
 
+@signature.documented
 def posterior(
     mu,
     rho,
@@ -287,16 +288,8 @@ def posterior(
 
     Parameters
     ----------
-    mu : array_like, shape (..., N)
-        Bearings of ``N >= 3`` frames, checked by
-        :func:`depthcore.problem.model.batch_problem` (as are ``rho`` and the prior).
-    rho : float or array_like, shape (...)
-        Noise SD, > 0.
-    prior_mean : array_like, shape (3,) or (..., 3)
-        Prior mean of ``(x_1, y_1, v)``.
-    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
-    process_noise : float
-        SD ``q >= 0`` of the velocity's change per frame.
+    {problem}
+    {process_noise}
     n_components : int
         EKFs in the sum, 1 to :data:`MAX_COMPONENTS`.
     depth_range : (float, float), optional

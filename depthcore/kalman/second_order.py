@@ -42,7 +42,7 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore import _paths
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import Gaussian, MeanAndCov, symmetric
 from depthcore.problem.model import (
     noise_free_state,
@@ -121,6 +121,7 @@ def likelihood_covariance(mu, rho: float, reading: str = "derived") -> np.ndarra
     return factor * rho**2 * np.linalg.inv(J)
 
 
+@signature.documented
 def second_order_batch(
     mu, rho: float, prior_mean, prior_cov, reading: str = "derived", process_noise: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -133,16 +134,9 @@ def second_order_batch(
 
     Parameters
     ----------
-    mu : array_like, shape (B, N)
-        ``N >= 3`` bearings per row.
-    rho : float or array_like, shape (B,)
-    prior_mean : array_like, shape (3,) or (B, 3)
-    prior_cov : array_like, shape (3, 3) or (B, 3, 3)
-        Symmetric positive definite. All four are checked by
-        :func:`depthcore.problem.model.batch_problem`.
+    {problem}
     reading : {"derived", "printed"}
-    process_noise : float
-        SD ``q >= 0`` of the velocity's change per frame.
+    {process_noise}
     """
     factor = {"derived": 2.0, "printed": 1.0}[_reading(reading)]
     mu, rho, prior_mean, prior_cov = model.batch_problem(mu, rho, prior_mean, prior_cov)
@@ -633,6 +627,7 @@ def _square_root_solve(c, g, weight, prior_mean, prior_cov):
     return c + delta, symmetric(cov)
 
 
+@signature.documented
 def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, reading: str = "derived"):
     """Eq. (8): the second-order approximation ``p_s`` at frame ``N``, of one sequence or a batch.
 
@@ -642,16 +637,8 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, reading: str
 
     Parameters
     ----------
-    mu : array_like, shape (N,) or (B, N)
-        ``N >= 3`` bearings; the paper's triple for ``N = 3``.
-    rho : float or array_like, shape (B,)
-        Noise standard deviation, > 0.
-    prior_mean : array_like, shape (3,) or (B, 3)
-        Mean of the state at time 1.
-    prior_cov : array_like, shape (3, 3) or (B, 3, 3)
-        Symmetric positive definite.
-    process_noise : float
-        ``q >= 0``.
+    {problem}
+    {process_noise}
     reading : {"derived", "printed"}
 
     Returns

@@ -86,7 +86,7 @@ import numpy as np
 
 from depthcore import _paths
 from depthcore.kalman.ekf import run_gaussian_filter
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import History, MeanAndCov, symmetric
 
 #: The UKF's estimates after each measurement (the type of :func:`depthcore.kalman.ekf.run`).
@@ -308,6 +308,7 @@ def update(
     return measurement_update(n, C, mu, rho, model.project, sigma_points)
 
 
+@signature.documented
 def run(
     mu,
     rho,
@@ -326,16 +327,8 @@ def run(
 
     Parameters
     ----------
-    mu : array_like, shape (..., N)
-        Bearings of ``N >= 3`` frames in time order (``N = 3``: the paper's
-        triple); the leading shape runs independent filters.
-    rho : float or array_like, shape (...)
-        Noise standard deviation, > 0.
-    prior_mean : array_like, shape (3,) or (..., 3)
-    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
-        Symmetric positive definite.
-    process_noise : float
-        SD ``q >= 0`` of the velocity's change per frame (0: the paper's model).
+    {problem}
+    {process_noise}
     sigma_points : SigmaPoints
     allow_behind_camera : bool
         See :func:`update`.

@@ -127,7 +127,7 @@ from depthcore.particles.resampling import (
     weighted_moments,
     weighted_standard_errors,
 )
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import INDEX, Gaussian, gaussian_logpdf, student_t
 from depthcore.problem.weights import normalise
 
@@ -475,6 +475,7 @@ def _resample(x, log_w, ancestors, need, N, rng, resampler):
     return x, log_w, ancestors
 
 
+@signature.documented
 def run(
     mu,
     rho,
@@ -492,15 +493,7 @@ def run(
 
     Parameters
     ----------
-    mu : array_like, shape (N,) or (B, N)
-        ``N >= 3`` bearings per row (the paper's triple for ``N = 3``), checked
-        by :func:`depthcore.problem.model.measurements_batch`.
-    rho : float or array_like, shape (B,)
-        Noise standard deviation, > 0.
-    prior_mean : array_like, shape (3,) or (B, 3)
-        Prior mean of the state at time 1.
-    prior_cov : array_like, shape (3, 3)
-        Prior covariance, symmetric positive definite.
+    {problem}
     n_particles : int
         ``N >= 1`` particles per trial. Memory grows like ``B * N``: about
         ``200 B N`` bytes at the peak.

@@ -110,7 +110,7 @@ from depthcore.particles.resampling import (
     replica_errors,
     weighted_moments,
 )
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.weights import normalise
 
 #: Metropolis-Hastings steps per particle after each resampling, by default.
@@ -563,6 +563,7 @@ def step(state: RBPF, mu_next, rng: np.random.Generator) -> RBPF:
     return _reweighted(state, new, state.log_weights + increment, rng)
 
 
+@signature.documented
 def run(
     mu,
     rho,
@@ -583,20 +584,12 @@ def run(
 
     Parameters
     ----------
-    mu : array_like, shape (K,) or (..., K)
-        Bearings of each trial in the order they arrive, ``K >= 1``, finite.
-    rho : float or array_like, shape (...)
-        Bearing noise SD, > 0.
-    prior_mean : array_like, shape (3,) or (..., 3)
-        Prior mean of ``(x_1, y_1, v_1)``.
-    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
-        Prior covariance, symmetric positive definite.
+    {problem}
     n_particles : int
         ``J >= 2`` particles (depths) per replica.
     rng : numpy.random.Generator or numpy.random.SeedSequence
         The only source of randomness.
-    process_noise : float or array_like, shape (...)
-        SD of the lateral acceleration, >= 0 (0: constant velocity).
+    {process_noise}
     replicas : int
         ``R >= 1`` independent clouds of ``J`` particles, for standard errors
         (:meth:`RBPF.standard_errors`); the cost grows like ``R J``.

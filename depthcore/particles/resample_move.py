@@ -82,7 +82,7 @@ from depthcore.particles.resampling import (
     weighted_density,
     weighted_mean_and_cov,
 )
-from depthcore.problem import checks, model
+from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import INDEX, Gaussian
 from depthcore.problem.weights import normalise
 
@@ -273,6 +273,7 @@ def _increment_chol(x1, W, prior_chol) -> np.ndarray:
     return np.linalg.cholesky(cov + 1e-12 * (prior_chol @ prior_chol.T))
 
 
+@signature.documented
 def run(
     mu,
     rho,
@@ -288,15 +289,7 @@ def run(
 
     Parameters
     ----------
-    mu : array_like, shape (B, K)
-        Bearings ``mu_1 .. mu_K`` of each trial, ``K >= 1``, in the order
-        they arrive; any finite values.
-    rho : float or array_like, shape (B,)
-        Noise standard deviation, > 0.
-    prior_mean : array_like, shape (3,) or (B, 3)
-        Prior mean of the state at time 1.
-    prior_cov : array_like, shape (3, 3)
-        Prior covariance, symmetric positive definite.
+    {problem}
     n_particles : int
         ``N >= 2`` particles per trial; memory grows like ``B * N``.
     rng : numpy.random.Generator

@@ -12,7 +12,9 @@ nothing here imports another family.
 * :mod:`~depthcore.problem.checks`: the checks every public function runs on
   its arguments, each refusal one line naming the argument;
 * :mod:`~depthcore.problem.weights`: log weights normalised in log space, for
-  the particle filters' samples and the exact filter's mixture alike.
+  the particle filters' samples and the exact filter's mixture alike;
+* :mod:`~depthcore.problem.signature`: the filters' one calling convention,
+  ``(mu, rho, prior_mean, prior_cov, process_noise)``, documented once.
 
 Where a new thing goes: a new motion or measurement model, or a new way to
 describe a track's frames, goes here, beside :mod:`~depthcore.problem.model`;

@@ -27,6 +27,16 @@ INDEX = {"x": 0, "y": 1, "v": 2}
 PAPER_PRIOR_SCALE = 1000.0
 
 
+def component_mean(index: int, doc: str) -> property:
+    """A property: ``self.mean[..., index]``, the mean of one state component."""
+    return property(lambda self: self.mean[..., index], doc=doc)
+
+
+def component_sd(index: int, doc: str) -> property:
+    """A property: ``sqrt(self.cov[..., index, index])``, the SD of one state component."""
+    return property(lambda self: np.sqrt(self.cov[..., index, index]), doc=doc)
+
+
 @dataclass(frozen=True)
 class Gaussian:
     """A Gaussian density ``N(x, mean, cov)`` on the state ``(x, y, v)``.
