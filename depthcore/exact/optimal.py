@@ -531,10 +531,7 @@ def run(
     Kalman filters over depth nodes placed by the same quadrature
     (:func:`depthcore.exact.posterior.posterior`).
 
-    Parameters
-    ----------
-    {problem}
-    {process_noise}
+    {parameters}
     reading : {"derived", "printed"}
         ``"printed"`` drops the y-dependent factor that Eq. (16) calls constant
         (the paper's three frames only).

@@ -89,10 +89,7 @@ def moments(
     given ``y_1`` from the Kalman filter at each node
     (:func:`~depthcore.exact.bank.lateral_filter`).
 
-    Parameters
-    ----------
-    {problem}
-    {process_noise}
+    {parameters}
     rtol : float
         Target accuracy of each mean and SD, relative to the SD.
     chunk : int

@@ -168,10 +168,7 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     (textbook Eq. (19.10)) is formed as a square root too
     (:func:`_predict_information`).
 
-    Parameters
-    ----------
-    {problem}
-    {process_noise}
+    {parameters}
 
     Returns
     -------

@@ -232,10 +232,7 @@ def depth_interval(z, S, k: int, level: float = 0.68) -> tuple[np.ndarray, np.nd
 def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     """The inverse-depth EKF over ``K`` bearings, batched, in its own coordinates.
 
-    Parameters
-    ----------
-    {problem}
-    {process_noise}
+    {parameters}
 
     Returns
     -------

@@ -168,10 +168,7 @@ def run(
 ) -> History:
     """The inverse-depth UKF over ``K`` bearings, batched, in its own coordinates.
 
-    Parameters
-    ----------
-    {problem}
-    {process_noise}
+    {parameters}
     sigma_points : depthcore.kalman.ukf.SigmaPoints
     allow_behind_camera : bool
         See :func:`update`.

@@ -163,10 +163,7 @@ def run(
     predict (Eq. (10), plus the process noise ``q**2`` on the velocity) and
     update for each further bearing.
 
-    Parameters
-    ----------
-    {problem}
-    {process_noise}
+    {parameters}
     max_iterations : int
 
     Returns

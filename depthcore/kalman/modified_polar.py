@@ -182,10 +182,7 @@ def anchor_jacobian(z, k: int) -> np.ndarray:
 def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     """The modified-polar EKF over ``K`` bearings, batched, in its own coordinates.
 
-    Parameters
-    ----------
-    {problem}
-    {process_noise}
+    {parameters}
 
     Returns
     -------

@@ -286,10 +286,7 @@ def posterior(
 ) -> GaussianSum:
     """The range-parametrised EKF [peach1995]_ over ``N`` bearings, batched.
 
-    Parameters
-    ----------
-    {problem}
-    {process_noise}
+    {parameters}
     n_components : int
         EKFs in the sum, 1 to :data:`MAX_COMPONENTS`.
     depth_range : (float, float), optional

@@ -132,9 +132,7 @@ def second_order_batch(
     and with process noise ``q > 0`` it is the Laplace approximation of the
     whole trajectory's likelihood (see the module docstring).
 
-    Parameters
-    ----------
-    {problem}
+    {parameters}
     reading : {"derived", "printed"}
     {process_noise}
     """
@@ -635,10 +633,7 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, reading: str
     the product of two Gaussians is a Gaussian. For ``N > 3`` bearings or
     process noise, its generalisation (:func:`second_order_batch`, the module docstring).
 
-    Parameters
-    ----------
-    {problem}
-    {process_noise}
+    {parameters}
     reading : {"derived", "printed"}
 
     Returns

@@ -325,10 +325,7 @@ def run(
     variance) and update, once per further measurement (the loop
     :func:`depthcore.kalman.ekf.run_gaussian_filter`).
 
-    Parameters
-    ----------
-    {problem}
-    {process_noise}
+    {parameters}
     sigma_points : SigmaPoints
     allow_behind_camera : bool
         See :func:`update`.

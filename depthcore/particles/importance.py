@@ -491,9 +491,7 @@ def run(
 ) -> ParticleBatch:
     """The particle filter for one sequence or ``B`` of them at once, vectorised over trials.
 
-    Parameters
-    ----------
-    {problem}
+    {parameters}
     n_particles : int
         ``N >= 1`` particles per trial. Memory grows like ``B * N``: about
         ``200 B N`` bytes at the peak.

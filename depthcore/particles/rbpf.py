@@ -582,9 +582,7 @@ def run(
     The bearings are taken one at a time (:func:`step`): the result after
     ``K`` frames is the filter's state, ready for more.
 
-    Parameters
-    ----------
-    {problem}
+    {parameters}
     n_particles : int
         ``J >= 2`` particles (depths) per replica.
     rng : numpy.random.Generator or numpy.random.SeedSequence

@@ -287,9 +287,7 @@ def run(
 ) -> ResampleMoveBatch:
     """The bootstrap filter with resample-move for ``B`` sequences of bearings, vectorised.
 
-    Parameters
-    ----------
-    {problem}
+    {parameters}
     n_particles : int
         ``N >= 2`` particles per trial; memory grows like ``B * N``.
     rng : numpy.random.Generator

@@ -5,12 +5,15 @@ Recommended import: ``from depthcore.problem import signature``.
 
 Every filter's door (:data:`depthcore.registry.filters.FILTERS` names them) and the
 functions built like one take the problem as these five arguments. Their
-docstrings write ``{problem}`` (and ``{process_noise}``) in their ``Parameters``
-section; :func:`documented` puts :data:`PROBLEM` (and :data:`PROCESS_NOISE`) there.
+docstrings write ``{parameters}`` where their ``Parameters`` section starts;
+:func:`documented` puts the section's heading and :data:`PROBLEM` there, and
+:data:`PROCESS_NOISE` when the function takes ``process_noise``; the function's
+own parameters follow.
 """
 
 from __future__ import annotations
 
+import inspect
 import textwrap
 
 #: The problem's four arguments, as a NumPy docstring's ``Parameters`` entries.
@@ -33,9 +36,9 @@ process_noise : float
 
 
 def documented(function):
-    """Fill ``{problem}`` and ``{process_noise}`` in ``function``'s docstring.
+    """Fill ``{parameters}`` in ``function``'s docstring: the heading and the problem's entries.
 
-    Each placeholder stands alone on a line; the entries take its indentation.
+    The placeholder stands alone on a line; the section takes its indentation.
 
     Parameters
     ----------
@@ -46,13 +49,14 @@ def documented(function):
     callable
         ``function``, its docstring filled.
     """
+    entries = [PROBLEM]
+    if "process_noise" in inspect.signature(function).parameters:
+        entries.append(PROCESS_NOISE)
+    section = "\n".join(["Parameters", "----------", *entries])
     lines = []
     for line in (function.__doc__ or "").splitlines():
-        key = line.strip()
-        if key in ("{problem}", "{process_noise}"):
-            text = PROBLEM if key == "{problem}" else PROCESS_NOISE
-            lines.append(textwrap.indent(text, line[: len(line) - len(line.lstrip())]))
-        else:
-            lines.append(line)
+        if line.strip() == "{parameters}":
+            line = textwrap.indent(section, line[: len(line) - len(line.lstrip())])
+        lines.append(line)
     function.__doc__ = "\n".join(lines)
     return function
