@@ -276,15 +276,8 @@ def update(
 
     Parameters
     ----------
-    n : array_like, shape (..., 3)
-        Predicted mean.
-    C : array_like, shape (..., 3, 3)
-        Predicted covariance, symmetric positive definite.
-    mu : float or array_like, shape (...)
-        The measurement.
-    rho : float or array_like, shape (...)
-        Noise standard deviation, > 0.
-    sigma_points : SigmaPoints
+    n, C, mu, rho, sigma_points
+        As for :func:`measurement_update`.
     allow_behind_camera : bool
         If false (default), a sigma point with depth ``<= 0`` raises
         :class:`ValueError`; if true, only a depth of exactly 0 does.
