@@ -109,16 +109,17 @@ pdf-build:
 
 # The LaTeX builder reads every page once; xelatex and the HTML builder then share its doctrees
 # (and the article is typeset beside them).
+SHIPPED_PDFS := depthcore.pdf article.pdf
 books: downloads ## the PDF, the article and the book from one reading of the pages
 	tools/xelatex.sh --check
 	$(PY) tools/check_notebooks.py cache --execute
 	$(clear-book)
 	rm -rf _build/latex
 	rm -f $(DOWNLOADS)/depthcore.pdf $(DOWNLOADS)/article.pdf
-	DEPTHCORE_DOWNLOADS_PENDING="depthcore.pdf article.pdf" $(VENV)/bin/jupyter-book build . --builder latex \
-	  --all -W -n --keep-going 2>&1 | tee _build/latex.log
-	DEPTHCORE_DOWNLOADS_PENDING="depthcore.pdf article.pdf" $(MAKE) -j2 --no-print-directory \
-	  --output-sync=target books-html books-xelatex article
+	DEPTHCORE_DOWNLOADS_PENDING="$(SHIPPED_PDFS)" $(VENV)/bin/jupyter-book build . --builder latex --all \
+	  -W -n --keep-going 2>&1 | tee _build/latex.log
+	DEPTHCORE_DOWNLOADS_PENDING="$(SHIPPED_PDFS)" $(MAKE) -j2 --no-print-directory --output-sync=target \
+	  books-html books-xelatex article
 	cp $(PDF) $(ARTICLE_PDF) $(DOWNLOADS)/
 	cp $(PDF) $(ARTICLE_PDF) _build/html/downloads/
 
