@@ -31,7 +31,7 @@ export JUPYTER_PATH := $(CURDIR)/tools/jupyter$(if $(JUPYTER_PATH),:$(JUPYTER_PA
 KERNEL := $(VENV)/share/jupyter/kernels/python3
 
 .PHONY: help venv book html-build pdf pdf-build books books-html books-xelatex downloads lab test \
-  core test-core lint notebooks notebooks-update notebooks-alone notebooks-standalone check-book \
+  article core test-core lint notebooks notebooks-update notebooks-alone notebooks-standalone check-book \
   check-lab figures records bench clean distclean
 
 help: ## this list
@@ -79,13 +79,15 @@ downloads: $(EDITABLE) $(FIGURES)/.written
 # _build/ without the previous HTML build (the LaTeX build, cache, figures, downloads kept).
 define clear-book
 find _build -mindepth 1 -maxdepth 1 ! -name latex ! -name pdf ! -name .jupyter_cache ! -name figures \
-  ! -name extra -exec rm -rf {} + 2>/dev/null || true
+  ! -name extra ! -name article -exec rm -rf {} + 2>/dev/null || true
 endef
 
 book: downloads ## the book, built strictly into _build/html, with its downloads
 	$(clear-book)
 	@if [[ -f $(PDF) ]]; then cp $(PDF) $(DOWNLOADS)/depthcore.pdf; else \
 	  echo "make book: NOTE: no $(PDF), so the book offers no PDF: run \`make pdf\` first" >&2; fi
+	@if [[ -f $(ARTICLE_PDF) ]]; then cp $(ARTICLE_PDF) $(DOWNLOADS)/article.pdf; else \
+	  echo "make book: NOTE: no $(ARTICLE_PDF), so the book offers no article: run \`make article\` first" >&2; fi
 	$(PY) tools/check_notebooks.py cache --execute
 	$(MAKE) --no-print-directory html-build
 
@@ -105,25 +107,34 @@ pdf-build:
 	mv $(LATEX_BUILD)/_build/latex _build/latex
 	tools/xelatex.sh _build/latex
 
-# The LaTeX builder reads every page once; xelatex and the HTML builder then share its doctrees.
-books: downloads ## the PDF and the book from one reading of the pages
+# The LaTeX builder reads every page once; xelatex and the HTML builder then share its doctrees
+# (and the article is typeset beside them).
+SHIPPED_PDFS := depthcore.pdf article.pdf
+books: downloads ## the PDF, the article and the book from one reading of the pages
 	tools/xelatex.sh --check
 	$(PY) tools/check_notebooks.py cache --execute
 	$(clear-book)
 	rm -rf _build/latex
-	rm -f $(DOWNLOADS)/depthcore.pdf
-	DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf $(VENV)/bin/jupyter-book build . --builder latex --all -W -n \
-	  --keep-going 2>&1 | tee _build/latex.log
-	DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf $(MAKE) -j2 --no-print-directory --output-sync=target \
-	  books-html books-xelatex
-	cp $(PDF) $(DOWNLOADS)/depthcore.pdf
-	cp $(PDF) _build/html/downloads/depthcore.pdf
+	rm -f $(DOWNLOADS)/depthcore.pdf $(DOWNLOADS)/article.pdf
+	DEPTHCORE_DOWNLOADS_PENDING="$(SHIPPED_PDFS)" $(VENV)/bin/jupyter-book build . --builder latex --all \
+	  -W -n --keep-going 2>&1 | tee _build/latex.log
+	DEPTHCORE_DOWNLOADS_PENDING="$(SHIPPED_PDFS)" $(MAKE) -j2 --no-print-directory --output-sync=target \
+	  books-html books-xelatex article
+	cp $(PDF) $(ARTICLE_PDF) $(DOWNLOADS)/
+	cp $(PDF) $(ARTICLE_PDF) _build/html/downloads/
 
 books-html:
 	$(VENV)/bin/jupyter-book build . -W -n --keep-going 2>&1 | tee _build/book.log
 
 books-xelatex:
 	tools/xelatex.sh _build/latex
+
+# The replication article: its numbers checked against the computations, then typeset.
+ARTICLE := _build/article
+ARTICLE_PDF := $(ARTICLE)/article.pdf
+article: $(EDITABLE) $(FIGURES)/.written ## the replication article, _build/article/article.pdf (needs xelatex)
+	tools/xelatex.sh --check
+	$(PY) tools/article.py build --figures $(FIGURES) --out $(ARTICLE)
 
 LAB_ARGS ?=# e.g. --no-browser; the MyST pages open as notebooks (tools/jupyter/lab/settings/)
 lab: $(EDITABLE) ## JupyterLab on the book's pages, which open as notebooks

@@ -208,19 +208,21 @@ def test_the_config_uses_the_cache_that_make_keys():
 def test_make_books_reads_the_pages_once_for_the_pdf_and_the_book_and_ships_the_pdf():
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
     books = makefile_recipe("books")
-    pending = "DEPTHCORE_DOWNLOADS_PENDING=depthcore.pdf "
+    pending = 'DEPTHCORE_DOWNLOADS_PENDING="$(SHIPPED_PDFS)" '
+    assert "SHIPPED_PDFS := depthcore.pdf article.pdf" in makefile
     latex = books.index(pending + "$(VENV)/bin/jupyter-book build . --builder latex --all")
     # The LaTeX build reads every page afresh into the default doctrees (no other output
     # path); the HTML build that follows, beside xelatex, writes from them (no --all).
     assert "--path-output" not in books[latex:].split("|", 1)[0]
     side_by_side = books.index(pending + "$(MAKE) -j2")
-    assert latex < side_by_side and "books-html books-xelatex" in books[side_by_side:]
+    assert latex < side_by_side and "books-html books-xelatex article" in books[side_by_side:]
     html = makefile_recipe("books-html")
     assert "jupyter-book build . " in html and "--all" not in html and "--builder" not in html
     assert "tools/xelatex.sh _build/latex" in makefile_recipe("books-xelatex")
     after = books[side_by_side:]
-    assert "cp $(PDF) $(DOWNLOADS)/depthcore.pdf" in after
-    assert "cp $(PDF) _build/html/downloads/depthcore.pdf" in after
+    # the book's PDF and the article, copied in once both are written
+    assert "cp $(PDF) $(ARTICLE_PDF) $(DOWNLOADS)/" in after
+    assert "cp $(PDF) $(ARTICLE_PDF) _build/html/downloads/" in after
     # make pdf reads every page itself, into doctrees apart from an HTML build's, which
     # a build of the book keeps.
     assert "LATEX_BUILD := _build/pdf" in makefile

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# Write the book's PDF from the LaTeX that Sphinx wrote: xelatex through latexmk, or say
-# which of TeX Live's tools are missing.
+# Write the book's PDF from the LaTeX that Sphinx wrote, or the article's: xelatex through
+# latexmk, or say which of TeX Live's tools are missing.
 #
 # Usage: tools/xelatex.sh --check      only check that xelatex and latexmk are installed
-#        tools/xelatex.sh DIR          run latexmk on DIR/depthcore.tex (DIR/depthcore.pdf)
+#        tools/xelatex.sh DIR [NAME]   run latexmk on DIR/NAME.tex (default depthcore), which
+#                                      writes DIR/NAME.pdf
 # The images are compressed at zlib's level 6, not 9: 3 s instead of 7, a PDF 3 % larger.
 set -euo pipefail
 for tool in xelatex latexmk; do
@@ -15,11 +16,12 @@ for tool in xelatex latexmk; do
   }
 done
 [[ $1 == --check ]] && exit 0
+name=${2:-depthcore}
 cd "$1"
 latexmk -xelatex -interaction=nonstopmode -halt-on-error \
-  -e '$xdvipdfmx = "xdvipdfmx -z 6 -E -o %D %O %S"' depthcore.tex >latexmk.log 2>&1 || {
+  -e '$xdvipdfmx = "xdvipdfmx -z 6 -E -o %D %O %S"' "$name.tex" >latexmk.log 2>&1 || {
   tail -n 40 latexmk.log >&2
-  echo "make pdf: xelatex failed, see $1/depthcore.log" >&2
+  echo "make pdf: xelatex failed, see $1/$name.log" >&2
   exit 1
 }
-echo "make pdf: wrote $1/depthcore.pdf"
+echo "make pdf: wrote $1/$name.pdf"

@@ -3,7 +3,9 @@
 * :mod:`~depthcore.provenance.benchmarks`: the benchmarks' records, the code
   fingerprints that make a record stale, and the machine a record was made on;
 * :mod:`~depthcore.provenance.records`: the book's heavy studies, computed once
-  and read back from their records while the pages run.
+  and read back from their records while the pages run;
+* :mod:`~depthcore.provenance.environment`: the environment of a build (date,
+  versions, processor) in one sentence, shared by the article and the book.
 
 The records themselves are package data beside these modules
 (``benchmark_records/``, ``study_records/``). Where a new thing goes: a new

@@ -106,7 +106,7 @@ def test_the_downloads_hold_every_figure_the_figures_command_writes_by_default(h
 
 def test_intro_links_the_pdf_the_source_archive_and_the_requirements(html_pages):
     hrefs = set(HREF_RE.findall(html_pages["book/intro.html"]))
-    for name in ("depthcore.pdf", "depthcore.tar.gz", "requirements.txt"):
+    for name in ("depthcore.pdf", "article.pdf", "depthcore.tar.gz", "requirements.txt"):
         assert f"../downloads/{name}" in hrefs, f"the intro does not link downloads/{name}"
 
 

@@ -186,7 +186,13 @@ def test_the_intro_is_one_chapter_that_opens_with_its_first_paragraph(plain_text
 
 
 def test_the_downloads_are_printed_with_their_addresses(plain_text):
-    for name in ("depthcore.pdf", "depthcore.tar.gz", "requirements.txt", "CITATION.cff"):
+    for name in (
+        "depthcore.pdf",
+        "article.pdf",
+        "depthcore.tar.gz",
+        "requirements.txt",
+        "CITATION.cff",
+    ):
         assert f"downloads/{name}" in plain_text, f"the PDF does not list downloads/{name}"
 
 
