@@ -54,6 +54,9 @@ READINGS = ("derived", "printed")
 #: frames; ``"all"``: every real ``y`` but the poles, Eq. (6) taken literally.
 SUPPORTS = ("front", "all")
 
+#: Target accuracy of each mean and SD, relative to the SD, unless a caller asks for another.
+RTOL = 1e-10
+
 #: ``G^{-2} x`` as a function of ``u = (x, v)`` for fixed ``y``: ``L u + (0, y - 2, 0)``.
 _L = A2[:, [0, 2]]
 
@@ -293,6 +296,7 @@ class Moments(NamedTuple):
     cov: np.ndarray
 
 
+@signature.documented
 def moments(
     mu,
     rho: float,
@@ -303,19 +307,9 @@ def moments(
     rtol: float = 1e-10,
     chunk: int = 64,
 ) -> Moments:
-    """Eqs. (13)-(16) for a batch: the optimal depth and velocity moments.
+    """Eqs. (13)-(16) for a batch of triples (``mu`` of shape (B, 3)): the optimal moments.
 
-    Parameters
-    ----------
-    mu : array_like, shape (B, 3)
-        One triple of measurements per row, each checked as in
-        :func:`depthcore.problem.model.measurements`.
-    rho : float or array_like, shape (B,)
-        Noise standard deviation, > 0.
-    prior_mean : array_like, shape (3,) or (B, 3)
-        Prior mean of the state at time 1.
-    prior_cov : array_like, shape (3, 3)
-        Prior covariance, symmetric positive definite.
+    {parameters}
     reading : {"derived", "printed"}
     support : {"front", "all"}
         See :func:`run`.
@@ -514,14 +508,7 @@ class OptimalMarginals:
 
 @signature.documented
 def run(
-    mu,
-    rho,
-    prior_mean,
-    prior_cov,
-    process_noise: float = 0.0,
-    reading: str = "derived",
-    support: str = "front",
-    rtol: float = 1e-10,
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, reading="derived", support="front", rtol=RTOL
 ):
     """The optimal filter, Eqs. (6), (13)-(16), of one sequence or a batch: the exact filter's door.
 

@@ -90,10 +90,8 @@ def moments(
     (:func:`~depthcore.exact.bank.lateral_filter`).
 
     {parameters}
-    rtol : float
-        Target accuracy of each mean and SD, relative to the SD.
-    chunk : int
-        Problems integrated together (memory grows with it).
+    rtol, chunk
+        As for :func:`depthcore.exact.optimal.moments`.
 
     Returns
     -------

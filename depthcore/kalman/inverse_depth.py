@@ -262,8 +262,27 @@ def estimate(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> Mean
     MeanAndCov
         Mean (..., 3) and covariance (..., 3, 3).
     """
-    means, covs = run(mu, rho, prior_mean, prior_cov, process_noise)
+    history = run(mu, rho, prior_mean, prior_cov, process_noise)
+    return last_state(history, history.means.shape[-2])
+
+
+def last_state(history: History, k: int) -> MeanAndCov:
+    """The last frame of ``history`` carried to ``(x, y, v)`` by :func:`to_state` at frame ``k``.
+
+    Parameters
+    ----------
+    history : History
+        Means (..., K, 3) and covariances (..., K, 3, 3) in inverse-depth
+        coordinates anchored at frame ``k`` (the modified-polar EKF's at the
+        current frame, ``k = 1``).
+    k : int
+
+    Returns
+    -------
+    MeanAndCov
+        Refused, naming ``mu``, where the bearings left a depth that is not positive.
+    """
     try:
-        return to_state(means[..., -1, :], covs[..., -1, :, :], means.shape[-2])
+        return to_state(history.means[..., -1, :], history.covs[..., -1, :, :], k)
     except ValueError as exc:
         raise ValueError(f"mu: {exc}") from None

@@ -58,13 +58,7 @@ def bearing(z, k: int) -> np.ndarray:
 def predict(z, S, process_noise: float = 0.0) -> MeanAndCov:
     """One frame of motion: the EKF's prediction with the exact variance ``E[w**2] q**2``.
 
-    Parameters
-    ----------
-    z : array_like, shape (..., 3)
-        Mean of ``(a_k, w, s_k)``.
-    S : array_like, shape (..., 3, 3)
-    process_noise : float
-        ``q >= 0``.
+    Parameters as for :func:`depthcore.kalman.inverse_depth.predict`.
 
     Returns
     -------
@@ -158,18 +152,13 @@ def to_state(
 
 @signature.documented
 def run(
-    mu,
-    rho,
-    prior_mean,
-    prior_cov,
-    process_noise: float = 0.0,
-    sigma_points: ukf.SigmaPoints = ukf.SigmaPoints(),
-    allow_behind_camera: bool = False,
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, sigma_points=None, allow_behind_camera=False
 ) -> History:
     """The inverse-depth UKF over ``K`` bearings, batched, in its own coordinates.
 
     {parameters}
-    sigma_points : depthcore.kalman.ukf.SigmaPoints
+    sigma_points : depthcore.kalman.ukf.SigmaPoints or None
+        ``None``: the default rule (:func:`depthcore.kalman.ukf.rule`).
     allow_behind_camera : bool
         See :func:`update`.
 
@@ -179,8 +168,7 @@ def run(
         Mean of ``(a_k, w, s_k)`` after bearing ``k``.
     covs : ndarray, shape (..., K, 3, 3)
     """
-    if not isinstance(sigma_points, ukf.SigmaPoints):
-        raise ValueError(f"sigma_points must be a SigmaPoints, got {type(sigma_points).__name__}")
+    sigma_points = ukf.rule(sigma_points)
     mu, rho, m, P = model.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
     q = checks.process_noise(process_noise, "process_noise")
     z, S = inverse_depth.prior(m, P)
@@ -189,24 +177,13 @@ def run(
         try:
             return update(z, S, mu_k, rho, k, sigma_points, allow_behind_camera)
         except ValueError as exc:
-            if "positive definite" in str(exc):
-                raise ValueError(
-                    "rho is too small for the inverse-depth UKF, which carries a covariance: "
-                    f"rounding left its covariance at frame {k} not positive definite"
-                ) from None
-            raise ValueError(f"mu: {exc}") from None
+            raise _refusal(exc, f"frame {k}") from None
 
     return run_recursion(z, S, mu, lambda z, S, k: predict(z, S, q), update_k)
 
 
 def estimate(
-    mu,
-    rho,
-    prior_mean,
-    prior_cov,
-    process_noise: float = 0.0,
-    sigma_points: ukf.SigmaPoints = ukf.SigmaPoints(),
-    allow_behind_camera: bool = False,
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, sigma_points=None, allow_behind_camera=False
 ) -> MeanAndCov:
     """The inverse-depth UKF's estimate of ``(x_K, y_K, v_K)``, batched.
 
@@ -217,21 +194,24 @@ def estimate(
     MeanAndCov
         Mean (..., 3) and covariance (..., 3, 3).
     """
+    sigma_points = ukf.rule(sigma_points)
     means, covs = run(
         mu, rho, prior_mean, prior_cov, process_noise, sigma_points, allow_behind_camera
     )
+    K = means.shape[-2]
     try:
         return to_state(
-            means[..., -1, :],
-            covs[..., -1, :, :],
-            means.shape[-2],
-            sigma_points,
-            allow_behind_camera,
+            means[..., -1, :], covs[..., -1, :, :], K, sigma_points, allow_behind_camera
         )
     except ValueError as exc:
-        if "positive definite" in str(exc):
-            raise ValueError(
-                "rho is too small for the inverse-depth UKF, which carries a covariance: "
-                "rounding left its covariance at the last frame not positive definite"
-            ) from None
-        raise ValueError(f"mu: {exc}") from None
+        raise _refusal(exc, "the last frame") from None
+
+
+def _refusal(exc: ValueError, where: str) -> ValueError:
+    """The refusal of a step that failed at ``where``: naming ``rho`` or ``mu``."""
+    if "positive definite" in str(exc):
+        return ValueError(
+            "rho is too small for the inverse-depth UKF, which carries a covariance: "
+            f"rounding left its covariance at {where} not positive definite"
+        )
+    return ValueError(f"mu: {exc}")

@@ -68,7 +68,7 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore.kalman import inverse_depth, linear
-from depthcore.problem import checks, model, signature
+from depthcore.problem import checks, model
 from depthcore.problem.gaussian import History, MeanAndCov, run_recursion
 
 #: The measurement matrix (the bearing is the first coordinate).
@@ -178,17 +178,12 @@ def anchor_jacobian(z, k: int) -> np.ndarray:
     return J
 
 
-@signature.documented
 def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     """The modified-polar EKF over ``K`` bearings, batched, in its own coordinates.
 
-    {parameters}
-
-    Returns
-    -------
-    means : ndarray, shape (..., K, 3)
-        Mean of ``(mu_k, omega_k, nu_k)`` after bearing ``k``.
-    covs : ndarray, shape (..., K, 3, 3)
+    As :func:`depthcore.kalman.inverse_depth.run` (the same arguments, a
+    :class:`~depthcore.problem.gaussian.History` of ``K`` frames), with the means
+    and covariances of ``(mu_k, omega_k, nu_k)``.
     """
     mu, rho, m, P = model.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
     q = checks.process_noise(process_noise, "process_noise")
@@ -215,8 +210,4 @@ def estimate(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> Mean
     MeanAndCov
         Mean (..., 3) and covariance (..., 3, 3).
     """
-    means, covs = run(mu, rho, prior_mean, prior_cov, process_noise)
-    try:
-        return inverse_depth.to_state(means[..., -1, :], covs[..., -1, :, :], 1)
-    except ValueError as exc:
-        raise ValueError(f"mu: {exc}") from None
+    return inverse_depth.last_state(run(mu, rho, prior_mean, prior_cov, process_noise), 1)

@@ -301,15 +301,18 @@ def update(
     return measurement_update(n, C, mu, rho, model.project, sigma_points)
 
 
+def rule(sigma_points) -> SigmaPoints:
+    """``sigma_points`` checked: a :class:`SigmaPoints`, or ``None`` for the default rule."""
+    if sigma_points is None:
+        return SigmaPoints()
+    if not isinstance(sigma_points, SigmaPoints):
+        raise ValueError(f"sigma_points must be a SigmaPoints, got {type(sigma_points).__name__}")
+    return sigma_points
+
+
 @signature.documented
 def run(
-    mu,
-    rho,
-    prior_mean,
-    prior_cov,
-    process_noise: float = 0.0,
-    sigma_points: SigmaPoints = SigmaPoints(),
-    allow_behind_camera: bool = False,
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, sigma_points=None, allow_behind_camera=False
 ) -> History:
     """Run the UKF over the measurements, batched like :func:`depthcore.kalman.ekf.run`.
 
@@ -319,7 +322,8 @@ def run(
     :func:`depthcore.kalman.ekf.run_gaussian_filter`).
 
     {parameters}
-    sigma_points : SigmaPoints
+    sigma_points : SigmaPoints or None
+        The sigma-point rule; ``None``: ``SigmaPoints()`` (:func:`rule`).
     allow_behind_camera : bool
         See :func:`update`.
 
@@ -329,8 +333,7 @@ def run(
         ``means`` (..., N, 3): ``means[..., i, :]`` is the mean after
         measurement ``i + 1``; ``covs`` (..., N, 3, 3).
     """
-    if not isinstance(sigma_points, SigmaPoints):
-        raise ValueError(f"sigma_points must be a SigmaPoints, got {type(sigma_points).__name__}")
+    sigma_points = rule(sigma_points)
     step = partial(update, sigma_points=sigma_points, allow_behind_camera=allow_behind_camera)
     return run_gaussian_filter(step, mu, rho, prior_mean, prior_cov, process_noise)
 

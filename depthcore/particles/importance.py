@@ -138,6 +138,7 @@ __all__ = [
     "ParticleBatch",
     "ParticleMoments",
     "ParticleResult",
+    "WeightedParticles",
     "run",
 ]
 
@@ -181,7 +182,24 @@ def _distinct_ess(ancestors, W) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class ParticleResult:
+class WeightedParticles:
+    """The fields of the particle filter's results, read-only (:class:`ParticleResult` of one
+    sequence, :class:`ParticleBatch` of ``B``): particles, log weights, ESS, resampling,
+    ancestors and the proposal."""
+
+    particles: np.ndarray
+    log_weights: np.ndarray
+    ess: np.ndarray
+    resampled: np.ndarray
+    ancestors: np.ndarray
+    proposal: str
+
+    def __post_init__(self):
+        _freeze(self)
+
+
+@dataclass(frozen=True)
+class ParticleResult(WeightedParticles):
     """The particle filter's weighted particles at time 3, for one triple.
 
     Built by :func:`run` (one sequence).
@@ -201,16 +219,6 @@ class ParticleResult:
         particles, and the motion being deterministic, duplicates stay identical.
     proposal : str
     """
-
-    particles: np.ndarray
-    log_weights: np.ndarray
-    ess: np.ndarray
-    resampled: np.ndarray
-    ancestors: np.ndarray
-    proposal: str
-
-    def __post_init__(self):
-        _freeze(self)
 
     def distinct_ess(self) -> float:
         """The ESS with the weights of identical particles (same ancestor) pooled.
@@ -280,7 +288,7 @@ def _component(component: str) -> int:
 
 
 @dataclass(frozen=True)
-class ParticleBatch:
+class ParticleBatch(WeightedParticles):
     """The particle filter's results for ``B`` triples at once; built by :func:`run`.
 
     Attributes
@@ -293,16 +301,6 @@ class ParticleBatch:
     ancestors : ndarray of int, shape (B, N)
     proposal : str
     """
-
-    particles: np.ndarray
-    log_weights: np.ndarray
-    ess: np.ndarray
-    resampled: np.ndarray
-    ancestors: np.ndarray
-    proposal: str
-
-    def __post_init__(self):
-        _freeze(self)
 
     def distinct_ess(self) -> np.ndarray:
         """:meth:`ParticleResult.distinct_ess` for each trial, shape (B,)."""

@@ -591,12 +591,9 @@ def run(
     replicas : int
         ``R >= 1`` independent clouds of ``J`` particles, for standard errors
         (:meth:`RBPF.standard_errors`); the cost grows like ``R J``.
-    moves : int
-        Metropolis-Hastings steps per particle after each resampling, >= 0.
-    ess_threshold : float
-        Resample and move when the ESS is below ``ess_threshold * J``; in
-        [0, 1] (0: never, importance sampling of the depth from its prior).
-    resampler : {"systematic", "multinomial", "residual"}
+    moves, ess_threshold, resampler
+        The resampling schedule, :class:`Settings`: ``moves >= 0``, ``ess_threshold``
+        in [0, 1] (0: never resample, importance sampling of the depth from its prior).
 
     Returns
     -------

@@ -279,11 +279,11 @@ def run(
     rho,
     prior_mean,
     prior_cov,
-    n_particles: int,
-    rng: np.random.Generator,
-    moves: int = 20,
-    ess_threshold: float = 0.5,
-    resampler: str = "systematic",
+    n_particles,
+    rng,
+    moves=20,
+    ess_threshold=0.5,
+    resampler="systematic",
 ) -> ResampleMoveBatch:
     """The bootstrap filter with resample-move for ``B`` sequences of bearings, vectorised.
 
@@ -404,14 +404,7 @@ resample_move = _paths.kept(
 
 
 def replicated(
-    mu,
-    rho,
-    prior_mean,
-    prior_cov,
-    n_particles: int,
-    rng: np.random.Generator,
-    replicas: int = REPLICAS,
-    **options,
+    mu, rho, prior_mean, prior_cov, n_particles, rng, replicas=REPLICAS, **options
 ) -> Replicated:
     """``replicas`` independent runs of :func:`run` on each sequence of bearings.
 
