@@ -316,14 +316,3 @@ def test_the_downloads_link_what_the_folder_holds_and_what_is_pending(tmp_path, 
     assert '<a class="reference external" href="downloads/depthcore.pdf">the book</a>' in page
     assert "the notes (not shipped by this build of the book)" in page
     assert "the book (not shipped" not in page
-
-
-def test_the_environment_directive_states_the_builds_environment_as_the_article_does(tmp_path):
-    import datetime
-
-    from depthcore.provenance import environment
-
-    page = build(tmp_path, "# Page\n\n```{depthcore-environment}\n```\n")
-    stated = environment.statement()
-    assert f"Built on {datetime.datetime.now(datetime.UTC).date().isoformat()}" in page
-    assert f"Python {stated['python']}" in page and stated["machine"]["cpu"] in page

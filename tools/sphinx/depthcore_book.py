@@ -393,20 +393,6 @@ class DownloadsDirective(SphinxDirective):
         return [only_html, only_latex, *messages]
 
 
-class EnvironmentDirective(SphinxDirective):
-    """The environment of this build, in the words the article's build uses.
-
-    :func:`depthcore.provenance.environment.sentence` of the environment the
-    builder runs in, written when the page is built.
-    """
-
-    def run(self):
-        from depthcore.provenance import environment
-
-        text = environment.sentence(environment.statement())
-        return [nodes.paragraph(text, text)]
-
-
 class DropHiddenCellsWithoutOutput(SphinxPostTransform):
     """Remove the ``hide-input`` code cells that show no output (before myst-nb wraps them)."""
 
@@ -610,7 +596,6 @@ def setup(app):
     app.add_post_transform(DropHiddenCellsWithoutOutput)
     app.add_config_value("depthcore_downloads", "_build/extra/downloads", "env")
     app.add_directive("depthcore-downloads", DownloadsDirective)
-    app.add_directive("depthcore-environment", EnvironmentDirective)
     # Before sphinx-book-theme builds its header buttons (priority 501).
     app.connect("html-page-context", add_executed_notebook, priority=450)
     app.connect("build-finished", copy_downloads)
