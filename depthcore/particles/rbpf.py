@@ -107,6 +107,7 @@ from depthcore.particles.importance import ParticleMoments
 from depthcore.particles.resampling import (
     RESAMPLERS,
     effective_sample_size,
+    metropolis,
     replica_errors,
     weighted_moments,
 )
@@ -401,11 +402,8 @@ def rejuvenate(bank: bk.Bank, scale, moves: int, rng: np.random.Generator):
         raise ValueError(f"scale must be positive, got minimum {float(np.min(scale)):.6g}")
     moves = _moves(moves)
     rng = checks.generator(rng)
-    nodes, mean, cov = bank.nodes, bank.mean, bank.cov
-    current = _finite_or_minus_inf(bank.log_weight)
-    accepted = np.zeros(current.shape[:-1])
-    for _ in range(moves):
-        proposal = nodes + np.asarray(scale)[..., None] * rng.standard_normal(nodes.shape)
+
+    def target(proposal):
         inside = proposal > 0
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             rerun = bk.filter_bank(
@@ -416,17 +414,20 @@ def rejuvenate(bank: bk.Bank, scale, moves: int, rng: np.random.Generator):
                 bank.prior_cov,
                 bank.process_noise,
             )
-        candidate = np.where(inside, _finite_or_minus_inf(rerun.log_weight), -np.inf)
-        with np.errstate(invalid="ignore"):
-            ok = np.log(rng.random(current.shape)) < candidate - current
-        nodes = np.where(ok, proposal, nodes)
-        mean = np.where(ok[..., None], rerun.mean, mean)
-        cov = np.where(ok[..., None, None], rerun.cov, cov)
-        current = np.where(ok, candidate, current)
-        accepted += ok.mean(axis=-1)
-    moved = bank._replace(nodes=nodes, mean=mean, cov=cov, log_weight=current, history=None)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return moved, accepted / moves if moves else np.full(accepted.shape, np.nan)
+        log_p = np.where(inside, _finite_or_minus_inf(rerun.log_weight), -np.inf)
+        return log_p, (rerun.mean, rerun.cov)
+
+    nodes, log_p, (mean, cov), acceptance = metropolis(
+        bank.nodes,
+        _finite_or_minus_inf(bank.log_weight),
+        lambda x, eps: x + np.asarray(scale)[..., None] * eps,
+        target,
+        moves,
+        rng,
+        (bank.mean, bank.cov),
+    )
+    moved = bank._replace(nodes=nodes, mean=mean, cov=cov, log_weight=log_p, history=None)
+    return moved, acceptance
 
 
 # --- the filter ------------------------------------------------------------------------

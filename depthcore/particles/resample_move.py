@@ -77,6 +77,7 @@ from depthcore.particles.resampling import (
     RESAMPLERS,
     check_rng,
     effective_sample_size,
+    metropolis,
     replica_errors,
     state_moments,
     weighted_density,
@@ -376,20 +377,18 @@ def _resample_move(x1, log_w, need, mu, rho, prior_mean, prior_chol, moves, rng,
     idx = resampler(W, rng)
     sub = np.take_along_axis(sub, idx[..., None], axis=1)
     args = (mu[need], rho[need], prior_mean[need], prior_chol)
-    current = log_target(sub, *args)
-    accepted = np.zeros(sub.shape[0])
-    for _ in range(moves):
-        proposal = sub + _RW_SCALE * np.einsum("bij,bnj->bni", chol, rng.standard_normal(sub.shape))
-        candidate = log_target(proposal, *args)
-        with np.errstate(invalid="ignore"):
-            ok = np.log(rng.random(current.shape)) < candidate - current
-        sub = np.where(ok[..., None], proposal, sub)
-        current = np.where(ok, candidate, current)
-        accepted += ok.mean(axis=-1)
+    sub, _, _, acceptance = metropolis(
+        sub,
+        log_target(sub, *args),
+        lambda x, eps: x + _RW_SCALE * np.einsum("bij,bnj->bni", chol, eps),
+        lambda proposal: (log_target(proposal, *args), ()),
+        moves,
+        rng,
+    )
     x1, log_w = x1.copy(), log_w.copy()
     x1[need] = sub
     log_w[need] = -np.log(x1.shape[1])
-    return x1, log_w, accepted / moves if moves else np.full(sub.shape[0], np.nan)
+    return x1, log_w, acceptance
 
 
 #: :func:`run` on one sequence (a batch of one) with the prior as a Gaussian,

@@ -117,6 +117,59 @@ def residual(W, rng: np.random.Generator, M: int | None = None) -> np.ndarray:
 RESAMPLERS = {"systematic": systematic, "multinomial": multinomial, "residual": residual}
 
 
+def metropolis(x, log_p, propose, target, moves: int, rng: np.random.Generator, carried=()):
+    """Random-walk Metropolis-Hastings moves of every particle, batched.
+
+    Each step draws ``eps ~ N(0, I)`` of ``x``'s shape, proposes
+    ``propose(x, eps)``, and accepts each particle's proposal with probability
+    ``min(1, exp(target - log_p))``; a proposal with log target ``-inf`` is
+    rejected. The resample-move filter moves whole states, the
+    Rao-Blackwellised filter depths with their Kalman filters (``carried``).
+
+    Parameters
+    ----------
+    x : ndarray, shape (..., J) or (..., J, D)
+        The particles.
+    log_p : ndarray, shape (..., J)
+        Their log target (``-inf`` outside its support).
+    propose : callable
+        ``propose(x, eps) -> proposal``, of ``x``'s shape.
+    target : callable
+        ``target(proposal) -> (log_p, carried)``: the proposals' log target and
+        the arrays (each of shape (..., J, ...)) that an accepted proposal brings.
+    moves : int
+        Steps, >= 0.
+    rng : numpy.random.Generator
+    carried : tuple of ndarray
+        The particles' current such arrays.
+
+    Returns
+    -------
+    x, log_p, carried
+        After the moves.
+    acceptance : ndarray, shape (...)
+        Mean acceptance rate over the particles and steps (NaN for ``moves = 0``).
+    """
+    accepted = np.zeros(log_p.shape[:-1])
+    for _ in range(moves):
+        proposal = propose(x, rng.standard_normal(x.shape))
+        candidate, brought = target(proposal)
+        with np.errstate(invalid="ignore"):
+            ok = np.log(rng.random(log_p.shape)) < candidate - log_p
+        x = _where(ok, proposal, x)
+        carried = tuple(_where(ok, b, c) for b, c in zip(brought, carried, strict=True))
+        log_p = np.where(ok, candidate, log_p)
+        accepted += ok.mean(axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return x, log_p, carried, accepted / moves if moves else np.full(accepted.shape, np.nan)
+
+
+def _where(ok, new, old):
+    """``new`` where ``ok`` (..., J), else ``old``; trailing axes of the arrays broadcast."""
+    new = np.asarray(new)
+    return np.where(ok.reshape(ok.shape + (1,) * (new.ndim - ok.ndim)), new, old)
+
+
 def effective_sample_size(log_w) -> np.ndarray:
     """Kish's effective sample size ``1 / sum_i W_i**2`` from (unnormalised) log weights.
 
