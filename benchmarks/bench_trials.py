@@ -59,7 +59,7 @@ def main(argv=None):
     print("|---|---:|---:|")
     print(f"| optimal.moments, vectorised over trials | {t_vec:.2f} s | 1 |")
     print(
-        f"| optimal.marginals, trial by trial ({n} timed, scaled) | {t_loop:.2f} s "
+        f"| optimal.run, trial by trial ({n} timed, scaled) | {t_loop:.2f} s "
         f"| {t_loop / t_vec:.1f} |"
     )
     print(

@@ -84,6 +84,7 @@ def _modules() -> tuple[str, ...]:
 _LAZY = {
     "FILTERS": ("depthcore.registry.filters", "FILTERS"),
     "track": ("depthcore.registry.tracking", "track"),
+    # depthcore.exact.optimal.marginals, kept until 0.3: it warns, naming the door optimal.run
     "optimal_marginals": ("depthcore.exact.optimal", "marginals"),
 }
 
@@ -94,7 +95,6 @@ __all__ = [
     "__version__",
     "bearings_from_pixels",
     "noise_free_state",
-    "optimal_marginals",
     "paper_prior",
     "track",
 ]

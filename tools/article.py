@@ -142,29 +142,31 @@ def paper_numbers() -> list[Number]:
         Number(
             "theorem-tol",
             _sci(readme.THEOREM_TOL),
-            "kalman.ekf.ekf, kalman.second_order.second_order",
+            "kalman.ekf.run, kalman.second_order.run",
             "Figures 2 and 3 with the prior mean G^-2 c",
         ),
     ]
 
     fig2, fig3 = SCENARIOS["fig2"], SCENARIOS["fig3"]
     broad = Gaussian(fig2.prior.mean, LIMIT_PRIOR * np.eye(3))
-    sd_o = optimal.marginals(fig2.mu, LIMIT_RHO, broad).depth_sd
-    sd_d = second_order.second_order(fig2.mu, LIMIT_RHO, broad).marginal("y")[1]
-    sd_p = second_order.second_order(fig2.mu, LIMIT_RHO, broad, reading="printed").marginal("y")[1]
+    sd_o = optimal.run(fig2.mu, LIMIT_RHO, broad.mean, broad.cov).depth_sd
+    sd_d = second_order.run(fig2.mu, LIMIT_RHO, broad.mean, broad.cov).marginal("y")[1]
+    sd_p = second_order.run(fig2.mu, LIMIT_RHO, broad.mean, broad.cov, reading="printed").marginal(
+        "y"
+    )[1]
     limit_args = f"fig2's bearings, rho = {formatting.sci(LIMIT_RHO, 0)}, prior cov 1e8 I"
     out += [
         Number("limit-rho", _sci(LIMIT_RHO), "tools/article.py LIMIT_RHO"),
         Number(
             "limit-derived",
             f"{sd_o / sd_d:.4f}",
-            "exact.optimal.marginals / second_order",
+            "exact.optimal.run / second_order.run",
             limit_args,
         ),
         Number(
             "limit-printed",
             f"{sd_o / sd_p:.4f}",
-            "exact.optimal.marginals / second_order(reading='printed')",
+            "exact.optimal.run / second_order.run(reading='printed')",
             limit_args,
         ),
     ]
@@ -172,7 +174,7 @@ def paper_numbers() -> list[Number]:
     with readme._records_required():
         for key, s in (("fig2", fig2), ("fig3", fig3)):
             run = records.recorded(reference.grid_moments, s.mu, s.rho, s.prior)
-            exact = optimal.marginals(s.mu, s.rho, s.prior)
+            exact = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov)
             assert abs(run.result.depth_mean - exact.depth_mean) < 1e-9
             out.append(
                 Number(
@@ -192,12 +194,14 @@ def paper_numbers() -> list[Number]:
                     record=_record_name(run),
                 )
             )
-    behind = optimal.marginals(fig3.mu, fig3.rho, fig3.prior, support="all").prob_behind_camera
+    behind = optimal.run(
+        fig3.mu, fig3.rho, fig3.prior.mean, fig3.prior.cov, support="all"
+    ).prob_behind_camera
     out.append(
         Number(
             "fig3-behind",
             _sci(behind, 1),
-            "exact.optimal.marginals(support='all')",
+            "exact.optimal.run(support='all')",
             '"fig3"',
         )
     )
