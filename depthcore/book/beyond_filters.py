@@ -373,12 +373,14 @@ def convergence_figure(result: dict, quantity: str = "depth"):
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.book.beyond_filters.particle_convergence`.
+        The errors of :func:`depthcore.book.beyond_filters.particle_convergence` at
+        its ``"sizes"`` ``N``, of each setting of ``"rmse"``, over ``"repeats"`` runs.
     quantity : {"depth", "velocity"}
 
     Returns
     -------
     matplotlib.figure.Figure
+        Two panels, the mean's errors and the SD's, one line per setting.
     """
 
     if quantity not in QUANTITIES:
@@ -431,8 +433,9 @@ def moments_texts(result: dict, decimals: int = 3) -> dict:
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.studies.reproduce.reproduce`.
+        Every scenario's rows of :func:`depthcore.studies.reproduce.reproduce`.
     decimals : int
+        Places of the mean, the SD and the standard error.
 
     Returns
     -------

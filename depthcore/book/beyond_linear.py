@@ -212,7 +212,8 @@ def rbpf_convergence_figure(result: dict):
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.book.beyond_linear.rbpf_convergence`.
+        The clouds of :func:`depthcore.book.beyond_linear.rbpf_convergence`, with
+        the exact bank's moments they are measured from.
 
     Returns
     -------
@@ -265,8 +266,9 @@ def rbpf_texts(result: dict, prefix: str) -> dict:
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.book.beyond_linear.rbpf_convergence`.
+        :func:`depthcore.book.beyond_linear.rbpf_convergence`'s result.
     prefix : str
+        Begins every key.
 
     Returns
     -------
