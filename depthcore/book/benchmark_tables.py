@@ -96,9 +96,7 @@ def _read(part, path):
 
 
 def _text(value, spec: str) -> str:
-    """``value`` as text: ``spec`` ``"sci"`` or ``"sciD"`` (``D`` digits) is :func:`sci`,
-    any other a format spec.
-    """
+    """``value`` by ``spec``: a format spec, or ``"sci"`` for :func:`sci` (``"sci2"``: 2 digits)."""
     if spec.startswith("sci"):
         return sci(value, int(spec[3:] or 1))
     return format(value, spec)
