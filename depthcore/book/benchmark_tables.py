@@ -10,6 +10,9 @@ numbers as texts, :func:`bench_tables` the tables of the costs chapter,
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import NamedTuple
+
 import numpy as np
 
 from depthcore.book.notebook import MarkdownTable
@@ -25,7 +28,8 @@ def bench_origin(record: dict) -> str:
     Parameters
     ----------
     record : dict
-        From :func:`depthcore.provenance.benchmarks.read`.
+        A benchmark's record (:func:`depthcore.provenance.benchmarks.read`), of
+        which ``"date"`` and ``"machine"`` are read.
 
     Returns
     -------
@@ -41,236 +45,444 @@ def bench_origin(record: dict) -> str:
     )
 
 
-def _optimal_bench_texts(r: dict) -> dict[str, str]:
-    m, t = r["results"]["moments"], r["results"]["per_triple"]
-    out = {
-        "one_d_ms": f"{m['one_d_ms']:.2f}",
-        "one_d_error": sci(m["one_d_error_sd"]),
-        "one_d_estimate": sci(m["one_d_estimate_sd"]),
-        "grid_rule": f"{m['grid_panels']} x 8 depth, {m['grid_order']}^2 (x, v) nodes",
-        "grid_ms": f"{m['grid_ms']:.0f}",
-        "grid_error": sci(m["grid_error_sd"]),
-        "grid_ratio": f"{m['grid_ratio']:,.0f}",
-    }
-    if "nquad_one_integral_s" in m:
-        out.update(
-            nquad_s=f"{m['nquad_one_integral_s']:.1f}",
-            nquad_error=sci(m["nquad_relative_error"]),
-            nquad_ratio=f"{m['nquad_ratio']:,.0f}",
-            nquad_all_s=f"{m['nquad_all_s']:.0f}",
-            nquad_all_ratio=f"{m['nquad_all_ratio']:,.0f}",
-        )
-    opt, so, ekf = (np.array(t[f"{n}_ms"]) for n in ("optimal", "second_order", "ekf"))
-    nodes, brute = np.array(t["nodes"]), np.array(t["brute_force_evaluations"])
-    for i, key in enumerate(t["keys"]):
-        out[f"{key}_figure"] = f"Figure {SCENARIOS[key].figure}"
-        out[f"{key}_optimal_ms"] = f"{opt[i]:.3f}"
-        out[f"{key}_second_order_ms"] = f"{so[i]:.3f}"
-        out[f"{key}_ekf_ms"] = f"{ekf[i]:.3f}"
-        out[f"{key}_optimal_ekf"] = f"{opt[i] / ekf[i]:.1f}"
-        out[f"{key}_second_order_ekf"] = f"{so[i] / ekf[i]:.2f}"
-        out[f"{key}_optimal_second_order"] = f"{opt[i] / so[i]:.1f}"
-        out[f"{key}_nodes"] = f"{nodes[i]}"
-        out[f"{key}_brute"] = f"{brute[i]:,}"
-    for name, ratio, fmt in (
-        ("optimal_ekf", opt / ekf, ".1f"),
-        ("second_order_ekf", so / ekf, ".2f"),
-        ("optimal_second_order", opt / so, ".1f"),
-    ):
-        out[f"{name}_min"], out[f"{name}_max"] = (format(f(ratio), fmt) for f in (np.min, np.max))
-    out["nodes_min"], out["nodes_max"] = f"{nodes.min()}", f"{nodes.max()}"
-    out["brute_max"] = f"{brute.max():,}"
-    out["brute_per_node"] = f"{brute.min() / nodes.max():,.0f}"
+# --- the records' numbers as texts, read by the tables of fields below ---------------------
+
+
+class _Group(NamedTuple):
+    """Fields read from one part of a record, their keys prefixed with ``name``.
+
+    A field is ``(key, path, spec)``: the text of key ``"<prefix>_<key>"`` is
+    the value at ``path`` as ``spec`` prints it (:func:`_text`). A path is
+    dotted keys into the part (``"results.ratio"``; an integer indexes a list,
+    ``""`` is the part itself) or a function of the part.
+
+    Attributes
+    ----------
+    name : str
+        Prefix of the group's keys ("" for none).
+    path : str or callable
+        Where the part is, as a field's path.
+    fields : tuple
+        Fields and groups, read from the part.
+    rows : bool
+        The part is a list: its fields are read from each item, under the key
+        prefix ``"<name>_<label>"``.
+    label : str, optional
+        The item's field that labels it; default its index.
+    when : str, optional
+        The group is read only where its part has this key.
+    """
+
+    name: str
+    path: str | Callable
+    fields: tuple
+    rows: bool = False
+    label: str | None = None
+    when: str | None = None
+
+
+def _key(*parts: str) -> str:
+    """The non-empty ``parts`` joined by underscores: a glued name."""
+    return "_".join(p for p in parts if p)
+
+
+def _read(part, path):
+    """The value at ``path`` (dotted keys or a function) in ``part``."""
+    if callable(path):
+        return path(part)
+    for step in filter(None, path.split(".")):
+        part = part[int(step)] if step.lstrip("-").isdigit() else part[step]
+    return part
+
+
+def _text(value, spec: str) -> str:
+    """``value`` by ``spec``: a format spec, or ``"sci"`` for :func:`sci` (``"sci2"``: 2 digits)."""
+    if spec.startswith("sci"):
+        return sci(value, int(spec[3:] or 1))
+    return format(value, spec)
+
+
+def _texts(part, fields, prefix: str = "") -> dict[str, str]:
+    """The texts of ``fields`` (and groups, :class:`_Group`) read from ``part``, in order."""
+    out = {}
+    for field in fields:
+        if isinstance(field, _Group):
+            out.update(_group_texts(part, field, prefix))
+        else:
+            key, path, spec = field
+            out[_key(prefix, key)] = _text(_read(part, path), spec)
     return out
 
 
-def _trials_bench_texts(r: dict) -> dict[str, str]:
-    x, s = r["results"], r["sizes"]
-    return {
-        "trials": f"{s['trials']:,}",
-        "timed": f"{s['timed_one_by_one']}",
-        "vectorised_s": f"{x['vectorised_s']:.2f}",
-        "per_trial_ms": f"{1e3 * x['vectorised_s'] / s['trials']:.3f}",
-        "loop_s": f"{x['trial_by_trial_s']:.2f}",
-        "ratio": f"{x['ratio']:.1f}",
-        "estimate": sci(x["estimate_sd"]),
-        "difference": sci(x["difference_sd"]),
-    }
-
-
-def _ekf_bench_texts(r: dict) -> dict[str, str]:
-    x = r["results"]
-    return {
-        "trials": f"{r['sizes']['trials']:,}",
-        "depthcore_ms": f"{x['depthcore_ms']:.1f}",
-        "filterpy_ms": f"{x['filterpy_ms']:,.0f}",
-        "ratio": f"{x['ratio']:,.0f}",
-        "ratio_min": f"{x['ratio_min']:,.0f}",
-        "ratio_max": f"{x['ratio_max']:,.0f}",
-        "pairs": f"{r['sizes']['pairs']}",
-        "mean_difference": sci(x["mean_difference_sd"]),
-        "cov_max": sci(x["covariance_difference_max"]),
-        "cov_median": sci(x["covariance_difference_median"]),
-    }
-
-
-def _kalman_bench_texts(r: dict) -> dict[str, str]:
-    x = r["results"]
-    return {
-        "steps": f"{r['sizes']['steps']:,}",
-        "pairs": f"{r['sizes']['pairs']}",
-        "depthcore_ms": f"{x['depthcore_ms']:.1f}",
-        "filterpy_ms": f"{x['filterpy_ms']:.1f}",
-        "ratio": f"{x['ratio']:.2f}",
-        "ratio_min": f"{x['ratio_min']:.2f}",
-        "ratio_max": f"{x['ratio_max']:.2f}",
-        "mean_difference": sci(x["mean_difference_sd"]),
-        "cov_max": sci(x["covariance_difference_max"]),
-    }
-
-
-def _frames_bench_texts(r: dict) -> dict[str, str]:
-    x = r["results"]
-    out = {
-        "trials": f"{r['sizes']['trials']}",
-        "q": f"{r['sizes']['process_noise']:g}",
-        "n_filters": f"{len(x['filters'])}",
-        "growth_max": f"{max(row['growth'] for row in x['filters']):.2f}",
-    }
-    for j, n in enumerate(x["frames"]):
-        out[f"n_{j}"] = f"{n:,}"
-    for i, row in enumerate(x["filters"]):
-        out[f"{i}_filter"] = row["filter"] + (
-            f" ({row['options']['n_particles']:,} particles)" if row["options"] else ""
-        )
-        out[f"{i}_q"] = f"{row['process_noise']:g}"
-        for j, t in enumerate(row["ms_per_trial"]):
-            out[f"{i}_{j}_ms"] = f"{t:,.1f}"
-        out[f"{i}_growth"] = f"{row['growth']:.2f}"
+def _group_texts(part, group: _Group, prefix: str) -> dict[str, str]:
+    """The texts of one :class:`_Group` of ``part``: of its part, or of each of its rows."""
+    inner = _read(part, group.path)
+    if group.when is not None and group.when not in inner:
+        return {}
+    if not group.rows:
+        return _texts(inner, group.fields, _key(prefix, group.name))
+    out = {}
+    for i, row in enumerate(inner):
+        label = str(i) if group.label is None else row[group.label]
+        out.update(_texts(row, group.fields, _key(prefix, group.name, label)))
     return out
 
 
-def _import_bench_texts(r: dict) -> dict[str, str]:
-    x = r["results"]
-    return {
-        "numpy_s": f"{x['numpy_s']:.3f}",
-        "depthcore_s": f"{x['depthcore_after_numpy_s']:.3f}",
-        "target_s": f"{x['target_s']:.2f}",
-        "runs": f"{r['sizes']['runs']}",
-    }
+def _columns_as_rows(columns: dict, names) -> list[dict]:
+    """Lists of equal length ``columns[name]`` as one dict per row."""
+    return [
+        dict(zip(names, row, strict=True)) for row in zip(*(columns[n] for n in names), strict=True)
+    ]
 
 
-def _bank_bench_texts(r: dict) -> dict[str, str]:
-    x = r["results"]
-    three, online, many, matched = (
-        x[k] for k in ("three_frames", "online", "many_trials", "matched_accuracy")
-    )
-    out = {
-        "three_trials": f"{three['trials']:,}",
-        "three_one_d_ms": f"{three['one_d_ms_per_trial']:.3f}",
-        "three_bank_ms": f"{three['bank_ms_per_trial']:.3f}",
-        "three_ratio": f"{three['ratio']:.2f}",
-        "three_difference": sci(three["difference_sd"]),
-        "three_target": f"{x['targets']['three_frames_ratio']:g}",
-        "online_trials": f"{online['trials']:,}",
-        "online_frames": f"{online['frames']:,}",
-        "online_windows": f"{len(online['windows'])}",
-        "many_trials": f"{many['trials']:,}",
-        "many_frames": f"{many['frames']}",
-        "many_s": f"{many['time_s']:.1f}",
-        "many_target_s": f"{many['target_s']:g}",
-        "many_met": "met" if many["time_s"] < many["target_s"] else "not met",
-        "many_worst": sci(many["worst_error_estimate_sd"]),
-        "matched_trials": f"{matched['trials']}",
-        "matched_frames": f"{matched['frames']}",
-        "matched_replicas": f"{matched['replicas']}",
-        "matched_bank_s": f"{matched['bank_time_s']:.3f}",
-        "matched_ratio": f"{matched['ratio']:,.0f}",
-        "matched_target_ratio": f"{matched['target_ratio']:g}",
-        "matched_largest": f"{matched['particles'][-1]:,}",
-        "matched_largest_s": f"{matched['time_per_run_s'][-1]:.2f}",
-        "matched_largest_error": sci(matched["error_sd"][-1], 2),
-        "matched_target_error": sci(matched["target_error_sd"], 0),
-        "matched_extrapolated_needed": sci(matched["extrapolated_particles_needed"]),
-        "matched_extrapolated_s": sci(matched["extrapolated_time_s"]),
-        "matched_extrapolated_ratio": sci(matched["extrapolated_ratio"]),
-    }
-    per = np.array([w["ms_per_update"] for w in online["windows"]])
-    for i, w in enumerate(online["windows"]):
-        out[f"online_{i}_frames"] = f"{w['first_frame']}–{w['last_frame']}"
-        out[f"online_{i}_ms"] = f"{w['ms_per_update']:.2f}"
-        out[f"online_{i}_ratio"] = f"{w['ratio_to_first']:.2f}"
-        out[f"online_{i}_nodes"] = f"{w['median_nodes']}"
-        out[f"online_{i}_sd"] = f"{w['median_depth_sd']:.4f}"
-    out["online_max_ratio"] = f"{per.max() / per.min():.1f}"
-    for i, (m, e, t) in enumerate(
-        zip(matched["particles"], matched["error_sd"], matched["time_per_run_s"], strict=True)
-    ):
-        out[f"matched_{i}_particles"] = f"{m:,}"
-        out[f"matched_{i}_error"] = sci(e, 2)
-        out[f"matched_{i}_s"] = f"{t:.2f}"
-    return out
+def _extreme_ratio(values) -> float:
+    """The largest of ``values`` over the least."""
+    return max(values) / min(values)
 
 
-def _rbpf_bench_texts(r: dict) -> dict[str, str]:
-    x = r["results"]
-    out = {"repeats": f"{r['sizes']['repeats']}"}
-    for i, row in enumerate(x["equal_cost"]):
-        p = f"equal_{i}"
-        out[f"{p}_problem"] = row["problem"]
-        out[f"{p}_rbpf_particles"] = f"{row['rbpf_particles']:,}"
-        out[f"{p}_rbpf_s"] = f"{row['rbpf_time_s']:.2f}"
-        out[f"{p}_rbpf_error"] = f"{row['rbpf_error_sd']:.4f}"
-        out[f"{p}_rm_particles"] = f"{row['resample_move_particles']:,}"
-        out[f"{p}_rm_s"] = f"{row['resample_move_time_s']:.2f}"
-        out[f"{p}_rm_error"] = f"{row['resample_move_error_sd']:.4f}"
-        out[f"{p}_ratio"] = f"{row['error_ratio']:.1f}"
-    times = [r["resample_move_time_s"] / r["rbpf_time_s"] for r in x["equal_cost"]]
-    out["equal_time_ratio_min"], out["equal_time_ratio_max"] = (
-        f"{f(times):.1f}" for f in (min, max)
-    )
-    for i, row in enumerate(x["convergence"]):
-        p = f"conv_{i}"
-        out[f"{p}_problem"] = row["problem"]
-        out[f"{p}_particles"] = f"{row['particles']:,}"
-        out[f"{p}_s"] = f"{row['time_s']:.2f}"
-        out[f"{p}_error"] = f"{row['error_sd']:.4f}"
-        out[f"{p}_se"] = f"{row['standard_error_sd']:.4f}"
-        out[f"{p}_scaled"] = f"{row['error_times_sqrt_particles_sd']:.2f}"
-    return out
+def _time_ratios(record: dict) -> list[float]:
+    """``bench_rbpf``'s resample-move time over the RBPF's, at equal cost, per problem."""
+    return [r["resample_move_time_s"] / r["rbpf_time_s"] for r in record["results"]["equal_cost"]]
 
 
-#: The problems of ``bench_range_ekf`` and how the tables name them.
+#: The three times of ``bench_optimal``'s triples, and the ratios of pairs of them with their
+#: formats.
+_TIMES = ("optimal", "second_order", "ekf")
+_RATIOS = (
+    ("optimal", "ekf", ".1f"),
+    ("second_order", "ekf", ".2f"),
+    ("optimal", "second_order", ".1f"),
+)
+#: The tolerances of ``bench_range_ekf`` and its problems, as the tables name them.
+_TOLERANCES = ("1e-02", "1e-03")
 _RANGE_EKF_PROBLEMS = {"fig2": "Figure 2 (3 frames)", "ten_frames": "a 10-frame track"}
 
 
-def _range_ekf_bench_texts(record: dict) -> dict[str, str]:
-    out = {}
-    for key, label in _RANGE_EKF_PROBLEMS.items():
-        r = record["results"][key]
-        for tol in ("1e-02", "1e-03"):
-            row = r[tol]
-            p = f"{key}_{tol}"
-            out[f"{p}_problem"] = label
-            out[f"{p}_tolerance"] = f"{float(tol):g}"
-            out[f"{p}_components"] = f"{row['components']:,}"
-            out[f"{p}_range_ms"] = f"{row['range_ekf_ms']:.1f}"
-            out[f"{p}_bank_ms"] = f"{row['bank_ms']:.1f}"
-            out[f"{p}_ratio"] = f"{row['ratio']:.1f}"
-    return out
+def _triples(record: dict) -> list[dict]:
+    """``bench_optimal``'s rows of the paper's triples, one dict each."""
+    t = record["results"]["per_triple"]
+    return _columns_as_rows(
+        t, ["keys", "nodes", "brute_force_evaluations", *(f"{n}_ms" for n in _TIMES)]
+    )
 
 
-#: Each benchmark's prefix of glued names and the function that formats its record.
-_BENCH_TEXTS = {
-    "bench_range_ekf": ("rekf", _range_ekf_bench_texts),
-    "bench_optimal": ("opt", _optimal_bench_texts),
-    "bench_trials": ("trials", _trials_bench_texts),
-    "bench_ekf_filterpy": ("ekfpy", _ekf_bench_texts),
-    "bench_import": ("import", _import_bench_texts),
-    "bench_bank": ("bank", _bank_bench_texts),
-    "bench_rbpf": ("rbpf", _rbpf_bench_texts),
-    "bench_kalman": ("kalmanpy", _kalman_bench_texts),
-    "bench_frames": ("frames", _frames_bench_texts),
+def _triple_column(record: dict, name: str) -> np.ndarray:
+    """One column of ``bench_optimal``'s rows of triples."""
+    return np.array(record["results"]["per_triple"][name])
+
+
+def _triple_ratios(record: dict, a: str, b: str) -> np.ndarray:
+    """Time ``a`` over time ``b`` of each triple."""
+    return _triple_column(record, f"{a}_ms") / _triple_column(record, f"{b}_ms")
+
+
+def _particles_label(row: dict) -> str:
+    """A filter of ``bench_frames`` with its particles, where it draws them."""
+    if not row["options"]:
+        return row["filter"]
+    return f"{row['filter']} ({row['options']['n_particles']:,} particles)"
+
+
+def _range_ekf_group(key: str, label: str, tol: str) -> _Group:
+    """``bench_range_ekf``'s fields of one problem at one tolerance."""
+    return _Group(
+        f"{key}_{tol}",
+        f"results.{key}.{tol}",
+        (
+            ("problem", lambda _: label, ""),
+            ("tolerance", lambda _: float(tol), "g"),
+            ("components", "components", ","),
+            ("range_ms", "range_ekf_ms", ".1f"),
+            ("bank_ms", "bank_ms", ".1f"),
+            ("ratio", "ratio", ".1f"),
+        ),
+    )
+
+
+def _against_filterpy(time: str, other_time: str, ratio: str) -> tuple:
+    """The fields of a timing against filterpy: both times and the ratio with its range."""
+    return (
+        ("depthcore_ms", "results.depthcore_ms", time),
+        ("filterpy_ms", "results.filterpy_ms", other_time),
+        *((key, f"results.{key}", ratio) for key in ("ratio", "ratio_min", "ratio_max")),
+    )
+
+
+#: The fields of filterpy's and depthcore's results' agreement.
+_AGREEMENT = (
+    ("mean_difference", "results.mean_difference_sd", "sci"),
+    ("cov_max", "results.covariance_difference_max", "sci"),
+)
+
+
+#: Each benchmark's prefix of glued names and the fields of its record's texts.
+_BENCHMARKS = {
+    "bench_range_ekf": (
+        "rekf",
+        tuple(
+            _range_ekf_group(key, label, tol)
+            for key, label in _RANGE_EKF_PROBLEMS.items()
+            for tol in _TOLERANCES
+        ),
+    ),
+    "bench_optimal": (
+        "opt",
+        (
+            _Group(
+                "",
+                "results.moments",
+                (
+                    ("one_d_ms", "one_d_ms", ".2f"),
+                    ("one_d_error", "one_d_error_sd", "sci"),
+                    ("one_d_estimate", "one_d_estimate_sd", "sci"),
+                    (
+                        "grid_rule",
+                        lambda m: f"{m['grid_panels']} x 8 depth, {m['grid_order']}^2 (x, v) nodes",
+                        "",
+                    ),
+                    ("grid_ms", "grid_ms", ".0f"),
+                    ("grid_error", "grid_error_sd", "sci"),
+                    ("grid_ratio", "grid_ratio", ",.0f"),
+                ),
+            ),
+            _Group(
+                "nquad",
+                "results.moments",
+                (
+                    ("s", "nquad_one_integral_s", ".1f"),
+                    ("error", "nquad_relative_error", "sci"),
+                    ("ratio", "nquad_ratio", ",.0f"),
+                    ("all_s", "nquad_all_s", ".0f"),
+                    ("all_ratio", "nquad_all_ratio", ",.0f"),
+                ),
+                when="nquad_one_integral_s",
+            ),
+            _Group(
+                "",
+                _triples,
+                (
+                    ("figure", lambda row: f"Figure {SCENARIOS[row['keys']].figure}", ""),
+                    *((f"{n}_ms", f"{n}_ms", ".3f") for n in _TIMES),
+                    *(
+                        (f"{a}_{b}", lambda row, a=a, b=b: row[f"{a}_ms"] / row[f"{b}_ms"], f)
+                        for a, b, f in _RATIOS
+                    ),
+                    ("nodes", "nodes", ""),
+                    ("brute", "brute_force_evaluations", ","),
+                ),
+                rows=True,
+                label="keys",
+            ),
+            *(
+                (f"{a}_{b}_{which}", lambda r, a=a, b=b, g=g: g(_triple_ratios(r, a, b)), f)
+                for a, b, f in _RATIOS
+                for which, g in (("min", np.min), ("max", np.max))
+            ),
+            ("nodes_min", lambda r: _triple_column(r, "nodes").min(), ""),
+            ("nodes_max", lambda r: _triple_column(r, "nodes").max(), ""),
+            ("brute_max", lambda r: _triple_column(r, "brute_force_evaluations").max(), ","),
+            (
+                "brute_per_node",
+                lambda r: (
+                    _triple_column(r, "brute_force_evaluations").min()
+                    / _triple_column(r, "nodes").max()
+                ),
+                ",.0f",
+            ),
+        ),
+    ),
+    "bench_trials": (
+        "trials",
+        (
+            ("trials", "sizes.trials", ","),
+            ("timed", "sizes.timed_one_by_one", ""),
+            ("vectorised_s", "results.vectorised_s", ".2f"),
+            (
+                "per_trial_ms",
+                lambda r: 1e3 * r["results"]["vectorised_s"] / r["sizes"]["trials"],
+                ".3f",
+            ),
+            ("loop_s", "results.trial_by_trial_s", ".2f"),
+            ("ratio", "results.ratio", ".1f"),
+            ("estimate", "results.estimate_sd", "sci"),
+            ("difference", "results.difference_sd", "sci"),
+        ),
+    ),
+    "bench_ekf_filterpy": (
+        "ekfpy",
+        (
+            ("trials", "sizes.trials", ","),
+            *_against_filterpy(".1f", ",.0f", ",.0f"),
+            ("pairs", "sizes.pairs", ""),
+            *_AGREEMENT,
+            ("cov_median", "results.covariance_difference_median", "sci"),
+        ),
+    ),
+    "bench_import": (
+        "import",
+        (
+            ("numpy_s", "results.numpy_s", ".3f"),
+            ("depthcore_s", "results.depthcore_after_numpy_s", ".3f"),
+            ("target_s", "results.target_s", ".2f"),
+            ("runs", "sizes.runs", ""),
+        ),
+    ),
+    "bench_bank": (
+        "bank",
+        (
+            _Group(
+                "three",
+                "results.three_frames",
+                (
+                    ("trials", "trials", ","),
+                    ("one_d_ms", "one_d_ms_per_trial", ".3f"),
+                    ("bank_ms", "bank_ms_per_trial", ".3f"),
+                    ("ratio", "ratio", ".2f"),
+                    ("difference", "difference_sd", "sci"),
+                ),
+            ),
+            ("three_target", "results.targets.three_frames_ratio", "g"),
+            _Group(
+                "online",
+                "results.online",
+                (
+                    ("trials", "trials", ","),
+                    ("frames", "frames", ","),
+                    ("windows", lambda online: len(online["windows"]), ""),
+                ),
+            ),
+            _Group(
+                "many",
+                "results.many_trials",
+                (
+                    ("trials", "trials", ","),
+                    ("frames", "frames", ""),
+                    ("s", "time_s", ".1f"),
+                    ("target_s", "target_s", "g"),
+                    ("met", lambda m: "met" if m["time_s"] < m["target_s"] else "not met", ""),
+                    ("worst", "worst_error_estimate_sd", "sci"),
+                ),
+            ),
+            _Group(
+                "matched",
+                "results.matched_accuracy",
+                (
+                    ("trials", "trials", ""),
+                    ("frames", "frames", ""),
+                    ("replicas", "replicas", ""),
+                    ("bank_s", "bank_time_s", ".3f"),
+                    ("ratio", "ratio", ",.0f"),
+                    ("target_ratio", "target_ratio", "g"),
+                    ("largest", "particles.-1", ","),
+                    ("largest_s", "time_per_run_s.-1", ".2f"),
+                    ("largest_error", "error_sd.-1", "sci2"),
+                    ("target_error", "target_error_sd", "sci0"),
+                    ("extrapolated_needed", "extrapolated_particles_needed", "sci"),
+                    ("extrapolated_s", "extrapolated_time_s", "sci"),
+                    ("extrapolated_ratio", "extrapolated_ratio", "sci"),
+                ),
+            ),
+            _Group(
+                "online",
+                "results.online.windows",
+                (
+                    ("frames", lambda w: f"{w['first_frame']}–{w['last_frame']}", ""),
+                    ("ms", "ms_per_update", ".2f"),
+                    ("ratio", "ratio_to_first", ".2f"),
+                    ("nodes", "median_nodes", ""),
+                    ("sd", "median_depth_sd", ".4f"),
+                ),
+                rows=True,
+            ),
+            (
+                "online_max_ratio",
+                lambda r: _extreme_ratio(
+                    [w["ms_per_update"] for w in r["results"]["online"]["windows"]]
+                ),
+                ".1f",
+            ),
+            _Group(
+                "matched",
+                lambda r: _columns_as_rows(
+                    r["results"]["matched_accuracy"], ("particles", "error_sd", "time_per_run_s")
+                ),
+                (
+                    ("particles", "particles", ","),
+                    ("error", "error_sd", "sci2"),
+                    ("s", "time_per_run_s", ".2f"),
+                ),
+                rows=True,
+            ),
+        ),
+    ),
+    "bench_rbpf": (
+        "rbpf",
+        (
+            ("repeats", "sizes.repeats", ""),
+            _Group(
+                "equal",
+                "results.equal_cost",
+                (
+                    ("problem", "problem", ""),
+                    ("rbpf_particles", "rbpf_particles", ","),
+                    ("rbpf_s", "rbpf_time_s", ".2f"),
+                    ("rbpf_error", "rbpf_error_sd", ".4f"),
+                    ("rm_particles", "resample_move_particles", ","),
+                    ("rm_s", "resample_move_time_s", ".2f"),
+                    ("rm_error", "resample_move_error_sd", ".4f"),
+                    ("ratio", "error_ratio", ".1f"),
+                ),
+                rows=True,
+            ),
+            *(
+                (f"equal_time_ratio_{f.__name__}", lambda r, f=f: f(_time_ratios(r)), ".1f")
+                for f in (min, max)
+            ),
+            _Group(
+                "conv",
+                "results.convergence",
+                (
+                    ("problem", "problem", ""),
+                    ("particles", "particles", ","),
+                    ("s", "time_s", ".2f"),
+                    ("error", "error_sd", ".4f"),
+                    ("se", "standard_error_sd", ".4f"),
+                    ("scaled", "error_times_sqrt_particles_sd", ".2f"),
+                ),
+                rows=True,
+            ),
+        ),
+    ),
+    "bench_kalman": (
+        "kalmanpy",
+        (
+            ("steps", "sizes.steps", ","),
+            ("pairs", "sizes.pairs", ""),
+            *_against_filterpy(".1f", ".1f", ".2f"),
+            *_AGREEMENT,
+        ),
+    ),
+    "bench_frames": (
+        "frames",
+        (
+            ("trials", "sizes.trials", ""),
+            ("q", "sizes.process_noise", "g"),
+            ("n_filters", lambda r: len(r["results"]["filters"]), ""),
+            ("growth_max", lambda r: max(row["growth"] for row in r["results"]["filters"]), ".2f"),
+            _Group("n", "results.frames", (("", "", ","),), rows=True),
+            _Group(
+                "",
+                "results.filters",
+                (
+                    ("filter", _particles_label, ""),
+                    ("q", "process_noise", "g"),
+                    _Group("", "ms_per_trial", (("ms", "", ",.1f"),), rows=True),
+                    ("growth", "growth", ".2f"),
+                ),
+                rows=True,
+            ),
+        ),
+    ),
 }
 
 
@@ -293,43 +505,55 @@ def bench_texts(name: str, record: dict) -> dict[str, str]:
         ``"<prefix>_origin"`` is :func:`bench_origin`. Times are in the unit that
         their record's key ends with.
     """
-    if name not in _BENCH_TEXTS:
-        raise ValueError(f"name must be one of {sorted(_BENCH_TEXTS)}, got {name!r}")
-    prefix, texts = _BENCH_TEXTS[name]
-    out = {f"{prefix}_{k}": v for k, v in texts(record).items()}
+    if name not in _BENCHMARKS:
+        raise ValueError(f"name must be one of {sorted(_BENCHMARKS)}, got {name!r}")
+    prefix, fields = _BENCHMARKS[name]
+    out = _texts(record, fields, prefix)
     out[f"{prefix}_origin"] = bench_origin(record)
     return out
 
 
-def bench_tables(records: dict) -> dict[str, MarkdownTable]:
-    """The benchmarks' tables, from the records.
-
-    Parameters
-    ----------
-    records : dict
-        ``{name: record}`` for every benchmark of :func:`bench_texts`.
-
-    Returns
-    -------
-    dict of str to MarkdownTable
-        ``"optimal"``, ``"per_triple"``, ``"ekf"``, ``"trials"``, ``"bank"``,
-        ``"rbpf_equal_cost"``, ``"rbpf_convergence"``, ``"kalman"``, ``"frames"``,
-        ``"range_ekf"``, ``"import"``.
-    """
+def _all_texts(records: dict) -> dict[str, str]:
+    """:func:`bench_texts` of every record of ``{name: record}``, in one dict."""
     t = {}
     for name, record in records.items():
         t.update(bench_texts(name, record))
-    ms, s = " ms", " s"
+    return t
+
+
+# --- the tables --------------------------------------------------------------------------------
+
+
+def _cell(t: dict, key: str) -> str:
+    """The text of ``key`` with its unit, where its key ends with one (``_s``, ``_ms``)."""
+    unit = key.rsplit("_", 1)[-1]
+    return t[key] + (f" {unit}" if unit in ("s", "ms") else "")
+
+
+def _grid(t: dict, header, prefix: str, rows, columns) -> MarkdownTable:
+    """A table of the texts ``"<prefix>_<row>_<column>"``, with their units."""
+    return MarkdownTable(header, [[_cell(t, _key(prefix, r, c)) for c in columns] for r in rows])
+
+
+def _routes(first: str, first_time: str, second: str, second_time: str, ratio: str):
+    """A table of two routes' times, the second's as a ratio to the first's."""
+    return MarkdownTable(
+        ["route", "time", "ratio"], [[first, first_time, "1"], [second, second_time, ratio]]
+    )
+
+
+def _optimal_table(t: dict) -> MarkdownTable:
+    """The routes to the optimal filter's moments (``bench_optimal``)."""
     rows = [
         [
             "1-D route, Eqs. (14)–(16), one batch",
-            t["opt_one_d_ms"] + ms,
+            _cell(t, "opt_one_d_ms"),
             f"{t['opt_one_d_error']} (estimate {t['opt_one_d_estimate']})",
             "1",
         ],
         [
             f"3-D Gauss–Legendre grid of Eq. (6) ({t['opt_grid_rule']})",
-            t["opt_grid_ms"] + ms,
+            _cell(t, "opt_grid_ms"),
             t["opt_grid_error"],
             t["opt_grid_ratio"],
         ],
@@ -338,59 +562,24 @@ def bench_tables(records: dict) -> dict[str, MarkdownTable]:
         rows += [
             [
                 "scipy nquad of Eq. (6), epsrel 1e-9: 1 integral (Figure 2's normaliser)",
-                t["opt_nquad_s"] + s,
+                _cell(t, "opt_nquad_s"),
                 f"{t['opt_nquad_error']} (relative)",
                 t["opt_nquad_ratio"],
             ],
             [
                 "x 25 integrals (5 moments x 5 scenarios), extrapolated",
-                t["opt_nquad_all_s"] + s,
+                _cell(t, "opt_nquad_all_s"),
                 "-",
                 t["opt_nquad_all_ratio"],
             ],
         ]
-    tables = {"optimal": MarkdownTable(["route", "time", "error / SD", "ratio"], rows)}
-    keys = records["bench_optimal"]["results"]["per_triple"]["keys"]
-    tables["per_triple"] = MarkdownTable(
-        ["figure", "optimal", "second order", "EKF", "optimal / EKF", "nodes", "brute force"],
-        [
-            [
-                t[f"opt_{k}_figure"],
-                t[f"opt_{k}_optimal_ms"] + ms,
-                t[f"opt_{k}_second_order_ms"] + ms,
-                t[f"opt_{k}_ekf_ms"] + ms,
-                t[f"opt_{k}_optimal_ekf"],
-                t[f"opt_{k}_nodes"],
-                t[f"opt_{k}_brute"],
-            ]
-            for k in keys
-        ],
-    )
-    tables["ekf"] = MarkdownTable(
-        ["route", "time", "ratio"],
-        [
-            ["depthcore.kalman.ekf.run, vectorised", t["ekfpy_depthcore_ms"] + ms, "1"],
-            [
-                "filterpy ExtendedKalmanFilter, trial by trial",
-                t["ekfpy_filterpy_ms"] + ms,
-                t["ekfpy_ratio"],
-            ],
-        ],
-    )
-    tables["trials"] = MarkdownTable(
-        ["route", "time", "ratio"],
-        [
-            ["optimal.moments, vectorised over trials", t["trials_vectorised_s"] + s, "1"],
-            [
-                f"optimal.marginals, trial by trial ({t['trials_timed']} timed, scaled)",
-                t["trials_loop_s"] + s,
-                t["trials_ratio"],
-            ],
-        ],
-    )
-    n_windows = int(t["bank_online_windows"])
-    windows = [f"bank_online_{i}" for i in range(n_windows)]
-    tables["bank"] = MarkdownTable(
+    return MarkdownTable(["route", "time", "error / SD", "ratio"], rows)
+
+
+def _bank_table(t: dict) -> MarkdownTable:
+    """The exact filter's bank against its targets (``bench_bank``)."""
+    windows = [f"bank_online_{i}" for i in range(int(t["bank_online_windows"]))]
+    return MarkdownTable(
         ["measurement", "result", "target"],
         [
             [
@@ -429,96 +618,112 @@ def bench_tables(records: dict) -> dict[str, MarkdownTable]:
             ],
         ],
     )
-    n_equal = len(records["bench_rbpf"]["results"]["equal_cost"])
-    n_conv = len(records["bench_rbpf"]["results"]["convergence"])
-    tables["rbpf_equal_cost"] = MarkdownTable(
-        [
-            "problem",
-            "RBPF particles",
-            "RBPF time",
-            "RBPF error",
-            "resample-move particles",
-            "resample-move time",
-            "resample-move error",
-            "error ratio",
-        ],
-        [
-            [
-                t[f"rbpf_equal_{i}_{k}"] + (s if k.endswith("_s") else "")
-                for k in (
-                    "problem",
-                    "rbpf_particles",
-                    "rbpf_s",
-                    "rbpf_error",
-                    "rm_particles",
-                    "rm_s",
-                    "rm_error",
-                    "ratio",
-                )
-            ]
-            for i in range(n_equal)
-        ],
+
+
+def _frames_table(t: dict, records: dict) -> MarkdownTable:
+    """Each filter's time per trial at each number of frames (``bench_frames``)."""
+    frames = range(len(records["bench_frames"]["results"]["frames"]))
+    return _grid(
+        t,
+        ["filter", "q", *(f"N = {t[f'frames_n_{j}']}" for j in frames), "growth per frame"],
+        "frames",
+        [f"{i}" for i in range(int(t["frames_n_filters"]))],
+        ["filter", "q", *(f"{j}_ms" for j in frames), "growth"],
     )
-    tables["rbpf_convergence"] = MarkdownTable(
-        ["problem", "particles", "time", "RMS error", "SE of the average", "RMS error x sqrt(J)"],
-        [
+
+
+def _row_tables(t: dict, records: dict) -> dict[str, MarkdownTable]:
+    """The tables of one row per problem or triple: header, the texts' prefix, rows, columns."""
+    rbpf = records["bench_rbpf"]["results"]
+    return {
+        "per_triple": _grid(
+            t,
+            ["figure", "optimal", "second order", "EKF", "optimal / EKF", "nodes", "brute force"],
+            "opt",
+            records["bench_optimal"]["results"]["per_triple"]["keys"],
+            ["figure", "optimal_ms", "second_order_ms", "ekf_ms", "optimal_ekf", "nodes", "brute"],
+        ),
+        "rbpf_equal_cost": _grid(
+            t,
+            ["problem", "RBPF particles", "RBPF time", "RBPF error", "resample-move particles"]
+            + ["resample-move time", "resample-move error", "error ratio"],
+            "rbpf_equal",
+            [f"{i}" for i in range(len(rbpf["equal_cost"]))],
+            ["problem", "rbpf_particles", "rbpf_s", "rbpf_error", "rm_particles", "rm_s"]
+            + ["rm_error", "ratio"],
+        ),
+        "rbpf_convergence": _grid(
+            t,
+            ["problem", "particles", "time", "RMS error", "SE of the average"]
+            + ["RMS error x sqrt(J)"],
+            "rbpf_conv",
+            [f"{i}" for i in range(len(rbpf["convergence"]))],
+            ["problem", "particles", "s", "error", "se", "scaled"],
+        ),
+        "range_ekf": _grid(
+            t,
+            ["problem", "depth mean and SD within", "components", "range EKF", "bank", "ratio"],
+            "rekf",
+            [f"{key}_{tol}" for key in _RANGE_EKF_PROBLEMS for tol in _TOLERANCES],
+            ["problem", "tolerance", "components", "range_ms", "bank_ms", "ratio"],
+        ),
+    }
+
+
+def bench_tables(records: dict) -> dict[str, MarkdownTable]:
+    """The benchmarks' tables, from the records.
+
+    Parameters
+    ----------
+    records : dict
+        ``{name: record}`` for every benchmark of :func:`bench_texts`.
+
+    Returns
+    -------
+    dict of str to MarkdownTable
+        ``"optimal"``, ``"per_triple"``, ``"ekf"``, ``"trials"``, ``"bank"``,
+        ``"rbpf_equal_cost"``, ``"rbpf_convergence"``, ``"kalman"``, ``"frames"``,
+        ``"range_ekf"``, ``"import"``.
+    """
+    t = _all_texts(records)
+    rows = _row_tables(t, records)
+    return {
+        "optimal": _optimal_table(t),
+        "per_triple": rows["per_triple"],
+        "ekf": _routes(
+            "depthcore.kalman.ekf.run, vectorised",
+            _cell(t, "ekfpy_depthcore_ms"),
+            "filterpy ExtendedKalmanFilter, trial by trial",
+            _cell(t, "ekfpy_filterpy_ms"),
+            t["ekfpy_ratio"],
+        ),
+        "trials": _routes(
+            "optimal.moments, vectorised over trials",
+            _cell(t, "trials_vectorised_s"),
+            f"optimal.marginals, trial by trial ({t['trials_timed']} timed, scaled)",
+            _cell(t, "trials_loop_s"),
+            t["trials_ratio"],
+        ),
+        "bank": _bank_table(t),
+        "rbpf_equal_cost": rows["rbpf_equal_cost"],
+        "rbpf_convergence": rows["rbpf_convergence"],
+        "kalman": _routes(
+            "depthcore kalman.run and fixed_interval_smoother",
+            _cell(t, "kalmanpy_depthcore_ms"),
+            "filterpy KalmanFilter and rts_smoother",
+            _cell(t, "kalmanpy_filterpy_ms"),
+            t["kalmanpy_ratio"],
+        ),
+        "frames": _frames_table(t, records),
+        "range_ekf": rows["range_ekf"],
+        "import": MarkdownTable(
+            ["import", "median time"],
             [
-                t[f"rbpf_conv_{i}_{k}"] + (s if k == "s" else "")
-                for k in ("problem", "particles", "s", "error", "se", "scaled")
-            ]
-            for i in range(n_conv)
-        ],
-    )
-    tables["kalman"] = MarkdownTable(
-        ["route", "time", "ratio"],
-        [
-            [
-                "depthcore kalman.run and fixed_interval_smoother",
-                t["kalmanpy_depthcore_ms"] + ms,
-                "1",
+                ["numpy", _cell(t, "import_numpy_s")],
+                ["depthcore, after numpy", _cell(t, "import_depthcore_s")],
             ],
-            [
-                "filterpy KalmanFilter and rts_smoother",
-                t["kalmanpy_filterpy_ms"] + ms,
-                t["kalmanpy_ratio"],
-            ],
-        ],
-    )
-    frames = records["bench_frames"]["results"]
-    tables["frames"] = MarkdownTable(
-        ["filter", "q"]
-        + [f"N = {t[f'frames_n_{j}']}" for j in range(len(frames["frames"]))]
-        + ["growth per frame"],
-        [
-            [t[f"frames_{i}_filter"], t[f"frames_{i}_q"]]
-            + [t[f"frames_{i}_{j}_ms"] + ms for j in range(len(frames["frames"]))]
-            + [t[f"frames_{i}_growth"]]
-            for i in range(len(frames["filters"]))
-        ],
-    )
-    tables["range_ekf"] = MarkdownTable(
-        ["problem", "depth mean and SD within", "components", "range EKF", "bank", "ratio"],
-        [
-            [
-                t[f"rekf_{key}_{tol}_problem"],
-                t[f"rekf_{key}_{tol}_tolerance"],
-                t[f"rekf_{key}_{tol}_components"],
-                t[f"rekf_{key}_{tol}_range_ms"] + ms,
-                t[f"rekf_{key}_{tol}_bank_ms"] + ms,
-                t[f"rekf_{key}_{tol}_ratio"],
-            ]
-            for key in _RANGE_EKF_PROBLEMS
-            for tol in ("1e-02", "1e-03")
-        ],
-    )
-    tables["import"] = MarkdownTable(
-        ["import", "median time"],
-        [
-            ["numpy", t["import_numpy_s"] + s],
-            ["depthcore, after numpy", t["import_depthcore_s"] + s],
-        ],
-    )
-    return tables
+        ),
+    }
 
 
 def bench_blocks(records: dict) -> dict[str, str]:
@@ -536,9 +741,7 @@ def bench_blocks(records: dict) -> dict[str, str]:
         then the sentences that quote the record's other numbers and where and
         when it was measured.
     """
-    t = {}
-    for name, record in records.items():
-        t.update(bench_texts(name, record))
+    t = _all_texts(records)
     notes = {
         "ekf": f"Times and ratio are medians over {t['ekfpy_pairs']} pairs timed alternately "
         f"(the pairs' ratios from {t['ekfpy_ratio_min']} to {t['ekfpy_ratio_max']}). "
@@ -572,7 +775,7 @@ def bench_blocks(records: dict) -> dict[str, str]:
         "range_ekf": "bench_range_ekf",
         "import": "bench_import",
     }
-    prefixes = {name: prefix for name, (prefix, _) in _BENCH_TEXTS.items()}
+    prefixes = {name: prefix for name, (prefix, _) in _BENCHMARKS.items()}
     blocks = {}
     for key, table in bench_tables(records).items():
         name = sources[key]

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, legend_below, reference_rate, subplots
 from depthcore.exact import optimal
 from depthcore.formatting import plus_minus
 from depthcore.kalman import ekf, ukf
@@ -386,12 +386,14 @@ def convergence_figure(result: dict, quantity: str = "depth"):
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.book.beyond_filters.particle_convergence`.
+        The errors of :func:`depthcore.book.beyond_filters.particle_convergence` at
+        its ``"sizes"`` ``N``, of each setting of ``"rmse"``, over ``"repeats"`` runs.
     quantity : {"depth", "velocity"}
 
     Returns
     -------
     matplotlib.figure.Figure
+        Two panels, the mean's errors and the SD's, one line per setting.
     """
 
     if quantity not in QUANTITIES:
@@ -407,26 +409,13 @@ def convergence_figure(result: dict, quantity: str = "depth"):
                 markersize=4,
                 **SETTING_STYLE.get(name, {"label": name}),
             )
-        ax.plot(
-            N,
-            ideal,
-            color="0.7",
-            linewidth=3,
-            alpha=0.6,
-            zorder=0,
-            label=r"posterior SD$/\sqrt{N}$",
-        )
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        reference_rate(ax, N, ideal, r"posterior SD$/\sqrt{N}$")
         ax.set_xlabel("number of particles $N$")
         ax.set_title(
             f"{quantity} {title}: RMS error over {result['repeats']} runs", fontsize=MIN_FONT
         )
     axes[0].set_ylabel("RMS error from the optimal filter")
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(
-        handles, labels, loc="outside lower center", ncol=2, frameon=False, fontsize=MIN_FONT
-    )
+    legend_below(fig, axes[:1], ncol=2)
     return fig
 
 
@@ -457,8 +446,9 @@ def moments_texts(result: dict, decimals: int = 3) -> dict:
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.studies.reproduce.reproduce`.
+        Every scenario's rows of :func:`depthcore.studies.reproduce.reproduce`.
     decimals : int
+        Places of the mean, the SD and the standard error.
 
     Returns
     -------

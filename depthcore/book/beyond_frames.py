@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, legend_below, subplots
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from depthcore.problem.scenarios import SCENARIOS
@@ -265,15 +265,7 @@ def frames_study_figure(result: dict, names=None, title: str | None = None):
         ax.set_xlabel("frames N")
     if title is not None:
         fig.suptitle(title)
-    handles, labels = [], []
-    for ax in axes.ravel():
-        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
-            if lab not in labels:
-                handles.append(h)
-                labels.append(lab)
-    fig.legend(
-        handles, labels, loc="outside lower center", ncol=3, frameon=False, fontsize=MIN_FONT
-    )
+    legend_below(fig, axes.ravel(), ncol=3)
     return fig
 
 

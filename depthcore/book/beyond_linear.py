@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.book.style import MIN_FONT, WIDTH, subplots
+from depthcore.book.style import MIN_FONT, WIDTH, legend_below, reference_rate, subplots
 from depthcore.exact import posterior
 from depthcore.particles import rbpf
 from depthcore.problem import checks
@@ -202,10 +202,7 @@ def smoothing_figure(track, states, first: int = 1):
         ax.set_xlabel("frame $k$")
         ax.set_ylabel(f"estimate minus truth: {name}")
         ax.set_title(f"{name}: mean $\\pm$ 2 SD, minus the truth", fontsize=MIN_FONT)
-    handles, labels = axes[0].get_legend_handles_labels()
-    fig.legend(
-        handles, labels, loc="outside lower center", ncol=3, frameon=False, fontsize=MIN_FONT
-    )
+    legend_below(fig, axes[:1], ncol=3)
     return fig
 
 
@@ -215,7 +212,8 @@ def rbpf_convergence_figure(result: dict):
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.book.beyond_linear.rbpf_convergence`.
+        The clouds of :func:`depthcore.book.beyond_linear.rbpf_convergence`, with
+        the exact bank's moments they are measured from.
 
     Returns
     -------
@@ -232,17 +230,7 @@ def rbpf_convergence_figure(result: dict):
     ax = axes[0]
     ax.plot(J, result["rmse"]["depth_mean"], "o-", color="tab:purple", label="depth mean")
     ax.plot(J, result["rmse"]["depth_sd"], "s--", color="tab:orange", label="depth SD")
-    ax.plot(
-        J,
-        exact["depth_sd"] / np.sqrt(J),
-        color="0.7",
-        linewidth=3,
-        alpha=0.6,
-        zorder=0,
-        label=r"exact depth SD$/\sqrt{J}$",
-    )
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+    reference_rate(ax, J, exact["depth_sd"] / np.sqrt(J), r"exact depth SD$/\sqrt{J}$")
     ax.set_xlabel("particles per cloud $J$")
     ax.set_ylabel("RMS error from the exact bank")
     ax.set_title(f"RMS error over {result['replicas']} independent clouds", fontsize=MIN_FONT)
@@ -278,8 +266,9 @@ def rbpf_texts(result: dict, prefix: str) -> dict:
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.book.beyond_linear.rbpf_convergence`.
+        :func:`depthcore.book.beyond_linear.rbpf_convergence`'s result.
     prefix : str
+        Begins every key.
 
     Returns
     -------

@@ -72,12 +72,14 @@ def calibration(result: dict, quantity: str = "depth"):
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.studies.monte_carlo.study`.
+        A study of :func:`depthcore.studies.monte_carlo.study`, whose filters'
+        ``"calibration"`` curves are drawn, titled with its trials, ``rho`` and prior.
     quantity : {"depth", "velocity"}
 
     Returns
     -------
     matplotlib.figure.Figure
+        The curves over the diagonal, where a calibrated filter's lies.
     """
 
     fig, ax = subplots(figsize=(5.2, 4.6))
@@ -104,7 +106,8 @@ def prior_calibration(result: dict):
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.studies.monte_carlo.prior_study`.
+        :func:`depthcore.studies.monte_carlo.prior_study`'s result: its ``"levels"``,
+        ``"coverage_se"`` and the depth's and velocity's ``"coverage"`` are drawn.
 
     Returns
     -------

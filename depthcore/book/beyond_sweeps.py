@@ -89,6 +89,28 @@ def noise_sweep(rhos, truth=None, prior_scale: float = PAPER_PRIOR_SCALE) -> dic
     return {"rho": rhos, **_compare(mu, rhos, pm, prior_scale * np.eye(3))}
 
 
+def _noise_free_state(mu, offsets) -> np.ndarray:
+    """``c`` of the bearings ``mu`` (Eq. (7)), where each prior depth ``c2 - 2 + offset`` is > 0."""
+    c = model.noise_free_states(mu[None])[0]
+    if np.any(c[1] - 2 + offsets <= 0):
+        raise ValueError("offsets must keep the prior's depth at time 1, c2 - 2 + offset, positive")
+    return c
+
+
+def _prior_means(mu, offsets, velocities):
+    """Prior means ``(c1 - 2 c3, c2 - 2 + offset, velocity)``, shape (D, V, 3)."""
+    c = _noise_free_state(mu, offsets)
+    pm = paper_prior_means(c, offsets[:, None] + np.zeros((1, len(velocities))))
+    pm[..., 2] = velocities[None, :]
+    return pm
+
+
+def _problem(mu, rho):
+    """The bearings and the noise SD, Figure 2's where not given."""
+    mu = np.asarray(SCENARIOS["fig2"].mu if mu is None else mu, dtype=float)
+    return mu, SCENARIOS["fig2"].rho if rho is None else rho
+
+
 def prior_offset_sweep(
     offsets, mu=None, rho: float | None = None, prior_scale: float = PAPER_PRIOR_SCALE
 ) -> dict:
@@ -110,30 +132,11 @@ def prior_offset_sweep(
     dict
         ``{"offset": (R,), name: {"depth_mean", "depth_sd", "hellinger"}}``.
     """
-    mu = np.asarray(SCENARIOS["fig2"].mu if mu is None else mu, dtype=float)
-    rho = SCENARIOS["fig2"].rho if rho is None else rho
+    mu, rho = _problem(mu, rho)
     offsets = np.atleast_1d(np.asarray(offsets, dtype=float))
-    c = model.noise_free_states(mu[None])[0]
-    if np.any(c[1] - 2 + offsets <= 0):
-        raise ValueError("offsets must keep the prior's depth at time 1, c2 - 2 + offset, positive")
-    pm = paper_prior_means(c, offsets)
+    pm = paper_prior_means(_noise_free_state(mu, offsets), offsets)
     mus = np.tile(mu, (len(offsets), 1))
     return {"offset": offsets, **_compare(mus, rho, pm, prior_scale * np.eye(3))}
-
-
-def _prior_means(mu, offsets, velocities):
-    """Prior means ``(c1 - 2 c3, c2 - 2 + offset, velocity)``, shape (D, V, 3), and ``c``."""
-    c = model.noise_free_states(mu[None])[0]
-    if np.any(c[1] - 2 + offsets <= 0):
-        raise ValueError("offsets must keep the prior's depth at time 1, c2 - 2 + offset, positive")
-    pm = paper_prior_means(c, offsets[:, None] + np.zeros((1, len(velocities))))
-    pm[..., 2] = velocities[None, :]
-    return pm
-
-
-def _problem(mu, rho):
-    mu = np.asarray(SCENARIOS["fig2"].mu if mu is None else mu, dtype=float)
-    return mu, SCENARIOS["fig2"].rho if rho is None else rho
 
 
 def prior_velocity_sweep(
@@ -154,10 +157,8 @@ def prior_velocity_sweep(
     ----------
     velocities : array_like, shape (R,)
         Velocities of the prior mean.
-    mu : array_like, shape (3,), optional
-        Default: Eq. (17).
-    rho : float, optional
-        Default: 1/200.
+    mu, rho : optional
+        The bearings, shape (3,), and the noise SD, as in :func:`prior_offset_sweep`.
     depth_offset : float
         Added to the prior mean's depth, as in :func:`prior_offset_sweep`.
     prior_scale : float
@@ -193,10 +194,8 @@ def prior_mean_map(
         Depth offsets, as in :func:`prior_offset_sweep`.
     velocities : array_like, shape (V,)
         Velocities of the prior mean.
-    mu : array_like, shape (3,), optional
-        Default: Eq. (17).
-    rho : float, optional
-        Default: 1/200.
+    mu, rho : optional
+        The bearings, shape (3,), and the noise SD, as in :func:`prior_offset_sweep`.
 
     Returns
     -------
@@ -273,11 +272,12 @@ def noise_study_figure(result: dict):
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.book.beyond_sweeps.noise_study`.
+        The scores of :func:`depthcore.book.beyond_sweeps.noise_study` at each ``"rho"``.
 
     Returns
     -------
     matplotlib.figure.Figure
+        Two panels: the coverage beside its nominal 0.68, and the RMSE.
     """
 
     fig, axes = subplots(1, 2, figsize=(WIDTH, 4.0))

@@ -376,6 +376,11 @@ def comparison_table(key: str, rows: list[dict]) -> MarkdownTable:
 # --- where the EKF linearises ------------------------------------------------------------------
 
 
+def _gradient_rows(h) -> np.ndarray:
+    """``h_k^T F^{k-3}`` for the rows ``h_k`` of ``h`` (3, 3): the vectors of Eq. (24), by row."""
+    return np.stack([h[k] @ model.G_linear(k - 2) for k in range(3)])
+
+
 def bearings_depth_sd(h, rho: float) -> float:
     """The depth SD at time 3 that three linearised bearings allow, without a prior.
 
@@ -401,7 +406,7 @@ def bearings_depth_sd(h, rho: float) -> float:
     """
     h = checks.finite_array(h, "h", (3, 3))
     rho = checks.positive_scalar(rho, "rho")
-    R = np.stack([h[k] @ model.G_linear(k - 2) for k in range(3)])
+    R = _gradient_rows(h)
     if np.linalg.matrix_rank(R) < 3:
         return float("inf")
     return float(rho * np.linalg.norm(np.linalg.solve(R.T, np.eye(3)[1])))
@@ -412,10 +417,9 @@ def ekf_linearisation(mu, rho: float, prior: Gaussian) -> dict:
 
     Parameters
     ----------
-    mu : array_like, shape (3,)
-    rho : float
-    prior : Gaussian
-        Density of the state at time 1.
+    mu, rho, prior
+        The bearings (3,), the noise SD and the prior at time 1 (a
+        :class:`~depthcore.problem.gaussian.Gaussian`), as the EKF takes them.
 
     Returns
     -------
@@ -433,7 +437,7 @@ def ekf_linearisation(mu, rho: float, prior: Gaussian) -> dict:
     history = ekf.run(mu, rho, prior.mean, prior.cov)
     predicted = [prior.mean] + [ekf.predict(history.means[i], history.covs[i])[0] for i in (0, 1)]
     h = model.observation_vector(np.stack(predicted))
-    rows = np.stack([h[k] @ model.G_linear(k - 2) for k in range(3)])
+    rows = _gradient_rows(h)
     return {
         "h": h,
         "rows": rows,

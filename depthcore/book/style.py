@@ -42,3 +42,41 @@ def subplots(nrows: int = 1, ncols: int = 1, *, figsize, **kwargs):
     if figsize[0] > WIDTH + 1e-9:
         raise ValueError(f"figsize: at most {WIDTH} inches wide, got {figsize[0]}")
     return plt.subplots(nrows, ncols, figsize=figsize, dpi=DPI, layout="constrained", **kwargs)
+
+
+def legend_below(fig, axes, ncol: int) -> None:
+    """One legend for a figure, below its plots: each label of ``axes`` once, in order.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        From :func:`subplots`, whose constrained layout keeps the legend outside the plots.
+    axes : sequence of matplotlib.axes.Axes
+        The plots whose labelled lines the legend names.
+    ncol : int
+        Columns of the legend.
+    """
+    handles, labels = [], []
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            if label not in labels:
+                handles.append(handle)
+                labels.append(label)
+    fig.legend(
+        handles, labels, loc="outside lower center", ncol=ncol, frameon=False, fontsize=MIN_FONT
+    )
+
+
+def reference_rate(ax, x, y, label: str) -> None:
+    """A broad grey line behind the data, on log-log axes: the rate a Monte Carlo error follows.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+    x, y : array_like, shape (n,)
+        Numbers of draws and the error expected with them, e.g. ``sd / sqrt(x)``.
+    label : str
+    """
+    ax.plot(x, y, color="0.7", linewidth=3, alpha=0.6, zorder=0, label=label)
+    ax.set_xscale("log")
+    ax.set_yscale("log")

@@ -581,14 +581,12 @@ def build_parser() -> argparse.ArgumentParser:
     Its filters are the registry's when it is built, a filter added by
     :func:`depthcore.registry.filters.register` among them.
     """
-    raw = argparse.RawDescriptionHelpFormatter
-    every, defaults = names(), names(default=True)
     p = _Parser(
         prog="python -m depthcore",
         description="Filter based estimates of depth (Maybank 1990): the paper's filters "
         f"on N >= 3 bearings (up to {FRAMES_MAX} frames).",
         epilog=EXAMPLES["all"],
-        formatter_class=raw,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--version", action="version", version=f"depthcore {__version__}")
     common = argparse.ArgumentParser(add_help=False)
@@ -596,25 +594,91 @@ def build_parser() -> argparse.ArgumentParser:
         "--debug", action="store_true", help="show the traceback of an unexpected failure"
     )
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-
-    r = sub.add_parser(
-        "reproduce",
-        parents=[common],
-        formatter_class=raw,
-        epilog=EXAMPLES["reproduce"],
-        help="moments of every filter for Figures 2-6, beside the paper's",
-        description="Moments of every filter for Figures 2-6, beside the paper's.",
+    r = _command(
+        sub, common, "reproduce", "moments of every filter for Figures 2-6, beside the paper's"
     )
-    r.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    r.set_defaults(run=_cmd_reproduce)
+    _add_json(r, _cmd_reproduce)
+    _add_estimate_arguments(sub, common)
+    _add_study_arguments(sub, common)
+    f = _command(sub, common, "figures", "write Figures 2-6 as PDF, PNG and SVG")
+    f.add_argument("--out", default="figures", help="output folder (default: figures)")
+    f.add_argument(
+        "--format",
+        dest="formats",
+        nargs="+",
+        choices=FIGURE_FORMATS,
+        metavar="FORMAT",
+        help="write these formats only, of pdf, png and svg (default: all three)",
+    )
+    f.set_defaults(run=_cmd_figures)
+    return p
 
-    e = sub.add_parser(
-        "estimate",
+
+def _command(sub, common, name: str, summary: str) -> argparse.ArgumentParser:
+    """The parser of command ``name``: ``summary`` its help and, as a sentence, its description.
+
+    Parameters
+    ----------
+    sub : argparse subparsers action
+        The main parser's commands.
+    common : argparse.ArgumentParser
+        The options every command has.
+    name : str
+        A key of :data:`EXAMPLES`, which gives the epilog.
+    summary : str
+        One line, lower case, without a full stop.
+    """
+    return sub.add_parser(
+        name,
         parents=[common],
-        formatter_class=raw,
-        epilog=EXAMPLES["estimate"],
-        help=f"moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames)",
-        description=f"Moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames).",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=EXAMPLES[name],
+        help=summary,
+        description=f"{summary[0].upper()}{summary[1:]}.",
+    )
+
+
+def _add_json(parser: argparse.ArgumentParser, run) -> None:
+    """The last option of a command that prints a table, ``--json``, and what the command runs."""
+    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    parser.set_defaults(run=run)
+
+
+def _add_filters(parser: argparse.ArgumentParser, what: str, note: str = "") -> None:
+    """``--filters``: the registry's names, its default ones by default.
+
+    ``what`` begins the help, ``note`` ends it, after the default and the other names.
+    """
+    every, defaults = names(), names(default=True)
+    parser.add_argument(
+        "--filters",
+        nargs="+",
+        default=list(defaults),
+        choices=every,
+        metavar="NAME",
+        help=f"{what} (default: {' '.join(defaults)}; also "
+        f"{' '.join(n for n in every if n not in defaults)}){note}",
+    )
+
+
+def _add_process_noise(parser: argparse.ArgumentParser, default: str, note: str = "") -> None:
+    """``--process-noise``, 0 by default: ``default`` says what 0 means, ``note`` ends its help."""
+    parser.add_argument(
+        "--process-noise",
+        type=float,
+        default=0.0,
+        metavar="Q",
+        help=f"SD of the velocity's change per frame (default 0{default}){note}",
+    )
+
+
+def _add_estimate_arguments(sub, common) -> None:
+    """The command ``estimate`` and its options."""
+    e = _command(
+        sub,
+        common,
+        "estimate",
+        f"moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames)",
     )
     e.add_argument(
         "--mu",
@@ -645,38 +709,19 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="S",
         help="prior covariance: S for S I (default 1000), or 9 values row by row",
     )
-    e.add_argument(
-        "--process-noise",
-        type=float,
-        default=0.0,
-        metavar="Q",
-        help="SD of the velocity's change per frame (default 0: the paper's constant velocity)",
-    )
+    _add_process_noise(e, ": the paper's constant velocity")
     e.add_argument(
         "--smooth",
         action="store_true",
         help="also the optimal filter's smoothed depth and lateral position at every frame",
     )
-    e.add_argument(
-        "--filters",
-        nargs="+",
-        default=list(defaults),
-        choices=every,
-        metavar="NAME",
-        help=f"filters to run, in this order (default: {' '.join(defaults)}; also "
-        f"{' '.join(n for n in every if n not in defaults)})",
-    )
-    e.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    e.set_defaults(run=_cmd_estimate)
+    _add_filters(e, "filters to run, in this order")
+    _add_json(e, _cmd_estimate)
 
-    st = sub.add_parser(
-        "study",
-        parents=[common],
-        formatter_class=raw,
-        epilog=EXAMPLES["study"],
-        help="Monte Carlo study of every filter's error and calibration",
-        description="Monte Carlo study of every filter's error and calibration.",
-    )
+
+def _add_study_arguments(sub, common) -> None:
+    """The command ``study`` and its options."""
+    st = _command(sub, common, "study", "Monte Carlo study of every filter's error and calibration")
     st.add_argument(
         "--trials",
         type=int,
@@ -701,16 +746,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="paper (default): the paper's rule on each trial's measurements; fixed: on the "
         "truth (the only choice with --truth prior)",
     )
-    st.add_argument(
-        "--filters",
-        nargs="+",
-        default=list(defaults),
-        choices=every,
-        metavar="NAME",
-        help=f"filters to score (default: {' '.join(defaults)}; also "
-        f"{' '.join(n for n in every if n not in defaults)}); only these run: "
-        "the Hellinger distances need the optimal filter, their reference, so without "
-        "'optimal' they are not computed (- in the table, null in JSON)",
+    _add_filters(
+        st,
+        "filters to score",
+        "; only these run: the Hellinger distances need the optimal filter, their reference, "
+        "so without 'optimal' they are not computed (- in the table, null in JSON)",
     )
     st.add_argument(
         "--particles",
@@ -729,36 +769,12 @@ def build_parser() -> argparse.ArgumentParser:
         f"{FRAMES_MAX}: the truth moves on from time 3 to frame N and every filter is scored "
         "there",
     )
-    st.add_argument(
-        "--process-noise",
-        type=float,
-        default=0.0,
-        metavar="Q",
-        help="SD of the velocity's change per frame (default 0); with Q > 0 the filters that "
-        "assume a constant velocity (particle) cannot be named",
+    _add_process_noise(
+        st,
+        "",
+        "; with Q > 0 the filters that assume a constant velocity (particle) cannot be named",
     )
-    st.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    st.set_defaults(run=_cmd_study)
-
-    f = sub.add_parser(
-        "figures",
-        parents=[common],
-        formatter_class=raw,
-        epilog=EXAMPLES["figures"],
-        help="write Figures 2-6 as PDF, PNG and SVG",
-        description="Write Figures 2-6 as PDF, PNG and SVG.",
-    )
-    f.add_argument("--out", default="figures", help="output folder (default: figures)")
-    f.add_argument(
-        "--format",
-        dest="formats",
-        nargs="+",
-        choices=FIGURE_FORMATS,
-        metavar="FORMAT",
-        help="write these formats only, of pdf, png and svg (default: all three)",
-    )
-    f.set_defaults(run=_cmd_figures)
-    return p
+    _add_json(st, _cmd_study)
 
 
 def _one_line(text: str) -> str:

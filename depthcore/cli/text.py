@@ -201,29 +201,46 @@ def format_study(result: dict) -> str:
     lines += [head, "-" * len(head)]
     for name, f in result["filters"].items():
         for q in ("depth", "velocity"):
-            r = f[q]
-            h = f["hellinger_depth"]
-            extra = (
-                f"{f['nees']:>8.2f} " + ("-".rjust(9) if h is None else f"{h['mean']:>9.3f}")
-                if q == "depth"
-                else ""
-            )
-            lines.append(
-                f"{name:<13} {q:<9} {r['bias']:>9.4f} {r['rmse']:>9.4f} {r['mean_sd']:>9.4f} "
-                f"{r['coverage_68']:>8.3f} {r['coverage_95']:>8.3f} {extra}".rstrip()
-            )
-            extra_se = (
-                f"{f['nees_se']:>8.2f} " + ("".rjust(9) if h is None else f"{h['se']:>9.3f}")
-                if q == "depth"
-                else ""
-            )
-            lines.append(
-                f"{'':<13} {'(se)':<9} {r['bias_se']:>9.4f} {r['rmse_se']:>9.4f} "
-                f"{r['mean_sd_se']:>9.4f} {r['coverage_68_se']:>8.3f} {r['coverage_95_se']:>8.3f} "
-                f"{extra_se}".rstrip()
-            )
+            lines.append(_study_row(f, q, name, q, ""))
+            lines.append(_study_row(f, q, "", "(se)", "_se"))
     lines.append(STUDY_LEGEND)
     return "\n".join(lines) + "\n"
+
+
+#: The columns of :func:`format_study`'s table: each score and its format.
+_STUDY_COLUMNS = (
+    ("bias", ">9.4f"),
+    ("rmse", ">9.4f"),
+    ("mean_sd", ">9.4f"),
+    ("coverage_68", ">8.3f"),
+    ("coverage_95", ">8.3f"),
+)
+
+
+def _study_row(f: dict, q: str, name: str, label: str, suffix: str) -> str:
+    """One line of :func:`format_study`'s table: a filter's scores of ``q``, or their SEs.
+
+    Parameters
+    ----------
+    f : dict
+        One filter's scores, ``study(...)["filters"][name]``.
+    q : {"depth", "velocity"}
+    name, label : str
+        The line's first two cells.
+    suffix : {"", "_se"}
+        The scores, or their standard errors; the depth's line adds the NEES
+        and the Hellinger distance (``-`` where it was not computed).
+    """
+    cells = " ".join(format(f[q][score + suffix], spec) for score, spec in _STUDY_COLUMNS)
+    extra = ""
+    if q == "depth":
+        h = f["hellinger_depth"]
+        missing = "" if suffix else "-"
+        hellinger = (
+            missing.rjust(9) if h is None else format(h["se" if suffix else "mean"], ">9.3f")
+        )
+        extra = f"{f['nees' + suffix]:>8.2f} {hellinger}"
+    return f"{name:<13} {label:<9} {cells} {extra}".rstrip()
 
 
 def _frames_text(result: dict) -> str:

@@ -86,19 +86,11 @@ def frames_study(
     groups = [(plain, trials)] + ([(("optimal",) + random, particle_trials)] if random else [])
     rows = {name: [] for name in names}
     paired = []
+    same = dict(seed=seed, prior=prior, n_particles=n_particles, process_noise=process_noise)
     for n in frames:
         for group, t in groups:
             r = monte_carlo.study(
-                truth,
-                rho,
-                trials=t,
-                seed=seed,
-                prior=prior,
-                names=group,
-                n_particles=n_particles,
-                frames=n,
-                process_noise=process_noise,
-                paired=group is plain,
+                truth, rho, trials=t, names=group, frames=n, paired=group is plain, **same
             )
             for name in group[1:] if group is not plain else group:
                 rows[name].append((r["filters"][name], r["valid_trials"]))

@@ -274,17 +274,10 @@ def ratio_se(means, cov, trials, powers=(1.0, 1.0)) -> np.ndarray:
 
 
 def mean_ratio_se(means, cov, trials) -> np.ndarray:
-    """Delta-method SE of a ratio ``a / b`` of two means over the same trials (:func:`ratio_se`).
+    """Delta-method SE of a ratio ``a / b`` of two means over the same trials.
 
-    Parameters
-    ----------
-    means : array_like, shape (..., 2)
-    cov : array_like, shape (..., 2, 2)
-    trials : int or array_like, shape (...)
-
-    Returns
-    -------
-    ndarray, shape (...)
+    :func:`ratio_se` with ``p = q = 1``: ``means`` (..., 2), ``cov``
+    (..., 2, 2) and ``trials`` are its own, and so is the result, of shape (...).
     """
     return ratio_se(means, cov, trials, (1.0, 1.0))
 
@@ -293,18 +286,9 @@ def rmse_ratio_se(means, cov, trials) -> np.ndarray:
     """Delta-method SE of a ratio of two RMSEs over the same trials, ``sqrt(a / b)``.
 
     ``a`` and ``b`` are the two filters' mean squared errors and ``cov`` the
-    covariance of their per-trial squared errors (:func:`ratio_se` with
-    ``p = q = 1/2``).
-
-    Parameters
-    ----------
-    means : array_like, shape (..., 2)
-    cov : array_like, shape (..., 2, 2)
-    trials : int or array_like, shape (...)
-
-    Returns
-    -------
-    ndarray, shape (...)
+    covariance of their per-trial squared errors: :func:`ratio_se` with
+    ``p = q = 1/2``, its arguments (``means`` (..., 2), ``cov`` (..., 2, 2),
+    ``trials``) and its result, of shape (...).
     """
     return ratio_se(means, cov, trials, (0.5, 0.5))
 

@@ -412,10 +412,8 @@ def detectable_difference(
         Nominal levels ``p`` in (0, 1).
     trials : int or array_like
         ``n >= 1``, broadcast against ``level``.
-    false_alarm : float
-        The test's size, in (0, 1).
-    power : float
-        In (0, 1).
+    false_alarm, power : float
+        The test's size and power, as :func:`detectable_shift` takes them.
 
     Returns
     -------
