@@ -700,7 +700,7 @@ def bench_tables(records: dict) -> dict[str, MarkdownTable]:
         "trials": _routes(
             "optimal.moments, vectorised over trials",
             _cell(t, "trials_vectorised_s"),
-            f"optimal.marginals, trial by trial ({t['trials_timed']} timed, scaled)",
+            f"optimal.run, trial by trial ({t['trials_timed']} timed, scaled)",
             _cell(t, "trials_loop_s"),
             t["trials_ratio"],
         ),

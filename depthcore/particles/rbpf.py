@@ -86,12 +86,8 @@ References
 .. [doucet2000] A. Doucet, N. de Freitas, K. Murphy and S. Russell,
    "Rao-Blackwellised particle filtering for dynamic Bayesian networks",
    UAI 2000.
-.. [gilks2001] W. R. Gilks and C. Berzuini, "Following a moving target: Monte
-   Carlo inference for dynamic Bayesian models", J. R. Statist. Soc. B 63(1),
-   2001.
-.. [roberts1997] G. O. Roberts, A. Gelman and W. R. Gilks, "Weak convergence
-   and optimal scaling of random walk Metropolis algorithms", Ann. Appl.
-   Probab. 7(1), 1997.
+
+[gilks2001]_ and [roberts1997]_ are listed with :mod:`depthcore.particles.resample_move`.
 """
 
 from __future__ import annotations
