@@ -9,7 +9,9 @@ probabilities proportional to ``w_j N(y_j; m_y, P_yy) L(y_j)``
 (:func:`mixture`, summed in log space). A :class:`Mixture` gives the
 mixture's moments, the depth's and the velocity's marginal densities and
 CDFs, and the fixed-interval smoothed states (:meth:`Mixture.smoothed`,
-textbook 19.2.6), each a :class:`Smoothed`.
+textbook 19.2.6), each a :class:`Smoothed`. :class:`Moments` holds the
+moments and their error estimates that the optimal filter's quadrature and
+the bank report for a batch of problems.
 
 References
 ----------
@@ -129,6 +131,33 @@ def _stacked_moments(W, means, covs, depths):
         moments = sums[..., 4:] / total - shift[..., _PAIR_FIRST] * shift[..., _PAIR_SECOND]
     mean = centre[..., None, :, 0] + shift
     return mean, moments[..., _SYMMETRIC].reshape(moments.shape[:-1] + (3, 3))
+
+
+class Moments(NamedTuple):
+    """Moments of the optimal depth and velocity marginals for a batch of problems.
+
+    The optimal filter's (:func:`depthcore.exact.optimal.moments`) and the bank's
+    (:func:`depthcore.exact.posterior.moments`).
+
+    Every field is an array of shape (B,). ``depth_error`` and
+    ``velocity_error`` are absolute error estimates of the means and SDs: the
+    largest change at the last halving of the quadrature step, an upper bound
+    in practice since the trapezoid rule converges geometrically here.
+    ``prob_behind_camera`` is the posterior probability that the depth at the
+    first frame, ``y - 2``, is not positive (zero for ``support="front"``).
+    ``mean`` (B, 3) and ``cov`` (B, 3, 3) are the posterior mean and covariance
+    of the whole state ``(x, y, v)`` at time 3.
+    """
+
+    depth_mean: np.ndarray
+    depth_sd: np.ndarray
+    velocity_mean: np.ndarray
+    velocity_sd: np.ndarray
+    depth_error: np.ndarray
+    velocity_error: np.ndarray
+    prob_behind_camera: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
 
 
 class Smoothed(NamedTuple):

@@ -37,13 +37,13 @@ the mixture over the same nodes of the Gaussian conditionals of ``v`` given
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
 from depthcore import _paths
-from depthcore.exact import quadrature
+from depthcore.exact import posterior, quadrature
 from depthcore.exact.cdf import gauss_legendre_cdf
+from depthcore.exact.mixture import Moments
 from depthcore.kalman.second_order import A2
 from depthcore.problem import checks, model, signature
 from depthcore.problem.gaussian import Gaussian
@@ -270,30 +270,6 @@ def conditional(y, mu, rho: float, prior: Gaussian, reading: str = "derived"):
     log_density, mean, (cxx, cxv, cvv) = _solve(np.stack([y, y - 1, y - 2], -1)[None], pb)
     cov = np.stack([np.stack([cxx, cxv], -1), np.stack([cxv, cvv], -1)], -2)
     return log_density[0], mean[:, 0].T, cov[0]
-
-
-class Moments(NamedTuple):
-    """Moments of the optimal depth and velocity marginals for a batch of problems.
-
-    Every field is an array of shape (B,). ``depth_error`` and
-    ``velocity_error`` are absolute error estimates of the means and SDs: the
-    largest change at the last halving of the quadrature step, an upper bound
-    in practice since the trapezoid rule converges geometrically here.
-    ``prob_behind_camera`` is the posterior probability that the depth at the
-    first frame, ``y - 2``, is not positive (zero for ``support="front"``).
-    ``mean`` (B, 3) and ``cov`` (B, 3, 3) are the posterior mean and covariance
-    of the whole state ``(x, y, v)`` at time 3.
-    """
-
-    depth_mean: np.ndarray
-    depth_sd: np.ndarray
-    velocity_mean: np.ndarray
-    velocity_sd: np.ndarray
-    depth_error: np.ndarray
-    velocity_error: np.ndarray
-    prob_behind_camera: np.ndarray
-    mean: np.ndarray
-    cov: np.ndarray
 
 
 @signature.documented
@@ -540,8 +516,6 @@ def run(
     """
     mu = model.measurements_batch(mu, "mu")
     if mu.shape[-1] != 3 or process_noise > 0:
-        from depthcore.exact import posterior  # it builds on this module
-
         if (reading, support) != ("derived", "front"):
             raise ValueError(
                 "reading and support other than 'derived' and 'front' are readings of the "

@@ -19,9 +19,9 @@ import dataclasses
 
 import numpy as np
 
-from depthcore.exact import optimal, quadrature
+from depthcore.exact import quadrature
 from depthcore.exact.bank import Bank, lateral_filter, run_bank, step
-from depthcore.exact.mixture import Mixture, mixture, mixture_of_log_weights
+from depthcore.exact.mixture import Mixture, Moments, mixture, mixture_of_log_weights
 from depthcore.kalman import linear
 from depthcore.problem import checks, model, signature
 
@@ -78,7 +78,7 @@ def _integrate(pb, rtol: float):
 @signature.documented
 def moments(
     mu, rho, prior_mean, prior_cov, process_noise=0.0, rtol: float = 1e-10, chunk: int = 64
-) -> optimal.Moments:
+) -> Moments:
     """The exact posterior moments at frame ``N``, with the depth nodes placed by quadrature.
 
     The depth at frame 1 is integrated by the quadrature of
@@ -95,7 +95,7 @@ def moments(
 
     Returns
     -------
-    depthcore.exact.optimal.Moments
+    depthcore.exact.mixture.Moments
         Arrays of shape (B,) (``(1,)`` for one problem), for the state at frame
         ``N``; ``prob_behind_camera`` is 0 (the support is ``y_1 > 0``).
 
@@ -116,9 +116,7 @@ def moments(
         out.append(np.concatenate([m.key_moments(), [err_y, err_v, m.behind]]))
         means.append(m.mean)
         covs.append(m.cov)
-    return optimal.Moments(
-        *np.concatenate(out, axis=1), np.concatenate(means), np.concatenate(covs)
-    )
+    return Moments(*np.concatenate(out, axis=1), np.concatenate(means), np.concatenate(covs))
 
 
 def _grid_nodes(grid):

@@ -156,7 +156,7 @@ class ParticleMoments(NamedTuple):
     """Weighted means and SDs of the depth ``y`` and velocity ``v`` at time 3.
 
     Floats for one filter, arrays of shape (B,) for a batch; the field names
-    are those of :class:`depthcore.exact.optimal.Moments`.
+    are those of :class:`depthcore.exact.mixture.Moments`.
     """
 
     depth_mean: np.ndarray

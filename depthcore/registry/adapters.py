@@ -16,6 +16,7 @@ sequence (``single``: floats) or of a batch (arrays of shape ``(B,)``).
 
 from __future__ import annotations
 
+import importlib
 import warnings
 
 import numpy as np
@@ -97,7 +98,7 @@ def exact(result, single: bool) -> Estimate:
 
     ``result`` is its :class:`~depthcore.exact.optimal.OptimalMarginals`,
     :class:`~depthcore.exact.optimal.BatchMarginals`,
-    :class:`~depthcore.exact.optimal.Moments` or
+    :class:`~depthcore.exact.mixture.Moments` or
     :class:`~depthcore.exact.mixture.Mixture`, kept as ``detail``; the
     probability of a depth behind the camera is in ``extra`` (0 for the
     bank, whose depths are in front by construction).
@@ -250,8 +251,8 @@ def required_rng(rng, name: str) -> np.random.Generator:
 def __getattr__(name):
     """``run_<filter>``, the registry's entries by their 0.1 names, kept until 0.3."""
     if name.startswith("run_"):
-        from depthcore.registry.filters import FILTERS
-
+        # the registry builds on this module: its table is read by name when first asked for
+        FILTERS = importlib.import_module("depthcore.registry.filters").FILTERS
         if name[4:] in FILTERS:
             warnings.warn(
                 f"depthcore.registry.adapters.{name} is replaced by "
