@@ -411,7 +411,8 @@ class OptimalMarginals:
     ----------
     depth_mean, depth_sd, velocity_mean, velocity_sd : float
     depth_error, velocity_error : float
-        Absolute error estimates of the means and SDs (see :class:`Moments`).
+        Absolute error estimates of the means and SDs
+        (see :class:`~depthcore.exact.mixture.Moments`).
     prob_behind_camera : float
         Posterior probability that the depth at the first frame is not positive.
     log_normaliser : float
@@ -511,7 +512,7 @@ def run(
     OptimalMarginals, BatchMarginals, Moments or Mixture
         One triple: its :class:`OptimalMarginals`; a batch of triples: the
         :class:`BatchMarginals` (derived reading, front support) or the
-        :class:`Moments`; more frames or process noise: the
+        :class:`~depthcore.exact.mixture.Moments`; more frames or process noise: the
         :class:`~depthcore.exact.mixture.Mixture`.
     """
     mu = model.measurements_batch(mu, "mu")
@@ -590,8 +591,8 @@ def _triple(
     )
 
 
-#: :func:`run` on one triple with the prior as a Gaussian, ``marginals(mu, rho, prior,
-#: reading, support, rtol)``; kept until 0.3.
+#: :func:`depthcore.exact.optimal.run` on one triple with the prior as a Gaussian,
+#: ``marginals(mu, rho, prior, reading, support, rtol)``; kept until 0.3.
 marginals = _paths.kept("depthcore.exact.optimal.marginals", run, ("reading", "support", "rtol"))
 
 

@@ -243,5 +243,6 @@ def _update_information(n, R, mu, rho):
     return n + delta, R_new
 
 
-#: :func:`run` with the prior as a Gaussian, ``ekf(mu, rho, prior, process_noise)``; until 0.3.
+#: :func:`depthcore.kalman.ekf.run` with the prior as a Gaussian, ``ekf(mu, rho, prior,
+#: process_noise)``; until 0.3.
 ekf = _paths.kept("depthcore.kalman.ekf.ekf", run, ("process_noise",))

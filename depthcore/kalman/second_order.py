@@ -663,8 +663,8 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, reading: str
     return Gaussian(mean[0], cov[0])
 
 
-#: :func:`run` with the prior as a Gaussian, ``second_order(mu, rho, prior, reading,
-#: process_noise)``; kept until 0.3.
+#: :func:`depthcore.kalman.second_order.run` with the prior as a Gaussian,
+#: ``second_order(mu, rho, prior, reading, process_noise)``; kept until 0.3.
 second_order = _paths.kept(
     "depthcore.kalman.second_order.second_order", run, ("reading", "process_noise")
 )

@@ -338,8 +338,8 @@ def run(
     return run_gaussian_filter(step, mu, rho, prior_mean, prior_cov, process_noise)
 
 
-#: :func:`run` with the prior as a Gaussian, ``ukf(mu, rho, prior, sigma_points,
-#: allow_behind_camera, process_noise)``; kept until 0.3.
+#: :func:`depthcore.kalman.ukf.run` with the prior as a Gaussian, ``ukf(mu, rho, prior,
+#: sigma_points, allow_behind_camera, process_noise)``; kept until 0.3.
 ukf = _paths.kept(
     "depthcore.kalman.ukf.ukf", run, ("sigma_points", "allow_behind_camera", "process_noise")
 )

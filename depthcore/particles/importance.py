@@ -567,8 +567,9 @@ def run(
     return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal)
 
 
-#: :func:`run` with the prior as a Gaussian, ``particle_filter(mu, rho, prior, n_particles,
-#: rng, proposal, resampler, ess_threshold, df, inflation)``; kept until 0.3.
+#: :func:`depthcore.particles.importance.run` with the prior as a Gaussian,
+#: ``particle_filter(mu, rho, prior, n_particles, rng, proposal, resampler, ess_threshold,
+#: df, inflation)``; kept until 0.3.
 particle_filter = _paths.kept(
     "depthcore.particles.importance.particle_filter",
     run,

@@ -391,9 +391,9 @@ def _resample_move(x1, log_w, need, mu, rho, prior_mean, prior_chol, moves, rng,
     return x1, log_w, acceptance
 
 
-#: :func:`run` on one sequence (a batch of one) with the prior as a Gaussian,
-#: ``resample_move(mu, rho, prior, n_particles, rng, moves, ess_threshold, resampler)``;
-#: kept until 0.3.
+#: :func:`depthcore.particles.resample_move.run` on one sequence (a batch of one) with the
+#: prior as a Gaussian, ``resample_move(mu, rho, prior, n_particles, rng, moves,
+#: ess_threshold, resampler)``; kept until 0.3.
 resample_move = _paths.kept(
     "depthcore.particles.resample_move.resample_move",
     run,

@@ -21,7 +21,7 @@ from importlib import metadata
 from depthcore import __version__
 from depthcore.provenance import benchmarks
 
-#: The packages a statement names, in this order, with the name it gives each: the numbers
+#: The packages a statement names, in this order, with the name it gives each; the numbers
 #: come from NumPy and SciPy, the figures from Matplotlib, the book from Jupyter Book.
 PACKAGES = {
     "numpy": "NumPy",

@@ -7,9 +7,10 @@ Each filter has one door, a batched function of its module (``ekf.run``,
 (a :class:`~depthcore.problem.gaussian.History`, a
 :class:`~depthcore.exact.mixture.Mixture`, weighted particles ...). Its entry in
 :data:`depthcore.registry.filters.FILTERS` names that door and one of the
-functions here, which reads the result as an :class:`Estimate`: one per kind
-of result, not one per filter. Each takes the result and whether it is of one
-sequence (``single``: floats) or of a batch (arrays of shape ``(B,)``).
+functions here, which reads the result as an
+:class:`~depthcore.registry.estimates.Estimate`: one per kind of result, not one per
+filter. Each takes the result and whether it is of one sequence (``single``: floats)
+or of a batch (arrays of shape ``(B,)``).
 :func:`gaussian_smoother` and :func:`smooth_optimal` are the smoothers that
 :func:`depthcore.registry.tracking.track` runs.
 """
@@ -32,7 +33,7 @@ from depthcore.registry.estimates import Estimate
 
 
 def gaussian(result, single: bool) -> Estimate:
-    """The :class:`Estimate` of a Gaussian filter (Eq. (13)): its mean and covariance at frame N.
+    """The estimate of a Gaussian filter (Eq. (13)): its mean and covariance at frame N.
 
     Parameters
     ----------
@@ -94,7 +95,7 @@ def checked_gaussian(name: str):
 
 
 def exact(result, single: bool) -> Estimate:
-    """The :class:`Estimate` of the optimal filter (:func:`depthcore.exact.optimal.run`).
+    """The estimate of the optimal filter (:func:`depthcore.exact.optimal.run`).
 
     ``result`` is its :class:`~depthcore.exact.optimal.OptimalMarginals`,
     :class:`~depthcore.exact.optimal.BatchMarginals`,
@@ -122,7 +123,7 @@ def exact(result, single: bool) -> Estimate:
 
 
 def particles(result, single: bool) -> Estimate:
-    """The :class:`Estimate` of the importance sampler (:func:`depthcore.particles.importance.run`).
+    """The estimate of the importance sampler (:func:`depthcore.particles.importance.run`).
 
     ``result`` is its ParticleResult (one sequence) or ParticleBatch. The
     errors are the larger of the delta-method standard errors of the mean and
@@ -141,7 +142,7 @@ def particles(result, single: bool) -> Estimate:
 
 
 def replicas(result, single: bool) -> Estimate:
-    """The :class:`Estimate` of the resample-move filter's replicas (``resample_move.replicated``).
+    """The estimate of the resample-move filter's replicas (``resample_move.replicated``).
 
     The moments are the pool's; the errors the larger of those of the mean and
     of the SD from the replicas' spread (Student-t widened), NaN where the
@@ -164,7 +165,7 @@ def replicas(result, single: bool) -> Estimate:
 
 
 def rao_blackwellised(result, single: bool) -> Estimate:
-    """The :class:`Estimate` of the Rao-Blackwellised particle filter (``rbpf.run``).
+    """The estimate of the Rao-Blackwellised particle filter (``rbpf.run``).
 
     The moments are those of the replicas pooled into one mixture
     (:meth:`~depthcore.particles.rbpf.RBPF.state_moments`, the law of total
@@ -186,7 +187,7 @@ def rao_blackwellised(result, single: bool) -> Estimate:
 def _replicated_estimate(
     moments, depth_error, velocity_error, mean, cov, detail, collapsed, single
 ):
-    """An :class:`Estimate` with Monte Carlo errors; floats and a bool for one sequence."""
+    """An estimate with Monte Carlo errors; floats and a bool for one sequence."""
     if single:
         moments = tuple(float(v) for v in moments)
         depth_error, velocity_error = float(depth_error), float(velocity_error)

@@ -128,7 +128,7 @@ class Filter:
     estimate : callable or None
         ``estimate(result, single) -> Estimate``: reads ``run``'s result (of one
         sequence if ``single``), one of :mod:`depthcore.registry.adapters`;
-        ``None`` when ``run`` returns an :class:`Estimate` itself.
+        ``None`` when ``run`` returns an :class:`~depthcore.registry.estimates.Estimate` itself.
     options : dict
         The registry's defaults of ``run``'s options (the number of particles,
         say), which a call's own options override.
