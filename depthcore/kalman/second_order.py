@@ -62,6 +62,7 @@ __all__ = [
     "damped_step",
     "hessian",
     "likelihood_covariance",
+    "run",
     "second_order",
     "minimiser",
     "second_order_batch",
