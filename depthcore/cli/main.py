@@ -183,12 +183,7 @@ def _prior(mu, prior_mean, prior_cov) -> Gaussian:
         raise ValueError(
             f"--prior-cov takes 1 value (S I) or 9 (a 3 x 3 matrix), got {len(prior_cov)}"
         )
-    try:
-        prior = Gaussian(mean, cov)
-    except ValueError as exc:
-        raise ValueError(
-            str(exc).replace("cov ", "--prior-cov ", 1).replace("mean ", "--prior-mean ", 1)
-        ) from None
+    prior = Gaussian.prior(mean, cov, names=("--prior-mean", "--prior-cov"))
     smallest = np.linalg.eigvalsh(prior.cov)[0]
     if smallest < PRIOR_COV_RANGE[0]:
         raise ValueError(
