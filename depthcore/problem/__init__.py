@@ -13,6 +13,10 @@ nothing here imports another family.
   its arguments, each refusal one line naming the argument;
 * :mod:`~depthcore.problem.weights`: log weights normalised in log space, for
   the particle filters' samples and the exact filter's mixture alike;
+* :mod:`~depthcore.problem.frames`: a track's frames as they come (gaps, noise per
+  frame, uneven steps), checked once for every filter;
+* :mod:`~depthcore.problem.predictive`: a bearing's predictive density and tail
+  probability, and the outlier gate;
 * :mod:`~depthcore.problem.signature`: the filters' one calling convention,
   ``(mu, rho, prior_mean, prior_cov, process_noise)``, documented once.
 

@@ -1,0 +1,253 @@
+"""A track's frames as they come: missing bearings, noise per frame, uneven steps.
+
+Recommended import: ``from depthcore.problem import frames``.
+
+The paper's track has a bearing at every frame, one noise level and a unit
+forward step between frames. A real track has gaps (a missed detection), a
+noise level per frame (a detector's own uncertainty) and frames at uneven
+intervals (a camera moving at varying speed, frames dropped by the capture).
+This module describes such a track and checks it, once, for every filter:
+
+* a missing bearing is ``NaN`` in ``mu``: the filters predict through that
+  frame without an update;
+* ``rho`` is a number, one per problem (shape ``mu.shape[:-1]``) or one per
+  frame (shape ``mu.shape``);
+* ``steps``, shape ``(N - 1,)`` (or ``mu.shape[:-1] + (N - 1,)``), is the
+  depth's change from each frame to the next, ``y_{k+1} = y_k + s_k``; the
+  lateral position moves by ``x_{k+1} = x_k + s_k v_k`` (Eq. (1) with the
+  step ``s_k`` in place of 1, :func:`depthcore.problem.model.G` with
+  ``k = s_k``).
+
+The process noise and the step. With process noise of SD ``q`` the velocity is
+a random walk whose variance grows in proportion to the depth travelled:
+``v_{k+1} = v_k + a_k``, ``a_k ~ N(0, q**2 s_k)`` (:func:`velocity_variance`).
+A unit step is the paper's model with the textbook's ``Sigma_p = diag(0, 0,
+q**2)`` (textbook Eq. (19.10)); two steps of ``s / 2`` add the same velocity
+variance as one step of ``s``, so ``q`` is a rate per unit of depth, not per
+frame.
+
+Every filter's door takes ``mu``, ``rho`` and ``steps`` as described here and
+checks them with :func:`check`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from depthcore.problem import checks
+
+#: The fewest bearings a problem must have present: two bearings fit any depth alike.
+MIN_PRESENT = 3
+
+
+class Frames(NamedTuple):
+    """A batch of tracks' frames, checked by :func:`check`.
+
+    Attributes
+    ----------
+    mu : ndarray, shape (..., N)
+        Bearings, ``NaN`` where a frame has none.
+    present : ndarray of bool, shape (..., N)
+        Where a bearing is present.
+    rho : ndarray, shape (..., N)
+        Noise SD per frame (a read-only broadcast view); ``1.0`` at missing frames,
+        where it is never used.
+    steps : ndarray, shape (..., N - 1)
+        The depth's change from each frame to the next (a read-only broadcast view).
+    """
+
+    mu: np.ndarray
+    present: np.ndarray
+    rho: np.ndarray
+    steps: np.ndarray
+
+    @property
+    def elapsed(self) -> np.ndarray:
+        """Depth travelled since frame 1, shape (..., N): ``0, s_1, s_1 + s_2, ...``."""
+        zero = np.zeros(self.steps.shape[:-1] + (1,))
+        return np.concatenate([zero, np.cumsum(self.steps, axis=-1)], axis=-1)
+
+    @property
+    def regular(self) -> bool:
+        """Whether these are the paper's frames: every bearing, unit steps, one ``rho`` per row."""
+        return bool(
+            np.all(self.present)
+            and np.all(self.steps == 1.0)
+            and np.all(self.rho == self.rho[..., :1])
+        )
+
+    @property
+    def row_rho(self) -> np.ndarray:
+        """``rho`` per problem, shape (...), when each row has one (see :attr:`regular`)."""
+        return np.array(self.rho[..., 0])
+
+
+def velocity_variance(process_noise, step) -> np.ndarray:
+    """The velocity's variance added over a step: ``q**2 s`` (see the module docstring).
+
+    Parameters
+    ----------
+    process_noise : float
+        ``q >= 0``, the SD of the velocity's change over a unit step.
+    step : float or array_like
+        ``s > 0``.
+
+    Returns
+    -------
+    ndarray, the shape of ``step``
+    """
+    return float(process_noise) ** 2 * np.asarray(step, dtype=float)
+
+
+def transition(step) -> np.ndarray:
+    """The linear part of the motion over a step ``s``: ``[[1, 0, s], [0, 1, 0], [0, 0, 1]]``.
+
+    Eq. (9) with the step ``s`` in place of 1 (:func:`depthcore.problem.model.G_linear`).
+
+    Parameters
+    ----------
+    step : float or array_like, shape (...)
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 3)
+    """
+    s = np.asarray(step, dtype=float)
+    F = np.broadcast_to(np.eye(3), s.shape + (3, 3)).copy()
+    F[..., 0, 2] = s
+    return F
+
+
+def _mu(value) -> np.ndarray:
+    mu = checks.as_float(value, "mu")
+    if mu.ndim < 1 or mu.shape[-1] < 3:
+        raise ValueError(
+            f"mu must have shape (..., N) with N >= 3 frames per problem, got shape {mu.shape}"
+        )
+    if mu.size == 0:
+        raise ValueError(f"mu must hold at least one problem, got an empty batch {mu.shape}")
+    if mu.shape[-1] > checks.MAX_FRAMES:
+        raise ValueError(
+            f"mu has {mu.shape[-1]} frames per problem, more than the "
+            f"{checks.MAX_FRAMES} the filters accept"
+        )
+    if np.any(np.isinf(mu)):
+        raise ValueError(
+            f"mu must be finite or NaN (a missing frame), got {int(np.sum(np.isinf(mu)))} "
+            "infinite entries"
+        )
+    return mu
+
+
+def _rho(value, mu: np.ndarray, present: np.ndarray) -> np.ndarray:
+    rho = checks.as_float(value, "rho")
+    batch = mu.shape[:-1]
+    if rho.ndim and rho.shape not in (batch, mu.shape):
+        allowed = "a number" + (f", shape {batch}" if batch else "") + f" or shape {mu.shape}"
+        raise ValueError(f"rho must be {allowed} (one per frame), got shape {rho.shape}")
+    per_frame = rho.shape == mu.shape and rho.ndim > 0
+    rho = np.broadcast_to(rho[..., None] if not per_frame else rho, mu.shape)
+    used = np.where(present, rho, 1.0)
+    bad = ~(np.isfinite(used) & (used > 0))
+    if np.any(bad):
+        where = np.unravel_index(int(np.argmax(bad)), mu.shape)
+        index = "[" + ", ".join(str(int(i)) for i in where) + "]" if per_frame else ""
+        raise ValueError(f"rho{index} must be finite and positive, got {float(used[where])!r}")
+    return used
+
+
+def _steps(value, mu: np.ndarray) -> np.ndarray:
+    n = mu.shape[-1]
+    if value is None:
+        return np.broadcast_to(np.ones(n - 1), mu.shape[:-1] + (n - 1,))
+    steps = checks.finite_array(value, "steps")
+    if (
+        steps.ndim < 1
+        or steps.shape[-1] != n - 1
+        or not checks.broadcasts(steps.shape, mu.shape[:-1] + (n - 1,))
+    ):
+        raise ValueError(
+            f"steps must have shape ({n - 1},), one per pair of consecutive frames, "
+            f"got shape {steps.shape}"
+        )
+    if not np.all(steps > 0):
+        raise ValueError(
+            f"steps must be positive (the depth grows between frames), got minimum "
+            f"{float(np.min(steps)):.6g}"
+        )
+    return np.broadcast_to(steps, mu.shape[:-1] + (n - 1,))
+
+
+def _degenerate(mu: np.ndarray, present: np.ndarray, elapsed: np.ndarray) -> np.ndarray:
+    """Rows whose present bearings are (numerically) affine in the depth travelled.
+
+    The second divided differences of consecutive present bearings, scaled so
+    that at unit steps they are ``mu_k - 2 mu_{k+1} + mu_{k+2}`` (the check of
+    :func:`depthcore.problem.model.measurements_batch`).
+    """
+    flat_mu = mu.reshape(-1, mu.shape[-1])
+    flat_p = present.reshape(flat_mu.shape)
+    flat_t = np.broadcast_to(elapsed, mu.shape).reshape(flat_mu.shape)
+    out = np.zeros(len(flat_mu), dtype=bool)
+    full = np.all(flat_p, axis=1)
+    rows = [np.flatnonzero(full)] + [[i] for i in np.flatnonzero(~full)]
+    for r in rows:
+        m, t = flat_mu[r], flat_t[r]
+        if len(r) == 1 and not full[r[0]]:
+            m, t = m[:, flat_p[r[0]]], t[:, flat_p[r[0]]]
+        slopes = np.diff(m, axis=1) / np.diff(t, axis=1)
+        second = np.diff(slopes, axis=1) * (t[:, 2:] - t[:, :-2]) / 2.0
+        out[r] = ~np.any(np.abs(second) > checks.DEGENERACY_TOL, axis=1)
+    return out.reshape(mu.shape[:-1])
+
+
+def check(mu, rho, steps=None) -> Frames:
+    """Check a batch of tracks: bearings with gaps, noise per frame, steps.
+
+    Parameters
+    ----------
+    mu : array_like, shape (..., N)
+        Bearings in time order, ``N >= 3``; ``NaN`` marks a missing frame.
+        Each problem needs at least :data:`MIN_PRESENT` bearings present, not
+        all on a line in the depth travelled (no finite depth explains them).
+    rho : float or array_like, shape (...) or (..., N)
+        Noise SD, > 0, per problem or per frame (any value at a missing frame,
+        ``NaN`` included).
+    steps : array_like, shape (N - 1,) or (..., N - 1), or None
+        The depth's change between consecutive frames, > 0; ``None``: all ones.
+
+    Returns
+    -------
+    Frames
+
+    Raises
+    ------
+    ValueError
+        One line naming the argument (and the row of a batch) that is wrong.
+    """
+    mu = _mu(mu)
+    present = ~np.isnan(mu)
+    rho = _rho(rho, mu, present)
+    steps = _steps(steps, mu)
+    batch = mu.shape[:-1]
+    counts = present.sum(axis=-1)
+    if np.any(counts < MIN_PRESENT):
+        i = int(np.argmin(counts.reshape(-1)))
+        where = "mu" + (checks.batch_index(i, batch) if batch else "")
+        raise ValueError(
+            f"{where} has {int(counts.reshape(-1)[i])} bearings present; at least "
+            f"{MIN_PRESENT} are needed to fix a depth"
+        )
+    frames = Frames(mu, present, rho, steps)
+    degenerate = _degenerate(mu, present, frames.elapsed)
+    if np.any(degenerate):
+        i = int(np.argmax(degenerate.reshape(-1)))
+        where = "mu" + (checks.batch_index(i, batch) if batch else "")
+        raise ValueError(
+            f"{where} is degenerate: its bearings lie on a line in the depth travelled "
+            f"(every second difference at most {checks.DEGENERACY_TOL:g} in magnitude), "
+            "so no finite depth explains them"
+        )
+    return frames

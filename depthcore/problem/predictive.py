@@ -1,0 +1,110 @@
+"""How probable a bearing was before it was seen: predictive densities, tails and the gate.
+
+Recommended import: ``from depthcore.problem import predictive``.
+
+Before it incorporates the bearing of frame ``k`` a filter holds a predictive
+density of that bearing, ``p(mu_k | mu_1 .. mu_{k-1})``: a Gaussian for the
+Kalman-type filters (mean the predicted bearing, variance the innovation's),
+a mixture of Gaussians for the exact filter (one per depth node) and for the
+particle filters (one per particle). Each update reports two numbers of it:
+
+* the log predictive density at the bearing seen (summed over frames, the log
+  marginal likelihood of the track under the filter);
+* the two-sided tail probability ``p = 2 min(F(mu_k), 1 - F(mu_k))``, ``F``
+  the predictive CDF: the probability, before the bearing was seen, of a
+  bearing at least as far out in the predictive's tails. For a Gaussian
+  predictive it is the usual two-sided p-value of the innovation.
+
+A gate ``g`` (a probability, e.g. ``1e-3``) skips every bearing whose tail
+probability is below ``g``: the filter predicts through that frame as through
+a missing one, and records that it did.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.special import log_ndtr, logsumexp
+
+from depthcore.problem import checks
+
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+def gate(value, name: str = "gate"):
+    """A gate: ``None`` (no gate) or a probability strictly between 0 and 1."""
+    if value is None:
+        return None
+    g = checks.number(value, name)
+    if not 0.0 < g < 1.0:
+        raise ValueError(f"{name} must be None or a probability in (0, 1), got {g!r}")
+    return g
+
+
+def _two_sided(log_lower, log_upper) -> np.ndarray:
+    """``2 min(F, 1 - F)`` from ``log F`` and ``log(1 - F)``, at most 1."""
+    return np.minimum(1.0, 2.0 * np.exp(np.minimum(log_lower, log_upper)))
+
+
+def gaussian(mu, mean, var):
+    """Log density and two-sided tail probability of ``mu`` under ``N(mean, var)``.
+
+    Parameters
+    ----------
+    mu, mean, var : array_like, broadcasting to a shape (...)
+        The bearing, the predicted bearing and the innovation's variance (> 0).
+
+    Returns
+    -------
+    log_density, tail : ndarray, shape (...)
+    """
+    mu, mean, var = (np.asarray(a, dtype=float) for a in (mu, mean, var))
+    z = (mu - mean) / np.sqrt(var)
+    log_density = -0.5 * (_LOG_2PI + np.log(var) + z * z)
+    return log_density, _two_sided(log_ndtr(z), log_ndtr(-z))
+
+
+def mixture(mu, log_weights, means, var):
+    """Log density and two-sided tail probability of ``mu`` under a mixture of Gaussians.
+
+    Parameters
+    ----------
+    mu : array_like, shape (...)
+        The bearing.
+    log_weights : array_like, shape (..., J)
+        Log weights of the components, normalised or not (they are normalised
+        here, in log space); ``-inf`` for an empty component.
+    means, var : array_like, shape (..., J)
+        The components' means and variances (> 0).
+
+    Returns
+    -------
+    log_density, tail : ndarray, shape (...)
+    """
+    mu = np.asarray(mu, dtype=float)[..., None]
+    log_w = np.asarray(log_weights, dtype=float)
+    log_w = log_w - logsumexp(log_w, axis=-1, keepdims=True)
+    means, var = np.asarray(means, dtype=float), np.asarray(var, dtype=float)
+    z = (mu - means) / np.sqrt(var)
+    log_density = logsumexp(log_w - 0.5 * (_LOG_2PI + np.log(var) + z * z), axis=-1)
+    log_lower = logsumexp(log_w + log_ndtr(z), axis=-1)
+    log_upper = logsumexp(log_w + log_ndtr(-z), axis=-1)
+    return log_density, _two_sided(log_lower, log_upper)
+
+
+def skipped(tail, present, gate_value) -> np.ndarray:
+    """Which present bearings a gate skips: tail probability below the gate.
+
+    Parameters
+    ----------
+    tail : ndarray, shape (...)
+    present : ndarray of bool, shape (...)
+    gate_value : float or None
+        From :func:`gate`.
+
+    Returns
+    -------
+    ndarray of bool, shape (...)
+    """
+    if gate_value is None:
+        return np.zeros(np.shape(present), dtype=bool)
+    return np.asarray(present) & (np.asarray(tail) < gate_value)
