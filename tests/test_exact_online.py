@@ -131,3 +131,29 @@ def test_refusals_name_the_argument():
         online.Online(PRIOR_MEAN, PRIOR_COV, rho=0.01, process_noise=-1.0)
     with pytest.raises(ValueError, match="prior_cov"):
         online.Online(PRIOR_MEAN, np.eye(2), rho=0.01)
+
+
+def test_the_batch_door_reports_each_frame_and_gates_as_the_online_filter():
+    mu, rho, steps = track(12, 0.01)
+    mu[7] += 0.2
+    post = optimal.run(mu, rho, PRIOR_MEAN, PRIOR_COV, steps=steps, gate=1e-3)
+    _, states = run_online(mu, rho, steps, 0.0, gate=1e-3)
+    u = post.updates
+    assert u.gated.tolist() == [s.gated for s in states] and u.gated[7]
+    assert_allclose(u.log_predictive, [s.log_predictive for s in states], rtol=1e-12)
+    missing = mu.copy()
+    missing[7] = np.nan
+    plain = optimal.run(missing, rho, PRIOR_MEAN, PRIOR_COV, steps=steps)
+    assert_allclose(post.mean, plain.mean, rtol=1e-13)
+    # without a gate: the report of every frame, its sum the bank's log marginal likelihood
+    ungated = plain.updates
+    assert np.isnan(ungated.log_predictive[[4, 7]]).all() and not ungated.gated.any()
+    log_front = log_ndtr(PRIOR_MEAN[1] / np.sqrt(PRIOR_COV[1, 1]))
+    assert_allclose(np.nansum(ungated.log_predictive), plain.log_normaliser - log_front, rtol=1e-10)
+    # a batch of tracks: one report per row
+    batch = optimal.run(
+        np.stack([mu, missing]), np.stack([rho, rho]), PRIOR_MEAN, PRIOR_COV, steps=steps, gate=1e-3
+    )
+    assert batch.updates.log_predictive.shape == (2, 12)
+    assert_allclose(batch.mean[0], post.mean, rtol=1e-12)
+    assert_allclose(batch.mean[1], post.mean, rtol=1e-12)

@@ -321,6 +321,55 @@ class Online:
         return bool(np.all(err <= np.maximum(self.rtol * sd, floor)))
 
 
+def track_updates(bank, gate=None, rtol: float = 1e-10) -> predictive.Updates:
+    """Each frame's predictive report for the tracks of a bank, by :class:`Online` row by row.
+
+    Parameters
+    ----------
+    bank : depthcore.exact.bank.Bank
+        The tracks (``mu`` with ``NaN`` at missing frames, ``frame_noise``,
+        ``frame_steps``), the prior and the process noise, batch shape (...).
+    gate : float or None
+    rtol : float
+        The nodes' tolerance.
+
+    Returns
+    -------
+    depthcore.problem.predictive.Updates
+        Arrays of shape (..., N).
+    """
+    gate = predictive.gate(gate)
+    mu = np.asarray(bank.mu)
+    batch = np.broadcast_shapes(
+        mu.shape[:-1],
+        bank.frame_noise.shape[:-1],
+        bank.frame_steps.shape[:-1],
+        np.shape(bank.process_noise),
+        bank.prior_mean.shape[:-1],
+        bank.prior_cov.shape[:-2],
+    )
+    N = mu.shape[-1]
+
+    def rows(a, core):
+        a = np.asarray(a, dtype=float)
+        return np.broadcast_to(a, batch + a.shape[a.ndim - core :]).reshape(
+            (-1,) + a.shape[a.ndim - core :]
+        )
+
+    mus, noise, steps = rows(mu, 1), rows(bank.frame_noise, 1), rows(bank.frame_steps, 1)
+    qs, means, covs = rows(bank.process_noise, 0), rows(bank.prior_mean, 1), rows(bank.prior_cov, 2)
+    out = np.full((3, len(mus), N), np.nan)
+    for i in range(len(mus)):
+        f = Online(means[i], covs[i], noise[i, 0], qs[i], gate, rtol)
+        for k in range(N):
+            s = f.update(mus[i, k], noise[i, k], 1.0 if k == 0 else steps[i, k - 1])
+            out[:, i, k] = s.log_predictive, s.tail, s.gated
+    shape = batch + (N,)
+    return predictive.Updates(
+        out[0].reshape(shape), out[1].reshape(shape), out[2].reshape(shape) == 1.0
+    )
+
+
 def _bearing(mu) -> float:
     """A bearing: a finite number or NaN (a missing frame)."""
     arr = checks.as_float(mu, "mu")
