@@ -17,6 +17,7 @@ columns, then one row per frame in time order.
 from __future__ import annotations
 
 import csv
+import inspect
 import io
 import math
 import re
@@ -484,7 +485,7 @@ def per_frame(
     mu = np.asarray(mu, dtype=float)
     n = mu.shape[0]
     present = np.isfinite(mu)
-    if np.ndim(rho) and np.all(rho[present] == rho[present][0]):
+    if np.ndim(rho) and np.any(present) and np.all(rho[present] == rho[present][0]):
         rho = float(rho[present][0])  # one noise level: the paper's frames
     frames = np.arange(1, n + 1) if frames is None else np.asarray(frames)
     rho_k = np.broadcast_to(np.asarray(rho, dtype=float), (n,))
@@ -494,6 +495,10 @@ def per_frame(
         options["steps"] = np.asarray(steps, dtype=float)
     if gate is not None:
         options["gate"] = gate
+    takes = inspect.signature(tracking.track).parameters
+    for key, name in (("steps", "steps"), ("gate", "--gate")):
+        if key in options and key not in takes:
+            raise ValueError(f"{name}: depthcore.track does not take {key} in this version")
     out = {
         "frames": int(n),
         "prior_mean": prior.mean.tolist(),
