@@ -400,3 +400,60 @@ def test_the_prior_of_a_file_is_the_papers_rule_on_its_first_three_bearings(tmp_
     assert main(["estimate", "--mu-file", path, "--rho", str(RHO), "--per-frame", "--json"]) == 0
     data = _strict_json(capsys.readouterr().out)
     assert data["prior_mean"] == paper_prior(model.noise_free_state(MU[:3])).mean.tolist()
+
+
+# --- gaps, noise per frame, steps and a gate reach depthcore.track ------------------------
+
+PRIOR_MEAN = [-1.0, 4.0, 0.0]
+
+
+def _library(mu, rho, **options):
+    """``depthcore.track``'s answer, or None where it refuses the inputs."""
+    prior = depthcore.Gaussian.prior(PRIOR_MEAN, 1000.0 * np.eye(3))
+    try:
+        return depthcore.track(mu, rho, prior, **options)
+    except (TypeError, ValueError):  # TypeError: a keyword this version does not take
+        return None
+
+
+TRACK_CASES = {
+    "gap as nan": ("mu\n-0.3\n0\n0.2\nnan\n0.43\n", {}, 0.005),
+    "gap in the frame numbers": ("frame,mu\n1,-0.3\n2,0\n3,0.2\n5,0.43\n", {}, 0.005),
+    "noise per frame": (
+        "mu,rho\n-0.3,0.005\n0,0.01\n0.2,0.005\n0.33,0.02\n0.43,0.005\n",
+        {},
+        None,
+    ),
+    "steps": (
+        "mu,step\n-0.3,\n0,1\n0.2,1\n0.3,0.5\n0.43,2\n",
+        {"steps": [1, 1, 0.5, 2]},
+        0.005,
+        {},
+    ),
+    "gate": ("mu\n-0.3\n0\n0.2\n0.9\n0.43\n", {"gate": 0.01}, 0.005),
+}
+
+
+@pytest.mark.parametrize("case", list(TRACK_CASES))
+def test_a_track_with_gaps_noise_or_steps_is_depthcore_track_or_its_refusal(tmp_path, capsys, case):
+    text, options, rho = TRACK_CASES[case]
+    path = _file(tmp_path, text)
+    track = _read(text.encode())
+    argv = ["estimate", "--mu-file", path, "--per-frame", "--json"]
+    argv += ["--prior-mean", *map(str, PRIOR_MEAN)] + ([] if rho is None else ["--rho", str(rho)])
+    argv += ["--gate", str(options["gate"])] if "gate" in options else []
+    expected = _library(track.mu, track.rho if rho is None else rho, **options)
+    status, out, err = _run(argv, capsys)
+    if expected is None:
+        assert status == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+        return
+    assert status == 0, err
+    rows = _strict_json(out)["filters"]["optimal"]
+    assert [r["bearing"] for r in rows] == np.isfinite(track.mu).tolist()
+    assert [r["mu"] for r in rows] == [None if np.isnan(m) else m for m in track.mu]
+    for key, attribute in tracks.QUANTITIES:
+        got = [r[f"smoothed_{key}_mean"] for r in rows]
+        assert got == getattr(expected.smoothed, f"{attribute}_mean").tolist()
+    updates = getattr(expected, "updates", None)
+    if updates is not None:
+        assert [r["gated"] for r in rows] == np.asarray(updates.gated).tolist()
