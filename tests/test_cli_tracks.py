@@ -433,21 +433,36 @@ TRACK_CASES = {
 }
 
 
-@pytest.mark.parametrize("case", list(TRACK_CASES))
-def test_a_track_with_gaps_noise_or_steps_is_depthcore_track_or_its_refusal(tmp_path, capsys, case):
+#: The exact filter's smoother does not yet take steps: depthcore.track fails inside it.
+EXACT_STEPS = pytest.mark.xfail(
+    strict=True, reason="the exact filter's bank track takes no steps yet (a TypeError inside)"
+)
+
+
+@pytest.mark.parametrize(
+    "case, name",
+    [
+        pytest.param(c, n, marks=EXACT_STEPS if (c, n) == ("steps", "optimal") else ())
+        for c in TRACK_CASES
+        for n in ("optimal", "ekf")
+    ],
+)
+def test_a_track_with_gaps_noise_or_steps_is_depthcore_track_or_its_refusal(
+    tmp_path, capsys, case, name
+):
     text, options, rho = TRACK_CASES[case]
     path = _file(tmp_path, text)
     track = _read(text.encode())
-    argv = ["estimate", "--mu-file", path, "--per-frame", "--json"]
+    argv = ["estimate", "--mu-file", path, "--per-frame", "--json", "--filters", name]
     argv += ["--prior-mean", *map(str, PRIOR_MEAN)] + ([] if rho is None else ["--rho", str(rho)])
     argv += ["--gate", str(options["gate"])] if "gate" in options else []
-    expected = _library(track.mu, track.rho if rho is None else rho, **options)
+    expected = _library(track.mu, track.rho if rho is None else rho, filter=name, **options)
     status, out, err = _run(argv, capsys)
     if expected is None:
         assert status == 2 and err.count("\n") == 1 and "Traceback" not in err, err
         return
     assert status == 0, err
-    rows = _strict_json(out)["filters"]["optimal"]
+    rows = _strict_json(out)["filters"][name]
     assert [r["bearing"] for r in rows] == np.isfinite(track.mu).tolist()
     assert [r["mu"] for r in rows] == [None if np.isnan(m) else m for m in track.mu]
     for key, attribute in tracks.QUANTITIES:
