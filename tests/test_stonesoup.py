@@ -1,0 +1,237 @@
+"""The paper's problem in Stone Soup's types: its models, Stone Soup's own filters on them.
+
+Stone Soup's EKF and UKF with :class:`~depthcore.stonesoup.models.DepthStep` and
+:class:`~depthcore.stonesoup.models.TangentBearing` equal depthcore's
+(:func:`depthcore.kalman.ekf.run`, :func:`depthcore.kalman.ukf.run`) on the same
+track; the exact filter in a Stone Soup loop equals the batch exact filter.
+"""
+
+from __future__ import annotations
+
+import datetime
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stonesoup")
+
+from scipy.stats import norm  # noqa: E402
+from stonesoup.functions import jacobian as numerical_jacobian  # noqa: E402
+from stonesoup.predictor.kalman import (  # noqa: E402
+    ExtendedKalmanPredictor,
+    KalmanPredictor,
+    UnscentedKalmanPredictor,
+)
+from stonesoup.types.array import StateVectors  # noqa: E402
+from stonesoup.types.state import GaussianState, State  # noqa: E402
+from stonesoup.updater.kalman import ExtendedKalmanUpdater, UnscentedKalmanUpdater  # noqa: E402
+
+from depthcore.kalman import ekf, ukf  # noqa: E402
+from depthcore.problem import frames, model  # noqa: E402
+from depthcore.problem.scenarios import SCENARIOS  # noqa: E402
+from depthcore.stonesoup import models, tracks  # noqa: E402
+
+SECOND = datetime.timedelta(seconds=1)
+FIG2 = SCENARIOS["fig2"]
+
+
+def relative(a, b) -> float:
+    return float(np.max(np.abs(np.asarray(a) - b)) / np.max(np.abs(b)))
+
+
+@pytest.fixture(scope="module")
+def track30():
+    """A 30-frame track with process noise, from a prior near its start."""
+    q, rho = 0.01, 0.005
+    sim = model.simulate([0.5, 8.0, 0.05], 30, rho, q, np.random.default_rng(1), frame=1)
+    prior_mean = sim.states[0] + [0.1, 1.0, 0.0]
+    return sim.mu, rho, q, prior_mean, np.diag([1.0, 4.0, 0.01])
+
+
+def stone_soup(predictor, updater, mu, rho, prior_mean, prior_cov, steps=None):
+    track = tracks.detections(mu, rho, steps)
+    prior = GaussianState(prior_mean, prior_cov, timestamp=track[0].timestamp)
+    return tracks.moments(tracks.run(predictor, updater, prior, track))
+
+
+# --- the models -------------------------------------------------------------------------
+
+
+def test_depth_step_moves_by_eq_1_with_the_step():
+    step = models.DepthStep(process_noise=0.3, speed=2.0)
+    state = State([1.0, 5.0, 0.2])
+    moved = step.function(state, time_interval=1.5 * SECOND)  # s = 3
+    np.testing.assert_array_equal(np.asarray(moved)[:, 0], model.G([1.0, 5.0, 0.2], 3.0))
+    np.testing.assert_array_equal(step.matrix(time_interval=1.5 * SECOND), frames.transition(3.0))
+    np.testing.assert_array_equal(
+        np.asarray(step.matrix(time_interval=1.5 * SECOND) @ state.state_vector)
+        + step.offset(time_interval=1.5 * SECOND),
+        moved,
+    )
+    np.testing.assert_array_equal(step.covar(time_interval=1.5 * SECOND), np.diag([0, 0, 0.27]))
+    np.testing.assert_array_equal(step.jacobian(state, time_interval=SECOND), frames.transition(2))
+
+
+def test_the_step_is_speed_times_seconds_or_a_fixed_depth():
+    assert models.DepthStep(speed=2.0).step(2.5 * SECOND) == 5.0
+    fixed = models.DepthStep(depth_per_step=0.5)
+    assert fixed.step(7 * SECOND) == fixed.step(None) == 0.5
+    assert fixed.step(0 * SECOND) == models.DepthStep(speed=1.0).step(0 * SECOND) == 0.0
+    with pytest.raises(ValueError, match="^time_interval must not be negative"):
+        fixed.step(-SECOND)
+    with pytest.raises(ValueError, match="^time_interval: a speed needs timestamps"):
+        models.DepthStep(speed=1.0).step(None)
+    with pytest.raises(ValueError, match="^process_noise"):
+        models.DepthStep(process_noise=-1.0)
+    with pytest.raises(ValueError, match="^speed"):
+        models.DepthStep(speed=0.0)
+
+
+def test_extended_kalman_predictor_keeps_the_depth_step_that_the_kalman_predictor_drops():
+    step = models.DepthStep(process_noise=0.1, speed=1.0)
+    t0 = datetime.datetime(2000, 1, 1)
+    prior = GaussianState([1.0, 5.0, 0.2], np.diag([1.0, 2.0, 0.5]), timestamp=t0)
+    exact_mean = frames.transition(2.0) @ [1.0, 5.0, 0.2] + [0.0, 2.0, 0.0]
+    exact_cov = frames.transition(2.0) @ prior.covar @ frames.transition(2.0).T
+    exact_cov[2, 2] += 0.1**2 * 2.0
+    for predictor in (ExtendedKalmanPredictor(step), UnscentedKalmanPredictor(step)):
+        pred = predictor.predict(prior, timestamp=t0 + 2 * SECOND)
+        np.testing.assert_allclose(np.asarray(pred.state_vector)[:, 0], exact_mean, rtol=1e-14)
+        np.testing.assert_allclose(pred.covar, exact_cov, rtol=1e-13, atol=1e-13)
+    dropped = KalmanPredictor(step).predict(prior, timestamp=t0 + 2 * SECOND)
+    np.testing.assert_allclose(np.asarray(dropped.state_vector)[:, 0], exact_mean - [0, 2, 0])
+
+
+def test_depth_step_draws_and_density():
+    step = models.DepthStep(process_noise=0.2, depth_per_step=4.0, seed=3)
+    noise = np.asarray(step.rvs(20000))
+    assert noise.shape == (3, 20000) and not np.any(noise[:2])
+    assert abs(noise[2].var() / 0.16 - 1) < 4 * np.sqrt(2 / 20000)  # the variance q**2 s
+    before = State([1.0, 5.0, 0.2])
+    after = State([1.8, 9.0, 0.5])  # x + 4 v, y + 4, v + 0.3
+    assert step.logpdf(after, before) == pytest.approx(norm.logpdf(0.3, 0.0, 0.4), rel=1e-14)
+    assert float(step.pdf(after, before)) == pytest.approx(norm.pdf(0.3, 0.0, 0.4), rel=1e-12)
+    assert step.logpdf(State([1.9, 9.0, 0.5]), before) == -np.inf
+    with pytest.raises(ValueError, match="^process_noise: with q = 0"):
+        models.DepthStep().logpdf(after, before)
+
+
+def test_tangent_bearing_is_eq_4_with_the_gradient_of_eq_11():
+    bearing = models.TangentBearing(noise_covar=[[0.01**2]], seed=5)
+    state = State([1.2, 6.0, 0.3])
+    assert bearing.ndim_meas == 1 and bearing.rho == pytest.approx(0.01)
+    assert float(bearing.function(state)[0, 0]) == 1.2 / 6.0
+    np.testing.assert_allclose(
+        bearing.jacobian(state), numerical_jacobian(bearing.function, state), rtol=1e-6
+    )
+    np.testing.assert_array_equal(bearing.jacobian(state), [[1 / 6, -1.2 / 36, 0.0]])
+    mu = State([0.21])
+    assert bearing.logpdf(mu, state) == pytest.approx(norm.logpdf(0.21, 0.2, 0.01), rel=1e-14)
+    assert bearing.logpdf(mu, State([1.2, -6.0, 0.3])) == -np.inf  # behind the camera
+    many = State(StateVectors([[1.2, 1.2], [6.0, 4.0], [0.0, 0.0]]))
+    np.testing.assert_allclose(
+        bearing.logpdf(mu, many), norm.logpdf(0.21, [0.2, 0.3], 0.01), rtol=1e-14
+    )
+    assert np.asarray(bearing.rvs(4)).shape == (1, 4)
+    with pytest.raises(ValueError, match="^noise_covar must be"):
+        models.TangentBearing(noise_covar=[[0.0]])
+
+
+# --- Stone Soup's Kalman filters equal depthcore's ---------------------------------------
+
+
+def test_stone_soup_ekf_equals_depthcore_ekf_on_figure_2():
+    prior = FIG2.prior
+    means, covs = stone_soup(
+        ExtendedKalmanPredictor(models.DepthStep(speed=1.0)),
+        ExtendedKalmanUpdater(None),
+        FIG2.mu,
+        FIG2.rho,
+        prior.mean,
+        prior.cov,
+    )
+    reference = ekf.run(FIG2.mu, FIG2.rho, prior.mean, prior.cov)
+    assert relative(means, reference.means) < 1e-12
+    assert relative(covs, reference.covs) < 1e-12
+
+
+def test_stone_soup_ekf_equals_depthcore_ekf_on_a_30_frame_track(track30):
+    mu, rho, q, m, P = track30
+    step = models.DepthStep(process_noise=q, speed=1.0)
+    means, covs = stone_soup(
+        ExtendedKalmanPredictor(step), ExtendedKalmanUpdater(None), mu, rho, m, P
+    )
+    reference = ekf.run(mu, rho, m, P, q)
+    assert relative(means, reference.means) < 1e-10
+    assert relative(covs, reference.covs) < 1e-10
+
+
+def test_stone_soup_ekf_through_a_gap_and_uneven_steps_is_the_recursion_by_hand(track30):
+    mu, rho, q, m, P = track30
+    mu = mu[:8].copy()
+    mu[4] = np.nan
+    steps = np.array([1.0, 0.5, 1.5, 2.0, 1.0, 0.25, 1.0])
+    rho_k = rho * np.linspace(1.0, 2.0, 8)
+    step = models.DepthStep(process_noise=q, speed=2.0)
+    track = tracks.detections(mu, rho_k, steps, speed=2.0)
+    prior = GaussianState(m, P, timestamp=track[0].timestamp)
+    means, covs = tracks.moments(
+        tracks.run(ExtendedKalmanPredictor(step), ExtendedKalmanUpdater(None), prior, track)
+    )
+    n, C = np.asarray(m, float), np.asarray(P, float)
+    for k in range(8):
+        if k:
+            F = frames.transition(steps[k - 1])
+            n = F @ n + [0.0, steps[k - 1], 0.0]
+            C = F @ C @ F.T + np.diag([0, 0, frames.velocity_variance(q, steps[k - 1])])
+        if not np.isnan(mu[k]):
+            n, C = ekf.update(n, C, mu[k], rho_k[k])
+        np.testing.assert_allclose(means[k], n, rtol=1e-10)
+        np.testing.assert_allclose(covs[k], C, rtol=1e-10, atol=1e-10 * np.max(np.abs(C)))
+
+
+#: The sigma points of :func:`depthcore.kalman.ukf.run` by default, in Stone Soup's names.
+SIGMA = {"alpha": 1.0, "beta": 0.0, "kappa": 0.0}
+
+
+@pytest.mark.parametrize("predictor", [ExtendedKalmanPredictor, UnscentedKalmanPredictor])
+def test_stone_soup_ukf_equals_depthcore_ukf_with_the_same_sigma_points(track30, predictor):
+    mu, rho, q, m, P = track30
+    options = SIGMA if predictor is UnscentedKalmanPredictor else {}
+    step = models.DepthStep(process_noise=q, speed=1.0)
+    means, covs = stone_soup(
+        predictor(step, **options), UnscentedKalmanUpdater(None, **SIGMA), mu, rho, m, P
+    )
+    reference = ukf.run(mu, rho, m, P, q)
+    assert relative(means, reference.means) < 1e-10
+    assert relative(covs, reference.covs) < 1e-10
+
+
+def test_stone_soup_ukf_on_figure_2_averages_across_the_pole_as_depthcore_allows():
+    prior = FIG2.prior
+    means, covs = stone_soup(
+        ExtendedKalmanPredictor(models.DepthStep(speed=1.0)),
+        UnscentedKalmanUpdater(None, **SIGMA),
+        FIG2.mu,
+        FIG2.rho,
+        prior.mean,
+        prior.cov,
+    )
+    with pytest.raises(ValueError, match="behind the camera"):
+        ukf.run(FIG2.mu, FIG2.rho, prior.mean, prior.cov)
+    reference = ukf.run(FIG2.mu, FIG2.rho, prior.mean, prior.cov, allow_behind_camera=True)
+    assert relative(means, reference.means) < 1e-10
+    assert relative(covs, reference.covs) < 1e-10
+
+
+def test_detections_carry_the_frames_clock_gaps_and_noise():
+    mu = [0.1, np.nan, 0.2, 0.25, 0.3]
+    track = tracks.detections(mu, [0.01, np.nan, 0.02, 0.03, 0.04], [1.0, 2.0, 0.5, 1.5], speed=2)
+    seconds = [(f.timestamp - tracks.START).total_seconds() for f in track]
+    np.testing.assert_allclose(seconds, [0.0, 0.5, 1.5, 1.75, 2.5], rtol=0, atol=0)
+    assert track[1].detection is None
+    assert [f.detection.measurement_model.rho for f in track if f.detection] == pytest.approx(
+        [0.01, 0.02, 0.03, 0.04]
+    )
+    with pytest.raises(ValueError, match="^mu must be one track"):
+        tracks.detections([[0.1, 0.2, 0.4]] * 2, 0.01)
