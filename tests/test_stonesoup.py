@@ -23,13 +23,16 @@ from stonesoup.predictor.kalman import (  # noqa: E402
     UnscentedKalmanPredictor,
 )
 from stonesoup.types.array import StateVectors  # noqa: E402
+from stonesoup.types.hypothesis import SingleHypothesis  # noqa: E402
 from stonesoup.types.state import GaussianState, State  # noqa: E402
 from stonesoup.updater.kalman import ExtendedKalmanUpdater, UnscentedKalmanUpdater  # noqa: E402
 
+from depthcore.exact import optimal  # noqa: E402
 from depthcore.kalman import ekf, ukf  # noqa: E402
 from depthcore.problem import frames, model  # noqa: E402
 from depthcore.problem.scenarios import SCENARIOS  # noqa: E402
-from depthcore.stonesoup import models, tracks  # noqa: E402
+from depthcore.registry.filters import FILTERS  # noqa: E402
+from depthcore.stonesoup import exact, models, tracks  # noqa: E402
 
 SECOND = datetime.timedelta(seconds=1)
 FIG2 = SCENARIOS["fig2"]
@@ -235,3 +238,133 @@ def test_detections_carry_the_frames_clock_gaps_and_noise():
     )
     with pytest.raises(ValueError, match="^mu must be one track"):
         tracks.detections([[0.1, 0.2, 0.4]] * 2, 0.01)
+
+
+# --- the exact filter in Stone Soup's loop equals the batch exact filter -----------------
+
+
+def exact_loop(mu, rho, prior_mean, prior_cov, q=0.0, steps=None, speed=1.0, gate=None):
+    track = tracks.detections(mu, rho, steps, speed=speed)
+    predictor = exact.ExactPredictor(models.DepthStep(process_noise=q, speed=speed))
+    updater = exact.ExactUpdater(models.TangentBearing(noise_covar=[[0.01]]), gate=gate)
+    prior = exact.ExactState(prior_mean, prior_cov, timestamp=track[0].timestamp)
+    return tracks.run(predictor, updater, prior, track)
+
+
+def test_exact_filter_in_a_stone_soup_loop_is_figure_2s_optimal_filter():
+    prior = FIG2.prior
+    track = exact_loop(FIG2.mu, FIG2.rho, prior.mean, prior.cov)
+    reference = FILTERS["optimal"](FIG2.mu, FIG2.rho, prior.mean, prior.cov)
+    last = track[-1]
+    assert isinstance(last, exact.ExactUpdate) and isinstance(last, GaussianState)
+    assert relative(np.asarray(last.state_vector)[:, 0], reference.mean) < 1e-10
+    assert relative(last.covar, reference.cov) < 1e-9
+    assert last.depth_mean == pytest.approx(reference.depth_mean, rel=1e-10)
+    assert last.estimate.depth_sd == pytest.approx(reference.depth_sd, rel=1e-9)
+    assert last.estimate.frame == 3
+
+
+def test_exact_filter_in_a_stone_soup_loop_equals_the_batch_along_30_frames(track30):
+    mu, rho, q, m, P = track30
+    means, covs = tracks.moments(exact_loop(mu, rho, m, P, q))
+    for n in (5, 10, 30):
+        reference = optimal.run(mu[:n], rho, m, P, process_noise=q)
+        assert relative(means[n - 1], reference.mean) < 1e-9, n
+        assert relative(covs[n - 1], reference.cov) < 1e-8, n
+
+
+def test_exact_filter_through_missed_detections_uneven_steps_and_noise_per_frame(track30):
+    mu, rho, q, m, P = track30
+    mu = mu[:12].copy()
+    mu[[4, 7, 11]] = np.nan  # missed detections, the last frame's too
+    steps = np.array([1.0, 0.5, 1.5, 2.0, 1.0, 0.25, 1.0, 1.0, 0.5, 1.0, 2.0])
+    rho_k = rho * np.linspace(1.0, 2.0, 12)
+    track = exact_loop(mu, rho_k, m, P, q, steps, speed=2.0)
+    assert [type(s).__name__ for s in track].count("ExactPrediction") == 3
+    means, covs = tracks.moments(track)
+    for n in (6, 11, 12):
+        reference = optimal.run(mu[:n], rho_k[:n], m, P, process_noise=q, steps=steps[: n - 1])
+        assert relative(means[n - 1], reference.mean) < 1e-9, n
+        assert relative(covs[n - 1], reference.cov) < 1e-8, n
+
+
+def test_two_steps_through_a_missed_frame_are_one_long_step_only_without_process_noise(track30):
+    mu, rho, _, m, P = track30
+    gap = mu[:6].copy()
+    gap[3] = np.nan
+    joined = np.delete(mu[:6], 3)
+    for q, equal in ((0.0, True), (0.05, False)):
+        through = exact_loop(gap, rho, m, P, q)[-1].covar
+        once = exact_loop(joined, rho, m, P, q, steps=[1.0, 1.0, 2.0, 1.0])[-1].covar
+        assert (relative(through, once) < 1e-9) == equal
+    # with q > 0 the velocity's change at the missed frame moves x over the second step:
+    # the answer is the batch's with that frame missing, not with one step of 2
+    reference = optimal.run(gap, rho, m, P, process_noise=0.05)
+    assert relative(exact_loop(gap, rho, m, P, 0.05)[-1].covar, reference.cov) < 1e-8
+
+
+def test_a_gated_outlier_is_a_missed_detection(track30):
+    mu, rho, q, m, P = track30
+    outlier = mu[:8].copy()
+    outlier[5] += 0.2  # forty noise SDs off
+    gated = exact_loop(outlier, rho, m, P, q, gate=1e-3)
+    missing = outlier.copy()
+    missing[5] = np.nan
+    reference = exact_loop(missing, rho, m, P, q)
+    assert gated[5].estimate.gated and gated[5].estimate.tail < 1e-3
+    assert not any(s.estimate.gated for i, s in enumerate(gated) if i != 5)
+    assert relative(gated[-1].covar, reference[-1].covar) < 1e-12
+    assert isinstance(reference[5], exact.ExactPrediction)  # the missed frame: predicted
+    assert np.isfinite(gated[5].estimate.log_predictive)
+
+
+def test_a_state_is_never_changed_by_predicting_or_updating_it(track30):
+    mu, rho, q, m, P = track30
+    track = exact_loop(mu[:5], rho, m, P, q)
+    state = track[-1]
+    before = (state.filter.current, state.filter.frame)
+    predictor = exact.ExactPredictor(models.DepthStep(process_noise=q, speed=1.0))
+    updater = exact.ExactUpdater(models.TangentBearing(noise_covar=[[rho**2]]))
+    later = state.timestamp + SECOND
+    detection = tracks.detections(mu[:6], rho)[-1].detection
+    answers = [
+        updater.update(SingleHypothesis(predictor.predict(state, timestamp=later), detection))
+        for _ in range(2)
+    ]
+    np.testing.assert_array_equal(answers[0].covar, answers[1].covar)
+    assert (state.filter.current, state.filter.frame) == before
+    assert state.filter is not answers[0].filter
+
+
+def test_a_prior_before_the_first_detection_is_moved_in_closed_form(track30):
+    mu, rho, q, m, P = track30
+    track = tracks.detections(mu[:6], rho)
+    predictor = exact.ExactPredictor(models.DepthStep(process_noise=q, speed=1.0))
+    updater = exact.ExactUpdater(models.TangentBearing(noise_covar=[[rho**2]]))
+    early = exact.ExactState(m, P, timestamp=track[0].timestamp - 2 * SECOND)
+    last = tracks.run(predictor, updater, early, track)[-1]
+    moved_mean, moved_cov = exact.moved_gaussian(m, P, 2.0, q)
+    reference = optimal.run(mu[:6], rho, moved_mean, moved_cov, process_noise=q)
+    assert relative(last.covar, reference.cov) < 1e-8
+
+
+def test_the_exact_updater_refuses_by_name():
+    prior = FIG2.prior
+    track = tracks.detections(FIG2.mu, FIG2.rho)
+    predictor = exact.ExactPredictor(models.DepthStep(speed=1.0))
+    updater = exact.ExactUpdater(models.TangentBearing(noise_covar=[[FIG2.rho**2]]))
+    state = tracks.run(
+        predictor,
+        updater,
+        exact.ExactState(prior.mean, prior.cov, timestamp=track[0].timestamp),
+        track,
+    )[-1]
+    same_time = predictor.predict(state, timestamp=state.timestamp)
+    with pytest.raises(ValueError, match="^hypothesis: its prediction has not moved"):
+        updater.update(SingleHypothesis(same_time, track[-1].detection))
+    with pytest.raises(ValueError, match="^predicted_state: the exact filter's predictive"):
+        updater.predict_measurement(same_time)
+    with pytest.raises(ValueError, match="^prior must be an ExactState"):
+        predictor.predict(GaussianState(prior.mean, prior.cov), timestamp=None)
+    with pytest.raises(ValueError, match="^gate must be None or a probability"):
+        exact.ExactUpdater(None, gate=2.0)
