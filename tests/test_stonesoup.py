@@ -23,6 +23,7 @@ from stonesoup.predictor.kalman import (  # noqa: E402
     UnscentedKalmanPredictor,
 )
 from stonesoup.types.array import StateVectors  # noqa: E402
+from stonesoup.types.detection import Detection  # noqa: E402
 from stonesoup.types.hypothesis import SingleHypothesis  # noqa: E402
 from stonesoup.types.state import GaussianState, State  # noqa: E402
 from stonesoup.updater.kalman import ExtendedKalmanUpdater, UnscentedKalmanUpdater  # noqa: E402
@@ -368,3 +369,17 @@ def test_the_exact_updater_refuses_by_name():
         predictor.predict(GaussianState(prior.mean, prior.cov), timestamp=None)
     with pytest.raises(ValueError, match="^gate must be None or a probability"):
         exact.ExactUpdater(None, gate=2.0)
+
+
+def test_without_timestamps_each_prediction_moves_by_the_fixed_depth_per_step(track30):
+    mu, rho, q, m, P = track30
+    moved_mean, moved_cov = exact.moved_gaussian(m, P, 0.5, q)
+    timed = exact_loop(mu[:6], rho, moved_mean, moved_cov, q, steps=[0.5] * 5, speed=1.0)
+    predictor = exact.ExactPredictor(models.DepthStep(process_noise=q, depth_per_step=0.5))
+    updater = exact.ExactUpdater(models.TangentBearing(noise_covar=[[rho**2]]))
+    state = exact.ExactState(m, P)  # no timestamps: every prediction moves by 0.5
+    for k in range(6):
+        prediction = predictor.predict(state, timestamp=None)
+        state = updater.update(SingleHypothesis(prediction, Detection([mu[k]])))
+    assert relative(state.covar, timed[-1].covar) < 1e-12
+    assert relative(state.state_vector, timed[-1].state_vector) < 1e-12
