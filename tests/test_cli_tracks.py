@@ -433,19 +433,9 @@ TRACK_CASES = {
 }
 
 
-#: The exact filter's smoother does not yet take steps: depthcore.track fails inside it.
-EXACT_STEPS = pytest.mark.xfail(
-    strict=True, reason="the exact filter's bank track takes no steps yet (a TypeError inside)"
-)
-
-
 @pytest.mark.parametrize(
     "case, name",
-    [
-        pytest.param(c, n, marks=EXACT_STEPS if (c, n) == ("steps", "optimal") else ())
-        for c in TRACK_CASES
-        for n in ("optimal", "ekf")
-    ],
+    [(c, n) for c in TRACK_CASES for n in ("optimal", "ekf")],
 )
 def test_a_track_with_gaps_noise_or_steps_is_depthcore_track_or_its_refusal(
     tmp_path, capsys, case, name
