@@ -46,7 +46,7 @@ from depthcore.exact import online, posterior, quadrature
 from depthcore.exact.cdf import gauss_legendre_cdf
 from depthcore.exact.mixture import Moments
 from depthcore.kalman.second_order import A2
-from depthcore.problem import checks, model, predictive, signature
+from depthcore.problem import checks, frames, model, predictive, signature
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import f
 
@@ -530,7 +530,7 @@ def run(
         _paper_only(reading, support)
         return _gated(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps, gate)
     if posterior.irregular(mu, rho, steps):
-        track = posterior.check_track(mu, rho, steps)
+        track = frames.check(mu, rho, steps)
         if not track.regular:
             _paper_only(reading, support)
             return posterior.posterior(

@@ -65,23 +65,6 @@ def irregular(mu, rho, steps) -> bool:
     return np.ndim(rho) >= 1 and np.shape(rho) == mu_arr.shape
 
 
-def check_track(mu, rho, steps) -> frames.Frames:
-    """:func:`depthcore.problem.frames.check`, a track with too few bearings refused as not finite.
-
-    (The paper's doors refuse a ``NaN`` bearing as not finite; a track with
-    gaps needs :data:`depthcore.problem.frames.MIN_PRESENT` bearings present.)
-    """
-    arr = np.asarray(mu)
-    if arr.dtype.kind == "f" and arr.ndim >= 1 and np.any(np.isnan(arr)):
-        present = np.sum(~np.isnan(arr), axis=-1)
-        if np.any(present < frames.MIN_PRESENT):
-            raise ValueError(
-                "mu must be finite, or NaN at missing frames with at least "
-                f"{frames.MIN_PRESENT} bearings present per track; got {int(np.min(present))}"
-            )
-    return frames.check(mu, rho, steps)
-
-
 def frames_problem(track: frames.Frames, prior_mean, prior_cov, process_noise):
     """A checked track (:func:`depthcore.problem.frames.check`) as a quadrature Problem.
 
@@ -131,7 +114,7 @@ def frames_problem(track: frames.Frames, prior_mean, prior_cov, process_noise):
 def _problem_of(mu, rho, prior_mean, prior_cov, process_noise, steps):
     """The quadrature Problem of a track or a batch, the paper's frames or not; and the batch."""
     if irregular(mu, rho, steps):
-        return frames_problem(check_track(mu, rho, steps), prior_mean, prior_cov, process_noise)
+        return frames_problem(frames.check(mu, rho, steps), prior_mean, prior_cov, process_noise)
     return _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise)
 
 
