@@ -25,8 +25,6 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy.special import log_ndtr, logsumexp
-
 from depthcore.problem import checks
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
@@ -67,6 +65,8 @@ def gaussian(mu, mean, var):
     -------
     log_density, tail : ndarray, shape (...)
     """
+    from scipy.special import log_ndtr  # scipy loads on first use, not with the package
+
     mu, mean, var = (np.asarray(a, dtype=float) for a in (mu, mean, var))
     z = (mu - mean) / np.sqrt(var)
     log_density = -0.5 * (_LOG_2PI + np.log(var) + z * z)
@@ -90,6 +90,8 @@ def mixture(mu, log_weights, means, var):
     -------
     log_density, tail : ndarray, shape (...)
     """
+    from scipy.special import log_ndtr, logsumexp
+
     mu = np.asarray(mu, dtype=float)[..., None]
     log_w = np.asarray(log_weights, dtype=float)
     log_w = log_w - logsumexp(log_w, axis=-1, keepdims=True)

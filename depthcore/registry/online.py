@@ -82,12 +82,22 @@ class FrameEstimate(NamedTuple):
 
 
 class OnlineFilter:
-    """A started online filter (:func:`start`): :meth:`update`, :attr:`frame`, :attr:`current`."""
+    """A started online filter (:func:`start`): :meth:`update`, :attr:`frame`, :attr:`current`.
+
+    :attr:`detail` is the family's own filter:
+    :class:`depthcore.exact.online.Online`, :class:`depthcore.kalman.online.EKF`
+    or :class:`depthcore.kalman.online.UKF`.
+    """
 
     def __init__(self, name: str, inner):
         self.name = name
         self._inner = inner
         self.current: FrameEstimate | None = None
+
+    @property
+    def detail(self):
+        """The family's own online filter (the exact one's node count, say)."""
+        return self._inner
 
     @property
     def frame(self) -> int:
