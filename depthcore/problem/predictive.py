@@ -25,6 +25,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+
 from depthcore.problem import checks
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
