@@ -13,7 +13,7 @@ from numpy.testing import assert_allclose
 from scipy.special import logsumexp
 
 from depthcore.exact import bank as bk
-from depthcore.exact import optimal, posterior
+from depthcore.exact import optimal, posterior, smoother
 
 PRIOR_MEAN = np.array([0.5, 8.0, 0.2])
 PRIOR_COV = np.array([[1.0, 0.3, 0.05], [0.3, 4.0, 0.0], [0.05, 0.0, 0.3]])
@@ -22,8 +22,8 @@ RHO = np.array([0.01, 0.02, np.nan, 0.01, 0.015, 0.01])
 STEPS = np.array([1.0, 0.5, 2.0, 1.0, 1.5])
 
 
-def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=40001):
-    """Mean (3,) and covariance (3, 3) of the state at frame N by a dense grid in log y_1.
+def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=4001, frame=-1):
+    """Mean (3,) and covariance (3, 3) of the state at ``frame`` (default N) by a dense grid.
 
     Given ``y_1 = y`` the present bearings are ``mu_k = x_k / y_k + w_k`` with
     ``x_k = x_1 + e_k v_1 + sum_{j < k} (e_k - e_{j+1}) a_j`` (``e_k`` the depth
@@ -47,9 +47,10 @@ def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=40001):
     for k in range(N):
         for j in range(k):
             X[k, 2 + j] = e[k] - e[j + 1]
+    frame = frame % N
     vN = np.zeros(D)
     vN[1] = 1.0
-    vN[2:] = 1.0
+    vN[2 : 2 + frame] = 1.0
     t = np.linspace(np.log(1e-3), np.log(300.0), n)
     y = np.exp(t)
     log_f = np.empty(n)
@@ -70,10 +71,10 @@ def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=40001):
         K = Cz @ H.T @ np.linalg.inv(S)
         mpost = mz + K @ r
         Cpost = Cz - K @ H @ Cz
-        A = np.stack([X[-1], vN])  # (x_N, v_N)
+        A = np.stack([X[frame], vN])  # (x_k, v_k) at the frame
         mxv = A @ mpost
         Cxv = A @ Cpost @ A.T
-        means[i] = [mxv[0], yi + e[-1], mxv[1]]
+        means[i] = [mxv[0], yi + e[frame], mxv[1]]
         s = np.zeros((3, 3))
         s[np.ix_([0, 2], [0, 2])] = Cxv
         second[i] = s + np.outer(means[i], means[i])
@@ -165,3 +166,32 @@ def test_batches_of_tracks_with_different_gaps():
     for i in range(2):
         one = posterior.posterior(mu[i], 0.01, PRIOR_MEAN, PRIOR_COV, steps=STEPS)
         assert_allclose(batch.mean[i], one.mean, rtol=1e-12)
+
+
+def test_the_smoothers_of_a_track_with_gaps_noise_per_frame_and_steps():
+    """Filtered, fixed-lag and fixed-interval states against the dense grid (q > 0)."""
+    q, lag = 0.05, 2
+    res = smoother.track(MU, RHO, PRIOR_MEAN, PRIOR_COV, q, lag=lag, steps=STEPS)
+    N = MU.size
+    for k in (1, 2, 3, 5):
+        cases = [
+            (res.filtered, dense_posterior(MU[: k + 1], RHO[: k + 1], STEPS[:k], q)),
+            (res.interval, dense_posterior(MU, RHO, STEPS, q, frame=k)),
+        ]
+        t = min(k + lag, N - 1)
+        cases.append(
+            (res.lagged, dense_posterior(MU[: t + 1], RHO[: t + 1], STEPS[:t], q, frame=k))
+        )
+        for series, (mean, cov) in cases:
+            sd = np.sqrt(np.diag(cov))
+            assert_allclose(series.mean[k], mean, rtol=0, atol=1e-8 * sd.max())
+            assert_allclose(np.sqrt(np.diag(series.cov[k])), sd, rtol=1e-8)
+    # the last frame's smoothed state is the filtered one
+    assert_allclose(res.interval.mean[-1], res.filtered.mean[-1], rtol=1e-12)
+
+
+def test_the_smoother_refuses_a_track_without_its_first_bearing():
+    with pytest.raises(ValueError, match=r"mu\[0\] must be present"):
+        smoother.track(np.r_[np.nan, MU[1:]], 0.01, PRIOR_MEAN, PRIOR_COV)
+    with pytest.raises(ValueError, match="steps"):
+        smoother.track(MU, 0.01, PRIOR_MEAN, PRIOR_COV, steps=[1.0, 2.0])

@@ -31,7 +31,7 @@ from depthcore.exact.bank import PSI, Bank, run_bank
 from depthcore.exact.cdf import gauss_legendre_cdf
 from depthcore.exact.tracks import transitions
 from depthcore.kalman import linear
-from depthcore.problem import checks
+from depthcore.problem import checks, predictive
 from depthcore.problem.gaussian import component_mean, component_sd
 from depthcore.problem.weights import normalised
 
@@ -210,6 +210,9 @@ class Mixture:
         step doubled), floored by roundoff; ``None`` for caller-given nodes.
     rtol : float or None
         The tolerance the nodes were placed for (:func:`~depthcore.exact.posterior.posterior`).
+    gated_updates : depthcore.problem.predictive.Updates or None
+        The per-frame report of a run with a gate (whose skipped bearings are
+        ``NaN`` in ``bank.mu``); see :attr:`updates`.
     """
 
     bank: Bank
@@ -221,11 +224,29 @@ class Mixture:
     depth_error: np.ndarray | None = None
     velocity_error: np.ndarray | None = None
     rtol: float | None = None
+    gated_updates: predictive.Updates | None = None
 
     depth_mean = component_mean(1, "``E[y_N]``, shape (...).")
     depth_sd = component_sd(1, "The SD of ``y_N``, shape (...).")
     velocity_mean = component_mean(2, "``E[v_N]``, shape (...).")
     velocity_sd = component_sd(2, "The SD of ``v_N``, shape (...).")
+
+    @property
+    def updates(self) -> predictive.Updates:
+        """Each frame's predictive report, arrays (..., N): log density, tail, gated.
+
+        The bearing's log predictive density and two-sided tail probability under
+        the mixture over depth nodes of the filters' predictions given the
+        earlier bearings (:func:`depthcore.exact.online.track_updates`, the
+        filter run one bearing at a time on its own nodes, to the same
+        tolerance); NaN at a missing frame. From a run with a gate, that run's
+        report (the skipped bearings marked).
+        """
+        if self.gated_updates is not None:
+            return self.gated_updates
+        from depthcore.exact import online  # the online filter is built on this module
+
+        return online.track_updates(self.bank, rtol=self.rtol or 1e-10)
 
     def _query(self, value, name):
         """Queries as (batch..., K) and a function restoring the caller's shape."""

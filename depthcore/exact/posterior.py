@@ -419,7 +419,7 @@ def _pad(a, J: int, axis: int, value):
 _ONE_NODE = 0.5
 
 
-def update(post: Mixture, mu_next) -> Mixture:
+def update(post: Mixture, mu_next, rho=None, step=1.0, gaps: bool = False) -> Mixture:
     """Add frame ``N + 1`` to a posterior from :func:`posterior`, online.
 
     Every node's Kalman filter and weight is updated (:func:`~depthcore.exact.bank.step`); nothing
@@ -439,6 +439,12 @@ def update(post: Mixture, mu_next) -> Mixture:
         After ``N`` frames, from :func:`posterior` or :func:`update`.
     mu_next : float or array_like, shape (B,)
         The bearing at frame ``N + 1``, one per problem.
+    rho : float or None
+        Its noise SD (``None``: the posterior's; see :func:`depthcore.exact.bank.step`).
+    step : float
+        The depth's change from frame ``N``, > 0.
+    gaps : bool
+        Whether a ``NaN`` bearing is a missing frame (else refused).
 
     Returns
     -------
@@ -452,7 +458,9 @@ def update(post: Mixture, mu_next) -> Mixture:
     single = post.log_normaliser.ndim == 0
     if single:
         post = _batch_of_one(post)
-    mu_next = checks.finite_array(mu_next, "mu_next")
+    mu_next = checks.as_float(mu_next, "mu_next")
+    if not np.all(np.isfinite(mu_next) | (gaps & np.isnan(mu_next))):
+        raise ValueError("mu_next must be finite (or NaN for a missing frame, with gaps=True)")
     if mu_next.ndim > 1 or (mu_next.ndim == 1 and mu_next.shape != post.log_normaliser.shape):
         raise ValueError(
             f"mu_next must be a scalar or have shape {post.log_normaliser.shape}, "
@@ -460,7 +468,10 @@ def update(post: Mixture, mu_next) -> Mixture:
         )
     if post.bank.frames >= MAX_FRAMES:
         raise ValueError(f"mu_next: at most {MAX_FRAMES} frames")
-    new, err, floor, free = _step_rows(post, np.broadcast_to(mu_next, post.log_normaliser.shape))
+    frame = {"rho": rho, "step": step, "gaps": gaps}
+    new, err, floor, free = _step_rows(
+        post, np.broadcast_to(mu_next, post.log_normaliser.shape), frame
+    )
     rtol = post.rtol
     ok = (
         free
@@ -488,7 +499,7 @@ def _row_blocks(rows: int, nodes: int) -> list:
     return [slice(i, i + size) for i in range(0, rows, size)]
 
 
-def _step_rows(post: Mixture, mu_next):
+def _step_rows(post: Mixture, mu_next, frame=None):
     """:func:`~depthcore.exact.bank.step`, :func:`~depthcore.exact.mixture.mixture_of_log_weights`
     and
     :func:`_resolution`, block by block.
@@ -503,6 +514,8 @@ def _step_rows(post: Mixture, mu_next):
     post : Mixture
         Batch shape (B,).
     mu_next : ndarray, shape (B,)
+    frame : dict or None
+        :func:`update`'s ``rho``, ``step`` and ``gaps`` (each a number or (B,)).
 
     Returns
     -------
@@ -519,7 +532,9 @@ def _step_rows(post: Mixture, mu_next):
     for rows in blocks:
         part = post if len(blocks) == 1 else _each_array(post, lambda a, rows=rows: a[rows])
         new, halved_mean, halved_cov, top, free = mixture_of_log_weights(
-            step(part.bank, mu_next[rows]), part.log_weights, halved=True
+            step(part.bank, mu_next[rows], **_frame_rows(frame, rows)),
+            part.log_weights,
+            halved=True,
         )
         parts.append((new, *_resolution(new, halved_mean, halved_cov, top), free))
     if len(parts) == 1:
@@ -545,6 +560,13 @@ def _step_rows(post: Mixture, mu_next):
     )
     err, floor = (np.concatenate([p[i] for p in parts], axis=1) for i in (1, 2))
     return new, err, floor, np.concatenate([p[3] for p in parts])
+
+
+def _frame_rows(frame, rows) -> dict:
+    """:func:`~depthcore.exact.bank.step`'s frame keywords for the problems ``rows``."""
+    if frame is None:
+        return {}
+    return {k: v[rows] if np.ndim(v) == 1 else v for k, v in frame.items()}
 
 
 def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
