@@ -29,7 +29,7 @@ FILTERS = [
     [
         ((0.1, 0.1, 0.1), "mu is degenerate"),
         ((-0.1, 0.0, 0.1), "mu is degenerate"),
-        ((np.nan, 0.0, 0.2), "mu has 2 bearings present"),
+        ((np.nan, 0.0, 0.2), "mu has 2 bearings present"),  # NaN: a missing frame
         ((-0.3, np.inf, 0.2), "mu must be finite"),
         ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
         ((-0.3, 0.0), r"mu must have shape (\(3,\)|\(\.\.\., N\) with N >= 3)"),

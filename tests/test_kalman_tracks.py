@@ -473,3 +473,12 @@ def test_online_optimal_after_n_frames_equals_the_batch_door():
     np.testing.assert_allclose(last.depth_mean, batch.depth_mean, rtol=1e-8)
     np.testing.assert_allclose(last.depth_sd, batch.depth_sd, rtol=1e-7)
     np.testing.assert_allclose(last.velocity_mean, batch.velocity_mean, rtol=1e-7, atol=1e-9)
+
+
+def test_track_passes_the_steps_to_the_exact_smoother():
+    mu = np.array([0.1, 0.2, np.nan, 0.35, 0.41])
+    gapped = depthcore.track(mu, RHO)
+    stepped = depthcore.track(mu[[0, 1, 3, 4]], RHO, gapped.prior, steps=[1.0, 2.0, 1.0])
+    keep = [0, 1, 3, 4]
+    np.testing.assert_allclose(stepped.smoothed.mean, gapped.smoothed.mean[keep], rtol=1e-8)
+    np.testing.assert_allclose(stepped.filtered.mean, gapped.filtered.mean[keep], rtol=1e-8)

@@ -176,7 +176,7 @@ def _refused(match, *args, **kwargs):
 @pytest.mark.parametrize(
     "mu",
     [
-        [0.1, np.nan, np.nan, 0.3],  # two bearings present
+        [0.1, np.nan, np.nan, 0.3],  # NaN is a missing frame: two present
         [0.1, np.inf, 0.2, 0.3],
         [],
         [0.1],

@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from depthcore.problem import checks, frames, model, predictive
+from depthcore.problem import checks, frames, model
 
 #: Index of each state component in ``(x, y, v)``.
 INDEX = {"x": 0, "y": 1, "v": 2}
@@ -304,6 +304,9 @@ def run_recursion(
         ``means`` (..., K, d) and ``covs`` (..., K, d, d) after each bearing,
         and the per-frame ``updates`` (..., K) when ``predictive_step`` is given.
     """
+    # imported here: ``import depthcore`` reads this module and leaves SciPy unloaded
+    from depthcore.problem import predictive
+
     mu = np.asarray(mu, dtype=float)
     present = ~np.isnan(mu) if present is None else np.asarray(present, dtype=bool)
     means, covs, reports = [], [], []

@@ -27,7 +27,7 @@ from depthcore.exact import mixture, optimal
 from depthcore.exact import smoother as bank_track
 from depthcore.kalman import ekf, linear
 from depthcore.particles.resampling import weighted_mean_and_cov
-from depthcore.problem import checks, frames, model, predictive
+from depthcore.problem import checks, frames, model
 from depthcore.problem.gaussian import Gaussian, History, MeanAndCov
 from depthcore.registry.estimates import Estimate
 
@@ -49,9 +49,7 @@ def gaussian(result, single: bool) -> Estimate:
     if single:
         g = Gaussian(mean, cov)
         (dm, ds), (vm, vs) = g.marginal("y"), g.marginal("v")
-        return Estimate(
-            dm, ds, vm, vs, None, None, g.mean, g.cov, result, updates=updates(result, single)
-        )
+        return Estimate(dm, ds, vm, vs, None, None, g.mean, g.cov, result)
     sd = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
     return Estimate(
         mean[..., 1],
@@ -63,23 +61,7 @@ def gaussian(result, single: bool) -> Estimate:
         mean,
         cov,
         result,
-        updates=updates(result, single),
     )
-
-
-def updates(result, single: bool):
-    """``result.updates`` (:class:`depthcore.problem.predictive.Updates`), or ``None``.
-
-    For one sequence each array has shape (N,) (a leading axis of one, as a
-    replicated filter's, is dropped); for a batch (B, N).
-    """
-    found = getattr(result, "updates", None)
-    if found is None:
-        return None
-    found = predictive.Updates(*(np.asarray(a) for a in found))
-    if single and found.tail.ndim == 2 and found.tail.shape[0] == 1:
-        found = predictive.Updates(*(a[0] for a in found))
-    return found
 
 
 def _last(result):
@@ -146,7 +128,6 @@ def exact(result, single: bool) -> Estimate:
         m.cov,
         result,
         {"prob_behind_camera": behind},
-        updates=updates(result, single),
     )
 
 
@@ -228,7 +209,6 @@ def _replicated_estimate(
         cov,
         detail,
         collapsed=collapsed,
-        updates=updates(detail, single),
     )
 
 

@@ -14,6 +14,7 @@ particles or Rao-Blackwellised particles, each a :class:`Family` in
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -22,6 +23,7 @@ import numpy as np
 
 from depthcore.exact import mixture
 from depthcore.particles.resampling import weighted_density
+from depthcore.problem import predictive
 from depthcore.problem.gaussian import Gaussian
 
 QUANTITIES = ("depth", "velocity")
@@ -69,10 +71,9 @@ class Estimate:
         :data:`depthcore.particles.resampling.MIN_EFFECTIVE_DRAWS` independent draws of
         the posterior), so that neither its spread nor its error can be
         trusted; its errors are then NaN. ``None`` for the other filters.
-    updates : depthcore.problem.predictive.Updates or None
-        Per frame, each bearing's log predictive density, tail probability and
-        whether the gate skipped it, arrays of shape (N,) for one sequence and
-        (B, N) for a batch; ``None`` for a filter that does not report them.
+
+    The per-frame report, :attr:`updates`, is read from ``detail`` when first
+    asked for (the exact filter computes it then).
     """
 
     depth_mean: Any
@@ -86,7 +87,17 @@ class Estimate:
     detail: Any = None
     extras: dict = field(default_factory=dict)
     collapsed: Any = None
-    updates: Any = None
+
+    @functools.cached_property
+    def updates(self):
+        """Per frame, each bearing's log predictive density, tail and whether the gate skipped it.
+
+        ``detail.updates`` (:class:`depthcore.problem.predictive.Updates`) with
+        arrays of shape (N,) for one sequence (a leading axis of one, as a
+        replicated filter's, dropped) and (B, N) for a batch; ``None`` for a
+        filter that does not report them.
+        """
+        return read_updates(self.detail, np.ndim(self.mean) == 1)
 
     def moments(self, quantity: str) -> dict:
         """``{"mean", "sd"}`` of ``"depth"`` or ``"velocity"``.
@@ -99,6 +110,25 @@ class Estimate:
         if error is not None:
             out["error"] = error
         return out
+
+
+def read_updates(result, single: bool):
+    """``result.updates`` as :class:`depthcore.problem.predictive.Updates`, or ``None``.
+
+    Parameters
+    ----------
+    result : object
+        A filter's own result.
+    single : bool
+        Whether it is of one sequence: then each array has shape (N,).
+    """
+    found = getattr(result, "updates", None)
+    if found is None:
+        return None
+    found = predictive.Updates(*(np.asarray(a) for a in found))
+    if single and found.tail.ndim == 2 and found.tail.shape[0] == 1:
+        found = predictive.Updates(*(a[0] for a in found))
+    return found
 
 
 def check_quantity(quantity: str) -> str:
