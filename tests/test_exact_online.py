@@ -157,3 +157,24 @@ def test_the_batch_door_reports_each_frame_and_gates_as_the_online_filter():
     assert batch.updates.log_predictive.shape == (2, 12)
     assert_allclose(batch.mean[0], post.mean, rtol=1e-12)
     assert_allclose(batch.mean[1], post.mean, rtol=1e-12)
+
+
+def test_the_paper_triples_report_the_online_exact_filters_updates():
+    """A triple's quadrature reports each bearing as the exact filter fed one at a time."""
+    from depthcore.problem.scenarios import SCENARIOS
+    from depthcore.registry import online as registry_online
+    from depthcore.registry.filters import FILTERS
+
+    s = SCENARIOS["fig2"]
+    one = FILTERS["optimal"](s.mu, s.rho, s.prior.mean, s.prior.cov)
+    live = registry_online.start("optimal", s.prior.mean, s.prior.cov, rho=s.rho)
+    by_hand = [live.update(m) for m in s.mu]
+    np.testing.assert_allclose(one.updates.log_predictive, [u.log_predictive for u in by_hand])
+    np.testing.assert_allclose(one.updates.tail, [u.tail for u in by_hand])
+    # the online filter's last state is the quadrature's posterior, to its tolerance
+    assert abs(by_hand[-1].depth_mean - float(one.depth_mean)) < 1e-8 * float(one.depth_sd)
+    batch = FILTERS["optimal"](
+        np.stack([s.mu, SCENARIOS["fig3"].mu]), s.rho, s.prior.mean, s.prior.cov
+    )
+    np.testing.assert_allclose(batch.updates.tail[0], one.updates.tail)
+    assert batch.updates.tail.shape == (2, 3)

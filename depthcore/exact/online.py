@@ -370,6 +370,45 @@ def track_updates(bank, gate=None, rtol: float = 1e-10) -> predictive.Updates:
     )
 
 
+def updates(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> predictive.Updates:
+    """Each bearing's predictive report for the paper's frames, by :class:`Online` row by row.
+
+    For the triples of :func:`depthcore.exact.optimal.run`, whose quadrature
+    computes the posterior of all three bearings at once: the report of the
+    same exact filter fed them one at a time (the model's reading of Eq. (16)
+    and the support in front of the camera).
+
+    Parameters
+    ----------
+    mu : ndarray, shape (..., N)
+        Checked bearings.
+    rho : ndarray, shape () or (...)
+    prior_mean : ndarray, shape (3,) or (..., 3)
+    prior_cov : ndarray, shape (3, 3) or (..., 3, 3)
+    rtol : float
+
+    Returns
+    -------
+    depthcore.problem.predictive.Updates
+        Arrays of shape (..., N).
+    """
+    mu = np.asarray(mu, dtype=float)
+    batch, N = mu.shape[:-1], mu.shape[-1]
+    rho = np.broadcast_to(rho, batch).reshape(-1)
+    means = np.broadcast_to(prior_mean, batch + (3,)).reshape(-1, 3)
+    covs = np.broadcast_to(prior_cov, batch + (3, 3)).reshape(-1, 3, 3)
+    out = np.full((3, len(rho), N), np.nan)
+    for i, row in enumerate(mu.reshape(-1, N)):
+        f = Online(means[i], covs[i], rho[i], 0.0, None, rtol)
+        for k in range(N):
+            s = f.update(row[k])
+            out[:, i, k] = s.log_predictive, s.tail, s.gated
+    shape = batch + (N,)
+    return predictive.Updates(
+        out[0].reshape(shape), out[1].reshape(shape), out[2].reshape(shape) == 1.0
+    )
+
+
 def _bearing(mu) -> float:
     """A bearing: a finite number or NaN (a missing frame)."""
     arr = checks.as_float(mu, "mu")

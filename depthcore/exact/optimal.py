@@ -445,6 +445,15 @@ class OptimalMarginals:
     _problem: quadrature.Problem
     _grids: dict
 
+    @property
+    def updates(self) -> predictive.Updates:
+        """Each bearing's log predictive density and tail probability, shape (3,) each.
+
+        Those of the exact filter fed the bearings one at a time
+        (:func:`depthcore.exact.online.updates`, computed when first read).
+        """
+        return online.updates(self.mu, self.rho, self.prior.mean, self.prior.cov)
+
     def depth_pdf(self, y) -> np.ndarray:
         """Normalised depth marginal ``p_oy`` at depths ``y`` (any shape).
 
@@ -664,6 +673,8 @@ class BatchMarginals:
     log_depth_range : tuple of ndarray
         The lower and upper ends (B,) of the quadrature's range in ``t = log(y - 2)``,
         and a panel width (B,) in its variable ``u``.
+    prior : tuple of ndarray
+        The prior's mean (3,) or (B, 3) and covariance (3, 3) or (B, 3, 3), as given.
     """
 
     moments: Moments
@@ -672,6 +683,17 @@ class BatchMarginals:
     _problem: quadrature.Problem
     _grids: dict  # the quadrature's u grids: {interval: (lo, h, n, frame)}
     log_depth_range: tuple
+    prior: tuple = None  # (prior_mean, prior_cov) as given
+
+    @property
+    def updates(self) -> predictive.Updates:
+        """Each bearing's log predictive density and tail probability, shape (B, 3) each.
+
+        Those of the exact filter fed the bearings one at a time
+        (:func:`depthcore.exact.online.updates`, computed when first read).
+        """
+        mean, cov = self.prior
+        return online.updates(self._problem.mu, self._problem.rho, mean, cov)
 
     def depth_log_pdf(self, y) -> np.ndarray:
         """``log p_oy`` at depths ``y`` of shape (B, m); ``-inf`` at ``y <= 2``."""
@@ -742,7 +764,9 @@ def batch_marginals(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> Batc
     moments_ = Moments(*m.key_moments(), err_y, err_v, m.behind, m.mean, m.cov)
     lo, h, n, frame = grids[3]
     t_ends = frame.t(np.stack([lo, lo + (n - 1) * h], 1))
-    return BatchMarginals(moments_, log_z, rtol, pb, grids, (t_ends[:, 0], t_ends[:, 1], 2.0 * h))
+    prior = (np.asarray(prior_mean, dtype=float), np.asarray(prior_cov, dtype=float))
+    ranges = (t_ends[:, 0], t_ends[:, 1], 2.0 * h)
+    return BatchMarginals(moments_, log_z, rtol, pb, grids, ranges, prior)
 
 
 # --- pieces of the derivation of Eq. (16), and quantiles --------------------------------------

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from depthcore.problem import checks, frames, model
+from depthcore.problem import checks, frames, model, predictive
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from depthcore.registry.filters import FILTERS, names
 
@@ -27,7 +27,7 @@ RHO_RANGE = (1e-12, 1e3)
 PROCESS_NOISE_MAX = 10.0
 
 #: The names a message refusing :func:`track`'s inputs may start with.
-_TRACK_ARGUMENTS = ("mu", "rho", "prior", "process_noise", "filter", "steps")
+_TRACK_ARGUMENTS = ("mu", "rho", "prior", "process_noise", "filter", "steps", "gate")
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,10 @@ class Track:
     detail : object
         The filter's own result: the exact filter's :class:`~depthcore.exact.smoother.Track`,
         a Gaussian filter's :class:`~depthcore.problem.gaussian.History`.
+    updates : depthcore.problem.predictive.Updates
+        Per frame, shape (N,) each: the bearing's log predictive density and
+        two-sided tail probability under the filter's prediction before it saw
+        it (``NaN`` at a missing frame), and whether the gate skipped it.
     """
 
     filter: str
@@ -66,6 +70,7 @@ class Track:
     prior: Gaussian
     process_noise: float
     detail: Any = None
+    updates: Any = None
 
     @property
     def frames(self) -> np.ndarray:
@@ -143,7 +148,9 @@ def _rho(rho, mu, steps):
     return value
 
 
-def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal", steps=None) -> Track:
+def track(
+    mu, rho, prior=None, process_noise=0.0, filter: str = "optimal", steps=None, gate=None
+) -> Track:
     """Filter and smooth one track: depth, lateral position and velocity at every frame.
 
     Parameters
@@ -183,12 +190,19 @@ def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal", steps
     steps : array_like, shape (N - 1,), optional
         The depth's change from each frame to the next, > 0 (``None``: ones,
         the paper's frames).
+    gate : float or None
+        Skip a bearing whose two-sided tail probability under the filter's
+        prediction is below this probability
+        (:func:`depthcore.problem.predictive.gate`); the filter and the
+        smoother then run as if that frame had no bearing, and
+        ``updates.gated`` says which were skipped. ``None``: no gate.
 
     Returns
     -------
     Track
         ``filtered`` and ``smoothed`` means and SDs of ``x``, ``y`` (the depth)
-        and ``v`` at every frame, arrays of shape (N,).
+        and ``v`` at every frame, arrays of shape (N,), and each frame's
+        ``updates``.
 
     Examples
     --------
@@ -230,8 +244,12 @@ def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal", steps
             f"prior must be a depthcore.Gaussian of the state at frame 1 or None, "
             f"got {type(prior).__name__}"
         )
+    gate = predictive.gate(gate)
     more = {} if steps is None else {"steps": steps}
     try:
+        report = entry(mu, rho, prior.mean, prior.cov, q, gate=gate, **more).updates
+        if gate is not None and np.any(report.gated):
+            mu = np.where(report.gated, np.nan, mu)  # a skipped bearing is a missing one
         filtered, smoothed, detail = entry.smoother(mu, rho, prior.mean, prior.cov, q, **more)
     except (ValueError, np.linalg.LinAlgError) as exc:
         message = str(exc)
@@ -248,4 +266,4 @@ def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal", steps
                 f"rho is too small beside the prior for the {filter} filter's "
                 f"smoother: its moments are not finite (rho = {rho!r})"
             )
-    return Track(filter, filtered, smoothed, prior, q, detail)
+    return Track(filter, filtered, smoothed, prior, q, detail, report)
