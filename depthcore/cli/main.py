@@ -33,11 +33,10 @@ import numpy as np
 from depthcore import __version__
 from depthcore.cli import text as cli_text
 from depthcore.cli import tracks
-from depthcore.problem import checks
-from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
-from depthcore.problem.model import noise_free_state
+from depthcore.problem import checks, frames
+from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian
 from depthcore.registry.filters import FILTERS, RBPF_REPLICAS, names
-from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE
+from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE, default_prior
 from depthcore.studies import monte_carlo, reproduce
 from depthcore.studies import trials as study_trials
 
@@ -156,21 +155,24 @@ def _check_process_noise(q: float) -> float:
     return q
 
 
-def _prior(mu, prior_mean, prior_cov) -> Gaussian:
-    """The prior from the command line, defaulting to the paper's rule."""
+def _prior(mu, prior_mean, prior_cov, steps=None) -> Gaussian:
+    """The prior from the command line, defaulting to the paper's rule.
+
+    The rule takes the first three bearings present, at their depths travelled
+    (:func:`depthcore.registry.tracking.default_prior`).
+    """
     if prior_mean is not None:
         _check_limits("--prior-mean", prior_mean, PRIOR_MEAN_MAX)
     if prior_cov is not None:
         _check_limits("--prior-cov", prior_cov, PRIOR_COV_RANGE[1])
     if prior_mean is None:
         try:
-            c = noise_free_state(mu[:3])
+            mean = default_prior(mu, steps).mean
         except ValueError as exc:
             raise ValueError(
                 f"{exc}; the paper's prior rule needs the noise-free solution of the first "
-                "three bearings, so give --prior-mean"
+                "three bearings present, so give --prior-mean"
             ) from None
-        mean = paper_prior(c).mean
     else:
         mean = np.array(prior_mean)
     if prior_cov is None:
@@ -241,20 +243,18 @@ def _cmd_estimate(args) -> str:
     if args.json and args.csv:
         raise ValueError("--csv: print JSON (--json) or CSV (--csv), not both")
     if not args.per_frame:
-        _refuse_ignored(args, "estimate without --per-frame", {"gate": "--gate", "csv": "--csv"})
-        tracks.check_regular(src, rho)
+        _refuse_ignored(args, "estimate without --per-frame", {"csv": "--csv"})
     gate = None if args.gate is None else tracks.check_gate(args.gate)
     steps = None if src.steps is None or np.all(src.steps == 1.0) else src.steps
-    if args.prior_mean is None:
-        tracks.check_paper_prior(src)
-    prior = _prior(src.mu, args.prior_mean, args.prior_cov)
+    frames.check(src.mu, rho, steps)  # the bearings' refusals come before the prior's
+    prior = _prior(src.mu, args.prior_mean, args.prior_cov, steps)
     if args.per_frame:
         return _per_frame(args, src, rho, steps, prior, q, gate)
     names = tuple(dict.fromkeys(args.filters))
     if len(names) != len(args.filters):
         raise ValueError("--filters: a filter is named more than once")
     summary = reproduce.summarize(
-        src.mu, float(rho), prior, process_noise=q, smooth=args.smooth, names=names
+        src.mu, rho, prior, process_noise=q, smooth=args.smooth, names=names, steps=steps, gate=gate
     )
     return _json(summary) if args.json else cli_text.format_summary(summary)
 
@@ -769,7 +769,7 @@ def _add_estimate_arguments(sub, common) -> None:
         "--gate",
         type=float,
         metavar="P",
-        help="with --per-frame: skip a bearing whose predictive tail probability is below P",
+        help="skip a bearing whose predictive tail probability is below P (a probability)",
     )
     e.add_argument(
         "--csv", action="store_true", help="with --per-frame: print CSV instead of a table"

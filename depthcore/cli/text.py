@@ -135,8 +135,21 @@ def format_summary(summary: dict) -> str:
         f"prior at time 1: mean (x, y, v) = ({m[0]:#.4g}, {m[1]:#.4g}, {m[2]:#.4g}), "
         f"covariance {cov_text}",
     ]
-    if N != 3 or q > 0:
+    missing = sum(v is None for v in summary["mu"])
+    if N != 3 or q > 0 or missing or "steps" in summary or np.ndim(summary["rho"]):
         lines.append(f"{N} frames, process noise q = {q:g}; every filter at frame {N}")
+    if missing or "steps" in summary or np.ndim(summary["rho"]):
+        steps = summary.get("steps")
+        lines.append(
+            f"{missing} missing frames; "
+            + ("unit steps" if steps is None else f"steps {min(steps):.4g} to {max(steps):.4g}")
+            + "; "
+            + (
+                f"rho = {summary['rho']:.4g}"
+                if np.ndim(summary["rho"]) == 0
+                else f"rho per frame, {min(summary['rho']):.4g} to {max(summary['rho']):.4g}"
+            )
+        )
     w = max([13, *(len(n) + 1 for n in [*summary["filters"], *summary.get("not_run", {})])])
     lines.append(
         f"{'filter':<{w}} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}"
@@ -147,6 +160,10 @@ def format_summary(summary: dict) -> str:
             f"{name:<{w}} {f['depth']['mean']:>#11.4g} {f['depth']['sd']:>#10.4g} "
             f"{f['velocity']['mean']:>#10.4g} {f['velocity']['sd']:>#10.4g}"
         )
+    for name, f in summary["filters"].items():
+        if "gated" in f:
+            skipped = ", ".join(map(str, f["gated"])) or "none"
+            lines.append(f"{name:<{w}} gate skipped frames: {skipped}")
     for name, reason in summary.get("not_run", {}).items():
         lines.append(f"{name:<{w}} not run: {reason}")
     o = summary["filters"].get("optimal")

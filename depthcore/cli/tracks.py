@@ -399,46 +399,6 @@ def check_gate(gate: float) -> float:
     return gate
 
 
-def check_paper_prior(track: TrackFile) -> None:
-    """Refuse the paper's prior rule without bearings at frames 1-3 one unit step apart."""
-    steps = track.steps
-    if not np.all(np.isfinite(track.mu[:3])) or (steps is not None and np.any(steps[:2] != 1)):
-        raise FileRefusal(
-            f"{track.name}: the paper's prior rule needs bearings at the first three frames, "
-            "one unit step apart; give --prior-mean"
-        )
-
-
-def check_regular(track: TrackFile, rho) -> None:
-    """Refuse a track that is not the paper's frames: a gap, noise per frame, an uneven step.
-
-    Parameters
-    ----------
-    track : TrackFile
-    rho : float or ndarray, shape (N,)
-
-    Raises
-    ------
-    FileRefusal
-        Naming the track's source and ``--per-frame``, which takes such tracks.
-    """
-    missing = np.flatnonzero(np.isnan(track.mu))
-    if missing.size:
-        raise FileRefusal(
-            f"{track.name}: frame {track.frames[missing[0]]} has no bearing (nan); a track "
-            "with missing frames is estimated with --per-frame"
-        )
-    if np.ndim(rho) and np.any(rho != rho[0]):
-        raise FileRefusal(
-            f"{track.name}: rho differs from frame to frame; noise per frame is estimated "
-            "with --per-frame"
-        )
-    if track.steps is not None and np.any(track.steps != 1.0):
-        raise FileRefusal(
-            f"{track.name}: a step is not 1; uneven steps are estimated with --per-frame"
-        )
-
-
 # --- every frame's state ------------------------------------------------------------------
 
 #: The quantities of a per-frame row, by the attribute of a series of states.

@@ -20,7 +20,7 @@ import numpy as np
 
 from depthcore.exact import posterior
 from depthcore.kalman import iterated
-from depthcore.problem import checks
+from depthcore.problem import checks, frames
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import noise_free_state, noise_free_states_unchecked
 from depthcore.problem.scenarios import REPORTED, REPORTED_DECIMALS, SCENARIOS, Scenario
@@ -70,14 +70,18 @@ def summarize(
     process_noise: float = 0.0,
     smooth: bool = False,
     names=NAMES,
+    steps=None,
+    gate=None,
 ) -> dict:
     """Moments of the depth and velocity marginals of the named filters at the last frame.
 
     Parameters
     ----------
     mu : array_like, shape (N,)
-        Bearings at frames 1 .. N, ``N >= 3`` (the paper's problem is ``N = 3``).
-    rho : float
+        Bearings at frames 1 .. N, ``N >= 3`` (the paper's problem is ``N = 3``);
+        ``NaN`` at a missing frame.
+    rho : float or array_like, shape (N,)
+        One noise SD, or one per frame.
     prior : Gaussian
         Density of the state at frame 1.
     seed : int or numpy.random.SeedSequence
@@ -90,6 +94,11 @@ def summarize(
     names : sequence of str
         Filters of :data:`depthcore.registry.filters.FILTERS`, run in this order
         (default :data:`depthcore.registry.filters.NAMES`).
+    steps : array_like, shape (N - 1,), optional
+        The depth's change between frames (``None``: ones).
+    gate : float or None
+        The outlier gate (:mod:`depthcore.problem.predictive`); each filter with
+        one reports the frames it skipped (``"gated"``, numbered from 1).
 
     Returns
     -------
@@ -97,8 +106,10 @@ def summarize(
         ``{"mu", "rho", "prior_mean", "prior_cov", "c", "frames", "process_noise",
         "filters": {name: moments}}`` with plain floats and lists, ready for
         JSON; ``c`` is the noise-free state of the first three bearings at frame
-        3. Filters that do not support the frames or the process noise are
-        listed under ``"not_run"`` with the reason. With three frames and no
+        3 (``None`` unless they are frames 1-3 at unit steps, in front of the
+        camera). Filters that do not support the frames, the process noise, a
+        missing bearing, a noise per frame, the steps or the gate are listed
+        under ``"not_run"`` with the reason. With three frames and no
         process noise the optimal filter's moments carry ``prob_behind_camera``
         and ``prob_behind_camera_all_depths`` (with every real depth allowed).
         With ``smooth``, ``"smoothed"``: lists over the frames of the depth's
@@ -106,11 +117,18 @@ def summarize(
     """
     mu = np.asarray(mu, dtype=float)
     q = float(process_noise)
-    if len(mu) == 3:
+    track = frames.check(mu, rho, steps)
+    first_three = bool(np.all(track.present[:3]) and np.all(track.steps[:2] == 1.0))
+    if track.regular and len(mu) == 3:
         c = noise_free_state(mu)
-    else:  # noise may put the first three bearings' solution behind the camera
+    elif first_three:  # noise may put the first three bearings' solution behind the camera
         c = noise_free_states_unchecked(mu[:3])
         c = c if np.all(np.isfinite(c)) and c[1] > 2 else None
+    else:
+        c = None
+    track_options = {} if steps is None else {"steps": np.asarray(steps, dtype=float)}
+    if gate is not None:
+        track_options["gate"] = gate
     filters, not_run = {}, {}
     for name in check_names(names):
         f = FILTERS[name]
@@ -122,14 +140,23 @@ def summarize(
             )
             continue
         extra = {"process_noise": q} if q > 0 else {}
-        filters[name] = _moments(_run(name, mu, rho, prior, seed, **extra))
-    if len(mu) == 3 and q == 0 and "optimal" in filters:
+        try:
+            est = _run(name, mu, rho, prior, seed, **extra, **track_options)
+        except ValueError as exc:
+            if track.regular and not track_options:
+                raise
+            not_run[name] = str(exc)  # a track this filter does not take: it says why
+            continue
+        filters[name] = _moments(est)
+        if gate is not None:
+            filters[name]["gated"] = [int(k) + 1 for k in np.flatnonzero(est.updates.gated)]
+    if track.regular and len(mu) == 3 and q == 0 and "optimal" in filters and not gate:
         filters["optimal"]["prob_behind_camera_all_depths"] = float(
             _run("optimal", mu, rho, prior, seed, support="all").extras["prob_behind_camera"]
         )
     out = {
-        "mu": [float(v) for v in mu],
-        "rho": float(rho),
+        "mu": [None if np.isnan(v) else float(v) for v in mu],
+        "rho": float(rho) if np.ndim(rho) == 0 else [float(r) for r in rho],
         "prior_mean": prior.mean.tolist(),
         "prior_cov": prior.cov.tolist(),
         "c": None if c is None else c.tolist(),
@@ -137,10 +164,19 @@ def summarize(
         "process_noise": q,
         "filters": filters,
     }
+    if steps is not None:
+        out["steps"] = [float(v) for v in np.asarray(steps, dtype=float)]
     if not_run:
         out["not_run"] = not_run
     if smooth:
-        sm = posterior.posterior(mu, rho, prior.mean, prior.cov, q, history=True).smoothed()
+        kept = mu.copy()
+        if gate is not None:  # the bearings the exact filter's gate skips are left out
+            skipped = FILTERS["optimal"](mu, rho, prior.mean, prior.cov, q, **track_options)
+            kept[skipped.updates.gated] = np.nan
+        more = {} if steps is None else {"steps": track_options["steps"]}
+        sm = posterior.posterior(
+            kept, rho, prior.mean, prior.cov, q, history=True, **more
+        ).smoothed()
         out["smoothed"] = {
             "depth_mean": sm.depth_mean.tolist(),
             "depth_sd": sm.depth_sd.tolist(),
