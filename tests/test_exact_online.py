@@ -146,7 +146,8 @@ def test_the_batch_door_reports_each_frame_and_gates_as_the_online_filter():
     plain = optimal.run(missing, rho, PRIOR_MEAN, PRIOR_COV, steps=steps)
     assert_allclose(post.mean, plain.mean, rtol=1e-13)
     # without a gate: the report of every frame, its sum the bank's log marginal likelihood
-    ungated = plain.updates
+    assert plain.updates is None  # without a gate the door computes no report
+    ungated = plain.report()
     assert np.isnan(ungated.log_predictive[[4, 7]]).all() and not ungated.gated.any()
     log_front = log_ndtr(PRIOR_MEAN[1] / np.sqrt(PRIOR_COV[1, 1]))
     assert_allclose(np.nansum(ungated.log_predictive), plain.log_normaliser - log_front, rtol=1e-10)

@@ -210,9 +210,12 @@ class Mixture:
         step doubled), floored by roundoff; ``None`` for caller-given nodes.
     rtol : float or None
         The tolerance the nodes were placed for (:func:`~depthcore.exact.posterior.posterior`).
-    gated_updates : depthcore.problem.predictive.Updates or None
-        The per-frame report of a run with a gate (whose skipped bearings are
-        ``NaN`` in ``bank.mu``); see :attr:`updates`.
+    updates : depthcore.problem.predictive.Updates or None
+        The per-frame report of a run with a gate, arrays (..., N): each
+        bearing's log predictive density, tail probability and whether the gate
+        skipped it (a skipped bearing is ``NaN`` in ``bank.mu``); ``None`` from
+        a run without a gate, which computes no report (:meth:`report` does, on
+        request).
     """
 
     bank: Bank
@@ -224,26 +227,27 @@ class Mixture:
     depth_error: np.ndarray | None = None
     velocity_error: np.ndarray | None = None
     rtol: float | None = None
-    gated_updates: predictive.Updates | None = None
+    updates: predictive.Updates | None = None
 
     depth_mean = component_mean(1, "``E[y_N]``, shape (...).")
     depth_sd = component_sd(1, "The SD of ``y_N``, shape (...).")
     velocity_mean = component_mean(2, "``E[v_N]``, shape (...).")
     velocity_sd = component_sd(2, "The SD of ``v_N``, shape (...).")
 
-    @property
-    def updates(self) -> predictive.Updates:
+    def report(self) -> predictive.Updates:
         """Each frame's predictive report, arrays (..., N): log density, tail, gated.
 
         The bearing's log predictive density and two-sided tail probability under
         the mixture over depth nodes of the filters' predictions given the
         earlier bearings (:func:`depthcore.exact.online.track_updates`, the
         filter run one bearing at a time on its own nodes, to the same
-        tolerance); NaN at a missing frame. From a run with a gate, that run's
-        report (the skipped bearings marked).
+        tolerance: a pass over every frame of every problem, which the bank
+        does not need and so runs only here); NaN at a missing frame. From a
+        run with a gate, that run's report, :attr:`updates` (the skipped
+        bearings marked).
         """
-        if self.gated_updates is not None:
-            return self.gated_updates
+        if self.updates is not None:
+            return self.updates
         from depthcore.exact import online  # the online filter is built on this module
 
         return online.track_updates(self.bank, rtol=self.rtol or 1e-10)

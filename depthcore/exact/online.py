@@ -182,7 +182,15 @@ class Online:
             process_noise=np.array([self.process_noise]),
             cov=self.prior_cov[None],
         )
-        _, _, _, _, grids = quadrature.integrate(pb, (3,), self.rtol)
+        try:
+            _, _, _, _, grids = quadrature.integrate(pb, (3,), self.rtol)
+        except ValueError as exc:  # the quadrature names a problem of no bearings: name the frame
+            reason = str(exc).split(": ", 1)[-1]
+            where = "the prior" if self.frame == 0 else f"frame {self.frame}"
+            raise ValueError(
+                f"mu: the exact filter's depth nodes cannot be placed at {where} "
+                f"(rho = {self.rho:.6g}): {reason}"
+            ) from None
         lo, h, n, frame = grids[3]
         u = quadrature.grid(lo, h, n, 0.0)[0]
         u = u[~np.isnan(u)][None]

@@ -531,8 +531,12 @@ def run(
     OptimalMarginals, BatchMarginals, Moments or Mixture
         One triple: its :class:`OptimalMarginals`; a batch of triples: the
         :class:`BatchMarginals` (derived reading, front support) or the
-        :class:`~depthcore.exact.mixture.Moments`; more frames or process noise: the
-        :class:`~depthcore.exact.mixture.Mixture`.
+        :class:`~depthcore.exact.mixture.Moments`; more frames, process noise, a
+        track with gaps, noise per frame or steps, or a gate: the
+        :class:`~depthcore.exact.mixture.Mixture`, whose ``updates`` is the
+        per-frame report of a run with a gate (``None`` without one: the report
+        replays the track frame by frame, which the estimate does not need;
+        :meth:`~depthcore.exact.mixture.Mixture.report` computes it on request).
     """
     gate = predictive.gate(gate)
     if gate is not None:
@@ -578,7 +582,7 @@ def _gated(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps, gate):
         post = posterior.posterior(
             kept, b.frame_noise, prior_mean, prior_cov, process_noise, rtol, steps=b.frame_steps
         )
-    return dataclasses.replace(post, gated_updates=report)
+    return dataclasses.replace(post, updates=report)
 
 
 def _paper_only(reading, support) -> None:
