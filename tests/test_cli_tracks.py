@@ -14,7 +14,9 @@ from depthcore.cli import tracks
 from depthcore.cli.main import MU_MAX, PIXELS_MAX, STEP_RANGE, main
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import paper_prior
-from depthcore.registry.tracking import RHO_RANGE
+from depthcore.registry.filters import FILTERS, PARTICLES
+from depthcore.registry.tracking import RHO_RANGE, default_prior
+from depthcore.studies.reproduce import PARTICLE_SEED
 
 from helpers import exit_status
 
@@ -283,23 +285,44 @@ def test_a_file_without_a_solution_is_refused_naming_the_file(tmp_path, capsys):
     _refused(["estimate", "--mu-file", path, "--rho", "0.01"], capsys, "line.csv: mu is degenerate")
 
 
-# --- the summary refuses what only --per-frame takes --------------------------------------
+# --- the summary takes tracks as they come ---------------------------------------------
+
+
+def _seeded(name: str) -> dict:
+    """The options the summary gives a random filter: its particles and seed."""
+    if not FILTERS[name].random:
+        return {}
+    return {"rng": np.random.default_rng(PARTICLE_SEED), "n_particles": PARTICLES}
 
 
 @pytest.mark.parametrize(
-    "header, rows, words",
+    "header, rows",
     [
-        (["mu"], [[-0.3], [0.0], ["nan"], [0.2]], "frame 3 has no bearing (nan)"),
-        (["mu", "rho"], [[m, 0.01 * (k + 1)] for k, m in enumerate(MU)], "rho differs"),
-        (["mu", "step"], [[-0.3, ""], [0, 1], [0.2, 2]], "a step is not 1"),
+        (["mu"], [[-0.3], [0.0], ["nan"], [0.2], [0.33]]),
+        (["mu", "rho"], [[m, 0.01 * (k + 1)] for k, m in enumerate(MU)]),
+        (["mu", "step"], [[-0.3, ""], [0, 1], [0.2, 2], [0.3, 0.5]]),
     ],
 )
-def test_without_per_frame_a_track_that_is_not_the_papers_is_refused(
-    tmp_path, capsys, header, rows, words
+def test_without_per_frame_a_track_as_it_comes_is_each_filters_last_frame(
+    tmp_path, capsys, header, rows
 ):
     path = _file(tmp_path, _csv(header, rows))
-    argv = ["estimate", "--mu-file", path] + ([] if "rho" in header else ["--rho", "0.01"])
-    _refused(argv, capsys, words, "--per-frame")
+    track = _read(_csv(header, rows).encode())
+    rho = track.rho if "rho" in header else 0.01
+    argv = ["estimate", "--mu-file", path, "--json"] + (
+        [] if "rho" in header else ["--rho", "0.01"]
+    )
+    assert main(argv) == 0
+    out = _strict_json(capsys.readouterr().out)
+    steps = None if track.steps is None else track.steps
+    prior = default_prior(track.mu, steps)
+    assert out["prior_mean"] == prior.mean.tolist()
+    more = {} if steps is None else {"steps": steps}
+    for name, got in out["filters"].items():
+        expected = FILTERS[name](track.mu, rho, prior.mean, prior.cov, **more, **_seeded(name))
+        assert got["depth"]["mean"] == float(expected.depth_mean)
+    for name, reason in out.get("not_run", {}).items():
+        assert reason.splitlines() == [reason] and name in FILTERS
 
 
 def test_unit_steps_in_a_file_are_the_papers_frames(tmp_path, capsys):
@@ -313,7 +336,6 @@ def test_unit_steps_in_a_file_are_the_papers_frames(tmp_path, capsys):
 @pytest.mark.parametrize(
     "extra, words",
     [
-        (["--gate", "0.01"], "--gate: not used by estimate without --per-frame"),
         (["--csv"], "--csv: not used by estimate without --per-frame"),
         (["--per-frame", "--csv", "--json"], "--csv: print JSON (--json) or CSV (--csv)"),
         (["--per-frame", "--smooth"], "--smooth: not used by --per-frame"),
@@ -328,13 +350,12 @@ def test_the_per_frame_options_are_refused_in_one_line(capsys, extra, words):
     _refused(["estimate", "--mu", *map(str, MU), "--rho", str(RHO), *extra], capsys, words)
 
 
-def test_the_papers_prior_needs_the_first_three_bearings(capsys):
-    _refused(
-        ["estimate", "--mu", "-0.3", "nan", "0.2", "0.33", "--rho", "0.01", "--per-frame"],
-        capsys,
-        "--mu: the paper's prior rule needs bearings at the first three frames",
-        "--prior-mean",
-    )
+def test_the_papers_prior_takes_the_first_three_bearings_present(capsys):
+    mu = [-0.3, float("nan"), 0.0, 0.1, 0.16]
+    argv = ["estimate", "--mu", *map(str, mu), "--rho", "0.01", "--per-frame", "--json"]
+    assert main(argv) == 0
+    out = _strict_json(capsys.readouterr().out)
+    assert out["prior_mean"] == default_prior(np.array(mu)).mean.tolist()
 
 
 # --- every frame's state ------------------------------------------------------------------

@@ -115,6 +115,9 @@ class Estimate:
 def read_updates(result, single: bool):
     """``result.updates`` as :class:`depthcore.problem.predictive.Updates`, or ``None``.
 
+    A result that computes its report only on demand (the exact filter's
+    :meth:`depthcore.exact.mixture.Mixture.report`) is asked for it here.
+
     Parameters
     ----------
     result : object
@@ -122,7 +125,8 @@ def read_updates(result, single: bool):
     single : bool
         Whether it is of one sequence: then each array has shape (N,).
     """
-    found = getattr(result, "updates", None)
+    report = getattr(result, "report", None)
+    found = report() if callable(report) else getattr(result, "updates", None)
     if found is None:
         return None
     found = predictive.Updates(*(np.asarray(a) for a in found))
