@@ -488,34 +488,38 @@ def step(
     X = sigma_points.points(n, C)
     d = np.asarray(depth(X), dtype=float)
     check_front(d, here, allow_behind_camera=True)
-    every = bool(np.all(here))
-    sub = (lambda a: a) if every else (lambda a: a[here])
-    moments = innovation(sub(n), sub(C), sub(rho), h, sigma_points, points=sub(X))
+    if np.all(here):
+        moments = innovation(n, C, rho, h, sigma_points, points=X)
+    else:
+        # rows without a bearing are transformed too (h takes the whole batch) and masked:
+        # their sigma points may sit on the pole, where h divides by zero
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            moments = innovation(n, C, rho, h, sigma_points, points=X)
+        moments = Innovation(
+            np.where(here, moments.mean, 0.0),
+            np.where(here, moments.var, 1.0),
+            np.where(here[..., None], moments.cross, 0.0),
+        )
+        mu = np.where(here, mu, 0.0)
     if not np.all(moments.var > 0):
         raise ValueError(
             "sigma_points: their negative weights left the innovation's variance "
             f"{float(np.min(moments.var)):.6g} <= 0"
         )
-    lp, tl = predictive.gaussian(sub(mu), moments.mean, moments.var)
-    skip = predictive.skipped(tl, np.ones(np.shape(tl), dtype=bool), gate)
-    if every:
-        log_p, tail, gated = lp, tl, skip
-    else:
-        log_p[here], tail[here], gated[here] = lp, tl, skip
+    lp, tl = predictive.gaussian(mu, moments.mean, moments.var)
+    gated = predictive.skipped(tl, here, gate)
+    log_p, tail = np.where(here, lp, np.nan), np.where(here, tl, np.nan)
     behind = here & np.any(~(d > 0), axis=-1)
     use = here & ~gated
     if not allow_behind_camera:
         check_front(d, use, allow_behind_camera=False)
     if not np.any(use):
         return Step(n, C, log_p, tail, gated, behind)
-    mean, cov = _gain_update(sub(n), sub(C), sub(mu), moments)
-    if every and not np.any(skip):
-        return Step(mean, cov, log_p, tail, gated, behind)
-    keep = ~skip[..., None]
-    new_n, new_C = n.copy(), C.copy()
-    new_n[here] = np.where(keep, mean, sub(n))
-    new_C[here] = np.where(keep[..., None], cov, sub(C))
-    return Step(new_n, new_C, log_p, tail, gated, behind)
+    mean, cov = _gain_update(n, C, mu, moments)
+    if not np.all(use):
+        mean = np.where(use[..., None], mean, n)
+        cov = np.where(use[..., None, None], cov, C)
+    return Step(mean, cov, log_p, tail, gated, behind)
 
 
 def rule(sigma_points) -> SigmaPoints:
