@@ -29,7 +29,7 @@ depth, ``y_{k+1} = y_k + s_k``, ``x_{k+1} = x_k + s_k v_k`` and
 
 (``s'`` the scaled velocity, ``s_k`` the step), the noise on ``s'`` of variance
 ``w**2 q**2 s_k`` (:func:`predict` with ``step``); and with ``t_k`` the depth
-travelled since frame 1 (:attr:`depthcore.problem.frames.Frames.elapsed`,
+travelled since frame 1 (``Frames.elapsed`` of :mod:`depthcore.problem.frames`,
 ``k - 1`` for unit steps), ``y_k = y_1 + t_k`` and the bearing is
 ``mu_k = a_k / (1 + t_k w)``. A missing bearing (``NaN``) is predicted through.
 

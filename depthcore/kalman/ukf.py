@@ -41,6 +41,8 @@ transform is exact for linear maps, so the prediction is done in closed form,
 ``n = F m + e``, ``C = F P F^T`` -- the EKF's Eq. (10), with no approximation;
 process noise ``a_k ~ N(0, q**2)`` on the velocity adds ``q**2`` to the
 velocity's variance (textbook Eq. (19.10), :func:`depthcore.kalman.ekf.predict`).
+Over a step ``s`` of the depth (:mod:`depthcore.problem.frames`) ``F`` and ``e``
+are those of the step (``n = G(m, s)``) and the velocity gains ``q**2 s``.
 
 Update for the scalar measurement ``mu = h(x) + w``, ``w ~ N(0, rho**2)``,
 with sigma points ``X_i`` of the prediction ``N(n, C)`` and ``Z_i = h(X_i)``:
@@ -57,6 +59,16 @@ average values of ``h`` from both sides of the pole, and :func:`update` raises
 a few units, so the default check rejects every paper scenario; smaller
 ``alpha`` pulls the points in, and ``allow_behind_camera=True`` runs the
 transform across the pole anyway (to show what it does).
+
+Tracks as they come. :func:`run` takes missing bearings (``NaN``: the
+prediction is kept, row by row), ``rho`` per frame, steps and a gate; each
+frame (:func:`step`) reports the bearing's log density and two-sided tail
+probability under the unscented predictive ``N(z, s)`` above
+(:func:`bearing_predictive`), and whether a sigma point of the Gaussian it
+transformed lay at depth ``y <= 0``: ``UKFHistory.behind`` per frame,
+``UKFHistory.went_behind`` for the whole track. With
+``allow_behind_camera=True`` the filter runs on across the pole and says where
+it did.
 
 Pulling the points in does not rescue the filter on the paper's prior. Under
 ``N(n, 1000 I)`` the depth has positive density ``p_y(0)`` at ``y = 0``, so
