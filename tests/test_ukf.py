@@ -277,6 +277,7 @@ def test_ukf_approaches_the_ekf_in_the_small_noise_tight_prior_limit():
     [
         ((0.1, 0.1, 0.1), "mu is degenerate"),
         ((np.nan, 0.0, 0.2), "mu has 2 bearings present"),
+        ((np.inf, 0.0, 0.2), "mu must be finite"),
         ((0.2, 0.0, -0.3), "mu puts the point behind the camera"),
         ((-0.3, 0.0), r"mu must have shape (\(3,\)|\(\.\.\., N\) with N >= 3)"),
     ],

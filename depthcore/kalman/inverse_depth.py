@@ -21,6 +21,18 @@ filter evaluates at its mean ``w`` (the EKF's first-order treatment of a noise
 term multiplied by the state). With no process noise (the paper's model)
 ``(a_1, w, s)`` is constant, ``s`` stays ``v / y_1`` and ``a_k = a_1 + (k - 1) s``.
 
+**Uneven steps** (:mod:`depthcore.problem.frames`). Over a step ``s_k`` of the
+depth, ``y_{k+1} = y_k + s_k``, ``x_{k+1} = x_k + s_k v_k`` and
+``v_{k+1} = v_k + a`` with ``a ~ N(0, q**2 s_k)``. Dividing by ``y_1``:
+
+    a_{k+1} = a_k + s_k * s_k',   w constant,   s'_{k+1} = s'_k + w a,
+
+(``s'`` the scaled velocity, ``s_k`` the step), the noise on ``s'`` of variance
+``w**2 q**2 s_k`` (:func:`predict` with ``step``); and with ``t_k`` the depth
+travelled since frame 1 (``Frames.elapsed`` of :mod:`depthcore.problem.frames`,
+``k - 1`` for unit steps), ``y_k = y_1 + t_k`` and the bearing is
+``mu_k = a_k / (1 + t_k w)``. A missing bearing (``NaN``) is predicted through.
+
 **The prior.** The paper's prior is a Gaussian ``N(m, P)`` on ``(x_1, y_1, v)``.
 Its image under ``(x, y, v) -> (x / y, 1 / y, v / y)`` has no moments (the
 depth's density is positive at ``y = 0``), so, as an EKF carries a Gaussian
@@ -51,8 +63,56 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore.kalman import linear
-from depthcore.problem import checks, model, signature
-from depthcore.problem.gaussian import History, MeanAndCov, run_recursion, symmetric
+from depthcore.problem import checks, predictive, signature
+from depthcore.problem.gaussian import (
+    History,
+    MeanAndCov,
+    checked_track,
+    run_recursion,
+    symmetric,
+)
+
+
+class StateEstimate(MeanAndCov):
+    """A filter's estimate of ``(x_K, y_K, v_K)`` at the last frame, and what each update saw.
+
+    A :class:`~depthcore.problem.gaussian.MeanAndCov` (it unpacks as ``mean, cov
+    = estimate``) with the per-frame reports of the run that led to it.
+
+    Attributes
+    ----------
+    mean : ndarray, shape (..., 3)
+    cov : ndarray, shape (..., 3, 3)
+    updates : depthcore.problem.predictive.Updates or None
+        Per frame (..., K): the bearing's log predictive density, tail
+        probability and whether the gate skipped it.
+    behind : ndarray of bool, shape (..., K), or None
+        For the unscented filters, where a sigma point lay behind the camera
+        (:class:`depthcore.kalman.ukf.UKFHistory`).
+    """
+
+    updates = None
+    behind = None
+
+    def __new__(cls, mean, cov, updates=None, behind=None):
+        self = super().__new__(cls, mean, cov)
+        if updates is not None:
+            self.updates = updates
+        if behind is not None:
+            self.behind = behind
+        return self
+
+    @property
+    def went_behind(self) -> np.ndarray:
+        """Whether a sigma point lay behind the camera at any frame, shape (...)."""
+        if self.behind is None:
+            return np.zeros(np.shape(self.mean)[:-1], dtype=bool)
+        return np.any(self.behind, axis=-1)
+
+
+def travelled(k: int, elapsed=None):
+    """``t``, the depth travelled since frame 1: ``elapsed``, or ``k - 1`` for unit steps."""
+    return k - 1 if elapsed is None else np.asarray(elapsed, dtype=float)
 
 
 def prior(mean, cov) -> MeanAndCov:
@@ -90,8 +150,8 @@ def prior(mean, cov) -> MeanAndCov:
     )
 
 
-def predict(z, S, process_noise: float = 0.0) -> MeanAndCov:
-    """One frame of motion in inverse-depth coordinates: ``a += s``; ``s`` gains ``w**2 q**2``.
+def predict(z, S, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
+    """A step of motion in inverse depth: ``a += step s``; ``s`` gains ``(w q)**2 step``.
 
     Parameters
     ----------
@@ -100,28 +160,60 @@ def predict(z, S, process_noise: float = 0.0) -> MeanAndCov:
     S : array_like, shape (..., 3, 3)
     process_noise : float
         ``q >= 0``.
+    step : float or array_like, shape (...)
+        The depth's change ``> 0`` (module docstring); 1 is a frame of the paper.
     """
     z = np.asarray(z, dtype=float)
     S = np.asarray(S, dtype=float)
-    # The transition is F = I + E_13, as in Eq. (10).
+    h = np.asarray(step, dtype=float)
+    # The transition is F = I + step E_13, as in Eq. (10) with the step.
     C = S.copy()
-    C[..., 0, :] += S[..., 2, :]
-    C[..., :, 0] += C[..., :, 2]
-    C[..., 2, 2] += (z[..., 1] * process_noise) ** 2
-    return MeanAndCov(z + np.stack([z[..., 2], 0.0 * z[..., 2], 0.0 * z[..., 2]], axis=-1), C)
+    C[..., 0, :] += h[..., None] * S[..., 2, :]
+    C[..., :, 0] += h[..., None] * C[..., :, 2]
+    C[..., 2, 2] += (z[..., 1] * process_noise) ** 2 * h
+    zero = 0.0 * z[..., 2]
+    return MeanAndCov(z + np.stack([h * z[..., 2], zero, zero], axis=-1), C)
 
 
-def observation_vector(z, k: int) -> np.ndarray:
-    """Gradient of ``a / (1 + (k - 1) w)`` at ``z = (a, w, s)``, shape (..., 3).
+def observation_vector(z, k: int, elapsed=None) -> np.ndarray:
+    """Gradient of ``a / (1 + t w)`` at ``z = (a, w, s)``, shape (..., 3).
 
-    Frames count from 1.
+    Frames count from 1; ``t`` is ``elapsed`` (shape (...)), the depth
+    travelled since frame 1, or ``k - 1`` (unit steps).
     """
     z = np.asarray(z, dtype=float)
-    D = 1.0 + (k - 1) * z[..., 1]
-    return np.stack([1.0 / D, -(k - 1) * z[..., 0] / D**2, 0.0 * D], axis=-1)
+    t = travelled(k, elapsed)
+    D = 1.0 + t * z[..., 1]
+    return np.stack([1.0 / D, -t * z[..., 0] / D**2, 0.0 * D], axis=-1)
 
 
-def update(z, S, mu, rho, k: int) -> MeanAndCov:
+def bearing_predictive(z, S, rho, k: int, elapsed=None) -> tuple[np.ndarray, np.ndarray]:
+    """The EKF's predictive density of the bearing of frame ``k``: ``N(a / D, h^T S h + rho**2)``.
+
+    ``D = 1 + t w`` and ``h`` :func:`observation_vector` at the predicted mean
+    ``z`` (the innovation's moments of :func:`update`, as Eq. (12)).
+
+    Parameters
+    ----------
+    z : array_like, shape (..., 3)
+    S : array_like, shape (..., 3, 3)
+    rho : float or array_like, shape (...)
+    k : int
+    elapsed : float or array_like, shape (...), optional
+
+    Returns
+    -------
+    mean, var : ndarray, shape (...)
+    """
+    z = np.asarray(z, dtype=float)
+    h = observation_vector(z, k, elapsed)
+    var = np.einsum("...i,...ij,...j->...", h, np.asarray(S, dtype=float), h)
+    D = 1.0 + travelled(k, elapsed) * z[..., 1]
+    with np.errstate(divide="ignore", invalid="ignore"):  # D <= 0 is refused by update
+        return z[..., 0] / D, var + np.asarray(rho, dtype=float) ** 2
+
+
+def update(z, S, mu, rho, k: int, elapsed=None) -> MeanAndCov:
     """The EKF update (gain form, Joseph covariance, as Eq. (12)) by the bearing of frame ``k``.
 
     Parameters
@@ -133,17 +225,19 @@ def update(z, S, mu, rho, k: int) -> MeanAndCov:
     rho : float or array_like, shape (...)
     k : int
         The frame, ``>= 1``.
+    elapsed : float or array_like, shape (...), optional
+        The depth travelled since frame 1 (default ``k - 1``).
     """
     z = np.asarray(z, dtype=float)
     S = np.asarray(S, dtype=float)
-    D = 1.0 + (k - 1) * z[..., 1]
+    D = 1.0 + travelled(k, elapsed) * z[..., 1]
     if not np.all(D > 0):
         raise ValueError(
             "prior_mean leads the inverse-depth EKF to a predicted depth <= 0 at frame "
             f"{k}; the projection is not defined there"
         )
     r2 = np.asarray(rho, dtype=float) ** 2
-    h = observation_vector(z, k)
+    h = observation_vector(z, k, elapsed)
     Sh = np.einsum("...ij,...j->...i", S, h)
     s = r2 + np.einsum("...i,...i->...", h, Sh)
     K = Sh / s[..., None]
@@ -151,10 +245,10 @@ def update(z, S, mu, rho, k: int) -> MeanAndCov:
     return MeanAndCov(mean, linear.joseph(S, K[..., :, None], h[..., None, :], r2[..., None, None]))
 
 
-def to_state(z, S, k: int) -> MeanAndCov:
+def to_state(z, S, k: int, elapsed=None) -> MeanAndCov:
     """The Gaussian of ``(a_k, w, s_k)`` as one of ``(x_k, y_k, v_k)``, linearised at its mean.
 
-    ``x_k = a_k / w``, ``y_k = 1 / w + k - 1``, ``v_k = s_k / w``.
+    ``x_k = a_k / w``, ``y_k = 1 / w + t``, ``v_k = s_k / w``.
 
     Parameters
     ----------
@@ -163,6 +257,8 @@ def to_state(z, S, k: int) -> MeanAndCov:
     S : array_like, shape (..., 3, 3)
     k : int
         The frame, ``>= 1``.
+    elapsed : float or array_like, shape (...), optional
+        ``t``, the depth travelled since frame 1 (default ``k - 1``).
     """
     z = np.asarray(z, dtype=float)
     S = np.asarray(S, dtype=float)
@@ -178,7 +274,7 @@ def to_state(z, S, k: int) -> MeanAndCov:
     J[..., 1, 1] = -1.0 / w**2
     J[..., 2, 1] = -s / w**2
     J[..., 2, 2] = 1.0 / w
-    mean = np.stack([a / w, 1.0 / w + (k - 1), s / w], axis=-1)
+    mean = np.stack(np.broadcast_arrays(a / w, 1.0 / w + travelled(k, elapsed), s / w), axis=-1)
     return MeanAndCov(mean, symmetric(J @ S @ np.swapaxes(J, -1, -2)))
 
 
@@ -229,44 +325,81 @@ def depth_interval(z, S, k: int, level: float = 0.68) -> tuple[np.ndarray, np.nd
 
 
 @signature.documented
-def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
+def run(
+    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, steps=None, gate=None
+) -> History:
     """The inverse-depth EKF over ``K`` bearings, batched, in its own coordinates.
+
+    The prior carried over by :func:`prior`, then :func:`predict` over each
+    step and :func:`update` at each bearing; a missing bearing (``NaN``) or one
+    the gate skips leaves the prediction, row by row
+    (:func:`depthcore.problem.gaussian.run_recursion`).
 
     {parameters}
 
     Returns
     -------
-    means : ndarray, shape (..., K, 3)
-        The mean of ``(a_k, w, s_k)`` after bearing ``k``.
-    covs : ndarray, shape (..., K, 3, 3)
+    History
+        ``means`` (..., K, 3), the mean of ``(a_k, w, s_k)`` after frame ``k``;
+        ``covs`` (..., K, 3, 3); ``updates`` (..., K), each bearing's
+        predictive report (:func:`bearing_predictive`).
 
     See Also
     --------
     estimate : the last frame's estimate in ``(x, y, v)``.
     """
-    mu, rho, m, P = model.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
+    return _run(mu, rho, prior_mean, prior_cov, process_noise, steps, gate)[0]
+
+
+def _run(mu, rho, prior_mean, prior_cov, process_noise, steps, gate):
+    """:func:`run` and the checked frames."""
+    track = checked_track(mu, rho, prior_mean, prior_cov, steps, triples=False)
     q = checks.nonnegative_scalar(process_noise, "process_noise")
-    z, S = prior(m, P)
-    return run_recursion(
-        z, S, mu, lambda z, S, k: predict(z, S, q), lambda z, S, mu_k, k: update(z, S, mu_k, rho, k)
+    g = predictive.gate(gate)
+    f, regular = track.frames, track.frames.regular
+    z, S = prior(track.mean, track.cov)
+
+    def elapsed(k):
+        return None if regular else f.elapsed[..., k - 1]
+
+    def rho_at(k):
+        return f.row_rho if regular else f.rho[..., k - 1]
+
+    def predict_k(z, S, k):
+        return predict(z, S, q) if regular else predict(z, S, q, f.steps[..., k - 2])
+
+    history = run_recursion(
+        z,
+        S,
+        f.mu,
+        predict_k,
+        lambda z, S, mu_k, k: update(z, S, mu_k, rho_at(k), k, elapsed(k)),
+        f.present,
+        lambda z, S, k: bearing_predictive(z, S, rho_at(k), k, elapsed(k)),
+        g,
     )
+    return history, f
 
 
-def estimate(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> MeanAndCov:
+def estimate(
+    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, steps=None, gate=None
+) -> StateEstimate:
     """The inverse-depth EKF's estimate of ``(x_K, y_K, v_K)`` at the last frame, batched.
 
-    :func:`run`, then :func:`to_state` at frame ``K``. Parameters as for :func:`run`.
+    :func:`run`, then :func:`to_state` at frame ``K`` (at the depth travelled
+    to it). Parameters as for :func:`run`.
 
     Returns
     -------
-    MeanAndCov
-        Mean (..., 3) and covariance (..., 3, 3).
+    StateEstimate
+        Mean (..., 3), covariance (..., 3, 3) and the per-frame ``updates`` (..., K).
     """
-    history = run(mu, rho, prior_mean, prior_cov, process_noise)
-    return last_state(history, history.means.shape[-2])
+    history, f = _run(mu, rho, prior_mean, prior_cov, process_noise, steps, gate)
+    K = history.means.shape[-2]
+    return last_state(history, K, None if f.regular else f.elapsed[..., -1])
 
 
-def last_state(history: History, k: int) -> MeanAndCov:
+def last_state(history: History, k: int, elapsed=None) -> StateEstimate:
     """The last frame of ``history`` carried to ``(x, y, v)`` by :func:`to_state` at frame ``k``.
 
     Parameters
@@ -274,15 +407,20 @@ def last_state(history: History, k: int) -> MeanAndCov:
     history : History
         Means (..., K, 3) and covariances (..., K, 3, 3) in inverse-depth
         coordinates anchored at frame ``k`` (the modified-polar EKF's at the
-        current frame, ``k = 1``).
+        current frame, ``k = 1``), and their ``updates``.
     k : int
+    elapsed : float or array_like, shape (...), optional
+        The depth travelled from the anchor to the last frame (default ``k - 1``).
 
     Returns
     -------
-    MeanAndCov
+    StateEstimate
         Refused, naming ``mu``, where the bearings left a depth that is not positive.
     """
     try:
-        return to_state(history.means[..., -1, :], history.covs[..., -1, :, :], k)
+        out = to_state(history.means[..., -1, :], history.covs[..., -1, :, :], k, elapsed)
     except ValueError as exc:
         raise ValueError(f"mu: {exc}") from None
+    return StateEstimate(
+        out.mean, out.cov, getattr(history, "updates", None), getattr(history, "behind", None)
+    )

@@ -23,6 +23,15 @@ covariance takes the exact variance of ``w a`` under the Gaussian,
 ``w a`` is a product of two Gaussian factors and the transform matches
 second moments of products exactly).
 
+**Tracks as they come.** Over a step ``s`` of the depth the motion is the
+inverse-depth EKF's (``a += s s'``, the noise variance ``E[w**2] q**2 s``), and
+the bearing at the depth ``t`` travelled since frame 1 is ``a / (1 + t w)``
+(:mod:`depthcore.kalman.inverse_depth`). Each frame's update is
+:func:`depthcore.kalman.ukf.step`: a missing bearing (``NaN``) or one the gate
+skips is predicted through, the bearing's unscented predictive density is
+reported, and so are the frames at which a sigma point lay behind the camera
+(``1 + t w <= 0``).
+
 **The prior** is carried to inverse depth as by the EKF, by linearisation at the
 prior mean (:func:`depthcore.kalman.inverse_depth.prior`): the image of the paper's
 prior under ``y -> 1 / y`` has no moments (its depth density is positive at
@@ -45,18 +54,23 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore.kalman import inverse_depth, ukf
-from depthcore.problem import checks, model, signature
-from depthcore.problem.gaussian import History, MeanAndCov, run_recursion
+from depthcore.kalman.inverse_depth import StateEstimate, travelled
+from depthcore.problem import checks, predictive, signature
+from depthcore.problem.gaussian import MeanAndCov, checked_track
 
 
-def bearing(z, k: int) -> np.ndarray:
-    """``h_k(z) = a / (1 + (k - 1) w)`` at states ``z = (a, w, s)`` of shape (..., 3)."""
+def bearing(z, k: int, elapsed=None) -> np.ndarray:
+    """``h_k(z) = a / (1 + t w)`` at states ``z = (a, w, s)`` of shape (..., 3).
+
+    ``t`` is ``elapsed`` (broadcasting with ``z.shape[:-1]``), the depth
+    travelled since frame 1, or ``k - 1``.
+    """
     z = np.asarray(z, dtype=float)
-    return z[..., 0] / (1.0 + (k - 1) * z[..., 1])
+    return z[..., 0] / (1.0 + travelled(k, elapsed) * z[..., 1])
 
 
-def predict(z, S, process_noise: float = 0.0) -> MeanAndCov:
-    """One frame of motion: the EKF's prediction with the exact variance ``E[w**2] q**2``.
+def predict(z, S, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
+    """A step of motion: the EKF's prediction with the exact variance ``E[w**2] q**2 step``.
 
     Parameters as for :func:`depthcore.kalman.inverse_depth.predict`.
 
@@ -65,9 +79,9 @@ def predict(z, S, process_noise: float = 0.0) -> MeanAndCov:
     MeanAndCov
         Mean (..., 3) and covariance (..., 3, 3) of ``(a_{k+1}, w, s_{k+1})``.
     """
-    mean, cov = inverse_depth.predict(z, S, process_noise)
+    mean, cov = inverse_depth.predict(z, S, process_noise, step)
     cov = cov.copy()
-    cov[..., 2, 2] += np.asarray(S, dtype=float)[..., 1, 1] * process_noise**2
+    cov[..., 2, 2] += np.asarray(S, dtype=float)[..., 1, 1] * process_noise**2 * np.asarray(step)
     return MeanAndCov(mean, cov)
 
 
@@ -79,6 +93,7 @@ def update(
     k: int,
     sigma_points: ukf.SigmaPoints = ukf.SigmaPoints(),
     allow_behind_camera: bool = False,
+    elapsed=None,
 ) -> MeanAndCov:
     """The unscented update by the bearing of frame ``k``,
     :func:`depthcore.kalman.ukf.measurement_update`.
@@ -98,18 +113,27 @@ def update(
     allow_behind_camera : bool
         If true, only a sigma point at the pole ``1 + (k - 1) w = 0`` is refused,
         as :func:`depthcore.kalman.ukf.update` does.
+    elapsed : float or array_like, shape (...), optional
+        The depth ``t`` travelled since frame 1 (default ``k - 1``); the
+        condition is then ``1 + t w > 0``.
     """
+    t = _points_axis(travelled(k, elapsed))
 
     def h(X):  # the bearing at the sigma points, refused behind the camera
-        D = 1.0 + (k - 1) * X[..., 1]
+        D = 1.0 + t * X[..., 1]
         if np.any(D == 0) or not (allow_behind_camera or np.all(D > 0)):
             raise ValueError(
                 f"a sigma point of the inverse-depth UKF lies behind the camera at frame {k} "
                 "(1 + (k - 1) w <= 0), where its bearing is not defined"
             )
-        return bearing(X, k)
+        return X[..., 0] / D
 
     return ukf.measurement_update(z, S, mu, rho, h, sigma_points)
+
+
+def _points_axis(t):
+    """The depth travelled, per problem (...), broadcast over the sigma points' axis."""
+    return t if np.ndim(t) == 0 else np.asarray(t)[..., None]
 
 
 def to_state(
@@ -118,8 +142,9 @@ def to_state(
     k: int,
     sigma_points: ukf.SigmaPoints = ukf.SigmaPoints(),
     allow_behind_camera: bool = False,
+    elapsed=None,
 ) -> MeanAndCov:
-    """The unscented transform of ``N(z, S)`` through ``(a / w, 1 / w + k - 1, s / w)``.
+    """The unscented transform of ``N(z, S)`` through ``(a / w, 1 / w + t, s / w)``.
 
     Parameters
     ----------
@@ -131,6 +156,8 @@ def to_state(
         The frame.
     sigma_points : depthcore.kalman.ukf.SigmaPoints
     allow_behind_camera : bool
+    elapsed : float or array_like, shape (...), optional
+        ``t``, the depth travelled since frame 1 (default ``k - 1``).
 
     Returns
     -------
@@ -145,15 +172,24 @@ def to_state(
             f"{float(np.min(np.abs(w) if allow_behind_camera else w)):.3g}: its depth lies "
             "at or beyond infinity"
         )
-    Y = np.stack([X[..., 0] / w, 1.0 / w + (k - 1), X[..., 2] / w], axis=-1)
+    t = _points_axis(travelled(k, elapsed))
+    Y = np.stack(np.broadcast_arrays(X[..., 0] / w, 1.0 / w + t, X[..., 2] / w), axis=-1)
     Wm, Wc = sigma_points.weights()
     return ukf.unscented_transform(Y, Wm, Wc)
 
 
 @signature.documented
 def run(
-    mu, rho, prior_mean, prior_cov, process_noise=0.0, sigma_points=None, allow_behind_camera=False
-) -> History:
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise=0.0,
+    sigma_points=None,
+    allow_behind_camera=False,
+    steps=None,
+    gate=None,
+) -> ukf.UKFHistory:
     """The inverse-depth UKF over ``K`` bearings, batched, in its own coordinates.
 
     {parameters}
@@ -164,47 +200,127 @@ def run(
 
     Returns
     -------
-    means : ndarray, shape (..., K, 3)
-        Mean of ``(a_k, w, s_k)`` after bearing ``k``.
-    covs : ndarray, shape (..., K, 3, 3)
+    depthcore.kalman.ukf.UKFHistory
+        ``means`` (..., K, 3), the mean of ``(a_k, w, s_k)`` after frame ``k``;
+        ``covs`` (..., K, 3, 3); ``updates`` (..., K), each bearing's unscented
+        predictive report; ``behind`` (..., K), where a sigma point had
+        ``1 + t w <= 0``.
     """
-    sigma_points = ukf.rule(sigma_points)
-    mu, rho, m, P = model.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
-    q = checks.process_noise(process_noise, "process_noise")
-    z, S = inverse_depth.prior(m, P)
+    return _run(
+        mu,
+        rho,
+        prior_mean,
+        prior_cov,
+        process_noise,
+        sigma_points,
+        allow_behind_camera,
+        steps,
+        gate,
+    )[0]
 
-    def update_k(z, S, mu_k, k):
+
+def _run(mu, rho, prior_mean, prior_cov, q, sigma_points, allow_behind_camera, steps, gate):
+    """:func:`run` and the checked frames."""
+    sigma_points = ukf.rule(sigma_points)
+    track = checked_track(mu, rho, prior_mean, prior_cov, steps, triples=False)
+    q = checks.process_noise(q, "process_noise")
+    g = predictive.gate(gate)
+    f, regular = track.frames, track.frames.regular
+    z, S = inverse_depth.prior(track.mean, track.cov)
+    means, covs, reports = [], [], []
+    for k in range(1, f.mu.shape[-1] + 1):
+        if k > 1:
+            z, S = predict(z, S, q) if regular else predict(z, S, q, f.steps[..., k - 2])
+        t = _points_axis(travelled(k, None if regular else f.elapsed[..., k - 1]))
+
+        def h(X, t=t):
+            return X[..., 0] / (1.0 + t * X[..., 1])
+
+        def depth(X, t=t):
+            return 1.0 + t * X[..., 1]
+
+        rho_k = f.row_rho if regular else f.rho[..., k - 1]
         try:
-            return update(z, S, mu_k, rho, k, sigma_points, allow_behind_camera)
+            out = ukf.step(
+                z,
+                S,
+                f.mu[..., k - 1],
+                rho_k,
+                f.present[..., k - 1],
+                g,
+                sigma_points,
+                True,
+                h,
+                depth,
+            )
         except ValueError as exc:
             raise _refusal(exc, f"frame {k}") from None
-
-    return run_recursion(z, S, mu, lambda z, S, k: predict(z, S, q), update_k)
+        if not allow_behind_camera and np.any(out.behind & ~out.gated):
+            raise ValueError(
+                f"mu: a sigma point of the inverse-depth UKF lies behind the camera at frame {k} "
+                "(1 + t w <= 0, t the depth travelled), where its bearing is not defined"
+            )
+        z, S = out.mean, out.cov
+        means.append(z)
+        covs.append(S)
+        reports.append(out[2:])
+    log_p, tail, gated, behind = (np.stack(r, axis=-1) for r in zip(*reports, strict=True))
+    history = ukf.UKFHistory(
+        np.stack(means, axis=-2),
+        np.stack(covs, axis=-3),
+        predictive.Updates(log_p, tail, gated),
+        behind,
+    )
+    return history, f
 
 
 def estimate(
-    mu, rho, prior_mean, prior_cov, process_noise=0.0, sigma_points=None, allow_behind_camera=False
-) -> MeanAndCov:
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise=0.0,
+    sigma_points=None,
+    allow_behind_camera=False,
+    steps=None,
+    gate=None,
+) -> StateEstimate:
     """The inverse-depth UKF's estimate of ``(x_K, y_K, v_K)``, batched.
 
-    :func:`run`, then :func:`to_state` at frame ``K``; parameters as for :func:`run`.
+    :func:`run`, then :func:`to_state` at frame ``K`` (at the depth travelled
+    to it); parameters as for :func:`run`.
 
     Returns
     -------
-    MeanAndCov
-        Mean (..., 3) and covariance (..., 3, 3).
+    depthcore.kalman.inverse_depth.StateEstimate
+        Mean (..., 3), covariance (..., 3, 3), the per-frame ``updates`` and
+        ``behind`` (..., K).
     """
     sigma_points = ukf.rule(sigma_points)
-    means, covs = run(
-        mu, rho, prior_mean, prior_cov, process_noise, sigma_points, allow_behind_camera
+    history, f = _run(
+        mu,
+        rho,
+        prior_mean,
+        prior_cov,
+        process_noise,
+        sigma_points,
+        allow_behind_camera,
+        steps,
+        gate,
     )
-    K = means.shape[-2]
+    K = history.means.shape[-2]
     try:
-        return to_state(
-            means[..., -1, :], covs[..., -1, :, :], K, sigma_points, allow_behind_camera
+        out = to_state(
+            history.means[..., -1, :],
+            history.covs[..., -1, :, :],
+            K,
+            sigma_points,
+            allow_behind_camera,
+            None if f.regular else f.elapsed[..., -1],
         )
     except ValueError as exc:
         raise _refusal(exc, "the last frame") from None
+    return StateEstimate(out.mean, out.cov, history.updates, history.behind)
 
 
 def _refusal(exc: ValueError, where: str) -> ValueError:

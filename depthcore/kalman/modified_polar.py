@@ -52,6 +52,18 @@ depth unchanged (``phi_k`` is linear in ``(a, s)`` at fixed ``w``), so the
 filters coincide when the depth is known, and differ at second order in the
 spread otherwise.
 
+**Uneven steps** (:mod:`depthcore.problem.frames`). Over a step ``s`` of the
+depth (``y_{k+1} = y_k + s``, ``x_{k+1} = x_k + s v_k``, ``v_{k+1} = v_k + a``
+with ``a ~ N(0, q**2 s)``) the same division by the new depth gives, with
+``D = 1 + s omega_k`` (so that ``y_{k+1} / y_k = D``),
+
+    mu_{k+1} = (mu_k + s nu_k) / D,   omega_{k+1} = omega_k / D,
+    nu_{k+1} = (nu_k + omega_k a) / D,
+
+the noise on ``nu`` of variance ``(omega q / D)**2 s``: :func:`transition`,
+:func:`transition_jacobian` and :func:`predict` with ``step``; ``s = 1`` is the
+motion above. A missing bearing (``NaN``) is predicted through.
+
 The estimate at the last frame ``K`` is ``(x_K, y_K, v_K) = (mu_K, 1, nu_K) /
 omega_K``, linearised at the mean (:func:`depthcore.kalman.inverse_depth.to_state` at
 frame 1, the anchor being the current frame).
@@ -68,32 +80,36 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore.kalman import inverse_depth, linear
-from depthcore.problem import checks, model
-from depthcore.problem.gaussian import History, MeanAndCov, run_recursion
+from depthcore.problem import checks, predictive, signature
+from depthcore.problem.gaussian import History, MeanAndCov, checked_track, run_recursion
 
 #: The measurement matrix (the bearing is the first coordinate).
 H = np.array([[1.0, 0.0, 0.0]])
 H.setflags(write=False)
 
 
-def _ratio(u) -> np.ndarray:
-    """``D = 1 + omega`` at states (..., 3); refuses a point that would pass behind the camera."""
-    D = 1.0 + u[..., 1]
+def _ratio(u, step=1.0) -> np.ndarray:
+    """``D = 1 + s omega`` at states (..., 3); refuses a point that would pass behind the camera."""
+    s = np.asarray(step, dtype=float)
+    D = 1.0 + s * u[..., 1]
     if not np.all(D > 0):
         raise ValueError(
-            "the modified-polar EKF's mean inverse depth is <= -1 "
-            f"(min {float(np.min(u[..., 1])):.6g}): the next depth y + 1 would not be positive"
+            "the modified-polar EKF's mean inverse depth is <= -1 / step "
+            f"(min {float(np.min(u[..., 1])):.6g}): the next depth y + step would not be "
+            "positive"
         )
     return D
 
 
-def transition(u) -> np.ndarray:
-    """One frame of motion without noise, ``(mu + nu, omega, nu) / (1 + omega)``.
+def transition(u, step=1.0) -> np.ndarray:
+    """A step of motion without noise, ``(mu + s nu, omega, nu) / (1 + s omega)``.
 
     Parameters
     ----------
     u : array_like, shape (..., 3)
         ``(mu_k, omega_k, nu_k)``.
+    step : float or array_like, shape (...)
+        ``s > 0``, the depth's change (1: a frame of the paper).
 
     Returns
     -------
@@ -101,48 +117,72 @@ def transition(u) -> np.ndarray:
         ``(mu_{k+1}, omega_{k+1}, nu_{k+1})``.
     """
     u = np.asarray(u, dtype=float)
-    D = 1.0 + u[..., 1]
-    return np.stack([u[..., 0] + u[..., 2], u[..., 1], u[..., 2]], axis=-1) / D[..., None]
+    s = np.asarray(step, dtype=float)
+    D = 1.0 + s * u[..., 1]
+    moved = np.broadcast_arrays(u[..., 0] + s * u[..., 2], u[..., 1], u[..., 2])
+    return np.stack(moved, axis=-1) / D[..., None]
 
 
-def transition_jacobian(u) -> np.ndarray:
+def transition_jacobian(u, step=1.0) -> np.ndarray:
     """The Jacobian of :func:`transition` at ``u`` (..., 3), shape (..., 3, 3)."""
     u = np.asarray(u, dtype=float)
+    s = np.asarray(step, dtype=float)
     mu, omega, nu = u[..., 0], u[..., 1], u[..., 2]
-    D = 1.0 + omega
-    J = np.zeros(u.shape + (3,))
+    D = 1.0 + s * omega
+    J = np.zeros(D.shape + (3, 3))
     J[..., 0, 0] = 1.0 / D
-    J[..., 0, 1] = -(mu + nu) / D**2
-    J[..., 0, 2] = 1.0 / D
+    J[..., 0, 1] = -s * (mu + s * nu) / D**2
+    J[..., 0, 2] = s / D
     J[..., 1, 1] = 1.0 / D**2
-    J[..., 2, 1] = -nu / D**2
+    J[..., 2, 1] = -s * nu / D**2
     J[..., 2, 2] = 1.0 / D
     return J
 
 
-def predict(u, U, process_noise: float = 0.0) -> MeanAndCov:
-    """The EKF's prediction: the motion at the mean, the covariance by its Jacobian.
+def predict(u, U, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
+    """The EKF's prediction over a step: the motion at the mean, the covariance by its Jacobian.
 
     Parameters
     ----------
     u : array_like, shape (..., 3)
-        Filtered mean of ``(mu_k, omega_k, nu_k)``; ``omega > -1``.
+        Filtered mean of ``(mu_k, omega_k, nu_k)``; ``1 + s omega > 0``.
     U : array_like, shape (..., 3, 3)
     process_noise : float
-        ``q >= 0``; adds ``(omega q / (1 + omega))**2`` to ``nu``'s variance.
+        ``q >= 0``; adds ``(omega q / D)**2 s`` to ``nu``'s variance.
+    step : float or array_like, shape (...)
+        ``s > 0`` (default 1, the paper's frame).
 
     Returns
     -------
     MeanAndCov
-        Predicted mean (..., 3) and covariance (..., 3, 3) at frame ``k + 1``.
+        Predicted mean (..., 3) and covariance (..., 3, 3) at the next frame.
     """
     u = np.asarray(u, dtype=float)
     U = np.asarray(U, dtype=float)
-    D = _ratio(u)
-    J = transition_jacobian(u)
+    s = np.asarray(step, dtype=float)
+    D = _ratio(u, s)
+    J = transition_jacobian(u, s)
     cov = J @ U @ np.swapaxes(J, -1, -2)
-    cov[..., 2, 2] += (u[..., 1] * process_noise / D) ** 2
-    return MeanAndCov(transition(u), 0.5 * (cov + np.swapaxes(cov, -1, -2)))
+    cov[..., 2, 2] += (u[..., 1] * process_noise / D) ** 2 * s
+    return MeanAndCov(transition(u, s), 0.5 * (cov + np.swapaxes(cov, -1, -2)))
+
+
+def bearing_predictive(u, U, rho) -> tuple[np.ndarray, np.ndarray]:
+    """The predictive density of the bearing, ``N(u_0, U_00 + rho**2)`` (textbook 19.2.2).
+
+    Parameters
+    ----------
+    u : array_like, shape (..., 3)
+        Predicted mean.
+    U : array_like, shape (..., 3, 3)
+    rho : float or array_like, shape (...)
+
+    Returns
+    -------
+    mean, var : ndarray, shape (...)
+    """
+    u = np.asarray(u, dtype=float)
+    return u[..., 0], np.asarray(U, dtype=float)[..., 0, 0] + np.asarray(rho, dtype=float) ** 2
 
 
 def update(u, U, mu, rho) -> MeanAndCov:
@@ -178,28 +218,51 @@ def anchor_jacobian(z, k: int) -> np.ndarray:
     return J
 
 
-def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
+@signature.documented
+def run(
+    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, steps=None, gate=None
+) -> History:
     """The modified-polar EKF over ``K`` bearings, batched, in its own coordinates.
 
     As :func:`depthcore.kalman.inverse_depth.run` (the same arguments, a
-    :class:`~depthcore.problem.gaussian.History` of ``K`` frames), with the means
-    and covariances of ``(mu_k, omega_k, nu_k)``.
+    :class:`~depthcore.problem.gaussian.History` of ``K`` frames with its
+    ``updates``), with the means and covariances of ``(mu_k, omega_k, nu_k)``:
+    :func:`predict` over each step, :func:`update` at each bearing, a missing
+    or gated bearing predicted through (the predictive density
+    :func:`bearing_predictive`).
+
+    {parameters}
     """
-    mu, rho, m, P = model.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
+    track = checked_track(mu, rho, prior_mean, prior_cov, steps, triples=False)
     q = checks.process_noise(process_noise, "process_noise")
-    u, U = inverse_depth.prior(m, P)  # at frame 1 the two coordinates coincide
-    rho = np.broadcast_to(rho, mu.shape[:-1])
+    g = predictive.gate(gate)
+    f, regular = track.frames, track.frames.regular
+    u, U = inverse_depth.prior(track.mean, track.cov)  # at frame 1 the two coordinates coincide
+
+    def rho_at(k):
+        return f.row_rho if regular else f.rho[..., k - 1]
 
     def predict_k(u, U, k):
         try:
-            return predict(u, U, q)
+            return predict(u, U, q) if regular else predict(u, U, q, f.steps[..., k - 2])
         except ValueError as exc:
             raise ValueError(f"mu: {exc}") from None
 
-    return run_recursion(u, U, mu, predict_k, lambda u, U, mu_k, k: update(u, U, mu_k, rho))
+    return run_recursion(
+        u,
+        U,
+        f.mu,
+        predict_k,
+        lambda u, U, mu_k, k: update(u, U, mu_k, rho_at(k)),
+        f.present,
+        lambda u, U, k: bearing_predictive(u, U, rho_at(k)),
+        g,
+    )
 
 
-def estimate(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> MeanAndCov:
+def estimate(
+    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, steps=None, gate=None
+) -> inverse_depth.StateEstimate:
     """The modified-polar EKF's estimate of ``(x_K, y_K, v_K)``, batched.
 
     :func:`run`, then ``(mu_K, 1, nu_K) / omega_K`` linearised at the mean.
@@ -207,7 +270,8 @@ def estimate(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> Mean
 
     Returns
     -------
-    MeanAndCov
-        Mean (..., 3) and covariance (..., 3, 3).
+    depthcore.kalman.inverse_depth.StateEstimate
+        Mean (..., 3), covariance (..., 3, 3) and the per-frame ``updates`` (..., K).
     """
-    return inverse_depth.last_state(run(mu, rho, prior_mean, prior_cov, process_noise), 1)
+    history = run(mu, rho, prior_mean, prior_cov, process_noise, steps, gate)
+    return inverse_depth.last_state(history, 1)

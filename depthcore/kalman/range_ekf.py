@@ -33,6 +33,17 @@ multiplied at each frame by its EKF's predictive likelihood of the bearing,
 ``h`` Eq. (11) at ``n`` (:func:`predictive_log_likelihoods`); weights are kept in
 log space and normalised at the end (:func:`posterior`).
 
+**Tracks as they come** (:mod:`depthcore.problem.frames`). Each component's
+EKF predicts over the step ``s_k`` (Eq. (10) with the step, the velocity's
+variance grown by ``q**2 s_k``) and reads ``rho`` per frame; a missing bearing
+(``NaN``) is predicted through and leaves the weights alone. Before each bearing
+the mixture's predictive density is the Gaussian sum of the components'
+predictive densities with the weights so far,
+``sum_i w_i N(mu_k; n1 / n2, s_k)`` (:func:`depthcore.problem.predictive.mixture`):
+its log density and two-sided tail probability are reported per frame, and a
+gate skips a bearing whose tail is below it, in every component at once (as a
+missing bearing).
+
 **Relation to the exact filter.** The bank of Kalman filters of
 :mod:`depthcore.exact.bank` is the limit of this mixture as the intervals shrink:
 with a depth SD ``s_i -> 0`` the EKF's linearisation in the depth is exact, the
@@ -57,7 +68,8 @@ import numpy as np
 from scipy.special import log_ndtr
 
 from depthcore.kalman import ekf
-from depthcore.problem import checks, model, signature
+from depthcore.problem import checks, model, predictive, signature
+from depthcore.problem.gaussian import checked_track, symmetric
 
 #: Components by default, enough for Figure 2's depth mean and SD to agree with the
 #: exact filter's to 1e-2 relative (far fewer leave the EKFs' linearisation over broad
@@ -110,7 +122,10 @@ class GaussianSum(NamedTuple):
     log_evidence : ndarray, shape (...)
         Log of the sum of prior weight times predictive likelihood: the
         mixture's approximation of ``log p(mu_1 .. mu_N)`` restricted to the
-        interval.
+        interval (over the bearings incorporated).
+    updates : depthcore.problem.predictive.Updates or None
+        Per frame (..., N): the bearing's log density and tail probability
+        under the mixture's predictive density, and whether the gate skipped it.
     """
 
     weight: np.ndarray
@@ -120,6 +135,7 @@ class GaussianSum(NamedTuple):
     cov: np.ndarray
     edges: np.ndarray
     log_evidence: np.ndarray
+    updates: predictive.Updates | None = None
 
 
 def _log_interval_probability(a, b, mean, sd):
@@ -274,6 +290,25 @@ def mixture_moments(weight, means, covs) -> tuple[np.ndarray, np.ndarray]:
     return mean, 0.5 * (cov + np.swapaxes(cov, -1, -2))
 
 
+def component_predictive(n, C, rho) -> tuple[np.ndarray, np.ndarray]:
+    """Each EKF's predictive density of a bearing: ``N(n1 / n2, rho**2 + h^T C h)``, Eq. (12).
+
+    Parameters
+    ----------
+    n : ndarray, shape (..., 3)
+        The EKF's prediction (Eq. (10)).
+    C : ndarray, shape (..., 3, 3)
+    rho : float or array_like, broadcasting with (...)
+
+    Returns
+    -------
+    mean, var : ndarray, shape (...)
+    """
+    h = model.observation_vector(n)
+    var = np.asarray(rho, dtype=float) ** 2 + np.einsum("...i,...ij,...j->...", h, C, h)
+    return n[..., 0] / n[..., 1], var
+
+
 @signature.documented
 def posterior(
     mu,
@@ -283,8 +318,17 @@ def posterior(
     process_noise: float = 0.0,
     n_components: int = N_COMPONENTS,
     depth_range=None,
+    steps=None,
+    gate=None,
 ) -> GaussianSum:
     """The range-parametrised EKF [peach1995]_ over ``N`` bearings, batched.
+
+    Each component runs the EKF of :func:`depthcore.kalman.ekf.run` (its
+    square-root information steps :func:`depthcore.kalman.ekf.information_predict`
+    and :func:`depthcore.kalman.ekf.information_update`), its weight multiplied
+    by its predictive likelihood of each bearing incorporated
+    (:func:`predictive_log_likelihoods`' density); a missing or gated bearing
+    is predicted through (module docstring).
 
     {parameters}
     n_components : int
@@ -296,21 +340,57 @@ def posterior(
     Returns
     -------
     GaussianSum
-        The components at frame ``N``, their normalised weights, and the
-        mixture's mean (..., 3) and covariance (..., 3, 3).
+        The components at frame ``N``, their normalised weights, the
+        mixture's mean (..., 3) and covariance (..., 3, 3), and the per-frame
+        ``updates`` (..., N).
     """
-    mu, rho, pm, pc = model.batch_inputs(mu, rho, prior_mean, prior_cov)
+    track = checked_track(mu, rho, prior_mean, prior_cov, steps)
     q = checks.process_noise(process_noise, "process_noise")
-    start = components(pm, pc, n_components, depth_range)
-    n = start.log_weight.shape[-1]
-    mu_c = np.broadcast_to(mu[..., None, :], mu.shape[:-1] + (n, mu.shape[-1]))
-    rho_c = np.broadcast_to(np.asarray(rho)[..., None], mu.shape[:-1] + (n,))
+    g = predictive.gate(gate)
+    f, regular = track.frames, track.frames.regular
+    start = components(track.mean, track.cov, n_components, depth_range)
+    batch, n_frames = f.mu.shape[:-1], f.mu.shape[-1]
+    shape = batch + (start.log_weight.shape[-1],)
     try:
-        means, covs = ekf.run(mu_c, rho_c, start.mean, start.cov, q)
+        cov0 = checks.covariances(start.cov, "prior_cov", 3)
     except ValueError as exc:
         raise ValueError(f"mu: a component's EKF has no answer ({exc})") from None
-    log_lik = predictive_log_likelihoods(means, covs, start.mean, start.cov, mu_c, rho_c, q)
-    log_w = start.log_weight + np.sum(log_lik, axis=-1)
+    if not np.all(np.isfinite(np.max(start.log_weight, axis=-1))):
+        raise ValueError(
+            "depth_range holds no prior probability, or no component explains the bearings"
+        )
+    m = np.broadcast_to(start.mean, shape + (3,))
+    C = np.broadcast_to(cov0, shape + (3, 3))
+    R = np.linalg.inv(np.linalg.cholesky(C))
+    log_w = start.log_weight
+    means, roots, log_liks, reports = [], [], [], []
+    for i in range(n_frames):
+        rho_i = (f.row_rho if regular else f.rho[..., i])[..., None]
+        if i > 0:
+            step = 1.0 if regular else f.steps[..., i - 1, None]
+            m, R = ekf.information_predict(means[-1], roots[-1], q, step)
+            R_inv = np.linalg.inv(roots[-1])
+            previous = symmetric(R_inv @ np.swapaxes(R_inv, -1, -2))
+            C = (
+                ekf.predict(means[-1], previous, q)
+                if regular
+                else ekf.predict(means[-1], previous, q, step)
+            ).cov
+        here = f.present[..., i]
+        mu_i = np.where(here, f.mu[..., i], 0.0)
+        bearing, var = component_predictive(m, C, rho_i)
+        log_p, tail = predictive.mixture(mu_i, log_w, bearing, var)
+        gated = predictive.skipped(tail, here, g)
+        use = here & ~gated
+        reports.append((np.where(here, log_p, np.nan), np.where(here, tail, np.nan), gated))
+        r = mu_i[..., None] - bearing
+        log_lik = np.where(use[..., None], -0.5 * (_LOG_2PI + np.log(var) + r**2 / var), 0.0)
+        log_w = log_w + log_lik
+        log_liks.append(log_lik)
+        out = ekf.information_update(m, R, mu_i[..., None], rho_i, use[..., None])
+        means.append(out.mean)
+        roots.append(out.root)
+    log_w = start.log_weight + np.sum(np.stack(log_liks, axis=-1), axis=-1)
     top = np.max(log_w, axis=-1, keepdims=True)
     if not np.all(np.isfinite(top)):
         raise ValueError(
@@ -319,6 +399,11 @@ def posterior(
     w = np.exp(log_w - top)
     total = np.sum(w, axis=-1, keepdims=True)
     w = w / total
-    last_m, last_c = means[..., -1, :], covs[..., -1, :, :]
+    last_m = means[-1]
+    R_inv = np.linalg.inv(roots[-1])
+    last_c = symmetric(R_inv @ np.swapaxes(R_inv, -1, -2))
     mean, cov = mixture_moments(w, last_m, last_c)
-    return GaussianSum(w, last_m, last_c, mean, cov, start.edges, (top + np.log(total))[..., 0])
+    updates = predictive.Updates(*(np.stack(x, axis=-1) for x in zip(*reports, strict=True)))
+    return GaussianSum(
+        w, last_m, last_c, mean, cov, start.edges, (top + np.log(total))[..., 0], updates
+    )

@@ -41,6 +41,8 @@ transform is exact for linear maps, so the prediction is done in closed form,
 ``n = F m + e``, ``C = F P F^T`` -- the EKF's Eq. (10), with no approximation;
 process noise ``a_k ~ N(0, q**2)`` on the velocity adds ``q**2`` to the
 velocity's variance (textbook Eq. (19.10), :func:`depthcore.kalman.ekf.predict`).
+Over a step ``s`` of the depth (:mod:`depthcore.problem.frames`) ``F`` and ``e``
+are those of the step (``n = G(m, s)``) and the velocity gains ``q**2 s``.
 
 Update for the scalar measurement ``mu = h(x) + w``, ``w ~ N(0, rho**2)``,
 with sigma points ``X_i`` of the prediction ``N(n, C)`` and ``Z_i = h(X_i)``:
@@ -57,6 +59,16 @@ average values of ``h`` from both sides of the pole, and :func:`update` raises
 a few units, so the default check rejects every paper scenario; smaller
 ``alpha`` pulls the points in, and ``allow_behind_camera=True`` runs the
 transform across the pole anyway (to show what it does).
+
+Tracks as they come. :func:`run` takes missing bearings (``NaN``: the
+prediction is kept, row by row), ``rho`` per frame, steps and a gate; each
+frame (:func:`step`) reports the bearing's log density and two-sided tail
+probability under the unscented predictive ``N(z, s)`` above
+(:func:`bearing_predictive`), and whether a sigma point of the Gaussian it
+transformed lay at depth ``y <= 0``: ``UKFHistory.behind`` per frame,
+``UKFHistory.went_behind`` for the whole track. With
+``allow_behind_camera=True`` the filter runs on across the pole and says where
+it did.
 
 Pulling the points in does not rescue the filter on the paper's prior. Under
 ``N(n, 1000 I)`` the depth has positive density ``p_y(0)`` at ``y = 0``, so
@@ -80,17 +92,14 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
+from typing import NamedTuple
 
 import numpy as np
 
 from depthcore import _paths
-from depthcore.kalman.ekf import run_gaussian_filter
-from depthcore.problem import checks, model, signature
-from depthcore.problem.gaussian import History, MeanAndCov, symmetric
-
-#: The UKF's estimates after each measurement (the type of :func:`depthcore.kalman.ekf.run`).
-UKFHistory = History
+from depthcore.kalman import ekf
+from depthcore.problem import checks, model, predictive, signature
+from depthcore.problem.gaussian import History, MeanAndCov, checked_track, symmetric
 
 #: Dimension of the state ``(x, y, v)``.
 DIM = 3
@@ -219,13 +228,76 @@ def unscented_transform(points, Wm, Wc, noise_cov=None) -> MeanAndCov:
     return MeanAndCov(mean, symmetric(cov))
 
 
+class Innovation(NamedTuple):
+    """The unscented moments of a scalar measurement ``mu = h(x) + w`` under ``N(n, C)``.
+
+    Attributes
+    ----------
+    mean : ndarray, shape (...)
+        ``z = sum_i Wm_i Z_i``, the predicted measurement.
+    var : ndarray, shape (...)
+        ``s = rho**2 + sum_i Wc_i (Z_i - z)**2``, the innovation's variance: the
+        unscented predictive density of the measurement is ``N(z, s)``.
+    cross : ndarray, shape (..., 3)
+        ``c = sum_i Wc_i (X_i - n) (Z_i - z)``, its cross-covariance with the state.
+    """
+
+    mean: np.ndarray
+    var: np.ndarray
+    cross: np.ndarray
+
+
+def innovation(
+    n, C, rho, h=model.project, sigma_points: SigmaPoints = SigmaPoints(), points=None
+) -> Innovation:
+    """The unscented transform of ``N(n, C)`` through a scalar ``h``, batched ([wan2000]_, 3).
+
+    Parameters
+    ----------
+    n : array_like, shape (..., 3)
+        Predicted mean.
+    C : array_like, shape (..., 3, 3)
+        Predicted covariance, symmetric positive definite.
+    rho : float or array_like, shape (...)
+        Noise standard deviation, > 0.
+    h : callable
+        Maps states of shape ``(..., 3)`` to measurements of shape ``(...)``.
+    sigma_points : SigmaPoints
+    points : ndarray, shape (..., 2 dim + 1, 3), optional
+        ``sigma_points.points(n, C)``, when the caller has them already.
+
+    Returns
+    -------
+    Innovation
+    """
+    n = np.asarray(n, dtype=float)
+    X = sigma_points.points(n, C) if points is None else points  # (..., 7, 3)
+    Wm, Wc = sigma_points.weights()
+    Z = np.asarray(h(X), dtype=float)[..., None]  # (..., 7, 1)
+    noise_var = np.asarray(rho, dtype=float) ** 2
+    z, S = unscented_transform(Z, Wm, Wc, noise_var[..., None, None])
+    z, s = z[..., 0], S[..., 0, 0]
+    c = np.einsum("i,...ij,...i->...j", Wc, X - n[..., None, :], Z[..., 0] - z[..., None])
+    return Innovation(z, s, c)
+
+
+def _gain_update(n, C, mu, moments: Innovation) -> MeanAndCov:
+    """``m = n + K (mu - z)``, ``P = C - c c^T / s`` with ``K = c / s`` (module docstring)."""
+    z, s, c = moments
+    innovation_ = np.asarray(mu, dtype=float) - z
+    mean = np.asarray(n, dtype=float) + (innovation_ / s)[..., None] * c
+    cov = np.asarray(C, dtype=float) - c[..., :, None] * c[..., None, :] / s[..., None, None]
+    return MeanAndCov(mean, symmetric(cov))
+
+
 def measurement_update(
     n, C, mu, rho: float, h=model.project, sigma_points: SigmaPoints = SigmaPoints()
 ) -> MeanAndCov:
     """Incorporate one scalar measurement ``mu = h(x) + w`` into ``N(n, C)``, batched.
 
     The measurement update of [wan2000]_, section 3, for a scalar measurement
-    with noise variance ``rho**2``; the equations are in the module docstring.
+    with noise variance ``rho**2``; the equations are in the module docstring
+    (:func:`innovation`, then the gain).
 
     Parameters
     ----------
@@ -247,18 +319,40 @@ def measurement_update(
     MeanAndCov
         The updated mean ``(..., 3)`` and covariance ``(..., 3, 3)``.
     """
-    n = np.asarray(n, dtype=float)
-    X = sigma_points.points(n, C)  # (..., 7, 3)
-    Wm, Wc = sigma_points.weights()
-    Z = np.asarray(h(X), dtype=float)[..., None]  # (..., 7, 1)
-    noise_var = np.asarray(rho, dtype=float) ** 2
-    z, S = unscented_transform(Z, Wm, Wc, noise_var[..., None, None])
-    z, s = z[..., 0], S[..., 0, 0]
-    c = np.einsum("i,...ij,...i->...j", Wc, X - n[..., None, :], Z[..., 0] - z[..., None])
-    innovation = np.asarray(mu, dtype=float) - z
-    mean = n + (innovation / s)[..., None] * c
-    cov = np.asarray(C, dtype=float) - c[..., :, None] * c[..., None, :] / s[..., None, None]
-    return MeanAndCov(mean, symmetric(cov))
+    return _gain_update(n, C, mu, innovation(n, C, rho, h, sigma_points))
+
+
+def _depth(X) -> np.ndarray:
+    """The depth ``y`` of states (..., 3): a point is in front of the camera where it is > 0."""
+    return X[..., 1]
+
+
+def check_front(depth, rows=None, allow_behind_camera: bool = False) -> None:
+    """Refuse sigma points behind the camera (or at the pole ``y = 0``), naming the first.
+
+    Parameters
+    ----------
+    depth : ndarray, shape (..., 2 dim + 1)
+        The sigma points' depths (for :func:`update`, ``y``).
+    rows : ndarray of bool, shape (...), optional
+        The problems checked (default all).
+    allow_behind_camera : bool
+        If true only a depth of exactly 0 is refused.
+    """
+    bad = depth == 0 if allow_behind_camera else ~(depth > 0)
+    if rows is not None:
+        bad = bad & np.asarray(rows, dtype=bool)[..., None]
+    if not np.any(bad):
+        return
+    where = tuple(int(i) for i in np.unravel_index(int(np.argmax(bad)), depth.shape))
+    trial = f" of trial {where[:-1]}" if depth.ndim > 1 else ""
+    if allow_behind_camera:
+        raise ValueError(f"sigma point {where[-1]}{trial} has depth 0, where x/y is undefined")
+    raise ValueError(
+        f"sigma point {where[-1]}{trial} has depth {depth[where]:.6g} <= 0: it lies behind "
+        "the camera, across the pole of x/y at y = 0; use a smaller alpha or a tighter "
+        "prior, or pass allow_behind_camera=True"
+    )
 
 
 def update(
@@ -286,19 +380,158 @@ def update(
     -------
     MeanAndCov
     """
-    depth = sigma_points.points(n, C)[..., 1]
-    bad = depth == 0 if allow_behind_camera else ~(depth > 0)
-    if np.any(bad):
-        where = tuple(int(i) for i in np.unravel_index(int(np.argmax(bad)), depth.shape))
-        trial = f" of trial {where[:-1]}" if depth.ndim > 1 else ""
-        if allow_behind_camera:
-            raise ValueError(f"sigma point {where[-1]}{trial} has depth 0, where x/y is undefined")
-        raise ValueError(
-            f"sigma point {where[-1]}{trial} has depth {depth[where]:.6g} <= 0: it lies behind "
-            "the camera, across the pole of x/y at y = 0; use a smaller alpha or a tighter "
-            "prior, or pass allow_behind_camera=True"
-        )
+    check_front(_depth(sigma_points.points(n, C)), None, allow_behind_camera)
     return measurement_update(n, C, mu, rho, model.project, sigma_points)
+
+
+def bearing_predictive(
+    n, C, rho, sigma_points: SigmaPoints = SigmaPoints(), allow_behind_camera: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """The UKF's predictive density of a bearing, ``N(z, s)``: :func:`innovation` of ``x / y``.
+
+    Mean ``z = sum_i Wm_i Z_i`` and variance ``s = rho**2 + sum_i Wc_i (Z_i -
+    z)**2`` of the projected sigma points ``Z_i = x_i / y_i`` of ``N(n, C)``,
+    the moments :func:`update` uses.
+
+    Parameters
+    ----------
+    n : array_like, shape (..., 3)
+    C : array_like, shape (..., 3, 3)
+    rho : float or array_like, shape (...)
+    sigma_points : SigmaPoints
+    allow_behind_camera : bool
+        As for :func:`update` (by default only a sigma point at depth 0 is refused).
+
+    Returns
+    -------
+    mean, var : ndarray, shape (...)
+    """
+    X = sigma_points.points(n, C)
+    check_front(_depth(X), None, allow_behind_camera)
+    moments = innovation(n, C, rho, model.project, sigma_points, points=X)
+    return moments.mean, moments.var
+
+
+class Step(NamedTuple):
+    """One frame of the UKF (:func:`step`), batched over problems ``(...)``.
+
+    Attributes
+    ----------
+    mean : ndarray, shape (..., 3)
+        After the frame (the prediction where the bearing is missing or gated).
+    cov : ndarray, shape (..., 3, 3)
+    log_predictive, tail : ndarray, shape (...)
+        The bearing's log density and two-sided tail probability under the
+        unscented predictive ``N(z, s)``; NaN where it is missing.
+    gated : ndarray of bool, shape (...)
+        Where the gate skipped the bearing.
+    behind : ndarray of bool, shape (...)
+        Where a sigma point the transform used lay at a depth ``<= 0`` (False
+        where the bearing is missing: no transform is made there).
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+    log_predictive: np.ndarray
+    tail: np.ndarray
+    gated: np.ndarray
+    behind: np.ndarray
+
+
+def step(
+    n,
+    C,
+    mu,
+    rho,
+    present=True,
+    gate=None,
+    sigma_points: SigmaPoints = SigmaPoints(),
+    allow_behind_camera: bool = False,
+    h=model.project,
+    depth=_depth,
+) -> Step:
+    """One frame's update, masked and gated, batched: report the bearing, then incorporate it.
+
+    Where the bearing is present (``present`` and not ``NaN``) the unscented
+    transform of ``N(n, C)`` through ``h`` (:func:`innovation`) gives the
+    bearing's predictive density ``N(z, s)``; its log density and two-sided
+    tail probability are reported (:func:`depthcore.problem.predictive.gaussian`),
+    a bearing whose tail is below ``gate`` is skipped, and the others are
+    incorporated as by :func:`measurement_update`. Elsewhere the prediction is
+    kept. A sigma point at ``depth(X) == 0`` is refused where the bearing is
+    present; one at ``depth(X) < 0`` is flagged in ``behind``, and refused
+    where it would enter an update unless ``allow_behind_camera``.
+
+    Parameters
+    ----------
+    n : ndarray, shape (..., 3)
+        Predicted mean.
+    C : ndarray, shape (..., 3, 3)
+        Predicted covariance.
+    mu : array_like, shape (...)
+        The bearing, ``NaN`` where missing.
+    rho : array_like, shape (...)
+        Its noise SD, > 0.
+    present : bool or array_like of bool, shape (...)
+    gate : float or None
+        Checked by :func:`depthcore.problem.predictive.gate`.
+    sigma_points : SigmaPoints
+    allow_behind_camera : bool
+    h : callable
+        The measurement, states (..., 3) to (...); default ``x / y``.
+    depth : callable
+        States (..., 3) to what must be positive for a point to lie in front
+        of the camera; default ``y``.
+
+    Returns
+    -------
+    Step
+    """
+    n = np.asarray(n, dtype=float)
+    C = np.asarray(C, dtype=float)
+    batch = n.shape[:-1]
+    mu = np.broadcast_to(np.asarray(mu, dtype=float), batch)
+    rho = np.broadcast_to(np.asarray(rho, dtype=float), batch)
+    here = np.broadcast_to(present, batch) & ~np.isnan(mu)
+    log_p, tail = np.full(batch, np.nan), np.full(batch, np.nan)
+    gated, behind = np.zeros(batch, dtype=bool), np.zeros(batch, dtype=bool)
+    if not np.any(here):
+        return Step(n, C, log_p, tail, gated, behind)
+    X = sigma_points.points(n, C)
+    d = np.asarray(depth(X), dtype=float)
+    check_front(d, here, allow_behind_camera=True)
+    if np.all(here):
+        moments = innovation(n, C, rho, h, sigma_points, points=X)
+    else:
+        # rows without a bearing are transformed too (h takes the whole batch) and masked:
+        # their sigma points may sit on the pole, where h divides by zero
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            moments = innovation(n, C, rho, h, sigma_points, points=X)
+        moments = Innovation(
+            np.where(here, moments.mean, 0.0),
+            np.where(here, moments.var, 1.0),
+            np.where(here[..., None], moments.cross, 0.0),
+        )
+        mu = np.where(here, mu, 0.0)
+    if not np.all(moments.var > 0):
+        raise ValueError(
+            "sigma_points: their negative weights left the innovation's variance "
+            f"{float(np.min(moments.var)):.6g} <= 0"
+        )
+    lp, tl = predictive.gaussian(mu, moments.mean, moments.var)
+    gated = predictive.skipped(tl, here, gate)
+    log_p, tail = np.where(here, lp, np.nan), np.where(here, tl, np.nan)
+    behind = here & np.any(~(d > 0), axis=-1)
+    use = here & ~gated
+    if not allow_behind_camera:
+        check_front(d, use, allow_behind_camera=False)
+    if not np.any(use):
+        return Step(n, C, log_p, tail, gated, behind)
+    mean, cov = _gain_update(n, C, mu, moments)
+    if not np.all(use):
+        mean = np.where(use[..., None], mean, n)
+        cov = np.where(use[..., None, None], cov, C)
+    return Step(mean, cov, log_p, tail, gated, behind)
 
 
 def rule(sigma_points) -> SigmaPoints:
@@ -310,16 +543,59 @@ def rule(sigma_points) -> SigmaPoints:
     return sigma_points
 
 
+class UKFHistory(History):
+    """The UKF's estimates after each frame, what each update saw, and where it crossed the pole.
+
+    A :class:`~depthcore.problem.gaussian.History` (it unpacks as ``means, covs
+    = history``) with one more per-frame array.
+
+    Attributes
+    ----------
+    means : ndarray, shape (..., N, 3)
+    covs : ndarray, shape (..., N, 3, 3)
+    updates : depthcore.problem.predictive.Updates
+        Per frame (..., N), the bearing's log density and tail probability under
+        the unscented predictive ``N(z, s)``, and whether the gate skipped it.
+    behind : ndarray of bool, shape (..., N)
+        Where a sigma point of the Gaussian the transform used at that frame
+        lay at depth ``y <= 0``, behind the camera: the transform then averaged
+        ``x / y`` across its pole (possible only with ``allow_behind_camera``,
+        or at a frame whose bearing the gate skipped). False at a missing frame.
+    """
+
+    behind = None
+
+    def __new__(cls, means, covs, updates=None, behind=None):
+        self = super().__new__(cls, means, covs, updates)
+        if behind is not None:
+            self.behind = behind
+        return self
+
+    @property
+    def went_behind(self) -> np.ndarray:
+        """Whether a sigma point lay behind the camera at any frame, shape (...)."""
+        return np.any(self.behind, axis=-1)
+
+
 @signature.documented
 def run(
-    mu, rho, prior_mean, prior_cov, process_noise=0.0, sigma_points=None, allow_behind_camera=False
-) -> History:
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise=0.0,
+    sigma_points=None,
+    allow_behind_camera=False,
+    steps=None,
+    gate=None,
+) -> UKFHistory:
     """Run the UKF over the measurements, batched like :func:`depthcore.kalman.ekf.run`.
 
     Incorporate ``mu1`` into the prior (the density of the state at time 1),
-    then predict exactly with Eq. (10) (plus ``q**2`` on the velocity's
-    variance) and update, once per further measurement (the loop
-    :func:`depthcore.kalman.ekf.run_gaussian_filter`).
+    then, for each further frame, predict exactly with Eq. (10) over its step
+    (plus ``q**2 s`` on the velocity's variance, :func:`depthcore.kalman.ekf.predict`)
+    and incorporate its bearing (:func:`step`): a missing bearing (``NaN``) or
+    one the gate skips leaves the prediction, row by row.
 
     {parameters}
     sigma_points : SigmaPoints or None
@@ -329,13 +605,49 @@ def run(
 
     Returns
     -------
-    History
+    UKFHistory
         ``means`` (..., N, 3): ``means[..., i, :]`` is the mean after
-        measurement ``i + 1``; ``covs`` (..., N, 3, 3).
+        frame ``i + 1``; ``covs`` (..., N, 3, 3); ``updates`` (..., N); and
+        ``behind`` (..., N), where sigma points lay behind the camera
+        (``went_behind`` (...): at any frame).
     """
     sigma_points = rule(sigma_points)
-    step = partial(update, sigma_points=sigma_points, allow_behind_camera=allow_behind_camera)
-    return run_gaussian_filter(step, mu, rho, prior_mean, prior_cov, process_noise)
+    track = checked_track(mu, rho, prior_mean, prior_cov, steps)
+    q = checks.nonnegative_scalar(process_noise, "process_noise")
+    g = predictive.gate(gate)
+    f = track.frames
+    regular = f.regular
+    n, C = track.mean, track.cov
+    means, covs, reports = [], [], []
+    for k in range(1, f.mu.shape[-1] + 1):
+        if k > 1:
+            n, C = ekf.predict(n, C, q) if regular else ekf.predict(n, C, q, f.steps[..., k - 2])
+        rho_k = f.row_rho if regular else f.rho[..., k - 1]
+        try:
+            out = step(
+                n,
+                C,
+                f.mu[..., k - 1],
+                rho_k,
+                f.present[..., k - 1],
+                g,
+                sigma_points,
+                allow_behind_camera,
+            )
+        except ValueError as exc:
+            raise ValueError(f"update with measurement {k}: {exc}") from None
+        n, C = out.mean, out.cov
+        means.append(n)
+        covs.append(C)
+        reports.append(out[2:])
+    updates, behind = _stack(reports)
+    return UKFHistory(np.stack(means, axis=-2), np.stack(covs, axis=-3), updates, behind)
+
+
+def _stack(reports) -> tuple[predictive.Updates, np.ndarray]:
+    """Per-frame reports ``(log_p, tail, gated, behind)`` as ``Updates`` and ``behind`` (..., N)."""
+    log_p, tail, gated, behind = (np.stack(r, axis=-1) for r in zip(*reports, strict=True))
+    return predictive.Updates(log_p, tail, gated), behind
 
 
 #: :func:`depthcore.kalman.ukf.run` with the prior as a Gaussian, ``ukf(mu, rho, prior,
