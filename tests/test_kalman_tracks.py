@@ -299,8 +299,11 @@ def test_the_registry_passes_gaps_rho_per_frame_steps_and_gate_and_reads_the_upd
     "name, kwargs, message",
     [
         ("second_order", {"gate": 0.01}, "gate: the second_order filter has no gate"),
-        ("ukf", {"gate": 0.01}, "gate: the ukf filter has no gate"),
-        ("ukf", {"steps": [1.0, 2.0]}, "steps: the ukf filter takes only unit steps"),
+        (
+            "second_order",
+            {"steps": [1.0, 2.0]},
+            "steps: the second-order approximation takes only unit steps",
+        ),
     ],
 )
 def test_the_registry_refuses_what_a_door_does_not_take_before_running(name, kwargs, message):
@@ -308,7 +311,7 @@ def test_the_registry_refuses_what_a_door_does_not_take_before_running(name, kwa
         FILTERS[name]([0.1, 0.2, 0.28], RHO, PRIOR_MEAN, PRIOR_COV, **kwargs)
 
 
-def test_the_registry_drops_unit_steps_for_a_door_without_steps():
+def test_the_registry_gives_unit_steps_the_papers_answer():
     a = FILTERS["ukf"]([0.1, 0.2, 0.28], RHO, PRIOR_MEAN, PRIOR_COV, steps=[1.0, 1.0])
     b = FILTERS["ukf"]([0.1, 0.2, 0.28], RHO, PRIOR_MEAN, PRIOR_COV)
     assert a.depth_mean == b.depth_mean
@@ -482,3 +485,17 @@ def test_track_passes_the_steps_to_the_exact_smoother():
     keep = [0, 1, 3, 4]
     np.testing.assert_allclose(stepped.smoothed.mean, gapped.smoothed.mean[keep], rtol=1e-8)
     np.testing.assert_allclose(stepped.filtered.mean, gapped.filtered.mean[keep], rtol=1e-8)
+
+
+def test_the_registrys_ukf_says_when_its_sigma_points_went_behind_the_camera():
+    """Figure 2's prior puts sigma points behind the camera; a narrow prior at the truth does not."""
+    from depthcore.problem.scenarios import SCENARIOS
+
+    s = SCENARIOS["fig2"]
+    wide = FILTERS["ukf"](s.mu, s.rho, s.prior.mean, s.prior.cov)
+    assert wide.extras["sigma_points_behind_camera"] is True
+    x1 = np.array([s.c[0] - 2 * s.c[2], s.c[1] - 2, s.c[2]])  # the truth at frame 1
+    narrow = FILTERS["ukf"](s.mu, s.rho, x1, 0.01 * np.eye(3))
+    assert narrow.extras["sigma_points_behind_camera"] is False
+    both = FILTERS["ukf"](np.stack([s.mu, s.mu]), s.rho, np.stack([s.prior.mean, x1]), s.prior.cov)
+    assert both.extras["sigma_points_behind_camera"].shape == (2,)

@@ -161,6 +161,8 @@ def format_summary(summary: dict) -> str:
             f"{f['velocity']['mean']:>#10.4g} {f['velocity']['sd']:>#10.4g}"
         )
     for name, f in summary["filters"].items():
+        if f.get("sigma_points_behind_camera"):
+            lines.append(f"{name:<{w}} its sigma points went behind the camera (y <= 0)")
         if "gated" in f:
             skipped = ", ".join(map(str, f["gated"])) or "none"
             lines.append(f"{name:<{w}} gate skipped frames: {skipped}")

@@ -75,6 +75,22 @@ def _last(result):
     return result, np.asarray(mean, dtype=float), np.asarray(cov, dtype=float)
 
 
+def unscented(result, single: bool) -> Estimate:
+    """:func:`gaussian` for the UKF, saying whether its sigma points went behind the camera.
+
+    The registry's UKF runs with ``allow_behind_camera=True``; its estimate's
+    ``extras["sigma_points_behind_camera"]`` (a bool for one sequence, an array
+    (B,) of them for a batch) is :attr:`depthcore.kalman.ukf.UKFHistory.went_behind`:
+    whether at some frame a sigma point lay at a depth ``y <= 0``, where the
+    unscented transform averaged ``x / y`` across its pole.
+    """
+    estimate = gaussian(result, single)
+    went = getattr(result, "went_behind", None)
+    if went is not None:
+        estimate.extras["sigma_points_behind_camera"] = bool(went) if single else np.asarray(went)
+    return estimate
+
+
 def checked_gaussian(name: str):
     """:func:`gaussian` for a filter that carries a covariance: refuse one that rounding broke.
 

@@ -323,7 +323,7 @@ FILTERS: dict[str, Filter] = {
             any_frames=True,
             with_process_noise=True,
             smoother=gaussian_smoother(ukf.run, allow_behind_camera=True),
-            estimate=adapters.gaussian,
+            estimate=adapters.unscented,
             options={"allow_behind_camera": True},
         ),
         Filter(

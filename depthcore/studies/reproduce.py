@@ -58,7 +58,7 @@ def _run(name: str, mu, rho, prior: Gaussian, seed, **options) -> Estimate:
 def _moments(est: Estimate) -> dict:
     """``{"depth": {"mean", "sd"[, "error"]}, "velocity": {...}, **extras}`` with plain floats."""
     out = {q: {k: float(v) for k, v in est.moments(q).items()} for q in QUANTITIES}
-    out.update({k: float(v) for k, v in est.extras.items()})
+    out.update({k: v if isinstance(v, bool) else float(v) for k, v in est.extras.items()})
     return out
 
 
