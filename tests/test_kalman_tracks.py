@@ -488,7 +488,7 @@ def test_track_passes_the_steps_to_the_exact_smoother():
 
 
 def test_the_registrys_ukf_says_when_its_sigma_points_went_behind_the_camera():
-    """Figure 2's prior puts sigma points behind the camera; a narrow prior at the truth does not."""
+    """Figure 2's prior puts sigma points behind the camera; a narrow one at the truth not."""
     from depthcore.problem.scenarios import SCENARIOS
 
     s = SCENARIOS["fig2"]
