@@ -1,4 +1,4 @@
-"""The noise levels learned from tracks: the bearing noise and the process noise by maximum likelihood.
+"""The noise levels learned from tracks: the bearing and process noise by maximum likelihood.
 
 Recommended import: ``from depthcore.exact import learning``.
 
@@ -63,7 +63,7 @@ from scipy import optimize, stats
 from scipy.special import logsumexp
 
 from depthcore.exact import posterior as exact_posterior
-from depthcore.exact.bank import PSI, lateral_filter
+from depthcore.exact.bank import PSI, lateral_filter, run_bank
 from depthcore.kalman import linear
 from depthcore.problem import checks, frames
 
@@ -77,10 +77,12 @@ MIN_BEARINGS = 4
 
 #: Central-difference step in the log parameters.
 _H = 1e-4
-#: Newton's method stops when no log parameter moves by more than this.
-_STEP_TOL = 1e-10
-#: Node placements stop when the estimate moves by less than this between them.
-_ROUND_TOL = 1e-8
+#: Newton's method stops when no log parameter moves by more than this (the step after it
+#: is of its square's order, below the central differences' noise).
+_STEP_TOL = 1e-7
+#: Node placements stop when the estimate moves by less than this between them (nodes
+#: placed at either estimate give the likelihood near it to the quadrature's tolerance).
+_ROUND_TOL = 1e-6
 _MAX_ROUNDS = 10
 _MAX_NEWTON = 100
 #: The largest Newton step in a log parameter (a factor e**2).
@@ -173,9 +175,7 @@ def _tracks(mu, prior_mean, prior_cov, steps, weights) -> _Tracks:
         raise ValueError(f"prior_mean must have shape (3,) or ({B}, 3), got {prior_mean.shape}")
     prior_cov = checks.finite_array(prior_cov, "prior_cov")
     if prior_cov.shape not in ((3, 3), (B, 3, 3)):
-        raise ValueError(
-            f"prior_cov must have shape (3, 3) or ({B}, 3, 3), got {prior_cov.shape}"
-        )
+        raise ValueError(f"prior_cov must have shape (3, 3) or ({B}, 3, 3), got {prior_cov.shape}")
     prior_cov = checks.covariances(prior_cov, "prior_cov", 3)
     if not track.regular:
         raise ValueError(
@@ -211,7 +211,7 @@ def _place(tracks: _Tracks, rho: float, q: float, rtol: float, history: bool = F
 
 
 def _on_nodes(tracks: _Tracks, nodes, log_w, rho: float, q: float) -> float:
-    """``sum_b log sum_j w_bj N(y_j; m_y, P_yy) L(y_j)`` on fixed nodes (B, J), log weights (B, J)."""
+    """``sum_b log sum_j w_bj N(y_j; m_y, P_yy) L(y_j)`` on fixed nodes and log weights (B, J)."""
     log_weight = lateral_filter(
         nodes, tracks.mu, np.asarray(rho), np.asarray(q), tracks.mean, tracks.cov
     )[0]
@@ -281,27 +281,26 @@ def _derivatives(f, theta):
     return f0, g, H
 
 
-def _newton(f, theta, lower=None):
+def _newton(f, theta):
     """Maximise ``f`` from ``theta`` (p,): Newton steps, halved until ``f`` does not fall.
 
-    ``lower`` (p,) bounds the parameters from below (a step stops there).
+    Each step is at most :data:`_MAX_STEP` in every parameter.
+
     Returns ``theta``, ``f``, the Hessian there, the number of steps and
     whether the steps settled.
     """
     theta = np.array(theta, dtype=float)
     for it in range(1, _MAX_NEWTON + 1):
         f0, g, H = _derivatives(f, theta)
-        try:
-            np.linalg.cholesky(-H)
-            d = np.linalg.solve(-H, g)
-        except np.linalg.LinAlgError:  # not concave here: a steepest-ascent step
-            d = g / max(float(np.max(np.abs(np.diag(H)))), 1.0)
+        # Newton's step on -H with its eigenvalues made positive (their absolute values):
+        # Newton's own where f is concave, an ascent direction where it is not
+        lam, V = np.linalg.eigh(-H)
+        lam = np.maximum(np.abs(lam), 1e-8 * max(float(np.max(np.abs(lam))), 1e-300))
+        d = V @ ((V.T @ g) / lam)
         d *= min(1.0, _MAX_STEP / max(float(np.max(np.abs(d))), 1e-300))
         t = 1.0
         for _ in range(40):
             new = theta + t * d
-            if lower is not None:
-                new = np.maximum(new, lower)
             f1 = f(new)
             if f1 >= f0 - 1e-12 * abs(f0):
                 break
@@ -505,10 +504,13 @@ def _result(pr, theta, H, f, iterations, converged, method, level, intervals, bo
             continue
         ses[name] = value * float(se_log[i])
         if intervals == "wald":
-            ints[name] = (value * float(np.exp(-z * se_log[i])), value * float(np.exp(z * se_log[i])))
+            ints[name] = (
+                value * float(np.exp(-z * se_log[i])),
+                value * float(np.exp(z * se_log[i])),
+            )
         else:
             ints[name] = _profile(pr, f, theta, i, level, float(se_log[i]))
-    ell = float(np.sum(_place(pr.tracks, rho, q, pr.rtol).log_normaliser))
+    ell = float(f(theta))  # on nodes placed within _ROUND_TOL of the estimate
     estimated = tuple(pr.free)
     words = ", ".join(f"{n} = {v:.6g}" for n, v in zip(NAMES, (rho, q), strict=True))
     note = (
@@ -615,7 +617,7 @@ def _profile(pr, f, theta, i, level, se):
 # --- EM -----------------------------------------------------------------------------------
 
 
-def expectations(post, tracks: _Tracks):
+def expectations(bank, log_weights, tracks: _Tracks):
     """The E-step: the expected squared residuals under the exact smoothed posterior.
 
     Each depth node's Kalman filter history is smoothed (textbook 19.2.6,
@@ -628,12 +630,15 @@ def expectations(post, tracks: _Tracks):
         E[(v_{k+1} - v_k)**2] = (E[v_{k+1}] - E[v_k])**2 + Var[v_k] + Var[v_{k+1}]
                                 - 2 Cov[v_k, v_{k+1}],
 
-    mixed over the nodes with the posterior's probabilities.
+    mixed over the nodes with the posterior's probabilities, proportional to
+    ``w_j N(y_j; m_y, P_yy) L(y_j)``.
 
     Parameters
     ----------
-    post : depthcore.exact.mixture.Mixture
-        The posterior of ``B`` tracks with its history (``history=True``).
+    bank : depthcore.exact.bank.Bank
+        The filters of ``B`` tracks on nodes (B, J), with their history.
+    log_weights : ndarray, shape (B, J)
+        The nodes' log quadrature weights (``-inf`` at padding).
     tracks : _Tracks
 
     Returns
@@ -643,40 +648,96 @@ def expectations(post, tracks: _Tracks):
     motion : ndarray, shape (B, N - 1)
         ``E[(v_{k+1} - v_k)**2] / s_k``.
     """
-    b = post.bank
-    res = b.history
-    smooth = linear.fixed_interval_smoother(res, PSI)  # (B, J, N, 2), (B, J, N, 2, 2)
-    gains = linear.smoother_gain(res.covs[..., :-1, :, :], res.predicted_covs[..., 1:, :, :], PSI)
-    cross = gains @ smooth.cov[..., 1:, :, :]  # Cov[w_k, w_{k+1}], (B, J, N - 1, 2, 2)
+    b = bank
+    smooth, cross = _smooth(b.history, PSI)
     depth = b.nodes[..., None] + tracks.elapsed[:, None, :]  # (B, J, N)
     mx, vx = smooth.mean[..., 0], smooth.cov[..., 0, 0]
     mu = np.where(tracks.present, tracks.mu, 0.0)[:, None, :]
     meas = (mu - mx / depth) ** 2 + vx / depth**2
     mv, vv = smooth.mean[..., 1], smooth.cov[..., 1, 1]
     motion = (mv[..., 1:] - mv[..., :-1]) ** 2 + vv[..., 1:] + vv[..., :-1] - 2.0 * cross[..., 1, 1]
-    p = post.probabilities[..., None]  # (B, J, 1)
+    log_p = log_weights + b.log_weight
+    p = np.exp(log_p - logsumexp(log_p, axis=-1, keepdims=True))[..., None]  # (B, J, 1)
     meas = np.sum(np.where(p > 0, p * meas, 0.0), axis=1)
     motion = np.sum(np.where(p > 0, p * motion, 0.0), axis=1)
     meas = np.where(tracks.present, meas / tracks.weights**2, 0.0)
     return meas, motion / tracks.steps
 
 
+def _smooth(res: linear.FilterResult, Psi):
+    """Textbook 19.2.6 on each node's filter: smoothed Gaussians and lag-one cross-covariances.
+
+    The Rauch-Tung-Striebel recursions of
+    :func:`depthcore.kalman.linear.fixed_interval_smoother` with their gains
+    ``C_k`` kept: ``Cov[w_k, w_{k+1} | mu] = C_k Sigma_{k+1|N}``.
+
+    Returns
+    -------
+    smooth : depthcore.kalman.linear.MeanAndCov
+        Means (..., N, 2) and covariances (..., N, 2, 2).
+    cross : ndarray, shape (..., N - 1, 2, 2)
+    """
+    cov, predicted = res.covs[..., :-1, :, :], res.predicted_covs[..., 1:, :, :]
+    try:  # C_k^T = Sigma_{+|k+1}^{-1} Psi Sigma_k, the predictions positive definite
+        gains = np.swapaxes(np.linalg.solve(predicted, Psi @ cov), -1, -2)
+    except np.linalg.LinAlgError:  # a singular prediction: the pseudo-inverse's gain
+        gains = linear.smoother_gain(cov, predicted, Psi)
+    means, covs = np.empty_like(res.means), np.empty_like(res.covs)
+    means[..., -1, :], covs[..., -1, :, :] = res.means[..., -1, :], res.covs[..., -1, :, :]
+    for t in range(res.means.shape[-2] - 2, -1, -1):
+        means[..., t, :], covs[..., t, :, :] = linear.smoother_step(
+            gains[..., t, :, :],
+            res.means[..., t, :],
+            res.covs[..., t, :, :],
+            res.predicted_means[..., t + 1, :],
+            res.predicted_covs[..., t + 1, :, :],
+            means[..., t + 1, :],
+            covs[..., t + 1, :, :],
+        )
+    return linear.MeanAndCov(means, covs), gains @ covs[..., 1:, :, :]
+
+
+#: EM re-places the depth nodes when a parameter has moved by this factor (in log) since
+#: they were placed, and once more when it has settled on them.
+_EM_REPLACE = 0.05
+
+
 def _fit_em(tracks, rho_k, q_k, free, level, intervals, rtol, tol, max_iter) -> Fit:
+    """EM from a rough start; the E-step on depth nodes placed at recent parameters.
+
+    On fixed nodes the E-step is the exact posterior of the model whose depth
+    takes the nodes' values with the quadrature's weights, so each iteration
+    is EM for that model; the nodes are re-placed (at the current parameters)
+    whenever the parameters have moved by :data:`_EM_REPLACE` in log since
+    they were placed, and when EM has settled on them, so that it stops only
+    on nodes placed at its estimate, where that model's likelihood is the
+    quadrature's.
+    """
     rho = _rho_start(tracks) if rho_k is None else rho_k
     q = (0.1 * _q_scale(tracks)) if q_k is None else q_k
     n_frames = int(np.sum(tracks.present))
     n_steps = int(tracks.steps.size)
-    converged, it = False, 0
-    for it in range(1, max_iter + 1):
-        post = _place(tracks, rho, q, rtol, history=True)
-        meas, motion = expectations(post, tracks)
+    converged, it, anchor, fresh = False, 0, None, False
+    while it < max_iter:
+        it += 1
+        here = np.log([rho, q if q > 0 else 1.0])
+        if anchor is None or np.max(np.abs(here - anchor)) > _EM_REPLACE:
+            post = _place(tracks, rho, q, rtol)
+            nodes, log_w, anchor, fresh = post.bank.nodes, post.log_weights, here, True
+        bank = run_bank(
+            nodes, tracks.mu, np.asarray(rho), np.asarray(q), tracks.mean, tracks.cov, True
+        )
+        meas, motion = expectations(bank, log_w, tracks)
         new_rho = float(np.sqrt(np.sum(meas) / n_frames)) if rho_k is None else rho
         new_q = float(np.sqrt(np.sum(motion) / n_steps)) if q_k is None else q
         moved = max(abs(np.log(new_rho / rho)), abs(np.log(new_q / q)) if q_k is None else 0.0)
         rho, q = new_rho, new_q
         if moved <= tol:
-            converged = True
-            break
+            if fresh:
+                converged = True
+                break
+            anchor = None  # settled on old nodes: once more on nodes placed here
+        fresh = False
     pr = _Problem(tracks, rho, q, free, rtol)
     theta = np.log([{"rho": rho, "process_noise": q}[n] for n in free])
     f = pr.on_nodes(rho, q)
