@@ -30,6 +30,8 @@ from a family above its own:
 * :mod:`depthcore.provenance`: the benchmarks' and the studies' records;
 * :mod:`depthcore.formatting`: numbers as the book and the command line print them;
 * :mod:`depthcore.cli`: the command line, ``python -m depthcore``;
+* :mod:`depthcore.stonesoup`: the paper's problem and the exact filter in Stone
+  Soup's types (the ``depthcore[stonesoup]`` extra). Nothing below it imports it;
 * :mod:`depthcore.book`: each chapter's experiments, figures and glued texts.
   Nothing outside it imports it.
 
@@ -60,6 +62,7 @@ SUBPACKAGES = (
     "studies",
     "provenance",
     "cli",
+    "stonesoup",
     "book",
 )
 

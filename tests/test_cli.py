@@ -117,7 +117,8 @@ def test_estimate_accepts_prior_options(capsys):
         (["--mu", "-0.3", "0", "0.2", "--rho", "-1"], "--rho must be from 1e-12 to 1000, got -1.0"),
         (["--mu", "-0.3", "0", "0.2", "--rho", "nan"], "--rho must be from 1e-12 to 1000, got nan"),
         (["--mu", "-0.3", "0", "0.2", "--rho", "1000.0001"], "got 1000.0001"),
-        (["--mu", "-0.3", "nan", "0.2", "--rho", "0.01"], "--mu must be finite"),
+        (["--mu", "-0.3", "nan", "0.2", "--rho", "0.01"], "--mu: frame 2 has no bearing (nan)"),
+        (["--mu", "-0.3", "inf", "0.2", "--rho", "0.01"], "--mu must be finite (or nan"),
         (["--mu", "0.2", "0", "-0.3", "--rho", "0.01"], "behind the camera"),
         (
             ["--mu", "-0.3", "0", "0.2", "--rho", "0.01", "--prior-cov", "-5"],

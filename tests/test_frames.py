@@ -127,3 +127,43 @@ def test_gate():
     np.testing.assert_array_equal(
         predictive.skipped([1e-4, 1e-2, 1e-5], [True, True, False], 1e-3), [True, False, False]
     )
+
+
+def test_simulate_with_steps_moves_by_eq1_with_each_step():
+    state = np.array([1.0, 5.0, 0.3])
+    steps = np.array([0.5, 2.0, 1.0, 1.5])
+    sim = model.simulate(state, 5, 1e-3, 0.0, np.random.default_rng(0), frame=3, steps=steps)
+    t = np.concatenate([[0.0], np.cumsum(steps)]) - 2.5  # depth travelled since frame 3
+    np.testing.assert_allclose(sim.states, model.G(state[None, :], t), rtol=1e-14)
+
+
+def test_simulate_with_unit_steps_and_rho_per_frame_is_the_regular_draw():
+    state = np.array([1.0, 5.0, 0.3])
+    for frame in (1, 3):
+        a = model.simulate(state, 8, 0.01, 0.2, np.random.default_rng(1), size=3, frame=frame)
+        b = model.simulate(
+            state, 8, np.full(8, 0.01), 0.2, np.random.default_rng(1), size=3, frame=frame
+        )
+        np.testing.assert_allclose(b.states, a.states, rtol=1e-14, atol=1e-15)
+        np.testing.assert_allclose(b.mu, a.mu, rtol=1e-14, atol=1e-15)
+
+
+def test_simulated_velocity_variance_grows_with_the_depth_travelled():
+    q, steps, size = 0.3, np.array([0.5, 2.0, 1.5]), 40_000
+    sim = model.simulate(
+        [0.0, 5.0, 0.0], 4, 0.01, q, np.random.default_rng(2), size=size, frame=1, steps=steps
+    )
+    v = sim.states[:, -1, 2]
+    expected = frames.velocity_variance(q, steps.sum())
+    # the sample variance of 40,000 normal draws has relative SE sqrt(2 / 40,000) = 0.7 %
+    assert abs(v.var() / expected - 1) < 4 * np.sqrt(2 / size)
+
+
+def test_simulate_refuses_bad_steps_and_rho():
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match=r"steps must have shape \(4,\)"):
+        model.simulate([0.0, 5.0, 0.0], 5, 0.01, 0.0, rng, steps=[1, 1])
+    with pytest.raises(ValueError, match="steps must be positive"):
+        model.simulate([0.0, 5.0, 0.0], 3, 0.01, 0.0, rng, steps=[1, -1])
+    with pytest.raises(ValueError, match=r"rho must be a number or have shape \(3,\)"):
+        model.simulate([0.0, 5.0, 0.0], 3, [0.01, 0.02], 0.0, rng)

@@ -8,16 +8,22 @@ are errors while a case runs.
 
 from __future__ import annotations
 
+import contextlib
+import csv
+import io
 import json
 import math
 import os
 import subprocess
 import sys
+import tempfile
 import time
 import warnings
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from depthcore.cli.main import main
 from depthcore.problem.checks import MAX_FRAMES
@@ -626,3 +632,169 @@ def test_the_kalman_filter_refuses_what_is_not_a_real_number(arg, value):
     )
     with pytest.raises(ValueError, match=f"^{arg} "):
         linear.run(**{**args, arg: value})
+
+
+# --- estimate's tracks: files, missing frames, noise per frame, steps, gate -----------------
+
+#: A field of a random track file: a number, a missing value, or something that is not one.
+_FIELDS = st.one_of(
+    st.floats(-1.0, 1.0).map(repr),
+    st.floats(1e-4, 0.5).map(repr),
+    st.integers(-3, 2000).map(str),
+    st.sampled_from(["", "nan", "NaN", "inf", "-inf", "1e7", "1e-320", "x", "1_0", "0x1", " 0.1"]),
+    st.text(max_size=6),
+)
+
+
+def _cli_output(argv) -> tuple[int, str, str]:
+    """(status, stdout, stderr) of ``main(argv)``, warnings as errors."""
+    out, err = io.StringIO(), io.StringIO()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            status = exit_status(argv)
+    return status, out.getvalue(), err.getvalue()
+
+
+def _answered_or_refused(argv, output: str) -> None:
+    """Exit 0 with well-formed output of ``output``'s kind, or 2 with one line; never else."""
+    start = time.perf_counter()
+    status, out, err = _cli_output(argv)
+    assert time.perf_counter() - start < BUDGET
+    if status == 0:
+        assert err == "", err
+        if output == "json":
+            data = _strict_json(out)
+            assert _finite(data), out
+        elif output == "csv":
+            rows = list(csv.reader(io.StringIO(out)))
+            assert len(rows) >= 4 and all(len(r) == len(rows[0]) for r in rows), out
+            for r in rows[1:]:
+                for cell in r[5:]:  # the numbers after filter, frame, bearing, mu, rho
+                    assert cell in ("", "true", "false") or math.isfinite(float(cell)), r
+        else:
+            assert "legend:" in out and "nan" not in out.lower().replace("(nan)", ""), out
+    else:
+        assert status == 2, (status, err)
+        assert out == "", out
+        assert err.count("\n") == 1 and err.endswith("\n"), err
+        assert "Traceback" not in err and "Warning" not in err, err
+
+
+def _format_flag(output: str) -> list:
+    return {"json": ["--json"], "csv": ["--csv"], "table": []}[output]
+
+
+@st.composite
+def _track_files(draw):
+    """Random CSV text: some columns, ragged or garbled rows, sometimes a well-made track."""
+    columns = draw(
+        st.lists(st.sampled_from(["mu", "u", "rho", "step", "frame", "depth", ""]), max_size=5)
+    )
+    rows = []
+    for _ in range(draw(st.integers(0, 12))):
+        width = len(columns) + draw(st.sampled_from([0, 0, 0, 0, -1, 1]))
+        rows.append([draw(_FIELDS) for _ in range(max(0, width))])
+    end = draw(st.sampled_from(["\n", "\r\n"]))
+    text = end.join(",".join(r) for r in [columns, *rows]) + draw(st.sampled_from(["", end]))
+    return draw(st.sampled_from([b"", b"\xef\xbb\xbf"])) + text.encode("utf-8", "replace")
+
+
+@st.composite
+def _tracks(draw):
+    """A point's bearings over random frames: gaps, noise per frame, steps, sometimes outliers."""
+    n = draw(st.integers(3, 12))
+    y = draw(st.floats(3.0, 30.0))
+    x = draw(st.floats(-0.8, 0.8)) * y
+    v = draw(st.floats(-1.5, 1.5))
+    steps = draw(
+        st.one_of(st.none(), st.lists(st.floats(0.2, 3.0), min_size=n - 1, max_size=n - 1))
+    )
+    s = np.ones(n - 1) if steps is None else np.array(steps)
+    elapsed = np.concatenate([[0.0], np.cumsum(s)])
+    mu = (x + v * elapsed) / (y + elapsed)
+    rho = np.array(draw(st.lists(st.floats(1e-4, 0.05), min_size=n, max_size=n)))
+    noise = np.array(draw(st.lists(st.floats(-2.0, 2.0), min_size=n, max_size=n)))
+    mu = mu + rho * noise
+    for k in draw(st.lists(st.integers(0, n - 1), max_size=n)):
+        mu[k] = np.nan
+    if draw(st.booleans()):
+        mu[draw(st.integers(0, n - 1))] += draw(st.sampled_from([0.5, -1.0, 3.0]))
+    return mu, rho, steps
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    data=_track_files(),
+    extra=st.lists(
+        st.sampled_from(
+            [
+                ["--rho", "0.01"],
+                ["--per-frame"],
+                ["--focal", "800", "--cx", "320"],
+                ["--gate", "0.01"],
+            ]
+        ),
+        max_size=3,
+        unique_by=lambda a: a[0],
+    ),
+    output=st.sampled_from(["json", "csv", "table"]),
+)
+def test_estimate_answers_or_refuses_any_track_file_in_one_line(data, extra, output):
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, "track.csv")
+        with open(path, "wb") as f:
+            f.write(data)
+        flat = [a for option in extra for a in option]
+        if output == "csv" and "--per-frame" not in flat:
+            output = "table"
+        argv = ["estimate", "--mu-file", path, *flat, *_format_flag(output)]
+        _answered_or_refused(argv, output)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    track=_tracks(),
+    name=st.sampled_from(["optimal", "ekf", "ukf"]),
+    gate=st.one_of(st.none(), st.sampled_from(["0.001", "0.05", "0.5"])),
+    prior=st.booleans(),
+    output=st.sampled_from(["json", "csv", "table"]),
+    q=st.sampled_from(["0", "0.01"]),
+)
+def test_per_frame_answers_or_refuses_gaps_noise_steps_and_gates(
+    track, name, gate, prior, output, q
+):
+    mu, rho, steps = track
+    lines = ["frame,mu,rho,step"] + [
+        f"{k + 1},{'' if np.isnan(m) else repr(m)},{'' if np.isnan(m) else repr(r)},"
+        f"{'' if k == 0 or steps is None else repr(steps[k - 1])}"
+        for k, (m, r) in enumerate(zip(mu, rho, strict=True))
+    ]
+    if steps is None:
+        lines = [line.rsplit(",", 1)[0] for line in lines]
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, "track.csv")
+        with open(path, "w", encoding="utf-8") as f:
+            f.write("\n".join(lines) + "\n")
+        argv = ["estimate", "--mu-file", path, "--per-frame", "--filters", name]
+        argv += ["--process-noise", q] + ([] if gate is None else ["--gate", gate])
+        argv += ["--prior-mean", "0", "8", "0"] if prior else []
+        _answered_or_refused(argv + _format_flag(output), output)
+        # the same bearings as arguments, one noise level
+        values = ["nan" if np.isnan(m) else repr(m) for m in mu]
+        argv = ["estimate", "--mu", *values, "--rho", repr(float(rho[0])), "--per-frame"]
+        argv += ["--filters", name] + ([] if gate is None else ["--gate", gate])
+        _answered_or_refused(argv + _format_flag(output), output)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    positions=st.lists(st.integers(0, 5), max_size=6),
+    per_frame=st.booleans(),
+)
+def test_nan_anywhere_in_mu_is_answered_or_refused_in_one_line(positions, per_frame):
+    values = ["-0.3", "0", "0.2", "0.33", "0.43", "0.51"]
+    for k in positions:
+        values[k] = "nan"
+    argv = ["estimate", "--mu", *values, "--rho", "0.005", "--prior-mean", "-1", "4", "0"]
+    _answered_or_refused(argv + (["--per-frame"] if per_frame else []) + ["--json"], "json")

@@ -319,6 +319,7 @@ LAYERS = (
     "provenance",
     "formatting",
     "cli",
+    "stonesoup",
     "book",
 )
 #: The modules directly in ``depthcore/`` that belong to no family: the front door.

@@ -32,7 +32,7 @@ import numpy as np
 
 from depthcore import __version__
 from depthcore.cli import text as cli_text
-from depthcore.cli.text import STUDY_LEGEND
+from depthcore.cli import tracks
 from depthcore.problem import checks
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from depthcore.problem.model import noise_free_state
@@ -70,6 +70,10 @@ PRIOR_COV_RANGE = (1e-12, 1e12)
 #: Smallest positive ``--process-noise``: the smallest normal double, below which
 #: the inverse of the noise overflows.
 PROCESS_NOISE_MIN = checks.MIN_PROCESS_NOISE
+#: The largest magnitude of ``estimate --focal`` and ``--cx``, in pixels.
+PIXELS_MAX = 1e9
+#: The range of a track file's ``step``: the depth's change between frames.
+STEP_RANGE = (1e-6, 1e3)
 #: Most bearings of ``estimate --mu``: the filters' limit.
 FRAMES_MAX = checks.MAX_FRAMES
 
@@ -231,22 +235,74 @@ def _cmd_reproduce(args) -> str:
 
 
 def _cmd_estimate(args) -> str:
-    mu = np.array(args.mu)
-    if len(mu) < 3:
-        raise ValueError(f"--mu takes at least 3 bearings (frames 1 .. N), got {len(mu)}")
-    if len(mu) > FRAMES_MAX:
-        raise ValueError(f"--mu takes at most {FRAMES_MAX} bearings, got {len(mu)}")
-    _check_limits("--mu", mu, MU_MAX)
-    _check_rho(args.rho)
+    src = _bearings(args)
+    rho = _noise(args, src)
     q = _check_process_noise(args.process_noise)
-    prior = _prior(mu, args.prior_mean, args.prior_cov)
+    if args.json and args.csv:
+        raise ValueError("--csv: print JSON (--json) or CSV (--csv), not both")
+    if not args.per_frame:
+        _refuse_ignored(args, "estimate without --per-frame", {"gate": "--gate", "csv": "--csv"})
+        tracks.check_regular(src, rho)
+    gate = None if args.gate is None else tracks.check_gate(args.gate)
+    steps = None if src.steps is None or np.all(src.steps == 1.0) else src.steps
+    if args.prior_mean is None:
+        tracks.check_paper_prior(src)
+    prior = _prior(src.mu, args.prior_mean, args.prior_cov)
+    if args.per_frame:
+        return _per_frame(args, src, rho, steps, prior, q, gate)
     names = tuple(dict.fromkeys(args.filters))
     if len(names) != len(args.filters):
         raise ValueError("--filters: a filter is named more than once")
     summary = reproduce.summarize(
-        mu, args.rho, prior, process_noise=q, smooth=args.smooth, names=names
+        src.mu, float(rho), prior, process_noise=q, smooth=args.smooth, names=names
     )
     return _json(summary) if args.json else cli_text.format_summary(summary)
+
+
+def _bearings(args) -> tracks.TrackFile:
+    """The bearings of ``--mu`` or ``--mu-file`` (``NaN`` at a missing frame)."""
+    if args.mu_file is None:
+        _refuse_ignored(args, "--mu (they convert a file's u column)", _PIXEL_FLAGS)
+        return tracks.from_values(args.mu, MU_MAX)
+    limits = tracks.Limits(MU_MAX, RHO_RANGE, STEP_RANGE, PIXELS_MAX)
+    src = tracks.read_file(args.mu_file, limits, args.focal, args.cx)
+    args._words = {k: f"{src.name}: {column}" for k, column in tracks.LIBRARY_NAMES.items()}
+    return src
+
+
+#: The options that convert a file's column ``u`` of pixels into bearings.
+_PIXEL_FLAGS = {"focal": "--focal", "cx": "--cx"}
+
+
+def _noise(args, src: tracks.TrackFile):
+    """``--rho``, or the file's ``rho`` column: a number or an array (N,)."""
+    if src.rho is None:
+        if args.rho is None:
+            raise ValueError(f"--rho is needed{'' if src.name == '--mu' else ': no rho column'}")
+        _check_rho(args.rho)
+        return args.rho
+    if args.rho is not None:
+        raise ValueError(f"--rho: not used: {src.name} has a rho column; leave it out")
+    return src.rho
+
+
+def _per_frame(args, src, rho, steps, prior, q, gate) -> str:
+    """``estimate --per-frame``: every frame's state by the filters with a smoother."""
+    if args.smooth:
+        raise ValueError("--smooth: not used by --per-frame (it smooths already); leave it out")
+    smoothed = names(smoothed=True)
+    chosen = _named_once(args.filters, "--filters") if "filters" in args._given else ("optimal",)
+    without = [n for n in chosen if n not in smoothed]
+    if without:
+        raise ValueError(
+            f"--filters: {without[0]} has no smoother; --per-frame takes {', '.join(smoothed)}"
+        )
+    result = tracks.per_frame(src.mu, rho, prior, q, chosen, steps, gate, src.frames)
+    if args.json:
+        return _json(result)
+    if args.csv:
+        return cli_text.per_frame_csv(result)
+    return cli_text.format_per_frame(result)
 
 
 def _check_out(out: str) -> Path:
@@ -493,14 +549,19 @@ _SINGULAR = {
 _LEADING = re.compile(r"^([A-Za-z_][A-Za-z_0-9]*)(\[[^\]]*\])?(?=[\s:,])")
 
 
-def _users_words(command: str, message: str) -> str:
-    """A refusal naming the argument as the user gave it (``--prior-cov``, not ``prior_cov``)."""
+def _users_words(command: str, message: str, words=None) -> str:
+    """A refusal naming the argument as the user gave it (``--prior-cov``, not ``prior_cov``).
+
+    ``words`` maps the library's names to the user's where they differ from
+    :data:`_FLAGS` (a file's columns).
+    """
     message = _one_line(message)
     if message.startswith("-"):
         return message
+    flags = {**_FLAGS, **(words or {})}
     m = _LEADING.match(message)
-    if m and m.group(1) in _FLAGS:
-        return _FLAGS[m.group(1)] + (m.group(2) or "") + message[m.end() :]
+    if m and m.group(1) in flags:
+        return flags[m.group(1)] + (m.group(2) or "") + message[m.end() :]
     if m and message[m.end() :].startswith(":"):  # an internal name: drop it
         message = message[m.end() + 1 :].strip()
     return f"{_INPUTS[command]} have no answer: {message}"
@@ -533,42 +594,6 @@ def _write(text: str) -> None:
 #: :func:`depthcore.book.paper.save_all` writes by default (a module imported only to draw).
 FIGURE_FORMATS = ("pdf", "png", "svg")
 
-EXAMPLES = {
-    "reproduce": """\
-examples:
-  python -m depthcore reproduce          the table of Figures 2-6 beside the paper
-  python -m depthcore reproduce --json   the same as JSON""",
-    "estimate": """\
-examples:
-  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
-  python -m depthcore estimate --mu -1e-1 0 0.2 --rho 0.01 --prior-cov 100
-  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --prior-mean -1 4 0 --json
-  python -m depthcore estimate --mu -0.3 0 0.2 0.33 0.43 --rho 0.005 --process-noise 0.01 --smooth
-  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --filters optimal iterated inverse_depth
-
-The noise-free state c is (x, y, v) at frame 3 (from the first three bearings);
-the prior is at frame 1; every filter reports the state at the last frame N.""",
-    "study": f"""\
-examples:
-  python -m depthcore study --trials 500 --seed 1
-  python -m depthcore study --filters ekf ukf --rho 0.01 --json
-  python -m depthcore study --frames 10 --process-noise 0.01 --trials 200
-
-{STUDY_LEGEND}""",
-    "figures": """\
-examples:
-  python -m depthcore figures --out figures
-  python -m depthcore figures --out figures --format svg""",
-}
-EXAMPLES["all"] = """\
-examples:
-  python -m depthcore reproduce
-  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
-  python -m depthcore study --trials 500 --seed 1
-  python -m depthcore figures --out figures
-
-`python -m depthcore COMMAND --help` shows each command's options and examples."""
-
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m depthcore``.
@@ -580,7 +605,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m depthcore",
         description="Filter based estimates of depth (Maybank 1990): the paper's filters "
         f"on N >= 3 bearings (up to {FRAMES_MAX} frames).",
-        epilog=EXAMPLES["all"],
+        epilog=cli_text.EXAMPLES["all"],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--version", action="version", version=f"depthcore {__version__}")
@@ -627,7 +652,7 @@ def _command(sub, common, name: str, summary: str) -> argparse.ArgumentParser:
         name,
         parents=[common],
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=EXAMPLES[name],
+        epilog=cli_text.EXAMPLES[name],
         help=summary,
         description=f"{summary[0].upper()}{summary[1:]}.",
     )
@@ -675,20 +700,38 @@ def _add_estimate_arguments(sub, common) -> None:
         "estimate",
         f"moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames)",
     )
-    e.add_argument(
+    given = e.add_mutually_exclusive_group(required=True)
+    given.add_argument(
         "--mu",
         type=float,
         nargs="+",
-        required=True,
         metavar="M",
         help="the measurements mu1 mu2 mu3 ... (tangents of the bearings at frames 1 .. N, "
-        f"3 <= N <= {FRAMES_MAX}; magnitudes up to {MU_MAX:g})",
+        f"3 <= N <= {FRAMES_MAX}; magnitudes up to {MU_MAX:g}; nan: a missing frame, "
+        "with --per-frame)",
+    )
+    given.add_argument(
+        "--mu-file",
+        metavar="FILE",
+        help="read the bearings from a CSV file instead (- for standard input; its format below)",
+    )
+    e.add_argument(
+        "--focal",
+        type=float,
+        metavar="F",
+        help="the focal length in pixels, for a file's column u of pixels",
+    )
+    e.add_argument(
+        "--cx",
+        type=float,
+        metavar="C",
+        help="the principal point's column in pixels, for a file's column u",
     )
     e.add_argument(
         "--rho",
         type=float,
-        required=True,
-        help=f"noise standard deviation, from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g}",
+        help=f"noise standard deviation, from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g} (needed "
+        "unless the file has a rho column)",
     )
     e.add_argument(
         "--prior-mean",
@@ -710,7 +753,27 @@ def _add_estimate_arguments(sub, common) -> None:
         action="store_true",
         help="also the optimal filter's smoothed depth and lateral position at every frame",
     )
-    _add_filters(e, "filters to run, in this order")
+    _add_filters(
+        e,
+        "filters to run, in this order",
+        f"; with --per-frame those with a smoother, of {' '.join(names(smoothed=True))} "
+        "(default: optimal)",
+    )
+    e.add_argument(
+        "--per-frame",
+        action="store_true",
+        help="the filtered and smoothed depth, lateral position and velocity with their SDs at "
+        "every frame (a track with missing frames, noise per frame or uneven steps needs it)",
+    )
+    e.add_argument(
+        "--gate",
+        type=float,
+        metavar="P",
+        help="with --per-frame: skip a bearing whose predictive tail probability is below P",
+    )
+    e.add_argument(
+        "--csv", action="store_true", help="with --per-frame: print CSV instead of a table"
+    )
     _add_json(e, _cmd_estimate)
 
 
@@ -804,10 +867,16 @@ def main(argv=None) -> int:
             traceback.print_exc()
         sys.stderr.write(f"{prog}: error: {_SINGULAR[args.command]}\n")
         return 2
+    except tracks.FileRefusal as exc:
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(f"{prog}: error: {_one_line(exc)}\n")
+        return 2
     except ValueError as exc:
         if args.debug:
             traceback.print_exc()
-        sys.stderr.write(f"{prog}: error: {_users_words(args.command, str(exc))}\n")
+        words = getattr(args, "_words", None)
+        sys.stderr.write(f"{prog}: error: {_users_words(args.command, str(exc), words)}\n")
         return 2
     except _WriteError as exc:
         sys.stderr.write(f"{prog}: error: {exc}\n")

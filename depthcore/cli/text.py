@@ -11,8 +11,12 @@ Nothing here computes: :func:`format_table` formats what
 
 from __future__ import annotations
 
+import csv
+import io
+
 import numpy as np
 
+from depthcore.cli.tracks import FORMAT as TRACK_FORMAT
 from depthcore.formatting import vec
 
 # --- the command line's tables ------------------------------------------------------------
@@ -289,3 +293,123 @@ def format_prior_study(result: dict) -> str:
         )
     lines.append(PRIOR_STUDY_LEGEND)
     return "\n".join(lines) + "\n"
+
+
+#: The legend of :func:`format_per_frame`'s columns.
+PER_FRAME_LEGEND = """\
+legend: frame    the frame's number; bearing: yes, no (a missing frame: the filter predicts
+                 through it) or gated (skipped: its predictive tail probability was below
+                 the gate)
+        mu       the bearing (blank at a missing frame)
+        filtered the state at the frame given the bearings up to it: mean (SD) of the depth
+                 y, the lateral position x and the velocity v
+        smoothed the same given every bearing of the track (at the last frame, the filtered)
+        tail     the two-sided tail probability of the bearing under the filter's predictive
+                 density (small: an outlier)"""
+
+
+def _cell(value, spec: str) -> str:
+    """A number in a table, blank where there is none or it is not finite."""
+    return "" if value is None or not np.isfinite(value) else format(value, spec)
+
+
+def format_per_frame(result: dict) -> str:
+    """A plain-text table of :func:`depthcore.cli.tracks.per_frame`'s result, block by filter."""
+    m, q = result["prior_mean"], result["process_noise"]
+    lines = [
+        f"{result['frames']} frames; prior at the first frame: mean (x, y, v) = "
+        f"({m[0]:#.4g}, {m[1]:#.4g}, {m[2]:#.4g}); process noise q = {q:g}"
+        + ("" if result["gate"] is None else f"; gate {result['gate']:g}")
+    ]
+    for name, rows in result["filters"].items():
+        tail = any("tail" in r for r in rows)
+        head = f"{'frame':>6} {'bearing':<7} {'mu':>10}"
+        for series in ("filtered", "smoothed"):
+            head += "  " + " ".join(f"{k + ' ' + series:>19}" for k, _ in _STATE)
+        head += f" {'tail':>8}" if tail else ""
+        lines += ["", f"{name}:", head]
+        for r in rows:
+            flag = "gated" if r.get("gated") else ("yes" if r["bearing"] else "no")
+            cells = f"{r['frame']:>6} {flag:<7} {_cell(r['mu'], '.6g'):>10}"
+            for series in ("filtered", "smoothed"):
+                cells += "  " + " ".join(
+                    f"{r[f'{series}_{k}_mean']:>#9.4g} ({r[f'{series}_{k}_sd']:#.3g})".rjust(19)
+                    for k, _ in _STATE
+                )
+            cells += f" {_cell(r.get('tail'), '.3g'):>8}" if tail else ""
+            lines.append(cells)
+    lines.append(PER_FRAME_LEGEND)
+    return "\n".join(lines) + "\n"
+
+
+#: The quantities of a per-frame table: the key in a row, the column's name.
+_STATE = (("depth", "y"), ("x", "x"), ("velocity", "v"))
+
+
+def per_frame_csv(result: dict) -> str:
+    """CSV of :func:`depthcore.cli.tracks.per_frame`'s result: a row per filter and frame.
+
+    The columns are ``filter`` and the keys of a row; a missing value is an
+    empty field; booleans are ``true`` and ``false``; numbers carry every digit.
+    """
+    rows = [dict(filter=name, **r) for name, rs in result["filters"].items() for r in rs]
+    columns = list(rows[0])
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(columns)
+    for r in rows:
+        writer.writerow([_csv_field(r.get(c)) for c in columns])
+    return out.getvalue()
+
+
+def _csv_field(value) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return ""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+# --- the commands' examples -----------------------------------------------------------
+
+#: The epilog of each command's help (``"all"``: the main help's).
+EXAMPLES = {
+    "reproduce": """\
+examples:
+  python -m depthcore reproduce          the table of Figures 2-6 beside the paper
+  python -m depthcore reproduce --json   the same as JSON""",
+    "estimate": f"""\
+examples:
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
+  python -m depthcore estimate --mu -1e-1 0 0.2 --rho 0.01 --prior-cov 100
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --prior-mean -1 4 0 --json
+  python -m depthcore estimate --mu -0.3 0 0.2 0.33 0.43 --rho 0.005 --process-noise 0.01 --smooth
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005 --filters optimal iterated inverse_depth
+  python -m depthcore estimate --mu -0.3 0 nan 0.33 0.43 --rho 0.005 --prior-mean -1 4 0 --per-frame
+  python -m depthcore estimate --mu-file track.csv --per-frame --csv
+  python -m depthcore estimate --mu-file pixels.csv --focal 800 --cx 320 --rho 0.002 --per-frame
+
+The noise-free state c is (x, y, v) at frame 3 (from the first three bearings);
+the prior is at frame 1; every filter reports the state at the last frame N.
+
+{TRACK_FORMAT}""",
+    "study": f"""\
+examples:
+  python -m depthcore study --trials 500 --seed 1
+  python -m depthcore study --filters ekf ukf --rho 0.01 --json
+  python -m depthcore study --frames 10 --process-noise 0.01 --trials 200
+
+{STUDY_LEGEND}""",
+    "figures": """\
+examples:
+  python -m depthcore figures --out figures
+  python -m depthcore figures --out figures --format svg""",
+}
+EXAMPLES["all"] = """\
+examples:
+  python -m depthcore reproduce
+  python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
+  python -m depthcore study --trials 500 --seed 1
+  python -m depthcore figures --out figures
+
+`python -m depthcore COMMAND --help` shows each command's options and examples."""

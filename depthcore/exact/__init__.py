@@ -7,12 +7,17 @@
   frames and its exact marginals, Eqs. (6), (13)-(16);
 * :mod:`~depthcore.exact.bank`: for any number of frames, a bank of Kalman
   filters over depth (given the depth, the model is linear);
+* :mod:`~depthcore.exact.tracks`: a track's frames for the bank (steps,
+  noise per frame, gaps);
 * :mod:`~depthcore.exact.mixture`: the bank's Gaussians mixed over the depth
   nodes, the exact posterior at frame ``N``;
 * :mod:`~depthcore.exact.posterior`: the bank with its depth nodes placed by
   the quadrature, the exact N-frame filter;
 * :mod:`~depthcore.exact.smoother`: one track frame by frame, filtered,
-  fixed-lag and fixed-interval smoothed.
+  fixed-lag and fixed-interval smoothed;
+* :mod:`~depthcore.exact.online`: the exact filter one bearing at a time, in
+  constant time and memory per frame, with each bearing's predictive report
+  and a gate.
 
 Where a new thing goes: another way to compute the exact posterior, or a new
 use of the bank (an online form, a likelihood), goes here. It may import

@@ -64,6 +64,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from depthcore.exact import tracks
 from depthcore.kalman import linear
 from depthcore.problem import checks
 
@@ -98,6 +99,11 @@ class Bank(NamedTuple):
     process_noise : ndarray, shape (...) or ()
     prior_mean : ndarray, shape (..., 3)
     prior_cov : ndarray, shape (..., 3, 3)
+    frame_steps : ndarray, shape (..., N - 1)
+        The depth's change from each frame to the next (ones: the paper's frames).
+    frame_noise : ndarray, shape (..., N)
+        The bearing noise SD at each frame (``rho`` at every frame for noise per
+        problem); ``mu`` is ``NaN`` at a missing frame, which has no update.
     history : depthcore.kalman.linear.FilterResult or None
         With ``history=True``: each node's filter at every frame, arrays of shape
         ``(..., J, N, ...)``.
@@ -112,12 +118,39 @@ class Bank(NamedTuple):
     process_noise: np.ndarray
     prior_mean: np.ndarray
     prior_cov: np.ndarray
+    frame_steps: np.ndarray
+    frame_noise: np.ndarray
     history: linear.FilterResult | None
 
     @property
+    def steps(self) -> np.ndarray | None:
+        """:attr:`frame_steps`, or ``None`` when they are all ones (the paper's frames)."""
+        return None if np.all(self.frame_steps == 1.0) else self.frame_steps
+
+    @property
+    def frame_rho(self) -> np.ndarray | None:
+        """:attr:`frame_noise`, or ``None`` when it is ``rho`` at every frame."""
+        rho = np.asarray(self.rho)
+        if rho.shape != self.frame_noise.shape and np.all(self.frame_noise == rho[..., None]):
+            return None
+        return self.frame_noise
+
+    @property
     def frames(self) -> int:
-        """``N``, the number of bearings seen."""
+        """``N``, the number of frames seen (missing ones included)."""
         return self.mu.shape[-1]
+
+    @property
+    def elapsed(self) -> np.ndarray:
+        """The depth travelled since frame 1 at every frame, shape (..., N): ``y_k - y_1``."""
+        return tracks.elapsed(self.steps, self.frames)
+
+    @property
+    def travelled(self) -> np.ndarray:
+        """``y_N - y_1``, shape (...) (a number for unit steps, ``N - 1``)."""
+        if self.steps is None:
+            return np.asarray(float(self.frames - 1))
+        return self.elapsed[..., -1]
 
 
 # --- checks ----------------------------------------------------------------------------
@@ -227,13 +260,15 @@ def measurement_matrices(nodes, frames) -> np.ndarray:
     return Phi
 
 
-def lateral_filter(nodes, mu, rho, process_noise, prior_mean, prior_cov):
+def lateral_filter(
+    nodes, mu, rho, process_noise, prior_mean, prior_cov, steps=None, frame_rho=None
+):
     """The Kalman filter of ``(x, v)`` at each depth node in closed form: log weight, frame ``N``.
 
     The same filter as :func:`filter_bank` (textbook 19.2.1 prediction, 19.2.2
     update, the log likelihood from the innovations) with its 2 x 2 algebra
     written out, elementwise over the nodes, for the depth quadrature. With
-    ``(a, b, c)`` the entries of ``Cov[(x, v)]`` and ``r_k = (rho y_k)**2``
+    ``(a, b, c)`` the entries of ``Cov[(x, v)]`` and ``r_k = (rho_k y_k)**2``
     (the bearing noise in units of ``x``), the update by ``mu_k`` is::
 
         e = mu_k y_k - x,   x += a e / (a + r_k),   v += b e / (a + r_k),
@@ -241,20 +276,27 @@ def lateral_filter(nodes, mu, rho, process_noise, prior_mean, prior_cov):
         det' = det r_k / (a + r_k),   c' = (det' + b'**2) / a',
 
     the log likelihood gains ``log N(mu_k; x / y_k, (a + r_k) / y_k**2)``,
-    and the prediction is ``x += v``, ``a += 2 b + c``, ``b += c``,
-    ``c += q**2``, ``det += q**2 a``. Tracking the determinant keeps ``c``
-    free of cancellation when the bearings pin ``x`` far more tightly than
-    the prior (small noise).
+    and the prediction over a step ``s`` (:func:`predict_lateral`) is
+    ``x += s v``, ``a += s (2 b + s c)``, ``b += s c``, ``c += q**2 s``,
+    ``det += q**2 s a``. Tracking the determinant keeps ``c`` free of
+    cancellation when the bearings pin ``x`` far more tightly than the prior
+    (small noise). A missing bearing (``NaN``) has no update: the filter
+    predicts through its frame.
 
     Parameters
     ----------
     nodes : ndarray, shape (..., J)
         Depths at frame 1, > 0.
     mu : ndarray, shape (..., N)
+        ``NaN`` at a missing frame.
     rho, process_noise : ndarray, shape (...) or ()
     prior_mean : ndarray, shape (..., 3)
     prior_cov : ndarray, shape (..., 3, 3)
         Already checked (see :func:`filter_bank`).
+    steps : ndarray, shape (..., N - 1), or None
+        The depth's change between frames, ``y_{k+1} = y_k + s_k`` (``None``: ones).
+    frame_rho : ndarray, shape (..., N), or None
+        The noise SD at each frame in place of ``rho`` (any value at a missing frame).
 
     Returns
     -------
@@ -267,10 +309,19 @@ def lateral_filter(nodes, mu, rho, process_noise, prior_mean, prior_cov):
         ``Var[x_N]``, ``Cov[x_N, v_N]``, ``Var[v_N]`` given ``y_1`` and ``mu``.
     """
     start, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
-    rho2 = (np.asarray(rho, dtype=float) ** 2)[..., None]
+    # with noise per frame, rho is that array and is read frame by frame below
+    rho2 = (np.asarray(rho if frame_rho is None else 1.0, dtype=float) ** 2)[..., None]
     q2 = (np.asarray(process_noise, dtype=float) ** 2)[..., None]
-    # the covariance does not depend on the bearings: its shape leaves out theirs
-    cov_shape = np.broadcast_shapes(start.cov.shape[:-2], nodes.shape, rho2.shape, q2.shape)
+    missing = np.isnan(mu)
+    gaps = bool(np.any(missing))
+    # the covariance does not depend on the bearings (only on which are present): its
+    # shape leaves out theirs, unless the frames differ from row to row
+    per_row = [a.shape[:-1] + (1,) for a in (steps, frame_rho) if a is not None]
+    if gaps:
+        per_row.append(mu.shape[:-1] + (1,))
+    cov_shape = np.broadcast_shapes(
+        start.cov.shape[:-2], nodes.shape, rho2.shape, q2.shape, *per_row
+    )
     M, C, rows = _lateral_state(
         np.broadcast_shapes(start.mean.shape[:-1], mu.shape[:-1] + (1,)), cov_shape
     )
@@ -279,16 +330,63 @@ def lateral_filter(nodes, mu, rho, process_noise, prior_mean, prior_cov):
     a, b, c = c0[..., 0, 0, None], c0[..., 0, 1, None], c0[..., 1, 1, None]
     C[_A], C[_B], C[_DET], C[_C] = a, b, a * c - b * b, c
     noise = q2 if np.any(q2) else None  # None: constant velocity, Eq. (1)
-    for k in range(mu.shape[-1]):
-        if k:
-            _predict_lateral(rows, noise)
-        y = nodes + k  # y_k = y_1 + k - 1
-        log_weight = log_weight + _update_lateral(rows, mu[..., k, None], y, rho2, y * y)
+    if steps is None and frame_rho is None and not gaps:  # the paper's frames
+        for k in range(mu.shape[-1]):
+            if k:
+                _predict_lateral(rows, noise)
+            y = nodes + k  # y_k = y_1 + k - 1
+            log_weight = log_weight + _update_lateral(rows, mu[..., k, None], y, rho2, y * y)
+    else:
+        depth = tracks.elapsed(steps, mu.shape[-1])
+        for k in range(mu.shape[-1]):
+            if k:
+                s = None if steps is None else steps[..., k - 1, None]
+                _predict_step(rows, noise, s)
+            y = nodes + depth[..., k, None]
+            r2 = rho2 if frame_rho is None else (frame_rho[..., k, None] ** 2)
+            log_weight = log_weight + _masked_update(rows, M, C, mu[..., k, None], y, r2)
     return (
         log_weight,
         M,
         (rows.a.reshape(cov_shape), rows.b.reshape(cov_shape), rows.c.reshape(cov_shape)),
     )
+
+
+def _predict_step(rows, noise, s) -> None:
+    """:func:`_predict_lateral` over a step ``s`` (..., 1), or a unit step for ``None``."""
+    if s is None:
+        _predict_lateral(rows, noise)
+    else:
+        _predict_lateral_step(rows, None if noise is None else noise * s, s)
+
+
+def _masked_update(rows, M, C, mu_k, y, rho2):
+    """:func:`_update_lateral` where ``mu_k`` (..., 1) is present; no change (log 0) elsewhere."""
+    present = ~np.isnan(mu_k)
+    if np.all(present):
+        return _update_lateral(rows, mu_k, y, rho2, y * y)
+    if not np.any(present):
+        return 0.0
+    M0, C0 = M.copy(), C.copy()
+    safe_rho2 = np.where(present, rho2, 1.0)
+    log_likelihood = _update_lateral(rows, np.where(present, mu_k, 0.0), y, safe_rho2, y * y)
+    np.copyto(M, M0, where=~present)
+    np.copyto(C, C0, where=~present)
+    return np.where(present, log_likelihood, 0.0)
+
+
+def _predict_lateral_step(s: _Rows, q2, step) -> None:
+    """Textbook 19.2.1 for ``x <- x + s v``, ``v <- v + a_k``, ``a_k ~ N(0, q**2 s)``, in place.
+
+    ``q2`` is the velocity variance added, ``q**2 s`` (or ``None`` for none);
+    ``step`` the step ``s`` (..., 1).
+    """
+    np.add(s.x, step * s.v, out=s.x)
+    np.add(s.a, step * (2.0 * s.b + step * s.c), out=s.a)
+    np.add(s.b, step * s.c, out=s.b)
+    if q2 is not None:
+        np.add(s.c, q2, out=s.c)
+        np.add(s.det, q2 * s.a, out=s.det)
 
 
 #: Rows of the lateral state arrays of :func:`lateral_filter`: the means ``(x, v)``, and
@@ -366,7 +464,7 @@ def _update_lateral(s: _Rows, mu_k, y, rho2, yy):
 
 
 def filter_bank(
-    nodes, mu, rho, prior_mean, prior_cov, process_noise=0.0, history: bool = False
+    nodes, mu, rho, prior_mean, prior_cov, process_noise=0.0, history: bool = False, steps=None
 ) -> Bank:
     """Run one Kalman filter (textbook 19.2.3) per depth node over the bearings ``mu_1 .. mu_N``.
 
@@ -376,9 +474,11 @@ def filter_bank(
         Depths at frame 1, all > 0. Leading axes broadcast with those of the
         other arguments (one set of nodes per trial, or shared).
     mu : array_like, shape (..., N)
-        Bearings at frames 1 .. N, ``N >= 1``.
-    rho : float or array_like, shape (...)
-        Bearing noise SD, > 0.
+        Bearings at frames 1 .. N, ``N >= 1``; ``NaN`` at a missing frame
+        (no update there).
+    rho : float or array_like, shape (...) or (..., N)
+        Bearing noise SD, > 0: per problem, or per frame when its shape is
+        ``mu``'s (any value at a missing frame).
     prior_mean : array_like, shape (..., 3)
         Prior mean of ``(x_1, y_1, v_1)``.
     prior_cov : array_like, shape (..., 3, 3)
@@ -389,6 +489,10 @@ def filter_bank(
         Keep every node's filter at every frame (:meth:`~depthcore.exact.mixture.Mixture.smoothed`
         reuses
         it, and reruns the filters without it).
+    steps : array_like, shape (N - 1,) or (..., N - 1), or None
+        The depth's change between frames, > 0 (``None``: unit steps): the
+        motion ``y_{k+1} = y_k + s_k``, ``x_{k+1} = x_k + s_k v_k``,
+        ``v_{k+1} = v_k + a_k``, ``a_k ~ N(0, q**2 s_k)``.
 
     Returns
     -------
@@ -398,7 +502,7 @@ def filter_bank(
         ValueError naming ``nodes``, never answered with NaN.
     """
     nodes = _nodes(nodes)
-    mu = _bearings(mu)
+    mu, rho, steps, frame_rho = tracks.check_track(mu, rho, steps, _bearings)
     rho, process_noise = _noise(rho, process_noise)
     prior_mean, prior_cov = _prior(prior_mean, prior_cov)
     _batch(
@@ -411,7 +515,9 @@ def filter_bank(
     )
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         try:
-            bank = run_bank(nodes, mu, rho, process_noise, prior_mean, prior_cov, history)
+            bank = run_bank(
+                nodes, mu, rho, process_noise, prior_mean, prior_cov, history, steps, frame_rho
+            )
         except ValueError:  # the Kalman filters' own refusal of an overflow
             bank = None
     if bank is None or not all(
@@ -434,17 +540,24 @@ def _batch(**shapes) -> tuple:
         raise ValueError(f"the leading (batch) shapes do not broadcast: {listed}") from None
 
 
-def run_bank(nodes, mu, rho, process_noise, prior_mean, prior_cov, history) -> Bank:
+def run_bank(
+    nodes, mu, rho, process_noise, prior_mean, prior_cov, history, steps=None, frame_rho=None
+) -> Bank:
     """:func:`filter_bank` on checked inputs, which its callers in the package have checked.
 
     The arguments are :func:`filter_bank`'s (``process_noise`` after ``rho``),
     checked as it checks them: positive finite nodes and ``rho``,
     ``process_noise >= 0``, a symmetric positive definite prior, batch shapes
-    that broadcast. The result is not checked for overflow.
+    that broadcast; ``steps`` (..., N - 1) positive or ``None``, ``frame_rho``
+    (..., N) positive at the present frames or ``None``. The result is not
+    checked for overflow.
     """
     q = process_noise
+    frames_ = tracks.frame_fields(mu, rho, steps, frame_rho)
     if not history:  # the closed form, as the depth quadrature uses
-        log_weight, (x, v), (a, b, c) = lateral_filter(nodes, mu, rho, q, prior_mean, prior_cov)
+        log_weight, (x, v), (a, b, c) = lateral_filter(
+            nodes, mu, rho, q, prior_mean, prior_cov, steps, frame_rho
+        )
         cov = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
         return Bank(
             nodes=nodes,
@@ -457,20 +570,24 @@ def run_bank(nodes, mu, rho, process_noise, prior_mean, prior_cov, history) -> B
             prior_mean=prior_mean,
             prior_cov=prior_cov,
             history=None,
+            **frames_,
         )
     N = mu.shape[-1]
     start, log_prior = conditional_prior(nodes, prior_mean, prior_cov)
-    # per node (axis -3 of the Kalman arrays): the prior given its depth, Phi_k = (1 / y_k, 0)
-    Phi = measurement_matrices(nodes, np.arange(1, N + 1))
-    res = linear.run(
-        mu[..., None, :, None],
-        start.mean,
-        start.cov,
-        PSI,
-        sigma_p(q)[..., None, None, :, :],
-        Phi,
-        (rho**2)[..., None, None, None, None],
-    )
+    if steps is None and frame_rho is None and not np.any(np.isnan(mu)):
+        # per node (axis -3 of the Kalman arrays): the prior given its depth, Phi_k = (1 / y_k, 0)
+        Phi = measurement_matrices(nodes, np.arange(1, N + 1))
+        res = linear.run(
+            mu[..., None, :, None],
+            start.mean,
+            start.cov,
+            PSI,
+            sigma_p(q)[..., None, None, :, :],
+            Phi,
+            (rho**2)[..., None, None, None, None],
+        )
+    else:
+        res = tracks.irregular_history(start, nodes, mu, rho, q, steps, frame_rho)
     return Bank(
         nodes=nodes,
         mean=res.means[..., -1, :],
@@ -482,21 +599,33 @@ def run_bank(nodes, mu, rho, process_noise, prior_mean, prior_cov, history) -> B
         prior_mean=prior_mean,
         prior_cov=prior_cov,
         history=res if history else None,
+        **frames_,
     )
 
 
-def step(bank: Bank, mu_next) -> Bank:
+def step(bank: Bank, mu_next, rho=None, step=1.0, gaps: bool = False) -> Bank:
     """Add frame ``N + 1``: predict (textbook 19.2.1) and update (19.2.2) every node's filter.
 
     Each node's log weight gains the log density of ``mu_{N+1}`` given the
-    earlier bearings and its depth; nothing earlier is recomputed.
+    earlier bearings and its depth; nothing earlier is recomputed (except for
+    a bank with a history and frames other than the paper's, whose filters are
+    rerun with the new frame).
 
     Parameters
     ----------
     bank : Bank
         The bank after ``N`` frames.
     mu_next : float or array_like, shape (...)
-        The bearing at frame ``N + 1``, one per trial.
+        The bearing at frame ``N + 1``, one per trial; with ``gaps``, ``NaN``
+        marks a trial without one (its filters predict through the frame, its
+        weights do not change).
+    rho : float or array_like, shape (...), or None
+        The noise SD at frame ``N + 1``; ``None``: the bank's ``rho`` (a bank
+        with noise per frame needs it given).
+    step : float or array_like, shape (...)
+        The depth's change from frame ``N`` to ``N + 1``, > 0.
+    gaps : bool
+        Whether ``NaN`` bearings are missing frames (else refused).
 
     Returns
     -------
@@ -505,6 +634,107 @@ def step(bank: Bank, mu_next) -> Bank:
     """
     if not isinstance(bank, Bank):
         raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")
+    raw = checks.as_float(mu_next, "mu_next")
+    if not gaps and not np.all(np.isfinite(raw)):
+        raise ValueError("mu_next must be finite (or NaN for a missing frame, with gaps=True)")
+    step_ = checks.finite_array(step, "step")
+    if not np.all(step_ > 0):
+        raise ValueError(f"step must be positive, got minimum {float(np.min(step_)):.6g}")
+    plain = (
+        rho is None
+        and not np.any(np.isnan(raw))
+        and np.all(step_ == 1.0)
+        and step_.ndim == 0
+        and bank.steps is None
+        and bank.frame_rho is None
+    )
+    if plain:
+        return _step(bank, mu_next)
+    if np.any(np.isinf(raw)):
+        raise ValueError("mu_next must be finite or NaN (a missing frame), got infinite entries")
+    _batch(bank=bank.log_weight.shape[:-1], mu_next=raw.shape, step=step_.shape)
+    N = bank.frames
+    if rho is None:
+        if bank.frame_rho is not None:
+            raise ValueError("rho: this bank has a noise level per frame; give the new frame's")
+        rho_next = np.asarray(bank.rho, dtype=float)
+    else:
+        rho_next = checks.finite_array(rho, "rho")
+        if not np.all(rho_next > 0):
+            raise ValueError(f"rho must be positive, got minimum {float(np.min(rho_next)):.6g}")
+    batch = np.broadcast_shapes(bank.mu.shape[:-1], raw.shape, step_.shape, rho_next.shape)
+    mu = np.concatenate(
+        [np.broadcast_to(bank.mu, batch + (N,)), np.broadcast_to(raw, batch)[..., None]], -1
+    )
+    old_steps = np.ones(N - 1) if bank.steps is None else bank.steps
+    steps = np.concatenate(
+        [np.broadcast_to(old_steps, batch + (N - 1,)), np.broadcast_to(step_, batch)[..., None]],
+        -1,
+    )
+    same_rho = bank.frame_rho is None and (rho is None or np.array_equal(rho_next, bank.rho))
+    frame_rho = None
+    if not same_rho:
+        old = bank.frame_rho
+        if old is None:
+            old = np.broadcast_to(np.asarray(bank.rho, dtype=float)[..., None], batch + (N,))
+        frame_rho = np.concatenate(
+            [np.broadcast_to(old, batch + (N,)), np.broadcast_to(rho_next, batch)[..., None]], -1
+        )
+    steps_or_none = None if np.all(steps == 1.0) else steps
+    if bank.history is not None:
+        return run_bank(
+            bank.nodes,
+            mu,
+            bank.rho if frame_rho is None else frame_rho,
+            bank.process_noise,
+            bank.prior_mean,
+            bank.prior_cov,
+            True,
+            steps_or_none,
+            frame_rho,
+        )
+    rho2 = (rho_next**2)[..., None]
+    q2 = (np.asarray(bank.process_noise) ** 2)[..., None]
+    s = step_[..., None]
+    y = bank.nodes + (bank.travelled[..., None] + s)
+    cov_shape = np.broadcast_shapes(bank.cov.shape[:-2], y.shape, rho2.shape, q2.shape)
+    if np.any(np.isnan(raw)):
+        cov_shape = np.broadcast_shapes(cov_shape, raw.shape + (1,))
+    M, C, rows = _lateral_state(
+        np.broadcast_shapes(bank.mean.shape[:-1], raw.shape + (1,)), cov_shape
+    )
+    M[_X], M[_V] = bank.mean[..., 0], bank.mean[..., 1]
+    C[_A], C[_B], C[_C] = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
+    np.multiply(C[_A], C[_C], out=C[_DET])
+    C[_DET] -= C[_B] * C[_B]
+    noise = q2 if np.any(q2) else None
+    _predict_step(rows, noise, None if np.all(step_ == 1.0) and step_.ndim == 0 else s)
+    log_likelihood = _masked_update(rows, M, C, raw[..., None], y, rho2)
+    return bank._replace(
+        mean=_pack_mean(M),
+        cov=_pack_cov(C, cov_shape),
+        mu=mu,
+        log_weight=bank.log_weight + log_likelihood,
+        rho=bank.rho if frame_rho is None else frame_rho,
+        **tracks.frame_fields(mu, bank.rho, steps_or_none, frame_rho),
+    )
+
+
+def _pack_mean(M) -> np.ndarray:
+    mean = np.empty(M.shape[1:] + (2,))
+    mean[..., 0], mean[..., 1] = M[_X], M[_V]
+    return mean
+
+
+def _pack_cov(C, cov_shape) -> np.ndarray:
+    cov = np.empty(cov_shape + (2, 2))
+    cov[..., 0, 0], cov[..., 1, 1] = C[_A].reshape(cov_shape), C[_C].reshape(cov_shape)
+    cov[..., 0, 1] = cov[..., 1, 0] = C[_B].reshape(cov_shape)
+    return cov
+
+
+def _step(bank: Bank, mu_next) -> Bank:
+    """:func:`step` on the paper's frames: a unit step, a bearing, the bank's ``rho``."""
     mu_next = checks.finite_array(mu_next, "mu_next")
     _batch(bank=bank.log_weight.shape[:-1], mu_next=mu_next.shape)
     N = bank.frames
@@ -530,8 +760,9 @@ def step(bank: Bank, mu_next) -> Bank:
         return bank._replace(
             mean=mean,
             cov=cov,
-            mu=_extend(bank.mu, mu_next),
+            mu=(mu := _extend(bank.mu, mu_next)),
             log_weight=bank.log_weight + log_likelihood,
+            **tracks.frame_fields(mu, bank.rho, None, None),
         )
     pred = linear.predict(bank.mean, bank.cov, PSI, sigma_p(bank.process_noise)[..., None, :, :])
     Phi = measurement_matrices(bank.nodes, [N + 1])[..., 0, :, :]
@@ -548,6 +779,7 @@ def step(bank: Bank, mu_next) -> Bank:
         mu=mu,
         history=history,
         log_weight=bank.log_weight + upd.log_likelihood,
+        **tracks.frame_fields(mu, bank.rho, None, None),
     )
 
 

@@ -29,8 +29,9 @@ from scipy.special import ndtr
 
 from depthcore.exact.bank import PSI, Bank, run_bank
 from depthcore.exact.cdf import gauss_legendre_cdf
+from depthcore.exact.tracks import transitions
 from depthcore.kalman import linear
-from depthcore.problem import checks
+from depthcore.problem import checks, predictive
 from depthcore.problem.gaussian import component_mean, component_sd
 from depthcore.problem.weights import normalised
 
@@ -209,6 +210,9 @@ class Mixture:
         step doubled), floored by roundoff; ``None`` for caller-given nodes.
     rtol : float or None
         The tolerance the nodes were placed for (:func:`~depthcore.exact.posterior.posterior`).
+    gated_updates : depthcore.problem.predictive.Updates or None
+        The per-frame report of a run with a gate (whose skipped bearings are
+        ``NaN`` in ``bank.mu``); see :attr:`updates`.
     """
 
     bank: Bank
@@ -220,11 +224,29 @@ class Mixture:
     depth_error: np.ndarray | None = None
     velocity_error: np.ndarray | None = None
     rtol: float | None = None
+    gated_updates: predictive.Updates | None = None
 
     depth_mean = component_mean(1, "``E[y_N]``, shape (...).")
     depth_sd = component_sd(1, "The SD of ``y_N``, shape (...).")
     velocity_mean = component_mean(2, "``E[v_N]``, shape (...).")
     velocity_sd = component_sd(2, "The SD of ``v_N``, shape (...).")
+
+    @property
+    def updates(self) -> predictive.Updates:
+        """Each frame's predictive report, arrays (..., N): log density, tail, gated.
+
+        The bearing's log predictive density and two-sided tail probability under
+        the mixture over depth nodes of the filters' predictions given the
+        earlier bearings (:func:`depthcore.exact.online.track_updates`, the
+        filter run one bearing at a time on its own nodes, to the same
+        tolerance); NaN at a missing frame. From a run with a gate, that run's
+        report (the skipped bearings marked).
+        """
+        if self.gated_updates is not None:
+            return self.gated_updates
+        from depthcore.exact import online  # the online filter is built on this module
+
+        return online.track_updates(self.bank, rtol=self.rtol or 1e-10)
 
     def _query(self, value, name):
         """Queries as (batch..., K) and a function restoring the caller's shape."""
@@ -255,7 +277,7 @@ class Mixture:
         """
         y, restore = self._query(y, "y")
         b = self.bank
-        y1 = y - (b.frames - 1)
+        y1 = y - _travelled(b)
         inside = y1 > 0
         log_w = run_bank(
             np.where(inside, y1, 1.0),
@@ -265,6 +287,8 @@ class Mixture:
             b.prior_mean,
             b.prior_cov,
             False,
+            b.steps,
+            b.frame_rho,
         ).log_weight
         return restore(np.where(inside, log_w - self.log_normaliser[..., None], -np.inf))
 
@@ -302,7 +326,7 @@ class Mixture:
         lo = np.log(np.min(np.where(big, nodes, np.inf), axis=-1))[..., None]
         hi = np.log(np.max(np.where(big, nodes, 0.0), axis=-1))[..., None]
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.log(np.maximum(y - (b.frames - 1), 0.0))
+            t = np.log(np.maximum(y - _travelled(b), 0.0))
         top = np.minimum(t, hi)
         width = np.maximum(top - lo, 0.0)
         # Start with panels of half the SD of log(y_1) under each problem's mixture: as
@@ -326,7 +350,15 @@ class Mixture:
             shape = tt.shape
             y1 = np.exp(tt.reshape(shape[:-3] + (-1,)))
             log_w = run_bank(
-                y1, b.mu, b.rho, b.process_noise, b.prior_mean, b.prior_cov, False
+                y1,
+                b.mu,
+                b.rho,
+                b.process_noise,
+                b.prior_mean,
+                b.prior_cov,
+                False,
+                b.steps,
+                b.frame_rho,
             ).log_weight
             dens = np.exp(log_w - self.log_normaliser[..., None] + np.log(y1))  # dy = y dt
             return dens.reshape(shape)
@@ -410,17 +442,33 @@ class Mixture:
         res = b.history
         if res is None:
             res = run_bank(
-                b.nodes, b.mu, b.rho, b.process_noise, b.prior_mean, b.prior_cov, True
+                b.nodes,
+                b.mu,
+                b.rho,
+                b.process_noise,
+                b.prior_mean,
+                b.prior_cov,
+                True,
+                b.steps,
+                b.frame_rho,
             ).history
-        s = linear.fixed_interval_smoother(res, PSI)  # (..., J, N, 2), (..., J, N, 2, 2)
-        frames = np.arange(b.frames)
+        Psi = PSI if b.steps is None else transitions(b.steps)[..., None, :, :, :]
+        s = linear.fixed_interval_smoother(res, Psi)  # (..., J, N, 2), (..., J, N, 2, 2)
+        frames = b.elapsed
         mean, cov = mixture_moments(
             self.probabilities[..., None, :],
             np.swapaxes(s.mean, -2, -3),
             np.swapaxes(s.cov, -3, -4),
-            b.nodes[..., None, :] + frames[:, None],
+            b.nodes[..., None, :] + frames[..., :, None],
         )
         return Smoothed(mean, cov)
+
+
+def _travelled(bank: Bank):
+    """``y_N - y_1``: the number ``N - 1`` for unit steps, else shape (..., 1) against the nodes."""
+    if bank.steps is None:
+        return bank.frames - 1
+    return bank.travelled[..., None]
 
 
 def _positive_scalar(value, name: str) -> float:
@@ -482,7 +530,7 @@ def mixture_of_log_weights(bank: Bank, log_weights, halved: bool = False):
     """
     a = bank.log_weight + log_weights
     probabilities, log_normaliser = normalised(a)
-    depth_N = bank.nodes + (bank.frames - 1)
+    depth_N = bank.nodes + _travelled(bank)
     if not halved:
         mean, cov = mixture_moments(probabilities, bank.mean, bank.cov, depth_N)
         return Mixture(bank, log_weights, probabilities, log_normaliser, mean, cov)

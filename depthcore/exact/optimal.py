@@ -36,16 +36,17 @@ the mixture over the same nodes of the Gaussian conditionals of ``v`` given
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from depthcore import _paths
-from depthcore.exact import posterior, quadrature
+from depthcore.exact import online, posterior, quadrature
 from depthcore.exact.cdf import gauss_legendre_cdf
 from depthcore.exact.mixture import Moments
 from depthcore.kalman.second_order import A2
-from depthcore.problem import checks, model, signature
+from depthcore.problem import checks, frames, model, predictive, signature
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import f
 
@@ -485,7 +486,16 @@ class OptimalMarginals:
 
 @signature.documented
 def run(
-    mu, rho, prior_mean, prior_cov, process_noise=0.0, reading="derived", support="front", rtol=RTOL
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise=0.0,
+    reading="derived",
+    support="front",
+    rtol=RTOL,
+    steps=None,
+    gate=None,
 ):
     """The optimal filter, Eqs. (6), (13)-(16), of one sequence or a batch: the exact filter's door.
 
@@ -515,6 +525,18 @@ def run(
         :class:`~depthcore.exact.mixture.Moments`; more frames or process noise: the
         :class:`~depthcore.exact.mixture.Mixture`.
     """
+    gate = predictive.gate(gate)
+    if gate is not None:
+        _paper_only(reading, support)
+        return _gated(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps, gate)
+    if posterior.irregular(mu, rho, steps):
+        track = frames.check(mu, rho, steps)
+        if not track.regular:
+            _paper_only(reading, support)
+            return posterior.posterior(
+                mu, rho, prior_mean, prior_cov, process_noise, rtol, steps=steps
+            )
+        rho = track.row_rho
     mu = model.measurements_batch(mu, "mu")
     if mu.shape[-1] != 3 or process_noise > 0:
         if (reading, support) != ("derived", "front"):
@@ -529,6 +551,35 @@ def run(
     if (reading, support) == ("derived", "front"):
         return batch_marginals(mu, rho, prior_mean, prior_cov, rtol)
     return moments(mu, rho, prior_mean, prior_cov, reading, support, rtol)
+
+
+def _gated(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps, gate):
+    """The bank on the track with the bearings the gate skips set missing, and the report.
+
+    The gate is applied frame by frame by the online filter
+    (:func:`depthcore.exact.online.track_updates`): a bearing is skipped when
+    its tail probability under the predictive given the bearings kept before it
+    is below the gate; the posterior is then the bank's on the bearings kept.
+    """
+    post = posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps=steps)
+    report = online.track_updates(post.bank, gate, rtol)
+    if np.any(report.gated):
+        kept = np.where(report.gated, np.nan, np.asarray(post.bank.mu))
+        b = post.bank
+        post = posterior.posterior(
+            kept, b.frame_noise, prior_mean, prior_cov, process_noise, rtol, steps=b.frame_steps
+        )
+    return dataclasses.replace(post, gated_updates=report)
+
+
+def _paper_only(reading, support) -> None:
+    """Refuse a reading or support of Eqs. (14)-(16) for a track that is not the paper's."""
+    if (reading, support) != ("derived", "front"):
+        raise ValueError(
+            "reading and support other than 'derived' and 'front' are readings of the "
+            "paper's three-frame Eqs. (14)-(16); a track with gaps, noise per frame or "
+            f"steps has neither, got {reading!r} and {support!r}"
+        )
 
 
 def _triple(

@@ -23,7 +23,7 @@ from depthcore.exact import quadrature
 from depthcore.exact.bank import Bank, lateral_filter, run_bank, step
 from depthcore.exact.mixture import Mixture, Moments, mixture, mixture_of_log_weights
 from depthcore.kalman import linear
-from depthcore.problem import checks, model, signature
+from depthcore.problem import checks, frames, model, signature
 
 # --- nodes placed by the depth quadrature ----------------------------------------------
 
@@ -55,10 +55,82 @@ def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
     return pb, batch
 
 
+def irregular(mu, rho, steps) -> bool:
+    """Whether a track is not the paper's frames: gaps, noise per frame or steps given."""
+    mu_arr = np.asarray(mu)
+    if steps is not None:
+        return True
+    if mu_arr.dtype.kind == "f" and np.any(np.isnan(mu_arr)):
+        return True
+    return np.ndim(rho) >= 1 and np.shape(rho) == mu_arr.shape
+
+
+def frames_problem(track: frames.Frames, prior_mean, prior_cov, process_noise):
+    """A checked track (:func:`depthcore.problem.frames.check`) as a quadrature Problem.
+
+    Steps all ones become ``None`` and noise equal at every frame of every row
+    becomes ``rho`` per row, so that the paper's frames take the paper's
+    arithmetic.
+
+    Returns
+    -------
+    depthcore.exact.quadrature.Problem
+        ``B`` problems (the track's batch flattened).
+    batch : tuple
+        The track's batch shape.
+    """
+    mu = track.mu
+    if mu.shape[-1] > MAX_FRAMES:
+        raise ValueError(f"mu: at most {MAX_FRAMES} frames, got {mu.shape[-1]}")
+    batch, N = mu.shape[:-1], mu.shape[-1]
+    B = int(np.prod(batch))
+    prior_mean = checks.finite_array(prior_mean, "prior_mean")
+    if prior_mean.shape[-1:] != (3,) or not checks.broadcasts(prior_mean.shape[:-1], batch):
+        raise ValueError(f"prior_mean must have shape (3,) or (..., 3), got {prior_mean.shape}")
+    prior_cov = checks.finite_array(prior_cov, "prior_cov")
+    if prior_cov.shape[-2:] != (3, 3) or not checks.broadcasts(prior_cov.shape[:-2], batch):
+        raise ValueError(f"prior_cov must have shape (3, 3) or (..., 3, 3), got {prior_cov.shape}")
+    prior_cov = checks.covariances(prior_cov, "prior_cov", 3)
+    q = checks.nonnegative_batch(process_noise, "process_noise", batch)
+    prior_cov = np.ascontiguousarray(np.broadcast_to(prior_cov, batch + (3, 3))).reshape(B, 3, 3)
+    rho = np.ascontiguousarray(track.rho).reshape(B, N)
+    per_row = np.all(np.where(track.present.reshape(B, N), rho, rho[:, :1]) == rho[:, :1])
+    steps = np.ascontiguousarray(track.steps).reshape(B, N - 1)
+    pb = quadrature.Problem(
+        mu=np.ascontiguousarray(mu).reshape(B, N),
+        rho=rho[:, 0] if per_row else np.max(np.where(np.isnan(mu.reshape(B, N)), 0, rho), 1),
+        mean=np.broadcast_to(prior_mean, batch + (3,)).reshape(B, 3),
+        R=np.linalg.inv(np.linalg.cholesky(prior_cov)),
+        reading="derived",
+        process_noise=np.broadcast_to(q, batch).reshape(B),
+        cov=prior_cov,
+        integrand=_integrand,
+        steps=None if np.all(steps == 1.0) else steps,
+        frame_rho=None if per_row else rho,
+    )
+    return pb, batch
+
+
+def _problem_of(mu, rho, prior_mean, prior_cov, process_noise, steps):
+    """The quadrature Problem of a track or a batch, the paper's frames or not; and the batch."""
+    if irregular(mu, rho, steps):
+        return frames_problem(frames.check(mu, rho, steps), prior_mean, prior_cov, process_noise)
+    return _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise)
+
+
 def _integrand(offsets, pb):
     """The depth quadrature's integrand: :func:`~depthcore.exact.bank.lateral_filter` at ``y_1 =
     offsets[..., 2]``."""
-    return lateral_filter(offsets[..., 2], pb.mu, pb.rho, pb.process_noise, pb.mean, pb.cov)
+    return lateral_filter(
+        offsets[..., 2],
+        pb.mu,
+        pb.rho,
+        pb.process_noise,
+        pb.mean,
+        pb.cov,
+        pb.steps,
+        pb.frame_rho,
+    )
 
 
 def _integrate(pb, rtol: float):
@@ -70,14 +142,24 @@ def _integrate(pb, rtol: float):
     """
     m, err_y, err_v, top, grids = quadrature.integrate(pb, (3,), rtol)
     mean = m.mean.copy()
-    mean[:, 1] += pb.mu.shape[1] - 3
+    if pb.steps is None:
+        mean[:, 1] += pb.mu.shape[1] - 3
+    else:
+        mean[:, 1] += np.sum(pb.steps, axis=1) - 2.0
     err_y = np.maximum(err_y, 64.0 * np.finfo(float).eps * np.abs(mean[:, 1]))
     return m._replace(mean=mean), err_y, err_v, top, grids
 
 
 @signature.documented
 def moments(
-    mu, rho, prior_mean, prior_cov, process_noise=0.0, rtol: float = 1e-10, chunk: int = 64
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise=0.0,
+    rtol: float = 1e-10,
+    chunk: int = 64,
+    steps=None,
 ) -> Moments:
     """The exact posterior moments at frame ``N``, with the depth nodes placed by quadrature.
 
@@ -105,9 +187,9 @@ def moments(
         For invalid inputs, naming the argument, or when the tolerance is out
         of reach within the quadrature's node budget, naming the problem.
     """
-    pb, _ = _quadrature_problem(
-        np.atleast_2d(mu) if np.ndim(mu) == 1 else mu, rho, prior_mean, prior_cov, process_noise
-    )
+    mu2 = np.atleast_2d(mu) if np.ndim(mu) == 1 else mu
+    rho2 = np.atleast_2d(rho) if np.ndim(mu) == 1 and np.shape(rho) == np.shape(mu) else rho
+    pb, _ = _problem_of(mu2, rho2, prior_mean, prior_cov, process_noise, steps)
     rtol = checks.positive_scalar(rtol, "rtol")
     chunk = checks.count(chunk, "chunk")
     out, means, covs = [], [], []
@@ -137,7 +219,14 @@ def _grid_nodes(grid):
 
 
 def posterior(
-    mu, rho, prior_mean, prior_cov, process_noise=0.0, rtol: float = 1e-10, history: bool = False
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise=0.0,
+    rtol: float = 1e-10,
+    history: bool = False,
+    steps=None,
 ) -> Mixture:
     """The exact posterior at frame ``N`` as a bank on nodes placed by the depth quadrature.
 
@@ -153,6 +242,11 @@ def posterior(
     history : bool
         Keep each node's filter at every frame (for
         :meth:`~depthcore.exact.mixture.Mixture.smoothed`).
+    steps : array_like, shape (N - 1,) or (B, N - 1), or None
+        The depth's change between frames (:func:`depthcore.problem.frames.check`);
+        with ``steps``, ``NaN`` bearings (missing frames) or ``rho`` per frame
+        (shape ``mu``'s) the track is checked by
+        :func:`depthcore.problem.frames.check` (at least three bearings present).
 
     Returns
     -------
@@ -160,9 +254,9 @@ def posterior(
         Batch shape ``()`` for ``mu`` of shape ``(N,)``, ``(B,)`` otherwise.
     """
     single = np.ndim(mu) == 1
-    pb, _ = _quadrature_problem(
-        np.atleast_2d(mu) if single else mu, rho, prior_mean, prior_cov, process_noise
-    )
+    mu2 = np.atleast_2d(mu) if single else mu
+    rho2 = np.atleast_2d(rho) if single and np.shape(rho) == np.shape(mu) else rho
+    pb, _ = _problem_of(mu2, rho2, prior_mean, prior_cov, process_noise, steps)
     rtol = checks.positive_scalar(rtol, "rtol")
     return _place(pb, rtol, history, single)
 
@@ -181,7 +275,10 @@ def _place(pb, rtol, history, single):
     _, err_y, err_v, _, grids = _integrate(pb, rtol)
     nodes, log_w = _grid_nodes(grids[3])
     shift = np.max(log_w, axis=1, keepdims=True)
-    bank = run_bank(nodes, pb.mu, pb.rho, pb.process_noise, pb.mean, pb.cov, history)
+    rho = pb.rho if pb.frame_rho is None else pb.frame_rho
+    bank = run_bank(
+        nodes, pb.mu, rho, pb.process_noise, pb.mean, pb.cov, history, pb.steps, pb.frame_rho
+    )
     post = mixture(bank, np.exp(log_w - shift))
     post = dataclasses.replace(
         post,
@@ -217,6 +314,8 @@ def _concatenate(parts) -> Mixture:
         process_noise=np.concatenate([b.process_noise for b in banks]),
         prior_mean=np.concatenate([b.prior_mean for b in banks]),
         prior_cov=np.concatenate([b.prior_cov for b in banks]),
+        frame_steps=np.concatenate([b.frame_steps for b in banks]),
+        frame_noise=np.concatenate([b.frame_noise for b in banks]),
         history=None
         if banks[0].history is None
         else linear.FilterResult(
@@ -320,7 +419,7 @@ def _pad(a, J: int, axis: int, value):
 _ONE_NODE = 0.5
 
 
-def update(post: Mixture, mu_next) -> Mixture:
+def update(post: Mixture, mu_next, rho=None, step=1.0, gaps: bool = False) -> Mixture:
     """Add frame ``N + 1`` to a posterior from :func:`posterior`, online.
 
     Every node's Kalman filter and weight is updated (:func:`~depthcore.exact.bank.step`); nothing
@@ -340,6 +439,12 @@ def update(post: Mixture, mu_next) -> Mixture:
         After ``N`` frames, from :func:`posterior` or :func:`update`.
     mu_next : float or array_like, shape (B,)
         The bearing at frame ``N + 1``, one per problem.
+    rho : float or None
+        Its noise SD (``None``: the posterior's; see :func:`depthcore.exact.bank.step`).
+    step : float
+        The depth's change from frame ``N``, > 0.
+    gaps : bool
+        Whether a ``NaN`` bearing is a missing frame (else refused).
 
     Returns
     -------
@@ -353,7 +458,9 @@ def update(post: Mixture, mu_next) -> Mixture:
     single = post.log_normaliser.ndim == 0
     if single:
         post = _batch_of_one(post)
-    mu_next = checks.finite_array(mu_next, "mu_next")
+    mu_next = checks.as_float(mu_next, "mu_next")
+    if not np.all(np.isfinite(mu_next) | (gaps & np.isnan(mu_next))):
+        raise ValueError("mu_next must be finite (or NaN for a missing frame, with gaps=True)")
     if mu_next.ndim > 1 or (mu_next.ndim == 1 and mu_next.shape != post.log_normaliser.shape):
         raise ValueError(
             f"mu_next must be a scalar or have shape {post.log_normaliser.shape}, "
@@ -361,7 +468,10 @@ def update(post: Mixture, mu_next) -> Mixture:
         )
     if post.bank.frames >= MAX_FRAMES:
         raise ValueError(f"mu_next: at most {MAX_FRAMES} frames")
-    new, err, floor, free = _step_rows(post, np.broadcast_to(mu_next, post.log_normaliser.shape))
+    frame = {"rho": rho, "step": step, "gaps": gaps}
+    new, err, floor, free = _step_rows(
+        post, np.broadcast_to(mu_next, post.log_normaliser.shape), frame
+    )
     rtol = post.rtol
     ok = (
         free
@@ -389,7 +499,7 @@ def _row_blocks(rows: int, nodes: int) -> list:
     return [slice(i, i + size) for i in range(0, rows, size)]
 
 
-def _step_rows(post: Mixture, mu_next):
+def _step_rows(post: Mixture, mu_next, frame=None):
     """:func:`~depthcore.exact.bank.step`, :func:`~depthcore.exact.mixture.mixture_of_log_weights`
     and
     :func:`_resolution`, block by block.
@@ -404,6 +514,8 @@ def _step_rows(post: Mixture, mu_next):
     post : Mixture
         Batch shape (B,).
     mu_next : ndarray, shape (B,)
+    frame : dict or None
+        :func:`update`'s ``rho``, ``step`` and ``gaps`` (each a number or (B,)).
 
     Returns
     -------
@@ -420,7 +532,9 @@ def _step_rows(post: Mixture, mu_next):
     for rows in blocks:
         part = post if len(blocks) == 1 else _each_array(post, lambda a, rows=rows: a[rows])
         new, halved_mean, halved_cov, top, free = mixture_of_log_weights(
-            step(part.bank, mu_next[rows]), part.log_weights, halved=True
+            step(part.bank, mu_next[rows], **_frame_rows(frame, rows)),
+            part.log_weights,
+            halved=True,
         )
         parts.append((new, *_resolution(new, halved_mean, halved_cov, top), free))
     if len(parts) == 1:
@@ -448,6 +562,13 @@ def _step_rows(post: Mixture, mu_next):
     return new, err, floor, np.concatenate([p[3] for p in parts])
 
 
+def _frame_rows(frame, rows) -> dict:
+    """:func:`~depthcore.exact.bank.step`'s frame keywords for the problems ``rows``."""
+    if frame is None:
+        return {}
+    return {k: v[rows] if np.ndim(v) == 1 else v for k, v in frame.items()}
+
+
 def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
     """``post`` with the problems at ``rows`` (B,) re-placed by the quadrature.
 
@@ -457,15 +578,18 @@ def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
     """
     b = post.bank
     idx = np.flatnonzero(rows)
+    fr = b.frame_rho
     pb = quadrature.Problem(
         mu=b.mu[idx],
-        rho=np.broadcast_to(b.rho, rows.shape)[idx],
+        rho=np.broadcast_to(b.rho, rows.shape)[idx] if fr is None else np.max(fr[idx], axis=1),
         mean=b.prior_mean[idx],
         R=np.linalg.inv(np.linalg.cholesky(b.prior_cov[idx])),
         reading="derived",
         process_noise=np.broadcast_to(b.process_noise, rows.shape)[idx],
         cov=b.prior_cov[idx],
         integrand=_integrand,
+        steps=None if b.steps is None else b.steps[idx],
+        frame_rho=None if fr is None else fr[idx],
     )
     fresh = _place(pb, post.rtol, b.history is not None, False)
     J = max(post.log_weights.shape[-1], fresh.log_weights.shape[-1])
@@ -542,5 +666,6 @@ def node_density(post: Mixture):
     b = post.bank
     log_density = b.log_weight - post.log_normaliser[..., None]
     density = np.where(np.isfinite(post.log_weights), np.exp(log_density), 0.0)
-    depths = np.broadcast_to(b.nodes, density.shape) + (b.frames - 1)
+    travelled = b.frames - 1 if b.steps is None else b.travelled[..., None]
+    depths = np.broadcast_to(b.nodes, density.shape) + travelled
     return depths, density

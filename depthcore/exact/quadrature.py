@@ -24,6 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from depthcore.exact import tracks
 from depthcore.kalman.second_order import second_order_batch
 from depthcore.problem import model
 from depthcore.problem.model import noise_free_states
@@ -75,6 +76,12 @@ class Problem(NamedTuple):
         The reading of Eq. (16) (see :func:`depthcore.exact.optimal.run`).
     process_noise : ndarray, shape (B,), or None
     cov : ndarray, shape (B, 3, 3), or None
+    steps : ndarray, shape (B, N - 1), or None
+        The depth's change between frames (``None``: unit steps; the bank's
+        integrand only).
+    frame_rho : ndarray, shape (B, N), or None
+        The noise SD per frame (``None``: ``rho``; the bank's integrand only).
+        ``mu`` is ``NaN`` at a missing frame.
     """
 
     mu: np.ndarray
@@ -86,6 +93,8 @@ class Problem(NamedTuple):
     reading: str = "derived"
     process_noise: np.ndarray | None = None
     cov: np.ndarray | None = None
+    steps: np.ndarray | None = None
+    frame_rho: np.ndarray | None = None
 
     def take(self, idx) -> Problem:
         """The problems at ``idx`` (an index or slice of the batch)."""
@@ -103,6 +112,8 @@ class Problem(NamedTuple):
             self.reading,
             part(self.process_noise),
             part(self.cov),
+            part(self.steps),
+            part(self.frame_rho),
         )
 
 
@@ -332,7 +343,9 @@ def _local_points(pb: Problem):
     behind the camera, with offsets ``0, +-1, +-0.1, .., +-1e-12`` in ``t``:
     a start for the Newton steps at every scale of the posterior's width.
     """
-    if pb.mu.shape[1] >= 3:
+    if pb.mu.shape[1] >= 3 and (pb.steps is not None or np.any(np.isnan(pb.mu))):
+        y = tracks.noise_free_start(pb.mu, pb.steps)
+    elif pb.mu.shape[1] >= 3:
         with np.errstate(all="ignore"):
             y = model.noise_free_states_unchecked(pb.mu[:, :3])[:, 1] - 2.0
     else:

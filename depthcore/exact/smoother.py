@@ -23,8 +23,9 @@ import numpy as np
 from depthcore.exact.bank import PSI, run_bank
 from depthcore.exact.mixture import Smoothed, mixture_moments
 from depthcore.exact.posterior import posterior, update
+from depthcore.exact.tracks import transitions
 from depthcore.kalman import linear
-from depthcore.problem import checks
+from depthcore.problem import checks, frames
 
 
 class Track(NamedTuple):
@@ -54,7 +55,9 @@ class Track(NamedTuple):
     posteriors: tuple
 
 
-def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol: float = 1e-10):
+def track(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol: float = 1e-10, steps=None
+):
     """The exact filter and its smoothers (textbook 19.2.6) at every frame of one track.
 
     The bearings arrive one at a time: the posterior after ``mu_1`` is placed
@@ -89,12 +92,24 @@ def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol:
     ``lag`` steps on 2 x 2 covariances); the augmented filter would cost
     ``O(lag**3)`` per frame (its covariance has side ``2 (lag + 1)``).
 
+    A track as it comes: ``NaN`` bearings are missing frames (the filters
+    predict through them), ``rho`` may be given per frame (shape ``(N,)``) and
+    ``steps`` are the depth's changes between frames (the motion of
+    :mod:`depthcore.problem.frames`); the smoothers run each node's
+    Rauch-Tung-Striebel recursion with the transition ``[[1, s_k], [0, 1]]``
+    of each step. The first bearing must be present (the nodes are first
+    placed on the posterior after it).
+
     Parameters
     ----------
     mu : array_like, shape (N,)
-        The bearings of one track, ``N >= 1``.
-    rho, prior_mean, prior_cov, process_noise, rtol
+        The bearings of one track, ``N >= 1``; ``NaN`` at a missing frame.
+    rho : float or array_like, shape (N,)
+        The noise SD, one or per frame (any value at a missing frame).
+    prior_mean, prior_cov, process_noise, rtol
         As for :func:`~depthcore.exact.posterior.posterior` (one problem).
+    steps : array_like, shape (N - 1,), or None
+        The depth's change between frames, > 0 (``None``: ones).
     lag : int
         The fixed-lag smoother's delay in frames, >= 0 (0: the filter; from
         ``N - 1`` on, the fixed-interval smoother, which is what it then is).
@@ -103,19 +118,60 @@ def track(mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol:
     -------
     Track
     """
-    mu = checks.finite_array(mu, "mu")
-    if mu.ndim != 1 or mu.size < 1:
-        raise ValueError(f"mu must have shape (N,) with N >= 1 (one track), got shape {mu.shape}")
+    raw = checks.as_float(mu, "mu")
+    if raw.ndim != 1 or raw.size < 1:
+        raise ValueError(f"mu must have shape (N,) with N >= 1 (one track), got shape {raw.shape}")
     lag = checks.nonnegative_count(lag, "lag")
-    posts = [posterior(mu[:1], rho, prior_mean, prior_cov, process_noise, rtol)]
+    mu = raw
+    per_frame, step_list = _frames(mu, rho, steps)
+    if np.isnan(mu[0]):
+        raise ValueError("mu[0] must be present: the track's first frame needs a bearing")
+    present = int(np.sum(~np.isnan(mu)))
+    if np.any(np.isinf(mu)) or (present < mu.size and present < frames.MIN_PRESENT):
+        raise ValueError(
+            f"mu must be finite, or NaN at missing frames with at least {frames.MIN_PRESENT} "
+            f"bearings present; got {present} present and {int(np.sum(np.isinf(mu)))} infinite"
+        )
+    first_rho = rho if per_frame is None else per_frame[0]
+    posts = [posterior(mu[:1], first_rho, prior_mean, prior_cov, process_noise, rtol)]
     for k in range(1, mu.size):
-        posts.append(update(posts[-1], mu[k]))
+        if per_frame is None and step_list is None and not np.isnan(mu[k]):
+            posts.append(update(posts[-1], mu[k]))
+        else:
+            posts.append(
+                update(
+                    posts[-1],
+                    mu[k],
+                    rho=None if per_frame is None else per_frame[k],
+                    step=1.0 if step_list is None else step_list[k - 1],
+                    gaps=True,
+                )
+            )
     filtered = Smoothed(np.stack([p.mean for p in posts]), np.stack([p.cov for p in posts]))
     interval = posts[-1].smoothed()
     # a delay reaching the last bearing from every frame: each frame is read from the
     # posterior after all N bearings, i.e. the fixed-interval smoother
     lagged = interval if lag >= mu.size - 1 else _lagged(posts, lag)
     return Track(filtered, interval, lagged, lag, tuple(posts))
+
+
+def _frames(mu, rho, steps):
+    """Noise per frame (N,) or ``None`` (one ``rho``), and steps (N - 1,) or ``None``."""
+    per_frame = None
+    if np.ndim(rho) > 0:
+        r = checks.as_float(rho, "rho")
+        if r.shape != mu.shape:
+            raise ValueError(f"rho must be a number or have shape {mu.shape}, got shape {r.shape}")
+        r = np.where(np.isnan(mu), 1.0, r)
+        if not np.all(np.isfinite(r) & (r > 0)):
+            raise ValueError("rho must be finite and positive at every present frame")
+        per_frame = r
+    if steps is None:
+        return per_frame, None
+    s = checks.finite_array(steps, "steps")
+    if s.shape != (mu.size - 1,) or not np.all(s > 0):
+        raise ValueError(f"steps must be {mu.size - 1} positive numbers, got {s.tolist()}")
+    return per_frame, s
 
 
 def _lagged(posts, lag: int) -> Smoothed:
@@ -140,12 +196,23 @@ def _lagged(posts, lag: int) -> Smoothed:
         if last <= first:
             continue
         b = posts[e - 1].bank
-        h = run_bank(b.nodes, b.mu, b.rho, b.process_noise, b.prior_mean, b.prior_cov, True).history
+        h = run_bank(
+            b.nodes,
+            b.mu,
+            b.rho,
+            b.process_noise,
+            b.prior_mean,
+            b.prior_cov,
+            True,
+            b.steps,
+            b.frame_rho,
+        ).history
+        Psi = PSI if b.steps is None else transitions(b.steps)[None]  # (1, N - 1, 2, 2)
         s = np.arange(first, last)
         t = np.minimum(s + lag, N - 1)
         mean, cov = h.means[:, t, :], h.covs[:, t, :, :]  # (J, frames, ...): at each t
         # the gain at frame k serves every chain through k: one per frame and node
-        gain = linear.smoother_gain(h.covs[:, :-1], h.predicted_covs[:, 1:], PSI)
+        gain = linear.smoother_gain(h.covs[:, :-1], h.predicted_covs[:, 1:], Psi)
         for i in range(1, int(np.max(t - s)) + 1):  # w_{k} from w_{k + 1}, k = t - i
             k = np.maximum(t - i, np.minimum(s, t - 1))  # a finished chain: any frame, dropped
             step = linear.smoother_step(
@@ -162,6 +229,6 @@ def _lagged(posts, lag: int) -> Smoothed:
             cov = np.where(going[..., None], step.cov, cov)
         W = np.stack([posts[k].probabilities for k in t])
         means[first:last], covs[first:last] = mixture_moments(
-            W, np.swapaxes(mean, 0, 1), np.swapaxes(cov, 0, 1), b.nodes + s[:, None]
+            W, np.swapaxes(mean, 0, 1), np.swapaxes(cov, 0, 1), b.nodes + b.elapsed[s][:, None]
         )
     return Smoothed(means, covs)

@@ -18,24 +18,33 @@ trial, say) with no Python loop over them.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
 from depthcore import _paths
 from depthcore.kalman import linear
-from depthcore.problem import checks, model, signature
-from depthcore.problem.gaussian import History, MeanAndCov, run_recursion, symmetric
+from depthcore.problem import checks, frames, model, predictive, signature
+from depthcore.problem.gaussian import (
+    History,
+    MeanAndCov,
+    checked_track,
+    run_recursion,
+    symmetric,
+)
 
 #: The EKF's estimates after each measurement: ``means[i]`` is ``m_{i+1}``,
 #: ``covs[i]`` is ``P_{i+1}``; ``.posterior`` is ``p_e = N(x, m_3, P_3)``.
 EKFHistory = History
 
 
-def predict(m, P, process_noise: float = 0.0) -> MeanAndCov:
-    """Eq. (10): ``n = F m + e``, ``C = F P F^T``, plus ``q**2`` on the velocity's variance.
+def predict(m, P, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
+    """Eq. (10) over a step ``s``: ``n = G(m, s)``, ``C = F_s P F_s^T``, plus ``q**2 s`` on ``v``.
 
-    With process noise ``q`` (textbook Eq. (19.10), ``Sigma_p = diag(0, 0, q**2)``)
-    the velocity's variance grows by ``q**2``; ``q = 0`` is Eq. (10).
+    With process noise ``q`` (textbook Eq. (19.10), ``Sigma_p = diag(0, 0, q**2 s)``,
+    :func:`depthcore.problem.frames.velocity_variance`) the velocity's variance
+    grows by ``q**2 s``; ``F_s`` is :func:`depthcore.problem.frames.transition`.
+    ``q = 0`` and ``s = 1`` is Eq. (10).
 
     Parameters
     ----------
@@ -43,16 +52,25 @@ def predict(m, P, process_noise: float = 0.0) -> MeanAndCov:
     P : array_like, shape (..., 3, 3)
     process_noise : float
         ``q >= 0`` (not checked here).
+    step : float or array_like, shape (...)
+        ``s > 0`` (not checked here), per problem.
     """
     m = np.asarray(m, dtype=float)
     P = np.asarray(P, dtype=float)
-    # F P F^T with F = I + E_13: add the v row to the x row, then the v column to the x column.
+    s = np.asarray(step, dtype=float)
+    # F P F^T with F = I + s E_13: add s times the v row to the x row, then the column.
     C = P.copy()
-    C[..., 0, :] += P[..., 2, :]
-    C[..., :, 0] += C[..., :, 2]
+    if s.ndim == 0 and s == 1.0:
+        C[..., 0, :] += P[..., 2, :]
+        C[..., :, 0] += C[..., :, 2]
+        mean = m @ model.F.T + model.e
+    else:
+        C[..., 0, :] += s[..., None] * P[..., 2, :]
+        C[..., :, 0] += s[..., None] * C[..., :, 2]
+        mean = model.G(m, s)
     if process_noise:
-        C[..., 2, 2] += process_noise**2
-    return MeanAndCov(m @ model.F.T + model.e, C)
+        C[..., 2, 2] += frames.velocity_variance(process_noise, s)
+    return MeanAndCov(mean, C)
 
 
 def _gradient(n) -> np.ndarray:
@@ -112,61 +130,224 @@ def update(n, C, mu, rho: float) -> MeanAndCov:
 
 
 def run_gaussian_filter(
-    update_step: Callable, mu, rho, prior_mean, prior_cov, process_noise: float = 0.0
+    update_step: Callable,
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    steps=None,
+    gate=None,
+    predictive_step: Callable | None = None,
 ) -> History:
     """The run loop shared by the Gaussian filters (EKF, UKF), batched.
 
     Initialise ``n = m``, ``C = P`` (the prior is the density of the state at
-    time 1), incorporate ``mu1``, then, for each further measurement, predict
-    with Eq. (10) (exact for the linear motion; :func:`predict`, with the
-    process noise ``q**2`` added to the velocity's variance) and incorporate it.
+    time 1), incorporate ``mu1``, then, for each further frame, predict with
+    Eq. (10) over its step (exact for the linear motion; :func:`predict`, with
+    the process noise ``q**2 s`` added to the velocity's variance) and
+    incorporate its bearing where it is present and not gated
+    (:func:`depthcore.problem.gaussian.run_recursion`).
 
     Parameters
     ----------
     update_step : callable
-        ``update_step(n, C, mu_k, rho) -> MeanAndCov``, batched; a
+        ``update_step(n, C, mu_k, rho_k) -> MeanAndCov``, batched; a
         :class:`ValueError` it raises is reraised naming the measurement.
     mu : array_like, shape (..., N)
-        Bearings of ``N >= 3`` frames in time order, checked by
-        :func:`depthcore.problem.model.batch_inputs` (as are the other arguments);
-        the leading shape runs independent filters.
-    rho : float or array_like, shape (...)
-        Noise standard deviation, > 0.
+        Bearings of ``N >= 3`` frames in time order, ``NaN`` where missing,
+        checked by :func:`depthcore.problem.gaussian.checked_track` (as are the
+        other arguments); the leading shape runs independent filters.
+    rho : float or array_like, shape (...) or (..., N)
+        Noise standard deviation, > 0, per problem or per frame.
     prior_mean : array_like, shape (3,) or (..., 3)
     prior_cov : array_like, shape (3, 3) or (..., 3, 3)
     process_noise : float
-        SD ``q >= 0`` of the velocity's change per frame (0: the paper's model).
+        SD ``q >= 0`` of the velocity's change per unit step (0: the paper's model).
+    steps : array_like, shape (N - 1,) or (..., N - 1), or None
+        The depth's change between frames (``None``: ones).
+    gate : float or None
+        :func:`depthcore.problem.predictive.gate`.
+    predictive_step : callable, optional
+        ``predictive_step(n, C, rho_k) -> (bearing_mean, bearing_var)``: the
+        filter's Gaussian predictive density of the bearing (the EKF's is
+        :func:`bearing_predictive`). Without it the result's ``updates`` is
+        ``None`` and a ``gate`` is refused.
 
     Returns
     -------
     History
-        ``means`` (..., N, 3) and ``covs`` (..., N, 3, 3) after each measurement.
+        ``means`` (..., N, 3) and ``covs`` (..., N, 3, 3) after each frame, and
+        ``updates`` (..., N) when ``predictive_step`` is given.
     """
-    mu, rho, n, C = model.batch_inputs(mu, rho, prior_mean, prior_cov)
+    track = checked_track(mu, rho, prior_mean, prior_cov, steps)
     q = checks.nonnegative_scalar(process_noise, "process_noise")
+    g = predictive.gate(gate)
+    if g is not None and predictive_step is None:
+        raise ValueError("gate: this filter reports no predictive density, so it has no gate")
+    f = track.frames
+    rho_k = f.rho
+    regular = f.regular
 
     def update(n, C, mu_k, k):
         try:
-            return update_step(n, C, mu_k, rho)
+            return update_step(n, C, mu_k, f.row_rho if regular else rho_k[..., k - 1])
         except ValueError as exc:
             raise ValueError(f"update with measurement {k}: {exc}") from None
 
-    return run_recursion(n, C, mu, lambda m, P, k: predict(m, P, q), update)
+    def predicted_bearing(n, C, k):
+        try:
+            return predictive_step(n, C, rho_k[..., k - 1])
+        except ValueError as exc:
+            raise ValueError(f"update with measurement {k}: {exc}") from None
+
+    def predict_k(m, P, k):
+        return predict(m, P, q) if regular else predict(m, P, q, f.steps[..., k - 2])
+
+    return run_recursion(
+        track.mean,
+        track.cov,
+        f.mu,
+        predict_k,
+        update,
+        f.present,
+        None if predictive_step is None else predicted_bearing,
+        g,
+    )
+
+
+def bearing_predictive(n, C, rho) -> tuple[np.ndarray, np.ndarray]:
+    """The EKF's predictive density of a bearing: mean ``n1 / n2``, variance ``h^T C h + rho**2``.
+
+    Eqs. (11)-(12): the innovation's variance ``rho**2 + h^T C h``.
+
+    Parameters
+    ----------
+    n : array_like, shape (..., 3)
+    C : array_like, shape (..., 3, 3)
+    rho : float or array_like, shape (...)
+
+    Returns
+    -------
+    mean, var : ndarray, shape (...)
+    """
+    n = np.asarray(n, dtype=float)
+    h = _gradient(n)
+    hCh = np.einsum("...i,...ij,...j->...", h, np.asarray(C, dtype=float), h)
+    return model.project(n), hCh + np.asarray(rho, dtype=float) ** 2
+
+
+class InformationStep(NamedTuple):
+    """One EKF update in square-root information form (:func:`information_update`).
+
+    ``mean`` (..., 3); ``root`` (..., 3, 3), ``R`` with ``P^{-1} = R^T R``;
+    ``log_predictive``, ``tail`` (NaN where the bearing is missing) and
+    ``gated`` (...), as in :class:`depthcore.problem.predictive.Updates`.
+    """
+
+    mean: np.ndarray
+    root: np.ndarray
+    log_predictive: np.ndarray
+    tail: np.ndarray
+    gated: np.ndarray
+
+
+def information_predict(m, R, process_noise: float = 0.0, step=1.0):
+    """Eq. (10) over a step ``s`` in square-root information form, batched.
+
+    ``n = G(m, s)``; the root of ``(F_s P F_s^T)^{-1} = F_s^{-T} P^{-1} F_s^{-1}``
+    is ``R F_s^{-1}``, and with process noise the root of
+    ``(F_s P F_s^T + diag(0, 0, q**2 s))^{-1}`` comes from a QR factorisation
+    (textbook Eq. (19.10); :func:`_predict_information`).
+
+    Parameters
+    ----------
+    m : ndarray, shape (..., 3)
+    R : ndarray, shape (..., 3, 3)
+    process_noise : float
+        ``q >= 0``, checked.
+    step : float or array_like, shape (...)
+        ``s > 0``, checked by the caller.
+
+    Returns
+    -------
+    n : ndarray, shape (..., 3)
+    R : ndarray, shape (..., 3, 3)
+    """
+    s = np.asarray(step, dtype=float)
+    if s.ndim == 0 and s == 1.0:
+        n = m @ model.F.T + model.e  # Eq. (10)
+        F, F_inverse = model.F, _F_INVERSE
+    else:
+        n = model.G(m, s)
+        F, F_inverse = frames.transition(s), frames.transition(-s)
+    if process_noise:
+        return n, _predict_information(R, process_noise, F, np.sqrt(s))
+    return n, R @ F_inverse
+
+
+def information_update(n, R, mu, rho, present=True, gate=None) -> InformationStep:
+    """Eq. (12) in square-root information form, masked and gated, batched.
+
+    The bearing's predictive density ``N(n1 / n2, h^T C h + rho**2)``
+    (:func:`bearing_predictive`, ``C = (R^T R)^{-1}``) gives its log density
+    and tail probability; where the bearing is missing (``present`` false or
+    ``mu`` NaN) or the gate skips it, the prediction is kept.
+
+    Parameters
+    ----------
+    n : ndarray, shape (..., 3)
+        Predicted mean, depth > 0.
+    R : ndarray, shape (..., 3, 3)
+        Root of the predicted information.
+    mu : array_like, shape (...)
+    rho : array_like, shape (...)
+        > 0.
+    present : bool or array_like of bool, shape (...)
+    gate : float or None
+        Checked by :func:`depthcore.problem.predictive.gate`.
+
+    Returns
+    -------
+    InformationStep
+    """
+    batch = n.shape[:-1]
+    mu = np.broadcast_to(np.asarray(mu, dtype=float), batch)
+    rho = np.broadcast_to(np.asarray(rho, dtype=float), batch)
+    here = np.broadcast_to(present, batch) & ~np.isnan(mu)
+    h = _gradient(n)  # Eq. (11)
+    z = np.linalg.solve(np.swapaxes(R, -1, -2), h[..., None])[..., 0]  # R^{-T} h
+    bearing = model.project(n)
+    mu_k = np.where(here, mu, bearing)
+    log_p, tail = predictive.gaussian(mu_k, bearing, np.sum(z * z, axis=-1) + rho**2)
+    gated = predictive.skipped(tail, here, gate)
+    use = here & ~gated
+    report = (np.where(here, log_p, np.nan), np.where(here, tail, np.nan), gated)
+    if not np.any(use):
+        return InformationStep(n, R, *report)
+    m, R_new = _update_information(n, R, mu_k, rho, h)
+    if not np.all(use):
+        m = np.where(use[..., None], m, n)
+        R_new = np.where(use[..., None, None], R_new, R)
+    return InformationStep(m, R_new, *report)
 
 
 @signature.documented
-def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
+def run(
+    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, steps=None, gate=None
+) -> History:
     """Run the EKF over the measurements, batched: Eq. (12), then (10) and (12) per measurement.
 
     Initialise ``n = m``, ``C = P`` (the prior, on the state at frame 1),
-    incorporate ``mu1`` with (12), then predict (10) and update (12) for each
-    further measurement; the last mean and covariance are those of the state
-    at frame ``N``. The information is carried as a square root
-    (:func:`_update_information`), which equals :func:`predict` and
+    incorporate ``mu1`` with (12), then predict (10) over each step and update
+    (12) for each further frame; a missing bearing (``NaN``) or one the gate
+    skips is not incorporated, row by row. The last mean and covariance are
+    those of the state at frame ``N``. The information is carried as a square
+    root (:func:`information_update`), which equals :func:`predict` and
     :func:`update` algebraically and keeps the small variances accurate at
     small noise. With process noise the prediction ``C = F P F^T + Sigma_p``
     (textbook Eq. (19.10)) is formed as a square root too
-    (:func:`_predict_information`).
+    (:func:`information_predict`).
 
     {parameters}
 
@@ -174,53 +355,56 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0) -> History:
     -------
     History
         ``means`` (..., N, 3): ``means[..., i, :]`` is the mean after
-        measurement ``i + 1``; ``covs`` (..., N, 3, 3). It unpacks as
-        ``means, covs = run(...)``.
+        frame ``i + 1``; ``covs`` (..., N, 3, 3); ``updates`` (..., N), each
+        bearing's log predictive density, tail probability and whether the
+        gate skipped it. It unpacks as ``means, covs = run(...)``.
     """
-    mu, rho, prior_mean, prior_cov = model.batch_problem(mu, rho, prior_mean, prior_cov)
+    track = checked_track(mu, rho, prior_mean, prior_cov, steps)
     q = checks.nonnegative_scalar(process_noise, "process_noise")
-    batch = mu.shape[:-1]
-    n = np.broadcast_to(prior_mean, batch + (3,))
+    g = predictive.gate(gate)
+    f = track.frames
+    regular = f.regular
+    n = track.mean
     # square root of the information: R^T R = P^{-1}, with P = L L^T
-    R = np.broadcast_to(np.linalg.inv(np.linalg.cholesky(prior_cov)), batch + (3, 3))
-    rho = np.broadcast_to(rho, batch)
-    means, roots = [], []
-    for i in range(mu.shape[-1]):
+    R = np.linalg.inv(np.linalg.cholesky(track.cov))
+    means, roots, reports = [], [], []
+    for i in range(f.mu.shape[-1]):
         if i > 0:
-            n = means[-1] @ model.F.T + model.e  # Eq. (10)
-            if q:
-                R = _predict_information(roots[-1], q)
-            else:
-                R = roots[-1] @ _F_INVERSE  # (F P F^T)^{-1} = F^{-T} P^{-1} F^{-1}
-        m, R_new = _update_information(n, R, mu[..., i], rho)
-        means.append(m)
-        roots.append(R_new)
+            n, R = information_predict(
+                means[-1], roots[-1], q, 1.0 if regular else f.steps[..., i - 1]
+            )
+        step = information_update(n, R, f.mu[..., i], f.rho[..., i], f.present[..., i], g)
+        means.append(step.mean)
+        roots.append(step.root)
+        reports.append(step[2:])
     R_inv = np.linalg.inv(np.stack(roots, axis=-3))
     covs = R_inv @ np.swapaxes(R_inv, -1, -2)
-    return History(np.stack(means, axis=-2), symmetric(covs))
+    updates = predictive.Updates(*(np.stack(r, axis=-1) for r in zip(*reports, strict=True)))
+    return History(np.stack(means, axis=-2), symmetric(covs), updates)
 
 
 #: Linear part of ``G^{-1}``, the inverse of ``F`` of Eq. (9).
 _F_INVERSE = model.G_linear(-1)
 
 
-def _predict_information(R, q: float) -> np.ndarray:
+def _predict_information(R, q: float, F=model.F, root_step=1.0) -> np.ndarray:
     """The root of the predicted information with process noise, batched.
 
     With ``P^{-1} = R^T R`` the covariance is ``P = S S^T``, ``S = R^{-1}``; the
-    prediction ``C = F P F^T + diag(0, 0, q**2)`` (textbook Eq. (19.10)) is
-    ``M^T M`` for ``M`` the rows of ``(F S)^T`` stacked on ``(0, 0, q)``, so the
-    QR factorisation ``M = Q U`` gives ``C = U^T U`` and the new root
+    prediction ``C = F P F^T + diag(0, 0, q**2 s)`` (textbook Eq. (19.10)) is
+    ``M^T M`` for ``M`` the rows of ``(F S)^T`` stacked on ``(0, 0, q sqrt(s))``,
+    so the QR factorisation ``M = Q U`` gives ``C = U^T U`` and the new root
     ``U^{-T}`` (``C^{-1} = U^{-1} U^{-T}``), with no subtraction.
     """
     S = np.linalg.inv(R)
-    noise = np.broadcast_to(np.array([[0.0, 0.0, q]]), R.shape[:-2] + (1, 3))
-    M = np.concatenate([np.swapaxes(model.F @ S, -1, -2), noise], axis=-2)  # (..., 4, 3)
+    noise = np.zeros(R.shape[:-2] + (1, 3))
+    noise[..., 0, 2] = q * np.asarray(root_step, dtype=float)
+    M = np.concatenate([np.swapaxes(F @ S, -1, -2), noise], axis=-2)  # (..., 4, 3)
     U = np.linalg.qr(M, mode="r")
     return np.swapaxes(np.linalg.inv(U), -1, -2)
 
 
-def _update_information(n, R, mu, rho):
+def _update_information(n, R, mu, rho, h):
     """Eq. (12) in square-root information form, batched: returns the mean and the new root.
 
     With the prediction's information ``C^{-1} = R^T R`` and the linearised
@@ -233,7 +417,6 @@ def _update_information(n, R, mu, rho):
     subtraction, so its small eigenvalues keep their relative accuracy at
     small noise.
     """
-    h = _gradient(n)  # Eq. (11)
     innovation = np.asarray(mu, dtype=float) - model.project(n)
     stacked = np.concatenate([R, (h / rho[..., None])[..., None, :]], axis=-2)  # (..., 4, 3)
     Q, R_new = np.linalg.qr(stacked)

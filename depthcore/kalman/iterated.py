@@ -64,8 +64,8 @@ from depthcore.kalman.second_order import (
     trajectory_solve,
     trajectory_states,
 )
-from depthcore.problem import checks, model, signature
-from depthcore.problem.gaussian import symmetric
+from depthcore.problem import checks, model, predictive, signature
+from depthcore.problem.gaussian import History, checked_track, run_recursion, symmetric
 
 #: Largest number of Gauss-Newton iterations of one update or smoother.
 MAX_ITERATIONS = 100
@@ -116,11 +116,7 @@ def update(n, C, mu, rho, max_iterations: int = MAX_ITERATIONS) -> IteratedUpdat
     """
     n = np.asarray(n, dtype=float)
     C = np.asarray(C, dtype=float)
-    if not np.all(n[..., 1] > 0):
-        raise ValueError(
-            "prior_mean leads the iterated EKF to a predicted depth n2 <= 0 "
-            f"(min {float(np.min(n[..., 1])):.6g}); the projection x/y is not defined there"
-        )
+    _check_depth(n)
     mu = np.broadcast_to(np.asarray(mu, dtype=float), n.shape[:-1])
     r2 = np.broadcast_to(np.asarray(rho, dtype=float) ** 2, n.shape[:-1])
     C_chol = np.linalg.cholesky(C)
@@ -153,44 +149,101 @@ def update(n, C, mu, rho, max_iterations: int = MAX_ITERATIONS) -> IteratedUpdat
     return IteratedUpdate(x, cov, iterations)
 
 
+def _check_depth(n) -> None:
+    if not np.all(n[..., 1] > 0):
+        raise ValueError(
+            "prior_mean leads the iterated EKF to a predicted depth n2 <= 0 "
+            f"(min {float(np.min(n[..., 1])):.6g}); the projection x/y is not defined there"
+        )
+
+
+def bearing_predictive(n, C, rho) -> tuple[np.ndarray, np.ndarray]:
+    """The predictive density of a bearing, linearised at the prediction as the EKF's.
+
+    ``N(n1 / n2, h^T C h + rho**2)`` with ``h`` from Eq. (11) at ``n``: the
+    first iterate's linearisation, before the bearing is seen.
+
+    Parameters
+    ----------
+    n : array_like, shape (..., 3)
+    C : array_like, shape (..., 3, 3)
+    rho : float or array_like, shape (...)
+
+    Returns
+    -------
+    mean, var : ndarray, shape (...)
+    """
+    n = np.asarray(n, dtype=float)
+    _check_depth(n)
+    h = model.observation_vector(n)
+    hCh = np.einsum("...i,...ij,...j->...", h, np.asarray(C, dtype=float), h)
+    return model.project(n), hCh + np.asarray(rho, dtype=float) ** 2
+
+
 @signature.documented
 def run(
-    mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, max_iterations: int = MAX_ITERATIONS
-) -> tuple[np.ndarray, np.ndarray]:
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    max_iterations: int = MAX_ITERATIONS,
+    steps=None,
+    gate=None,
+) -> History:
     """The iterated EKF over ``K`` bearings, batched.
 
     Initialise with the prior, apply the iterated update to ``mu_1``, then
-    predict (Eq. (10), plus the process noise ``q**2`` on the velocity) and
-    update for each further bearing.
+    predict (Eq. (10) over the step, plus the process noise ``q**2 s`` on the
+    velocity) and update for each further frame; a missing bearing (``NaN``)
+    or one the gate skips is not incorporated, row by row
+    (:func:`depthcore.problem.gaussian.run_recursion`). The predictive density
+    of each bearing is the EKF's at the prediction (:func:`bearing_predictive`).
 
     {parameters}
     max_iterations : int
 
     Returns
     -------
-    means : ndarray, shape (..., K, 3)
-        ``means[..., k, :]`` is the mean after bearing ``k + 1``.
-    covs : ndarray, shape (..., K, 3, 3)
+    History
+        ``means`` (..., K, 3), ``means[..., k, :]`` the mean after frame
+        ``k + 1``; ``covs`` (..., K, 3, 3); ``updates`` (..., K). It unpacks as
+        ``means, covs = run(...)``.
     """
-    mu, rho, n, C = model.batch_inputs(mu, rho, prior_mean, prior_cov, triples=False)
+    track = checked_track(mu, rho, prior_mean, prior_cov, steps, triples=False)
     q = checks.nonnegative_scalar(process_noise, "process_noise")
+    g = predictive.gate(gate)
+    f = track.frames
+    regular = f.regular
     Q = np.diag([0.0, 0.0, q**2])
-    means, covs = [], []
-    for k in range(mu.shape[-1]):
-        if k > 0:
-            n, C = predict(means[-1], covs[-1])
-            C = C + Q
+
+    def predict_k(m, P, k):
+        if regular:
+            n, C = predict(m, P)
+            return n, C + Q
+        return predict(m, P, q, f.steps[..., k - 2])
+
+    def update_k(n, C, mu_k, k):
         try:
-            m, P, _ = update(n, C, mu[..., k], rho, max_iterations)
+            m, P, _ = update(n, C, mu_k, f.rho[..., k - 1], max_iterations)
         except np.linalg.LinAlgError:
             raise ValueError(
                 f"mu and rho lead the iterated EKF to a covariance that is not positive "
-                f"definite at bearing {k + 1}: a rho tiny beside the prior loses it to "
+                f"definite at bearing {k}: a rho tiny beside the prior loses it to "
                 "rounding, or the linearisations drift too far apart"
             ) from None
-        means.append(m)
-        covs.append(P)
-    return np.stack(means, axis=-2), np.stack(covs, axis=-3)
+        return m, P
+
+    return run_recursion(
+        track.mean,
+        track.cov,
+        f.mu,
+        predict_k,
+        update_k,
+        f.present,
+        lambda n, C, k: bearing_predictive(n, C, f.rho[..., k - 1]),
+        g,
+    )
 
 
 def _residuals_and_jacobian(x1, K: int):

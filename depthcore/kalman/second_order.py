@@ -42,7 +42,7 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore import _paths
-from depthcore.problem import checks, model, signature
+from depthcore.problem import checks, frames, model, signature
 from depthcore.problem.gaussian import Gaussian, MeanAndCov, symmetric
 from depthcore.problem.model import (
     noise_free_state,
@@ -65,6 +65,7 @@ __all__ = [
     "run",
     "second_order",
     "minimiser",
+    "paper_frames",
     "second_order_batch",
     "theorem1_precision",
     "trajectory_laplace",
@@ -626,13 +627,58 @@ def _square_root_solve(c, g, weight, prior_mean, prior_cov):
     return c + delta, symmetric(cov)
 
 
+def paper_frames(mu, rho, steps=None):
+    """``mu`` and ``rho`` of a track the second-order approximation takes, or a one-line refusal.
+
+    The approximation expands the misfit of all the bearings about one
+    noise-free solution at unit steps with one noise level: a track with a
+    missing bearing, uneven steps or a ``rho`` that changes from frame to frame
+    is refused, naming the argument. A ``rho`` given per frame but the same at
+    every frame of a problem is read as that problem's.
+
+    Returns
+    -------
+    mu : array_like
+        As given (checked further by the filter).
+    rho : float or ndarray, shape (...)
+    """
+    mu_arr = checks.as_float(mu, "mu")
+    rho_arr = checks.as_float(rho, "rho")
+    per_frame = rho_arr.ndim > 0 and rho_arr.shape == mu_arr.shape
+    if steps is None and not per_frame and not np.any(np.isnan(mu_arr)):
+        return mu, rho
+    f = frames.check(mu_arr, rho_arr, steps)
+    if not np.all(f.present):
+        raise ValueError(
+            "mu: the second-order approximation takes no missing bearings (NaN); "
+            "use the EKF, the UKF or the exact filter"
+        )
+    if not np.all(f.steps == 1.0):
+        raise ValueError("steps: the second-order approximation takes only unit steps")
+    if not np.all(f.rho == f.rho[..., :1]):
+        raise ValueError(
+            "rho: the second-order approximation takes one rho per problem, not one per frame"
+        )
+    return mu, f.row_rho
+
+
 @signature.documented
-def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, reading: str = "derived"):
+def run(
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    reading: str = "derived",
+    steps=None,
+):
     """Eq. (8): the second-order approximation ``p_s`` at frame ``N``, of one sequence or a batch.
 
     ``p_s(x) = N(x, c, S) p(G^{-2} x)`` with ``S`` from :func:`likelihood_covariance`;
     the product of two Gaussians is a Gaussian. For ``N > 3`` bearings or
     process noise, its generalisation (:func:`second_order_batch`, the module docstring).
+    Only the paper's frames (:func:`paper_frames`): no gaps, unit steps, one
+    ``rho`` per problem.
 
     {parameters}
     reading : {"derived", "printed"}
@@ -643,6 +689,7 @@ def run(mu, rho, prior_mean, prior_cov, process_noise: float = 0.0, reading: str
         For one sequence the Gaussian ``p_s`` (state at frame ``N``); for a batch
         its means (B, 3) and covariances (B, 3, 3).
     """
+    mu, rho = paper_frames(mu, rho, steps)
     if np.ndim(mu) != 1:
         return MeanAndCov(
             *second_order_batch(mu, rho, prior_mean, prior_cov, reading, process_noise)

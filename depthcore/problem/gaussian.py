@@ -5,7 +5,10 @@ Recommended import: ``from depthcore.problem.gaussian import Gaussian, paper_pri
 * :class:`Gaussian`, with its marginals (Eq. (13)); :func:`gaussian_logpdf`,
   the batched log density every module uses;
 * :class:`MeanAndCov` and :class:`History`, the result types of the Gaussian
-  filters (:mod:`depthcore.kalman.ekf`, :mod:`depthcore.kalman.ukf`);
+  filters (:mod:`depthcore.kalman.ekf`, :mod:`depthcore.kalman.ukf`), with each
+  update's report (:class:`depthcore.problem.predictive.Updates`);
+* :func:`checked_track` and :func:`run_recursion`: the checks and the loop of
+  the recursive Gaussian filters, over tracks with gaps, noise per frame and steps;
 * :func:`paper_prior` and :func:`paper_prior_means`: the paper's prior rule,
   for one triple and for a batch;
 * :func:`student_t`: draws from multivariate Student t laws with their log densities.
@@ -18,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from depthcore.problem import checks
+from depthcore.problem import checks, frames, model, predictive
 
 #: Index of each state component in ``(x, y, v)``.
 INDEX = {"x": 0, "y": 1, "v": 2}
@@ -146,19 +149,36 @@ class MeanAndCov(NamedTuple):
     cov: np.ndarray
 
 
-class History(NamedTuple):
-    """A Gaussian filter's estimates after each measurement.
+class _Pair(NamedTuple):
+    means: np.ndarray
+    covs: np.ndarray
+
+
+class History(_Pair):
+    """A Gaussian filter's estimates after each measurement, and what each update saw.
+
+    It unpacks as ``means, covs = history``.
 
     Attributes
     ----------
     means : ndarray, shape (..., K, 3)
-        ``means[..., i, :]`` is the mean after measurement ``mu_{i+1}``.
+        ``means[..., i, :]`` is the mean after measurement ``mu_{i+1}`` (the
+        prediction, where that bearing is missing or gated).
     covs : ndarray, shape (..., K, 3, 3)
         ``covs[..., i, :, :]`` is the covariance after measurement ``mu_{i+1}``.
+    updates : depthcore.problem.predictive.Updates or None
+        Per frame, the bearing's log predictive density and tail probability
+        and whether the gate skipped it, each of shape (..., K); ``None`` when
+        the filter does not report them.
     """
 
-    means: np.ndarray
-    covs: np.ndarray
+    updates = None
+
+    def __new__(cls, means, covs, updates=None):
+        self = super().__new__(cls, means, covs)
+        if updates is not None:
+            self.updates = updates
+        return self
 
     @property
     def posterior(self) -> Gaussian:
@@ -166,41 +186,152 @@ class History(NamedTuple):
         return Gaussian(self.means[-1], self.covs[-1])
 
 
-def run_recursion(mean, cov, mu, predict, update) -> History:
+class CheckedTrack(NamedTuple):
+    """A batch of tracks and a prior, checked once for a Gaussian filter (:func:`checked_track`).
+
+    Attributes
+    ----------
+    frames : depthcore.problem.frames.Frames
+        The bearings (``NaN`` where missing), which are present, ``rho`` per
+        frame (..., N) and the steps (..., N - 1).
+    mean : ndarray, shape (..., 3)
+        The prior mean, broadcast to the batch (read-only).
+    cov : ndarray, shape (..., 3, 3)
+        The prior covariance, broadcast to the batch (read-only).
+    """
+
+    frames: frames.Frames
+    mean: np.ndarray
+    cov: np.ndarray
+
+
+def checked_track(mu, rho, prior_mean, prior_cov, steps=None, triples: bool = True) -> CheckedTrack:
+    """Check a Gaussian filter's track and prior: the paper's frames as ever, others as they come.
+
+    Finite bearings with one ``rho`` per problem and no ``steps`` go through
+    :func:`depthcore.problem.model.batch_problem` (its refusals, e.g. the
+    paper's triple behind the camera); a track with gaps, ``rho`` per frame or
+    steps through :func:`depthcore.problem.frames.check`, the prior through
+    the same checks.
+
+    Parameters
+    ----------
+    mu : array_like, shape (..., N)
+    rho : float or array_like, shape (...) or (..., N)
+    prior_mean : array_like, shape (3,) or (..., 3)
+    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
+    steps : array_like, shape (N - 1,) or (..., N - 1), or None
+    triples : bool
+        As for :func:`depthcore.problem.model.batch_problem` (``False``: any
+        ``N >= 1`` finite bearings of the paper's frames).
+
+    Returns
+    -------
+    CheckedTrack
+    """
+    mu_arr = checks.as_float(mu, "mu")
+    rho_arr = checks.as_float(rho, "rho")
+    paper = (
+        steps is None
+        and not np.any(np.isnan(mu_arr))
+        and (rho_arr.ndim == 0 or rho_arr.shape != mu_arr.shape)
+    )
+    if paper:
+        mu_arr, rho_arr, prior_mean, prior_cov = model.batch_problem(
+            mu_arr, rho_arr, prior_mean, prior_cov, triples
+        )
+        n = mu_arr.shape[-1]
+        checked = frames.Frames(
+            mu_arr,
+            np.ones(mu_arr.shape, dtype=bool),
+            np.broadcast_to(rho_arr[..., None], mu_arr.shape),
+            np.broadcast_to(np.ones(n - 1), mu_arr.shape[:-1] + (n - 1,)),
+        )
+    else:
+        checked = frames.check(mu_arr, rho_arr, steps)
+        # the prior's checks; the bearings and the noise are checked above
+        _, _, prior_mean, prior_cov = model.batch_problem(
+            np.zeros(checked.mu.shape[:-1] + (1,)), 1.0, prior_mean, prior_cov, triples=False
+        )
+    batch = checked.mu.shape[:-1]
+    return CheckedTrack(
+        checked,
+        np.broadcast_to(prior_mean, batch + (3,)),
+        np.broadcast_to(prior_cov, batch + (3, 3)),
+    )
+
+
+def run_recursion(
+    mean, cov, mu, predict, update, present=None, predictive_step=None, gate=None
+) -> History:
     """The predict-update loop of the recursive Gaussian filters, batched, on checked inputs.
 
     From ``N(mean, cov)``, the Gaussian of the state at frame 1, incorporate
     ``mu_1``; then, for each frame ``k = 2 .. K``, predict the state at frame
-    ``k`` and incorporate ``mu_k`` (textbook 19.3). The filter's own
-    coordinates, prediction and update are the caller's, as are the checks of
-    the inputs and the wording of a refusal.
+    ``k`` and incorporate ``mu_k`` (textbook 19.3). A missing bearing (``NaN``,
+    or ``present`` false) or one the gate skips is not incorporated: the state
+    after that frame is the prediction (a masked update, row by row). The
+    filter's own coordinates, prediction and update are the caller's, as are
+    the checks of the inputs and the wording of a refusal.
 
     Parameters
     ----------
     mean : ndarray, shape (..., d)
     cov : ndarray, shape (..., d, d)
     mu : ndarray, shape (..., K)
-        Bearings in time order, ``K >= 1``.
+        Bearings in time order, ``K >= 1``; ``NaN`` where missing.
     predict : callable
         ``predict(mean, cov, k) -> (mean, cov)``: the state at frame ``k`` from
         the state at frame ``k - 1``.
     update : callable
         ``update(mean, cov, mu_k, k) -> (mean, cov)``: incorporate the bearing of
-        frame ``k``.
+        frame ``k`` (it sees a finite ``mu_k`` in every row: the predicted
+        bearing, or 0, where the bearing is not incorporated).
+    present : ndarray of bool, shape (..., K), optional
+        Where a bearing is present; default where ``mu`` is not ``NaN``.
+    predictive_step : callable, optional
+        ``predictive_step(mean, cov, k) -> (bearing_mean, bearing_var)``, each
+        (...): the Gaussian predictive density of the bearing of frame ``k``
+        (:func:`depthcore.problem.predictive.gaussian`). Without it the result's
+        ``updates`` is ``None`` and there is no gate.
+    gate : float or None
+        From :func:`depthcore.problem.predictive.gate`: skip a bearing whose
+        tail probability is below it.
 
     Returns
     -------
     History
-        ``means`` (..., K, d) and ``covs`` (..., K, d, d) after each bearing.
+        ``means`` (..., K, d) and ``covs`` (..., K, d, d) after each bearing,
+        and the per-frame ``updates`` (..., K) when ``predictive_step`` is given.
     """
-    means, covs = [], []
+    mu = np.asarray(mu, dtype=float)
+    present = ~np.isnan(mu) if present is None else np.asarray(present, dtype=bool)
+    means, covs, reports = [], [], []
     for k in range(1, mu.shape[-1] + 1):
         if k > 1:
             mean, cov = predict(mean, cov, k)
-        mean, cov = update(mean, cov, mu[..., k - 1], k)
+        here = np.broadcast_to(present[..., k - 1], np.shape(mean)[:-1])
+        mu_k = np.where(here, mu[..., k - 1], 0.0)
+        use = here
+        if predictive_step is not None:
+            bearing_mean, bearing_var = predictive_step(mean, cov, k)
+            mu_k = np.where(here, mu_k, bearing_mean)
+            log_p, tail = predictive.gaussian(mu_k, bearing_mean, bearing_var)
+            gated = predictive.skipped(tail, here, gate)
+            reports.append((np.where(here, log_p, np.nan), np.where(here, tail, np.nan), gated))
+            use = here & ~gated
+        if np.all(use):
+            mean, cov = update(mean, cov, mu_k, k)
+        elif np.any(use):
+            new_mean, new_cov = update(mean, cov, mu_k, k)
+            mean = np.where(use[..., None], new_mean, mean)
+            cov = np.where(use[..., None, None], new_cov, cov)
         means.append(mean)
         covs.append(cov)
-    return History(np.stack(means, axis=-2), np.stack(covs, axis=-3))
+    updates = None
+    if reports:
+        updates = predictive.Updates(*(np.stack(r, axis=-1) for r in zip(*reports, strict=True)))
+    return History(np.stack(means, axis=-2), np.stack(covs, axis=-3), updates)
 
 
 def paper_prior(c, depth_offset: float = 0.0, scale: float = PAPER_PRIOR_SCALE) -> Gaussian:

@@ -155,6 +155,7 @@ def simulate(
     size: int | None = None,
     *,
     frame: int = N_MEASUREMENTS,
+    steps=None,
 ) -> Simulation:
     """Draw a track of ``N`` frames through a given state, and its noisy bearings, Eqs. (1), (4).
 
@@ -181,10 +182,10 @@ def simulate(
         ``y - frame + 1``, must be > 0 (then it is at every frame).
     frames : int
         ``N >= 1``, the frames ``1 .. N`` simulated.
-    rho : float
-        Bearing noise SD, > 0.
+    rho : float or array_like, shape (N,)
+        Bearing noise SD, > 0, for all frames or per frame.
     process_noise : float
-        Acceleration SD, >= 0.
+        Acceleration SD, >= 0 (per unit step).
     rng : numpy.random.Generator
         Draws the accelerations (of shape ``lead + (N - frame,)``, when
         ``q > 0`` and ``N > frame``), then the bearing noise (``lead + (N,)``).
@@ -192,6 +193,9 @@ def simulate(
         Number of independent tracks from each ``state``; ``None`` for one.
     frame : int
         ``>= 1``: the frame at which the track passes through ``state``.
+    steps : array_like, shape (N - 1,), optional
+        The depth's change between consecutive frames, > 0; ``None``: all ones.
+        Draws the same random numbers as unit steps, scaled.
 
     Returns
     -------
@@ -210,14 +214,42 @@ def simulate(
             f"state puts the point behind the camera: the depth at frame 1 must be > 0, "
             f"got minimum {float(np.min(depth_1)):.6g}"
         )
-    rho = checks.positive_scalar(rho, "rho")
+    rho = checks.positive_array(rho, "rho")
+    if rho.ndim and rho.shape != (frames,):
+        raise ValueError(f"rho must be a number or have shape ({frames},), got {rho.shape}")
     process_noise = checks.nonnegative_scalar(process_noise, "process_noise")
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
     if size is not None:
         size = checks.count(size, "size")
     lead = ((size,) if size is not None else ()) + state.shape[:-1]
-    return draw_track(state, frames, rho, process_noise, rng, lead, frame)
+    if steps is None and not rho.ndim:
+        return draw_track(state, frames, float(rho), process_noise, rng, lead, frame)
+    steps = np.ones(frames - 1) if steps is None else checks.positive_array(steps, "steps")
+    if steps.shape != (frames - 1,):
+        raise ValueError(f"steps must have shape ({frames - 1},), got shape {steps.shape}")
+    return _draw_uneven(state, rho, process_noise, rng, lead, frame, steps)
+
+
+def _draw_uneven(state, rho, process_noise: float, rng, lead, frame: int, steps) -> Simulation:
+    """:func:`simulate` with steps between frames and noise per frame, on checked inputs."""
+    frames = len(steps) + 1
+    elapsed = np.concatenate([[0.0], np.cumsum(steps)])
+    t = elapsed - elapsed[frame - 1]  # depth travelled since the given frame
+    n_noisy = max(frames - frame, 0)
+    v = np.broadcast_to(state[..., 2, None], lead + (frames,)).copy()
+    if process_noise > 0 and n_noisy:
+        after = steps[frame - 1 :]  # the steps from the given frame on
+        a = process_noise * np.sqrt(after) * rng.standard_normal(lead + (n_noisy,))
+        v[..., frame:] += np.cumsum(a, axis=-1)
+    # x_{k+1} = x_k + s_k v_k from the given frame on; backwards by the constant velocity
+    moves = v[..., :-1] * steps
+    x = np.concatenate([np.zeros(lead + (1,)), np.cumsum(moves, axis=-1)], axis=-1)
+    x = state[..., 0, None] + x - x[..., frame - 1 : frame]
+    y = np.broadcast_to(state[..., 1, None] + t, x.shape)
+    states = np.stack([x, np.asarray(y, dtype=float), v], axis=-1)
+    mu = x / y + rho * rng.standard_normal(lead + (frames,))
+    return Simulation(states, mu)
 
 
 def draw_track(state, frames: int, rho: float, process_noise: float, rng, lead, frame: int):

@@ -9,7 +9,9 @@
 * :mod:`~depthcore.registry.filters`: the table
   :data:`~depthcore.registry.filters.FILTERS`, by name;
 * :mod:`~depthcore.registry.tracking`: :func:`~depthcore.registry.tracking.track`,
-  one track filtered and smoothed at every frame.
+  one track filtered and smoothed at every frame;
+* :mod:`~depthcore.registry.online`: :func:`~depthcore.registry.online.start`,
+  a filter fed one bearing at a time.
 
 Where a new thing goes: a new filter, once its module exists in its family,
 gets one entry in :data:`~depthcore.registry.filters.FILTERS`; the command

@@ -27,7 +27,7 @@ from depthcore.exact import mixture, optimal
 from depthcore.exact import smoother as bank_track
 from depthcore.kalman import ekf, linear
 from depthcore.particles.resampling import weighted_mean_and_cov
-from depthcore.problem import checks, model
+from depthcore.problem import checks, frames, model, predictive
 from depthcore.problem.gaussian import Gaussian, History, MeanAndCov
 from depthcore.registry.estimates import Estimate
 
@@ -49,17 +49,44 @@ def gaussian(result, single: bool) -> Estimate:
     if single:
         g = Gaussian(mean, cov)
         (dm, ds), (vm, vs) = g.marginal("y"), g.marginal("v")
-        return Estimate(dm, ds, vm, vs, None, None, g.mean, g.cov, result)
+        return Estimate(
+            dm, ds, vm, vs, None, None, g.mean, g.cov, result, updates=updates(result, single)
+        )
     sd = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
     return Estimate(
-        mean[..., 1], sd[..., 1], mean[..., 2], sd[..., 2], None, None, mean, cov, result
+        mean[..., 1],
+        sd[..., 1],
+        mean[..., 2],
+        sd[..., 2],
+        None,
+        None,
+        mean,
+        cov,
+        result,
+        updates=updates(result, single),
     )
+
+
+def updates(result, single: bool):
+    """``result.updates`` (:class:`depthcore.problem.predictive.Updates`), or ``None``.
+
+    For one sequence each array has shape (N,) (a leading axis of one, as a
+    replicated filter's, is dropped); for a batch (B, N).
+    """
+    found = getattr(result, "updates", None)
+    if found is None:
+        return None
+    found = predictive.Updates(*(np.asarray(a) for a in found))
+    if single and found.tail.ndim == 2 and found.tail.shape[0] == 1:
+        found = predictive.Updates(*(a[0] for a in found))
+    return found
 
 
 def _last(result):
     """``result`` (a pair of histories read as a History), its mean and covariance at frame N."""
     if isinstance(result, tuple) and not hasattr(result, "mean"):
-        result = History(*result)
+        if not isinstance(result, History):
+            result = History(*result)
         mean, cov = result.means[..., -1, :], result.covs[..., -1, :, :]
     else:
         mean, cov = result.mean, result.cov
@@ -119,6 +146,7 @@ def exact(result, single: bool) -> Estimate:
         m.cov,
         result,
         {"prob_behind_camera": behind},
+        updates=updates(result, single),
     )
 
 
@@ -192,17 +220,30 @@ def _replicated_estimate(
         moments = tuple(float(v) for v in moments)
         depth_error, velocity_error = float(depth_error), float(velocity_error)
         collapsed = bool(collapsed)
-    return Estimate(*moments, depth_error, velocity_error, mean, cov, detail, collapsed=collapsed)
+    return Estimate(
+        *moments,
+        depth_error,
+        velocity_error,
+        mean,
+        cov,
+        detail,
+        collapsed=collapsed,
+        updates=updates(detail, single),
+    )
 
 
-def smooth_optimal(mu, rho, prior_mean, prior_cov, process_noise):
+def smooth_optimal(mu, rho, prior_mean, prior_cov, process_noise, steps=None):
     """The exact filter and its fixed-interval smoother: :func:`depthcore.exact.smoother.track`.
 
     The bearings are added online (:func:`depthcore.exact.posterior.update`); the smoothed
     state is each depth node's Rauch-Tung-Striebel smoother mixed over the
     nodes (textbook 19.2.6, :meth:`depthcore.exact.mixture.Mixture.smoothed`).
+    ``steps`` (N - 1,), or ``None`` for unit steps, is passed on by keyword.
     """
-    t = bank_track.track(mu, rho, prior_mean, prior_cov, process_noise, lag=mu.size - 1)
+    more = {} if steps is None else {"steps": steps}
+    t = bank_track.track(
+        mu, rho, prior_mean, prior_cov, process_noise, lag=np.shape(mu)[-1] - 1, **more
+    )
     return t.filtered, t.interval, t
 
 
@@ -212,21 +253,33 @@ def gaussian_smoother(run, **options):
     ``run`` is the door of a Gaussian filter whose result is a
     :class:`~depthcore.problem.gaussian.History` (:func:`depthcore.kalman.ekf.run`,
     :func:`depthcore.kalman.ukf.run`), called with ``options``; the smoother
-    takes checked inputs, as :func:`depthcore.registry.tracking.track` passes them.
+    takes checked inputs, as :func:`depthcore.registry.tracking.track` passes them
+    (``mu`` (N,) with ``NaN`` where missing, ``rho`` a number or (N,), and
+    ``steps`` (N - 1,) or ``None``, passed to ``run`` only when given).
 
-    The motion, Eq. (1) with the process noise on the velocity, is linear
-    (``x_{k+1} = F x_k + e``), so every Gaussian filter predicts exactly
-    (Eq. (10)): the predicted Gaussian at frame ``k + 1`` is ``F m_k + e``,
-    ``F P_k F^T + diag(0, 0, q**2)``, and the backward recursions of textbook
-    19.2.6 (:func:`depthcore.kalman.linear.fixed_interval_smoother`) run over the
-    filter's own Gaussians: for the EKF this is the extended Kalman smoother
-    (textbook 19.3), for the UKF the unscented one.
+    The motion, Eq. (1) over the step ``s_k`` with the process noise on the
+    velocity, is linear (``x_{k+1} = F_k x_k + s_k e``), so every Gaussian
+    filter predicts exactly (Eq. (10)): the predicted Gaussian at frame
+    ``k + 1`` is ``F_k m_k + s_k e``, ``F_k P_k F_k^T + diag(0, 0, q**2 s_k)``,
+    and the backward recursions of textbook 19.2.6
+    (:func:`depthcore.kalman.linear.fixed_interval_smoother`, with ``Psi = F_k``
+    per step) run over the filter's own Gaussians: for the EKF this is the
+    extended Kalman smoother (textbook 19.3), for the UKF the unscented one. At
+    a missing frame the filter's Gaussian is its prediction, and the
+    smoother's recursions run through it unchanged.
     """
 
-    def smoother(mu, rho, prior_mean, prior_cov, process_noise):
-        h = run(mu, rho, prior_mean, prior_cov, process_noise=process_noise, **options)
+    def smoother(mu, rho, prior_mean, prior_cov, process_noise, steps=None):
+        more = {} if steps is None else {"steps": steps}
+        h = run(mu, rho, prior_mean, prior_cov, process_noise=process_noise, **options, **more)
         means, covs = h.means, h.covs
-        predicted = ekf.predict(means[:-1], covs[:-1], process_noise)
+        if steps is None:
+            predicted = ekf.predict(means[:-1], covs[:-1], process_noise)
+            Psi = model.F
+        else:
+            s = np.asarray(steps, dtype=float)
+            predicted = ekf.predict(means[:-1], covs[:-1], process_noise, s)
+            Psi = frames.transition(s)
         filtered = linear.FilterResult(
             means,
             covs,
@@ -234,8 +287,8 @@ def gaussian_smoother(run, **options):
             np.concatenate([prior_cov[None], predicted.cov]),
             np.zeros(means.shape[0]),
         )
-        s = linear.fixed_interval_smoother(filtered, model.F)
-        return mixture.Smoothed(means, covs), mixture.Smoothed(s.mean, s.cov), h
+        smoothed = linear.fixed_interval_smoother(filtered, Psi)
+        return mixture.Smoothed(means, covs), mixture.Smoothed(smoothed.mean, smoothed.cov), h
 
     return smoother
 

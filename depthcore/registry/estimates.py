@@ -69,6 +69,10 @@ class Estimate:
         :data:`depthcore.particles.resampling.MIN_EFFECTIVE_DRAWS` independent draws of
         the posterior), so that neither its spread nor its error can be
         trusted; its errors are then NaN. ``None`` for the other filters.
+    updates : depthcore.problem.predictive.Updates or None
+        Per frame, each bearing's log predictive density, tail probability and
+        whether the gate skipped it, arrays of shape (N,) for one sequence and
+        (B, N) for a batch; ``None`` for a filter that does not report them.
     """
 
     depth_mean: Any
@@ -82,6 +86,7 @@ class Estimate:
     detail: Any = None
     extras: dict = field(default_factory=dict)
     collapsed: Any = None
+    updates: Any = None
 
     def moments(self, quantity: str) -> dict:
         """``{"mean", "sd"}`` of ``"depth"`` or ``"velocity"``.

@@ -4,13 +4,16 @@ Recommended import: ``from depthcore.registry.filters import FILTERS``.
 
 Each entry of :data:`FILTERS` is a :class:`Filter`. Calling it::
 
-    estimate = FILTERS[name](mu, rho, prior_mean, prior_cov, process_noise=0.0, **options)
+    estimate = FILTERS[name](mu, rho, prior_mean, prior_cov, process_noise=0.0,
+                             steps=None, gate=None, **options)
 
 runs the filter on one sequence of ``N`` bearings (``mu`` of shape ``(N,)``;
 the paper's triple is ``N = 3``) or on a batch (``mu`` of shape ``(B, N)``,
-``rho`` a float or shape ``(B,)``, the prior's mean ``(3,)`` or ``(B, 3)`` and
-covariance ``(3, 3)``), with process noise ``a_k ~ N(0, q**2)`` on the
-velocity if ``process_noise = q > 0`` (the N-frame model of
+``rho`` a float or shape ``(B,)``, or one per frame, ``(N,)`` or ``(B, N)``;
+``NaN`` in ``mu`` marks a missing frame; ``steps`` the depth's change between
+frames; ``gate`` an outlier gate, :mod:`depthcore.problem.predictive`), the
+prior's mean ``(3,)`` or ``(B, 3)`` and covariance ``(3, 3)``), with process
+noise ``a_k ~ N(0, q**2 s_k)`` on the velocity if ``process_noise = q > 0`` (the N-frame model of
 :mod:`depthcore.exact.bank`; the prior is on the state at frame 1), and returns an
 :class:`~depthcore.registry.estimates.Estimate`: the depth and velocity means and SDs at frame
 ``N`` (time 3
@@ -59,6 +62,7 @@ particle filter (:mod:`depthcore.particles.rbpf`), the range-parametrised EKF
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -76,7 +80,7 @@ from depthcore.kalman import (
     ukf,
 )
 from depthcore.particles import importance, rbpf, resample_move
-from depthcore.problem import checks, model
+from depthcore.problem import checks, frames, model, predictive
 from depthcore.problem.gaussian import Gaussian
 from depthcore.registry import adapters
 from depthcore.registry.adapters import checked_gaussian, gaussian_smoother
@@ -149,34 +153,58 @@ class Filter:
     estimate: Callable | None = None
     options: dict = field(default_factory=dict)
 
-    def __call__(self, mu, rho, prior_mean, prior_cov, process_noise=0.0, **options) -> Estimate:
+    def __call__(
+        self, mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None, gate=None, **options
+    ) -> Estimate:
         """Run the filter; see the module docstring for the arguments and their shapes.
 
         Every number goes through one conversion, :func:`depthcore.problem.checks.as_float`
         (lists and arrays of integers or floats; complex, boolean, object and
         text values are refused by name). ``mu`` is checked by
         :func:`depthcore.problem.model.measurements_batch` (and must have 3 columns
-        unless ``any_frames``); for one sequence ``rho`` is a number (a float,
-        a 0-d array or a list of one); ``process_noise`` is checked by
+        unless ``any_frames``), or, with a missing bearing (``NaN``), ``rho``
+        per frame or ``steps``, by :func:`depthcore.problem.frames.check`; for one
+        sequence ``rho`` is a number (a float, a 0-d array or a list of one) or
+        one per frame, shape (N,); ``process_noise`` is checked by
         :func:`depthcore.problem.checks.process_noise`, and must be 0 unless
-        ``with_process_noise``.
+        ``with_process_noise``. ``steps`` (N - 1,) or (B, N - 1) and ``gate``
+        (:func:`depthcore.problem.predictive.gate`) go to the filter's door; a
+        door that does not take them refuses steps other than ones, or a gate,
+        naming the argument, before it runs.
         """
-        mu = model.measurements_batch(mu, "mu")
+        mu_arr = checks.as_float(mu, "mu")
+        rho = checks.as_float(rho, "rho")
+        per_frame = rho.ndim > 0 and rho.shape == mu_arr.shape
+        if steps is None and not per_frame and not np.any(np.isnan(mu_arr)):
+            mu = model.measurements_batch(mu_arr, "mu")
+        else:
+            checked = frames.check(mu_arr, rho, steps)
+            mu = checked.mu
+            if steps is not None and np.all(checked.steps == 1.0) and "steps" not in self.takes:
+                steps = None
         if mu.shape[-1] != 3 and not self.any_frames:
             raise ValueError(
                 f"mu must have shape (3,) or (B, 3): the {self.name} filter takes the "
                 f"paper's three frames, got {mu.shape[-1]} bearings per problem"
             )
-        rho = checks.as_float(rho, "rho")
         single = mu.ndim == 1
-        if single:
+        if single and not per_frame:
             rho = checks.number(rho, "rho")
         prior_mean = checks.as_float(prior_mean, "prior_mean")
         prior_cov = checks.as_float(prior_cov, "prior_cov")
         if single:
             Gaussian.prior(prior_mean, prior_cov)
         q = checks.process_noise(process_noise, "process_noise")
+        gate = predictive.gate(gate)
         options = {**self.options, **options}
+        for name, value, refusal in (
+            ("steps", steps, f"steps: the {self.name} filter takes only unit steps"),
+            ("gate", gate, f"gate: the {self.name} filter has no gate"),
+        ):
+            if name in self.takes:
+                options[name] = value
+            elif value is not None:
+                raise ValueError(refusal)
         if self.random:
             options["rng"] = adapters.required_rng(options.get("rng"), f"{self.name} filter")
         if self.with_process_noise:
@@ -188,6 +216,14 @@ class Filter:
             )
         result = self.run(mu, rho, prior_mean, prior_cov, **options)
         return result if self.estimate is None else self.estimate(result, single)
+
+    @property
+    def takes(self) -> frozenset:
+        """The names of the keyword arguments the filter's door declares."""
+        try:
+            return frozenset(inspect.signature(self.run).parameters)
+        except (TypeError, ValueError):
+            return frozenset()
 
     @property
     def frames(self) -> str:

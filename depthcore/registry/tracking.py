@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from depthcore.problem import checks, model
-from depthcore.problem.gaussian import Gaussian, paper_prior
+from depthcore.problem import checks, frames, model
+from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from depthcore.registry.filters import FILTERS, names
 
 #: The noise levels ``rho`` that :func:`track` answers for (and the command line's ``--rho``).
@@ -27,7 +27,7 @@ RHO_RANGE = (1e-12, 1e3)
 PROCESS_NOISE_MAX = 10.0
 
 #: The names a message refusing :func:`track`'s inputs may start with.
-_TRACK_ARGUMENTS = ("mu", "rho", "prior", "process_noise", "filter")
+_TRACK_ARGUMENTS = ("mu", "rho", "prior", "process_noise", "filter", "steps")
 
 
 @dataclass(frozen=True)
@@ -73,7 +73,77 @@ class Track:
         return np.arange(1, self.filtered.mean.shape[0] + 1)
 
 
-def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal") -> Track:
+def default_prior(mu, steps=None) -> Gaussian:
+    """The paper's prior rule for a track as it comes: from its first three present bearings.
+
+    The paper's rule (:func:`depthcore.problem.gaussian.paper_prior`) takes the
+    noise-free state of the first three bearings, Eq. (7), moves it back to
+    frame 1 and sets the velocity to 0. A track with gaps or steps uses its
+    first three present bearings ``mu_a, mu_b, mu_c`` at their depths
+    travelled since frame 1, ``t_a, t_b, t_c``: the state ``(x_1, y_1, v)`` at
+    frame 1 through which they pass without noise solves the three linear
+    equations ``x_1 + t_k v - mu_k y_1 = mu_k t_k`` (Eq. (1) over the steps),
+    and the prior is ``N((x_1, y_1, 0), 1000 I)``. With the first three
+    bearings present at unit steps it is the paper's rule itself.
+
+    Parameters
+    ----------
+    mu : ndarray, shape (N,)
+        Checked bearings, ``NaN`` where missing.
+    steps : array_like, shape (N - 1,), or None
+
+    Returns
+    -------
+    Gaussian
+        Refused, naming ``prior``, when the three bearings put the point
+        behind the camera at frame 1 or are degenerate.
+    """
+    mu = np.asarray(mu, dtype=float)
+    present = np.flatnonzero(~np.isnan(mu))[:3]
+    s = np.ones(mu.shape[-1] - 1) if steps is None else np.asarray(steps, dtype=float)
+    if np.array_equal(present, [0, 1, 2]) and np.all(s[:2] == 1.0):
+        try:
+            c = model.noise_free_state(mu[:3])
+        except ValueError as exc:
+            raise ValueError(
+                f"prior is needed: the paper's rule cannot use the first three bearings ({exc})"
+            ) from None
+        return paper_prior(c)
+    t = np.concatenate([[0.0], np.cumsum(s)])[present]
+    m = mu[present]
+    A = np.stack([np.ones(3), -m, t], axis=-1)  # unknowns (x_1, y_1, v)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        solvable = np.linalg.cond(A) < 1e12
+        x1, y1, _ = np.linalg.solve(A, m * t) if solvable else (np.nan,) * 3
+    if not solvable or not y1 > 0:
+        why = (
+            "are degenerate"
+            if not solvable
+            else f"put the point behind the camera (y_1 = {y1:.6g})"
+        )
+        raise ValueError(
+            f"prior is needed: the first three present bearings (frames "
+            f"{', '.join(str(int(i) + 1) for i in present)}) {why}"
+        )
+    return Gaussian(np.array([x1, y1, 0.0]), PAPER_PRIOR_SCALE * np.eye(3))
+
+
+def _rho(rho, mu, steps):
+    """``rho`` for :func:`track`: a number or one per frame (N,), in :data:`RHO_RANGE`."""
+    arr = checks.as_float(rho, "rho")
+    if arr.ndim == 0 or arr.shape == (1,):
+        value = checks.positive_scalar(rho, "rho")
+        used = np.array([value])
+    else:
+        used = frames.check(mu, arr, steps).rho[~np.isnan(mu)]
+        value = arr
+    if not np.all((RHO_RANGE[0] <= used) & (used <= RHO_RANGE[1])):
+        bad = float(used[np.argmax(~((RHO_RANGE[0] <= used) & (used <= RHO_RANGE[1])))])
+        raise ValueError(f"rho must be from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g}, got {bad!r}")
+    return value
+
+
+def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal", steps=None) -> Track:
     """Filter and smooth one track: depth, lateral position and velocity at every frame.
 
     Parameters
@@ -82,21 +152,27 @@ def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal") -> Tr
         The bearings of frames ``1 .. N``, ``3 <= N <= depthcore.problem.checks.MAX_FRAMES``:
         ``mu_k = x_k / y_k``, the tangent of the angle between the point and the
         camera's direction of motion (from pixel columns,
-        :func:`depthcore.problem.model.bearings_from_pixels`); checked by
-        :func:`depthcore.problem.model.measurements_batch`.
-    rho : float
+        :func:`depthcore.problem.model.bearings_from_pixels`); ``NaN`` marks a
+        missing frame, which the filter predicts through. Checked by
+        :func:`depthcore.problem.model.measurements_batch` (by
+        :func:`depthcore.problem.frames.check` with gaps, ``rho`` per frame or
+        steps).
+    rho : float or array_like, shape (N,)
         The SD of the bearings' noise, in :data:`RHO_RANGE` (in the units of
         ``mu``: a pixel noise of SD ``s`` is ``rho = s / f`` for a focal
-        length of ``f`` pixels).
+        length of ``f`` pixels), one for all frames or one per frame.
     prior : depthcore.problem.gaussian.Gaussian, optional
         The prior of the state ``(x_1, y_1, v_1)`` at frame 1; by default the
-        paper's rule applied to the first three bearings
-        (:func:`depthcore.problem.gaussian.paper_prior` of their noise-free state,
-        Eq. (7)), refused when those bearings put the point behind the camera
+        paper's rule applied to the first three present bearings
+        (:func:`default_prior`: :func:`depthcore.problem.gaussian.paper_prior`
+        of their noise-free state, Eq. (7), when they are frames 1-3 at unit
+        steps), refused when those bearings put the point behind the camera
         or are degenerate.
     process_noise : float
-        ``q``, the SD of the velocity's change per frame: 0 (constant velocity)
-        or from ``depthcore.problem.checks.MIN_PROCESS_NOISE`` to :data:`PROCESS_NOISE_MAX`.
+        ``q``, the SD of the velocity's change per unit step: 0 (constant
+        velocity) or from ``depthcore.problem.checks.MIN_PROCESS_NOISE`` to
+        :data:`PROCESS_NOISE_MAX`; over a step ``s`` the velocity's variance
+        grows by ``q**2 s``.
     filter : str
         A filter with a smoother, one of :data:`~depthcore.registry.filters.SMOOTHED`:
         ``"optimal"`` (the
@@ -104,6 +180,9 @@ def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal") -> Tr
         smoother), ``"ekf"`` (the extended Kalman filter and smoother),
         ``"ukf"`` (the unscented ones). The others, without a smoother, are
         refused, naming ``filter``.
+    steps : array_like, shape (N - 1,), optional
+        The depth's change from each frame to the next, > 0 (``None``: ones,
+        the paper's frames).
 
     Returns
     -------
@@ -117,6 +196,9 @@ def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal") -> Tr
     >>> t = depthcore.track([0.1, 0.2, 0.28, 0.35], rho=0.002)
     >>> t.smoothed.depth_mean.shape
     (4,)
+    >>> t = depthcore.track([0.1, 0.2, float("nan"), 0.35], rho=0.002, filter="ekf")
+    >>> t.smoothed.depth_mean.shape
+    (4,)
     """
     if not isinstance(filter, str) or filter not in FILTERS:
         raise ValueError(f"filter must be one of {names(smoothed=True)}, got {filter!r}")
@@ -126,30 +208,31 @@ def track(mu, rho, prior=None, process_noise=0.0, filter: str = "optimal") -> Tr
             f"filter must be one of {names(smoothed=True)}, the filters with a smoother; "
             f"{filter!r} has none"
         )
-    mu = model.measurements_batch(mu, "mu")
+    mu_arr = checks.as_float(mu, "mu")
+    rho_arr = checks.as_float(rho, "rho")
+    if steps is None and rho_arr.ndim == 0 and not np.any(np.isnan(mu_arr)):
+        mu = model.measurements_batch(mu_arr, "mu")
+    else:
+        checked = frames.check(mu_arr, 1.0, steps)
+        mu = checked.mu
+        if steps is not None:
+            steps = np.array(checked.steps)
     if mu.ndim != 1:
         raise ValueError(f"mu must have shape (N,), one track, got shape {mu.shape}")
-    rho = checks.positive_scalar(rho, "rho")
-    if not RHO_RANGE[0] <= rho <= RHO_RANGE[1]:
-        raise ValueError(f"rho must be from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g}, got {rho!r}")
+    rho = _rho(rho, mu, steps)
     q = checks.process_noise(process_noise, "process_noise")
     if q > PROCESS_NOISE_MAX:
         raise ValueError(f"process_noise must be at most {PROCESS_NOISE_MAX:g}, got {q!r}")
     if prior is None:
-        try:
-            c = model.noise_free_state(mu[:3])
-        except ValueError as exc:
-            raise ValueError(
-                f"prior is needed: the paper's rule cannot use the first three bearings ({exc})"
-            ) from None
-        prior = paper_prior(c)
+        prior = default_prior(mu, steps)
     elif not isinstance(prior, Gaussian):
         raise ValueError(
             f"prior must be a depthcore.Gaussian of the state at frame 1 or None, "
             f"got {type(prior).__name__}"
         )
+    more = {} if steps is None else {"steps": steps}
     try:
-        filtered, smoothed, detail = entry.smoother(mu, rho, prior.mean, prior.cov, q)
+        filtered, smoothed, detail = entry.smoother(mu, rho, prior.mean, prior.cov, q, **more)
     except (ValueError, np.linalg.LinAlgError) as exc:
         message = str(exc)
         if isinstance(exc, ValueError) and message.startswith(_TRACK_ARGUMENTS):

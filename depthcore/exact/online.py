@@ -1,0 +1,411 @@
+"""The exact filter one bearing at a time, in constant time and memory per frame.
+
+Recommended import: ``from depthcore.exact import online``.
+
+:class:`Online` holds the bank of Kalman filters over depth
+(:mod:`depthcore.exact.bank`) on a bounded set of depth nodes, and nothing of
+the past bearings: per node ``y_j`` (the depth at frame 1) its quadrature
+weight, its log density ``log N(y_j; m_y, P_yy) + log p(mu_1 .. mu_k | y_j)``
+and the Gaussian of the lateral state ``(x_k, v_k)`` given ``y_j`` (the
+motion of :mod:`depthcore.problem.frames`: ``x <- x + s v``,
+``v <- v + a``, ``a ~ N(0, q**2 s)``; the bearing ``mu_k = x_k / y_k + w_k``,
+``y_k = y_j + e_k`` with ``e_k`` the depth travelled). Each
+:meth:`Online.update` predicts every node's filter by the step (textbook
+19.2.1), reports the bearing's predictive density under the mixture of the
+nodes (:func:`depthcore.problem.predictive.mixture`: node ``j`` predicts
+``N(x_j / y_k, a_j / y_k**2 + rho_k**2)``, ``a_j`` the predicted ``Var[x_k]``,
+weighted by the node's probability), skips it if a gate says so, and updates
+each node (textbook 19.2.2).
+
+The nodes. They are placed on the prior by the depth quadrature
+(:func:`depthcore.exact.quadrature.integrate`, trapezoid nodes in
+``t = log y_1`` about the density's mode and width, the step halved until the
+moments agree to ``rtol``). As bearings accumulate, the posterior narrows; after
+each update the nodes are checked as :func:`depthcore.exact.posterior.update`
+checks them (the moments on every other node agree with those on all to
+``rtol`` of the SD, the end nodes carry negligible probability, no node holds
+half of it). Nodes that fail are re-placed by the same quadrature, whose
+integrand at a new depth is interpolated from the current nodes: a degree-7
+spline in ``t`` of each node's log density and lateral Gaussian (the log
+density extended below its end values beyond the nodes). Since the check
+fails when the coarser grid of every other node stops resolving the density,
+the current nodes still resolve it to far better than ``rtol`` then, and the
+spline's error (order ``h**8`` in the node spacing ``h``) is what the
+re-placement adds; :attr:`Online.replacements` counts them. Between
+re-placements the filter is the bank on fixed nodes, exact to the
+quadrature's error. The node count is bounded by the quadrature's budget
+(:data:`depthcore.exact.quadrature.NODE_BUDGET`), so time and memory per frame
+are bounded whatever the number of frames.
+
+Example
+-------
+A live loop: one bearing per frame as the camera delivers it, a gate at 1e-3
+(``NaN`` for a frame without a detection)::
+
+    from depthcore.exact import online
+
+    f = online.Online(prior_mean, prior_cov, rho=0.01, gate=1e-3)
+    for mu_k, step_k in camera:            # step_k: the depth moved since the last frame
+        est = f.update(mu_k, step=step_k)  # step is ignored at the first frame
+        if est.gated:
+            print(f"frame {est.frame}: bearing skipped (tail {est.tail:.2g})")
+        print(est.depth_mean, est.depth_sd)
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from scipy.interpolate import make_interp_spline
+
+from depthcore.exact import quadrature
+from depthcore.exact.bank import lateral_filter
+from depthcore.exact.mixture import mixture_moments
+from depthcore.problem import checks, predictive
+from depthcore.problem.weights import normalised
+
+_LOG_2PI = float(np.log(2.0 * np.pi))
+#: A node holding this much of the probability or more does not resolve the posterior.
+_ONE_NODE = 0.5
+#: The end nodes must carry log probabilities this far below the largest.
+_END_MARGIN = 40.0
+#: The spline's degree in ``t = log y_1`` for a re-placement.
+_DEGREE = 7
+
+
+class State(NamedTuple):
+    """The exact filter after a frame (:meth:`Online.update`).
+
+    Attributes
+    ----------
+    frame : int
+        Frames seen so far, missing ones included (1 after the first).
+    mean : ndarray, shape (3,)
+        ``E[(x_k, y_k, v_k) | mu_1 .. mu_k]``.
+    cov : ndarray, shape (3, 3)
+    depth_mean, depth_sd, velocity_mean, velocity_sd : float
+    log_predictive : float
+        ``log p(mu_k | mu_1 .. mu_{k-1})`` under the mixture; NaN at a missing frame.
+    tail : float
+        Two-sided tail probability of ``mu_k`` under that predictive; NaN when missing.
+    gated : bool
+        Whether the gate skipped this bearing.
+    """
+
+    frame: int
+    mean: np.ndarray
+    cov: np.ndarray
+    depth_mean: float
+    depth_sd: float
+    velocity_mean: float
+    velocity_sd: float
+    log_predictive: float
+    tail: float
+    gated: bool
+
+
+class _Nodes(NamedTuple):
+    """The bank on its nodes: depths at frame 1, log quadrature weights, log densities, lateral."""
+
+    y: np.ndarray  # (J,)
+    log_w: np.ndarray  # (J,)
+    log_p: np.ndarray  # (J,)
+    lateral: np.ndarray  # (6, J): x, v, a, b, c, det
+
+
+class Online:
+    """The exact filter over depth nodes, one bearing at a time (see the module docstring).
+
+    Parameters
+    ----------
+    prior_mean : array_like, shape (3,)
+        Prior mean of ``(x_1, y_1, v_1)``.
+    prior_cov : array_like, shape (3, 3)
+        Prior covariance, symmetric positive definite.
+    rho : float
+        The bearing noise SD, > 0, used where :meth:`update` is given none.
+    process_noise : float
+        ``q >= 0``: the velocity's variance grows by ``q**2 s`` over a step ``s``.
+    gate : float or None
+        Skip a bearing whose two-sided predictive tail probability is below it.
+    rtol : float
+        The quadrature's tolerance for the nodes (mean and SD relative to the SD).
+    """
+
+    def __init__(self, prior_mean, prior_cov, rho, process_noise=0.0, gate=None, rtol=1e-10):
+        m = checks.finite_array(prior_mean, "prior_mean")
+        if m.shape != (3,):
+            raise ValueError(f"prior_mean must have shape (3,), got shape {m.shape}")
+        P = checks.finite_array(prior_cov, "prior_cov")
+        if P.shape != (3, 3):
+            raise ValueError(f"prior_cov must have shape (3, 3), got shape {P.shape}")
+        P = checks.covariances(P, "prior_cov", 3)
+        self.prior_mean, self.prior_cov = m, P
+        self.rho = checks.positive_scalar(rho, "rho")
+        q = checks.number(process_noise, "process_noise")
+        if not q >= 0:
+            raise ValueError(f"process_noise must be >= 0, got {q!r}")
+        self.process_noise = q
+        self.gate = predictive.gate(gate)
+        self.rtol = checks.positive_scalar(rtol, "rtol")
+        self.frame = 0
+        self.travelled = 0.0
+        self.replacements = 0
+        self.current: State | None = None
+        self._nodes = self._place(self._prior_integrand, m[1])
+
+    @property
+    def node_count(self) -> int:
+        """The number of depth nodes now (at most the quadrature's node budget)."""
+        return int(self._nodes.y.size)
+
+    # --- placement ---------------------------------------------------------------------
+
+    def _prior_integrand(self, offsets, pb):
+        """The prior's depth density and ``(x_1, v_1)`` given ``y_1``: the bank before a bearing."""
+        log_p, M, cov = lateral_filter(
+            offsets[..., 2], np.empty((1, 0)), self.rho, 0.0, self.prior_mean, self.prior_cov
+        )
+        return log_p, M, cov
+
+    def _place(self, integrand, depth_guess) -> _Nodes:
+        """Nodes by the depth quadrature for ``integrand`` (a quadrature Problem's)."""
+        mean = self.prior_mean.copy()
+        mean[1] = depth_guess
+        pb = quadrature.Problem(
+            mu=np.empty((1, 0)),
+            rho=np.array([self.rho]),
+            mean=mean[None],
+            R=np.linalg.inv(np.linalg.cholesky(self.prior_cov))[None],
+            integrand=integrand,
+            process_noise=np.array([self.process_noise]),
+            cov=self.prior_cov[None],
+        )
+        _, _, _, _, grids = quadrature.integrate(pb, (3,), self.rtol)
+        lo, h, n, frame = grids[3]
+        u = quadrature.grid(lo, h, n, 0.0)[0]
+        u = u[~np.isnan(u)][None]
+        t = frame.t(u)
+        log_w = (np.log(h) + t + frame.log_jacobian(u))[0]
+        y = np.exp(t[0])
+        offsets = np.stack([y + 2.0, y + 1.0, y], -1)[None]
+        log_p, M, (a, b, c) = integrand(offsets, pb)
+        a, b, c = (np.broadcast_to(v, log_p.shape)[0] for v in (a, b, c))
+        lateral = np.stack([M[0, 0], M[1, 0], a, b, c, a * c - b * b])
+        return _Nodes(y, log_w, log_p[0], lateral)
+
+    def _interpolant(self):
+        """The quadrature integrand interpolated from the current nodes (module docstring)."""
+        nodes = self._nodes
+        t = np.log(nodes.y)
+        splines = [
+            make_interp_spline(t, v, k=min(_DEGREE, len(t) - 1))
+            for v in (nodes.log_p, *nodes.lateral)
+        ]
+        lo, hi = t[0], t[-1]
+        h_lo, h_hi = t[1] - t[0], t[-1] - t[-2]
+
+        def integrand(offsets, pb):
+            tt = np.log(offsets[..., 2])  # the quadrature's y_1 (see _place)
+            values = [s(np.clip(tt, lo, hi)) for s in splines]
+            below = (np.minimum(tt - lo, 0.0) / h_lo) ** 2
+            above = (np.maximum(tt - hi, 0.0) / h_hi) ** 2
+            log_p = values[0] - below - above
+            M = np.stack([values[1], values[2]])
+            return log_p, M, (values[3], values[4], values[5])
+
+        return integrand
+
+    def _replace_nodes(self) -> None:
+        """Re-place the nodes from the current mixture by the quadrature (module docstring)."""
+        nodes = self._nodes
+        integrand = self._interpolant()
+        mode = nodes.y[np.argmax(nodes.log_p + nodes.log_w)]
+        new = self._place(integrand, mode)
+        lateral = new.lateral.copy()
+        lateral[5] = lateral[2] * lateral[4] - lateral[3] ** 2
+        self._nodes = new._replace(lateral=lateral)
+        self.replacements += 1
+
+    # --- the filter --------------------------------------------------------------------
+
+    def update(self, mu, rho=None, step=1.0) -> State:
+        """Add the next frame: predict by ``step``, report the bearing, gate it, update.
+
+        Parameters
+        ----------
+        mu : float
+            The bearing; ``NaN`` for a frame without one.
+        rho : float or None
+            Its noise SD (``None``: the filter's ``rho``).
+        step : float
+            The depth's change since the last frame, > 0; ignored (and must be
+            left at 1) at the first frame.
+
+        Returns
+        -------
+        State
+        """
+        mu = _bearing(mu)
+        r = self.rho if rho is None else checks.positive_scalar(rho, "rho")
+        s = checks.positive_scalar(step, "step")
+        if self.frame == 0 and s != 1.0:
+            raise ValueError("step: the first frame has no step before it; leave it at 1")
+        if self.frame >= checks.MAX_FRAMES:
+            raise ValueError(f"mu: at most {checks.MAX_FRAMES} frames")
+        nodes = self._nodes
+        lat = nodes.lateral.copy()
+        if self.frame > 0:
+            _predict(lat, s, self.process_noise**2 * s)
+            self.travelled += s
+        self.frame += 1
+        y = nodes.y + self.travelled
+        log_p = nodes.log_p
+        log_pred, tail, gated = np.nan, np.nan, False
+        if not np.isnan(mu):
+            log_pred, tail = (
+                float(v)
+                for v in predictive.mixture(
+                    mu, log_p + nodes.log_w, lat[0] / y, lat[2] / (y * y) + r * r
+                )
+            )
+            gated = bool(predictive.skipped(tail, True, self.gate))
+            if not gated:
+                log_p = log_p + _update(lat, mu, y, r * r)
+        self._nodes = nodes._replace(log_p=log_p, lateral=lat)
+        if not self._resolved():
+            self._replace_nodes()
+        mean, cov = self._moments()
+        self.current = State(
+            self.frame,
+            mean,
+            cov,
+            float(mean[1]),
+            float(np.sqrt(cov[1, 1])),
+            float(mean[2]),
+            float(np.sqrt(cov[2, 2])),
+            log_pred,
+            tail,
+            gated,
+        )
+        return self.current
+
+    def _moments(self, every_other: bool = False):
+        nodes = self._nodes
+        p, _ = normalised(nodes.log_p + nodes.log_w)
+        if every_other:
+            p = np.where(np.arange(p.size) % 2 == 0, p, 0.0)
+        lat = nodes.lateral
+        means = np.stack([lat[0], lat[1]], -1)
+        covs = np.stack([np.stack([lat[2], lat[3]], -1), np.stack([lat[3], lat[4]], -1)], -2)
+        return mixture_moments(p, means, covs, nodes.y + self.travelled)
+
+    def _resolved(self) -> bool:
+        """The check of :func:`depthcore.exact.posterior.update` on the current nodes."""
+        nodes = self._nodes
+        a = nodes.log_p + nodes.log_w
+        top = np.max(a)
+        p, _ = normalised(a)
+        if max(a[0], a[-1]) > top - _END_MARGIN or np.max(p) >= _ONE_NODE:
+            return False
+        mean, cov = self._moments()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            half_mean, half_cov = self._moments(every_other=True)
+        eps = np.finfo(float).eps
+        floor = np.array(
+            [64.0 * eps * (abs(mean[k]) + (2.0 + abs(top)) * np.sqrt(cov[k, k])) for k in (1, 2)]
+        )
+        err = quadrature.halving_error(mean, cov, half_mean, half_cov, floor)
+        sd = np.sqrt([cov[1, 1], cov[2, 2]])
+        return bool(np.all(err <= np.maximum(self.rtol * sd, floor)))
+
+
+def track_updates(bank, gate=None, rtol: float = 1e-10) -> predictive.Updates:
+    """Each frame's predictive report for the tracks of a bank, by :class:`Online` row by row.
+
+    Parameters
+    ----------
+    bank : depthcore.exact.bank.Bank
+        The tracks (``mu`` with ``NaN`` at missing frames, ``frame_noise``,
+        ``frame_steps``), the prior and the process noise, batch shape (...).
+    gate : float or None
+    rtol : float
+        The nodes' tolerance.
+
+    Returns
+    -------
+    depthcore.problem.predictive.Updates
+        Arrays of shape (..., N).
+    """
+    gate = predictive.gate(gate)
+    mu = np.asarray(bank.mu)
+    batch = np.broadcast_shapes(
+        mu.shape[:-1],
+        bank.frame_noise.shape[:-1],
+        bank.frame_steps.shape[:-1],
+        np.shape(bank.process_noise),
+        bank.prior_mean.shape[:-1],
+        bank.prior_cov.shape[:-2],
+    )
+    N = mu.shape[-1]
+
+    def rows(a, core):
+        a = np.asarray(a, dtype=float)
+        return np.broadcast_to(a, batch + a.shape[a.ndim - core :]).reshape(
+            (-1,) + a.shape[a.ndim - core :]
+        )
+
+    mus, noise, steps = rows(mu, 1), rows(bank.frame_noise, 1), rows(bank.frame_steps, 1)
+    qs, means, covs = rows(bank.process_noise, 0), rows(bank.prior_mean, 1), rows(bank.prior_cov, 2)
+    out = np.full((3, len(mus), N), np.nan)
+    for i in range(len(mus)):
+        f = Online(means[i], covs[i], noise[i, 0], qs[i], gate, rtol)
+        for k in range(N):
+            s = f.update(mus[i, k], noise[i, k], 1.0 if k == 0 else steps[i, k - 1])
+            out[:, i, k] = s.log_predictive, s.tail, s.gated
+    shape = batch + (N,)
+    return predictive.Updates(
+        out[0].reshape(shape), out[1].reshape(shape), out[2].reshape(shape) == 1.0
+    )
+
+
+def _bearing(mu) -> float:
+    """A bearing: a finite number or NaN (a missing frame)."""
+    arr = checks.as_float(mu, "mu")
+    if arr.ndim != 0:
+        raise ValueError(f"mu must be one bearing (a number), got shape {arr.shape}")
+    value = float(arr)
+    if np.isinf(value):
+        raise ValueError(f"mu must be finite or NaN (a missing frame), got {value!r}")
+    return value
+
+
+def _predict(lat, s: float, q2: float) -> None:
+    """Textbook 19.2.1 over a step ``s`` for every node, in place (see ``bank.lateral_filter``)."""
+    x, v, a, b, c, det = lat
+    x += s * v
+    a += s * (2.0 * b + s * c)
+    b += s * c
+    if q2:
+        c += q2
+        det += q2 * a
+
+
+def _update(lat, mu: float, y, rho2: float):
+    """Textbook 19.2.2 by the bearing ``mu`` for every node, in place; the log likelihoods."""
+    x, v, a, b, c, det = lat
+    yy = y * y
+    r = rho2 * yy
+    total = a + r
+    e = mu * y - x
+    g = e / total
+    log_likelihood = -0.5 * (_LOG_2PI + np.log(total / yy) + e * g)
+    x += a * g
+    v += b * g
+    ratio = r / total
+    a *= ratio
+    b *= ratio
+    det *= ratio
+    lat[4] = (det + b * b) / a
+    return log_likelihood

@@ -1,0 +1,254 @@
+"""The EKF and the UKF one bearing at a time, in constant time and memory per frame.
+
+Recommended import: ``from depthcore.kalman import online``.
+
+:class:`EKF` and :class:`UKF` hold the filter's Gaussian of the state at the
+last frame and nothing of the past bearings. Each ``update(mu, rho, step)``
+predicts the state over the step (Eq. (10) with the step ``s``: ``x <- x + s v``,
+``y <- y + s``, the velocity's variance grown by ``q**2 s``,
+:mod:`depthcore.problem.frames`), reports the bearing's predictive density and
+tail probability (:mod:`depthcore.problem.predictive`), skips it if it is
+missing (``NaN``) or the gate says so, and otherwise incorporates it. After
+``N`` frames the Gaussian is the batch door's at frame ``N``
+(:func:`depthcore.kalman.ekf.run`; for the UKF the loop
+:func:`depthcore.kalman.ekf.run_gaussian_filter` with
+:func:`depthcore.kalman.ukf.update` and :func:`unscented_predictive`), the
+same arithmetic frame by frame.
+
+Example
+-------
+>>> import numpy as np
+>>> from depthcore.kalman import online
+>>> f = online.EKF([0.0, 8.0, 0.0], np.eye(3), rho=0.01)
+>>> for mu in (0.1, 0.2, float("nan"), 0.35):
+...     step = f.update(mu)
+>>> step.frame, bool(np.isnan(step.tail))
+(4, False)
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from depthcore.kalman import ekf, ukf
+from depthcore.problem import checks, predictive
+from depthcore.problem.gaussian import Gaussian, symmetric
+
+
+class Step(NamedTuple):
+    """A filter after a frame (``update`` of :class:`EKF`, :class:`UKF`).
+
+    Attributes
+    ----------
+    frame : int
+        Frames seen so far, missing ones included (1 after the first).
+    mean : ndarray, shape (3,)
+        Mean of ``(x_k, y_k, v_k)`` given ``mu_1 .. mu_k``.
+    cov : ndarray, shape (3, 3)
+    depth_mean, depth_sd, velocity_mean, velocity_sd : float
+    log_predictive : float
+        The bearing's log predictive density; NaN at a missing frame.
+    tail : float
+        Its two-sided tail probability; NaN at a missing frame.
+    gated : bool
+        Whether the gate skipped the bearing.
+    """
+
+    frame: int
+    mean: np.ndarray
+    cov: np.ndarray
+    depth_mean: float
+    depth_sd: float
+    velocity_mean: float
+    velocity_sd: float
+    log_predictive: float
+    tail: float
+    gated: bool
+
+
+def unscented_predictive(n, C, rho, sigma_points=None) -> tuple[np.ndarray, np.ndarray]:
+    """The UKF's predictive density of a bearing: the unscented transform of ``x / y``.
+
+    Mean ``z = sum_i Wm_i Z_i`` and variance ``sum_i Wc_i (Z_i - z)**2 + rho**2``
+    of the projected sigma points ``Z_i`` of ``N(n, C)`` (the innovation's
+    moments of :func:`depthcore.kalman.ukf.measurement_update`).
+
+    Parameters
+    ----------
+    n : array_like, shape (..., 3)
+    C : array_like, shape (..., 3, 3)
+    rho : float or array_like, shape (...)
+    sigma_points : depthcore.kalman.ukf.SigmaPoints or None
+
+    Returns
+    -------
+    mean, var : ndarray, shape (...)
+    """
+    rule = ukf.rule(sigma_points)
+    X = rule.points(n, C)
+    depth = X[..., 1]
+    if np.any(depth == 0):
+        raise ValueError("a sigma point has depth 0, where the bearing x/y is undefined")
+    Wm, Wc = rule.weights()
+    noise = (np.asarray(rho, dtype=float) ** 2)[..., None, None]
+    z, S = ukf.unscented_transform((X[..., 0] / depth)[..., None], Wm, Wc, noise)
+    return z[..., 0], S[..., 0, 0]
+
+
+class _Online:
+    """What :class:`EKF` and :class:`UKF` share: the checks, the frame count, the report."""
+
+    def __init__(self, prior_mean, prior_cov, rho=None, process_noise=0.0, gate=None):
+        prior = Gaussian.prior(prior_mean, prior_cov)
+        self.prior = prior
+        self.rho = None if rho is None else checks.positive_scalar(rho, "rho")
+        self.process_noise = checks.nonnegative_scalar(process_noise, "process_noise")
+        self.gate = predictive.gate(gate)
+        self.frame = 0
+        self.current: Step | None = None
+
+    def _frame(self, mu, rho, step):
+        """Check one frame's ``mu``, ``rho`` and ``step``; return them as floats."""
+        arr = checks.as_float(mu, "mu")
+        if arr.ndim != 0:
+            raise ValueError(f"mu must be one bearing (a number), got shape {arr.shape}")
+        mu = float(arr)
+        if np.isinf(mu):
+            raise ValueError(f"mu must be finite or NaN (a missing frame), got {mu!r}")
+        if rho is None and self.rho is None:
+            raise ValueError("rho is needed: give it to start or to this update")
+        r = self.rho if rho is None else checks.positive_scalar(rho, "rho")
+        s = checks.positive_scalar(step, "step")
+        if self.frame == 0 and s != 1.0:
+            raise ValueError("step: the first frame has no step before it; leave it at 1")
+        if self.frame >= checks.MAX_FRAMES:
+            raise ValueError(f"mu: at most {checks.MAX_FRAMES} frames")
+        return mu, r, s
+
+    def _report(self, mean, cov, log_p, tail, gated) -> Step:
+        self.frame += 1
+        self.current = Step(
+            self.frame,
+            mean,
+            cov,
+            float(mean[1]),
+            float(np.sqrt(cov[1, 1])),
+            float(mean[2]),
+            float(np.sqrt(cov[2, 2])),
+            float(log_p),
+            float(tail),
+            bool(gated),
+        )
+        return self.current
+
+
+class EKF(_Online):
+    """The EKF one bearing at a time, in square-root information form (Eqs. (10)-(12)).
+
+    Each frame is :func:`depthcore.kalman.ekf.information_predict` and
+    :func:`depthcore.kalman.ekf.information_update`, as in
+    :func:`depthcore.kalman.ekf.run`.
+
+    Parameters
+    ----------
+    prior_mean : array_like, shape (3,)
+        Prior mean of ``(x_1, y_1, v_1)``.
+    prior_cov : array_like, shape (3, 3)
+        Prior covariance, symmetric positive definite.
+    rho : float or None
+        The bearing noise SD, > 0, where :meth:`update` is given none.
+    process_noise : float
+        ``q >= 0``: the velocity's variance grows by ``q**2 s`` over a step ``s``.
+    gate : float or None
+        Skip a bearing whose two-sided predictive tail probability is below it.
+    """
+
+    def __init__(self, prior_mean, prior_cov, rho=None, process_noise=0.0, gate=None):
+        super().__init__(prior_mean, prior_cov, rho, process_noise, gate)
+        self._mean = self.prior.mean.copy()
+        self._root = np.linalg.inv(np.linalg.cholesky(self.prior.cov))
+
+    def update(self, mu, rho=None, step=1.0) -> Step:
+        """Add the next frame: predict by ``step``, report the bearing, gate it, update.
+
+        Parameters
+        ----------
+        mu : float
+            The bearing; ``NaN`` for a frame without one.
+        rho : float or None
+            Its noise SD (``None``: the filter's ``rho``).
+        step : float
+            The depth's change since the last frame, > 0; ignored (and must be
+            left at 1) at the first frame.
+
+        Returns
+        -------
+        Step
+        """
+        mu, r, s = self._frame(mu, rho, step)
+        n, R = self._mean, self._root
+        if self.frame > 0:
+            n, R = ekf.information_predict(n, R, self.process_noise, s)
+        out = ekf.information_update(n, R, np.array(mu), np.array(r), True, self.gate)
+        self._mean, self._root = out.mean, out.root
+        R_inv = np.linalg.inv(out.root)
+        cov = symmetric(R_inv @ R_inv.T)
+        return self._report(out.mean, cov, out.log_predictive, out.tail, out.gated)
+
+
+class UKF(_Online):
+    """The UKF one bearing at a time: exact prediction (Eq. (10)), unscented update.
+
+    Each frame is :func:`depthcore.kalman.ekf.predict` and
+    :func:`depthcore.kalman.ukf.update`, as in :func:`depthcore.kalman.ukf.run`;
+    the bearing's predictive density is :func:`unscented_predictive`.
+
+    Parameters
+    ----------
+    prior_mean, prior_cov, rho, process_noise, gate
+        As for :class:`EKF`.
+    sigma_points : depthcore.kalman.ukf.SigmaPoints or None
+        The sigma-point rule (``None``: the default rule).
+    allow_behind_camera : bool
+        As for :func:`depthcore.kalman.ukf.update`.
+    """
+
+    def __init__(
+        self,
+        prior_mean,
+        prior_cov,
+        rho=None,
+        process_noise=0.0,
+        gate=None,
+        sigma_points=None,
+        allow_behind_camera=False,
+    ):
+        super().__init__(prior_mean, prior_cov, rho, process_noise, gate)
+        self.sigma_points = ukf.rule(sigma_points)
+        self.allow_behind_camera = bool(allow_behind_camera)
+        self._mean, self._cov = self.prior.mean.copy(), self.prior.cov.copy()
+
+    def update(self, mu, rho=None, step=1.0) -> Step:
+        """Add the next frame, as :meth:`EKF.update` does."""
+        mu, r, s = self._frame(mu, rho, step)
+        n, C = self._mean, self._cov
+        if self.frame > 0:
+            n, C = ekf.predict(n, C, self.process_noise, s)
+        log_p, tail, gated = np.nan, np.nan, False
+        if not np.isnan(mu):
+            z, var = unscented_predictive(n, C, r, self.sigma_points)
+            log_p, tail = predictive.gaussian(mu, z, var)
+            gated = bool(predictive.skipped(tail, True, self.gate))
+            if not gated:
+                n, C = ukf.update(
+                    n,
+                    C,
+                    mu,
+                    r,
+                    sigma_points=self.sigma_points,
+                    allow_behind_camera=self.allow_behind_camera,
+                )
+        self._mean, self._cov = n, C
+        return self._report(n, C, log_p, tail, gated)

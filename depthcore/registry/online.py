@@ -1,0 +1,155 @@
+"""A filter fed one bearing at a time: one door, :func:`start`, for every online filter.
+
+Recommended import: ``from depthcore.registry import online``.
+
+``f = online.start(name, prior_mean, prior_cov, rho=None, process_noise=0.0, gate=None)``
+starts the filter ``name`` (one of :data:`NAMES`: ``"optimal"``, the exact
+filter, :class:`depthcore.exact.online.Online`; ``"ekf"`` and ``"ukf"``,
+:class:`depthcore.kalman.online.EKF` and :class:`depthcore.kalman.online.UKF`)
+on the prior of the state at frame 1. Each ``f.update(mu_k, rho=None,
+step=1.0)`` predicts the state over ``step`` (not at the first frame),
+reports the bearing's predictive density and tail probability, skips it if it
+is missing (``NaN``) or gated, incorporates it otherwise, and returns a
+:class:`FrameEstimate`. Time and memory per frame are constant; after ``N``
+frames the estimate is the batch door's at frame ``N``
+(:data:`depthcore.registry.filters.FILTERS`).
+
+Example: a live loop, each bearing used as it arrives
+
+>>> import numpy as np
+>>> from depthcore.registry import online
+>>> f = online.start("ekf", [0.0, 8.0, 0.0], 10.0 * np.eye(3), rho=0.01, gate=1e-4)
+>>> for mu in (0.1, 0.2, float("nan"), 0.35, 3.0, 0.41):
+...     est = f.update(mu)
+...     if est.gated:
+...         print(f"frame {est.frame}: bearing skipped (tail {est.tail:.1e})")
+frame 5: bearing skipped (tail 0.0e+00)
+>>> f.frame, f.current.depth_mean > 0
+(6, True)
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import NamedTuple
+
+import numpy as np
+
+#: The online filters by name: the module and class of each.
+ONLINE = {
+    "optimal": ("depthcore.exact.online", "Online"),
+    "ekf": ("depthcore.kalman.online", "EKF"),
+    "ukf": ("depthcore.kalman.online", "UKF"),
+}
+
+#: The names :func:`start` takes.
+NAMES = tuple(ONLINE)
+
+#: The registry's options of each online filter (those of its batch entry).
+DEFAULT_OPTIONS = {"ukf": {"allow_behind_camera": True}}
+
+
+class FrameEstimate(NamedTuple):
+    """An online filter's estimate after a frame (:meth:`OnlineFilter.update`).
+
+    Attributes
+    ----------
+    frame : int
+        Frames seen so far, missing ones included (1 after the first).
+    mean : ndarray, shape (3,)
+        Mean of the state ``(x_k, y_k, v_k)`` given the bearings so far.
+    cov : ndarray, shape (3, 3)
+    depth_mean, depth_sd, velocity_mean, velocity_sd : float
+    log_predictive : float
+        The bearing's log predictive density given the earlier ones; NaN at a
+        missing frame.
+    tail : float
+        Its two-sided tail probability under that predictive; NaN at a missing frame.
+    gated : bool
+        Whether the gate skipped the bearing.
+    """
+
+    frame: int
+    mean: np.ndarray
+    cov: np.ndarray
+    depth_mean: float
+    depth_sd: float
+    velocity_mean: float
+    velocity_sd: float
+    log_predictive: float
+    tail: float
+    gated: bool
+
+
+class OnlineFilter:
+    """A started online filter (:func:`start`): :meth:`update`, :attr:`frame`, :attr:`current`."""
+
+    def __init__(self, name: str, inner):
+        self.name = name
+        self._inner = inner
+        self.current: FrameEstimate | None = None
+
+    @property
+    def frame(self) -> int:
+        """Frames seen so far, missing ones included."""
+        return int(self._inner.frame)
+
+    def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
+        """Add the next frame's bearing.
+
+        Parameters
+        ----------
+        mu : float
+            The bearing; ``NaN`` for a frame without one.
+        rho : float or None
+            Its noise SD, > 0 (``None``: the one given to :func:`start`).
+        step : float
+            The depth's change since the last frame, > 0; at the first frame it
+            must be left at 1.
+
+        Returns
+        -------
+        FrameEstimate
+        """
+        out = self._inner.update(mu, rho=rho, step=step)
+        self.current = FrameEstimate(*(getattr(out, f) for f in FrameEstimate._fields))
+        return self.current
+
+
+def start(
+    name: str, prior_mean, prior_cov, rho=None, process_noise=0.0, gate=None, **options
+) -> OnlineFilter:
+    """Start the online filter ``name`` on the prior of the state at frame 1.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`NAMES`.
+    prior_mean : array_like, shape (3,)
+    prior_cov : array_like, shape (3, 3)
+        Symmetric positive definite.
+    rho : float or None
+        The bearings' noise SD, > 0, where an update is given none.
+    process_noise : float
+        ``q >= 0``: the velocity's variance grows by ``q**2 s`` over a step ``s``.
+    gate : float or None
+        Skip a bearing whose two-sided predictive tail probability is below it
+        (:func:`depthcore.problem.predictive.gate`).
+    **options
+        The filter's own options (the UKF's ``sigma_points`` and
+        ``allow_behind_camera``, the exact filter's ``rtol``).
+
+    Returns
+    -------
+    OnlineFilter
+    """
+    if not isinstance(name, str) or name not in ONLINE:
+        raise ValueError(f"name must be one of {NAMES}, got {name!r}")
+    module, cls = ONLINE[name]
+    try:
+        factory = getattr(importlib.import_module(module), cls)
+    except ImportError:
+        raise ValueError(f"name: the online {name} filter is not installed ({module})") from None
+    options = {**DEFAULT_OPTIONS.get(name, {}), **options}
+    inner = factory(prior_mean, prior_cov, rho, process_noise, gate, **options)
+    return OnlineFilter(name, inner)

@@ -1,0 +1,197 @@
+"""The exact filter on tracks as they come: gaps, noise per frame, uneven steps.
+
+Every number is checked against a route written here from the model alone: the
+bearings given the depth at frame 1 are linear-Gaussian in
+``(x_1, v_1, a_1 .. a_{N-1})`` (the motion of :mod:`depthcore.problem.frames`),
+so ``p(mu | y_1)`` and the Gaussian of ``(x_N, v_N)`` given ``y_1`` are
+closed-form regressions, and the depth is integrated on a dense grid.
+"""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from scipy.special import logsumexp
+
+from depthcore.exact import bank as bk
+from depthcore.exact import optimal, posterior, smoother
+
+PRIOR_MEAN = np.array([0.5, 8.0, 0.2])
+PRIOR_COV = np.array([[1.0, 0.3, 0.05], [0.3, 4.0, 0.0], [0.05, 0.0, 0.3]])
+MU = np.array([0.06, 0.055, np.nan, 0.048, 0.047, 0.04])
+RHO = np.array([0.01, 0.02, np.nan, 0.01, 0.015, 0.01])
+STEPS = np.array([1.0, 0.5, 2.0, 1.0, 1.5])
+
+
+def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=4001, frame=-1):
+    """Mean (3,) and covariance (3, 3) of the state at ``frame`` (default N) by a dense grid.
+
+    Given ``y_1 = y`` the present bearings are ``mu_k = x_k / y_k + w_k`` with
+    ``x_k = x_1 + e_k v_1 + sum_{j < k} (e_k - e_{j+1}) a_j`` (``e_k`` the depth
+    travelled to frame k), linear in ``z = (x_1, v_1, a_1 .. a_{N-1})``.
+    """
+    mu, rho = np.asarray(mu, float), np.broadcast_to(np.asarray(rho, float), np.shape(mu))
+    N = mu.size
+    e = np.concatenate([[0.0], np.cumsum(steps)])
+    keep = ~np.isnan(mu)
+    # z's prior given y: (x_1, v_1) conditioned on y_1 = y; a_j ~ N(0, q**2 s_j)
+    iu = [0, 2]
+    slope = P[iu, 1] / P[1, 1]
+    Cu = P[np.ix_(iu, iu)] - np.outer(slope, P[1, iu])
+    D = 2 + N - 1
+    Cz = np.zeros((D, D))
+    Cz[:2, :2] = Cu
+    Cz[2:, 2:] = np.diag(q**2 * np.asarray(steps, float))
+    # x_k and v_N as rows acting on z
+    X = np.zeros((N, D))
+    X[:, 0], X[:, 1] = 1.0, e
+    for k in range(N):
+        for j in range(k):
+            X[k, 2 + j] = e[k] - e[j + 1]
+    frame = frame % N
+    vN = np.zeros(D)
+    vN[1] = 1.0
+    vN[2 : 2 + frame] = 1.0
+    t = np.linspace(np.log(1e-3), np.log(300.0), n)
+    y = np.exp(t)
+    log_f = np.empty(n)
+    means = np.empty((n, 3))
+    second = np.empty((n, 3, 3))
+    for i, yi in enumerate(y):
+        mz = np.zeros(D)
+        mz[:2] = m[iu] + slope * (yi - m[1])
+        H = X[keep] / (yi + e[keep])[:, None]
+        S = H @ Cz @ H.T + np.diag(rho[keep] ** 2)
+        r = mu[keep] - H @ mz
+        sol = np.linalg.solve(S, r)
+        log_f[i] = (
+            -0.5 * (np.log(2 * np.pi * P[1, 1]) + (yi - m[1]) ** 2 / P[1, 1])
+            - 0.5 * (np.linalg.slogdet(2 * np.pi * S)[1] + r @ sol)
+            + t[i]  # dy = y dt
+        )
+        K = Cz @ H.T @ np.linalg.inv(S)
+        mpost = mz + K @ r
+        Cpost = Cz - K @ H @ Cz
+        A = np.stack([X[frame], vN])  # (x_k, v_k) at the frame
+        mxv = A @ mpost
+        Cxv = A @ Cpost @ A.T
+        means[i] = [mxv[0], yi + e[frame], mxv[1]]
+        s = np.zeros((3, 3))
+        s[np.ix_([0, 2], [0, 2])] = Cxv
+        second[i] = s + np.outer(means[i], means[i])
+    w = np.exp(log_f - logsumexp(log_f))
+    mean = w @ means
+    cov = np.einsum("i,ijk->jk", w, second) - np.outer(mean, mean)
+    return mean, cov
+
+
+@pytest.mark.parametrize("q", [0.0, 0.05])
+def test_gaps_noise_per_frame_and_steps_equal_a_dense_grid(q):
+    post = optimal.run(MU, RHO, PRIOR_MEAN, PRIOR_COV, process_noise=q, steps=STEPS)
+    mean, cov = dense_posterior(MU, RHO, STEPS, q)
+    sd = np.sqrt(np.diag(cov))
+    assert_allclose(post.mean, mean, atol=1e-8 * sd.max(), rtol=0)
+    assert_allclose(np.sqrt(np.diag(post.cov)), sd, rtol=1e-8)
+    assert_allclose(post.cov, cov, atol=1e-8 * sd.max() ** 2)
+
+
+def test_a_gap_is_the_posterior_given_the_present_bearings():
+    """NaN at frame k equals the track without it, its two steps merged (q = 0)."""
+    rho = 0.01
+    with_gap = optimal.run(MU, rho, PRIOR_MEAN, PRIOR_COV)
+    merged = optimal.run(np.delete(MU, 2), rho, PRIOR_MEAN, PRIOR_COV, steps=[1.0, 2.0, 1.0, 1.0])
+    assert_allclose(with_gap.mean, merged.mean, rtol=1e-12, atol=1e-15)
+    assert_allclose(with_gap.cov, merged.cov, rtol=1e-10, atol=1e-16)
+    # the same nodes: the bank alone, frame by frame, equals the merged bank exactly
+    nodes = with_gap.bank.nodes
+    a = bk.filter_bank(nodes, MU, rho, PRIOR_MEAN, PRIOR_COV)
+    b = bk.filter_bank(nodes, np.delete(MU, 2), rho, PRIOR_MEAN, PRIOR_COV, steps=[1, 2, 1, 1])
+    assert_allclose(a.log_weight, b.log_weight, rtol=1e-13)
+    assert_allclose(a.mean, b.mean, rtol=1e-12, atol=1e-15)
+
+
+def test_two_unit_steps_without_the_middle_bearing_are_one_step_of_two_only_without_noise():
+    mu = np.array([0.06, np.nan, 0.05, 0.046])
+    nodes = np.linspace(3.0, 20.0, 7)
+    a = bk.filter_bank(nodes, mu, 0.01, PRIOR_MEAN, PRIOR_COV, process_noise=0.0)
+    b = bk.filter_bank(nodes, mu[[0, 2, 3]], 0.01, PRIOR_MEAN, PRIOR_COV, steps=[2.0, 1.0])
+    assert_allclose(a.log_weight, b.log_weight, rtol=1e-13)
+    # with process noise the velocity variance added over the gap is q**2 (1 + 1) = q**2 2
+    # too, but the position also integrates the first step's acceleration over the second
+    # step: the two differ
+    a = bk.filter_bank(nodes, mu, 0.01, PRIOR_MEAN, PRIOR_COV, process_noise=0.1)
+    b = bk.filter_bank(nodes, mu[[0, 2, 3]], 0.01, PRIOR_MEAN, PRIOR_COV, 0.1, steps=[2.0, 1.0])
+    assert np.max(np.abs(a.log_weight - b.log_weight)) > 1e-6
+
+
+def test_the_history_and_step_agree_with_the_closed_form():
+    nodes = np.linspace(3.0, 20.0, 5)
+    args = dict(nodes=nodes, rho=RHO, prior_mean=PRIOR_MEAN, prior_cov=PRIOR_COV)
+    closed = bk.filter_bank(mu=MU, process_noise=0.05, steps=STEPS, **args)
+    hist = bk.filter_bank(mu=MU, process_noise=0.05, steps=STEPS, history=True, **args)
+    assert_allclose(hist.log_weight, closed.log_weight, rtol=1e-12)
+    assert_allclose(hist.mean, closed.mean, rtol=1e-11, atol=1e-14)
+    assert_allclose(hist.cov, closed.cov, rtol=1e-10, atol=1e-16)
+    first = bk.filter_bank(nodes, MU[:3], RHO[:3], PRIOR_MEAN, PRIOR_COV, 0.05, steps=STEPS[:2])
+    for k in range(3, MU.size):
+        first = bk.step(first, MU[k], rho=RHO[k], step=STEPS[k - 1], gaps=True)
+    assert_allclose(first.log_weight, closed.log_weight, rtol=1e-12)
+    assert_allclose(first.mean, closed.mean, rtol=1e-11, atol=1e-14)
+
+
+def test_noise_per_frame_equal_at_every_frame_is_the_paper_arithmetic():
+    mu = np.array([0.06, 0.055, 0.05, 0.048])
+    a = optimal.run(mu, 0.01, PRIOR_MEAN, PRIOR_COV)
+    b = optimal.run(mu, np.full(4, 0.01), PRIOR_MEAN, PRIOR_COV, steps=np.ones(3))
+    assert_allclose(b.mean, a.mean, rtol=0, atol=0)
+    assert_allclose(b.cov, a.cov, rtol=0, atol=0)
+
+
+def test_refusals_name_the_argument():
+    with pytest.raises(ValueError, match="steps"):
+        optimal.run(MU, 0.01, PRIOR_MEAN, PRIOR_COV, steps=[1.0, -1.0, 1.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="reading"):
+        optimal.run(MU, 0.01, PRIOR_MEAN, PRIOR_COV, reading="printed")
+    with pytest.raises(ValueError, match="mu"):
+        optimal.run(np.array([0.1, np.nan, np.nan, 0.2]), 0.01, PRIOR_MEAN, PRIOR_COV)
+    with pytest.raises(ValueError, match="gate"):
+        optimal.run(MU, 0.01, PRIOR_MEAN, PRIOR_COV, gate=2.0)
+    with pytest.raises(ValueError, match="mu_next must be finite"):
+        bk.step(bk.filter_bank([5.0], [0.1], 0.01, PRIOR_MEAN, PRIOR_COV), np.nan)
+
+
+def test_batches_of_tracks_with_different_gaps():
+    mu = np.stack([MU, np.where(np.arange(6) == 4, np.nan, MU + 0.001)])
+    mu[1, 2] = 0.052
+    batch = posterior.posterior(mu, 0.01, PRIOR_MEAN, PRIOR_COV, steps=STEPS)
+    for i in range(2):
+        one = posterior.posterior(mu[i], 0.01, PRIOR_MEAN, PRIOR_COV, steps=STEPS)
+        assert_allclose(batch.mean[i], one.mean, rtol=1e-12)
+
+
+def test_the_smoothers_of_a_track_with_gaps_noise_per_frame_and_steps():
+    """Filtered, fixed-lag and fixed-interval states against the dense grid (q > 0)."""
+    q, lag = 0.05, 2
+    res = smoother.track(MU, RHO, PRIOR_MEAN, PRIOR_COV, q, lag=lag, steps=STEPS)
+    N = MU.size
+    for k in (1, 2, 3, 5):
+        cases = [
+            (res.filtered, dense_posterior(MU[: k + 1], RHO[: k + 1], STEPS[:k], q)),
+            (res.interval, dense_posterior(MU, RHO, STEPS, q, frame=k)),
+        ]
+        t = min(k + lag, N - 1)
+        cases.append(
+            (res.lagged, dense_posterior(MU[: t + 1], RHO[: t + 1], STEPS[:t], q, frame=k))
+        )
+        for series, (mean, cov) in cases:
+            sd = np.sqrt(np.diag(cov))
+            assert_allclose(series.mean[k], mean, rtol=0, atol=1e-8 * sd.max())
+            assert_allclose(np.sqrt(np.diag(series.cov[k])), sd, rtol=1e-8)
+    # the last frame's smoothed state is the filtered one
+    assert_allclose(res.interval.mean[-1], res.filtered.mean[-1], rtol=1e-12)
+
+
+def test_the_smoother_refuses_a_track_without_its_first_bearing():
+    with pytest.raises(ValueError, match=r"mu\[0\] must be present"):
+        smoother.track(np.r_[np.nan, MU[1:]], 0.01, PRIOR_MEAN, PRIOR_COV)
+    with pytest.raises(ValueError, match="steps"):
+        smoother.track(MU, 0.01, PRIOR_MEAN, PRIOR_COV, steps=[1.0, 2.0])
