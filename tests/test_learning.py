@@ -29,13 +29,16 @@ def _tracks(seed, tracks, frames, rho, q, mean=PRIOR_MEAN, cov=PRIOR_COV):
     return model.simulate(states, frames, rho, q, rng, frame=1).mu
 
 
-def _grid_log_likelihood(mu, rho, q, mean, cov, points=40_001):
+def _grid_log_likelihood(mu, rho, q, mean, cov, steps=None, weights=None, points=40_001):
     """log p(mu | rho, q) of one track: a dense trapezoid over log depth of N(y) L(y) y.
 
     L(y) by a Kalman filter of (x, v) written out here: the prior conditioned on
-    y_1 = y, predictions x += v, v += a (Var a = q**2), updates by mu_k with
-    Phi = (1 / y_k, 0) and noise rho**2.
+    y_1 = y, predictions over a step s: x += s v, v += a (Var a = q**2 s), updates
+    by the present mu_k (NaN: none) with Phi = (1 / y_k, 0) and noise
+    (rho weights_k)**2, y_k = y + the steps so far.
     """
+    steps = np.ones(len(mu) - 1) if steps is None else np.asarray(steps)
+    weights = np.ones(len(mu)) if weights is None else np.asarray(weights)
     lo, hi = np.log(1e-3), np.log(mean[1] + 14.0 * np.sqrt(cov[1, 1]))
     t = np.linspace(lo, hi, points)
     y = np.exp(t)
@@ -45,15 +48,18 @@ def _grid_log_likelihood(mu, rho, q, mean, cov, points=40_001):
     P = cov[np.ix_(u, u)] - np.outer(slope, cov[1, u])
     P = np.broadcast_to(P, (y.size, 2, 2)).copy()
     log_f = stats.norm.logpdf(y, mean[1], np.sqrt(cov[1, 1])) + t  # dy = y dt
-    F = np.array([[1.0, 1.0], [0.0, 1.0]])
+    yk = y.copy()
     for k, mu_k in enumerate(mu):
         if k:
+            F = np.array([[1.0, steps[k - 1]], [0.0, 1.0]])
             m = m @ F.T
             P = F @ P @ F.T
-            P[:, 1, 1] += q**2
-        yk = y + k
+            P[:, 1, 1] += q**2 * steps[k - 1]
+            yk = yk + steps[k - 1]
+        if np.isnan(mu_k):
+            continue
         h = np.stack([1.0 / yk, np.zeros_like(yk)], -1)  # (J, 2)
-        S = np.einsum("ji,jik,jk->j", h, P, h) + rho**2
+        S = np.einsum("ji,jik,jk->j", h, P, h) + (rho * weights[k]) ** 2
         e = mu_k - m[:, 0] / yk
         log_f += stats.norm.logpdf(e, 0.0, np.sqrt(S))
         K = np.einsum("jik,jk->ji", P, h) / S[:, None]
@@ -72,6 +78,35 @@ def test_log_likelihood_equals_a_dense_depth_grid():
     got = learning.log_likelihood(mu, PRIOR_MEAN, PRIOR_COV, rho, q)
     want = sum(_grid_log_likelihood(m, rho, q, PRIOR_MEAN, PRIOR_COV) for m in mu)
     assert got == pytest.approx(want, abs=1e-8)
+
+
+def test_log_likelihood_with_gaps_steps_and_weights_equals_a_dense_depth_grid():
+    """Missing bearings, uneven steps and relative noise per frame, to 1e-8."""
+    rho, q = 0.02, 0.05
+    mu = _tracks(11, 2, 7, rho, q)
+    mu[0, 2] = mu[1, 4] = np.nan
+    steps = np.array([1.0, 0.5, 2.0, 1.0, 1.5, 0.75])
+    weights = np.array([1.0, 2.0, 1.0, 0.5, 1.0, 1.5, 1.0])
+    got = learning.log_likelihood(mu, PRIOR_MEAN, PRIOR_COV, rho, q, steps, weights)
+    want = sum(_grid_log_likelihood(m, rho, q, PRIOR_MEAN, PRIOR_COV, steps, weights) for m in mu)
+    assert got == pytest.approx(want, abs=1e-8)
+
+
+def test_ml_and_em_agree_with_gaps_steps_and_weights():
+    mu = _tracks(12, 4, 12, 0.01, 0.05)
+    mu[0, 3] = mu[2, 7] = mu[3, 1] = np.nan
+    steps = np.tile([1.0, 0.5, 2.0], 4)[:11]
+    weights = np.tile([1.0, 2.0], 6)
+    kw = {"steps": steps, "weights": weights, "process_noise": 0.05}
+    ml = learning.fit(mu, PRIOR_MEAN, PRIOR_COV, **kw)
+    em = learning.fit(mu, PRIOR_MEAN, PRIOR_COV, method="em", **kw)
+    assert ml.converged and em.converged
+    assert em.rho == pytest.approx(ml.rho, rel=1e-7)
+    assert em.log_likelihood == pytest.approx(ml.log_likelihood, abs=1e-9)
+    # relative weights: doubling every frame's weight halves the estimate of rho
+    twice = learning.fit(mu, PRIOR_MEAN, PRIOR_COV, **{**kw, "weights": 2 * weights})
+    assert twice.rho == pytest.approx(ml.rho / 2, rel=1e-7)
+    assert twice.log_likelihood == pytest.approx(ml.log_likelihood, abs=1e-8)
 
 
 def test_log_likelihood_equals_brute_3d_quadrature_at_three_frames():

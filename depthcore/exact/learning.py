@@ -9,7 +9,9 @@ maximising the marginal likelihood of the bearings,
 
     log p(mu_1 .. mu_N | rho, q) = log integral_{y_1 > 0} N(y_1; m_y, P_yy) L(y_1; rho, q) dy_1,
 
-summed over the tracks, where ``L(y_1)`` is the likelihood of the bearings
+summed over the tracks (with gaps, uneven steps and a relative noise level per
+frame, ``rho_k = rho weights_k``, as :mod:`depthcore.problem.frames` describes
+them), where ``L(y_1)`` is the likelihood of the bearings
 given the depth from the Kalman filter over the lateral state
 (:mod:`depthcore.exact.bank`, the prediction-error decomposition of textbook
 19.2.3). The depth integral is the exact filter's depth quadrature
@@ -64,6 +66,7 @@ from scipy.special import logsumexp
 
 from depthcore.exact import posterior as exact_posterior
 from depthcore.exact.bank import PSI, lateral_filter, run_bank
+from depthcore.exact.tracks import transitions
 from depthcore.kalman import linear
 from depthcore.problem import checks, frames
 
@@ -152,12 +155,20 @@ class _Tracks(NamedTuple):
     steps: np.ndarray  # (B, N - 1)
     mean: np.ndarray  # (B, 3)
     cov: np.ndarray  # (B, 3, 3)
-    regular: bool
 
     @property
     def elapsed(self) -> np.ndarray:
         zero = np.zeros(self.steps.shape[:-1] + (1,))
         return np.concatenate([zero, np.cumsum(self.steps, axis=-1)], axis=-1)
+
+    @property
+    def unit_steps(self):
+        """The steps, or ``None`` when they are all ones (the paper's frames)."""
+        return None if np.all(self.steps == 1.0) else self.steps
+
+    def frame_rho(self, rho: float):
+        """The noise SD at every frame, ``rho weights_k`` (B, N), or ``None`` for ``rho`` at all."""
+        return None if np.all(self.weights == 1.0) else rho * self.weights
 
 
 # --- checks ------------------------------------------------------------------------------
@@ -168,6 +179,15 @@ def _tracks(mu, prior_mean, prior_cov, steps, weights) -> _Tracks:
     if mu.ndim not in (1, 2):
         raise ValueError(f"mu must have shape (N,) or (B, N), got shape {mu.shape}")
     mu = np.atleast_2d(mu)
+    if weights is not None:
+        weights = checks.as_float(weights, "weights")
+        if weights.shape not in (mu.shape[-1:], mu.shape):
+            raise ValueError(
+                f"weights must have shape ({mu.shape[-1]},) or {mu.shape}, got {weights.shape}"
+            )
+        weights = np.broadcast_to(weights, mu.shape)
+        if not np.all(np.isnan(mu) | (np.isfinite(weights) & (weights > 0))):
+            raise ValueError("weights must be finite and positive at every present frame")
     track = frames.check(mu, 1.0 if weights is None else weights, steps)
     B = mu.shape[0]
     prior_mean = checks.finite_array(prior_mean, "prior_mean")
@@ -177,11 +197,6 @@ def _tracks(mu, prior_mean, prior_cov, steps, weights) -> _Tracks:
     if prior_cov.shape not in ((3, 3), (B, 3, 3)):
         raise ValueError(f"prior_cov must have shape (3, 3) or ({B}, 3, 3), got {prior_cov.shape}")
     prior_cov = checks.covariances(prior_cov, "prior_cov", 3)
-    if not track.regular:
-        raise ValueError(
-            "mu, steps, weights: the noise is learned from the paper's frames (every bearing, "
-            "unit steps, one noise level per track)"
-        )
     return _Tracks(
         mu=track.mu,
         present=track.present,
@@ -189,7 +204,6 @@ def _tracks(mu, prior_mean, prior_cov, steps, weights) -> _Tracks:
         steps=np.array(track.steps),
         mean=np.broadcast_to(prior_mean, (B, 3)).copy(),
         cov=np.broadcast_to(prior_cov, (B, 3, 3)).copy(),
-        regular=track.regular,
     )
 
 
@@ -205,15 +219,31 @@ def _level(level) -> float:
 
 def _place(tracks: _Tracks, rho: float, q: float, rtol: float, history: bool = False):
     """The exact posterior of every track at ``(rho, q)``, nodes placed by the depth quadrature."""
+    frame_rho = tracks.frame_rho(rho)
     return exact_posterior.posterior(
-        tracks.mu, rho, tracks.mean, tracks.cov, q, rtol=rtol, history=history
+        tracks.mu,
+        rho if frame_rho is None else frame_rho,
+        tracks.mean,
+        tracks.cov,
+        q,
+        rtol=rtol,
+        history=history,
+        steps=tracks.unit_steps,
     )
 
 
 def _on_nodes(tracks: _Tracks, nodes, log_w, rho: float, q: float) -> float:
     """``sum_b log sum_j w_bj N(y_j; m_y, P_yy) L(y_j)`` on fixed nodes and log weights (B, J)."""
+    frame_rho = tracks.frame_rho(rho)
     log_weight = lateral_filter(
-        nodes, tracks.mu, np.asarray(rho), np.asarray(q), tracks.mean, tracks.cov
+        nodes,
+        tracks.mu,
+        np.asarray(rho),
+        np.asarray(q),
+        tracks.mean,
+        tracks.cov,
+        tracks.unit_steps,
+        frame_rho,
     )[0]
     return float(np.sum(logsumexp(log_w + log_weight, axis=-1)))
 
@@ -649,7 +679,8 @@ def expectations(bank, log_weights, tracks: _Tracks):
         ``E[(v_{k+1} - v_k)**2] / s_k``.
     """
     b = bank
-    smooth, cross = _smooth(b.history, PSI)
+    steps = tracks.unit_steps
+    smooth, cross = _smooth(b.history, PSI if steps is None else transitions(steps)[:, None])
     depth = b.nodes[..., None] + tracks.elapsed[:, None, :]  # (B, J, N)
     mx, vx = smooth.mean[..., 0], smooth.cov[..., 0, 0]
     mu = np.where(tracks.present, tracks.mu, 0.0)[:, None, :]
@@ -724,8 +755,17 @@ def _fit_em(tracks, rho_k, q_k, free, level, intervals, rtol, tol, max_iter) -> 
         if anchor is None or np.max(np.abs(here - anchor)) > _EM_REPLACE:
             post = _place(tracks, rho, q, rtol)
             nodes, log_w, anchor, fresh = post.bank.nodes, post.log_weights, here, True
+        frame_rho = tracks.frame_rho(rho)
         bank = run_bank(
-            nodes, tracks.mu, np.asarray(rho), np.asarray(q), tracks.mean, tracks.cov, True
+            nodes,
+            tracks.mu,
+            np.asarray(rho) if frame_rho is None else frame_rho,
+            np.asarray(q),
+            tracks.mean,
+            tracks.cov,
+            True,
+            tracks.unit_steps,
+            frame_rho,
         )
         meas, motion = expectations(bank, log_w, tracks)
         new_rho = float(np.sqrt(np.sum(meas) / n_frames)) if rho_k is None else rho
