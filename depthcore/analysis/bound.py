@@ -430,20 +430,39 @@ SINGULAR = 1e-13
 
 
 def _scale(A) -> np.ndarray:
-    """Per matrix (..., 3, 3), an even exponent ``e`` bringing ``2**-e A`` near 1, or 0."""
-    e = np.frexp(np.max(np.abs(A), axis=(-1, -2)))[1]
-    return np.where(np.abs(e) > _SCALE_FREE, 2 * (e // 2), 0)
+    """Per matrix (..., 3, 3), exponents ``d`` (..., 3) equilibrating it: ``2**(d_i + d_j) A_ij``.
+
+    Zero (nothing to do) unless the diagonal reaches beyond ``2**±_SCALE_FREE``
+    or spreads over more than that; then ``d_i = -floor(e_i / 2)`` with
+    ``A_ii = m 2**e_i``, bringing every diagonal entry near 1. Scaling by powers
+    of two is exact, and so the Cholesky factor and the inverse are those of
+    ``A`` scaled, to the last bit (within the range of normal doubles).
+    """
+    e = np.frexp(np.abs(np.diagonal(A, axis1=-2, axis2=-1)))[1]
+    wide = (np.max(np.abs(e), axis=-1) > _SCALE_FREE) | (
+        np.max(e, axis=-1) - np.min(e, axis=-1) > _SCALE_FREE
+    )
+    return np.where(wide[..., None], -(e // 2), 0)
+
+
+def _scaled(A, d) -> np.ndarray:
+    """``2**(d_i + d_j) A_ij``."""
+    return np.ldexp(A, d[..., :, None] + d[..., None, :])
 
 
 def _scaled_inverse(A, invert) -> np.ndarray:
-    """``invert`` applied to ``A / 4**k`` and the result divided by ``4**k``: exact scaling."""
-    e = _scale(A)[..., None, None]
-    return np.ldexp(invert(np.ldexp(A, -e)), -e)
+    """``A^{-1}`` as ``D (D A D)^{-1} D``, ``D`` a diagonal of powers of two (:func:`_scale`)."""
+    d = _scale(A)
+    return _scaled(invert(_scaled(A, d)), d)
 
 
 def _determined(J) -> np.ndarray:
-    """Whether each information matrix (..., 3, 3) is positive definite beyond rounding."""
-    w = np.linalg.eigvalsh(np.ldexp(J, -_scale(J)[..., None, None]))
+    """Whether each information matrix (..., 3, 3) is positive definite beyond rounding.
+
+    Judged on ``J`` equilibrated by :func:`_scale` where its diagonal spans
+    more than the doubles' middle range (depths of ``1e150`` beside unit velocities).
+    """
+    w = np.linalg.eigvalsh(_scaled(J, _scale(J)))
     return w[..., 0] > SINGULAR * np.abs(w[..., -1])
 
 
@@ -640,7 +659,7 @@ def track_moments(state, frame: int, frames: int, process_noise: float) -> Track
         psi = np.array([[1.0, 1.0], [0.0, 1.0]])
         cov = np.zeros((n, 2, 2))
         for k in range(frame, n):
-            cov[k] = psi @ cov[k - 1] @ psi.T + np.diag([0.0, q**2])
+            cov[k] = psi @ cov[k - 1] @ psi.T + np.diag([0.0, np.float64(q) ** 2])
     if not np.all(np.isfinite(mean)):
         raise ValueError("state: the track it starts leaves the range of doubles")
     if not np.all(np.isfinite(cov)):
