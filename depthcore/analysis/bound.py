@@ -695,8 +695,8 @@ def posterior_bound(state, frame: int, frames: int, rho, prior_cov=None, process
     """
     t = track_moments(state, frame, frames, process_noise)
     rho = checks.positive_scalar(rho, "rho")
-    lateral = t.mean[:, [0, 2]]
-    info = expected_measurement_information(t.mean[:, 1], lateral, t.lateral_cov, rho)
+    block = _information_block(t.mean[:, 0], t.mean[:, 1], rho, t.lateral_cov[:, 0, 0])
+    info = _assemble(block, (len(t.mean),), "state and rho")  # Eq. (11), E[I_k] as below
     J = _recursion(info, _prior_information(prior_cov), t.process_noise, None)
     if not np.all(np.isfinite(J)):
         raise ValueError("state and rho: the information exceeds the largest double")
