@@ -45,6 +45,22 @@ Two readings of ``I_k``, both in the recursion above:
 against a bound, with Monte Carlo standard errors, and flags a claimed SD
 below it.
 
+Tracks as they come (:mod:`depthcore.problem.frames`). The motion with a step
+``s_k`` is ``y_{k+1} = y_k + s_k``, ``x_{k+1} = x_k + s_k v_k``,
+``v_{k+1} = v_k + a_k`` with ``a_k ~ N(0, q_k**2 s_k)``: ``F`` above becomes
+``F_k`` (:func:`depthcore.problem.frames.transition`) and ``Q_k = q_k**2 s_k u u^T``
+(:func:`depthcore.problem.frames.velocity_variance`). A missing bearing adds no
+information (``I_k = 0``) and ``rho`` may differ from frame to frame.
+:func:`conditional_bound` reads the steps off the true states' depths.
+
+Numbers at the edges of floating point. The bearing's information is computed on
+the binary mantissas of ``x``, ``y`` and ``rho`` with their exponents apart, so
+a depth of ``1e150`` with ``rho = 1e-150`` is no harder than a depth of 1; the
+inverses are taken of matrices scaled by a power of four (exactly). Where a
+result itself lies beyond the largest double (an information about a point
+``1e-300`` in front of the camera), the function refuses, naming the argument.
+Every refusal is a one-line :class:`ValueError`; no function warns.
+
 References
 ----------
 .. [tichavsky1998] P. Tichavský, C. H. Muravchik and A. Nehorai, "Posterior
@@ -62,6 +78,7 @@ from typing import NamedTuple
 import numpy as np
 
 from depthcore.problem import checks, model
+from depthcore.problem.frames import transition, velocity_variance
 from depthcore.problem.gaussian import symmetric
 
 #: The direction of the process noise in ``(x, y, v)``: only the velocity changes.
@@ -69,6 +86,97 @@ U = np.array([0.0, 0.0, 1.0])
 U.setflags(write=False)
 #: The default critical value of :func:`against_bound`, the standard normal's two-sided 1 % point.
 Z = 2.5758293035489004
+
+
+#: Process noise variances above this take the form of the Sherman-Morrison step
+#: that holds in the limit of an infinite variance (the velocity forgotten).
+_LARGE_VARIANCE = 1e100
+
+#: Matrices whose largest entry lies within ``2**±_SCALE_FREE`` are inverted as they are;
+#: others are first scaled by a power of four, which is exact.
+_SCALE_FREE = 256
+
+
+def _rho(value, shape: tuple[int, ...], present=None) -> np.ndarray:
+    """``rho`` broadcast to ``shape`` (..., N): finite and > 0 where a bearing is present."""
+    rho = checks.as_float(value, "rho")
+    if not checks.broadcasts(rho.shape, shape):
+        raise ValueError(
+            f"rho must be a number or broadcast to {shape} (one per frame), got shape {rho.shape}"
+        )
+    rho = np.broadcast_to(rho, shape)
+    used = rho if present is None else np.where(present, rho, 1.0)
+    bad = ~(np.isfinite(used) & (used > 0))
+    if np.any(bad):
+        worst = float(used[np.unravel_index(np.argmax(bad), shape)])
+        raise ValueError(f"rho must be finite and positive, got {worst!r}")
+    return used
+
+
+def _states(value, name: str = "states") -> np.ndarray:
+    """States ``(..., N, 3)``, finite, ``N`` at most :data:`checks.MAX_FRAMES`."""
+    states = checks.finite_array(value, name)
+    if states.ndim < 2 or states.shape[-1] != 3 or states.shape[-2] < 1:
+        raise ValueError(f"{name} must have shape (..., N, 3), got {states.shape}")
+    _frames_limit(states.shape[-2], name)
+    return states
+
+
+def _frames_limit(n: int, name: str) -> None:
+    if n > checks.MAX_FRAMES:
+        raise ValueError(
+            f"{name} has {n} frames, more than the {checks.MAX_FRAMES} the bound accepts"
+        )
+
+
+def _information_block(x, y, rho, c=None):
+    """The nonzero 2 x 2 block of ``h h^T / rho**2`` (``c`` None) or ``E[h h^T] / rho**2``.
+
+    ``h = (1 / y, -x / y**2)`` (Eq. (11)); with ``c`` the variance of ``x``
+    (``x`` its mean), ``E[h h^T] = [[1 / y**2, -x / y**3], [., (x**2 + c) / y**4]]``.
+    Computed on the mantissas of ``frexp`` with the exponents added apart: the
+    same floating point operations, in the same order, as on the numbers
+    themselves, so bit for bit the same where those stay within range, and no
+    intermediate overflow where they do not. Entries beyond the largest double
+    come back ``inf``.
+
+    Returns
+    -------
+    tuple of three ndarrays: the entries (0, 0), (0, 1) and (1, 1).
+    """
+    my, ey = np.frexp(y)
+    mx, ex = np.frexp(x)
+    mr, er = np.frexp(rho)
+    r2 = mr**2
+    with np.errstate(over="ignore", under="ignore"):
+        if c is None:
+            am, ae = 1.0 / my, -ey
+            bm, be = -mx / my**2, ex - 2 * ey
+            i00 = np.ldexp(am * am / r2, 2 * ae - 2 * er)
+            i01 = np.ldexp(am * bm / r2, ae + be - 2 * er)
+            i11 = np.ldexp(bm * bm / r2, 2 * be - 2 * er)
+        else:
+            mc, ec = np.frexp(c)
+            top = np.maximum(2 * ex, ec)
+            total = np.ldexp(mx**2, 2 * ex - top) + np.ldexp(mc, ec - top)
+            i00 = np.ldexp(1.0 / my**2 / r2, -2 * ey - 2 * er)
+            i01 = np.ldexp(-mx / my**3 / r2, ex - 3 * ey - 2 * er)
+            i11 = np.ldexp(total / my**4 / r2, top - 4 * ey - 2 * er)
+    return i00, i01, i11
+
+
+def _assemble(block, shape, names: str) -> np.ndarray:
+    i00, i01, i11 = np.broadcast_arrays(*block)
+    if not (np.all(np.isfinite(i00)) and np.all(np.isfinite(i01)) and np.all(np.isfinite(i11))):
+        raise ValueError(
+            f"{names}: the information exceeds the largest double (a depth too small for the "
+            "noise level)"
+        )
+    out = np.zeros(shape + (3, 3))
+    out[..., 0, 0] = i00
+    out[..., 0, 1] = out[..., 1, 0] = i01
+    out[..., 1, 1] = i11
+    return out
 
 
 def measurement_information(states, rho) -> np.ndarray:
@@ -81,16 +189,27 @@ def measurement_information(states, rho) -> np.ndarray:
     ----------
     states : array_like, shape (..., 3)
         States ``(x, y, v)`` with ``y != 0``.
-    rho : float
-        Bearing noise SD, > 0.
+    rho : float or array_like, broadcastable to shape (...)
+        Bearing noise SD, > 0 (one per state, e.g. per frame).
 
     Returns
     -------
     ndarray, shape (..., 3, 3)
+
+    Raises
+    ------
+    ValueError
+        Naming ``states`` or ``rho``; also when the information exceeds the
+        largest double.
     """
-    rho = checks.positive_scalar(rho, "rho")
-    h = model.observation_vector(checks.finite_array(states, "states"))
-    return h[..., :, None] * h[..., None, :] / rho**2
+    states = checks.finite_array(states, "states")
+    if states.ndim < 1 or states.shape[-1] != 3:
+        raise ValueError(f"states must have shape (..., 3), got {states.shape}")
+    if np.any(states[..., 1] == 0):
+        raise ValueError("states must have nonzero depths y: the projection x / y is undefined")
+    rho = _rho(rho, states.shape[:-1])
+    block = _information_block(states[..., 0], states[..., 1], rho)
+    return _assemble(block, states.shape[:-1], "states and rho")
 
 
 def expected_measurement_information(depth, lateral_mean, lateral_cov, rho) -> np.ndarray:
@@ -108,64 +227,100 @@ def expected_measurement_information(depth, lateral_mean, lateral_cov, rho) -> n
     lateral_mean : array_like, shape (..., 2)
         Means of ``(x, v)``.
     lateral_cov : array_like, shape (..., 2, 2)
-        Covariances of ``(x, v)``.
-    rho : float
+        Covariances of ``(x, v)`` (the variance of ``x`` >= 0).
+    rho : float or array_like, broadcastable to shape (...)
 
     Returns
     -------
     ndarray, shape (..., 3, 3)
     """
-    rho = checks.positive_scalar(rho, "rho")
     y = checks.finite_array(depth, "depth")
     if not np.all(y > 0):
         raise ValueError("depth must be positive: the point must be in front of the camera")
-    m = checks.finite_array(lateral_mean, "lateral_mean")[..., 0]
-    c = checks.finite_array(lateral_cov, "lateral_cov")[..., 0, 0]
-    y, m, c = np.broadcast_arrays(y, m, c)
-    out = np.zeros(y.shape + (3, 3))
-    out[..., 0, 0] = 1.0 / y**2
-    out[..., 0, 1] = out[..., 1, 0] = -m / y**3
-    out[..., 1, 1] = (m**2 + c) / y**4
-    return out / rho**2
+    mean = checks.finite_array(lateral_mean, "lateral_mean")
+    if mean.ndim < 1 or mean.shape[-1] != 2:
+        raise ValueError(f"lateral_mean must have shape (..., 2), got {mean.shape}")
+    cov = checks.finite_array(lateral_cov, "lateral_cov")
+    if cov.ndim < 2 or cov.shape[-2:] != (2, 2):
+        raise ValueError(f"lateral_cov must have shape (..., 2, 2), got {cov.shape}")
+    m, c = mean[..., 0], cov[..., 0, 0]
+    if np.any(c < 0):
+        raise ValueError("lateral_cov must have a nonnegative variance of x")
+    try:
+        shape = np.broadcast_shapes(y.shape, m.shape, c.shape)
+    except ValueError:
+        raise ValueError(
+            f"depth, lateral_mean and lateral_cov must broadcast, got shapes {y.shape}, "
+            f"{mean.shape} and {cov.shape}"
+        ) from None
+    rho = _rho(rho, shape)
+    block = _information_block(m, y, rho, c)
+    return _assemble(block, shape, "depth, lateral_mean and rho")
 
 
 def process_noise_steps(process_noise, frames: int) -> np.ndarray:
     """The SD ``q_k`` of the velocity's change over each step ``k -> k + 1``, shape (N - 1,).
 
     ``process_noise`` is a float (the same at every step) or an array of
-    shape ``(N - 1,)``, each ``>= 0``.
+    shape ``(N - 1,)``, each ``>= 0``; ``frames`` is ``N``, 1 to
+    :data:`depthcore.problem.checks.MAX_FRAMES`.
     """
+    n = checks.count(frames, "frames")
+    _frames_limit(n, "frames")
     q = checks.finite_array(process_noise, "process_noise")
     if np.any(q < 0):
         raise ValueError("process_noise must be >= 0")
     if q.ndim == 0:
-        return np.full(frames - 1, float(q))
-    if q.shape != (frames - 1,):
+        return np.full(n - 1, float(q))
+    if q.shape != (n - 1,):
         raise ValueError(
-            f"process_noise must be a float or have shape ({frames - 1},), one SD per step, "
+            f"process_noise must be a float or have shape ({n - 1},), one SD per step, "
             f"got shape {q.shape}"
         )
     return q
 
 
-def information(measurement_info, prior_cov=None, process_noise=0.0) -> np.ndarray:
+def _steps(value, n: int, batch: tuple[int, ...]):
+    """Steps ``(N - 1,)`` or ``(..., N - 1)``, finite and > 0; None stays None."""
+    if value is None:
+        return None
+    steps = checks.finite_array(value, "steps")
+    if (
+        steps.ndim < 1
+        or steps.shape[-1] != n - 1
+        or not checks.broadcasts(steps.shape, batch + (n - 1,))
+    ):
+        raise ValueError(
+            f"steps must have shape ({n - 1},) or broadcast to {batch + (n - 1,)}, "
+            f"got shape {steps.shape}"
+        )
+    if not np.all(steps > 0):
+        raise ValueError("steps must be positive (the depth grows between frames)")
+    return steps
+
+
+def information(measurement_info, prior_cov=None, process_noise=0.0, steps=None) -> np.ndarray:
     """The information about the state at every frame: the recursion of Tichavský et al. (1998).
 
-    ``J_1 = P^{-1} + I_1`` and ``J_{k+1} = (F J_k^{-1} F^T + Q_k)^{-1} + I_{k+1}``,
+    ``J_1 = P^{-1} + I_1`` and ``J_{k+1} = (F_k J_k^{-1} F_k^T + Q_k)^{-1} + I_{k+1}``,
     Tichavský et al. (1998), Eq. (21) with linear Gaussian motion (module
-    docstring), computed by Sherman–Morrison without inverting ``J_k``.
+    docstring), computed by Sherman–Morrison without inverting ``J_k``;
+    ``F_k`` moves by the step ``s_k`` and ``Q_k = q_k**2 s_k u u^T``.
 
     Parameters
     ----------
     measurement_info : array_like, shape (..., N, 3, 3)
         ``I_k`` of each bearing, conditional (:func:`measurement_information`
         at the true states) or expected
-        (:func:`expected_measurement_information`).
+        (:func:`expected_measurement_information`); zero at a missing bearing.
+        ``N`` at most :data:`depthcore.problem.checks.MAX_FRAMES`.
     prior_cov : array_like, shape (3, 3), optional
         ``P``, the prior covariance of the state at frame 1 (symmetric positive
         definite); ``None``: no prior, the information of the bearings alone.
     process_noise : float or array_like, shape (N - 1,)
-        ``q_k >= 0`` (:func:`process_noise_steps`).
+        ``q_k >= 0`` (:func:`process_noise_steps`), per unit step.
+    steps : array_like, shape (N - 1,) or (..., N - 1), optional
+        The depth's change ``s_k > 0`` between frames; ``None``: all ones.
 
     Returns
     -------
@@ -173,33 +328,82 @@ def information(measurement_info, prior_cov=None, process_noise=0.0) -> np.ndarr
         ``J_k`` after the bearing of frame ``k``.
     """
     info = checks.finite_array(measurement_info, "measurement_info")
-    if info.ndim < 3 or info.shape[-2:] != (3, 3):
+    if info.ndim < 3 or info.shape[-2:] != (3, 3) or info.shape[-3] < 1:
         raise ValueError(f"measurement_info must have shape (..., N, 3, 3), got {info.shape}")
     n = info.shape[-3]
-    q2 = process_noise_steps(process_noise, n) ** 2
+    _frames_limit(n, "measurement_info")
+    q = process_noise_steps(process_noise, n)
+    steps = _steps(steps, n, info.shape[:-3])
+    J = _recursion(info, _prior_information(prior_cov), q, steps)
+    if not np.all(np.isfinite(J)):
+        raise ValueError("measurement_info: the information exceeds the largest double")
+    return J
+
+
+def _prior_information(prior_cov) -> np.ndarray:
+    """``P^{-1}``, or zero without a prior."""
     if prior_cov is None:
-        prior_info = np.zeros((3, 3))
+        return np.zeros((3, 3))
+    P = checks.covariance(prior_cov, "prior_cov", 3)
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = _scaled_inverse(P, np.linalg.inv)
+    if not np.all(np.isfinite(out)):
+        raise ValueError("prior_cov: its inverse exceeds the largest double")
+    return out
+
+
+def _recursion(info, prior_info, q, steps) -> np.ndarray:
+    """Eq. (21) of Tichavský et al. (1998) over ``I_k`` (..., N, 3, 3); ``inf`` on overflow."""
+    n = info.shape[-3]
+    if steps is not None and np.all(steps == 1.0):
+        steps = None
+    if steps is None:
+        f_inv = [model.G_linear(-1)] * (n - 1)
+        with np.errstate(over="ignore"):
+            var = q**2
     else:
-        prior_info = np.linalg.inv(checks.covariance(prior_cov, "prior_cov", 3))
-    f_inv = model.G_linear(-1)
+        if steps.ndim > 1 and np.all(steps == steps.reshape(-1, n - 1)[0]):
+            steps = steps.reshape(-1, n - 1)[0]
+        f_inv = [transition(-steps[..., k]) for k in range(n - 1)]
+        with np.errstate(over="ignore"):
+            var = velocity_variance(1.0, steps) * q**2
     out = np.empty(info.shape)
     J = prior_info + info[..., 0, :, :]
     out[..., 0, :, :] = J
-    for k in range(n - 1):
-        M = f_inv.T @ J @ f_inv
-        if q2[k] > 0:
-            Mu = M @ U
-            M = (
-                M
-                - q2[k]
-                * Mu[..., :, None]
-                * Mu[..., None, :]
-                / (1.0 + q2[k] * (Mu @ U))[..., None, None]
+    with np.errstate(over="ignore", invalid="ignore"):
+        for k in range(n - 1):
+            F = f_inv[k]
+            M = np.swapaxes(F, -1, -2) @ J @ F
+            v = var[..., k]
+            if np.any(v > 0):
+                M = _velocity_noise(M, v)
+            J = M + info[..., k + 1, :, :]
+            J = symmetric(J)
+            out[..., k + 1, :, :] = J
+    return np.where(np.isnan(out), np.inf, out)
+
+
+def _velocity_noise(M, v) -> np.ndarray:
+    """``(M^{-1} + v u u^T)^{-1}`` by Sherman–Morrison: ``M - v (Mu)(Mu)^T / (1 + v u^T M u)``.
+
+    For ``v`` above :data:`_LARGE_VARIANCE` (``inf`` included) the same as
+    ``M - (Mu)(Mu)^T / (1 / v + u^T M u)``, which holds in the limit.
+    """
+    Mu = M @ U
+    w = (Mu @ U)[..., None, None]
+    outer = Mu[..., :, None] * Mu[..., None, :]
+    if np.ndim(v) == 0:
+        if v <= _LARGE_VARIANCE:
+            return (
+                M - v * Mu[..., :, None] * Mu[..., None, :] / (1.0 + v * (Mu @ U))[..., None, None]
             )
-        J = M + info[..., k + 1, :, :]
-        J = symmetric(J)
-        out[..., k + 1, :, :] = J
-    return out
+        denominator = 1.0 / v + w
+        return M - outer / np.where(denominator > 0, denominator, 1.0)
+    vv = np.asarray(v)[..., None, None]
+    small = M - vv * Mu[..., :, None] * Mu[..., None, :] / (1.0 + vv * w)
+    denominator = 1.0 / vv + w
+    large = M - outer / np.where(denominator > 0, denominator, 1.0)
+    return np.where(vv > _LARGE_VARIANCE, large, small)
 
 
 def covariance_bound(information_matrix) -> np.ndarray:
@@ -207,24 +411,58 @@ def covariance_bound(information_matrix) -> np.ndarray:
 
     Refuses, naming ``information``, a ``J`` that is not positive definite
     (its least eigenvalue at most :data:`SINGULAR` times its largest): the
-    bearings (and the prior) then do not determine the state.
+    bearings (and the prior) then do not determine the state; and a ``J``
+    whose inverse exceeds the largest double.
     """
     J = checks.finite_array(information_matrix, "information")
+    if J.ndim < 2 or J.shape[-2:] != (3, 3):
+        raise ValueError(f"information must have shape (..., 3, 3), got {J.shape}")
     if not np.all(_determined(J)):
         raise ValueError(
             "information is singular: the bearings and the prior do not determine the state "
             "(with no prior, at least three bearings are needed)"
         )
-    return _inverse(J)
+    return _checked_inverse(J)
 
 
 #: An information matrix whose least eigenvalue is at most this fraction of its largest is singular.
 SINGULAR = 1e-13
 
 
+def _scale(A) -> np.ndarray:
+    """Per matrix (..., 3, 3), exponents ``d`` (..., 3) equilibrating it: ``2**(d_i + d_j) A_ij``.
+
+    Zero (nothing to do) unless the diagonal reaches beyond ``2**±_SCALE_FREE``
+    or spreads over more than that; then ``d_i = -floor(e_i / 2)`` with
+    ``A_ii = m 2**e_i``, bringing every diagonal entry near 1. Scaling by powers
+    of two is exact, and so the Cholesky factor and the inverse are those of
+    ``A`` scaled, to the last bit (within the range of normal doubles).
+    """
+    e = np.frexp(np.abs(np.diagonal(A, axis1=-2, axis2=-1)))[1]
+    wide = (np.max(np.abs(e), axis=-1) > _SCALE_FREE) | (
+        np.max(e, axis=-1) - np.min(e, axis=-1) > _SCALE_FREE
+    )
+    return np.where(wide[..., None], -(e // 2), 0)
+
+
+def _scaled(A, d) -> np.ndarray:
+    """``2**(d_i + d_j) A_ij``."""
+    return np.ldexp(A, d[..., :, None] + d[..., None, :])
+
+
+def _scaled_inverse(A, invert) -> np.ndarray:
+    """``A^{-1}`` as ``D (D A D)^{-1} D``, ``D`` a diagonal of powers of two (:func:`_scale`)."""
+    d = _scale(A)
+    return _scaled(invert(_scaled(A, d)), d)
+
+
 def _determined(J) -> np.ndarray:
-    """Whether each information matrix (..., 3, 3) is positive definite beyond rounding."""
-    w = np.linalg.eigvalsh(J)
+    """Whether each information matrix (..., 3, 3) is positive definite beyond rounding.
+
+    Judged on ``J`` equilibrated by :func:`_scale` where its diagonal spans
+    more than the doubles' middle range (depths of ``1e150`` beside unit velocities).
+    """
+    w = np.linalg.eigvalsh(_scaled(J, _scale(J)))
     return w[..., 0] > SINGULAR * np.abs(w[..., -1])
 
 
@@ -232,6 +470,18 @@ def _inverse(J) -> np.ndarray:
     """Inverse of symmetric positive definite matrices (..., 3, 3), by Cholesky."""
     L_inv = np.linalg.inv(np.linalg.cholesky(J))
     return np.swapaxes(L_inv, -1, -2) @ L_inv
+
+
+def _checked_inverse(J) -> np.ndarray:
+    """:func:`_inverse` of scaled ``J``, refused (naming ``information``) beyond the doubles."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = _scaled_inverse(J, _inverse)
+    if not np.all(np.isfinite(out)):
+        raise ValueError(
+            "information: its inverse, the bound, exceeds the largest double (the bearings "
+            "carry almost no information)"
+        )
+    return out
 
 
 def _frame_bounds(J) -> np.ndarray:
@@ -243,39 +493,117 @@ def _frame_bounds(J) -> np.ndarray:
     ok = _determined(J)
     covariance_bound(J[..., -1, :, :])
     out = np.full(J.shape, np.nan)
-    out[ok] = _inverse(J[ok])
+    out[ok] = _checked_inverse(J[ok])
     return out
 
 
-def conditional_bound(states, rho, prior_cov=None, process_noise=0.0) -> np.ndarray:
-    """The bound on the state at every frame, conditional on the true track.
+def _present(value, shape: tuple[int, ...]) -> np.ndarray:
+    """``present`` as booleans broadcast to ``shape`` (..., N); None: every frame."""
+    if value is None:
+        return np.ones(shape, dtype=bool)
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):
+        raise ValueError("present must be booleans, got a ragged or mixed value") from None
+    if arr.dtype.kind != "b":
+        raise ValueError(f"present must be booleans (True where a bearing is), got {arr.dtype}")
+    if not checks.broadcasts(arr.shape, shape):
+        raise ValueError(f"present must broadcast to {shape}, got shape {arr.shape}")
+    return np.broadcast_to(arr, shape)
 
-    :func:`information` with ``I_k`` at the true states (Tichavský et al.
-    1998, Eq. (21); the bound along the true trajectory of Ristic et al. 2004,
-    ch. 6), inverted by :func:`covariance_bound`.
+
+#: A step within this many units in the last place of the depths of 1 is the unit step.
+_STEP_ULPS = 4.0
+#: ``x_{k+1} = x_k + s_k v_k`` must hold within this many units in the last place of its terms.
+_MOTION_ULPS = 64.0
+
+
+def track_steps(states) -> np.ndarray:
+    """The steps ``s_k = y_{k+1} - y_k`` of a true track, checked against its lateral motion.
+
+    A step within rounding of 1 (:data:`_STEP_ULPS` units in the last place
+    of the depths) is taken as exactly 1, the paper's step. Each step must be
+    positive and the states must move by the motion with a step (module
+    docstring), ``x_{k+1} = x_k + s_k v_k`` within rounding
+    (:data:`_MOTION_ULPS` units in the last place of its terms); the velocity
+    may change by an acceleration.
 
     Parameters
     ----------
     states : array_like, shape (..., N, 3)
-        The true track, frames 1 .. N.
-    rho : float
+
+    Returns
+    -------
+    ndarray, shape (..., N - 1)
+    """
+    states = _states(states)
+    x, y, v = states[..., 0], states[..., 1], states[..., 2]
+    eps = np.finfo(float).eps
+    with np.errstate(over="ignore", invalid="ignore"):
+        s = np.diff(y, axis=-1)
+        depth = np.maximum(np.abs(y[..., 1:]), np.abs(y[..., :-1]))
+        s = np.where(np.abs(s - 1.0) <= _STEP_ULPS * eps * np.maximum(depth, 1.0), 1.0, s)
+        if not np.all(s > 0) or not np.all(np.isfinite(s)):
+            raise ValueError("states must have depths growing from frame to frame (steps > 0)")
+        moved = s * v[..., :-1]
+        error = np.abs(x[..., 1:] - x[..., :-1] - moved)
+        scale = np.abs(x[..., 1:]) + np.abs(x[..., :-1]) + 2 * depth * np.abs(v[..., :-1])
+        ok = error <= _MOTION_ULPS * eps * scale
+    if not np.all(ok):
+        raise ValueError(
+            "states must move by x_{k+1} = x_k + s_k v_k with the step s_k = y_{k+1} - y_k"
+        )
+    return s
+
+
+def conditional_bound(states, rho, prior_cov=None, process_noise=0.0, present=None) -> np.ndarray:
+    """The bound on the state at every frame, conditional on the true track.
+
+    :func:`information` with ``I_k`` at the true states (Tichavský et al.
+    1998, Eq. (21); the bound along the true trajectory of Ristic et al. 2004,
+    ch. 6), inverted by :func:`covariance_bound`. The steps are read off the
+    states' depths (:func:`track_steps`), ``F_k`` moving by ``s_k`` and the
+    velocity's variance growing by ``q_k**2 s_k`` over it; a missing bearing
+    (``present`` False) adds no information.
+
+    Parameters
+    ----------
+    states : array_like, shape (..., N, 3)
+        The true track, frames 1 .. N (``N`` at most
+        :data:`depthcore.problem.checks.MAX_FRAMES`), depths positive and
+        growing, ``x_{k+1} = x_k + s_k v_k``.
+    rho : float or array_like, broadcastable to shape (..., N)
+        Bearing noise SD, > 0, per frame (any value, NaN included, at a
+        missing frame); a number for every frame.
     prior_cov : array_like, shape (3, 3), optional
         The prior covariance of the state at frame 1; ``None``: none.
     process_noise : float or array_like, shape (N - 1,)
+        ``q_k >= 0``, per unit step.
+    present : array_like of bool, broadcastable to shape (..., N), optional
+        Where a bearing was taken; ``None``: at every frame.
 
     Returns
     -------
     ndarray, shape (..., N, 3, 3)
         The bound on the covariance of the state at each frame ``k``, from
-        the bearings of frames 1 .. k (NaN at frames that the bearings so far
-        do not determine, without a prior; refused at frame ``N``).
+        the bearings of frames 1 .. k. NaN means no bound: at frames that the
+        bearings so far do not determine (without a prior); refused, naming
+        ``information``, at frame ``N``.
     """
-    states = checks.finite_array(states, "states")
-    if states.ndim < 2 or states.shape[-1] != 3:
-        raise ValueError(f"states must have shape (..., N, 3), got {states.shape}")
+    states = _states(states)
     if not np.all(states[..., 1] > 0):
         raise ValueError("states must have positive depths: the point in front of the camera")
-    J = information(measurement_information(states, rho), prior_cov, process_noise)
+    steps = track_steps(states)
+    shape = states.shape[:-1]
+    present = _present(present, shape)
+    rho = _rho(rho, shape, present)
+    info = measurement_information(states, rho)
+    info = np.where(present[..., None, None], info, 0.0)
+    q = process_noise_steps(process_noise, shape[-1])
+    with np.errstate(over="ignore"):
+        J = _recursion(info, _prior_information(prior_cov), q, steps)
+    if not np.all(np.isfinite(J)):
+        raise ValueError("states and rho: the information exceeds the largest double")
     return _frame_bounds(J)
 
 
@@ -319,17 +647,23 @@ def track_moments(state, frame: int, frames: int, process_noise: float) -> Track
     """
     state = checks.finite_array(state, "state", (3,))
     n = checks.count(frames, "frames")
+    _frames_limit(n, "frames")
     frame = checks.count(frame, "frame")
     if not 1 <= frame <= n:
         raise ValueError(f"frame must be from 1 to frames = {n}, got {frame}")
-    q = checks.nonnegative_scalar(process_noise, "process_noise")
+    q = checks.process_noise(process_noise)
     if not state[1] - (frame - 1) > 0:
         raise ValueError("state puts the point behind the camera at frame 1")
-    mean = np.stack([model.G(state, k - frame) for k in range(1, n + 1)])
-    psi = np.array([[1.0, 1.0], [0.0, 1.0]])
-    cov = np.zeros((n, 2, 2))
-    for k in range(frame, n):
-        cov[k] = psi @ cov[k - 1] @ psi.T + np.diag([0.0, q**2])
+    with np.errstate(over="ignore", invalid="ignore"):
+        mean = np.stack([model.G(state, k - frame) for k in range(1, n + 1)])
+        psi = np.array([[1.0, 1.0], [0.0, 1.0]])
+        cov = np.zeros((n, 2, 2))
+        for k in range(frame, n):
+            cov[k] = psi @ cov[k - 1] @ psi.T + np.diag([0.0, np.float64(q) ** 2])
+    if not np.all(np.isfinite(mean)):
+        raise ValueError("state: the track it starts leaves the range of doubles")
+    if not np.all(np.isfinite(cov)):
+        raise ValueError("process_noise: the track's lateral variance exceeds the largest double")
     steps = np.where(np.arange(1, n) >= frame, q, 0.0)
     return TrackMoments(mean, cov, steps)
 
@@ -357,12 +691,16 @@ def posterior_bound(state, frame: int, frames: int, rho, prior_cov=None, process
     Returns
     -------
     ndarray, shape (N, 3, 3)
-        As :func:`conditional_bound`.
+        As :func:`conditional_bound` (NaN at the frames not yet determined).
     """
     t = track_moments(state, frame, frames, process_noise)
-    lateral = t.mean[:, [0, 2]]
-    info = expected_measurement_information(t.mean[:, 1], lateral, t.lateral_cov, rho)
-    return _frame_bounds(information(info, prior_cov, t.process_noise))
+    rho = checks.positive_scalar(rho, "rho")
+    block = _information_block(t.mean[:, 0], t.mean[:, 1], rho, t.lateral_cov[:, 0, 0])
+    info = _assemble(block, (len(t.mean),), "state and rho")  # Eq. (11), E[I_k] as below
+    J = _recursion(info, _prior_information(prior_cov), t.process_noise, None)
+    if not np.all(np.isfinite(J)):
+        raise ValueError("state and rho: the information exceeds the largest double")
+    return _frame_bounds(J)
 
 
 def against_bound(errors, sds, bound_sd, z: float = Z) -> dict:
@@ -407,22 +745,53 @@ def against_bound(errors, sds, bound_sd, z: float = Z) -> dict:
     if np.any(b <= 0):
         raise ValueError("bound_sd must be positive")
     z = checks.positive_scalar(z, "z")
+    try:
+        np.broadcast_shapes(b.shape, e.shape[:-1])
+    except ValueError:
+        raise ValueError(
+            f"bound_sd must broadcast to {e.shape[:-1]}, got shape {b.shape}"
+        ) from None
     t = e.shape[-1]
+    # Each row scaled by an even power of two (exact), so that squares neither
+    # overflow nor underflow; the scale is taken out again at the end.
+    ke = _row_scale(e)
+    ks = _row_scale(s)
+    e = np.ldexp(e, -ke[..., None])
+    s = np.ldexp(s, -ks[..., None])
     mse = np.mean(e**2, axis=-1)
     rmse = np.sqrt(mse)
     with np.errstate(divide="ignore", invalid="ignore"):
         rmse_se = np.where(rmse > 0, np.std(e**2, axis=-1, ddof=1) / (2 * np.sqrt(t) * rmse), 0.0)
     mean_sd = np.mean(s, axis=-1)
     mean_sd_se = np.std(s, axis=-1, ddof=1) / np.sqrt(t)
-    return {
-        "rmse": rmse,
-        "rmse_se": rmse_se,
-        "mean_sd": mean_sd,
-        "mean_sd_se": mean_sd_se,
-        "rmse_ratio": rmse / b,
-        "rmse_ratio_se": rmse_se / b,
-        "sd_ratio": mean_sd / b,
-        "sd_ratio_se": mean_sd_se / b,
-        "overconfident": mean_sd + z * mean_sd_se < b,
-        "trials": np.full(np.shape(rmse), t),
-    }
+    with np.errstate(over="ignore", under="ignore"):
+        out = {
+            "rmse": np.ldexp(rmse, ke),
+            "rmse_se": np.ldexp(rmse_se, ke),
+            "mean_sd": np.ldexp(mean_sd, ks),
+            "mean_sd_se": np.ldexp(mean_sd_se, ks),
+            "rmse_ratio": _ratio(rmse, ke, b),
+            "rmse_ratio_se": _ratio(rmse_se, ke, b),
+            "sd_ratio": _ratio(mean_sd, ks, b),
+            "sd_ratio_se": _ratio(mean_sd_se, ks, b),
+        }
+        z_se = np.ldexp(z * mean_sd_se, ks)  # may be inf: then not overconfident, rightly
+        out["overconfident"] = out["mean_sd"] + z_se < b
+    if not all(np.all(np.isfinite(out[key])) for key in out if key != "overconfident"):
+        raise ValueError(
+            "bound_sd: the errors or sds over it exceed the largest double (a bound_sd too small)"
+        )
+    out["trials"] = np.full(np.shape(out["rmse"]), t)
+    return out
+
+
+def _row_scale(a) -> np.ndarray:
+    """Per row of ``a`` (..., T), an even exponent ``k`` with ``2**-k max|a|`` near 1."""
+    e = np.frexp(np.max(np.abs(a), axis=-1))[1]
+    return 2 * (e // 2)
+
+
+def _ratio(mantissa, exponent, b) -> np.ndarray:
+    """``mantissa * 2**exponent / b`` without overflow in between (``inf`` if it overflows)."""
+    mb, eb = np.frexp(b)
+    return np.ldexp(mantissa / mb, exponent - eb)
