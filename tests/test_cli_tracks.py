@@ -482,3 +482,69 @@ def test_a_track_with_gaps_noise_or_steps_is_depthcore_track_or_its_refusal(
     updates = getattr(expected, "updates", None)
     if updates is not None:
         assert [r["gated"] for r in rows] == np.asarray(updates.gated).tolist()
+
+
+# --- learning the noise --------------------------------------------------------------------
+
+
+def _learn_track():
+    sim = model.simulate([1.0, 5.0, 0.3], 30, 0.005, 0.02, np.random.default_rng(3), frame=1)
+    return sim.mu
+
+
+def test_learn_noise_is_the_maximum_likelihood_fit_and_runs_the_filters_with_it(capsys):
+    from depthcore.exact import learning
+
+    mu = _learn_track()
+    argv = ["estimate", "--mu", *map(repr, mu.tolist()), "--learn-noise", "--json"]
+    argv += [
+        "--prior-mean",
+        "1",
+        "5",
+        "0",
+        "--prior-cov",
+        "1",
+        "0",
+        "0",
+        "0",
+        "4",
+        "0",
+        "0",
+        "0",
+        "1",
+    ]
+    assert main(argv) == 0
+    out = _strict_json(capsys.readouterr().out)
+    prior_cov = np.diag([1.0, 4.0, 1.0])
+    fit = learning.fit(mu, [1.0, 5.0, 0.0], prior_cov)
+    assert out["learned"]["rho"] == fit.rho and out["learned"]["rho_se"] == fit.rho_se
+    assert out["learned"]["process_noise"] == fit.process_noise
+    assert out["rho"] == fit.rho and out["process_noise"] == fit.process_noise
+    ekf = FILTERS["ekf"](mu, fit.rho, [1.0, 5.0, 0.0], prior_cov, fit.process_noise)
+    assert out["filters"]["ekf"]["depth"]["mean"] == float(ekf.depth_mean)
+
+
+def test_learn_noise_with_a_given_process_noise_learns_rho_only(capsys):
+    mu = _learn_track()
+    argv = ["estimate", "--mu", *map(repr, mu.tolist()), "--learn-noise", "--per-frame"]
+    argv += ["--prior-mean", "1", "5", "0", "--process-noise", "0", "--json"]
+    assert main(argv) == 0
+    learned = _strict_json(capsys.readouterr().out)["learned"]
+    assert learned["estimated"] == ["rho"] and learned["process_noise"] == 0.0
+    assert learned["process_noise_se"] is None and learned["rho_se"] > 0
+
+
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (["--rho", "0.01"], "--rho: not used with --learn-noise"),
+        (["--per-frame", "--csv"], "--csv: the learned noise levels have no CSV"),
+    ],
+)
+def test_learn_noise_refusals(capsys, extra, words):
+    argv = ["estimate", "--mu", *map(repr, _learn_track().tolist()), "--learn-noise"]
+    _refused(argv + ["--prior-mean", "1", "5", "0", *extra], capsys, words)
+
+
+def test_learn_noise_needs_four_bearings(capsys):
+    _refused(["estimate", "--mu", "0.1", "0.2", "0.28", "--learn-noise"], capsys, "at least 4")

@@ -238,7 +238,13 @@ def _cmd_reproduce(args) -> str:
 
 def _cmd_estimate(args) -> str:
     src = _bearings(args)
-    rho = _noise(args, src)
+    learned = None
+    if args.learn_noise:
+        if args.rho is not None:
+            raise ValueError("--rho: not used with --learn-noise, which estimates it; leave it out")
+        rho = 1.0 if src.rho is None else src.rho  # a rho column: the relative noise levels
+    else:
+        rho = _noise(args, src)
     q = _check_process_noise(args.process_noise)
     if args.json and args.csv:
         raise ValueError("--csv: print JSON (--json) or CSV (--csv), not both")
@@ -248,15 +254,64 @@ def _cmd_estimate(args) -> str:
     steps = None if src.steps is None or np.all(src.steps == 1.0) else src.steps
     frames.check(src.mu, rho, steps)  # the bearings' refusals come before the prior's
     prior = _prior(src.mu, args.prior_mean, args.prior_cov, steps)
+    if args.learn_noise:
+        known_q = q if "process_noise" in getattr(args, "_given", ()) else None
+        learned = _learn(src.mu, rho, prior, known_q, steps)
+        rho = learned.rho * np.asarray(rho) if np.ndim(rho) else learned.rho
+        q = learned.process_noise
     if args.per_frame:
-        return _per_frame(args, src, rho, steps, prior, q, gate)
+        return _per_frame(args, src, rho, steps, prior, q, gate, learned)
     names = tuple(dict.fromkeys(args.filters))
     if len(names) != len(args.filters):
         raise ValueError("--filters: a filter is named more than once")
     summary = reproduce.summarize(
         src.mu, rho, prior, process_noise=q, smooth=args.smooth, names=names, steps=steps, gate=gate
     )
-    return _json(summary) if args.json else cli_text.format_summary(summary)
+    if learned is not None:
+        summary["learned"] = _learned(learned)
+    return (
+        _json(summary)
+        if args.json
+        else cli_text.format_learned(summary) + cli_text.format_summary(summary)
+    )
+
+
+def _learn(mu, weights, prior: Gaussian, known_q, steps):
+    """``--learn-noise``: rho (and q unless given) by maximum likelihood, textbook 19.1.2."""
+    from depthcore.exact import learning
+
+    return learning.fit(
+        mu,
+        prior.mean,
+        prior.cov,
+        process_noise=known_q,
+        steps=steps,
+        weights=np.asarray(weights) if np.ndim(weights) else None,
+    )
+
+
+def _learned(fit) -> dict:
+    """A learned fit as plain JSON values (``None`` for a standard error it has not)."""
+
+    def number(v):
+        return None if v is None else float(v)
+
+    def interval(v):
+        return None if v is None else [float(v[0]), float(v[1])]
+
+    return {
+        "rho": float(fit.rho),
+        "rho_se": number(fit.rho_se),
+        "rho_interval": interval(fit.rho_interval),
+        "process_noise": float(fit.process_noise),
+        "process_noise_se": number(fit.process_noise_se),
+        "process_noise_interval": interval(fit.process_noise_interval),
+        "estimated": list(fit.estimated),
+        "at_boundary": bool(fit.at_boundary),
+        "level": float(fit.level),
+        "log_likelihood": float(fit.log_likelihood),
+        "converged": bool(fit.converged),
+    }
 
 
 def _bearings(args) -> tracks.TrackFile:
@@ -286,7 +341,7 @@ def _noise(args, src: tracks.TrackFile):
     return src.rho
 
 
-def _per_frame(args, src, rho, steps, prior, q, gate) -> str:
+def _per_frame(args, src, rho, steps, prior, q, gate, learned=None) -> str:
     """``estimate --per-frame``: every frame's state by the filters with a smoother."""
     if args.smooth:
         raise ValueError("--smooth: not used by --per-frame (it smooths already); leave it out")
@@ -298,11 +353,15 @@ def _per_frame(args, src, rho, steps, prior, q, gate) -> str:
             f"--filters: {without[0]} has no smoother; --per-frame takes {', '.join(smoothed)}"
         )
     result = tracks.per_frame(src.mu, rho, prior, q, chosen, steps, gate, src.frames)
+    if learned is not None:
+        result["learned"] = _learned(learned)
     if args.json:
         return _json(result)
     if args.csv:
+        if learned is not None:
+            raise ValueError("--csv: the learned noise levels have no CSV; use --json or the table")
         return cli_text.per_frame_csv(result)
-    return cli_text.format_per_frame(result)
+    return cli_text.format_learned(result) + cli_text.format_per_frame(result)
 
 
 def _check_out(out: str) -> Path:
@@ -764,6 +823,13 @@ def _add_estimate_arguments(sub, common) -> None:
         action="store_true",
         help="the filtered and smoothed depth, lateral position and velocity with their SDs at "
         "every frame (a track with missing frames, noise per frame or uneven steps needs it)",
+    )
+    e.add_argument(
+        "--learn-noise",
+        action="store_true",
+        help="estimate rho and the process noise from the track by maximum likelihood (with "
+        "--process-noise given: rho only; a rho column gives the frames' relative noise "
+        "levels), with standard errors, and run the filters with them",
     )
     e.add_argument(
         "--gate",

@@ -332,6 +332,34 @@ def _cell(value, spec: str) -> str:
     return "" if value is None or not np.isfinite(value) else format(value, spec)
 
 
+def format_learned(result: dict) -> str:
+    """The line of ``--learn-noise``'s estimates, or nothing without them."""
+    fit = result.get("learned")
+    if fit is None:
+        return ""
+
+    def one(name, symbol):
+        value, se, interval = fit[name], fit[f"{name}_se"], fit[f"{name}_interval"]
+        if name not in fit["estimated"]:
+            return f"{symbol} = {value:.4g} (given)"
+        if se is None:  # at the boundary q = 0: a one-sided interval
+            return (
+                f"{symbol} = {value:.4g} (at 0; {fit['level']:.0%} upper bound {interval[1]:.3g})"
+            )
+        return (
+            f"{symbol} = {value:.4g} ± {se:.2g} ({fit['level']:.0%} interval "
+            f"{interval[0]:.4g} to {interval[1]:.4g})"
+        )
+
+    return (
+        "learned by maximum likelihood: "
+        + one("rho", "rho")
+        + "; "
+        + one("process_noise", "q")
+        + "\n"
+    )
+
+
 def format_per_frame(result: dict) -> str:
     """A plain-text table of :func:`depthcore.cli.tracks.per_frame`'s result, block by filter."""
     m, q = result["prior_mean"], result["process_noise"]
