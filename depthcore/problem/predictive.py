@@ -22,12 +22,22 @@ a missing one, and records that it did.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.special import log_ndtr, logsumexp
 
 from depthcore.problem import checks
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+class Updates(NamedTuple):
+    """Per frame, what each update saw: shape (..., N) each; NaN / False at a missing frame."""
+
+    log_predictive: np.ndarray
+    tail: np.ndarray
+    gated: np.ndarray
 
 
 def gate(value, name: str = "gate"):
