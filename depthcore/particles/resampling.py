@@ -18,12 +18,51 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.problem import checks
+from depthcore.problem import checks, frames, model
 
 
 def check_rng(rng):
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+
+
+def track_problem(mu, rho, prior_mean, prior_cov, steps=None, triples: bool = False):
+    """The particle filters' checks of a batch of tracks as they come, and of the prior.
+
+    :func:`depthcore.problem.frames.check` of ``mu, rho, steps``; on the paper's
+    frames (:attr:`~depthcore.problem.frames.Frames.regular`) also
+    :func:`depthcore.problem.model.batch_inputs` with ``triples`` (the refusals
+    the filters have always made), otherwise the prior's checks alone.
+
+    Parameters
+    ----------
+    mu : array_like, shape (..., N)
+        ``NaN`` at a missing frame.
+    rho : float or array_like, shape (...) or (..., N)
+    prior_mean : array_like, shape (3,) or (..., 3)
+    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
+    steps : array_like, shape (N - 1,) or (..., N - 1), or None
+    triples : bool
+        Check regular frames' bearings as the paper's triples (``N = 3``).
+
+    Returns
+    -------
+    track : depthcore.problem.frames.Frames
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+        Read-only broadcast views.
+    """
+    track = frames.check(mu, rho, steps)
+    if track.regular:
+        _, _, prior_mean, prior_cov = model.batch_inputs(
+            track.mu, track.row_rho, prior_mean, prior_cov, triples=triples
+        )
+    else:
+        filled = np.where(track.present, track.mu, 0.0)
+        _, _, prior_mean, prior_cov = model.batch_inputs(
+            filled, 1.0, prior_mean, prior_cov, triples=False
+        )
+    return track, prior_mean, prior_cov
 
 
 def _weights(W, M) -> tuple[np.ndarray, int]:
