@@ -200,3 +200,16 @@ def test_refusals_name_the_argument():
         importance.run(
             np.where(np.arange(6) < 4, np.nan, MU), RHO, M, P, 100, np.random.default_rng(0)
         )
+
+
+def test_rbpf_refuses_what_it_does_not_take():
+    from depthcore.particles import rbpf
+
+    rng = np.random.default_rng(0)
+    for kwargs, name in (({"steps": [1, 2, 1, 1, 1]}, "steps"), ({"gate": 1e-3}, "gate")):
+        with pytest.raises(ValueError, match=f"^{name}: the Rao-Blackwellised"):
+            rbpf.run(MU, RHO, M, P, 10, rng, **kwargs)
+    with pytest.raises(ValueError, match="^mu: the Rao-Blackwellised"):
+        rbpf.run(GAP, RHO, M, P, 10, rng)
+    with pytest.raises(ValueError, match="^rho: the Rao-Blackwellised"):
+        rbpf.run(MU, RHO_FRAMES, M, P, 10, rng)
