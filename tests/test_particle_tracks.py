@@ -209,7 +209,7 @@ def test_rbpf_refuses_what_it_does_not_take():
     for kwargs, name in (({"steps": [1, 2, 1, 1, 1]}, "steps"), ({"gate": 1e-3}, "gate")):
         with pytest.raises(ValueError, match=f"^{name}: the Rao-Blackwellised"):
             rbpf.run(MU, RHO, M, P, 10, rng, **kwargs)
-    with pytest.raises(ValueError, match="^mu: the Rao-Blackwellised"):
+    with pytest.raises(ValueError, match="^mu must be finite"):
         rbpf.run(GAP, RHO, M, P, 10, rng)
     with pytest.raises(ValueError, match="^rho: the Rao-Blackwellised"):
         rbpf.run(MU, RHO_FRAMES, M, P, 10, rng)

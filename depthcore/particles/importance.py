@@ -652,14 +652,14 @@ def _resample(x, log_w, ancestors, need, N, rng, resampler):
 
 def _one_track(mu, rho, prior_mean, prior_cov, steps):
     """The single sequence's checks, as they have always been made on the paper's frames."""
-    track = frames.check(mu, rho, steps)
-    if track.regular:
+    if steps is None and np.ndim(rho) == 0 and not np.any(np.isnan(np.asarray(mu, dtype=float))):
         mu = checks.finite_array(mu, "mu")
         if mu.shape == (3,):
             model.measurements(mu)
-    Gaussian.prior(prior_mean, prior_cov)
-    if np.ndim(rho) == 0:
+        Gaussian.prior(prior_mean, prior_cov)
         checks.positive_scalar(rho, "rho")
+    track = frames.check(mu, rho, steps)
+    Gaussian.prior(prior_mean, prior_cov)
     return track
 
 

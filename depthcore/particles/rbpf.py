@@ -594,8 +594,9 @@ def run(
         The resampling schedule, :class:`Settings`: ``moves >= 0``, ``ess_threshold``
         in [0, 1] (0: never resample, importance sampling of the depth from its prior).
 
-    The filter takes the paper's frames only: a missing bearing, ``rho`` per
-    frame that varies, steps other than 1 or a gate are refused by name.
+    The filter takes the paper's frames only: a missing bearing (``mu must be
+    finite``), ``rho`` per frame that varies, steps other than 1 or a gate are
+    refused by name.
 
     Returns
     -------
@@ -604,17 +605,16 @@ def run(
     if gate is not None:
         predictive.gate(gate)
         raise ValueError("gate: the Rao-Blackwellised particle filter takes no gate")
-    if np.ndim(mu) >= 1 and np.shape(mu)[-1] >= 3 and np.all(np.isfinite(mu)):
+    per_frame = np.ndim(rho) > 0 and np.shape(rho) == np.shape(mu)
+    if steps is not None or per_frame:  # a missing bearing is refused below: mu must be finite
         track = frames.check(mu, rho, steps)
         if not np.all(track.steps == 1.0):
             raise ValueError("steps: the Rao-Blackwellised particle filter takes only unit steps")
-        if not track.regular:
+        if not np.all(track.rho == track.rho[..., :1]):
             raise ValueError(
                 "rho: the Rao-Blackwellised particle filter takes one noise SD per problem"
             )
-        rho = track.row_rho if np.shape(rho) == np.shape(mu) else rho
-    elif np.ndim(mu) >= 1 and np.any(np.isnan(mu)):
-        raise ValueError("mu: the Rao-Blackwellised particle filter takes no missing bearings")
+        rho = track.row_rho if per_frame else rho
     mu, rho, prior_mean, prior_cov = model.batch_inputs(
         mu, rho, prior_mean, prior_cov, triples=False
     )

@@ -52,6 +52,19 @@ def track_problem(mu, rho, prior_mean, prior_cov, steps=None, triples: bool = Fa
     prior_cov : ndarray, shape (..., 3, 3)
         Read-only broadcast views.
     """
+    if _as_always(mu, rho, steps):  # the paper's frames: the checks as they have always been
+        mu, rho, prior_mean, prior_cov = model.batch_inputs(
+            mu, rho, prior_mean, prior_cov, triples=triples
+        )
+        n = mu.shape[-1]
+        row = np.broadcast_to(rho, mu.shape[:-1])[..., None]
+        track = frames.Frames(
+            mu,
+            np.ones(mu.shape, dtype=bool),
+            np.broadcast_to(row, mu.shape),
+            np.broadcast_to(np.ones(max(n - 1, 0)), mu.shape[:-1] + (max(n - 1, 0),)),
+        )
+        return track, prior_mean, prior_cov
     track = frames.check(mu, rho, steps)
     if track.regular:
         _, _, prior_mean, prior_cov = model.batch_inputs(
@@ -63,6 +76,16 @@ def track_problem(mu, rho, prior_mean, prior_cov, steps=None, triples: bool = Fa
             filled, 1.0, prior_mean, prior_cov, triples=False
         )
     return track, prior_mean, prior_cov
+
+
+def _as_always(mu, rho, steps) -> bool:
+    """No steps, no ``NaN`` bearing and no ``rho`` per frame: the paper's frames."""
+    try:
+        values = np.asarray(mu, dtype=float)
+    except (TypeError, ValueError):
+        return True
+    per_frame = values.ndim >= 1 and np.ndim(rho) == values.ndim and np.ndim(rho) > 0
+    return steps is None and not np.any(np.isnan(values)) and not per_frame
 
 
 def _weights(W, M) -> tuple[np.ndarray, int]:
