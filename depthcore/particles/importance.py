@@ -111,6 +111,7 @@ References
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -123,11 +124,12 @@ from depthcore.particles.resampling import (
     RESAMPLERS,
     check_rng,
     effective_sample_size,
+    track_problem,
     weighted_density,
     weighted_moments,
     weighted_standard_errors,
 )
-from depthcore.problem import checks, model, signature
+from depthcore.problem import checks, frames, model, predictive, signature
 from depthcore.problem.gaussian import INDEX, Gaussian, gaussian_logpdf, student_t
 from depthcore.problem.weights import normalise
 
@@ -165,12 +167,18 @@ class ParticleMoments(NamedTuple):
     velocity_sd: np.ndarray
 
 
+def _read_only(a) -> np.ndarray:
+    a = np.array(a)
+    a.setflags(write=False)
+    return a
+
+
 def _freeze(result):
     """Store read-only copies of a result's arrays."""
     for name in ("particles", "log_weights", "ess", "resampled", "ancestors"):
-        a = np.array(getattr(result, name))
-        a.setflags(write=False)
-        object.__setattr__(result, name, a)
+        object.__setattr__(result, name, _read_only(getattr(result, name)))
+    if result.updates is not None:
+        object.__setattr__(result, "updates", predictive.Updates(*map(_read_only, result.updates)))
 
 
 def _distinct_ess(ancestors, W) -> np.ndarray:
@@ -193,6 +201,7 @@ class WeightedParticles:
     resampled: np.ndarray
     ancestors: np.ndarray
     proposal: str
+    updates: predictive.Updates | None = None
 
     def __post_init__(self):
         _freeze(self)
@@ -218,6 +227,12 @@ class ParticleResult(WeightedParticles):
         The time-1 draw each particle descends from; resampling duplicates
         particles, and the motion being deterministic, duplicates stay identical.
     proposal : str
+    updates : depthcore.problem.predictive.Updates
+        Per frame, arrays of shape (N,): the log predictive density of the
+        bearing and its two-sided tail probability under the weighted mixture
+        of the particles' ``N(x_k / y_k, rho_k**2)`` (the filtering weights,
+        without the look-ahead terms), NaN at a missing frame, and whether the
+        gate skipped it.
     """
 
     def distinct_ess(self) -> float:
@@ -300,6 +315,8 @@ class ParticleBatch(WeightedParticles):
     resampled : ndarray of bool, shape (B, N)
     ancestors : ndarray of int, shape (B, N)
     proposal : str
+    updates : depthcore.problem.predictive.Updates
+        Arrays of shape (B, N), as :class:`ParticleResult`'s.
     """
 
     def distinct_ess(self) -> np.ndarray:
@@ -322,6 +339,7 @@ class ParticleBatch(WeightedParticles):
             self.resampled[i],
             self.ancestors[i],
             self.proposal,
+            None if self.updates is None else predictive.Updates(*(a[i] for a in self.updates)),
         )
 
     def moments(self) -> ParticleMoments:
@@ -357,13 +375,14 @@ def _degrees_of_freedom(df) -> float:
 def _linearised_log_likelihood(x3, c, g, r0, rho, k) -> np.ndarray:
     """``log Lt_k``: the log likelihoods of ``mu_{k+1}`` linearised about ``c``, at states ``x3``.
 
-    ``-(r0_k + g_k . (x3 - c))**2 / (2 rho**2)`` with ``g_k`` (B, 3) the gradient of
+    ``-(r0_k + g_k . (x3 - c))**2 / (2 rho_k**2)`` with ``g_k`` (B, 3) the gradient of
     the residual of ``mu_{k+1}`` at ``c`` (Eq. (8)) and ``r0_k`` (B,) the residual
-    there (0 at the paper's noise-free state); ``x3`` (B, n, 3) at the last frame,
-    ``k`` (K,) frames from 0: returns shape (B, n, K).
+    there (0 at the paper's noise-free state; ``g_k`` and ``r0_k`` are 0 at a
+    missing frame, whose term is 0); ``x3`` (B, n, 3) at the last frame,
+    ``rho`` (B, N) per frame, ``k`` (K,) frames from 0: returns shape (B, n, K).
     """
     d = x3 - c[:, None, :]
-    r = (d @ np.swapaxes(g[:, k], -1, -2) + r0[:, None, k]) / rho[:, None, None]
+    r = (d @ np.swapaxes(g[:, k], -1, -2) + r0[:, None, k]) / rho[:, None, k]
     return -0.5 * r**2
 
 
@@ -378,30 +397,144 @@ def _blocks(n_frames: int, per_frame: int):
     return [np.arange(k, min(k + size, n_frames)) for k in range(0, n_frames, size)]
 
 
-def _initial(mu, rho, prior_mean, prior_cov, N, rng, proposal, df, inflation):
-    """Time-1 particles (B, N, 3), their log weights (B, N) and the look-ahead terms."""
+#: Gauss-Newton iterations of the proposal's centre on a track that is not the paper's frames.
+_CENTRE_ITERATIONS = 50
+
+
+def _bearings_at(x, back) -> np.ndarray:
+    """The bearings ``(x + b v) / (y + b)`` (..., N) of last-frame states ``x`` (..., 3) at
+    offsets ``back`` (..., N) from the last frame."""
+    return (x[..., None, 0] + back * x[..., None, 2]) / (x[..., None, 1] + back)
+
+
+def _track_centre(track: frames.Frames) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The proposal's centre ``c`` (B, 3) at the last frame, with ``g`` (B, N, 3) and ``r0`` (B, N).
+
+    The minimiser of the misfit ``sum_k ((h_k(x) - mu_k) / rho_k)**2`` over the
+    present bearings, ``h_k(x) = (x + b_k v) / (y + b_k)`` the bearing of frame
+    ``k`` at the offset ``b_k <= 0`` (depth travelled) from the last frame: the
+    track's form of the minimiser ``c_N`` of Eq. (5). It starts from the
+    bearings' linear equations ``x + b_k v - mu_k y = mu_k b_k`` (the noise-free
+    solution, Eq. (7), in least squares) and takes Gauss-Newton steps, halved
+    until the misfit falls with the point in front of the camera at frame 1.
+    ``g_k`` is the residual's gradient (Eqs. (20)-(22) at the offsets ``b_k``)
+    and ``r0_k`` the residual at ``c``; both 0 at a missing frame.
+    """
+    present, mu = track.present, np.where(track.present, track.mu, 0.0)
+    weight = np.where(present, 1.0 / track.rho, 0.0)
+    back = track.elapsed - track.elapsed[:, -1:]
+    A = np.stack([np.ones_like(mu), -mu, back], axis=-1) * weight[..., None]
+    c = np.stack(
+        [
+            np.linalg.lstsq(a, m * b * w, rcond=None)[0]
+            for a, m, b, w in zip(A, mu, back, weight, strict=True)
+        ]
+    )
+    depth_1 = -back[:, 0]  # the last frame's depth less the first's
+
+    def misfit(x):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.where(present, _bearings_at(x, back) - mu, 0.0) * weight
+        return np.where(x[:, 1] > depth_1, np.sum(r**2, axis=-1), np.inf)
+
+    behind = ~(c[:, 1] > depth_1)
+    c[behind, 1] = depth_1[behind] + 1.0  # a start in front; Gauss-Newton moves it
+    for _ in range(_CENTRE_ITERATIONS):
+        g, r = _gradients(c, back, present), np.where(present, _bearings_at(c, back) - mu, 0.0)
+        J, res = g * weight[..., None], r * weight
+        step = np.stack(
+            [np.linalg.lstsq(j, -e, rcond=None)[0] for j, e in zip(J, res, strict=True)]
+        )
+        now, scale = misfit(c), np.ones(len(c))
+        for _ in range(30):
+            trial = c + scale[:, None] * step
+            better = misfit(trial) < now
+            if np.all(better | (scale < 1e-8)):
+                break
+            scale = np.where(better, scale, scale / 2)
+        c = np.where(
+            (misfit(c + scale[:, None] * step) < now)[:, None], c + scale[:, None] * step, c
+        )
+    g = _gradients(c, back, present)
+    return c, g, np.where(present, _bearings_at(c, back) - mu, 0.0)
+
+
+def _gradients(c, back, present) -> np.ndarray:
+    """Gradients (B, N, 3) of the bearings ``h_k`` at last-frame states ``c`` (B, 3); 0 where
+    a frame is missing."""
+    depth = c[:, None, 1] + back
+    x = c[:, None, 0] + back * c[:, None, 2]
+    g = np.stack([1.0 / depth, -x / depth**2, back / depth], axis=-1)
+    return np.where(present[..., None], g, 0.0)
+
+
+def _track_proposal(track, prior_mean, prior_cov):
+    """The Gaussian ``p_s`` at the last frame of a track, its centre and look-ahead terms.
+
+    The prior moved to the last frame (``x_N = F(T) x_1 + (0, T, 0)``, ``T`` the
+    depth travelled, :func:`depthcore.problem.frames.transition`) times the
+    present bearings' likelihoods linearised about :func:`_track_centre`'s
+    ``c``, Eq. (8): information ``(F P F^T)^{-1} + sum_k g_k g_k^T / rho_k**2``.
+
+    Returns
+    -------
+    mean : ndarray, shape (B, 3)
+    cov : ndarray, shape (B, 3, 3)
+    look_ahead : tuple
+        ``(c, g, r0)`` of :func:`_linearised_log_likelihood`.
+    """
+    c, g, r0 = _track_centre(track)
+    T = track.elapsed[:, -1]
+    F = frames.transition(T)
+    moved_mean = model.G(prior_mean, T)
+    moved_cov = F @ prior_cov @ np.swapaxes(F, -1, -2)
+    prior_info = np.linalg.inv(moved_cov)
+    w = np.where(track.present, 1.0 / track.rho**2, 0.0)
+    info = prior_info + np.einsum("bk,bki,bkj->bij", w, g, g)
+    cov = np.linalg.inv(info)
+    cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    pull = np.einsum("bij,bj->bi", prior_info, moved_mean - c) - np.einsum(
+        "bk,bki,bk->bi", w, g, r0
+    )
+    return c + np.einsum("bij,bj->bi", cov, pull), cov, (c, g, r0)
+
+
+def _initial(track, prior_mean, prior_cov, N, rng, proposal, df, inflation):
+    """Time-1 particles (B, N, 3), their log weights (B, N) and the look-ahead terms.
+
+    The proposal sees only the present bearings: on the paper's frames the
+    second-order Gaussian of :func:`depthcore.kalman.second_order.second_order_batch`,
+    otherwise :func:`_track_proposal`. The weight is zero where the depth at
+    frame 1 is not positive (the front support).
+    """
+    mu = track.mu
     if proposal == "prior":
         L = np.linalg.cholesky(prior_cov)
         x1 = prior_mean[:, None, :] + rng.standard_normal((len(mu), N, 3)) @ L.T
-        return x1, np.zeros(x1.shape[:2]), None
+        return x1, np.where(x1[..., 1] > 0, 0.0, -np.inf), None
     n_frames = mu.shape[1]
-    mean_s, cov_s = second_order_batch(mu, rho, prior_mean, prior_cov)
-    x3, log_q = student_t(mean_s, inflation**2 * cov_s, df, N, rng)
-    if n_frames == 3:
-        c = model.noise_free_states(mu)
-        r0 = np.zeros(mu.shape)  # f(c) = 0, Eq. (7)
+    rho = track.rho
+    if track.regular:
+        mean_s, cov_s = second_order_batch(mu, track.row_rho, prior_mean, prior_cov)
+        if n_frames == 3:
+            c = model.noise_free_states(mu)
+            r0 = np.zeros(mu.shape)  # f(c) = 0, Eq. (7)
+        else:
+            c = minimiser(mu)
+            r0 = model.residuals(c, mu)
+        g = model.residual_gradients(c, n_frames)  # (B, N, 3): rows g_k, Eqs. (20)-(22)
+        look_ahead = (c, g, r0)
     else:
-        c = minimiser(mu)
-        r0 = model.residuals(c, mu)
-    g = model.residual_gradients(c, n_frames)  # (B, N, 3): rows g_k, Eqs. (20)-(22)
-    look_ahead = (c, g, r0)
+        mean_s, cov_s, look_ahead = _track_proposal(track, prior_mean, prior_cov)
+    x3, log_q = student_t(mean_s, inflation**2 * cov_s, df, N, rng)
     log_lt = sum(
-        np.sum(_linearised_log_likelihood(x3, c, g, r0, rho, k), axis=-1)
+        np.sum(_linearised_log_likelihood(x3, *look_ahead, rho, k), axis=-1)
         for k in _blocks(n_frames, x3.shape[0] * N)
     )
-    x1 = model.G(x3, 1 - n_frames)
+    x1 = model.G(x3, -track.elapsed[:, -1:] if not track.regular else 1 - n_frames)
     log_prior = gaussian_logpdf(x1, prior_mean[:, None, :], prior_cov)
-    return x1, log_prior - log_q + log_lt, look_ahead
+    log_w = log_prior - log_q + log_lt
+    return x1, np.where(x1[..., 1] > 0, log_w, -np.inf), look_ahead
 
 
 def _dead(log_w, k) -> None:
@@ -420,18 +553,38 @@ def _dead(log_w, k) -> None:
         )
 
 
-def _without_resampling(x1, log_w, look_ahead, mu, rho):
+def _predictive(mu_k, log_w, states, rho_k, present_k):
+    """The bearings' log predictive densities and tails (B, K) under the weighted particles.
+
+    ``log_w`` (B, N, K) the filtering log weights before each frame, ``states``
+    (B, N, K, 3) at the frames, ``mu_k``, ``rho_k``, ``present_k`` (B, K): the
+    mixture of ``N(x / y, rho_k**2)`` (:func:`depthcore.problem.predictive.mixture`);
+    NaN at a missing frame.
+    """
+    alive = np.isfinite(log_w) & (states[..., 1] > 0)
+    safe = np.where(alive[..., None], states, 1.0)
+    means = np.swapaxes(model.project(safe), 1, 2)  # (B, K, N)
+    weights = np.swapaxes(np.where(alive, log_w, -np.inf), 1, 2)
+    var = (rho_k**2)[..., None]
+    log_p, tail = predictive.mixture(np.where(present_k, mu_k, 0.0), weights, means, var)
+    return np.where(present_k, log_p, np.nan), np.where(present_k, tail, np.nan)
+
+
+def _without_resampling(x1, log_w, look_ahead, track, gate, skip):
     """The weights after every frame of a run that never resamples, several frames at once.
 
     Without resampling every particle moves by Eq. (1) alone: its state at
-    frame ``k`` is ``G^{k-1} x_1``, and its log weight after ``mu_k`` is the
-    initial one plus, over the frames ``j <= k``, the log likelihood (4) of
-    ``mu_j`` less the look-ahead term of frame ``j`` (the terms the initial
-    weight holds, so that at the last frame they cancel). These sums are taken a
-    block of frames at a time, the ESS after each frame from them (it does not
-    depend on the normalisation), and the weights normalised once, at the end:
-    the per-frame loop of :func:`run`, which normalises and moves the particles
-    at every frame, gives the same to rounding.
+    frame ``k`` is ``x_1`` moved by the depth travelled to frame ``k``, and its
+    log weight after ``mu_k`` is the initial one plus, over the present frames
+    ``j <= k``, the log likelihood (4) of ``mu_j`` less the look-ahead term of
+    frame ``j`` (the terms the initial weight holds, so that at the last frame
+    they cancel). These sums are taken a block of frames at a time (one frame
+    at a time with a gate, whose decisions depend on the frames before), the
+    ESS after each frame from them (it does not depend on the normalisation),
+    and the weights normalised once, at the end: the per-frame loop of
+    :func:`run`, which normalises and moves the particles at every frame,
+    gives the same to rounding. A skipped bearing (gated) swaps its look-ahead
+    term for nothing.
 
     Returns
     -------
@@ -440,16 +593,40 @@ def _without_resampling(x1, log_w, look_ahead, mu, rho):
     log_w : ndarray, shape (B, N)
         Normalised.
     ess : ndarray, shape (B, n_frames)
+    updates : depthcore.problem.predictive.Updates
     """
     B, N = log_w.shape
+    mu, present, rho, t = track.mu, track.present, track.rho, track.elapsed
     n_frames = mu.shape[1]
     ess = np.empty((B, n_frames))
-    x3 = model.G(x1, n_frames - 1)
+    log_pred, tail = np.full((B, n_frames), np.nan), np.full((B, n_frames), np.nan)
+    gated = np.zeros((B, n_frames), dtype=bool)
+    regular = track.regular
+    x3 = model.G(x1, n_frames - 1 if regular else t[:, -1:])
     # the depth grows with the frames: a particle in front at frame 1 stays in front
     front = not np.all(x1[..., 1] > 0)
-    for k in _blocks(n_frames, 4 * B * N):
-        states = model.G(x1[:, :, None, :], k)  # (B, N, K, 3)
-        increments = model.log_likelihood(mu[:, None, k], states, rho[:, None, None], front)
+    filtering = log_w
+    if look_ahead is not None:  # the filtering weights: without the look-ahead terms
+        filtering = log_w - sum(
+            np.sum(_linearised_log_likelihood(x3, *look_ahead, rho, k), axis=-1)
+            for k in _blocks(n_frames, B * N)
+        )
+    blocks = _blocks(n_frames, 4 * B * N) if gate is None else np.arange(n_frames)[:, None]
+    for k in blocks:
+        states = model.G(x1[:, :, None, :], k if regular else t[:, None, k])  # (B, N, K, 3)
+        with np.errstate(invalid="ignore"):
+            log_l = model.log_likelihood(
+                np.where(present[:, None, k], mu[:, None, k], 0.0), states, rho[:, None, k], front
+            )
+        log_l = np.where(present[:, None, k], log_l, 0.0)
+        before = filtering[..., None] + np.concatenate(
+            [np.zeros((B, N, 1)), np.cumsum(log_l[..., :-1], axis=-1)], axis=-1
+        )
+        log_pred[:, k], tail[:, k] = _predictive(mu[:, k], before, states, rho[:, k], present[:, k])
+        gated[:, k] = predictive.skipped(tail[:, k], present[:, k], gate) | skip[:, k]
+        log_l = np.where(gated[:, None, k], 0.0, log_l)
+        filtering = filtering + np.sum(log_l, axis=-1)
+        increments = log_l
         if look_ahead is not None:
             increments = increments - _linearised_log_likelihood(x3, *look_ahead, rho, k)
         block = log_w[..., None] + np.cumsum(increments, axis=-1)  # (B, N, K)
@@ -458,7 +635,7 @@ def _without_resampling(x1, log_w, look_ahead, mu, rho):
         w = np.exp(block - top)
         ess[:, k] = np.sum(w, axis=1) ** 2 / np.sum(w**2, axis=1)
         log_w = block[..., -1]
-    return x3, normalise(log_w), ess
+    return x3, normalise(log_w), ess, predictive.Updates(log_pred, tail, gated)
 
 
 def _resample(x, log_w, ancestors, need, N, rng, resampler):
@@ -471,6 +648,19 @@ def _resample(x, log_w, ancestors, need, N, rng, resampler):
     ancestors[need] = np.take_along_axis(ancestors[need], idx, axis=1)
     log_w[need] = -np.log(N)
     return x, log_w, ancestors
+
+
+def _one_track(mu, rho, prior_mean, prior_cov, steps):
+    """The single sequence's checks, as they have always been made on the paper's frames."""
+    if steps is None and np.ndim(rho) == 0 and not np.any(np.isnan(np.asarray(mu, dtype=float))):
+        mu = checks.finite_array(mu, "mu")
+        if mu.shape == (3,):
+            model.measurements(mu)
+        Gaussian.prior(prior_mean, prior_cov)
+        checks.positive_scalar(rho, "rho")
+    track = frames.check(mu, rho, steps)
+    Gaussian.prior(prior_mean, prior_cov)
+    return track
 
 
 @signature.documented
@@ -486,6 +676,8 @@ def run(
     ess_threshold: float = 0.0,
     df: float = DEFAULT_DF,
     inflation: float = DEFAULT_INFLATION,
+    steps=None,
+    gate=None,
 ) -> ParticleBatch:
     """The particle filter for one sequence or ``B`` of them at once, vectorised over trials.
 
@@ -496,7 +688,8 @@ def run(
     rng : numpy.random.Generator
         The only source of randomness.
     proposal : {"second_order", "prior"}
-        Where the time-1 particles come from (see the module docstring).
+        Where the time-1 particles come from (see the module docstring); the
+        second-order proposal is built from the present bearings alone.
     resampler : {"systematic", "multinomial", "residual"}
     ess_threshold : float
         Resample before a move when the ESS is below ``ess_threshold * N``; in
@@ -512,21 +705,29 @@ def run(
     ParticleResult or ParticleBatch
         For one sequence its :class:`ParticleResult`, for a batch the
         :class:`ParticleBatch`.
+
+    Notes
+    -----
+    A missing bearing (``NaN``) is predicted through: the particles move and
+    keep their weights. With a gate, a bearing whose predictive tail under the
+    filtering weights falls below it is skipped likewise. The second-order
+    proposal is drawn before any bearing is weighed, so with it a gate is
+    applied by refitting: the proposal is rebuilt without the bearings skipped
+    so far, from the same state of ``rng``, until no further bearing falls
+    below the gate; the answer is then the one for those bearings set to
+    ``NaN``, draw for draw.
     """
     if np.ndim(mu) == 1:
-        mu = checks.finite_array(mu, "mu")
-        if mu.shape == (3,):
-            mu = model.measurements(mu)
-        Gaussian.prior(prior_mean, prior_cov)
-        rho = checks.positive_scalar(rho, "rho")
+        _one_track(mu, rho, prior_mean, prior_cov, steps)
         options = (n_particles, rng, proposal, resampler, ess_threshold, df, inflation)
-        return run(np.asarray(mu)[None], rho, prior_mean, prior_cov, *options).trial(0)
+        rho = np.asarray(rho)[None] if np.ndim(rho) == 1 else rho
+        steps = None if steps is None else np.asarray(steps)[None]
+        mu = np.asarray(mu, dtype=float)[None]
+        return run(mu, rho, prior_mean, prior_cov, *options, steps=steps, gate=gate).trial(0)
     prior_cov = checks.covariance(prior_cov, "prior_cov", 3)
-    mu, rho, prior_mean, _ = model.batch_inputs(mu, rho, prior_mean, prior_cov)  # checks each row
-    if mu.ndim != 2:
-        raise ValueError(f"mu must have shape (B, N), got shape {mu.shape}")
-    B, n_frames = mu.shape
-    rho = np.broadcast_to(rho, (B,))
+    track, prior_mean, _ = track_problem(mu, rho, prior_mean, prior_cov, steps, triples=True)
+    if track.mu.ndim != 2:
+        raise ValueError(f"mu must have shape (B, N), got shape {track.mu.shape}")
     N = checks.count(n_particles, "n_particles")
     check_rng(rng)
     if proposal not in PROPOSALS:
@@ -538,33 +739,76 @@ def run(
         raise ValueError(f"ess_threshold must lie in [0, 1], got {threshold}")
     df = _degrees_of_freedom(df)
     inflation = checks.positive_scalar(inflation, "inflation")
+    gate = predictive.gate(gate)
+    options = (prior_mean, prior_cov, N, proposal, RESAMPLERS[resampler], threshold, df, inflation)
+    skip = np.zeros(track.mu.shape, dtype=bool)
+    if gate is None or proposal == "prior":
+        return _filter(track, skip, gate, rng, *options)
+    for _ in range(track.mu.shape[1]):  # refit the proposal without the skipped bearings
+        draws = copy.deepcopy(rng)
+        result = _filter(track, skip, gate, draws, *options)
+        if np.array_equal(result.updates.gated, skip):
+            break
+        skip = skip | result.updates.gated
+    rng.bit_generator.state = draws.bit_generator.state
+    return result
 
-    x, log_w, look_ahead = _initial(mu, rho, prior_mean, prior_cov, N, rng, proposal, df, inflation)
+
+def _filter(track, skip, gate, rng, prior_mean, prior_cov, N, proposal, resampler, threshold, *t):
+    """:func:`run` on checked inputs; ``skip`` (B, N): bearings left out of the proposal and
+    the weights (reported as gated, with their predictive)."""
+    B, n_frames = track.mu.shape
+    fitted = track
+    if np.any(skip):
+        fitted = frames.Frames(
+            np.where(skip, np.nan, track.mu), track.present & ~skip, track.rho, track.steps
+        )
+    x, log_w, look_ahead = _initial(fitted, prior_mean, prior_cov, N, rng, proposal, *t)
     ancestors = np.broadcast_to(np.arange(N), (B, N))
     resampled = np.zeros((B, n_frames), dtype=bool)
     if threshold == 0.0:  # never resamples: no per-frame normalisation or moves needed
-        x, log_w, ess = _without_resampling(x, log_w, look_ahead, mu, rho)
-        return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal)
+        x, log_w, ess, updates = _without_resampling(x, log_w, look_ahead, track, gate, skip)
+        return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal, updates)
+    mu, present, rho, t = track.mu, track.present, track.rho, track.elapsed
     ess = np.zeros((B, n_frames))
+    log_pred, tail = np.full((B, n_frames), np.nan), np.full((B, n_frames), np.nan)
+    gated = np.zeros((B, n_frames), dtype=bool)
     for k in range(n_frames):
         if k > 0:
             resampled[:, k] = ess[:, k - 1] < threshold * N
-            x, log_w, ancestors = _resample(
-                x, log_w, ancestors, resampled[:, k], N, rng, RESAMPLERS[resampler]
+            x, log_w, ancestors = _resample(x, log_w, ancestors, resampled[:, k], N, rng, resampler)
+            x = model.G(x) if track.regular else model.G(x, track.steps[:, k - 1, None])  # Eq. (1)
+        filtering, to_end = log_w, None
+        if look_ahead is not None:  # the filtering weights: without the look-ahead terms
+            to_end = model.G(x, n_frames - 1 - k if track.regular else t[:, -1:] - t[:, k, None])
+            ahead = _linearised_log_likelihood(to_end, *look_ahead, rho, np.arange(k, n_frames))
+            filtering = log_w - np.sum(ahead, axis=-1)
+        log_pred[:, k], tail[:, k] = (
+            a[:, 0]
+            for a in _predictive(
+                mu[:, k, None],
+                filtering[..., None],
+                x[:, :, None],
+                rho[:, k, None],
+                present[:, k, None],
             )
-            x = model.G(x)  # Eq. (1): the deterministic motion
-        log_w = log_w + model.log_likelihood(mu[:, k, None], x, rho[:, None], front=True)
+        )
+        gated[:, k] = predictive.skipped(tail[:, k], present[:, k], gate) | skip[:, k]
+        use = present[:, k] & ~gated[:, k]
+        with np.errstate(invalid="ignore"):
+            log_l = model.log_likelihood(
+                np.where(use, mu[:, k], 0.0)[:, None], x, rho[:, k, None], front=True
+            )
+        log_w = log_w + np.where(use[:, None], log_l, 0.0)
         if look_ahead is not None:
             log_w = (
-                log_w
-                - _linearised_log_likelihood(
-                    model.G(x, n_frames - 1 - k), *look_ahead, rho, np.array([k])
-                )[..., 0]
+                log_w - _linearised_log_likelihood(to_end, *look_ahead, rho, np.array([k]))[..., 0]
             )
         _dead(log_w[..., None], np.array([k]))
         log_w = normalise(log_w)
         ess[:, k] = effective_sample_size(log_w)
-    return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal)
+    updates = predictive.Updates(log_pred, tail, gated)
+    return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal, updates)
 
 
 #: :func:`depthcore.particles.importance.run` with the prior as a Gaussian,

@@ -107,7 +107,7 @@ from depthcore.particles.resampling import (
     replica_errors,
     weighted_moments,
 )
-from depthcore.problem import checks, model, signature
+from depthcore.problem import checks, frames, model, predictive, signature
 from depthcore.problem.weights import normalise
 
 #: Metropolis-Hastings steps per particle after each resampling, by default.
@@ -573,6 +573,8 @@ def run(
     moves: int = DEFAULT_MOVES,
     ess_threshold: float = 0.5,
     resampler: str = "systematic",
+    steps=None,
+    gate=None,
 ) -> RBPF:
     """The Rao-Blackwellised particle filter over bearings ``mu_1 .. mu_K``, batched over trials.
 
@@ -592,10 +594,27 @@ def run(
         The resampling schedule, :class:`Settings`: ``moves >= 0``, ``ess_threshold``
         in [0, 1] (0: never resample, importance sampling of the depth from its prior).
 
+    The filter takes the paper's frames only: a missing bearing (``mu must be
+    finite``), ``rho`` per frame that varies, steps other than 1 or a gate are
+    refused by name.
+
     Returns
     -------
     RBPF
     """
+    if gate is not None:
+        predictive.gate(gate)
+        raise ValueError("gate: the Rao-Blackwellised particle filter takes no gate")
+    per_frame = np.ndim(rho) > 0 and np.shape(rho) == np.shape(mu)
+    if steps is not None or per_frame:  # a missing bearing is refused below: mu must be finite
+        track = frames.check(mu, rho, steps)
+        if not np.all(track.steps == 1.0):
+            raise ValueError("steps: the Rao-Blackwellised particle filter takes only unit steps")
+        if not np.all(track.rho == track.rho[..., :1]):
+            raise ValueError(
+                "rho: the Rao-Blackwellised particle filter takes one noise SD per problem"
+            )
+        rho = track.row_rho if per_frame else rho
     mu, rho, prior_mean, prior_cov = model.batch_inputs(
         mu, rho, prior_mean, prior_cov, triples=False
     )

@@ -80,10 +80,11 @@ from depthcore.particles.resampling import (
     metropolis,
     replica_errors,
     state_moments,
+    track_problem,
     weighted_density,
     weighted_mean_and_cov,
 )
-from depthcore.problem import checks, model, signature
+from depthcore.problem import checks, frames, model, predictive, signature
 from depthcore.problem.gaussian import INDEX, Gaussian
 from depthcore.problem.weights import normalise
 
@@ -111,6 +112,11 @@ class ResampleMoveBatch:
     acceptance : ndarray, shape (B, K)
         Mean Metropolis acceptance rate of the moves at step ``k`` (NaN where
         the step did not move).
+    updates : depthcore.problem.predictive.Updates or None
+        Arrays of shape (B, K): each bearing's log predictive density and
+        two-sided tail probability under the weighted mixture of the particles'
+        ``N(x_k / y_k, rho_k**2)`` before it was seen (NaN at a missing
+        frame), and whether the gate skipped it.
     """
 
     particles: np.ndarray
@@ -118,6 +124,7 @@ class ResampleMoveBatch:
     ess: np.ndarray
     resampled: np.ndarray
     acceptance: np.ndarray
+    updates: predictive.Updates | None = None
 
     def moments(self) -> dict:
         """Weighted depth and velocity means and SDs at the last frame, each of shape (B,)."""
@@ -174,6 +181,21 @@ class Replicated:
         lw = self.runs.log_weights - np.log(self.replicas)
         return lw.reshape(lw.shape[0] // self.replicas, -1)
 
+    @property
+    def updates(self) -> predictive.Updates:
+        """Per frame, shape (B, K): the pool's log predictive density (the log of the
+        replicas' average predictive density, the pooled mixture's), the replicas'
+        average tail probability, and whether every replica's gate skipped the bearing
+        (each replica gates on its own predictive)."""
+        from scipy.special import logsumexp
+
+        u = self.runs.updates
+        R = self.replicas
+        log_p, tail, gated = (a.reshape(-1, R, a.shape[-1]) for a in u)
+        return predictive.Updates(
+            logsumexp(log_p, axis=1) - np.log(R), np.mean(tail, axis=1), np.all(gated, axis=1)
+        )
+
     def replica_moments(self) -> dict:
         """Each replica's depth and velocity means and SDs, shape (B, R)."""
         return {k: v.reshape(-1, self.replicas) for k, v in self.runs.moments().items()}
@@ -226,19 +248,27 @@ class Replicated:
         return pool.density(component, grid, method, bandwidth)
 
 
-def _log_likelihood(mu_k, x1, k: int, rho) -> np.ndarray:
-    """Eq. (4) for bearing ``mu_k`` (B,) of the states ``G^k x1`` (B, N, 3).
+def _log_likelihood(mu_k, x1, k, rho) -> np.ndarray:
+    """Eq. (4) for bearing ``mu_k`` (B,) of the states ``x1`` (B, N, 3) moved by ``k``.
 
-    ``k`` counts frames after the first (``mu_1`` has ``k = 0``). States with
-    ``y_1 <= 0`` get ``-inf``: the point is in front of the camera at every frame.
+    ``k`` is the depth travelled since the first frame: a number of unit steps
+    (``mu_1`` has ``k = 0``) or one per trial, shape (B, 1). ``rho`` (B,) is the
+    bearing's noise SD. A missing bearing (``NaN``) adds nothing (0). States
+    with ``y_1 <= 0`` get ``-inf``: the point is in front of the camera at
+    every frame.
     """
     inside = x1[..., 1] > 0
     xk = model.G(np.where(inside[..., None], x1, 1.0), k)
-    log_l = model.log_likelihood(mu_k[:, None], xk, rho[:, None])
+    present = ~np.isnan(mu_k)
+    if np.all(present):
+        log_l = model.log_likelihood(mu_k[:, None], xk, rho[:, None])
+    else:
+        log_l = model.log_likelihood(np.where(present, mu_k, 0.0)[:, None], xk, rho[:, None])
+        log_l = np.where(present[:, None], log_l, 0.0)
     return np.where(inside, log_l, -np.inf)
 
 
-def log_target(x1, mu, rho, prior_mean, prior_chol) -> np.ndarray:
+def log_target(x1, mu, rho, prior_mean, prior_chol, elapsed=None) -> np.ndarray:
     """``log pi_k(x_1)`` up to a constant: the prior, the front support and ``k`` likelihoods.
 
     Parameters
@@ -246,11 +276,15 @@ def log_target(x1, mu, rho, prior_mean, prior_chol) -> np.ndarray:
     x1 : ndarray, shape (B, N, 3)
         Time-1 states.
     mu : ndarray, shape (B, k)
-        The bearings seen so far.
-    rho : ndarray, shape (B,)
+        The bearings seen so far, ``NaN`` where a frame has none (or its
+        bearing was skipped by the gate).
+    rho : ndarray, shape (B,) or (B, k)
+        Noise SD per trial, or per trial and frame.
     prior_mean : ndarray, shape (B, 3)
     prior_chol : ndarray, shape (3, 3)
         Lower Cholesky factor of the prior covariance.
+    elapsed : ndarray, shape (B, k), optional
+        Depth travelled from frame 1 to each frame; ``None``: unit steps.
 
     Returns
     -------
@@ -260,8 +294,27 @@ def log_target(x1, mu, rho, prior_mean, prior_chol) -> np.ndarray:
     z = np.linalg.solve(prior_chol, d).T.reshape(x1.shape)
     total = -0.5 * np.sum(z**2, axis=-1)
     for k in range(mu.shape[1]):
-        total = total + _log_likelihood(mu[:, k], x1, k, rho)
+        rho_k = rho if rho.ndim == 1 else rho[:, k]
+        moved = k if elapsed is None else elapsed[:, k, None]
+        total = total + _log_likelihood(mu[:, k], x1, moved, rho_k)
     return total
+
+
+def _predictive(mu_k, log_w, x1, moved, rho_k):
+    """Log predictive density and tail (B,) of ``mu_k`` under the weighted particles.
+
+    The mixture of ``N(x / y, rho_k**2)`` over the states ``x1`` (B, N, 3) moved
+    by ``moved`` with the normalised ``log_w`` (B, N), particles behind the
+    camera left out (:func:`depthcore.problem.predictive.mixture`); NaN where
+    ``mu_k`` is.
+    """
+    inside = x1[..., 1] > 0
+    means = model.project(model.G(np.where(inside[..., None], x1, 1.0), moved))
+    present = ~np.isnan(mu_k)
+    log_p, tail = predictive.mixture(
+        np.where(present, mu_k, 0.0), np.where(inside, log_w, -np.inf), means, (rho_k**2)[:, None]
+    )
+    return np.where(present, log_p, np.nan), np.where(present, tail, np.nan)
 
 
 def _increment_chol(x1, W, prior_chol) -> np.ndarray:
@@ -285,8 +338,15 @@ def run(
     moves=20,
     ess_threshold=0.5,
     resampler="systematic",
+    steps=None,
+    gate=None,
 ) -> ResampleMoveBatch:
     """The bootstrap filter with resample-move for ``B`` sequences of bearings, vectorised.
+
+    A missing bearing (``NaN``) adds nothing to the weights or to the moves'
+    target; the point moves on by the step (``x += s v``, ``y += s``). A
+    bearing whose predictive tail probability is below ``gate`` is skipped
+    likewise.
 
     {parameters}
     n_particles : int
@@ -305,15 +365,24 @@ def run(
     -------
     ResampleMoveBatch
     """
+    track, _, _ = track_problem(mu, rho, prior_mean, prior_cov, steps)
     mu, rho, prior_mean, prior_cov = model.batch_problem(
-        mu, rho, prior_mean, prior_cov, triples=False
+        np.where(track.present, track.mu, 0.0),
+        track.rho[..., 0],
+        prior_mean,
+        prior_cov,
+        triples=False,
     )
+    mu = track.mu
     if mu.ndim != 2 or mu.shape[0] < 1:
         raise ValueError(f"mu must have shape (B, K) with B, K >= 1, got shape {mu.shape}")
     if prior_cov.shape != (3, 3):
         raise ValueError(f"prior_cov must have shape (3, 3), got shape {prior_cov.shape}")
     B, K = mu.shape
-    rho = np.broadcast_to(rho, (B,))
+    regular = track.regular
+    # on the paper's frames the per-trial rho and unit steps, as the filter has always used
+    rho = np.broadcast_to(track.row_rho, (B,)) if regular else np.array(track.rho)
+    elapsed = None if regular else track.elapsed
     prior_mean = np.broadcast_to(prior_mean, (B, 3))
     prior_chol = np.linalg.cholesky(prior_cov)
     if (
@@ -331,14 +400,23 @@ def run(
         raise ValueError(f"ess_threshold must lie in [0, 1], got {threshold}")
     if resampler not in RESAMPLERS:
         raise ValueError(f"resampler must be one of {tuple(RESAMPLERS)}, got {resampler!r}")
+    gate = predictive.gate(gate)
 
     x1 = prior_mean[:, None, :] + rng.standard_normal((B, N, 3)) @ prior_chol.T
     log_w = np.zeros((B, N))
     ess = np.zeros((B, K))
     resampled = np.zeros((B, K), dtype=bool)
     acceptance = np.full((B, K), np.nan)
+    log_pred, tail = np.full((B, K), np.nan), np.full((B, K), np.nan)
+    gated = np.zeros((B, K), dtype=bool)
+    used = np.array(mu)  # the bearings the weights hold: NaN where missing or gated
     for k in range(K):
-        log_w = log_w + _log_likelihood(mu[:, k], x1, k, rho)
+        moved = k if regular else elapsed[:, k, None]
+        rho_k = rho if regular else rho[:, k]
+        log_pred[:, k], tail[:, k] = _predictive(mu[:, k], normalise(log_w), x1, moved, rho_k)
+        gated[:, k] = predictive.skipped(tail[:, k], track.present[:, k], gate)
+        used[gated[:, k], k] = np.nan
+        log_w = log_w + _log_likelihood(used[:, k], x1, moved, rho_k)
         dead = ~np.any(np.isfinite(log_w), axis=-1)
         if np.any(dead):
             raise ValueError(
@@ -355,18 +433,23 @@ def run(
             x1,
             log_w,
             need,
-            mu[:, : k + 1],
-            rho,
+            used[:, : k + 1],
+            rho if regular else rho[:, : k + 1],
             prior_mean,
             prior_chol,
             moves,
             rng,
             RESAMPLERS[resampler],
+            None if regular else elapsed[:, : k + 1],
         )
-    return ResampleMoveBatch(model.G(x1, K - 1), log_w, ess, resampled, acceptance)
+    last = model.G(x1, K - 1 if regular else elapsed[:, -1:])
+    updates = predictive.Updates(log_pred, tail, gated)
+    return ResampleMoveBatch(last, log_w, ess, resampled, acceptance, updates)
 
 
-def _resample_move(x1, log_w, need, mu, rho, prior_mean, prior_chol, moves, rng, resampler):
+def _resample_move(
+    x1, log_w, need, mu, rho, prior_mean, prior_chol, moves, rng, resampler, elapsed=None
+):
     """Resample the trials ``need`` (B,) and move their particles.
 
     Returns ``x1, log_w, acceptance``.
@@ -377,6 +460,7 @@ def _resample_move(x1, log_w, need, mu, rho, prior_mean, prior_chol, moves, rng,
     idx = resampler(W, rng)
     sub = np.take_along_axis(sub, idx[..., None], axis=1)
     args = (mu[need], rho[need], prior_mean[need], prior_chol)
+    args = args if elapsed is None else args + (elapsed[need],)
     sub, _, _, acceptance = metropolis(
         sub,
         log_target(sub, *args),
@@ -409,8 +493,10 @@ def replicated(
 
     The filter's door: parameters are as for :func:`run`, with ``mu`` of shape
     (K,) (one sequence, a batch of one) or (B, K), ``prior_mean`` (3,) or
-    (B, 3), ``n_particles`` per replica and ``options`` those of :func:`run`;
-    the replicas are rows of one batch, drawn from ``rng``.
+    (B, 3), ``rho`` a number or of shape (B,), (K,) or (B, K) (one per frame),
+    ``steps`` (K - 1,) or (B, K - 1), ``n_particles`` per replica and
+    ``options`` those of :func:`run`; the replicas are rows of one batch, drawn
+    from ``rng``.
 
     Returns
     -------
@@ -418,15 +504,34 @@ def replicated(
     """
     R = checks.count(replicas, "replicas")
     mu = np.asarray(mu)
+    steps = options.pop("steps", None)
     if mu.ndim == 1:
         Gaussian.prior(prior_mean, prior_cov)
-        rho = checks.positive_scalar(rho, "rho")
-        mu = checks.finite_array(mu, "mu")[None]
+        track = frames.check(mu, rho, steps)
+        if track.regular:
+            checks.finite_array(mu, "mu")
+        if np.ndim(rho) == 0:
+            rho = checks.positive_scalar(rho, "rho")
+        else:
+            rho = np.asarray(rho)[None]
+        mu = track.mu[None]
+        steps = None if steps is None else np.asarray(steps, dtype=float)[None]
     if mu.ndim != 2:
         raise ValueError(f"mu must have shape (K,) or (B, K), got shape {mu.shape}")
     rho = np.asarray(rho)
     prior_mean = np.asarray(prior_mean)
-    rho = np.repeat(rho, R, axis=0) if rho.ndim else rho
+    rho = np.repeat(rho, R, axis=0) if rho.ndim == 2 or rho.shape == mu.shape[:1] else rho
     prior_mean = np.repeat(prior_mean, R, axis=0) if prior_mean.ndim == 2 else prior_mean
-    runs = run(np.repeat(mu, R, axis=0), rho, prior_mean, prior_cov, n_particles, rng, **options)
+    if steps is not None and np.ndim(steps) == 2:
+        steps = np.repeat(np.asarray(steps), R, axis=0)
+    runs = run(
+        np.repeat(mu, R, axis=0),
+        rho,
+        prior_mean,
+        prior_cov,
+        n_particles,
+        rng,
+        steps=steps,
+        **options,
+    )
     return Replicated(runs, R)

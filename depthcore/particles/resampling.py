@@ -18,12 +18,74 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.problem import checks
+from depthcore.problem import checks, frames, model
 
 
 def check_rng(rng):
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+
+
+def track_problem(mu, rho, prior_mean, prior_cov, steps=None, triples: bool = False):
+    """The particle filters' checks of a batch of tracks as they come, and of the prior.
+
+    :func:`depthcore.problem.frames.check` of ``mu, rho, steps``; on the paper's
+    frames (:attr:`~depthcore.problem.frames.Frames.regular`) also
+    :func:`depthcore.problem.model.batch_inputs` with ``triples`` (the refusals
+    the filters have always made), otherwise the prior's checks alone.
+
+    Parameters
+    ----------
+    mu : array_like, shape (..., N)
+        ``NaN`` at a missing frame.
+    rho : float or array_like, shape (...) or (..., N)
+    prior_mean : array_like, shape (3,) or (..., 3)
+    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
+    steps : array_like, shape (N - 1,) or (..., N - 1), or None
+    triples : bool
+        Check regular frames' bearings as the paper's triples (``N = 3``).
+
+    Returns
+    -------
+    track : depthcore.problem.frames.Frames
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
+        Read-only broadcast views.
+    """
+    if _as_always(mu, rho, steps):  # the paper's frames: the checks as they have always been
+        mu, rho, prior_mean, prior_cov = model.batch_inputs(
+            mu, rho, prior_mean, prior_cov, triples=triples
+        )
+        n = mu.shape[-1]
+        row = np.broadcast_to(rho, mu.shape[:-1])[..., None]
+        track = frames.Frames(
+            mu,
+            np.ones(mu.shape, dtype=bool),
+            np.broadcast_to(row, mu.shape),
+            np.broadcast_to(np.ones(max(n - 1, 0)), mu.shape[:-1] + (max(n - 1, 0),)),
+        )
+        return track, prior_mean, prior_cov
+    track = frames.check(mu, rho, steps)
+    if track.regular:
+        _, _, prior_mean, prior_cov = model.batch_inputs(
+            track.mu, track.row_rho, prior_mean, prior_cov, triples=triples
+        )
+    else:
+        filled = np.where(track.present, track.mu, 0.0)
+        _, _, prior_mean, prior_cov = model.batch_inputs(
+            filled, 1.0, prior_mean, prior_cov, triples=False
+        )
+    return track, prior_mean, prior_cov
+
+
+def _as_always(mu, rho, steps) -> bool:
+    """No steps, no ``NaN`` bearing and no ``rho`` per frame: the paper's frames."""
+    try:
+        values = np.asarray(mu, dtype=float)
+    except (TypeError, ValueError):
+        return True
+    per_frame = values.ndim >= 1 and np.ndim(rho) == values.ndim and np.ndim(rho) > 0
+    return steps is None and not np.any(np.isnan(values)) and not per_frame
 
 
 def _weights(W, M) -> tuple[np.ndarray, int]:
