@@ -487,7 +487,16 @@ resample_move = _paths.kept(
 
 
 def replicated(
-    mu, rho, prior_mean, prior_cov, n_particles, rng, replicas=REPLICAS, **options
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    n_particles,
+    rng,
+    replicas=REPLICAS,
+    steps=None,
+    gate=None,
+    **options,
 ) -> Replicated:
     """``replicas`` independent runs of :func:`run` on each sequence of bearings.
 
@@ -504,7 +513,6 @@ def replicated(
     """
     R = checks.count(replicas, "replicas")
     mu = np.asarray(mu)
-    steps = options.pop("steps", None)
     if mu.ndim == 1:
         Gaussian.prior(prior_mean, prior_cov)
         track = frames.check(mu, rho, steps)
@@ -532,6 +540,7 @@ def replicated(
         n_particles,
         rng,
         steps=steps,
+        gate=gate,
         **options,
     )
     return Replicated(runs, R)
