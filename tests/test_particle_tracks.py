@@ -202,14 +202,37 @@ def test_refusals_name_the_argument():
         )
 
 
-def test_rbpf_refuses_what_it_does_not_take():
+@pytest.mark.filterwarnings("error")
+def test_rbpf_with_gaps_rho_and_steps_agrees_with_the_grid():
+    """8 replicas of 500 particles: within 4.5 replica errors of the grid."""
     from depthcore.particles import rbpf
 
-    rng = np.random.default_rng(0)
-    for kwargs, name in (({"steps": [1, 2, 1, 1, 1]}, "steps"), ({"gate": 1e-3}, "gate")):
-        with pytest.raises(ValueError, match=f"^{name}: the Rao-Blackwellised"):
-            rbpf.run(MU, RHO, M, P, 10, rng, **kwargs)
-    with pytest.raises(ValueError, match="^mu must be finite"):
-        rbpf.run(GAP, RHO, M, P, 10, rng)
-    with pytest.raises(ValueError, match="^rho: the Rao-Blackwellised"):
-        rbpf.run(MU, RHO_FRAMES, M, P, 10, rng)
+    exact = grid_posterior(GAP, RHO_FRAMES, STEPS)
+    r = rbpf.run(GAP, RHO_FRAMES, M, P, 500, np.random.default_rng(1), replicas=8, steps=STEPS)
+    _agrees(r.moments(), r.standard_errors(), exact)
+    assert np.array_equal(np.isnan(r.updates.tail), np.isnan(GAP))
+    # the summed log predictive estimates the log evidence (the grid's, to Monte Carlo error)
+    r = rbpf.run(GAP, RHO, M, P, 500, np.random.default_rng(1), replicas=8)
+    assert abs(np.nansum(r.updates.log_predictive) - grid_log_evidence(GAP, RHO)) < 0.25
+
+
+@pytest.mark.filterwarnings("error")
+def test_rbpf_gate_is_the_bearing_missing_draw_for_draw():
+    from depthcore.particles import rbpf
+
+    gated = rbpf.run(OUTLIER, RHO, M, P, 200, np.random.default_rng(2), replicas=2, gate=1e-3)
+    missing = rbpf.run(WITHOUT, RHO, M, P, 200, np.random.default_rng(2), replicas=2)
+    assert gated.updates.gated.tolist() == [False, False, True, False, False, False]
+    np.testing.assert_array_equal(gated.log_weights, missing.log_weights)
+    np.testing.assert_array_equal(gated.bank.nodes, missing.bank.nodes)
+
+
+def test_rbpf_unit_steps_and_constant_rho_are_the_papers_draws():
+    from depthcore.particles import rbpf
+
+    a = rbpf.run(MU, RHO, M, P, 200, np.random.default_rng(3), replicas=2)
+    b = rbpf.run(
+        MU, np.full(6, RHO), M, P, 200, np.random.default_rng(3), replicas=2, steps=np.ones(5)
+    )
+    np.testing.assert_allclose(b.log_weights, a.log_weights, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(b.state_moments()[0], a.state_moments()[0], rtol=1e-12)

@@ -278,7 +278,7 @@ def test_without_moves_the_depths_degenerate():
 @pytest.mark.parametrize(
     "change, message",
     [
-        (dict(mu=[0.1, np.nan, 0.2]), "mu must be finite"),
+        (dict(mu=[0.1, np.nan, 0.2]), "mu has 2 bearings present"),
         (dict(mu=np.zeros((2, 0))), "mu must have shape"),
         (dict(rho=0.0), "rho must be positive"),
         (dict(rho=[1.0, 2.0]), "rho must be a scalar or have shape"),

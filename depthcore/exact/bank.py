@@ -508,7 +508,7 @@ def filter_bank(
     _batch(
         nodes=nodes.shape[:-1],
         mu=mu.shape[:-1],
-        rho=rho.shape,
+        rho=rho.shape if frame_rho is None else rho.shape[:-1],  # per frame: (..., N)
         process_noise=process_noise.shape,
         prior_mean=prior_mean.shape[:-1],
         prior_cov=prior_cov.shape[:-2],

@@ -164,6 +164,11 @@ class RBPF:
         Mean Metropolis-Hastings acceptance rate of the moves at frame ``k``
         (NaN where the frame did not move, or ``moves = 0``).
     settings : Settings
+    updates : depthcore.problem.predictive.Updates
+        Per frame, shape (..., K) each: the bearing's log predictive density
+        and two-sided tail probability under the pooled particles of all
+        replicas (each particle's Kalman predictive, weighted by the
+        particle's weight over ``R``), and whether the gate skipped it.
     """
 
     bank: bk.Bank
@@ -172,6 +177,12 @@ class RBPF:
     resampled: np.ndarray
     acceptance: np.ndarray
     settings: Settings
+    updates: predictive.Updates | None = None
+
+    @property
+    def _travelled(self):
+        """``y_K - y_1`` with a trailing axis for the particles: ``K - 1`` at unit steps."""
+        return np.asarray(self.bank.travelled)[..., None]
 
     @property
     def frames(self) -> int:
@@ -198,7 +209,7 @@ class RBPF:
         """
         b = self.bank
         mean, cov = bmix.mixture_moments(
-            np.exp(self.log_weights), b.mean, b.cov, b.nodes + (self.frames - 1)
+            np.exp(self.log_weights), b.mean, b.cov, b.nodes + self._travelled
         )
         return ParticleMoments(
             mean[..., 1], np.sqrt(cov[..., 1, 1]), mean[..., 2], np.sqrt(cov[..., 2, 2])
@@ -212,7 +223,8 @@ class RBPF:
         W : ndarray, shape (..., R J)
             Normalised weights, each replica's over ``R``.
         depths : ndarray, shape (..., R J)
-            The particles' depths ``y_K = y_1 + K - 1``.
+            The particles' depths ``y_K``: ``y_1`` plus the depth travelled
+            (``K - 1`` at unit steps).
         means : ndarray, shape (..., R J, 2)
             ``E[(x_K, v_K) | y_1, mu_1 .. mu_K]`` of each particle.
         covs : ndarray, shape (..., R J, 2, 2)
@@ -226,7 +238,9 @@ class RBPF:
         covs = np.broadcast_to(b.cov, self.log_weights.shape + (2, 2))
         return (
             W,
-            depths + (self.frames - 1),
+            depths + self._travelled[..., 0, :]
+            if self._travelled.ndim > 1
+            else depths + self._travelled,
             means.reshape(batch + (n, 2)),
             covs.reshape(batch + (n, 2, 2)),
         )
@@ -405,10 +419,11 @@ def rejuvenate(bank: bk.Bank, scale, moves: int, rng: np.random.Generator):
             rerun = bk.filter_bank(
                 np.where(inside, proposal, 1.0),
                 bank.mu,
-                bank.rho,
+                bank.rho if bank.frame_rho is None else bank.frame_noise,
                 bank.prior_mean,
                 bank.prior_cov,
                 bank.process_noise,
+                steps=bank.steps,
             )
         log_p = np.where(inside, _finite_or_minus_inf(rerun.log_weight), -np.inf)
         return log_p, (rerun.mean, rerun.cov)
@@ -478,8 +493,12 @@ def _resample_move(bank: bk.Bank, log_w, need, settings: Settings, rng):
     return bank._replace(**fields), log_w, acceptance
 
 
-def _reweighted(state: RBPF, bank: bk.Bank, log_w, rng) -> RBPF:
-    """Normalise the new weights, record the ESS, resample and move where it is low."""
+def _reweighted(state: RBPF, bank: bk.Bank, log_w, rng, report=None) -> RBPF:
+    """Normalise the new weights, record the ESS, resample and move where it is low.
+
+    ``report``: the frame's (log predictive, tail, gated), each of the batch
+    shape without the replicas, appended to the state's updates.
+    """
     if not np.all(np.any(np.isfinite(log_w), axis=-1)):
         raise ValueError(
             f"n_particles is too small: every particle of a replica has weight zero "
@@ -492,6 +511,14 @@ def _reweighted(state: RBPF, bank: bk.Bank, log_w, rng) -> RBPF:
     acceptance = np.full(ess.shape, np.nan)
     if np.any(need):
         bank, log_w, acceptance[need] = _resample_move(bank, log_w, need, settings, rng)
+    updates = state.updates
+    if report is not None:
+        updates = predictive.Updates(
+            *(
+                np.concatenate([old, np.asarray(new)[..., None]], axis=-1)
+                for old, new in zip(state.updates, report, strict=True)
+            )
+        )
     return RBPF(
         bank,
         log_w,
@@ -499,15 +526,77 @@ def _reweighted(state: RBPF, bank: bk.Bank, log_w, rng) -> RBPF:
         np.concatenate([state.resampled, need[..., None]], axis=-1),
         np.concatenate([state.acceptance, acceptance[..., None]], axis=-1),
         settings,
+        updates,
     )
 
 
-def _start(mu_1, rho, q, prior_mean, prior_cov, J, R, settings, rng) -> RBPF:
-    """Frame 1: depths from the truncated prior, each filter updated by ``mu_1``, weights."""
+def _pooled_report(log_w, bank: bk.Bank, mu, rho, depth_ahead, gate):
+    """A frame's report under the particles of all replicas pooled, and the gate's verdict.
+
+    Each particle predicts ``mu`` as ``N(x / y, P_xx / y**2 + rho**2)`` from its
+    lateral Gaussian moved by the step ahead (``x + s v``, variance
+    ``P_xx + 2 s P_xv + s**2 P_vv``) at its depth ``y``; the particles are
+    weighted by their normalised weights over ``R``.
+
+    Parameters
+    ----------
+    log_w : ndarray, shape (..., R, J)
+        Normalised log weights before the frame.
+    bank : depthcore.exact.bank.Bank
+        The particles before the frame (``mean`` (..., R, J, 2)).
+    mu : ndarray, shape (...)
+    rho : ndarray, shape (...) or ()
+    depth_ahead : tuple of ndarray
+        The step ``s`` to the frame (shape (...) or ()) and the particles'
+        depths ``y`` at it (..., R, J).
+    gate : float or None
+
+    Returns
+    -------
+    log_density, tail, gated : ndarray, shape (...)
+    """
+    s, y = depth_ahead
+    s = np.asarray(s)[..., None, None]
+    x = bank.mean[..., 0] + s * bank.mean[..., 1]
+    var_x = bank.cov[..., 0, 0] + 2 * s * bank.cov[..., 0, 1] + s * s * bank.cov[..., 1, 1]
+    r2 = np.asarray(rho, dtype=float)[..., None, None] ** 2
+    shape = log_w.shape[:-2] + (-1,)
+    R = log_w.shape[-2]
+    with np.errstate(invalid="ignore"):
+        log_d, tail = predictive.mixture(
+            np.where(np.isnan(mu), 0.0, mu),
+            (log_w - np.log(R)).reshape(shape),
+            (x / y).reshape(shape),
+            (var_x / y**2 + r2).reshape(shape),
+        )
+    missing = np.isnan(mu)
+    log_d, tail = np.where(missing, np.nan, log_d), np.where(missing, np.nan, tail)
+    return log_d, tail, predictive.skipped(tail, ~missing, gate)
+
+
+def _start(mu_1, rho, q, prior_mean, prior_cov, J, R, settings, rng, gate=None) -> RBPF:
+    """Frame 1: depths from the truncated prior, each filter updated by ``mu_1``, weights.
+
+    ``mu_1`` may be ``NaN`` (no bearing at frame 1: the particles keep the
+    prior's weights); ``rho`` is frame 1's noise.
+    """
     batch = mu_1.shape + (R,)
     prior_mean = np.broadcast_to(prior_mean[..., None, :], batch + (3,))
     prior_cov = np.broadcast_to(prior_cov[..., None, :, :], batch + (3, 3))
     nodes = prior_depths(prior_mean, prior_cov, batch + (J,), rng)
+    # the prior's predictive of mu_1 at each particle's depth: a bank before any bearing
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        before = bk.filter_bank(
+            nodes,
+            np.full(batch + (1,), np.nan),
+            np.broadcast_to(rho[..., None], batch),
+            prior_mean,
+            prior_cov,
+            np.broadcast_to(q[..., None], batch),
+        )
+    uniform = np.full(batch + (J,), -np.log(J))
+    report = _pooled_report(uniform, before, mu_1, rho, (0.0, nodes), gate)
+    mu_1 = np.where(report[2], np.nan, mu_1)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         bank = bk.filter_bank(
             nodes,
@@ -520,11 +609,13 @@ def _start(mu_1, rho, q, prior_mean, prior_cov, J, R, settings, rng) -> RBPF:
     log_prior = bk.conditional_prior(nodes, prior_mean, prior_cov)[1]
     bank = bank._replace(log_weight=_finite_or_minus_inf(bank.log_weight))
     empty = np.zeros(batch + (0,))
-    state = RBPF(bank, None, empty, empty.astype(bool), empty, settings)
-    return _reweighted(state, bank, bank.log_weight - log_prior, rng)
+    none = np.zeros(mu_1.shape + (0,))
+    updates = predictive.Updates(none, none, none.astype(bool))
+    state = RBPF(bank, None, empty, empty.astype(bool), empty, settings, updates)
+    return _reweighted(state, bank, bank.log_weight - log_prior, rng, report)
 
 
-def step(state: RBPF, mu_next, rng: np.random.Generator) -> RBPF:
+def step(state: RBPF, mu_next, rng: np.random.Generator, rho=None, step=1.0, gate=None) -> RBPF:
     """Add frame ``K + 1``: every particle's Kalman filter predicts and incorporates ``mu_{K+1}``.
 
     The log weights gain the innovations' log densities (textbook 19.2.2,
@@ -537,8 +628,16 @@ def step(state: RBPF, mu_next, rng: np.random.Generator) -> RBPF:
     state : RBPF
         The filter after ``K`` frames.
     mu_next : float or array_like, shape (...)
-        The bearing at frame ``K + 1`` of each trial, finite.
+        The bearing at frame ``K + 1`` of each trial; ``NaN``: no bearing (the
+        filters predict through the frame, the weights stay).
     rng : numpy.random.Generator or numpy.random.SeedSequence
+    rho : float or array_like, shape (...), or None
+        The frame's noise SD (``None``: the filter's).
+    step : float or array_like, shape (...)
+        The depth's change since frame ``K``, > 0.
+    gate : float or None
+        Skip a bearing whose tail probability under the pooled particles'
+        predictive is below it (:mod:`depthcore.problem.predictive`).
 
     Returns
     -------
@@ -547,17 +646,40 @@ def step(state: RBPF, mu_next, rng: np.random.Generator) -> RBPF:
     if not isinstance(state, RBPF):
         raise ValueError(f"state must be an RBPF, got {type(state).__name__}")
     batch = state.log_weights.shape[:-2]
-    mu_next = checks.finite_array(mu_next, "mu_next")
+    mu_next = checks.as_float(mu_next, "mu_next")
+    if np.any(np.isinf(mu_next)):
+        raise ValueError("mu_next must be finite or NaN (a missing frame)")
     if mu_next.shape not in ((), batch):
         raise ValueError(f"mu_next must be a scalar or have shape {batch}, got {mu_next.shape}")
     rng = checks.generator(rng)
+    gate = predictive.gate(gate)
     old = state.bank
+    plain = rho is None and np.all(np.asarray(step) == 1.0) and old.steps is None
+    plain = plain and old.frame_rho is None and not np.any(np.isnan(mu_next))
+    noise = np.asarray(old.frame_noise[..., -1] if rho is None else rho, dtype=float)
+    step_b = np.asarray(step, dtype=float)
+    step_b = step_b[..., None] if step_b.ndim else step_b  # over the replicas
+    depths = old.nodes + (np.asarray(old.travelled) + step_b)[..., None]
+    row_noise = noise[..., 0] if noise.ndim > len(batch) else noise  # the same in every replica
+    report = _pooled_report(
+        state.log_weights, old, np.broadcast_to(mu_next, batch), row_noise, (step, depths), gate
+    )
+    mu_next = np.where(report[2], np.nan, np.broadcast_to(mu_next, batch))
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        new = bk.step(old, np.broadcast_to(mu_next, batch)[..., None])
+        if plain and not np.any(report[2]):
+            new = bk.step(old, np.broadcast_to(mu_next, batch)[..., None])
+        else:
+            new = bk.step(
+                old,
+                np.broadcast_to(mu_next, batch)[..., None],
+                rho=None if rho is None else np.asarray(rho, dtype=float)[..., None],
+                step=np.asarray(step, dtype=float)[..., None] if np.ndim(step) else step,
+                gaps=True,
+            )
     new = new._replace(log_weight=_finite_or_minus_inf(new.log_weight))
     with np.errstate(invalid="ignore"):
         increment = np.where(np.isfinite(old.log_weight), new.log_weight - old.log_weight, -np.inf)
-    return _reweighted(state, new, state.log_weights + increment, rng)
+    return _reweighted(state, new, state.log_weights + increment, rng, report)
 
 
 @signature.documented
@@ -594,30 +716,31 @@ def run(
         The resampling schedule, :class:`Settings`: ``moves >= 0``, ``ess_threshold``
         in [0, 1] (0: never resample, importance sampling of the depth from its prior).
 
-    The filter takes the paper's frames only: a missing bearing (``mu must be
-    finite``), ``rho`` per frame that varies, steps other than 1 or a gate are
-    refused by name.
+    A missing bearing (``NaN``) is predicted through, ``rho`` may be given per
+    frame and ``steps`` between frames; the particles' depths at frame ``k``
+    are ``y_1`` plus the depth travelled.
 
     Returns
     -------
     RBPF
     """
-    if gate is not None:
-        predictive.gate(gate)
-        raise ValueError("gate: the Rao-Blackwellised particle filter takes no gate")
+    gate = predictive.gate(gate)
     per_frame = np.ndim(rho) > 0 and np.shape(rho) == np.shape(mu)
-    if steps is not None or per_frame:  # a missing bearing is refused below: mu must be finite
+    arr = checks.as_float(mu, "mu")
+    regular = steps is None and not per_frame and not np.any(np.isnan(arr))
+    if regular:
+        mu, rho, prior_mean, prior_cov = model.batch_inputs(
+            mu, rho, prior_mean, prior_cov, triples=False
+        )
+        rho_frames = np.broadcast_to(np.asarray(rho)[..., None], mu.shape)
+        step_frames = np.ones(mu.shape[:-1] + (mu.shape[-1] - 1,))
+    else:
         track = frames.check(mu, rho, steps)
-        if not np.all(track.steps == 1.0):
-            raise ValueError("steps: the Rao-Blackwellised particle filter takes only unit steps")
-        if not np.all(track.rho == track.rho[..., :1]):
-            raise ValueError(
-                "rho: the Rao-Blackwellised particle filter takes one noise SD per problem"
-            )
-        rho = track.row_rho if per_frame else rho
-    mu, rho, prior_mean, prior_cov = model.batch_inputs(
-        mu, rho, prior_mean, prior_cov, triples=False
-    )
+        mu, rho_frames, step_frames = track.mu, track.rho, track.steps
+        _, _, prior_mean, prior_cov = model.batch_inputs(
+            np.where(track.present, mu, 0.0), 1.0, prior_mean, prior_cov, triples=False
+        )
+        rho = np.array(rho_frames[..., 0])
     batch = mu.shape[:-1]
     process_noise = checks.nonnegative_batch(process_noise, "process_noise", batch)
     if (
@@ -631,8 +754,20 @@ def run(
     rng = checks.generator(rng)
     rho, process_noise = np.broadcast_to(rho, batch), np.broadcast_to(process_noise, batch)
     state = _start(
-        mu[..., 0], rho, process_noise, prior_mean, prior_cov, int(n_particles), R, settings, rng
+        mu[..., 0],
+        rho,
+        process_noise,
+        prior_mean,
+        prior_cov,
+        int(n_particles),
+        R,
+        settings,
+        rng,
+        gate,
     )
     for k in range(1, mu.shape[-1]):
-        state = step(state, mu[..., k], rng)
+        if regular and gate is None:
+            state = step(state, mu[..., k], rng)
+        else:
+            state = step(state, mu[..., k], rng, rho_frames[..., k], step_frames[..., k - 1], gate)
     return state
