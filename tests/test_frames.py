@@ -167,3 +167,11 @@ def test_simulate_refuses_bad_steps_and_rho():
         model.simulate([0.0, 5.0, 0.0], 3, 0.01, 0.0, rng, steps=[1, -1])
     with pytest.raises(ValueError, match=r"rho must be a number or have shape \(3,\)"):
         model.simulate([0.0, 5.0, 0.0], 3, [0.01, 0.02], 0.0, rng)
+
+
+def test_extreme_noise_and_steps_are_refused_by_name():
+    mu = [0.1, 0.2, 0.31, 0.4]
+    with pytest.raises(ValueError, match=r"rho\[0\] must be from 1e-150 to 1e\+150"):
+        frames.check(mu, [1e-300, 0.1, 0.1, 0.1])
+    with pytest.raises(ValueError, match="steps must add up to a depth travelled that grows"):
+        frames.check(mu, 0.1, [1e-300, 1e300, 1.0])

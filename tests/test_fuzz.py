@@ -798,3 +798,70 @@ def test_nan_anywhere_in_mu_is_answered_or_refused_in_one_line(positions, per_fr
         values[k] = "nan"
     argv = ["estimate", "--mu", *values, "--rho", "0.005", "--prior-mean", "-1", "4", "0"]
     _answered_or_refused(argv + (["--per-frame"] if per_frame else []) + ["--json"], "json")
+
+
+# --- tracks as they come: gaps, noise per frame, steps, a gate --------------------------
+
+GAPPY = np.where(np.arange(6) == 2, np.nan, SIX)
+TRACKS = [  # (argument, value, keyword arguments beyond GOOD)
+    ("mu", GAPPY, {}),
+    ("mu", np.array([np.nan, *SIX[1:]]), {}),  # the first frame missing
+    ("mu", np.array([np.nan, np.nan, np.nan, *SIX[3:]]), {}),  # three present
+    ("mu", np.array([SIX[0], np.nan, np.nan, np.nan, np.nan, SIX[5]]), {}),  # two present
+    ("mu", np.full(6, np.nan), {}),
+    ("rho", np.array([0.005, 0.01, np.nan, 0.005, 0.02, 0.005]), {"mu": GAPPY}),
+    ("rho", np.array([0.005, 0.01, np.nan, 0.005, 0.02, 0.005]), {"mu": SIX}),
+    ("rho", np.array([0.005, 0.0, 0.01, 0.005, 0.02, 0.005]), {"mu": SIX}),
+    ("rho", np.array([1e-300, 0.01, 0.01, 0.005, 0.02, 1e300]), {"mu": SIX}),
+    ("rho", np.full(5, 0.005), {"mu": SIX}),
+    ("steps", np.array([1.0, 0.5, 2.0, 1.0, 1.5]), {"mu": SIX}),
+    ("steps", np.array([1.0, 0.5, 2.0, 1.0, 1.5]), {"mu": GAPPY}),
+    ("steps", np.array([1.0, 0.0, 2.0, 1.0, 1.5]), {"mu": SIX}),
+    ("steps", np.array([1.0, -1.0, 2.0, 1.0, 1.5]), {"mu": SIX}),
+    ("steps", np.array([1e-300, 1.0, 1e300, 1.0, 1.0]), {"mu": SIX}),
+    ("steps", np.array([1.0, np.nan, 2.0, 1.0, 1.5]), {"mu": SIX}),
+    ("steps", np.ones(3), {"mu": SIX}),
+    ("steps", "1 1 1 1 1", {"mu": SIX}),
+    ("gate", 1e-3, {"mu": SIX}),
+    ("gate", 1e-300, {"mu": GAPPY}),
+    ("gate", 0.999999, {"mu": SIX}),
+    ("gate", 0.0, {"mu": SIX}),
+    ("gate", 1.0, {"mu": SIX}),
+    ("gate", np.nan, {"mu": SIX}),
+    ("gate", "0.01", {"mu": SIX}),
+    ("gate", [0.01, 0.02], {"mu": SIX}),
+]
+TRACK_CASES = [(name, *case) for name in ALL_NAMES for case in TRACKS]
+
+
+@pytest.mark.parametrize(
+    ("name", "arg", "value", "extra"),
+    TRACK_CASES,
+    ids=[f"{n}-{a}-{i % len(TRACKS)}" for i, (n, a, _, _) in enumerate(TRACK_CASES)],
+)
+def test_tracks_as_they_come_are_answered_or_refused_naming_the_argument(name, arg, value, extra):
+    kwargs = {**GOOD, **extra}
+    options = {arg: value} if arg in ("steps", "gate") else {}
+    if arg not in ("steps", "gate"):
+        kwargs[arg] = value
+    if FILTERS[name].random:
+        options.update({"rng": np.random.default_rng(0), "n_particles": 200})
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            est = FILTERS[name](**kwargs, **options)
+        except ValueError as exc:
+            message = str(exc)
+            assert "\n" not in message
+            # the argument, or another whose combination with it has no answer
+            named = (arg, "mu", "rho", "prior_mean", "prior_cov")
+            assert message.startswith(named) or arg in message, message
+            return
+    assert time.perf_counter() - start < BUDGET
+    assert np.all(np.isfinite(est.mean)) and np.all(np.isfinite(est.cov))
+    updates = est.updates
+    if updates is not None:  # per frame, NaN exactly where no bearing was seen
+        missing = np.isnan(np.asarray(kwargs["mu"], dtype=float))
+        assert np.array_equal(np.isnan(updates.tail), missing | np.isnan(updates.tail))
+        assert not np.any(np.isnan(updates.tail[~missing & ~updates.gated]))

@@ -41,6 +41,10 @@ from depthcore.problem import checks
 #: The fewest bearings a problem must have present: two bearings fit any depth alike.
 MIN_PRESENT = 3
 
+#: The range of a noise SD: its square (a variance) and the square of its
+#: inverse (an information) must be normal doubles.
+RHO_LIMITS = (1e-150, 1e150)
+
 
 class Frames(NamedTuple):
     """A batch of tracks' frames, checked by :func:`check`.
@@ -155,6 +159,14 @@ def _rho(value, mu: np.ndarray, present: np.ndarray) -> np.ndarray:
         where = np.unravel_index(int(np.argmax(bad)), mu.shape)
         index = "[" + ", ".join(str(int(i)) for i in where) + "]" if per_frame else ""
         raise ValueError(f"rho{index} must be finite and positive, got {float(used[where])!r}")
+    extreme = (used < RHO_LIMITS[0]) | (used > RHO_LIMITS[1])
+    if np.any(extreme):
+        where = np.unravel_index(int(np.argmax(extreme)), mu.shape)
+        index = "[" + ", ".join(str(int(i)) for i in where) + "]" if per_frame else ""
+        raise ValueError(
+            f"rho{index} must be from {RHO_LIMITS[0]:g} to {RHO_LIMITS[1]:g} (its square a "
+            f"normal double), got {float(used[where])!r}"
+        )
     return used
 
 
@@ -241,6 +253,13 @@ def check(mu, rho, steps=None) -> Frames:
             f"{MIN_PRESENT} are needed to fix a depth"
         )
     frames = Frames(mu, present, rho, steps)
+    gaps = np.diff(frames.elapsed, axis=-1)
+    if not (np.all(np.isfinite(frames.elapsed)) and np.all(gaps > 0)):
+        raise ValueError(
+            "steps must add up to a depth travelled that grows at every frame in double "
+            f"precision; steps from {float(np.min(steps)):.3g} to {float(np.max(steps)):.3g} "
+            "lose a step to rounding"
+        )
     degenerate = _degenerate(mu, present, frames.elapsed)
     if np.any(degenerate):
         i = int(np.argmax(degenerate.reshape(-1)))
