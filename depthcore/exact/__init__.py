@@ -17,7 +17,10 @@
   fixed-lag and fixed-interval smoothed;
 * :mod:`~depthcore.exact.online`: the exact filter one bearing at a time, in
   constant time and memory per frame, with each bearing's predictive report
-  and a gate.
+  and a gate;
+* :mod:`~depthcore.exact.learning`: the bearing noise and the process noise
+  learned from tracks by maximum likelihood on the depth quadrature, or by EM
+  with the nodes' smoothers as its E-step.
 
 Where a new thing goes: another way to compute the exact posterior, or a new
 use of the bank (an online form, a likelihood), goes here. It may import
