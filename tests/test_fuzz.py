@@ -457,10 +457,10 @@ def test_a_real_process_with_unwritable_output_ends_in_one_line(kind):
     ids=["inf", "-inf", "nan", "numpy inf"],
 )
 def test_json_output_has_null_with_a_reason_for_what_cannot_be_estimated(value):
-    from depthcore.cli.main import _json
+    from depthcore.cli.text import as_json
 
     result = {"filters": {"particle": {"depth": {"mean": 6.5, "sd": 0.0, "error": value}}}}
-    data = _strict_json(_json(result))
+    data = _strict_json(as_json(result))
     depth = data["filters"]["particle"]["depth"]
     assert depth["error"] is None and "cannot be estimated" in depth["error_reason"]
     assert depth["mean"] == 6.5 and depth["sd"] == 0.0

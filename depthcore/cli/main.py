@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.metadata
-import json
 import math
 import os
 import re
@@ -233,7 +232,7 @@ def _cmd_reproduce(args) -> str:
     result = _with_bar(
         "reproduce", "figure", lambda progress: reproduce.reproduce(progress=progress)
     )
-    return _json(result) if args.json else cli_text.format_table(result)
+    return cli_text.as_json(result) if args.json else cli_text.format_table(result)
 
 
 def _cmd_estimate(args) -> str:
@@ -256,7 +255,7 @@ def _cmd_estimate(args) -> str:
     prior = _prior(src.mu, args.prior_mean, args.prior_cov, steps)
     if args.learn_noise:
         known_q = q if "process_noise" in getattr(args, "_given", ()) else None
-        learned = _learn(src.mu, rho, prior, known_q, steps)
+        learned = tracks.learn(src.mu, rho, prior, known_q, steps)
         rho = learned.rho * np.asarray(rho) if np.ndim(rho) else learned.rho
         q = learned.process_noise
     if args.per_frame:
@@ -268,50 +267,12 @@ def _cmd_estimate(args) -> str:
         src.mu, rho, prior, process_noise=q, smooth=args.smooth, names=names, steps=steps, gate=gate
     )
     if learned is not None:
-        summary["learned"] = _learned(learned)
+        summary["learned"] = tracks.learned_json(learned)
     return (
-        _json(summary)
+        cli_text.as_json(summary)
         if args.json
         else cli_text.format_learned(summary) + cli_text.format_summary(summary)
     )
-
-
-def _learn(mu, weights, prior: Gaussian, known_q, steps):
-    """``--learn-noise``: rho (and q unless given) by maximum likelihood, textbook 19.1.2."""
-    from depthcore.exact import learning
-
-    return learning.fit(
-        mu,
-        prior.mean,
-        prior.cov,
-        process_noise=known_q,
-        steps=steps,
-        weights=np.asarray(weights) if np.ndim(weights) else None,
-    )
-
-
-def _learned(fit) -> dict:
-    """A learned fit as plain JSON values (``None`` for a standard error it has not)."""
-
-    def number(v):
-        return None if v is None else float(v)
-
-    def interval(v):
-        return None if v is None else [float(v[0]), float(v[1])]
-
-    return {
-        "rho": float(fit.rho),
-        "rho_se": number(fit.rho_se),
-        "rho_interval": interval(fit.rho_interval),
-        "process_noise": float(fit.process_noise),
-        "process_noise_se": number(fit.process_noise_se),
-        "process_noise_interval": interval(fit.process_noise_interval),
-        "estimated": list(fit.estimated),
-        "at_boundary": bool(fit.at_boundary),
-        "level": float(fit.level),
-        "log_likelihood": float(fit.log_likelihood),
-        "converged": bool(fit.converged),
-    }
 
 
 def _bearings(args) -> tracks.TrackFile:
@@ -354,9 +315,9 @@ def _per_frame(args, src, rho, steps, prior, q, gate, learned=None) -> str:
         )
     result = tracks.per_frame(src.mu, rho, prior, q, chosen, steps, gate, src.frames)
     if learned is not None:
-        result["learned"] = _learned(learned)
+        result["learned"] = tracks.learned_json(learned)
     if args.json:
-        return _json(result)
+        return cli_text.as_json(result)
     if args.csv:
         if learned is not None:
             raise ValueError("--csv: the learned noise levels have no CSV; use --json or the table")
@@ -496,7 +457,7 @@ def _cmd_study(args) -> str:
                 progress=progress,
             ),
         )
-        return _json(result) if args.json else cli_text.format_prior_study(result)
+        return cli_text.as_json(result) if args.json else cli_text.format_prior_study(result)
     if not any(FILTERS[n].random for n in names):
         _refuse_ignored(
             args,
@@ -524,44 +485,7 @@ def _cmd_study(args) -> str:
             process_noise=q,
         ),
     )
-    return _json(result) if args.json else cli_text.format_study(result)
-
-
-# --- strict JSON -----------------------------------------------------------------------
-
-#: Why a number of the output is not finite, by its key.
-_REASONS = {
-    "error": "the Monte Carlo error cannot be estimated from this run: the weights "
-    "collapsed onto too few particles (or too few replicas)",
-}
-
-
-def _strict(value, key: str = ""):
-    """``value`` with every non-finite float made ``None``; returns (value, reason or None)."""
-    if isinstance(value, dict):
-        out = {}
-        for k, v in value.items():
-            v, reason = _strict(v, k)
-            out[k] = v
-            if reason is not None and f"{k}_reason" not in value:
-                out[f"{k}_reason"] = reason
-        return out, None
-    if isinstance(value, (list, tuple)):
-        items = [_strict(v, key) for v in value]
-        reasons = [r for _, r in items if r is not None]
-        return [v for v, _ in items], (reasons[0] if reasons else None)
-    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
-        return None, _REASONS.get(
-            key, f"not a finite number ({float(value)}): cannot be estimated from this run"
-        )
-    if isinstance(value, np.generic):
-        return value.item(), None
-    return value, None
-
-
-def _json(result) -> str:
-    """``result`` as strict JSON: no NaN or Infinity (see :func:`_strict`)."""
-    return json.dumps(_strict(result)[0], indent=2, allow_nan=False) + "\n"
+    return cli_text.as_json(result) if args.json else cli_text.format_study(result)
 
 
 # --- refusals in the user's words -------------------------------------------------------

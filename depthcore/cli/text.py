@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import csv
 import io
+import json
+import math
 
 import numpy as np
 
@@ -460,3 +462,40 @@ examples:
   python -m depthcore figures --out figures
 
 `python -m depthcore COMMAND --help` shows each command's options and examples."""
+
+
+# --- strict JSON -----------------------------------------------------------------------
+
+#: Why a number of the output is not finite, by its key.
+REASONS = {
+    "error": "the Monte Carlo error cannot be estimated from this run: the weights "
+    "collapsed onto too few particles (or too few replicas)",
+}
+
+
+def strict(value, key: str = ""):
+    """``value`` with every non-finite float made ``None``; returns (value, reason or None)."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            v, reason = strict(v, k)
+            out[k] = v
+            if reason is not None and f"{k}_reason" not in value:
+                out[f"{k}_reason"] = reason
+        return out, None
+    if isinstance(value, (list, tuple)):
+        items = [strict(v, key) for v in value]
+        reasons = [r for _, r in items if r is not None]
+        return [v for v, _ in items], (reasons[0] if reasons else None)
+    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
+        return None, REASONS.get(
+            key, f"not a finite number ({float(value)}): cannot be estimated from this run"
+        )
+    if isinstance(value, np.generic):
+        return value.item(), None
+    return value, None
+
+
+def as_json(result) -> str:
+    """``result`` as strict JSON: no NaN or Infinity (see :func:`strict`)."""
+    return json.dumps(strict(result)[0], indent=2, allow_nan=False) + "\n"

@@ -490,3 +490,59 @@ def per_frame(
             rows.append(row)
         out["filters"][name] = rows
     return out
+
+
+# --- learning the noise ---------------------------------------------------------------
+
+
+def learn(mu, weights, prior, known_q, steps):
+    """``--learn-noise``: rho (and q unless given) by maximum likelihood, textbook 19.1.2.
+
+    Parameters
+    ----------
+    mu : ndarray, shape (N,)
+    weights : float or ndarray, shape (N,)
+        A file's ``rho`` column: the frames' relative noise levels (a number: none).
+    prior : depthcore.problem.gaussian.Gaussian
+    known_q : float or None
+        The process noise when given, ``None`` to learn it.
+    steps : ndarray, shape (N - 1,), or None
+
+    Returns
+    -------
+    depthcore.exact.learning.Fit
+    """
+    from depthcore.exact import learning
+
+    return learning.fit(
+        mu,
+        prior.mean,
+        prior.cov,
+        process_noise=known_q,
+        steps=steps,
+        weights=np.asarray(weights) if np.ndim(weights) else None,
+    )
+
+
+def learned_json(fit) -> dict:
+    """A learned fit as plain JSON values (``None`` for a standard error it has not)."""
+
+    def number(v):
+        return None if v is None else float(v)
+
+    def interval(v):
+        return None if v is None else [float(v[0]), float(v[1])]
+
+    return {
+        "rho": float(fit.rho),
+        "rho_se": number(fit.rho_se),
+        "rho_interval": interval(fit.rho_interval),
+        "process_noise": float(fit.process_noise),
+        "process_noise_se": number(fit.process_noise_se),
+        "process_noise_interval": interval(fit.process_noise_interval),
+        "estimated": list(fit.estimated),
+        "at_boundary": bool(fit.at_boundary),
+        "level": float(fit.level),
+        "log_likelihood": float(fit.log_likelihood),
+        "converged": bool(fit.converged),
+    }
