@@ -464,7 +464,7 @@ def test_json_output_has_null_with_a_reason_for_what_cannot_be_estimated(value):
     depth = data["filters"]["particle"]["depth"]
     assert depth["error"] is None and "cannot be estimated" in depth["error_reason"]
     assert depth["mean"] == 6.5 and depth["sd"] == 0.0
-    listed = _strict_json(_json({"depth_mean": [1.0, value, 3.0]}))
+    listed = _strict_json(as_json({"depth_mean": [1.0, value, 3.0]}))
     assert listed["depth_mean"] == [1.0, None, 3.0] and "depth_mean_reason" in listed
 
 
