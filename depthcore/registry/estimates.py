@@ -50,6 +50,9 @@ class Estimate:
     (or arrays of shape ``()``) for one sequence of bearings, arrays of shape
     ``(B,)`` for a batch.
 
+    The per-frame report, :attr:`updates`, is read from ``detail`` when first
+    asked for (the exact filter computes it then).
+
     Attributes
     ----------
     depth_mean, depth_sd, velocity_mean, velocity_sd : float or ndarray, shape (B,)
@@ -71,9 +74,6 @@ class Estimate:
         :data:`depthcore.particles.resampling.MIN_EFFECTIVE_DRAWS` independent draws of
         the posterior), so that neither its spread nor its error can be
         trusted; its errors are then NaN. ``None`` for the other filters.
-
-    The per-frame report, :attr:`updates`, is read from ``detail`` when first
-    asked for (the exact filter computes it then).
     """
 
     depth_mean: Any

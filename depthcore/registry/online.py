@@ -1,4 +1,4 @@
-"""A filter fed one bearing at a time: one door, :func:`start`, for every online filter.
+"""Filters fed one bearing at a time, through one door: :func:`~depthcore.registry.online.start`.
 
 Recommended import: ``from depthcore.registry import online``.
 
