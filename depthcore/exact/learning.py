@@ -655,11 +655,9 @@ def expectations(bank, log_weights, tracks: _Tracks):
     Rauch-Tung-Striebel gains ``C_k`` the lag-one cross-covariance is
     ``Cov[w_k, w_{k+1}] = C_k Sigma_{k+1|N}``. Given the node (depth
     ``y_k = y_j + e_k`` at frame ``k``),
-
-        E[(mu_k - x_k / y_k)**2] = (mu_k - E[x_k] / y_k)**2 + Var[x_k] / y_k**2,
-        E[(v_{k+1} - v_k)**2] = (E[v_{k+1}] - E[v_k])**2 + Var[v_k] + Var[v_{k+1}]
-                                - 2 Cov[v_k, v_{k+1}],
-
+    ``E[(mu_k - x_k / y_k)**2] = (mu_k - E[x_k] / y_k)**2 + Var[x_k] / y_k**2`` and
+    ``E[(v_{k+1} - v_k)**2] = (E[v_{k+1}] - E[v_k])**2 + Var[v_k] + Var[v_{k+1}]
+    - 2 Cov[v_k, v_{k+1}]``,
     mixed over the nodes with the posterior's probabilities, proportional to
     ``w_j N(y_j; m_y, P_yy) L(y_j)``.
 
