@@ -13,7 +13,7 @@ nodes, one bearing at a time)::
         prediction = predictor.predict(track[-1], timestamp=detection.timestamp)
         track.append(updater.update(SingleHypothesis(prediction, detection)))
 
-:class:`ExactState` is a Stone Soup :class:`~stonesoup.types.state.GaussianState`
+:class:`ExactState` is a Stone Soup ``stonesoup.types.state.GaussianState``
 whose ``state_vector`` and ``covar`` are the exact posterior's mean and
 covariance (not a Gaussian's: the posterior is the bank's mixture, skewed in
 depth), so Stone Soup's plots and metrics read them; it carries the exact

@@ -18,13 +18,13 @@ sees of it). This module writes the paper's two:
   filter, :func:`depthcore.exact.optimal.run`).
 
 The motion is affine, ``F(s) x + e s`` with ``e = (0, 1, 0)`` (Eq. (9)):
-Stone Soup's :class:`~stonesoup.predictor.kalman.KalmanPredictor` predicts the
+Stone Soup's ``stonesoup.predictor.kalman.KalmanPredictor`` predicts the
 mean as ``F x`` alone and would drop the depth's ``+ s``, so
 :class:`DepthStep` is not a Stone Soup ``LinearModel``: the
-:class:`~stonesoup.predictor.kalman.ExtendedKalmanPredictor` (which moves the
+``stonesoup.predictor.kalman.ExtendedKalmanPredictor`` (which moves the
 mean by :meth:`DepthStep.function` and the covariance by
 :meth:`DepthStep.jacobian`) and the
-:class:`~stonesoup.predictor.kalman.UnscentedKalmanPredictor` predict it
+``stonesoup.predictor.kalman.UnscentedKalmanPredictor`` predict it
 exactly, and the particle predictor moves each particle by it.
 """
 
@@ -215,7 +215,7 @@ class DepthStep(TransitionModel, GaussianModel):
         return float(log_p[0]) if log_p.size == 1 else log_p
 
     def pdf(self, state1, state2, time_interval=None, **kwargs):
-        """:meth:`logpdf` as a Stone Soup :class:`~stonesoup.types.numeric.Probability`."""
+        """:meth:`logpdf` as a Stone Soup ``stonesoup.types.numeric.Probability``."""
         return Probability.from_log_ufunc(self.logpdf(state1, state2, time_interval=time_interval))
 
 
@@ -290,5 +290,5 @@ class TangentBearing(MeasurementModel, GaussianModel):
         return float(log_l[0]) if log_l.size == 1 else log_l
 
     def pdf(self, state1, state2, **kwargs):
-        """:meth:`logpdf` as a Stone Soup :class:`~stonesoup.types.numeric.Probability`."""
+        """:meth:`logpdf` as a Stone Soup ``stonesoup.types.numeric.Probability``."""
         return Probability.from_log_ufunc(self.logpdf(state1, state2))

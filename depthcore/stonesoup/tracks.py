@@ -7,13 +7,13 @@ number or one per frame) and depth steps (:func:`depthcore.problem.frames.check`
 becomes one :class:`Frame` per frame: its timestamp, ``start`` plus the depth
 travelled since frame 1 over ``speed`` (the clock of
 :class:`depthcore.stonesoup.models.DepthStep` with that ``speed``), and its
-:class:`~stonesoup.types.detection.Detection`, ``None`` at a missing frame.
+``stonesoup.types.detection.Detection``, ``None`` at a missing frame.
 Each detection carries its own :class:`~depthcore.stonesoup.models.TangentBearing`
 with that frame's ``rho``.
 
 :func:`run` is Stone Soup's loop: predict to each frame's timestamp, update
 with the frame's detection if there is one (a
-:class:`~stonesoup.types.hypothesis.SingleHypothesis`), or keep the prediction
+``stonesoup.types.hypothesis.SingleHypothesis``), or keep the prediction
 (a missed detection). Stone Soup's timestamps carry whole microseconds, so a
 depth step is kept to ``speed`` times a microsecond.
 """
