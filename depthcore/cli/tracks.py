@@ -156,7 +156,7 @@ class Limits(NamedTuple):
     pixels: float
 
 
-#: The most empty lines after the last row (more are refused: the reading stays short).
+#: The most empty lines after the last row (more are refused, so the reading stays short).
 MAX_TRAILING_BLANKS = 100
 
 

@@ -70,12 +70,12 @@ from depthcore.exact.tracks import transitions
 from depthcore.kalman import linear
 from depthcore.problem import checks, frames
 
-#: The parameters, by name: the bearing noise SD and the process noise SD.
+#: The parameters, by name, the bearing noise SD and the process noise SD.
 NAMES = ("rho", "process_noise")
 #: The methods of :func:`fit`.
 METHODS = ("ml", "em")
-#: The fewest present bearings a track needs for the noise to show in it: three
-#: bearings are fitted exactly by a constant-velocity track at some depth.
+#: The fewest present bearings a track needs for the noise to show in it (three
+#: bearings are fitted exactly by a constant-velocity track at some depth).
 MIN_BEARINGS = 4
 
 #: Central-difference step in the log parameters.

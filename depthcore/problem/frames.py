@@ -38,10 +38,10 @@ import numpy as np
 
 from depthcore.problem import checks
 
-#: The fewest bearings a problem must have present: two bearings fit any depth alike.
+#: The fewest bearings a problem must have present (two bearings fit any depth alike).
 MIN_PRESENT = 3
 
-#: The range of a noise SD: its square (a variance) and the square of its
+#: The range of a noise SD, where its square (a variance) and the square of its
 #: inverse (an information) must be normal doubles.
 RHO_LIMITS = (1e-150, 1e150)
 
@@ -69,13 +69,13 @@ class Frames(NamedTuple):
 
     @property
     def elapsed(self) -> np.ndarray:
-        """Depth travelled since frame 1, shape (..., N): ``0, s_1, s_1 + s_2, ...``."""
+        """Depth travelled since frame 1 at each frame, shape (..., N), ``0, s_1, s_1 + s_2, ...``."""
         zero = np.zeros(self.steps.shape[:-1] + (1,))
         return np.concatenate([zero, np.cumsum(self.steps, axis=-1)], axis=-1)
 
     @property
     def regular(self) -> bool:
-        """Whether these are the paper's frames: every bearing, unit steps, one ``rho`` per row."""
+        """Whether these are the paper's frames (every bearing, unit steps, one ``rho`` per row)."""
         return bool(
             np.all(self.present)
             and np.all(self.steps == 1.0)

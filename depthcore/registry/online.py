@@ -35,7 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-#: The online filters by name: the module and class of each.
+#: The online filters by name, with the module and class of each.
 ONLINE = {
     "optimal": ("depthcore.exact.online", "Online"),
     "ekf": ("depthcore.kalman.online", "EKF"),
