@@ -69,7 +69,7 @@ class Frames(NamedTuple):
 
     @property
     def elapsed(self) -> np.ndarray:
-        """Depth travelled since frame 1 at each frame, shape (..., N), ``0, s_1, s_1 + s_2, ...``."""
+        """Depth travelled since frame 1 at each frame, shape (..., N), from 0."""
         zero = np.zeros(self.steps.shape[:-1] + (1,))
         return np.concatenate([zero, np.cumsum(self.steps, axis=-1)], axis=-1)
 
