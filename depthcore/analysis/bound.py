@@ -521,11 +521,11 @@ _MOTION_ULPS = 64.0
 def track_steps(states) -> np.ndarray:
     """The steps ``s_k = y_{k+1} - y_k`` of a true track, checked against its lateral motion.
 
-    A step within rounding of 1 (:data:`_STEP_ULPS` units in the last place
+    A step within rounding of 1 (``_STEP_ULPS`` units in the last place
     of the depths) is taken as exactly 1, the paper's step. Each step must be
     positive and the states must move by the motion with a step (module
     docstring), ``x_{k+1} = x_k + s_k v_k`` within rounding
-    (:data:`_MOTION_ULPS` units in the last place of its terms); the velocity
+    (``_MOTION_ULPS`` units in the last place of its terms); the velocity
     may change by an acceleration.
 
     Parameters

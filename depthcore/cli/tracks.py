@@ -3,7 +3,7 @@
 Recommended import: ``from depthcore.cli import tracks``.
 
 :func:`read` reads ``estimate --mu-file FILE`` (``-``: standard input) line by
-line with the :mod:`csv` module and refuses a malformed file in one line naming
+line with the ``csv`` module and refuses a malformed file in one line naming
 the file and the line, ``FILE:LINE: ...`` (:class:`FileRefusal`). Its time and
 memory do not grow with the file: it stops as soon as the rows pass the
 filters' limit of frames, :data:`depthcore.problem.checks.MAX_FRAMES`, and a

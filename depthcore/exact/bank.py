@@ -142,7 +142,7 @@ class Bank(NamedTuple):
 
     @property
     def elapsed(self) -> np.ndarray:
-        """The depth travelled since frame 1 at every frame, shape (..., N): ``y_k - y_1``."""
+        """The depth travelled since frame 1 at every frame, ``y_k - y_1``, shape (..., N)."""
         return tracks.elapsed(self.steps, self.frames)
 
     @property
@@ -276,7 +276,7 @@ def lateral_filter(
         det' = det r_k / (a + r_k),   c' = (det' + b'**2) / a',
 
     the log likelihood gains ``log N(mu_k; x / y_k, (a + r_k) / y_k**2)``,
-    and the prediction over a step ``s`` (:func:`predict_lateral`) is
+    and the prediction over a step ``s`` (``predict_lateral``) is
     ``x += s v``, ``a += s (2 b + s c)``, ``b += s c``, ``c += q**2 s``,
     ``det += q**2 s a``. Tracking the determinant keeps ``c`` free of
     cancellation when the bearings pin ``x`` far more tightly than the prior

@@ -243,7 +243,7 @@ class Mixture:
         filter run one bearing at a time on its own nodes, to the same
         tolerance: a pass over every frame of every problem, which the bank
         does not need and so runs only here); NaN at a missing frame. From a
-        run with a gate, that run's report, :attr:`updates` (the skipped
+        run with a gate, that run's report, ``updates`` (the skipped
         bearings marked).
         """
         if self.updates is not None:

@@ -49,7 +49,7 @@ def elapsed(steps, frames: int) -> np.ndarray:
 
 
 def check_track(mu, rho, steps, bearings):
-    """Bearings with gaps, noise per problem or per frame, steps: checked, for :func:`filter_bank`.
+    """Bearings with gaps, noise per problem or per frame, steps, checked for ``filter_bank``.
 
     ``bearings`` checks ``mu`` for the paper's frames. Returns ``mu``, ``rho``
     (``frame_rho`` where given per frame), ``steps`` (``None`` for unit steps)

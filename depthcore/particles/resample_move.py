@@ -183,7 +183,7 @@ class Replicated:
 
     @property
     def updates(self) -> predictive.Updates:
-        """Per frame, shape (B, K): the pool's log predictive density (the log of the
+        """Per frame, shape (B, K), the pool's log predictive density (the log of the
         replicas' average predictive density, the pooled mixture's), the replicas'
         average tail probability, and whether every replica's gate skipped the bearing
         (each replica gates on its own predictive)."""

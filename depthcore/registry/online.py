@@ -82,7 +82,7 @@ class FrameEstimate(NamedTuple):
 
 
 class OnlineFilter:
-    """A started online filter (:func:`start`): :meth:`update`, :attr:`frame`, :attr:`current`.
+    """A started online filter (:func:`start`): :meth:`update`, :attr:`frame`, ``current``.
 
     :attr:`detail` is the family's own filter:
     :class:`depthcore.exact.online.Online`, :class:`depthcore.kalman.online.EKF`
