@@ -256,7 +256,7 @@ def log_likelihood(
     ``log integral_{y_1 > 0} N(y_1; m_y, P_yy) L(y_1) dy_1`` per track
     (textbook 19.1.2; ``L`` from the Kalman filters over depth, textbook
     19.2.3), by the exact filter's depth quadrature
-    (:attr:`depthcore.exact.mixture.Mixture.log_normaliser`), to its tolerance.
+    (the mixture's ``log_normaliser``), to its tolerance.
 
     Parameters
     ----------
