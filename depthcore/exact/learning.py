@@ -99,14 +99,18 @@ class Fit(NamedTuple):
 
     Attributes
     ----------
-    rho, process_noise : float
-        The estimates (or the given values).
-    rho_se, process_noise_se : float or None
-        Standard errors from the observed information (delta method from the
-        log parameters); ``None`` for a given value or an estimate at the
-        boundary ``q = 0``.
-    rho_interval, process_noise_interval : tuple of two floats, or None
-        Intervals at ``level``: Wald's on the log scale
+    rho : float
+        The estimate of rho (or its given value).
+    process_noise : float
+        The estimate of q (or its given value).
+    rho_se : float or None
+        Standard errors (this and ``process_noise_se``) from the observed
+        information (delta method from the log parameters); ``None`` for a
+        given value or an estimate at the boundary ``q = 0``.
+    process_noise_se : float or None
+        As ``rho_se``.
+    rho_interval : tuple of two floats, or None
+        Intervals at ``level`` (this and ``process_noise_interval``): Wald's on the log scale
         (``rho exp(+- z se(log rho))``) or the profile likelihood's; for
         ``q = 0`` at the boundary, ``(0, upper)`` one-sided. ``None`` for a
         given value.

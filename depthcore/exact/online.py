@@ -31,7 +31,7 @@ density extended below its end values beyond the nodes). Since the check
 fails when the coarser grid of every other node stops resolving the density,
 the current nodes still resolve it to far better than ``rtol`` then, and the
 spline's error (order ``h**8`` in the node spacing ``h``) is what the
-re-placement adds; :attr:`~depthcore.exact.online.Online.replacements` counts them. Between
+re-placement adds; ``Online.replacements`` counts them. Between
 re-placements the filter is the bank on fixed nodes, exact to the
 quadrature's error. The node count is bounded by the quadrature's budget
 (:data:`depthcore.exact.quadrature.NODE_BUDGET`), so time and memory per frame
