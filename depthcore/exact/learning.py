@@ -109,8 +109,9 @@ class Fit(NamedTuple):
         given value or an estimate at the boundary ``q = 0``.
     process_noise_se : float or None
         As ``rho_se``.
-    rho_interval : tuple of two floats, or None
-        Intervals at ``level`` (this and ``process_noise_interval``): Wald's on the log scale
+    rho_interval : tuple or None
+        Two floats, the interval at ``level`` (this and
+        ``process_noise_interval``): Wald's on the log scale
         (``rho exp(+- z se(log rho))``) or the profile likelihood's; for
         ``q = 0`` at the boundary, ``(0, upper)`` one-sided. ``None`` for a
         given value.

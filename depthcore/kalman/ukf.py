@@ -420,9 +420,12 @@ class Step(NamedTuple):
     mean : ndarray, shape (..., 3)
         After the frame (the prediction where the bearing is missing or gated).
     cov : ndarray, shape (..., 3, 3)
-    log_predictive, tail : ndarray, shape (...)
-        The bearing's log density and two-sided tail probability under the
-        unscented predictive ``N(z, s)``; NaN where it is missing.
+    log_predictive : ndarray, shape (...)
+        The bearing's log density under the unscented predictive ``N(z, s)``;
+        NaN where it is missing.
+    tail : ndarray, shape (...)
+        The bearing's two-sided tail probability under the same predictive;
+        NaN where it is missing.
     gated : ndarray of bool, shape (...)
         Where the gate skipped the bearing.
     behind : ndarray of bool, shape (...)
