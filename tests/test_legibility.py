@@ -36,14 +36,17 @@ from depthcore.book import (
     beyond_frames,
     beyond_hard,
     beyond_linear,
+    beyond_stonesoup,
     beyond_study,
     beyond_sweeps,
+    beyond_tracks,
     paper,
     style,
 )
 from depthcore.exact import posterior, smoother
 from depthcore.problem import model
 from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry import online
 from depthcore.registry.filters import NAMES as FILTER_NAMES
 from depthcore.studies import frames, hardness, monte_carlo
 
@@ -121,6 +124,31 @@ def _rbpf_convergence():
     return beyond_linear.rbpf_convergence_figure(r)
 
 
+def _track_figure():
+    track = beyond_tracks.demo_track(5, frames=12, n_missing=2, outlier=9)
+    x1 = track.states[0]
+    prior_mean = np.array([x1[0], 1.3 * x1[1], 0.0])
+    prior_cov = np.diag([1.0, (0.3 * x1[1]) ** 2, 1.0])
+    runs = {
+        (name, gated): beyond_tracks.filtered(
+            name, track, prior_mean, prior_cov, gate=1e-3 if gated else None
+        )
+        for name in ("optimal", "ekf")
+        for gated in (False, True)
+    }
+    return beyond_tracks.track_figure(track, runs, 1e-3)
+
+
+def _offset_figure():
+    sim = model.simulate(FIG2.c, 8, FIG2.rho, 0.0, np.random.default_rng(3))
+    runs = {}
+    for name in ("optimal", "ekf"):
+        f = online.start(name, FIG2.prior.mean, FIG2.prior.cov, rho=FIG2.rho)
+        est = [f.update(m) for m in sim.mu]
+        runs[name] = (np.array([e.mean for e in est]), np.array([e.cov for e in est]))
+    return beyond_stonesoup.offset_figure(runs, sim.states[:, 1], [5])
+
+
 def _frame_marginals():
     sim = model.simulate(FIG2.c, 6, FIG2.rho, 0.0, np.random.default_rng(3))
     names = FRAMES_NAMES[:5] + ("particle", "resample_move", "rbpf")
@@ -170,6 +198,8 @@ BUILDERS = {
     "smoothing_figure": _smoothing,
     "rbpf_convergence_figure": _rbpf_convergence,
     "frame_marginals_figure": _frame_marginals,
+    "track_figure": _track_figure,
+    "offset_figure": _offset_figure,
     "frames_study_figure": lambda: beyond_frames.frames_study_figure(
         _frames_run(), title="the paper's prior rule, q = 0.02"
     ),

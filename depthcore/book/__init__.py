@@ -13,8 +13,8 @@ figures and the texts its page glues, in that order:
   :mod:`~depthcore.book.beyond_sweeps`, :mod:`~depthcore.book.beyond_linear`,
   :mod:`~depthcore.book.beyond_frames`, :mod:`~depthcore.book.beyond_bound`,
   :mod:`~depthcore.book.beyond_hard`, :mod:`~depthcore.book.beyond_conjecture`,
-  :mod:`~depthcore.book.beyond_tracks`: the chapters beyond the paper, one
-  each, in the book's order.
+  :mod:`~depthcore.book.beyond_tracks`, :mod:`~depthcore.book.beyond_stonesoup`:
+  the chapters beyond the paper, one each, in the book's order.
 
 What several chapters share has one place each: :mod:`~depthcore.book.style`
 the plots' style, :mod:`~depthcore.book.notebook` what a page shows when it

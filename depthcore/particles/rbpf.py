@@ -703,6 +703,10 @@ def run(
     The bearings are taken one at a time (:func:`step`): the result after
     ``K`` frames is the filter's state, ready for more.
 
+    A missing bearing (``NaN``) is predicted through, ``rho`` may be given per
+    frame and ``steps`` between frames; the particles' depths at frame ``k``
+    are ``y_1`` plus the depth travelled.
+
     {parameters}
     n_particles : int
         ``J >= 2`` particles (depths) per replica.
@@ -715,10 +719,6 @@ def run(
     moves, ess_threshold, resampler
         The resampling schedule, :class:`Settings`: ``moves >= 0``, ``ess_threshold``
         in [0, 1] (0: never resample, importance sampling of the depth from its prior).
-
-    A missing bearing (``NaN``) is predicted through, ``rho`` may be given per
-    frame and ``steps`` between frames; the particles' depths at frame ``k``
-    are ``y_1`` plus the depth travelled.
 
     Returns
     -------
