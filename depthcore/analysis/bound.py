@@ -42,8 +42,8 @@ Two readings of ``I_k``, both in the recursion above:
   any Gaussian depth, whose density is positive at ``y = 0``.
 
 :func:`against_bound` sets estimates' errors and claimed SDs, trial by trial,
-against a bound, with Monte Carlo standard errors, and flags a claimed SD
-below it.
+against a bound, with Monte Carlo standard errors, and flags a mean claimed SD
+below it (a claim to beat the bound, which its errors may or may not bear out).
 
 Tracks as they come (:mod:`depthcore.problem.frames`). The motion with a step
 ``s_k`` is ``y_{k+1} = y_k + s_k``, ``x_{k+1} = x_k + s_k v_k``,
@@ -708,9 +708,14 @@ def against_bound(errors, sds, bound_sd, z: float = Z) -> dict:
 
     The RMSE ``sqrt(mean(e**2))`` has the standard error
     ``sd(e**2) / (2 sqrt(T) RMSE)`` (the delta method), the mean claimed SD
-    ``sd(s) / sqrt(T)``. A filter is flagged *overconfident* where its mean
-    claimed SD lies more than ``z`` standard errors below the bound: it claims
-    an uncertainty that no estimator achieves.
+    ``sd(s) / sqrt(T)``. A filter is flagged ``"overconfident"`` where its mean
+    claimed SD lies more than ``z`` standard errors below the bound. What that
+    means depends on the bound: below a bound conditional on the truth it
+    claims a precision no unbiased estimator has at that truth (a biased one
+    may have it); below a posterior bound, one that no estimator has on average
+    over the truths the bound averages over, though at one truth some may. The
+    flag does not look at the errors: whether the filter is overconfident
+    there, its RMSE against its mean claimed SD says.
 
     Parameters
     ----------

@@ -47,10 +47,16 @@ covariance by its Jacobian), the predictions at frame ``k`` correspond through
 by the second-order remainder of ``phi_k`` over the update's step:
 ``u_k = phi_k(z_bar) + J (z_k - z_bar)`` where the inverse-depth EKF's mean maps
 to ``phi_k(z_k)`` (``z_bar`` the predicted mean, ``J`` the Jacobian of
-``phi_k`` there). The remainder vanishes when the update leaves the inverse
-depth unchanged (``phi_k`` is linear in ``(a, s)`` at fixed ``w``), so the
-filters coincide when the depth is known, and differ at second order in the
-spread otherwise.
+``phi_k`` there): the modified-polar Gaussian is the inverse-depth one carried
+by the tangent of ``phi_k`` at the predicted mean, not at the updated one. The
+remainder vanishes when the update leaves the inverse depth unchanged
+(``phi_k`` is linear in ``(a, s)`` at fixed ``w``), so the filters coincide
+when the depth is known. Otherwise the next step linearises each filter at a
+different point, and the tangents there differ at first order in the update's
+step, weighted by the inverse depth's spread. That is no small remainder when
+the prior is broad: on Figure 2's bearings with the paper's prior the inverse
+depth is still almost unknown after the second bearing (its SD above one), and
+the two filters' depth SDs at time 3 differ more than twofold.
 
 **Uneven steps** (:mod:`depthcore.problem.frames`). Over a step ``s`` of the
 depth (``y_{k+1} = y_k + s``, ``x_{k+1} = x_k + s v_k``, ``v_{k+1} = v_k + a``
