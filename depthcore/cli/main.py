@@ -36,7 +36,7 @@ from depthcore.problem import checks, frames
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian
 from depthcore.registry.filters import FILTERS, RBPF_REPLICAS, names
 from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE, default_prior
-from depthcore.studies import monte_carlo, reproduce
+from depthcore.studies import monte_carlo, reproduce, tasks
 from depthcore.studies import trials as study_trials
 
 #: Largest ``study --trials``: a limit on run time (the study streams its trials in
@@ -56,6 +56,8 @@ PARTICLES_IN_FLIGHT = 1_000_000
 #: for the importance sampler on five frames, 10 times that for the
 #: Rao-Blackwellised filter), shown by the progress bar.
 MAX_PARTICLES = PARTICLES_IN_FLIGHT // RBPF_REPLICAS
+#: Largest ``study --workers``: a limit on the local processes started.
+MAX_WORKERS = 64
 #: Smallest ``study --particles``: the weighted covariance of the three-dimensional
 #: state, which the study scores, is singular with fewer.
 MIN_PARTICLES = 4
@@ -437,8 +439,13 @@ def _cmd_study(args) -> str:
     if args.truth == [monte_carlo.PRIOR_TRUTH]:
         _refuse_ignored(
             args,
-            "--truth prior (it checks the optimal filter alone)",
-            {"filters": "--filters", "particles": "--particles"},
+            "--truth prior (it checks the optimal filter alone, in this process)",
+            {
+                "filters": "--filters",
+                "particles": "--particles",
+                "workers": "--workers",
+                "scheduler": "--scheduler",
+            },
         )
         if args.prior == "paper":
             raise ValueError(
@@ -468,24 +475,45 @@ def _cmd_study(args) -> str:
     if args.truth is not None:
         truth = _truth(args.truth)
         _check_limits("--truth", truth, MU_MAX)
-    result = _with_bar(
-        "study",
-        "trial",
-        lambda progress: monte_carlo.study(
-            truth=truth,
-            rho=args.rho,
-            trials=args.trials,
-            seed=args.seed,
-            prior=args.prior or "paper",
-            names=names,
-            n_particles=args.particles,
-            chunk=_chunk(names, args.particles),
-            progress=progress,
-            frames=args.frames,
-            process_noise=q,
-        ),
-    )
+    with tasks.cluster(*_cluster(args)) as client:
+        result = _with_bar(
+            "study", "trial", lambda progress: _study(args, truth, names, q, client, progress)
+        )
     return cli_text.as_json(result) if args.json else cli_text.format_study(result)
+
+
+def _cluster(args) -> tuple:
+    """``study``'s ``--workers`` and ``--scheduler``, checked, for :func:`tasks.cluster`."""
+    if args.workers is not None and args.scheduler is not None:
+        raise ValueError(
+            "--workers and --scheduler: give one of them (a local cluster, or a running one)"
+        )
+    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
+        raise ValueError(
+            f"--workers must be a number of local worker processes, 1 to {MAX_WORKERS}, "
+            f"got {args.workers}"
+        )
+    if args.scheduler is not None and not args.scheduler.strip():
+        raise ValueError("--scheduler must be a scheduler's address (tcp://host:8786), got ''")
+    return args.workers, args.scheduler
+
+
+def _study(args, truth, names, q, client, progress) -> dict:
+    """:func:`monte_carlo.study` with ``study``'s arguments, its chunks on ``client``."""
+    return monte_carlo.study(
+        truth=truth,
+        rho=args.rho,
+        trials=args.trials,
+        seed=args.seed,
+        prior=args.prior or "paper",
+        names=names,
+        n_particles=args.particles,
+        chunk=_chunk(names, args.particles),
+        progress=progress,
+        frames=args.frames,
+        process_noise=q,
+        client=client,
+    )
 
 
 # --- refusals in the user's words -------------------------------------------------------
@@ -508,6 +536,8 @@ _FLAGS = {
     "particles": "--particles",
     "frames": "--frames",
     "out": "--out",
+    "workers": "--workers",
+    "scheduler": "--scheduler",
 }
 
 #: The arguments a refusal blames when the library names none of them.
@@ -821,6 +851,20 @@ def _add_study_arguments(sub, common) -> None:
         st,
         "",
         "; with Q > 0 the filters that assume a constant velocity (particle) cannot be named",
+    )
+    st.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help=f"run the chunks of trials on a local Dask cluster of N worker processes, 1 to "
+        f"{MAX_WORKERS} (default: in this process); the result is the same, bit for bit",
+    )
+    st.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run the chunks of trials on the running Dask cluster whose scheduler is at "
+        "ADDRESS (tcp://host:8786; its workers must have the same depthcore); the result is "
+        "the same, bit for bit",
     )
     _add_json(st, _cmd_study)
 

@@ -32,7 +32,10 @@ its workers must import the same depthcore).
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
+import socket
 from collections.abc import Callable, Iterable
 
 import numpy as np
@@ -65,26 +68,123 @@ def chunk_seeds(seed, n: int) -> list[np.random.SeedSequence]:
     return checks.spawn(seed, n)
 
 
-def connect(address: str, timeout: float = CONNECT_TIMEOUT):
+def connect(address: str, timeout: float = CONNECT_TIMEOUT, name: str = "scheduler"):
     """A :class:`distributed.Client` of the scheduler at ``address``.
 
     Raises
     ------
     ValueError
-        Naming ``scheduler`` when no scheduler answers at ``address`` within
+        Naming ``name`` when no scheduler answers at ``address`` within
         ``timeout`` seconds.
     """
     if not isinstance(address, str) or not address.strip():
-        raise ValueError(f"scheduler must be a scheduler's address, got {address!r}")
+        raise ValueError(f"{name} must be a scheduler's address, got {address!r}")
     from distributed import Client
 
+    address = address.strip()
     try:
-        return Client(address.strip(), timeout=timeout, set_as_default=False)
-    except (OSError, TimeoutError, ValueError) as exc:
-        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        kind = _identity(address, timeout)
+    except Exception as exc:  # noqa: BLE001 - whatever answers, or not, is one refusal
+        reason = _one_line(exc) or type(exc).__name__
         raise ValueError(
-            f"scheduler: no scheduler answers at {address!r} within {timeout:g} s ({reason})"
+            f"{name}: no scheduler answers at {address!r} within {timeout:g} s ({reason})"
         ) from None
+    if kind != "Scheduler":
+        raise ValueError(f"{name}: {address!r} is not a Dask scheduler (it is a {kind!r})")
+    return Client(address, timeout=timeout, set_as_default=False)
+
+
+def _one_line(exc) -> str:
+    return " ".join(str(exc).split())[:160]
+
+
+def _identity(address: str, timeout: float) -> str:
+    """The type of the Dask server at ``address`` (``"Scheduler"``), asked within ``timeout`` s.
+
+    Asked in a thread of its own, so that it also works under a running event
+    loop (a notebook's), and before a client is made, which would wait longer.
+    """
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+
+    from distributed.comm import connect as comm_connect
+    from distributed.comm import parse_address, parse_host_port
+
+    scheme, location = parse_address(address)
+    if scheme in ("tcp", "tls"):  # a closed port refuses at once; Dask would retry until timeout
+        socket.create_connection(parse_host_port(location), timeout=timeout).close()
+
+    async def ask():
+        comm = await comm_connect(address, timeout=timeout)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            reply = await asyncio.wait_for(comm.read(), timeout)
+        finally:
+            comm.abort()
+        return reply.get("type") if isinstance(reply, dict) else type(reply).__name__
+
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, ask()).result()
+
+
+def _quiet() -> None:
+    """Keep Dask's log messages below errors off stderr: a study prints nothing."""
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+
+
+@contextlib.contextmanager
+def cluster(workers: int | None = None, scheduler: str | None = None):
+    """A client for a study's chunks, closed on leaving: the context of ``client=``.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Start a local cluster of ``workers`` processes of one thread each
+        (``distributed.LocalCluster``, no dashboard), closed on leaving.
+    scheduler : str, optional
+        The address of a running scheduler (``tcp://host:8786``) to connect to
+        (within :data:`CONNECT_TIMEOUT` seconds).
+
+    Yields
+    ------
+    distributed.Client or None
+        None when neither is given: the chunks run in this process, and
+        nothing of Dask is imported.
+
+    Raises
+    ------
+    ValueError
+        Naming ``workers`` (not an integer >= 1, or given with ``scheduler``)
+        or ``scheduler`` (no scheduler answers there).
+    """
+    if workers is not None and scheduler is not None:
+        raise ValueError("workers: give workers or a scheduler, not both")
+    if workers is None and scheduler is None:
+        yield None
+        return
+    if scheduler is not None:
+        client = connect(scheduler)
+        _quiet()
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    workers = checks.count(workers, "workers")
+    from distributed import Client, LocalCluster
+
+    _quiet()
+    with (
+        LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        ) as local,
+        Client(local, set_as_default=False) as client,
+    ):
+        yield client
 
 
 def resolve(client=None):
@@ -95,7 +195,8 @@ def resolve(client=None):
     if not address:
         return None
     if address not in _clients:
-        _clients[address] = connect(address)
+        _clients[address] = connect(address, name=SCHEDULER)
+        _quiet()
     return _clients[address]
 
 
@@ -168,7 +269,7 @@ def _fold_on(client, task, items, fold, sizes, tick) -> int:
     pending, size_of, results = {}, {}, {}
     submitted = folded = 0
     exhausted = False
-    completed = as_completed()
+    completed = as_completed(loop=client.loop)
 
     def submit_more():
         nonlocal submitted, exhausted
