@@ -200,6 +200,12 @@ def resolve(client=None):
     return _clients[address]
 
 
+def disconnect() -> None:
+    """Close the clients :func:`resolve` made for :data:`SCHEDULER`'s addresses."""
+    while _clients:
+        _clients.popitem()[1].close()
+
+
 def window(client) -> int:
     """Chunks submitted ahead of the next one to fold: twice the cluster's threads, at least 2."""
     return max(2, 2 * sum(client.nthreads().values()))
