@@ -59,6 +59,7 @@ def _cluster(tmp_path, workers=2):
                 "distributed.cli.dask_worker",
                 *("--scheduler-file", str(file), "--host", "127.0.0.1", "--name", f"w{i}"),
                 *("--nworkers", "1", "--nthreads", "1", "--no-nanny", "--no-dashboard"),
+                *("--preload", "depthcore.studies.monte_carlo"),
                 log=log,
             )
         deadline = time.monotonic() + STARTUP
@@ -83,10 +84,9 @@ def _same(a: dict, b: dict) -> bool:
 def test_a_study_on_a_cluster_that_loses_a_worker_equals_it_in_process(tmp_path, monkeypatch):
     from distributed import Client
 
-    here = monte_carlo.study(**STUDY)
     small = {**STUDY, "trials": 24, "names": ("optimal", "particle")}
-    alone = monte_carlo.study(**small)
     with _cluster(tmp_path) as (address, procs), Client(address, timeout=STARTUP) as client:
+        here, alone = monte_carlo.study(**STUDY), monte_carlo.study(**small)  # as workers start
         client.wait_for_workers(2, timeout=STARTUP)
         names = {w["name"]: a for a, w in client.scheduler_info()["workers"].items()}
         calls, killed = [], []
