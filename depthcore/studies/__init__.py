@@ -21,8 +21,8 @@ the scheduler named by the environment variable ``DEPTHCORE_SCHEDULER`` when it
 is set. The results are the same, bit for bit, on any number of workers: each
 chunk draws from its own child of the study's seed, by chunk index, and the
 chunks are added in chunk order. From the command line,
-``depthcore study --workers 4`` starts four local worker processes and
-``depthcore study --scheduler tcp://host:8786`` uses a running cluster.
+``python -m depthcore study --workers 4`` starts four local worker processes and
+``python -m depthcore study --scheduler tcp://host:8786`` uses a running cluster.
 
 Where a new thing goes: a new study, or a new score, goes here; a study one
 chapter of the book alone runs goes with that chapter in :mod:`depthcore.book`.

@@ -5,11 +5,11 @@ Recommended import: ``from depthcore.studies import tasks``.
 :func:`fold_chunks` is where every study of :mod:`depthcore.studies` maps its
 chunks: it runs ``task(item)`` for each chunk's inputs and folds the results
 into the study's running sums **in chunk order**, whatever order they finish
-in. A chunk's inputs carry everything it draws from (its trials, and the
-seed of its own random numbers, a child of the study's seed by chunk index,
-:func:`chunk_seeds`), so a chunk's result does not depend on where, when or
-how often it runs, and the study's result is the same, bit for bit, in one
-process or on any number of workers.
+in. A chunk's inputs carry everything it draws from (its trials, drawn in
+order by the study, or its own seed, a child of the study's seed by chunk
+index, :func:`chunk_seeds`), so a chunk's result does not depend on where,
+when or how often it runs, and the study's result is the same, bit for bit,
+in one process or on any number of workers.
 
 Where the chunks run (:func:`resolve`):
 
@@ -24,7 +24,7 @@ Where the chunks run (:func:`resolve`):
   (``tcp://host:8786``) and no ``client``: on that cluster, through one client
   per process (how ``make records`` runs the book's studies on every core).
 
-From the command line: ``depthcore study ... --workers 4`` starts a local
+From the command line: ``python -m depthcore study --workers 4`` starts a local
 cluster of four processes for the study, ``--scheduler tcp://host:8786`` uses a
 running one (``dask scheduler`` and ``dask worker tcp://host:8786`` start one;
 its workers must import the same depthcore).
