@@ -56,8 +56,6 @@ PARTICLES_IN_FLIGHT = 1_000_000
 #: for the importance sampler on five frames, 10 times that for the
 #: Rao-Blackwellised filter), shown by the progress bar.
 MAX_PARTICLES = PARTICLES_IN_FLIGHT // RBPF_REPLICAS
-#: Largest ``study --workers``: a limit on the local processes started.
-MAX_WORKERS = 64
 #: Smallest ``study --particles``: the weighted covariance of the three-dimensional
 #: state, which the study scores, is singular with fewer.
 MIN_PARTICLES = 4
@@ -440,12 +438,7 @@ def _cmd_study(args) -> str:
         _refuse_ignored(
             args,
             "--truth prior (it checks the optimal filter alone, in this process)",
-            {
-                "filters": "--filters",
-                "particles": "--particles",
-                "workers": "--workers",
-                "scheduler": "--scheduler",
-            },
+            {k: f"--{k}" for k in ("filters", "particles", "workers", "scheduler")},
         )
         if args.prior == "paper":
             raise ValueError(
@@ -475,45 +468,18 @@ def _cmd_study(args) -> str:
     if args.truth is not None:
         truth = _truth(args.truth)
         _check_limits("--truth", truth, MU_MAX)
-    with tasks.cluster(*_cluster(args)) as client:
+    if args.workers is not None and args.scheduler is not None:
+        raise ValueError("--workers and --scheduler: give one (a local cluster, or a running one)")
+    options = dict(
+        truth=truth, rho=args.rho, trials=args.trials, seed=args.seed, prior=args.prior or "paper"
+    )
+    options.update(names=names, n_particles=args.particles, chunk=_chunk(names, args.particles))
+    options.update(frames=args.frames, process_noise=q)
+    with tasks.cluster(args.workers, args.scheduler) as client:
         result = _with_bar(
-            "study", "trial", lambda progress: _study(args, truth, names, q, client, progress)
+            "study", "trial", lambda p: monte_carlo.study(**options, progress=p, client=client)
         )
     return cli_text.as_json(result) if args.json else cli_text.format_study(result)
-
-
-def _cluster(args) -> tuple:
-    """``study``'s ``--workers`` and ``--scheduler``, checked, for :func:`tasks.cluster`."""
-    if args.workers is not None and args.scheduler is not None:
-        raise ValueError(
-            "--workers and --scheduler: give one of them (a local cluster, or a running one)"
-        )
-    if args.workers is not None and not 1 <= args.workers <= MAX_WORKERS:
-        raise ValueError(
-            f"--workers must be a number of local worker processes, 1 to {MAX_WORKERS}, "
-            f"got {args.workers}"
-        )
-    if args.scheduler is not None and not args.scheduler.strip():
-        raise ValueError("--scheduler must be a scheduler's address (tcp://host:8786), got ''")
-    return args.workers, args.scheduler
-
-
-def _study(args, truth, names, q, client, progress) -> dict:
-    """:func:`monte_carlo.study` with ``study``'s arguments, its chunks on ``client``."""
-    return monte_carlo.study(
-        truth=truth,
-        rho=args.rho,
-        trials=args.trials,
-        seed=args.seed,
-        prior=args.prior or "paper",
-        names=names,
-        n_particles=args.particles,
-        chunk=_chunk(names, args.particles),
-        progress=progress,
-        frames=args.frames,
-        process_noise=q,
-        client=client,
-    )
 
 
 # --- refusals in the user's words -------------------------------------------------------
@@ -852,19 +818,19 @@ def _add_study_arguments(sub, common) -> None:
         "",
         "; with Q > 0 the filters that assume a constant velocity (particle) cannot be named",
     )
+    same = "the same result, bit for bit"
     st.add_argument(
         "--workers",
         type=int,
         metavar="N",
-        help=f"run the chunks of trials on a local Dask cluster of N worker processes, 1 to "
-        f"{MAX_WORKERS} (default: in this process); the result is the same, bit for bit",
+        help=f"run the trials on a local Dask "
+        f"cluster of N processes, 1 to {tasks.MAX_WORKERS} (default: in this process); {same}",
     )
     st.add_argument(
         "--scheduler",
         metavar="ADDRESS",
-        help="run the chunks of trials on the running Dask cluster whose scheduler is at "
-        "ADDRESS (tcp://host:8786; its workers must have the same depthcore); the result is "
-        "the same, bit for bit",
+        help="run the trials on the Dask cluster "
+        f"whose scheduler is at ADDRESS (tcp://host:8786, workers with this depthcore); {same}",
     )
     _add_json(st, _cmd_study)
 

@@ -45,6 +45,9 @@ from depthcore.problem import checks
 #: The environment variable naming a scheduler's address that studies run on when given no client.
 SCHEDULER = "DEPTHCORE_SCHEDULER"
 
+#: Most worker processes :func:`cluster` starts.
+MAX_WORKERS = 64
+
 #: Seconds to wait for a scheduler named by address before refusing it.
 CONNECT_TIMEOUT = 5.0
 
@@ -139,7 +142,7 @@ def cluster(workers: int | None = None, scheduler: str | None = None):
     Parameters
     ----------
     workers : int, optional
-        Start a local cluster of ``workers`` processes of one thread each
+        Start a local cluster of ``workers`` processes (1 to :data:`MAX_WORKERS`) of one thread each
         (``distributed.LocalCluster``, no dashboard), closed on leaving.
     scheduler : str, optional
         The address of a running scheduler (``tcp://host:8786``) to connect to
@@ -170,7 +173,13 @@ def cluster(workers: int | None = None, scheduler: str | None = None):
         finally:
             client.close()
         return
-    workers = checks.count(workers, "workers")
+    if isinstance(workers, bool) or not (
+        isinstance(workers, (int, np.integer)) and 1 <= workers <= MAX_WORKERS
+    ):
+        raise ValueError(
+            f"workers must be a number of local worker processes, 1 to {MAX_WORKERS}, "
+            f"got {workers!r}"
+        )
     from distributed import Client, LocalCluster
 
     _quiet()
