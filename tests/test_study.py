@@ -94,10 +94,13 @@ def _direct_scores(truth, est):
 
 
 def test_streamed_scores_equal_those_of_all_trials_at_once():
-    # The study draws the noise and the particles from the first two children
-    # of the seed: redo it without chunks and score every trial at once.
+    # The study draws the noise from the seed's first child and the particles of
+    # chunk k from its second child's child k: redo it without chunks and score
+    # every trial at once.
     seed, n = 9, 40
-    noise, particles = (np.random.default_rng(s) for s in checks.spawn(seed, 2))
+    noise_seed, particle_seed = checks.spawn(seed, 2)
+    noise = np.random.default_rng(noise_seed)
+    particles = np.random.default_rng(checks.spawn(particle_seed, 1)[0])
     trials = study_trials.simulate(SCENARIOS["fig2"].c, 1 / 200, n, noise)
     est = study_trials.run_filters(trials, NAMES, particles, 300)
     one = monte_carlo.study(trials=n, seed=seed, chunk=n, n_particles=300)

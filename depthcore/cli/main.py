@@ -36,7 +36,7 @@ from depthcore.problem import checks, frames
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian
 from depthcore.registry.filters import FILTERS, RBPF_REPLICAS, names
 from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE, default_prior
-from depthcore.studies import monte_carlo, reproduce
+from depthcore.studies import monte_carlo, reproduce, tasks
 from depthcore.studies import trials as study_trials
 
 #: Largest ``study --trials``: a limit on run time (the study streams its trials in
@@ -437,8 +437,8 @@ def _cmd_study(args) -> str:
     if args.truth == [monte_carlo.PRIOR_TRUTH]:
         _refuse_ignored(
             args,
-            "--truth prior (it checks the optimal filter alone)",
-            {"filters": "--filters", "particles": "--particles"},
+            "--truth prior (it checks the optimal filter alone, in this process)",
+            {k: f"--{k}" for k in ("filters", "particles", "workers", "scheduler")},
         )
         if args.prior == "paper":
             raise ValueError(
@@ -468,23 +468,17 @@ def _cmd_study(args) -> str:
     if args.truth is not None:
         truth = _truth(args.truth)
         _check_limits("--truth", truth, MU_MAX)
-    result = _with_bar(
-        "study",
-        "trial",
-        lambda progress: monte_carlo.study(
-            truth=truth,
-            rho=args.rho,
-            trials=args.trials,
-            seed=args.seed,
-            prior=args.prior or "paper",
-            names=names,
-            n_particles=args.particles,
-            chunk=_chunk(names, args.particles),
-            progress=progress,
-            frames=args.frames,
-            process_noise=q,
-        ),
+    if args.workers is not None and args.scheduler is not None:
+        raise ValueError("--workers and --scheduler: give one (a local cluster, or a running one)")
+    options = dict(
+        truth=truth, rho=args.rho, trials=args.trials, seed=args.seed, prior=args.prior or "paper"
     )
+    options.update(names=names, n_particles=args.particles, chunk=_chunk(names, args.particles))
+    options.update(frames=args.frames, process_noise=q)
+    with tasks.cluster(args.workers, args.scheduler) as client:
+        result = _with_bar(
+            "study", "trial", lambda p: monte_carlo.study(**options, progress=p, client=client)
+        )
     return cli_text.as_json(result) if args.json else cli_text.format_study(result)
 
 
@@ -508,6 +502,8 @@ _FLAGS = {
     "particles": "--particles",
     "frames": "--frames",
     "out": "--out",
+    "workers": "--workers",
+    "scheduler": "--scheduler",
 }
 
 #: The arguments a refusal blames when the library names none of them.
@@ -821,6 +817,20 @@ def _add_study_arguments(sub, common) -> None:
         st,
         "",
         "; with Q > 0 the filters that assume a constant velocity (particle) cannot be named",
+    )
+    same = "the same result, bit for bit"
+    st.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help=f"run the trials on a local Dask "
+        f"cluster of N processes, 1 to {tasks.MAX_WORKERS} (default: in this process); {same}",
+    )
+    st.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="run the trials on the Dask cluster "
+        f"whose scheduler is at ADDRESS (tcp://host:8786, workers with this depthcore); {same}",
     )
     _add_json(st, _cmd_study)
 

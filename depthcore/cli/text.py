@@ -447,6 +447,8 @@ examples:
   python -m depthcore study --trials 500 --seed 1
   python -m depthcore study --filters ekf ukf --rho 0.01 --json
   python -m depthcore study --frames 10 --process-noise 0.01 --trials 200
+  python -m depthcore study --trials 20000 --workers 4
+  python -m depthcore study --trials 20000 --scheduler tcp://host:8786
 
 {STUDY_LEGEND}""",
     "figures": """\

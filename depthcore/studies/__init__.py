@@ -11,7 +11,18 @@
 * :mod:`~depthcore.studies.hardness`: where the problem is hard, across
   parallax, prior and depth;
 * :mod:`~depthcore.studies.reproduce`: the paper's tables reproduced, and the
-  curves of its figures.
+  curves of its figures;
+* :mod:`~depthcore.studies.tasks`: where the studies' chunks of trials run, in
+  this process or as tasks of a Dask cluster, folded in chunk order.
+
+On a cluster: the studies take ``client=`` (a ``distributed.Client``; default
+None, this process, with nothing of Dask imported), and with none given run on
+the scheduler named by the environment variable ``DEPTHCORE_SCHEDULER`` when it
+is set. The results are the same, bit for bit, on any number of workers: each
+chunk draws from its own child of the study's seed, by chunk index, and the
+chunks are added in chunk order. From the command line,
+``python -m depthcore study --workers 4`` starts four local worker processes and
+``python -m depthcore study --scheduler tcp://host:8786`` uses a running cluster.
 
 Where a new thing goes: a new study, or a new score, goes here; a study one
 chapter of the book alone runs goes with that chapter in :mod:`depthcore.book`.

@@ -32,6 +32,7 @@ def frames_study(
     rho: float = SCENARIOS["fig2"].rho,
     particle_trials: int | None = None,
     n_particles: int = study_trials.PARTICLES,
+    client=None,
 ) -> dict:
     """:func:`depthcore.studies.monte_carlo.study` at each number of frames, its depth scores
     gathered.
@@ -63,6 +64,10 @@ def frames_study(
     particle_trials : int, optional
         Trials per ``N`` of the random filters; default ``trials``.
     n_particles : int
+    client : distributed.Client, optional
+        Run every study's chunks as tasks of its cluster
+        (:mod:`depthcore.studies.tasks`); default in this process. The result
+        is the same, bit for bit.
 
     Returns
     -------
@@ -86,7 +91,9 @@ def frames_study(
     groups = [(plain, trials)] + ([(("optimal",) + random, particle_trials)] if random else [])
     rows = {name: [] for name in names}
     paired = []
-    same = dict(seed=seed, prior=prior, n_particles=n_particles, process_noise=process_noise)
+    same = dict(
+        seed=seed, prior=prior, n_particles=n_particles, process_noise=process_noise, client=client
+    )
     for n in frames:
         for group, t in groups:
             r = monte_carlo.study(

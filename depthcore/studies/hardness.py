@@ -65,7 +65,7 @@ from depthcore.problem import checks, model
 from depthcore.problem.gaussian import paper_prior_means
 from depthcore.registry.filters import FILTERS, check_names
 from depthcore.studies import pairs as study_pairs
-from depthcore.studies import scores
+from depthcore.studies import scores, tasks
 from depthcore.studies import trials as study_trials
 from depthcore.studies.scores import LEVELS
 
@@ -384,7 +384,9 @@ def hard_cell(
     return out
 
 
-def hard_study(cells, rho: float, trials: int, seed, names=NAMES, frames: int = 3) -> list[dict]:
+def hard_study(
+    cells, rho: float, trials: int, seed, names=NAMES, frames: int = 3, client=None
+) -> list[dict]:
     """:func:`hard_cell` for each setting, with independent streams spawned from ``seed``.
 
     Parameters
@@ -392,6 +394,10 @@ def hard_study(cells, rho: float, trials: int, seed, names=NAMES, frames: int = 
     cells : sequence of (truth, prior_scale, prior_velocity)
     rho, trials, seed, names, frames
         As for :func:`hard_cell`.
+    client : distributed.Client, optional
+        Run the cells as tasks of its cluster (:mod:`depthcore.studies.tasks`);
+        default in this process. Cell ``k`` draws from the seed's child ``k``
+        wherever it runs, so the result is the same, bit for bit.
 
     Returns
     -------
@@ -400,11 +406,19 @@ def hard_study(cells, rho: float, trials: int, seed, names=NAMES, frames: int = 
     cells = list(cells)
     if not cells:
         raise ValueError("cells must not be empty")
-    seeds = checks.spawn(checks.seed_sequence(seed), len(cells))
-    return [
-        hard_cell(t, rho, s, v, trials, sd, names, frames)
+    seeds = tasks.chunk_seeds(checks.seed_sequence(seed), len(cells))
+    items = (
+        (t, rho, s, v, trials, sd, names, frames)
         for (t, s, v), sd in zip(cells, seeds, strict=True)
-    ]
+    )
+    out = []
+    tasks.fold_chunks(_cell, items, lambda k, cell: out.append(cell), client=client)
+    return out
+
+
+def _cell(item) -> dict:
+    """:func:`hard_cell` of one cell's arguments: a task of :func:`hard_study`."""
+    return hard_cell(*item)
 
 
 def paired_comparison(cell: dict, reading: str, a: str, b: str) -> dict:

@@ -36,8 +36,9 @@ paper's prior rule; they are counted and left out of every score.
 
 :func:`study` streams the trials: it draws and filters them in chunks of at
 most :data:`CHUNK` and keeps only running sums (:class:`~depthcore.studies.scores.Tally`), so its
-memory
-does not grow with the number of trials.
+memory does not grow with the number of trials. The chunks are filtered in
+this process or, given a ``client``, as tasks of a Dask cluster
+(:mod:`depthcore.studies.tasks`), with the same result bit for bit.
 
 References
 ----------
@@ -56,12 +57,37 @@ from depthcore.problem import checks
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry.filters import FILTERS, NAMES, check_names
+from depthcore.studies import tasks
 from depthcore.studies.pairs import CoMoments, trial_scores
 from depthcore.studies.scores import CALIBRATION_LEVELS, Tally, coverage_se
 from depthcore.studies.trials import PARTICLES, run_filters, simulate
 
 #: Trials drawn and filtered together by :func:`study`: its memory is that of one chunk.
 CHUNK = 100
+
+
+def filter_chunk(item) -> tuple:
+    """One chunk of :func:`study`, its trials' filters run: a task of :mod:`.tasks`.
+
+    Parameters
+    ----------
+    item : tuple
+        ``(trials, names, seed, n_particles)``: the chunk's
+        :class:`~depthcore.studies.trials.Trials`, the filters, the seed of its
+        random filters' draws (``None`` when none is named) and their particles.
+
+    Returns
+    -------
+    tuple
+        ``(trials, estimates)``: ``estimates`` is
+        :func:`~depthcore.studies.trials.run_filters`'s ``{name: Estimates}``,
+        ``None`` when the chunk has no valid trial.
+    """
+    part, names, seed, n_particles = item
+    if not len(part.mu):
+        return part, None
+    rng = None if seed is None else np.random.default_rng(seed)
+    return part, run_filters(part, names, rng, n_particles)
 
 
 def study(
@@ -77,6 +103,7 @@ def study(
     frames: int = 3,
     process_noise: float = 0.0,
     paired: bool = False,
+    client=None,
 ) -> dict:
     """The whole study; returns a JSON-ready dict.
 
@@ -98,10 +125,10 @@ def study(
         ``"optimal"`` is not among ``names`` it is not run and every
         filter's ``hellinger_depth`` is ``None``.
     chunk : int
-        Trials drawn and filtered together (default :data:`CHUNK`);
-        ``progress(done, total)`` is called after each chunk with the trials
-        drawn so far and ``trials``. Memory grows with ``chunk`` (and
-        ``n_particles``), not with ``trials``: only running sums are kept.
+        Trials drawn and filtered together (default :data:`CHUNK`), one task
+        of :func:`~depthcore.studies.tasks.fold_chunks`. Memory grows with
+        ``chunk`` (and ``n_particles``), not with ``trials``: only running
+        sums are kept.
     n_particles : int
         Particles per trial of the particle filter.
     frames : int
@@ -125,14 +152,26 @@ def study(
         :func:`~depthcore.studies.pairs.ratio_se`,
         :func:`~depthcore.studies.pairs.paired_difference_se`). Its memory
         grows with the square of the number of filters, not with ``trials``.
+    progress : callable, optional
+        ``progress(done, total)``, called as each chunk completes, with the
+        trials of the chunks completed so far and ``trials``.
+    client : distributed.Client, optional
+        Filter the chunks as tasks of its cluster (:mod:`depthcore.studies.tasks`);
+        default in this process (or on the cluster named by
+        ``DEPTHCORE_SCHEDULER``). The result is the same, bit for bit.
 
     Notes
     -----
-    The noise and the particle filter draw from two streams spawned from the
+    The noise and the random filters draw from the first two children of the
     one seed, whichever filters run: a filter's results do not depend on
-    which other filters are named. The noise does not depend on ``chunk``
-    either, so the scores of the deterministic filters agree across chunk
-    sizes to rounding; the particle filter's draws do depend on ``chunk``.
+    which other filters are named. The noise is drawn from one stream, chunk
+    after chunk, so it does not depend on ``chunk``, and the scores of the
+    deterministic filters agree across chunk sizes to rounding. The random
+    filters of chunk ``k`` draw from the second child's child ``k``
+    (:func:`~depthcore.studies.tasks.chunk_seeds`): their draws depend on
+    ``chunk``, not on where or in what order the chunks run. The chunks'
+    results are added in chunk order, so the result does not depend on the
+    number of workers either.
     """
     truth = SCENARIOS["fig2"].c if truth is None else truth
     names = check_names(names)
@@ -153,34 +192,42 @@ def study(
             f"noise {q:g}; leave them out"
         )
     seed = checks.seed_sequence(seed)
-    noise_rng, particle_rng = (np.random.default_rng(s) for s in checks.spawn(seed, 2))
-    tallies = comoments = None
+    noise_seed, particle_seed = checks.spawn(seed, 2)
+    noise_rng = np.random.default_rng(noise_seed)
+    sizes = [min(chunk, int(trials) - start) for start in range(0, int(trials), chunk)]
+    random = any(FILTERS[n].random for n in names)
+    seeds = tasks.chunk_seeds(particle_seed, len(sizes)) if random else [None] * len(sizes)
+
+    def items():
+        # the noise is drawn here, chunk after chunk from one stream, as it
+        # would be in one chunk: the trials do not depend on the chunks
+        for size, chunk_seed in zip(sizes, seeds, strict=True):
+            part = simulate(truth, rho, size, noise_rng, prior, frames=frames, process_noise=q)
+            yield part, names, chunk_seed, n_particles
+
+    tallies = comoments = part = None
     n_valid = n_rejected = 0
-    for start in range(0, int(trials), chunk):
-        part = simulate(
-            truth,
-            rho,
-            min(chunk, int(trials) - start),
-            noise_rng,
-            prior,
-            frames=frames,
-            process_noise=q,
-        )
+
+    def fold(k, result):
+        nonlocal tallies, comoments, part, n_valid, n_rejected
+        part, estimates = result
         if tallies is None:
             tallies = {name: Tally(part.truth) for name in names}
         n_rejected += part.n_rejected
-        if len(part.mu):
-            n_valid += len(part.mu)
-            estimates = run_filters(part, names, particle_rng, n_particles)
-            for name, est in estimates.items():
-                tallies[name].add(est)
-            if paired:
-                per_trial = {n: trial_scores(e, part.truth) for n, e in estimates.items()}
-                if comoments is None:
-                    comoments = CoMoments([(n, k) for n in names for k in per_trial[n]])
-                comoments.add(np.column_stack([per_trial[n][k] for n, k in comoments.columns]))
-        if progress is not None:
-            progress(min(start + chunk, int(trials)), int(trials))
+        if estimates is None:
+            return
+        n_valid += len(part.mu)
+        for name, est in estimates.items():
+            tallies[name].add(est)
+        if paired:
+            per_trial = {n: trial_scores(e, part.truth) for n, e in estimates.items()}
+            if comoments is None:
+                comoments = CoMoments([(n, k) for n in names for k in per_trial[n]])
+            comoments.add(np.column_stack([per_trial[n][k] for n, k in comoments.columns]))
+
+    tasks.fold_chunks(
+        filter_chunk, items(), fold, sizes, int(trials), progress=progress, client=client
+    )
     if n_valid == 0:
         raise ValueError(
             f"truth and rho leave no valid trial: all {trials} noisy triples are degenerate "

@@ -1,0 +1,325 @@
+"""A study's chunks of trials as tasks: in this process, or on a Dask cluster.
+
+Recommended import: ``from depthcore.studies import tasks``.
+
+:func:`fold_chunks` is where every study of :mod:`depthcore.studies` maps its
+chunks: it runs ``task(item)`` for each chunk's inputs and folds the results
+into the study's running sums **in chunk order**, whatever order they finish
+in. A chunk's inputs carry everything it draws from (its trials, drawn in
+order by the study, or its own seed, a child of the study's seed by chunk
+index, :func:`chunk_seeds`), so a chunk's result does not depend on where,
+when or how often it runs, and the study's result is the same, bit for bit,
+in one process or on any number of workers.
+
+Where the chunks run (:func:`resolve`):
+
+* ``client=None`` and no :data:`SCHEDULER` in the environment: one after the
+  other in this process, importing nothing of Dask;
+* ``client``, a :class:`distributed.Client`: as tasks of its cluster's
+  scheduler, at most :func:`window` of them submitted ahead of the next
+  chunk to fold, so that the memory held stays that of a few chunks. A
+  worker lost mid-study has its chunks run again by the scheduler; each
+  chunk is folded and counted once, by its index;
+* the environment variable :data:`SCHEDULER` set to a scheduler's address
+  (``tcp://host:8786``) and no ``client``: on that cluster, through one client
+  per process (how ``make records`` runs the book's studies on every core).
+
+From the command line: ``python -m depthcore study --workers 4`` starts a local
+cluster of four processes for the study, ``--scheduler tcp://host:8786`` uses a
+running one (``dask scheduler`` and ``dask worker tcp://host:8786`` start one;
+its workers must import the same depthcore).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import socket
+from collections.abc import Callable, Iterable
+
+import numpy as np
+
+from depthcore.problem import checks
+
+#: The environment variable naming a scheduler's address that studies run on when given no client.
+SCHEDULER = "DEPTHCORE_SCHEDULER"
+
+#: Most worker processes :func:`cluster` starts.
+MAX_WORKERS = 64
+
+#: Seconds to wait for a scheduler named by address before refusing it.
+CONNECT_TIMEOUT = 5.0
+
+_clients: dict = {}
+
+
+def chunk_seeds(seed, n: int) -> list[np.random.SeedSequence]:
+    """The seeds of ``n`` chunks: the children ``0 .. n - 1`` of ``seed``, by chunk index.
+
+    Parameters
+    ----------
+    seed : int or numpy.random.SeedSequence
+    n : int
+        Number of chunks, >= 0.
+
+    Returns
+    -------
+    list of numpy.random.SeedSequence, length n
+        Chunk ``k``'s seed is the same whatever ``n`` (``seed``'s child ``k``).
+    """
+    return checks.spawn(seed, n)
+
+
+def connect(address: str, timeout: float = CONNECT_TIMEOUT, name: str = "scheduler"):
+    """A :class:`distributed.Client` of the scheduler at ``address``.
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` when no scheduler answers at ``address`` within
+        ``timeout`` seconds.
+    """
+    if not isinstance(address, str) or not address.strip():
+        raise ValueError(f"{name} must be a scheduler's address, got {address!r}")
+    from distributed import Client
+
+    address = address.strip()
+    try:
+        kind = _identity(address, timeout)
+    except Exception as exc:  # noqa: BLE001 - whatever answers, or not, is one refusal
+        reason = _one_line(exc) or type(exc).__name__
+        raise ValueError(
+            f"{name}: no scheduler answers at {address!r} within {timeout:g} s ({reason})"
+        ) from None
+    if kind != "Scheduler":
+        raise ValueError(f"{name}: {address!r} is not a Dask scheduler (it is a {kind!r})")
+    return Client(address, timeout=timeout, set_as_default=False)
+
+
+def _one_line(exc) -> str:
+    return " ".join(str(exc).split())[:160]
+
+
+def _identity(address: str, timeout: float) -> str:
+    """The type of the Dask server at ``address`` (``"Scheduler"``), asked within ``timeout`` s.
+
+    Asked in a thread of its own, so that it also works under a running event
+    loop (a notebook's), and before a client is made, which would wait longer.
+    """
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+
+    from distributed.comm import connect as comm_connect
+    from distributed.comm import parse_address, parse_host_port
+
+    scheme, location = parse_address(address)
+    if scheme in ("tcp", "tls"):  # a closed port refuses at once; Dask would retry until timeout
+        socket.create_connection(parse_host_port(location), timeout=timeout).close()
+
+    async def ask():
+        comm = await comm_connect(address, timeout=timeout)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            reply = await asyncio.wait_for(comm.read(), timeout)
+        finally:
+            comm.abort()
+        return reply.get("type") if isinstance(reply, dict) else type(reply).__name__
+
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, ask()).result()
+
+
+def _quiet() -> None:
+    """Keep Dask's log messages below errors off stderr: a study prints nothing."""
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+
+
+@contextlib.contextmanager
+def cluster(workers: int | None = None, scheduler: str | None = None):
+    """A client for a study's chunks, closed on leaving: the context of ``client=``.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Start a local cluster of ``workers`` processes (1 to :data:`MAX_WORKERS`) of one thread each
+        (``distributed.LocalCluster``, no dashboard), closed on leaving.
+    scheduler : str, optional
+        The address of a running scheduler (``tcp://host:8786``) to connect to
+        (within :data:`CONNECT_TIMEOUT` seconds).
+
+    Yields
+    ------
+    distributed.Client or None
+        None when neither is given: the chunks run in this process, and
+        nothing of Dask is imported.
+
+    Raises
+    ------
+    ValueError
+        Naming ``workers`` (not an integer >= 1, or given with ``scheduler``)
+        or ``scheduler`` (no scheduler answers there).
+    """
+    if workers is not None and scheduler is not None:
+        raise ValueError("workers: give workers or a scheduler, not both")
+    if workers is None and scheduler is None:
+        yield None
+        return
+    if scheduler is not None:
+        client = connect(scheduler)
+        _quiet()
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    if isinstance(workers, bool) or not (
+        isinstance(workers, (int, np.integer)) and 1 <= workers <= MAX_WORKERS
+    ):
+        raise ValueError(
+            f"workers must be a number of local worker processes, 1 to {MAX_WORKERS}, "
+            f"got {workers!r}"
+        )
+    from distributed import Client, LocalCluster
+
+    _quiet()
+    with (
+        LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        ) as local,
+        Client(local, set_as_default=False) as client,
+    ):
+        yield client
+
+
+def resolve(client=None):
+    """The client chunks run on: ``client``, else :data:`SCHEDULER`'s, else None (this process)."""
+    if client is not None:
+        return client
+    address = os.environ.get(SCHEDULER, "").strip()
+    if not address:
+        return None
+    if address not in _clients:
+        _clients[address] = connect(address, name=SCHEDULER)
+        _quiet()
+    return _clients[address]
+
+
+def disconnect() -> None:
+    """Close the clients :func:`resolve` made for :data:`SCHEDULER`'s addresses."""
+    while _clients:
+        _clients.popitem()[1].close()
+
+
+def window(client) -> int:
+    """Chunks submitted ahead of the next one to fold: twice the cluster's threads, at least 2."""
+    return max(2, 2 * sum(client.nthreads().values()))
+
+
+def fold_chunks(
+    task: Callable,
+    items: Iterable,
+    fold: Callable[[int, object], None],
+    sizes: Iterable[int] | None = None,
+    total: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    client=None,
+) -> int:
+    """Run ``task(item)`` for each chunk's ``item`` and fold the results in chunk order.
+
+    Parameters
+    ----------
+    task : callable
+        ``task(item) -> result``, a module-level function (pickled by name
+        for a cluster's workers), deterministic given ``item``.
+    items : iterable
+        Each chunk's inputs, in chunk order; read lazily, as chunks are
+        submitted (one at a time in this process).
+    fold : callable
+        ``fold(k, result)``, called for ``k = 0, 1, ...`` in that order, once per chunk.
+    sizes : iterable of int, optional
+        The trials of each chunk, in chunk order, for ``progress``; default 1 each.
+    total : int, optional
+        What ``progress`` counts up to; default the number of chunks.
+    progress : callable, optional
+        ``progress(done, total)`` as each chunk completes (in any order on a
+        cluster), ``done`` the trials of the chunks completed so far.
+    client : distributed.Client, optional
+        Run the chunks as tasks of its scheduler (see :func:`resolve`).
+
+    Returns
+    -------
+    int
+        Number of chunks.
+    """
+    items = iter(items)
+    sizes = None if sizes is None else iter(sizes)
+    client = resolve(client)
+    done = 0
+
+    def tick(size):
+        nonlocal done
+        done += size
+        if progress is not None:
+            progress(done, done if total is None else total)
+
+    if client is None:
+        k = 0
+        for k, item in enumerate(items, start=1):
+            fold(k - 1, task(item))
+            tick(1 if sizes is None else next(sizes))
+        return k
+    return _fold_on(client, task, items, fold, sizes, tick)
+
+
+def _fold_on(client, task, items, fold, sizes, tick) -> int:
+    """:func:`fold_chunks` on a cluster: a window of futures, folded by index."""
+    from distributed import as_completed
+
+    ahead, token = window(client), _token()
+    pending, size_of, results = {}, {}, {}
+    submitted = folded = 0
+    exhausted = False
+    completed = as_completed(loop=client.loop)
+
+    def submit_more():
+        nonlocal submitted, exhausted
+        while not exhausted and submitted < folded + ahead:
+            try:
+                item = next(items)
+            except StopIteration:
+                exhausted = True
+                return
+            key = f"depthcore-chunk-{token}-{submitted}"
+            pending[key] = (submitted, client.submit(task, item, pure=False, key=key))
+            size_of[submitted] = 1 if sizes is None else next(sizes)
+            completed.add(pending[key][1])
+            submitted += 1
+
+    try:
+        submit_more()
+        while folded < submitted:
+            future = next(completed)
+            if future.key not in pending:
+                continue  # a chunk counts once, however often it ran
+            k, _ = pending.pop(future.key)
+            results[k] = future.result()
+            future.release()
+            tick(size_of.pop(k))
+            while folded in results:
+                fold(folded, results.pop(folded))
+                folded += 1
+            submit_more()
+    finally:
+        for _, future in pending.values():
+            future.cancel()
+    return submitted
+
+
+def _token() -> str:
+    """A fresh hex token, so that two studies' chunks never share a task key."""
+    return os.urandom(8).hex()

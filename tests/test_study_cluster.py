@@ -1,0 +1,187 @@
+"""A study's chunks as tasks of a Dask cluster: the same result, bit for bit, a lost worker and all.
+
+The cluster is real: a ``dask scheduler`` and two ``dask worker`` processes
+on the loopback interface, started here and killed in ``finally``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+from depthcore.cli.main import main
+from depthcore.studies import monte_carlo, tasks
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+#: Seconds the cluster may take to start, and a study on it to finish.
+STARTUP, RUN = 60, 120
+
+#: A small study with a deterministic and a random filter, in chunks of 8 trials.
+STUDY = dict(trials=48, seed=5, chunk=8, names=("optimal", "ekf", "particle"), n_particles=150)
+
+
+def _dask(*args, log):
+    return subprocess.Popen(
+        [sys.executable, "-m", *args], env=ENV, stdout=log, stderr=subprocess.STDOUT
+    )
+
+
+@contextmanager
+def _cluster(tmp_path, workers=2):
+    """``(address, {name: process})`` of a scheduler and ``workers`` workers on 127.0.0.1.
+
+    All are killed on leaving, or after :data:`RUN` seconds (a study waiting on
+    a cluster that hangs then fails instead of waiting for ever).
+    """
+    file = tmp_path / "scheduler.json"
+    log = open(tmp_path / "cluster.log", "w")  # noqa: SIM115 - closed in finally
+    procs = {}
+    watchdog = threading.Timer(STARTUP + RUN, lambda: [p.kill() for p in procs.values()])
+    watchdog.start()
+    try:
+        procs["scheduler"] = _dask(
+            "distributed.cli.dask_scheduler",
+            *("--host", "127.0.0.1", "--port", "0", "--no-dashboard"),
+            *("--scheduler-file", str(file)),
+            log=log,
+        )
+        for i in range(workers):
+            procs[f"w{i}"] = _dask(
+                "distributed.cli.dask_worker",
+                *("--scheduler-file", str(file), "--host", "127.0.0.1", "--name", f"w{i}"),
+                *("--nworkers", "1", "--nthreads", "1", "--no-nanny", "--no-dashboard"),
+                *("--preload", "depthcore.studies.monte_carlo"),
+                log=log,
+            )
+        deadline = time.monotonic() + STARTUP
+        while not (file.is_file() and file.read_text().strip()):
+            assert time.monotonic() < deadline, "the scheduler did not start"
+            time.sleep(0.1)
+        yield json.loads(file.read_text())["address"], procs
+    finally:
+        watchdog.cancel()
+        for p in procs.values():
+            p.kill()
+        for p in procs.values():
+            p.wait(timeout=30)
+        log.close()
+
+
+def _same(a: dict, b: dict) -> bool:
+    """Equal bit for bit: floats written with repr, NaN included."""
+    return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+
+
+def test_a_study_on_a_cluster_that_loses_a_worker_equals_it_in_process(tmp_path, monkeypatch):
+    from distributed import Client
+
+    small = {**STUDY, "trials": 24, "names": ("optimal", "particle")}
+    with _cluster(tmp_path) as (address, procs), Client(address, timeout=STARTUP) as client:
+        here, alone = monte_carlo.study(**STUDY), monte_carlo.study(**small)  # as workers start
+        client.wait_for_workers(2, timeout=STARTUP)
+        names = {w["name"]: a for a, w in client.scheduler_info()["workers"].items()}
+        calls, killed = [], []
+
+        def progress(done, total):
+            calls.append((done, total))
+            if not killed:  # after the first chunk: kill a worker that holds a running chunk
+                busy = client.processing()
+                victim = max(("w0", "w1"), key=lambda n: len(busy.get(names[n], ())))
+                procs[victim].kill()
+                killed.append((victim, len(busy.get(names[victim], ()))))
+
+        start = time.monotonic()
+        there = monte_carlo.study(**STUDY, client=client, progress=progress)
+        assert time.monotonic() - start < RUN
+        # on the one worker left, the cluster named by DEPTHCORE_SCHEDULER rather than a client
+        monkeypatch.setenv(tasks.SCHEDULER, address)
+        try:
+            named = monte_carlo.study(**small)
+            assert tasks.resolve() is not None
+        finally:
+            tasks.disconnect()
+    assert killed and killed[0][1] >= 1  # a chunk was running on the worker killed
+    assert _same(there, here) and _same(named, alone)
+    assert there["trials"] == STUDY["trials"]
+    # each chunk counted once, as it completed: 6 chunks of 8 trials
+    done = [d for d, _ in calls]
+    assert len(calls) == 6 and {t for _, t in calls} == {48}
+    assert done == sorted(done) and done[-1] == 48
+    assert all(b - a == 8 for a, b in zip([0] + done, done, strict=False))
+
+
+def _cli(*args) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "depthcore", *args],
+        env=ENV,
+        capture_output=True,
+        text=True,
+        timeout=RUN,
+        cwd=ROOT,
+    )
+
+
+def test_the_command_line_on_two_local_workers_prints_the_same_json(capsys):
+    study = ["study", "--trials", "40", "--filters", "ekf", "optimal", "--json"]
+    assert main(study) == 0
+    alone = capsys.readouterr().out
+    cluster = _cli(*study, "--workers", "2")
+    assert cluster.returncode == 0, cluster.stderr
+    assert cluster.stdout == alone and json.loads(alone)["trials"] == 40
+    assert cluster.stderr == ""
+
+
+def test_without_a_cluster_nothing_of_dask_is_imported():
+    code = (
+        "import sys; from depthcore.cli.main import main; "
+        "s = main(['study', '--trials', '3', '--filters', 'ekf', '--json']); "
+        "sys.exit(10 + s if 'distributed' in sys.modules or 'dask' in sys.modules else s)"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code], env=ENV, capture_output=True, text=True, timeout=RUN
+    )
+    assert r.returncode == 0, r.stderr
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--workers", "0"], "--workers must be a number of local worker processes, 1 to 64"),
+        (["--workers", "-3"], "--workers must be a number of local worker processes"),
+        (["--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"], "--workers and --scheduler"),
+        (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler: no scheduler answers at"),
+        (["--scheduler", "nonsense"], "--scheduler: no scheduler answers at 'nonsense'"),
+        (["--scheduler", " "], "--scheduler must be a scheduler's address"),
+        (["--truth", "prior", "--prior", "fixed", "--workers", "2"], "--workers: not used by"),
+    ],
+)
+def test_the_command_line_refuses_a_bad_cluster_in_one_line(capsys, args, message):
+    start = time.monotonic()
+    assert main(["study", "--trials", "3", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err
+    assert time.monotonic() - start < 2 * tasks.CONNECT_TIMEOUT
+
+
+def test_chunks_are_folded_in_order_and_counted_once():
+    folded, ticks = [], []
+    n = tasks.fold_chunks(
+        lambda x: x * x,
+        iter(range(5)),
+        lambda k, r: folded.append((k, r)),
+        sizes=[3, 3, 3, 3, 1],
+        total=13,
+        progress=lambda d, t: ticks.append((d, t)),
+    )
+    assert n == 5 and folded == [(k, k * k) for k in range(5)]
+    assert ticks == [(3, 13), (6, 13), (9, 13), (12, 13), (13, 13)]
+    assert [s.spawn_key for s in tasks.chunk_seeds(7, 3)] == [(0,), (1,), (2,)]
