@@ -24,8 +24,9 @@ REFERENCE = re.compile(r"\{eval\}`(\w+)\(\"([^\"`]*)\"\)`")
 ROLE = re.compile(r"\{([\w:-]+)\}`")
 DIRECTIVE = re.compile(r"^\s*(`{3,}|:{3,})\{([\w:-]+)\}", re.M)
 CODE_CELL = re.compile(r"^(`{3,})\{code-cell\}.*?^\1\s*$", re.S | re.M)
-# What jupyterlab-myst 2.7.0 renders (myst-parser's roles and directives, and
-# the cell's {eval} expressions evaluated in the kernel).
+# What jupyterlab-myst 2.7.0 renders (myst-parser's roles and directives, mystmd's
+# exercises, solutions, theorems and proofs, and the cell's {eval} expressions
+# evaluated in the kernel).
 LAB_ROLES = {"eval", "math", "sub", "sup", "abbr", "kbd", "code"}
 LAB_DIRECTIVES = {
     "code-cell",
@@ -45,6 +46,11 @@ LAB_DIRECTIVES = {
     "margin",
     "table",
     "list-table",
+    "exercise",
+    "solution-start",
+    "solution-end",
+    "prf:theorem",
+    "prf:proof",
 }
 # Pages with no kernel (no GlueLog, no code cells) and the book's own directives:
 # JupyterLab shows these as jupyterlab-myst does, which resolves no reference
@@ -84,6 +90,11 @@ def test_citations_pages_and_sections_resolve_as_the_book_writes_them(book):
     assert crossref.BookReferences(ROOT / "book" / "api").doc("/book/fig5").href == "../fig5.md"
     assert book.ref("sec-cost") == "What the optimal filter costs"
     assert book.ref("below <sec-resample-move>") == "below"
+    # Theorems as sphinx-proof's {prf:ref} names them, numbered in their own count.
+    assert book.prf_ref("thm-1") == "Theorem 1"
+    assert book.prf_ref("the theorem <thm-1>") == "the theorem"
+    with pytest.raises(ValueError, match="theorem 'thm-9': no labelled theorem"):
+        book.prf_ref("thm-9")
 
 
 @pytest.mark.parametrize(
@@ -130,10 +141,12 @@ def test_page_equations_numbers_a_page_s_equations_as_the_book(book):
 def test_the_toc_order_numbers_a_figure_or_equation_once_each():
     text = "# T\n\n$$\nx\n$$ (eq-a)\n\n```{figure}\n:name: fig-a\n\n{eval}`f`\n\nC.\n```\n"
     text += "\n(sec-a)=\n## S\n\n```{math}\n:label: eq-b\ny\n```\n\n$$\nz\n$$\n"
+    text += "\n```{prf:theorem}\n:label: thm-a\n\nP.\n```\n\n```{prf:proof}\nQ.\n```\n"
     assert crossref.scan_page(text) == {
         "title": "T",
         "equations": ["eq-a", "eq-b"],
         "figures": ["fig-a"],
+        "theorems": ["thm-a"],
         "sections": {"sec-a": "S"},
     }
     toc = {"root": "a", "parts": [{"chapters": [{"file": "b", "sections": [{"file": "c"}]}]}]}

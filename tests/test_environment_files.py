@@ -70,6 +70,8 @@ def test_requirements_pin_every_package_exactly():
         "filterpy",
         "pytest-xdist",
         "sphinx-mathjax-offline",
+        "sphinx-exercise",
+        "sphinx-proof",
         "setuptools",
         "jupyterlab",
     ):

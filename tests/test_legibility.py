@@ -40,6 +40,7 @@ from depthcore.book import (
     beyond_study,
     beyond_sweeps,
     beyond_tracks,
+    intuition,
     paper,
     style,
 )
@@ -169,6 +170,7 @@ BUILDERS = {
     "figure": lambda: paper.figure("fig3", n=101),
     "figure, extended": lambda: paper.figure("fig2", n=101, filters=FILTER_NAMES),
     "translating_point": lambda: paper.translating_point(),
+    "bearings_figure": lambda: intuition.bearings_figure(FIG2.mu, [4.0, 6.0, 9.0], 6.0),
     "readings_figure": lambda: paper.readings_figure("fig3", n=201),
     "first_update_figure": lambda: beyond_filters.first_update_figure(
         beyond_filters.first_update(FIG2)

@@ -3,10 +3,11 @@
 A book page writes each reference of its text as an ``{eval}`` role whose
 expression names the role the book renders and its target:
 ``{eval}`cite_t("maybank1990")```, ``{eval}`cite_p("kalman1960,prince2012")```,
-``{eval}`eq("eq-7")```, ``{eval}`numref("fig-2")```, ``{eval}`ref("sec-cost")```
-and ``{eval}`doc("fig5")``` (``"text <target>"`` as in the roles). The book
-(``tools/sphinx/depthcore_book.py``) renders each as the role it names
-(``{cite:t}``, ``{cite:p}``, ``{eq}``, ``{numref}``, ``{ref}``, ``{doc}``),
+``{eval}`eq("eq-7")```, ``{eval}`numref("fig-2")```, ``{eval}`ref("sec-cost")```,
+``{eval}`doc("fig5")``` and ``{eval}`prf_ref("thm-1")``` (``"text <target>"`` as in
+the roles). The book (``tools/sphinx/depthcore_book.py``) renders each as the role
+it names (``{cite:t}``, ``{cite:p}``, ``{eq}``, ``{numref}``, ``{ref}``, ``{doc}``,
+sphinx-proof's ``{prf:ref}``),
 resolved by Sphinx; in JupyterLab, whose MyST renderer (jupyterlab-myst)
 knows one notebook at a time and no bibliography, the expression is
 evaluated in the page's kernel, where :class:`depthcore.book.notebook.GlueLog`
@@ -17,7 +18,8 @@ sources as Sphinx does:
   (``_toc.yml``) and, within a page, in the order of the text, one counter
   for the whole book each (the book's ``numfig_secnum_depth: 0``): a labelled
   display equation (``$$ ... $$ (label)``, or a ``{math}`` directive with a
-  ``:label:``) and a figure with a ``:name:``;
+  ``:label:``) and a figure with a ``:name:``; theorems (a ``{prf:theorem}``
+  with a ``:label:``) likewise, in a count of their own;
 * a page is named by its first heading, a section label by the heading that
   follows it;
 * a citation is written as sphinxcontrib-bibtex's ``author_year`` style (the
@@ -42,6 +44,9 @@ from pathlib import Path
 #: The book's captions and references of figures (its ``numfig_format``).
 FIGURE_FORMAT = "Figure %s"
 
+#: A theorem as sphinx-proof's ``{prf:ref}`` names it.
+THEOREM_FORMAT = "Theorem %s"
+
 #: The roles written as ``{eval}`` expressions: function name -> the book's role.
 ROLES = {
     "cite_t": "cite:t",
@@ -50,6 +55,7 @@ ROLES = {
     "numref": "numref",
     "ref": "ref",
     "doc": "doc",
+    "prf_ref": "prf:ref",
 }
 
 _FENCE = re.compile(r"^(`{3,}|:{3,})\{([^}]+)\}(.*)$")
@@ -131,9 +137,10 @@ def scan_page(text: str) -> dict:
     dict
         ``"title"`` (its first heading, or ``None``), ``"equations"`` (labels
         of its numbered equations), ``"figures"`` (names of its named
-        figures) and ``"sections"`` (``{label: heading}`` of its section labels).
+        figures), ``"theorems"`` (labels of its labelled theorems) and
+        ``"sections"`` (``{label: heading}`` of its section labels).
     """
-    found = {"title": None, "equations": [], "figures": [], "sections": {}}
+    found = {"title": None, "equations": [], "figures": [], "theorems": [], "sections": {}}
     lines = text.splitlines()
     fence = None  # (marker, directive) of the open directive
     pending_target = None
@@ -149,6 +156,8 @@ def scan_page(text: str) -> dict:
                 found["equations"].append(option.group(2).strip())
             if option and name in _FIGURE_DIRECTIVES and option.group(1) == "name":
                 found["figures"].append(option.group(2).strip())
+            if option and name == "prf:theorem" and option.group(1) == "label":
+                found["theorems"].append(option.group(2).strip())
             continue
         opening = _FENCE.match(stripped)
         if opening:
@@ -241,6 +250,7 @@ class BookReferences:
         index = {
             "equations": {},
             "figures": {},
+            "theorems": {},
             "sections": {},
             "titles": {},
             "entries": {},
@@ -254,7 +264,7 @@ class BookReferences:
             index["titles"][page] = found["title"]
             index["page_equations"][page] = found["equations"]
             index["sections"].update(found["sections"])
-            for kind in ("equations", "figures"):
+            for kind in ("equations", "figures", "theorems"):
                 for label in found[kind]:
                     index[kind][label] = str(len(index[kind]) + 1)
         for bib in config.get("bibtex_bibfiles", []):
@@ -327,6 +337,14 @@ class BookReferences:
         if label not in sections:
             raise ValueError(f"label {label!r}: no section of the book has this label")
         return Resolved(sections[label] if explicit is None else explicit)
+
+    def prf_ref(self, text: str) -> Resolved:
+        """``{prf:ref}`label``` or ``{prf:ref}`text <label>```: "Theorem 1", or the text."""
+        explicit, label = split_target(text)
+        numbers = self._load()["theorems"]
+        if label not in numbers:
+            raise ValueError(f"theorem {label!r}: no labelled theorem of the book has this label")
+        return Resolved(THEOREM_FORMAT % numbers[label] if explicit is None else explicit)
 
     def doc(self, text: str) -> PageLink:
         """``{doc}`page``` or ``{doc}`text <page>```: the page's title, or the text, as a link."""
