@@ -11,7 +11,9 @@
 * :mod:`~depthcore.studies.hardness`: where the problem is hard, across
   parallax, prior and depth;
 * :mod:`~depthcore.studies.reproduce`: the paper's tables reproduced, and the
-  curves of its figures.
+  curves of its figures;
+* :mod:`~depthcore.studies.verdicts`: what the replication found, one verdict
+  per figure and for Theorem 1, decided from those tables.
 
 Where a new thing goes: a new study, or a new score, goes here; a study one
 chapter of the book alone runs goes with that chapter in :mod:`depthcore.book`.
