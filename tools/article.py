@@ -61,7 +61,7 @@ COMMAND = "python tools/article.py"
 #: The figures the article shows: the book's, as vector PDF.
 FIGURES = tuple(f"figure{SCENARIOS[key].figure}.pdf" for key in SCENARIOS)
 #: The Monte Carlo study of the coverage, as book/beyond_study.md reads it from its record.
-STUDY = {"trials": 2000, "seed": 1, "prior": "paper", "paired": True}
+STUDY = readme.intro.COVERAGE_STUDY
 #: The noise levels of the small-noise limit of Eq. (8) (book/discrepancies.md).
 LIMIT_RHO = 1e-5
 #: The broad prior's covariance scale of that limit.

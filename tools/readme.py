@@ -30,7 +30,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from depthcore import SCENARIOS
-from depthcore.book import benchmark_tables, beyond_bound, intro, paper
+from depthcore.book import beyond_bound, intro, paper
 from depthcore.formatting import rho_label, sci
 from depthcore.problem.scenarios import REPORTED_DECIMALS
 from depthcore.provenance import benchmarks, records
@@ -145,26 +145,8 @@ def bound_texts() -> dict[str, str]:
 
 
 def cost_texts(bench: dict) -> dict[str, str]:
-    """The paper's filters' costs and the bank's against a particle filter, from the records."""
-    t = benchmark_tables.bench_texts("bench_optimal", bench["bench_optimal"])
-    t |= benchmark_tables.bench_texts("bench_bank", bench["bench_bank"])
-    triple = bench["bench_optimal"]["results"]["per_triple"]
-    matched = bench["bench_bank"]["results"]["matched_accuracy"]
-    assert float(t["opt_optimal_ekf_min"]) > 1 and matched["ratio"] > 1
-    figures = [SCENARIOS[key].figure for key in triple["keys"]]
-    dates = {bench[name]["date"][:10] for name in ("bench_optimal", "bench_bank")}
-    return {
-        "optimal_ekf_min": t["opt_optimal_ekf_min"],
-        "optimal_ekf_max": t["opt_optimal_ekf_max"],
-        "figures": _figures(figures),
-        "grid_ratio": t["opt_grid_ratio"],
-        "bank_trials": t["bank_matched_trials"],
-        "bank_frames": t["bank_matched_frames"],
-        "bank_particles": t["bank_matched_largest"],
-        "bank_ratio": t["bank_matched_ratio"],
-        "bank_error": t["bank_matched_largest_error"],
-        "date": " and ".join(sorted(dates)),
-    }
+    """The paper's filters' costs and the bank's against a particle filter (``intro.cost_texts``)."""
+    return intro.cost_texts(bench)
 
 
 def citation() -> str:

@@ -3,7 +3,9 @@
 Recommended import: ``from depthcore.book import intro``.
 
 The verdicts themselves come from :mod:`depthcore.studies.verdicts`; this module
-holds the extensions' headline: the study of the bound that
+holds the extensions' headline: the coverage study of book/beyond_study.md
+(:data:`COVERAGE_STUDY`), the costs in the benchmarks' records (:func:`cost_texts`)
+and the study of the bound that
 book/beyond_bound.md runs without process noise (:data:`BOUND_FRAMES`,
 :data:`BOUND_STUDY`: the page passes these to its chapter's ``bound_study``
 and reads its record) set against the Cramér–Rao bound (:func:`bound_texts`).
@@ -15,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore.analysis import bound
+from depthcore.book import benchmark_tables
 from depthcore.formatting import rho_label
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 from depthcore.problem.scenarios import SCENARIOS
@@ -39,6 +42,9 @@ BOUND_STUDY = dict(
     particle_trials=30,
     n_particles=100,
 )
+#: The Monte Carlo study of the coverage that book/beyond_study.md reads from its record
+#: (``depthcore.studies.monte_carlo.study`` at Figure 2's point and noise level).
+COVERAGE_STUDY = {"trials": 2000, "seed": 1, "prior": "paper", "paired": True}
 #: A filter "on the bound": its stated depth SD within this fraction of it (book/beyond_bound.md).
 NEAR = 0.10
 
@@ -96,4 +102,40 @@ def bound_texts(result: dict) -> dict[str, str]:
         "ekf_rmse": f"{ekf_rmse:.1f}",
         "z": f"{bound.Z:.2f}",
         "near": f"{100 * NEAR:g} %",
+    }
+
+
+def cost_texts(bench: dict) -> dict[str, str]:
+    """The paper's filters' costs and the bank's against a particle filter, from the records.
+
+    Parameters
+    ----------
+    bench : dict
+        The records of ``bench_optimal`` and ``bench_bank``, by name
+        (:func:`depthcore.provenance.benchmarks.read`).
+
+    Returns
+    -------
+    dict
+        The texts of the headline on the cost, by name.
+    """
+    t = benchmark_tables.bench_texts("bench_optimal", bench["bench_optimal"])
+    t |= benchmark_tables.bench_texts("bench_bank", bench["bench_bank"])
+    triple = bench["bench_optimal"]["results"]["per_triple"]
+    matched = bench["bench_bank"]["results"]["matched_accuracy"]
+    if not (float(t["opt_optimal_ekf_min"]) > 1 and matched["ratio"] > 1):
+        raise ValueError("the benchmarks' records do not bear out the headline on the cost")
+    figures = [SCENARIOS[key].figure for key in triple["keys"]]
+    dates = {bench[name]["date"][:10] for name in ("bench_optimal", "bench_bank")}
+    return {
+        "optimal_ekf_min": t["opt_optimal_ekf_min"],
+        "optimal_ekf_max": t["opt_optimal_ekf_max"],
+        "figures": "Figures " + ", ".join(str(f) for f in figures[:-1]) + f" and {figures[-1]}",
+        "grid_ratio": t["opt_grid_ratio"],
+        "bank_trials": t["bank_matched_trials"],
+        "bank_frames": t["bank_matched_frames"],
+        "bank_particles": t["bank_matched_largest"],
+        "bank_ratio": t["bank_matched_ratio"],
+        "bank_error": t["bank_matched_largest_error"],
+        "date": " and ".join(sorted(dates)),
     }
