@@ -145,7 +145,7 @@ def bound_texts() -> dict[str, str]:
 
 
 def cost_texts(bench: dict) -> dict[str, str]:
-    """The paper's filters' costs and the bank's against a particle filter (``intro.cost_texts``)."""
+    """The costs of the paper's filters and of the bank (``intro.cost_texts``)."""
     return intro.cost_texts(bench)
 
 
