@@ -22,9 +22,11 @@ from depthcore.formatting import rho_label
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 from depthcore.problem.scenarios import SCENARIOS
 
-#: The study of the bound that book/beyond_bound.md reads from its record, without process
-#: noise: its frames, trials, seed, filters, prior rule, particle trials and particles.
+#: The numbers of frames of the study of the bound that book/beyond_bound.md reads from
+#: its record, without process noise.
 BOUND_FRAMES = np.array([3, 5, 10, 20, 30])
+#: That study's trials, seed, filters, particle trials and particles (its prior rule
+#: is the paper's).
 BOUND_STUDY = dict(
     trials=150,
     seed=1,
@@ -45,7 +47,8 @@ BOUND_STUDY = dict(
 #: The Monte Carlo study of the coverage that book/beyond_study.md reads from its record
 #: (``depthcore.studies.monte_carlo.study`` at Figure 2's point and noise level).
 COVERAGE_STUDY = {"trials": 2000, "seed": 1, "prior": "paper", "paired": True}
-#: A filter "on the bound": its stated depth SD within this fraction of it (book/beyond_bound.md).
+#: A filter is "on the bound" when its stated depth SD lies within this fraction of it
+#: (book/beyond_bound.md).
 NEAR = 0.10
 
 

@@ -37,14 +37,17 @@ __all__ = [
     "verdicts",
 ]
 
-#: Theorem 1's check, as book/appendix.md makes it: the EKF's covariance with the
-#: theorem's prior and the second-order filter's agree to this, relative.
+#: The tolerance of Theorem 1's check, as book/appendix.md makes it; the EKF's covariance
+#: with the theorem's prior and the second-order filter's agree to this, relative.
 THEOREM_TOL = 1e-8
-#: The three verdicts.
+#: The verdict where the formulas as derived give what the paper prints or says.
 REPRODUCED = "reproduced"
+#: The verdict where they do so once an error of the print is corrected.
 CORRECTED = "reproduced under a corrected reading"
+#: The verdict where no reading of the formulas gives what the paper prints or says.
 NOT_REPRODUCED = "not reproduced"
-#: Figure 6's optimal and second-order filters "almost unaffected": their depth mean moves less.
+#: Figure 6's optimal and second-order filters count as "almost unaffected" when their
+#: depth means move by less than this.
 UNAFFECTED = 0.01
 #: The share of the prior's shift the EKF passes on, at least, to count as passing it through.
 PASSED = 0.75
