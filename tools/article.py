@@ -46,7 +46,7 @@ from depthcore.kalman import second_order  # noqa: E402
 from depthcore.problem import model  # noqa: E402
 from depthcore.problem.scenarios import REPORTED_DECIMALS, SCAN_TEXT  # noqa: E402
 from depthcore.provenance import environment, records  # noqa: E402
-from depthcore.studies import monte_carlo, reproduce  # noqa: E402
+from depthcore.studies import monte_carlo, reproduce, verdicts  # noqa: E402
 
 ARTICLE = ROOT / "article"
 SOURCE = ARTICLE / "article.tex"
@@ -61,7 +61,7 @@ COMMAND = "python tools/article.py"
 #: The figures the article shows: the book's, as vector PDF.
 FIGURES = tuple(f"figure{SCENARIOS[key].figure}.pdf" for key in SCENARIOS)
 #: The Monte Carlo study of the coverage, as book/beyond_study.md reads it from its record.
-STUDY = {"trials": 2000, "seed": 1, "prior": "paper", "paired": True}
+STUDY = readme.intro.COVERAGE_STUDY
 #: The noise levels of the small-noise limit of Eq. (8) (book/discrepancies.md).
 LIMIT_RHO = 1e-5
 #: The broad prior's covariance scale of that limit.
@@ -146,6 +146,9 @@ def paper_numbers() -> list[Number]:
             "Figures 2 and 3 with the prior mean G^-2 c",
         ),
     ]
+
+    for v in verdicts.verdicts():
+        out.append(Number(f"verdict-{v.page}", v.verdict, "studies.verdicts.verdicts", v.item))
 
     fig2, fig3 = SCENARIOS["fig2"], SCENARIOS["fig3"]
     broad = Gaussian(fig2.prior.mean, LIMIT_PRIOR * np.eye(3))

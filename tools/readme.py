@@ -29,18 +29,12 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-import numpy as np
-
-from depthcore import SCENARIOS, Gaussian
-from depthcore.analysis import bound
-from depthcore.book import benchmark_tables, beyond_bound, paper
+from depthcore import SCENARIOS
+from depthcore.book import beyond_bound, intro, paper
 from depthcore.formatting import rho_label, sci
-from depthcore.kalman import ekf, second_order
-from depthcore.problem import model
-from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 from depthcore.problem.scenarios import REPORTED_DECIMALS
 from depthcore.provenance import benchmarks, records
-from depthcore.studies import reproduce
+from depthcore.studies import verdicts
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
@@ -49,31 +43,12 @@ BLOCK = re.compile(r"(<!-- readme:(\w+) -->\n)(?:.*?\n)?(<!-- /readme:\2 -->)", 
 #: What the command line says when the README is not what this writes.
 COMMAND = "python tools/readme.py"
 
-#: Theorem 1's check, as book/appendix.md makes it: the EKF's covariance with the
-#: theorem's prior and the second-order filter's agree to this, relative.
-THEOREM_TOL = 1e-8
-#: The study of the bound that book/beyond_bound.md reads from its record, without process
-#: noise: its frames, trials, seed, filters, prior rule, particle trials and particles.
-BOUND_FRAMES = np.array([3, 5, 10, 20, 30])
-BOUND_STUDY = dict(
-    trials=150,
-    seed=1,
-    names=(
-        "optimal",
-        "second_order",
-        "ekf",
-        "inverse_depth",
-        "iterated",
-        "ukf",
-        "particle",
-        "rbpf",
-        "resample_move",
-    ),
-    particle_trials=30,
-    n_particles=100,
-)
-#: A filter "on the bound": its stated depth SD within this fraction of it (book/beyond_bound.md).
-NEAR = 0.10
+#: Theorem 1's check, as book/appendix.md makes it (:mod:`depthcore.studies.verdicts`).
+THEOREM_TOL = verdicts.THEOREM_TOL
+#: The study of the bound that book/beyond_bound.md reads (:mod:`depthcore.book.intro`).
+BOUND_FRAMES = intro.BOUND_FRAMES
+BOUND_STUDY = intro.BOUND_STUDY
+NEAR = intro.NEAR
 
 
 def bench_records() -> dict:
@@ -109,34 +84,26 @@ def paper_texts() -> dict[str, str]:
     reproduced), book/appendix.md (Theorem 1) and book/discrepancies.md (Eqs.
     (8) and (16), Figure 3's numbers, the noise in pixels), each cheap.
     """
-    printed, unmatched, figures = 0, [], []
-    for key, s in SCENARIOS.items():
-        for row in reproduce.comparison(key):
-            if row["id"] in ("opt", "so", "ekf") and row["reported_mean"] is not None:
-                printed += 2
-                figures += [s.figure] if s.figure not in figures else []
-                unmatched += [
-                    (key, row["id"], m) for m in ("mean", "sd") if not row[f"{m}_matches"]
-                ]
-    fig3 = {row["id"]: row for row in reproduce.comparison("fig3")}
+    n = verdicts.paper_numbers()
+    printed, unmatched = n["printed"], n["unmatched"]
+    figures = sorted(
+        {
+            SCENARIOS[key].figure
+            for key, rows in n["rows"].items()
+            if rows["opt"]["reported_mean"] is not None
+        }
+    )
+    fig3 = n["rows"]["fig3"]
     assert unmatched == [("fig3", "opt", "mean"), ("fig3", "opt", "sd")], unmatched
     assert fig3["opt_printed"]["mean_matches"] and not fig3["opt_printed"]["sd_matches"]
     assert fig3["opt"]["reported_sd"] == fig3["opt"]["reported_mean"]  # the SD repeats the mean
     assert fig3["so"]["sd_matches"] and not fig3["so_printed"]["sd_matches"]
-
-    theorem = 0.0
-    for key in ("fig2", "fig3"):
-        s = SCENARIOS[key]
-        prior = Gaussian(model.G(s.c, -2), s.prior.cov)  # Theorem 1's prior mean, G^-2 c
-        p3 = ekf.run(s.mu, s.rho, prior.mean, prior.cov).posterior.cov
-        d = second_order.run(s.mu, s.rho, prior.mean, prior.cov).cov
-        theorem = max(theorem, np.abs(np.linalg.solve(p3, d) - np.eye(3)).max())
-    assert theorem < THEOREM_TOL
+    assert n["theorem"] < THEOREM_TOL
 
     rho5 = SCENARIOS["fig5"].rho
-    pixels = model.noise_in_pixels(rho5)
+    pixels = n["pixels"]
     assert pixels > 1.5  # the paper: "about 1 pixel"
-    moments = reproduce.filter_moments(SCENARIOS["fig2"])
+    moments = n["moments"]["fig2"]
     ekf_ratio = moments["optimal"][1] / moments["ekf"][1]
     assert ekf_ratio > 4
     return {
@@ -159,10 +126,9 @@ def paper_texts() -> dict[str, str]:
 def bound_texts() -> dict[str, str]:
     """The EKF, the second-order filter and the iterated EKF against the Cramér–Rao bound.
 
-    Read from the record of book/beyond_bound.md's study without process noise, and
-    set against the bound as that page does.
+    :func:`depthcore.book.intro.bound_texts` of book/beyond_bound.md's study without
+    process noise, read from its record only.
     """
-    fig2 = SCENARIOS["fig2"]
     with _records_required():
         run = records.recorded(
             beyond_bound.bound_study,
@@ -175,57 +141,12 @@ def bound_texts() -> dict[str, str]:
             particle_trials=BOUND_STUDY["particle_trials"],
             n_particles=BOUND_STUDY["n_particles"],
         )
-    prior_cov = PAPER_PRIOR_SCALE * np.eye(3)
-    b = bound.posterior_bound(fig2.c, 3, int(BOUND_FRAMES[-1]), fig2.rho, prior_cov)
-    bound_sd = np.sqrt(b[BOUND_FRAMES - 1, 1, 1])
-    a = {
-        name: bound.against_bound(
-            run.result[name]["depth_error"], run.result[name]["depth_sd"], bound_sd
-        )
-        for name in ("ekf", "second_order", "iterated")
-    }
-    assert a["ekf"]["overconfident"].all()
-    ekf_rmse = a["ekf"]["rmse_ratio"][1:].min()
-    assert ekf_rmse > 1.5
-    for name in ("second_order", "iterated"):
-        x = a[name]
-        assert not x["overconfident"].any()
-        assert np.all(np.abs(x["rmse_ratio"] - 1) < bound.Z * x["rmse_ratio_se"]), name
-        assert np.all(np.abs(x["sd_ratio"] - 1) < NEAR), name
-    return {
-        "trials": f"{run.result['ekf']['depth_error'].shape[-1]}",
-        "rho2": rho_label(fig2.rho),
-        "n_first": f"{BOUND_FRAMES[0]}",
-        "n_second": f"{BOUND_FRAMES[1]}",
-        "n_last": f"{BOUND_FRAMES[-1]}",
-        "ekf_sd3": f"{a['ekf']['sd_ratio'][0]:.2f}",
-        "ekf_rmse": f"{ekf_rmse:.1f}",
-        "z": f"{bound.Z:.2f}",
-        "near": f"{100 * NEAR:g} %",
-    }
+    return intro.bound_texts(run.result)
 
 
 def cost_texts(bench: dict) -> dict[str, str]:
-    """The paper's filters' costs and the bank's against a particle filter, from the records."""
-    t = benchmark_tables.bench_texts("bench_optimal", bench["bench_optimal"])
-    t |= benchmark_tables.bench_texts("bench_bank", bench["bench_bank"])
-    triple = bench["bench_optimal"]["results"]["per_triple"]
-    matched = bench["bench_bank"]["results"]["matched_accuracy"]
-    assert float(t["opt_optimal_ekf_min"]) > 1 and matched["ratio"] > 1
-    figures = [SCENARIOS[key].figure for key in triple["keys"]]
-    dates = {bench[name]["date"][:10] for name in ("bench_optimal", "bench_bank")}
-    return {
-        "optimal_ekf_min": t["opt_optimal_ekf_min"],
-        "optimal_ekf_max": t["opt_optimal_ekf_max"],
-        "figures": _figures(figures),
-        "grid_ratio": t["opt_grid_ratio"],
-        "bank_trials": t["bank_matched_trials"],
-        "bank_frames": t["bank_matched_frames"],
-        "bank_particles": t["bank_matched_largest"],
-        "bank_ratio": t["bank_matched_ratio"],
-        "bank_error": t["bank_matched_largest_error"],
-        "date": " and ".join(sorted(dates)),
-    }
+    """The costs of the paper's filters and of the bank (``intro.cost_texts``)."""
+    return intro.cost_texts(bench)
 
 
 def citation() -> str:

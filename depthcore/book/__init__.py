@@ -5,6 +5,7 @@ the studies) knows nothing of the book; the modules here run it for the book's
 pages and show what it returns. A chapter's module holds its experiment, its
 figures and the texts its page glues, in that order:
 
+* :mod:`~depthcore.book.intro`: the intro's headline of the extensions;
 * :mod:`~depthcore.book.intuition`: the first chapter, why three bearings
   fix a depth (two fit every depth, the known step fixes the scale);
 * :mod:`~depthcore.book.paper`: the paper's own chapters, the model, the

@@ -174,13 +174,13 @@ def test_no_page_is_blank(pages):
 
 
 def test_the_intro_is_one_chapter_that_opens_with_its_first_paragraph(plain_text, pages):
-    assert re.search(r"1\.1 The problem .*1\.2 Three filters", plain_text), (
+    assert re.search(r"1\.1 What this replication found .*1\.2 Reading routes", plain_text), (
         "the intro's sections are not sections 1.1, 1.2, ... of one chapter"
     )
     opening = [i for i, page in enumerate(pages) if "This book is an executable account" in page]
     assert len(opening) == 1, "the intro's opening paragraph is not on one page"
     page = pages[opening[0]]
-    assert "INTRODUCTION" in page.upper() and "The problem" in page, (
+    assert "INTRODUCTION" in page.upper() and "What this replication found" in page, (
         "the intro's opening paragraph is not on the page of its chapter's title and first section"
     )
 
