@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy import integrate, stats
@@ -116,6 +118,18 @@ def test_mixture_of_one_is_the_gaussian():
     )
     b = predictive.gaussian(np.array([0.3, 5.0]), 0.0, 1.0)
     np.testing.assert_allclose(a, b, rtol=1e-13)
+
+
+def test_mixture_with_every_component_empty_predicts_nothing_without_a_warning():
+    # a particle cloud wholly behind the camera: every log weight -inf in the first row
+    log_w = np.array([[-np.inf, -np.inf], [0.0, -np.inf]])
+    means, var = np.array([[0.1, 0.2], [0.1, 0.3]]), np.full((2, 2), 1e-2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        log_d, tail = predictive.mixture(np.array([0.1, 0.2]), log_w, means, var)
+    assert np.isnan(log_d[0]) and np.isnan(tail[0])
+    one = predictive.gaussian(0.2, 0.1, 1e-2)
+    assert log_d[1] == pytest.approx(one[0], rel=1e-13) and tail[1] == pytest.approx(one[1])
 
 
 def test_gate():

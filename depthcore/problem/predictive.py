@@ -90,18 +90,23 @@ def mixture(mu, log_weights, means, var):
     Returns
     -------
     log_density, tail : ndarray, shape (...)
+        NaN where every component is empty (every log weight ``-inf``, as for a
+        particle cloud wholly behind the camera): such a mixture predicts nothing.
     """
     from scipy.special import log_ndtr, logsumexp
 
     mu = np.asarray(mu, dtype=float)[..., None]
     log_w = np.asarray(log_weights, dtype=float)
-    log_w = log_w - logsumexp(log_w, axis=-1, keepdims=True)
+    total = logsumexp(log_w, axis=-1, keepdims=True)
+    empty = np.isneginf(total[..., 0])
+    log_w = np.where(np.isneginf(total), -np.inf, log_w - np.where(empty[..., None], 0.0, total))
     means, var = np.asarray(means, dtype=float), np.asarray(var, dtype=float)
     z = (mu - means) / np.sqrt(var)
     log_density = logsumexp(log_w - 0.5 * (_LOG_2PI + np.log(var) + z * z), axis=-1)
     log_lower = logsumexp(log_w + log_ndtr(z), axis=-1)
     log_upper = logsumexp(log_w + log_ndtr(-z), axis=-1)
-    return log_density, _two_sided(log_lower, log_upper)
+    tail = _two_sided(log_lower, log_upper)
+    return np.where(empty, np.nan, log_density), np.where(empty, np.nan, tail)
 
 
 def skipped(tail, present, gate_value) -> np.ndarray:

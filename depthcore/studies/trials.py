@@ -327,7 +327,13 @@ def run_filters(
         try:
             est = f(mu, rho, pm, pc, **options)
         except ValueError as exc:
-            # the bearings were drawn here, so no bearing is the user's to mend
+            # the bearings were drawn here, so no bearing is the user's to mend: the blame is
+            # the particle count where the filter names it, else the choice of filters
+            if str(exc).startswith("n_particles"):
+                raise ValueError(
+                    f"n_particles: the {name} filter has no answer for a simulated trial "
+                    f"({exc}); use more particles, or leave {name} out"
+                ) from None
             raise ValueError(
                 f"filters: the {name} filter has no answer for a simulated trial ({exc}); "
                 f"leave {name} out, or lower the process noise or the noise level"
