@@ -15,7 +15,7 @@ Where the chunks run (:func:`resolve`):
 
 * ``client=None`` and no :data:`SCHEDULER` in the environment: one after the
   other in this process, importing nothing of Dask;
-* ``client``, a :class:`distributed.Client`: as tasks of its cluster's
+* ``client``, a ``distributed.Client``: as tasks of its cluster's
   scheduler, at most :func:`window` of them submitted ahead of the next
   chunk to fold, so that the memory held stays that of a few chunks. A
   worker lost mid-study has its chunks run again by the scheduler; each
@@ -72,7 +72,7 @@ def chunk_seeds(seed, n: int) -> list[np.random.SeedSequence]:
 
 
 def connect(address: str, timeout: float = CONNECT_TIMEOUT, name: str = "scheduler"):
-    """A :class:`distributed.Client` of the scheduler at ``address``.
+    """A ``distributed.Client`` of the scheduler at ``address``.
 
     Raises
     ------
