@@ -353,6 +353,23 @@ FRAMES = [  # (argument, value, keyword arguments beyond GOOD)
 FRAME_CASES = [(name, *case) for name in ALL_NAMES for case in FRAMES]
 
 
+def _answer_or_refusal(name, kwargs, options):
+    """Run the registry's filter ``name`` with warnings as errors: ``(estimate, None)``, its
+    moments finite and within the time budget, or ``(None, message)`` for a one-line refusal."""
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            est = FILTERS[name](**kwargs, **options)
+        except ValueError as exc:
+            message = str(exc)
+            assert "\n" not in message
+            return None, message
+    assert time.perf_counter() - start < BUDGET
+    assert np.all(np.isfinite(est.mean)) and np.all(np.isfinite(est.cov))
+    return est, None
+
+
 @pytest.mark.parametrize(
     ("name", "arg", "value", "extra"),
     FRAME_CASES,
@@ -363,20 +380,11 @@ def test_n_frame_inputs_are_answered_or_refused_naming_the_argument(name, arg, v
     options = {}
     if FILTERS[name].random:
         options = {"rng": np.random.default_rng(0), "n_particles": 200}
-    start = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        try:
-            est = FILTERS[name](**kwargs, **options)
-        except ValueError as exc:
-            message = str(exc)
-            assert "\n" not in message
-            # a refusal names the argument, or the measurements when the other
-            # arguments make them inconsistent (e.g. a prior behind the camera)
-            assert arg in message or "mu" in message, message
-            return
-    assert time.perf_counter() - start < BUDGET
-    assert np.all(np.isfinite(est.mean)) and np.all(np.isfinite(est.cov))
+    est, message = _answer_or_refusal(name, kwargs, options)
+    if message is not None:
+        # a refusal names the argument, or the measurements when the other
+        # arguments make them inconsistent (e.g. a prior behind the camera)
+        assert arg in message or "mu" in message, message
 
 
 def test_the_limit_on_frames_is_one_constant():
@@ -846,20 +854,12 @@ def test_tracks_as_they_come_are_answered_or_refused_naming_the_argument(name, a
         kwargs[arg] = value
     if FILTERS[name].random:
         options.update({"rng": np.random.default_rng(0), "n_particles": 200})
-    start = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        try:
-            est = FILTERS[name](**kwargs, **options)
-        except ValueError as exc:
-            message = str(exc)
-            assert "\n" not in message
-            # the argument, or another whose combination with it has no answer
-            named = (arg, "mu", "rho", "prior_mean", "prior_cov")
-            assert message.startswith(named) or arg in message, message
-            return
-    assert time.perf_counter() - start < BUDGET
-    assert np.all(np.isfinite(est.mean)) and np.all(np.isfinite(est.cov))
+    est, message = _answer_or_refusal(name, kwargs, options)
+    if message is not None:
+        # the argument, or another whose combination with it has no answer
+        named = (arg, "mu", "rho", "prior_mean", "prior_cov")
+        assert message.startswith(named) or arg in message, message
+        return
     updates = est.updates
     if updates is not None:  # per frame, NaN exactly where no bearing was seen
         missing = np.isnan(np.asarray(kwargs["mu"], dtype=float))
