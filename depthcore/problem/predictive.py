@@ -99,7 +99,7 @@ def mixture(mu, log_weights, means, var):
     log_w = np.asarray(log_weights, dtype=float)
     total = logsumexp(log_w, axis=-1, keepdims=True)
     empty = np.isneginf(total[..., 0])
-    log_w = np.where(np.isneginf(total), -np.inf, log_w - np.where(empty[..., None], 0.0, total))
+    log_w = log_w - np.where(empty[..., None], 0.0, total)  # an empty row stays -inf
     means, var = np.asarray(means, dtype=float), np.asarray(var, dtype=float)
     z = (mu - means) / np.sqrt(var)
     log_density = logsumexp(log_w - 0.5 * (_LOG_2PI + np.log(var) + z * z), axis=-1)
