@@ -113,6 +113,7 @@ def test_a_changed_page_loses_its_cached_outputs_alone(tmp_path):
         "depthcore/problem/model.py",
         "depthcore/provenance/benchmark_records/bench_x.json",
         "requirements.txt",
+        "tools/jupyter/kernels/python3/launch.py",
     ],
 )
 def test_a_change_of_the_package_or_its_environment_empties_the_cache(tmp_path, change):
@@ -126,6 +127,24 @@ def test_a_change_of_the_package_or_its_environment_empties_the_cache(tmp_path, 
     assert check_notebooks.prepare_cache(pages, cache, root) == ["all"]
     assert cached_uris(cache) == []
     assert (cache / check_notebooks.CACHE_KEY).is_file()
+
+
+def test_a_reference_keeps_the_png_of_a_figure_and_not_its_vector_copy():
+    import nbformat
+
+    nb = nbformat.v4.new_notebook()
+    data = {"image/png": "iVBOR", "application/pdf": "JVBER", "text/plain": "<Figure>"}
+    glued = {f"application/papermill.record/{k}": v for k, v in data.items()}
+    nb.cells = [
+        nbformat.v4.new_code_cell("fig", outputs=[nbformat.v4.new_output("display_data", data)]),
+        nbformat.v4.new_code_cell("glue", outputs=[nbformat.v4.new_output("display_data", glued)]),
+    ]
+    check_notebooks.drop_vector_copies(nb)
+    assert set(nb.cells[0].outputs[0].data) == {"image/png", "text/plain"}
+    assert set(nb.cells[1].outputs[0].data) == {
+        "application/papermill.record/image/png",
+        "application/papermill.record/text/plain",
+    }
 
 
 def test_bytecode_does_not_change_the_fingerprint(tmp_path):

@@ -87,8 +87,17 @@ UV = str(ROOT / ".venv" / "uv" / "bin" / "uv")
 
 # Outputs nbval must not compare: stderr (warnings carry installation paths;
 # matplotlib's one-off font-cache message), SVG (random element ids) and glued
-# figures (PNG bytes vary across platforms). Images are shown, not quoted.
-SKIP_COMPARE = ("stderr", "image/svg+xml", "application/papermill.record/image/png")
+# figures (PNG bytes vary across platforms; the PDF's vector copy carries its date).
+# Images are shown, not quoted.
+SKIP_COMPARE = (
+    "stderr",
+    "image/svg+xml",
+    "application/pdf",
+    "application/papermill.record/image/png",
+    "application/papermill.record/application/pdf",
+)
+#: The figures' vector copies, which only the PDF build reads: a reference keeps the PNG.
+VECTOR_ONLY = ("application/pdf", "application/papermill.record/application/pdf")
 
 
 def pytest_collectstart(collector):
@@ -507,7 +516,7 @@ def execution_cache(config_path: Path = ROOT / "_config.yml") -> Path:
 #: The execution cache that the HTML and the PDF builds share (``_build/.jupyter_cache``).
 CACHE = execution_cache()
 #: What every page's outputs may depend on besides its own text.
-ENVIRONMENT = ("depthcore", "requirements.txt", "CITATION.cff")
+ENVIRONMENT = ("depthcore", "requirements.txt", "CITATION.cff", "tools/jupyter")
 #: The key of the cache's contents, beside them.
 CACHE_KEY = "depthcore-key.json"
 
@@ -845,6 +854,14 @@ def stable_cell_ids(nb) -> None:
         cell.id = digest if seen[digest] == 1 else f"{digest}-{seen[digest]}"
 
 
+def drop_vector_copies(nb) -> None:
+    """Remove the figures' PDF copies (:data:`VECTOR_ONLY`) from a notebook's outputs, in place."""
+    for cell in nb.cells:
+        for output in cell.get("outputs", []):
+            for mime in VECTOR_ONLY:
+                output.get("data", {}).pop(mime, None)
+
+
 def update_page(page: Path) -> Path:
     """Execute ``page`` in a fresh kernel and write its outputs as its reference; return that."""
     import jupytext
@@ -862,6 +879,7 @@ def update_page(page: Path) -> Path:
         resources={"metadata": {"path": str(page.parent)}},
     ).execute()
     stable_cell_ids(nb)
+    drop_vector_copies(nb)
     ref = reference_path(page)
     ref.parent.mkdir(exist_ok=True)
     nbformat.write(nb, ref)

@@ -12,9 +12,14 @@ and checks that
   ``??`` for an unresolved reference);
 * the HTML book ships the same PDF;
 * the title page names the paper, the package's version and the build's date;
-  no page is blank; the intro is one chapter, its opening paragraph on the
-  page of its title; the list of downloads is printed with their addresses;
-  the API reference is a short list of module summaries.
+  the contents are headed "Contents"; the book's parts (``_toc.yml``'s
+  captions) open with a part page each, in order, and are listed in the
+  contents; no page is blank but a part's; the figures are vector graphics
+  (a handful of raster images at most); no raw Markdown table is printed;
+  no line of code or output is broken (Sphinx marks a broken line with ↪);
+  the intro is one chapter, its opening paragraph on the page of its title;
+  the list of downloads is printed with their addresses; the API reference is
+  a short list of module summaries.
 
 Without the PDF or pdftotext the checks are skipped with a message, and fail
 under CI (``CI=true``).
@@ -167,10 +172,69 @@ def test_the_title_page_names_the_paper_the_version_and_the_date(pages):
     )
 
 
-def test_no_page_is_blank(pages):
-    # every page but the title page carries a running head or a chapter's opening, and text
-    blank = [i + 1 for i, page in enumerate(pages) if len(page.split()) < 12]
+#: A part's opening page: "Part IV Appendix and notes 49" (its caption and number alone).
+PART_PAGE = re.compile(r"^Part ([IVXL]+) (.+?) ?(\d*)$")
+#: At most this many raster images in the PDF (heat maps may be raster; curves are not).
+MAX_RASTER_IMAGES = 6
+
+
+def book_parts() -> list[str]:
+    """The captions of ``_toc.yml``'s parts, in order."""
+    import yaml
+
+    toc = yaml.safe_load((ROOT / "_toc.yml").read_text(encoding="utf-8"))
+    return [part["caption"] for part in toc["parts"]]
+
+
+def test_no_page_is_blank_but_a_parts_opening(pages):
+    # every page but the title page and the parts' openings carries a running head or a
+    # chapter's opening, and text
+    blank = [
+        i + 1
+        for i, page in enumerate(pages)
+        if len(page.split()) < 12 and not PART_PAGE.match(page)
+    ]
     assert not blank, f"pages with (almost) no text: {blank}"
+
+
+def test_the_contents_are_headed_contents(pages):
+    contents = [i for i, page in enumerate(pages[:4]) if "1 Introduction" in page]
+    assert contents, "no table of contents among the first pages"
+    head = pages[contents[0]].split("1 Introduction")[0]
+    assert head.strip().upper().endswith("CONTENTS"), f"the contents are headed {head!r}"
+    for caption in book_parts():
+        assert caption.upper() not in head.upper(), f"the contents are headed {head!r}"
+
+
+def test_each_part_opens_with_its_page_in_order(pages, plain_text):
+    opened = [PART_PAGE.match(page).group(2) for page in pages if PART_PAGE.match(page)]
+    assert opened == book_parts(), f"the PDF's parts are {opened}, _toc.yml's {book_parts()}"
+    for number, caption in zip(("I", "II", "III"), book_parts(), strict=False):
+        assert f"{number} {caption}" in plain_text, f"the contents do not list part {caption!r}"
+
+
+def test_the_figures_are_vector_graphics(pdf):
+    listing = subprocess.run(
+        ["pdfimages", "-list", str(pdf)], capture_output=True, text=True, check=True, timeout=120
+    ).stdout.splitlines()[2:]
+    assert len(listing) <= MAX_RASTER_IMAGES, (
+        f"{len(listing)} raster images in the PDF (at most {MAX_RASTER_IMAGES}): "
+        f"pages {sorted({int(line.split()[0]) for line in listing})}"
+    )
+
+
+def test_no_line_of_code_is_broken(plain_text):
+    # pdftotext reads the continuation mark of a broken verbatim line as ",→"
+    found = [
+        plain_text[max(m.start() - 60, 0) : m.end() + 20]
+        for m in re.finditer(r",\u2192|\u21aa", plain_text)
+    ]
+    assert not found, f"{len(found)} broken lines of code in the PDF: {found[:3]}"
+
+
+def test_no_raw_markdown_table_is_printed(plain_text):
+    found = re.findall(r".{0,40}\|\s*(?:-{3,}|—|:?-+:?)\s*\|.{0,40}", plain_text)
+    assert not found, f"a Markdown table printed as text: {found[:3]}"
 
 
 def test_the_intro_is_one_chapter_that_opens_with_its_first_paragraph(plain_text, pages):

@@ -444,6 +444,54 @@ class DropHtmlOnlyPages(SphinxPostTransform):
                     )
 
 
+#: The heading of the PDF's table of contents. The LaTeX builder would take the
+#: caption of the root page's first toctree, the book's first part ("The idea").
+CONTENTS = "Contents"
+
+
+def book_parts(env) -> dict[str, str]:
+    """The first page of each of the book's parts, and the part's caption.
+
+    The parts are the captioned toctrees of the root page (``_toc.yml``'s
+    ``parts``), in order.
+    """
+    first = {}
+    for toctree in env.get_doctree(env.config.root_doc).findall(addnodes.toctree):
+        caption = toctree.get("caption")
+        entries = [name for _, name in toctree["entries"] if name not in ("self", None)]
+        if caption and entries:
+            first[entries[0]] = caption
+    return first
+
+
+class PrintParts(SphinxPostTransform):
+    """In the PDF, open each of the book's parts with ``\\part{caption}``.
+
+    The HTML book shows its parts as the captions of the sidebar's sections; the
+    LaTeX builder drops toctree captions. Each part's first page (its
+    ``start_of_file`` node in the PDF's single document) is preceded by a raw
+    LaTeX ``\\part``, so that the printed book and its contents show the parts.
+    """
+
+    default_priority = 6
+    formats = ("latex",)
+
+    def run(self, **kwargs):
+        first = book_parts(self.env)
+        for node in list(self.document.findall(addnodes.start_of_file)):
+            caption = first.get(node["docname"])
+            if caption is None:
+                continue
+            raw = nodes.raw("", f"\\part{{{caption}}}\n", format="latex")
+            node.parent.insert(node.parent.index(node), raw)
+
+
+def contents_heading(app):
+    """Head the PDF's table of contents :data:`CONTENTS` (see there)."""
+    if app.builder.format == "latex":
+        app.builder.get_contentsname = lambda indexfile: CONTENTS
+
+
 def root_page_as_one_chapter(app, doctree, docname):
     """In the PDF, make the root page's own text one chapter, :data:`INTRODUCTION`.
 
@@ -592,6 +640,8 @@ def setup(app):
     app.add_directive("math", Math, override=True)
     app.add_transform(DropLabFrontmatter)
     app.add_post_transform(DropHtmlOnlyPages)
+    app.add_post_transform(PrintParts)
+    app.connect("builder-inited", contents_heading)
     app.connect("doctree-resolved", root_page_as_one_chapter)
     app.add_post_transform(DropHiddenCellsWithoutOutput)
     app.add_config_value("depthcore_downloads", "_build/extra/downloads", "env")

@@ -7,6 +7,10 @@ kernel, except that its log drops the warning that a kernel "is running over
 TCP without encryption", printed by every kernel that a local client starts
 over the loopback interface, which would otherwise fill the build log with one
 identical warning per page. Every other message of the kernel is kept.
+
+Its figures are shown as PNG and also kept as PDF: the HTML book shows the PNG,
+the PDF book prints the vector copy (myst-nb prefers ``application/pdf`` for
+LaTeX), so that a printed figure's lines and text stay sharp at any size.
 """
 
 import logging
@@ -20,6 +24,10 @@ class _DropPlainTcpNotice(logging.Filter):
 
 
 class BookKernelApp(IPKernelApp):
+    def initialize(self, argv=None):
+        self.config.InlineBackend.figure_formats = {"png", "pdf"}
+        super().initialize(argv)
+
     def init_sockets(self):
         self.log.addFilter(_DropPlainTcpNotice())
         super().init_sockets()
