@@ -198,7 +198,12 @@ class Controls:
             )
         for axis, s in zip("xyv", sd, strict=True):
             self.sliders[f"sd_{axis}"] = widgets.FloatLogSlider(
-                value=s, min=-2, max=3, description=f"SD ${axis}$", readout_format=".3g", **log_slider
+                value=s,
+                min=-2,
+                max=3,
+                description=f"SD ${axis}$",
+                readout_format=".3g",
+                **log_slider,
             )
         self.sliders["frames"] = widgets.IntSlider(
             value=frames,
