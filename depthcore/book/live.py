@@ -183,7 +183,7 @@ class Controls:
         log_slider = {"base": 10, "step": 0.05, "continuous_update": False}
         self.sliders = {
             "rho": widgets.FloatLogSlider(
-                value=rho, min=-4, max=-1, description="rho", readout_format=".2e", **log_slider
+                value=rho, min=-4, max=-1, description=r"$\rho$", readout_format=".2e", **log_slider
             ),
         }
         for axis, m in zip("xyv", mean, strict=True):
@@ -193,18 +193,23 @@ class Controls:
                 min=-span,
                 max=span,
                 step=span / 200,
-                description=f"mean {axis}",
+                description=f"mean ${axis}$",
                 continuous_update=False,
             )
         for axis, s in zip("xyv", sd, strict=True):
             self.sliders[f"sd_{axis}"] = widgets.FloatLogSlider(
-                value=s, min=-2, max=3, description=f"SD {axis}", readout_format=".3g", **log_slider
+                value=s,
+                min=-2,
+                max=3,
+                description=f"SD ${axis}$",
+                readout_format=".3g",
+                **log_slider,
             )
         self.sliders["frames"] = widgets.IntSlider(
             value=frames,
             min=3,
             max=max(MAX_SLIDER_FRAMES, frames),
-            description="frames N",
+            description="frames $N$",
             continuous_update=False,
         )
         self.figure = Figure(figsize=(6.4, 3.6), layout="constrained")
@@ -243,7 +248,6 @@ class Controls:
         try:
             draw(self.ax, depth_marginals(**self.setting()))
             self.message = ""
-            self.ax.set_title(f"rho = {self.sliders['rho'].value:.3g}", fontsize=9)
         except ValueError as error:
             self.ax.clear()
             self.message = str(error).splitlines()[0]

@@ -81,7 +81,7 @@ def plot_marginals(ax, curves: dict, quantity: str, filters=_filters.PAPER_FILTE
     return ax
 
 
-def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
+def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS, label: bool = False):
     """Figure ``key`` (``"fig2"`` ... ``"fig6"``): the marginal densities the paper plots.
 
     Parameters
@@ -96,6 +96,10 @@ def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
         UKF and the particle filter. For the keys of :data:`PRINTED_OVERLAY`
         the optimal depth marginal of Eq. (16) as printed is drawn first,
         in :data:`PRINTED_STYLE`.
+    label : bool
+        Name the figure ("Figure 2", "Figure 2, extended") at the top left of
+        the axes, for a file read apart from its caption (:func:`save_all`);
+        the book's pages leave it out, as their captions say it.
 
     Returns
     -------
@@ -122,10 +126,9 @@ def figure(key: str, n: int = 801, filters=_filters.PAPER_FILTERS):
                 va="top",
                 fontsize=MIN_FONT,
             )
-    extended = "extended " if set(filters) - set(_filters.PAPER_FILTERS) else ""
-    ax.set_title(
-        f"Figure {s.figure} ({extended}reproduction): {caption(key)}", fontsize=MIN_FONT, wrap=True
-    )
+    if label:
+        extended = ", extended" if set(filters) - set(_filters.PAPER_FILTERS) else ""
+        ax.set_title(f"Figure {s.figure}{extended}", fontsize=MIN_FONT, loc="left")
     return fig
 
 
@@ -154,7 +157,7 @@ def save_all(out_dir, formats=("pdf", "png", "svg"), progress=None) -> list[Path
     paths = []
     for key, s in SCENARIOS.items():
         for suffix, filters in (("", _filters.PAPER_FILTERS), ("-extended", _filters.NAMES)):
-            fig = figure(key, filters=filters)
+            fig = figure(key, filters=filters, label=True)
             for fmt in formats:
                 path = out / f"figure{s.figure}{suffix}.{fmt}"
                 fig.savefig(path, dpi=200, metadata=_NO_DATE.get(fmt))
@@ -211,9 +214,6 @@ def readings_figure(key: str, y_max: float = 150.0, n: int = 1201):
     ax.set_xlim(0.0, y_max)
     ax.set_ylim(bottom=0.0)
     ax.legend(frameon=False)
-    ax.set_title(
-        f"Figure {s.figure}'s measurements: the optimal depth marginal, two readings", fontsize=10
-    )
     return fig
 
 
@@ -305,9 +305,6 @@ def translating_point(x3=None, n: int = 3):
     ax.set_ylim(-0.4, reach)
     ax.set_xlabel("lateral position $x$")
     ax.set_ylabel("depth $y$")
-    ax.set_title(
-        f"Figure 1 (reproduction): a translating point seen at times 1 to {n}", fontsize=MIN_FONT
-    )
     return fig
 
 
