@@ -207,16 +207,10 @@ BUILDERS = {
     ),
     "hard_figure": lambda: beyond_hard.hard_figure(
         hardness.hard_study(
-            [((1.2, 6.0, v), 1000.0, 0.0) for v in (0.0, 1.2)] + [(FIG2.c, 1.0, 0.0)],
-            FIG2.rho,
-            6,
-            1,
-            ("optimal", "second_order", "ekf"),
+            [(FIG2.c, s, 0.0) for s in np.geomspace(1.0, 1000.0, 11)], FIG2.rho, 8, 1
         ),
-        [
-            ("lateral velocity v of (1.2, 6, v)", [0, 1], [0.0, 1.2], False),
-            ("prior covariance s (s I)", [2, 1], [1.0, 1000.0], True),
-        ],
+        ["$v = 0$", "$v = 0.2$", "$v = 0.6$", "$\\mathbf{c}$", "$v = 2.4$", "$s = 1$"]
+        + ["$s = 10$", "$s = 100$", "$v_0 = 1.2$", "$y = 24$", "$v = 0$\n$s = 1$"],
     ),
     "conjecture_figure": lambda: beyond_conjecture.conjecture_figure(
         beyond_conjecture.conjecture_study(
