@@ -199,7 +199,7 @@ def verdict_texts(cells: list, prefix: str) -> dict:
 
 
 def score_text(scores: dict, score: str) -> str:
-    """One score of one filter as :func:`hard_texts` shows it: ``"value ± standard error"``.
+    """One score of one filter as the chapter quotes it: ``"value ± standard error"``.
 
     Two decimals for a coverage, three significant figures' worth for a depth
     (:func:`~depthcore.formatting.value_se`).
@@ -223,7 +223,7 @@ def extreme_text(cells: list, reading: str, name: str, score: str, which: str, w
     name : str
         A filter of the cells.
     score : str
-        One of :data:`HARD_SCORES`.
+        A score of the filter with its ``"<score>_se"``, e.g. ``"rmse"``, ``"coverage_68"``.
     which : {"min", "max"}
     where : array_like of bool, shape (len(cells),), optional
         The cells to search (default all).
