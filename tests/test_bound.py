@@ -324,3 +324,32 @@ def test_bound_study_simulates_the_truth_at_time_three():
         beyond_bound.bound_study([3, 6], 10, 2, ("particle",), "fixed", 0.05)
     again = beyond_bound.bound_study([6], 30, 2, ("ekf",), "fixed", 0.05)
     assert_allclose(again["ekf"]["depth_error"][0], r["ekf"]["depth_error"][1])
+
+
+def test_bound_figure_draws_each_filter_over_the_bound_and_rings_the_overconfident():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    frames = np.array([3, 6])
+    r = beyond_bound.bound_study(frames, 30, 2, ("optimal", "ekf"), "fixed")
+    b = np.sqrt(bound.posterior_bound(FIG2.c, 3, 6, RHO, 1000.0 * np.eye(3))[frames - 1, 1, 1])
+    against = {
+        n: bound.against_bound(r[n]["depth_error"], r[n]["depth_sd"], b)
+        for n in r
+        if n in ("optimal", "ekf")
+    }
+    fig = beyond_bound.bound_figure(frames, [("$q = 0$", against), ("again", against)])
+    try:
+        assert len(fig.axes) == 4
+        top, bottom = fig.axes[0], fig.axes[2]
+        # one error bar per filter; the ratios plotted are against_bound's
+        assert len(top.containers) == 2
+        line = top.containers[0].lines[0]
+        assert_allclose(line.get_ydata(), against["optimal"]["rmse_ratio"])
+        rings = [x for x in bottom.lines if x.get_label().startswith("stated SD")]
+        over = sum(int(a["overconfident"].sum()) for a in against.values())
+        assert sum(len(x.get_xdata()) for x in rings) == over
+    finally:
+        plt.close(fig)

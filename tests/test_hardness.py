@@ -9,6 +9,7 @@ from numpy.testing import assert_allclose
 from depthcore import SCENARIOS
 from depthcore.analysis import bound
 from depthcore.book import beyond_hard
+from depthcore.formatting import value_se
 from depthcore.problem import model
 from depthcore.registry.filters import FILTERS
 from depthcore.studies import hardness, scores
@@ -201,28 +202,48 @@ def test_hard_study_texts_and_figure():
     cells = hardness.hard_study(
         [(FIG2.c, 1.0, 0.0), (FIG2.c, 10.0, 0.0)], RHO, 8, 1, ("optimal", "ekf")
     )
-    t = beyond_hard.hard_texts(cells, "h")
-    assert t["h_0_x"] == "(1.2, 6, 1.2); 1 I; v₀ = 0"
-    assert " ± " in t["h_1_prior_ekf_coverage_68"]
-    assert t["h_0_d2"] == f"{cells[0]['second_difference']:.1f}"
-    flat = [dict(cells[0], second_difference=-1e-12)]
-    assert beyond_hard.hard_texts(flat, "h")["h_0_d2"] == "0.0"
+    assert beyond_hard.hard_label(cells[0]) == "(1.2, 6, 1.2); 1 I; v₀ = 0"
     # the extremes the prose names: the cell, and its score with its standard error
     cov = [c["prior"]["filters"]["ekf"]["coverage_68"] for c in cells]
     i, text = beyond_hard.extreme_text(cells, "prior", "ekf", "coverage_68", "max")
-    assert i == int(np.argmax(cov)) and text == t[f"h_{i}_prior_ekf_coverage_68"]
-    j, text = beyond_hard.extreme_text(cells, "prior", "ekf", "coverage_68", "max", [False, True])
-    assert j == 1 and text == t["h_1_prior_ekf_coverage_68"]
-    assert (
-        beyond_hard.score_text(cells[0]["fixed"]["filters"]["optimal"], "rmse")
-        == (t["h_0_fixed_optimal_rmse"])
+    ekf = cells[i]["prior"]["filters"]["ekf"]
+    assert i == int(np.argmax(cov)) and text == value_se(
+        ekf["coverage_68"], ekf["coverage_68_se"], 2
     )
+    j, text = beyond_hard.extreme_text(cells, "prior", "ekf", "coverage_68", "max", [False, True])
+    assert j == 1 and text == beyond_hard.score_text(
+        cells[1]["prior"]["filters"]["ekf"], "coverage_68"
+    )
+    po = cells[0]["fixed"]["filters"]["optimal"]
+    places = max(0, 2 - int(np.floor(np.log10(po["rmse"]))))
+    assert beyond_hard.score_text(po, "rmse") == value_se(po["rmse"], po["rmse_se"], places)
     with pytest.raises(ValueError, match="which"):
         beyond_hard.extreme_text(cells, "prior", "ekf", "coverage_68", "median")
     with pytest.raises(ValueError, match="where"):
         beyond_hard.extreme_text(cells, "prior", "ekf", "coverage_68", "min", [False, False])
-    fig = beyond_hard.hard_figure(cells, [("prior scale s", [0, 1], [1.0, 10.0], True)])
-    assert len(fig.axes) == 2
+    # each setting named by its departure from a reference truth and prior
+    assert beyond_hard.setting_label(cells[0], FIG2.c, 1.0) == "reference"
+    assert beyond_hard.setting_label(cells[0], FIG2.c, 1.0, "c") == "c"
+    assert beyond_hard.setting_label(cells[1], FIG2.c, 1.0) == "$s = 10$"
+    far = dict(cells[0], truth=4 * np.asarray(FIG2.c))
+    assert beyond_hard.setting_label(far, FIG2.c, 1.0) == "$y = 24$"
+    slow = dict(cells[0], truth=np.array([1.2, 6.0, 0.0]))
+    assert beyond_hard.setting_label(slow, FIG2.c, 10.0) == "$v = 0$\n$s = 1$"
+    # the verdicts counted per filter, reading and level: those of hardness.verdicts
+    v = beyond_hard.verdict_texts(cells, "h")
+    for reading in hardness.READINGS:
+        for name in ("optimal", "ekf"):
+            expected = sum(hardness.verdicts(c, reading)["calibrated_68"][name] for c in cells)
+            assert v[f"h_{name}_{reading}_68"] == str(expected)
+    assert len(v) == 2 * 2 * 2
+    fig = beyond_hard.hard_figure(cells, ["a", "b"])
+    assert len(fig.axes) == 4
+    # over the prior the exact posterior's RMSE is its own reference: 1, and the others
+    # the paired ratios
+    ys = fig.axes[1].lines
+    assert any(np.allclose(line.get_ydata(), 1.0) for line in ys)
+    with pytest.raises(ValueError, match="labels"):
+        beyond_hard.hard_figure(cells, ["a"])
     with pytest.raises(ValueError, match="cells"):
         hardness.hard_study([], RHO, 8, 1)
 

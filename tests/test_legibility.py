@@ -30,7 +30,9 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.text import Text  # noqa: E402
 
+from depthcore.analysis import bound
 from depthcore.book import (
+    beyond_bound,
     beyond_conjecture,
     beyond_filters,
     beyond_frames,
@@ -166,6 +168,17 @@ def _frame_marginals():
 
 
 #: One builder per plotting function the book calls, on small inputs of the book's shape.
+def _bound_figure():
+    # every filter the page draws, so that the legend is the page's
+    ns = np.array([3, 5, 10])
+    names = ("optimal", "second_order", "ekf", "inverse_depth", "iterated", "ukf")
+    names += ("particle", "rbpf", "resample_move")
+    r = beyond_bound.bound_study(ns, 6, 1, names, "paper", particle_trials=4, n_particles=20)
+    b = np.sqrt(bound.posterior_bound(FIG2.c, 3, 10, FIG2.rho, 1000.0 * np.eye(3))[ns - 1, 1, 1])
+    against = {n: bound.against_bound(r[n]["depth_error"], r[n]["depth_sd"], b) for n in names}
+    return beyond_bound.bound_figure(ns, [("$q = 0$", against), ("$q = 0.02$", against)])
+
+
 BUILDERS = {
     "figure": lambda: paper.figure("fig3", n=101),
     "figure, extended": lambda: paper.figure("fig2", n=101, filters=FILTER_NAMES),
@@ -207,17 +220,12 @@ BUILDERS = {
     ),
     "hard_figure": lambda: beyond_hard.hard_figure(
         hardness.hard_study(
-            [((1.2, 6.0, v), 1000.0, 0.0) for v in (0.0, 1.2)] + [(FIG2.c, 1.0, 0.0)],
-            FIG2.rho,
-            6,
-            1,
-            ("optimal", "second_order", "ekf"),
+            [(FIG2.c, s, 0.0) for s in np.geomspace(1.0, 1000.0, 11)], FIG2.rho, 8, 1
         ),
-        [
-            ("lateral velocity v of (1.2, 6, v)", [0, 1], [0.0, 1.2], False),
-            ("prior covariance s (s I)", [2, 1], [1.0, 1000.0], True),
-        ],
+        ["$v = 0$", "$v = 0.2$", "$v = 0.6$", "$\\mathbf{c}$", "$v = 2.4$", "$s = 1$"]
+        + ["$s = 10$", "$s = 100$", "$v_0 = 1.2$", "$y = 24$", "$v = 0$\n$s = 1$"],
     ),
+    "bound_figure": _bound_figure,
     "conjecture_figure": lambda: beyond_conjecture.conjecture_figure(
         beyond_conjecture.conjecture_study(
             [3, 10, 30], 1 / np.array([1000, 500, 200, 100, 50]), [4.0, 6.0, 12.0, 24.0], 4, 2

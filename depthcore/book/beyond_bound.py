@@ -3,13 +3,15 @@
 Recommended import: ``from depthcore.book import beyond_bound``.
 
 :func:`bound_study` runs every named filter over the trials and returns the
-errors and claimed SDs that the chapter holds against :mod:`depthcore.analysis.bound`.
+errors and claimed SDs that the chapter holds against :mod:`depthcore.analysis.bound`;
+:func:`bound_figure` draws them over the bound.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
 from depthcore.problem import checks
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 from depthcore.problem.scenarios import SCENARIOS
@@ -129,3 +131,86 @@ def bound_study(
             r["velocity_sd"].append(np.asarray(est.velocity_sd))
         out[name] = {k: np.array(v) for k, v in r.items()}
     return out
+
+
+def bound_figure(frames, columns):
+    """Every filter's depth RMSE and mean stated SD over the bound, against ``N``.
+
+    Parameters
+    ----------
+    frames : array_like of int, shape (F,)
+        The numbers of frames ``N``.
+    columns : sequence of (str, dict)
+        One column each: its short label and ``{name: against}``, each
+        ``against`` the result of :func:`depthcore.analysis.bound.against_bound`
+        over ``frames`` (arrays of shape (F,)).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Two rows (the RMSE over the bound; the mean stated SD over the bound),
+        one column per entry of ``columns``, on log axes; every filter with
+        two-standard-error bars (the lower bar stopping short of zero), a grey
+        line at 1, and a black ring round each stated SD significantly below
+        the bound (``"overconfident"``).
+    """
+    frames = np.asarray(frames, dtype=float)
+    fig, axes = subplots(
+        2, len(columns), figsize=(WIDTH, 6.4), sharex=True, sharey="row", squeeze=False
+    )
+    names = list(dict.fromkeys(n for _, against in columns for n in against))
+    for j, (title, against) in enumerate(columns):
+        axes[0, j].set_title(title)
+        for i, key in enumerate(("rmse_ratio", "sd_ratio")):
+            ax = axes[i, j]
+            for k, name in enumerate(names):
+                if name not in against:
+                    continue
+                a = against[name]
+                y, se = np.asarray(a[key]), np.asarray(a[f"{key}_se"])
+                # a small offset per filter along the log axis keeps the bars apart
+                x = frames * (1 + 0.03 * (k - (len(names) - 1) / 2))
+                style = STYLE[name]
+                ax.errorbar(
+                    x,
+                    y,
+                    yerr=np.vstack([np.minimum(2 * se, 0.9 * y), 2 * se]),
+                    color=style["color"],
+                    linestyle=style["linestyle"],
+                    label=style["label"],
+                    marker="o",
+                    markersize=3,
+                    linewidth=1,
+                    elinewidth=0.8,
+                    capsize=1.5,
+                )
+                if key == "sd_ratio" and np.any(a["overconfident"]):
+                    over = np.asarray(a["overconfident"])
+                    ax.plot(
+                        x[over],
+                        y[over],
+                        linestyle="none",
+                        marker="o",
+                        markersize=8,
+                        markerfacecolor="none",
+                        markeredgecolor="black",
+                        label="stated SD significantly\nbelow the bound",
+                    )
+            ax.axhline(1.0, color="0.6", linewidth=1, zorder=0)
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xticks(frames, [f"{n:g}" for n in frames])
+            ax.set_xticks([], minor=True)
+        axes[-1, j].set_xlabel("frames $N$")
+    axes[0, 0].set_ylabel("RMSE / bound")
+    axes[1, 0].set_ylabel("mean stated SD / bound")
+    handles, labels = [], []
+    for ax in axes.ravel():
+        for h, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            if label not in labels:
+                handles.append(h)
+                labels.append(label)
+    fig.legend(
+        handles, labels, loc="outside lower center", ncol=2, frameon=False, fontsize=MIN_FONT
+    )
+    return fig

@@ -208,17 +208,19 @@ def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse"))
     Returns
     -------
     matplotlib.figure.Figure
-        One row per score, one column per number of frames; the legend gives the
-        depths' colours and the filters' line styles once each.
+        One row per score, one column per number of frames, each score with
+        two-standard-error bars (``"<score>_se"``; on a log axis the lower bar
+        stops short of zero); the two filters a little apart along ``rho``. The
+        legend gives the depths' colours and the filters' line styles once each.
     """
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
     labels = {
-        "hellinger": "Hellinger distance\nto the optimal filter",
+        "hellinger": "Hellinger distance\nto $p_o$",
         "coverage_68": "coverage of the\ncentral 68 % interval",
         "coverage_95": "coverage of the\ncentral 95 % interval",
-        "rmse": "RMSE of the depth mean",
+        "rmse": "RMSE of the\ndepth mean",
         "nees": "mean NEES",
     }
     nominal = {"coverage_68": 0.68, "coverage_95": 0.95, "nees": 3.0}
@@ -232,41 +234,75 @@ def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse"))
         squeeze=False,
     )
     colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(result["depth"])))
-    styles = (("second_order", "-"), ("ekf", ":"))
+    # the two filters a little apart along the (logarithmic) noise axis
+    styles = (("second_order", "-", 0.95), ("ekf", ":", 1.05))
+    rho = np.asarray(result["rho"], dtype=float)
     for j, n in enumerate(frames):
-        axes[0, j].set_title(f"N = {int(n)}")
+        axes[0, j].set_title(f"$N = {int(n)}$")
         for i, score in enumerate(scores):
             ax = axes[i, j]
+            log_y = score in ("rmse", "nees")
             for d, colour in enumerate(colours):
-                for name, style in styles:
-                    ax.plot(
-                        result["rho"],
-                        result[name][score][:, d, j],
+                for name, style, shift in styles:
+                    y = result[name][score][:, d, j]
+                    se = result[name][f"{score}_se"][:, d, j]
+                    lower = np.minimum(2 * se, 0.9 * y) if log_y else 2 * se
+                    ax.errorbar(
+                        rho * shift,
+                        y,
+                        yerr=np.vstack([lower, 2 * se]),
                         color=colour,
                         linestyle=style,
                         marker="o",
                         markersize=2.5,
+                        elinewidth=0.8,
+                        capsize=1.5,
                     )
             if score in nominal:
                 ax.axhline(nominal[score], color="0.6", linewidth=1)
-            if score in ("rmse", "nees"):
+            if log_y:
                 ax.set_yscale("log")
             ax.set_xscale("log")
-            rho = np.asarray(result["rho"])[::2]
-            ax.set_xticks(rho, [rho_label(r) for r in rho])
+            ticks = rho[::2]
+            ax.set_xticks(ticks, [rho_label(r) for r in ticks])
             ax.set_xticks([], minor=True)
             if j == 0:
                 ax.set_ylabel(labels[score])
-        axes[-1, j].set_xlabel("noise level rho")
+        axes[-1, j].set_xlabel(r"noise level $\rho$")
     handles = [
-        Line2D([], [], color=colour, marker="o", markersize=3, label=f"depth {depth:g}")
+        Line2D([], [], color=colour, marker="o", markersize=3, label=f"depth $y = {depth:g}$")
         for depth, colour in zip(result["depth"], colours, strict=True)
     ] + [
         Line2D([], [], color="0.3", linestyle=style, label=_filters.FILTERS[name].label)
-        for name, style in styles
+        for name, style, _ in styles
     ]
     fig.legend(handles=handles, loc="outside lower center", ncol=3, frameon=False)
     return fig
+
+
+def dominant_trials(rmse, rmse_se):
+    """How many equal far-off trials would give an RMSE its standard error.
+
+    When ``k`` of ``n`` trials carry nearly all the squared error, equally,
+    the RMSE is ``e sqrt(k / n)`` and its delta-method standard error
+    (:func:`depthcore.analysis.bound.against_bound`) about ``e / (2 sqrt(n))``,
+    so ``k`` is about ``(rmse / (2 rmse_se))**2``: near 1 when a single trial
+    drives the RMSE, large when the errors are spread evenly.
+
+    Parameters
+    ----------
+    rmse, rmse_se : array_like, shape (...)
+        RMSEs (> 0) and their standard errors.
+
+    Returns
+    -------
+    numpy.ndarray, shape (...)
+        ``(rmse / (2 rmse_se))**2``; infinite where the SE is zero.
+    """
+    rmse = np.asarray(rmse, dtype=float)
+    se = np.asarray(rmse_se, dtype=float)
+    with np.errstate(divide="ignore"):
+        return (rmse / (2.0 * se)) ** 2
 
 
 def conjecture_texts(result: dict, wins: dict, prefix: str, z: float = COVERAGE_Z) -> dict:

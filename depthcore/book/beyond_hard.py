@@ -2,82 +2,166 @@
 
 Recommended import: ``from depthcore.book import beyond_hard``.
 
-:func:`hard_figure` draws each filter's coverage over the cells of
-:func:`depthcore.studies.hardness.hard_study`; :func:`hard_label` and
-:func:`hard_texts`, :func:`score_text` and :func:`extreme_text` give the texts the chapter glues;
-:func:`outcome_counts` counts the outcomes of its paired tests.
+:func:`hard_figure` draws every filter's RMSE and coverage in each cell of
+:func:`depthcore.studies.hardness.hard_study`, each cell named by :func:`setting_label`;
+:func:`hard_label`, :func:`score_text`, :func:`extreme_text` and :func:`verdict_texts`
+give the texts the chapter glues; :func:`outcome_counts` counts the outcomes of its
+paired tests.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from depthcore.book.style import STYLE, WIDTH, subplots
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
 from depthcore.formatting import value_se
+from depthcore.studies import hardness
+
+#: A marker per filter of :data:`depthcore.studies.hardness.NAMES`, so that the
+#: filters stay apart in print without colour.
+MARKERS = {
+    "optimal": "o",
+    "second_order": "s",
+    "ekf": "v",
+    "ukf": "^",
+    "iterated": "D",
+    "inverse_depth": "P",
+}
 
 
-def hard_figure(cells: list, groups: list, level: int = 68):
-    """Each filter's coverage at the fixed truth and over the prior, along axes of settings.
+def setting_label(cell: dict, truth, prior_scale: float, reference: str = "reference") -> str:
+    """How one cell of :func:`~depthcore.studies.hardness.hard_study` departs from a reference.
 
     Parameters
     ----------
-    cells : list of dict
+    cell : dict
+        From :func:`depthcore.studies.hardness.hard_cell`.
+    truth : array_like, shape (3,)
+        The reference truth ``(x, y, v)`` at time 3.
+    prior_scale : float
+        The reference prior covariance ``s`` of ``s I``; the reference prior
+        velocity is 0.
+    reference : str
+        The label of a cell that departs in nothing.
+
+    Returns
+    -------
+    str
+        One line per departure, in mathematics: the truth's components that
+        differ (its depth alone when the truth is a multiple of the
+        reference), ``s`` and ``v_0``; ``reference`` when none does.
+    """
+    ref = np.asarray(truth, dtype=float)
+    t = np.asarray(cell["truth"], dtype=float)
+    parts = []
+    k = t[1] / ref[1]
+    if np.allclose(t, k * ref) and not np.isclose(k, 1.0):
+        parts.append(f"$y = {t[1]:g}$")
+    else:
+        parts += [
+            f"${name} = {a:g}$"
+            for name, a, b in zip("xyv", t, ref, strict=True)
+            if not np.isclose(a, b)
+        ]
+    s = float(cell["prior_cov"][0, 0])
+    if not np.isclose(s, prior_scale):
+        parts.append(f"$s = {s:g}$")
+    v0 = float(cell["prior_mean"][2])
+    if v0 != 0.0:
+        parts.append(f"$v_0 = {v0:g}$")
+    return "\n".join(parts) or reference
+
+
+def _ratios(cells: list, reading: str, name: str) -> tuple:
+    """A filter's depth RMSE per cell over the reference of ``reading``, with its SE.
+
+    At the fixed truth the reference is the cell's bound SD (exact, so the SE
+    is the RMSE's over it); over the prior it is the exact posterior's RMSE over
+    the same trials (:func:`~depthcore.studies.hardness.paired_comparison`).
+    """
+    if reading == "fixed":
+        s = [c["fixed"]["filters"][name] for c in cells]
+        b = np.array([c["bound_sd"] for c in cells])
+        return np.array([v["rmse"] for v in s]) / b, np.array([v["rmse_se"] for v in s]) / b
+    if name == "optimal":
+        return np.ones(len(cells)), np.zeros(len(cells))
+    d = [hardness.paired_comparison(c, "prior", name, "optimal") for c in cells]
+    return np.array([v["rmse_ratio"] for v in d]), np.array([v["rmse_ratio_se"] for v in d])
+
+
+def hard_figure(cells: list, labels, level: int = 68):
+    """Every filter's depth RMSE and coverage per setting, at the fixed truth and over the prior.
+
+    Parameters
+    ----------
+    cells : list of dict, length C
         From :func:`depthcore.studies.hardness.hard_study`.
-    groups : list of (str, list of int, array_like, bool)
-        One column each: the x-axis label, the indices of its cells, their
-        x values and whether the x-axis is logarithmic.
+    labels : sequence of str, length C
+        The settings' tick labels (:func:`setting_label`).
     level : int
         The central interval's level in percent, 68 or 95.
 
     Returns
     -------
     matplotlib.figure.Figure
-        Two rows (at the fixed truth; truths drawn from the prior), one column
-        per group; each filter's coverage with two-standard-error bars, the
-        nominal level in grey.
+        Four rows sharing the settings as x-axis: the RMSE at the fixed truth
+        over the bound's depth SD; the RMSE over the prior over the exact
+        posterior's on the same trials; the coverage at the fixed truth; the
+        coverage over the prior. Each filter with two-standard-error bars; grey
+        lines at 1 and at the nominal level.
     """
+    if len(labels) != len(cells):
+        raise ValueError(f"labels must name each of the {len(cells)} cells, got {len(labels)}")
     key = f"coverage_{int(level)}"
     names = list(cells[0]["fixed"]["filters"])
-    fig, axes = subplots(2, len(groups), figsize=(WIDTH, 5.4), sharey=True, squeeze=False)
-    rows = (("fixed", "at the fixed truth"), ("prior", "truths from the prior"))
-    for i, (reading, title) in enumerate(rows):
-        for j, (xlabel, indices, xs, log_x) in enumerate(groups):
-            ax = axes[i, j]
-            xs = np.asarray(xs, dtype=float)
-            for k, name in enumerate(names):
-                s = [cells[c][reading]["filters"][name] for c in indices]
-                # a small offset per filter keeps the error bars apart
-                shift = (k - (len(names) - 1) / 2) * 0.012
-                x = xs * (1 + shift) if log_x else xs + shift * (np.ptp(xs) or 1.0)
-                style = {
-                    a: STYLE[name][a] for a in ("color", "marker", "label") if a in STYLE[name]
-                }
-                ax.errorbar(
-                    x,
-                    [v[key] for v in s],
-                    yerr=[2 * v[f"{key}_se"] for v in s],
-                    linewidth=1.2,
-                    markersize=3.5,
-                    capsize=2,
-                    **style,
-                )
-            ax.axhline(level / 100, color="0.6", linewidth=1)
-            if log_x:
-                ax.set_xscale("log")
-            ax.set_xticks(xs, [f"{v:g}" for v in xs])
-            ax.set_xticks([], minor=True)
-            ax.set_ylim(-0.03, 1.03)
-            if i == 1:
-                ax.set_xlabel(xlabel)
-            if j == 0:
-                ax.set_ylabel(f"{level} % coverage,\n{title}")
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncol=3, frameon=False)
+    x = np.arange(len(cells), dtype=float)
+    fig, axes = subplots(4, 1, figsize=(WIDTH, 7.8), sharex=True)
+    rows = (
+        ("fixed", "ratio", "RMSE / bound,\nfixed truth"),
+        ("prior", "ratio", "RMSE / RMSE of $p_o$,\nover the prior"),
+        ("fixed", key, f"{level} % coverage,\nfixed truth"),
+        ("prior", key, f"{level} % coverage,\nover the prior"),
+    )
+    for ax, (reading, score, ylabel) in zip(axes, rows, strict=True):
+        for k, name in enumerate(names):
+            if score == "ratio":
+                y, se = _ratios(cells, reading, name)
+                # on a log axis the lower bar stops short of zero
+                lower = np.minimum(2 * se, 0.9 * y)
+                yerr = np.vstack([lower, 2 * se])
+            else:
+                s = [c[reading]["filters"][name] for c in cells]
+                y = np.array([v[score] for v in s])
+                yerr = 2 * np.array([v[f"{score}_se"] for v in s])
+            # a small offset per filter keeps the error bars apart
+            shift = (k - (len(names) - 1) / 2) * 0.13
+            ax.errorbar(
+                x + shift,
+                y,
+                yerr=yerr,
+                color=STYLE[name]["color"],
+                label=STYLE[name]["label"],
+                marker=MARKERS.get(name, "o"),
+                markersize=3.5,
+                linestyle="none",
+                elinewidth=1,
+                capsize=1.5,
+            )
+        if score == "ratio":
+            ax.set_yscale("log")
+            ax.axhline(1.0, color="0.6", linewidth=1, zorder=0)
+        else:
+            ax.axhline(level / 100, color="0.6", linewidth=1, zorder=0)
+            ax.set_ylim(-0.04, 1.04)
+        for boundary in x[:-1] + 0.5:
+            ax.axvline(boundary, color="0.9", linewidth=0.8, zorder=0)
+        ax.set_ylabel(ylabel)
+    axes[-1].set_xticks(x, labels)
+    axes[-1].set_xlim(-0.5, len(cells) - 0.5)
+    axes[-1].set_xlabel("setting")
+    handles, texts = axes[0].get_legend_handles_labels()
+    fig.legend(handles, texts, loc="outside lower center", ncol=3, frameon=False, fontsize=MIN_FONT)
     return fig
-
-
-#: The depth scores of every filter that :func:`hard_texts` formats.
-HARD_SCORES = ("rmse", "mean_sd", "coverage_68", "coverage_95")
 
 
 def hard_label(cell: dict) -> str:
@@ -87,35 +171,35 @@ def hard_label(cell: dict) -> str:
     return f"({x:g}, {y:g}, {v:g}); {s:g} I; v₀ = {float(cell['prior_mean'][2]):g}"
 
 
-def hard_texts(cells: list, prefix: str) -> dict:
-    """Texts of :func:`depthcore.studies.hardness.hard_study`'s cells, for glue.
+def verdict_texts(cells: list, prefix: str) -> dict:
+    """How many settings each filter's coverage passes its test in, per reading and level, for glue.
+
+    Parameters
+    ----------
+    cells : list of dict
+        From :func:`depthcore.studies.hardness.hard_study`.
+    prefix : str
 
     Returns
     -------
     dict
-        For the ``i``-th cell: ``"<prefix>_<i>_x"`` (:func:`hard_label`),
-        ``"<prefix>_<i>_d2"`` (the bearings' second difference over ``rho``),
-        ``"<prefix>_<i>_bound"`` (the bound's depth SD), and for each reading
-        ``r`` (``"fixed"``, ``"prior"``), filter and score of
-        :data:`HARD_SCORES` ``"<prefix>_<i>_<r>_<filter>_<score>"``:
-        ``"value ± standard error"`` (:func:`~depthcore.formatting.value_se`; two decimals for
-        the
-        coverages, three significant figures' worth for the depths).
+        ``"<prefix>_<filter>_<reading>_<level>"``: the number of cells where
+        the filter's central ``level`` % interval passes the coverage test of
+        :func:`depthcore.studies.hardness.verdicts`, for each filter, reading
+        (``"fixed"``, ``"prior"``) and level (68, 95).
     """
     out = {}
-    for i, c in enumerate(cells):
-        out[f"{prefix}_{i}_x"] = hard_label(c)
-        out[f"{prefix}_{i}_d2"] = f"{round(c['second_difference'], 1) + 0.0:.1f}"
-        out[f"{prefix}_{i}_bound"] = f"{c['bound_sd']:.3g}"
-        for reading in ("fixed", "prior"):
-            for name, s in c[reading]["filters"].items():
-                for score in HARD_SCORES:
-                    out[f"{prefix}_{i}_{reading}_{name}_{score}"] = score_text(s, score)
+    for reading in hardness.READINGS:
+        v = [hardness.verdicts(c, reading) for c in cells]
+        for level in (68, 95):
+            for name in v[0][f"calibrated_{level}"]:
+                n = sum(x[f"calibrated_{level}"][name] for x in v)
+                out[f"{prefix}_{name}_{reading}_{level}"] = str(int(n))
     return out
 
 
 def score_text(scores: dict, score: str) -> str:
-    """One score of one filter as :func:`hard_texts` shows it: ``"value ± standard error"``.
+    """One score of one filter as the chapter quotes it: ``"value ± standard error"``.
 
     Two decimals for a coverage, three significant figures' worth for a depth
     (:func:`~depthcore.formatting.value_se`).
@@ -139,7 +223,7 @@ def extreme_text(cells: list, reading: str, name: str, score: str, which: str, w
     name : str
         A filter of the cells.
     score : str
-        One of :data:`HARD_SCORES`.
+        A score of the filter with its ``"<score>_se"``, e.g. ``"rmse"``, ``"coverage_68"``.
     which : {"min", "max"}
     where : array_like of bool, shape (len(cells),), optional
         The cells to search (default all).
