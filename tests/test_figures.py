@@ -146,7 +146,8 @@ def test_convergence_figure_draws_each_setting_and_the_reference(convergence):
 
 def test_profile_figure_draws_each_noise_level():
     fig = beyond_sweeps.profile_figure(FIG2.mu, [1 / 200, 1 / 50], np.geomspace(2.5, 100, 50))
-    assert [line.get_label() for line in fig.axes[0].get_lines()] == ["rho = 1/200", "rho = 1/50"]
+    labels = [line.get_label() for line in fig.axes[0].get_lines()]
+    assert labels == [r"$\rho = 1/200$", r"$\rho = 1/50$"]
     plt.close(fig)
 
 
