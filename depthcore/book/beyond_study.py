@@ -85,7 +85,9 @@ def calibration(result: dict, quantity: str = "depth", notes: dict | None = None
         The curves over the diagonal, where a calibrated filter's lies, inside a
         grey band of two binomial standard errors ``sqrt(p (1 - p) / n)`` about
         it over the study's ``n`` valid trials: a calibrated filter's curve
-        leaves it at a level with probability about 5 %.
+        leaves it at a level with probability about 5 %. Each point has bars of
+        two binomial standard errors of its own coverage ``c``,
+        ``sqrt(c (1 - c) / n)``.
     """
 
     fig, ax = subplots(figsize=(5.2, 5.0))
@@ -100,9 +102,19 @@ def calibration(result: dict, quantity: str = "depth", notes: dict | None = None
         label="two binomial SEs",
     )
     ax.plot([0, 1], [0, 1], color="0.6", linewidth=1, label="calibrated")
+    n = max(int(result["valid_trials"]), 1)
     for name, f in result["filters"].items():
         cal = f["calibration"]
-        ax.plot(cal["levels"], cal[quantity], marker="o", markersize=3, **STYLE[name])
+        covered = np.asarray(cal[quantity], dtype=float)
+        ax.errorbar(
+            np.asarray(cal["levels"], dtype=float),
+            covered,
+            yerr=2 * np.sqrt(covered * (1 - covered) / n),
+            marker="o",
+            markersize=3,
+            elinewidth=0.8,
+            **STYLE[name],
+        )
     for name, text in (notes or {}).items():
         cal = result["filters"][name]["calibration"]
         j = int(np.argmin(np.abs(np.asarray(cal["levels"]) - NOTE_LEVEL)))
