@@ -280,7 +280,7 @@ def noise_study_figure(result: dict):
         Two panels: the coverage beside its nominal 0.68, and the RMSE.
     """
 
-    fig, axes = subplots(1, 2, figsize=(WIDTH, 4.0))
+    fig, axes = subplots(1, 2, figsize=(WIDTH, 4.4))
     names = [n for n in _filters.NAMES if n in result]
     for name in names:
         r = result[name]
@@ -303,7 +303,7 @@ def noise_study_figure(result: dict):
     for ax in axes:
         ax.set_xscale("log")
         ax.set_xlabel(r"noise level $\rho$ (radians)")
-    axes[0].legend(frameon=False, fontsize=MIN_FONT)
+    legend_below(fig, axes, ncol=5)
     return fig
 
 
