@@ -5,6 +5,7 @@ Recommended import: ``from depthcore.book import beyond_study``.
 * :func:`truth_study`: the study (:func:`depthcore.studies.monte_carlo.study`) at several
   true states, each filter's scores gathered over the truths by
   :func:`depthcore.studies.monte_carlo.gather_scores`;
+* :func:`truth_study_figure`: its depth scores at each truth, with error bars;
 * :func:`calibration` and :func:`prior_calibration`: the calibration plots of
   :func:`depthcore.studies.monte_carlo.study` and :func:`depthcore.studies.monte_carlo.prior_study`;
 * :func:`truth_study_texts` and :func:`prior_study_texts`: the texts the
