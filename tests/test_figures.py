@@ -151,7 +151,8 @@ def test_convergence_figure_draws_each_setting_and_the_reference(convergence):
 
 def test_profile_figure_draws_each_noise_level():
     fig = beyond_sweeps.profile_figure(FIG2.mu, [1 / 200, 1 / 50], np.geomspace(2.5, 100, 50))
-    assert [line.get_label() for line in fig.axes[0].get_lines()] == ["rho = 1/200", "rho = 1/50"]
+    labels = [line.get_label() for line in fig.axes[0].get_lines()]
+    assert labels == [r"$\rho = 1/200$", r"$\rho = 1/50$"]
     plt.close(fig)
 
 
@@ -417,4 +418,79 @@ def test_rbpf_convergence_figure_draws_the_errors(fig2_track):
     first = fig.axes[0].get_lines()[0]
     assert_allclose(first.get_ydata(), r["rmse"]["depth_mean"])
     assert_allclose(first.get_xdata(), [10, 40])
+    plt.close(fig)
+
+
+def _bars(container):
+    """The data line's values and the lower and upper ends of an errorbar container's bars."""
+    line, _, (segments,) = container.lines
+    ends = np.array(segments.get_segments())[:, :, 1]
+    return np.asarray(line.get_ydata(), float), ends[:, 0], ends[:, 1]
+
+
+def test_truth_study_figure_draws_each_score_with_two_standard_errors():
+    truths = np.vstack([FIG2.c, [-1.0, 4.0, 1.0]])
+    r = beyond_study.truth_study(truths, FIG2.rho, trials=20, seed=2, names=("optimal", "ekf"))
+    fig = beyond_study.truth_study_figure(r, ["a", "b"])
+    fig.canvas.draw()
+    for ax, (score, *_) in zip(fig.axes, beyond_study.TRUTH_PANELS, strict=True):
+        drawn = {c.get_label(): c for c in ax.containers}
+        for name in ("optimal", "ekf"):
+            y, lo, hi = _bars(drawn[style.STYLE[name]["label"]])
+            assert_allclose(y, r[name][score])
+            assert_allclose(lo, r[name][score] - 2 * r[name][f"{score}_se"])
+            assert_allclose(hi, r[name][score] + 2 * r[name][f"{score}_se"])
+    for ax in fig.axes[2:]:  # the truths' labels under the lower panels
+        assert [t.get_text() for t in ax.get_xticklabels()] == ["a", "b"]
+    plt.close(fig)
+
+
+def test_calibration_notes_point_at_the_curve():
+    from depthcore.studies import monte_carlo
+
+    r = monte_carlo.study(trials=20, seed=0, names=("optimal", "ekf"))
+    fig = beyond_study.calibration(r, notes={"ekf": "a note"})
+    (note,) = fig.axes[0].texts
+    cal = r["filters"]["ekf"]["calibration"]
+    j = int(np.argmin(np.abs(np.asarray(cal["levels"]) - beyond_study.NOTE_LEVEL)))
+    assert note.get_text() == "a note"
+    assert_allclose(note.xy, (cal["levels"][j], cal["depth"][j]))
+    plt.close(fig)
+
+
+def test_frames_study_figure_draws_each_score_with_two_standard_errors():
+    from depthcore.book import beyond_frames
+    from depthcore.studies import frames
+
+    r = frames.frames_study([3, 5], 10, 1, ("optimal", "ekf"))
+    fig = beyond_frames.frames_study_figure(r)
+    for ax, (score, *_) in zip(fig.axes, beyond_frames.FRAMES_ROWS, strict=True):
+        drawn = {c.get_label(): c for c in ax.containers}
+        names = ["ekf"] if score == "hellinger" else ["optimal", "ekf"]
+        assert len(drawn) == len(names)
+        for name in names:
+            y, lo, hi = _bars(drawn[style.STYLE[name]["label"]])
+            assert_allclose(y, r[name][score])
+            assert_allclose(hi - lo, 4 * r[name][f"{score}_se"], atol=1e-12)
+    plt.close(fig)
+
+
+def test_frame_marginals_grids_hold_each_filter_and_the_exact_marginal():
+    # Each filter's grid spans its own mean +- 6 SDs and the exact one's, and on it
+    # both densities hold nearly all their mass, however far apart they are.
+    from depthcore.book import beyond_frames
+    from depthcore.problem import model
+
+    sim = model.simulate(FIG2.c, 10, FIG2.rho, 0.0, np.random.default_rng(3))
+    (p,) = beyond_frames.frame_marginals(sim.mu, FIG2.rho, [10], ("ekf", "ukf"), n_points=401)
+    for name in ("optimal", "ekf", "ukf"):
+        grid = p["grid"][name]
+        assert np.all(np.diff(grid) > 0)
+        for k in ("optimal", name):
+            m, s = p["depth_mean"][k], p["depth_sd"][k]
+            assert grid[0] <= max(m - 6 * s, 1e-9) + 1e-9 and grid[-1] >= m + 6 * s - 1e-9
+        assert 0.99 < np.trapezoid(p["exact"][name], grid) < 1.01
+        if name != "ukf":  # the UKF's grid is cut at depth 0, within its SD of the mean
+            assert 0.99 < np.trapezoid(p["density"][name], grid) < 1.01
+    fig = beyond_frames.frame_marginals_figure([p], ["ekf", "ukf"])
     plt.close(fig)

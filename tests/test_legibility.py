@@ -194,6 +194,16 @@ BUILDERS = {
     "calibration": lambda: beyond_study.calibration(
         monte_carlo.study(trials=20, seed=0, n_particles=100)
     ),
+    "calibration, with notes": lambda: beyond_study.calibration(
+        monte_carlo.study(trials=20, seed=0, n_particles=100),
+        notes={"optimal": "optimal: a note\nof two lines", "ekf": "EKF: a note"},
+    ),
+    "truth_study_figure": lambda: beyond_study.truth_study_figure(
+        beyond_study.truth_study(
+            np.vstack([FIG2.c, [-1.0, 4.0, 1.0]]), FIG2.rho, trials=20, seed=2
+        ),
+        ["(1.2, 6, 1.2)\nFigure 2", "(-1, 4, 1)\nnear"],
+    ),
     "prior_calibration": lambda: beyond_study.prior_calibration(
         monte_carlo.prior_study(trials=40, seed=1)
     ),
@@ -215,9 +225,7 @@ BUILDERS = {
     "frame_marginals_figure": _frame_marginals,
     "track_figure": _track_figure,
     "offset_figure": _offset_figure,
-    "frames_study_figure": lambda: beyond_frames.frames_study_figure(
-        _frames_run(), title="the paper's prior rule, q = 0.02"
-    ),
+    "frames_study_figure": lambda: beyond_frames.frames_study_figure(_frames_run()),
     "hard_figure": lambda: beyond_hard.hard_figure(
         hardness.hard_study(
             [(FIG2.c, s, 0.0) for s in np.geomspace(1.0, 1000.0, 11)], FIG2.rho, 8, 1

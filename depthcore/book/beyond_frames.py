@@ -105,12 +105,16 @@ def frame_marginals(
     n_points : int
         Points of the depth grid.
     width : float
-        The grid spans the optimal depth mean ± ``width`` optimal SDs (cut at 0).
+        Each filter's grid joins ``n_points`` points over its depth mean ±
+        ``width`` of its SDs and ``n_points`` over the optimal filter's mean ±
+        ``width`` optimal SDs (cut at 0), so that both densities are resolved.
 
     Returns
     -------
     list of dict, one per ``N``
-        ``"frames"``, ``"grid"`` (G,), ``"density"`` ``{name: (G,)}``,
+        ``"frames"``; ``"grid"`` ``{name: (G,)}``, each filter's grid, and on it
+        ``"density"`` ``{name: (G,)}``, the filter's depth density, and
+        ``"exact"`` ``{name: (G,)}``, the optimal filter's;
         ``"depth_mean"`` and ``"depth_sd"`` ``{name: float}``.
     """
     mu = checks.finite_array(mu, "mu")
@@ -138,18 +142,29 @@ def frame_marginals(
                     options["n_particles"] = n_particles
             estimates[name] = f(mu[:n], rho, pm, pc, **options)
         ref = estimates["optimal"]
-        lo = max(float(ref.depth_mean) - width * float(ref.depth_sd), 1e-9)
-        grid = np.linspace(lo, float(ref.depth_mean) + width * float(ref.depth_sd), n_points)
+        grids = {k: _joint_grid((ref, e), width, n_points) for k, e in estimates.items()}
         out.append(
             {
                 "frames": n,
-                "grid": grid,
-                "density": {k: FILTERS[k].density(e, "depth", grid) for k, e in estimates.items()},
+                "grid": grids,
+                "density": {
+                    k: FILTERS[k].density(e, "depth", grids[k]) for k, e in estimates.items()
+                },
+                "exact": {k: FILTERS["optimal"].density(ref, "depth", grids[k]) for k in estimates},
                 "depth_mean": {k: float(e.depth_mean) for k, e in estimates.items()},
                 "depth_sd": {k: float(e.depth_sd) for k, e in estimates.items()},
             }
         )
     return out
+
+
+def _joint_grid(estimates, width: float, n_points: int) -> np.ndarray:
+    """Depths over each estimate's mean ± ``width`` SDs, ``n_points`` each, joined, > 0."""
+    parts = []
+    for e in estimates:
+        m, s = float(e.depth_mean), float(e.depth_sd)
+        parts.append(np.linspace(max(m - width * s, 1e-9), m + width * s, n_points))
+    return np.unique(np.concatenate(parts))
 
 
 def frame_marginals_figure(result: list, names=None):
@@ -166,38 +181,69 @@ def frame_marginals_figure(result: list, names=None):
     -------
     matplotlib.figure.Figure
         One row per filter (its label, wrapped, at the left), one column per
-        number of frames (its depth axis at the bottom).
+        number of frames (its label at the top). Each panel has its own depth
+        and density axes, spanning both densities' means ± :data:`PANEL_SDS`
+        of their SDs, so that the filter's density and the optimal one are
+        both seen whole however far apart or different in width they are; the
+        density axis is logarithmic where their peaks differ by more than a
+        factor :data:`LOG_PEAKS`.
     """
     import textwrap
 
-    from matplotlib.ticker import MaxNLocator
+    from matplotlib.ticker import LogLocator, MaxNLocator, NullLocator
 
     if names is None:
         names = [n for n in result[0]["density"] if n != "optimal"]
     fig, axes = subplots(
         len(names),
         len(result),
-        figsize=(WIDTH, 0.8 * len(names) + 1.1),
-        sharex="col",
+        figsize=(WIDTH, 1.05 * len(names) + 0.9),
         squeeze=False,
     )
     exact = {**STYLE["optimal"], "color": "black", "linestyle": "-", "linewidth": 1.0}
     for j, r in enumerate(result):
         for i, name in enumerate(names):
             ax = axes[i, j]
-            ax.fill_between(r["grid"], r["density"]["optimal"], color="0.85", linewidth=0)
-            ax.plot(r["grid"], r["density"]["optimal"], **exact)
-            ax.plot(r["grid"], r["density"][name], **{**STYLE[name], "linewidth": 1.4})
-            ax.set_yticks([])
+            grid = r["grid"][name]
+            ax.fill_between(grid, r["exact"][name], color="0.85", linewidth=0)
+            ax.plot(grid, r["exact"][name], **exact)
+            ax.plot(grid, r["density"][name], **{**STYLE[name], "linewidth": 1.4})
+            ends = [
+                (
+                    r["depth_mean"][k] - PANEL_SDS * r["depth_sd"][k],
+                    r["depth_mean"][k] + PANEL_SDS * r["depth_sd"][k],
+                )
+                for k in ("optimal", name)
+            ]
+            ax.set_xlim(
+                max(min(e[0] for e in ends), grid[0]), min(max(e[1] for e in ends), grid[-1])
+            )
+            peaks = sorted((float(np.max(r["exact"][name])), float(np.max(r["density"][name]))))
+            if peaks[1] > LOG_PEAKS * peaks[0]:
+                ax.set_yscale("log")
+                ax.set_ylim(peaks[0] / 30, 3 * peaks[1])
+                ax.yaxis.set_major_locator(LogLocator(numticks=3))
+                ax.yaxis.set_minor_locator(NullLocator())
+            else:
+                ax.set_ylim(0, None)
+                ax.yaxis.set_major_locator(MaxNLocator(2))
+            ax.xaxis.set_major_locator(MaxNLocator(3))
+            ax.tick_params(labelsize=MIN_FONT, length=2, pad=1)
             if i == 0:
-                ax.set_title(f"N = {r['frames']}")
+                ax.set_title(f"$N = {r['frames']}$")
             if j == 0:
                 label = textwrap.fill(_filters.FILTERS[name].label, 14)
                 ax.set_ylabel(label, fontsize=MIN_FONT, rotation=0, ha="right", va="center")
-        axes[-1, j].xaxis.set_major_locator(MaxNLocator(3))
-        axes[-1, j].tick_params(labelsize=MIN_FONT)
-        axes[-1, j].set_xlabel(f"depth at frame {r['frames']}", fontsize=MIN_FONT)
+        axes[-1, j].set_xlabel(f"depth $y$ at frame {r['frames']}", fontsize=MIN_FONT)
     return fig
+
+
+#: The half-width of each panel of :func:`frame_marginals_figure`, in SDs of either density.
+PANEL_SDS = 4.0
+
+#: A panel of :func:`frame_marginals_figure` whose two densities' peaks differ by more than
+#: this factor draws the density on a logarithmic axis, where the lower one is seen.
+LOG_PEAKS = 20.0
 
 
 #: The panels of :func:`frames_study_figure`, each (score, label, logarithmic axis, nominal level).
@@ -211,6 +257,10 @@ FRAMES_ROWS = (
 )
 
 
+#: The factor between neighbouring filters' positions along ``N`` in :func:`frames_study_figure`.
+SPREAD = 1.02
+
+
 def _coverage_bands(ax, frames, level: float, trials) -> None:
     """Shade where a coverage over each number of ``trials`` passes the coverage test."""
 
@@ -219,7 +269,7 @@ def _coverage_bands(ax, frames, level: float, trials) -> None:
         ax.axhspan(level - half, level + half, color="0.5", alpha=0.15, linewidth=0)
 
 
-def frames_study_figure(result: dict, names=None, title: str | None = None):
+def frames_study_figure(result: dict, names=None):
     """The scores of :func:`~depthcore.studies.frames.frames_study` against ``N``, one panel each.
 
     Parameters
@@ -228,13 +278,14 @@ def frames_study_figure(result: dict, names=None, title: str | None = None):
         One ``frames_study`` result.
     names : sequence of str, optional
         Filters to draw; default every filter of ``result``.
-    title : str, optional
-        Drawn above the panels.
 
     Returns
     -------
     matplotlib.figure.Figure
-        Six panels, :data:`FRAMES_ROWS`, two to a row. The coverage panels shade
+        Six panels, :data:`FRAMES_ROWS`, two to a row, each score with bars of
+        two Monte Carlo standard errors either side (its ``"<score>_se"``), the
+        filters' points spread a little along ``N`` so that their bars do not
+        overlap. The coverage panels shade
         where a coverage passes :func:`~depthcore.studies.scores.coverage_test`
         (within :data:`~depthcore.studies.scores.COVERAGE_Z` binomial standard errors
         of the nominal level) over each filter's number of trials, one band per
@@ -246,10 +297,20 @@ def frames_study_figure(result: dict, names=None, title: str | None = None):
     names = [n for n in names if n in result]
     fig, axes = subplots(3, 2, figsize=(WIDTH, 8.0), sharex=True)
     frames = np.asarray(result["frames"])
+    spread = SPREAD ** (np.arange(len(names)) - (len(names) - 1) / 2)
     for ax, (score, label, log, nominal) in zip(axes.ravel(), FRAMES_ROWS, strict=True):
-        for name in names:
+        for name, factor in zip(names, spread, strict=True):
             if not (score == "hellinger" and name == "optimal"):
-                ax.plot(frames, result[name][score], marker="o", markersize=3, **STYLE[name])
+                ax.errorbar(
+                    frames * factor,
+                    result[name][score],
+                    yerr=2 * np.asarray(result[name][f"{score}_se"]),
+                    marker="o",
+                    markersize=3,
+                    capsize=1.5,
+                    elinewidth=0.8,
+                    **STYLE[name],
+                )
         if score.startswith("coverage"):
             _coverage_bands(ax, frames, nominal, [result[n]["trials"][0] for n in names])
             ax.set_ylim(-0.02, 1.02)
@@ -262,9 +323,7 @@ def frames_study_figure(result: dict, names=None, title: str | None = None):
         ax.set_xticks(frames, [str(int(n)) for n in frames])
         ax.set_xticks([], minor=True)
     for ax in axes[-1]:
-        ax.set_xlabel("frames N")
-    if title is not None:
-        fig.suptitle(title)
+        ax.set_xlabel("frames $N$")
     legend_below(fig, axes.ravel(), ncol=3)
     return fig
 

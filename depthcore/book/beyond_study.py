@@ -5,6 +5,7 @@ Recommended import: ``from depthcore.book import beyond_study``.
 * :func:`truth_study`: the study (:func:`depthcore.studies.monte_carlo.study`) at several
   true states, each filter's scores gathered over the truths by
   :func:`depthcore.studies.monte_carlo.gather_scores`;
+* :func:`truth_study_figure`: its depth scores at each truth, with error bars;
 * :func:`calibration` and :func:`prior_calibration`: the calibration plots of
   :func:`depthcore.studies.monte_carlo.study` and :func:`depthcore.studies.monte_carlo.prior_study`;
 * :func:`truth_study_texts` and :func:`prior_study_texts`: the texts the
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.book.style import MIN_FONT, STYLE, subplots
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, legend_below, subplots
 from depthcore.formatting import SCORE_TEXTS, row_extremes, value_se, vec
 from depthcore.problem import checks
 from depthcore.registry.estimates import QUANTITIES
@@ -66,38 +67,78 @@ def truth_study(
     return out
 
 
-def calibration(result: dict, quantity: str = "depth"):
+def calibration(result: dict, quantity: str = "depth", notes: dict | None = None):
     """Coverage of each filter's central intervals against their nominal level.
 
     Parameters
     ----------
     result : dict
         A study of :func:`depthcore.studies.monte_carlo.study`, whose filters'
-        ``"calibration"`` curves are drawn, titled with its trials, ``rho`` and prior.
+        ``"calibration"`` curves are drawn.
     quantity : {"depth", "velocity"}
+    notes : dict, optional
+        ``{filter: text}``: a note on a filter's curve, with an arrow to its
+        point at the level :data:`NOTE_LEVEL`.
 
     Returns
     -------
     matplotlib.figure.Figure
-        The curves over the diagonal, where a calibrated filter's lies.
+        The curves over the diagonal, where a calibrated filter's lies, inside a
+        grey band of two binomial standard errors ``sqrt(p (1 - p) / n)`` about
+        it over the study's ``n`` valid trials: a calibrated filter's curve
+        leaves it at a level with probability about 5 %. Each point has bars of
+        two binomial standard errors of its own coverage ``c``,
+        ``sqrt(c (1 - c) / n)``.
     """
 
-    fig, ax = subplots(figsize=(5.2, 4.6))
-    ax.plot([0, 1], [0, 1], color="0.7", linewidth=1, label="calibrated")
+    fig, ax = subplots(figsize=(5.2, 5.0))
+    levels = np.linspace(0.0, 1.0, 201)
+    se = np.sqrt(levels * (1 - levels) / max(int(result["valid_trials"]), 1))
+    ax.fill_between(
+        levels,
+        levels - 2 * se,
+        levels + 2 * se,
+        color="0.85",
+        linewidth=0,
+        label="two binomial SEs",
+    )
+    ax.plot([0, 1], [0, 1], color="0.6", linewidth=1, label="calibrated")
+    n = max(int(result["valid_trials"]), 1)
     for name, f in result["filters"].items():
         cal = f["calibration"]
-        ax.plot(cal["levels"], cal[quantity], marker="o", markersize=3, **STYLE[name])
+        covered = np.asarray(cal[quantity], dtype=float)
+        ax.errorbar(
+            np.asarray(cal["levels"], dtype=float),
+            covered,
+            yerr=2 * np.sqrt(covered * (1 - covered) / n),
+            marker="o",
+            markersize=3,
+            elinewidth=0.8,
+            **STYLE[name],
+        )
+    for name, text in (notes or {}).items():
+        cal = result["filters"][name]["calibration"]
+        j = int(np.argmin(np.abs(np.asarray(cal["levels"]) - NOTE_LEVEL)))
+        x, y = float(cal["levels"][j]), float(cal[quantity][j])
+        below = y < x - 0.05
+        ax.annotate(
+            text,
+            (x, y),
+            xytext=(x + 0.02, y - 0.3) if below else (x - 0.55, y + 0.15),
+            fontsize=MIN_FONT,
+            color=STYLE[name]["color"],
+            arrowprops={"arrowstyle": "->", "color": STYLE[name]["color"]},
+        )
     ax.set_xlabel("nominal level of the central interval")
     ax.set_ylabel(f"fraction of trials whose true {quantity} it covers")
     ax.set_xlim(0, 1)
-    ax.set_ylim(0, 1)
-    ax.legend(frameon=False, fontsize=MIN_FONT)
-    ax.set_title(
-        f"{quantity}: {result['valid_trials']} trials, rho = {result['rho']:.4g}, "
-        f"{result['prior']} prior",
-        fontsize=MIN_FONT,
-    )
+    ax.set_ylim(0, 1.03)
+    legend_below(fig, [ax], ncol=2)
     return fig
+
+
+#: The nominal level at which :func:`calibration` points a note at a filter's curve.
+NOTE_LEVEL = 0.6
 
 
 def prior_calibration(result: dict):
@@ -140,10 +181,66 @@ def prior_calibration(result: dict):
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1)
     ax.legend(frameon=False, fontsize=MIN_FONT)
-    ax.set_title(
-        f"truths from the prior: {result['valid_trials']} trials, rho = {result['rho']:.4g}",
-        fontsize=MIN_FONT,
-    )
+    return fig
+
+
+#: The panels of :func:`truth_study_figure`: (score, axis label, logarithmic axis, reference).
+TRUTH_PANELS = (
+    ("bias", "bias of the depth mean", False, 0.0),
+    ("rmse", "RMSE of the depth mean", True, None),
+    ("coverage_68", "coverage of the central\n68 % depth interval", False, 0.68),
+    ("nees", "mean NEES", True, 3.0),
+)
+
+
+def truth_study_figure(result: dict, labels=None):
+    """:func:`truth_study`'s depth scores at each truth, with two-standard-error bars.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`truth_study`.
+    labels : sequence of str, shape (T,), optional
+        The truths' names on the horizontal axis; default their states.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Four panels, :data:`TRUTH_PANELS`, one point per filter and truth with
+        bars of two Monte Carlo standard errors either side, and a grey line at
+        the value of an unbiased or calibrated filter.
+    """
+
+    truths = np.asarray(result["truth"])
+    if labels is None:
+        labels = ["(" + ", ".join(f"{v:g}" for v in t) + ")" for t in truths]
+    names = [n for n in NAMES if n in result]
+    x = np.arange(len(truths), dtype=float)
+    fig, axes = subplots(2, 2, figsize=(WIDTH, 5.6), sharex=True)
+    for ax, (score, label, log, reference) in zip(axes.ravel(), TRUTH_PANELS, strict=True):
+        for k, name in enumerate(names):
+            r = result[name]
+            ax.errorbar(
+                x + 0.08 * (k - (len(names) - 1) / 2),
+                r[score],
+                yerr=2 * np.asarray(r[f"{score}_se"]),
+                marker="o",
+                markersize=4,
+                capsize=2,
+                linestyle="none",
+                color=STYLE[name]["color"],
+                label=STYLE[name]["label"],
+            )
+        if reference is not None:
+            ax.axhline(reference, color="0.6", linewidth=1, zorder=0)
+        if log:
+            ax.set_yscale("log")
+        ax.set_ylabel(label)
+        ax.set_xticks(x, labels)
+        ax.set_xlim(x[0] - 0.4, x[-1] + 0.4)
+    for ax in axes[-1]:
+        ax.set_xlabel("true state $(x, y, v)$ at time 3")
+    legend_below(fig, axes.ravel(), ncol=len(names))
     return fig
 
 

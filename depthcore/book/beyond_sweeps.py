@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, legend_below, subplots
 from depthcore.formatting import SCORE_TEXTS, plus_minus, rho_label, row_extremes, value_se
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, paper_prior_means
@@ -280,7 +280,7 @@ def noise_study_figure(result: dict):
         Two panels: the coverage beside its nominal 0.68, and the RMSE.
     """
 
-    fig, axes = subplots(1, 2, figsize=(WIDTH, 4.0))
+    fig, axes = subplots(1, 2, figsize=(WIDTH, 4.4))
     names = [n for n in _filters.NAMES if n in result]
     for name in names:
         r = result[name]
@@ -295,15 +295,15 @@ def noise_study_figure(result: dict):
                 capsize=2,
                 **STYLE[name],
             )
-    axes[0].axhline(0.68, color="0.7", linewidth=1, label="calibrated: 0.68")
+    axes[0].axhline(0.68, color="0.7", linewidth=1, label="calibrated")
     axes[0].set_ylim(0, 1.02)
     axes[0].set_ylabel("fraction of trials whose true depth\nthe central 68 % interval covers")
     axes[1].set_yscale("log")
     axes[1].set_ylabel("RMS error of the depth mean")
     for ax in axes:
         ax.set_xscale("log")
-        ax.set_xlabel("noise level rho (radians)")
-    axes[0].legend(frameon=False, fontsize=MIN_FONT)
+        ax.set_xlabel(r"noise level $\rho$ (radians)")
+    legend_below(fig, axes, ncol=5)
     return fig
 
 
@@ -329,7 +329,7 @@ def profile_figure(mu, rhos, depths):
             depths,
             np.exp(-f / (2.0 * rho**2)),
             linewidth=1.6,
-            label=f"rho = {rho_label(rho)}",
+            label=rf"$\rho = {rho_label(rho)}$",
         )
     ax.set_xscale("log")
     ax.set_xlabel("depth $y$ at time 3")
@@ -358,17 +358,17 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False, l
     """
 
     labels = {
-        "rho": "noise level rho (radians)",
-        "offset": "offset of the prior's depth",
-        "velocity": "velocity of the prior's mean",
+        "rho": r"noise level $\rho$ (radians)",
+        "offset": r"offset $\Delta$ of the prior's depth",
+        "velocity": r"velocity $v_0$ of the prior mean",
     }
     ylabels = {
-        "hellinger": "Hellinger distance of the depth marginal to the optimal one",
-        "depth_mean": "depth mean",
-        "depth_sd": "depth SD",
+        "hellinger": "Hellinger distance of the\ndepth marginal to the optimal one",
+        "depth_mean": "depth mean at time 3",
+        "depth_sd": "depth SD at time 3",
     }
-    fig, ax = subplots(figsize=(6.0, 4.0))
-    for name in _filters.NAMES:
+    fig, ax = subplots(figsize=(6.0, 4.4))
+    for name in FILTERS:
         if name in result and not (field == "hellinger" and name == "optimal"):
             ax.plot(result[x], result[name][field], marker="o", markersize=3, **STYLE[name])
     if log_x:
@@ -376,8 +376,8 @@ def sweep(result: dict, x: str, field: str = "hellinger", log_x: bool = False, l
     if log_y:
         ax.set_yscale("log")
     ax.set_xlabel(labels[x])
-    ax.set_ylabel(ylabels[field], fontsize=MIN_FONT)
-    ax.legend(frameon=False, fontsize=MIN_FONT)
+    ax.set_ylabel(ylabels[field])
+    legend_below(fig, [ax], ncol=3)
     return fig
 
 
@@ -413,9 +413,9 @@ def prior_mean_map_figure(result: dict, marks: dict | None = None):
     for label, (offset, velocity) in (marks or {}).items():
         ax.plot(velocity, offset, marker="o", color="black", linestyle="none")
         ax.annotate(label, (velocity, offset), xytext=(5, 5), textcoords="offset points")
-    fig.colorbar(mesh, ax=ax, label="log10(EKF depth SD / optimal depth SD)")
-    ax.set_xlabel("velocity of the prior's mean")
-    ax.set_ylabel("offset of the prior's depth")
+    fig.colorbar(mesh, ax=ax, label=r"$\log_{10}$(EKF depth SD / optimal depth SD)")
+    ax.set_xlabel(r"velocity $v_0$ of the prior mean")
+    ax.set_ylabel(r"offset $\Delta$ of the prior's depth")
     return fig
 
 
