@@ -10,7 +10,14 @@ import pytest
 from numpy.testing import assert_allclose
 
 from depthcore import SCENARIOS
-from depthcore.book import beyond_filters, beyond_linear, beyond_study, beyond_sweeps, paper
+from depthcore.book import (
+    beyond_filters,
+    beyond_linear,
+    beyond_particles,
+    beyond_study,
+    beyond_sweeps,
+    paper,
+)
 from depthcore.exact import optimal, posterior
 from depthcore.kalman import ekf, ukf
 from depthcore.kalman.second_order import second_order
@@ -58,14 +65,14 @@ def test_first_update_rejects_a_non_scenario():
 
 @pytest.fixture(scope="module")
 def convergence():
-    return beyond_filters.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
+    return beyond_particles.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
 
 
 def test_particle_convergence_shapes(convergence):
     r = convergence
     assert_allclose(r["sizes"], [300, 600])
-    assert set(r["rmse"]) == set(beyond_filters.SETTINGS)
-    for name in beyond_filters.SETTINGS:
+    assert set(r["rmse"]) == set(beyond_particles.SETTINGS)
+    for name in beyond_particles.SETTINGS:
         assert set(r["rmse"][name]) == set(estimates.MOMENTS)
         assert r["rmse"][name]["depth_mean"].shape == (2,)
         assert r["ess"][name].shape == (2, 3)
@@ -85,7 +92,7 @@ def test_particle_convergence_default_is_close_and_bootstrap_collapses(convergen
 
 
 def test_particle_convergence_streams_are_per_setting_and_repeatable(convergence):
-    alone = beyond_filters.particle_convergence(
+    alone = beyond_particles.particle_convergence(
         FIG2, [300, 600], repeats=4, seed=3, settings={"default": {}}
     )
     for m in estimates.MOMENTS:
@@ -95,8 +102,8 @@ def test_particle_convergence_streams_are_per_setting_and_repeatable(convergence
 
 
 def test_particle_convergence_chunks_repeats(monkeypatch):
-    monkeypatch.setattr(beyond_filters, "CHUNK_PARTICLES", 500)  # one run of N = 300 per call
-    r = beyond_filters.particle_convergence(
+    monkeypatch.setattr(beyond_particles, "CHUNK_PARTICLES", 500)  # one run of N = 300 per call
+    r = beyond_particles.particle_convergence(
         FIG2, [300], repeats=3, seed=0, settings={"default": {}}
     )
     assert r["rmse"]["default"]["depth_mean"].shape == (1,)
@@ -106,12 +113,12 @@ def test_particle_convergence_chunks_repeats(monkeypatch):
 @pytest.mark.parametrize("bad", [[0], [1.5], [[10, 20]], []])
 def test_particle_convergence_rejects_bad_sizes(bad):
     with pytest.raises(ValueError, match="sizes must be positive integers"):
-        beyond_filters.particle_convergence(FIG2, bad, repeats=2, seed=0)
+        beyond_particles.particle_convergence(FIG2, bad, repeats=2, seed=0)
 
 
 def test_particle_convergence_rejects_bad_repeats():
     with pytest.raises(ValueError, match="repeats must be a positive integer"):
-        beyond_filters.particle_convergence(FIG2, [100], repeats=0, seed=0)
+        beyond_particles.particle_convergence(FIG2, [100], repeats=0, seed=0)
 
 
 def test_noise_study_gathers_the_study_at_each_level():
@@ -297,7 +304,7 @@ def test_truth_study_rejects_bad_truths(bad):
 
 
 def test_resample_move_runs_are_the_filter_run_on_independent_streams():
-    r = beyond_filters.resample_move_runs(FIG2, 2000, 3, seed=3, moves=5)
+    r = beyond_particles.resample_move_runs(FIG2, 2000, 3, seed=3, moves=5)
     exact = optimal.run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     assert r["exact"]["depth_sd"] == exact.depth_sd
     streams = np.random.SeedSequence(3).spawn(3)
@@ -315,9 +322,9 @@ def test_resample_move_runs_are_the_filter_run_on_independent_streams():
 
 def test_resample_move_runs_rejects_bad_arguments():
     with pytest.raises(ValueError, match="scenario"):
-        beyond_filters.resample_move_runs("fig2", 100, 2, seed=0)
+        beyond_particles.resample_move_runs("fig2", 100, 2, seed=0)
     with pytest.raises(ValueError, match="repeats"):
-        beyond_filters.resample_move_runs(FIG2, 100, 1, seed=0)
+        beyond_particles.resample_move_runs(FIG2, 100, 1, seed=0)
 
 
 # --- the Rao-Blackwellised particle filter against the bank ----------------------------

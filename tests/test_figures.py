@@ -9,7 +9,15 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from numpy.testing import assert_allclose  # noqa: E402
 
-from depthcore.book import beyond_filters, beyond_linear, beyond_study, beyond_sweeps, paper, style
+from depthcore.book import (
+    beyond_filters,
+    beyond_linear,
+    beyond_particles,
+    beyond_study,
+    beyond_sweeps,
+    paper,
+    style,
+)
 from depthcore.exact import posterior, smoother
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry.filters import NAMES, PAPER_FILTERS
@@ -134,19 +142,53 @@ def test_first_update_figure_draws_both_filters():
     plt.close(fig)
 
 
+def test_extended_figure_draws_every_filter_in_a_panel_per_experiment():
+    from depthcore.registry.filters import NAMES
+    from depthcore.studies import reproduce
+
+    grids = {"fig2": (2.5, 10.5), "fig5": (4.5, 8.0), "fig4": (0.4, 2.2)}
+    fig = beyond_filters.extended_figure(grids, {"fig5": 0.5}, n=41)
+    panels = fig.axes[: len(grids)]
+    assert [ax.get_title() for ax in panels] == [
+        "Figure 2",
+        r"Figure 5: $\rho = 1/500$",
+        "Figure 4",
+    ]
+    for ax, key in zip(panels, grids, strict=True):
+        curves = reproduce.curves(SCENARIOS[key], np.linspace(*grids[key], 41), filters=NAMES)
+        lines = ax.get_lines()
+        assert [line.get_label() for line in lines] == [style.STYLE[n]["label"] for n in NAMES]
+        for line, name in zip(lines, NAMES, strict=True):
+            assert_allclose(line.get_ydata(), curves[name], rtol=1e-12)
+    assert panels[1].get_ylim() == (0.0, 0.5)
+    assert panels[2].get_xlabel() == "velocity $v$"
+    # the fourth cell of the grid holds the one legend, naming every filter
+    spare = fig.axes[len(grids)]
+    assert [t.get_text() for t in spare.get_legend().get_texts()] == [
+        style.STYLE[n]["label"] for n in NAMES
+    ]
+    plt.close(fig)
+
+
+def test_panel_label_names_what_differs_from_figure_2():
+    assert beyond_filters.panel_label("fig2") == "Figure 2"
+    assert beyond_filters.panel_label("fig3") == r"Figure 3: $\mu_{1:3} = (-0.25, 0, 0.2)$"
+    assert beyond_filters.panel_label("fig6") == "Figure 6: prior depth $+2$"
+
+
 @pytest.fixture(scope="module")
 def convergence():
-    return beyond_filters.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
+    return beyond_particles.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
 
 
 def test_convergence_figure_draws_each_setting_and_the_reference(convergence):
-    fig = beyond_filters.convergence_figure(convergence)
+    fig = beyond_particles.convergence_figure(convergence)
     assert len(fig.axes) == 2
-    assert len(fig.axes[0].get_lines()) == len(beyond_filters.SETTINGS) + 1
+    assert len(fig.axes[0].get_lines()) == len(beyond_particles.SETTINGS) + 1
     assert fig.axes[0].get_xscale() == "log" and fig.axes[0].get_yscale() == "log"
     plt.close(fig)
     with pytest.raises(ValueError, match="quantity must be one of"):
-        beyond_filters.convergence_figure(convergence, "position")
+        beyond_particles.convergence_figure(convergence, "position")
 
 
 def test_profile_figure_draws_each_noise_level():
@@ -288,7 +330,7 @@ def test_first_update_figure_draws_the_ellipses_and_sigma_points():
 
 def test_convergence_figure_draws_the_errors_and_the_ideal_line(convergence):
     for quantity in ("depth", "velocity"):
-        fig = beyond_filters.convergence_figure(convergence, quantity)
+        fig = beyond_particles.convergence_figure(convergence, quantity)
         N = np.asarray(convergence["sizes"])
         for ax, moment in zip(fig.axes, ("mean", "sd"), strict=True):
             lines = ax.get_lines()

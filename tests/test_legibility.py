@@ -38,6 +38,7 @@ from depthcore.book import (
     beyond_frames,
     beyond_hard,
     beyond_linear,
+    beyond_particles,
     beyond_stonesoup,
     beyond_study,
     beyond_sweeps,
@@ -50,7 +51,6 @@ from depthcore.exact import posterior, smoother
 from depthcore.problem import model
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry import online
-from depthcore.registry.filters import NAMES as FILTER_NAMES
 from depthcore.studies import frames, hardness, monte_carlo
 
 #: Width in CSS pixels at which the book shows a figure at a 1280-pixel window.
@@ -181,15 +181,15 @@ def _bound_figure():
 
 BUILDERS = {
     "figure": lambda: paper.figure("fig3", n=101),
-    "figure, extended": lambda: paper.figure("fig2", n=101, filters=FILTER_NAMES),
+    "extended_figure": lambda: beyond_filters.extended_figure(paper.GRIDS, paper.YLIM, n=101),
     "translating_point": lambda: paper.translating_point(),
     "bearings_figure": lambda: intuition.bearings_figure(FIG2.mu, [4.0, 6.0, 9.0], 6.0),
     "readings_figure": lambda: paper.readings_figure("fig3", n=201),
     "first_update_figure": lambda: beyond_filters.first_update_figure(
         beyond_filters.first_update(FIG2)
     ),
-    "convergence_figure": lambda: beyond_filters.convergence_figure(
-        beyond_filters.particle_convergence(FIG2, [100, 200], repeats=2, seed=3)
+    "convergence_figure": lambda: beyond_particles.convergence_figure(
+        beyond_particles.particle_convergence(FIG2, [100, 200], repeats=2, seed=3)
     ),
     "calibration": lambda: beyond_study.calibration(
         monte_carlo.study(trials=20, seed=0, n_particles=100)

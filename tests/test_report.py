@@ -317,6 +317,9 @@ def test_bench_texts_format_the_records_numbers():
     assert t["opt_nodes_max"] == str(max(triple["nodes"]))
     assert t["opt_origin"] == benchmark_tables.bench_origin(r)
     assert r["date"][:10] in t["opt_origin"] and r["machine"]["cpu"] in t["opt_origin"]
+    machine = benchmark_tables.bench_machine(r)
+    assert t["opt_origin"] == f"{r['date'][:10]} on {machine}"
+    assert machine.startswith(f"{r['machine']['cores']} cores (") and r["date"][:4] not in machine
     assert formatting.sci(1.5e8) == "1.5e8" and formatting.sci(0.0287, 2) == "2.87e-2"
     assert formatting.sci(1e-8, 0) == "1e-8"
     with pytest.raises(ValueError, match="name"):

@@ -159,7 +159,7 @@ MUTANTS = [
     ),
     (
         "convergence figure's ideal line is sd / N",
-        "depthcore/book/beyond_filters.py",
+        "depthcore/book/beyond_particles.py",
         'ideal = result["exact"][f"{quantity}_sd"] / np.sqrt(N)',
         'ideal = result["exact"][f"{quantity}_sd"] / N',
         "tests/test_figures.py",

@@ -12,7 +12,8 @@ figures and the texts its page glues, in that order:
   filters, the marginals, Figures 2-6 and the appendix;
 * :mod:`~depthcore.book.using`: the page "Using depthcore", its module map and
   tables read from the package;
-* :mod:`~depthcore.book.beyond_filters`, :mod:`~depthcore.book.beyond_study`,
+* :mod:`~depthcore.book.beyond_filters`, :mod:`~depthcore.book.beyond_particles`,
+  :mod:`~depthcore.book.beyond_study`,
   :mod:`~depthcore.book.beyond_sweeps`, :mod:`~depthcore.book.beyond_linear`,
   :mod:`~depthcore.book.beyond_frames`, :mod:`~depthcore.book.beyond_bound`,
   :mod:`~depthcore.book.beyond_hard`, :mod:`~depthcore.book.beyond_conjecture`,

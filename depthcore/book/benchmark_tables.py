@@ -5,7 +5,8 @@ Recommended import: ``from depthcore.book import benchmark_tables``.
 :func:`bench_texts` gives one benchmark record's (:mod:`depthcore.provenance.benchmarks`)
 numbers as texts, :func:`bench_tables` the tables of the costs chapter,
 :func:`bench_blocks` every table with its notes (the page "Reproducing this book") and
-:func:`bench_origin` the machine and date a record was measured on.
+:func:`bench_origin` the machine and date a record was measured on (:func:`bench_machine`
+the machine alone).
 """
 
 from __future__ import annotations
@@ -22,6 +23,28 @@ from depthcore.problem.scenarios import SCENARIOS
 # --- the benchmarks' records -----------------------------------------------------------------
 
 
+def bench_machine(record: dict) -> str:
+    """The machine a benchmark's record was measured on, as the book states it.
+
+    Parameters
+    ----------
+    record : dict
+        A benchmark's record (:func:`depthcore.provenance.benchmarks.read`), of
+        which ``"machine"`` is read.
+
+    Returns
+    -------
+    str
+        E.g. ``"2 cores (AMD EPYC, family 25, model 17; scipy-openblas
+        0.3.31.188.0, SkylakeX kernels), Python 3.11.7, NumPy 2.4.6, SciPy 1.17.1"``
+    """
+    m = record["machine"]
+    return (
+        f"{m['cores']} cores ({m['cpu']}, {m['processor']}; {m['blas']}), "
+        f"Python {m['python']}, NumPy {m['numpy']}, SciPy {m['scipy']}"
+    )
+
+
 def bench_origin(record: dict) -> str:
     """When and where a benchmark's record was measured, as the book states it.
 
@@ -34,15 +57,10 @@ def bench_origin(record: dict) -> str:
     Returns
     -------
     str
-        E.g. ``"2026-11-26 on 2 cores (AMD EPYC, family 25, model 17; scipy-openblas
-        0.3.31.188.0, SkylakeX kernels), Python 3.11.7, NumPy 2.4.6, SciPy 1.17.1"``
+        The date and :func:`bench_machine`: ``"2026-11-26 on 2 cores (AMD EPYC, ...),
+        Python 3.11.7, NumPy 2.4.6, SciPy 1.17.1"``
     """
-    m = record["machine"]
-    return (
-        f"{record['date'][:10]} on {m['cores']} cores ({m['cpu']}, {m['processor']}; "
-        f"{m['blas']}), Python {m['python']}, "
-        f"NumPy {m['numpy']}, SciPy {m['scipy']}"
-    )
+    return f"{record['date'][:10]} on {bench_machine(record)}"
 
 
 # --- the records' numbers as texts, read by the tables of fields below ---------------------

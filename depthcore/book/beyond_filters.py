@@ -1,4 +1,4 @@
-"""The chapter on the other filters: the first update, the particle filters' convergence.
+"""The chapter on the other filters: Figures 2-6 with five filters, the UKF's first update.
 
 Recommended import: ``from depthcore.book import beyond_filters``.
 
@@ -6,12 +6,8 @@ Recommended import: ``from depthcore.book import beyond_filters``.
   after the first measurement; :func:`truncated_bearing_moments`: why the
   unscented transform of the paper's prior has nothing to match, the moments
   of ``x / y`` under a Gaussian with positive density at ``y = 0`` not existing;
-* :func:`particle_convergence` and :func:`convergence_figure`: the importance
-  sampler's error against the number of particles, for the settings
-  :data:`SETTINGS`;
-* :func:`resample_move_runs`: the causal particle filter with resample-move
-  (:mod:`depthcore.particles.resample_move`) run independently several times on a
-  scenario, against the optimal filter;
+* :func:`extended_figure`: the paper's Figures 2-6 as one grid of panels, with
+  the UKF and importance sampling beside the paper's three filters;
 * :func:`moments_texts`: every filter's moments as the chapter's table glues them.
 """
 
@@ -19,171 +15,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.book.style import MIN_FONT, STYLE, WIDTH, legend_below, reference_rate, subplots
-from depthcore.exact import optimal
-from depthcore.formatting import plus_minus
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, legend_below, subplots
+from depthcore.formatting import plus_minus, rho_label
 from depthcore.kalman import ekf, ukf
-from depthcore.particles import importance, resample_move
 from depthcore.problem import checks
 from depthcore.problem.gaussian import MeanAndCov
-from depthcore.problem.scenarios import Scenario
-from depthcore.registry.estimates import MOMENTS, QUANTITIES
+from depthcore.problem.scenarios import SCENARIOS, Scenario
+from depthcore.registry.estimates import QUANTITIES
 from depthcore.registry.filters import NAMES
-
-#: Settings of the particle filter compared by :func:`particle_convergence`:
-#: keyword arguments of :func:`depthcore.particles.importance.run`.
-SETTINGS = {
-    "default": {},
-    "resampling": {"ess_threshold": 0.5},
-    "bootstrap": {"proposal": "prior"},
-}
-
-
-#: Particles per call of :func:`depthcore.particles.importance.run` (bounds the memory, about 200
-#: bytes each).
-CHUNK_PARTICLES = 200_000
-
-
-# --- convergence of the particle filter ------------------------------------------------------
-
-
-def _run_repeats(scenario: Scenario, n: int, repeats: int, rng, kwargs: dict):
-    """Moments (repeats,) per field and the ESS after each measurement (repeats, 3)."""
-    s, prior = scenario, scenario.prior
-    per_call = max(1, CHUNK_PARTICLES // n)
-    moments, ess = [], []
-    for start in range(0, repeats, per_call):
-        b = min(per_call, repeats - start)
-        batch = importance.run(
-            np.tile(s.mu, (b, 1)), s.rho, prior.mean, prior.cov, n, rng, **kwargs
-        )
-        moments.append(np.stack(batch.moments(), axis=-1))
-        ess.append(batch.ess)
-    return np.concatenate(moments), np.concatenate(ess)
-
-
-def particle_convergence(
-    scenario: Scenario, sizes, repeats: int, seed, settings: dict | None = None
-) -> dict:
-    """Root-mean-square errors of the particle filter's moments against ``N``.
-
-    Each setting runs ``repeats`` independent filters on the scenario's
-    measurements for each number of particles; the errors are measured from
-    the optimal filter's exact moments (:func:`depthcore.exact.optimal.run`).
-
-    Parameters
-    ----------
-    scenario : Scenario
-    sizes : array_like of int, shape (S,)
-        Numbers of particles ``N``.
-    repeats : int
-        Independent runs per ``N``, >= 1.
-    seed : int or numpy.random.SeedSequence
-        Each setting draws from its own child stream of this seed.
-    settings : dict, optional
-        ``{name: keyword arguments of particle.run}``; default :data:`SETTINGS`.
-
-    Returns
-    -------
-    dict
-        ``"sizes"`` (S,), ``"repeats"``, ``"exact"``: ``{moment: float}`` for
-        :data:`~depthcore.registry.estimates.MOMENTS`, ``"rmse"``: ``{setting: {moment: (S,)}}`` and
-        ``"ess"``: ``{setting: (S, 3)}``, the mean ESS after each measurement
-        as a fraction of ``N``.
-    """
-    if not isinstance(scenario, Scenario):
-        raise ValueError(f"scenario must be a Scenario, got {type(scenario).__name__}")
-    sizes = checks.sizes(sizes)
-    if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:
-        raise ValueError(f"repeats must be a positive integer, got {repeats!r}")
-    settings = SETTINGS if settings is None else settings
-    opt = optimal.run(scenario.mu, scenario.rho, scenario.prior.mean, scenario.prior.cov)
-    exact = np.array([getattr(opt, m) for m in MOMENTS])
-    streams = checks.spawn(seed, len(settings))
-    rmse, ess = {}, {}
-    for (name, kwargs), stream in zip(settings.items(), streams, strict=True):
-        rng = np.random.default_rng(stream)
-        err, frac = [], []
-        for n in sizes:
-            m, e = _run_repeats(scenario, int(n), int(repeats), rng, kwargs)
-            err.append(np.sqrt(np.mean((m - exact) ** 2, axis=0)))
-            frac.append(np.mean(e, axis=0) / n)
-        err = np.array(err)
-        rmse[name] = {m: err[:, i] for i, m in enumerate(MOMENTS)}
-        ess[name] = np.array(frac)
-    return {
-        "sizes": sizes,
-        "repeats": int(repeats),
-        "exact": {m: float(v) for m, v in zip(MOMENTS, exact, strict=True)},
-        "rmse": rmse,
-        "ess": ess,
-    }
-
-
-# --- the causal particle filter (resample-move) ----------------------------------------------
-
-
-def resample_move_runs(
-    scenario: Scenario, n_particles: int, repeats: int, seed, moves: int = 20
-) -> dict:
-    """Independent runs of the resample-move particle filter on a scenario.
-
-    The filter of :func:`depthcore.particles.resample_move.run` sees the bearings one at
-    a time (bootstrap proposal from the prior, systematic resampling when the
-    ESS falls below ``N/2``, then ``moves`` Metropolis steps per particle).
-    The ``repeats`` runs draw from independent child streams of ``seed``;
-    their spread gives the Monte Carlo standard error of the moments.
-
-    Parameters
-    ----------
-    scenario : Scenario
-    n_particles : int
-        Particles per run, >= 2.
-    repeats : int
-        Independent runs, >= 2.
-    seed : int or numpy.random.SeedSequence
-    moves : int
-        Metropolis steps per particle after each resampling.
-
-    Returns
-    -------
-    dict
-        ``"runs"``: ``{moment: (repeats,)}`` for :data:`~depthcore.registry.estimates.MOMENTS`;
-        ``"mean"`` and
-        ``"se"``: ``{moment: float}``, the mean over the runs and its standard
-        error (SD over the runs / sqrt(repeats)); ``"exact"``: ``{moment:
-        float}`` of the optimal filter (:func:`depthcore.exact.optimal.run`,
-        in front of the camera); ``"ess"`` (repeats, 3): the ESS after each
-        bearing as a fraction of ``N``; ``"resampled"`` (repeats, 3).
-    """
-    if not isinstance(scenario, Scenario):
-        raise ValueError(f"scenario must be a Scenario, got {type(scenario).__name__}")
-    if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 2:
-        raise ValueError(f"repeats must be an integer >= 2, got {repeats!r}")
-    s, prior = scenario, scenario.prior
-    batches = [
-        resample_move.run(
-            [s.mu],
-            s.rho,
-            prior.mean,
-            prior.cov,
-            n_particles,
-            np.random.default_rng(stream),
-            moves,
-        )
-        for stream in checks.spawn(seed, int(repeats))
-    ]
-    runs = {k: np.concatenate([b.moments()[k] for b in batches]) for k in MOMENTS}
-    opt = optimal.run(s.mu, s.rho, prior.mean, prior.cov)
-    return {
-        "runs": runs,
-        "mean": {k: float(np.mean(v)) for k, v in runs.items()},
-        "se": {k: float(np.std(v, ddof=1) / np.sqrt(len(v))) for k, v in runs.items()},
-        "exact": {k: float(getattr(opt, k)) for k in MOMENTS},
-        "ess": np.concatenate([b.ess for b in batches]) / n_particles,
-        "resampled": np.concatenate([b.resampled for b in batches]),
-    }
-
+from depthcore.studies import reproduce
 
 # --- the first update of the EKF and the UKF -------------------------------------------------
 
@@ -289,30 +129,6 @@ def truncated_bearing_moments(mean, cov, eps) -> dict:
     }
 
 
-#: Legend labels and line styles of the importance sampler's settings,
-#: :data:`depthcore.book.beyond_filters.SETTINGS`.
-SETTING_STYLE = {
-    "default": {
-        "label": "importance sampling, t proposal from $p_s$ (default)",
-        "color": "tab:purple",
-        "linestyle": "-",
-        "marker": "o",
-    },
-    "resampling": {
-        "label": "same, resampling (no move) when ESS < N/2",
-        "color": "tab:orange",
-        "linestyle": "--",
-        "marker": "s",
-    },
-    "bootstrap": {
-        "label": "bootstrap: particles from the prior",
-        "color": "0.45",
-        "linestyle": ":",
-        "marker": "^",
-    },
-}
-
-
 def _ellipse(mean, cov, n_sd: float = 2.0, n: int = 361) -> np.ndarray:
     """Points (n, 2) of the ``n_sd``-SD ellipse of a 2-D Gaussian (a segment if singular)."""
     vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
@@ -377,46 +193,87 @@ def first_update_figure(update: dict, extent: float = 70.0):
     return fig
 
 
-def convergence_figure(result: dict, quantity: str = "depth"):
-    """RMS errors of the mean and the SD of one marginal against ``N``, on log axes.
+# --- Figures 2-6 with five filters -----------------------------------------------------------
 
-    The grey line is ``sd / sqrt(N)``, the standard error of the mean of
-    ``N`` independent draws from the optimal posterior.
+
+def panel_label(key: str, base: str = "fig2") -> str:
+    """A panel's label: the paper's figure number and what differs from Figure 2's experiment.
 
     Parameters
     ----------
-    result : dict
-        The errors of :func:`depthcore.book.beyond_filters.particle_convergence` at
-        its ``"sizes"`` ``N``, of each setting of ``"rmse"``, over ``"repeats"`` runs.
-    quantity : {"depth", "velocity"}
+    key : str
+        A key of :data:`depthcore.problem.scenarios.SCENARIOS`.
+    base : str
+        The experiment the others are told apart from.
+
+    Returns
+    -------
+    str
+        ``"Figure 5: $\\rho = 1/500$"``: the measurements, the noise and the
+        prior's depth offset where they differ from ``base``'s (the marginal
+        drawn is the panel's axis label).
+    """
+    s, b = SCENARIOS[key], SCENARIOS[base]
+    parts = []
+    if tuple(s.mu) != tuple(b.mu):
+        parts.append(r"$\mu_{1:3} = (" + ", ".join(f"{m:g}" for m in s.mu) + ")$")
+    if s.rho != b.rho:
+        parts.append(rf"$\rho = {rho_label(s.rho)}$")
+    if s.depth_offset != b.depth_offset:
+        parts.append(f"prior depth ${s.depth_offset:+g}$")
+    return f"Figure {s.figure}" + (": " + ", ".join(parts) if parts else "")
+
+
+def extended_figure(grids: dict, ylim: dict | None = None, n: int = 801, filters=NAMES):
+    """The paper's Figures 2-6 redrawn with every filter, one panel each, one legend.
+
+    Parameters
+    ----------
+    grids : dict
+        ``{scenario key: (lo, hi)}``, the range of each panel's axis (the
+        figure pages' ranges), one panel per key in a grid of two columns.
+    ylim : dict, optional
+        ``{scenario key: top}``: where a panel's density axis is cut (as the
+        paper cuts the EKF's peak on Figure 3).
+    n : int
+        Grid points of each density.
+    filters : sequence of str
+        The filters drawn (default: all of :data:`depthcore.registry.filters.NAMES`).
 
     Returns
     -------
     matplotlib.figure.Figure
-        Two panels, the mean's errors and the SD's, one line per setting.
+        One panel per key, labelled by :func:`panel_label`, with the marginal
+        densities of :func:`depthcore.studies.reproduce.curves`; the legend in
+        the grid's empty cell, or below the grid when it has none.
     """
-
-    if quantity not in QUANTITIES:
-        raise ValueError(f"quantity must be one of {QUANTITIES}, got {quantity!r}")
-    N = result["sizes"]
-    ideal = result["exact"][f"{quantity}_sd"] / np.sqrt(N)
-    fig, axes = subplots(1, 2, figsize=(WIDTH, 4.4), sharey=True)
-    for ax, moment, title in zip(axes, ("mean", "sd"), ("mean", "SD"), strict=True):
-        for name, err in result["rmse"].items():
-            ax.plot(
-                N,
-                err[f"{quantity}_{moment}"],
-                markersize=4,
-                **SETTING_STYLE.get(name, {"label": name}),
-            )
-        reference_rate(ax, N, ideal, r"posterior SD$/\sqrt{N}$")
-        ax.set_xlabel("number of particles $N$")
-        ax.set_title(
-            f"{quantity} {title}: RMS error over {result['repeats']} runs", fontsize=MIN_FONT
-        )
-    axes[0].set_ylabel("RMS error from the optimal filter")
-    legend_below(fig, axes[:1], ncol=2)
+    keys, ylim = list(grids), ylim or {}
+    rows = (len(keys) + 1) // 2
+    fig, axes = subplots(rows, 2, figsize=(WIDTH, 2.6 * rows + 0.4), squeeze=False)
+    axes = axes.ravel()
+    for ax, key in zip(axes, keys, strict=False):
+        s = SCENARIOS[key]
+        curves = reproduce.curves(s, np.linspace(*grids[key], n), filters=filters)
+        for name in filters:
+            ax.plot(curves["grid"], curves[name], linewidth=1.4, **STYLE[name])
+        sym = _SYMBOL[s.quantity]
+        ax.set_xlabel(f"{s.quantity} ${sym}$")
+        ax.set_ylabel(f"density of ${sym}$")
+        if key in ylim:
+            ax.set_ylim(0, ylim[key])
+        ax.set_title(panel_label(key), fontsize=MIN_FONT)
+    spare = axes[len(keys) :]
+    for ax in spare:
+        ax.axis("off")
+    if len(spare):
+        handles, labels = axes[0].get_legend_handles_labels()
+        spare[0].legend(handles, labels, loc="center", frameon=False, fontsize=MIN_FONT)
+    else:
+        legend_below(fig, axes[:1], ncol=3)
     return fig
+
+
+_SYMBOL = {"depth": "y", "velocity": "v"}
 
 
 def _row(rows: list[dict], name: str, quantity: str) -> dict:

@@ -148,12 +148,12 @@ def bank_depth_figure(densities: dict, truth=None):
     axes[0].set_xlabel("depth $y_N$ at frame $N$ (dots: the nodes; dotted: the truth)")
     axes[0].set_ylabel("posterior density")
     axes[0].legend(frameon=False, fontsize=MIN_FONT)
-    axes[0].set_title("the bank's depth density at its nodes", fontsize=MIN_FONT)
+    axes[0].set_title("(a)", fontsize=MIN_FONT)
     if truth is not None:
         axes[1].axvline(0.0, color="0.5", linewidth=0.8, linestyle=":")
         axes[1].set_xlabel("depth minus the true depth at frame $N$")
         axes[1].set_ylabel("posterior density (log scale)")
-        axes[1].set_title("about the truth, on a log scale", fontsize=MIN_FONT)
+        axes[1].set_title("(b) about the truth", fontsize=MIN_FONT)
     else:
         axes[1].set_visible(False)
     return fig
@@ -191,7 +191,8 @@ def smoothing_figure(track, states, first: int = 1):
         ("fixed-interval smoothed", track.interval, "tab:green", "-"),
     )
     fig, axes = subplots(1, 2, figsize=(WIDTH, 4.2))
-    for ax, i, name in zip(axes, (1, 0), ("depth $y_k$", "lateral position $x_k$"), strict=True):
+    names = ("(a) depth $y_k$", "(b) lateral position $x_k$")
+    for ax, i, name in zip(axes, (1, 0), names, strict=True):
         for label, s, colour, style in series:
             err = s.mean[rows, i] - states[rows, i]
             sd = np.sqrt(s.cov[rows, i, i])
@@ -200,8 +201,8 @@ def smoothing_figure(track, states, first: int = 1):
         ax.axhline(0.0, color="black", linewidth=0.8)
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("frame $k$")
-        ax.set_ylabel(f"estimate minus truth: {name}")
-        ax.set_title(f"{name}: mean $\\pm$ 2 SD, minus the truth", fontsize=MIN_FONT)
+        ax.set_ylabel("estimate minus truth")
+        ax.set_title(name, fontsize=MIN_FONT)
     legend_below(fig, axes[:1], ncol=3)
     return fig
 
@@ -233,7 +234,7 @@ def rbpf_convergence_figure(result: dict):
     reference_rate(ax, J, exact["depth_sd"] / np.sqrt(J), r"exact depth SD$/\sqrt{J}$")
     ax.set_xlabel("particles per cloud $J$")
     ax.set_ylabel("RMS error from the exact bank")
-    ax.set_title(f"RMS error over {result['replicas']} independent clouds", fontsize=MIN_FONT)
+    ax.set_title("(a) RMS error", fontsize=MIN_FONT)
     ax.legend(frameon=False, fontsize=MIN_FONT)
     ax = axes[1]
     runs = result["runs"]["depth_mean"] - exact["depth_mean"]
@@ -252,7 +253,7 @@ def rbpf_convergence_figure(result: dict):
     ax.set_xscale("log")
     ax.set_xlabel("particles per cloud $J$")
     ax.set_ylabel(f"depth mean at frame {result['frames']} minus the exact one")
-    ax.set_title("each cloud's depth mean (grey dots)", fontsize=MIN_FONT)
+    ax.set_title("(b) each cloud's depth mean", fontsize=MIN_FONT)
     ax.legend(frameon=False, fontsize=MIN_FONT)
     return fig
 

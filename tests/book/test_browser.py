@@ -202,7 +202,7 @@ def narrowed_to_a_phone(driver) -> dict:
 
 
 #: Pages with tables wider than a phone, and their mathematics.
-PHONE_PAGES = ("book/fig2", "book/beyond_filters", "book/beyond_hard")
+PHONE_PAGES = ("book/fig2", "book/beyond_filters", "book/beyond_particles", "book/beyond_hard")
 
 
 class PageChecks:

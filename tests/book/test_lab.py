@@ -56,9 +56,9 @@ from test_browser import CHROMEDRIVER, CHROMIUM, CHROMIUM_FLAGS
 
 ROOT = Path(__file__).resolve().parents[2]
 # fig2: a citation, references to equations and pages, a glued figure;
-# beyond_filters: citations of every kind, equations and figures of other pages,
-# seven glued figures; fig6: an exercise, its solution and a reference to a theorem.
-PAGES = ("fig2", "beyond_filters", "fig6")
+# beyond_particles: citations of every kind, equations and a figure of other pages,
+# glued figures and tables; fig6: an exercise, its solution and a reference to a theorem.
+PAGES = ("fig2", "beyond_particles", "fig6")
 EVAL_ROLE = re.compile(r"\{eval\}`([A-Za-z_][A-Za-z0-9_]*)`")
 REFERENCE = re.compile(r"\{eval\}`((\w+)\(\"([^\"`]*)\"\))`")
 # A glued figure: ```{figure}, its options, {eval}`name`, a blank line, its caption.
