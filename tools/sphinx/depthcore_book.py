@@ -486,6 +486,27 @@ class PrintParts(SphinxPostTransform):
             node.parent.insert(node.parent.index(node), raw)
 
 
+class UnnumberedFiguresInPrint(SphinxPostTransform):
+    """In the PDF, print the caption of a figure without a name as its legend, unnumbered.
+
+    The HTML book numbers only the figures that carry a name (``:name:``); the
+    LaTeX builder would number every captioned figure, so that an unnamed one
+    (the intuition page's, the live frames of Figures 2 and 6) would take a
+    number and shift the paper's. Its caption's text is kept, as the legend.
+    """
+
+    default_priority = 7
+    formats = ("latex",)
+
+    def run(self, **kwargs):
+        for figure in list(self.document.findall(nodes.figure)):
+            if figure["ids"]:
+                continue
+            for caption in [c for c in figure.children if isinstance(c, nodes.caption)]:
+                legend = nodes.legend("", nodes.paragraph("", "", *caption.children))
+                caption.replace_self(legend)
+
+
 def contents_heading(app):
     """Head the PDF's table of contents :data:`CONTENTS` (see there)."""
     if app.builder.format == "latex":
@@ -641,6 +662,7 @@ def setup(app):
     app.add_transform(DropLabFrontmatter)
     app.add_post_transform(DropHtmlOnlyPages)
     app.add_post_transform(PrintParts)
+    app.add_post_transform(UnnumberedFiguresInPrint)
     app.connect("builder-inited", contents_heading)
     app.connect("doctree-resolved", root_page_as_one_chapter)
     app.add_post_transform(DropHiddenCellsWithoutOutput)
