@@ -33,7 +33,7 @@ def test_the_book_is_within_its_budget_of_words():
     assert total <= prose.BOOK_WORDS, f"{total} words of prose in the book"
 
 
-PAGE = '''---
+PAGE = """---
 jupytext:
   formats: md:myst
 ---
@@ -73,7 +73,7 @@ glue("only", "1", display=False)
 :class: dropdown
 Three more words.
 :::
-'''
+"""
 
 
 def test_prose_counts_words_outside_code_math_and_options():
