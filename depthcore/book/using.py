@@ -5,18 +5,24 @@ Recommended import: ``from depthcore.book import using``.
 :func:`module_map` lists every module of ``depthcore.MODULES`` by family with
 the first paragraph of its docstring (:func:`module_summary`), and
 :func:`filter_table` every filter of the registry, so that the page's tables
-follow the package rather than a copy of it; :func:`limit` prints a limit of
-the inputs as the page's table of limits does.
+follow the package rather than a copy of it; :func:`command_help` is a
+command's ``--help`` as the command line prints it, and :func:`limit` prints a
+limit of the inputs as the page's table of limits does.
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import inspect
+import io
+import os
 import re
 
 import depthcore
 from depthcore.book.notebook import MarkdownTable
+from depthcore.cli import main as cli
+from depthcore.cli import text as cli_text
 from depthcore.registry.filters import FILTERS
 
 
@@ -74,3 +80,39 @@ def filter_table() -> MarkdownTable:
 def limit(x: float) -> str:
     """A limit as the page's table prints it: ``1e6`` rather than ``1e+06``, ``1e-9``."""
     return re.sub(r"e\+?0*(\d)", r"e\1", f"{x:g}").replace("e-0", "e-")
+
+
+def command_help(command: str, columns: int = 100) -> str:
+    """The ``--help`` of one command of ``python -m depthcore``, as the parser prints it.
+
+    Parameters
+    ----------
+    command : str
+        One of the commands: ``reproduce``, ``estimate``, ``study``, ``figures``.
+    columns : int
+        The width the help is wrapped to (argparse reads it from ``COLUMNS``).
+
+    Returns
+    -------
+    str
+        The help text, ending with the command's examples.
+
+    Raises
+    ------
+    ValueError
+        If ``command`` is not one of the commands.
+    """
+    if command not in cli_text.EXAMPLES or command == "all":
+        raise ValueError(f"command must be one of python -m depthcore's commands, got {command!r}")
+    out = io.StringIO()
+    before = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = str(columns)
+    try:
+        with contextlib.redirect_stdout(out), contextlib.suppress(SystemExit):
+            cli.build_parser().parse_args([command, "--help"])
+    finally:
+        if before is None:
+            del os.environ["COLUMNS"]
+        else:
+            os.environ["COLUMNS"] = before
+    return out.getvalue()
