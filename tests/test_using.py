@@ -36,6 +36,24 @@ def test_the_filter_table_has_a_row_per_registered_filter():
     assert sum(r[5] == "yes" for r in rows) == sum(f.default for f in FILTERS.values())
 
 
+def test_the_limits_table_reads_each_limit_from_the_module_that_enforces_it():
+    from depthcore.cli import main as cli
+    from depthcore.problem import checks
+
+    rows = {r[0]: r[1] for r in using.limits_table().rows}
+    assert f"3 to {checks.MAX_FRAMES:,} bearings" in rows["`--mu`"]
+    assert using.limit(cli.MU_MAX) in rows["`--mu`"]
+    assert rows["`study --frames`"] == f"from 3 to {checks.MAX_FRAMES:,}"
+
+
+def test_command_help_is_the_commands_help_and_refuses_another_name():
+    text = using.command_help("estimate", columns=80)
+    assert text.startswith("usage: python -m depthcore estimate") and "--mu-file" in text
+    assert max(len(line) for line in text.splitlines()) <= 100
+    with pytest.raises(ValueError, match="command must be"):
+        using.command_help("all")
+
+
 @pytest.mark.parametrize(
     ("x", "text"), [(1e6, "1e6"), (1e-9, "1e-9"), (0.5, "0.5"), (1e-12, "1e-12"), (1e15, "1e15")]
 )
