@@ -53,31 +53,29 @@ def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=4001, frame=
     vN[2 : 2 + frame] = 1.0
     t = np.linspace(np.log(1e-3), np.log(300.0), n)
     y = np.exp(t)
-    log_f = np.empty(n)
-    means = np.empty((n, 3))
-    second = np.empty((n, 3, 3))
-    for i, yi in enumerate(y):
-        mz = np.zeros(D)
-        mz[:2] = m[iu] + slope * (yi - m[1])
-        H = X[keep] / (yi + e[keep])[:, None]
-        S = H @ Cz @ H.T + np.diag(rho[keep] ** 2)
-        r = mu[keep] - H @ mz
-        sol = np.linalg.solve(S, r)
-        log_f[i] = (
-            -0.5 * (np.log(2 * np.pi * P[1, 1]) + (yi - m[1]) ** 2 / P[1, 1])
-            - 0.5 * (np.linalg.slogdet(2 * np.pi * S)[1] + r @ sol)
-            + t[i]  # dy = y dt
-        )
-        K = Cz @ H.T @ np.linalg.inv(S)
-        mpost = mz + K @ r
-        Cpost = Cz - K @ H @ Cz
-        A = np.stack([X[frame], vN])  # (x_k, v_k) at the frame
-        mxv = A @ mpost
-        Cxv = A @ Cpost @ A.T
-        means[i] = [mxv[0], yi + e[frame], mxv[1]]
-        s = np.zeros((3, 3))
-        s[np.ix_([0, 2], [0, 2])] = Cxv
-        second[i] = s + np.outer(means[i], means[i])
+    # every node at once: (n, ...) stacks of the regression at each depth
+    mz = np.zeros((n, D))
+    mz[:, :2] = m[iu] + np.outer(y - m[1], slope)
+    H = X[keep][None] / (y[:, None] + e[keep][None])[:, :, None]
+    S = H @ Cz @ np.swapaxes(H, 1, 2) + np.diag(rho[keep] ** 2)
+    r = mu[keep][None] - np.einsum("nij,nj->ni", H, mz)
+    sol = np.linalg.solve(S, r[..., None])[..., 0]
+    log_f = (
+        -0.5 * (np.log(2 * np.pi * P[1, 1]) + (y - m[1]) ** 2 / P[1, 1])
+        - 0.5 * (np.linalg.slogdet(2 * np.pi * S)[1] + np.einsum("ni,ni->n", r, sol))
+        + t  # dy = y dt
+    )
+    K = Cz @ np.swapaxes(H, 1, 2) @ np.linalg.inv(S)
+    mpost = mz + np.einsum("nij,nj->ni", K, r)
+    Cpost = Cz - K @ H @ Cz
+    A = np.stack([X[frame], vN])  # (x_k, v_k) at the frame
+    mxv = np.einsum("ij,nj->ni", A, mpost)
+    Cxv = A @ Cpost @ A.T
+    means = np.stack([mxv[:, 0], y + e[frame], mxv[:, 1]], axis=1)
+    second = np.zeros((n, 3, 3))
+    second[:, 0, 0], second[:, 0, 2] = Cxv[:, 0, 0], Cxv[:, 0, 1]
+    second[:, 2, 0], second[:, 2, 2] = Cxv[:, 1, 0], Cxv[:, 1, 1]
+    second += means[:, :, None] * means[:, None, :]
     w = np.exp(log_f - logsumexp(log_f))
     mean = w @ means
     cov = np.einsum("i,ijk->jk", w, second) - np.outer(mean, mean)

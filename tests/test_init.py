@@ -107,22 +107,54 @@ def test_an_unknown_attribute_raises_attribute_error():
 # --- the paths before 0.2 -------------------------------------------------------------
 
 
-@pytest.mark.parametrize("old", sorted(_paths.MOVED))
-def test_an_old_path_imports_the_new_module_with_a_warning_naming_it(old):
+#: Run in one fresh interpreter for every old path: before each, every module of the package
+#: leaves ``sys.modules`` and its finder leaves ``sys.meta_path``, so that each old path is
+#: imported as by a fresh ``python -c`` (the third-party modules, which the old paths do not
+#: concern, stay loaded), and what that ``python -c`` would print is collected. Each case's
+#: code is compiled as ``<old path>``, a name apart from the driver's own ``<string>``.
+_OLD_PATHS_DRIVER = """
+import contextlib, io, json, sys
+from depthcore import _paths
+out = {}
+for old in sorted(_paths.MOVED):
+    for name in [m for m in sys.modules if m == "depthcore" or m.startswith("depthcore.")]:
+        del sys.modules[name]
+    sys.meta_path[:] = [f for f in sys.meta_path if type(f).__name__ != "MovedFinder"]
     new = _paths.MOVED[old]
     code = (
-        "import warnings, sys\n"
-        "warnings.simplefilter('always')\n"
-        "with warnings.catch_warnings(record=True) as caught:\n"
-        f"    import {old} as m\n"
-        f"import {new} as n\n"
-        "print(m is n, n.__spec__.name, sys.modules[n.__name__] is n)\n"
-        "print(caught[0].category.__name__, caught[0].filename == '<string>')\n"
-        "print(caught[0].message)\n"
+        "import warnings, sys\\n"
+        "warnings.simplefilter('always')\\n"
+        "with warnings.catch_warnings(record=True) as caught:\\n"
+        f"    import {old} as m\\n"
+        f"import {new} as n\\n"
+        "print(m is n, n.__spec__.name, sys.modules[n.__name__] is n)\\n"
+        "print(caught[0].category.__name__, caught[0].filename == '<old path>')\\n"
+        "print(caught[0].message)\\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True
-    ).stdout.splitlines()
+    text = io.StringIO()
+    with contextlib.redirect_stdout(text):
+        exec(compile(code, "<old path>", "exec"), {"__name__": "__main__"})
+    out[old] = text.getvalue().splitlines()
+print(json.dumps(out))
+"""
+
+
+@pytest.fixture(scope="module")
+def old_path_imports():
+    """``{old path: the three lines printed}`` of :data:`_OLD_PATHS_DRIVER`."""
+    import json
+
+    return json.loads(
+        subprocess.run(
+            [sys.executable, "-c", _OLD_PATHS_DRIVER], capture_output=True, text=True, check=True
+        ).stdout
+    )
+
+
+@pytest.mark.parametrize("old", sorted(_paths.MOVED))
+def test_an_old_path_imports_the_new_module_with_a_warning_naming_it(old, old_path_imports):
+    new = _paths.MOVED[old]
+    out = old_path_imports[old]
     assert out[0] == f"True {new} True"
     # the warning points at the line that imported the old path, not at the import machinery
     assert out[1] == "DeprecationWarning True"
