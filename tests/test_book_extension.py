@@ -102,3 +102,13 @@ def test_download_lines_are_parsed_or_refused():
     for bad in ("no colon here", "dir/file.pdf: nested", ": no file", "file.pdf:"):
         with pytest.raises(ValueError, match="file: what it is"):
             book_ext.parse_downloads([bad])
+
+
+def test_an_unnamed_figure_keeps_its_caption_as_an_unnumbered_legend():
+    from docutils import nodes
+
+    figure = nodes.figure("", nodes.image(uri="x.png"), nodes.caption("", "", nodes.Text("A cap")))
+    book_ext.unnumbered(figure)
+    assert not list(figure.findall(nodes.caption))
+    (legend,) = figure.findall(nodes.legend)
+    assert legend.astext() == "A cap"

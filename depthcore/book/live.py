@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from depthcore.book.style import WIDTH
 from depthcore.problem import checks, model
 from depthcore.registry.filters import FILTERS, check_names
 
@@ -143,7 +144,7 @@ def figure(mu, rho: float, prior_mean, prior_cov, frames: int = 3, names=NAMES, 
     """
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(6.4, 3.6), layout="constrained")
+    fig = Figure(figsize=(WIDTH, 0.5625 * WIDTH), layout="constrained")
     ax = fig.add_subplot()
     draw(ax, depth_marginals(mu, rho, prior_mean, prior_cov, frames, names))
     if title:
@@ -212,7 +213,7 @@ class Controls:
             description="frames $N$",
             continuous_update=False,
         )
-        self.figure = Figure(figsize=(6.4, 3.6), layout="constrained")
+        self.figure = Figure(figsize=(WIDTH, 0.5625 * WIDTH), layout="constrained")
         self.ax = self.figure.add_subplot()
         self.message = ""
         self.output = widgets.Output()

@@ -437,7 +437,7 @@ def test_page_renders_its_numbers_and_math_in_jupyterlab(lab, driver, page):
         assert cell["mathErrors"] == 0, f"{page}: MathJax errors in {source[:80]!r}"
     assert not missing, f"{page}: numbers not shown: {missing}"
     assert shown >= 10, f"{page}: only {shown} numbers shown in the text"
-    assert references >= 10, f"{page}: only {references} references shown"
+    assert references >= 5, f"{page}: only {references} references shown"
     assert figures >= 1, f"{page}: no glued figure shown"
 
 

@@ -231,7 +231,7 @@ class Figure(patches.Figure):
     ``:enumerated: false`` is for JupyterLab, which numbers a notebook's
     figures from 1 (the book numbers them across its pages, and
     ``{eval}`numref("name")``` shows that number in JupyterLab too); the book
-    numbers every named figure, whatever it says.
+    numbers every named figure, whatever it says, and no other (:func:`unnumbered`).
     """
 
     required_arguments = 0
@@ -240,6 +240,14 @@ class Figure(patches.Figure):
 
     def run(self):
         self.options.pop("enumerated", None)
+        made = self.figure()
+        if "name" not in self.options:
+            for figure in made:
+                if isinstance(figure, nodes.figure):
+                    unnumbered(figure)
+        return made
+
+    def figure(self):
         if self.arguments:
             return super().run()
         from myst_nb.ext.glue.directives import PasteFigureDirective
@@ -265,6 +273,18 @@ class Figure(patches.Figure):
             self.state,
             self.state_machine,
         ).run()
+
+
+def unnumbered(figure) -> None:
+    """Make a figure's caption its legend, so that neither build numbers it (in place).
+
+    Sphinx numbers every captioned figure, named or not; the book numbers its
+    named figures alone (the paper's Figures 1-6 keep their numbers), and an
+    unnamed one (the intuition page's, the live frames of Figures 2 and 6)
+    keeps its caption's text, unnumbered, as the legend below it.
+    """
+    for caption in [c for c in figure.children if isinstance(c, nodes.caption)]:
+        caption.replace_self(nodes.legend("", nodes.paragraph("", "", *caption.children)))
 
 
 class Math(patches.MathDirective):
@@ -486,27 +506,6 @@ class PrintParts(SphinxPostTransform):
             node.parent.insert(node.parent.index(node), raw)
 
 
-class UnnumberedFiguresInPrint(SphinxPostTransform):
-    """In the PDF, print the caption of a figure without a name as its legend, unnumbered.
-
-    The HTML book numbers only the figures that carry a name (``:name:``); the
-    LaTeX builder would number every captioned figure, so that an unnamed one
-    (the intuition page's, the live frames of Figures 2 and 6) would take a
-    number and shift the paper's. Its caption's text is kept, as the legend.
-    """
-
-    default_priority = 7
-    formats = ("latex",)
-
-    def run(self, **kwargs):
-        for figure in list(self.document.findall(nodes.figure)):
-            if figure["ids"]:
-                continue
-            for caption in [c for c in figure.children if isinstance(c, nodes.caption)]:
-                legend = nodes.legend("", nodes.paragraph("", "", *caption.children))
-                caption.replace_self(legend)
-
-
 def contents_heading(app):
     """Head the PDF's table of contents :data:`CONTENTS` (see there)."""
     if app.builder.format == "latex":
@@ -662,7 +661,6 @@ def setup(app):
     app.add_transform(DropLabFrontmatter)
     app.add_post_transform(DropHtmlOnlyPages)
     app.add_post_transform(PrintParts)
-    app.add_post_transform(UnnumberedFiguresInPrint)
     app.connect("builder-inited", contents_heading)
     app.connect("doctree-resolved", root_page_as_one_chapter)
     app.add_post_transform(DropHiddenCellsWithoutOutput)
