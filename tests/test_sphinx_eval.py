@@ -284,6 +284,21 @@ def test_a_figure_of_an_eval_pastes_the_glued_figure_as_glue_figure_does(tmp_pat
     )
 
 
+@pytest.mark.parametrize("builder", ["html", "latex"])
+def test_a_figure_without_a_name_is_not_numbered_and_keeps_its_caption(tmp_path, builder):
+    unnamed = FIGURES.split("```{figure}")[1].replace(":name: fig-eval\n", "")
+    text = "# Page\n\nSee {numref}`fig-glue`.\n" + FIGURES.split("```{figure}")[0]
+    out = build_book(tmp_path, text + "```{figure}" + unnamed, builder)
+    page = (out / ("index.html" if builder == "html" else "projectnamenotset.tex")).read_text()
+    if builder == "html":
+        plain = re.sub(r"<[^>]+>", "", page)
+        assert "See Figure 1" in plain and "Figure 2" not in plain
+        assert plain.count("The glued dot") == 2
+    else:
+        assert page.count("\\caption{") == 2  # the named one and the other page's
+        assert "sphinxlegend" in page and "The glued dot" in page.split("sphinxlegend")[1]
+
+
 def test_a_figure_without_a_glued_name_fails_the_strict_build(tmp_path):
     with pytest.raises(Exception, match="glued figure"):
         build_book(tmp_path, "# Page\n\n```{figure}\n:name: fig-x\n\nNo image.\n```\n")

@@ -240,8 +240,9 @@ class Figure(patches.Figure):
 
     def run(self):
         self.options.pop("enumerated", None)
+        named = "name" in self.options  # (Sphinx's figure pops it)
         made = self.figure()
-        if "name" not in self.options:
+        if not named:
             for figure in made:
                 if isinstance(figure, nodes.figure):
                     unnumbered(figure)
