@@ -137,20 +137,6 @@ def test_a_value_and_its_standard_error_are_printed_to_the_values_places():
     assert formatting.value_se(-0.0, 1e-9, 1) == "0.0 ± 0.0000"  # at most three more places
 
 
-def test_sweep_texts_label_the_rows():
-    r = beyond_sweeps.noise_sweep([1 / 1000, 1 / 200])
-    texts = beyond_sweeps.sweep_texts(r, "rho", "ns")
-    assert texts["ns_0_x"] == "1/1000" and texts["ns_1_x"] == "1/200"
-    assert texts["ns_1_optimal"] == (
-        f"{r['optimal']['depth_mean'][1]:.3f} ± {r['optimal']['depth_sd'][1]:.3f}"
-    )
-    assert texts["ns_0_ekf_h"] == f"{r['ekf']['hellinger'][0]:.3f}"
-    off = beyond_sweeps.sweep_texts(beyond_sweeps.prior_offset_sweep([-1.0, 2.0]), "offset", "po")
-    assert off["po_0_x"] == "-1" and off["po_1_x"] == "2"
-    with pytest.raises(ValueError, match="x must be"):
-        beyond_sweeps.sweep_texts(r, "noise", "ns")
-
-
 def test_noise_study_texts():
     r = beyond_sweeps.noise_study([1 / 200], trials=20, seed=0, names=("second_order",))
     texts = beyond_sweeps.noise_study_texts(r, "mc")

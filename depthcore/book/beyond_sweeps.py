@@ -15,8 +15,8 @@ Recommended import: ``from depthcore.book import beyond_sweeps``.
 * :func:`noise_study`: the Monte Carlo study (:func:`depthcore.studies.monte_carlo.study`)
   at several noise levels;
 * :func:`sweep`, :func:`profile_figure`, :func:`prior_mean_map_figure`,
-  :func:`noise_study_figure` draw them, :func:`sweep_texts` and
-  :func:`noise_study_texts` give the texts the chapter glues.
+  :func:`noise_study_figure` draw them, :func:`noise_study_texts` gives the texts the
+  chapter glues.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from depthcore.book.style import MIN_FONT, STYLE, WIDTH, legend_below, subplots
-from depthcore.formatting import SCORE_TEXTS, plus_minus, rho_label, row_extremes, value_se
+from depthcore.formatting import SCORE_TEXTS, rho_label, row_extremes, value_se
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from depthcore.problem.scenarios import SCENARIOS
@@ -417,39 +417,6 @@ def prior_mean_map_figure(result: dict, marks: dict | None = None):
     ax.set_xlabel(r"velocity $v_0$ of the prior mean")
     ax.set_ylabel(r"offset $\Delta$ of the prior's depth")
     return fig
-
-
-def sweep_texts(result: dict, x: str, prefix: str, decimals: int = 3) -> dict:
-    """Texts of a sweep's rows, for glue.
-
-    Parameters
-    ----------
-    result : dict
-        From :func:`depthcore.book.beyond_sweeps.noise_sweep` (``x="rho"``) or
-        :func:`depthcore.book.beyond_sweeps.prior_offset_sweep` (``x="offset"``).
-    x : {"rho", "offset"}
-    prefix : str
-    decimals : int
-
-    Returns
-    -------
-    dict
-        For row ``i``: ``"<prefix>_<i>_x"`` (``"1/200"`` or the offset),
-        ``"<prefix>_<i>_<filter>"`` (``"mean ± sd"`` of the depth) and
-        ``"<prefix>_<i>_<filter>_h"`` (the Hellinger distance to the optimal
-        filter, 3 decimals) for each filter in the result.
-    """
-    if x not in ("rho", "offset"):
-        raise ValueError(f"x must be 'rho' or 'offset', got {x!r}")
-    out = {}
-    names = [n for n in NAMES if n in result]
-    for i, value in enumerate(result[x]):
-        out[f"{prefix}_{i}_x"] = rho_label(value) if x == "rho" else f"{float(value) + 0.0:g}"
-        for name in names:
-            r = result[name]
-            out[f"{prefix}_{i}_{name}"] = plus_minus(r["depth_mean"][i], r["depth_sd"][i], decimals)
-            out[f"{prefix}_{i}_{name}_h"] = f"{float(r['hellinger'][i]):.3f}"
-    return out
 
 
 def noise_study_texts(result: dict, prefix: str) -> dict:
