@@ -608,11 +608,22 @@ def run(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p=None, mu_m=No
         likelihood of each measurement given the earlier ones. A run whose
         numbers overflow the doubles (covariances or measurements near 1e154
         and beyond, whose squares do) is refused with a ValueError naming the
-        model's scales, never returned with NaN or infinities.
+        model's scales, never returned with NaN or infinities; so is a run
+        whose innovation covariance ``Sigma_m + Phi Sigma_+ Phi^T`` is singular
+        or indefinite to working precision (a measurement noise below the
+        rounding of a vast predicted spread along a measured direction).
     """
     args = _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        res = _run(*args)
+        try:
+            res = _run(*args)
+        except np.linalg.LinAlgError:  # the solve or the Cholesky factor of S failed
+            raise ValueError(
+                "Sigma_m (the measurement noise covariance) is too small beside prior_cov, "
+                "Psi and Sigma_p: the innovation covariance Sigma_m + Phi Sigma_+ Phi^T is "
+                "not positive definite to working precision; rescale the state or the "
+                "measurements"
+            ) from None
     if not all(np.all(np.isfinite(a)) for a in res):
         raise ValueError(
             "x, prior_cov, Psi, Sigma_p and Sigma_m are too large together: the filter's "
