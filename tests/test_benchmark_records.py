@@ -43,7 +43,17 @@ TABLES = {
     },
     "bench_frames": {"frames", "filters"},
     "bench_import": {"numpy_s", "depthcore_after_numpy_s", "target_s"},
-    "bench_kalman": {"depthcore_ms", "filterpy_ms", "ratio", "ratio_min", "ratio_max"},
+    "bench_kalman": {
+        "depthcore_ms",
+        "filterpy_ms",
+        "ratio",
+        "ratio_min",
+        "ratio_max",
+        "filter_ratio",
+        "smoother_ratio",
+        "dimensions",
+        "target_ratio",
+    },
     "bench_optimal": {"moments", "per_triple"},
     "bench_range_ekf": {"fig2", "ten_frames"},
     "bench_rbpf": {"exact", "equal_cost", "convergence"},
@@ -241,6 +251,12 @@ def test_the_kalman_and_frames_records_are_what_the_book_says_of_them():
     # largest N no more than twice that at the smallest
     k = benchmarks.read("bench_kalman")
     assert k["sizes"]["steps"] == 1000 and k["results"]["mean_difference_sd"] < 1e-9
+    # the plane's models: state dimensions 2, 4, 6, measured in 2-D, filter and smoother timed
+    dims = k["results"]["dimensions"]
+    assert [row["state_dimension"] for row in dims] == [2, 4, 6]
+    for row in dims:
+        assert row["measurement_dimension"] == 2 and row["mean_difference_sd"] < 1e-9
+        assert {"filter_ratio", "smoother_ratio", "ratio"} <= set(row)
     frames = benchmarks.read("bench_frames")["results"]
     assert frames["frames"] == [30, 100, 300, 1000]
     for row in frames["filters"]:

@@ -16,6 +16,8 @@ quantities are exact Gaussian conditioning and a multivariate normal density
 of all the measurements.
 """
 
+import math
+
 import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter, rts_smoother
@@ -376,6 +378,210 @@ def test_textbook_19_2_6_augmented_model_copies_the_state_down():
     assert_allclose(Phi_a @ w.ravel(), Phi @ w[0], rtol=1e-14)
     assert_allclose(Q_a[:n, :n], Q)
     assert np.count_nonzero(Q_a) == np.count_nonzero(Q)
+
+
+# --- the filter and smoother loops against their steps, at several dimensions ----------
+
+
+def at_step(a, t, core):
+    """Step ``t`` of a model array with ``core`` trailing axes (time on axis ``-core - 1``)."""
+    a = np.asarray(a, dtype=float)
+    if a.ndim == core:
+        return a
+    return np.take(a, min(t, a.shape[-core - 1] - 1), axis=-core - 1)
+
+
+def stepwise_filter(model):
+    """Textbook 19.2.3 as its steps: :func:`update` (19.2.2) after :func:`predict` (19.2.1).
+
+    Returns the filtered and predicted means and covariances and the log
+    likelihoods, stacked on the time axis.
+    """
+    x = model["x"]
+    T, n, m = x.shape[-2], model["prior_mean"].shape[-1], x.shape[-1]
+    mu_p = np.zeros(n) if model["mu_p"] is None else model["mu_p"]
+    mu_m = np.zeros(m) if model["mu_m"] is None else model["mu_m"]
+    mean, cov = model["prior_mean"], model["prior_cov"]
+    out = {k: [] for k in FilterResult._fields}
+    for t in range(T):
+        if t > 0:
+            mean, cov = predict(
+                mean,
+                cov,
+                at_step(model["Psi"], t - 1, 2),
+                at_step(model["Sigma_p"], t - 1, 2),
+                at_step(mu_p, t - 1, 1),
+            )
+        out["predicted_means"].append(mean)
+        out["predicted_covs"].append(cov)
+        mean, cov, ll = update(
+            mean,
+            cov,
+            x[..., t, :],
+            at_step(model["Phi"], t, 2),
+            at_step(model["Sigma_m"], t, 2),
+            at_step(mu_m, t, 1),
+        )
+        out["means"].append(mean)
+        out["covs"].append(cov)
+        out["log_likelihoods"].append(ll)
+    stacked = {}
+    for k, v in out.items():
+        core = {"means": 1, "predicted_means": 1, "log_likelihoods": 0}.get(k, 2)
+        v = np.broadcast_arrays(*v)
+        stacked[k] = np.stack(v, axis=v[0].ndim - core)
+    return FilterResult(**stacked)
+
+
+def stepwise_smoother(filtered, Psi):
+    """Textbook 19.2.6 as its steps: :func:`linear.smoother_step` from ``T`` back to 1."""
+    T = filtered.means.shape[-2]
+    gains = linear.smoother_gain(
+        filtered.covs[..., :-1, :, :], filtered.predicted_covs[..., 1:, :, :], Psi
+    )
+    means, covs = [filtered.means[..., -1, :]], [filtered.covs[..., -1, :, :]]
+    for t in range(T - 2, -1, -1):
+        mean, cov = linear.smoother_step(
+            gains[..., t, :, :],
+            filtered.means[..., t, :],
+            filtered.covs[..., t, :, :],
+            filtered.predicted_means[..., t + 1, :],
+            filtered.predicted_covs[..., t + 1, :, :],
+            means[-1],
+            covs[-1],
+        )
+        means.append(mean)
+        covs.append(cov)
+    return np.stack(means[::-1], axis=-2), np.stack(covs[::-1], axis=-3)
+
+
+def batch_of(models):
+    """Models stacked on a leading axis; the time-constant arrays get a time axis of length 1."""
+    stack = {k: np.stack([md[k] for md in models]) for k in models[0]}
+    for k, core in (
+        ("Psi", 2),
+        ("Sigma_p", 2),
+        ("Phi", 2),
+        ("Sigma_m", 2),
+        ("mu_p", 1),
+        ("mu_m", 1),
+    ):
+        if stack[k].ndim == core + 1:
+            stack[k] = stack[k][:, None]
+    return stack
+
+
+def assert_relative(got, expected, rtol):
+    """Every entry within ``rtol`` of the largest entry of ``expected`` along its last axes."""
+    scale = np.max(np.abs(expected))
+    assert np.max(np.abs(got - expected)) <= rtol * scale, np.max(np.abs(got - expected)) / scale
+
+
+DIMENSIONS = [(n, m) for n in (2, 4, 6) for m in (1, 2, 3)]
+
+
+@pytest.mark.parametrize(("n", "m"), DIMENSIONS)
+@pytest.mark.parametrize("batched", [False, True])
+def test_textbook_19_2_3_filter_is_its_steps_19_2_1_and_19_2_2(n, m, batched):
+    # run's loop (time-first outputs, the log likelihoods scored after the loop; for a
+    # single filter ndarray.dot and the closed-form 2 x 2 gain) against predict and update.
+    rng = np.random.default_rng(100 + 10 * n + m)
+    models = [random_model(rng, n=n, m=m, T=40, time_varying=True) for _ in range(3)]
+    model = batch_of(models) if batched else models[0]
+    res = run(**model)
+    ref = stepwise_filter(model)
+    for field in FilterResult._fields:
+        assert getattr(res, field).shape == getattr(ref, field).shape
+        assert_relative(getattr(res, field), getattr(ref, field), 1e-12)
+
+
+@pytest.mark.parametrize(("n", "m"), DIMENSIONS)
+def test_textbook_19_2_6_fixed_interval_smoother_is_its_steps(n, m):
+    rng = np.random.default_rng(200 + 10 * n + m)
+    for model, Psi in (
+        (random_model(rng, n=n, m=m, T=40, singular_noise=True), None),
+        (batch_of([random_model(rng, n=n, m=m, T=40) for _ in range(3)]), None),
+    ):
+        Psi = model["Psi"]
+        res = run(**model)
+        got = fixed_interval_smoother(res, Psi)
+        means, covs = stepwise_smoother(res, Psi)
+        assert_relative(got.mean, means, 1e-12)
+        assert_relative(got.cov, covs, 1e-12)
+        assert_allclose(got.cov, np.swapaxes(got.cov, -1, -2), rtol=0, atol=0)
+
+
+@pytest.mark.parametrize(("n", "m"), DIMENSIONS)
+def test_textbook_19_2_3_a_single_filter_equals_a_batch_of_one(n, m):
+    # The single filter's route (ndarray.dot, the closed-form gain for m = 2) and the
+    # batched one (matmul, LAPACK's solve) differ only by rounding.
+    model = random_model(np.random.default_rng(300 + 10 * n + m), n=n, m=m, T=60)
+    one, batch = run(**model), run(**batch_of([model]))
+    for field in FilterResult._fields:
+        assert_relative(getattr(one, field), getattr(batch, field)[0], 1e-12)
+    s1 = fixed_interval_smoother(one, model["Psi"])
+    sb = fixed_interval_smoother(batch, model["Psi"])
+    assert_relative(s1.mean, sb.mean[0], 1e-12)
+    assert_relative(s1.cov, sb.cov[0], 1e-12)
+
+
+def plane_motion(n):
+    """A point in the plane whose position, or velocity, or acceleration walks (``n = 2, 4, 6``).
+
+    The state is the position and its first ``n / 2 - 1`` derivatives,
+    ``Psi`` their Taylor step over one unit of time, ``Sigma_p`` noise on the
+    highest derivative alone (singular for ``n > 2``, as in the depth model),
+    and the measurement the position with correlated noise.
+    """
+    q = n // 2
+    F = np.array(
+        [[1.0 / math.factorial(j - i) if j >= i else 0.0 for j in range(q)] for i in range(q)]
+    )
+    Psi = np.kron(F, np.eye(2))
+    Sigma_p = np.zeros((n, n))
+    Sigma_p[-2:, -2:] = 1e-3 * np.eye(2)
+    Phi = np.eye(2, n)
+    Sigma_m = np.array([[0.04, 0.01], [0.01, 0.02]])
+    return Psi, Sigma_p, Phi, Sigma_m
+
+
+@pytest.mark.parametrize("n", [2, 4, 6])
+def test_textbook_19_2_3_and_19_2_6_match_filterpy_over_a_long_sequence(n):
+    # The benchmark's setting: 2-D measurements, 300 steps, filterpy's KalmanFilter and
+    # rts_smoother as the independent route.
+    T = 300
+    Psi, Sigma_p, Phi, Sigma_m = plane_motion(n)
+    rng = np.random.default_rng(500 + n)
+    model = dict(
+        x=np.cumsum(rng.normal(size=(T, 2)), axis=0) * 0.1,
+        prior_mean=np.zeros(n),
+        prior_cov=np.eye(n),
+        Psi=Psi,
+        Sigma_p=Sigma_p,
+        Phi=Phi,
+        Sigma_m=Sigma_m,
+        mu_p=None,
+        mu_m=None,
+    )
+    res = run(**model)
+    means, covs, lls = filterpy_run(model)
+    assert_relative(res.means, means, 1e-11)
+    assert_relative(res.covs, covs, 1e-11)
+    assert_allclose(res.log_likelihoods, lls, rtol=1e-11)
+    xs, Ps, _, _ = rts_smoother(res.means, res.covs, [Psi] * T, [Sigma_p] * T)
+    got = fixed_interval_smoother(res, Psi)
+    assert_relative(got.mean, xs, 1e-11)
+    assert_relative(got.cov, Ps, 1e-11)
+
+
+@pytest.mark.parametrize("batched", [False, True])
+def test_run_refuses_an_innovation_covariance_singular_to_working_precision(batched):
+    # Both measurements see the first component, whose variance 1e155 leaves the
+    # measurement noise below its rounding: S is singular in the doubles.
+    x = np.ones((5, 2))
+    args = (np.zeros(2), 1e155 * np.eye(2), np.eye(2), 1e155 * np.eye(2))
+    with pytest.raises(ValueError, match=r"Sigma_m \(the measurement noise covariance\) is too"):
+        run(x[None] if batched else x, *args, [[1.0, 0.0], [2.0, 0.0]], [[1.0, 0.2], [0.2, 1.0]])
 
 
 # --- batching --------------------------------------------------------------------------

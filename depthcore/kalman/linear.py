@@ -53,6 +53,7 @@ References
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -65,6 +66,8 @@ _LOG_2PI = float(np.log(2.0 * np.pi))
 _SYMMETRY_TOL = 1e-10
 #: Eigenvalues of a positive semi-definite matrix may fall this far (relative) below 0.
 _PSD_TOL = 1e-12
+#: One half as a NumPy scalar: multiplying an array by it skips converting a Python float.
+_HALF = np.float64(0.5)
 
 
 class MeanAndCov(NamedTuple):
@@ -260,26 +263,60 @@ def joseph(cov, gain, Phi, Sigma_m) -> np.ndarray:
     return symmetric(A @ cov @ A.mT + gain @ Sigma_m @ gain.mT)
 
 
-def _update(mean, cov, x, Phi, Sigma_m, mu_m) -> Update:
-    CPt = cov @ Phi.mT
-    S = Sigma_m + Phi @ CPt  # innovation covariance (..., m, m)
-    r = x - mu_m - (Phi @ mean[..., None])[..., 0]  # the innovation (..., m)
-    if S.shape[-1] == 1:  # a scalar measurement: divide instead of solving
+def _gain(PHt, S) -> np.ndarray:
+    """Textbook 19.2.2: the gain ``K = Sigma_+ Phi^T S^{-1}`` (..., n, m).
+
+    A scalar measurement divides by ``S``; otherwise ``K^T = S^{-1} Phi
+    Sigma_+`` is solved for (``S`` symmetric positive definite).
+
+    Parameters
+    ----------
+    PHt : ndarray, shape (..., n, m)
+        ``Sigma_+ Phi^T``.
+    S : ndarray, shape (..., m, m)
+        The innovation covariance ``Sigma_m + Phi Sigma_+ Phi^T``.
+
+    Returns
+    -------
+    ndarray, shape (..., n, m)
+    """
+    if S.shape[-1] == 1:
+        return PHt / S
+    return np.linalg.solve(S, PHt.mT).mT
+
+
+def _innovation_log_density(r, S) -> np.ndarray:
+    """``log N(r; 0, S)``: the log density of an innovation given the earlier measurements.
+
+    Parameters
+    ----------
+    r : ndarray, shape (..., m)
+        Innovations ``x - mu_m - Phi mu_+``.
+    S : ndarray, shape (..., m, m)
+        Their covariances ``Sigma_m + Phi Sigma_+ Phi^T``, symmetric positive definite.
+
+    Returns
+    -------
+    ndarray, shape (...)
+    """
+    if S.shape[-1] == 1:  # a scalar measurement: divide instead of factorising
         s = S[..., 0, 0]
-        K = CPt / s[..., None, None]
         log_det = np.log(s)
         quad = r[..., 0] ** 2 / s
     else:
-        # S is symmetric, so K^T = S^-1 Phi Sigma_+
-        S = symmetric(S)
-        K = np.linalg.solve(S, CPt.mT).mT
         chol = np.linalg.cholesky(S)
         log_det = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=-2, axis2=-1)), axis=-1)
         z = np.linalg.solve(chol, r[..., None])[..., 0]
         quad = np.sum(z**2, axis=-1)
+    return -0.5 * (S.shape[-1] * _LOG_2PI + log_det + quad)
+
+
+def _update(mean, cov, x, Phi, Sigma_m, mu_m) -> Update:
+    PHt = cov @ Phi.mT
+    K, S = _gain_and_innovation_cov(PHt, Sigma_m + Phi @ PHt)
+    r = x - mu_m - (Phi @ mean[..., None])[..., 0]  # the innovation (..., m)
     new_mean = mean + (K @ r[..., None])[..., 0]
-    log_likelihood = -0.5 * (S.shape[-1] * _LOG_2PI + log_det + quad)
-    return Update(new_mean, joseph(cov, K, Phi, Sigma_m), log_likelihood)
+    return Update(new_mean, joseph(cov, K, Phi, Sigma_m), _innovation_log_density(r, S))
 
 
 def update(mean, cov, x, Phi, Sigma_m, mu_m=None) -> Update:
@@ -352,30 +389,167 @@ def _batch_shape(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> tuple:
     return np.broadcast_shapes(*shapes)
 
 
+def _steps(arr: np.ndarray, core: int, steps: int) -> list:
+    """The model array ``arr`` at each of ``steps`` steps: itself, or its time slices (views)."""
+    if arr.ndim == core:
+        return [arr] * steps
+    return [_at(arr, t, core) for t in range(steps)]
+
+
+def _time_first(arr: np.ndarray, core: int) -> np.ndarray:
+    """A view of ``arr`` (..., T, *core) with its time axis first, for cheap per-step indexing."""
+    return np.moveaxis(arr, -core - 1, 0)
+
+
+def _symmetric_matrix(A: np.ndarray) -> np.ndarray:
+    """``(A + A^T) / 2`` of one square matrix: :func:`symmetric`'s numbers, in fewer steps.
+
+    Adding a transposed view walks it by strides, slower for a small matrix
+    than copying it first; the sum and the halving are the same floating-point
+    operations, so the result is identical.
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+    """
+    return (A + A.T.copy()) * _HALF
+
+
+def _gain_and_innovation_cov(PHt, S) -> tuple[np.ndarray, np.ndarray]:
+    """Textbook 19.2.2: the gain ``K = Sigma_+ Phi^T S^{-1}`` and the symmetrised ``S``.
+
+    Parameters
+    ----------
+    PHt : ndarray, shape (..., n, m)
+        ``Sigma_+ Phi^T``.
+    S : ndarray, shape (..., m, m)
+        ``Sigma_m + Phi Sigma_+ Phi^T`` as computed, symmetric to roundoff.
+
+    Returns
+    -------
+    K : ndarray, shape (..., n, m)
+        The gain (:func:`_gain`) formed from the symmetric part of ``S``.
+    S : ndarray, shape (..., m, m)
+        The symmetric part of ``S`` (:func:`symmetric`; ``S`` itself for ``m = 1``).
+    """
+    if S.shape[-1] > 1:
+        S = symmetric(S)
+    return _gain(PHt, S), S
+
+
+def _matrix_gain_and_innovation_cov(PHt, S) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_gain_and_innovation_cov` for one filter, ``PHt`` (n, m) and ``S`` (m, m).
+
+    For ``m = 2`` the symmetric part ``[[a, b], [b, c]]`` of ``S`` (``b`` the
+    mean of its off-diagonal entries, as :func:`symmetric` computes it) is
+    inverted from its Cholesky factor ``L`` in closed form, the arithmetic of
+    LAPACK's ``potrf`` for a 2 x 2 matrix: ``l11 = sqrt(a)``, ``l21 = b /
+    l11``, ``l22 = sqrt(c - l21^2)``, then ``S^{-1} = L^{-T} L^{-1}``. A
+    matrix whose factorisation fails (not positive definite to working
+    precision, or not finite) is left to LAPACK's solver, as for ``m > 2``.
+
+    Parameters
+    ----------
+    PHt : ndarray, shape (n, m)
+    S : ndarray, shape (m, m)
+
+    Returns
+    -------
+    K : ndarray, shape (n, m)
+    S : ndarray, shape (m, m)
+        The symmetric part of ``S``, entry for entry :func:`symmetric`'s.
+    """
+    m = S.shape[-1]
+    if m == 1:
+        return PHt / S, S
+    if m == 2:
+        (a, b01), (b10, c) = S.tolist()
+        b = (b01 + b10) * 0.5
+        S = np.array([[a, b], [b, c]])
+        if a > 0.0:
+            l11 = math.sqrt(a)
+            l21 = b / l11
+            d = c - l21 * l21
+            if d > 0.0 and math.isfinite(d):
+                i11, i22 = 1.0 / l11, 1.0 / math.sqrt(d)
+                i21 = -l21 * i11 * i22
+                off = i21 * i22
+                inverse = np.array([[i11 * i11 + i21 * i21, off], [off, i22 * i22]])
+                return PHt.dot(inverse), S
+        return np.linalg.solve(S, PHt.T).T, S
+    S = _symmetric_matrix(S)
+    return np.linalg.solve(S, PHt.T).T, S
+
+
 def _run(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> FilterResult:
-    T, n = x.shape[-2], mean.shape[-1]
+    """The filter's loop over checked inputs (see :func:`run`).
+
+    The per-step work is only what depends on the previous step: the model's
+    per-step arrays and transposes, the measurements' offsets and the output
+    arrays are prepared once, means are carried as columns ``(..., n, 1)``,
+    and the innovations' log densities are evaluated for all steps together
+    after the loop from the stored innovations and their covariances. Each
+    step is the arithmetic of :func:`predict` (textbook 19.2.1) and
+    :func:`update` (19.2.2, the Joseph form, symmetrised). A single filter
+    (no leading axes) multiplies its matrices with ``ndarray.dot``, which
+    skips the broadcasting machinery of ``matmul``, and forms a two-dimensional
+    measurement's gain in closed form (:func:`_matrix_gain_and_innovation_cov`).
+    """
+    T, n, m = x.shape[-2], mean.shape[-1], x.shape[-1]
     batch = _batch_shape(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m)
-    out = FilterResult(
-        np.empty(batch + (T, n)),
-        np.empty(batch + (T, n, n)),
-        np.empty(batch + (T, n)),
-        np.empty(batch + (T, n, n)),
-        np.empty(batch + (T,)),
+    if batch:
+        mm, sym, gain = np.matmul, symmetric, _gain_and_innovation_cov
+    else:
+        mm, sym, gain = np.ndarray.dot, _symmetric_matrix, _matrix_gain_and_innovation_cov
+    means, pmeans = np.empty(batch + (T, n, 1)), np.empty(batch + (T, n, 1))
+    covs, pcovs = np.empty(batch + (T, n, n)), np.empty(batch + (T, n, n))
+    innovations, innovation_covs = np.empty(batch + (T, m, 1)), np.empty(batch + (T, m, m))
+    # time-first views of the outputs: step t is [t]
+    means_t, pmeans_t, covs_t, pcovs_t, r_t, S_t = (
+        _time_first(a, 2) for a in (means, pmeans, covs, pcovs, innovations, innovation_covs)
     )
+    Psis, Sigma_ps = _steps(Psi, 2, T - 1), _steps(Sigma_p, 2, T - 1)
+    Psi_Ts = [P.mT for P in Psis] if Psi.ndim > 2 else [Psi.mT] * (T - 1)
+    offsets = np.any(mu_p != 0.0)  # a zero offset is skipped: adding it changes nothing
+    mu_ps = _steps(mu_p[..., None], 2, T - 1)
+    Phis, Sigma_ms = _steps(Phi, 2, T), _steps(Sigma_m, 2, T)
+    Phi_Ts = [P.mT for P in Phis] if Phi.ndim > 2 else [Phi.mT] * T
+    xs = _time_first((x - mu_m)[..., None], 2)  # x_t - mu_m, (T, ..., m, 1)
+    eye = _eye(n)
+    mean = mean[..., None]
     for t in range(T):
-        if t > 0:
-            mean, cov = _predict(
-                mean, cov, _at(Psi, t - 1, 2), _at(Sigma_p, t - 1, 2), _at(mu_p, t - 1, 1)
-            )
-        out.predicted_means[..., t, :] = mean
-        out.predicted_covs[..., t, :, :] = cov
-        mean, cov, ll = _update(
-            mean, cov, x[..., t, :], _at(Phi, t, 2), _at(Sigma_m, t, 2), _at(mu_m, t, 1)
-        )
-        out.means[..., t, :] = mean
-        out.covs[..., t, :, :] = cov
-        out.log_likelihoods[..., t] = ll
-    return out
+        if t > 0:  # textbook 19.2.1
+            Psi_t = Psis[t - 1]
+            mean = mm(Psi_t, mean)
+            if offsets:
+                mean = mu_ps[t - 1] + mean
+            cov = sym(Sigma_ps[t - 1] + mm(mm(Psi_t, cov), Psi_Ts[t - 1]))
+        pmeans_t[t] = mean
+        pcovs_t[t] = cov
+        # textbook 19.2.2
+        Phi_t, Sigma_m_t = Phis[t], Sigma_ms[t]
+        PHt = mm(cov, Phi_Ts[t])
+        K, S = gain(PHt, Sigma_m_t + mm(Phi_t, PHt))
+        r = xs[t] - mm(Phi_t, mean)
+        mean = mean + mm(K, r)
+        # the Joseph form, as joseph()
+        A = eye - mm(K, Phi_t)
+        cov = sym(mm(mm(A, cov), A.mT) + mm(mm(K, Sigma_m_t), K.mT))
+        means_t[t] = mean
+        covs_t[t] = cov
+        r_t[t] = r
+        S_t[t] = S
+    return FilterResult(
+        means[..., 0],
+        covs,
+        pmeans[..., 0],
+        pcovs,
+        _innovation_log_density(innovations[..., 0], innovation_covs),
+    )
 
 
 def _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m):
@@ -434,11 +608,22 @@ def run(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p=None, mu_m=No
         likelihood of each measurement given the earlier ones. A run whose
         numbers overflow the doubles (covariances or measurements near 1e154
         and beyond, whose squares do) is refused with a ValueError naming the
-        model's scales, never returned with NaN or infinities.
+        model's scales, never returned with NaN or infinities; so is a run
+        whose innovation covariance ``Sigma_m + Phi Sigma_+ Phi^T`` is singular
+        or indefinite to working precision (a measurement noise below the
+        rounding of a vast predicted spread along a measured direction).
     """
     args = _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        res = _run(*args)
+        try:
+            res = _run(*args)
+        except np.linalg.LinAlgError:  # the solve or the Cholesky factor of S failed
+            raise ValueError(
+                "Sigma_m (the measurement noise covariance) is too small beside prior_cov, "
+                "Psi and Sigma_p: the innovation covariance Sigma_m + Phi Sigma_+ Phi^T is "
+                "not positive definite to working precision; rescale the state or the "
+                "measurements"
+            ) from None
     if not all(np.all(np.isfinite(a)) for a in res):
         raise ValueError(
             "x, prior_cov, Psi, Sigma_p and Sigma_m are too large together: the filter's "
@@ -456,9 +641,15 @@ def _solve_or_pinv(A, B):
 
     Where ``A`` is singular to working precision (condition number above
     ``1 / eps``) its pseudo-inverse takes the place of the inverse; the choice
-    is made for each matrix alone, so a batch gives what a loop gives.
+    is made for each matrix alone, so a batch gives what a loop gives. The
+    condition number is the ratio of the largest to the least absolute
+    eigenvalue, which for a symmetric matrix are its singular values (the
+    2-norm condition number of ``np.linalg.cond``) at half the cost of an SVD.
     """
-    singular = ~(np.linalg.cond(A) < 1.0 / np.finfo(float).eps)
+    lam = np.abs(np.linalg.eigvalsh(A))
+    with np.errstate(divide="ignore", invalid="ignore"):  # a zero eigenvalue: singular
+        cond = np.max(lam, axis=-1) / np.min(lam, axis=-1)
+    singular = ~(cond < 1.0 / np.finfo(float).eps)
     if not np.any(singular):
         return np.linalg.solve(A, B)
     eye = np.broadcast_to(np.eye(A.shape[-1]), A.shape)
@@ -506,21 +697,24 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
         filtered.covs[..., :-1, :, :], filtered.predicted_covs[..., 1:, :, :], Psi
     )
     batch = np.broadcast_shapes(filtered.means.shape[:-2], gains.shape[:-3])
-    means = np.empty(batch + (T, n))
-    covs = np.empty(batch + (T, n, n))
-    means[..., -1, :] = filtered.means[..., -1, :]
-    covs[..., -1, :, :] = filtered.covs[..., -1, :, :]
+    means, covs = np.empty(batch + (T, n, 1)), np.empty(batch + (T, n, n))
+    # time-first views: step t is [t]; means as columns (..., n, 1)
+    means_t, covs_t = _time_first(means, 2), _time_first(covs, 2)
+    C_t = _time_first(gains, 2)
+    m_t = _time_first(filtered.means[..., None], 2)
+    P_t = _time_first(filtered.covs, 2)
+    pm_t = _time_first(filtered.predicted_means[..., None], 2)
+    pP_t = _time_first(filtered.predicted_covs, 2)
+    mm, sym = (np.matmul, symmetric) if batch else (np.ndarray.dot, _symmetric_matrix)
+    mean, cov = m_t[T - 1], P_t[T - 1]
+    means_t[T - 1], covs_t[T - 1] = mean, cov
+    # the arithmetic of smoother_step, without its per-call slicing
     for t in range(T - 2, -1, -1):
-        means[..., t, :], covs[..., t, :, :] = smoother_step(
-            gains[..., t, :, :],
-            filtered.means[..., t, :],
-            filtered.covs[..., t, :, :],
-            filtered.predicted_means[..., t + 1, :],
-            filtered.predicted_covs[..., t + 1, :, :],
-            means[..., t + 1, :],
-            covs[..., t + 1, :, :],
-        )
-    return MeanAndCov(means, covs)
+        C = C_t[t]
+        mean = m_t[t] + mm(C, mean - pm_t[t + 1])
+        cov = sym(P_t[t] + mm(mm(C, cov - pP_t[t + 1]), C.mT))
+        means_t[t], covs_t[t] = mean, cov
+    return MeanAndCov(means[..., 0], covs)
 
 
 def smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
