@@ -198,3 +198,17 @@ def test_hard_scores_add_median_and_divergent_keeping_their_keys():
     assert full["divergent"]["count"] == int(np.sum(np.abs(e) > scores.DIVERGENCE * 6.0))
     with pytest.raises(ValueError, match="true_depth"):
         hardness.depth_scores(e, sd, pit, y[:3])
+
+
+def test_every_trial_divergent_leaves_no_rmse_kept_and_strict_json():
+    import json
+
+    rng = np.random.default_rng(4)
+    est = heavy_estimates(20, rng)
+    far = Estimates(est.mean + [0.0, 100.0, 0.0], est.cov, est.depth_cdf, est.velocity_cdf, None)
+    tally = scores.Tally(TRUTH)
+    tally.add(far)
+    out = tally.scores()
+    assert out["divergent"]["count"] == 20 and out["depth"]["rmse_kept"] is None
+    assert out["track_loss_levels"]["0.1"]["rmse_kept"] is None
+    json.dumps(out, allow_nan=False)

@@ -269,10 +269,14 @@ def test_study_command_json(capsys):
             "hellinger_depth",
             "calibration",
             "track_loss",
+            "divergent",
+            "track_loss_levels",
+            "anees",
         }
         assert len(f["calibration"]["depth"]) == len(f["calibration"]["levels"])
-        scores = {"bias", "rmse", "mean_sd", "coverage_68", "coverage_95"}
-        assert set(f["depth"]) == scores | {f"{s}_se" for s in scores}
+        scores = {"bias", "rmse", "mean_sd", "coverage_68", "coverage_95", "rmse_kept"}
+        robust = {"median_abs_error", "median_abs_error_ci"}
+        assert set(f["depth"]) == scores | {f"{s}_se" for s in scores} | robust
 
 
 def test_study_command_rejects_bad_trials(capsys):

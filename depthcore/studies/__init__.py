@@ -14,6 +14,8 @@
   curves of its figures;
 * :mod:`~depthcore.studies.tasks`: where the studies' chunks of trials run, in
   this process or as tasks of a Dask cluster, folded in chunk order.
+* :mod:`~depthcore.studies.replication`: a study replicated on independent
+  seeds, its stated errors set against the spread across replicates;
 * :mod:`~depthcore.studies.verdicts`: what the replication found, one verdict
   per figure and for Theorem 1, decided from those tables.
 

@@ -226,7 +226,7 @@ class Tally:
             ``{"depth": {...}, "velocity": {...}}`` with ``"median_abs_error"``,
             ``"median_abs_error_ci"`` (:meth:`AbsoluteErrors.median`),
             ``"rmse_kept"``, ``"rmse_kept_se"`` (over the trials that did not
-            diverge); ``"divergent"`` (:func:`fraction_of`, with the
+            diverge; None when every trial did); ``"divergent"`` (:func:`fraction_of`, with the
             ``"threshold"`` :data:`DIVERGENCE` and the ``"count"``);
             ``"track_loss_levels"``, ``{f"{t:g}": {"lost", "fraction", "se",
             "upper", "rmse_kept", "rmse_kept_se"}}`` for each threshold of
@@ -270,11 +270,11 @@ class Tally:
         return out
 
     def _kept_rmse(self, rule, k: int) -> tuple:
-        """The RMSE of quantity ``k`` over the trials ``rule`` keeps and its SE; NaN when none."""
+        """The RMSE of quantity ``k`` over the trials ``rule`` keeps and its SE; None when none."""
         kept = self.kept[rule]
         m = kept["n"]
         if m == 0:
-            return float("nan"), float("nan")
+            return None, None
         rmse = float(np.sqrt(kept["squared_error"][k] / m))
         se = mean_se(kept["spread"][k], m)
         return rmse, se / (2.0 * rmse) if rmse > 0 else 0.0
