@@ -21,17 +21,18 @@ The three drawn forms share the lateral part of bearings-only tracking's
 initialisation [ristic2004]_ and of monocular SLAM's inverse-depth feature
 [civera2008]_: the point lies on a ray whose bearing is known to one bearing's
 noise, ``a = x_1 / y_1 ~ N(c_x / c_y, rho**2)``, at a depth ``y_1`` that the
-prior knows poorly, and it moves with a lateral speed ``v ~ N(c_v,``
-:data:`SPEED_SD` ``**2)``; ``a``, ``y_1`` and ``v`` are independent and
-``x_1 = a y_1``. They differ in the depth's law, each truncated to depths in
+prior knows poorly, and it moves with a lateral speed
+``v ~ N(c_v, SPEED_SD**2)`` (:data:`SPEED_SD`); ``a``, ``y_1`` and ``v`` are
+independent and ``x_1 = a y_1``. They differ in the depth's law, each truncated to depths in
 front of the camera so that its moments exist:
 
 * ``"range"``: a Gaussian range prior, ``y_1 ~ N(c_y, (RANGE_SD c_y)**2)``,
   the range known to :data:`RANGE_SD` of itself, truncated to ``y_1 >=
   RANGE_NEAREST c_y`` (three SDs below the centre, 0.13 % of the mass);
 * ``"log_uniform"``: ``log y_1`` uniform over ``log c_y +- log(LOG_UNIFORM_RATIO) / 2``,
-  a depth known to a decade, the range-parametrised filters' prior [peach1995]_,
-  whose depth intervals grow in geometric progression for this law;
+  a depth known to a decade: the law under which the geometrically growing
+  depth intervals of the range-parametrised filters [peach1995]_ are equally
+  probable;
 * ``"inverse_depth"``: the inverse depth ``w = 1 / y_1`` Gaussian,
   ``N(1 / c_y, (INVERSE_DEPTH_SD / c_y)**2)``, the SD half the mean so that
   the two-SD region reaches ``w = 0``, a point at infinity, the rule by which
