@@ -190,6 +190,7 @@ CAPABILITIES = {
     "range_parametrised": (True, True),
     "inverse_depth_ukf": (True, True),
     "modified_polar": (True, True),
+    "batch_ml": (True, False),
 }
 CASES = [
     (name, n, q)

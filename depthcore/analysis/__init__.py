@@ -2,6 +2,9 @@
 
 * :mod:`~depthcore.analysis.bound`: the Cramér-Rao bound on the state at
   frame ``N``, conditional on the truth and averaged over the prior;
+* :mod:`~depthcore.analysis.batch_ml`: the batch maximum-likelihood estimate
+  from the bearings alone, the baseline without a prior, with the inverse
+  Fisher information as its covariance;
 * :mod:`~depthcore.analysis.calibration`: simulation-based calibration of the
   exact filter;
 * :mod:`~depthcore.analysis.reference`: independent routes (dense grids,

@@ -264,11 +264,8 @@ def _listed(values, spec: str) -> str:
 def _kalman_met(record: dict) -> str:
     """Whether every model's filter and smoother reach ``bench_kalman``'s target ratio."""
     target = record["results"]["target_ratio"]
-    met = all(
-        row[key] >= target
-        for row in _kalman_rows(record)
-        for key in ("filter_ratio", "smoother_ratio")
-    )
+    rows = _kalman_rows(record)
+    met = all(row[k] >= target for row in rows for k in ("filter_ratio", "smoother_ratio"))
     return "met" if met else "not met"
 
 

@@ -440,10 +440,10 @@ def _cmd_study(args) -> str:
             "--truth prior (it checks the optimal filter alone, in this process)",
             {k: f"--{k}" for k in ("filters", "particles", "workers", "scheduler")},
         )
-        if args.prior == "paper":
+        if args.prior not in (None, "fixed"):
             raise ValueError(
-                "--prior: --truth prior needs a fixed prior (the paper's rule centres the prior "
-                "on each trial's own measurements, which is not a prior), got paper"
+                "--prior: --truth prior needs a fixed prior (the paper's rule is no prior; the "
+                f"other forms draw truths about --truth X Y V), got {args.prior}"
             )
         result = _with_bar(
             "study",
@@ -786,9 +786,11 @@ def _add_study_arguments(sub, common) -> None:
     )
     st.add_argument(
         "--prior",
-        choices=("paper", "fixed"),
+        choices=study_trials.PRIORS,
         help="paper (default): the paper's rule on each trial's measurements; fixed: on the "
-        "truth (the only choice with --truth prior)",
+        "truth (the only choice with --truth prior); range, log_uniform, inverse_depth: each "
+        "trial's truth drawn from a prior of that form centred on the truth, the filters given "
+        "its Gaussian",
     )
     _add_filters(
         st,

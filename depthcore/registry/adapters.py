@@ -91,6 +91,21 @@ def unscented(result, single: bool) -> Estimate:
     return estimate
 
 
+def maximum_likelihood(result, single: bool) -> Estimate:
+    """:func:`gaussian` for the batch maximum-likelihood estimate (``batch_ml.run``).
+
+    Its mean is the estimate, its covariance the inverse Fisher information
+    there; ``extras["at_limit"]`` (a bool, or an array (B,) of them) says
+    where the likelihood had no maximum within the depths searched, and
+    ``extras["misfit"]`` holds the least sum of squared standardised residuals.
+    """
+    estimate = gaussian(result, single)
+    at_limit, misfit = np.asarray(result.at_limit), np.asarray(result.misfit)
+    estimate.extras["at_limit"] = bool(at_limit) if single else at_limit
+    estimate.extras["misfit"] = float(misfit) if single else misfit
+    return estimate
+
+
 def checked_gaussian(name: str):
     """:func:`gaussian` for a filter that carries a covariance: refuse one that rounding broke.
 

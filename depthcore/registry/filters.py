@@ -57,7 +57,10 @@ resample-move (:mod:`depthcore.particles.resample_move`), the Rao-Blackwellised
 particle filter (:mod:`depthcore.particles.rbpf`), the range-parametrised EKF
 (:mod:`depthcore.kalman.range_ekf`), the inverse-depth UKF
 (:mod:`depthcore.kalman.inverse_depth_ukf`) and the EKF in modified polar coordinates
-(:mod:`depthcore.kalman.modified_polar`).
+(:mod:`depthcore.kalman.modified_polar`); and, as a baseline without a prior, the
+batch maximum-likelihood estimate (:mod:`depthcore.analysis.batch_ml`, ``batch_ml``: the
+state that maximises the likelihood of all the bearings, with the inverse Fisher
+information there as its covariance; ``q = 0`` only), which ignores the prior it is given.
 """
 
 from __future__ import annotations
@@ -68,6 +71,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from depthcore.analysis import batch_ml
 from depthcore.exact import optimal
 from depthcore.kalman import (
     ekf,
@@ -433,6 +437,18 @@ FILTERS: dict[str, Filter] = {
             with_process_noise=True,
             default=False,
             estimate=checked_gaussian("modified-polar EKF"),
+        ),
+        Filter(
+            "batch_ml",
+            "batch maximum likelihood",
+            {"color": "dimgray", "linestyle": (0, (3, 1, 1, 1))},
+            "gaussian",
+            False,
+            batch_ml.run,
+            (("-", "front", {}),),
+            any_frames=True,
+            default=False,
+            estimate=adapters.maximum_likelihood,
         ),
     )
 }

@@ -4,6 +4,9 @@
   ``SeedSequence`` and every filter run on them;
 * :mod:`~depthcore.studies.scores`: the scores, as running sums over chunks
   of trials, with their errors;
+* :mod:`~depthcore.studies.priors`: the prior's form, an axis of the studies:
+  the paper's rule, a range prior, a log-uniform depth, an inverse-depth
+  prior, the last three drawing each trial's truth;
 * :mod:`~depthcore.studies.pairs`: two filters compared over the same trials;
 * :mod:`~depthcore.studies.monte_carlo`: the studies the command line runs
   (which estimate, and which stated uncertainty, to trust);

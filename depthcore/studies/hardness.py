@@ -128,8 +128,14 @@ def prior_for(truth, prior_scale: float, prior_velocity: float = 0.0):
     return mean, scale * np.eye(3)
 
 
-def depth_scores(errors, sds, pit) -> dict:
+def depth_scores(errors, sds, pit, true_depth=None) -> dict:
     """Bias, RMSE, mean stated SD and coverage of depth estimates, each with its standard error.
+
+    Beside them, what a few far-off trials cannot drive: the median absolute
+    error with its distribution-free interval
+    (:func:`depthcore.studies.scores.median_interval`, exact) and, given the
+    true depths, the trials that diverged
+    (:func:`depthcore.studies.scores.divergent`).
 
     Parameters
     ----------
@@ -147,7 +153,9 @@ def depth_scores(errors, sds, pit) -> dict:
         ``"bias"``, ``"rmse"``, ``"mean_sd"`` (the RMSE's error by the delta
         method, :func:`depthcore.analysis.bound.against_bound`), ``"coverage_68"``,
         ``"coverage_95"`` (binomial errors), each with ``"<score>_se"``, and
-        ``"trials"``.
+        ``"trials"``; ``"median_abs_error"``, ``"median_abs_error_ci"`` and,
+        given ``true_depth``, ``"divergent"``: ``{"threshold", "count",
+        "fraction", "se", "upper"}`` (:func:`depthcore.studies.scores.fraction_of`).
     """
     e = checks.finite_array(errors, "errors")
     pit = checks.finite_array(pit, "pit")
@@ -168,6 +176,17 @@ def depth_scores(errors, sds, pit) -> dict:
         key = f"coverage_{round(100 * p)}"
         out[key] = float(c)
         out[f"{key}_se"] = float(scores.proportion_se(round(c * n), n))
+    out["median_abs_error"], out["median_abs_error_ci"] = scores.median_interval(np.abs(e))
+    if true_depth is not None:
+        y = checks.finite_array(true_depth, "true_depth")
+        if y.shape != e.shape:
+            raise ValueError(f"true_depth must have the shape of errors, {e.shape}, got {y.shape}")
+        count = int(np.count_nonzero(scores.divergent(y + e, y)))
+        out["divergent"] = {
+            "threshold": scores.DIVERGENCE,
+            "count": count,
+            **scores.fraction_of(count, n),
+        }
     return out
 
 
@@ -250,7 +269,7 @@ def score_estimates(estimates: dict, true_depth) -> dict:
                 f"names: the {name} filter answers fewer than two trials; leave it out"
             )
         out[name] = {
-            **depth_scores(m[ok] - true_depth[ok], s[ok], cdf[ok]),
+            **depth_scores(m[ok] - true_depth[ok], s[ok], cdf[ok], true_depth[ok]),
             "failed": int(np.sum(~ok)),
         }
     return out

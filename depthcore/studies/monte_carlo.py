@@ -8,8 +8,11 @@ or ``N`` with ``frames=N`` (up to ``depthcore.problem.checks.MAX_FRAMES``), the 
 moving on from time 3 to frame ``N``, with process noise ``q`` on its velocity
 if ``process_noise=q``. It builds the prior by the paper's rule from that
 trial's first three bearings (``prior="paper"``, as the paper does) or once
-from the truth's noise-free bearings (``prior="fixed"``), runs every filter,
-and scores its estimate of the state at the last frame:
+from the truth's noise-free bearings (``prior="fixed"``), or, for a prior of
+another form (``"range"``, ``"log_uniform"``, ``"inverse_depth"``,
+:mod:`depthcore.studies.priors`), draws each trial's truth from that prior
+centred on the true state and scores each trial against its own truth; it
+runs every filter, and scores its estimate of the state at the last frame:
 
 * bias and RMSE of its depth and velocity means;
 * coverage of its central 68 % and 95 % intervals: the truth lies in the
@@ -53,10 +56,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from depthcore.problem import checks
+from depthcore.problem import checks, model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry.filters import FILTERS, NAMES, check_names
+from depthcore.studies import priors as prior_forms
 from depthcore.studies import tasks
 from depthcore.studies.pairs import CoMoments, trial_scores
 from depthcore.studies.scores import CALIBRATION_LEVELS, Tally, coverage_se
@@ -118,7 +122,11 @@ def study(
     seed : int or numpy.random.SeedSequence
         Seeds the ``numpy.random.Generator`` streams that draw the noise and
         the particles (default 0).
-    prior : {"paper", "fixed"}
+    prior : {"paper", "fixed", "range", "log_uniform", "inverse_depth"}
+        How the trials' priors are built (:func:`~depthcore.studies.trials.simulate`):
+        for the last three, the truths are drawn from the prior centred on
+        ``truth`` and the result's ``"prior_gaussian"`` holds the filters'
+        prior (its ``"mean"`` and ``"cov"``).
     names : sequence of str
         Filters to score, from :data:`depthcore.registry.filters.FILTERS`; only these
         run. The Hellinger distances need the optimal filter: when
@@ -246,6 +254,9 @@ def study(
         "process_noise": q,
         "filters": {name: tallies[name].scores() for name in names},
     }
+    if prior in prior_forms.DRAWN:
+        mean, cov = prior_forms.gaussian(prior, model.G(part.truth, -2), rho)
+        out["prior_gaussian"] = {"mean": mean.tolist(), "cov": cov.tolist()}
     if paired:
         out["paired"] = comoments.summary()
     return out

@@ -12,6 +12,13 @@ filter, and the fraction of lost tracks (:func:`lost_tracks`,
 :func:`mean_se`, :func:`coverage_se`); :func:`detectable_difference` states
 the power of a coverage test; :func:`scores` tallies one chunk at once.
 
+Beside the RMSE, what a few far-off trials cannot drive: the median absolute
+error with a distribution-free 95 % interval (:func:`median_ranks`, from a
+histogram of fixed memory, :class:`AbsoluteErrors`), the count of divergent
+trials (:data:`DIVERGENCE`) and the RMSE over the others, the track loss at
+each threshold of :data:`TRACK_LOSS_LEVELS` with the RMSE over the tracks
+kept, and the ANEES with its chi-square acceptance region (:func:`anees_region`).
+
 :func:`difference_verdict` tests a difference (of two filters' scores, or
 of a score and a bound) two-sided with three outcomes and
 :func:`detectable_shift` states such a test's power; the differences of two
@@ -41,6 +48,29 @@ TRACK_LOSS = 0.5
 
 #: Confidence of the upper bound on the track-loss probability.
 TRACK_LOSS_CONFIDENCE = 0.95
+
+
+#: The thresholds of :func:`lost_tracks` at which the track loss is also counted.
+TRACK_LOSS_LEVELS = (0.1, 0.25, 0.5, 1.0)
+
+
+#: A trial diverges when its depth error exceeds this multiple of the true depth (or is not
+#: finite): an estimate off by more than the whole distance says nothing of it.
+DIVERGENCE = 1.0
+
+
+#: Level of the median absolute error's distribution-free interval and of the ANEES's region.
+INTERVAL_LEVEL = 0.95
+
+
+#: Relative width of the bins of :class:`AbsoluteErrors`: the median absolute error and its
+#: interval's ends are stated to within this fraction.
+MEDIAN_RESOLUTION = 1e-3
+
+
+#: The absolute errors :class:`AbsoluteErrors` resolves: from the first to the second; smaller
+#: ones fall in one bin from 0, larger or non-finite ones in one bin to infinity.
+ERROR_RANGE = (1e-8, 1e8)
 
 
 #: Every nominal level whose coverage is counted: :data:`LEVELS` and :data:`CALIBRATION_LEVELS`.
@@ -88,6 +118,17 @@ class Tally:
         Sum of the Hellinger distances; ``None`` once a chunk has none.
     lost : int
         Trials whose track is lost (:func:`lost_tracks`).
+    absolute : tuple of AbsoluteErrors
+        The depth and velocity absolute errors, binned (:class:`AbsoluteErrors`).
+    kept : dict
+        Over the trials kept by each rule, ``"divergent"`` (the depth error
+        within :data:`DIVERGENCE` times the true depth) and each threshold of
+        :data:`TRACK_LOSS_LEVELS`: ``{"n", "squared_error" (2,), "spread" (2,)}``,
+        the trials kept, the sums of their squared depth and velocity errors
+        and those sums' squared deviations (:func:`pooled_squares`).
+    nees_outside : int
+        Trials whose NEES lies outside the chi-square(3) :data:`INTERVAL_LEVEL`
+        region (:func:`anees_region` of one trial).
     """
 
     def __init__(self, truth):
@@ -107,12 +148,19 @@ class Tally:
             "hellinger": 0.0,
         }
         self.lost = 0
+        self.absolute = (AbsoluteErrors(), AbsoluteErrors())
+        self.kept = {
+            rule: {"n": 0, "squared_error": np.zeros(2), "spread": np.zeros(2)}
+            for rule in ("divergent", *TRACK_LOSS_LEVELS)
+        }
+        self.nees_outside = 0
 
     def add(self, est: Estimates) -> None:
         """Add the scores of one chunk of trials (an empty chunk adds nothing)."""
         n = len(est.mean)
         if n == 0:
             return
+        self._add_robust(est, n)
         full = est.mean - (self.truth if est.truth is None else est.truth)
         nees = np.einsum("ni,ni->n", full, np.linalg.solve(est.cov, full[..., None])[..., 0])
         err, sd = errors_and_sds(est, self.truth)
@@ -145,6 +193,91 @@ class Tally:
 
     def _truths(self, est: Estimates, n: int) -> np.ndarray:
         return np.broadcast_to(self.truth if est.truth is None else est.truth, (n, 3))
+
+    def _add_robust(self, est: Estimates, n: int) -> None:
+        """The robust scores' sums of one chunk: absolute errors, trials kept, NEES outside."""
+        err, _ = errors_and_sds(est, self.truth)
+        truths = self._truths(est, n)
+        for k in range(2):
+            self.absolute[k].add(np.abs(err[:, k]))
+        keep = {"divergent": ~divergent(est.mean[:, 1], truths[:, 1])}
+        for t in TRACK_LOSS_LEVELS:
+            keep[t] = ~lost_tracks(est.mean, truths, t)
+        for rule, rows in keep.items():
+            kept = self.kept[rule]
+            squared = err[rows] ** 2
+            if len(squared):
+                kept["spread"] = pooled_squares(
+                    kept["n"], kept["squared_error"], kept["spread"], squared
+                )
+                kept["squared_error"] = kept["squared_error"] + np.sum(squared, axis=0)
+                kept["n"] += len(squared)
+        full = est.mean - truths
+        nees = np.einsum("ni,ni->n", full, np.linalg.solve(est.cov, full[..., None])[..., 0])
+        lo, hi = anees_region(1, 3, INTERVAL_LEVEL)
+        self.nees_outside += int(np.count_nonzero(~((nees >= lo) & (nees <= hi))))
+
+    def robust_scores(self) -> dict:
+        """The scores beside the RMSE that a few far-off trials cannot drive.
+
+        Returns
+        -------
+        dict
+            ``{"depth": {...}, "velocity": {...}}`` with ``"median_abs_error"``,
+            ``"median_abs_error_ci"`` (:meth:`AbsoluteErrors.median`),
+            ``"rmse_kept"``, ``"rmse_kept_se"`` (over the trials that did not
+            diverge); ``"divergent"`` (:func:`fraction_of`, with the
+            ``"threshold"`` :data:`DIVERGENCE` and the ``"count"``);
+            ``"track_loss_levels"``, ``{f"{t:g}": {"lost", "fraction", "se",
+            "upper", "rmse_kept", "rmse_kept_se"}}`` for each threshold of
+            :data:`TRACK_LOSS_LEVELS` (the depth RMSE over the tracks kept);
+            ``"anees"``: ``{"value", "se", "dim", "region", "outside",
+            "outside_se"}`` (:func:`anees_region`; ``"outside"`` the fraction of
+            trials whose NEES lies outside the one-trial region).
+        """
+        n = self.n
+        out = {}
+        for k, q in enumerate(("depth", "velocity")):
+            median, ci = self.absolute[k].median(INTERVAL_LEVEL)
+            rmse, rmse_se = self._kept_rmse("divergent", k)
+            out[q] = {
+                "median_abs_error": median,
+                "median_abs_error_ci": ci,
+                "rmse_kept": rmse,
+                "rmse_kept_se": rmse_se,
+            }
+        count = n - self.kept["divergent"]["n"]
+        out["divergent"] = {"threshold": DIVERGENCE, "count": count, **fraction_of(count, n)}
+        out["track_loss_levels"] = {}
+        for t in TRACK_LOSS_LEVELS:
+            lost = n - self.kept[t]["n"]
+            rmse, rmse_se = self._kept_rmse(t, 0)
+            out["track_loss_levels"][f"{t:g}"] = {
+                "lost": lost,
+                **fraction_of(lost, n),
+                "rmse_kept": rmse,
+                "rmse_kept_se": rmse_se,
+            }
+        outside = fraction_of(self.nees_outside, n)
+        out["anees"] = {
+            "value": float(self.nees / n),
+            "se": mean_se(self.spread["nees"], n),
+            "dim": 3,
+            "region": list(anees_region(n, 3, INTERVAL_LEVEL)),
+            "outside": outside["fraction"],
+            "outside_se": outside["se"],
+        }
+        return out
+
+    def _kept_rmse(self, rule, k: int) -> tuple:
+        """The RMSE of quantity ``k`` over the trials ``rule`` keeps and its SE; NaN when none."""
+        kept = self.kept[rule]
+        m = kept["n"]
+        if m == 0:
+            return float("nan"), float("nan")
+        rmse = float(np.sqrt(kept["squared_error"][k] / m))
+        se = mean_se(kept["spread"][k], m)
+        return rmse, se / (2.0 * rmse) if rmse > 0 else 0.0
 
     def scores(self) -> dict:
         """The scores of :func:`scores` over every trial added, with their standard errors."""
@@ -189,6 +322,10 @@ class Tally:
             }
         )
         out["track_loss"] = track_loss(self.lost, n)
+        robust = self.robust_scores()
+        for q in ("depth", "velocity"):
+            out[q].update(robust.pop(q))
+        out.update(robust)
         return out
 
 
@@ -336,6 +473,199 @@ def track_loss(lost: int, trials: int, confidence: float = TRACK_LOSS_CONFIDENCE
         "threshold": TRACK_LOSS,
         "confidence": float(confidence),
     }
+
+
+def divergent(depth, true_depth, threshold: float = DIVERGENCE) -> np.ndarray:
+    """Whether each trial diverged: ``|depth - true_depth| > threshold true_depth``, or NaN.
+
+    Parameters
+    ----------
+    depth, true_depth : array_like, shape (...)
+        Estimated and true depths (the true ones > 0).
+    threshold : float
+        > 0, a multiple of the true depth (default :data:`DIVERGENCE`).
+
+    Returns
+    -------
+    ndarray of bool, shape (...)
+    """
+    threshold = checks.positive_scalar(threshold, "threshold")
+    depth = np.asarray(depth, dtype=float)
+    true_depth = np.asarray(true_depth, dtype=float)
+    return ~(np.abs(depth - true_depth) <= threshold * true_depth)
+
+
+def fraction_of(count: int, trials: int, confidence: float = TRACK_LOSS_CONFIDENCE) -> dict:
+    """A fraction of trials, its binomial SE and its exact one-sided upper bound.
+
+    As :func:`track_loss`: ``{"fraction", "se", "upper"}``, ``se`` the
+    binomial ``sqrt(p (1 - p) / n)`` and ``upper`` the Clopper-Pearson bound
+    at ``confidence`` (useful when ``count`` is 0, where ``se`` is 0).
+    """
+    t = track_loss(count, trials, confidence)
+    return {"fraction": t["fraction"], "se": t["se"], "upper": t["upper"]}
+
+
+def anees_region(trials: int, dim: int = 3, level: float = INTERVAL_LEVEL) -> tuple:
+    """The two-sided acceptance region of the ANEES of ``trials`` trials of a consistent filter.
+
+    For a filter whose errors follow its covariance, each trial's NEES is
+    chi-square with ``dim`` degrees of freedom, so ``M`` times the average of
+    ``M`` independent trials' NEES (the ANEES) is chi-square with ``M dim``
+    (Bar-Shalom, Li and Kirubarajan 2001, section 5.4). The region holds the
+    ANEES with probability ``level``.
+
+    Parameters
+    ----------
+    trials : int
+        ``M >= 1``.
+    dim : int
+        The state's dimension, >= 1.
+    level : float
+        In (0, 1).
+
+    Returns
+    -------
+    tuple of float
+        ``(lo, hi)``: the chi-square(``M dim``) quantiles at ``(1 - level) / 2``
+        and ``(1 + level) / 2``, over ``M``.
+    """
+    m = checks.count(trials, "trials")
+    dim = checks.count(dim, "dim")
+    level = float(level)
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    from scipy.stats import chi2
+
+    lo, hi = chi2.ppf([(1 - level) / 2, (1 + level) / 2], m * dim)
+    return float(lo / m), float(hi / m)
+
+
+def median_ranks(trials: int, level: float = INTERVAL_LEVEL) -> tuple:
+    """The ranks of the order statistics of a distribution-free interval for a median.
+
+    For ``n`` independent draws of any continuous law, the interval from the
+    ``j``-th smallest to the ``(n + 1 - j)``-th holds the median with
+    probability ``1 - 2 P(B <= j - 1)``, ``B ~ Binomial(n, 1/2)``; ``j`` is the
+    largest rank for which that is at least ``level``.
+
+    Parameters
+    ----------
+    trials : int
+        ``n >= 1``.
+    level : float
+        In (0, 1).
+
+    Returns
+    -------
+    tuple of int
+        ``(j, k)``, ranks from 1 (``k = n + 1 - j``); ``(0, n + 1)`` when no
+        ranks reach ``level`` (too few trials): the interval is then unbounded.
+    """
+    n = checks.count(trials, "trials")
+    level = float(level)
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    from scipy.stats import binom
+
+    cdf = binom.cdf(np.arange(n + 1), n, 0.5)
+    j = int(np.count_nonzero(cdf <= (1 - level) / 2))
+    return j, n + 1 - j
+
+
+def median_interval(values, level: float = INTERVAL_LEVEL) -> tuple:
+    """The sample median of ``values`` (T,) and its distribution-free interval, exactly.
+
+    Returns ``(median, [lo, hi])``: ``numpy.median`` and the order statistics of
+    :func:`median_ranks` (``0.0`` and ``None`` for an end it leaves unbounded).
+    """
+    v = np.sort(checks.finite_array(values, "values"))
+    if v.ndim != 1 or not len(v):
+        raise ValueError("values must be a non-empty one-dimensional array")
+    j, k = median_ranks(len(v), level)
+    lo = float(v[j - 1]) if j >= 1 else 0.0
+    hi = float(v[k - 1]) if k <= len(v) else None
+    return float(np.median(v)), [lo, hi]
+
+
+class AbsoluteErrors:
+    """A histogram of absolute errors of fixed size: their median and its interval, streamed.
+
+    The bins are geometric, of relative width :data:`MEDIAN_RESOLUTION`, over
+    :data:`ERROR_RANGE`, with one bin below it (from 0) and one above (to
+    infinity, non-finite errors included): the memory is fixed whatever the
+    number of trials, the counts are integers, so chunks add exactly, and each
+    order statistic is known to lie in its bin.
+
+    Attributes
+    ----------
+    counts : ndarray of int, shape (B + 2,)
+    n : int
+    """
+
+    def __init__(self, resolution: float = MEDIAN_RESOLUTION, error_range=ERROR_RANGE):
+        self.resolution = checks.positive_scalar(resolution, "resolution")
+        lo, hi = (checks.positive_scalar(v, "error_range") for v in error_range)
+        if not hi > lo:
+            raise ValueError(f"error_range must be increasing, got {error_range!r}")
+        self.bins = int(np.ceil(np.log(hi / lo) / np.log1p(self.resolution)))
+        self.lo = lo
+        self.counts = np.zeros(self.bins + 2, dtype=np.int64)
+        self.n = 0
+
+    def edges(self, b) -> tuple:
+        """The lower and upper edges of bins ``b`` (0: below the range; ``B + 1``: above it)."""
+        b = np.asarray(b)
+        lower = np.where(b == 0, 0.0, self.lo * np.exp((b - 1) * np.log1p(self.resolution)))
+        upper = np.where(
+            b == self.bins + 1, np.inf, self.lo * np.exp(b * np.log1p(self.resolution))
+        )
+        return lower, upper
+
+    def index(self, values) -> np.ndarray:
+        """The bin of each absolute error (NaN and infinity in the last)."""
+        v = np.asarray(values, dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            b = np.floor(np.log(v / self.lo) / np.log1p(self.resolution)) + 1
+        b = np.where(v < self.lo, 0, b)
+        return np.where(np.isfinite(b), np.clip(b, 0, self.bins + 1), self.bins + 1).astype(int)
+
+    def add(self, values) -> None:
+        """Count a chunk of absolute errors, shape (m,)."""
+        self.counts += np.bincount(self.index(values), minlength=len(self.counts))
+        self.n += len(values)
+
+    def order_statistic_bin(self, rank: int) -> int:
+        """The bin of the ``rank``-th smallest error (from 1)."""
+        return int(np.searchsorted(np.cumsum(self.counts), rank))
+
+    def median(self, level: float = INTERVAL_LEVEL) -> tuple:
+        """The median absolute error and its distribution-free ``level`` interval.
+
+        Returns
+        -------
+        tuple
+            ``(median, [lo, hi])``: the median is the mean of the geometric
+            centres of the bins of the middle order statistic(s) (within
+            :data:`MEDIAN_RESOLUTION` of ``numpy.median``, relative); ``lo`` the
+            lower edge of the bin of the ``j``-th smallest error and ``hi`` the
+            upper edge of that of the ``(n + 1 - j)``-th (:func:`median_ranks`),
+            so the interval holds the exact one. An end that is not finite (the
+            errors beyond :data:`ERROR_RANGE`, or too few trials) is ``None``,
+            as is the median then.
+        """
+        if self.n == 0:
+            raise ValueError("trials: no trial was added to the tally")
+        middle = {(self.n + 1) // 2, self.n // 2 + 1}
+        centres = []
+        for rank in sorted(middle):
+            lower, upper = self.edges(self.order_statistic_bin(rank))
+            centres.append(float(np.sqrt(lower * upper)) if lower > 0 else float(upper) / 2)
+        median = float(np.mean(centres))
+        j, k = median_ranks(self.n, level)
+        lo = float(self.edges(self.order_statistic_bin(j))[0]) if j >= 1 else 0.0
+        hi = float(self.edges(self.order_statistic_bin(k))[1]) if k <= self.n else np.inf
+        return (median if np.isfinite(median) else None), [lo, hi if np.isfinite(hi) else None]
 
 
 def coverage_se(level, trials) -> np.ndarray:

@@ -4,12 +4,14 @@ Recommended import: ``from depthcore.studies import trials``.
 
 :func:`simulate` draws a study's trials for a true state (the paper's three
 bearings, or ``N`` frames with process noise) and builds each trial's prior
-(the paper's rule, or fixed); :func:`run_filters` runs the registry's filters
-on them and keeps what the scores need of each estimate (:class:`Estimates`):
-the moments, the marginal CDFs at the truth, the NEES and the Hellinger
-distance to the optimal filter's depth marginal (:func:`hellinger`,
-:func:`gaussian_hellinger`). The scores are :mod:`depthcore.studies.scores`'s; the
-study that streams trials through both, :mod:`depthcore.studies.monte_carlo`'s.
+(the paper's rule, or fixed), or draws each trial's truth from a prior of
+another form (:mod:`depthcore.studies.priors`) centred on that state;
+:func:`run_filters` runs the registry's filters on them and keeps what the
+scores need of each estimate (:class:`Estimates`): the moments, the marginal
+CDFs at the truth, the NEES and the Hellinger distance to the optimal
+filter's depth marginal (:func:`hellinger`, :func:`gaussian_hellinger`). The
+scores are :mod:`depthcore.studies.scores`'s; the study that streams trials
+through both, :mod:`depthcore.studies.monte_carlo`'s.
 """
 
 from __future__ import annotations
@@ -24,8 +26,10 @@ from depthcore.problem import checks, model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, gaussian_logpdf, paper_prior_means
 from depthcore.registry.estimates import exact_depth_range
 from depthcore.registry.filters import FILTERS, NAMES, check_names
+from depthcore.studies import priors as prior_forms
 
-PRIORS = ("paper", "fixed")
+#: The priors of :func:`simulate`: the paper's rule, fixed, and the forms whose truths are drawn.
+PRIORS = ("paper", "fixed", *prior_forms.DRAWN)
 
 
 #: Particles per trial of the particle filter.
@@ -51,7 +55,8 @@ class Trials:
         ``q``, the SD of the velocity's change per frame (0: the paper's model).
     states : ndarray, shape (N, 3), or None
         The true state at the last frame of each trial, where it is not
-        ``truth`` (more than three frames); ``None`` otherwise.
+        ``truth`` (more than three frames, or truths drawn from the prior);
+        ``None`` otherwise.
     tracks : ndarray, shape (N, K, 3), or None
         The true state at every frame ``1 .. K`` of each trial, where asked
         for (:func:`simulate`'s ``tracks``); ``None`` otherwise.
@@ -126,12 +131,19 @@ def simulate(
     n : int
         Number of trials, >= 1.
     rng : numpy.random.Generator
-    prior : {"paper", "fixed"}
+    prior : {"paper", "fixed", "range", "log_uniform", "inverse_depth"}
         ``"paper"``: mean ``(c1 - 2 c3, c2 - 2, 0)`` from each trial's own
         noise-free solution; ``"fixed"``: the same rule applied once to the
-        truth.
+        truth. The other forms (:data:`depthcore.studies.priors.DRAWN`) draw
+        each trial's state at frame 1 from the form's law centred on
+        ``G^{-2} truth`` (:func:`depthcore.studies.priors.draw`, before the
+        bearings, from ``rng``), move it to time 3, where the trial goes on as
+        from ``truth``, and give every trial the form's Gaussian
+        (:func:`depthcore.studies.priors.gaussian`); ``Trials.states`` holds
+        each trial's own truth at its last frame.
     prior_scale : float
-        Prior covariance ``prior_scale * I``.
+        Prior covariance ``prior_scale * I`` (the paper's rule and ``"fixed"``;
+        the drawn forms state their own).
     frames : int
         ``N >= 3``: the point is followed on from time 3 to frame ``N``
         (:func:`depthcore.problem.model.simulate` with ``frame=3``). The state at
@@ -162,6 +174,8 @@ def simulate(
         )
     if not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    if prior in prior_forms.DRAWN:
+        return _drawn_trials(truth, rho, int(n), rng, prior, frames, q, tracks)
     sim = model.draw_track(truth, frames, rho, q, rng, (int(n),), 3)
     mu = sim.mu
     states = None if frames == 3 else sim.states[:, -1, :]
@@ -181,6 +195,27 @@ def simulate(
         int(np.sum(~keep)),
         q,
         None if states is None else states[keep],
+        sim.states[keep] if tracks else None,
+    )
+
+
+def _drawn_trials(truth, rho, n, rng, form, frames, q, tracks) -> Trials:
+    """:func:`simulate` for a prior form whose truths are drawn, on checked inputs."""
+    centre = model.G(truth, -2)
+    start = prior_forms.draw(form, centre, rho, n, rng)
+    sim = model.draw_track(model.G(start, 2), frames, rho, q, rng, (n,), 3)
+    keep = valid_triples(sim.mu[:, :3])
+    mean, cov = prior_forms.gaussian(form, centre, rho)
+    n_kept = int(np.sum(keep))
+    return Trials(
+        truth,
+        rho,
+        sim.mu[keep],
+        np.tile(mean, (n_kept, 1)),
+        cov,
+        int(np.sum(~keep)),
+        q,
+        sim.states[keep, -1, :],
         sim.states[keep] if tracks else None,
     )
 
