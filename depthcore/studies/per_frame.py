@@ -13,9 +13,9 @@ tracking literature evaluates a filter ([ristic2004]_, chapter 6;
   at frame ``k`` (:func:`depthcore.analysis.bound.posterior_bound`);
 * the NEES, ``(m - x)^T P^{-1} (m - x)`` over the whole state, averaged over
   the ``M`` trials (the ANEES), with its chi-square acceptance region
-  (:func:`anees_region`: ``M`` times the ANEES of a filter whose errors follow
-  its covariances is chi-square with ``3 M`` degrees of freedom), and the
-  fraction of trials whose own NEES lies outside the central 95 % region of
+  (:func:`depthcore.studies.scores.anees_region`: ``M`` times the ANEES of
+  a filter whose errors follow its covariances is chi-square with ``3 M``
+  degrees of freedom), and the fraction of trials whose own NEES lies outside the central 95 % region of
   the chi-square with 3 degrees of freedom;
 * track loss at every frame at each threshold of :data:`TRACK_LOSS_LEVELS`
   (the position error over the true distance, as
@@ -55,7 +55,7 @@ from depthcore.problem import checks
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, History
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry.filters import FILTERS, check_names
-from depthcore.studies import tasks
+from depthcore.studies import scores, tasks
 from depthcore.studies.scores import lost_tracks
 from depthcore.studies.trials import PARTICLES, simulate
 
@@ -76,44 +76,6 @@ STATE_DIM = 3
 
 #: The filters of :func:`per_frame_study` unless named: the deterministic ones of the bound.
 NAMES = ("optimal", "second_order", "ekf", "inverse_depth", "iterated", "ukf")
-
-
-def anees_region(trials, dim: int = STATE_DIM, level: float = NEES_LEVEL) -> tuple:
-    """The two-sided acceptance region of the ANEES over ``M`` trials.
-
-    A filter whose errors follow its covariances has NEES chi-square with
-    ``dim`` degrees of freedom in each trial, so ``M`` times the average of
-    ``M`` independent ones is chi-square with ``M dim`` degrees of freedom
-    (Bar-Shalom, Li and Kirubarajan 2001, section 5.4.2): the region is
-    ``[chi2.ppf(a / 2, M dim) / M, chi2.ppf(1 - a / 2, M dim) / M]``, ``a = 1 - level``.
-
-    Parameters
-    ----------
-    trials : int or array_like of int
-        ``M >= 1``.
-    dim : int
-        Degrees of freedom of one NEES, >= 1.
-    level : float
-        In (0, 1).
-
-    Returns
-    -------
-    tuple of (float or ndarray)
-        ``(lo, hi)``, of the shape of ``trials``.
-    """
-    from scipy.stats import chi2  # imported here: scipy.stats takes a second to import
-
-    m = np.asarray(trials)
-    if m.dtype.kind not in "iu" or np.any(m < 1):
-        raise ValueError(f"trials must be integers >= 1, got {trials!r}")
-    dim = checks.count(dim, "dim")
-    level = float(level)
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level!r}")
-    a = 1.0 - level
-    lo = chi2.ppf(a / 2, m * dim) / m
-    hi = chi2.ppf(1 - a / 2, m * dim) / m
-    return (float(lo), float(hi)) if m.ndim == 0 else (lo, hi)
 
 
 def frame_states(name, mu, rho, prior_mean, prior_cov, frames, process_noise=0.0, **options):
@@ -476,7 +438,8 @@ def per_frame_study(
         :func:`depthcore.analysis.bound.posterior_bound` at each frame (for
         the truth's law, the prior covariance and ``process_noise``); and
         ``"filters"``: per filter :meth:`FrameTally.scores` (arrays over the
-        K frames) and ``"anees_region"``, :func:`anees_region` for its trials.
+        K frames) and ``"anees_region"``, the
+        :func:`depthcore.studies.scores.anees_region` of its trials.
     """
     n_frames = checks.frames(frames)
     trials = checks.count(trials, "trials")
@@ -576,7 +539,7 @@ def per_frame_study(
         if tally.n == 0:
             continue
         s = tally.scores()
-        s["anees_region"] = list(anees_region(tally.n))
+        s["anees_region"] = list(scores.anees_region(tally.n, STATE_DIM, NEES_LEVEL))
         out["filters"][name] = s
     return out
 
