@@ -15,8 +15,9 @@ tracking literature evaluates a filter ([ristic2004]_, chapter 6;
   the ``M`` trials (the ANEES), with its chi-square acceptance region
   (:func:`depthcore.studies.scores.anees_region`: ``M`` times the ANEES of
   a filter whose errors follow its covariances is chi-square with ``3 M``
-  degrees of freedom), and the fraction of trials whose own NEES lies outside the central 95 % region of
-  the chi-square with 3 degrees of freedom;
+  degrees of freedom), and the fraction of trials whose own NEES lies
+  outside the central 95 % region of the chi-square with 3 degrees of
+  freedom;
 * track loss at every frame at each threshold of :data:`TRACK_LOSS_LEVELS`
   (the position error over the true distance, as
   :func:`depthcore.studies.scores.lost_tracks`), with its binomial standard
