@@ -536,3 +536,69 @@ def test_frame_marginals_grids_hold_each_filter_and_the_exact_marginal():
             assert 0.99 < np.trapezoid(p["density"][name], grid) < 1.01
     fig = beyond_frames.frame_marginals_figure([p], ["ekf", "ukf"])
     plt.close(fig)
+
+
+def _per_frame_run():
+    from depthcore.studies import per_frame
+
+    return per_frame.per_frame_study(6, 50, 1, ("optimal", "ekf"), process_noise=0.02)
+
+
+def _band_widths(ax, x):
+    """The height of each band ``fill_between`` drew at each ``x``, in order."""
+    out = []
+    for poly in ax.collections:
+        v = poly.get_paths()[0].vertices
+        out.append(np.array([np.ptp(v[np.isclose(v[:, 0], xi), 1]) for xi in x]))
+    return out
+
+
+def test_frame_bound_figure_draws_the_rmse_over_the_bound_with_two_standard_errors():
+    from depthcore.book import beyond_bound
+
+    r = _per_frame_run()
+    fig = beyond_bound.frame_bound_figure([("a", r)], zoom=(0.5, 5.0))
+    b = r["bound"]["depth"]
+    zoomed = fig.axes[1]
+    lines = {line.get_label(): line for line in zoomed.get_lines()}
+    widths = _band_widths(zoomed, r["frames"])
+    for name, width in zip(("optimal", "ekf"), widths, strict=True):
+        d = r["filters"][name]["depth"]
+        assert_allclose(lines[style.STYLE[name]["label"]].get_ydata(), d["rmse"] / b)
+        assert_allclose(width, 4 * d["rmse_se"] / b, rtol=1e-9)
+    assert zoomed.get_ylim() == (0.5, 5.0)
+    plt.close(fig)
+
+
+def test_nees_frames_figure_shades_the_anees_region_of_each_filter():
+    from depthcore.book import beyond_frames
+
+    r = _per_frame_run()
+    fig = beyond_frames.nees_frames_figure([("a", r)])
+    (ax,) = fig.axes
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    for name in ("optimal", "ekf"):
+        assert_allclose(lines[style.STYLE[name]["label"]].get_ydata(), r["filters"][name]["nees"])
+    lo, hi = r["filters"]["ekf"]["anees_region"]
+    spans = [p for p in ax.patches if p.get_height() > 0]
+    assert any(
+        np.isclose(p.get_y(), lo) and np.isclose(p.get_y() + p.get_height(), hi) for p in spans
+    )
+    plt.close(fig)
+
+
+def test_track_loss_figure_draws_each_threshold_and_the_rmse_over_the_tracks_kept():
+    from depthcore.book import beyond_frames
+
+    r = _per_frame_run()
+    fig = beyond_frames.track_loss_figure(r)
+    axes = np.reshape(fig.axes, (len(r["levels"]), 2))
+    for i in range(len(r["levels"])):
+        lines = {line.get_label(): line for line in axes[i, 0].get_lines()}
+        kept = {line.get_label(): line for line in axes[i, 1].get_lines()}
+        for name in ("optimal", "ekf"):
+            loss = r["filters"][name]["track_loss"]
+            label = style.STYLE[name]["label"]
+            assert_allclose(lines[label].get_ydata(), loss["fraction"][i])
+            assert_allclose(kept[label].get_ydata(), loss["depth"]["rmse_kept"][i])
+    plt.close(fig)

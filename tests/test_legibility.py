@@ -51,7 +51,7 @@ from depthcore.exact import posterior, smoother
 from depthcore.problem import model
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry import online
-from depthcore.studies import frames, hardness, monte_carlo
+from depthcore.studies import frames, hardness, monte_carlo, per_frame
 
 #: Width in CSS pixels at which the book shows a figure at a 1280-pixel window.
 CONTENT_WIDTH_PX = 660.0
@@ -179,6 +179,14 @@ def _bound_figure():
     return beyond_bound.bound_figure(ns, [("$q = 0$", against), ("$q = 0.02$", against)])
 
 
+def _per_frame_runs():
+    names = ("optimal", "second_order", "ekf", "inverse_depth", "iterated", "ukf")
+    return [
+        (label, per_frame.per_frame_study(8, 50, 1, names, process_noise=q))
+        for label, q in (("$q = 0$", 0.0), ("$q = 0.02$", 0.02))
+    ]
+
+
 BUILDERS = {
     "figure": lambda: paper.figure("fig3", n=101),
     "extended_figure": lambda: beyond_filters.extended_figure(paper.GRIDS, paper.YLIM, n=101),
@@ -234,6 +242,13 @@ BUILDERS = {
         + ["$s = 10$", "$s = 100$", "$v_0 = 1.2$", "$y = 24$", "$v = 0$\n$s = 1$"],
     ),
     "bound_figure": _bound_figure,
+    "frame_bound_figure": lambda: beyond_bound.frame_bound_figure(
+        _per_frame_runs(), zoom=(0.9, 2.7)
+    ),
+    "nees_frames_figure": lambda: beyond_frames.nees_frames_figure(
+        _per_frame_runs(), zoom=(1.5, 5.0)
+    ),
+    "track_loss_figure": lambda: beyond_frames.track_loss_figure(_per_frame_runs()[0][1]),
     "conjecture_figure": lambda: beyond_conjecture.conjecture_figure(
         beyond_conjecture.conjecture_study(
             [3, 10, 30], 1 / np.array([1000, 500, 200, 100, 50]), [4.0, 6.0, 12.0, 24.0], 4, 2

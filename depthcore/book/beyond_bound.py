@@ -4,14 +4,15 @@ Recommended import: ``from depthcore.book import beyond_bound``.
 
 :func:`bound_study` runs every named filter over the trials and returns the
 errors and claimed SDs that the chapter holds against :mod:`depthcore.analysis.bound`;
-:func:`bound_figure` draws them over the bound.
+:func:`bound_figure` draws them over the bound; :func:`frame_bound_figure` draws the
+RMSE over the bound at every frame, from :func:`depthcore.studies.per_frame.per_frame_study`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, legend_below, subplots
 from depthcore.problem import checks
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 from depthcore.problem.scenarios import SCENARIOS
@@ -213,4 +214,75 @@ def bound_figure(frames, columns):
     fig.legend(
         handles, labels, loc="outside lower center", ncol=2, frameon=False, fontsize=MIN_FONT
     )
+    return fig
+
+
+def frame_bound_figure(columns, names=None, zoom=None):
+    """Every filter's depth RMSE over the bound at every frame, with Monte Carlo bands.
+
+    Parameters
+    ----------
+    columns : sequence of (str, dict)
+        One column of panels each: its short label and a result of
+        :func:`depthcore.studies.per_frame.per_frame_study` (its ``"frames"``
+        (K,), its ``"bound"`` and each filter's depth RMSE and its standard
+        error, (K,)).
+    names : sequence of str, optional
+        Filters to draw; default every filter of the first result.
+    zoom : (float, float), optional
+        The range of a second row of panels, on a linear axis, that shows the
+        filters near the bound; default no second row.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One column per entry of ``columns``, sharing a logarithmic axis of the
+        RMSE over the bound's depth SD against the frame ``k`` (and, with
+        ``zoom``, a linear one below it): a line per filter, shaded two
+        standard errors either side (on the logarithmic axis the lower edge
+        stopping short of zero), and a grey line at 1, the bound.
+    """
+    if names is None:
+        names = list(columns[0][1]["filters"])
+    rows = 1 if zoom is None else 2
+    fig, axes = subplots(
+        rows,
+        len(columns),
+        figsize=(WIDTH, 3.0 * rows + 0.8),
+        sharex=True,
+        sharey="row",
+        squeeze=False,
+    )
+    for j, (title, result) in enumerate(columns):
+        k = np.asarray(result["frames"], dtype=float)
+        b = np.asarray(result["bound"]["depth"])
+        for i in range(rows):
+            ax = axes[i, j]
+            for name in names:
+                if name not in result["filters"]:
+                    continue
+                d = result["filters"][name]["depth"]
+                y, se = np.asarray(d["rmse"]) / b, np.asarray(d["rmse_se"]) / b
+                style = STYLE[name]
+                ax.plot(
+                    k,
+                    y,
+                    color=style["color"],
+                    linestyle=style["linestyle"],
+                    label=style["label"],
+                    linewidth=1.2,
+                )
+                lo = y - 2 * se if i else np.maximum(y - 2 * se, 0.1 * y)
+                ax.fill_between(k, lo, y + 2 * se, color=style["color"], alpha=0.25, linewidth=0)
+            ax.axhline(1.0, color="0.6", linewidth=1, zorder=0)
+            ax.set_xlim(k[0], k[-1])
+        axes[0, j].set_yscale("log")
+        axes[0, j].set_title(title)
+        axes[-1, j].set_xlabel("frame $k$")
+        if zoom is not None:
+            axes[1, j].set_ylim(*zoom)
+    axes[0, 0].set_ylabel("depth RMSE / bound")
+    if zoom is not None:
+        axes[1, 0].set_ylabel("depth RMSE / bound\n(near the bound)")
+    legend_below(fig, axes.ravel(), ncol=3)
     return fig

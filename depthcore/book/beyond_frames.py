@@ -8,7 +8,10 @@ Recommended import: ``from depthcore.book import beyond_frames``.
   :func:`depthcore.studies.scores.coverage_test`;
 * :func:`frame_marginals` and :func:`frame_marginals_figure`: every filter's
   depth marginal at several frames of one track; :func:`track_marginals`
-  draws the track and runs them from one seed.
+  draws the track and runs them from one seed;
+* :func:`nees_frames_figure` and :func:`track_loss_figure`: the ANEES with its
+  chi-square region and the track loss at several thresholds, at every frame
+  (:func:`depthcore.studies.per_frame.per_frame_study`).
 """
 
 from __future__ import annotations
@@ -358,3 +361,154 @@ def frames_study_texts(result: dict, prefix: str) -> dict:
         )
         out[f"{prefix}_{name}_fails"] = str(int(np.sum(verdicts != "calibrated")))
     return out
+
+
+# --- frame by frame --------------------------------------------------------------------------
+
+
+def _band(ax, k, y, se, name, log: bool = True) -> None:
+    """One filter's line with two standard errors shaded either side (short of zero if ``log``)."""
+    style = STYLE[name]
+    ax.plot(
+        k,
+        y,
+        color=style["color"],
+        linestyle=style["linestyle"],
+        label=style["label"],
+        linewidth=1.2,
+    )
+    lo = np.maximum(y - 2 * se, 0.1 * y) if log else y - 2 * se
+    ax.fill_between(k, lo, y + 2 * se, color=style["color"], alpha=0.25, linewidth=0)
+
+
+def nees_frames_figure(columns, names=None, zoom=None):
+    """Every filter's ANEES at every frame, with its chi-square acceptance region.
+
+    Parameters
+    ----------
+    columns : sequence of (str, dict)
+        One column of panels each: its short label and a result of
+        :func:`depthcore.studies.per_frame.per_frame_study`.
+    names : sequence of str, optional
+        Filters to draw; default every filter of the first result.
+    zoom : (float, float), optional
+        The range of a second row of panels, on a linear axis, that shows the
+        filters near the region; default no second row.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One column per entry of ``columns``, on a logarithmic axis against
+        the frame ``k`` (and, with ``zoom``, a linear one below it): each
+        filter's ANEES (the mean NEES over its trials), shaded two standard
+        errors either side, over the grey band of its 95 % acceptance region
+        (``"anees_region"``; one band per number of trials) and a grey line
+        at 3, the state's dimension.
+    """
+    if names is None:
+        names = list(columns[0][1]["filters"])
+    rows = 1 if zoom is None else 2
+    fig, axes = subplots(
+        rows,
+        len(columns),
+        figsize=(WIDTH, 3.0 * rows + 0.8),
+        sharex=True,
+        sharey="row",
+        squeeze=False,
+    )
+    for j, (title, result) in enumerate(columns):
+        k = np.asarray(result["frames"], dtype=float)
+        for i in range(rows):
+            ax = axes[i, j]
+            regions = set()
+            for name in names:
+                if name not in result["filters"]:
+                    continue
+                r = result["filters"][name]
+                regions.add(tuple(r["anees_region"]))
+                _band(ax, k, np.asarray(r["nees"]), np.asarray(r["nees_se"]), name, log=i == 0)
+            for lo, hi in regions:
+                ax.axhspan(lo, hi, color="0.5", alpha=0.3, linewidth=0)
+            ax.axhline(3.0, color="0.45", linewidth=1, zorder=0)
+            ax.set_xlim(k[0], k[-1])
+        axes[0, j].set_yscale("log")
+        axes[0, j].set_title(title)
+        axes[-1, j].set_xlabel("frame $k$")
+        if zoom is not None:
+            axes[1, j].set_ylim(*zoom)
+    axes[0, 0].set_ylabel("ANEES")
+    if zoom is not None:
+        axes[1, 0].set_ylabel("ANEES\n(near the region)")
+    legend_below(fig, axes.ravel(), ncol=3)
+    return fig
+
+
+def track_loss_figure(result: dict, names=None):
+    """Track loss at every frame at each threshold, and the depth RMSE over the tracks kept.
+
+    Parameters
+    ----------
+    result : dict
+        A result of :func:`depthcore.studies.per_frame.per_frame_study`.
+    names : sequence of str, optional
+        Filters to draw; default every filter of ``result``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One row per threshold of ``result["levels"]``: at the left the
+        fraction of tracks lost at frame ``k``, at the right the depth RMSE
+        over the tracks not lost (logarithmic, with the bound's depth SD in
+        grey); each filter shaded two standard errors either side.
+    """
+    if names is None:
+        names = list(result["filters"])
+    levels = result["levels"]
+    fig, axes = subplots(
+        len(levels),
+        2,
+        figsize=(WIDTH, 1.9 * len(levels) + 1.2),
+        sharex=True,
+        sharey="col",
+        squeeze=False,
+    )
+    k = np.asarray(result["frames"], dtype=float)
+    for i, t in enumerate(levels):
+        for name in names:
+            if name not in result["filters"]:
+                continue
+            loss = result["filters"][name]["track_loss"]
+            _band(
+                axes[i, 0],
+                k,
+                np.asarray(loss["fraction"][i]),
+                np.asarray(loss["se"][i]),
+                name,
+                log=False,
+            )
+            kept = loss["depth"]
+            _band(
+                axes[i, 1],
+                k,
+                np.asarray(kept["rmse_kept"][i]),
+                np.asarray(kept["rmse_kept_se"][i]),
+                name,
+            )
+        axes[i, 1].plot(
+            k,
+            result["bound"]["depth"],
+            color="0.5",
+            linewidth=2.5,
+            zorder=0,
+            alpha=0.6,
+            label="bound (depth SD)",
+        )
+        axes[i, 1].set_yscale("log")
+        axes[i, 0].set_ylim(-0.02, 1.02)
+        axes[i, 0].set_ylabel(f"lost at {t:g}\nof the distance", fontsize=MIN_FONT)
+        axes[i, 1].set_ylabel("depth RMSE,\ntracks kept", fontsize=MIN_FONT)
+    for ax in axes[-1]:
+        ax.set_xlabel("frame $k$")
+        ax.set_xlim(k[0], k[-1])
+    legend_below(fig, axes.ravel(), ncol=3)
+    return fig

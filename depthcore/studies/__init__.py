@@ -11,6 +11,9 @@
 * :mod:`~depthcore.studies.monte_carlo`: the studies the command line runs
   (which estimate, and which stated uncertainty, to trust);
 * :mod:`~depthcore.studies.frames`: the study at several numbers of frames;
+* :mod:`~depthcore.studies.per_frame`: every filter scored at every frame of
+  one set of tracks (RMSE beside the bound, ANEES with its chi-square region,
+  track loss at several thresholds);
 * :mod:`~depthcore.studies.hardness`: where the problem is hard, across
   parallax, prior and depth;
 * :mod:`~depthcore.studies.reproduce`: the paper's tables reproduced, and the
