@@ -365,6 +365,23 @@ _BENCHMARKS = {
             ("difference", "results.difference_sd", "sci"),
         ),
     ),
+    "bench_workers": (
+        "workers",
+        (
+            ("trials", "sizes.trials", ","),
+            ("frames", "sizes.frames", ""),
+            ("filters", lambda r: len(r["sizes"]["filters"]), ""),
+            ("cores", "results.workers.cores", ""),
+            ("in_process_s", "results.in_process_s", ".1f"),
+            ("one_s", "results.one_s", ".1f"),
+            ("two_s", "results.two_s", ".1f"),
+            ("cores_s", "results.cores_s", ".1f"),
+            ("speedup_one", "results.speedup_one", ".2f"),
+            ("speedup_two", "results.speedup_two", ".2f"),
+            ("speedup_cores", "results.speedup_cores", ".2f"),
+            ("two_over_one", "results.two_over_one", ".2f"),
+        ),
+    ),
     "bench_ekf_filterpy": (
         "ekfpy",
         (
@@ -599,8 +616,8 @@ def bench_texts(name: str, record: dict) -> dict[str, str]:
     -------
     dict of str to str
         ``"<prefix>_<quantity>"`` -> text, the prefix ``opt``, ``trials``,
-        ``ekfpy``, ``import``, ``bank``, ``rbpf``, ``kalmanpy``, ``frames`` or
-        ``rekf``;
+        ``ekfpy``, ``import``, ``bank``, ``rbpf``, ``kalmanpy``, ``frames``,
+        ``rekf`` or ``workers``;
         ``"<prefix>_origin"`` is :func:`bench_origin`. Times are in the unit that
         their record's key ends with.
     """
