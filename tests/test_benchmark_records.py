@@ -58,6 +58,17 @@ TABLES = {
     "bench_range_ekf": {"fig2", "ten_frames"},
     "bench_rbpf": {"exact", "equal_cost", "convergence"},
     "bench_trials": {"vectorised_s", "trial_by_trial_s", "ratio", "estimate_sd"},
+    "bench_workers": {
+        "in_process_s",
+        "one_s",
+        "two_s",
+        "cores_s",
+        "speedup_one",
+        "speedup_two",
+        "speedup_cores",
+        "two_over_one",
+        "workers",
+    },
 }
 
 

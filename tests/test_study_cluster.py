@@ -185,3 +185,37 @@ def test_chunks_are_folded_in_order_and_counted_once():
     assert n == 5 and folded == [(k, k * k) for k in range(5)]
     assert ticks == [(3, 13), (6, 13), (9, 13), (12, 13), (13, 13)]
     assert [s.spawn_key for s in tasks.chunk_seeds(7, 3)] == [(0,), (1,), (2,)]
+
+
+def _encoded(result) -> str:
+    """A study's result as its record writes it: arrays and floats exactly."""
+    from depthcore.provenance import records
+
+    return json.dumps(records.encode(result), sort_keys=True)
+
+
+def test_the_books_other_studies_on_two_local_workers_equal_them_in_process():
+    from depthcore.book import beyond_bound, beyond_frames, beyond_particles
+    from depthcore.problem.scenarios import SCENARIOS
+
+    fig2 = SCENARIOS["fig2"]
+    calls = [
+        (
+            beyond_bound.bound_study,
+            ([3, 5], 8, 1, ("optimal", "ekf", "particle", "rbpf")),
+            {"particle_trials": 4, "n_particles": 50},
+        ),
+        (monte_carlo.prior_study, (), {"trials": 300, "seed": 2}),
+        (beyond_particles.particle_convergence, (fig2, [20, 40], 3, 1), {}),
+        (beyond_particles.resample_move_runs, (fig2, 50, 3, 1), {"moves": 2}),
+        (
+            beyond_frames.track_marginals,
+            (3, 6, [3, 6], ("optimal", "ekf", "particle")),
+            {"n_points": 21},
+        ),
+    ]
+    here = [_encoded(f(*a, **k)) for f, a, k in calls]
+    with tasks.cluster(workers=2) as client:
+        there = [_encoded(f(*a, **k, client=client)) for f, a, k in calls]
+    for (f, _, _), a, b in zip(calls, here, there, strict=True):
+        assert a == b, f.__name__

@@ -221,6 +221,43 @@ class SelfCalibration:
         return out
 
 
+def pit_values(
+    mu, truth, rho: float, prior_mean, prior_cov, process_noise: float = 0.0, bank: bool = False
+):
+    """The optimal filter's posterior CDFs of the depth and velocity at the truth, at frame ``N``.
+
+    For the paper's three frames with no process noise the filter is
+    :func:`depthcore.exact.optimal.batch_marginals`, Eqs. (13)-(16), unless
+    ``bank``; otherwise the exact N-frame filter, the bank of Kalman filters
+    over depth (:func:`depthcore.exact.posterior.posterior`).
+
+    Parameters
+    ----------
+    mu : ndarray, shape (n, N)
+        Bearings of each trial, ``N >= 3``.
+    truth : ndarray, shape (n, 3)
+        The true state at frame ``N``.
+    rho : float
+        Noise level the filter assumes.
+    prior_mean : array_like, shape (3,)
+    prior_cov : array_like, shape (3, 3)
+    process_noise : float
+        ``q >= 0`` the filter assumes.
+    bank : bool
+        Run the bank of Kalman filters on three frames without process noise too.
+
+    Returns
+    -------
+    depth, velocity : ndarray, shape (n,)
+        The PIT values.
+    """
+    if mu.shape[1] == 3 and process_noise == 0 and not bank:
+        ref = optimal.batch_marginals(mu, rho, prior_mean, prior_cov)
+        return ref.depth_cdf(truth[:, 1]), ref.velocity_cdf(truth[:, 2])
+    mx = posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise)
+    return mx.depth_cdf(truth[:, 1:2])[:, 0], mx.velocity_cdf(truth[:, 2:3])[:, 0]
+
+
 def self_calibration(
     prior_mean,
     prior_cov,
@@ -284,15 +321,11 @@ def self_calibration(
     depth, velocity = [], []
     for start in range(0, len(draws.mu), chunk):
         part = slice(start, start + chunk)
-        truth = draws.truth[part]
-        if frames == 3 and q == 0 and filter_q == 0:
-            ref = optimal.batch_marginals(draws.mu[part], filter_rho, prior_mean, prior_cov)
-            depth.append(ref.depth_cdf(truth[:, 1]))
-            velocity.append(ref.velocity_cdf(truth[:, 2]))
-        else:
-            mx = posterior.posterior(draws.mu[part], filter_rho, prior_mean, prior_cov, filter_q)
-            depth.append(mx.depth_cdf(truth[:, 1:2])[:, 0])
-            velocity.append(mx.velocity_cdf(truth[:, 2:3])[:, 0])
+        d, v = pit_values(
+            draws.mu[part], draws.truth[part], filter_rho, prior_mean, prior_cov, filter_q, q > 0
+        )
+        depth.append(d)
+        velocity.append(v)
         if progress is not None:
             progress(min(start + chunk, len(draws.mu)), len(draws.mu))
     return SelfCalibration(

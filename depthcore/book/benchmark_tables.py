@@ -2,11 +2,10 @@
 
 Recommended import: ``from depthcore.book import benchmark_tables``.
 
-:func:`bench_texts` gives one benchmark record's (:mod:`depthcore.provenance.benchmarks`)
-numbers as texts, :func:`bench_tables` the tables of the costs chapter,
-:func:`bench_blocks` every table with its notes (the page "Reproducing this book") and
-:func:`bench_origin` the machine and date a record was measured on (:func:`bench_machine`
-the machine alone).
+:func:`bench_texts` gives a record's (:mod:`depthcore.provenance.benchmarks`) numbers as
+texts, :func:`bench_tables` the costs chapter's tables, :func:`bench_blocks` every table with
+its notes (the page "Reproducing this book"), :func:`bench_origin` the machine and date a
+record was measured on (:func:`bench_machine` the machine alone).
 """
 
 from __future__ import annotations
@@ -29,8 +28,7 @@ def bench_machine(record: dict) -> str:
     Parameters
     ----------
     record : dict
-        A benchmark's record (:func:`depthcore.provenance.benchmarks.read`), of
-        which ``"machine"`` is read.
+        A benchmark's record (:func:`depthcore.provenance.benchmarks.read`); its ``"machine"``.
 
     Returns
     -------
@@ -57,8 +55,7 @@ def bench_origin(record: dict) -> str:
     Returns
     -------
     str
-        The date and :func:`bench_machine`: ``"2026-11-26 on 2 cores (AMD EPYC, ...),
-        Python 3.11.7, NumPy 2.4.6, SciPy 1.17.1"``
+        The date and :func:`bench_machine`: ``"2026-11-26 on 2 cores (AMD EPYC, ...), ..."``
     """
     return f"{record['date'][:10]} on {bench_machine(record)}"
 
@@ -83,8 +80,7 @@ class _Group(NamedTuple):
     fields : tuple
         Fields and groups, read from the part.
     rows : bool
-        The part is a list: its fields are read from each item, under the key
-        prefix ``"<name>_<label>"``.
+        The part is a list: its fields are read from each item, prefix ``"<name>_<label>"``.
     label : str, optional
         The item's field that labels it; default its index.
     when : str, optional
@@ -362,6 +358,14 @@ _BENCHMARKS = {
             ("difference", "results.difference_sd", "sci"),
         ),
     ),
+    "bench_workers": (
+        "workers",
+        (("trials", "sizes.trials", ","), ("frames", "sizes.frames", ""))
+        + (("filters", lambda r: len(r["sizes"]["filters"]), ""),)
+        + (("cores", "results.workers.cores", ""), ("two_over_one", "results.two_over_one", ".2f"))
+        + tuple((k, f"results.{k}", ".1f") for k in ("in_process_s", "one_s", "two_s", "cores_s"))
+        + tuple((f"speedup_{k}", f"results.speedup_{k}", ".2f") for k in ("one", "two", "cores")),
+    ),
     "bench_ekf_filterpy": (
         "ekfpy",
         (
@@ -595,11 +599,9 @@ def bench_texts(name: str, record: dict) -> dict[str, str]:
     Returns
     -------
     dict of str to str
-        ``"<prefix>_<quantity>"`` -> text, the prefix ``opt``, ``trials``,
-        ``ekfpy``, ``import``, ``bank``, ``rbpf``, ``kalmanpy``, ``frames`` or
-        ``rekf``;
-        ``"<prefix>_origin"`` is :func:`bench_origin`. Times are in the unit that
-        their record's key ends with.
+        ``"<prefix>_<quantity>"`` -> text, the prefix ``opt``, ``trials``, ``ekfpy``,
+        ``import``, ``bank``, ``rbpf``, ``kalmanpy``, ``frames``, ``rekf`` or ``workers``;
+        ``"<prefix>_origin"`` is :func:`bench_origin`. Times in their key's unit.
     """
     if name not in _BENCHMARKS:
         raise ValueError(f"name must be one of {sorted(_BENCHMARKS)}, got {name!r}")
@@ -611,10 +613,7 @@ def bench_texts(name: str, record: dict) -> dict[str, str]:
 
 def _all_texts(records: dict) -> dict[str, str]:
     """:func:`bench_texts` of every record of ``{name: record}``, in one dict."""
-    t = {}
-    for name, record in records.items():
-        t.update(bench_texts(name, record))
-    return t
+    return {k: v for name, record in records.items() for k, v in bench_texts(name, record).items()}
 
 
 # --- the tables --------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ from depthcore.problem import checks
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry.filters import FILTERS, check_names
+from depthcore.studies import tasks
 from depthcore.studies import trials as study_trials
 
 # --- the Cramér-Rao bound --------------------------------------------------------------
@@ -33,6 +34,7 @@ def bound_study(
     rho: float = SCENARIOS["fig2"].rho,
     particle_trials: int | None = None,
     n_particles: int = study_trials.PARTICLES,
+    client=None,
 ) -> dict:
     """Every named filter's depth and velocity errors and claimed SDs at frame ``N``, by trial.
 
@@ -68,6 +70,11 @@ def bound_study(
     particle_trials : int, optional
         Default ``trials``.
     n_particles : int
+    client : distributed.Client, optional
+        Run the filters as tasks of its cluster (:mod:`depthcore.studies.tasks`):
+        each deterministic filter at each ``N`` one task, the random filters,
+        which draw from one stream in turn, one task; default in this process.
+        The result is the same, bit for bit.
 
     Returns
     -------
@@ -105,7 +112,6 @@ def bound_study(
     )
     mu, pm, pc, states = drawn.mu, drawn.prior_mean, drawn.prior_cov, drawn.tracks
     truth, rho = drawn.truth, drawn.rho
-    noise = {"process_noise": q} if q > 0 else {}
     out = {
         "frames": np.array(frames),
         "truth": truth,
@@ -116,21 +122,61 @@ def bound_study(
         "states": states[:, np.array(frames) - 1, :],
         "rejected_trials": drawn.n_rejected,
     }
+    # the random filters draw from one stream, one after the other: one task runs them all
+    # in order, on the first particle_trials trials; each other filter at each N is a task
+    random = tuple(n for n in names if FILTERS[n].random)
+    rows = slice(0, particle_trials)
+    at = list(enumerate(frames))
+    items = [(random, at, mu[rows], rho, pm[rows], pc, states[rows], q, particle_rng, n_particles)]
+    items = items[: len(random) > 0] + [
+        ((name,), [j_n], mu, rho, pm, pc, states, q, None, n_particles)
+        for name in names
+        if name not in random
+        for j_n in at
+    ]
+    runs = {name: {} for name in names}
+
+    def fold(k, result):
+        for name, by_frame in result.items():
+            runs[name].update(by_frame)
+
+    tasks.fold_chunks(_bound_task, items, fold, client=client)
+    for name in names:
+        by_frame = [runs[name][j] for j in range(len(frames))]
+        out[name] = {k: np.array([r[k] for r in by_frame]) for k in BOUND_ERRORS}
+    return out
+
+
+#: The errors and claimed SDs of each filter that :func:`bound_study` returns.
+BOUND_ERRORS = ("depth_error", "depth_sd", "velocity_error", "velocity_sd")
+
+
+def _bound_task(item) -> dict:
+    """Filters ``names`` on the first ``N`` bearings for each ``N``: a task of :func:`bound_study`.
+
+    ``item`` is ``(names, frames, mu, rho, pm, pc, states, q, rng, n_particles)``,
+    ``frames`` a list of ``(j, N)``; returns ``{name: {j: {error: (T,)}}}``, each
+    error of :data:`BOUND_ERRORS`. The random filters draw from ``rng`` in the
+    order of ``names``, then of ``frames``.
+    """
+    names, frames, mu, rho, pm, pc, states, q, rng, n_particles = item
+    noise = {"process_noise": q} if q > 0 else {}
+    out = {}
     for name in names:
         f = FILTERS[name]
-        rows = slice(None) if not f.random else slice(0, particle_trials)
         options = dict(noise) if f.with_process_noise else {}
         if f.random:
-            options.update(rng=particle_rng, n_particles=n_particles)
-        r = {k: [] for k in ("depth_error", "depth_sd", "velocity_error", "velocity_sd")}
-        for n in frames:
-            est = f(mu[rows, :n], rho, pm[rows], pc, **options)
-            true = states[rows, n - 1]
-            r["depth_error"].append(np.asarray(est.depth_mean) - true[:, 1])
-            r["depth_sd"].append(np.asarray(est.depth_sd))
-            r["velocity_error"].append(np.asarray(est.velocity_mean) - true[:, 2])
-            r["velocity_sd"].append(np.asarray(est.velocity_sd))
-        out[name] = {k: np.array(v) for k, v in r.items()}
+            options.update(rng=rng, n_particles=n_particles)
+        out[name] = {}
+        for j, n in frames:
+            est = f(mu[:, :n], rho, pm, pc, **options)
+            true = states[:, n - 1]
+            out[name][j] = {
+                "depth_error": np.asarray(est.depth_mean) - true[:, 1],
+                "depth_sd": np.asarray(est.depth_sd),
+                "velocity_error": np.asarray(est.velocity_mean) - true[:, 2],
+                "velocity_sd": np.asarray(est.velocity_sd),
+            }
     return out
 
 

@@ -24,13 +24,20 @@ from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry import filters as _filters
 from depthcore.registry.filters import FILTERS, check_names
+from depthcore.studies import tasks
 from depthcore.studies.scores import COVERAGE_Z, coverage_test
 
 # --- more frames ----------------------------------------------------------------------------
 
 
 def track_marginals(
-    seed, frames: int, panel_frames, names, scenario: str = "fig2", n_points: int = 601
+    seed,
+    frames: int,
+    panel_frames,
+    names,
+    scenario: str = "fig2",
+    n_points: int = 601,
+    client=None,
 ) -> dict:
     """One track of a scenario's point and each filter's depth marginals along it.
 
@@ -52,6 +59,8 @@ def track_marginals(
         state at time 3 and noise level are taken.
     n_points : int
         Grid points of each density.
+    client : distributed.Client, optional
+        Run the filters on its cluster (:func:`frame_marginals`); the same result, bit for bit.
 
     Returns
     -------
@@ -71,7 +80,9 @@ def track_marginals(
     s = SCENARIOS[scenario]
     rng = np.random.default_rng(seed)
     track = model.simulate(s.c, frames, s.rho, 0.0, rng)
-    panels = frame_marginals(track.mu, s.rho, panel_frames, names, rng=rng, n_points=n_points)
+    panels = frame_marginals(
+        track.mu, s.rho, panel_frames, names, rng=rng, n_points=n_points, client=client
+    )
     return {"mu": track.mu, "panels": panels}
 
 
@@ -85,6 +96,7 @@ def frame_marginals(
     n_points: int = 601,
     width: float = 6.0,
     prior_scale: float = PAPER_PRIOR_SCALE,
+    client=None,
 ) -> list[dict]:
     """Each filter's depth marginal after the first ``N`` of one sequence of bearings.
 
@@ -111,6 +123,11 @@ def frame_marginals(
         Each filter's grid joins ``n_points`` points over its depth mean ±
         ``width`` of its SDs and ``n_points`` over the optimal filter's mean ±
         ``width`` optimal SDs (cut at 0), so that both densities are resolved.
+    client : distributed.Client, optional
+        Run the filters as tasks of its cluster (:mod:`depthcore.studies.tasks`):
+        each deterministic filter at each ``N`` one task, the random filters,
+        which draw from ``rng`` in turn, one task; default in this process.
+        The result is the same, bit for bit.
 
     Returns
     -------
@@ -131,19 +148,28 @@ def frame_marginals(
     width = checks.positive_scalar(width, "width")
     pm = paper_prior_means(model.noise_free_states(mu[None, :3]))[0]
     pc = checks.positive_scalar(prior_scale, "prior_scale") * np.eye(3)
+    random = [name for name in names if FILTERS[name].random]
+    if random and rng is None:
+        raise ValueError(f"rng is required to run the {random[0]} filter")
+    at = list(enumerate(frames))
+    # the random filters draw from rng in turn, frame after frame: one task runs them all
+    items = [(tuple(random), at, mu, rho, pm, pc, rng, n_particles)][: len(random) > 0]
+    items += [
+        ((name,), [j_n], mu, rho, pm, pc, None, None)
+        for j_n in at
+        for name in names
+        if name not in random
+    ]
+    found = [{} for _ in frames]
+
+    def fold(k, result):
+        for j, estimates in result.items():
+            found[j].update(estimates)
+
+    tasks.fold_chunks(_marginals_task, items, fold, client=client)
     out = []
-    for n in frames:
-        estimates = {}
-        for name in names:
-            f = FILTERS[name]
-            options = {}
-            if f.random:
-                if rng is None:
-                    raise ValueError(f"rng is required to run the {name} filter")
-                options["rng"] = rng
-                if n_particles is not None:
-                    options["n_particles"] = n_particles
-            estimates[name] = f(mu[:n], rho, pm, pc, **options)
+    for (_, n), by_name in zip(at, found, strict=True):
+        estimates = {name: by_name[name] for name in names}
         ref = estimates["optimal"]
         grids = {k: _joint_grid((ref, e), width, n_points) for k, e in estimates.items()}
         out.append(
@@ -158,6 +184,28 @@ def frame_marginals(
                 "depth_sd": {k: float(e.depth_sd) for k, e in estimates.items()},
             }
         )
+    return out
+
+
+def _marginals_task(item) -> dict:
+    """Filters ``names`` on the first ``N`` bearings: a task of :func:`frame_marginals`.
+
+    ``item`` is ``(names, frames, mu, rho, pm, pc, rng, n_particles)``, ``frames``
+    a list of ``(j, N)``; returns ``{j: {name: estimates}}``, the random filters
+    drawing from ``rng`` frame after frame, in the order of ``names``.
+    """
+    names, frames, mu, rho, pm, pc, rng, n_particles = item
+    out = {}
+    for j, n in frames:
+        out[j] = {}
+        for name in names:
+            f = FILTERS[name]
+            options = {}
+            if f.random:
+                options["rng"] = rng
+                if n_particles is not None:
+                    options["n_particles"] = n_particles
+            out[j][name] = f(mu[:n], rho, pm, pc, **options)
     return out
 
 

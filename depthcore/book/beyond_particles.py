@@ -20,6 +20,7 @@ from depthcore.particles import importance, resample_move
 from depthcore.problem import checks
 from depthcore.problem.scenarios import Scenario
 from depthcore.registry.estimates import MOMENTS, QUANTITIES
+from depthcore.studies import tasks
 
 #: Settings of the particle filter compared by :func:`particle_convergence`:
 #: keyword arguments of :func:`depthcore.particles.importance.run`.
@@ -53,8 +54,24 @@ def _run_repeats(scenario: Scenario, n: int, repeats: int, rng, kwargs: dict):
     return np.concatenate(moments), np.concatenate(ess)
 
 
+def _convergence_task(item) -> tuple:
+    """One setting of :func:`particle_convergence`, every ``N`` in turn from its own stream.
+
+    ``item`` is ``(scenario, sizes, repeats, kwargs, stream, exact)``; returns the
+    RMSE of each moment (S, 4) and the mean ESS fraction after each measurement (S, 3).
+    """
+    scenario, sizes, repeats, kwargs, stream, exact = item
+    rng = np.random.default_rng(stream)
+    err, frac = [], []
+    for n in sizes:
+        m, e = _run_repeats(scenario, int(n), repeats, rng, kwargs)
+        err.append(np.sqrt(np.mean((m - exact) ** 2, axis=0)))
+        frac.append(np.mean(e, axis=0) / n)
+    return np.array(err), np.array(frac)
+
+
 def particle_convergence(
-    scenario: Scenario, sizes, repeats: int, seed, settings: dict | None = None
+    scenario: Scenario, sizes, repeats: int, seed, settings: dict | None = None, client=None
 ) -> dict:
     """Root-mean-square errors of the particle filter's moments against ``N``.
 
@@ -73,6 +90,9 @@ def particle_convergence(
         Each setting draws from its own child stream of this seed.
     settings : dict, optional
         ``{name: keyword arguments of particle.run}``; default :data:`SETTINGS`.
+    client : distributed.Client, optional
+        Run each setting as a task of its cluster (:mod:`depthcore.studies.tasks`);
+        default in this process. The result is the same, bit for bit.
 
     Returns
     -------
@@ -91,17 +111,16 @@ def particle_convergence(
     opt = optimal.run(scenario.mu, scenario.rho, scenario.prior.mean, scenario.prior.cov)
     exact = np.array([getattr(opt, m) for m in MOMENTS])
     streams = checks.spawn(seed, len(settings))
+    items = [
+        (scenario, sizes, int(repeats), kwargs, stream, exact)
+        for kwargs, stream in zip(settings.values(), streams, strict=True)
+    ]
+    runs = []
+    tasks.fold_chunks(_convergence_task, items, lambda k, r: runs.append(r), client=client)
     rmse, ess = {}, {}
-    for (name, kwargs), stream in zip(settings.items(), streams, strict=True):
-        rng = np.random.default_rng(stream)
-        err, frac = [], []
-        for n in sizes:
-            m, e = _run_repeats(scenario, int(n), int(repeats), rng, kwargs)
-            err.append(np.sqrt(np.mean((m - exact) ** 2, axis=0)))
-            frac.append(np.mean(e, axis=0) / n)
-        err = np.array(err)
+    for name, (err, frac) in zip(settings, runs, strict=True):
         rmse[name] = {m: err[:, i] for i, m in enumerate(MOMENTS)}
-        ess[name] = np.array(frac)
+        ess[name] = frac
     return {
         "sizes": sizes,
         "repeats": int(repeats),
@@ -114,8 +133,18 @@ def particle_convergence(
 # --- the causal particle filter (resample-move) ----------------------------------------------
 
 
+def _resample_move_task(item) -> tuple:
+    """One run of :func:`resample_move_runs`: ``(moments, ess, resampled)`` of the filter.
+
+    ``item`` is ``(mu, rho, prior_mean, prior_cov, n_particles, stream, moves)``.
+    """
+    mu, rho, mean, cov, n_particles, stream, moves = item
+    b = resample_move.run([mu], rho, mean, cov, n_particles, np.random.default_rng(stream), moves)
+    return b.moments(), b.ess, b.resampled
+
+
 def resample_move_runs(
-    scenario: Scenario, n_particles: int, repeats: int, seed, moves: int = 20
+    scenario: Scenario, n_particles: int, repeats: int, seed, moves: int = 20, client=None
 ) -> dict:
     """Independent runs of the resample-move particle filter on a scenario.
 
@@ -135,6 +164,9 @@ def resample_move_runs(
     seed : int or numpy.random.SeedSequence
     moves : int
         Metropolis steps per particle after each resampling.
+    client : distributed.Client, optional
+        Run each run as a task of its cluster (:mod:`depthcore.studies.tasks`);
+        default in this process. The result is the same, bit for bit.
 
     Returns
     -------
@@ -152,27 +184,21 @@ def resample_move_runs(
     if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 2:
         raise ValueError(f"repeats must be an integer >= 2, got {repeats!r}")
     s, prior = scenario, scenario.prior
-    batches = [
-        resample_move.run(
-            [s.mu],
-            s.rho,
-            prior.mean,
-            prior.cov,
-            n_particles,
-            np.random.default_rng(stream),
-            moves,
-        )
+    items = (
+        (s.mu, s.rho, prior.mean, prior.cov, n_particles, stream, moves)
         for stream in checks.spawn(seed, int(repeats))
-    ]
-    runs = {k: np.concatenate([b.moments()[k] for b in batches]) for k in MOMENTS}
+    )
+    batches = []
+    tasks.fold_chunks(_resample_move_task, items, lambda k, b: batches.append(b), client=client)
+    runs = {k: np.concatenate([b[0][k] for b in batches]) for k in MOMENTS}
     opt = optimal.run(s.mu, s.rho, prior.mean, prior.cov)
     return {
         "runs": runs,
         "mean": {k: float(np.mean(v)) for k, v in runs.items()},
         "se": {k: float(np.std(v, ddof=1) / np.sqrt(len(v))) for k, v in runs.items()},
         "exact": {k: float(getattr(opt, k)) for k in MOMENTS},
-        "ess": np.concatenate([b.ess for b in batches]) / n_particles,
-        "resampled": np.concatenate([b.resampled for b in batches]),
+        "ess": np.concatenate([b[1] for b in batches]) / n_particles,
+        "resampled": np.concatenate([b[2] for b in batches]),
     }
 
 

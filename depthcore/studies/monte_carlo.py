@@ -56,6 +56,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from depthcore.analysis import calibration
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, paper_prior_means
 from depthcore.problem.scenarios import SCENARIOS
@@ -269,6 +270,19 @@ PRIOR_TRUTH = "prior"
 #: False-alarm rate of the uniformity tests reported by :func:`prior_study`.
 FALSE_ALARM = 0.01
 
+#: Truths filtered together by :func:`prior_study`, one task each.
+PRIOR_CHUNK = 256
+
+
+def _pit_chunk(item) -> tuple:
+    """The PIT values of one chunk of truths: a task of :func:`prior_study`.
+
+    ``item`` is ``(mu, truth, rho, mean, cov, q)``; returns
+    :func:`depthcore.analysis.calibration.pit_values`'s ``(depth, velocity)``.
+    """
+    mu, truth, rho, mean, cov, q = item
+    return calibration.pit_values(mu, truth, rho, mean, cov, q, q > 0)
+
 
 def prior_study(
     rho: float = SCENARIOS["fig2"].rho,
@@ -279,6 +293,7 @@ def prior_study(
     frames: int = 3,
     process_noise: float = 0.0,
     progress: Callable[[int, int], None] | None = None,
+    client=None,
 ) -> dict:
     """Self-calibration of the optimal filter over truths drawn from its fixed prior.
 
@@ -313,14 +328,16 @@ def prior_study(
         ``q >= 0``.
     progress : callable, optional
         ``progress(done, total)``, called as the trials are filtered.
+    client : distributed.Client, optional
+        Filter the truths, drawn here, in chunks of :data:`PRIOR_CHUNK` as tasks
+        of its cluster (:mod:`depthcore.studies.tasks`); default in this process.
+        The result is the same, bit for bit.
 
     Returns
     -------
     dict
         JSON-ready.
     """
-    from depthcore.analysis import calibration
-
     prior_scale = checks.positive_scalar(prior_scale, "prior_scale")
     false_alarm = float(false_alarm)
     if not 0.0 < false_alarm < 1.0:
@@ -328,16 +345,27 @@ def prior_study(
     seed = checks.seed_sequence(seed)
     mean = paper_prior_means(np.asarray(SCENARIOS["fig2"].c, dtype=float)[None])[0]
     cov = prior_scale * np.eye(3)
-    r = calibration.self_calibration(
-        mean,
-        cov,
-        rho,
-        trials,
-        np.random.default_rng(seed),
-        frames=frames,
-        process_noise=process_noise,
-        progress=progress,
+    frames = checks.frames(frames)
+    q = checks.nonnegative_scalar(process_noise, "process_noise")
+    draws = calibration.draw_from_prior(
+        mean, cov, rho, trials, np.random.default_rng(seed), frames=frames, process_noise=q
     )
+    starts = range(0, len(draws.mu), PRIOR_CHUNK)
+    pits = []
+    tasks.fold_chunks(
+        _pit_chunk,
+        (
+            (draws.mu[i : i + PRIOR_CHUNK], draws.truth[i : i + PRIOR_CHUNK], rho, mean, cov, q)
+            for i in starts
+        ),
+        lambda k, pit: pits.append(pit),
+        sizes=[len(draws.mu[i : i + PRIOR_CHUNK]) for i in starts],
+        total=len(draws.mu),
+        progress=progress,
+        client=client,
+    )
+    depth, velocity = (np.concatenate([p[j] for p in pits]) for j in (0, 1))
+    r = calibration.SelfCalibration(draws, float(rho), float(rho), depth, velocity)
     s = r.summary(CALIBRATION_LEVELS)
     n = s["trials"]
     levels = np.asarray(CALIBRATION_LEVELS)
