@@ -169,7 +169,7 @@ class Moments:
         self.squares = np.zeros(shape)
 
     def add(self, values, mask=None) -> None:
-        """Add a block: ``values`` (m, *shape), counted where ``mask`` (m, *shape) is true."""
+        """Add a block: ``values``, shape ``(m, *shape)``, counted where ``mask`` is true."""
         v = np.asarray(values, dtype=float)
         mask = np.ones(v.shape, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         m = np.count_nonzero(mask, axis=0)
