@@ -451,6 +451,14 @@ examples:
   python -m depthcore study --trials 20000 --scheduler tcp://host:8786
 
 {STUDY_LEGEND}""",
+    "atlas": """\
+examples:
+  python -m depthcore atlas --size book --workers 2 --out atlas.json
+  python -m depthcore atlas --size full --scheduler tcp://host:8786 --out atlas.json
+
+Each cell is a study; the JSON holds every cell's scores and verdicts (calibrated,
+track lost, within 10 % of the bound: true, false or null when undecided) and the
+measured seconds per trial of each filter at each number of frames.""",
     "figures": """\
 examples:
   python -m depthcore figures --out figures
