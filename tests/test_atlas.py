@@ -190,3 +190,33 @@ def test_probe_cost_times_the_filters_it_is_given():
     assert merged["seconds_per_trial"]["particle"] == cost["seconds_per_trial"]["particle"]
     with pytest.raises(ValueError, match="^costs: measured at different numbers of particles"):
         atlas.merged_cost(cost, {**cost, "particles": 31})
+
+
+def test_the_chapter_counts_and_maps_each_verdict():
+    from depthcore.book import beyond_atlas
+
+    def cell(parallax, frames, **entries):
+        return {
+            **dict(form="paper", frames=frames, rho=0.005, prior_scale=1000.0),
+            "depth": 6.0,
+            "parallax": parallax,
+            "filters": entries,
+        }
+
+    yes = {"calibrated": True, "lost": False, "near_bound": None}
+    no = {"calibrated": False, "lost": True, "near_bound": True}
+    failed = {"failed": "reason", **dict.fromkeys(atlas.VERDICTS)}
+    result = {
+        "names": ["ekf"],
+        "axes": {**{a: ["x"] for a in atlas.AXES}, "frames": [3, 10], "parallax": [0, 1]},
+        "cells": [cell(0, 3, ekf=yes), cell(1, 3, ekf=no), cell(0, 10, ekf=failed), cell(1, 10)],
+    }
+    counts = beyond_atlas.verdict_counts(result)["ekf"]
+    assert counts["calibrated"] == dict(yes=1, no=1, undecided=0, no_answer=2, cells=4)
+    assert counts["near_bound"] == dict(yes=1, no=0, undecided=1, no_answer=2, cells=4)
+    texts = beyond_atlas.count_texts({"ekf": counts}, "at")
+    assert texts["at_ekf_lost"] == "1 (0)"
+    m, settings = beyond_atlas.verdict_grid(result, "calibrated", ["ekf"])
+    assert settings == [("paper", 3, 0.005, 1000.0), ("paper", 10, 0.005, 1000.0)]
+    assert m.shape == (1, 5) and np.isnan(m[0, 2])
+    assert m[0].tolist()[:2] == [1.0, 0.0] and m[0, 3:].tolist() == [3.0, 3.0]

@@ -30,13 +30,13 @@ from pathlib import Path
 import numpy as np
 
 from depthcore import __version__
+from depthcore.cli import atlas_command, tracks
 from depthcore.cli import text as cli_text
-from depthcore.cli import tracks
 from depthcore.problem import checks, frames
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian
 from depthcore.registry.filters import FILTERS, RBPF_REPLICAS, names
 from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE, default_prior
-from depthcore.studies import atlas, monte_carlo, reproduce, tasks
+from depthcore.studies import monte_carlo, reproduce, tasks
 from depthcore.studies import trials as study_trials
 
 #: Largest ``study --trials``: a limit on run time (the study streams its trials in
@@ -482,42 +482,6 @@ def _cmd_study(args) -> str:
     return cli_text.as_json(result) if args.json else cli_text.format_study(result)
 
 
-def _check_file(out: str) -> Path:
-    """The file of ``atlas --out``: refuses an empty path, a folder, a folder that is not there."""
-    if not out.strip():
-        raise ValueError("--out must be a file, got an empty path")
-    path = Path(out)
-    if path.is_dir():
-        raise ValueError(f"--out must be a file, but {out!r} is a folder")
-    if not path.parent.is_dir():
-        raise ValueError(f"--out: the folder of {out!r} does not exist")
-    if not os.access(path.parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        raise ValueError(f"--out: cannot write {out!r}: permission denied")
-    return path
-
-
-def _cmd_atlas(args) -> str:
-    if args.seed < 0:
-        raise ValueError(f"--seed must be a non-negative integer, got {args.seed}")
-    if args.workers is not None and args.scheduler is not None:
-        raise ValueError("--workers and --scheduler: give one (a local cluster, or a running one)")
-    path = None if args.out is None else _check_file(args.out)
-    with tasks.cluster(args.workers, args.scheduler) as client:
-        result = _with_bar(
-            f"atlas ({args.size})",
-            "trial",
-            lambda p: atlas.atlas(args.size, args.seed, client=client, progress=p),
-        )
-    text = cli_text.as_json(result)
-    if path is None:
-        return text
-    try:
-        path.write_text(text)
-    except OSError as exc:
-        raise _WriteError(f"cannot write --out {args.out!r}: {exc.strerror}") from None
-    return ""
-
-
 # --- refusals in the user's words -------------------------------------------------------
 
 #: The library's names of the command line's arguments.
@@ -637,7 +601,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_json(r, _cmd_reproduce)
     _add_estimate_arguments(sub, common)
     _add_study_arguments(sub, common)
-    _add_atlas_arguments(sub, common)
+    atlas_command.add(_command(sub, common, "atlas", atlas_command.SUMMARY), _with_bar, _WriteError)
     f = _command(sub, common, "figures", "write Figures 2-6 as PDF, PNG and SVG")
     f.add_argument("--out", default="figures", help="output folder (default: figures)")
     f.add_argument(
@@ -872,42 +836,6 @@ def _add_study_arguments(sub, common) -> None:
         f"whose scheduler is at ADDRESS (tcp://host:8786, workers with this depthcore); {same}",
     )
     _add_json(st, _cmd_study)
-
-
-def _add_atlas_arguments(sub, common) -> None:
-    """The command ``atlas`` and its options."""
-    at = _command(
-        sub,
-        common,
-        "atlas",
-        "every filter's verdicts over a grid of parallax, prior, noise, depth and frames",
-    )
-    at.add_argument(
-        "--size",
-        choices=tuple(atlas.SIZES),
-        default="book",
-        help="book (default): the book's grid; full: every axis finer, thousands of trials "
-        "per cell, for a cluster",
-    )
-    at.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    same = "the same result, bit for bit (but the measured cost)"
-    at.add_argument(
-        "--workers",
-        type=int,
-        metavar="N",
-        help=f"run the cells on a local Dask cluster of N processes, 1 to {tasks.MAX_WORKERS} "
-        f"(default: in this process); {same}",
-    )
-    at.add_argument(
-        "--scheduler",
-        metavar="ADDRESS",
-        help="run the cells on the Dask cluster whose scheduler is at ADDRESS "
-        f"(tcp://host:8786, workers with this depthcore); {same}",
-    )
-    at.add_argument(
-        "--out", metavar="FILE", help="write the JSON to FILE (default: standard output)"
-    )
-    at.set_defaults(run=_cmd_atlas)
 
 
 def _one_line(text: str) -> str:
