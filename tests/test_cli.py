@@ -311,10 +311,6 @@ def test_estimate_takes_more_frames_process_noise_and_smoothing(capsys):
         ),
         (["study", "--truth", "prior", "--prior", "paper", "--frames", "5"], "needs a fixed prior"),
         (
-            ["study", "--frames", "10", "--process-noise", "10", "--trials", "50"],
-            "--filters: the second_order filter has no answer for a simulated trial",
-        ),
-        (
             ["study", "--truth", "prior", "--frames", "5", "--process-noise", "-1"],
             "--process-noise",
         ),

@@ -32,6 +32,7 @@ from matplotlib.text import Text  # noqa: E402
 
 from depthcore.analysis import bound
 from depthcore.book import (
+    beyond_atlas,
     beyond_bound,
     beyond_conjecture,
     beyond_filters,
@@ -51,7 +52,7 @@ from depthcore.exact import posterior, smoother
 from depthcore.problem import model
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry import online
-from depthcore.studies import frames, hardness, monte_carlo, per_frame
+from depthcore.studies import atlas, frames, hardness, monte_carlo, per_frame
 
 #: Width in CSS pixels at which the book shows a figure at a 1280-pixel window.
 CONTENT_WIDTH_PX = 660.0
@@ -249,6 +250,24 @@ BUILDERS = {
         _per_frame_runs(), zoom=(1.5, 5.0)
     ),
     "track_loss_figure": lambda: beyond_frames.track_loss_figure(_per_frame_runs()[0][1]),
+    "verdict_map": lambda: beyond_atlas.verdict_map(
+        atlas.atlas(
+            atlas.Grid(
+                (0.0, 0.2, 0.4),
+                (4.0, 12.0),
+                (1.0, 1000.0),
+                (atlas.PIXEL, atlas.PIXEL / 10),
+                (3, 10, 30),
+                ("paper",),
+                6,
+                20,
+                6,
+                ("optimal", "ekf", "ukf"),
+            ),
+            seed=1,
+        ),
+        "calibrated",
+    ),
     "conjecture_figure": lambda: beyond_conjecture.conjecture_figure(
         beyond_conjecture.conjecture_study(
             [3, 10, 30], 1 / np.array([1000, 500, 200, 100, 50]), [4.0, 6.0, 12.0, 24.0], 4, 2

@@ -272,6 +272,7 @@ def test_study_command_json(capsys):
             "divergent",
             "track_loss_levels",
             "anees",
+            "refused",
         }
         assert len(f["calibration"]["depth"]) == len(f["calibration"]["levels"])
         scores = {"bias", "rmse", "mean_sd", "coverage_68", "coverage_95", "rmse_kept"}
@@ -420,14 +421,27 @@ def test_study_with_large_process_noise_keeps_its_trials():
     assert r["valid_trials"] == 20 and r["rejected_trials"] == 0
 
 
-def test_a_filter_without_answer_for_a_simulated_trial_is_named_not_its_bearings():
+def test_a_filter_without_answer_for_some_simulated_trials_is_scored_over_the_others(capsys):
     """At q = 10 the velocity swings by 10 a frame: the second-order filter's start (the
-    least misfit without process noise) is not determined on some trials. The refusal
-    names the filter and what the user can change, not the bearings it drew itself."""
-    with pytest.raises(ValueError, match=r"^filters: the second_order filter has no answer"):
-        monte_carlo.study(
-            [1.2, 6.0, 1.2], 1 / 200, 50, names=("second_order",), frames=10, process_noise=10.0
-        )
+    least misfit without process noise) is not determined on some trials. Those trials are
+    counted apart, the filter scored over the others, and the table says how many."""
+    args = ([1.2, 6.0, 1.2], 1 / 200, 50)
+    kwargs = {"frames": 10, "process_noise": 10.0}
+    r = monte_carlo.study(*args, names=("second_order", "optimal"), **kwargs)
+    refused = r["filters"]["second_order"]["refused"]["count"]
+    assert 0 < refused < r["valid_trials"] and r["filters"]["optimal"]["refused"]["count"] == 0
+    alone = monte_carlo.study(*args, names=("optimal",), **kwargs)["filters"]["optimal"]
+    assert alone["depth"]["rmse"] == r["filters"]["optimal"]["depth"]["rmse"]
+    command = ["study", "--frames", "10", "--process-noise", "10", "--trials", "50"]
+    assert main([*command, "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert main(command) == 0
+    out = capsys.readouterr().out
+    counts = [(n, f["refused"]["count"]) for n, f in data["filters"].items()]
+    listed = ", ".join(f"{n} {c}" for n, c in counts if c)
+    n = data["valid_trials"]
+    line = f"trials refused, of {n} (each filter scored over the trials it answers): {listed}"
+    assert "second_order" in listed and line in out.splitlines()
 
 
 def test_study_refuses_filters_that_cannot_run_on_the_frames_or_process_noise():

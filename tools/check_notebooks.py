@@ -871,7 +871,8 @@ def update_page(page: Path) -> Path:
     nb = jupytext.read(page)
     NotebookClient(
         nb,
-        timeout=TIMEOUT,
+        # a cell that computes its study's record (make records) takes what the study takes
+        timeout=None if os.environ.get("DEPTHCORE_RECORDS") == "write" else TIMEOUT,
         iopub_timeout=IOPUB_TIMEOUT,
         raise_on_iopub_timeout=True,
         kernel_name="python3",

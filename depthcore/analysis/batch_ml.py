@@ -72,7 +72,7 @@ MAX_ITERATIONS = 200
 #: A step smaller than this many SDs of the estimate (in the Fisher metric) ends the search.
 STEP_TOLERANCE = 1e-10
 
-#: The damping beyond which a track's search stops: no step lowers its misfit.
+#: The damping beyond which a track's search stops, as no step lowers its misfit.
 MAX_DAMPING = 1e16
 
 

@@ -17,6 +17,7 @@ figures and the texts its page glues, in that order:
   :mod:`~depthcore.book.beyond_sweeps`, :mod:`~depthcore.book.beyond_linear`,
   :mod:`~depthcore.book.beyond_frames`, :mod:`~depthcore.book.beyond_bound`,
   :mod:`~depthcore.book.beyond_hard`, :mod:`~depthcore.book.beyond_conjecture`,
+  :mod:`~depthcore.book.beyond_atlas`,
   :mod:`~depthcore.book.beyond_tracks`, :mod:`~depthcore.book.beyond_stonesoup`:
   the chapters beyond the paper, one each, in the book's order.
 

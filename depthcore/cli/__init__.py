@@ -4,7 +4,9 @@
 * :mod:`~depthcore.cli.text`: the command line's tables and their legends;
 * :mod:`~depthcore.cli.tracks`: ``estimate``'s tracks: bearings from a CSV file
   (``--mu-file``), gaps, noise per frame and steps, every frame's state
-  (``--per-frame``).
+  (``--per-frame``);
+* :mod:`~depthcore.cli.atlas_command`: ``atlas``, every filter's verdicts over
+  a grid of settings, in this process or on a Dask cluster.
 
 Where a new thing goes: a new command is a function and a subparser in
 :mod:`~depthcore.cli.main`; what it prints goes in :mod:`~depthcore.cli.text`;

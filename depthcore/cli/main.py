@@ -1,4 +1,4 @@
-"""The command line: ``python -m depthcore {reproduce,estimate,study,figures} ...``.
+"""The command line: ``python -m depthcore {reproduce,estimate,study,atlas,figures} ...``.
 
 ``depthcore/__main__.py`` calls :func:`main`.
 
@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from depthcore import __version__
+from depthcore.cli import atlas_command, tracks
 from depthcore.cli import text as cli_text
-from depthcore.cli import tracks
 from depthcore.problem import checks, frames
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian
 from depthcore.registry.filters import FILTERS, RBPF_REPLICAS, names
@@ -511,6 +511,7 @@ _INPUTS = {
     "reproduce": "the paper's scenarios",
     "estimate": "--mu, --rho and the prior",
     "study": "--truth, --rho, --frames and --process-noise",
+    "atlas": "--size",
     "figures": "--out",
 }
 
@@ -523,6 +524,7 @@ _SINGULAR = {
     "particles carry weight, or the noise is too small to resolve); try more --particles or "
     "a larger --rho",
     "figures": "a filter's covariance is singular in double precision",
+    "atlas": "a filter's covariance is singular in double precision",
 }
 
 _LEADING = re.compile(r"^([A-Za-z_][A-Za-z_0-9]*)(\[[^\]]*\])?(?=[\s:,])")
@@ -599,6 +601,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_json(r, _cmd_reproduce)
     _add_estimate_arguments(sub, common)
     _add_study_arguments(sub, common)
+    atlas_command.add(_command(sub, common, "atlas", atlas_command.SUMMARY), _with_bar, _WriteError)
     f = _command(sub, common, "figures", "write Figures 2-6 as PDF, PNG and SVG")
     f.add_argument("--out", default="figures", help="output folder (default: figures)")
     f.add_argument(

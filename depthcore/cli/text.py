@@ -228,6 +228,16 @@ def format_study(result: dict) -> str:
         for q in ("depth", "velocity"):
             lines.append(_study_row(f, q, name, q, ""))
             lines.append(_study_row(f, q, "", "(se)", "_se"))
+    refused = [
+        f"{name} {f['refused']['count']}"
+        for name, f in result["filters"].items()
+        if f.get("refused", {}).get("count", 0)
+    ]
+    if refused:
+        lines.append(
+            f"trials refused, of {result['valid_trials']} (each filter scored over the "
+            f"trials it answers): {', '.join(refused)}"
+        )
     lines.append(STUDY_LEGEND)
     return "\n".join(lines) + "\n"
 
@@ -451,6 +461,14 @@ examples:
   python -m depthcore study --trials 20000 --scheduler tcp://host:8786
 
 {STUDY_LEGEND}""",
+    "atlas": """\
+examples:
+  python -m depthcore atlas --size book --workers 2 --out atlas.json
+  python -m depthcore atlas --size full --scheduler tcp://host:8786 --out atlas.json
+
+Each cell is a study; the JSON holds every cell's scores and verdicts (calibrated,
+track lost, within 10 % of the bound: true, false or null when undecided) and the
+measured seconds per trial of each filter at each number of frames.""",
     "figures": """\
 examples:
   python -m depthcore figures --out figures

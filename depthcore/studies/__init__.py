@@ -16,6 +16,8 @@
   track loss at several thresholds);
 * :mod:`~depthcore.studies.hardness`: where the problem is hard, across
   parallax, prior and depth;
+* :mod:`~depthcore.studies.atlas`: every filter's verdicts over a grid of
+  parallax, prior, noise, depth and frames, at the book's size or a cluster's;
 * :mod:`~depthcore.studies.reproduce`: the paper's tables reproduced, and the
   curves of its figures;
 * :mod:`~depthcore.studies.tasks`: where the studies' chunks of trials run, in

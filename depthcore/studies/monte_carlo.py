@@ -101,6 +101,7 @@ def study(
     trials: int = 500,
     seed=0,
     prior: str = "paper",
+    prior_scale: float = PAPER_PRIOR_SCALE,
     names=NAMES,
     chunk: int = CHUNK,
     n_particles: int = PARTICLES,
@@ -128,6 +129,9 @@ def study(
         for the last three, the truths are drawn from the prior centred on
         ``truth`` and the result's ``"prior_gaussian"`` holds the filters'
         prior (its ``"mean"`` and ``"cov"``).
+    prior_scale : float
+        The prior covariance ``prior_scale * I`` of the paper's rule and of
+        ``"fixed"`` (default the paper's 1000); the drawn forms state their own.
     names : sequence of str
         Filters to score, from :data:`depthcore.registry.filters.FILTERS`; only these
         run. The Hellinger distances need the optimal filter: when
@@ -182,85 +186,195 @@ def study(
     results are added in chunk order, so the result does not depend on the
     number of workers either.
     """
-    truth = SCENARIOS["fig2"].c if truth is None else truth
-    names = check_names(names)
-    if not (isinstance(trials, (int, np.integer)) and trials >= 1):
-        raise ValueError(f"trials must be a positive integer, got {trials!r}")
-    chunk = checks.count(chunk, "chunk")
-    q = checks.nonnegative_scalar(process_noise, "process_noise")
-    frames = checks.frames(frames)
-    unable = [
-        n
-        for n in names
-        if (frames != 3 and not FILTERS[n].any_frames)
-        or (q > 0 and not FILTERS[n].with_process_noise)
-    ]
-    if unable:
-        raise ValueError(
-            f"names: {', '.join(unable)} cannot run on {frames} frames with process "
-            f"noise {q:g}; leave them out"
-        )
-    seed = checks.seed_sequence(seed)
-    noise_seed, particle_seed = checks.spawn(seed, 2)
-    noise_rng = np.random.default_rng(noise_seed)
-    sizes = [min(chunk, int(trials) - start) for start in range(0, int(trials), chunk)]
-    random = any(FILTERS[n].random for n in names)
-    seeds = tasks.chunk_seeds(particle_seed, len(sizes)) if random else [None] * len(sizes)
+    run = Study(
+        truth,
+        rho,
+        trials,
+        seed,
+        prior,
+        prior_scale,
+        names,
+        chunk,
+        n_particles,
+        frames,
+        process_noise,
+        paired,
+    )
+    tasks.fold_chunks(
+        filter_chunk,
+        run.items(),
+        run.fold,
+        run.sizes,
+        run.trials,
+        progress=progress,
+        client=client,
+    )
+    return run.result()
 
-    def items():
+
+class Study:
+    """One study's chunks and running sums: :func:`study` in parts, for a runner of many.
+
+    ``Study(...)`` checks the arguments (those of :func:`study`, in its order,
+    without ``progress`` and ``client``) and plans the chunks; :meth:`items`
+    draws each chunk's trials in order (the inputs of :func:`filter_chunk`);
+    :meth:`fold` adds a chunk's result, in chunk order; :meth:`result` is
+    :func:`study`'s. A runner that folds several studies' chunks in one stream
+    (:mod:`depthcore.studies.atlas`) gets, study by study, what :func:`study`
+    returns.
+
+    Attributes
+    ----------
+    sizes : list of int
+        The trials of each chunk, in order.
+    trials : int
+    n_valid, n_rejected : int
+        Trials folded so far that were scored, and left out.
+    """
+
+    def __init__(
+        self,
+        truth=None,
+        rho: float = SCENARIOS["fig2"].rho,
+        trials: int = 500,
+        seed=0,
+        prior: str = "paper",
+        prior_scale: float = PAPER_PRIOR_SCALE,
+        names=NAMES,
+        chunk: int = CHUNK,
+        n_particles: int = PARTICLES,
+        frames: int = 3,
+        process_noise: float = 0.0,
+        paired: bool = False,
+    ):
+        self.truth = SCENARIOS["fig2"].c if truth is None else truth
+        names = check_names(names)
+        if not (isinstance(trials, (int, np.integer)) and trials >= 1):
+            raise ValueError(f"trials must be a positive integer, got {trials!r}")
+        chunk = checks.count(chunk, "chunk")
+        q = checks.nonnegative_scalar(process_noise, "process_noise")
+        frames = checks.frames(frames)
+        unable = [
+            n
+            for n in names
+            if (frames != 3 and not FILTERS[n].any_frames)
+            or (q > 0 and not FILTERS[n].with_process_noise)
+        ]
+        if unable:
+            raise ValueError(
+                f"names: {', '.join(unable)} cannot run on {frames} frames with process "
+                f"noise {q:g}; leave them out"
+            )
+        self.prior_scale = checks.positive_scalar(prior_scale, "prior_scale")
+        self.seed = checks.seed_sequence(seed)
+        noise_seed, particle_seed = checks.spawn(self.seed, 2)
+        self._noise_seed = noise_seed
+        self.trials, self.names, self.rho, self.prior = int(trials), names, rho, prior
+        self.frames, self.q, self.paired, self.n_particles = frames, q, paired, n_particles
+        self.sizes = [min(chunk, self.trials - start) for start in range(0, self.trials, chunk)]
+        random = any(FILTERS[n].random for n in names)
+        n = len(self.sizes)
+        self._seeds = tasks.chunk_seeds(particle_seed, n) if random else [None] * n
+        self.tallies = self.comoments = self._part = None
+        self.n_valid = self.n_rejected = 0
+
+    def items(self):
+        """Each chunk's ``(trials, names, seed, n_particles)``, drawn in order, lazily."""
         # the noise is drawn here, chunk after chunk from one stream, as it
         # would be in one chunk: the trials do not depend on the chunks
-        for size, chunk_seed in zip(sizes, seeds, strict=True):
-            part = simulate(truth, rho, size, noise_rng, prior, frames=frames, process_noise=q)
-            yield part, names, chunk_seed, n_particles
+        noise_rng = np.random.default_rng(self._noise_seed)
+        for size, chunk_seed in zip(self.sizes, self._seeds, strict=True):
+            part = simulate(
+                self.truth,
+                self.rho,
+                size,
+                noise_rng,
+                self.prior,
+                self.prior_scale,
+                frames=self.frames,
+                process_noise=self.q,
+            )
+            yield part, self.names, chunk_seed, self.n_particles
 
-    tallies = comoments = part = None
-    n_valid = n_rejected = 0
-
-    def fold(k, result):
-        nonlocal tallies, comoments, part, n_valid, n_rejected
+    def fold(self, k: int, result) -> None:
+        """Add chunk ``k``'s result (:func:`filter_chunk`'s), ``k = 0, 1, ...`` in order."""
         part, estimates = result
-        if tallies is None:
-            tallies = {name: Tally(part.truth) for name in names}
-        n_rejected += part.n_rejected
+        self._part = part
+        if self.tallies is None:
+            self.tallies = {name: Tally(part.truth) for name in self.names}
+        self.n_rejected += part.n_rejected
         if estimates is None:
             return
-        n_valid += len(part.mu)
+        self.n_valid += len(part.mu)
         for name, est in estimates.items():
-            tallies[name].add(est)
-        if paired:
-            per_trial = {n: trial_scores(e, part.truth) for n, e in estimates.items()}
-            if comoments is None:
-                comoments = CoMoments([(n, k) for n in names for k in per_trial[n]])
-            comoments.add(np.column_stack([per_trial[n][k] for n, k in comoments.columns]))
+            self.tallies[name].add(est)
+        if self.paired:
+            per_trial, both = _paired_rows(estimates, part.truth, len(part.mu))
+            if self.comoments is None:
+                columns = [(n, k) for n in self.names for k in per_trial[n]]
+                self.comoments = CoMoments(columns)
+            self.comoments.add(
+                np.column_stack([per_trial[n][k][both] for n, k in self.comoments.columns])
+            )
 
-    tasks.fold_chunks(
-        filter_chunk, items(), fold, sizes, int(trials), progress=progress, client=client
-    )
-    if n_valid == 0:
-        raise ValueError(
-            f"truth and rho leave no valid trial: all {trials} noisy triples are degenerate "
-            "or put the point behind the camera"
-        )
-    out = {
-        "truth": [float(v) for v in part.truth],
-        "rho": float(rho),
-        "prior": prior,
-        "seed": seed.entropy,
-        "trials": int(trials),
-        "valid_trials": n_valid,
-        "rejected_trials": n_rejected,
-        "particles": int(n_particles) if any(FILTERS[n].random for n in names) else None,
-        "frames": int(frames),
-        "process_noise": q,
-        "filters": {name: tallies[name].scores() for name in names},
-    }
-    if prior in prior_forms.DRAWN:
-        mean, cov = prior_forms.gaussian(prior, model.G(part.truth, -2), rho)
-        out["prior_gaussian"] = {"mean": mean.tolist(), "cov": cov.tolist()}
-    if paired:
-        out["paired"] = comoments.summary()
-    return out
+    def header(self) -> dict:
+        """What the study was: every key of :meth:`result` but ``filters`` and ``paired``."""
+        return {
+            "truth": [float(v) for v in self._part.truth],
+            "rho": float(self.rho),
+            "prior": self.prior,
+            "prior_scale": self.prior_scale,
+            "seed": self.seed.entropy,
+            "trials": self.trials,
+            "valid_trials": self.n_valid,
+            "rejected_trials": self.n_rejected,
+            "particles": int(self.n_particles)
+            if any(FILTERS[n].random for n in self.names)
+            else None,
+            "frames": int(self.frames),
+            "process_noise": self.q,
+        }
+
+    def result(self) -> dict:
+        """:func:`study`'s result, once every chunk is folded."""
+        if self.n_valid == 0:
+            raise ValueError(
+                f"truth and rho leave no valid trial: all {self.trials} noisy triples are "
+                "degenerate or put the point behind the camera"
+            )
+        silent = [n for n, t in self.tallies.items() if t.n == 0]
+        if silent:
+            raise ValueError(
+                f"filters: the {', '.join(silent)} filter has no answer for any of the "
+                f"{self.n_valid} valid trials; leave it out"
+            )
+        out = {**self.header(), "filters": {n: t.scores() for n, t in self.tallies.items()}}
+        if self.prior in prior_forms.DRAWN:
+            mean, cov = prior_forms.gaussian(self.prior, model.G(self._part.truth, -2), self.rho)
+            out["prior_gaussian"] = {"mean": mean.tolist(), "cov": cov.tolist()}
+        if self.paired:
+            out["paired"] = self.comoments.summary()
+        return out
+
+
+def _paired_rows(estimates: dict, truth, m: int) -> tuple:
+    """Each filter's per-trial scores over a chunk's ``m`` trials, and the trials all answer.
+
+    Returns ``({name: {score: (m,)}}, both)``: a trial a filter refused is
+    NaN in its scores, and ``both`` (bool, shape (m,)) marks the trials
+    every filter answered, over which the pairs are compared.
+    """
+    both = np.ones(m, dtype=bool)
+    out = {}
+    for name, est in estimates.items():
+        rows = np.ones(m, dtype=bool) if est.answered is None else est.answered
+        both &= rows
+        out[name] = {}
+        for key, values in trial_scores(est, truth).items():
+            full = np.full(m, np.nan)
+            full[rows] = values
+            out[name][key] = full
+    return out, both
 
 
 #: The ``truth`` that asks for truths drawn from the prior (:func:`prior_study`).

@@ -60,13 +60,13 @@ from depthcore.studies import scores, tasks
 from depthcore.studies.scores import lost_tracks
 from depthcore.studies.trials import PARTICLES, simulate
 
-#: Trials drawn and filtered together, from one seed: the unit the results are summed in.
+#: Trials drawn and filtered together from one seed, the unit the results are summed in.
 BLOCK = 50
 
 #: Trials per chunk (a task of :func:`~depthcore.studies.tasks.fold_chunks`), a multiple of BLOCK.
 CHUNK = 200
 
-#: Thresholds of track loss: the position error over the point's true distance.
+#: Thresholds of track loss, on the position error over the point's true distance.
 TRACK_LOSS_LEVELS = (0.1, 0.25, 0.5, 1.0)
 
 #: Level of the chi-square acceptance regions of the NEES and the ANEES.
@@ -154,7 +154,7 @@ def trial_values(means, covs, states, levels=TRACK_LOSS_LEVELS) -> dict:
     }
 
 
-class Moments:
+class FrameMoments:
     """Running count, sum and sum of squared deviations of values over blocks of trials, per cell.
 
     Each block's values (trials first) are added by :meth:`add`, optionally
@@ -210,13 +210,13 @@ class FrameTally:
         self.levels = tuple(float(t) for t in levels)
         L = len(self.levels)
         self.n = 0
-        self.error = Moments((frames, 2))
-        self.squared = Moments((frames, 2))
-        self.sd = Moments((frames, 2))
-        self.nees = Moments(frames)
+        self.error = FrameMoments((frames, 2))
+        self.squared = FrameMoments((frames, 2))
+        self.sd = FrameMoments((frames, 2))
+        self.nees = FrameMoments(frames)
         self.outside = np.zeros(frames, dtype=np.int64)
         self.lost = np.zeros((L, frames), dtype=np.int64)
-        self.kept = Moments((L, frames, 2))
+        self.kept = FrameMoments((L, frames, 2))
 
     def add(self, values: dict, region) -> None:
         """Add one block's :func:`trial_values`; ``region`` the NEES's per-trial (lo, hi)."""

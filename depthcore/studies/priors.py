@@ -72,7 +72,7 @@ FORMS = ("paper", "range", "log_uniform", "inverse_depth")
 #: The forms whose truths are drawn from the prior.
 DRAWN = FORMS[1:]
 
-#: The lateral speed's SD, in depth units per frame: the camera's forward speed.
+#: The lateral speed's SD in depth units per frame, the camera's forward speed.
 SPEED_SD = 1.0
 
 #: The range prior's depth SD, as a fraction of its centre.

@@ -29,7 +29,7 @@ import numpy as np
 from depthcore.problem import checks
 from depthcore.studies import monte_carlo
 
-#: The depth scores each replicate keeps, with the key of the error it states (None: none).
+#: The depth scores each replicate keeps, with the key of the error it states (or None).
 SCORES = {
     "rmse": "rmse_se",
     "coverage_68": "coverage_68_se",

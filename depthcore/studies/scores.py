@@ -154,9 +154,14 @@ class Tally:
             for rule in ("divergent", *TRACK_LOSS_LEVELS)
         }
         self.nees_outside = 0
+        self.refused = 0
 
     def add(self, est: Estimates) -> None:
-        """Add the scores of one chunk of trials (an empty chunk adds nothing)."""
+        """Add the scores of one chunk of trials (an empty chunk adds nothing).
+
+        The trials the filter refused (``est.refused``) are counted apart.
+        """
+        self.refused += int(est.refused)
         n = len(est.mean)
         if n == 0:
             return
@@ -322,11 +327,19 @@ class Tally:
             }
         )
         out["track_loss"] = track_loss(self.lost, n)
+        out["refused"] = refused_scores(self.refused, n)
         robust = self.robust_scores()
         for q in ("depth", "velocity"):
             out[q].update(robust.pop(q))
         out.update(robust)
         return out
+
+
+def refused_scores(refused: int, answered: int) -> dict:
+    """Trials refused, apart from the ``answered`` scored: ``{"count", "fraction", "se"}``."""
+    total = int(refused) + int(answered)
+    se = float(proportion_se(int(refused), total))
+    return {"count": int(refused), "fraction": int(refused) / total, "se": se}
 
 
 def pooled_squares(n, total, squares, values):
@@ -599,7 +612,8 @@ class AbsoluteErrors:
 
     Attributes
     ----------
-    counts : ndarray of int, shape (B + 2,)
+    counts : ndarray of int
+        One count per bin, the bins of the range and the two beyond it.
     n : int
     """
 

@@ -16,6 +16,8 @@ through both, :mod:`depthcore.studies.monte_carlo`'s.
 
 from __future__ import annotations
 
+import dataclasses
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -95,6 +97,11 @@ class Estimates:
         ``None`` when the optimal filter was not run.
     truth : ndarray, shape (N, 3), or None
         The true state of each trial when it is not the tally's one truth.
+    refused : int
+        Trials of the batch the filter had no answer for, left out of the
+        arrays above (``N`` counts the trials answered).
+    answered : ndarray of bool, shape (N + refused,), or None
+        Which trials of the batch the rows above are; ``None``: all of them.
     """
 
     mean: np.ndarray
@@ -103,6 +110,8 @@ class Estimates:
     velocity_cdf: np.ndarray
     hellinger: np.ndarray | None
     truth: np.ndarray | None = None
+    refused: int = 0
+    answered: np.ndarray | None = None
 
 
 def valid_triples(mu) -> np.ndarray:
@@ -327,6 +336,7 @@ def run_filters(
     names=NAMES,
     rng: np.random.Generator | None = None,
     n_particles: int = PARTICLES,
+    seconds: dict | None = None,
 ) -> dict:
     """Run the named filters of :data:`depthcore.registry.filters.FILTERS` over every trial.
 
@@ -336,14 +346,29 @@ def run_filters(
     ``rng`` drives the random filters (the particle filter; required when one
     is among ``names``). The UKF runs with the default sigma points even where
     some lie behind the camera (the paper's prior is that broad).
+
+    A deterministic filter that has no answer for some trials (it refuses
+    them, or a covariance turns singular) is scored over the trials it
+    answers: the trials it refuses are found by halving the failing batch
+    (:func:`answered_rows`) and counted in its ``Estimates.refused``. A
+    filter that answers none, or a random filter that fails, is refused with
+    one line naming the filter.
+
+    Given a dict ``seconds``, each filter's wall-clock time over the trials
+    (its scores' inputs included) is put there by name.
     """
     names = check_names(names)
     mu, rho, pm, pc = trials.mu, trials.rho, trials.prior_mean, trials.prior_cov
     noise = {"process_noise": trials.process_noise} if trials.process_noise > 0 else {}
+    clock = {} if seconds is None else seconds
+    start = time.perf_counter()
     reference = FILTERS["optimal"](mu, rho, pm, pc, **noise) if "optimal" in names else None
+    if reference is not None:
+        clock["optimal"] = time.perf_counter() - start
     ref = None if reference is None else reference.detail
     out = {}
     for name in names:
+        start = time.perf_counter()
         f = FILTERS[name]
         if f.scoring.exact:
             out[name] = Estimates(
@@ -353,25 +378,91 @@ def run_filters(
                 np.zeros(len(mu)),
                 trials.states,
             )
+            clock[name] += time.perf_counter() - start
             continue
-        options = dict(noise)
-        if f.random:
-            if rng is None:
-                raise ValueError(f"rng is required to run the {name} filter")
-            options.update(rng=rng, n_particles=n_particles)
-        try:
-            est = f(mu, rho, pm, pc, **options)
-        except ValueError as exc:
-            # the bearings were drawn here, so no bearing is the user's to mend: the blame is
-            # the particle count where the filter names it, else the choice of filters
-            if str(exc).startswith("n_particles"):
-                raise ValueError(
-                    f"n_particles: the {name} filter has no answer for a simulated trial "
-                    f"({exc}); use more particles, or leave {name} out"
-                ) from None
-            raise ValueError(
-                f"filters: the {name} filter has no answer for a simulated trial ({exc}); "
-                f"leave {name} out, or lower the process noise or the noise level"
-            ) from None
-        out[name] = _estimates(trials, est, f.scoring, ref)
+        out[name] = _run_one(trials, name, rng, n_particles, noise, ref)
+        clock[name] = time.perf_counter() - start
     return out
+
+
+#: The failures of a filter on a trial that count the trial as refused by it.
+FAILURES = (ValueError, np.linalg.LinAlgError)
+
+
+def _run_one(trials: Trials, name: str, rng, n_particles: int, noise: dict, ref) -> Estimates:
+    """One non-exact filter's :class:`Estimates` over the trials it answers."""
+    f = FILTERS[name]
+    options = dict(noise)
+    if f.random:
+        if rng is None:
+            raise ValueError(f"rng is required to run the {name} filter")
+        options.update(rng=rng, n_particles=n_particles)
+
+    def run(part: Trials):
+        est = f(part.mu, part.rho, part.prior_mean, part.prior_cov, **options)
+        # a covariance singular in double precision gives no NEES: no answer a score can read
+        np.linalg.solve(est.cov, est.mean[..., None])
+        return est
+
+    try:
+        return _estimates(trials, run(trials), f.scoring, ref)
+    except FAILURES as exc:
+        if str(exc).startswith("n_particles"):
+            raise ValueError(
+                f"n_particles: the {name} filter has no answer for a simulated trial "
+                f"({exc}); use more particles, or leave {name} out"
+            ) from None
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+    rows = None if f.random else answered_rows(lambda r: run(subset(trials, r)), len(trials.mu))
+    if rows is None or not len(rows):
+        # the bearings were drawn here, so no bearing is the user's to mend: the blame
+        # is the choice of filters
+        raise ValueError(
+            f"filters: the {name} filter has no answer for a simulated trial ({reason}); "
+            f"leave {name} out, or lower the process noise or the noise level"
+        )
+    part = subset(trials, rows)
+    if ref is not None:  # the reference over the trials answered, run again on them alone
+        ref = FILTERS["optimal"](part.mu, part.rho, part.prior_mean, part.prior_cov, **noise)
+        ref = ref.detail
+    est = _estimates(part, run(part), f.scoring, ref)
+    answered = np.zeros(len(trials.mu), dtype=bool)
+    answered[rows] = True
+    return dataclasses.replace(est, refused=len(trials.mu) - len(rows), answered=answered)
+
+
+def answered_rows(run: Callable, n: int) -> np.ndarray:
+    """The rows ``0 .. n - 1`` on which ``run(rows)`` does not fail, by halving.
+
+    ``run`` is called on a batch of rows and raises one of :data:`FAILURES`
+    when it has no answer for one of them; a failing batch is halved until
+    every failing row stands alone. The calls grow as the failing rows times
+    ``log2 n``. Returns the answered rows, sorted, shape (m,).
+    """
+    ok = []
+
+    def fill(rows):
+        try:
+            run(rows)
+        except FAILURES:
+            if len(rows) > 1:
+                fill(rows[: len(rows) // 2])
+                fill(rows[len(rows) // 2 :])
+            return
+        ok.append(rows)
+
+    fill(np.arange(int(n)))
+    return np.concatenate(ok) if ok else np.zeros(0, dtype=int)
+
+
+def subset(trials: Trials, rows) -> Trials:
+    """The trials ``rows`` of ``trials`` (none counted as rejected)."""
+    rows = np.asarray(rows, dtype=int)
+    return dataclasses.replace(
+        trials,
+        mu=trials.mu[rows],
+        prior_mean=trials.prior_mean[rows],
+        n_rejected=0,
+        states=None if trials.states is None else trials.states[rows],
+        tracks=None if trials.tracks is None else trials.tracks[rows],
+    )

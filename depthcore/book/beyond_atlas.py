@@ -1,0 +1,223 @@
+"""The chapter on the atlas: where each filter is calibrated, loses the track, nears the bound.
+
+Recommended import: ``from depthcore.book import beyond_atlas``.
+
+:func:`verdict_counts` counts each filter's verdicts over the cells of
+:func:`depthcore.studies.atlas.atlas`, :func:`count_texts` gives them as the
+chapter glues them and :func:`cost_rows` the measured cost per trial;
+:func:`verdict_map` draws one verdict over every cell: per filter, the
+prior settings by the parallaxes, at each number of frames and noise level.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.studies import atlas
+
+#: The outcomes of a verdict in a cell, as :func:`verdict_grid` codes them.
+OUTCOMES = {True: 1.0, False: 0.0, None: 2.0}
+
+#: Where a filter has no answer in a cell (it failed on a trial, or none was valid).
+NO_ANSWER = 3.0
+
+#: The colours of :data:`OUTCOMES` and :data:`NO_ANSWER` (yes dark, no light, undecided grey).
+COLOURS = ("#deebf7", "#08519c", "#969696", "#ffffff")
+
+
+def _undecided(entry: dict, verdict: str) -> bool:
+    return entry.get(verdict) is None and "failed" not in entry
+
+
+def verdict_counts(result: dict, names=None) -> dict:
+    """Per filter and verdict, in how many cells it is yes, no, undecided, or has no answer.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.studies.atlas.atlas`.
+    names : sequence of str, optional
+        Default the atlas's filters.
+
+    Returns
+    -------
+    dict
+        ``{name: {verdict: {"yes", "no", "undecided", "no_answer", "cells"}}}``:
+        a cell where the filter failed, or had no valid trial, has no answer;
+        one where its score is not finite is undecided.
+    """
+    names = result["names"] if names is None else names
+    out = {}
+    for name in names:
+        out[name] = {}
+        for verdict in atlas.VERDICTS:
+            c = dict.fromkeys(("yes", "no", "undecided", "no_answer", "cells"), 0)
+            for cell in result["cells"]:
+                entry = cell["filters"].get(name)
+                c["cells"] += 1
+                if entry is None or "failed" in entry:
+                    c["no_answer"] += 1
+                elif entry[verdict] is None:
+                    c["undecided"] += 1
+                else:
+                    c["yes" if entry[verdict] else "no"] += 1
+            out[name][verdict] = c
+    return out
+
+
+def count_texts(counts: dict, prefix: str) -> dict:
+    """The counts as glued: ``{prefix}_{name}_{verdict}`` is "yes (undecided)"."""
+    return {
+        f"{prefix}_{name}_{verdict}": f"{c['yes']} ({c['undecided']})"
+        for name, by in counts.items()
+        for verdict, c in by.items()
+    }
+
+
+#: Where a verdict is not tested in a cell (no bound for the forms whose truths are drawn).
+UNTESTED = 4.0
+
+
+def prior_label(form: str, scale) -> str:
+    """A prior setting as the map names it: the paper's rule with its scale, or the form."""
+    return {
+        "paper": f"paper, $s = {scale:g}$" if scale is not None else "paper",
+        "range": "range",
+        "log_uniform": "log-uniform",
+        "inverse_depth": "inverse depth",
+    }.get(form, form)
+
+
+def _row_key(cell: dict) -> tuple:
+    return (cell["form"], cell["prior_scale"], cell["depth"])
+
+
+def _column_key(cell: dict) -> tuple:
+    return (cell["frames"], cell["rho"])
+
+
+def _keys(cells, key) -> list:
+    out = []
+    for c in cells:
+        if key(c) not in out:
+            out.append(key(c))
+    return out
+
+
+def verdict_grid(result: dict, verdict: str, names) -> tuple:
+    """One verdict as a matrix of tiles, with the settings of its rows and columns.
+
+    Rows: per filter, a block of the prior settings and depths (in cell
+    order, the prior's form and scale, then the depth), then a gap; columns:
+    per number of frames and noise level, the parallaxes (increasing to the
+    right), then a gap.
+
+    Returns
+    -------
+    tuple
+        ``(matrix, rows, columns)``: ``matrix`` of shape
+        ``(F (R + 1) - 1, C (P + 1) - 1)`` coded by :data:`OUTCOMES`,
+        :data:`NO_ANSWER` and :data:`UNTESTED`, NaN in the gaps; ``rows`` the
+        ``R`` settings ``(form, prior_scale, depth)`` of a filter's block,
+        ``columns`` the ``C`` settings ``(frames, rho)``.
+    """
+    cells = result["cells"]
+    rows, columns = _keys(cells, _row_key), _keys(cells, _column_key)
+    parallax = list(result["axes"]["parallax"])
+    n_row, n_par = len(rows), len(parallax)
+    m = np.full((len(names) * (n_row + 1) - 1, len(columns) * (n_par + 1) - 1), np.nan)
+    for cell in cells:
+        r, c = rows.index(_row_key(cell)), columns.index(_column_key(cell))
+        col = c * (n_par + 1) + parallax.index(cell["parallax"])
+        for f, name in enumerate(names):
+            entry = cell["filters"].get(name)
+            if entry is None or "failed" in entry:
+                value = NO_ANSWER
+            elif verdict == "near_bound" and cell.get("bound_sd", 0.0) is None:
+                value = UNTESTED
+            else:
+                value = OUTCOMES[entry[verdict]]
+            m[f * (n_row + 1) + r, col] = value
+    return m, rows, columns
+
+
+def _noise_label(rho: float) -> str:
+    return f"{rho / atlas.PIXEL:.2g} px"
+
+
+def verdict_map(result: dict, verdict: str, names=None):
+    """One verdict in every cell: a block of tiles per filter (rows), per frames and noise.
+
+    Within a block the prior settings (and depths) run down, the parallaxes
+    (increasing) to the right; a tile is dark where the verdict holds, light
+    where it does not, grey where the test cannot decide, white with a cross
+    where the filter has no answer, white with a dot where the verdict is
+    not tested (no bound).
+    """
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    names = result["names"] if names is None else names
+    m, rows, columns = verdict_grid(result, verdict, names)
+    n_row, n_par = len(rows), len(result["axes"]["parallax"])
+    width = WIDTH
+    height = 1.0 + m.shape[0] / m.shape[1] * width * 0.78
+    fig, ax = subplots(figsize=(width, height))
+    colours = ListedColormap([*COLOURS, "#ffffff"])
+    bounds = [-0.5, 0.5, 1.5, 2.5, 3.5, 4.5]
+    ax.imshow(m, cmap=colours, norm=BoundaryNorm(bounds, 5), aspect="auto")
+    for code, marker, size in ((NO_ANSWER, "x", 8), (UNTESTED, ".", 3)):
+        r, c = np.nonzero(m == code)
+        ax.scatter(c, r, marker=marker, s=size, color="0.3", linewidths=0.6)
+    depths = {d for _, _, d in rows}
+    labels = [
+        prior_label(form, scale) + (f", $y = {d:g}$" if len(depths) > 1 else "")
+        for form, scale, d in rows
+    ]
+    ticks, tick_labels = [], []
+    for f, name in enumerate(names):
+        ticks += [f * (n_row + 1) + r for r in range(n_row)]
+        tick_labels += [f"{STYLE[name]['label']}: {label}" for label in labels]
+    ax.set_yticks(ticks)
+    ax.set_yticklabels(tick_labels, fontsize=MIN_FONT)
+    ax.set_xticks([c * (n_par + 1) + (n_par - 1) / 2 for c in range(len(columns))])
+    ax.set_xticklabels(
+        [f"N = {frames}\n{_noise_label(rho)}" for frames, rho in columns], fontsize=MIN_FONT
+    )
+    for f in range(1, len(names)):
+        ax.axhline(f * (n_row + 1) - 1, color="0.2", linewidth=0.8)
+    ax.tick_params(length=0)
+    for spine in ax.spines.values():
+        spine.set_visible(False)
+    handles = [
+        Patch(facecolor=COLOURS[1], label="yes"),
+        Patch(facecolor=COLOURS[0], edgecolor="0.6", label="no"),
+        Patch(facecolor=COLOURS[2], label="undecided"),
+        Line2D([], [], marker="x", linestyle="", color="0.3", label="no answer"),
+        Line2D([], [], marker=".", linestyle="", color="0.3", label="no bound"),
+    ]
+    fig.legend(
+        handles=handles, loc="outside lower center", ncol=5, frameon=False, fontsize=MIN_FONT
+    )
+    return fig
+
+
+def cost_rows(cost: dict, names) -> list[dict]:
+    """The measured milliseconds per trial of each filter at each number of frames.
+
+    Returns
+    -------
+    list of dict
+        ``{"name", "frames": {str(N): milliseconds}}`` per name of ``names``.
+    """
+    per = cost["seconds_per_trial"]
+    return [
+        {"name": n, "frames": {f: 1e3 * s for f, s in sorted(per[n].items(), key=_frames)}}
+        for n in names
+    ]
+
+
+def _frames(item) -> int:
+    return int(item[0])

@@ -1,0 +1,269 @@
+"""The atlas: cells that are studies, the same whatever the workers, and its verdicts."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from depthcore.analysis import bound
+from depthcore.cli.main import main
+from depthcore.problem import model
+from depthcore.studies import atlas, monte_carlo, tasks
+from depthcore.studies.scores import TEST_Z, detectable_difference
+
+from helpers import exit_status
+
+#: A tiny atlas: two parallaxes, two frames, a deterministic and a random filter.
+TINY = atlas.Grid(
+    parallax=(0.0, 0.2),
+    depth=(6.0,),
+    prior_scale=(1000.0,),
+    rho=(0.005,),
+    frames=(3, 5),
+    forms=("paper",),
+    trials=24,
+    n_particles=60,
+    chunk=8,
+    names=("optimal", "ekf", "particle"),
+)
+
+
+def _same(a: dict, b: dict) -> bool:
+    """Equal bit for bit, but the measured cost."""
+    a, b = dict(a), dict(b)
+    a.pop("cost"), b.pop("cost")
+    return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+
+
+def test_a_cell_is_the_study_of_its_setting_with_its_seed():
+    result = atlas.atlas(TINY, seed=3)
+    assert len(result["cells"]) == 4 and result["shape"] == [1, 2, 1, 1, 1, 2]
+    cell = result["cells"][3]
+    assert (cell["frames"], cell["parallax"]) == (5, 0.2)
+    alone = monte_carlo.study(
+        truth=atlas.truth_of(0.2, 6.0),
+        rho=0.005,
+        trials=24,
+        seed=atlas.cell_seed(3, 3),
+        names=TINY.names,
+        chunk=8,
+        n_particles=60,
+        frames=5,
+    )
+    assert cell["truth"] == alone["truth"] == pytest.approx([1.2, 6.0, 1.2], abs=1e-15)
+    assert cell["valid_trials"] == alone["valid_trials"]
+    b = math.sqrt(bound.posterior_bound(alone["truth"], 3, 5, 0.005, 1000 * np.eye(3))[-1, 1, 1])
+    assert cell["bound_sd"] == b
+    for name in TINY.names:
+        mine, theirs = cell["filters"][name], alone["filters"][name]
+        assert mine["rmse"] == theirs["depth"]["rmse"]
+        assert mine["coverage_68"] == theirs["depth"]["coverage_68"]
+        assert mine["track_loss"] == theirs["track_loss"]["fraction"]
+        assert mine["bound_ratio"] == theirs["depth"]["rmse"] / b
+    # the cell's seed is its index's child, whatever the number of cells
+    assert atlas.cell_seed(3, 3).spawn_key == np.random.SeedSequence(3).spawn(4)[3].spawn_key
+
+
+def test_the_atlas_is_the_same_in_other_chunks_of_work_and_on_two_workers():
+    here = atlas.atlas(TINY, seed=1)
+    seen = []
+    again = atlas.atlas(TINY, seed=1, on_cell=seen.append)
+    assert _same(here, again) and seen == again["cells"]
+    with tasks.cluster(workers=2) as client:
+        there = atlas.atlas(TINY, seed=1, client=client)
+    assert _same(here, there)
+    cost = here["cost"]["seconds_per_trial"]
+    assert set(cost) == set(TINY.names) and set(cost["ekf"]) == {"3", "5"}
+
+
+def test_progress_counts_every_cells_trials():
+    calls = []
+    atlas.atlas(TINY, seed=0, progress=lambda d, t: calls.append((d, t)))
+    assert calls[-1] == (4 * 24, 4 * 24) and len(calls) == 4 * 3
+
+
+def _summary(**kw):
+    base = dict(trials=2000, coverage_68=0.68, track_loss=0.0, lost=0)
+    base.update(bound_ratio=1.0, bound_ratio_se=0.01)
+    return {**base, **kw}
+
+
+def test_verdicts_on_constructed_scores():
+    se = math.sqrt(0.68 * 0.32 / 2000)
+    v = atlas.verdicts(_summary())
+    assert v == {"calibrated": True, "lost": False, "near_bound": True}
+    # calibration: the binomial test at 1 %, two-sided
+    assert atlas.verdicts(_summary(coverage_68=0.68 - 2.5 * se))["calibrated"] is True
+    assert atlas.verdicts(_summary(coverage_68=0.68 - 2.7 * se))["calibrated"] is False
+    assert atlas.verdicts(_summary(coverage_68=0.68 + 2.7 * se))["calibrated"] is False
+    # a pass of a test too coarse to find a coverage 0.1 off is undecided
+    few = next(n for n in range(10, 1000) if detectable_difference(0.68, n) <= 0.1)
+    assert atlas.verdicts(_summary(trials=few))["calibrated"] is True
+    assert atlas.verdicts(_summary(trials=few - 1))["calibrated"] is None
+    # track loss against its level, with the Agresti-Coull error
+    assert atlas.verdicts(_summary(track_loss=0.5, lost=1000))["lost"] is True
+    assert atlas.verdicts(_summary(track_loss=0.1, lost=200))["lost"] is None
+    assert atlas.verdicts(_summary(track_loss=0.01, lost=20))["lost"] is False
+    # the bound: 1.1 against the ratio's error
+    near = atlas.verdicts(_summary(bound_ratio=1.1 - 1.01 * TEST_Z * 0.01))
+    assert near["near_bound"] is True
+    assert atlas.verdicts(_summary(bound_ratio=1.1 - 0.99 * TEST_Z * 0.01))["near_bound"] is None
+    assert atlas.verdicts(_summary(bound_ratio=1.1 + 1.01 * TEST_Z * 0.01))["near_bound"] is False
+    # no score, no verdict
+    assert atlas.verdicts(_summary(bound_ratio=None, bound_ratio_se=None))["near_bound"] is None
+    assert atlas.verdicts(_summary(coverage_68=None))["calibrated"] is None
+
+
+def test_the_grid_and_its_refusals():
+    assert atlas.truth_of(0.5, 6.0).tolist() == [3.0, 6.0, 3.0]
+    assert atlas.PIXEL == pytest.approx(1 / model.noise_in_pixels(1.0))
+    assert model.noise_in_pixels(atlas.PIXEL) == pytest.approx(1.0)
+    for size in atlas.SIZES.values():
+        assert size.frames == (3, 10, 30) and 0 in size.parallax and max(size.parallax) > 0.2
+        assert min(size.prior_scale) == 1 and max(size.prior_scale) == 1000
+        assert max(size.rho) == atlas.PIXEL and min(size.rho) == pytest.approx(atlas.PIXEL / 10)
+    book, full = atlas.SIZES["book"], atlas.SIZES["full"]
+    for axis in atlas.AXES[1:]:
+        assert set(book.axis(axis)) <= set(full.axis(axis)), axis
+        assert len(full.axis(axis)) >= len(book.axis(axis))
+    assert full.trials >= 1000
+    with pytest.raises(ValueError, match="^depth must exceed 2"):
+        atlas.truth_of(0.1, 2.0)
+    with pytest.raises(ValueError, match="^parallax"):
+        atlas.truth_of(-0.1, 6.0)
+    with pytest.raises(ValueError, match="^size must be one of"):
+        atlas.grid_of("huge")
+
+
+def test_estimated_cost_adds_every_cells_filters():
+    cost = {"seconds_per_trial": {n: {"3": 1.0, "5": 3.0} for n in TINY.names}}
+    cost["particles"] = 30
+    est = atlas.estimated_cost(cost, TINY)
+    # per cell 24 trials of optimal, ekf and the particle filter at twice the particles
+    per_frames = {3: 24 * (1 + 1 + 2), 5: 24 * (3 + 3 + 6)}
+    assert est["cells"] == 4
+    assert est["core_hours"] * 3600 == pytest.approx(2 * (per_frames[3] + per_frames[5]))
+    with pytest.raises(ValueError, match="^cost: no measured cost of the filter ekf"):
+        atlas.estimated_cost({"seconds_per_trial": {"optimal": {"3": 1.0}}, "particles": 1}, TINY)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--size", "huge"], "argument --size: invalid choice: 'huge'"),
+        (["--seed", "-1"], "--seed must be a non-negative integer, got -1"),
+        (["--workers", "0"], "--workers must be a number of local worker processes"),
+        (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers and --scheduler"),
+        (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler: no scheduler answers"),
+        (["--out", ""], "--out must be a file, got an empty path"),
+        (["--out", "."], "--out must be a file, but '.' is a folder"),
+        (["--out", "no/such/dir/a.json"], "--out: the folder of 'no/such/dir/a.json' does"),
+    ],
+)
+def test_the_command_refuses_in_one_line(args, message, capsys):
+    status = exit_status(["atlas", *args])
+    out, err = capsys.readouterr()
+    assert status == 2 and out == ""
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err
+
+
+def test_the_command_writes_strict_json(tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(atlas.SIZES, "book", TINY)
+    out = tmp_path / "atlas.json"
+    assert main(["atlas", "--seed", "2", "--out", str(out)]) == 0
+    assert capsys.readouterr() == ("", "")
+    written = json.loads(out.read_text())  # strict: no NaN
+    assert _same(written, json.loads(json.dumps(atlas.atlas(TINY, seed=2))))
+
+
+def test_probe_cost_times_the_filters_it_is_given():
+    cost = atlas.probe_cost(("ekf", "particle"), (3, 5), trials=10, n_particles=30, seed=0)
+    assert set(cost["seconds_per_trial"]) == {"ekf", "particle"}
+    assert set(cost["seconds_per_trial"]["ekf"]) == {"3", "5"} and cost["particles"] == 30
+    assert all(s > 0 for by in cost["seconds_per_trial"].values() for s in by.values())
+    other = {**cost, "seconds_per_trial": {"optimal": {"3": 1.0}, "ekf": {"3": 9.0}}}
+    merged = atlas.merged_cost(other, cost)
+    assert merged["seconds_per_trial"]["ekf"] == {"3": 9.0}
+    assert merged["seconds_per_trial"]["particle"] == cost["seconds_per_trial"]["particle"]
+    with pytest.raises(ValueError, match="^costs: measured at different numbers of particles"):
+        atlas.merged_cost(cost, {**cost, "particles": 31})
+
+
+def test_the_chapter_counts_and_maps_each_verdict():
+    from depthcore.book import beyond_atlas
+
+    def cell(parallax, frames, **entries):
+        return {
+            **dict(form="paper", frames=frames, rho=0.005, prior_scale=1000.0),
+            "depth": 6.0,
+            "parallax": parallax,
+            "filters": entries,
+        }
+
+    yes = {"calibrated": True, "lost": False, "near_bound": None}
+    no = {"calibrated": False, "lost": True, "near_bound": True}
+    failed = {"failed": "reason", **dict.fromkeys(atlas.VERDICTS)}
+    result = {
+        "names": ["ekf"],
+        "axes": {**{a: ["x"] for a in atlas.AXES}, "frames": [3, 10], "parallax": [0, 1]},
+        "cells": [cell(0, 3, ekf=yes), cell(1, 3, ekf=no), cell(0, 10, ekf=failed), cell(1, 10)],
+    }
+    counts = beyond_atlas.verdict_counts(result)["ekf"]
+    assert counts["calibrated"] == dict(yes=1, no=1, undecided=0, no_answer=2, cells=4)
+    assert counts["near_bound"] == dict(yes=1, no=0, undecided=1, no_answer=2, cells=4)
+    texts = beyond_atlas.count_texts({"ekf": counts}, "at")
+    assert texts["at_ekf_lost"] == "1 (0)"
+    m, rows, columns = beyond_atlas.verdict_grid(result, "calibrated", ["ekf"])
+    assert rows == [("paper", 1000.0, 6.0)] and columns == [(3, 0.005), (10, 0.005)]
+    assert m.shape == (1, 5) and np.isnan(m[0, 2])
+    assert m[0].tolist()[:2] == [1.0, 0.0] and m[0, 3:].tolist() == [3.0, 3.0]
+    # a form whose truths are drawn has no bound: its near-bound verdict is not tested
+    drawn = {**cell(0, 3, ekf=yes), "form": "range", "prior_scale": None, "bound_sd": None}
+    result["cells"].append(drawn)
+    m, rows, _ = beyond_atlas.verdict_grid(result, "near_bound", ["ekf"])
+    assert rows[-1] == ("range", None, 6.0) and m[1, 0] == beyond_atlas.UNTESTED
+    assert beyond_atlas.prior_label("paper", 1.0) == "paper, $s = 1$"
+
+
+def test_the_prior_forms_are_an_axis_and_refused_trials_are_counted_apart():
+    grid = atlas.Grid(
+        parallax=(0.2,),
+        depth=(6.0,),
+        prior_scale=(1000.0, 1.0),
+        rho=(0.005,),
+        frames=(3,),
+        forms=("paper", "inverse_depth"),
+        trials=300,
+        n_particles=60,
+        chunk=100,
+        names=("optimal", "ekf", "ukf"),
+    )
+    settings = atlas.cells(grid)
+    # the drawn form states its own covariance: one cell, at no prior scale
+    assert [(c["form"], c["prior_scale"]) for c in settings] == [
+        ("paper", 1000.0),
+        ("paper", 1.0),
+        ("inverse_depth", None),
+    ]
+    result = atlas.atlas(grid, seed=5)
+    drawn = result["cells"][2]
+    alone = monte_carlo.study(
+        truth=atlas.truth_of(0.2, 6.0),
+        rho=0.005,
+        trials=300,
+        seed=atlas.cell_seed(5, 2),
+        prior="inverse_depth",
+        names=grid.names,
+        chunk=100,
+    )
+    assert drawn["bound_sd"] is None
+    for name in grid.names:
+        mine, theirs = drawn["filters"][name], alone["filters"][name]
+        assert mine["rmse"] == theirs["depth"]["rmse"] and mine["near_bound"] is None
+        assert mine["refused"] == theirs["refused"]["count"]
+        assert mine["trials"] == alone["valid_trials"] - mine["refused"]
+    assert drawn["filters"]["ekf"]["refused"] > 0  # scored over the trials it answers
+    assert result["cells"][1]["filters"]["ekf"]["near_bound"] is not None
