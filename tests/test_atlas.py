@@ -186,7 +186,10 @@ def test_probe_cost_times_the_filters_it_is_given():
     assert all(s > 0 for by in cost["seconds_per_trial"].values() for s in by.values())
     other = {**cost, "seconds_per_trial": {"optimal": {"3": 1.0}, "ekf": {"3": 9.0}}}
     merged = atlas.merged_cost(other, cost)
-    assert merged["seconds_per_trial"]["ekf"] == {"3": 9.0}
+    assert merged["seconds_per_trial"]["ekf"] == {
+        "3": 9.0,
+        "5": cost["seconds_per_trial"]["ekf"]["5"],
+    }
     assert merged["seconds_per_trial"]["particle"] == cost["seconds_per_trial"]["particle"]
     with pytest.raises(ValueError, match="^costs: measured at different numbers of particles"):
         atlas.merged_cost(cost, {**cost, "particles": 31})
@@ -267,3 +270,49 @@ def test_the_prior_forms_are_an_axis_and_refused_trials_are_counted_apart():
         assert mine["trials"] == alone["valid_trials"] - mine["refused"]
     assert drawn["filters"]["ekf"]["refused"] > 0  # scored over the trials it answers
     assert result["cells"][1]["filters"]["ekf"]["near_bound"] is not None
+
+
+def test_the_chapter_counts_each_verdict_per_prior_setting():
+    from depthcore.book import beyond_atlas
+
+    def cell(form, scale, verdict):
+        entry = {"calibrated": verdict, "lost": False, "near_bound": None}
+        return {"form": form, "prior_scale": scale, "filters": {"ekf": entry}}
+
+    result = {
+        "names": ["ekf"],
+        "cells": [
+            cell("paper", 1000.0, True),
+            cell("range", None, False),
+            cell("paper", 1000.0, None),
+            cell("range", None, False),
+        ],
+    }
+    by = beyond_atlas.counts_by_prior(result, "ekf", "calibrated")
+    assert list(by) == [("paper", 1000.0), ("range", None)]
+    assert by[("paper", 1000.0)] == dict(yes=1, no=0, undecided=1, no_answer=0, cells=2)
+    assert by[("range", None)] == dict(yes=0, no=2, undecided=0, no_answer=0, cells=2)
+
+
+def test_a_filter_runs_up_to_its_most_frames_in_a_grid():
+    grid = atlas.Grid(
+        (0.2,),
+        (6.0,),
+        (1000.0,),
+        (0.005,),
+        (3, 5),
+        ("paper",),
+        8,
+        30,
+        8,
+        ("ekf", "iterated"),
+        (("iterated", 3),),
+    )
+    assert atlas.names_at(grid, 3) == ("ekf", "iterated")
+    assert atlas.names_at(grid, 5) == ("ekf",)
+    result = atlas.atlas(grid, seed=2)
+    assert result["max_frames"] == {"iterated": 3}
+    assert set(result["cells"][1]["filters"]) == {"ekf"}
+    assert atlas.SIZES["book"].runs(atlas.COSTLY_AT_30, 10)
+    assert not atlas.SIZES["book"].runs(atlas.COSTLY_AT_30, 30)
+    assert atlas.SIZES["full"].runs(atlas.COSTLY_AT_30, 30)

@@ -107,3 +107,16 @@ class _Refusing:
 
     def __call__(self, *args, **kwargs):
         raise ValueError("mu: no answer")
+
+
+def test_a_random_filter_refusing_trials_draws_on_from_its_generator():
+    """At no parallax the particle filter's proposal is not determined on some tracks."""
+    part = study_trials.simulate([0.0, 6.0, 0.0], 0.005, 30, np.random.default_rng(0), frames=5)
+
+    def run():
+        return study_trials.run_filters(part, ("particle",), np.random.default_rng(1), 60)
+
+    est = run()["particle"]
+    assert 0 < est.refused < len(part.mu) and np.isfinite(est.mean).all()
+    again = run()["particle"]
+    assert np.array_equal(est.mean, again.mean) and np.array_equal(est.answered, again.answered)

@@ -66,6 +66,26 @@ def verdict_counts(result: dict, names=None) -> dict:
     return out
 
 
+def counts_by_prior(result: dict, name: str, verdict: str) -> dict:
+    """One filter's :func:`verdict_counts` for one verdict, per prior setting.
+
+    Returns
+    -------
+    dict
+        ``{(form, prior_scale): {"yes", "no", "undecided", "no_answer", "cells"}}``,
+        the settings in cell order.
+    """
+    out: dict = {}
+    for cell in result["cells"]:
+        key = (cell["form"], cell["prior_scale"])
+        part = {**result, "cells": [cell]}
+        c = verdict_counts(part, [name])[name][verdict]
+        total = out.setdefault(key, dict.fromkeys(c, 0))
+        for k, v in c.items():
+            total[k] += v
+    return out
+
+
 def count_texts(counts: dict, prefix: str) -> dict:
     """The counts as glued: ``{prefix}_{name}_{verdict}`` is "yes (undecided)"."""
     return {

@@ -108,6 +108,10 @@ BOUND_TOLERANCE = 1.1
 #: size runs them, and the book measures their cost apart (:func:`probe_cost`).
 COSTLY = ("resample_move", "rbpf", "range_parametrised")
 
+#: The filter the book's atlas runs to 10 frames alone: at 30 frames its iterations cost
+#: more than every other filter of the book's atlas together (:func:`probe_cost` measures it).
+COSTLY_AT_30 = "iterated"
+
 #: The verdicts of a cell, each True, False or None (undecided, or no answer).
 VERDICTS = ("calibrated", "lost", "near_bound")
 
@@ -138,6 +142,8 @@ class Grid:
         Trials per chunk (a task).
     names : tuple of str
         The filters; those that cannot run at a cell's frames are left out there.
+    max_frames : tuple of (str, int)
+        Filters run only up to a number of frames, ``(name, N)`` pairs.
     """
 
     parallax: tuple
@@ -150,6 +156,13 @@ class Grid:
     n_particles: int
     chunk: int
     names: tuple = ALL_NAMES
+    max_frames: tuple = ()
+
+    def runs(self, name: str, frames: int) -> bool:
+        """Whether filter ``name`` runs on ``frames`` frames in this grid."""
+        limit = dict(self.max_frames).get(name)
+        able = frames == 3 or FILTERS[name].any_frames
+        return able and (limit is None or frames <= limit)
 
     @property
     def shape(self) -> tuple:
@@ -175,6 +188,7 @@ SIZES = {
         n_particles=200,
         chunk=100,
         names=tuple(n for n in ALL_NAMES if n not in COSTLY),
+        max_frames=((COSTLY_AT_30, 10),),
     ),
     "full": Grid(
         parallax=(0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.6),
@@ -227,8 +241,8 @@ def cells(grid: Grid) -> list[dict]:
 
 
 def names_at(grid: Grid, frames: int) -> tuple:
-    """The filters of ``grid`` that run on ``frames`` frames (``any_frames``, or 3)."""
-    return tuple(n for n in grid.names if frames == 3 or FILTERS[n].any_frames)
+    """The filters of ``grid`` that run on ``frames`` frames (:meth:`Grid.runs`)."""
+    return tuple(n for n in grid.names if grid.runs(n, frames))
 
 
 def cell_seed(seed, index: int) -> np.random.SeedSequence:
@@ -517,6 +531,7 @@ def atlas(
         "particles": grid.n_particles,
         "chunk": grid.chunk,
         "names": list(grid.names),
+        "max_frames": dict(grid.max_frames),
         "levels": {
             "calibration_level": CALIBRATION_LEVEL,
             "calibration_reach": CALIBRATION_REACH,
@@ -648,14 +663,17 @@ def probe_cost(names, frames=(3, 10, 30), trials: int = 50, n_particles: int = 2
 def merged_cost(*costs) -> dict:
     """Costs of :func:`cost_of` or :func:`probe_cost` at the same particles, as one.
 
-    A filter's seconds per trial are the first cost's that has them.
+    A filter's seconds per trial at a number of frames are the first cost's
+    that has them.
     """
     if len({c["particles"] for c in costs}) != 1:
         raise ValueError("costs: measured at different numbers of particles")
     per: dict = {}
     for c in costs:
         for name, by_frames in c["seconds_per_trial"].items():
-            per.setdefault(name, dict(by_frames))
+            mine = per.setdefault(name, {})
+            for frames, seconds in by_frames.items():
+                mine.setdefault(frames, seconds)
     return {
         "seconds_per_trial": per,
         "particles": costs[0]["particles"],

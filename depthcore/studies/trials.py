@@ -347,12 +347,13 @@ def run_filters(
     is among ``names``). The UKF runs with the default sigma points even where
     some lie behind the camera (the paper's prior is that broad).
 
-    A deterministic filter that has no answer for some trials (it refuses
-    them, or a covariance turns singular) is scored over the trials it
-    answers: the trials it refuses are found by halving the failing batch
+    A filter that has no answer for some trials (it refuses them, or a
+    covariance turns singular) is scored over the trials it answers: the
+    trials it refuses are found by halving the failing batch
     (:func:`answered_rows`) and counted in its ``Estimates.refused``. A
-    filter that answers none, or a random filter that fails, is refused with
-    one line naming the filter.
+    random filter draws on from ``rng`` as the batches are run again, so its
+    draws stay a function of the seed. A filter that answers none, or whose
+    particles are too few, is refused with one line naming the filter.
 
     Given a dict ``seconds``, each filter's wall-clock time over the trials
     (its scores' inputs included) is put there by name.
@@ -413,8 +414,8 @@ def _run_one(trials: Trials, name: str, rng, n_particles: int, noise: dict, ref)
                 f"({exc}); use more particles, or leave {name} out"
             ) from None
         reason = " ".join(str(exc).split()) or type(exc).__name__
-    rows = None if f.random else answered_rows(lambda r: run(subset(trials, r)), len(trials.mu))
-    if rows is None or not len(rows):
+    rows = answered_rows(lambda r: run(subset(trials, r)), len(trials.mu))
+    if not len(rows):
         # the bearings were drawn here, so no bearing is the user's to mend: the blame
         # is the choice of filters
         raise ValueError(
