@@ -215,14 +215,16 @@ def test_the_chapter_counts_and_maps_each_verdict():
         "cells": [cell(0, 3, ekf=yes), cell(1, 3, ekf=no), cell(0, 10, ekf=failed), cell(1, 10)],
     }
     counts = beyond_atlas.verdict_counts(result)["ekf"]
-    assert counts["calibrated"] == dict(yes=1, no=1, undecided=0, no_answer=2, cells=4)
-    assert counts["near_bound"] == dict(yes=1, no=0, undecided=1, no_answer=2, cells=4)
+    known = dict(no_answer=1, not_run=1, untested=0, cells=4)
+    assert counts["calibrated"] == dict(yes=1, no=1, undecided=0, **known)
+    assert counts["near_bound"] == dict(yes=1, no=0, undecided=1, **known)
+    assert beyond_atlas.count_cell(counts["lost"]) == "1 / 1 / 0 (1 not run, 1 without answer)"
     texts = beyond_atlas.count_texts({"ekf": counts}, "at")
     assert texts["at_ekf_lost"] == "1 (0)"
     m, rows, columns = beyond_atlas.verdict_grid(result, "calibrated", ["ekf"])
     assert rows == [("paper", 1000.0, 6.0)] and columns == [(3, 0.005), (10, 0.005)]
     assert m.shape == (1, 5) and np.isnan(m[0, 2])
-    assert m[0].tolist()[:2] == [1.0, 0.0] and m[0, 3:].tolist() == [3.0, 3.0]
+    assert m[0].tolist()[:2] == [1.0, 0.0] and m[0, 3:].tolist() == [3.0, 5.0]
     # a form whose truths are drawn has no bound: its near-bound verdict is not tested
     drawn = {**cell(0, 3, ekf=yes), "form": "range", "prior_scale": None, "bound_sd": None}
     result["cells"].append(drawn)
@@ -290,8 +292,9 @@ def test_the_chapter_counts_each_verdict_per_prior_setting():
     }
     by = beyond_atlas.counts_by_prior(result, "ekf", "calibrated")
     assert list(by) == [("paper", 1000.0), ("range", None)]
-    assert by[("paper", 1000.0)] == dict(yes=1, no=0, undecided=1, no_answer=0, cells=2)
-    assert by[("range", None)] == dict(yes=0, no=2, undecided=0, no_answer=0, cells=2)
+    none = dict(no_answer=0, not_run=0, untested=0)
+    assert by[("paper", 1000.0)] == dict(yes=1, no=0, undecided=1, cells=2, **none)
+    assert by[("range", None)] == dict(yes=0, no=2, undecided=0, cells=2, **none)
 
 
 def test_a_filter_runs_up_to_its_most_frames_in_a_grid():

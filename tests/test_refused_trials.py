@@ -120,3 +120,24 @@ def test_a_random_filter_refusing_trials_draws_on_from_its_generator():
     assert 0 < est.refused < len(part.mu) and np.isfinite(est.mean).all()
     again = run()["particle"]
     assert np.array_equal(est.mean, again.mean) and np.array_equal(est.answered, again.answered)
+
+
+class _Flaky(_Refusing):
+    """A random registry entry that, at each call, fails on trials its draws pick anew."""
+
+    def __call__(self, mu, *args, rng, **kwargs):
+        if np.any(rng.random(len(mu)) < 0.02):
+            raise np.linalg.LinAlgError("Singular matrix")
+        return self._entry(mu, *args, rng=rng, **kwargs)
+
+
+def test_a_random_filter_failing_anew_when_run_again_is_isolated_in_rounds(monkeypatch):
+    from depthcore.registry import filters
+
+    monkeypatch.setitem(filters.FILTERS, "particle", _Flaky(filters.FILTERS["particle"]))
+    part = study_trials.simulate([1.2, 6.0, 1.2], 0.005, 40, np.random.default_rng(0))
+    est = study_trials.run_filters(part, ("particle",), np.random.default_rng(8), 50)["particle"]
+    # the first run failed; the trials answered are those the last run answered
+    assert est.answered is not None and est.answered.sum() == len(est.mean)
+    assert est.refused == len(part.mu) - len(est.mean) < len(part.mu) / 2
+    assert np.isfinite(est.mean).all()

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from depthcore.book.notebook import MarkdownTable
 from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
 from depthcore.studies import atlas
 
@@ -31,7 +32,7 @@ def _undecided(entry: dict, verdict: str) -> bool:
 
 
 def verdict_counts(result: dict, names=None) -> dict:
-    """Per filter and verdict, in how many cells it is yes, no, undecided, or has no answer.
+    """Per filter and verdict, in how many cells it is yes, no, undecided, or not known.
 
     Parameters
     ----------
@@ -43,27 +44,38 @@ def verdict_counts(result: dict, names=None) -> dict:
     Returns
     -------
     dict
-        ``{name: {verdict: {"yes", "no", "undecided", "no_answer", "cells"}}}``:
-        a cell where the filter failed, or had no valid trial, has no answer;
-        one where its score is not finite is undecided.
+        ``{name: {verdict: {"yes", "no", "undecided", "no_answer", "not_run",
+        "untested", "cells"}}}``: a cell where the filter failed, or had no
+        valid trial, has no answer; one the grid does not run it in
+        (:meth:`depthcore.studies.atlas.Grid.runs`) is not run; the nearness to
+        the bound is not tested where the cell has no bound; a verdict whose
+        test cannot decide, or whose score is not finite, is undecided.
     """
     names = result["names"] if names is None else names
+    keys = ("yes", "no", "undecided", "no_answer", "not_run", "untested", "cells")
     out = {}
     for name in names:
         out[name] = {}
         for verdict in atlas.VERDICTS:
-            c = dict.fromkeys(("yes", "no", "undecided", "no_answer", "cells"), 0)
+            c = dict.fromkeys(keys, 0)
             for cell in result["cells"]:
-                entry = cell["filters"].get(name)
                 c["cells"] += 1
-                if entry is None or "failed" in entry:
-                    c["no_answer"] += 1
-                elif entry[verdict] is None:
-                    c["undecided"] += 1
-                else:
-                    c["yes" if entry[verdict] else "no"] += 1
+                c[_outcome(cell, name, verdict)] += 1
             out[name][verdict] = c
     return out
+
+
+def _outcome(cell: dict, name: str, verdict: str) -> str:
+    entry = cell["filters"].get(name)
+    if entry is None:
+        return "not_run"
+    if "failed" in entry:
+        return "no_answer"
+    if verdict == "near_bound" and "bound_sd" in cell and cell["bound_sd"] is None:
+        return "untested"
+    if entry[verdict] is None:
+        return "undecided"
+    return "yes" if entry[verdict] else "no"
 
 
 def counts_by_prior(result: dict, name: str, verdict: str) -> dict:
@@ -97,6 +109,19 @@ def count_texts(counts: dict, prefix: str) -> dict:
 
 #: Where a verdict is not tested in a cell (no bound for the forms whose truths are drawn).
 UNTESTED = 4.0
+
+#: Where a filter does not run in a cell (the grid's most frames for it).
+NOT_RUN = 5.0
+
+#: The code of each outcome of :func:`_outcome` in :func:`verdict_grid`'s matrix.
+CODES = {
+    "yes": OUTCOMES[True],
+    "no": OUTCOMES[False],
+    "undecided": OUTCOMES[None],
+    "no_answer": NO_ANSWER,
+    "untested": UNTESTED,
+    "not_run": NOT_RUN,
+}
 
 
 def prior_label(form: str, scale) -> str:
@@ -151,14 +176,8 @@ def verdict_grid(result: dict, verdict: str, names) -> tuple:
         r, c = rows.index(_row_key(cell)), columns.index(_column_key(cell))
         col = c * (n_par + 1) + parallax.index(cell["parallax"])
         for f, name in enumerate(names):
-            entry = cell["filters"].get(name)
-            if entry is None or "failed" in entry:
-                value = NO_ANSWER
-            elif verdict == "near_bound" and cell.get("bound_sd", 0.0) is None:
-                value = UNTESTED
-            else:
-                value = OUTCOMES[entry[verdict]]
-            m[f * (n_row + 1) + r, col] = value
+            outcome = _outcome(cell, name, verdict)
+            m[f * (n_row + 1) + r, col] = CODES[outcome]
     return m, rows, columns
 
 
@@ -173,7 +192,7 @@ def verdict_map(result: dict, verdict: str, names=None):
     (increasing) to the right; a tile is dark where the verdict holds, light
     where it does not, grey where the test cannot decide, white with a cross
     where the filter has no answer, white with a dot where the verdict is
-    not tested (no bound).
+    not tested (no bound), pale grey where the grid does not run the filter.
     """
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.lines import Line2D
@@ -185,9 +204,9 @@ def verdict_map(result: dict, verdict: str, names=None):
     width = WIDTH
     height = 1.0 + m.shape[0] / m.shape[1] * width * 0.78
     fig, ax = subplots(figsize=(width, height))
-    colours = ListedColormap([*COLOURS, "#ffffff"])
-    bounds = [-0.5, 0.5, 1.5, 2.5, 3.5, 4.5]
-    ax.imshow(m, cmap=colours, norm=BoundaryNorm(bounds, 5), aspect="auto")
+    colours = ListedColormap([*COLOURS, "#ffffff", "#f0f0f0"])
+    bounds = [-0.5, 0.5, 1.5, 2.5, 3.5, 4.5, 5.5]
+    ax.imshow(m, cmap=colours, norm=BoundaryNorm(bounds, 6), aspect="auto")
     for code, marker, size in ((NO_ANSWER, "x", 8), (UNTESTED, ".", 3)):
         r, c = np.nonzero(m == code)
         ax.scatter(c, r, marker=marker, s=size, color="0.3", linewidths=0.6)
@@ -217,11 +236,60 @@ def verdict_map(result: dict, verdict: str, names=None):
         Patch(facecolor=COLOURS[2], label="undecided"),
         Line2D([], [], marker="x", linestyle="", color="0.3", label="no answer"),
         Line2D([], [], marker=".", linestyle="", color="0.3", label="no bound"),
+        Patch(facecolor="#f0f0f0", label="not run"),
     ]
     fig.legend(
-        handles=handles, loc="outside lower center", ncol=5, frameon=False, fontsize=MIN_FONT
+        handles=handles, loc="outside lower center", ncol=6, frameon=False, fontsize=MIN_FONT
     )
     return fig
+
+
+#: The headings of :func:`summary_table`'s columns, by verdict.
+VERDICT_HEADINGS = {
+    "calibrated": "calibrated",
+    "lost": "track lost",
+    "near_bound": "near the bound",
+}
+
+
+def count_cell(c: dict) -> str:
+    """One filter's counts of one verdict as a table shows them: yes / no / undecided."""
+    text = f"{c['yes']} / {c['no']} / {c['undecided']}"
+    notes = [
+        f"{c[key]} {words}"
+        for key, words in (
+            ("not_run", "not run"),
+            ("no_answer", "without answer"),
+            ("untested", "not tested"),
+        )
+        if c[key]
+    ]
+    return text + (f" ({', '.join(notes)})" if notes else "")
+
+
+def summary_table(counts: dict, names) -> MarkdownTable:
+    """Per filter, in how many cells each verdict is yes, no and undecided."""
+    header = ["filter", *(f"{h}: yes / no / undecided" for h in VERDICT_HEADINGS.values())]
+    rows = [
+        [STYLE[name]["label"], *(count_cell(counts[name][v]) for v in VERDICT_HEADINGS)]
+        for name in names
+    ]
+    return MarkdownTable(header, rows)
+
+
+def cost_table(cost: dict, names) -> MarkdownTable:
+    """The measured milliseconds per trial of each filter at each number of frames."""
+    rows = cost_rows(cost, names)
+    frames = sorted({f for r in rows for f in r["frames"]}, key=int)
+    header = ["filter", *(f"N = {f}" for f in frames)]
+    body = [
+        [
+            STYLE[r["name"]]["label"],
+            *(f"{r['frames'][f]:.2g}" if f in r["frames"] else "–" for f in frames),
+        ]
+        for r in rows
+    ]
+    return MarkdownTable(header, body)
 
 
 def cost_rows(cost: dict, names) -> list[dict]:

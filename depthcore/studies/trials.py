@@ -389,6 +389,10 @@ def run_filters(
 #: The failures of a filter on a trial that count the trial as refused by it.
 FAILURES = (ValueError, np.linalg.LinAlgError)
 
+#: Most rounds of isolating a filter's refused trials: a random filter, run again on the
+#: trials it answered, draws afresh and may refuse others.
+ROUNDS = 5
+
 
 def _run_one(trials: Trials, name: str, rng, n_particles: int, noise: dict, ref) -> Estimates:
     """One non-exact filter's :class:`Estimates` over the trials it answers."""
@@ -414,7 +418,20 @@ def _run_one(trials: Trials, name: str, rng, n_particles: int, noise: dict, ref)
                 f"({exc}); use more particles, or leave {name} out"
             ) from None
         reason = " ".join(str(exc).split()) or type(exc).__name__
-    rows = answered_rows(lambda r: run(subset(trials, r)), len(trials.mu))
+    rows = np.arange(len(trials.mu))
+    for _ in range(ROUNDS):
+        rows = rows[answered_rows(lambda r, rows=rows: run(subset(trials, rows[r])), len(rows))]
+        if not len(rows):
+            break
+        # a random filter draws afresh on the trials it answered, and may refuse others
+        try:
+            part = subset(trials, rows)
+            est = run(part)
+            break
+        except FAILURES:
+            continue
+    else:
+        rows = rows[:0]
     if not len(rows):
         # the bearings were drawn here, so no bearing is the user's to mend: the blame
         # is the choice of filters
@@ -422,11 +439,10 @@ def _run_one(trials: Trials, name: str, rng, n_particles: int, noise: dict, ref)
             f"filters: the {name} filter has no answer for a simulated trial ({reason}); "
             f"leave {name} out, or lower the process noise or the noise level"
         )
-    part = subset(trials, rows)
     if ref is not None:  # the reference over the trials answered, run again on them alone
         ref = FILTERS["optimal"](part.mu, part.rho, part.prior_mean, part.prior_cov, **noise)
         ref = ref.detail
-    est = _estimates(part, run(part), f.scoring, ref)
+    est = _estimates(part, est, f.scoring, ref)
     answered = np.zeros(len(trials.mu), dtype=bool)
     answered[rows] = True
     return dataclasses.replace(est, refused=len(trials.mu) - len(rows), answered=answered)
