@@ -191,7 +191,7 @@ figures: $(EDITABLE) ## the paper's figures into figures/
 	$(PY) -m depthcore figures --out figures/
 
 # The pages that read studies from their records: executed writing them, then reading them.
-RECORD_PAGES := marginals discrepancies beyond_filters beyond_particles beyond_study beyond_sweeps beyond_frames beyond_bound beyond_hard beyond_conjecture intro conclusions reproducing
+RECORD_PAGES := marginals discrepancies beyond_filters beyond_particles beyond_study beyond_sweeps beyond_frames beyond_bound beyond_hard beyond_conjecture beyond_atlas intro conclusions reproducing
 # Their studies' chunks run on a local Dask cluster of every core (tools/cluster.py).
 records: $(EDITABLE) ## every study the book reads from a record, again (and the README)
 	rm -f depthcore/provenance/study_records/*.json

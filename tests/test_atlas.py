@@ -241,10 +241,10 @@ def test_the_prior_forms_are_an_axis_and_refused_trials_are_counted_apart():
         rho=(0.005,),
         frames=(3,),
         forms=("paper", "inverse_depth"),
-        trials=300,
+        trials=200,
         n_particles=60,
         chunk=100,
-        names=("optimal", "ekf", "ukf"),
+        names=("optimal", "ekf"),
     )
     settings = atlas.cells(grid)
     # the drawn form states its own covariance: one cell, at no prior scale
@@ -258,7 +258,7 @@ def test_the_prior_forms_are_an_axis_and_refused_trials_are_counted_apart():
     alone = monte_carlo.study(
         truth=atlas.truth_of(0.2, 6.0),
         rho=0.005,
-        trials=300,
+        trials=200,
         seed=atlas.cell_seed(5, 2),
         prior="inverse_depth",
         names=grid.names,

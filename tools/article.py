@@ -41,12 +41,13 @@ import readme  # noqa: E402  (the README's numbers: the same computations, share
 
 from depthcore import SCENARIOS, Gaussian, __version__, formatting  # noqa: E402
 from depthcore.analysis import reference  # noqa: E402
+from depthcore.book import beyond_atlas  # noqa: E402
 from depthcore.exact import optimal  # noqa: E402
 from depthcore.kalman import second_order  # noqa: E402
 from depthcore.problem import model  # noqa: E402
 from depthcore.problem.scenarios import REPORTED_DECIMALS, SCAN_TEXT  # noqa: E402
 from depthcore.provenance import environment, records  # noqa: E402
-from depthcore.studies import monte_carlo, reproduce, verdicts  # noqa: E402
+from depthcore.studies import atlas, monte_carlo, reproduce, verdicts  # noqa: E402
 
 ARTICLE = ROOT / "article"
 SOURCE = ARTICLE / "article.tex"
@@ -326,6 +327,7 @@ def extension_numbers(bench: dict) -> list[Number]:
                 bound_record,
             )
         )
+    out += atlas_numbers()
     c = readme.cost_texts(bench)
     for key, record in (
         ("optimal_ekf_min", "bench_optimal"),
@@ -346,6 +348,28 @@ def extension_numbers(bench: dict) -> list[Number]:
             )
         )
     return out
+
+
+def atlas_numbers() -> list[Number]:
+    """The atlas's calibrated cells per group of filters, from its record (book/beyond_atlas.md)."""
+    with readme._records_required():
+        run = records.recorded(atlas.atlas, "book", beyond_atlas.SEED)
+    texts = {
+        "cells": f"{len(run.result['cells'])}",
+        **beyond_atlas.calibration_texts(beyond_atlas.verdict_counts(run.result)),
+    }
+    args = f"size 'book', {len(run.result['cells'])} cells of {run.result['trials']} trials"
+    return [
+        Number(
+            f"atlas-{key.replace('_', '-')}",
+            text,
+            "studies.atlas.atlas",
+            args,
+            f"{beyond_atlas.SEED}",
+            _record_name(run),
+        )
+        for key, text in texts.items()
+    ]
 
 
 def software_numbers() -> list[Number]:

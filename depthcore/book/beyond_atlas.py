@@ -17,6 +17,14 @@ from depthcore.book.notebook import MarkdownTable
 from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
 from depthcore.studies import atlas
 
+#: The seed of the book's atlas (cell ``i`` is seeded by its child ``i``).
+SEED = 34
+
+#: The filters the chapter finds calibrated in most cells, and those calibrated in few
+#: (its checks assert the split; :func:`calibration_texts` counts them).
+CALIBRATED_GROUP = ("optimal", "second_order", "modified_polar", "batch_ml", "particle")
+MISCALIBRATED_GROUP = ("ekf", "ukf", "inverse_depth", "inverse_depth_ukf")
+
 #: The outcomes of a verdict in a cell, as :func:`verdict_grid` codes them.
 OUTCOMES = {True: 1.0, False: 0.0, None: 2.0}
 
@@ -96,6 +104,25 @@ def counts_by_prior(result: dict, name: str, verdict: str) -> dict:
         for k, v in c.items():
             total[k] += v
     return out
+
+
+def calibration_texts(counts: dict) -> dict:
+    """The calibrated cells of each group, as the chapter and the conclusions glue them.
+
+    Returns
+    -------
+    dict
+        ``"good_min"``, ``"good_max"`` (:data:`CALIBRATED_GROUP`'s fewest and
+        most), ``"ekf"`` (``"none"`` for 0) and ``"poor_max"`` (the most of
+        :data:`MISCALIBRATED_GROUP` but the EKF).
+    """
+    yes = {n: counts[n]["calibrated"]["yes"] for n in counts}
+    return {
+        "good_min": f"{min(yes[n] for n in CALIBRATED_GROUP)}",
+        "good_max": f"{max(yes[n] for n in CALIBRATED_GROUP)}",
+        "ekf": "none" if yes["ekf"] == 0 else f"{yes['ekf']}",
+        "poor_max": f"{max(yes[n] for n in MISCALIBRATED_GROUP if n != 'ekf')}",
+    }
 
 
 def count_texts(counts: dict, prefix: str) -> dict:
