@@ -140,7 +140,7 @@ UNTESTED = 4.0
 #: Where a filter does not run in a cell (the grid's most frames for it).
 NOT_RUN = 5.0
 
-#: The code of each outcome of :func:`_outcome` in :func:`verdict_grid`'s matrix.
+#: The code of each outcome of a verdict in :func:`verdict_grid`'s matrix.
 CODES = {
     "yes": OUTCOMES[True],
     "no": OUTCOMES[False],

@@ -108,7 +108,7 @@ BOUND_TOLERANCE = 1.1
 #: size runs them, and the book measures their cost apart (:func:`probe_cost`).
 COSTLY = ("resample_move", "rbpf", "range_parametrised")
 
-#: The filter the book's atlas runs to 10 frames alone: at 30 frames its iterations cost
+#: The filter the book's atlas runs to 10 frames alone, since at 30 frames its iterations cost
 #: more than every other filter of the book's atlas together (:func:`probe_cost` measures it).
 COSTLY_AT_30 = "iterated"
 

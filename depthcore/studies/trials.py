@@ -389,7 +389,7 @@ def run_filters(
 #: The failures of a filter on a trial that count the trial as refused by it.
 FAILURES = (ValueError, np.linalg.LinAlgError)
 
-#: Most rounds of isolating a filter's refused trials: a random filter, run again on the
+#: Most rounds of isolating a filter's refused trials, since a random filter, run again on the
 #: trials it answered, draws afresh and may refuse others.
 ROUNDS = 5
 
