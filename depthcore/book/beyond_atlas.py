@@ -20,9 +20,10 @@ from depthcore.studies import atlas
 #: The seed of the book's atlas (cell ``i`` is seeded by its child ``i``).
 SEED = 34
 
-#: The filters the chapter finds calibrated in most cells, and those calibrated in few
-#: (its checks assert the split; :func:`calibration_texts` counts them).
+#: The filters the chapter finds calibrated in most cells (its checks assert it).
 CALIBRATED_GROUP = ("optimal", "second_order", "modified_polar", "batch_ml", "particle")
+
+#: The filters the chapter finds calibrated in few cells (its checks assert it).
 MISCALIBRATED_GROUP = ("ekf", "ukf", "inverse_depth", "inverse_depth_ukf")
 
 #: The outcomes of a verdict in a cell, as :func:`verdict_grid` codes them.

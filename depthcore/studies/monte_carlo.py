@@ -228,8 +228,10 @@ class Study:
     sizes : list of int
         The trials of each chunk, in order.
     trials : int
-    n_valid, n_rejected : int
-        Trials folded so far that were scored, and left out.
+    n_valid : int
+        Trials folded so far that were scored.
+    n_rejected : int
+        Trials folded so far that were left out.
     """
 
     def __init__(

@@ -100,8 +100,9 @@ class Estimates:
     refused : int
         Trials of the batch the filter had no answer for, left out of the
         arrays above (``N`` counts the trials answered).
-    answered : ndarray of bool, shape (N + refused,), or None
-        Which trials of the batch the rows above are; ``None``: all of them.
+    answered : ndarray of bool, or None
+        Which trials of the batch (one entry each, answered or refused) the
+        rows above are; ``None``: all of them.
     """
 
     mean: np.ndarray
