@@ -11,6 +11,7 @@ attribute that only another module defines (``marginals._start``).
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -419,3 +420,45 @@ def test_every_subpackage_says_what_lives_there_and_where_a_new_thing_goes():
         for module in listed:
             assert f"depthcore.{name}.{module}" in doc, (name, module)
         assert "Where a new thing goes" in doc or name == "book", name
+
+
+#: An inline literal, read left to right; a Sphinx role inside one is shown raw, never linked.
+LITERAL = re.compile(r"``(.+?)``", re.S)
+ROLE = re.compile(r":[a-z]+:`[^`]+`")
+
+
+def roles_in_literals(text: str) -> list[str]:
+    """Every inline literal of ``text`` that holds a Sphinx role."""
+    return [m.group(1) for m in LITERAL.finditer(text) if ROLE.search(m.group(1))]
+
+
+def test_finds_a_role_inside_a_literal():
+    assert roles_in_literals('``{"r": :func:`f`\'s result}``')
+    assert not roles_in_literals("``x`` (:func:`f`) and ``y``")
+
+
+#: The definitions that carry docstrings besides the module.
+DOCUMENTED = (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)
+
+
+def docstrings(source: str) -> list[str]:
+    """The docstrings of a module, its classes and functions, and its ``#:`` comments."""
+    tree = ast.parse(source)
+    nodes = [tree, *(n for n in ast.walk(tree) if isinstance(n, DOCUMENTED))]
+    found = [ast.get_docstring(n) or "" for n in nodes]
+    comments = [line.strip() for line in source.splitlines()]
+    return found + [line[2:] for line in comments if line.startswith("#:")]
+
+
+def test_no_docstring_puts_a_role_inside_a_literal():
+    found = {
+        name: hits
+        for name, path in PATHS.items()
+        for hits in [
+            hit
+            for doc in docstrings(path.read_text(encoding="utf-8"))
+            for hit in roles_in_literals(doc)
+        ]
+        if hits
+    }
+    assert not found, found

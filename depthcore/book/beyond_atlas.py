@@ -234,7 +234,14 @@ def verdict_map(result: dict, verdict: str, names=None):
     fig, ax = subplots(figsize=(width, height))
     colours = ListedColormap([*COLOURS, "#ffffff", "#f0f0f0"])
     bounds = [-0.5, 0.5, 1.5, 2.5, 3.5, 4.5, 5.5]
-    ax.imshow(m, cmap=colours, norm=BoundaryNorm(bounds, 6), aspect="auto")
+    ax.pcolormesh(  # tiles as vector rectangles; the gaps between blocks left blank
+        np.arange(m.shape[1] + 1) - 0.5,
+        np.arange(m.shape[0] + 1) - 0.5,
+        np.ma.masked_invalid(m),
+        cmap=colours,
+        norm=BoundaryNorm(bounds, 6),
+    )
+    ax.set_ylim(m.shape[0] - 0.5, -0.5)  # the first row at the top
     for code, marker, size in ((NO_ANSWER, "x", 8), (UNTESTED, ".", 3)):
         r, c = np.nonzero(m == code)
         ax.scatter(c, r, marker=marker, s=size, color="0.3", linewidths=0.6)

@@ -197,13 +197,14 @@ def referee_cells(frames, blocks, seed, names=("optimal",), **study) -> dict:
     Returns
     -------
     dict
-        ``{N: {"blocks": {trials: {"replicates": :func:`replicate`'s result,
-        score: :func:`spread` of each filter's depth score, against the
-        pooled value}}, "pooled": {name: {"mse", "rmse", "coverage_68",
-        "median_abs_error"}}}}``: the pooled values over every replicate of the
-        cell (:func:`pooled`; the RMSE's error by the delta method from the
-        pooled MSE's, the median absolute error the median of the replicates'
-        with the SD of the largest blocks' over their square root).
+        ``{N: {"blocks": {trials: {"replicates": result, score: spread}},
+        "pooled": {name: {"mse", "rmse", "coverage_68", "median_abs_error"}}}}``:
+        each block's ``result`` is :func:`replicate`'s and ``spread`` is
+        :func:`spread` of each filter's depth score against the pooled value;
+        the pooled values are over every replicate of the cell (:func:`pooled`;
+        the RMSE's error by the delta method from the pooled MSE's, the median
+        absolute error the median of the replicates' with the SD of the largest
+        blocks' over their square root).
     """
     frames = [checks.frames(n) for n in np.atleast_1d(frames)]
     blocks = [(checks.count(t, "blocks"), checks.count(r, "blocks")) for t, r in blocks]
