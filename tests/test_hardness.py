@@ -5,6 +5,7 @@ computation, and the exact posterior's calibration over its prior (Talts et al. 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
+from scipy.stats import binom
 
 from depthcore import SCENARIOS
 from depthcore.analysis import bound
@@ -271,3 +272,14 @@ def test_outcome_counts_count_wins_ties_and_losses():
     assert beyond_hard.outcome_counts(np.zeros((2, 3), dtype=int)) == (0, 6, 0)
     with pytest.raises(ValueError, match="outcomes"):
         beyond_hard.outcome_counts([1, 2])
+
+
+def test_median_text_states_the_median_and_its_distribution_free_interval():
+    e = np.arange(1.0, 102.0)  # 101 absolute errors, median 51
+    s = hardness.depth_scores(e, np.ones(101), np.full(101, 0.5))
+    # the order statistics j < k with P(j <= B < k) >= 0.95, B ~ Binomial(101, 1/2)
+    j, k = 41, 61
+    assert binom.cdf(k - 1, 101, 0.5) - binom.cdf(j - 1, 101, 0.5) >= 0.95
+    assert beyond_hard.median_text(s) == f"51.0 (95 % interval {j:.1f} to {k:.1f})"
+    unbounded = dict(s, median_abs_error_ci=[2.0, None])
+    assert beyond_hard.median_text(unbounded, 2) == "51.00 (95 % interval from 2.00)"

@@ -4,9 +4,9 @@ Recommended import: ``from depthcore.book import beyond_hard``.
 
 :func:`hard_figure` draws every filter's RMSE and coverage in each cell of
 :func:`depthcore.studies.hardness.hard_study`, each cell named by :func:`setting_label`;
-:func:`hard_label`, :func:`score_text`, :func:`extreme_text` and :func:`verdict_texts`
-give the texts the chapter glues; :func:`outcome_counts` counts the outcomes of its
-paired tests.
+:func:`hard_label`, :func:`score_text`, :func:`median_text`, :func:`extreme_text` and
+:func:`verdict_texts` give the texts the chapter glues; :func:`outcome_counts` counts
+the outcomes of its paired tests.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import numpy as np
 from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
 from depthcore.formatting import value_se
 from depthcore.studies import hardness
+from depthcore.studies.scores import INTERVAL_LEVEL
 
 #: A marker per filter of :data:`depthcore.studies.hardness.NAMES`, so that the
 #: filters stay apart in print without colour.
@@ -210,6 +211,31 @@ def score_text(scores: dict, score: str) -> str:
     else:
         decimals = max(0, 2 - int(np.floor(np.log10(max(abs(value), 1e-3)))))
     return value_se(value, scores[f"{score}_se"], decimals)
+
+
+def median_text(scores: dict, decimals: int = 1) -> str:
+    """A filter's median absolute depth error with its distribution-free 95 % interval.
+
+    Parameters
+    ----------
+    scores : dict
+        One filter's scores in one reading of a cell
+        (:func:`depthcore.studies.hardness.depth_scores`), with
+        ``"median_abs_error"`` and ``"median_abs_error_ci"``.
+    decimals : int
+
+    Returns
+    -------
+    str
+        ``"m (95 % interval lo to hi)"``; ``"m (95 % interval from lo)"`` when
+        the interval has no upper end.
+    """
+    m = scores["median_abs_error"]
+    lo, hi = scores["median_abs_error_ci"]
+    level = f"{100 * INTERVAL_LEVEL:g} %"
+    if hi is None:
+        return f"{m:.{decimals}f} ({level} interval from {lo:.{decimals}f})"
+    return f"{m:.{decimals}f} ({level} interval {lo:.{decimals}f} to {hi:.{decimals}f})"
 
 
 def extreme_text(cells: list, reading: str, name: str, score: str, which: str, where=None):
