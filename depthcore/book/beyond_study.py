@@ -323,14 +323,3 @@ def prior_study_texts(result: dict, prefix: str) -> dict:
 #: the exact filter, the paper's prior rule, three and thirty frames, blocks of 150 trials
 #: (60 replicates) and of 2,000 (10), pooled into long runs of 29,000 trials.
 REFEREE_CELLS = {"frames": (3, 30), "blocks": ((150, 60), (2000, 10)), "seed": 34}
-
-#: The long run of the hard chapter's setting at Figure 2's truth with the paper's prior
-#: covariance (:func:`depthcore.studies.replication.fixed_truth_replicates`): 20 replicates
-#: of 500 trials.
-HARD_LONG_RUN = {
-    "prior_scale": 1000.0,
-    "prior_velocity": 0.0,
-    "trials": 500,
-    "replicates": 20,
-    "seed": 34,
-}
