@@ -216,11 +216,12 @@ def _noise_label(rho: float) -> str:
 def verdict_map(result: dict, verdict: str, names=None):
     """One verdict in every cell: a block of tiles per filter (rows), per frames and noise.
 
-    Within a block the prior settings (and depths) run down, the parallaxes
-    (increasing) to the right; a tile is dark where the verdict holds, light
-    where it does not, grey where the test cannot decide, white with a cross
-    where the filter has no answer, white with a dot where the verdict is
-    not tested (no bound), pale grey where the grid does not run the filter.
+    Each block is headed by its filter; within it the prior settings (and
+    depths) run down, the parallaxes (increasing) to the right; a tile is
+    dark where the verdict holds, light where it does not, grey where the
+    test cannot decide, white with a cross where the filter has no answer,
+    white with a dot where the verdict is not tested (no bound), pale grey
+    where the grid does not run the filter.
     """
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.lines import Line2D
@@ -241,7 +242,6 @@ def verdict_map(result: dict, verdict: str, names=None):
         cmap=colours,
         norm=BoundaryNorm(bounds, 6),
     )
-    ax.set_ylim(m.shape[0] - 0.5, -0.5)  # the first row at the top
     for code, marker, size in ((NO_ANSWER, "x", 8), (UNTESTED, ".", 3)):
         r, c = np.nonzero(m == code)
         ax.scatter(c, r, marker=marker, s=size, color="0.3", linewidths=0.6)
@@ -250,18 +250,20 @@ def verdict_map(result: dict, verdict: str, names=None):
         prior_label(form, scale) + (f", $y = {d:g}$" if len(depths) > 1 else "")
         for form, scale, d in rows
     ]
-    ticks, tick_labels = [], []
-    for f, name in enumerate(names):
-        ticks += [f * (n_row + 1) + r for r in range(n_row)]
-        tick_labels += [f"{STYLE[name]['label']}: {label}" for label in labels]
+    ticks, tick_labels, headings = [], [], []
+    for f, name in enumerate(names):  # each block headed by its filter, in the gap above it
+        headings.append(len(ticks))
+        ticks += [f * (n_row + 1) - 1] + [f * (n_row + 1) + r for r in range(n_row)]
+        tick_labels += [STYLE[name]["label"]] + labels
     ax.set_yticks(ticks)
     ax.set_yticklabels(tick_labels, fontsize=MIN_FONT)
+    for i in headings:
+        ax.get_yticklabels()[i].set_fontweight("bold")
+    ax.set_ylim(m.shape[0] - 0.5, -1.5)
     ax.set_xticks([c * (n_par + 1) + (n_par - 1) / 2 for c in range(len(columns))])
     ax.set_xticklabels(
         [f"N = {frames}\n{_noise_label(rho)}" for frames, rho in columns], fontsize=MIN_FONT
     )
-    for f in range(1, len(names)):
-        ax.axhline(f * (n_row + 1) - 1, color="0.2", linewidth=0.8)
     ax.tick_params(length=0)
     for spine in ax.spines.values():
         spine.set_visible(False)
