@@ -217,5 +217,14 @@ def test_the_books_other_studies_on_two_local_workers_equal_them_in_process():
     here = [_encoded(f(*a, **k)) for f, a, k in calls]
     with tasks.cluster(workers=2) as client:
         there = [_encoded(f(*a, **k, client=client)) for f, a, k in calls]
+        environ = client.run(_worker_environ)  # each worker's, by its address
     for (f, _, _), a, b in zip(calls, here, there, strict=True):
         assert a == b, f.__name__
+    # the workers keep freed memory up to tasks.WORKER_ENVIRON's threshold, not Dask's 64 KiB
+    assert len(environ) == 2
+    assert all(e == tasks.WORKER_ENVIRON for e in environ.values()), environ
+
+
+def _worker_environ() -> dict:
+    """The variables of :data:`depthcore.studies.tasks.WORKER_ENVIRON` in this process."""
+    return {k: os.environ.get(k) for k in tasks.WORKER_ENVIRON}

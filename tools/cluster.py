@@ -12,7 +12,6 @@ Usage: ``python tools/cluster.py [--workers N] COMMAND [ARG ...]`` (default
 from __future__ import annotations
 
 import argparse
-import logging
 import os
 import subprocess
 import sys
@@ -32,16 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not args.command:
         parser.error("a command to run is required")
-    from distributed import LocalCluster
-
-    with LocalCluster(
-        n_workers=args.workers,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address=None,
-        silence_logs=logging.ERROR,
-    ) as cluster:
+    with tasks.local_cluster(args.workers, host="127.0.0.1") as cluster:
         env = {**os.environ, tasks.SCHEDULER: cluster.scheduler_address}
         print(
             f"a local cluster of {args.workers} workers at {cluster.scheduler_address}",

@@ -51,6 +51,19 @@ MAX_WORKERS = 64
 #: Seconds to wait for a scheduler named by address before refusing it.
 CONNECT_TIMEOUT = 5.0
 
+#: The environment each worker process of :func:`local_cluster` starts with. Dask's default
+#: returns freed memory to the system from 64 KiB on (``MALLOC_TRIM_THRESHOLD_``), so that
+#: each large NumPy temporary of a chunk is mapped and zeroed afresh by the system; at 64 MiB
+#: a worker keeps at most that much freed memory for reuse. Set it too for the workers of a
+#: cluster started by hand (``dask worker``).
+WORKER_ENVIRON = {
+    "MALLOC_TRIM_THRESHOLD_": str(64 << 20),
+    "MALLOC_MMAP_THRESHOLD_": str(64 << 20),
+    "OMP_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+}
+
 _clients: dict = {}
 
 
@@ -180,20 +193,38 @@ def cluster(workers: int | None = None, scheduler: str | None = None):
             f"workers must be a number of local worker processes, 1 to {MAX_WORKERS}, "
             f"got {workers!r}"
         )
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     _quiet()
-    with (
-        LocalCluster(
-            n_workers=workers,
+    with local_cluster(workers) as local, Client(local, set_as_default=False) as client:
+        yield client
+
+
+def local_cluster(workers: int, host: str | None = None):
+    """A ``distributed.LocalCluster`` of ``workers`` processes of one thread, no dashboard.
+
+    Each worker process starts with :data:`WORKER_ENVIRON`. Use it as a
+    context manager; :func:`cluster` gives a client of one.
+
+    Parameters
+    ----------
+    workers : int
+        At least 1.
+    host : str, optional
+        The interface the scheduler and workers listen on (``"127.0.0.1"``).
+    """
+    import dask
+    from distributed import LocalCluster
+
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENVIRON}):
+        return LocalCluster(
+            n_workers=checks.count(workers, "workers"),
             threads_per_worker=1,
             processes=True,
+            host=host,
             dashboard_address=None,
             silence_logs=logging.ERROR,
-        ) as local,
-        Client(local, set_as_default=False) as client,
-    ):
-        yield client
+        )
 
 
 def resolve(client=None):
