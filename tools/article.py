@@ -47,7 +47,7 @@ from depthcore.kalman import second_order  # noqa: E402
 from depthcore.problem import model  # noqa: E402
 from depthcore.problem.scenarios import REPORTED_DECIMALS, SCAN_TEXT  # noqa: E402
 from depthcore.provenance import environment, records  # noqa: E402
-from depthcore.studies import atlas, monte_carlo, reproduce, verdicts  # noqa: E402
+from depthcore.studies import monte_carlo, reproduce, verdicts  # noqa: E402
 
 ARTICLE = ROOT / "article"
 SOURCE = ARTICLE / "article.tex"
@@ -352,12 +352,8 @@ def extension_numbers(bench: dict) -> list[Number]:
 
 def atlas_numbers() -> list[Number]:
     """The atlas's calibrated cells per group of filters, from its record (book/beyond_atlas.md)."""
-    with readme._records_required():
-        run = records.recorded(atlas.atlas, "book", beyond_atlas.SEED)
-    texts = {
-        "cells": f"{len(run.result['cells'])}",
-        **beyond_atlas.calibration_texts(beyond_atlas.verdict_counts(run.result)),
-    }
+    run = readme.atlas_run()
+    texts = {k: v for k, v in readme.atlas_texts(run).items() if k != "trials"}
     args = f"size 'book', {len(run.result['cells'])} cells of {run.result['trials']} trials"
     return [
         Number(

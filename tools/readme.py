@@ -144,14 +144,19 @@ def bound_texts() -> dict[str, str]:
     return intro.bound_texts(run.result)
 
 
-def atlas_texts() -> dict[str, str]:
+def atlas_run():
+    """The book's atlas (book/beyond_atlas.md), read from its record only."""
+    with _records_required():
+        return records.recorded(atlas.atlas, "book", beyond_atlas.SEED)
+
+
+def atlas_texts(run=None) -> dict[str, str]:
     """The atlas's cells and calibrated cells per group of filters (book/beyond_atlas.md).
 
-    :func:`depthcore.book.beyond_atlas.calibration_texts` of the book's atlas,
-    read from its record only, with ``"cells"`` and ``"trials"``.
+    :func:`depthcore.book.beyond_atlas.calibration_texts` of ``run`` (default
+    :func:`atlas_run`), with ``"cells"`` and ``"trials"``.
     """
-    with _records_required():
-        run = records.recorded(atlas.atlas, "book", beyond_atlas.SEED)
+    run = atlas_run() if run is None else run
     counts = beyond_atlas.verdict_counts(run.result)
     return {
         "cells": f"{len(run.result['cells'])}",
