@@ -47,6 +47,36 @@ def test_iterated_update_is_the_mode_of_the_one_step_posterior(key):
     assert np.max(np.abs(grad)) < 1e-3 * np.max(np.abs(np.linalg.solve(C, out.mean - n)) + 1)
 
 
+def test_an_update_stops_at_the_rounding_of_its_objective():
+    """At small noise the iterated update (textbook 19.3) stops within a few dozen iterations.
+
+    Near the mode the Gauss-Newton steps can go back and forth by a unit in
+    the last place, more than ``STEP_TOL`` SDs where the SDs are tiny; the
+    update stops when a step no longer lowers the objective, at the mode to
+    within the objective's rounding, found here independently by
+    ``scipy.optimize.least_squares``.
+    """
+    from depthcore.studies import trials
+
+    rng = np.random.default_rng(3)  # a draw where a step of one unit in the last place recurs
+    drawn = trials.simulate(np.array([2.4, 6.0, 2.4]), 1e-4, 60, rng, "paper", frames=3)
+    m, P = ekf.update(drawn.prior_mean, drawn.prior_cov, drawn.mu[:, 0], drawn.rho)
+    n, C = ekf.predict(m, P)
+    out = iterated.update(n, C, drawn.mu[:, 1], drawn.rho)
+    assert out.iterations.max() < 20 < iterated.MAX_ITERATIONS
+    sd = np.sqrt(np.diagonal(out.cov, axis1=-2, axis2=-1))
+    for i in range(len(n)):
+        L_inv = np.linalg.inv(np.linalg.cholesky(C[i]))
+
+        def residuals(x, i=i, L_inv=L_inv):
+            return np.append(L_inv @ (x - n[i]), (drawn.mu[i, 1] - x[0] / x[1]) / drawn.rho)
+
+        mode = least_squares(residuals, out.mean[i], xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+        assert np.max(np.abs(out.mean[i] - mode) / sd[i]) < 1e-6
+        f = np.sum(residuals(out.mean[i]) ** 2)
+        assert f <= np.sum(residuals(mode) ** 2) * (1 + 1e-12)
+
+
 def test_one_iteration_is_the_ekf_update_eq_12():
     """With one iteration (and an objective that the EKF step decreases) the update is Eq. (12)."""
     s = SCENARIOS["fig2"]

@@ -69,7 +69,10 @@ from depthcore.problem.gaussian import History, checked_track, run_recursion, sy
 
 #: Largest number of Gauss-Newton iterations of one update or smoother.
 MAX_ITERATIONS = 100
-#: Iterations stop when a step changes the state by less than this, in SDs.
+#: Iterations stop when a step changes the state by less than this, in SDs, or when a step
+#: no longer lowers the objective: the iterate is then the mode to within the objective's
+#: rounding (about ``sqrt(eps f)`` SDs for an objective ``f`` and the doubles' ``eps``), where
+#: steps back and forth by a unit in the last place can still be more than ``STEP_TOL`` SDs.
 STEP_TOL = 1e-12
 
 
@@ -139,8 +142,8 @@ def update(n, C, mu, rho, max_iterations: int = MAX_ITERATIONS) -> IteratedUpdat
         z = np.linalg.solve(C_chol, (x_new - x)[..., None])[..., 0]
         moved = np.sqrt(np.sum(z**2, axis=-1))
         x = np.where(active[..., None], x_new, x)
+        active = active & (moved > STEP_TOL) & (f_new < f)
         f = np.where(active, f_new, f)
-        active = active & (moved > STEP_TOL)
     # The gain of the last linearisation (at convergence, the gradient at the mode itself).
     h = model.observation_vector(linearised_at)
     Ch = np.einsum("...ij,...j->...i", C, h)
@@ -366,8 +369,8 @@ def smoother(
         iterations = iterations + active
         moved = np.sqrt(np.abs(np.einsum("...i,...ij,...j->...", x_new - x, A, x_new - x)))
         x = np.where(active[..., None], x_new, x)
+        active = active & (moved > STEP_TOL) & (f_new < f)
         f = np.where(active, f_new, f)
-        active = active & (moved > STEP_TOL)
     _, J = _residuals_and_jacobian(x, K)
     Jw = J / rho[..., None, None]
     cov1 = np.linalg.inv(P_inv + np.swapaxes(Jw, -1, -2) @ Jw)
@@ -461,8 +464,8 @@ def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:
             + np.sum(np.einsum("bki,bki->bk", H, d) ** 2, axis=-1)
             + np.sum((dz[:, 3:] / q) ** 2, axis=-1)
         )
+        converged[rows] = ~((moved > STEP_TOL) & (f_new < f[rows]))
         z[rows], f[rows] = z_new, f_new
-        converged[rows] = ~(moved > STEP_TOL)
     s = trajectory_states(z)
     zero = np.zeros((B, K))
     _, R = trajectory_solve(bearing_rows(s, weight), zero, zero[:, 1:], q, L_inv, np.zeros((B, 3)))

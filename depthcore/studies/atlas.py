@@ -108,10 +108,6 @@ BOUND_TOLERANCE = 1.1
 #: size runs them, and the book measures their cost apart (:func:`probe_cost`).
 COSTLY = ("resample_move", "rbpf", "range_parametrised")
 
-#: The filter the book's atlas runs to 10 frames alone, since at 30 frames its iterations cost
-#: more than every other filter of the book's atlas together (:func:`probe_cost` measures it).
-COSTLY_AT_30 = "iterated"
-
 #: The verdicts of a cell, each True, False or None (undecided, or no answer).
 VERDICTS = ("calibrated", "lost", "near_bound")
 
@@ -188,7 +184,6 @@ SIZES = {
         n_particles=200,
         chunk=100,
         names=tuple(n for n in ALL_NAMES if n not in COSTLY),
-        max_frames=((COSTLY_AT_30, 10),),
     ),
     "full": Grid(
         parallax=(0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.6),

@@ -186,16 +186,8 @@ def cluster(workers: int | None = None, scheduler: str | None = None):
         finally:
             client.close()
         return
-    if isinstance(workers, bool) or not (
-        isinstance(workers, (int, np.integer)) and 1 <= workers <= MAX_WORKERS
-    ):
-        raise ValueError(
-            f"workers must be a number of local worker processes, 1 to {MAX_WORKERS}, "
-            f"got {workers!r}"
-        )
     from distributed import Client
 
-    _quiet()
     with local_cluster(workers) as local, Client(local, set_as_default=False) as client:
         yield client
 
@@ -209,16 +201,29 @@ def local_cluster(workers: int, host: str | None = None):
     Parameters
     ----------
     workers : int
-        At least 1.
+        1 to :data:`MAX_WORKERS`.
     host : str, optional
         The interface the scheduler and workers listen on (``"127.0.0.1"``).
+
+    Raises
+    ------
+    ValueError
+        Naming ``workers`` when it is not an integer from 1 to :data:`MAX_WORKERS`.
     """
+    if isinstance(workers, bool) or not (
+        isinstance(workers, (int, np.integer)) and 1 <= workers <= MAX_WORKERS
+    ):
+        raise ValueError(
+            f"workers must be a number of local worker processes, 1 to {MAX_WORKERS}, "
+            f"got {workers!r}"
+        )
     import dask
     from distributed import LocalCluster
 
+    _quiet()
     with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENVIRON}):
         return LocalCluster(
-            n_workers=checks.count(workers, "workers"),
+            n_workers=int(workers),
             threads_per_worker=1,
             processes=True,
             host=host,
