@@ -606,3 +606,30 @@ def test_the_detectable_difference_is_found_with_the_stated_power():
     assert np.mean(fails) == pytest.approx(0.8, abs=0.02)  # binomial SE of 20,000 tests: 0.003
     with pytest.raises(ValueError, match="power must lie in"):
         study_scores.detectable_difference(0.68, n, power=1.0)
+
+
+@pytest.mark.parametrize(
+    "se, level, step",
+    [(0.01, 0.68, 100), (0.005, 0.95, 100), (0.02, 0.5, 1), (0.0033, 0.68, 50), (0.3, 0.68, 100)],
+)
+def test_trials_for_se_is_the_fewest_multiple_that_reaches_the_se(se, level, step):
+    # The binomial SE sqrt(p (1 - p) / n) at the returned n is at most se, one step fewer is not.
+    n = study_scores.trials_for_se(se, level, step)
+    assert n % step == 0 and n >= step
+    assert np.sqrt(level * (1 - level) / n) <= se
+    if n > step:
+        assert np.sqrt(level * (1 - level) / (n - step)) > se
+
+
+def test_trials_for_se_gives_the_books_2200_and_refuses_in_one_line():
+    assert study_scores.trials_for_se(0.01) == 2200
+    assert study_scores.coverage_se(0.68, 2200) < 0.01 < study_scores.coverage_se(0.68, 2100)
+    for kwargs, name in (
+        ({"se": 0.0}, "se"),
+        ({"se": float("nan")}, "se"),
+        ({"se": 0.01, "level": 1.0}, "level"),
+        ({"se": 0.01, "step": 0}, "step"),
+        ({"se": 0.01, "step": 2.5}, "step"),
+    ):
+        with pytest.raises(ValueError, match=f"^{name} must"):
+            study_scores.trials_for_se(**kwargs)
