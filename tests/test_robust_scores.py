@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from depthcore.studies import hardness, scores
+from depthcore.studies import hardness, medians, scores
 from depthcore.studies.trials import Estimates
 
 TRUTH = np.array([1.2, 6.0, 1.2])
@@ -30,7 +30,7 @@ def split(est, sizes):
 
 @pytest.mark.parametrize("n", [1, 2, 7, 150, 2001])
 def test_median_ranks_are_the_widest_binomial_ones_at_95(n):
-    j, k = scores.median_ranks(n)
+    j, k = medians.median_ranks(n)
     assert k == n + 1 - j
     miss = 2 * stats.binom.cdf(j - 1, n, 0.5) if j else 0.0
     assert 1 - miss >= 0.95
@@ -46,32 +46,32 @@ def test_histogram_median_against_numpy_and_order_statistics(seed, sizes):
     """Cauchy-tailed absolute errors over eight decades, in several chunkings."""
     rng = np.random.default_rng(seed)
     values = np.abs(rng.standard_cauchy(sum(sizes))) * 10.0 ** rng.integers(-3, 4)
-    h = scores.AbsoluteErrors()
+    h = medians.AbsoluteErrors()
     edges = np.cumsum([0, *sizes])
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         h.add(values[a:b])
     median, (lo, hi) = h.median()
-    r = scores.MEDIAN_RESOLUTION
+    r = medians.MEDIAN_RESOLUTION
     assert median == pytest.approx(np.median(values), rel=r)
     v = np.sort(values)
-    j, k = scores.median_ranks(len(v))
+    j, k = medians.median_ranks(len(v))
     eps = 1e-12  # the bins' edges are computed in floating point
     assert lo <= v[j - 1] * (1 + eps) and v[j - 1] <= lo * (1 + r) * (1 + eps)
     assert hi >= v[k - 1] * (1 - eps) and v[k - 1] >= hi / (1 + r) * (1 - eps)
-    one = scores.AbsoluteErrors()
+    one = medians.AbsoluteErrors()
     one.add(values)
     assert np.array_equal(one.counts, h.counts)  # any chunking: the same counts
 
 
 def test_histogram_ends_and_memory():
-    h = scores.AbsoluteErrors()
+    h = medians.AbsoluteErrors()
     size = h.counts.nbytes
     h.add(np.array([0.0, 1e-9, np.nan, np.inf, 1e9]))
     assert h.counts[0] == 2 and h.counts[-1] == 3 and h.counts.nbytes == size
     median, ci = h.median()
     assert median is None and ci == [0.0, None]  # five trials: no 95 % interval
     with pytest.raises(ValueError, match="trials"):
-        scores.AbsoluteErrors().median()
+        medians.AbsoluteErrors().median()
 
 
 def test_median_interval_covers_at_its_level():
@@ -80,7 +80,7 @@ def test_median_interval_covers_at_its_level():
     held = [
         lo <= 1.0 <= hi
         for lo, hi in (
-            scores.median_interval(np.abs(rng.standard_cauchy(40)))[1] for _ in range(4000)
+            medians.median_interval(np.abs(rng.standard_cauchy(40)))[1] for _ in range(4000)
         )
     ]
     assert np.mean(held) > 0.95 - 4 * np.sqrt(0.05 * 0.95 / 4000)
@@ -108,9 +108,9 @@ def test_tally_robust_scores_against_direct_sums():
         assert out[q]["rmse_kept"] == pytest.approx(rmse, rel=1e-12)
         se = np.std(e**2, ddof=1) / np.sqrt(len(e)) / (2 * rmse)
         assert out[q]["rmse_kept_se"] == pytest.approx(se, rel=1e-10)
-        median, ci = scores.median_interval(np.abs(err[:, k + 1]))
-        assert out[q]["median_abs_error"] == pytest.approx(median, rel=scores.MEDIAN_RESOLUTION)
-        assert ci[0] <= out[q]["median_abs_error_ci"][0] * (1 + scores.MEDIAN_RESOLUTION)
+        median, ci = medians.median_interval(np.abs(err[:, k + 1]))
+        assert out[q]["median_abs_error"] == pytest.approx(median, rel=medians.MEDIAN_RESOLUTION)
+        assert ci[0] <= out[q]["median_abs_error_ci"][0] * (1 + medians.MEDIAN_RESOLUTION)
     position = np.hypot(err[:, 0], err[:, 1])
     for t in scores.TRACK_LOSS_LEVELS:
         lost = position > t * np.hypot(TRUTH[0], TRUTH[1])

@@ -17,7 +17,7 @@ import numpy as np
 from depthcore.book.style import MIN_FONT, STYLE, WIDTH, subplots
 from depthcore.formatting import value_se
 from depthcore.studies import hardness
-from depthcore.studies.scores import INTERVAL_LEVEL
+from depthcore.studies.medians import INTERVAL_LEVEL
 
 #: The long run of the chapter's setting at Figure 2's truth with the paper's prior
 #: covariance (:func:`depthcore.studies.replication.fixed_truth_replicates`): 40 replicates

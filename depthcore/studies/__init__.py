@@ -3,7 +3,9 @@
 * :mod:`~depthcore.studies.trials`: the trials, bearings drawn afresh from a
   ``SeedSequence`` and every filter run on them;
 * :mod:`~depthcore.studies.scores`: the scores, as running sums over chunks
-  of trials, with their errors;
+  of trials, with their errors, and the tests of a coverage and their power;
+* :mod:`~depthcore.studies.medians`: the median absolute error, streamed in a
+  histogram of fixed size, with a distribution-free interval;
 * :mod:`~depthcore.studies.priors`: the prior's form, an axis of the studies:
   the paper's rule, a range prior, a log-uniform depth, an inverse-depth
   prior, the last three drawing each trial's truth;

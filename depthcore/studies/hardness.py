@@ -64,8 +64,8 @@ from depthcore.exact import mixture
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import paper_prior_means
 from depthcore.registry.filters import FILTERS, check_names
+from depthcore.studies import medians, scores, tasks
 from depthcore.studies import pairs as study_pairs
-from depthcore.studies import scores, tasks
 from depthcore.studies import trials as study_trials
 from depthcore.studies.scores import LEVELS
 
@@ -133,7 +133,7 @@ def depth_scores(errors, sds, pit, true_depth=None) -> dict:
 
     Beside them, what a few far-off trials cannot drive: the median absolute
     error with its distribution-free interval
-    (:func:`depthcore.studies.scores.median_interval`, exact) and, given the
+    (:func:`depthcore.studies.medians.median_interval`, exact) and, given the
     true depths, the trials that diverged
     (:func:`depthcore.studies.scores.divergent`).
 
@@ -176,7 +176,7 @@ def depth_scores(errors, sds, pit, true_depth=None) -> dict:
         key = f"coverage_{round(100 * p)}"
         out[key] = float(c)
         out[f"{key}_se"] = float(scores.proportion_se(round(c * n), n))
-    out["median_abs_error"], out["median_abs_error_ci"] = scores.median_interval(np.abs(e))
+    out["median_abs_error"], out["median_abs_error_ci"] = medians.median_interval(np.abs(e))
     if true_depth is not None:
         y = checks.finite_array(true_depth, "true_depth")
         if y.shape != e.shape:

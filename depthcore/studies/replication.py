@@ -17,7 +17,7 @@ on average (its square is unbiased) but short in the typical study: a study
 that happens to hold none of the rare large errors states a small RMSE and a
 small error together. No error computed from the trials of one study can see
 the tails those trials miss; the median absolute error's distribution-free
-interval (:func:`depthcore.studies.scores.median_ranks`) does not need them,
+interval (:func:`depthcore.studies.medians.median_ranks`) does not need them,
 and holds at its level whatever the law of the errors, which :func:`spread`
 checks across the replicates too.
 """
