@@ -31,13 +31,8 @@ import numpy as np
 
 from depthcore.exact import bank, optimal
 from depthcore.exact.optimal import log_posterior
-from depthcore.kalman import linear
-from depthcore.kalman.second_order import (
-    bearing_residuals,
-    minimiser,
-    second_order,
-    trajectory_map,
-)
+from depthcore.kalman import linear, second_order
+from depthcore.kalman.second_order import bearing_residuals, minimiser, trajectory_map
 from depthcore.particles.resampling import weighted_moments, weighted_standard_errors
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import Gaussian, student_t, symmetric
@@ -130,7 +125,11 @@ def grid_moments(
     rho = checks.positive_scalar(rho, "rho")
     lo, hi = y_range
     if hi is None:
-        hi = second_order(mu, rho, prior).mean[1] + 60 * np.sqrt(prior.cov[1, 1]) + 100
+        hi = (
+            second_order.run(mu, rho, prior.mean, prior.cov).mean[1]
+            + 60 * np.sqrt(prior.cov[1, 1])
+            + 100
+        )
     t, wt = _gauss_legendre_panels(np.log(max(lo - 2, 1e-2)), np.log(hi - 2), panels, order)
     y = 2.0 + np.exp(t)
     wy = wt * np.exp(t)
@@ -178,7 +177,7 @@ def importance_moments(
         Delta-method standard errors of the two means.
     """
     mu = model.measurements(mu)
-    ps = second_order(mu, rho, prior)
+    ps = second_order.run(mu, rho, prior.mean, prior.cov)
     draws, log_q = student_t(ps.mean[None], inflate**2 * ps.cov[None], df, n, rng)
     x, log_q = draws[0], log_q[0]
     front = x[:, 1] > 2
