@@ -7,8 +7,7 @@ import pytest
 
 from depthcore import paper_prior
 from depthcore.exact import optimal
-from depthcore.kalman.ekf import ekf
-from depthcore.kalman.second_order import second_order
+from depthcore.kalman import ekf, second_order
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import noise_free_state
@@ -18,8 +17,8 @@ from depthcore.studies import frames
 PRIOR = paper_prior(noise_free_state(MU_17))
 FILTERS = [
     lambda mu, rho, prior: optimal.run(mu, rho, prior.mean, prior.cov),
-    lambda mu, rho, prior: second_order(mu, rho, prior),
-    lambda mu, rho, prior: ekf(mu, rho, prior),
+    lambda mu, rho, prior: second_order.run(mu, rho, prior.mean, prior.cov),
+    lambda mu, rho, prior: ekf.run(mu, rho, prior.mean, prior.cov),
 ]
 
 

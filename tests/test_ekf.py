@@ -7,8 +7,8 @@ from numpy.testing import assert_allclose
 
 from depthcore import paper_prior
 from depthcore.kalman import ekf as ekf_module
-from depthcore.kalman.ekf import ekf, predict, run, update
-from depthcore.kalman.second_order import second_order
+from depthcore.kalman import second_order
+from depthcore.kalman.ekf import predict, run, update
 from depthcore.problem import model
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import noise_free_state
@@ -61,14 +61,14 @@ def test_run_is_batched_like_a_loop():
     prior = paper_prior(noise_free_state(MU_17))
     means, covs = run(mu, 0.005, prior.mean, prior.cov)
     for i in range(5):
-        h = ekf(mu[i], 0.005, prior)
+        h = run(mu[i], 0.005, prior.mean, prior.cov)
         assert_allclose(means[i], h.means, rtol=1e-13)
         assert_allclose(covs[i], h.covs, rtol=1e-12)
 
 
 def test_ekf_history_shapes():
     s = SCENARIOS["fig2"]
-    h = ekf(s.mu, s.rho, s.prior)
+    h = run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     assert h.means.shape == (3, 3) and h.covs.shape == (3, 3, 3)
     assert_allclose(h.posterior.mean, h.means[-1])
 
@@ -80,10 +80,10 @@ def test_theorem1_eq19_eq24_ekf_equals_second_order_when_prior_mean_is_exact(c):
     c = noise_free_state(mu)
     prior = Gaussian(model.G(c, -2), 1000 * np.eye(3))
     rho = 1 / 200
-    hist = ekf(mu, rho, prior)
+    hist = run(mu, rho, prior.mean, prior.cov)
     # Eq. (19): every innovation is zero, so the means are G^-2 c, G^-1 c, c.
     assert_allclose(hist.means, [model.G(c, -2), model.G(c, -1), c], rtol=1e-9, atol=1e-9)
-    ps = second_order(mu, rho, prior)
+    ps = second_order.run(mu, rho, prior.mean, prior.cov)
     assert_allclose(ps.mean, c, rtol=1e-7, atol=1e-7)
     # Eq. (24): the covariances agree (condition numbers reach 1e8: rtol 1e-6).
     assert_allclose(hist.posterior.cov, ps.cov, rtol=1e-6, atol=1e-9 * np.abs(ps.cov).max())
@@ -92,15 +92,15 @@ def test_theorem1_eq19_eq24_ekf_equals_second_order_when_prior_mean_is_exact(c):
 def test_theorem1_eq24_fails_for_the_printed_covariance():
     c = noise_free_state(MU_17)
     prior = Gaussian(model.G(c, -2), 1000 * np.eye(3))
-    pe = ekf(MU_17, 1 / 200, prior).posterior
-    printed = second_order(MU_17, 1 / 200, prior, reading="printed")
+    pe = run(MU_17, 1 / 200, prior.mean, prior.cov).posterior
+    printed = second_order.run(MU_17, 1 / 200, prior.mean, prior.cov, reading="printed")
     assert printed.cov[1, 1] == pytest.approx(pe.cov[1, 1] / 2, rel=1e-3)
 
 
 def test_ekf_rejects_prior_mean_behind_the_camera():
     prior = Gaussian([0.0, -3.0, 0.0], np.eye(3))
     with pytest.raises(ValueError, match="prior_mean leads the EKF to a predicted depth"):
-        ekf(MU_17, 0.01, prior)
+        run(MU_17, 0.01, prior.mean, prior.cov)
 
 
 def test_run_rejects_bad_rho():
@@ -185,7 +185,7 @@ def test_n_frame_ekf_with_process_noise_is_the_linearised_recursion(n_frames, q)
 
 def test_process_noise_zero_and_three_frames_are_the_papers_ekf():
     s = SCENARIOS["fig2"]
-    paper = ekf(s.mu, s.rho, s.prior)
+    paper = run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     again = run(s.mu, s.rho, s.prior.mean, s.prior.cov, process_noise=0.0)
     assert np.array_equal(paper.means, again.means) and np.array_equal(paper.covs, again.covs)
 

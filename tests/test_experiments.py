@@ -19,8 +19,7 @@ from depthcore.book import (
     paper,
 )
 from depthcore.exact import optimal, posterior
-from depthcore.kalman import ekf, ukf
-from depthcore.kalman.second_order import second_order
+from depthcore.kalman import ekf, second_order, ukf
 from depthcore.particles import rbpf, resample_move
 from depthcore.problem import checks, gaussian, model
 from depthcore.registry import estimates
@@ -163,7 +162,7 @@ def test_prior_offset_sweep_matches_figure6():
         ekf.run(s6.mu, s6.rho, s6.prior.mean, s6.prior.cov).posterior.mean[1]
     )
     assert r["second_order"]["depth_mean"][1] == pytest.approx(
-        second_order(s6.mu, s6.rho, s6.prior).mean[1]
+        second_order.run(s6.mu, s6.rho, s6.prior.mean, s6.prior.cov).mean[1]
     )
     # the EKF follows the offset, the optimal filter hardly moves
     assert r["ekf"]["depth_mean"][1] - r["ekf"]["depth_mean"][0] > 1.5
@@ -199,7 +198,8 @@ def test_prior_velocity_sweep_matches_direct_runs():
         prior = _prior_with_velocity(v0)
         direct = ekf.run(FIG2.mu, FIG2.rho, prior.mean, prior.cov).posterior.marginal("y")
         assert_allclose([sw["ekf"]["depth_mean"][i], sw["ekf"]["depth_sd"][i]], direct, rtol=1e-9)
-    opt = optimal.marginals(FIG2.mu, FIG2.rho, _prior_with_velocity(-2.0))
+    prior = _prior_with_velocity(-2.0)
+    opt = optimal.run(FIG2.mu, FIG2.rho, prior.mean, prior.cov)
     assert_allclose(sw["optimal"]["depth_sd"][0], opt.depth_sd, rtol=1e-8)
     # v0 = 0 is the paper's prior: Figure 2's EKF SD 0.16; near v0 = 0.95 the SD is the prior's
     assert abs(sw["ekf"]["depth_sd"][1] - 0.16) < 0.005 and sw["ekf"]["depth_sd"][2] > 25
@@ -309,8 +309,9 @@ def test_resample_move_runs_are_the_filter_run_on_independent_streams():
     assert r["exact"]["depth_sd"] == exact.depth_sd
     streams = np.random.SeedSequence(3).spawn(3)
     for i, stream in enumerate(streams):
-        one = resample_move.resample_move(
-            FIG2.mu, FIG2.rho, FIG2.prior, 2000, np.random.default_rng(stream), moves=5
+        rng = np.random.default_rng(stream)
+        one = resample_move.run(
+            [FIG2.mu], FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 2000, rng, moves=5
         )
         assert r["runs"]["depth_mean"][i] == one.moments()["depth_mean"][0]
         assert_allclose(r["ess"][i], one.ess[0] / 2000)

@@ -240,8 +240,7 @@ def test_figure_draws_the_densities_of_each_filter(key):
     # the optimal filter's quadrature density and the Gaussian ones of Eq. (13).
     from depthcore.book import paper, style
     from depthcore.exact import optimal
-    from depthcore.kalman.ekf import ekf
-    from depthcore.kalman.second_order import second_order
+    from depthcore.kalman import ekf, second_order
 
     s = SCENARIOS[key]
     fig = paper.figure(key, n=201)
@@ -252,8 +251,12 @@ def test_figure_draws_the_densities_of_each_filter(key):
     pdf = m.depth_pdf if s.quantity == "depth" else m.velocity_pdf
     want = {
         "optimal": pdf(grid),
-        "second_order": _normal_pdf(grid, *second_order(s.mu, s.rho, s.prior).marginal(comp)),
-        "ekf": _normal_pdf(grid, *ekf(s.mu, s.rho, s.prior).posterior.marginal(comp)),
+        "second_order": _normal_pdf(
+            grid, *second_order.run(s.mu, s.rho, s.prior.mean, s.prior.cov).marginal(comp)
+        ),
+        "ekf": _normal_pdf(
+            grid, *ekf.run(s.mu, s.rho, s.prior.mean, s.prior.cov).posterior.marginal(comp)
+        ),
     }
     for name, y in want.items():
         x_drawn, y_drawn = lines[style.STYLE[name]["label"]]
@@ -263,7 +266,7 @@ def test_figure_draws_the_densities_of_each_filter(key):
 
 
 def test_extended_figure_draws_the_curves_of_every_filter():
-    from depthcore.kalman.ukf import ukf
+    from depthcore.kalman import ukf
 
     s = FIG2
     fig = paper.figure("fig2", n=101, filters=NAMES)
@@ -272,7 +275,9 @@ def test_extended_figure_draws_the_curves_of_every_filter():
     c = reproduce.curves(s, grid, filters=NAMES)
     for name in NAMES:
         assert_allclose(lines[style.STYLE[name]["label"]][1], c[name], rtol=1e-12, atol=0)
-    u = ukf(s.mu, s.rho, s.prior, allow_behind_camera=True).posterior.marginal("y")
+    u = ukf.run(
+        s.mu, s.rho, s.prior.mean, s.prior.cov, allow_behind_camera=True
+    ).posterior.marginal("y")
     u = _normal_pdf(grid, *u)
     assert_allclose(lines[style.STYLE["ukf"]["label"]][1], u, rtol=1e-9)
     # the particle filter's kernel estimate integrates to one and sits on the optimal curve

@@ -216,9 +216,10 @@ def test_marginals_reject_bad_options(kwargs, message):
         optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, **kwargs)
 
 
-def test_marginals_reject_a_prior_that_is_not_gaussian():
+def test_the_kept_marginals_reject_a_prior_that_is_not_gaussian():
     with pytest.raises(ValueError, match="prior must be a Gaussian"):
-        optimal.marginals(MU_17, 0.005, {"mean": [0, 4, 0]})
+        with pytest.warns(DeprecationWarning, match="optimal.run"):
+            optimal.marginals(MU_17, 0.005, {"mean": [0, 4, 0]})
 
 
 def test_conditional_rejects_depths_at_the_poles():

@@ -6,7 +6,7 @@ from numpy.testing import assert_allclose
 
 from depthcore.analysis import reference
 from depthcore.exact import optimal, quadrature
-from depthcore.kalman.second_order import second_order
+from depthcore.kalman import second_order
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import noise_free_state
 
@@ -19,6 +19,11 @@ NODE_BOUND = 2 * quadrature.NODE_BUDGET
 def _prior(mu, scale=1000.0):
     c = noise_free_state(mu)
     return Gaussian(np.array([c[0] - 2 * c[2], c[1] - 2, 0.0]), scale * np.eye(3))
+
+
+def _exact(mu, rho, scale=1000.0):
+    prior = _prior(mu, scale)
+    return optimal.run(mu, rho, prior.mean, prior.cov)
 
 
 def _key(m):
@@ -65,7 +70,7 @@ EXTREMES = {
 @pytest.mark.parametrize("name", list(EXTREMES))
 def test_extremes_run_within_the_node_bound_with_finite_moments(name):
     mu, rho, scale = EXTREMES[name]
-    m = optimal.marginals(mu, rho, _prior(mu, scale))
+    m = _exact(mu, rho, scale)
     assert np.all(np.isfinite(_key(m))) and m.depth_sd > 0 and m.velocity_sd > 0
     assert 0 < m.n_nodes <= NODE_BOUND
     # below the tolerance, or at the roundoff floor where the depth itself is rounded
@@ -120,7 +125,7 @@ def test_small_noise_limit_is_p_s_plus_a_term_linear_in_rho():
     ratios, shift_errors = [], []
     for rho in (1e-7, 1e-8, 1e-9):
         m = optimal.run(mu, rho, prior.mean, prior.cov)
-        s = second_order(mu, rho, prior)
+        s = second_order.run(mu, rho, prior.mean, prior.cov)
         sd = np.sqrt(np.diag(s.cov))
         assert m.depth_sd == pytest.approx(sd[1], rel=1e-7)
         assert m.velocity_sd == pytest.approx(sd[2], rel=1e-7)
@@ -153,7 +158,7 @@ def test_batch_of_extremes_matches_single_calls():
     means = np.array([_prior(mu).mean for mu in mus])
     batch = optimal.moments(mus, rhos, means, 1000 * np.eye(3))
     for k, _n in enumerate(names):
-        single = optimal.marginals(mus[k], rhos[k], _prior(mus[k]))
+        single = _exact(mus[k], rhos[k])
         assert batch.depth_mean[k] == pytest.approx(single.depth_mean, rel=1e-12)
         assert batch.velocity_sd[k] == pytest.approx(single.velocity_sd, rel=1e-10)
 
@@ -162,12 +167,12 @@ def test_budget_exhausted_is_a_value_error_naming_the_input(monkeypatch):
     monkeypatch.setattr(quadrature, "NODE_BUDGET", 20)
     mu, rho, scale = EXTREMES["prior scale 1e6"]
     with pytest.raises(ValueError, match=r"mu\[0\] = .*did not reach rtol"):
-        optimal.marginals(mu, rho, _prior(mu, scale))
+        _exact(mu, rho, scale)
 
 
 def test_velocity_error_estimate_includes_roundoff_at_a_far_depth():
     mu, rho, scale = EXTREMES["depth 6e5"]
-    m = optimal.marginals(mu, rho, _prior(mu, scale))
+    m = _exact(mu, rho, scale)
     assert m.velocity_error >= 64 * np.finfo(float).eps * m.velocity_sd
     assert m.depth_error >= 64 * np.finfo(float).eps * m.depth_mean
 
@@ -178,7 +183,7 @@ def test_batch_marginals_cdf_at_small_noise_matches_the_gaussian_limit():
     mu = np.array([[-0.3, 0, 0.2]])
     prior = _prior(mu[0])
     bm = optimal.batch_marginals(mu, 1e-7, prior.mean, prior.cov)
-    s = second_order(mu[0], 1e-7, prior)
+    s = second_order.run(mu[0], 1e-7, prior.mean, prior.cov)
     y = s.mean[1] + 0.7 * np.sqrt(s.cov[1, 1])
     assert bm.depth_cdf(np.array([y]))[0] == pytest.approx(norm.cdf(0.7), abs=1e-4)
     v = s.mean[2] - 0.4 * np.sqrt(s.cov[2, 2])

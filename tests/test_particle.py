@@ -44,7 +44,7 @@ def replicates(n_particles, n_replicates, seed, scenario=FIG2, **kwargs):
 
 
 def test_result_log_weights_are_normalised_and_ess_matches():
-    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 3000, np.random.default_rng(8))
+    r = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 3000, np.random.default_rng(8))
     assert r.particles.shape == (3000, 3) and r.log_weights.shape == (3000,)
     assert_allclose(logsumexp(r.log_weights), 0.0, atol=1e-12)
     assert_allclose(r.ess[-1], 1.0 / np.sum(r.weights**2), rtol=1e-10)
@@ -52,7 +52,15 @@ def test_result_log_weights_are_normalised_and_ess_matches():
 
 
 def test_gaussian_proposal_is_the_limit_of_infinite_df():
-    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 2000, np.random.default_rng(25), df=np.inf)
+    r = run(
+        FIG2.mu,
+        FIG2.rho,
+        FIG2.prior.mean,
+        FIG2.prior.cov,
+        2000,
+        np.random.default_rng(25),
+        df=np.inf,
+    )
     m, S = second_order_batch(np.array([FIG2.mu]), FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     q = stats.multivariate_normal(m[0], pf.DEFAULT_INFLATION**2 * S[0])
     alive = np.isfinite(r.log_weights)
@@ -68,8 +76,14 @@ def test_final_weights_are_posterior_over_proposal():
     # Without resampling the look-ahead terms cancel: log W = log p_o - log q + const,
     # with p_o the optimal posterior (6) and q the t proposal (scipy's density).
     N = 2000
-    r = particle_filter(
-        FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(9), ess_threshold=0.0
+    r = run(
+        FIG2.mu,
+        FIG2.rho,
+        FIG2.prior.mean,
+        FIG2.prior.cov,
+        N,
+        np.random.default_rng(9),
+        ess_threshold=0.0,
     )
     m, S = second_order_batch(np.array([FIG2.mu]), FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     q = stats.multivariate_t(m[0], pf.DEFAULT_INFLATION**2 * S[0], df=pf.DEFAULT_DF)
@@ -87,16 +101,22 @@ def test_final_weights_are_posterior_over_proposal():
 @pytest.mark.parametrize("proposal", ["second_order", "prior"])
 def test_same_seed_gives_identical_output(proposal):
     kwargs = dict(proposal=proposal, ess_threshold=1.0)  # resampling at every step too
-    a = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 500, np.random.default_rng(10), **kwargs)
-    b = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 500, np.random.default_rng(10), **kwargs)
-    c = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 500, np.random.default_rng(11), **kwargs)
+    a = run(
+        FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 500, np.random.default_rng(10), **kwargs
+    )
+    b = run(
+        FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 500, np.random.default_rng(10), **kwargs
+    )
+    c = run(
+        FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 500, np.random.default_rng(11), **kwargs
+    )
     for name in ("particles", "log_weights", "ess", "resampled", "ancestors"):
         assert_array_equal(getattr(a, name), getattr(b, name))
     assert not np.array_equal(a.particles, c.particles)
 
 
 def test_single_is_the_batch_of_one():
-    a = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 400, np.random.default_rng(12))
+    a = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 400, np.random.default_rng(12))
     b = run(
         np.array([FIG2.mu]),
         FIG2.rho,
@@ -124,8 +144,14 @@ def test_batch_of_different_triples():
 
 
 def test_resampling_duplicates_particles_with_their_ancestors():
-    r = particle_filter(
-        FIG2.mu, FIG2.rho, FIG2.prior, 800, np.random.default_rng(14), ess_threshold=1.0
+    r = run(
+        FIG2.mu,
+        FIG2.rho,
+        FIG2.prior.mean,
+        FIG2.prior.cov,
+        800,
+        np.random.default_rng(14),
+        ess_threshold=1.0,
     )
     assert_array_equal(r.resampled, [False, True, True])
     assert len(np.unique(r.ancestors)) < 800
@@ -136,7 +162,7 @@ def test_resampling_duplicates_particles_with_their_ancestors():
 
 
 def test_result_is_immutable():
-    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 100, np.random.default_rng(15))
+    r = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 100, np.random.default_rng(15))
     with pytest.raises(ValueError):
         r.particles[0, 0] = 1.0
     with pytest.raises(AttributeError):
@@ -148,10 +174,11 @@ def test_result_is_immutable():
 
 def test_bootstrap_collapses_on_fig2_while_the_proposal_does_not():
     N = 4000
-    boot = particle_filter(
+    boot = run(
         FIG2.mu,
         FIG2.rho,
-        FIG2.prior,
+        FIG2.prior.mean,
+        FIG2.prior.cov,
         N,
         np.random.default_rng(16),
         proposal="prior",
@@ -160,17 +187,18 @@ def test_bootstrap_collapses_on_fig2_while_the_proposal_does_not():
     assert boot.ess[0] < 0.02 * N  # a bearing alone leaves a thin wedge of the prior
     assert boot.resampled[1]
     assert boot.distinct_ess() < 10  # the copies made by resampling count as one particle
-    plain = particle_filter(
+    plain = run(
         FIG2.mu,
         FIG2.rho,
-        FIG2.prior,
+        FIG2.prior.mean,
+        FIG2.prior.cov,
         N,
         np.random.default_rng(16),
         proposal="prior",
         ess_threshold=0.0,
     )
     assert np.all(plain.ess[1:] < 10)  # after two bearings: a handful of particles
-    good = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, N, np.random.default_rng(16))
+    good = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, N, np.random.default_rng(16))
     assert np.all(good.ess > 0.3 * N) and not good.resampled.any()
     assert good.distinct_ess() == pytest.approx(good.ess[-1], rel=1e-12)
 
@@ -251,7 +279,7 @@ def test_fig3_converges_without_resampling_but_not_with_it():
 
 
 def test_depth_density_approaches_the_optimal_marginal(fig2_optimal):
-    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 20000, np.random.default_rng(21))
+    r = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 20000, np.random.default_rng(21))
     grid = np.linspace(2.5, 14.0, 231)
     exact = fig2_optimal.depth_pdf(grid)
     step = grid[1] - grid[0]
@@ -266,7 +294,7 @@ def test_depth_density_approaches_the_optimal_marginal(fig2_optimal):
 
 
 def test_density_bandwidth_and_grid_checks():
-    r = particle_filter(FIG2.mu, FIG2.rho, FIG2.prior, 500, np.random.default_rng(22))
+    r = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 500, np.random.default_rng(22))
     narrow = r.density("y", np.linspace(0, 20, 50), bandwidth=0.05)
     wide = r.density("y", np.linspace(0, 20, 50), bandwidth=2.0)
     assert narrow.max() > wide.max()
@@ -288,7 +316,7 @@ def test_density_bandwidth_and_grid_checks():
 @pytest.mark.parametrize("n", [0, -5, 2.5, True, "100"])
 def test_rejects_bad_n_particles(n):
     with pytest.raises(ValueError, match="n_particles must be an integer >= 1"):
-        particle_filter(MU_17, 0.005, FIG2.prior, n, np.random.default_rng(0))
+        run(MU_17, 0.005, FIG2.prior.mean, FIG2.prior.cov, n, np.random.default_rng(0))
 
 
 @pytest.mark.parametrize(
@@ -304,7 +332,7 @@ def test_rejects_bad_n_particles(n):
 )
 def test_rejects_bad_measurements(mu, message):
     with pytest.raises(ValueError, match=message):
-        particle_filter(mu, 0.005, FIG2.prior, 100, np.random.default_rng(0))
+        run(mu, 0.005, FIG2.prior.mean, FIG2.prior.cov, 100, np.random.default_rng(0))
 
 
 @pytest.mark.parametrize(
@@ -313,7 +341,7 @@ def test_rejects_bad_measurements(mu, message):
 )
 def test_rejects_bad_rho(rho, message):
     with pytest.raises(ValueError, match=message):
-        particle_filter(MU_17, rho, FIG2.prior, 100, np.random.default_rng(0))
+        run(MU_17, rho, FIG2.prior.mean, FIG2.prior.cov, 100, np.random.default_rng(0))
     with pytest.raises(ValueError, match=message):
         run(np.array([MU_17]), rho, FIG2.prior.mean, FIG2.prior.cov, 100, np.random.default_rng(0))
 
@@ -332,18 +360,19 @@ def test_rejects_bad_rho(rho, message):
 )
 def test_rejects_bad_options(kwargs, message):
     with pytest.raises(ValueError, match=message):
-        particle_filter(MU_17, 0.005, FIG2.prior, 100, np.random.default_rng(0), **kwargs)
+        run(MU_17, 0.005, FIG2.prior.mean, FIG2.prior.cov, 100, np.random.default_rng(0), **kwargs)
 
 
 def test_rejects_a_bad_rng_or_prior():
     with pytest.raises(ValueError, match="rng must be a numpy.random.Generator"):
-        particle_filter(MU_17, 0.005, FIG2.prior, 100, 42)
+        run(MU_17, 0.005, FIG2.prior.mean, FIG2.prior.cov, 100, 42)
     with pytest.raises(ValueError, match="rng must be a numpy.random.Generator"):
-        particle_filter(MU_17, 0.005, FIG2.prior, 100, np.random.RandomState(0))
+        run(MU_17, 0.005, FIG2.prior.mean, FIG2.prior.cov, 100, np.random.RandomState(0))
     with pytest.raises(ValueError, match="prior must be a Gaussian"):
-        particle_filter(
-            MU_17, 0.005, (FIG2.prior.mean, FIG2.prior.cov), 100, np.random.default_rng(0)
-        )
+        with pytest.warns(DeprecationWarning, match="importance.run"):
+            particle_filter(
+                MU_17, 0.005, (FIG2.prior.mean, FIG2.prior.cov), 100, np.random.default_rng(0)
+            )
 
 
 def test_run_rejects_bad_shapes():
@@ -368,7 +397,7 @@ def test_prior_proposal_with_one_particle_can_lose_every_particle():
     # Half the prior's mass is behind the camera; a lone particle there has weight zero.
     prior = Gaussian(FIG2.prior.mean - [0.0, 60.0, 0.0], FIG2.prior.cov)
     with pytest.raises(RuntimeError, match="every particle of trial 0 has zero weight after mu_1"):
-        particle_filter(FIG2.mu, FIG2.rho, prior, 1, np.random.default_rng(0), proposal="prior")
+        run(FIG2.mu, FIG2.rho, prior.mean, prior.cov, 1, np.random.default_rng(0), proposal="prior")
 
 
 # --- N frames ---------------------------------------------------------------------------
@@ -387,7 +416,7 @@ def test_n_frame_importance_sampling_matches_the_bank_of_kalman_filters():
     w = np.full(y1.shape, y1[1] - y1[0])
     w[[0, -1]] /= 2
     exact = mixture.mixture(bank.filter_bank(y1, mu, rho, prior.mean, prior.cov), w)
-    r = particle_filter(mu, rho, prior, 40_000, np.random.default_rng(22))
+    r = run(mu, rho, prior.mean, prior.cov, 40_000, np.random.default_rng(22))
     assert r.particles.shape == (40_000, 3) and r.ess.shape == (6,)
     m, se = r.moments(), r.standard_errors()
     for got, err, want in (

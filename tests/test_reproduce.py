@@ -5,8 +5,7 @@ import pytest
 
 from depthcore import SCENARIOS
 from depthcore.exact import optimal
-from depthcore.kalman.ekf import ekf
-from depthcore.kalman.second_order import second_order
+from depthcore.kalman import ekf, second_order
 from depthcore.studies import reproduce
 
 
@@ -18,8 +17,12 @@ def test_filter_moments_agree_with_each_filter(key):
     comp = {"depth": "y", "velocity": "v"}[s.quantity]
     opt = (m.depth_mean, m.depth_sd) if s.quantity == "depth" else (m.velocity_mean, m.velocity_sd)
     assert got["optimal"] == pytest.approx(opt, rel=1e-12)
-    assert got["second_order"] == pytest.approx(second_order(s.mu, s.rho, s.prior).marginal(comp))
-    assert got["ekf"] == pytest.approx(ekf(s.mu, s.rho, s.prior).posterior.marginal(comp))
+    assert got["second_order"] == pytest.approx(
+        second_order.run(s.mu, s.rho, s.prior.mean, s.prior.cov).marginal(comp)
+    )
+    assert got["ekf"] == pytest.approx(
+        ekf.run(s.mu, s.rho, s.prior.mean, s.prior.cov).posterior.marginal(comp)
+    )
 
 
 def test_filter_moments_rejects_an_unknown_quantity():

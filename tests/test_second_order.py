@@ -7,12 +7,11 @@ from numpy.testing import assert_allclose
 from depthcore import paper_prior
 from depthcore.analysis import reference
 from depthcore.exact import optimal
-from depthcore.kalman.ekf import ekf
+from depthcore.kalman import ekf, second_order
 from depthcore.kalman.second_order import (
     hessian,
     likelihood_covariance,
     minimiser,
-    second_order,
     second_order_batch,
     theorem1_precision,
     trajectory_solve,
@@ -67,7 +66,7 @@ def test_eq8_second_order_is_the_product_of_its_two_gaussians():
     mu, rho = MU_17, 1 / 200
     c = noise_free_state(mu)
     prior = paper_prior(c)
-    ps = second_order(mu, rho, prior)
+    ps = second_order.run(mu, rho, prior.mean, prior.cov)
     lik = Gaussian(c, likelihood_covariance(mu, rho))
     rng = np.random.default_rng(3)
     x = ps.mean + rng.normal(scale=0.3, size=(50, 3))
@@ -82,7 +81,8 @@ def test_second_order_batch_matches_single():
     means = np.array([paper_prior(noise_free_state(m)).mean for m in mus])
     m, P = second_order_batch(mus, 1 / 200, means, 1000 * np.eye(3))
     for i, mu in enumerate(mus):
-        g = second_order(mu, 1 / 200, paper_prior(noise_free_state(mu)))
+        prior = paper_prior(noise_free_state(mu))
+        g = second_order.run(mu, 1 / 200, prior.mean, prior.cov)
         # inverse versus Cholesky solve of a precision with condition number ~1e5
         assert_allclose(m[i], g.mean, rtol=1e-10)
         assert_allclose(P[i], g.cov, rtol=1e-9)
@@ -101,7 +101,7 @@ def test_eq23_second_order_density_is_the_linearised_posterior():
     c = noise_free_state(mu)
     prior = paper_prior(c)
     g = residual_gradients(c)
-    ps = second_order(mu, rho, prior)
+    ps = second_order.run(mu, rho, prior.mean, prior.cov)
     x = ps.mean + np.random.default_rng(3).normal(scale=0.2, size=(40, 3))
     eq23 = -np.sum(((x - c) @ g.T) ** 2, axis=1) / (2 * rho**2) + prior.logpdf(model.G(x, -2))
     assert np.ptp(ps.logpdf(x) - eq23) < 1e-8
@@ -113,8 +113,8 @@ def test_theorem1_precision_is_the_inverse_of_the_ekf_and_second_order_covarianc
     prior = Gaussian(model.G(c, -2), 1000.0 * np.eye(3))
     rho = 1 / 200
     D_inv = theorem1_precision(mu, rho, prior)
-    P3 = ekf(mu, rho, prior).posterior.cov
-    D = second_order(mu, rho, prior).cov
+    P3 = ekf.run(mu, rho, prior.mean, prior.cov).posterior.cov
+    D = second_order.run(mu, rho, prior.mean, prior.cov).cov
     # inverses of matrices with condition number ~1e6: 1e-8 relative
     assert_allclose(D_inv @ P3, np.eye(3), atol=1e-8)
     assert_allclose(D_inv @ D, np.eye(3), atol=1e-8)
@@ -148,7 +148,7 @@ def test_n3_minimiser_is_the_noise_free_state_and_the_gaussian_is_p_s():
         )
         assert_allclose(mean[i], np.linalg.solve(info, rhs), rtol=1e-10)
         assert_allclose(cov[i], np.linalg.inv(info), rtol=1e-8)
-        ps = second_order(mu[i], 2e-3, Gaussian(prior_mean, PRIOR_COV))
+        ps = second_order.run(mu[i], 2e-3, prior_mean, PRIOR_COV)
         assert np.array_equal(ps.mean, mean[i]) and np.array_equal(ps.cov, cov[i])
 
 
@@ -276,7 +276,7 @@ def test_trajectory_laplace_tends_to_the_approximation_without_process_noise(n_f
 
 def test_single_sequence_is_the_batch_row():
     mu = _problem(6, size=1)
-    g = second_order(mu[0], 2e-3, Gaussian(X1, PRIOR_COV), process_noise=0.01)
+    g = second_order.run(mu[0], 2e-3, X1, PRIOR_COV, process_noise=0.01)
     mean, cov = second_order_batch(mu, 2e-3, X1, PRIOR_COV, process_noise=0.01)
     assert np.array_equal(g.mean, mean[0]) and np.array_equal(g.cov, cov[0])
 

