@@ -193,18 +193,21 @@ figures: $(EDITABLE) ## the paper's figures into figures/
 # The pages that read studies from their records: executed writing them, then reading them.
 RECORD_PAGES := marginals discrepancies beyond_filters beyond_particles beyond_study beyond_sweeps beyond_frames beyond_bound beyond_hard beyond_conjecture beyond_atlas intro conclusions reproducing
 # Their studies' chunks run on a local Dask cluster of every core (tools/cluster.py).
-records: $(EDITABLE) ## every study the book reads from a record, again (and the README)
+records: $(EDITABLE) ## every study the book reads from a record, again (and the README and article)
 	rm -f depthcore/provenance/study_records/*.json
 	DEPTHCORE_RECORDS=write $(PY) tools/cluster.py $(PY) tools/check_notebooks.py update $(RECORD_PAGES)
 	$(PY) tools/check_notebooks.py update $(RECORD_PAGES)
 	$(PY) tools/readme.py
+	$(PY) tools/article.py write
 
-BENCH_PAGES := marginals beyond_cost beyond_frames reproducing
+# The pages that read the benchmarks' records.
+BENCH_PAGES := marginals beyond_cost beyond_filters beyond_frames intro conclusions reproducing
 BENCH ?= $(basename $(notdir $(wildcard benchmarks/bench_*.py)))
 bench: $(EDITABLE) ## every benchmark and its record (BENCH="bench_bank": one)
 	@for b in $(BENCH); do echo "== benchmarks/$$b.py"; \
 	  TIMEFORMAT="$$b took %R s"; time $(PY) benchmarks/$$b.py; done
 	$(PY) tools/readme.py
+	$(PY) tools/article.py write
 	$(PY) tools/check_notebooks.py update $(BENCH_PAGES)
 
 clean: ## remove the build outputs (make distclean also removes .venv/)
