@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
 import threading
@@ -130,11 +131,29 @@ def _cli(*args) -> subprocess.CompletedProcess:
     )
 
 
+@contextmanager
+def _port_taken(port: int):
+    """Dask's dashboard port held by another listener (or already taken) for the duration."""
+    holder = socket.socket()
+    try:
+        holder.bind(("", port))
+        holder.listen()
+    except OSError:
+        pass  # something else holds it already
+    try:
+        yield
+    finally:
+        holder.close()
+
+
 def test_the_command_line_on_two_local_workers_prints_the_same_json(capsys):
+    # Dask's dashboard port 8787 taken, as by a running dashboard: the local
+    # cluster's scheduler listens elsewhere, and nothing is said about it.
     study = ["study", "--trials", "40", "--filters", "ekf", "optimal", "--json"]
     assert main(study) == 0
     alone = capsys.readouterr().out
-    cluster = _cli(*study, "--workers", "2")
+    with _port_taken(8787):
+        cluster = _cli(*study, "--workers", "2")
     assert cluster.returncode == 0, cluster.stderr
     assert cluster.stdout == alone and json.loads(alone)["trials"] == 40
     assert cluster.stderr == ""

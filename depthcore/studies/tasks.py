@@ -195,8 +195,11 @@ def cluster(workers: int | None = None, scheduler: str | None = None):
 def local_cluster(workers: int, host: str | None = None):
     """A ``distributed.LocalCluster`` of ``workers`` processes of one thread, no dashboard.
 
-    Each worker process starts with :data:`WORKER_ENVIRON`. Use it as a
-    context manager; :func:`cluster` gives a client of one.
+    Each worker process starts with :data:`WORKER_ENVIRON`. The scheduler's
+    HTTP server (health checks; no dashboard) listens on a free port, not
+    Dask's 8787, so that a dashboard or another cluster already on that port
+    is no obstacle. Use it as a context manager; :func:`cluster` gives a
+    client of one.
 
     Parameters
     ----------
@@ -228,6 +231,7 @@ def local_cluster(workers: int, host: str | None = None):
             processes=True,
             host=host,
             dashboard_address=None,
+            scheduler_kwargs={"dashboard_address": f"{host or ''}:0"},
             silence_logs=logging.ERROR,
         )
 
