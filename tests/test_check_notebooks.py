@@ -552,3 +552,35 @@ def test_a_page_saved_unchanged_from_jupyterlab_keeps_its_bytes(page):
     nb.metadata["kernelspec"] = kernelspec()
     nb.metadata["language_info"] = {"name": "python", "version": "3.11.7"}
     assert jupytext.writes(nb, fmt="md:myst", config=config) == text
+
+
+def test_a_kernel_that_dies_on_starting_is_started_again_then_named():
+    # jupyter_client's message for a kernel that could not bind its ports: started again,
+    # up to KERNEL_STARTS times; any other error, or the last such death, is raised.
+    calls = []
+
+    def dies_once():
+        calls.append(1)
+        if len(calls) == 1:
+            raise RuntimeError(check_notebooks.KERNEL_DIED)
+        return "ran"
+
+    assert check_notebooks.with_kernel_starts(dies_once) == "ran" and len(calls) == 2
+
+    def always_dies():
+        calls.append(1)
+        raise RuntimeError(check_notebooks.KERNEL_DIED)
+
+    calls.clear()
+    with pytest.raises(RuntimeError, match=check_notebooks.KERNEL_DIED):
+        check_notebooks.with_kernel_starts(always_dies)
+    assert len(calls) == check_notebooks.KERNEL_STARTS
+
+    def other_error():
+        calls.append(1)
+        raise RuntimeError("Kernel didn't respond in 60 seconds")
+
+    calls.clear()
+    with pytest.raises(RuntimeError, match="didn't respond"):
+        check_notebooks.with_kernel_starts(other_error)
+    assert len(calls) == 1

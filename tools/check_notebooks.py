@@ -78,6 +78,24 @@ TIMEOUT = 600  # seconds per cell, as `execute.timeout` in _config.yml
 #: on a loaded machine a cell that glues hundreds of numbers loses its last ones).
 #: Every execution here waits this long and fails, rather than truncate, beyond it.
 IOPUB_TIMEOUT = 120
+#: Times a page's kernel is started before its failure to start is an error. A kernel binds
+#: the ports that jupyter_client chose for it a moment before, and when another process takes
+#: one in between (two pages execute at a time) it dies before answering.
+KERNEL_STARTS = 3
+#: What jupyter_client says of a kernel that died so.
+KERNEL_DIED = "Kernel died before replying to kernel_info"
+
+
+def with_kernel_starts(execute, starts: int = KERNEL_STARTS):
+    """``execute()``, called again when its kernel died on starting, up to ``starts`` times."""
+    for start in range(1, starts + 1):
+        try:
+            return execute()
+        except RuntimeError as exc:
+            if KERNEL_DIED not in str(exc) or start == starts:
+                raise
+
+
 #: The book's kernel, ``kernels/python3``: ipykernel, run by the Python that starts it,
 #: without its notice about plain TCP on the loopback interface.
 KERNELS = ROOT / "tools" / "jupyter"
@@ -601,19 +619,24 @@ def execute_for_cache(page: Path, alone: bool = False):
     import nbformat
     from jupyter_cache.executors.utils import single_nb_execution
 
-    nb = read_as_the_book(page)
     with tempfile.TemporaryDirectory(prefix=f"depthcore-{page.stem}-") as folder:
-        if alone:
-            nbformat.write(nb, Path(folder) / f"{page.stem}.ipynb")
         cwd = folder if alone else str(page.parent)
-        result = single_nb_execution(
-            nb,
-            cwd=cwd,
-            timeout=TIMEOUT,
-            allow_errors=False,
-            iopub_timeout=IOPUB_TIMEOUT,
-            raise_on_iopub_timeout=True,
-        )
+
+        def execute():
+            nb = read_as_the_book(page)
+            if alone:
+                nbformat.write(nb, Path(folder) / f"{page.stem}.ipynb")
+            result = single_nb_execution(
+                nb,
+                cwd=cwd,
+                timeout=TIMEOUT,
+                allow_errors=False,
+                iopub_timeout=IOPUB_TIMEOUT,
+                raise_on_iopub_timeout=True,
+            )
+            return nb, result
+
+        nb, result = with_kernel_starts(execute)
     return page, nb, result.time, None if result.err is None else result.exc_string
 
 
@@ -868,17 +891,21 @@ def update_page(page: Path) -> Path:
     import nbformat
     from nbclient import NotebookClient
 
-    nb = jupytext.read(page)
-    NotebookClient(
-        nb,
-        # a cell that computes its study's record (make records) takes what the study takes
-        timeout=None if os.environ.get("DEPTHCORE_RECORDS") == "write" else TIMEOUT,
-        iopub_timeout=IOPUB_TIMEOUT,
-        raise_on_iopub_timeout=True,
-        kernel_name="python3",
-        record_timing=False,
-        resources={"metadata": {"path": str(page.parent)}},
-    ).execute()
+    def execute():
+        nb = jupytext.read(page)
+        NotebookClient(
+            nb,
+            # a cell that computes its study's record (make records) takes what the study takes
+            timeout=None if os.environ.get("DEPTHCORE_RECORDS") == "write" else TIMEOUT,
+            iopub_timeout=IOPUB_TIMEOUT,
+            raise_on_iopub_timeout=True,
+            kernel_name="python3",
+            record_timing=False,
+            resources={"metadata": {"path": str(page.parent)}},
+        ).execute()
+        return nb
+
+    nb = with_kernel_starts(execute)
     stable_cell_ids(nb)
     drop_vector_copies(nb)
     ref = reference_path(page)
