@@ -76,6 +76,25 @@ MAX_ITERATIONS = 100
 STEP_TOL = 1e-12
 
 
+def _still_descending(moved, f_new, f) -> np.ndarray:
+    """Whether a Gauss-Newton iteration goes on after a step (the rule of :data:`STEP_TOL`).
+
+    Parameters
+    ----------
+    moved : ndarray, shape (...)
+        The step's length, in SDs of the state.
+    f_new, f : ndarray, shape (...)
+        The objective after the step and before it.
+
+    Returns
+    -------
+    ndarray of bool, shape (...)
+        True where the step moved the state by more than :data:`STEP_TOL` SDs and
+        lowered the objective.
+    """
+    return (moved > STEP_TOL) & (f_new < f)
+
+
 class IteratedUpdate(NamedTuple):
     """An iterated measurement update: the mean, its covariance and the iterations used."""
 
@@ -142,7 +161,7 @@ def update(n, C, mu, rho, max_iterations: int = MAX_ITERATIONS) -> IteratedUpdat
         z = np.linalg.solve(C_chol, (x_new - x)[..., None])[..., 0]
         moved = np.sqrt(np.sum(z**2, axis=-1))
         x = np.where(active[..., None], x_new, x)
-        active = active & (moved > STEP_TOL) & (f_new < f)
+        active = active & _still_descending(moved, f_new, f)
         f = np.where(active, f_new, f)
     # The gain of the last linearisation (at convergence, the gradient at the mode itself).
     h = model.observation_vector(linearised_at)
@@ -369,7 +388,7 @@ def smoother(
         iterations = iterations + active
         moved = np.sqrt(np.abs(np.einsum("...i,...ij,...j->...", x_new - x, A, x_new - x)))
         x = np.where(active[..., None], x_new, x)
-        active = active & (moved > STEP_TOL) & (f_new < f)
+        active = active & _still_descending(moved, f_new, f)
         f = np.where(active, f_new, f)
     _, J = _residuals_and_jacobian(x, K)
     Jw = J / rho[..., None, None]
@@ -464,7 +483,7 @@ def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:
             + np.sum(np.einsum("bki,bki->bk", H, d) ** 2, axis=-1)
             + np.sum((dz[:, 3:] / q) ** 2, axis=-1)
         )
-        converged[rows] = ~((moved > STEP_TOL) & (f_new < f[rows]))
+        converged[rows] = ~_still_descending(moved, f_new, f[rows])
         z[rows], f[rows] = z_new, f_new
     s = trajectory_states(z)
     zero = np.zeros((B, K))
