@@ -22,6 +22,11 @@ def fig2_optimal():
     return optimal.run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, support="front")
 
 
+def on_fig2(n_particles, rng, **options):
+    """The particle filter on Figure 2's triple, with its prior."""
+    return run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, n_particles, rng, **options)
+
+
 def reference(opt):
     return np.array([opt.depth_mean, opt.depth_sd, opt.velocity_mean, opt.velocity_sd])
 
@@ -44,7 +49,7 @@ def replicates(n_particles, n_replicates, seed, scenario=FIG2, **kwargs):
 
 
 def test_result_log_weights_are_normalised_and_ess_matches():
-    r = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 3000, np.random.default_rng(8))
+    r = on_fig2(3000, np.random.default_rng(8))
     assert r.particles.shape == (3000, 3) and r.log_weights.shape == (3000,)
     assert_allclose(logsumexp(r.log_weights), 0.0, atol=1e-12)
     assert_allclose(r.ess[-1], 1.0 / np.sum(r.weights**2), rtol=1e-10)
@@ -52,15 +57,7 @@ def test_result_log_weights_are_normalised_and_ess_matches():
 
 
 def test_gaussian_proposal_is_the_limit_of_infinite_df():
-    r = run(
-        FIG2.mu,
-        FIG2.rho,
-        FIG2.prior.mean,
-        FIG2.prior.cov,
-        2000,
-        np.random.default_rng(25),
-        df=np.inf,
-    )
+    r = on_fig2(2000, np.random.default_rng(25), df=np.inf)
     m, S = second_order_batch(np.array([FIG2.mu]), FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     q = stats.multivariate_normal(m[0], pf.DEFAULT_INFLATION**2 * S[0])
     alive = np.isfinite(r.log_weights)
@@ -76,15 +73,7 @@ def test_final_weights_are_posterior_over_proposal():
     # Without resampling the look-ahead terms cancel: log W = log p_o - log q + const,
     # with p_o the optimal posterior (6) and q the t proposal (scipy's density).
     N = 2000
-    r = run(
-        FIG2.mu,
-        FIG2.rho,
-        FIG2.prior.mean,
-        FIG2.prior.cov,
-        N,
-        np.random.default_rng(9),
-        ess_threshold=0.0,
-    )
+    r = on_fig2(N, np.random.default_rng(9), ess_threshold=0.0)
     m, S = second_order_batch(np.array([FIG2.mu]), FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     q = stats.multivariate_t(m[0], pf.DEFAULT_INFLATION**2 * S[0], df=pf.DEFAULT_DF)
     x = r.particles
@@ -101,22 +90,16 @@ def test_final_weights_are_posterior_over_proposal():
 @pytest.mark.parametrize("proposal", ["second_order", "prior"])
 def test_same_seed_gives_identical_output(proposal):
     kwargs = dict(proposal=proposal, ess_threshold=1.0)  # resampling at every step too
-    a = run(
-        FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 500, np.random.default_rng(10), **kwargs
-    )
-    b = run(
-        FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 500, np.random.default_rng(10), **kwargs
-    )
-    c = run(
-        FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 500, np.random.default_rng(11), **kwargs
-    )
+    a = on_fig2(500, np.random.default_rng(10), **kwargs)
+    b = on_fig2(500, np.random.default_rng(10), **kwargs)
+    c = on_fig2(500, np.random.default_rng(11), **kwargs)
     for name in ("particles", "log_weights", "ess", "resampled", "ancestors"):
         assert_array_equal(getattr(a, name), getattr(b, name))
     assert not np.array_equal(a.particles, c.particles)
 
 
 def test_single_is_the_batch_of_one():
-    a = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 400, np.random.default_rng(12))
+    a = on_fig2(400, np.random.default_rng(12))
     b = run(
         np.array([FIG2.mu]),
         FIG2.rho,
@@ -144,15 +127,7 @@ def test_batch_of_different_triples():
 
 
 def test_resampling_duplicates_particles_with_their_ancestors():
-    r = run(
-        FIG2.mu,
-        FIG2.rho,
-        FIG2.prior.mean,
-        FIG2.prior.cov,
-        800,
-        np.random.default_rng(14),
-        ess_threshold=1.0,
-    )
+    r = on_fig2(800, np.random.default_rng(14), ess_threshold=1.0)
     assert_array_equal(r.resampled, [False, True, True])
     assert len(np.unique(r.ancestors)) < 800
     for a in np.unique(r.ancestors)[:20]:
@@ -162,7 +137,7 @@ def test_resampling_duplicates_particles_with_their_ancestors():
 
 
 def test_result_is_immutable():
-    r = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 100, np.random.default_rng(15))
+    r = on_fig2(100, np.random.default_rng(15))
     with pytest.raises(ValueError):
         r.particles[0, 0] = 1.0
     with pytest.raises(AttributeError):
@@ -174,31 +149,13 @@ def test_result_is_immutable():
 
 def test_bootstrap_collapses_on_fig2_while_the_proposal_does_not():
     N = 4000
-    boot = run(
-        FIG2.mu,
-        FIG2.rho,
-        FIG2.prior.mean,
-        FIG2.prior.cov,
-        N,
-        np.random.default_rng(16),
-        proposal="prior",
-        ess_threshold=0.5,
-    )
+    boot = on_fig2(N, np.random.default_rng(16), proposal="prior", ess_threshold=0.5)
     assert boot.ess[0] < 0.02 * N  # a bearing alone leaves a thin wedge of the prior
     assert boot.resampled[1]
     assert boot.distinct_ess() < 10  # the copies made by resampling count as one particle
-    plain = run(
-        FIG2.mu,
-        FIG2.rho,
-        FIG2.prior.mean,
-        FIG2.prior.cov,
-        N,
-        np.random.default_rng(16),
-        proposal="prior",
-        ess_threshold=0.0,
-    )
+    plain = on_fig2(N, np.random.default_rng(16), proposal="prior", ess_threshold=0.0)
     assert np.all(plain.ess[1:] < 10)  # after two bearings: a handful of particles
-    good = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, N, np.random.default_rng(16))
+    good = on_fig2(N, np.random.default_rng(16))
     assert np.all(good.ess > 0.3 * N) and not good.resampled.any()
     assert good.distinct_ess() == pytest.approx(good.ess[-1], rel=1e-12)
 
@@ -279,7 +236,7 @@ def test_fig3_converges_without_resampling_but_not_with_it():
 
 
 def test_depth_density_approaches_the_optimal_marginal(fig2_optimal):
-    r = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 20000, np.random.default_rng(21))
+    r = on_fig2(20000, np.random.default_rng(21))
     grid = np.linspace(2.5, 14.0, 231)
     exact = fig2_optimal.depth_pdf(grid)
     step = grid[1] - grid[0]
@@ -294,7 +251,7 @@ def test_depth_density_approaches_the_optimal_marginal(fig2_optimal):
 
 
 def test_density_bandwidth_and_grid_checks():
-    r = run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, 500, np.random.default_rng(22))
+    r = on_fig2(500, np.random.default_rng(22))
     narrow = r.density("y", np.linspace(0, 20, 50), bandwidth=0.05)
     wide = r.density("y", np.linspace(0, 20, 50), bandwidth=2.0)
     assert narrow.max() > wide.max()
