@@ -583,13 +583,9 @@ def trials_for_se(se: float, level: float = 0.68, step: int = 100) -> int:
     -------
     int
     """
-    se, level = float(se), float(level)
-    if not (np.isfinite(se) and se > 0.0):
-        raise ValueError(f"se must be positive, got {se!r}")
+    se, step, level = checks.positive_scalar(se, "se"), checks.count(step, "step"), float(level)
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must lie in (0, 1), got {level!r}")
-    if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 1:
-        raise ValueError(f"step must be a positive integer, got {step!r}")
     n = step * max(1, int(np.ceil(level * (1.0 - level) / se**2 / step)))
     while coverage_se(level, n) > se:  # the rounding of the quotient, at most once
         n += step
