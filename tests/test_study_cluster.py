@@ -134,16 +134,13 @@ def _cli(*args) -> subprocess.CompletedProcess:
 @contextmanager
 def _port_taken(port: int):
     """Dask's dashboard port held by another listener (or already taken) for the duration."""
-    holder = socket.socket()
-    try:
-        holder.bind(("", port))
-        holder.listen()
-    except OSError:
-        pass  # something else holds it already
-    try:
+    with socket.socket() as holder:
+        try:
+            holder.bind(("", port))
+            holder.listen()
+        except OSError:
+            pass  # something else holds it already
         yield
-    finally:
-        holder.close()
 
 
 def test_the_command_line_on_two_local_workers_prints_the_same_json(capsys):
