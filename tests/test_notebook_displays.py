@@ -170,3 +170,30 @@ def test_a_downloaded_notebook_gives_the_page_its_tables(page, tmp_path, monkeyp
     assert tables_of(page_text(page.stem)) == expected
     (tmp_path / page.name).write_text(page.read_text(encoding="utf-8"), encoding="utf-8")
     assert page_text(page.name) == page.read_text(encoding="utf-8")
+
+
+def test_a_markdown_tables_text_depends_on_its_values_not_on_their_widths():
+    """The last column is not padded and its rule is as wide as its header: a long value
+    there, such as the environment statement naming the processor (which
+    tests/nbval_sanitize.cfg replaces), leaves the rest of the plain text alone."""
+    from depthcore.book.notebook import MarkdownTable
+
+    table = MarkdownTable(["glued name", "value"], [["rep_n", "3"], ["rep_what", "a long value"]])
+    assert repr(table).splitlines() == [
+        "glued name  value",
+        "----------  -----",
+        "rep_n       3",
+        "rep_what    a long value",
+    ]
+    patterns = check_notebooks.sanitize_patterns()
+    texts = []
+    for environment in (
+        "Built on 2026-01-31 with depthcore 1.0 on a laptop",
+        "Built on 2026-02-01 with depthcore 1.0 on 64 cores (a processor of a long name)",
+    ):
+        text = repr(MarkdownTable(["glued name", "value"], [["rep_environment", environment]]))
+        for regex, replace in patterns.items():
+            text = re.sub(regex, replace, text)
+        texts.append(text)
+    assert texts[0] == texts[1]
+    assert texts[0].splitlines()[1] == "---------------  -----"

@@ -51,8 +51,15 @@ class MarkdownTable:
         return self.markdown()
 
     def __repr__(self) -> str:
+        """The table as aligned plain text, under a rule line.
+
+        Every column but the last is padded to its longest cell; the last needs
+        no padding, and its rule is as wide as its header, so that a long value
+        there (an environment naming the processor) leaves the rule unchanged.
+        """
         table = [self.header, *self.rows]
-        widths = [max(len(row[j]) for row in table) for j in range(len(self.header))]
+        widths = [max(len(row[j]) for row in table) for j in range(len(self.header) - 1)]
+        widths.append(len(self.header[-1]))
         lines = [
             "  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip()
             for row in table
