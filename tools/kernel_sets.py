@@ -1,0 +1,147 @@
+"""Run a command as other processors would: under OpenBLAS kernel sets other than this one's.
+
+``make notebooks-kernels`` runs the page checks (``tools/check_notebooks.py check``) once
+per set, so that a reference which holds what one processor's kernels print, and another's
+do not, fails here rather than on a reader's machine:
+
+* OpenBLAS's kernels of other processors (``OPENBLAS_CORETYPE``): ``Nehalem`` (SSE4.2,
+  before AVX), ``Haswell`` (AVX2) and ``SkylakeX`` (AVX-512, where this processor has it),
+  each skipped where it is this processor's own choice or cannot run here (OpenBLAS runs
+  ``Prescott`` too, but names it ``Katmai``, so that a probe cannot tell it ran);
+* NumPy's own SIMD loops cut to the build's baseline (``NPY_DISABLE_CPU_FEATURES``: every
+  feature NumPy found beyond it), with this processor's BLAS kernels.
+
+Each set is probed first (a Python that loads NumPy under it and names the kernels it
+runs); a set that this processor cannot run is named and skipped, and fewer than two
+OpenBLAS sets besides the native one is an error. Outside x86-64 only the NumPy set runs.
+
+Usage: ``python tools/kernel_sets.py [--list] -- COMMAND [ARG ...]``; exits non-zero when
+the command fails under any set, naming the sets it failed under.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+
+#: OpenBLAS's kernel sets to try, each with the CPU flags (of /proc/cpuinfo) it needs.
+CORETYPES = {
+    "Nehalem": ("sse4_2",),
+    "Haswell": ("avx2", "fma"),
+    "SkylakeX": ("avx512f", "avx512bw", "avx512vl", "avx512dq", "avx512cd"),
+}
+#: The variables a set may change, cleared from the environment the sets start from.
+VARIABLES = ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES")
+#: What the probe prints: the kernels OpenBLAS runs and the SIMD features NumPy uses.
+PROBE = """
+import json, numpy
+from depthcore.provenance import benchmarks
+m = benchmarks.machine()
+simd = numpy.show_config(mode="dicts").get("SIMD Extensions", {})
+print(json.dumps({"blas": m["blas"], "baseline": simd.get("baseline", []),
+                  "found": simd.get("found", [])}))
+"""
+
+
+def cpu_flags() -> set[str]:
+    """The flags of this processor (Linux's /proc/cpuinfo), empty where it cannot be read."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    return set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    return set()
+
+
+def probe(env: dict) -> dict | None:
+    """What NumPy and OpenBLAS run under ``env``; None when a Python cannot start under it."""
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, timeout=120
+    )
+    if out.returncode != 0:
+        return None
+    return json.loads(out.stdout.splitlines()[-1])
+
+
+def kernel(blas: str) -> str:
+    """The kernel set's name in :func:`depthcore.provenance.benchmarks.machine`'s ``blas``."""
+    return blas.removesuffix(" kernels").rsplit(", ", 1)[-1]
+
+
+def kernel_sets(base: dict) -> tuple[list[tuple[str, dict]], list[str]]:
+    """The sets to run under, each a name and its environment, and the sets skipped, why."""
+    native = probe(base)
+    if native is None:
+        raise RuntimeError("a Python with NumPy and depthcore does not start here")
+    sets, skipped = [], []
+    x86 = platform.machine().lower() in ("x86_64", "amd64")
+    flags = cpu_flags()
+    for name, needs in CORETYPES.items() if x86 else ():
+        env = {**base, "OPENBLAS_CORETYPE": name}
+        if name.lower() == kernel(native["blas"]).lower():
+            skipped.append(f"{name} (this processor's own)")
+        elif not set(needs) <= flags:
+            skipped.append(f"{name} (needs {', '.join(sorted(set(needs) - flags))})")
+        elif (seen := probe(env)) is None or kernel(seen["blas"]).lower() != name.lower():
+            skipped.append(f"{name} (OpenBLAS did not run it here)")
+        else:
+            sets.append((f"OPENBLAS_CORETYPE={name}", env))
+    if x86 and len(sets) < 2:
+        raise RuntimeError(
+            f"fewer than two OpenBLAS kernel sets besides this processor's: {'; '.join(skipped)}"
+        )
+    beyond = [f for f in native["found"] if f not in native["baseline"]]
+    if beyond:
+        features = " ".join(beyond)
+        sets.append((f'NPY_DISABLE_CPU_FEATURES="{features}"', {**base, VARIABLES[1]: features}))
+    else:
+        skipped.append("NPY_DISABLE_CPU_FEATURES (NumPy found nothing beyond its baseline)")
+    return sets, skipped
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--list", action="store_true", help="name the sets and run nothing")
+    parser.add_argument("command", nargs=argparse.REMAINDER, help="-- COMMAND [ARG ...]")
+    args = parser.parse_args(argv)
+    command = args.command[1:] if args.command[:1] == ["--"] else args.command
+    if not command and not args.list:
+        parser.error("a command to run is required, after --")
+    base = {k: v for k, v in os.environ.items() if k not in VARIABLES}
+    try:
+        sets, skipped = kernel_sets(base)
+    except RuntimeError as err:
+        print(f"kernel sets: {err}", file=sys.stderr)
+        return 1
+    for why in skipped:
+        print(f"kernel sets: skipped {why}", flush=True)
+    failed = []
+    for name, env in sets:
+        if args.list:
+            print(f"kernel sets: {name}")
+            continue
+        print(f"kernel sets: {' '.join(command)}  under {name}", flush=True)
+        start = time.monotonic()
+        status = subprocess.run(command, env=env).returncode
+        print(
+            f"kernel sets: under {name}: {'passed' if status == 0 else 'FAILED'} "
+            f"({time.monotonic() - start:.0f} s)",
+            flush=True,
+        )
+        if status != 0:
+            failed.append(name)
+    if failed:
+        print(f"kernel sets: failed under {'; '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
