@@ -200,9 +200,11 @@ figures: $(EDITABLE) ## the paper's figures into figures/
 # The pages that read studies from their records: executed writing them, then reading them.
 RECORD_PAGES := marginals discrepancies beyond_filters beyond_particles beyond_study beyond_sweeps beyond_frames beyond_bound beyond_hard beyond_conjecture beyond_atlas intro conclusions reproducing
 # Their studies' chunks run on a local Dask cluster of every core (tools/cluster.py).
+# The new records are written beside the committed ones, which they replace only once every
+# page has run (tools/records.py): an interrupted run leaves the committed set, and the pages'
+# references, as they were.
 records: $(EDITABLE) ## every study the book reads from a record, again (and the README and article)
-	rm -f depthcore/provenance/study_records/*.json
-	DEPTHCORE_RECORDS=write $(PY) tools/cluster.py $(PY) tools/check_notebooks.py update $(RECORD_PAGES)
+	$(PY) tools/records.py -- $(PY) tools/cluster.py $(PY) tools/check_notebooks.py update $(RECORD_PAGES)
 	$(PY) tools/check_notebooks.py update $(RECORD_PAGES)
 	$(PY) tools/readme.py
 	$(PY) tools/article.py write

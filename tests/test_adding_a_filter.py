@@ -160,3 +160,83 @@ def test_register_refuses_what_is_not_a_new_filter():
     with pytest.raises(ValueError, match="family must be one of"):
         register(unknown)
     assert "x" not in names()
+
+
+#: The fingerprints of what each committed study record's call runs, as a copy of the package
+#: sees them (:func:`depthcore.provenance.records.code_fingerprint`).
+FINGERPRINTS = """
+import json
+from depthcore.provenance import records
+prints = {}
+for path in records.committed():
+    r = records.read(path)
+    args = records.decode(r["arguments"]["args"])
+    kwargs = records.decode(r["arguments"]["kwargs"])
+    prints[path.stem] = records.code_fingerprint(r["function"], args, kwargs)
+print(json.dumps(prints))
+"""
+
+
+def _changed_in_a_copy(tmp_path, edit) -> dict:
+    """Each record's fingerprints that ``edit`` changes: this package against an edited copy."""
+    before = _run(FINGERPRINTS, ROOT)
+    package = tmp_path / "depthcore"
+    shutil.copytree(ROOT / "depthcore", package, ignore=shutil.ignore_patterns("__pycache__"))
+    edit(package)
+    after = _run(FINGERPRINTS, tmp_path, PYTHONPATH=str(tmp_path))
+    assert before.keys() == after.keys() and len(before) >= 20
+    changed = {
+        name: sorted(
+            k
+            for k in before[name].keys() | after[name].keys()
+            if before[name].get(k) != after[name].get(k)
+        )
+        for name in before
+    }
+    return {name: keys for name, keys in changed.items() if keys}
+
+
+def _add_toy_to_the_registry(package: Path) -> None:
+    """The toy filter added as the package's own: a module, and an entry among FILTERS'."""
+    (package / "kalman" / "toy.py").write_text(TOY_MODULE, encoding="utf-8")
+    registry = package / "registry" / "filters.py"
+    text = registry.read_text(encoding="utf-8")
+    start = text.index("FILTERS: dict[str, Filter] = {")
+    end = text.index("\n    )\n}\n", start)  # the end of the tuple of entries
+    entry = textwrap.indent(TOY_ENTRY.format(run="toy.run").strip(), " " * 8)
+    text = text[:end] + "\n" + entry + "," + text[end:]
+    text = text.replace(
+        "from depthcore.kalman import (",
+        "from depthcore.kalman import toy\nfrom depthcore.kalman import (",
+        1,
+    )
+    registry.write_text(text, encoding="utf-8")
+
+
+def test_a_new_filter_makes_stale_only_the_records_of_studies_that_run_every_filter(tmp_path):
+    def edit(package):
+        _add_toy_to_the_registry(package)
+        # a docstring and a comment of the exact filter, which nearly every study runs
+        bank = package / "exact" / "bank.py"
+        text = bank.read_text(encoding="utf-8")
+        bank.write_text(text.replace('"""', '"""Reworded. ', 1) + "\n# a comment\n", "utf-8")
+
+    changed = _changed_in_a_copy(tmp_path, edit)
+    # the atlas runs every registered filter (ALL_NAMES), and so does its cost probe
+    assert {name.split("-")[0] for name in changed} == {"atlas", "probe_cost"}, changed
+    for keys in changed.values():
+        assert keys == ["code depthcore.kalman.toy:run", "filter toy"]
+
+
+def test_a_change_to_a_studys_code_makes_its_records_stale_and_no_others(tmp_path):
+    def edit(package):
+        reference = package / "analysis" / "reference.py"
+        text = reference.read_text(encoding="utf-8")
+        start = text.index("def grid_moments(")
+        body = text.index('"""', text.index('"""', start) + 3) + 3  # past its docstring
+        reference.write_text(text[:body] + "\n    rho = float(rho)" + text[body:], "utf-8")
+
+    changed = _changed_in_a_copy(tmp_path, edit)
+    assert {name.split("-")[0] for name in changed} == {"grid_moments"}, changed
+    for keys in changed.values():
+        assert keys == ["code depthcore.analysis.reference:grid_moments"]

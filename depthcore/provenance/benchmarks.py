@@ -32,8 +32,6 @@ from pathlib import Path
 
 import numpy as np
 
-from depthcore import __version__
-
 #: The repository, where the benchmark scripts sit beside the package.
 ROOT = Path(__file__).resolve().parents[2]
 #: The committed records, one per script, kept as package data so that an installed
@@ -380,6 +378,8 @@ def write(script, modules, sizes: dict, results: dict, full: bool = True) -> Pat
     Path
         The file written, ``<directory>/<name>.json``.
     """
+    from depthcore.provenance.environment import code_version  # it imports this module
+
     script = Path(script).resolve()
     name = script.stem
     record = {
@@ -387,7 +387,7 @@ def write(script, modules, sizes: dict, results: dict, full: bool = True) -> Pat
         "command": command(name),
         "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "machine": machine(),
-        "depthcore_version": __version__,
+        "depthcore_version": code_version(),
         "measures": list(modules),
         "fingerprint": fingerprints(script, modules),
         "units": UNITS,

@@ -15,8 +15,11 @@ when it runs, so the two state the same environment in the same words.
 from __future__ import annotations
 
 import datetime
+import functools
 import platform
+import subprocess
 from importlib import metadata
+from pathlib import Path
 
 from depthcore import __version__
 from depthcore.provenance import benchmarks
@@ -30,6 +33,42 @@ PACKAGES = {
     "jupyter-book": "Jupyter Book",
     "sphinx": "Sphinx",
 }
+
+
+#: The repository, whose commit names the code of a checkout.
+ROOT = Path(__file__).resolve().parents[2]
+#: What the code's version ignores of the package's folder: the records that code writes.
+RECORDS = ("depthcore/provenance/study_records", "depthcore/provenance/benchmark_records")
+
+
+@functools.lru_cache(maxsize=1)
+def code_version() -> str:
+    """depthcore's version and, in a git checkout, the commit of its code.
+
+    Returns
+    -------
+    str
+        ``"0.2.0+g5eaeec6"`` (PEP 440's local version: the commit's first 7
+        hexadecimal digits), with ``".dirty"`` appended when the package's
+        files (its records apart) differ from that commit; plain ``"0.2.0"``
+        outside a checkout (an installed archive), where no commit is known.
+    """
+
+    def git(*args):
+        return subprocess.run(
+            ["git", *args], cwd=ROOT, capture_output=True, text=True, timeout=30, check=True
+        ).stdout.strip()
+
+    if not (ROOT / ".git").exists():
+        return __version__
+    try:
+        commit = git("rev-parse", "--short=7", "HEAD")
+        changes = git(
+            "status", "--porcelain", "--", "depthcore", *(f":(exclude){p}" for p in RECORDS)
+        )
+    except (OSError, subprocess.SubprocessError):
+        return __version__
+    return f"{__version__}+g{commit}" + (".dirty" if changes else "")
 
 
 def _version(distribution: str) -> str:
@@ -91,3 +130,86 @@ def sentence(stated: dict) -> str:
         )
     except (KeyError, TypeError) as err:
         raise ValueError(f"stated must be what environment.statement() returns: {err!r}") from None
+
+
+def _machine_words(m: dict) -> str:
+    """A machine as a record stores it, in words: processor, cores, BLAS and its kernels."""
+    return f"{m['cpu']} ({m['processor']}), {m['cores']} logical CPUs, BLAS {m['blas']}"
+
+
+def origins(kinds: dict) -> list[dict]:
+    """Where and when each kind of record was computed, read from the records themselves.
+
+    Parameters
+    ----------
+    kinds : dict of str to list of dict
+        A kind's name (``"study records"``) -> its records, each with the
+        fields ``date``, ``machine`` and ``depthcore_version`` that study and
+        benchmark records share.
+
+    Returns
+    -------
+    list of dict
+        One per kind and machine, in the order given: ``kind``, ``count``,
+        ``dates`` (the first and last, ISO 8601 days), ``machine`` (in
+        words), ``versions`` (depthcore's, sorted) and ``software`` (Python,
+        NumPy and SciPy as the machine stored them).
+    """
+    found = []
+    for kind, rows in kinds.items():
+        groups: dict[str, list[dict]] = {}
+        for row in rows:
+            try:
+                groups.setdefault(_machine_words(row["machine"]), []).append(row)
+            except (KeyError, TypeError) as err:
+                raise ValueError(f"kinds: a record of {kind} lacks {err}") from None
+        for machine, group in groups.items():
+            days = sorted(str(r["date"])[:10] for r in group)
+            m = group[0]["machine"]
+            found.append(
+                {
+                    "kind": kind,
+                    "count": len(group),
+                    "dates": (days[0], days[-1]),
+                    "machine": machine,
+                    "versions": sorted({str(r["depthcore_version"]) for r in group}),
+                    "software": f"Python {m['python']}, NumPy {m['numpy']}, SciPy {m['scipy']}",
+                }
+            )
+    return found
+
+
+def origins_sentence(found: list[dict]) -> str:
+    """:func:`origins` as one sentence: which records were computed where, when, by what.
+
+    Examples
+    --------
+    "The 31 study records were computed on 2026-12-06 on Intel(R) Xeon(R) Processor
+    (family 6, model 167), 2 logical CPUs, BLAS scipy-openblas 0.3.31.188.0, SkylakeX
+    kernels, with depthcore 0.2.0+g1234567 on Python 3.11.7, NumPy 2.4.6, SciPy 1.17.1;
+    the 10 benchmark records on 2026-11-29 on ..."
+    """
+    if not found:
+        raise ValueError("found must name at least one kind of record")
+    parts = []
+    for i, o in enumerate(found):
+        days = " to ".join(dict.fromkeys(o["dates"]))
+        verb = " were computed" if i == 0 else ""
+        parts.append(
+            f"{'The' if i == 0 else 'the'} {o['count']} {o['kind']}{verb} on {days} on "
+            f"{o['machine']}, with depthcore {' and '.join(o['versions'])} on {o['software']}"
+        )
+    return "; ".join(parts) + "."
+
+
+def records_sentence() -> str:
+    """:func:`origins_sentence` of the committed study and benchmark records.
+
+    The book's page "Reproducing this book" and the article state it beside
+    the environment of their own build (:func:`sentence`), which may differ.
+    """
+    from depthcore.provenance import records  # records imports this module
+
+    studies = [records.read(path) for path in records.committed()]
+    measured = [benchmarks.read(path.stem) for path in sorted(benchmarks.RESULTS.glob("*.json"))]
+    return origins_sentence(origins({"study records": studies, "benchmark records": measured}))

@@ -15,10 +15,13 @@ what the computation returns, bit for bit (floats are written with
 
 Each record, ``depthcore/provenance/study_records/<function>-<key>.json``, holds
 the function, its arguments, the result, the date, the machine, the seconds
-the computation took, depthcore's version and the fingerprint of the code it
-ran (:func:`depthcore.provenance.benchmarks.fingerprint` of the function's module and of
-every depthcore module it imports, directly or not). A change of that code
-makes the record stale (:func:`stale`), and a stale record is never read.
+the computation took, depthcore's version with the commit of its code
+(:func:`depthcore.provenance.environment.code_version`) and the fingerprints
+of what the call runs (:func:`depthcore.provenance.closure.fingerprints`: the
+functions and classes its code reaches, the constants they read, the filters
+it names, the data files it reads). A change of any of these makes the record
+stale (:func:`stale`), and a stale record is never read; a change elsewhere
+(a filter the study does not run, a page, a docstring) leaves it valid.
 
 How :func:`recorded` treats records is set by the environment variable
 ``DEPTHCORE_RECORDS`` (:data:`MODES`): ``read`` (the default) reads a current
@@ -37,8 +40,8 @@ archive and is read on the reader's machine. ``joblib.Memory`` keys a result
 on the cached function's own code only: with joblib 1.6.0, a result stays in
 use after a change to a function that the cached one calls (checked: ``f``
 calling ``g``, ``g`` changed from ``x + 1`` to ``x + 100``, ``f(1)`` still
-returns the stored 2), where a record here is stale as soon as any depthcore
-module the function imports changes (:func:`stale`). Its results are pickles,
+returns the stored 2), where a record here is stale as soon as any code the
+call reaches changes (:func:`stale`). Its results are pickles,
 which a review cannot read in a diff and which depend on the classes'
 module paths and the library versions that wrote them; a record is JSON, with
 the date, machine, duration and code fingerprint beside the result, and is read
@@ -60,13 +63,16 @@ from pathlib import Path
 
 import numpy as np
 
-from depthcore import __version__
-from depthcore.provenance import benchmarks
+from depthcore.provenance import benchmarks, closure, environment
 
 #: The committed records, kept as package data so that the book's source archive carries them.
 RECORDS = Path(__file__).resolve().parent / "study_records"
 #: The environment variable that sets how :func:`recorded` treats records.
 ENVIRONMENT = "DEPTHCORE_RECORDS"
+#: The environment variable naming another folder of records for :func:`recorded` to read
+#: and write: ``make records`` writes the new set there, beside the committed one, and
+#: puts it in place only once every study has run (``tools/records.py``).
+DIRECTORY = "DEPTHCORE_RECORDS_DIR"
 #: The values of :data:`ENVIRONMENT`, in this order: read a current record (the default),
 #: also write the record of each computation, or require a current record.
 MODES = ("read", "write", "require")
@@ -221,12 +227,6 @@ def function_name(function) -> str:
     return f"{module}:{function.__qualname__}"
 
 
-def _module_name(name: str) -> str:
-    """The module of a record's function, relative to the package: ``book.beyond_frames``."""
-    module = name.partition(":")[0]
-    return module.removeprefix("depthcore").removeprefix(".") or "__init__"
-
-
 def _encode_named(value, what: str):
     """:func:`encode`, its TypeError naming ``what`` was being encoded."""
     try:
@@ -265,24 +265,44 @@ def record_path(name: str, key: str, directory=None) -> Path:
     return Path(RECORDS if directory is None else directory) / f"{function}-{key}.json"
 
 
-def code_fingerprint(name: str) -> dict[str, str]:
-    """The fingerprints of a function's module and of every depthcore module it imports.
+def resolve(name: str):
+    """The function a record names, ``module:qualname``; a ValueError when there is none."""
+    module, _, qualname = name.partition(":")
+    if not (module == "depthcore" or module.startswith("depthcore.")):
+        raise ValueError(f"function must be one of depthcore's functions, got {name!r}")
+    try:
+        obj = importlib.import_module(module)
+        for part in qualname.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError):
+        raise ValueError(f"function {name!r} is gone from depthcore") from None
+    return obj
+
+
+def code_fingerprint(name: str, args=(), kwargs=None) -> dict[str, str]:
+    """The fingerprints of what one call of a function runs (:mod:`.closure`).
 
     Parameters
     ----------
     name : str
         ``module:qualname``, from :func:`function_name`.
+    args, kwargs
+        The call's arguments: the registry's filters they name count.
 
     Returns
     -------
     dict of str to str
-        Path relative to the repository (``depthcore/...``) -> fingerprint.
+        ``"code module:qualname"``, ``"constant module:NAME"``, ``"filter
+        NAME"`` or ``"file path"`` -> fingerprint: the code the call reaches,
+        not every module its function's module imports, so that a change
+        elsewhere (a filter it does not run, a page, a docstring) leaves its
+        record valid.
     """
-    return benchmarks.module_fingerprints([_module_name(name)])
+    return closure.fingerprints(resolve(name), args, kwargs)
 
 
 def stale(record: dict) -> list[str]:
-    """The sources whose code changed since ``record`` was made; empty when it is current.
+    """What changed, of the code a record's call runs, since it was made; empty when current.
 
     Parameters
     ----------
@@ -292,13 +312,16 @@ def stale(record: dict) -> list[str]:
     Returns
     -------
     list of str
-        Paths relative to the repository: changed, gone, or newly imported.
+        The fingerprints' keys (:func:`code_fingerprint`) that differ: changed,
+        gone, or newly reached.
     """
     try:
-        current = code_fingerprint(record["function"])
+        args = decode(record["arguments"]["args"])
+        kwargs = decode(record["arguments"]["kwargs"])
+        current = code_fingerprint(record["function"], args, kwargs)
     except ValueError:
         return sorted(record["fingerprint"])
-    return benchmarks.changed_sources(record["fingerprint"], current)
+    return closure.changed(record["fingerprint"], current)
 
 
 def read(path) -> dict:
@@ -325,14 +348,20 @@ def write(name: str, args, kwargs, result, seconds: float, directory=None) -> di
         "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "seconds": round(float(seconds), 1),
         "machine": benchmarks.machine(),
-        "depthcore_version": __version__,
-        "fingerprint": code_fingerprint(name),
+        "depthcore_version": environment.code_version(),
+        "fingerprint": code_fingerprint(name, args, kwargs),
         "result": _encode_named(result, f"the result of {name}"),
     }
     path = record_path(name, key, directory)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(record, indent=None, allow_nan=True) + "\n", encoding="utf-8")
     return record
+
+
+def directory() -> Path:
+    """Where :func:`recorded` reads and writes: ``DEPTHCORE_RECORDS_DIR``, else :data:`RECORDS`."""
+    value = os.environ.get(DIRECTORY, "").strip()
+    return Path(value) if value else RECORDS
 
 
 def mode() -> str:
@@ -402,7 +431,8 @@ def recorded(function, /, *args, **kwargs) -> Recorded:
     """
     name = function_name(function)
     key = call_key(name, args, kwargs)
-    path = record_path(name, key)
+    folder = directory()
+    path = record_path(name, key, folder)
     how = mode()
     if path.is_file():
         record = read(path)
@@ -417,6 +447,6 @@ def recorded(function, /, *args, **kwargs) -> Recorded:
     result = function(*args, **kwargs)
     seconds = time.perf_counter() - start
     if how == "write":
-        record = write(name, args, kwargs, result, seconds)
+        record = write(name, args, kwargs, result, seconds, folder)
         return Recorded(decode(record["result"]), path, record["date"], seconds, False)
     return Recorded(result, path, None, seconds, False)
