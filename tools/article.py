@@ -662,7 +662,7 @@ def build(figures: Path, out: Path) -> int:
         shutil.copy(path, out / path.name)
     for name in FIGURES:
         shutil.copy(figures / name, out / name)
-    sentence = environment.sentence(environment.statement())
+    sentence = environment.records_sentence() + " " + environment.sentence(environment.statement())
     (out / "environment.tex").write_text(_tex(sentence) + "\n", encoding="utf-8")
     done = subprocess.run([str(ROOT / "tools" / "xelatex.sh"), str(out), "article"], check=False)
     return done.returncode

@@ -1,0 +1,84 @@
+"""Where the records were computed, and by which code: stated from the records, never assumed."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+import depthcore
+from depthcore.provenance import benchmarks, environment, records
+
+ROOT = Path(__file__).resolve().parent.parent
+#: A record's version: the package's, and in a checkout the commit of the code that computed it.
+VERSION = re.compile(r"^(?P<release>\d+\.\d+\.\d+)(?:\+g(?P<commit>[0-9a-f]{7,40}))?$")
+STUDIES = [records.read(p) for p in records.committed()]
+MEASURED = [benchmarks.read(p.stem) for p in sorted(benchmarks.RESULTS.glob("*.json"))]
+
+
+def _known_commit(commit: str) -> bool | None:
+    """Whether ``commit`` is in this checkout's history; None outside a git checkout."""
+    if not (ROOT / ".git").exists() or shutil.which("git") is None:
+        return None
+    out = subprocess.run(
+        ["git", "cat-file", "-e", f"{commit}^{{commit}}"], cwd=ROOT, capture_output=True
+    )
+    return out.returncode == 0
+
+
+@pytest.mark.parametrize("kind, rows", [("study", STUDIES)], ids=["study records"])
+def test_every_record_names_the_release_and_the_commit_that_computed_it(kind, rows):
+    for record in rows:
+        version = str(record["depthcore_version"])
+        match = VERSION.match(version)
+        assert match, f"{kind} record {record.get('key')}: version {version!r}, not clean"
+        assert match["release"] == depthcore.__version__
+        assert match["commit"], f"{kind} record {record.get('key')}: no commit in {version!r}"
+        assert _known_commit(match["commit"]) in (True, None), version
+
+
+def test_the_code_version_is_the_release_with_the_checkouts_commit():
+    version = environment.code_version()
+    assert version.startswith(depthcore.__version__)
+    if (ROOT / ".git").exists() and shutil.which("git"):
+        assert re.fullmatch(r"\d+\.\d+\.\d+\+g[0-9a-f]{7}(\.dirty)?", version), version
+
+
+def _record(cpu: str, date: str, version: str) -> dict:
+    machine = dict(benchmarks.machine(), cpu=cpu, processor="family 1, model 2")
+    return {"machine": machine, "date": f"{date}T10:00:00+00:00", "depthcore_version": version}
+
+
+def test_the_origins_name_each_machine_its_dates_and_versions():
+    found = environment.origins(
+        {
+            "study records": [
+                _record("Chip A", "2026-12-02", "0.2.0+gaaaaaaa"),
+                _record("Chip A", "2026-12-01", "0.2.0+gaaaaaaa"),
+            ],
+            "benchmark records": [_record("Chip B", "2026-11-29", "0.2.0+gbbbbbbb")],
+        }
+    )
+    assert [(o["kind"], o["count"], o["dates"]) for o in found] == [
+        ("study records", 2, ("2026-12-01", "2026-12-02")),
+        ("benchmark records", 1, ("2026-11-29", "2026-11-29")),
+    ]
+    text = environment.origins_sentence(found)
+    assert text.startswith(
+        "The 2 study records were computed on 2026-12-01 to 2026-12-02 on Chip A"
+    )
+    assert "; the 1 benchmark records on 2026-11-29 on Chip B" in text
+    assert "0.2.0+gaaaaaaa" in text and "0.2.0+gbbbbbbb" in text
+    with pytest.raises(ValueError, match="lacks"):
+        environment.origins({"study records": [{"date": "2026-12-01"}]})
+
+
+def test_the_records_sentence_is_read_from_the_committed_records():
+    text = environment.records_sentence()
+    assert f"The {len(STUDIES)} study records were computed on " in text
+    assert f"the {len(MEASURED)} benchmark records on " in text
+    for record in STUDIES + MEASURED:
+        assert record["machine"]["cpu"] in text and str(record["depthcore_version"]) in text
