@@ -155,9 +155,9 @@ def test_estimated_cost_adds_every_cells_filters():
     [
         (["--size", "huge"], "argument --size: invalid choice: 'huge'"),
         (["--seed", "-1"], "--seed must be a non-negative integer, got -1"),
-        (["--workers", "0"], "--workers must be a number of local worker processes"),
+        (["--workers", "0"], "--workers must be a whole number from 1 to 64"),
         (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers and --scheduler"),
-        (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler: no scheduler answers"),
+        (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler: no Dask scheduler answers"),
         (["--out", ""], "--out must be a file, got an empty path"),
         (["--out", "."], "--out must be a file, but '.' is a folder"),
         (["--out", "no/such/dir/a.json"], "--out: the folder of 'no/such/dir/a.json' does"),

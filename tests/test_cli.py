@@ -3,14 +3,16 @@
 import json
 import subprocess
 import sys
+import time
 
 import pytest
 
+from depthcore.cli import cluster as cluster_options
 from depthcore.cli.main import build_parser, main
 from depthcore.exact import posterior
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry.filters import FILTERS
-from depthcore.studies import monte_carlo, reproduce
+from depthcore.studies import monte_carlo, reproduce, tasks
 from depthcore.studies import trials as study_trials
 
 from helpers import exit_status
@@ -371,3 +373,50 @@ def test_help_speaks_of_n_frames_not_three_measurements(argv, capsys):
     assert "three measurements" not in out and "any three" not in out
     assert "N >= 3 bearings (up to 1000 frames)" in " ".join(out.split())
     assert "three noisy image" not in depthcore.__doc__
+
+
+# --- study --workers: a whole number from 1 to tasks.MAX_WORKERS, or one line -------------
+
+#: Values of ``study --workers`` refused, by class: out of range (10000 must not start ten
+#: thousand processes), not a whole number in decimal digits, or no value at all.
+_BAD_WORKERS = {
+    "out of range": ["0", "-1", "65", "10000", "99999999999999999999"],
+    "not whole": ["1.5", "abc", "", "1e3", "0x10", "1_0", "\u0662", "2 2", "64x"],
+}
+
+
+@pytest.mark.parametrize("command", [["study", "--trials", "3"], ["atlas"]], ids=["study", "atlas"])
+@pytest.mark.parametrize("value", [v for values in _BAD_WORKERS.values() for v in values], ids=repr)
+def test_study_refuses_workers_out_of_range_or_not_whole_in_one_line(
+    command, value, capsys, recwarn
+):
+    # refused before any cluster starts, in this process: within a second (30 s: a guard)
+    start = time.monotonic()
+    status, out, err = refusal([*command, "--workers", value], capsys)
+    assert status == 2 and out == ""
+    assert err == (
+        f"python -m depthcore {command[0]}: error: --workers must be a whole number from 1 to "
+        f"{tasks.MAX_WORKERS}, got {value!r}\n"
+    )
+    assert "Traceback" not in err and "Warning" not in err and not recwarn.list
+    assert time.monotonic() - start < 30
+
+
+def test_study_refuses_workers_given_no_value_in_one_line(capsys):
+    status, out, err = refusal(["study", "--workers", "-x"], capsys)
+    assert status == 2 and out == "" and err.count("\n") == 1
+    assert "argument --workers: expected one argument" in err
+
+
+@pytest.mark.parametrize("value, workers", [("2", 2), (" 2", 2), ("+2 ", 2), ("064", 64)])
+def test_study_reads_workers_as_a_whole_number_blanks_around_it_dropped(value, workers):
+    assert cluster_options.workers(value) == workers
+
+
+def test_study_help_states_the_cap_on_workers_and_the_wait_for_a_scheduler(capsys):
+    with pytest.raises(SystemExit):
+        main(["study", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert f"a whole number from 1 to {tasks.MAX_WORKERS} whatever the cores" in out
+    wait = f"{tasks.CONNECT_TIMEOUT:g} s"
+    assert f"refused unless it answers within {wait} and has a worker within {wait} more" in out

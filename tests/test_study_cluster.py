@@ -120,13 +120,14 @@ def test_a_study_on_a_cluster_that_loses_a_worker_equals_it_in_process(tmp_path,
     assert all(b - a == 8 for a, b in zip([0] + done, done, strict=False))
 
 
-def _cli(*args) -> subprocess.CompletedProcess:
+def _cli(*args, timeout: float = RUN) -> subprocess.CompletedProcess:
+    """``python -m depthcore *args`` in a process of its own, killed after ``timeout`` s."""
     return subprocess.run(
         [sys.executable, "-m", "depthcore", *args],
         env=ENV,
         capture_output=True,
         text=True,
-        timeout=RUN,
+        timeout=timeout,
         cwd=ROOT,
     )
 
@@ -168,24 +169,177 @@ def test_without_a_cluster_nothing_of_dask_is_imported():
     assert r.returncode == 0, r.stderr
 
 
+#: The refusal of a scheduler's address of the wrong form.
+_FORM = "--scheduler must be a scheduler's address SCHEME://HOST:PORT (tcp|tls|ws|wss|ucx; "
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--workers", "0"], "--workers must be a number of local worker processes, 1 to 64"),
-        (["--workers", "-3"], "--workers must be a number of local worker processes"),
+        (["--workers", "0"], "--workers must be a whole number from 1 to 64, got '0'"),
+        (["--workers", "-3"], "--workers must be a whole number from 1 to 64, got '-3'"),
         (["--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"], "--workers and --scheduler"),
-        (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler: no scheduler answers at"),
-        (["--scheduler", "nonsense"], "--scheduler: no scheduler answers at 'nonsense'"),
-        (["--scheduler", " "], "--scheduler must be a scheduler's address"),
+        (["--workers", "x", "--scheduler", "tcp://127.0.0.1:8786"], "--workers and --scheduler"),
+        (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler: no Dask scheduler answers at"),
+        (["--scheduler", "tcp://[::1]:1"], "--scheduler: no Dask scheduler answers at"),
+        (["--scheduler", "tls://127.0.0.1:1"], "--scheduler: no Dask scheduler answers at"),
+        *(
+            (["--scheduler", address], _FORM)
+            for address in (
+                *("", " ", "abc", "nonsense", "tcp://", "tcp://127.0.0.1", "tcp://:1"),
+                *("tcp://127.0.0.1:0", "tcp://127.0.0.1:99999", "tcp://127.0.0.1:-1"),
+                *("http://127.0.0.1:8786", "inproc://x", "tcp://127.0.0.1:1 tcp://127.0.0.1:2"),
+            )
+        ),
         (["--truth", "prior", "--prior", "fixed", "--workers", "2"], "--workers: not used by"),
     ],
 )
-def test_the_command_line_refuses_a_bad_cluster_in_one_line(capsys, args, message):
+def test_the_command_line_refuses_a_bad_cluster_in_one_line(capsys, recwarn, args, message):
+    # in this process; below, in processes of their own, each class of value and of server
     start = time.monotonic()
     assert main(["study", "--trials", "3", *args]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and message in err and "Traceback" not in err
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1
+    assert err.startswith(f"python -m depthcore study: error: {message}"), err
+    assert "Traceback" not in err and "Warning" not in err and not recwarn.list
     assert time.monotonic() - start < 2 * tasks.CONNECT_TIMEOUT
+
+
+#: Seconds within which the command line answers any value of --workers or --scheduler, its
+#: start included: a value of the wrong form at once (1-2 s), an address within
+#: tasks.CONNECT_TIMEOUT for the scheduler's answer and as many again for its first worker.
+#: A guard against a hang, generous for a loaded machine; not a measure.
+ANSWER = 30
+
+
+@contextmanager
+def _refusing():
+    """The address of a port on 127.0.0.1 bound but not listening: it refuses a connection."""
+    with socket.socket() as bound:
+        bound.bind(("127.0.0.1", 0))
+        yield f"tcp://127.0.0.1:{bound.getsockname()[1]}"
+
+
+@contextmanager
+def _silent():
+    """The address of a TCP server on 127.0.0.1 that accepts connections and never answers."""
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(8)  # the system accepts; nothing reads or writes
+        yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
+
+
+@contextmanager
+def _http():
+    """The address of an HTTP server on 127.0.0.1 (as a dashboard's port), answering 4xx."""
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+    class Quiet(BaseHTTPRequestHandler):
+        def log_message(self, *args):
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Quiet)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"tcp://127.0.0.1:{server.server_address[1]}"
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+@contextmanager
+def _idle(tmp_path):
+    """The address of a real scheduler on 127.0.0.1 without any worker."""
+    with _cluster(tmp_path, workers=0) as (address, _):
+        yield address
+
+
+@contextmanager
+def _worker(tmp_path):
+    """The address of a real worker (a Dask server, but no scheduler) on 127.0.0.1."""
+    from distributed import Client
+
+    with _cluster(tmp_path, workers=1) as (address, _), Client(address, timeout=STARTUP) as c:
+        c.wait_for_workers(1, timeout=STARTUP)
+        yield next(iter(c.scheduler_info()["workers"]))
+
+
+_SERVERS = {"refusing": _refusing, "silent": _silent, "http": _http}
+_SCHEDULERS = {"idle": _idle, "worker": _worker}
+
+
+def _answer(*args) -> tuple[subprocess.CompletedProcess, float]:
+    """``study`` of 3 trials with ``args`` in a process of its own, and its seconds."""
+    start = time.monotonic()
+    result = _cli("study", "--trials", "3", "--filters", "ekf", *args, timeout=2 * ANSWER)
+    return result, time.monotonic() - start
+
+
+def _one_refusal(result, seconds: float, message: str, address: str = "") -> None:
+    """Exit status 2, one line naming the argument (and ``address``), nothing else, in time.
+
+    In time: within :data:`ANSWER` seconds.
+    """
+    both = result.stdout + result.stderr
+    assert result.returncode == 2, both
+    assert result.stdout == "" and result.stderr.count("\n") == 1, both
+    assert result.stderr.startswith(f"python -m depthcore study: error: {message}"), both
+    assert not address or repr(address) in result.stderr, both
+    assert "Traceback" not in both and "Warning" not in both
+    assert seconds < ANSWER, seconds
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--workers", "10000"], "--workers must be a whole number from 1 to 64, got '10000'"),
+        (["--workers", "1.5"], "--workers must be a whole number from 1 to 64, got '1.5'"),
+        (["--workers", ""], "--workers must be a whole number from 1 to 64, got ''"),
+        (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers and --scheduler"),
+        (["--scheduler", ""], _FORM),
+        (["--scheduler", "http://127.0.0.1:8786"], _FORM),
+    ],
+    ids=["out-of-range", "not-whole", "empty", "both", "no-address", "not-dask"],
+)
+def test_a_process_answers_a_bad_value_in_one_line_within_seconds(args, message):
+    _one_refusal(*_answer(*args), message)
+
+
+@pytest.mark.parametrize(
+    "kind, message",
+    [
+        ("refusing", "--scheduler: no Dask scheduler answers at"),
+        ("silent", "--scheduler: no Dask scheduler answered at"),
+        ("http", "--scheduler: no Dask scheduler answer"),  # it closes, or keeps silent
+        ("idle", "--scheduler: the Dask scheduler at"),
+        ("worker", "--scheduler: no Dask scheduler answers at"),
+    ],
+)
+def test_a_process_refuses_a_server_that_is_no_scheduler_with_a_worker(tmp_path, kind, message):
+    # each server on 127.0.0.1 for the test's duration; Dask's own timeouts would wait for ever
+    # on the silent one (dask/distributed#8071) and on the idle scheduler's missing workers
+    server = _SERVERS[kind]() if kind in _SERVERS else _SCHEDULERS[kind](tmp_path)
+    with server as address:
+        result, seconds = _answer("--scheduler", address)
+    _one_refusal(result, seconds, message, address)
+
+
+def test_the_command_line_on_a_running_scheduler_named_localhost_prints_the_same_json(
+    tmp_path, capsys
+):
+    from distributed import Client
+
+    study = ["study", "--trials", "40", "--filters", "ekf", "optimal", "--json"]
+    assert main(study) == 0
+    alone = capsys.readouterr().out
+    with _cluster(tmp_path, workers=1) as (address, _), Client(address, timeout=STARTUP) as c:
+        c.wait_for_workers(1, timeout=STARTUP)
+        named = address.replace("tcp://127.0.0.1:", "tcp://localhost:")
+        result = _cli(*study, "--scheduler", named, timeout=RUN)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout == alone and json.loads(alone)["trials"] == 40
+    assert result.stderr == ""
 
 
 def test_chunks_are_folded_in_order_and_counted_once():

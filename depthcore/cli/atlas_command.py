@@ -15,6 +15,7 @@ import argparse
 import os
 from pathlib import Path
 
+from depthcore.cli import cluster
 from depthcore.cli import text as cli_text
 from depthcore.studies import atlas, tasks
 
@@ -47,7 +48,8 @@ def run(args, with_bar, write_error) -> str:
     if args.workers is not None and args.scheduler is not None:
         raise ValueError("--workers and --scheduler: give one (a local cluster, or a running one)")
     path = None if args.out is None else check_file(args.out)
-    with tasks.cluster(args.workers, args.scheduler) as client:
+    workers = None if args.workers is None else cluster.workers(args.workers)
+    with tasks.cluster(workers, args.scheduler) as client:
         result = with_bar(
             f"atlas ({args.size})",
             "trial",
@@ -76,16 +78,17 @@ def add(parser: argparse.ArgumentParser, with_bar, write_error) -> None:
     same = "the same result, bit for bit (but the measured cost)"
     parser.add_argument(
         "--workers",
-        type=int,
         metavar="N",
-        help=f"run the cells on a local Dask cluster of N processes, 1 to {tasks.MAX_WORKERS} "
-        f"(default: in this process); {same}",
+        help="run the cells on a local Dask cluster of N processes, a whole number from 1 to "
+        f"{tasks.MAX_WORKERS} whatever the cores (default: in this process); {same}",
     )
+    wait = f"{tasks.CONNECT_TIMEOUT:g} s"
     parser.add_argument(
         "--scheduler",
         metavar="ADDRESS",
         help="run the cells on the Dask cluster whose scheduler is at ADDRESS "
-        f"(tcp://host:8786, workers with this depthcore); {same}",
+        f"(tcp://host:8786, workers with this depthcore), refused unless it answers within "
+        f"{wait} and has a worker within {wait} more; {same}",
     )
     parser.add_argument(
         "--out", metavar="FILE", help="write the JSON to FILE (default: standard output)"

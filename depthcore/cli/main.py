@@ -31,6 +31,7 @@ import numpy as np
 
 from depthcore import __version__
 from depthcore.cli import atlas_command, tracks
+from depthcore.cli import cluster as cluster_options
 from depthcore.cli import text as cli_text
 from depthcore.problem import checks, frames
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian
@@ -470,12 +471,13 @@ def _cmd_study(args) -> str:
         _check_limits("--truth", truth, MU_MAX)
     if args.workers is not None and args.scheduler is not None:
         raise ValueError("--workers and --scheduler: give one (a local cluster, or a running one)")
+    workers = None if args.workers is None else cluster_options.workers(args.workers)
     options = dict(
         truth=truth, rho=args.rho, trials=args.trials, seed=args.seed, prior=args.prior or "paper"
     )
     options.update(names=names, n_particles=args.particles, chunk=_chunk(names, args.particles))
     options.update(frames=args.frames, process_noise=q)
-    with tasks.cluster(args.workers, args.scheduler) as client:
+    with tasks.cluster(workers, args.scheduler) as client:
         result = _with_bar(
             "study", "trial", lambda p: monte_carlo.study(**options, progress=p, client=client)
         )
@@ -504,6 +506,7 @@ _FLAGS = {
     "out": "--out",
     "workers": "--workers",
     "scheduler": "--scheduler",
+    tasks.SCHEDULER: tasks.SCHEDULER,  # the environment's scheduler, named as the user set it
 }
 
 #: The arguments a refusal blames when the library names none of them.
@@ -826,16 +829,17 @@ def _add_study_arguments(sub, common) -> None:
     same = "the same result, bit for bit"
     st.add_argument(
         "--workers",
-        type=int,
         metavar="N",
-        help=f"run the trials on a local Dask "
-        f"cluster of N processes, 1 to {tasks.MAX_WORKERS} (default: in this process); {same}",
+        help="run the trials on a local Dask cluster of N processes, a whole number from 1 to "
+        f"{tasks.MAX_WORKERS} whatever the cores (default: in this process); {same}",
     )
+    wait = f"{tasks.CONNECT_TIMEOUT:g} s"
     st.add_argument(
         "--scheduler",
         metavar="ADDRESS",
-        help="run the trials on the Dask cluster "
-        f"whose scheduler is at ADDRESS (tcp://host:8786, workers with this depthcore); {same}",
+        help="run the trials on the Dask cluster whose scheduler is at ADDRESS "
+        f"(tcp://host:8786, workers with this depthcore), refused unless it answers within "
+        f"{wait} and has a worker within {wait} more; {same}",
     )
     _add_json(st, _cmd_study)
 

@@ -32,6 +32,7 @@ its workers must import the same depthcore).
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import os
@@ -48,7 +49,8 @@ SCHEDULER = "DEPTHCORE_SCHEDULER"
 #: Most worker processes :func:`cluster` starts.
 MAX_WORKERS = 64
 
-#: Seconds to wait for a scheduler named by address before refusing it.
+#: Seconds to wait for a scheduler named by address to answer before refusing it, and as
+#: many again for its first worker.
 CONNECT_TIMEOUT = 5.0
 
 #: The environment each worker process of :func:`local_cluster` starts with. Dask's default
@@ -85,28 +87,49 @@ def chunk_seeds(seed, n: int) -> list[np.random.SeedSequence]:
 
 
 def connect(address: str, timeout: float = CONNECT_TIMEOUT, name: str = "scheduler"):
-    """A ``distributed.Client`` of the scheduler at ``address``.
+    """A ``distributed.Client`` of the scheduler at ``address``, which has a worker.
+
+    Parameters
+    ----------
+    address : str
+        A scheduler's address, ``tcp://host:8786`` (or ``host:8786``).
+    timeout : float
+        Seconds to wait for the scheduler's answer, and as many again for its first worker.
+    name : str
+        The argument a refusal names.
+
+    Returns
+    -------
+    distributed.Client
+        Not the default client; the caller closes it.
 
     Raises
     ------
     ValueError
-        Naming ``name`` when no scheduler answers at ``address`` within
-        ``timeout`` seconds.
+        Naming ``name`` when ``address`` is not an address, when no Dask
+        scheduler answers there within ``timeout`` seconds, or when it has
+        no worker after as many again.
     """
-    if not isinstance(address, str) or not address.strip():
-        raise ValueError(f"{name} must be a scheduler's address, got {address!r}")
-    from distributed import Client
-
-    address = address.strip()
+    address, where = _address(address, name)
+    _quiet()
     try:
-        kind = _identity(address, timeout)
+        kind, workers = _probe(address, where, timeout)
+    except TimeoutError:
+        raise ValueError(
+            f"{name}: no Dask scheduler answered at {address!r} within {timeout:g} s"
+        ) from None
     except Exception as exc:  # noqa: BLE001 - whatever answers, or not, is one refusal
         reason = _one_line(exc) or type(exc).__name__
-        raise ValueError(
-            f"{name}: no scheduler answers at {address!r} within {timeout:g} s ({reason})"
-        ) from None
+        raise ValueError(f"{name}: no Dask scheduler answers at {address!r} ({reason})") from None
     if kind != "Scheduler":
         raise ValueError(f"{name}: {address!r} is not a Dask scheduler (it is a {kind!r})")
+    if not workers:
+        raise ValueError(
+            f"{name}: the Dask scheduler at {address!r} has no worker (none joined within "
+            f"{timeout:g} s; dask worker {address} starts one)"
+        )
+    from distributed import Client
+
     return Client(address, timeout=timeout, set_as_default=False)
 
 
@@ -114,33 +137,91 @@ def _one_line(exc) -> str:
     return " ".join(str(exc).split())[:160]
 
 
-def _identity(address: str, timeout: float) -> str:
-    """The type of the Dask server at ``address`` (``"Scheduler"``), asked within ``timeout`` s.
+#: The schemes of Dask's addresses that name a host and a port.
+_NETWORK = ("tcp", "tls", "ws", "wss", "ucx")
 
-    Asked in a thread of its own, so that it also works under a running event
-    loop (a notebook's), and before a client is made, which would wait longer.
+
+def _address(address, name: str) -> tuple[str, tuple[str, int]]:
+    """``address`` without surrounding blanks, and its host and port, if it is an address.
+
+    Parameters
+    ----------
+    address : str
+        ``scheme://host:port`` (a scheme of :data:`_NETWORK`) or ``host:port``
+        (``tcp``), the port 1 to 65535.
+    name : str
+        The argument a refusal names.
+
+    Returns
+    -------
+    address : str
+    where : tuple of (str, int)
+        The host and the port.
+
+    Raises
+    ------
+    ValueError
+        Naming ``name`` when ``address`` is not a string of that form.
     """
-    import asyncio
-    from concurrent.futures import ThreadPoolExecutor
-
-    from distributed.comm import connect as comm_connect
+    shape = f"a scheduler's address SCHEME://HOST:PORT ({'|'.join(_NETWORK)}; 1 to 65535)"
+    if not isinstance(address, str) or not address.strip():
+        raise ValueError(f"{name} must be {shape}, got {address!r}")
     from distributed.comm import parse_address, parse_host_port
 
-    scheme, location = parse_address(address)
-    if scheme in ("tcp", "tls"):  # a closed port refuses at once; Dask would retry until timeout
-        socket.create_connection(parse_host_port(location), timeout=timeout).close()
+    address = address.strip()
+    try:
+        scheme, location = parse_address(address)
+        host, port = parse_host_port(location) if scheme in _NETWORK else ("", 0)
+    except ValueError as exc:
+        raise ValueError(f"{name} must be {shape}, got {address!r} ({_one_line(exc)})") from None
+    if not host or not 1 <= port <= 65535:
+        raise ValueError(f"{name} must be {shape}, got {address!r}")
+    return address, (host, port)
 
-    async def ask():
-        comm = await comm_connect(address, timeout=timeout)
-        try:
-            await comm.write({"op": "identity", "reply": True})
-            reply = await asyncio.wait_for(comm.read(), timeout)
-        finally:
-            comm.abort()
-        return reply.get("type") if isinstance(reply, dict) else type(reply).__name__
 
+def _probe(address: str, where: tuple[str, int], timeout: float) -> tuple[str, bool]:
+    """The type of the Dask server at ``address`` (``"Scheduler"``), and whether it has a worker.
+
+    A closed port (``where``: the host and port) refuses at once (Dask would
+    retry until ``timeout``). The server is then asked through an asynchronous
+    ``distributed.Client`` in a thread and an event loop of its own (so that it
+    also works under a running loop, a notebook's), bounded by ``timeout``:
+    Dask's own ``timeout`` does not bound its handshake, so a server that
+    accepts and never answers would hold a client for ever
+    (dask/distributed#8071). A scheduler is given ``timeout`` more for its
+    first worker: without one, the chunks would wait for ever.
+
+    Raises
+    ------
+    TimeoutError
+        When the server does not answer in time.
+    Exception
+        Whatever Dask raises for an address it cannot connect to.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    socket.create_connection(where, timeout=timeout).close()
     with ThreadPoolExecutor(1) as pool:
-        return pool.submit(asyncio.run, ask()).result()
+        return pool.submit(asyncio.run, _ask(address, timeout)).result()
+
+
+async def _ask(address: str, timeout: float) -> tuple[str, bool]:
+    """:func:`_probe`'s question, in an event loop: the server's type, and has it a worker."""
+    from distributed import Client
+
+    client = Client(address, asynchronous=True, timeout=timeout, set_as_default=False)
+    try:
+        await asyncio.wait_for(client, timeout)
+        kind = client.scheduler_info().get("type")
+        if kind != "Scheduler":
+            return kind, False
+        try:
+            await asyncio.wait_for(client.wait_for_workers(1), timeout)
+        except TimeoutError:
+            return kind, False
+        return kind, True
+    finally:
+        await asyncio.wait_for(client.close(), timeout)
 
 
 def _quiet() -> None:
@@ -159,7 +240,8 @@ def cluster(workers: int | None = None, scheduler: str | None = None):
         (``distributed.LocalCluster``, no dashboard), closed on leaving.
     scheduler : str, optional
         The address of a running scheduler (``tcp://host:8786``) to connect to
-        (within :data:`CONNECT_TIMEOUT` seconds).
+        (:func:`connect`: it must answer within :data:`CONNECT_TIMEOUT` seconds,
+        and have a worker within as many again).
 
     Yields
     ------
@@ -170,8 +252,8 @@ def cluster(workers: int | None = None, scheduler: str | None = None):
     Raises
     ------
     ValueError
-        Naming ``workers`` (not an integer >= 1, or given with ``scheduler``)
-        or ``scheduler`` (no scheduler answers there).
+        Naming ``workers`` (not an integer from 1 to :data:`MAX_WORKERS`, or
+        given with ``scheduler``) or ``scheduler`` (see :func:`connect`).
     """
     if workers is not None and scheduler is not None:
         raise ValueError("workers: give workers or a scheduler, not both")
@@ -180,7 +262,6 @@ def cluster(workers: int | None = None, scheduler: str | None = None):
         return
     if scheduler is not None:
         client = connect(scheduler)
-        _quiet()
         try:
             yield client
         finally:
@@ -216,10 +297,7 @@ def local_cluster(workers: int, host: str | None = None):
     if isinstance(workers, bool) or not (
         isinstance(workers, (int, np.integer)) and 1 <= workers <= MAX_WORKERS
     ):
-        raise ValueError(
-            f"workers must be a number of local worker processes, 1 to {MAX_WORKERS}, "
-            f"got {workers!r}"
-        )
+        raise ValueError(f"workers must be a whole number from 1 to {MAX_WORKERS}, got {workers!r}")
     import dask
     from distributed import LocalCluster
 
@@ -245,7 +323,6 @@ def resolve(client=None):
         return None
     if address not in _clients:
         _clients[address] = connect(address, name=SCHEDULER)
-        _quiet()
     return _clients[address]
 
 
