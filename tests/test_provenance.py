@@ -29,7 +29,9 @@ def _known_commit(commit: str) -> bool | None:
     return out.returncode == 0
 
 
-@pytest.mark.parametrize("kind, rows", [("study", STUDIES)], ids=["study records"])
+@pytest.mark.parametrize(
+    "kind, rows", [("study", STUDIES), ("benchmark", MEASURED)], ids=["study", "benchmark"]
+)
 def test_every_record_names_the_release_and_the_commit_that_computed_it(kind, rows):
     for record in rows:
         version = str(record["depthcore_version"])

@@ -73,6 +73,10 @@ TIMING = re.compile(
 )
 #: What a study record read says of its computation (``Recorded.__str__``): the record's own.
 RECORD_TIMING = re.compile(r"computed on \d{4}-\d{2}-\d{2} in \d+ s\b")
+#: A duration the code states as a limit ("answers within 5 s"), a constant, not a timing.
+STATED_LIMIT = re.compile(
+    r"\b(?:within|at most|under|after|timeout of)\s+\d+(?:\.\d+)?\s*(?:s|ms|seconds?|minutes?)\b"
+)
 
 
 def machine_names() -> list[str]:
@@ -155,7 +159,7 @@ def machine_specific(nb, page: str, patterns: dict[str, str], names=()) -> list[
             for word in words:
                 for match in word.finditer(text):
                     problems.append(f"{where}: names the machine: {match.group(0)!r}")
-            for match in TIMING.finditer(RECORD_TIMING.sub("", text)):
+            for match in TIMING.finditer(STATED_LIMIT.sub("", RECORD_TIMING.sub("", text))):
                 problems.append(f"{where}: a timing of the run: {match.group(0)!r}")
     return list(dict.fromkeys(problems))
 
@@ -210,6 +214,14 @@ def test_the_scan_finds_what_varies(text, found, patterns):
     assert all(p.startswith("page: code cell 1: ") for p in problems)
     # the same output read from records is exempt
     assert machine_specific(notebook((text, [FROM_RECORDS])), "page", patterns) == []
+
+
+@pytest.mark.parametrize(
+    "text", ["refused unless it answers within 5 s", "a timeout of 30 s", "at most 2.5 seconds"]
+)
+def test_a_limit_the_code_states_is_no_timing(text, patterns):
+    assert machine_specific(notebook((text, [])), "page", patterns) == []
+    assert machine_specific(notebook((text + "; took 3.2 s", [])), "page", patterns)
 
 
 def test_the_reference_test_fails_naming_page_cell_and_text(tmp_path, patterns):
