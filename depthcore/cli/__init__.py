@@ -7,8 +7,8 @@
   (``--per-frame``);
 * :mod:`~depthcore.cli.atlas_command`: ``atlas``, every filter's verdicts over
   a grid of settings, in this process or on a Dask cluster;
-* :mod:`~depthcore.cli.cluster`: the ``--workers`` option that ``study`` and
-  ``atlas`` share.
+* :mod:`~depthcore.cli.cluster`: the ``--workers`` and ``--scheduler`` options that
+  ``study`` and ``atlas`` share.
 
 Where a new thing goes: a new command is a function and a subparser in
 :mod:`~depthcore.cli.main`; what it prints goes in :mod:`~depthcore.cli.text`;

@@ -76,20 +76,7 @@ def add(parser: argparse.ArgumentParser, with_bar, write_error) -> None:
     )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     same = "the same result, bit for bit (but the measured cost)"
-    parser.add_argument(
-        "--workers",
-        metavar="N",
-        help="run the cells on a local Dask cluster of N processes, a whole number from 1 to "
-        f"{tasks.MAX_WORKERS} whatever the cores (default: in this process); {same}",
-    )
-    wait = f"{tasks.CONNECT_TIMEOUT:g} s"
-    parser.add_argument(
-        "--scheduler",
-        metavar="ADDRESS",
-        help="run the cells on the Dask cluster whose scheduler is at ADDRESS "
-        f"(tcp://host:8786, workers with this depthcore), refused unless it answers within "
-        f"{wait} and has a worker within {wait} more; {same}",
-    )
+    cluster.add_arguments(parser, "cells", same)
     parser.add_argument(
         "--out", metavar="FILE", help="write the JSON to FILE (default: standard output)"
     )

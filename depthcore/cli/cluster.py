@@ -1,4 +1,4 @@
-"""The options ``study`` and ``atlas`` share to run on a Dask cluster: ``--workers N``.
+"""The options ``study`` and ``atlas`` share to run on Dask: ``--workers``, ``--scheduler``.
 
 Recommended import: ``from depthcore.cli import cluster``.
 
@@ -9,7 +9,30 @@ how one is reached (``--scheduler``) is :mod:`depthcore.studies.tasks`'s.
 
 from __future__ import annotations
 
+import argparse
+
 from depthcore.studies import tasks
+
+
+def add_arguments(parser: argparse.ArgumentParser, what: str, same: str) -> None:
+    """``--workers N`` and ``--scheduler ADDRESS`` on ``parser``, which run its ``what``.
+
+    ``same`` says what the result is on a cluster ("the same result, bit for bit").
+    """
+    parser.add_argument(
+        "--workers",
+        metavar="N",
+        help=f"run the {what} on a local Dask cluster of N processes, a whole number from 1 to "
+        f"{tasks.MAX_WORKERS} whatever the cores (default: in this process); {same}",
+    )
+    wait = f"{tasks.CONNECT_TIMEOUT:g} s"
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help=f"run the {what} on the Dask cluster whose scheduler is at ADDRESS "
+        f"(tcp://host:8786, workers with this depthcore), refused unless it answers within "
+        f"{wait} and has a worker within {wait} more; {same}",
+    )
 
 
 def workers(text: str) -> int:

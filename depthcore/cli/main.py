@@ -826,21 +826,7 @@ def _add_study_arguments(sub, common) -> None:
         "",
         "; with Q > 0 the filters that assume a constant velocity (particle) cannot be named",
     )
-    same = "the same result, bit for bit"
-    st.add_argument(
-        "--workers",
-        metavar="N",
-        help="run the trials on a local Dask cluster of N processes, a whole number from 1 to "
-        f"{tasks.MAX_WORKERS} whatever the cores (default: in this process); {same}",
-    )
-    wait = f"{tasks.CONNECT_TIMEOUT:g} s"
-    st.add_argument(
-        "--scheduler",
-        metavar="ADDRESS",
-        help="run the trials on the Dask cluster whose scheduler is at ADDRESS "
-        f"(tcp://host:8786, workers with this depthcore), refused unless it answers within "
-        f"{wait} and has a worker within {wait} more; {same}",
-    )
+    cluster_options.add_arguments(st, "trials", "the same result, bit for bit")
     _add_json(st, _cmd_study)
 
 
