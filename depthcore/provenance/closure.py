@@ -45,7 +45,7 @@ from pathlib import Path
 
 #: The package whose code a fingerprint covers.
 PACKAGE = "depthcore"
-#: The repository: files under it that a constant names are fingerprinted by their bytes.
+#: The repository, whose files named by a constant are fingerprinted by their bytes.
 ROOT = Path(__file__).resolve().parents[2]
 #: Where the registry lives, and its name there.
 REGISTRY = ("depthcore.registry.filters", "FILTERS")

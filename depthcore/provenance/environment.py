@@ -37,7 +37,7 @@ PACKAGES = {
 
 #: The repository, whose commit names the code of a checkout.
 ROOT = Path(__file__).resolve().parents[2]
-#: What the code's version ignores of the package's folder: the records that code writes.
+#: The package's folders of records, which the code writes and its version ignores.
 RECORDS = ("depthcore/provenance/study_records", "depthcore/provenance/benchmark_records")
 
 
