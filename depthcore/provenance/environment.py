@@ -92,7 +92,8 @@ def statement(date: datetime.date | None = None, packages=None) -> dict:
     Returns
     -------
     dict
-        ``date`` (ISO 8601), ``depthcore``, ``python``, ``packages`` (printed
+        ``date`` (ISO 8601), ``depthcore`` (:func:`code_version`: with the
+        commit, in a checkout), ``python``, ``packages`` (printed
         name -> version, in the order given) and ``machine``
         (:func:`depthcore.provenance.benchmarks.machine`: ``cpu``, ``processor``,
         ``cores``, ``system``, ``blas`` and more).
@@ -104,7 +105,7 @@ def statement(date: datetime.date | None = None, packages=None) -> dict:
     packages = PACKAGES if packages is None else dict(packages)
     return {
         "date": date.isoformat(),
-        "depthcore": __version__,
+        "depthcore": code_version(),
         "python": platform.python_version(),
         "packages": {label: _version(name) for name, label in packages.items()},
         "machine": benchmarks.machine(),
