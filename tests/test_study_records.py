@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import hashlib
 import json
 import re
 from pathlib import Path
@@ -319,3 +320,19 @@ def test_a_result_that_cannot_be_recorded_is_named_when_writing(record_dir, monk
         records.recorded(style.subplots, 1, 1, figsize=(2.0, 2.0))
     plt.close("all")
     assert list(record_dir.iterdir()) == []
+
+
+def test_a_data_file_a_constant_names_is_fingerprinted_by_its_bytes(tmp_path):
+    walk = closure._Walk()
+    walk.file(closure.ROOT / "pyproject.toml")
+    walk.file(tmp_path / "outside.json")  # not in the repository: not counted
+    walk.file("pyproject.toml")  # a plain string is a name, not a path
+    digest = hashlib.sha256((closure.ROOT / "pyproject.toml").read_bytes()).hexdigest()
+    assert walk.prints == {"file pyproject.toml": digest}
+
+
+def test_only_depthcore_functions_are_fingerprinted():
+    with pytest.raises(ValueError, match="function must be one of depthcore's functions"):
+        closure.fingerprints(np.mean)
+    with pytest.raises(ValueError, match="function must be one of depthcore's functions"):
+        closure.fingerprints(lambda: None)
