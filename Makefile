@@ -166,7 +166,8 @@ notebooks: $(EDITABLE) ## re-run the pages, compare with book/_nbval/ (PAGES="fi
 	$(PY) tools/check_notebooks.py check $(PAGES)
 
 # The page checks once per kernel set of another processor (tools/kernel_sets.py: OpenBLAS's
-# Nehalem, Haswell and, with AVX-512, SkylakeX kernels, and NumPy's SIMD cut to its baseline),
+# Nehalem, Haswell and SkylakeX kernels, those this processor can run and are not its own,
+# Sandybridge or Prescott standing in where fewer than two can, and NumPy's baseline SIMD),
 # the studies read from their records: a reference that holds what only this processor's
 # kernels print fails here. .ci/run runs it after make test.
 notebooks-kernels: $(EDITABLE) ## re-run the pages as other processors would, compare with book/_nbval/

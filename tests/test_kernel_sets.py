@@ -65,3 +65,40 @@ def test_ci_runs_the_page_checks_under_other_kernel_sets_after_make_test():
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
     recipe = makefile.split("\nnotebooks-kernels:", 1)[1].split("\n\n", 1)[0]
     assert "tools/kernel_sets.py --" in recipe and "check_notebooks.py check" in recipe
+
+
+def _machine(monkeypatch, native: str, flags: set[str]) -> None:
+    """A processor with ``flags`` whose OpenBLAS picks ``native`` and runs whatever it is told."""
+
+    def probe(env):
+        core = env.get("OPENBLAS_CORETYPE", native)
+        named = {"Prescott": "Katmai"}.get(core, core)
+        return {"blas": f"openblas 0.3, {named} kernels", "baseline": ["X86_V2"], "found": []}
+
+    monkeypatch.setattr(kernel_sets, "probe", probe)
+    monkeypatch.setattr(kernel_sets, "cpu_flags", lambda: flags)
+    monkeypatch.setattr(kernel_sets.platform, "machine", lambda: "x86_64")
+
+
+AVX2 = {"sse4_2", "avx", "avx2", "fma", "pni"}
+
+
+@pytest.mark.parametrize(
+    "native, flags, chosen",
+    [
+        ("SkylakeX", AVX2 | set(kernel_sets.CORETYPES["SkylakeX"]), ["Nehalem", "Haswell"]),
+        ("Haswell", AVX2, ["Nehalem", "Sandybridge"]),  # no AVX-512: a fallback stands in
+        ("Zen", AVX2, ["Nehalem", "Sandybridge"]),  # Zen runs Haswell's kernels
+        ("Nehalem", {"sse4_2", "pni"}, ["Prescott"]),  # too few: refused below
+    ],
+)
+def test_two_other_kernel_sets_are_chosen_wherever_two_can_run(monkeypatch, native, flags, chosen):
+    _machine(monkeypatch, native, flags)
+    if len(chosen) < 2:
+        with pytest.raises(RuntimeError, match="fewer than two OpenBLAS kernel sets"):
+            kernel_sets.kernel_sets({})
+        return
+    sets, skipped = kernel_sets.kernel_sets({})
+    assert [name.split("=")[1] for name, _ in sets] == chosen
+    assert all(env["OPENBLAS_CORETYPE"] == name.split("=")[1] for name, env in sets)
+    assert any("NPY_DISABLE_CPU_FEATURES (NumPy found nothing" in why for why in skipped)

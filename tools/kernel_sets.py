@@ -6,8 +6,8 @@ do not, fails here rather than on a reader's machine:
 
 * OpenBLAS's kernels of other processors (``OPENBLAS_CORETYPE``): ``Nehalem`` (SSE4.2,
   before AVX), ``Haswell`` (AVX2) and ``SkylakeX`` (AVX-512, where this processor has it),
-  each skipped where it is this processor's own choice or cannot run here (OpenBLAS runs
-  ``Prescott`` too, but names it ``Katmai``, so that a probe cannot tell it ran);
+  each skipped where it is this processor's own choice or cannot run here (``Sandybridge``
+  and ``Prescott``, which OpenBLAS names ``Katmai``, stand in while fewer than two run);
 * NumPy's own SIMD loops cut to the build's baseline (``NPY_DISABLE_CPU_FEATURES``: every
   feature NumPy found beyond it), with this processor's BLAS kernels.
 
@@ -35,8 +35,13 @@ CORETYPES = {
     "Haswell": ("avx2", "fma"),
     "SkylakeX": ("avx512f", "avx512bw", "avx512vl", "avx512dq", "avx512cd"),
 }
-#: The variables a set may change, cleared from the environment the sets start from.
-VARIABLES = ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES")
+#: Tried, in this order, only while fewer than two of :data:`CORETYPES` could run.
+FALLBACKS = {"Sandybridge": ("avx",), "Prescott": ("pni",)}
+#: Kernel sets OpenBLAS names otherwise, or that run the same kernels: by the name it reports.
+SAME = {"katmai": "prescott", "zen": "haswell"}
+#: The variable a set adds to the environment; the machine's own OPENBLAS_CORETYPE, where one
+#: is set (on processors an older OpenBLAS mishandles), is kept as the native set.
+NUMPY = "NPY_DISABLE_CPU_FEATURES"
 #: What the probe prints: the kernels OpenBLAS runs and the SIMD features NumPy uses.
 PROBE = """
 import json, numpy
@@ -75,6 +80,11 @@ def kernel(blas: str) -> str:
     return blas.removesuffix(" kernels").rsplit(", ", 1)[-1]
 
 
+def _same(name: str) -> str:
+    """A kernel set's name, lower case, as the set whose kernels it runs (:data:`SAME`)."""
+    return SAME.get(name.lower(), name.lower())
+
+
 def kernel_sets(base: dict) -> tuple[list[tuple[str, dict]], list[str]]:
     """The sets to run under, each a name and its environment, and the sets skipped, why."""
     native = probe(base)
@@ -82,14 +92,16 @@ def kernel_sets(base: dict) -> tuple[list[tuple[str, dict]], list[str]]:
         raise RuntimeError("a Python with NumPy and depthcore does not start here")
     sets, skipped = [], []
     x86 = platform.machine().lower() in ("x86_64", "amd64")
-    flags = cpu_flags()
-    for name, needs in CORETYPES.items() if x86 else ():
+    flags, own = cpu_flags(), _same(kernel(native["blas"]))
+    for name, needs in {**CORETYPES, **FALLBACKS}.items() if x86 else ():
+        if name in FALLBACKS and len(sets) >= 2:
+            break
         env = {**base, "OPENBLAS_CORETYPE": name}
-        if name.lower() == kernel(native["blas"]).lower():
+        if _same(name) == own:
             skipped.append(f"{name} (this processor's own)")
         elif not set(needs) <= flags:
             skipped.append(f"{name} (needs {', '.join(sorted(set(needs) - flags))})")
-        elif (seen := probe(env)) is None or kernel(seen["blas"]).lower() != name.lower():
+        elif (seen := probe(env)) is None or _same(kernel(seen["blas"])) != _same(name):
             skipped.append(f"{name} (OpenBLAS did not run it here)")
         else:
             sets.append((f"OPENBLAS_CORETYPE={name}", env))
@@ -100,7 +112,7 @@ def kernel_sets(base: dict) -> tuple[list[tuple[str, dict]], list[str]]:
     beyond = [f for f in native["found"] if f not in native["baseline"]]
     if beyond:
         features = " ".join(beyond)
-        sets.append((f'NPY_DISABLE_CPU_FEATURES="{features}"', {**base, VARIABLES[1]: features}))
+        sets.append((f'{NUMPY}="{features}"', {**base, NUMPY: features}))
     else:
         skipped.append("NPY_DISABLE_CPU_FEATURES (NumPy found nothing beyond its baseline)")
     return sets, skipped
@@ -114,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     command = args.command[1:] if args.command[:1] == ["--"] else args.command
     if not command and not args.list:
         parser.error("a command to run is required, after --")
-    base = {k: v for k, v in os.environ.items() if k not in VARIABLES}
+    base = {k: v for k, v in os.environ.items() if k != NUMPY}
     try:
         sets, skipped = kernel_sets(base)
     except RuntimeError as err:
