@@ -14,8 +14,10 @@ from __future__ import annotations
 import ast
 import dataclasses
 import hashlib
+import importlib.util
 import json
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -336,3 +338,26 @@ def test_only_depthcore_functions_are_fingerprinted():
         closure.fingerprints(np.mean)
     with pytest.raises(ValueError, match="function must be one of depthcore's functions"):
         closure.fingerprints(lambda: None)
+
+
+def test_a_lambda_bound_to_a_name_is_fingerprinted_by_the_statement_that_binds_it(tmp_path):
+    def fingerprint(source: str) -> dict:
+        path = tmp_path / f"probe{len(source)}.py"
+        path.write_text(source, encoding="utf-8")
+        spec = importlib.util.spec_from_file_location("depthcore._closure_probe", path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module
+        try:
+            spec.loader.exec_module(module)
+            return closure.fingerprints(module.study)
+        finally:
+            del sys.modules[spec.name]
+
+    study = "\n\ndef study(x):\n    return scale(x)\n"
+    before = fingerprint("scale = lambda x: 2 * x" + study)
+    after = fingerprint("scale = lambda x: 20 * x" + study)
+    assert set(before) == {
+        "code depthcore._closure_probe:study",
+        "constant depthcore._closure_probe:scale",
+    }
+    assert closure.changed(before, after) == ["constant depthcore._closure_probe:scale"]

@@ -195,21 +195,22 @@ class _Walk:
         self.registry = getattr(module, REGISTRY[1])
         self.registry_tree = _module_tree(module)
 
-    def code(self, obj) -> None:
-        """A depthcore function or class, and what its code names."""
+    def code(self, obj) -> bool:
+        """A depthcore function or class, and what its code names; False if its ``def`` is not
+        found (a lambda, a function made by another), which the caller then fingerprints by
+        the statement that binds it."""
         obj = inspect.unwrap(obj)
         module = sys.modules.get(getattr(obj, "__module__", ""))
         qualname = getattr(obj, "__qualname__", "").split(".<locals>")[0]
         tree = _module_tree(module) if module is not None else None
         node = _definition(tree, qualname) if tree is not None else None
         if node is None:
-            self.prints[f"code {obj.__module__}:{qualname}"] = "no source"
-            return
+            return False
         key = f"code {module.__name__}:{qualname}"
-        if key in self.prints:
-            return
-        self.prints[key], chains, strings = _read(node)
-        self.follow(chains, strings, module)
+        if key not in self.prints:
+            self.prints[key], chains, strings = _read(node)
+            self.follow(chains, strings, module)
+        return True
 
     def names(self, node: ast.AST, module: types.ModuleType) -> None:
         self.follow(*_read(node)[1:], module)
@@ -235,9 +236,8 @@ class _Walk:
             return
         target = inspect.unwrap(obj) if callable(obj) else obj
         if isinstance(target, (types.FunctionType, type)):
-            if _ours(getattr(target, "__module__", "") or ""):
-                self.code(target)
-            return
+            if not _ours(getattr(target, "__module__", "") or "") or self.code(target):
+                return
         if _ours(owner.__name__):
             self.constant(owner, attr, obj)
 
@@ -342,7 +342,7 @@ def fingerprints(function, args=(), kwargs=None) -> dict[str, str]:
     dict of str to str
         Sorted; keys ``"code module:qualname"``, ``"constant module:NAME"``,
         ``"filter NAME"`` and ``"file path"``, each mapped to 64 hexadecimal
-        digits (``"no source"`` for a definition whose source is not found).
+        digits.
 
     Raises
     ------
