@@ -37,9 +37,7 @@ from a family above its own:
 
 The names below are the package's front door; everything else is imported from
 its subpackage (``from depthcore.exact import optimal``). Subpackages are
-attributes of the package, imported when first used. The modules' paths before
-0.2 (``depthcore.optimal``) still import, with a :class:`DeprecationWarning`
-naming the new path, until 0.3 (``depthcore._paths``).
+attributes of the package, imported when first used.
 """
 
 import importlib
@@ -49,7 +47,7 @@ from depthcore.problem.gaussian import Gaussian, paper_prior
 from depthcore.problem.model import bearings_from_pixels, noise_free_state
 from depthcore.problem.scenarios import SCENARIOS
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 
 #: The subpackages, from the bottom of the house up, imported on first access.
 SUBPACKAGES = (
@@ -87,8 +85,6 @@ def _modules() -> tuple[str, ...]:
 _LAZY = {
     "FILTERS": ("depthcore.registry.filters", "FILTERS"),
     "track": ("depthcore.registry.tracking", "track"),
-    # depthcore.exact.optimal.marginals, kept until 0.3: it warns, naming the door optimal.run
-    "optimal_marginals": ("depthcore.exact.optimal", "marginals"),
 }
 
 __all__ = [
@@ -102,8 +98,6 @@ __all__ = [
     "track",
 ]
 
-_paths.install()
-
 
 def __getattr__(name):
     if name == "MODULES":
@@ -115,8 +109,6 @@ def __getattr__(name):
     if name in _LAZY:
         module, attribute = _LAZY[name]
         return getattr(importlib.import_module(module), attribute)
-    if f"{__name__}.{name}" in _paths.MOVED:
-        return _paths.moved_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

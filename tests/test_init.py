@@ -1,18 +1,16 @@
-"""The package's front door: its names, its subpackages, and the old paths of moved modules."""
+"""The package's front door: its names, its subpackages, and the paths 0.3 removed."""
 
 import importlib
 import pkgutil
+import re
 import subprocess
 import sys
 import warnings
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 import depthcore
-from depthcore import _paths
-from depthcore.kalman import ukf
 
 PACKAGE = Path(depthcore.__file__).parent
 
@@ -39,10 +37,10 @@ def test_import_leaves_scipy_and_the_heavy_modules_unloaded():
 def test_the_front_door_names_resolve_without_a_warning():
     out = _run(
         "import depthcore; "
-        "print(depthcore.optimal_marginals.__name__, depthcore.track.__name__, "
+        "print(depthcore.track.__name__, "
         "len(depthcore.FILTERS) > 5, depthcore.exact.optimal.__name__)"
     )
-    assert out == "marginals track True depthcore.exact.optimal"
+    assert out == "track True depthcore.exact.optimal"
 
 
 def test_every_module_is_an_attribute_of_its_package_after_import_depthcore():
@@ -104,82 +102,63 @@ def test_an_unknown_attribute_raises_attribute_error():
         depthcore.walkthrough  # noqa: B018
 
 
-# --- the paths before 0.2 -------------------------------------------------------------
+# --- what 0.3 removed, as the changelog names it --------------------------------------
+
+CHANGELOG = Path(__file__).resolve().parent.parent / "CHANGELOG.md"
 
 
-#: Run in one fresh interpreter for every old path: before each, every module of the package
-#: leaves ``sys.modules`` and its finder leaves ``sys.meta_path``, so that each old path is
-#: imported as by a fresh ``python -c`` (the third-party modules, which the old paths do not
-#: concern, stay loaded), and what that ``python -c`` would print is collected. Each case's
-#: code is compiled as ``<old path>``, a name apart from the driver's own ``<string>``.
-_OLD_PATHS_DRIVER = """
-import contextlib, io, json, sys
-from depthcore import _paths
-out = {}
-for old in sorted(_paths.MOVED):
-    for name in [m for m in sys.modules if m == "depthcore" or m.startswith("depthcore.")]:
-        del sys.modules[name]
-    sys.meta_path[:] = [f for f in sys.meta_path if type(f).__name__ != "MovedFinder"]
-    new = _paths.MOVED[old]
-    code = (
-        "import warnings, sys\\n"
-        "warnings.simplefilter('always')\\n"
-        "with warnings.catch_warnings(record=True) as caught:\\n"
-        f"    import {old} as m\\n"
-        f"import {new} as n\\n"
-        "print(m is n, n.__spec__.name, sys.modules[n.__name__] is n)\\n"
-        "print(caught[0].category.__name__, caught[0].filename == '<old path>')\\n"
-        "print(caught[0].message)\\n"
+def _removed_rows() -> list[tuple[str, str]]:
+    """The changelog's rows of removed module paths: ``(removed, replacement)``."""
+    text = CHANGELOG.read_text(encoding="utf-8")
+    section = text.split("### Removed", 1)[1].split("Functions that took", 1)[0]
+    return re.findall(r"^\| `(depthcore[\w.]*)` \| `(depthcore[\w.]*)` \|$", section, re.M)
+
+
+REMOVED = _removed_rows()
+
+
+def test_the_changelog_names_every_removed_module_path():
+    assert len(REMOVED) == 41, REMOVED
+
+
+@pytest.mark.parametrize("old, new", REMOVED, ids=[r[0] for r in REMOVED])
+def test_a_removed_path_no_longer_imports_and_its_replacement_does(old, new):
+    package, _, name = old.rpartition(".")
+    with pytest.raises(ImportError):
+        exec(f"import {old}", {})
+    with pytest.raises(ImportError):
+        exec(f"from {package} import {name}", {})
+    assert importlib.import_module(new).__name__ == new
+
+
+@pytest.mark.parametrize(
+    "module, removed, door",
+    [
+        ("depthcore.kalman.ekf", "ekf", "run"),
+        ("depthcore.kalman.ukf", "ukf", "run"),
+        ("depthcore.kalman.second_order", "second_order", "run"),
+        ("depthcore.exact.optimal", "marginals", "run"),
+        ("depthcore.particles.importance", "particle_filter", "run"),
+        ("depthcore.particles.resample_move", "resample_move", "run"),
+        ("depthcore.registry.adapters", "run_ekf", None),
+        ("depthcore", "optimal_marginals", None),
+        ("depthcore.kalman", "run", None),
+    ],
+)
+def test_a_removed_function_is_gone_and_the_changelog_names_its_replacement(module, removed, door):
+    m = importlib.import_module(module)
+    with pytest.raises(AttributeError):
+        getattr(m, removed)
+    assert door is None or callable(getattr(m, door))
+    changelog = CHANGELOG.read_text(encoding="utf-8")
+    shown = (
+        "run_<name>"
+        if removed == "run_ekf"
+        else "<name>"
+        if module == "depthcore.kalman"
+        else removed
     )
-    text = io.StringIO()
-    with contextlib.redirect_stdout(text):
-        exec(compile(code, "<old path>", "exec"), {"__name__": "__main__"})
-    out[old] = text.getvalue().splitlines()
-print(json.dumps(out))
-"""
-
-
-@pytest.fixture(scope="module")
-def old_path_imports():
-    """``{old path: the three lines printed}`` of :data:`_OLD_PATHS_DRIVER`."""
-    import json
-
-    return json.loads(
-        subprocess.run(
-            [sys.executable, "-c", _OLD_PATHS_DRIVER], capture_output=True, text=True, check=True
-        ).stdout
-    )
-
-
-@pytest.mark.parametrize("old", sorted(_paths.MOVED))
-def test_an_old_path_imports_the_new_module_with_a_warning_naming_it(old, old_path_imports):
-    new = _paths.MOVED[old]
-    out = old_path_imports[old]
-    assert out[0] == f"True {new} True"
-    # the warning points at the line that imported the old path, not at the import machinery
-    assert out[1] == "DeprecationWarning True"
-    assert out[2] == f"{old} has moved to {new}; the old path stops working in depthcore 0.3"
-
-
-def test_the_old_from_imports_work_with_a_warning():
-    # run as text, so that the checks of the package's own imports do not read them
-    found = {}
-    with pytest.warns(DeprecationWarning, match="depthcore.optimal has moved to depthcore.exact"):
-        exec("from depthcore import optimal", found)
-    assert found["optimal"] is importlib.import_module("depthcore.exact.optimal")
-    with pytest.warns(DeprecationWarning, match="depthcore.book.records has moved to"):
-        exec("from depthcore.book import records", found)
-    assert found["records"].__name__ == "depthcore.provenance.records"
-
-
-def test_the_old_linear_kalman_module_reads_through_the_subpackage_with_a_warning():
-    from depthcore.kalman import linear
-
-    with pytest.warns(DeprecationWarning, match=r"depthcore.kalman.run has moved to .*linear.run"):
-        run = depthcore.kalman.run
-    assert run is linear.run
-    with pytest.raises(AttributeError, match="has no attribute 'nothing'"):
-        depthcore.kalman.nothing  # noqa: B018
+    assert f"`{module}.{shown}" in changelog
 
 
 def test_the_new_paths_never_warn():
@@ -187,66 +166,3 @@ def test_the_new_paths_never_warn():
         warnings.simplefilter("error")
         for name in depthcore.MODULES:
             importlib.import_module(name)
-
-
-KEPT = [
-    ("depthcore.kalman.ekf", "ekf", "run", (), lambda r: r.means),
-    ("depthcore.kalman.ukf", "ukf", "run", (ukf.SigmaPoints(), True), lambda r: r.means),
-    ("depthcore.kalman.second_order", "second_order", "run", ("printed",), lambda r: r.cov),
-    ("depthcore.exact.optimal", "marginals", "run", ("derived", "all"), lambda r: r.mean),
-]
-
-
-@pytest.mark.parametrize("module, old, door, args, read", KEPT, ids=[k[1] for k in KEPT])
-def test_a_kept_function_warns_naming_its_door_and_answers_as_the_door(
-    module, old, door, args, read
-):
-    from depthcore.problem.scenarios import SCENARIOS
-
-    m = importlib.import_module(module)
-    s = SCENARIOS["fig2"]
-    with pytest.warns(
-        DeprecationWarning, match=rf"{module}\.{old} is replaced by {module}\.{door}"
-    ):
-        kept = getattr(m, old)(s.mu, s.rho, s.prior, *args)
-    names = {
-        "second_order": ("reading",),
-        "marginals": ("reading", "support"),
-        "ukf": ("sigma_points", "allow_behind_camera"),
-    }.get(old, ())
-    direct = getattr(m, door)(
-        s.mu, s.rho, s.prior.mean, s.prior.cov, **dict(zip(names, args, strict=False))
-    )
-    assert np.array_equal(read(kept), read(direct))
-    with (
-        pytest.warns(DeprecationWarning),
-        pytest.raises(ValueError, match="prior must be a Gaussian"),
-    ):
-        getattr(m, old)(s.mu, s.rho, {"mean": s.prior.mean})
-
-
-def test_the_kept_particle_filters_answer_as_their_doors():
-    from depthcore.particles import importance, resample_move
-    from depthcore.problem.scenarios import SCENARIOS
-
-    s = SCENARIOS["fig2"]
-    with pytest.warns(DeprecationWarning, match="importance.run"):
-        kept = importance.particle_filter(s.mu, s.rho, s.prior, 50, np.random.default_rng(3))
-    direct = importance.run(s.mu, s.rho, s.prior.mean, s.prior.cov, 50, np.random.default_rng(3))
-    assert np.array_equal(kept.particles, direct.particles)
-    with pytest.warns(DeprecationWarning, match="resample_move.run"):
-        kept = resample_move.resample_move(s.mu, s.rho, s.prior, 50, np.random.default_rng(3), 2)
-    direct = resample_move.run(
-        [s.mu], s.rho, s.prior.mean, s.prior.cov, 50, np.random.default_rng(3), 2
-    )
-    assert np.array_equal(kept.particles, direct.particles)
-
-
-def test_the_registrys_old_run_functions_are_its_entries():
-    from depthcore.registry import adapters
-    from depthcore.registry.filters import FILTERS
-
-    with pytest.warns(DeprecationWarning, match=r"FILTERS\['ekf'\]"):
-        assert getattr(adapters, "run_" + "ekf") is FILTERS["ekf"]
-    with pytest.raises(AttributeError):
-        getattr(adapters, "run_" + "nothing")

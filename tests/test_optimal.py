@@ -216,12 +216,6 @@ def test_marginals_reject_bad_options(kwargs, message):
         optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, **kwargs)
 
 
-def test_the_kept_marginals_reject_a_prior_that_is_not_gaussian():
-    with pytest.raises(ValueError, match="prior must be a Gaussian"):
-        with pytest.warns(DeprecationWarning, match="optimal.run"):
-            optimal.marginals(MU_17, 0.005, {"mean": [0, 4, 0]})
-
-
 def test_conditional_rejects_depths_at_the_poles():
     s = SCENARIOS["fig2"]
     with pytest.raises(ValueError, match="y must avoid the poles"):
@@ -259,7 +253,7 @@ def test_kept_range_names_the_first_levels_nodes_by_index():
 
 SCENARIO_NODES = """
 import json
-from depthcore import optimal
+from depthcore.exact import optimal
 from depthcore.problem.scenarios import SCENARIOS
 out = {}
 for key, s in SCENARIOS.items():

@@ -9,7 +9,7 @@ from scipy.special import logsumexp
 from depthcore.exact import bank, mixture, optimal
 from depthcore.kalman.second_order import second_order_batch
 from depthcore.particles import importance as pf
-from depthcore.particles.importance import ParticleResult, particle_filter, run
+from depthcore.particles.importance import ParticleResult, run
 from depthcore.problem import model
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.scenarios import MU_17, SCENARIOS
@@ -325,11 +325,6 @@ def test_rejects_a_bad_rng_or_prior():
         run(MU_17, 0.005, FIG2.prior.mean, FIG2.prior.cov, 100, 42)
     with pytest.raises(ValueError, match="rng must be a numpy.random.Generator"):
         run(MU_17, 0.005, FIG2.prior.mean, FIG2.prior.cov, 100, np.random.RandomState(0))
-    with pytest.raises(ValueError, match="prior must be a Gaussian"):
-        with pytest.warns(DeprecationWarning, match="importance.run"):
-            particle_filter(
-                MU_17, 0.005, (FIG2.prior.mean, FIG2.prior.cov), 100, np.random.default_rng(0)
-            )
 
 
 def test_run_rejects_bad_shapes():

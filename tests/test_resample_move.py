@@ -113,16 +113,6 @@ def test_any_number_of_bearings():
     assert one.particles.shape == (1, 500, 3)
 
 
-def test_the_kept_single_entry_point_matches_the_batch():
-    s = SCENARIOS["fig2"]
-    with pytest.warns(DeprecationWarning, match="resample_move.run"):
-        a = resample_move.resample_move(s.mu, s.rho, s.prior, 2000, np.random.default_rng(4))
-    b = resample_move.run(
-        np.array([s.mu]), s.rho, s.prior.mean, s.prior.cov, 2000, np.random.default_rng(4)
-    )
-    np.testing.assert_array_equal(a.particles, b.particles)
-
-
 @pytest.mark.parametrize(
     ("kwargs", "name"),
     [

@@ -13,7 +13,6 @@ from depthcore.kalman.ukf import (
     SigmaPoints,
     measurement_update,
     run,
-    ukf,
     unscented_transform,
     update,
 )
@@ -345,12 +344,6 @@ def test_sigma_points_reject_bad_shapes_and_covariances():
         SigmaPoints().points(np.zeros(2), np.eye(3))
     with pytest.raises(ValueError, match="cov must be positive definite"):
         SigmaPoints().points(np.zeros(3), -np.eye(3))
-
-
-def test_the_kept_ukf_rejects_a_prior_that_is_not_a_gaussian():
-    with pytest.raises(ValueError, match="prior must be a Gaussian"):
-        with pytest.warns(DeprecationWarning, match="ukf.run"):
-            ukf(MU_17, 0.005, (TIGHT.mean, TIGHT.cov))
 
 
 def test_run_takes_rho_batched_like_the_ekf():

@@ -52,8 +52,6 @@ __all__ = ["MODULES", *MODULES]
 
 
 def __getattr__(name):
-    if f"{__name__}.{name}" in _paths.MOVED:
-        return _paths.moved_module(f"{__name__}.{name}")
     return _paths.submodule(__name__, name)
 
 

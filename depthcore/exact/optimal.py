@@ -41,7 +41,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from depthcore import _paths
 from depthcore.exact import online, posterior, quadrature
 from depthcore.exact.cdf import gauss_legendre_cdf
 from depthcore.exact.mixture import Moments
@@ -653,11 +652,6 @@ def _triple(
         _problem=pb,
         _grids=grids,
     )
-
-
-#: :func:`depthcore.exact.optimal.run` on one triple with the prior as a Gaussian,
-#: ``marginals(mu, rho, prior, reading, support, rtol)``; kept until 0.3.
-marginals = _paths.kept("depthcore.exact.optimal.marginals", run, ("reading", "support", "rtol"))
 
 
 @dataclass(frozen=True)

@@ -20,19 +20,10 @@ Where a new thing goes: a new Gaussian filter is one module here, with one
 batched function in the registry's calling convention, then its entry in
 :mod:`depthcore.registry.filters` and its test. It imports from
 :mod:`depthcore.problem` only (and from this family).
-
-Before 0.2 the linear Kalman filter was the module ``depthcore.kalman``; its
-names read from this package still work, with a :class:`DeprecationWarning`
-naming :mod:`depthcore.kalman.linear`, until 0.3.
 """
 
 from depthcore import _paths
 
 
 def __getattr__(name):
-    if name.startswith("__"):
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    try:
-        return _paths.submodule(__name__, name)
-    except AttributeError:
-        return _paths.moved_attribute(__name__, f"{__name__}.linear", name)
+    return _paths.submodule(__name__, name)

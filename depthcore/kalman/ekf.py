@@ -22,7 +22,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from depthcore import _paths
 from depthcore.kalman import linear
 from depthcore.problem import checks, frames, model, predictive, signature
 from depthcore.problem.gaussian import (
@@ -424,8 +423,3 @@ def _update_information(n, R, mu, rho, h):
         ..., 0
     ]
     return n + delta, R_new
-
-
-#: :func:`depthcore.kalman.ekf.run` with the prior as a Gaussian, ``ekf(mu, rho, prior,
-#: process_noise)``; until 0.3.
-ekf = _paths.kept("depthcore.kalman.ekf.ekf", run, ("process_noise",))

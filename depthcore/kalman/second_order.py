@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore import _paths
 from depthcore.problem import checks, frames, model, signature
 from depthcore.problem.gaussian import Gaussian, MeanAndCov, symmetric
 from depthcore.problem.model import (
@@ -63,7 +62,6 @@ __all__ = [
     "hessian",
     "likelihood_covariance",
     "run",
-    "second_order",
     "minimiser",
     "paper_frames",
     "second_order_batch",
@@ -709,13 +707,6 @@ def run(
         c[None], g[None], np.array([np.sqrt(2.0 / factor) / rho]), prior.mean, prior.cov
     )
     return Gaussian(mean[0], cov[0])
-
-
-#: :func:`depthcore.kalman.second_order.run` with the prior as a Gaussian,
-#: ``second_order(mu, rho, prior, reading, process_noise)``; kept until 0.3.
-second_order = _paths.kept(
-    "depthcore.kalman.second_order.second_order", run, ("reading", "process_noise")
-)
 
 
 def _reading(reading: str) -> str:

@@ -96,7 +96,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from depthcore import _paths
 from depthcore.kalman import ekf
 from depthcore.problem import checks, model, predictive, signature
 from depthcore.problem.gaussian import History, MeanAndCov, checked_track, symmetric
@@ -651,10 +650,3 @@ def _stack(reports) -> tuple[predictive.Updates, np.ndarray]:
     """Per-frame reports ``(log_p, tail, gated, behind)`` as ``Updates`` and ``behind`` (..., N)."""
     log_p, tail, gated, behind = (np.stack(r, axis=-1) for r in zip(*reports, strict=True))
     return predictive.Updates(log_p, tail, gated), behind
-
-
-#: :func:`depthcore.kalman.ukf.run` with the prior as a Gaussian, ``ukf(mu, rho, prior,
-#: sigma_points, allow_behind_camera, process_noise)``; kept until 0.3.
-ukf = _paths.kept(
-    "depthcore.kalman.ukf.ukf", run, ("sigma_points", "allow_behind_camera", "process_noise")
-)

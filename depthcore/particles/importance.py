@@ -117,7 +117,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from depthcore import _paths
 from depthcore.kalman.second_order import minimiser, second_order_batch
 from depthcore.particles.resampling import (
     MIN_EFFECTIVE_DRAWS,
@@ -809,13 +808,3 @@ def _filter(track, skip, gate, rng, prior_mean, prior_cov, N, proposal, resample
         ess[:, k] = effective_sample_size(log_w)
     updates = predictive.Updates(log_pred, tail, gated)
     return ParticleBatch(x, log_w, ess, resampled, np.array(ancestors), proposal, updates)
-
-
-#: :func:`depthcore.particles.importance.run` with the prior as a Gaussian,
-#: ``particle_filter(mu, rho, prior, n_particles, rng, proposal, resampler, ess_threshold,
-#: df, inflation)``; kept until 0.3.
-particle_filter = _paths.kept(
-    "depthcore.particles.importance.particle_filter",
-    run,
-    ("n_particles", "rng", "proposal", "resampler", "ess_threshold", "df", "inflation"),
-)

@@ -72,7 +72,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from depthcore import _paths
 from depthcore.particles.resampling import (
     RESAMPLERS,
     check_rng,
@@ -473,17 +472,6 @@ def _resample_move(
     x1[need] = sub
     log_w[need] = -np.log(x1.shape[1])
     return x1, log_w, acceptance
-
-
-#: :func:`depthcore.particles.resample_move.run` on one sequence (a batch of one) with the
-#: prior as a Gaussian, ``resample_move(mu, rho, prior, n_particles, rng, moves,
-#: ess_threshold, resampler)``; kept until 0.3.
-resample_move = _paths.kept(
-    "depthcore.particles.resample_move.resample_move",
-    run,
-    ("n_particles", "rng", "moves", "ess_threshold", "resampler"),
-    one_row=True,
-)
 
 
 def replicated(

@@ -17,12 +17,8 @@ or of a batch (arrays of shape ``(B,)``).
 
 from __future__ import annotations
 
-import importlib
-import warnings
-
 import numpy as np
 
-from depthcore import _paths
 from depthcore.exact import mixture, optimal
 from depthcore.exact import smoother as bank_track
 from depthcore.kalman import ekf, linear
@@ -311,20 +307,3 @@ def required_rng(rng, name: str) -> np.random.Generator:
             f"rng is required to run the {name}: pass a numpy.random.Generator or SeedSequence"
         )
     return checks.generator(rng)
-
-
-def __getattr__(name):
-    """``run_<filter>``, the registry's entries by their 0.1 names, kept until 0.3."""
-    if name.startswith("run_"):
-        # the registry builds on this module: its table is read by name when first asked for
-        FILTERS = importlib.import_module("depthcore.registry.filters").FILTERS
-        if name[4:] in FILTERS:
-            warnings.warn(
-                f"depthcore.registry.adapters.{name} is replaced by "
-                f"depthcore.registry.filters.FILTERS[{name[4:]!r}]; it stops working in "
-                f"depthcore {_paths.REMOVED_IN}",
-                DeprecationWarning,
-                stacklevel=2,
-            )
-            return FILTERS[name[4:]]
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
