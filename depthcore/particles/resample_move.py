@@ -136,7 +136,7 @@ class ResampleMoveBatch:
 
         :func:`depthcore.particles.resampling.weighted_density` of the particles'
         ``component`` (``"x"``, ``"y"`` or ``"v"``) at the last frame; the
-        batch must hold one trial (as :func:`resample_move` returns).
+        batch must hold one trial (as :func:`run` returns for a batch of one sequence).
 
         Returns
         -------
