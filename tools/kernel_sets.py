@@ -29,6 +29,8 @@ import subprocess
 import sys
 import time
 
+from depthcore.provenance import benchmarks
+
 #: OpenBLAS's kernel sets to try, each with the CPU flags (of /proc/cpuinfo) it needs.
 CORETYPES = {
     "Nehalem": ("sse4_2",),
@@ -55,14 +57,7 @@ print(json.dumps({"blas": m["blas"], "baseline": simd.get("baseline", []),
 
 def cpu_flags() -> set[str]:
     """The flags of this processor (Linux's /proc/cpuinfo), empty where it cannot be read."""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            for line in f:
-                if line.startswith("flags"):
-                    return set(line.split(":", 1)[1].split())
-    except OSError:
-        pass
-    return set()
+    return set(benchmarks.cpuinfo().get("flags", "").split())
 
 
 def probe(env: dict) -> dict | None:

@@ -56,7 +56,7 @@ FIELDS = (
 )
 
 
-def _drop_docstrings(tree: ast.AST) -> ast.AST:
+def drop_docstrings(tree: ast.AST) -> ast.AST:
     """``tree`` with the docstring of the module and of every class and function removed."""
     for node in ast.walk(tree):
         if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
@@ -100,7 +100,7 @@ def _version_of(path: Path) -> tuple[str, int, int]:
 @functools.lru_cache(maxsize=1024)
 def _source_fingerprint(path: str, mtime_ns: int, size: int) -> str:
     """:func:`fingerprint` of one version of a source, computed once per process."""
-    tree = _drop_docstrings(ast.parse(Path(path).read_text(encoding="utf-8"), filename=path))
+    tree = drop_docstrings(ast.parse(Path(path).read_text(encoding="utf-8"), filename=path))
     return hashlib.sha256(ast.dump(tree, include_attributes=False).encode()).hexdigest()
 
 
@@ -254,7 +254,7 @@ def changed_sources(recorded: dict, current: dict) -> list[str]:
     return [p for p in sorted(set(current) | set(recorded)) if current.get(p) != recorded.get(p)]
 
 
-def _cpuinfo() -> dict[str, str]:
+def cpuinfo() -> dict[str, str]:
     """The first processor's fields of ``/proc/cpuinfo`` (empty where there is none)."""
     fields: dict[str, str] = {}
     try:
@@ -327,7 +327,7 @@ def machine() -> dict:
     """
     import scipy
 
-    info, config = _cpuinfo(), np.show_config(mode="dicts")
+    info, config = cpuinfo(), np.show_config(mode="dicts")
     simd = config.get("SIMD Extensions", {})
     return {
         "cores": os.cpu_count(),

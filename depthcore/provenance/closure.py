@@ -43,10 +43,12 @@ import sys
 import types
 from pathlib import Path
 
+from depthcore.provenance import benchmarks
+
 #: The package whose code a fingerprint covers.
 PACKAGE = "depthcore"
 #: The repository, whose files named by a constant are fingerprinted by their bytes.
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = benchmarks.ROOT
 #: Where the registry lives, and its name there.
 REGISTRY = ("depthcore.registry.filters", "FILTERS")
 
@@ -57,22 +59,6 @@ def _ours(name: str) -> bool:
 
 def _digest(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
-
-
-def _without_docstring(node: ast.AST) -> ast.AST:
-    """A copy of ``node`` without the docstring of any function or class in it."""
-    node = copy.deepcopy(node)
-    for inner in ast.walk(node):
-        if isinstance(inner, (ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
-            body = inner.body
-            first = body[0] if body else None
-            if (
-                isinstance(first, ast.Expr)
-                and isinstance(first.value, ast.Constant)
-                and isinstance(first.value.value, str)
-            ):
-                inner.body = body[1:] or [ast.Pass()]
-    return node
 
 
 @functools.lru_cache(maxsize=512)
@@ -160,7 +146,7 @@ def _read(node: ast.AST) -> tuple[str, list[list[str]], list[str]]:
     """The fingerprint of a statement without its docstrings, and :func:`_names` of it."""
     kept = _READ.get(id(node))
     if kept is None or kept[0] is not node:
-        bare = _without_docstring(node)
+        bare = benchmarks.drop_docstrings(copy.deepcopy(node))
         kept = (node, (_digest(ast.dump(bare)), *_names(bare)))
         _READ[id(node)] = kept
     return kept[1]

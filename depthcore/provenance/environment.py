@@ -19,7 +19,6 @@ import functools
 import platform
 import subprocess
 from importlib import metadata
-from pathlib import Path
 
 from depthcore import __version__
 from depthcore.provenance import benchmarks
@@ -36,7 +35,7 @@ PACKAGES = {
 
 
 #: The repository, whose commit names the code of a checkout.
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = benchmarks.ROOT
 #: The package's folders of records, which the code writes and its version ignores.
 RECORDS = ("depthcore/provenance/study_records", "depthcore/provenance/benchmark_records")
 

@@ -99,15 +99,25 @@ def _class_path(cls) -> str:
     return f"{cls.__module__}:{cls.__qualname__}"
 
 
-def _depthcore_class(path: str):
-    """The class named ``module:qualname``, which must be depthcore's."""
+def _ours(path: str) -> bool:
+    module = path.partition(":")[0]
+    return module == "depthcore" or module.startswith("depthcore.")
+
+
+def _named(path: str):
+    """The object named ``module:qualname``: its module imported, then each attribute read."""
     module, _, qualname = path.partition(":")
-    if module != "depthcore" and not module.startswith("depthcore."):
-        raise ValueError(f"a record may hold only depthcore's classes, got {path!r}")
     obj = importlib.import_module(module)
     for part in qualname.split("."):
         obj = getattr(obj, part)
     return obj
+
+
+def _depthcore_class(path: str):
+    """The class named ``module:qualname``, which must be depthcore's."""
+    if not _ours(path):
+        raise ValueError(f"a record may hold only depthcore's classes, got {path!r}")
+    return _named(path)
 
 
 def encode(value):
@@ -222,7 +232,7 @@ def decode(value):
 def function_name(function) -> str:
     """``module:qualname`` of a depthcore function, as records name it."""
     module = getattr(function, "__module__", "") or ""
-    if not callable(function) or not (module == "depthcore" or module.startswith("depthcore.")):
+    if not callable(function) or not _ours(module):
         raise ValueError(f"function must be one of depthcore's functions, got {function!r}")
     return f"{module}:{function.__qualname__}"
 
@@ -267,16 +277,12 @@ def record_path(name: str, key: str, directory=None) -> Path:
 
 def resolve(name: str):
     """The function a record names, ``module:qualname``; a ValueError when there is none."""
-    module, _, qualname = name.partition(":")
-    if not (module == "depthcore" or module.startswith("depthcore.")):
+    if not _ours(name):
         raise ValueError(f"function must be one of depthcore's functions, got {name!r}")
     try:
-        obj = importlib.import_module(module)
-        for part in qualname.split("."):
-            obj = getattr(obj, part)
+        return _named(name)
     except (ImportError, AttributeError):
         raise ValueError(f"function {name!r} is gone from depthcore") from None
-    return obj
 
 
 def code_fingerprint(name: str, args=(), kwargs=None) -> dict[str, str]:
