@@ -50,8 +50,13 @@ def folders(tmp_path):
     return current, references
 
 
-def _start(current: Path, references: Path, outcome: str) -> subprocess.Popen:
-    command = [sys.executable, "-c", PAGES, str(references), outcome]
+def _pages(references: Path, outcome: str) -> list[str]:
+    """The command that stands for the pages (:data:`PAGES`), ending as ``outcome`` says."""
+    return [sys.executable, "-c", PAGES, str(references), outcome]
+
+
+def _start(current: Path, references: Path, command: list[str]) -> subprocess.Popen:
+    """tools/records.py on these folders, running ``command``."""
     return subprocess.Popen(
         [
             sys.executable,
@@ -76,7 +81,7 @@ def _contents(folder: Path) -> dict:
 
 def test_a_run_that_ends_well_replaces_the_records_whole(folders):
     current, references = folders
-    process = _start(current, references, "0")
+    process = _start(current, references, _pages(references, "0"))
     _, err = process.communicate(timeout=120)
     assert process.returncode == 0, err
     names = [p.name for p in current.iterdir()]
@@ -94,14 +99,14 @@ def test_a_failed_or_interrupted_run_leaves_the_records_and_references_as_they_w
     current, references = folders
     before, refs = _contents(current), _contents(references)
     if outcome == "interrupt":
-        process = _start(current, references, "wait")
+        process = _start(current, references, _pages(references, "wait"))
         deadline = time.monotonic() + 120
         while not (references / "started").exists():
             assert time.monotonic() < deadline and process.poll() is None, process.stderr.read()
             time.sleep(0.1)
         process.send_signal(signal.SIGINT)
     else:
-        process = _start(current, references, outcome)
+        process = _start(current, references, _pages(references, outcome))
     _, err = process.communicate(timeout=120)
     assert process.returncode == (130 if outcome == "interrupt" else 1), err
     assert _contents(current) == before
@@ -113,26 +118,12 @@ def test_a_failed_or_interrupted_run_leaves_the_records_and_references_as_they_w
         assert "interrupted (SIGINT): the committed records kept" in err
 
 
-def test_a_run_that_records_nothing_changes_nothing(folders, tmp_path):
+def test_a_run_that_records_nothing_changes_nothing(folders):
     current, references = folders
     before = _contents(current)
-    out = subprocess.run(
-        [
-            sys.executable,
-            str(SCRIPT),
-            "--records",
-            str(current),
-            "--references",
-            str(references),
-            "--",
-            sys.executable,
-            "-c",
-            "pass",
-        ],
-        capture_output=True,
-        text=True,
-    )
-    assert out.returncode == 1 and "wrote no record" in out.stderr
+    process = _start(current, references, [sys.executable, "-c", "pass"])
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 1 and "wrote no record" in err
     assert _contents(current) == before
 
 
