@@ -46,31 +46,31 @@ $(KERNEL)/.installed: $(STAMP) $(wildcard tools/jupyter/kernels/python3/*)
 	cp tools/jupyter/kernels/python3/kernel.json tools/jupyter/kernels/python3/launch.py $(KERNEL)/
 	touch $@
 
-$(EDITABLE): $(STAMP) $(KERNEL)/.installed pyproject.toml depthcore/__init__.py
-	$(UV) pip install -q --python $(PY) --no-deps --no-build-isolation -e .
+$(EDITABLE): $(STAMP) $(KERNEL)/.installed pyproject.toml depthcore/__init__.py depthbook/pyproject.toml
+	$(UV) pip install -q --python $(PY) --no-deps --no-build-isolation -e . -e depthbook
 	touch $@
 
-venv: $(EDITABLE) ## .venv/ with the pins and depthcore installed editable
+venv: $(EDITABLE) ## .venv/ with the pins, depthcore and the book's depthbook installed editable
 
 $(CITE_VENV)/.installed: requirements-cite.txt $(STAMP)
 	tools/make-venv.sh "$(PYTHON)" $(CITE_VENV) $(VENV)/uv requirements-cite.txt
 	touch $@
 
-# .venv/'s packages without depthcore: the source archive is installed before each run.
+# .venv/'s packages without depthcore and depthbook: their archives are installed before each run.
 $(ALONE_VENV)/.installed: requirements.txt $(STAMP)
 	rm -rf $(ALONE_VENV)
 	$(PYTHON) -m venv --without-pip $(ALONE_VENV)
 	cp -a $(VENV)/$(SITE)/. $(ALONE_VENV)/$(SITE)/
-	rm -rf $(ALONE_VENV)/$(SITE)/__editable__*depthcore* $(ALONE_VENV)/$(SITE)/depthcore-*.dist-info
+	rm -rf $(ALONE_VENV)/$(SITE)/__editable__*depth{core,book}* $(ALONE_VENV)/$(SITE)/depth{core,book}-*.dist-info
 	touch $@
 
 DOWNLOADS := _build/extra/downloads
 PDF := _build/latex/depthcore.pdf
 FIGURES := _build/figures
 LATEX_BUILD := _build/pdf
-$(FIGURES)/.written: $(EDITABLE) $(shell find depthcore -type f ! -path '*/__pycache__/*')
+$(FIGURES)/.written: $(EDITABLE) $(shell find depthcore depthbook -type f ! -path '*/__pycache__/*')
 	rm -rf $(FIGURES)
-	$(PY) -m depthcore figures --out $(FIGURES)
+	$(PY) -m depthbook figures --out $(FIGURES)
 	touch $@
 
 downloads: $(EDITABLE) $(FIGURES)/.written
@@ -196,7 +196,7 @@ check-lab: $(EDITABLE) ## the pages run and opened in JupyterLab, in a headless 
 	$(PY) -m pytest -q -rs $(LAB_TESTS) $(PYTEST_ARGS)
 
 figures: $(EDITABLE) ## the paper's figures into figures/
-	$(PY) -m depthcore figures --out figures/
+	$(PY) -m depthbook figures --out figures/
 
 # The pages that read studies from their records: executed writing them, then reading them.
 RECORD_PAGES := marginals discrepancies beyond_filters beyond_particles beyond_study beyond_sweeps beyond_frames beyond_bound beyond_hard beyond_conjecture beyond_atlas intro conclusions reproducing

@@ -24,8 +24,8 @@ recorded as such beside the measured ratio):
    the particle filter would need for an error of 1e-3 SD.
 
 Usage: ``python benchmarks/bench_bank.py [--quick]``; the full run writes its
-record ``depthcore/provenance/benchmark_records/bench_bank.json``
-(:mod:`depthcore.provenance.benchmarks`),
+record ``depthbook/provenance/benchmark_records/bench_bank.json``
+(:mod:`depthbook.provenance.benchmarks`),
 ``--quick`` (smaller sizes) writes outside the committed records.
 """
 
@@ -41,11 +41,11 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from depthbook.provenance import benchmarks
 from depthcore.exact import optimal, posterior
 from depthcore.particles import resample_move
 from depthcore.problem import model
 from depthcore.problem.scenarios import SCENARIOS
-from depthcore.provenance import benchmarks
 
 FIG2 = SCENARIOS["fig2"]
 #: The depthcore modules this benchmark measures (fingerprinted in its record).

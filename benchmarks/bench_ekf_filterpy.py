@@ -13,8 +13,8 @@ over the pairs of their ratio (each pair measured back to back, so that a
 change of the machine's load between pairs changes both).
 
 Usage: ``python benchmarks/bench_ekf_filterpy.py [--quick]``; the full run
-writes its record ``depthcore/provenance/benchmark_records/bench_ekf_filterpy.json``
-(:mod:`depthcore.provenance.benchmarks`), ``--quick`` (1,000 trials, 3 pairs) writes
+writes its record ``depthbook/provenance/benchmark_records/bench_ekf_filterpy.json``
+(:mod:`depthbook.provenance.benchmarks`), ``--quick`` (1,000 trials, 3 pairs) writes
 outside the committed records.
 """
 
@@ -31,10 +31,10 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from filterpy.kalman import ExtendedKalmanFilter  # noqa: E402
 
+from depthbook.provenance import benchmarks
 from depthcore.kalman import ekf
 from depthcore.problem import model
 from depthcore.problem.scenarios import SCENARIOS
-from depthcore.provenance import benchmarks
 from depthcore.studies import trials as study_trials
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).

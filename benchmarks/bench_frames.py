@@ -14,8 +14,8 @@ relative to that at the smallest, 1 where the cost grows linearly with N
 like N**2.
 
 Usage: ``python benchmarks/bench_frames.py [--quick]``; the full run writes its
-record ``depthcore/provenance/benchmark_records/bench_frames.json``
-(:mod:`depthcore.provenance.benchmarks`),
+record ``depthbook/provenance/benchmark_records/bench_frames.json``
+(:mod:`depthbook.provenance.benchmarks`),
 ``--quick`` (N = 10, 20, 40) writes outside the committed records.
 """
 
@@ -31,10 +31,10 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from depthbook.provenance import benchmarks
 from depthcore.kalman import iterated
 from depthcore.problem import model
 from depthcore.problem.scenarios import SCENARIOS
-from depthcore.provenance import benchmarks
 from depthcore.registry.filters import FILTERS
 
 FIG2 = SCENARIOS["fig2"]

@@ -3,8 +3,8 @@
 Prints the median wall time of each over several runs and the difference,
 the cost of the package on top of NumPy (target: at most 0.15 s). Usage:
 ``python benchmarks/bench_import.py [--quick]``; the full run writes its record
-``depthcore/provenance/benchmark_records/bench_import.json``
-(:mod:`depthcore.provenance.benchmarks`),
+``depthbook/provenance/benchmark_records/bench_import.json``
+(:mod:`depthbook.provenance.benchmarks`),
 ``--quick`` (3 runs each) writes outside the committed records.
 """
 
@@ -15,7 +15,7 @@ import statistics
 import subprocess
 import sys
 
-from depthcore.provenance import benchmarks
+from depthbook.provenance import benchmarks
 
 RUNS = 15
 #: The depthcore modules that ``import depthcore`` loads (fingerprinted in the record).

@@ -29,8 +29,8 @@ depthcore at least as fast). The two routes' smoothed means and covariances are
 compared.
 
 Usage: ``python benchmarks/bench_kalman.py [--quick]``; the full run writes its
-record ``depthcore/provenance/benchmark_records/bench_kalman.json``
-(:mod:`depthcore.provenance.benchmarks`),
+record ``depthbook/provenance/benchmark_records/bench_kalman.json``
+(:mod:`depthbook.provenance.benchmarks`),
 ``--quick`` (200 steps, 3 pairs) writes outside the committed records.
 """
 
@@ -48,8 +48,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from filterpy.kalman import KalmanFilter, rts_smoother  # noqa: E402
 
+from depthbook.provenance import benchmarks
 from depthcore.kalman import linear
-from depthcore.provenance import benchmarks
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
 MEASURES = ("kalman.linear",)

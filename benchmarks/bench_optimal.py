@@ -5,7 +5,7 @@ Measures, side by side in one run, on one core:
 * the 1-D route of :func:`depthcore.exact.optimal.moments` (Eqs. (14)-(16)), all five
   scenarios in one batch, at the default tolerance;
 * a dense 3-D Gauss-Legendre grid over Eq. (6) itself
-  (:func:`depthcore.analysis.reference.grid_moments`), refined until it agrees with
+  (:func:`depthbook.reference.grid_moments`), refined until it agrees with
   its next refinement to 1e-8 of each SD;
 * with ``--nquad``, scipy's adaptive ``nquad`` on Eq. (6) for one integral
   (the normaliser of Figure 2) at ``epsrel=1e-9``; the full set (five
@@ -20,14 +20,14 @@ the scenarios: the optimal filter's moments
 approximation (:func:`depthcore.kalman.second_order.run`, Eqs. (7)-(8)) and
 the EKF (:func:`depthcore.kalman.ekf.run`, Eqs. (10)-(12)), with the optimal
 filter's quadrature nodes in the depth and the evaluations of Eq. (6) that
-the brute-force grid (:func:`depthcore.analysis.reference.grid_moments`, its default
+the brute-force grid (:func:`depthbook.reference.grid_moments`, its default
 rule) spends on the same triple.
 
 Accuracy is the largest difference, over scenarios and over the depth and
 velocity means and SDs, from the 1-D route at ``rtol=1e-13``, divided by
 the SD. Usage: ``python benchmarks/bench_optimal.py [--quick]``; the full run
-writes its record ``depthcore/provenance/benchmark_records/bench_optimal.json``
-(:mod:`depthcore.provenance.benchmarks`), ``--quick`` (no ``nquad``, fewer repeats) writes
+writes its record ``depthbook/provenance/benchmark_records/bench_optimal.json``
+(:mod:`depthbook.provenance.benchmarks`), ``--quick`` (no ``nquad``, fewer repeats) writes
 outside the committed records.
 """
 
@@ -46,14 +46,14 @@ import warnings  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import integrate  # noqa: E402
 
-from depthcore.analysis import reference
+from depthbook import reference
+from depthbook.provenance import benchmarks
 from depthcore.exact import optimal
 from depthcore.kalman import ekf, second_order
 from depthcore.problem.scenarios import SCENARIOS
-from depthcore.provenance import benchmarks
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
-MEASURES = ("exact.optimal", "analysis.reference", "kalman.second_order", "kalman.ekf")
+MEASURES = ("exact.optimal", "depthbook.reference", "kalman.second_order", "kalman.ekf")
 #: The scenarios of the per-triple table (Figure 4 shares Figure 2's problem).
 TRIPLE_KEYS = ("fig2", "fig3", "fig5", "fig6")
 LADDER = [(50, 12), (100, 16), (150, 20), (200, 24), (300, 28), (400, 32), (600, 40)]

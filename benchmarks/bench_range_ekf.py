@@ -13,8 +13,8 @@ measured side by side with the bank's time of one call on the same problem in
 this run (the least of repeated calls), and their ratio.
 
 Usage: ``python benchmarks/bench_range_ekf.py [--quick]``; the full run
-writes its record ``depthcore/provenance/benchmark_records/bench_range_ekf.json``
-(:mod:`depthcore.provenance.benchmarks`), ``--quick`` (fewer repeats) writes outside the
+writes its record ``depthbook/provenance/benchmark_records/bench_range_ekf.json``
+(:mod:`depthbook.provenance.benchmarks`), ``--quick`` (fewer repeats) writes outside the
 committed records.
 """
 
@@ -30,11 +30,11 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from depthbook.provenance import benchmarks
 from depthcore.exact import posterior
 from depthcore.kalman import range_ekf
 from depthcore.problem import model
 from depthcore.problem.scenarios import SCENARIOS
-from depthcore.provenance import benchmarks
 
 FIG2 = SCENARIOS["fig2"]
 #: The depthcore modules this benchmark measures (fingerprinted in its record).

@@ -20,8 +20,8 @@ posterior SD of the depth; "RMS error" is the root mean square over
 ``--repeats`` independent runs, "SE" the RBPF's standard error of the
 average of those runs from their spread (:meth:`depthcore.particles.rbpf.RBPF.standard_errors`).
 Usage: ``python benchmarks/bench_rbpf.py [--quick]``; the full run writes its
-record ``depthcore/provenance/benchmark_records/bench_rbpf.json``
-(:mod:`depthcore.provenance.benchmarks`),
+record ``depthbook/provenance/benchmark_records/bench_rbpf.json``
+(:mod:`depthbook.provenance.benchmarks`),
 ``--quick`` (fewer runs and particles) writes outside the committed records.
 """
 
@@ -37,12 +37,12 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from depthbook.provenance import benchmarks
 from depthcore.exact import bank, mixture
 from depthcore.particles import rbpf, resample_move
 from depthcore.problem import model
 from depthcore.problem.gaussian import paper_prior
 from depthcore.problem.scenarios import SCENARIOS
-from depthcore.provenance import benchmarks
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).
 MEASURES = ("particles.rbpf", "particles.resample_move", "exact.bank", "exact.mixture")

@@ -5,8 +5,8 @@ prior built from its own measurements) and times, on one core,
 :func:`depthcore.exact.optimal.moments` vectorised over the trials against
 :func:`depthcore.exact.optimal.run` called trial by trial on a subset, and
 checks that the two agree. Usage: ``python benchmarks/bench_trials.py [--quick]``;
-the full run writes its record ``depthcore/provenance/benchmark_records/bench_trials.json``
-(:mod:`depthcore.provenance.benchmarks`), ``--quick`` (1,000 trials) writes outside the
+the full run writes its record ``depthbook/provenance/benchmark_records/bench_trials.json``
+(:mod:`depthbook.provenance.benchmarks`), ``--quick`` (1,000 trials) writes outside the
 committed records.
 """
 
@@ -22,9 +22,9 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from depthbook.provenance import benchmarks
 from depthcore.exact import optimal
 from depthcore.problem.scenarios import SCENARIOS
-from depthcore.provenance import benchmarks
 from depthcore.studies import trials
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).

@@ -9,8 +9,8 @@ cluster is started, warmed by a small study (its workers import depthcore) and
 then timed on the study alone; the results on every cluster are checked equal
 to the one in process, bit for bit. The ratios are the time in process over
 each cluster's. Usage: ``python benchmarks/bench_workers.py [--quick]``; the
-full run writes its record ``depthcore/provenance/benchmark_records/bench_workers.json``
-(:mod:`depthcore.provenance.benchmarks`), ``--quick`` (a tenth of the trials)
+full run writes its record ``depthbook/provenance/benchmark_records/bench_workers.json``
+(:mod:`depthbook.provenance.benchmarks`), ``--quick`` (a tenth of the trials)
 writes outside the committed records.
 """
 
@@ -25,7 +25,7 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
 
-from depthcore.provenance import benchmarks  # noqa: E402
+from depthbook.provenance import benchmarks  # noqa: E402
 from depthcore.studies import monte_carlo, tasks  # noqa: E402
 
 #: The depthcore modules this benchmark measures (fingerprinted in its record).

@@ -27,13 +27,16 @@ from a family above its own:
   :func:`~depthcore.registry.tracking.track`;
 * :mod:`depthcore.studies`: Monte Carlo studies and the reproduction of the
   paper's tables;
-* :mod:`depthcore.provenance`: the benchmarks' and the studies' records;
-* :mod:`depthcore.formatting`: numbers as the book and the command line print them;
 * :mod:`depthcore.cli`: the command line, ``python -m depthcore``;
 * :mod:`depthcore.stonesoup`: the paper's problem and the exact filter in Stone
-  Soup's types (the ``depthcore[stonesoup]`` extra). Nothing below it imports it;
-* :mod:`depthcore.book`: each chapter's experiments, figures and glued texts.
-  Nothing outside it imports it.
+  Soup's types (the ``depthcore[stonesoup]`` extra). Nothing below it imports it.
+
+The package needs NumPy and SciPy alone; the extras add what a part of it uses
+(``depthcore[plot]``: matplotlib and tqdm, for the command line's progress
+bars and the figures; ``depthcore[stonesoup]``; ``depthcore[dask]``). The
+book's code (its chapters, records and verdicts) is a package of its own,
+``depthbook``, beside the book's pages in the repository; nothing here imports
+it.
 
 The names below are the package's front door; everything else is imported from
 its subpackage (``from depthcore.exact import optimal``). Subpackages are
@@ -58,10 +61,8 @@ SUBPACKAGES = (
     "analysis",
     "registry",
     "studies",
-    "provenance",
     "cli",
     "stonesoup",
-    "book",
 )
 
 
@@ -69,15 +70,12 @@ def _modules() -> tuple[str, ...]:
     """Every public module's path, read from the package's folders without importing them.
 
     :data:`MODULES`, computed when first read: each subpackage, in the order of
-    :data:`SUBPACKAGES`, followed by its modules in alphabetical order, and
-    :mod:`depthcore.formatting` between the provenance and the command line.
+    :data:`SUBPACKAGES`, followed by its modules in alphabetical order.
     """
     found = []
     for package in SUBPACKAGES:
         found.append(f"depthcore.{package}")
         found += [f"depthcore.{package}.{m}" for m in _paths.modules_in(f"{__path__[0]}/{package}")]
-        if package == "provenance":
-            found.append("depthcore.formatting")
     return tuple(found)
 
 
@@ -104,7 +102,7 @@ def __getattr__(name):
         # every public module, from the folders (not imported): computed once, when first read
         globals()["MODULES"] = _modules()
         return globals()["MODULES"]
-    if name in SUBPACKAGES or name == "formatting":
+    if name in SUBPACKAGES:
         return importlib.import_module(f"{__name__}.{name}")
     if name in _LAZY:
         module, attribute = _LAZY[name]
@@ -113,4 +111,4 @@ def __getattr__(name):
 
 
 def __dir__():
-    return sorted(set(globals()) | set(SUBPACKAGES) | set(_LAZY) | {"formatting", "MODULES"})
+    return sorted(set(globals()) | set(SUBPACKAGES) | set(_LAZY) | {"MODULES"})

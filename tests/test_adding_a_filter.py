@@ -163,10 +163,10 @@ def test_register_refuses_what_is_not_a_new_filter():
 
 
 #: The fingerprints of what each committed study record's call runs, as a copy of the package
-#: sees them (:func:`depthcore.provenance.records.code_fingerprint`).
+#: sees them (:func:`depthbook.provenance.records.code_fingerprint`).
 FINGERPRINTS = """
 import json
-from depthcore.provenance import records
+from depthbook.provenance import records
 prints = {}
 for path in records.committed():
     r = records.read(path)
@@ -181,7 +181,8 @@ def _changed_in_a_copy(tmp_path, edit) -> dict:
     """Each record's fingerprints that ``edit`` changes: this package against an edited copy."""
     before = _run(FINGERPRINTS, ROOT)
     package = tmp_path / "depthcore"
-    shutil.copytree(ROOT / "depthcore", package, ignore=shutil.ignore_patterns("__pycache__"))
+    for name in ("depthcore", "depthbook"):
+        shutil.copytree(ROOT / name, tmp_path / name, ignore=shutil.ignore_patterns("__pycache__"))
     edit(package)
     after = _run(FINGERPRINTS, tmp_path, PYTHONPATH=str(tmp_path))
     assert before.keys() == after.keys() and len(before) >= 20
@@ -230,7 +231,7 @@ def test_a_new_filter_makes_stale_only_the_records_of_studies_that_run_every_fil
 
 def test_a_change_to_a_studys_code_makes_its_records_stale_and_no_others(tmp_path):
     def edit(package):
-        reference = package / "analysis" / "reference.py"
+        reference = package.parent / "depthbook" / "reference.py"
         text = reference.read_text(encoding="utf-8")
         start = text.index("def grid_moments(")
         body = text.index('"""', text.index('"""', start) + 3) + 3  # past its docstring
@@ -239,4 +240,4 @@ def test_a_change_to_a_studys_code_makes_its_records_stale_and_no_others(tmp_pat
     changed = _changed_in_a_copy(tmp_path, edit)
     assert {name.split("-")[0] for name in changed} == {"grid_moments"}, changed
     for keys in changed.values():
-        assert keys == ["code depthcore.analysis.reference:grid_moments"]
+        assert keys == ["code depthbook.reference:grid_moments"]

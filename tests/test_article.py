@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT / "tools"))
 from test_prose_numbers import ALLOWED, math_numbers  # noqa: E402
 
 import article  # noqa: E402
-from depthcore.provenance import environment  # noqa: E402
+from depthbook.provenance import environment  # noqa: E402
 
 SOURCE = article.SOURCE.read_text(encoding="utf-8")
 

@@ -196,7 +196,7 @@ def test_probe_cost_times_the_filters_it_is_given():
 
 
 def test_the_chapter_counts_and_maps_each_verdict():
-    from depthcore.book import beyond_atlas
+    from depthbook import beyond_atlas
 
     def cell(parallax, frames, **entries):
         return {
@@ -275,7 +275,7 @@ def test_the_prior_forms_are_an_axis_and_refused_trials_are_counted_apart():
 
 
 def test_the_chapter_counts_each_verdict_per_prior_setting():
-    from depthcore.book import beyond_atlas
+    from depthbook import beyond_atlas
 
     def cell(form, scale, verdict):
         entry = {"calibrated": verdict, "lost": False, "near_bound": None}

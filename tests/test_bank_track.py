@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore.analysis import reference
+from depthbook import reference
 from depthcore.exact import bank as bk
 from depthcore.exact import mixture as bmix
 from depthcore.exact import optimal

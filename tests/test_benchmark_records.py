@@ -1,7 +1,7 @@
 """Every benchmark has a committed record, complete and measured on the current code.
 
-The book and the README show the numbers of ``depthcore/provenance/benchmark_records/<name>.json``
-(:mod:`depthcore.provenance.benchmarks`). These tests never run a benchmark: they read
+The book and the README show the numbers of ``depthbook/provenance/benchmark_records/<name>.json``
+(:mod:`depthbook.provenance.benchmarks`). These tests never run a benchmark: they read
 the records and compare each one's fingerprint with the sources it measured,
 so that a change of the measured code names the record to measure again.
 """
@@ -21,9 +21,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import depthcore
+from depthbook import benchmark_tables
+from depthbook.provenance import benchmarks
 from depthcore import __version__
-from depthcore.book import benchmark_tables
-from depthcore.provenance import benchmarks
 
 from helpers import OLDER_KERNELS
 
@@ -82,7 +83,7 @@ def test_every_script_has_a_committed_record(name):
     assert path.is_file(), f"{name} has no record: run `make bench BENCH={name}`"
 
 
-#: What a record says of the machine it was measured on (depthcore.provenance.benchmarks.machine).
+#: What a record says of the machine it was measured on (depthbook.provenance.benchmarks.machine).
 MACHINE_FIELDS = ("cores", "cpu", "processor", "system", "python", "numpy", "scipy", "simd", "blas")
 
 
@@ -96,7 +97,7 @@ def test_the_machine_names_the_blas_kernels_the_processor_runs():
     if "openblas" not in built["name"] or platform.machine() != "x86_64":
         return
     assert here["blas"].endswith(" kernels")
-    code = "from depthcore.provenance import benchmarks; print(benchmarks.machine()['blas'])"
+    code = "from depthbook.provenance import benchmarks; print(benchmarks.machine()['blas'])"
     env = dict(os.environ, **OLDER_KERNELS)
     run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
@@ -126,7 +127,7 @@ def test_every_record_measured_the_current_code(name):
     r = benchmarks.read(name)
     changed = benchmarks.stale(r)
     assert not changed, (
-        f"depthcore/provenance/benchmark_records/{name}.json is stale: "
+        f"depthbook/provenance/benchmark_records/{name}.json is stale: "
         f"{', '.join(changed)} changed "
         f"since it was recorded on {r['date']}; measure again with `make bench BENCH={name}` "
         f"(`{r['command']}`)"
@@ -159,7 +160,7 @@ def test_a_quick_run_leaves_the_committed_record(tmp_path, monkeypatch):
     monkeypatch.setattr(benchmarks, "RESULTS", tmp_path / "results")
     monkeypatch.setattr(benchmarks, "QUICK_RESULTS", tmp_path / "quick")
     (tmp_path / "depthcore" / "exact").mkdir(parents=True)
-    optimal = Path(benchmarks.__file__).parents[1] / "exact" / "optimal.py"
+    optimal = Path(depthcore.__file__).parent / "exact" / "optimal.py"
     shutil.copy(optimal, tmp_path / "depthcore" / "exact")
     path = benchmarks.write(script, ["exact.optimal"], {"trials": 1}, {"x_s": 1.0}, full=False)
     assert path == tmp_path / "quick" / "bench_probe.json"
@@ -195,7 +196,7 @@ def test_the_readme_shows_the_records():
         if not re.search(rf"(?<![\w.,]){re.escape(value)}(?![\w]|[.,]\d)", findings)
     }
     assert not missing, (
-        f"README.md's benchmark numbers differ from depthcore/provenance/benchmark_records/ "
+        f"README.md's benchmark numbers differ from depthbook/provenance/benchmark_records/ "
         f"({missing}): run `{readme.COMMAND}`"
     )
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-import depthcore
+import depthbook
 
 SPHINX_DIR = Path(__file__).resolve().parent.parent / "tools" / "sphinx"
 sys.path.insert(0, str(SPHINX_DIR))
@@ -84,7 +84,7 @@ def test_every_converted_formula_of_the_package_has_balanced_braces():
 
 
 def test_module_summaries_are_the_first_paragraph_in_myst():
-    summary = book_ext.module_summary(depthcore.book.live)
+    summary = book_ext.module_summary(depthbook.live)
     assert summary.startswith("Live controls for the figure pages") and "\n" not in summary
     assert (
         book_ext.rst_to_myst(

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from depthbook import intro
 from depthcore import SCENARIOS
 from depthcore.analysis import bound
-from depthcore.book import intro
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 
 TRIALS = 400

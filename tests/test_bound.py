@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from depthbook import beyond_bound
 from depthcore import SCENARIOS
 from depthcore.analysis import bound
-from depthcore.book import beyond_bound
 from depthcore.problem import model
 
 FIG2 = SCENARIOS["fig2"]

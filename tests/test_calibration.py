@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from depthbook import beyond_study
 from depthcore.analysis import calibration
-from depthcore.book import beyond_study
 from depthcore.cli import text as cli_text
 from depthcore.problem import model
 from depthcore.studies import scores

@@ -111,7 +111,7 @@ def test_a_changed_page_loses_its_cached_outputs_alone(tmp_path):
     "change",
     [
         "depthcore/problem/model.py",
-        "depthcore/provenance/benchmark_records/bench_x.json",
+        "depthbook/provenance/benchmark_records/bench_x.json",
         "requirements.txt",
         "tools/jupyter/kernels/python3/launch.py",
     ],

@@ -5,6 +5,7 @@ import re
 import numpy as np
 import pytest
 
+from depthbook.studies import frames
 from depthcore import paper_prior
 from depthcore.exact import optimal
 from depthcore.kalman import ekf, second_order
@@ -12,7 +13,6 @@ from depthcore.problem import checks, model
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import noise_free_state
 from depthcore.problem.scenarios import MU_17
-from depthcore.studies import frames
 
 PRIOR = paper_prior(noise_free_state(MU_17))
 FILTERS = [

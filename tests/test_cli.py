@@ -1,4 +1,4 @@
-"""The command line: python -m depthcore reproduce | estimate | figures."""
+"""The command line: python -m depthcore reproduce | estimate | study | atlas."""
 
 import json
 import subprocess
@@ -171,39 +171,7 @@ def test_a_refusal_ends_the_process_with_one_line_and_status_2(args, message):
     assert len(lines) == 1 and message in lines[0]
 
 
-def test_figures_command_writes_each_figure_in_the_formats_named(tmp_path, capsys):
-    # (all three by default: `make downloads` writes them, tests/book/test_downloads.py checks)
-    assert main(["figures", "--out", str(tmp_path), "--format", "svg"]) == 0
-    expected = [f"figure{n}{x}.svg" for n in range(2, 7) for x in ("", "-extended")]
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(expected)
-    assert capsys.readouterr().out.split() == [str(tmp_path / name) for name in expected]
-
-
-def test_figures_formats_are_those_the_figures_are_written_in_by_default():
-    import inspect
-
-    from depthcore.book import paper
-    from depthcore.cli.main import FIGURE_FORMATS
-
-    assert inspect.signature(paper.save_all).parameters["formats"].default == FIGURE_FORMATS
-    assert build_parser().parse_args(["figures"]).formats is None  # then FIGURE_FORMATS
-    with pytest.raises(SystemExit):
-        build_parser().parse_args(["figures", "--format", "jpg"])
-
-
-def test_figures_refuses_a_format_named_twice_or_unknown(tmp_path, capsys):
-    status, out, err = refusal(
-        ["figures", "--out", str(tmp_path), "--format", "svg", "png", "svg"], capsys
-    )
-    assert status == 2 and out == "" and not any(tmp_path.iterdir())
-    assert err.strip().splitlines() == [
-        "python -m depthcore figures: error: --format names svg more than once"
-    ]
-    status, out, err = refusal(["figures", "--out", str(tmp_path), "--format", "jpg"], capsys)
-    assert status == 2 and len(err.strip().splitlines()) == 1 and "invalid choice: 'jpg'" in err
-
-
-@pytest.mark.parametrize("command", ["reproduce", "estimate", "study", "figures"])
+@pytest.mark.parametrize("command", ["reproduce", "estimate", "study", "atlas"])
 def test_every_help_is_plain_text_with_examples(command, capsys):
     with pytest.raises(SystemExit):
         main([command, "--help"])

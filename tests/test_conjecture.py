@@ -10,8 +10,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
+from depthbook import beyond_conjecture  # noqa: E402
 from depthcore.analysis import bound  # noqa: E402
-from depthcore.book import beyond_conjecture  # noqa: E402
 
 
 @pytest.mark.parametrize("k", [1, 3])

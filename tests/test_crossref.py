@@ -1,7 +1,7 @@
-"""depthcore.book.crossref: the book's references resolved from its sources, as in JupyterLab.
+"""depthbook.crossref: the book's references resolved from its sources, as in JupyterLab.
 
 The Sphinx side (each ``{eval}`` reference rendered as the role it names, with
-the text that :class:`~depthcore.book.crossref.BookReferences` gives) is checked in
+the text that :class:`~depthbook.crossref.BookReferences` gives) is checked in
 ``tests/test_sphinx_eval.py``; the pages rendered in JupyterLab in
 ``tests/book/test_lab.py``. Here: every reference of the pages resolves, to the
 paper's numbers where the paper numbers, and every page with a kernel writes
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from depthcore.book import crossref
+from depthbook import crossref
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = sorted((ROOT / "book").glob("*.md"))

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore import SCENARIOS
-from depthcore.book import (
+from depthbook import (
     beyond_filters,
     beyond_linear,
     beyond_particles,
@@ -18,6 +17,7 @@ from depthcore.book import (
     beyond_sweeps,
     paper,
 )
+from depthcore import SCENARIOS
 from depthcore.exact import optimal, posterior
 from depthcore.kalman import ekf, second_order, ukf
 from depthcore.particles import rbpf, resample_move

@@ -9,7 +9,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from numpy.testing import assert_allclose  # noqa: E402
 
-from depthcore.book import (
+from depthbook import (
     beyond_filters,
     beyond_linear,
     beyond_particles,
@@ -47,7 +47,7 @@ def test_figure_draws_the_filters(key, filters):
 
 def test_figure_3_overlays_the_printed_reading_of_eq16():
     # The curve the paper's Eq. (16) gives as printed, drawn beside the faithful one.
-    from depthcore.book import paper, style
+    from depthbook import paper, style
     from depthcore.exact import optimal
 
     s = SCENARIOS["fig3"]
@@ -96,7 +96,7 @@ def test_curves_reject_unknown_quantity_or_filter():
 
 
 def test_calibration_and_sweep_figures():
-    from depthcore.book import beyond_sweeps
+    from depthbook import beyond_sweeps
     from depthcore.studies import monte_carlo
 
     r = monte_carlo.study(trials=20, seed=0, n_particles=200)
@@ -238,7 +238,7 @@ def _normal_pdf(x, mean, sd):
 def test_figure_draws_the_densities_of_each_filter(key):
     # The drawn curves, against the filters' own marginals computed here:
     # the optimal filter's quadrature density and the Gaussian ones of Eq. (13).
-    from depthcore.book import paper, style
+    from depthbook import paper, style
     from depthcore.exact import optimal
     from depthcore.kalman import ekf, second_order
 
@@ -287,7 +287,7 @@ def test_extended_figure_draws_the_curves_of_every_filter():
 
 
 def test_readings_figure_draws_both_densities_and_their_means():
-    from depthcore.book import paper
+    from depthbook import paper
     from depthcore.exact import optimal
 
     s = SCENARIOS["fig3"]
@@ -371,7 +371,7 @@ def test_profile_figure_draws_the_profile_likelihood():
 
 
 def test_calibration_and_sweep_figures_draw_their_results():
-    from depthcore.book import beyond_sweeps, style
+    from depthbook import beyond_sweeps, style
     from depthcore.studies import monte_carlo
 
     r = monte_carlo.study(trials=20, seed=0, names=("optimal", "ekf"))
@@ -428,7 +428,7 @@ def fig2_track():
 
 
 def test_bank_depth_figure_draws_one_curve_per_frame(fig2_track):
-    from depthcore.book import beyond_linear
+    from depthbook import beyond_linear
 
     sim, tr = fig2_track
     frames = [3, 4, 6]
@@ -506,8 +506,8 @@ def test_calibration_notes_point_at_the_curve():
 
 
 def test_frames_study_figure_draws_each_score_with_two_standard_errors():
-    from depthcore.book import beyond_frames
-    from depthcore.studies import frames
+    from depthbook import beyond_frames
+    from depthbook.studies import frames
 
     r = frames.frames_study([3, 5], 10, 1, ("optimal", "ekf"))
     fig = beyond_frames.frames_study_figure(r)
@@ -525,7 +525,7 @@ def test_frames_study_figure_draws_each_score_with_two_standard_errors():
 def test_frame_marginals_grids_hold_each_filter_and_the_exact_marginal():
     # Each filter's grid spans its own mean +- 6 SDs and the exact one's, and on it
     # both densities hold nearly all their mass, however far apart they are.
-    from depthcore.book import beyond_frames
+    from depthbook import beyond_frames
     from depthcore.problem import model
 
     sim = model.simulate(FIG2.c, 10, FIG2.rho, 0.0, np.random.default_rng(3))
@@ -544,7 +544,7 @@ def test_frame_marginals_grids_hold_each_filter_and_the_exact_marginal():
 
 
 def _per_frame_run():
-    from depthcore.studies import per_frame
+    from depthbook.studies import per_frame
 
     return per_frame.per_frame_study(6, 50, 1, ("optimal", "ekf"), process_noise=0.02)
 
@@ -559,7 +559,7 @@ def _band_widths(ax, x):
 
 
 def test_frame_bound_figure_draws_the_rmse_over_the_bound_with_two_standard_errors():
-    from depthcore.book import beyond_bound
+    from depthbook import beyond_bound
 
     r = _per_frame_run()
     fig = beyond_bound.frame_bound_figure([("a", r)], zoom=(0.5, 5.0))
@@ -576,7 +576,7 @@ def test_frame_bound_figure_draws_the_rmse_over_the_bound_with_two_standard_erro
 
 
 def test_nees_frames_figure_shades_the_anees_region_of_each_filter():
-    from depthcore.book import beyond_frames
+    from depthbook import beyond_frames
 
     r = _per_frame_run()
     fig = beyond_frames.nees_frames_figure([("a", r)])
@@ -593,7 +593,7 @@ def test_nees_frames_figure_shades_the_anees_region_of_each_filter():
 
 
 def test_track_loss_figure_draws_each_threshold_and_the_rmse_over_the_tracks_kept():
-    from depthcore.book import beyond_frames
+    from depthbook import beyond_frames
 
     r = _per_frame_run()
     fig = beyond_frames.track_loss_figure(r)

@@ -255,19 +255,6 @@ def test_command_line_answers_or_refuses_in_one_line(argv, names, capsys):
         assert any(n in err for n in names), err
 
 
-@pytest.mark.parametrize(
-    "out", ["", "   ", "{file}", "{file}/below", "{file}/below/deeper"], ids=str
-)
-def test_figures_refuses_files_and_empty_paths(out, tmp_path, capsys):
-    f = tmp_path / "a_file"
-    f.write_text("x")
-    assert main(["figures", "--out", out.format(file=f)]) == 2
-    captured = capsys.readouterr()
-    assert captured.out == "" and captured.err.count("\n") == 1
-    assert "out must be a folder" in captured.err
-    assert list(tmp_path.iterdir()) == [f]
-
-
 GOOD = dict(
     mu=np.array([-0.3, 0.0, 0.2]),
     rho=0.005,
@@ -430,16 +417,6 @@ def test_output_that_cannot_be_written_ends_in_one_line(argv, kind, capsys, monk
     err = capsys.readouterr().err
     assert status == 1
     assert err.count("\n") == 1 and "cannot write the output" in err, err
-
-
-@pytest.mark.parametrize(
-    "out", ["/proc/depthcore-figures", "/proc/self/a/b", "/proc/self", "/dev/null/x", "/dev/full/x"]
-)
-def test_figures_out_that_cannot_be_made_ends_in_one_line(out, capsys):
-    status = main(["figures", "--out", out])
-    captured = capsys.readouterr()
-    assert status in (1, 2) and captured.out == ""
-    assert captured.err.count("\n") == 1 and "--out" in captured.err, captured.err
 
 
 @pytest.mark.parametrize("kind", ["full", "closed"])

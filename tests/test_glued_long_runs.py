@@ -10,12 +10,12 @@ number moved by more than that.
 import numpy as np
 import pytest
 
+from depthbook import beyond_bound, beyond_hard, beyond_study, intro
+from depthbook.provenance import records
+from depthbook.studies import hardness, replication
 from depthcore import SCENARIOS
 from depthcore.analysis import bound
-from depthcore.book import beyond_bound, beyond_hard, beyond_study, intro
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
-from depthcore.provenance import records
-from depthcore.studies import hardness, replication
 
 FIG2 = SCENARIOS["fig2"]
 

@@ -1,4 +1,4 @@
-"""Where the problem is hard (depthcore.studies.hardness): the bearings' second difference
+"""Where the problem is hard (depthbook.studies.hardness): the bearings' second difference
 against its closed form, the bound where it vanishes, the scores against direct
 computation, and the exact posterior's calibration over its prior (Talts et al. 2018)."""
 
@@ -7,13 +7,14 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy.stats import binom
 
+from depthbook import beyond_hard
+from depthbook.formatting import value_se
+from depthbook.studies import hardness
 from depthcore import SCENARIOS
 from depthcore.analysis import bound
-from depthcore.book import beyond_hard
-from depthcore.formatting import value_se
 from depthcore.problem import model
 from depthcore.registry.filters import FILTERS
-from depthcore.studies import hardness, scores
+from depthcore.studies import scores
 
 FIG2 = SCENARIOS["fig2"]
 RHO = FIG2.rho

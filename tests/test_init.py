@@ -28,7 +28,7 @@ def test_import_leaves_scipy_and_the_heavy_modules_unloaded():
     out = _run(
         "import sys, depthcore; "
         "print(sorted(m for m in ('scipy', 'matplotlib', 'depthcore.studies.monte_carlo', "
-        "'depthcore.exact.optimal', 'depthcore.registry.filters', 'depthcore.book') "
+        "'depthcore.exact.optimal', 'depthcore.registry.filters', 'depthbook') "
         "if m in sys.modules))"
     )
     assert out == "[]"
@@ -65,13 +65,13 @@ def test_star_import_imports_neither_the_book_nor_every_module():
     out = _run(
         "import sys; from depthcore import *; "
         "print(sorted(n for n in ('Gaussian', 'FILTERS', 'track', 'SCENARIOS') if n in globals()), "
-        "'depthcore.book' in sys.modules, 'depthcore.studies.monte_carlo' in sys.modules)"
+        "'depthbook' in sys.modules, 'depthcore.studies.monte_carlo' in sys.modules)"
     )
     assert out == "['FILTERS', 'Gaussian', 'SCENARIOS', 'track'] False False"
 
 
 def _modules_on_disk() -> set[str]:
-    found = {"depthcore.formatting"}
+    found = set()
     for sub in depthcore.SUBPACKAGES:
         found.add(f"depthcore.{sub}")
         for m in pkgutil.iter_modules([str(PACKAGE / sub)]):
@@ -111,7 +111,7 @@ def _removed_rows() -> list[tuple[str, str]]:
     """The changelog's rows of removed module paths: ``(removed, replacement)``."""
     text = CHANGELOG.read_text(encoding="utf-8")
     section = text.split("### Removed", 1)[1].split("Functions that took", 1)[0]
-    return re.findall(r"^\| `(depthcore[\w.]*)` \| `(depthcore[\w.]*)` \|$", section, re.M)
+    return re.findall(r"^\| `(depthcore[\w.]*)` \| `(depth(?:core|book)[\w.]*)` \|$", section, re.M)
 
 
 REMOVED = _removed_rows()

@@ -334,10 +334,10 @@ def test_smoother_with_process_noise_batched_equals_looped_and_refuses_bad_noise
 @pytest.mark.parametrize("frames", [3, 8, 20])
 def test_smoother_with_process_noise_equals_the_dense_route(frames):
     """The linear-cost Gauss-Newton against
-    :func:`depthcore.analysis.reference.iterated_smoother_dense`
+    :func:`depthbook.reference.iterated_smoother_dense`
     (every step a dense least-squares solve over the whole trajectory), to the resolution of
     their line searches, which stop where the objective no longer decreases in floating point."""
-    from depthcore.analysis import reference
+    from depthbook import reference
 
     q = 0.02
     mu, rho, prior = _noisy_track(q, frames=frames)

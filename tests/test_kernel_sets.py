@@ -31,7 +31,7 @@ def test_at_least_two_other_kernel_sets_and_numpys_baseline_run_here():
     runs = [line for line in out.stdout.splitlines() if "skipped" not in line]
     blas = [line for line in runs if "OPENBLAS_CORETYPE=" in line]
     assert len(blas) >= 2 and len(set(blas)) == len(blas), out.stdout
-    from depthcore.provenance import benchmarks
+    from depthbook.provenance import benchmarks
 
     native = kernel_sets.kernel(benchmarks.machine()["blas"])
     assert not any(line.endswith(f"={native}") for line in blas), (native, out.stdout)

@@ -280,6 +280,7 @@ SOURCES = (
     [p for p in sorted(PACKAGE.rglob("*.py")) if p.stem != "__init__"]
     + sorted((ROOT / "tests").glob("*.py"))
     + sorted((ROOT / "benchmarks").glob("*.py"))
+    + sorted((ROOT / "depthbook").rglob("*.py"))
     + sorted((ROOT / "book").glob("*.md"))
 )
 
@@ -317,11 +318,8 @@ LAYERS = (
     "analysis",
     "registry",
     "studies",
-    "provenance",
-    "formatting",
     "cli",
     "stonesoup",
-    "book",
 )
 #: The modules directly in ``depthcore/`` that belong to no family: the front door.
 TOP_LEVEL = {"__init__", "__main__", "_paths"}
@@ -360,26 +358,26 @@ def upward_imports(source: str, own: str) -> list[str]:
 
 def test_finds_imports_of_the_families_above():
     source = (
-        "from depthcore.book import paper\n"
-        "from depthcore.book.style import STYLE\n"
+        "from depthcore.cli import main\n"
+        "from depthcore.cli.text import vec\n"
         "from depthcore.problem import model\n"
         "from depthcore.registry.filters import FILTERS\n"
     )
     assert imported_modules(source, "kalman.ekf") == {
-        "book",
-        "book.paper",
-        "book.style",
+        "cli",
+        "cli.main",
+        "cli.text",
         "problem",
         "problem.model",
         "registry.filters",
     }
     assert upward_imports(source, "exact.bank") == [
-        "book",
-        "book.paper",
-        "book.style",
+        "cli",
+        "cli.main",
+        "cli.text",
         "registry.filters",
     ]
-    assert upward_imports(source, "book.paper") == []
+    assert upward_imports(source, "cli.text") == []
 
 
 def test_every_module_belongs_to_a_family_or_stands_at_the_top():
@@ -392,20 +390,47 @@ def test_no_module_imports_from_a_family_above_its_own(module):
     assert upward_imports(PATHS[module].read_text(encoding="utf-8"), module) == []
 
 
-@pytest.mark.parametrize("module", [m for m in MODULES if family(m) != "book"])
-def test_no_module_outside_the_book_imports_it(module):
-    imported = imported_modules(PATHS[module].read_text(encoding="utf-8"), module)
-    assert not [m for m in imported if m == "book" or m.startswith("book.")]
+#: The book's own package, beside the installed one.
+BOOK = ROOT / "depthbook"
+
+
+def imports_of(source: str) -> set[str]:
+    """The absolute module names a source imports (``import a.b``, ``from a.b import c``)."""
+    found = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            found.add(node.module)
+            found.update(f"{node.module}.{alias.name}" for alias in node.names)
+    return found
+
+
+def test_finds_the_modules_a_source_imports():
+    source = "import depthbook\nfrom depthbook.provenance import records\nimport os.path\n"
+    assert imports_of(source) == {
+        "depthbook",
+        "depthbook.provenance",
+        "depthbook.provenance.records",
+        "os.path",
+    }
+
+
+@pytest.mark.parametrize("module", MODULES)
+def test_no_module_of_the_package_imports_the_books(module):
+    imported = imports_of(PATHS[module].read_text(encoding="utf-8"))
+    assert not [m for m in imported if m.partition(".")[0] == "depthbook"]
 
 
 #: The book's chapter modules: what one chapter alone needs.
-CHAPTERS = [m for m in MODULES if m.startswith(("book.beyond_", "book.paper"))]
+CHAPTERS = sorted(p.stem for p in BOOK.glob("*.py") if p.stem.startswith(("beyond_", "paper")))
 
 
 @pytest.mark.parametrize("module", CHAPTERS)
 def test_no_chapter_module_imports_another(module):
-    imported = imported_modules(PATHS[module].read_text(encoding="utf-8"), module)
-    assert not [m for m in imported if m in CHAPTERS and m != module]
+    imported = imports_of((BOOK / f"{module}.py").read_text(encoding="utf-8"))
+    others = {f"depthbook.{c}" for c in CHAPTERS if c != module}
+    assert not imported & others
 
 
 @pytest.mark.parametrize("module", MODULES)
@@ -419,7 +444,7 @@ def test_every_subpackage_says_what_lives_there_and_where_a_new_thing_goes():
         listed = {p.stem for p in PATHS[name].parent.glob("*.py") if not p.stem.startswith("_")}
         for module in listed:
             assert f"depthcore.{name}.{module}" in doc, (name, module)
-        assert "Where a new thing goes" in doc or name == "book", name
+        assert "Where a new thing goes" in doc, name
 
 
 #: An inline literal, read left to right; a Sphinx role inside one is shown raw, never linked.

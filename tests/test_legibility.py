@@ -1,6 +1,6 @@
 """Every figure the book shows is legible at the book's width, on screen and on paper.
 
-For each plotting function of the book's wing (:mod:`depthcore.book`) that a page
+For each plotting function of the book's wing (:mod:`depthbook`) that a page
 calls, drawn here on small inputs of the same shape: the figure's size in
 inches as the book saves it (``bbox_inches="tight"``, as Jupyter and the book
 render it), its resolution, and the smallest font of any text it draws
@@ -30,8 +30,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.text import Text  # noqa: E402
 
-from depthcore.analysis import bound
-from depthcore.book import (
+from depthbook import (
     beyond_atlas,
     beyond_bound,
     beyond_conjecture,
@@ -48,11 +47,13 @@ from depthcore.book import (
     paper,
     style,
 )
+from depthbook.studies import frames, hardness, per_frame
+from depthcore.analysis import bound
 from depthcore.exact import posterior, smoother
 from depthcore.problem import model
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry import online
-from depthcore.studies import atlas, frames, hardness, monte_carlo, per_frame
+from depthcore.studies import atlas, monte_carlo
 
 #: Width in CSS pixels at which the book shows a figure at a 1280-pixel window.
 CONTENT_WIDTH_PX = 660.0

@@ -1,4 +1,4 @@
-"""The live controls of the figure pages (depthcore.book.live): bearings, marginals, redraw."""
+"""The live controls of the figure pages (depthbook.live): bearings, marginals, redraw."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import base64
 import numpy as np
 import pytest
 
+from depthbook import beyond_frames, live
 from depthcore import SCENARIOS
-from depthcore.book import beyond_frames, live
 from depthcore.problem import checks, model
 from depthcore.registry.filters import FILTERS
 

@@ -132,7 +132,7 @@ def test_every_page_with_equations_starts_its_count_at_its_first_in_the_book():
     """The front matter of the pages (checked by --check above) holds the book's numbers."""
     import json
 
-    from depthcore.book.crossref import BookReferences
+    from depthbook.crossref import BookReferences
 
     paper = json.loads((ROOT / "tests" / "data" / "equation_labels.json").read_text())
     book = BookReferences(ROOT)

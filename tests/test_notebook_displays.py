@@ -4,7 +4,7 @@ The book pastes what a page glues (``myst_nb.glue(..., display=False)``) into
 its text: figures (``{glue:figure}``, ``{glue}``) and numbers
 (``{eval}``, ``{glue:text}``) in tables and prose. Jupyter displays none of these records,
 so each page also displays them in cells that the book leaves out
-(:class:`depthcore.book.notebook.GlueLog`, :func:`depthcore.book.paper.comparison_table`).
+(:class:`depthbook.notebook.GlueLog`, :func:`depthbook.paper.comparison_table`).
 
 The outputs checked are those of ``book/_nbval/<page>.ipynb``: the page
 converted by jupytext and executed as a plain notebook with nbclient (``make
@@ -16,8 +16,8 @@ the page. For each page:
   with its value, as the book pastes it;
 * every table of the page that pastes glued numbers is displayed whole, with
   the numbers that the book puts in it (the figure pages' tables of the
-  paper's numbers beside ours by :func:`depthcore.book.paper.comparison_table`,
-  the others by :class:`depthcore.book.notebook.GlueLog` from the page's own text).
+  paper's numbers beside ours by :func:`depthbook.paper.comparison_table`,
+  the others by :class:`depthbook.notebook.GlueLog` from the page's own text).
 """
 
 from __future__ import annotations
@@ -159,8 +159,8 @@ def test_a_downloaded_notebook_gives_the_page_its_tables(page, tmp_path, monkeyp
     """GlueLog("fig6.md") run where only the page's notebook is (a download) finds its tables."""
     import jupytext
 
-    from depthcore.book.notebook import page_tables as tables_of
-    from depthcore.book.notebook import page_text
+    from depthbook.notebook import page_tables as tables_of
+    from depthbook.notebook import page_text
 
     expected = tables_of(page.read_text(encoding="utf-8"))
     monkeypatch.chdir(tmp_path)
@@ -176,7 +176,7 @@ def test_a_markdown_tables_text_depends_on_its_values_not_on_their_widths():
     """The last column is not padded and its rule is as wide as its header: a long value
     there, such as the environment statement naming the processor (which
     tests/nbval_sanitize.cfg replaces), leaves the rest of the plain text alone."""
-    from depthcore.book.notebook import MarkdownTable
+    from depthbook.notebook import MarkdownTable
 
     table = MarkdownTable(["glued name", "value"], [["rep_n", "3"], ["rep_what", "a long value"]])
     assert repr(table).splitlines() == [

@@ -11,7 +11,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from depthcore.analysis import reference
+from depthbook import reference
 from depthcore.exact import optimal, quadrature
 from depthcore.problem import model
 from depthcore.problem.gaussian import Gaussian

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from depthcore.analysis import reference
+from depthbook import reference
 from depthcore.exact import optimal, quadrature
 from depthcore.kalman import second_order
 from depthcore.problem.gaussian import Gaussian

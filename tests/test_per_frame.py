@@ -1,4 +1,4 @@
-"""Every filter scored at every frame (depthcore.studies.per_frame), against independent routes."""
+"""Every filter scored at every frame (depthbook.studies.per_frame), against independent routes."""
 
 from __future__ import annotations
 
@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from depthbook.studies import per_frame
 from depthcore import SCENARIOS
 from depthcore.analysis import bound
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 from depthcore.registry.filters import FILTERS
-from depthcore.studies import monte_carlo, per_frame, scores, tasks
+from depthcore.studies import monte_carlo, scores, tasks
 from depthcore.studies.trials import Trials, simulate
 
 FIG2 = SCENARIOS["fig2"]

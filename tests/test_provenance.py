@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import depthcore
-from depthcore.provenance import benchmarks, environment, records
+from depthbook.provenance import benchmarks, environment, records
 
 ROOT = Path(__file__).resolve().parent.parent
 #: A record's version: the package's, and in a checkout the commit of the code that computed it.

@@ -46,7 +46,7 @@ def test_the_readmes_numbers_are_what_the_tool_writes(text, blocks):
 def test_the_readmes_figure_is_what_the_books_figure_code_draws():
     assert readme.FIGURE.is_file(), f"{readme.FIGURE.name} is missing: run `{readme.COMMAND}`"
     assert readme.figure_svg() == readme.FIGURE.read_bytes(), (
-        f"{readme.FIGURE.relative_to(ROOT)} is not what depthcore.book.paper.figure draws: "
+        f"{readme.FIGURE.relative_to(ROOT)} is not what depthbook.paper.figure draws: "
         f"run `{readme.COMMAND}`"
     )
     assert f"]({readme.FIGURE.relative_to(ROOT).as_posix()})" in readme.blocks()["figure"]
@@ -73,7 +73,7 @@ def test_regenerate_replaces_between_markers_and_names_a_missing_block():
 
 
 def test_the_studies_are_read_from_their_records_and_never_computed(monkeypatch):
-    from depthcore.provenance import records
+    from depthbook.provenance import records
 
     monkeypatch.delenv(records.ENVIRONMENT, raising=False)
     with readme._records_required():

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from depthcore.provenance import records
-from depthcore.studies import frames
+from depthbook.provenance import records
+from depthbook.studies import frames
 
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPT = ROOT / "tools" / "records.py"
@@ -28,8 +28,8 @@ SCRIPT = ROOT / "tools" / "records.py"
 PAGES = """
 import os, sys, time
 from pathlib import Path
-from depthcore.provenance import records
-from depthcore.studies import frames
+from depthbook.provenance import records
+from depthbook.studies import frames
 records.recorded(frames.frames_study, [3, 4], 12, 1, ("optimal", "ekf"))
 Path(sys.argv[1], "page.ipynb").write_text("rewritten")
 Path(sys.argv[1], "started").write_text("")
@@ -87,7 +87,7 @@ def test_a_run_that_ends_well_replaces_the_records_whole(folders):
     names = [p.name for p in current.iterdir()]
     assert len(names) == 1 and names[0].startswith("frames_study-"), names
     record = json.loads((current / names[0]).read_text())
-    assert record["function"] == "depthcore.studies.frames:frames_study"
+    assert record["function"] == "depthbook.studies.frames:frames_study"
     assert (references / "page.ipynb").read_text() == "rewritten"
     assert sorted(p.name for p in current.parent.iterdir()) == ["_nbval", "study_records"]
 

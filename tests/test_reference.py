@@ -1,11 +1,11 @@
-"""The independent routes of :mod:`depthcore.analysis.reference`, each against its closed form."""
+"""The independent routes of :mod:`depthbook.reference`, each against its closed form."""
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from depthbook import reference
 from depthcore import SCENARIOS
-from depthcore.analysis import reference
 from depthcore.exact import optimal
 from depthcore.kalman.second_order import hessian
 from depthcore.problem import model

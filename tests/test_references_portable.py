@@ -13,10 +13,10 @@ regexes of ``tests/nbval_sanitize.cfg`` as nbval sanitises them, and fails on
   ("below 1e-12"); the smallest normal double, 2.2250738585072014e-308, is a
   constant;
 * a processor or a BLAS kernel set named: this machine's
-  (:func:`depthcore.provenance.benchmarks.machine`), or any of :data:`MACHINE_WORDS`;
+  (:func:`depthbook.provenance.benchmarks.machine`), or any of :data:`MACHINE_WORDS`;
 * a timing of the run: a number of s, ms, µs, seconds or minutes, except a study
   record's own "computed on YYYY-MM-DD in N s"
-  (:class:`depthcore.provenance.records.Recorded`), which the record fixes.
+  (:class:`depthbook.provenance.records.Recorded`), which the record fixes.
 
 A code cell tagged ``from-records`` is exempt: what it shows is read from the
 committed benchmark or study records, the same on every machine.
@@ -81,7 +81,7 @@ STATED_LIMIT = re.compile(
 
 def machine_names() -> list[str]:
     """This machine's processor, as a benchmark record would name it."""
-    from depthcore.provenance.benchmarks import machine
+    from depthbook.provenance.benchmarks import machine
 
     info = machine()
     return [str(info[key]).strip() for key in ("cpu", "processor") if str(info[key]).strip()]
@@ -256,7 +256,7 @@ def test_the_scan_names_this_machine(patterns):
         "largest entry of P_e^-1 P_s - I: below 1e-12\n",
         "estimated error below 1E-12 of the depth SD, tail below 10^{-14}, 10⁻¹⁴",
         "the smallest normal double, 2.2250738585072014e-308",
-        "read from its record depthcore/provenance/study_records/x.json, "
+        "read from its record depthbook/provenance/study_records/x.json, "
         "computed on 2025-01-31 in 42 s",
         "an error of 0.0 and 0e+00, a mean of 1.6e-3, 1e-3 of the SD",
         "Built on 2025-01-31 with depthcore 1.0 on an Intel Xeon, 0.2 s",

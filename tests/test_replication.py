@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from depthcore.studies import monte_carlo, replication
+from depthbook.studies import replication
+from depthcore.studies import monte_carlo
 
 
 def test_spread_of_normal_replicates_and_its_error():

@@ -6,16 +6,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from depthcore import SCENARIOS, formatting
-from depthcore.book import (
+from depthbook import (
     benchmark_tables,
     beyond_filters,
     beyond_linear,
     beyond_study,
     beyond_sweeps,
+    formatting,
     notebook,
     paper,
 )
+from depthcore import SCENARIOS
 from depthcore.exact import optimal
 from depthcore.kalman import ekf, iterated
 from depthcore.problem.scenarios import REPORTED
@@ -292,7 +293,7 @@ def test_rbpf_texts_format_each_row_of_the_convergence_table():
 
 
 def test_bench_texts_format_the_records_numbers():
-    from depthcore.provenance import benchmarks
+    from depthbook.provenance import benchmarks
 
     r = benchmarks.read("bench_optimal")
     t = benchmark_tables.bench_texts("bench_optimal", r)
@@ -313,7 +314,7 @@ def test_bench_texts_format_the_records_numbers():
 
 
 def test_bench_blocks_hold_every_table_and_its_origin():
-    from depthcore.provenance import benchmarks
+    from depthbook.provenance import benchmarks
 
     names = ["bench_bank", "bench_ekf_filterpy", "bench_import", "bench_kalman"]
     names += ["bench_optimal", "bench_rbpf", "bench_trials", "bench_frames", "bench_range_ekf"]

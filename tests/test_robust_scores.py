@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from depthcore.studies import hardness, medians, scores
+from depthbook.studies import hardness
+from depthcore.studies import medians, scores
 from depthcore.studies.trials import Estimates
 
 TRUTH = np.array([1.2, 6.0, 1.2])

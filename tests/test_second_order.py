@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from depthbook import reference
 from depthcore import paper_prior
-from depthcore.analysis import reference
 from depthcore.exact import optimal
 from depthcore.kalman import ekf, second_order
 from depthcore.kalman.second_order import (
@@ -350,7 +350,7 @@ def test_trajectory_states_follow_the_motion_frame_by_frame():
 
 @pytest.mark.parametrize("n_frames", [3, 5, 12, 30])
 def test_trajectory_laplace_equals_the_dense_route(n_frames):
-    """The linear-cost route against :func:`depthcore.analysis.reference.trajectory_laplace_dense`,
+    """The linear-cost route against :func:`depthbook.reference.trajectory_laplace_dense`,
     the same Gauss-Newton with every step a dense solve, to the resolution of their line
     searches (which stop where the objective no longer decreases in floating point)."""
     rho, q = 2e-3, 0.02

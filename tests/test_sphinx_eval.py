@@ -249,8 +249,8 @@ def test_a_reference_written_as_eval_renders_as_its_role(tmp_path, builder):
         shown[i] = role
     if builder == "html":
         plain = {i: re.sub(r"<[^>]+>", "", s) for i, s in shown.items()}
-        # What the kernel's functions (depthcore.book.crossref) give in JupyterLab.
-        from depthcore.book.crossref import BookReferences
+        # What the kernel's functions (depthbook.crossref) give in JupyterLab.
+        from depthbook.crossref import BookReferences
 
         (src := tmp_path / "src" / "_toc.yml").write_text(
             "format: jb-book\nroot: index\nchapters:\n  - file: other\n"

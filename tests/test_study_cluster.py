@@ -359,13 +359,13 @@ def test_chunks_are_folded_in_order_and_counted_once():
 
 def _encoded(result) -> str:
     """A study's result as its record writes it: arrays and floats exactly."""
-    from depthcore.provenance import records
+    from depthbook.provenance import records
 
     return json.dumps(records.encode(result), sort_keys=True)
 
 
 def test_the_books_other_studies_on_two_local_workers_equal_them_in_process():
-    from depthcore.book import beyond_bound, beyond_frames, beyond_particles
+    from depthbook import beyond_bound, beyond_frames, beyond_particles
     from depthcore.problem.scenarios import SCENARIOS
 
     fig2 = SCENARIOS["fig2"]

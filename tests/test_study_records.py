@@ -1,7 +1,7 @@
 """The book's studies read from their records: the encoding, the modes, and every record current.
 
-The pages call their Monte Carlo studies through ``depthcore.provenance.records.recorded``,
-which reads ``depthcore/provenance/study_records/<function>-<key>.json`` when it was made
+The pages call their Monte Carlo studies through ``depthbook.provenance.records.recorded``,
+which reads ``depthbook/provenance/study_records/<function>-<key>.json`` when it was made
 by the current code. These tests never run a page's study: they check that every
 committed record names a function and its arguments, that its key is the key of
 that call, and that the code it ran has not changed since (`make records`
@@ -23,10 +23,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from depthbook.provenance import benchmarks, closure, records
+from depthbook.studies import frames
 from depthcore import SCENARIOS
 from depthcore.problem import gaussian
-from depthcore.provenance import benchmarks, closure, records
-from depthcore.studies import frames, monte_carlo
+from depthcore.studies import monte_carlo
 
 ROOT = Path(__file__).resolve().parent.parent
 COMMITTED = records.committed()
@@ -187,7 +188,7 @@ def test_require_refuses_a_call_without_a_current_record(record_dir, monkeypatch
     with pytest.raises(ValueError) as refused:
         records.recorded(frames.frames_study, np.arange(3, 1003), 12, 1)
     assert str(refused.value).startswith(
-        "depthcore.studies.frames:frames_study(array([   3, ..., 1001, 1002]), 12, 1) has no "
+        "depthbook.studies.frames:frames_study(array([   3, ..., 1001, 1002]), 12, 1) has no "
         "current record"
     )
     assert len(str(refused.value)) < 240
@@ -214,10 +215,10 @@ def test_only_depthcore_functions_are_recorded():
 
 def test_the_fingerprint_covers_the_code_the_call_runs_and_the_filters_it_names():
     prints = records.code_fingerprint(
-        "depthcore.studies.frames:frames_study", ([3, 4], 12, 1, ("optimal", "ekf"))
+        "depthbook.studies.frames:frames_study", ([3, 4], 12, 1, ("optimal", "ekf"))
     )
     for key in (
-        "code depthcore.studies.frames:frames_study",
+        "code depthbook.studies.frames:frames_study",
         "code depthcore.exact.bank:run_bank",
         "code depthcore.kalman.ekf:run",
         "code depthcore.problem.model:log_likelihood",
@@ -229,10 +230,11 @@ def test_the_fingerprint_covers_the_code_the_call_runs_and_the_filters_it_names(
     # (NAMES) that the code it reaches names: a change to it leaves this study's record valid.
     assert "filter rbpf" not in prints
     assert not any(k.startswith("code depthcore.particles.rbpf:") for k in prints)
-    assert not any(k.startswith("code depthcore.book.") for k in prints)
+    # the study is the book's, and it reaches no chapter's code
+    assert not any(k.startswith(("code depthbook.beyond_", "code depthbook.paper")) for k in prints)
     assert all(len(v) == 64 for v in prints.values())
     with_rbpf = records.code_fingerprint(
-        "depthcore.studies.frames:frames_study", ([3, 4], 12, 1, ("optimal", "rbpf"))
+        "depthbook.studies.frames:frames_study", ([3, 4], 12, 1, ("optimal", "rbpf"))
     )
     assert "filter rbpf" in with_rbpf and "code depthcore.particles.rbpf:run" in with_rbpf
 
@@ -249,11 +251,11 @@ def test_the_fingerprint_of_a_definition_ignores_its_docstring_and_comments():
 
 def test_a_record_whose_function_is_gone_is_stale_in_everything():
     record = {
-        "function": "depthcore.studies.frames:no_such_study",
+        "function": "depthbook.studies.frames:no_such_study",
         "arguments": records.arguments(),
-        "fingerprint": {"code depthcore.studies.frames:no_such_study": "0" * 64},
+        "fingerprint": {"code depthbook.studies.frames:no_such_study": "0" * 64},
     }
-    assert records.stale(record) == ["code depthcore.studies.frames:no_such_study"]
+    assert records.stale(record) == ["code depthbook.studies.frames:no_such_study"]
 
 
 # --- the committed records ------------------------------------------------------------------
@@ -298,9 +300,11 @@ def test_every_page_that_reads_a_record_is_recomputed_by_make_records():
     assert reading == listed
 
 
-def test_the_source_archive_carries_the_records():
-    pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
-    assert '"provenance/study_records/*.json"' in pyproject
+def test_the_books_archive_carries_the_records_and_the_packages_does_not():
+    book = (ROOT / "depthbook" / "pyproject.toml").read_text(encoding="utf-8")
+    assert '"study_records/*.json"' in book and '"benchmark_records/*.json"' in book
+    package = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    assert "records" not in package.split("[tool.setuptools.package-data]")[1].split("[")[0]
 
 
 def test_an_argument_that_cannot_be_recorded_is_named(record_dir):
@@ -315,10 +319,10 @@ def test_an_argument_that_cannot_be_recorded_is_named(record_dir):
 def test_a_result_that_cannot_be_recorded_is_named_when_writing(record_dir, monkeypatch):
     import matplotlib.pyplot as plt
 
-    from depthcore.book import style
+    from depthbook import style
 
     monkeypatch.setenv(records.ENVIRONMENT, "write")
-    with pytest.raises(TypeError, match=r"the result of depthcore\.book\.style:subplots"):
+    with pytest.raises(TypeError, match=r"the result of depthbook\.style:subplots"):
         records.recorded(style.subplots, 1, 1, figsize=(2.0, 2.0))
     plt.close("all")
     assert list(record_dir.iterdir()) == []

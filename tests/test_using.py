@@ -3,15 +3,16 @@
 import pytest
 
 import depthcore
-from depthcore.book import using
+from depthbook import using
 from depthcore.registry.filters import FILTERS
 
 
 def test_family_names_each_modules_family_and_refuses_another_package():
     assert using.family("depthcore.exact.optimal") == "exact"
-    assert using.family("depthcore.formatting") == "formatting"
-    with pytest.raises(ValueError, match="depthcore's modules"):
-        using.family("numpy.linalg")
+    assert using.family("depthcore.cli.text") == "cli"
+    for other in ("numpy.linalg", "depthbook.formatting"):
+        with pytest.raises(ValueError, match="depthcore's modules"):
+            using.family(other)
 
 
 def test_module_summary_is_the_first_paragraph_with_markdown_for_rest():

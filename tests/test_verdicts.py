@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from depthcore.studies import verdicts
+from depthbook.studies import verdicts
 
 
 @pytest.fixture(scope="module")

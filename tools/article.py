@@ -15,8 +15,8 @@ Carlo studies are read from their records, the timings from the benchmarks'):
 ``write`` (the default) rewrites them; ``--check`` changes nothing and fails when
 any differs from what the code gives now; ``build`` checks them, then typesets
 the article with the book's figures 2-6 (vector PDF, from
-:func:`depthcore.book.paper.save_all`) and the environment statement of
-:mod:`depthcore.provenance.environment`, written as the build runs, into
+:func:`depthbook.paper.save_all`) and the environment statement of
+:mod:`depthbook.provenance.environment`, written as the build runs, into
 ``OUT/article.pdf``.
 
 Usage: ``python tools/article.py [--check]``,
@@ -39,15 +39,15 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tools"))
 import readme  # noqa: E402  (the README's numbers: the same computations, shared)
 
-from depthcore import SCENARIOS, Gaussian, __version__, formatting  # noqa: E402
-from depthcore.analysis import reference  # noqa: E402
-from depthcore.book import beyond_atlas  # noqa: E402
+from depthbook import beyond_atlas, formatting, reference  # noqa: E402
+from depthbook.provenance import environment, records  # noqa: E402
+from depthbook.studies import verdicts  # noqa: E402
+from depthcore import SCENARIOS, Gaussian, __version__  # noqa: E402
 from depthcore.exact import optimal  # noqa: E402
 from depthcore.kalman import second_order  # noqa: E402
 from depthcore.problem import model  # noqa: E402
 from depthcore.problem.scenarios import REPORTED_DECIMALS, SCAN_TEXT  # noqa: E402
-from depthcore.provenance import environment, records  # noqa: E402
-from depthcore.studies import monte_carlo, reproduce, verdicts  # noqa: E402
+from depthcore.studies import monte_carlo, reproduce  # noqa: E402
 
 ARTICLE = ROOT / "article"
 SOURCE = ARTICLE / "article.tex"

@@ -328,10 +328,12 @@ def run_nbval(
 
 #: Where the HTML book offers each page's executed notebook (tools/sphinx).
 BOOK_SOURCES = ROOT / "_build" / "html" / "_sources"
-#: What the HTML book offers to install: the pinned requirements and the source archive.
+#: What the HTML book offers to install: the pinned requirements and the two source archives.
 BOOK_DOWNLOADS = ROOT / "_build" / "html" / "downloads"
 #: The same, as ``make downloads`` writes them, before the book is built.
 BOOK_SOURCE_ARCHIVE = ROOT / "_build" / "extra" / "downloads" / "depthcore.tar.gz"
+#: The archives a page run alone installs: the package and the book's own package.
+ARCHIVES = ("depthcore.tar.gz", "depthbook.tar.gz")
 BOOK_REQUIREMENTS = BOOK_SOURCE_ARCHIVE.parent / "requirements.txt"
 
 
@@ -376,7 +378,7 @@ def environment_mismatch(
     unmet : list of str
         The pins (``name==version``) not installed at their version.
     foreign : list of str
-        Installed distributions that are neither pinned nor depthcore nor pip.
+        Installed distributions that are neither pinned nor depthcore, depthbook or pip.
     """
     listed = subprocess.run(
         [uv, "pip", "list", "--quiet", "--python", python, "--format", "freeze"],
@@ -396,7 +398,7 @@ def environment_mismatch(
     pinned = pins(requirements.read_text(encoding="utf-8").splitlines())
     installed = pins(listed.splitlines())
     unmet = [f"{n}=={v}" for n, v in sorted(pinned.items()) if installed.get(n) != v]
-    foreign = sorted(set(installed) - set(pinned) - {"depthcore", "pip"})
+    foreign = sorted(set(installed) - set(pinned) - {"depthcore", "depthbook", "pip"})
     return unmet, foreign
 
 
@@ -406,8 +408,8 @@ def install_book_environment(
     """Install into ``python``'s environment the book's requirements and source archive.
 
     The environment a reader makes from the downloads: ``requirements.txt``
-    (installed only when a pin is unmet) and ``depthcore.tar.gz`` (always
-    reinstalled, as the archive changes with the tree), installed by ``uv``
+    (installed only when a pin is unmet) and the archives :data:`ARCHIVES` (always
+    reinstalled, as they change with the tree), installed by ``uv``
     (``uv pip install``, as ``pip install`` would, in a second rather than five).
 
     Returns
@@ -416,12 +418,14 @@ def install_book_environment(
         Why the environment is not the book's (a pin unmet, a package not
         pinned), or None when it is.
     """
-    archive, requirements = downloads / "depthcore.tar.gz", downloads / "requirements.txt"
+    requirements = downloads / "requirements.txt"
     install = [uv, "pip", "install", "--quiet", "--python", python]
     if environment_mismatch(python, requirements, uv)[0]:
         subprocess.run(install + ["-r", str(requirements)], check=True)
     subprocess.run(
-        install + ["--no-build-isolation", "--reinstall", "--no-deps", str(archive)],
+        install
+        + ["--no-build-isolation", "--reinstall", "--no-deps"]
+        + [str(downloads / a) for a in ARCHIVES],
         check=True,
     )
     unmet, foreign = environment_mismatch(python, requirements, uv)
@@ -454,8 +458,7 @@ def standalone(
     import nbformat
 
     problems: list[str] = []
-    archive, requirements = downloads / "depthcore.tar.gz", downloads / "requirements.txt"
-    for needed in (archive, requirements):
+    for needed in [downloads / a for a in ARCHIVES] + [downloads / "requirements.txt"]:
         if not needed.is_file():
             problems.append(f"{shown(needed)} not found: run `make book` first")
     runs = {}
@@ -534,7 +537,7 @@ def execution_cache(config_path: Path = ROOT / "_config.yml") -> Path:
 #: The execution cache that the HTML and the PDF builds share (``_build/.jupyter_cache``).
 CACHE = execution_cache()
 #: What every page's outputs may depend on besides its own text.
-ENVIRONMENT = ("depthcore", "requirements.txt", "CITATION.cff", "tools/jupyter")
+ENVIRONMENT = ("depthcore", "depthbook", "requirements.txt", "CITATION.cff", "tools/jupyter")
 #: The key of the cache's contents, beside them.
 CACHE_KEY = "depthcore-key.json"
 

@@ -29,7 +29,7 @@ import subprocess
 import sys
 import time
 
-from depthcore.provenance import benchmarks
+from depthbook.provenance import benchmarks
 
 #: OpenBLAS's kernel sets to try, each with the CPU flags (of /proc/cpuinfo) it needs.
 CORETYPES = {
@@ -47,7 +47,7 @@ NUMPY = "NPY_DISABLE_CPU_FEATURES"
 #: What the probe prints: the kernels OpenBLAS runs and the SIMD features NumPy uses.
 PROBE = """
 import json, numpy
-from depthcore.provenance import benchmarks
+from depthbook.provenance import benchmarks
 m = benchmarks.machine()
 simd = numpy.show_config(mode="dicts").get("SIMD Extensions", {})
 print(json.dumps({"blas": m["blas"], "baseline": simd.get("baseline", []),
@@ -71,7 +71,7 @@ def probe(env: dict) -> dict | None:
 
 
 def kernel(blas: str) -> str:
-    """The kernel set's name in :func:`depthcore.provenance.benchmarks.machine`'s ``blas``."""
+    """The kernel set's name in :func:`depthbook.provenance.benchmarks.machine`'s ``blas``."""
     return blas.removesuffix(" kernels").rsplit(", ", 1)[-1]
 
 

@@ -6,12 +6,12 @@ number shows in the book only; written ``{eval}`name```, it shows in the book
 (``tools/sphinx/depthcore_book.py`` pastes the text glued under ``name``,
 exactly as ``glue:text`` does) and in JupyterLab, whose MyST renderer
 (jupyterlab-myst) evaluates ``name`` in the page's kernel, where
-:class:`depthcore.book.notebook.GlueLog` binds every glued text to its name.
+:class:`depthbook.notebook.GlueLog` binds every glued text to its name.
 
 The references and glued figures of a page that runs a ``GlueLog`` are
 written for JupyterLab too, which knows one notebook at a time, no
 bibliography and no ``glue:figure``: each reference as an ``{eval}`` call of
-the function of :mod:`depthcore.book.crossref` that resolves it in the kernel as
+the function of :mod:`depthbook.crossref` that resolves it in the kernel as
 the book does (``{cite:t}`maybank1990``` as ``{eval}`cite_t("maybank1990")```,
 likewise ``cite:p``, ``eq``, ``numref``, ``ref`` and ``doc``), which the book
 renders as the role it names; each ``{glue:figure}`` as a ``{figure}``
@@ -38,7 +38,7 @@ text cell with its front matter, a YAML block::
     ```
 
 whose number is that of the page's first labelled equation in the book
-(:meth:`depthcore.book.crossref.BookReferences.page_equations`, which numbers
+(:meth:`depthbook.crossref.BookReferences.page_equations`, which numbers
 them as the book does); the page's others follow it, as in the book. The
 book does not show this block (``tools/sphinx/depthcore_book.py`` drops it).
 
@@ -63,7 +63,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from depthcore.book.crossref import ROLES, BookReferences
+from depthbook.crossref import ROLES, BookReferences
 
 ROLE = re.compile(r"\{glue:text\}`([^`]+)`")
 NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -71,7 +71,7 @@ FENCE = re.compile(r"^\s*(`{3,}|:{3,})\{code-cell\}")
 
 
 #: The references of the text, each written as an ``{eval}`` call of the
-#: function of ``depthcore.book.crossref`` that JupyterLab evaluates: role -> function.
+#: function of ``depthbook.crossref`` that JupyterLab evaluates: role -> function.
 REFERENCE_ROLES = {role: function for function, role in ROLES.items()}
 REFERENCE = re.compile(r"\{(" + "|".join(map(re.escape, REFERENCE_ROLES)) + r")\}`([^`]+)`")
 KERNEL = re.compile(r"^\w+ = GlueLog\(", re.M)

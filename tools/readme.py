@@ -4,11 +4,11 @@ The README holds, between the marker comments ``<!-- readme:KEY -->`` and
 ``<!-- /readme:KEY -->``, the blocks of :func:`blocks`: what the book found,
 with every number computed by the functions the book's pages use, or read from
 the records they read (the Monte Carlo study of the bound,
-:mod:`depthcore.provenance.records`, and the benchmarks,
-:mod:`depthcore.provenance.benchmarks`); no study is computed here. Each
+:mod:`depthbook.provenance.records`, and the benchmarks,
+:mod:`depthbook.provenance.benchmarks`); no study is computed here. Each
 sentence's claims are asserted before it is written. The README also shows
 ``_static/figure2.svg``, the paper's Figure 2 as
-:func:`depthcore.book.paper.figure` draws it (:func:`figure_svg`), written
+:func:`depthbook.paper.figure` draws it (:func:`figure_svg`), written
 without a date and with fixed element ids, so that the same code gives the
 same bytes.
 
@@ -29,12 +29,13 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
+from depthbook import beyond_atlas, beyond_bound, intro, paper
+from depthbook.formatting import rho_label, sci
+from depthbook.provenance import benchmarks, records
+from depthbook.studies import verdicts
 from depthcore import SCENARIOS
-from depthcore.book import beyond_atlas, beyond_bound, intro, paper
-from depthcore.formatting import rho_label, sci
 from depthcore.problem.scenarios import REPORTED_DECIMALS
-from depthcore.provenance import benchmarks, records
-from depthcore.studies import atlas, verdicts
+from depthcore.studies import atlas
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
@@ -43,9 +44,9 @@ BLOCK = re.compile(r"(<!-- readme:(\w+) -->\n)(?:.*?\n)?(<!-- /readme:\2 -->)", 
 #: What the command line says when the README is not what this writes.
 COMMAND = "python tools/readme.py"
 
-#: Theorem 1's check, as book/appendix.md makes it (:mod:`depthcore.studies.verdicts`).
+#: Theorem 1's check, as book/appendix.md makes it (:mod:`depthbook.studies.verdicts`).
 THEOREM_TOL = verdicts.THEOREM_TOL
-#: The study of the bound that book/beyond_bound.md reads (:mod:`depthcore.book.intro`).
+#: The study of the bound that book/beyond_bound.md reads (:mod:`depthbook.intro`).
 BOUND_FRAMES = intro.BOUND_FRAMES
 BOUND_STUDY = intro.BOUND_STUDY
 NEAR = intro.NEAR
@@ -126,7 +127,7 @@ def paper_texts() -> dict[str, str]:
 def bound_texts() -> dict[str, str]:
     """The EKF, the second-order filter and the iterated EKF against the Cramér–Rao bound.
 
-    :func:`depthcore.book.intro.bound_texts` of book/beyond_bound.md's study without
+    :func:`depthbook.intro.bound_texts` of book/beyond_bound.md's study without
     process noise, read from its record only.
     """
     with _records_required():
@@ -153,7 +154,7 @@ def atlas_run():
 def atlas_texts(run=None) -> dict[str, str]:
     """The atlas's cells and calibrated cells per group of filters (book/beyond_atlas.md).
 
-    :func:`depthcore.book.beyond_atlas.calibration_texts` of ``run`` (default
+    :func:`depthbook.beyond_atlas.calibration_texts` of ``run`` (default
     :func:`atlas_run`), with ``"cells"`` and ``"trials"``.
     """
     run = atlas_run() if run is None else run
@@ -233,7 +234,7 @@ def blocks(bench: dict | None = None) -> dict[str, str]:
     figure = (
         f"![The paper's Figure 2 reproduced: {paper.caption('fig2')}]"
         f"({FIGURE.relative_to(ROOT).as_posix()})\n\n"
-        f'The paper\'s Figure 2, drawn by `depthcore.book.paper.figure("fig2")`: the '
+        f'The paper\'s Figure 2, drawn by `depthbook.paper.figure("fig2")`: the '
         f"{s.quantity} marginals of the optimal filter, the second-order approximation and "
         f"the EKF at time 3, for the bearings ({', '.join(f'{m:g}' for m in s.mu)}) at "
         f"ρ = {rho_label(s.rho)}."
@@ -262,7 +263,7 @@ def _item(text: str, width: int = 80) -> str:
 
 
 def figure_svg() -> bytes:
-    """Figure 2 as :func:`depthcore.book.paper.figure` draws it, as SVG without a date."""
+    """Figure 2 as :func:`depthbook.paper.figure` draws it, as SVG without a date."""
     import matplotlib
 
     matplotlib.use("Agg")

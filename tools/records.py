@@ -25,7 +25,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from depthcore.provenance import records
+from depthbook.provenance import records
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The pages' references, which the first pass of ``make records`` rewrites.

@@ -1,4 +1,4 @@
-"""What the filters are measured against: the bound, self-calibration, independent routes.
+"""What the filters are measured against: the bound, the batch estimate, self-calibration.
 
 * :mod:`~depthcore.analysis.bound`: the Cramér-Rao bound on the state at
   frame ``N``, conditional on the truth and averaged over the prior;
@@ -6,14 +6,12 @@
   from the bearings alone, the baseline without a prior, with the inverse
   Fisher information as its covariance;
 * :mod:`~depthcore.analysis.calibration`: simulation-based calibration of the
-  exact filter;
-* :mod:`~depthcore.analysis.reference`: independent routes (dense grids,
-  brute-force sums, closed forms) to what the package computes otherwise,
-  for its tests and the book's checks.
+  exact filter.
 
-Where a new thing goes: a new yardstick for the filters, or a new independent
-route for checking one, goes here. It may import every family of filters,
-never the registry or the studies, which use it.
+Where a new thing goes: a new yardstick for the filters goes here; an
+independent route that only checks one goes to the book's ``depthbook.reference``.
+It may import every family of filters, never the registry or the studies, which
+use it.
 """
 
 from depthcore import _paths

@@ -1,4 +1,4 @@
-"""The command line: ``python -m depthcore {reproduce,estimate,study,atlas,figures} ...``.
+"""The command line: ``python -m depthcore {reproduce,estimate,study,atlas} ...``.
 
 ``depthcore/__main__.py`` calls :func:`main`.
 
@@ -18,14 +18,12 @@ seconds show a progress bar on stderr when it is a terminal.
 from __future__ import annotations
 
 import argparse
-import importlib.metadata
 import math
 import os
 import re
 import sys
 import traceback
 import warnings
-from pathlib import Path
 
 import numpy as np
 
@@ -200,10 +198,13 @@ def _prior(mu, prior_mean, prior_cov, steps=None) -> Gaussian:
 
 
 def _bar(total: int, desc: str, unit: str):
-    """A progress bar on stderr when it is a terminal, else ``None``."""
+    """A progress bar on stderr when it is a terminal and tqdm is installed, else ``None``."""
     if not sys.stderr.isatty():
         return None
-    from tqdm import tqdm
+    try:
+        from tqdm import tqdm
+    except ImportError:  # the extra depthcore[plot] is not installed: no bar
+        return None
 
     return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr)
 
@@ -326,65 +327,12 @@ def _per_frame(args, src, rho, steps, prior, q, gate, learned=None) -> str:
     return cli_text.format_learned(result) + cli_text.format_per_frame(result)
 
 
-def _check_out(out: str) -> Path:
-    """The folder of ``figures --out``: refuses an empty path, a file, a path below a file."""
-    if not out.strip():
-        raise ValueError("--out must be a folder, got an empty path")
-    path = Path(out)
-    if path.exists() and not path.is_dir():
-        raise ValueError(f"--out must be a folder, but {out!r} is an existing file")
-    for parent in path.parents:
-        if parent.exists() and not parent.is_dir():
-            raise ValueError(f"--out must be a folder, but {str(parent)!r} in {out!r} is a file")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"--out: cannot make the folder {out!r}: {exc.strerror}") from None
-    if not os.access(path, os.W_OK):
-        raise ValueError(f"--out: cannot write into the folder {out!r}: permission denied")
-    return path
-
-
 def _named_once(values, option: str) -> tuple:
     """``values`` as a tuple; a ``ValueError`` naming those the option ``option`` repeats."""
     repeated = sorted({v for v in values if values.count(v) > 1})
     if repeated:
         raise ValueError(f"{option} names {', '.join(repeated)} more than once")
     return tuple(values)
-
-
-#: The entry-point group (``pyproject.toml``) of the function that draws the paper's
-#: figures: the book's :func:`depthcore.book.paper.save_all`, which the command line
-#: finds there rather than importing the book.
-FIGURE_WRITERS = "depthcore.figures"
-
-
-def _figure_writer():
-    """The installed figure writer of :data:`FIGURE_WRITERS`; a ValueError when there is none."""
-    found = sorted(importlib.metadata.entry_points(group=FIGURE_WRITERS), key=lambda e: e.name)
-    if not found:
-        raise ValueError(
-            f"figures: no figure writer is installed (entry point group {FIGURE_WRITERS}); "
-            "install depthcore again"
-        )
-    return found[0].load()
-
-
-def _cmd_figures(args) -> str:
-    out = _check_out(args.out)
-    formats = _named_once(args.formats or FIGURE_FORMATS, "--format")
-    import matplotlib
-
-    matplotlib.use("Agg")
-    save_all = _figure_writer()
-    try:
-        paths = _with_bar(
-            "figures", "figure", lambda progress: save_all(out, formats, progress=progress)
-        )
-    except OSError as exc:
-        where = exc.filename or args.out
-        raise _WriteError(f"--out: cannot write {str(where)!r}: {exc.strerror}") from None
-    return "\n".join(str(p) for p in paths) + "\n"
 
 
 def _truth(values) -> np.ndarray:
@@ -515,7 +463,6 @@ _INPUTS = {
     "estimate": "--mu, --rho and the prior",
     "study": "--truth, --rho, --frames and --process-noise",
     "atlas": "--size",
-    "figures": "--out",
 }
 
 #: A refusal when a filter's covariance turns out singular.
@@ -526,7 +473,6 @@ _SINGULAR = {
     "study": "--particles and --rho have no answer: a filter's covariance is singular (too few "
     "particles carry weight, or the noise is too small to resolve); try more --particles or "
     "a larger --rho",
-    "figures": "a filter's covariance is singular in double precision",
     "atlas": "a filter's covariance is singular in double precision",
 }
 
@@ -574,11 +520,6 @@ def _write(text: str) -> None:
         raise _WriteError(f"cannot write the output to standard output: {reason}") from None
 
 
-#: The formats ``figures --format`` accepts, all written when it is not given: those
-#: :func:`depthcore.book.paper.save_all` writes by default (a module imported only to draw).
-FIGURE_FORMATS = ("pdf", "png", "svg")
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m depthcore``.
 
@@ -605,17 +546,6 @@ def build_parser() -> argparse.ArgumentParser:
     _add_estimate_arguments(sub, common)
     _add_study_arguments(sub, common)
     atlas_command.add(_command(sub, common, "atlas", atlas_command.SUMMARY), _with_bar, _WriteError)
-    f = _command(sub, common, "figures", "write Figures 2-6 as PDF, PNG and SVG")
-    f.add_argument("--out", default="figures", help="output folder (default: figures)")
-    f.add_argument(
-        "--format",
-        dest="formats",
-        nargs="+",
-        choices=FIGURE_FORMATS,
-        metavar="FORMAT",
-        help="write these formats only, of pdf, png and svg (default: all three)",
-    )
-    f.set_defaults(run=_cmd_figures)
     return p
 
 

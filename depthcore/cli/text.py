@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from depthcore.cli.tracks import FORMAT as TRACK_FORMAT
-from depthcore.formatting import vec
+from depthcore.problem import checks
 
 # --- the command line's tables ------------------------------------------------------------
 
@@ -72,6 +72,27 @@ legend: bias, rmse  mean and root mean square of estimate - truth over the trial
                     (0 = the same density, 1 = disjoint); a dash: not computed, as the
                     optimal filter, the reference, runs only when it is among the filters
         (se)        under each row: the Monte Carlo standard error of each number above it"""
+
+
+def vec(values, decimals: int = 4) -> str:
+    """A vector as the command line and the book print it: ``"(1.2000, 6.0000, 1.2000)"``.
+
+    Rounds first, so that a value that rounds to zero prints as ``0.0000``,
+    never ``-0.0000``.
+
+    Parameters
+    ----------
+    values : array_like, shape (n,)
+    decimals : int
+        Places after the decimal point, >= 0.
+    """
+    values = checks.finite_array(values, "values")
+    if values.ndim != 1:
+        raise ValueError(f"values must be 1-D, got shape {values.shape}")
+    if int(decimals) != decimals or decimals < 0:
+        raise ValueError(f"decimals must be a non-negative integer, got {decimals!r}")
+    decimals = int(decimals)
+    return "(" + ", ".join(f"{v + 0.0:.{decimals}f}" for v in np.round(values, decimals)) + ")"
 
 
 def format_table(result: dict) -> str:
@@ -469,17 +490,12 @@ examples:
 Each cell is a study; the JSON holds every cell's scores and verdicts (calibrated,
 track lost, within 10 % of the bound: true, false or null when undecided) and the
 measured seconds per trial of each filter at each number of frames.""",
-    "figures": """\
-examples:
-  python -m depthcore figures --out figures
-  python -m depthcore figures --out figures --format svg""",
 }
 EXAMPLES["all"] = """\
 examples:
   python -m depthcore reproduce
   python -m depthcore estimate --mu -0.3 0 0.2 --rho 0.005
   python -m depthcore study --trials 500 --seed 1
-  python -m depthcore figures --out figures
 
 `python -m depthcore COMMAND --help` shows each command's options and examples."""
 

@@ -429,7 +429,7 @@ def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:
     Each step solves the linearised least-squares problem through the
     trajectory's block-tridiagonal structure
     (:func:`depthcore.kalman.second_order.trajectory_solve`), so its cost grows
-    linearly with the frames; :func:`depthcore.analysis.reference.iterated_smoother_dense`
+    linearly with the frames; :func:`depthbook.reference.iterated_smoother_dense`
     solves the same problems densely.
     """
     K = mu.shape[-1]

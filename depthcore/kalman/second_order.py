@@ -522,7 +522,7 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, process_noise: float):
     problem, the Gauss-Newton steps and the product with the prior, is solved
     through the trajectory's block-tridiagonal structure
     (:func:`trajectory_solve`), so the cost grows linearly with ``N``; the
-    rows run side by side. :func:`depthcore.analysis.reference.trajectory_laplace_dense`
+    rows run side by side. :func:`depthbook.reference.trajectory_laplace_dense`
     solves the same problems densely.
 
     Parameters

@@ -74,7 +74,7 @@ Pulling the points in does not rescue the filter on the paper's prior. Under
 ``N(n, 1000 I)`` the depth has positive density ``p_y(0)`` at ``y = 0``, so
 ``P(|y| < eps)`` is about ``2 eps p_y(0)`` and ``E[(x / y)**2 ; |y| > eps]``
 grows like ``2 p_y(0) E[x**2 | y = 0] / eps``: ``Var[x / y]`` is infinite and
-``E[x / y]`` does not exist (:func:`depthcore.book.beyond_filters.truncated_bearing_moments`).
+``E[x / y]`` does not exist (:func:`depthbook.beyond_filters.truncated_bearing_moments`).
 The moments the transform sets out to match are undefined, so whatever
 ``alpha``, ``beta`` and ``kappa`` it uses, its answer depends on where its
 points happen to fall.

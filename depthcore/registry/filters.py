@@ -33,7 +33,7 @@ runs over one track), and what it supports: ``any_frames`` (any
 paper's three) and ``with_process_noise`` (``q > 0`` or only ``q = 0``); a
 call outside them is refused with a :class:`ValueError` naming ``mu`` or
 ``process_noise``. :mod:`depthcore.studies.reproduce`, :mod:`depthcore.studies.monte_carlo`,
-the command line and the book's chapters (:mod:`depthcore.book`)
+the command line and the book's chapters (:mod:`depthbook`)
 iterate the entries marked ``default`` (:data:`NAMES`), which are the five of
 the paper's problem; the N-frame filters (``iterated``, ``inverse_depth``,
 ``resample_move``, ``rbpf``) are registered with ``default=False`` and run only when

@@ -12,22 +12,12 @@
 * :mod:`~depthcore.studies.pairs`: two filters compared over the same trials;
 * :mod:`~depthcore.studies.monte_carlo`: the studies the command line runs
   (which estimate, and which stated uncertainty, to trust);
-* :mod:`~depthcore.studies.frames`: the study at several numbers of frames;
-* :mod:`~depthcore.studies.per_frame`: every filter scored at every frame of
-  one set of tracks (RMSE beside the bound, ANEES with its chi-square region,
-  track loss at several thresholds);
-* :mod:`~depthcore.studies.hardness`: where the problem is hard, across
-  parallax, prior and depth;
 * :mod:`~depthcore.studies.atlas`: every filter's verdicts over a grid of
   parallax, prior, noise, depth and frames, at the book's size or a cluster's;
 * :mod:`~depthcore.studies.reproduce`: the paper's tables reproduced, and the
   curves of its figures;
 * :mod:`~depthcore.studies.tasks`: where the studies' chunks of trials run, in
   this process or as tasks of a Dask cluster, folded in chunk order.
-* :mod:`~depthcore.studies.replication`: a study replicated on independent
-  seeds, its stated errors set against the spread across replicates;
-* :mod:`~depthcore.studies.verdicts`: what the replication found, one verdict
-  per figure and for Theorem 1, decided from those tables.
 
 On a cluster: the studies take ``client=`` (a ``distributed.Client``; default
 None, this process, with nothing of Dask imported), and with none given run on
@@ -39,7 +29,7 @@ chunks are added in chunk order. From the command line,
 ``python -m depthcore study --scheduler tcp://host:8786`` uses a running cluster.
 
 Where a new thing goes: a new study, or a new score, goes here; a study one
-chapter of the book alone runs goes with that chapter in :mod:`depthcore.book`.
+the book alone runs goes to the book's own package, ``depthbook``, beside it.
 It may import every family below it, through the registry.
 """
 

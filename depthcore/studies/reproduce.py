@@ -5,7 +5,7 @@ Recommended import: ``from depthcore.studies import reproduce``.
 Everything here iterates the default entries of the registry
 :data:`depthcore.registry.filters.FILTERS` (:data:`~depthcore.registry.filters.NAMES`);
 :func:`comparison` sets each filter's numbers beside the paper's for one
-figure (:data:`TABLE_ROWS`). The book's :mod:`depthcore.book.paper` only draws
+figure (:data:`TABLE_ROWS`). The book's :mod:`depthbook.paper` only draws
 what :func:`curves` returns and shows what :func:`comparison` returns, and
 :mod:`depthcore.cli.text` formats what :func:`reproduce` and :func:`summarize` return.
 

@@ -46,7 +46,7 @@ def test_each_module_is_documented_with_its_members_on_its_familys_page(html_dir
     for name in depthcore.MODULES:
         html = page_html(html_dir, f"book/api/{family_of(name)}")
         assert f'id="module-{name}"' in html, f"{name} is not documented"
-        if name.count(".") > 1 or name == "depthcore.formatting":
+        if name.count(".") > 1 or name == "depthbook.formatting":
             assert re.search(rf'<dt class="sig[^"]*" id="{re.escape(name)}\.\w+', html), (
                 f"{name} is documented without any of its members"
             )

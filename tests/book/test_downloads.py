@@ -91,7 +91,7 @@ def test_figure_page_links_the_figure_in_three_formats(html_dir, html_pages, num
 
 
 def test_the_downloads_hold_every_figure_the_figures_command_writes_by_default(html_dir):
-    # `make downloads` runs `python -m depthcore figures` with its default formats.
+    # `make downloads` runs `python -m depthbook figures` with its default formats.
     written = sorted(p.name for p in (html_dir / "downloads" / "figures").iterdir())
     assert written == sorted(
         f"figure{n}{x}.{fmt}"
@@ -133,7 +133,7 @@ def test_source_archive_holds_the_benchmark_records(html_dir):
     with tarfile.open(html_dir / "downloads" / "depthcore.tar.gz") as tar:
         names = tar.getnames()
     missing = [
-        r for r in records if f"{top}/depthcore/provenance/benchmark_records/{r}" not in names
+        r for r in records if f"{top}/depthbook/provenance/benchmark_records/{r}" not in names
     ]
     assert not missing, f"the source archive lacks the records {missing}"
 

@@ -14,7 +14,7 @@ them), and checks in the rendered page that
   run), with no error and no role left as source;
 * every reference, written ``{eval}`cite_t("key")```, ``{eval}`eq("eq-7")```,
   ``{eval}`numref("fig-2")```, ``{eval}`doc("fig5")``` (see
-  :mod:`depthcore.book.crossref`), shows what the book shows: an equation of the
+  :mod:`depthbook.crossref`), shows what the book shows: an equation of the
   paper its number in the paper (``tests/data/equation_labels.json``), a
   figure of the paper its number there (``tests/data/figure_numbers.json``),
   a citation its author-year text (as sphinxcontrib-bibtex writes it,
@@ -446,12 +446,12 @@ def expected_references():
 
     The paper's equations and figures by the tables of tests/data (their
     numbers in the paper, which the built book is checked to show); the
-    rest as :mod:`depthcore.book.crossref` resolves them, which
+    rest as :mod:`depthbook.crossref` resolves them, which
     ``tests/test_sphinx_eval.py`` checks against Sphinx's own rendering.
     """
     import json
 
-    from depthcore.book.crossref import BookReferences, split_target
+    from depthbook.crossref import BookReferences, split_target
 
     data = ROOT / "tests" / "data"
     equations = json.loads((data / "equation_labels.json").read_text())

@@ -17,7 +17,7 @@ The numbers of the text: ``{eval}`name```
 The pages write each number of their text as ``{eval}`name```, where
 ``name`` is the name under which the page glues the number's text
 (``myst_nb.glue(name, text, display=False)``). In JupyterLab, jupyterlab-myst
-evaluates ``name`` in the page's kernel, where ``depthcore.book.notebook.GlueLog``
+evaluates ``name`` in the page's kernel, where ``depthbook.notebook.GlueLog``
 binds each glued text to its name. The book executes its pages with myst-nb
 (not in myst-nb's ``inline`` mode, the only one in which its own ``eval``
 role works): this extension makes ``eval`` paste the text glued under the
@@ -138,7 +138,7 @@ def reference_call(text: str) -> tuple[str, str] | None:
     """``(role, content)`` of an ``{eval}`` expression ``cite_t("maybank1990")``, else ``None``.
 
     The expression is a call of one of the functions of
-    :data:`depthcore.book.crossref.ROLES` with one string literal, the content of
+    :data:`depthbook.crossref.ROLES` with one string literal, the content of
     the role it stands for; any other expression is ``None`` (a glued name).
 
     Raises
@@ -146,7 +146,7 @@ def reference_call(text: str) -> tuple[str, str] | None:
     ValueError
         A call of another function, or with other arguments.
     """
-    from depthcore.book.crossref import ROLES
+    from depthbook.crossref import ROLES
 
     try:
         tree = ast.parse(text.strip(), mode="eval").body
@@ -227,7 +227,7 @@ class Figure(patches.Figure):
     myst-nb's ``glue:figure`` directive pastes it (and with its options).
     JupyterLab's MyST renderer (jupyterlab-myst) knows ``figure`` but not
     ``glue:figure``, and shows the same figure, evaluated in the page's kernel
-    (:class:`depthcore.book.notebook.GluedOutput`), with the caption. The option
+    (:class:`depthbook.notebook.GluedOutput`), with the caption. The option
     ``:enumerated: false`` is for JupyterLab, which numbers a notebook's
     figures from 1 (the book numbers them across its pages, and
     ``{eval}`numref("name")``` shows that number in JupyterLab too); the book
@@ -596,7 +596,7 @@ def family_modules(package: str) -> list[str]:
     ----------
     package : str
         ``depthcore.<family>`` (one of ``depthcore.SUBPACKAGES``), or a module
-        directly in ``depthcore/`` (``depthcore.formatting``).
+        directly in ``depthcore/`` (``depthbook.formatting``).
 
     Returns
     -------

@@ -1,0 +1,348 @@
+"""The chapter on the atlas: where each filter is calibrated, loses the track, nears the bound.
+
+Recommended import: ``from depthbook import beyond_atlas``.
+
+:func:`verdict_counts` counts each filter's verdicts over the cells of
+:func:`depthcore.studies.atlas.atlas`, :func:`count_texts` gives them as the
+chapter glues them and :func:`cost_rows` the measured cost per trial;
+:func:`verdict_map` draws one verdict over every cell: per filter, the
+prior settings by the parallaxes, at each number of frames and noise level.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from depthbook.notebook import MarkdownTable
+from depthbook.style import MIN_FONT, STYLE, WIDTH, subplots
+from depthcore.studies import atlas
+
+#: The seed of the book's atlas (cell ``i`` is seeded by its child ``i``).
+SEED = 34
+
+#: The filters the chapter finds calibrated in most cells (its checks assert it).
+CALIBRATED_GROUP = ("optimal", "second_order", "modified_polar", "batch_ml", "particle")
+
+#: The filters the chapter finds calibrated in few cells (its checks assert it).
+MISCALIBRATED_GROUP = ("ekf", "ukf", "inverse_depth", "inverse_depth_ukf")
+
+#: The outcomes of a verdict in a cell, as :func:`verdict_grid` codes them.
+OUTCOMES = {True: 1.0, False: 0.0, None: 2.0}
+
+#: Where a filter has no answer in a cell (it failed on a trial, or none was valid).
+NO_ANSWER = 3.0
+
+#: The colours of :data:`OUTCOMES` and :data:`NO_ANSWER` (yes dark, no light, undecided grey).
+COLOURS = ("#deebf7", "#08519c", "#969696", "#ffffff")
+
+
+def _undecided(entry: dict, verdict: str) -> bool:
+    return entry.get(verdict) is None and "failed" not in entry
+
+
+def verdict_counts(result: dict, names=None) -> dict:
+    """Per filter and verdict, in how many cells it is yes, no, undecided, or not known.
+
+    Parameters
+    ----------
+    result : dict
+        From :func:`depthcore.studies.atlas.atlas`.
+    names : sequence of str, optional
+        Default the atlas's filters.
+
+    Returns
+    -------
+    dict
+        ``{name: {verdict: {"yes", "no", "undecided", "no_answer", "not_run",
+        "untested", "cells"}}}``: a cell where the filter failed, or had no
+        valid trial, has no answer; one the grid does not run it in
+        (:meth:`depthcore.studies.atlas.Grid.runs`) is not run; the nearness to
+        the bound is not tested where the cell has no bound; a verdict whose
+        test cannot decide, or whose score is not finite, is undecided.
+    """
+    names = result["names"] if names is None else names
+    keys = ("yes", "no", "undecided", "no_answer", "not_run", "untested", "cells")
+    out = {}
+    for name in names:
+        out[name] = {}
+        for verdict in atlas.VERDICTS:
+            c = dict.fromkeys(keys, 0)
+            for cell in result["cells"]:
+                c["cells"] += 1
+                c[_outcome(cell, name, verdict)] += 1
+            out[name][verdict] = c
+    return out
+
+
+def _outcome(cell: dict, name: str, verdict: str) -> str:
+    entry = cell["filters"].get(name)
+    if entry is None:
+        return "not_run"
+    if "failed" in entry:
+        return "no_answer"
+    if verdict == "near_bound" and "bound_sd" in cell and cell["bound_sd"] is None:
+        return "untested"
+    if entry[verdict] is None:
+        return "undecided"
+    return "yes" if entry[verdict] else "no"
+
+
+def counts_by_prior(result: dict, name: str, verdict: str) -> dict:
+    """One filter's :func:`verdict_counts` for one verdict, per prior setting.
+
+    Returns
+    -------
+    dict
+        ``{(form, prior_scale): {"yes", "no", "undecided", "no_answer", "cells"}}``,
+        the settings in cell order.
+    """
+    out: dict = {}
+    for cell in result["cells"]:
+        key = (cell["form"], cell["prior_scale"])
+        part = {**result, "cells": [cell]}
+        c = verdict_counts(part, [name])[name][verdict]
+        total = out.setdefault(key, dict.fromkeys(c, 0))
+        for k, v in c.items():
+            total[k] += v
+    return out
+
+
+def calibration_texts(counts: dict) -> dict:
+    """The calibrated cells of each group, as the chapter and the conclusions glue them.
+
+    Returns
+    -------
+    dict
+        ``"good_min"``, ``"good_max"`` (:data:`CALIBRATED_GROUP`'s fewest and
+        most), ``"ekf"`` (``"none"`` for 0) and ``"poor_max"`` (the most of
+        :data:`MISCALIBRATED_GROUP` but the EKF).
+    """
+    yes = {n: counts[n]["calibrated"]["yes"] for n in counts}
+    return {
+        "good_min": f"{min(yes[n] for n in CALIBRATED_GROUP)}",
+        "good_max": f"{max(yes[n] for n in CALIBRATED_GROUP)}",
+        "ekf": "none" if yes["ekf"] == 0 else f"{yes['ekf']}",
+        "poor_max": f"{max(yes[n] for n in MISCALIBRATED_GROUP if n != 'ekf')}",
+    }
+
+
+def count_texts(counts: dict, prefix: str) -> dict:
+    """The counts as glued: ``{prefix}_{name}_{verdict}`` is "yes (undecided)"."""
+    return {
+        f"{prefix}_{name}_{verdict}": f"{c['yes']} ({c['undecided']})"
+        for name, by in counts.items()
+        for verdict, c in by.items()
+    }
+
+
+#: Where a verdict is not tested in a cell (no bound for the forms whose truths are drawn).
+UNTESTED = 4.0
+
+#: Where a filter does not run in a cell (the grid's most frames for it).
+NOT_RUN = 5.0
+
+#: The code of each outcome of a verdict in :func:`verdict_grid`'s matrix.
+CODES = {
+    "yes": OUTCOMES[True],
+    "no": OUTCOMES[False],
+    "undecided": OUTCOMES[None],
+    "no_answer": NO_ANSWER,
+    "untested": UNTESTED,
+    "not_run": NOT_RUN,
+}
+
+
+def prior_label(form: str, scale) -> str:
+    """A prior setting as the map names it: the paper's rule with its scale, or the form."""
+    return {
+        "paper": f"paper, $s = {scale:g}$" if scale is not None else "paper",
+        "range": "range",
+        "log_uniform": "log-uniform",
+        "inverse_depth": "inverse depth",
+    }.get(form, form)
+
+
+def _row_key(cell: dict) -> tuple:
+    return (cell["form"], cell["prior_scale"], cell["depth"])
+
+
+def _column_key(cell: dict) -> tuple:
+    return (cell["frames"], cell["rho"])
+
+
+def _keys(cells, key) -> list:
+    out = []
+    for c in cells:
+        if key(c) not in out:
+            out.append(key(c))
+    return out
+
+
+def verdict_grid(result: dict, verdict: str, names) -> tuple:
+    """One verdict as a matrix of tiles, with the settings of its rows and columns.
+
+    Rows: per filter, a block of the prior settings and depths (in cell
+    order, the prior's form and scale, then the depth), then a gap; columns:
+    per number of frames and noise level, the parallaxes (increasing to the
+    right), then a gap.
+
+    Returns
+    -------
+    tuple
+        ``(matrix, rows, columns)``: ``matrix`` of shape
+        ``(F (R + 1) - 1, C (P + 1) - 1)`` coded by :data:`OUTCOMES`,
+        :data:`NO_ANSWER` and :data:`UNTESTED`, NaN in the gaps; ``rows`` the
+        ``R`` settings ``(form, prior_scale, depth)`` of a filter's block,
+        ``columns`` the ``C`` settings ``(frames, rho)``.
+    """
+    cells = result["cells"]
+    rows, columns = _keys(cells, _row_key), _keys(cells, _column_key)
+    parallax = list(result["axes"]["parallax"])
+    n_row, n_par = len(rows), len(parallax)
+    m = np.full((len(names) * (n_row + 1) - 1, len(columns) * (n_par + 1) - 1), np.nan)
+    for cell in cells:
+        r, c = rows.index(_row_key(cell)), columns.index(_column_key(cell))
+        col = c * (n_par + 1) + parallax.index(cell["parallax"])
+        for f, name in enumerate(names):
+            outcome = _outcome(cell, name, verdict)
+            m[f * (n_row + 1) + r, col] = CODES[outcome]
+    return m, rows, columns
+
+
+def _noise_label(rho: float) -> str:
+    return f"{rho / atlas.PIXEL:.2g} px"
+
+
+def verdict_map(result: dict, verdict: str, names=None):
+    """One verdict in every cell: a block of tiles per filter (rows), per frames and noise.
+
+    Each block is headed by its filter; within it the prior settings (and
+    depths) run down, the parallaxes (increasing) to the right; a tile is
+    dark where the verdict holds, light where it does not, grey where the
+    test cannot decide, white with a cross where the filter has no answer,
+    white with a dot where the verdict is not tested (no bound), pale grey
+    where the grid does not run the filter.
+    """
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    names = result["names"] if names is None else names
+    m, rows, columns = verdict_grid(result, verdict, names)
+    n_row, n_par = len(rows), len(result["axes"]["parallax"])
+    width = WIDTH
+    height = 1.0 + m.shape[0] / m.shape[1] * width * 0.78
+    fig, ax = subplots(figsize=(width, height))
+    colours = ListedColormap([*COLOURS, "#ffffff", "#f0f0f0"])
+    bounds = [-0.5, 0.5, 1.5, 2.5, 3.5, 4.5, 5.5]
+    ax.pcolormesh(  # tiles as vector rectangles; the gaps between blocks left blank
+        np.arange(m.shape[1] + 1) - 0.5,
+        np.arange(m.shape[0] + 1) - 0.5,
+        np.ma.masked_invalid(m),
+        cmap=colours,
+        norm=BoundaryNorm(bounds, 6),
+    )
+    for code, marker, size in ((NO_ANSWER, "x", 8), (UNTESTED, ".", 3)):
+        r, c = np.nonzero(m == code)
+        ax.scatter(c, r, marker=marker, s=size, color="0.3", linewidths=0.6)
+    depths = {d for _, _, d in rows}
+    labels = [
+        prior_label(form, scale) + (f", $y = {d:g}$" if len(depths) > 1 else "")
+        for form, scale, d in rows
+    ]
+    ticks, tick_labels, headings = [], [], []
+    for f, name in enumerate(names):  # each block headed by its filter, in the gap above it
+        headings.append(len(ticks))
+        ticks += [f * (n_row + 1) - 1] + [f * (n_row + 1) + r for r in range(n_row)]
+        tick_labels += [STYLE[name]["label"]] + labels
+    ax.set_yticks(ticks)
+    ax.set_yticklabels(tick_labels, fontsize=MIN_FONT)
+    for i in headings:
+        ax.get_yticklabels()[i].set_fontweight("bold")
+    ax.set_ylim(m.shape[0] - 0.5, -1.5)
+    ax.set_xticks([c * (n_par + 1) + (n_par - 1) / 2 for c in range(len(columns))])
+    ax.set_xticklabels(
+        [f"N = {frames}\n{_noise_label(rho)}" for frames, rho in columns], fontsize=MIN_FONT
+    )
+    ax.tick_params(length=0)
+    for spine in ax.spines.values():
+        spine.set_visible(False)
+    handles = [
+        Patch(facecolor=COLOURS[1], label="yes"),
+        Patch(facecolor=COLOURS[0], edgecolor="0.6", label="no"),
+        Patch(facecolor=COLOURS[2], label="undecided"),
+        Line2D([], [], marker="x", linestyle="", color="0.3", label="no answer"),
+        Line2D([], [], marker=".", linestyle="", color="0.3", label="no bound"),
+        Patch(facecolor="#f0f0f0", label="not run"),
+    ]
+    fig.legend(
+        handles=handles, loc="outside lower center", ncol=6, frameon=False, fontsize=MIN_FONT
+    )
+    return fig
+
+
+#: The headings of :func:`summary_table`'s columns, by verdict.
+VERDICT_HEADINGS = {
+    "calibrated": "calibrated",
+    "lost": "track lost",
+    "near_bound": "near the bound",
+}
+
+
+def count_cell(c: dict) -> str:
+    """One filter's counts of one verdict as a table shows them: yes / no / undecided."""
+    text = f"{c['yes']} / {c['no']} / {c['undecided']}"
+    notes = [
+        f"{c[key]} {words}"
+        for key, words in (
+            ("not_run", "not run"),
+            ("no_answer", "without answer"),
+            ("untested", "not tested"),
+        )
+        if c[key]
+    ]
+    return text + (f" ({', '.join(notes)})" if notes else "")
+
+
+def summary_table(counts: dict, names) -> MarkdownTable:
+    """Per filter, in how many cells each verdict is yes, no and undecided."""
+    header = ["filter", *(f"{h}: yes / no / undecided" for h in VERDICT_HEADINGS.values())]
+    rows = [
+        [STYLE[name]["label"], *(count_cell(counts[name][v]) for v in VERDICT_HEADINGS)]
+        for name in names
+    ]
+    return MarkdownTable(header, rows)
+
+
+def cost_table(cost: dict, names) -> MarkdownTable:
+    """The measured milliseconds per trial of each filter at each number of frames."""
+    rows = cost_rows(cost, names)
+    frames = sorted({f for r in rows for f in r["frames"]}, key=int)
+    header = ["filter", *(f"N = {f}" for f in frames)]
+    body = [
+        [
+            STYLE[r["name"]]["label"],
+            *(f"{r['frames'][f]:.2g}" if f in r["frames"] else "–" for f in frames),
+        ]
+        for r in rows
+    ]
+    return MarkdownTable(header, body)
+
+
+def cost_rows(cost: dict, names) -> list[dict]:
+    """The measured milliseconds per trial of each filter at each number of frames.
+
+    Returns
+    -------
+    list of dict
+        ``{"name", "frames": {str(N): milliseconds}}`` per name of ``names``.
+    """
+    per = cost["seconds_per_trial"]
+    return [
+        {"name": n, "frames": {f: 1e3 * s for f, s in sorted(per[n].items(), key=_frames)}}
+        for n in names
+    ]
+
+
+def _frames(item) -> int:
+    return int(item[0])

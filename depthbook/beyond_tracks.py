@@ -1,0 +1,193 @@
+"""The chapter on real tracks: one track with gaps, uneven steps, noise per frame and an outlier.
+
+Recommended import: ``from depthbook import beyond_tracks``.
+
+* :func:`demo_track` draws the chapter's track from one seed: Figure 2's point
+  seen by a camera moving at varying speed, some frames without a detection,
+  a noise level per frame, and one mismatched bearing;
+* :func:`filtered` runs a filter of the registry over every prefix of it, with
+  or without a gate, and :func:`track_figure` draws the filtered depths and
+  each bearing's tail probability.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from depthbook.style import MIN_FONT, STYLE, WIDTH, legend_below, subplots
+from depthcore.problem import checks, model
+from depthcore.problem.scenarios import SCENARIOS
+from depthcore.registry import online
+
+
+class DemoTrack(NamedTuple):
+    """The chapter's track (:func:`demo_track`).
+
+    Attributes
+    ----------
+    mu : ndarray, shape (N,)
+        Bearings, ``NaN`` at the missing frames, the outlier included.
+    clean : ndarray, shape (N,)
+        The same bearings with the outlier's true value.
+    rho : ndarray, shape (N,)
+        Noise SD per frame.
+    steps : ndarray, shape (N - 1,)
+    states : ndarray, shape (N, 3)
+        The true states ``(x, y, v)``.
+    missing : ndarray of int
+        The missing frames (numbered from 1).
+    outlier : int
+        The frame of the mismatched bearing (numbered from 1).
+    offset : float
+        The outlier's offset, in units of its frame's ``rho``.
+    """
+
+    mu: np.ndarray
+    clean: np.ndarray
+    rho: np.ndarray
+    steps: np.ndarray
+    states: np.ndarray
+    missing: np.ndarray
+    outlier: int
+    offset: float
+
+
+def demo_track(
+    seed,
+    frames: int = 40,
+    n_missing: int = 6,
+    outlier: int = 30,
+    offset: float = 15.0,
+    step_range=(0.5, 1.5),
+    rho_range=(0.5, 2.0),
+) -> DemoTrack:
+    """Figure 2's point on a real track, drawn from one seed.
+
+    The point passes through Figure 2's noise-free state at time 3 with
+    constant velocity. Between frames the camera moves forward by a step drawn
+    uniformly from ``step_range``; each frame's noise SD is Figure 2's
+    ``rho = 1/200`` times a factor drawn log-uniformly from ``rho_range``;
+    ``n_missing`` frames after the third are drawn without a detection; and
+    the bearing of frame ``outlier`` is moved by ``offset`` of its SDs (a
+    mismatched feature).
+
+    Parameters
+    ----------
+    seed : int or numpy.random.SeedSequence
+    frames : int
+    n_missing : int
+    outlier : int
+        From 4 to ``frames``; never a missing frame.
+    offset : float
+    step_range, rho_range : tuple of float
+        ``(low, high)``, ``0 < low <= high``.
+
+    Returns
+    -------
+    DemoTrack
+    """
+    rng = checks.generator(seed, "seed")
+    frames = checks.frames(frames)
+    fig2 = SCENARIOS["fig2"]
+    steps = rng.uniform(*step_range, size=frames - 1)
+    factor = np.exp(rng.uniform(*np.log(rho_range), size=frames))
+    rho = fig2.rho * factor
+    candidates = np.setdiff1d(np.arange(4, frames + 1), [outlier])
+    missing = np.sort(rng.choice(candidates, size=n_missing, replace=False))
+    sim = model.simulate(fig2.c, frames, rho, 0.0, rng, steps=steps)
+    clean = sim.mu.copy()
+    clean[missing - 1] = np.nan
+    mu = clean.copy()
+    mu[outlier - 1] += offset * rho[outlier - 1]
+    return DemoTrack(mu, clean, rho, steps, sim.states, missing, outlier, offset)
+
+
+def filtered(name: str, track: DemoTrack, prior_mean, prior_cov, gate=None, mu=None) -> list:
+    """A filter run one frame at a time over the track (the online door), every frame's state.
+
+    Parameters
+    ----------
+    name : str
+        A filter of :func:`depthcore.registry.online.start`.
+    track : DemoTrack
+    prior_mean : array_like, shape (3,)
+    prior_cov : array_like, shape (3, 3)
+    gate : float or None
+    mu : array_like, shape (N,), optional
+        Bearings in place of the track's (its clean ones, say).
+
+    Returns
+    -------
+    list of depthcore.registry.online.FrameEstimate
+        One per frame.
+    """
+    mu = track.mu if mu is None else mu
+    f = online.start(name, prior_mean, prior_cov, rho=track.rho[0], gate=gate)
+    steps = np.concatenate([[1.0], track.steps])
+    return [f.update(m, rho=r, step=s) for m, r, s in zip(mu, track.rho, steps, strict=True)]
+
+
+def track_figure(track: DemoTrack, runs: dict, gate: float):
+    """Filtered depth errors along the track and each bearing's predictive tail probability.
+
+    Parameters
+    ----------
+    track : DemoTrack
+    runs : dict
+        ``{(name, gated): list of FrameEstimate}`` from :func:`filtered`, for
+        each filter with ``gated`` false and true.
+    gate : float
+        The gate of the gated runs, drawn as a line.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Above, each run's filtered depth minus the truth (a symmetric log scale,
+        linear within 0.1), the ungated runs with a band of one SD; below, the
+        tail probability of each bearing before the ungated runs saw it, and
+        circled, the bearings a gated run skipped, at their tail probability
+        under that run's prediction.
+    """
+    fig, (top, bottom) = subplots(2, 1, figsize=(WIDTH, 5.6), sharex=True)
+    k = np.arange(1, len(track.mu) + 1)
+    truth = track.states[:, 1]
+    for (name, gated), states in runs.items():
+        style = {**STYLE[name]}
+        label = style.pop("label") + (", gated" if gated else "")
+        style["linestyle"] = "--" if gated else "-"
+        error = np.array([s.depth_mean for s in states]) - truth
+        top.plot(k, error, label=label, **style)
+        if gated:
+            skipped = np.array([s.gated for s in states])
+            tail = np.array([s.tail for s in states])
+            bottom.plot(
+                k[skipped],
+                np.maximum(tail[skipped], 1e-300),
+                linestyle="none",
+                marker="o",
+                markersize=8,
+                markerfacecolor="none",
+                color=style.get("color"),
+                label=f"skipped, {label}",
+            )
+        else:
+            sd = np.array([s.depth_sd for s in states])
+            top.fill_between(k, error - sd, error + sd, alpha=0.15, color=style.get("color"))
+            tail = np.array([s.tail for s in states])
+            bottom.plot(k, np.maximum(tail, 1e-300), marker=".", label=label, **style)
+    top.set_yscale("symlog", linthresh=0.1)
+    top.axhline(0.0, color="black", linewidth=0.8)
+    bottom.set_yscale("log")
+    bottom.axhline(gate, color="0.3", linewidth=1, linestyle=":", label=f"gate {gate:g}")
+    for ax in (top, bottom):
+        ax.axvline(track.outlier, color="0.6", linewidth=5, alpha=0.35, zorder=0)
+        for m in track.missing:
+            ax.axvline(m, color="0.8", linewidth=0.8, linestyle="-.", zorder=0)
+        ax.tick_params(labelsize=MIN_FONT)
+    top.set_ylabel("filtered depth − truth", fontsize=MIN_FONT)
+    bottom.set_ylabel("tail probability", fontsize=MIN_FONT)
+    bottom.set_xlabel("frame $k$", fontsize=MIN_FONT)
+    legend_below(fig, [top, bottom], ncol=3)
+    return fig
