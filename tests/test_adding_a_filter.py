@@ -44,18 +44,7 @@ def run(mu, rho, prior_mean, prior_cov, process_noise=0.0):
 '''
 
 TOY_ENTRY = """
-Filter(
-    "toy",
-    "toy EKF",
-    {{"color": "tab:gray", "linestyle": "-"}},
-    "gaussian",
-    False,
-    {run},
-    (("-", "all", {{}}),),
-    any_frames=True,
-    with_process_noise=True,
-    default=False,
-)
+Filter("toy", {run}, any_frames=True, with_process_noise=True, default=False)
 """
 
 #: What each interpreter checks once the toy filter is in: the registry runs it and agrees
@@ -81,8 +70,11 @@ rows = json.loads(out.getvalue())
 help_text = io.StringIO()
 with contextlib.redirect_stdout(help_text), contextlib.suppress(SystemExit):
     main(["study", "--help"])
+from depthcore.studies import monte_carlo
+studied = monte_carlo.study(trials=20, seed=1, names=("ekf", "toy"))
 print(json.dumps({"names": names(), "in_help": "toy" in help_text.getvalue(),
-                  "cli": rows, "depth": float(est.depth_mean)}))
+                  "cli": rows, "depth": float(est.depth_mean),
+                  "studied": sorted(studied["filters"])}))
 """
 
 
@@ -114,7 +106,7 @@ def test_a_filter_of_ones_own_joins_the_registry_and_the_command_line(tmp_path):
         "register(" + TOY_ENTRY.format(run="toy_filter.run") + ")\n"
     )
     got = _run(register_it + textwrap.dedent(CHECKS), tmp_path)
-    assert got["names"][-1] == "toy" and got["in_help"]
+    assert got["names"][-1] == "toy" and got["in_help"] and got["studied"] == ["ekf", "toy"]
     assert _cli_depth(got["cli"], "toy") == pytest.approx(got["depth"], rel=1e-12)
     assert _cli_depth(got["cli"], "toy") != pytest.approx(_cli_depth(got["cli"], "ekf"))
 
@@ -143,7 +135,7 @@ def test_a_filter_added_to_the_package_is_listed_everywhere(tmp_path):
         "assert 'depthcore.kalman.toy' in depthcore_book.family_modules('depthcore.kalman')\n"
     )
     got = _run(listing + textwrap.dedent(CHECKS), tmp_path, PYTHONPATH=str(tmp_path))
-    assert "toy" in got["names"] and got["in_help"]
+    assert "toy" in got["names"] and got["in_help"] and got["studied"] == ["ekf", "toy"]
     assert _cli_depth(got["cli"], "toy") == pytest.approx(got["depth"], rel=1e-12)
 
 

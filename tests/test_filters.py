@@ -176,22 +176,6 @@ def test_unknown_names_are_rejected():
 
 # --- N frames and process noise ---------------------------------------------------------
 
-#: What each filter supports: (any N >= 3 frames, process noise > 0).
-CAPABILITIES = {
-    "optimal": (True, True),
-    "second_order": (True, True),
-    "ekf": (True, True),
-    "ukf": (True, True),
-    "particle": (True, False),
-    "iterated": (True, True),
-    "inverse_depth": (True, True),
-    "resample_move": (True, False),
-    "rbpf": (True, True),
-    "range_parametrised": (True, True),
-    "inverse_depth_ukf": (True, True),
-    "modified_polar": (True, True),
-    "batch_ml": (True, False),
-}
 CASES = [
     (name, n, q)
     for name in ALL_NAMES
@@ -206,10 +190,28 @@ def _frames(n_frames, size=3, seed=3):
     return model.simulate(FIG2.c, n_frames, FIG2.rho, 0.0, rng, size=size).mu
 
 
-def test_each_filter_declares_what_it_supports():
-    assert {n: (f.any_frames, f.with_process_noise) for n, f in FILTERS.items()} == CAPABILITIES
+@pytest.mark.parametrize("name", ALL_NAMES)
+def test_each_filter_runs_what_it_declares_and_refuses_the_rest_by_name(name):
+    # What an entry declares (any_frames, with_process_noise) is what a call does:
+    # five frames run or are refused naming mu; process noise runs or is refused naming it.
+    f, p = FILTERS[name], FIG2.prior
+    five = _frames(5, size=1)[0]
+    if f.any_frames:
+        assert np.isfinite(f(five, FIG2.rho, p.mean, p.cov, **_options(name)).depth_mean)
+    else:
+        with pytest.raises(ValueError, match=r"^mu must have shape \(3,\)"):
+            f(five, FIG2.rho, p.mean, p.cov, **_options(name))
+    if f.with_process_noise:
+        run = f(FIG2.mu, FIG2.rho, p.mean, p.cov, process_noise=0.01, **_options(name))
+        assert np.isfinite(run.depth_mean)
+    else:
+        with pytest.raises(ValueError, match=r"^process_noise must be 0"):
+            f(FIG2.mu, FIG2.rho, p.mean, p.cov, process_noise=0.01, **_options(name))
+
+
+def test_the_default_filters_are_the_paper_problems_five():
     assert {n: f.default for n, f in FILTERS.items()} == {n: n in NAMES for n in ALL_NAMES}
-    assert FILTERS["optimal"].frames == "any" and FILTERS["ekf"].frames == "any"
+    assert len(NAMES) == 5 and FILTERS["optimal"].frames == "any"
 
 
 @pytest.mark.parametrize(("name", "n_frames", "q"), CASES)

@@ -438,12 +438,21 @@ def test_no_module_is_over_the_line_limit(module):
     assert len(PATHS[module].read_text(encoding="utf-8").splitlines()) <= MAX_LINES
 
 
+def _filter_doors() -> set[str]:
+    """The modules of the registered filters' doors: the registry lists them, not a docstring."""
+    from depthcore.registry.filters import FILTERS
+
+    return {f.run.__module__ for f in FILTERS.values()}
+
+
 def test_every_subpackage_says_what_lives_there_and_where_a_new_thing_goes():
+    doors = _filter_doors()
     for name in SUBPACKAGES:
         doc = ast.get_docstring(ast.parse(PATHS[name].read_text(encoding="utf-8"))) or ""
         listed = {p.stem for p in PATHS[name].parent.glob("*.py") if not p.stem.startswith("_")}
         for module in listed:
-            assert f"depthcore.{name}.{module}" in doc, (name, module)
+            full = f"depthcore.{name}.{module}"
+            assert full in doc or full in doors, (name, module)
         assert "Where a new thing goes" in doc, name
 
 

@@ -67,7 +67,7 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 
 import numpy as np
 
@@ -93,18 +93,23 @@ from depthcore.registry.estimates import FAMILY, Estimate, Family, check_quantit
 
 @dataclass(frozen=True)
 class Filter:
-    """One filter of the registry.
+    """One filter of the registry: ``Filter(name, run, **keywords)``.
+
+    ``name`` and ``run`` are all a Gaussian filter on the paper's three frames
+    needs; every other attribute is a keyword with a default.
 
     Attributes
     ----------
     name : str
     label : str
-        Legend label (LaTeX allowed).
+        Legend label (LaTeX allowed); default the name.
     style : dict
-        Matplotlib line properties (colour, line style).
+        Matplotlib line properties (colour, line style); default none, the
+        plot's next colour.
     family : {"exact", "gaussian", "particles", "rao_blackwellised"}
+        Default ``"gaussian"``.
     in_paper : bool
-        Whether the paper compares it.
+        Whether the paper compares it; default False.
     run : callable
         The filter's door, a batched function of its module:
         ``run(mu, rho, prior_mean, prior_cov, **options)``, and also
@@ -112,7 +117,7 @@ class Filter:
         ``(N,)`` or ``(B, N)``; it returns the filter's own result.
     variants : tuple of (str, str, dict)
         ``(reading, support, options)`` of each row the filter contributes to
-        the reproduction tables.
+        the reproduction tables; default one row, ``("-", "all", {})``.
     random : bool
         Whether it draws random numbers: then it takes ``rng`` (a
         ``numpy.random.Generator`` or ``SeedSequence``) and ``n_particles``.
@@ -143,12 +148,13 @@ class Filter:
     """
 
     name: str
-    label: str
-    style: dict
-    family: str
-    in_paper: bool
     run: Callable[..., Estimate]
-    variants: tuple
+    _: KW_ONLY
+    label: str = ""
+    style: dict = field(default_factory=dict)
+    family: str = "gaussian"
+    in_paper: bool = False
+    variants: tuple = (("-", "all", {}),)
     random: bool = False
     any_frames: bool = False
     with_process_noise: bool = False
@@ -156,6 +162,10 @@ class Filter:
     smoother: Callable | None = None
     estimate: Callable | None = None
     options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not self.label:
+            object.__setattr__(self, "label", self.name)
 
     def __call__(
         self, mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None, gate=None, **options
@@ -276,12 +286,12 @@ FILTERS: dict[str, Filter] = {
     for f in (
         Filter(
             "optimal",
-            "optimal $p_o$",
-            {"color": "black", "linestyle": "-"},
-            "exact",
-            True,
             optimal.run,
-            tuple(
+            label="optimal $p_o$",
+            style={"color": "black", "linestyle": "-"},
+            family="exact",
+            in_paper=True,
+            variants=tuple(
                 (r, s, {"reading": r, "support": s})
                 for r in optimal.READINGS
                 for s in optimal.SUPPORTS
@@ -293,24 +303,22 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "second_order",
-            "second order $p_s$",
-            {"color": "tab:blue", "linestyle": "--"},
-            "gaussian",
-            True,
             second_order.run,
-            tuple((r, "all", {"reading": r}) for r in second_order.READINGS),
+            label="second order $p_s$",
+            style={"color": "tab:blue", "linestyle": "--"},
+            in_paper=True,
+            variants=tuple((r, "all", {"reading": r}) for r in second_order.READINGS),
             any_frames=True,
             with_process_noise=True,
             estimate=adapters.gaussian,
         ),
         Filter(
             "ekf",
-            "EKF $p_e$",
-            {"color": "tab:red", "linestyle": ":"},
-            "gaussian",
-            True,
             ekf.run,
-            (("printed", "all", {}),),
+            label="EKF $p_e$",
+            style={"color": "tab:red", "linestyle": ":"},
+            in_paper=True,
+            variants=(("printed", "all", {}),),
             any_frames=True,
             with_process_noise=True,
             smoother=gaussian_smoother(ekf.run),
@@ -318,12 +326,9 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "ukf",
-            "UKF",
-            {"color": "tab:green", "linestyle": "-."},
-            "gaussian",
-            False,
             ukf.run,
-            (("-", "all", {}),),
+            label="UKF",
+            style={"color": "tab:green", "linestyle": "-."},
             any_frames=True,
             with_process_noise=True,
             smoother=gaussian_smoother(ukf.run, allow_behind_camera=True),
@@ -332,12 +337,11 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "particle",
-            "importance sampling, $q$ from $p_s$",
-            {"color": "tab:purple", "linestyle": (0, (5, 1, 1, 1, 1, 1))},
-            "particles",
-            False,
             importance.run,
-            (("-", "front", {}),),
+            label="importance sampling, $q$ from $p_s$",
+            style={"color": "tab:purple", "linestyle": (0, (5, 1, 1, 1, 1, 1))},
+            family="particles",
+            variants=(("-", "front", {}),),
             random=True,
             any_frames=True,
             estimate=adapters.particles,
@@ -345,12 +349,9 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "iterated",
-            "iterated EKF",
-            {"color": "tab:orange", "linestyle": "--"},
-            "gaussian",
-            False,
             iterated.run,
-            (("-", "all", {}),),
+            label="iterated EKF",
+            style={"color": "tab:orange", "linestyle": "--"},
             any_frames=True,
             with_process_noise=True,
             default=False,
@@ -358,12 +359,9 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "inverse_depth",
-            "inverse-depth EKF",
-            {"color": "tab:brown", "linestyle": ":"},
-            "gaussian",
-            False,
             inverse_depth.estimate,
-            (("-", "all", {}),),
+            label="inverse-depth EKF",
+            style={"color": "tab:brown", "linestyle": ":"},
             any_frames=True,
             with_process_noise=True,
             default=False,
@@ -371,12 +369,11 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "resample_move",
-            "resample-move particle filter",
-            {"color": "tab:pink", "linestyle": "-."},
-            "particles",
-            False,
             resample_move.replicated,
-            (("-", "front", {}),),
+            label="resample-move particle filter",
+            style={"color": "tab:pink", "linestyle": "-."},
+            family="particles",
+            variants=(("-", "front", {}),),
             random=True,
             any_frames=True,
             default=False,
@@ -385,12 +382,11 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "rbpf",
-            "Rao-Blackwellised particle filter",
-            {"color": "tab:olive", "linestyle": "--"},
-            "rao_blackwellised",
-            False,
             rbpf.run,
-            (("-", "front", {}),),
+            label="Rao-Blackwellised particle filter",
+            style={"color": "tab:olive", "linestyle": "--"},
+            family="rao_blackwellised",
+            variants=(("-", "front", {}),),
             random=True,
             any_frames=True,
             with_process_noise=True,
@@ -400,12 +396,10 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "range_parametrised",
-            "range-parametrised EKF",
-            {"color": "tab:cyan", "linestyle": "-."},
-            "gaussian",
-            False,
             range_ekf.posterior,
-            (("-", "front", {}),),
+            label="range-parametrised EKF",
+            style={"color": "tab:cyan", "linestyle": "-."},
+            variants=(("-", "front", {}),),
             any_frames=True,
             with_process_noise=True,
             default=False,
@@ -413,12 +407,9 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "inverse_depth_ukf",
-            "inverse-depth UKF",
-            {"color": "tab:gray", "linestyle": "--"},
-            "gaussian",
-            False,
             inverse_depth_ukf.estimate,
-            (("-", "all", {}),),
+            label="inverse-depth UKF",
+            style={"color": "tab:gray", "linestyle": "--"},
             any_frames=True,
             with_process_noise=True,
             default=False,
@@ -427,12 +418,9 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "modified_polar",
-            "modified-polar EKF",
-            {"color": "tab:blue", "linestyle": (0, (1, 1))},
-            "gaussian",
-            False,
             modified_polar.estimate,
-            (("-", "all", {}),),
+            label="modified-polar EKF",
+            style={"color": "tab:blue", "linestyle": (0, (1, 1))},
             any_frames=True,
             with_process_noise=True,
             default=False,
@@ -440,12 +428,10 @@ FILTERS: dict[str, Filter] = {
         ),
         Filter(
             "batch_ml",
-            "batch maximum likelihood",
-            {"color": "dimgray", "linestyle": (0, (3, 1, 1, 1))},
-            "gaussian",
-            False,
             batch_ml.run,
-            (("-", "front", {}),),
+            label="batch maximum likelihood",
+            style={"color": "dimgray", "linestyle": (0, (3, 1, 1, 1))},
+            variants=(("-", "front", {}),),
             any_frames=True,
             default=False,
             estimate=adapters.maximum_likelihood,
