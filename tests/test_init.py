@@ -166,3 +166,14 @@ def test_the_new_paths_never_warn():
         warnings.simplefilter("error")
         for name in depthcore.MODULES:
             importlib.import_module(name)
+
+
+def test_the_books_package_has_the_packages_version_and_is_not_installed_with_it():
+    import tomllib
+
+    root = PACKAGE.parent
+    book = tomllib.loads((root / "depthbook" / "pyproject.toml").read_text(encoding="utf-8"))
+    assert book["project"]["version"] == depthcore.__version__
+    package = tomllib.loads((root / "pyproject.toml").read_text(encoding="utf-8"))
+    assert package["project"]["dependencies"] == ["numpy>=1.26", "scipy>=1.11"]
+    assert package["tool"]["setuptools"]["packages"]["find"]["include"] == ["depthcore*"]

@@ -104,9 +104,15 @@ def test_the_downloads_hold_every_figure_the_figures_command_writes_by_default(h
         assert is_format(data, name.rsplit(".", 1)[1]), f"{name} is not the format it names"
 
 
-def test_intro_links_the_pdf_the_source_archive_and_the_requirements(html_pages):
+def test_intro_links_the_pdf_the_source_archives_and_the_requirements(html_pages):
     hrefs = set(HREF_RE.findall(html_pages["book/intro.html"]))
-    for name in ("depthcore.pdf", "article.pdf", "depthcore.tar.gz", "requirements.txt"):
+    for name in (
+        "depthcore.pdf",
+        "article.pdf",
+        "depthcore.tar.gz",
+        "depthbook.tar.gz",
+        "requirements.txt",
+    ):
         assert f"../downloads/{name}" in hrefs, f"the intro does not link downloads/{name}"
 
 
@@ -123,19 +129,23 @@ def test_source_archive_is_an_sdist_of_this_version(html_dir):
     assert f"\nVersion: {depthcore.__version__}\n" in info
 
 
-def test_source_archive_holds_the_benchmark_records(html_dir):
-    # The pages that show the benchmarks read them from the installed package.
-    records = sorted(
-        p.name for p in (ROOT / "depthcore" / "provenance" / "benchmark_records").glob("*.json")
+def test_the_books_archive_holds_its_code_and_every_record_and_the_packages_none(html_dir):
+    # The pages read the records from the book's package, installed from its archive.
+    book = ROOT / "depthbook"
+    files = sorted(
+        p.relative_to(book).as_posix()
+        for p in book.rglob("*")
+        if p.suffix in (".py", ".json") and "__pycache__" not in p.parts
     )
-    assert records
-    top = f"depthcore-{depthcore.__version__}"
-    with tarfile.open(html_dir / "downloads" / "depthcore.tar.gz") as tar:
+    assert any(f.startswith("provenance/study_records/") for f in files)
+    assert any(f.startswith("provenance/benchmark_records/") for f in files)
+    top = f"depthbook-{depthcore.__version__}"
+    with tarfile.open(html_dir / "downloads" / "depthbook.tar.gz") as tar:
         names = tar.getnames()
-    missing = [
-        r for r in records if f"{top}/depthbook/provenance/benchmark_records/{r}" not in names
-    ]
-    assert not missing, f"the source archive lacks the records {missing}"
+    missing = [f for f in files if f"{top}/{f}" not in names and f"{top}/./{f}" not in names]
+    assert not missing, f"the book's archive lacks {missing}"
+    with tarfile.open(html_dir / "downloads" / "depthcore.tar.gz") as tar:
+        assert not [n for n in tar.getnames() if n.endswith(".json")], "records in the package"
 
 
 def test_source_archive_installs_the_citation_file(html_dir):

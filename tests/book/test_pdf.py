@@ -279,6 +279,7 @@ def test_the_downloads_are_printed_with_their_addresses(plain_text):
         "depthcore.pdf",
         "article.pdf",
         "depthcore.tar.gz",
+        "depthbook.tar.gz",
         "requirements.txt",
         "CITATION.cff",
     ):
