@@ -177,3 +177,21 @@ def test_the_books_package_has_the_packages_version_and_is_not_installed_with_it
     package = tomllib.loads((root / "pyproject.toml").read_text(encoding="utf-8"))
     assert package["project"]["dependencies"] == ["numpy>=1.26", "scipy>=1.11"]
     assert package["tool"]["setuptools"]["packages"]["find"]["include"] == ["depthcore*"]
+
+
+def _moved_rows() -> list[tuple[str, str]]:
+    """The changelog's rows of modules moved out of the package: ``(old, now)``."""
+    text = CHANGELOG.read_text(encoding="utf-8")
+    section = text.split("### Moved out of the package", 1)[1].split("###", 1)[0]
+    return re.findall(r"^\| `(depthcore[\w.]*)` \| `(depthbook[\w.]*)` \|$", section, re.M)
+
+
+MOVED = _moved_rows()
+
+
+@pytest.mark.parametrize("old, new", MOVED, ids=[r[0] for r in MOVED])
+def test_a_module_moved_to_the_book_leaves_the_package(old, new):
+    assert len(MOVED) == 8
+    with pytest.raises(ImportError):
+        importlib.import_module(old)
+    assert importlib.import_module(new).__name__ == new
