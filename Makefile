@@ -1,5 +1,6 @@
-# depthcore: the package, its tests and the executable book. `make help` lists the targets (a
-# reader needs book, pdf, lab and test); the book's appendix "Reproducing this book" says more.
+# depthcore: the package, its tests and the executable book. `make help` lists the targets a
+# reader runs (book and test first); the others, without help text, are steps of those, and
+# the book's appendix "Reproducing this book" says more.
 #
 # Every target runs in .venv/ (Python 3.11 and the pins of requirements.txt), depthcore
 # installed editable. Each build executes each page once, through Jupyter Book's cache.
@@ -30,11 +31,11 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 export JUPYTER_PATH := $(CURDIR)/tools/jupyter$(if $(JUPYTER_PATH),:$(JUPYTER_PATH))
 KERNEL := $(VENV)/share/jupyter/kernels/python3
 
-.PHONY: help venv book html-build pdf pdf-build books books-html books-xelatex downloads lab test \
-  article core test-core lint notebooks notebooks-kernels notebooks-update notebooks-alone notebooks-standalone check-book \
-  check-lab figures records bench clean distclean
+.PHONY: help venv book book-html pdf pdf-latex builds builds-html builds-xelatex downloads lab test \
+  article core core-and-setup lint notebooks notebooks-kernels notebooks-update notebooks-alone \
+  check-downloads check-book check-lab figures records bench clean distclean
 
-help: ## this list
+help: ## this list of the targets a reader runs
 	@awk -F ':.*## ' '/^[a-z-]+:.*## /{printf "  make %-21s %s\n", $$1, $$2}' Makefile
 
 $(STAMP): requirements.txt
@@ -50,7 +51,8 @@ $(EDITABLE): $(STAMP) $(KERNEL)/.installed pyproject.toml depthcore/__init__.py 
 	$(UV) pip install -q --python $(PY) --no-deps --no-build-isolation -e . -e depthbook
 	touch $@
 
-venv: $(EDITABLE) ## .venv/ with the pins, depthcore and the book's depthbook installed editable
+# .venv/ with the pins, depthcore and the book's depthbook installed editable.
+venv: $(EDITABLE)
 
 $(CITE_VENV)/.installed: requirements-cite.txt $(STAMP)
 	tools/make-venv.sh "$(PYTHON)" $(CITE_VENV) $(VENV)/uv requirements-cite.txt
@@ -89,17 +91,17 @@ book: downloads ## the book, built strictly into _build/html, with its downloads
 	@if [[ -f $(ARTICLE_PDF) ]]; then cp $(ARTICLE_PDF) $(DOWNLOADS)/article.pdf; else \
 	  echo "make book: NOTE: no $(ARTICLE_PDF), so the book offers no article: run \`make article\` first" >&2; fi
 	$(PY) tools/check_notebooks.py cache --execute
-	$(MAKE) --no-print-directory html-build
+	$(MAKE) --no-print-directory book-html
 
-html-build:
+book-html:
 	$(VENV)/bin/jupyter-book build . --all -W -n --keep-going 2>&1 | tee _build/book.log
 
 pdf: $(EDITABLE) ## the book as a PDF, _build/latex/depthcore.pdf (needs xelatex)
 	tools/xelatex.sh --check
 	$(PY) tools/check_notebooks.py cache --execute
-	$(MAKE) --no-print-directory pdf-build
+	$(MAKE) --no-print-directory pdf-latex
 
-pdf-build:
+pdf-latex:
 	rm -rf _build/latex $(LATEX_BUILD)
 	mkdir -p _build
 	$(VENV)/bin/jupyter-book build . --builder latex --path-output $(LATEX_BUILD) --all -W -n \
@@ -110,7 +112,8 @@ pdf-build:
 # The LaTeX builder reads every page once; xelatex and the HTML builder then share its doctrees
 # (and the article is typeset beside them).
 SHIPPED_PDFS := depthcore.pdf article.pdf
-books: downloads ## the PDF, the article and the book from one reading of the pages
+# make test's builds: the PDF, the article and the book from one reading of the pages.
+builds: downloads
 	tools/xelatex.sh --check
 	$(PY) tools/check_notebooks.py cache --execute
 	$(clear-book)
@@ -119,14 +122,14 @@ books: downloads ## the PDF, the article and the book from one reading of the pa
 	DEPTHCORE_DOWNLOADS_PENDING="$(SHIPPED_PDFS)" $(VENV)/bin/jupyter-book build . --builder latex --all \
 	  -W -n --keep-going 2>&1 | tee _build/latex.log
 	DEPTHCORE_DOWNLOADS_PENDING="$(SHIPPED_PDFS)" $(MAKE) -j2 --no-print-directory --output-sync=target \
-	  books-html books-xelatex article
+	  builds-html builds-xelatex article
 	cp $(PDF) $(ARTICLE_PDF) $(DOWNLOADS)/
 	cp $(PDF) $(ARTICLE_PDF) _build/html/downloads/
 
-books-html:
+builds-html:
 	$(VENV)/bin/jupyter-book build . -W -n --keep-going 2>&1 | tee _build/book.log
 
-books-xelatex:
+builds-xelatex:
 	tools/xelatex.sh _build/latex
 
 # The replication article: its numbers checked against the computations, then typeset.
@@ -144,21 +147,23 @@ lab: $(EDITABLE) ## JupyterLab on the book's pages, which open as notebooks
 	  $(LAB_ARGS) book/intro.md
 
 # The stages of make test, in order; the checks in JupyterLab run beside them from LAB_BESIDE on.
-TEST_STAGES := lint core notebooks-alone books check-book
-LAB_BESIDE := books
+TEST_STAGES := lint core-and-setup notebooks-alone builds check-book
+LAB_BESIDE := builds
 test: $(EDITABLE) ## every check: lint, core, pages alone, PDF and book, built book, JupyterLab
 	tools/system-packages.sh
 	tools/run-stages.sh check-lab $(LAB_BESIDE) $(TEST_STAGES)
 
-# The core tests beside the figures and the venv of the pages run alone (both cores busy).
-core: $(EDITABLE) ## the core tests
-	$(MAKE) -j2 --no-print-directory --output-sync=line test-core $(FIGURES)/.written \
-	  $(ALONE_VENV)/.installed
-
-test-core: $(EDITABLE) $(CITE_VENV)/.installed
+core: $(EDITABLE) $(CITE_VENV)/.installed ## the package's tests only, the quick check (PYTEST_ARGS="-k ekf": some)
 	$(PY) -m pytest -q -rs -n 2 --dist worksteal tests $(PYTEST_ARGS)
 
-lint: $(EDITABLE) ## ruff check and ruff format --check
+# make test's first stage: core beside the figures and the venv of the pages run alone, which
+# the later stages need (both cores busy).
+core-and-setup: $(EDITABLE)
+	$(MAKE) -j2 --no-print-directory --output-sync=line core $(FIGURES)/.written \
+	  $(ALONE_VENV)/.installed
+
+# ruff check and ruff format --check.
+lint: $(EDITABLE)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
@@ -170,29 +175,34 @@ notebooks: $(EDITABLE) ## re-run the pages, compare with book/_nbval/ (PAGES="fi
 # Sandybridge or Prescott standing in where fewer than two can, and NumPy's baseline SIMD),
 # the studies read from their records: a reference that holds what only this processor's
 # kernels print fails here. .ci/run runs it after make test.
-notebooks-kernels: $(EDITABLE) ## re-run the pages as other processors would, compare with book/_nbval/
+notebooks-kernels: $(EDITABLE)
 	DEPTHCORE_RECORDS=require $(PY) tools/kernel_sets.py -- $(PY) tools/check_notebooks.py check $(PAGES)
 
-notebooks-update: $(EDITABLE) ## re-run the pages, rewrite book/_nbval/ (PAGES too)
+# The pages re-run, book/_nbval/ rewritten from them (PAGES too).
+notebooks-update: $(EDITABLE)
 	$(PY) tools/check_notebooks.py update $(PAGES)
 
 # Each page run once, alone as a reader runs a download, into the builds' cache and compared
 # with book/_nbval/, its studies read from their records; .venv/'s bytecode linked for its copy.
 link-bytecode = tools/link-bytecode.sh $(PYTHONPYCACHEPREFIX)$(CURDIR)/{$(VENV),$(ALONE_VENV)}/$(SITE)
-notebooks-alone: $(EDITABLE) $(ALONE_VENV)/.installed downloads ## each page run alone, for the builds
+notebooks-alone: $(EDITABLE) $(ALONE_VENV)/.installed downloads
 	$(link-bytecode)
 	DEPTHCORE_RECORDS=require $(PY) tools/check_notebooks.py cache --execute --python $(ALONE_VENV)/bin/python \
 	  --uv $(UV)
 
-notebooks-standalone: $(EDITABLE) $(ALONE_VENV)/.installed ## the built book's notebooks, run alone
+# The built book's downloadable notebooks, each run alone (make book first; not in make test,
+# which executes each page once, in notebooks-alone).
+check-downloads: $(EDITABLE) $(ALONE_VENV)/.installed
 	$(link-bytecode)
 	$(PY) tools/check_notebooks.py standalone --python $(ALONE_VENV)/bin/python --uv $(UV) $(PAGES)
 
 LAB_TESTS := tests/book/test_lab.py
-check-book: $(EDITABLE) ## checks of the built book (make book first), in a headless browser
+# Checks of the built book (make book first), in a headless browser.
+check-book: $(EDITABLE)
 	$(PY) -m pytest -q -rs -n 2 --dist loadscope tests/book --ignore=$(LAB_TESTS) $(PYTEST_ARGS)
 
-check-lab: $(EDITABLE) ## the pages run and opened in JupyterLab, in a headless browser
+# The pages run and opened in JupyterLab, in a headless browser.
+check-lab: $(EDITABLE)
 	$(PY) -m pytest -q -rs $(LAB_TESTS) $(PYTEST_ARGS)
 
 figures: $(EDITABLE) ## the paper's figures into figures/

@@ -211,34 +211,34 @@ def test_the_config_uses_the_cache_that_make_keys():
     assert check_notebooks.CACHE == ROOT / config["execute"]["cache"]
     assert check_notebooks.CACHE == ROOT / "_build" / ".jupyter_cache"
     for target, builds in (
-        ("book", ["html-build"]),
-        ("pdf", ["pdf-build"]),
-        ("books", ["--builder latex", "books-html"]),
+        ("book", ["book-html"]),
+        ("pdf", ["pdf-latex"]),
+        ("builds", ["--builder latex", "builds-html"]),
     ):
         text = makefile_recipe(target)
         cached = text.find("tools/check_notebooks.py cache --execute")
         for build in builds:
             assert 0 <= cached < text.index(f" {build}"), (target, build)
-    assert "jupyter-book build . --all" in makefile_recipe("html-build")
+    assert "jupyter-book build . --all" in makefile_recipe("book-html")
     latex = "jupyter-book build . --builder latex --path-output $(LATEX_BUILD)"
-    assert latex in makefile_recipe("pdf-build")
+    assert latex in makefile_recipe("pdf-latex")
 
 
-def test_make_books_reads_the_pages_once_for_the_pdf_and_the_book_and_ships_the_pdf():
+def test_make_builds_reads_the_pages_once_for_the_pdf_and_the_book_and_ships_the_pdf():
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
-    books = makefile_recipe("books")
+    builds = makefile_recipe("builds")
     pending = 'DEPTHCORE_DOWNLOADS_PENDING="$(SHIPPED_PDFS)" '
     assert "SHIPPED_PDFS := depthcore.pdf article.pdf" in makefile
-    latex = books.index(pending + "$(VENV)/bin/jupyter-book build . --builder latex --all")
+    latex = builds.index(pending + "$(VENV)/bin/jupyter-book build . --builder latex --all")
     # The LaTeX build reads every page afresh into the default doctrees (no other output
     # path); the HTML build that follows, beside xelatex, writes from them (no --all).
-    assert "--path-output" not in books[latex:].split("|", 1)[0]
-    side_by_side = books.index(pending + "$(MAKE) -j2")
-    assert latex < side_by_side and "books-html books-xelatex article" in books[side_by_side:]
-    html = makefile_recipe("books-html")
+    assert "--path-output" not in builds[latex:].split("|", 1)[0]
+    side_by_side = builds.index(pending + "$(MAKE) -j2")
+    assert latex < side_by_side and "builds-html builds-xelatex article" in builds[side_by_side:]
+    html = makefile_recipe("builds-html")
     assert "jupyter-book build . " in html and "--all" not in html and "--builder" not in html
-    assert "tools/xelatex.sh _build/latex" in makefile_recipe("books-xelatex")
-    after = books[side_by_side:]
+    assert "tools/xelatex.sh _build/latex" in makefile_recipe("builds-xelatex")
+    after = builds[side_by_side:]
     # the book's PDF and the article, copied in once both are written
     assert "cp $(PDF) $(ARTICLE_PDF) $(DOWNLOADS)/" in after
     assert "cp $(PDF) $(ARTICLE_PDF) _build/html/downloads/" in after
@@ -460,11 +460,11 @@ def test_make_test_executes_each_page_once_alone_before_the_builds():
     recipe = makefile_recipe("test")
     assert "tools/run-stages.sh check-lab $(LAB_BESIDE) $(TEST_STAGES)" in recipe
     steps = makefile.split("\nTEST_STAGES := ", 1)[1].split("\n", 1)[0].split()
-    assert steps.index("core") < steps.index("notebooks-alone") < steps.index("books")
-    assert steps.index("books") < steps.index("check-book")
+    assert steps.index("core-and-setup") < steps.index("notebooks-alone") < steps.index("builds")
+    assert steps.index("builds") < steps.index("check-book")
     # check-lab beside the stages from one of them on, waited for at the end.
     assert makefile.split("\nLAB_BESIDE := ", 1)[1].split("\n", 1)[0] in steps
-    assert "notebooks-standalone" not in steps + recipe.split()  # a second execution of every page
+    assert "check-downloads" not in steps + recipe.split()  # a second execution of every page
     alone = makefile_recipe("notebooks-alone")
     assert "cache --execute --python $(ALONE_VENV)/bin/python" in alone
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+import subprocess
 import sys
 from pathlib import Path
 
@@ -103,3 +104,47 @@ def test_the_readme_is_a_front_door(text):
     prose = re.sub(r"```.*?```", "", text, flags=re.S)
     for path in re.findall(r"\]\(((?!https?:)[^)#]+)\)", prose):
         assert (ROOT / path).exists(), f"README.md links {path}, which does not exist"
+
+
+def test_the_families_table_is_every_subpackage_by_its_docstring(monkeypatch):
+    table = readme.families()
+    for name in readme.FAMILIES:
+        assert f"| `depthcore.{name}` | " in table
+    monkeypatch.setattr(readme, "FAMILIES", readme.FAMILIES[1:])
+    with pytest.raises(ValueError, match="missing"):
+        readme.families()
+
+
+def test_the_layout_names_every_top_level_folder(text):
+    layout = text.split("\n## Layout\n", 1)[1].split("\n## ", 1)[0]
+    try:
+        tracked = subprocess.run(
+            ["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True
+        ).stdout.split()
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("not a git checkout")
+    folders = {path.split("/", 1)[0] for path in tracked if "/" in path}
+    unnamed = sorted(f for f in folders if f"`{f}/`" not in layout)
+    assert not unnamed, f"README.md's Layout does not name {unnamed}"
+    for extra in ("[plot]", "[stonesoup]", "[dask]"):
+        assert f"`{extra}`" in layout
+
+
+def _readers_targets() -> list[str]:
+    """The Makefile's targets with a ``## `` help text, which ``make help`` lists."""
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    return re.findall(r"^([a-z-]+):.*## ", makefile, re.M)
+
+
+def test_make_help_lists_the_readers_targets_under_distinct_names(text):
+    shown = _readers_targets()
+    expected = {"book", "pdf", "lab", "test", "core", "figures", "records", "bench", "clean"}
+    assert expected <= set(shown)
+    assert shown[:2] == ["help", "book"]
+    for a in shown:
+        for b in shown:
+            assert a == b or not b.startswith(a), (
+                f"make {a} and make {b}: one name extends the other"
+            )
+    named = set(re.findall(r"`make ([a-z-]+)", text))
+    assert named <= set(shown), f"README.md names targets make help hides: {named - set(shown)}"

@@ -10,7 +10,8 @@ sentence's claims are asserted before it is written. The README also shows
 ``_static/figure2.svg``, the paper's Figure 2 as
 :func:`depthbook.paper.figure` draws it (:func:`figure_svg`), written
 without a date and with fixed element ids, so that the same code gives the
-same bytes.
+same bytes. Its table of the package's families is each subpackage's docstring
+summary (:func:`families`), read without importing it.
 
 ``make bench`` runs this after measuring; ``tests/test_readme.py`` checks
 that the README and the figure are what this writes.
@@ -22,6 +23,7 @@ fail if the README or its figure differs from what the code gives now).
 from __future__ import annotations
 
 import argparse
+import ast
 import io
 import os
 import re
@@ -43,6 +45,18 @@ FIGURE = ROOT / "_static" / "figure2.svg"
 BLOCK = re.compile(r"(<!-- readme:(\w+) -->\n)(?:.*?\n)?(<!-- /readme:\2 -->)", re.S)
 #: What the command line says when the README is not what this writes.
 COMMAND = "python tools/readme.py"
+#: The package's families, the subpackages of ``depthcore``, in the order the README lists them.
+FAMILIES = (
+    "problem",
+    "kalman",
+    "exact",
+    "particles",
+    "analysis",
+    "registry",
+    "studies",
+    "cli",
+    "stonesoup",
+)
 
 #: Theorem 1's check, as book/appendix.md makes it (:mod:`depthbook.studies.verdicts`).
 THEOREM_TOL = verdicts.THEOREM_TOL
@@ -190,8 +204,31 @@ def citation() -> str:
     )
 
 
+def families() -> str:
+    """The package's families as a Markdown table: each subpackage and its docstring's summary.
+
+    Raises
+    ------
+    ValueError
+        If :data:`FAMILIES` does not name exactly the subpackages of ``depthcore``.
+    """
+    package = ROOT / "depthcore"
+    found = {p.parent.name for p in package.glob("*/__init__.py")}
+    if found != set(FAMILIES):
+        raise ValueError(
+            f"FAMILIES must name exactly depthcore's subpackages: missing "
+            f"{sorted(found - set(FAMILIES))}, not subpackages {sorted(set(FAMILIES) - found)}"
+        )
+    rows = ["| family | what it holds |", "| --- | --- |"]
+    for name in FAMILIES:
+        source = (package / name / "__init__.py").read_text(encoding="utf-8")
+        summary = ast.get_docstring(ast.parse(source)).splitlines()[0]
+        rows.append(f"| `depthcore.{name}` | {summary} |")
+    return "\n".join(rows)
+
+
 def blocks(bench: dict | None = None) -> dict[str, str]:
-    """The README's generated blocks, by key: ``findings``, ``figure`` and ``citation``."""
+    """The README's generated blocks: ``findings``, ``figure``, ``families``, ``citation``."""
     bench = bench_records() if bench is None else bench
     p, b, c, a = paper_texts(), bound_texts(), cost_texts(bench), atlas_texts()
     findings = [
@@ -241,7 +278,12 @@ def blocks(bench: dict | None = None) -> dict[str, str]:
     )
     figure = figure.split("\n\n")[0] + "\n\n" + _wrap(figure.split("\n\n")[1])
     listed = "\n".join(_item(text) for text in findings)
-    return {"findings": listed, "figure": figure, "citation": citation()}
+    return {
+        "findings": listed,
+        "figure": figure,
+        "families": families(),
+        "citation": citation(),
+    }
 
 
 def _wrap(text: str, width: int = 80) -> str:
