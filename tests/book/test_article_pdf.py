@@ -1,5 +1,5 @@
 """Checks of the built replication article, ``_build/article/article.pdf`` (``make article``,
-which ``make books`` runs beside the book's builds): its length, its figures, that every
+which ``make builds`` runs beside the book's builds): its length, its figures, that every
 number in its text is one the code computed, and that the HTML book ships it.
 
 Reads the PDF's text with poppler's ``pdftotext`` and its page count with ``pdfinfo``.
@@ -28,7 +28,7 @@ PAGES = (4, 12)
 @pytest.fixture(scope="module")
 def pdf() -> Path:
     if not PDF.is_file():
-        pytest.skip(f"no {PDF.relative_to(ROOT)}: run `make article` (or `make books`)")
+        pytest.skip(f"no {PDF.relative_to(ROOT)}: run `make article` (or `make builds`)")
     for tool in ("pdftotext", "pdfinfo"):
         if shutil.which(tool) is None:
             pytest.skip(f"{tool} not found (Debian: poppler-utils)")
@@ -72,5 +72,5 @@ def test_every_decimal_in_the_articles_text_is_a_computed_value(text):
 def test_the_html_book_ships_the_article(pdf):
     shipped = HTML_DOWNLOADS / "article.pdf"
     if not HTML_DOWNLOADS.is_dir():
-        pytest.skip("no built HTML book: run `make books`")
+        pytest.skip("no built HTML book: run `make builds`")
     assert shipped.is_file() and shipped.read_bytes() == pdf.read_bytes()
