@@ -120,7 +120,7 @@ def filtered(name: str, track: DemoTrack, prior_mean, prior_cov, gate=None, mu=N
 
     Returns
     -------
-    list of depthcore.registry.online.FrameEstimate
+    list of depthcore.problem.predictive.FrameEstimate
         One per frame.
     """
     mu = track.mu if mu is None else mu

@@ -219,3 +219,18 @@ def test_a_list_of_frames_names_the_value_refused():
         frames.frames_study([3, 2.5], 10, 1)
     with pytest.raises(ValueError, match=r"from 3 to 1000, got 0$"):
         frames.frames_study(0, 10, 1)
+
+
+@pytest.mark.parametrize(
+    "value", [float("nan"), float("inf"), -float("inf"), 0, 0.0, 1, 1.0, -0.5, True, False, "0.5"]
+)
+def test_probability_refuses_what_is_not_strictly_between_0_and_1(value):
+    message = f"level must lie in (0, 1), got {value!r}"
+    with pytest.raises(ValueError, match=f"^{re.escape(message)}$"):
+        checks.probability(value, "level")
+
+
+@pytest.mark.parametrize("value", [0.95, 1e-300, np.float32(0.5), np.array(0.25), 1 - 1e-16])
+def test_probability_returns_a_level_in_the_open_interval_as_a_float(value):
+    p = checks.probability(value, "level")
+    assert type(p) is float and p == float(value)

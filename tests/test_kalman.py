@@ -27,7 +27,6 @@ from scipy import stats
 from depthcore.kalman import linear
 from depthcore.kalman.linear import (
     FilterResult,
-    MeanAndCov,
     augment,
     fixed_interval_smoother,
     fixed_lag_smoother,
@@ -35,6 +34,7 @@ from depthcore.kalman.linear import (
     run,
     update,
 )
+from depthcore.problem.gaussian import MeanAndCov
 
 
 def random_spd(rng, n, scale=1.0):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import pickle
+from collections.abc import Callable
 from functools import partial
 
 import numpy as np
@@ -12,8 +13,8 @@ import pytest
 import depthcore
 from depthcore.kalman import ekf, iterated, second_order, ukf
 from depthcore.kalman import online as kalman_online
-from depthcore.problem import frames, predictive
-from depthcore.problem.gaussian import History, paper_prior
+from depthcore.problem import checks, frames, predictive
+from depthcore.problem.gaussian import History, checked_track, paper_prior, run_recursion
 from depthcore.registry import online
 from depthcore.registry.filters import FILTERS
 from depthcore.registry.tracking import default_prior
@@ -24,6 +25,93 @@ MU = np.array([0.1, 0.2, 0.27, 0.35, 0.41, 0.46])
 PRIOR_MEAN = np.array([0.2, 7.0, 0.0])
 PRIOR_COV = 4.0 * np.eye(3)
 RHO = 0.01
+
+
+def run_gaussian_filter(
+    update_step: Callable,
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise: float = 0.0,
+    steps=None,
+    gate=None,
+    predictive_step: Callable | None = None,
+) -> History:
+    """The predict-update loop of a Gaussian filter around any update step, batched.
+
+    Initialise ``n = m``, ``C = P`` (the prior is the density of the state at
+    time 1), incorporate ``mu1``, then, for each further frame, predict with
+    Eq. (10) over its step (exact for the linear motion; :func:`depthcore.kalman.ekf.predict`, with
+    the process noise ``q**2 s`` added to the velocity's variance) and
+    incorporate its bearing where it is present and not gated
+    (:func:`depthcore.problem.gaussian.run_recursion`).
+
+    Parameters
+    ----------
+    update_step : callable
+        ``update_step(n, C, mu_k, rho_k) -> MeanAndCov``, batched; a
+        :class:`ValueError` it raises is reraised naming the measurement.
+    mu : array_like, shape (..., N)
+        Bearings of ``N >= 3`` frames in time order, ``NaN`` where missing,
+        checked by :func:`depthcore.problem.gaussian.checked_track` (as are the
+        other arguments); the leading shape runs independent filters.
+    rho : float or array_like, shape (...) or (..., N)
+        Noise standard deviation, > 0, per problem or per frame.
+    prior_mean : array_like, shape (3,) or (..., 3)
+    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
+    process_noise : float
+        SD ``q >= 0`` of the velocity's change per unit step (0: the paper's model).
+    steps : array_like, shape (N - 1,) or (..., N - 1), or None
+        The depth's change between frames (``None``: ones).
+    gate : float or None
+        :func:`depthcore.problem.predictive.gate`.
+    predictive_step : callable, optional
+        ``predictive_step(n, C, rho_k) -> (bearing_mean, bearing_var)``: the
+        filter's Gaussian predictive density of the bearing (the EKF's is
+        :func:`depthcore.kalman.ekf.bearing_predictive`). Without it the result's ``updates`` is
+        ``None`` and a ``gate`` is refused.
+
+    Returns
+    -------
+    History
+        ``means`` (..., N, 3) and ``covs`` (..., N, 3, 3) after each frame, and
+        ``updates`` (..., N) when ``predictive_step`` is given.
+    """
+    track = checked_track(mu, rho, prior_mean, prior_cov, steps)
+    q = checks.nonnegative_scalar(process_noise, "process_noise")
+    g = predictive.gate(gate)
+    if g is not None and predictive_step is None:
+        raise ValueError("gate: this filter reports no predictive density, so it has no gate")
+    f = track.frames
+    rho_k = f.rho
+    regular = f.regular
+
+    def update(n, C, mu_k, k):
+        try:
+            return update_step(n, C, mu_k, f.row_rho if regular else rho_k[..., k - 1])
+        except ValueError as exc:
+            raise ValueError(f"update with measurement {k}: {exc}") from None
+
+    def predicted_bearing(n, C, k):
+        try:
+            return predictive_step(n, C, rho_k[..., k - 1])
+        except ValueError as exc:
+            raise ValueError(f"update with measurement {k}: {exc}") from None
+
+    def predict_k(m, P, k):
+        return ekf.predict(m, P, q) if regular else ekf.predict(m, P, q, f.steps[..., k - 2])
+
+    return run_recursion(
+        track.mean,
+        track.cov,
+        f.mu,
+        predict_k,
+        update,
+        f.present,
+        None if predictive_step is None else predicted_bearing,
+        g,
+    )
 
 
 def by_hand(mu, rho, prior_mean, prior_cov, q=0.0, steps=None):
@@ -137,10 +225,10 @@ def test_ukf_loop_with_gaps_skips_those_updates():
     mu = MU.copy()
     mu[2] = np.nan
     step = partial(ukf.update, allow_behind_camera=True)
-    h = ekf.run_gaussian_filter(
+    h = run_gaussian_filter(
         step, mu, RHO, PRIOR_MEAN, PRIOR_COV, predictive_step=kalman_online.unscented_predictive
     )
-    before = ekf.run_gaussian_filter(step, MU[:3], RHO, PRIOR_MEAN, PRIOR_COV)  # frame 2 sees 1-2
+    before = run_gaussian_filter(step, MU[:3], RHO, PRIOR_MEAN, PRIOR_COV)  # frame 2 sees 1-2
     before = History(before.means[:2], before.covs[:2])
     n, C = ekf.predict(*ekf.predict(before.means[-1], before.covs[-1]))
     n, C = step(n, C, mu[3], RHO)
@@ -272,7 +360,7 @@ def test_the_ekf_refuses_a_bad_track_in_one_line(kwargs, message):
 
 def test_the_gaussian_loop_without_a_predictive_refuses_a_gate():
     with pytest.raises(ValueError, match=r"^gate: this filter reports no predictive density"):
-        ekf.run_gaussian_filter(ekf.update, MU, RHO, PRIOR_MEAN, PRIOR_COV, gate=0.01)
+        run_gaussian_filter(ekf.update, MU, RHO, PRIOR_MEAN, PRIOR_COV, gate=0.01)
 
 
 # --- the registry --------------------------------------------------------------------------
@@ -408,7 +496,7 @@ def test_online_ekf_after_n_frames_equals_the_batch_door():
 def test_online_ukf_after_n_frames_equals_the_batch_loop():
     f = online.start("ukf", PRIOR_MEAN, PRIOR_COV, process_noise=0.03, gate=1e-3)
     frames_seen = _feed(f)
-    h = ekf.run_gaussian_filter(
+    h = run_gaussian_filter(
         partial(ukf.update, allow_behind_camera=True),
         TRACK,
         TRACK_RHO,

@@ -275,16 +275,6 @@ def score_estimates(estimates: dict, true_depth) -> dict:
     return out
 
 
-def score_filters(mu, rho: float, prior_mean, prior_cov, true_depth, names=NAMES) -> dict:
-    """:func:`depth_scores` of each named filter over a batch of trials.
-
-    :func:`filter_estimates` scored by :func:`score_estimates`.
-    """
-    return score_estimates(
-        filter_estimates(mu, rho, prior_mean, prior_cov, true_depth, names), true_depth
-    )
-
-
 #: The per-trial depth scores whose co-moments :func:`paired_scores` keeps.
 PAIRED_SCORES = ("squared_error", "sd", "coverage_68", "coverage_95")
 

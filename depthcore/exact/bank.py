@@ -67,6 +67,7 @@ import numpy as np
 from depthcore.exact import tracks
 from depthcore.kalman import linear
 from depthcore.problem import checks
+from depthcore.problem.gaussian import MeanAndCov
 
 #: The lateral state ``(x, v)`` moves by ``x <- x + v``: the transition matrix.
 PSI = np.array([[1.0, 1.0], [0.0, 1.0]])
@@ -217,7 +218,7 @@ def conditional_prior(nodes, prior_mean, prior_cov):
 
     Returns
     -------
-    prior : depthcore.kalman.linear.MeanAndCov
+    prior : depthcore.problem.gaussian.MeanAndCov
         Mean (..., J, 2) and covariance (..., 1, 2, 2) of ``(x_1, v_1)`` given ``y_1``.
     log_density : ndarray, shape (..., J)
         ``log N(y_1; m_y, P_yy)``.
@@ -231,7 +232,7 @@ def conditional_prior(nodes, prior_mean, prior_cov):
     mean = m_u[..., None, :] + slope[..., None, :] * d[..., None]
     cov = prior_cov[..., u, u] - slope[..., :, None] * P_uy[..., None, :]
     log_density = -0.5 * (_LOG_2PI + np.log(P_yy)[..., None]) - 0.5 * d**2 / P_yy[..., None]
-    return linear.MeanAndCov(mean, cov[..., None, :, :]), log_density
+    return MeanAndCov(mean, cov[..., None, :, :]), log_density
 
 
 def sigma_p(process_noise) -> np.ndarray:

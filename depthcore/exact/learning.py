@@ -69,6 +69,7 @@ from depthcore.exact.bank import PSI, lateral_filter, run_bank
 from depthcore.exact.tracks import transitions
 from depthcore.kalman import linear
 from depthcore.problem import checks, frames
+from depthcore.problem.gaussian import MeanAndCov
 
 #: The parameters, by name, the bearing noise SD and the process noise SD.
 NAMES = ("rho", "process_noise")
@@ -707,7 +708,7 @@ def _smooth(res: linear.FilterResult, Psi):
 
     Returns
     -------
-    smooth : depthcore.kalman.linear.MeanAndCov
+    smooth : depthcore.problem.gaussian.MeanAndCov
         Means (..., N, 2) and covariances (..., N, 2, 2).
     cross : ndarray, shape (..., N - 1, 2, 2)
     """
@@ -728,7 +729,7 @@ def _smooth(res: linear.FilterResult, Psi):
             means[..., t + 1, :],
             covs[..., t + 1, :, :],
         )
-    return linear.MeanAndCov(means, covs), gains @ covs[..., 1:, :, :]
+    return MeanAndCov(means, covs), gains @ covs[..., 1:, :, :]
 
 
 #: EM re-places the depth nodes when a parameter has moved by this factor (in log) since

@@ -63,6 +63,7 @@ from depthcore.exact import quadrature
 from depthcore.exact.bank import lateral_filter
 from depthcore.exact.mixture import mixture_moments
 from depthcore.problem import checks, predictive
+from depthcore.problem.predictive import FrameEstimate
 from depthcore.problem.weights import normalised
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
@@ -72,37 +73,6 @@ _ONE_NODE = 0.5
 _END_MARGIN = 40.0
 #: The spline's degree in ``t = log y_1`` for a re-placement.
 _DEGREE = 7
-
-
-class State(NamedTuple):
-    """The exact filter after a frame (:meth:`Online.update`).
-
-    Attributes
-    ----------
-    frame : int
-        Frames seen so far, missing ones included (1 after the first).
-    mean : ndarray, shape (3,)
-        ``E[(x_k, y_k, v_k) | mu_1 .. mu_k]``.
-    cov : ndarray, shape (3, 3)
-    depth_mean, depth_sd, velocity_mean, velocity_sd : float
-    log_predictive : float
-        ``log p(mu_k | mu_1 .. mu_{k-1})`` under the mixture; NaN at a missing frame.
-    tail : float
-        Two-sided tail probability of ``mu_k`` under that predictive; NaN when missing.
-    gated : bool
-        Whether the gate skipped this bearing.
-    """
-
-    frame: int
-    mean: np.ndarray
-    cov: np.ndarray
-    depth_mean: float
-    depth_sd: float
-    velocity_mean: float
-    velocity_sd: float
-    log_predictive: float
-    tail: float
-    gated: bool
 
 
 class _Nodes(NamedTuple):
@@ -152,7 +122,7 @@ class Online:
         self.frame = 0
         self.travelled = 0.0
         self.replacements = 0
-        self.current: State | None = None
+        self.current: FrameEstimate | None = None
         self._nodes = self._place(self._prior_integrand, m[1])
 
     @property
@@ -238,7 +208,7 @@ class Online:
 
     # --- the filter --------------------------------------------------------------------
 
-    def update(self, mu, rho=None, step=1.0) -> State:
+    def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
         """Add the next frame: predict by ``step``, report the bearing, gate it, update.
 
         Parameters
@@ -253,7 +223,7 @@ class Online:
 
         Returns
         -------
-        State
+        FrameEstimate
         """
         mu = _bearing(mu)
         r = self.rho if rho is None else checks.positive_scalar(rho, "rho")
@@ -285,7 +255,7 @@ class Online:
         if not self._resolved():
             self._replace_nodes()
         mean, cov = self._moments()
-        self.current = State(
+        self.current = FrameEstimate(
             self.frame,
             mean,
             cov,

@@ -6,7 +6,7 @@
   approximation, Eqs. (8), (24);
 * :mod:`~depthcore.kalman.ekf`: the paper's extended Kalman filter, Eqs.
   (10)-(12), and the predict-update recursion the other Gaussian filters share
-  (:func:`~depthcore.kalman.ekf.run_gaussian_filter`);
+  (:func:`~depthcore.kalman.ekf.predict`, :func:`~depthcore.problem.gaussian.run_recursion`);
 * :mod:`~depthcore.kalman.ukf`: the unscented Kalman filter (textbook 19.4);
 * :mod:`~depthcore.kalman.iterated`: the iterated EKF and its smoother;
 * :mod:`~depthcore.kalman.online`: the EKF and the UKF one bearing at a time;

@@ -17,7 +17,6 @@ trial, say) with no Python loop over them.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -28,7 +27,6 @@ from depthcore.problem.gaussian import (
     History,
     MeanAndCov,
     checked_track,
-    run_recursion,
     symmetric,
 )
 
@@ -126,93 +124,6 @@ def update(n, C, mu, rho: float) -> MeanAndCov:
     # which equals it algebraically and keeps P symmetric positive definite in floating point.
     cov = linear.joseph(C, K[..., :, None], h[..., None, :], r2[..., None, None])
     return MeanAndCov(mean, cov)
-
-
-def run_gaussian_filter(
-    update_step: Callable,
-    mu,
-    rho,
-    prior_mean,
-    prior_cov,
-    process_noise: float = 0.0,
-    steps=None,
-    gate=None,
-    predictive_step: Callable | None = None,
-) -> History:
-    """The run loop shared by the Gaussian filters (EKF, UKF), batched.
-
-    Initialise ``n = m``, ``C = P`` (the prior is the density of the state at
-    time 1), incorporate ``mu1``, then, for each further frame, predict with
-    Eq. (10) over its step (exact for the linear motion; :func:`predict`, with
-    the process noise ``q**2 s`` added to the velocity's variance) and
-    incorporate its bearing where it is present and not gated
-    (:func:`depthcore.problem.gaussian.run_recursion`).
-
-    Parameters
-    ----------
-    update_step : callable
-        ``update_step(n, C, mu_k, rho_k) -> MeanAndCov``, batched; a
-        :class:`ValueError` it raises is reraised naming the measurement.
-    mu : array_like, shape (..., N)
-        Bearings of ``N >= 3`` frames in time order, ``NaN`` where missing,
-        checked by :func:`depthcore.problem.gaussian.checked_track` (as are the
-        other arguments); the leading shape runs independent filters.
-    rho : float or array_like, shape (...) or (..., N)
-        Noise standard deviation, > 0, per problem or per frame.
-    prior_mean : array_like, shape (3,) or (..., 3)
-    prior_cov : array_like, shape (3, 3) or (..., 3, 3)
-    process_noise : float
-        SD ``q >= 0`` of the velocity's change per unit step (0: the paper's model).
-    steps : array_like, shape (N - 1,) or (..., N - 1), or None
-        The depth's change between frames (``None``: ones).
-    gate : float or None
-        :func:`depthcore.problem.predictive.gate`.
-    predictive_step : callable, optional
-        ``predictive_step(n, C, rho_k) -> (bearing_mean, bearing_var)``: the
-        filter's Gaussian predictive density of the bearing (the EKF's is
-        :func:`bearing_predictive`). Without it the result's ``updates`` is
-        ``None`` and a ``gate`` is refused.
-
-    Returns
-    -------
-    History
-        ``means`` (..., N, 3) and ``covs`` (..., N, 3, 3) after each frame, and
-        ``updates`` (..., N) when ``predictive_step`` is given.
-    """
-    track = checked_track(mu, rho, prior_mean, prior_cov, steps)
-    q = checks.nonnegative_scalar(process_noise, "process_noise")
-    g = predictive.gate(gate)
-    if g is not None and predictive_step is None:
-        raise ValueError("gate: this filter reports no predictive density, so it has no gate")
-    f = track.frames
-    rho_k = f.rho
-    regular = f.regular
-
-    def update(n, C, mu_k, k):
-        try:
-            return update_step(n, C, mu_k, f.row_rho if regular else rho_k[..., k - 1])
-        except ValueError as exc:
-            raise ValueError(f"update with measurement {k}: {exc}") from None
-
-    def predicted_bearing(n, C, k):
-        try:
-            return predictive_step(n, C, rho_k[..., k - 1])
-        except ValueError as exc:
-            raise ValueError(f"update with measurement {k}: {exc}") from None
-
-    def predict_k(m, P, k):
-        return predict(m, P, q) if regular else predict(m, P, q, f.steps[..., k - 2])
-
-    return run_recursion(
-        track.mean,
-        track.cov,
-        f.mu,
-        predict_k,
-        update,
-        f.present,
-        None if predictive_step is None else predicted_bearing,
-        g,
-    )
 
 
 def bearing_predictive(n, C, rho) -> tuple[np.ndarray, np.ndarray]:

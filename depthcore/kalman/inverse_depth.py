@@ -308,9 +308,7 @@ def depth_interval(z, S, k: int, level: float = 0.68) -> tuple[np.ndarray, np.nd
 
     z = np.asarray(z, dtype=float)
     S = np.asarray(S, dtype=float)
-    level = float(level)
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    level = checks.probability(level, "level")
     w, sd = z[..., 1], np.sqrt(S[..., 1, 1])
     if not np.all(w > 0):
         raise ValueError(

@@ -57,10 +57,8 @@ import numpy as np
 from depthcore.kalman import linear
 from depthcore.kalman.ekf import predict
 from depthcore.kalman.second_order import (
-    bearing_residuals,
     bearing_rows,
     damped_step,
-    trajectory_map,
     trajectory_solve,
     trajectory_states,
 )
@@ -397,30 +395,6 @@ def smoother(
     cov = FK @ cov1 @ FK.T
     trajectory = np.stack([model.G(x, k) for k in range(K)], axis=-2)
     return SmootherResult(model.G(x, K - 1), symmetric(cov), iterations, ~active, trajectory)
-
-
-def trajectory_residuals(z, mu, rho, prior_mean, prior_cov, process_noise):
-    """The trajectory's stacked whitened residuals (negative log posterior) and Jacobian.
-
-    ``z = (x_1, y_1, v_1, a_1 .. a_{K-1})`` (K + 2,); the residuals (2 K + 2,)
-    are ``L^{-1} (x_1 - m)``, ``(x_k / y_k - mu_k) / rho`` and ``a_k / q``
-    (:func:`smoother`, textbook 19.3): half their squared norm is the negative
-    log posterior up to a constant.
-
-    Returns
-    -------
-    r : ndarray, shape (2 K + 2,)
-    M : ndarray, shape (2 K + 2, K + 2)
-    """
-    K = mu.shape[-1]
-    L_inv = np.linalg.inv(np.linalg.cholesky(prior_cov))
-    bearing, J = bearing_residuals(z, mu, trajectory_map(K))
-    M = np.zeros((2 * K + 2, K + 2))
-    M[:3, :3] = L_inv
-    M[3 : K + 3] = J / rho
-    M[K + 3 :, 3:] = np.eye(K - 1) / process_noise
-    r = np.concatenate([L_inv @ (z[:3] - prior_mean), bearing / rho, z[3:] / process_noise])
-    return r, M
 
 
 def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:

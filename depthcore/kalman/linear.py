@@ -59,7 +59,7 @@ from typing import NamedTuple
 import numpy as np
 
 from depthcore.problem import checks
-from depthcore.problem.gaussian import symmetric
+from depthcore.problem.gaussian import MeanAndCov, symmetric
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 #: Relative asymmetry tolerated in a covariance matrix.
@@ -68,13 +68,6 @@ _SYMMETRY_TOL = 1e-10
 _PSD_TOL = 1e-12
 #: One half as a NumPy scalar: multiplying an array by it skips converting a Python float.
 _HALF = np.float64(0.5)
-
-
-class MeanAndCov(NamedTuple):
-    """A Gaussian: mean of shape ``(..., n)``, covariance of shape ``(..., n, n)``."""
-
-    mean: np.ndarray
-    cov: np.ndarray
 
 
 class Update(NamedTuple):

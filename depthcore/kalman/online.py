@@ -10,10 +10,9 @@ predicts the state over the step (Eq. (10) with the step ``s``: ``x <- x + s v``
 tail probability (:mod:`depthcore.problem.predictive`), skips it if it is
 missing (``NaN``) or the gate says so, and otherwise incorporates it. After
 ``N`` frames the Gaussian is the batch door's at frame ``N``
-(:func:`depthcore.kalman.ekf.run`; for the UKF the loop
-:func:`depthcore.kalman.ekf.run_gaussian_filter` with
-:func:`depthcore.kalman.ukf.update` and :func:`unscented_predictive`), the
-same arithmetic frame by frame.
+(:func:`depthcore.kalman.ekf.run`; for the UKF the same predict-update
+loop with :func:`depthcore.kalman.ukf.update` and :func:`unscented_predictive`),
+the same arithmetic frame by frame.
 
 Example
 -------
@@ -28,44 +27,12 @@ Example
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
 from depthcore.kalman import ekf, ukf
 from depthcore.problem import checks, predictive
 from depthcore.problem.gaussian import Gaussian, symmetric
-
-
-class Step(NamedTuple):
-    """A filter after a frame (``update`` of :class:`EKF`, :class:`UKF`).
-
-    Attributes
-    ----------
-    frame : int
-        Frames seen so far, missing ones included (1 after the first).
-    mean : ndarray, shape (3,)
-        Mean of ``(x_k, y_k, v_k)`` given ``mu_1 .. mu_k``.
-    cov : ndarray, shape (3, 3)
-    depth_mean, depth_sd, velocity_mean, velocity_sd : float
-    log_predictive : float
-        The bearing's log predictive density; NaN at a missing frame.
-    tail : float
-        Its two-sided tail probability; NaN at a missing frame.
-    gated : bool
-        Whether the gate skipped the bearing.
-    """
-
-    frame: int
-    mean: np.ndarray
-    cov: np.ndarray
-    depth_mean: float
-    depth_sd: float
-    velocity_mean: float
-    velocity_sd: float
-    log_predictive: float
-    tail: float
-    gated: bool
+from depthcore.problem.predictive import FrameEstimate
 
 
 def unscented_predictive(n, C, rho, sigma_points=None) -> tuple[np.ndarray, np.ndarray]:
@@ -107,7 +74,7 @@ class _Online:
         self.process_noise = checks.nonnegative_scalar(process_noise, "process_noise")
         self.gate = predictive.gate(gate)
         self.frame = 0
-        self.current: Step | None = None
+        self.current: FrameEstimate | None = None
 
     def _frame(self, mu, rho, step):
         """Check one frame's ``mu``, ``rho`` and ``step``; return them as floats."""
@@ -127,9 +94,9 @@ class _Online:
             raise ValueError(f"mu: at most {checks.MAX_FRAMES} frames")
         return mu, r, s
 
-    def _report(self, mean, cov, log_p, tail, gated) -> Step:
+    def _report(self, mean, cov, log_p, tail, gated) -> FrameEstimate:
         self.frame += 1
-        self.current = Step(
+        self.current = FrameEstimate(
             self.frame,
             mean,
             cov,
@@ -170,7 +137,7 @@ class EKF(_Online):
         self._mean = self.prior.mean.copy()
         self._root = np.linalg.inv(np.linalg.cholesky(self.prior.cov))
 
-    def update(self, mu, rho=None, step=1.0) -> Step:
+    def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
         """Add the next frame: predict by ``step``, report the bearing, gate it, update.
 
         Parameters
@@ -185,7 +152,7 @@ class EKF(_Online):
 
         Returns
         -------
-        Step
+        FrameEstimate
         """
         mu, r, s = self._frame(mu, rho, step)
         n, R = self._mean, self._root
@@ -230,7 +197,7 @@ class UKF(_Online):
         self.allow_behind_camera = bool(allow_behind_camera)
         self._mean, self._cov = self.prior.mean.copy(), self.prior.cov.copy()
 
-    def update(self, mu, rho=None, step=1.0) -> Step:
+    def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
         """Add the next frame, as :meth:`EKF.update` does."""
         mu, r, s = self._frame(mu, rho, step)
         n, C = self._mean, self._cov

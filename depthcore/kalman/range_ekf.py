@@ -30,7 +30,7 @@ and its prior weight is the prior's probability of the interval,
 (Eqs. (10)-(12), with the process noise of its prediction), and its weight is
 multiplied at each frame by its EKF's predictive likelihood of the bearing,
 ``N(mu_k; n1 / n2, rho**2 + h^T C h)`` with ``(n, C)`` the EKF's prediction and
-``h`` Eq. (11) at ``n`` (:func:`predictive_log_likelihoods`); weights are kept in
+``h`` Eq. (11) at ``n`` (:func:`component_predictive`); weights are kept in
 log space and normalised at the end (:func:`posterior`).
 
 **Tracks as they come** (:mod:`depthcore.problem.frames`). Each component's
@@ -228,42 +228,6 @@ def components(prior_mean, prior_cov, n_components: int, depth_range=None) -> Co
     return Components(log_w, mean, cov, edges)
 
 
-def predictive_log_likelihoods(
-    means, covs, prior_mean, prior_cov, mu, rho, process_noise: float = 0.0
-) -> np.ndarray:
-    """Each EKF's log predictive density of each bearing, ``log N(mu_k; n1 / n2, s_k)``.
-
-    ``(n, C)`` is the EKF's prediction for frame ``k``: the prior at ``k = 1``,
-    :func:`depthcore.kalman.ekf.predict` of the previous update after; ``h`` is Eq. (11)
-    at ``n`` and ``s_k = rho**2 + h^T C h`` the innovation variance of Eq. (12).
-
-    Parameters
-    ----------
-    means : array_like, shape (..., N, 3)
-        The EKF's mean after each bearing (:func:`depthcore.kalman.ekf.run`).
-    covs : array_like, shape (..., N, 3, 3)
-    prior_mean : array_like, shape (..., 3)
-    prior_cov : array_like, shape (..., 3, 3)
-    mu : array_like, shape (..., N)
-    rho : float or array_like, shape (...)
-    process_noise : float
-        ``q >= 0``.
-
-    Returns
-    -------
-    ndarray, shape (..., N)
-    """
-    means = np.asarray(means, dtype=float)
-    covs = np.asarray(covs, dtype=float)
-    n_pred, C_pred = ekf.predict(means[..., :-1, :], covs[..., :-1, :, :], process_noise)
-    n = np.concatenate([np.asarray(prior_mean, float)[..., None, :], n_pred], axis=-2)
-    C = np.concatenate([np.asarray(prior_cov, float)[..., None, :, :], C_pred], axis=-3)
-    h = model.observation_vector(n)
-    s = np.asarray(rho, dtype=float)[..., None] ** 2 + np.einsum("...i,...ij,...j->...", h, C, h)
-    r = np.asarray(mu, dtype=float) - n[..., 0] / n[..., 1]
-    return -0.5 * (_LOG_2PI + np.log(s) + r**2 / s)
-
-
 def mixture_moments(weight, means, covs) -> tuple[np.ndarray, np.ndarray]:
     """Mean and covariance of a Gaussian sum (law of total variance).
 
@@ -327,7 +291,7 @@ def posterior(
     square-root information steps :func:`depthcore.kalman.ekf.information_predict`
     and :func:`depthcore.kalman.ekf.information_update`), its weight multiplied
     by its predictive likelihood of each bearing incorporated
-    (:func:`predictive_log_likelihoods`' density); a missing or gated bearing
+    (:func:`component_predictive`' density); a missing or gated bearing
     is predicted through (module docstring).
 
     {parameters}

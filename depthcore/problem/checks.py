@@ -101,6 +101,27 @@ def positive_scalar(value, name: str) -> float:
     return x
 
 
+def probability(value, name: str) -> float:
+    """A level or probability ``p`` strictly between 0 and 1, as a float.
+
+    Parameters
+    ----------
+    value : float
+        A real number (not a bool), ``0 < p < 1``; NaN and infinities are refused.
+    name : str
+        The argument's name, for the message.
+
+    Returns
+    -------
+    float
+    """
+    kind = np.asarray(value).dtype.kind if np.ndim(value) == 0 else ""
+    p = float(value) if kind in _NUMERIC_KINDS else float("nan")
+    if not 0.0 < p < 1.0:
+        raise ValueError(f"{name} must lie in (0, 1), got {value!r}")
+    return p
+
+
 def nonnegative_scalar(value, name: str) -> float:
     """Return ``value`` (a :func:`number`) as a float, checking that it is finite and >= 0."""
     x = number(value, name)

@@ -143,7 +143,11 @@ def gaussian_logpdf(x, mean, cov) -> np.ndarray:
 
 
 class MeanAndCov(NamedTuple):
-    """A mean of shape ``(..., 3)`` and covariance of shape ``(..., 3, 3)``."""
+    """A Gaussian: mean of shape ``(..., n)``, covariance of shape ``(..., n, n)``.
+
+    ``n = 3`` for the state ``(x, y, v)``; any ``n`` for the linear-Gaussian
+    model of :mod:`depthcore.kalman.linear`.
+    """
 
     mean: np.ndarray
     cov: np.ndarray

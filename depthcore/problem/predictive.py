@@ -17,7 +17,8 @@ particle filters (one per particle). Each update reports two numbers of it:
 
 A gate ``g`` (a probability, e.g. ``1e-3``) skips every bearing whose tail
 probability is below ``g``: the filter predicts through that frame as through
-a missing one, and records that it did.
+a missing one, and records that it did. An online filter answers each frame
+with a :class:`FrameEstimate`: its state's moments and these reports.
 """
 
 from __future__ import annotations
@@ -37,6 +38,42 @@ class Updates(NamedTuple):
     log_predictive: np.ndarray
     tail: np.ndarray
     gated: np.ndarray
+
+
+class FrameEstimate(NamedTuple):
+    """An online filter's estimate after a frame, with what its update saw.
+
+    The answer of :meth:`depthcore.registry.online.OnlineFilter.update`, of
+    :class:`depthcore.exact.online.Online` and of
+    :class:`depthcore.kalman.online.EKF` and :class:`depthcore.kalman.online.UKF`.
+
+    Attributes
+    ----------
+    frame : int
+        Frames seen so far, missing ones included (1 after the first).
+    mean : ndarray, shape (3,)
+        Mean of the state ``(x_k, y_k, v_k)`` given the bearings so far.
+    cov : ndarray, shape (3, 3)
+    depth_mean, depth_sd, velocity_mean, velocity_sd : float
+    log_predictive : float
+        The bearing's log predictive density given the earlier ones; NaN at a
+        missing frame.
+    tail : float
+        Its two-sided tail probability under that predictive; NaN at a missing frame.
+    gated : bool
+        Whether the gate skipped the bearing.
+    """
+
+    frame: int
+    mean: np.ndarray
+    cov: np.ndarray
+    depth_mean: float
+    depth_sd: float
+    velocity_mean: float
+    velocity_sd: float
+    log_predictive: float
+    tail: float
+    gated: bool
 
 
 def gate(value, name: str = "gate"):

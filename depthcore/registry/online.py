@@ -10,9 +10,9 @@ on the prior of the state at frame 1. Each ``f.update(mu_k, rho=None,
 step=1.0)`` predicts the state over ``step`` (not at the first frame),
 reports the bearing's predictive density and tail probability, skips it if it
 is missing (``NaN``) or gated, incorporates it otherwise, and returns a
-:class:`FrameEstimate`. Time and memory per frame are constant; after ``N``
-frames the estimate is the batch door's at frame ``N``
-(:data:`depthcore.registry.filters.FILTERS`).
+:class:`~depthcore.problem.predictive.FrameEstimate`. Time and memory per
+frame are constant; after ``N`` frames the estimate is the batch door's at
+frame ``N`` (:data:`depthcore.registry.filters.FILTERS`).
 
 Example: a live loop, each bearing used as it arrives
 
@@ -31,9 +31,8 @@ frame 5: bearing skipped (tail 0.0e+00)
 from __future__ import annotations
 
 import importlib
-from typing import NamedTuple
 
-import numpy as np
+from depthcore.problem.predictive import FrameEstimate
 
 #: The online filters by name, with the module and class of each.
 ONLINE = {
@@ -47,38 +46,6 @@ NAMES = tuple(ONLINE)
 
 #: The registry's options of each online filter (those of its batch entry).
 DEFAULT_OPTIONS = {"ukf": {"allow_behind_camera": True}}
-
-
-class FrameEstimate(NamedTuple):
-    """An online filter's estimate after a frame (:meth:`OnlineFilter.update`).
-
-    Attributes
-    ----------
-    frame : int
-        Frames seen so far, missing ones included (1 after the first).
-    mean : ndarray, shape (3,)
-        Mean of the state ``(x_k, y_k, v_k)`` given the bearings so far.
-    cov : ndarray, shape (3, 3)
-    depth_mean, depth_sd, velocity_mean, velocity_sd : float
-    log_predictive : float
-        The bearing's log predictive density given the earlier ones; NaN at a
-        missing frame.
-    tail : float
-        Its two-sided tail probability under that predictive; NaN at a missing frame.
-    gated : bool
-        Whether the gate skipped the bearing.
-    """
-
-    frame: int
-    mean: np.ndarray
-    cov: np.ndarray
-    depth_mean: float
-    depth_sd: float
-    velocity_mean: float
-    velocity_sd: float
-    log_predictive: float
-    tail: float
-    gated: bool
 
 
 class OnlineFilter:
@@ -121,8 +88,7 @@ class OnlineFilter:
         -------
         FrameEstimate
         """
-        out = self._inner.update(mu, rho=rho, step=step)
-        self.current = FrameEstimate(*(getattr(out, f) for f in FrameEstimate._fields))
+        self.current = self._inner.update(mu, rho=rho, step=step)
         return self.current
 
 

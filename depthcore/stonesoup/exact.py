@@ -20,7 +20,7 @@ depth), so Stone Soup's plots and metrics read them; it carries the exact
 filter itself (``filter``, the mixture over depth nodes after its last
 bearing) and what its last update reported (``estimate``: the depth's and
 velocity's means and SDs, the bearing's log predictive density, tail
-probability and whether a gate skipped it, :class:`depthcore.exact.online.State`).
+probability and whether a gate skipped it, :class:`depthcore.problem.predictive.FrameEstimate`).
 
 How a prediction stays exact and the prior untouched. Before the first
 bearing the state is the Gaussian prior, and :class:`ExactPredictor` moves it
@@ -73,7 +73,7 @@ class ExactState(GaussianState):
     pending: tuple = Property(
         default=(), doc="The depth steps predicted since the filter's last frame."
     )
-    estimate: online.State = Property(
+    estimate: predictive.FrameEstimate = Property(
         default=None, doc="What the filter's last update reported; ``None`` before it."
     )
 

@@ -55,9 +55,7 @@ def median_ranks(trials: int, level: float = INTERVAL_LEVEL) -> tuple:
         ranks reach ``level`` (too few trials): the interval is then unbounded.
     """
     n = checks.count(trials, "trials")
-    level = float(level)
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    level = checks.probability(level, "level")
     from scipy.stats import binom
 
     cdf = binom.cdf(np.arange(n + 1), n, 0.5)

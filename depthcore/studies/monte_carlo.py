@@ -455,9 +455,7 @@ def prior_study(
         JSON-ready.
     """
     prior_scale = checks.positive_scalar(prior_scale, "prior_scale")
-    false_alarm = float(false_alarm)
-    if not 0.0 < false_alarm < 1.0:
-        raise ValueError(f"false_alarm must lie in (0, 1), got {false_alarm!r}")
+    false_alarm = checks.probability(false_alarm, "false_alarm")
     seed = checks.seed_sequence(seed)
     mean = paper_prior_means(np.asarray(SCENARIOS["fig2"].c, dtype=float)[None])[0]
     cov = prior_scale * np.eye(3)
@@ -506,94 +504,6 @@ def prior_study(
         t = s[q]
         t["calibrated"] = bool(min(t["ks_pvalue"], t["chi2_pvalue"]) > false_alarm / 2)
         out[q] = t
-    return out
-
-
-#: The samplers whose Monte Carlo errors :func:`error_coverage` checks.
-SAMPLERS = ("particle", "resample_move", "rbpf")
-
-
-#: The moments whose errors :func:`error_coverage` checks.
-ERROR_MOMENTS = ("depth_mean", "depth_sd", "velocity_mean", "velocity_sd")
-
-
-def error_coverage(
-    name: str,
-    mu,
-    rho: float,
-    prior_mean,
-    prior_cov,
-    runs: int = 100,
-    seed=0,
-    process_noise: float = 0.0,
-    **options,
-) -> dict:
-    """How often a sampler's reported error covers its actual error.
-
-    The sampler ``name`` of the registry runs ``runs`` times, independently,
-    on one problem (the runs are the rows of one batch, drawn from one
-    generator seeded by ``seed``); each moment's error, estimate minus the
-    exact value of the optimal filter (the bank of Kalman filters beyond
-    three frames or with process noise), is compared with the error the
-    sampler reports for it (``depth_error`` for the depth's moments,
-    ``velocity_error`` for the velocity's). An honest error puts about 95 %
-    of the runs within two reported errors; a run flagged ``collapsed``
-    reports no error (NaN) and is counted apart.
-
-    Parameters
-    ----------
-    name : str
-        One of :data:`SAMPLERS`.
-    mu : array_like, shape (K,)
-        One sequence of bearings.
-    rho, prior_mean, prior_cov, process_noise
-        The problem, as for every filter of the registry.
-    runs : int
-        Independent runs, >= 1.
-    seed : int or numpy.random.SeedSequence
-    **options
-        For the sampler (``n_particles``, ``replicas``, ...); its defaults otherwise.
-
-    Returns
-    -------
-    dict
-        ``"runs"``, ``"collapsed"`` (the number of runs flagged), and for each
-        of :data:`ERROR_MOMENTS` ``{"within_two": fraction of the runs not
-        collapsed whose error is within two reported errors, "max_z": the
-        largest absolute error over the reported error, "se": the binomial standard error of
-        the fraction}``; ``"worst_collapsed_z"``: the largest absolute error of a
-        collapsed run's depth mean over the exact depth SD (how far off the
-        flag was right to be).
-    """
-    if name not in SAMPLERS:
-        raise ValueError(f"name must be one of {SAMPLERS}, got {name!r}")
-    runs = checks.count(runs, "runs")
-    mu = checks.finite_array(mu, "mu")
-    if mu.ndim != 1:
-        raise ValueError(f"mu must have shape (K,), got shape {mu.shape}")
-    batch = np.tile(mu, (runs, 1))
-    noise = {"process_noise": process_noise} if process_noise else {}
-    exact = FILTERS["optimal"](mu, rho, prior_mean, prior_cov, **noise)
-    rng = np.random.default_rng(checks.seed_sequence(seed))
-    est = FILTERS[name](batch, rho, prior_mean, prior_cov, rng=rng, **noise, **options)
-    collapsed = np.broadcast_to(np.asarray(est.collapsed, dtype=bool), (runs,))
-    out = {"runs": runs, "collapsed": int(np.sum(collapsed))}
-    ok = ~collapsed
-    for moment in ERROR_MOMENTS:
-        quantity = moment.split("_")[0]
-        err = np.asarray(getattr(est, moment)) - getattr(exact, moment)
-        reported = np.asarray(getattr(est, f"{quantity}_error"))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = np.abs(err[ok]) / reported[ok]
-        n = int(np.sum(ok))
-        frac = float(np.mean(z <= 2.0)) if n else float("nan")
-        out[moment] = {
-            "within_two": frac,
-            "max_z": float(np.max(z)) if n else float("nan"),
-            "se": float(np.sqrt(frac * (1 - frac) / n)) if n else float("nan"),
-        }
-    depth_err = np.abs(np.asarray(est.depth_mean) - exact.depth_mean) / exact.depth_sd
-    out["worst_collapsed_z"] = float(np.max(depth_err[collapsed])) if np.any(collapsed) else None
     return out
 
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from depthcore.problem import checks
 from depthcore.studies.scores import LEVELS, errors_and_sds, interval_holds
 from depthcore.studies.trials import Estimates
 
@@ -344,9 +345,7 @@ def coverage_gap_difference(means, cov, trials, level) -> tuple:
         The difference and its SE.
     """
     means, cov, n = _pair_arrays(means, cov, trials)
-    level = float(level)
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    level = checks.probability(level, "level")
     off = means - level
     gap = np.abs(off[..., 0]) - np.abs(off[..., 1])
     return gap, paired_difference_se(cov, n, (np.sign(off[..., 0]), np.sign(off[..., 1])))

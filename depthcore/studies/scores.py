@@ -462,8 +462,7 @@ def track_loss(lost: int, trials: int, confidence: float = TRACK_LOSS_CONFIDENCE
     n = checks.count(trials, "trials")
     if isinstance(lost, bool) or not isinstance(lost, (int, np.integer)) or not 0 <= lost <= n:
         raise ValueError(f"lost must be an integer from 0 to trials = {n}, got {lost!r}")
-    if not 0 < confidence < 1:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
+    confidence = checks.probability(confidence, "confidence")
     from scipy.stats import beta  # imported here: scipy.stats takes a second to import
 
     p = lost / n
@@ -534,9 +533,7 @@ def anees_region(trials: int, dim: int = 3, level: float = INTERVAL_LEVEL) -> tu
     """
     m = checks.count(trials, "trials")
     dim = checks.count(dim, "dim")
-    level = float(level)
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    level = checks.probability(level, "level")
     from scipy.stats import chi2
 
     lo, hi = chi2.ppf([(1 - level) / 2, (1 + level) / 2], m * dim)
@@ -583,9 +580,8 @@ def trials_for_se(se: float, level: float = 0.68, step: int = 100) -> int:
     -------
     int
     """
-    se, step, level = checks.positive_scalar(se, "se"), checks.count(step, "step"), float(level)
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    se, step = checks.positive_scalar(se, "se"), checks.count(step, "step")
+    level = checks.probability(level, "level")
     n = step * max(1, int(np.ceil(level * (1.0 - level) / se**2 / step)))
     while coverage_se(level, n) > se:  # the rounding of the quotient, at most once
         n += step
@@ -735,10 +731,9 @@ def detectable_shift(se, false_alarm: float = TEST_FALSE_ALARM, power: float = T
     ndarray
         Of the shape of ``se``.
     """
-    for value, name in ((false_alarm, "false_alarm"), (power, "power")):
-        if not 0.0 < float(value) < 1.0:
-            raise ValueError(f"{name} must lie in (0, 1), got {value!r}")
-    z = ndtri(1.0 - float(false_alarm) / 2.0) + ndtri(float(power))
+    false_alarm = checks.probability(false_alarm, "false_alarm")
+    power = checks.probability(power, "power")
+    z = ndtri(1.0 - false_alarm / 2.0) + ndtri(power)
     return z * np.asarray(se, dtype=float)
 
 
@@ -776,9 +771,7 @@ def coverage_test(coverage, level: float, trials, z: float = COVERAGE_Z) -> dict
     coverage = checks.finite_array(coverage, "coverage")
     if np.any((coverage < 0) | (coverage > 1)):
         raise ValueError("coverage must lie in [0, 1]")
-    level = float(level)
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level!r}")
+    level = checks.probability(level, "level")
     trials = checks.finite_array(trials, "trials")
     if np.any(trials < 1):
         raise ValueError("trials must each be at least 1")
