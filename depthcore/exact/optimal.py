@@ -25,13 +25,8 @@ formula (``det M = sum_{i<j} (g_i x g_j)**2``, ``S det M = sum_{i<j<k}
 det[g z]_{ijk}**2``), so neither suffers cancellation near the poles
 ``y = 0, 1, 2`` or at small noise.
 
-The depth marginal is then a one-dimensional integral, done on each of the
-intervals ``(-inf, 0)``, ``(0, 1)``, ``(1, 2)``, ``(2, inf)`` by the trapezoid
-rule of :mod:`depthcore.exact.quadrature` after a change of variable that sends the
-interval to the real line; the step is halved until the moments agree to the
-requested tolerance, and the last change is reported as the error estimate. The velocity marginal is
-the mixture over the same nodes of the Gaussian conditionals of ``v`` given
-``y``.
+The depth marginal is integrated by :mod:`depthcore.exact.quadrature`; the velocity
+marginal is the mixture over the same nodes of the Gaussians of ``v`` given ``y``.
 """
 
 from __future__ import annotations
@@ -78,9 +73,7 @@ def _problem(mu, rho, prior_mean, prior_cov, reading) -> quadrature.Problem:
 
 
 def log_posterior(x, mu, rho: float, prior: Gaussian) -> np.ndarray:
-    """Eq. (6): unnormalised log density of the optimal filter at time 3.
-
-    ``-f(x) / (2 rho**2) + log p(G^{-2} x)``, with ``f`` from Eq. (5).
+    """Eq. (6): ``-f(x) / (2 rho**2) + log p(G^{-2} x)``, ``f`` from Eq. (5), unnormalised.
 
     Parameters
     ----------
@@ -102,13 +95,10 @@ def log_posterior(x, mu, rho: float, prior: Gaussian) -> np.ndarray:
 
 
 def _terms(offsets, pb: quadrature.Problem):
-    """The six linear terms ``g_i . u - z_i`` of Eq. (6) at fixed depths.
+    """The six terms ``g_i . u - z_i`` of Eq. (6) at ``offsets`` (B, n, 3): ``gx, gv, z`` (6, B, n).
 
-    ``offsets`` has shape (B, n, 3): ``(y, y - 1, y - 2)``. Returns ``gx``,
-    ``gv`` and ``z``, each of shape (6, B, n): rows 0-2 are the measurement
-    terms at times 3, 2, 1 (``((x - k v) / (y - k) - mu_{3-k}) / rho`` for
-    ``k = 0, 1, 2``), rows 3-5 the prior's argument ``G^{-2} x - m``
-    whitened by ``R``.
+    Rows 0-2: ``((x - k v) / (y - k) - mu_{3-k}) / rho``, ``k = 0, 1, 2``; rows 3-5:
+    ``R (G^{-2} x - m)``.
     """
     B, n, _ = offsets.shape
     s = np.moveaxis(offsets, -1, 0) * pb.rho[:, None]
@@ -134,21 +124,12 @@ _MEAS_PAIRS = ((0, 1), (0, 2), (1, 2))
 
 
 def _solve(offsets, pb: quadrature.Problem):
-    """Log depth marginal and the Gaussian of ``(x, v)`` given ``y``, batched.
+    """The integrand of :class:`~depthcore.exact.quadrature.Problem` for Eq. (6), batched.
 
-    ``offsets`` has shape (B, n, 3): ``(y, y - 1, y - 2)``. Returns
-    ``log_density`` (B, n), ``mean`` (2, B, n) and the covariance entries
-    ``(cxx, cxv, cvv)``, each (B, n).
-
-    The six terms of :func:`_terms` have a structure that the Cauchy-Binet
-    sums exploit: measurement row ``k`` is ``g = s_k (1, -k)``, ``z = w_k``
-    with ``s_k = 1 / ((y - k) rho)`` and ``w_k = mu_{3-k} / rho``; prior row
-    ``j`` is ``g = q_j`` (constant), ``z = zeta_j = alpha_j - beta_j (y - 2)``.
-    So every 2 x 2 minor of ``g`` is ``s_k s_l (k - l)``, ``s_k K_kj`` with
-    ``K_kj = q_jv + k q_jx``, or a constant ``P_jj'``; every 3 x 3 minor of
-    ``[g z]`` expands along ``z`` into those. ``det M`` is the sum of the
-    squared 2 x 2 minors, ``S det M`` that of the squared 3 x 3 minors, and
-    the conditional mean follows by Cramer's rule.
+    Cauchy-Binet (module docstring) on the rows of :func:`_terms`: measurement row
+    ``k`` is ``g = s_k (1, -k)``, ``z = w_k``; prior row ``j`` is ``g = q_j``,
+    ``z = zeta_j``. The 2 x 2 minors are ``s_k s_l (k - l)``, ``s_k K_kj`` or ``P_jj'``;
+    the mean follows by Cramer's rule.
     """
     rho = pb.rho[:, None]
     s = [1.0 / (offsets[..., k] * rho) for k in range(3)]
@@ -218,21 +199,10 @@ def _solve(offsets, pb: quadrature.Problem):
 
 
 def quadratic_coefficients(y, mu, rho: float, prior: Gaussian) -> np.ndarray:
-    """Eq. (14): the coefficients ``A, B, C, D, E`` of ``p_o`` at fixed depths.
+    """Eq. (14): ``log p_o = -1/2 (A x**2 + B x v + C v**2 + D x + E v) + terms in y only``.
 
-    ``log p_o = -1/2 (A x**2 + B x v + C v**2 + D x + E v) + terms in y only``.
-
-    Parameters
-    ----------
-    y : array_like, shape (n,)
-    mu, rho, prior
-        As in :func:`log_posterior`.
-
-    Returns
-    -------
-    ndarray, shape (n, 5)
-        Columns ``A, B, C, D, E``; ``M = [[A, B/2], [B/2, C]]`` and ``l = (D, E)``
-        of Eq. (15).
+    ``y`` is (n,), ``mu, rho, prior`` as in :func:`log_posterior`. Returns (n, 5), columns
+    ``A .. E``; ``M = [[A, B/2], [B/2, C]]`` and ``l = (D, E)`` of Eq. (15).
     """
     y = np.atleast_1d(np.asarray(y, dtype=float))
     pb = _problem(model.measurements(mu), rho, prior.mean, prior.cov, "derived")
@@ -257,11 +227,10 @@ def conditional(y, mu, rho: float, prior: Gaussian, reading: str = "derived"):
     Returns
     -------
     log_density : ndarray, shape (n,)
-        Unnormalised ``log p_oy(y)`` (the Gaussian integral's ``2 pi`` dropped).
+        Unnormalised ``log p_oy(y)``.
     mean : ndarray, shape (n, 2)
-        ``E[(x, v) | y]``.
     cov : ndarray, shape (n, 2, 2)
-        ``Cov[(x, v) | y] = M^{-1}``.
+        ``E[(x, v) | y]`` and ``Cov[(x, v) | y] = M^{-1}``.
     """
     y = np.atleast_1d(checks.finite_array(y, "y"))
     if np.any(np.isin(y, (0.0, 1.0, 2.0))):
@@ -288,9 +257,8 @@ def moments(
     {parameters}
     reading : {"derived", "printed"}
     support : {"front", "all"}
-        See :func:`run`.
     rtol : float
-        Target accuracy of each mean and SD, relative to the SD.
+        See :func:`run`.
     chunk : int
         Problems integrated together (memory grows with it).
 
@@ -325,18 +293,9 @@ def _fine_velocity_mixture(
 ):
     """The velocity mixture on nodes close enough for a smooth curve, batched.
 
-    Given the depth, the velocity is Gaussian with SD ``s_v(y)``, which at
-    small noise is far narrower than the spacing of the conditional means
-    ``vbar(y_j)`` at the moment quadrature's nodes: summed there, the mixture
-    ``sum_j w_j N(v, vbar_j, s_v_j**2)`` ripples although its moments are
-    right. Starting from those nodes, each problem's step in ``t`` is halved
-    until its neighbouring nodes with weight above 1e-14 have means within
-    half an SD, where the ripple is below 1e-30 of the density. Each problem
-    is refined on its own, so its nodes do not depend on the rest of the
-    batch, and a halving evaluates only the new midpoints.
-
-    Returns normalised weights, means and SDs, each of shape (B, n) (the
-    rows padded with zero weights).
+    At small noise ``s_v(y)`` is far narrower than the spacing of the means at the
+    moment nodes, so each problem's step is halved until neighbouring nodes of weight
+    above 1e-14 have means within half an SD. Returns weights, means and SDs (B, n).
     """
     B = len(log_normaliser)
     weights, means, sds = [], [], []
@@ -382,10 +341,7 @@ def _fine_velocity_mixture(
 def _velocity_nodes(
     interval: int, u, frame: quadrature.Frame, pb: quadrature.Problem, log_normaliser
 ):
-    """Depth weights (per unit ``u``), conditional velocity means and SDs at nodes ``u`` (B, n).
-
-    NaN nodes (padding) get weight 0, mean 0 and SD 1.
-    """
+    """Depth weights, velocity means and SDs at nodes ``u`` (B, n); NaN nodes weigh 0."""
     skip = np.isnan(u)
     offsets, log_jac = quadrature.mapped_nodes(interval, np.where(skip, 0.0, u), frame)
     log_density, mean, (_, _, cvv) = _solve(offsets, pb)
@@ -403,26 +359,21 @@ def _interleave(a, b):
 
 @dataclass(frozen=True)
 class OptimalMarginals:
-    """The optimal filter's depth and velocity marginals, Eqs. (13)-(16).
-
-    Built by :func:`run` (one triple).
+    """The optimal filter's depth and velocity marginals of one triple, Eqs. (13)-(16).
 
     Attributes
     ----------
     depth_mean, depth_sd, velocity_mean, velocity_sd : float
     depth_error, velocity_error : float
-        Absolute error estimates of the means and SDs
-        (see :class:`~depthcore.exact.mixture.Moments`).
+        See :class:`~depthcore.exact.mixture.Moments`.
     prob_behind_camera : float
         Posterior probability that the depth at the first frame is not positive.
     log_normaliser : float
-        ``log`` of the integral of the unnormalised depth marginal of :func:`conditional`.
+        ``log`` of the integral of :func:`conditional`'s depth marginal.
     n_nodes : int
-        Number of quadrature nodes used.
     mean : ndarray, shape (3,)
-        Posterior mean of ``(x, y, v)`` at time 3.
     cov : ndarray, shape (3, 3)
-        Posterior covariance of ``(x, y, v)`` at time 3.
+        Posterior mean and covariance of ``(x, y, v)`` at time 3.
     """
 
     mu: np.ndarray
@@ -446,18 +397,11 @@ class OptimalMarginals:
 
     @property
     def updates(self) -> predictive.Updates:
-        """Each bearing's log predictive density and tail probability, shape (3,) each.
-
-        Those of the exact filter fed the bearings one at a time
-        (:func:`depthcore.exact.online.updates`, computed when first read).
-        """
+        """Per bearing: :func:`~depthcore.exact.online.updates`, shape (3,) each."""
         return online.updates(self.mu, self.rho, self.prior.mean, self.prior.cov)
 
     def depth_pdf(self, y) -> np.ndarray:
-        """Normalised depth marginal ``p_oy`` at depths ``y`` (any shape).
-
-        Zero at the poles ``y = 0, 1, 2`` and, for ``support="front"``, at ``y <= 2``.
-        """
+        """Normalised ``p_oy`` at ``y`` (any shape); zero at the poles and outside the support."""
         y = np.asarray(y, dtype=float)
         flat = y.ravel()
         outside = np.isin(flat, (0.0, 1.0, 2.0))
@@ -469,12 +413,7 @@ class OptimalMarginals:
         return pdf.reshape(y.shape)
 
     def velocity_pdf(self, v) -> np.ndarray:
-        """Normalised velocity marginal ``p_ov`` at velocities ``v`` (any shape).
-
-        The mixture over depths ``y_j`` of the Gaussian conditionals of ``v``
-        given ``y``, weighted by the depth marginal, on nodes fine enough for a
-        smooth curve (see :func:`_fine_velocity_mixture`).
-        """
+        """Normalised ``p_ov`` at ``v`` (any shape), on :func:`_fine_velocity_mixture`'s nodes."""
         v = np.asarray(v, dtype=float)
         w, m, sd = (
             a[0]
@@ -507,11 +446,8 @@ def run(
 ):
     """The optimal filter, Eqs. (6), (13)-(16), of one sequence or a batch: the exact filter's door.
 
-    For the paper's three frames without process noise, the one-dimensional
-    quadrature of Eqs. (14)-(16) (:class:`OptimalMarginals`,
-    :func:`batch_marginals`, :func:`moments`); for more frames or with process noise, the bank of
-    Kalman filters over depth nodes placed by the same quadrature
-    (:func:`depthcore.exact.posterior.posterior`).
+    Three frames without process noise: the quadrature of Eqs. (14)-(16); otherwise the
+    bank of :func:`depthcore.exact.posterior.posterior`.
 
     {parameters}
     reading : {"derived", "printed"}
@@ -528,14 +464,12 @@ def run(
     Returns
     -------
     OptimalMarginals, BatchMarginals, Moments or Mixture
-        One triple: its :class:`OptimalMarginals`; a batch of triples: the
-        :class:`BatchMarginals` (derived reading, front support) or the
-        :class:`~depthcore.exact.mixture.Moments`; more frames, process noise, a
-        track with gaps, noise per frame or steps, or a gate: the
-        :class:`~depthcore.exact.mixture.Mixture`, whose ``updates`` is the
-        per-frame report of a run with a gate (``None`` without one: the report
-        replays the track frame by frame, which the estimate does not need;
-        :meth:`~depthcore.exact.mixture.Mixture.report` computes it on request).
+        One triple: :class:`OptimalMarginals`; a batch of triples:
+        :class:`BatchMarginals` (derived, front) or
+        :class:`~depthcore.exact.mixture.Moments`; otherwise the
+        :class:`~depthcore.exact.mixture.Mixture`, whose ``updates`` is the gate's
+        report (``None`` without a gate: see its
+        :meth:`~depthcore.exact.mixture.Mixture.report`).
     """
     gate = predictive.gate(gate)
     if gate is not None:
@@ -566,13 +500,7 @@ def run(
 
 
 def _gated(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps, gate):
-    """The bank on the track with the bearings the gate skips set missing, and the report.
-
-    The gate is applied frame by frame by the online filter
-    (:func:`depthcore.exact.online.track_updates`): a bearing is skipped when
-    its tail probability under the predictive given the bearings kept before it
-    is below the gate; the posterior is then the bank's on the bearings kept.
-    """
+    """Bank and report on the bearings :func:`~depthcore.exact.online.track_updates` keeps."""
     post = posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps=steps)
     report = online.track_updates(post.bank, gate, rtol)
     if np.any(report.gated):
@@ -602,30 +530,7 @@ def _triple(
     support: str = "front",
     rtol: float = 1e-10,
 ) -> OptimalMarginals:
-    """Eqs. (13)-(16): the optimal depth and velocity marginals and their moments.
-
-    Parameters
-    ----------
-    mu : array_like, shape (3,)
-        Measurements; checked by :func:`depthcore.problem.model.measurements`.
-    rho : float
-        Noise standard deviation, > 0.
-    prior : Gaussian
-        Density of the state at time 1.
-    reading : {"derived", "printed"}
-        ``"printed"`` drops the y-dependent factor that Eq. (16) calls constant.
-    support : {"front", "all"}
-        ``"front"`` (default) conditions on the point being in front of the
-        camera at every frame (``y > 2``), as a camera that sees the point
-        implies; ``"all"`` integrates Eq. (6) over every depth, behind the
-        camera too, and reports that mass as ``prob_behind_camera``.
-    rtol : float
-        Target accuracy of each mean and SD, relative to the SD.
-
-    Returns
-    -------
-    OptimalMarginals
-    """
+    """Eqs. (13)-(16) for one triple ``mu`` (3,): :func:`run`'s :class:`OptimalMarginals`."""
     mu = model.measurements(mu)
     pb = _problem(mu, rho, prior.mean, prior.cov, reading)
     rtol = checks.positive_scalar(rtol, "rtol")
@@ -656,11 +561,7 @@ def _triple(
 
 @dataclass(frozen=True)
 class BatchMarginals:
-    """Optimal depth and velocity marginals for a batch of ``B`` problems (``y > 2``).
-
-    Built by :func:`batch_marginals`; used for Monte Carlo studies, where each
-    trial needs more than moments: the marginal CDFs at the truth and the
-    depth density.
+    """Optimal marginals of ``B`` problems (``y > 2``) with their CDFs and depth density.
 
     Attributes
     ----------
@@ -669,10 +570,9 @@ class BatchMarginals:
     rtol : float
         The tolerance of the moments and of :meth:`depth_cdf`.
     log_depth_range : tuple of ndarray
-        The lower and upper ends (B,) of the quadrature's range in ``t = log(y - 2)``,
-        and a panel width (B,) in its variable ``u``.
+        Lower and upper ends (B,) of the range in ``t = log(y - 2)``, and a panel width (B,).
     prior : tuple of ndarray
-        The prior's mean (3,) or (B, 3) and covariance (3, 3) or (B, 3, 3), as given.
+        Mean (3,) or (B, 3) and covariance (3, 3) or (B, 3, 3), as given.
     """
 
     moments: Moments
@@ -685,11 +585,7 @@ class BatchMarginals:
 
     @property
     def updates(self) -> predictive.Updates:
-        """Each bearing's log predictive density and tail probability, shape (B, 3) each.
-
-        Those of the exact filter fed the bearings one at a time
-        (:func:`depthcore.exact.online.updates`, computed when first read).
-        """
+        """Per bearing: :func:`~depthcore.exact.online.updates`, shape (B, 3) each."""
         mean, cov = self.prior
         return online.updates(self._problem.mu, self._problem.rho, mean, cov)
 
@@ -702,13 +598,7 @@ class BatchMarginals:
         return np.where(inside, log_density - self.log_normaliser[:, None], -np.inf)
 
     def depth_cdf(self, y) -> np.ndarray:
-        """``P(depth <= y)`` for one depth per problem, ``y`` of shape (B,).
-
-        Integrated afresh from the lower end of the quadrature range up to
-        ``y`` by composite 8-point Gauss-Legendre panels in ``t = log(y - 2)``,
-        doubling the panels until the mass changes by at most ``rtol``
-        (:func:`depthcore.exact.cdf.gauss_legendre_cdf`).
-        """
+        """``P(depth <= y)``, ``y`` (B,), by :func:`depthcore.exact.cdf.gauss_legendre_cdf`."""
         y = checks.finite_array(y, "y")
         lo, h, _, frame = self._grids[3]
         step = 2.0 * h
@@ -736,11 +626,7 @@ class BatchMarginals:
         return np.where(inside, np.clip(cdf, 0.0, 1.0), 0.0)
 
     def velocity_cdf(self, v) -> np.ndarray:
-        """``P(velocity <= v)`` for one velocity per problem, ``v`` of shape (B,).
-
-        The mixture over depths of the Gaussian CDFs of ``v`` given ``y``, on
-        the nodes of :func:`_fine_velocity_mixture`.
-        """
+        """``P(velocity <= v)``, ``v`` (B,), on :func:`_fine_velocity_mixture`'s nodes."""
         from scipy.special import ndtr
 
         v = checks.finite_array(v, "v")
@@ -749,12 +635,7 @@ class BatchMarginals:
 
 
 def batch_marginals(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> BatchMarginals:
-    """Eqs. (13)-(16) for a batch, keeping what CDFs and densities need.
-
-    Parameters are as for :func:`moments` (``reading="derived"``,
-    ``support="front"``). Memory grows with ``B`` times the number of nodes
-    (a few hundred): split very large batches.
-    """
+    """Eqs. (13)-(16) for a batch, as :func:`moments` (derived, front); memory grows with ``B``."""
     pb = _problem(mu, rho, prior_mean, prior_cov, "derived")
     rtol = checks.positive_scalar(rtol, "rtol")
     m, err_y, err_v, top, grids = quadrature.integrate(pb, (3,), rtol)
@@ -773,16 +654,7 @@ def batch_marginals(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> Batc
 def eq16_printed(coefficients) -> np.ndarray:
     """Eq. (16) as printed: ``log(exp(l^T M^{-1} l / 8) / sqrt(det M))`` from ``A .. E``.
 
-    Parameters
-    ----------
-    coefficients : array_like, shape (n, 5)
-        Columns ``A, B, C, D, E`` of Eq. (14) at ``n`` depths
-        (:func:`depthcore.exact.optimal.quadratic_coefficients`).
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        The log of the printed ``p_oy`` without its constant ``c``.
+    ``coefficients`` (n, 5) are :func:`quadratic_coefficients`'s; returns (n,), without ``c``.
     """
     A, B, C, D, E = np.asarray(coefficients, dtype=float).T
     det_M = A * C - B**2 / 4.0  # Eq. (15): M = [[A, B/2], [B/2, C]]
@@ -794,20 +666,8 @@ def eq16_printed(coefficients) -> np.ndarray:
 def prior_exponent(y, mu, rho: float, prior: Gaussian) -> np.ndarray:
     """``K(y)``: the part of the exponent of (6) at depth ``y`` free of ``x`` and ``v``.
 
-    At fixed ``y`` the log posterior (6) is
-    ``-1/2 (A x**2 + B x v + C v**2 + D x + E v) - 1/2 K(y)`` up to a constant;
-    ``K(y)`` is minus twice its value at ``x = v = 0``. Eq. (14) leaves it out.
-
-    Parameters
-    ----------
-    y : array_like, shape (n,)
-    mu, rho, prior
-        As in :func:`depthcore.exact.optimal.log_posterior`.
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        ``K(y)``, up to an additive constant.
+    (6) is ``-1/2 (A x**2 + B x v + C v**2 + D x + E v) - 1/2 K(y)`` + const; Eq. (14)
+    leaves ``K`` out. ``y`` (n,), the rest as in :func:`log_posterior`; returns (n,).
     """
     y = np.atleast_1d(checks.finite_array(y, "y"))
     x = np.stack([np.zeros_like(y), y, np.zeros_like(y)], -1)
@@ -817,22 +677,8 @@ def prior_exponent(y, mu, rho: float, prior: Gaussian) -> np.ndarray:
 def depth_quantiles(m: OptimalMarginals, probs, n: int = 20001) -> np.ndarray:
     """Quantiles of the optimal depth marginal ``p_oy`` (support ``y > 2``).
 
-    The cumulative distribution is the trapezoid rule on a grid uniform in
-    ``t = log(y - 2)`` from ``y - 2 = 1e-4`` to ``50 * (E y + 10 sd)``,
-    inverted by linear interpolation.
-
-    Parameters
-    ----------
-    m : OptimalMarginals
-        From :func:`depthcore.exact.optimal.run` with ``support="front"``.
-    probs : array_like
-        Probabilities in (0, 1).
-    n : int
-        Grid points.
-
-    Returns
-    -------
-    ndarray, shape of ``probs``
+    The trapezoid CDF on ``n`` points uniform in ``t = log(y - 2)`` from ``1e-4`` to
+    ``50 (E y + 10 sd)``, inverted linearly at ``probs`` in (0, 1) (same shape out).
     """
     if m.support != "front":
         raise ValueError(f"depth_quantiles needs support='front', got {m.support!r}")

@@ -66,18 +66,10 @@ def irregular(mu, rho, steps) -> bool:
 
 
 def frames_problem(track: frames.Frames, prior_mean, prior_cov, process_noise):
-    """A checked track (:func:`depthcore.problem.frames.check`) as a quadrature Problem.
+    """A checked track (:func:`depthcore.problem.frames.check`) as ``B`` quadrature problems.
 
-    Steps all ones become ``None`` and noise equal at every frame of every row
-    becomes ``rho`` per row, so that the paper's frames take the paper's
-    arithmetic.
-
-    Returns
-    -------
-    depthcore.exact.quadrature.Problem
-        ``B`` problems (the track's batch flattened).
-    batch : tuple
-        The track's batch shape.
+    Unit steps become ``None`` and equal noise ``rho`` per row. Returns the
+    :class:`depthcore.exact.quadrature.Problem` and the track's batch shape.
     """
     mu = track.mu
     if mu.shape[-1] > MAX_FRAMES:
@@ -136,9 +128,7 @@ def _integrand(offsets, pb):
 def _integrate(pb, rtol: float):
     """The quadrature of :mod:`depthcore.exact.quadrature` on ``y_1 > 0``, moments of ``y_N``.
 
-    The quadrature reports the depth as ``y_1 + 2`` (its variable is
-    ``t = log(y_1)``, as for the paper's three frames); the depth at frame
-    ``N`` is ``y_1 + N - 1``.
+    The quadrature reports the depth as ``y_1 + 2``; at frame ``N`` it is ``y_1 + N - 1``.
     """
     m, err_y, err_v, top, grids = quadrature.integrate(pb, (3,), rtol)
     mean = m.mean.copy()
@@ -163,13 +153,8 @@ def moments(
 ) -> Moments:
     """The exact posterior moments at frame ``N``, with the depth nodes placed by quadrature.
 
-    The depth at frame 1 is integrated by the quadrature of
-    :func:`depthcore.exact.optimal.moments` (nodes about the posterior's own mode
-    and width in ``t = log(y_1)``, the step halved until the moments settle,
-    a node budget, a roundoff floor on the error estimate), with the
-    integrand ``N(y_1; m_y, P_yy) L(y_1)`` and the Gaussian of ``(x_N, v_N)``
-    given ``y_1`` from the Kalman filter at each node
-    (:func:`~depthcore.exact.bank.lateral_filter`).
+    :mod:`depthcore.exact.quadrature` of ``N(y_1; m_y, P_yy) L(y_1)`` in ``t = log(y_1)``,
+    with :func:`~depthcore.exact.bank.lateral_filter` at each node.
 
     {parameters}
     rtol, chunk
@@ -178,14 +163,12 @@ def moments(
     Returns
     -------
     depthcore.exact.mixture.Moments
-        Arrays of shape (B,) (``(1,)`` for one problem), for the state at frame
-        ``N``; ``prob_behind_camera`` is 0 (the support is ``y_1 > 0``).
+        Arrays of shape (B,) (``(1,)`` for one problem) at frame ``N``.
 
     Raises
     ------
     ValueError
-        For invalid inputs, naming the argument, or when the tolerance is out
-        of reach within the quadrature's node budget, naming the problem.
+        For invalid inputs or a tolerance out of reach.
     """
     mu2 = np.atleast_2d(mu) if np.ndim(mu) == 1 else mu
     rho2 = np.atleast_2d(rho) if np.ndim(mu) == 1 and np.shape(rho) == np.shape(mu) else rho
@@ -204,9 +187,7 @@ def moments(
 def _grid_nodes(grid):
     """Depths at frame 1 (B, J) and log quadrature weights (B, J) of a quadrature grid.
 
-    ``grid = (lo, h, n, frame)`` holds the trapezoid nodes ``u_j = lo + h j``,
-    ``j < n``, of each problem in the quadrature's variable ``u``, with
-    ``t = log(y_1)`` a function of ``u`` (:class:`depthcore.exact.quadrature.Frame`);
+    ``grid = (lo, h, n, frame)`` as :func:`depthcore.exact.quadrature.integrate`'s;
     ``dy_1 = y_1 (dt/du) du``. Rows with fewer nodes are padded with weight 0.
     """
     lo, h, n, frame = grid
@@ -230,9 +211,8 @@ def posterior(
 ) -> Mixture:
     """The exact posterior at frame ``N`` as a bank on nodes placed by the depth quadrature.
 
-    The nodes and weights are the last trapezoid level of :func:`moments`'s
-    quadrature, so the mixture's moments are those moments (to roundoff) and
-    carry their error estimates. :func:`update` adds frames online.
+    The nodes are the last level of :func:`moments`'s quadrature, so the mixture's
+    moments are those and carry their error estimates.
 
     Parameters
     ----------
@@ -243,10 +223,8 @@ def posterior(
         Keep each node's filter at every frame (for
         :meth:`~depthcore.exact.mixture.Mixture.smoothed`).
     steps : array_like, shape (N - 1,) or (B, N - 1), or None
-        The depth's change between frames (:func:`depthcore.problem.frames.check`);
-        with ``steps``, ``NaN`` bearings (missing frames) or ``rho`` per frame
-        (shape ``mu``'s) the track is checked by
-        :func:`depthcore.problem.frames.check` (at least three bearings present).
+        With steps, ``NaN`` bearings or ``rho`` per frame the track is checked by
+        :func:`depthcore.problem.frames.check`.
 
     Returns
     -------
@@ -294,9 +272,7 @@ def _place(pb, rtol, history, single):
 def _concatenate(parts) -> Mixture:
     """Batches of placed posteriors joined along the batch, their nodes padded to one count.
 
-    A padded node has quadrature weight 0 (log weight ``-inf``) and probability
-    0, so each problem's mixture is unchanged: its fields are joined, not
-    recomputed.
+    A padded node has weight 0, so the fields are joined, not recomputed.
     """
     J = max(p.log_weights.shape[-1] for p in parts)
     banks = [p.bank for p in parts]
@@ -374,21 +350,9 @@ def _squeeze(post: Mixture) -> Mixture:
 def _resolution(post: Mixture, halved_mean, halved_cov, top):
     """The error of the moments on the placed nodes and its roundoff floor, each (2, B).
 
-    The nodes of :func:`posterior` are a trapezoid grid in order; dropping
-    every other one (doubling the weights of the rest, ``_halving``)
-    doubles the step, and the change of the depth's and the velocity's mean
-    and SD estimates the error, as the quadrature's own halvings do
-    (:func:`depthcore.exact.quadrature.halving_error`, floored by roundoff).
-
-    Parameters
-    ----------
-    post : Mixture
-    halved_mean : ndarray, shape (B, 3)
-    halved_cov : ndarray, shape (B, 3, 3)
-        The mixture's moments on every other node.
-    top : ndarray, shape (B, 1)
-        The largest log probability of a node, up to the constant of ``post``'s
-        log weights.
+    The moments on every other node (``halved_mean`` (B, 3), ``halved_cov`` (B, 3, 3))
+    against all, as :func:`depthcore.exact.quadrature.halving_error`; ``top`` (B, 1) is
+    the largest log probability of a node.
     """
     eps = np.finfo(float).eps
     floors = []
@@ -402,10 +366,7 @@ def _resolution(post: Mixture, halved_mean, halved_cov, top):
 
 
 def _pad(a, J: int, axis: int, value):
-    """``a`` padded with ``value`` along ``axis`` (counted from the end of the batch) to ``J``.
-
-    ``a`` itself, not a copy, when it has ``J`` already.
-    """
+    """``a`` padded with ``value`` along ``axis`` (from the batch's end) to ``J``, or ``a``."""
     if a.shape[axis] == J:
         return a
     width = [(0, 0)] * a.ndim
@@ -413,38 +374,24 @@ def _pad(a, J: int, axis: int, value):
     return np.pad(a, width, constant_values=value)
 
 
-#: A node holding this much of the probability or more does not resolve the posterior
-#: (a step of h carries about h / (2.5 sd) of a Gaussian's mass; the quadrature's
-#: tolerances need h well below the SD).
+#: A node holding this much of the probability or more does not resolve the posterior.
 _ONE_NODE = 0.5
 
 
 def update(post: Mixture, mu_next, rho=None, step=1.0, gaps: bool = False) -> Mixture:
     """Add frame ``N + 1`` to a posterior from :func:`posterior`, online.
 
-    Every node's Kalman filter and weight is updated (:func:`~depthcore.exact.bank.step`); nothing
-    earlier is recomputed while the nodes still resolve the posterior to the
-    tolerance they were placed for (:func:`_resolution`: the moments on every
-    other node agree with those on all nodes, and the end nodes carry
-    negligible probability). As the bearings accumulate, the posterior
-    narrows, and a problem whose nodes no longer resolve it has them
-    re-placed by the quadrature from all ``N + 1`` bearings (cost ``O(N)``
-    for that problem, the others untouched). Since the posterior's width
-    shrinks geometrically in the number of re-placements, they are rare and
-    the cost per frame stays flat on average.
+    Every node's filter and weight is updated (:func:`~depthcore.exact.bank.step`);
+    a problem whose nodes no longer resolve the posterior (:func:`_resolution`) has
+    them re-placed from all ``N + 1`` bearings, rarely, so the cost per frame stays flat.
 
     Parameters
     ----------
     post : Mixture
-        After ``N`` frames, from :func:`posterior` or :func:`update`.
+        From :func:`posterior` or :func:`update`.
     mu_next : float or array_like, shape (B,)
-        The bearing at frame ``N + 1``, one per problem.
-    rho : float or None
-        Its noise SD (``None``: the posterior's; see :func:`depthcore.exact.bank.step`).
-    step : float
-        The depth's change from frame ``N``, > 0.
-    gaps : bool
-        Whether a ``NaN`` bearing is a missing frame (else refused).
+    rho, step, gaps
+        As for :func:`depthcore.exact.bank.step`.
 
     Returns
     -------
@@ -477,9 +424,7 @@ def update(post: Mixture, mu_next, rho=None, step=1.0, gaps: bool = False) -> Mi
         free
         & (err[0] <= np.maximum(rtol * new.depth_sd, floor[0]))
         & (err[1] <= np.maximum(rtol * new.velocity_sd, floor[1]))
-        # a posterior that has narrowed below the nodes' step sits on one node, whose
-        # moments every other node reproduces when it is among them: a trapezoid rule
-        # that resolves a density puts well under half its mass on any one node
+        # a posterior narrower than the step sits on one node
         & (np.max(new.probabilities, axis=-1) < _ONE_NODE)
     )
     new = dataclasses.replace(new, depth_error=err[0], velocity_error=err[1], rtol=rtol)
@@ -500,30 +445,11 @@ def _row_blocks(rows: int, nodes: int) -> list:
 
 
 def _step_rows(post: Mixture, mu_next, frame=None):
-    """:func:`~depthcore.exact.bank.step`, :func:`~depthcore.exact.mixture.mixture_of_log_weights`
-    and
-    :func:`_resolution`, block by block.
+    """:func:`~depthcore.exact.bank.step`, the mixture and :func:`_resolution`, block by block.
 
-    Each pass is elementwise or a sum over the nodes within a problem, so a
-    block of problems at a time gives the same numbers as the whole batch at
-    once, while the block's temporaries stay in the processor's cache instead
-    of being allocated (and written) at the batch's full size.
-
-    Parameters
-    ----------
-    post : Mixture
-        Batch shape (B,).
-    mu_next : ndarray, shape (B,)
-    frame : dict or None
-        :func:`update`'s ``rho``, ``step`` and ``gaps`` (each a number or (B,)).
-
-    Returns
-    -------
-    new : Mixture
-        After ``N + 1`` frames, without error estimates.
-    err, floor : ndarray, shape (2, B)
-    free : ndarray of bool, shape (B,)
-        As ``_halving``.
+    The same numbers as the whole batch, with the temporaries in cache. ``post`` (B,),
+    ``mu_next`` (B,), ``frame`` :func:`update`'s ``rho, step, gaps`` or ``None``.
+    Returns the mixture (no error estimates), ``err, floor`` (2, B) and ``free`` (B,).
     """
     B, J = post.log_weights.shape
     # the history grows along the frames, not by blocks: one block
@@ -572,9 +498,7 @@ def _frame_rows(frame, rows) -> dict:
 def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
     """``post`` with the problems at ``rows`` (B,) re-placed by the quadrature.
 
-    With ``own``, the arrays of the nodes' means, covariances, log weights and
-    probabilities belong to ``post`` alone and are overwritten where they keep
-    their shape (saving a copy of each); ``post``'s other arrays are not.
+    With ``own``, ``post``'s node arrays are overwritten where they keep their shape.
     """
     b = post.bank
     idx = np.flatnonzero(rows)
@@ -644,22 +568,9 @@ def _batch_of_one(post: Mixture) -> Mixture:
 def node_density(post: Mixture):
     """The posterior density of the depth at frame ``N`` at each of the bank's nodes.
 
-    A node's probability is ``p_j = eta_j N(y_j; m_y, P_yy) L(y_j) / Z`` with its
-    quadrature weight ``eta_j`` (``Mixture.log_weights``) and the normaliser
-    ``Z`` (``Mixture.log_normaliser``), so ``p_j / eta_j`` is the normalised
-    density of the depth at frame 1 at ``y_j``; the depth at frame ``N`` is
-    ``y_j + N - 1`` with the same density (a shift).
-
-    Parameters
-    ----------
-    post : Mixture
-
-    Returns
-    -------
-    depths : ndarray, shape (..., J)
-        ``y_j + N - 1``, the nodes as depths at frame ``N``.
-    density : ndarray, shape (..., J)
-        ``p(y_N = y_j + N - 1 | mu_1 .. mu_N)``; 0 at padding nodes (weight 0).
+    ``p_j / eta_j`` with ``p_j`` the node's probability and ``eta_j`` its quadrature
+    weight. Returns ``depths`` ``y_j + N - 1`` and the ``density`` there, (..., J) each
+    (0 at padding).
     """
     if not isinstance(post, Mixture):
         raise ValueError(f"post must be a Mixture, got {type(post).__name__}")

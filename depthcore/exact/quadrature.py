@@ -2,18 +2,12 @@
 
 Recommended import: ``from depthcore.exact import quadrature``.
 
-The optimal filter's marginals (:mod:`depthcore.exact.optimal`, Eqs. (13)-(16)) and
-the exact filter for any number of frames (:mod:`depthcore.exact.bank`) both reduce
-to one-dimensional integrals over the depth of an integrand that, at each
-depth, returns a log density and the Gaussian of ``(x, v)`` given the depth.
-This module integrates such an integrand (a :class:`Problem`) on each of the
-intervals ``(-inf, 0)``, ``(0, 1)``, ``(1, 2)``, ``(2, inf)`` between the
-poles of the paper's three frames, by the trapezoid rule after a change of
-variable that sends the interval to the real line (``t = log(y - 2)`` on
-``y > 2``), in a frame about the integrand's own mode and width
-(:class:`Frame`). The step is halved until the moments agree to the
-requested tolerance, and the last change, floored by roundoff, is the error
-estimate (:func:`halving_error`). A density's CDF over such a range is
+The marginals of :mod:`depthcore.exact.optimal` (Eqs. (13)-(16)) and
+:mod:`depthcore.exact.bank` are integrals over the depth of an integrand (a
+:class:`Problem`). Each interval ``(-inf, 0)``, ``(0, 1)``, ``(1, 2)``, ``(2, inf)``
+between the poles is sent to the real line (``t = log(y - 2)`` on ``y > 2``) and
+integrated by the trapezoid rule about the integrand's mode (:class:`Frame`), halving
+the step until the moments agree (:func:`halving_error`). A CDF over such a range is
 :func:`depthcore.exact.cdf.gauss_legendre_cdf`'s.
 """
 
@@ -29,59 +23,38 @@ from depthcore.kalman.second_order import second_order_batch
 from depthcore.problem import model
 from depthcore.problem.model import noise_free_states
 
-#: Nodes whose log integrand is this far below the maximum are cut off (e^-60 ~ 1e-26).
+#: Log integrand cut off this far below the maximum (e^-60 ~ 1e-26).
 CUTOFF = 60.0
 #: The intervals (k, k + 1) are mapped from t in [-_T_MAX, _T_MAX].
 _T_MAX = 60.0
 _SCAN_STEP = 1.0
-#: Starting step of the quadrature in its standardised variable ``u`` (see :class:`Frame`).
+#: Starting step in ``u`` (:class:`Frame`).
 _U_STEP = 0.5
-#: Most nodes of one interval for one problem; beyond it the tolerance is declared out of reach.
+#: Most nodes of one interval for one problem.
 NODE_BUDGET = 4097
-#: Widths of the mode within which the quadrature's variable is linear in ``t``
-#: (see :class:`Frame`).
+#: Widths of the mode within which ``u`` is linear in ``t`` (:class:`Frame`).
 _CORE = 4.0
 #: Newton steps locating the mode of the depth integrand.
 _NEWTON_STEPS = 8
-#: Most damped Newton steps from the scan alone (problems without the second-order
-#: start, :func:`_newton`).
+#: Most damped Newton steps from the scan alone (:func:`_newton`).
 _SCAN_NEWTON_STEPS = 30
 
 
 class Problem(NamedTuple):
     """A batch of ``B`` problems: measurements, noise, prior (whitened) and the integrand.
 
-    ``integrand(offsets, problem)``, for depths with offsets ``(y, y - 1,
-    y - 2)`` of shape (B, n, 3), returns the log density (B, n) (up to a
-    constant per problem), the mean of ``(x, v)`` given the depth (2, B, n)
+    ``integrand(offsets, problem)``, for offsets ``(y, y - 1, y - 2)`` (B, n, 3),
+    returns the log density (B, n), the mean of ``(x, v)`` given the depth (2, B, n)
     and its covariance entries ``(cxx, cxv, cvv)``, each (B, n). With
-    ``second_order`` (the paper's three frames, :mod:`depthcore.exact.optimal`), the
-    nodes on ``y > 2`` start from the second-order density of Eq. (24);
-    without it (:mod:`depthcore.exact.bank`, any number of frames, the depth
-    ``y_1 = offsets[..., 2]`` at frame 1), a scan and Newton steps find the
-    mode. ``process_noise`` (B,) and ``cov`` (B, 3, 3) are then the process noise and the
-    prior covariance.
+    ``second_order`` (:mod:`depthcore.exact.optimal`) the nodes on ``y > 2`` start
+    from the second-order density of Eq. (24); without it (:mod:`depthcore.exact.bank`,
+    depth ``y_1 = offsets[..., 2]``) a scan and Newton steps find the mode.
 
-    Attributes
-    ----------
-    mu : ndarray, shape (B, 3) or (B, N)
-    rho : ndarray, shape (B,)
-    mean : ndarray, shape (B, 3)
-        Prior mean.
-    R : ndarray, shape (B, 3, 3)
-        Whitening of the prior, ``P^{-1} = R^T R``.
-    integrand : callable
-    second_order : bool
-    reading : str
-        The reading of Eq. (16) (see :func:`depthcore.exact.optimal.run`).
-    process_noise : ndarray, shape (B,), or None
-    cov : ndarray, shape (B, 3, 3), or None
-    steps : ndarray, shape (B, N - 1), or None
-        The depth's change between frames (``None``: unit steps; the bank's
-        integrand only).
-    frame_rho : ndarray, shape (B, N), or None
-        The noise SD per frame (``None``: ``rho``; the bank's integrand only).
-        ``mu`` is ``NaN`` at a missing frame.
+    Shapes: ``mu`` (B, 3) or (B, N), ``NaN`` at a missing frame; ``rho`` and
+    ``process_noise`` (B,); ``mean`` (B, 3); ``R`` and ``cov`` (B, 3, 3), the prior
+    ``P^{-1} = R^T R``; ``steps`` (B, N - 1), the depth's change between frames
+    (``None``: unit); ``frame_rho`` (B, N) (``None``: ``rho``). ``reading`` is that
+    of Eq. (16) (:func:`depthcore.exact.optimal.run`).
     """
 
     mu: np.ndarray
@@ -118,11 +91,7 @@ class Problem(NamedTuple):
 
 
 def _nodes(interval: int, t: np.ndarray):
-    """Map ``t`` (any shape) to depths in one interval between the poles.
-
-    Returns the offsets ``(y, y - 1, y - 2)`` (shape ``t.shape + (3,)``) and
-    ``log |dy/dt|``.
-    """
+    """Offsets ``(y, y - 1, y - 2)`` (``t.shape + (3,)``) and ``log |dy/dt|`` at ``t``."""
     if interval == 0:  # (-inf, 0): y = -exp(t)
         y = -np.exp(t)
         return np.stack([y, y - 1, y - 2], -1), t
@@ -140,13 +109,8 @@ def _nodes(interval: int, t: np.ndarray):
 class Frame(NamedTuple):
     """Where one interval's integrand lives, per problem: ``t = t0 + sigma L sinh(u / L)``.
 
-    ``t0`` (B,) is the mode of the integrand in ``t`` and ``sigma`` (B,) its
-    width there (from the curvature); ``L = 4`` (``_CORE``). Within ``L``
-    widths of the mode ``u`` is the standardised variable ``(t - t0) /
-    sigma``, where the trapezoid rule converges as fast as on a Gaussian;
-    beyond, the node spacing in ``t`` grows in proportion to the distance
-    from the mode, so that tails reaching any multiple of the width cost
-    only a logarithmic number of nodes.
+    ``t0`` (B,) is the mode in ``t``, ``sigma`` (B,) its width, ``L = 4``: linear near
+    the mode, logarithmic in the tails.
     """
 
     t0: np.ndarray
@@ -174,21 +138,9 @@ def _log_cosh(u):
 
 
 def mapped_nodes(interval: int, u: np.ndarray, frame: Frame):
-    """Offsets ``(y, y - 1, y - 2)`` and ``log |dy/du|`` at nodes ``u`` of one interval.
-
-    Parameters
-    ----------
-    interval : int
-        0, 1, 2 or 3: the interval ``(-inf, 0)``, ``(0, 1)``, ``(1, 2)`` or ``(2, inf)``.
-    u : ndarray, shape (B, n)
-        Nodes in the quadrature's variable.
-    frame : Frame
-        The interval's frame, ``t`` as a function of ``u``.
-
-    Returns
-    -------
-    offsets : ndarray, shape (B, n, 3)
-    log_jacobian : ndarray, shape (B, n)
+    """Offsets ``(y, y - 1, y - 2)`` and ``log |dy/du|`` at nodes ``u`` of one interval:
+    ``interval`` 0, 1, 2 or 3 is ``(-inf, 0)``, ``(0, 1)``, ``(1, 2)`` or ``(2, inf)``;
+    ``u`` is (B, n), the results (B, n, 3) and (B, n).
     """
     offsets, log_jac = _nodes(interval, frame.t(u))
     return offsets, log_jac + frame.log_jacobian(u)
@@ -215,13 +167,7 @@ def _node_values(interval, u, frame, pb):
 
 
 def _sums(values, skip, shift, centre):
-    """Trapezoid sums (without the step) from :func:`_node_values` at nodes (B, n).
-
-    The sums, shape (11, B), are of the weight, of the first moments of
-    ``(x, y, v) - centre`` and of the second moments in :data:`_SECOND` order
-    (the conditional covariance of ``(x, v)`` given ``y`` included), and of
-    the weight below ``y = 2``, leaving out nodes where ``skip``.
-    """
+    """Trapezoid sums (11, B): weight, moments of ``(x, y, v) - centre``, weight below 2."""
     offsets, log_f, mean, (cxx, cxv, cvv) = values
     w = np.exp(np.where(skip, -np.inf, log_f - shift[:, None]))
     d = np.stack(
@@ -241,19 +187,8 @@ def _sums(values, skip, shift, centre):
 
 
 class Totals(NamedTuple):
-    """The moments of the integrand for a batch of ``B`` problems.
-
-    Attributes
-    ----------
-    mean : ndarray, shape (B, 3)
-        Mean of ``(x, y, v)``.
-    cov : ndarray, shape (B, 3, 3)
-        Covariance of ``(x, y, v)``.
-    behind : ndarray, shape (B,)
-        Probability of ``y < 2``.
-    Z : ndarray, shape (B,)
-        Normaliser, scaled by ``exp(-top)`` (see :func:`integrate`).
-    """
+    """The moments of ``B`` problems: ``mean`` (B, 3) and ``cov`` (B, 3, 3) of ``(x, y, v)``,
+    ``behind`` (B,) = P(y < 2), ``Z`` (B,) the normaliser scaled by ``exp(-top)``."""
 
     mean: np.ndarray
     cov: np.ndarray
@@ -273,13 +208,7 @@ class Totals(NamedTuple):
 
 
 def _moments(totals: np.ndarray, centre: np.ndarray) -> Totals:
-    """Mean, covariance, P(y < 2) and normaliser from summed trapezoid totals.
-
-    A problem whose nodes all carry zero weight (a coarse level that misses a
-    posterior narrower than its step) gets NaN moments, without a warning: its
-    change between levels is then NaN, which never passes the tolerance, so
-    the quadrature refines it or refuses it as too narrow.
-    """
+    """Mean, covariance, P(y < 2) and normaliser from summed totals (NaN with no weight)."""
     Z = totals[0]
     with np.errstate(invalid="ignore", divide="ignore"):
         m = (totals[1:4] / Z).T  # (B, 3), centred
@@ -293,12 +222,7 @@ def _moments(totals: np.ndarray, centre: np.ndarray) -> Totals:
 
 
 def _t_limits(interval: int, pb: Problem, c: np.ndarray, cov_p: np.ndarray):
-    """The ``t`` range searched in one interval, per problem: two arrays (B,).
-
-    On the unbounded intervals the far end lies 1e4 times beyond the largest
-    of the prior's scale, the prior mean and the noise-free depth, where the
-    integrand has long decayed (checked by :func:`_ranges`).
-    """
+    """The ``t`` range searched in one interval, (B,) each; far ends 1e4 times the scale."""
     B = len(c)
     if interval in (1, 2):
         return np.full(B, -_T_MAX), np.full(B, _T_MAX)
@@ -308,15 +232,8 @@ def _t_limits(interval: int, pb: Problem, c: np.ndarray, cov_p: np.ndarray):
 
 
 def _scan_points(interval: int, c, mean_s, sd_s, lo_t, hi_t, guessed: bool = False):
-    """Where to look for the mode in ``t``: (B, n) points, the first ``n_coarse`` of them coarse.
-
-    A scan of the whole range at about unit steps and, on ``y > 2``, 25
-    points across 12 second-order SDs about the noise-free depth and about
-    the second-order mean (left out when ``guessed``, the second-order frame's
-    first level being evaluated too, and both lie within an SD of each other;
-    and when ``c`` is ``None``, for problems with no noise-free solution).
-    Returns the points and ``n_coarse``.
-    """
+    """Points (B, n) in ``t`` to look for the mode, and ``n_coarse``: a unit-step scan,
+    and on ``y > 2`` 25 points across 12 SDs about ``c`` and the second-order mean."""
     t = lo_t[:, None] + (hi_t - lo_t)[:, None] * _unit(
         int(np.ceil(np.max(hi_t - lo_t) / _SCAN_STEP)) + 1
     )
@@ -335,14 +252,7 @@ def _scan_points(interval: int, c, mean_s, sd_s, lo_t, hi_t, guessed: bool = Fal
 
 
 def _local_points(pb: Problem):
-    """Scan points (B, 27) about the depth of the first three bearings' noise-free solution.
-
-    For problems without the second-order start (any number of frames) the depth at frame 3 of
-    Eq. (7)'s ``c`` from ``mu_1 .. mu_3`` (in the quadrature's variable
-    ``t = log(y_1)``), or the prior mean's depth where that is undefined or
-    behind the camera, with offsets ``0, +-1, +-0.1, .., +-1e-12`` in ``t``:
-    a start for the Newton steps at every scale of the posterior's width.
-    """
+    """Scan points (B, 27): Eq. (7)'s depth (or the prior's) offset by ``0, +-1, .., +-1e-12``."""
     if pb.mu.shape[1] >= 3 and (pb.steps is not None or np.any(np.isnan(pb.mu))):
         y = tracks.noise_free_start(pb.mu, pb.steps)
     elif pb.mu.shape[1] >= 3:
@@ -357,14 +267,7 @@ def _local_points(pb: Problem):
 
 
 def _frame(interval: int, pb: Problem, t, scan, coarse_mask, lo_t, hi_t):
-    """Locate the mode of one interval's integrand in ``t`` and its width, per problem.
-
-    From the integrand ``scan`` at points ``t`` (B, n): a parabola through
-    the best point and its neighbours gives the mode and the width ``(-d2
-    log f / dt2) ** -1/2``; where the best point is one of the coarse ones
-    (``coarse_mask``, (n,)), Newton steps on parabolas one width wide refine
-    both. Returns the :class:`Frame` and the largest log integrand seen (B,).
-    """
+    """The :class:`Frame` of one interval from ``scan`` at ``t`` (B, n), and the top (B,)."""
     B = t.shape[0]
     order = np.argsort(t, axis=1, kind="stable")
     ts = np.take_along_axis(t, order, 1)
@@ -398,17 +301,7 @@ def _frame(interval: int, pb: Problem, t, scan, coarse_mask, lo_t, hi_t):
 
 
 def _newton(interval: int, pb: Problem, t0, f0, sigma, lo_t, hi_t):
-    """Damped Newton steps to the mode of the log integrand in ``t``, from ``t0`` (B,).
-
-    For problems with no second-order guess, whose mode may lie many of its
-    own (tiny) widths from the best scan point. Each step takes the first and
-    second differences at ``t0 +- sigma``, moves by ``-d1 / d2`` (uphill by
-    ``4 sigma`` where the points are not concave), halving the move until the
-    log integrand does not decrease, and sets ``sigma`` to the curvature's
-    width ``(-d2)**-1/2``. Stops when the moves fall below a hundredth of the
-    width and the width settles, or after :data:`_SCAN_NEWTON_STEPS` steps.
-    Returns the mode, its width and the log integrand there, each (B,).
-    """
+    """Damped Newton steps from ``t0`` (B,): the mode, its width and the log integrand there."""
     floor = _sigma_floor(t0)
     for _ in range(_SCAN_NEWTON_STEPS):
         h = _clip(sigma, floor, 1.0)
@@ -424,7 +317,6 @@ def _newton(interval: int, pb: Problem, t0, f0, sigma, lo_t, hi_t):
         f1 = np.full_like(f0, -np.inf)
         for _ in range(60):  # halve the move until the log integrand does not decrease
             t1 = _clip(t0 + move, lo_t, hi_t)
-            # (a move below a hundredth of the width is not worth the roundoff it hits)
             worse = ~(f1 >= f0) & (np.abs(move) > 0.01 * h)
             if not np.any(worse):
                 break
@@ -442,11 +334,7 @@ def _newton(interval: int, pb: Problem, t0, f0, sigma, lo_t, hi_t):
 
 
 def _parabola(ta, tb, tc, fa, fb, fc):
-    """Vertex, width and value of the parabola through three points (B,) with ``tb`` in the middle.
-
-    Where the points are not concave the middle point is kept and the width
-    is the wider gap.
-    """
+    """Vertex, width and value of the parabola through three points (B,); else ``tb``."""
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         d1 = (fb - fa) / (tb - ta)
         d2 = (fc - fb) / (tc - tb)
@@ -486,22 +374,10 @@ def _level0(frame: Frame, lo_t, hi_t):
 
 
 def _ranges(pb: Problem, intervals):
-    """Place each interval's nodes relative to its own mode and width.
+    """Place each interval's nodes about its own mode and width.
 
-    On ``y > 2`` the second-order density gives a first frame (its mean and
-    SD in ``t``), and the first trapezoid level in that frame is evaluated
-    together with the scan of :func:`_scan_points`. If the best node is not
-    one of the first level's, or the parabola through it and its neighbours
-    disagrees with the first frame (mode more than three widths away, width
-    off by more than a factor 3), the mode and width are found from all
-    nodes (:func:`_frame`) and the first level is evaluated again in that
-    frame. Elsewhere the scan comes first.
-
-    Returns the log-integrand maximum found in ``t`` (B,), per interval
-    ``(frame, u, values, hi_t, (t, log f))``: the :class:`Frame`, the first
-    level's nodes ``u`` and :func:`_node_values` there, the far end in ``t``
-    and the scan; and the second-order mean (B, 3), about which the moments
-    are accumulated.
+    Returns the top (B,), per interval ``(frame, u, values, hi_t, (t, log f))``
+    and the centre (B, 3) of the moments.
     """
     paper = pb.second_order
     if paper:
@@ -586,43 +462,30 @@ def _ranges(pb: Problem, intervals):
 def integrate(pb: Problem, intervals, rtol: float):
     """Integrate the depth marginal of a batch by the trapezoid rule; moments, errors, grids.
 
-    The first level of the trapezoid rule spans each interval's whole ``u``
-    range at step 0.5 (``_U_STEP``); the nodes where the integrand is above
-    ``e^-60`` of its maximum (and the unit-step scan's) set the range
-    ``[lo, hi]`` that later levels refine by halving the step. Each problem's
-    step is halved until its means and SDs change by at most ``rtol`` of the
-    SD (or by the roundoff floor of :func:`_roundoff`); a problem that has
-    converged keeps its result, so it does not depend on the other rows of
-    the batch. More than :data:`NODE_BUDGET` nodes in an interval is a
-    ``ValueError`` naming the problem.
+    Each problem's step is halved until its means and SDs change by at most ``rtol``
+    of the SD (or :func:`_roundoff`'s floor), independently of the other rows.
 
     Parameters
     ----------
     pb : Problem
-        ``B`` problems.
     intervals : tuple of int
-        The intervals integrated (see :func:`mapped_nodes`): ``(3,)`` for ``y > 2``.
+        See :func:`mapped_nodes`; ``(3,)`` for ``y > 2``.
     rtol : float
-        Target accuracy of each mean and SD, relative to the SD.
 
     Returns
     -------
     totals : Totals
     depth_error, velocity_error : ndarray, shape (B,)
-        Error estimates of the depth's and the velocity's mean and SD
-        (:func:`halving_error`).
+        Error estimates (:func:`halving_error`).
     top : ndarray, shape (B,)
         The largest log integrand found; the sums are scaled by ``exp(-top)``.
     grids : dict
-        The last trapezoid level of each interval, ``{interval: (lo, h, n,
-        frame)}``: the nodes ``u = lo + h j``, ``j < n``, arrays (B,), in the
-        :class:`Frame` ``frame``.
+        ``{interval: (lo, h, n, frame)}``: the last level's nodes ``u = lo + h j``, ``j < n``.
 
     Raises
     ------
     ValueError
-        When the integrand does not decay, the tolerance is out of reach within
-        the node budget, or the marginal is too narrow to resolve, naming the problem.
+        The integrand does not decay, needs over :data:`NODE_BUDGET` nodes or is too narrow.
     """
     top, found, centre = _ranges(pb, intervals)
     B = len(top)
@@ -656,8 +519,7 @@ def integrate(pb: Problem, intervals, rtol: float):
     halvings = 2  # the first pass adds two levels in one evaluation
     while True:
         growth = 2**halvings
-        # a problem with no interval left to refine (its scan kept at most one node in
-        # each: a posterior narrower than the scan's step) would loop here for ever
+        # no interval left to refine: a posterior narrower than the scan's step
         stuck = ~done & np.all([g[1] == 0 for g in grids.values()], axis=0)
         if np.any(stuck):
             raise _too_narrow(pb, int(np.argmax(stuck)), rtol)
@@ -674,7 +536,6 @@ def integrate(pb: Problem, intervals, rtol: float):
         levels = [dict() for _ in range(halvings)]
         for i, (lo, h, n, frame) in grids.items():
             hh = np.where(done, 0.0, h)
-            # the new nodes of each level, as fractions of the current step, in one evaluation
             fractions = [
                 [(2 * j + 1) / 2 ** (lev + 1) for j in range(2**lev)] for lev in range(halvings)
             ]
@@ -734,28 +595,10 @@ def integrate(pb: Problem, intervals, rtol: float):
 def kept_range(keep, scan_index, keep_scan):
     """The nodes of the first level that later levels refine: those kept, one more each side.
 
-    A node of the first level is named by its index, an exact integer; a point
-    of the scan, which lies between nodes, by its position in units of the
-    step from the first node. The range runs from the node before the first
-    node or scan point kept to the node after the last, clipped to the level:
-    which nodes it holds does not depend on how the nodes' coordinates round.
-    It takes :func:`integrate`'s own arrays, unchecked.
-
-    Parameters
-    ----------
-    keep : ndarray of bool, shape (B, n)
-        The first level's nodes kept (integrand above the cutoff).
-    scan_index : ndarray, shape (B, m)
-        The scan's points as positions on the first level's nodes ``0 .. n - 1``.
-    keep_scan : ndarray of bool, shape (B, m)
-        The scan's points kept.
-
-    Returns
-    -------
-    j_lo, j_hi : ndarray, shape (B,)
-        The range's first and last node (0 where nothing is kept), as floats.
-    active : ndarray of bool, shape (B,)
-        Whether anything is kept.
+    Nodes are named by index, scan points by position in steps, so rounding does not
+    matter. ``keep`` (B, n) and ``keep_scan`` (B, m) are bool, ``scan_index`` (B, m) the
+    scan's positions on the nodes ``0 .. n - 1``. Returns ``j_lo, j_hi`` (B,), floats (0
+    where nothing is kept), and ``active`` (B,).
     """
     n = keep.shape[1]
     index = np.arange(n, dtype=float)
@@ -783,11 +626,7 @@ def _too_narrow(pb: Problem, k: int, rtol: float) -> ValueError:
 
 
 def _check_peak(log_f, skip, top, pb: Problem, rtol: float) -> None:
-    """Refuse a problem whose refined nodes rise far above the peak found (a missed mode).
-
-    The sums are scaled by ``exp(-top)``; a node ``e^60`` above it means the
-    mode and width that placed the nodes were wrong, and the sums would overflow.
-    """
+    """Refuse a problem whose refined nodes rise ``e^60`` above ``top`` (a missed mode)."""
     with np.errstate(invalid="ignore"):
         high = np.any(np.where(skip, False, log_f > (top + CUTOFF)[:, None]), axis=1)
     if np.any(high):
@@ -817,19 +656,8 @@ def _expand(mask, a):
 def grid(lo, h, n, offset):
     """Nodes ``lo + h (j + offset)``, ``j < n`` (``n`` per problem), of a trapezoid level.
 
-    Parameters
-    ----------
-    lo, h : ndarray, shape (B,)
-        First node and step (0 for a problem with no nodes).
-    n : int or ndarray, shape (B,)
-        Number of nodes.
-    offset : float
-        Shift of every node, in steps (0.5 for the midpoints).
-
-    Returns
-    -------
-    ndarray, shape (B, max n)
-        Padded with NaN.
+    ``lo``, ``h`` and ``n`` are (B,) (``h = 0``: no nodes); ``offset`` is in steps (0.5
+    for midpoints). Returns (B, max n), padded with NaN.
     """
     n = np.broadcast_to(n, lo.shape)
     j = np.arange(int(np.max(n)))
@@ -840,14 +668,8 @@ def grid(lo, h, n, offset):
 def _roundoff(totals: Totals, top: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """A floor (2, B) on the error of the depth and velocity moments from roundoff.
 
-    Three sources are counted, each with a safety factor of 64: the depths at
-    the nodes are rounded to ``eps |y|``, which moves the moments by up to
-    ``eps (|E y| + sd y)`` (likewise for the velocity); the log integrand, a
-    difference of terms as large as its maximum ``top``, carries an absolute
-    error of about ``eps |top|``, which perturbs the weights and so moves a
-    mean or SD by up to ``eps |top|`` times the SD; and the variance, a
-    difference of second moments about ``centre``, loses ``eps (E y -
-    centre)**2``, which moves the SD by that over the SD.
+    ``64 eps`` times: ``|E y| + sd y`` (rounded nodes), ``|top| sd y`` (the log
+    integrand's error) and ``(E y - centre)**2 / sd y`` (cancellation); likewise for ``v``.
     """
     eps = np.finfo(float).eps
     noise = 1.0 + np.abs(top)
@@ -862,28 +684,11 @@ def _roundoff(totals: Totals, top: np.ndarray, centre: np.ndarray) -> np.ndarray
 def halving_error(mean, cov, halved_mean, halved_cov, floor) -> np.ndarray:
     """The error of the depth's and the velocity's mean and SD from one halving of the step.
 
-    The trapezoid rule converges geometrically on these integrands, so the
-    change of a mean or an SD between the nodes at one step and those at
-    twice that step bounds the error of the finer in practice. The estimate
-    is the larger of the changes of the mean and of the SD, and at least the
-    roundoff ``floor``; a change that is NaN (no weight on the coarser
-    nodes: they do not resolve the density) is infinite.
+    The trapezoid rule converges geometrically here, so the larger change of the
+    mean and the SD bounds the finer level's error, at least ``floor``; NaN is infinite.
 
-    Parameters
-    ----------
-    mean : ndarray, shape (..., 3)
-    cov : ndarray, shape (..., 3, 3)
-        Mean and covariance of ``(x, y, v)`` on the finer nodes.
-    halved_mean : ndarray, shape (..., 3)
-    halved_cov : ndarray, shape (..., 3, 3)
-        The same on the coarser nodes.
-    floor : ndarray, shape (2, ...)
-        The roundoff floor of the depth's and the velocity's estimate.
-
-    Returns
-    -------
-    ndarray, shape (2, ...)
-        The error estimates of the depth's (row 0) and the velocity's (row 1) mean and SD.
+    ``mean`` (..., 3) and ``cov`` (..., 3, 3) are on the finer nodes, ``halved_*`` on the
+    coarser; ``floor`` and the result (2, ...) are the depth's and the velocity's rows.
     """
     changes = []
     for k in (1, 2):
