@@ -14,6 +14,7 @@ from depthcore.cli import tracks
 from depthcore.cli.main import MU_MAX, PIXELS_MAX, STEP_RANGE, main
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import paper_prior
+from depthcore.registry import track_files
 from depthcore.registry.filters import FILTERS, PARTICLES
 from depthcore.registry.tracking import RHO_RANGE, default_prior
 from depthcore.studies.reproduce import PARTICLE_SEED
@@ -22,7 +23,7 @@ from helpers import exit_status
 
 MU = [-0.3, 0.0, 0.2, 0.33, 0.43]
 RHO = 0.005
-LIMITS = tracks.Limits(MU_MAX, RHO_RANGE, STEP_RANGE, PIXELS_MAX)
+LIMITS = track_files.Limits(MU_MAX, RHO_RANGE, STEP_RANGE, PIXELS_MAX)
 
 
 def _strict_json(text: str):
@@ -62,7 +63,7 @@ def _refused(argv, capsys, *words):
 
 
 def _read(text: bytes, focal=None, cx=None):
-    return tracks.read("t.csv", io.BytesIO(text), LIMITS, focal, cx)
+    return track_files.read("t.csv", io.BytesIO(text), LIMITS, focal, cx, tracks.WORDS)
 
 
 # --- reading a track file -------------------------------------------------------------------
@@ -184,7 +185,7 @@ def test_a_constant_rho_column_equals_rho_given_once(tmp_path, capsys):
     ],
 )
 def test_a_malformed_file_is_refused_naming_its_line(data, words):
-    with pytest.raises(tracks.FileRefusal) as info:
+    with pytest.raises(track_files.FileRefusal) as info:
         _read(data)
     message = str(info.value)
     assert "\n" not in message and words in message, message
@@ -211,8 +212,8 @@ class _Endless(io.RawIOBase):
 
 def test_a_file_past_the_limit_of_frames_is_refused_without_reading_the_rest():
     stream = _Endless()
-    with pytest.raises(tracks.FileRefusal, match=rf"t.csv:{checks.MAX_FRAMES + 2}: more than"):
-        tracks.read("t.csv", stream, LIMITS)
+    with pytest.raises(track_files.FileRefusal, match=rf"t.csv:{checks.MAX_FRAMES + 2}: more than"):
+        track_files.read("t.csv", stream, LIMITS)
     assert stream.read_lines == checks.MAX_FRAMES + 2
 
 
@@ -372,7 +373,7 @@ def test_per_frame_json_is_the_librarys_track(capsys, name):
     assert [r["frame"] for r in rows] == [1, 2, 3, 4, 5]
     assert all(r["bearing"] for r in rows) and rows[0]["step"] is None
     for series, states in (("filtered", t.filtered), ("smoothed", t.smoothed)):
-        for key, attribute in tracks.QUANTITIES:
+        for key, attribute in track_files.QUANTITIES:
             for suffix in ("mean", "sd"):
                 got = [r[f"{series}_{key}_{suffix}"] for r in rows]
                 assert got == getattr(states, f"{attribute}_{suffix}").tolist()
@@ -476,7 +477,7 @@ def test_a_track_with_gaps_noise_or_steps_is_depthcore_track_or_its_refusal(
     rows = _strict_json(out)["filters"][name]
     assert [r["bearing"] for r in rows] == np.isfinite(track.mu).tolist()
     assert [r["mu"] for r in rows] == [None if np.isnan(m) else m for m in track.mu]
-    for key, attribute in tracks.QUANTITIES:
+    for key, attribute in track_files.QUANTITIES:
         got = [r[f"smoothed_{key}_mean"] for r in rows]
         assert got == getattr(expected.smoothed, f"{attribute}_mean").tolist()
     updates = getattr(expected, "updates", None)

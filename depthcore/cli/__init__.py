@@ -2,9 +2,9 @@
 
 * :mod:`~depthcore.cli.main`: the parser, the commands and the one-line refusals;
 * :mod:`~depthcore.cli.text`: the command line's tables and their legends;
-* :mod:`~depthcore.cli.tracks`: ``estimate``'s tracks: bearings from a CSV file
-  (``--mu-file``), gaps, noise per frame and steps, every frame's state
-  (``--per-frame``);
+* :mod:`~depthcore.cli.tracks`: ``estimate``'s tracks in the user's words:
+  ``--mu-file`` (standard input for ``-``), ``--mu``, ``--focal``, ``--cx``,
+  ``--gate``, and the track file's format as ``estimate --help`` shows it;
 * :mod:`~depthcore.cli.atlas_command`: ``atlas``, every filter's verdicts over
   a grid of settings, in this process or on a Dask cluster;
 * :mod:`~depthcore.cli.cluster`: the ``--workers`` and ``--scheduler`` options that
@@ -12,7 +12,9 @@
 
 Where a new thing goes: a new command is a function and a subparser in
 :mod:`~depthcore.cli.main`; what it prints goes in :mod:`~depthcore.cli.text`;
-what reads a track or runs it frame by frame, in :mod:`~depthcore.cli.tracks`.
+what reads a track or runs it frame by frame is the library's
+(:mod:`depthcore.registry.track_files`); the command line checks its options
+and prints.
 The command line lists the registry's filters; it holds no filter of its own.
 """
 

@@ -33,6 +33,7 @@ from depthcore.cli import cluster as cluster_options
 from depthcore.cli import text as cli_text
 from depthcore.problem import checks, frames
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian
+from depthcore.registry import track_files
 from depthcore.registry.filters import FILTERS, RBPF_REPLICAS, names
 from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE, default_prior
 from depthcore.studies import monte_carlo, reproduce, tasks
@@ -257,7 +258,7 @@ def _cmd_estimate(args) -> str:
     prior = _prior(src.mu, args.prior_mean, args.prior_cov, steps)
     if args.learn_noise:
         known_q = q if "process_noise" in getattr(args, "_given", ()) else None
-        learned = tracks.learn(src.mu, rho, prior, known_q, steps)
+        learned = track_files.learn(src.mu, rho, prior, known_q, steps)
         rho = learned.rho * np.asarray(rho) if np.ndim(rho) else learned.rho
         q = learned.process_noise
     if args.per_frame:
@@ -269,7 +270,7 @@ def _cmd_estimate(args) -> str:
         src.mu, rho, prior, process_noise=q, smooth=args.smooth, names=names, steps=steps, gate=gate
     )
     if learned is not None:
-        summary["learned"] = tracks.learned_json(learned)
+        summary["learned"] = track_files.learned_json(learned)
     return (
         cli_text.as_json(summary)
         if args.json
@@ -277,14 +278,14 @@ def _cmd_estimate(args) -> str:
     )
 
 
-def _bearings(args) -> tracks.TrackFile:
+def _bearings(args) -> track_files.TrackFile:
     """The bearings of ``--mu`` or ``--mu-file`` (``NaN`` at a missing frame)."""
     if args.mu_file is None:
         _refuse_ignored(args, "--mu (they convert a file's u column)", _PIXEL_FLAGS)
         return tracks.from_values(args.mu, MU_MAX)
-    limits = tracks.Limits(MU_MAX, RHO_RANGE, STEP_RANGE, PIXELS_MAX)
+    limits = track_files.Limits(MU_MAX, RHO_RANGE, STEP_RANGE, PIXELS_MAX)
     src = tracks.read_file(args.mu_file, limits, args.focal, args.cx)
-    args._words = {k: f"{src.name}: {column}" for k, column in tracks.LIBRARY_NAMES.items()}
+    args._words = {k: f"{src.name}: {column}" for k, column in track_files.LIBRARY_NAMES.items()}
     return src
 
 
@@ -292,7 +293,7 @@ def _bearings(args) -> tracks.TrackFile:
 _PIXEL_FLAGS = {"focal": "--focal", "cx": "--cx"}
 
 
-def _noise(args, src: tracks.TrackFile):
+def _noise(args, src: track_files.TrackFile):
     """``--rho``, or the file's ``rho`` column: a number or an array (N,)."""
     if src.rho is None:
         if args.rho is None:
@@ -315,9 +316,9 @@ def _per_frame(args, src, rho, steps, prior, q, gate, learned=None) -> str:
         raise ValueError(
             f"--filters: {without[0]} has no smoother; --per-frame takes {', '.join(smoothed)}"
         )
-    result = tracks.per_frame(src.mu, rho, prior, q, chosen, steps, gate, src.frames)
+    result = track_files.per_frame(src.mu, rho, prior, q, chosen, steps, gate, src.frames)
     if learned is not None:
-        result["learned"] = tracks.learned_json(learned)
+        result["learned"] = track_files.learned_json(learned)
     if args.json:
         return cli_text.as_json(result)
     if args.csv:
@@ -792,7 +793,7 @@ def main(argv=None) -> int:
             traceback.print_exc()
         sys.stderr.write(f"{prog}: error: {_SINGULAR[args.command]}\n")
         return 2
-    except tracks.FileRefusal as exc:
+    except track_files.FileRefusal as exc:
         if args.debug:
             traceback.print_exc()
         sys.stderr.write(f"{prog}: error: {_one_line(exc)}\n")

@@ -394,7 +394,10 @@ def format_learned(result: dict) -> str:
 
 
 def format_per_frame(result: dict) -> str:
-    """A plain-text table of :func:`depthcore.cli.tracks.per_frame`'s result, block by filter."""
+    """A plain-text table of a per-frame result, block by filter.
+
+    The result is :func:`depthcore.registry.track_files.per_frame`'s.
+    """
     m, q = result["prior_mean"], result["process_noise"]
     lines = [
         f"{result['frames']} frames; prior at the first frame: mean (x, y, v) = "
@@ -427,7 +430,7 @@ _STATE = (("depth", "y"), ("x", "x"), ("velocity", "v"))
 
 
 def per_frame_csv(result: dict) -> str:
-    """CSV of :func:`depthcore.cli.tracks.per_frame`'s result: a row per filter and frame.
+    """CSV of :func:`depthcore.registry.track_files.per_frame`'s result: a row per filter and frame.
 
     The columns are ``filter`` and the keys of a row; a missing value is an
     empty field; booleans are ``true`` and ``false``; numbers carry every digit.

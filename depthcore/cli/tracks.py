@@ -1,39 +1,23 @@
-"""The command line's track files: bearings over frames read from a CSV file.
+"""The command line's track files: ``estimate --mu-file FILE`` and ``--mu``.
 
 Recommended import: ``from depthcore.cli import tracks``.
 
-:func:`read` reads ``estimate --mu-file FILE`` (``-``: standard input) line by
-line with the ``csv`` module and refuses a malformed file in one line naming
-the file and the line, ``FILE:LINE: ...`` (:class:`FileRefusal`). Its time and
-memory do not grow with the file: it stops as soon as the rows pass the
-filters' limit of frames, :data:`depthcore.problem.checks.MAX_FRAMES`, and a
-line may hold at most :data:`MAX_LINE` characters.
-
-The format (:data:`FORMAT`, shown by ``estimate --help``): UTF-8 text (a UTF-8
-byte order mark is allowed), lines ending in LF or CRLF, a header naming the
-columns, then one row per frame in time order.
+Reading a track file and running it frame by frame are the library's,
+:mod:`depthcore.registry.track_files`; here are the options' checks in the
+user's words (``--focal``, ``--cx``, ``--mu``, ``--gate``), standard input for
+``-``, and the format as ``estimate --help`` shows it (:data:`FORMAT`).
 """
 
 from __future__ import annotations
 
-import csv
-import inspect
 import io
 import math
-import re
 import sys
-from typing import NamedTuple
 
 import numpy as np
 
 from depthcore.problem import checks
-from depthcore.registry import tracking
-
-#: The most characters of one line of a track file (a row holds a few numbers).
-MAX_LINE = 4096
-
-#: The columns a track file may name, in the order :data:`FORMAT` explains them.
-COLUMNS = ("mu", "u", "rho", "step", "frame")
+from depthcore.registry import track_files
 
 #: The track file's format, as ``estimate --help`` shows it.
 FORMAT = """\
@@ -51,300 +35,23 @@ input): a header naming the columns, then one row per frame in time order.
 An empty field or nan in mu (or u) is a missing frame: the filter predicts
 through it (its rho may be empty too)."""
 
-_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
-_INTEGER = re.compile(r"^[+-]?\d+$")
+#: How the library's refusals of a track file name the options and the format.
+WORDS = {"focal": "--focal", "cx": "--cx", "format": "see estimate --help"}
 
 
-class FileRefusal(ValueError):
-    """A refusal of a track as it stands: ``FILE:LINE: why``, ``FILE: why`` or ``--mu: why``."""
-
-
-#: The library's names of a track's arrays (:func:`depthcore.registry.tracking.track`'s
-#: arguments) and the columns of a track file that give them.
-LIBRARY_NAMES = {"mu": "mu", "rho": "rho", "steps": "step"}
-
-
-class TrackFile(NamedTuple):
-    """A track read by :func:`read`.
-
-    Attributes
-    ----------
-    name : str
-        The file as the user named it (``<stdin>`` for ``-``).
-    mu : ndarray, shape (N,)
-        Bearings, ``NaN`` at a missing frame.
-    rho : ndarray, shape (N,), or None
-        The ``rho`` column (``NaN`` where empty, only at missing frames); ``None``
-        without one.
-    steps : ndarray, shape (N - 1,), or None
-        The ``step`` column from the second row on; ``None`` without one.
-    frames : ndarray of int, shape (N,)
-        The frame numbers: the ``frame`` column with the missing frames filled
-        in, else ``1 .. N``.
-    pixels : bool
-        Whether the bearings came from a ``u`` column.
-    """
-
-    name: str
-    mu: np.ndarray
-    rho: np.ndarray | None
-    steps: np.ndarray | None
-    frames: np.ndarray
-    pixels: bool
-
-
-def _lines(stream, name: str, counter: list):
-    """The decoded lines of a binary ``stream``, each at most :data:`MAX_LINE` characters.
-
-    ``counter[0]`` is the number of the line last read (1-based).
-    """
-    while True:
-        raw = stream.readline(4 * MAX_LINE + 2)
-        if not raw:
-            return
-        counter[0] += 1
-        if len(raw) > 4 * MAX_LINE and not raw.endswith(b"\n"):
-            raise FileRefusal(
-                f"{name}:{counter[0]}: a line longer than {MAX_LINE} characters; a row "
-                "holds a few numbers"
-            )
-        if counter[0] == 1 and raw.startswith(b"\xef\xbb\xbf"):  # UTF-8's byte order mark
-            raw = raw[3:]
-        try:
-            line = raw.decode("utf-8")
-        except UnicodeDecodeError:
-            raise FileRefusal(
-                f"{name}:{counter[0]}: not UTF-8 text (a binary file, or text in another "
-                "encoding); a track file is CSV text"
-            ) from None
-        if len(line.rstrip("\r\n")) > MAX_LINE:
-            raise FileRefusal(
-                f"{name}:{counter[0]}: a line longer than {MAX_LINE} characters; a row "
-                "holds a few numbers"
-            )
-        yield line
-
-
-def _number(text: str, column: str, where: str) -> float:
-    """A field's decimal number; ``NaN`` for an empty field or ``nan``."""
-    text = text.strip()
-    if text == "" or text.lower() == "nan":
-        return math.nan
-    if not _NUMBER.match(text):
-        raise FileRefusal(f"{where}: {column} must be a number, got {text!r}")
-    return float(text)
-
-
-class Limits(NamedTuple):
-    """The ranges :func:`read` checks each field against.
-
-    Attributes
-    ----------
-    mu : float
-        The largest magnitude of a bearing (of ``mu``, or of ``(u - cx) / focal``).
-    rho : (float, float)
-        The range of a ``rho`` field.
-    step : (float, float)
-        The range of a ``step`` field.
-    pixels : float
-        The largest magnitude of ``--focal`` and ``--cx``.
-    """
-
-    mu: float
-    rho: tuple
-    step: tuple
-    pixels: float
-
-
-#: The most empty lines after the last row (more are refused, so the reading stays short).
-MAX_TRAILING_BLANKS = 100
-
-
-def read(path: str, stream, limits: Limits, focal=None, cx=None) -> TrackFile:
-    """Read a track file, checking every field where it stands.
-
-    Parameters
-    ----------
-    path : str
-        The file as the user named it, for the messages (``-``: standard input).
-    stream : binary file object
-        The open file, read line by line.
-    limits : Limits
-    focal, cx : float or None
-        The focal length and the principal point's column in pixels, for a ``u``
-        column (checked by the caller; both needed with one).
+def read_file(path: str, limits: track_files.Limits, focal=None, cx=None):
+    """:func:`depthcore.registry.track_files.read` of ``--mu-file`` (``-``: standard input).
 
     Returns
     -------
-    TrackFile
+    depthcore.registry.track_files.TrackFile
 
     Raises
     ------
-    FileRefusal
-        ``FILE:LINE: why`` (``FILE: why`` of the whole track).
-    """
-    name = "<stdin>" if path == "-" else path
-    counter = [0]
-    reader = csv.reader(_lines(stream, name, counter), strict=True)
-    rows, columns, blank = [], None, None
-    try:
-        for row in reader:
-            where = f"{name}:{counter[0]}"
-            if columns is None:
-                columns = _header(row, where, focal is not None)
-                continue
-            if not row:  # an empty line: allowed at the end only
-                blank = blank or counter[0]
-                if counter[0] - blank >= MAX_TRAILING_BLANKS:
-                    raise FileRefusal(f"{where}: more than {MAX_TRAILING_BLANKS} empty lines")
-                continue
-            if blank is not None:
-                raise FileRefusal(f"{name}:{blank}: an empty line; give one row per frame")
-            if len(row) != len(columns):
-                raise FileRefusal(
-                    f"{where}: {len(row)} fields, but the header names {len(columns)} columns"
-                )
-            fields = dict(zip(columns, row, strict=True))
-            values = _row(fields, where, limits, focal, cx, first=not rows)
-            _in_order(values, rows, columns, where)
-            rows.append(values)
-    except csv.Error as exc:
-        raise FileRefusal(f"{name}:{counter[0]}: not CSV: {exc}") from None
-    if columns is None:
-        raise FileRefusal(
-            f"{name}:1: an empty file; the first line names the columns, of "
-            f"{', '.join(COLUMNS)} (see estimate --help)"
-        )
-    if not rows:
-        raise FileRefusal(f"{name}:{counter[0] + 1}: no frames after the header")
-    return _assemble(name, columns, rows)
-
-
-def _header(row: list, where: str, pixels: bool) -> list:
-    """The header's column names, checked."""
-    names = [c.strip() for c in row]
-    if not any(names):
-        raise FileRefusal(
-            f"{where}: an empty first line; the first line names the columns, of "
-            f"{', '.join(COLUMNS)} (see estimate --help)"
-        )
-    unknown = [c for c in names if c not in COLUMNS]
-    if unknown:
-        raise FileRefusal(
-            f"{where}: no header or an unknown column {unknown[0]!r}; the first line names the "
-            f"columns, of {', '.join(COLUMNS)} (see estimate --help)"
-        )
-    repeated = sorted({c for c in names if names.count(c) > 1})
-    if repeated:
-        raise FileRefusal(f"{where}: the header names {repeated[0]!r} more than once")
-    if ("mu" in names) == ("u" in names):
-        raise FileRefusal(
-            f"{where}: the header must name either a mu column or a u column (pixels)"
-        )
-    if "u" in names and not pixels:
-        raise FileRefusal(f"{where}: a u column (pixels) needs --focal and --cx")
-    if "mu" in names and pixels:
-        raise FileRefusal(f"{where}: --focal and --cx are for a u column; this file has mu")
-    return names
-
-
-def _row(fields: dict, where: str, limits: Limits, focal, cx, first: bool) -> dict:
-    """One row's numbers, checked: ``mu`` (from ``u``), ``rho``, ``step``, ``frame``."""
-    out = {}
-    for column, raw in fields.items():
-        text = raw.strip()
-        if column == "frame":
-            if not _INTEGER.match(text) or len(text) > 18:
-                raise FileRefusal(f"{where}: frame must be an integer, got {text!r}")
-            out["frame"] = int(text)
-            continue
-        value = _number(text, column, where)
-        if column == "u" and not math.isnan(value):
-            value = (value - cx) / focal
-            column = "mu"
-            if not abs(value) <= limits.mu:
-                raise FileRefusal(
-                    f"{where}: u gives a bearing (u - cx) / focal of magnitude more than "
-                    f"{limits.mu:g}, got u = {text}"
-                )
-        elif column == "u":
-            column = "mu"
-        elif column == "mu" and not abs(value) <= limits.mu and not math.isnan(value):
-            raise FileRefusal(f"{where}: mu must be at most {limits.mu:g} in magnitude, got {text}")
-        elif column == "rho" and not math.isnan(value):
-            lo, hi = limits.rho
-            if not lo <= value <= hi:
-                raise FileRefusal(f"{where}: rho must be from {lo:g} to {hi:g}, got {text}")
-        elif column == "step":
-            lo, hi = limits.step
-            if first and text:
-                raise FileRefusal(
-                    f"{where}: the first row's step must be empty (step is the depth's "
-                    f"change since the previous frame), got {text}"
-                )
-            if not first and not lo <= value <= hi:  # an empty field (NaN) too
-                raise FileRefusal(
-                    f"{where}: step must be from {lo:g} to {hi:g} (the depth's change since "
-                    f"the previous frame), got {text or 'an empty field'}"
-                )
-        out[column] = value
-    if "rho" in out and math.isnan(out["rho"]) and not math.isnan(out["mu"]):
-        raise FileRefusal(f"{where}: rho is empty at a frame with a bearing")
-    return out
-
-
-def _in_order(values: dict, rows: list, columns: list, where: str) -> None:
-    """Refuse a frame number out of order, or the frames passing the filters' limit."""
-    frames = len(rows) + 1
-    if "frame" in values and rows:
-        if values["frame"] <= rows[-1]["frame"]:
-            raise FileRefusal(
-                f"{where}: frame must increase strictly, got {values['frame']} after "
-                f"{rows[-1]['frame']}"
-            )
-        if "step" not in columns:  # the gaps are missing frames
-            frames = values["frame"] - rows[0]["frame"] + 1
-    if frames > checks.MAX_FRAMES:
-        raise FileRefusal(
-            f"{where}: more than {checks.MAX_FRAMES} frames (the filters' limit)"
-            + (
-                " counting the missing frames between the frame numbers"
-                if len(rows) + 1 < frames
-                else ""
-            )
-        )
-
-
-def _assemble(name: str, columns: list, rows: list) -> TrackFile:
-    """The track of the rows, the missing frames between frame numbers filled in."""
-    if "frame" in columns and "step" not in columns:
-        first = rows[0]["frame"]
-        n = rows[-1]["frame"] - first + 1
-        index = [r["frame"] - first for r in rows]
-        frames = np.arange(first, first + n)
-    else:
-        n = len(rows)
-        index = list(range(n))
-        frames = np.array([r["frame"] for r in rows]) if "frame" in columns else np.arange(1, n + 1)
-    mu = np.full(n, np.nan)
-    mu[index] = [r["mu"] for r in rows]
-    rho = None
-    if "rho" in columns:
-        rho = np.full(n, np.nan)
-        rho[index] = [r["rho"] for r in rows]
-    steps = np.array([r["step"] for r in rows[1:]]) if "step" in columns else None
-    return TrackFile(name, mu, rho, steps, frames, "u" in columns)
-
-
-def read_file(path: str, limits: Limits, focal=None, cx=None) -> TrackFile:
-    """:func:`read` of the file at ``path``, or of standard input for ``-``.
-
-    Raises
-    ------
-    FileRefusal
+    depthcore.registry.track_files.FileRefusal
         A malformed file, ``FILE:LINE: why``.
     ValueError
-        A file that cannot be opened or read, naming ``--mu-file``.
+        Naming ``--focal``, ``--cx`` or ``--mu-file`` (a file that cannot be read).
     """
     if (focal is None) != (cx is None):
         raise ValueError(f"{'--cx' if cx is None else '--focal'} is needed with the other")
@@ -361,15 +68,15 @@ def read_file(path: str, limits: Limits, focal=None, cx=None) -> TrackFile:
         stream = getattr(sys.stdin, "buffer", None)
         if stream is None:  # a text stream put in standard input's place
             stream = io.BytesIO(sys.stdin.read().encode())
-        return read("-", stream, limits, focal, cx)
+        return track_files.read("-", stream, limits, focal, cx, WORDS)
     try:
         with open(path, "rb") as stream:
-            return read(path, stream, limits, focal, cx)
+            return track_files.read(path, stream, limits, focal, cx, WORDS)
     except OSError as exc:
         raise ValueError(f"--mu-file: cannot read {path!r}: {exc.strerror or exc}") from None
 
 
-def from_values(values, limit: float) -> TrackFile:
+def from_values(values, limit: float) -> track_files.TrackFile:
     """The track of ``estimate --mu``: 3 to ``MAX_FRAMES`` numbers, ``nan`` a missing frame.
 
     Raises
@@ -389,7 +96,7 @@ def from_values(values, limit: float) -> TrackFile:
             f"--mu must be finite (or nan, a missing frame) and at most {limit:g} in "
             f"magnitude, got {float(mu[np.abs(mu) > limit][0])!r}"
         )
-    return TrackFile("--mu", mu, None, None, np.arange(1, len(mu) + 1), False)
+    return track_files.TrackFile("--mu", mu, None, None, np.arange(1, len(mu) + 1), False)
 
 
 def check_gate(gate: float) -> float:
@@ -397,152 +104,3 @@ def check_gate(gate: float) -> float:
     if not (math.isfinite(gate) and 0 < gate < 1):
         raise ValueError(f"--gate must be a probability between 0 and 1 (excluded), got {gate!r}")
     return gate
-
-
-# --- every frame's state ------------------------------------------------------------------
-
-#: The quantities of a per-frame row, by the attribute of a series of states.
-QUANTITIES = (
-    ("depth", "depth"),
-    ("x", "lateral"),
-    ("velocity", "velocity"),
-)
-
-
-def per_frame(
-    mu, rho, prior, process_noise: float, names, steps=None, gate=None, frames=None
-) -> dict:
-    """Every frame's filtered and smoothed state by the named filters, ready for JSON.
-
-    Parameters
-    ----------
-    mu : ndarray, shape (N,)
-        Bearings, ``NaN`` at a missing frame.
-    rho : float or ndarray, shape (N,)
-        The noise SD, one or per frame.
-    prior : depthcore.problem.gaussian.Gaussian
-        The state's density at the first frame.
-    process_noise : float
-    names : sequence of str
-        Filters with a smoother (:data:`depthcore.registry.filters.SMOOTHED`).
-    steps : ndarray, shape (N - 1,), or None
-        The depth's change between consecutive frames (``None``: unit steps).
-    gate : float or None
-        Skip a bearing whose predictive tail probability is below ``gate``.
-    frames : ndarray of int, shape (N,), or None
-        The frames' numbers (default ``1 .. N``).
-
-    Returns
-    -------
-    dict
-        ``{"frames", "prior_mean", "prior_cov", "process_noise", "gate", "filters":
-        {name: rows}}``; a row per frame: ``frame``, ``bearing`` (whether the frame
-        has one), ``mu``, ``rho``, ``step`` (``None`` at the first frame), the
-        filter's ``tail`` and ``gated`` where it reports them, then
-        ``filtered_depth_mean``, ``filtered_depth_sd``, ``filtered_x_mean``, ...,
-        ``smoothed_velocity_sd`` (depth ``y``, lateral position ``x``, velocity ``v``).
-    """
-    mu = np.asarray(mu, dtype=float)
-    n = mu.shape[0]
-    present = np.isfinite(mu)
-    if np.ndim(rho) and np.any(present) and np.all(rho[present] == rho[present][0]):
-        rho = float(rho[present][0])  # one noise level: the paper's frames
-    frames = np.arange(1, n + 1) if frames is None else np.asarray(frames)
-    rho_k = np.broadcast_to(np.asarray(rho, dtype=float), (n,))
-    step_k = [None] + ([1.0] * (n - 1) if steps is None else [float(s) for s in np.asarray(steps)])
-    options = {}
-    if steps is not None:
-        options["steps"] = np.asarray(steps, dtype=float)
-    if gate is not None:
-        options["gate"] = gate
-    takes = inspect.signature(tracking.track).parameters
-    for key, name in (("steps", "steps"), ("gate", "--gate")):
-        if key in options and key not in takes:
-            raise ValueError(f"{name}: depthcore.track does not take {key} in this version")
-    out = {
-        "frames": int(n),
-        "prior_mean": prior.mean.tolist(),
-        "prior_cov": prior.cov.tolist(),
-        "process_noise": float(process_noise),
-        "gate": gate,
-        "filters": {},
-    }
-    for name in names:
-        t = tracking.track(mu, rho, prior, process_noise, filter=name, **options)
-        updates = getattr(t, "updates", None)
-        rows = []
-        for k in range(n):
-            present = bool(np.isfinite(mu[k]))
-            row = {
-                "frame": int(frames[k]),
-                "bearing": present,
-                "mu": float(mu[k]),
-                "rho": float(rho_k[k]) if present else None,
-                "step": step_k[k],
-            }
-            if updates is not None:
-                row["tail"] = float(np.asarray(updates.tail)[k])
-                row["gated"] = bool(np.asarray(updates.gated)[k])
-            for series, states in (("filtered", t.filtered), ("smoothed", t.smoothed)):
-                for key, attribute in QUANTITIES:
-                    row[f"{series}_{key}_mean"] = float(getattr(states, f"{attribute}_mean")[k])
-                    row[f"{series}_{key}_sd"] = float(getattr(states, f"{attribute}_sd")[k])
-            rows.append(row)
-        out["filters"][name] = rows
-    return out
-
-
-# --- learning the noise ---------------------------------------------------------------
-
-
-def learn(mu, weights, prior, known_q, steps):
-    """``--learn-noise``: rho (and q unless given) by maximum likelihood, textbook 19.1.2.
-
-    Parameters
-    ----------
-    mu : ndarray, shape (N,)
-    weights : float or ndarray, shape (N,)
-        A file's ``rho`` column: the frames' relative noise levels (a number: none).
-    prior : depthcore.problem.gaussian.Gaussian
-    known_q : float or None
-        The process noise when given, ``None`` to learn it.
-    steps : ndarray, shape (N - 1,), or None
-
-    Returns
-    -------
-    depthcore.exact.learning.Fit
-    """
-    from depthcore.exact import learning
-
-    return learning.fit(
-        mu,
-        prior.mean,
-        prior.cov,
-        process_noise=known_q,
-        steps=steps,
-        weights=np.asarray(weights) if np.ndim(weights) else None,
-    )
-
-
-def learned_json(fit) -> dict:
-    """A learned fit as plain JSON values (``None`` for a standard error it has not)."""
-
-    def number(v):
-        return None if v is None else float(v)
-
-    def interval(v):
-        return None if v is None else [float(v[0]), float(v[1])]
-
-    return {
-        "rho": float(fit.rho),
-        "rho_se": number(fit.rho_se),
-        "rho_interval": interval(fit.rho_interval),
-        "process_noise": float(fit.process_noise),
-        "process_noise_se": number(fit.process_noise_se),
-        "process_noise_interval": interval(fit.process_noise_interval),
-        "estimated": list(fit.estimated),
-        "at_boundary": bool(fit.at_boundary),
-        "level": float(fit.level),
-        "log_likelihood": float(fit.log_likelihood),
-        "converged": bool(fit.converged),
-    }
