@@ -21,8 +21,9 @@ Where the chunks run (:func:`resolve`):
   worker lost mid-study has its chunks run again by the scheduler; each
   chunk is folded and counted once, by its index;
 * the environment variable :data:`SCHEDULER` set to a scheduler's address
-  (``tcp://host:8786``) and no ``client``: on that cluster, through one client
-  per process (how ``make records`` runs the book's studies on every core).
+  (``tcp://host:8786``) and no ``client``: on that cluster, through Dask's
+  default client (``distributed.default_client``), made once per process
+  (how ``make records`` runs the book's studies on every core).
 
 From the command line: ``python -m depthcore study --workers 4`` starts a local
 cluster of four processes for the study, ``--scheduler tcp://host:8786`` uses a
@@ -32,11 +33,13 @@ its workers must import the same depthcore).
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import logging
 import os
 import socket
+import sys
+import threading
+import traceback
 from collections.abc import Callable, Iterable
 
 import numpy as np
@@ -66,8 +69,6 @@ WORKER_ENVIRON = {
     "OPENBLAS_NUM_THREADS": "1",
 }
 
-_clients: dict = {}
-
 
 def chunk_seeds(seed, n: int) -> list[np.random.SeedSequence]:
     """The seeds of ``n`` chunks: the children ``0 .. n - 1`` of ``seed``, by chunk index.
@@ -86,7 +87,9 @@ def chunk_seeds(seed, n: int) -> list[np.random.SeedSequence]:
     return checks.spawn(seed, n)
 
 
-def connect(address: str, timeout: float = CONNECT_TIMEOUT, name: str = "scheduler"):
+def connect(
+    address: str, timeout: float = CONNECT_TIMEOUT, name: str = "scheduler", default: bool = False
+):
     """A ``distributed.Client`` of the scheduler at ``address``, which has a worker.
 
     Parameters
@@ -97,11 +100,13 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT, name: str = "schedul
         Seconds to wait for the scheduler's answer, and as many again for its first worker.
     name : str
         The argument a refusal names.
+    default : bool
+        Make the client Dask's default client (``distributed.default_client``).
 
     Returns
     -------
     distributed.Client
-        Not the default client; the caller closes it.
+        The caller closes it.
 
     Raises
     ------
@@ -109,11 +114,21 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT, name: str = "schedul
         Naming ``name`` when ``address`` is not an address, when no Dask
         scheduler answers there within ``timeout`` seconds, or when it has
         no worker after as many again.
+
+    Notes
+    -----
+    A closed port (nothing listens) is refused at once. The client is
+    ``distributed.Client(address, timeout=timeout)``, made in a thread of its
+    own and waited for ``timeout`` seconds more: Dask's ``timeout`` does not
+    bound its handshake, so a server that accepts and never answers would
+    hold the caller for ever (dask/distributed#8071). Its first worker is
+    ``client.wait_for_workers(1, timeout=timeout)``.
     """
     address, where = _address(address, name)
     _quiet()
     try:
-        kind, workers = _probe(address, where, timeout)
+        socket.create_connection(where, timeout=timeout).close()
+        client = _client(address, timeout, default)
     except TimeoutError:
         raise ValueError(
             f"{name}: no Dask scheduler answered at {address!r} within {timeout:g} s"
@@ -121,16 +136,46 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT, name: str = "schedul
     except Exception as exc:  # noqa: BLE001 - whatever answers, or not, is one refusal
         reason = _one_line(exc) or type(exc).__name__
         raise ValueError(f"{name}: no Dask scheduler answers at {address!r} ({reason})") from None
-    if kind != "Scheduler":
-        raise ValueError(f"{name}: {address!r} is not a Dask scheduler (it is a {kind!r})")
-    if not workers:
+    try:
+        client.wait_for_workers(1, timeout=timeout)
+    except TimeoutError:
+        client.close()
         raise ValueError(
             f"{name}: the Dask scheduler at {address!r} has no worker (none joined within "
             f"{timeout:g} s; dask worker {address} starts one)"
-        )
+        ) from None
+    return client
+
+
+def _client(address: str, timeout: float, default: bool):
+    """``distributed.Client(address, timeout=timeout)``, or TimeoutError after twice ``timeout``.
+
+    The client is made in a daemon thread, so that a server that never answers
+    holds that thread only.
+    """
     from distributed import Client
 
-    return Client(address, timeout=timeout, set_as_default=False)
+    made: list = []
+
+    def make():
+        try:
+            made.append(Client(address, timeout=timeout, set_as_default=default))
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller
+            for frame, _ in traceback.walk_tb(exc.__traceback__):
+                half = frame.f_locals.get("self")
+                if isinstance(half, Client):  # made, not connected: closed here, not at exit
+                    half.close(timeout=timeout)
+                    break
+            made.append(exc)
+
+    thread = threading.Thread(target=make, name="depthcore-connect", daemon=True)
+    thread.start()
+    thread.join(2 * timeout)
+    if not made:
+        raise TimeoutError(address)
+    if isinstance(made[0], BaseException):
+        raise made[0]
+    return made[0]
 
 
 def _one_line(exc) -> str:
@@ -177,51 +222,6 @@ def _address(address, name: str) -> tuple[str, tuple[str, int]]:
     if not host or not 1 <= port <= 65535:
         raise ValueError(f"{name} must be {shape}, got {address!r}")
     return address, (host, port)
-
-
-def _probe(address: str, where: tuple[str, int], timeout: float) -> tuple[str, bool]:
-    """The type of the Dask server at ``address`` (``"Scheduler"``), and whether it has a worker.
-
-    A closed port (``where``: the host and port) refuses at once (Dask would
-    retry until ``timeout``). The server is then asked through an asynchronous
-    ``distributed.Client`` in a thread and an event loop of its own (so that it
-    also works under a running loop, a notebook's), bounded by ``timeout``:
-    Dask's own ``timeout`` does not bound its handshake, so a server that
-    accepts and never answers would hold a client for ever
-    (dask/distributed#8071). A scheduler is given ``timeout`` more for its
-    first worker: without one, the chunks would wait for ever.
-
-    Raises
-    ------
-    TimeoutError
-        When the server does not answer in time.
-    Exception
-        Whatever Dask raises for an address it cannot connect to.
-    """
-    from concurrent.futures import ThreadPoolExecutor
-
-    socket.create_connection(where, timeout=timeout).close()
-    with ThreadPoolExecutor(1) as pool:
-        return pool.submit(asyncio.run, _ask(address, timeout)).result()
-
-
-async def _ask(address: str, timeout: float) -> tuple[str, bool]:
-    """:func:`_probe`'s question, in an event loop: the server's type, and has it a worker."""
-    from distributed import Client
-
-    client = Client(address, asynchronous=True, timeout=timeout, set_as_default=False)
-    try:
-        await asyncio.wait_for(client, timeout)
-        kind = client.scheduler_info().get("type")
-        if kind != "Scheduler":
-            return kind, False
-        try:
-            await asyncio.wait_for(client.wait_for_workers(1), timeout)
-        except TimeoutError:
-            return kind, False
-        return kind, True
-    finally:
-        await asyncio.wait_for(client.close(), timeout)
 
 
 def _quiet() -> None:
@@ -315,21 +315,44 @@ def local_cluster(workers: int, host: str | None = None):
 
 
 def resolve(client=None):
-    """The client chunks run on: ``client``, else :data:`SCHEDULER`'s, else None (this process)."""
+    """The client chunks run on: ``client``, else :data:`SCHEDULER`'s, else None (this process).
+
+    :data:`SCHEDULER`'s client is Dask's default client
+    (``distributed.default_client()``) when it is of that scheduler, else a new
+    one (:func:`connect`), made the default.
+    """
     if client is not None:
         return client
     address = os.environ.get(SCHEDULER, "").strip()
     if not address:
         return None
-    if address not in _clients:
-        _clients[address] = connect(address, name=SCHEDULER)
-    return _clients[address]
+    current = _current(address)
+    if current is not None:
+        return current
+    return connect(address, name=SCHEDULER, default=True)
 
 
 def disconnect() -> None:
-    """Close the clients :func:`resolve` made for :data:`SCHEDULER`'s addresses."""
-    while _clients:
-        _clients.popitem()[1].close()
+    """Close Dask's default client if it is :data:`SCHEDULER`'s, made by :func:`resolve`."""
+    address = os.environ.get(SCHEDULER, "").strip()
+    if not address or "distributed" not in sys.modules:
+        return
+    current = _current(address)
+    if current is not None:
+        current.close()
+
+
+def _current(address: str):
+    """Dask's default client if it is running and of the scheduler at ``address``, else None."""
+    from distributed import default_client
+    from distributed.comm import resolve_address
+
+    try:
+        current = default_client()
+        same = current.scheduler.address == resolve_address(address)
+    except ValueError:  # no default client, or not an address (connect refuses it)
+        return None
+    return current if same and current.status == "running" else None
 
 
 def window(client) -> int:
