@@ -5,94 +5,48 @@ check of the optimal filter, not a causal filter (without process noise).
 
 Recommended import: ``from depthcore.particles import importance``.
 
-By default (``proposal="second_order"``, ``ess_threshold=0``) the filter is
-importance sampling of the state: the particles are drawn from a multivariate
-Student t distribution built on the second-order Gaussian ``p_s`` (Eq. (8)),
-weighted by the prior and the three likelihoods (Eq. (4)) over the proposal's
-density, and never resampled. With ``proposal="prior"`` and
-``ess_threshold > 0`` it is the sampling-importance-resampling (bootstrap)
-filter of Prince, section 19.5 [prince2012]_, [gordon1993]_.
+With ``proposal="prior"`` and ``ess_threshold > 0`` it is the
+sampling-importance-resampling (bootstrap) filter of Prince, section 19.5
+[prince2012]_, [gordon1993]_; the motion being deterministic, its particles are
+never spread again and its ESS collapses on the paper's broad prior.
 
-N frames. Everything below holds for ``N >= 3`` bearings of the constant-velocity
-model (no process noise, the model of :mod:`depthcore.exact.bank` with ``q = 0``),
-with "time 3" read as frame ``N`` and ``p_s`` as its ``N``-frame
-generalisation (:func:`depthcore.kalman.second_order.second_order_batch`: the
-Gaussian at the minimiser ``c_N`` of the misfit of all ``N`` bearings, times
-the prior). The filter is importance sampling with a proposal built from all
-the bearings, not a causal filter (that is :mod:`depthcore.particles.resample_move`);
-with process noise every frame's state is a new unknown and a proposal on the
-state at frame 1 alone no longer covers the posterior, so the registry
-(:mod:`depthcore.registry.filters`) refuses ``process_noise > 0`` for it.
+``N >= 3`` frames of the constant-velocity model (:mod:`depthcore.exact.bank`
+with ``q = 0``; "time 3" is frame ``N``, ``p_s`` the ``N``-frame Gaussian of
+:func:`depthcore.kalman.second_order.second_order_batch`). With process noise a
+proposal at frame 1 no longer covers the posterior, and the registry refuses it;
+the causal filter is :mod:`depthcore.particles.resample_move`.
 
-The steps. The state at time 1 is drawn from a distribution ``q``, weighted by
-``prior / q``, and then, for ``k = 1 .. N``: moved deterministically by ``G``
-(Eq. (1)), reweighted by the likelihood of ``mu_k`` (Eq. (4)), and, if
-``ess_threshold > 0``, resampled when the effective sample size falls below
-``ess_threshold * N`` (:mod:`depthcore.particles.resampling`). Weights are kept as
-logarithms. A particle whose depth is ``<= 0`` at any frame gets weight zero:
-the point is in front of the camera, so the filter targets the optimal
-posterior restricted to ``y3 > 2``, as :func:`depthcore.exact.optimal.run`
-does with ``support="front"``.
+The state at time 1 is drawn from ``q``, weighted by ``prior / q``, then for
+``k = 1 .. N`` moved by ``G`` (Eq. (1)), reweighted by the likelihood of ``mu_k``
+(Eq. (4)) and, if ``ess_threshold > 0``, resampled when the ESS falls below
+``ess_threshold * N`` (:mod:`depthcore.particles.resampling`). A particle with
+depth ``<= 0`` at any frame has weight zero: the target is the optimal posterior
+on ``y3 > 2`` (:func:`depthcore.exact.optimal.run`, ``support="front"``).
 
-The bootstrap filter. The motion is deterministic: nothing ever spreads the
-particles again, so the filter can only reweight (and duplicate) the particles
-it drew at time 1. With ``proposal="prior"`` they come from the paper's broad
-prior, of which only a thin wedge is compatible with the bearings, so
-the effective sample size collapses. (After a resampling step ``ess`` counts
-the copies of a particle separately; :meth:`ParticleResult.distinct_ess`
-pools them.)
-
-The proposal (``proposal="second_order"``). The particles are drawn where the
-posterior is: from a multivariate Student t distribution with ``df`` degrees
-of freedom (default :data:`DEFAULT_DF`) centred on the mean of ``p_s`` at time
-3, with scale matrix ``inflation**2`` (default :data:`DEFAULT_INFLATION`)
-times its covariance, and pulled back to time 1 by ``G^{-2}``. The pull-back
-is affine with unit Jacobian (``F^{-2}`` is unit upper triangular), so the
-density of the time-1 particles is ``q`` at their image at time 3, and the
-initial log weight is ``log prior - log q``. The heavy tails and the inflation
-cover the parts of the optimal posterior that ``p_s`` misses (its depth
-marginal is skewed and, with a broad prior, heavy-tailed).
-
-Because ``q`` already anticipates all the measurements, the intermediate
-targets are chosen to match it ([delmoral2006]_: any sequence of intermediate
-distributions may be used as long as the last is the posterior): after
-``mu_k`` the particles target
+The proposal (``"second_order"``) is a Student t with ``df`` degrees of freedom
+(:data:`DEFAULT_DF`) about the mean of ``p_s`` at time 3, scale ``inflation**2``
+(:data:`DEFAULT_INFLATION`) times its covariance, pulled back by ``G^{-2}`` (unit
+Jacobian); its heavy tails cover what ``p_s`` misses. As ``q`` anticipates all the
+bearings, the intermediate targets match it ([delmoral2006]_): after ``mu_k``
 
     pi_k(x) ~ prior(x1) prod_{j <= k} L_j(x) prod_{j > k} Lt_j(x),
 
-where ``Lt_j(x) = exp(-(g_j . (x3 - c))**2 / (2 rho**2))`` is the likelihood
-of ``mu_j`` linearised about the noise-free state ``c`` (Eq. (7)), ``g_j``
-the residual gradients of Eqs. (20)-(22) -- the factors whose product with the
-prior is ``p_s`` itself. (With ``N > 3`` frames the linearisation is about the
-minimiser ``c_N``, where the residuals ``r_j`` do not vanish:
-``Lt_j(x) = exp(-(r_j + g_j . (x_N - c_N))**2 / (2 rho**2))``, whose product
-over ``j`` is the ``N``-frame ``p_s``'s likelihood factor up to a constant,
-because ``sum_j r_j g_j = 0`` at the minimiser.) So the initial log weight also carries
-``sum_j log Lt_j``, and step ``k`` adds ``log L_k - log Lt_k``. After ``mu_3``
-every ``Lt`` has been swapped for the exact ``L`` and the weights are
-``prior * L_1 L_2 L_3 / q``, the importance weights of the posterior; on the
-way, the ESS after each step measures how well the particles fit.
+where ``Lt_j(x) = exp(-(r_j + g_j . (x3 - c))**2 / (2 rho**2))`` is the likelihood
+of ``mu_j`` linearised about ``c`` (Eq. (7); the minimiser ``c_N`` for ``N > 3``,
+where ``sum_j r_j g_j = 0``), ``g_j`` the gradients of Eqs. (20)-(22): their
+product with the prior is ``p_s``. The initial log weight carries ``sum_j log
+Lt_j`` and step ``k`` adds ``log L_k - log Lt_k``, so the final weights are
+``prior * L_1 L_2 L_3 / q``.
 
-Resampling. The default ``ess_threshold = 0`` never resamples, because the
-motion is deterministic: duplicated particles are never diversified again, so
-resampling cannot improve the final estimates, and it commits the particles to
-the intermediate target of the step at which it fires. ``ess_threshold = 0.5``
-is the usual rule.
-
-Convergence. Without resampling the final particles are an importance sample
-of the time-3 posterior ``p_o`` restricted to ``y > 2``, with weights
-proportional to ``p_o / q``. ``q`` is positive everywhere, so self-normalised
-weighted averages converge almost surely to the posterior expectations as
-``N`` grows, and since ``q`` has polynomial tails while ``p_o`` inherits the
-Gaussian tails of the prior, ``E_q[(p_o / q)**2]`` is finite and the error
-falls as ``1 / sqrt(N)`` (delta method for the SDs). With resampling the
-limits still hold, each resampling step being an unbiased selection
-[douc2005]_. :meth:`ParticleResult.standard_errors` estimates the Monte Carlo
-standard errors of the moments. They rest on many distinct particles carrying
-the weight: where the distinct ESS (identical particles pooled) falls below
-:data:`depthcore.particles.resampling.MIN_EFFECTIVE_DRAWS`, :meth:`ParticleResult.collapsed`
-says so, and the registry reports the errors there as NaN, not as the
-vanishing spread of a few particles.
+The default ``ess_threshold = 0`` never resamples: duplicates are never
+diversified, so resampling cannot help the final estimates (0.5 is the usual rule).
+The final particles are an importance sample of ``p_o`` on ``y > 2``; ``q`` has
+polynomial tails and ``p_o`` the prior's Gaussian ones, so ``E_q[(p_o / q)**2]`` is
+finite and the error falls as ``1 / sqrt(N)``; resampling is an unbiased selection
+[douc2005]_. :meth:`ParticleResult.standard_errors` estimates the errors;
+:meth:`ParticleResult.collapsed` flags a distinct ESS below
+:data:`depthcore.particles.resampling.MIN_EFFECTIVE_DRAWS`, where the registry
+reports them as NaN.
 
 References
 ----------
@@ -208,9 +162,7 @@ class WeightedParticles:
 
 @dataclass(frozen=True)
 class ParticleResult(WeightedParticles):
-    """The particle filter's weighted particles at time 3, for one triple.
-
-    Built by :func:`run` (one sequence).
+    """The particle filter's weighted particles at time 3, for one sequence (:func:`run`).
 
     Attributes
     ----------
@@ -221,33 +173,21 @@ class ParticleResult(WeightedParticles):
     ess : ndarray, shape (N,)
         Effective sample size after each measurement.
     resampled : ndarray of bool, shape (N,)
-        Whether the particles were resampled before measurement ``k + 1`` (never before the first).
+        Whether the particles were resampled before measurement ``k + 1``.
     ancestors : ndarray of int, shape (N,)
-        The time-1 draw each particle descends from; resampling duplicates
-        particles, and the motion being deterministic, duplicates stay identical.
+        The time-1 draw each particle descends from.
     proposal : str
     updates : depthcore.problem.predictive.Updates
-        Per frame, arrays of shape (N,): the log predictive density of the
-        bearing and its two-sided tail probability under the weighted mixture
-        of the particles' ``N(x_k / y_k, rho_k**2)`` (the filtering weights,
-        without the look-ahead terms), NaN at a missing frame, and whether the
-        gate skipped it.
+        Per frame (N,), under the particles' ``N(x_k / y_k, rho_k**2)`` with the
+        filtering weights; NaN at a missing frame.
     """
 
     def distinct_ess(self) -> float:
-        """The ESS with the weights of identical particles (same ancestor) pooled.
-
-        After resampling, ``ess`` counts ``N`` copies of one particle as ``N``;
-        this counts them as one.
-        """
+        """The ESS with the weights of identical particles (same ancestor) pooled."""
         return float(_distinct_ess(self.ancestors, self.weights))
 
     def collapsed(self) -> bool:
-        """Whether the weight sits on fewer than ``MIN_EFFECTIVE_DRAWS`` distinct particles.
-
-        Then the weighted spread and :meth:`standard_errors` describe those few
-        particles, not the posterior, and cannot be trusted.
-        """
+        """Whether the weight sits on fewer than ``MIN_EFFECTIVE_DRAWS`` distinct particles."""
         return bool(self.distinct_ess() < MIN_EFFECTIVE_DRAWS)
 
     @property
@@ -270,11 +210,7 @@ class ParticleResult(WeightedParticles):
         return ParticleMoments(*self.marginal("y"), *self.marginal("v"))
 
     def standard_errors(self) -> ParticleMoments:
-        """Monte Carlo standard errors of :meth:`moments` (delta method).
-
-        They treat the particles as independent draws, so after resampling
-        (``resampled.any()``) they understate the error.
-        """
+        """Monte Carlo standard errors of :meth:`moments` (delta method; low after resampling)."""
         W = self.weights
         y, v = (weighted_standard_errors(self.particles[:, INDEX[c]], W) for c in "yv")
         return ParticleMoments(float(y[0]), float(y[1]), float(v[0]), float(v[1]))
@@ -284,12 +220,8 @@ class ParticleResult(WeightedParticles):
     ) -> np.ndarray:
         """Weighted density estimate of one component's marginal on ``grid``.
 
-        :func:`depthcore.particles.resampling.weighted_density` of the particles' ``component``
-        (``"x"``, ``"y"`` or ``"v"``); ``method`` is ``"kde"`` or ``"histogram"``.
-
-        Returns
-        -------
-        ndarray, shape (G,)
+        :func:`depthcore.particles.resampling.weighted_density` of ``component``
+        (``"x"``, ``"y"`` or ``"v"``); returns shape (G,).
         """
         x = self.particles[:, _component(component)]
         return weighted_density(x, self.weights, grid, method, bandwidth)
@@ -315,7 +247,7 @@ class ParticleBatch(WeightedParticles):
     ancestors : ndarray of int, shape (B, N)
     proposal : str
     updates : depthcore.problem.predictive.Updates
-        Arrays of shape (B, N), as :class:`ParticleResult`'s.
+        (B, N) each.
     """
 
     def distinct_ess(self) -> np.ndarray:
@@ -374,19 +306,15 @@ def _degrees_of_freedom(df) -> float:
 def _linearised_log_likelihood(x3, c, g, r0, rho, k) -> np.ndarray:
     """``log Lt_k``: the log likelihoods of ``mu_{k+1}`` linearised about ``c``, at states ``x3``.
 
-    ``-(r0_k + g_k . (x3 - c))**2 / (2 rho_k**2)`` with ``g_k`` (B, 3) the gradient of
-    the residual of ``mu_{k+1}`` at ``c`` (Eq. (8)) and ``r0_k`` (B,) the residual
-    there (0 at the paper's noise-free state; ``g_k`` and ``r0_k`` are 0 at a
-    missing frame, whose term is 0); ``x3`` (B, n, 3) at the last frame,
-    ``rho`` (B, N) per frame, ``k`` (K,) frames from 0: returns shape (B, n, K).
+    ``g`` (B, N, 3), ``r0`` (B, N) (0 at a missing frame), ``x3`` (B, n, 3), ``rho``
+    (B, N), ``k`` (K,) frames from 0: returns shape (B, n, K).
     """
     d = x3 - c[:, None, :]
     r = (d @ np.swapaxes(g[:, k], -1, -2) + r0[:, None, k]) / rho[:, None, k]
     return -0.5 * r**2
 
 
-#: Floats per array of one block of frames (trials x particles x frames) of the loops over
-#: the frames that take several frames at once: about 16 MB.
+#: Floats per array of one block of frames (trials x particles x frames): about 16 MB.
 _BLOCK_FLOATS = 2**21
 
 
@@ -409,15 +337,10 @@ def _bearings_at(x, back) -> np.ndarray:
 def _track_centre(track: frames.Frames) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The proposal's centre ``c`` (B, 3) at the last frame, with ``g`` (B, N, 3) and ``r0`` (B, N).
 
-    The minimiser of the misfit ``sum_k ((h_k(x) - mu_k) / rho_k)**2`` over the
-    present bearings, ``h_k(x) = (x + b_k v) / (y + b_k)`` the bearing of frame
-    ``k`` at the offset ``b_k <= 0`` (depth travelled) from the last frame: the
-    track's form of the minimiser ``c_N`` of Eq. (5). It starts from the
-    bearings' linear equations ``x + b_k v - mu_k y = mu_k b_k`` (the noise-free
-    solution, Eq. (7), in least squares) and takes Gauss-Newton steps, halved
-    until the misfit falls with the point in front of the camera at frame 1.
-    ``g_k`` is the residual's gradient (Eqs. (20)-(22) at the offsets ``b_k``)
-    and ``r0_k`` the residual at ``c``; both 0 at a missing frame.
+    The minimiser of ``sum_k ((h_k(x) - mu_k) / rho_k)**2``, ``h_k(x) = (x + b_k v) /
+    (y + b_k)`` at the offset ``b_k <= 0`` from the last frame (Eq. (5)'s ``c_N``), by
+    Gauss-Newton from the least-squares Eq. (7); ``g_k`` is the residual's gradient
+    (Eqs. (20)-(22)), ``r0_k`` the residual.
     """
     present, mu = track.present, np.where(track.present, track.mu, 0.0)
     weight = np.where(present, 1.0 / track.rho, 0.0)
@@ -470,17 +393,9 @@ def _gradients(c, back, present) -> np.ndarray:
 def _track_proposal(track, prior_mean, prior_cov):
     """The Gaussian ``p_s`` at the last frame of a track, its centre and look-ahead terms.
 
-    The prior moved to the last frame (``x_N = F(T) x_1 + (0, T, 0)``, ``T`` the
-    depth travelled, :func:`depthcore.problem.frames.transition`) times the
-    present bearings' likelihoods linearised about :func:`_track_centre`'s
-    ``c``, Eq. (8): information ``(F P F^T)^{-1} + sum_k g_k g_k^T / rho_k**2``.
-
-    Returns
-    -------
-    mean : ndarray, shape (B, 3)
-    cov : ndarray, shape (B, 3, 3)
-    look_ahead : tuple
-        ``(c, g, r0)`` of :func:`_linearised_log_likelihood`.
+    Eq. (8): information ``(F P F^T)^{-1} + sum_k g_k g_k^T / rho_k**2`` with ``F``
+    :func:`depthcore.problem.frames.transition`'s. Returns mean (B, 3), cov (B, 3, 3)
+    and ``(c, g, r0)``.
     """
     c, g, r0 = _track_centre(track)
     T = track.elapsed[:, -1]
@@ -501,10 +416,8 @@ def _track_proposal(track, prior_mean, prior_cov):
 def _initial(track, prior_mean, prior_cov, N, rng, proposal, df, inflation):
     """Time-1 particles (B, N, 3), their log weights (B, N) and the look-ahead terms.
 
-    The proposal sees only the present bearings: on the paper's frames the
-    second-order Gaussian of :func:`depthcore.kalman.second_order.second_order_batch`,
-    otherwise :func:`_track_proposal`. The weight is zero where the depth at
-    frame 1 is not positive (the front support).
+    The proposal is :func:`_track_proposal`'s, or on the paper's frames
+    :func:`depthcore.kalman.second_order.second_order_batch`'s.
     """
     mu = track.mu
     if proposal == "prior":
@@ -537,11 +450,7 @@ def _initial(track, prior_mean, prior_cov, N, rng, proposal, df, inflation):
 
 
 def _dead(log_w, k) -> None:
-    """Refuse a trial none of whose particles (axis 1 of ``log_w``) has a positive weight.
-
-    ``log_w`` (B, N, K) after the frames ``k`` (K,) (``N`` may be 1: the largest of
-    each trial's log weights); names the first frame and trial.
-    """
+    """Refuse a trial none of whose particles has a positive weight, ``log_w`` (B, N, K)."""
     dead = ~np.any(np.isfinite(log_w), axis=1)  # (B, K)
     if np.any(dead):
         j = int(np.argmax(np.any(dead, axis=0)))
@@ -555,10 +464,8 @@ def _dead(log_w, k) -> None:
 def _predictive(mu_k, log_w, states, rho_k, present_k):
     """The bearings' log predictive densities and tails (B, K) under the weighted particles.
 
-    ``log_w`` (B, N, K) the filtering log weights before each frame, ``states``
-    (B, N, K, 3) at the frames, ``mu_k``, ``rho_k``, ``present_k`` (B, K): the
-    mixture of ``N(x / y, rho_k**2)`` (:func:`depthcore.problem.predictive.mixture`);
-    NaN at a missing frame.
+    ``log_w`` (B, N, K), ``states`` (B, N, K, 3), ``mu_k``, ``rho_k``, ``present_k``
+    (B, K); :func:`depthcore.problem.predictive.mixture`.
     """
     alive = np.isfinite(log_w) & (states[..., 1] > 0)
     safe = np.where(alive[..., None], states, 1.0)
@@ -572,18 +479,9 @@ def _predictive(mu_k, log_w, states, rho_k, present_k):
 def _without_resampling(x1, log_w, look_ahead, track, gate, skip):
     """The weights after every frame of a run that never resamples, several frames at once.
 
-    Without resampling every particle moves by Eq. (1) alone: its state at
-    frame ``k`` is ``x_1`` moved by the depth travelled to frame ``k``, and its
-    log weight after ``mu_k`` is the initial one plus, over the present frames
-    ``j <= k``, the log likelihood (4) of ``mu_j`` less the look-ahead term of
-    frame ``j`` (the terms the initial weight holds, so that at the last frame
-    they cancel). These sums are taken a block of frames at a time (one frame
-    at a time with a gate, whose decisions depend on the frames before), the
-    ESS after each frame from them (it does not depend on the normalisation),
-    and the weights normalised once, at the end: the per-frame loop of
-    :func:`run`, which normalises and moves the particles at every frame,
-    gives the same to rounding. A skipped bearing (gated) swaps its look-ahead
-    term for nothing.
+    Each log weight after ``mu_k`` is the initial one plus, over present frames
+    ``j <= k``, ``log L_j - log Lt_j``, summed a block of frames at a time (one with a
+    gate) and normalised once: the per-frame loop's result to rounding.
 
     Returns
     -------
@@ -682,18 +580,13 @@ def run(
 
     {parameters}
     n_particles : int
-        ``N >= 1`` particles per trial. Memory grows like ``B * N``: about
-        ``200 B N`` bytes at the peak.
+        ``N >= 1`` per trial; about ``200 B N`` bytes at the peak.
     rng : numpy.random.Generator
-        The only source of randomness.
     proposal : {"second_order", "prior"}
-        Where the time-1 particles come from (see the module docstring); the
-        second-order proposal is built from the present bearings alone.
+        See the module docstring.
     resampler : {"systematic", "multinomial", "residual"}
     ess_threshold : float
-        Resample before a move when the ESS is below ``ess_threshold * N``; in
-        [0, 1]. Default 0, never (see the module docstring); 0.5 is the usual
-        SIR rule.
+        In [0, 1]; see the module docstring.
     df : float
         Degrees of freedom of the t proposal, > 0 (``inf`` for a Gaussian).
     inflation : float
@@ -702,19 +595,12 @@ def run(
     Returns
     -------
     ParticleResult or ParticleBatch
-        For one sequence its :class:`ParticleResult`, for a batch the
-        :class:`ParticleBatch`.
 
     Notes
     -----
-    A missing bearing (``NaN``) is predicted through: the particles move and
-    keep their weights. With a gate, a bearing whose predictive tail under the
-    filtering weights falls below it is skipped likewise. The second-order
-    proposal is drawn before any bearing is weighed, so with it a gate is
-    applied by refitting: the proposal is rebuilt without the bearings skipped
-    so far, from the same state of ``rng``, until no further bearing falls
-    below the gate; the answer is then the one for those bearings set to
-    ``NaN``, draw for draw.
+    A missing (``NaN``) or gated bearing is predicted through. With the second-order
+    proposal a gate refits it without the bearings skipped, from the same ``rng``
+    state, until none more is skipped.
     """
     if np.ndim(mu) == 1:
         _one_track(mu, rho, prior_mean, prior_cov, steps)

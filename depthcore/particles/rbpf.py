@@ -2,81 +2,37 @@
 
 Recommended import: ``from depthcore.particles import rbpf``.
 
-The textbook's extensions of the particle filter (Prince, section 19.5.3
-[prince2012]_) include Rao-Blackwellisation: the state is split into two
-parts, the first tracked by particles and the second, conditioned on the
-first, by a Kalman filter [doucet2000]_. The model of :mod:`depthcore.exact.bank`
-splits this way. Given the depth at frame 1, ``y_1 = y``, the depth at frame
-``k`` is ``y + k - 1`` and the lateral state ``u_k = (x_k, v_k)`` is
-linear-Gaussian (textbook Eqs. (19.5), (19.7)); so each particle is a depth
-``y^(j)`` carrying the Kalman filter of ``u_k`` at that depth
-(:func:`depthcore.exact.bank.filter_bank`, :func:`depthcore.exact.bank.step`), and the
-lateral part of the posterior is exact given the particles. The particles
-sample only the one-dimensional depth.
+Rao-Blackwellisation (Prince, section 19.5.3 [prince2012]_, [doucet2000]_) splits
+the state of :mod:`depthcore.exact.bank`'s model: given ``y_1 = y`` the lateral state
+``u_k = (x_k, v_k)`` is linear-Gaussian (textbook Eqs. (19.5), (19.7)), so each
+particle is a depth ``y^(j)`` carrying the Kalman filter of ``u_k`` at that depth
+(:func:`depthcore.exact.bank.filter_bank`, :func:`depthcore.exact.bank.step`); the
+particles sample only the depth. For ``J`` particles and bearings seen one at a time:
 
-The steps, for ``J`` particles and bearings ``mu_1, mu_2, ..`` seen one at a time:
+* Frame 1. Depths from ``N(m_y, P_yy)`` on ``y > 0`` (the "front" support),
+  exactly (:func:`prior_depths`); each filter starts from
+  :func:`depthcore.exact.bank.conditional_prior` and incorporates ``mu_1``
+  (textbook 19.2.2).
+* Frame ``k``. Each filter predicts (19.2.1) and incorporates ``mu_k``; the log
+  weight gains ``log p(mu_k | mu_1 .. mu_{k-1}, y^(j))`` (19.5.2).
+* Resampling, when the ESS falls below ``ess_threshold * J`` (default 0.5; 19.5.3)
+  (:mod:`depthcore.particles.resampling`), each copy keeping its filter.
+* Rejuvenation (:func:`rejuvenate`). The depth is static, so after each
+  resampling every particle takes ``moves`` Metropolis-Hastings steps [gilks2001]_,
+  a random walk of SD ``2.38`` times the depths' weighted SD [roberts1997]_,
+  targeting
 
-* Frame 1. The depths are drawn from the prior's depth marginal
-  ``N(m_y, P_yy)`` restricted to ``y > 0`` (the point in front of the camera
-  at every frame, the "front" support of :func:`depthcore.exact.optimal.run`).
-  The truncation is handled exactly, by inverse-CDF sampling of the truncated
-  Gaussian in log space (:func:`prior_depths`); its normaliser
-  ``P(y_1 > 0)`` is the same for every particle and cancels when the weights
-  are normalised. Each particle's filter starts from the prior of ``(x_1, v_1)``
-  given its depth (:func:`depthcore.exact.bank.conditional_prior`) and incorporates
-  ``mu_1`` (textbook 19.2.2).
-* Frame ``k``. Each filter predicts (textbook 19.2.1) and incorporates ``mu_k``;
-  the particle's log weight gains the log density of the innovation,
-  ``log p(mu_k | mu_1 .. mu_{k-1}, y^(j))`` (the textbook's measurement
-  incorporation, 19.5.2, with the Kalman filter's marginal likelihood in place
-  of the likelihood of one state).
-* Resampling. When the effective sample size falls below
-  ``ess_threshold * J`` (default ``0.5``; textbook 19.5.3 resamples now and
-  then rather than at every frame) the particles are resampled, systematically by default
-  (:mod:`depthcore.particles.resampling`), each copy keeping its Kalman filter.
-* Rejuvenation (:func:`rejuvenate`). The depth is static: resampling only
-  duplicates depths and nothing spreads them again, so without a move the
-  cloud degenerates to a few distinct depths. After each resampling every
-  particle takes ``moves`` Metropolis-Hastings steps on its depth
-  [gilks2001]_, a Gaussian random walk with SD ``2.38`` times the weighted SD
-  of the depths before resampling (the scale for a one-dimensional target
-  [roberts1997]_), targeting the posterior of the depth given all bearings so
-  far,
+      pi_k(y)  proportional to  N(y; m_y, P_yy) [y > 0] p(mu_1 .. mu_k | y).
 
-      pi_k(y)  proportional to  N(y; m_y, P_yy) [y > 0] p(mu_1 .. mu_k | y),
+A frame costs ``O(J)``, a resampling ``O(moves J k)``. On the paper's problem the
+third bearing collapses a thousand particles' weights onto two or three and the moves
+rebuild the posterior: hence :data:`DEFAULT_MOVES` (``benchmarks/bench_rbpf.py``).
 
-  which leaves the filtering distribution invariant. The marginal likelihood
-  ``p(mu_1 .. mu_k | y')`` at a proposed depth comes from rerunning that
-  particle's Kalman filter over all ``k`` frames (:func:`depthcore.exact.bank.filter_bank`),
-  and an accepted move takes the rerun filter with it. Proposals at
-  ``y' <= 0`` are rejected without a rerun.
-
-Cost. A frame without resampling costs one Kalman step per particle, ``O(J)``.
-A resampling at frame ``k`` costs ``moves`` reruns over ``k`` frames,
-``O(moves J k)``; over ``N`` frames, resampling at every frame in the worst
-case, ``O(moves J N**2)``. The past bearings are kept for these reruns
-(``RBPF.bank.mu``).
-
-On the paper's problem the moves do most of the work. With the broad prior
-``N(m, 1000 I)`` the first two bearings leave the depth spread over tens of
-units and the third fixes it to within about one: after ``mu_3`` the weights
-of a thousand particles collapse onto two or three (ESS near 2), and the
-posterior is rebuilt by the moves from those survivors. Hence the default of
-:data:`DEFAULT_MOVES` moves, and the error's ``1 / sqrt(J)`` decay only from
-about a thousand particles on (``benchmarks/bench_rbpf.py``).
-
-Monte Carlo standard errors. After a resampling and a move, the particles are
-correlated and the weighted spread of one cloud does not measure the error of
-its estimates. The filter therefore runs ``replicas`` independent clouds
-(independent draws from the one generator): :meth:`RBPF.moments` averages
-their estimates and :meth:`RBPF.standard_errors` is the SD of the replicas'
-estimates over ``sqrt(replicas)``, the standard error of that average (NaN
-with one replica). :meth:`RBPF.errors` widens it by the Student t factor for
-``replicas - 1`` degrees of freedom, so that the estimate lies within 1.96
-errors of the exact value in 95 % of runs, and flags a collapse (replicas that
-disagree by more than the posterior's width), where the error is NaN
-(:func:`depthcore.particles.resampling.replica_errors`). The self-normalised estimates
-also carry a bias of order ``1 / J``, which this does not measure.
+Moved particles are correlated, so the filter runs ``replicas`` independent clouds:
+:meth:`RBPF.moments` averages them, :meth:`RBPF.standard_errors` is their SD over
+``sqrt(replicas)`` and :meth:`RBPF.errors` widens it by Student t and flags a
+collapse (:func:`depthcore.particles.resampling.replica_errors`). The ``1 / J``
+bias of self-normalisation is not measured.
 
 References
 ----------
@@ -139,36 +95,23 @@ class Settings:
 
 @dataclass(frozen=True)
 class RBPF:
-    """The Rao-Blackwellised particle filter after ``K`` frames.
-
-    Built by :func:`run`, extended by :func:`step`. ``(...)`` is the batch
-    shape of the trials (empty for one sequence), ``R`` the number of
-    independent replicas and ``J`` the number of particles in each.
+    """The filter after ``K`` frames: batch ``(...)``, ``R`` replicas of ``J`` particles.
 
     Attributes
     ----------
     bank : depthcore.exact.bank.Bank
-        The particles as a bank of Kalman filters: ``nodes`` (..., R, J) are
-        their depths at frame 1, ``mean`` (..., R, J, 2) and ``cov``
-        (..., R, J, 2, 2) the Gaussian of ``(x_K, v_K)`` given each depth and
-        the bearings, ``log_weight`` (..., R, J) ``log pi_K`` up to a constant,
-        ``mu`` (..., R, K) the bearings so far.
+        The particles' filters: ``nodes`` (..., R, J), ``mean`` (..., R, J, 2),
+        ``cov`` (..., R, J, 2, 2), ``log_weight`` (..., R, J), ``mu`` (..., R, K).
     log_weights : ndarray, shape (..., R, J)
-        The particles' normalised log weights.
+        Normalised.
     ess : ndarray, shape (..., R, K)
-        Effective sample size after reweighting by ``mu_k``, before any
-        resampling at that frame.
+        After reweighting by ``mu_k``, before resampling.
     resampled : ndarray of bool, shape (..., R, K)
-        Whether frame ``k`` resampled and moved the particles.
     acceptance : ndarray, shape (..., R, K)
-        Mean Metropolis-Hastings acceptance rate of the moves at frame ``k``
-        (NaN where the frame did not move, or ``moves = 0``).
+        Mean acceptance rate of the moves (NaN without moves).
     settings : Settings
     updates : depthcore.problem.predictive.Updates
-        Per frame, shape (..., K) each: the bearing's log predictive density
-        and two-sided tail probability under the pooled particles of all
-        replicas (each particle's Kalman predictive, weighted by the
-        particle's weight over ``R``), and whether the gate skipped it.
+        Per frame (..., K), under the pooled particles (:func:`_pooled_report`).
     """
 
     bank: bk.Bank
@@ -200,13 +143,7 @@ class RBPF:
         return self.log_weights.shape[-2]
 
     def replica_moments(self) -> ParticleMoments:
-        """Depth and velocity means and SDs at frame ``K`` of each replica, shape (..., R).
-
-        The moments of the mixture of the particles' Gaussians
-        (:func:`depthcore.exact.mixture.mixture`'s formula with the particles' weights):
-        the depth ``y_1 + K - 1`` is exact given a particle, the velocity
-        Gaussian given its depth.
-        """
+        """Depth and velocity means and SDs at frame ``K`` of each replica, shape (..., R)."""
         b = self.bank
         mean, cov = bmix.mixture_moments(
             np.exp(self.log_weights), b.mean, b.cov, b.nodes + self._travelled
@@ -218,16 +155,8 @@ class RBPF:
     def pooled(self):
         """The replicas pooled into one mixture at frame ``K``.
 
-        Returns
-        -------
-        W : ndarray, shape (..., R J)
-            Normalised weights, each replica's over ``R``.
-        depths : ndarray, shape (..., R J)
-            The particles' depths ``y_K``: ``y_1`` plus the depth travelled
-            (``K - 1`` at unit steps).
-        means : ndarray, shape (..., R J, 2)
-            ``E[(x_K, v_K) | y_1, mu_1 .. mu_K]`` of each particle.
-        covs : ndarray, shape (..., R J, 2, 2)
+        Returns weights ``W`` (..., R J) (each replica's over ``R``), depths ``y_K``
+        (..., R J), means (..., R J, 2) and covariances (..., R J, 2, 2).
         """
         b = self.bank
         batch = self.log_weights.shape[:-2]
@@ -246,20 +175,12 @@ class RBPF:
         )
 
     def state_moments(self):
-        """Mean (..., 3) and covariance (..., 3, 3) of ``(x_K, y_K, v_K)`` under :meth:`pooled`.
-
-        The law of total variance over the particles' Kalman filters: the
-        weighted covariance of their means plus their weighted covariances
-        (the depth is exact given a particle).
-        """
+        """Mean (..., 3) and covariance (..., 3, 3) of ``(x_K, y_K, v_K)`` under :meth:`pooled`."""
         W, depths, means, covs = self.pooled()
         return bmix.mixture_moments(W, means, covs, depths)
 
     def depth_cdf(self, y):
-        """``P(y_K <= y)`` under :meth:`pooled`, the particles' weighted step function.
-
-        ``y`` of shape (...) or (..., G); returns the same shape.
-        """
+        """``P(y_K <= y)`` under :meth:`pooled`, ``y`` (...) or (..., G)."""
         W, depths, _, _ = self.pooled()
         y = np.asarray(y, dtype=float)
         if y.ndim > W.ndim - 1:
@@ -267,10 +188,7 @@ class RBPF:
         return np.sum(W * (depths <= y[..., None]), axis=-1)
 
     def velocity_cdf(self, v):
-        """``P(v_K <= v)`` under :meth:`pooled`: the Gaussian mixture's CDF.
-
-        ``v`` of shape (...) or (..., G); returns the same shape.
-        """
+        """``P(v_K <= v)`` under :meth:`pooled`, ``v`` (...) or (..., G)."""
         W, _, means, covs = self.pooled()
         v = np.asarray(v, dtype=float)
         m, s = means[..., 1], np.sqrt(covs[..., 1, 1])
@@ -279,10 +197,7 @@ class RBPF:
         return np.sum(W * ndtr((v[..., None] - m) / s), axis=-1)
 
     def velocity_pdf(self, v):
-        """The density of ``v_K`` under :meth:`pooled`, a Gaussian mixture.
-
-        Shapes as :meth:`velocity_cdf`.
-        """
+        """The density of ``v_K`` under :meth:`pooled`; shapes as :meth:`velocity_cdf`."""
         W, _, means, covs = self.pooled()
         v = np.asarray(v, dtype=float)
         m, s = means[..., 1], np.sqrt(covs[..., 1, 1])
@@ -296,12 +211,7 @@ class RBPF:
         return ParticleMoments(*(np.mean(m, axis=-1) for m in self.replica_moments()))
 
     def standard_errors(self) -> ParticleMoments:
-        """Standard errors of :meth:`moments` from the spread of the independent replicas.
-
-        The SD of the ``R`` replicas' estimates (``ddof = 1``) over ``sqrt(R)``,
-        shape (...); NaN with one replica. They do not include the ``O(1 / J)``
-        bias of the self-normalised estimates.
-        """
+        """Standard errors of :meth:`moments`, shape (...): see the module docstring."""
         R = self.replicas
         if R < 2:
             return ParticleMoments(*(np.full(m.shape[:-1], np.nan) for m in self.replica_moments()))
@@ -312,12 +222,7 @@ class RBPF:
     def errors(self) -> tuple[ParticleMoments, np.ndarray]:
         """Monte Carlo errors of the moments and the collapse flag, shape (...).
 
-        :func:`depthcore.particles.resampling.replica_errors` of each of
-        :meth:`replica_moments` over the replicas: the standard error of
-        :meth:`standard_errors` widened by the Student t factor for ``R - 1``
-        degrees of freedom, NaN where the replicas collapsed (each worth fewer
-        than ``MIN_EFFECTIVE_DRAWS`` independent draws of the posterior) or
-        ``R < 2``. ``collapsed`` is true where the depth or the velocity has.
+        :func:`depthcore.particles.resampling.replica_errors` of :meth:`replica_moments`.
         """
         m = self.replica_moments()
         out, collapsed = [], np.zeros(m.depth_mean.shape[:-1], dtype=bool)
@@ -339,24 +244,8 @@ class RBPF:
 def prior_depths(prior_mean, prior_cov, shape, rng: np.random.Generator) -> np.ndarray:
     """Draws of ``y_1`` from ``N(m_y, P_yy)`` restricted to ``y_1 > 0``, by inverse CDF.
 
-    With ``s = sqrt(P_yy)`` and ``V`` uniform on ``(0, Phi(m_y / s)]``,
-    ``y = m_y - s Phi^{-1}(V)`` has the truncated density: ``y > 0`` exactly
-    when ``V < Phi(m_y / s)``. ``log V`` and the inverse are computed in log
-    space (``log_ndtr``, ``ndtri_exp``), so a prior with almost no mass in
-    front of the camera is sampled as accurately as one with almost all.
-
-    Parameters
-    ----------
-    prior_mean : ndarray, shape (..., 3)
-    prior_cov : ndarray, shape (..., 3, 3)
-    shape : tuple of int
-        ``(...) + (J,)``: the draws' shape, the priors' batch shape then the draws.
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    ndarray, shape ``shape``
-        Depths at frame 1, all > 0.
+    ``y = m_y - s Phi^{-1}(V)``, ``V`` uniform on ``(0, Phi(m_y / s)]``, in log space.
+    ``prior_mean`` (..., 3), ``prior_cov`` (..., 3, 3), ``shape`` ``(...) + (J,)``.
     """
     m = prior_mean[..., 1, None]
     s = np.sqrt(prior_cov[..., 1, 1])[..., None]
@@ -377,33 +266,24 @@ def _finite_or_minus_inf(log_weight):
 def rejuvenate(bank: bk.Bank, scale, moves: int, rng: np.random.Generator):
     """Metropolis-Hastings random-walk moves on the particles' depths [gilks2001]_.
 
-    The target of each particle is the posterior of the depth at frame 1 given
-    the bank's bearings, ``pi_K(y) ~ N(y; m_y, P_yy) [y > 0] p(mu_1 .. mu_K | y)``,
-    whose log is ``bank.log_weight`` up to a constant. Each step proposes
-    ``y' = y + scale eps``, ``eps ~ N(0, 1)``, reruns the Kalman filter at
-    ``y'`` over all ``K`` bearings (textbook 19.2.3, :func:`depthcore.exact.bank.filter_bank`)
-    and accepts with probability ``min(1, pi_K(y') / pi_K(y))``; a proposal
-    ``y' <= 0`` is rejected. An accepted particle takes the rerun filter's
-    mean, covariance and log weight. Cost: ``moves`` reruns over ``K`` frames
-    per particle.
+    The target is ``pi_K`` (module docstring), ``bank.log_weight`` up to a constant;
+    each step reruns the filter at ``y' = y + scale eps`` (textbook 19.2.3) and
+    accepts with probability ``min(1, pi_K(y') / pi_K(y))``.
 
     Parameters
     ----------
     bank : depthcore.exact.bank.Bank
-        The particles: nodes (..., J) and their filters after the bank's
-        bearings; the other fields broadcast with the batch shape (...).
+        Nodes (..., J).
     scale : array_like, shape (...) or ()
-        The random walk's SD, > 0.
     moves : int
-        Steps per particle, >= 0.
     rng : numpy.random.Generator
 
     Returns
     -------
     bank : depthcore.exact.bank.Bank
-        The moved particles (``history`` dropped).
+        Without ``history``.
     acceptance : ndarray, shape (...)
-        Mean acceptance rate over the particles and steps (NaN for ``moves = 0``).
+        NaN for ``moves = 0``.
     """
     if not isinstance(bank, bk.Bank):
         raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")
@@ -494,11 +374,7 @@ def _resample_move(bank: bk.Bank, log_w, need, settings: Settings, rng):
 
 
 def _reweighted(state: RBPF, bank: bk.Bank, log_w, rng, report=None) -> RBPF:
-    """Normalise the new weights, record the ESS, resample and move where it is low.
-
-    ``report``: the frame's (log predictive, tail, gated), each of the batch
-    shape without the replicas, appended to the state's updates.
-    """
+    """Normalise the new weights, record the ESS and ``report``, resample and move."""
     if not np.all(np.any(np.isfinite(log_w), axis=-1)):
         raise ValueError(
             f"n_particles is too small: every particle of a replica has weight zero "
@@ -533,27 +409,10 @@ def _reweighted(state: RBPF, bank: bk.Bank, log_w, rng, report=None) -> RBPF:
 def _pooled_report(log_w, bank: bk.Bank, mu, rho, depth_ahead, gate):
     """A frame's report under the particles of all replicas pooled, and the gate's verdict.
 
-    Each particle predicts ``mu`` as ``N(x / y, P_xx / y**2 + rho**2)`` from its
-    lateral Gaussian moved by the step ahead (``x + s v``, variance
-    ``P_xx + 2 s P_xv + s**2 P_vv``) at its depth ``y``; the particles are
-    weighted by their normalised weights over ``R``.
-
-    Parameters
-    ----------
-    log_w : ndarray, shape (..., R, J)
-        Normalised log weights before the frame.
-    bank : depthcore.exact.bank.Bank
-        The particles before the frame (``mean`` (..., R, J, 2)).
-    mu : ndarray, shape (...)
-    rho : ndarray, shape (...) or ()
-    depth_ahead : tuple of ndarray
-        The step ``s`` to the frame (shape (...) or ()) and the particles'
-        depths ``y`` at it (..., R, J).
-    gate : float or None
-
-    Returns
-    -------
-    log_density, tail, gated : ndarray, shape (...)
+    Each particle predicts ``N(x / y, P_xx / y**2 + rho**2)`` after the step ``s``
+    (``x + s v``, ``P_xx + 2 s P_xv + s**2 P_vv``), weighted over ``R``. ``log_w``
+    (..., R, J), ``mu`` (...), ``depth_ahead`` ``(s, y)`` with ``y`` (..., R, J);
+    returns three arrays (...).
     """
     s, y = depth_ahead
     s = np.asarray(s)[..., None, None]
@@ -575,11 +434,7 @@ def _pooled_report(log_w, bank: bk.Bank, mu, rho, depth_ahead, gate):
 
 
 def _start(mu_1, rho, q, prior_mean, prior_cov, J, R, settings, rng, gate=None) -> RBPF:
-    """Frame 1: depths from the truncated prior, each filter updated by ``mu_1``, weights.
-
-    ``mu_1`` may be ``NaN`` (no bearing at frame 1: the particles keep the
-    prior's weights); ``rho`` is frame 1's noise.
-    """
+    """Frame 1: depths from the truncated prior, each filter updated by ``mu_1`` (or NaN)."""
     batch = mu_1.shape + (R,)
     prior_mean = np.broadcast_to(prior_mean[..., None, :], batch + (3,))
     prior_cov = np.broadcast_to(prior_cov[..., None, :, :], batch + (3, 3))
@@ -618,26 +473,21 @@ def _start(mu_1, rho, q, prior_mean, prior_cov, J, R, settings, rng, gate=None) 
 def step(state: RBPF, mu_next, rng: np.random.Generator, rho=None, step=1.0, gate=None) -> RBPF:
     """Add frame ``K + 1``: every particle's Kalman filter predicts and incorporates ``mu_{K+1}``.
 
-    The log weights gain the innovations' log densities (textbook 19.2.2,
-    19.5.2); then, where the ESS falls below the threshold, the particles are
-    resampled and moved (:func:`rejuvenate`). Cost ``O(J)`` per trial and
-    replica, plus ``O(moves J (K + 1))`` where it resamples.
+    The log weights gain the innovations' log densities (textbook 19.2.2, 19.5.2),
+    then particles are resampled and moved where the ESS is low (:func:`rejuvenate`).
 
     Parameters
     ----------
     state : RBPF
-        The filter after ``K`` frames.
     mu_next : float or array_like, shape (...)
-        The bearing at frame ``K + 1`` of each trial; ``NaN``: no bearing (the
-        filters predict through the frame, the weights stay).
+        ``NaN``: no bearing.
     rng : numpy.random.Generator or numpy.random.SeedSequence
     rho : float or array_like, shape (...), or None
-        The frame's noise SD (``None``: the filter's).
+        ``None``: the filter's.
     step : float or array_like, shape (...)
         The depth's change since frame ``K``, > 0.
     gate : float or None
-        Skip a bearing whose tail probability under the pooled particles'
-        predictive is below it (:mod:`depthcore.problem.predictive`).
+        See :mod:`depthcore.problem.predictive`.
 
     Returns
     -------
@@ -700,22 +550,15 @@ def run(
 ) -> RBPF:
     """The Rao-Blackwellised particle filter over bearings ``mu_1 .. mu_K``, batched over trials.
 
-    The bearings are taken one at a time (:func:`step`): the result after
-    ``K`` frames is the filter's state, ready for more.
-
-    A missing bearing (``NaN``) is predicted through, ``rho`` may be given per
-    frame and ``steps`` between frames; the particles' depths at frame ``k``
-    are ``y_1`` plus the depth travelled.
+    The bearings are taken one at a time (:func:`step`); a ``NaN`` is predicted through.
 
     {parameters}
     n_particles : int
         ``J >= 2`` particles (depths) per replica.
     rng : numpy.random.Generator or numpy.random.SeedSequence
-        The only source of randomness.
     {process_noise}
     replicas : int
-        ``R >= 1`` independent clouds of ``J`` particles, for standard errors
-        (:meth:`RBPF.standard_errors`); the cost grows like ``R J``.
+        ``R >= 1`` independent clouds, for :meth:`RBPF.standard_errors`.
     moves, ess_threshold, resampler
         The resampling schedule, :class:`Settings`: ``moves >= 0``, ``ess_threshold``
         in [0, 1] (0: never resample, importance sampling of the depth from its prior).

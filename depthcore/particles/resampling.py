@@ -29,10 +29,8 @@ def check_rng(rng):
 def track_problem(mu, rho, prior_mean, prior_cov, steps=None, triples: bool = False):
     """The particle filters' checks of a batch of tracks as they come, and of the prior.
 
-    :func:`depthcore.problem.frames.check` of ``mu, rho, steps``; on the paper's
-    frames (:attr:`~depthcore.problem.frames.Frames.regular`) also
-    :func:`depthcore.problem.model.batch_inputs` with ``triples`` (the refusals
-    the filters have always made), otherwise the prior's checks alone.
+    :func:`depthcore.problem.frames.check`; on regular frames also
+    :func:`depthcore.problem.model.batch_inputs` with ``triples``.
 
     Parameters
     ----------
@@ -43,7 +41,6 @@ def track_problem(mu, rho, prior_mean, prior_cov, steps=None, triples: bool = Fa
     prior_cov : array_like, shape (3, 3) or (..., 3, 3)
     steps : array_like, shape (N - 1,) or (..., N - 1), or None
     triples : bool
-        Check regular frames' bearings as the paper's triples (``N = 3``).
 
     Returns
     -------
@@ -114,18 +111,16 @@ def _indices(counts) -> np.ndarray:
 def systematic(W, rng: np.random.Generator, M: int | None = None) -> np.ndarray:
     """Systematic resampling, batched over the leading axes of ``W``.
 
-    One uniform ``U`` per row; the points ``(U + j) / M``, ``j = 0 .. M-1``,
-    select particle ``i`` when they fall in ``[C_{i-1}, C_i)`` with ``C`` the
-    cumulative weights [douc2005]_. Particle ``i`` is drawn ``floor(M W_i)`` or
-    ``ceil(M W_i)`` times.
+    One uniform ``U`` per row; the points ``(U + j) / M`` select particle ``i`` in
+    ``[C_{i-1}, C_i)`` [douc2005]_: ``floor(M W_i)`` or ``ceil(M W_i)`` times.
 
     Parameters
     ----------
     W : array_like, shape (..., N)
-        Normalised weights (each row sums to 1).
+        Normalised weights.
     rng : numpy.random.Generator
     M : int, optional
-        Number of draws; ``N`` by default.
+        Draws; ``N`` by default.
 
     Returns
     -------
@@ -156,14 +151,9 @@ def multinomial(W, rng: np.random.Generator, M: int | None = None) -> np.ndarray
 def residual(W, rng: np.random.Generator, M: int | None = None) -> np.ndarray:
     """Residual resampling, batched.
 
-    Particle ``i`` is kept ``floor(M W_i)`` times, and the remaining ``R = M -
-    sum_i floor(M W_i)`` draws are multinomial with probabilities proportional
-    to the residuals ``M W_i - floor(M W_i)`` [douc2005]_. (filterpy's
-    ``residual_resample``, in 1.4.5 and 2.0.0, computes ``weights -
-    num_copies``, i.e. ``W_i - floor(N W_i)``, which is negative for every
-    copied particle; the residual is ``N W_i - floor(N W_i)``.) Parameters and
-    returns as :func:`systematic`; particle ``i`` is drawn at least
-    ``floor(M W_i)`` times and ``M W_i`` times on average.
+    ``floor(M W_i)`` copies, the rest multinomial on the residuals ``M W_i - floor(M
+    W_i)`` [douc2005]_ (not filterpy's ``W_i - floor(N W_i)``, negative when copied).
+    Parameters and returns as :func:`systematic`.
     """
     W, M = _weights(W, M)
     check_rng(rng)
@@ -182,35 +172,28 @@ RESAMPLERS = {"systematic": systematic, "multinomial": multinomial, "residual": 
 def metropolis(x, log_p, propose, target, moves: int, rng: np.random.Generator, carried=()):
     """Random-walk Metropolis-Hastings moves of every particle, batched.
 
-    Each step draws ``eps ~ N(0, I)`` of ``x``'s shape, proposes
-    ``propose(x, eps)``, and accepts each particle's proposal with probability
-    ``min(1, exp(target - log_p))``; a proposal with log target ``-inf`` is
-    rejected. The resample-move filter moves whole states, the
-    Rao-Blackwellised filter depths with their Kalman filters (``carried``).
+    Each step proposes ``propose(x, eps)``, ``eps ~ N(0, I)``, and accepts with
+    probability ``min(1, exp(target - log_p))``.
 
     Parameters
     ----------
     x : ndarray, shape (..., J) or (..., J, D)
-        The particles.
     log_p : ndarray, shape (..., J)
-        Their log target (``-inf`` outside its support).
+        ``-inf`` outside the support.
     propose : callable
-        ``propose(x, eps) -> proposal``, of ``x``'s shape.
+        ``propose(x, eps) -> proposal``.
     target : callable
-        ``target(proposal) -> (log_p, carried)``: the proposals' log target and
-        the arrays (each of shape (..., J, ...)) that an accepted proposal brings.
+        ``target(proposal) -> (log_p, carried)``, the arrays (..., J, ...) an
+        accepted proposal brings.
     moves : int
-        Steps, >= 0.
     rng : numpy.random.Generator
     carried : tuple of ndarray
-        The particles' current such arrays.
 
     Returns
     -------
     x, log_p, carried
-        After the moves.
     acceptance : ndarray, shape (...)
-        Mean acceptance rate over the particles and steps (NaN for ``moves = 0``).
+        NaN for ``moves = 0``.
     """
     accepted = np.zeros(log_p.shape[:-1])
     for _ in range(moves):
@@ -235,16 +218,7 @@ def _where(ok, new, old):
 def effective_sample_size(log_w) -> np.ndarray:
     """Kish's effective sample size ``1 / sum_i W_i**2`` from (unnormalised) log weights.
 
-    Computed as ``exp(2 logsumexp(log w) - logsumexp(2 log w))``.
-
-    Parameters
-    ----------
-    log_w : array_like, shape (..., N)
-
-    Returns
-    -------
-    ndarray, shape (...)
-        Between 1 and ``N``.
+    ``log_w`` (..., N); returns (...), between 1 and ``N``.
     """
     from scipy.special import logsumexp
 
@@ -261,17 +235,8 @@ def weighted_moments(x, W) -> tuple[np.ndarray, np.ndarray]:
 def state_moments(particles, log_weights) -> dict:
     """Weighted depth and velocity means and SDs of particles of the state ``(x, y, v)``.
 
-    Parameters
-    ----------
-    particles : ndarray, shape (..., N, 3)
-    log_weights : ndarray, shape (..., N)
-        Normalised log weights.
-
-    Returns
-    -------
-    dict
-        ``depth_mean``, ``depth_sd``, ``velocity_mean`` and ``velocity_sd``,
-        each of shape (...): :func:`weighted_moments` of ``y`` and ``v``.
+    ``particles`` (..., N, 3), normalised ``log_weights`` (..., N); returns a dict of
+    ``depth_mean``, ``depth_sd``, ``velocity_mean``, ``velocity_sd``, each (...).
     """
     W = np.exp(log_weights)
     out = {}
@@ -297,35 +262,25 @@ def weighted_standard_errors(x, W) -> tuple[np.ndarray, np.ndarray]:
         return se_mean, np.where(sd > 0, se_var / (2.0 * sd), np.inf)
 
 
-#: A sampler whose cloud is worth fewer independent draws of the posterior than this
-#: has collapsed: its spread no longer measures the posterior's, nor its Monte Carlo error.
+#: A cloud worth fewer independent draws of the posterior than this has collapsed.
 MIN_EFFECTIVE_DRAWS = 10.0
 
 
 def replica_errors(estimates, within_sd, axis: int = -1) -> tuple[np.ndarray, np.ndarray]:
     """Monte Carlo error of the average of ``R`` independent replicas' estimates, and collapse.
 
-    The error is the standard error of the average, ``s / sqrt(R)`` with ``s``
-    the replicas' SD (``ddof = 1``), widened by the Student t factor
-    ``t_{R-1}(0.975) / z(0.975)``: with ``R - 1`` degrees of freedom in ``s``,
-    the estimate lies within 1.96 errors of the exact value in 95 % of runs
-    (for approximately normal, unbiased replicas), not the 86 % that
-    ``+/- 2 s / sqrt(R)`` gives with four replicas.
-
-    A replica is worth ``n_eff = within_sd**2 / s**2`` independent draws of
-    the posterior (the posterior variance over the variance of one replica's
-    estimate). Below :data:`MIN_EFFECTIVE_DRAWS` the replicas have collapsed:
-    each describes a narrow piece of the posterior, their estimates scatter
-    by more than its width and can all be biased alike, and no error from
-    their spread is trustworthy. So is a cloud with no spread at all. There
-    the error is NaN.
+    The error is ``s / sqrt(R)`` (``s`` the replicas' SD, ``ddof = 1``) widened by
+    ``t_{R-1}(0.975) / z(0.975)``, so the estimate lies within 1.96 errors of the exact
+    value in 95 % of runs. A replica is worth ``n_eff = within_sd**2 / s**2`` draws;
+    below :data:`MIN_EFFECTIVE_DRAWS` (or with no spread) the replicas have collapsed
+    and the error is NaN.
 
     Parameters
     ----------
     estimates : array_like, shape (..., R, ...)
-        Each replica's estimate, replicas along ``axis``.
+        Replicas along ``axis``.
     within_sd : array_like, same shape
-        Each replica's own posterior SD of the quantity.
+        Each replica's own posterior SD.
     axis : int
 
     Returns
@@ -366,19 +321,12 @@ def weighted_density(x, W, grid, method: str = "kde", bandwidth: float | None = 
 
     Parameters
     ----------
-    x : ndarray, shape (N,)
-    W : ndarray, shape (N,)
-        Normalised weights.
+    x, W : ndarray, shape (N,)
     grid : array_like, shape (G,)
-        Increasing points. For ``method="histogram"`` they must be evenly
-        spaced: they are the centres of the bins.
+        Increasing; evenly spaced bin centres for ``"histogram"``.
     method : {"kde", "histogram"}
-        ``"kde"``: a weighted Gaussian kernel density estimate;
-        ``"histogram"``: the weight in each bin over its width (weight
-        outside the bins is dropped).
     bandwidth : float, optional
-        The kernel SD for ``"kde"``; default Silverman's rule
-        ``0.9 min(sd, IQR / 1.34) ESS**(-1/5)`` with weighted quantiles.
+        The kernel SD; default Silverman's ``0.9 min(sd, IQR / 1.34) ESS**(-1/5)``.
 
     Returns
     -------
