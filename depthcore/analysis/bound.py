@@ -18,48 +18,22 @@ this linear motion with Gaussian noise of covariance ``Q_k = q_k**2 u u^T``
 
     J_1 = P^{-1} + I_1,    J_{k+1} = (F J_k^{-1} F^T + Q_k)^{-1} + I_{k+1},
 
-computed here without inverting ``J_k`` (so also when it is singular, as it
-is without a prior), by the Sherman–Morrison identity for the rank-one
-``Q_k``: with ``M = F^{-T} J_k F^{-1}``,
-``(F J_k^{-1} F^T + Q_k)^{-1} = M - q_k**2 (M u)(M u)^T / (1 + q_k**2 u^T M u)``.
+computed without inverting ``J_k`` by Sherman–Morrison (:func:`_velocity_noise`).
 The bound on the covariance of any estimator of ``s_N`` is ``J_N^{-1}``.
 
-Two readings of ``I_k``, both in the recursion above:
+* **conditional on the true track** (:func:`conditional_bound`): ``I_k`` at the
+  true states; with ``q = 0`` the batch information
+  ``F^{-(N-1)T} P^{-1} F^{-(N-1)} + sum_k g_k g_k^T / rho**2`` (Eqs. (20)-(22)), the
+  bound of Ristic, Arulampalam & Gordon (2004, ch. 6) [ristic2004]_;
+* **the posterior bound** (:func:`posterior_bound`): ``E[I_k]`` over the
+  accelerations after a known state (a Gaussian depth would make ``E[1 / y**2]``
+  infinite).
 
-* **conditional on the true track** (:func:`conditional_bound`): ``I_k`` at
-  the track's true states, the prior's information ``P^{-1}`` added; with
-  ``q = 0`` this is the batch information of all ``N`` bearings about
-  ``s_N``, ``F^{-(N-1)T} P^{-1} F^{-(N-1)} + sum_k g_k g_k^T / rho**2``, with
-  ``g_k`` the residual gradients of Eqs. (20)-(22)
-  (:func:`depthcore.problem.model.residual_gradients`), the bound that Ristic,
-  Arulampalam & Gordon (2004, ch. 6) [ristic2004]_ set bearings-only trackers against;
-* **the posterior bound** (:func:`posterior_bound`, Tichavský et al. 1998):
-  ``E[I_k]`` over the law of the track. The expectation is taken over the
-  accelerations that act after a known state (the lateral position is then
-  Gaussian at a known depth, and ``E[I_k]`` has a closed form,
-  :func:`expected_measurement_information`), not over a Gaussian prior on the
-  depth: ``I_k`` grows like ``1 / y**2`` and ``E[1 / y**2]`` is infinite for
-  any Gaussian depth, whose density is positive at ``y = 0``.
-
-:func:`against_bound` sets estimates' errors and claimed SDs, trial by trial,
-against a bound, with Monte Carlo standard errors, and flags a mean claimed SD
-below it (a claim to beat the bound, which its errors may or may not bear out).
-
-Tracks as they come (:mod:`depthcore.problem.frames`). The motion with a step
-``s_k`` is ``y_{k+1} = y_k + s_k``, ``x_{k+1} = x_k + s_k v_k``,
-``v_{k+1} = v_k + a_k`` with ``a_k ~ N(0, q_k**2 s_k)``: ``F`` above becomes
-``F_k`` (:func:`depthcore.problem.frames.transition`) and ``Q_k = q_k**2 s_k u u^T``
-(:func:`depthcore.problem.frames.velocity_variance`). A missing bearing adds no
-information (``I_k = 0``) and ``rho`` may differ from frame to frame.
-:func:`conditional_bound` reads the steps off the true states' depths.
-
-Numbers at the edges of floating point. The bearing's information is computed on
-the binary mantissas of ``x``, ``y`` and ``rho`` with their exponents apart, so
-a depth of ``1e150`` with ``rho = 1e-150`` is no harder than a depth of 1; the
-inverses are taken of matrices scaled by a power of four (exactly). Where a
-result itself lies beyond the largest double (an information about a point
-``1e-300`` in front of the camera), the function refuses, naming the argument.
-Every refusal is a one-line :class:`ValueError`; no function warns.
+:func:`against_bound` sets estimates' errors and claimed SDs against a bound.
+With steps ``s_k`` (:mod:`depthcore.problem.frames`) ``F`` becomes ``F_k`` and
+``Q_k = q_k**2 s_k u u^T``; a missing bearing has ``I_k = 0``. Information is
+computed on mantissas and exponents apart, so extreme scales cost nothing; a
+result beyond the largest double is a one-line :class:`ValueError`.
 
 References
 ----------
@@ -88,12 +62,10 @@ U.setflags(write=False)
 Z = 2.5758293035489004
 
 
-#: Process noise variances above this take the form of the Sherman-Morrison step
-#: that holds in the limit of an infinite variance (the velocity forgotten).
+#: Process noise variances above this take the Sherman-Morrison step's limiting form.
 _LARGE_VARIANCE = 1e100
 
-#: Matrices whose largest entry lies within ``2**±_SCALE_FREE`` are inverted as they are;
-#: others are first scaled by a power of four, which is exact.
+#: Matrices within ``2**±_SCALE_FREE`` are inverted as they are; others scaled first.
 _SCALE_FREE = 256
 
 
@@ -132,17 +104,8 @@ def _frames_limit(n: int, name: str) -> None:
 def _information_block(x, y, rho, c=None):
     """The nonzero 2 x 2 block of ``h h^T / rho**2`` (``c`` None) or ``E[h h^T] / rho**2``.
 
-    ``h = (1 / y, -x / y**2)`` (Eq. (11)); with ``c`` the variance of ``x``
-    (``x`` its mean), ``E[h h^T] = [[1 / y**2, -x / y**3], [., (x**2 + c) / y**4]]``.
-    Computed on the mantissas of ``frexp`` with the exponents added apart: the
-    same floating point operations, in the same order, as on the numbers
-    themselves, so bit for bit the same where those stay within range, and no
-    intermediate overflow where they do not. Entries beyond the largest double
-    come back ``inf``.
-
-    Returns
-    -------
-    tuple of three ndarrays: the entries (0, 0), (0, 1) and (1, 1).
+    On ``frexp`` mantissas with exponents apart (bit for bit the plain result in
+    range, ``inf`` beyond). Returns the entries (0, 0), (0, 1) and (1, 1).
     """
     my, ey = np.frexp(y)
     mx, ex = np.frexp(x)
@@ -182,25 +145,9 @@ def _assemble(block, shape, names: str) -> np.ndarray:
 def measurement_information(states, rho) -> np.ndarray:
     """One bearing's Fisher information about the state it sees, ``h h^T / rho**2``.
 
-    ``h`` is the gradient of the projection ``x / y`` at the state, Eq. (11)
-    (:func:`depthcore.problem.model.observation_vector`).
-
-    Parameters
-    ----------
-    states : array_like, shape (..., 3)
-        States ``(x, y, v)`` with ``y != 0``.
-    rho : float or array_like, broadcastable to shape (...)
-        Bearing noise SD, > 0 (one per state, e.g. per frame).
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
-
-    Raises
-    ------
-    ValueError
-        Naming ``states`` or ``rho``; also when the information exceeds the
-        largest double.
+    ``h`` is Eq. (11)'s gradient (:func:`depthcore.problem.model.observation_vector`).
+    ``states`` (..., 3) with ``y != 0``, ``rho`` broadcastable to (...); returns
+    (..., 3, 3).
     """
     states = checks.finite_array(states, "states")
     if states.ndim < 1 or states.shape[-1] != 3:
@@ -215,24 +162,9 @@ def measurement_information(states, rho) -> np.ndarray:
 def expected_measurement_information(depth, lateral_mean, lateral_cov, rho) -> np.ndarray:
     """``E[h h^T] / rho**2`` over a Gaussian lateral state at a known depth.
 
-    With ``x ~ N(m, c)`` at depth ``y``, ``h = (1 / y, -x / y**2, 0)`` (Eq. (11))
-    has ``E[h h^T] = [[1 / y**2, -m / y**3, 0], [-m / y**3, (m**2 + c) / y**4, 0],
-    [0, 0, 0]]``: the expected measurement information of the posterior bound
-    (Tichavský et al. 1998, the term ``E[H^T R^{-1} H]`` of ``D22``).
-
-    Parameters
-    ----------
-    depth : array_like, shape (...)
-        Depths ``y > 0``.
-    lateral_mean : array_like, shape (..., 2)
-        Means of ``(x, v)``.
-    lateral_cov : array_like, shape (..., 2, 2)
-        Covariances of ``(x, v)`` (the variance of ``x`` >= 0).
-    rho : float or array_like, broadcastable to shape (...)
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
+    With ``x ~ N(m, c)``, ``E[h h^T] = [[1 / y**2, -m / y**3], [-m / y**3, (m**2 + c) /
+    y**4]]`` (Tichavský et al. 1998, ``E[H^T R^{-1} H]`` of ``D22``). ``depth`` (...),
+    ``lateral_mean`` (..., 2), ``lateral_cov`` (..., 2, 2) of ``(x, v)``; returns (..., 3, 3).
     """
     y = checks.finite_array(depth, "depth")
     if not np.all(y > 0):
@@ -261,9 +193,7 @@ def expected_measurement_information(depth, lateral_mean, lateral_cov, rho) -> n
 def process_noise_steps(process_noise, frames: int) -> np.ndarray:
     """The SD ``q_k`` of the velocity's change over each step ``k -> k + 1``, shape (N - 1,).
 
-    ``process_noise`` is a float (the same at every step) or an array of
-    shape ``(N - 1,)``, each ``>= 0``; ``frames`` is ``N``, 1 to
-    :data:`depthcore.problem.checks.MAX_FRAMES`.
+    ``process_noise``: a float or (N - 1,), ``>= 0``; ``frames`` is ``N``.
     """
     n = checks.count(frames, "frames")
     _frames_limit(n, "frames")
@@ -302,25 +232,18 @@ def _steps(value, n: int, batch: tuple[int, ...]):
 def information(measurement_info, prior_cov=None, process_noise=0.0, steps=None) -> np.ndarray:
     """The information about the state at every frame: the recursion of Tichavský et al. (1998).
 
-    ``J_1 = P^{-1} + I_1`` and ``J_{k+1} = (F_k J_k^{-1} F_k^T + Q_k)^{-1} + I_{k+1}``,
-    Tichavský et al. (1998), Eq. (21) with linear Gaussian motion (module
-    docstring), computed by Sherman–Morrison without inverting ``J_k``;
-    ``F_k`` moves by the step ``s_k`` and ``Q_k = q_k**2 s_k u u^T``.
+    Eq. (21) with linear Gaussian motion (module docstring).
 
     Parameters
     ----------
     measurement_info : array_like, shape (..., N, 3, 3)
-        ``I_k`` of each bearing, conditional (:func:`measurement_information`
-        at the true states) or expected
-        (:func:`expected_measurement_information`); zero at a missing bearing.
-        ``N`` at most :data:`depthcore.problem.checks.MAX_FRAMES`.
+        ``I_k`` of each bearing (zero at a missing one).
     prior_cov : array_like, shape (3, 3), optional
-        ``P``, the prior covariance of the state at frame 1 (symmetric positive
-        definite); ``None``: no prior, the information of the bearings alone.
+        ``P``; ``None``: the bearings alone.
     process_noise : float or array_like, shape (N - 1,)
-        ``q_k >= 0`` (:func:`process_noise_steps`), per unit step.
+        ``q_k >= 0``, per unit step.
     steps : array_like, shape (N - 1,) or (..., N - 1), optional
-        The depth's change ``s_k > 0`` between frames; ``None``: all ones.
+        ``s_k > 0``; ``None``: all ones.
 
     Returns
     -------
@@ -386,8 +309,7 @@ def _recursion(info, prior_info, q, steps) -> np.ndarray:
 def _velocity_noise(M, v) -> np.ndarray:
     """``(M^{-1} + v u u^T)^{-1}`` by Sherman–Morrison: ``M - v (Mu)(Mu)^T / (1 + v u^T M u)``.
 
-    For ``v`` above :data:`_LARGE_VARIANCE` (``inf`` included) the same as
-    ``M - (Mu)(Mu)^T / (1 / v + u^T M u)``, which holds in the limit.
+    Above :data:`_LARGE_VARIANCE` as ``M - (Mu)(Mu)^T / (1 / v + u^T M u)``.
     """
     Mu = M @ U
     w = (Mu @ U)[..., None, None]
@@ -409,10 +331,7 @@ def _velocity_noise(M, v) -> np.ndarray:
 def covariance_bound(information_matrix) -> np.ndarray:
     """The Cramér–Rao bound ``J^{-1}`` of information matrices ``J`` (..., 3, 3).
 
-    Refuses, naming ``information``, a ``J`` that is not positive definite
-    (its least eigenvalue at most :data:`SINGULAR` times its largest): the
-    bearings (and the prior) then do not determine the state; and a ``J``
-    whose inverse exceeds the largest double.
+    Refuses a ``J`` not positive definite (:data:`SINGULAR`) or whose inverse overflows.
     """
     J = checks.finite_array(information_matrix, "information")
     if J.ndim < 2 or J.shape[-2:] != (3, 3):
@@ -432,11 +351,8 @@ SINGULAR = 1e-13
 def _scale(A) -> np.ndarray:
     """Per matrix (..., 3, 3), exponents ``d`` (..., 3) equilibrating it: ``2**(d_i + d_j) A_ij``.
 
-    Zero (nothing to do) unless the diagonal reaches beyond ``2**±_SCALE_FREE``
-    or spreads over more than that; then ``d_i = -floor(e_i / 2)`` with
-    ``A_ii = m 2**e_i``, bringing every diagonal entry near 1. Scaling by powers
-    of two is exact, and so the Cholesky factor and the inverse are those of
-    ``A`` scaled, to the last bit (within the range of normal doubles).
+    Zero unless the diagonal leaves ``2**±_SCALE_FREE``; then ``d_i = -floor(e_i / 2)``
+    with ``A_ii = m 2**e_i`` (exact).
     """
     e = np.frexp(np.abs(np.diagonal(A, axis1=-2, axis2=-1)))[1]
     wide = (np.max(np.abs(e), axis=-1) > _SCALE_FREE) | (
@@ -457,11 +373,7 @@ def _scaled_inverse(A, invert) -> np.ndarray:
 
 
 def _determined(J) -> np.ndarray:
-    """Whether each information matrix (..., 3, 3) is positive definite beyond rounding.
-
-    Judged on ``J`` equilibrated by :func:`_scale` where its diagonal spans
-    more than the doubles' middle range (depths of ``1e150`` beside unit velocities).
-    """
+    """Whether each information matrix (..., 3, 3) is positive definite, after :func:`_scale`."""
     w = np.linalg.eigvalsh(_scaled(J, _scale(J)))
     return w[..., 0] > SINGULAR * np.abs(w[..., -1])
 
@@ -485,11 +397,7 @@ def _checked_inverse(J) -> np.ndarray:
 
 
 def _frame_bounds(J) -> np.ndarray:
-    """:func:`covariance_bound` at every frame of ``J`` (..., N, 3, 3).
-
-    The last frame must be determined; earlier frames that are not (fewer
-    than three bearings and no prior) get NaN.
-    """
+    """:func:`covariance_bound` at every frame of ``J`` (..., N, 3, 3), NaN if undetermined."""
     ok = _determined(J)
     covariance_bound(J[..., -1, :, :])
     out = np.full(J.shape, np.nan)
@@ -521,20 +429,8 @@ _MOTION_ULPS = 64.0
 def track_steps(states) -> np.ndarray:
     """The steps ``s_k = y_{k+1} - y_k`` of a true track, checked against its lateral motion.
 
-    A step within rounding of 1 (``_STEP_ULPS`` units in the last place
-    of the depths) is taken as exactly 1, the paper's step. Each step must be
-    positive and the states must move by the motion with a step (module
-    docstring), ``x_{k+1} = x_k + s_k v_k`` within rounding
-    (``_MOTION_ULPS`` units in the last place of its terms); the velocity
-    may change by an acceleration.
-
-    Parameters
-    ----------
-    states : array_like, shape (..., N, 3)
-
-    Returns
-    -------
-    ndarray, shape (..., N - 1)
+    Within :data:`_STEP_ULPS` of 1 a step is 1; ``x_{k+1} = x_k + s_k v_k`` must hold
+    within :data:`_MOTION_ULPS`. ``states`` (..., N, 3); returns (..., N - 1).
     """
     states = _states(states)
     x, y, v = states[..., 0], states[..., 1], states[..., 2]
@@ -559,24 +455,16 @@ def track_steps(states) -> np.ndarray:
 def conditional_bound(states, rho, prior_cov=None, process_noise=0.0, present=None) -> np.ndarray:
     """The bound on the state at every frame, conditional on the true track.
 
-    :func:`information` with ``I_k`` at the true states (Tichavský et al.
-    1998, Eq. (21); the bound along the true trajectory of Ristic et al. 2004,
-    ch. 6), inverted by :func:`covariance_bound`. The steps are read off the
-    states' depths (:func:`track_steps`), ``F_k`` moving by ``s_k`` and the
-    velocity's variance growing by ``q_k**2 s_k`` over it; a missing bearing
-    (``present`` False) adds no information.
+    :func:`information` with ``I_k`` at the true states (Eq. (21); Ristic et al. 2004,
+    ch. 6), steps from :func:`track_steps`, inverted by :func:`covariance_bound`.
 
     Parameters
     ----------
     states : array_like, shape (..., N, 3)
-        The true track, frames 1 .. N (``N`` at most
-        :data:`depthcore.problem.checks.MAX_FRAMES`), depths positive and
-        growing, ``x_{k+1} = x_k + s_k v_k``.
+        The true track, frames 1 .. N.
     rho : float or array_like, broadcastable to shape (..., N)
-        Bearing noise SD, > 0, per frame (any value, NaN included, at a
-        missing frame); a number for every frame.
+        Per frame (any value at a missing frame).
     prior_cov : array_like, shape (3, 3), optional
-        The prior covariance of the state at frame 1; ``None``: none.
     process_noise : float or array_like, shape (N - 1,)
         ``q_k >= 0``, per unit step.
     present : array_like of bool, broadcastable to shape (..., N), optional
@@ -585,10 +473,7 @@ def conditional_bound(states, rho, prior_cov=None, process_noise=0.0, present=No
     Returns
     -------
     ndarray, shape (..., N, 3, 3)
-        The bound on the covariance of the state at each frame ``k``, from
-        the bearings of frames 1 .. k. NaN means no bound: at frames that the
-        bearings so far do not determine (without a prior); refused, naming
-        ``information``, at frame ``N``.
+        The bound at each frame from the bearings so far; NaN where undetermined.
     """
     states = _states(states)
     if not np.all(states[..., 1] > 0):
@@ -610,14 +495,8 @@ def conditional_bound(states, rho, prior_cov=None, process_noise=0.0, present=No
 class TrackMoments(NamedTuple):
     """The law of a track whose state at one frame is known, frames 1 .. N.
 
-    Attributes
-    ----------
-    mean : ndarray, shape (N, 3)
-        Mean state at each frame (its depth is exact).
-    lateral_cov : ndarray, shape (N, 2, 2)
-        Covariance of ``(x_k, v_k)``.
-    process_noise : ndarray, shape (N - 1,)
-        ``q_k`` of each step: 0 before the known frame.
+    ``mean`` (N, 3) (the depth exact), ``lateral_cov`` (N, 2, 2) of ``(x_k, v_k)``,
+    ``process_noise`` (N - 1,), 0 before the known frame.
     """
 
     mean: np.ndarray
@@ -628,22 +507,9 @@ class TrackMoments(NamedTuple):
 def track_moments(state, frame: int, frames: int, process_noise: float) -> TrackMoments:
     """The law of the track when the state at ``frame`` is known and accelerations act after it.
 
-    Before ``frame`` the point moves by ``G`` (Eq. (1)), exactly; from
-    ``frame`` on, ``v_{k+1} = v_k + a_k`` with ``a_k ~ N(0, q**2)`` and
-    ``x_{k+1} = x_k + v_k``, so ``(x_k, v_k)`` is Gaussian with mean
-    ``Psi**(k - frame) (x, v)`` and covariance
-    ``C_{k+1} = Psi C_k Psi^T + diag(0, q**2)``, ``C_frame = 0``.
-
-    Parameters
-    ----------
-    state : array_like, shape (3,)
-        The state at ``frame``, with positive depth at frame 1.
-    frame : int
-        From 1 to ``frames``.
-    frames : int
-        ``N >= 1``.
-    process_noise : float
-        ``q >= 0``.
+    Before ``frame`` by ``G`` (Eq. (1)); after, ``(x_k, v_k)`` has mean ``Psi**(k - frame)
+    (x, v)`` and ``C_{k+1} = Psi C_k Psi^T + diag(0, q**2)``, ``C_frame = 0``. ``state``
+    (3,), ``1 <= frame <= frames``, ``process_noise`` ``q >= 0``.
     """
     state = checks.finite_array(state, "state", (3,))
     n = checks.count(frames, "frames")
@@ -671,27 +537,8 @@ def track_moments(state, frame: int, frames: int, process_noise: float) -> Track
 def posterior_bound(state, frame: int, frames: int, rho, prior_cov=None, process_noise=0.0):
     """The posterior bound on the state at every frame, over the accelerations after ``frame``.
 
-    Tichavský et al. (1998), Eq. (21) (:func:`information`) with the expected
-    measurement information ``E[I_k]`` (:func:`expected_measurement_information`)
-    over the law of the track given the state at ``frame``
-    (:func:`track_moments`), and ``q_k = 0`` before it. With
-    ``process_noise = 0`` the track is known and this is
-    :func:`conditional_bound` of it.
-
-    Parameters
-    ----------
-    state : array_like, shape (3,)
-        The true state at ``frame``.
-    frame : int
-    frames : int
-    rho : float
-    prior_cov : array_like, shape (3, 3), optional
-    process_noise : float
-
-    Returns
-    -------
-    ndarray, shape (N, 3, 3)
-        As :func:`conditional_bound` (NaN at the frames not yet determined).
+    Tichavský et al. (1998), Eq. (21) with ``E[I_k]`` over :func:`track_moments`;
+    ``state`` (3,) at ``frame``; returns (N, 3, 3) as :func:`conditional_bound`.
     """
     t = track_moments(state, frame, frames, process_noise)
     rho = checks.positive_scalar(rho, "rho")
@@ -706,28 +553,17 @@ def posterior_bound(state, frame: int, frames: int, rho, prior_cov=None, process
 def against_bound(errors, sds, bound_sd, z: float = Z) -> dict:
     """Estimates' errors and claimed SDs over trials, set against a bound's SD.
 
-    The RMSE ``sqrt(mean(e**2))`` has the standard error
-    ``sd(e**2) / (2 sqrt(T) RMSE)`` (the delta method), the mean claimed SD
-    ``sd(s) / sqrt(T)``. A filter is flagged ``"overconfident"`` where its mean
-    claimed SD lies more than ``z`` standard errors below the bound. What that
-    means depends on the bound: below a bound conditional on the truth it
-    claims a precision no unbiased estimator has at that truth (a biased one
-    may have it); below a posterior bound, one that no estimator has on average
-    over the truths the bound averages over, though at one truth some may. The
-    flag does not look at the errors: whether the filter is overconfident
-    there, its RMSE against its mean claimed SD says.
+    The RMSE's standard error is ``sd(e**2) / (2 sqrt(T) RMSE)``, the mean claimed SD's
+    ``sd(s) / sqrt(T)``. ``"overconfident"`` flags a mean claimed SD more than ``z``
+    standard errors below the bound (a claim, not the errors).
 
     Parameters
     ----------
     errors : array_like, shape (..., T)
-        Estimate minus truth in each of ``T >= 2`` trials.
+        Estimate minus truth, ``T >= 2``.
     sds : array_like, shape (..., T)
-        The SD each estimate claims.
     bound_sd : array_like, broadcastable to shape (...)
-        The bound's SD (the square root of a diagonal entry of a
-        :func:`covariance_bound`), > 0.
     z : float
-        Critical value, > 0 (default the two-sided 1 % point).
 
     Returns
     -------

@@ -6,25 +6,12 @@ A Bayesian posterior is calibrated on average over truths drawn from its own
 prior: if ``x ~ p(x)`` and ``mu ~ p(mu | x)``, then ``x`` is a draw from the
 posterior ``p(x | mu)``, so the posterior CDF of any scalar function of the
 state, evaluated at the truth (its probability integral transform, PIT), is
-uniform on [0, 1] [cook2006]_, [talts2018]_. Every central interval then
-covers the truth at exactly its nominal rate. The check below draws truths
-from the filter's prior ``N(m, P)`` restricted to the front support (the point
-in front of the camera at every frame: depth ``y_1 > 0`` at the first frame),
-simulates its bearings (the paper's three, or ``N`` frames with process noise
-``q``, :func:`draw_from_prior`), runs the optimal filter
-(:func:`depthcore.exact.optimal.batch_marginals`, or the bank of
-:mod:`depthcore.exact.bank` beyond three frames) and tests the PIT values of the
-depth and velocity at the last frame for uniformity.
-
-Trials whose bearings have no noise-free solution in front of the camera
-(Eq. (7) degenerate or ``c2 <= 2``) are left out, as in the Monte Carlo study.
-That selection depends on the bearings alone, and for every kept ``mu`` the
-truth is still a draw from ``p(x | mu)``: the PIT values of the kept trials
-stay uniform.
-
-The prior must not depend on the bearings: the paper's rule, which centres
-the prior on each trial's own noise-free solution, is not a prior in this
-sense, and the fixed-truth study's coverage need not be nominal.
+uniform on [0, 1] [cook2006]_, [talts2018]_. The check draws truths from the
+prior on ``y_1 > 0`` (:func:`draw_from_prior`), runs the optimal filter
+(:func:`pit_values`) and tests the PIT values at the last frame for uniformity.
+Trials whose bearings have no noise-free solution in front (Eq. (7)) are left out:
+a selection by the bearings alone, which keeps the PIT uniform. The prior must not
+depend on the bearings (the paper's rule does, so its coverage need not be nominal).
 
 References
 ----------
@@ -58,13 +45,12 @@ class PriorDraws:
     Attributes
     ----------
     truth : ndarray, shape (n, 3)
-        True states at time 3 of the kept trials.
-    mu : ndarray, shape (n, 3)
-        Their bearings.
+        True states at the last frame of the kept trials.
+    mu : ndarray, shape (n, N)
     n_behind : int
-        Prior draws rejected because the point was behind the camera.
+        Prior draws behind the camera.
     n_rejected : int
-        Kept draws whose bearings had no noise-free solution in front of the camera.
+        Draws whose bearings had no noise-free solution in front.
     """
 
     truth: np.ndarray
@@ -85,39 +71,26 @@ def draw_from_prior(
 ) -> PriorDraws:
     """Draw ``n`` truths from ``N(m, P)`` with ``y_1 > 0`` and simulate their bearings.
 
-    With ``frames = N > 3`` or ``process_noise = q > 0`` each truth is
-    followed from frame 1 to frame ``N`` with accelerations ``a_k ~ N(0, q**2)``
-    from frame 1 on (:func:`depthcore.problem.model.simulate` with ``frame=1``: the
-    filter's own model, whose prior is on the state at frame 1, as drawing
-    truths from the prior needs), and the truth kept is the state at
-    frame ``N``; the trials kept are those whose first three bearings have a
-    noise-free solution in front of the camera, a selection by the bearings
-    alone.
+    Tracks by :func:`depthcore.problem.model.simulate` with ``frame=1``; the truth kept
+    is the state at frame ``N``.
 
     Parameters
     ----------
     prior_mean : array_like, shape (3,)
-        Prior mean of the state at time 1.
     prior_cov : array_like, shape (3, 3)
     rho : float
-        Noise standard deviation of the bearings, > 0.
     n : int
-        Truths in front of the camera to draw, >= 1 (fewer trials are kept
-        when some bearings have no noise-free solution in front).
+        Truths in front of the camera to draw (fewer may be kept).
     rng : numpy.random.Generator
     max_rounds : int
-        Rejection rounds before giving up (a prior with almost no mass in front
-        of the camera is refused).
+        Rejection rounds before giving up.
     frames : int
-        ``N``, from 3 to ``depthcore.problem.checks.MAX_FRAMES``.
+        ``N >= 3``.
     process_noise : float
-        ``q >= 0``.
 
     Returns
     -------
     PriorDraws
-        ``truth`` is the state at frame ``N`` (time 3 for the paper's problem),
-        ``mu`` the ``N`` bearings of each kept trial.
     """
     mean = checks.finite_array(prior_mean, "prior_mean", (3,))
     chol = np.linalg.cholesky(checks.covariance(prior_cov, "prior_cov", 3))
@@ -155,14 +128,7 @@ def _frames_and_noise(frames, process_noise) -> tuple[int, float]:
 def coverage(pit, levels=LEVELS) -> np.ndarray:
     """Fraction of PIT values inside each central interval: ``|u - 1/2| <= p / 2``.
 
-    Parameters
-    ----------
-    pit : array_like, shape (n,)
-    levels : sequence of float, shape (L,)
-
-    Returns
-    -------
-    ndarray, shape (L,)
+    ``pit`` (n,), ``levels`` (L,); returns (L,).
     """
     u = np.asarray(pit, dtype=float)
     return np.array([np.mean(np.abs(u - 0.5) <= p / 2) for p in levels])
@@ -171,11 +137,8 @@ def coverage(pit, levels=LEVELS) -> np.ndarray:
 def uniformity(pit, bins: int = BINS) -> dict:
     """Tests of the PIT values against the uniform distribution on [0, 1].
 
-    Returns the Kolmogorov-Smirnov statistic and p-value, and the chi-square
-    statistic and p-value of ``bins`` equal bins (``bins - 1`` degrees of
-    freedom). Under uniformity each p-value is itself uniform: at a
-    false-alarm rate ``alpha`` a test rejects a calibrated filter with
-    probability ``alpha``.
+    The Kolmogorov-Smirnov and the chi-square (``bins`` equal bins) statistics and
+    p-values.
     """
     from scipy import stats
 
@@ -199,12 +162,9 @@ class SelfCalibration:
     Attributes
     ----------
     draws : PriorDraws
-    rho : float
-        The noise level the bearings were simulated with.
-    filter_rho : float
-        The noise level the filter assumed.
+    rho, filter_rho : float
+        The noise level simulated and assumed.
     depth_pit, velocity_pit : ndarray, shape (n,)
-        Posterior CDFs of the depth and velocity at time 3, at the truth.
     """
 
     draws: PriorDraws
@@ -226,25 +186,19 @@ def pit_values(
 ):
     """The optimal filter's posterior CDFs of the depth and velocity at the truth, at frame ``N``.
 
-    For the paper's three frames with no process noise the filter is
-    :func:`depthcore.exact.optimal.batch_marginals`, Eqs. (13)-(16), unless
-    ``bank``; otherwise the exact N-frame filter, the bank of Kalman filters
-    over depth (:func:`depthcore.exact.posterior.posterior`).
+    :func:`depthcore.exact.optimal.batch_marginals` (Eqs. (13)-(16)) on three frames
+    without process noise unless ``bank``; otherwise
+    :func:`depthcore.exact.posterior.posterior`.
 
     Parameters
     ----------
     mu : ndarray, shape (n, N)
-        Bearings of each trial, ``N >= 3``.
     truth : ndarray, shape (n, 3)
-        The true state at frame ``N``.
     rho : float
-        Noise level the filter assumes.
     prior_mean : array_like, shape (3,)
     prior_cov : array_like, shape (3, 3)
     process_noise : float
-        ``q >= 0`` the filter assumes.
     bank : bool
-        Run the bank of Kalman filters on three frames without process noise too.
 
     Returns
     -------
@@ -273,42 +227,29 @@ def self_calibration(
 ) -> SelfCalibration:
     """Simulation-based calibration of the optimal filter, Eqs. (6) and (13)-(16).
 
-    For the paper's three frames with no process noise the filter is
-    :func:`depthcore.exact.optimal.batch_marginals`; for ``frames = N > 3`` or
-    ``process_noise > 0`` it is the exact N-frame filter, the bank of Kalman
-    filters over depth (:func:`depthcore.exact.posterior.posterior`), and the PIT values
-    are those of the depth and velocity at frame ``N``.
+    Draws by :func:`draw_from_prior`, the filter of :func:`pit_values`.
 
     Parameters
     ----------
     prior_mean : array_like, shape (3,)
     prior_cov : array_like, shape (3, 3)
-        The filter's prior of the state at time 1, from which the truths are drawn.
     rho : float
-        Noise level of the simulated bearings.
     trials : int
-        Truths to draw (see :func:`draw_from_prior`).
     rng : numpy.random.Generator
     filter_rho : float, optional
-        Noise level the filter assumes; ``rho`` by default. Another value makes
-        a miscalibrated filter, to show the check's power.
+        ``rho`` by default; another value makes a miscalibrated filter.
     chunk : int
-        Trials integrated together (memory grows with it).
+        Trials integrated together.
     frames : int
-        ``N``, the bearings of each trial (see :func:`draw_from_prior`).
     process_noise : float
-        ``q >= 0`` of the simulated tracks.
     progress : callable, optional
-        ``progress(done, total)``, called after each chunk with the truths
-        filtered so far and their number.
+        ``progress(done, total)`` after each chunk.
     filter_process_noise : float, optional
-        Process noise the filter assumes; ``process_noise`` by default. Another
-        value makes a miscalibrated filter.
+        ``process_noise`` by default.
 
     Returns
     -------
     SelfCalibration
-        The PIT values are at frame ``N``.
     """
     frames, q = _frames_and_noise(frames, process_noise)
     draws = draw_from_prior(prior_mean, prior_cov, rho, trials, rng, frames=frames, process_noise=q)
