@@ -6,19 +6,11 @@ bearing ``x / y`` plus white Gaussian noise of standard deviation ``rho``.
 
 Recommended import: ``from depthcore.problem import model``.
 
-All functions act on the last axis of arrays of states, so ``x`` may have shape
-``(3,)`` or ``(..., 3)``. Besides the motion ``G`` (1), (9), the projection and
-its gradient ``h`` (11) and the likelihood (4), the module holds the misfit
-``f`` of the bearings (5) (the paper's three, or any ``N``), its residuals
-and their gradients (20)-(22), the noise-free state ``c`` of three bearings
-(7), and the least misfit at each depth, and it draws tracks of any number of
-frames, with or without process noise, and their bearings (:func:`simulate`,
-the one simulator of the package). It also
-checks the bearings against the model (:func:`measurements`,
-:func:`measurements_batch`, :func:`valid_measurements`: finite, not
-degenerate, the noise-free solution in front of the camera) and a filter's
-inputs as a whole (:func:`batch_problem`, :func:`batch_inputs`), with the
-generic checks of ``depthcore.problem.checks``.
+All functions act on the last axis of arrays of states, ``(3,)`` or ``(..., 3)``.
+Besides the equations above, it draws tracks and their bearings (:func:`simulate`,
+the package's one simulator) and checks bearings (:func:`measurements`,
+:func:`measurements_batch`, :func:`valid_measurements`) and a filter's inputs
+(:func:`batch_problem`, :func:`batch_inputs`).
 """
 
 from __future__ import annotations
@@ -44,8 +36,7 @@ N_MEASUREMENTS = 3
 def G_linear(k: int) -> np.ndarray:
     """Linear part of ``G**k`` (``k`` may be negative), a ``(3, 3)`` array.
 
-    Eqs. (1), (9): ``G**k x = (x + k v, y + k, v)``, so the linear part is ``F**k``
-    with ``F**k = [[1, 0, k], [0, 1, 0], [0, 0, 1]]``.
+    Eqs. (1), (9): ``F**k = [[1, 0, k], [0, 1, 0], [0, 0, 1]]``.
     """
     return np.array([[1.0, 0.0, float(k)], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
 
@@ -56,10 +47,8 @@ def G(x, k: int = 1) -> np.ndarray:
     Parameters
     ----------
     x : array_like, shape (..., 3)
-        States ``(x, y, v)``.
     k : int or array_like
-        Number of time steps; ``G(x, -2)`` is the paper's ``G^{-2} x``. An
-        array of steps broadcasts with ``x.shape[:-1]``.
+        Time steps (broadcast with ``x.shape[:-1]``); ``G(x, -2)`` is ``G^{-2} x``.
 
     Returns
     -------
@@ -85,7 +74,6 @@ def observation_vector(n) -> np.ndarray:
     Parameters
     ----------
     n : array_like, shape (..., 3)
-        The state at which the projection is linearised (the EKF's predicted mean).
 
     Returns
     -------
@@ -102,14 +90,10 @@ def log_likelihood(mu, x, rho, front: bool = False) -> np.ndarray:
     Parameters
     ----------
     mu : float or array_like broadcastable to ``x.shape[:-1]``
-        Measured bearing (radians, as a tangent).
     x : array_like, shape (..., 3)
-        States at the time of the measurement.
     rho : float or array_like broadcastable to ``x.shape[:-1]``
-        Noise standard deviation, > 0.
     front : bool
-        If true, states with depth ``y <= 0`` (behind the camera) get ``-inf``,
-        the log of the support's indicator.
+        If true, states with ``y <= 0`` get ``-inf``.
 
     Returns
     -------
@@ -159,43 +143,28 @@ def simulate(
 ) -> Simulation:
     """Draw a track of ``N`` frames through a given state, and its noisy bearings, Eqs. (1), (4).
 
-    The given ``state`` is the state at frame ``frame`` (by default time 3,
-    the time of the paper's estimates). Up to that frame the motion is the
-    noise-free one of Eq. (1), ``G**(k - frame) state`` at frame ``k``; from it
-    on the velocity changes by a random acceleration at every frame:
-
-        y_{k+1} = y_k + 1,   x_{k+1} = x_k + v_k,   v_{k+1} = v_k + a_k,
-        a_k ~ N(0, q**2) for k >= frame,
-
-    and every frame's bearing is ``mu_k = x_k / y_k + w_k``, ``w_k ~ N(0, rho**2)``
-    (Eq. (4)). So with ``frame=3`` the state at time 3 is ``state`` in every
-    draw, frames 1-3 are the paper's three noise-free positions and the
-    accelerations act between frames 3 .. N; with ``frame=1`` the accelerations
-    act from frame 1 on, the model of :mod:`depthcore.exact.bank` with the prior on
-    the state at frame 1 (what drawing truths from that prior needs). With
-    ``q = 0`` no acceleration is drawn and the track is the noise-free motion.
+    Up to ``frame`` the motion is Eq. (1)'s; from it on ``v_{k+1} = v_k + a_k``,
+    ``a_k ~ N(0, q**2)`` (:mod:`depthcore.exact.bank`'s model), and ``mu_k = x_k / y_k +
+    w_k``, ``w_k ~ N(0, rho**2)`` (Eq. (4)).
 
     Parameters
     ----------
     state : array_like, shape (..., 3)
-        The state ``(x, y, v)`` at frame ``frame``; the depth at frame 1,
-        ``y - frame + 1``, must be > 0 (then it is at every frame).
+        The state at frame ``frame``, in front of the camera at frame 1.
     frames : int
-        ``N >= 1``, the frames ``1 .. N`` simulated.
+        ``N >= 1``.
     rho : float or array_like, shape (N,)
-        Bearing noise SD, > 0, for all frames or per frame.
     process_noise : float
         Acceleration SD, >= 0 (per unit step).
     rng : numpy.random.Generator
-        Draws the accelerations (of shape ``lead + (N - frame,)``, when
-        ``q > 0`` and ``N > frame``), then the bearing noise (``lead + (N,)``).
+        Draws the accelerations (``lead + (N - frame,)``, when ``q > 0``), then the
+        bearing noise (``lead + (N,)``).
     size : int, optional
-        Number of independent tracks from each ``state``; ``None`` for one.
+        Independent tracks from each ``state``; ``None`` for one.
     frame : int
-        ``>= 1``: the frame at which the track passes through ``state``.
+        Default 3, the time of the paper's estimates.
     steps : array_like, shape (N - 1,), optional
-        The depth's change between consecutive frames, > 0; ``None``: all ones.
-        Draws the same random numbers as unit steps, scaled.
+        The depth's change between frames, > 0; ``None``: all ones.
 
     Returns
     -------
@@ -253,27 +222,7 @@ def _draw_uneven(state, rho, process_noise: float, rng, lead, frame: int, steps)
 
 
 def draw_track(state, frames: int, rho: float, process_noise: float, rng, lead, frame: int):
-    """:func:`simulate` on checked inputs, which its callers have checked as it checks them.
-
-    Parameters
-    ----------
-    state : ndarray, shape (..., 3)
-        Finite, in front of the camera at frame 1.
-    frames, frame : int
-        ``>= 1``.
-    rho : float
-        ``> 0``.
-    process_noise : float
-        ``>= 0``.
-    rng : numpy.random.Generator
-    lead : tuple of int
-        The leading shape of the tracks, ``(size,) + state.shape[:-1]`` or
-        ``state.shape[:-1]``.
-
-    Returns
-    -------
-    Simulation
-    """
+    """:func:`simulate` on checked inputs; ``lead`` is the tracks' leading shape."""
     k = np.arange(1, frames + 1) - frame  # frames from the given one
     n_noisy = max(frames - frame, 0)
     v = np.broadcast_to(state[..., 2, None], lead + (frames,))
@@ -300,25 +249,9 @@ def noise_in_pixels(
 ) -> float:
     """The image error, in pixels, of a bearing error ``rho`` (radians).
 
-    With ``small_angle`` (the paper's arithmetic) the image's ``image_size``
-    pixels span ``fov_deg`` degrees uniformly: ``rho * image_size / fov``.
-    Without it, a pinhole camera whose image spans the field of view has focal
-    length ``(image_size / 2) / tan(fov / 2)`` pixels, and a bearing error
-    ``rho`` at the image centre moves the image by ``focal * tan(rho)``.
-
-    Parameters
-    ----------
-    rho : float
-        Bearing noise (radians), > 0.
-    image_size : int
-        Image width in pixels.
-    fov_deg : float
-        Horizontal field of view in degrees, in (0, 180).
-    small_angle : bool
-
-    Returns
-    -------
-    float
+    With ``small_angle`` (the paper's arithmetic) ``rho * image_size / fov``; without,
+    ``focal * tan(rho)`` with ``focal = (image_size / 2) / tan(fov / 2)``. ``fov_deg`` is
+    the horizontal field of view in (0, 180) degrees, ``image_size`` the width in pixels.
     """
     rho = checks.positive_scalar(rho, "rho")
     size = checks.positive_scalar(image_size, "image_size")
@@ -334,24 +267,9 @@ def noise_in_pixels(
 def bearings_from_pixels(u, cx, focal) -> np.ndarray:
     """The bearings ``mu = x / y`` of image columns ``u`` seen by a pinhole camera.
 
-    ``mu = (u - cx) / focal``: the tangent of the angle between the ray
-    through column ``u`` and the optical axis, which points along the
-    camera's motion (Eq. (4) without its noise). A pixel noise of SD ``s`` is
-    a bearing noise ``rho = s / focal``.
-
-    Parameters
-    ----------
-    u : array_like, shape (N,)
-        Image columns of the point in frames ``1 .. N``, in pixels; finite.
-    cx : float
-        The principal point's column (where the optical axis meets the
-        image), in pixels; finite.
-    focal : float
-        The focal length in pixels, > 0.
-
-    Returns
-    -------
-    ndarray, shape (N,)
+    ``mu = (u - cx) / focal`` (Eq. (4) without noise); a pixel noise ``s`` is ``rho = s /
+    focal``. ``u`` (N,) columns in pixels, ``cx`` the principal point's column, ``focal``
+    in pixels; returns (N,).
     """
     u = checks.finite_array(u, "u")
     if u.ndim != 1 or u.size == 0:
@@ -376,7 +294,7 @@ def noise_free_state(mu) -> np.ndarray:
     Parameters
     ----------
     mu : array_like, shape (3,)
-        Measurements ``(mu1, mu2, mu3)``; checked by :func:`depthcore.problem.model.measurements`.
+        Checked by :func:`measurements`.
 
     Returns
     -------
@@ -404,9 +322,7 @@ def noise_free_states_unchecked(mu) -> np.ndarray:
 def noise_free_depth_unchecked(mu) -> np.ndarray:
     """``c2`` of Eq. (7), the noise-free depth at time 3, for triples ``mu`` of shape (..., 3).
 
-    ``c2 = 2 (mu1 - mu2) / (mu1 + mu3 - 2 mu2)``, unchecked (NaN or inf where
-    the triple is degenerate); returns shape ``mu.shape[:-1]``. The point is
-    in front of the camera at all three times when ``c2 - 2 > 0``.
+    ``c2 = 2 (mu1 - mu2) / (mu1 + mu3 - 2 mu2)``, unchecked; shape ``mu.shape[:-1]``.
     """
     mu1, mu2, mu3 = np.moveaxis(np.asarray(mu, dtype=float), -1, 0)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # documented NaN, inf
@@ -442,20 +358,8 @@ def f(x, mu) -> np.ndarray:
 def residual_gradients(x, frames: int = N_MEASUREMENTS) -> np.ndarray:
     """Eqs. (20)-(22): gradients of the residuals at states ``x``, rows in time order.
 
-    Row ``k`` is ``h(G^{k-N+1} x) F^{k-N+1}``: the observation vector (11) at the
-    state of frame ``k + 1``, pulled back to the last frame ``N``
-    (``N = 3``: the paper's Eqs. (20)-(22)).
-
-    Parameters
-    ----------
-    x : array_like, shape (..., 3)
-        States at the last frame.
-    frames : int
-        ``N``, the number of bearings (default 3).
-
-    Returns
-    -------
-    ndarray, shape (..., N, 3)
+    Row ``k`` is ``h(G^{k-N+1} x) F^{k-N+1}``, Eq. (11) pulled back to the last frame.
+    ``x`` (..., 3) at the last frame, ``frames`` ``N``; returns (..., N, 3).
     """
     x = np.asarray(x, dtype=float)
     back = np.arange(frames) - (frames - 1.0)  # k - N for frames k = 1 .. N
@@ -490,22 +394,8 @@ def noise_free_states(mu) -> np.ndarray:
 def profile_misfit(mu, depths) -> np.ndarray:
     """The least misfit ``f`` (Eq. (5)) of the measurements over states with a given depth.
 
-    At a fixed depth ``y3`` at time 3 the bearings
-    ``(x3 - (3 - i) v) / (y3 - 3 + i)`` are linear in ``(x3, v)``, so
-    ``min_{x3, v} sum_i (mu_i - x_i / y_i)**2`` is a linear least-squares
-    problem, solved here for each depth. ``exp(-f / (2 rho**2))`` at the
-    minimum is the profile likelihood of the depth, relative to its value at
-    the noise-free solution (where the misfit is 0).
-
-    Parameters
-    ----------
-    mu : array_like, shape (3,)
-    depths : array_like, shape (n,)
-        Depths ``y3 > 2`` at time 3 (the point in front of the camera at times 1-3).
-
-    Returns
-    -------
-    ndarray, shape (n,)
+    Linear least squares in ``(x3, v)`` at each depth ``y3 > 2`` of ``depths`` (n,);
+    ``exp(-f / (2 rho**2))`` is the depth's profile likelihood. Returns (n,).
     """
     mu = measurements(mu)
     y3 = np.atleast_1d(checks.finite_array(depths, "depths"))
@@ -524,9 +414,7 @@ def profile_misfit(mu, depths) -> np.ndarray:
 def far_misfit(mu) -> float:
     """The limit of :func:`profile_misfit` at infinite depth, ``(mu1 - 2 mu2 + mu3)**2 / 6``.
 
-    Far away the bearings of a point moving with constant velocity change
-    linearly in time, ``a + b (i - 1)``, and the least misfit of three
-    measurements by such a line is their component along ``(1, -2, 1) / sqrt(6)``.
+    Far away the bearings are linear in time: the misfit is along ``(1, -2, 1) / sqrt(6)``.
     """
     mu = measurements(mu)
     return float((mu[0] - 2.0 * mu[1] + mu[2]) ** 2 / 6.0)
@@ -561,9 +449,7 @@ def measurements(mu, name: str = "mu") -> np.ndarray:
 def valid_measurements(mu) -> np.ndarray:
     """Which triples of ``mu`` (..., 3) :func:`measurements` accepts, without raising.
 
-    Finite, not degenerate, and with the noise-free depth ``c2`` of Eq. (7)
-    above 2 (in front of the camera at all three times); returns a boolean
-    array of shape ``mu.shape[:-1]``.
+    Returns a boolean array of shape ``mu.shape[:-1]``.
     """
     arr = np.asarray(mu, dtype=float)
     d = arr[..., 0] + arr[..., 2] - 2.0 * arr[..., 1]
@@ -577,21 +463,9 @@ def valid_measurements(mu) -> np.ndarray:
 def measurements_batch(mu, name: str = "mu") -> np.ndarray:
     """Check bearings of shape ``(..., N)``, ``3 <= N <= MAX_FRAMES``, row by row.
 
-    ``MAX_FRAMES`` is ``depthcore.problem.checks.MAX_FRAMES``.
-
-    With ``N = 3`` (the paper's problem) each triple is checked as
-    :func:`depthcore.problem.model.measurements` does: not degenerate, and its noise-free solution,
-    Eq. (7), in front of the camera. With ``N > 3`` a row is degenerate when
-    every consecutive triple is, i.e. when every second difference
-    ``mu_k - 2 mu_{k+1} + mu_{k+2}`` is at or below ``depthcore.problem.checks.DEGENERACY_TOL`` in
-    magnitude: the bearings are then (numerically) affine in time, which a
-    point at a finite depth explains only by a constant bearing (the point
-    moving along its line of sight), at every depth alike. Noise may put any
-    one triple's noise-free solution behind the camera, so with ``N > 3`` no
-    row is refused for that; the filters that need a point in front of the
-    camera say so themselves.
-
-    The first offending row is named with its index, e.g. ``mu[4]``.
+    With ``N = 3`` each triple as :func:`measurements`; with ``N > 3`` a row is refused
+    only when every second difference is within ``depthcore.problem.checks.DEGENERACY_TOL``
+    (bearings affine in time). The first offending row is named, e.g. ``mu[4]``.
     """
     arr = checks.finite_array(mu, name)
     if arr.ndim < 1 or arr.shape[-1] < 3:
@@ -634,15 +508,11 @@ def batch_problem(mu, rho, prior_mean, prior_cov, triples: bool = True):
     Parameters
     ----------
     mu : array_like, shape (..., N), or (..., K) when ``triples`` is false
-        Bearings of ``N >= 3`` frames checked by :func:`depthcore.problem.model.measurements_batch`
-        (triples, ``N = 3``, as the paper's); otherwise any finite bearings,
-        ``K >= 1``.
+        Checked by :func:`measurements_batch`; otherwise any finite bearings.
     rho : float or array_like, shape ``mu.shape[:-1]``
-        Finite and > 0.
     prior_mean : array_like, broadcastable to ``mu.shape``
-        Finite.
     prior_cov : array_like, broadcastable to ``mu.shape + (3,)``
-        Symmetric positive definite, checked by :func:`depthcore.problem.checks.covariances`.
+        Checked by :func:`depthcore.problem.checks.covariances`.
 
     Returns
     -------
