@@ -30,27 +30,14 @@ from its innovations, and
 
     p(y_1 = y | mu_1 .. mu_N)  proportional to  N(y; m_y, P_yy) L(y).
 
-The exact posterior of the state at frame ``N`` is the mixture over depth of
-the Kalman filters' Gaussians weighted by this density. Given depth nodes
-``y_j`` and quadrature weights ``w_j`` (``sum_j w_j g(y_j)`` approximates
-``integral g(y) dy``), the mixture's probabilities are proportional to
-``w_j N(y_j; m_y, P_yy) L(y_j)``, summed in log space. Adding a frame updates
-each node's filter and log weight (:func:`step`); the past is not revisited.
-The nodes are the depths at frame 1, which do not move as frames are added; the
-depth at frame ``N`` is ``y_N = y_1 + N - 1``.
-
-This module holds the bank over given nodes (:func:`filter_bank`, one frame
-more by :func:`step`). Built on it: the mixture over the nodes and its
-marginals (:mod:`depthcore.exact.mixture`), the nodes placed by the depth
-quadrature and updated online (:mod:`depthcore.exact.posterior`), and one track
-filtered and smoothed frame by frame (:mod:`depthcore.exact.smoother`).
-
-The support is the caller's: the nodes must be positive (the point in front of
-the camera at every frame, the "front" support of
-:func:`depthcore.exact.optimal.run`), and the mixture is exact up to the
-quadrature error of the nodes, which the caller controls. At ``N = 3``,
-``q = 0`` the unnormalised depth density is that of Eqs. (14)-(16)
-(:func:`depthcore.exact.optimal.conditional`) up to a constant factor.
+The exact posterior at frame ``N`` is the mixture over depth nodes ``y_j`` (depths
+at frame 1, fixed as frames are added) with quadrature weights ``w_j`` of the
+filters' Gaussians, with probabilities proportional to ``w_j N(y_j; m_y, P_yy)
+L(y_j)`` (:mod:`depthcore.exact.mixture`). A frame more updates each node's filter
+and log weight (:func:`step`); the past is not revisited. The nodes must be
+positive (the "front" support); the nodes' placement is
+:mod:`depthcore.exact.posterior`'s. At ``N = 3``, ``q = 0`` the depth density is
+that of Eqs. (14)-(16) (:func:`depthcore.exact.optimal.conditional`) up to a constant.
 
 References
 ----------
@@ -77,37 +64,28 @@ _LOG_2PI = float(np.log(2.0 * np.pi))
 
 
 class Bank(NamedTuple):
-    """The bank of Kalman filters over depth nodes after ``N`` frames.
-
-    Built by :func:`filter_bank`, extended by :func:`step`. The batch shape
-    ``(...)`` is that of the trials (empty for one problem); ``J`` is the
-    number of nodes.
+    """The bank of Kalman filters over ``J`` depth nodes after ``N`` frames, batch ``(...)``.
 
     Attributes
     ----------
     nodes : ndarray, shape (..., J)
         Depths at frame 1, ``y_1 > 0``.
     mean : ndarray, shape (..., J, 2)
-        ``E[(x_N, v_N) | y_1, mu_1 .. mu_N]`` for each node.
     cov : ndarray, shape (..., J, 2, 2)
-        ``Cov[(x_N, v_N) | y_1, mu_1 .. mu_N]``.
+        ``E`` and ``Cov[(x_N, v_N) | y_1, mu_1 .. mu_N]``.
     log_weight : ndarray, shape (..., J)
-        ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``: the unnormalised log
-        posterior density of the depth at frame 1.
+        ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``.
     mu : ndarray, shape (..., N)
-        The bearings so far.
-    rho : ndarray, shape (...) or ()
-    process_noise : ndarray, shape (...) or ()
+        ``NaN`` at a missing frame.
+    rho, process_noise : ndarray, shape (...) or ()
     prior_mean : ndarray, shape (..., 3)
     prior_cov : ndarray, shape (..., 3, 3)
     frame_steps : ndarray, shape (..., N - 1)
-        The depth's change from each frame to the next (ones: the paper's frames).
+        The depth's change from each frame to the next.
     frame_noise : ndarray, shape (..., N)
-        The bearing noise SD at each frame (``rho`` at every frame for noise per
-        problem); ``mu`` is ``NaN`` at a missing frame, which has no update.
+        The bearing noise SD at each frame.
     history : depthcore.kalman.linear.FilterResult or None
-        With ``history=True``: each node's filter at every frame, arrays of shape
-        ``(..., J, N, ...)``.
+        Each node's filter at every frame, ``(..., J, N, ...)``.
     """
 
     nodes: np.ndarray
@@ -148,7 +126,7 @@ class Bank(NamedTuple):
 
     @property
     def travelled(self) -> np.ndarray:
-        """``y_N - y_1``, shape (...) (a number for unit steps, ``N - 1``)."""
+        """``y_N - y_1``, shape (...)."""
         if self.steps is None:
             return np.asarray(float(self.frames - 1))
         return self.elapsed[..., -1]
@@ -203,25 +181,10 @@ def _bearings(mu) -> np.ndarray:
 
 
 def conditional_prior(nodes, prior_mean, prior_cov):
-    """The prior of ``(x_1, v_1)`` given the depth ``y_1``, and the prior depth density.
+    """The prior of ``(x_1, v_1)`` given ``y_1`` (module docstring), and ``log N(y_1; m_y, P_yy)``.
 
-    Gaussian conditioning of ``N(m, P)`` on ``(x_1, y_1, v_1)``:
-    ``E[u | y] = m_u + P_uy (y - m_y) / P_yy``, ``Cov[u | y] = P_uu - P_uy P_yu / P_yy``
-    with ``u = (x_1, v_1)``.
-
-    Parameters
-    ----------
-    nodes : ndarray, shape (..., J)
-        Depths at frame 1.
-    prior_mean : ndarray, shape (..., 3)
-    prior_cov : ndarray, shape (..., 3, 3)
-
-    Returns
-    -------
-    prior : depthcore.problem.gaussian.MeanAndCov
-        Mean (..., J, 2) and covariance (..., 1, 2, 2) of ``(x_1, v_1)`` given ``y_1``.
-    log_density : ndarray, shape (..., J)
-        ``log N(y_1; m_y, P_yy)``.
+    ``nodes`` (..., J), ``prior_mean`` (..., 3), ``prior_cov`` (..., 3, 3); returns a
+    :class:`~depthcore.problem.gaussian.MeanAndCov` (..., J, 2) and (..., 1, 2, 2), and (..., J).
     """
     u = slice(0, 3, 2)  # x and v
     m_u, m_y = prior_mean[..., u], prior_mean[..., 1]
@@ -246,14 +209,7 @@ def sigma_p(process_noise) -> np.ndarray:
 def measurement_matrices(nodes, frames) -> np.ndarray:
     """``Phi_k = (1 / y_k, 0)`` with ``y_k = y_1 + k - 1``, for frames ``k`` (1-based).
 
-    Parameters
-    ----------
-    nodes : ndarray, shape (..., J)
-    frames : array_like of int, shape (K,)
-
-    Returns
-    -------
-    ndarray, shape (..., J, K, 1, 2)
+    ``nodes`` (..., J), ``frames`` (K,); returns (..., J, K, 1, 2).
     """
     depth = nodes[..., None] + (np.asarray(frames, dtype=float) - 1.0)
     Phi = np.zeros(depth.shape + (1, 2))
@@ -266,48 +222,22 @@ def lateral_filter(
 ):
     """The Kalman filter of ``(x, v)`` at each depth node in closed form: log weight, frame ``N``.
 
-    The same filter as :func:`filter_bank` (textbook 19.2.1 prediction, 19.2.2
-    update, the log likelihood from the innovations) with its 2 x 2 algebra
-    written out, elementwise over the nodes, for the depth quadrature. With
-    ``(a, b, c)`` the entries of ``Cov[(x, v)]`` and ``r_k = (rho_k y_k)**2``
-    (the bearing noise in units of ``x``), the update by ``mu_k`` is::
+    :func:`filter_bank`'s filter (textbook 19.2.1, 19.2.2) written out elementwise.
+    With ``(a, b, c)`` the entries of ``Cov[(x, v)]`` and ``r_k = (rho_k y_k)**2``,
+    the update by ``mu_k`` is::
 
         e = mu_k y_k - x,   x += a e / (a + r_k),   v += b e / (a + r_k),
         a' = a r_k / (a + r_k),   b' = b r_k / (a + r_k),
         det' = det r_k / (a + r_k),   c' = (det' + b'**2) / a',
 
-    the log likelihood gains ``log N(mu_k; x / y_k, (a + r_k) / y_k**2)``,
-    and the prediction over a step ``s`` (``predict_lateral``) is
-    ``x += s v``, ``a += s (2 b + s c)``, ``b += s c``, ``c += q**2 s``,
-    ``det += q**2 s a``. Tracking the determinant keeps ``c`` free of
-    cancellation when the bearings pin ``x`` far more tightly than the prior
-    (small noise). A missing bearing (``NaN``) has no update: the filter
-    predicts through its frame.
+    the log likelihood gains ``log N(mu_k; x / y_k, (a + r_k) / y_k**2)``, and the
+    prediction over a step ``s`` is ``x += s v``, ``a += s (2 b + s c)``, ``b += s c``,
+    ``c += q**2 s``, ``det += q**2 s a`` (the determinant keeps ``c`` free of
+    cancellation at small noise). A ``NaN`` bearing has no update.
 
-    Parameters
-    ----------
-    nodes : ndarray, shape (..., J)
-        Depths at frame 1, > 0.
-    mu : ndarray, shape (..., N)
-        ``NaN`` at a missing frame.
-    rho, process_noise : ndarray, shape (...) or ()
-    prior_mean : ndarray, shape (..., 3)
-    prior_cov : ndarray, shape (..., 3, 3)
-        Already checked (see :func:`filter_bank`).
-    steps : ndarray, shape (..., N - 1), or None
-        The depth's change between frames, ``y_{k+1} = y_k + s_k`` (``None``: ones).
-    frame_rho : ndarray, shape (..., N), or None
-        The noise SD at each frame in place of ``rho`` (any value at a missing frame).
-
-    Returns
-    -------
-    log_weight : ndarray, shape (..., J)
-        ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``, as
-        :attr:`Bank.log_weight`.
-    mean : ndarray, shape (2, ..., J)
-        ``E[x_N | y_1, mu]`` and ``E[v_N | y_1, mu]``, in rows.
-    cov : tuple of three ndarrays, shape (..., J)
-        ``Var[x_N]``, ``Cov[x_N, v_N]``, ``Var[v_N]`` given ``y_1`` and ``mu``.
+    The arguments are :func:`run_bank`'s, checked. Returns ``log_weight`` (..., J) as
+    :attr:`Bank.log_weight`, ``mean`` (2, ..., J) of ``x_N`` and ``v_N``, and ``cov``,
+    three arrays (..., J): ``Var[x_N]``, ``Cov[x_N, v_N]``, ``Var[v_N]``.
     """
     start, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
     # with noise per frame, rho is that array and is read frame by frame below
@@ -315,8 +245,7 @@ def lateral_filter(
     q2 = (np.asarray(process_noise, dtype=float) ** 2)[..., None]
     missing = np.isnan(mu)
     gaps = bool(np.any(missing))
-    # the covariance does not depend on the bearings (only on which are present): its
-    # shape leaves out theirs, unless the frames differ from row to row
+    # the covariance depends only on which bearings are present
     per_row = [a.shape[:-1] + (1,) for a in (steps, frame_rho) if a is not None]
     if gaps:
         per_row.append(mu.shape[:-1] + (1,))
@@ -377,11 +306,7 @@ def _masked_update(rows, M, C, mu_k, y, rho2):
 
 
 def _predict_lateral_step(s: _Rows, q2, step) -> None:
-    """Textbook 19.2.1 for ``x <- x + s v``, ``v <- v + a_k``, ``a_k ~ N(0, q**2 s)``, in place.
-
-    ``q2`` is the velocity variance added, ``q**2 s`` (or ``None`` for none);
-    ``step`` the step ``s`` (..., 1).
-    """
+    """Textbook 19.2.1 over a step ``s`` (..., 1), in place; ``q2 = q**2 s`` or ``None``."""
     np.add(s.x, step * s.v, out=s.x)
     np.add(s.a, step * (2.0 * s.b + step * s.c), out=s.a)
     np.add(s.b, step * s.c, out=s.b)
@@ -390,18 +315,13 @@ def _predict_lateral_step(s: _Rows, q2, step) -> None:
         np.add(s.det, q2 * s.a, out=s.det)
 
 
-#: Rows of the lateral state arrays of :func:`lateral_filter`: the means ``(x, v)``, and
-#: the covariance entries ``a, b``, the determinant ``det`` and ``c``, in an order that
-#: makes the paired updates single operations on slices.
+#: Rows of the lateral state arrays ``M`` (``x, v``) and ``C`` (``a, b, det, c``).
 _X, _V = 0, 1
 _A, _B, _DET, _C = 0, 1, 2, 3
 
 
 class _Rows(NamedTuple):
-    """Views of the lateral state arrays ``M`` (2, ...) and ``C`` (4, ...), made once.
-
-    The filter updates them in place (``out=``), so the views stay those of the state.
-    """
+    """Views of the lateral state arrays ``M`` (2, ...) and ``C`` (4, ...), updated in place."""
 
     M: np.ndarray
     x: np.ndarray
@@ -415,12 +335,7 @@ class _Rows(NamedTuple):
 
 
 def _lateral_state(mean_shape, cov_shape):
-    """Empty state arrays for :func:`lateral_filter`, ``M`` (2, ...) and ``C`` (4, ...), and rows.
-
-    ``M`` has the shape ``mean_shape`` and ``cov_shape`` broadcast to; ``C``
-    has ``cov_shape``, padded with leading ones to that rank, so that
-    ``C[_A : _B + 1]`` broadcasts against the means.
-    """
+    """Empty state arrays ``M`` (2, ...) and ``C`` (4, ...) for :func:`lateral_filter`, and rows."""
     mean_shape = np.broadcast_shapes(mean_shape, cov_shape)
     pad = (1,) * (len(mean_shape) - len(cov_shape))
     M, C = np.empty((2,) + mean_shape), np.empty((4,) + pad + tuple(cov_shape))
@@ -429,11 +344,7 @@ def _lateral_state(mean_shape, cov_shape):
 
 
 def _predict_lateral(s: _Rows, q2) -> None:
-    """Textbook 19.2.1 for ``x <- x + v``, ``v <- v + a_k``, in place: see :func:`lateral_filter`.
-
-    ``q2`` is ``q**2``, or ``None`` for no process noise (``q = 0``), where
-    ``c`` and ``det`` are left as they are instead of adding zeros to them.
-    """
+    """Textbook 19.2.1 for a unit step, in place; ``q2`` is ``q**2`` or ``None`` (``q = 0``)."""
     np.add(s.x, s.v, out=s.x)
     np.add(s.a, 2.0 * s.b, out=s.a)
     np.add(s.a, s.c, out=s.a)  # a + 2 b + c
@@ -446,9 +357,7 @@ def _predict_lateral(s: _Rows, q2) -> None:
 def _update_lateral(s: _Rows, mu_k, y, rho2, yy):
     """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``, in place; the log likelihood.
 
-    ``yy`` is ``y * y``. The log likelihood ``log N(mu_k; x / y, (a + r) / y**2)``
-    is computed as ``-(log 2 pi + log((a + r) / y**2) + e g) / 2`` with
-    ``g = e / (a + r)``.
+    ``yy`` is ``y * y``; see :func:`lateral_filter`.
     """
     r = rho2 * yy
     total = s.a + r
@@ -472,35 +381,26 @@ def filter_bank(
     Parameters
     ----------
     nodes : array_like, shape (..., J)
-        Depths at frame 1, all > 0. Leading axes broadcast with those of the
-        other arguments (one set of nodes per trial, or shared).
+        Depths at frame 1, > 0; leading axes broadcast with the others'.
     mu : array_like, shape (..., N)
-        Bearings at frames 1 .. N, ``N >= 1``; ``NaN`` at a missing frame
-        (no update there).
+        ``NaN`` at a missing frame.
     rho : float or array_like, shape (...) or (..., N)
-        Bearing noise SD, > 0: per problem, or per frame when its shape is
-        ``mu``'s (any value at a missing frame).
+        Bearing noise SD, > 0, per problem or per frame.
     prior_mean : array_like, shape (..., 3)
-        Prior mean of ``(x_1, y_1, v_1)``.
     prior_cov : array_like, shape (..., 3, 3)
-        Prior covariance, symmetric positive definite.
     process_noise : float or array_like, shape (...)
-        SD of the lateral acceleration ``a_k``, >= 0 (0: constant velocity).
+        SD of the lateral acceleration ``a_k``, >= 0.
     history : bool
-        Keep every node's filter at every frame (:meth:`~depthcore.exact.mixture.Mixture.smoothed`
-        reuses
-        it, and reruns the filters without it).
+        Keep every node's filter at every frame (for
+        :meth:`~depthcore.exact.mixture.Mixture.smoothed`).
     steps : array_like, shape (N - 1,) or (..., N - 1), or None
-        The depth's change between frames, > 0 (``None``: unit steps): the
-        motion ``y_{k+1} = y_k + s_k``, ``x_{k+1} = x_k + s_k v_k``,
-        ``v_{k+1} = v_k + a_k``, ``a_k ~ N(0, q**2 s_k)``.
+        The depth's change between frames, > 0 (``None``: unit steps), with
+        ``x_{k+1} = x_k + s_k v_k`` and ``a_k ~ N(0, q**2 s_k)``.
 
     Returns
     -------
     Bank
-        Finite: nodes so near 0 or so far that the filters' numbers overflow
-        the doubles (the model holds ``1 / y`` and ``y**2``) are refused with a
-        ValueError naming ``nodes``, never answered with NaN.
+        Finite: nodes whose filters overflow are refused with a ValueError.
     """
     nodes = _nodes(nodes)
     mu, rho, steps, frame_rho = tracks.check_track(mu, rho, steps, _bearings)
@@ -544,15 +444,7 @@ def _batch(**shapes) -> tuple:
 def run_bank(
     nodes, mu, rho, process_noise, prior_mean, prior_cov, history, steps=None, frame_rho=None
 ) -> Bank:
-    """:func:`filter_bank` on checked inputs, which its callers in the package have checked.
-
-    The arguments are :func:`filter_bank`'s (``process_noise`` after ``rho``),
-    checked as it checks them: positive finite nodes and ``rho``,
-    ``process_noise >= 0``, a symmetric positive definite prior, batch shapes
-    that broadcast; ``steps`` (..., N - 1) positive or ``None``, ``frame_rho``
-    (..., N) positive at the present frames or ``None``. The result is not
-    checked for overflow.
-    """
+    """:func:`filter_bank` on inputs it has checked (``frame_rho`` (..., N) or ``None``)."""
     q = process_noise
     frames_ = tracks.frame_fields(mu, rho, steps, frame_rho)
     if not history:  # the closed form, as the depth quadrature uses
@@ -607,31 +499,23 @@ def run_bank(
 def step(bank: Bank, mu_next, rho=None, step=1.0, gaps: bool = False) -> Bank:
     """Add frame ``N + 1``: predict (textbook 19.2.1) and update (19.2.2) every node's filter.
 
-    Each node's log weight gains the log density of ``mu_{N+1}`` given the
-    earlier bearings and its depth; nothing earlier is recomputed (except for
-    a bank with a history and frames other than the paper's, whose filters are
-    rerun with the new frame).
+    Each node's log weight gains the log density of ``mu_{N+1}``; nothing earlier is
+    recomputed (but a bank with a history and irregular frames is rerun).
 
     Parameters
     ----------
     bank : Bank
-        The bank after ``N`` frames.
     mu_next : float or array_like, shape (...)
-        The bearing at frame ``N + 1``, one per trial; with ``gaps``, ``NaN``
-        marks a trial without one (its filters predict through the frame, its
-        weights do not change).
+        ``NaN`` (with ``gaps``) for a trial without a bearing.
     rho : float or array_like, shape (...), or None
-        The noise SD at frame ``N + 1``; ``None``: the bank's ``rho`` (a bank
-        with noise per frame needs it given).
+        ``None``: the bank's (needed with noise per frame).
     step : float or array_like, shape (...)
         The depth's change from frame ``N`` to ``N + 1``, > 0.
     gaps : bool
-        Whether ``NaN`` bearings are missing frames (else refused).
 
     Returns
     -------
     Bank
-        The bank after ``N + 1`` frames (with its history extended if it has one).
     """
     if not isinstance(bank, Bank):
         raise ValueError(f"bank must be a Bank, got {type(bank).__name__}")

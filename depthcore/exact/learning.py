@@ -9,46 +9,29 @@ maximising the marginal likelihood of the bearings,
 
     log p(mu_1 .. mu_N | rho, q) = log integral_{y_1 > 0} N(y_1; m_y, P_yy) L(y_1; rho, q) dy_1,
 
-summed over the tracks (with gaps, uneven steps and a relative noise level per
-frame, ``rho_k = rho weights_k``, as :mod:`depthcore.problem.frames` describes
-them), where ``L(y_1)`` is the likelihood of the bearings
-given the depth from the Kalman filter over the lateral state
-(:mod:`depthcore.exact.bank`, the prediction-error decomposition of textbook
-19.2.3). The depth integral is the exact filter's depth quadrature
-(:mod:`depthcore.exact.posterior`): :func:`log_likelihood` is accurate to the
-quadrature's tolerance.
+summed over the tracks (gaps, uneven steps, ``rho_k = rho weights_k``), where
+``L(y_1)`` is the Kalman filters' likelihood (:mod:`depthcore.exact.bank`,
+textbook 19.2.3), integrated by the depth quadrature of
+:mod:`depthcore.exact.posterior`.
 
 Two routes to the same estimate:
 
-* ``method="ml"``: Newton's method on ``log rho`` and ``log q`` with the
-  derivatives by central differences, on depth nodes held fixed (the
-  log-likelihood on fixed nodes is a smooth function of the parameters); the
-  nodes are re-placed at the new estimate and the maximisation repeated until
-  the estimate no longer moves. The observed information (the Hessian of the
-  negative log-likelihood in the log parameters) gives the standard errors,
-  by the delta method ``se(rho) = rho se(log rho)``.
-* ``method="em"``: the EM algorithm the textbook describes (Section 7.8 there),
-  with the depth and the trajectory hidden. The E-step is the exact posterior
-  of the trajectory at the current ``(rho, q)``: each depth node's
-  Rauch-Tung-Striebel smoother (textbook 19.2.6), its smoothed means and
-  covariances of ``(x_k, v_k)`` and the lag-one cross-covariances
-  ``Cov[w_k, w_{k+1}] = C_k Sigma_{k+1|N}``, mixed over the nodes with the
-  posterior's probabilities. The M-step maximises the expected complete-data
-  log-likelihood in closed form (Eq. (4) and the random walk of the velocity):
+* ``method="ml"``: Newton's method on ``log rho`` and ``log q`` (central
+  differences) on depth nodes held fixed, re-placed at the estimate until it stays
+  put; the observed information gives the standard errors, ``se(rho) = rho se(log rho)``.
+* ``method="em"``: EM (textbook Section 7.8) with the depth and trajectory hidden.
+  The E-step is :func:`expectations` (the smoother, textbook 19.2.6); the M-step is
+  in closed form (Eq. (4) and the velocity's random walk):
 
       rho**2 = mean over present frames of E[(mu_k - x_k / y_k)**2] / w_k**2,
       q**2   = mean over steps of E[(v_{k+1} - v_k)**2] / s_k,
 
-  with ``w_k`` the frames' relative noise levels (``rho_k = rho w_k``) and
-  ``s_k`` the steps. Each iteration does not lower the likelihood; its fixed
-  point is the maximum-likelihood estimate.
+  with ``w_k`` the relative noise levels and ``s_k`` the steps; its fixed point is
+  the maximum-likelihood estimate.
 
-The process noise at the boundary. ``q = 0`` (constant velocity, Eq. (1)) is a
-value the data may favour: when the likelihood does not rise from ``q = 0``
-the estimate is ``q = 0``, reported as at the boundary with a one-sided upper
-bound (the likelihood-ratio bound with the boundary's critical value, the
-``2 level - 1`` quantile of chi-squared with one degree of freedom), not a
-standard error.
+When the likelihood does not rise from ``q = 0`` (constant velocity, Eq. (1)) the
+estimate is ``q = 0`` at the boundary, with a one-sided upper bound
+(:func:`_q_upper`) in place of a standard error.
 
 References
 ----------
@@ -75,17 +58,14 @@ from depthcore.problem.gaussian import MeanAndCov
 NAMES = ("rho", "process_noise")
 #: The methods of :func:`fit`.
 METHODS = ("ml", "em")
-#: The fewest present bearings a track needs for the noise to show in it (three
-#: bearings are fitted exactly by a constant-velocity track at some depth).
+#: The fewest present bearings a track needs (three fit a constant-velocity track exactly).
 MIN_BEARINGS = 4
 
 #: Central-difference step in the log parameters.
 _H = 1e-4
-#: Newton's method stops when no log parameter moves by more than this (the step after it
-#: is of its square's order, below the central differences' noise).
+#: Newton's method stops when no log parameter moves by more than this.
 _STEP_TOL = 1e-7
-#: Node placements stop when the estimate moves by less than this between them (nodes
-#: placed at either estimate give the likelihood near it to the quadrature's tolerance).
+#: Node placements stop when the estimate moves by less than this between them.
 _ROUND_TOL = 1e-6
 _MAX_ROUNDS = 10
 _MAX_NEWTON = 100
@@ -100,39 +80,26 @@ class Fit(NamedTuple):
 
     Attributes
     ----------
-    rho : float
-        The estimate of rho (or its given value).
-    process_noise : float
-        The estimate of q (or its given value).
-    rho_se : float or None
-        Standard errors (this and ``process_noise_se``) from the observed
-        information (delta method from the log parameters); ``None`` for a
-        given value or an estimate at the boundary ``q = 0``.
-    process_noise_se : float or None
-        As ``rho_se``.
-    rho_interval : tuple or None
-        Two floats, the interval at ``level`` (this and
-        ``process_noise_interval``): Wald's on the log scale
-        (``rho exp(+- z se(log rho))``) or the profile likelihood's; for
-        ``q = 0`` at the boundary, ``(0, upper)`` one-sided. ``None`` for a
-        given value.
+    rho, process_noise : float
+        The estimates (or given values).
+    rho_se, process_noise_se : float or None
+        Standard errors (delta method); ``None`` if given or at the boundary ``q = 0``.
+    rho_interval, process_noise_interval : tuple or None
+        The interval at ``level``: Wald's on the log scale or the profile
+        likelihood's; ``(0, upper)`` at the boundary; ``None`` if given.
     log_likelihood : float
         ``log p(mu | rho, q)`` at the estimate, summed over the tracks.
     iterations : int
-        Newton steps (``"ml"``) or EM iterations (``"em"``).
+        Newton steps or EM iterations.
     converged : bool
     method : str
-        ``"ml"`` or ``"em"``.
     estimated : tuple of str
-        The parameters estimated, from :data:`NAMES`.
+        From :data:`NAMES`.
     at_boundary : bool
-        Whether the process noise estimate is ``q = 0`` at the boundary.
     covariance : ndarray, shape (p, p)
-        The inverse observed information of the estimated log parameters (in
-        the order of ``estimated``, without ``q`` at the boundary).
+        The inverse observed information of the estimated log parameters.
     level : float
     note : str
-        One line saying what was estimated and how it ended.
     """
 
     rho: float
@@ -257,34 +224,9 @@ def _on_nodes(tracks: _Tracks, nodes, log_w, rho: float, q: float) -> float:
 def log_likelihood(
     mu, prior_mean, prior_cov, rho, process_noise=0.0, steps=None, weights=None, rtol=1e-10
 ) -> float:
-    """``log p(mu | rho, q)``, the bearings' log density with the state integrated out, summed.
+    """``log p(mu | rho, q)`` summed over the tracks (module docstring, textbook 19.1.2).
 
-    ``log integral_{y_1 > 0} N(y_1; m_y, P_yy) L(y_1) dy_1`` per track
-    (textbook 19.1.2; ``L`` from the Kalman filters over depth, textbook
-    19.2.3), by the exact filter's depth quadrature
-    (the mixture's ``log_normaliser``), to its tolerance.
-
-    Parameters
-    ----------
-    mu : array_like, shape (N,) or (B, N)
-        One track or ``B`` tracks of ``N`` bearings.
-    prior_mean : array_like, shape (3,) or (B, 3)
-    prior_cov : array_like, shape (3, 3) or (B, 3, 3)
-        The prior of ``(x_1, y_1, v_1)``, the same for every track or one per track.
-    rho : float
-        Bearing noise SD, > 0.
-    process_noise : float
-        ``q``, >= 0.
-    steps : array_like, shape (N - 1,) or (B, N - 1), optional
-        The depth's change between frames (``None``: ones).
-    weights : array_like, shape (N,) or (B, N), optional
-        The frames' relative noise levels, ``rho_k = rho weights_k`` (``None``: ones).
-    rtol : float
-        The depth quadrature's tolerance.
-
-    Returns
-    -------
-    float
+    The arguments are :func:`fit`'s, with ``rho`` (> 0) and ``process_noise`` (>= 0) given.
     """
     tracks = _tracks(mu, prior_mean, prior_cov, steps, weights)
     rho = checks.positive_scalar(rho, "rho")
@@ -318,18 +260,11 @@ def _derivatives(f, theta):
 
 
 def _newton(f, theta):
-    """Maximise ``f`` from ``theta`` (p,): Newton steps, halved until ``f`` does not fall.
-
-    Each step is at most :data:`_MAX_STEP` in every parameter.
-
-    Returns ``theta``, ``f``, the Hessian there, the number of steps and
-    whether the steps settled.
-    """
+    """Maximise ``f`` from ``theta`` (p,) by Newton steps: ``theta, f, H, steps, settled``."""
     theta = np.array(theta, dtype=float)
     for it in range(1, _MAX_NEWTON + 1):
         f0, g, H = _derivatives(f, theta)
-        # Newton's step on -H with its eigenvalues made positive (their absolute values):
-        # Newton's own where f is concave, an ascent direction where it is not
+        # Newton's step on -H with its eigenvalues' absolute values: an ascent direction
         lam, V = np.linalg.eigh(-H)
         lam = np.maximum(np.abs(lam), 1e-8 * max(float(np.max(np.abs(lam))), 1e-300))
         d = V @ ((V.T @ g) / lam)
@@ -437,31 +372,25 @@ def fit(
     Parameters
     ----------
     mu : array_like, shape (N,) or (B, N)
-        One track or ``B`` tracks (``NaN``: a missing frame).
+        ``NaN``: a missing frame.
     prior_mean : array_like, shape (3,) or (B, 3)
     prior_cov : array_like, shape (3, 3) or (B, 3, 3)
-        The prior of ``(x_1, y_1, v_1)``: the same for every track or one per track.
     rho : float or None
-        The bearing noise SD: ``None`` to estimate it, a number (> 0) if known.
+        ``None`` to estimate it.
     process_noise : float or None
-        ``q``: ``None`` to estimate it, a number (>= 0) if known (0: constant velocity).
+        ``q``: ``None`` to estimate it.
     steps : array_like, shape (N - 1,) or (B, N - 1), optional
-        The depth's change between frames (``None``: ones).
     weights : array_like, shape (N,) or (B, N), optional
         The frames' relative noise levels, ``rho_k = rho weights_k``.
     method : {"ml", "em"}
-        Newton's method on the log-likelihood, or the EM algorithm with the
-        smoother as its E-step (see the module's docstring).
+        See the module docstring.
     intervals : {"wald", "profile"}
-        Wald's intervals on the log scale, or the profile likelihood's.
     level : float
-        The intervals' coverage, in [0.5, 1).
+        In [0.5, 1).
     rtol : float
         The depth quadrature's tolerance.
-    tol : float
-        EM stops when no log parameter moves by more than this in an iteration.
-    max_iter : int
-        At most this many EM iterations.
+    tol, max_iter
+        EM's tolerance in the log parameters and most iterations.
 
     Returns
     -------
@@ -470,8 +399,7 @@ def fit(
     Raises
     ------
     ValueError
-        One line naming the argument: nothing to estimate, too few bearings,
-        an unknown method, invalid tracks or prior.
+        Nothing to estimate, too few bearings, invalid arguments.
     """
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -590,11 +518,9 @@ def _boundary(pr0, theta0, H0, f0, iterations, converged, level, intervals, trac
 def _q_upper(pr0, theta0, f0, level, tracks):
     """The one-sided upper bound on ``q`` at the boundary ``q = 0``.
 
-    Where the profile log-likelihood of ``q`` (maximised over ``rho`` when it
-    is estimated; on the nodes placed at ``q = 0``) falls ``c / 2`` below its
-    value at ``q = 0``, ``c`` the ``2 level - 1`` quantile of chi-squared with
-    one degree of freedom (the boundary's 50:50 mixture of chi-squared with 0
-    and 1 degrees of freedom). ``None`` when it does not fall that far.
+    Where the profile log-likelihood of ``q`` falls ``c / 2`` below its value at
+    ``q = 0``, ``c`` the ``2 level - 1`` quantile of chi-squared with one degree of
+    freedom (the boundary's 50:50 mixture); ``None`` if it does not.
     """
     c = float(stats.chi2.ppf(2.0 * level - 1.0, 1))
     target = f0(theta0) - c / 2.0
@@ -656,21 +582,15 @@ def _profile(pr, f, theta, i, level, se):
 def expectations(bank, log_weights, tracks: _Tracks):
     """The E-step: the expected squared residuals under the exact smoothed posterior.
 
-    Each depth node's Kalman filter history is smoothed (textbook 19.2.6,
-    :func:`depthcore.kalman.linear.fixed_interval_smoother`); with the
-    Rauch-Tung-Striebel gains ``C_k`` the lag-one cross-covariance is
-    ``Cov[w_k, w_{k+1}] = C_k Sigma_{k+1|N}``. Given the node (depth
-    ``y_k = y_j + e_k`` at frame ``k``),
+    Each node's filter is smoothed (:func:`_smooth`, textbook 19.2.6); given the node,
     ``E[(mu_k - x_k / y_k)**2] = (mu_k - E[x_k] / y_k)**2 + Var[x_k] / y_k**2`` and
     ``E[(v_{k+1} - v_k)**2] = (E[v_{k+1}] - E[v_k])**2 + Var[v_k] + Var[v_{k+1}]
-    - 2 Cov[v_k, v_{k+1}]``,
-    mixed over the nodes with the posterior's probabilities, proportional to
-    ``w_j N(y_j; m_y, P_yy) L(y_j)``.
+    - 2 Cov[v_k, v_{k+1}]``, mixed over the nodes with the posterior's probabilities.
 
     Parameters
     ----------
     bank : depthcore.exact.bank.Bank
-        The filters of ``B`` tracks on nodes (B, J), with their history.
+        ``B`` tracks on nodes (B, J), with their history.
     log_weights : ndarray, shape (B, J)
         The nodes' log quadrature weights (``-inf`` at padding).
     tracks : _Tracks
@@ -700,17 +620,10 @@ def expectations(bank, log_weights, tracks: _Tracks):
 
 
 def _smooth(res: linear.FilterResult, Psi):
-    """Textbook 19.2.6 on each node's filter: smoothed Gaussians and lag-one cross-covariances.
+    """Textbook 19.2.6 on each node's filter, with ``Cov[w_k, w_{k+1} | mu] = C_k Sigma_{k+1|N}``.
 
-    The Rauch-Tung-Striebel recursions of
-    :func:`depthcore.kalman.linear.fixed_interval_smoother` with their gains
-    ``C_k`` kept: ``Cov[w_k, w_{k+1} | mu] = C_k Sigma_{k+1|N}``.
-
-    Returns
-    -------
-    smooth : depthcore.problem.gaussian.MeanAndCov
-        Means (..., N, 2) and covariances (..., N, 2, 2).
-    cross : ndarray, shape (..., N - 1, 2, 2)
+    Returns the smoothed ``MeanAndCov`` (..., N, 2), (..., N, 2, 2) and the cross
+    covariances (..., N - 1, 2, 2).
     """
     cov, predicted = res.covs[..., :-1, :, :], res.predicted_covs[..., 1:, :, :]
     try:  # C_k^T = Sigma_{+|k+1}^{-1} Psi Sigma_k, the predictions positive definite
@@ -732,21 +645,15 @@ def _smooth(res: linear.FilterResult, Psi):
     return MeanAndCov(means, covs), gains @ covs[..., 1:, :, :]
 
 
-#: EM re-places the depth nodes when a parameter has moved by this factor (in log) since
-#: they were placed, and once more when it has settled on them.
+#: EM re-places the depth nodes when a parameter has moved by this (in log) since placed.
 _EM_REPLACE = 0.05
 
 
 def _fit_em(tracks, rho_k, q_k, free, level, intervals, rtol, tol, max_iter) -> Fit:
     """EM from a rough start; the E-step on depth nodes placed at recent parameters.
 
-    On fixed nodes the E-step is the exact posterior of the model whose depth
-    takes the nodes' values with the quadrature's weights, so each iteration
-    is EM for that model; the nodes are re-placed (at the current parameters)
-    whenever the parameters have moved by :data:`_EM_REPLACE` in log since
-    they were placed, and when EM has settled on them, so that it stops only
-    on nodes placed at its estimate, where that model's likelihood is the
-    quadrature's.
+    The nodes are re-placed after a move of :data:`_EM_REPLACE` and when EM settles,
+    so it stops only on nodes placed at its estimate.
     """
     rho = _rho_start(tracks) if rho_k is None else rho_k
     q = (0.1 * _q_scale(tracks)) if q_k is None else q_k
