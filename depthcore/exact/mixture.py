@@ -46,19 +46,16 @@ _MAX_DOUBLINGS = 12
 def mixture_moments(W, means, covs, depths):
     """Mean and covariance of ``(x, y, v)`` under a mixture over depth nodes.
 
-    The law of total variance: the weighted covariance of the nodes' means
-    plus their weighted covariances (:func:`_stacked_moments` with one set
-    of weights); the depth is known exactly given the node.
+    :func:`_stacked_moments` with one set of weights.
 
     Parameters
     ----------
     W : array_like, shape (..., J)
-        Weights >= 0 (probabilities once normalised).
+        Weights >= 0.
     means : ndarray, shape (..., J, 2)
     covs : ndarray, shape (..., J, 2, 2)
         The Gaussians of ``(x, v)`` at each node.
     depths : ndarray, shape (..., J)
-        The node depths.
 
     Returns
     -------
@@ -91,14 +88,10 @@ def _stacked_moments(W, means, covs, depths):
         S = sum_j W_j,   s = sum_j W_j d_j / S,   mean = c + s,
         cov = sum_j W_j (d_j d_j^T + C_j) / S - s s^T.
 
-    The nodes' terms ``(1, d_j, d_j d_j^T + C_j)`` are formed once and summed
-    for every weighting by one matrix product.
-
     Parameters
     ----------
     W : ndarray, shape (..., K, J)
-        Weights >= 0 (need not be normalised); a row with no positive weight
-        gets NaN moments.
+        Weights >= 0; a row with no positive weight gets NaN moments.
     means : ndarray, shape (..., J, 2)
     covs : ndarray, shape (..., J, 2, 2)
     depths : ndarray, shape (..., J)
@@ -137,17 +130,9 @@ def _stacked_moments(W, means, covs, depths):
 class Moments(NamedTuple):
     """Moments of the optimal depth and velocity marginals for a batch of problems.
 
-    The optimal filter's (:func:`depthcore.exact.optimal.moments`) and the bank's
-    (:func:`depthcore.exact.posterior.moments`).
-
-    Every field is an array of shape (B,). ``depth_error`` and
-    ``velocity_error`` are absolute error estimates of the means and SDs: the
-    largest change at the last halving of the quadrature step, an upper bound
-    in practice since the trapezoid rule converges geometrically here.
-    ``prob_behind_camera`` is the posterior probability that the depth at the
-    first frame, ``y - 2``, is not positive (zero for ``support="front"``).
-    ``mean`` (B, 3) and ``cov`` (B, 3, 3) are the posterior mean and covariance
-    of the whole state ``(x, y, v)`` at time 3.
+    Every field is an array of shape (B,); ``depth_error`` and ``velocity_error`` are
+    :func:`depthcore.exact.quadrature.halving_error`'s; ``prob_behind_camera`` is
+    ``P(y - 2 <= 0)``; ``mean`` (B, 3) and ``cov`` (B, 3, 3) are of ``(x, y, v)``.
     """
 
     depth_mean: np.ndarray
@@ -184,9 +169,7 @@ class Smoothed(NamedTuple):
 
 @dataclass(frozen=True)
 class Mixture:
-    """The optimal posterior at frame ``N``: the bank's Gaussians mixed over the depth nodes.
-
-    Built by :func:`mixture`. ``(...)`` is the batch shape.
+    """The optimal posterior at frame ``N`` (:func:`mixture`), batch shape ``(...)``.
 
     Attributes
     ----------
@@ -194,28 +177,18 @@ class Mixture:
     log_weights : ndarray, shape (..., J)
         Log quadrature weights of the nodes.
     probabilities : ndarray, shape (..., J)
-        ``w_j N(y_j; m_y, P_yy) L(y_j)``, normalised over the nodes.
+        ``w_j N(y_j; m_y, P_yy) L(y_j)``, normalised.
     log_normaliser : ndarray, shape (...)
-        ``log sum_j w_j N(y_j; m_y, P_yy) L(y_j)``: the log density of the bearings
-        with the depth integrated over the nodes' support.
+        ``log sum_j w_j N(y_j; m_y, P_yy) L(y_j)``.
     mean : ndarray, shape (..., 3)
-        Posterior mean of ``(x_N, y_N, v_N)``.
     cov : ndarray, shape (..., 3, 3)
-        Posterior covariance of ``(x_N, y_N, v_N)``.
+        Of ``(x_N, y_N, v_N)``.
     depth_error, velocity_error : ndarray, shape (...), or None
-        Error estimates of the depth's and the velocity's mean and SD when the
-        nodes were placed by :func:`~depthcore.exact.posterior.posterior` (and kept by
-        :func:`~depthcore.exact.posterior.update`):
-        the change of those moments when every other node is dropped (the
-        step doubled), floored by roundoff; ``None`` for caller-given nodes.
+        For nodes placed by :func:`~depthcore.exact.posterior.posterior`; ``None``
+        for caller-given nodes.
     rtol : float or None
-        The tolerance the nodes were placed for (:func:`~depthcore.exact.posterior.posterior`).
     updates : depthcore.problem.predictive.Updates or None
-        The per-frame report of a run with a gate, arrays (..., N): each
-        bearing's log predictive density, tail probability and whether the gate
-        skipped it (a skipped bearing is ``NaN`` in ``bank.mu``); ``None`` from
-        a run without a gate, which computes no report (:meth:`report` does, on
-        request).
+        A gated run's report, (..., N); ``None`` without a gate (see :meth:`report`).
     """
 
     bank: Bank
@@ -237,14 +210,8 @@ class Mixture:
     def report(self) -> predictive.Updates:
         """Each frame's predictive report, arrays (..., N): log density, tail, gated.
 
-        The bearing's log predictive density and two-sided tail probability under
-        the mixture over depth nodes of the filters' predictions given the
-        earlier bearings (:func:`depthcore.exact.online.track_updates`, the
-        filter run one bearing at a time on its own nodes, to the same
-        tolerance: a pass over every frame of every problem, which the bank
-        does not need and so runs only here); NaN at a missing frame. From a
-        run with a gate, that run's report, ``updates`` (the skipped
-        bearings marked).
+        :func:`depthcore.exact.online.track_updates`, computed here on request; NaN at a
+        missing frame. From a gated run, its ``updates``.
         """
         if self.updates is not None:
             return self.updates
@@ -303,23 +270,15 @@ class Mixture:
     def depth_cdf(self, y, rtol: float = 1e-10) -> np.ndarray:
         """``P(y_N <= y)``, integrated from the density.
 
-        The mass lies between the smallest and largest nodes whose probability
-        is within ``e**-60`` of the largest; the CDF is 0 below and 1 above them.
-        In between, the density is integrated from the lower end by composite
-        8-point Gauss-Legendre panels in ``t = log(y_1)``, the panels halved
-        until the CDF changes by at most ``rtol``
-        (:func:`depthcore.exact.cdf.gauss_legendre_cdf`).
+        0 and 1 beyond the nodes within ``e**-60`` of the largest; between,
+        :func:`depthcore.exact.cdf.gauss_legendre_cdf` in ``t = log(y_1)``.
 
         Parameters
         ----------
         y : array_like
-            Depths at frame ``N``: any shape for one problem; ``(..., K)`` for a batch.
+            Any shape for one problem; ``(..., K)`` for a batch.
         rtol : float
-            Absolute tolerance of the CDF, > 0, or its roundoff floor
-            ``64 eps (1 + |t|) / sd_t`` where that is larger (``t`` the
-            mixture's mean of ``log(y_1)``, ``sd_t`` its SD): at a tiny noise
-            level the posterior is so narrow that the depths themselves, as
-            floats, cannot resolve it further.
+            Absolute tolerance, > 0, floored at ``64 eps (1 + |t|) / sd_t``.
         """
         rtol = _positive_scalar(rtol, "rtol")
         y, restore = self._query(y, "y")
@@ -333,19 +292,13 @@ class Mixture:
             t = np.log(np.maximum(y - _travelled(b), 0.0))
         top = np.minimum(t, hi)
         width = np.maximum(top - lo, 0.0)
-        # Start with panels of half the SD of log(y_1) under each problem's mixture: as
-        # many as the widest range in units of its own SD needs (in a batch of
-        # problems, not the widest range over the narrowest SD).
+        # Panels of half the SD of log(y_1) under each problem's own mixture.
         log_nodes = np.log(nodes)
         centre = np.sum(self.probabilities * log_nodes, axis=-1, keepdims=True)
         sd_t = np.sqrt(np.sum(self.probabilities * (log_nodes - centre) ** 2, axis=-1))
         panels = int(np.clip(np.ceil(np.max(width / (0.5 * sd_t[..., None] + 1e-3))), 4, 4096))
-        # Roundoff: a depth is a float, rounded to eps (1 + |t|) in t, which moves the
-        # log density by that times its slope, about z / sd_t at z SDs (|z| ~ 1 on
-        # average); the CDF, an average of the density's relative errors, cannot
-        # settle below 64 eps (1 + |t|) / sd_t (the safety factor of the package's
-        # other roundoff floors), which matters only for posteriors narrower than
-        # about 1e-5 of the depth in relative terms.
+        # Roundoff: a depth rounded to eps (1 + |t|) in t moves the log density by
+        # about that over sd_t, so the CDF cannot settle below 64 eps (1 + |t|) / sd_t.
         eps = np.finfo(float).eps
         floor = 64.0 * eps * (1.0 + np.abs(centre)) / np.maximum(sd_t[..., None], eps)
         tol = np.maximum(rtol, floor)
@@ -382,15 +335,9 @@ class Mixture:
     def velocity_gap(self) -> np.ndarray:
         """The resolution of the velocity mixture, shape (...).
 
-        The largest difference between the conditional means ``E[v_N | y_j]``
-        of neighbouring nodes (in depth order), in units of the smaller
-        conditional SD, over the pairs where either node has probability above
-        ``1e-14`` of the largest. :meth:`velocity_pdf` and :meth:`velocity_cdf`
-        sum one Gaussian per node; for Gaussians of equal SD spaced ``h`` SDs
-        apart the sum ripples with relative amplitude ``2 exp(-2 pi**2 / h**2)``
-        (Poisson summation): about ``5e-9`` at ``h = 1`` and ``1e-34`` at
-        ``h = 0.5``, but ``0.2`` at ``h = 3``. The moments need no such
-        resolution.
+        The largest gap between neighbouring nodes' ``E[v_N | y_j]`` in conditional SDs
+        (nodes above ``1e-14`` of the largest). A sum of Gaussians ``h`` SDs apart
+        ripples by ``2 exp(-2 pi**2 / h**2)``: ``5e-9`` at ``h = 1``, ``0.2`` at ``h = 3``.
         """
         b = self.bank
         order = np.argsort(np.broadcast_to(b.nodes, self.probabilities.shape), axis=-1)
@@ -409,14 +356,8 @@ class Mixture:
     def velocity_pdf(self, v) -> np.ndarray:
         """Posterior density of ``v_N``: ``sum_j p_j N(v; E[v_N | y_j], Var[v_N | y_j])``.
 
-        The nodes must be close enough that neighbouring conditional means
-        differ by less than about a conditional SD (:attr:`velocity_gap`), or
-        the sum ripples.
-
-        Parameters
-        ----------
-        v : array_like
-            Any shape for one problem; ``(..., K)`` for a batch.
+        Smooth when :attr:`velocity_gap` is below about 1. ``v``: any shape for one
+        problem, ``(..., K)`` for a batch.
         """
         v, restore = self._query(v, "v")
         W, m, sd = self._velocity_terms()
@@ -426,8 +367,7 @@ class Mixture:
     def velocity_cdf(self, v) -> np.ndarray:
         """``P(v_N <= v)``: the mixture of the nodes' Gaussian CDFs.
 
-        Converged only when the nodes resolve the velocity (:attr:`velocity_gap`
-        below about 1), as for :meth:`velocity_pdf`.
+        As :meth:`velocity_pdf`.
         """
         v, restore = self._query(v, "v")
         W, m, sd = self._velocity_terms()
@@ -436,11 +376,8 @@ class Mixture:
     def smoothed(self) -> Smoothed:
         """Textbook 19.2.6: the state at every frame given all bearings.
 
-        Each node's filter history (the bank's, or from a rerun of the filters
-        if the bank kept none) is smoothed by the fixed-interval smoother
-        (:func:`depthcore.kalman.linear.fixed_interval_smoother`);
-        the smoothed Gaussians of ``(x_k, v_k)`` are mixed with the nodes'
-        probabilities, and the depth at frame ``k`` is ``y_1 + k - 1``.
+        Each node's history is smoothed
+        (:func:`depthcore.kalman.linear.fixed_interval_smoother`) and mixed.
         """
         b = self.bank
         res = b.history
@@ -489,18 +426,13 @@ def mixture(bank: Bank, weights) -> Mixture:
     ----------
     bank : Bank
     weights : array_like, shape (..., J)
-        Quadrature weights of the nodes for integrals over the depth at frame 1
-        (``sum_j w_j g(y_j)`` approximates ``integral g(y) dy``), broadcasting
-        with ``bank.nodes``: >= 0 (a zero weight pads a batch's node sets to
-        one length), at least one positive per problem.
+        Quadrature weights (``sum_j w_j g(y_j)`` approximates ``integral g(y) dy``),
+        >= 0 (zero pads), at least one positive per problem.
 
     Returns
     -------
     Mixture
-        The probabilities ``p_j`` proportional to ``w_j N(y_j; m_y, P_yy) L(y_j)``
-        (in log space, the largest subtracted), the log normaliser, and the
-        mixture's mean and covariance of ``(x_N, y_N, v_N)``: with
-        ``m_j = (E[x_N | y_j], y_j + N - 1, E[v_N | y_j])``,
+        ``p_j`` proportional to ``w_j N(y_j; m_y, P_yy) L(y_j)``, with
         ``mean = sum_j p_j m_j`` and
         ``cov = sum_j p_j (Cov[(x_N, v_N) | y_j] + (m_j - mean)(m_j - mean)^T)``.
     """
@@ -559,20 +491,8 @@ _END_MARGIN = 40.0
 def _halving(log_p, top):
     """Every other node of the placed grid, and whether its ends are free.
 
-    Parameters
-    ----------
-    log_p : ndarray, shape (..., J)
-        The nodes' log probabilities up to a constant, ``-inf`` at padding.
-    top : ndarray, shape (..., 1)
-        Their largest.
-
-    Returns
-    -------
-    every_other : ndarray of bool, shape (..., J)
-        The nodes with positive weight an even number of places from the first.
-    free : ndarray of bool, shape (...)
-        The first and last nodes with positive weight carry log probabilities
-        more than :data:`_END_MARGIN` below the largest.
+    ``log_p`` (..., J) (``-inf`` at padding), ``top`` (..., 1) its largest. Returns
+    ``every_other`` (..., J) and ``free`` (...): both end nodes :data:`_END_MARGIN` below.
     """
     valid = np.isfinite(log_p)
     J = log_p.shape[-1]
