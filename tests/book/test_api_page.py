@@ -38,15 +38,15 @@ def page_html(html_dir, page: str) -> str:
 
 def test_family_pages_follow_the_house():
     pages = [p.removeprefix("book/api/") for p in toc_pages() if p.startswith("book/api/")]
-    assert pages == FAMILIES
-    assert set(FAMILIES) == set(depthcore.SUBPACKAGES) | {"formatting"}
+    assert pages == [*FAMILIES, "depthbook"]
+    assert FAMILIES == list(depthcore.SUBPACKAGES)
 
 
 def test_each_module_is_documented_with_its_members_on_its_familys_page(html_dir):
     for name in depthcore.MODULES:
         html = page_html(html_dir, f"book/api/{family_of(name)}")
         assert f'id="module-{name}"' in html, f"{name} is not documented"
-        if name.count(".") > 1 or name == "depthbook.formatting":
+        if name.count(".") > 1:
             assert re.search(rf'<dt class="sig[^"]*" id="{re.escape(name)}\.\w+', html), (
                 f"{name} is documented without any of its members"
             )
@@ -72,3 +72,15 @@ def test_api_pages_render_their_markup_and_mathematics(html_dir):
     # the docstrings' formulas: hundreds of them, typeset
     assert typeset > 300, f"only {typeset} formulas typeset on the API pages"
     assert r"\rho ^{2} J^{-1}" in page_html(html_dir, "book/api/kalman")
+
+
+def test_the_books_own_package_has_a_page_of_its_own(html_dir):
+    html = page_html(html_dir, "book/api/depthbook")
+    for name in (
+        "depthbook",
+        "depthbook.paper",
+        "depthbook.reference",
+        "depthbook.provenance.records",
+        "depthbook.studies.verdicts",
+    ):
+        assert f'id="module-{name}"' in html, f"{name} is not documented"

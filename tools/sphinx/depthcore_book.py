@@ -589,22 +589,38 @@ class ModuleSummaries(SphinxDirective):
         return container.children
 
 
+def book_modules() -> list[str]:
+    """``depthbook``, the book's own package, and its modules and subpackages, by folder."""
+    import pkgutil
+
+    import depthbook
+
+    found = ["depthbook"]
+    for m in pkgutil.walk_packages(depthbook.__path__, "depthbook."):
+        if not any(part.startswith("_") for part in m.name.split(".")):
+            found.append(m.name)
+    return found
+
+
 def family_modules(package: str) -> list[str]:
     """The modules a family's API page documents: the package, then its modules.
 
     Parameters
     ----------
     package : str
-        ``depthcore.<family>`` (one of ``depthcore.SUBPACKAGES``), or a module
-        directly in ``depthcore/`` (``depthbook.formatting``).
+        ``depthcore.<family>`` (one of ``depthcore.SUBPACKAGES``), or ``depthbook``,
+        the book's own package.
 
     Returns
     -------
     list of str
-        ``package`` and, for a family, the names in ``depthcore.MODULES`` below it.
+        ``package`` and, for a family, the names in ``depthcore.MODULES`` below it;
+        for ``depthbook``, :func:`book_modules`.
     """
     import depthcore
 
+    if package == "depthbook":
+        return book_modules()
     if package not in depthcore.MODULES:
         raise ValueError(f"package must be one of depthcore.MODULES, got {package!r}")
     return [package] + [m for m in depthcore.MODULES if m.startswith(f"{package}.")]
@@ -618,7 +634,7 @@ class PackageReference(SphinxDirective):
     (:func:`family_modules`), so a new module needs no page of its own. The
     page itself shows the family's own docstring above (the sections are
     attached to the page as they are parsed, so that text comes first there);
-    a module directly in ``depthcore/`` is rendered whole, members included.
+    a package without modules is rendered whole, members included.
     """
 
     required_arguments = 1
