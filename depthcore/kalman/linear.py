@@ -2,47 +2,36 @@
 
 Recommended import: ``from depthcore.kalman import linear``.
 
-The model of [prince2012]_, section 19.2, in its notation: the state ``w_t``
-(dimension ``n``) and the measurement ``x_t`` (dimension ``m``; a scalar
-measurement is ``m = 1``) at times ``t = 1 .. T`` obey
+The model of [prince2012]_, in its notation: the state ``w_t`` (dimension ``n``)
+and the measurement ``x_t`` (dimension ``m``) at times ``t = 1 .. T`` obey
 
     w_t = mu_p + Psi w_{t-1} + eps_p,   eps_p ~ N(0, Sigma_p)    (textbook Eq. (19.5))
     x_t = mu_m + Phi w_t + eps_m,       eps_m ~ N(0, Sigma_m)    (textbook Eq. (19.7))
 
-with a Gaussian prior ``N(mu_0, Sigma_0)`` on the state at the first
-measurement, ``w_1``. The filter alternates two steps:
+with a Gaussian prior ``N(mu_0, Sigma_0)`` on ``w_1``. The filter alternates:
 
 * prediction, textbook 19.2.1 (the Chapman-Kolmogorov integral):
   ``mu_+ = mu_p + Psi mu_{t-1}``, ``Sigma_+ = Sigma_p + Psi Sigma_{t-1} Psi^T``;
-* measurement incorporation in the gain form of textbook 19.2.2 (the rewriting
-  of Eq. (19.10) by the matrix inversion lemma):
-  ``K = Sigma_+ Phi^T (Sigma_m + Phi Sigma_+ Phi^T)^{-1}``,
-  ``mu_t = mu_+ + K (x_t - mu_m - Phi mu_+)``, ``Sigma_t = (I - K Phi) Sigma_+``.
-  The covariance is computed in the Joseph form
-  ``(I - K Phi) Sigma_+ (I - K Phi)^T + K Sigma_m K^T``, equal to it in exact
-  arithmetic and symmetric positive semi-definite in floating point.
+* measurement incorporation in the gain form of textbook 19.2.2 (Eq. (19.10)
+  by the matrix inversion lemma): ``K = Sigma_+ Phi^T S_t^{-1}``,
+  ``mu_t = mu_+ + K (x_t - mu_m - Phi mu_+)``, ``Sigma_t = (I - K Phi) Sigma_+``
+  in the Joseph form ``(I - K Phi) Sigma_+ (I - K Phi)^T + K Sigma_m K^T``
+  (positive semi-definite in floating point).
 
-The innovation ``x_t - mu_m - Phi mu_+`` has the Gaussian density
-``N(0, S_t)``, ``S_t = Sigma_m + Phi Sigma_+ Phi^T``, given the earlier
-measurements, so the log marginal likelihood of all measurements is the sum of
-the innovations' log densities (the prediction-error decomposition).
+The innovation ``x_t - mu_m - Phi mu_+`` is ``N(0, S_t)``, ``S_t = Sigma_m +
+Phi Sigma_+ Phi^T``; the log marginal likelihood sums their log densities.
 
-Smoothing, textbook 19.2.6: the fixed-interval smoother runs the backward
-recursions (the Rauch-Tung-Striebel smoother)
+Smoothing, textbook 19.2.6: the fixed-interval (Rauch-Tung-Striebel) smoother
+runs, backward,
 
     C_t = Sigma_t Psi^T Sigma_{+|t+1}^{-1}
     mu_{t|T} = mu_t + C_t (mu_{t+1|T} - mu_{+|t+1})
     Sigma_{t|T} = Sigma_t + C_t (Sigma_{t+1|T} - Sigma_{+|t+1}) C_t^T
 
-over the filter's output; the fixed-lag smoother augments the state with its
-``tau`` predecessors, ``(w_t, w_{t-1}, .., w_{t-tau})``, whose temporal model
-applies ``Psi`` to the first block and copies the others down, and whose
-measurement model sees the first block alone, and runs the filter on it.
+over the filter's output; the fixed-lag smoother runs the filter on the state
+augmented with its ``tau`` predecessors (:func:`augment`).
 
-Every function is batched: leading axes ``(...)`` of the means, covariances,
-measurements and model matrices broadcast together (NumPy rules), so
-independent filters (one per Monte Carlo trial, one per depth, ...) run side by
-side without a Python loop over them.
+Leading axes ``(...)`` of all arrays broadcast: independent filters run side by side.
 
 References
 ----------
@@ -78,8 +67,7 @@ class Update(NamedTuple):
     mean : ndarray, shape (..., n)
     cov : ndarray, shape (..., n, n)
     log_likelihood : ndarray, shape (...)
-        Log density of the measurement given the earlier ones: the innovation's
-        ``log N(x - mu_m - Phi mu_+; 0, Sigma_m + Phi Sigma_+ Phi^T)``.
+        The innovation's log density given the earlier measurements.
     """
 
     mean: np.ndarray
@@ -92,12 +80,10 @@ class FilterResult(NamedTuple):
 
     Attributes
     ----------
-    means : ndarray, shape (..., T, n)
-        ``means[..., t, :]`` is the filtered mean after measurement ``t + 1``.
-    covs : ndarray, shape (..., T, n, n)
-    predicted_means : ndarray, shape (..., T, n)
-        The mean before measurement ``t + 1`` (the prior's at ``t = 0``).
-    predicted_covs : ndarray, shape (..., T, n, n)
+    means, covs : ndarray, shape (..., T, n) and (..., T, n, n)
+        Entry ``t``: after measurement ``t + 1``.
+    predicted_means, predicted_covs : ndarray, shape (..., T, n) and (..., T, n, n)
+        Entry ``t``: before measurement ``t + 1`` (the prior at ``t = 0``).
     log_likelihoods : ndarray, shape (..., T)
         Log density of each measurement given the earlier ones.
     """
@@ -112,9 +98,6 @@ class FilterResult(NamedTuple):
     def log_likelihood(self) -> np.ndarray:
         """Log marginal likelihood of all measurements, shape (...)."""
         return np.sum(self.log_likelihoods, axis=-1)
-
-
-# --- input checks ----------------------------------------------------------------------
 
 
 def _array(value, name: str, min_ndim: int) -> np.ndarray:
@@ -178,9 +161,6 @@ def _model(Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m, n: int):
     return Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
 
 
-# --- the two steps ---------------------------------------------------------------------
-
-
 def _eye(n: int) -> np.ndarray:
     """The identity of size ``n``, read-only and made once per size."""
     if n not in _EYES:
@@ -203,22 +183,17 @@ def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
 
     Parameters
     ----------
-    mean : array_like, shape (..., n)
-        Filtered mean at time ``t - 1``.
-    cov : array_like, shape (..., n, n)
-        Filtered covariance at time ``t - 1``, symmetric positive semi-definite.
-    Psi : array_like, shape (..., n, n)
-        Transition matrix.
-    Sigma_p : array_like, shape (..., n, n)
-        Transition noise covariance, symmetric positive semi-definite (zero for
-        a deterministic motion).
+    mean, cov : array_like, shape (..., n) and (..., n, n)
+        Filtered mean and covariance (positive semi-definite) at time ``t - 1``.
+    Psi, Sigma_p : array_like, shape (..., n, n)
+        Transition matrix and noise covariance (positive semi-definite).
     mu_p : array_like, shape (..., n), optional
         Mean change of the state; zero by default.
 
     Returns
     -------
     MeanAndCov
-        The prediction of the state at time ``t``, leading axes broadcast.
+        Leading axes broadcast.
     """
     mean = _array(mean, "mean", 1)
     n = mean.shape[-1]
@@ -230,12 +205,9 @@ def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
 
 
 def joseph(cov, gain, Phi, Sigma_m) -> np.ndarray:
-    """Textbook 19.2.2: the updated covariance in the Joseph form, symmetrised.
+    """Textbook 19.2.2: the updated covariance in the Joseph form (module docstring), symmetrised.
 
-    ``(I - K Phi) Sigma_+ (I - K Phi)^T + K Sigma_m K^T``: for the optimal gain
-    ``K`` it equals ``(I - K Phi) Sigma_+`` in exact arithmetic, and it stays
-    symmetric positive semi-definite in floating point. The EKF's Eq. (12) is
-    the case of one scalar measurement, ``Phi = h^T`` and ``Sigma_m = rho**2``.
+    The EKF's Eq. (12) is the case ``Phi = h^T``, ``Sigma_m = rho**2``.
 
     Parameters
     ----------
@@ -257,41 +229,14 @@ def joseph(cov, gain, Phi, Sigma_m) -> np.ndarray:
 
 
 def _gain(PHt, S) -> np.ndarray:
-    """Textbook 19.2.2: the gain ``K = Sigma_+ Phi^T S^{-1}`` (..., n, m).
-
-    A scalar measurement divides by ``S``; otherwise ``K^T = S^{-1} Phi
-    Sigma_+`` is solved for (``S`` symmetric positive definite).
-
-    Parameters
-    ----------
-    PHt : ndarray, shape (..., n, m)
-        ``Sigma_+ Phi^T``.
-    S : ndarray, shape (..., m, m)
-        The innovation covariance ``Sigma_m + Phi Sigma_+ Phi^T``.
-
-    Returns
-    -------
-    ndarray, shape (..., n, m)
-    """
+    """Textbook 19.2.2: the gain ``K = Sigma_+ Phi^T S^{-1}`` (..., n, m) from ``Sigma_+ Phi^T``."""
     if S.shape[-1] == 1:
         return PHt / S
     return np.linalg.solve(S, PHt.mT).mT
 
 
 def _innovation_log_density(r, S) -> np.ndarray:
-    """``log N(r; 0, S)``: the log density of an innovation given the earlier measurements.
-
-    Parameters
-    ----------
-    r : ndarray, shape (..., m)
-        Innovations ``x - mu_m - Phi mu_+``.
-    S : ndarray, shape (..., m, m)
-        Their covariances ``Sigma_m + Phi Sigma_+ Phi^T``, symmetric positive definite.
-
-    Returns
-    -------
-    ndarray, shape (...)
-    """
+    """``log N(r; 0, S)`` (...) of innovations ``r`` (..., m) with covariances ``S`` (..., m, m)."""
     if S.shape[-1] == 1:  # a scalar measurement: divide instead of factorising
         s = S[..., 0, 0]
         log_det = np.log(s)
@@ -313,34 +258,23 @@ def _update(mean, cov, x, Phi, Sigma_m, mu_m) -> Update:
 
 
 def update(mean, cov, x, Phi, Sigma_m, mu_m=None) -> Update:
-    """Textbook 19.2.2: incorporate the measurement ``x`` in the gain form, Joseph covariance.
-
-    ``K = Sigma_+ Phi^T S^{-1}`` with ``S = Sigma_m + Phi Sigma_+ Phi^T``;
-    ``mu = mu_+ + K (x - mu_m - Phi mu_+)``;
-    ``Sigma = (I - K Phi) Sigma_+ (I - K Phi)^T + K Sigma_m K^T`` (the Joseph
-    form of ``(I - K Phi) Sigma_+``).
+    """Textbook 19.2.2: incorporate the measurement ``x`` in the gain form (module docstring).
 
     Parameters
     ----------
-    mean : array_like, shape (..., n)
-        Predicted mean ``mu_+``.
-    cov : array_like, shape (..., n, n)
-        Predicted covariance ``Sigma_+``, symmetric positive semi-definite.
+    mean, cov : array_like, shape (..., n) and (..., n, n)
+        Predicted mean ``mu_+`` and covariance ``Sigma_+`` (positive semi-definite).
     x : array_like, shape (..., m)
         The measurement (``m = 1`` for a scalar one).
-    Phi : array_like, shape (..., m, n)
-        Measurement matrix.
-    Sigma_m : array_like, shape (..., m, m)
-        Measurement noise covariance, symmetric positive definite (for
-        ``m = 1``, a variance > 0).
+    Phi, Sigma_m : array_like, shape (..., m, n) and (..., m, m)
+        Measurement matrix and noise covariance (positive definite).
     mu_m : array_like, shape (..., m), optional
         Measurement offset; zero by default.
 
     Returns
     -------
     Update
-        Filtered mean and covariance and the measurement's log likelihood given
-        the earlier ones, leading axes broadcast.
+        Leading axes broadcast.
     """
     mean = _array(mean, "mean", 1)
     n = mean.shape[-1]
@@ -353,9 +287,6 @@ def update(mean, cov, x, Phi, Sigma_m, mu_m=None) -> Update:
     Sigma_m = _covariance(Sigma_m, "Sigma_m (the measurement noise covariance)", m, definite=True)
     mu_m = np.zeros(m) if mu_m is None else _vector(mu_m, "mu_m", m)
     return _update(mean, cov, x, Phi, Sigma_m, mu_m)
-
-
-# --- the filter over a sequence --------------------------------------------------------
 
 
 def _at(arr: np.ndarray, t: int, core: int) -> np.ndarray:
@@ -395,40 +326,12 @@ def _time_first(arr: np.ndarray, core: int) -> np.ndarray:
 
 
 def _symmetric_matrix(A: np.ndarray) -> np.ndarray:
-    """``(A + A^T) / 2`` of one square matrix: :func:`symmetric`'s numbers, in fewer steps.
-
-    Adding a transposed view walks it by strides, slower for a small matrix
-    than copying it first; the sum and the halving are the same floating-point
-    operations, so the result is identical.
-
-    Parameters
-    ----------
-    A : ndarray, shape (n, n)
-
-    Returns
-    -------
-    ndarray, shape (n, n)
-    """
+    """``(A + A^T) / 2`` of one matrix (n, n): :func:`symmetric`'s numbers, faster."""
     return (A + A.T.copy()) * _HALF
 
 
 def _gain_and_innovation_cov(PHt, S) -> tuple[np.ndarray, np.ndarray]:
-    """Textbook 19.2.2: the gain ``K = Sigma_+ Phi^T S^{-1}`` and the symmetrised ``S``.
-
-    Parameters
-    ----------
-    PHt : ndarray, shape (..., n, m)
-        ``Sigma_+ Phi^T``.
-    S : ndarray, shape (..., m, m)
-        ``Sigma_m + Phi Sigma_+ Phi^T`` as computed, symmetric to roundoff.
-
-    Returns
-    -------
-    K : ndarray, shape (..., n, m)
-        The gain (:func:`_gain`) formed from the symmetric part of ``S``.
-    S : ndarray, shape (..., m, m)
-        The symmetric part of ``S`` (:func:`symmetric`; ``S`` itself for ``m = 1``).
-    """
+    """The gain (:func:`_gain`) and ``S``'s symmetric part, from ``PHt`` and ``S`` as computed."""
     if S.shape[-1] > 1:
         S = symmetric(S)
     return _gain(PHt, S), S
@@ -437,24 +340,10 @@ def _gain_and_innovation_cov(PHt, S) -> tuple[np.ndarray, np.ndarray]:
 def _matrix_gain_and_innovation_cov(PHt, S) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_gain_and_innovation_cov` for one filter, ``PHt`` (n, m) and ``S`` (m, m).
 
-    For ``m = 2`` the symmetric part ``[[a, b], [b, c]]`` of ``S`` (``b`` the
-    mean of its off-diagonal entries, as :func:`symmetric` computes it) is
-    inverted from its Cholesky factor ``L`` in closed form, the arithmetic of
-    LAPACK's ``potrf`` for a 2 x 2 matrix: ``l11 = sqrt(a)``, ``l21 = b /
-    l11``, ``l22 = sqrt(c - l21^2)``, then ``S^{-1} = L^{-T} L^{-1}``. A
-    matrix whose factorisation fails (not positive definite to working
-    precision, or not finite) is left to LAPACK's solver, as for ``m > 2``.
-
-    Parameters
-    ----------
-    PHt : ndarray, shape (n, m)
-    S : ndarray, shape (m, m)
-
-    Returns
-    -------
-    K : ndarray, shape (n, m)
-    S : ndarray, shape (m, m)
-        The symmetric part of ``S``, entry for entry :func:`symmetric`'s.
+    For ``m = 2`` the symmetric part ``[[a, b], [b, c]]`` of ``S`` is inverted
+    from its Cholesky factor ``L`` in closed form, LAPACK's ``potrf`` arithmetic:
+    ``l11 = sqrt(a)``, ``l21 = b / l11``, ``l22 = sqrt(c - l21^2)``, ``S^{-1} =
+    L^{-T} L^{-1}``. A failed factorisation is left to LAPACK's solver.
     """
     m = S.shape[-1]
     if m == 1:
@@ -479,18 +368,11 @@ def _matrix_gain_and_innovation_cov(PHt, S) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _run(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> FilterResult:
-    """The filter's loop over checked inputs (see :func:`run`).
+    """The filter's loop over checked inputs (:func:`run`): :func:`predict` and :func:`update`.
 
-    The per-step work is only what depends on the previous step: the model's
-    per-step arrays and transposes, the measurements' offsets and the output
-    arrays are prepared once, means are carried as columns ``(..., n, 1)``,
-    and the innovations' log densities are evaluated for all steps together
-    after the loop from the stored innovations and their covariances. Each
-    step is the arithmetic of :func:`predict` (textbook 19.2.1) and
-    :func:`update` (19.2.2, the Joseph form, symmetrised). A single filter
-    (no leading axes) multiplies its matrices with ``ndarray.dot``, which
-    skips the broadcasting machinery of ``matmul``, and forms a two-dimensional
-    measurement's gain in closed form (:func:`_matrix_gain_and_innovation_cov`).
+    Only what depends on the previous step is done per step; means are
+    columns ``(..., n, 1)``, and the log densities come after the loop. A
+    single filter uses ``ndarray.dot`` and :func:`_matrix_gain_and_innovation_cov`.
     """
     T, n, m = x.shape[-2], mean.shape[-1], x.shape[-1]
     batch = _batch_shape(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m)
@@ -501,7 +383,6 @@ def _run(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> FilterResult:
     means, pmeans = np.empty(batch + (T, n, 1)), np.empty(batch + (T, n, 1))
     covs, pcovs = np.empty(batch + (T, n, n)), np.empty(batch + (T, n, n))
     innovations, innovation_covs = np.empty(batch + (T, m, 1)), np.empty(batch + (T, m, m))
-    # time-first views of the outputs: step t is [t]
     means_t, pmeans_t, covs_t, pcovs_t, r_t, S_t = (
         _time_first(a, 2) for a in (means, pmeans, covs, pcovs, innovations, innovation_covs)
     )
@@ -523,13 +404,11 @@ def _run(x, mean, cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m) -> FilterResult:
             cov = sym(Sigma_ps[t - 1] + mm(mm(Psi_t, cov), Psi_Ts[t - 1]))
         pmeans_t[t] = mean
         pcovs_t[t] = cov
-        # textbook 19.2.2
         Phi_t, Sigma_m_t = Phis[t], Sigma_ms[t]
         PHt = mm(cov, Phi_Ts[t])
         K, S = gain(PHt, Sigma_m_t + mm(Phi_t, PHt))
         r = xs[t] - mm(Phi_t, mean)
         mean = mean + mm(K, r)
-        # the Joseph form, as joseph()
         A = eye - mm(K, Phi_t)
         cov = sym(mm(mm(A, cov), A.mT) + mm(mm(K, Sigma_m_t), K.mT))
         means_t[t] = mean
@@ -570,9 +449,7 @@ def _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m):
 def run(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p=None, mu_m=None) -> FilterResult:
     """Textbook 19.2.3: the Kalman filter over ``T`` measurements, with the log marginal likelihood.
 
-    The prior is the density of the state at the first measurement: ``x_1`` is
-    incorporated into it (textbook 19.2.2), then each later measurement after a
-    prediction (textbook 19.2.1).
+    ``x_1`` updates the prior (19.2.2); each later one follows a prediction (19.2.1).
 
     Parameters
     ----------
@@ -597,14 +474,9 @@ def run(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p=None, mu_m=No
     Returns
     -------
     FilterResult
-        Filtered and predicted means and covariances at every time, and the log
-        likelihood of each measurement given the earlier ones. A run whose
-        numbers overflow the doubles (covariances or measurements near 1e154
-        and beyond, whose squares do) is refused with a ValueError naming the
-        model's scales, never returned with NaN or infinities; so is a run
-        whose innovation covariance ``Sigma_m + Phi Sigma_+ Phi^T`` is singular
-        or indefinite to working precision (a measurement noise below the
-        rounding of a vast predicted spread along a measured direction).
+        A run whose numbers overflow the doubles (scales near 1e154 and beyond)
+        or whose innovation covariance is singular or indefinite to working
+        precision is refused with a ValueError, never returned with NaN.
     """
     args = _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -626,18 +498,11 @@ def run(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p=None, mu_m=No
     return res
 
 
-# --- smoothers -------------------------------------------------------------------------
-
-
 def _solve_or_pinv(A, B):
     """``A^{-1} B`` for symmetric positive semi-definite ``A`` (..., n, n), matrix by matrix.
 
-    Where ``A`` is singular to working precision (condition number above
-    ``1 / eps``) its pseudo-inverse takes the place of the inverse; the choice
-    is made for each matrix alone, so a batch gives what a loop gives. The
-    condition number is the ratio of the largest to the least absolute
-    eigenvalue, which for a symmetric matrix are its singular values (the
-    2-norm condition number of ``np.linalg.cond``) at half the cost of an SVD.
+    A matrix singular to working precision (2-norm condition number, from the
+    eigenvalues, above ``1 / eps``) takes its pseudo-inverse, each matrix alone.
     """
     lam = np.abs(np.linalg.eigvalsh(A))
     with np.errstate(divide="ignore", invalid="ignore"):  # a zero eigenvalue: singular
@@ -653,18 +518,11 @@ def _solve_or_pinv(A, B):
 
 
 def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
-    """Textbook 19.2.6: the fixed-interval (Rauch-Tung-Striebel) smoother's backward recursions.
+    """Textbook 19.2.6: the fixed-interval (Rauch-Tung-Striebel) smoother (module docstring).
 
-    ``C_t = Sigma_t Psi^T Sigma_{+|t+1}^{-1}``,
-    ``mu_{t|T} = mu_t + C_t (mu_{t+1|T} - mu_{+|t+1})``,
-    ``Sigma_{t|T} = Sigma_t + C_t (Sigma_{t+1|T} - Sigma_{+|t+1}) C_t^T``.
-
-    ``C_t`` is the regression coefficient of ``w_t`` on ``w_{t+1}`` given
-    ``x_1 .. x_t``. Where a predicted covariance ``Sigma_{+|t+1}`` is singular
-    (a direction the motion moves without noise, with no prior uncertainty
-    left), its pseudo-inverse takes the place of the inverse: ``w_{t+1} -
-    mu_{+|t+1}`` lies in its range, where every generalised inverse gives the
-    same conditional mean and covariance.
+    Where a predicted covariance ``Sigma_{+|t+1}`` is singular, its
+    pseudo-inverse takes the place of the inverse: ``w_{t+1} - mu_{+|t+1}``
+    lies in its range, where every generalised inverse gives the same answer.
 
     Parameters
     ----------
@@ -684,14 +542,11 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
     T, n = filtered.means.shape[-2:]
     Psi = _matrix(Psi, "Psi", n, n)
     _time_axis(Psi, "Psi", 2, T - 1)
-    # Every gain depends on the filter alone: all T - 1 of them in one batched solve,
-    # with one batched check of the predicted covariances' conditioning.
     gains = smoother_gain(
         filtered.covs[..., :-1, :, :], filtered.predicted_covs[..., 1:, :, :], Psi
     )
     batch = np.broadcast_shapes(filtered.means.shape[:-2], gains.shape[:-3])
     means, covs = np.empty(batch + (T, n, 1)), np.empty(batch + (T, n, n))
-    # time-first views: step t is [t]; means as columns (..., n, 1)
     means_t, covs_t = _time_first(means, 2), _time_first(covs, 2)
     C_t = _time_first(gains, 2)
     m_t = _time_first(filtered.means[..., None], 2)
@@ -713,9 +568,8 @@ def fixed_interval_smoother(filtered: FilterResult, Psi) -> MeanAndCov:
 def smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
     """Textbook 19.2.6: the Rauch-Tung-Striebel gain ``C_t = Sigma_t Psi^T Sigma_{+|t+1}^{-1}``.
 
-    ``C_t`` depends on the filter alone (not on the later measurements), so
-    one gain serves every backward recursion that passes through ``t``. A
-    singular ``Sigma_{+|t+1}`` is handled as in :func:`fixed_interval_smoother`.
+    It depends on the filter alone; a singular ``Sigma_{+|t+1}`` is handled as
+    in :func:`fixed_interval_smoother`.
 
     Parameters
     ----------
@@ -730,22 +584,16 @@ def smoother_gain(cov, predicted_cov, Psi) -> np.ndarray:
     -------
     ndarray, shape (..., n, n)
     """
-    # C_t^T = Sigma_{+|t+1}^{-1} Psi Sigma_t
     return np.swapaxes(_solve_or_pinv(predicted_cov, Psi @ cov), -1, -2)
 
 
 def smoother_step(
     gain, mean, cov, predicted_mean, predicted_cov, next_mean, next_cov
 ) -> MeanAndCov:
-    """Textbook 19.2.6: one backward step of the Rauch-Tung-Striebel smoother.
+    """Textbook 19.2.6: one backward step of the Rauch-Tung-Striebel smoother (module docstring).
 
-    From the filtered Gaussian ``(mu_t, Sigma_t)`` of ``w_t`` given ``x_1 .. x_t``,
-    the prediction ``(mu_{+|t+1}, Sigma_{+|t+1})`` made from it, its gain
-    ``C_t`` (:func:`smoother_gain`) and a Gaussian ``(mu_{t+1|T}, Sigma_{t+1|T})``
-    of ``w_{t+1}`` given ``x_1 .. x_T``, ``T > t``:
-    ``mu_{t|T} = mu_t + C_t (mu_{t+1|T} - mu_{+|t+1})``,
-    ``Sigma_{t|T} = Sigma_t + C_t (Sigma_{t+1|T} - Sigma_{+|t+1}) C_t^T``.
-    :func:`fixed_interval_smoother` is this step from ``T`` back to 1.
+    From the filtered ``(mu_t, Sigma_t)``, its prediction, its gain
+    (:func:`smoother_gain`) and the smoothed ``(mu_{t+1|T}, Sigma_{t+1|T})``.
 
     Parameters
     ----------
@@ -755,8 +603,7 @@ def smoother_step(
     Returns
     -------
     MeanAndCov
-        The mean (..., n) and (symmetrised) covariance (..., n, n) of ``w_t``
-        given ``x_1 .. x_T``.
+        The smoothed mean (..., n) and covariance (..., n, n) of ``w_t``.
     """
     C = gain
     smoothed_mean = mean + (C @ (next_mean - predicted_mean)[..., None])[..., 0]
@@ -767,11 +614,9 @@ def smoother_step(
 def augment(Psi, Sigma_p, Phi, lag: int, mu_p=None):
     """Textbook 19.2.6: the fixed-lag smoother's augmented temporal and measurement models.
 
-    The augmented state ``(w_t, w_{t-1}, .., w_{t-lag})`` moves by
-    ``Psi_a = [[Psi, 0, .., 0], [I, 0, .., 0], [0, I, .., 0], ..]``, with noise
-    ``Sigma_p`` and offset ``mu_p`` on the first block alone, and is measured
-    by ``Phi_a = [Phi, 0, .., 0]``: the delayed copies play no part in the
-    measurement.
+    The state ``(w_t, w_{t-1}, .., w_{t-lag})`` moves by ``Psi_a = [[Psi, 0, ..],
+    [I, 0, ..], [0, I, ..], ..]``, noise and offset on the first block alone,
+    and is measured by ``Phi_a = [Phi, 0, .., 0]``.
 
     Parameters
     ----------
@@ -810,14 +655,8 @@ def fixed_lag_smoother(
 ) -> MeanAndCov:
     """Textbook 19.2.6: the fixed-lag smoother, by running the filter on the augmented state.
 
-    At time ``t`` the augmented filter (:func:`augment`) holds the state at
-    times ``t, t - 1, .., t - lag`` given ``x_1 .. x_t``. The augmented prior
-    is that of ``w_1`` copied into every block (the copies older than ``w_1``
-    are never read). The estimate of ``w_s`` is read off at time
-    ``min(s + lag, T)``: it uses the measurements up to ``lag`` steps after
-    ``s`` (all of them near the end), so it is the fixed-interval smoother's
-    marginal over the first ``min(s + lag, T)`` measurements. ``lag = 0`` is the
-    filter itself.
+    The prior of ``w_1`` fills every block (:func:`augment`); ``w_s`` is read
+    off at time ``min(s + lag, T)``. ``lag = 0`` is the filter itself.
 
     Parameters
     ----------
@@ -837,7 +676,7 @@ def fixed_lag_smoother(
         x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
     )
     T, n = x.shape[-2], prior_mean.shape[-1]
-    lag = min(checks.nonnegative_count(lag, "lag"), T - 1)  # a longer lag changes nothing
+    lag = min(checks.nonnegative_count(lag, "lag"), T - 1)
     Psi_a, Sigma_pa, Phi_a, mu_pa = augment(Psi, Sigma_p, Phi, lag, mu_p)
     res = _run(
         x,
