@@ -131,6 +131,20 @@ class Bank(NamedTuple):
             return np.asarray(float(self.frames - 1))
         return self.elapsed[..., -1]
 
+    def rerun(self, nodes, history: bool = False) -> Bank:
+        """:func:`run_bank` on this bank's bearings, noise, prior and frames at other ``nodes``."""
+        return run_bank(
+            nodes,
+            self.mu,
+            self.rho,
+            self.process_noise,
+            self.prior_mean,
+            self.prior_cov,
+            history,
+            self.steps,
+            self.frame_rho,
+        )
+
 
 # --- checks ----------------------------------------------------------------------------
 
@@ -447,51 +461,44 @@ def run_bank(
     """:func:`filter_bank` on inputs it has checked (``frame_rho`` (..., N) or ``None``)."""
     q = process_noise
     frames_ = tracks.frame_fields(mu, rho, steps, frame_rho)
+    res = None
     if not history:  # the closed form, as the depth quadrature uses
         log_weight, (x, v), (a, b, c) = lateral_filter(
             nodes, mu, rho, q, prior_mean, prior_cov, steps, frame_rho
         )
+        mean = np.stack([x, v], -1)
         cov = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
-        return Bank(
-            nodes=nodes,
-            mean=np.stack([x, v], -1),
-            cov=cov,
-            log_weight=log_weight,
-            mu=mu,
-            rho=rho,
-            process_noise=q,
-            prior_mean=prior_mean,
-            prior_cov=prior_cov,
-            history=None,
-            **frames_,
-        )
-    N = mu.shape[-1]
-    start, log_prior = conditional_prior(nodes, prior_mean, prior_cov)
-    if steps is None and frame_rho is None and not np.any(np.isnan(mu)):
-        # per node (axis -3 of the Kalman arrays): the prior given its depth, Phi_k = (1 / y_k, 0)
-        Phi = measurement_matrices(nodes, np.arange(1, N + 1))
-        res = linear.run(
-            mu[..., None, :, None],
-            start.mean,
-            start.cov,
-            PSI,
-            sigma_p(q)[..., None, None, :, :],
-            Phi,
-            (rho**2)[..., None, None, None, None],
-        )
     else:
-        res = tracks.irregular_history(start, nodes, mu, rho, q, steps, frame_rho)
+        N = mu.shape[-1]
+        start, log_prior = conditional_prior(nodes, prior_mean, prior_cov)
+        if steps is None and frame_rho is None and not np.any(np.isnan(mu)):
+            # per node (axis -3 of the Kalman arrays): the prior given its depth,
+            # Phi_k = (1 / y_k, 0)
+            Phi = measurement_matrices(nodes, np.arange(1, N + 1))
+            res = linear.run(
+                mu[..., None, :, None],
+                start.mean,
+                start.cov,
+                PSI,
+                sigma_p(q)[..., None, None, :, :],
+                Phi,
+                (rho**2)[..., None, None, None, None],
+            )
+        else:
+            res = tracks.irregular_history(start, nodes, mu, rho, q, steps, frame_rho)
+        mean, cov = res.means[..., -1, :], res.covs[..., -1, :, :]
+        log_weight = log_prior + res.log_likelihood
     return Bank(
         nodes=nodes,
-        mean=res.means[..., -1, :],
-        cov=res.covs[..., -1, :, :],
-        log_weight=log_prior + res.log_likelihood,
+        mean=mean,
+        cov=cov,
+        log_weight=log_weight,
         mu=mu,
         rho=rho,
         process_noise=q,
         prior_mean=prior_mean,
         prior_cov=prior_cov,
-        history=res if history else None,
+        history=res,
         **frames_,
     )
 
@@ -585,13 +592,9 @@ def step(bank: Bank, mu_next, rho=None, step=1.0, gaps: bool = False) -> Bank:
     cov_shape = np.broadcast_shapes(bank.cov.shape[:-2], y.shape, rho2.shape, q2.shape)
     if np.any(np.isnan(raw)):
         cov_shape = np.broadcast_shapes(cov_shape, raw.shape + (1,))
-    M, C, rows = _lateral_state(
-        np.broadcast_shapes(bank.mean.shape[:-1], raw.shape + (1,)), cov_shape
+    M, C, rows = _loaded_state(
+        bank, np.broadcast_shapes(bank.mean.shape[:-1], raw.shape + (1,)), cov_shape
     )
-    M[_X], M[_V] = bank.mean[..., 0], bank.mean[..., 1]
-    C[_A], C[_B], C[_C] = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
-    np.multiply(C[_A], C[_C], out=C[_DET])
-    C[_DET] -= C[_B] * C[_B]
     noise = q2 if np.any(q2) else None
     _predict_step(rows, noise, None if np.all(step_ == 1.0) and step_.ndim == 0 else s)
     log_likelihood = _masked_update(rows, M, C, raw[..., None], y, rho2)
@@ -603,6 +606,16 @@ def step(bank: Bank, mu_next, rho=None, step=1.0, gaps: bool = False) -> Bank:
         rho=bank.rho if frame_rho is None else frame_rho,
         **tracks.frame_fields(mu, bank.rho, steps_or_none, frame_rho),
     )
+
+
+def _loaded_state(bank: Bank, mean_shape, cov_shape):
+    """:func:`_lateral_state` holding the bank's means and covariances, with their determinants."""
+    M, C, rows = _lateral_state(mean_shape, cov_shape)
+    M[_X], M[_V] = bank.mean[..., 0], bank.mean[..., 1]
+    C[_A], C[_B], C[_C] = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
+    np.multiply(C[_A], C[_C], out=C[_DET])
+    C[_DET] -= C[_B] * C[_B]
+    return M, C, rows
 
 
 def _pack_mean(M) -> np.ndarray:
@@ -628,23 +641,14 @@ def _step(bank: Bank, mu_next) -> Bank:
         q2 = (np.asarray(bank.process_noise) ** 2)[..., None]
         y = bank.nodes + N
         cov_shape = np.broadcast_shapes(bank.cov.shape[:-2], y.shape, rho2.shape, q2.shape)
-        M, C, rows = _lateral_state(
-            np.broadcast_shapes(bank.mean.shape[:-1], mu_next.shape + (1,)), cov_shape
+        M, C, rows = _loaded_state(
+            bank, np.broadcast_shapes(bank.mean.shape[:-1], mu_next.shape + (1,)), cov_shape
         )
-        M[_X], M[_V] = bank.mean[..., 0], bank.mean[..., 1]
-        C[_A], C[_B], C[_C] = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
-        np.multiply(C[_A], C[_C], out=C[_DET])
-        C[_DET] -= C[_B] * C[_B]
         _predict_lateral(rows, q2 if np.any(q2) else None)
         log_likelihood = _update_lateral(rows, mu_next[..., None], y, rho2, y * y)
-        mean = np.empty(M.shape[1:] + (2,))
-        mean[..., 0], mean[..., 1] = M[_X], M[_V]
-        cov = np.empty(cov_shape + (2, 2))
-        cov[..., 0, 0], cov[..., 1, 1] = C[_A], C[_C]
-        cov[..., 0, 1] = cov[..., 1, 0] = C[_B]
         return bank._replace(
-            mean=mean,
-            cov=cov,
+            mean=_pack_mean(M),
+            cov=_pack_cov(C, cov_shape),
             mu=(mu := _extend(bank.mu, mu_next)),
             log_weight=bank.log_weight + log_likelihood,
             **tracks.frame_fields(mu, bank.rho, None, None),

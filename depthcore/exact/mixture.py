@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import ndtr
 
-from depthcore.exact.bank import PSI, Bank, run_bank
+from depthcore.exact.bank import PSI, Bank
 from depthcore.exact.cdf import gauss_legendre_cdf
 from depthcore.exact.tracks import transitions
 from depthcore.kalman import linear
@@ -250,17 +250,7 @@ class Mixture:
         b = self.bank
         y1 = y - _travelled(b)
         inside = y1 > 0
-        log_w = run_bank(
-            np.where(inside, y1, 1.0),
-            b.mu,
-            b.rho,
-            b.process_noise,
-            b.prior_mean,
-            b.prior_cov,
-            False,
-            b.steps,
-            b.frame_rho,
-        ).log_weight
+        log_w = b.rerun(np.where(inside, y1, 1.0)).log_weight
         return restore(np.where(inside, log_w - self.log_normaliser[..., None], -np.inf))
 
     def depth_pdf(self, y) -> np.ndarray:
@@ -306,17 +296,7 @@ class Mixture:
         def density(tt):
             shape = tt.shape
             y1 = np.exp(tt.reshape(shape[:-3] + (-1,)))
-            log_w = run_bank(
-                y1,
-                b.mu,
-                b.rho,
-                b.process_noise,
-                b.prior_mean,
-                b.prior_cov,
-                False,
-                b.steps,
-                b.frame_rho,
-            ).log_weight
+            log_w = b.rerun(y1).log_weight
             dens = np.exp(log_w - self.log_normaliser[..., None] + np.log(y1))  # dy = y dt
             return dens.reshape(shape)
 
@@ -382,17 +362,7 @@ class Mixture:
         b = self.bank
         res = b.history
         if res is None:
-            res = run_bank(
-                b.nodes,
-                b.mu,
-                b.rho,
-                b.process_noise,
-                b.prior_mean,
-                b.prior_cov,
-                True,
-                b.steps,
-                b.frame_rho,
-            ).history
+            res = b.rerun(b.nodes, history=True).history
         Psi = PSI if b.steps is None else transitions(b.steps)[..., None, :, :, :]
         s = linear.fixed_interval_smoother(res, Psi)  # (..., J, N, 2), (..., J, N, 2, 2)
         frames = b.elapsed
