@@ -41,18 +41,27 @@ def _quadrature_problem(mu, rho, prior_mean, prior_cov, process_noise):
     batch, N = mu.shape[:-1], mu.shape[-1]
     q = checks.nonnegative_batch(process_noise, "process_noise", batch)
     B = int(np.prod(batch))
+    rho = np.broadcast_to(rho, batch).reshape(B)
+    return _flat_problem(mu.reshape(B, N), rho, prior_mean, prior_cov, q, batch), batch
+
+
+def _flat_problem(mu, rho, prior_mean, prior_cov, q, batch, steps=None, frame_rho=None):
+    """``B`` quadrature problems, ``mu`` (B, N) and ``rho`` (B,), the prior and ``q`` broadcast
+    to ``batch`` and flattened."""
+    B = mu.shape[0]
     prior_cov = np.ascontiguousarray(np.broadcast_to(prior_cov, batch + (3, 3))).reshape(B, 3, 3)
-    pb = quadrature.Problem(
-        mu=mu.reshape(B, N),
-        rho=np.broadcast_to(rho, batch).reshape(B),
+    return quadrature.Problem(
+        mu=mu,
+        rho=rho,
         mean=np.broadcast_to(prior_mean, batch + (3,)).reshape(B, 3),
         R=np.linalg.inv(np.linalg.cholesky(prior_cov)),
         reading="derived",
         process_noise=np.broadcast_to(q, batch).reshape(B),
         cov=prior_cov,
         integrand=_integrand,
+        steps=steps,
+        frame_rho=frame_rho,
     )
-    return pb, batch
 
 
 def irregular(mu, rho, steps) -> bool:
@@ -84,19 +93,16 @@ def frames_problem(track: frames.Frames, prior_mean, prior_cov, process_noise):
         raise ValueError(f"prior_cov must have shape (3, 3) or (..., 3, 3), got {prior_cov.shape}")
     prior_cov = checks.covariances(prior_cov, "prior_cov", 3)
     q = checks.nonnegative_batch(process_noise, "process_noise", batch)
-    prior_cov = np.ascontiguousarray(np.broadcast_to(prior_cov, batch + (3, 3))).reshape(B, 3, 3)
     rho = np.ascontiguousarray(track.rho).reshape(B, N)
     per_row = np.all(np.where(track.present.reshape(B, N), rho, rho[:, :1]) == rho[:, :1])
     steps = np.ascontiguousarray(track.steps).reshape(B, N - 1)
-    pb = quadrature.Problem(
-        mu=np.ascontiguousarray(mu).reshape(B, N),
-        rho=rho[:, 0] if per_row else np.max(np.where(np.isnan(mu.reshape(B, N)), 0, rho), 1),
-        mean=np.broadcast_to(prior_mean, batch + (3,)).reshape(B, 3),
-        R=np.linalg.inv(np.linalg.cholesky(prior_cov)),
-        reading="derived",
-        process_noise=np.broadcast_to(q, batch).reshape(B),
-        cov=prior_cov,
-        integrand=_integrand,
+    pb = _flat_problem(
+        np.ascontiguousarray(mu).reshape(B, N),
+        rho[:, 0] if per_row else np.max(np.where(np.isnan(mu.reshape(B, N)), 0, rho), 1),
+        prior_mean,
+        prior_cov,
+        q,
+        batch,
         steps=None if np.all(steps == 1.0) else steps,
         frame_rho=None if per_row else rho,
     )
