@@ -187,23 +187,24 @@ class RBPF:
             W, depths = W[..., None, :], depths[..., None, :]
         return np.sum(W * (depths <= y[..., None]), axis=-1)
 
-    def velocity_cdf(self, v):
-        """``P(v_K <= v)`` under :meth:`pooled`, ``v`` (...) or (..., G)."""
+    def _velocity_terms(self, v):
+        """``v[..., None]`` and the weights, means and SDs of ``v_K`` under :meth:`pooled`."""
         W, _, means, covs = self.pooled()
         v = np.asarray(v, dtype=float)
         m, s = means[..., 1], np.sqrt(covs[..., 1, 1])
         if v.ndim > W.ndim - 1:
             W, m, s = W[..., None, :], m[..., None, :], s[..., None, :]
-        return np.sum(W * ndtr((v[..., None] - m) / s), axis=-1)
+        return v[..., None], W, m, s
+
+    def velocity_cdf(self, v):
+        """``P(v_K <= v)`` under :meth:`pooled`, ``v`` (...) or (..., G)."""
+        v, W, m, s = self._velocity_terms(v)
+        return np.sum(W * ndtr((v - m) / s), axis=-1)
 
     def velocity_pdf(self, v):
         """The density of ``v_K`` under :meth:`pooled`; shapes as :meth:`velocity_cdf`."""
-        W, _, means, covs = self.pooled()
-        v = np.asarray(v, dtype=float)
-        m, s = means[..., 1], np.sqrt(covs[..., 1, 1])
-        if v.ndim > W.ndim - 1:
-            W, m, s = W[..., None, :], m[..., None, :], s[..., None, :]
-        z = (v[..., None] - m) / s
+        v, W, m, s = self._velocity_terms(v)
+        z = (v - m) / s
         return np.sum(W * np.exp(-0.5 * z**2) / (np.sqrt(2 * np.pi) * s), axis=-1)
 
     def moments(self) -> ParticleMoments:
