@@ -1,6 +1,7 @@
 """The command line, ``python -m depthcore``: argument parsing and its plain-text tables.
 
-* :mod:`~depthcore.cli.main`: the parser, the commands and the one-line refusals;
+* :mod:`~depthcore.cli.main`: the parser, the commands and their exit statuses;
+* :mod:`~depthcore.cli.refusals`: the one-line refusals in the user's words;
 * :mod:`~depthcore.cli.text`: the command line's tables and their legends;
 * :mod:`~depthcore.cli.tracks`: ``estimate``'s tracks in the user's words:
   ``--mu-file`` (standard input for ``-``), ``--mu``, ``--focal``, ``--cx``,

@@ -2,17 +2,14 @@
 
 ``depthcore/__main__.py`` calls :func:`main`.
 
-Bad input ends with a one-line message on stderr naming the argument as the
-user gave it (``--rho``, ``--prior-cov``) and exit status 2: a value out of
-range (printed exactly as given), a flag given twice, a flag the chosen mode
-would ignore. A failure to write the output (a closed standard output, a full
-disk, a folder that cannot be made) ends with one line and exit status 1, as
-does any other failure (out of memory, a bug), which asks to rerun with
-``--debug`` (which shows the traceback). Warnings never reach stderr: inside
-the command line they are errors, reported like any other failure. The JSON
-output is strict: a number that cannot be estimated is ``null``, with a
-``<key>_reason`` beside it saying why. Commands that run longer than a few
-seconds show a progress bar on stderr when it is a terminal.
+Bad input ends with a one-line message on stderr in the user's words
+(:mod:`depthcore.cli.refusals`) and exit status 2: a value out of range, a flag
+given twice, a flag the chosen mode would ignore. A failure to write the output
+ends with one line and exit status 1, as does any other failure, which asks to
+rerun with ``--debug`` (which shows the traceback). Warnings are errors here.
+The JSON output is strict: a number that cannot be estimated is ``null``, with
+a ``<key>_reason`` beside it saying why. Long commands show a progress bar on
+stderr when it is a terminal.
 """
 
 from __future__ import annotations
@@ -28,7 +25,7 @@ import warnings
 import numpy as np
 
 from depthcore import __version__
-from depthcore.cli import atlas_command, tracks
+from depthcore.cli import atlas_command, refusals, tracks
 from depthcore.cli import cluster as cluster_options
 from depthcore.cli import text as cli_text
 from depthcore.problem import checks, frames
@@ -39,22 +36,17 @@ from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE, default_pr
 from depthcore.studies import monte_carlo, reproduce, tasks
 from depthcore.studies import trials as study_trials
 
-#: Largest ``study --trials``: a limit on run time (the study streams its trials in
-#: chunks, so its memory does not grow with their number).
+#: Largest ``study --trials``: a limit on run time (trials stream in chunks).
 MAX_TRIALS = 100_000
 
-#: Most particles held in memory at once by ``study``: the trials of a chunk times
-#: the particles per trial (times the Rao-Blackwellised filter's replicas). Measured
-#: on five frames, 10**6 particles in flight take about 0.2 GB in the importance
-#: sampler and 0.6 GB in the Rao-Blackwellised filter, so the study's memory stays
-#: below about 1 GB whatever ``--particles`` is: with many particles a chunk holds
-#: fewer trials.
+#: Most particles held in memory at once by ``study`` (a chunk's trials times the
+#: particles per trial, times the Rao-Blackwellised filter's replicas): on five
+#: frames about 0.2 GB in the importance sampler, 0.6 GB in the Rao-Blackwellised
+#: filter, so the study stays below about 1 GB whatever ``--particles`` is.
 PARTICLES_IN_FLIGHT = 1_000_000
-#: Largest ``study --particles``: one trial alone must fit in
-#: :data:`PARTICLES_IN_FLIGHT` with the Rao-Blackwellised filter's replicas. Time
-#: grows linearly with trials times particles (about 1 s per 10**6 particle-trials
-#: for the importance sampler on five frames, 10 times that for the
-#: Rao-Blackwellised filter), shown by the progress bar.
+#: Largest ``study --particles``: one trial must fit in :data:`PARTICLES_IN_FLIGHT`.
+#: Time grows with trials times particles (about 1 s per 10**6 for the importance
+#: sampler on five frames, 10 times that for the Rao-Blackwellised filter).
 MAX_PARTICLES = PARTICLES_IN_FLIGHT // RBPF_REPLICAS
 #: Smallest ``study --particles``: the weighted covariance of the three-dimensional
 #: state, which the study scores, is singular with fewer.
@@ -75,17 +67,12 @@ STEP_RANGE = (1e-6, 1e3)
 #: Most bearings of ``estimate --mu``: the filters' limit.
 FRAMES_MAX = checks.MAX_FRAMES
 
-# A negative number in any notation (-1, -.5, -1e-1, -1E+3, -inf, -nan) is a
-# value, not an option.
+# A negative number in any notation (-1, -.5, -1e-1, -1E+3, -inf, -nan) is a value.
 _NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.I)
 
 
 class _Once:
-    """Mixed into every option's action: refuses a second use and records the first.
-
-    ``namespace._given`` holds the destinations of the options the user gave,
-    so a flag that the chosen mode would ignore can be refused.
-    """
+    """Mixed into every option's action: refuses a second use; records in ``namespace._given``."""
 
     def __call__(self, parser, namespace, values, option_string=None):
         given = namespace.__dict__.setdefault("_given", set())
@@ -110,7 +97,7 @@ class _Parser(argparse.ArgumentParser):
         return super()._add_action(action)
 
     def error(self, message):
-        self.exit(2, f"{self.prog}: error: {_one_line(message)}\n")
+        self.exit(2, f"{self.prog}: error: {refusals.one_line(message)}\n")
 
     def _print_message(self, message, file=None):
         # argparse drops a failed write of --help or --version silently; report it
@@ -120,28 +107,10 @@ class _Parser(argparse.ArgumentParser):
             super()._print_message(message, file)
 
 
-def _exact(value) -> str:
-    """A number as the user gave it: every digit, never rounded to a limit."""
-    return repr(float(value))
-
-
-def _check_limits(name: str, values, largest: float) -> None:
-    """Refuse a value that is not finite or whose magnitude exceeds ``largest``."""
-    v = np.asarray(values, dtype=float)
-    bad = ~np.isfinite(v)
-    if np.any(bad):
-        raise ValueError(f"{name} must be finite, got {_exact(v[bad][0])}")
-    big = np.abs(v) > largest
-    if np.any(big):
-        raise ValueError(
-            f"{name} must be at most {largest:g} in magnitude, got {_exact(v[big][0])}"
-        )
-
-
 def _check_rho(rho: float) -> None:
     lo, hi = RHO_RANGE
     if not (math.isfinite(rho) and lo <= rho <= hi):
-        raise ValueError(f"--rho must be from {lo:g} to {hi:g}, got {_exact(rho)}")
+        raise ValueError(f"--rho must be from {lo:g} to {hi:g}, got {refusals.exact(rho)}")
 
 
 def _check_process_noise(q: float) -> float:
@@ -149,21 +118,17 @@ def _check_process_noise(q: float) -> float:
     if not (math.isfinite(q) and (q == 0 or PROCESS_NOISE_MIN <= q <= PROCESS_NOISE_MAX)):
         raise ValueError(
             f"--process-noise must be 0 or from {PROCESS_NOISE_MIN:g} to "
-            f"{PROCESS_NOISE_MAX:g}, got {_exact(q)}"
+            f"{PROCESS_NOISE_MAX:g}, got {refusals.exact(q)}"
         )
     return q
 
 
 def _prior(mu, prior_mean, prior_cov, steps=None) -> Gaussian:
-    """The prior from the command line, defaulting to the paper's rule.
-
-    The rule takes the first three bearings present, at their depths travelled
-    (:func:`depthcore.registry.tracking.default_prior`).
-    """
+    """The prior from the command line, defaulting to the paper's rule (``default_prior``)."""
     if prior_mean is not None:
-        _check_limits("--prior-mean", prior_mean, PRIOR_MEAN_MAX)
+        refusals.check_limits("--prior-mean", prior_mean, PRIOR_MEAN_MAX)
     if prior_cov is not None:
-        _check_limits("--prior-cov", prior_cov, PRIOR_COV_RANGE[1])
+        refusals.check_limits("--prior-cov", prior_cov, PRIOR_COV_RANGE[1])
     if prior_mean is None:
         try:
             mean = default_prior(mu, steps).mean
@@ -179,7 +144,8 @@ def _prior(mu, prior_mean, prior_cov, steps=None) -> Gaussian:
     elif len(prior_cov) == 1:
         if not prior_cov[0] > 0:
             raise ValueError(
-                f"--prior-cov must be positive definite; S = {_exact(prior_cov[0])} is not > 0"
+                "--prior-cov must be positive definite; "
+                f"S = {refusals.exact(prior_cov[0])} is not > 0"
             )
         cov = prior_cov[0] * np.eye(3)
     elif len(prior_cov) == 9:
@@ -417,7 +383,7 @@ def _cmd_study(args) -> str:
     truth = None
     if args.truth is not None:
         truth = _truth(args.truth)
-        _check_limits("--truth", truth, MU_MAX)
+        refusals.check_limits("--truth", truth, MU_MAX)
     if args.workers is not None and args.scheduler is not None:
         raise ValueError("--workers and --scheduler: give one (a local cluster, or a running one)")
     workers = None if args.workers is None else cluster_options.workers(args.workers)
@@ -431,71 +397,6 @@ def _cmd_study(args) -> str:
             "study", "trial", lambda p: monte_carlo.study(**options, progress=p, client=client)
         )
     return cli_text.as_json(result) if args.json else cli_text.format_study(result)
-
-
-# --- refusals in the user's words -------------------------------------------------------
-
-#: The library's names of the command line's arguments.
-_FLAGS = {
-    "mu": "--mu",
-    "rho": "--rho",
-    "prior_mean": "--prior-mean",
-    "prior_cov": "--prior-cov",
-    "process_noise": "--process-noise",
-    "q": "--process-noise",
-    "truth": "--truth",
-    "trials": "--trials",
-    "seed": "--seed",
-    "prior": "--prior",
-    "names": "--filters",
-    "filters": "--filters",
-    "n_particles": "--particles",
-    "particles": "--particles",
-    "frames": "--frames",
-    "out": "--out",
-    "workers": "--workers",
-    "scheduler": "--scheduler",
-    tasks.SCHEDULER: tasks.SCHEDULER,  # the environment's scheduler, named as the user set it
-}
-
-#: The arguments a refusal blames when the library names none of them.
-_INPUTS = {
-    "reproduce": "the paper's scenarios",
-    "estimate": "--mu, --rho and the prior",
-    "study": "--truth, --rho, --frames and --process-noise",
-    "atlas": "--size",
-}
-
-#: A refusal when a filter's covariance turns out singular.
-_SINGULAR = {
-    "reproduce": "a filter's covariance is singular in double precision",
-    "estimate": "--mu, --rho and the prior have no answer: a filter's covariance is singular "
-    "in double precision; try a larger --rho or a broader --prior-cov",
-    "study": "--particles and --rho have no answer: a filter's covariance is singular (too few "
-    "particles carry weight, or the noise is too small to resolve); try more --particles or "
-    "a larger --rho",
-    "atlas": "a filter's covariance is singular in double precision",
-}
-
-_LEADING = re.compile(r"^([A-Za-z_][A-Za-z_0-9]*)(\[[^\]]*\])?(?=[\s:,])")
-
-
-def _users_words(command: str, message: str, words=None) -> str:
-    """A refusal naming the argument as the user gave it (``--prior-cov``, not ``prior_cov``).
-
-    ``words`` maps the library's names to the user's where they differ from
-    :data:`_FLAGS` (a file's columns).
-    """
-    message = _one_line(message)
-    if message.startswith("-"):
-        return message
-    flags = {**_FLAGS, **(words or {})}
-    m = _LEADING.match(message)
-    if m and m.group(1) in flags:
-        return flags[m.group(1)] + (m.group(2) or "") + message[m.end() :]
-    if m and message[m.end() :].startswith(":"):  # an internal name: drop it
-        message = message[m.end() + 1 :].strip()
-    return f"{_INPUTS[command]} have no answer: {message}"
 
 
 class _WriteError(Exception):
@@ -522,11 +423,7 @@ def _write(text: str) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``python -m depthcore``.
-
-    Its filters are the registry's when it is built, a filter added by
-    :func:`depthcore.registry.filters.register` among them.
-    """
+    """The argument parser of ``python -m depthcore``, with the registry's filters when built."""
     p = _Parser(
         prog="python -m depthcore",
         description="Filter based estimates of depth (Maybank 1990): the paper's filters "
@@ -553,16 +450,8 @@ def build_parser() -> argparse.ArgumentParser:
 def _command(sub, common, name: str, summary: str) -> argparse.ArgumentParser:
     """The parser of command ``name``: ``summary`` its help and, as a sentence, its description.
 
-    Parameters
-    ----------
-    sub : argparse subparsers action
-        The main parser's commands.
-    common : argparse.ArgumentParser
-        The options every command has.
-    name : str
-        A key of :data:`EXAMPLES`, which gives the epilog.
-    summary : str
-        One line, lower case, without a full stop.
+    ``name`` is a key of ``cli_text.EXAMPLES`` (the epilog); ``summary`` one
+    line, lower case, without a full stop.
     """
     return sub.add_parser(
         name,
@@ -581,10 +470,7 @@ def _add_json(parser: argparse.ArgumentParser, run) -> None:
 
 
 def _add_filters(parser: argparse.ArgumentParser, what: str, note: str = "") -> None:
-    """``--filters``: the registry's names, its default ones by default.
-
-    ``what`` begins the help, ``note`` ends it, after the default and the other names.
-    """
+    """``--filters`` (the registry's defaults): ``what`` begins the help, ``note`` ends it."""
     every, defaults = names(), names(default=True)
     parser.add_argument(
         "--filters",
@@ -761,15 +647,8 @@ def _add_study_arguments(sub, common) -> None:
     _add_json(st, _cmd_study)
 
 
-def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
-
-
 def _parse(argv) -> argparse.Namespace:
-    """The parsed arguments; ``--help``, ``--version`` and refusals raise SystemExit.
-
-    A help text that cannot be written raises :class:`_WriteError` instead.
-    """
+    """The parsed arguments; ``--help``, ``--version`` and refusals raise SystemExit."""
     return build_parser().parse_args(argv)
 
 
@@ -782,8 +661,7 @@ def main(argv=None) -> int:
         return 1
     prog = f"python -m depthcore {args.command}"
     try:
-        # Warnings become errors here only: the warning filters are restored on
-        # return, so library users are not affected.
+        # Warnings become errors here only: the filters are restored on return.
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             text = args.run(args)
@@ -791,18 +669,18 @@ def main(argv=None) -> int:
     except np.linalg.LinAlgError:
         if args.debug:
             traceback.print_exc()
-        sys.stderr.write(f"{prog}: error: {_SINGULAR[args.command]}\n")
+        sys.stderr.write(f"{prog}: error: {refusals.SINGULAR[args.command]}\n")
         return 2
     except track_files.FileRefusal as exc:
         if args.debug:
             traceback.print_exc()
-        sys.stderr.write(f"{prog}: error: {_one_line(exc)}\n")
+        sys.stderr.write(f"{prog}: error: {refusals.one_line(exc)}\n")
         return 2
     except ValueError as exc:
         if args.debug:
             traceback.print_exc()
         words = getattr(args, "_words", None)
-        sys.stderr.write(f"{prog}: error: {_users_words(args.command, str(exc), words)}\n")
+        sys.stderr.write(f"{prog}: error: {refusals.users_words(args.command, str(exc), words)}\n")
         return 2
     except _WriteError as exc:
         sys.stderr.write(f"{prog}: error: {exc}\n")
@@ -814,7 +692,7 @@ def main(argv=None) -> int:
         if args.debug:
             traceback.print_exc()
         sys.stderr.write(
-            f"{prog}: error: unexpected {type(exc).__name__}: {_one_line(exc)[:200]}"
+            f"{prog}: error: unexpected {type(exc).__name__}: {refusals.one_line(exc)[:200]}"
             " (rerun with --debug to see the traceback)\n"
         )
         return 1
