@@ -1,13 +1,18 @@
-"""The notebook drift check's choice of pages (tools/check_notebooks.py), without executing any."""
+"""The notebook drift check (tools/check_notebooks.py): its choice of pages, its cache key,
+what it refuses, and nbval's runs of small notebooks."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
+import jupytext
+import nbformat
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -15,6 +20,7 @@ sys.path.insert(0, str(ROOT / "tools"))
 import check_notebooks  # noqa: E402
 
 PAGES = check_notebooks.notebook_pages()
+v4 = nbformat.v4
 
 
 def test_no_names_select_every_page():
@@ -26,9 +32,18 @@ def test_names_select_those_pages_in_toc_order():
     assert [p.stem for p in chosen] == ["fig2", "fig6", "cite"]
 
 
-def test_an_unknown_page_is_refused_by_name():
-    with pytest.raises(check_notebooks.CheckError, match="not a page of _toc.yml: nosuch"):
+def test_an_unknown_page_is_refused_by_name(capsys):
+    with pytest.raises(ValueError, match="not a page of _toc.yml: nosuch"):
         check_notebooks.select_pages(PAGES, ["fig2", "nosuch"])
+    assert check_notebooks.main(["check", "nosuch"]) == 1
+    assert capsys.readouterr().err.startswith("make notebooks:\n  - not a page of _toc.yml: nosuch")
+
+
+def test_the_pages_are_the_toc_documents_with_a_kernel():
+    names = [page.relative_to(ROOT).with_suffix("").as_posix() for page in PAGES]
+    assert names == [entry for entry in check_notebooks.toc_files() if entry in names]
+    assert {"intro", "fig2", "fig6", "cite"} <= {p.stem for p in PAGES}
+    assert "notation" not in {p.stem for p in PAGES}  # a page without code
 
 
 def test_only_references_of_pages_outside_the_toc_are_stale():
@@ -40,13 +55,13 @@ def test_only_references_of_pages_outside_the_toc_are_stale():
 
 
 def test_update_of_named_pages_leaves_the_other_references(monkeypatch):
-    executed, deleted = [], []
-    monkeypatch.setattr(
-        check_notebooks, "update", lambda pages, workers: executed.extend(pages) or 0
-    )
-    monkeypatch.setattr(Path, "unlink", lambda self, *a, **k: deleted.append(self))
+    calls = []
+    monkeypatch.setattr(check_notebooks, "update", lambda *args: calls.append(args) or 0)
     assert check_notebooks.main(["update", "fig6"]) == 0
-    assert [p.stem for p in executed] == ["fig6"] and deleted == []
+    assert check_notebooks.main(["update"]) == 0
+    (pages, _, every), (all_pages, _, all_every) = calls
+    assert [p.stem for p in pages] == ["fig6"] and every is None  # no stale reference deleted
+    assert all_pages == all_every == PAGES
     assert check_notebooks.main(["update", "nosuch"]) == 1
 
 
@@ -129,71 +144,42 @@ def test_a_change_of_the_package_or_its_environment_empties_the_cache(tmp_path, 
     assert (cache / check_notebooks.CACHE_KEY).is_file()
 
 
-def test_a_reference_keeps_the_png_of_a_figure_and_not_its_vector_copy():
-    import nbformat
-
-    nb = nbformat.v4.new_notebook()
-    data = {"image/png": "iVBOR", "application/pdf": "JVBER", "text/plain": "<Figure>"}
-    glued = {f"application/papermill.record/{k}": v for k, v in data.items()}
-    nb.cells = [
-        nbformat.v4.new_code_cell("fig", outputs=[nbformat.v4.new_output("display_data", data)]),
-        nbformat.v4.new_code_cell("glue", outputs=[nbformat.v4.new_output("display_data", glued)]),
-    ]
-    check_notebooks.drop_vector_copies(nb)
-    assert set(nb.cells[0].outputs[0].data) == {"image/png", "text/plain"}
-    assert set(nb.cells[1].outputs[0].data) == {
-        "application/papermill.record/image/png",
-        "application/papermill.record/text/plain",
-    }
+def test_a_new_reference_loses_the_page_its_cached_outputs(tmp_path):
+    # A record executed alone was checked against the reference it was executed beside.
+    root, pages = small_project(tmp_path)
+    cache = root / "_build" / ".jupyter_cache"
+    check_notebooks.prepare_cache(pages, cache, root)
+    for page in pages:
+        cache_page(cache, page)
+    (root / "book" / "_nbval").mkdir()
+    (root / "book" / "_nbval" / "one.ipynb").write_text("{}")
+    assert check_notebooks.prepare_cache(pages, cache, root) == ["book/one.md"]
+    assert cached_uris(cache) == ["two.md"]
 
 
-def test_bytecode_does_not_change_the_fingerprint(tmp_path):
-    root, _ = small_project(tmp_path)
-    before = check_notebooks.environment_fingerprint(root)
+def test_bytecode_does_not_change_the_key(tmp_path):
+    root, pages = small_project(tmp_path)
+    cache = root / "_build" / ".jupyter_cache"
+    check_notebooks.prepare_cache(pages, cache, root)
     (root / "depthcore" / "__pycache__").mkdir()
     (root / "depthcore" / "__pycache__" / "model.cpython-311.pyc").write_bytes(b"\0")
-    assert check_notebooks.environment_fingerprint(root) == before
+    assert check_notebooks.prepare_cache(pages, cache, root) == []
     (root / "depthcore" / "model.py").write_text("X = 2\n")
-    assert check_notebooks.environment_fingerprint(root) != before
+    assert check_notebooks.prepare_cache(pages, cache, root) == ["all"]
 
 
-PAGE_HEAD = """---
-jupytext:
-  text_representation:
-    extension: .md
-    format_name: myst
-kernelspec:
-  display_name: Python 3
-  language: python
-  name: python3
----
-
-# A page
-
-```{code-cell} ipython3
-"""
-
-
-def test_the_pages_the_cache_lacks_are_executed_and_found_by_the_build(tmp_path, monkeypatch):
+def test_jupytext_reads_each_page_as_myst_nb_does_for_the_cache():
+    """The notebooks cached here are found by the build, which looks them up as myst-nb reads."""
     from jupyter_cache import get_cache
+    from myst_nb.core.read import read_myst_markdown_notebook
 
-    monkeypatch.setenv("JUPYTER_PATH", str(check_notebooks.KERNELS))
-    good, bad = tmp_path / "good.md", tmp_path / "bad.md"
-    good.write_text(
-        PAGE_HEAD + "from pathlib import Path\nprint(sorted(Path().glob('*.md')))\n```\n"
-    )
-    bad.write_text(PAGE_HEAD + "1 / 0\n```\n")
-    cache = tmp_path / "cache"
-    assert check_notebooks.fill_cache([good, bad], 2, cache) == [good]
-    # What myst-nb's cache mode looks up: the page as it reads it.
-    store = get_cache(cache)
-    record = store.match_cache_notebook(check_notebooks.read_as_the_book(good))
-    (cell,) = [c for c in store.get_cache_bundle(record.pk).nb.cells if c.cell_type == "code"]
-    # run in the page's folder, as the build runs it
-    assert cell.outputs[0]["text"] == "[PosixPath('bad.md'), PosixPath('good.md')]\n"
-    assert check_notebooks.fill_cache([good], 2, cache) == []  # nothing left to execute
-    with pytest.raises(KeyError):
-        store.match_cache_notebook(check_notebooks.read_as_the_book(bad))
+    store = get_cache(Path(tempfile.mkdtemp()))
+    for page in PAGES:
+        as_the_book = read_myst_markdown_notebook(page.read_text(encoding="utf-8"), path=page)
+        assert (
+            store.create_hashed_notebook(jupytext.read(page))[1]
+            == (store.create_hashed_notebook(as_the_book)[1])
+        ), page
 
 
 def makefile_recipe(target: str) -> str:
@@ -248,211 +234,231 @@ def test_make_builds_reads_the_pages_once_for_the_pdf_and_the_book_and_ships_the
     assert "! -name pdf" in makefile.split("define clear-book", 1)[1].split("endef", 1)[0]
 
 
-# --- the downloaded notebooks, run alone ---------------------------------------------------
+# --- nbval's runs of small pages ------------------------------------------------------------
+
+PAGE_HEAD = """---
+jupytext:
+  text_representation:
+    extension: .md
+    format_name: myst
+kernelspec:
+  display_name: Python 3
+  language: python
+  name: python3
+---
+
+# A page
+
+```{code-cell} ipython3
+"""
 
 
-def test_the_downloaded_notebook_of_a_page():
-    page = ROOT / "book" / "fig6.md"
-    assert check_notebooks.downloaded_notebook(page) == (
-        ROOT / "_build" / "html" / "_sources" / "book" / "fig6.ipynb"
+def write_page(folder: Path, name: str, *sources: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    page = folder / f"{name}.md"
+    page.write_text(PAGE_HEAD + "\n```\n\n```{code-cell} ipython3\n".join(sources) + "\n```\n")
+    return page
+
+
+def write_reference(page: Path, *texts: str | None, executed: bool = True) -> None:
+    """The page's reference, each code cell showing one line ``texts`` (None: nothing)."""
+    nb = jupytext.read(page)
+    for i, (cell, text) in enumerate(zip(check_notebooks.code_cells(nb), texts, strict=True)):
+        cell.execution_count = i + 1 if executed else None
+        cell.outputs = [] if text is None else [v4.new_output("stream", name="stdout", text=text)]
+    check_notebooks.reference_path(page).parent.mkdir(exist_ok=True)
+    nbformat.write(nb, check_notebooks.reference_path(page))
+
+
+@pytest.fixture
+def book(tmp_path, monkeypatch):
+    """A repository of its own (``tmp_path``), whose pages run with the book's kernel."""
+    monkeypatch.setenv("JUPYTER_PATH", check_notebooks.KERNELS)
+    monkeypatch.setattr(check_notebooks, "ROOT", tmp_path)
+    return tmp_path / "book"
+
+
+def test_a_reference_that_cannot_vouch_for_its_page_is_named(book):
+    problems: list[str] = []
+    cases = {
+        "same": (["print(1)", "print(2)"], ["print(1)", "print(2)"]),
+        "edited": (["print(1)", "print(3)"], ["print(1)", "print(2)"]),
+        "added": (["print(1)", "print(2)"], ["print(1)"]),
+        "removed": (["print(1)"], ["print(1)", "print(2)"]),
+        "hidden": (["print(1)", "x = 1\ny = 2;"], ["print(1)", "x = 1\ny = 2;"]),
+    }
+    for name, (now, then) in cases.items():
+        page = write_page(book, name, *then)
+        write_reference(page, *["1\n"] * len(then))
+        write_page(book, name, *now)
+    unexecuted = write_page(book, "unexecuted", "print(1)")
+    write_reference(unexecuted, "1\n", executed=False)
+    write_page(book, "missing", "print(1)")
+    nbs = {p.stem: check_notebooks.with_reference(p, problems, jupytext.read(p))
+           for p in sorted(book.glob("*.md"))}  # fmt: skip
+    assert [stem for stem, nb in nbs.items() if nb is not None] == ["same"]
+    assert nbs["same"].cells[1].outputs[0]["text"] == "1\n"  # the reference's outputs
+    assert problems == [
+        "book/added.md: code cell 2 is new or edited: 'print(2)'",
+        "book/edited.md: code cell 2 is new or edited: 'print(3)'",
+        "book/hidden.md: code cell 2 ends with ';': assign it (`_ = ...`)",
+        "book/missing.md: no reference notebook book/_nbval/missing.ipynb",
+        "book/removed.md: reference code cell 2 was removed from the page",
+        "book/unexecuted.md: code cell 1 of the reference was never executed",
+    ]
+    # A downloaded notebook older than its page
+    offered = book / "offered.ipynb"
+    nbformat.write(
+        v4.new_notebook(cells=[v4.new_code_cell("print(0)"), v4.new_code_cell("print(2)")]), offered
     )
-
-
-def test_the_reference_outputs_replace_the_downloaded_ones():
-    import nbformat
-
-    v4 = nbformat.v4
-    nb = v4.new_notebook(
-        cells=[v4.new_markdown_cell("text"), v4.new_code_cell("1 + 1", execution_count=3)]
+    page = book / "same.md"
+    assert (
+        check_notebooks.with_reference(page, problems, nbformat.read(offered, 4), offered) is None
     )
-    ref = v4.new_notebook(
-        cells=[
-            v4.new_code_cell(
-                "1 + 1",
-                execution_count=1,
-                outputs=[v4.new_output("execute_result", {"text/plain": "2"}, execution_count=1)],
-            )
-        ]
+    assert problems[-1] == "book/offered.ipynb: code cells differ from the page's: run `make book`"
+
+
+def test_the_pages_the_cache_lacks_run_in_their_folder_and_are_found_by_the_build(book):
+    from jupyter_cache import get_cache
+    from myst_nb.core.read import read_myst_markdown_notebook
+
+    good = write_page(book, "good", "from pathlib import Path\nprint(sorted(Path().glob('*.md')))")
+    bad = write_page(book, "bad", "1 / 0")
+    cache = book.parent / "cache"
+    assert check_notebooks.fill_cache([good, bad], 2, cache) == ([good], [])
+    # What myst-nb's cache mode looks up: the page as it reads it.
+    store = get_cache(cache)
+    as_the_book = read_myst_markdown_notebook(good.read_text(), path=good)
+    record = store.match_cache_notebook(as_the_book)
+    assert record.data == {"alone": False}
+    (cell,) = check_notebooks.code_cells(store.get_cache_bundle(record.pk).nb)
+    assert cell.execution_count == 1
+    # run in the page's folder, as the build runs it, and its copies removed
+    assert cell.outputs == [
+        {
+            "output_type": "stream",
+            "name": "stdout",
+            "text": "[PosixPath('bad.md'), PosixPath('good.md')]\n",
+        }
+    ]
+    assert sorted(p.name for p in book.iterdir()) == ["bad.md", "good.md"]
+    with pytest.raises(KeyError):
+        store.match_cache_notebook(jupytext.read(bad))
+
+
+def test_pages_run_alone_off_the_repository_are_cached_once_they_show_their_references(
+    book, monkeypatch
+):
+    from jupyter_cache import get_cache
+
+    monkeypatch.setenv("PYTHONPATH", str(ROOT / "tools"))
+    shows = "print(sorted(Path().iterdir()), os.environ.get('PYTHONPATH'), sys.executable)"
+    alone = write_page(book, "alone", "import os, sys\nfrom pathlib import Path\n" + shows)
+    write_reference(alone, f"[PosixPath('alone.ipynb')] None {sys.executable}\n")
+    reads = write_page(book, "reads", "print(len(open('reads.md').read()) > 0)")
+    write_reference(reads, "True\n")
+    drifted = write_page(book, "drifted", "print(0.51)")
+    write_reference(drifted, "0.5\n")
+    downloads = book.parent / "downloads"
+    downloads.mkdir()
+    for name in ("depthcore.tar.gz", "depthbook.tar.gz", "requirements.txt"):
+        (downloads / name).write_text("")
+    installs, run = [], subprocess.run
+    monkeypatch.setattr(subprocess, "run", lambda cmd, *a, **k: installs.append(cmd)
+                        if cmd[0] == "uv" else run(cmd, *a, **k))  # fmt: skip
+    cache = book.parent / "cache"
+    # Executed in the page's folder (as `make book` alone does), the page that reads its file runs.
+    assert check_notebooks.fill_cache([reads], 1, cache) == ([reads], [])
+    pages = [alone, reads, drifted]
+    cached, problems = check_notebooks.fill_cache(
+        pages, 2, cache, sys.executable, None, downloads, "uv"
     )
-    out = check_notebooks.with_reference_outputs(nb, ref)
-    assert out.cells[0].source == "text"
-    assert out.cells[1].execution_count == 1
-    assert out.cells[1].outputs[0]["data"]["text/plain"] == "2"
+    # ... alone, it fails, and the page whose output differs from its reference is not cached.
+    assert cached == [alone] and problems == ["2 fail alone, or differ (above)"]
+    python = ["uv", "pip", "-q", "--python", sys.executable]
+    archives = [downloads / "depthcore.tar.gz", downloads / "depthbook.tar.gz"]
+    assert installs == [
+        [*python, "sync", downloads / "requirements.txt"],
+        [*python, "install", "--no-build-isolation", "--reinstall", "--no-deps", *archives],
+    ]
+    records = {Path(r.uri).name: r.data for r in get_cache(cache).list_cache_records()}
+    assert records == {"alone.md": {"alone": True}, "reads.md": {"alone": False}}
 
 
-def test_the_standalone_conftest_skips_what_the_drift_check_skips():
-    namespace: dict = {}
-    exec(check_notebooks.conftest_text(), namespace)
-
-    class Collector:
-        skip_compare = ("metadata",)
-
-    collector = Collector()
-    namespace["pytest_collectstart"](collector)
-    assert collector.skip_compare == ("metadata",) + check_notebooks.SKIP_COMPARE
-
-
-def test_the_environment_is_the_pins_and_depthcore_alone(tmp_path, monkeypatch):
-    import subprocess
-
-    requirements = tmp_path / "requirements.txt"
-    requirements.write_text("# pins\nNumPy==2.4.6\njupyter_client==8.10.0\nscipy==1.17.1\n")
-    listed = "numpy==2.4.6\njupyter-client==8.9.0\npip==24.0\ndepthcore==1.0\nrequests==2.0\n"
-    monkeypatch.setattr(
-        subprocess, "run", lambda *a, **k: subprocess.CompletedProcess(a, 0, stdout=listed)
-    )
-    unmet, foreign = check_notebooks.environment_mismatch("python", requirements)
-    assert unmet == ["jupyter-client==8.10.0", "scipy==1.17.1"]
-    assert foreign == ["requests"]
-
-
-def test_standalone_refuses_to_run_without_a_built_book(tmp_path, capsys):
-    page = check_notebooks.select_pages(PAGES, ["fig6"])
-    status = check_notebooks.standalone(
-        page, "python", 1, PAGES, sources=tmp_path / "_sources", downloads=tmp_path / "downloads"
-    )
+def test_a_built_book_is_needed_to_run_its_notebooks_alone(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(check_notebooks, "BOOK_DOWNLOADS", tmp_path / "downloads")
+    monkeypatch.setattr(check_notebooks, "BOOK_SOURCES", tmp_path / "_sources")
+    assert check_notebooks.main(["standalone", "--python", "python", "fig6"]) == 1
     err = capsys.readouterr().err
-    assert status == 1
-    assert "depthcore.tar.gz not found" in err and "offers no notebook" in err
+    assert err.startswith("make notebooks-standalone:\n")
+    assert "depthcore.tar.gz not found: run `make book` first" in err
+    assert "depthbook.tar.gz not found" in err and "requirements.txt not found" in err
+    assert f"book/fig6.md: the book offers no notebook {tmp_path}/_sources/book/fig6.ipynb" in err
 
 
-# --- one execution of each page, alone, for the drift check and the builds ----------------
-
-
-def output(kind: str, text: str):
-    import nbformat
-
-    if kind in ("stdout", "stderr"):
-        return nbformat.v4.new_output("stream", name=kind, text=text)
-    return nbformat.v4.new_output("execute_result", {"text/plain": text}, execution_count=1)
+def test_update_writes_the_outputs_with_ids_of_their_cells_and_no_vector_copies(book):
+    figure = {"text/plain": "<Figure>", "image/png": "iVBOR", "application/pdf": "JVBER"}
+    page = write_page(book, "fig", "print(1)", f"from IPython.display import publish_display_data\n"
+                      f"publish_display_data({figure!r})")  # fmt: skip
+    assert check_notebooks.update([page], 1) == 0
+    ref = check_notebooks.reference_path(page)
+    first = ref.read_bytes()
+    nb = nbformat.read(ref, as_version=4)
+    one, shows = check_notebooks.code_cells(nb)
+    assert (one.execution_count, one.outputs[0]["text"]) == (1, "1\n")
+    assert set(shows.outputs[0]["data"]) == {"text/plain", "image/png"}
+    assert check_notebooks.update([page], 1) == 0
+    assert ref.read_bytes() == first  # an unchanged page, an unchanged reference
 
 
 #: Outputs of a cell against the reference ``0.5``, and whether nbval takes them for it.
 CASES = [
-    ([output("result", "0.5")], True),
-    ([output("result", "np.float64(0.5)")], True),  # NumPy 2's repr, sanitised
-    ([output("result", "0.5"), output("stderr", "a warning\n")], True),  # stderr skipped
-    ([output("result", "0.51")], False),  # a number the page shows
-    ([output("result", "0.5"), output("stdout", "more\n")], False),  # an output more
+    ([("result", "0.5")], True),
+    ([("result", "np.float64(0.5)")], True),  # NumPy 2's repr, sanitised
+    ([("result", "0.5"), ("stderr", "a warning")], True),  # stderr skipped
+    ([("svg", "<svg id='a1'/>")], True),  # SVG skipped (with the text 0.5)
+    ([("result", "0.51")], False),  # a number the page shows
+    ([("result", "0.5"), ("stdout", "more")], False),  # an output more
     ([], False),  # an output less
 ]
 
 
-def test_outputs_compare_as_nbval_compares_them(tmp_path):
-    """The comparison of the cached outputs gives nbval's verdict, run on the same cells."""
-    import os
-    import subprocess
-    import xml.etree.ElementTree as ET
-
-    import nbformat
-
-    patterns = check_notebooks.sanitize_patterns()
-    ref = [output("result", "0.5")]
-    assert [check_notebooks.output_difference(new, ref, patterns) is None for new, _ in CASES] == [
-        same for _, same in CASES
-    ]
-    # nbval itself, one cell per case: each shows what the case holds, against the reference.
-    v4 = nbformat.v4
+def test_nbval_with_this_plugin_compares_what_the_book_shows(tmp_path, monkeypatch):
+    monkeypatch.setenv("JUPYTER_PATH", check_notebooks.KERNELS)
+    lines = {
+        "result": "display(Text({!r}))",
+        "svg": "publish_display_data({{'text/plain': '0.5', 'image/svg+xml': {!r}}})",
+        "stderr": "print({!r}, file=sys.stderr)",
+        "stdout": "print({!r})",
+    }
     head = (
-        "import sys\nfrom IPython.display import display\n\n"
+        "import sys\nfrom IPython.display import display, publish_display_data\n\n"
         "class Text:\n    def __init__(self, t):\n        self.t = t\n\n"
         "    def __repr__(self):\n        return self.t\n"
     )
     cells = [v4.new_code_cell(head, execution_count=1)]
-    for new, _ in CASES:
-        lines = [
-            f"print({out.text[:-1]!r}, file=sys.{out.name})"
-            if out.output_type == "stream"
-            else f"display(Text({out.data['text/plain']!r}))"
-            for out in new
-        ]
+    for shows, _ in CASES:
+        source = "\n".join(lines[kind].format(text) for kind, text in shows)
         reference = [v4.new_output("display_data", {"text/plain": "0.5"})]
-        cells.append(v4.new_code_cell("\n".join(lines), execution_count=1, outputs=reference))
+        cells.append(v4.new_code_cell(source, execution_count=1, outputs=reference))
     nb = v4.new_notebook(cells=cells)
     nb.metadata.kernelspec = {"name": "python3", "display_name": "Python 3", "language": "python"}
     nbformat.write(nb, tmp_path / "cells.ipynb")
-    (tmp_path / "conftest.py").write_text(check_notebooks.conftest_text())
+    (tmp_path / "conftest.py").write_bytes(Path(check_notebooks.__file__).read_bytes())
     subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--nbval",
          f"--nbval-sanitize-with={check_notebooks.SANITIZE}", "--junitxml=nbval.xml",
          "cells.ipynb"],
         cwd=tmp_path,
         capture_output=True,
-        env={**os.environ, "JUPYTER_PATH": str(check_notebooks.KERNELS)},
     )  # fmt: skip
+    import xml.etree.ElementTree as ET
+
     verdicts = {
         case.get("name"): case.find("failure") is None and case.find("error") is None
         for case in ET.parse(tmp_path / "nbval.xml").getroot().iter("testcase")
     }
     assert [verdicts[f"Cell {i}"] for i in range(1, len(CASES) + 1)] == [s for _, s in CASES]
-
-
-def test_pages_executed_alone_run_beside_their_notebook_alone_off_the_repository(
-    tmp_path, monkeypatch
-):
-    from jupyter_cache import get_cache
-
-    monkeypatch.setenv("JUPYTER_PATH", str(check_notebooks.KERNELS))
-    monkeypatch.setenv("PYTHONPATH", str(ROOT / "tools"))
-    alone = tmp_path / "alone.md"
-    alone.write_text(
-        PAGE_HEAD
-        + "import os, sys\nfrom pathlib import Path\n"
-        + "print(sorted(Path().iterdir()), os.environ.get('PYTHONPATH'), sys.executable)\n```\n"
-    )
-    reads = tmp_path / "reads.md"
-    reads.write_text(PAGE_HEAD + "open('reads.md').read()\n```\n")
-    cache = tmp_path / "cache"
-    # Executed beside the page (as `make book` alone does), the page that reads its file runs.
-    assert check_notebooks.fill_cache([reads], 1, cache) == [reads]
-    store = get_cache(cache)
-    assert check_notebooks.executed_alone(store, reads) is False
-    done = check_notebooks.fill_cache([alone, reads], 2, cache, python=sys.executable)
-    # ... alone, it fails, and its record from the page's folder is not taken for one alone.
-    assert done == [alone]
-    assert check_notebooks.executed_alone(store, alone) is True
-    assert check_notebooks.executed_alone(store, reads) is False
-    record = store.match_cache_notebook(check_notebooks.read_as_the_book(alone))
-    (cell,) = [c for c in store.get_cache_bundle(record.pk).nb.cells if c.cell_type == "code"]
-    # the folder holds the page's notebook alone, as a reader's download folder
-    assert cell.outputs[0]["text"] == f"[PosixPath('alone.ipynb')] None {sys.executable}\n"
-    # Nothing left to execute alone: a record executed alone is kept.
-    assert check_notebooks.fill_cache([alone], 2, cache, python=sys.executable) == []
-
-
-def test_the_cached_outputs_are_compared_with_the_references(tmp_path, monkeypatch):
-    import nbformat
-
-    monkeypatch.setenv("JUPYTER_PATH", str(check_notebooks.KERNELS))
-    monkeypatch.setattr(check_notebooks, "ROOT", tmp_path)
-    pages = []
-    for name, shows, reference in (("same", "0.5", "0.5"), ("drifted", "0.51", "0.5")):
-        page = tmp_path / f"{name}.md"
-        page.write_text(PAGE_HEAD + f"print({shows})\n```\n")
-        ref = check_notebooks.reference_path(page)
-        ref.parent.mkdir(exist_ok=True)
-        nb = nbformat.v4.new_notebook(
-            cells=[
-                nbformat.v4.new_markdown_cell("# A page"),
-                nbformat.v4.new_code_cell(
-                    f"print({shows})",
-                    execution_count=1,
-                    outputs=[
-                        nbformat.v4.new_output("stream", name="stdout", text=reference + "\n")
-                    ],
-                ),
-            ]
-        )
-        nbformat.write(nb, ref)
-        pages.append(page)
-    cache = tmp_path / "cache"
-    missing = tmp_path / "missing.md"
-    missing.write_text(PAGE_HEAD + "print(1)\n```\n")
-    assert check_notebooks.fill_cache(pages, 2, cache, python=sys.executable) == pages
-    problems = check_notebooks.cached_drift([*pages, missing], cache)
-    assert len(problems) == 2, problems
-    assert problems[0].startswith("drifted.md: code cell 1: 'stdout' differs")
-    assert problems[1].startswith("missing.md: no reference notebook")
 
 
 def test_make_test_executes_each_page_once_alone_before_the_builds():
@@ -520,7 +526,6 @@ def test_the_stage_runner_stops_at_the_first_failing_stage_and_fails(tmp_path):
 
 
 def kernelspec() -> dict:
-    import json
 
     spec = json.loads(
         (ROOT / "tools" / "jupyter" / "kernels" / "python3" / "kernel.json").read_text()
@@ -532,7 +537,7 @@ def kernelspec() -> dict:
 NOTEBOOK_PAGES = [
     page
     for page in sorted((ROOT / "book").glob("*.md"))
-    if check_notebooks.has_notebook_front_matter(page.read_text(encoding="utf-8"))
+    if "kernelspec" in jupytext.reads(page.read_text(encoding="utf-8"), "md:myst").metadata
 ]
 
 
@@ -552,35 +557,3 @@ def test_a_page_saved_unchanged_from_jupyterlab_keeps_its_bytes(page):
     nb.metadata["kernelspec"] = kernelspec()
     nb.metadata["language_info"] = {"name": "python", "version": "3.11.7"}
     assert jupytext.writes(nb, fmt="md:myst", config=config) == text
-
-
-def test_a_kernel_that_dies_on_starting_is_started_again_then_named():
-    # jupyter_client's message for a kernel that could not bind its ports: started again,
-    # up to KERNEL_STARTS times; any other error, or the last such death, is raised.
-    calls = []
-
-    def dies_once():
-        calls.append(1)
-        if len(calls) == 1:
-            raise RuntimeError(check_notebooks.KERNEL_DIED)
-        return "ran"
-
-    assert check_notebooks.with_kernel_starts(dies_once) == "ran" and len(calls) == 2
-
-    def always_dies():
-        calls.append(1)
-        raise RuntimeError(check_notebooks.KERNEL_DIED)
-
-    calls.clear()
-    with pytest.raises(RuntimeError, match=check_notebooks.KERNEL_DIED):
-        check_notebooks.with_kernel_starts(always_dies)
-    assert len(calls) == check_notebooks.KERNEL_STARTS
-
-    def other_error():
-        calls.append(1)
-        raise RuntimeError("Kernel didn't respond in 60 seconds")
-
-    calls.clear()
-    with pytest.raises(RuntimeError, match="didn't respond"):
-        check_notebooks.with_kernel_starts(other_error)
-    assert len(calls) == 1
