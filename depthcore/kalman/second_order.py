@@ -14,18 +14,13 @@ up to a constant. The paper prints ``rho**2 J^{-1}``; ``reading="printed"``
 follows the print, ``reading="derived"`` (the default) the expansion.
 
 N frames (the model of :mod:`depthcore.exact.bank`). With ``N > 3`` bearings and no
-process noise, ``f = sum_k r_k**2`` over all ``N`` residuals no longer vanishes
-anywhere: the Gaussian is centred on its minimiser ``c_N`` over the state at
-frame ``N`` (:func:`minimiser`, Gauss-Newton from the three-frame noise-free
-solutions of frames 1-3 and ``N-2 .. N`` and a coarse profile over depth),
-where ``J_r^T r = 0`` (``J_r`` the residuals' Jacobian, rows
-:func:`depthcore.problem.model.residual_gradients`), so that
-``f(c_N + d) ~ f(c_N) + |J_r d|**2`` and the likelihood becomes
-``N(x, c_N, 2 rho**2 H^{-1})`` with the Gauss-Newton Hessian ``H = 2 J_r^T J_r``,
-i.e. covariance ``rho**2 (J_r^T J_r)^{-1}``. It is multiplied by the prior as
-``p_s`` is, Eq. (8). At ``N = 3`` the minimiser is ``c`` exactly (``f(c) = 0``,
-Eq. (7)), the Gauss-Newton Hessian is the Hessian ``J`` itself, and this is
-``p_s``.
+process noise, ``f`` over all ``N`` residuals no longer vanishes anywhere: the
+Gaussian is centred on its minimiser ``c_N`` at frame ``N`` (:func:`minimiser`),
+where ``J_r^T r = 0`` (``J_r`` the residuals' Jacobian,
+:func:`depthcore.problem.model.residual_gradients`), so ``f(c_N + d) ~ f(c_N) +
+|J_r d|**2`` and the likelihood is ``N(x, c_N, rho**2 (J_r^T J_r)^{-1})``,
+multiplied by the prior as ``p_s`` is, Eq. (8). At ``N = 3``, ``c_N = c``
+(``f(c) = 0``, Eq. (7)) and this is ``p_s``.
 
 With process noise ``a_k ~ N(0, q**2)`` on the velocity the unknowns are the
 whole trajectory: the state at frame 1 and the accelerations
@@ -127,10 +122,7 @@ def second_order_batch(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Eq. (8) for a batch: means ``(B, 3)`` and covariances ``(B, 3, 3)`` at frame ``N``.
 
-    For triples (``N = 3``, ``q = 0``) this is ``p_s``; for ``N > 3`` bearings
-    the Gaussian is centred on the minimiser of the misfit over all of them,
-    and with process noise ``q > 0`` it is the Laplace approximation of the
-    whole trajectory's likelihood (see the module docstring).
+    ``p_s`` for triples; for ``N > 3`` or ``q > 0``, see the module docstring.
 
     {parameters}
     reading : {"derived", "printed"}
@@ -210,9 +202,8 @@ def _starts(mu) -> np.ndarray:
 def minimiser(mu) -> np.ndarray:
     """The minimiser over the state at frame ``N`` of ``f = sum_k r_k**2``, batched.
 
-    Gauss-Newton (each step a least-squares solve of ``J_r d = -r`` by QR) from
-    the best of the starts of :func:`_starts`, with the step halved until ``f``
-    decreases and the point stays in front of the camera at frame 1.
+    Gauss-Newton (QR steps, :func:`damped_step`) from the best of :func:`_starts`,
+    the point kept in front of the camera at frame 1.
 
     Parameters
     ----------
@@ -239,9 +230,7 @@ def minimiser(mu) -> np.ndarray:
         i = int(np.argmax(~np.isfinite(f)))
         raise ValueError(f"mu[{i}]: no start in front of the camera for the misfit's minimiser")
     active = np.ones(B, dtype=bool)
-    # Bearings that no track explains well (a large process noise) can send the
-    # iteration far out, where the gradients overflow: such a run does not
-    # converge, and is refused below, not warned about.
+    # A run sent far out, where the gradients overflow, does not converge: refused below.
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         for _ in range(MAX_ITERATIONS):
             if not np.any(active):
@@ -302,11 +291,9 @@ def _determined(J, what: str) -> None:
 def damped_step(x, step, f, objective):
     """``x + t step`` with ``t`` halved from 1 until the objective does not increase.
 
-    The line search of the Gauss-Newton iterations here and in
-    :mod:`depthcore.kalman.iterated`. ``x`` (..., d) and ``f`` (...) are the current
-    points and objective values, ``step`` (..., d) the proposed steps and
-    ``objective`` maps points (..., d) to values (...). Returns the new points
-    and their objective values; where no halving helps, ``x`` and ``f`` are kept.
+    Here and in :mod:`depthcore.kalman.iterated`: ``x`` (..., d) and ``f`` (...)
+    the current points and values, ``step`` (..., d), ``objective`` points to
+    values. Returns the new points and values (``x``, ``f`` where no halving helps).
     """
     t = np.ones(x.shape[:-1])
     x_new = x + step
@@ -377,9 +364,8 @@ def trajectory_states(z, offset: bool = True) -> np.ndarray:
     """The states ``(x_k, y_k, v_k)`` of a trajectory ``z = (x_1, y_1, v_1, a_1 .. a_{N-1})``.
 
     ``v_k = v_1 + sum_{i < k} a_i``, ``x_{k+1} = x_k + v_k``, ``y_k = y_1 + k - 1``
-    (Eq. (1) with the accelerations added to the velocity), by cumulative sums:
-    ``O(N)``. With ``offset=False`` the ``+ k - 1`` of the depth is left out,
-    which maps increments of ``z`` to increments of the states.
+    (Eq. (1) with accelerations). ``offset=False`` leaves out the ``+ k - 1``,
+    mapping increments of ``z`` to increments of the states.
 
     Parameters
     ----------
@@ -410,14 +396,10 @@ def trajectory_solve(H, y, t, process_noise: float, U=None, u=None):
 
         sum_k (H_k . d_k - y_k)**2 + sum_k (b_k / q - t_k)**2 + norm(U d_1 - u)**2
 
-    (the last term only when ``U`` is given). The normal equations of this
-    problem are block tridiagonal in the states; it is solved without forming
-    them, as the square-root information filter does (textbook 19.2, in
-    information form): at each frame one QR factorisation of a 5 x 5 matrix
-    eliminates the acceleration and the previous state, then a back
-    substitution through the motion recovers every increment. The cost is
-    ``O(N)``, against ``O(N**3)`` for a QR factorisation of the whole
-    ``(2 N - 1 + 3) x (N + 2)`` Jacobian, with the same least-squares solution.
+    (the last term only when ``U`` is given), as the square-root information
+    filter does (textbook 19.2, in information form): at each frame one QR of a
+    5 x 5 matrix eliminates the acceleration and the previous state, then a back
+    substitution recovers every increment, in ``O(N)``.
 
     Parameters
     ----------
@@ -510,20 +492,12 @@ def bearing_rows(states, weight) -> np.ndarray:
 def trajectory_laplace(mu, weight, prior_mean, prior_cov, process_noise: float):
     """The Laplace approximation of the trajectory's likelihood, times the prior, at frame ``N``.
 
-    For each row, with ``z = (x_1, y_1, v_1, a_1 .. a_{N-1})``, Gauss-Newton
-    minimises ``|weight r(z)|**2 + |a / q|**2`` (``r`` the ``N`` bearing
-    residuals; ``weight = 1 / rho`` for the derived reading), starting from the
-    minimiser without process noise (:func:`minimiser`, moved to frame 1,
-    ``a = 0``). At the minimiser ``z*`` the stacked Jacobian ``M`` of both
-    terms gives the Gaussian ``N(z, z*, (M^T M)^{-1})``; multiplied by the
-    prior ``N(x_1, m, P)`` and mapped to the state at frame ``N``,
-    ``x_N = x_1 + (N - 1) v_1 + sum_i (N - 1 - i) a_i``, ``y_N = y_1 + N - 1``,
-    ``v_N = v_1 + sum_i a_i``, which is linear in ``z``. Every least-squares
-    problem, the Gauss-Newton steps and the product with the prior, is solved
-    through the trajectory's block-tridiagonal structure
-    (:func:`trajectory_solve`), so the cost grows linearly with ``N``; the
-    rows run side by side. :func:`depthbook.reference.trajectory_laplace_dense`
-    solves the same problems densely.
+    Gauss-Newton minimises ``|weight r(z)|**2 + |a / q|**2`` over ``z = (x_1,
+    y_1, v_1, a_1 .. a_{N-1})`` from :func:`minimiser` (moved to frame 1, ``a =
+    0``); at ``z*`` the stacked Jacobian ``M`` gives ``N(z, z*, (M^T M)^{-1})``,
+    multiplied by the prior on ``x_1`` and mapped (linearly) to frame ``N``.
+    Every least-squares problem is :func:`trajectory_solve`'s, ``O(N)``;
+    :func:`depthbook.reference.trajectory_laplace_dense` solves them densely.
 
     Parameters
     ----------
@@ -588,27 +562,11 @@ def trajectory_laplace(mu, weight, prior_mean, prior_cov, process_noise: float):
 def _square_root_solve(c, g, weight, prior_mean, prior_cov):
     """Eq. (8) in square-root form: the Gaussian ``N(c, S) p(G^{1-N} x)`` by QR, batched.
 
-    With ``S^{-1} = weight**2 g^T g`` (``g`` the ``N`` residual gradients,
-    ``weight`` per problem) and ``P = L L^T``, the mean is ``c + delta`` where
-    ``delta`` minimises ``|weight g delta|**2 + |L^{-1} (A (c + delta) + b - m)|**2``
-    with ``G^{1-N} x = A x + b`` (``A2``, ``b2`` for ``N = 3``): a least-squares
-    problem whose ``(N + 3) x 3`` matrix ``K`` stacks the whitened residual
-    Jacobian on the prior's whitened map. Its QR factor ``R`` gives
-    ``delta = R^{-1} Q^T r`` and the covariance ``R^{-1} R^{-T}``, without
-    forming (and squaring the condition of) the information matrix.
-
-    Parameters
-    ----------
-    c : ndarray, shape (B, 3)
-    g : ndarray, shape (B, N, 3)
-    weight : ndarray, shape (B,)
-    prior_mean : array_like, shape (3,) or (B, 3)
-    prior_cov : array_like, shape (3, 3) or (B, 3, 3)
-
-    Returns
-    -------
-    mean : ndarray, shape (B, 3)
-    cov : ndarray, shape (B, 3, 3)
+    With ``S^{-1} = weight**2 g^T g`` (``g`` (B, N, 3) the residual gradients)
+    and ``P = L L^T``, the mean ``c + delta`` minimises ``|weight g delta|**2 +
+    |L^{-1} (A (c + delta) + b - m)|**2`` (``G^{1-N} x = A x + b``); the QR
+    factor ``R`` of its stacked matrix gives ``delta`` and the covariance
+    ``R^{-1} R^{-T}`` without squaring the condition. Means (B, 3), covariances (B, 3, 3).
     """
     B, n_frames = g.shape[:2]
     A, b = (A2, b2) if n_frames == 3 else (model.G_linear(1 - n_frames), model.e * (1 - n_frames))
@@ -628,11 +586,8 @@ def _square_root_solve(c, g, weight, prior_mean, prior_cov):
 def paper_frames(mu, rho, steps=None):
     """``mu`` and ``rho`` of a track the second-order approximation takes, or a one-line refusal.
 
-    The approximation expands the misfit of all the bearings about one
-    noise-free solution at unit steps with one noise level: a track with a
-    missing bearing, uneven steps or a ``rho`` that changes from frame to frame
-    is refused, naming the argument. A ``rho`` given per frame but the same at
-    every frame of a problem is read as that problem's.
+    A missing bearing, uneven steps or a ``rho`` that changes from frame to
+    frame is refused; a ``rho`` per frame, the same at every frame, is one.
 
     Returns
     -------
@@ -673,10 +628,8 @@ def run(
     """Eq. (8): the second-order approximation ``p_s`` at frame ``N``, of one sequence or a batch.
 
     ``p_s(x) = N(x, c, S) p(G^{-2} x)`` with ``S`` from :func:`likelihood_covariance`;
-    the product of two Gaussians is a Gaussian. For ``N > 3`` bearings or
-    process noise, its generalisation (:func:`second_order_batch`, the module docstring).
-    Only the paper's frames (:func:`paper_frames`): no gaps, unit steps, one
-    ``rho`` per problem.
+    for ``N > 3`` or process noise, see the module docstring. Only the paper's
+    frames (:func:`paper_frames`).
 
     {parameters}
     reading : {"derived", "printed"}

@@ -2,27 +2,17 @@
 
 Recommended import: ``from depthcore.studies import scores``.
 
-A :class:`Tally` keeps, for one filter, the running sums of its scores over
-the chunks of trials that :func:`depthcore.studies.monte_carlo.study` streams (so that
-memory does not grow with the number of trials): bias and RMSE of the depth
-and velocity means, coverage of central intervals at :data:`LEVELS` and
-:data:`CALIBRATION_LEVELS`, mean NEES, the Hellinger distance to the optimal
-filter, and the fraction of lost tracks (:func:`lost_tracks`,
-:func:`track_loss`), each with its standard error (:func:`pooled_squares`,
-:func:`mean_se`, :func:`coverage_se`); :func:`detectable_difference` states
-the power of a coverage test; :func:`scores` tallies one chunk at once.
+A :class:`Tally` keeps one filter's running sums of its scores over the
+chunks of trials that :func:`depthcore.studies.monte_carlo.study` streams (its
+memory does not grow with the trials): bias and RMSE, coverage, NEES, the
+Hellinger distance to the optimal filter and the track loss, each with its
+standard error; and, beside the RMSE, what a few far-off trials cannot drive
+(:meth:`Tally.robust_scores`, the medians of :mod:`depthcore.studies.medians`).
+:func:`scores` tallies one chunk at once.
 
-Beside the RMSE, what a few far-off trials cannot drive: the median absolute
-error with a distribution-free 95 % interval, from a histogram of fixed memory
-(:mod:`depthcore.studies.medians`), the count of divergent trials
-(:data:`DIVERGENCE`) and the RMSE over the others, the track loss at
-each threshold of :data:`TRACK_LOSS_LEVELS` with the RMSE over the tracks
-kept, and the ANEES with its chi-square acceptance region (:func:`anees_region`).
-
-:func:`difference_verdict` tests a difference (of two filters' scores, or
-of a score and a bound) two-sided with three outcomes and
-:func:`detectable_shift` states such a test's power; the differences of two
-filters over the same trials and their errors are
+:func:`coverage_test` and :func:`difference_verdict` test a coverage or a
+difference, :func:`detectable_difference` and :func:`detectable_shift` state
+their power; the differences of two filters over the same trials are
 :mod:`depthcore.studies.pairs`'.
 """
 
@@ -38,27 +28,21 @@ from depthcore.studies.trials import Estimates, Trials
 #: Nominal levels of the coverage scores, those of the central 68 % and 95 % intervals.
 LEVELS = (0.68, 0.95)
 
-
 #: Nominal levels of the calibration curve, central intervals from 5 % to 99 %.
 CALIBRATION_LEVELS = tuple(np.round(np.concatenate([np.arange(0.05, 0.951, 0.05), [0.99]]), 2))
-
 
 #: A track is lost when its position error exceeds this fraction of the point's true distance.
 TRACK_LOSS = 0.5
 
-
 #: Confidence of the upper bound on the track-loss probability.
 TRACK_LOSS_CONFIDENCE = 0.95
-
 
 #: The thresholds of :func:`lost_tracks` at which the track loss is also counted.
 TRACK_LOSS_LEVELS = (0.1, 0.25, 0.5, 1.0)
 
-
 #: A trial diverges when its depth error exceeds this multiple of the true depth (or is not
 #: finite): an estimate off by more than the whole distance says nothing of it.
 DIVERGENCE = 1.0
-
 
 #: Every nominal level whose coverage is counted: :data:`LEVELS` and :data:`CALIBRATION_LEVELS`.
 _COVERAGE_LEVELS = tuple(sorted(set(LEVELS) | set(CALIBRATION_LEVELS)))
@@ -67,63 +51,46 @@ _COVERAGE_LEVELS = tuple(sorted(set(LEVELS) | set(CALIBRATION_LEVELS)))
 class Tally:
     """Running sums of one filter's scores over chunks of trials.
 
-    Holds a fixed number of sums and counts, whatever the number of trials:
-    :meth:`add` each chunk's :class:`~depthcore.studies.trials.Estimates`, then read :meth:`scores`.
-    The
-    sums of a chunk are taken with ``numpy.sum`` and added in order, so one
-    chunk gives exactly the means ``numpy.mean`` gives over it, and several
-    chunks agree with one to rounding.
+    :meth:`add` each chunk's :class:`~depthcore.studies.trials.Estimates`, then
+    read :meth:`scores`; one chunk gives exactly ``numpy.mean``'s means, several
+    agree with one to rounding.
 
     Parameters
     ----------
     truth : array_like, shape (3,)
-        True state at time 3 (each chunk's ``Estimates.truth``, where given,
-        takes its place).
+        True state at time 3 (a chunk's ``Estimates.truth`` replaces it).
 
     Attributes
     ----------
     n : int
         Trials added.
-    error : ndarray, shape (2,)
-        Sums over the trials of the depth and velocity errors.
-    squared_error : ndarray, shape (2,)
-        Sums of their squares.
-    sd : ndarray, shape (2,)
-        Sums of the filter's depth and velocity SDs.
+    error, squared_error, sd : ndarray, shape (2,)
+        Sums of the depth and velocity errors, their squares, and the SDs.
     spread : dict of ndarray or float
-        For the standard errors: the sums of squared deviations from their
-        mean (:func:`pooled_squares`) of the errors (``"error"``), their
-        squares (``"squared_error"``), the SDs (``"sd"``), the NEES
-        (``"nees"``) and the Hellinger distances (``"hellinger"``, absent once
-        a chunk has none).
+        Sums of squared deviations (:func:`pooled_squares`) of ``"error"``,
+        ``"squared_error"``, ``"sd"``, ``"nees"`` and ``"hellinger"`` (absent
+        once a chunk has none).
     covered : ndarray of int, shape (2, L)
-        Trials whose central interval holds the true depth and velocity, at
-        each of the ``L`` levels of :data:`LEVELS` and :data:`CALIBRATION_LEVELS`.
+        Trials covered at each level of :data:`LEVELS` and :data:`CALIBRATION_LEVELS`.
     nees : float
-        Sum of the NEES.
     hellinger : float or None
-        Sum of the Hellinger distances; ``None`` once a chunk has none.
+        ``None`` once a chunk has none.
     lost : int
         Trials whose track is lost (:func:`lost_tracks`).
     absolute : tuple of AbsoluteErrors
-        The depth and velocity absolute errors, binned
-        (:class:`~depthcore.studies.medians.AbsoluteErrors`).
+        The depth and velocity absolute errors, binned.
     kept : dict
-        Over the trials kept by each rule, ``"divergent"`` (the depth error
-        within :data:`DIVERGENCE` times the true depth) and each threshold of
-        :data:`TRACK_LOSS_LEVELS`: ``{"n", "squared_error" (2,), "spread" (2,)}``,
-        the trials kept, the sums of their squared depth and velocity errors
-        and those sums' squared deviations (:func:`pooled_squares`).
+        For ``"divergent"`` (:func:`divergent`) and each threshold of
+        :data:`TRACK_LOSS_LEVELS`, over the trials kept: ``{"n",
+        "squared_error" (2,), "spread" (2,)}``.
     nees_outside : int
-        Trials whose NEES lies outside the chi-square(3) region at
-        :data:`~depthcore.studies.medians.INTERVAL_LEVEL` (:func:`anees_region` of
-        one trial).
+        Trials outside the one-trial :func:`anees_region`.
     """
 
     def __init__(self, truth):
         self.truth = checks.finite_array(truth, "truth", (3,))
         self.n = 0
-        self.error = np.zeros(2)  # sums of estimate - truth, depth and velocity
+        self.error = np.zeros(2)
         self.squared_error = np.zeros(2)
         self.sd = np.zeros(2)
         self.covered = np.zeros((2, len(_COVERAGE_LEVELS)), dtype=np.int64)
@@ -334,21 +301,16 @@ def refused_scores(refused: int, answered: int) -> dict:
 def pooled_squares(n, total, squares, values):
     """The sum of squared deviations from the mean, with one more chunk of values pooled in.
 
-    Chan, Golub and LeVeque's pairwise update: with ``n`` earlier values of
-    sum ``total`` and sum of squared deviations ``squares``, and a chunk of
-    ``m`` values of mean ``b`` and sum of squared deviations ``s_b``,
-    ``squares + s_b + (b - total / n)**2 n m / (n + m)``. Unlike the sum of
-    squares less ``n`` times the squared mean, no two large numbers are
-    subtracted, so the result does not depend on the chunks beyond rounding.
+    Chan, Golub and LeVeque's pairwise update, ``squares + s_b + (b - total /
+    n)**2 n m / (n + m)`` for a chunk of ``m`` values of mean ``b`` and squared
+    deviations ``s_b``: no two large numbers are subtracted.
 
     Parameters
     ----------
     n : int
         Earlier values, >= 0.
-    total : float or ndarray, shape (...)
-        Their sum (ignored when ``n`` is 0).
-    squares : float or ndarray, shape (...)
-        Their sum of squared deviations from their mean.
+    total, squares : float or ndarray, shape (...)
+        Their sum (ignored when ``n`` is 0) and sum of squared deviations.
     values : ndarray, shape (m, ...)
         The chunk, ``m >= 1``.
 
@@ -365,10 +327,7 @@ def pooled_squares(n, total, squares, values):
 
 
 def errors_and_sds(est: Estimates, truth) -> tuple:
-    """Each trial's depth and velocity errors and stated SDs, both shape (n, 2).
-
-    ``truth`` (3,) is the true state, which ``est.truth``, where given, replaces.
-    """
+    """Each trial's depth and velocity errors and stated SDs, (n, 2), about ``truth`` (3,)."""
     full = est.mean - (truth if est.truth is None else est.truth)
     return full[:, 1:], np.sqrt(est.cov[:, (1, 2), (1, 2)])
 
@@ -381,7 +340,6 @@ def interval_holds(cdf, level) -> np.ndarray:
     cdf : array_like, shape (...)
         The estimate's CDF at the truth (its PIT value).
     level : float
-        Nominal level, in (0, 1).
 
     Returns
     -------
@@ -391,18 +349,13 @@ def interval_holds(cdf, level) -> np.ndarray:
 
 
 def mean_se(squares, n: int) -> float:
-    """Standard error ``sqrt(s**2 / n)`` of a mean over ``n`` independent trials.
-
-    ``s**2 = squares / (n - 1)`` is the trials' sample variance, from the sum
-    of squared deviations from their mean (:func:`pooled_squares`); 0 for one
-    trial (no spread to estimate).
+    """Standard error ``sqrt(s**2 / n)`` of a mean over ``n`` independent trials (0 for one).
 
     Parameters
     ----------
     squares : float
-        Sum of squared deviations from the mean, >= 0.
+        Sum of squared deviations from the mean (:func:`pooled_squares`), >= 0.
     n : int
-        Trials, >= 1.
 
     Returns
     -------
@@ -414,19 +367,13 @@ def mean_se(squares, n: int) -> float:
 
 
 def lost_tracks(mean, truth, threshold: float = TRACK_LOSS) -> np.ndarray:
-    """Whether each trial's track is lost: its position error beyond ``threshold`` times the range.
-
-    A track is lost when ``|(x_est - x, y_est - y)| > threshold |(x, y)|`` at the
-    last frame (or the estimate is not finite); see the module docstring.
+    """Whether each track is lost: ``|(x_est - x, y_est - y)| > threshold |(x, y)|``, or NaN.
 
     Parameters
     ----------
-    mean : array_like, shape (..., 3)
-        Estimated states ``(x, y, v)``.
-    truth : array_like, shape (..., 3)
-        True states.
+    mean, truth : array_like, shape (..., 3)
+        Estimated and true states ``(x, y, v)``.
     threshold : float
-        > 0.
 
     Returns
     -------
@@ -444,12 +391,10 @@ def track_loss(lost: int, trials: int, confidence: float = TRACK_LOSS_CONFIDENCE
 
     Parameters
     ----------
-    lost : int
-        Tracks lost, ``0 <= lost <= trials``.
-    trials : int
-        ``n >= 1``.
+    lost, trials : int
+        Tracks lost, ``0 <= lost <= n``, of ``n >= 1``.
     confidence : float
-        Of the one-sided upper bound, in (0, 1).
+        Of the one-sided upper bound.
 
     Returns
     -------
@@ -497,12 +442,7 @@ def divergent(depth, true_depth, threshold: float = DIVERGENCE) -> np.ndarray:
 
 
 def fraction_of(count: int, trials: int, confidence: float = TRACK_LOSS_CONFIDENCE) -> dict:
-    """A fraction of trials, its binomial SE and its exact one-sided upper bound.
-
-    As :func:`track_loss`: ``{"fraction", "se", "upper"}``, ``se`` the
-    binomial ``sqrt(p (1 - p) / n)`` and ``upper`` the Clopper-Pearson bound
-    at ``confidence`` (useful when ``count`` is 0, where ``se`` is 0).
-    """
+    """``{"fraction", "se", "upper"}`` of ``count`` of ``trials``, as in :func:`track_loss`."""
     t = track_loss(count, trials, confidence)
     return {"fraction": t["fraction"], "se": t["se"], "upper": t["upper"]}
 
@@ -510,20 +450,14 @@ def fraction_of(count: int, trials: int, confidence: float = TRACK_LOSS_CONFIDEN
 def anees_region(trials: int, dim: int = 3, level: float = INTERVAL_LEVEL) -> tuple:
     """The two-sided acceptance region of the ANEES of ``trials`` trials of a consistent filter.
 
-    For a filter whose errors follow its covariance, each trial's NEES is
-    chi-square with ``dim`` degrees of freedom, so ``M`` times the average of
-    ``M`` independent trials' NEES (the ANEES) is chi-square with ``M dim``
-    (Bar-Shalom, Li and Kirubarajan 2001, section 5.4). The region holds the
-    ANEES with probability ``level``.
+    ``M`` times the ANEES of ``M`` trials is chi-square with ``M dim`` degrees
+    of freedom (Bar-Shalom, Li and Kirubarajan 2001, section 5.4).
 
     Parameters
     ----------
-    trials : int
-        ``M >= 1``.
-    dim : int
-        The state's dimension, >= 1.
+    trials, dim : int
+        ``M >= 1`` and the state's dimension.
     level : float
-        In (0, 1).
 
     Returns
     -------
@@ -545,15 +479,12 @@ def coverage_se(level, trials) -> np.ndarray:
 
     Parameters
     ----------
-    level : float or array_like
-        Nominal levels ``p`` in (0, 1).
-    trials : int or array_like
-        Independent trials ``n >= 1``, broadcast against ``level``.
+    level, trials : float or array_like
+        Nominal levels ``p`` in (0, 1) and trials ``n >= 1``, broadcast.
 
     Returns
     -------
     ndarray
-        The standard error of a calibrated filter's coverage.
     """
     level = np.asarray(level, dtype=float)
     return np.sqrt(level * (1 - level) / trials)
@@ -562,19 +493,15 @@ def coverage_se(level, trials) -> np.ndarray:
 def trials_for_se(se: float, level: float = 0.68, step: int = 100) -> int:
     """The fewest trials, a multiple of ``step``, whose coverage SE at ``level`` is at most ``se``.
 
-    The inverse of :func:`coverage_se`: ``n = step * ceil(p (1 - p) / (se^2 step))``
-    for ``p = level``; 2,200 trials bring a 68 % coverage's SE to 0.01
-    (0.00995), which is what a verdict of :func:`coverage_test` between a
-    calibrated filter and one a few points off needs.
+    The inverse of :func:`coverage_se`; 2,200 trials bring a 68 % coverage's
+    SE to 0.01 (0.00995).
 
     Parameters
     ----------
     se : float
         The largest standard error, > 0.
     level : float
-        Nominal level ``p``, in (0, 1).
     step : int
-        Trials are counted in multiples of it, >= 1.
 
     Returns
     -------
@@ -593,20 +520,14 @@ def trials_for_se(se: float, level: float = 0.68, step: int = 100) -> int:
 def proportion_se(covered, trials) -> np.ndarray:
     """Standard error of a coverage estimated from ``covered`` of ``trials`` trials.
 
-    The binomial ``sqrt(p (1 - p) / n)`` at the Agresti-Coull centre
-    ``p = (k + 2) / (n + 4)``, over ``n + 4`` trials: it agrees with the
-    plug-in ``sqrt(c (1 - c) / n)`` (``c = k / n``) to a relative ``O(1 / n)``
-    inside the range, but stays positive when no trial or every trial is
-    covered, where the plug-in says 0 and a reader would take the coverage
-    for exact (``k = 0`` of 150: 0.009, about a third of the rule of three's
-    95 % bound ``3 / n``).
+    The binomial ``sqrt(p (1 - p) / n)`` at the Agresti-Coull centre ``p = (k +
+    2) / (n + 4)``, over ``n + 4`` trials: the plug-in's to ``O(1 / n)``, but
+    positive when no trial or every trial is covered (``k = 0`` of 150: 0.009).
 
     Parameters
     ----------
-    covered : int or array_like
-        Covered trials ``k``, from 0 to ``n``.
-    trials : int or array_like
-        Trials ``n >= 1``, broadcast against ``covered``.
+    covered, trials : int or array_like
+        Covered trials ``k`` of ``n >= 1``, broadcast.
 
     Returns
     -------
@@ -618,9 +539,8 @@ def proportion_se(covered, trials) -> np.ndarray:
     return np.sqrt(centre * (1.0 - centre) / (n + 4.0))
 
 
-#: The size and power at which :func:`detectable_difference` states a coverage test's reach.
+#: The size at which :func:`detectable_difference` states a coverage test's reach.
 TEST_FALSE_ALARM = 0.01
-
 
 #: The power at which :func:`detectable_difference` states a coverage test's reach.
 TEST_POWER = 0.8
@@ -631,20 +551,14 @@ def detectable_difference(
 ):
     """The smallest coverage error that a two-sided binomial test finds with a given power.
 
-    A coverage ``c`` of ``n`` trials is tested against its nominal level
-    ``p`` by ``|c - p| > z_a sqrt(p (1 - p) / n)``, ``z_a`` the standard
-    normal's upper ``false_alarm / 2`` point. In the normal approximation a
-    filter whose true coverage is ``p ± d`` fails the test with probability
-    ``power`` (ignoring the far tail) when
-    ``d = (z_a + z_b) sqrt(p (1 - p) / n)``, ``z_b`` the standard normal's
-    ``power`` quantile.
+    :func:`detectable_shift` of :func:`coverage_se`: ``d = (z_a + z_b) sqrt(p
+    (1 - p) / n)``, a true coverage ``p ± d`` failing the test with probability
+    ``power``.
 
     Parameters
     ----------
-    level : float or array_like
-        Nominal levels ``p`` in (0, 1).
-    trials : int or array_like
-        ``n >= 1``, broadcast against ``level``.
+    level, trials : float or array_like
+        As :func:`coverage_se` takes them.
     false_alarm, power : float
         The test's size and power, as :func:`detectable_shift` takes them.
 
@@ -659,16 +573,11 @@ def detectable_difference(
 def scores(trials: Trials, est: Estimates) -> dict:
     """Bias, RMSE, coverage, NEES and Hellinger distance of one filter, each with its SE.
 
-    Every score ``s`` has its Monte Carlo standard error beside it as
-    ``s_se`` (the Hellinger distance's as ``hellinger_depth["se"]``): the
-    sample SD over the trials divided by ``sqrt(n)`` for the means (bias, mean
-    SD, NEES, Hellinger distance), ``sqrt(c (1 - c) / n)`` for a coverage
-    ``c``, and the delta method's ``se(MSE) / (2 RMSE)`` for the RMSE.
-
-    ``calibration`` holds the coverage of the central intervals at every level
-    of :data:`CALIBRATION_LEVELS`: a calibrated filter's curve is the diagonal.
-    ``hellinger_depth`` is ``{"mean": ...}``, or ``None`` when the estimates
-    have no Hellinger distances (the optimal filter was not run).
+    Every score ``s`` has its Monte Carlo SE beside it as ``s_se``
+    (:func:`mean_se`, :func:`proportion_se`, the delta method's ``se(MSE) /
+    (2 RMSE)`` for the RMSE). ``calibration`` holds the coverage at every level
+    of :data:`CALIBRATION_LEVELS`; ``hellinger_depth`` is ``{"mean", "se"}``,
+    or ``None`` without the optimal filter.
     """
     tally = Tally(trials.truth)
     tally.add(est)
@@ -685,20 +594,15 @@ def difference_verdict(difference, se, z: float = TEST_Z) -> np.ndarray:
 
     Parameters
     ----------
-    difference : array_like, shape (...)
-        An estimate less its null value (a paired difference of two filters'
-        scores, or a score less a bound).
-    se : array_like, shape (...)
-        Its standard error, >= 0.
+    difference, se : array_like, shape (...)
+        An estimate less its null value, and its standard error (>= 0).
     z : float
         Critical value, > 0 (default the 1 % point, :data:`TEST_Z`).
 
     Returns
     -------
     ndarray of int, shape (...)
-        ``1`` where ``difference > z se`` (significantly above), ``-1`` where
-        ``difference < -z se`` (significantly below), ``0`` where the test
-        detects no difference.
+        ``1`` where ``difference > z se``, ``-1`` where ``difference < -z se``, else ``0``.
     """
     d = np.asarray(difference, dtype=float)
     se = np.asarray(se, dtype=float)
@@ -721,10 +625,8 @@ def detectable_shift(se, false_alarm: float = TEST_FALSE_ALARM, power: float = T
     ----------
     se : float or array_like
         The standard error of the difference tested.
-    false_alarm : float
-        The test's size, in (0, 1).
-    power : float
-        In (0, 1).
+    false_alarm, power : float
+        The test's size and power.
 
     Returns
     -------
@@ -744,12 +646,8 @@ COVERAGE_Z = TEST_Z
 def coverage_test(coverage, level: float, trials, z: float = COVERAGE_Z) -> dict:
     """The binomial test of a coverage against its nominal level, normal approximation.
 
-    A filter whose central ``level`` interval holds the truth with probability
-    ``level`` covers it in a fraction of ``n`` independent trials with standard
-    error ``sqrt(level (1 - level) / n)``. The coverage is called
-    ``"calibrated"`` when it lies within ``z`` standard errors of the level
-    (a two-sided test at 1 % for the default ``z``), ``"overconfident"`` when
-    below (intervals too narrow), ``"underconfident"`` when above.
+    ``"calibrated"`` within ``z`` standard errors (:func:`coverage_se`) of the
+    level, ``"overconfident"`` below (intervals too narrow), ``"underconfident"`` above.
 
     Parameters
     ----------
