@@ -106,9 +106,7 @@ DIM = 3
 
 @dataclass(frozen=True)
 class SigmaPoints:
-    """Scaled sigma points of Julier and Uhlmann / Wan and van der Merwe.
-
-    See the module docstring for the points and weights.
+    """Scaled sigma points of Julier and Uhlmann / Wan and van der Merwe (module docstring).
 
     Attributes
     ----------
@@ -232,13 +230,10 @@ class Innovation(NamedTuple):
 
     Attributes
     ----------
-    mean : ndarray, shape (...)
-        ``z = sum_i Wm_i Z_i``, the predicted measurement.
-    var : ndarray, shape (...)
-        ``s = rho**2 + sum_i Wc_i (Z_i - z)**2``, the innovation's variance: the
-        unscented predictive density of the measurement is ``N(z, s)``.
+    mean, var : ndarray, shape (...)
+        ``z`` and ``s`` of the module docstring: the predictive is ``N(z, s)``.
     cross : ndarray, shape (..., 3)
-        ``c = sum_i Wc_i (X_i - n) (Z_i - z)``, its cross-covariance with the state.
+        ``c``, its cross-covariance with the state.
     """
 
     mean: np.ndarray
@@ -253,14 +248,12 @@ def innovation(
 
     Parameters
     ----------
-    n : array_like, shape (..., 3)
-        Predicted mean.
-    C : array_like, shape (..., 3, 3)
-        Predicted covariance, symmetric positive definite.
+    n, C : array_like, shape (..., 3) and (..., 3, 3)
+        Predicted mean and covariance (positive definite).
     rho : float or array_like, shape (...)
         Noise standard deviation, > 0.
     h : callable
-        Maps states of shape ``(..., 3)`` to measurements of shape ``(...)``.
+        Maps states ``(..., 3)`` to measurements ``(...)``.
     sigma_points : SigmaPoints
     points : ndarray, shape (..., 2 dim + 1, 3), optional
         ``sigma_points.points(n, C)``, when the caller has them already.
@@ -294,24 +287,14 @@ def measurement_update(
 ) -> MeanAndCov:
     """Incorporate one scalar measurement ``mu = h(x) + w`` into ``N(n, C)``, batched.
 
-    The measurement update of [wan2000]_, section 3, for a scalar measurement
-    with noise variance ``rho**2``; the equations are in the module docstring
-    (:func:`innovation`, then the gain).
+    [wan2000]_, section 3; the equations are in the module docstring.
 
     Parameters
     ----------
-    n : array_like, shape (..., 3)
-        Predicted mean.
-    C : array_like, shape (..., 3, 3)
-        Predicted covariance, symmetric positive definite.
+    n, C, rho, h, sigma_points
+        As for :func:`innovation` (``h`` by default ``x / y``).
     mu : float or array_like, shape (...)
         The measurement.
-    rho : float or array_like, shape (...)
-        Noise standard deviation, > 0.
-    h : callable
-        Maps states of shape ``(..., 3)`` to measurements of shape ``(...)``;
-        default the projection ``x / y``.
-    sigma_points : SigmaPoints
 
     Returns
     -------
@@ -388,16 +371,12 @@ def bearing_predictive(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The UKF's predictive density of a bearing, ``N(z, s)``: :func:`innovation` of ``x / y``.
 
-    Mean ``z = sum_i Wm_i Z_i`` and variance ``s = rho**2 + sum_i Wc_i (Z_i -
-    z)**2`` of the projected sigma points ``Z_i = x_i / y_i`` of ``N(n, C)``,
-    the moments :func:`update` uses.
+    The moments :func:`update` uses.
 
     Parameters
     ----------
-    n : array_like, shape (..., 3)
-    C : array_like, shape (..., 3, 3)
-    rho : float or array_like, shape (...)
-    sigma_points : SigmaPoints
+    n, C, rho, sigma_points
+        As for :func:`innovation`.
     allow_behind_camera : bool
         As for :func:`update` (by default only a sigma point at depth 0 is refused).
 
@@ -419,12 +398,9 @@ class Step(NamedTuple):
     mean : ndarray, shape (..., 3)
         After the frame (the prediction where the bearing is missing or gated).
     cov : ndarray, shape (..., 3, 3)
-    log_predictive : ndarray, shape (...)
-        The bearing's log density under the unscented predictive ``N(z, s)``;
-        NaN where it is missing.
-    tail : ndarray, shape (...)
-        The bearing's two-sided tail probability under the same predictive;
-        NaN where it is missing.
+    log_predictive, tail : ndarray, shape (...)
+        The bearing's log density and two-sided tail probability under the
+        unscented predictive ``N(z, s)``; NaN where it is missing.
     gated : ndarray of bool, shape (...)
         Where the gate skipped the bearing.
     behind : ndarray of bool, shape (...)
@@ -454,26 +430,19 @@ def step(
 ) -> Step:
     """One frame's update, masked and gated, batched: report the bearing, then incorporate it.
 
-    Where the bearing is present (``present`` and not ``NaN``) the unscented
-    transform of ``N(n, C)`` through ``h`` (:func:`innovation`) gives the
-    bearing's predictive density ``N(z, s)``; its log density and two-sided
-    tail probability are reported (:func:`depthcore.problem.predictive.gaussian`),
-    a bearing whose tail is below ``gate`` is skipped, and the others are
-    incorporated as by :func:`measurement_update`. Elsewhere the prediction is
-    kept. A sigma point at ``depth(X) == 0`` is refused where the bearing is
-    present; one at ``depth(X) < 0`` is flagged in ``behind``, and refused
-    where it would enter an update unless ``allow_behind_camera``.
+    Where the bearing is present (``present``, not ``NaN``) its predictive
+    ``N(z, s)`` (:func:`innovation`) is reported
+    (:func:`depthcore.problem.predictive.gaussian`), a tail below ``gate`` is
+    skipped, the others are incorporated as by :func:`measurement_update`.
+    A sigma point at ``depth(X) == 0`` is refused; one at ``depth(X) < 0`` is
+    flagged in ``behind``, and refused in an update unless ``allow_behind_camera``.
 
     Parameters
     ----------
-    n : ndarray, shape (..., 3)
-        Predicted mean.
-    C : ndarray, shape (..., 3, 3)
-        Predicted covariance.
-    mu : array_like, shape (...)
-        The bearing, ``NaN`` where missing.
-    rho : array_like, shape (...)
-        Its noise SD, > 0.
+    n, C : ndarray, shape (..., 3) and (..., 3, 3)
+        Predicted mean and covariance.
+    mu, rho : array_like, shape (...)
+        The bearing (``NaN`` where missing) and its noise SD.
     present : bool or array_like of bool, shape (...)
     gate : float or None
         Checked by :func:`depthcore.problem.predictive.gate`.
@@ -556,13 +525,9 @@ class UKFHistory(History):
     means : ndarray, shape (..., N, 3)
     covs : ndarray, shape (..., N, 3, 3)
     updates : depthcore.problem.predictive.Updates
-        Per frame (..., N), the bearing's log density and tail probability under
-        the unscented predictive ``N(z, s)``, and whether the gate skipped it.
+        Per frame (..., N), as :class:`Step` reports them.
     behind : ndarray of bool, shape (..., N)
-        Where a sigma point of the Gaussian the transform used at that frame
-        lay at depth ``y <= 0``, behind the camera: the transform then averaged
-        ``x / y`` across its pole (possible only with ``allow_behind_camera``,
-        or at a frame whose bearing the gate skipped). False at a missing frame.
+        :class:`Step`'s ``behind`` at each frame.
     """
 
     behind = None
@@ -593,11 +558,8 @@ def run(
 ) -> UKFHistory:
     """Run the UKF over the measurements, batched like :func:`depthcore.kalman.ekf.run`.
 
-    Incorporate ``mu1`` into the prior (the density of the state at time 1),
-    then, for each further frame, predict exactly with Eq. (10) over its step
-    (plus ``q**2 s`` on the velocity's variance, :func:`depthcore.kalman.ekf.predict`)
-    and incorporate its bearing (:func:`step`): a missing bearing (``NaN``) or
-    one the gate skips leaves the prediction, row by row.
+    ``mu1`` updates the prior; each further frame is predicted exactly, Eq.
+    (10) (:func:`depthcore.kalman.ekf.predict`), then updated by :func:`step`.
 
     {parameters}
     sigma_points : SigmaPoints or None
@@ -608,10 +570,7 @@ def run(
     Returns
     -------
     UKFHistory
-        ``means`` (..., N, 3): ``means[..., i, :]`` is the mean after
-        frame ``i + 1``; ``covs`` (..., N, 3, 3); ``updates`` (..., N); and
-        ``behind`` (..., N), where sigma points lay behind the camera
-        (``went_behind`` (...): at any frame).
+        Entry ``i`` after frame ``i + 1``.
     """
     sigma_points = rule(sigma_points)
     track = checked_track(mu, rho, prior_mean, prior_cov, steps)
