@@ -33,11 +33,10 @@ from its innovations, and
 The exact posterior at frame ``N`` is the mixture over depth nodes ``y_j`` (depths
 at frame 1, fixed as frames are added) with quadrature weights ``w_j`` of the
 filters' Gaussians, with probabilities proportional to ``w_j N(y_j; m_y, P_yy)
-L(y_j)`` (:mod:`depthcore.exact.mixture`). A frame more updates each node's filter
-and log weight (:func:`step`); the past is not revisited. The nodes must be
-positive (the "front" support); the nodes' placement is
-:mod:`depthcore.exact.posterior`'s. At ``N = 3``, ``q = 0`` the depth density is
-that of Eqs. (14)-(16) (:func:`depthcore.exact.optimal.conditional`) up to a constant.
+L(y_j)`` (:mod:`depthcore.exact.mixture`; the nodes, positive, are placed by
+:mod:`depthcore.exact.posterior`). A frame more updates each node's filter and
+log weight (:func:`step`). At ``N = 3``, ``q = 0`` the depth density is that of
+Eqs. (14)-(16) (:func:`depthcore.exact.optimal.conditional`) up to a constant.
 
 References
 ----------
@@ -78,8 +77,7 @@ class Bank(NamedTuple):
     mu : ndarray, shape (..., N)
         ``NaN`` at a missing frame.
     rho, process_noise : ndarray, shape (...) or ()
-    prior_mean : ndarray, shape (..., 3)
-    prior_cov : ndarray, shape (..., 3, 3)
+    prior_mean, prior_cov : ndarray, shapes (..., 3) and (..., 3, 3)
     frame_steps : ndarray, shape (..., N - 1)
         The depth's change from each frame to the next.
     frame_noise : ndarray, shape (..., N)
