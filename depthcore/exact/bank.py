@@ -398,13 +398,11 @@ def filter_bank(
         ``NaN`` at a missing frame.
     rho : float or array_like, shape (...) or (..., N)
         Bearing noise SD, > 0, per problem or per frame.
-    prior_mean : array_like, shape (..., 3)
-    prior_cov : array_like, shape (..., 3, 3)
+    prior_mean, prior_cov : array_like, shapes (..., 3) and (..., 3, 3)
     process_noise : float or array_like, shape (...)
         SD of the lateral acceleration ``a_k``, >= 0.
     history : bool
-        Keep every node's filter at every frame (for
-        :meth:`~depthcore.exact.mixture.Mixture.smoothed`).
+        Keep every node's filter at every frame (for ``Mixture.smoothed``).
     steps : array_like, shape (N - 1,) or (..., N - 1), or None
         The depth's change between frames, > 0 (``None``: unit steps), with
         ``x_{k+1} = x_k + s_k v_k`` and ``a_k ~ N(0, q**2 s_k)``.
