@@ -20,16 +20,11 @@ leave the current filtering distribution invariant,
 
     pi_k(x_1) ~ N(x_1; m, P) [y_1 > 0] prod_{j <= k} p(mu_j | G^{j-1} x_1),
 
-so duplicated particles spread out again over ``pi_k``. Since the motion is
-deterministic (no process noise: the registry, :mod:`depthcore.registry.filters`,
-refuses ``process_noise > 0`` for this filter, whose state is the static
-``x_1``), the time-1 state ``x_1`` is a static parameter of the model and
-``pi_k`` is its posterior given the first ``k`` bearings; the state at frame
-``k`` is ``G^{k-1} x_1``. Every step uses only ``mu_1 .. mu_k``: the filter is
-causal, and its effective sample size after ``mu_k`` measures how well the
-particles drawn so far explain the bearings seen so far. The point is in front
-of the camera at every frame (``y_1 > 0``), the support of
-:func:`depthcore.exact.optimal.run` with ``support="front"``.
+so duplicated particles spread out again over ``pi_k``, the posterior of the
+static ``x_1`` given the first ``k`` bearings (no process noise: the registry
+refuses it); the state at frame ``k`` is ``G^{k-1} x_1``. The filter is
+causal, and the point is in front of the camera at every frame (``y_1 > 0``,
+:func:`depthcore.exact.optimal.run`'s ``support="front"``).
 
 Resampling happens when the ESS falls below ``ess_threshold * N`` (default
 ``0.5``, the usual rule [kong1994]_), with systematic resampling by default

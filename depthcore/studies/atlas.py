@@ -10,15 +10,10 @@ registry that runs there. The truth at time 3 is set by its **parallax**
 paper's Figure 2 does (``p = 0.2``, ``y = 6``); at ``p = 0`` it moves along
 the axis and its bearings say nothing of its depth. The noise ``rho`` is
 counted in pixels of the paper's camera (:data:`PIXEL`, 512 pixels over 30
-degrees), the prior's ``form`` (:data:`FORMS`) is the paper's rule (the
-mean from each trial's noise-free solution, the covariance ``s I``, ``s`` the
-prior scale, the paper's 1000) or one of the forms whose truths are drawn
-from the prior (:mod:`depthcore.studies.priors`: a range prior, a log-uniform
-depth with a speed prior, an inverse-depth prior, each centred on the
-cell's truth, stating its own covariance, so that the prior scale is not an
-axis of theirs), and the point is followed to frame ``N`` (``frames``) where
-every filter is scored. A filter that refuses some trials of a cell is
-scored over those it answers, the refused ones counted apart
+degrees); the prior's ``form`` (:data:`FORMS`) is the paper's rule (covariance
+``s I``, ``s`` the prior scale) or one whose truths are drawn from it, with its
+own covariance (:mod:`depthcore.studies.priors`); every filter is scored at
+frame ``N`` (``frames``), over the trials it answers, refusals counted apart
 (:func:`depthcore.studies.trials.run_filters`).
 
 Each cell says, for each filter (:func:`verdicts`), with a test of the
@@ -39,15 +34,12 @@ cell's own Monte Carlo error (three outcomes: yes, no, undecided):
   The bound is that of one fixed truth, so the forms whose truths are drawn
   have no bound and no such verdict (``None``).
 
-:func:`atlas` runs the cells' chunks as tasks of
-:func:`depthcore.studies.tasks.fold_chunks`, all cells in one stream, so that
-a cluster is kept busy across cells, and folds them in order: each cell's
-running sums are reduced to its summary as its last chunk arrives and then
-dropped, so memory holds a few cells' chunks and every cell's summary, never
-their trials. Cell ``i`` is seeded by the ``i``-th child of the atlas's seed,
-and its result is what ``study`` returns with that seed (:func:`cell_study`);
-the atlas is the same, bit for bit, in one process or on any number of
-workers (its ``cost``, a measurement of time, aside).
+:func:`atlas` runs all cells' chunks in one stream of tasks
+(:func:`depthcore.studies.tasks.fold_chunks`) and folds them in order, each
+cell reduced to its summary as its last chunk arrives: memory never holds
+trials. Cell ``i``, seeded by the ``i``-th child of the seed, is what ``study``
+returns with that seed (:func:`cell_study`); the atlas is the same, bit for
+bit, on any number of workers (its ``cost`` aside).
 
 Two sizes, :data:`SIZES`: the book's (``"book"``) and the full one
 (``"full"``, every axis finer and thousands of trials per cell), whose cost a

@@ -23,15 +23,11 @@ runs every filter, and scores its estimate of the state at the last frame:
 * the mean Hellinger distance from its depth marginal to the optimal one,
   when the optimal filter is among the filters run (it is run only when
   asked for; otherwise the distance is not computed and reported as ``None``);
-* the fraction of lost tracks, counted beside the RMSE as the bearings-only
-  tracking literature does (e.g. [ristic2004]_, chapter 6): a trial's track is
-  lost when the error of its estimated position ``(x, y)`` at the last frame
-  exceeds :data:`~depthcore.studies.scores.TRACK_LOSS` times the true distance of the point from the
-  camera, ``|(x_est - x, y_est - y)| > TRACK_LOSS |(x, y)|`` (a relative
-  threshold, the problem having no natural unit of length), or when the
-  estimate is not finite. Reported with its binomial standard error
-  ``sqrt(p (1 - p) / n)`` and, since that is 0 when no track is lost, the
-  exact (Clopper-Pearson) one-sided 95 % upper bound on the loss probability.
+* the fraction of lost tracks, as the bearings-only tracking literature counts
+  them beside the RMSE (e.g. [ristic2004]_, chapter 6): a position error beyond
+  a fraction of the point's distance, the problem having no natural unit of
+  length (:func:`~depthcore.studies.scores.lost_tracks`), with its binomial SE
+  and exact upper bound (:func:`~depthcore.studies.scores.track_loss`).
 
 Trials whose measurements have no noise-free solution in front of the camera
 (Eq. (7) degenerate or ``c2 <= 2``) cannot run the second-order filter or the
