@@ -88,11 +88,11 @@ def test_environment_yml_pins_the_same_set_as_requirements():
     assert parse_pins(lines, "environment.yml") == requirements_pins()
 
 
-def test_environment_yml_installs_depthcore_and_python_311():
+def test_environment_yml_installs_depthcore_its_book_and_python_311():
     deps = environment_yml()["dependencies"]
     assert "python=3.11" in deps
     assert "pip" in deps
-    assert "-e ." in environment_pip_lines()
+    assert {"-e .", "-e depthbook"} <= set(environment_pip_lines())
 
 
 def test_python_version_file_is_311():
