@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from depthcore.exact.bank import PSI, run_bank
+from depthcore.exact.bank import PSI
 from depthcore.exact.mixture import Smoothed, mixture_moments
 from depthcore.exact.posterior import posterior, update
 from depthcore.exact.tracks import transitions
@@ -196,17 +196,7 @@ def _lagged(posts, lag: int) -> Smoothed:
         if last <= first:
             continue
         b = posts[e - 1].bank
-        h = run_bank(
-            b.nodes,
-            b.mu,
-            b.rho,
-            b.process_noise,
-            b.prior_mean,
-            b.prior_cov,
-            True,
-            b.steps,
-            b.frame_rho,
-        ).history
+        h = b.rerun(b.nodes, history=True).history
         Psi = PSI if b.steps is None else transitions(b.steps)[None]  # (1, N - 1, 2, 2)
         s = np.arange(first, last)
         t = np.minimum(s + lag, N - 1)
