@@ -211,27 +211,11 @@ class Online:
     def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
         """Add the next frame: predict by ``step``, report the bearing, gate it, update.
 
-        Parameters
-        ----------
-        mu : float
-            The bearing; ``NaN`` for a frame without one.
-        rho : float or None
-            Its noise SD (``None``: the filter's ``rho``).
-        step : float
-            The depth's change since the last frame, > 0; ignored (and must be
-            left at 1) at the first frame.
-
-        Returns
-        -------
-        FrameEstimate
+        ``mu``, ``rho`` (``None``: the filter's) and ``step`` as
+        :func:`depthcore.problem.predictive.frame_inputs` checks them; returns a
+        :class:`~depthcore.problem.predictive.FrameEstimate`.
         """
-        mu = _bearing(mu)
-        r = self.rho if rho is None else checks.positive_scalar(rho, "rho")
-        s = checks.positive_scalar(step, "step")
-        if self.frame == 0 and s != 1.0:
-            raise ValueError("step: the first frame has no step before it; leave it at 1")
-        if self.frame >= checks.MAX_FRAMES:
-            raise ValueError(f"mu: at most {checks.MAX_FRAMES} frames")
+        mu, r, s = predictive.frame_inputs(mu, rho, step, self.rho, self.frame)
         nodes = self._nodes
         lat = nodes.lateral.copy()
         if self.frame > 0:
@@ -255,18 +239,7 @@ class Online:
         if not self._resolved():
             self._replace_nodes()
         mean, cov = self._moments()
-        self.current = FrameEstimate(
-            self.frame,
-            mean,
-            cov,
-            float(mean[1]),
-            float(np.sqrt(cov[1, 1])),
-            float(mean[2]),
-            float(np.sqrt(cov[2, 2])),
-            log_pred,
-            tail,
-            gated,
-        )
+        self.current = predictive.frame_estimate(self.frame, mean, cov, log_pred, tail, gated)
         return self.current
 
     def _moments(self, every_other: bool = False):
@@ -385,17 +358,6 @@ def updates(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> predictive.U
     return predictive.Updates(
         out[0].reshape(shape), out[1].reshape(shape), out[2].reshape(shape) == 1.0
     )
-
-
-def _bearing(mu) -> float:
-    """A bearing: a finite number or NaN (a missing frame)."""
-    arr = checks.as_float(mu, "mu")
-    if arr.ndim != 0:
-        raise ValueError(f"mu must be one bearing (a number), got shape {arr.shape}")
-    value = float(arr)
-    if np.isinf(value):
-        raise ValueError(f"mu must be finite or NaN (a missing frame), got {value!r}")
-    return value
 
 
 def _predict(lat, s: float, q2: float) -> None:

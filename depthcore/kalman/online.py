@@ -76,38 +76,9 @@ class _Online:
         self.frame = 0
         self.current: FrameEstimate | None = None
 
-    def _frame(self, mu, rho, step):
-        """Check one frame's ``mu``, ``rho`` and ``step``; return them as floats."""
-        arr = checks.as_float(mu, "mu")
-        if arr.ndim != 0:
-            raise ValueError(f"mu must be one bearing (a number), got shape {arr.shape}")
-        mu = float(arr)
-        if np.isinf(mu):
-            raise ValueError(f"mu must be finite or NaN (a missing frame), got {mu!r}")
-        if rho is None and self.rho is None:
-            raise ValueError("rho is needed: give it to start or to this update")
-        r = self.rho if rho is None else checks.positive_scalar(rho, "rho")
-        s = checks.positive_scalar(step, "step")
-        if self.frame == 0 and s != 1.0:
-            raise ValueError("step: the first frame has no step before it; leave it at 1")
-        if self.frame >= checks.MAX_FRAMES:
-            raise ValueError(f"mu: at most {checks.MAX_FRAMES} frames")
-        return mu, r, s
-
     def _report(self, mean, cov, log_p, tail, gated) -> FrameEstimate:
         self.frame += 1
-        self.current = FrameEstimate(
-            self.frame,
-            mean,
-            cov,
-            float(mean[1]),
-            float(np.sqrt(cov[1, 1])),
-            float(mean[2]),
-            float(np.sqrt(cov[2, 2])),
-            float(log_p),
-            float(tail),
-            bool(gated),
-        )
+        self.current = predictive.frame_estimate(self.frame, mean, cov, log_p, tail, gated)
         return self.current
 
 
@@ -140,21 +111,11 @@ class EKF(_Online):
     def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
         """Add the next frame: predict by ``step``, report the bearing, gate it, update.
 
-        Parameters
-        ----------
-        mu : float
-            The bearing; ``NaN`` for a frame without one.
-        rho : float or None
-            Its noise SD (``None``: the filter's ``rho``).
-        step : float
-            The depth's change since the last frame, > 0; ignored (and must be
-            left at 1) at the first frame.
-
-        Returns
-        -------
-        FrameEstimate
+        ``mu``, ``rho`` (``None``: the filter's) and ``step`` as
+        :func:`depthcore.problem.predictive.frame_inputs` checks them; returns a
+        :class:`~depthcore.problem.predictive.FrameEstimate`.
         """
-        mu, r, s = self._frame(mu, rho, step)
+        mu, r, s = predictive.frame_inputs(mu, rho, step, self.rho, self.frame)
         n, R = self._mean, self._root
         if self.frame > 0:
             n, R = ekf.information_predict(n, R, self.process_noise, s)
@@ -199,7 +160,7 @@ class UKF(_Online):
 
     def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
         """Add the next frame, as :meth:`EKF.update` does."""
-        mu, r, s = self._frame(mu, rho, step)
+        mu, r, s = predictive.frame_inputs(mu, rho, step, self.rho, self.frame)
         n, C = self._mean, self._cov
         if self.frame > 0:
             n, C = ekf.predict(n, C, self.process_noise, s)

@@ -17,8 +17,9 @@ particle filters (one per particle). Each update reports two numbers of it:
 
 A gate ``g`` (a probability, e.g. ``1e-3``) skips every bearing whose tail
 probability is below ``g``: the filter predicts through that frame as through
-a missing one, and records that it did. An online filter answers each frame
-with a :class:`FrameEstimate`: its state's moments and these reports.
+a missing one, and records that it did. An online filter takes each frame's
+inputs as :func:`frame_inputs` checks them and answers with a
+:class:`FrameEstimate` (:func:`frame_estimate`): its state's moments and these reports.
 """
 
 from __future__ import annotations
@@ -74,6 +75,60 @@ class FrameEstimate(NamedTuple):
     log_predictive: float
     tail: float
     gated: bool
+
+
+def frame_inputs(mu, rho, step, default_rho, frame: int) -> tuple[float, float, float]:
+    """One frame of an online filter, checked: its bearing, noise SD and step.
+
+    Parameters
+    ----------
+    mu : float
+        The bearing; ``NaN`` for a frame without one.
+    rho : float or None
+        Its noise SD, > 0 (``None``: ``default_rho``).
+    step : float
+        The depth's change since the last frame, > 0; at the first frame it
+        must be left at 1.
+    default_rho : float or None
+        The filter's own noise SD.
+    frame : int
+        Frames seen before this one.
+
+    Returns
+    -------
+    mu, rho, step : float
+    """
+    arr = checks.as_float(mu, "mu")
+    if arr.ndim != 0:
+        raise ValueError(f"mu must be one bearing (a number), got shape {arr.shape}")
+    mu = float(arr)
+    if np.isinf(mu):
+        raise ValueError(f"mu must be finite or NaN (a missing frame), got {mu!r}")
+    if rho is None and default_rho is None:
+        raise ValueError("rho is needed: give it to start or to this update")
+    r = default_rho if rho is None else checks.positive_scalar(rho, "rho")
+    s = checks.positive_scalar(step, "step")
+    if frame == 0 and s != 1.0:
+        raise ValueError("step: the first frame has no step before it; leave it at 1")
+    if frame >= checks.MAX_FRAMES:
+        raise ValueError(f"mu: at most {checks.MAX_FRAMES} frames")
+    return mu, r, s
+
+
+def frame_estimate(frame: int, mean, cov, log_predictive, tail, gated) -> FrameEstimate:
+    """The :class:`FrameEstimate` of the state's ``mean`` and ``cov`` after ``frame`` frames."""
+    return FrameEstimate(
+        frame,
+        mean,
+        cov,
+        float(mean[1]),
+        float(np.sqrt(cov[1, 1])),
+        float(mean[2]),
+        float(np.sqrt(cov[2, 2])),
+        float(log_predictive),
+        float(tail),
+        bool(gated),
+    )
 
 
 def gate(value, name: str = "gate"):

@@ -74,19 +74,9 @@ class OnlineFilter:
     def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
         """Add the next frame's bearing.
 
-        Parameters
-        ----------
-        mu : float
-            The bearing; ``NaN`` for a frame without one.
-        rho : float or None
-            Its noise SD, > 0 (``None``: the one given to :func:`start`).
-        step : float
-            The depth's change since the last frame, > 0; at the first frame it
-            must be left at 1.
-
-        Returns
-        -------
-        FrameEstimate
+        ``mu``, ``rho`` (``None``: the one given to :func:`start`) and ``step`` as
+        :func:`depthcore.problem.predictive.frame_inputs` checks them; returns a
+        :class:`~depthcore.problem.predictive.FrameEstimate`.
         """
         self.current = self._inner.update(mu, rho=rho, step=step)
         return self.current
