@@ -89,16 +89,10 @@ class Online:
 
     Parameters
     ----------
-    prior_mean : array_like, shape (3,)
-        Prior mean of ``(x_1, y_1, v_1)``.
-    prior_cov : array_like, shape (3, 3)
-        Prior covariance, symmetric positive definite.
+    prior_mean, prior_cov, process_noise, gate
+        As for :class:`depthcore.kalman.online.EKF`.
     rho : float
         The bearing noise SD, > 0, used where :meth:`update` is given none.
-    process_noise : float
-        ``q >= 0``: the velocity's variance grows by ``q**2 s`` over a step ``s``.
-    gate : float or None
-        Skip a bearing whose two-sided predictive tail probability is below it.
     rtol : float
         The quadrature's tolerance for the nodes (mean and SD relative to the SD).
     """

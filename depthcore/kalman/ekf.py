@@ -142,7 +142,15 @@ def bearing_predictive(n, C, rho) -> tuple[np.ndarray, np.ndarray]:
     mean, var : ndarray, shape (...)
     """
     n = np.asarray(n, dtype=float)
-    h = _gradient(n)
+    return linearised_predictive(n, _gradient(n), C, rho)
+
+
+def linearised_predictive(n, h, C, rho) -> tuple[np.ndarray, np.ndarray]:
+    """A bearing's predictive density ``N(n1 / n2, h^T C h + rho**2)``, linearised by ``h``.
+
+    ``h`` (..., 3) is the projection's gradient at ``n`` (Eq. (11)); ``n``, ``C``,
+    ``rho`` and the returns are as for :func:`bearing_predictive`.
+    """
     hCh = np.einsum("...i,...ij,...j->...", h, np.asarray(C, dtype=float), h)
     return model.project(n), hCh + np.asarray(rho, dtype=float) ** 2
 

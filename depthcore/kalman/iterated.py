@@ -55,7 +55,7 @@ from typing import NamedTuple
 import numpy as np
 
 from depthcore.kalman import linear
-from depthcore.kalman.ekf import predict
+from depthcore.kalman.ekf import linearised_predictive, predict
 from depthcore.kalman.second_order import (
     bearing_rows,
     damped_step,
@@ -181,23 +181,12 @@ def bearing_predictive(n, C, rho) -> tuple[np.ndarray, np.ndarray]:
     """The predictive density of a bearing, linearised at the prediction as the EKF's.
 
     ``N(n1 / n2, h^T C h + rho**2)`` with ``h`` from Eq. (11) at ``n``: the
-    first iterate's linearisation, before the bearing is seen.
-
-    Parameters
-    ----------
-    n : array_like, shape (..., 3)
-    C : array_like, shape (..., 3, 3)
-    rho : float or array_like, shape (...)
-
-    Returns
-    -------
-    mean, var : ndarray, shape (...)
+    first iterate's linearisation, before the bearing is seen. Parameters and
+    returns as for :func:`depthcore.kalman.ekf.bearing_predictive`.
     """
     n = np.asarray(n, dtype=float)
     _check_depth(n)
-    h = model.observation_vector(n)
-    hCh = np.einsum("...i,...ij,...j->...", h, np.asarray(C, dtype=float), h)
-    return model.project(n), hCh + np.asarray(rho, dtype=float) ** 2
+    return linearised_predictive(n, model.observation_vector(n), C, rho)
 
 
 @signature.documented
