@@ -115,6 +115,20 @@ def travelled(k: int, elapsed=None):
     return k - 1 if elapsed is None else np.asarray(elapsed, dtype=float)
 
 
+def _jacobian(a, w, s) -> np.ndarray:
+    """The Jacobian of ``(a, w, s) -> (a / w, 1 / w, s / w)`` at ``(a, w, s)``, shape (..., 3, 3).
+
+    The map is its own inverse: it carries ``(x, y, v)`` to ``(a, w, s)`` and back.
+    """
+    J = np.zeros(np.shape(a) + (3, 3))
+    J[..., 0, 0] = 1.0 / w
+    J[..., 0, 1] = -a / w**2
+    J[..., 1, 1] = -1.0 / w**2
+    J[..., 2, 1] = -s / w**2
+    J[..., 2, 2] = 1.0 / w
+    return J
+
+
 def prior(mean, cov) -> MeanAndCov:
     """The prior ``N(m, P)`` of ``(x_1, y_1, v)`` carried to ``(a_1, w, s_1)``.
 
@@ -139,12 +153,7 @@ def prior(mean, cov) -> MeanAndCov:
             f"got min {float(np.min(m[..., 1])):.6g}"
         )
     x, y, v = m[..., 0], m[..., 1], m[..., 2]
-    J = np.zeros(m.shape + (3,))
-    J[..., 0, 0] = 1.0 / y
-    J[..., 0, 1] = -x / y**2
-    J[..., 1, 1] = -1.0 / y**2
-    J[..., 2, 1] = -v / y**2
-    J[..., 2, 2] = 1.0 / y
+    J = _jacobian(x, y, v)
     return MeanAndCov(
         np.stack([x / y, 1.0 / y, v / y], axis=-1), symmetric(J @ P @ np.swapaxes(J, -1, -2))
     )
@@ -268,12 +277,7 @@ def to_state(z, S, k: int, elapsed=None) -> MeanAndCov:
             "the inverse-depth EKF's mean inverse depth is not positive "
             f"(min {float(np.min(w)):.6g}): its depth estimate lies at or beyond infinity"
         )
-    J = np.zeros(z.shape + (3,))
-    J[..., 0, 0] = 1.0 / w
-    J[..., 0, 1] = -a / w**2
-    J[..., 1, 1] = -1.0 / w**2
-    J[..., 2, 1] = -s / w**2
-    J[..., 2, 2] = 1.0 / w
+    J = _jacobian(a, w, s)
     mean = np.stack(np.broadcast_arrays(a / w, 1.0 / w + travelled(k, elapsed), s / w), axis=-1)
     return MeanAndCov(mean, symmetric(J @ S @ np.swapaxes(J, -1, -2)))
 
