@@ -147,18 +147,27 @@ def _covariance(value, name: str, n: int, definite: bool) -> np.ndarray:
     return arr
 
 
-def _model(Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m, n: int):
-    """Check the model's matrices against the state dimension ``n``; return them and ``m``."""
+def _transition(Psi, Sigma_p, mu_p, n: int):
+    """Check the prediction's ``Psi``, ``Sigma_p`` and ``mu_p`` (zero by default) against ``n``."""
     Psi = _matrix(Psi, "Psi", n, n)
     Sigma_p = _covariance(Sigma_p, "Sigma_p", n, definite=False)
+    return Psi, Sigma_p, np.zeros(n) if mu_p is None else _vector(mu_p, "mu_p", n)
+
+
+def _measurement(Phi, Sigma_m, mu_m, n: int):
+    """Check the update's ``Phi``, ``Sigma_m`` and ``mu_m`` (zero by default) against ``n``."""
     Phi = _array(Phi, "Phi", 2)
     if Phi.shape[-1] != n:
         raise ValueError(f"Phi must have trailing shape (m, {n}), got shape {Phi.shape}")
     m = Phi.shape[-2]
     Sigma_m = _covariance(Sigma_m, "Sigma_m (the measurement noise covariance)", m, definite=True)
-    mu_p = np.zeros(n) if mu_p is None else _vector(mu_p, "mu_p", n)
-    mu_m = np.zeros(m) if mu_m is None else _vector(mu_m, "mu_m", m)
-    return Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m
+    return Phi, Sigma_m, np.zeros(m) if mu_m is None else _vector(mu_m, "mu_m", m)
+
+
+def _state(mean, cov) -> tuple[np.ndarray, np.ndarray]:
+    """Check a filtered or predicted ``mean`` and ``cov`` (positive semi-definite)."""
+    mean = _array(mean, "mean", 1)
+    return mean, _covariance(cov, "cov", mean.shape[-1], definite=False)
 
 
 def _eye(n: int) -> np.ndarray:
@@ -195,12 +204,8 @@ def predict(mean, cov, Psi, Sigma_p, mu_p=None) -> MeanAndCov:
     MeanAndCov
         Leading axes broadcast.
     """
-    mean = _array(mean, "mean", 1)
-    n = mean.shape[-1]
-    cov = _covariance(cov, "cov", n, definite=False)
-    Psi = _matrix(Psi, "Psi", n, n)
-    Sigma_p = _covariance(Sigma_p, "Sigma_p", n, definite=False)
-    mu_p = np.zeros(n) if mu_p is None else _vector(mu_p, "mu_p", n)
+    mean, cov = _state(mean, cov)
+    Psi, Sigma_p, mu_p = _transition(Psi, Sigma_p, mu_p, mean.shape[-1])
     return _predict(mean, cov, Psi, Sigma_p, mu_p)
 
 
@@ -276,16 +281,9 @@ def update(mean, cov, x, Phi, Sigma_m, mu_m=None) -> Update:
     Update
         Leading axes broadcast.
     """
-    mean = _array(mean, "mean", 1)
-    n = mean.shape[-1]
-    cov = _covariance(cov, "cov", n, definite=False)
-    Phi = _array(Phi, "Phi", 2)
-    if Phi.shape[-1] != n:
-        raise ValueError(f"Phi must have trailing shape (m, {n}), got shape {Phi.shape}")
-    m = Phi.shape[-2]
-    x = _vector(x, "x", m)
-    Sigma_m = _covariance(Sigma_m, "Sigma_m (the measurement noise covariance)", m, definite=True)
-    mu_m = np.zeros(m) if mu_m is None else _vector(mu_m, "mu_m", m)
+    mean, cov = _state(mean, cov)
+    Phi, Sigma_m, mu_m = _measurement(Phi, Sigma_m, mu_m, mean.shape[-1])
+    x = _vector(x, "x", Phi.shape[-2])
     return _update(mean, cov, x, Phi, Sigma_m, mu_m)
 
 
@@ -429,7 +427,8 @@ def _sequence(x, prior_mean, prior_cov, Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m):
     prior_mean = _array(prior_mean, "prior_mean", 1)
     n = prior_mean.shape[-1]
     prior_cov = _covariance(prior_cov, "prior_cov", n, definite=True)
-    Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m = _model(Psi, Sigma_p, Phi, Sigma_m, mu_p, mu_m, n)
+    Psi, Sigma_p, mu_p = _transition(Psi, Sigma_p, mu_p, n)
+    Phi, Sigma_m, mu_m = _measurement(Phi, Sigma_m, mu_m, n)
     x = _array(x, "x", 2)
     T, m = x.shape[-2:]
     if m != Phi.shape[-2]:
