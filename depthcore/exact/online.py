@@ -107,10 +107,7 @@ class Online:
         P = checks.covariances(P, "prior_cov", 3)
         self.prior_mean, self.prior_cov = m, P
         self.rho = checks.positive_scalar(rho, "rho")
-        q = checks.number(process_noise, "process_noise")
-        if not q >= 0:
-            raise ValueError(f"process_noise must be >= 0, got {q!r}")
-        self.process_noise = q
+        self.process_noise = checks.nonnegative_scalar(process_noise, "process_noise")
         self.gate = predictive.gate(gate)
         self.rtol = checks.positive_scalar(rtol, "rtol")
         self.frame = 0

@@ -206,6 +206,25 @@ def three_frames(mu, name: str = "mu") -> np.ndarray:
     return arr
 
 
+def frame_rows(arr: np.ndarray, name: str, unit: str) -> np.ndarray:
+    """``arr`` itself, refused unless of shape ``(..., N)``, ``3 <= N <= MAX_FRAMES``, non-empty.
+
+    ``unit`` names what ``N`` counts in the refusals (``"frames"``, ``"bearings"``).
+    """
+    if arr.ndim < 1 or arr.shape[-1] < 3:
+        raise ValueError(
+            f"{name} must have shape (..., N) with N >= 3 {unit} per problem, got shape {arr.shape}"
+        )
+    if arr.size == 0:
+        raise ValueError(f"{name} must hold at least one problem, got an empty batch {arr.shape}")
+    if arr.shape[-1] > MAX_FRAMES:
+        raise ValueError(
+            f"{name} has {arr.shape[-1]} {unit} per problem, more than the "
+            f"{MAX_FRAMES} frames the filters accept"
+        )
+    return arr
+
+
 def covariances(value, name: str, dim: int = 3) -> np.ndarray:
     """Check symmetric positive-definite matrices of shape ``(..., dim, dim)``.
 

@@ -125,18 +125,7 @@ def transition(step) -> np.ndarray:
 
 
 def _mu(value) -> np.ndarray:
-    mu = checks.as_float(value, "mu")
-    if mu.ndim < 1 or mu.shape[-1] < 3:
-        raise ValueError(
-            f"mu must have shape (..., N) with N >= 3 frames per problem, got shape {mu.shape}"
-        )
-    if mu.size == 0:
-        raise ValueError(f"mu must hold at least one problem, got an empty batch {mu.shape}")
-    if mu.shape[-1] > checks.MAX_FRAMES:
-        raise ValueError(
-            f"mu has {mu.shape[-1]} frames per problem, more than the "
-            f"{checks.MAX_FRAMES} the filters accept"
-        )
+    mu = checks.frame_rows(checks.as_float(value, "mu"), "mu", "frames")
     if np.any(np.isinf(mu)):
         raise ValueError(
             f"mu must be finite or NaN (a missing frame), got {int(np.sum(np.isinf(mu)))} "

@@ -467,19 +467,7 @@ def measurements_batch(mu, name: str = "mu") -> np.ndarray:
     only when every second difference is within ``depthcore.problem.checks.DEGENERACY_TOL``
     (bearings affine in time). The first offending row is named, e.g. ``mu[4]``.
     """
-    arr = checks.finite_array(mu, name)
-    if arr.ndim < 1 or arr.shape[-1] < 3:
-        raise ValueError(
-            f"{name} must have shape (..., N) with N >= 3 bearings per problem, "
-            f"got shape {arr.shape}"
-        )
-    if arr.size == 0:
-        raise ValueError(f"{name} must hold at least one problem, got an empty batch {arr.shape}")
-    if arr.shape[-1] > checks.MAX_FRAMES:
-        raise ValueError(
-            f"{name} has {arr.shape[-1]} bearings per problem, more than the "
-            f"{checks.MAX_FRAMES} frames the filters accept"
-        )
+    arr = checks.frame_rows(checks.finite_array(mu, name), name, "bearings")
     batch = arr.shape[:-1]
     n_frames = arr.shape[-1]
     flat = arr.reshape(-1, n_frames)
