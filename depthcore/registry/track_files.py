@@ -258,25 +258,11 @@ def _check_pixels(focal, cx, largest: float) -> None:
 
 
 def read_path(path, limits: Limits, focal=None, cx=None) -> TrackFile:
-    """:func:`read` of the file at ``path``.
+    """:func:`read` of the file at ``path`` (a str or os.PathLike).
 
-    Parameters
-    ----------
-    path : str or os.PathLike
-    limits : Limits
-    focal, cx : float or None
-        See :func:`read`.
-
-    Returns
-    -------
-    TrackFile
-
-    Raises
-    ------
-    FileRefusal
-        A malformed file, ``FILE:LINE: why``.
-    ValueError
-        Naming ``path`` when the file cannot be opened or read.
+    ``limits``, ``focal`` and ``cx``, the :class:`TrackFile` and the
+    :class:`FileRefusal` of a malformed file are :func:`read`'s; a ``ValueError``
+    names ``path`` when the file cannot be opened or read.
     """
     try:
         text = os.fspath(path)
