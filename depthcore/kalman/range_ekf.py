@@ -268,9 +268,7 @@ def component_predictive(n, C, rho) -> tuple[np.ndarray, np.ndarray]:
     -------
     mean, var : ndarray, shape (...)
     """
-    h = model.observation_vector(n)
-    var = np.asarray(rho, dtype=float) ** 2 + np.einsum("...i,...ij,...j->...", h, C, h)
-    return n[..., 0] / n[..., 1], var
+    return ekf.linearised_predictive(n, model.observation_vector(n), C, rho)
 
 
 @signature.documented
