@@ -79,7 +79,7 @@ def test_the_provenance_names_each_study_record_that_exists(found):
     records = {n.record for n in found if n.record != "computed"}
     assert any(r.startswith("study_records/") for r in records)
     for record in records:
-        assert (ROOT / "depthcore" / "provenance" / record).is_file(), record
+        assert (ROOT / "depthbook" / "provenance" / record).is_file(), record
     seeded = [n for n in found if n.seed != "none"]
     assert seeded and all(n.record.startswith("study_records/") for n in seeded)
 
