@@ -375,11 +375,12 @@ def test_pages_run_alone_off_the_repository_are_cached_once_they_show_their_refe
     )
     # ... alone, it fails, and the page whose output differs from its reference is not cached.
     assert cached == [alone] and problems == ["2 fail alone, or differ (above)"]
-    python = ["uv", "pip", "-q", "--python", sys.executable]
+    into = ["-q", "--python", sys.executable]
     archives = [downloads / "depthcore.tar.gz", downloads / "depthbook.tar.gz"]
     assert installs == [
-        [*python, "sync", downloads / "requirements.txt"],
-        [*python, "install", "--no-build-isolation", "--reinstall", "--no-deps", *archives],
+        ["uv", "pip", "sync", *into, downloads / "requirements.txt"],
+        ["uv", "pip", "install", *into, "--reinstall", "--no-deps", "--no-build-isolation"]
+        + archives,
     ]
     records = {Path(r.uri).name: r.data for r in get_cache(cache).list_cache_records()}
     assert records == {"alone.md": {"alone": True}, "reads.md": {"alone": False}}
@@ -390,7 +391,7 @@ def test_a_built_book_is_needed_to_run_its_notebooks_alone(tmp_path, monkeypatch
     monkeypatch.setattr(check_notebooks, "BOOK_SOURCES", tmp_path / "_sources")
     assert check_notebooks.main(["standalone", "--python", "python", "fig6"]) == 1
     err = capsys.readouterr().err
-    assert err.startswith("make notebooks-standalone:\n")
+    assert err.startswith("make check-downloads:\n")
     assert "depthcore.tar.gz not found: run `make book` first" in err
     assert "depthbook.tar.gz not found" in err and "requirements.txt not found" in err
     assert f"book/fig6.md: the book offers no notebook {tmp_path}/_sources/book/fig6.ipynb" in err

@@ -186,9 +186,9 @@ def alone(pages, python, workers, every, downloads, uv=UV, sources=None):
         runs[page] = with_reference(page, problems, nb, path)
     if problems:
         return problems, {}
-    uv, again = [uv, "pip", "-q", "--python", python], ["--reinstall", "--no-deps"]
-    subprocess.run([*uv, "sync", needed[-1]], check=True)  # the pins exactly, then the archives
-    subprocess.run([*uv, "install", "--no-build-isolation", *again, *needed[:2]], check=True)
+    into, again = ["-q", "--python", python], ["--reinstall", "--no-deps", "--no-build-isolation"]
+    subprocess.run([uv, "pip", "sync", *into, needed[-1]], check=True)  # the pins exactly,
+    subprocess.run([uv, "pip", "install", *into, *again, *needed[:2]], check=True)  # the archives
     status, executed = nbval(runs, workers, python)
     return [f"{len(runs) - len(executed)} fail alone, or differ (above)"] * bool(status), executed
 
@@ -285,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "standalone":
         python = args.python or str(ROOT / ".venv" / "standalone" / "bin" / "python")
         run = (pages, python, args.workers, every, BOOK_DOWNLOADS, args.uv, BOOK_SOURCES)
-        return report("make notebooks-standalone", alone(*run)[0])
+        return report("make check-downloads", alone(*run)[0])
     if dropped := prepare_cache(every):
         print(f"execution cache: dropped {', '.join(dropped)} (changed since executed)")
     if not args.execute:
