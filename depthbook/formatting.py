@@ -2,7 +2,7 @@
 
 Recommended import: ``from depthbook import formatting``.
 
-:func:`vec` a vector (the command line's, :func:`depthcore.cli.text.vec`),
+``vec`` a vector (the command line's :func:`depthcore.cli.text.vec`),
 :func:`rho_label` a noise level, :func:`plus_minus` a mean and an SD,
 :func:`value_se` a Monte Carlo value with its standard error, and
 :func:`study_texts` every score of one Monte Carlo study, as several chapters

@@ -45,7 +45,7 @@ from pathlib import Path
 
 from depthbook.provenance import benchmarks
 
-#: The packages whose code a fingerprint covers: the filters' and the book's.
+#: The packages whose code a fingerprint covers, the filters' and the book's.
 PACKAGES = ("depthcore", "depthbook")
 #: The repository, whose files named by a constant are fingerprinted by their bytes.
 ROOT = benchmarks.ROOT

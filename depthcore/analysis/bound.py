@@ -429,8 +429,8 @@ _MOTION_ULPS = 64.0
 def track_steps(states) -> np.ndarray:
     """The steps ``s_k = y_{k+1} - y_k`` of a true track, checked against its lateral motion.
 
-    Within :data:`_STEP_ULPS` of 1 a step is 1; ``x_{k+1} = x_k + s_k v_k`` must hold
-    within :data:`_MOTION_ULPS`. ``states`` (..., N, 3); returns (..., N - 1).
+    Within ``_STEP_ULPS`` of 1 a step is 1; ``x_{k+1} = x_k + s_k v_k`` must hold
+    within ``_MOTION_ULPS``. ``states`` (..., N, 3); returns (..., N - 1).
     """
     states = _states(states)
     x, y, v = states[..., 0], states[..., 1], states[..., 2]

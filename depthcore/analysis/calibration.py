@@ -162,9 +162,11 @@ class SelfCalibration:
     Attributes
     ----------
     draws : PriorDraws
-    rho, filter_rho : float
+    rho : float
+    filter_rho : float
         The noise level simulated and assumed.
-    depth_pit, velocity_pit : ndarray, shape (n,)
+    depth_pit : ndarray, shape (n,)
+    velocity_pit : ndarray, shape (n,)
     """
 
     draws: PriorDraws

@@ -76,8 +76,10 @@ class Bank(NamedTuple):
         ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``.
     mu : ndarray, shape (..., N)
         ``NaN`` at a missing frame.
-    rho, process_noise : ndarray, shape (...) or ()
-    prior_mean, prior_cov : ndarray, shapes (..., 3) and (..., 3, 3)
+    rho : ndarray, shape (...) or ()
+    process_noise : ndarray, shape (...) or ()
+    prior_mean : ndarray, shape (..., 3)
+    prior_cov : ndarray, shape (..., 3, 3)
     frame_steps : ndarray, shape (..., N - 1)
         The depth's change from each frame to the next.
     frame_noise : ndarray, shape (..., N)
@@ -219,10 +221,7 @@ def sigma_p(process_noise) -> np.ndarray:
 
 
 def measurement_matrices(nodes, frames) -> np.ndarray:
-    """``Phi_k = (1 / y_k, 0)`` with ``y_k = y_1 + k - 1``, for frames ``k`` (1-based).
-
-    ``nodes`` (..., J), ``frames`` (K,); returns (..., J, K, 1, 2).
-    """
+    """``Phi_k = (1 / y_k, 0)``, ``y_k = y_1 + k - 1``, at frames ``k`` (K,): (..., J, K, 1, 2)."""
     depth = nodes[..., None] + (np.asarray(frames, dtype=float) - 1.0)
     Phi = np.zeros(depth.shape + (1, 2))
     Phi[..., 0, 0] = 1.0 / depth
@@ -503,11 +502,10 @@ def step(bank: Bank, mu_next, rho=None, step=1.0, gaps: bool = False) -> Bank:
     """Add frame ``N + 1``: predict (textbook 19.2.1) and update (19.2.2) every node's filter.
 
     Each node's log weight gains the log density of ``mu_{N+1}``; nothing earlier is
-    recomputed (but a bank with a history and irregular frames is rerun).
+    recomputed (a bank with a history and irregular frames is rerun).
 
     Parameters
     ----------
-    bank : Bank
     mu_next : float or array_like, shape (...)
         ``NaN`` (with ``gaps``) for a trial without a bearing.
     rho : float or array_like, shape (...), or None

@@ -80,11 +80,14 @@ class Fit(NamedTuple):
 
     Attributes
     ----------
-    rho, process_noise : float
+    rho : float
+    process_noise : float
         The estimates (or given values).
-    rho_se, process_noise_se : float or None
+    rho_se : float or None
+    process_noise_se : float or None
         Standard errors (delta method); ``None`` if given or at the boundary ``q = 0``.
-    rho_interval, process_noise_interval : tuple or None
+    rho_interval : tuple or None
+    process_noise_interval : tuple or None
         The interval at ``level``: Wald's on the log scale or the profile
         likelihood's; ``(0, upper)`` at the boundary; ``None`` if given.
     log_likelihood : float

@@ -397,7 +397,7 @@ class OptimalMarginals:
 
     @property
     def updates(self) -> predictive.Updates:
-        """Per bearing: :func:`~depthcore.exact.online.updates`, shape (3,) each."""
+        """The :func:`~depthcore.exact.online.updates` of each bearing, shape (3,) each."""
         return online.updates(self.mu, self.rho, self.prior.mean, self.prior.cov)
 
     def depth_pdf(self, y) -> np.ndarray:
@@ -585,7 +585,7 @@ class BatchMarginals:
 
     @property
     def updates(self) -> predictive.Updates:
-        """Per bearing: :func:`~depthcore.exact.online.updates`, shape (B, 3) each."""
+        """The :func:`~depthcore.exact.online.updates` of each bearing, shape (B, 3) each."""
         mean, cov = self.prior
         return online.updates(self._problem.mu, self._problem.rho, mean, cov)
 

@@ -80,9 +80,11 @@ class FilterResult(NamedTuple):
 
     Attributes
     ----------
-    means, covs : ndarray, shape (..., T, n) and (..., T, n, n)
+    means : ndarray, shape (..., T, n)
+    covs : ndarray, shape (..., T, n, n)
         Entry ``t``: after measurement ``t + 1``.
-    predicted_means, predicted_covs : ndarray, shape (..., T, n) and (..., T, n, n)
+    predicted_means : ndarray, shape (..., T, n)
+    predicted_covs : ndarray, shape (..., T, n, n)
         Entry ``t``: before measurement ``t + 1`` (the prior at ``t = 0``).
     log_likelihoods : ndarray, shape (..., T)
         Log density of each measurement given the earlier ones.

@@ -230,7 +230,8 @@ class Innovation(NamedTuple):
 
     Attributes
     ----------
-    mean, var : ndarray, shape (...)
+    mean : ndarray, shape (...)
+    var : ndarray, shape (...)
         ``z`` and ``s`` of the module docstring: the predictive is ``N(z, s)``.
     cross : ndarray, shape (..., 3)
         ``c``, its cross-covariance with the state.
@@ -398,7 +399,8 @@ class Step(NamedTuple):
     mean : ndarray, shape (..., 3)
         After the frame (the prediction where the bearing is missing or gated).
     cov : ndarray, shape (..., 3, 3)
-    log_predictive, tail : ndarray, shape (...)
+    log_predictive : ndarray, shape (...)
+    tail : ndarray, shape (...)
         The bearing's log density and two-sided tail probability under the
         unscented predictive ``N(z, s)``; NaN where it is missing.
     gated : ndarray of bool, shape (...)

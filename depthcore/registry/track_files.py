@@ -48,7 +48,7 @@ from depthcore.registry import filters, tracking
 #: The most characters of one line of a track file (a row holds a few numbers).
 MAX_LINE = 4096
 
-#: The columns a track file may name, in the order :data:`FORMAT` explains them.
+#: The columns a track file may name, in the order ``estimate --help`` explains them.
 COLUMNS = ("mu", "u", "rho", "step", "frame")
 
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")

@@ -64,7 +64,9 @@ class Tally:
     ----------
     n : int
         Trials added.
-    error, squared_error, sd : ndarray, shape (2,)
+    error : ndarray, shape (2,)
+    squared_error : ndarray, shape (2,)
+    sd : ndarray, shape (2,)
         Sums of the depth and velocity errors, their squares, and the SDs.
     spread : dict of ndarray or float
         Sums of squared deviations (:func:`pooled_squares`) of ``"error"``,
