@@ -31,6 +31,7 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
+import depthcore
 from depthbook import beyond_atlas, beyond_bound, intro, paper
 from depthbook.formatting import rho_label, sci
 from depthbook.provenance import benchmarks, records
@@ -45,19 +46,6 @@ FIGURE = ROOT / "_static" / "figure2.svg"
 BLOCK = re.compile(r"(<!-- readme:(\w+) -->\n)(?:.*?\n)?(<!-- /readme:\2 -->)", re.S)
 #: What the command line says when the README is not what this writes.
 COMMAND = "python tools/readme.py"
-#: The package's families, the subpackages of ``depthcore``, in the order the README lists them.
-FAMILIES = (
-    "problem",
-    "kalman",
-    "exact",
-    "particles",
-    "analysis",
-    "registry",
-    "studies",
-    "cli",
-    "stonesoup",
-)
-
 #: Theorem 1's check, as book/appendix.md makes it (:mod:`depthbook.studies.verdicts`).
 THEOREM_TOL = verdicts.THEOREM_TOL
 #: The study of the bound that book/beyond_bound.md reads (:mod:`depthbook.intro`).
@@ -205,22 +193,11 @@ def citation() -> str:
 
 
 def families() -> str:
-    """The package's families as a Markdown table: each subpackage and its docstring's summary.
-
-    Raises
-    ------
-    ValueError
-        If :data:`FAMILIES` does not name exactly the subpackages of ``depthcore``.
-    """
+    """The package's families as a Markdown table: each subpackage, in the order of
+    ``depthcore.SUBPACKAGES``, and the first line of its docstring (read, not imported)."""
     package = ROOT / "depthcore"
-    found = {p.parent.name for p in package.glob("*/__init__.py")}
-    if found != set(FAMILIES):
-        raise ValueError(
-            f"FAMILIES must name exactly depthcore's subpackages: missing "
-            f"{sorted(found - set(FAMILIES))}, not subpackages {sorted(set(FAMILIES) - found)}"
-        )
     rows = ["| family | what it holds |", "| --- | --- |"]
-    for name in FAMILIES:
+    for name in depthcore.SUBPACKAGES:
         source = (package / name / "__init__.py").read_text(encoding="utf-8")
         summary = ast.get_docstring(ast.parse(source)).splitlines()[0]
         rows.append(f"| `depthcore.{name}` | {summary} |")
