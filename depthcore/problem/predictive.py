@@ -92,7 +92,8 @@ def frame_inputs(mu, rho, step, default_rho, frame: int) -> tuple[float, float, 
     default_rho : float or None
         The filter's own noise SD.
     frame : int
-        Frames seen before this one.
+        Frames seen before this one, any number (an online filter holds
+        nothing of the frames before).
 
     Returns
     -------
@@ -110,8 +111,6 @@ def frame_inputs(mu, rho, step, default_rho, frame: int) -> tuple[float, float, 
     s = checks.positive_scalar(step, "step")
     if frame == 0 and s != 1.0:
         raise ValueError("step: the first frame has no step before it; leave it at 1")
-    if frame >= checks.MAX_FRAMES:
-        raise ValueError(f"mu: at most {checks.MAX_FRAMES} frames")
     return mu, r, s
 
 

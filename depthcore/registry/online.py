@@ -11,8 +11,10 @@ step=1.0)`` predicts the state over ``step`` (not at the first frame),
 reports the bearing's predictive density and tail probability, skips it if it
 is missing (``NaN``) or gated, incorporates it otherwise, and returns a
 :class:`~depthcore.problem.predictive.FrameEstimate`. Time and memory per
-frame are constant; after ``N`` frames the estimate is the batch door's at
-frame ``N`` (:data:`depthcore.registry.filters.FILTERS`).
+frame are constant and the frames are not limited in number (the batch doors
+hold a whole track, at most ``depthcore.problem.checks.MAX_FRAMES`` frames);
+after ``N`` frames the estimate is the batch door's at frame ``N``
+(:data:`depthcore.registry.filters.FILTERS`).
 
 Example: a live loop, each bearing used as it arrives
 
