@@ -183,8 +183,8 @@ def test_every_help_is_plain_text_with_examples(command, capsys):
 def test_estimate_shows_its_prior_and_labels_c(capsys):
     assert main(["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005"]) == 0
     out = capsys.readouterr().out
-    assert "c = (x, y, v) at time 3 = (1.200, 6.000, 1.200)" in out
-    assert "prior at time 1: mean (x, y, v) = (-1.200, 4.000, 0.000), covariance 1000 I" in out
+    assert "c = (x, y, v) at frame 3 = (1.200, 6.000, 1.200)" in out
+    assert "prior at frame 1: mean (x, y, v) = (-1.200, 4.000, 0.000), covariance 1000 I" in out
 
 
 def test_reproduce_counts_the_matched_numbers(capsys):
@@ -325,7 +325,7 @@ def test_every_table_has_a_legend_of_its_columns(capsys):
     assert main(["estimate", "--mu", "-0.3", "0", "0.2", "0.33", "--rho", "0.005", "--smooth"]) == 0
     out = capsys.readouterr().out
     assert "legend: depth mean, depth sd" in out and "vel. mean, vel. sd" in out
-    assert "frame                 1 .. N" in out
+    assert "frame                 the frame's number in the track" in out
     assert main(["study", "--truth", "prior", "--trials", "3"]) == 0
     out = capsys.readouterr().out
     assert "legend: nominal" in out and "KS p, chi-square p" in out
@@ -339,7 +339,7 @@ def test_help_speaks_of_n_frames_not_three_measurements(argv, capsys):
         main(argv)
     out = capsys.readouterr().out
     assert "three measurements" not in out and "any three" not in out
-    assert "N >= 3 bearings (up to 1000 frames)" in " ".join(out.split())
+    assert "N >= 3 bearings (up to 1000 frames held whole" in " ".join(out.split())
     assert "three noisy image" not in depthcore.__doc__
 
 

@@ -14,7 +14,7 @@ from depthcore.cli import tracks
 from depthcore.cli.main import MU_MAX, PIXELS_MAX, STEP_RANGE, main
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import paper_prior
-from depthcore.registry import track_files
+from depthcore.registry import track_files, track_runs
 from depthcore.registry.filters import FILTERS, PARTICLES
 from depthcore.registry.tracking import RHO_RANGE, default_prior
 from depthcore.studies.reproduce import PARTICLE_SEED
@@ -62,8 +62,8 @@ def _refused(argv, capsys, *words):
     return err
 
 
-def _read(text: bytes, focal=None, cx=None):
-    return track_files.read("t.csv", io.BytesIO(text), LIMITS, focal, cx, tracks.WORDS)
+def _read(text: bytes, focal=None, cx=None, direction="receding"):
+    return track_files.read("t.csv", io.BytesIO(text), LIMITS, focal, cx, tracks.WORDS, direction)
 
 
 # --- reading a track file -------------------------------------------------------------------
@@ -174,7 +174,7 @@ def test_a_constant_rho_column_equals_rho_given_once(tmp_path, capsys):
         (b"frame,mu\n2,0.1\n1,0.2\n", "t.csv:3: frame must increase strictly"),
         (b"frame,mu\n1.5,0.1\n", "t.csv:2: frame must be an integer, got '1.5'"),
         (b"frame,mu\n,0.1\n", "t.csv:2: frame must be an integer, got ''"),
-        (b"frame,mu\n1,0.1\n5000,0.2\n", "t.csv:3: more than 1000 frames"),
+        (b"frame,mu\n1,0.1\n5000,0.2\n", "t.csv:3: frame jumps from 1 to 5000, more than 1000"),
         (b"mu\n0.1\n0.\x002\n", "t.csv:3: mu must be a number, got '0.\\x002'"),
         (b"mu\n0.1\n\xff\xfe\x00\x01\n", "t.csv:3: not UTF-8 text"),
         ("mu\n0.1\n".encode("utf-16"), "t.csv:1: not UTF-8 text"),
@@ -310,7 +310,7 @@ def test_without_per_frame_a_track_as_it_comes_is_each_filters_last_frame(
     path = _file(tmp_path, _csv(header, rows))
     track = _read(_csv(header, rows).encode())
     rho = track.rho if "rho" in header else 0.01
-    argv = ["estimate", "--mu-file", path, "--json"] + (
+    argv = ["estimate", "--mu-file", path, "--json", "--direction", "receding"] + (
         [] if "rho" in header else ["--rho", "0.01"]
     )
     assert main(argv) == 0
@@ -328,10 +328,13 @@ def test_without_per_frame_a_track_as_it_comes_is_each_filters_last_frame(
 
 def test_unit_steps_in_a_file_are_the_papers_frames(tmp_path, capsys):
     path = _file(tmp_path, _csv(["mu", "step"], [[MU[0], ""]] + [[m, 1] for m in MU[1:]]))
-    assert main(["estimate", "--mu-file", path, "--rho", str(RHO), "--json"]) == 0
+    argv = ["estimate", "--mu-file", path, "--rho", str(RHO), "--json", "--direction", "receding"]
+    assert main(argv) == 0
     from_file = _strict_json(capsys.readouterr().out)
     assert main(["estimate", "--mu", *map(str, MU), "--rho", str(RHO), "--json"]) == 0
-    assert from_file == _strict_json(capsys.readouterr().out)
+    from_values = _strict_json(capsys.readouterr().out)
+    assert from_file.pop("direction_given") and not from_values.pop("direction_given")
+    assert from_file == from_values
 
 
 @pytest.mark.parametrize(
@@ -373,7 +376,7 @@ def test_per_frame_json_is_the_librarys_track(capsys, name):
     assert [r["frame"] for r in rows] == [1, 2, 3, 4, 5]
     assert all(r["bearing"] for r in rows) and rows[0]["step"] is None
     for series, states in (("filtered", t.filtered), ("smoothed", t.smoothed)):
-        for key, attribute in track_files.QUANTITIES:
+        for key, attribute in track_runs.QUANTITIES:
             for suffix in ("mean", "sd"):
                 got = [r[f"{series}_{key}_{suffix}"] for r in rows]
                 assert got == getattr(states, f"{attribute}_{suffix}").tolist()
@@ -468,6 +471,7 @@ def test_a_track_with_gaps_noise_or_steps_is_depthcore_track_or_its_refusal(
     argv = ["estimate", "--mu-file", path, "--per-frame", "--json", "--filters", name]
     argv += ["--prior-mean", *map(str, PRIOR_MEAN)] + ([] if rho is None else ["--rho", str(rho)])
     argv += ["--gate", str(options["gate"])] if "gate" in options else []
+    argv += ["--direction", "receding"] if "step" in text else []
     expected = _library(track.mu, track.rho if rho is None else rho, filter=name, **options)
     status, out, err = _run(argv, capsys)
     if expected is None:
@@ -477,7 +481,7 @@ def test_a_track_with_gaps_noise_or_steps_is_depthcore_track_or_its_refusal(
     rows = _strict_json(out)["filters"][name]
     assert [r["bearing"] for r in rows] == np.isfinite(track.mu).tolist()
     assert [r["mu"] for r in rows] == [None if np.isnan(m) else m for m in track.mu]
-    for key, attribute in track_files.QUANTITIES:
+    for key, attribute in track_runs.QUANTITIES:
         got = [r[f"smoothed_{key}_mean"] for r in rows]
         assert got == getattr(expected.smoothed, f"{attribute}_mean").tolist()
     updates = getattr(expected, "updates", None)

@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import re
 import sys
 import traceback
 import warnings
@@ -25,12 +23,12 @@ import warnings
 import numpy as np
 
 from depthcore import __version__
-from depthcore.cli import atlas_command, refusals, tracks
+from depthcore.cli import atlas_command, parsing, refusals, tracks
 from depthcore.cli import cluster as cluster_options
 from depthcore.cli import text as cli_text
 from depthcore.problem import checks, frames
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian
-from depthcore.registry import track_files
+from depthcore.registry import online, track_files, track_runs
 from depthcore.registry.filters import FILTERS, RBPF_REPLICAS, names
 from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE, default_prior
 from depthcore.studies import monte_carlo, reproduce, tasks
@@ -66,45 +64,6 @@ PIXELS_MAX = 1e9
 STEP_RANGE = (1e-6, 1e3)
 #: Most bearings of ``estimate --mu``: the filters' limit.
 FRAMES_MAX = checks.MAX_FRAMES
-
-# A negative number in any notation (-1, -.5, -1e-1, -1E+3, -inf, -nan) is a value.
-_NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.I)
-
-
-class _Once:
-    """Mixed into every option's action: refuses a second use; records in ``namespace._given``."""
-
-    def __call__(self, parser, namespace, values, option_string=None):
-        given = namespace.__dict__.setdefault("_given", set())
-        if self.dest in given:
-            raise argparse.ArgumentError(self, "given more than once; give it once")
-        given.add(self.dest)
-        super().__call__(parser, namespace, values, option_string)
-
-
-class _Parser(argparse.ArgumentParser):
-    def __init__(self, *args, **kwargs):
-        kwargs.setdefault("allow_abbrev", False)
-        super().__init__(*args, **kwargs)
-        self._negative_number_matcher = _NEGATIVE
-        self._has_negative_number_optionals = []
-
-    def _add_action(self, action):
-        if action.option_strings and not isinstance(
-            action, (_Once, argparse._HelpAction, argparse._VersionAction)
-        ):
-            action.__class__ = type(f"Once{type(action).__name__}", (_Once, type(action)), {})
-        return super()._add_action(action)
-
-    def error(self, message):
-        self.exit(2, f"{self.prog}: error: {refusals.one_line(message)}\n")
-
-    def _print_message(self, message, file=None):
-        # argparse drops a failed write of --help or --version silently; report it
-        if message and (file is None or file is sys.stdout):
-            _write(message)
-        else:
-            super()._print_message(message, file)
 
 
 def _check_rho(rho: float) -> None:
@@ -164,49 +123,18 @@ def _prior(mu, prior_mean, prior_cov, steps=None) -> Gaussian:
     return prior
 
 
-def _bar(total: int, desc: str, unit: str):
-    """A progress bar on stderr when it is a terminal and tqdm is installed, else ``None``."""
-    if not sys.stderr.isatty():
-        return None
-    try:
-        from tqdm import tqdm
-    except ImportError:  # the extra depthcore[plot] is not installed: no bar
-        return None
-
-    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr)
-
-
-def _progress(bar):
-    """``progress(done, total)`` moving ``bar`` (or doing nothing without one)."""
-
-    def progress(done, total):
-        if bar is not None:
-            bar.total = total
-            bar.update(done - bar.n)
-
-    return progress
-
-
-def _with_bar(desc: str, unit: str, run):
-    """``run(progress)`` with a progress bar named ``desc`` on stderr."""
-    bar = _bar(None, desc, unit)
-    try:
-        return run(_progress(bar))
-    finally:
-        if bar is not None:
-            bar.close()
-
-
 def _cmd_reproduce(args) -> str:
-    result = _with_bar(
+    result = parsing.with_bar(
         "reproduce", "figure", lambda progress: reproduce.reproduce(progress=progress)
     )
     return cli_text.as_json(result) if args.json else cli_text.format_table(result)
 
 
-def _cmd_estimate(args) -> str:
-    src = _bearings(args)
-    learned = None
+def _cmd_estimate(args):
+    held = _bearings(args)
+    src = held.track or track_files.assemble(held.reading, held.first)  # a long track's start
+    if held.track is None:
+        _refuse_long(args, held)
     if args.learn_noise:
         if args.rho is not None:
             raise ValueError("--rho: not used with --learn-noise, which estimates it; leave it out")
@@ -217,26 +145,32 @@ def _cmd_estimate(args) -> str:
     if args.json and args.csv:
         raise ValueError("--csv: print JSON (--json) or CSV (--csv), not both")
     if not args.per_frame:
-        _refuse_ignored(args, "estimate without --per-frame", {"csv": "--csv"})
+        parsing.refuse_ignored(args, "estimate without --per-frame", {"csv": "--csv"})
     gate = None if args.gate is None else tracks.check_gate(args.gate)
     steps = None if src.steps is None or np.all(src.steps == 1.0) else src.steps
-    frames.check(src.mu, rho, steps)  # the bearings' refusals come before the prior's
+    if held.track is not None:
+        frames.check(src.mu, rho, steps)  # the bearings' refusals come before the prior's
     prior = _prior(src.mu, args.prior_mean, args.prior_cov, steps)
+    direction = {"direction": src.direction, "direction_given": args.direction is not None}
+    if held.track is None:
+        return _streamed(args, held, None if src.rho is not None else rho, prior, q, gate)
+    learned = None
     if args.learn_noise:
         known_q = q if "process_noise" in getattr(args, "_given", ()) else None
-        learned = track_files.learn(src.mu, rho, prior, known_q, steps)
+        learned = track_runs.learn(src.mu, rho, prior, known_q, steps)
         rho = learned.rho * np.asarray(rho) if np.ndim(rho) else learned.rho
         q = learned.process_noise
     if args.per_frame:
-        return _per_frame(args, src, rho, steps, prior, q, gate, learned)
+        return _per_frame(args, src, rho, steps, prior, q, gate, learned, direction)
     names = tuple(dict.fromkeys(args.filters))
     if len(names) != len(args.filters):
         raise ValueError("--filters: a filter is named more than once")
     summary = reproduce.summarize(
         src.mu, rho, prior, process_noise=q, smooth=args.smooth, names=names, steps=steps, gate=gate
     )
+    summary |= _named_frames(summary, src) | direction
     if learned is not None:
-        summary["learned"] = track_files.learned_json(learned)
+        summary["learned"] = track_runs.learned_json(learned)
     return (
         cli_text.as_json(summary)
         if args.json
@@ -244,15 +178,47 @@ def _cmd_estimate(args) -> str:
     )
 
 
-def _bearings(args) -> track_files.TrackFile:
+def _named_frames(summary: dict, src: track_files.TrackFile) -> dict:
+    """The summary's frames named by the track's numbers and times, never by their order."""
+    label = tracks.labeller(src)
+    out = {"frame_numbers": src.frames.tolist()}
+    if src.times is not None:
+        out["times"] = src.times.tolist()
+    for f in summary["filters"].values():
+        if "gated" in f:
+            k = np.array(f["gated"], dtype=int) - 1
+            f["gated"] = src.frames[k].tolist()
+            if src.times is not None:
+                f["gated_times"] = src.times[k].tolist()
+    for name, reason in summary.get("not_run", {}).items():
+        summary["not_run"][name] = track_runs.relabel(reason, label)
+    if "smoothed" in summary:
+        summary["smoothed"] = {"frame": out["frame_numbers"], **out, **summary["smoothed"]}
+        del summary["smoothed"]["frame_numbers"]
+    return out
+
+
+def _bearings(args) -> track_files.Held:
     """The bearings of ``--mu`` or ``--mu-file`` (``NaN`` at a missing frame)."""
+    args._words = {"prior": "--prior-mean"}  # the paper's rule: give the prior's mean instead
     if args.mu_file is None:
-        _refuse_ignored(args, "--mu (they convert a file's u column)", _PIXEL_FLAGS)
-        return tracks.from_values(args.mu, MU_MAX)
+        parsing.refuse_ignored(args, "--mu (they convert a file's u column)", _PIXEL_FLAGS)
+        parsing.refuse_ignored(
+            args, "--mu (it converts a file's time column)", {"speed": "--speed"}
+        )
+        track = tracks.from_values(args.mu, MU_MAX, args.steps, args.direction, STEP_RANGE)
+        return track_files.Held(track, None, None)
+    parsing.refuse_ignored(
+        args, "--mu-file (its step, travel or time column)", {"steps": "--steps"}
+    )
     limits = track_files.Limits(MU_MAX, RHO_RANGE, STEP_RANGE, PIXELS_MAX)
-    src = tracks.read_file(args.mu_file, limits, args.focal, args.cx)
-    args._words = {k: f"{src.name}: {column}" for k, column in track_files.LIBRARY_NAMES.items()}
-    return src
+    options = {k: getattr(args, k) for k in ("focal", "cx", "direction", "speed")}
+    held = tracks.read_file(args.mu_file, limits, options)
+    name = held.reading.name
+    args._words |= {k: f"{name}: {column}" for k, column in track_files.LIBRARY_NAMES.items()}
+    if held.track is not None:
+        args._label = tracks.labeller(held.track)
+    return held
 
 
 #: The options that convert a file's column ``u`` of pixels into bearings.
@@ -271,35 +237,75 @@ def _noise(args, src: track_files.TrackFile):
     return src.rho
 
 
-def _per_frame(args, src, rho, steps, prior, q, gate, learned=None) -> str:
-    """``estimate --per-frame``: every frame's state by the filters with a smoother."""
+def _chosen(args) -> tuple:
+    """``--filters`` of ``--per-frame``: those with a smoother (default: the optimal filter)."""
     if args.smooth:
         raise ValueError("--smooth: not used by --per-frame (it smooths already); leave it out")
     smoothed = names(smoothed=True)
-    chosen = _named_once(args.filters, "--filters") if "filters" in args._given else ("optimal",)
+    chosen = (
+        parsing.named_once(args.filters, "--filters") if "filters" in args._given else ("optimal",)
+    )
     without = [n for n in chosen if n not in smoothed]
     if without:
         raise ValueError(
             f"--filters: {without[0]} has no smoother; --per-frame takes {', '.join(smoothed)}"
         )
-    result = track_files.per_frame(src.mu, rho, prior, q, chosen, steps, gate, src.frames)
+    return chosen
+
+
+def _per_frame(args, src, rho, steps, prior, q, gate, learned, direction):
+    """``estimate --per-frame``: every frame's state by the filters with a smoother."""
+    chosen = _chosen(args)
+    result = track_runs.per_frame(src.mu, rho, prior, q, chosen, steps, gate, src.frames, src.times)
+    blocks = result.pop("filters")
     if learned is not None:
-        result["learned"] = track_files.learned_json(learned)
-    if args.json:
-        return cli_text.as_json(result)
-    if args.csv:
-        if learned is not None:
+        if args.csv:
             raise ValueError("--csv: the learned noise levels have no CSV; use --json or the table")
-        return cli_text.per_frame_csv(result)
-    return cli_text.format_learned(result) + cli_text.format_per_frame(result)
+        result["learned"] = track_runs.learned_json(learned)
+    return cli_text.per_frame_text(result | direction, blocks, _output(args))
 
 
-def _named_once(values, option: str) -> tuple:
-    """``values`` as a tuple; a ``ValueError`` naming those the option ``option`` repeats."""
-    repeated = sorted({v for v in values if values.count(v) > 1})
-    if repeated:
-        raise ValueError(f"{option} names {', '.join(repeated)} more than once")
-    return tuple(values)
+def _output(args) -> str:
+    return "json" if args.json else "csv" if args.csv else "table"
+
+
+def _refuse_long(args, held) -> None:
+    """Refuse what a track past ``MAX_FRAMES`` frames cannot have: all but ``--per-frame``."""
+    where = f"{held.reading.name}:{held.first[-1].line}: more than {FRAMES_MAX} frames"
+    holds = f"holds the whole track, at most {FRAMES_MAX} frames"
+    if not args.per_frame:
+        raise track_files.FileRefusal(
+            f"{where}: estimate's summary {holds}; --per-frame streams a longer one through "
+            f"the online filters ({', '.join(online.NAMES)})"
+        )
+    for flag in ("--learn-noise", "--smooth"):
+        if getattr(args, flag[2:].replace("-", "_")):
+            raise track_files.FileRefusal(f"{where}: {flag} {holds}")
+    streaming = [n for n in _chosen(args) if n not in online.NAMES]
+    if streaming:
+        raise ValueError(
+            f"--filters: {streaming[0]} has no online form; past {FRAMES_MAX} frames "
+            f"--per-frame streams the track through {', '.join(online.NAMES)}"
+        )
+
+
+def _streamed(args, held, rho, prior, q, gate):
+    """``estimate --per-frame`` of a track past ``MAX_FRAMES``: the online filters, streamed."""
+    chosen = _chosen(args)
+    rows = track_runs.streamed(held.reading.frames, rho, prior, q, chosen, gate)
+    count, blocks = tracks.spool(rows, chosen)
+    head = {
+        "frames": count,
+        "prior_mean": prior.mean.tolist(),
+        "prior_cov": prior.cov.tolist(),
+        "process_noise": q,
+        "gate": gate,
+        "smoothed": False,
+        "smoothed_reason": f"the smoother holds the whole track, at most {FRAMES_MAX} frames",
+        "direction": held.reading.direction,
+        "direction_given": args.direction is not None,
+    }
+    return cli_text.per_frame_text(head, blocks, _output(args))
 
 
 def _truth(values) -> np.ndarray:
@@ -313,16 +319,6 @@ def _truth(values) -> np.ndarray:
             f"--truth must be 'prior' or three numbers X Y V, got {' '.join(values)!r}"
         )
     return truth
-
-
-def _refuse_ignored(args, mode: str, flags: dict) -> None:
-    """Refuse the flags of ``flags`` (dest: flag) that the user gave but ``mode`` ignores."""
-    given = [flag for dest, flag in flags.items() if dest in getattr(args, "_given", ())]
-    if given:
-        raise ValueError(
-            f"{' and '.join(given)}: not used by {mode}; "
-            f"leave {'them' if len(given) > 1 else 'it'} out"
-        )
 
 
 def _chunk(names, particles: int) -> int:
@@ -347,11 +343,11 @@ def _cmd_study(args) -> str:
     _check_rho(args.rho)
     checks.frames(args.frames, "--frames")
     q = _check_process_noise(args.process_noise)
-    names = _named_once(args.filters, "--filters")
+    names = parsing.named_once(args.filters, "--filters")
     if q > 0 and "filters" not in getattr(args, "_given", ()):  # the default: those that can run
         names = tuple(n for n in names if FILTERS[n].with_process_noise)
     if args.truth == [monte_carlo.PRIOR_TRUTH]:
-        _refuse_ignored(
+        parsing.refuse_ignored(
             args,
             "--truth prior (it checks the optimal filter alone, in this process)",
             {k: f"--{k}" for k in ("filters", "particles", "workers", "scheduler")},
@@ -361,7 +357,7 @@ def _cmd_study(args) -> str:
                 "--prior: --truth prior needs a fixed prior (the paper's rule is no prior; the "
                 f"other forms draw truths about --truth X Y V), got {args.prior}"
             )
-        result = _with_bar(
+        result = parsing.with_bar(
             "study",
             "trial",
             lambda progress: monte_carlo.prior_study(
@@ -375,7 +371,7 @@ def _cmd_study(args) -> str:
         )
         return cli_text.as_json(result) if args.json else cli_text.format_prior_study(result)
     if not any(FILTERS[n].random for n in names):
-        _refuse_ignored(
+        parsing.refuse_ignored(
             args,
             f"the filters {' '.join(names)}, which draw no particles",
             {"particles": "--particles"},
@@ -393,41 +389,18 @@ def _cmd_study(args) -> str:
     options.update(names=names, n_particles=args.particles, chunk=_chunk(names, args.particles))
     options.update(frames=args.frames, process_noise=q)
     with tasks.cluster(workers, args.scheduler) as client:
-        result = _with_bar(
+        result = parsing.with_bar(
             "study", "trial", lambda p: monte_carlo.study(**options, progress=p, client=client)
         )
     return cli_text.as_json(result) if args.json else cli_text.format_study(result)
 
 
-class _WriteError(Exception):
-    """The output could not be written: one line, exit status 1."""
-
-
-def _write(text: str) -> None:
-    """Write ``text`` to standard output, raising :class:`_WriteError` if it cannot."""
-    stream = sys.stdout
-    if stream is None:
-        raise _WriteError("cannot write the output: standard output is closed")
-    try:
-        stream.write(text)
-        stream.flush()
-    except (OSError, ValueError) as exc:
-        # nothing more may reach the broken stream, not even at exit
-        try:
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, stream.fileno())
-        except (OSError, ValueError):
-            pass
-        reason = getattr(exc, "strerror", None) or str(exc)
-        raise _WriteError(f"cannot write the output to standard output: {reason}") from None
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m depthcore``, with the registry's filters when built."""
-    p = _Parser(
+    p = parsing.Parser(
         prog="python -m depthcore",
         description="Filter based estimates of depth (Maybank 1990): the paper's filters "
-        f"on N >= 3 bearings (up to {FRAMES_MAX} frames).",
+        f"on N >= 3 bearings (up to {FRAMES_MAX} frames held whole, any number streamed).",
         epilog=cli_text.EXAMPLES["all"],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -436,71 +409,26 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument(
         "--debug", action="store_true", help="show the traceback of an unexpected failure"
     )
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    r = _command(
+    sub = p.add_subparsers(dest="command", required=True, parser_class=parsing.Parser)
+    r = parsing.command(
         sub, common, "reproduce", "moments of every filter for Figures 2-6, beside the paper's"
     )
-    _add_json(r, _cmd_reproduce)
+    parsing.add_json(r, _cmd_reproduce)
     _add_estimate_arguments(sub, common)
     _add_study_arguments(sub, common)
-    atlas_command.add(_command(sub, common, "atlas", atlas_command.SUMMARY), _with_bar, _WriteError)
+    atlas = parsing.command(sub, common, "atlas", atlas_command.SUMMARY)
+    atlas_command.add(atlas, parsing.with_bar, parsing.WriteError)
     return p
-
-
-def _command(sub, common, name: str, summary: str) -> argparse.ArgumentParser:
-    """The parser of command ``name``: ``summary`` its help and, as a sentence, its description.
-
-    ``name`` is a key of ``cli_text.EXAMPLES`` (the epilog); ``summary`` one
-    line, lower case, without a full stop.
-    """
-    return sub.add_parser(
-        name,
-        parents=[common],
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog=cli_text.EXAMPLES[name],
-        help=summary,
-        description=f"{summary[0].upper()}{summary[1:]}.",
-    )
-
-
-def _add_json(parser: argparse.ArgumentParser, run) -> None:
-    """The last option of a command that prints a table, ``--json``, and what the command runs."""
-    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    parser.set_defaults(run=run)
-
-
-def _add_filters(parser: argparse.ArgumentParser, what: str, note: str = "") -> None:
-    """``--filters`` (the registry's defaults): ``what`` begins the help, ``note`` ends it."""
-    every, defaults = names(), names(default=True)
-    parser.add_argument(
-        "--filters",
-        nargs="+",
-        default=list(defaults),
-        choices=every,
-        metavar="NAME",
-        help=f"{what} (default: {' '.join(defaults)}; also "
-        f"{' '.join(n for n in every if n not in defaults)}){note}",
-    )
-
-
-def _add_process_noise(parser: argparse.ArgumentParser, default: str, note: str = "") -> None:
-    """``--process-noise``, 0 by default: ``default`` says what 0 means, ``note`` ends its help."""
-    parser.add_argument(
-        "--process-noise",
-        type=float,
-        default=0.0,
-        metavar="Q",
-        help=f"SD of the velocity's change per frame (default 0{default}){note}",
-    )
 
 
 def _add_estimate_arguments(sub, common) -> None:
     """The command ``estimate`` and its options."""
-    e = _command(
+    e = parsing.command(
         sub,
         common,
         "estimate",
-        f"moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames)",
+        f"moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames held "
+        "whole; --per-frame streams any number)",
     )
     given = e.add_mutually_exclusive_group(required=True)
     given.add_argument(
@@ -512,23 +440,7 @@ def _add_estimate_arguments(sub, common) -> None:
         f"3 <= N <= {FRAMES_MAX}; magnitudes up to {MU_MAX:g}; nan: a missing frame, "
         "with --per-frame)",
     )
-    given.add_argument(
-        "--mu-file",
-        metavar="FILE",
-        help="read the bearings from a CSV file instead (- for standard input; its format below)",
-    )
-    e.add_argument(
-        "--focal",
-        type=float,
-        metavar="F",
-        help="the focal length in pixels, for a file's column u of pixels",
-    )
-    e.add_argument(
-        "--cx",
-        type=float,
-        metavar="C",
-        help="the principal point's column in pixels, for a file's column u",
-    )
+    tracks.add_arguments(e, given)
     e.add_argument(
         "--rho",
         type=float,
@@ -540,7 +452,7 @@ def _add_estimate_arguments(sub, common) -> None:
         type=float,
         nargs=3,
         metavar=("X", "Y", "V"),
-        help="prior mean at time 1 (default: the paper's (c1 - 2 c3, c2 - 2, 0))",
+        help="prior mean at the first frame (default: the paper's (c1 - 2 c3, c2 - 2, 0))",
     )
     e.add_argument(
         "--prior-cov",
@@ -549,13 +461,13 @@ def _add_estimate_arguments(sub, common) -> None:
         metavar="S",
         help="prior covariance: S for S I (default 1000), or 9 values row by row",
     )
-    _add_process_noise(e, ": the paper's constant velocity")
+    parsing.add_process_noise(e, ": the paper's constant velocity")
     e.add_argument(
         "--smooth",
         action="store_true",
         help="also the optimal filter's smoothed depth and lateral position at every frame",
     )
-    _add_filters(
+    parsing.add_filters(
         e,
         "filters to run, in this order",
         f"; with --per-frame those with a smoother, of {' '.join(names(smoothed=True))} "
@@ -565,7 +477,8 @@ def _add_estimate_arguments(sub, common) -> None:
         "--per-frame",
         action="store_true",
         help="the filtered and smoothed depth, lateral position and velocity with their SDs at "
-        "every frame (a track with missing frames, noise per frame or uneven steps needs it)",
+        "every frame (a track with missing frames, noise per frame or uneven steps needs it); "
+        f"past {FRAMES_MAX} frames the filtered ones, streamed through the online filters",
     )
     e.add_argument(
         "--learn-noise",
@@ -583,12 +496,14 @@ def _add_estimate_arguments(sub, common) -> None:
     e.add_argument(
         "--csv", action="store_true", help="with --per-frame: print CSV instead of a table"
     )
-    _add_json(e, _cmd_estimate)
+    parsing.add_json(e, _cmd_estimate)
 
 
 def _add_study_arguments(sub, common) -> None:
     """The command ``study`` and its options."""
-    st = _command(sub, common, "study", "Monte Carlo study of every filter's error and calibration")
+    st = parsing.command(
+        sub, common, "study", "Monte Carlo study of every filter's error and calibration"
+    )
     st.add_argument(
         "--trials",
         type=int,
@@ -615,7 +530,7 @@ def _add_study_arguments(sub, common) -> None:
         "trial's truth drawn from a prior of that form centred on the truth, the filters given "
         "its Gaussian",
     )
-    _add_filters(
+    parsing.add_filters(
         st,
         "filters to score",
         "; only these run: the Hellinger distances need the optimal filter, their reference, "
@@ -638,13 +553,13 @@ def _add_study_arguments(sub, common) -> None:
         f"{FRAMES_MAX}: the truth moves on from time 3 to frame N and every filter is scored "
         "there",
     )
-    _add_process_noise(
+    parsing.add_process_noise(
         st,
         "",
         "; with Q > 0 the filters that assume a constant velocity (particle) cannot be named",
     )
     cluster_options.add_arguments(st, "trials", "the same result, bit for bit")
-    _add_json(st, _cmd_study)
+    parsing.add_json(st, _cmd_study)
 
 
 def _parse(argv) -> argparse.Namespace:
@@ -656,7 +571,7 @@ def main(argv=None) -> int:
     """Run the command line; returns the exit status (0, 1 or 2)."""
     try:
         args = _parse(argv)
-    except _WriteError as exc:
+    except parsing.WriteError as exc:
         sys.stderr.write(f"python -m depthcore: error: {exc}\n")
         return 1
     prog = f"python -m depthcore {args.command}"
@@ -665,7 +580,8 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             text = args.run(args)
-        _write(text)
+            for chunk in [text] if isinstance(text, str) else text:  # a long track: in chunks
+                parsing.write(chunk)
     except np.linalg.LinAlgError:
         if args.debug:
             traceback.print_exc()
@@ -679,10 +595,11 @@ def main(argv=None) -> int:
     except ValueError as exc:
         if args.debug:
             traceback.print_exc()
-        words = getattr(args, "_words", None)
-        sys.stderr.write(f"{prog}: error: {refusals.users_words(args.command, str(exc), words)}\n")
+        words, label = getattr(args, "_words", None), getattr(args, "_label", None)
+        message = str(exc) if label is None else track_runs.relabel(str(exc), label)
+        sys.stderr.write(f"{prog}: error: {refusals.users_words(args.command, message, words)}\n")
         return 2
-    except _WriteError as exc:
+    except parsing.WriteError as exc:
         sys.stderr.write(f"{prog}: error: {exc}\n")
         return 1
     except KeyboardInterrupt:

@@ -15,6 +15,7 @@ import csv
 import io
 import json
 import math
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -48,9 +49,10 @@ legend: depth mean, depth sd  the filter's posterior mean and SD of the depth y 
 
 #: The legend of :func:`format_summary`'s smoothed columns.
 SMOOTHED_LEGEND = """\
-        frame                 1 .. N; depth mean, depth sd and x mean, x sd: the optimal
-                              filter's mean and SD of the depth y and the lateral position x
-                              at that frame given all N bearings"""
+        frame                 the frame's number in the track (its time, where the track has
+                              one); depth mean, depth sd and x mean, x sd: the optimal filter's
+                              mean and SD of the depth y and the lateral position x at that
+                              frame given all N bearings"""
 
 
 #: The legend of :func:`format_prior_study`'s columns.
@@ -152,15 +154,21 @@ def format_summary(summary: dict) -> str:
         cov_text = "[" + "; ".join(" ".join(f"{v:.4g}" for v in row) for row in cov) + "]"
     N = summary.get("frames", 3)
     q = summary.get("process_noise", 0.0)
+    number = summary.get("frame_numbers", list(range(1, N + 1)))
     lines = [
-        "noise-free state c = (x, y, v) at time 3 = "
+        f"noise-free state c = (x, y, v) at frame {number[min(2, N - 1)]} = "
         + ("undefined" if c is None else f"({c[0]:#.4g}, {c[1]:#.4g}, {c[2]:#.4g})"),
-        f"prior at time 1: mean (x, y, v) = ({m[0]:#.4g}, {m[1]:#.4g}, {m[2]:#.4g}), "
-        f"covariance {cov_text}",
+        f"prior at frame {number[0]}: mean (x, y, v) = ({m[0]:#.4g}, {m[1]:#.4g}, "
+        f"{m[2]:#.4g}), covariance {cov_text}",
     ]
+    if "direction" in summary:
+        lines.append(direction_text(summary))
     missing = sum(v is None for v in summary["mu"])
     if N != 3 or q > 0 or missing or "steps" in summary or np.ndim(summary["rho"]):
-        lines.append(f"{N} frames, process noise q = {q:g}; every filter at frame {N}")
+        lines.append(
+            f"{N} frames, process noise q = {q:g}; every filter at frame "
+            + _frame_label(summary, N - 1)
+        )
     if missing or "steps" in summary or np.ndim(summary["rho"]):
         steps = summary.get("steps")
         lines.append(
@@ -187,7 +195,8 @@ def format_summary(summary: dict) -> str:
         if f.get("sigma_points_behind_camera"):
             lines.append(f"{name:<{w}} its sigma points went behind the camera (y <= 0)")
         if "gated" in f:
-            skipped = ", ".join(map(str, f["gated"])) or "none"
+            times = f.get("gated_times", [None] * len(f["gated"]))
+            skipped = ", ".join(map(_label, f["gated"], times)) or "none"
             lines.append(f"{name:<{w}} gate skipped frames: {skipped}")
     for name, reason in summary.get("not_run", {}).items():
         lines.append(f"{name:<{w}} not run: {reason}")
@@ -210,16 +219,25 @@ def format_summary(summary: dict) -> str:
             "   (optimal, smoothed)"
         )
         for k, row in enumerate(
-            zip(
-                sm["depth_mean"], sm["depth_sd"], sm["lateral_mean"], sm["lateral_sd"], strict=True
-            ),
-            1,
+            zip(sm["depth_mean"], sm["depth_sd"], sm["lateral_mean"], sm["lateral_sd"], strict=True)
         ):
-            lines.append(f"{k:>5} " + " ".join(f"{v:>#10.4g}" for v in row).replace(" ", "  ", 1))
+            cells = " ".join(f"{v:>#10.4g}" for v in row).replace(" ", "  ", 1)
+            lines.append(f"{_frame_label(summary, k):>5} {cells}")
     lines.append(SUMMARY_LEGEND)
     if "smoothed" in summary:
         lines.append(SMOOTHED_LEGEND)
     return "\n".join(lines) + "\n"
+
+
+def _label(frame, time=None) -> str:
+    """A frame named by its number, and its time where the track has one."""
+    return str(frame) if time is None else f"{frame} (t = {time:.6g} s)"
+
+
+def _frame_label(summary: dict, k: int) -> str:
+    """The name of a summary's frame ``k`` (from 0): its number, and its time if it has one."""
+    number = summary.get("frame_numbers", [k + 1])[k if "frame_numbers" in summary else 0]
+    return _label(number, summary["times"][k] if "times" in summary else None)
 
 
 def _error(value) -> str:
@@ -347,9 +365,10 @@ def format_prior_study(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: The legend of :func:`format_per_frame`'s columns.
+#: The legend of :func:`per_frame_text`'s table.
 PER_FRAME_LEGEND = """\
-legend: frame    the frame's number; bearing: yes, no (a missing frame: the filter predicts
+legend: frame    the frame's number in the track (time: its time in seconds, where the
+                 track has one); bearing: yes, no (a missing frame: the filter predicts
                  through it) or gated (skipped: its predictive tail probability was below
                  the gate)
         mu       the bearing (blank at a missing frame)
@@ -393,56 +412,97 @@ def format_learned(result: dict) -> str:
     )
 
 
-def format_per_frame(result: dict) -> str:
-    """A plain-text table of a per-frame result, block by filter.
+def per_frame_text(head: dict, blocks: dict, output: str) -> Iterator[str]:
+    """A per-frame result as text, chunk by chunk: a table, CSV or JSON (``output``).
 
-    The result is :func:`depthcore.registry.track_files.per_frame`'s.
+    ``head`` holds the result's keys but ``"filters"`` (those of
+    :func:`depthcore.registry.track_runs.per_frame`'s result, the learned noise
+    and the direction of :func:`direction_text`), ``blocks`` each filter's rows,
+    each read once, in order: a list, or rows read back one at a time. The JSON
+    is :func:`as_json`'s of the whole result; the CSV has a row per filter and
+    frame, its columns ``filter`` and the keys of a row (a missing value an
+    empty field, booleans ``true`` and ``false``, numbers with every digit).
     """
-    m, q = result["prior_mean"], result["process_noise"]
-    lines = [
-        f"{result['frames']} frames; prior at the first frame: mean (x, y, v) = "
+    return {"table": _table_chunks, "csv": _csv_chunks, "json": _json_chunks}[output](head, blocks)
+
+
+def _table_chunks(head: dict, blocks: dict) -> Iterator[str]:
+    m, q = head["prior_mean"], head["process_noise"]
+    yield format_learned(head) + (
+        f"{head['frames']} frames; prior at the first frame: mean (x, y, v) = "
         f"({m[0]:#.4g}, {m[1]:#.4g}, {m[2]:#.4g}); process noise q = {q:g}"
-        + ("" if result["gate"] is None else f"; gate {result['gate']:g}")
-    ]
-    for name, rows in result["filters"].items():
-        tail = any("tail" in r for r in rows)
-        head = f"{'frame':>6} {'bearing':<7} {'mu':>10}"
-        for series in ("filtered", "smoothed"):
-            head += "  " + " ".join(f"{k + ' ' + series:>19}" for k, _ in _STATE)
-        head += f" {'tail':>8}" if tail else ""
-        lines += ["", f"{name}:", head]
-        for r in rows:
+        + ("" if head["gate"] is None else f"; gate {head['gate']:g}")
+        + f"\n{direction_text(head)}\n"
+    )
+    if not head["smoothed"]:
+        yield f"smoothed: not computed, {head['smoothed_reason']}\n"
+    series = ("filtered", "smoothed") if head["smoothed"] else ("filtered",)
+    for name, rows in blocks.items():
+        for k, r in enumerate(rows):
+            if k == 0:
+                timed, tail = "time" in r, "tail" in r
+                top = f"{'frame':>6}" + (f" {'time':>10}" if timed else "")
+                top += f" {'bearing':<7} {'mu':>10}"
+                for s in series:
+                    top += "  " + " ".join(f"{key + ' ' + s:>19}" for key, _ in _STATE)
+                yield f"\n{name}:\n{top}" + (f" {'tail':>8}" if tail else "") + "\n"
             flag = "gated" if r.get("gated") else ("yes" if r["bearing"] else "no")
-            cells = f"{r['frame']:>6} {flag:<7} {_cell(r['mu'], '.6g'):>10}"
-            for series in ("filtered", "smoothed"):
+            cells = f"{r['frame']:>6}" + (f" {r['time']:>10.4g}" if timed else "")
+            cells += f" {flag:<7} {_cell(r['mu'], '.6g'):>10}"
+            for s in series:
                 cells += "  " + " ".join(
-                    f"{r[f'{series}_{k}_mean']:>#9.4g} ({r[f'{series}_{k}_sd']:#.3g})".rjust(19)
-                    for k, _ in _STATE
+                    f"{r[f'{s}_{key}_mean']:>#9.4g} ({r[f'{s}_{key}_sd']:#.3g})".rjust(19)
+                    for key, _ in _STATE
                 )
-            cells += f" {_cell(r.get('tail'), '.3g'):>8}" if tail else ""
-            lines.append(cells)
-    lines.append(PER_FRAME_LEGEND)
-    return "\n".join(lines) + "\n"
+            yield cells + (f" {_cell(r.get('tail'), '.3g'):>8}" if tail else "") + "\n"
+    yield PER_FRAME_LEGEND + "\n"
 
 
 #: The quantities of a per-frame table: the key in a row, the column's name.
 _STATE = (("depth", "y"), ("x", "x"), ("velocity", "v"))
 
 
-def per_frame_csv(result: dict) -> str:
-    """CSV of :func:`depthcore.registry.track_files.per_frame`'s result: a row per filter and frame.
+def _csv_chunks(head: dict, blocks: dict) -> Iterator[str]:
+    columns = None
+    for name, rows in blocks.items():
+        for r in rows:
+            r = {"filter": name, **r}
+            if columns is None:
+                columns = list(r)
+                yield _csv_line(columns)
+            yield _csv_line([_csv_field(r.get(c)) for c in columns])
 
-    The columns are ``filter`` and the keys of a row; a missing value is an
-    empty field; booleans are ``true`` and ``false``; numbers carry every digit.
-    """
-    rows = [dict(filter=name, **r) for name, rs in result["filters"].items() for r in rs]
-    columns = list(rows[0])
+
+def _csv_line(fields: list) -> str:
     out = io.StringIO()
-    writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(columns)
-    for r in rows:
-        writer.writerow([_csv_field(r.get(c)) for c in columns])
+    csv.writer(out, lineterminator="\n").writerow(fields)
     return out.getvalue()
+
+
+def _json_chunks(head: dict, blocks: dict) -> Iterator[str]:
+    text = as_json({**head, "filters": {}})  # "filters" last: its rows go between its braces
+    yield text[: text.rindex("{}")] + "{"
+    for i, (name, rows) in enumerate(blocks.items()):
+        yield ("," if i else "") + f"\n    {json.dumps(name)}: ["
+        for k, r in enumerate(rows):
+            row = json.dumps(strict(r)[0], indent=2, allow_nan=False)
+            yield ("," if k else "") + "\n      " + row.replace("\n", "\n      ")
+        yield "\n    ]"
+    yield "\n  }\n}\n"
+
+
+#: What each direction of ``--direction`` means, as the outputs say it.
+DIRECTIONS = {
+    "receding": "the camera moves away from the point",
+    "approaching": "the camera moves towards the point",
+    "signed": "each step's sign: + receding, - approaching",
+}
+
+
+def direction_text(result: dict) -> str:
+    """The line naming the direction a result's steps were read in, and whether it was given."""
+    how = "given" if result["direction_given"] else "the default: no distances given"
+    return f"direction: {result['direction']} ({DIRECTIONS[result['direction']]}; {how})"
 
 
 def _csv_field(value) -> str:

@@ -1,14 +1,16 @@
-"""Track files: one track's bearings over frames read from CSV, and its frames' states.
+"""Track files: one track's bearings over frames read from CSV, row by row or held whole.
 
 Recommended import: ``from depthcore.registry import track_files``.
 
-:func:`read` reads a track file from a binary stream line by line with the
-standard ``csv`` module and refuses a malformed file in one line naming the
-file and the line, ``FILE:LINE: ...`` (:class:`FileRefusal`, a
-``ValueError``). Its time and memory do not grow with the file: it stops as
-soon as the rows pass the filters' limit of frames,
-:data:`depthcore.problem.checks.MAX_FRAMES`, and a line may hold at most
-:data:`MAX_LINE` characters. :func:`read_path` reads the file at a path.
+:func:`open_track` reads a track file's header from a binary stream and then
+gives its frames one at a time (:class:`Frame`), each row checked where it
+stands with the standard ``csv`` module, so that time and memory do not grow
+with the file (a line may hold at most :data:`MAX_LINE` characters).
+:func:`read` holds the whole track (:class:`TrackFile`), at most
+:data:`depthcore.problem.checks.MAX_FRAMES` frames, the limit of the filters
+that need it; :func:`hold` holds it only if it fits. :func:`read_path` reads
+the file at a path. A malformed file is refused in one line naming the file
+and the line, ``FILE:LINE: ...`` (:class:`FileRefusal`, a ``ValueError``).
 
 The format: UTF-8 text (a UTF-8 byte order mark is allowed), lines ending in
 LF or CRLF, a header naming the columns (:data:`COLUMNS`), then one row per
@@ -18,38 +20,59 @@ frame in time order:
 * ``u``: the image column in pixels instead of ``mu``, with ``focal`` and
   ``cx``: ``mu = (u - cx) / focal``;
 * ``rho`` (optional): the noise SD of each frame's bearing;
-* ``step`` (optional): the depth's change since the previous frame (> 0; the
-  first row's must be empty);
 * ``frame`` (optional): the frame number, strictly increasing integers;
-  without a ``step`` column a gap in the numbers is that many missing frames.
+  without a distance column a gap in the numbers is that many missing frames
+  (at most :data:`MAX_GAP` in a row);
+* at most one distance column (:data:`DISTANCES`), which gives the steps
+  (without one, unit steps): ``step``, the depth's change since the previous
+  frame (the first row's empty); ``travel``, the distance moved along the
+  line of sight since the first row (0 there); or ``time``, in seconds,
+  strictly increasing, the step being ``speed`` times the time between rows.
 
 An empty field or ``nan`` in ``mu`` (or ``u``) is a missing frame (its
 ``rho`` may be empty too).
 
-:func:`per_frame` runs a track through filters with a smoother and gives
-every frame's filtered and smoothed state, ready for JSON; :func:`learn`
-estimates its noise levels by maximum likelihood and :func:`learned_json`
-gives the fit as JSON values.
+The direction. A step is the depth's signed change between frames
+(:mod:`depthcore.problem.frames`): positive while the point recedes (the
+camera moves away from it), negative while it approaches (the camera moves
+towards it), never zero. A file's distances are read in the ``direction``
+given (:data:`DIRECTIONS`): ``"receding"`` or ``"approaching"`` take its
+step, travel or time amounts as positive magnitudes and give them that sign;
+``"signed"`` takes the signs of its step or travel column. A file with a
+distance column is refused without a direction, so that a camera moving
+towards the scene is never read as one moving away; without one the frames
+are unit steps, receding unless ``direction`` says otherwise (the paper's
+frames).
 """
 
 from __future__ import annotations
 
 import csv
+import itertools
 import math
 import os
 import re
+from collections.abc import Iterator
 from typing import NamedTuple
 
 import numpy as np
 
 from depthcore.problem import checks
-from depthcore.registry import filters, tracking
 
 #: The most characters of one line of a track file (a row holds a few numbers).
 MAX_LINE = 4096
 
 #: The columns a track file may name, in the order ``estimate --help`` explains them.
-COLUMNS = ("mu", "u", "rho", "step", "frame")
+COLUMNS = ("mu", "u", "rho", "frame", "step", "travel", "time")
+
+#: The columns that give the steps; a file names at most one.
+DISTANCES = ("step", "travel", "time")
+
+#: How a file's distances are read: their sign given, or their own.
+DIRECTIONS = ("receding", "approaching", "signed")
+
+#: The most missing frames in a row that a gap between frame numbers may stand for.
+MAX_GAP = checks.MAX_FRAMES
 
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 _INTEGER = re.compile(r"^[+-]?\d+$")
@@ -65,7 +88,7 @@ LIBRARY_NAMES = {"mu": "mu", "rho": "rho", "steps": "step"}
 
 
 class TrackFile(NamedTuple):
-    """A track read by :func:`read`.
+    """A track held whole (:func:`read`).
 
     Attributes
     ----------
@@ -77,12 +100,17 @@ class TrackFile(NamedTuple):
         The ``rho`` column (``NaN`` where empty, only at missing frames); ``None``
         without one.
     steps : ndarray, shape (N - 1,), or None
-        The ``step`` column from the second row on; ``None`` without one.
+        The depth's signed change from each frame to the next; ``None`` for unit
+        steps receding (the paper's frames).
     frames : ndarray of int, shape (N,)
         The frame numbers: the ``frame`` column with the missing frames filled
         in, else ``1 .. N``.
     pixels : bool
         Whether the bearings came from a ``u`` column.
+    times : ndarray, shape (N,), or None
+        The ``time`` column, in seconds; ``None`` without one.
+    direction : str
+        How the distances were read, one of :data:`DIRECTIONS`.
     """
 
     name: str
@@ -91,6 +119,93 @@ class TrackFile(NamedTuple):
     steps: np.ndarray | None
     frames: np.ndarray
     pixels: bool
+    times: np.ndarray | None = None
+    direction: str = "receding"
+
+
+class Frame(NamedTuple):
+    """One frame of a track file (:func:`open_track`).
+
+    Attributes
+    ----------
+    frame : int
+        Its number: the ``frame`` column's (missing frames between numbers
+        filled in), else 1, 2, ... in the order of the rows.
+    time : float
+        The ``time`` column's value in seconds; ``NaN`` without one.
+    mu : float
+        The bearing; ``NaN`` at a missing frame.
+    rho : float
+        The ``rho`` column's value; ``NaN`` without one or where empty.
+    step : float
+        The depth's signed change since the previous frame; ``NaN`` at the first.
+    line : int
+        The line of the file that gave it (for a frame missing between frame
+        numbers, the next row's).
+    """
+
+    frame: int
+    time: float
+    mu: float
+    rho: float
+    step: float
+    line: int
+
+
+class Reading(NamedTuple):
+    """A track file opened by :func:`open_track`: what its header says, then its frames.
+
+    Attributes
+    ----------
+    name : str
+        The file as the user named it (``<stdin>`` for ``-``).
+    columns : tuple of str
+        The header's columns.
+    direction : str
+        How the distances are read, one of :data:`DIRECTIONS`.
+    frames : iterator of Frame
+        The frames, each read and checked as it is asked for.
+    """
+
+    name: str
+    columns: tuple
+    direction: str
+    frames: Iterator[Frame]
+
+
+class Limits(NamedTuple):
+    """The ranges :func:`read` checks each field against.
+
+    Attributes
+    ----------
+    mu : float
+        The largest magnitude of a bearing (of ``mu``, or of ``(u - cx) / focal``).
+    rho : (float, float)
+        The range of a ``rho`` field.
+    step : (float, float)
+        The range of a step's magnitude, whichever column gives it.
+    pixels : float
+        The largest magnitude of ``focal`` and ``cx``.
+    """
+
+    mu: float
+    rho: tuple
+    step: tuple
+    pixels: float
+
+
+#: The most empty lines after the last row (more are refused, so the reading stays short).
+MAX_TRAILING_BLANKS = 100
+
+
+#: How :func:`read`'s refusals name ``focal``, ``cx``, where the format is described and
+#: what takes a track longer than the filters that hold it.
+WORDS = {
+    "focal": "focal",
+    "cx": "cx",
+    "format": "see depthcore.registry.track_files",
+    "long": "depthcore.registry.track_runs.streamed runs a longer one frame by frame",
+}
 
 
 def _lines(stream, name: str, counter: list):
@@ -135,37 +250,10 @@ def _number(text: str, column: str, where: str) -> float:
     return float(text)
 
 
-class Limits(NamedTuple):
-    """The ranges :func:`read` checks each field against.
-
-    Attributes
-    ----------
-    mu : float
-        The largest magnitude of a bearing (of ``mu``, or of ``(u - cx) / focal``).
-    rho : (float, float)
-        The range of a ``rho`` field.
-    step : (float, float)
-        The range of a ``step`` field.
-    pixels : float
-        The largest magnitude of ``focal`` and ``cx``.
-    """
-
-    mu: float
-    rho: tuple
-    step: tuple
-    pixels: float
-
-
-#: The most empty lines after the last row (more are refused, so the reading stays short).
-MAX_TRAILING_BLANKS = 100
-
-
-#: How :func:`read`'s refusals name ``focal``, ``cx`` and where the format is described.
-WORDS = {"focal": "focal", "cx": "cx", "format": "see depthcore.registry.track_files"}
-
-
-def read(path: str, stream, limits: Limits, focal=None, cx=None, words=None) -> TrackFile:
-    """Read a track file, checking every field where it stands.
+def open_track(
+    path: str, stream, limits: Limits, focal=None, cx=None, words=None, direction=None, speed=None
+) -> Reading:
+    """Read a track file's header; its frames follow, each checked as it is read.
 
     Parameters
     ----------
@@ -179,19 +267,26 @@ def read(path: str, stream, limits: Limits, focal=None, cx=None, words=None) -> 
         The focal length (> 0) and the principal point's column in pixels, for a
         ``u`` column (both or neither; finite, at most ``limits.pixels`` in magnitude).
     words : dict, optional
-        How the refusals name ``focal``, ``cx`` and where the format is described
-        (the keys of :data:`WORDS`, its values by default).
+        How the refusals name ``focal``, ``cx``, the format and what takes a
+        longer track (the keys of :data:`WORDS`, its values by default).
+    direction : str or None
+        One of :data:`DIRECTIONS` (module docstring); needed with a distance
+        column, ``"receding"`` without one by default.
+    speed : float or None
+        With a ``time`` column (and only then): the depth's rate of change per
+        second, a magnitude (> 0).
 
     Returns
     -------
-    TrackFile
+    Reading
 
     Raises
     ------
     FileRefusal
-        ``FILE:LINE: why`` (``FILE: why`` of the whole track).
+        ``FILE:LINE: why``, when the header is read or, as they are read, of the rows.
     ValueError
-        Naming ``path``, ``limits``, ``focal``, ``cx`` or ``words`` when it is not of its form.
+        Naming ``path``, ``limits``, ``focal``, ``cx``, ``words``, ``direction`` or
+        ``speed`` when it is not of its form or the file needs another.
     """
     if not isinstance(path, str):
         raise ValueError(f"path must be a string, got {type(path).__name__}")
@@ -204,13 +299,72 @@ def read(path: str, stream, limits: Limits, focal=None, cx=None, words=None) -> 
     name = "<stdin>" if path == "-" else path
     counter = [0]
     reader = csv.reader(_lines(stream, name, counter), strict=True)
-    rows, columns, blank = [], None, None
+    try:
+        row = next(reader, None)
+    except csv.Error as exc:
+        raise FileRefusal(f"{name}:{counter[0]}: not CSV: {exc}") from None
+    if row is None:
+        raise FileRefusal(
+            f"{name}:1: an empty file; the first line names the columns, of "
+            f"{', '.join(COLUMNS)} ({words['format']})"
+        )
+    columns = _header(row, f"{name}:1", focal is not None, words)
+    direction = _direction(columns, name, direction, speed)
+    rows = _frames(reader, name, counter, columns, (limits, focal, cx, direction, speed))
+    return Reading(name, tuple(columns), direction, rows)
+
+
+def _direction(columns: list, name: str, direction, speed) -> str:
+    """``direction`` checked against the file's distance column; ``speed`` against its time."""
+    given = [c for c in DISTANCES if c in columns]
+    if len(given) > 1:
+        raise FileRefusal(
+            f"{name}:1: the header names {given[0]} and {given[1]}; give one of "
+            f"{', '.join(DISTANCES)} (each gives the steps)"
+        )
+    kind = given[0] if given else None
+    if direction is not None and direction not in DIRECTIONS:
+        raise ValueError(f"direction must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
+    if kind == "time" and speed is None:
+        raise ValueError(
+            f"speed is needed: {name} has a time column, and a step is the speed times the "
+            "time between rows"
+        )
+    if kind != "time" and speed is not None:
+        raise ValueError(f"speed: not used: {name} has no time column; leave it out")
+    if speed is not None and not (
+        isinstance(speed, (int, float, np.integer, np.floating))
+        and math.isfinite(speed)
+        and speed > 0
+    ):
+        raise ValueError(
+            f"speed must be a positive number (the depth's change per second, a magnitude: "
+            f"the direction gives its sign), got {speed!r}"
+        )
+    if direction is None and kind is not None:
+        signed = "" if kind == "time" else f", or signed (the {kind} column's own signs)"
+        raise ValueError(
+            f"direction is needed: {name} has a {kind} column; say receding (the point's "
+            f"depth grows: the camera moves away from it), approaching (the camera moves "
+            f"towards it){signed}"
+        )
+    if direction == "signed" and kind in (None, "time"):
+        raise ValueError(
+            f"direction signed takes the signs of a step or travel column, and {name} has "
+            f"{'a time column' if kind else 'no distances'}; say receding or approaching"
+        )
+    return direction or "receding"
+
+
+def _frames(reader, name: str, counter: list, columns: list, how: tuple) -> Iterator[Frame]:
+    """The frames of the rows after the header (:func:`open_track`), missing ones filled in."""
+    limits, focal, cx, direction, speed = how
+    sign = -1.0 if direction == "approaching" else 1.0
+    distance = next((c for c in DISTANCES if c in columns), None)
+    previous, blank = None, None
     try:
         for row in reader:
             where = f"{name}:{counter[0]}"
-            if columns is None:
-                columns = _header(row, where, focal is not None, words)
-                continue
             if not row:  # an empty line: allowed at the end only
                 blank = blank or counter[0]
                 if counter[0] - blank >= MAX_TRAILING_BLANKS:
@@ -222,20 +376,170 @@ def read(path: str, stream, limits: Limits, focal=None, cx=None, words=None) -> 
                 raise FileRefusal(
                     f"{where}: {len(row)} fields, but the header names {len(columns)} columns"
                 )
-            fields = dict(zip(columns, row, strict=True))
-            values = _row(fields, where, limits, focal, cx, first=not rows)
-            _in_order(values, rows, columns, where)
-            rows.append(values)
+            values = _row(dict(zip(columns, row, strict=True)), where, limits, focal, cx)
+            number = values.get("frame", 1 if previous is None else previous["frame"] + 1)
+            values["frame"] = number
+            step = math.nan
+            if previous is not None:
+                if number <= previous["frame"]:
+                    raise FileRefusal(
+                        f"{where}: frame must increase strictly, got {number} after "
+                        f"{previous['frame']}"
+                    )
+                if distance is None:
+                    step = sign
+                    yield from _gap(previous["frame"], number, sign, where, counter[0])
+                else:
+                    step = _step(distance, values, previous, where, limits, direction, speed)
+            elif distance is not None:
+                _first(distance, values, where)
+            previous = values
+            time = values.get("time", math.nan)
+            yield Frame(number, time, values["mu"], values.get("rho", math.nan), step, counter[0])
     except csv.Error as exc:
         raise FileRefusal(f"{name}:{counter[0]}: not CSV: {exc}") from None
-    if columns is None:
-        raise FileRefusal(
-            f"{name}:1: an empty file; the first line names the columns, of "
-            f"{', '.join(COLUMNS)} ({words['format']})"
-        )
-    if not rows:
+    if previous is None:
         raise FileRefusal(f"{name}:{counter[0] + 1}: no frames after the header")
-    return _assemble(name, columns, rows)
+
+
+def _gap(last: int, number: int, sign: float, where: str, line: int) -> Iterator[Frame]:
+    """The missing frames between frame numbers ``last`` and ``number``, unit steps apart."""
+    if number - last - 1 > MAX_GAP:
+        raise FileRefusal(
+            f"{where}: frame jumps from {last} to {number}, more than {MAX_GAP} missing "
+            "frames in a row; a step, travel or time column spans a gap in one step"
+        )
+    for k in range(last + 1, number):
+        yield Frame(k, math.nan, math.nan, math.nan, sign, line)
+
+
+def _first(distance: str, values: dict, where: str) -> None:
+    """Refuse a first row whose step is not empty or whose travel is not 0."""
+    value = values[distance]
+    if distance == "step" and not math.isnan(value):
+        raise FileRefusal(
+            f"{where}: the first row's step must be empty (step is the depth's change since "
+            f"the previous frame), got {value:g}"
+        )
+    if distance == "travel" and value != 0:
+        raise FileRefusal(
+            f"{where}: the first row's travel must be 0 (travel is the distance moved since "
+            f"the first row), got {value:g}"
+        )
+
+
+def _step(distance: str, values, previous, where: str, limits, direction: str, speed) -> float:
+    """The depth's signed change since the previous row, from the file's distance column."""
+    lo, hi = limits.step
+    value = values[distance]
+    signed = direction == "signed"
+    amount = value if distance == "step" else value - previous[distance]
+    if distance == "time":
+        if not amount > 0:
+            raise FileRefusal(
+                f"{where}: time must increase strictly, got {value:g} after {previous['time']:g}"
+            )
+        amount *= speed
+        if not lo <= amount <= hi:
+            raise FileRefusal(
+                f"{where}: time gives a step of {amount:.6g} (speed times the "
+                f"{value - previous['time']:g} s since the previous row); a step must be "
+                f"from {lo:g} to {hi:g}"
+            )
+    elif not lo <= (abs(amount) if signed else amount) <= hi:  # an empty step (NaN) too
+        size = (
+            "in magnitude (its sign the direction: + receding, - approaching)"
+            if signed
+            else f"(a magnitude: the direction, {direction}, gives the sign)"
+        )
+        if distance == "step":
+            got = "an empty field" if math.isnan(value) else f"{value:g}"
+            raise FileRefusal(
+                f"{where}: step must be from {lo:g} to {hi:g} {size}, the depth's change since "
+                f"the previous frame; got {got}"
+            )
+        raise FileRefusal(
+            f"{where}: travel must change by {lo:g} to {hi:g} {size} from row to row, the "
+            f"distance moved since the first row; got {value:g} after {previous['travel']:g}"
+        )
+    return -amount if direction == "approaching" else amount
+
+
+def read(
+    path: str, stream, limits: Limits, focal=None, cx=None, words=None, direction=None, speed=None
+) -> TrackFile:
+    """Read a whole track file, checking every field where it stands.
+
+    The arguments are :func:`open_track`'s. A file of more than
+    :data:`depthcore.problem.checks.MAX_FRAMES` frames is refused at the line
+    that passes the limit, the rest unread.
+
+    Returns
+    -------
+    TrackFile
+
+    Raises
+    ------
+    FileRefusal, ValueError
+        As :func:`open_track`'s.
+    """
+    reading = open_track(path, stream, limits, focal, cx, words, direction, speed)
+    held = hold(reading)
+    if held.track is None:
+        words = {**WORDS, **(words or {})}
+        raise FileRefusal(
+            f"{reading.name}:{held.first[-1].line}: more than {checks.MAX_FRAMES} frames, "
+            f"the most the filters that hold a whole track take ({words['long']})"
+        )
+    return held.track
+
+
+class Held(NamedTuple):
+    """A track held whole if it fits (:func:`hold`).
+
+    Attributes
+    ----------
+    track : TrackFile or None
+        The whole track, or ``None`` past the limit.
+    reading : Reading
+        The track's reading; past the limit its ``frames`` are every frame,
+        row by row, from the first (those of ``first`` read already).
+    first : list of Frame or None
+        Past the limit, its first ``limit + 1`` frames.
+    """
+
+    track: TrackFile | None
+    reading: Reading
+    first: list | None
+
+
+def hold(reading: Reading, limit: int = checks.MAX_FRAMES) -> Held:
+    """The track of ``reading`` whole if it has at most ``limit`` frames, else row by row.
+
+    At most ``limit + 1`` frames are read before the answer.
+    """
+    first = list(itertools.islice(reading.frames, limit + 1))
+    if len(first) <= limit:
+        return Held(assemble(reading, first), reading, None)
+    return Held(None, reading._replace(frames=itertools.chain(first, reading.frames)), first)
+
+
+def assemble(reading: Reading, frames: list) -> TrackFile:
+    """The :class:`TrackFile` of a list of ``reading``'s frames."""
+    time, mu, rho, step = np.array([f[1:5] for f in frames], dtype=float).reshape(-1, 4).T
+    steps = step[1:]
+    if not set(DISTANCES) & set(reading.columns) and reading.direction == "receding":
+        steps = None  # unit steps receding: the paper's frames
+    return TrackFile(
+        reading.name,
+        mu,
+        rho if "rho" in reading.columns else None,
+        steps,
+        np.array([f.frame for f in frames], dtype=int),
+        "u" in reading.columns,
+        time if "time" in reading.columns else None,
+        reading.direction,
+    )
 
 
 def _check_pixels(focal, cx, largest: float) -> None:
@@ -257,12 +561,13 @@ def _check_pixels(focal, cx, largest: float) -> None:
         raise ValueError(f"focal must be positive, got {focal!r}")
 
 
-def read_path(path, limits: Limits, focal=None, cx=None) -> TrackFile:
+def read_path(path, limits: Limits, focal=None, cx=None, direction=None, speed=None) -> TrackFile:
     """:func:`read` of the file at ``path`` (a str or os.PathLike).
 
-    ``limits``, ``focal`` and ``cx``, the :class:`TrackFile` and the
-    :class:`FileRefusal` of a malformed file are :func:`read`'s; a ``ValueError``
-    names ``path`` when the file cannot be opened or read.
+    ``limits``, ``focal``, ``cx``, ``direction`` and ``speed``, the
+    :class:`TrackFile` and the :class:`FileRefusal` of a malformed file are
+    :func:`read`'s; a ``ValueError`` names ``path`` when the file cannot be
+    opened or read.
     """
     try:
         text = os.fspath(path)
@@ -270,7 +575,7 @@ def read_path(path, limits: Limits, focal=None, cx=None) -> TrackFile:
         raise ValueError(f"path must be a file's path, got {type(path).__name__}") from None
     try:
         with open(text, "rb") as stream:
-            return read(str(text), stream, limits, focal, cx)
+            return read(str(text), stream, limits, focal, cx, None, direction, speed)
     except OSError as exc:
         raise ValueError(f"path: cannot read {text!r}: {exc.strerror or exc}") from None
 
@@ -305,8 +610,8 @@ def _header(row: list, where: str, pixels: bool, words: dict) -> list:
     return names
 
 
-def _row(fields: dict, where: str, limits: Limits, focal, cx, first: bool) -> dict:
-    """One row's numbers, checked: ``mu`` (from ``u``), ``rho``, ``step``, ``frame``."""
+def _row(fields: dict, where: str, limits: Limits, focal, cx) -> dict:
+    """One row's numbers, checked: ``mu`` (from ``u``), ``rho``, ``frame``, a distance."""
     out = {}
     for column, raw in fields.items():
         text = raw.strip()
@@ -318,262 +623,20 @@ def _row(fields: dict, where: str, limits: Limits, focal, cx, first: bool) -> di
         value = _number(text, column, where)
         if column == "u" and not math.isnan(value):
             value = (value - cx) / focal
-            column = "mu"
             if not abs(value) <= limits.mu:
                 raise FileRefusal(
                     f"{where}: u gives a bearing (u - cx) / focal of magnitude more than "
                     f"{limits.mu:g}, got u = {text}"
                 )
-        elif column == "u":
-            column = "mu"
         elif column == "mu" and not abs(value) <= limits.mu and not math.isnan(value):
             raise FileRefusal(f"{where}: mu must be at most {limits.mu:g} in magnitude, got {text}")
         elif column == "rho" and not math.isnan(value):
             lo, hi = limits.rho
             if not lo <= value <= hi:
                 raise FileRefusal(f"{where}: rho must be from {lo:g} to {hi:g}, got {text}")
-        elif column == "step":
-            lo, hi = limits.step
-            if first and text:
-                raise FileRefusal(
-                    f"{where}: the first row's step must be empty (step is the depth's "
-                    f"change since the previous frame), got {text}"
-                )
-            if not first and not lo <= value <= hi:  # an empty field (NaN) too
-                raise FileRefusal(
-                    f"{where}: step must be from {lo:g} to {hi:g} (the depth's change since "
-                    f"the previous frame), got {text or 'an empty field'}"
-                )
-        out[column] = value
+        elif column in ("travel", "time") and math.isnan(value):
+            raise FileRefusal(f"{where}: {column} must be a number at every row, got {text!r}")
+        out["mu" if column == "u" else column] = value
     if "rho" in out and math.isnan(out["rho"]) and not math.isnan(out["mu"]):
         raise FileRefusal(f"{where}: rho is empty at a frame with a bearing")
     return out
-
-
-def _in_order(values: dict, rows: list, columns: list, where: str) -> None:
-    """Refuse a frame number out of order, or the frames passing the filters' limit."""
-    frames = len(rows) + 1
-    if "frame" in values and rows:
-        if values["frame"] <= rows[-1]["frame"]:
-            raise FileRefusal(
-                f"{where}: frame must increase strictly, got {values['frame']} after "
-                f"{rows[-1]['frame']}"
-            )
-        if "step" not in columns:  # the gaps are missing frames
-            frames = values["frame"] - rows[0]["frame"] + 1
-    if frames > checks.MAX_FRAMES:
-        raise FileRefusal(
-            f"{where}: more than {checks.MAX_FRAMES} frames (the filters' limit)"
-            + (
-                " counting the missing frames between the frame numbers"
-                if len(rows) + 1 < frames
-                else ""
-            )
-        )
-
-
-def _assemble(name: str, columns: list, rows: list) -> TrackFile:
-    """The track of the rows, the missing frames between frame numbers filled in."""
-    if "frame" in columns and "step" not in columns:
-        first = rows[0]["frame"]
-        n = rows[-1]["frame"] - first + 1
-        index = [r["frame"] - first for r in rows]
-        frames = np.arange(first, first + n)
-    else:
-        n = len(rows)
-        index = list(range(n))
-        frames = np.array([r["frame"] for r in rows]) if "frame" in columns else np.arange(1, n + 1)
-    mu = np.full(n, np.nan)
-    mu[index] = [r["mu"] for r in rows]
-    rho = None
-    if "rho" in columns:
-        rho = np.full(n, np.nan)
-        rho[index] = [r["rho"] for r in rows]
-    steps = np.array([r["step"] for r in rows[1:]]) if "step" in columns else None
-    return TrackFile(name, mu, rho, steps, frames, "u" in columns)
-
-
-# --- every frame's state ------------------------------------------------------------------
-
-#: The quantities of a per-frame row, by the attribute of a series of states.
-QUANTITIES = (
-    ("depth", "depth"),
-    ("x", "lateral"),
-    ("velocity", "velocity"),
-)
-
-
-def per_frame(
-    mu, rho, prior, process_noise: float, names, steps=None, gate=None, frames=None
-) -> dict:
-    """Every frame's filtered and smoothed state by the named filters, ready for JSON.
-
-    Parameters
-    ----------
-    mu : ndarray, shape (N,)
-        Bearings, ``NaN`` at a missing frame.
-    rho : float or ndarray, shape (N,)
-        The noise SD, one or per frame.
-    prior : depthcore.problem.gaussian.Gaussian
-        The state's density at the first frame.
-    process_noise : float
-    names : sequence of str
-        Filters with a smoother (:data:`depthcore.registry.filters.SMOOTHED`).
-    steps : ndarray, shape (N - 1,), or None
-        The depth's change between consecutive frames (``None``: unit steps).
-    gate : float or None
-        Skip a bearing whose predictive tail probability is below ``gate``.
-    frames : ndarray of int, shape (N,), or None
-        The frames' numbers (default ``1 .. N``).
-
-    Returns
-    -------
-    dict
-        ``{"frames", "prior_mean", "prior_cov", "process_noise", "gate", "filters":
-        {name: rows}}``; a row per frame: ``frame``, ``bearing`` (whether the frame
-        has one), ``mu``, ``rho``, ``step`` (``None`` at the first frame), the
-        filter's ``tail`` and ``gated`` where it reports them, then
-        ``filtered_depth_mean``, ``filtered_depth_sd``, ``filtered_x_mean``, ...,
-        ``smoothed_velocity_sd`` (depth ``y``, lateral position ``x``, velocity ``v``).
-    """
-    try:
-        mu = np.asarray(mu, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError("mu must be an array of numbers, shape (N,)") from None
-    if mu.ndim != 1:
-        raise ValueError(f"mu must be one track, shape (N,), got shape {mu.shape}")
-    n = mu.shape[0]
-    if isinstance(names, str) or not len(names):
-        raise ValueError(f"names must be a sequence of filter names, got {names!r}")
-    smoothed = filters.names(smoothed=True)
-    for name in names:
-        if name not in smoothed:
-            raise ValueError(
-                f"names: {name!r} is not a filter with a smoother; these are {', '.join(smoothed)}"
-            )
-    if frames is not None and np.shape(frames) != (n,):
-        raise ValueError(f"frames must have shape ({n},), one per bearing, got {np.shape(frames)}")
-    if np.ndim(rho):
-        rho = np.asarray(rho, dtype=float)
-    present = np.isfinite(mu)
-    if np.ndim(rho) and np.any(present) and np.all(rho[present] == rho[present][0]):
-        rho = float(rho[present][0])  # one noise level: the paper's frames
-    frames = np.arange(1, n + 1) if frames is None else np.asarray(frames)
-    rho_k = np.broadcast_to(np.asarray(rho, dtype=float), (n,))
-    step_k = [None] + ([1.0] * (n - 1) if steps is None else [float(s) for s in np.asarray(steps)])
-    options = {}
-    if steps is not None:
-        options["steps"] = np.asarray(steps, dtype=float)
-    if gate is not None:
-        options["gate"] = gate
-    out = {
-        "frames": int(n),
-        "prior_mean": prior.mean.tolist(),
-        "prior_cov": prior.cov.tolist(),
-        "process_noise": float(process_noise),
-        "gate": gate,
-        "filters": {},
-    }
-    for name in names:
-        t = tracking.track(mu, rho, prior, process_noise, filter=name, **options)
-        updates = getattr(t, "updates", None)
-        rows = []
-        for k in range(n):
-            present = bool(np.isfinite(mu[k]))
-            row = {
-                "frame": int(frames[k]),
-                "bearing": present,
-                "mu": float(mu[k]),
-                "rho": float(rho_k[k]) if present else None,
-                "step": step_k[k],
-            }
-            if updates is not None:
-                row["tail"] = float(np.asarray(updates.tail)[k])
-                row["gated"] = bool(np.asarray(updates.gated)[k])
-            for series, states in (("filtered", t.filtered), ("smoothed", t.smoothed)):
-                for key, attribute in QUANTITIES:
-                    row[f"{series}_{key}_mean"] = float(getattr(states, f"{attribute}_mean")[k])
-                    row[f"{series}_{key}_sd"] = float(getattr(states, f"{attribute}_sd")[k])
-            rows.append(row)
-        out["filters"][name] = rows
-    return out
-
-
-# --- learning the noise ---------------------------------------------------------------
-
-
-def learn(mu, weights, prior, known_q=None, steps=None):
-    """A track's noise levels: rho (and q unless given) by maximum likelihood, textbook 19.1.2.
-
-    Parameters
-    ----------
-    mu : ndarray, shape (N,)
-        Bearings, ``NaN`` at a missing frame.
-    weights : float or ndarray, shape (N,)
-        A file's ``rho`` column: the frames' relative noise levels (a number: none).
-    prior : depthcore.problem.gaussian.Gaussian
-        The state's density at the first frame.
-    known_q : float or None
-        The process noise when given, ``None`` to learn it.
-    steps : ndarray, shape (N - 1,), or None
-        The depth's change between consecutive frames (``None``: unit steps).
-
-    Returns
-    -------
-    depthcore.exact.learning.Fit
-
-    Raises
-    ------
-    ValueError
-        Naming ``prior`` when it is not a Gaussian, or the argument
-        :func:`depthcore.exact.learning.fit` refuses.
-    """
-    from depthcore.exact import learning
-
-    if not (hasattr(prior, "mean") and hasattr(prior, "cov")):
-        raise ValueError(f"prior must be a Gaussian (mean and cov), got {type(prior).__name__}")
-    return learning.fit(
-        mu,
-        prior.mean,
-        prior.cov,
-        process_noise=known_q,
-        steps=steps,
-        weights=np.asarray(weights) if np.ndim(weights) else None,
-    )
-
-
-def learned_json(fit) -> dict:
-    """A learned fit as plain JSON values (``None`` for a standard error it has not).
-
-    Parameters
-    ----------
-    fit : depthcore.exact.learning.Fit
-        :func:`learn`'s result.
-
-    Returns
-    -------
-    dict
-        ``rho``, ``rho_se``, ``rho_interval``, ``process_noise``,
-        ``process_noise_se``, ``process_noise_interval``, ``estimated``,
-        ``at_boundary``, ``level``, ``log_likelihood``, ``converged``.
-    """
-
-    def number(v):
-        return None if v is None else float(v)
-
-    def interval(v):
-        return None if v is None else [float(v[0]), float(v[1])]
-
-    return {
-        "rho": float(fit.rho),
-        "rho_se": number(fit.rho_se),
-        "rho_interval": interval(fit.rho_interval),
-        "process_noise": float(fit.process_noise),
-        "process_noise_se": number(fit.process_noise_se),
-        "process_noise_interval": interval(fit.process_noise_interval),
-        "estimated": list(fit.estimated),
-        "at_boundary": bool(fit.at_boundary),
-        "level": float(fit.level),
-        "log_likelihood": float(fit.log_likelihood),
-        "converged": bool(fit.converged),
-    }
