@@ -12,7 +12,7 @@ from numpy.testing import assert_allclose
 from scipy import integrate
 
 from depthbook import reference
-from depthcore.exact import optimal, quadrature
+from depthcore.exact import modes, optimal, quadrature
 from depthcore.problem import model
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import f, noise_free_state
@@ -445,7 +445,7 @@ def test_velocity_cdf_refines_each_problem_on_its_own_and_matches_a_finer_mixtur
         )
     rows = [3, 7]
     lo, h, n, frame = batch._grids[3]
-    sub_grids = {3: (lo[rows], h[rows], n[rows], quadrature.Frame(*(a[rows] for a in frame)))}
+    sub_grids = {3: (lo[rows], h[rows], n[rows], modes.Frame(*(a[rows] for a in frame)))}
     whole = optimal._fine_velocity_mixture(batch._problem, batch._grids, batch.log_normaliser)
     part = optimal._fine_velocity_mixture(
         batch._problem.take(rows), sub_grids, batch.log_normaliser[rows]

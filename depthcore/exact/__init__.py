@@ -2,11 +2,15 @@
 
 * :mod:`~depthcore.exact.quadrature`: the log-depth trapezoid rule with its
   error estimate;
+* :mod:`~depthcore.exact.modes`: where the quadrature puts its nodes, each
+  interval of the depth about its integrand's mode and width;
 * :mod:`~depthcore.exact.cdf`: a marginal's CDF by Gauss-Legendre panels;
 * :mod:`~depthcore.exact.optimal`: the paper's optimal filter for three
   frames and its exact marginals, Eqs. (6), (13)-(16);
 * :mod:`~depthcore.exact.bank`: for any number of frames, a bank of Kalman
   filters over depth (given the depth, the model is linear);
+* :mod:`~depthcore.exact.lateral`: the Kalman filter of the lateral state
+  given the depth, written out elementwise for every node at once;
 * :mod:`~depthcore.exact.tracks`: a track's frames for the bank (steps,
   noise per frame, gaps);
 * :mod:`~depthcore.exact.mixture`: the bank's Gaussians mixed over the depth

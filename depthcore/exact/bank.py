@@ -50,9 +50,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from depthcore.exact import tracks
+from depthcore.exact import lateral, tracks
 from depthcore.kalman import linear
 from depthcore.problem import checks
+from depthcore.problem.frames import depth_floor
 from depthcore.problem.gaussian import MeanAndCov
 
 #: The lateral state ``(x, v)`` moves by ``x <- x + v``: the transition matrix.
@@ -123,6 +124,14 @@ class Bank(NamedTuple):
     def elapsed(self) -> np.ndarray:
         """The depth travelled since frame 1 at every frame, ``y_k - y_1``, shape (..., N)."""
         return tracks.elapsed(self.steps, self.frames)
+
+    @property
+    def floor(self) -> np.ndarray:
+        """The depth at frame 1 below which the point has reached the camera, shape (...).
+
+        :func:`depthcore.problem.frames.depth_floor`: 0 while the point only recedes.
+        """
+        return depth_floor(self.elapsed)
 
     @property
     def travelled(self) -> np.ndarray:
@@ -263,122 +272,43 @@ def lateral_filter(
     cov_shape = np.broadcast_shapes(
         start.cov.shape[:-2], nodes.shape, rho2.shape, q2.shape, *per_row
     )
-    M, C, rows = _lateral_state(
+    M, C, rows = lateral.state(
         np.broadcast_shapes(start.mean.shape[:-1], mu.shape[:-1] + (1,)), cov_shape
     )
-    M[_X], M[_V] = start.mean[..., 0], start.mean[..., 1]
+    M[lateral.X_ROW], M[lateral.V_ROW] = start.mean[..., 0], start.mean[..., 1]
     c0 = start.cov[..., 0, :, :]
     a, b, c = c0[..., 0, 0, None], c0[..., 0, 1, None], c0[..., 1, 1, None]
-    C[_A], C[_B], C[_DET], C[_C] = a, b, a * c - b * b, c
+    C[lateral.A_ROW], C[lateral.B_ROW], C[lateral.DET_ROW], C[lateral.C_ROW] = (
+        a,
+        b,
+        a * c - b * b,
+        c,
+    )
     noise = q2 if np.any(q2) else None  # None: constant velocity, Eq. (1)
     if steps is None and frame_rho is None and not gaps:  # the paper's frames
         for k in range(mu.shape[-1]):
             if k:
-                _predict_lateral(rows, noise)
+                lateral.predict_unit(rows, noise)
             y = nodes + k  # y_k = y_1 + k - 1
-            log_weight = log_weight + _update_lateral(rows, mu[..., k, None], y, rho2, y * y)
+            log_weight = log_weight + lateral.update(rows, mu[..., k, None], y, rho2, y * y)
     else:
         depth = tracks.elapsed(steps, mu.shape[-1])
         for k in range(mu.shape[-1]):
             if k:
                 s = None if steps is None else steps[..., k - 1, None]
-                _predict_step(rows, noise, s)
+                lateral.predict(rows, noise, s)
             y = nodes + depth[..., k, None]
+            reached = y <= 0  # at or behind the camera: no weight
+            if np.any(reached):
+                log_weight = np.where(reached, -np.inf, log_weight)
+                y = np.where(reached, 1.0, y)
             r2 = rho2 if frame_rho is None else (frame_rho[..., k, None] ** 2)
-            log_weight = log_weight + _masked_update(rows, M, C, mu[..., k, None], y, r2)
+            log_weight = log_weight + lateral.masked_update(rows, M, C, mu[..., k, None], y, r2)
     return (
         log_weight,
         M,
         (rows.a.reshape(cov_shape), rows.b.reshape(cov_shape), rows.c.reshape(cov_shape)),
     )
-
-
-def _predict_step(rows, noise, s) -> None:
-    """:func:`_predict_lateral` over a step ``s`` (..., 1), or a unit step for ``None``."""
-    if s is None:
-        _predict_lateral(rows, noise)
-    else:
-        _predict_lateral_step(rows, None if noise is None else noise * s, s)
-
-
-def _masked_update(rows, M, C, mu_k, y, rho2):
-    """:func:`_update_lateral` where ``mu_k`` (..., 1) is present; no change (log 0) elsewhere."""
-    present = ~np.isnan(mu_k)
-    if np.all(present):
-        return _update_lateral(rows, mu_k, y, rho2, y * y)
-    if not np.any(present):
-        return 0.0
-    M0, C0 = M.copy(), C.copy()
-    safe_rho2 = np.where(present, rho2, 1.0)
-    log_likelihood = _update_lateral(rows, np.where(present, mu_k, 0.0), y, safe_rho2, y * y)
-    np.copyto(M, M0, where=~present)
-    np.copyto(C, C0, where=~present)
-    return np.where(present, log_likelihood, 0.0)
-
-
-def _predict_lateral_step(s: _Rows, q2, step) -> None:
-    """Textbook 19.2.1 over a step ``s`` (..., 1), in place; ``q2 = q**2 s`` or ``None``."""
-    np.add(s.x, step * s.v, out=s.x)
-    np.add(s.a, step * (2.0 * s.b + step * s.c), out=s.a)
-    np.add(s.b, step * s.c, out=s.b)
-    if q2 is not None:
-        np.add(s.c, q2, out=s.c)
-        np.add(s.det, q2 * s.a, out=s.det)
-
-
-#: Rows of the lateral state arrays ``M`` (``x, v``) and ``C`` (``a, b, det, c``).
-_X, _V = 0, 1
-_A, _B, _DET, _C = 0, 1, 2, 3
-
-
-class _Rows(NamedTuple):
-    """Views of the lateral state arrays ``M`` (2, ...) and ``C`` (4, ...), updated in place."""
-
-    M: np.ndarray
-    x: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    b: np.ndarray
-    det: np.ndarray
-    c: np.ndarray
-    ab: np.ndarray
-    ab_det: np.ndarray
-
-
-def _lateral_state(mean_shape, cov_shape):
-    """Empty state arrays ``M`` (2, ...) and ``C`` (4, ...) for :func:`lateral_filter`, and rows."""
-    mean_shape = np.broadcast_shapes(mean_shape, cov_shape)
-    pad = (1,) * (len(mean_shape) - len(cov_shape))
-    M, C = np.empty((2,) + mean_shape), np.empty((4,) + pad + tuple(cov_shape))
-    rows = _Rows(M, M[_X], M[_V], C[_A], C[_B], C[_DET], C[_C], C[_A : _B + 1], C[_A : _DET + 1])
-    return M, C, rows
-
-
-def _predict_lateral(s: _Rows, q2) -> None:
-    """Textbook 19.2.1 for a unit step, in place; ``q2`` is ``q**2`` or ``None`` (``q = 0``)."""
-    np.add(s.x, s.v, out=s.x)
-    np.add(s.a, 2.0 * s.b, out=s.a)
-    np.add(s.a, s.c, out=s.a)  # a + 2 b + c
-    np.add(s.b, s.c, out=s.b)
-    if q2 is not None:
-        np.add(s.c, q2, out=s.c)
-        np.add(s.det, q2 * s.a, out=s.det)
-
-
-def _update_lateral(s: _Rows, mu_k, y, rho2, yy):
-    """Textbook 19.2.2 for the bearing ``mu_k`` at depth ``y``, in place; the log likelihood.
-
-    ``yy`` is ``y * y``; see :func:`lateral_filter`.
-    """
-    r = rho2 * yy
-    total = s.a + r
-    e = mu_k * y - s.x
-    g = e / total
-    log_likelihood = -0.5 * (_LOG_2PI + np.log(total / yy) + e * g)
-    np.add(s.M, s.ab * g, out=s.M)  # x + a g and v + b g
-    np.multiply(s.ab_det, r / total, out=s.ab_det)  # a, b and det times r / (a + r)
-    np.divide(s.det + s.b * s.b, s.a, out=s.c)
-    return log_likelihood
 
 
 # --- the bank --------------------------------------------------------------------------
@@ -392,7 +322,9 @@ def filter_bank(
     Parameters
     ----------
     nodes : array_like, shape (..., J)
-        Depths at frame 1, > 0; leading axes broadcast with the others'.
+        Depths at frame 1, > 0; leading axes broadcast with the others'. A node
+        that puts the point at or behind the camera at some frame (below
+        :attr:`Bank.floor`, for a camera that approaches) has no weight.
     mu : array_like, shape (..., N)
         ``NaN`` at a missing frame.
     rho : float or array_like, shape (...) or (..., N)
@@ -403,8 +335,9 @@ def filter_bank(
     history : bool
         Keep every node's filter at every frame (for ``Mixture.smoothed``).
     steps : array_like, shape (N - 1,) or (..., N - 1), or None
-        The depth's change between frames, > 0 (``None``: unit steps), with
-        ``x_{k+1} = x_k + s_k v_k`` and ``a_k ~ N(0, q**2 s_k)``.
+        The depth's signed change between frames, nonzero (negative: the camera
+        approaches; ``None``: unit steps), with ``x_{k+1} = x_k + s_k v_k`` and
+        ``a_k ~ N(0, q**2 |s_k|)``.
 
     Returns
     -------
@@ -430,8 +363,16 @@ def filter_bank(
             )
         except ValueError:  # the Kalman filters' own refusal of an overflow
             bank = None
-    if bank is None or not all(
-        np.all(np.isfinite(a)) for a in (bank.mean, bank.cov, bank.log_weight)
+    if bank is not None and np.any(np.all(bank.log_weight == -np.inf, axis=-1)):
+        raise ValueError(
+            f"nodes: every node is at or behind the floor {float(np.max(bank.floor)):.6g}, "
+            "where the point would reach the camera; give depths at frame 1 above it"
+        )
+    if (
+        bank is None
+        or not all(np.all(np.isfinite(a)) for a in (bank.mean, bank.cov))
+        # no weight only where the point would reach the camera
+        or not np.all(np.isfinite(bank.log_weight) | (nodes <= bank.floor[..., None]))
     ):
         raise ValueError(
             f"nodes from {float(np.min(nodes))!r} to {float(np.max(nodes))!r} overflow the "
@@ -483,6 +424,9 @@ def run_bank(
             res = tracks.irregular_history(start, nodes, mu, rho, q, steps, frame_rho)
         mean, cov = res.means[..., -1, :], res.covs[..., -1, :, :]
         log_weight = log_prior + res.log_likelihood
+    if steps is not None:  # no weight where the point would reach the camera
+        floor = depth_floor(tracks.elapsed(steps, mu.shape[-1]))
+        log_weight = np.where(nodes > floor[..., None], log_weight, -np.inf)
     return Bank(
         nodes=nodes,
         mean=mean,
@@ -511,7 +455,8 @@ def step(bank: Bank, mu_next, rho=None, step=1.0, gaps: bool = False) -> Bank:
     rho : float or array_like, shape (...), or None
         ``None``: the bank's (needed with noise per frame).
     step : float or array_like, shape (...)
-        The depth's change from frame ``N`` to ``N + 1``, > 0.
+        The depth's signed change from frame ``N`` to ``N + 1``, nonzero (negative:
+        the camera approaches; nodes that the step brings to the camera lose their weight).
     gaps : bool
 
     Returns
@@ -524,8 +469,8 @@ def step(bank: Bank, mu_next, rho=None, step=1.0, gaps: bool = False) -> Bank:
     if not gaps and not np.all(np.isfinite(raw)):
         raise ValueError("mu_next must be finite (or NaN for a missing frame, with gaps=True)")
     step_ = checks.finite_array(step, "step")
-    if not np.all(step_ > 0):
-        raise ValueError(f"step must be positive, got minimum {float(np.min(step_)):.6g}")
+    if np.any(step_ == 0):
+        raise ValueError("step must be nonzero (the depth's signed change), got a zero step")
     plain = (
         rho is None
         and not np.any(np.isnan(raw))
@@ -583,46 +528,31 @@ def step(bank: Bank, mu_next, rho=None, step=1.0, gaps: bool = False) -> Bank:
     q2 = (np.asarray(bank.process_noise) ** 2)[..., None]
     s = step_[..., None]
     y = bank.nodes + (bank.travelled[..., None] + s)
+    reached = y <= 0  # the point at or behind the camera: no weight from here on
+    y = np.where(reached, 1.0, y)
     cov_shape = np.broadcast_shapes(bank.cov.shape[:-2], y.shape, rho2.shape, q2.shape)
     if np.any(np.isnan(raw)):
         cov_shape = np.broadcast_shapes(cov_shape, raw.shape + (1,))
-    M, C, rows = _loaded_state(
+    if np.any(reached):  # its own covariance per node: reached nodes are not updated
+        cov_shape = np.broadcast_shapes(cov_shape, reached.shape)
+    M, C, rows = lateral.loaded_state(
         bank, np.broadcast_shapes(bank.mean.shape[:-1], raw.shape + (1,)), cov_shape
     )
     noise = q2 if np.any(q2) else None
-    _predict_step(rows, noise, None if np.all(step_ == 1.0) and step_.ndim == 0 else s)
-    log_likelihood = _masked_update(rows, M, C, raw[..., None], y, rho2)
+    lateral.predict(rows, noise, None if np.all(step_ == 1.0) and step_.ndim == 0 else s)
+    bearing = raw[..., None]
+    if np.any(reached):  # no update where the point has reached the camera: no weight there
+        bearing = np.where(reached, np.nan, bearing)
+    log_likelihood = lateral.masked_update(rows, M, C, bearing, y, rho2)
+    log_likelihood = np.where(reached, -np.inf, log_likelihood)
     return bank._replace(
-        mean=_pack_mean(M),
-        cov=_pack_cov(C, cov_shape),
+        mean=lateral.pack_mean(M),
+        cov=lateral.pack_cov(C, cov_shape),
         mu=mu,
         log_weight=bank.log_weight + log_likelihood,
         rho=bank.rho if frame_rho is None else frame_rho,
         **tracks.frame_fields(mu, bank.rho, steps_or_none, frame_rho),
     )
-
-
-def _loaded_state(bank: Bank, mean_shape, cov_shape):
-    """:func:`_lateral_state` holding the bank's means and covariances, with their determinants."""
-    M, C, rows = _lateral_state(mean_shape, cov_shape)
-    M[_X], M[_V] = bank.mean[..., 0], bank.mean[..., 1]
-    C[_A], C[_B], C[_C] = bank.cov[..., 0, 0], bank.cov[..., 0, 1], bank.cov[..., 1, 1]
-    np.multiply(C[_A], C[_C], out=C[_DET])
-    C[_DET] -= C[_B] * C[_B]
-    return M, C, rows
-
-
-def _pack_mean(M) -> np.ndarray:
-    mean = np.empty(M.shape[1:] + (2,))
-    mean[..., 0], mean[..., 1] = M[_X], M[_V]
-    return mean
-
-
-def _pack_cov(C, cov_shape) -> np.ndarray:
-    cov = np.empty(cov_shape + (2, 2))
-    cov[..., 0, 0], cov[..., 1, 1] = C[_A].reshape(cov_shape), C[_C].reshape(cov_shape)
-    cov[..., 0, 1] = cov[..., 1, 0] = C[_B].reshape(cov_shape)
-    return cov
 
 
 def _step(bank: Bank, mu_next) -> Bank:
@@ -635,14 +565,14 @@ def _step(bank: Bank, mu_next) -> Bank:
         q2 = (np.asarray(bank.process_noise) ** 2)[..., None]
         y = bank.nodes + N
         cov_shape = np.broadcast_shapes(bank.cov.shape[:-2], y.shape, rho2.shape, q2.shape)
-        M, C, rows = _loaded_state(
+        M, C, rows = lateral.loaded_state(
             bank, np.broadcast_shapes(bank.mean.shape[:-1], mu_next.shape + (1,)), cov_shape
         )
-        _predict_lateral(rows, q2 if np.any(q2) else None)
-        log_likelihood = _update_lateral(rows, mu_next[..., None], y, rho2, y * y)
+        lateral.predict_unit(rows, q2 if np.any(q2) else None)
+        log_likelihood = lateral.update(rows, mu_next[..., None], y, rho2, y * y)
         return bank._replace(
-            mean=_pack_mean(M),
-            cov=_pack_cov(C, cov_shape),
+            mean=lateral.pack_mean(M),
+            cov=lateral.pack_cov(C, cov_shape),
             mu=(mu := _extend(bank.mu, mu_next)),
             log_weight=bank.log_weight + log_likelihood,
             **tracks.frame_fields(mu, bank.rho, None, None),

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from depthcore.exact import online, posterior, quadrature
+from depthcore.exact import modes, online, posterior, quadrature
 from depthcore.exact.cdf import gauss_legendre_cdf
 from depthcore.exact.mixture import Moments
 from depthcore.kalman.second_order import A2
@@ -319,7 +319,7 @@ def _fine_velocity_mixture(
             keep = np.flatnonzero(refine)
             active, u, w, mean, sd = active[keep], u[keep], w[keep], mean[keep], sd[keep]
             mid = 0.5 * (u[:, :-1] + u[:, 1:])
-            sub = quadrature.Frame(frame.t0[active], frame.sigma[active])
+            sub = modes.Frame(frame.t0[active], frame.sigma[active])
             new = _velocity_nodes(i, mid, sub, pb.take(active), log_normaliser[active])
             u, w, mean, sd = (
                 _interleave(a, b) for a, b in zip((u, w, mean, sd), (mid, *new), strict=True)
@@ -338,12 +338,10 @@ def _fine_velocity_mixture(
     )
 
 
-def _velocity_nodes(
-    interval: int, u, frame: quadrature.Frame, pb: quadrature.Problem, log_normaliser
-):
+def _velocity_nodes(interval: int, u, frame: modes.Frame, pb: quadrature.Problem, log_normaliser):
     """Depth weights, velocity means and SDs at nodes ``u`` (B, n); NaN nodes weigh 0."""
     skip = np.isnan(u)
-    offsets, log_jac = quadrature.mapped_nodes(interval, np.where(skip, 0.0, u), frame)
+    offsets, log_jac = modes.mapped_nodes(interval, np.where(skip, 0.0, u), frame)
     log_density, mean, (_, _, cvv) = _solve(offsets, pb)
     w = np.where(skip, 0.0, np.exp(log_density + log_jac - log_normaliser[:, None]))
     return w, np.where(skip, 0.0, mean[1]), np.where(skip, 1.0, np.sqrt(cvv))
@@ -609,7 +607,7 @@ class BatchMarginals:
         hi = np.where(inside, u_up, lo + 1.0)
 
         def density(u):
-            offsets, log_jac = quadrature.mapped_nodes(3, u.reshape(len(y), -1), frame)
+            offsets, log_jac = modes.mapped_nodes(3, u.reshape(len(y), -1), frame)
             log_f = _solve(offsets, self._problem)[0] + log_jac - self.log_normaliser[:, None]
             return np.exp(log_f).reshape(u.shape)
 
