@@ -158,7 +158,7 @@ def test_a_study_scores_it():
         (lambda: batch_ml.estimate([-0.3, 0.0, 0.2], -1.0), "rho"),
         (lambda: batch_ml.covariance([1.0, 1.0, 0.0], np.full(4, 0.01)), "state"),
         (
-            lambda: batch_ml.information([1.0, 9.0, 0.0], np.full(4, 0.01), [1.0, -1.0, 1.0]),
+            lambda: batch_ml.information([1.0, 9.0, 0.0], np.full(4, 0.01), [1.0, 0.0, 1.0]),
             "steps",
         ),
     ],

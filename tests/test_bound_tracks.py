@@ -58,12 +58,25 @@ TRACK_RHO = RHO * np.array([1.0, 2.5, 0.7, 1.0, 4.0, 1.3, 0.9, 2.0])
 TRACK_PRESENT = np.array([True, True, False, True, True, False, True, True])
 
 
+#: A camera that approaches: the same steps towards the point, from 12 units deeper.
+APPROACH = (np.array([0.0, 12.0, 0.0]), -TRACK_STEPS)
+
+
 @pytest.mark.parametrize("prior_cov", [P, None])
-@pytest.mark.parametrize("x1", [model.G(FIG2.c, -2), np.array([0.5, 3.0, -0.2])])
-def test_gaps_noise_per_frame_and_uneven_steps_are_the_batch_information(x1, prior_cov):
+@pytest.mark.parametrize(
+    ("x1", "steps"),
+    [
+        (model.G(FIG2.c, -2), TRACK_STEPS),
+        (np.array([0.5, 3.0, -0.2]), TRACK_STEPS),
+        (np.array([0.5, 3.0, -0.2]) + APPROACH[0], APPROACH[1]),
+    ],
+    ids=["fig2", "near", "approaching"],
+)
+def test_gaps_noise_per_frame_and_uneven_steps_are_the_batch_information(x1, steps, prior_cov):
     """q = 0: Eq. (21) with F_k at each step, I_k = 0 at a gap and rho_k per frame, against the
-    batch information of the present bearings about s_k, by hand, at every determined frame."""
-    states = _moving(x1, TRACK_STEPS)
+    batch information of the present bearings about s_k, by hand, at every determined frame;
+    receding and approaching."""
+    states = _moving(x1, steps)
     rho = np.where(TRACK_PRESENT, TRACK_RHO, np.nan)  # NaN at a gap is never read
     B = bound.conditional_bound(states, rho, prior_cov, 0.0, TRACK_PRESENT)
     first = 1 if prior_cov is not None else 4  # the fourth frame has the third bearing
@@ -98,7 +111,7 @@ def _stacked_bound(states, rho, present, prior_cov, q):
     C = np.zeros((3 * n, 3 * n))
     C[:3, :3] = prior_cov
     for j in range(1, n):
-        C[3 * j + 2, 3 * j + 2] = q**2 * steps[j - 1]
+        C[3 * j + 2, 3 * j + 2] = q**2 * abs(steps[j - 1])
     Sigma = A @ C @ A.T
     rows = []
     for k in np.flatnonzero(present):
@@ -112,13 +125,17 @@ def _stacked_bound(states, rho, present, prior_cov, q):
     return post[-3:, -3:]
 
 
+@pytest.mark.parametrize("approaching", [False, True])
 @pytest.mark.parametrize("q", [0.01, 0.3])
-def test_process_noise_over_uneven_steps_is_the_stacked_linear_gaussian_bound(q):
-    """q > 0: the recursion's bound on s_N, with the velocity's variance q**2 s_k over each
-    step, a gap and rho per frame, against the brute-force marginal of the stacked states."""
+def test_process_noise_over_uneven_steps_is_the_stacked_linear_gaussian_bound(q, approaching):
+    """q > 0: the recursion's bound on s_N, with the velocity's variance q**2 |s_k| over each
+    step, a gap and rho per frame, against the brute-force marginal of the stacked states;
+    receding and approaching."""
     rng = np.random.default_rng(5)
+    steps = -TRACK_STEPS if approaching else TRACK_STEPS
     a = q * np.sqrt(TRACK_STEPS) * rng.standard_normal(len(TRACK_STEPS))
-    states = _moving(model.G(FIG2.c, -2), TRACK_STEPS, a)
+    start = model.G(FIG2.c, -2) + (APPROACH[0] if approaching else 0.0)
+    states = _moving(start, steps, a)
     B = bound.conditional_bound(states, TRACK_RHO, P, q, TRACK_PRESENT)
     for k in (4, 8):  # the bound at frame k from the frames up to k
         expected = _stacked_bound(states[:k], TRACK_RHO, TRACK_PRESENT[:k], P, q)
@@ -187,7 +204,7 @@ def test_scaling_the_track_scales_the_bound():
     ("call", "name"),
     [
         (lambda s: bound.conditional_bound(s + np.eye(8, 3, -7) * 0.1, RHO), "states"),
-        (lambda s: bound.conditional_bound(s[::-1], RHO), "states"),
+        (lambda s: bound.conditional_bound(np.concatenate([s[:1], s[:-1]]), RHO), "states"),
         (lambda s: bound.conditional_bound(s, RHO, P, 0.0, [1, 1, 0, 1, 1, 1, 1, 1]), "present"),
         (lambda s: bound.conditional_bound(s, RHO, P, 0.0, np.ones(7, bool)), "present"),
         (lambda s: bound.conditional_bound(s, np.full(7, RHO), P), "rho"),

@@ -129,7 +129,7 @@ def by_hand(mu, rho, prior_mean, prior_cov, q=0.0, steps=None):
         if k > 0:
             F = frames.transition(steps[k - 1])
             m = F @ m + np.array([0.0, steps[k - 1], 0.0])
-            P = F @ P @ F.T + np.diag([0.0, 0.0, q**2 * steps[k - 1]])
+            P = F @ P @ F.T + np.diag([0.0, 0.0, q**2 * abs(steps[k - 1])])
         if np.isnan(mu[k]):
             logs.append(np.nan)
         else:
@@ -266,10 +266,13 @@ def test_two_unit_steps_with_the_middle_bearing_missing_are_one_step_of_two(run)
     )
 
 
-def test_uneven_steps_equal_the_recursion_with_each_step():
-    steps = np.array([0.5, 1.5, 2.0, 0.25, 1.0])
-    h = ekf.run(MU, RHO, PRIOR_MEAN, PRIOR_COV, process_noise=0.04, steps=steps)
-    m, P, logs = by_hand(MU, RHO, PRIOR_MEAN, PRIOR_COV, 0.04, steps)
+@pytest.mark.parametrize("sign", [1.0, -1.0], ids=["receding", "approaching"])
+def test_uneven_steps_equal_the_recursion_with_each_step(sign):
+    """Eqs. (10)-(12) over each signed step, the velocity's variance q**2 |s| (textbook 19.10)."""
+    steps = sign * np.array([0.5, 1.5, 2.0, 0.25, 1.0])
+    prior_mean = PRIOR_MEAN + [0.0, 10.0 if sign < 0 else 0.0, 0.0]  # in front at every frame
+    h = ekf.run(MU, RHO, prior_mean, PRIOR_COV, process_noise=0.04, steps=steps)
+    m, P, logs = by_hand(MU, RHO, prior_mean, PRIOR_COV, 0.04, steps)
     np.testing.assert_allclose(h.means, m, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(h.covs, P, rtol=1e-7, atol=1e-13)
     np.testing.assert_allclose(h.updates.log_predictive, logs, rtol=1e-9)
@@ -339,7 +342,7 @@ def test_second_order_reads_a_constant_per_frame_rho_as_the_problems():
     "kwargs, message",
     [
         ({"gate": 1.5}, r"^gate must be None or a probability"),
-        ({"steps": [1.0, -1.0, 1.0, 1.0, 1.0]}, r"^steps must be positive"),
+        ({"steps": [1.0, 0.0, 1.0, 1.0, 1.0]}, r"^steps must be nonzero"),
         ({"mu": [0.1, np.nan, np.nan, np.nan, np.nan, 0.5]}, r"^mu has 2 bearings present"),
         ({"rho": np.array([0.01, 0.0, 0.01, 0.01, 0.01, 0.01])}, r"^rho\[1\] must be finite"),
     ],

@@ -413,7 +413,7 @@ def test_the_ukf_step_functions_keep_their_signatures():
     "kwargs, message",
     [
         ({"steps": [1.0, 1.0]}, r"^steps must have shape \(5,\)"),
-        ({"steps": [1.0, -1.0, 1.0, 1.0, 1.0]}, "^steps must be positive"),
+        ({"steps": [1.0, 0.0, 1.0, 1.0, 1.0]}, "^steps must be nonzero"),
         ({"gate": 1.5}, r"^gate must be None or a probability in \(0, 1\)"),
         ({"gate": 0.0}, r"^gate must be None or a probability"),
     ],

@@ -22,7 +22,10 @@ front of the camera.
 the least misfit over them is a weighted linear least-squares problem
 (the profile of :func:`depthcore.problem.model.profile_misfit`). The depth at
 frame 1, ``y_1 = y_N - t_1``, is searched on :data:`GRID` points spaced
-evenly in ``log(y_1 / t_1)`` between :data:`DEPTH_LIMITS`; from the best,
+evenly in ``log((y_1 - f) / r)`` between :data:`DEPTH_LIMITS`, ``f`` the depth at
+frame 1 below which the point reaches the camera
+(:func:`depthcore.problem.frames.depth_floor`, 0 while it recedes) and ``r`` the
+range of depths the track spans (``t_1`` while it recedes); from the best,
 Levenberg-Marquardt iterations (Gauss-Newton steps damped by Marquardt's
 diagonal, [nocedal2006]_ ch. 10) run on ``(x_N, log y_1, v)``, so the depth
 stays positive at every frame, every track of a batch at once, until a step
@@ -60,7 +63,7 @@ import numpy as np
 
 from depthcore.problem import checks, frames
 
-#: The depth at frame 1 searched, as multiples of the depth travelled from frame 1 to frame N.
+#: The depth at frame 1 searched, above the floor, as multiples of the range the track spans.
 DEPTH_LIMITS = (1e-6, 1e6)
 
 #: Points of the search in log depth before the iterations.
@@ -102,13 +105,21 @@ class BatchML(NamedTuple):
 
 class _Tracks(NamedTuple):
     """Flattened checked tracks: weights ``1 / rho`` (0 where missing), bearings (0 where
-    missing), ``t`` the depth travelled to frame N, ``elapsed`` from frame 1, ``span`` = t_1."""
+    missing), ``t`` the depth travelled to frame N, ``elapsed`` from frame 1, ``span`` = t_1,
+    ``floor`` (:func:`depthcore.problem.frames.depth_floor`) and ``reach``, the range of
+    depths the track spans (``t_1`` while the point recedes)."""
 
     w: np.ndarray
     mu: np.ndarray
     t: np.ndarray
     elapsed: np.ndarray
     span: np.ndarray
+    floor: np.ndarray
+    reach: np.ndarray
+
+    def depth1(self, z):
+        """The depth at frame 1 at ``z = log((y_1 - floor) / reach)``, (B,)."""
+        return self.floor + self.reach * np.exp(z)
 
 
 def _tracks(f: frames.Frames) -> _Tracks:
@@ -120,7 +131,9 @@ def _tracks(f: frames.Frames) -> _Tracks:
     # each track's weights scaled by their largest (the estimate does not change)
     w = w / np.max(w, axis=1, keepdims=True)
     mu = np.where(present, f.mu.reshape(-1, n), 0.0)
-    return _Tracks(w, mu, span[:, None] - elapsed, elapsed, span)
+    floor = frames.depth_floor(elapsed)
+    reach = np.max(elapsed, axis=1) - np.min(elapsed, axis=1)
+    return _Tracks(w, mu, span[:, None] - elapsed, elapsed, span, floor, reach)
 
 
 def _profile(tr: _Tracks, depth1: np.ndarray) -> tuple:
@@ -140,13 +153,13 @@ def _profile(tr: _Tracks, depth1: np.ndarray) -> tuple:
 
 def _residuals(tr: _Tracks, p: np.ndarray):
     """Standardised residuals (B, N) and their Jacobian (B, N, 3) in ``p = (x_N, z, v)``,
-    ``z = log(y_1 / t_1)``."""
-    depth1 = tr.span * np.exp(p[:, 1])
+    ``z = log((y_1 - floor) / reach)`` (:class:`_Tracks`)."""
+    depth1 = tr.depth1(p[:, 1])
     y = depth1[:, None] + tr.elapsed
     x = p[:, :1] - tr.t * p[:, 2:]
     r = tr.w * (x / y - tr.mu)
     jac = np.stack(
-        [tr.w / y, -tr.w * x / y**2 * depth1[:, None], -tr.w * tr.t / y],
+        [tr.w / y, -tr.w * x / y**2 * (depth1 - tr.floor)[:, None], -tr.w * tr.t / y],
         axis=-1,
     )
     return r, jac
@@ -159,7 +172,7 @@ def _search(tr: _Tracks, limits, scale: np.ndarray) -> tuple:
     best = np.full(len(tr.span), np.inf)
     p = np.zeros((len(tr.span), 3))
     for z in grid:
-        x, v, misfit = _profile(tr, tr.span * np.exp(z))
+        x, v, misfit = _profile(tr, tr.depth1(z))
         better = misfit < best
         best = np.where(better, misfit, best)
         p[better] = np.stack([x, np.full_like(x, z), v], axis=-1)[better]
@@ -192,7 +205,7 @@ def _search(tr: _Tracks, limits, scale: np.ndarray) -> tuple:
     at_limit = (p[:, 1] <= z_lo) | (p[:, 1] >= z_hi)
     if np.any(at_limit):  # the best state at the limiting depth
         edge = _Tracks(*(a[at_limit] for a in tr))
-        x, v, _ = _profile(edge, edge.span * np.exp(p[at_limit, 1]))
+        x, v, _ = _profile(edge, edge.depth1(p[at_limit, 1]))
         p[at_limit, 0], p[at_limit, 2] = x, v
     return p, at_limit, iterations
 
@@ -227,8 +240,11 @@ def _frame_inputs(state, rho, steps, present):
     if steps is None:
         steps = np.ones(n - 1)
     steps = checks.finite_array(steps, "steps")
-    if steps.ndim < 1 or steps.shape[-1] != n - 1 or not np.all(steps > 0):
-        raise ValueError(f"steps must be positive, shape (..., {n - 1}), got shape {steps.shape}")
+    if steps.ndim < 1 or steps.shape[-1] != n - 1 or np.any(steps == 0):
+        raise ValueError(
+            f"steps must be nonzero (signed; negative: approaching), shape (..., {n - 1}), "
+            f"got shape {steps.shape}"
+        )
     try:
         batch = np.broadcast_shapes(
             state.shape[:-1], rho.shape[:-1], present.shape[:-1], steps.shape[:-1]
@@ -245,7 +261,7 @@ def _frame_inputs(state, rho, steps, present):
     steps = np.broadcast_to(steps, batch + (n - 1,)).reshape(-1, n - 1)
     t = np.concatenate([np.cumsum(steps[:, ::-1], axis=1)[:, ::-1], np.zeros((len(steps), 1))], 1)
     s = np.broadcast_to(state, batch + (3,)).reshape(-1, 3)
-    if not np.all(s[:, 1] - t[:, 0] > 0):
+    if not np.all(s[:, 1] - np.max(t, axis=1) > 0):
         raise ValueError("state must put the point in front of the camera at every frame")
     w = np.where(present, 1.0 / np.where(present, rho, 1.0), 0.0)
     return s, t, w, batch
@@ -309,7 +325,8 @@ def estimate(mu, rho, steps=None, process_noise=0.0, depth_limits=DEPTH_LIMITS) 
         Must be 0: the likelihood is that of the constant-velocity motion.
     depth_limits : tuple of float
         ``(lo, hi)``, ``0 < lo < hi``: the depth at frame 1 searched, as
-        multiples of the depth travelled from frame 1 to frame N.
+        multiples of the range of depths the track spans, above the depth at
+        which the point reaches the camera (the module docstring).
 
     Returns
     -------
@@ -337,7 +354,7 @@ def estimate(mu, rho, steps=None, process_noise=0.0, depth_limits=DEPTH_LIMITS) 
     n = f.mu.shape[-1]
     scale = np.max(np.where(f.present, 1.0 / f.rho, 0.0).reshape(-1, n), axis=1)
     p, at_limit, iterations = _search(tr, limits, scale)
-    depth_n = tr.span * np.exp(p[:, 1]) + tr.span
+    depth_n = tr.depth1(p[:, 1]) + tr.span
     mean = np.stack([p[:, 0], depth_n, p[:, 2]], axis=-1)
     A = _gradients(mean, tr.t, tr.w)
     cov = _inverse_information(A, scale)

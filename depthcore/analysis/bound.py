@@ -211,7 +211,7 @@ def process_noise_steps(process_noise, frames: int) -> np.ndarray:
 
 
 def _steps(value, n: int, batch: tuple[int, ...]):
-    """Steps ``(N - 1,)`` or ``(..., N - 1)``, finite and > 0; None stays None."""
+    """Steps ``(N - 1,)`` or ``(..., N - 1)``, finite and nonzero (signed); None stays None."""
     if value is None:
         return None
     steps = checks.finite_array(value, "steps")
@@ -224,8 +224,8 @@ def _steps(value, n: int, batch: tuple[int, ...]):
             f"steps must have shape ({n - 1},) or broadcast to {batch + (n - 1,)}, "
             f"got shape {steps.shape}"
         )
-    if not np.all(steps > 0):
-        raise ValueError("steps must be positive (the depth grows between frames)")
+    if np.any(steps == 0):
+        raise ValueError("steps must be nonzero (the depth's signed change; negative: approaching)")
     return steps
 
 
@@ -439,8 +439,11 @@ def track_steps(states) -> np.ndarray:
         s = np.diff(y, axis=-1)
         depth = np.maximum(np.abs(y[..., 1:]), np.abs(y[..., :-1]))
         s = np.where(np.abs(s - 1.0) <= _STEP_ULPS * eps * np.maximum(depth, 1.0), 1.0, s)
-        if not np.all(s > 0) or not np.all(np.isfinite(s)):
-            raise ValueError("states must have depths growing from frame to frame (steps > 0)")
+        if np.any(s == 0) or not np.all(np.isfinite(s)):
+            raise ValueError(
+                "states must have depths that change from frame to frame (steps nonzero: "
+                "positive receding, negative approaching)"
+            )
         moved = s * v[..., :-1]
         error = np.abs(x[..., 1:] - x[..., :-1] - moved)
         scale = np.abs(x[..., 1:]) + np.abs(x[..., :-1]) + 2 * depth * np.abs(v[..., :-1])

@@ -36,11 +36,11 @@ EKFHistory = History
 
 
 def predict(m, P, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
-    """Eq. (10) over a step ``s``: ``n = G(m, s)``, ``C = F_s P F_s^T``, plus ``q**2 s`` on ``v``.
+    """Eq. (10) over a step ``s``: ``n = G(m, s)``, ``C = F_s P F_s^T``, plus ``q**2 |s|`` on ``v``.
 
-    With process noise ``q`` (textbook Eq. (19.10), ``Sigma_p = diag(0, 0, q**2 s)``,
+    With process noise ``q`` (textbook Eq. (19.10), ``Sigma_p = diag(0, 0, q**2 |s|)``,
     :func:`depthcore.problem.frames.velocity_variance`) the velocity's variance
-    grows by ``q**2 s``; ``F_s`` is :func:`depthcore.problem.frames.transition`.
+    grows by ``q**2 |s|``; ``F_s`` is :func:`depthcore.problem.frames.transition`.
     ``q = 0`` and ``s = 1`` is Eq. (10).
 
     Parameters
@@ -50,7 +50,7 @@ def predict(m, P, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
     process_noise : float
         ``q >= 0`` (not checked here).
     step : float or array_like, shape (...)
-        ``s > 0`` (not checked here), per problem.
+        ``s != 0`` (not checked here), the depth's signed change, per problem.
     """
     m = np.asarray(m, dtype=float)
     P = np.asarray(P, dtype=float)
@@ -185,7 +185,7 @@ def information_predict(m, R, process_noise: float = 0.0, step=1.0):
     process_noise : float
         ``q >= 0``, checked.
     step : float or array_like, shape (...)
-        ``s > 0``, checked by the caller.
+        ``s != 0`` (signed), checked by the caller.
 
     Returns
     -------
@@ -200,7 +200,7 @@ def information_predict(m, R, process_noise: float = 0.0, step=1.0):
         n = model.G(m, s)
         F, F_inverse = frames.transition(s), frames.transition(-s)
     if process_noise:
-        return n, _predict_information(R, process_noise, F, np.sqrt(s))
+        return n, _predict_information(R, process_noise, F, np.sqrt(np.abs(s)))
     return n, R @ F_inverse
 
 
@@ -309,8 +309,8 @@ def _predict_information(R, q: float, F=model.F, root_step=1.0) -> np.ndarray:
     """The root of the predicted information with process noise, batched.
 
     With ``P^{-1} = R^T R`` the covariance is ``P = S S^T``, ``S = R^{-1}``; the
-    prediction ``C = F P F^T + diag(0, 0, q**2 s)`` (textbook Eq. (19.10)) is
-    ``M^T M`` for ``M`` the rows of ``(F S)^T`` stacked on ``(0, 0, q sqrt(s))``,
+    prediction ``C = F P F^T + diag(0, 0, q**2 |s|)`` (textbook Eq. (19.10)) is
+    ``M^T M`` for ``M`` the rows of ``(F S)^T`` stacked on ``(0, 0, q sqrt(|s|))``,
     so the QR factorisation ``M = Q U`` gives ``C = U^T U`` and the new root
     ``U^{-T}`` (``C^{-1} = U^{-1} U^{-T}``), with no subtraction.
     """

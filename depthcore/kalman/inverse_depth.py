@@ -160,7 +160,7 @@ def prior(mean, cov) -> MeanAndCov:
 
 
 def predict(z, S, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
-    """A step of motion in inverse depth: ``a += step s``; ``s`` gains ``(w q)**2 step``.
+    """A step of motion in inverse depth: ``a += step s``; ``s`` gains ``(w q)**2 |step|``.
 
     Parameters
     ----------
@@ -170,7 +170,7 @@ def predict(z, S, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
     process_noise : float
         ``q >= 0``.
     step : float or array_like, shape (...)
-        The depth's change ``> 0`` (module docstring); 1 is a frame of the paper.
+        The depth's signed change, nonzero (module docstring); 1 is a frame of the paper.
     """
     z = np.asarray(z, dtype=float)
     S = np.asarray(S, dtype=float)
@@ -179,7 +179,7 @@ def predict(z, S, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
     C = S.copy()
     C[..., 0, :] += h[..., None] * S[..., 2, :]
     C[..., :, 0] += h[..., None] * C[..., :, 2]
-    C[..., 2, 2] += (z[..., 1] * process_noise) ** 2 * h
+    C[..., 2, 2] += (z[..., 1] * process_noise) ** 2 * np.abs(h)
     zero = 0.0 * z[..., 2]
     return MeanAndCov(z + np.stack([h * z[..., 2], zero, zero], axis=-1), C)
 

@@ -115,7 +115,7 @@ def transition(u, step=1.0) -> np.ndarray:
     u : array_like, shape (..., 3)
         ``(mu_k, omega_k, nu_k)``.
     step : float or array_like, shape (...)
-        ``s > 0``, the depth's change (1: a frame of the paper).
+        ``s != 0``, the depth's signed change (1: a frame of the paper).
 
     Returns
     -------
@@ -156,7 +156,7 @@ def predict(u, U, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
     process_noise : float
         ``q >= 0``; adds ``(omega q / D)**2 s`` to ``nu``'s variance.
     step : float or array_like, shape (...)
-        ``s > 0`` (default 1, the paper's frame).
+        ``s != 0``, signed (default 1, the paper's frame).
 
     Returns
     -------
@@ -169,7 +169,7 @@ def predict(u, U, process_noise: float = 0.0, step=1.0) -> MeanAndCov:
     D = _ratio(u, s)
     J = transition_jacobian(u, s)
     cov = J @ U @ np.swapaxes(J, -1, -2)
-    cov[..., 2, 2] += (u[..., 1] * process_noise / D) ** 2 * s
+    cov[..., 2, 2] += (u[..., 1] * process_noise / D) ** 2 * np.abs(s)
     return MeanAndCov(transition(u, s), 0.5 * (cov + np.swapaxes(cov, -1, -2)))
 
 

@@ -5,7 +5,7 @@ Recommended import: ``from depthcore.kalman import online``.
 :class:`EKF` and :class:`UKF` hold the filter's Gaussian of the state at the
 last frame and nothing of the past bearings. Each ``update(mu, rho, step)``
 predicts the state over the step (Eq. (10) with the step ``s``: ``x <- x + s v``,
-``y <- y + s``, the velocity's variance grown by ``q**2 s``,
+``y <- y + s``, the velocity's variance grown by ``q**2 |s|``, the step signed,
 :mod:`depthcore.problem.frames`), reports the bearing's predictive density and
 tail probability (:mod:`depthcore.problem.predictive`), skips it if it is
 missing (``NaN``) or the gate says so, and otherwise incorporates it. After

@@ -150,13 +150,18 @@ def _log_interval_probability(a, b, mean, sd):
         return log_hi + np.log1p(-np.exp(log_lo - log_hi))
 
 
-def default_depth_range(prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
-    """The default ``[lo, hi]``: ``hi = m_y + DEPTH_SPAN sqrt(P_yy)``, ``lo = NEAREST hi``.
+def default_depth_range(prior_mean, prior_cov, floor=0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The default ``[lo, hi]``: ``hi = m_y + DEPTH_SPAN sqrt(P_yy)``, ``lo`` just above the floor.
+
+    ``lo = floor + NEAREST (hi - floor)``: the depths at frame 1 that keep the point in
+    front of the camera at every frame are those above the floor
+    (:func:`depthcore.problem.frames.depth_floor`, 0 for a receding point).
 
     Parameters
     ----------
     prior_mean : array_like, shape (..., 3)
     prior_cov : array_like, shape (..., 3, 3)
+    floor : float or array_like, shape (...)
 
     Returns
     -------
@@ -165,16 +170,20 @@ def default_depth_range(prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
     m = np.asarray(prior_mean, dtype=float)
     P = np.asarray(prior_cov, dtype=float)
     hi = m[..., 1] + DEPTH_SPAN * np.sqrt(P[..., 1, 1])
-    if not np.all(hi > 0):
+    if not np.all(hi > floor):
         raise ValueError(
             f"prior_mean puts the prior's depth so far behind the camera that m_y + "
-            f"{DEPTH_SPAN:g} prior SDs is not positive; pass depth_range"
+            f"{DEPTH_SPAN:g} prior SDs does not keep the point in front at every frame; "
+            "pass depth_range"
         )
-    return NEAREST * hi, hi
+    return floor + NEAREST * (hi - floor), hi
 
 
-def components(prior_mean, prior_cov, n_components: int, depth_range=None) -> Components:
+def components(prior_mean, prior_cov, n_components: int, depth_range=None, floor=0.0) -> Components:
     """Cut the depth interval in geometric progression and start one Gaussian on each piece.
+
+    The progression is in the depth above the floor, ``y_1 - floor``, where the
+    point comes nearest the camera (0 while it recedes).
 
     Parameters
     ----------
@@ -185,7 +194,9 @@ def components(prior_mean, prior_cov, n_components: int, depth_range=None) -> Co
     n_components : int
         ``n``, from 1 to :data:`MAX_COMPONENTS`.
     depth_range : (float, float), optional
-        ``(lo, hi)`` with ``0 < lo < hi``; by default :func:`default_depth_range`.
+        ``(lo, hi)`` with ``floor < lo < hi``; by default :func:`default_depth_range`.
+    floor : float or array_like, shape (...)
+        The depth at frame 1 below which the point reaches the camera, >= 0.
 
     Returns
     -------
@@ -201,17 +212,23 @@ def components(prior_mean, prior_cov, n_components: int, depth_range=None) -> Co
     batch = np.broadcast_shapes(m.shape[:-1], P.shape[:-2])
     m = np.broadcast_to(m, batch + (3,))
     P = np.broadcast_to(P, batch + (3, 3))
+    floor = np.broadcast_to(np.asarray(floor, dtype=float), batch)
     if depth_range is None:
-        lo, hi = default_depth_range(m, P)
+        lo, hi = default_depth_range(m, P, floor)
     else:
         rng = checks.finite_array(depth_range, "depth_range", (2,))
-        if not 0 < rng[0] < rng[1]:
+        least = float(np.max(floor))
+        if not least < rng[0] < rng[1]:
             raise ValueError(
-                f"depth_range must be (lo, hi) with 0 < lo < hi, got {tuple(rng.tolist())}"
+                f"depth_range must be (lo, hi) with {least:g} < lo < hi (above the depth at "
+                f"which the point reaches the camera), got {tuple(rng.tolist())}"
             )
         lo, hi = np.broadcast_to(rng[0], batch), np.broadcast_to(rng[1], batch)
     steps = np.arange(n + 1) / n
-    edges = lo[..., None] * (hi / lo)[..., None] ** steps
+    edges = (
+        floor[..., None]
+        + (lo - floor)[..., None] * ((hi - floor) / (lo - floor))[..., None] ** steps
+    )
     edges[..., -1] = hi
     centre = 0.5 * (edges[..., 1:] + edges[..., :-1])
     s2 = (edges[..., 1:] - edges[..., :-1]) ** 2 / 12.0
@@ -310,7 +327,7 @@ def posterior(
     q = checks.process_noise(process_noise, "process_noise")
     g = predictive.gate(gate)
     f, regular = track.frames, track.frames.regular
-    start = components(track.mean, track.cov, n_components, depth_range)
+    start = components(track.mean, track.cov, n_components, depth_range, track.frames.floor)
     batch, n_frames = f.mu.shape[:-1], f.mu.shape[-1]
     shape = batch + (start.log_weight.shape[-1],)
     try:

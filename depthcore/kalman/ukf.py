@@ -42,7 +42,7 @@ transform is exact for linear maps, so the prediction is done in closed form,
 process noise ``a_k ~ N(0, q**2)`` on the velocity adds ``q**2`` to the
 velocity's variance (textbook Eq. (19.10), :func:`depthcore.kalman.ekf.predict`).
 Over a step ``s`` of the depth (:mod:`depthcore.problem.frames`) ``F`` and ``e``
-are those of the step (``n = G(m, s)``) and the velocity gains ``q**2 s``.
+are those of the step (``n = G(m, s)``) and the velocity gains ``q**2 |s|``.
 
 Update for the scalar measurement ``mu = h(x) + w``, ``w ~ N(0, rho**2)``,
 with sigma points ``X_i`` of the prediction ``N(n, C)`` and ``Z_i = h(X_i)``:

@@ -500,8 +500,8 @@ def _without_resampling(x1, log_w, look_ahead, track, gate, skip):
     gated = np.zeros((B, n_frames), dtype=bool)
     regular = track.regular
     x3 = model.G(x1, n_frames - 1 if regular else t[:, -1:])
-    # the depth grows with the frames: a particle in front at frame 1 stays in front
-    front = not np.all(x1[..., 1] > 0)
+    # a particle in front of the camera where the point comes nearest stays in front
+    front = not np.all(x1[..., 1] > track.floor.reshape(-1)[:, None])
     filtering = log_w
     if look_ahead is not None:  # the filtering weights: without the look-ahead terms
         filtering = log_w - sum(
@@ -515,7 +515,8 @@ def _without_resampling(x1, log_w, look_ahead, track, gate, skip):
             log_l = model.log_likelihood(
                 np.where(present[:, None, k], mu[:, None, k], 0.0), states, rho[:, None, k], front
             )
-        log_l = np.where(present[:, None, k], log_l, 0.0)
+        behind = front & (states[..., 1] <= 0)  # no weight, with or without a bearing
+        log_l = np.where(present[:, None, k], log_l, np.where(behind, -np.inf, 0.0))
         before = filtering[..., None] + np.concatenate(
             [np.zeros((B, N, 1)), np.cumsum(log_l[..., :-1], axis=-1)], axis=-1
         )
@@ -684,7 +685,7 @@ def _filter(track, skip, gate, rng, prior_mean, prior_cov, N, proposal, resample
             log_l = model.log_likelihood(
                 np.where(use, mu[:, k], 0.0)[:, None], x, rho[:, k, None], front=True
             )
-        log_w = log_w + np.where(use[:, None], log_l, 0.0)
+        log_w = log_w + np.where(use[:, None], log_l, np.where(x[..., 1] > 0, 0.0, -np.inf))
         if look_ahead is not None:
             log_w = (
                 log_w - _linearised_log_likelihood(to_end, *look_ahead, rho, np.array([k]))[..., 0]

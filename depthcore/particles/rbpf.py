@@ -22,7 +22,12 @@ particles sample only the depth. For ``J`` particles and bearings seen one at a 
   a random walk of SD ``2.38`` times the depths' weighted SD [roberts1997]_,
   targeting
 
-      pi_k(y)  proportional to  N(y; m_y, P_yy) [y > 0] p(mu_1 .. mu_k | y).
+      pi_k(y)  proportional to  N(y; m_y, P_yy) [y > f_k] p(mu_1 .. mu_k | y),
+
+  with ``f_k`` the depth at frame 1 below which the point would have reached the
+  camera by frame ``k`` (:func:`depthcore.problem.frames.depth_floor`: 0 while it
+  recedes; a step towards the point gives the particles it brings to the camera
+  no weight).
 
 A frame costs ``O(J)``, a resampling ``O(moves J k)``. On the paper's problem the
 third bearing collapses a thousand particles' weights onto two or three and the moves
@@ -294,11 +299,13 @@ def rejuvenate(bank: bk.Bank, scale, moves: int, rng: np.random.Generator):
     moves = _moves(moves)
     rng = checks.generator(rng)
 
+    floor = bank.floor[..., None]  # depths at frame 1 that reach the camera have no weight
+
     def target(proposal):
-        inside = proposal > 0
+        inside = proposal > floor
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             rerun = bk.filter_bank(
-                np.where(inside, proposal, 1.0),
+                np.where(inside, proposal, floor + 1.0),
                 bank.mu,
                 bank.rho if bank.frame_rho is None else bank.frame_noise,
                 bank.prior_mean,
@@ -422,6 +429,9 @@ def _pooled_report(log_w, bank: bk.Bank, mu, rho, depth_ahead, gate):
     r2 = np.asarray(rho, dtype=float)[..., None, None] ** 2
     shape = log_w.shape[:-2] + (-1,)
     R = log_w.shape[-2]
+    reached = y <= 0  # particles the step brings to the camera: no weight
+    log_w = np.where(reached, -np.inf, log_w)
+    y = np.where(reached, 1.0, y)
     with np.errstate(invalid="ignore"):
         log_d, tail = predictive.mixture(
             np.where(np.isnan(mu), 0.0, mu),
@@ -486,7 +496,8 @@ def step(state: RBPF, mu_next, rng: np.random.Generator, rho=None, step=1.0, gat
     rho : float or array_like, shape (...), or None
         ``None``: the filter's.
     step : float or array_like, shape (...)
-        The depth's change since frame ``K``, > 0.
+        The depth's signed change since frame ``K``, nonzero (negative: the camera
+        approaches).
     gate : float or None
         See :mod:`depthcore.problem.predictive`.
 

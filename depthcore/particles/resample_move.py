@@ -248,11 +248,12 @@ def _log_likelihood(mu_k, x1, k, rho) -> np.ndarray:
     ``k`` is the depth travelled since the first frame: a number of unit steps
     (``mu_1`` has ``k = 0``) or one per trial, shape (B, 1). ``rho`` (B,) is the
     bearing's noise SD. A missing bearing (``NaN``) adds nothing (0). States
-    with ``y_1 <= 0`` get ``-inf``: the point is in front of the camera at
-    every frame.
+    at or behind the camera at this frame, ``y_1 + k <= 0``, get ``-inf``
+    (a missing bearing too): the point is in front of the camera at every frame.
     """
-    inside = x1[..., 1] > 0
-    xk = model.G(np.where(inside[..., None], x1, 1.0), k)
+    xk = model.G(x1, k)
+    inside = xk[..., 1] > 0
+    xk = np.where(inside[..., None], xk, 1.0)
     present = ~np.isnan(mu_k)
     if np.all(present):
         log_l = model.log_likelihood(mu_k[:, None], xk, rho[:, None])

@@ -99,7 +99,7 @@ def start(
     rho : float or None
         The bearings' noise SD, > 0, where an update is given none.
     process_noise : float
-        ``q >= 0``: the velocity's variance grows by ``q**2 s`` over a step ``s``.
+        ``q >= 0``: the velocity's variance grows by ``q**2 |s|`` over a step ``s`` (signed).
     gate : float or None
         Skip a bearing whose two-sided predictive tail probability is below it
         (:func:`depthcore.problem.predictive.gate`).

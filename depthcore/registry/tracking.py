@@ -35,8 +35,8 @@ class Track:
     """One track's state at every frame, filtered and smoothed (:func:`track`).
 
     Frame ``k`` is row ``k - 1`` of every array; ``N`` is the number of bearings.
-    Depths are in units of the camera's forward motion per frame (the depth
-    grows by 1 from frame to frame, Eq. (1)); the lateral position ``x`` in
+    Depths are in units of the depth's change per frame of the paper's frames
+    (the point recedes by 1 from frame to frame, Eq. (1)); the lateral position ``x`` in
     the same units; the velocity ``v`` is ``x``'s change per frame.
 
     Attributes
@@ -120,11 +120,12 @@ def default_prior(mu, steps=None) -> Gaussian:
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         solvable = np.linalg.cond(A) < 1e12
         x1, y1, _ = np.linalg.solve(A, m * t) if solvable else (np.nan,) * 3
-    if not solvable or not y1 > 0:
+    if not solvable or not np.all(y1 + t > 0):  # in front of the camera at those frames
         why = (
             "are degenerate"
             if not solvable
-            else f"put the point behind the camera (y_1 = {y1:.6g})"
+            else f"put the point behind the camera (y_1 = {y1:.6g}, depth travelled "
+            f"{', '.join(f'{v:.6g}' for v in t)})"
         )
         raise ValueError(
             f"prior is needed: the first three present bearings (frames "
@@ -188,8 +189,10 @@ def track(
         ``"ukf"`` (the unscented ones). The others, without a smoother, are
         refused, naming ``filter``.
     steps : array_like, shape (N - 1,), optional
-        The depth's change from each frame to the next, > 0 (``None``: ones,
-        the paper's frames).
+        The depth's signed change from each frame to the next, nonzero: positive
+        while the point recedes (the camera moves away), negative while the camera
+        approaches it (``None``: ones, the paper's frames). The point must stay in
+        front of the camera at every frame.
     gate : float or None
         Skip a bearing whose two-sided tail probability under the filter's
         prediction is below this probability

@@ -44,7 +44,7 @@ The numbers are this module's choices, stated here, not measurements: the
 literature fixes the forms, and the spreads above are the ones its examples
 describe in words (a range known to about a third of itself, a decade of
 depth, an inverse depth whose two-SD region reaches infinity). The speed's SD
-is the camera's forward speed (one depth unit per frame): the point's
+is the depth's change per frame (the point recedes one depth unit per frame): the point's
 direction of motion within 45 degrees of the camera's axis at one SD.
 
 References
@@ -72,7 +72,7 @@ FORMS = ("paper", "range", "log_uniform", "inverse_depth")
 #: The forms whose truths are drawn from the prior.
 DRAWN = FORMS[1:]
 
-#: The lateral speed's SD in depth units per frame, the camera's forward speed.
+#: The lateral speed's SD in depth units per frame, the speed at which the point recedes.
 SPEED_SD = 1.0
 
 #: The range prior's depth SD, as a fraction of its centre.
