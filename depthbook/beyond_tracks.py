@@ -7,7 +7,9 @@ Recommended import: ``from depthbook import beyond_tracks``.
   a noise level per frame, and one mismatched bearing;
 * :func:`filtered` runs a filter of the registry over every prefix of it, with
   or without a gate, and :func:`track_figure` draws the filtered depths and
-  each bearing's tail probability.
+  each bearing's tail probability;
+* :func:`approach` runs the exact filter on tracks of a camera that approaches
+  the point, reading the steps the right way and the wrong way.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from depthbook.style import MIN_FONT, STYLE, WIDTH, legend_below, subplots
+from depthcore.exact import posterior
 from depthcore.problem import checks, model
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry import online
@@ -66,7 +69,7 @@ def demo_track(
     """Figure 2's point on a real track, drawn from one seed.
 
     The point passes through Figure 2's noise-free state at time 3 with
-    constant velocity. Between frames the camera moves forward by a step drawn
+    constant velocity. Between frames the point recedes from the camera by a step drawn
     uniformly from ``step_range``; each frame's noise SD is Figure 2's
     ``rho = 1/200`` times a factor drawn log-uniformly from ``rho_range``;
     ``n_missing`` frames after the third are drawn without a detection; and
@@ -191,3 +194,57 @@ def track_figure(track: DemoTrack, runs: dict, gate: float):
     bottom.set_xlabel("frame $k$", fontsize=MIN_FONT)
     legend_below(fig, [top, bottom], ncol=3)
     return fig
+
+
+class Approach(NamedTuple):
+    """Tracks of a camera that approaches the point, and the exact filter read both ways.
+
+    Attributes
+    ----------
+    steps : ndarray, shape (N - 1,)
+        The depth's signed change between frames (negative: approaching).
+    truth : ndarray, shape (B, 3)
+        The state at the last frame of each track.
+    right : depthcore.exact.mixture.Moments
+        The exact filter's moments at the last frame with the steps as they are.
+    wrong : depthcore.exact.mixture.Moments
+        The same with the steps' signs flipped: the camera read as receding.
+    """
+
+    steps: np.ndarray
+    truth: np.ndarray
+    right: object
+    wrong: object
+
+    def z(self, which: str) -> np.ndarray:
+        """The depth's error at the last frame in the filter's SDs, (B,), for ``"right"``
+        or ``"wrong"``."""
+        m = getattr(self, which)
+        return (m.mean[:, 1] - self.truth[:, 1]) / np.sqrt(m.cov[:, 1, 1])
+
+
+def approach(
+    seed: int, draws: int, frames: int, step: float, rho: float, prior_mean, prior_cov
+) -> Approach:
+    """``draws`` tracks of ``frames`` frames, each step ``step`` (< 0), the truth from the prior.
+
+    The states at frame 1 are drawn from ``N(prior_mean, prior_cov)`` restricted to
+    depths that keep the point in front of the camera at every frame (the exact
+    filter's own support), the bearings by :func:`depthcore.problem.model.simulate`
+    with noise SD ``rho``; both readings run through
+    :func:`depthcore.exact.posterior.moments`.
+    """
+    rng = np.random.default_rng(seed)
+    steps = np.full(frames - 1, float(step))
+    floor = -float(np.min(np.concatenate([[0.0], np.cumsum(steps)])))
+    mean, cov = np.asarray(prior_mean, dtype=float), np.asarray(prior_cov, dtype=float)
+    states = np.empty((0, 3))
+    while len(states) < draws:
+        drawn = rng.multivariate_normal(mean, cov, size=2 * draws)
+        states = np.concatenate([states, drawn[drawn[:, 1] > floor]])
+    states = states[:draws]
+    sims = [model.simulate(x, frames, rho, 0.0, rng, frame=1, steps=steps) for x in states]
+    mu = np.array([s.mu for s in sims])
+    right = posterior.moments(mu, rho, mean, cov, steps=steps)
+    wrong = posterior.moments(mu, rho, mean, cov, steps=-steps)
+    return Approach(steps, np.array([s.states[-1] for s in sims]), right, wrong)
