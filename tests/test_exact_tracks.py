@@ -22,12 +22,14 @@ RHO = np.array([0.01, 0.02, np.nan, 0.01, 0.015, 0.01])
 STEPS = np.array([1.0, 0.5, 2.0, 1.0, 1.5])
 
 
-def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=4001, frame=-1):
+def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=8001, frame=-1):
     """Mean (3,) and covariance (3, 3) of the state at ``frame`` (default N) by a dense grid.
 
     Given ``y_1 = y`` the present bearings are ``mu_k = x_k / y_k + w_k`` with
     ``x_k = x_1 + e_k v_1 + sum_{j < k} (e_k - e_{j+1}) a_j`` (``e_k`` the depth
-    travelled to frame k), linear in ``z = (x_1, v_1, a_1 .. a_{N-1})``.
+    travelled to frame k, signed), linear in ``z = (x_1, v_1, a_1 .. a_{N-1})``; the
+    depth ``y_1`` runs over a grid in ``log(y_1 - f)`` above the depth ``f`` at which
+    the point would reach the camera at some frame (0 while it recedes).
     """
     mu, rho = np.asarray(mu, float), np.broadcast_to(np.asarray(rho, float), np.shape(mu))
     N = mu.size
@@ -40,7 +42,7 @@ def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=4001, frame=
     D = 2 + N - 1
     Cz = np.zeros((D, D))
     Cz[:2, :2] = Cu
-    Cz[2:, 2:] = np.diag(q**2 * np.asarray(steps, float))
+    Cz[2:, 2:] = np.diag(q**2 * np.abs(np.asarray(steps, float)))
     # x_k and v_N as rows acting on z
     X = np.zeros((N, D))
     X[:, 0], X[:, 1] = 1.0, e
@@ -51,8 +53,8 @@ def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=4001, frame=
     vN = np.zeros(D)
     vN[1] = 1.0
     vN[2 : 2 + frame] = 1.0
-    t = np.linspace(np.log(1e-3), np.log(300.0), n)
-    y = np.exp(t)
+    t = np.linspace(np.log(1e-9), np.log(300.0), n)  # the density vanishes at the floor
+    y = max(0.0, -e.min()) + np.exp(t)
     # every node at once: (n, ...) stacks of the regression at each depth
     mz = np.zeros((n, D))
     mz[:, :2] = m[iu] + np.outer(y - m[1], slope)
@@ -63,7 +65,7 @@ def dense_posterior(mu, rho, steps, q, m=PRIOR_MEAN, P=PRIOR_COV, n=4001, frame=
     log_f = (
         -0.5 * (np.log(2 * np.pi * P[1, 1]) + (y - m[1]) ** 2 / P[1, 1])
         - 0.5 * (np.linalg.slogdet(2 * np.pi * S)[1] + np.einsum("ni,ni->n", r, sol))
-        + t  # dy = y dt
+        + t  # dy = (y - f) dt
     )
     K = Cz @ np.swapaxes(H, 1, 2) @ np.linalg.inv(S)
     mpost = mz + np.einsum("nij,nj->ni", K, r)
@@ -145,8 +147,8 @@ def test_noise_per_frame_equal_at_every_frame_is_the_paper_arithmetic():
 
 
 def test_refusals_name_the_argument():
-    with pytest.raises(ValueError, match="steps"):
-        optimal.run(MU, 0.01, PRIOR_MEAN, PRIOR_COV, steps=[1.0, -1.0, 1.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="^steps must be nonzero"):
+        optimal.run(MU, 0.01, PRIOR_MEAN, PRIOR_COV, steps=[1.0, 0.0, 1.0, 1.0, 1.0])
     with pytest.raises(ValueError, match="reading"):
         optimal.run(MU, 0.01, PRIOR_MEAN, PRIOR_COV, reading="printed")
     with pytest.raises(ValueError, match="mu"):
@@ -193,3 +195,55 @@ def test_the_smoother_refuses_a_track_without_its_first_bearing():
         smoother.track(np.r_[np.nan, MU[1:]], 0.01, PRIOR_MEAN, PRIOR_COV)
     with pytest.raises(ValueError, match="steps"):
         smoother.track(MU, 0.01, PRIOR_MEAN, PRIOR_COV, steps=[1.0, 2.0])
+
+
+#: A camera that approaches the point (every step negative), and one that goes back and forth.
+APPROACHING = -STEPS
+BACK_AND_FORTH = np.array([1.0, -0.5, -2.0, -1.0, 1.5])
+
+
+@pytest.mark.parametrize("q", [0.0, 0.05])
+@pytest.mark.parametrize("steps", [APPROACHING, BACK_AND_FORTH], ids=["approaching", "mixed"])
+def test_signed_steps_equal_a_dense_grid_above_the_nearest_depth(steps, q):
+    """Negative steps (the camera approaches): the grid runs above the depth at frame 1 where
+    the point would reach the camera, the process noise grows with |s|; to 1e-8 of an SD."""
+    mu = MU.copy()
+    post = optimal.run(mu, RHO, PRIOR_MEAN, PRIOR_COV, process_noise=q, steps=steps)
+    mean, cov = dense_posterior(mu, RHO, steps, q)
+    sd = np.sqrt(np.diag(cov))
+    assert_allclose(post.mean, mean, atol=1e-8 * sd.max(), rtol=0)
+    assert_allclose(np.sqrt(np.diag(post.cov)), sd, rtol=1e-8)
+    # the filter one frame at a time (the smoother's filtered states) agrees at every frame
+    track = smoother.track(mu, RHO, PRIOR_MEAN, PRIOR_COV, q, steps=steps)
+    for k in (2, 4):
+        mean_k, cov_k = dense_posterior(mu[: k + 1], RHO[: k + 1], steps[:k], q)
+        sd_k = np.sqrt(np.diag(cov_k))
+        assert_allclose(track.filtered.mean[k], mean_k, atol=1e-7 * sd_k.max(), rtol=0)
+
+
+def test_no_node_below_the_floor_has_weight_and_the_wrong_direction_is_far_off():
+    post = optimal.run(MU, RHO, PRIOR_MEAN, PRIOR_COV, steps=APPROACHING)
+    floor = float(np.sum(STEPS))  # the depth travelled towards the camera
+    assert post.bank.floor == pytest.approx(floor)
+    weighted = post.probabilities > 0
+    assert np.all(post.bank.nodes[weighted] > floor) and np.sum(weighted) > 20
+    # a filter given the nodes below the floor gives them no weight
+    b = bk.filter_bank([floor / 2, floor + 1.0], MU, RHO, PRIOR_MEAN, PRIOR_COV, steps=APPROACHING)
+    assert b.log_weight[0] == -np.inf and np.isfinite(b.log_weight[1])
+    with pytest.raises(ValueError, match="^nodes: every node is at or behind the floor"):
+        bk.filter_bank([1.0, 2.0], MU, RHO, PRIOR_MEAN, PRIOR_COV, steps=APPROACHING)
+    # the same bearings read as a receding camera: another answer, many SDs away
+    wrong = optimal.run(MU, RHO, PRIOR_MEAN, PRIOR_COV, steps=STEPS)
+    assert abs(wrong.mean[1] - post.mean[1]) > 3 * np.sqrt(post.cov[1, 1])
+
+
+def test_a_step_that_reaches_the_camera_takes_the_nodes_weight_online():
+    """bank.step with a negative step: the nodes it brings to the camera lose their weight."""
+    b = bk.filter_bank([0.8, 3.0, 6.0], MU[:2], RHO[:2], PRIOR_MEAN, PRIOR_COV, steps=[1.0])
+    after = bk.step(b, 0.05, rho=0.01, step=-2.0)
+    assert after.log_weight[0] == -np.inf and np.all(np.isfinite(after.log_weight[1:]))
+    rerun = bk.filter_bank(
+        [3.0, 6.0], after.mu, after.frame_noise, PRIOR_MEAN, PRIOR_COV, steps=[1.0, -2.0]
+    )
+    assert_allclose(after.log_weight[1:], rerun.log_weight, rtol=1e-12)
+    assert_allclose(after.mean[1:], rerun.mean, rtol=1e-12)

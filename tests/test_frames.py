@@ -43,7 +43,7 @@ def test_batch_rho_per_problem_and_per_frame():
         ([0.1, 0.2], 0.01, None, "mu must have shape"),
         ([0.1, 0.2, 0.31], [1, 2], None, "rho must be a number"),
         ([0.1, 0.2, 0.31], [0.1, -1, 0.1], None, r"rho\[1\] must be finite and positive"),
-        ([0.1, 0.2, 0.31], 0.01, [1, 0], "steps must be positive"),
+        ([0.1, 0.2, 0.31], 0.01, [1, 0], "steps must be nonzero"),
         ([0.1, 0.2, 0.31], 0.01, [1, 1, 1], "steps must have shape"),
         ([0.1, 0.2, 0.31], 0.01, [1, np.nan], "steps must be finite"),
         ([0.1, 0.2, 0.31], "0.01", None, "rho must be numeric"),
@@ -177,8 +177,10 @@ def test_simulate_refuses_bad_steps_and_rho():
     rng = np.random.default_rng(0)
     with pytest.raises(ValueError, match=r"steps must have shape \(4,\)"):
         model.simulate([0.0, 5.0, 0.0], 5, 0.01, 0.0, rng, steps=[1, 1])
-    with pytest.raises(ValueError, match="steps must be positive"):
-        model.simulate([0.0, 5.0, 0.0], 3, 0.01, 0.0, rng, steps=[1, -1])
+    with pytest.raises(ValueError, match="steps must be nonzero"):
+        model.simulate([0.0, 5.0, 0.0], 3, 0.01, 0.0, rng, steps=[1, 0])
+    with pytest.raises(ValueError, match="state and steps bring the point to the camera"):
+        model.simulate([0.0, 5.0, 0.0], 3, 0.01, 0.0, rng, frame=1, steps=[-3, -3])
     with pytest.raises(ValueError, match=r"rho must be a number or have shape \(3,\)"):
         model.simulate([0.0, 5.0, 0.0], 3, [0.01, 0.02], 0.0, rng)
 
@@ -187,5 +189,5 @@ def test_extreme_noise_and_steps_are_refused_by_name():
     mu = [0.1, 0.2, 0.31, 0.4]
     with pytest.raises(ValueError, match=r"rho\[0\] must be from 1e-150 to 1e\+150"):
         frames.check(mu, [1e-300, 0.1, 0.1, 0.1])
-    with pytest.raises(ValueError, match="steps must add up to a depth travelled that grows"):
+    with pytest.raises(ValueError, match="steps must add up to a depth travelled that changes"):
         frames.check(mu, 0.1, [1e-300, 1e300, 1.0])

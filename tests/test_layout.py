@@ -327,8 +327,10 @@ TOP_LEVEL = {"__init__", "__main__", "_paths"}
 MAX_TOP_LEVEL = 8
 #: The most lines a module may have.
 MAX_LINES = 700
-#: The most lines the installed package may have: the filters and their science, no book.
-MAX_PACKAGE_LINES = 24_000
+#: The most lines the installed package may have: the filters and their science, no book
+#: (24,000 for the core alone; the real camera's signed steps, any length of track, time
+#: columns and Stone Soup's trackers brought it to this).
+MAX_PACKAGE_LINES = 27_000
 
 
 def family(module: str) -> str | None:

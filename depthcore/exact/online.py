@@ -19,8 +19,15 @@ each node (textbook 19.2.2).
 
 The nodes. They are placed on the prior by the depth quadrature
 (:func:`depthcore.exact.quadrature.integrate`, trapezoid nodes in
-``t = log y_1`` about the density's mode and width, the step halved until the
-moments agree to ``rtol``). As bearings accumulate, the posterior narrows; after
+``t = log (y_1 - f)`` about the density's mode and width, the step halved until the
+moments agree to ``rtol``), ``f`` the floor: the depth at frame 1 below which the
+point would have reached the camera by now (0 while it recedes,
+:func:`depthcore.problem.frames.depth_floor`). A step towards the point (negative)
+that brings it nearer than ever raises the floor: the nodes it brings to the camera
+are dropped, and if they held more than a negligible part of the probability the
+nodes are first re-placed above the new floor (from the density before the frame,
+smooth there), so that the kink the new bearing puts at the floor lies at the end of
+the log transform. As bearings accumulate, the posterior narrows; after
 each update the nodes are checked as :func:`depthcore.exact.posterior.update`
 checks them (the moments on every other node agree with those on all to
 ``rtol`` of the SD, the end nodes carry negligible probability, no node holds
@@ -73,6 +80,8 @@ _ONE_NODE = 0.5
 _END_MARGIN = 40.0
 #: The spline's degree in ``t = log y_1`` for a re-placement.
 _DEGREE = 7
+#: Nodes nearer the floor than this fraction of the depth are dropped (:meth:`Online._place`).
+_NEAREST = 1e-12
 
 
 class _Nodes(NamedTuple):
@@ -112,6 +121,8 @@ class Online:
         self.rtol = checks.positive_scalar(rtol, "rtol")
         self.frame = 0
         self.travelled = 0.0
+        self.floor = 0.0
+        self._node_floor = 0.0  # the floor the nodes were placed above
         self.replacements = 0
         self.current: FrameEstimate | None = None
         self._nodes = self._place(self._prior_integrand, m[1])
@@ -131,15 +142,26 @@ class Online:
         return log_p, M, cov
 
     def _place(self, integrand, depth_guess) -> _Nodes:
-        """Nodes by the depth quadrature for ``integrand`` (a quadrature Problem's)."""
+        """Nodes by the depth quadrature for ``integrand`` (a quadrature Problem's).
+
+        The quadrature's depth is the distance above the floor, ``y_1 - floor``; the
+        integrand is given ``y_1`` (``offsets[..., 2]``).
+        """
+        floor = self.floor
+
+        def above(offsets, pb):
+            shifted = offsets.copy()
+            shifted[..., 2] += floor
+            return integrand(shifted, pb)
+
         mean = self.prior_mean.copy()
-        mean[1] = depth_guess
+        mean[1] = depth_guess - floor
         pb = quadrature.Problem(
             mu=np.empty((1, 0)),
             rho=np.array([self.rho]),
             mean=mean[None],
             R=np.linalg.inv(np.linalg.cholesky(self.prior_cov))[None],
-            integrand=integrand,
+            integrand=above,
             process_noise=np.array([self.process_noise]),
             cov=self.prior_cov[None],
         )
@@ -157,7 +179,14 @@ class Online:
         u = u[~np.isnan(u)][None]
         t = frame.t(u)
         log_w = (np.log(h) + t + frame.log_jacobian(u))[0]
-        y = np.exp(t[0])
+        y = floor + np.exp(t[0])
+        # nodes within rounding of the floor (at the camera) or of each other, or nearer it
+        # than _NEAREST of the depth (where the covariances of a track that returns towards
+        # an earlier depth lose their digits): no weight
+        keep = (y - floor > _NEAREST * (depth_guess - floor)) & np.concatenate(
+            [[True], np.diff(y) > 0]
+        )
+        t, log_w, y = t[:, keep], log_w[keep], y[keep]
         offsets = np.stack([y + 2.0, y + 1.0, y], -1)[None]
         log_p, M, (a, b, c) = integrand(offsets, pb)
         a, b, c = (np.broadcast_to(v, log_p.shape)[0] for v in (a, b, c))
@@ -165,9 +194,13 @@ class Online:
         return _Nodes(y, log_w, log_p[0], lateral)
 
     def _interpolant(self):
-        """The quadrature integrand interpolated from the current nodes (module docstring)."""
+        """The quadrature integrand interpolated from the current nodes (module docstring).
+
+        The splines are in ``log (y_1 - f)``, ``f`` the floor the nodes were placed above.
+        """
         nodes = self._nodes
-        t = np.log(nodes.y)
+        base = self._node_floor
+        t = np.log(nodes.y - base)
         splines = [
             make_interp_spline(t, v, k=min(_DEGREE, len(t) - 1))
             for v in (nodes.log_p, *nodes.lateral)
@@ -176,7 +209,8 @@ class Online:
         h_lo, h_hi = t[1] - t[0], t[-1] - t[-2]
 
         def integrand(offsets, pb):
-            tt = np.log(offsets[..., 2])  # the quadrature's y_1 (see _place)
+            with np.errstate(divide="ignore"):  # at the floor: log 0, no weight
+                tt = np.log(np.maximum(offsets[..., 2] - base, 0.0))  # y_1 (see _place)
             values = [s(np.clip(tt, lo, hi)) for s in splines]
             below = (np.minimum(tt - lo, 0.0) / h_lo) ** 2
             above = (np.maximum(tt - hi, 0.0) / h_hi) ** 2
@@ -190,12 +224,37 @@ class Online:
         """Re-place the nodes from the current mixture by the quadrature (module docstring)."""
         nodes = self._nodes
         integrand = self._interpolant()
-        mode = nodes.y[np.argmax(nodes.log_p + nodes.log_w)]
+        weighted = np.where(nodes.y > self.floor, nodes.log_p + nodes.log_w, -np.inf)
+        mode = nodes.y[np.argmax(weighted)]
         new = self._place(integrand, mode)
         lateral = new.lateral.copy()
         lateral[5] = lateral[2] * lateral[4] - lateral[3] ** 2
         self._nodes = new._replace(lateral=lateral)
+        self._node_floor = self.floor
         self.replacements += 1
+
+    def _raise_floor(self, floor: float) -> None:
+        """The point comes nearer than ever: drop the nodes at or below the new floor.
+
+        If they hold more than ``exp(-_END_MARGIN)`` of the largest node's weight the
+        nodes are first re-placed above it, from the density before this frame.
+        """
+        nodes = self._nodes
+        cut = nodes.y <= floor
+        if np.all(cut):
+            raise ValueError(
+                f"step: it brings the point to the camera at every depth the filter holds "
+                f"(the depth at frame 1 would have to exceed {floor:.6g})"
+            )
+        a = nodes.log_p + nodes.log_w
+        self.floor = floor
+        if np.any(cut) and (np.max(a[cut]) > np.max(a) - _END_MARGIN or np.sum(~cut) < 8):
+            self._replace_nodes()
+        elif np.any(cut):
+            keep = ~cut
+            self._nodes = _Nodes(
+                nodes.y[keep], nodes.log_w[keep], nodes.log_p[keep], nodes.lateral[:, keep]
+            )
 
     # --- the filter --------------------------------------------------------------------
 
@@ -207,10 +266,12 @@ class Online:
         :class:`~depthcore.problem.predictive.FrameEstimate`.
         """
         mu, r, s = predictive.frame_inputs(mu, rho, step, self.rho, self.frame)
+        if self.frame > 0 and -(self.travelled + s) > self.floor:
+            self._raise_floor(-(self.travelled + s))
         nodes = self._nodes
         lat = nodes.lateral.copy()
         if self.frame > 0:
-            _predict(lat, s, self.process_noise**2 * s)
+            _predict(lat, s, self.process_noise**2 * abs(s))
             self.travelled += s
         self.frame += 1
         y = nodes.y + self.travelled
@@ -352,11 +413,18 @@ def updates(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> predictive.U
 
 
 def _predict(lat, s: float, q2: float) -> None:
-    """Textbook 19.2.1 over a step ``s`` for every node, in place (see ``bank.lateral_filter``)."""
+    """Textbook 19.2.1 over a step ``s`` for every node, in place (see ``bank.lateral_filter``).
+
+    ``Var[x]`` without cancellation for either sign of the step, as
+    :func:`depthcore.exact.lateral.predict_step` computes it.
+    """
     x, v, a, b, c, det = lat
     x += s * v
-    a += s * (2.0 * b + s * c)
-    b += s * c
+    shear_b = b + s * c
+    with np.errstate(divide="ignore", invalid="ignore"):  # only where c > 0 is it used
+        stable = (det + shear_b * shear_b) / c
+    a[:] = np.where(s * b >= 0, a + s * (2.0 * b + s * c), stable)
+    b[:] = shear_b
     if q2:
         c += q2
         det += q2 * a

@@ -118,9 +118,14 @@ def _problem_of(mu, rho, prior_mean, prior_cov, process_noise, steps):
 
 def _integrand(offsets, pb):
     """The depth quadrature's integrand: :func:`~depthcore.exact.bank.lateral_filter` at ``y_1 =
-    offsets[..., 2]``."""
+    offsets[..., 2] + floor``.
+
+    The quadrature's depth is the distance above the floor (:attr:`Problem.floor
+    <depthcore.exact.quadrature.Problem.floor>`), the depth where the point comes nearest
+    the camera: its log transform then resolves the kink the density has there.
+    """
     return lateral_filter(
-        offsets[..., 2],
+        offsets[..., 2] + pb.floor[:, None],
         pb.mu,
         pb.rho,
         pb.process_noise,
@@ -134,14 +139,15 @@ def _integrand(offsets, pb):
 def _integrate(pb, rtol: float):
     """The quadrature of :mod:`depthcore.exact.quadrature` on ``y_1 > 0``, moments of ``y_N``.
 
-    The quadrature reports the depth as ``y_1 + 2``; at frame ``N`` it is ``y_1 + N - 1``.
+    The quadrature reports the depth as ``y_1 - floor + 2``; at frame ``N`` it is
+    ``y_1 + N - 1`` (the travelled depth ``e_N`` for steps).
     """
     m, err_y, err_v, top, grids = quadrature.integrate(pb, (3,), rtol)
     mean = m.mean.copy()
     if pb.steps is None:
         mean[:, 1] += pb.mu.shape[1] - 3
     else:
-        mean[:, 1] += np.sum(pb.steps, axis=1) - 2.0
+        mean[:, 1] += pb.floor + np.sum(pb.steps, axis=1) - 2.0
     err_y = np.maximum(err_y, 64.0 * np.finfo(float).eps * np.abs(mean[:, 1]))
     return m._replace(mean=mean), err_y, err_v, top, grids
 
@@ -258,6 +264,7 @@ def _place(pb, rtol, history, single):
         return _concatenate(parts)
     _, err_y, err_v, _, grids = _integrate(pb, rtol)
     nodes, log_w = _grid_nodes(grids[3])
+    nodes = nodes + pb.floor[:, None]
     shift = np.max(log_w, axis=1, keepdims=True)
     rho = pb.rho if pb.frame_rho is None else pb.frame_rho
     bank = run_bank(

@@ -109,7 +109,8 @@ def track(
     prior_mean, prior_cov, process_noise, rtol
         As for :func:`~depthcore.exact.posterior.posterior` (one problem).
     steps : array_like, shape (N - 1,), or None
-        The depth's change between frames, > 0 (``None``: ones).
+        The depth's signed change between frames, nonzero (negative: the camera
+        approaches; ``None``: ones).
     lag : int
         The fixed-lag smoother's delay in frames, >= 0 (0: the filter; from
         ``N - 1`` on, the fixed-interval smoother, which is what it then is).
@@ -169,8 +170,10 @@ def _frames(mu, rho, steps):
     if steps is None:
         return per_frame, None
     s = checks.finite_array(steps, "steps")
-    if s.shape != (mu.size - 1,) or not np.all(s > 0):
-        raise ValueError(f"steps must be {mu.size - 1} positive numbers, got {s.tolist()}")
+    if s.shape != (mu.size - 1,):
+        raise ValueError(f"steps must have shape ({mu.size - 1},), got shape {s.shape}")
+    if np.any(s == 0):
+        raise ValueError("steps must be nonzero (the depth's signed change), got a zero step")
     return per_frame, s
 
 

@@ -5,7 +5,8 @@ Recommended import: ``from depthcore.exact import tracks``.
 The bank (:mod:`depthcore.exact.bank`) runs the motion of
 :mod:`depthcore.problem.frames` given the depth: with the depth travelled
 ``e_k = y_k - y_1`` (:func:`elapsed`), the lateral state ``(x, v)`` moves by
-``[[1, s_k], [0, 1]]`` (:func:`transitions`) with velocity noise ``q**2 s_k``,
+``[[1, s_k], [0, 1]]`` (:func:`transitions`) with velocity noise ``q**2 |s_k|``
+(the step signed: negative while the camera approaches the point),
 the bearing at frame ``k`` observes ``(1 / (y_1 + e_k), 0)`` with noise
 ``rho_k**2``, and a missing frame has no update. This module holds those
 pieces, the bank's frame fields, the checks of a track for
@@ -79,8 +80,11 @@ def check_track(mu, rho, steps, bearings):
                 f"steps must have shape (..., {N - 1}), one per pair of frames, "
                 f"got shape {steps.shape}"
             )
-        if not np.all(steps > 0):
-            raise ValueError(f"steps must be positive, got minimum {float(np.min(steps)):.6g}")
+        if np.any(steps == 0):
+            raise ValueError(
+                "steps must be nonzero (the depth's signed change; negative: the camera "
+                "approaches), got a zero step"
+            )
     return arr, rho, steps, frame_rho
 
 
@@ -96,13 +100,14 @@ def irregular_history(start, nodes, mu, rho, q, steps, frame_rho) -> linear.Filt
     """Each node's Kalman filter at every frame with steps, per-frame noise and gaps.
 
     :func:`depthcore.kalman.linear.run` with the transition ``[[1, s_k], [0, 1]]``
-    and the noise ``diag(0, q**2 s_k)`` per step; a missing frame has a zero
+    and the noise ``diag(0, q**2 |s_k|)`` per step; a missing frame has a zero
     measurement row (no update), whose log density (of a zero bearing with unit
     noise) is replaced by 0.
     """
     N = mu.shape[-1]
     present = ~np.isnan(mu)
     depth = nodes[..., None] + elapsed(steps, N)[..., None, :]  # (..., J, N)
+    depth = np.where(depth > 0, depth, 1.0)  # behind the camera: no weight (bank.run_bank)
     Phi = np.zeros(depth.shape + (1, 2))
     Phi[..., 0, 0] = np.where(present[..., None, :], 1.0 / depth, 0.0)
     if frame_rho is None:
@@ -112,7 +117,7 @@ def irregular_history(start, nodes, mu, rho, q, steps, frame_rho) -> linear.Filt
     r2 = np.where(present, r, 1.0) ** 2  # (..., N)
     s = np.ones(N - 1) if steps is None else np.asarray(steps, dtype=float)
     Sigma_p = np.zeros(np.broadcast_shapes(np.shape(q) + (1,), s.shape) + (2, 2))
-    Sigma_p[..., 1, 1] = np.asarray(q, dtype=float)[..., None] ** 2 * s
+    Sigma_p[..., 1, 1] = np.asarray(q, dtype=float)[..., None] ** 2 * np.abs(s)
     Psi = transitions(s)
     res = linear.run(
         np.where(present, mu, 0.0)[..., None, :, None],

@@ -3,9 +3,10 @@
 Recommended import: ``from depthcore.problem import frames``.
 
 The paper's track has a bearing at every frame, one noise level and a unit
-forward step between frames. A real track has gaps (a missed detection), a
-noise level per frame (a detector's own uncertainty) and frames at uneven
-intervals (a camera moving at varying speed, frames dropped by the capture).
+step between frames, the point receding from the camera. A real track has gaps
+(a missed detection), a noise level per frame (a detector's own uncertainty) and
+frames at uneven intervals (a camera moving at varying speed, frames dropped by the
+capture).
 This module describes such a track and checks it, once, for every filter:
 
 * a missing bearing is ``NaN`` in ``mu``: the filters predict through that
@@ -13,14 +14,19 @@ This module describes such a track and checks it, once, for every filter:
 * ``rho`` is a number, one per problem (shape ``mu.shape[:-1]``) or one per
   frame (shape ``mu.shape``);
 * ``steps``, shape ``(N - 1,)`` (or ``mu.shape[:-1] + (N - 1,)``), is the
-  depth's change from each frame to the next, ``y_{k+1} = y_k + s_k``; the
-  lateral position moves by ``x_{k+1} = x_k + s_k v_k`` (Eq. (1) with the
-  step ``s_k`` in place of 1, :func:`depthcore.problem.model.G` with
-  ``k = s_k``).
+  depth's signed change from each frame to the next, ``y_{k+1} = y_k + s_k``:
+  positive while the point recedes (the camera moves away from it), negative
+  while it approaches (the camera moves towards it), never zero. The point
+  moves on a straight line, ``x = x_1 + v (y - y_1)``, so the lateral position
+  moves by ``x_{k+1} = x_k + s_k v_k`` for either sign (Eq. (1) with the step
+  ``s_k`` in place of 1, :func:`depthcore.problem.model.G` with ``k = s_k``).
+  The depth must stay positive at every frame: the filters give no weight to
+  depths that would reach the camera (:func:`depth_floor`).
 
 The process noise and the step. With process noise of SD ``q`` the velocity is
-a random walk whose variance grows in proportion to the depth travelled:
-``v_{k+1} = v_k + a_k``, ``a_k ~ N(0, q**2 s_k)`` (:func:`velocity_variance`).
+a random walk whose variance grows in proportion to the distance moved:
+``v_{k+1} = v_k + a_k``, ``a_k ~ N(0, q**2 |s_k|)`` (:func:`velocity_variance`),
+the same whichever way the camera moves.
 A unit step is the paper's model with the textbook's ``Sigma_p = diag(0, 0,
 q**2)`` (textbook Eq. (19.10)); two steps of ``s / 2`` add the same velocity
 variance as one step of ``s``, so ``q`` is a rate per unit of depth, not per
@@ -74,6 +80,14 @@ class Frames(NamedTuple):
         return np.concatenate([zero, np.cumsum(self.steps, axis=-1)], axis=-1)
 
     @property
+    def floor(self) -> np.ndarray:
+        """The depth at frame 1 below which the point reaches the camera, shape (...).
+
+        :func:`depth_floor` of :attr:`elapsed`: 0 while the point only recedes.
+        """
+        return depth_floor(self.elapsed)
+
+    @property
     def regular(self) -> bool:
         """Whether these are the paper's frames (every bearing, unit steps, one ``rho`` per row)."""
         return bool(
@@ -89,20 +103,41 @@ class Frames(NamedTuple):
 
 
 def velocity_variance(process_noise, step) -> np.ndarray:
-    """The velocity's variance added over a step: ``q**2 s`` (see the module docstring).
+    """The velocity's variance added over a step: ``q**2 |s|`` (see the module docstring).
 
     Parameters
     ----------
     process_noise : float
         ``q >= 0``, the SD of the velocity's change over a unit step.
     step : float or array_like
-        ``s > 0``.
+        ``s != 0``, the depth's signed change; the variance grows with the distance moved.
 
     Returns
     -------
     ndarray, the shape of ``step``
     """
-    return float(process_noise) ** 2 * np.asarray(step, dtype=float)
+    return float(process_noise) ** 2 * np.abs(np.asarray(step, dtype=float))
+
+
+def depth_floor(elapsed) -> np.ndarray:
+    """The least depth at frame 1 that keeps the point in front of the camera at every frame.
+
+    With ``e_k = y_k - y_1`` the depth travelled to frame ``k`` (``e_1 = 0``), the
+    depths ``y_k = y_1 + e_k`` are all positive exactly when ``y_1 > -min_k e_k``:
+    the floor is ``max(0, -min_k e_k)``, where the point comes nearest to the
+    camera. 0 for a receding point; for one that approaches, the depth travelled
+    towards the camera at its nearest.
+
+    Parameters
+    ----------
+    elapsed : array_like, shape (..., N)
+
+    Returns
+    -------
+    ndarray, shape (...)
+    """
+    elapsed = np.asarray(elapsed, dtype=float)
+    return np.maximum(-np.min(elapsed, axis=-1), 0.0)
 
 
 def transition(step) -> np.ndarray:
@@ -173,10 +208,10 @@ def _steps(value, mu: np.ndarray) -> np.ndarray:
             f"steps must have shape ({n - 1},), one per pair of consecutive frames, "
             f"got shape {steps.shape}"
         )
-    if not np.all(steps > 0):
+    if np.any(steps == 0):
         raise ValueError(
-            f"steps must be positive (the depth grows between frames), got minimum "
-            f"{float(np.min(steps)):.6g}"
+            "steps must be nonzero: the depth's signed change between frames, positive "
+            "while the point recedes, negative while the camera approaches it; got a zero step"
         )
     return np.broadcast_to(steps, mu.shape[:-1] + (n - 1,))
 
@@ -217,7 +252,8 @@ def check(mu, rho, steps=None) -> Frames:
         Noise SD, > 0, per problem or per frame (any value at a missing frame,
         ``NaN`` included).
     steps : array_like, shape (N - 1,) or (..., N - 1), or None
-        The depth's change between consecutive frames, > 0; ``None``: all ones.
+        The depth's signed change between consecutive frames, nonzero (negative:
+        the camera approaches the point); ``None``: all ones.
 
     Returns
     -------
@@ -243,9 +279,9 @@ def check(mu, rho, steps=None) -> Frames:
         )
     frames = Frames(mu, present, rho, steps)
     gaps = np.diff(frames.elapsed, axis=-1)
-    if not (np.all(np.isfinite(frames.elapsed)) and np.all(gaps > 0)):
+    if not (np.all(np.isfinite(frames.elapsed)) and np.all(gaps != 0)):
         raise ValueError(
-            "steps must add up to a depth travelled that grows at every frame in double "
+            "steps must add up to a depth travelled that changes at every frame in double "
             f"precision; steps from {float(np.min(steps)):.3g} to {float(np.max(steps)):.3g} "
             "lose a step to rounding"
         )

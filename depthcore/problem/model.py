@@ -164,7 +164,8 @@ def simulate(
     frame : int
         Default 3, the time of the paper's estimates.
     steps : array_like, shape (N - 1,), optional
-        The depth's change between frames, > 0; ``None``: all ones.
+        The depth's signed change between frames, nonzero (negative: the camera
+        approaches the point, whose depth must stay positive); ``None``: all ones.
 
     Returns
     -------
@@ -194,9 +195,18 @@ def simulate(
     lead = ((size,) if size is not None else ()) + state.shape[:-1]
     if steps is None and not rho.ndim:
         return draw_track(state, frames, float(rho), process_noise, rng, lead, frame)
-    steps = np.ones(frames - 1) if steps is None else checks.positive_array(steps, "steps")
+    steps = np.ones(frames - 1) if steps is None else checks.finite_array(steps, "steps")
     if steps.shape != (frames - 1,):
         raise ValueError(f"steps must have shape ({frames - 1},), got shape {steps.shape}")
+    if np.any(steps == 0):
+        raise ValueError("steps must be nonzero (the depth's signed change), got a zero step")
+    elapsed = np.concatenate([[0.0], np.cumsum(steps)])
+    nearest = np.min(elapsed) - elapsed[frame - 1] + state[..., 1]
+    if not np.all(nearest > 0):
+        raise ValueError(
+            "state and steps bring the point to the camera: its depth must stay > 0 at every "
+            f"frame, got minimum {float(np.min(nearest)):.6g}"
+        )
     return _draw_uneven(state, rho, process_noise, rng, lead, frame, steps)
 
 
@@ -209,7 +219,7 @@ def _draw_uneven(state, rho, process_noise: float, rng, lead, frame: int, steps)
     v = np.broadcast_to(state[..., 2, None], lead + (frames,)).copy()
     if process_noise > 0 and n_noisy:
         after = steps[frame - 1 :]  # the steps from the given frame on
-        a = process_noise * np.sqrt(after) * rng.standard_normal(lead + (n_noisy,))
+        a = process_noise * np.sqrt(np.abs(after)) * rng.standard_normal(lead + (n_noisy,))
         v[..., frame:] += np.cumsum(a, axis=-1)
     # x_{k+1} = x_k + s_k v_k from the given frame on; backwards by the constant velocity
     moves = v[..., :-1] * steps

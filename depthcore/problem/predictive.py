@@ -87,8 +87,8 @@ def frame_inputs(mu, rho, step, default_rho, frame: int) -> tuple[float, float, 
     rho : float or None
         Its noise SD, > 0 (``None``: ``default_rho``).
     step : float
-        The depth's change since the last frame, > 0; at the first frame it
-        must be left at 1.
+        The depth's signed change since the last frame, nonzero (negative: the
+        camera approaches the point); at the first frame it must be left at 1.
     default_rho : float or None
         The filter's own noise SD.
     frame : int
@@ -108,7 +108,12 @@ def frame_inputs(mu, rho, step, default_rho, frame: int) -> tuple[float, float, 
     if rho is None and default_rho is None:
         raise ValueError("rho is needed: give it to start or to this update")
     r = default_rho if rho is None else checks.positive_scalar(rho, "rho")
-    s = checks.positive_scalar(step, "step")
+    s = checks.number(step, "step")
+    if s == 0:
+        raise ValueError(
+            f"step must be nonzero (the depth's signed change: negative while the "
+            f"camera approaches), got {s!r}"
+        )
     if frame == 0 and s != 1.0:
         raise ValueError("step: the first frame has no step before it; leave it at 1")
     return mu, r, s

@@ -35,14 +35,16 @@ prior_cov : array_like, shape (3, 3) or (..., 3, 3)
 PROCESS_NOISE = """\
 process_noise : float
     SD ``q >= 0`` of the velocity's change per frame, ``v_{k+1} = v_k + a_k``
-    with ``a_k ~ N(0, q**2 s_k)`` over a step ``s_k`` (0: the paper's constant
+    with ``a_k ~ N(0, q**2 |s_k|)`` over a step ``s_k`` (0: the paper's constant
     velocity; :mod:`depthcore.problem.frames`)."""
 
 #: The steps between frames, as a NumPy docstring's ``Parameters`` entry.
 STEPS = """\
 steps : array_like, shape (N - 1,) or (..., N - 1), optional
-    The depth's change from each frame to the next, > 0 (``None``: all ones,
-    the paper's frames); the lateral position moves by ``v * steps[k]``."""
+    The depth's signed change from each frame to the next, nonzero: positive
+    while the point recedes, negative while the camera approaches it (``None``:
+    all ones, the paper's frames); the lateral position moves by ``v * steps[k]``
+    either way, and the point stays in front of the camera at every frame."""
 
 #: The outlier gate, as a NumPy docstring's ``Parameters`` entry.
 GATE = """\
