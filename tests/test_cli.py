@@ -339,7 +339,7 @@ def test_help_speaks_of_n_frames_not_three_measurements(argv, capsys):
         main(argv)
     out = capsys.readouterr().out
     assert "three measurements" not in out and "any three" not in out
-    assert "N >= 3 bearings (up to 1000 frames held whole" in " ".join(out.split())
+    assert "N >= 3 bearings (up to 1000 frames, or any number streamed)" in " ".join(out.split())
     assert "three noisy image" not in depthcore.__doc__
 
 

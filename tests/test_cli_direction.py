@@ -1,12 +1,18 @@
 """estimate's distances: the direction made explicit, time and travel, the file's frame names,
 and tracks past the limit of frames streamed through the online filters."""
 
+import contextlib
 import io
 import json
+import os
+import tempfile
 import tracemalloc
+import warnings
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import depthcore
 from depthcore.cli import tracks
@@ -400,3 +406,59 @@ def test_streaming_a_long_file_takes_memory_that_does_not_grow_with_it(tmp_path)
     # kilobyte per frame
     held = _peak([*argv, long], io.StringIO())
     assert held > peaks[0] + 1_000_000, (peaks, held)
+
+
+# --- odd distances, directions and speeds: an answer or one line ---------------------------
+
+_DISTANCE = st.one_of(
+    st.floats(-3.0, 3.0).map(repr),
+    st.sampled_from(["", "0", "-0", "nan", "inf", "1e308", "-1e308", "1e-320", "x", "1_0"]),
+)
+
+
+@st.composite
+def _distance_files(draw):
+    """A track's bearings with a frame, step, travel or time column of odd values."""
+    n = draw(st.integers(0, 8))
+    column = draw(st.sampled_from(["step", "travel", "time", "frame"]))
+    e = np.cumsum(np.concatenate([[0.0], np.full(max(n - 1, 0), 0.7)]))
+    mu = (1.0 + 0.3 * e) / (6.0 + e)
+    rows = [
+        f"{m!r},{draw(_DISTANCE) if column != 'frame' else draw(st.integers(-2, 9))}" for m in mu
+    ]
+    return f"mu,{column}\n" + "".join(r + "\n" for r in rows)
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    text=_distance_files(),
+    direction=st.sampled_from([None, "receding", "approaching", "signed"]),
+    speed=st.sampled_from([None, "1", "0", "-2", "nan", "1e308", "1e-300"]),
+    per_frame=st.booleans(),
+    output=st.sampled_from(["json", "csv", "table"]),
+)
+def test_odd_distances_directions_and_speeds_are_answered_or_refused_in_one_line(
+    text, direction, speed, per_frame, output
+):
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, "t.csv")
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(text)
+        argv = ["estimate", "--mu-file", path, "--rho", "0.01", "--filters", "ekf"]
+        argv += [] if direction is None else ["--direction", direction]
+        argv += [] if speed is None else ["--speed", speed]
+        argv += ["--per-frame"] if per_frame else []
+        argv += {"json": ["--json"], "csv": ["--csv"] if per_frame else [], "table": []}[output]
+        out, err = io.StringIO(), io.StringIO()
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                status = exit_status(argv)
+    out, err = out.getvalue(), err.getvalue()
+    if status == 0:
+        assert err == "" and out, err
+        if "--json" in argv:
+            json.loads(out, parse_constant=lambda c: pytest.fail(f"not strict JSON: {c}"))
+    else:
+        assert status == 2 and out == "" and err.count("\n") == 1, (status, out, err)
+        assert "Traceback" not in err and "Warning" not in err, err

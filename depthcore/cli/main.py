@@ -132,6 +132,14 @@ def _cmd_reproduce(args) -> str:
 
 def _cmd_estimate(args):
     held = _bearings(args)
+    try:
+        return _estimate(args, held)
+    finally:  # a long track's file, read or not
+        if held.reading is not None:
+            held.reading.frames.close()
+
+
+def _estimate(args, held):
     src = held.track or track_files.assemble(held.reading, held.first)  # a long track's start
     if held.track is None:
         _refuse_long(args, held)
@@ -400,7 +408,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = parsing.Parser(
         prog="python -m depthcore",
         description="Filter based estimates of depth (Maybank 1990): the paper's filters "
-        f"on N >= 3 bearings (up to {FRAMES_MAX} frames held whole, any number streamed).",
+        f"on N >= 3 bearings (up to {FRAMES_MAX} frames, or any number streamed).",
         epilog=cli_text.EXAMPLES["all"],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -427,8 +435,8 @@ def _add_estimate_arguments(sub, common) -> None:
         sub,
         common,
         "estimate",
-        f"moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames held "
-        "whole; --per-frame streams any number)",
+        f"moments of every filter for any N >= 3 bearings (up to {FRAMES_MAX} frames, or any "
+        "number streamed)",
     )
     given = e.add_mutually_exclusive_group(required=True)
     given.add_argument(

@@ -531,6 +531,7 @@ examples:
   python -m depthcore estimate --mu -0.3 0 nan 0.33 0.43 --rho 0.005 --prior-mean -1 4 0 --per-frame
   python -m depthcore estimate --mu-file track.csv --per-frame --csv
   python -m depthcore estimate --mu-file pixels.csv --focal 800 --cx 320 --rho 0.002 --per-frame
+  python -m depthcore estimate --mu-file drive.csv --direction approaching --speed 8 --per-frame
 
 The noise-free state c is (x, y, v) at frame 3 (from the first three bearings);
 the prior is at frame 1; every filter reports the state at the last frame N.

@@ -51,9 +51,9 @@ receding or approaching (the distances are then positive magnitudes) or signed
 (the step or travel column's own signs). Without distances the frames are unit
 steps receding, the paper's; every output names the direction it used.
 
-Up to {checks.MAX_FRAMES} frames are held whole, as the summary, --smooth and
---learn-noise need; --per-frame streams a longer file through the online filters
-({", ".join(online.NAMES)}), each frame's filtered state without the smoothed one."""
+Up to {checks.MAX_FRAMES} frames are held whole, as the summary, --smooth and --learn-noise
+need; --per-frame streams a longer file through the online filters ({", ".join(online.NAMES)}):
+each frame's filtered state, without the smoothed one."""
 
 #: How the library's refusals of a track file name the options and the format.
 WORDS = {
@@ -110,7 +110,8 @@ def read_file(path: str, limits: track_files.Limits, options: dict) -> track_fil
     -------
     depthcore.registry.track_files.Held
         The track whole, or past :data:`depthcore.problem.checks.MAX_FRAMES`
-        frames its frames row by row (the file left open until they are read).
+        frames its frames row by row (the file open until they are read, or
+        until their ``close()``).
 
     Raises
     ------
@@ -149,15 +150,24 @@ def read_file(path: str, limits: track_files.Limits, options: dict) -> track_fil
     if held.track is not None:
         close()
         return held
-    return held._replace(reading=held.reading._replace(frames=_closing(held, close)))
+    return held._replace(reading=held.reading._replace(frames=_Closing(held.reading.frames, close)))
 
 
-def _closing(held, close):
-    """The frames of ``held``, then its file closed by ``close()``."""
-    try:
-        yield from held.reading.frames
-    finally:
-        close()
+class _Closing:
+    """A long track's frames, row by row; its file closed at the end or by :meth:`close`."""
+
+    def __init__(self, frames, close):
+        self.frames, self.close = frames, close
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        try:
+            return next(self.frames)
+        except BaseException:
+            self.close()
+            raise
 
 
 def labeller(track: track_files.TrackFile):
