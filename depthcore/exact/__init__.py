@@ -17,6 +17,8 @@
   nodes, the exact posterior at frame ``N``;
 * :mod:`~depthcore.exact.posterior`: the bank with its depth nodes placed by
   the quadrature, the exact N-frame filter;
+* :mod:`~depthcore.exact.spatial`: a point in 3-D, ``(x, y, v, h, w)`` seen as
+  bearing pairs, by a bank of four-state Kalman filters over depth;
 * :mod:`~depthcore.exact.smoother`: one track frame by frame, filtered,
   fixed-lag and fixed-interval smoothed;
 * :mod:`~depthcore.exact.online`: the exact filter one bearing at a time, in

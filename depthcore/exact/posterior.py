@@ -196,7 +196,7 @@ def moments(
     return Moments(*np.concatenate(out, axis=1), np.concatenate(means), np.concatenate(covs))
 
 
-def _grid_nodes(grid):
+def grid_nodes(grid):
     """Depths at frame 1 (B, J) and log quadrature weights (B, J) of a quadrature grid.
 
     ``grid = (lo, h, n, frame)`` as :func:`depthcore.exact.quadrature.integrate`'s;
@@ -263,7 +263,7 @@ def _place(pb, rtol, history, single):
         ]
         return _concatenate(parts)
     _, err_y, err_v, _, grids = _integrate(pb, rtol)
-    nodes, log_w = _grid_nodes(grids[3])
+    nodes, log_w = grid_nodes(grids[3])
     nodes = nodes + pb.floor[:, None]
     shift = np.max(log_w, axis=1, keepdims=True)
     rho = pb.rho if pb.frame_rho is None else pb.frame_rho

@@ -216,8 +216,11 @@ def _steps(value, mu: np.ndarray) -> np.ndarray:
     return np.broadcast_to(steps, mu.shape[:-1] + (n - 1,))
 
 
-def _degenerate(mu: np.ndarray, present: np.ndarray, elapsed: np.ndarray) -> np.ndarray:
-    """Rows whose present bearings are (numerically) affine in the depth travelled.
+def degenerate(mu: np.ndarray, present: np.ndarray, elapsed: np.ndarray) -> np.ndarray:
+    """Rows whose present bearings are (numerically) affine in the depth travelled, (...).
+
+    ``mu``, ``present`` and ``elapsed`` of shape (..., N), each row with at least
+    :data:`MIN_PRESENT` bearings present.
 
     The second divided differences of consecutive present bearings, scaled so
     that at unit steps they are ``mu_k - 2 mu_{k+1} + mu_{k+2}`` (the check of
@@ -239,7 +242,7 @@ def _degenerate(mu: np.ndarray, present: np.ndarray, elapsed: np.ndarray) -> np.
     return out.reshape(mu.shape[:-1])
 
 
-def check(mu, rho, steps=None) -> Frames:
+def check(mu, rho, steps=None, parallax: bool = True) -> Frames:
     """Check a batch of tracks: bearings with gaps, noise per frame, steps.
 
     Parameters
@@ -254,6 +257,10 @@ def check(mu, rho, steps=None) -> Frames:
     steps : array_like, shape (N - 1,) or (..., N - 1), or None
         The depth's signed change between consecutive frames, nonzero (negative:
         the camera approaches the point); ``None``: all ones.
+    parallax : bool
+        Refuse rows whose bearings lie on a line in the depth travelled
+        (:func:`degenerate`); ``False`` leaves that to the caller (a point in 3-D
+        may show its parallax in the other coordinate).
 
     Returns
     -------
@@ -285,9 +292,9 @@ def check(mu, rho, steps=None) -> Frames:
             f"precision; steps from {float(np.min(steps)):.3g} to {float(np.max(steps)):.3g} "
             "lose a step to rounding"
         )
-    degenerate = _degenerate(mu, present, frames.elapsed)
-    if np.any(degenerate):
-        i = int(np.argmax(degenerate.reshape(-1)))
+    flat = degenerate(mu, present, frames.elapsed) if parallax else np.zeros(batch, bool)
+    if np.any(flat):
+        i = int(np.argmax(flat.reshape(-1)))
         where = "mu" + (checks.batch_index(i, batch) if batch else "")
         raise ValueError(
             f"{where} is degenerate: its bearings lie on a line in the depth travelled "

@@ -1,0 +1,369 @@
+"""The exact filter for a point in 3-D: a bank of four-state Kalman filters over depth.
+
+Recommended import: ``from depthcore.exact import spatial``.
+
+The point's state is ``(x, y, v, h, w)``: the paper's ``(x, y, v)`` and its height
+``h`` with vertical velocity ``w``, which move as ``x`` and ``v`` do. Over a step
+``s`` (the depth's signed change, :mod:`depthcore.problem.frames`)
+
+    y += s,   x += s v,   h += s w,   v += a,   w += b,   a, b ~ N(0, q**2 |s|),
+
+and the camera sees the pair ``(mu_k, nu_k) = (x_k / y_k, h_k / y_k)`` plus
+independent noise of SD ``rho_k`` on each (Eq. (4) twice). Given the depth at frame
+1, ``y_1 = y``, the depths at every frame are known and the lateral-vertical state
+``u = (x, v, h, w)`` is linear-Gaussian, as the plane's ``(x, v)`` is in
+:mod:`depthcore.exact.bank`: its prior is ``N(m, P)`` conditioned on ``y_1 = y``, it
+moves by ``F_s = [[1, s], [0, 1]]`` in each block with noise ``diag(0, q**2 |s|)`` in
+each, and the pair observes ``x / y_k`` and ``h / y_k``. One Kalman filter per depth
+node (textbook 19.2.1, 19.2.2, the pair as two scalar updates in Joseph form) gives
+the exact ``p(mu, nu | y)`` and the Gaussian of ``u_N`` given ``y``, and
+
+    p(y_1 = y | all pairs)  proportional to  N(y; m_y, P_yy) p(mu, nu | y),
+
+integrated over the depth on the nodes of the depth quadrature
+(:mod:`depthcore.exact.quadrature`, placed above the floor where the point would
+reach the camera, :func:`depthcore.problem.frames.depth_floor`). The prior may
+correlate any coordinates; when it does not correlate the blocks, the likelihood is
+the product of the plane's for ``mu`` and the same for ``nu``.
+
+A missing frame is a row of two ``NaN``; a pair with one coordinate missing is
+refused. With the height's prior narrow at 0, bearings ``nu = 0`` and ``q = 0`` the
+filter is the plane's (``tests/test_spatial.py``).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from depthcore.exact import quadrature
+from depthcore.exact.posterior import grid_nodes
+from depthcore.problem import checks, frames
+
+#: The lateral-vertical state ``u = (x, v, h, w)`` in the state ``(x, y, v, h, w)``.
+LATERAL = np.array([0, 2, 3, 4])
+#: The coordinates of ``u`` the pair observes (``x`` and ``h``).
+OBSERVED = (0, 2)
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+class Pairs(NamedTuple):
+    """Checked tracks of bearing pairs (:func:`check`), flattened to ``B`` rows.
+
+    Attributes
+    ----------
+    mu : ndarray, shape (B, N, 2)
+        ``NaN`` rows at missing frames.
+    present : ndarray of bool, shape (B, N)
+    rho : ndarray, shape (B, N)
+        Noise SD per frame, on each coordinate (1 at missing frames).
+    steps : ndarray, shape (B, N - 1)
+    batch : tuple of int
+        The leading shape the rows came from.
+    """
+
+    mu: np.ndarray
+    present: np.ndarray
+    rho: np.ndarray
+    steps: np.ndarray
+    batch: tuple
+
+    @property
+    def elapsed(self) -> np.ndarray:
+        """Depth travelled since frame 1 at each frame, (B, N)."""
+        zero = np.zeros((len(self.steps), 1))
+        return np.concatenate([zero, np.cumsum(self.steps, axis=1)], axis=1)
+
+
+def check(mu, rho, steps=None) -> Pairs:
+    """Check tracks of pairs ``(mu_k, nu_k)``: gaps, noise per frame, signed steps.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N, 2) or (..., N, 2)
+        ``(x / y, h / y)`` per frame; a row of ``NaN`` is a missing frame. At least
+        :data:`depthcore.problem.frames.MIN_PRESENT` pairs present, and in one of
+        the two coordinates not all on a line in the depth travelled.
+    rho : float or array_like, shape (...) or (..., N)
+        Noise SD on each coordinate, per track or per frame.
+    steps : array_like, shape (N - 1,) or (..., N - 1), or None
+        As for :func:`depthcore.problem.frames.check`.
+
+    Returns
+    -------
+    Pairs
+
+    Raises
+    ------
+    ValueError
+        One line naming the argument.
+    """
+    arr = checks.as_float(mu, "mu")
+    if arr.ndim < 2 or arr.shape[-1] != 2:
+        raise ValueError(
+            f"mu must have shape (N, 2) or (..., N, 2), a pair (x / y, h / y) per frame, "
+            f"got shape {arr.shape}"
+        )
+    half = np.isnan(arr[..., 0]) != np.isnan(arr[..., 1])
+    if np.any(half):
+        k = np.unravel_index(int(np.argmax(half)), half.shape)
+        raise ValueError(
+            f"mu{list(map(int, k))} has one coordinate missing: a frame has both or neither"
+        )
+    across = frames.check(arr[..., 0], rho, steps, parallax=False)
+    up = np.where(across.present, arr[..., 1], np.nan)
+    if np.any(np.isinf(up)):
+        raise ValueError("mu must be finite or NaN (a missing frame), got infinite entries")
+    flat = frames.degenerate(across.mu, across.present, across.elapsed) & frames.degenerate(
+        np.where(across.present, up, 0.0), across.present, across.elapsed
+    )
+    if np.any(flat):
+        raise ValueError(
+            "mu is degenerate: both coordinates lie on lines in the depth travelled, "
+            "so no finite depth explains them"
+        )
+    batch, n = across.mu.shape[:-1], across.mu.shape[-1]
+    B = int(np.prod(batch))
+    return Pairs(
+        np.stack([across.mu, up], axis=-1).reshape(B, n, 2),
+        across.present.reshape(B, n),
+        np.ascontiguousarray(across.rho).reshape(B, n),
+        np.ascontiguousarray(across.steps).reshape(B, n - 1),
+        batch,
+    )
+
+
+def _prior(prior_mean, prior_cov, B: int, batch: tuple):
+    m = checks.finite_array(prior_mean, "prior_mean")
+    if m.shape[-1:] != (5,) or not checks.broadcasts(m.shape[:-1], batch):
+        raise ValueError(
+            f"prior_mean must have shape (5,) or (..., 5), (x, y, v, h, w), got {m.shape}"
+        )
+    P = checks.finite_array(prior_cov, "prior_cov")
+    if P.shape[-2:] != (5, 5) or not checks.broadcasts(P.shape[:-2], batch):
+        raise ValueError(f"prior_cov must have shape (5, 5) or (..., 5, 5), got {P.shape}")
+    P = checks.covariances(P, "prior_cov", 5)
+    m = np.broadcast_to(m, batch + (5,)).reshape(B, 5)
+    P = np.ascontiguousarray(np.broadcast_to(P, batch + (5, 5))).reshape(B, 5, 5)
+    return m, P
+
+
+def conditional_prior(nodes, prior_mean, prior_cov):
+    """The prior of ``u = (x_1, v_1, h_1, w_1)`` given ``y_1`` at each node, and ``log N(y_1)``.
+
+    ``nodes`` (B, J), ``prior_mean`` (B, 5), ``prior_cov`` (B, 5, 5); returns the means
+    (B, J, 4), the covariance (B, 1, 4, 4) and the log prior density of the depth (B, J).
+    """
+    m_u, m_y = prior_mean[:, LATERAL], prior_mean[:, 1]
+    P_yy = prior_cov[:, 1, 1]
+    P_uy = prior_cov[:, LATERAL, 1]
+    slope = P_uy / P_yy[:, None]
+    d = nodes - m_y[:, None]
+    mean = m_u[:, None, :] + d[..., None] * slope[:, None, :]
+    cov = prior_cov[:, LATERAL][:, :, LATERAL] - slope[:, :, None] * P_uy[:, None, :]
+    log_density = -0.5 * (_LOG_2PI + np.log(P_yy)[:, None] + d * d / P_yy[:, None])
+    return mean, cov[:, None], log_density
+
+
+def _predict(M, C, s, q2) -> tuple:
+    """Textbook 19.2.1 over steps ``s`` (B, 1): both blocks move by ``[[1, s], [0, 1]]``."""
+    F = np.zeros(s.shape + (4, 4))
+    F[..., [0, 1, 2, 3], [0, 1, 2, 3]] = 1.0
+    F[..., 0, 1] = F[..., 2, 3] = s
+    M = np.einsum("...ij,...j->...i", F, M)
+    C = F @ C @ np.swapaxes(F, -1, -2)
+    if q2 is not None:
+        noise = q2 * np.abs(s)
+        C = C.copy()
+        C[..., 1, 1] += noise
+        C[..., 3, 3] += noise
+    return M, C
+
+
+def _update(M, C, bearing, y, rho2, i: int):
+    """Textbook 19.2.2 by one coordinate's bearing at depth ``y``, Joseph form; the log density.
+
+    The bearing times the depth observes ``u_i`` with noise variance ``rho**2 y**2``.
+    """
+    r = rho2 * y * y
+    S = C[..., i, i] + r
+    e = bearing * y - M[..., i]
+    K = C[..., :, i] / S[..., None]
+    A = np.broadcast_to(np.eye(4), K.shape + (4,)).copy()
+    A[..., :, i] -= K
+    C = A @ C @ np.swapaxes(A, -1, -2) + r[..., None, None] * K[..., :, None] * K[..., None, :]
+    log_density = -0.5 * (_LOG_2PI + np.log(S / (y * y)) + e * e / S)
+    return M + K * e[..., None], C, log_density
+
+
+def node_filter(nodes, pairs: Pairs, prior_mean, prior_cov, process_noise):
+    """One four-state Kalman filter per depth node over every frame (module docstring).
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (B, J)
+        Depths at frame 1; nodes at or below the floor get log weight ``-inf``.
+    pairs : Pairs
+    prior_mean : ndarray, shape (B, 5)
+    prior_cov : ndarray, shape (B, 5, 5)
+    process_noise : ndarray, shape (B,)
+
+    Returns
+    -------
+    log_weight : ndarray, shape (B, J)
+        ``log N(y_1; m_y, P_yy) + log p(pairs | y_1)``.
+    mean : ndarray, shape (B, J, 4)
+    cov : ndarray, shape (B, J, 4, 4)
+        ``u_N`` given ``y_1`` and the pairs.
+    """
+    M, C, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
+    C = np.broadcast_to(C, M.shape + (4,)).copy()
+    q2 = (process_noise**2)[:, None]
+    q2 = q2 if np.any(q2) else None
+    elapsed = pairs.elapsed
+    reached = nodes <= frames.depth_floor(elapsed)[:, None]
+    for k in range(pairs.mu.shape[1]):
+        if k:
+            M, C = _predict(M, C, pairs.steps[:, k - 1, None], q2)
+        here = pairs.present[:, k, None] & ~reached
+        y = np.where(here, nodes + elapsed[:, k, None], 1.0)
+        rho2 = (pairs.rho[:, k] ** 2)[:, None]
+        for i, coordinate in zip(OBSERVED, (0, 1), strict=True):
+            bearing = np.where(here, pairs.mu[:, k, coordinate, None], 0.0)
+            M1, C1, log_density = _update(M, C, bearing, y, rho2, i)
+            M = np.where(here[..., None], M1, M)
+            C = np.where(here[..., None, None], C1, C)
+            log_weight = log_weight + np.where(here, log_density, 0.0)
+    C = 0.5 * (C + np.swapaxes(C, -1, -2))
+    return np.where(reached, -np.inf, log_weight), M, C
+
+
+class SpatialPosterior(NamedTuple):
+    """The exact posterior of ``(x, y, v, h, w)`` at the last frame, batch shape (...).
+
+    Attributes
+    ----------
+    mean : ndarray, shape (..., 5)
+    cov : ndarray, shape (..., 5, 5)
+    error : ndarray, shape (..., 5)
+        The quadrature's error estimate of each coordinate's mean and SD (the larger),
+        from the moments on every other node.
+    nodes : ndarray, shape (..., J)
+        Depths at frame 1.
+    probabilities : ndarray, shape (..., J)
+    node_mean : ndarray, shape (..., J, 4)
+    node_cov : ndarray, shape (..., J, 4, 4)
+        ``u_N = (x_N, v_N, h_N, w_N)`` given each node.
+    travelled : ndarray, shape (...)
+        ``y_N - y_1``.
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+    error: np.ndarray
+    nodes: np.ndarray
+    probabilities: np.ndarray
+    node_mean: np.ndarray
+    node_cov: np.ndarray
+    travelled: np.ndarray
+
+
+def _moments(p, nodes, travelled, M, C):
+    """Mean (B, 5) and covariance (B, 5, 5) of the state at frame N under node weights ``p``."""
+    B, J = p.shape
+    states = np.zeros((B, J, 5))
+    states[..., LATERAL] = M
+    states[..., 1] = nodes + travelled[:, None]
+    covs = np.zeros((B, J, 5, 5))
+    covs[..., LATERAL[:, None], LATERAL[None, :]] = C
+    mean = np.einsum("bj,bjk->bk", p, states)
+    d = states - mean[:, None, :]
+    cov = np.einsum("bj,bjkl->bkl", p, covs + d[..., :, None] * d[..., None, :])
+    return mean, cov
+
+
+def _mode_bearings(pairs: Pairs) -> np.ndarray:
+    """Per row, the coordinate with the larger parallax (B, N): where the depth scan starts."""
+    mu = np.where(pairs.present[..., None], pairs.mu, 0.0)
+    second = np.abs(np.diff(mu, n=2, axis=1)).sum(axis=1)  # (B, 2)
+    pick = np.argmax(second, axis=1)
+    return np.where(pairs.present, mu[np.arange(len(mu)), :, pick], np.nan)
+
+
+def posterior(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None, rtol: float = 1e-10
+) -> SpatialPosterior:
+    """The exact posterior of a point in 3-D at the last frame, to ``rtol`` of each SD.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N, 2) or (..., N, 2)
+        Pairs ``(x / y, h / y)``; ``NaN`` rows at missing frames (:func:`check`).
+    rho : float or array_like, shape (...) or (..., N)
+    prior_mean : array_like, shape (5,) or (..., 5)
+        The prior mean of ``(x_1, y_1, v, h_1, w)``.
+    prior_cov : array_like, shape (5, 5) or (..., 5, 5)
+    process_noise : float or array_like, shape (...)
+        ``q >= 0``, on both velocities.
+    steps : array_like, shape (N - 1,) or (..., N - 1), or None
+        The depth's signed change between frames.
+    rtol : float
+        The quadrature's tolerance, relative to each SD.
+
+    Returns
+    -------
+    SpatialPosterior
+    """
+    pairs = check(mu, rho, steps)
+    B = len(pairs.mu)
+    m, P = _prior(prior_mean, prior_cov, B, pairs.batch)
+    q = checks.nonnegative_batch(process_noise, "process_noise", pairs.batch).reshape(-1)
+    q = np.broadcast_to(q, (B,))
+    rtol = checks.positive_scalar(rtol, "rtol")
+    floor = frames.depth_floor(pairs.elapsed)
+
+    def integrand(offsets, pb):
+        log_weight, M, C = node_filter(offsets[..., 2] + floor[:, None], pairs, m, P, q)
+        lateral = (C[..., 0, 0], C[..., 0, 1], C[..., 1, 1])
+        return log_weight, np.stack([M[..., 0], M[..., 1]]), lateral
+
+    xyv = [0, 1, 2]
+    steps_or_none = None if np.all(pairs.steps == 1.0) else pairs.steps
+    pb = quadrature.Problem(
+        mu=_mode_bearings(pairs),
+        rho=np.max(np.where(pairs.present, pairs.rho, 0.0), axis=1),
+        mean=m[:, xyv],
+        R=np.linalg.inv(np.linalg.cholesky(P[:, xyv][:, :, xyv])),
+        integrand=integrand,
+        process_noise=q,
+        cov=P[:, xyv][:, :, xyv],
+        steps=steps_or_none,
+    )
+    _, _, _, _, grids = quadrature.integrate(pb, (3,), rtol)
+    nodes, log_w = grid_nodes(grids[3])
+    nodes = nodes + floor[:, None]
+    log_weight, M, C = node_filter(nodes, pairs, m, P, q)
+    a = log_w + log_weight
+    a = np.where(np.isnan(a), -np.inf, a)
+    p = np.exp(a - np.max(a, axis=1, keepdims=True))
+    p /= np.sum(p, axis=1, keepdims=True)
+    travelled = pairs.elapsed[:, -1]
+    mean, cov = _moments(p, nodes, travelled, M, C)
+    half = np.where(np.arange(p.shape[1]) % 2 == 0, p, 0.0)
+    half /= np.sum(half, axis=1, keepdims=True)
+    half_mean, half_cov = _moments(half, nodes, travelled, M, C)
+    sd, half_sd = (np.sqrt(np.diagonal(c, axis1=1, axis2=2)) for c in (cov, half_cov))
+    error = np.maximum(np.abs(half_mean - mean), np.abs(half_sd - sd))
+    shape = pairs.batch
+    J = nodes.shape[1]
+    return SpatialPosterior(
+        mean.reshape(shape + (5,)),
+        cov.reshape(shape + (5, 5)),
+        error.reshape(shape + (5,)),
+        nodes.reshape(shape + (J,)),
+        p.reshape(shape + (J,)),
+        M.reshape(shape + (J, 4)),
+        C.reshape(shape + (J, 4, 4)),
+        travelled.reshape(shape),
+    )
