@@ -55,6 +55,7 @@ TABLES = {
         "dimensions",
         "target_ratio",
     },
+    "bench_long_track": {"frames", "filters"},
     "bench_optimal": {"moments", "per_triple"},
     "bench_range_ekf": {"fig2", "ten_frames"},
     "bench_rbpf": {"exact", "equal_cost", "convergence"},
