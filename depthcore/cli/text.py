@@ -49,10 +49,10 @@ legend: depth mean, depth sd  the filter's posterior mean and SD of the depth y 
 
 #: The legend of :func:`format_summary`'s smoothed columns.
 SMOOTHED_LEGEND = """\
-        frame                 the frame's number in the track (its time, where the track has
-                              one); depth mean, depth sd and x mean, x sd: the optimal filter's
-                              mean and SD of the depth y and the lateral position x at that
-                              frame given all N bearings"""
+        frame                 the frame's number in the track (time: its time in seconds,
+                              where the track has one); depth mean, depth sd and x mean, x sd:
+                              the optimal filter's mean and SD of the depth y and the lateral
+                              position x at that frame given all N bearings"""
 
 
 #: The legend of :func:`format_prior_study`'s columns.
@@ -214,15 +214,21 @@ def format_summary(summary: dict) -> str:
         lines.append(text)
     if "smoothed" in summary:
         sm = summary["smoothed"]
+        frames = sm.get("frame", list(range(1, N + 1)))
+        times = sm.get("times")
+        w = max(5, *(len(str(f)) for f in frames))
         lines.append(
-            f"{'frame':>5} {'depth mean':>11} {'depth sd':>10} {'x mean':>10} {'x sd':>10}"
+            f"{'frame':>{w}}"
+            + (f" {'time':>10}" if times else "")
+            + f" {'depth mean':>11} {'depth sd':>10} {'x mean':>10} {'x sd':>10}"
             "   (optimal, smoothed)"
         )
         for k, row in enumerate(
             zip(sm["depth_mean"], sm["depth_sd"], sm["lateral_mean"], sm["lateral_sd"], strict=True)
         ):
             cells = " ".join(f"{v:>#10.4g}" for v in row).replace(" ", "  ", 1)
-            lines.append(f"{_frame_label(summary, k):>5} {cells}")
+            time = f" {times[k]:>10.4g}" if times else ""
+            lines.append(f"{frames[k]:>{w}}{time} {cells}")
     lines.append(SUMMARY_LEGEND)
     if "smoothed" in summary:
         lines.append(SMOOTHED_LEGEND)
