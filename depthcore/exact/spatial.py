@@ -27,8 +27,9 @@ correlate any coordinates; when it does not correlate the blocks, the likelihood
 the product of the plane's for ``mu`` and the same for ``nu``.
 
 A missing frame is a row of two ``NaN``; a pair with one coordinate missing is
-refused. With the height's prior narrow at 0, bearings ``nu = 0`` and ``q = 0`` the
-filter is the plane's (``tests/test_spatial.py``).
+refused (:func:`depthcore.problem.bearing_pairs.check`). With the height's prior
+narrow at 0, bearings ``nu = 0`` and ``q = 0`` the filter is the plane's
+(``tests/test_spatial.py``).
 """
 
 from __future__ import annotations
@@ -40,98 +41,13 @@ import numpy as np
 from depthcore.exact import quadrature
 from depthcore.exact.posterior import grid_nodes
 from depthcore.problem import checks, frames
+from depthcore.problem.bearing_pairs import Pairs, check
 
 #: The lateral-vertical state ``u = (x, v, h, w)`` in the state ``(x, y, v, h, w)``.
 LATERAL = np.array([0, 2, 3, 4])
 #: The coordinates of ``u`` the pair observes (``x`` and ``h``).
 OBSERVED = (0, 2)
 _LOG_2PI = float(np.log(2.0 * np.pi))
-
-
-class Pairs(NamedTuple):
-    """Checked tracks of bearing pairs (:func:`check`), flattened to ``B`` rows.
-
-    Attributes
-    ----------
-    mu : ndarray, shape (B, N, 2)
-        ``NaN`` rows at missing frames.
-    present : ndarray of bool, shape (B, N)
-    rho : ndarray, shape (B, N)
-        Noise SD per frame, on each coordinate (1 at missing frames).
-    steps : ndarray, shape (B, N - 1)
-    batch : tuple of int
-        The leading shape the rows came from.
-    """
-
-    mu: np.ndarray
-    present: np.ndarray
-    rho: np.ndarray
-    steps: np.ndarray
-    batch: tuple
-
-    @property
-    def elapsed(self) -> np.ndarray:
-        """Depth travelled since frame 1 at each frame, (B, N)."""
-        zero = np.zeros((len(self.steps), 1))
-        return np.concatenate([zero, np.cumsum(self.steps, axis=1)], axis=1)
-
-
-def check(mu, rho, steps=None) -> Pairs:
-    """Check tracks of pairs ``(mu_k, nu_k)``: gaps, noise per frame, signed steps.
-
-    Parameters
-    ----------
-    mu : array_like, shape (N, 2) or (..., N, 2)
-        ``(x / y, h / y)`` per frame; a row of ``NaN`` is a missing frame. At least
-        :data:`depthcore.problem.frames.MIN_PRESENT` pairs present, and in one of
-        the two coordinates not all on a line in the depth travelled.
-    rho : float or array_like, shape (...) or (..., N)
-        Noise SD on each coordinate, per track or per frame.
-    steps : array_like, shape (N - 1,) or (..., N - 1), or None
-        As for :func:`depthcore.problem.frames.check`.
-
-    Returns
-    -------
-    Pairs
-
-    Raises
-    ------
-    ValueError
-        One line naming the argument.
-    """
-    arr = checks.as_float(mu, "mu")
-    if arr.ndim < 2 or arr.shape[-1] != 2:
-        raise ValueError(
-            f"mu must have shape (N, 2) or (..., N, 2), a pair (x / y, h / y) per frame, "
-            f"got shape {arr.shape}"
-        )
-    half = np.isnan(arr[..., 0]) != np.isnan(arr[..., 1])
-    if np.any(half):
-        k = np.unravel_index(int(np.argmax(half)), half.shape)
-        raise ValueError(
-            f"mu{list(map(int, k))} has one coordinate missing: a frame has both or neither"
-        )
-    across = frames.check(arr[..., 0], rho, steps, parallax=False)
-    up = np.where(across.present, arr[..., 1], np.nan)
-    if np.any(np.isinf(up)):
-        raise ValueError("mu must be finite or NaN (a missing frame), got infinite entries")
-    flat = frames.degenerate(across.mu, across.present, across.elapsed) & frames.degenerate(
-        np.where(across.present, up, 0.0), across.present, across.elapsed
-    )
-    if np.any(flat):
-        raise ValueError(
-            "mu is degenerate: both coordinates lie on lines in the depth travelled, "
-            "so no finite depth explains them"
-        )
-    batch, n = across.mu.shape[:-1], across.mu.shape[-1]
-    B = int(np.prod(batch))
-    return Pairs(
-        np.stack([across.mu, up], axis=-1).reshape(B, n, 2),
-        across.present.reshape(B, n),
-        np.ascontiguousarray(across.rho).reshape(B, n),
-        np.ascontiguousarray(across.steps).reshape(B, n - 1),
-        batch,
-    )
 
 
 def _prior(prior_mean, prior_cov, B: int, batch: tuple):

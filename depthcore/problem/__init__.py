@@ -15,6 +15,8 @@ nothing here imports another family.
   the particle filters' samples and the exact filter's mixture alike;
 * :mod:`~depthcore.problem.frames`: a track's frames as they come (gaps, noise per
   frame, uneven steps), checked once for every filter;
+* :mod:`~depthcore.problem.bearing_pairs`: the same for a point in 3-D, seen as
+  pairs ``(x / y, h / y)``;
 * :mod:`~depthcore.problem.predictive`: a bearing's predictive density and tail
   probability, and the outlier gate;
 * :mod:`~depthcore.problem.signature`: the filters' one calling convention,

@@ -71,6 +71,30 @@ def _last(result):
     return result, np.asarray(mean, dtype=float), np.asarray(cov, dtype=float)
 
 
+def spatial(result, single: bool) -> Estimate:
+    """The estimate of a filter of a point in 3-D: the state ``(x, y, v, h, w)`` at frame N.
+
+    ``result.mean`` (..., 5) and ``result.cov`` (..., 5, 5) (a
+    :class:`~depthcore.exact.spatial.SpatialPosterior`, whose ``error`` gives the
+    depth's and velocity's errors, or a :class:`~depthcore.kalman.spatial.SpatialHistory`);
+    the velocity is the lateral one, ``v``. ``single`` is not needed: the shapes say it.
+    """
+    mean, cov = np.asarray(result.mean, dtype=float), np.asarray(result.cov, dtype=float)
+    sd = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+    error = getattr(result, "error", None)
+    return Estimate(
+        mean[..., 1],
+        sd[..., 1],
+        mean[..., 2],
+        sd[..., 2],
+        None if error is None else error[..., 1],
+        None if error is None else error[..., 2],
+        mean,
+        cov,
+        result,
+    )
+
+
 def unscented(result, single: bool) -> Estimate:
     """:func:`gaussian` for the UKF, saying whether its sigma points went behind the camera.
 

@@ -65,6 +65,7 @@ information there as its covariance; ``q = 0`` only), which ignores the prior it
 
 from __future__ import annotations
 
+import functools
 import inspect
 from collections.abc import Callable
 from dataclasses import KW_ONLY, dataclass, field
@@ -73,6 +74,7 @@ import numpy as np
 
 from depthcore.analysis import batch_ml
 from depthcore.exact import optimal
+from depthcore.exact import spatial as exact_spatial
 from depthcore.kalman import (
     ekf,
     inverse_depth,
@@ -81,6 +83,7 @@ from depthcore.kalman import (
     modified_polar,
     range_ekf,
     second_order,
+    spatial,
     ukf,
 )
 from depthcore.particles import importance, rbpf, resample_move
@@ -145,6 +148,12 @@ class Filter:
     options : dict
         The registry's defaults of ``run``'s options (the number of particles,
         say), which a call's own options override.
+    spatial : callable or None
+        The filter's door for a point in 3-D, ``spatial(mu, rho, prior_mean,
+        prior_cov, process_noise=q, steps=steps)`` with ``mu`` of shape
+        ``(..., N, 2)`` (pairs ``(x / y, h / y)``) and a prior on ``(x, y, v, h,
+        w)``, returning a result with ``mean`` (..., 5) and ``cov`` (..., 5, 5);
+        ``None``: pairs are refused, naming ``mu``.
     """
 
     name: str
@@ -162,6 +171,7 @@ class Filter:
     smoother: Callable | None = None
     estimate: Callable | None = None
     options: dict = field(default_factory=dict)
+    spatial: Callable | None = None
 
     def __post_init__(self):
         if not self.label:
@@ -187,6 +197,8 @@ class Filter:
         naming the argument, before it runs.
         """
         mu_arr = checks.as_float(mu, "mu")
+        if mu_arr.ndim >= 2 and mu_arr.shape[-1] == 2:  # pairs: a point in 3-D
+            return self._pairs(mu_arr, rho, prior_mean, prior_cov, process_noise, steps, gate)
         rho = checks.as_float(rho, "rho")
         per_frame = rho.ndim > 0 and rho.shape == mu_arr.shape
         if steps is None and not per_frame and not np.any(np.isnan(mu_arr)):
@@ -230,6 +242,20 @@ class Filter:
             )
         result = self.run(mu, rho, prior_mean, prior_cov, **options)
         return result if self.estimate is None else self.estimate(result, single)
+
+    def _pairs(self, mu, rho, prior_mean, prior_cov, process_noise, steps, gate) -> Estimate:
+        """:meth:`__call__` for a point in 3-D: the filter's :attr:`spatial` door."""
+        if self.spatial is None:
+            with_pairs = ", ".join(n for n, f in FILTERS.items() if f.spatial is not None)
+            raise ValueError(
+                f"mu of shape {mu.shape} holds pairs (x / y, h / y), a point in 3-D, which "
+                f"the {self.name} filter does not take ({with_pairs} do)"
+            )
+        if gate is not None:
+            raise ValueError("gate: the filters of a point in 3-D have no gate")
+        q = checks.process_noise(process_noise, "process_noise")
+        result = self.spatial(mu, rho, prior_mean, prior_cov, process_noise=q, steps=steps)
+        return adapters.spatial(result, mu.ndim == 2)
 
     @property
     def takes(self) -> frozenset:
@@ -300,6 +326,7 @@ FILTERS: dict[str, Filter] = {
             with_process_noise=True,
             smoother=adapters.smooth_optimal,
             estimate=adapters.exact,
+            spatial=exact_spatial.posterior,
         ),
         Filter(
             "second_order",
@@ -323,6 +350,7 @@ FILTERS: dict[str, Filter] = {
             with_process_noise=True,
             smoother=gaussian_smoother(ekf.run),
             estimate=adapters.gaussian,
+            spatial=functools.partial(spatial.run, filter="ekf"),
         ),
         Filter(
             "ukf",
@@ -334,6 +362,7 @@ FILTERS: dict[str, Filter] = {
             smoother=gaussian_smoother(ukf.run, allow_behind_camera=True),
             estimate=adapters.unscented,
             options={"allow_behind_camera": True},
+            spatial=functools.partial(spatial.run, filter="ukf"),
         ),
         Filter(
             "particle",

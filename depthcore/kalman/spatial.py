@@ -1,0 +1,202 @@
+"""The EKF and the UKF for a point in 3-D, seen as bearing pairs.
+
+Recommended import: ``from depthcore.kalman import spatial``.
+
+The state is ``(x, y, v, h, w)`` and the pair ``(mu, nu) = (x / y, h / y)`` plus noise
+of SD ``rho`` on each (:mod:`depthcore.problem.bearing_pairs`). The motion is linear
+(Eq. (1) in each block over a signed step ``s``: ``x += s v``, ``h += s w``, ``y += s``,
+the velocities' variances growing by ``q**2 |s|``), so both filters predict exactly
+(textbook 19.2.1). They differ in the update:
+
+* the EKF linearises the pair at the predicted mean (Eqs. (11)-(12) for both
+  coordinates: rows ``(1 / y, -x / y**2, 0, 0, 0)`` and ``(0, -h / y**2, 0, 1 / y, 0)``);
+* the UKF moves ``2 d + 1`` sigma points of the prediction (:class:`depthcore.kalman.ukf.
+  SigmaPoints` with ``dim = 5``) through the pair and takes their moments.
+
+:func:`run` runs either over a track with gaps, noise per frame and signed steps, and
+reports each pair's log predictive density. A missing frame (a row of ``NaN``) is
+predicted through.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from depthcore.kalman.ukf import SigmaPoints, unscented_transform
+from depthcore.problem import checks
+from depthcore.problem.bearing_pairs import check
+
+#: The state's dimension, ``(x, y, v, h, w)``.
+DIM = 5
+#: The sigma points of the UKF in 3-D: Julier's ``kappa = 3 - dim``.
+SIGMA_POINTS = SigmaPoints(dim=DIM, kappa=3.0 - DIM)
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+class SpatialHistory(NamedTuple):
+    """A Gaussian filter's states at every frame of tracks of pairs, batch shape (...).
+
+    Attributes
+    ----------
+    means : ndarray, shape (..., N, 5)
+    covs : ndarray, shape (..., N, 5, 5)
+    log_predictive : ndarray, shape (..., N)
+        Each pair's log predictive density (``NaN`` at a missing frame).
+    """
+
+    means: np.ndarray
+    covs: np.ndarray
+    log_predictive: np.ndarray
+
+    @property
+    def mean(self) -> np.ndarray:
+        """The state's mean at the last frame, (..., 5)."""
+        return self.means[..., -1, :]
+
+    @property
+    def cov(self) -> np.ndarray:
+        """The state's covariance at the last frame, (..., 5, 5)."""
+        return self.covs[..., -1, :, :]
+
+
+def predict(m, P, process_noise, step):
+    """Textbook 19.2.1 over a signed step: ``F_s m`` and ``F_s P F_s^T`` plus ``q**2 |s|``.
+
+    ``m`` (..., 5), ``P`` (..., 5, 5), ``step`` (...); returns the mean and covariance.
+    """
+    s = np.asarray(step, dtype=float)
+    F = np.broadcast_to(np.eye(DIM), s.shape + (DIM, DIM)).copy()
+    F[..., 0, 2] = F[..., 3, 4] = s
+    mean = np.einsum("...ij,...j->...i", F, m)
+    mean[..., 1] += s
+    cov = F @ P @ np.swapaxes(F, -1, -2)
+    noise = float(process_noise) ** 2 * np.abs(s)
+    cov[..., 2, 2] += noise
+    cov[..., 4, 4] += noise
+    return mean, cov
+
+
+def measurement(states) -> np.ndarray:
+    """The pair ``(x / y, h / y)`` of states (..., 5): (..., 2)."""
+    return np.stack([states[..., 0] / states[..., 1], states[..., 3] / states[..., 1]], axis=-1)
+
+
+def jacobian(m) -> np.ndarray:
+    """The pair's Jacobian at states ``m`` (..., 5): (..., 2, 5)."""
+    x, y, h = m[..., 0], m[..., 1], m[..., 3]
+    J = np.zeros(m.shape[:-1] + (2, DIM))
+    J[..., 0, 0], J[..., 0, 1] = 1.0 / y, -x / y**2
+    J[..., 1, 3], J[..., 1, 1] = 1.0 / y, -h / y**2
+    return J
+
+
+def _gain_update(m, P, z, predicted, S, cross):
+    """The Kalman update from the pair's predicted mean, covariance ``S`` and ``Cov[pair,
+    state]`` ``cross`` (..., 2, 5); the pair's log predictive density."""
+    K = np.swapaxes(np.linalg.solve(S, cross), -1, -2)  # Cov[state, pair] S^{-1}: (..., 5, 2)
+    r = z - predicted
+    mean = m + np.einsum("...ij,...j->...i", K, r)
+    cov = P - K @ S @ np.swapaxes(K, -1, -2)
+    cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    sol = np.linalg.solve(S, r[..., None])[..., 0]
+    log_p = -0.5 * (2 * _LOG_2PI + np.linalg.slogdet(S)[1] + np.sum(r * sol, axis=-1))
+    return mean, cov, log_p
+
+
+def ekf_update(m, P, z, rho):
+    """The EKF's update by the pair ``z`` (..., 2), noise SD ``rho`` (...) on each coordinate."""
+    J = jacobian(m)
+    rho2 = np.asarray(rho, dtype=float)[..., None, None] ** 2
+    S = J @ P @ np.swapaxes(J, -1, -2) + rho2 * np.eye(2)
+    return _gain_update(m, P, z, measurement(m), S, J @ P)
+
+
+def ukf_update(m, P, z, rho, sigma_points: SigmaPoints = SIGMA_POINTS):
+    """The UKF's update by the pair ``z``: the sigma points' moments of the pair."""
+    X = sigma_points.points(m, P)
+    if np.any(X[..., 1] <= 0):
+        raise ValueError("a sigma point lies at or behind the camera, where x / y is undefined")
+    Z = measurement(X)
+    Wm, Wc = sigma_points.weights()
+    rho2 = np.asarray(rho, dtype=float)[..., None, None] ** 2
+    moments = unscented_transform(Z, Wm, Wc)
+    S = moments.cov + rho2 * np.eye(2)
+    cross = np.einsum(
+        "i,...ia,...ib->...ab", Wc, Z - moments.mean[..., None, :], X - m[..., None, :]
+    )
+    return _gain_update(m, P, z, moments.mean, S, cross)
+
+
+#: The updates by name.
+UPDATES = {"ekf": ekf_update, "ukf": ukf_update}
+
+
+def run(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None, filter: str = "ekf"
+) -> SpatialHistory:
+    """The EKF or the UKF over tracks of pairs, batched.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N, 2) or (..., N, 2)
+        Pairs ``(x / y, h / y)``; a row of ``NaN`` at a missing frame.
+    rho : float or array_like, shape (...) or (..., N)
+    prior_mean : array_like, shape (5,) or (..., 5)
+        The prior of ``(x_1, y_1, v, h_1, w)`` at frame 1.
+    prior_cov : array_like, shape (5, 5) or (..., 5, 5)
+    process_noise : float
+        ``q >= 0`` on both velocities.
+    steps : array_like, shape (N - 1,) or (..., N - 1), or None
+        The depth's signed change between frames.
+    filter : {"ekf", "ukf"}
+
+    Returns
+    -------
+    SpatialHistory
+
+    Raises
+    ------
+    ValueError
+        One line naming the argument; ``mu`` where a prediction puts the point at or
+        behind the camera.
+    """
+    if filter not in UPDATES:
+        raise ValueError(f"filter must be one of {sorted(UPDATES)}, got {filter!r}")
+    pairs = check(mu, rho, steps)
+    B, N = pairs.present.shape
+    m = checks.finite_array(prior_mean, "prior_mean")
+    P = checks.finite_array(prior_cov, "prior_cov")
+    if m.shape[-1:] != (DIM,) or P.shape[-2:] != (DIM, DIM):
+        raise ValueError(
+            f"prior_mean and prior_cov must have shapes (5,) and (5, 5), (x, y, v, h, w), "
+            f"got {m.shape} and {P.shape}"
+        )
+    P = checks.covariances(P, "prior_cov", DIM)
+    m = np.broadcast_to(m, pairs.batch + (DIM,)).reshape(B, DIM).copy()
+    P = np.broadcast_to(P, pairs.batch + (DIM, DIM)).reshape(B, DIM, DIM).copy()
+    q = checks.nonnegative_scalar(process_noise, "process_noise")
+    update = UPDATES[filter]
+    means, covs = np.empty((B, N, DIM)), np.empty((B, N, DIM, DIM))
+    log_p = np.full((B, N), np.nan)
+    for k in range(N):
+        if k:
+            m, P = predict(m, P, q, pairs.steps[:, k - 1])
+        here = pairs.present[:, k]
+        if np.any(here & ~(m[:, 1] > 0)):
+            raise ValueError(
+                f"mu: the {filter.upper()}'s prediction puts the point at or behind the camera "
+                f"at frame {k + 1} (depth {float(np.min(m[here, 1])):.6g})"
+            )
+        if np.any(here):
+            rows = np.flatnonzero(here)
+            new_m, new_P, lp = update(m[rows], P[rows], pairs.mu[rows, k], pairs.rho[rows, k])
+            m[rows], P[rows], log_p[rows, k] = new_m, new_P, lp
+        means[:, k], covs[:, k] = m, P
+    shape = pairs.batch
+    return SpatialHistory(
+        means.reshape(shape + (N, DIM)),
+        covs.reshape(shape + (N, DIM, DIM)),
+        log_p.reshape(shape + (N,)),
+    )
