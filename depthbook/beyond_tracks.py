@@ -248,3 +248,71 @@ def approach(
     right = posterior.moments(mu, rho, mean, cov, steps=steps)
     wrong = posterior.moments(mu, rho, mean, cov, steps=-steps)
     return Approach(steps, np.array([s.states[-1] for s in sims]), right, wrong)
+
+
+#: The filters with a door for a point in 3-D that the chapter runs.
+SPACE_FILTERS = ("optimal", "ekf", "ukf")
+
+
+def space_tracks(seed: int, draws: int, frames: int, step: float, pixel_sd, focal, prior):
+    """Points in 3-D that the camera approaches, seen in pixels: truths and bearing pairs.
+
+    Each state at frame 1 is drawn from ``prior`` (a mean (5,) and covariance (5, 5) of
+    ``(x, y, v, h, w)``) restricted to points in front of the camera at every frame;
+    the point moves on its line by ``step`` (< 0: approaching) per frame; each frame's
+    column and row carry noise of SD ``pixel_sd`` about the principal point ``(0, 0)``,
+    and :func:`depthcore.problem.model.bearings_from_pixels` turns each into a bearing
+    (``rho = pixel_sd / focal``). Returns the states (draws, N, 5) and pairs (draws, N, 2).
+    """
+    rng = np.random.default_rng(seed)
+    mean, cov = (np.asarray(a, dtype=float) for a in prior)
+    e = step * np.arange(frames)
+    x1 = np.empty((0, 5))
+    while len(x1) < draws:
+        drawn = rng.multivariate_normal(mean, cov, size=2 * draws)
+        x1 = np.concatenate([x1, drawn[drawn[:, 1] + e.min() > 0]])
+    x1 = x1[:draws]
+    ones = np.ones(frames)
+    states = np.stack(
+        [
+            x1[:, 0, None] + e * x1[:, 2, None],
+            x1[:, 1, None] + e,
+            x1[:, 2, None] * ones,
+            x1[:, 3, None] + e * x1[:, 4, None],
+            x1[:, 4, None] * ones,
+        ],
+        axis=-1,
+    )
+    exact = focal * states[..., [0, 3]] / states[..., 1:2]
+    pixels = exact + pixel_sd * rng.standard_normal(exact.shape)
+    pairs = np.stack(
+        [model.bearings_from_pixels(p, 0.0, focal) for p in pixels.reshape(-1, 2).T], axis=-1
+    )
+    return states, pairs.reshape(pixels.shape)
+
+
+def space_study(seed: int, draws: int, frames: int, step: float, pixel_sd, focal, prior):
+    """Each 3-D filter's depth error at the last frame, in its own SDs, over the tracks of
+    :func:`space_tracks`.
+
+    The exact filter runs on the batch; the EKF and the UKF track by track, ``NaN``
+    where one refuses a track (its prediction lost the point). Returns ``{name: ndarray
+    (draws,)}`` and the tracks' last depths (draws,).
+    """
+    from depthcore.registry.filters import FILTERS
+
+    states, pairs = space_tracks(seed, draws, frames, step, pixel_sd, focal, prior)
+    depth = states[:, -1, 1]
+    steps = np.full(frames - 1, float(step))
+    rho = pixel_sd / focal
+    exact = FILTERS["optimal"](pairs, rho, *prior, steps=steps)
+    z = {"optimal": (exact.depth_mean - depth) / exact.depth_sd}
+    for name in SPACE_FILTERS[1:]:
+        z[name] = np.full(draws, np.nan)
+        for i in range(draws):
+            try:
+                est = FILTERS[name](pairs[i], rho, *prior, steps=steps)
+            except ValueError:
+                continue
+            z[name][i] = (est.depth_mean - depth[i]) / est.depth_sd
+    return z, depth

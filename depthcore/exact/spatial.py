@@ -15,7 +15,7 @@ independent noise of SD ``rho_k`` on each (Eq. (4) twice). Given the depth at fr
 :mod:`depthcore.exact.bank`: its prior is ``N(m, P)`` conditioned on ``y_1 = y``, it
 moves by ``F_s = [[1, s], [0, 1]]`` in each block with noise ``diag(0, q**2 |s|)`` in
 each, and the pair observes ``x / y_k`` and ``h / y_k``. One Kalman filter per depth
-node (textbook 19.2.1, 19.2.2, the pair as two scalar updates in Joseph form) gives
+node (textbook 19.2.1, 19.2.2, the pair as two scalar updates) gives
 the exact ``p(mu, nu | y)`` and the Gaussian of ``u_N`` given ``y``, and
 
     p(y_1 = y | all pairs)  proportional to  N(y; m_y, P_yy) p(mu, nu | y),
@@ -98,19 +98,20 @@ def _predict(M, C, s, q2) -> tuple:
 
 
 def _update(M, C, bearing, y, rho2, i: int):
-    """Textbook 19.2.2 by one coordinate's bearing at depth ``y``, Joseph form; the log density.
+    """Textbook 19.2.2 by one coordinate's bearing at depth ``y``; the log density.
 
-    The bearing times the depth observes ``u_i`` with noise variance ``rho**2 y**2``.
+    The bearing times the depth observes ``u_i`` with noise variance ``rho**2 y**2``:
+    ``S = C_ii + rho**2 y**2``, the gain ``C[:, i] / S``, and the covariance less the
+    outer product of its ``i``-th column with itself over ``S`` (symmetric by
+    construction).
     """
     r = rho2 * y * y
     S = C[..., i, i] + r
     e = bearing * y - M[..., i]
-    K = C[..., :, i] / S[..., None]
-    A = np.broadcast_to(np.eye(4), K.shape + (4,)).copy()
-    A[..., :, i] -= K
-    C = A @ C @ np.swapaxes(A, -1, -2) + r[..., None, None] * K[..., :, None] * K[..., None, :]
+    column = C[..., :, i]
+    C = C - column[..., :, None] * (column / S[..., None])[..., None, :]
     log_density = -0.5 * (_LOG_2PI + np.log(S / (y * y)) + e * e / S)
-    return M + K * e[..., None], C, log_density
+    return M + column * (e / S)[..., None], C, log_density
 
 
 def node_filter(nodes, pairs: Pairs, prior_mean, prior_cov, process_noise):
