@@ -170,3 +170,27 @@ def test_refusals_name_the_argument_in_one_line(kwargs, message):
     with pytest.raises(ValueError, match=message) as info:
         spatial.posterior(**args)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("steps", [STEPS, -STEPS], ids=["away", "towards"])
+def test_the_online_exact_filter_takes_pairs_and_is_the_batch_filter(steps):
+    """A prior on five coordinates makes each update a pair: frame by frame within 1e-8 of
+    an SD of the batch 3-D filter of the frames so far."""
+    from depthcore.exact import online
+
+    f = online.Online(PRIOR_MEAN, PRIOR_COV, rho=0.01)
+    for k in range(len(PAIRS)):
+        est = f.update(
+            PAIRS[k], rho=None if np.isnan(RHO[k]) else RHO[k], step=1.0 if k == 0 else steps[k - 1]
+        )
+        if k >= 3:
+            b = spatial.posterior(
+                PAIRS[: k + 1], RHO[: k + 1], PRIOR_MEAN, PRIOR_COV, steps=steps[:k]
+            )
+            sd = np.sqrt(np.diag(b.cov))
+            assert_allclose(est.mean, b.mean, atol=1e-8 * sd.max(), rtol=0)
+            assert_allclose(np.sqrt(np.diag(est.cov)), sd, rtol=1e-8)
+    with pytest.raises(ValueError, match="^mu must be one pair"):
+        f.update(0.1)
+    with pytest.raises(ValueError, match="^gate: the exact filter of a point in 3-D"):
+        online.Online(PRIOR_MEAN, PRIOR_COV, rho=0.01, gate=1e-3)

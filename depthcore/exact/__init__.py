@@ -24,6 +24,8 @@
 * :mod:`~depthcore.exact.online`: the exact filter one bearing at a time, in
   constant time and memory per frame, with each bearing's predictive report
   and a gate;
+* :mod:`~depthcore.exact.online_nodes`: what each node of the online filter
+  holds, the plane's Gaussian of ``(x, v)`` or the space's of ``(x, v, h, w)``;
 * :mod:`~depthcore.exact.learning`: the bearing noise and the process noise
   learned from tracks by maximum likelihood on the depth quadrature, or by EM
   with the nodes' smoothers as its E-step.

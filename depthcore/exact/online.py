@@ -67,13 +67,11 @@ import numpy as np
 from scipy.interpolate import make_interp_spline
 
 from depthcore.exact import quadrature
-from depthcore.exact.bank import lateral_filter
-from depthcore.exact.mixture import mixture_moments
+from depthcore.exact.online_nodes import Plane, Space
 from depthcore.problem import checks, predictive
 from depthcore.problem.predictive import FrameEstimate
 from depthcore.problem.weights import normalised
 
-_LOG_2PI = float(np.log(2.0 * np.pi))
 #: A node holding this much of the probability or more does not resolve the posterior.
 _ONE_NODE = 0.5
 #: The end nodes must carry log probabilities this far below the largest.
@@ -90,7 +88,7 @@ class _Nodes(NamedTuple):
     y: np.ndarray  # (J,)
     log_w: np.ndarray  # (J,)
     log_p: np.ndarray  # (J,)
-    lateral: np.ndarray  # (6, J): x, v, a, b, c, det
+    lateral: np.ndarray  # (K, J): the rows of depthcore.exact.online_nodes' Plane or Space
 
 
 class Online:
@@ -99,7 +97,10 @@ class Online:
     Parameters
     ----------
     prior_mean, prior_cov, process_noise, gate
-        As for :class:`depthcore.kalman.online.EKF`.
+        As for :class:`depthcore.kalman.online.EKF`: a prior on ``(x, y, v)`` (the
+        paper's point, one bearing per update) or on ``(x, y, v, h, w)`` (a point in
+        3-D, :mod:`depthcore.exact.spatial`: a pair ``(x / y, h / y)`` per update,
+        without a gate).
     rho : float
         The bearing noise SD, > 0, used where :meth:`update` is given none.
     rtol : float
@@ -108,16 +109,21 @@ class Online:
 
     def __init__(self, prior_mean, prior_cov, rho, process_noise=0.0, gate=None, rtol=1e-10):
         m = checks.finite_array(prior_mean, "prior_mean")
-        if m.shape != (3,):
-            raise ValueError(f"prior_mean must have shape (3,), got shape {m.shape}")
+        if m.shape not in ((3,), (5,)):
+            raise ValueError(
+                f"prior_mean must have shape (3,) or (5,) (a point in 3-D), got shape {m.shape}"
+            )
         P = checks.finite_array(prior_cov, "prior_cov")
-        if P.shape != (3, 3):
-            raise ValueError(f"prior_cov must have shape (3, 3), got shape {P.shape}")
-        P = checks.covariances(P, "prior_cov", 3)
+        if P.shape != m.shape * 2:
+            raise ValueError(f"prior_cov must have shape {m.shape * 2}, got shape {P.shape}")
+        P = checks.covariances(P, "prior_cov", m.size)
         self.prior_mean, self.prior_cov = m, P
         self.rho = checks.positive_scalar(rho, "rho")
         self.process_noise = checks.nonnegative_scalar(process_noise, "process_noise")
         self.gate = predictive.gate(gate)
+        if m.size == 5 and self.gate is not None:
+            raise ValueError("gate: the exact filter of a point in 3-D has no gate")
+        self.model = (Plane if m.size == 3 else Space)(m, P, self.rho)
         self.rtol = checks.positive_scalar(rtol, "rtol")
         self.frame = 0
         self.travelled = 0.0
@@ -125,7 +131,7 @@ class Online:
         self._node_floor = 0.0  # the floor the nodes were placed above
         self.replacements = 0
         self.current: FrameEstimate | None = None
-        self._nodes = self._place(self._prior_integrand, m[1])
+        self._nodes = self._place(self.model.prior, m[1])
 
     @property
     def node_count(self) -> int:
@@ -134,36 +140,32 @@ class Online:
 
     # --- placement ---------------------------------------------------------------------
 
-    def _prior_integrand(self, offsets, pb):
-        """The prior's depth density and ``(x_1, v_1)`` given ``y_1``: the bank before a bearing."""
-        log_p, M, cov = lateral_filter(
-            offsets[..., 2], np.empty((1, 0)), self.rho, 0.0, self.prior_mean, self.prior_cov
-        )
-        return log_p, M, cov
+    def _place(self, source, depth_guess) -> _Nodes:
+        """Nodes by the depth quadrature for the node values ``source(y_1)`` (log density
+        (J,) and rows (K, J)), placed by the ``(x, v)`` block's moments.
 
-    def _place(self, integrand, depth_guess) -> _Nodes:
-        """Nodes by the depth quadrature for ``integrand`` (a quadrature Problem's).
-
-        The quadrature's depth is the distance above the floor, ``y_1 - floor``; the
-        integrand is given ``y_1`` (``offsets[..., 2]``).
+        The quadrature's depth is the distance above the floor, ``y_1 - floor``.
         """
         floor = self.floor
+        view = self.model.view
 
         def above(offsets, pb):
-            shifted = offsets.copy()
-            shifted[..., 2] += floor
-            return integrand(shifted, pb)
+            log_p, lat = source(offsets[0, :, 2] + floor)
+            M, cov = view(lat)
+            return log_p[None], M[:, None, :], tuple(c[None] for c in cov)
 
-        mean = self.prior_mean.copy()
+        xyv = [0, 1, 2]
+        mean = self.prior_mean[xyv].copy()
         mean[1] = depth_guess - floor
+        cov = self.prior_cov[np.ix_(xyv, xyv)]
         pb = quadrature.Problem(
             mu=np.empty((1, 0)),
             rho=np.array([self.rho]),
             mean=mean[None],
-            R=np.linalg.inv(np.linalg.cholesky(self.prior_cov))[None],
+            R=np.linalg.inv(np.linalg.cholesky(cov))[None],
             integrand=above,
             process_noise=np.array([self.process_noise]),
-            cov=self.prior_cov[None],
+            cov=cov[None],
         )
         try:
             _, _, _, _, grids = quadrature.integrate(pb, (3,), self.rtol)
@@ -186,15 +188,12 @@ class Online:
         keep = (y - floor > _NEAREST * (depth_guess - floor)) & np.concatenate(
             [[True], np.diff(y) > 0]
         )
-        t, log_w, y = t[:, keep], log_w[keep], y[keep]
-        offsets = np.stack([y + 2.0, y + 1.0, y], -1)[None]
-        log_p, M, (a, b, c) = integrand(offsets, pb)
-        a, b, c = (np.broadcast_to(v, log_p.shape)[0] for v in (a, b, c))
-        lateral = np.stack([M[0, 0], M[1, 0], a, b, c, a * c - b * b])
-        return _Nodes(y, log_w, log_p[0], lateral)
+        log_w, y = log_w[keep], y[keep]
+        log_p, lateral = source(y)
+        return _Nodes(y, log_w, log_p, lateral)
 
     def _interpolant(self):
-        """The quadrature integrand interpolated from the current nodes (module docstring).
+        """The node values interpolated from the current nodes (module docstring).
 
         The splines are in ``log (y_1 - f)``, ``f`` the floor the nodes were placed above.
         """
@@ -208,28 +207,24 @@ class Online:
         lo, hi = t[0], t[-1]
         h_lo, h_hi = t[1] - t[0], t[-1] - t[-2]
 
-        def integrand(offsets, pb):
+        repair = self.model.repair
+
+        def source(y):
             with np.errstate(divide="ignore"):  # at the floor: log 0, no weight
-                tt = np.log(np.maximum(offsets[..., 2] - base, 0.0))  # y_1 (see _place)
+                tt = np.log(np.maximum(y - base, 0.0))
             values = [s(np.clip(tt, lo, hi)) for s in splines]
             below = (np.minimum(tt - lo, 0.0) / h_lo) ** 2
             above = (np.maximum(tt - hi, 0.0) / h_hi) ** 2
-            log_p = values[0] - below - above
-            M = np.stack([values[1], values[2]])
-            return log_p, M, (values[3], values[4], values[5])
+            return values[0] - below - above, repair(np.stack(values[1:]))
 
-        return integrand
+        return source
 
     def _replace_nodes(self) -> None:
         """Re-place the nodes from the current mixture by the quadrature (module docstring)."""
         nodes = self._nodes
-        integrand = self._interpolant()
         weighted = np.where(nodes.y > self.floor, nodes.log_p + nodes.log_w, -np.inf)
         mode = nodes.y[np.argmax(weighted)]
-        new = self._place(integrand, mode)
-        lateral = new.lateral.copy()
-        lateral[5] = lateral[2] * lateral[4] - lateral[3] ** 2
-        self._nodes = new._replace(lateral=lateral)
+        self._nodes = self._place(self._interpolant(), mode)
         self._node_floor = self.floor
         self.replacements += 1
 
@@ -261,32 +256,32 @@ class Online:
     def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
         """Add the next frame: predict by ``step``, report the bearing, gate it, update.
 
-        ``mu``, ``rho`` (``None``: the filter's) and ``step`` as
+        ``mu`` (a bearing, or a pair ``(x / y, h / y)`` for a point in 3-D; ``NaN``: no
+        observation), ``rho`` (``None``: the filter's) and ``step`` as
         :func:`depthcore.problem.predictive.frame_inputs` checks them; returns a
         :class:`~depthcore.problem.predictive.FrameEstimate`.
         """
-        mu, r, s = predictive.frame_inputs(mu, rho, step, self.rho, self.frame)
+        obs = self.model.observation(mu)
+        missing = np.isscalar(obs) and np.isnan(obs)
+        _, r, s = predictive.frame_inputs(
+            np.nan if missing else 0.0, rho, step, self.rho, self.frame
+        )
         if self.frame > 0 and -(self.travelled + s) > self.floor:
             self._raise_floor(-(self.travelled + s))
         nodes = self._nodes
         lat = nodes.lateral.copy()
         if self.frame > 0:
-            _predict(lat, s, self.process_noise**2 * abs(s))
+            self.model.predict(lat, s, self.process_noise**2 * abs(s))
             self.travelled += s
         self.frame += 1
         y = nodes.y + self.travelled
         log_p = nodes.log_p
         log_pred, tail, gated = np.nan, np.nan, False
-        if not np.isnan(mu):
-            log_pred, tail = (
-                float(v)
-                for v in predictive.mixture(
-                    mu, log_p + nodes.log_w, lat[0] / y, lat[2] / (y * y) + r * r
-                )
-            )
+        if not missing:
+            log_pred, tail = self.model.predictive(obs, log_p + nodes.log_w, lat, y, r * r)
             gated = bool(predictive.skipped(tail, True, self.gate))
             if not gated:
-                log_p = log_p + _update(lat, mu, y, r * r)
+                log_p = log_p + self.model.update(lat, obs, y, r * r)
         self._nodes = nodes._replace(log_p=log_p, lateral=lat)
         if not self._resolved():
             self._replace_nodes()
@@ -299,10 +294,7 @@ class Online:
         p, _ = normalised(nodes.log_p + nodes.log_w)
         if every_other:
             p = np.where(np.arange(p.size) % 2 == 0, p, 0.0)
-        lat = nodes.lateral
-        means = np.stack([lat[0], lat[1]], -1)
-        covs = np.stack([np.stack([lat[2], lat[3]], -1), np.stack([lat[3], lat[4]], -1)], -2)
-        return mixture_moments(p, means, covs, nodes.y + self.travelled)
+        return self.model.moments(p, nodes.lateral, nodes.y + self.travelled)
 
     def _resolved(self) -> bool:
         """The check of :func:`depthcore.exact.posterior.update` on the current nodes."""
@@ -410,40 +402,3 @@ def updates(mu, rho, prior_mean, prior_cov, rtol: float = 1e-10) -> predictive.U
     return predictive.Updates(
         out[0].reshape(shape), out[1].reshape(shape), out[2].reshape(shape) == 1.0
     )
-
-
-def _predict(lat, s: float, q2: float) -> None:
-    """Textbook 19.2.1 over a step ``s`` for every node, in place (see ``bank.lateral_filter``).
-
-    ``Var[x]`` without cancellation for either sign of the step, as
-    :func:`depthcore.exact.lateral.predict_step` computes it.
-    """
-    x, v, a, b, c, det = lat
-    x += s * v
-    shear_b = b + s * c
-    with np.errstate(divide="ignore", invalid="ignore"):  # only where c > 0 is it used
-        stable = (det + shear_b * shear_b) / c
-    a[:] = np.where(s * b >= 0, a + s * (2.0 * b + s * c), stable)
-    b[:] = shear_b
-    if q2:
-        c += q2
-        det += q2 * a
-
-
-def _update(lat, mu: float, y, rho2: float):
-    """Textbook 19.2.2 by the bearing ``mu`` for every node, in place; the log likelihoods."""
-    x, v, a, b, c, det = lat
-    yy = y * y
-    r = rho2 * yy
-    total = a + r
-    e = mu * y - x
-    g = e / total
-    log_likelihood = -0.5 * (_LOG_2PI + np.log(total / yy) + e * g)
-    x += a * g
-    v += b * g
-    ratio = r / total
-    a *= ratio
-    b *= ratio
-    det *= ratio
-    lat[4] = (det + b * b) / a
-    return log_likelihood

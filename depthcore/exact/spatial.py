@@ -82,8 +82,12 @@ def conditional_prior(nodes, prior_mean, prior_cov):
     return mean, cov[:, None], log_density
 
 
-def _predict(M, C, s, q2) -> tuple:
-    """Textbook 19.2.1 over steps ``s`` (B, 1): both blocks move by ``[[1, s], [0, 1]]``."""
+def predict_nodes(M, C, s, q2) -> tuple:
+    """Textbook 19.2.1 over steps ``s``: both blocks move by ``[[1, s], [0, 1]]``.
+
+    ``M`` (..., 4) and ``C`` (..., 4, 4) of ``u = (x, v, h, w)``, ``s`` broadcasting with
+    ``M.shape[:-1]``, ``q2`` the velocities' ``q**2`` (its shape too) or ``None`` for 0.
+    """
     F = np.zeros(s.shape + (4, 4))
     F[..., [0, 1, 2, 3], [0, 1, 2, 3]] = 1.0
     F[..., 0, 1] = F[..., 2, 3] = s
@@ -97,7 +101,7 @@ def _predict(M, C, s, q2) -> tuple:
     return M, C
 
 
-def _update(M, C, bearing, y, rho2, i: int):
+def update_nodes(M, C, bearing, y, rho2, i: int):
     """Textbook 19.2.2 by one coordinate's bearing at depth ``y``; the log density.
 
     The bearing times the depth observes ``u_i`` with noise variance ``rho**2 y**2``:
@@ -142,13 +146,13 @@ def node_filter(nodes, pairs: Pairs, prior_mean, prior_cov, process_noise):
     reached = nodes <= frames.depth_floor(elapsed)[:, None]
     for k in range(pairs.mu.shape[1]):
         if k:
-            M, C = _predict(M, C, pairs.steps[:, k - 1, None], q2)
+            M, C = predict_nodes(M, C, pairs.steps[:, k - 1, None], q2)
         here = pairs.present[:, k, None] & ~reached
         y = np.where(here, nodes + elapsed[:, k, None], 1.0)
         rho2 = (pairs.rho[:, k] ** 2)[:, None]
         for i, coordinate in zip(OBSERVED, (0, 1), strict=True):
             bearing = np.where(here, pairs.mu[:, k, coordinate, None], 0.0)
-            M1, C1, log_density = _update(M, C, bearing, y, rho2, i)
+            M1, C1, log_density = update_nodes(M, C, bearing, y, rho2, i)
             M = np.where(here[..., None], M1, M)
             C = np.where(here[..., None, None], C1, C)
             log_weight = log_weight + np.where(here, log_density, 0.0)
