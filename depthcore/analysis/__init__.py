@@ -2,6 +2,8 @@
 
 * :mod:`~depthcore.analysis.bound`: the Cramér-Rao bound on the state at
   frame ``N``, conditional on the truth and averaged over the prior;
+* :mod:`~depthcore.analysis.bound_space`: the same bound for a point in 3-D
+  seen as bearing pairs;
 * :mod:`~depthcore.analysis.batch_ml`: the batch maximum-likelihood estimate
   from the bearings alone, the baseline without a prior, with the inverse
   Fisher information as its covariance;
