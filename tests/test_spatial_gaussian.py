@@ -119,3 +119,29 @@ def test_the_registry_takes_pairs_in_the_filters_with_a_3d_form():
                 FILTERS[name](PAIRS, RHO, PRIOR_MEAN, PRIOR_COV, steps=STEPS)
     with pytest.raises(ValueError, match="^gate: the filters of a point in 3-D have no gate"):
         FILTERS["ekf"](PAIRS, RHO, PRIOR_MEAN, PRIOR_COV, steps=STEPS, gate=1e-3)
+
+
+@pytest.mark.parametrize("name", ["ekf", "ukf", "optimal"])
+def test_the_online_filters_take_pairs_when_the_prior_is_in_3d(name):
+    """A prior of five coordinates: each update a pair; the EKF and UKF online are their batch
+    3-D doors frame by frame, the exact one its batch 3-D filter; the Gaussian filters' gate
+    is the pair's exact tail exp(-d**2 / 2)."""
+    from depthcore.registry import online
+
+    f = online.start(name, PRIOR_MEAN, PRIOR_COV, rho=0.01)
+    for k in range(len(PAIRS)):
+        rho = None if np.isnan(RHO[k]) else RHO[k]
+        est = f.update(PAIRS[k], rho=rho, step=1.0 if k == 0 else STEPS[k - 1])
+    if name == "optimal":
+        batch = exact_spatial.posterior(PAIRS, RHO, PRIOR_MEAN, PRIOR_COV, steps=STEPS)
+        assert_allclose(est.mean, batch.mean, rtol=1e-8)
+        return
+    batch = spatial.run(PAIRS, RHO, PRIOR_MEAN, PRIOR_COV, steps=STEPS, filter=name)
+    assert_allclose(est.mean, batch.mean, rtol=1e-10)
+    assert_allclose(est.log_predictive, batch.log_predictive[-1], rtol=1e-10)
+    # a pair 4 predictive SDs off along one axis: tail exp(-8); a gate at 1e-3 skips it
+    g = online.start(name, PRIOR_MEAN, PRIOR_COV, rho=0.01, gate=1e-3)
+    first = g.update(PAIRS[0])
+    assert 0.0 < first.tail <= 1.0 and not first.gated
+    far = g.update(PAIRS[1] + [0.5, 0.0], step=STEPS[0])
+    assert far.gated and far.tail < 1e-3

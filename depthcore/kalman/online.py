@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.kalman import ekf, ukf
+from depthcore.kalman import ekf, spatial, ukf
 from depthcore.problem import checks, predictive
 from depthcore.problem.gaussian import Gaussian, symmetric
 from depthcore.problem.predictive import FrameEstimate
@@ -178,5 +178,70 @@ class UKF(_Online):
                     sigma_points=self.sigma_points,
                     allow_behind_camera=self.allow_behind_camera,
                 )
+        self._mean, self._cov = n, C
+        return self._report(n, C, log_p, tail, gated)
+
+
+class Spatial(_Online):
+    """The EKF or the UKF of a point in 3-D, one pair ``(x / y, h / y)`` at a time.
+
+    Each frame is :func:`depthcore.kalman.spatial.predict` and the filter's update
+    (:func:`depthcore.kalman.spatial.ekf_update` or ``ukf_update``), as in
+    :func:`depthcore.kalman.spatial.run`. A pair's tail probability under the
+    Gaussian predictive ``N(z, S)`` is that of a density below the observed pair's,
+    ``exp(-d**2 / 2)`` with ``d`` the pair's Mahalanobis distance, exactly.
+
+    Parameters
+    ----------
+    prior_mean : array_like, shape (5,)
+        Prior mean of ``(x_1, y_1, v, h_1, w)``.
+    prior_cov : array_like, shape (5, 5)
+    rho, process_noise, gate
+        As for :class:`EKF`.
+    filter : {"ekf", "ukf"}
+    """
+
+    def __init__(self, prior_mean, prior_cov, rho=None, process_noise=0.0, gate=None, filter="ekf"):
+        m = checks.finite_array(prior_mean, "prior_mean", (5,))
+        P = checks.covariance(prior_cov, "prior_cov", 5)
+        if filter not in spatial.UPDATES:
+            raise ValueError(f"filter must be one of {sorted(spatial.UPDATES)}, got {filter!r}")
+        self.rho = None if rho is None else checks.positive_scalar(rho, "rho")
+        self.process_noise = checks.nonnegative_scalar(process_noise, "process_noise")
+        self.gate = predictive.gate(gate)
+        self.frame = 0
+        self.current = None
+        self.filter = filter
+        self._mean, self._cov = m.copy(), P.copy()
+
+    def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
+        """Add the next frame: predict by ``step``, report the pair, gate it, update.
+
+        ``mu`` a pair (``NaN``: none this frame); ``rho`` and ``step`` as
+        :func:`depthcore.problem.predictive.frame_inputs` checks them.
+        """
+        pair = checks.as_float(mu, "mu")
+        if pair.shape != (2,) or np.isnan(pair[0]) != np.isnan(pair[1]) or np.any(np.isinf(pair)):
+            raise ValueError(
+                f"mu must be one pair (x / y, h / y), finite or both NaN, got {pair.tolist()}"
+            )
+        missing = bool(np.isnan(pair[0]))
+        placeholder = np.nan if missing else 0.0  # the pair is checked above
+        _, r, s = predictive.frame_inputs(placeholder, rho, step, self.rho, self.frame)
+        n, C = self._mean, self._cov
+        if self.frame > 0:
+            n, C = spatial.predict(n, C, self.process_noise, s)
+        log_p, tail, gated = np.nan, np.nan, False
+        if not missing:
+            if not n[1] > 0:
+                raise ValueError(
+                    f"mu: the {self.filter.upper()}'s prediction puts the point at or behind "
+                    f"the camera at frame {self.frame + 1} (depth {n[1]:.6g})"
+                )
+            new_n, new_C, log_p, tail = spatial.UPDATES[self.filter](n, C, pair, r)
+            log_p, tail = float(log_p), float(tail)
+            gated = bool(predictive.skipped(tail, True, self.gate))
+            if not gated:
+                n, C = new_n, new_C
         self._mean, self._cov = n, C
         return self._report(n, C, log_p, tail, gated)

@@ -94,15 +94,21 @@ def jacobian(m) -> np.ndarray:
 
 def _gain_update(m, P, z, predicted, S, cross):
     """The Kalman update from the pair's predicted mean, covariance ``S`` and ``Cov[pair,
-    state]`` ``cross`` (..., 2, 5); the pair's log predictive density."""
+    state]`` ``cross`` (..., 2, 5).
+
+    Returns the mean, the covariance, the pair's log predictive density under ``N(pred,
+    S)`` and its tail probability, the probability of a density below the observed
+    pair's: ``exp(-d**2 / 2)`` for ``d`` its Mahalanobis distance, exactly.
+    """
     K = np.swapaxes(np.linalg.solve(S, cross), -1, -2)  # Cov[state, pair] S^{-1}: (..., 5, 2)
     r = z - predicted
     mean = m + np.einsum("...ij,...j->...i", K, r)
     cov = P - K @ S @ np.swapaxes(K, -1, -2)
     cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
     sol = np.linalg.solve(S, r[..., None])[..., 0]
-    log_p = -0.5 * (2 * _LOG_2PI + np.linalg.slogdet(S)[1] + np.sum(r * sol, axis=-1))
-    return mean, cov, log_p
+    d2 = np.sum(r * sol, axis=-1)
+    log_p = -0.5 * (2 * _LOG_2PI + np.linalg.slogdet(S)[1] + d2)
+    return mean, cov, log_p, np.exp(-0.5 * d2)
 
 
 def ekf_update(m, P, z, rho):
@@ -191,7 +197,7 @@ def run(
             )
         if np.any(here):
             rows = np.flatnonzero(here)
-            new_m, new_P, lp = update(m[rows], P[rows], pairs.mu[rows, k], pairs.rho[rows, k])
+            new_m, new_P, lp, _ = update(m[rows], P[rows], pairs.mu[rows, k], pairs.rho[rows, k])
             m[rows], P[rows], log_p[rows, k] = new_m, new_P, lp
         means[:, k], covs[:, k] = m, P
     shape = pairs.batch

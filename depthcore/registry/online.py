@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import importlib
 
+import numpy as np
+
 from depthcore.problem.predictive import FrameEstimate
 
 #: The online filters by name, with the module and class of each.
@@ -93,8 +95,11 @@ def start(
     ----------
     name : str
         One of :data:`NAMES`.
-    prior_mean : array_like, shape (3,)
-    prior_cov : array_like, shape (3, 3)
+    prior_mean : array_like, shape (3,) or (5,)
+        Of ``(x, y, v)``, or of ``(x, y, v, h, w)`` for a point in 3-D: then each
+        update takes a pair ``(x / y, h / y)`` (:class:`depthcore.kalman.online.Spatial`
+        for the EKF and the UKF; the exact filter's pairs have no gate).
+    prior_cov : array_like, shape (3, 3) or (5, 5)
         Symmetric positive definite.
     rho : float or None
         The bearings' noise SD, > 0, where an update is given none.
@@ -119,5 +124,7 @@ def start(
     except ImportError:
         raise ValueError(f"name: the online {name} filter is not installed ({module})") from None
     options = {**DEFAULT_OPTIONS.get(name, {}), **options}
+    if np.shape(prior_mean) == (5,) and name in ("ekf", "ukf"):  # a point in 3-D: pairs
+        factory, options = importlib.import_module(module).Spatial, {"filter": name}
     inner = factory(prior_mean, prior_cov, rho, process_noise, gate, **options)
     return OnlineFilter(name, inner)
