@@ -39,22 +39,23 @@ def _grid_log_likelihood(mu, rho, q, mean, cov, steps=None, weights=None, points
     """
     steps = np.ones(len(mu) - 1) if steps is None else np.asarray(steps)
     weights = np.ones(len(mu)) if weights is None else np.asarray(weights)
+    floor = max(0.0, -float(np.min(np.cumsum(steps))))  # where the point reaches the camera
     lo, hi = np.log(1e-3), np.log(mean[1] + 14.0 * np.sqrt(cov[1, 1]))
     t = np.linspace(lo, hi, points)
-    y = np.exp(t)
+    y = floor + np.exp(t)
     u = [0, 2]
     slope = cov[u, 1] / cov[1, 1]
     m = mean[u][None, :] + (y - mean[1])[:, None] * slope[None, :]
     P = cov[np.ix_(u, u)] - np.outer(slope, cov[1, u])
     P = np.broadcast_to(P, (y.size, 2, 2)).copy()
-    log_f = stats.norm.logpdf(y, mean[1], np.sqrt(cov[1, 1])) + t  # dy = y dt
+    log_f = stats.norm.logpdf(y, mean[1], np.sqrt(cov[1, 1])) + t  # dy = (y - floor) dt
     yk = y.copy()
     for k, mu_k in enumerate(mu):
         if k:
             F = np.array([[1.0, steps[k - 1]], [0.0, 1.0]])
             m = m @ F.T
             P = F @ P @ F.T
-            P[:, 1, 1] += q**2 * steps[k - 1]
+            P[:, 1, 1] += q**2 * abs(steps[k - 1])
             yk = yk + steps[k - 1]
         if np.isnan(mu_k):
             continue
@@ -90,6 +91,24 @@ def test_log_likelihood_with_gaps_steps_and_weights_equals_a_dense_depth_grid():
     got = learning.log_likelihood(mu, PRIOR_MEAN, PRIOR_COV, rho, q, steps, weights)
     want = sum(_grid_log_likelihood(m, rho, q, PRIOR_MEAN, PRIOR_COV, steps, weights) for m in mu)
     assert got == pytest.approx(want, abs=1e-8)
+
+
+def test_learning_on_tracks_of_an_approaching_camera():
+    """Negative steps: the log-likelihood equals the dense grid above the floor to 1e-8, and
+    ML and EM agree on rho and q (the velocity noise grows with |s|)."""
+    rng = np.random.default_rng(5)
+    steps = np.full(11, -0.3)
+    states = rng.multivariate_normal([0.0, 9.0, 0.0], np.diag([1.0, 1.0, 0.25]), size=4)
+    mu = model.simulate(states, 12, 0.01, 0.05, rng, frame=1, steps=steps).mu
+    mean, cov = np.array([0.0, 9.0, 0.0]), np.diag([1.0, 1.0, 0.25])
+    got = learning.log_likelihood(mu, mean, cov, 0.01, 0.05, steps)
+    want = sum(_grid_log_likelihood(m, 0.01, 0.05, mean, cov, steps) for m in mu)
+    assert got == pytest.approx(want, abs=1e-8)
+    ml = learning.fit(mu, mean, cov, steps=steps)
+    em = learning.fit(mu, mean, cov, steps=steps, method="em", tol=1e-9)
+    assert ml.converged and em.converged
+    assert em.rho == pytest.approx(ml.rho, rel=1e-6)
+    assert em.log_likelihood == pytest.approx(ml.log_likelihood, abs=1e-8)
 
 
 def test_ml_and_em_agree_with_gaps_steps_and_weights():

@@ -24,9 +24,9 @@ Two routes to the same estimate:
   in closed form (Eq. (4) and the velocity's random walk):
 
       rho**2 = mean over present frames of E[(mu_k - x_k / y_k)**2] / w_k**2,
-      q**2   = mean over steps of E[(v_{k+1} - v_k)**2] / s_k,
+      q**2   = mean over steps of E[(v_{k+1} - v_k)**2] / |s_k|,
 
-  with ``w_k`` the relative noise levels and ``s_k`` the steps; its fixed point is
+  with ``w_k`` the relative noise levels and ``s_k`` the (signed) steps; its fixed point is
   the maximum-likelihood estimate.
 
 When the likelihood does not rise from ``q = 0`` (constant velocity, Eq. (1)) the
@@ -619,7 +619,7 @@ def expectations(bank, log_weights, tracks: _Tracks):
     meas = np.sum(np.where(p > 0, p * meas, 0.0), axis=1)
     motion = np.sum(np.where(p > 0, p * motion, 0.0), axis=1)
     meas = np.where(tracks.present, meas / tracks.weights**2, 0.0)
-    return meas, motion / tracks.steps
+    return meas, motion / np.abs(tracks.steps)
 
 
 def _smooth(res: linear.FilterResult, Psi):
