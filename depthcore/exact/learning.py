@@ -20,7 +20,8 @@ Two routes to the same estimate:
   differences) on depth nodes held fixed, re-placed at the estimate until it stays
   put; the observed information gives the standard errors, ``se(rho) = rho se(log rho)``.
 * ``method="em"``: EM (textbook Section 7.8) with the depth and trajectory hidden.
-  The E-step is :func:`expectations` (the smoother, textbook 19.2.6); the M-step is
+  The E-step is :func:`depthcore.exact.e_step.expectations` (the smoother, textbook
+  19.2.6); the M-step is
   in closed form (Eq. (4) and the velocity's random walk):
 
       rho**2 = mean over present frames of E[(mu_k - x_k / y_k)**2] / w_k**2,
@@ -47,12 +48,10 @@ import numpy as np
 from scipy import optimize, stats
 from scipy.special import logsumexp
 
+from depthcore.exact import e_step, online
 from depthcore.exact import posterior as exact_posterior
-from depthcore.exact.bank import PSI, lateral_filter, run_bank
-from depthcore.exact.tracks import transitions
-from depthcore.kalman import linear
-from depthcore.problem import checks, frames
-from depthcore.problem.gaussian import MeanAndCov
+from depthcore.exact.bank import lateral_filter, run_bank
+from depthcore.problem import checks, frames, predictive
 
 #: The parameters, by name, the bearing noise SD and the process noise SD.
 NAMES = ("rho", "process_noise")
@@ -103,6 +102,8 @@ class Fit(NamedTuple):
         The inverse observed information of the estimated log parameters.
     level : float
     note : str
+    gated : ndarray of bool, shape (B, N), or None
+        With a gate, the bearings it skipped (left out of the fit); ``None`` without one.
     """
 
     rho: float
@@ -120,6 +121,7 @@ class Fit(NamedTuple):
     covariance: np.ndarray
     level: float
     note: str
+    gated: np.ndarray | None = None
 
 
 class _Tracks(NamedTuple):
@@ -364,11 +366,12 @@ def fit(
     steps=None,
     weights=None,
     method: str = "ml",
-    intervals: str = "wald",
+    intervals: str = "profile",
     level: float = 0.95,
     rtol: float = 1e-10,
     tol: float = 1e-10,
     max_iter: int = 2000,
+    gate=None,
 ) -> Fit:
     """Estimate the bearing noise ``rho`` and/or the process noise ``q`` from tracks (19.1.2).
 
@@ -387,13 +390,21 @@ def fit(
         The frames' relative noise levels, ``rho_k = rho weights_k``.
     method : {"ml", "em"}
         See the module docstring.
-    intervals : {"wald", "profile"}
+    intervals : {"profile", "wald"}
+        The profile likelihood's interval (default): where the likelihood stays
+        within the chi-squared quantile down to ``q = 0`` its lower end is 0, so it
+        covers a process noise at the boundary; or Wald's on the log scale.
     level : float
         In [0.5, 1).
     rtol : float
         The depth quadrature's tolerance.
     tol, max_iter
         EM's tolerance in the log parameters and most iterations.
+    gate : float or None
+        Skip outliers while learning (:mod:`depthcore.problem.predictive`): the exact
+        filter at the estimate reports each bearing's tail probability; those below
+        ``gate`` are left out and the noise levels fitted again, until no more are
+        skipped (:attr:`Fit.gated`), so that an outlier does not inflate ``rho``.
 
     Returns
     -------
@@ -418,9 +429,39 @@ def fit(
     if not free:
         raise ValueError("rho, process_noise: both are given; give None for one to estimate it")
     _enough(tracks, free)
-    if method == "em":
-        return _fit_em(tracks, rho_k, q_k, free, level, intervals, rtol, tol, max_iter)
-    return _fit_ml(tracks, rho_k, q_k, free, level, intervals, rtol)
+    gate = predictive.gate(gate)
+
+    def fitted(tracks):
+        if method == "em":
+            return _fit_em(tracks, rho_k, q_k, free, level, intervals, rtol, tol, max_iter)
+        return _fit_ml(tracks, rho_k, q_k, free, level, intervals, rtol)
+
+    result = fitted(tracks)
+    if gate is None:
+        return result
+    skipped = np.zeros(tracks.mu.shape, dtype=bool)
+    for _ in range(_GATE_ROUNDS):
+        post = _place(tracks, result.rho, result.process_noise, rtol)
+        new = online.track_updates(post.bank, gate, rtol).gated
+        if not np.any(new):
+            break
+        skipped |= new
+        mu = np.where(skipped, np.nan, tracks.mu)
+        tracks = tracks._replace(mu=mu, present=~np.isnan(mu))
+        few = np.sum(tracks.present, axis=-1) < frames.MIN_PRESENT
+        if np.any(few):
+            raise ValueError(
+                f"gate: at {gate:g} it leaves track {int(np.argmax(few))} with fewer than "
+                f"{frames.MIN_PRESENT} bearings; give a smaller gate or none"
+            )
+        _enough(tracks, free)
+        result = fitted(tracks)
+    note = f"{result.note}; the gate at {gate:g} skipped {int(skipped.sum())} bearings"
+    return result._replace(gated=skipped, note=note)
+
+
+#: The most rounds of fitting and gating (each skips at least one more bearing).
+_GATE_ROUNDS = 10
 
 
 def _fit_ml(tracks, rho_k, q_k, free, level, intervals, rtol) -> Fit:
@@ -582,72 +623,6 @@ def _profile(pr, f, theta, i, level, se):
 # --- EM -----------------------------------------------------------------------------------
 
 
-def expectations(bank, log_weights, tracks: _Tracks):
-    """The E-step: the expected squared residuals under the exact smoothed posterior.
-
-    Each node's filter is smoothed (:func:`_smooth`, textbook 19.2.6); given the node,
-    ``E[(mu_k - x_k / y_k)**2] = (mu_k - E[x_k] / y_k)**2 + Var[x_k] / y_k**2`` and
-    ``E[(v_{k+1} - v_k)**2] = (E[v_{k+1}] - E[v_k])**2 + Var[v_k] + Var[v_{k+1}]
-    - 2 Cov[v_k, v_{k+1}]``, mixed over the nodes with the posterior's probabilities.
-
-    Parameters
-    ----------
-    bank : depthcore.exact.bank.Bank
-        ``B`` tracks on nodes (B, J), with their history.
-    log_weights : ndarray, shape (B, J)
-        The nodes' log quadrature weights (``-inf`` at padding).
-    tracks : _Tracks
-
-    Returns
-    -------
-    measurement : ndarray, shape (B, N)
-        ``E[(mu_k - x_k / y_k)**2] / w_k**2`` (0 at a missing frame).
-    motion : ndarray, shape (B, N - 1)
-        ``E[(v_{k+1} - v_k)**2] / s_k``.
-    """
-    b = bank
-    steps = tracks.unit_steps
-    smooth, cross = _smooth(b.history, PSI if steps is None else transitions(steps)[:, None])
-    depth = b.nodes[..., None] + tracks.elapsed[:, None, :]  # (B, J, N)
-    mx, vx = smooth.mean[..., 0], smooth.cov[..., 0, 0]
-    mu = np.where(tracks.present, tracks.mu, 0.0)[:, None, :]
-    meas = (mu - mx / depth) ** 2 + vx / depth**2
-    mv, vv = smooth.mean[..., 1], smooth.cov[..., 1, 1]
-    motion = (mv[..., 1:] - mv[..., :-1]) ** 2 + vv[..., 1:] + vv[..., :-1] - 2.0 * cross[..., 1, 1]
-    log_p = log_weights + b.log_weight
-    p = np.exp(log_p - logsumexp(log_p, axis=-1, keepdims=True))[..., None]  # (B, J, 1)
-    meas = np.sum(np.where(p > 0, p * meas, 0.0), axis=1)
-    motion = np.sum(np.where(p > 0, p * motion, 0.0), axis=1)
-    meas = np.where(tracks.present, meas / tracks.weights**2, 0.0)
-    return meas, motion / np.abs(tracks.steps)
-
-
-def _smooth(res: linear.FilterResult, Psi):
-    """Textbook 19.2.6 on each node's filter, with ``Cov[w_k, w_{k+1} | mu] = C_k Sigma_{k+1|N}``.
-
-    Returns the smoothed ``MeanAndCov`` (..., N, 2), (..., N, 2, 2) and the cross
-    covariances (..., N - 1, 2, 2).
-    """
-    cov, predicted = res.covs[..., :-1, :, :], res.predicted_covs[..., 1:, :, :]
-    try:  # C_k^T = Sigma_{+|k+1}^{-1} Psi Sigma_k, the predictions positive definite
-        gains = np.swapaxes(np.linalg.solve(predicted, Psi @ cov), -1, -2)
-    except np.linalg.LinAlgError:  # a singular prediction: the pseudo-inverse's gain
-        gains = linear.smoother_gain(cov, predicted, Psi)
-    means, covs = np.empty_like(res.means), np.empty_like(res.covs)
-    means[..., -1, :], covs[..., -1, :, :] = res.means[..., -1, :], res.covs[..., -1, :, :]
-    for t in range(res.means.shape[-2] - 2, -1, -1):
-        means[..., t, :], covs[..., t, :, :] = linear.smoother_step(
-            gains[..., t, :, :],
-            res.means[..., t, :],
-            res.covs[..., t, :, :],
-            res.predicted_means[..., t + 1, :],
-            res.predicted_covs[..., t + 1, :, :],
-            means[..., t + 1, :],
-            covs[..., t + 1, :, :],
-        )
-    return MeanAndCov(means, covs), gains @ covs[..., 1:, :, :]
-
-
 #: EM re-places the depth nodes when a parameter has moved by this (in log) since placed.
 _EM_REPLACE = 0.05
 
@@ -681,7 +656,7 @@ def _fit_em(tracks, rho_k, q_k, free, level, intervals, rtol, tol, max_iter) -> 
             tracks.unit_steps,
             frame_rho,
         )
-        meas, motion = expectations(bank, log_w, tracks)
+        meas, motion = e_step.expectations(bank, log_w, tracks)
         new_rho = float(np.sqrt(np.sum(meas) / n_frames)) if rho_k is None else rho
         new_q = float(np.sqrt(np.sum(motion) / n_steps)) if q_k is None else q
         moved = max(abs(np.log(new_rho / rho)), abs(np.log(new_q / q)) if q_k is None else 0.0)
