@@ -145,3 +145,11 @@ def test_the_online_filters_take_pairs_when_the_prior_is_in_3d(name):
     assert 0.0 < first.tail <= 1.0 and not first.gated
     far = g.update(PAIRS[1] + [0.5, 0.0], step=STEPS[0])
     assert far.gated and far.tail < 1e-3
+
+
+def test_track_says_pairs_go_to_the_filters_of_a_point_in_3d():
+    from depthcore.registry.tracking import track
+
+    with pytest.raises(ValueError, match=r"^mu of shape \(N, 2\) holds pairs") as info:
+        track(PAIRS, 0.01)
+    assert "\n" not in str(info.value)

@@ -226,6 +226,12 @@ def track(
             f"{filter!r} has none"
         )
     mu_arr = checks.as_float(mu, "mu")
+    if mu_arr.ndim == 2 and mu_arr.shape[-1] == 2:
+        raise ValueError(
+            "mu of shape (N, 2) holds pairs, a point in 3-D: track() filters and smooths a "
+            "point in the plane; FILTERS['optimal'], 'ekf' and 'ukf' and registry.online "
+            "filter pairs"
+        )
     rho_arr = checks.as_float(rho, "rho")
     if steps is None and rho_arr.ndim == 0 and not np.any(np.isnan(mu_arr)):
         mu = model.measurements_batch(mu_arr, "mu")
