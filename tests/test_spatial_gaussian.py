@@ -153,3 +153,34 @@ def test_track_says_pairs_go_to_the_filters_of_a_point_in_3d():
     with pytest.raises(ValueError, match=r"^mu of shape \(N, 2\) holds pairs") as info:
         track(PAIRS, 0.01)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"prior_mean": [1e300, 1e300, 1e300, 1e300, 1e300]},
+        {"process_noise": 1e300},
+        {"steps": np.full(5, 1e300)},
+        {"mu": PAIRS * 1e300},
+    ],
+    ids=["prior", "noise", "steps", "pairs"],
+)
+@pytest.mark.parametrize("door", ["exact", "ekf", "ukf"])
+def test_extreme_values_get_an_answer_or_one_line_and_no_warning(kwargs, door):
+    import warnings
+
+    args = {"mu": PAIRS, "rho": 0.01, "prior_mean": PRIOR_MEAN, "prior_cov": PRIOR_COV}
+    args.update(kwargs)
+    run = {
+        "exact": exact_spatial.posterior,
+        "ekf": spatial.run,
+        "ukf": lambda **a: spatial.run(**a, filter="ukf"),
+    }[door]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            out = run(**args)
+        except ValueError as exc:
+            assert "\n" not in str(exc)
+            return
+    assert np.all(np.isfinite(out.mean))

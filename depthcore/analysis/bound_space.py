@@ -112,7 +112,10 @@ def conditional_bound(states, rho, prior_cov=None, process_noise=0.0, present=No
     ndarray, shape (..., N, 5, 5)
     """
     states = _states(states)
-    info = measurement_information(states, rho, present)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        info = measurement_information(states, rho, present)
+    if not np.all(np.isfinite(info)):
+        raise ValueError("states and rho: the information exceeds the largest double")
     q = checks.nonnegative_scalar(process_noise, "process_noise")
     steps = np.diff(states[..., 1], axis=-1)
     if np.any(steps == 0):
@@ -122,6 +125,15 @@ def conditional_bound(states, rho, prior_cov=None, process_noise=0.0, present=No
     else:
         P = checks.covariance(prior_cov, "prior_cov", 5)
         J = np.broadcast_to(np.linalg.inv(P), info.shape[:-3] + (5, 5))
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = _recursion(info, J, q, steps)
+    if np.any(np.isinf(out)):
+        raise ValueError("states and rho: the bound exceeds the largest double")
+    return out
+
+
+def _recursion(info, J, q, steps):
+    """The recursion of :func:`conditional_bound` on checked inputs, (..., N, 5, 5)."""
     n = info.shape[-3]
     out = np.full(info.shape, np.nan)
     for k in range(n):

@@ -270,18 +270,25 @@ class Online:
             self._raise_floor(-(self.travelled + s))
         nodes = self._nodes
         lat = nodes.lateral.copy()
-        if self.frame > 0:
-            self.model.predict(lat, s, self.process_noise**2 * abs(s))
-            self.travelled += s
-        self.frame += 1
-        y = nodes.y + self.travelled
+        travelled = self.travelled + (s if self.frame > 0 else 0.0)
+        y = nodes.y + travelled
         log_p = nodes.log_p
         log_pred, tail, gated = np.nan, np.nan, False
-        if not missing:
-            log_pred, tail = self.model.predictive(obs, log_p + nodes.log_w, lat, y, r * r)
-            gated = bool(predictive.skipped(tail, True, self.gate))
-            if not gated:
-                log_p = log_p + self.model.update(lat, obs, y, r * r)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+            if self.frame > 0:
+                self.model.predict(lat, s, self.process_noise**2 * abs(s))
+            if not missing:
+                log_pred, tail = self.model.predictive(obs, log_p + nodes.log_w, lat, y, r * r)
+                gated = bool(predictive.skipped(tail, True, self.gate))
+                if not gated:
+                    log_p = log_p + self.model.update(lat, obs, y, r * r)
+        if not (np.all(np.isfinite(lat)) and np.all(log_p < np.inf) and np.any(log_p > -np.inf)):
+            raise ValueError(
+                f"mu = {mu!r} with rho = {r:.6g} overflows the exact filter's nodes in double "
+                f"precision at frame {self.frame + 1}; the filter is left at frame {self.frame}"
+            )
+        self.travelled = travelled
+        self.frame += 1
         self._nodes = nodes._replace(log_p=log_p, lateral=lat)
         if not self._resolved():
             self._replace_nodes()

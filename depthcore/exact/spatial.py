@@ -261,21 +261,27 @@ def posterior(
         cov=P[:, xyv][:, :, xyv],
         steps=steps_or_none,
     )
-    _, _, _, _, grids = quadrature.integrate(pb, (3,), rtol)
-    nodes, log_w = grid_nodes(grids[3])
-    nodes = nodes + floor[:, None]
-    log_weight, M, C = node_filter(nodes, pairs, m, P, q)
-    a = log_w + log_weight
-    a = np.where(np.isnan(a), -np.inf, a)
-    p = np.exp(a - np.max(a, axis=1, keepdims=True))
-    p /= np.sum(p, axis=1, keepdims=True)
-    travelled = pairs.elapsed[:, -1]
-    mean, cov = _moments(p, nodes, travelled, M, C)
-    half = np.where(np.arange(p.shape[1]) % 2 == 0, p, 0.0)
-    half /= np.sum(half, axis=1, keepdims=True)
-    half_mean, half_cov = _moments(half, nodes, travelled, M, C)
-    sd, half_sd = (np.sqrt(np.diagonal(c, axis1=1, axis2=2)) for c in (cov, half_cov))
-    error = np.maximum(np.abs(half_mean - mean), np.abs(half_sd - sd))
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        _, _, _, _, grids = quadrature.integrate(pb, (3,), rtol)
+        nodes, log_w = grid_nodes(grids[3])
+        nodes = nodes + floor[:, None]
+        log_weight, M, C = node_filter(nodes, pairs, m, P, q)
+        a = log_w + log_weight
+        a = np.where(np.isnan(a), -np.inf, a)
+        p = np.exp(a - np.max(a, axis=1, keepdims=True))
+        p /= np.sum(p, axis=1, keepdims=True)
+        travelled = pairs.elapsed[:, -1]
+        mean, cov = _moments(p, nodes, travelled, M, C)
+        half = np.where(np.arange(p.shape[1]) % 2 == 0, p, 0.0)
+        half /= np.sum(half, axis=1, keepdims=True)
+        half_mean, half_cov = _moments(half, nodes, travelled, M, C)
+        sd, half_sd = (np.sqrt(np.diagonal(c, axis1=1, axis2=2)) for c in (cov, half_cov))
+        error = np.maximum(np.abs(half_mean - mean), np.abs(half_sd - sd))
+    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)) and np.all(sd > 0)):
+        raise ValueError(
+            "mu, rho, prior_mean and prior_cov overflow the exact 3-D filter in double "
+            "precision (the model holds 1 / y and y**2); give values nearer the track's scale"
+        )
     shape = pairs.batch
     J = nodes.shape[1]
     return SpatialPosterior(

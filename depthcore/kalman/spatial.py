@@ -72,7 +72,7 @@ def predict(m, P, process_noise, step):
     mean = np.einsum("...ij,...j->...i", F, m)
     mean[..., 1] += s
     cov = F @ P @ np.swapaxes(F, -1, -2)
-    noise = float(process_noise) ** 2 * np.abs(s)
+    noise = np.square(np.float64(process_noise)) * np.abs(s)
     cov[..., 2, 2] += noise
     cov[..., 4, 4] += noise
     return mean, cov
@@ -106,7 +106,7 @@ def _gain_update(m, P, z, predicted, S, cross):
     cov = P - K @ S @ np.swapaxes(K, -1, -2)
     cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
     sol = np.linalg.solve(S, r[..., None])[..., 0]
-    d2 = np.sum(r * sol, axis=-1)
+    d2 = np.maximum(np.sum(r * sol, axis=-1), 0.0)
     log_p = -0.5 * (2 * _LOG_2PI + np.linalg.slogdet(S)[1] + d2)
     return mean, cov, log_p, np.exp(-0.5 * d2)
 
@@ -182,8 +182,26 @@ def run(
     P = checks.covariances(P, "prior_cov", DIM)
     m = np.broadcast_to(m, pairs.batch + (DIM,)).reshape(B, DIM).copy()
     P = np.broadcast_to(P, pairs.batch + (DIM, DIM)).reshape(B, DIM, DIM).copy()
-    q = checks.nonnegative_scalar(process_noise, "process_noise")
+    q = checks.process_noise(process_noise, "process_noise")
     update = UPDATES[filter]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        means, covs, log_p = _loop(pairs, m, P, q, update, filter)
+    if not (np.all(np.isfinite(means)) and np.all(np.isfinite(covs))):
+        raise ValueError(
+            f"mu, rho, prior_mean and prior_cov overflow the {filter.upper()} in double "
+            "precision; give values nearer the track's scale"
+        )
+    shape = pairs.batch
+    return SpatialHistory(
+        means.reshape(shape + (N, DIM)),
+        covs.reshape(shape + (N, DIM, DIM)),
+        log_p.reshape(shape + (N,)),
+    )
+
+
+def _loop(pairs, m, P, q, update, filter):
+    """:func:`run`'s predict-update loop on checked inputs: means, covariances, log densities."""
+    B, N = pairs.present.shape
     means, covs = np.empty((B, N, DIM)), np.empty((B, N, DIM, DIM))
     log_p = np.full((B, N), np.nan)
     for k in range(N):
@@ -200,9 +218,4 @@ def run(
             new_m, new_P, lp, _ = update(m[rows], P[rows], pairs.mu[rows, k], pairs.rho[rows, k])
             m[rows], P[rows], log_p[rows, k] = new_m, new_P, lp
         means[:, k], covs[:, k] = m, P
-    shape = pairs.batch
-    return SpatialHistory(
-        means.reshape(shape + (N, DIM)),
-        covs.reshape(shape + (N, DIM, DIM)),
-        log_p.reshape(shape + (N,)),
-    )
+    return means, covs, log_p
