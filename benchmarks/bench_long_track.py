@@ -6,7 +6,9 @@ lateral velocity a random walk (process noise ``Q`` per unit of depth), a
 bearing at every frame with noise ``RHO``. Each filter of
 :mod:`depthcore.registry.online` named in :data:`FILTERS` takes the frames one
 at a time, as from a live camera. For each: the mean time per frame of the
-first and of the last 1,000 frames (their ratio 1 when the cost does not grow),
+first and of the last 1,000 frames (their ratio 1 when the cost does not grow;
+the process's CPU time, one thread, so that other work on the machine does not
+enter the comparison),
 the memory a 1,000-frame stretch needs at its peak at the start and at the end
 (tracemalloc, which slows those frames, so they are timed apart), the size of
 what the filter holds (its pickled state) after the first and the last frames,
@@ -67,11 +69,11 @@ def track(frames: int):
 
 
 def run(f, mu, start: int, stop: int, step: float) -> float:
-    """Frames ``start + 1 .. stop`` through ``f``; the seconds they took."""
-    t = time.perf_counter()
+    """Frames ``start + 1 .. stop`` through ``f``; the process's CPU seconds they took."""
+    t = time.process_time()
     for k in range(start, stop):
         f.update(mu[k], step=1.0 if k == 0 else step)
-    return time.perf_counter() - t
+    return time.process_time() - t
 
 
 def traced_peak(f, mu, start: int, step: float) -> int:
