@@ -81,14 +81,42 @@ def test_the_step_is_speed_times_seconds_or_a_fixed_depth():
     fixed = models.DepthStep(depth_per_step=0.5)
     assert fixed.step(7 * SECOND) == fixed.step(None) == 0.5
     assert fixed.step(0 * SECOND) == models.DepthStep(speed=1.0).step(0 * SECOND) == 0.0
-    with pytest.raises(ValueError, match="^time_interval must not be negative"):
-        fixed.step(-SECOND)
     with pytest.raises(ValueError, match="^time_interval: a speed needs timestamps"):
         models.DepthStep(speed=1.0).step(None)
     with pytest.raises(ValueError, match="^process_noise"):
         models.DepthStep(process_noise=-1.0)
-    with pytest.raises(ValueError, match="^speed"):
-        models.DepthStep(speed=0.0)
+    for bad in (0.0, np.inf, np.nan):
+        with pytest.raises(ValueError, match="^speed"):
+            models.DepthStep(speed=bad)
+        with pytest.raises(ValueError, match="^depth_per_step"):
+            models.DepthStep(depth_per_step=bad)
+    with pytest.raises(ValueError, match="^time_interval: .* beyond the floating-point range"):
+        models.DepthStep(speed=1e308).step(datetime.timedelta(days=10))
+
+
+def test_a_step_is_signed_and_its_noise_grows_with_the_distance_moved():
+    # a camera approaching the point: a negative speed (or depth per step), or a prediction
+    # back in time; the motion x += s v for either sign, the variance q**2 |s| (never < 0)
+    approaching = models.DepthStep(process_noise=0.3, speed=-2.0)
+    assert approaching.step(1.5 * SECOND) == -3.0
+    assert models.DepthStep(speed=2.0).step(-1.5 * SECOND) == -3.0
+    assert models.DepthStep(depth_per_step=0.5).step(-SECOND) == -0.5
+    assert models.DepthStep(depth_per_step=-0.5).step(None) == -0.5
+    state = State([1.0, 5.0, 0.2])
+    moved = approaching.function(state, time_interval=1.5 * SECOND)
+    np.testing.assert_array_equal(np.asarray(moved)[:, 0], [1.0 - 3 * 0.2, 2.0, 0.2])
+    np.testing.assert_array_equal(
+        approaching.covar(time_interval=1.5 * SECOND), np.diag([0, 0, 0.27])
+    )
+    receding = models.DepthStep(process_noise=0.3, speed=2.0).covar(time_interval=1.5 * SECOND)
+    np.testing.assert_array_equal(approaching.covar(time_interval=1.5 * SECOND), receding)
+    noise = np.asarray(models.DepthStep(process_noise=0.2, depth_per_step=-4.0, seed=3).rvs(20000))
+    assert abs(noise[2].var() / 0.16 - 1) < 4 * np.sqrt(2 / 20000)
+    after = State([0.2 - 4 * 0.2, 1.0, 0.5])  # from (0.2, 5, 0.2) by s = -4, v + 0.3
+    step = models.DepthStep(process_noise=0.2, depth_per_step=-4.0)
+    assert step.logpdf(after, State([0.2, 5.0, 0.2])) == pytest.approx(
+        norm.logpdf(0.3, 0.0, 0.4), rel=1e-14
+    )
 
 
 def test_extended_kalman_predictor_keeps_the_depth_step_that_the_kalman_predictor_drops():
@@ -363,12 +391,14 @@ def test_the_exact_updater_refuses_by_name():
     same_time = predictor.predict(state, timestamp=state.timestamp)
     with pytest.raises(ValueError, match="^hypothesis: its prediction has not moved"):
         updater.update(SingleHypothesis(same_time, track[-1].detection))
-    with pytest.raises(ValueError, match="^predicted_state: the exact filter's predictive"):
-        updater.predict_measurement(same_time)
-    with pytest.raises(ValueError, match="^prior must be an ExactState"):
-        predictor.predict(GaussianState(prior.mean, prior.cov), timestamp=None)
+    with pytest.raises(ValueError, match="^prior must be a Track or a GaussianState"):
+        predictor.predict(State([1.0, 2.0, 3.0]), timestamp=None)
+    with pytest.raises(ValueError, match="^prior: the state must be"):
+        predictor.predict(GaussianState([1.0, 2.0], np.eye(2)), timestamp=None)
     with pytest.raises(ValueError, match="^gate must be None or a probability"):
         exact.ExactUpdater(None, gate=2.0)
+    with pytest.raises(ValueError, match="^transition_model must be a DepthStep"):
+        exact.ExactPredictor(None)
 
 
 def test_without_timestamps_each_prediction_moves_by_the_fixed_depth_per_step(track30):

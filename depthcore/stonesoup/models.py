@@ -8,10 +8,15 @@ sees of it). This module writes the paper's two:
 
 * :class:`DepthStep`, the motion with a step ``s`` (Eq. (1) with ``s`` in
   place of 1, :func:`depthcore.problem.model.G`): ``y <- y + s``,
-  ``x <- x + s v``, ``v <- v + a``, ``a ~ N(0, q**2 s)``
+  ``x <- x + s v``, ``v <- v + a``, ``a ~ N(0, q**2 |s|)``
   (:func:`depthcore.problem.frames.velocity_variance`). The step ``s`` is the
-  depth travelled over Stone Soup's ``time_interval``: the interval in
+  depth's signed change over Stone Soup's ``time_interval``: the interval in
   seconds times a speed (depth per second), or a fixed depth per prediction.
+  Positive: the point recedes (the camera moves away from it); negative: it
+  approaches (the camera moves towards it). The point moves on a straight
+  line, so ``x <- x + s v`` holds for either sign, and the velocity's noise
+  grows with the distance moved, ``|s|``, never with ``s`` itself; a negative
+  ``time_interval`` (a prediction back in time) moves it the other way.
 * :class:`TangentBearing`, the bearing ``mu = x / y + w``, ``w ~ N(0, rho**2)``
   (Eq. (4)), with its gradient ``(1 / y, -x / y**2, 0)`` (Eq. (11)); a state
   behind the camera (``y <= 0``) has likelihood 0 (the support of the exact
@@ -60,6 +65,26 @@ def states_of(state) -> np.ndarray:
     return values
 
 
+def velocity_variance(process_noise: float, step: float) -> float:
+    """``q**2 |s|``: the velocity's variance added over a signed step ``s`` (Eq. (1) with noise).
+
+    :func:`depthcore.problem.frames.velocity_variance` of the distance moved,
+    ``|s|``: the same whichever way the camera moves.
+    """
+    return float(frames.velocity_variance(process_noise, abs(float(step))))
+
+
+def _nonzero(value, name: str) -> float:
+    """A finite, nonzero number (a signed step or speed)."""
+    x = checks.number(value, name)
+    if x == 0:
+        raise ValueError(
+            f"{name} must be nonzero: positive while the point recedes, negative while the "
+            "camera approaches it"
+        )
+    return x
+
+
 def _draw(random_state, scale, size) -> np.ndarray:
     """Normal draws of SD ``scale`` from a numpy Generator (or RandomState), shape ``size``."""
     if random_state is None:
@@ -68,15 +93,17 @@ def _draw(random_state, scale, size) -> np.ndarray:
 
 
 class DepthStep(TransitionModel, GaussianModel):
-    """The motion with a depth step ``s``: ``(x + s v, y + s, v + a)``, ``a ~ N(0, q**2 s)``.
+    """The motion with a depth step ``s``: ``(x + s v, y + s, v + a)``, ``a ~ N(0, q**2 |s|)``.
 
     Eq. (1) with the step ``s`` in place of 1 and process noise on the
     velocity (:mod:`depthcore.problem.frames`). The step over a prediction is
     :meth:`step`: ``speed`` times Stone Soup's ``time_interval`` in seconds
     when a speed is given; otherwise ``depth_per_step`` for every prediction
-    over a nonzero (or unknown, ``None``) interval and 0 over a zero one (so
-    the prior at the first detection's timestamp does not move). A negative
-    interval is refused: the depth only grows.
+    over a positive (or unknown, ``None``) interval, minus it over a negative
+    one, and 0 over a zero one (so the prior at the first detection's
+    timestamp does not move). The step is signed: a negative ``speed`` or
+    ``depth_per_step`` is a camera that approaches the point, and the
+    velocity's noise grows with ``|s|`` either way.
 
     The seed (Stone Soup's ``seed`` property) starts a numpy Generator for
     :meth:`rvs`; pass ``random_state=`` (a Generator) to draw from your own.
@@ -87,18 +114,20 @@ class DepthStep(TransitionModel, GaussianModel):
     )
     speed: float = Property(
         default=None,
-        doc="Depth travelled per second of ``time_interval``; ``None``: ``depth_per_step``.",
+        doc="The depth's signed change per second of ``time_interval`` (negative: the "
+        "camera approaches); ``None``: ``depth_per_step``.",
     )
     depth_per_step: float = Property(
-        default=1.0, doc="The step ``s`` of each prediction when ``speed`` is ``None``."
+        default=1.0,
+        doc="The signed step ``s`` of each prediction when ``speed`` is ``None``.",
     )
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.process_noise = checks.nonnegative_scalar(self.process_noise, "process_noise")
         if self.speed is not None:
-            self.speed = checks.positive_scalar(self.speed, "speed")
-        self.depth_per_step = checks.positive_scalar(self.depth_per_step, "depth_per_step")
+            self.speed = _nonzero(self.speed, "speed")
+        self.depth_per_step = _nonzero(self.depth_per_step, "depth_per_step")
         self.random_state = np.random.default_rng(self.seed) if self.seed is not None else None
 
     @property
@@ -107,7 +136,7 @@ class DepthStep(TransitionModel, GaussianModel):
         return 3
 
     def step(self, time_interval=None) -> float:
-        """The depth travelled over ``time_interval``, ``s >= 0`` (see the class docstring).
+        """The depth's signed change over ``time_interval`` (see the class docstring).
 
         Parameters
         ----------
@@ -116,6 +145,7 @@ class DepthStep(TransitionModel, GaussianModel):
         Returns
         -------
         float
+            Finite; negative where the point approaches the camera.
         """
         if time_interval is None:
             if self.speed is not None:
@@ -129,13 +159,15 @@ class DepthStep(TransitionModel, GaussianModel):
                 f"{type(time_interval).__name__}"
             )
         seconds = time_interval.total_seconds()
-        if seconds < 0:
+        if self.speed is None:
+            return float(np.sign(seconds)) * self.depth_per_step
+        s = self.speed * seconds
+        if not np.isfinite(s):
             raise ValueError(
-                f"time_interval must not be negative (the depth only grows), got {seconds:g} s"
+                f"time_interval: {seconds:g} s at speed {self.speed:g} is a step beyond the "
+                "floating-point range"
             )
-        if seconds == 0:
-            return 0.0
-        return self.depth_per_step if self.speed is None else self.speed * seconds
+        return s
 
     def matrix(self, time_interval=None, **kwargs) -> np.ndarray:
         """The linear part ``F(s) = [[1, 0, s], [0, 1, 0], [0, 0, 1]]`` (Eq. (9)), shape (3, 3)."""
@@ -171,19 +203,22 @@ class DepthStep(TransitionModel, GaussianModel):
         return vectors(moved + np.asarray(noise, dtype=float))
 
     def covar(self, time_interval=None, **kwargs) -> CovarianceMatrix:
-        """The motion's noise covariance ``diag(0, 0, q**2 s)``, shape (3, 3)."""
-        q2s = float(frames.velocity_variance(self.process_noise, self.step(time_interval)))
-        return CovarianceMatrix(np.diag([0.0, 0.0, q2s]))
+        """The motion's noise covariance ``diag(0, 0, q**2 |s|)``, shape (3, 3)."""
+        return CovarianceMatrix(np.diag([0.0, 0.0, self.velocity_variance(time_interval)]))
+
+    def velocity_variance(self, time_interval=None) -> float:
+        """``q**2 |s|``, the velocity's variance added over ``time_interval`` (never negative)."""
+        return velocity_variance(self.process_noise, self.step(time_interval))
 
     def rvs(self, num_samples=1, random_state=None, time_interval=None, **kwargs):
-        """Draws of the motion's noise: zeros in ``x`` and ``y``, ``N(0, q**2 s)`` in ``v``.
+        """Draws of the motion's noise: zeros in ``x`` and ``y``, ``N(0, q**2 |s|)`` in ``v``.
 
         Returns
         -------
         StateVector (``num_samples == 1``) or StateVectors, shape (3, num_samples)
         """
         rng = random_state if random_state is not None else self.random_state
-        sd = float(np.sqrt(frames.velocity_variance(self.process_noise, self.step(time_interval))))
+        sd = float(np.sqrt(self.velocity_variance(time_interval)))
         noise = np.zeros((3, int(num_samples)))
         noise[2] = _draw(rng, sd, int(num_samples))
         return vectors(noise)
@@ -192,7 +227,7 @@ class DepthStep(TransitionModel, GaussianModel):
         """Log density of ``state1`` after a step from ``state2``, log space.
 
         Only the velocity is random: ``x`` and ``y`` move deterministically, so
-        the density is that of the velocity, ``N(v1; v2, q**2 s)``, where
+        the density is that of the velocity, ``N(v1; v2, q**2 |s|)``, where
         ``state1``'s ``x`` and ``y`` are the move's (to a relative 1e-12, the
         rounding of :meth:`function`), and ``-inf`` elsewhere. With ``q = 0``
         or ``s = 0`` the motion is deterministic and has no density: refused.
@@ -201,7 +236,7 @@ class DepthStep(TransitionModel, GaussianModel):
         -------
         float (one pair) or ndarray, shape (n,)
         """
-        var = float(frames.velocity_variance(self.process_noise, self.step(time_interval)))
+        var = self.velocity_variance(time_interval)
         if var == 0:
             raise ValueError(
                 "process_noise: with q = 0 (or a zero step) the motion is deterministic and "
@@ -228,9 +263,19 @@ class TangentBearing(MeasurementModel, GaussianModel):
     (:func:`depthcore.problem.model.log_likelihood` with ``front=True``).
     This is the tangent of the bearing, not Stone Soup's angle models
     (``Cartesian2DToBearing``, ``atan2``).
+
+    The seed (Stone Soup's ``seed`` property) starts a numpy Generator for
+    :meth:`rvs`. With ``common_draws`` every call without a ``random_state``
+    starts from the seed again, so that every caller gets the same draws
+    (common random numbers): a particle filter's predicted bearings then do
+    not depend on the order in which a Stone Soup tracker, whose tracks are a
+    set, visits the tracks that score a detection.
     """
 
     ndim_state: int = Property(default=3, doc="3: the state ``(x, y, v)``.")
+    common_draws: bool = Property(
+        default=False, doc="Whether each call of :meth:`rvs` starts from the seed."
+    )
     mapping: tuple = Property(default=(0, 1), doc="The state's ``x`` and ``y`` are seen.")
     noise_covar: CovarianceMatrix = Property(doc="``[[rho**2]]``, the bearing's noise variance.")
 
@@ -242,6 +287,8 @@ class TangentBearing(MeasurementModel, GaussianModel):
         if self.ndim_state != 3 or tuple(self.mapping) != (0, 1):
             raise ValueError("ndim_state and mapping must be 3 and (0, 1): the state (x, y, v)")
         self.noise_covar = CovarianceMatrix(covar.reshape(1, 1))
+        if self.common_draws and self.seed is None:
+            raise ValueError("common_draws: a seed is needed to start every call from")
         self.random_state = np.random.default_rng(self.seed) if self.seed is not None else None
 
     @property
@@ -276,6 +323,8 @@ class TangentBearing(MeasurementModel, GaussianModel):
     def rvs(self, num_samples=1, random_state=None, **kwargs):
         """Draws of the bearing's noise ``N(0, rho**2)``, shape (1, num_samples)."""
         rng = random_state if random_state is not None else self.random_state
+        if random_state is None and self.common_draws:
+            rng = np.random.default_rng(self.seed)
         return vectors(_draw(rng, self.rho, (1, int(num_samples))))
 
     def logpdf(self, state1, state2, **kwargs):
