@@ -348,7 +348,7 @@ def test_run_rejects_bad_shapes():
 def test_prior_proposal_with_one_particle_can_lose_every_particle():
     # Half the prior's mass is behind the camera; a lone particle there has weight zero.
     prior = Gaussian(FIG2.prior.mean - [0.0, 60.0, 0.0], FIG2.prior.cov)
-    with pytest.raises(RuntimeError, match="every particle of trial 0 has zero weight after mu_1"):
+    with pytest.raises(ValueError, match="^n_particles: every particle of trial 0 has zero weight"):
         run(FIG2.mu, FIG2.rho, prior.mean, prior.cov, 1, np.random.default_rng(0), proposal="prior")
 
 

@@ -454,9 +454,9 @@ def _dead(log_w, k) -> None:
     dead = ~np.any(np.isfinite(log_w), axis=1)  # (B, K)
     if np.any(dead):
         j = int(np.argmax(np.any(dead, axis=0)))
-        raise RuntimeError(
-            f"every particle of trial {int(np.argmax(dead[:, j]))} has zero weight after "
-            f"mu_{int(k[j]) + 1} (behind the camera); increase n_particles or use "
+        raise ValueError(
+            f"n_particles: every particle of trial {int(np.argmax(dead[:, j]))} has zero "
+            f"weight after mu_{int(k[j]) + 1} (behind the camera); increase n_particles or use "
             "proposal='second_order'"
         )
 
