@@ -63,7 +63,6 @@ updater's.
 from __future__ import annotations
 
 import copy
-import functools
 
 import numpy as np
 from stonesoup.base import Property
@@ -77,17 +76,60 @@ from depthcore.exact import online
 from depthcore.problem import checks, frames, predictive
 from depthcore.stonesoup.models import DepthStep, velocity_variance
 
-#: States whose prediction a predictor keeps (Stone Soup's predictors keep as many).
-CACHED_PREDICTIONS = 128
-#: Runs of the filter through a prediction and a detection that an updater keeps, so that
-#: a hypothesiser's evaluation of a pair is the update's (a frame's pairs, tracks times
-#: detections, fit).
-CACHED_RUNS = 512
+#: The most predictions a predictor keeps, and runs of the filter through a prediction and
+#: a detection an updater keeps, for one timestamp (:class:`FrameCache`): a frame's pairs,
+#: tracks times detections.
+CACHED = 1024
 #: A bearing whose predictive tail probability is below this is scored without being
 #: incorporated (about 6.1 SDs of a Gaussian): no hypothesiser keeps it.
 SCORE_GATE = 1e-9
 #: A gate that skips every bearing (the largest double below 1): its score alone.
 ONLY_SCORE = float(np.nextafter(1.0, 0.0))
+
+
+class FrameCache:
+    """A function's answers kept for the latest timestamp only: a frame's, dropped at the next.
+
+    A Stone Soup tracker asks, within a frame, for the same prediction and the
+    same scores many times (once per detection, once more to update); none is
+    asked for again once the tracker has moved on. The answers are kept by
+    their arguments' identities (Stone Soup's states and detections are
+    compared by identity; numbers by value) while ``timestamp(*args)`` stays the same, at most
+    :data:`CACHED` of them; another timestamp starts afresh. So what a long
+    track holds per frame does not grow with the frames.
+
+    Parameters
+    ----------
+    function : callable
+    timestamp : callable
+        The timestamp of a call's arguments.
+    """
+
+    def __init__(self, function, timestamp):
+        self.function = function
+        self.timestamp = timestamp
+        self.time = None
+        self.answers: dict = {}
+
+    def __call__(self, *args):
+        """``function(*args)``, computed once for the latest timestamp."""
+        time = self.timestamp(*args)
+        if time != self.time or len(self.answers) >= CACHED:
+            self.answers.clear()
+            self.time = time
+        key = tuple(a if isinstance(a, (int, float)) else id(a) for a in args)
+        kept = self.answers.get(key)
+        if kept is None or any(
+            a is not b and not isinstance(a, (int, float))
+            for a, b in zip(args, kept[0], strict=True)
+        ):
+            kept = (args, self.function(*args))
+            self.answers[key] = kept
+        return kept[1]
+
+
+def _pair_time(prediction, detection):
+    return detection.timestamp
 
 
 class ExactState(GaussianState):
@@ -200,8 +242,8 @@ class ExactPredictor(Predictor):
     ``transition_model`` is a :class:`~depthcore.stonesoup.models.DepthStep`
     (its :meth:`~depthcore.stonesoup.models.DepthStep.step` turns the time
     interval into the depth's signed change); there is no control model.
-    Like Stone Soup's own predictors it keeps its last predictions
-    (:data:`CACHED_PREDICTIONS` of them), so a hypothesiser that predicts a
+    Like Stone Soup's own predictors it keeps its predictions (those to the
+    latest timestamp, :class:`FrameCache`), so a hypothesiser that predicts a
     track once per detection predicts it once.
     """
 
@@ -213,7 +255,7 @@ class ExactPredictor(Predictor):
             raise ValueError(
                 f"transition_model must be a DepthStep, got {type(self.transition_model).__name__}"
             )
-        self._cached = functools.lru_cache(maxsize=CACHED_PREDICTIONS)(self._predict)
+        self._cached = FrameCache(self._predict, lambda prior, timestamp: timestamp)
 
     def predict(self, prior, timestamp=None, **kwargs) -> ExactPrediction:
         """The prior predicted to ``timestamp`` (see the module docstring).
@@ -294,9 +336,9 @@ class ExactUpdater(Updater):
         self.gate = predictive.gate(self.gate)
         self.rtol = checks.positive_scalar(self.rtol, "rtol")
         self.process_noise = checks.nonnegative_scalar(self.process_noise, "process_noise")
-        self._runs = functools.lru_cache(maxsize=CACHED_RUNS)(self._run)
-        self._scores = functools.lru_cache(maxsize=CACHED_RUNS)(self._score)
-        self._started = functools.lru_cache(maxsize=CACHED_PREDICTIONS)(self._start)
+        self._runs = FrameCache(self._run, _pair_time)
+        self._scores = FrameCache(self._score, _pair_time)
+        self._started = FrameCache(self._start, lambda prediction, rho: prediction.timestamp)
 
     def rho(self, measurement_model=None) -> float:
         """The bearing's noise SD under ``measurement_model`` (``None``: the updater's)."""
@@ -327,8 +369,8 @@ class ExactUpdater(Updater):
     def start(self, prediction: GaussianState, rho: float) -> online.Online:
         """The exact filter started on a Gaussian prediction, before its first bearing.
 
-        Kept for the prediction (:data:`CACHED_PREDICTIONS` of them): every
-        detection scored against it starts from the same nodes.
+        Kept for the prediction (:class:`FrameCache`): every detection scored
+        against it starts from the same nodes.
         """
         return self._started(prediction, rho)
 
@@ -368,8 +410,8 @@ class ExactUpdater(Updater):
     def filter_through(self, prediction, detection):
         """The exact filter run through a prediction's step with a detection's bearing.
 
-        The updater keeps its last :data:`CACHED_RUNS` runs, and a run made while
-        scoring the pair (:meth:`predictive_at`) is this one.
+        The updater keeps the runs of the latest timestamp (:class:`FrameCache`),
+        and a run made while scoring the pair (:meth:`predictive_at`) is this one.
 
         Parameters
         ----------
