@@ -225,6 +225,37 @@ def test_odd_inputs_get_one_line_refusals(sim, case):
     assert "\n" not in str(refused.value)
 
 
+def test_numbers_beyond_the_floating_point_range_are_refused_in_one_line(sim):
+    prior_mean = sim.states[0] + [0.1, 1.0, 0.0]
+    track, _, updater = loop(sim.mu[:4], prior_mean)
+    later = track[-1].timestamp + SECOND
+    cases = [
+        (
+            lambda: exact.ExactPredictor(models.DepthStep(process_noise=Q, speed=1e300)).predict(
+                track, later
+            ),
+            "^time_interval: a step of 1e\\+300 moves the state beyond",
+        ),
+        (lambda: models.DepthStep(process_noise=1e200), "^process_noise must be at most"),
+        (
+            lambda: models.DepthStep(process_noise=1e150, speed=1e200).covar(time_interval=SECOND),
+            "^time_interval: the velocity's variance",
+        ),
+        (
+            lambda: updater.predict_measurement(GaussianState([1e300, 1e-300, 0.0], np.eye(3))),
+            "^predicted_state: its bearing's mean or variance overflows",
+        ),
+        (lambda: tracks.detections([0.1, 0.2, 0.3], RHO, [1e308, 1e308]), "^steps add up"),
+    ]
+    for call, message in cases:
+        with (
+            np.errstate(over="raise", divide="raise", invalid="raise"),
+            pytest.raises(ValueError, match=message) as refused,
+        ):
+            call()
+        assert "\n" not in str(refused.value)
+
+
 def test_a_zero_or_negative_interval_is_a_zero_or_backward_step(sim):
     prior_mean = sim.states[0] + [0.1, 1.0, 0.0]
     track, predictor, updater = loop(sim.mu[:4], prior_mean)

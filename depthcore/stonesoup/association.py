@@ -137,11 +137,18 @@ def predict_bearing(updater, predicted_state, measurement_model=None, measuremen
             f"{m[1]:.6g}"
         )
     P = np.asarray(state.covar, dtype=float)
-    H = model.observation_vector(m)[None, :]
-    cross = P @ H.T
-    covar = H @ cross + (rho * rho if measurement_noise else 0.0)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore", under="ignore"):
+        H = model.observation_vector(m)[None, :]
+        cross = P @ H.T
+        covar = H @ cross + (rho * rho if measurement_noise else 0.0)
+        bearing = m[0] / m[1]
+    if not (np.isfinite(bearing) and np.all(np.isfinite(cross)) and np.isfinite(covar[0, 0])):
+        raise ValueError(
+            "predicted_state: its bearing's mean or variance overflows (a state of depth "
+            f"{m[1]:.6g} and lateral position {m[0]:.6g})"
+        )
     return ExactMeasurementPrediction(
-        np.array([[m[0] / m[1]]]),
+        np.array([[bearing]]),
         covar,
         timestamp=state.timestamp,
         cross_covar=cross,

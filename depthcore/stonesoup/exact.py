@@ -192,9 +192,14 @@ def moved_gaussian(mean, cov, step: float, process_noise: float):
     cov : ndarray, shape (3, 3)
     """
     F = frames.transition(step)
-    m = F @ np.asarray(mean, dtype=float).reshape(3) + [0.0, step, 0.0]
-    P = F @ np.asarray(cov, dtype=float) @ F.T
-    P[2, 2] += velocity_variance(process_noise, step)
+    with np.errstate(over="ignore", invalid="ignore"):
+        m = F @ np.asarray(mean, dtype=float).reshape(3) + [0.0, step, 0.0]
+        P = F @ np.asarray(cov, dtype=float) @ F.T
+        P[2, 2] += velocity_variance(process_noise, step)
+    if not (np.all(np.isfinite(m)) and np.all(np.isfinite(P))):
+        raise ValueError(
+            f"time_interval: a step of {step:.6g} moves the state beyond the floating-point range"
+        )
     return m, 0.5 * (P + P.T)
 
 

@@ -65,13 +65,25 @@ def states_of(state) -> np.ndarray:
     return values
 
 
+#: The largest process noise ``q`` whose square is a finite double.
+MAX_PROCESS_NOISE = 1e150
+
+
 def velocity_variance(process_noise: float, step: float) -> float:
     """``q**2 |s|``: the velocity's variance added over a signed step ``s`` (Eq. (1) with noise).
 
     :func:`depthcore.problem.frames.velocity_variance` of the distance moved,
-    ``|s|``: the same whichever way the camera moves.
+    ``|s|``: the same whichever way the camera moves. Refused where it
+    overflows.
     """
-    return float(frames.velocity_variance(process_noise, abs(float(step))))
+    with np.errstate(over="ignore"):
+        var = float(frames.velocity_variance(process_noise, abs(float(step))))
+    if not np.isfinite(var):
+        raise ValueError(
+            f"time_interval: the velocity's variance q**2 |s| over a step of {step:.6g} with "
+            f"q = {process_noise:.6g} overflows"
+        )
+    return var
 
 
 def _nonzero(value, name: str) -> float:
@@ -125,6 +137,11 @@ class DepthStep(TransitionModel, GaussianModel):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.process_noise = checks.nonnegative_scalar(self.process_noise, "process_noise")
+        if self.process_noise > MAX_PROCESS_NOISE:
+            raise ValueError(
+                f"process_noise must be at most {MAX_PROCESS_NOISE:g} (its square a finite "
+                f"double), got {self.process_noise:g}"
+            )
         if self.speed is not None:
             self.speed = _nonzero(self.speed, "speed")
         self.depth_per_step = _nonzero(self.depth_per_step, "depth_per_step")

@@ -199,6 +199,10 @@ class SystematicResampler(Resampler):
         -------
         stonesoup.types.state.ParticleState
         """
+        if not isinstance(particles, ParticleState):
+            raise ValueError(
+                f"particles must be a Stone Soup ParticleState, got {type(particles).__name__}"
+            )
         log_w = np.asarray(particles.log_weight, dtype=float)
         n = log_w.size if nparts is None else checks.count(nparts, "nparts")
         ess = float(resampling.effective_sample_size(log_w))

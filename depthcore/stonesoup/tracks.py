@@ -126,7 +126,19 @@ def one_track(mu, rho, steps=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise ValueError(f"steps must have shape ({n - 1},), got shape {steps.shape}")
     if np.any(steps == 0):
         raise ValueError("steps must be nonzero (the depth's signed change between frames)")
-    return mu, rho, np.concatenate([[0.0], np.cumsum(steps)])
+    return mu, rho, travelled(steps)
+
+
+def travelled(steps) -> np.ndarray:
+    """The depth's signed change since frame 1 at each frame, from 0, shape (N,).
+
+    Refused where the steps add up beyond the floating-point range.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        elapsed = np.concatenate([[0.0], np.cumsum(steps)])
+    if not np.all(np.isfinite(elapsed)):
+        raise ValueError("steps add up beyond the floating-point range")
+    return elapsed
 
 
 def clock(elapsed, speed) -> np.ndarray:
@@ -147,7 +159,8 @@ def clock(elapsed, speed) -> np.ndarray:
     speed = checks.number(speed, "speed")
     if speed == 0:
         raise ValueError("speed must be nonzero (negative: the camera approaches the point)")
-    seconds = np.asarray(elapsed, dtype=float) / speed
+    with np.errstate(over="ignore", invalid="ignore"):
+        seconds = np.asarray(elapsed, dtype=float) / speed
     if not (np.all(np.isfinite(seconds)) and np.all(np.diff(seconds) > 0)):
         raise ValueError(
             f"steps must all have the sign of speed ({speed:g}), so that time moves on at "
@@ -224,7 +237,7 @@ def scene(
     steps = np.ones(N - 1) if steps is None else checks.finite_array(steps, "steps")
     if steps.shape != (N - 1,):
         raise ValueError(f"steps must have shape ({N - 1},), got shape {steps.shape}")
-    seconds = clock(np.concatenate([[0.0], np.cumsum(steps)]), speed)
+    seconds = clock(travelled(steps), speed)
     if not isinstance(start, datetime.datetime):
         raise ValueError(f"start must be a datetime.datetime, got {type(start).__name__}")
     times = [start + datetime.timedelta(seconds=float(t)) for t in seconds]
