@@ -19,6 +19,10 @@ frame in time order:
 * ``mu``: the bearing (tangent of the angle from the direction of motion); or
 * ``u``: the image column in pixels instead of ``mu``, with ``focal`` and
   ``cx``: ``mu = (u - cx) / focal``;
+* ``nu`` with ``mu``, or ``v`` with ``u`` (and ``cy``, the principal point's
+  row): the vertical bearing ``h / y``, ``nu = (v - cy) / focal``, which makes
+  each frame a pair, a point in 3-D (:mod:`depthcore.problem.bearing_pairs`;
+  ``h`` measured the way the rows grow);
 * ``rho`` (optional): the noise SD of each frame's bearing;
 * ``frame`` (optional): the frame number, strictly increasing integers;
   without a distance column a gap in the numbers is that many missing frames
@@ -30,7 +34,7 @@ frame in time order:
   strictly increasing, the step being ``speed`` times the time between rows.
 
 An empty field or ``nan`` in ``mu`` (or ``u``) is a missing frame (its
-``rho`` may be empty too).
+``rho`` may be empty too); a pair has both coordinates or neither.
 
 The direction. A step is the depth's signed change between frames
 (:mod:`depthcore.problem.frames`): positive while the point recedes (the
@@ -63,7 +67,7 @@ from depthcore.problem import checks
 MAX_LINE = 4096
 
 #: The columns a track file may name, in the order ``estimate --help`` explains them.
-COLUMNS = ("mu", "u", "rho", "frame", "step", "travel", "time")
+COLUMNS = ("mu", "nu", "u", "v", "rho", "frame", "step", "travel", "time")
 
 #: The columns that give the steps; a file names at most one.
 DISTANCES = ("step", "travel", "time")
@@ -94,8 +98,9 @@ class TrackFile(NamedTuple):
     ----------
     name : str
         The file as the user named it (``<stdin>`` for ``-``).
-    mu : ndarray, shape (N,)
-        Bearings, ``NaN`` at a missing frame.
+    mu : ndarray, shape (N,) or (N, 2)
+        Bearings, ``NaN`` at a missing frame; pairs ``(mu, nu)`` with a ``nu``
+        or ``v`` column.
     rho : ndarray, shape (N,), or None
         The ``rho`` column (``NaN`` where empty, only at missing frames); ``None``
         without one.
@@ -106,7 +111,7 @@ class TrackFile(NamedTuple):
         The frame numbers: the ``frame`` column with the missing frames filled
         in, else ``1 .. N``.
     pixels : bool
-        Whether the bearings came from a ``u`` column.
+        Whether the bearings came from a ``u`` column (and ``v``).
     times : ndarray, shape (N,), or None
         The ``time`` column, in seconds; ``None`` without one.
     direction : str
@@ -142,6 +147,8 @@ class Frame(NamedTuple):
     line : int
         The line of the file that gave it (for a frame missing between frame
         numbers, the next row's).
+    nu : float
+        The vertical bearing of a pair (``NaN`` at a missing frame or without one).
     """
 
     frame: int
@@ -150,6 +157,7 @@ class Frame(NamedTuple):
     rho: float
     step: float
     line: int
+    nu: float = math.nan
 
 
 class Reading(NamedTuple):
@@ -172,6 +180,11 @@ class Reading(NamedTuple):
     direction: str
     frames: Iterator[Frame]
 
+    @property
+    def pairs(self) -> bool:
+        """Whether each frame is a pair ``(mu, nu)``: a ``nu`` or a ``v`` column."""
+        return bool({"nu", "v"} & set(self.columns))
+
 
 class Limits(NamedTuple):
     """The ranges :func:`read` checks each field against.
@@ -185,7 +198,7 @@ class Limits(NamedTuple):
     step : (float, float)
         The range of a step's magnitude, whichever column gives it.
     pixels : float
-        The largest magnitude of ``focal`` and ``cx``.
+        The largest magnitude of ``focal``, ``cx`` and ``cy``.
     """
 
     mu: float
@@ -203,6 +216,7 @@ MAX_TRAILING_BLANKS = 100
 WORDS = {
     "focal": "focal",
     "cx": "cx",
+    "cy": "cy",
     "format": "see depthcore.registry.track_files",
     "long": "depthcore.registry.track_runs.streamed runs a longer one frame by frame",
 }
@@ -213,16 +227,14 @@ def _lines(stream, name: str, counter: list):
 
     ``counter[0]`` is the number of the line last read (1-based).
     """
+    long = f"a line longer than {MAX_LINE} characters; a row holds a few numbers"
     while True:
         raw = stream.readline(4 * MAX_LINE + 2)
         if not raw:
             return
         counter[0] += 1
         if len(raw) > 4 * MAX_LINE and not raw.endswith(b"\n"):
-            raise FileRefusal(
-                f"{name}:{counter[0]}: a line longer than {MAX_LINE} characters; a row "
-                "holds a few numbers"
-            )
+            raise FileRefusal(f"{name}:{counter[0]}: {long}")
         if counter[0] == 1 and raw.startswith(b"\xef\xbb\xbf"):  # UTF-8's byte order mark
             raw = raw[3:]
         try:
@@ -233,10 +245,7 @@ def _lines(stream, name: str, counter: list):
                 "encoding); a track file is CSV text"
             ) from None
         if len(line.rstrip("\r\n")) > MAX_LINE:
-            raise FileRefusal(
-                f"{name}:{counter[0]}: a line longer than {MAX_LINE} characters; a row "
-                "holds a few numbers"
-            )
+            raise FileRefusal(f"{name}:{counter[0]}: {long}")
         yield line
 
 
@@ -251,7 +260,15 @@ def _number(text: str, column: str, where: str) -> float:
 
 
 def open_track(
-    path: str, stream, limits: Limits, focal=None, cx=None, words=None, direction=None, speed=None
+    path: str,
+    stream,
+    limits: Limits,
+    focal=None,
+    cx=None,
+    words=None,
+    direction=None,
+    speed=None,
+    cy=None,
 ) -> Reading:
     """Read a track file's header; its frames follow, each checked as it is read.
 
@@ -275,6 +292,8 @@ def open_track(
     speed : float or None
         With a ``time`` column (and only then): the depth's rate of change per
         second, a magnitude (> 0).
+    cy : float or None
+        The principal point's row in pixels, for a ``v`` column (with ``focal``).
 
     Returns
     -------
@@ -285,14 +304,14 @@ def open_track(
     FileRefusal
         ``FILE:LINE: why``, when the header is read or, as they are read, of the rows.
     ValueError
-        Naming ``path``, ``limits``, ``focal``, ``cx``, ``words``, ``direction`` or
-        ``speed`` when it is not of its form or the file needs another.
+        Naming ``path``, ``limits``, ``focal``, ``cx``, ``cy``, ``words``, ``direction``
+        or ``speed`` when it is not of its form or the file needs another.
     """
     if not isinstance(path, str):
         raise ValueError(f"path must be a string, got {type(path).__name__}")
     if not isinstance(limits, Limits):
         raise ValueError(f"limits must be a track_files.Limits, got {type(limits).__name__}")
-    _check_pixels(focal, cx, limits.pixels)
+    _check_pixels(focal, cx, cy, limits.pixels)
     words = {**WORDS, **(words or {})}
     if set(words) != set(WORDS):
         raise ValueError(f"words takes the keys {', '.join(WORDS)}, got {sorted(words)}")
@@ -308,9 +327,9 @@ def open_track(
             f"{name}:1: an empty file; the first line names the columns, of "
             f"{', '.join(COLUMNS)} ({words['format']})"
         )
-    columns = _header(row, f"{name}:1", focal is not None, words)
+    columns = _header(row, f"{name}:1", (focal is not None, cy is not None), words)
     direction = _direction(columns, name, direction, speed)
-    rows = _frames(reader, name, counter, columns, (limits, focal, cx, direction, speed))
+    rows = _frames(reader, name, counter, columns, (limits, (focal, cx, cy), direction, speed))
     return Reading(name, tuple(columns), direction, rows)
 
 
@@ -358,7 +377,7 @@ def _direction(columns: list, name: str, direction, speed) -> str:
 
 def _frames(reader, name: str, counter: list, columns: list, how: tuple) -> Iterator[Frame]:
     """The frames of the rows after the header (:func:`open_track`), missing ones filled in."""
-    limits, focal, cx, direction, speed = how
+    limits, pixels, direction, speed = how
     sign = -1.0 if direction == "approaching" else 1.0
     distance = next((c for c in DISTANCES if c in columns), None)
     previous, blank = None, None
@@ -376,7 +395,7 @@ def _frames(reader, name: str, counter: list, columns: list, how: tuple) -> Iter
                 raise FileRefusal(
                     f"{where}: {len(row)} fields, but the header names {len(columns)} columns"
                 )
-            values = _row(dict(zip(columns, row, strict=True)), where, limits, focal, cx)
+            values = _row(dict(zip(columns, row, strict=True)), where, limits, pixels)
             number = values.get("frame", 1 if previous is None else previous["frame"] + 1)
             values["frame"] = number
             step = math.nan
@@ -395,7 +414,8 @@ def _frames(reader, name: str, counter: list, columns: list, how: tuple) -> Iter
                 _first(distance, values, where)
             previous = values
             time = values.get("time", math.nan)
-            yield Frame(number, time, values["mu"], values.get("rho", math.nan), step, counter[0])
+            rho, nu = values.get("rho", math.nan), values.get("nu", math.nan)
+            yield Frame(number, time, values["mu"], rho, step, counter[0], nu)
     except csv.Error as exc:
         raise FileRefusal(f"{name}:{counter[0]}: not CSV: {exc}") from None
     if previous is None:
@@ -466,7 +486,15 @@ def _step(distance: str, values, previous, where: str, limits, direction: str, s
 
 
 def read(
-    path: str, stream, limits: Limits, focal=None, cx=None, words=None, direction=None, speed=None
+    path: str,
+    stream,
+    limits: Limits,
+    focal=None,
+    cx=None,
+    words=None,
+    direction=None,
+    speed=None,
+    cy=None,
 ) -> TrackFile:
     """Read a whole track file, checking every field where it stands.
 
@@ -483,7 +511,7 @@ def read(
     FileRefusal, ValueError
         As :func:`open_track`'s.
     """
-    reading = open_track(path, stream, limits, focal, cx, words, direction, speed)
+    reading = open_track(path, stream, limits, focal, cx, words, direction, speed, cy)
     held = hold(reading)
     if held.track is None:
         words = {**WORDS, **(words or {})}
@@ -527,6 +555,8 @@ def hold(reading: Reading, limit: int = checks.MAX_FRAMES) -> Held:
 def assemble(reading: Reading, frames: list) -> TrackFile:
     """The :class:`TrackFile` of a list of ``reading``'s frames."""
     time, mu, rho, step = np.array([f[1:5] for f in frames], dtype=float).reshape(-1, 4).T
+    if reading.pairs:
+        mu = np.stack([mu, np.array([f.nu for f in frames], dtype=float)], axis=-1)
     steps = step[1:]
     if not set(DISTANCES) & set(reading.columns) and reading.direction == "receding":
         steps = None  # unit steps receding: the paper's frames
@@ -542,14 +572,17 @@ def assemble(reading: Reading, frames: list) -> TrackFile:
     )
 
 
-def _check_pixels(focal, cx, largest: float) -> None:
-    """Refuse ``focal`` and ``cx`` unless both are None or both finite numbers, ``focal > 0``."""
+def _check_pixels(focal, cx, cy, largest: float) -> None:
+    """Refuse ``focal`` and ``cx`` unless both are None or both finite numbers, ``focal > 0``;
+    ``cy`` unless None or, with them, finite."""
     if (focal is None) != (cx is None):
         raise ValueError(f"{'cx' if cx is None else 'focal'} is needed with the other")
+    if cy is not None and focal is None:
+        raise ValueError("cy is for a v column (pixel rows), with focal and cx; give them too")
     if focal is None:
         return
-    for argument, value in (("focal", focal), ("cx", cx)):
-        if not (
+    for argument, value in (("focal", focal), ("cx", cx), ("cy", cy)):
+        if value is not None and not (
             isinstance(value, (int, float, np.integer, np.floating))
             and math.isfinite(value)
             and abs(value) <= largest
@@ -561,10 +594,12 @@ def _check_pixels(focal, cx, largest: float) -> None:
         raise ValueError(f"focal must be positive, got {focal!r}")
 
 
-def read_path(path, limits: Limits, focal=None, cx=None, direction=None, speed=None) -> TrackFile:
+def read_path(
+    path, limits: Limits, focal=None, cx=None, direction=None, speed=None, cy=None
+) -> TrackFile:
     """:func:`read` of the file at ``path`` (a str or os.PathLike).
 
-    ``limits``, ``focal``, ``cx``, ``direction`` and ``speed``, the
+    ``limits``, ``focal``, ``cx``, ``direction``, ``speed`` and ``cy``, the
     :class:`TrackFile` and the :class:`FileRefusal` of a malformed file are
     :func:`read`'s; a ``ValueError`` names ``path`` when the file cannot be
     opened or read.
@@ -575,13 +610,13 @@ def read_path(path, limits: Limits, focal=None, cx=None, direction=None, speed=N
         raise ValueError(f"path must be a file's path, got {type(path).__name__}") from None
     try:
         with open(text, "rb") as stream:
-            return read(str(text), stream, limits, focal, cx, None, direction, speed)
+            return read(str(text), stream, limits, focal, cx, None, direction, speed, cy)
     except OSError as exc:
         raise ValueError(f"path: cannot read {text!r}: {exc.strerror or exc}") from None
 
 
-def _header(row: list, where: str, pixels: bool, words: dict) -> list:
-    """The header's column names, checked."""
+def _header(row: list, where: str, pixels: tuple, words: dict) -> list:
+    """The header's column names, checked; ``pixels``: whether focal and cx, and cy, are given."""
     names = [c.strip() for c in row]
     if not any(names):
         raise FileRefusal(
@@ -601,17 +636,27 @@ def _header(row: list, where: str, pixels: bool, words: dict) -> list:
         raise FileRefusal(
             f"{where}: the header must name either a mu column or a u column (pixels)"
         )
-    if "u" in names and not pixels:
+    if "u" in names and not pixels[0]:
         raise FileRefusal(f"{where}: a u column (pixels) needs {words['focal']} and {words['cx']}")
-    if "mu" in names and pixels:
+    if "mu" in names and pixels[0]:
         raise FileRefusal(
             f"{where}: {words['focal']} and {words['cx']} are for a u column; this file has mu"
+        )
+    if ("nu" in names and "u" in names) or ("v" in names and "mu" in names):
+        raise FileRefusal(f"{where}: a pair's columns are mu and nu, or u and v (pixels)")
+    if ("v" in names) != pixels[1]:
+        raise FileRefusal(
+            f"{where}: a v column (pixel rows) needs {words['cy']}"
+            if "v" in names
+            else f"{where}: {words['cy']} is for a v column (pixel rows); this file has none"
         )
     return names
 
 
-def _row(fields: dict, where: str, limits: Limits, focal, cx) -> dict:
-    """One row's numbers, checked: ``mu`` (from ``u``), ``rho``, ``frame``, a distance."""
+def _row(fields: dict, where: str, limits: Limits, pixels: tuple) -> dict:
+    """One row's numbers, checked: ``mu`` (from ``u``), ``nu`` (from ``v``), ``rho``, ``frame``,
+    a distance; ``pixels`` is ``(focal, cx, cy)``."""
+    focal, cx, cy = pixels
     out = {}
     for column, raw in fields.items():
         text = raw.strip()
@@ -621,22 +666,30 @@ def _row(fields: dict, where: str, limits: Limits, focal, cx) -> dict:
             out["frame"] = int(text)
             continue
         value = _number(text, column, where)
-        if column == "u" and not math.isnan(value):
-            value = (value - cx) / focal
+        if column in ("u", "v") and not math.isnan(value):
+            centre, axis = (cx, "cx") if column == "u" else (cy, "cy")
+            value = (value - centre) / focal
             if not abs(value) <= limits.mu:
                 raise FileRefusal(
-                    f"{where}: u gives a bearing (u - cx) / focal of magnitude more than "
-                    f"{limits.mu:g}, got u = {text}"
+                    f"{where}: {column} gives a bearing ({column} - {axis}) / focal of magnitude "
+                    f"more than {limits.mu:g}, got {column} = {text}"
                 )
-        elif column == "mu" and not abs(value) <= limits.mu and not math.isnan(value):
-            raise FileRefusal(f"{where}: mu must be at most {limits.mu:g} in magnitude, got {text}")
+        elif column in ("mu", "nu") and not abs(value) <= limits.mu and not math.isnan(value):
+            raise FileRefusal(
+                f"{where}: {column} must be at most {limits.mu:g} in magnitude, got {text}"
+            )
         elif column == "rho" and not math.isnan(value):
             lo, hi = limits.rho
             if not lo <= value <= hi:
                 raise FileRefusal(f"{where}: rho must be from {lo:g} to {hi:g}, got {text}")
         elif column in ("travel", "time") and math.isnan(value):
             raise FileRefusal(f"{where}: {column} must be a number at every row, got {text!r}")
-        out["mu" if column == "u" else column] = value
+        out[{"u": "mu", "v": "nu"}.get(column, column)] = value
+    if "nu" in out and math.isnan(out["mu"]) != math.isnan(out["nu"]):
+        raise FileRefusal(
+            f"{where}: a pair has one coordinate only; give both (a frame with a bearing) or "
+            "neither (a missing frame)"
+        )
     if "rho" in out and math.isnan(out["rho"]) and not math.isnan(out["mu"]):
         raise FileRefusal(f"{where}: rho is empty at a frame with a bearing")
     return out
