@@ -273,7 +273,10 @@ def test_estimate_takes_more_frames_process_noise_and_smoothing(capsys):
             ["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.005", "--process-noise", "1e3"],
             "--process-noise must be 0 or from",
         ),
-        (["estimate", "--mu", "0.3", "0", "0.2", "0.1", "--rho", "0.005"], "give --prior-mean"),
+        (
+            ["estimate", "--mu", "0.3", "0", "0.2", "0.1", "--rho", "0.005"],
+            "--prior-mean or --prior-depth MEAN SD is needed",
+        ),
         (["study", "--frames", "2"], "--frames must be an integer from 3 to 1000, got 2"),
         (
             ["study", "--frames", "5", "--process-noise", "0.01", "--filters", "particle"],

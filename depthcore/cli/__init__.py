@@ -4,10 +4,13 @@
 * :mod:`~depthcore.cli.parsing`: what the commands share: the parser (each
   option once), their common options, the progress bar and the output;
 * :mod:`~depthcore.cli.refusals`: the one-line refusals in the user's words;
+* :mod:`~depthcore.cli.priors`: ``estimate``'s prior, ``--prior-mean``,
+  ``--prior-cov`` and ``--prior-depth``, on three coordinates or, for pairs, five,
+  and the rule it follows without one;
 * :mod:`~depthcore.cli.text`: the command line's tables and their legends;
 * :mod:`~depthcore.cli.tracks`: ``estimate``'s tracks in the user's words:
-  ``--mu-file`` (standard input for ``-``), ``--mu``, ``--steps``,
-  ``--direction``, ``--speed``, ``--focal``, ``--cx``, ``--gate``, the track
+  ``--mu-file`` (standard input for ``-``), ``--mu``, ``--nu``, ``--steps``,
+  ``--direction``, ``--speed``, ``--focal``, ``--cx``, ``--cy``, ``--gate``, the track
   file's format and the direction's convention as ``estimate --help`` shows
   them, and a long track's rows spooled;
 * :mod:`~depthcore.cli.atlas_command`: ``atlas``, every filter's verdicts over

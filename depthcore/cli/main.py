@@ -23,14 +23,13 @@ import warnings
 import numpy as np
 
 from depthcore import __version__
-from depthcore.cli import atlas_command, parsing, refusals, tracks
+from depthcore.cli import atlas_command, parsing, priors, refusals, tracks
 from depthcore.cli import cluster as cluster_options
 from depthcore.cli import text as cli_text
-from depthcore.problem import checks, frames
-from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian
+from depthcore.problem import bearing_pairs, checks, frames
 from depthcore.registry import online, track_files, track_runs
 from depthcore.registry.filters import FILTERS, RBPF_REPLICAS, names
-from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE, default_prior
+from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE
 from depthcore.studies import monte_carlo, reproduce, tasks
 from depthcore.studies import trials as study_trials
 
@@ -82,47 +81,6 @@ def _check_process_noise(q: float) -> float:
     return q
 
 
-def _prior(mu, prior_mean, prior_cov, steps=None) -> Gaussian:
-    """The prior from the command line, defaulting to the paper's rule (``default_prior``)."""
-    if prior_mean is not None:
-        refusals.check_limits("--prior-mean", prior_mean, PRIOR_MEAN_MAX)
-    if prior_cov is not None:
-        refusals.check_limits("--prior-cov", prior_cov, PRIOR_COV_RANGE[1])
-    if prior_mean is None:
-        try:
-            mean = default_prior(mu, steps).mean
-        except ValueError as exc:
-            raise ValueError(
-                f"{exc}; the paper's prior rule needs the noise-free solution of the first "
-                "three bearings present, so give --prior-mean"
-            ) from None
-    else:
-        mean = np.array(prior_mean)
-    if prior_cov is None:
-        cov = PAPER_PRIOR_SCALE * np.eye(3)
-    elif len(prior_cov) == 1:
-        if not prior_cov[0] > 0:
-            raise ValueError(
-                "--prior-cov must be positive definite; "
-                f"S = {refusals.exact(prior_cov[0])} is not > 0"
-            )
-        cov = prior_cov[0] * np.eye(3)
-    elif len(prior_cov) == 9:
-        cov = np.array(prior_cov).reshape(3, 3)
-    else:
-        raise ValueError(
-            f"--prior-cov takes 1 value (S I) or 9 (a 3 x 3 matrix), got {len(prior_cov)}"
-        )
-    prior = Gaussian.prior(mean, cov, names=("--prior-mean", "--prior-cov"))
-    smallest = np.linalg.eigvalsh(prior.cov)[0]
-    if smallest < PRIOR_COV_RANGE[0]:
-        raise ValueError(
-            f"--prior-cov must have eigenvalues of at least {PRIOR_COV_RANGE[0]:g}, "
-            f"got {smallest!r}"
-        )
-    return prior
-
-
 def _cmd_reproduce(args) -> str:
     result = parsing.with_bar(
         "reproduce", "figure", lambda progress: reproduce.reproduce(progress=progress)
@@ -141,11 +99,17 @@ def _cmd_estimate(args):
 
 def _estimate(args, held):
     src = held.track or track_files.assemble(held.reading, held.first)  # a long track's start
+    pairs = src.mu.ndim == 2
     if held.track is None:
         _refuse_long(args, held)
     if args.learn_noise:
         if args.rho is not None:
             raise ValueError("--rho: not used with --learn-noise, which estimates it; leave it out")
+        if pairs:
+            raise ValueError(
+                "--learn-noise learns from the plane's bearings (mu or u) only; this track has "
+                "pairs (a point in 3-D)"
+            )
         rho = 1.0 if src.rho is None else src.rho  # a rho column: the relative noise levels
     else:
         rho = _noise(args, src)
@@ -156,18 +120,27 @@ def _estimate(args, held):
         parsing.refuse_ignored(args, "estimate without --per-frame", {"csv": "--csv"})
     gate = None if args.gate is None else tracks.check_gate(args.gate)
     steps = None if src.steps is None or np.all(src.steps == 1.0) else src.steps
-    if held.track is not None:
-        frames.check(src.mu, rho, steps)  # the bearings' refusals come before the prior's
-    prior = _prior(src.mu, args.prior_mean, args.prior_cov, steps)
+    if held.track is not None:  # the bearings' refusals come before the prior's
+        (bearing_pairs.check if pairs else frames.check)(src.mu, rho, steps)
+    prior = priors.prior(src.mu, steps, args, PRIOR_MEAN_MAX, PRIOR_COV_RANGE)
     direction = {"direction": src.direction, "direction_given": args.direction is not None}
+    stream_rho = None if src.rho is not None else rho
+    if pairs:
+        _refuse_for_pairs(args, gate)
     if held.track is None:
-        return _streamed(args, held, None if src.rho is not None else rho, prior, q, gate)
+        return _streamed(args, held.reading.frames, stream_rho, prior, q, gate, direction)
+    if pairs and args.per_frame:
+        frames_in = track_runs.frames_of(src)
+        return _streamed(args, frames_in, stream_rho, prior, q, gate, direction, "pairs")
+    if pairs:
+        return _pairs(args, src, rho, steps, prior, q, direction)
     learned = None
     if args.learn_noise:
         known_q = q if "process_noise" in getattr(args, "_given", ()) else None
-        learned = track_runs.learn(src.mu, rho, prior, known_q, steps)
+        learned = track_runs.learn(src.mu, rho, prior, known_q, steps, gate)
         rho = learned.rho * np.asarray(rho) if np.ndim(rho) else learned.rho
         q = learned.process_noise
+        learned = track_runs.learned_json(learned, src.rho is not None, src.frames, src.times)
     if args.per_frame:
         return _per_frame(args, src, rho, steps, prior, q, gate, learned, direction)
     names = tuple(dict.fromkeys(args.filters))
@@ -178,7 +151,14 @@ def _estimate(args, held):
     )
     summary |= _named_frames(summary, src) | direction
     if learned is not None:
-        summary["learned"] = track_runs.learned_json(learned)
+        summary["learned"] = learned
+    return _summary_text(args, summary, src, steps)
+
+
+def _summary_text(args, summary: dict, src, steps) -> str:
+    """The summary as JSON or a table, saying why ``c`` is undefined where it is."""
+    if summary["c"] is None:
+        summary["c_reason"] = track_runs.noise_free(src.mu, steps)[1]
     return (
         cli_text.as_json(summary)
         if args.json
@@ -210,17 +190,18 @@ def _bearings(args) -> track_files.Held:
     """The bearings of ``--mu`` or ``--mu-file`` (``NaN`` at a missing frame)."""
     args._words = {"prior": "--prior-mean"}  # the paper's rule: give the prior's mean instead
     if args.mu_file is None:
-        parsing.refuse_ignored(args, "--mu (they convert a file's u column)", _PIXEL_FLAGS)
+        parsing.refuse_ignored(args, "--mu (they convert a file's u and v columns)", _PIXEL_FLAGS)
         parsing.refuse_ignored(
             args, "--mu (it converts a file's time column)", {"speed": "--speed"}
         )
-        track = tracks.from_values(args.mu, MU_MAX, args.steps, args.direction, STEP_RANGE)
+        track = tracks.from_values(args.mu, MU_MAX, args.steps, args.direction, STEP_RANGE, args.nu)
         return track_files.Held(track, None, None)
     parsing.refuse_ignored(
         args, "--mu-file (its step, travel or time column)", {"steps": "--steps"}
     )
+    parsing.refuse_ignored(args, "--mu-file (its nu or v column)", {"nu": "--nu"})
     limits = track_files.Limits(MU_MAX, RHO_RANGE, STEP_RANGE, PIXELS_MAX)
-    options = {k: getattr(args, k) for k in ("focal", "cx", "direction", "speed")}
+    options = {k: getattr(args, k) for k in ("focal", "cx", "cy", "direction", "speed")}
     held = tracks.read_file(args.mu_file, limits, options)
     name = held.reading.name
     args._words |= {k: f"{name}: {column}" for k, column in track_files.LIBRARY_NAMES.items()}
@@ -230,7 +211,7 @@ def _bearings(args) -> track_files.Held:
 
 
 #: The options that convert a file's column ``u`` of pixels into bearings.
-_PIXEL_FLAGS = {"focal": "--focal", "cx": "--cx"}
+_PIXEL_FLAGS = {"focal": "--focal", "cx": "--cx", "cy": "--cy"}
 
 
 def _noise(args, src: track_files.TrackFile):
@@ -269,8 +250,34 @@ def _per_frame(args, src, rho, steps, prior, q, gate, learned, direction):
     if learned is not None:
         if args.csv:
             raise ValueError("--csv: the learned noise levels have no CSV; use --json or the table")
-        result["learned"] = track_runs.learned_json(learned)
+        result["learned"] = learned
     return cli_text.per_frame_text(result | direction, blocks, _output(args))
+
+
+def _refuse_for_pairs(args, gate) -> None:
+    """Refuse what a track of pairs cannot have: a smoother, the exact filter's gate."""
+    if args.smooth:
+        raise ValueError("--smooth: no smoother takes pairs (a point in 3-D) yet; leave it out")
+    if gate is not None and (not args.per_frame or "optimal" in _chosen(args)):
+        raise ValueError(
+            "--gate: the exact filter has no gate on pairs (a point in 3-D); --per-frame "
+            "--filters ekf ukf gates each frame's pair"
+        )
+
+
+def _pairs(args, src, rho, steps, prior, q, direction):
+    """``estimate`` of a track of pairs, a point in 3-D: the filters that take them."""
+    spatial = track_runs.spatial_names()
+    names = parsing.named_once(args.filters, "--filters") if "filters" in args._given else spatial
+    without = [n for n in names if n not in spatial]
+    if without:
+        raise ValueError(
+            f"--filters: {without[0]} takes no pairs (a point in 3-D); {', '.join(spatial)} do"
+        )
+    summary = track_runs.summarize_pairs(src.mu, rho, prior, q, names, steps)
+    summary["c"] = track_runs.noise_free(src.mu, steps)[0]
+    summary["c"] = None if summary["c"] is None else summary["c"].tolist()
+    return _summary_text(args, summary | _named_frames(summary, src) | direction, src, steps)
 
 
 def _output(args) -> str:
@@ -297,23 +304,26 @@ def _refuse_long(args, held) -> None:
         )
 
 
-def _streamed(args, held, rho, prior, q, gate):
-    """``estimate --per-frame`` of a track past ``MAX_FRAMES``: the online filters, streamed."""
+def _streamed(args, frames_in, rho, prior, q, gate, direction, why="long"):
+    """``estimate --per-frame`` through the online filters, streamed: a track past
+    ``MAX_FRAMES`` (``why`` ``"long"``) or of pairs (``"pairs"``), which no smoother takes."""
     chosen = _chosen(args)
-    rows = track_runs.streamed(held.reading.frames, rho, prior, q, chosen, gate)
+    rows = track_runs.streamed(frames_in, rho, prior, q, chosen, gate)
     count, blocks = tracks.spool(rows, chosen)
     head = {
         "frames": count,
+        **({"coordinates": ["x", "y", "v", "h", "w"]} if len(prior.mean) == 5 else {}),
         "prior_mean": prior.mean.tolist(),
         "prior_cov": prior.cov.tolist(),
         "process_noise": q,
         "gate": gate,
         "smoothed": False,
-        "smoothed_reason": f"the smoother holds the whole track, at most {FRAMES_MAX} frames",
-        "direction": held.reading.direction,
-        "direction_given": args.direction is not None,
+        "smoothed_reason": {
+            "long": f"the smoother holds the whole track, at most {FRAMES_MAX} frames",
+            "pairs": "no smoother takes pairs (a point in 3-D) yet",
+        }[why],
     }
-    return cli_text.per_frame_text(head, blocks, _output(args))
+    return cli_text.per_frame_text(head | direction, blocks, _output(args))
 
 
 def _truth(values) -> np.ndarray:
@@ -455,20 +465,7 @@ def _add_estimate_arguments(sub, common) -> None:
         help=f"noise standard deviation, from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g} (needed "
         "unless the file has a rho column)",
     )
-    e.add_argument(
-        "--prior-mean",
-        type=float,
-        nargs=3,
-        metavar=("X", "Y", "V"),
-        help="prior mean at the first frame (default: the paper's (c1 - 2 c3, c2 - 2, 0))",
-    )
-    e.add_argument(
-        "--prior-cov",
-        type=float,
-        nargs="+",
-        metavar="S",
-        help="prior covariance: S for S I (default 1000), or 9 values row by row",
-    )
+    priors.add_arguments(e)
     parsing.add_process_noise(e, ": the paper's constant velocity")
     e.add_argument(
         "--smooth",
@@ -493,13 +490,15 @@ def _add_estimate_arguments(sub, common) -> None:
         action="store_true",
         help="estimate rho and the process noise from the track by maximum likelihood (with "
         "--process-noise given: rho only; a rho column gives the frames' relative noise "
-        "levels), with standard errors, and run the filters with them",
+        "levels, and its scale is learned), with standard errors and the profile "
+        "likelihood's intervals, and run the filters with them",
     )
     e.add_argument(
         "--gate",
         type=float,
         metavar="P",
-        help="skip a bearing whose predictive tail probability is below P (a probability)",
+        help="skip a bearing whose predictive tail probability is below P (a probability); "
+        "with --learn-noise, also while learning",
     )
     e.add_argument(
         "--csv", action="store_true", help="with --per-frame: print CSV instead of a table"

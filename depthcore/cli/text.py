@@ -19,6 +19,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from depthcore.cli.priors import RULE as PRIOR_RULE
 from depthcore.cli.tracks import FORMAT as TRACK_FORMAT
 from depthcore.problem import checks
 
@@ -45,6 +46,10 @@ SUMMARY_LEGEND = """\
 legend: depth mean, depth sd  the filter's posterior mean and SD of the depth y at frame N
         vel. mean, vel. sd    the same of the velocity v (the x-velocity; the y-velocity is 1)
         error estimates       the optimal filter's numerical error of its mean and SD"""
+
+#: The legend of :func:`format_summary`'s columns of a point in 3-D (pairs).
+SPACE_LEGEND = """\
+        height mean, sd       the same of the height h; vert. vel. mean, sd of its velocity w"""
 
 
 #: The legend of :func:`format_summary`'s smoothed columns.
@@ -148,18 +153,19 @@ def format_summary(summary: dict) -> str:
     """A plain-text rendering of :func:`~depthcore.studies.reproduce.summarize`'s result."""
     c = summary["c"]
     m, cov = summary["prior_mean"], np.asarray(summary["prior_cov"])
-    if np.array_equal(cov, cov[0, 0] * np.eye(3)):
+    if np.array_equal(cov, cov[0, 0] * np.eye(len(m))):
         cov_text = f"{cov[0, 0]:.4g} I"
     else:
         cov_text = "[" + "; ".join(" ".join(f"{v:.4g}" for v in row) for row in cov) + "]"
     N = summary.get("frames", 3)
     q = summary.get("process_noise", 0.0)
     number = summary.get("frame_numbers", list(range(1, N + 1)))
+    undefined = "undefined" + (f": {summary['c_reason']}" if summary.get("c_reason") else "")
     lines = [
         f"noise-free state c = (x, y, v) at frame {number[min(2, N - 1)]} = "
-        + ("undefined" if c is None else f"({c[0]:#.4g}, {c[1]:#.4g}, {c[2]:#.4g})"),
-        f"prior at frame {number[0]}: mean (x, y, v) = ({m[0]:#.4g}, {m[1]:#.4g}, "
-        f"{m[2]:#.4g}), covariance {cov_text}",
+        + (undefined if c is None else f"({c[0]:#.4g}, {c[1]:#.4g}, {c[2]:#.4g})"),
+        f"prior at frame {number[0]}: mean {'(x, y, v, h, w)' if len(m) == 5 else '(x, y, v)'}"
+        f" = ({', '.join(f'{v:#.4g}' for v in m)}), covariance {cov_text}",
     ]
     if "direction" in summary:
         lines.append(direction_text(summary))
@@ -182,14 +188,19 @@ def format_summary(summary: dict) -> str:
             )
         )
     w = max([13, *(len(n) + 1 for n in [*summary["filters"], *summary.get("not_run", {})])])
+    space = len(m) == 5  # pairs: a point in 3-D
+    columns = _SUMMARY_COLUMNS if space else _SUMMARY_COLUMNS[:2]
     lines.append(
-        f"{'filter':<{w}} {'depth mean':>11} {'depth sd':>10} {'vel. mean':>10} {'vel. sd':>10}"
+        f"{'filter':<{w}}"
+        + "".join(f" {h + ' mean':>{width}} {h + ' sd':>10}" for _, h, width in columns)
     )
     for name in summary["filters"]:
         f = summary["filters"][name]
         lines.append(
-            f"{name:<{w}} {f['depth']['mean']:>#11.4g} {f['depth']['sd']:>#10.4g} "
-            f"{f['velocity']['mean']:>#10.4g} {f['velocity']['sd']:>#10.4g}"
+            f"{name:<{w}}"
+            + "".join(
+                f" {f[k]['mean']:>#{width}.4g} {f[k]['sd']:>#10.4g}" for k, _, width in columns
+            )
         )
     for name, f in summary["filters"].items():
         if f.get("sigma_points_behind_camera"):
@@ -229,10 +240,20 @@ def format_summary(summary: dict) -> str:
             cells = " ".join(f"{v:>#10.4g}" for v in row).replace(" ", "  ", 1)
             time = f" {times[k]:>10.4g}" if times else ""
             lines.append(f"{frames[k]:>{w}}{time} {cells}")
-    lines.append(SUMMARY_LEGEND)
+    lines.append(SUMMARY_LEGEND + ("\n" + SPACE_LEGEND if space else ""))
     if "smoothed" in summary:
         lines.append(SMOOTHED_LEGEND)
     return "\n".join(lines) + "\n"
+
+
+#: The columns of :func:`format_summary`'s table: a moment's key, the column's name and the
+#: mean's width; a point in 3-D (pairs) has all four, the plane the first two.
+_SUMMARY_COLUMNS = (
+    ("depth", "depth", 11),
+    ("velocity", "vel.", 10),
+    ("height", "height", 11),
+    ("vertical_velocity", "vert. vel.", 15),
+)
 
 
 def _label(frame, time=None) -> str:
@@ -377,9 +398,10 @@ legend: frame    the frame's number in the track (time: its time in seconds, whe
                  track has one); bearing: yes, no (a missing frame: the filter predicts
                  through it) or gated (skipped: its predictive tail probability was below
                  the gate)
-        mu       the bearing (blank at a missing frame)
+        mu       the bearing (blank at a missing frame); nu: a pair's vertical bearing
         filtered the state at the frame given the bearings up to it: mean (SD) of the depth
-                 y, the lateral position x and the velocity v
+                 y, the lateral position x and the velocity v (with pairs, the height h and
+                 its velocity w)
         smoothed the same given every bearing of the track (at the last frame, the filtered)
         tail     the two-sided tail probability of the bearing under the filter's predictive
                  density (small: an outlier)"""
@@ -391,31 +413,35 @@ def _cell(value, spec: str) -> str:
 
 
 def format_learned(result: dict) -> str:
-    """The line of ``--learn-noise``'s estimates, or nothing without them."""
+    """The lines of ``--learn-noise``'s estimates, or nothing without them.
+
+    A ``rho`` column's learned factor is named its scale; the intervals are named
+    by their kind (the profile likelihood's); with a gate, the frames it skipped.
+    """
     fit = result.get("learned")
     if fit is None:
         return ""
+    kind = f"{fit['level']:.0%} {fit['intervals']}-likelihood"
 
     def one(name, symbol):
         value, se, interval = fit[name], fit[f"{name}_se"], fit[f"{name}_interval"]
         if name not in fit["estimated"]:
             return f"{symbol} = {value:.4g} (given)"
         if se is None:  # at the boundary q = 0: a one-sided interval
-            return (
-                f"{symbol} = {value:.4g} (at 0; {fit['level']:.0%} upper bound {interval[1]:.3g})"
-            )
+            return f"{symbol} = {value:.4g} (at 0; {kind} upper bound {interval[1]:.3g})"
         return (
-            f"{symbol} = {value:.4g} ± {se:.2g} ({fit['level']:.0%} interval "
+            f"{symbol} = {value:.4g} ± {se:.2g} ({kind} interval "
             f"{interval[0]:.4g} to {interval[1]:.4g})"
         )
 
-    return (
-        "learned by maximum likelihood: "
-        + one("rho", "rho")
-        + "; "
-        + one("process_noise", "q")
-        + "\n"
-    )
+    rho = "rho_column_scale" if "rho_column_scale" in fit else "rho"
+    text = f"learned by maximum likelihood: {one(rho, rho.replace('_', ' '))}; "
+    text += one("process_noise", "q") + "\n"
+    if "gate_skipped" in fit:
+        times = fit.get("gate_skipped_times", [None] * len(fit["gate_skipped"]))
+        skipped = ", ".join(map(_label, fit["gate_skipped"], times)) or "none"
+        text += f"learning's gate skipped frames: {skipped}\n"
+    return text
 
 
 def per_frame_text(head: dict, blocks: dict, output: str) -> Iterator[str]:
@@ -435,8 +461,9 @@ def per_frame_text(head: dict, blocks: dict, output: str) -> Iterator[str]:
 def _table_chunks(head: dict, blocks: dict) -> Iterator[str]:
     m, q = head["prior_mean"], head["process_noise"]
     yield format_learned(head) + (
-        f"{head['frames']} frames; prior at the first frame: mean (x, y, v) = "
-        f"({m[0]:#.4g}, {m[1]:#.4g}, {m[2]:#.4g}); process noise q = {q:g}"
+        f"{head['frames']} frames; prior at the first frame: mean "
+        f"{'(x, y, v, h, w)' if len(m) == 5 else '(x, y, v)'} = "
+        f"({', '.join(f'{v:#.4g}' for v in m)}); process noise q = {q:g}"
         + ("" if head["gate"] is None else f"; gate {head['gate']:g}")
         + f"\n{direction_text(head)}\n"
     )
@@ -447,25 +474,34 @@ def _table_chunks(head: dict, blocks: dict) -> Iterator[str]:
         for k, r in enumerate(rows):
             if k == 0:
                 timed, tail = "time" in r, "tail" in r
+                state = _STATE if "nu" in r else _STATE[:3]
+                bearings = ("mu", "nu") if "nu" in r else ("mu",)
                 top = f"{'frame':>6}" + (f" {'time':>10}" if timed else "")
-                top += f" {'bearing':<7} {'mu':>10}"
+                top += f" {'bearing':<7}" + "".join(f" {b:>10}" for b in bearings)
                 for s in series:
-                    top += "  " + " ".join(f"{key + ' ' + s:>19}" for key, _ in _STATE)
+                    top += "  " + " ".join(f"{key + ' ' + s:>19}" for _, key in state)
                 yield f"\n{name}:\n{top}" + (f" {'tail':>8}" if tail else "") + "\n"
             flag = "gated" if r.get("gated") else ("yes" if r["bearing"] else "no")
             cells = f"{r['frame']:>6}" + (f" {r['time']:>10.4g}" if timed else "")
-            cells += f" {flag:<7} {_cell(r['mu'], '.6g'):>10}"
+            cells += f" {flag:<7}" + "".join(f" {_cell(r[b], '.6g'):>10}" for b in bearings)
             for s in series:
                 cells += "  " + " ".join(
                     f"{r[f'{s}_{key}_mean']:>#9.4g} ({r[f'{s}_{key}_sd']:#.3g})".rjust(19)
-                    for key, _ in _STATE
+                    for key, _ in state
                 )
             yield cells + (f" {_cell(r.get('tail'), '.3g'):>8}" if tail else "") + "\n"
     yield PER_FRAME_LEGEND + "\n"
 
 
-#: The quantities of a per-frame table: the key in a row, the column's name.
-_STATE = (("depth", "y"), ("x", "x"), ("velocity", "v"))
+#: The quantities of a per-frame table: the key in a row, the column's name (a point in 3-D,
+#: pairs, has all five, the plane the first three).
+_STATE = (
+    ("depth", "depth"),
+    ("x", "x"),
+    ("velocity", "velocity"),
+    ("height", "height"),
+    ("vertical_velocity", "vert. vel."),
+)
 
 
 def _csv_chunks(head: dict, blocks: dict) -> Iterator[str]:
@@ -538,11 +574,15 @@ examples:
   python -m depthcore estimate --mu-file track.csv --per-frame --csv
   python -m depthcore estimate --mu-file pixels.csv --focal 800 --cx 320 --rho 0.002 --per-frame
   python -m depthcore estimate --mu-file drive.csv --direction approaching --speed 8 --per-frame
+  python -m depthcore estimate --mu-file points.csv --focal 800 --cx 320 --cy 240 --rho 0.002
+  python -m depthcore estimate --mu-file track.csv --learn-noise --gate 0.001 --prior-depth 20 5
 
 The noise-free state c is (x, y, v) at frame 3 (from the first three bearings);
 the prior is at frame 1; every filter reports the state at the last frame N.
 
-{TRACK_FORMAT}""",
+{TRACK_FORMAT}
+
+{PRIOR_RULE}""",
     "study": f"""\
 examples:
   python -m depthcore study --trials 500 --seed 1

@@ -5,8 +5,8 @@ Recommended import: ``from depthcore.cli import tracks``.
 Reading a track file and running it frame by frame are the library's
 (:mod:`depthcore.registry.track_files`, :mod:`depthcore.registry.track_runs`);
 here are the track's options (:func:`add_arguments`) and their checks in the
-user's words (``--focal``, ``--cx``, ``--mu``, ``--steps``, ``--direction``,
-``--speed``, ``--gate``), standard input for ``-``, the format and the
+user's words (``--focal``, ``--cx``, ``--cy``, ``--mu``, ``--nu``, ``--steps``,
+``--direction``, ``--speed``, ``--gate``), standard input for ``-``, the format and the
 direction's convention as ``estimate --help`` shows them (:data:`FORMAT`), and
 the rows of a long track spooled to temporary files (:func:`spool`), so that
 its output is printed whole once every frame is answered, in constant memory.
@@ -23,7 +23,7 @@ import tempfile
 import numpy as np
 
 from depthcore.problem import checks
-from depthcore.registry import online, track_files
+from depthcore.registry import online, track_files, track_runs
 
 #: The track file's format and the direction's convention, as ``estimate --help`` shows them.
 FORMAT = f"""\
@@ -32,6 +32,9 @@ input): a header naming the columns, then one row per frame in time order.
   mu      the bearing (tangent of the angle from the direction of motion); or
   u       the image column in pixels instead of mu, with --focal and --cx:
           mu = (u - cx) / focal (a pixel noise s is rho = s / focal)
+  nu      optional, with mu: the vertical bearing h / y, making each frame a
+          pair, a point in 3-D (below); or
+  v       the image row in pixels, with u and --cy: nu = (v - cy) / focal
   rho     optional: the noise SD of each frame's bearing (in mu's units);
           without it, --rho for every frame
   frame   optional: the frame number, strictly increasing integers; without a
@@ -42,7 +45,7 @@ and at most one distance column, which gives the steps (without: unit steps):
   time    the time in seconds, strictly increasing: a step is --speed V (the
           depth's change per second) times the time since the previous row
 An empty field or nan in mu (or u) is a missing frame: the filter predicts
-through it (its rho may be empty too).
+through it (its rho may be empty too); a pair has both or neither.
 
 The direction. A step is the depth's change: + while the point recedes (the
 camera moves away from it), - while it approaches (the camera moves towards
@@ -50,6 +53,12 @@ it). Distances (a step, travel or time column, or --steps) need --direction:
 receding or approaching (the distances are then positive magnitudes) or signed
 (the step or travel column's own signs). Without distances the frames are unit
 steps receding, the paper's; every output names the direction it used.
+
+Pairs (a nu or v column, or --nu): the point (x, y, v) and its height h and
+vertical velocity w (h measured as the rows grow), the noise rho on each
+bearing. The filters that take them are {", ".join(track_runs.spatial_names())}, on a prior of five
+coordinates (below); --per-frame streams them through the online filters; no
+smoother, nor --learn-noise, takes them yet.
 
 Up to {checks.MAX_FRAMES} frames are held whole, as the summary, --smooth and --learn-noise
 need; --per-frame streams a longer file through the online filters ({", ".join(online.NAMES)}):
@@ -59,6 +68,7 @@ each frame's filtered state, without the smoothed one."""
 WORDS = {
     "focal": "--focal",
     "cx": "--cx",
+    "cy": "--cy",
     "format": "see estimate --help",
     "long": "--per-frame streams a longer one through the online filters",
 }
@@ -72,10 +82,21 @@ def add_arguments(parser, given) -> None:
         help="read the bearings from a CSV file instead (- for standard input; its format below)",
     )
     parser.add_argument(
-        "--focal", type=float, metavar="F", help="the focal length in pixels, for a column u"
+        "--focal", type=float, metavar="F", help="the focal length in pixels, for columns u, v"
     )
     parser.add_argument(
         "--cx", type=float, metavar="C", help="the principal point's column in pixels, for u"
+    )
+    parser.add_argument(
+        "--cy", type=float, metavar="C", help="the principal point's row in pixels, for v"
+    )
+    parser.add_argument(
+        "--nu",
+        type=float,
+        nargs="+",
+        metavar="N",
+        help="with --mu: the vertical bearings nu1 nu2 ... (h / y), one per mu (nan where "
+        "mu is): a point in 3-D",
     )
     parser.add_argument(
         "--steps",
@@ -104,7 +125,7 @@ def add_arguments(parser, given) -> None:
 def read_file(path: str, limits: track_files.Limits, options: dict) -> track_files.Held:
     """:func:`depthcore.registry.track_files.hold` of ``--mu-file`` (``-``: standard input).
 
-    ``options`` holds ``focal``, ``cx``, ``direction`` and ``speed`` as given.
+    ``options`` holds ``focal``, ``cx``, ``cy``, ``direction`` and ``speed`` as given.
 
     Returns
     -------
@@ -118,19 +139,10 @@ def read_file(path: str, limits: track_files.Limits, options: dict) -> track_fil
     depthcore.registry.track_files.FileRefusal
         A malformed file, ``FILE:LINE: why``.
     ValueError
-        Naming ``--focal``, ``--cx``, ``--speed``, ``--direction`` or
-        ``--mu-file`` (a file that cannot be read).
+        Naming ``--mu-file`` (a file that cannot be read), or ``focal``, ``cx``,
+        ``cy``, ``speed`` and ``direction`` as the library does (the command line
+        names them as its options, :data:`depthcore.cli.refusals.FLAGS`).
     """
-    focal, cx = options["focal"], options["cx"]
-    if (focal is None) != (cx is None):
-        raise ValueError(f"{'--cx' if cx is None else '--focal'} is needed with the other")
-    for flag, value in (("--focal", focal), ("--cx", cx)):
-        if value is not None and not (math.isfinite(value) and abs(value) <= limits.pixels):
-            raise ValueError(
-                f"{flag} must be finite and at most {limits.pixels:g} in magnitude, got {value!r}"
-            )
-    if focal is not None and not focal > 0:
-        raise ValueError(f"--focal must be positive, got {focal!r}")
     if path == "-":
         stream = getattr(sys.stdin, "buffer", None)
         if stream is None:  # a text stream put in standard input's place
@@ -142,7 +154,8 @@ def read_file(path: str, limits: track_files.Limits, options: dict) -> track_fil
             raise ValueError(f"--mu-file: cannot read {path!r}: {exc.strerror or exc}") from None
     close = (lambda: None) if path == "-" else stream.close  # standard input is left open
     try:
-        args = (limits, focal, cx, WORDS, options["direction"], options["speed"])
+        pixels = options["focal"], options["cx"]
+        args = (limits, *pixels, WORDS, options["direction"], options["speed"], options["cy"])
         held = track_files.hold(track_files.open_track(path, stream, *args))
     except BaseException:
         close()
@@ -182,12 +195,16 @@ def labeller(track: track_files.TrackFile):
     return label
 
 
-def from_values(values, limit: float, steps=None, direction=None, step_range=(0, math.inf)):
+def from_values(
+    values, limit: float, steps=None, direction=None, step_range=(0, math.inf), nu=None
+):
     """The track of ``estimate --mu``: 3 to ``MAX_FRAMES`` numbers, ``nan`` a missing frame.
 
     ``steps`` (``--steps``, N - 1 numbers) are read in ``direction``
     (``--direction``; needed with them) as a track file's step column is
     (:mod:`depthcore.registry.track_files`), their magnitudes in ``step_range``.
+    ``nu`` (``--nu``, N numbers, ``nan`` where ``mu`` is) makes the track pairs
+    ``(mu, nu)`` of shape (N, 2).
 
     Returns
     -------
@@ -196,10 +213,18 @@ def from_values(values, limit: float, steps=None, direction=None, step_range=(0,
     Raises
     ------
     ValueError
-        Naming ``--mu``: too few or too many, infinite, or a magnitude above
-        ``limit``; ``--steps`` or ``--direction``.
+        Naming ``--mu`` or ``--nu``: too few or too many, infinite, or a magnitude
+        above ``limit``; ``--steps`` or ``--direction``.
     """
     mu = np.array(values, dtype=float)
+    if nu is not None:
+        nu = np.array(nu, dtype=float)
+        if len(nu) != len(mu):
+            raise ValueError(f"--nu takes one vertical bearing per --mu ({len(mu)}), got {len(nu)}")
+        if np.any(np.isnan(nu) != np.isnan(mu)):
+            raise ValueError("--nu must be nan exactly where --mu is: a missing frame has neither")
+        if np.any(np.abs(nu[~np.isnan(nu)]) > limit):
+            raise ValueError(f"--nu must be finite (or nan) and at most {limit:g} in magnitude")
     if not 3 <= len(mu) <= checks.MAX_FRAMES:
         raise ValueError(
             f"--mu takes at least 3 bearings and at most {checks.MAX_FRAMES} (frames 1 .. N), "
@@ -242,6 +267,7 @@ def from_values(values, limit: float, steps=None, direction=None, step_range=(0,
             )
         s = signs[direction] * s
     numbers = np.arange(1, len(mu) + 1)
+    mu = mu if nu is None else np.stack([mu, nu], axis=-1)
     return track_files.TrackFile("--mu", mu, None, s, numbers, False, None, direction or "receding")
 
 
