@@ -218,16 +218,16 @@ def test_learned_json_names_a_columns_scale_the_intervals_and_the_frames_the_gat
     mu = (-2.0 + 0.5 * e) / (10.0 + e) + 0.002 * rng.standard_normal(30)
     mu[[13, 21]] += [0.04, -0.04]  # two outliers, 20 SDs off
     prior = tracking.default_prior(mu)
-    fit = track_runs.learn(mu, 1.0, prior, gate=0.01)
-    same = learning.fit(mu, prior.mean, prior.cov, gate=0.01, intervals="profile")
-    assert (fit.rho, fit.process_noise_interval) == (same.rho, same.process_noise_interval)
+    fit = track_runs.learn(mu, 1.0, prior, 0.0, gate=0.01)
+    same = learning.fit(mu, prior.mean, prior.cov, process_noise=0.0, gate=0.01)
+    assert (fit.rho, fit.rho_interval) == (same.rho, same.rho_interval)
     frames, times = np.arange(101, 131), 0.04 * e
     out = track_runs.learned_json(fit, True, frames, times)
     assert out["gate_skipped"] == [114, 122]
     assert out["gate_skipped_times"] == times[[13, 21]].tolist()
     assert out["rho_column_scale"] == fit.rho and "rho" not in out
-    assert out["estimated"] == ["rho_column_scale", "process_noise"]
+    assert out["estimated"] == ["rho_column_scale"]
     assert out["intervals"] == "profile"
     assert track_runs.learned_json(fit)["gate_skipped"] == [14, 22]
-    ungated = track_runs.learned_json(track_runs.learn(mu, 1.0, prior))
+    ungated = track_runs.learned_json(track_runs.learn(mu, 1.0, prior, 0.0))
     assert "gate_skipped" not in ungated and ungated["rho"] > 5 * fit.rho
