@@ -130,10 +130,8 @@ def prior(mu, steps, args, largest: float, cov_range: tuple):
 def _count(flag: str, got: int, d: int) -> str:
     """The refusal of ``got`` values of ``flag`` for a state of ``d`` coordinates."""
     what = {
-        ("--prior-mean", 3): "3 numbers X Y V",
-        ("--prior-mean", 5): "5 numbers X Y V H W for pairs (a point in 3-D)",
-        ("--prior-cov", 3): "1 value (S I) or 9 (a 3 x 3 matrix)",
-        ("--prior-cov", 5): "1 value (S I) or 25 (a 5 x 5 matrix) for pairs (a point in 3-D)",
-    }[flag, d]
+        "--prior-mean": f"{d} numbers {' '.join('XYVHW'[:d])}",
+        "--prior-cov": f"1 value (S I) or {d * d} (a {d} x {d} matrix)",
+    }[flag] + (" for pairs (a point in 3-D)" if d == 5 else "")
     other = " (a nu or v column, or --nu, makes pairs)" if d == 3 and got in (5, 25) else ""
     return f"{flag} takes {what}, got {got}{other}"

@@ -314,22 +314,9 @@ def start_prior(mu, steps=None, depth=None):
 
 
 def noise_free(mu, steps=None) -> tuple:
-    """The noise-free state ``c`` of Eq. (7) at frame 3, or why it is undefined.
-
-    Parameters
-    ----------
-    mu : ndarray, shape (N,) or (N, 2)
-        Bearings or pairs (their horizontal bearings), ``NaN`` at a missing frame.
-    steps : array_like, shape (N - 1,), or None
-
-    Returns
-    -------
-    c : ndarray, shape (3,), or None
-        Defined where the first three frames have bearings one unit step apart,
-        receding, not degenerate, and put the point in front of the camera.
-    reason : str or None
-        Why ``c`` is undefined.
-    """
+    """``(c, None)``, the noise-free state of Eq. (7) at frame 3 of bearings ``mu`` (N,) or of
+    pairs' (N, 2), where the first three frames have them a unit step apart, receding, not
+    degenerate and in front of the camera; else ``(None, why)``. ``steps`` (N - 1,) or None."""
     mu = np.asarray(mu, dtype=float)
     mu = mu if mu.ndim == 1 else mu[:, 0]
     s = np.ones(len(mu) - 1) if steps is None else np.asarray(steps, dtype=float)
