@@ -358,6 +358,36 @@ _BENCHMARKS = {
             ("difference", "results.difference_sd", "sci"),
         ),
     ),
+    "bench_long_track": (
+        "long",
+        (
+            ("frames", "results.frames", ","),
+            _Group(
+                "",
+                "results.filters",
+                (
+                    ("first_ms", "first_ms", ".2f"),
+                    ("last_ms", "last_ms", ".2f"),
+                    ("held_first", "held_first_bytes", ","),
+                    ("held_last", "held_last_bytes", ","),
+                ),
+                rows=True,
+                label="filter",
+            ),
+        ),
+    ),
+    "bench_stonesoup": (
+        "ss",
+        (
+            ("frames", "results.per_update.frames", ","),
+            ("stone_soup_ms", "results.per_update.stone_soup_ms_per_frame", ".2f"),
+            ("online_ms", "results.per_update.online_ms_per_frame", ".2f"),
+            ("ratio", "results.per_update.ratio", ".2f"),
+            ("target_ratio", "results.per_update.target_ratio", "g"),
+            ("tracker_exact_ms", "results.tracker.exact_ms_per_frame", ".1f"),
+            ("tracker_ekf_ms", "results.tracker.ekf_ms_per_frame", ".1f"),
+        ),
+    ),
     "bench_workers": (
         "workers",
         (("trials", "sizes.trials", ","), ("frames", "sizes.frames", ""))
@@ -600,7 +630,8 @@ def bench_texts(name: str, record: dict) -> dict[str, str]:
     -------
     dict of str to str
         ``"<prefix>_<quantity>"`` -> text, the prefix ``opt``, ``trials``, ``ekfpy``,
-        ``import``, ``bank``, ``rbpf``, ``kalmanpy``, ``frames``, ``rekf`` or ``workers``;
+        ``import``, ``bank``, ``rbpf``, ``kalmanpy``, ``frames``, ``rekf``, ``long``, ``ss``
+        or ``workers``;
         ``"<prefix>_origin"`` is :func:`bench_origin`. Times in their key's unit.
     """
     if name not in _BENCHMARKS:
