@@ -111,6 +111,15 @@ def test_the_default_prior_of_pairs_is_the_planes_rule_and_the_height_on_the_fir
     assert out["c"][1] == pytest.approx(y1 + 2, rel=1e-12)
 
 
+def test_prior_depth_with_pairs_puts_x_and_h_on_the_first_line_of_sight(tmp_path, capsys):
+    path = _file(tmp_path, _mu_nu(PAIRS))
+    out = _json(
+        ["estimate", "--mu-file", path, "--rho", "0.002", "--prior-depth", "12", "3"], capsys
+    )
+    assert out["prior_mean"] == [PAIRS[0, 0] * 12.0, 12.0, 0.0, PAIRS[0, 1] * 12.0, 0.0]
+    assert np.diag(out["prior_cov"]).tolist() == [1000.0, 9.0, 1000.0, 1000.0, 1000.0]
+
+
 def test_the_table_names_the_height_and_its_velocity(tmp_path, capsys):
     path = _file(tmp_path, _mu_nu(PAIRS))
     status, out, err = _run(["estimate", "--mu-file", path, "--rho", "0.002", *PRIOR], capsys)
