@@ -59,6 +59,7 @@ TABLES = {
     "bench_optimal": {"moments", "per_triple"},
     "bench_range_ekf": {"fig2", "ten_frames"},
     "bench_rbpf": {"exact", "equal_cost", "convergence"},
+    "bench_stonesoup": {"per_update", "long_track", "tracker"},
     "bench_trials": {"vectorised_s", "trial_by_trial_s", "ratio", "estimate_sd"},
     "bench_workers": {
         "in_process_s",
