@@ -229,7 +229,7 @@ def long_track(n_frames: int, window: int) -> dict:
     return {"frames": n_frames, "window": window, **rows}
 
 
-#: The tracker's scene: four points (x, y, v) at frame 1, their bearings crossing.
+#: The tracker's scene, four points (x, y, v) at frame 1, their bearings crossing.
 POINTS = np.array([[1.2, 4.0, 1.2], [-1.0, 5.0, -0.8], [0.5, 6.0, -0.5], [-0.5, 3.0, 0.6]])
 TRACKER_PRIOR = GaussianState([0.0, 5.0, 0.0], np.diag([9.0, 9.0, 1.0]))
 

@@ -40,10 +40,11 @@ from depthcore.exact import optimal
 from depthcore.problem import checks, model
 from depthcore.stonesoup import association, exact, models, particles, tracks
 
-#: The points' states (x, y, v) at frame 1: their bearings cross as the camera recedes.
+#: The points' states (x, y, v) at frame 1, their bearings crossing as the camera recedes.
 POINTS = np.array([[1.2, 4.0, 1.2], [-1.0, 5.0, -0.8], [0.5, 6.0, -0.5], [-0.5, 3.0, 0.6]])
-#: The prior of a new track, before its first bearing: (x, y, v) and their covariance.
+#: The prior mean of a new track's (x, y, v), before its first bearing.
 PRIOR_MEAN = np.array([0.0, 5.0, 0.0])
+#: The prior covariance of a new track's (x, y, v).
 PRIOR_COV = np.diag([9.0, 9.0, 1.0])
 #: The bearings' noise SD (Figure 2's), the probability that a point is detected.
 RHO, DETECT = 0.005, 0.9
@@ -53,7 +54,7 @@ CLUTTER, FIELD = 2.0, 1.2
 FRAMES = 20
 #: Detections a held track needs to be confirmed; frames without one before deletion.
 MIN_POINTS, DELETE_AFTER = 4, 3
-#: The association gate: a distance of 3 (Mahalanobis, or the exact tail's normal quantile).
+#: The association gate, a distance of 3 (Mahalanobis, or the exact tail's normal quantile).
 MISSED_DISTANCE = 3.0
 #: OSPA's cut-off and SIAP's association distance, in units of depth, on (x, y).
 OSPA_CUTOFF, ASSOCIATION_DISTANCE = 2.0, 2.0
@@ -61,7 +62,7 @@ OSPA_CUTOFF, ASSOCIATION_DISTANCE = 2.0, 2.0
 PARTICLES = 1000
 #: The filters, by the registry's names where they have one.
 FILTERS = ("optimal", "ekf", "ukf", "particle")
-#: The scores kept of each scene: OSPA averaged over the frames, and SIAP's.
+#: The scores kept of each scene, OSPA averaged over the frames and SIAP's.
 SCORES = {
     "ospa": None,
     "completeness": "SIAP Completeness",

@@ -83,7 +83,7 @@ CACHED = 1024
 #: A bearing whose predictive tail probability is below this is scored without being
 #: incorporated (about 6.1 SDs of a Gaussian): no hypothesiser keeps it.
 SCORE_GATE = 1e-9
-#: A gate that skips every bearing (the largest double below 1): its score alone.
+#: A gate that skips every bearing, the largest double below 1, for a bearing's score alone.
 ONLY_SCORE = float(np.nextafter(1.0, 0.0))
 
 
