@@ -25,7 +25,7 @@ Two routes to the same estimate:
   in closed form (Eq. (4) and the velocity's random walk):
 
       rho**2 = mean over present frames of E[(mu_k - x_k / y_k)**2] / w_k**2,
-      q**2   = mean over steps of E[(v_{k+1} - v_k)**2] / |s_k|,
+      q**2   = mean over steps of E[(v_{k+1} - v_k)**2] / abs(s_k),
 
   with ``w_k`` the relative noise levels and ``s_k`` the (signed) steps; its fixed point is
   the maximum-likelihood estimate.

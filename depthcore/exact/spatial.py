@@ -6,7 +6,7 @@ The point's state is ``(x, y, v, h, w)``: the paper's ``(x, y, v)`` and its heig
 ``h`` with vertical velocity ``w``, which move as ``x`` and ``v`` do. Over a step
 ``s`` (the depth's signed change, :mod:`depthcore.problem.frames`)
 
-    y += s,   x += s v,   h += s w,   v += a,   w += b,   a, b ~ N(0, q**2 |s|),
+    y += s,   x += s v,   h += s w,   v += a,   w += b,   a, b ~ N(0, q**2 abs(s)),
 
 and the camera sees the pair ``(mu_k, nu_k) = (x_k / y_k, h_k / y_k)`` plus
 independent noise of SD ``rho_k`` on each (Eq. (4) twice). Given the depth at frame
