@@ -52,6 +52,7 @@ class Parser(argparse.ArgumentParser):
         return super()._add_action(action)
 
     def error(self, message):
+        """Exit with status 2, ``message`` in one line after the program's name."""
         self.exit(2, f"{self.prog}: error: {refusals.one_line(message)}\n")
 
     def _print_message(self, message, file=None):

@@ -59,7 +59,7 @@ class Problem(NamedTuple):
 
     @property
     def floor(self) -> np.ndarray:
-        """The depth at frame 1 below which the point reaches the camera (B,): 0 receding.
+        """The depth at frame 1 below which the point reaches the camera, (B,), 0 receding.
 
         :func:`depthcore.problem.frames.depth_floor` of the steps. The bank's integrand
         takes the quadrature's depth ``offsets[..., 2]`` as the distance above it, the
@@ -162,7 +162,7 @@ def integrate(pb: Problem, intervals, rtol: float):
     ----------
     pb : Problem
     intervals : tuple of int
-        See :func:`mapped_nodes`; ``(3,)`` for ``y > 2``.
+        See :func:`depthcore.exact.modes.mapped_nodes`; ``(3,)`` for ``y > 2``.
     rtol : float
 
     Returns

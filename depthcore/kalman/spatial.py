@@ -10,8 +10,9 @@ the velocities' variances growing by ``q**2 |s|``), so both filters predict exac
 
 * the EKF linearises the pair at the predicted mean (Eqs. (11)-(12) for both
   coordinates: rows ``(1 / y, -x / y**2, 0, 0, 0)`` and ``(0, -h / y**2, 0, 1 / y, 0)``);
-* the UKF moves ``2 d + 1`` sigma points of the prediction (:class:`depthcore.kalman.ukf.
-  SigmaPoints` with ``dim = 5``) through the pair and takes their moments.
+* the UKF moves ``2 d + 1`` sigma points of the prediction
+  (:class:`depthcore.kalman.ukf.SigmaPoints` with ``dim = 5``) through the pair and
+  takes their moments.
 
 :func:`run` runs either over a track with gaps, noise per frame and signed steps, and
 reports each pair's log predictive density. A missing frame (a row of ``NaN``) is
@@ -30,7 +31,7 @@ from depthcore.problem.bearing_pairs import check
 
 #: The state's dimension, ``(x, y, v, h, w)``.
 DIM = 5
-#: The sigma points of the UKF in 3-D: Julier's ``kappa = 3 - dim``.
+#: The sigma points of the UKF in 3-D, with Julier's ``kappa = 3 - dim``.
 SIGMA_POINTS = SigmaPoints(dim=DIM, kappa=3.0 - DIM)
 _LOG_2PI = float(np.log(2.0 * np.pi))
 

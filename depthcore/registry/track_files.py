@@ -72,7 +72,7 @@ COLUMNS = ("mu", "nu", "u", "v", "rho", "frame", "step", "travel", "time")
 #: The columns that give the steps; a file names at most one.
 DISTANCES = ("step", "travel", "time")
 
-#: How a file's distances are read: their sign given, or their own.
+#: How a file's distances are read, their sign given or their own.
 DIRECTIONS = ("receding", "approaching", "signed")
 
 #: The most missing frames in a row that a gap between frame numbers may stand for.
@@ -171,7 +171,7 @@ class Reading(NamedTuple):
         The header's columns.
     direction : str
         How the distances are read, one of :data:`DIRECTIONS`.
-    frames : iterator of Frame
+    frames : iterable of Frame
         The frames, each read and checked as it is asked for.
     """
 

@@ -390,7 +390,7 @@ def summarize_pairs(mu, rho, prior, process_noise: float, names, steps=None) -> 
 
 # --- learning the noise ---------------------------------------------------------------
 
-#: The intervals of the learned noise levels: the profile likelihood's
+#: The intervals of the learned noise levels, the profile likelihood's
 #: (:func:`depthcore.exact.learning.fit`).
 INTERVALS = "profile"
 
