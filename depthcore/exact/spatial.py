@@ -220,7 +220,8 @@ def posterior(
     Parameters
     ----------
     mu : array_like, shape (N, 2) or (..., N, 2)
-        Pairs ``(x / y, h / y)``; ``NaN`` rows at missing frames (:func:`depthcore.problem.bearing_pairs.check`).
+        Pairs ``(x / y, h / y)``; ``NaN`` rows at missing frames
+        (:func:`depthcore.problem.bearing_pairs.check`).
     rho : float or array_like, shape (...) or (..., N)
     prior_mean : array_like, shape (5,) or (..., 5)
         The prior mean of ``(x_1, y_1, v, h_1, w)``.
