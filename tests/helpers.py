@@ -1,5 +1,7 @@
 """Strategies and helpers shared by the core tests."""
 
+import json
+
 import numpy as np
 from hypothesis import assume
 from hypothesis import strategies as st
@@ -42,6 +44,39 @@ def exit_status(argv) -> int:
         return main(argv)
     except SystemExit as exc:  # argparse's refusals
         return exc.code
+
+
+def run_cli(argv, capsys):
+    """``(status, stdout, stderr)`` of ``python -m depthcore *argv`` run in this process."""
+    status = exit_status(argv)
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def strict_json(text: str):
+    """``text`` read as JSON, failing on ``NaN``, ``Infinity`` or ``-Infinity``."""
+
+    def refuse(constant):
+        raise AssertionError(f"not strict JSON: {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def cli_json(argv, capsys):
+    """The strict JSON the command line prints with ``--json``, nothing on stderr."""
+    status, out, err = run_cli([*argv, "--json"], capsys)
+    assert status == 0 and err == "", err
+    return strict_json(out)
+
+
+def cli_refused(argv, capsys, *words):
+    """A refusal: status 2, one line on stderr naming ``words``, no traceback or warning."""
+    status, out, err = run_cli(argv, capsys)
+    assert status == 2 and out == "" and err.count("\n") == 1, (status, out, err)
+    assert "Traceback" not in err and "Warning" not in err, err
+    for w in words:
+        assert w in err, err
+    return err
 
 
 #: The environment of a subprocess that runs an older x86-64 processor's kernels:

@@ -20,7 +20,7 @@ from depthcore.cli.main import main
 from depthcore.problem import checks, model
 from depthcore.registry import online
 
-from helpers import exit_status
+from helpers import cli_refused, exit_status, run_cli
 
 RHO = 0.002
 PRIOR = ["--prior-mean", "2", "15", "0", "--prior-cov", "100"]
@@ -53,25 +53,10 @@ def _steps_column():
     return [None, *STEPS.tolist()]
 
 
-def _run(argv, capsys):
-    status = exit_status(argv)
-    out, err = capsys.readouterr()
-    return status, out, err
-
-
 def _json(argv, capsys):
-    status, out, err = _run([*argv, "--json"], capsys)
+    status, out, err = run_cli([*argv, "--json"], capsys)
     assert status == 0, err
     return json.loads(out, parse_constant=lambda c: pytest.fail(f"not strict JSON: {c}"))
-
-
-def _refused(argv, capsys, *words):
-    status, out, err = _run(argv, capsys)
-    assert status == 2 and out == "" and err.count("\n") == 1, (status, out, err)
-    assert "Traceback" not in err and "Warning" not in err, err
-    for w in words:
-        assert w in err, err
-    return err
 
 
 # --- the direction is explicit --------------------------------------------------------------
@@ -90,7 +75,7 @@ def test_distances_in_a_file_are_refused_without_a_direction(
 ):
     path = _file(tmp_path, header, [_approaching().tolist(), column])
     kind = header.split(",")[1]
-    _refused(
+    cli_refused(
         ["estimate", "--mu-file", path, "--rho", str(RHO), *extra],
         capsys,
         "--direction is needed",
@@ -103,7 +88,7 @@ def test_distances_in_a_file_are_refused_without_a_direction(
 def test_steps_as_arguments_are_refused_without_a_direction(capsys):
     mu = _approaching()[:5].tolist()
     argv = ["estimate", "--mu", *map(repr, mu), "--rho", str(RHO), "--steps", "1", "1", "1", "1"]
-    _refused(argv, capsys, "--direction is needed with --steps")
+    cli_refused(argv, capsys, "--direction is needed with --steps")
 
 
 def test_without_distances_the_output_names_the_receding_default(capsys):
@@ -207,7 +192,7 @@ def test_distances_against_their_direction_are_refused_in_one_line(
     mu = [0.1, 0.2, 0.28]
     columns = [mu] + [column] * (header.count(",")) if column else [mu]
     path = _file(tmp_path, header, columns)
-    _refused(["estimate", "--mu-file", path, "--rho", "0.01", *extra], capsys, words)
+    cli_refused(["estimate", "--mu-file", path, "--rho", "0.01", *extra], capsys, words)
 
 
 @pytest.mark.parametrize(
@@ -226,13 +211,13 @@ def test_steps_as_arguments_are_refused_in_one_line(capsys, extra, words):
     argv = ["estimate", "--mu", "-0.3", "0", "0.2", "0.33", "0.43", "--rho", "0.005", *extra]
     if "--direction" not in extra and "--steps" in extra:
         argv += ["--direction", "receding"]
-    _refused(argv, capsys, words)
+    cli_refused(argv, capsys, words)
 
 
 def test_steps_from_a_file_are_refused_with_steps_as_arguments(tmp_path, capsys):
     path = _file(tmp_path, "mu", [[0.1, 0.2, 0.28]])
     argv = ["estimate", "--mu-file", path, "--rho", "0.01", "--steps", "1", "1"]
-    _refused(argv, capsys, "--steps: not used by --mu-file")
+    cli_refused(argv, capsys, "--steps: not used by --mu-file")
 
 
 def test_approaching_without_distances_is_unit_steps_towards_the_point(capsys):
@@ -305,7 +290,7 @@ def test_a_refusal_names_frames_by_the_files_numbers(tmp_path, capsys):
     # refuses, naming them as the file numbers them
     mu = [0.1, None, 0.3, 0.2, 0.25]
     path = _file(tmp_path, "frame,mu", [[7, 8, 9, 10, 11], mu])
-    err = _refused(["estimate", "--mu-file", path, "--rho", "0.01"], capsys, "frames 7, 9, 10")
+    err = cli_refused(["estimate", "--mu-file", path, "--rho", "0.01"], capsys, "frames 7, 9, 10")
     assert "frames 1," not in err
 
 
@@ -329,9 +314,9 @@ def test_a_long_file_is_refused_but_with_per_frame_naming_the_line_and_the_way(t
     path, _ = _long(tmp_path, checks.MAX_FRAMES + 5)
     where = f"{path}:{checks.MAX_FRAMES + 2}: more than {checks.MAX_FRAMES} frames"
     base = ["estimate", "--mu-file", path, "--rho", "0.01"]
-    _refused(base, capsys, where, "--per-frame streams")
-    _refused([*base, "--per-frame", "--learn-noise"], capsys, where, "--learn-noise holds")
-    _refused([*base, "--rho", "0.01"][:-2] + ["--per-frame", "--smooth"], capsys, "--smooth")
+    cli_refused(base, capsys, where, "--per-frame streams")
+    cli_refused([*base, "--per-frame", "--learn-noise"], capsys, where, "--learn-noise holds")
+    cli_refused([*base, "--rho", "0.01"][:-2] + ["--per-frame", "--smooth"], capsys, "--smooth")
 
 
 @pytest.mark.parametrize("output", ["json", "csv", "table"])
@@ -343,7 +328,7 @@ def test_a_long_file_streams_each_frames_filtered_state_through_the_online_filte
     argv = ["estimate", "--mu-file", path, "--rho", "0.01", "--per-frame", "--filters", "ukf"]
     argv += ["--prior-mean", "1", "5", "0", "--gate", "1e-4"]
     argv += {"json": ["--json"], "csv": ["--csv"], "table": []}[output]
-    status, out, err = _run(argv, capsys)
+    status, out, err = run_cli(argv, capsys)
     assert status == 0 and err == "", err
     live = online.start("ukf", [1.0, 5.0, 0.0], 1000.0 * np.eye(3), rho=0.01, gate=1e-4)
     states = [live.update(m) for m in mu]
@@ -369,7 +354,7 @@ def test_a_long_file_streams_each_frames_filtered_state_through_the_online_filte
 def test_a_malformed_row_deep_in_a_long_file_prints_nothing_but_its_refusal(tmp_path, capsys):
     path, _ = _long(tmp_path, checks.MAX_FRAMES + 300, bad_line=checks.MAX_FRAMES + 250)
     argv = ["estimate", "--mu-file", path, "--rho", "0.01", "--per-frame", "--filters", "ukf"]
-    _refused(argv, capsys, f"{path}:{checks.MAX_FRAMES + 250}: mu must be a number")
+    cli_refused(argv, capsys, f"{path}:{checks.MAX_FRAMES + 250}: mu must be a number")
 
 
 class _Discard(io.TextIOBase):

@@ -1,8 +1,6 @@
 """estimate --learn-noise on real tracks: the gate while learning, the profile likelihood's
 intervals, a rho column's scale, --prior-depth, and why the noise-free state c is undefined."""
 
-import json
-
 import numpy as np
 import pytest
 
@@ -11,7 +9,7 @@ from depthcore.exact import learning
 from depthcore.registry import track_runs, tracking
 from depthcore.registry.filters import FILTERS
 
-from helpers import exit_status
+from helpers import cli_json, cli_refused, run_cli
 
 E = np.arange(30.0)
 CLEAN = (-2.0 + 0.5 * E) / (10.0 + E) + 0.002 * np.random.default_rng(0).standard_normal(30)
@@ -20,34 +18,6 @@ MU = CLEAN.copy()
 MU[OUTLIERS] += [0.04, -0.04]
 FRAMES = 101 + np.arange(30)
 TIMES = 0.25 * E  # at --speed 4: unit steps, exactly
-
-
-def _strict_json(text: str):
-    def refuse(constant):
-        raise AssertionError(f"not strict JSON: {constant}")
-
-    return json.loads(text, parse_constant=refuse)
-
-
-def _run(argv, capsys):
-    status = exit_status(argv)
-    out, err = capsys.readouterr()
-    return status, out, err
-
-
-def _json(argv, capsys):
-    status, out, err = _run([*argv, "--json"], capsys)
-    assert status == 0 and err == "", err
-    return _strict_json(out)
-
-
-def _refused(argv, capsys, *words):
-    status, out, err = _run(argv, capsys)
-    assert status == 2 and out == "" and err.count("\n") == 1, (status, out, err)
-    assert "Traceback" not in err and "Warning" not in err, err
-    for w in words:
-        assert w in err, err
-    return err
 
 
 def _file(tmp_path, mu, rho=None):
@@ -69,12 +39,12 @@ def test_the_gate_keeps_outliers_out_of_the_fit_and_names_them_by_the_files_fram
 ):
     track = _file(tmp_path, MU)
     rho_only = ["--learn-noise", "--process-noise", "0"]
-    out = _json(["estimate", *track, *rho_only, "--gate", "0.01"], capsys)
+    out = cli_json(["estimate", *track, *rho_only, "--gate", "0.01"], capsys)
     gated = out["learned"]
     assert gated["gate_skipped"] == FRAMES[OUTLIERS].tolist()
     assert gated["gate_skipped_times"] == TIMES[OUTLIERS].tolist()
     # without the gate the two outliers inflate rho, which the gate's fit does not
-    ungated = _json(["estimate", *track, *rho_only], capsys)["learned"]
+    ungated = cli_json(["estimate", *track, *rho_only], capsys)["learned"]
     prior = tracking.default_prior(CLEAN)
     clean = learning.fit(CLEAN, prior.mean, prior.cov, process_noise=0.0)
     assert ungated["rho"] > 5 * gated["rho"] and "gate_skipped" not in ungated
@@ -85,7 +55,7 @@ def test_the_gate_keeps_outliers_out_of_the_fit_and_names_them_by_the_files_fram
 
 def test_the_intervals_are_the_profile_likelihoods_and_the_output_says_so(capsys):
     mu = CLEAN[:12]
-    learned = _json(["estimate", "--mu", *map(repr, mu.tolist()), "--learn-noise"], capsys)
+    learned = cli_json(["estimate", "--mu", *map(repr, mu.tolist()), "--learn-noise"], capsys)
     learned = learned["learned"]
     prior = tracking.default_prior(mu)
     profile = learning.fit(mu, prior.mean, prior.cov, intervals="profile")
@@ -105,7 +75,7 @@ def test_a_rho_column_is_scaled_and_the_scale_is_named_so(tmp_path, capsys):
     column = np.where(E % 2 == 0, 0.002, 0.004)
     mu = (-2.0 + 0.5 * E) / (10.0 + E) + 1.5 * column * np.random.default_rng(1).standard_normal(30)
     track = _file(tmp_path, mu, column.tolist())
-    out = _json(["estimate", *track, "--learn-noise", "--process-noise", "0"], capsys)
+    out = cli_json(["estimate", *track, "--learn-noise", "--process-noise", "0"], capsys)
     learned = out["learned"]
     prior = tracking.default_prior(mu)
     fit = learning.fit(mu, prior.mean, prior.cov, process_noise=0.0, weights=column)
@@ -122,7 +92,7 @@ def test_a_rho_column_is_scaled_and_the_scale_is_named_so(tmp_path, capsys):
 
 def test_prior_depth_is_a_range_prior_on_the_depth_used_by_filters_and_learning(capsys):
     argv = ["estimate", "--mu", *map(repr, CLEAN.tolist()), "--prior-depth", "12", "3"]
-    out = _json([*argv, "--learn-noise", "--process-noise", "0"], capsys)
+    out = cli_json([*argv, "--learn-noise", "--process-noise", "0"], capsys)
     mean, cov = [CLEAN[0] * 12.0, 12.0, 0.0], np.diag([1000.0, 9.0, 1000.0])
     assert out["prior_mean"] == mean and out["prior_cov"] == cov.tolist()
     fit = learning.fit(CLEAN, mean, cov, process_noise=0.0)
@@ -144,16 +114,18 @@ TWO = ["--filters", "optimal", "ekf"]
 )
 def test_where_c_is_undefined_the_refusal_says_why_and_offers_both_priors(capsys, mu, why):
     for extra in (["--rho", "0.01"], ["--learn-noise"], ["--rho", "0.01", "--per-frame"]):
-        _refused(
+        cli_refused(
             ["estimate", "--mu", *mu, *extra],
             capsys,
             "--prior-mean or --prior-depth MEAN SD is needed",
             "no noise-free state c",
             why,
         )
-    out = _json(["estimate", "--mu", *mu, "--rho", "0.01", "--prior-depth", "5", "2", *TWO], capsys)
+    out = cli_json(
+        ["estimate", "--mu", *mu, "--rho", "0.01", "--prior-depth", "5", "2", *TWO], capsys
+    )
     assert out["c"] is None and out["c_reason"] == track_runs.noise_free(np.array(mu, float))[1]
-    status, text, _ = _run(
+    status, text, _ = run_cli(
         ["estimate", "--mu", *mu, "--rho", "0.01", "--prior-depth", "5", "2", *TWO], capsys
     )
     assert status == 0 and f"= undefined: {out['c_reason']}" in text.splitlines()[0]
@@ -162,7 +134,7 @@ def test_where_c_is_undefined_the_refusal_says_why_and_offers_both_priors(capsys
 def test_the_refusal_names_the_files_frames(tmp_path, capsys):
     path = tmp_path / "t.csv"
     path.write_text("frame,mu\n7,0.3\n9,0.1\n10,0.2\n11,0.3\n")
-    _refused(["estimate", "--mu-file", str(path), "--rho", "0.01"], capsys, "(frames 7, 9, 10)")
+    cli_refused(["estimate", "--mu-file", str(path), "--rho", "0.01"], capsys, "(frames 7, 9, 10)")
 
 
 @pytest.mark.parametrize(
@@ -187,4 +159,4 @@ def test_the_refusal_names_the_files_frames(tmp_path, capsys):
     ],
 )
 def test_prior_depth_is_refused_in_one_line_naming_it(capsys, extra, words):
-    _refused(["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.01", *extra], capsys, words)
+    cli_refused(["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.01", *extra], capsys, words)

@@ -1,7 +1,5 @@
 """estimate on points in 3-D: pairs from mu,nu or u,v columns (or --mu with --nu)."""
 
-import json
-
 import numpy as np
 import pytest
 
@@ -9,7 +7,7 @@ from depthcore.cli.main import FRAMES_MAX
 from depthcore.registry import online, track_runs
 from depthcore.registry.filters import FILTERS
 
-from helpers import exit_status
+from helpers import cli_json, cli_refused, run_cli
 
 # a point at (x, y, v, h, w) = (-2, 10, 0.5, 1.5, -0.1) seen for 8 frames at unit steps
 E = np.arange(8.0)
@@ -18,13 +16,6 @@ PAIRS = PAIRS + 0.002 * np.random.default_rng(7).standard_normal(PAIRS.shape)
 RHO = 0.002
 FOCAL, CX, CY = 500.0, 320.0, 240.0
 PRIOR = ["--prior-mean", "-2", "10", "0", "1", "0", "--prior-cov", "4"]
-
-
-def _strict_json(text: str):
-    def refuse(constant):
-        raise AssertionError(f"not strict JSON: {constant}")
-
-    return json.loads(text, parse_constant=refuse)
 
 
 def _file(tmp_path, text, name="pairs.csv"):
@@ -46,33 +37,11 @@ def _pixels(pairs) -> str:
     )
 
 
-def _run(argv, capsys):
-    status = exit_status(argv)
-    out, err = capsys.readouterr()
-    return status, out, err
-
-
-def _refused(argv, capsys, *words):
-    status, out, err = _run(argv, capsys)
-    assert status == 2, (out, err)
-    assert out == "" and err.count("\n") == 1, err
-    assert "Traceback" not in err and "Warning" not in err, err
-    for w in words:
-        assert w in err, err
-    return err
-
-
-def _json(argv, capsys):
-    status, out, err = _run([*argv, "--json"], capsys)
-    assert status == 0 and err == "", err
-    return _strict_json(out)
-
-
 # --- the summary ------------------------------------------------------------------------------
 
 
 def test_a_pairs_file_gives_each_filters_five_coordinates(tmp_path, capsys):
-    out = _json(
+    out = cli_json(
         ["estimate", "--mu-file", _file(tmp_path, _mu_nu(PAIRS)), "--rho", "0.002", *PRIOR], capsys
     )
     mean, cov = np.array([-2.0, 10.0, 0.0, 1.0, 0.0]), 4.0 * np.eye(5)
@@ -86,7 +55,7 @@ def test_a_pairs_file_gives_each_filters_five_coordinates(tmp_path, capsys):
     # the same pairs from pixels, and from --mu with --nu
     pixels = _file(tmp_path, _pixels(PAIRS), "pixels.csv")
     argv = ["estimate", "--mu-file", pixels, "--focal", "500", "--cx", "320", "--cy", "240"]
-    from_pixels = _json([*argv, "--rho", "0.002", *PRIOR], capsys)
+    from_pixels = cli_json([*argv, "--rho", "0.002", *PRIOR], capsys)
     d = (
         from_pixels["filters"]["optimal"]["height"]["mean"]
         - out["filters"]["optimal"]["height"]["mean"]
@@ -94,14 +63,17 @@ def test_a_pairs_file_gives_each_filters_five_coordinates(tmp_path, capsys):
     assert abs(d) < 1e-9
     values = ["--mu", *map(repr, PAIRS[:, 0].tolist()), "--nu", *map(repr, PAIRS[:, 1].tolist())]
     assert (
-        _json(["estimate", *values, "--rho", "0.002", *PRIOR], capsys)["filters"] == out["filters"]
+        cli_json(["estimate", *values, "--rho", "0.002", *PRIOR], capsys)["filters"]
+        == out["filters"]
     )
 
 
 def test_the_default_prior_of_pairs_is_the_planes_rule_and_the_height_on_the_first_sight(
     tmp_path, capsys
 ):
-    out = _json(["estimate", "--mu-file", _file(tmp_path, _mu_nu(PAIRS)), "--rho", "0.002"], capsys)
+    out = cli_json(
+        ["estimate", "--mu-file", _file(tmp_path, _mu_nu(PAIRS)), "--rho", "0.002"], capsys
+    )
     c = PAIRS[:3, 0]
     y1 = 2 * (c[0] - c[1]) / (c[0] + c[2] - 2 * c[1]) - 2  # Eq. (7)'s c2, moved to frame 1
     assert out["prior_mean"][1] == pytest.approx(y1, rel=1e-12)
@@ -113,7 +85,7 @@ def test_the_default_prior_of_pairs_is_the_planes_rule_and_the_height_on_the_fir
 
 def test_prior_depth_with_pairs_puts_x_and_h_on_the_first_line_of_sight(tmp_path, capsys):
     path = _file(tmp_path, _mu_nu(PAIRS))
-    out = _json(
+    out = cli_json(
         ["estimate", "--mu-file", path, "--rho", "0.002", "--prior-depth", "12", "3"], capsys
     )
     assert out["prior_mean"] == [PAIRS[0, 0] * 12.0, 12.0, 0.0, PAIRS[0, 1] * 12.0, 0.0]
@@ -122,12 +94,12 @@ def test_prior_depth_with_pairs_puts_x_and_h_on_the_first_line_of_sight(tmp_path
 
 def test_the_table_names_the_height_and_its_velocity(tmp_path, capsys):
     path = _file(tmp_path, _mu_nu(PAIRS))
-    status, out, err = _run(["estimate", "--mu-file", path, "--rho", "0.002", *PRIOR], capsys)
+    status, out, err = run_cli(["estimate", "--mu-file", path, "--rho", "0.002", *PRIOR], capsys)
     assert status == 0 and err == ""
     assert "mean (x, y, v, h, w) = (-2.000, 10.00, 0.000, 1.000, 0.000)" in out
     assert "height mean  height sd vert. vel. mean vert. vel. sd" in out
     assert "height mean, sd       the same of the height h" in out
-    status, plane, _ = _run(
+    status, plane, _ = run_cli(
         ["estimate", "--mu", *map(repr, PAIRS[:, 0].tolist()), "--rho", "0.002"], capsys
     )
     assert status == 0 and "height" not in plane
@@ -144,7 +116,7 @@ def test_with_gaps_steps_and_a_rho_column_the_filters_take_them(tmp_path, capsys
         for k, ((m, n), r) in enumerate(zip(pairs.tolist(), rho.tolist(), strict=True))
     )
     path = _file(tmp_path, text)
-    out = _json(["estimate", "--mu-file", path, "--direction", "approaching", *PRIOR], capsys)
+    out = cli_json(["estimate", "--mu-file", path, "--direction", "approaching", *PRIOR], capsys)
     est = FILTERS["ekf"](pairs, rho, [-2, 10, 0, 1, 0], 4 * np.eye(5), steps=-steps)
     assert out["filters"]["ekf"]["depth"]["mean"] == est.mean[1]
     assert out["steps"] == (-steps).tolist() and out["mu"][4] is None
@@ -161,7 +133,7 @@ def test_per_frame_streams_pairs_through_the_online_filters(tmp_path, capsys, ga
     path = _file(tmp_path, _mu_nu(pairs))
     base = ["estimate", "--mu-file", path, "--rho", "0.002", *PRIOR, "--per-frame"]
     argv = [*base, "--filters", "ekf", "ukf"] + ([] if gate is None else ["--gate", gate])
-    out = _json(argv, capsys)
+    out = cli_json(argv, capsys)
     assert out["smoothed"] is False and "no smoother takes pairs" in out["smoothed_reason"]
     for name in ("ekf", "ukf"):
         live = online.start(name, [-2, 10, 0, 1, 0], 4 * np.eye(5), RHO, 0.0, gate and float(gate))
@@ -172,9 +144,9 @@ def test_per_frame_streams_pairs_through_the_online_filters(tmp_path, capsys, ga
             assert row["filtered_height_mean"] == est.mean[3]
             assert row["filtered_vertical_velocity_sd"] == np.sqrt(est.cov[4, 4])
         assert out["filters"][name][5]["gated"] == (gate is not None)
-    status, table, _ = _run([*base, "--filters", "optimal"], capsys)
+    status, table, _ = run_cli([*base, "--filters", "optimal"], capsys)
     assert status == 0 and "height filtered vert. vel. filtered" in table and "nu" in table
-    status, text, _ = _run([*base, "--csv"], capsys)
+    status, text, _ = run_cli([*base, "--csv"], capsys)
     assert status == 0 and text.splitlines()[0].startswith("filter,frame,bearing,mu,nu,rho")
 
 
@@ -184,12 +156,12 @@ def test_a_long_file_of_pairs_streams_past_the_held_limit(tmp_path, capsys):
     pairs = np.stack([-2.0 + 0.5 * e, 1.5 - 0.1 * e], axis=-1) / (10.0 + e)[:, None]
     path = _file(tmp_path, _mu_nu(pairs))
     argv = ["estimate", "--mu-file", path, "--rho", "0.002", *PRIOR, "--per-frame"]
-    out = _json([*argv, "--filters", "ekf"], capsys)
+    out = cli_json([*argv, "--filters", "ekf"], capsys)
     assert out["frames"] == n and len(out["filters"]["ekf"]) == n
     assert out["filters"]["ekf"][-1]["filtered_height_mean"] == pytest.approx(
         1.5 - 0.1 * (n - 1), rel=1e-3
     )
-    _refused(argv[:-1], capsys, "more than 1000 frames")
+    cli_refused(argv[:-1], capsys, "more than 1000 frames")
 
 
 # --- refusals ---------------------------------------------------------------------------------
@@ -217,12 +189,12 @@ def test_a_long_file_of_pairs_streams_past_the_held_limit(tmp_path, capsys):
 )
 def test_what_pairs_cannot_have_is_refused_in_one_line(tmp_path, capsys, extra, words):
     path = _file(tmp_path, _mu_nu(PAIRS))
-    _refused(["estimate", "--mu-file", path, "--rho", "0.002", *extra], capsys, words)
+    cli_refused(["estimate", "--mu-file", path, "--rho", "0.002", *extra], capsys, words)
 
 
 def test_learning_from_pairs_is_refused_by_name(tmp_path, capsys):
     path = _file(tmp_path, _mu_nu(PAIRS))
-    _refused(
+    cli_refused(
         ["estimate", "--mu-file", path, "--learn-noise"],
         capsys,
         "--learn-noise learns from the plane",
@@ -261,7 +233,7 @@ def test_learning_from_pairs_is_refused_by_name(tmp_path, capsys):
     ],
 )
 def test_the_options_of_pairs_are_refused_in_one_line_naming_them(capsys, argv, words):
-    _refused(["estimate", *argv], capsys, words)
+    cli_refused(["estimate", *argv], capsys, words)
 
 
 @pytest.mark.parametrize(
@@ -291,4 +263,4 @@ def test_a_file_of_pairs_and_its_options_are_refused_in_one_line(
     tmp_path, capsys, text, flags, words
 ):
     path = _file(tmp_path, text)
-    _refused(["estimate", "--mu-file", path, "--rho", "0.01", *flags], capsys, words)
+    cli_refused(["estimate", "--mu-file", path, "--rho", "0.01", *flags], capsys, words)

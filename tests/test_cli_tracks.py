@@ -2,7 +2,6 @@
 
 import csv
 import io
-import json
 import math
 import time
 
@@ -19,18 +18,11 @@ from depthcore.registry.filters import FILTERS, PARTICLES
 from depthcore.registry.tracking import RHO_RANGE, default_prior
 from depthcore.studies.reproduce import PARTICLE_SEED
 
-from helpers import exit_status
+from helpers import run_cli, strict_json
 
 MU = [-0.3, 0.0, 0.2, 0.33, 0.43]
 RHO = 0.005
 LIMITS = track_files.Limits(MU_MAX, RHO_RANGE, STEP_RANGE, PIXELS_MAX)
-
-
-def _strict_json(text: str):
-    def refuse(constant):
-        raise AssertionError(f"not strict JSON: {constant}")
-
-    return json.loads(text, parse_constant=refuse)
 
 
 def _file(tmp_path, text, name="track.csv", mode="w"):
@@ -46,14 +38,8 @@ def _csv(columns, rows, end="\n"):
     return end.join([",".join(columns)] + [",".join(str(v) for v in r) for r in rows]) + end
 
 
-def _run(argv, capsys):
-    status = exit_status(argv)
-    out, err = capsys.readouterr()
-    return status, out, err
-
-
 def _refused(argv, capsys, *words):
-    status, out, err = _run(argv, capsys)
+    status, out, err = run_cli(argv, capsys)
     assert status == 2, (out, err)
     assert out == "" and err.count("\n") == 1 and err.endswith("\n"), err
     assert "Traceback" not in err and "Warning" not in err, err
@@ -77,9 +63,9 @@ def test_a_file_of_bearings_gives_what_the_same_bearings_as_arguments_give(
     text = _csv(["mu"], [[m] for m in MU], end).encode()
     path = _file(tmp_path, bom + text)
     assert main(["estimate", "--mu-file", path, "--rho", str(RHO), "--json"]) == 0
-    from_file = _strict_json(capsys.readouterr().out)
+    from_file = strict_json(capsys.readouterr().out)
     assert main(["estimate", "--mu", *map(str, MU), "--rho", str(RHO), "--json"]) == 0
-    assert from_file == _strict_json(capsys.readouterr().out)
+    assert from_file == strict_json(capsys.readouterr().out)
 
 
 def test_standard_input_is_read_for_a_dash(capsys, monkeypatch):
@@ -87,7 +73,7 @@ def test_standard_input_is_read_for_a_dash(capsys, monkeypatch):
     monkeypatch.setattr("sys.stdin", io.TextIOWrapper(io.BytesIO(data)))
     argv = ["estimate", "--mu-file", "-", "--rho", str(RHO), "--per-frame", "--json"]
     assert main(argv) == 0
-    rows = _strict_json(capsys.readouterr().out)["filters"]["optimal"]
+    rows = strict_json(capsys.readouterr().out)["filters"]["optimal"]
     assert [r["frame"] for r in rows] == [1, 2, 3, 4, 5]
     monkeypatch.setattr("sys.stdin", io.TextIOWrapper(io.BytesIO(b"mu\n0.1\nabc\n")))
     _refused(["estimate", "--mu-file", "-", "--rho", "0.01"], capsys, "<stdin>:3: mu must be")
@@ -134,11 +120,11 @@ def test_a_rho_column_gives_the_noise_of_each_frame_and_may_be_empty_at_a_missin
 def test_a_constant_rho_column_equals_rho_given_once(tmp_path, capsys):
     path = _file(tmp_path, _csv(["mu", "rho"], [[m, RHO] for m in MU]))
     assert main(["estimate", "--mu-file", path, "--per-frame", "--json"]) == 0
-    from_file = _strict_json(capsys.readouterr().out)
+    from_file = strict_json(capsys.readouterr().out)
     assert (
         main(["estimate", "--mu", *map(str, MU), "--rho", str(RHO), "--per-frame", "--json"]) == 0
     )
-    assert from_file == _strict_json(capsys.readouterr().out)
+    assert from_file == strict_json(capsys.readouterr().out)
 
 
 # --- malformed files: one line naming the file and the line ---------------------------------
@@ -314,7 +300,7 @@ def test_without_per_frame_a_track_as_it_comes_is_each_filters_last_frame(
         [] if "rho" in header else ["--rho", "0.01"]
     )
     assert main(argv) == 0
-    out = _strict_json(capsys.readouterr().out)
+    out = strict_json(capsys.readouterr().out)
     steps = None if track.steps is None else track.steps
     prior = default_prior(track.mu, steps)
     assert out["prior_mean"] == prior.mean.tolist()
@@ -330,9 +316,9 @@ def test_unit_steps_in_a_file_are_the_papers_frames(tmp_path, capsys):
     path = _file(tmp_path, _csv(["mu", "step"], [[MU[0], ""]] + [[m, 1] for m in MU[1:]]))
     argv = ["estimate", "--mu-file", path, "--rho", str(RHO), "--json", "--direction", "receding"]
     assert main(argv) == 0
-    from_file = _strict_json(capsys.readouterr().out)
+    from_file = strict_json(capsys.readouterr().out)
     assert main(["estimate", "--mu", *map(str, MU), "--rho", str(RHO), "--json"]) == 0
-    from_values = _strict_json(capsys.readouterr().out)
+    from_values = strict_json(capsys.readouterr().out)
     assert from_file.pop("direction_given") and not from_values.pop("direction_given")
     assert from_file == from_values
 
@@ -358,7 +344,7 @@ def test_the_papers_prior_takes_the_first_three_bearings_present(capsys):
     mu = [-0.3, float("nan"), 0.0, 0.1, 0.16]
     argv = ["estimate", "--mu", *map(str, mu), "--rho", "0.01", "--per-frame", "--json"]
     assert main(argv) == 0
-    out = _strict_json(capsys.readouterr().out)
+    out = strict_json(capsys.readouterr().out)
     assert out["prior_mean"] == default_prior(np.array(mu)).mean.tolist()
 
 
@@ -369,7 +355,7 @@ def test_the_papers_prior_takes_the_first_three_bearings_present(capsys):
 def test_per_frame_json_is_the_librarys_track(capsys, name):
     argv = ["estimate", "--mu", *map(str, MU), "--rho", str(RHO), "--per-frame", "--json"]
     assert main([*argv, "--filters", name]) == 0
-    data = _strict_json(capsys.readouterr().out)
+    data = strict_json(capsys.readouterr().out)
     t = depthcore.track(MU, RHO, filter=name)
     assert data["prior_mean"] == t.prior.mean.tolist()
     rows = data["filters"][name]
@@ -385,7 +371,7 @@ def test_per_frame_json_is_the_librarys_track(capsys, name):
 def test_per_frame_csv_holds_the_json_numbers_in_full(capsys):
     argv = ["estimate", "--mu", *map(str, MU), "--rho", str(RHO), "--per-frame"]
     assert main([*argv, "--filters", "optimal", "ekf", "--json"]) == 0
-    data = _strict_json(capsys.readouterr().out)
+    data = strict_json(capsys.readouterr().out)
     assert main([*argv, "--filters", "optimal", "ekf", "--csv"]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
     assert len(rows) == 2 * len(MU)
@@ -423,7 +409,7 @@ def test_the_help_describes_the_file_format(capsys):
 def test_the_prior_of_a_file_is_the_papers_rule_on_its_first_three_bearings(tmp_path, capsys):
     path = _file(tmp_path, _csv(["mu"], [[m] for m in MU]))
     assert main(["estimate", "--mu-file", path, "--rho", str(RHO), "--per-frame", "--json"]) == 0
-    data = _strict_json(capsys.readouterr().out)
+    data = strict_json(capsys.readouterr().out)
     assert data["prior_mean"] == paper_prior(model.noise_free_state(MU[:3])).mean.tolist()
 
 
@@ -473,12 +459,12 @@ def test_a_track_with_gaps_noise_or_steps_is_depthcore_track_or_its_refusal(
     argv += ["--gate", str(options["gate"])] if "gate" in options else []
     argv += ["--direction", "receding"] if "step" in text else []
     expected = _library(track.mu, track.rho if rho is None else rho, filter=name, **options)
-    status, out, err = _run(argv, capsys)
+    status, out, err = run_cli(argv, capsys)
     if expected is None:
         assert status == 2 and err.count("\n") == 1 and "Traceback" not in err, err
         return
     assert status == 0, err
-    rows = _strict_json(out)["filters"][name]
+    rows = strict_json(out)["filters"][name]
     assert [r["bearing"] for r in rows] == np.isfinite(track.mu).tolist()
     assert [r["mu"] for r in rows] == [None if np.isnan(m) else m for m in track.mu]
     for key, attribute in track_runs.QUANTITIES:
@@ -519,7 +505,7 @@ def test_learn_noise_is_the_maximum_likelihood_fit_and_runs_the_filters_with_it(
         "1",
     ]
     assert main(argv) == 0
-    out = _strict_json(capsys.readouterr().out)
+    out = strict_json(capsys.readouterr().out)
     prior_cov = np.diag([1.0, 4.0, 1.0])
     fit = learning.fit(mu, [1.0, 5.0, 0.0], prior_cov)
     assert out["learned"]["rho"] == fit.rho and out["learned"]["rho_se"] == fit.rho_se
@@ -534,7 +520,7 @@ def test_learn_noise_with_a_given_process_noise_learns_rho_only(capsys):
     argv = ["estimate", "--mu", *map(repr, mu.tolist()), "--learn-noise", "--per-frame"]
     argv += ["--prior-mean", "1", "5", "0", "--process-noise", "0", "--json"]
     assert main(argv) == 0
-    learned = _strict_json(capsys.readouterr().out)["learned"]
+    learned = strict_json(capsys.readouterr().out)["learned"]
     assert learned["estimated"] == ["rho"] and learned["process_noise"] == 0.0
     assert learned["process_noise_se"] is None and learned["rho_se"] > 0
 
