@@ -171,7 +171,7 @@ class Reading(NamedTuple):
         The header's columns.
     direction : str
         How the distances are read, one of :data:`DIRECTIONS`.
-    frames : iterable of Frame
+    frames : iterator of Frame
         The frames, each read and checked as it is asked for.
     """
 
