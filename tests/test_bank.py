@@ -690,6 +690,19 @@ def test_closed_form_filter_with_shared_nodes_equals_the_kalman_route():
         assert_allclose(np.broadcast_to(closed.cov, route.cov.shape), route.cov, rtol=1e-8)
 
 
+def test_the_closed_form_update_is_defined_for_a_bearing_without_noise():
+    """With r = 0 the updated Var[x] is 0 and Var[v] the limit c - b**2 / a, finite: the
+    form (det + c r) / (a + r) of lateral_filter, where (det' + b'**2) / a' is 0 / 0."""
+    y = np.array([2.0, 5.0])
+    mean, cov = np.array([0.0, 4.0, 0.1]), np.diag([1.0, 4.0, 0.25]) + 0.1
+    with np.errstate(all="raise"):
+        _, _, (a, b, c) = bk.lateral_filter(y, np.array([[0.2]]), 0.0, 0.0, mean, cov)
+    given = bk.conditional_prior(y, mean, cov)[0].cov[..., 0, :, :]
+    a0, b0, c0 = given[..., 0, 0], given[..., 0, 1], given[..., 1, 1]
+    assert np.all(a == 0.0) and np.all(b == 0.0)
+    assert_allclose(np.broadcast_to(c, (1, 2))[0], c0 - b0**2 / a0, rtol=1e-12)
+
+
 EPS = np.finfo(float).eps
 
 

@@ -160,3 +160,20 @@ def test_the_refusal_names_the_files_frames(tmp_path, capsys):
 )
 def test_prior_depth_is_refused_in_one_line_naming_it(capsys, extra, words):
     cli_refused(["estimate", "--mu", "-0.3", "0", "0.2", "--rho", "0.01", *extra], capsys, words)
+
+
+def test_a_fit_that_finds_no_maximum_is_refused_in_one_line_and_a_converged_one_is_not(capsys):
+    """Five bearings leave the likelihood unbounded as rho -> 0 (q takes every bearing):
+    the command says so instead of filtering with rho near 0; thirty bearings fit."""
+    few = ["estimate", "--mu", "0.3", "0.1", "0.2", "0.3", "0.35", "--learn-noise"]
+    cli_refused([*few, "--prior-depth", "3", "2"], capsys, "--learn-noise", "no maximum")
+    fit = cli_json(["estimate", "--mu", *map(repr, CLEAN.tolist()), "--learn-noise"], capsys)
+    assert fit["learned"]["converged"] and 0.001 < fit["learned"]["rho"] < 0.004
+
+
+def test_the_learned_noise_text_reads_a_missing_interval_as_none():
+    fit = {"level": 0.95, "intervals": "profile", "estimated": ["rho", "process_noise"]}
+    fit |= {"rho": 0.002, "rho_se": None, "rho_interval": None}
+    fit |= {"process_noise": 0.01, "process_noise_se": None, "process_noise_interval": None}
+    text = cli_text.format_learned({"learned": fit})
+    assert "rho = 0.002 (no interval)" in text and "q = 0.01 (no interval)" in text

@@ -138,6 +138,12 @@ def _estimate(args, held):
     if args.learn_noise:
         known_q = q if "process_noise" in getattr(args, "_given", ()) else None
         learned = track_runs.learn(src.mu, rho, prior, known_q, steps, gate)
+        if not learned.converged:
+            raise ValueError(
+                f"--learn-noise: the likelihood of these {np.size(src.mu)} bearings has no "
+                f"maximum the fit could reach (it stopped at rho = {learned.rho:.3g}, "
+                f"q = {learned.process_noise:.3g}); give --rho, or --process-noise, or more frames"
+            )
         rho = learned.rho * np.asarray(rho) if np.ndim(rho) else learned.rho
         q = learned.process_noise
         learned = track_runs.learned_json(learned, src.rho is not None, src.frames, src.times)

@@ -427,6 +427,8 @@ def format_learned(result: dict) -> str:
         value, se, interval = fit[name], fit[f"{name}_se"], fit[f"{name}_interval"]
         if name not in fit["estimated"]:
             return f"{symbol} = {value:.4g} (given)"
+        if interval is None:  # the likelihood's curvature gave none
+            return f"{symbol} = {value:.4g} (no interval)"
         if se is None:  # at the boundary q = 0: a one-sided interval
             return f"{symbol} = {value:.4g} (at 0; {kind} upper bound {interval[1]:.3g})"
         return (

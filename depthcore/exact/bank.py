@@ -248,7 +248,7 @@ def lateral_filter(
 
         e = mu_k y_k - x,   x += a e / (a + r_k),   v += b e / (a + r_k),
         a' = a r_k / (a + r_k),   b' = b r_k / (a + r_k),
-        det' = det r_k / (a + r_k),   c' = (det' + b'**2) / a',
+        det' = det r_k / (a + r_k),   c' = (det + c r_k) / (a + r_k),
 
     the log likelihood gains ``log N(mu_k; x / y_k, (a + r_k) / y_k**2)``, and the
     prediction over a step ``s`` is ``x += s v``, ``a += s (2 b + s c)``, ``b += s c``,

@@ -128,8 +128,10 @@ def update(s: Rows, mu_k, y, rho2, yy):
     g = e / total
     log_likelihood = -0.5 * (LOG_2PI + np.log(total / yy) + e * g)
     np.add(s.M, s.ab * g, out=s.M)  # x + a g and v + b g
+    # c - b**2 / (a + r) = (det + c r) / (a + r): a sum of non-negative terms, defined
+    # where the updated a is 0 (r = 0: a bearing without noise)
+    np.divide(s.det + s.c * r, total, out=s.c)
     np.multiply(s.ab_det, r / total, out=s.ab_det)  # a, b and det times r / (a + r)
-    np.divide(s.det + s.b * s.b, s.a, out=s.c)
     return log_likelihood
 
 
