@@ -10,8 +10,9 @@
 * :mod:`~depthcore.kalman.ukf`: the unscented Kalman filter (textbook 19.4);
 * :mod:`~depthcore.kalman.iterated`: the iterated EKF and its smoother;
 * :mod:`~depthcore.kalman.online`: the EKF and the UKF one bearing at a time;
-* :mod:`~depthcore.kalman.spatial`: the EKF and the UKF for a point in 3-D,
-  seen as bearing pairs;
+* :mod:`~depthcore.kalman.spatial`: the EKF, the iterated EKF and the UKF for a
+  point in 3-D, seen as bearing pairs, and :mod:`~depthcore.kalman.spatial_inverse`,
+  the inverse-depth EKF for it;
 * :mod:`~depthcore.kalman.inverse_depth`,
   :mod:`~depthcore.kalman.inverse_depth_ukf`,
   :mod:`~depthcore.kalman.modified_polar`,

@@ -74,7 +74,7 @@ MAX_ITERATIONS = 100
 STEP_TOL = 1e-12
 
 
-def _still_descending(moved, f_new, f) -> np.ndarray:
+def still_descending(moved, f_new, f) -> np.ndarray:
     """Whether a Gauss-Newton iteration goes on after a step (the rule of :data:`STEP_TOL`).
 
     Parameters
@@ -159,7 +159,7 @@ def update(n, C, mu, rho, max_iterations: int = MAX_ITERATIONS) -> IteratedUpdat
         z = np.linalg.solve(C_chol, (x_new - x)[..., None])[..., 0]
         moved = np.sqrt(np.sum(z**2, axis=-1))
         x = np.where(active[..., None], x_new, x)
-        active = active & _still_descending(moved, f_new, f)
+        active = active & still_descending(moved, f_new, f)
         f = np.where(active, f_new, f)
     # The gain of the last linearisation (at convergence, the gradient at the mode itself).
     h = model.observation_vector(linearised_at)
@@ -375,7 +375,7 @@ def smoother(
         iterations = iterations + active
         moved = np.sqrt(np.abs(np.einsum("...i,...ij,...j->...", x_new - x, A, x_new - x)))
         x = np.where(active[..., None], x_new, x)
-        active = active & _still_descending(moved, f_new, f)
+        active = active & still_descending(moved, f_new, f)
         f = np.where(active, f_new, f)
     _, J = _residuals_and_jacobian(x, K)
     Jw = J / rho[..., None, None]
@@ -446,7 +446,7 @@ def _smoother_with_noise(mu, rho, m, P, q, max_iterations) -> SmootherResult:
             + np.sum(np.einsum("bki,bki->bk", H, d) ** 2, axis=-1)
             + np.sum((dz[:, 3:] / q) ** 2, axis=-1)
         )
-        converged[rows] = ~_still_descending(moved, f_new, f[rows])
+        converged[rows] = ~still_descending(moved, f_new, f[rows])
         z[rows], f[rows] = z_new, f_new
     s = trajectory_states(z)
     zero = np.zeros((B, K))

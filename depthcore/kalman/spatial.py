@@ -1,4 +1,4 @@
-"""The EKF and the UKF for a point in 3-D, seen as bearing pairs.
+"""The EKF, the iterated EKF and the UKF for a point in 3-D, seen as bearing pairs.
 
 Recommended import: ``from depthcore.kalman import spatial``.
 
@@ -10,11 +10,17 @@ the velocities' variances growing by ``q**2 |s|``), so both filters predict exac
 
 * the EKF linearises the pair at the predicted mean (Eqs. (11)-(12) for both
   coordinates: rows ``(1 / y, -x / y**2, 0, 0, 0)`` and ``(0, -h / y**2, 0, 1 / y, 0)``);
+* the iterated EKF relinearises at its own iterate, Gauss-Newton on
+  ``|x - m|_P**2 + |z - (x / y, h / y)|**2 / rho**2`` as
+  :func:`depthcore.kalman.iterated.update` does for one bearing (textbook 19.3,
+  Bell and Cathey 1993): the first iterate is the EKF's update, the fixed point
+  the mode of the one-step posterior, the covariance the Joseph form at the last
+  linearisation;
 * the UKF moves ``2 d + 1`` sigma points of the prediction
   (:class:`depthcore.kalman.ukf.SigmaPoints` with ``dim = 5``) through the pair and
   takes their moments.
 
-:func:`run` runs either over a track with gaps, noise per frame and signed steps, and
+:func:`run` runs any of them over a track with gaps, noise per frame and signed steps, and
 reports each pair's log predictive density. A missing frame (a row of ``NaN``) is
 predicted through.
 """
@@ -25,6 +31,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from depthcore.kalman import linear
+from depthcore.kalman.iterated import MAX_ITERATIONS, still_descending
+from depthcore.kalman.second_order import damped_step
 from depthcore.kalman.ukf import SigmaPoints, unscented_transform
 from depthcore.problem import checks
 from depthcore.problem.bearing_pairs import check
@@ -93,9 +102,9 @@ def jacobian(m) -> np.ndarray:
     return J
 
 
-def _gain_update(m, P, z, predicted, S, cross):
-    """The Kalman update from the pair's predicted mean, covariance ``S`` and ``Cov[pair,
-    state]`` ``cross`` (..., 2, 5).
+def gain_update(m, P, z, predicted, S, cross):
+    """Textbook 19.2.2: the update from the pair's predicted mean, covariance ``S`` (..., 2, 2)
+    and ``Cov[pair, state]`` ``cross`` (..., 2, d), of a state ``(m, P)`` of any dimension d.
 
     Returns the mean, the covariance, the pair's log predictive density under ``N(pred,
     S)`` and its tail probability, the probability of a density below the observed
@@ -117,7 +126,7 @@ def ekf_update(m, P, z, rho):
     J = jacobian(m)
     rho2 = np.asarray(rho, dtype=float)[..., None, None] ** 2
     S = J @ P @ np.swapaxes(J, -1, -2) + rho2 * np.eye(2)
-    return _gain_update(m, P, z, measurement(m), S, J @ P)
+    return gain_update(m, P, z, measurement(m), S, J @ P)
 
 
 def ukf_update(m, P, z, rho, sigma_points: SigmaPoints = SIGMA_POINTS):
@@ -133,17 +142,69 @@ def ukf_update(m, P, z, rho, sigma_points: SigmaPoints = SIGMA_POINTS):
     cross = np.einsum(
         "i,...ia,...ib->...ab", Wc, Z - moments.mean[..., None, :], X - m[..., None, :]
     )
-    return _gain_update(m, P, z, moments.mean, S, cross)
+    return gain_update(m, P, z, moments.mean, S, cross)
+
+
+def _objective(x, m, P_chol, z, r2):
+    """``|x - m|_P**2 + |z - (x / y, h / y)|**2 / rho**2`` (...), ``inf`` behind the camera."""
+    d = np.linalg.solve(P_chol, (x - m)[..., None])[..., 0]
+    front = x[..., 1] > 0
+    r = z - measurement(np.where(front[..., None], x, 1.0))
+    return np.where(front, np.sum(d**2, axis=-1) + np.sum(r**2, axis=-1) / r2, np.inf)
+
+
+def iterated_update(m, P, z, rho, max_iterations: int = MAX_ITERATIONS):
+    """The iterated EKF's update by the pair ``z`` (module docstring), from ``x_0 = m``.
+
+    ``x_{i+1} = m + K_i (z - g(x_i) - H_i (m - x_i))``, ``K_i = P H_i^T (H_i P H_i^T +
+    rho**2 I)^{-1}`` with ``g`` the pair and ``H_i`` its Jacobian at ``x_i``, each step
+    halved where it would leave the camera's front or raise the objective
+    (:func:`depthcore.kalman.second_order.damped_step`), stopped by
+    :func:`depthcore.kalman.iterated.still_descending`. ``m`` (..., 5), ``P`` (..., 5, 5),
+    ``z`` (..., 2), ``rho`` (...). Returns the mean, the Joseph-form covariance at the last
+    linearisation, and the log predictive density and tail probability of the EKF's
+    linearisation at ``m`` (as :func:`depthcore.kalman.iterated.bearing_predictive`).
+    """
+    r2 = np.asarray(rho, dtype=float) ** 2
+    eye = np.eye(2)
+
+    def gain(x):
+        H = jacobian(x)
+        S = H @ P @ np.swapaxes(H, -1, -2) + r2[..., None, None] * eye
+        return H, S, np.swapaxes(np.linalg.solve(S, H @ P), -1, -2)
+
+    H, S, _ = gain(m)
+    _, _, log_p, tail = gain_update(m, P, z, measurement(m), S, H @ P)
+    P_chol = np.linalg.cholesky(P)
+    x, at = m.copy(), m.copy()
+    f = _objective(x, m, P_chol, z, r2)
+    active = np.ones(m.shape[:-1], dtype=bool)
+    for _ in range(max_iterations):
+        if not np.any(active):
+            break
+        at = np.where(active[..., None], x, at)
+        H, _, K = gain(x)
+        residual = z - measurement(x) - np.einsum("...ij,...j->...i", H, m - x)
+        step = m + np.einsum("...ij,...j->...i", K, residual) - x
+        x_new, f_new = damped_step(x, step, f, lambda y: _objective(y, m, P_chol, z, r2))
+        d = np.linalg.solve(P_chol, (x_new - x)[..., None])[..., 0]
+        x = np.where(active[..., None], x_new, x)
+        active = active & still_descending(np.sqrt(np.sum(d**2, axis=-1)), f_new, f)
+        f = np.where(active, f_new, f)
+    H, _, K = gain(at)
+    cov = linear.joseph(P, K, H, r2[..., None, None] * eye)
+    return x, cov, log_p, tail
 
 
 #: The updates by name.
-UPDATES = {"ekf": ekf_update, "ukf": ukf_update}
+UPDATES = {"ekf": ekf_update, "iterated": iterated_update, "ukf": ukf_update}
+_LABELS = {"ekf": "EKF", "iterated": "iterated EKF", "ukf": "UKF"}
 
 
 def run(
     mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None, filter: str = "ekf"
 ) -> SpatialHistory:
-    """The EKF or the UKF over tracks of pairs, batched.
+    """The EKF, the iterated EKF or the UKF over tracks of pairs, batched.
 
     Parameters
     ----------
@@ -157,7 +218,7 @@ def run(
         ``q >= 0`` on both velocities.
     steps : array_like, shape (N - 1,) or (..., N - 1), or None
         The depth's signed change between frames.
-    filter : {"ekf", "ukf"}
+    filter : {"ekf", "iterated", "ukf"}
 
     Returns
     -------
@@ -185,11 +246,18 @@ def run(
     P = np.broadcast_to(P, pairs.batch + (DIM, DIM)).reshape(B, DIM, DIM).copy()
     q = checks.process_noise(process_noise, "process_noise")
     update = UPDATES[filter]
+    label = _LABELS[filter]
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-        means, covs, log_p = _loop(pairs, m, P, q, update, filter)
+        try:
+            means, covs, log_p = _loop(pairs, m, P, q, update, label)
+        except np.linalg.LinAlgError:
+            raise ValueError(
+                f"mu and rho lead the {label} to a covariance that is not positive definite: "
+                "a rho tiny beside the prior loses it to rounding"
+            ) from None
     if not (np.all(np.isfinite(means)) and np.all(np.isfinite(covs))):
         raise ValueError(
-            f"mu, rho, prior_mean and prior_cov overflow the {filter.upper()} in double "
+            f"mu, rho, prior_mean and prior_cov overflow the {label} in double "
             "precision; give values nearer the track's scale"
         )
     shape = pairs.batch
@@ -200,7 +268,7 @@ def run(
     )
 
 
-def _loop(pairs, m, P, q, update, filter):
+def _loop(pairs, m, P, q, update, label):
     """:func:`run`'s predict-update loop on checked inputs: means, covariances, log densities."""
     B, N = pairs.present.shape
     means, covs = np.empty((B, N, DIM)), np.empty((B, N, DIM, DIM))
@@ -211,7 +279,7 @@ def _loop(pairs, m, P, q, update, filter):
         here = pairs.present[:, k]
         if np.any(here & ~(m[:, 1] > 0)):
             raise ValueError(
-                f"mu: the {filter.upper()}'s prediction puts the point at or behind the camera "
+                f"mu: the {label}'s prediction puts the point at or behind the camera "
                 f"at frame {k + 1} (depth {float(np.min(m[here, 1])):.6g})"
             )
         if np.any(here):

@@ -84,6 +84,7 @@ from depthcore.kalman import (
     range_ekf,
     second_order,
     spatial,
+    spatial_inverse,
     ukf,
 )
 from depthcore.particles import importance, rbpf, resample_move
@@ -385,6 +386,7 @@ FILTERS: dict[str, Filter] = {
             with_process_noise=True,
             default=False,
             estimate=checked_gaussian("iterated EKF"),
+            spatial=functools.partial(spatial.run, filter="iterated"),
         ),
         Filter(
             "inverse_depth",
@@ -395,6 +397,7 @@ FILTERS: dict[str, Filter] = {
             with_process_noise=True,
             default=False,
             estimate=checked_gaussian("inverse-depth EKF"),
+            spatial=spatial_inverse.run,
         ),
         Filter(
             "resample_move",
