@@ -147,11 +147,15 @@ def test_the_online_filters_take_pairs_when_the_prior_is_in_3d(name):
     assert far.gated and far.tail < 1e-3
 
 
-def test_track_says_pairs_go_to_the_filters_of_a_point_in_3d():
+def test_track_filters_and_smooths_pairs_and_refuses_a_gate_on_them_in_one_line():
+    """track() of pairs: the state (x, y, v, h, w) at every frame (tests/test_spatial_filters.py
+    checks the numbers); a gate has no 3-D form yet and is refused by name."""
     from depthcore.registry.tracking import track
 
-    with pytest.raises(ValueError, match=r"^mu of shape \(N, 2\) holds pairs") as info:
-        track(PAIRS, 0.01)
+    t = track(PAIRS, 0.01, steps=STEPS)
+    assert t.filtered.mean.shape == t.smoothed.mean.shape == (len(PAIRS), 5)
+    with pytest.raises(ValueError, match=r"^gate: track\(\) has no gate on pairs") as info:
+        track(PAIRS, 0.01, steps=STEPS, gate=1e-3)
     assert "\n" not in str(info.value)
 
 

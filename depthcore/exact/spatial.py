@@ -39,7 +39,9 @@ from typing import NamedTuple
 import numpy as np
 
 from depthcore.exact import quadrature
+from depthcore.exact.mixture import Smoothed
 from depthcore.exact.posterior import grid_nodes
+from depthcore.kalman import linear
 from depthcore.problem import checks, frames
 from depthcore.problem.bearing_pairs import Pairs, check
 
@@ -118,7 +120,13 @@ def update_nodes(M, C, bearing, y, rho2, i: int):
     return M + column * (e / S)[..., None], C, log_density
 
 
-def node_filter(nodes, pairs: Pairs, prior_mean, prior_cov, process_noise):
+def running_floor(elapsed) -> np.ndarray:
+    """The depth floor of frames 1 .. k at every ``k``, (B, N), as
+    :func:`depthcore.problem.frames.depth_floor` of each prefix of ``elapsed`` (B, N)."""
+    return np.maximum.accumulate(np.maximum(-elapsed, 0.0), axis=-1)
+
+
+def node_filter(nodes, pairs: Pairs, prior_mean, prior_cov, process_noise, history=False):
     """One four-state Kalman filter per depth node over every frame (module docstring).
 
     Parameters
@@ -129,6 +137,8 @@ def node_filter(nodes, pairs: Pairs, prior_mean, prior_cov, process_noise):
     prior_mean : ndarray, shape (B, 5)
     prior_cov : ndarray, shape (B, 5, 5)
     process_noise : ndarray, shape (B,)
+    history : bool
+        Also return every frame's Gaussians, for the smoother (:func:`track`).
 
     Returns
     -------
@@ -137,16 +147,25 @@ def node_filter(nodes, pairs: Pairs, prior_mean, prior_cov, process_noise):
     mean : ndarray, shape (B, J, 4)
     cov : ndarray, shape (B, J, 4, 4)
         ``u_N`` given ``y_1`` and the pairs.
+    frames : depthcore.kalman.linear.FilterResult
+        With ``history``: the filtered and predicted ``u_k`` given ``y_1`` at every frame,
+        means (B, J, N, 4) and covariances (B, J, N, 4, 4), and ``log p(pair_k | earlier
+        pairs, y_1)`` (B, J, N) (0 at a missing frame and where the point has reached the
+        camera by frame ``k``, :func:`running_floor`).
     """
     M, C, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
     C = np.broadcast_to(C, M.shape + (4,)).copy()
     q2 = (process_noise**2)[:, None]
     q2 = q2 if np.any(q2) else None
     elapsed = pairs.elapsed
-    reached = nodes <= frames.depth_floor(elapsed)[:, None]
+    floors = running_floor(elapsed)
+    kept = []
     for k in range(pairs.mu.shape[1]):
         if k:
             M, C = predict_nodes(M, C, pairs.steps[:, k - 1, None], q2)
+        kept.append((M, C))
+        gain = 0.0
+        reached = nodes <= floors[:, k, None]
         here = pairs.present[:, k, None] & ~reached
         y = np.where(here, nodes + elapsed[:, k, None], 1.0)
         rho2 = (pairs.rho[:, k] ** 2)[:, None]
@@ -156,8 +175,14 @@ def node_filter(nodes, pairs: Pairs, prior_mean, prior_cov, process_noise):
             M = np.where(here[..., None], M1, M)
             C = np.where(here[..., None, None], C1, C)
             log_weight = log_weight + np.where(here, log_density, 0.0)
+            gain = gain + np.where(here, log_density, 0.0)
+        kept[-1] += (M, C, gain)
     C = 0.5 * (C + np.swapaxes(C, -1, -2))
-    return np.where(reached, -np.inf, log_weight), M, C
+    log_weight = np.where(reached, -np.inf, log_weight)
+    if not history:
+        return log_weight, M, C
+    pm, pc, fm, fc, lp = (np.stack(a, axis=2) for a in zip(*kept, strict=True))
+    return log_weight, M, C, linear.FilterResult(fm, fc, pm, pc, lp)
 
 
 class SpatialPosterior(NamedTuple):
@@ -242,7 +267,26 @@ def posterior(
     m, P = _prior(prior_mean, prior_cov, B, pairs.batch)
     q = checks.nonnegative_batch(process_noise, "process_noise", pairs.batch).reshape(-1)
     q = np.broadcast_to(q, (B,))
-    rtol = checks.positive_scalar(rtol, "rtol")
+    return _posterior(pairs, m, P, q, checks.positive_scalar(rtol, "rtol"))
+
+
+def _weighted(a, nodes, travelled, M, C):
+    """Node probabilities from log weights ``a`` (B, J), the moments (B, 5), (B, 5, 5) and
+    their error (B, 5), the change of each mean and SD on every other node."""
+    a = np.where(np.isnan(a), -np.inf, a)
+    p = np.exp(a - np.max(a, axis=1, keepdims=True))
+    p /= np.sum(p, axis=1, keepdims=True)
+    mean, cov = _moments(p, nodes, travelled, M, C)
+    half = np.where(np.arange(p.shape[1]) % 2 == 0, p, 0.0)
+    half /= np.sum(half, axis=1, keepdims=True)
+    half_mean, half_cov = _moments(half, nodes, travelled, M, C)
+    sd, half_sd = (np.sqrt(np.diagonal(c, axis1=1, axis2=2)) for c in (cov, half_cov))
+    return p, mean, cov, np.maximum(np.abs(half_mean - mean), np.abs(half_sd - sd))
+
+
+def _placed(pairs: Pairs, m, P, q, rtol: float):
+    """The depth quadrature's nodes (B, J) at frame 1 and their log weights (B, J) for
+    ``pairs``, placed by :func:`depthcore.exact.quadrature.integrate` to ``rtol``."""
     floor = frames.depth_floor(pairs.elapsed)
 
     def integrand(offsets, pb):
@@ -262,22 +306,19 @@ def posterior(
         cov=P[:, xyv][:, :, xyv],
         steps=steps_or_none,
     )
+    _, _, _, _, grids = quadrature.integrate(pb, (3,), rtol)
+    nodes, log_w = grid_nodes(grids[3])
+    return nodes + floor[:, None], log_w
+
+
+def _posterior(pairs: Pairs, m, P, q, rtol: float) -> SpatialPosterior:
+    """:func:`posterior` of checked pairs, ``m`` (B, 5), ``P`` (B, 5, 5), ``q`` (B,)."""
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-        _, _, _, _, grids = quadrature.integrate(pb, (3,), rtol)
-        nodes, log_w = grid_nodes(grids[3])
-        nodes = nodes + floor[:, None]
+        nodes, log_w = _placed(pairs, m, P, q, rtol)
         log_weight, M, C = node_filter(nodes, pairs, m, P, q)
-        a = log_w + log_weight
-        a = np.where(np.isnan(a), -np.inf, a)
-        p = np.exp(a - np.max(a, axis=1, keepdims=True))
-        p /= np.sum(p, axis=1, keepdims=True)
         travelled = pairs.elapsed[:, -1]
-        mean, cov = _moments(p, nodes, travelled, M, C)
-        half = np.where(np.arange(p.shape[1]) % 2 == 0, p, 0.0)
-        half /= np.sum(half, axis=1, keepdims=True)
-        half_mean, half_cov = _moments(half, nodes, travelled, M, C)
-        sd, half_sd = (np.sqrt(np.diagonal(c, axis1=1, axis2=2)) for c in (cov, half_cov))
-        error = np.maximum(np.abs(half_mean - mean), np.abs(half_sd - sd))
+        p, mean, cov, error = _weighted(log_w + log_weight, nodes, travelled, M, C)
+        sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
     if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)) and np.all(sd > 0)):
         raise ValueError(
             "mu, rho, prior_mean and prior_cov overflow the exact 3-D filter in double "
@@ -295,3 +336,131 @@ def posterior(
         C.reshape(shape + (J, 4, 4)),
         travelled.reshape(shape),
     )
+
+
+class SpatialTrack(NamedTuple):
+    """The exact filter and smoother of one track of pairs at every frame (:func:`track`).
+
+    Attributes
+    ----------
+    filtered : depthcore.exact.mixture.Smoothed
+        The state ``(x_k, y_k, v_k, h_k, w_k)`` given the pairs up to frame ``k``: means
+        (N, 5) and covariances (N, 5, 5), row ``k - 1`` for frame ``k``.
+    smoothed : depthcore.exact.mixture.Smoothed
+        The state at frame ``k`` given all ``N`` pairs; at frame ``N`` the filtered state.
+    nodes : ndarray, shape (J,)
+        The depths at frame 1 on which the smoother mixes.
+    probabilities : ndarray, shape (J,)
+        Their posterior probabilities after all ``N`` pairs.
+    placements : int
+        How many times the filter placed its nodes.
+    """
+
+    filtered: Smoothed
+    smoothed: Smoothed
+    nodes: np.ndarray
+    probabilities: np.ndarray
+    placements: int
+
+
+def track(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None, rtol: float = 1e-10
+) -> SpatialTrack:
+    """The exact filter and its fixed-interval smoother at every frame of one track of pairs.
+
+    **Filtered.** The state at frame ``k`` given the pairs up to it is the mixture of the
+    nodes' Kalman filters (:func:`node_filter`), weighted by the quadrature's weights times
+    ``N(y_1; m_y, P_yy) p(pairs_1 .. pairs_k | y_1)``. The nodes are placed for the pairs
+    of the first frame (:func:`depthcore.exact.quadrature.integrate`, to ``rtol``) and kept
+    while they resolve each later frame's posterior as the plane's online update keeps
+    them (:func:`depthcore.exact.posterior.update`): every mean and SD of the depth and the
+    velocity changes by at most ``rtol`` of its SD, or by the roundoff floor, on every other
+    node, no node holds half the probability, and the nodes at both ends lie
+    :data:`depthcore.exact.quadrature.CUTOFF` below the largest in log weight; at the first
+    frame they do not, they are placed anew for the pairs up to it.
+
+    **Smoothed.** Given the depth ``y_1`` the model is linear-Gaussian (module docstring), so
+    each node's Gaussian of ``u_k`` given all pairs is its Rauch-Tung-Striebel smoother
+    (textbook 19.2.3, :func:`depthcore.kalman.linear.fixed_interval_smoother`, the transition
+    ``[[1, s], [0, 1]]`` in each block) run back from its filter at frame ``N``; the depth's
+    posterior is the filter's at frame ``N``, so the smoothed density of the state at frame
+    ``k`` is exactly the mixture over those nodes with those probabilities, the depth
+    ``y_1 + t_k`` at each node. At frame ``N`` it is the filtered state.
+
+    Parameters
+    ----------
+    mu : array_like, shape (N, 2)
+        One track's pairs ``(x / y, h / y)``; ``NaN`` rows at missing frames, the first
+        present.
+    rho : float or array_like, shape (N,)
+    prior_mean : array_like, shape (5,)
+    prior_cov : array_like, shape (5, 5)
+    process_noise : float
+    steps : array_like, shape (N - 1,), or None
+    rtol : float
+        The quadrature's tolerance at every frame, relative to each SD.
+
+    Returns
+    -------
+    SpatialTrack
+    """
+    pairs = check(mu, rho, steps)
+    if pairs.batch != ():
+        raise ValueError(f"mu must have shape (N, 2), one track, got shape {np.shape(mu)}")
+    if not pairs.present[0, 0]:
+        raise ValueError("mu: the first pair must be present to start the exact filter")
+    m, P = _prior(prior_mean, prior_cov, 1, ())
+    q = np.array([checks.nonnegative_scalar(process_noise, "process_noise")])
+    rtol = checks.positive_scalar(rtol, "rtol")
+    N = pairs.mu.shape[1]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        means, covs, nodes, p, history, placements = _filtered(pairs, m, P, q, rtol)
+        F = np.broadcast_to(np.eye(4), (N - 1, 4, 4)).copy()
+        F[:, 0, 1] = F[:, 2, 3] = pairs.steps[0]
+        smooth = linear.fixed_interval_smoother(history, F)
+        mean, cov = np.empty((N, 5)), np.empty((N, 5, 5))
+        for k in range(N):
+            M, C = smooth.mean[:, :, k], smooth.cov[:, :, k]
+            mean[k], cov[k] = _moments(p, nodes, pairs.elapsed[:, k], M, C)
+    if not all(np.all(np.isfinite(a)) for a in (means, covs, mean, cov)):
+        raise ValueError(
+            "mu, rho, prior_mean and prior_cov overflow the exact 3-D smoother in double "
+            "precision; give values nearer the track's scale"
+        )
+    return SpatialTrack(Smoothed(means, covs), Smoothed(mean, cov), nodes[0], p[0], placements)
+
+
+def _filtered(pairs: Pairs, m, P, q, rtol: float):
+    """:func:`track`'s filter: the moments at every frame, (N, 5) and (N, 5, 5), the last
+    nodes (1, J), their probabilities (1, J) at frame N, their filters' history and the
+    number of placements."""
+    N = pairs.mu.shape[1]
+    floors = running_floor(pairs.elapsed)
+    means, covs = np.empty((N, 5)), np.empty((N, 5, 5))
+    eps = np.finfo(float).eps
+    k, placements = 0, 0
+    while k < N:
+        cut = (pairs.mu[:, : k + 1], pairs.present[:, : k + 1], pairs.rho[:, : k + 1])
+        nodes, log_w = _placed(Pairs(*cut, pairs.steps[:, :k], ()), m, P, q, rtol)
+        placements += 1
+        *_, history = node_filter(nodes, pairs, m, P, q, history=True)
+        log_prior = conditional_prior(nodes, m, P)[2]
+        a = (log_w + log_prior)[..., None] + np.cumsum(history.log_likelihoods, axis=-1)
+        a = np.where(nodes[..., None] <= floors[:, None, :], -np.inf, a)
+        start = k
+        while k < N:
+            M, C = history.means[:, :, k], history.covs[:, :, k]
+            p, mean, cov, error = _weighted(a[..., k], nodes, pairs.elapsed[:, k], M, C)
+            sd = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+            top = np.log(np.max(p))
+            floor = 64.0 * eps * (np.abs(mean) + (2.0 + abs(top)) * sd)
+            resolved = (
+                np.all(error[0, 1:3] <= np.maximum(rtol * sd[0, 1:3], floor[0, 1:3]))
+                and np.max(p) < 0.5
+                and max(a[0, 0, k], a[0, -1, k]) < np.max(a[..., k]) - quadrature.CUTOFF
+            )
+            if k > start and not resolved:
+                break
+            means[k], covs[k] = mean[0], cov[0]
+            k += 1
+    return means, covs, nodes, p, history, placements

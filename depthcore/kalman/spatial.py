@@ -288,3 +288,35 @@ def _loop(pairs, m, P, q, update, label):
             m[rows], P[rows], log_p[rows, k] = new_m, new_P, lp
         means[:, k], covs[:, k] = m, P
     return means, covs, log_p
+
+
+def smoother(
+    mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None, filter: str = "ekf"
+) -> tuple:
+    """:func:`run` and the Rauch-Tung-Striebel smoother over its Gaussians (textbook 19.2.3).
+
+    The motion is linear (:func:`predict`), so the backward recursions run over the
+    filter's own Gaussians with ``F_s`` per step
+    (:func:`depthcore.kalman.linear.fixed_interval_smoother`): for the EKF the extended
+    Kalman smoother, for the UKF the unscented one, as the plane's
+    (:func:`depthcore.registry.adapters.gaussian_smoother`). Parameters as for :func:`run`.
+
+    Returns
+    -------
+    history : SpatialHistory
+        The filter's, means (..., N, 5) and covariances (..., N, 5, 5).
+    smoothed : depthcore.problem.gaussian.MeanAndCov
+        The state at every frame given all pairs, the same shapes; at frame ``N`` the
+        filter's.
+    """
+    h = run(mu, rho, prior_mean, prior_cov, process_noise, steps, filter)
+    s = np.ascontiguousarray(check(mu, rho, steps).steps).reshape(h.means.shape[:-2] + (-1,))
+    q = checks.process_noise(process_noise, "process_noise")
+    pm, pc = predict(h.means[..., :-1, :], h.covs[..., :-1, :, :], q, s)
+    # entry 0, the prior, is not used by the backward recursions: the filter's first stands in
+    pm = np.concatenate([h.means[..., :1, :], pm], axis=-2)
+    pc = np.concatenate([h.covs[..., :1, :, :], pc], axis=-3)
+    F = np.broadcast_to(np.eye(DIM), s.shape + (DIM, DIM)).copy()
+    F[..., 0, 2] = F[..., 3, 4] = s
+    filtered = linear.FilterResult(h.means, h.covs, pm, pc, h.log_predictive)
+    return h, linear.fixed_interval_smoother(filtered, F)

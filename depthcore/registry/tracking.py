@@ -16,7 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from depthcore.problem import checks, frames, model, predictive
+from depthcore.exact import spatial as exact_spatial
+from depthcore.exact.mixture import Smoothed
+from depthcore.kalman import spatial
+from depthcore.problem import bearing_pairs, checks, frames, model, predictive
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from depthcore.registry.filters import FILTERS, names
 
@@ -143,10 +146,15 @@ def _rho(rho, mu, steps):
     else:
         used = frames.check(mu, arr, steps).rho[~np.isnan(mu)]
         value = arr
+    _in_range(used)
+    return value
+
+
+def _in_range(used) -> None:
+    """Refuse, naming ``rho``, a noise level of the frames outside :data:`RHO_RANGE`."""
     if not np.all((RHO_RANGE[0] <= used) & (used <= RHO_RANGE[1])):
         bad = float(used[np.argmax(~((RHO_RANGE[0] <= used) & (used <= RHO_RANGE[1])))])
         raise ValueError(f"rho must be from {RHO_RANGE[0]:g} to {RHO_RANGE[1]:g}, got {bad!r}")
-    return value
 
 
 def track(
@@ -227,11 +235,7 @@ def track(
         )
     mu_arr = checks.as_float(mu, "mu")
     if mu_arr.ndim == 2 and mu_arr.shape[-1] == 2:
-        raise ValueError(
-            "mu of shape (N, 2) holds pairs, a point in 3-D: track() filters and smooths a "
-            "point in the plane; FILTERS['optimal'], 'ekf' and 'ukf' and registry.online "
-            "filter pairs"
-        )
+        return _pairs(mu_arr, rho, prior, process_noise, filter, steps, gate)
     rho_arr = checks.as_float(rho, "rho")
     if steps is None and rho_arr.ndim == 0 and not np.any(np.isnan(mu_arr)):
         mu = model.measurements_batch(mu_arr, "mu")
@@ -276,3 +280,49 @@ def track(
                 f"smoother: its moments are not finite (rho = {rho!r})"
             )
     return Track(filter, filtered, smoothed, prior, q, detail, report)
+
+
+def _pairs(mu, rho, prior, process_noise, filter: str, steps, gate) -> Track:
+    """:func:`track` of pairs ``mu`` (N, 2), a point in 3-D: the exact or a Gaussian 3-D filter.
+
+    ``"optimal"``: :func:`depthcore.exact.spatial.track`, the exact filter at every frame and
+    each depth node's Rauch-Tung-Striebel smoother mixed over the nodes; ``"ekf"`` and
+    ``"ukf"``: :func:`depthcore.kalman.spatial.smoother`. The prior by default is the
+    command line's rule for pairs (:func:`depthcore.registry.track_runs.start_prior`).
+    """
+    from depthcore.registry import track_runs  # it imports this module
+
+    if gate is not None:
+        raise ValueError("gate: track() has no gate on pairs (a point in 3-D) yet; leave it None")
+    rho = checks.as_float(rho, "rho")
+    rho = checks.positive_scalar(rho, "rho") if rho.shape in ((), (1,)) else rho
+    checked = bearing_pairs.check(mu, rho, steps)
+    _in_range(checked.rho[checked.present])
+    steps = None if steps is None else checked.steps[0]
+    q = checks.process_noise(process_noise, "process_noise")
+    if q > PROCESS_NOISE_MAX:
+        raise ValueError(f"process_noise must be at most {PROCESS_NOISE_MAX:g}, got {q!r}")
+    if prior is None:
+        prior = track_runs.start_prior(checked.mu[0], steps)
+    elif np.shape(getattr(prior, "mean", None)) != (5,):
+        raise ValueError(
+            "prior must have a mean (5,) and a covariance (5, 5) of (x, y, v, h, w) for pairs, "
+            f"or be None, got {type(prior).__name__}"
+        )
+    args = (mu, rho, prior.mean, prior.cov, q, steps)
+    try:
+        if filter == "optimal":
+            detail = exact_spatial.track(*args)
+            filtered, smoothed = detail.filtered, detail.smoothed
+        else:
+            detail, s = spatial.smoother(*args, filter=filter)
+            filtered, smoothed = Smoothed(detail.means, detail.covs), Smoothed(s.mean, s.cov)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        message = str(exc)
+        if isinstance(exc, ValueError) and message.startswith(_TRACK_ARGUMENTS):
+            raise
+        raise ValueError(
+            f"mu, rho and prior have no answer from the {filter} filter of pairs ({message}); "
+            "try another filter, a larger rho or a broader prior"
+        ) from None
+    return Track(filter, filtered, smoothed, prior, q, detail, None)
