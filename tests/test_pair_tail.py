@@ -107,3 +107,61 @@ def test_the_mode_gives_one_and_far_out_gives_zero():
     assert pair_tail.tail([30.0, -20.0], log_w, means, covs).tail < 1e-100
     with pytest.raises(ValueError, match="^log_weights: every component is empty$"):
         pair_tail.tail([0.0, 0.0], [-np.inf], means[:1], covs[:1])
+
+
+# --- the exact filter's gate on pairs ----------------------------------------------------------
+
+PRIOR_MEAN = np.array([0.5, 8.0, 0.2, 0.1, 0.0])
+PRIOR_COV = np.diag([1.0, 4.0, 0.3, 1.0, 0.3])
+RHO = 0.01
+
+
+def outlier_track(N=14, seed=1):
+    """A point in 3-D seen for N frames, its pairs 5 and ``10 % N`` (0-based) moved 5 SDs
+    or more."""
+    truth = np.array([0.8, 7.0, 0.1, -0.3, 0.05])
+    k = np.arange(N)
+    x, y, h = truth[0] + truth[2] * k, truth[1] + k, truth[3] + truth[4] * k
+    pairs = np.stack([x / y, h / y], -1)
+    pairs = pairs + RHO * np.random.default_rng(seed).standard_normal(pairs.shape)
+    pairs[5] += [0.06, -0.05]
+    pairs[10 % N] += [-0.05, 0.06]
+    return pairs, np.array([x[-1], y[-1], truth[2], h[-1], truth[4]])
+
+
+def test_the_exact_filter_gates_exactly_the_outlying_pairs_and_beats_no_gate():
+    from depthcore.exact import online
+
+    pairs, end = outlier_track()
+    runs = {}
+    for gate in (None, 1e-3):
+        f = online.Online(PRIOR_MEAN, PRIOR_COV, rho=RHO, gate=gate)
+        runs[gate] = [f.update(p) for p in pairs]
+    assert [e.frame for e in runs[1e-3] if e.gated] == [6, 11]
+    assert not any(e.gated for e in runs[None])
+    assert all(e.tail < 1e-6 for e in (runs[None][5], runs[None][10]))
+    errors = {}
+    for gate, ests in runs.items():
+        d = ests[-1].mean - end
+        errors[gate] = (abs(d[1]), d @ np.linalg.solve(ests[-1].cov, d))
+    assert errors[1e-3][0] < 0.7 * errors[None][0] and errors[1e-3][1] < 0.5 * errors[None][1]
+
+
+def test_the_command_line_gates_pairs_of_the_exact_filter_frame_by_frame(tmp_path, capsys):
+    from depthcore.registry import online
+
+    from helpers import cli_json
+
+    pairs, _ = outlier_track(N=8)  # the outliers at frames 3 and 6
+    path = tmp_path / "pairs.csv"
+    path.write_text("mu,nu\n" + "".join(f"{m!r},{n!r}\n" for m, n in pairs.tolist()))
+    prior = ["--prior-mean", *map(str, PRIOR_MEAN), "--prior-cov", *map(str, PRIOR_COV.ravel())]
+    argv = ["estimate", "--mu-file", str(path), "--rho", str(RHO), *prior, "--per-frame"]
+    out = cli_json([*argv, "--filters", "optimal", "--gate", "0.001"], capsys)
+    rows = out["filters"]["optimal"]
+    assert out["gate"] == 0.001 and [r["frame"] for r in rows if r["gated"]] == [3, 6]
+    live = online.start("optimal", PRIOR_MEAN, PRIOR_COV, RHO, 0.0, 0.001)
+    for row, pair in zip(rows, pairs, strict=True):
+        est = live.update(pair)
+        assert row["gated"] == est.gated and row["tail"] == est.tail
+        assert row["filtered_depth_mean"] == est.mean[1]

@@ -192,5 +192,4 @@ def test_the_online_exact_filter_takes_pairs_and_is_the_batch_filter(steps):
             assert_allclose(np.sqrt(np.diag(est.cov)), sd, rtol=1e-8)
     with pytest.raises(ValueError, match="^mu must be one pair"):
         f.update(0.1)
-    with pytest.raises(ValueError, match="^gate: the exact filter of a point in 3-D"):
-        online.Online(PRIOR_MEAN, PRIOR_COV, rho=0.01, gate=1e-3)
+    assert online.Online(PRIOR_MEAN, PRIOR_COV, rho=0.01, gate=1e-3).gate == 1e-3  # pairs gate

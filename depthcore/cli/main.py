@@ -261,13 +261,13 @@ def _per_frame(args, src, rho, steps, prior, q, gate, learned, direction):
 
 
 def _refuse_for_pairs(args, gate) -> None:
-    """Refuse what a track of pairs cannot have: a smoother, the exact filter's gate."""
+    """Refuse what a track of pairs cannot have: a smoother, a gate in the summary."""
     if args.smooth:
         raise ValueError("--smooth: no smoother takes pairs (a point in 3-D) yet; leave it out")
-    if gate is not None and (not args.per_frame or "optimal" in _chosen(args)):
+    if gate is not None and not args.per_frame:
         raise ValueError(
-            "--gate: the exact filter has no gate on pairs (a point in 3-D); --per-frame "
-            "--filters ekf ukf gates each frame's pair"
+            "--gate: the summary of pairs (a point in 3-D) has no gate; --per-frame gates "
+            "each frame's pair"
         )
 
 

@@ -14,8 +14,10 @@ motion of :mod:`depthcore.problem.frames`: ``x <- x + s v``,
 19.2.1), reports the bearing's predictive density under the mixture of the
 nodes (:func:`depthcore.problem.predictive.mixture`: node ``j`` predicts
 ``N(x_j / y_k, a_j / y_k**2 + rho_k**2)``, ``a_j`` the predicted ``Var[x_k]``,
-weighted by the node's probability), skips it if a gate says so, and updates
-each node (textbook 19.2.2).
+weighted by the node's probability; a pair of a point in 3-D: the mixture of
+bivariate Gaussians of :meth:`depthcore.exact.online_nodes.Space.predictive`, its
+tail by :func:`depthcore.problem.pair_tail.tail`), skips it if a gate says so, and
+updates each node (textbook 19.2.2).
 
 The nodes. They are placed on the prior by the depth quadrature
 (:func:`depthcore.exact.quadrature.integrate`, trapezoid nodes in
@@ -100,7 +102,8 @@ class Online:
         As for :class:`depthcore.kalman.online.EKF`: a prior on ``(x, y, v)`` (the
         paper's point, one bearing per update) or on ``(x, y, v, h, w)`` (a point in
         3-D, :mod:`depthcore.exact.spatial`: a pair ``(x / y, h / y)`` per update,
-        without a gate).
+        its tail the probability of a pair of lower predictive density,
+        :func:`depthcore.problem.pair_tail.tail`).
     rho : float
         The bearing noise SD, > 0, used where :meth:`update` is given none.
     rtol : float
@@ -121,8 +124,6 @@ class Online:
         self.rho = checks.positive_scalar(rho, "rho")
         self.process_noise = checks.nonnegative_scalar(process_noise, "process_noise")
         self.gate = predictive.gate(gate)
-        if m.size == 5 and self.gate is not None:
-            raise ValueError("gate: the exact filter of a point in 3-D has no gate")
         self.model = (Plane if m.size == 3 else Space)(m, P, self.rho)
         self.rtol = checks.positive_scalar(rtol, "rtol")
         self.frame = 0

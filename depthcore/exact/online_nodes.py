@@ -28,7 +28,7 @@ from scipy.special import logsumexp
 from depthcore.exact import spatial
 from depthcore.exact.bank import lateral_filter
 from depthcore.exact.mixture import mixture_moments
-from depthcore.problem import checks, predictive
+from depthcore.problem import checks, pair_tail, predictive
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 
@@ -182,18 +182,26 @@ class Space:
         lat[:] = self.pack(M, 0.5 * (C + np.swapaxes(C, -1, -2)))
         return total
 
+    @staticmethod
+    def observed(lat, y, rho2: float):
+        """Node ``j``'s pair: mean ``(x_j, h_j) / y_j`` (J, 2), covariance
+        ``C_j[[x, h]] / y_j**2 + rho**2 I`` (J, 2, 2), and ``Cov[u, pair]`` (J, 4, 2)."""
+        M, C = Space.unpack(lat)
+        ij = list(spatial.OBSERVED)
+        cross = C[:, :, ij] / y[:, None, None]
+        return M[:, ij] / y[:, None], cross[:, ij] / y[:, None, None] + rho2 * np.eye(2), cross
+
     def predictive(self, pair, log_w, lat, y, rho2: float):
         """The pair's log predictive density under the nodes (a mixture of bivariate
-        Gaussians); its tail is not computed (``NaN``): pairs have no gate."""
-        M, C = self.unpack(lat)
-        i, j = spatial.OBSERVED
-        mean = np.stack([M[:, i], M[:, j]], -1) / y[:, None]
-        S = C[:, [i, j]][:, :, [i, j]] / (y * y)[:, None, None] + rho2 * np.eye(2)
+        Gaussians) and its tail, the probability of a pair of lower predictive density
+        (:func:`depthcore.problem.pair_tail.tail`, to 1e-9 or 1e-6 of it)."""
+        mean, S, _ = self.observed(lat, y, rho2)
         r = np.asarray(pair) - mean
         sol = np.linalg.solve(S, r[..., None])[..., 0]
         log_n = -0.5 * (2 * _LOG_2PI + np.linalg.slogdet(S)[1] + np.sum(r * sol, axis=-1))
         log_w = log_w - logsumexp(log_w)
-        return float(logsumexp(log_w + log_n)), np.nan
+        tail = pair_tail.tail(pair, log_w, mean, S).tail
+        return float(logsumexp(log_w + log_n)), tail
 
     def moments(self, p, lat, depths):
         """Mean (5,) and covariance (5, 5) of ``(x, y, v, h, w)`` under node probabilities."""

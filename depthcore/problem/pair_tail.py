@@ -15,10 +15,10 @@ mixture has no closed form. :func:`tail` computes it deterministically.
 
 Polar coordinates about the mixture's mean ``c``, whitened by the Cholesky factor
 ``L`` of its covariance: ``z = c + L r (cos t, sin t)``, ``dz = det(L) r dr dt``.
-Along each ray ``f(r) = log p(z) - log p(z_obs)`` is found on a grid of a
-quarter of the narrowest component's SD along the ray, its extrema refined by
-bisection on ``f'`` (closed form), and between consecutive extrema (``f``
-monotone there) each crossing ``f = 0`` by bisection. ``{f <= 0}`` is a union of
+Along each ray ``f(r) = log p(z) - log p(z_obs)`` is found on a grid (64 equal cells,
+and half an SD or less about each component's centre), its extrema refined by the
+Illinois rule on ``f'`` (closed form), and between consecutive extrema (``f``
+monotone there) each crossing ``f = 0`` by the same rule. ``{f <= 0}`` is a union of
 intervals in ``r``, and each component's mass over ``[r, inf)`` along the ray has
 a closed form (with ``q(r) = A r**2 - 2 B r + C`` its Mahalanobis form, ``s = 1 /
 sqrt(A)``, ``mu = B / A``)
@@ -133,12 +133,9 @@ class _Rays:
         peak = self.log_K - 0.5 * (A * top * top - 2 * B * top + self.C)
         relevant = peak >= self.log_p0 - _NEGLIGIBLE - np.log(self.C.size)
         r_m = np.max(np.where(relevant, top, 0.0), axis=1)
-        s_min = np.min(np.where(relevant, 1 / np.sqrt(A), np.inf), axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cells = np.nan_to_num(4 * r_m / s_min, nan=0.0, posinf=0.0)
-        n = int(min(max(np.max(cells, initial=0.0), 1.0), 1e5)) + 2
         M = theta.size
-        grid = r_m[:, None] * np.linspace(0.0, 1.0, n)
+        grid = _grid(mu, 1 / np.sqrt(A), relevant, r_m)
+        n = grid.shape[1]
         f, d = np.empty((M, n)), np.empty((M, n))
         per = max(1, _CELLS // (n * A.shape[1]))
         for k in range(0, M, per):
@@ -178,6 +175,27 @@ class _Rays:
         mass = np.bincount(ri, sign * self._mass(A[ri], B[ri], cross), minlength=M).astype(float)
         mass += np.where(inside, self._mass(A, B, np.zeros(M)), 0.0)
         return mass, n_cross
+
+
+def _grid(mu, sd, relevant, r_m):
+    """Each ray's grid on ``[0, r_m]`` (M, n), padded with ``r_m``: 64 equal cells, and
+    about each relevant component's centre ``mu_j`` (within 6 SDs) a lattice of at most
+    half its SD ``sd_j`` (a power of 2, shared by the components of one scale)."""
+    M = mu.shape[0]
+    level = np.floor(np.log2(sd / 2))
+    points = mu[..., None] + sd[..., None] * np.linspace(-6.0, 6.0, 25)
+    cell = np.floor(points / 2.0 ** level[..., None])
+    ok = relevant[..., None] & (points > 0) & (points < r_m[:, None, None])
+    ray = np.broadcast_to(np.arange(M)[:, None, None], ok.shape)
+    keys = np.unique(np.stack([ray[ok], level[..., None].repeat(25, -1)[ok], cell[ok]]), axis=1)
+    ray = np.concatenate([keys[0].astype(int), np.repeat(np.arange(M), 65)])
+    r = np.concatenate([keys[2] * 2.0 ** keys[1], (r_m[:, None] * np.linspace(0, 1, 65)).ravel()])
+    order = np.lexsort((r, ray))
+    ray, r = ray[order], r[order]
+    counts = np.bincount(ray, minlength=M)
+    grid = np.repeat(r_m[:, None], counts.max() + 1, axis=1)
+    grid[ray, np.arange(ray.size) - np.repeat(np.cumsum(counts) - counts, counts)] = r
+    return grid
 
 
 def _root(fun, lo, hi, f_lo, f_hi):
