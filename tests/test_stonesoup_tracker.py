@@ -105,19 +105,6 @@ def test_the_tail_is_the_density_integrated():
         )
 
 
-def test_the_gaussian_summary_is_the_bearing_linearised_at_the_exact_moments():
-    prediction, updater, _ = fig2_prediction()
-    measured = updater.predict_measurement(prediction)
-    gaussian = GaussianState(prediction.state_vector, prediction.covar)
-    bearing = models.TangentBearing(noise_covar=[[FIG2.rho**2]])
-    reference = ExtendedKalmanUpdater(bearing).predict_measurement(gaussian)
-    np.testing.assert_allclose(measured.state_vector, reference.state_vector, rtol=1e-14)
-    np.testing.assert_allclose(measured.covar, reference.covar, rtol=1e-12)
-    np.testing.assert_allclose(measured.cross_covar, reference.cross_covar, rtol=1e-12)
-    quiet = updater.predict_measurement(prediction, measurement_noise=False)
-    assert float(measured.covar[0, 0] - quiet.covar[0, 0]) == pytest.approx(FIG2.rho**2)
-
-
 def test_the_exact_distance_is_the_normal_quantile_of_the_exact_tail():
     prediction, updater, later = fig2_prediction()
     measured = updater.predict_measurement(prediction)

@@ -93,6 +93,14 @@ class _Nodes(NamedTuple):
     lateral: np.ndarray  # (K, J): the rows of depthcore.exact.online_nodes' Plane or Space
 
 
+class Predicted(NamedTuple):
+    """The next observation's exact predictive moments (:meth:`Online.predictive_moments`)."""
+
+    mean: np.ndarray  # (d,)
+    cov: np.ndarray  # (d, d)
+    cross: np.ndarray  # (D, d): Cov[state, observation]
+
+
 class Online:
     """The exact filter over depth nodes, one bearing at a time (see the module docstring).
 
@@ -296,6 +304,54 @@ class Online:
         mean, cov = self._moments()
         self.current = predictive.frame_estimate(self.frame, mean, cov, log_pred, tail, gated)
         return self.current
+
+    def predictive_moments(self, step=1.0, rho=None) -> Predicted:
+        """Mean and covariance of the next observation under the exact predictive, and its
+        covariance with the state; the filter is not changed (one prediction of the nodes).
+
+        The predictive is the mixture over the nodes after the step (textbook 19.2.1), node
+        ``j`` weighted by its probability ``p_j`` (a node the step brings to the camera by
+        none) and predicting ``N(m_j / y_j, S_j)``, ``S_j = C_j / y_j**2 + rho**2 I`` (the
+        observed block of its lateral covariance): ``mean = sum_j p_j m_j / y_j``,
+        ``cov = sum_j p_j (S_j + d_j d_j^T)``, ``d_j = m_j / y_j - mean``, and
+        ``cross = sum_j p_j (Cov_j[state, obs] + (s_j - E[state]) d_j^T)``, ``s_j`` node
+        ``j``'s state mean (its depth ``y_j``).
+
+        Parameters
+        ----------
+        step : float
+            The depth's signed change to the next frame, as :meth:`update` takes it (1 at
+            the first frame); 0: the observation at the filter's own frame.
+        rho : float or None
+            The next observation's noise SD (``None``: the filter's).
+
+        Returns
+        -------
+        Predicted
+            ``mean`` (d,), ``cov`` (d, d) and ``cross`` (D, d): ``d`` 1 (a bearing) or 2 (a
+            pair), ``D`` the state's 3 or 5 coordinates.
+        """
+        moved = step == 0 and self.frame > 0
+        _, r, s = predictive.frame_inputs(0.0, rho, 1.0 if moved else step, self.rho, self.frame)
+        s = 0.0 if moved else s
+        nodes = self._nodes
+        lat = nodes.lateral.copy()
+        y = nodes.y + self.travelled + (s if self.frame > 0 else 0.0)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+            if s and self.frame > 0:
+                self.model.predict(lat, s, self.process_noise**2 * abs(s))
+            p, _ = normalised(np.where(y > 0, nodes.log_p + nodes.log_w, -np.inf))
+            keep = p > 0
+            means, S, states, cross = self.model.observed(lat[:, keep], y[keep], r * r)
+            p = p[keep]
+            mean = p @ means
+            d = means - mean
+            e = states - p @ states
+            cov = np.einsum("j,jkl->kl", p, S + d[:, :, None] * d[:, None, :])
+            cross = np.einsum("j,jkl->kl", p, cross + e[:, :, None] * d[:, None, :])
+        if not (np.all(np.isfinite(cov)) and np.all(np.isfinite(cross))):
+            raise ValueError(f"step: the predictive's moments overflow after a step of {s:.6g}")
+        return Predicted(mean, 0.5 * (cov + cov.T), cross)
 
     def _moments(self, every_other: bool = False):
         nodes = self._nodes

@@ -100,6 +100,15 @@ class Plane:
         return log_likelihood
 
     @staticmethod
+    def observed(lat, y, rho2: float):
+        """Node ``j``'s bearing: mean ``x_j / y_j`` (J, 1), variance ``a_j / y_j**2 + rho**2``
+        (J, 1, 1); its state ``(x, y, v)`` (J, 3) and ``Cov[state, bearing]`` (J, 3, 1)."""
+        x, v, a, b = lat[:4]
+        states = np.stack([x, y, v], -1)
+        cross = np.stack([a / y, np.zeros_like(y), b / y], -1)[..., None]
+        return (x / y)[:, None], (a / (y * y) + rho2)[:, None, None], states, cross
+
+    @staticmethod
     def predictive(mu: float, log_w, lat, y, rho2: float):
         """The bearing's log predictive density and two-sided tail under the nodes."""
         out = predictive.mixture(mu, log_w, lat[0] / y, lat[2] / (y * y) + rho2)
@@ -185,17 +194,20 @@ class Space:
     @staticmethod
     def observed(lat, y, rho2: float):
         """Node ``j``'s pair: mean ``(x_j, h_j) / y_j`` (J, 2), covariance
-        ``C_j[[x, h]] / y_j**2 + rho**2 I`` (J, 2, 2), and ``Cov[u, pair]`` (J, 4, 2)."""
+        ``C_j[[x, h]] / y_j**2 + rho**2 I`` (J, 2, 2); its state ``(x, y, v, h, w)``
+        (J, 5) and ``Cov[state, pair]`` (J, 5, 2) (none with ``y``, known given the node)."""
         M, C = Space.unpack(lat)
         ij = list(spatial.OBSERVED)
-        cross = C[:, :, ij] / y[:, None, None]
-        return M[:, ij] / y[:, None], cross[:, ij] / y[:, None, None] + rho2 * np.eye(2), cross
+        states = np.insert(M, 1, y, axis=1)
+        cross = np.insert(C[:, :, ij] / y[:, None, None], 1, 0.0, axis=1)
+        S = C[:, ij][:, :, ij] / (y * y)[:, None, None] + rho2 * np.eye(2)
+        return M[:, ij] / y[:, None], S, states, cross
 
     def predictive(self, pair, log_w, lat, y, rho2: float):
         """The pair's log predictive density under the nodes (a mixture of bivariate
         Gaussians) and its tail, the probability of a pair of lower predictive density
         (:func:`depthcore.problem.pair_tail.tail`, to 1e-9 or 1e-6 of it)."""
-        mean, S, _ = self.observed(lat, y, rho2)
+        mean, S, _, _ = self.observed(lat, y, rho2)
         r = np.asarray(pair) - mean
         sol = np.linalg.solve(S, r[..., None])[..., 0]
         log_n = -0.5 * (2 * _LOG_2PI + np.linalg.slogdet(S)[1] + np.sum(r * sol, axis=-1))

@@ -14,11 +14,10 @@ be small. Here:
 
 * :func:`predict_bearing` (the exact updater's ``predict_measurement``) gives
   an :class:`ExactMeasurementPrediction`: a Stone Soup Gaussian measurement
-  prediction whose mean, covariance and cross-covariance are a Gaussian
-  summary, the bearing linearised at the exact predicted state's mean with
-  its exact covariance (Eqs. (11)-(12) at the exact moments, as Stone Soup's
-  ``ExtendedKalmanUpdater`` forms them), for Stone Soup's Gaussian measures;
-  and whose :meth:`~ExactMeasurementPrediction.log_predictive` and
+  prediction whose mean, covariance and cross-covariance are the exact
+  predictive's moments (the mixture over the depth nodes,
+  :meth:`depthcore.exact.online.Online.predictive_moments`), for Stone Soup's
+  Gaussian measures; and whose :meth:`~ExactMeasurementPrediction.log_predictive` and
   :meth:`~ExactMeasurementPrediction.tail` are the exact predictive's log
   density and two-sided tail probability at a detection
   (:mod:`depthcore.problem.predictive`).
@@ -71,7 +70,7 @@ from depthcore.stonesoup.exact import ExactUpdate, ExactUpdater, last_state
 
 
 class ExactBearing(GaussianState):
-    """The bearing predicted by the exact filter: a Gaussian summary, and the filter's prediction.
+    """The bearing predicted by the exact filter: its moments, and the filter's prediction.
 
     The state type of :class:`ExactMeasurementPrediction` (Stone Soup makes a
     measurement prediction of a state type).
@@ -82,15 +81,15 @@ class ExactBearing(GaussianState):
 
 
 class ExactMeasurementPrediction(MeasurementPrediction, ExactBearing):
-    """The exact filter's predictive bearing: a Gaussian summary, and the exact density on request.
+    """The exact filter's predictive bearing: its moments, and the exact density on request.
 
-    ``state_vector``, ``covar`` and ``cross_covar`` are the Gaussian summary of
-    :func:`predict_bearing`; :meth:`log_predictive` and :meth:`tail` are the
-    exact predictive's, at a detection.
+    ``state_vector``, ``covar`` and ``cross_covar`` are the exact predictive's
+    mean, variance and covariance with the state (:func:`predict_bearing`);
+    :meth:`log_predictive` and :meth:`tail` are its density and tail at a detection.
     """
 
     cross_covar: CovarianceMatrix = Property(
-        default=None, doc="The summary's state-bearing cross-covariance, shape (3, 1)."
+        default=None, doc="The state-bearing cross-covariance, shape (3, 1)."
     )
 
     def log_predictive(self, detection) -> float:
@@ -110,9 +109,11 @@ class ExactMeasurementPrediction(MeasurementPrediction, ExactBearing):
 def predict_bearing(updater, predicted_state, measurement_model=None, measurement_noise=True):
     """The exact updater's measurement prediction (see the module docstring).
 
-    The summary: ``h(m)`` and ``H P H^T (+ rho**2)``, ``P H^T``, with ``m`` and
-    ``P`` the exact predicted state's mean and covariance and ``H`` the
-    bearing's gradient at ``m``, Eq. (11).
+    Its mean, covariance and cross-covariance are the exact predictive's
+    (:meth:`depthcore.exact.online.Online.predictive_moments`: the moments of the
+    mixture over the depth nodes, with the state's covariance with the bearing), of the
+    prediction's filter moved by its step, or of the filter started on a Gaussian
+    prediction (:meth:`depthcore.stonesoup.exact.ExactUpdater.start`).
 
     Parameters
     ----------
@@ -136,22 +137,27 @@ def predict_bearing(updater, predicted_state, measurement_model=None, measuremen
             f"predicted_state: its mean depth must be positive (in front of the camera), got "
             f"{m[1]:.6g}"
         )
-    P = np.asarray(state.covar, dtype=float)
+    overflow = (
+        "predicted_state: its bearing's mean or variance overflows (a state of depth "
+        f"{m[1]:.6g} and lateral position {m[0]:.6g})"
+    )
     with np.errstate(over="ignore", divide="ignore", invalid="ignore", under="ignore"):
-        H = model.observation_vector(m)[None, :]
-        cross = P @ H.T
-        covar = H @ cross + (rho * rho if measurement_noise else 0.0)
-        bearing = m[0] / m[1]
-    if not (np.isfinite(bearing) and np.all(np.isfinite(cross)) and np.isfinite(covar[0, 0])):
-        raise ValueError(
-            "predicted_state: its bearing's mean or variance overflows (a state of depth "
-            f"{m[1]:.6g} and lateral position {m[0]:.6g})"
-        )
+        if not (np.isfinite(m[0] / m[1]) and np.all(np.isfinite(model.observation_vector(m)))):
+            raise ValueError(overflow)
+    base = getattr(state, "filter", None)
+    try:
+        if base is None:
+            moments = updater.start(state, rho).predictive_moments(rho=rho)
+        else:
+            moments = base.predictive_moments(step=state.step, rho=rho)
+    except ValueError:
+        raise ValueError(overflow) from None
+    covar = moments.cov - (0.0 if measurement_noise else rho * rho)
     return ExactMeasurementPrediction(
-        np.array([[bearing]]),
+        moments.mean[:, None],
         covar,
         timestamp=state.timestamp,
-        cross_covar=cross,
+        cross_covar=moments.cross,
         prediction=state,
         updater=updater,
     )

@@ -361,9 +361,9 @@ class ExactUpdater(Updater):
     ):
         """The bearing's predictive, as Stone Soup's Gaussian measurement prediction.
 
-        :func:`depthcore.stonesoup.association.predict_bearing`: a Gaussian
-        summary for Stone Soup's Gaussian association, with the exact
-        predictive density and tail at a detection on request.
+        :func:`depthcore.stonesoup.association.predict_bearing`: the exact
+        predictive's mean, variance and covariance with the state, for Stone Soup's
+        Gaussian association, with its density and tail at a detection on request.
         """
         from depthcore.stonesoup import association  # it builds on this module
 
