@@ -31,7 +31,7 @@ the mass along the ray has a square-root kink, found by bisection in ``t``; betw
 kinks Gauss-Legendre in ``u`` with ``t = a + (b - a) (1 - cos(pi u)) / 2`` (smooth
 across the kinks), without kinks the periodic trapezoid rule. The order is doubled
 until two successive values agree to ``max(ATOL, RTOL * T)``; the reported error is
-their difference (beyond the tolerance if the largest order, :data:`MAX_ORDER`, is
+their difference (beyond the tolerance if :data:`MAX_ANGLES` angles in all are
 reached first).
 """
 
@@ -44,8 +44,8 @@ from scipy.special import erfcx, logsumexp, ndtr, roots_legendre
 
 #: The tolerance: absolute and relative to the tail, whichever is larger.
 ATOL, RTOL = 1e-9, 1e-6
-#: The largest number of angles per segment (Gauss) or in all (trapezoid).
-MAX_ORDER = 4096
+#: The most angles of one order, over all segments: the doubling stops there.
+MAX_ANGLES = 2**13
 #: A component whose peak along a ray is this far below the observed density is ignored
 #: in placing the ray's grid (it cannot make a crossing).
 _NEGLIGIBLE = 40.0
@@ -251,7 +251,7 @@ def tail(z, log_weights, means, covs) -> PairTail:
     -------
     PairTail
         The tail in [0, 1] and the error estimate, at most ``max(ATOL, RTOL * tail)``
-        unless :data:`MAX_ORDER` angles per segment did not reach it.
+        unless :data:`MAX_ANGLES` angles did not reach it.
     """
     log_w = np.asarray(log_weights, float)
     if not np.any(log_w > -np.inf):
@@ -283,7 +283,7 @@ def _integrate(rays, breaks, check):
     """The angle integral between kinks ``breaks``: value, error, and new kinks or ``None``
     (``check``: whether a crossing count that differs within a segment ends it)."""
     previous = None
-    order = 16
+    order = 32
     while True:
         if breaks.size == 0:
             theta = np.linspace(0.0, 2 * np.pi, order, endpoint=False)
@@ -309,7 +309,7 @@ def _integrate(rays, breaks, check):
                 return value, np.inf, new
         if previous is not None:
             error = abs(value - previous)
-            if error <= max(ATOL, RTOL * abs(value)) or order >= MAX_ORDER:
+            if error <= max(ATOL, RTOL * abs(value)) or order * max(1, breaks.size) >= MAX_ANGLES:
                 return value, error, None
         previous = value
         order *= 2
