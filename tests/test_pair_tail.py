@@ -130,12 +130,12 @@ def outlier_track(N=14, seed=1):
 
 
 def test_the_exact_filter_gates_exactly_the_outlying_pairs_and_beats_no_gate():
-    from depthcore.exact import online
+    from depthcore.exact.online import Online
 
     pairs, end = outlier_track()
     runs = {}
     for gate in (None, 1e-3):
-        f = online.Online(PRIOR_MEAN, PRIOR_COV, rho=RHO, gate=gate)
+        f = Online(PRIOR_MEAN, PRIOR_COV, rho=RHO, gate=gate)
         runs[gate] = [f.update(p) for p in pairs]
     assert [e.frame for e in runs[1e-3] if e.gated] == [6, 11]
     assert not any(e.gated for e in runs[None])

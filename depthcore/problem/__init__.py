@@ -19,6 +19,7 @@ nothing here imports another family.
   pairs ``(x / y, h / y)``;
 * :mod:`~depthcore.problem.predictive`: a bearing's predictive density and tail
   probability, and the outlier gate;
+* :mod:`~depthcore.problem.pair_tail`: a pair's tail under a Gaussian mixture;
 * :mod:`~depthcore.problem.signature`: the filters' one calling convention,
   ``(mu, rho, prior_mean, prior_cov, process_noise)``, documented once.
 

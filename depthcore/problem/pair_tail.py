@@ -2,37 +2,23 @@
 
 Recommended import: ``from depthcore.problem import pair_tail``.
 
-A filter of a point in 3-D predicts the next pair ``z = (x / y, h / y)`` by a
-mixture ``p(z) = sum_j w_j N(z; m_j, S_j)`` (the exact filter: one component per
-depth node). The pair's tail is the probability, before it was seen, of a pair
-no more probable than it:
-
-    T = P_{Z ~ p}( p(Z) <= p(z_obs) ),
-
-which for one Gaussian is ``exp(-d**2 / 2)``, ``d`` the Mahalanobis distance (as
-the Gaussian filters gate a pair, :mod:`depthcore.kalman.spatial`), and for a
-mixture has no closed form. :func:`tail` computes it deterministically.
-
-Polar coordinates about the mixture's mean ``c``, whitened by the Cholesky factor
-``L`` of its covariance: ``z = c + L r (cos t, sin t)``, ``dz = det(L) r dr dt``.
-Along each ray ``f(r) = log p(z) - log p(z_obs)`` is found on a grid (64 equal cells,
-and half an SD or less about each component's centre), its extrema refined by the
-Illinois rule on ``f'`` (closed form), and between consecutive extrema (``f``
-monotone there) each crossing ``f = 0`` by the same rule. ``{f <= 0}`` is a union of
-intervals in ``r``, and each component's mass over ``[r, inf)`` along the ray has
-a closed form (with ``q(r) = A r**2 - 2 B r + C`` its Mahalanobis form, ``s = 1 /
-sqrt(A)``, ``mu = B / A``)
-
-    K exp(-q(r) / 2) s (s + mu sqrt(pi / 2) erfcx((r - mu) / (s sqrt 2)))
-
-(the error function's scaled complement, stable in the tail). The angle: where
-the number of crossings changes (a ray tangent to the level set ``p = p(z_obs)``)
-the mass along the ray has a square-root kink, found by bisection in ``t``; between
-kinks Gauss-Legendre in ``u`` with ``t = a + (b - a) (1 - cos(pi u)) / 2`` (smooth
-across the kinks), without kinks the periodic trapezoid rule. The order is doubled
-until two successive values agree to ``max(ATOL, RTOL * T)``; the reported error is
-their difference (beyond the tolerance if :data:`MAX_ANGLES` angles in all are
-reached first).
+A filter of a point in 3-D predicts the next pair ``z = (x / y, h / y)`` by a mixture
+``p(z) = sum_j w_j N(z; m_j, S_j)`` (the exact filter: a component per depth node). The
+pair's tail, ``T = P_{Z ~ p}(p(Z) <= p(z_obs))``, is ``exp(-d**2 / 2)`` for one Gaussian
+(``d`` the Mahalanobis distance, the Gaussian filters' gate,
+:mod:`depthcore.kalman.spatial`). :func:`tail` computes it for a mixture, by rays from the
+mixture's mean ``c``, whitened by the Cholesky factor ``L`` of its covariance:
+``z = c + L r (cos t, sin t)``, ``dz = det(L) r dr dt``. Along a ray, ``f(r) = log p(z) -
+log p(z_obs)`` is found on a grid (half an SD or less about each component's centre), its
+extrema and then its crossings ``f = 0`` (one between consecutive extrema) refined by the
+Illinois rule; over each interval of ``{f <= 0}`` each component's mass has a closed form,
+over ``[r, inf)`` ``K exp(-q(r) / 2) s (s + mu sqrt(pi / 2) erfcx((r - mu) / (s sqrt 2)))``
+(``q(r) = A r**2 - 2 B r + C`` its Mahalanobis form, ``s = A**-0.5``, ``mu = B / A``). In
+the angle, a ray tangent to the level set ``p = p(z_obs)`` changes the number of crossings
+and puts a square-root kink in the mass: kinks are found by bisection, and between them
+Gauss-Legendre in ``u``, ``t = a + (b - a) (1 - cos(pi u)) / 2``, integrates smoothly
+(without kinks, the periodic trapezoid rule). The order doubles until two values agree to
+``max(ATOL, RTOL * T)``; the error reported is their difference.
 """
 
 from __future__ import annotations
@@ -46,13 +32,8 @@ from scipy.special import erfcx, logsumexp, ndtr, roots_legendre
 ATOL, RTOL = 1e-9, 1e-6
 #: The most angles of one order, over all segments: the doubling stops there.
 MAX_ANGLES = 2**13
-#: A component whose peak along a ray is this far below the observed density is ignored
-#: in placing the ray's grid (it cannot make a crossing).
-_NEGLIGIBLE = 40.0
-_BISECTIONS = 44  # in the angle: 2 pi / 64 / 2**44 < 1e-14
-_ILLINOIS = 40
-_SLIVER = 1e-9
-_ROUNDS = 16
+_NEGLIGIBLE = 40.0  # a component this far below p(z_obs) on a ray places no grid there
+_SLIVER = 1e-9  # kinks nearer than this are rounding's (a sector's error: its width**1.5)
 _CELLS = 2**22  # grid values per chunk of rays
 
 
@@ -97,7 +78,7 @@ class _Rays:
 
     def _mass(self, A, B, r):
         """Each ray's mass over ``[r, inf)``, ``det(L)`` included; ``r`` (M,) >= 0."""
-        A, B, r = A, B, r[:, None]
+        r = r[:, None]
         s = 1 / np.sqrt(A)
         mu = B * s * s
         t = (r - mu) / s
@@ -116,13 +97,11 @@ class _Rays:
     def rays(self, theta):
         """Mass of ``{p <= p(z_obs)}`` along each ray (M,) and its number of crossings (M,)."""
         theta = np.asarray(theta, float)
-        out = [np.empty(theta.shape), np.empty(theta.shape, int)]
-        J = self.C.size
-        step = max(1, _CELLS // (J * 64))
-        for k in range(0, theta.size, step):
-            mass, count = self._rays(theta[k : k + step])
-            out[0][k : k + step], out[1][k : k + step] = mass, count
-        return out[0], out[1]
+        step = max(1, _CELLS // (self.C.size * 64))
+        if not theta.size:
+            return np.empty(0), np.empty(0, int)
+        out = [self._rays(theta[k : k + step]) for k in range(0, theta.size, step)]
+        return tuple(np.concatenate(v) for v in zip(*out, strict=True))
 
     def _rays(self, theta):
         u = np.stack([np.cos(theta), np.sin(theta)], -1)
@@ -135,14 +114,12 @@ class _Rays:
         r_m = np.max(np.where(relevant, top, 0.0), axis=1)
         M = theta.size
         grid = _grid(mu, 1 / np.sqrt(A), relevant, r_m)
-        n = grid.shape[1]
-        f, d = np.empty((M, n)), np.empty((M, n))
-        per = max(1, _CELLS // (n * A.shape[1]))
-        for k in range(0, M, per):
-            f[k : k + per], d[k : k + per] = self._f(
-                A[k : k + per], B[k : k + per], grid[k : k + per]
-            )
-        # extrema: f' changes sign between grid points; refined by bisection on f'
+        per = max(1, _CELLS // (grid.shape[1] * A.shape[1]))
+        parts = [
+            self._f(A[k : k + per], B[k : k + per], grid[k : k + per]) for k in range(0, M, per)
+        ]
+        f, d = (np.concatenate(v) for v in zip(*parts, strict=True))
+        # extrema: f' changes sign between grid points
         i, col = np.nonzero((d[:, :-1] > 0) != (d[:, 1:] > 0))
         Ai, Bi = A[i], B[i]
         ext = _root(
@@ -201,7 +178,7 @@ def _grid(mu, sd, relevant, r_m):
 def _root(fun, lo, hi, f_lo, f_hi):
     """Roots of ``fun`` in brackets ``[lo, hi]`` (values of opposite signs) by the Illinois rule."""
     side = np.zeros(lo.shape)
-    for _ in range(_ILLINOIS):
+    for _ in range(40):
         if np.all(hi - lo <= 4e-16 * np.maximum(1.0, hi)):
             break
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -219,7 +196,7 @@ def _root(fun, lo, hi, f_lo, f_hi):
 
 def _breaks(rays, a, b, na):
     """Angles where the crossing count changes, by bisection between ``a`` and ``b``."""
-    for _ in range(_BISECTIONS):
+    for _ in range(44):  # 2 pi / 64 / 2**44 < 1e-14
         mid = 0.5 * (a + b)
         _, nm = rays.rays(mid)
         left = nm == na
@@ -259,7 +236,7 @@ def tail(z, log_weights, means, covs) -> PairTail:
     rays = _Rays(z, log_w, np.asarray(means, float), np.asarray(covs, float))
     theta = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
     breaks = _clean(_cyclic(rays, theta, rays.rays(theta)[1]))
-    for rounds in range(_ROUNDS, -1, -1):  # kinks found at new angles start the segments again
+    for rounds in range(16, -1, -1):  # kinks found at new angles start the segments again
         value, error, extra = _integrate(rays, breaks, rounds > 0)
         if extra is None:
             break
@@ -272,8 +249,7 @@ def tail(z, log_weights, means, covs) -> PairTail:
 
 
 def _clean(breaks):
-    """Kinks in [0, 2 pi), sorted, without pairs nearer than ``_SLIVER`` (rounding's, or a
-    sector too thin to matter: its kinks' square roots change the integral by its width**1.5)."""
+    """Kinks in [0, 2 pi), sorted, without pairs nearer than ``_SLIVER``."""
     b = np.sort(np.mod(breaks, 2 * np.pi))
     close = np.diff(b, append=b[:1] + 2 * np.pi) < _SLIVER
     return b[~(close | np.roll(close, 1))]
