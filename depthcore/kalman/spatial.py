@@ -232,8 +232,24 @@ def run(
     """
     if filter not in UPDATES:
         raise ValueError(f"filter must be one of {sorted(UPDATES)}, got {filter!r}")
+    pairs, m, P, q = checked(mu, rho, prior_mean, prior_cov, process_noise, steps)
+    label = _LABELS[filter]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        try:
+            means, covs, log_p = _loop(pairs, m, P, q, UPDATES[filter], label)
+        except np.linalg.LinAlgError:
+            raise ValueError(
+                f"mu and rho lead the {label} to a covariance that is not positive definite: "
+                "a rho tiny beside the prior loses it to rounding"
+            ) from None
+    return history(pairs, means, covs, log_p, label)
+
+
+def checked(mu, rho, prior_mean, prior_cov, process_noise, steps):
+    """:func:`run`'s inputs checked: the pairs, the prior's means (B, 5) and covariances
+    (B, 5, 5) for their ``B`` rows, and ``q``; refusals name the argument."""
     pairs = check(mu, rho, steps)
-    B, N = pairs.present.shape
+    B = len(pairs.mu)
     m = checks.finite_array(prior_mean, "prior_mean")
     P = checks.finite_array(prior_cov, "prior_cov")
     if m.shape[-1:] != (DIM,) or P.shape[-2:] != (DIM, DIM):
@@ -244,23 +260,18 @@ def run(
     P = checks.covariances(P, "prior_cov", DIM)
     m = np.broadcast_to(m, pairs.batch + (DIM,)).reshape(B, DIM).copy()
     P = np.broadcast_to(P, pairs.batch + (DIM, DIM)).reshape(B, DIM, DIM).copy()
-    q = checks.process_noise(process_noise, "process_noise")
-    update = UPDATES[filter]
-    label = _LABELS[filter]
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-        try:
-            means, covs, log_p = _loop(pairs, m, P, q, update, label)
-        except np.linalg.LinAlgError:
-            raise ValueError(
-                f"mu and rho lead the {label} to a covariance that is not positive definite: "
-                "a rho tiny beside the prior loses it to rounding"
-            ) from None
+    return pairs, m, P, checks.process_noise(process_noise, "process_noise")
+
+
+def history(pairs, means, covs, log_p, label: str) -> SpatialHistory:
+    """Rows (B, N, ...) of a filter named ``label`` as a :class:`SpatialHistory` of the pairs'
+    batch shape; refused, naming the arguments, where they overflowed."""
     if not (np.all(np.isfinite(means)) and np.all(np.isfinite(covs))):
         raise ValueError(
             f"mu, rho, prior_mean and prior_cov overflow the {label} in double "
             "precision; give values nearer the track's scale"
         )
-    shape = pairs.batch
+    shape, N = pairs.batch, pairs.mu.shape[1]
     return SpatialHistory(
         means.reshape(shape + (N, DIM)),
         covs.reshape(shape + (N, DIM, DIM)),

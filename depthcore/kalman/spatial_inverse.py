@@ -37,9 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.kalman.spatial import DIM, SpatialHistory, gain_update
-from depthcore.problem import checks
-from depthcore.problem.bearing_pairs import check
+from depthcore.kalman.spatial import DIM, SpatialHistory, checked, gain_update, history
 
 
 def map_jacobian(z) -> np.ndarray:
@@ -142,19 +140,8 @@ def run(mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None) -> Spatia
         One line naming the argument; ``mu`` where the depth is not positive at a frame or
         the mean inverse depth is not positive.
     """
-    pairs = check(mu, rho, steps)
+    pairs, m, P, q = checked(mu, rho, prior_mean, prior_cov, process_noise, steps)
     B, N = pairs.present.shape
-    m = checks.finite_array(prior_mean, "prior_mean")
-    P = checks.finite_array(prior_cov, "prior_cov")
-    if m.shape[-1:] != (DIM,) or P.shape[-2:] != (DIM, DIM):
-        raise ValueError(
-            f"prior_mean and prior_cov must have shapes (5,) and (5, 5), (x, y, v, h, w), "
-            f"got {m.shape} and {P.shape}"
-        )
-    P = checks.covariances(P, "prior_cov", DIM)
-    m = np.broadcast_to(m, pairs.batch + (DIM,)).reshape(B, DIM)
-    P = np.broadcast_to(P, pairs.batch + (DIM, DIM)).reshape(B, DIM, DIM)
-    q = checks.process_noise(process_noise, "process_noise")
     z, S = prior(m, P)
     t = pairs.elapsed
     means, covs = np.empty((B, N, DIM)), np.empty((B, N, DIM, DIM))
@@ -181,14 +168,4 @@ def run(mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None) -> Spatia
                 )
             means[:, k], covs[:, k] = _mapped(z, S)
             means[:, k, 1] += t[:, k]
-    if not (np.all(np.isfinite(means)) and np.all(np.isfinite(covs))):
-        raise ValueError(
-            "mu, rho, prior_mean and prior_cov overflow the inverse-depth EKF in double "
-            "precision; give values nearer the track's scale"
-        )
-    shape = pairs.batch
-    return SpatialHistory(
-        means.reshape(shape + (N, DIM)),
-        covs.reshape(shape + (N, DIM, DIM)),
-        log_p.reshape(shape + (N,)),
-    )
+    return history(pairs, means, covs, log_p, "inverse-depth EKF")
