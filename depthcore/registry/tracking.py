@@ -49,22 +49,27 @@ class Track:
     filtered : depthcore.exact.mixture.Smoothed
         The state at frame ``k`` given ``mu_1 .. mu_k``: a
         :class:`~depthcore.exact.mixture.Smoothed` of means (N, 3) and covariances
-        (N, 3, 3) of ``(x_k, y_k, v_k)``, whose ``depth_mean``, ``depth_sd``,
+        (N, 3, 3) of ``(x_k, y_k, v_k)`` (of pairs, (N, 5) and (N, 5, 5) of
+        ``(x_k, y_k, v_k, h_k, w_k)``), whose ``depth_mean``, ``depth_sd``,
         ``lateral_mean``, ``lateral_sd``, ``velocity_mean`` and
         ``velocity_sd`` have shape (N,).
     smoothed : depthcore.exact.mixture.Smoothed
         The state at frame ``k`` given all ``N`` bearings (the fixed-interval
         smoother, textbook 19.2.6); at frame ``N`` it is the filtered state.
     prior : depthcore.problem.gaussian.Gaussian
-        The prior of the state at frame 1 that the filter used.
+        The prior of the state at frame 1 that the filter used (of pairs, one with a
+        ``mean`` (5,) and a ``cov`` (5, 5)).
     process_noise : float
     detail : object
         The filter's own result: the exact filter's :class:`~depthcore.exact.smoother.Track`,
-        a Gaussian filter's :class:`~depthcore.problem.gaussian.History`.
+        a Gaussian filter's :class:`~depthcore.problem.gaussian.History`; of pairs, a
+        :class:`~depthcore.exact.spatial.SpatialTrack` or a
+        :class:`~depthcore.kalman.spatial.SpatialHistory`.
     updates : depthcore.problem.predictive.Updates
         Per frame, shape (N,) each: the bearing's log predictive density and
         two-sided tail probability under the filter's prediction before it saw
-        it (``NaN`` at a missing frame), and whether the gate skipped it.
+        it (``NaN`` at a missing frame), and whether the gate skipped it. ``None`` for
+        pairs, which have no gate yet.
     """
 
     filter: str
@@ -164,7 +169,7 @@ def track(
 
     Parameters
     ----------
-    mu : array_like, shape (N,)
+    mu : array_like, shape (N,) or (N, 2)
         The bearings of frames ``1 .. N``, ``3 <= N <= depthcore.problem.checks.MAX_FRAMES``:
         ``mu_k = x_k / y_k``, the tangent of the angle between the point and the
         camera's direction of motion (from pixel columns,
@@ -172,7 +177,12 @@ def track(
         missing frame, which the filter predicts through. Checked by
         :func:`depthcore.problem.model.measurements_batch` (by
         :func:`depthcore.problem.frames.check` with gaps, ``rho`` per frame or
-        steps).
+        steps). Pairs ``(x_k / y_k, h_k / y_k)``, a point in 3-D
+        (:func:`depthcore.problem.bearing_pairs.check`), go to the 3-D forms of the
+        filters: the exact filter at every frame and its smoother
+        (:func:`depthcore.exact.spatial.track`), the EKF's and UKF's
+        (:func:`depthcore.kalman.spatial.smoother`); their prior is by default the rule of
+        :func:`depthcore.registry.track_runs.start_prior`, and a gate is refused.
     rho : float or array_like, shape (N,)
         The SD of the bearings' noise, in :data:`RHO_RANGE` (in the units of
         ``mu``: a pixel noise of SD ``s`` is ``rho = s / f`` for a focal
@@ -224,6 +234,9 @@ def track(
     >>> t = depthcore.track([0.1, 0.2, float("nan"), 0.35], rho=0.002, filter="ekf")
     >>> t.smoothed.depth_mean.shape
     (4,)
+    >>> t = depthcore.track([[0.1, 0.05], [0.2, 0.04], [0.28, 0.03], [0.35, 0.02]], rho=0.002)
+    >>> t.smoothed.mean.shape
+    (4, 5)
     """
     if not isinstance(filter, str) or filter not in FILTERS:
         raise ValueError(f"filter must be one of {names(smoothed=True)}, got {filter!r}")
