@@ -325,3 +325,36 @@ def _plane_prior():
     from depthcore.problem.gaussian import Gaussian
 
     return Gaussian(PLANE_MEAN, PLANE_COV)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"prior_mean": np.full(5, 1e300)},
+        {"process_noise": 1e300},
+        {"steps": np.full(11, 1e300)},
+        {"mu": _benign_pairs(12) * 1e300},
+        {"rho": 1e-300},
+    ],
+    ids=["prior", "noise", "steps", "pairs", "rho"],
+)
+@pytest.mark.parametrize("door", ["iterated", "inverse_depth", "exact_track", "ekf_smoother"])
+def test_extreme_values_get_an_answer_or_one_line_and_no_warning(kwargs, door):
+    import warnings
+
+    args = {"mu": _benign_pairs(12), "rho": 0.002, "prior_mean": MEAN_5, "prior_cov": COV_5}
+    args.update(kwargs)
+    run = {
+        "iterated": lambda **a: spatial.run(**a, filter="iterated"),
+        "inverse_depth": spatial_inverse.run,
+        "exact_track": lambda **a: exact_spatial.track(**a).smoothed,
+        "ekf_smoother": lambda **a: spatial.smoother(**a)[1],
+    }[door]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            out = run(**args)
+        except ValueError as exc:
+            assert "\n" not in str(exc)
+            return
+    assert np.all(np.isfinite(out.mean))

@@ -142,11 +142,11 @@ def run(mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None) -> Spatia
     """
     pairs, m, P, q = checked(mu, rho, prior_mean, prior_cov, process_noise, steps)
     B, N = pairs.present.shape
-    z, S = prior(m, P)
     t = pairs.elapsed
     means, covs = np.empty((B, N, DIM)), np.empty((B, N, DIM, DIM))
     log_p = np.full((B, N), np.nan)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        z, S = prior(m, P)
         for k in range(N):
             if k:
                 z, S = predict(z, S, q, pairs.steps[:, k - 1])
