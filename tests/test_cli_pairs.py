@@ -175,7 +175,7 @@ def test_a_long_file_of_pairs_streams_past_the_held_limit(tmp_path, capsys):
             ["--prior-cov", *["1", "0", "0", "0", "1", "0", "0", "0", "1"]],
             "--prior-cov takes 1 value (S I) or 25",
         ),
-        (["--smooth"], "--smooth: no smoother takes pairs"),
+        (["--smooth", "--per-frame"], "--smooth: --per-frame streams pairs"),
         (["--gate", "0.01"], "--gate: the summary of pairs (a point in 3-D) has no gate"),
         (["--filters", "second_order"], "--filters: second_order takes no pairs (a point in 3-D)"),
         (["--filters", "ekf", "particle"], "--filters: particle takes no pairs"),

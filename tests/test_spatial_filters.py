@@ -358,3 +358,24 @@ def test_extreme_values_get_an_answer_or_one_line_and_no_warning(kwargs, door):
             assert "\n" not in str(exc)
             return
     assert np.all(np.isfinite(out.mean))
+
+
+def test_the_command_line_smooths_pairs_by_the_exact_3d_smoother(tmp_path, capsys):
+    """estimate --smooth on a file of pairs: the smoothed depth and lateral position at every
+    frame are depthcore.exact.spatial.track's; the table shows them too."""
+    from helpers import cli_json, run_cli
+
+    pairs = _benign_pairs(8)
+    pairs[3] = np.nan
+    path = tmp_path / "pairs.csv"
+    rows = [",\n" if np.isnan(m) else f"{m!r},{n!r}\n" for m, n in pairs.tolist()]
+    path.write_text("mu,nu\n" + "".join(rows), encoding="utf-8")
+    prior = ["--prior-mean", "0.5", "8", "0", "0", "0", "--prior-cov", "4"]
+    argv = ["estimate", "--mu-file", str(path), "--rho", "0.002", *prior, "--smooth"]
+    out = cli_json(argv, capsys)
+    t = exact_spatial.track(pairs, 0.002, MEAN_5, 4.0 * np.eye(5))
+    assert_allclose(out["smoothed"]["depth_mean"], t.smoothed.depth_mean, rtol=1e-14)
+    assert_allclose(out["smoothed"]["lateral_sd"], t.smoothed.lateral_sd, rtol=1e-14)
+    assert out["smoothed"]["frame"] == list(range(1, 9))
+    status, text, err = run_cli(argv, capsys)
+    assert status == 0 and err == "" and "smoothed" in text

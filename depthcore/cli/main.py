@@ -29,7 +29,7 @@ from depthcore.cli import text as cli_text
 from depthcore.problem import bearing_pairs, checks, frames
 from depthcore.registry import online, track_files, track_runs
 from depthcore.registry.filters import FILTERS, RBPF_REPLICAS, names
-from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE
+from depthcore.registry.tracking import PROCESS_NOISE_MAX, RHO_RANGE, track
 from depthcore.studies import monte_carlo, reproduce, tasks
 from depthcore.studies import trials as study_trials
 
@@ -261,9 +261,13 @@ def _per_frame(args, src, rho, steps, prior, q, gate, learned, direction):
 
 
 def _refuse_for_pairs(args, gate) -> None:
-    """Refuse what a track of pairs cannot have: a smoother, a gate in the summary."""
-    if args.smooth:
-        raise ValueError("--smooth: no smoother takes pairs (a point in 3-D) yet; leave it out")
+    """Refuse what a track of pairs cannot have: a smoother frame by frame, a gate in the
+    summary."""
+    if args.smooth and args.per_frame:
+        raise ValueError(
+            "--smooth: --per-frame streams pairs (a point in 3-D) through the online filters, "
+            "which do not smooth; leave it out"
+        )
     if gate is not None and not args.per_frame:
         raise ValueError(
             "--gate: the summary of pairs (a point in 3-D) has no gate; --per-frame gates "
@@ -281,6 +285,10 @@ def _pairs(args, src, rho, steps, prior, q, direction):
             f"--filters: {without[0]} takes no pairs (a point in 3-D); {', '.join(spatial)} do"
         )
     summary = track_runs.summarize_pairs(src.mu, rho, prior, q, names, steps)
+    if args.smooth:  # the exact filter's smoother of pairs, depthcore.exact.spatial.track
+        sm = track(src.mu, rho, prior, q, steps=steps).smoothed
+        keys = ("depth_mean", "depth_sd", "lateral_mean", "lateral_sd")
+        summary["smoothed"] = {k: getattr(sm, k).tolist() for k in keys}
     summary["c"] = track_runs.noise_free(src.mu, steps)[0]
     summary["c"] = None if summary["c"] is None else summary["c"].tolist()
     return _summary_text(args, summary | _named_frames(summary, src) | direction, src, steps)
