@@ -134,7 +134,7 @@ def test_per_frame_streams_pairs_through_the_online_filters(tmp_path, capsys, ga
     base = ["estimate", "--mu-file", path, "--rho", "0.002", *PRIOR, "--per-frame"]
     argv = [*base, "--filters", "ekf", "ukf"] + ([] if gate is None else ["--gate", gate])
     out = cli_json(argv, capsys)
-    assert out["smoothed"] is False and "no smoother takes pairs" in out["smoothed_reason"]
+    assert out["smoothed"] is False and "do not smooth" in out["smoothed_reason"]
     for name in ("ekf", "ukf"):
         live = online.start(name, [-2, 10, 0, 1, 0], 4 * np.eye(5), RHO, 0.0, gate and float(gate))
         for k, pair in enumerate(pairs):

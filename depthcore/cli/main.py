@@ -320,7 +320,7 @@ def _refuse_long(args, held) -> None:
 
 def _streamed(args, frames_in, rho, prior, q, gate, direction, why="long"):
     """``estimate --per-frame`` through the online filters, streamed: a track past
-    ``MAX_FRAMES`` (``why`` ``"long"``) or of pairs (``"pairs"``), which no smoother takes."""
+    ``MAX_FRAMES`` (``why`` ``"long"``) or of pairs (``"pairs"``), neither smoothed."""
     chosen = _chosen(args)
     rows = track_runs.streamed(frames_in, rho, prior, q, chosen, gate)
     count, blocks = tracks.spool(rows, chosen)
@@ -334,7 +334,8 @@ def _streamed(args, frames_in, rho, prior, q, gate, direction, why="long"):
         "smoothed": False,
         "smoothed_reason": {
             "long": f"the smoother holds the whole track, at most {FRAMES_MAX} frames",
-            "pairs": "no smoother takes pairs (a point in 3-D) yet",
+            "pairs": "the online filters of pairs (a point in 3-D) do not smooth; --smooth without "
+            "--per-frame smooths them",
         }[why],
     }
     return cli_text.per_frame_text(head | direction, blocks, _output(args))
