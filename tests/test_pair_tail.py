@@ -139,7 +139,8 @@ def test_the_exact_filter_gates_exactly_the_outlying_pairs_and_beats_no_gate():
         runs[gate] = [f.update(p) for p in pairs]
     assert [e.frame for e in runs[1e-3] if e.gated] == [6, 11]
     assert not any(e.gated for e in runs[None])
-    assert all(e.tail < 1e-6 for e in (runs[None][5], runs[None][10]))
+    assert all(e.tail < 1e-6 for e in (runs[1e-3][5], runs[1e-3][10]))
+    assert all(np.isnan(e.tail) for e in runs[None])  # without a gate no tail is computed
     errors = {}
     for gate, ests in runs.items():
         d = ests[-1].mean - end

@@ -16,7 +16,8 @@ nodes (:func:`depthcore.problem.predictive.mixture`: node ``j`` predicts
 ``N(x_j / y_k, a_j / y_k**2 + rho_k**2)``, ``a_j`` the predicted ``Var[x_k]``,
 weighted by the node's probability; a pair of a point in 3-D: the mixture of
 bivariate Gaussians of :meth:`depthcore.exact.online_nodes.Space.predictive`, its
-tail by :func:`depthcore.problem.pair_tail.tail`), skips it if a gate says so, and
+tail by :func:`depthcore.problem.pair_tail.tail`, computed only for a gate: ``NaN``
+without one), skips it if a gate says so, and
 updates each node (textbook 19.2.2).
 
 The nodes. They are placed on the prior by the depth quadrature
@@ -111,7 +112,7 @@ class Online:
         paper's point, one bearing per update) or on ``(x, y, v, h, w)`` (a point in
         3-D, :mod:`depthcore.exact.spatial`: a pair ``(x / y, h / y)`` per update,
         its tail the probability of a pair of lower predictive density,
-        :func:`depthcore.problem.pair_tail.tail`).
+        :func:`depthcore.problem.pair_tail.tail`, reported only with a gate).
     rho : float
         The bearing noise SD, > 0, used where :meth:`update` is given none.
     rtol : float
@@ -287,7 +288,9 @@ class Online:
             if self.frame > 0:
                 self.model.predict(lat, s, self.process_noise**2 * abs(s))
             if not missing:
-                log_pred, tail = self.model.predictive(obs, log_p + nodes.log_w, lat, y, r * r)
+                log_pred, tail = self.model.predictive(
+                    obs, log_p + nodes.log_w, lat, y, r * r, tail=self.gate is not None
+                )
                 gated = bool(predictive.skipped(tail, True, self.gate))
                 if not gated:
                     log_p = log_p + self.model.update(lat, obs, y, r * r)

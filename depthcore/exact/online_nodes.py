@@ -109,8 +109,9 @@ class Plane:
         return (x / y)[:, None], (a / (y * y) + rho2)[:, None, None], states, cross
 
     @staticmethod
-    def predictive(mu: float, log_w, lat, y, rho2: float):
-        """The bearing's log predictive density and two-sided tail under the nodes."""
+    def predictive(mu: float, log_w, lat, y, rho2: float, tail: bool = True):
+        """The bearing's log predictive density and two-sided tail under the nodes (the
+        tail always: it costs little)."""
         out = predictive.mixture(mu, log_w, lat[0] / y, lat[2] / (y * y) + rho2)
         return tuple(float(v) for v in out)
 
@@ -203,17 +204,18 @@ class Space:
         S = C[:, ij][:, :, ij] / (y * y)[:, None, None] + rho2 * np.eye(2)
         return M[:, ij] / y[:, None], S, states, cross
 
-    def predictive(self, pair, log_w, lat, y, rho2: float):
+    def predictive(self, pair, log_w, lat, y, rho2: float, tail: bool = True):
         """The pair's log predictive density under the nodes (a mixture of bivariate
-        Gaussians) and its tail, the probability of a pair of lower predictive density
-        (:func:`depthcore.problem.pair_tail.tail`, to 1e-9 or 1e-6 of it)."""
+        Gaussians) and, with ``tail``, its tail, the probability of a pair of lower
+        predictive density (:func:`depthcore.problem.pair_tail.tail`, to 1e-9 or 1e-6 of
+        it; some hundred times the cost of the rest of a frame); else ``NaN``."""
         mean, S, _, _ = self.observed(lat, y, rho2)
         r = np.asarray(pair) - mean
         sol = np.linalg.solve(S, r[..., None])[..., 0]
         log_n = -0.5 * (2 * _LOG_2PI + np.linalg.slogdet(S)[1] + np.sum(r * sol, axis=-1))
         log_w = log_w - logsumexp(log_w)
-        tail = pair_tail.tail(pair, log_w, mean, S).tail
-        return float(logsumexp(log_w + log_n)), tail
+        p_tail = pair_tail.tail(pair, log_w, mean, S).tail if tail else np.nan
+        return float(logsumexp(log_w + log_n)), p_tail
 
     def moments(self, p, lat, depths):
         """Mean (5,) and covariance (5, 5) of ``(x, y, v, h, w)`` under node probabilities."""
