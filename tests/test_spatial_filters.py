@@ -312,7 +312,7 @@ def test_track_of_pairs_gives_every_frame_filtered_and_smoothed_by_the_exact_and
     h, s = spatial.smoother(pairs, 0.002, t.prior.mean, t.prior.cov, 0.01)
     assert_allclose(e.smoothed.mean, s.mean, rtol=1e-14)
     for kwargs, words in (
-        ({"gate": 0.01}, "^gate: track"),
+        ({"gate": 2.0}, "^gate must be"),
         ({"prior": _plane_prior()}, "^prior must have a mean"),
         ({"filter": "iterated"}, "^filter must be one of"),
     ):

@@ -147,16 +147,30 @@ def test_the_online_filters_take_pairs_when_the_prior_is_in_3d(name):
     assert far.gated and far.tail < 1e-3
 
 
-def test_track_filters_and_smooths_pairs_and_refuses_a_gate_on_them_in_one_line():
+def test_track_filters_and_smooths_pairs_and_its_gate_skips_an_outlying_pair():
     """track() of pairs: the state (x, y, v, h, w) at every frame (tests/test_spatial_filters.py
-    checks the numbers); a gate has no 3-D form yet and is refused by name."""
+    checks the numbers); with a gate, each filter's online tail of each pair decides, a
+    skipped pair is a missing one, and without the outlier the gate skips nothing."""
+    from depthcore.registry.track_runs import Prior
     from depthcore.registry.tracking import track
 
     t = track(PAIRS, 0.01, steps=STEPS)
     assert t.filtered.mean.shape == t.smoothed.mean.shape == (len(PAIRS), 5)
-    with pytest.raises(ValueError, match=r"^gate: track\(\) has no gate on pairs") as info:
-        track(PAIRS, 0.01, steps=STEPS, gate=1e-3)
-    assert "\n" not in str(info.value)
+    assert t.updates is None
+    bad = PAIRS.copy()
+    bad[4] += [0.3, -0.3]  # some 20 SDs off
+    prior = Prior(PRIOR_MEAN, PRIOR_COV)
+    for name in ("optimal", "ekf", "ukf"):
+        clean = track(PAIRS, 0.01, prior, steps=STEPS, filter=name, gate=1e-3)
+        assert not np.any(clean.updates.gated)
+        assert np.all(clean.updates.tail[~np.isnan(MU)] > 1e-3)
+        gated = track(bad, 0.01, prior, steps=STEPS, filter=name, gate=1e-3)
+        assert gated.updates.gated.tolist() == [False] * 4 + [True, False]
+        dropped = PAIRS.copy()
+        dropped[4] = np.nan
+        without = track(dropped, 0.01, prior, steps=STEPS, filter=name)
+        assert_allclose(gated.smoothed.mean, without.smoothed.mean, rtol=1e-12)
+        assert_allclose(gated.filtered.cov, without.filtered.cov, rtol=1e-12)
 
 
 @pytest.mark.parametrize(

@@ -182,7 +182,8 @@ def track(
         filters: the exact filter at every frame and its smoother
         (:func:`depthcore.exact.spatial.track`), the EKF's and UKF's
         (:func:`depthcore.kalman.spatial.smoother`); their prior is by default the rule of
-        :func:`depthcore.registry.track_runs.start_prior`, and a gate is refused.
+        :func:`depthcore.registry.track_runs.start_prior`, and a gate reads the online
+        filter's tail of each pair (:mod:`depthcore.registry.online`).
     rho : float or array_like, shape (N,)
         The SD of the bearings' noise, in :data:`RHO_RANGE` (in the units of
         ``mu``: a pixel noise of SD ``s`` is ``rho = s / f`` for a focal
@@ -305,8 +306,7 @@ def _pairs(mu, rho, prior, process_noise, filter: str, steps, gate) -> Track:
     """
     from depthcore.registry import track_runs  # it imports this module
 
-    if gate is not None:
-        raise ValueError("gate: track() has no gate on pairs (a point in 3-D) yet; leave it None")
+    gate = predictive.gate(gate)
     rho = checks.as_float(rho, "rho")
     rho = checks.positive_scalar(rho, "rho") if rho.shape in ((), (1,)) else rho
     checked = bearing_pairs.check(mu, rho, steps)
@@ -322,8 +322,12 @@ def _pairs(mu, rho, prior, process_noise, filter: str, steps, gate) -> Track:
             "prior must have a mean (5,) and a covariance (5, 5) of (x, y, v, h, w) for pairs, "
             f"or be None, got {type(prior).__name__}"
         )
-    args = (mu, rho, prior.mean, prior.cov, q, steps)
+    report = None
     try:
+        if gate is not None:
+            report = _gated_pairs(checked, prior, q, filter, gate)
+            mu = np.where(report.gated[:, None], np.nan, mu)  # a skipped pair is a missing one
+        args = (mu, rho, prior.mean, prior.cov, q, steps)
         if filter == "optimal":
             detail = exact_spatial.track(*args)
             filtered, smoothed = detail.filtered, detail.smoothed
@@ -338,4 +342,18 @@ def _pairs(mu, rho, prior, process_noise, filter: str, steps, gate) -> Track:
             f"mu, rho and prior have no answer from the {filter} filter of pairs ({message}); "
             "try another filter, a larger rho or a broader prior"
         ) from None
-    return Track(filter, filtered, smoothed, prior, q, detail, None)
+    return Track(filter, filtered, smoothed, prior, q, detail, report)
+
+
+def _gated_pairs(checked, prior, q: float, filter: str, gate: float) -> predictive.Updates:
+    """Each pair's report by the online filter ``filter`` with the gate: arrays (N,)."""
+    from depthcore.registry import online  # it imports the registry's filters
+
+    f = online.start(filter, prior.mean, prior.cov, 1.0, q, gate)
+    mu, rho = checked.mu[0], checked.rho[0]
+    steps = np.concatenate([[1.0], checked.steps[0]])  # the first is not used
+    out = np.full((3, len(mu)), np.nan)
+    for k in range(len(mu)):
+        est = f.update(mu[k], rho=float(rho[k]), step=float(steps[k]))
+        out[:, k] = est.log_predictive, est.tail, est.gated
+    return predictive.Updates(out[0], out[1], out[2] == 1.0)
