@@ -379,3 +379,26 @@ def test_the_command_line_smooths_pairs_by_the_exact_3d_smoother(tmp_path, capsy
     assert out["smoothed"]["frame"] == list(range(1, 9))
     status, text, err = run_cli(argv, capsys)
     assert status == 0 and err == "" and "smoothed" in text
+
+
+def test_a_noise_tiny_beside_the_prior_gets_an_answer_or_one_line_from_every_3d_door():
+    """rho = 1e-9 on four pairs, one far out: the EKF's Joseph-form covariance stays positive
+    (P - K S K^T lost it to rounding, a negative variance); the others answer or refuse."""
+    import warnings
+
+    from depthcore.registry import track_runs
+
+    pairs = np.array([[0.0027, 1e-300], [0.2875, 0.0], [0.3057, 0.0], [5.0187, -1.0]])
+    prior = track_runs.start_prior(pairs, None, (3.0, 2.0))
+    answered = []
+    for name in track_runs.spatial_names():
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            try:
+                est = FILTERS[name](pairs, 1e-9, prior.mean, prior.cov)
+            except ValueError as exc:
+                assert "\n" not in str(exc)
+                continue
+        assert np.all(np.diagonal(est.cov) >= 0) and est.depth_sd > 0
+        answered.append(name)
+    assert "ekf" in answered

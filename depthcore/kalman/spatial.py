@@ -102,19 +102,25 @@ def jacobian(m) -> np.ndarray:
     return J
 
 
-def gain_update(m, P, z, predicted, S, cross):
+def gain_update(m, P, z, predicted, S, cross, H=None, rho2=None):
     """Textbook 19.2.2: the update from the pair's predicted mean, covariance ``S`` (..., 2, 2)
     and ``Cov[pair, state]`` ``cross`` (..., 2, d), of a state ``(m, P)`` of any dimension d.
 
-    Returns the mean, the covariance, the pair's log predictive density under ``N(pred,
-    S)`` and its tail probability, the probability of a density below the observed
-    pair's: ``exp(-d**2 / 2)`` for ``d`` its Mahalanobis distance, exactly.
+    With the linearised measurement ``H`` (..., 2, d) and the noise variance ``rho2``
+    (..., 1, 1) the covariance is the Joseph form's (:func:`depthcore.kalman.linear.joseph`),
+    positive semi-definite whatever the rounding (a noise tiny beside the prior); else
+    ``P - K S K^T``. Returns the mean, the covariance, the pair's log predictive density
+    under ``N(pred, S)`` and its tail probability, the probability of a density below the
+    observed pair's: ``exp(-d**2 / 2)`` for ``d`` its Mahalanobis distance, exactly.
     """
     K = np.swapaxes(np.linalg.solve(S, cross), -1, -2)  # Cov[state, pair] S^{-1}: (..., 5, 2)
     r = z - predicted
     mean = m + np.einsum("...ij,...j->...i", K, r)
-    cov = P - K @ S @ np.swapaxes(K, -1, -2)
-    cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    if H is None:
+        cov = P - K @ S @ np.swapaxes(K, -1, -2)
+        cov = 0.5 * (cov + np.swapaxes(cov, -1, -2))
+    else:
+        cov = linear.joseph(P, K, H, rho2 * np.eye(2))
     sol = np.linalg.solve(S, r[..., None])[..., 0]
     d2 = np.maximum(np.sum(r * sol, axis=-1), 0.0)
     log_p = -0.5 * (2 * _LOG_2PI + np.linalg.slogdet(S)[1] + d2)
@@ -126,7 +132,7 @@ def ekf_update(m, P, z, rho):
     J = jacobian(m)
     rho2 = np.asarray(rho, dtype=float)[..., None, None] ** 2
     S = J @ P @ np.swapaxes(J, -1, -2) + rho2 * np.eye(2)
-    return gain_update(m, P, z, measurement(m), S, J @ P)
+    return gain_update(m, P, z, measurement(m), S, J @ P, J, rho2)
 
 
 def ukf_update(m, P, z, rho, sigma_points: SigmaPoints = SIGMA_POINTS):

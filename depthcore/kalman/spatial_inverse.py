@@ -110,7 +110,7 @@ def update(z, S, pair, rho, elapsed):
     rho2 = np.asarray(rho, dtype=float)[..., None, None] ** 2
     R = H @ S @ np.swapaxes(H, -1, -2) + rho2 * np.eye(2)
     predicted = np.stack([z[..., 0], z[..., 3]], axis=-1) / D[..., None]
-    return gain_update(z, S, pair, predicted, R, H @ S)
+    return gain_update(z, S, pair, predicted, R, H @ S, H, rho2)
 
 
 def run(mu, rho, prior_mean, prior_cov, process_noise=0.0, steps=None) -> SpatialHistory:

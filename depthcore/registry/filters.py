@@ -256,6 +256,12 @@ class Filter:
             raise ValueError("gate: the filters of a point in 3-D have no gate")
         q = checks.process_noise(process_noise, "process_noise")
         result = self.spatial(mu, rho, prior_mean, prior_cov, process_noise=q, steps=steps)
+        variances = np.diagonal(np.asarray(result.cov), axis1=-2, axis2=-1)
+        if not np.all(variances >= 0):  # NaN too
+            raise ValueError(
+                f"mu and rho lead the {self.name} filter of pairs to a variance that is negative "
+                "or not a number (a rho tiny beside the prior); try a larger rho"
+            )
         return adapters.spatial(result, mu.ndim == 2)
 
     @property
