@@ -26,6 +26,8 @@
   and a gate;
 * :mod:`~depthcore.exact.online_nodes`: what each node of the online filter
   holds, the plane's Gaussian of ``(x, v)`` or the space's of ``(x, v, h, w)``;
+* :mod:`~depthcore.exact.features`: the online filter for many features at
+  once, a fixed number of nodes each, every frame one set of array operations;
 * :mod:`~depthcore.exact.e_step`: EM's expectations under the exact smoothed
   posterior, for learning the noise levels;
 * :mod:`~depthcore.exact.learning`: the bearing noise and the process noise

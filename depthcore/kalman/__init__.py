@@ -10,6 +10,7 @@
 * :mod:`~depthcore.kalman.ukf`: the unscented Kalman filter (textbook 19.4);
 * :mod:`~depthcore.kalman.iterated`: the iterated EKF and its smoother;
 * :mod:`~depthcore.kalman.online`: the EKF and the UKF one bearing at a time;
+* :mod:`~depthcore.kalman.features`: the same for many features at once, batched;
 * :mod:`~depthcore.kalman.spatial`: the EKF, the iterated EKF and the UKF for a
   point in 3-D, seen as bearing pairs, and :mod:`~depthcore.kalman.spatial_inverse`,
   the inverse-depth EKF for it;

@@ -77,6 +77,109 @@ class FrameEstimate(NamedTuple):
     gated: bool
 
 
+class FrameEstimates(NamedTuple):
+    """A batched online filter's estimates of ``B`` features after a frame.
+
+    The answer of :class:`depthcore.exact.features.Features` and of
+    :class:`depthcore.kalman.features.Features`: :class:`FrameEstimate` row by row,
+    without a gate.
+
+    Attributes
+    ----------
+    frame : int
+        Frames seen so far, missing ones included.
+    mean : ndarray, shape (B, d)
+        Mean of each feature's state, ``(x, y, v)`` (``d = 3``) or ``(x, y, v, h, w)``.
+    cov : ndarray, shape (B, d, d)
+    depth_mean, depth_sd, velocity_mean, velocity_sd : ndarray, shape (B,)
+    log_predictive : ndarray, shape (B,)
+        Each observation's log predictive density given the earlier ones; NaN where the
+        feature was not seen.
+    tail : ndarray, shape (B,)
+        Its tail probability where the filter computes one (the Kalman filters), else NaN.
+    """
+
+    frame: int
+    mean: np.ndarray
+    cov: np.ndarray
+    depth_mean: np.ndarray
+    depth_sd: np.ndarray
+    velocity_mean: np.ndarray
+    velocity_sd: np.ndarray
+    log_predictive: np.ndarray
+    tail: np.ndarray
+
+
+def frame_estimates(frame: int, mean, cov, log_predictive, tail=None) -> FrameEstimates:
+    """The :class:`FrameEstimates` of means (B, d) and covariances (B, d, d)."""
+    lp = np.asarray(log_predictive, dtype=float)
+    tail = np.full(lp.shape, np.nan) if tail is None else np.asarray(tail, dtype=float)
+    sd = np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1))
+    return FrameEstimates(frame, mean, cov, mean[:, 1], sd[:, 1], mean[:, 2], sd[:, 2], lp, tail)
+
+
+def batch_prior(prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
+    """Priors of ``B`` features, checked: means (B, d) and covariances (B, d, d), d = 3 or 5."""
+    m = checks.finite_array(prior_mean, "prior_mean")
+    if m.ndim != 2 or m.shape[1] not in (3, 5) or not len(m):
+        raise ValueError(f"prior_mean must have shape (B, 3) or (B, 5), got shape {m.shape}")
+    P = checks.finite_array(prior_cov, "prior_cov")
+    if P.shape != m.shape + m.shape[1:]:
+        raise ValueError(f"prior_cov must have shape {m.shape + m.shape[1:]}, got {P.shape}")
+    return m, checks.covariances(P, "prior_cov", m.shape[1])
+
+
+def per_feature(value, name: str, B: int, positive: bool = True) -> np.ndarray:
+    """A number or one per feature, (B,): finite and > 0 (``positive``) or nonzero."""
+    arr = checks.finite_array(value, name)
+    if arr.shape not in ((), (B,)):
+        raise ValueError(f"{name} must be a number or have shape ({B},), got shape {arr.shape}")
+    bad = ~(arr > 0) if positive else arr == 0
+    if np.any(bad):
+        what = "positive" if positive else "nonzero (negative: the camera approaches)"
+        raise ValueError(f"{name} must be {what}, got {float(np.ravel(arr)[np.argmax(bad)])!r}")
+    return np.broadcast_to(arr, (B,)).astype(float)
+
+
+def batch_inputs(mu, rho, step, default_rho, frame: int, dim: int, B: int):
+    """One frame of a batched online filter, checked (as :func:`frame_inputs` checks one).
+
+    Parameters
+    ----------
+    mu : array_like, shape (B,) or (B, 2)
+        Bearings (``dim`` 3) or pairs (``dim`` 5); NaN (a NaN row): not seen this frame.
+    rho : float, array_like of shape (B,), or None
+        ``None``: ``default_rho``.
+    step : float or array_like, shape (B,)
+        Signed, nonzero; ignored at the first frame (``frame`` 0).
+    default_rho : ndarray, shape (B,), or None
+    frame : int
+    dim : int
+    B : int
+
+    Returns
+    -------
+    mu : ndarray, shape (B,) or (B, 2)
+    present : ndarray of bool, shape (B,)
+    rho, step : ndarray, shape (B,)
+    """
+    arr = checks.as_float(mu, "mu")
+    shape = (B,) if dim == 3 else (B, 2)
+    if arr.shape != shape:
+        raise ValueError(f"mu must have shape {shape}, got shape {arr.shape}")
+    if np.any(np.isinf(arr)):
+        raise ValueError("mu must be finite or NaN (a feature not seen this frame)")
+    nan = np.isnan(arr)
+    if dim == 5 and np.any(nan[:, 0] != nan[:, 1]):
+        raise ValueError("mu has a pair with one coordinate missing: a frame has both or neither")
+    present = ~(nan if dim == 3 else nan[:, 0])
+    if rho is None and default_rho is None:
+        raise ValueError("rho is needed: give it to start or to this update")
+    r = default_rho if rho is None else per_feature(rho, "rho", B)
+    s = np.ones(B) if frame == 0 else per_feature(step, "step", B, positive=False)
+    return arr, present, r, s
+
+
 def frame_inputs(mu, rho, step, default_rho, frame: int) -> tuple[float, float, float]:
     """One frame of an online filter, checked: its bearing, noise SD and step.
 

@@ -16,6 +16,14 @@ hold a whole track, at most ``depthcore.problem.checks.MAX_FRAMES`` frames);
 after ``N`` frames the estimate is the batch door's at frame ``N``
 (:data:`depthcore.registry.filters.FILTERS`).
 
+Many features at once: priors of shape (B, d) and (B, d, d) start the batched
+filter of the name (:data:`BATCHED`: ``"optimal"``,
+:class:`depthcore.exact.features.Features`; ``"ekf"`` and ``"ukf"``,
+:class:`depthcore.kalman.features.Features`), whose ``update(mu, rho=None,
+step=1.0)`` takes every feature's bearing (B,) or pair (B, 2) of the frame (NaN
+where one is not seen), ``rho`` and ``step`` a number or one per feature, and
+returns a :class:`~depthcore.problem.predictive.FrameEstimates`; it has no gate.
+
 Example: a live loop, each bearing used as it arrives
 
 >>> import numpy as np
@@ -36,13 +44,20 @@ import importlib
 
 import numpy as np
 
-from depthcore.problem.predictive import FrameEstimate
+from depthcore.problem.predictive import FrameEstimate, FrameEstimates
 
 #: The online filters by name, with the module and class of each.
 ONLINE = {
     "optimal": ("depthcore.exact.online", "Online"),
     "ekf": ("depthcore.kalman.online", "EKF"),
     "ukf": ("depthcore.kalman.online", "UKF"),
+}
+
+#: The batched filters by name, for priors of many features (module docstring).
+BATCHED = {
+    "optimal": ("depthcore.exact.features", "Features"),
+    "ekf": ("depthcore.kalman.features", "Features"),
+    "ukf": ("depthcore.kalman.features", "Features"),
 }
 
 #: The names :func:`start` takes.
@@ -57,13 +72,17 @@ class OnlineFilter:
 
     :attr:`detail` is the family's own filter:
     :class:`depthcore.exact.online.Online`, :class:`depthcore.kalman.online.EKF`
-    or :class:`depthcore.kalman.online.UKF`.
+    or :class:`depthcore.kalman.online.UKF` (:class:`depthcore.kalman.online.Spatial`
+    in 3-D); for a batch of features :class:`depthcore.exact.features.Features` or
+    :class:`depthcore.kalman.features.Features`, whose answers are
+    :class:`~depthcore.problem.predictive.FrameEstimates`.
     """
 
-    def __init__(self, name: str, inner):
+    def __init__(self, name: str, inner, batched: bool = False):
         self.name = name
         self._inner = inner
-        self.current: FrameEstimate | None = None
+        self._batched = batched
+        self.current: FrameEstimate | FrameEstimates | None = None
 
     @property
     def detail(self):
@@ -75,12 +94,19 @@ class OnlineFilter:
         """Frames seen so far, missing ones included."""
         return int(self._inner.frame)
 
-    def update(self, mu, rho=None, step=1.0) -> FrameEstimate:
-        """Add the next frame's bearing.
+    @property
+    def batched(self) -> bool:
+        """Whether the filter holds a batch of features (priors of shape (B, d))."""
+        return self._batched
+
+    def update(self, mu, rho=None, step=1.0) -> FrameEstimate | FrameEstimates:
+        """Add the next frame's bearing (of every feature, for a batch).
 
         ``mu``, ``rho`` (``None``: the one given to :func:`start`) and ``step`` as
-        :func:`depthcore.problem.predictive.frame_inputs` checks them; returns a
-        :class:`~depthcore.problem.predictive.FrameEstimate`.
+        :func:`depthcore.problem.predictive.frame_inputs` checks them (as
+        :func:`depthcore.problem.predictive.batch_inputs` checks them for a batch);
+        returns a :class:`~depthcore.problem.predictive.FrameEstimate`
+        (:class:`~depthcore.problem.predictive.FrameEstimates`).
         """
         self.current = self._inner.update(mu, rho=rho, step=step)
         return self.current
@@ -95,22 +121,25 @@ def start(
     ----------
     name : str
         One of :data:`NAMES`.
-    prior_mean : array_like, shape (3,) or (5,)
+    prior_mean : array_like, shape (3,), (5,), (B, 3) or (B, 5)
         Of ``(x, y, v)``, or of ``(x, y, v, h, w)`` for a point in 3-D: then each
         update takes a pair ``(x / y, h / y)`` (:class:`depthcore.kalman.online.Spatial`
-        for the EKF and the UKF; the exact filter's pairs have no gate).
-    prior_cov : array_like, shape (3, 3) or (5, 5)
+        for the EKF and the UKF; the exact filter's pairs have no gate). With a
+        leading ``B``: ``B`` features at once (module docstring), without a gate.
+    prior_cov : array_like, shape (3, 3), (5, 5), (B, 3, 3) or (B, 5, 5)
         Symmetric positive definite.
     rho : float or None
-        The bearings' noise SD, > 0, where an update is given none.
+        The bearings' noise SD, > 0, where an update is given none (for a batch, a
+        number or one per feature).
     process_noise : float
-        ``q >= 0``: the velocity's variance grows by ``q**2 |s|`` over a step ``s`` (signed).
+        ``q >= 0``: the velocity's variance grows by ``q**2 abs(s)`` over a step ``s``.
     gate : float or None
         Skip a bearing whose two-sided predictive tail probability is below it
         (:func:`depthcore.problem.predictive.gate`).
     **options
         The filter's own options (the UKF's ``sigma_points`` and
-        ``allow_behind_camera``, the exact filter's ``rtol``).
+        ``allow_behind_camera``, the exact filter's ``rtol``, the batched exact
+        filter's ``nodes`` and ``rtol``).
 
     Returns
     -------
@@ -124,6 +153,17 @@ def start(
     except ImportError:
         raise ValueError(f"name: the online {name} filter is not installed ({module})") from None
     options = {**DEFAULT_OPTIONS.get(name, {}), **options}
+    if np.ndim(prior_mean) == 2:  # a batch of features
+        if gate is not None:
+            raise ValueError(f"gate: the batched {name} filter has no gate; give None")
+        module, cls = BATCHED[name]
+        factory = getattr(importlib.import_module(module), cls)
+        if name != "optimal":
+            options = {"filter": name, **options}
+            if np.shape(prior_mean)[-1] == 5:
+                options.pop("allow_behind_camera", None)
+        inner = factory(prior_mean, prior_cov, rho, process_noise, **options)
+        return OnlineFilter(name, inner, batched=True)
     if np.shape(prior_mean) == (5,) and name in ("ekf", "ukf"):  # a point in 3-D: pairs
         factory, options = importlib.import_module(module).Spatial, {"filter": name}
     inner = factory(prior_mean, prior_cov, rho, process_noise, gate, **options)
