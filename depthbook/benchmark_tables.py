@@ -358,6 +358,29 @@ _BENCHMARKS = {
             ("difference", "results.difference_sd", "sci"),
         ),
     ),
+    "bench_features": (
+        "features",
+        (
+            ("target_ms", "results.target_ms", "g"),
+            *(
+                _Group(
+                    name,
+                    f"results.{name}",
+                    (
+                        ("features", "features", ","),
+                        ("frames", "frames", ""),
+                        ("nodes", "nodes", ""),
+                        ("exact_ms", "exact_ms", ".1f"),
+                        ("ekf_ms", "ekf_ms", ".2f"),
+                        ("ratio", "ratio", ".1f"),
+                        ("mean", "mean_difference_sd", "sci"),
+                        ("sd", "sd_difference_sd", "sci"),
+                    ),
+                )
+                for name in ("space", "plane")
+            ),
+        ),
+    ),
     "bench_long_track": (
         "long",
         (

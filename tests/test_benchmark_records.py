@@ -43,6 +43,7 @@ TABLES = {
         "mean_difference_sd",
     },
     "bench_frames": {"frames", "filters"},
+    "bench_features": {"space", "plane", "target_ms"},
     "bench_import": {"numpy_s", "depthcore_after_numpy_s", "target_s"},
     "bench_kalman": {
         "depthcore_ms",
