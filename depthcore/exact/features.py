@@ -42,7 +42,7 @@ within ``1e-3`` of its SD of :class:`~depthcore.exact.online.Online` at ``rtol =
 1e-10`` (plane and 3-D, receding, approaching and mixed steps, uneven, missing
 frames, noise per frame, ``q = 0`` and ``q > 0``), and the log predictive within
 ``1e-3``. Too few nodes for a density fail its check at every frame:
-:attr:`Features.unresolved` says which features failed after their last
+``Features.unresolved`` says which features failed after their last
 re-placement, and their answers are not to be trusted. ``J = 64`` (the default)
 resolved every case tested, and 32 most; with 24 the check fails and so does the
 accuracy, and below 16 the nodes' arithmetic may overflow (a ``ValueError``). The
