@@ -124,7 +124,7 @@ def start(
     prior_mean : array_like, shape (3,), (5,), (B, 3) or (B, 5)
         Of ``(x, y, v)``, or of ``(x, y, v, h, w)`` for a point in 3-D: then each
         update takes a pair ``(x / y, h / y)`` (:class:`depthcore.kalman.online.Spatial`
-        for the EKF and the UKF; the exact filter's pairs have no gate). With a
+        for the EKF and the UKF). With a
         leading ``B``: ``B`` features at once (module docstring), without a gate.
     prior_cov : array_like, shape (3, 3), (5, 5), (B, 3, 3) or (B, 5, 5)
         Symmetric positive definite.
