@@ -56,9 +56,11 @@ steps receding, the paper's; every output names the direction it used.
 
 Pairs (a nu or v column, or --nu): the point (x, y, v) and its height h and
 vertical velocity w (h measured as the rows grow), the noise rho on each
-bearing. The filters that take them are {", ".join(track_runs.spatial_names())}, on a prior of five
-coordinates (below); --per-frame streams them through the online filters; no
-smoother, nor --learn-noise, takes them yet.
+bearing. The filters that take them are
+{", ".join(track_runs.spatial_names())},
+on a prior of five coordinates (below); --per-frame streams them through the
+online filters; --smooth gives the exact filter's smoother of them; --learn-noise
+does not take them yet.
 
 Up to {checks.MAX_FRAMES} frames are held whole, as the summary, --smooth and --learn-noise
 need; --per-frame streams a longer file through the online filters ({", ".join(online.NAMES)}):
