@@ -251,7 +251,7 @@ def approach(
 
 
 #: The filters with a door for a point in 3-D that the chapter runs.
-SPACE_FILTERS = ("optimal", "ekf", "ukf")
+SPACE_FILTERS = ("optimal", "ekf", "ukf", "iterated", "inverse_depth")
 
 
 def space_tracks(seed: int, draws: int, frames: int, step: float, pixel_sd, focal, prior):
@@ -295,7 +295,7 @@ def space_study(seed: int, draws: int, frames: int, step: float, pixel_sd, focal
     """Each 3-D filter's depth error at the last frame, in its own SDs, over the tracks of
     :func:`space_tracks`.
 
-    The exact filter runs on the batch; the EKF and the UKF track by track, ``NaN``
+    The exact filter runs on the batch; the Gaussian filters track by track, ``NaN``
     where one refuses a track (its prediction lost the point). Returns ``{name: ndarray
     (draws,)}`` and the tracks' last depths (draws,).
     """
