@@ -233,3 +233,43 @@ def test_a_step_is_checked_after_the_first_frame(cls):
     for bad in (0.0, [1.0, 0.0, 1.0, 1.0], [1.0, 1.0]):
         with pytest.raises(ValueError, match="^step"):
             f.update(np.full((4, 2), 0.1), step=bad)
+
+
+def test_one_recursion_serves_both_blocks_where_the_prior_makes_them_one():
+    """Given the depth the lateral and vertical blocks see the same geometry: where the
+    prior conditions them to one covariance with none between (as the benchmark's prior
+    does, to 1e-11), the shared recursion gives the full 4 x 4 recursion's answers to 1e-9
+    of an SD; a prior whose blocks differ keeps the full recursion."""
+    rng = np.random.default_rng(8)
+    B, N = 6, 30
+    m_y = rng.uniform(8.0, 30.0, B)
+    mu, nu = rng.uniform(-0.3, 0.3, B), rng.uniform(-0.3, 0.3, B)
+    mean = np.stack([mu * m_y, m_y, np.zeros(B), nu * m_y, np.zeros(B)], 1)
+    cov = np.zeros((B, 5, 5))
+    s2 = (0.3 * m_y) ** 2
+    cov[:, 1, 1] = s2
+    cov[:, 0, 1] = cov[:, 1, 0] = mu * s2
+    cov[:, 3, 1] = cov[:, 1, 3] = nu * s2
+    cov[:, 0, 3] = cov[:, 3, 0] = mu * nu * s2
+    cov[:, 0, 0], cov[:, 3, 3] = mu**2 * s2 + 0.01, nu**2 * s2 + 0.01
+    cov[:, 2, 2] = cov[:, 4, 4] = 0.01
+    y = m_y[:, None] - 0.1 * np.arange(N)
+    pairs = np.stack([mu[:, None] * m_y[:, None] / y, nu[:, None] * m_y[:, None] / y], -1)
+    pairs += 0.003 * rng.standard_normal(pairs.shape)
+    steps = np.full(B, -0.1)
+    shared = exact_features.Features(mean, cov, 0.003, 1e-3)
+    full = exact_features.Features(mean, cov, 0.003, 1e-3)
+    for k in range(N):
+        step = 1.0 if k == 0 else steps
+        a = shared.update(pairs[:, k], step=step)
+        if k == 0:
+            assert shared._shares
+            full._shares = False  # the 4 x 4 recursion from here on
+        b = full.update(pairs[:, k], step=step)
+        assert np.all(np.abs(a.depth_mean - b.depth_mean) <= 1e-9 * b.depth_sd)
+        assert np.all(np.abs(a.depth_sd - b.depth_sd) <= 1e-9 * b.depth_sd)
+        assert np.allclose(a.cov, b.cov, rtol=1e-8, atol=1e-12)
+    cov[:, 4, 4] = 0.02  # the vertical velocity less certain: two covariances
+    other = exact_features.Features(mean, cov, 0.003, 1e-3)
+    other.update(pairs[:, 0])
+    assert not other._shares
