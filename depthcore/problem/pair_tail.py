@@ -28,9 +28,9 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import erfcx, logsumexp, ndtr, roots_legendre
 
-#: The tolerance: absolute and relative to the tail, whichever is larger.
+#: The tolerance absolute and relative to the tail, whichever is larger.
 ATOL, RTOL = 1e-9, 1e-6
-#: The most angles of one order, over all segments: the doubling stops there.
+#: The doubling of the angles stops at this many, over all segments of one order.
 MAX_ANGLES = 2**13
 _NEGLIGIBLE = 40.0  # a component this far below p(z_obs) on a ray places no grid there
 _SLIVER = 1e-9  # kinks nearer than this are rounding's (a sector's error: its width**1.5)
