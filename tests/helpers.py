@@ -85,3 +85,17 @@ OLDER_KERNELS = {
     "OPENBLAS_CORETYPE": "Nehalem",
     "NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR",
 }
+
+
+def answer_or_one_line(run, **args):
+    """``run(**args)`` with warnings as errors: its answer, or ``None`` where it refused in
+    one line (a ``ValueError`` whose message has no line break)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            return run(**args)
+        except ValueError as exc:
+            assert "\n" not in str(exc)
+            return None

@@ -9,6 +9,8 @@ from numpy.testing import assert_allclose
 from depthcore.exact import spatial as exact_spatial
 from depthcore.kalman import ekf, spatial
 
+from helpers import answer_or_one_line
+
 MU = np.array([0.06, 0.055, np.nan, 0.048, 0.047, 0.04])
 NU = np.array([0.02, 0.025, np.nan, 0.03, 0.031, 0.034])
 PAIRS = np.stack([MU, NU], axis=-1)
@@ -185,8 +187,6 @@ def test_track_filters_and_smooths_pairs_and_its_gate_skips_an_outlying_pair():
 )
 @pytest.mark.parametrize("door", ["exact", "ekf", "ukf"])
 def test_extreme_values_get_an_answer_or_one_line_and_no_warning(kwargs, door):
-    import warnings
-
     args = {"mu": PAIRS, "rho": 0.01, "prior_mean": PRIOR_MEAN, "prior_cov": PRIOR_COV}
     args.update(kwargs)
     run = {
@@ -194,11 +194,5 @@ def test_extreme_values_get_an_answer_or_one_line_and_no_warning(kwargs, door):
         "ekf": spatial.run,
         "ukf": lambda **a: spatial.run(**a, filter="ukf"),
     }[door]
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        try:
-            out = run(**args)
-        except ValueError as exc:
-            assert "\n" not in str(exc)
-            return
-    assert np.all(np.isfinite(out.mean))
+    out = answer_or_one_line(run, **args)
+    assert out is None or np.all(np.isfinite(out.mean))
