@@ -279,13 +279,7 @@ def track(
             mu = np.where(report.gated, np.nan, mu)  # a skipped bearing is a missing one
         filtered, smoothed, detail = entry.smoother(mu, rho, prior.mean, prior.cov, q, **more)
     except (ValueError, np.linalg.LinAlgError) as exc:
-        message = str(exc)
-        if isinstance(exc, ValueError) and message.startswith(_TRACK_ARGUMENTS):
-            raise
-        raise ValueError(
-            f"mu, rho and prior have no answer from the {filter} filter ({message}); "
-            "try another filter, a larger rho or a broader prior"
-        ) from None
+        raise _no_answer(exc, f"the {filter} filter") from None
     for series in (filtered, smoothed):
         variances = np.diagonal(series.cov, axis1=-2, axis2=-1)
         if not (np.all(np.isfinite(series.mean)) and np.all(variances >= 0)):
@@ -335,14 +329,20 @@ def _pairs(mu, rho, prior, process_noise, filter: str, steps, gate) -> Track:
             detail, s = spatial.smoother(*args, filter=filter)
             filtered, smoothed = Smoothed(detail.means, detail.covs), Smoothed(s.mean, s.cov)
     except (ValueError, np.linalg.LinAlgError) as exc:
-        message = str(exc)
-        if isinstance(exc, ValueError) and message.startswith(_TRACK_ARGUMENTS):
-            raise
-        raise ValueError(
-            f"mu, rho and prior have no answer from the {filter} filter of pairs ({message}); "
-            "try another filter, a larger rho or a broader prior"
-        ) from None
+        raise _no_answer(exc, f"the {filter} filter of pairs") from None
     return Track(filter, filtered, smoothed, prior, q, detail, report)
+
+
+def _no_answer(exc: Exception, who: str) -> Exception:
+    """A filter's failure as :func:`track`'s refusal: a refusal of track()'s own arguments
+    as it is, anything else as no answer from ``who``."""
+    message = str(exc)
+    if isinstance(exc, ValueError) and message.startswith(_TRACK_ARGUMENTS):
+        return exc
+    return ValueError(
+        f"mu, rho and prior have no answer from {who} ({message}); "
+        "try another filter, a larger rho or a broader prior"
+    )
 
 
 def _gated_pairs(checked, prior, q: float, filter: str, gate: float) -> predictive.Updates:
