@@ -264,14 +264,7 @@ def _run(mu, rho, prior_mean, prior_cov, q, sigma_points, allow_behind_camera, s
         means.append(z)
         covs.append(S)
         reports.append(out[2:])
-    log_p, tail, gated, behind = (np.stack(r, axis=-1) for r in zip(*reports, strict=True))
-    history = ukf.UKFHistory(
-        np.stack(means, axis=-2),
-        np.stack(covs, axis=-3),
-        predictive.Updates(log_p, tail, gated),
-        behind,
-    )
-    return history, f
+    return ukf.history(means, covs, reports), f
 
 
 def estimate(

@@ -603,11 +603,15 @@ def run(
         means.append(n)
         covs.append(C)
         reports.append(out[2:])
-    updates, behind = _stack(reports)
-    return UKFHistory(np.stack(means, axis=-2), np.stack(covs, axis=-3), updates, behind)
+    return history(means, covs, reports)
 
 
-def _stack(reports) -> tuple[predictive.Updates, np.ndarray]:
-    """Per-frame reports ``(log_p, tail, gated, behind)`` as ``Updates`` and ``behind`` (..., N)."""
+def history(means, covs, reports) -> UKFHistory:
+    """Per-frame means (..., 3), covariances (..., 3, 3) and :class:`Step` reports as a history.
+
+    ``reports`` holds each frame's ``(log_p, tail, gated, behind)``; returns the
+    :class:`UKFHistory` of ``N`` frames, (..., N, 3), (..., N, 3, 3) and (..., N).
+    """
     log_p, tail, gated, behind = (np.stack(r, axis=-1) for r in zip(*reports, strict=True))
-    return predictive.Updates(log_p, tail, gated), behind
+    updates = predictive.Updates(log_p, tail, gated)
+    return UKFHistory(np.stack(means, axis=-2), np.stack(covs, axis=-3), updates, behind)
