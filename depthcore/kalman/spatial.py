@@ -77,12 +77,22 @@ def predict(m, P, process_noise, step):
     ``m`` (..., 5), ``P`` (..., 5, 5), ``step`` (...); returns the mean and covariance.
     """
     s = np.asarray(step, dtype=float)
-    F = np.broadcast_to(np.eye(DIM), s.shape + (DIM, DIM)).copy()
-    F[..., 0, 2] = F[..., 3, 4] = s
-    mean = np.einsum("...ij,...j->...i", F, m)
+    mean, cov = transition(m, P, s, np.square(np.float64(process_noise)) * np.abs(s))
     mean[..., 1] += s
+    return mean, cov
+
+
+def transition(m, P, step, noise):
+    """``F m`` and ``F P F^T``, ``noise`` added to both velocities' variances (textbook 19.2.1).
+
+    ``F`` is the identity with ``step`` (an ndarray, (...)) at (0, 2) and (3, 4): the lateral
+    coordinates move by ``step`` times their velocities. ``m`` (..., 5), ``P``
+    (..., 5, 5), ``noise`` (...); returns the mean and covariance.
+    """
+    F = np.broadcast_to(np.eye(DIM), step.shape + (DIM, DIM)).copy()
+    F[..., 0, 2] = F[..., 3, 4] = step
+    mean = np.einsum("...ij,...j->...i", F, m)
     cov = F @ P @ np.swapaxes(F, -1, -2)
-    noise = np.square(np.float64(process_noise)) * np.abs(s)
     cov[..., 2, 2] += noise
     cov[..., 4, 4] += noise
     return mean, cov

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthcore.kalman.spatial import DIM, SpatialHistory, checked, gain_update, history
+from depthcore.kalman.spatial import DIM, SpatialHistory, checked, gain_update, history, transition
 
 
 def map_jacobian(z) -> np.ndarray:
@@ -84,14 +84,7 @@ def predict(z, S, process_noise, step):
     ``z`` (..., 5), ``S`` (..., 5, 5), ``step`` (...); returns the mean and covariance.
     """
     h = np.asarray(step, dtype=float)
-    F = np.broadcast_to(np.eye(DIM), h.shape + (DIM, DIM)).copy()
-    F[..., 0, 2] = F[..., 3, 4] = h
-    mean = np.einsum("...ij,...j->...i", F, z)
-    cov = F @ S @ np.swapaxes(F, -1, -2)
-    noise = (z[..., 1] * process_noise) ** 2 * np.abs(h)
-    cov[..., 2, 2] += noise
-    cov[..., 4, 4] += noise
-    return mean, cov
+    return transition(z, S, h, (z[..., 1] * process_noise) ** 2 * np.abs(h))
 
 
 def update(z, S, pair, rho, elapsed):
