@@ -138,6 +138,69 @@ def test_a_study_scores_it():
     assert np.isfinite(scores["nees"])
 
 
+def _profile_minimum_at_an_end(mu, rho):
+    """Per track: whether the least misfit over a dense grid of depths lies at an end of it.
+
+    An independent check of the flag: the misfit minimised over ``(x_N, v)`` at each depth
+    (by numpy's least squares), over 501 depths spanning the limits, log-spaced.
+    """
+    n = mu.shape[-1]
+    t = np.arange(n - 1, -1, -1.0)  # the depth travelled from each frame to frame N
+    span = t[0]
+    z = np.linspace(np.log(batch_ml.DEPTH_LIMITS[0]), np.log(batch_ml.DEPTH_LIMITS[1]), 501)
+    out = []
+    for m in mu:
+        misfit = []
+        for y1 in span * np.exp(z):
+            y = y1 + span - t  # the depth at each frame, receding
+            A = np.stack([1.0 / y, -t / y], axis=1) / rho
+            _, res, *_ = np.linalg.lstsq(A, m / rho, rcond=None)
+            misfit.append(res[0] if len(res) else 0.0)
+        misfit = np.asarray(misfit)
+        best = np.min(misfit)
+        # interior: some inner depth beats both ends by more than rounding
+        out.append(not best < min(misfit[0], misfit[-1]) - 1e-9 * max(1.0, best))
+    return np.asarray(out)
+
+
+def test_a_track_without_parallax_is_flagged_and_one_with_a_clear_maximum_is_not():
+    rng = np.random.default_rng(7)
+    rho = 0.002
+    # zero parallax: the point moves along the optical axis, the bearings are noise alone
+    flat = model.simulate(np.array([0.0, 6.0, 0.0]), 10, rho, 0.0, rng, size=40).mu
+    clear = model.simulate(np.array([3.0, 6.0, 3.0]), 10, rho, 0.0, rng, size=40).mu
+    flat_est, clear_est = batch_ml.estimate(flat, rho), batch_ml.estimate(clear, rho)
+    assert not np.any(clear_est.at_limit)
+    # about half the tracks without parallax have no interior maximum, and the flag is
+    # exactly where a dense search over the depth finds its least misfit at an end
+    assert 0.25 < np.mean(flat_est.at_limit) < 0.9
+    np.testing.assert_array_equal(flat_est.at_limit, _profile_minimum_at_an_end(flat, rho))
+    assert not np.any(_profile_minimum_at_an_end(clear, rho))
+
+
+def test_a_study_scores_it_only_where_it_has_a_maximum_and_counts_the_others_apart():
+    run = monte_carlo.Study(
+        np.array([0.0, 6.0, 0.0]),
+        rho=0.002,
+        trials=300,
+        seed=2,
+        names=("batch_ml", "ekf"),
+        chunk=100,
+        frames=10,
+    )
+    flagged = 0
+    for k, item in enumerate(run.items()):
+        part = item[0]
+        flagged += int(np.sum(batch_ml.estimate(part.mu, part.rho).at_limit))
+        run.fold(k, (part, monte_carlo.filter_chunk(item)[1]))
+    out = run.result()
+    ml, ekf = out["filters"]["batch_ml"], out["filters"]["ekf"]
+    assert flagged > 0 and ml["no_maximum"]["count"] == flagged
+    assert run.tallies["batch_ml"].n == out["valid_trials"] - flagged and "no_maximum" not in ekf
+    assert run.tallies["ekf"].n + ekf["refused"]["count"] == out["valid_trials"]
+    assert ml["no_maximum"]["fraction"] == flagged / out["valid_trials"]
+
+
 @pytest.mark.parametrize(
     ("call", "name"),
     [

@@ -29,11 +29,17 @@ range of depths the track spans (``t_1`` while it recedes); from the best,
 Levenberg-Marquardt iterations (Gauss-Newton steps damped by Marquardt's
 diagonal, [nocedal2006]_ ch. 10) run on ``(x_N, log y_1, v)``, so the depth
 stays positive at every frame, every track of a batch at once, until a step
-moves the estimate by less than :data:`STEP_TOLERANCE` of its SD. Where the
-likelihood rises all the way to a limit (no finite maximum: the bearings
-bend the way no point in front of the camera explains, which noise does to
-many tracks of little parallax), the estimate is the best state at that
-depth and ``at_limit`` says so.
+moves the estimate by less than :data:`STEP_TOLERANCE` of its SD.
+
+**No interior maximum.** Where the likelihood rises all the way to a limit,
+or is flat up to it, it has no maximum within the depths searched: the
+bearings bend the way no point in front of the camera explains, or not at
+all. Noise does that to many tracks of little parallax; at zero parallax,
+where the bearings say nothing of the depth, to more than half the tracks
+of ten frames. The estimate is then the best state at the limiting depth,
+a limit of the search and no estimate of the depth, and ``at_limit`` says
+so: a study scores the estimate only where it is false, and counts the
+others apart (:func:`depthcore.studies.trials.interior`).
 
 **The covariance** is the inverse of the Fisher information at the estimate,
 
@@ -91,7 +97,9 @@ class BatchML(NamedTuple):
     misfit : ndarray, shape (...)
         ``f`` at ``mean``: the sum of squared standardised residuals.
     at_limit : ndarray of bool, shape (...)
-        Whether the depth lies at one of :data:`DEPTH_LIMITS` (no finite maximum within).
+        Whether the likelihood has no interior maximum: the depth lies at one
+        of :data:`DEPTH_LIMITS`, and ``mean`` is the search's limit, not an
+        estimate (the module docstring).
     iterations : int
         The Levenberg-Marquardt iterations run.
     """

@@ -87,6 +87,11 @@ class Tally:
         "squared_error" (2,), "spread" (2,)}``.
     nees_outside : int
         Trials outside the one-trial :func:`anees_region`.
+    refused : int
+        Trials the filter refused, counted apart.
+    no_maximum : int or None
+        Trials where its estimate had no interior maximum, counted apart;
+        ``None`` for a filter whose estimates carry no such flag.
     """
 
     def __init__(self, truth):
@@ -113,13 +118,17 @@ class Tally:
         }
         self.nees_outside = 0
         self.refused = 0
+        self.no_maximum: int | None = None
 
     def add(self, est: Estimates) -> None:
         """Add the scores of one chunk of trials (an empty chunk adds nothing).
 
-        The trials the filter refused (``est.refused``) are counted apart.
+        The trials the filter refused (``est.refused``), and those where its
+        estimate has no interior maximum (``est.no_maximum``), are counted apart.
         """
         self.refused += int(est.refused)
+        if est.no_maximum is not None:
+            self.no_maximum = (self.no_maximum or 0) + int(est.no_maximum)
         n = len(est.mean)
         if n == 0:
             return
@@ -286,6 +295,8 @@ class Tally:
         )
         out["track_loss"] = track_loss(self.lost, n)
         out["refused"] = refused_scores(self.refused, n)
+        if self.no_maximum is not None:  # a filter that can have no maximum (batch ML)
+            out["no_maximum"] = refused_scores(self.no_maximum, n)
         robust = self.robust_scores()
         for q in ("depth", "velocity"):
             out[q].update(robust.pop(q))

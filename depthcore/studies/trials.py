@@ -103,6 +103,12 @@ class Estimates:
     answered : ndarray of bool, or None
         Which trials of the batch (one entry each, answered or refused) the
         rows above are; ``None``: all of them.
+    no_maximum : int or None
+        Trials of the batch answered where the filter's estimate has no
+        interior maximum (``extras["at_limit"]``: the batch maximum-likelihood
+        estimate at its search limit, :mod:`depthcore.analysis.batch_ml`),
+        left out of the arrays above and of ``answered``; ``None`` for a
+        filter whose estimates carry no such flag.
     """
 
     mean: np.ndarray
@@ -113,6 +119,7 @@ class Estimates:
     truth: np.ndarray | None = None
     refused: int = 0
     answered: np.ndarray | None = None
+    no_maximum: int | None = None
 
 
 def valid_triples(mu) -> np.ndarray:
@@ -411,7 +418,8 @@ def _run_one(trials: Trials, name: str, rng, n_particles: int, noise: dict, ref)
         return est
 
     try:
-        return _estimates(trials, run(trials), f.scoring, ref)
+        est = run(trials)
+        return interior(_estimates(trials, est, f.scoring, ref), est)
     except FAILURES as exc:
         if str(exc).startswith("n_particles"):
             raise ValueError(
@@ -443,10 +451,55 @@ def _run_one(trials: Trials, name: str, rng, n_particles: int, noise: dict, ref)
     if ref is not None:  # the reference over the trials answered, run again on them alone
         ref = FILTERS["optimal"](part.mu, part.rho, part.prior_mean, part.prior_cov, **noise)
         ref = ref.detail
-    est = _estimates(part, est, f.scoring, ref)
+    scored = _estimates(part, est, f.scoring, ref)
     answered = np.zeros(len(trials.mu), dtype=bool)
     answered[rows] = True
-    return dataclasses.replace(est, refused=len(trials.mu) - len(rows), answered=answered)
+    scored = dataclasses.replace(scored, refused=len(trials.mu) - len(rows), answered=answered)
+    return interior(scored, est)
+
+
+def interior(scored: Estimates, estimate) -> Estimates:
+    """``scored`` without the trials where ``estimate`` has no interior maximum, counted apart.
+
+    Parameters
+    ----------
+    scored : Estimates
+        A filter's scores' inputs over the trials it answered.
+    estimate : depthcore.registry.estimates.Estimate
+        The filter's estimate over the same trials; where its
+        ``extras["at_limit"]`` (bool, shape (n,)) is true the estimate is a
+        limit of the search, not a maximum of the likelihood.
+
+    Returns
+    -------
+    Estimates
+        ``scored`` itself where the estimate carries no such flag; otherwise
+        its rows with an interior maximum, ``answered`` marking them and
+        ``no_maximum`` counting the others.
+    """
+    flags = getattr(estimate, "extras", {}).get("at_limit")
+    if flags is None:
+        return scored
+    keep = ~np.asarray(flags, dtype=bool).reshape(-1)
+    n_all = scored.refused + len(keep)
+    rows = np.arange(n_all) if scored.answered is None else np.flatnonzero(scored.answered)
+    answered = np.zeros(n_all, dtype=bool)
+    answered[rows[keep]] = True
+
+    def part(a):
+        return None if a is None else a[keep]
+
+    return dataclasses.replace(
+        scored,
+        mean=scored.mean[keep],
+        cov=scored.cov[keep],
+        depth_cdf=scored.depth_cdf[keep],
+        velocity_cdf=scored.velocity_cdf[keep],
+        hellinger=part(scored.hellinger),
+        truth=part(scored.truth),
+        answered=answered,
+        no_maximum=int(np.count_nonzero(~keep)),
+    )
 
 
 def answered_rows(run: Callable, n: int) -> np.ndarray:
