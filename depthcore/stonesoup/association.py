@@ -63,10 +63,9 @@ from stonesoup.types.multihypothesis import MultipleHypothesis
 from stonesoup.types.numeric import Probability
 from stonesoup.types.prediction import MeasurementPrediction
 from stonesoup.types.state import GaussianState
-from stonesoup.types.update import Update
 
 from depthcore.problem import model
-from depthcore.stonesoup.exact import ExactUpdate, ExactUpdater, last_state
+from depthcore.stonesoup.exact import ExactUpdater, exact_update, last_state
 
 
 class ExactBearing(GaussianState):
@@ -270,14 +269,4 @@ class ExactPDAUpdater(ExactUpdater):
         covars = np.stack([np.asarray(s.covar, dtype=float) for s in states], axis=2)
         mean, covar = gm_reduce_single(means, covars, weights / weights.sum())
         present = next((h.measurement for h in hypotheses if h), hypotheses[0].measurement)
-        return Update.from_state(
-            hypotheses[0].prediction,
-            mean,
-            covar,
-            timestamp=present.timestamp,
-            filter=None,
-            step=0.0,
-            estimate=None,
-            hypothesis=hypothesis,
-            target_type=ExactUpdate,
-        )
+        return exact_update(hypothesis, hypotheses[0].prediction, mean, covar, present.timestamp)

@@ -499,17 +499,28 @@ class ExactUpdater(Updater):
         """
         prediction, detection = hypothesis.prediction, hypothesis.measurement
         filter_, estimate = self.filter_through(prediction, detection)
-        return Update.from_state(
-            prediction,
-            estimate.mean.reshape(3, 1),
-            estimate.cov,
-            timestamp=detection.timestamp,
-            filter=filter_,
-            step=0.0,
-            estimate=estimate,
-            hypothesis=hypothesis,
-            target_type=ExactUpdate,
-        )
+        mean, t = estimate.mean.reshape(3, 1), detection.timestamp
+        return exact_update(hypothesis, prediction, mean, estimate.cov, t, filter_, estimate)
+
+
+def exact_update(hypothesis, prediction, mean, covar, timestamp, filter_=None, estimate=None):
+    """``prediction`` updated by ``hypothesis`` to ``N(mean, covar)`` at ``timestamp``.
+
+    ``mean`` (3, 1), ``covar`` (3, 3); the :class:`ExactUpdate` stands at the
+    filter's last frame (``step`` 0), ``filter_`` and ``estimate`` as
+    :class:`ExactState` holds them (``None``: a Gaussian without a filter).
+    """
+    return Update.from_state(
+        prediction,
+        mean,
+        covar,
+        timestamp=timestamp,
+        filter=filter_,
+        step=0.0,
+        estimate=estimate,
+        hypothesis=hypothesis,
+        target_type=ExactUpdate,
+    )
 
 
 def bearing_of(detection) -> float:
