@@ -609,8 +609,7 @@ def run(
 def history(means, covs, reports) -> UKFHistory:
     """Per-frame means (..., 3), covariances (..., 3, 3) and :class:`Step` reports as a history.
 
-    ``reports`` holds each frame's ``(log_p, tail, gated, behind)``; returns the
-    :class:`UKFHistory` of ``N`` frames, (..., N, 3), (..., N, 3, 3) and (..., N).
+    ``reports``: each frame's ``(log_p, tail, gated, behind)``; a :class:`UKFHistory` of N frames.
     """
     log_p, tail, gated, behind = (np.stack(r, axis=-1) for r in zip(*reports, strict=True))
     updates = predictive.Updates(log_p, tail, gated)
