@@ -15,6 +15,8 @@
   noise per frame, gaps);
 * :mod:`~depthcore.exact.mixture`: the bank's Gaussians mixed over the depth
   nodes, the exact posterior at frame ``N``;
+* :mod:`~depthcore.exact.panels`: the depth quadrature under any prior on the
+  depth, Gauss-Legendre panels that end at the prior's edges and kinks;
 * :mod:`~depthcore.exact.posterior`: the bank with its depth nodes placed by
   the quadrature, the exact N-frame filter;
 * :mod:`~depthcore.exact.spatial`: a point in 3-D, ``(x, y, v, h, w)`` seen as

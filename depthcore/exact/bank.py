@@ -53,6 +53,7 @@ import numpy as np
 from depthcore.exact import lateral, tracks
 from depthcore.kalman import linear
 from depthcore.problem import checks
+from depthcore.problem.depth_prior import DepthPrior
 from depthcore.problem.frames import depth_floor
 from depthcore.problem.gaussian import MeanAndCov
 
@@ -74,7 +75,8 @@ class Bank(NamedTuple):
     cov : ndarray, shape (..., J, 2, 2)
         ``E`` and ``Cov[(x_N, v_N) | y_1, mu_1 .. mu_N]``.
     log_weight : ndarray, shape (..., J)
-        ``log N(y_1; m_y, P_yy) + log p(mu_1 .. mu_N | y_1)``.
+        ``log p(y_1) + log p(mu_1 .. mu_N | y_1)``, the prior's depth density
+        ``N(y_1; m_y, P_yy)`` or :attr:`law`'s.
     mu : ndarray, shape (..., N)
         ``NaN`` at a missing frame.
     rho : ndarray, shape (...) or ()
@@ -87,6 +89,9 @@ class Bank(NamedTuple):
         The bearing noise SD at each frame.
     history : depthcore.kalman.linear.FilterResult or None
         Each node's filter at every frame, ``(..., J, N, ...)``.
+    law : depthcore.problem.depth_prior.DepthPrior or None
+        A prior whose depth law is not Gaussian, in place of ``prior_mean`` and
+        ``prior_cov`` (:func:`conditional_prior`); ``None``: the Gaussian.
     """
 
     nodes: np.ndarray
@@ -101,6 +106,7 @@ class Bank(NamedTuple):
     frame_steps: np.ndarray
     frame_noise: np.ndarray
     history: linear.FilterResult | None
+    law: DepthPrior | None = None
 
     @property
     def steps(self) -> np.ndarray | None:
@@ -152,6 +158,7 @@ class Bank(NamedTuple):
             history,
             self.steps,
             self.frame_rho,
+            self.law,
         )
 
 
@@ -203,12 +210,16 @@ def _bearings(mu) -> np.ndarray:
 # --- the model given the depth ---------------------------------------------------------
 
 
-def conditional_prior(nodes, prior_mean, prior_cov):
+def conditional_prior(nodes, prior_mean, prior_cov, law=None):
     """The prior of ``(x_1, v_1)`` given ``y_1`` (module docstring), and ``log N(y_1; m_y, P_yy)``.
 
     ``nodes`` (..., J), ``prior_mean`` (..., 3), ``prior_cov`` (..., 3, 3); returns a
     :class:`~depthcore.problem.gaussian.MeanAndCov` (..., J, 2) and (..., 1, 2, 2), and (..., J).
+    With ``law`` (:class:`~depthcore.problem.depth_prior.DepthPrior`) its Gaussian given
+    the depth, covariance (..., J, 2, 2), and its log density of the depth, in their place.
     """
+    if law is not None:
+        return law.lateral.at(nodes), law.log_pdf(nodes)
     u = slice(0, 3, 2)  # x and v
     m_u, m_y = prior_mean[..., u], prior_mean[..., 1]
     P_yy = prior_cov[..., 1, 1]
@@ -238,7 +249,7 @@ def measurement_matrices(nodes, frames) -> np.ndarray:
 
 
 def lateral_filter(
-    nodes, mu, rho, process_noise, prior_mean, prior_cov, steps=None, frame_rho=None
+    nodes, mu, rho, process_noise, prior_mean, prior_cov, steps=None, frame_rho=None, law=None
 ):
     """The Kalman filter of ``(x, v)`` at each depth node in closed form: log weight, frame ``N``.
 
@@ -259,7 +270,7 @@ def lateral_filter(
     :attr:`Bank.log_weight`, ``mean`` (2, ..., J) of ``x_N`` and ``v_N``, and ``cov``,
     three arrays (..., J): ``Var[x_N]``, ``Cov[x_N, v_N]``, ``Var[v_N]``.
     """
-    start, log_weight = conditional_prior(nodes, prior_mean, prior_cov)
+    start, log_weight = conditional_prior(nodes, prior_mean, prior_cov, law)
     # with noise per frame, rho is that array and is read frame by frame below
     rho2 = (np.asarray(rho if frame_rho is None else 1.0, dtype=float) ** 2)[..., None]
     q2 = (np.asarray(process_noise, dtype=float) ** 2)[..., None]
@@ -276,8 +287,8 @@ def lateral_filter(
         np.broadcast_shapes(start.mean.shape[:-1], mu.shape[:-1] + (1,)), cov_shape
     )
     M[lateral.X_ROW], M[lateral.V_ROW] = start.mean[..., 0], start.mean[..., 1]
-    c0 = start.cov[..., 0, :, :]
-    a, b, c = c0[..., 0, 0, None], c0[..., 0, 1, None], c0[..., 1, 1, None]
+    # one covariance for every node (..., 1, 2, 2), or one each (..., J, 2, 2)
+    a, b, c = start.cov[..., 0, 0], start.cov[..., 0, 1], start.cov[..., 1, 1]
     C[lateral.A_ROW], C[lateral.B_ROW], C[lateral.DET_ROW], C[lateral.C_ROW] = (
         a,
         b,
@@ -392,21 +403,32 @@ def _batch(**shapes) -> tuple:
 
 
 def run_bank(
-    nodes, mu, rho, process_noise, prior_mean, prior_cov, history, steps=None, frame_rho=None
+    nodes,
+    mu,
+    rho,
+    process_noise,
+    prior_mean,
+    prior_cov,
+    history,
+    steps=None,
+    frame_rho=None,
+    law=None,
 ) -> Bank:
-    """:func:`filter_bank` on inputs it has checked (``frame_rho`` (..., N) or ``None``)."""
+    """:func:`filter_bank` on inputs it has checked (``frame_rho`` (..., N) or ``None``), with
+    ``law`` (:class:`~depthcore.problem.depth_prior.DepthPrior`) the prior in place of the
+    Gaussian's (:func:`conditional_prior`)."""
     q = process_noise
     frames_ = tracks.frame_fields(mu, rho, steps, frame_rho)
     res = None
     if not history:  # the closed form, as the depth quadrature uses
         log_weight, (x, v), (a, b, c) = lateral_filter(
-            nodes, mu, rho, q, prior_mean, prior_cov, steps, frame_rho
+            nodes, mu, rho, q, prior_mean, prior_cov, steps, frame_rho, law
         )
         mean = np.stack([x, v], -1)
         cov = np.stack([np.stack([a, b], -1), np.stack([b, c], -1)], -2)
     else:
         N = mu.shape[-1]
-        start, log_prior = conditional_prior(nodes, prior_mean, prior_cov)
+        start, log_prior = conditional_prior(nodes, prior_mean, prior_cov, law)
         if steps is None and frame_rho is None and not np.any(np.isnan(mu)):
             # per node (axis -3 of the Kalman arrays): the prior given its depth,
             # Phi_k = (1 / y_k, 0)
@@ -438,6 +460,7 @@ def run_bank(
         prior_mean=prior_mean,
         prior_cov=prior_cov,
         history=res,
+        law=law,
         **frames_,
     )
 

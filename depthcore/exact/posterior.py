@@ -19,11 +19,12 @@ import dataclasses
 
 import numpy as np
 
-from depthcore.exact import quadrature
+from depthcore.exact import panels, quadrature
 from depthcore.exact.bank import Bank, lateral_filter, run_bank, step
 from depthcore.exact.mixture import Mixture, Moments, mixture, mixture_of_log_weights
 from depthcore.kalman import linear
 from depthcore.problem import checks, frames, model, signature
+from depthcore.problem.depth_prior import DepthPrior
 
 # --- nodes placed by the depth quadrature ----------------------------------------------
 
@@ -220,6 +221,7 @@ def posterior(
     rtol: float = 1e-10,
     history: bool = False,
     steps=None,
+    law=None,
 ) -> Mixture:
     """The exact posterior at frame ``N`` as a bank on nodes placed by the depth quadrature.
 
@@ -237,6 +239,11 @@ def posterior(
     steps : array_like, shape (N - 1,) or (B, N - 1), or None
         With steps, ``NaN`` bearings or ``rho`` per frame the track is checked by
         :func:`depthcore.problem.frames.check`.
+    law : depthcore.problem.depth_prior.DepthPrior, optional
+        A prior whose depth law need not be Gaussian, in place of ``prior_mean`` and
+        ``prior_cov`` (``None`` both, or its own :meth:`gaussian
+        <depthcore.problem.depth_prior.DepthPrior.gaussian>`); its nodes are placed by
+        :func:`depthcore.exact.panels.place`.
 
     Returns
     -------
@@ -246,22 +253,41 @@ def posterior(
     single = np.ndim(mu) == 1
     mu2 = np.atleast_2d(mu) if single else mu
     rho2 = np.atleast_2d(rho) if single and np.shape(rho) == np.shape(mu) else rho
+    if law is not None:
+        prior_mean, prior_cov = law_prior(law, prior_mean, prior_cov)
     pb, _ = _problem_of(mu2, rho2, prior_mean, prior_cov, process_noise, steps)
     rtol = checks.positive_scalar(rtol, "rtol")
-    return _place(pb, rtol, history, single)
+    return _place(pb, rtol, history, single, law)
+
+
+def law_prior(law, prior_mean, prior_cov):
+    """The Gaussian that stands beside ``law``: its own moments; ``prior_mean`` and
+    ``prior_cov`` must be ``None`` or those, else a one-line refusal."""
+    if not isinstance(law, DepthPrior):
+        raise ValueError(f"law must be a DepthPrior, got {type(law).__name__}")
+    mean, cov = law.gaussian()
+    for value, own, name in ((prior_mean, mean, "prior_mean"), (prior_cov, cov, "prior_cov")):
+        if value is not None and not np.allclose(value, own, rtol=1e-9, atol=0.0):
+            raise ValueError(
+                f"{name} must be None with a law, or the law's own moments (law.gaussian())"
+            )
+    return mean, cov
 
 
 #: Problems placed together by the quadrature (its memory grows with this times its nodes).
 _CHUNK = 64
 
 
-def _place(pb, rtol, history, single):
+def _place(pb, rtol, history, single, law=None):
     B = pb.mu.shape[0]
     if B > _CHUNK:
         parts = [
-            _place(pb.take(slice(i, i + _CHUNK)), rtol, history, False) for i in range(0, B, _CHUNK)
+            _place(pb.take(slice(i, i + _CHUNK)), rtol, history, False, law)
+            for i in range(0, B, _CHUNK)
         ]
         return _concatenate(parts)
+    if law is not None:
+        return _place_law(pb, rtol, history, single, law)
     _, err_y, err_v, _, grids = _integrate(pb, rtol)
     nodes, log_w = grid_nodes(grids[3])
     nodes = nodes + pb.floor[:, None]
@@ -277,6 +303,35 @@ def _place(pb, rtol, history, single):
         log_normaliser=post.log_normaliser + shift[:, 0],
         depth_error=err_y,
         velocity_error=err_v,
+        rtol=rtol,
+    )
+    return _squeeze(post) if single else post
+
+
+def _place_law(pb, rtol, history, single, law):
+    """:func:`_place` under a prior ``law``, its nodes from :func:`panels.place`."""
+    placed = panels.place(pb, law, rtol)
+    shift = np.max(placed.log_weights, axis=1, keepdims=True)
+    rho = pb.rho if pb.frame_rho is None else pb.frame_rho
+    bank = run_bank(
+        placed.nodes,
+        pb.mu,
+        rho,
+        pb.process_noise,
+        pb.mean,
+        pb.cov,
+        history,
+        pb.steps,
+        pb.frame_rho,
+        law,
+    )
+    post = mixture(bank, np.exp(placed.log_weights - shift))
+    post = dataclasses.replace(
+        post,
+        log_weights=post.log_weights + shift,
+        log_normaliser=post.log_normaliser + shift[:, 0],
+        depth_error=placed.depth_error,
+        velocity_error=placed.velocity_error,
         rtol=rtol,
     )
     return _squeeze(post) if single else post
@@ -338,7 +393,7 @@ def _each_array(post: Mixture, take) -> Mixture:
     b = post.bank
     history = None if b.history is None else linear.FilterResult(*(take(a) for a in b.history))
     return Mixture(
-        Bank(*(take(a) for a in b[:-1]), history),
+        Bank(*(take(a) for a in b[:-2]), history, b.law),
         *(
             take(getattr(post, name))
             for name in (

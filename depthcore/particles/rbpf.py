@@ -350,7 +350,9 @@ def _settings(moves, ess_threshold, resampler) -> Settings:
 def _rows(bank: bk.Bank, rows) -> bk.Bank:
     """The bank's trials ``rows`` (a boolean mask of its batch shape), history dropped."""
     return bk.Bank(
-        *(getattr(bank, f)[rows] for f in bk.Bank._fields if f != "history"), history=None
+        *(getattr(bank, f)[rows] for f in bk.Bank._fields if f not in ("history", "law")),
+        history=None,
+        law=bank.law,
     )
 
 

@@ -13,6 +13,8 @@ nothing here imports another family.
   its arguments, each refusal one line naming the argument;
 * :mod:`~depthcore.problem.weights`: log weights normalised in log space, for
   the particle filters' samples and the exact filter's mixture alike;
+* :mod:`~depthcore.problem.depth_prior`: a prior whose depth law is any proper
+  density (log-uniform, range, inverse-depth, tabulated), Gaussian given the depth;
 * :mod:`~depthcore.problem.frames`: a track's frames as they come (gaps, noise per
   frame, uneven steps), checked once for every filter;
 * :mod:`~depthcore.problem.bearing_pairs`: the same for a point in 3-D, seen as
