@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
-from depthcore.exact import posterior
+import depthcore
+from depthcore.exact import optimal, posterior
 from depthcore.problem import depth_prior as dp
+from depthcore.problem.gaussian import Gaussian
 
 LATERAL = dp.Lateral.on_ray(0.2, 0.01, 0.3, 1.0)
 
@@ -26,7 +28,7 @@ LAWS = {
 
 
 def grid_moments(law, mu, rho, steps, q, panels=2000, order=10):
-    """Posterior mean and SD of ``(y_N, v_N)`` and ``E[x_1]`` by a dense grid, (5,)."""
+    """Posterior mean and SD of ``y_N``, ``v_N`` and ``x_1`` (given every bearing), (6,)."""
     N = len(mu)
     steps = np.ones(N - 1) if steps is None else np.asarray(steps, float)
     rho = np.broadcast_to(np.asarray(rho, float), (N,))
@@ -73,7 +75,7 @@ def grid_moments(law, mu, rho, steps, q, panels=2000, order=10):
     K = S @ np.swapaxes(H, 1, 2) @ inv
     mz = m + np.einsum("nkm,nm->nk", K, r)
     Sz = S - K @ H @ S
-    out = np.stack([logl, mz @ V, np.einsum("k,nkl,l->n", V, Sz, V), mz[:, 0]], axis=1)
+    out = np.stack([logl, mz @ V, np.einsum("k,nkl,l->n", V, Sz, V), mz[:, 0], Sz[:, 0, 0]], 1)
     logp = law.log_pdf(y) + out[:, 0] + np.log(wt) + t
     p = np.exp(logp - logp.max())
     p /= p.sum()
@@ -82,7 +84,8 @@ def grid_moments(law, mu, rho, steps, q, panels=2000, order=10):
     sy = math.sqrt(p @ (yN - my) ** 2)
     mv = p @ out[:, 1]
     sv = math.sqrt(p @ (out[:, 2] + (out[:, 1] - mv) ** 2))
-    return np.array([my, sy, mv, sv, p @ out[:, 3]])
+    mx = p @ out[:, 3]
+    return np.array([my, sy, mv, sv, mx, math.sqrt(p @ (out[:, 4] + (out[:, 3] - mx) ** 2))])
 
 
 def _track(law, N, steps, rho, q, seed):
@@ -214,4 +217,36 @@ def test_the_draws_fail_the_test_of_another_law():
 def test_a_meaningless_prior_is_refused_in_one_line(build, message):
     with pytest.raises(ValueError, match=message) as err:
         build()
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("form", ["log_uniform", "table"])
+def test_the_smoother_under_a_law_agrees_with_the_grid_at_frame_1(form):
+    law = LAWS[form]
+    N, steps, rho, q, gaps = CASES["ten frames, a gap, uneven steps, process noise"]
+    mu = _track(law, N, steps, rho, q, seed=11)
+    mu[gaps] = np.nan
+    ref = grid_moments(law, mu, rho, steps, q)
+    s = posterior.posterior(mu, rho, None, None, q, steps=steps, history=True, law=law).smoothed()
+    assert abs(s.mean[0, 0] - ref[4]) <= 1e-8 * ref[5]
+    assert abs(math.sqrt(s.cov[0, 0, 0]) - ref[5]) <= 1e-8 * ref[5]
+
+
+def test_track_gives_the_exact_filter_the_law_and_the_gaussian_filters_its_gaussian():
+    law = LAWS["log_uniform"]
+    mu = _track(law, 8, None, 0.01, 0.0, seed=12)
+    exact = depthcore.track(mu, 0.01, prior=law)
+    post = posterior.posterior(mu, 0.01, None, None, law=law)
+    assert abs(exact.filtered.depth_mean[-1] - post.depth_mean) <= 1e-8 * post.depth_sd
+    stand_in = Gaussian(*law.gaussian())
+    under_gaussian = depthcore.track(mu, 0.01, prior=stand_in)
+    # the law is not its Gaussian: the exact filter's answer moves by many tolerances
+    assert abs(under_gaussian.filtered.depth_mean[-1] - post.depth_mean) > 1e-3 * post.depth_sd
+    ekf = depthcore.track(mu, 0.01, prior=law, filter="ekf")
+    assert np.array_equal(
+        ekf.filtered.depth_mean,
+        depthcore.track(mu, 0.01, prior=stand_in, filter="ekf").filtered.depth_mean,
+    )
+    with pytest.raises(ValueError, match="gate") as err:
+        optimal.run(mu, 0.01, None, None, gate=0.01, law=law)
     assert "\n" not in str(err.value)

@@ -188,3 +188,21 @@ def test_the_command_line_takes_the_forms(capsys):
     assert main(["study", "--truth", "prior", "--prior", "range", "--trials", "5"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--prior" in err, err
+
+
+@pytest.mark.parametrize("form", priors.DRAWN)
+def test_each_drawn_forms_law_has_the_filters_gaussian_and_the_draws_depths(form):
+    centre, rho = np.array([4.0, 20.0, 0.5]), 0.01
+    law = priors.law(form, centre, rho)
+    mean, cov = priors.gaussian(form, centre, rho)
+    own_mean, own_cov = law.gaussian()
+    assert np.allclose(own_mean, mean, rtol=1e-9, atol=1e-12)
+    assert np.allclose(own_cov, cov, rtol=1e-8, atol=1e-12)
+    # the same uniforms give the same depths: the law's quantiles are the study's
+    a = law.draw_depths(1000, np.random.default_rng(4))
+    b = priors.draw_depths(form, centre[1], 1000, np.random.default_rng(4))
+    assert np.allclose(a, b, rtol=1e-12)
+    assert not np.allclose(
+        priors.law("log_uniform" if form != "log_uniform" else "range", centre, rho).gaussian()[1],
+        cov,
+    )

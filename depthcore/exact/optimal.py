@@ -441,38 +441,38 @@ def run(
     rtol=RTOL,
     steps=None,
     gate=None,
+    law=None,
 ):
     """The optimal filter, Eqs. (6), (13)-(16), of one sequence or a batch: the exact filter's door.
 
-    Three frames without process noise: the quadrature of Eqs. (14)-(16); otherwise the
-    bank of :func:`depthcore.exact.posterior.posterior`.
+    Three frames without process noise: the quadrature of Eqs. (14)-(16); otherwise (or
+    with ``law``) the bank of :func:`depthcore.exact.posterior.posterior`.
 
     {parameters}
     reading : {"derived", "printed"}
-        ``"printed"`` drops the y-dependent factor that Eq. (16) calls constant
-        (the paper's three frames only).
+        ``"printed"`` drops the y-dependent factor that Eq. (16) calls constant.
     support : {"front", "all"}
         ``"front"`` (default) conditions on the point being in front of the camera
         at every frame (``y > 2``); ``"all"`` integrates Eq. (6) over every depth,
-        behind the camera too, and reports that mass as ``prob_behind_camera``
-        (the paper's three frames only).
+        behind the camera too, and reports that mass as ``prob_behind_camera``.
+        Both readings and supports: the paper's three frames only.
     rtol : float
         Target accuracy of each mean and SD, relative to the SD.
+    law : depthcore.problem.depth_prior.DepthPrior, optional
+        A prior with any law of the depth in place of the Gaussian (no gate).
 
     Returns
     -------
     OptimalMarginals, BatchMarginals, Moments or Mixture
-        One triple: :class:`OptimalMarginals`; a batch of triples:
-        :class:`BatchMarginals` (derived, front) or
-        :class:`~depthcore.exact.mixture.Moments`; otherwise the
-        :class:`~depthcore.exact.mixture.Mixture`, whose ``updates`` is the gate's
-        report (``None`` without a gate: see its
-        :meth:`~depthcore.exact.mixture.Mixture.report`).
+        One triple: :class:`OptimalMarginals`; a batch of triples: :class:`BatchMarginals`
+        (derived, front) or :class:`~depthcore.exact.mixture.Moments`; otherwise the
+        :class:`~depthcore.exact.mixture.Mixture`, whose ``updates`` is the gate's report
+        (``None`` without a gate: see its :meth:`~depthcore.exact.mixture.Mixture.report`).
     """
     gate = predictive.gate(gate)
-    if gate is not None:
+    if gate is not None or law is not None:
         _paper_only(reading, support)
-        return _gated(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps, gate)
+        return _gated(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps, gate, law)
     if posterior.irregular(mu, rho, steps):
         track = frames.check(mu, rho, steps)
         if not track.regular:
@@ -497,8 +497,15 @@ def run(
     return moments(mu, rho, prior_mean, prior_cov, reading, support, rtol)
 
 
-def _gated(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps, gate):
-    """Bank and report on the bearings :func:`~depthcore.exact.online.track_updates` keeps."""
+def _gated(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps, gate, law=None):
+    """Bank and report on the bearings :func:`~depthcore.exact.online.track_updates` keeps;
+    under a ``law``, the bank alone (the online filter that gates takes a Gaussian prior)."""
+    if law is not None and gate is not None:
+        raise ValueError("gate: the online filter that gates takes a Gaussian prior, no law")
+    if law is not None:
+        return posterior.posterior(
+            mu, rho, prior_mean, prior_cov, process_noise, rtol, steps=steps, law=law
+        )
     post = posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps=steps)
     report = online.track_updates(post.bank, gate, rtol)
     if np.any(report.gated):

@@ -103,7 +103,10 @@ def _mode(pb, law, t_lo, t_hi):
     B = len(t_lo)
     rows = np.arange(B)
     t = t_lo[:, None] + (t_hi - t_lo)[:, None] * np.linspace(0.0, 1.0, SCAN)
-    seeds = [tracks.noise_free_start(pb.mu, pb.steps) - pb.floor]
+    seeds = [np.full(B, np.nan)]
+    if pb.mu.shape[1] >= 3:  # the depth the first three present bearings fit exactly
+        with np.errstate(all="ignore"):
+            seeds[0] = tracks.noise_free_start(pb.mu, pb.steps) - pb.floor
     ey, _ = law.depth_moments()
     seeds.append(np.full(B, ey) - pb.floor)
     extra = [

@@ -452,6 +452,9 @@ def update(post: Mixture, mu_next, rho=None, step=1.0, gaps: bool = False) -> Mi
     Every node's filter and weight is updated (:func:`~depthcore.exact.bank.step`);
     a problem whose nodes no longer resolve the posterior (:func:`_resolution`) has
     them re-placed from all ``N + 1`` bearings, rarely, so the cost per frame stays flat.
+    Under a prior's law (:attr:`Bank.law <depthcore.exact.bank.Bank.law>`), whose panel
+    nodes the halving check does not apply to, every frame re-places them, at a cost
+    that grows with ``N``.
 
     Parameters
     ----------
@@ -496,6 +499,9 @@ def update(post: Mixture, mu_next, rho=None, step=1.0, gaps: bool = False) -> Mi
         & (np.max(new.probabilities, axis=-1) < _ONE_NODE)
     )
     new = dataclasses.replace(new, depth_error=err[0], velocity_error=err[1], rtol=rtol)
+    if post.bank.law is not None:
+        # panel nodes have no every-other-node check: under a law they are placed afresh
+        ok = np.zeros_like(ok)
     if not np.all(ok):
         # step and _mixture made new arrays for the nodes' filters and probabilities
         new = _replace_rows(new, ~ok, own=post.bank.history is None)
@@ -583,7 +589,7 @@ def _replace_rows(post: Mixture, rows, own: bool = False) -> Mixture:
         steps=None if b.steps is None else b.steps[idx],
         frame_rho=None if fr is None else fr[idx],
     )
-    fresh = _place(pb, post.rtol, b.history is not None, False)
+    fresh = _place(pb, post.rtol, b.history is not None, False, b.law)
     J = max(post.log_weights.shape[-1], fresh.log_weights.shape[-1])
     fb = fresh.bank
 

@@ -56,7 +56,15 @@ class Track(NamedTuple):
 
 
 def track(
-    mu, rho, prior_mean, prior_cov, process_noise=0.0, lag: int = 2, rtol: float = 1e-10, steps=None
+    mu,
+    rho,
+    prior_mean,
+    prior_cov,
+    process_noise=0.0,
+    lag: int = 2,
+    rtol: float = 1e-10,
+    steps=None,
+    law=None,
 ):
     """The exact filter and its smoothers (textbook 19.2.6) at every frame of one track.
 
@@ -114,6 +122,9 @@ def track(
     lag : int
         The fixed-lag smoother's delay in frames, >= 0 (0: the filter; from
         ``N - 1`` on, the fixed-interval smoother, which is what it then is).
+    law : depthcore.problem.depth_prior.DepthPrior, optional
+        A prior whose depth law need not be Gaussian, as
+        :func:`~depthcore.exact.posterior.posterior` takes it.
 
     Returns
     -------
@@ -134,7 +145,7 @@ def track(
             f"bearings present; got {present} present and {int(np.sum(np.isinf(mu)))} infinite"
         )
     first_rho = rho if per_frame is None else per_frame[0]
-    posts = [posterior(mu[:1], first_rho, prior_mean, prior_cov, process_noise, rtol)]
+    posts = [posterior(mu[:1], first_rho, prior_mean, prior_cov, process_noise, rtol, law=law)]
     for k in range(1, mu.size):
         if per_frame is None and step_list is None and not np.isnan(mu[k]):
             posts.append(update(posts[-1], mu[k]))

@@ -263,17 +263,18 @@ def _replicated_estimate(
     )
 
 
-def smooth_optimal(mu, rho, prior_mean, prior_cov, process_noise, steps=None):
+def smooth_optimal(mu, rho, prior_mean, prior_cov, process_noise, steps=None, law=None):
     """The exact filter and its fixed-interval smoother: :func:`depthcore.exact.smoother.track`.
 
     The bearings are added online (:func:`depthcore.exact.posterior.update`); the smoothed
     state is each depth node's Rauch-Tung-Striebel smoother mixed over the
     nodes (textbook 19.2.6, :meth:`depthcore.exact.mixture.Mixture.smoothed`).
-    ``steps`` (N - 1,), or ``None`` for unit steps, is passed on by keyword.
+    ``steps`` (N - 1,), or ``None`` for unit steps, and ``law`` (a
+    :class:`~depthcore.problem.depth_prior.DepthPrior`, or ``None``) are passed on by keyword.
     """
     more = {} if steps is None else {"steps": steps}
     t = bank_track.track(
-        mu, rho, prior_mean, prior_cov, process_noise, lag=np.shape(mu)[-1] - 1, **more
+        mu, rho, prior_mean, prior_cov, process_noise, lag=np.shape(mu)[-1] - 1, law=law, **more
     )
     return t.filtered, t.interval, t
 

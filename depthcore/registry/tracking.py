@@ -20,6 +20,7 @@ from depthcore.exact import spatial as exact_spatial
 from depthcore.exact.mixture import Smoothed
 from depthcore.kalman import spatial
 from depthcore.problem import bearing_pairs, checks, frames, model, predictive
+from depthcore.problem.depth_prior import DepthPrior
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian, paper_prior
 from depthcore.registry.filters import FILTERS, names
 
@@ -188,8 +189,12 @@ def track(
         The SD of the bearings' noise, in :data:`RHO_RANGE` (in the units of
         ``mu``: a pixel noise of SD ``s`` is ``rho = s / f`` for a focal
         length of ``f`` pixels), one for all frames or one per frame.
-    prior : depthcore.problem.gaussian.Gaussian, optional
-        The prior of the state ``(x_1, y_1, v_1)`` at frame 1; by default the
+    prior : depthcore.problem.gaussian.Gaussian or depthcore.problem.depth_prior.DepthPrior
+        The prior of the state ``(x_1, y_1, v_1)`` at frame 1. A
+        :class:`~depthcore.problem.depth_prior.DepthPrior` (any law of the depth,
+        Gaussian given it) is the exact filter's prior as it is; the Gaussian filters
+        take its Gaussian of the same mean and covariance (the exact filter takes no gate
+        under it). By default the
         paper's rule applied to the first three present bearings
         (:func:`default_prior`: :func:`depthcore.problem.gaussian.paper_prior`
         of their noise-free state, Eq. (7), when they are frames 1-3 at unit
@@ -266,18 +271,21 @@ def track(
         raise ValueError(f"process_noise must be at most {PROCESS_NOISE_MAX:g}, got {q!r}")
     if prior is None:
         prior = default_prior(mu, steps)
-    elif not isinstance(prior, Gaussian):
+    elif not isinstance(prior, Gaussian | DepthPrior):
         raise ValueError(
-            f"prior must be a depthcore.Gaussian of the state at frame 1 or None, "
-            f"got {type(prior).__name__}"
+            f"prior must be a depthcore.Gaussian or a DepthPrior of the state at frame 1, or "
+            f"None, got {type(prior).__name__}"
         )
     gate = predictive.gate(gate)
     more = {} if steps is None else {"steps": steps}
+    mean, cov = (prior.mean, prior.cov) if isinstance(prior, Gaussian) else prior.gaussian()
+    if isinstance(prior, DepthPrior) and filter == "optimal":
+        more["law"] = prior  # the exact filter under the law; the others, its Gaussian
     try:
-        report = entry(mu, rho, prior.mean, prior.cov, q, gate=gate, **more).updates
+        report = entry(mu, rho, mean, cov, q, gate=gate, **more).updates
         if gate is not None and np.any(report.gated):
             mu = np.where(report.gated, np.nan, mu)  # a skipped bearing is a missing one
-        filtered, smoothed, detail = entry.smoother(mu, rho, prior.mean, prior.cov, q, **more)
+        filtered, smoothed, detail = entry.smoother(mu, rho, mean, cov, q, **more)
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise _no_answer(exc, f"the {filter} filter") from None
     for series in (filtered, smoothed):

@@ -64,7 +64,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import ndtr, ndtri
 
-from depthcore.problem import checks
+from depthcore.problem import checks, depth_prior
 
 #: The prior's forms, the paper's rule first.
 FORMS = ("paper", "range", "log_uniform", "inverse_depth")
@@ -215,6 +215,37 @@ def gaussian(form: str, centre, rho: float) -> tuple[np.ndarray, np.ndarray]:
     cov[1, 1] = var_y
     cov[2, 2] = SPEED_SD**2
     return mean, cov
+
+
+def law(form: str, centre, rho: float) -> depth_prior.DepthPrior:
+    """A drawn form's law itself, for the exact filter: the depth's law and, given the depth,
+    the ray's Gaussian ``x_1 = a y_1``, ``a ~ N(c_x / c_y, rho**2)``, ``v ~ N(c_v, SPEED_SD**2)``.
+
+    Its :meth:`~depthcore.problem.depth_prior.DepthPrior.gaussian` is :func:`gaussian`'s
+    mean and covariance; its draws follow :func:`draw`'s law.
+
+    Parameters
+    ----------
+    form : {"range", "log_uniform", "inverse_depth"}
+    centre : array_like, shape (3,)
+    rho : float
+
+    Returns
+    -------
+    depthcore.problem.depth_prior.DepthPrior
+    """
+    _drawn(form)
+    c = _centre(centre)
+    rho = checks.positive_scalar(rho, "rho")
+    lateral = depth_prior.Lateral.on_ray(c[0] / c[1], rho, c[2], SPEED_SD)
+    m = c[1]
+    if form == "range":
+        return depth_prior.range_prior(m, RANGE_SD * m, lateral, lo=RANGE_NEAREST * m)
+    if form == "log_uniform":
+        r = np.sqrt(LOG_UNIFORM_RATIO)
+        return depth_prior.log_uniform(m / r, m * r, lateral)
+    lo, hi = INVERSE_DEPTH_LIMITS
+    return depth_prior.inverse_depth(1.0 / m, INVERSE_DEPTH_SD / m, lo / m, hi / m, lateral)
 
 
 def draw_depths(form: str, depth: float, n: int, rng: np.random.Generator) -> np.ndarray:
