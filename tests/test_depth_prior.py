@@ -13,7 +13,7 @@ import pytest
 from scipy import integrate, stats
 
 import depthcore
-from depthcore.exact import optimal, posterior
+from depthcore.exact import online, optimal, posterior
 from depthcore.problem import depth_prior as dp
 from depthcore.problem.gaussian import Gaussian
 
@@ -202,7 +202,7 @@ def test_the_draws_fail_the_test_of_another_law():
         (lambda: dp.inverse_depth(0.05, 0.02, 0.0, 0.5, LATERAL), "lo"),
         (lambda: dp.range_prior(0.0, 1e-300, LATERAL, lo=1.0, hi=2.0), "no mass"),
         (lambda: dp.table([1.0, 1.0], [1.0, 1.0], LATERAL), "increasing"),
-        (lambda: dp.table([1.0, 2.0], [0.0, 0.0], LATERAL), "positive integral"),
+        (lambda: dp.table([1.0, 2.0, 3.0], [1.0, 0.0, 1.0], LATERAL), "positive between"),
         (lambda: dp.table([1.0, 2.0], [1.0, 1.0], "ray"), "lateral must be a Lateral"),
         (
             lambda: dp.Lateral([0, 0], [1, 0], np.zeros((2, 2)), np.zeros((2, 2))),
@@ -247,6 +247,50 @@ def test_track_gives_the_exact_filter_the_law_and_the_gaussian_filters_its_gauss
         ekf.filtered.depth_mean,
         depthcore.track(mu, 0.01, prior=stand_in, filter="ekf").filtered.depth_mean,
     )
-    with pytest.raises(ValueError, match="gate") as err:
-        optimal.run(mu, 0.01, None, None, gate=0.01, law=law)
-    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("form", ["log_uniform", "inverse_depth", "table"])
+def test_the_online_filter_under_a_law_is_the_batch_posterior_at_every_frame(form):
+    """Placed afresh every frame from its interpolated nodes, it keeps the batch's answer."""
+    law = LAWS[form]
+    mu = _track(law, 30, None, 0.01, 0.0, seed=21)
+    mu[7] = np.nan
+    f = online.Online(None, None, 0.01, law=law)
+    for k in range(30):
+        est = f.update(mu[k])
+        if k in (0, 2, 9, 29):
+            p = posterior.posterior(mu[: k + 1], 0.01, None, None, law=law)
+            for got, want, sd in (
+                (est.depth_mean, p.depth_mean, p.depth_sd),
+                (est.depth_sd, p.depth_sd, p.depth_sd),
+                (est.velocity_mean, p.velocity_mean, p.velocity_sd),
+            ):
+                assert abs(got - want) <= 1e-8 * sd, (k, got, want)
+
+
+def test_an_approaching_camera_under_a_law_online_and_in_batch():
+    law = LAWS["range"]
+    steps = np.r_[np.ones(4), -np.ones(5)]
+    mu = _track(law, 10, steps, 0.01, 0.0, seed=22)
+    f = online.Online(None, None, 0.01, law=law)
+    for k in range(10):
+        est = f.update(mu[k], step=1.0 if k == 0 else steps[k - 1])
+    p = posterior.posterior(mu, 0.01, None, None, steps=steps, law=law)
+    assert abs(est.depth_mean - p.depth_mean) <= 1e-8 * p.depth_sd
+    assert abs(est.depth_sd - p.depth_sd) <= 1e-8 * p.depth_sd
+
+
+def test_the_gate_under_a_law_skips_the_outlier_and_keeps_the_rest():
+    law = LAWS["log_uniform"]
+    mu = _track(law, 25, None, 0.01, 0.0, seed=23)
+    bad = mu.copy()
+    bad[20] += 0.3
+    gated = optimal.run(bad, 0.01, None, None, gate=1e-3, law=law)
+    assert np.flatnonzero(gated.updates.gated).tolist() == [20]
+    without = mu.copy()
+    without[20] = np.nan
+    ref = posterior.posterior(without, 0.01, None, None, law=law)
+    assert abs(gated.depth_mean - ref.depth_mean) <= 1e-8 * ref.depth_sd
+    # through track(), the smoother skips it too
+    t = depthcore.track(bad, 0.01, prior=law, gate=1e-3)
+    assert t.updates.gated[20] and not np.any(np.delete(t.updates.gated, 20))

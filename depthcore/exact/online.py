@@ -45,7 +45,9 @@ re-placement adds; ``Online.replacements`` counts them. Between
 re-placements the filter is the bank on fixed nodes, exact to the
 quadrature's error. The node count is bounded by the quadrature's budget
 (:data:`depthcore.exact.quadrature.NODE_BUDGET`), so time and memory per frame
-are bounded whatever the number of frames.
+are bounded whatever the number of frames. Under a prior with any law of the depth
+(``law``) the nodes are Gauss-Legendre panels instead (:mod:`depthcore.exact.panels`),
+placed afresh every frame from each half panel's polynomial through its nodes.
 
 Example
 -------
@@ -69,9 +71,10 @@ from typing import NamedTuple
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
-from depthcore.exact import quadrature
+from depthcore.exact import panels, quadrature
 from depthcore.exact.online_nodes import Plane, Space
 from depthcore.problem import checks, predictive
+from depthcore.problem.depth_prior import stand_in
 from depthcore.problem.predictive import FrameEstimate
 from depthcore.problem.weights import normalised
 
@@ -117,9 +120,21 @@ class Online:
         The bearing noise SD, > 0, used where :meth:`update` is given none.
     rtol : float
         The quadrature's tolerance for the nodes (mean and SD relative to the SD).
+    law : depthcore.problem.depth_prior.DepthPrior, optional
+        For the paper's point, a prior with any law of the depth in place of the Gaussian
+        (``prior_mean`` and ``prior_cov`` then ``None`` or its own moments): the nodes
+        are Gauss-Legendre panels ending at its edges and kinks
+        (:func:`depthcore.exact.panels.place`), placed afresh at every frame from the
+        interpolated log likelihood and lateral Gaussian plus the law's exact density, so
+        a hard edge needs no margin.
     """
 
-    def __init__(self, prior_mean, prior_cov, rho, process_noise=0.0, gate=None, rtol=1e-10):
+    def __init__(
+        self, prior_mean, prior_cov, rho, process_noise=0.0, gate=None, rtol=1e-10, law=None
+    ):
+        if law is not None:
+            prior_mean, prior_cov = stand_in(law, prior_mean, prior_cov)
+        self.law = law
         m = checks.finite_array(prior_mean, "prior_mean")
         if m.shape not in ((3,), (5,)):
             raise ValueError(
@@ -133,7 +148,9 @@ class Online:
         self.rho = checks.positive_scalar(rho, "rho")
         self.process_noise = checks.nonnegative_scalar(process_noise, "process_noise")
         self.gate = predictive.gate(gate)
-        self.model = (Plane if m.size == 3 else Space)(m, P, self.rho)
+        if law is not None and m.size != 3:
+            raise ValueError("law: a point in 3-D takes a Gaussian prior (prior_mean (5,))")
+        self.model = Plane(m, P, self.rho, law) if m.size == 3 else Space(m, P, self.rho)
         self.rtol = checks.positive_scalar(rtol, "rtol")
         self.frame = 0
         self.travelled = 0.0
@@ -156,6 +173,8 @@ class Online:
 
         The quadrature's depth is the distance above the floor, ``y_1 - floor``.
         """
+        if self.law is not None:
+            return self._place_panels(source, depth_guess)
         floor = self.floor
         view = self.model.view
 
@@ -202,14 +221,48 @@ class Online:
         log_p, lateral = source(y)
         return _Nodes(y, log_w, log_p, lateral)
 
+    def _place_panels(self, source, depth_guess) -> _Nodes:
+        """Nodes by :func:`depthcore.exact.panels.place` under the law, for ``source``."""
+
+        def values(y, idx):  # one problem: every row of y is one of its panels
+            log_p, lat = source(y.ravel())
+            return log_p.reshape(y.shape), lat[1].reshape(y.shape), lat[4].reshape(y.shape)
+
+        where = "the prior" if self.frame == 0 else f"frame {self.frame}"
+        target = panels.Target(
+            values,
+            np.array([self.floor]),
+            np.array([[depth_guess]]),
+            lambda k: f"mu: the exact filter's depth nodes cannot be placed at {where}",
+        )
+        placed = panels.place(target, self.law, self.rtol)
+        keep = np.isfinite(placed.log_weights[0])
+        y, log_w = placed.nodes[0][keep], placed.log_weights[0][keep]
+        log_p, lateral = source(y)
+        return _Nodes(y, log_w, log_p, lateral)
+
     def _interpolant(self):
         """The node values interpolated from the current nodes (module docstring).
 
         The splines are in ``log (y_1 - f)``, ``f`` the floor the nodes were placed above.
+        Under a law, each half panel's polynomial through its Gauss-Legendre nodes
+        (:func:`depthcore.exact.panels.interpolant`) of the log likelihood and the
+        lateral rows, plus the law's exact log density.
         """
         nodes = self._nodes
         base = self._node_floor
         t = np.log(nodes.y - base)
+        if self.law is not None:
+            law, repair = self.law, self.model.repair
+            loglik = nodes.log_p - law.log_pdf(nodes.y)
+            inner = panels.interpolant(t, np.vstack([loglik, nodes.lateral]))
+
+            def source(y):
+                with np.errstate(divide="ignore"):
+                    values = inner(np.log(np.maximum(y - base, 0.0)))
+                return values[0] + law.log_pdf(y), repair(values[1:])
+
+            return source
         splines = [
             make_interp_spline(t, v, k=min(_DEGREE, len(t) - 1))
             for v in (nodes.log_p, *nodes.lateral)
@@ -253,7 +306,9 @@ class Online:
             )
         a = nodes.log_p + nodes.log_w
         self.floor = floor
-        if np.any(cut) and (np.max(a[cut]) > np.max(a) - _END_MARGIN or np.sum(~cut) < 8):
+        if np.any(cut) and (
+            np.max(a[cut]) > np.max(a) - _END_MARGIN or np.sum(~cut) < 8 or self.law is not None
+        ):
             self._replace_nodes()
         elif np.any(cut):
             keep = ~cut
@@ -364,7 +419,10 @@ class Online:
         return self.model.moments(p, nodes.lateral, nodes.y + self.travelled)
 
     def _resolved(self) -> bool:
-        """The check of :func:`depthcore.exact.posterior.update` on the current nodes."""
+        """The check of :func:`depthcore.exact.posterior.update` on the current nodes (under
+        a law, whose panel nodes it does not apply to, never: they are placed afresh)."""
+        if self.law is not None:
+            return False
         nodes = self._nodes
         a = nodes.log_p + nodes.log_w
         top = np.max(a)
@@ -422,7 +480,7 @@ def track_updates(bank, gate=None, rtol: float = 1e-10) -> predictive.Updates:
     qs, means, covs = rows(bank.process_noise, 0), rows(bank.prior_mean, 1), rows(bank.prior_cov, 2)
     out = np.full((3, len(mus), N), np.nan)
     for i in range(len(mus)):
-        f = Online(means[i], covs[i], noise[i, 0], qs[i], gate, rtol)
+        f = Online(means[i], covs[i], noise[i, 0], qs[i], gate, rtol, law=bank.law)
         for k in range(N):
             s = f.update(mus[i, k], noise[i, k], 1.0 if k == 0 else steps[i, k - 1])
             out[:, i, k] = s.log_predictive, s.tail, s.gated

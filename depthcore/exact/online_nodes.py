@@ -39,13 +39,14 @@ class Plane:
     dim = 3
     rows = 6
 
-    def __init__(self, prior_mean, prior_cov, rho: float):
-        self.prior_mean, self.prior_cov, self.rho = prior_mean, prior_cov, rho
+    def __init__(self, prior_mean, prior_cov, rho: float, law=None):
+        self.prior_mean, self.prior_cov, self.rho, self.law = prior_mean, prior_cov, rho, law
 
     def prior(self, y):
-        """``log N(y; m_y, P_yy)`` (J,) and the rows (6, J) of ``(x_1, v_1)`` given ``y_1 = y``."""
+        """``log N(y; m_y, P_yy)`` (J,) (or the law's log density of the depth) and the rows
+        (6, J) of ``(x_1, v_1)`` given ``y_1 = y``."""
         log_p, M, (a, b, c) = lateral_filter(
-            y[None], np.empty((1, 0)), self.rho, 0.0, self.prior_mean, self.prior_cov
+            y[None], np.empty((1, 0)), self.rho, 0.0, self.prior_mean, self.prior_cov, law=self.law
         )
         a, b, c = (np.broadcast_to(v, log_p.shape)[0] for v in (a, b, c))
         return log_p[0], np.stack([M[0, 0], M[1, 0], a, b, c, a * c - b * b])

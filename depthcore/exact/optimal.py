@@ -459,7 +459,7 @@ def run(
     rtol : float
         Target accuracy of each mean and SD, relative to the SD.
     law : depthcore.problem.depth_prior.DepthPrior, optional
-        A prior with any law of the depth in place of the Gaussian (no gate).
+        A prior with any law of the depth in place of the Gaussian.
 
     Returns
     -------
@@ -498,21 +498,19 @@ def run(
 
 
 def _gated(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps, gate, law=None):
-    """Bank and report on the bearings :func:`~depthcore.exact.online.track_updates` keeps;
-    under a ``law``, the bank alone (the online filter that gates takes a Gaussian prior)."""
-    if law is not None and gate is not None:
-        raise ValueError("gate: the online filter that gates takes a Gaussian prior, no law")
-    if law is not None:
-        return posterior.posterior(
-            mu, rho, prior_mean, prior_cov, process_noise, rtol, steps=steps, law=law
-        )
-    post = posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise, rtol, steps=steps)
+    """Bank and report on the bearings :func:`~depthcore.exact.online.track_updates` keeps
+    (under ``law`` if given; without a gate, the bank alone)."""
+    more = {"steps": steps, "law": law}
+    post = posterior.posterior(mu, rho, prior_mean, prior_cov, process_noise, rtol, **more)
+    if gate is None:
+        return post
     report = online.track_updates(post.bank, gate, rtol)
     if np.any(report.gated):
-        kept = np.where(report.gated, np.nan, np.asarray(post.bank.mu))
         b = post.bank
+        kept = np.where(report.gated, np.nan, np.asarray(b.mu))
+        more["steps"] = b.frame_steps
         post = posterior.posterior(
-            kept, b.frame_noise, prior_mean, prior_cov, process_noise, rtol, steps=b.frame_steps
+            kept, b.frame_noise, b.prior_mean, b.prior_cov, process_noise, rtol, **more
         )
     return dataclasses.replace(post, updates=report)
 

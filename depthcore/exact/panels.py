@@ -18,6 +18,7 @@ are within ``rtol`` of each SD. The nodes returned are the halves' (:func:`place
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -64,11 +65,35 @@ class Placed(NamedTuple):
     velocity_error: np.ndarray
 
 
-def _log_f(t, idx, pb: Problem, law: DepthPrior):
-    """``log f`` in ``t`` (with ``dy = e^t dt``), ``E[v_N | y]`` and ``Var[v_N | y]`` at ``t``
-    (P, n) of the problems ``idx`` (P,)."""
-    y = pb.floor[idx][:, None] + np.exp(t)
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+class Target(NamedTuple):
+    """What the panels integrate for ``B`` problems.
+
+    Attributes
+    ----------
+    values : callable
+        ``values(y, idx)``, depths at frame 1 ``y`` (P, n) of the problems ``idx`` (P,):
+        ``log f(y)`` (the prior's log density plus the log likelihood), ``E[v_N | y]`` and
+        ``Var[v_N | y]``, each (P, n).
+    floor : ndarray, shape (B,)
+        The depth at frame 1 below which the point would reach the camera.
+    seeds : ndarray, shape (B, S)
+        Depths at frame 1 the scan for the mode also tries (``NaN``: none).
+    name : callable
+        ``name(k)``, problem ``k`` in a refusal.
+    """
+
+    values: Callable
+    floor: np.ndarray
+    seeds: np.ndarray
+    name: Callable
+
+
+def of_problems(pb: Problem, law: DepthPrior) -> Target:
+    """The :class:`Target` of the bank's problems ``pb`` under ``law``
+    (:func:`~depthcore.exact.bank.lateral_filter` at each depth, its ``prior_mean`` and
+    ``prior_cov`` unread); the scan also tries the depth the first three bearings fit."""
+
+    def values(y, idx):
         log_w, (_, v), (_, _, c) = lateral_filter(
             y,
             pb.mu[idx],
@@ -80,14 +105,33 @@ def _log_f(t, idx, pb: Problem, law: DepthPrior):
             None if pb.frame_rho is None else pb.frame_rho[idx],
             law,
         )
+        return log_w, v, c
+
+    seeds = np.full((pb.mu.shape[0], 1), np.nan)
+    if pb.mu.shape[1] >= 3:  # the depth the first three present bearings fit exactly
+        with np.errstate(all="ignore"):
+            seeds[:, 0] = tracks.noise_free_start(pb.mu, pb.steps)
+
+    def name(k):
+        return f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g}"
+
+    return Target(values, pb.floor, seeds, name)
+
+
+def _log_f(t, idx, target: Target):
+    """``log f`` in ``t`` (with ``dy = e^t dt``), ``E[v_N | y]`` and ``Var[v_N | y]`` at ``t``
+    (P, n) of the problems ``idx`` (P,)."""
+    y = target.floor[idx][:, None] + np.exp(t)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        log_w, v, c = target.values(y, idx)
     log_w = np.where(np.isnan(log_w), -np.inf, log_w)
-    return y, log_w + t, v, np.broadcast_to(c, y.shape)
+    return y, log_w + t, np.broadcast_to(v, y.shape), np.broadcast_to(c, y.shape)
 
 
-def _ends(pb: Problem, law: DepthPrior):
+def _ends(target: Target, law: DepthPrior):
     """The range ``(t_lo, t_hi)`` (B,) of ``t`` and whether each end is the prior's edge."""
     lo, hi = law.support
-    floor = pb.floor
+    floor = target.floor
     ey, ey2 = law.depth_moments()
     scale = ey + np.sqrt(max(ey2 - ey * ey, 0.0))
     lo_edge = lo > floor
@@ -98,22 +142,17 @@ def _ends(pb: Problem, law: DepthPrior):
     return t_lo, t_hi, lo_edge, np.full(len(floor), np.isfinite(hi))
 
 
-def _mode(pb, law, t_lo, t_hi):
+def _mode(target: Target, law, t_lo, t_hi):
     """The scan's and Newton's mode ``t*`` (B,), its width (B,) and ``log f`` there (B,)."""
     B = len(t_lo)
     rows = np.arange(B)
     t = t_lo[:, None] + (t_hi - t_lo)[:, None] * np.linspace(0.0, 1.0, SCAN)
-    seeds = [np.full(B, np.nan)]
-    if pb.mu.shape[1] >= 3:  # the depth the first three present bearings fit exactly
-        with np.errstate(all="ignore"):
-            seeds[0] = tracks.noise_free_start(pb.mu, pb.steps) - pb.floor
     ey, _ = law.depth_moments()
-    seeds.append(np.full(B, ey) - pb.floor)
-    extra = [
-        np.log(np.where(np.isfinite(s) & (s > 0), s, np.exp(0.5 * (t_lo + t_hi)))) for s in seeds
-    ]
-    t = np.clip(np.concatenate([t, np.stack(extra, 1)], 1), t_lo[:, None], t_hi[:, None])
-    f = _log_f(t, rows, pb, law)[1]
+    seeds = np.concatenate([target.seeds, np.full((B, 1), ey)], 1) - target.floor[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        extra = np.log(np.where(np.isfinite(seeds) & (seeds > 0), seeds, np.exp(t_lo)[:, None]))
+    t = np.clip(np.concatenate([t, extra], 1), t_lo[:, None], t_hi[:, None])
+    f = _log_f(t, rows, target)[1]
     k = np.argmax(f, axis=1)
     t0, f0 = t[rows, k], f[rows, k]
     h = np.full(B, (t_hi - t_lo) / (SCAN - 1))
@@ -121,7 +160,7 @@ def _mode(pb, law, t_lo, t_hi):
         pts = np.clip(
             t0[:, None] + h[:, None] * np.array([-1.0, 0.0, 1.0]), t_lo[:, None], t_hi[:, None]
         )
-        phi = _log_f(pts, rows, pb, law)[1]
+        phi = _log_f(pts, rows, target)[1]
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
             d1 = (phi[:, 2] - phi[:, 0]) / (2.0 * h)
             d2 = (phi[:, 2] - 2.0 * phi[:, 1] + phi[:, 0]) / h**2
@@ -130,7 +169,7 @@ def _mode(pb, law, t_lo, t_hi):
             width = np.where(concave, 1.0 / np.sqrt(-np.where(concave, d2, -1.0)), h)
         move = np.where(np.isfinite(move), move, 0.0)
         t1 = np.clip(t0 + move, t_lo, t_hi)
-        f1 = _log_f(t1[:, None], rows, pb, law)[1][:, 0]
+        f1 = _log_f(t1[:, None], rows, target)[1][:, 0]
         up = f1 > f0
         t0, f0 = np.where(up, t1, t0), np.where(up, f1, f0)
         floor_h = 1e3 * np.finfo(float).eps * np.maximum(1.0, np.abs(t0))
@@ -141,13 +180,13 @@ def _mode(pb, law, t_lo, t_hi):
     return t0, h, np.maximum(f0, np.max(f, axis=1))
 
 
-def _first_panels(pb, law, t_lo, t_hi, t0, width):
+def _first_panels(target: Target, law, t_lo, t_hi, t0, width):
     """The first panels' ends, as flat arrays ``idx``, ``a``, ``b``."""
     idx, a, b = [], [], []
     bps = law.breakpoints
     for i in range(len(t_lo)):
         cuts = [np.linspace(t_lo[i], t_hi[i], int(np.ceil(1.0 / _SPREAD)) + 1)]
-        inside = bps[bps > pb.floor[i]] - pb.floor[i]
+        inside = bps[bps > target.floor[i]] - target.floor[i]
         cuts.append(np.log(inside))
         cuts.append(t0[i] + width[i] * np.concatenate([-_ABOUT_MODE, _ABOUT_MODE]))
         c = np.unique(np.clip(np.concatenate(cuts), t_lo[i], t_hi[i]))
@@ -158,12 +197,12 @@ def _first_panels(pb, law, t_lo, t_hi, t0, width):
     return np.concatenate(idx), np.concatenate(a), np.concatenate(b)
 
 
-def _sums(t_a, t_b, idx, pb, law, shift):
+def _sums(t_a, t_b, idx, target, shift):
     """Each panel's Gauss-Legendre sums (5, P), scaled by ``e^-shift[idx]``, its nodes'
     depths (P, n) and log weights in ``y`` (P, n), and the largest ``log f`` (P,)."""
     half = 0.5 * (t_b - t_a)
     t = (0.5 * (t_a + t_b))[:, None] + half[:, None] * _X
-    y, log_f, v, c = _log_f(t, idx, pb, law)
+    y, log_f, v, c = _log_f(t, idx, target)
     log_q = np.log(half)[:, None] + np.log(_W) + log_f  # the panel's terms, in t
     e = np.exp(log_q - shift[idx][:, None])
     sums = np.stack(
@@ -173,10 +212,10 @@ def _sums(t_a, t_b, idx, pb, law, shift):
     return sums, y, log_wy, np.max(log_f, axis=1)
 
 
-def _halves(t_a, t_b, idx, pb, law, shift):
+def _halves(t_a, t_b, idx, target, shift):
     m = 0.5 * (t_a + t_b)
-    left = _sums(t_a, m, idx, pb, law, shift)
-    right = _sums(m, t_b, idx, pb, law, shift)
+    left = _sums(t_a, m, idx, target, shift)
+    right = _sums(m, t_b, idx, target, shift)
     return left, right
 
 
@@ -202,17 +241,17 @@ def _errors(diff, idx, totals):
     return np.where(np.isfinite(ey), ey, np.inf), np.where(np.isfinite(ev), ev, np.inf)
 
 
-def _refuse(pb, k: int, why: str) -> ValueError:
-    return ValueError(f"mu[{k}] = {pb.mu[k].tolist()} with rho = {pb.rho[k]:.6g}: {why}")
+def _refuse(target: Target, k: int, why: str) -> ValueError:
+    return ValueError(f"{target.name(k)}: {why}")
 
 
-def place(pb: Problem, law: DepthPrior, rtol: float) -> Placed:
+def place(target: Target, law: DepthPrior, rtol: float) -> Placed:
     """Nodes and log weights in ``y_1`` for ``B`` problems under the prior ``law``.
 
     Parameters
     ----------
-    pb : depthcore.exact.quadrature.Problem
-        The bank's problems (``pb.mean`` and ``pb.cov`` are not read for the prior).
+    target : Target
+        What to integrate (:func:`of_problems` for the bank's problems).
     law : depthcore.problem.depth_prior.DepthPrior
     rtol : float
         The changes of the means and SDs of the depth and the velocity, summed over
@@ -228,13 +267,13 @@ def place(pb: Problem, law: DepthPrior, rtol: float) -> Placed:
         Where the integrand does not decay at an open end, or the panels exceed
         :data:`PANEL_BUDGET` or :data:`ROUNDS` before ``rtol``.
     """
-    B = pb.mu.shape[0]
-    t_lo, t_hi, lo_edge, hi_edge = _ends(pb, law)
-    t0, width, top = _mode(pb, law, t_lo, t_hi)
+    B = len(target.floor)
+    t_lo, t_hi, lo_edge, hi_edge = _ends(target, law)
+    t0, width, top = _mode(target, law, t_lo, t_hi)
     rows = np.arange(B)
     for end, edge, step in ((t_hi, hi_edge, 2.0), (t_lo, lo_edge, -5.0)):
         for _ in range(12):  # an open end moves out until the integrand is negligible there
-            f_end = _log_f(end[:, None], rows, pb, law)[1][:, 0]
+            f_end = _log_f(end[:, None], rows, target)[1][:, 0]
             open_ = ~edge & (f_end > top - CUTOFF)
             if not np.any(open_):
                 break
@@ -242,12 +281,12 @@ def place(pb: Problem, law: DepthPrior, rtol: float) -> Placed:
         else:
             k = int(np.argmax(open_))
             raise _refuse(
-                pb, k, "the posterior of the depth does not decay at the prior's open end"
+                target, k, "the posterior of the depth does not decay at the prior's open end"
             )
-    idx, a, b = _first_panels(pb, law, t_lo, t_hi, t0, width)
-    coarse = _sums(a, b, idx, pb, law, top)[0]
+    idx, a, b = _first_panels(target, law, t_lo, t_hi, t0, width)
+    coarse = _sums(a, b, idx, target, top)[0]
     for _ in range(ROUNDS):
-        (left, yl, wl, fl), (right, yr, wr, fr) = _halves(a, b, idx, pb, law, top)
+        (left, yl, wl, fl), (right, yr, wr, fr) = _halves(a, b, idx, target, top)
         high = np.full(B, -np.inf)
         np.maximum.at(high, idx, np.maximum(fl, fr))
         fine = left + right
@@ -262,14 +301,16 @@ def place(pb: Problem, law: DepthPrior, rtol: float) -> Placed:
         lagging = ~((err_y <= rtol * sy) & (err_v <= rtol * sv))
         if np.any(high > top + CUTOFF):
             k = int(np.argmax(high > top + CUTOFF))
-            raise _refuse(pb, k, "the depth's posterior is narrower than its quadrature can place")
+            raise _refuse(
+                target, k, "the depth's posterior is narrower than its quadrature can place"
+            )
         if not np.any(lagging):
             break
         share = np.maximum(ey / np.where(sy > 0, sy, 1.0)[idx], ev / np.where(sv > 0, sv, 1.0)[idx])
         split = lagging[idx] & (share * count[idx] >= rtol)
         if np.any(count + np.bincount(idx[split], minlength=B) > PANEL_BUDGET):
             k = int(np.argmax(count + np.bincount(idx[split], minlength=B) > PANEL_BUDGET))
-            raise _refuse(pb, k, f"the depth quadrature needs over {PANEL_BUDGET} panels")
+            raise _refuse(target, k, f"the depth quadrature needs over {PANEL_BUDGET} panels")
         m = 0.5 * (a + b)
         keep = ~split
         idx = np.concatenate([idx[keep], idx[split], idx[split]])
@@ -280,7 +321,7 @@ def place(pb: Problem, law: DepthPrior, rtol: float) -> Placed:
         )
     else:
         k = int(np.argmax(lagging))
-        raise _refuse(pb, k, f"the depth quadrature did not reach rtol = {rtol:.3g}")
+        raise _refuse(target, k, f"the depth quadrature did not reach rtol = {rtol:.3g}")
     y = np.concatenate([yl, yr], axis=1)
     log_w = np.concatenate([wl, wr], axis=1)
     order = np.argsort(idx, kind="stable")
@@ -291,6 +332,39 @@ def place(pb: Problem, law: DepthPrior, rtol: float) -> Placed:
     start = np.r_[0, np.cumsum(count)[:-1]]
     for i in range(B):
         yi = y[start[i] : start[i] + count[i]].ravel()
-        nodes[i, : yi.size], nodes[i, yi.size :] = yi, yi[0]
-        weights[i, : yi.size] = log_w[start[i] : start[i] + count[i]].ravel()
+        order = np.argsort(yi, kind="stable")  # increasing depths
+        nodes[i, : yi.size], nodes[i, yi.size :] = yi[order], yi[order[0]]
+        weights[i, : yi.size] = log_w[start[i] : start[i] + count[i]].ravel()[order]
     return Placed(nodes, weights, err_y, err_v)
+
+
+#: Barycentric weights of the Gauss-Legendre nodes on [-1, 1].
+_BARY = 1.0 / np.array([np.prod([a - b for b in _X if b != a]) for a in _X])
+
+
+def interpolant(t, values) -> Callable:
+    """The polynomials through each half panel's nodes, for values at placed nodes.
+
+    ``t`` (J,) are :func:`place`'s nodes (one problem, increasing, in ``t``), ``J`` a
+    multiple of :data:`ORDER`: each run of ``ORDER`` is one half panel's Gauss-Legendre
+    nodes, from which its ends are recovered. ``values`` (K, J). Returns a function of
+    ``t`` (n,) giving (K, n): at each point the degree ``ORDER - 1`` polynomial of the
+    half panel holding it (barycentric form), the end ones continued beyond the nodes.
+    """
+    groups = t.reshape(-1, ORDER)
+    half = (groups[:, -1] - groups[:, 0]) / (_X[-1] - _X[0])
+    mid = groups[:, 0] - half * _X[0]
+    starts = mid - half
+    per_group = values.reshape(values.shape[0], -1, ORDER)
+
+    def evaluate(tt):
+        g = np.clip(np.searchsorted(starts, tt, side="right") - 1, 0, len(starts) - 1)
+        d = (tt - mid[g])[:, None] / half[g][:, None] - _X
+        hit = d == 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            c = np.where(hit, 0.0, _BARY / d)
+        c = np.where(np.any(hit, axis=1)[:, None], hit.astype(float), c)
+        v = per_group[:, g, :]  # (K, n, ORDER)
+        return np.einsum("kno,no->kn", v, c) / c.sum(1)
+
+    return evaluate

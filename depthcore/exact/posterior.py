@@ -24,7 +24,7 @@ from depthcore.exact.bank import Bank, lateral_filter, run_bank, step
 from depthcore.exact.mixture import Mixture, Moments, mixture, mixture_of_log_weights
 from depthcore.kalman import linear
 from depthcore.problem import checks, frames, model, signature
-from depthcore.problem.depth_prior import DepthPrior
+from depthcore.problem.depth_prior import stand_in
 
 # --- nodes placed by the depth quadrature ----------------------------------------------
 
@@ -254,24 +254,10 @@ def posterior(
     mu2 = np.atleast_2d(mu) if single else mu
     rho2 = np.atleast_2d(rho) if single and np.shape(rho) == np.shape(mu) else rho
     if law is not None:
-        prior_mean, prior_cov = law_prior(law, prior_mean, prior_cov)
+        prior_mean, prior_cov = stand_in(law, prior_mean, prior_cov)
     pb, _ = _problem_of(mu2, rho2, prior_mean, prior_cov, process_noise, steps)
     rtol = checks.positive_scalar(rtol, "rtol")
     return _place(pb, rtol, history, single, law)
-
-
-def law_prior(law, prior_mean, prior_cov):
-    """The Gaussian that stands beside ``law``: its own moments; ``prior_mean`` and
-    ``prior_cov`` must be ``None`` or those, else a one-line refusal."""
-    if not isinstance(law, DepthPrior):
-        raise ValueError(f"law must be a DepthPrior, got {type(law).__name__}")
-    mean, cov = law.gaussian()
-    for value, own, name in ((prior_mean, mean, "prior_mean"), (prior_cov, cov, "prior_cov")):
-        if value is not None and not np.allclose(value, own, rtol=1e-9, atol=0.0):
-            raise ValueError(
-                f"{name} must be None with a law, or the law's own moments (law.gaussian())"
-            )
-    return mean, cov
 
 
 #: Problems placed together by the quadrature (its memory grows with this times its nodes).
@@ -310,7 +296,7 @@ def _place(pb, rtol, history, single, law=None):
 
 def _place_law(pb, rtol, history, single, law):
     """:func:`_place` under a prior ``law``, its nodes from :func:`panels.place`."""
-    placed = panels.place(pb, law, rtol)
+    placed = panels.place(panels.of_problems(pb, law), law, rtol)
     shift = np.max(placed.log_weights, axis=1, keepdims=True)
     rho = pb.rho if pb.frame_rho is None else pb.frame_rho
     bank = run_bank(

@@ -28,6 +28,7 @@ take the Gaussian of the same mean and covariance (:meth:`DepthPrior.gaussian`).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -191,6 +192,10 @@ class DepthPrior:
 
     def depth_moments(self) -> tuple[float, float]:
         """``(E[y_1], E[y_1**2])``, in closed form or by Gauss-Legendre quadrature."""
+        return self._moments
+
+    @functools.cached_property
+    def _moments(self) -> tuple[float, float]:
         p = self.parameters
         if self.form == "log_uniform":
             lo, hi = p
@@ -206,7 +211,7 @@ class DepthPrior:
             e2 = m * m + 2 * m * s * (pa - pb) / z + s * s * (1.0 + (apa - bpb) / z)
             return mean, e2
         edges = self.breakpoints
-        x, w = np.polynomial.legendre.leggauss(_MOMENT_NODES)
+        x, w = _gauss_legendre(_MOMENT_NODES)
         mid, half = 0.5 * (edges[1:] + edges[:-1]), 0.5 * np.diff(edges)
         y = (mid[:, None] + half[:, None] * x).ravel()
         wy = (half[:, None] * w).ravel() * np.exp(self.log_pdf(y))
@@ -256,6 +261,11 @@ class DepthPrior:
         L = np.linalg.cholesky(g.cov + 1e-300 * np.eye(2))
         u = g.mean + np.einsum("nij,nj->ni", L, z)
         return np.stack([u[:, 0], y, u[:, 1]], axis=-1)
+
+
+@functools.lru_cache(maxsize=4)
+def _gauss_legendre(n: int):
+    return np.polynomial.legendre.leggauss(n)
 
 
 def _phi(z):
@@ -349,7 +359,8 @@ def inverse_depth(mean, sd, lo, hi, lateral: Lateral) -> DepthPrior:
 def table(depths, density, lateral: Lateral) -> DepthPrior:
     """A density tabulated at increasing depths > 0, linear between them, zero outside.
 
-    ``density`` (K,) >= 0 at ``depths`` (K,), ``K >= 2``, need not be normalised.
+    ``density`` (K,) at ``depths`` (K,), ``K >= 2``, positive but at the first and last
+    depths (where it may be 0), need not be normalised.
     """
     d = checks.finite_array(depths, "depths")
     f = checks.finite_array(density, "density")
@@ -359,6 +370,24 @@ def table(depths, density, lateral: Lateral) -> DepthPrior:
         )
     if not (d[0] > 0 and np.all(np.diff(d) > 0)):
         raise ValueError("depths must be positive and increasing")
-    if np.any(f < 0) or not _table_mass(d, f) > 0:
-        raise ValueError("density must be >= 0 with a positive integral")
+    if np.any(f < 0) or not np.all(f[1:-1] > 0) or not _table_mass(d, f) > 0:
+        raise ValueError("density must be positive between the first and last depths (0 at them)")
     return DepthPrior("table", tuple(d.tolist()) + tuple(f.tolist()), _lateral(lateral))
+
+
+def stand_in(law, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
+    """The Gaussian that stands beside ``law`` (:meth:`DepthPrior.gaussian`), checked against
+    a caller's ``prior_mean`` and ``prior_cov``: each ``None`` or the law's own, else a
+    one-line refusal naming it."""
+    if not isinstance(law, DepthPrior):
+        raise ValueError(f"law must be a DepthPrior, got {type(law).__name__}")
+    mean, cov = law.gaussian()
+    for value, own, name in ((prior_mean, mean, "prior_mean"), (prior_cov, cov, "prior_cov")):
+        given = None if value is None else checks.as_float(value, name)
+        if given is not None and not (
+            given.shape == own.shape and np.allclose(given, own, rtol=1e-9, atol=0.0)
+        ):
+            raise ValueError(
+                f"{name} must be None with a law, or the law's own moments (law.gaussian())"
+            )
+    return mean, cov

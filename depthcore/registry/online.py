@@ -41,6 +41,7 @@ frame 5: bearing skipped (tail 0.0e+00)
 from __future__ import annotations
 
 import importlib
+import inspect
 
 import numpy as np
 
@@ -138,8 +139,9 @@ def start(
         (:func:`depthcore.problem.predictive.gate`).
     **options
         The filter's own options (the UKF's ``sigma_points`` and
-        ``allow_behind_camera``, the exact filter's ``rtol``, the batched exact
-        filter's ``nodes`` and ``rtol``).
+        ``allow_behind_camera``, the exact filter's ``rtol`` and ``law``, a
+        :class:`~depthcore.problem.depth_prior.DepthPrior`, the batched exact filter's
+        ``nodes`` and ``rtol``); another is refused in one line naming it.
 
     Returns
     -------
@@ -162,9 +164,18 @@ def start(
             options = {"filter": name, **options}
             if np.shape(prior_mean)[-1] == 5:
                 options.pop("allow_behind_camera", None)
-        inner = factory(prior_mean, prior_cov, rho, process_noise, **options)
+        inner = factory(prior_mean, prior_cov, rho, process_noise, **_known(factory, options))
         return OnlineFilter(name, inner, batched=True)
     if np.shape(prior_mean) == (5,) and name in ("ekf", "ukf"):  # a point in 3-D: pairs
         factory, options = importlib.import_module(module).Spatial, {"filter": name}
-    inner = factory(prior_mean, prior_cov, rho, process_noise, gate, **options)
+    inner = factory(prior_mean, prior_cov, rho, process_noise, gate, **_known(factory, options))
     return OnlineFilter(name, inner)
+
+
+def _known(factory, options: dict) -> dict:
+    """``options`` if ``factory`` takes each of them, else a one-line refusal naming one."""
+    takes = inspect.signature(factory).parameters
+    for key in options:
+        if key not in takes:
+            raise ValueError(f"{key}: the {factory.__name__} filter takes no such option")
+    return options

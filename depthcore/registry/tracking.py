@@ -193,8 +193,7 @@ def track(
         The prior of the state ``(x_1, y_1, v_1)`` at frame 1. A
         :class:`~depthcore.problem.depth_prior.DepthPrior` (any law of the depth,
         Gaussian given it) is the exact filter's prior as it is; the Gaussian filters
-        take its Gaussian of the same mean and covariance (the exact filter takes no gate
-        under it). By default the
+        take its Gaussian of the same mean and covariance. By default the
         paper's rule applied to the first three present bearings
         (:func:`default_prior`: :func:`depthcore.problem.gaussian.paper_prior`
         of their noise-free state, Eq. (7), when they are frames 1-3 at unit
