@@ -13,7 +13,7 @@ import pytest
 from scipy import integrate, stats
 
 import depthcore
-from depthcore.exact import online, optimal, posterior
+from depthcore.exact import learning, online, optimal, posterior
 from depthcore.problem import depth_prior as dp
 from depthcore.problem.gaussian import Gaussian
 
@@ -28,7 +28,8 @@ LAWS = {
 
 
 def grid_moments(law, mu, rho, steps, q, panels=2000, order=10):
-    """Posterior mean and SD of ``y_N``, ``v_N`` and ``x_1`` (given every bearing), (6,)."""
+    """Posterior mean and SD of ``y_N``, ``v_N`` and ``x_1`` (given every bearing), and the
+    log marginal likelihood of the bearings, (7,)."""
     N = len(mu)
     steps = np.ones(N - 1) if steps is None else np.asarray(steps, float)
     rho = np.broadcast_to(np.asarray(rho, float), (N,))
@@ -85,7 +86,9 @@ def grid_moments(law, mu, rho, steps, q, panels=2000, order=10):
     mv = p @ out[:, 1]
     sv = math.sqrt(p @ (out[:, 2] + (out[:, 1] - mv) ** 2))
     mx = p @ out[:, 3]
-    return np.array([my, sy, mv, sv, mx, math.sqrt(p @ (out[:, 4] + (out[:, 3] - mx) ** 2))])
+    log_z = logp.max() + math.log(np.sum(np.exp(logp - logp.max())))
+    sx = math.sqrt(p @ (out[:, 4] + (out[:, 3] - mx) ** 2))
+    return np.array([my, sy, mv, sv, mx, sx, log_z])
 
 
 def _track(law, N, steps, rho, q, seed):
@@ -294,3 +297,27 @@ def test_the_gate_under_a_law_skips_the_outlier_and_keeps_the_rest():
     # through track(), the smoother skips it too
     t = depthcore.track(bad, 0.01, prior=law, gate=1e-3)
     assert t.updates.gated[20] and not np.any(np.delete(t.updates.gated, 20))
+
+
+@pytest.mark.parametrize("form", ["log_uniform", "table"])
+def test_the_likelihood_of_the_noise_under_a_law_is_the_grids(form):
+    law = LAWS[form]
+    N, steps, rho, q, gaps = CASES["ten frames, a gap, uneven steps, process noise"]
+    mu = _track(law, N, steps, rho, q, seed=31)
+    mu[gaps] = np.nan
+    got = learning.log_likelihood(mu, None, None, rho, q, steps=steps, law=law)
+    assert abs(got - grid_moments(law, mu, rho, steps, q)[6]) <= 1e-8
+
+
+def test_learning_rho_under_a_law_finds_the_maximum_of_its_likelihood():
+    law = LAWS["log_uniform"]
+    mu = np.stack([_track(law, 10, None, 0.01, 0.0, seed=40 + i) for i in range(6)])
+    fit = learning.fit(mu, None, None, process_noise=0.0, law=law)
+    at = {
+        r: learning.log_likelihood(mu, None, None, r, law=law)
+        for r in fit.rho * np.r_[0.98, 1, 1.02]
+    }
+    assert at[fit.rho] > max(v for r, v in at.items() if r != fit.rho)
+    assert fit.rho_interval[0] < fit.rho < fit.rho_interval[1]
+    stand_in = learning.fit(mu, *law.gaussian(), process_noise=0.0)
+    assert abs(stand_in.rho - fit.rho) > 1e-6 * fit.rho  # the law is not its Gaussian

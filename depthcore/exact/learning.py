@@ -52,6 +52,7 @@ from depthcore.exact import e_step, online
 from depthcore.exact import posterior as exact_posterior
 from depthcore.exact.bank import lateral_filter, run_bank
 from depthcore.problem import checks, frames, predictive
+from depthcore.problem.depth_prior import DepthPrior, stand_in
 
 #: The parameters, by name, the bearing noise SD and the process noise SD.
 NAMES = ("rho", "process_noise")
@@ -133,6 +134,7 @@ class _Tracks(NamedTuple):
     steps: np.ndarray  # (B, N - 1)
     mean: np.ndarray  # (B, 3)
     cov: np.ndarray  # (B, 3, 3)
+    law: DepthPrior | None = None  # in place of the Gaussian (mean, cov its moments)
 
     @property
     def elapsed(self) -> np.ndarray:
@@ -152,7 +154,9 @@ class _Tracks(NamedTuple):
 # --- checks ------------------------------------------------------------------------------
 
 
-def _tracks(mu, prior_mean, prior_cov, steps, weights) -> _Tracks:
+def _tracks(mu, prior_mean, prior_cov, steps, weights, law=None) -> _Tracks:
+    if law is not None:
+        prior_mean, prior_cov = stand_in(law, prior_mean, prior_cov)
     mu = checks.as_float(mu, "mu")
     if mu.ndim not in (1, 2):
         raise ValueError(f"mu must have shape (N,) or (B, N), got shape {mu.shape}")
@@ -182,6 +186,7 @@ def _tracks(mu, prior_mean, prior_cov, steps, weights) -> _Tracks:
         steps=np.array(track.steps),
         mean=np.broadcast_to(prior_mean, (B, 3)).copy(),
         cov=np.broadcast_to(prior_cov, (B, 3, 3)).copy(),
+        law=law,
     )
 
 
@@ -207,6 +212,7 @@ def _place(tracks: _Tracks, rho: float, q: float, rtol: float, history: bool = F
         rtol=rtol,
         history=history,
         steps=tracks.unit_steps,
+        law=tracks.law,
     )
 
 
@@ -222,18 +228,27 @@ def _on_nodes(tracks: _Tracks, nodes, log_w, rho: float, q: float) -> float:
         tracks.cov,
         tracks.unit_steps,
         frame_rho,
+        tracks.law,
     )[0]
     return float(np.sum(logsumexp(log_w + log_weight, axis=-1)))
 
 
 def log_likelihood(
-    mu, prior_mean, prior_cov, rho, process_noise=0.0, steps=None, weights=None, rtol=1e-10
+    mu,
+    prior_mean,
+    prior_cov,
+    rho,
+    process_noise=0.0,
+    steps=None,
+    weights=None,
+    rtol=1e-10,
+    law=None,
 ) -> float:
     """``log p(mu | rho, q)`` summed over the tracks (module docstring, textbook 19.1.2).
 
     The arguments are :func:`fit`'s, with ``rho`` (> 0) and ``process_noise`` (>= 0) given.
     """
-    tracks = _tracks(mu, prior_mean, prior_cov, steps, weights)
+    tracks = _tracks(mu, prior_mean, prior_cov, steps, weights, law)
     rho = checks.positive_scalar(rho, "rho")
     q = checks.process_noise(process_noise)
     rtol = checks.positive_scalar(rtol, "rtol")
@@ -372,6 +387,7 @@ def fit(
     tol: float = 1e-10,
     max_iter: int = 2000,
     gate=None,
+    law=None,
 ) -> Fit:
     """Estimate the bearing noise ``rho`` and/or the process noise ``q`` from tracks (19.1.2).
 
@@ -405,6 +421,9 @@ def fit(
         filter at the estimate reports each bearing's tail probability; those below
         ``gate`` are left out and the noise levels fitted again, until no more are
         skipped (:attr:`Fit.gated`), so that an outlier does not inflate ``rho``.
+    law : depthcore.problem.depth_prior.DepthPrior, optional
+        A prior with any law of the depth in place of the Gaussian (``prior_mean`` and
+        ``prior_cov`` then ``None`` or its moments), as the exact filter takes it.
 
     Returns
     -------
@@ -423,7 +442,7 @@ def fit(
     rtol = checks.positive_scalar(rtol, "rtol")
     tol = checks.positive_scalar(tol, "tol")
     max_iter = checks.count(max_iter, "max_iter")
-    tracks = _tracks(mu, prior_mean, prior_cov, steps, weights)
+    tracks = _tracks(mu, prior_mean, prior_cov, steps, weights, law)
     rho_k, q_k = _known(rho, "rho"), _known(process_noise, "process_noise")
     free = tuple(n for n, v in zip(NAMES, (rho_k, q_k), strict=True) if v is None)
     if not free:
@@ -655,6 +674,7 @@ def _fit_em(tracks, rho_k, q_k, free, level, intervals, rtol, tol, max_iter) -> 
             True,
             tracks.unit_steps,
             frame_rho,
+            tracks.law,
         )
         meas, motion = e_step.expectations(bank, log_w, tracks)
         new_rho = float(np.sqrt(np.sum(meas) / n_frames)) if rho_k is None else rho

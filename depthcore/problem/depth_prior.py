@@ -377,16 +377,18 @@ def table(depths, density, lateral: Lateral) -> DepthPrior:
 
 def stand_in(law, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
     """The Gaussian that stands beside ``law`` (:meth:`DepthPrior.gaussian`), checked against
-    a caller's ``prior_mean`` and ``prior_cov``: each ``None`` or the law's own, else a
-    one-line refusal naming it."""
+    a caller's ``prior_mean`` and ``prior_cov``: each ``None`` or the law's own (repeated
+    over leading axes or not), else a one-line refusal naming it."""
     if not isinstance(law, DepthPrior):
         raise ValueError(f"law must be a DepthPrior, got {type(law).__name__}")
     mean, cov = law.gaussian()
     for value, own, name in ((prior_mean, mean, "prior_mean"), (prior_cov, cov, "prior_cov")):
         given = None if value is None else checks.as_float(value, name)
-        if given is not None and not (
-            given.shape == own.shape and np.allclose(given, own, rtol=1e-9, atol=0.0)
-        ):
+        same = given is None or (
+            given.shape[given.ndim - own.ndim :] == own.shape
+            and np.allclose(given, own, rtol=1e-9, atol=0.0)
+        )
+        if not same:
             raise ValueError(
                 f"{name} must be None with a law, or the law's own moments (law.gaussian())"
             )
