@@ -2,9 +2,11 @@
 
 Recommended import: ``from depthbook import beyond_atlas``.
 
-:func:`verdict_counts` counts each filter's verdicts over the cells of
-:func:`depthcore.studies.atlas.atlas`, :func:`count_texts` gives them as the
-chapter glues them and :func:`cost_rows` the measured cost per trial;
+:func:`read` reads the calibration verdicts from the coverages of a record of
+:func:`depthcore.studies.atlas.atlas` (whatever verdicts it stored);
+:func:`verdict_counts` counts each filter's verdicts over the cells,
+:func:`headline` states its calibration, :func:`count_texts` gives the counts
+as the chapter glues them and :func:`cost_rows` the measured cost per trial;
 :func:`verdict_map` draws one verdict over every cell: per filter, the
 prior settings by the parallaxes, at each number of frames and noise level.
 """
@@ -15,15 +17,15 @@ import numpy as np
 
 from depthbook.notebook import MarkdownTable
 from depthbook.style import MIN_FONT, STYLE, WIDTH, subplots
-from depthcore.studies import atlas
+from depthcore.studies import atlas, coverage_verdicts
 
 #: The seed of the book's atlas (cell ``i`` is seeded by its child ``i``).
 SEED = 34
 
-#: The filters the chapter finds calibrated in most cells (its checks assert it).
+#: The filters the chapter finds miscalibrated in few cells (its checks assert it).
 CALIBRATED_GROUP = ("optimal", "second_order", "modified_polar", "batch_ml", "particle")
 
-#: The filters the chapter finds calibrated in few cells (its checks assert it).
+#: The filters the chapter finds miscalibrated in most cells (its checks assert it).
 MISCALIBRATED_GROUP = ("ekf", "ukf", "inverse_depth", "inverse_depth_ukf")
 
 #: The outcomes of a verdict in a cell, as :func:`verdict_grid` codes them.
@@ -36,8 +38,15 @@ NO_ANSWER = 3.0
 COLOURS = ("#deebf7", "#08519c", "#969696", "#ffffff")
 
 
-def _undecided(entry: dict, verdict: str) -> bool:
-    return entry.get(verdict) is None and "failed" not in entry
+def read(result: dict) -> dict:
+    """The atlas ``result`` with its calibration verdicts read from its coverages.
+
+    :func:`depthcore.studies.coverage_verdicts.with_calibration`: every
+    filter's ``"calibrated"`` from the coverage and trials of each cell whose
+    truths are drawn, at the tolerance and false-discovery rate stated there;
+    a record made before those verdicts is read as a new one.
+    """
+    return coverage_verdicts.with_calibration(result)
 
 
 def verdict_counts(result: dict, names=None) -> dict:
@@ -46,7 +55,8 @@ def verdict_counts(result: dict, names=None) -> dict:
     Parameters
     ----------
     result : dict
-        From :func:`depthcore.studies.atlas.atlas`.
+        From :func:`depthcore.studies.atlas.atlas` (its record), read by
+        :func:`read`.
     names : sequence of str, optional
         Default the atlas's filters.
 
@@ -57,9 +67,14 @@ def verdict_counts(result: dict, names=None) -> dict:
         "untested", "cells"}}}``: a cell where the filter failed, or had no
         valid trial, has no answer; one the grid does not run it in
         (:meth:`depthcore.studies.atlas.Grid.runs`) is not run; the nearness to
-        the bound is not tested where the cell has no bound; a verdict whose
-        test cannot decide, or whose score is not finite, is undecided.
+        the bound is not tested where the cell has no bound, the calibration
+        where its truth is fixed; a verdict whose test cannot decide, or whose
+        score is not finite, is undecided.
     """
+    return _counts(read(result), names)
+
+
+def _counts(result: dict, names=None) -> dict:
     names = result["names"] if names is None else names
     keys = ("yes", "no", "undecided", "no_answer", "not_run", "untested", "cells")
     out = {}
@@ -82,6 +97,8 @@ def _outcome(cell: dict, name: str, verdict: str) -> str:
         return "no_answer"
     if verdict == "near_bound" and "bound_sd" in cell and cell["bound_sd"] is None:
         return "untested"
+    if verdict == "calibrated" and coverage_verdicts.fixed_truth(cell):
+        return "untested"
     if entry[verdict] is None:
         return "undecided"
     return "yes" if entry[verdict] else "no"
@@ -97,32 +114,83 @@ def counts_by_prior(result: dict, name: str, verdict: str) -> dict:
         the settings in cell order.
     """
     out: dict = {}
-    for cell in result["cells"]:
+    for cell in read(result)["cells"]:
         key = (cell["form"], cell["prior_scale"])
         part = {**result, "cells": [cell]}
-        c = verdict_counts(part, [name])[name][verdict]
+        c = _counts(part, [name])[name][verdict]
         total = out.setdefault(key, dict.fromkeys(c, 0))
         for k, v in c.items():
             total[k] += v
     return out
 
 
+def tested(c: dict) -> int:
+    """The cells a verdict's counts (:func:`verdict_counts`) decide or leave undecided."""
+    return c["yes"] + c["no"] + c["undecided"]
+
+
+def headline(c: dict, tolerance: float) -> str:
+    """A filter's calibration counts as stated: calibrated within ±t in K of M cells, ..."""
+    return (
+        f"calibrated within ±{tolerance:g} in {c['yes']} of {tested(c)} cells, "
+        f"miscalibrated in {c['no']}, undecided in {c['undecided']}"
+    )
+
+
 def calibration_texts(counts: dict) -> dict:
-    """The calibrated cells of each group, as the chapter and the conclusions glue them.
+    """The calibration counts of each group, as the chapter and the conclusions glue them.
 
     Returns
     -------
     dict
         ``"good_min"``, ``"good_max"`` (:data:`CALIBRATED_GROUP`'s fewest and
-        most), ``"ekf"`` (``"none"`` for 0) and ``"poor_max"`` (the most of
-        :data:`MISCALIBRATED_GROUP` but the EKF).
+        most cells called calibrated), ``"ekf"`` (``"none"`` for 0),
+        ``"poor_max"`` (the most of :data:`MISCALIBRATED_GROUP` but the EKF),
+        ``"good_no_max"`` (:data:`CALIBRATED_GROUP`'s most called
+        miscalibrated), ``"poor_no_min"``, ``"poor_no_max"``
+        (:data:`MISCALIBRATED_GROUP`'s fewest and most called miscalibrated)
+        and ``"judged"`` (the most cells judged).
     """
     yes = {n: counts[n]["calibrated"]["yes"] for n in counts}
+    no = {n: counts[n]["calibrated"]["no"] for n in counts}
     return {
         "good_min": f"{min(yes[n] for n in CALIBRATED_GROUP)}",
         "good_max": f"{max(yes[n] for n in CALIBRATED_GROUP)}",
         "ekf": "none" if yes["ekf"] == 0 else f"{yes['ekf']}",
         "poor_max": f"{max(yes[n] for n in MISCALIBRATED_GROUP if n != 'ekf')}",
+        "good_no_max": f"{max(no[n] for n in CALIBRATED_GROUP)}",
+        "poor_no_min": f"{min(no[n] for n in MISCALIBRATED_GROUP)}",
+        "poor_no_max": f"{max(no[n] for n in MISCALIBRATED_GROUP)}",
+        "judged": f"{max(tested(counts[n]['calibrated']) for n in counts)}",
+    }
+
+
+def headline_table(counts: dict, names, tolerance: float) -> MarkdownTable:
+    """Per filter, its calibration :func:`headline`."""
+    rows = [[STYLE[n]["label"], headline(counts[n]["calibrated"], tolerance)] for n in names]
+    return MarkdownTable(["filter", "68 % depth intervals"], rows)
+
+
+def no_maximum(result: dict, name: str = "batch_ml") -> dict:
+    """The trials where a filter's estimate had no interior maximum, over an atlas's cells.
+
+    Returns
+    -------
+    dict
+        ``"counted"`` (whether the record counts them, per cell, as
+        :func:`depthcore.studies.atlas.filter_summary`'s ``"no_maximum"``),
+        ``"trials"`` (their sum), ``"answered"`` (the trials with a maximum
+        scored, summed over the same cells) and ``"cells"`` (the cells with
+        one or more).
+    """
+    entries = [c["filters"][name] for c in result["cells"] if name in c["filters"]]
+    entries = [e for e in entries if "failed" not in e]
+    counted = bool(entries) and all("no_maximum" in e for e in entries)
+    return {
+        "counted": counted,
+        "trials": sum(e.get("no_maximum", 0) for e in entries),
+        "answered": sum(e["trials"] for e in entries),
+        "cells": sum(e.get("no_maximum", 0) > 0 for e in entries),
     }
 
 
@@ -195,7 +263,7 @@ def verdict_grid(result: dict, verdict: str, names) -> tuple:
         ``R`` settings ``(form, prior_scale, depth)`` of a filter's block,
         ``columns`` the ``C`` settings ``(frames, rho)``.
     """
-    cells = result["cells"]
+    cells = read(result)["cells"]
     rows, columns = _keys(cells, _row_key), _keys(cells, _column_key)
     parallax = list(result["axes"]["parallax"])
     n_row, n_par = len(rows), len(parallax)
@@ -220,7 +288,8 @@ def verdict_map(result: dict, verdict: str, names=None):
     depths) run down, the parallaxes (increasing) to the right; a tile is
     dark where the verdict holds, light where it does not, grey where the
     test cannot decide, white with a cross where the filter has no answer,
-    white with a dot where the verdict is not tested (no bound), pale grey
+    white with a dot where the verdict is not tested (no bound, or a fixed
+    truth for the calibration), pale grey
     where the grid does not run the filter.
     """
     from matplotlib.colors import BoundaryNorm, ListedColormap
@@ -272,7 +341,7 @@ def verdict_map(result: dict, verdict: str, names=None):
         Patch(facecolor=COLOURS[0], edgecolor="0.6", label="no"),
         Patch(facecolor=COLOURS[2], label="undecided"),
         Line2D([], [], marker="x", linestyle="", color="0.3", label="no answer"),
-        Line2D([], [], marker=".", linestyle="", color="0.3", label="no bound"),
+        Line2D([], [], marker=".", linestyle="", color="0.3", label="not tested"),
         Patch(facecolor="#f0f0f0", label="not run"),
     ]
     fig.legend(

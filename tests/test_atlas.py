@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from depthcore.analysis import bound
+from depthcore.analysis import batch_ml, bound
 from depthcore.cli.main import main
 from depthcore.problem import model
-from depthcore.studies import atlas, monte_carlo, tasks
-from depthcore.studies.scores import TEST_Z, detectable_difference
+from depthcore.studies import atlas, coverage_verdicts, monte_carlo, tasks
+from depthcore.studies.scores import TEST_Z
 
 from helpers import exit_status
 
@@ -71,7 +71,9 @@ def test_the_atlas_is_the_same_in_other_chunks_of_work_and_on_two_workers():
     here = atlas.atlas(TINY, seed=1)
     seen = []
     again = atlas.atlas(TINY, seed=1, on_cell=seen.append)
-    assert _same(here, again) and seen == again["cells"]
+    assert _same(here, again)
+    # each cell as it is summarised; its calibration is read once every cell is in
+    assert coverage_verdicts.with_calibration({**again, "cells": seen}) == again
     with tasks.cluster(workers=2) as client:
         there = atlas.atlas(TINY, seed=1, client=client)
     assert _same(here, there)
@@ -92,17 +94,9 @@ def _summary(**kw):
 
 
 def test_verdicts_on_constructed_scores():
-    se = math.sqrt(0.68 * 0.32 / 2000)
     v = atlas.verdicts(_summary())
-    assert v == {"calibrated": True, "lost": False, "near_bound": True}
-    # calibration: the binomial test at 1 %, two-sided
-    assert atlas.verdicts(_summary(coverage_68=0.68 - 2.5 * se))["calibrated"] is True
-    assert atlas.verdicts(_summary(coverage_68=0.68 - 2.7 * se))["calibrated"] is False
-    assert atlas.verdicts(_summary(coverage_68=0.68 + 2.7 * se))["calibrated"] is False
-    # a pass of a test too coarse to find a coverage 0.1 off is undecided
-    few = next(n for n in range(10, 1000) if detectable_difference(0.68, n) <= 0.1)
-    assert atlas.verdicts(_summary(trials=few))["calibrated"] is True
-    assert atlas.verdicts(_summary(trials=few - 1))["calibrated"] is None
+    # the calibration is read over all cells (coverage_verdicts), not in one
+    assert v == {"lost": False, "near_bound": True}
     # track loss against its level, with the Agresti-Coull error
     assert atlas.verdicts(_summary(track_loss=0.5, lost=1000))["lost"] is True
     assert atlas.verdicts(_summary(track_loss=0.1, lost=200))["lost"] is None
@@ -114,7 +108,58 @@ def test_verdicts_on_constructed_scores():
     assert atlas.verdicts(_summary(bound_ratio=1.1 + 1.01 * TEST_Z * 0.01))["near_bound"] is False
     # no score, no verdict
     assert atlas.verdicts(_summary(bound_ratio=None, bound_ratio_se=None))["near_bound"] is None
-    assert atlas.verdicts(_summary(coverage_68=None))["calibrated"] is None
+
+
+def test_the_atlas_reads_its_calibration_over_its_drawn_cells():
+    grid = atlas.Grid(
+        parallax=(0.2,),
+        depth=(6.0,),
+        prior_scale=(1000.0,),
+        rho=(0.005,),
+        frames=(3,),
+        forms=("paper", "range", "log_uniform"),
+        trials=40,
+        n_particles=60,
+        chunk=40,
+        names=("optimal", "ekf"),
+    )
+    result = atlas.atlas(grid, seed=2)
+    assert result == coverage_verdicts.with_calibration(result)  # read once, as the book does
+    paper, *drawn = result["cells"]
+    assert all(e["calibrated"] is None for e in paper["filters"].values())  # a fixed truth
+    for name in grid.names:
+        k = [round(c["filters"][name]["coverage_68"] * c["filters"][name]["trials"]) for c in drawn]
+        n = [c["filters"][name]["trials"] for c in drawn]
+        expected = coverage_verdicts.verdicts(k, n)
+        assert [c["filters"][name]["calibrated"] for c in drawn] == expected
+    assert result["levels"]["calibration_tolerance"] == coverage_verdicts.TOLERANCE
+
+
+def test_the_batch_ml_trials_without_a_maximum_are_counted_apart_in_each_cell():
+    grid = atlas.Grid(
+        parallax=(0.0, 0.4),
+        depth=(6.0,),
+        prior_scale=(1000.0,),
+        rho=(0.002,),
+        frames=(10,),
+        forms=("paper",),
+        trials=200,
+        n_particles=60,
+        chunk=100,
+        names=("batch_ml", "ekf"),
+    )
+    result = atlas.atlas(grid, seed=4)
+    for i, setting in enumerate(atlas.cells(grid)):
+        run = atlas.cell_study(grid, setting, atlas.cell_seed(4, i))
+        flagged = valid = 0
+        for part, *_ in run.items():
+            valid += len(part.mu)
+            if len(part.mu):
+                flagged += int(np.sum(batch_ml.estimate(part.mu, part.rho).at_limit))
+        entry = result["cells"][i]["filters"]["batch_ml"]
+        assert entry["no_maximum"] == flagged and entry["trials"] == valid - flagged
+        assert "no_maximum" not in result["cells"][i]["filters"]["ekf"]
+        assert (flagged > 0) == (setting["parallax"] == 0)  # without parallax, many
 
 
 def test_the_grid_and_its_refusals():
@@ -200,14 +245,17 @@ def test_the_chapter_counts_and_maps_each_verdict():
 
     def cell(parallax, frames, **entries):
         return {
-            **dict(form="paper", frames=frames, rho=0.005, prior_scale=1000.0),
+            **dict(form="range", frames=frames, rho=0.005, prior_scale=None),
             "depth": 6.0,
             "parallax": parallax,
             "filters": entries,
         }
 
-    yes = {"calibrated": True, "lost": False, "near_bound": None}
-    no = {"calibrated": False, "lost": True, "near_bound": True}
+    # the calibration is read from the coverages (a stored verdict is replaced)
+    yes = {"trials": 7500, "coverage_68": 0.68, "calibrated": False, "lost": False}
+    yes["near_bound"] = None
+    no = {"trials": 7500, "coverage_68": 0.5, "calibrated": True, "lost": True}
+    no["near_bound"] = True
     failed = {"failed": "reason", **dict.fromkeys(atlas.VERDICTS)}
     result = {
         "names": ["ekf"],
@@ -221,15 +269,24 @@ def test_the_chapter_counts_and_maps_each_verdict():
     assert beyond_atlas.count_cell(counts["lost"]) == "1 / 1 / 0 (1 not run, 1 without answer)"
     texts = beyond_atlas.count_texts({"ekf": counts}, "at")
     assert texts["at_ekf_lost"] == "1 (0)"
+    tol = coverage_verdicts.TOLERANCE
+    assert beyond_atlas.headline(counts["calibrated"], tol) == (
+        f"calibrated within ±{tol:g} in 1 of 2 cells, miscalibrated in 1, undecided in 0"
+    )
     m, rows, columns = beyond_atlas.verdict_grid(result, "calibrated", ["ekf"])
-    assert rows == [("paper", 1000.0, 6.0)] and columns == [(3, 0.005), (10, 0.005)]
+    assert rows == [("range", None, 6.0)] and columns == [(3, 0.005), (10, 0.005)]
     assert m.shape == (1, 5) and np.isnan(m[0, 2])
     assert m[0].tolist()[:2] == [1.0, 0.0] and m[0, 3:].tolist() == [3.0, 5.0]
-    # a form whose truths are drawn has no bound: its near-bound verdict is not tested
-    drawn = {**cell(0, 3, ekf=yes), "form": "range", "prior_scale": None, "bound_sd": None}
-    result["cells"].append(drawn)
+    # a form whose truths are drawn has no bound: its near-bound verdict is not tested; the
+    # paper's rule has a fixed truth: its calibration is not tested
+    drawn = {**cell(0, 3, ekf=yes), "bound_sd": None}
+    paper = {**cell(0, 3, ekf=yes), "form": "paper", "prior_scale": 1000.0}
+    result["cells"] += [drawn, paper]
     m, rows, _ = beyond_atlas.verdict_grid(result, "near_bound", ["ekf"])
-    assert rows[-1] == ("range", None, 6.0) and m[1, 0] == beyond_atlas.UNTESTED
+    assert m[0, 0] == beyond_atlas.UNTESTED
+    m, rows, _ = beyond_atlas.verdict_grid(result, "calibrated", ["ekf"])
+    assert rows[-1] == ("paper", 1000.0, 6.0) and m[1, 0] == beyond_atlas.UNTESTED
+    assert beyond_atlas.verdict_counts(result)["ekf"]["calibrated"]["untested"] == 1
     assert beyond_atlas.prior_label("paper", 1.0) == "paper, $s = 1$"
 
 
@@ -277,24 +334,29 @@ def test_the_prior_forms_are_an_axis_and_refused_trials_are_counted_apart():
 def test_the_chapter_counts_each_verdict_per_prior_setting():
     from depthbook import beyond_atlas
 
-    def cell(form, scale, verdict):
-        entry = {"calibrated": verdict, "lost": False, "near_bound": None}
+    def cell(form, scale, coverage, lost=False):
+        entry = {"trials": 7500, "coverage_68": coverage, "lost": lost, "near_bound": None}
         return {"form": form, "prior_scale": scale, "filters": {"ekf": entry}}
 
     result = {
         "names": ["ekf"],
         "cells": [
-            cell("paper", 1000.0, True),
-            cell("range", None, False),
-            cell("paper", 1000.0, None),
-            cell("range", None, False),
+            cell("paper", 1000.0, 0.68, lost=True),
+            cell("range", None, 0.5),
+            cell("paper", 1000.0, 0.5),
+            cell("range", None, 0.68),
+            cell("log_uniform", None, 0.5),
         ],
     }
     by = beyond_atlas.counts_by_prior(result, "ekf", "calibrated")
-    assert list(by) == [("paper", 1000.0), ("range", None)]
-    none = dict(no_answer=0, not_run=0, untested=0)
-    assert by[("paper", 1000.0)] == dict(yes=1, no=0, undecided=1, cells=2, **none)
-    assert by[("range", None)] == dict(yes=0, no=2, undecided=0, cells=2, **none)
+    assert list(by) == [("paper", 1000.0), ("range", None), ("log_uniform", None)]
+    none = dict(no_answer=0, not_run=0)
+    # the paper's rule has a fixed truth: its coverage is not judged
+    assert by[("paper", 1000.0)] == dict(yes=0, no=0, undecided=0, cells=2, untested=2, **none)
+    assert by[("range", None)] == dict(yes=1, no=1, undecided=0, cells=2, untested=0, **none)
+    # the verdicts are read over all the cells at once, not per prior setting
+    lost = beyond_atlas.counts_by_prior(result, "ekf", "lost")[("paper", 1000.0)]
+    assert lost == dict(yes=1, no=1, undecided=0, cells=2, untested=0, **none)
 
 
 def test_a_filter_runs_up_to_its_most_frames_in_a_grid():

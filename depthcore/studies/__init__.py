@@ -14,6 +14,8 @@
   (which estimate, and which stated uncertainty, to trust);
 * :mod:`~depthcore.studies.atlas`: every filter's verdicts over a grid of
   parallax, prior, noise, depth and frames, at the book's size or a cluster's;
+* :mod:`~depthcore.studies.coverage_verdicts`: a coverage calibrated within a
+  tolerance, outside it, or undecided, at a false-discovery rate, and the trials that takes;
 * :mod:`~depthcore.studies.reproduce`: the paper's tables reproduced, and the
   curves of its figures;
 * :mod:`~depthcore.studies.tasks`: where the studies' chunks of trials run, in

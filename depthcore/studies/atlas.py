@@ -16,14 +16,16 @@ own covariance (:mod:`depthcore.studies.priors`); every filter is scored at
 frame ``N`` (``frames``), over the trials it answers, refusals counted apart
 (:func:`depthcore.studies.trials.run_filters`).
 
-Each cell says, for each filter (:func:`verdicts`), with a test of the
-cell's own Monte Carlo error (three outcomes: yes, no, undecided):
+Each cell says, for each filter, with tests of the cells' own Monte Carlo
+error (three outcomes: yes, no, undecided):
 
-* **calibrated**: the coverage of its central 68 % depth interval passes
-  the binomial test (:func:`depthcore.studies.scores.coverage_test`) and
-  the test is fine enough to find a coverage :data:`CALIBRATION_REACH` off
-  (:func:`~depthcore.studies.scores.detectable_difference`); a pass of a
-  coarser test is undecided;
+* **calibrated**: its central 68 % depth interval's coverage lies within a
+  stated tolerance of 0.68 (yes), outside it (no), or the trials cannot tell,
+  the false-discovery rate of each claim held over the filter's cells
+  (:func:`depthcore.studies.coverage_verdicts.with_calibration`, read over
+  all cells once the last is in). Only the cells whose truths are drawn from
+  the prior are judged: at the paper's rule the truth is fixed, and a
+  coverage at one truth tests no posterior (``None`` there);
 * **track lost**: the fraction of trials whose track is lost
   (:func:`~depthcore.studies.scores.lost_tracks`) lies above
   :data:`LOSS_LEVEL` (significantly above: yes; below: no);
@@ -33,6 +35,10 @@ cell's own Monte Carlo error (three outcomes: yes, no, undecided):
   :data:`BOUND_TOLERANCE` (within 10 %), tested with its standard error.
   The bound is that of one fixed truth, so the forms whose truths are drawn
   have no bound and no such verdict (``None``).
+
+A filter whose estimate has no interior maximum on a trial (the batch
+maximum-likelihood estimate at its search limit) is scored over the others,
+the trials at the limit counted apart (``"no_maximum"``).
 
 :func:`atlas` runs all cells' chunks in one stream of tasks
 (:func:`depthcore.studies.tasks.fold_chunks`) and folds them in order, each
@@ -64,15 +70,9 @@ from depthcore.analysis import bound
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 from depthcore.registry.filters import ALL_NAMES, FILTERS
-from depthcore.studies import monte_carlo, tasks
+from depthcore.studies import coverage_verdicts, monte_carlo, tasks
 from depthcore.studies import priors as prior_forms
-from depthcore.studies.scores import (
-    TEST_Z,
-    coverage_test,
-    detectable_difference,
-    difference_verdict,
-    proportion_se,
-)
+from depthcore.studies.scores import TEST_Z, difference_verdict, proportion_se
 from depthcore.studies.trials import run_filters
 
 #: The bearing noise of one pixel of the paper's camera, 512 pixels over 30 degrees (radians).
@@ -84,11 +84,9 @@ FORMS = prior_forms.FORMS
 #: The axes of the grid, outermost first, in the order of :func:`cells`.
 AXES = ("form", "frames", "rho", "prior_scale", "depth", "parallax")
 
-#: The nominal level of the coverage behind the verdict ``calibrated``.
-CALIBRATION_LEVEL = 0.68
-
-#: The coverage error the calibration test must find (with power 0.8 at 1 %) to decide.
-CALIBRATION_REACH = 0.1
+#: Trials per cell: what the calibration verdict needs at its tolerance, in whole chunks of
+#: 100 (:func:`depthcore.studies.coverage_verdicts.trials_needed`).
+TRIALS = 100 * math.ceil(coverage_verdicts.trials_needed() / 100)
 
 #: The fraction of lost tracks above which a filter loses the track.
 LOSS_LEVEL = 0.1
@@ -102,6 +100,9 @@ COSTLY = ("resample_move", "rbpf", "range_parametrised")
 
 #: The verdicts of a cell, each True, False or None (undecided, or no answer).
 VERDICTS = ("calibrated", "lost", "near_bound")
+
+#: The verdicts each cell draws alone; ``calibrated`` is read over all cells.
+CELL_VERDICTS = ("lost", "near_bound")
 
 
 @dataclass(frozen=True)
@@ -172,7 +173,7 @@ SIZES = {
         rho=(PIXEL, PIXEL / 10),
         frames=(3, 10, 30),
         forms=FORMS,
-        trials=300,
+        trials=TRIALS,
         n_particles=200,
         chunk=100,
         names=tuple(n for n in ALL_NAMES if n not in COSTLY),
@@ -184,7 +185,7 @@ SIZES = {
         rho=(PIXEL, PIXEL / math.sqrt(10), PIXEL / 10),
         frames=(3, 10, 30),
         forms=FORMS,
-        trials=2000,
+        trials=TRIALS,
         n_particles=500,
         chunk=100,
     ),
@@ -331,27 +332,23 @@ def _finite(x):
 
 
 def verdicts(summary: dict) -> dict:
-    """A filter's three verdicts in a cell from its summary (:func:`filter_summary`).
+    """A filter's verdicts in a cell that the cell draws alone, from its summary.
 
     Parameters
     ----------
     summary : dict
-        With ``"trials"``, ``"coverage_68"``, ``"track_loss"``, ``"lost"``,
-        ``"bound_ratio"`` and ``"bound_ratio_se"`` (None where not finite).
+        From :func:`filter_summary`: with ``"trials"``, ``"track_loss"``,
+        ``"lost"``, ``"bound_ratio"`` and ``"bound_ratio_se"`` (None where
+        not finite).
 
     Returns
     -------
     dict
-        ``{verdict: True, False or None}`` for each of :data:`VERDICTS`: None
-        where the test cannot decide, or the score is None.
+        ``{verdict: True, False or None}`` for each of :data:`CELL_VERDICTS`:
+        None where the test cannot decide, or the score is None.
     """
     n = summary["trials"]
-    out = dict.fromkeys(VERDICTS)
-    c = summary["coverage_68"]
-    if c is not None and n >= 1:
-        passed = coverage_test(c, CALIBRATION_LEVEL, n)["verdict"] == "calibrated"
-        fine = detectable_difference(CALIBRATION_LEVEL, n) <= CALIBRATION_REACH
-        out["calibrated"] = None if (passed and not fine) else bool(passed)
+    out = dict.fromkeys(CELL_VERDICTS)
     if n >= 1:
         se = proportion_se(summary["lost"], n)
         v = int(difference_verdict(summary["track_loss"] - LOSS_LEVEL, se, TEST_Z))
@@ -369,8 +366,10 @@ def filter_summary(scores: dict, limit: float | None) -> dict:
     The depth's RMSE, median absolute error (where the scores have it),
     coverage and the fraction of lost tracks, each with its SE, the RMSE over
     ``limit`` (the bound's SD, None without one), the divergent trials'
-    fraction (where the scores count them), the trials it refused (counted
-    apart: ``"trials"`` are those it answered), and the :func:`verdicts`.
+    fraction (where the scores count them), the trials it refused and those
+    where its estimate has no interior maximum (``"no_maximum"``, where the
+    filter can have none; both counted apart: ``"trials"`` are those scored),
+    and the :func:`verdicts`.
     """
     d = scores["depth"]
     n = int(scores["trials"])
@@ -392,6 +391,8 @@ def filter_summary(scores: dict, limit: float | None) -> dict:
         out["median_abs_error"] = _finite(d["median_abs_error"])
     if "refused" in scores:
         out["refused"] = int(scores["refused"]["count"])
+    if "no_maximum" in scores:
+        out["no_maximum"] = int(scores["no_maximum"]["count"])
     if "divergent" in scores:
         out["divergent"] = float(scores["divergent"]["fraction"])
         out["divergent_se"] = float(scores["divergent"]["se"])
@@ -462,7 +463,8 @@ def atlas(
     progress : callable, optional
         ``progress(done, total)`` in trials, over every cell.
     on_cell : callable, optional
-        ``on_cell(summary)`` as each cell is summarised, in cell order.
+        ``on_cell(summary)`` as each cell is summarised, in cell order (its
+        filters without ``"calibrated"``, read once every cell is in).
 
     Returns
     -------
@@ -471,8 +473,11 @@ def atlas(
         ``"particles"``, ``"chunk"``, ``"names"``, ``"levels"`` (the verdicts'
         thresholds), ``"cells"`` (each cell's summary, in :func:`cells`
         order: its setting, truth, ``bound_sd``, valid and rejected trials,
-        and per filter the summary of :func:`filter_summary`) and ``"cost"``
-        (the measured time, :func:`cost_of`; it alone differs from run to run).
+        and per filter the summary of :func:`filter_summary` with its
+        ``"calibrated"``) and ``"cost"`` (the measured time, :func:`cost_of`;
+        it alone differs from run to run); the calibration's level, tolerance
+        and false-discovery rate in ``"levels"``
+        (:func:`~depthcore.studies.coverage_verdicts.with_calibration`).
     """
     grid = grid_of(size)
     root = checks.seed_sequence(seed)
@@ -510,7 +515,7 @@ def atlas(
         chunk_task, items(), fold, sizes, grid.trials * len(settings), progress, client
     )
     wall = time.perf_counter() - start
-    return {
+    out = {
         "axes": {a: list(grid.axis(a)) for a in AXES},
         "shape": list(grid.shape),
         "seed": root.entropy,
@@ -520,8 +525,6 @@ def atlas(
         "names": list(grid.names),
         "max_frames": dict(grid.max_frames),
         "levels": {
-            "calibration_level": CALIBRATION_LEVEL,
-            "calibration_reach": CALIBRATION_REACH,
             "loss_level": LOSS_LEVEL,
             "bound_tolerance": BOUND_TOLERANCE,
             "z": TEST_Z,
@@ -529,6 +532,7 @@ def atlas(
         "cells": summaries,
         "cost": cost_of(clock, grid, wall),
     }
+    return coverage_verdicts.with_calibration(out)
 
 
 def _chunk_sizes(grid: Grid) -> list[int]:

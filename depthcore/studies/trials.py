@@ -461,21 +461,11 @@ def _run_one(trials: Trials, name: str, rng, n_particles: int, noise: dict, ref)
 def interior(scored: Estimates, estimate) -> Estimates:
     """``scored`` without the trials where ``estimate`` has no interior maximum, counted apart.
 
-    Parameters
-    ----------
-    scored : Estimates
-        A filter's scores' inputs over the trials it answered.
-    estimate : depthcore.registry.estimates.Estimate
-        The filter's estimate over the same trials; where its
-        ``extras["at_limit"]`` (bool, shape (n,)) is true the estimate is a
-        limit of the search, not a maximum of the likelihood.
-
-    Returns
-    -------
-    Estimates
-        ``scored`` itself where the estimate carries no such flag; otherwise
-        its rows with an interior maximum, ``answered`` marking them and
-        ``no_maximum`` counting the others.
+    ``scored``: a filter's scores' inputs over the trials it answered;
+    ``estimate``: its registry estimate there, whose ``extras["at_limit"]``
+    (bool, (n,)) marks a limit of the search, not a maximum of the likelihood.
+    Returns ``scored`` where there is no such flag, else its rows with a
+    maximum, ``answered`` marking them and ``no_maximum`` counting the others.
     """
     flags = getattr(estimate, "extras", {}).get("at_limit")
     if flags is None:
