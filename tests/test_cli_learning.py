@@ -148,8 +148,8 @@ def test_the_refusal_names_the_files_frames(tmp_path, capsys):
         (["--prior-depth", "5", "1e-9"], "--prior-depth takes the depth's mean"),
         (["--prior-depth", "5", "nan"], "--prior-depth must be finite"),
         (["--prior-depth", "1e300", "1"], "--prior-depth must be at most 1000"),
-        (["--prior-depth", "5", "abc"], "argument --prior-depth: invalid float value"),
-        (["--prior-depth", "5"], "argument --prior-depth: expected 2 arguments"),
+        (["--prior-depth", "5", "abc"], "--prior-depth takes MEAN SD as numbers"),
+        (["--prior-depth", "5"], "--prior-depth takes MEAN SD, got 1 value"),
         (
             ["--prior-depth", "5", "1", "--prior-mean", "0", "5", "0"],
             "--prior-depth: a prior of its own",

@@ -167,6 +167,8 @@ def format_summary(summary: dict) -> str:
         f"prior at frame {number[0]}: mean {'(x, y, v, h, w)' if len(m) == 5 else '(x, y, v)'}"
         f" = ({', '.join(f'{v:#.4g}' for v in m)}), covariance {cov_text}",
     ]
+    if "prior_depth" in summary:
+        lines.append(depth_law_text(summary["prior_depth"]))
     if "direction" in summary:
         lines.append(direction_text(summary))
     missing = sum(v is None for v in summary["mu"])
@@ -467,6 +469,7 @@ def _table_chunks(head: dict, blocks: dict) -> Iterator[str]:
         f"{'(x, y, v, h, w)' if len(m) == 5 else '(x, y, v)'} = "
         f"({', '.join(f'{v:#.4g}' for v in m)}); process noise q = {q:g}"
         + ("" if head["gate"] is None else f"; gate {head['gate']:g}")
+        + ("" if "prior_depth" not in head else "\n" + depth_law_text(head["prior_depth"]))
         + f"\n{direction_text(head)}\n"
     )
     if not head["smoothed"]:
@@ -647,3 +650,18 @@ def strict(value, key: str = ""):
 def as_json(result) -> str:
     """``result`` as strict JSON: no NaN or Infinity (see :func:`strict`)."""
     return json.dumps(strict(result)[0], indent=2, allow_nan=False) + "\n"
+
+
+def depth_law_text(law: dict) -> str:
+    """The line naming ``--prior-depth``'s law, which the exact filter takes as it is."""
+    p = ["inf" if v is None else f"{v:g}" for v in law["parameters"]]
+    what = {
+        "log_uniform": lambda: f"log-uniform from {p[0]} to {p[1]}",
+        "range": lambda: f"Gaussian N({p[0]}, {p[1]}**2) truncated to {p[2]} .. {p[3]}",
+        "inverse_depth": lambda: f"1/depth ~ N({p[0]}, {p[1]}**2) truncated to {p[2]} .. {p[3]}",
+        "table": lambda: f"tabulated at {len(p) // 2} depths from {p[0]} to {p[len(p) // 2 - 1]}",
+    }[law["form"]]()
+    return (
+        f"prior on the depth at the first frame: {what} (the optimal filter's; the other "
+        "filters take the mean and covariance above)"
+    )

@@ -23,7 +23,8 @@ its prior need only say two things: the depth's density ``p(y_1)`` on
 
 Its edges and kinks (:attr:`DepthPrior.breakpoints`) are where the exact filter's
 quadrature ends its panels (:mod:`depthcore.exact.panels`). The Gaussian filters
-take the Gaussian of the same mean and covariance (:meth:`DepthPrior.gaussian`).
+take the Gaussian of the same mean and covariance (:meth:`DepthPrior.gaussian`, also
+its :attr:`~DepthPrior.mean` and :attr:`~DepthPrior.cov`, as a Gaussian prior has them).
 """
 
 from __future__ import annotations
@@ -217,6 +218,16 @@ class DepthPrior:
         wy = (half[:, None] * w).ravel() * np.exp(self.log_pdf(y))
         return float(wy @ y), float(wy @ (y * y))
 
+    @property
+    def mean(self) -> np.ndarray:
+        """The mean (3,) of ``(x_1, y_1, v_1)``, :meth:`gaussian`'s."""
+        return self.gaussian()[0]
+
+    @property
+    def cov(self) -> np.ndarray:
+        """The covariance (3, 3) of ``(x_1, y_1, v_1)``, :meth:`gaussian`'s."""
+        return self.gaussian()[1]
+
     def gaussian(self) -> tuple[np.ndarray, np.ndarray]:
         """The mean (3,) and covariance (3, 3) of ``(x_1, y_1, v_1)`` under this prior.
 
@@ -393,3 +404,17 @@ def stand_in(law, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
                 f"{name} must be None with a law, or the law's own moments (law.gaussian())"
             )
     return mean, cov
+
+
+def options(name: str, prior) -> dict:
+    """``{"law": prior}`` for the exact filter ``"optimal"`` when ``prior`` is a
+    :class:`DepthPrior`, else ``{}``: the other filters take its Gaussian."""
+    return {"law": prior} if name == "optimal" and isinstance(prior, DepthPrior) else {}
+
+
+def describe(prior) -> dict:
+    """A :class:`DepthPrior`'s law for JSON, ``{"form", "parameters"}``; ``{}`` for a Gaussian."""
+    if not isinstance(prior, DepthPrior):
+        return {}
+    values = [float(v) if math.isfinite(v) else None for v in prior.parameters]  # strict JSON
+    return {"prior_depth": {"form": prior.form, "parameters": values}}

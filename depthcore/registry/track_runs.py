@@ -28,7 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from depthcore.problem import bearing_pairs, model
+from depthcore.problem import bearing_pairs, depth_prior, model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, Gaussian
 from depthcore.registry import filters, online, track_files, tracking
 
@@ -131,6 +131,7 @@ def per_frame(
         "frames": int(n),
         "prior_mean": prior.mean.tolist(),
         "prior_cov": prior.cov.tolist(),
+        **depth_prior.describe(prior),
         "process_noise": float(process_noise),
         "gate": gate,
         "smoothed": True,
@@ -195,7 +196,10 @@ def streamed(frames, rho, prior, process_noise: float, names, gate=None) -> Iter
         step = 1.0 if k == 0 else float(f.step)
         if k == 0:
             mean, cov = prior.mean, prior.cov
-            started = [online.start(n, mean, cov, r, process_noise, gate) for n in names]
+            started = [
+                online.start(n, mean, cov, r, process_noise, gate, **depth_prior.options(n, prior))
+                for n in names
+            ]
         rows = {}
         for name, live in zip(names, started, strict=True):
             try:
@@ -434,6 +438,7 @@ def learn(mu, weights, prior, known_q=None, steps=None, gate=None):
         mu,
         prior.mean,
         prior.cov,
+        **depth_prior.options("optimal", prior),
         process_noise=known_q,
         steps=steps,
         weights=np.asarray(weights) if np.ndim(weights) else None,

@@ -20,7 +20,7 @@ import numpy as np
 
 from depthcore.exact import posterior
 from depthcore.kalman import iterated
-from depthcore.problem import checks, frames
+from depthcore.problem import checks, depth_prior, frames
 from depthcore.problem.gaussian import Gaussian
 from depthcore.problem.model import noise_free_state, noise_free_states_unchecked
 from depthcore.problem.scenarios import REPORTED, REPORTED_DECIMALS, SCENARIOS, Scenario
@@ -52,7 +52,8 @@ def _options(name: str, seed) -> dict:
 
 
 def _run(name: str, mu, rho, prior: Gaussian, seed, **options) -> Estimate:
-    return FILTERS[name](mu, rho, prior.mean, prior.cov, **_options(name, seed), **options)
+    law = depth_prior.options(name, prior)
+    return FILTERS[name](mu, rho, prior.mean, prior.cov, **_options(name, seed), **law, **options)
 
 
 def _moments(est: Estimate) -> dict:
@@ -150,7 +151,15 @@ def summarize(
         filters[name] = _moments(est)
         if gate is not None:
             filters[name]["gated"] = [int(k) + 1 for k in np.flatnonzero(est.updates.gated)]
-    if track.regular and len(mu) == 3 and q == 0 and "optimal" in filters and not gate:
+    paper_prior = not isinstance(prior, depth_prior.DepthPrior)  # Eq. (6) takes a Gaussian
+    if (
+        track.regular
+        and len(mu) == 3
+        and q == 0
+        and "optimal" in filters
+        and not gate
+        and paper_prior
+    ):
         filters["optimal"]["prob_behind_camera_all_depths"] = float(
             _run("optimal", mu, rho, prior, seed, support="all").extras["prob_behind_camera"]
         )
@@ -159,6 +168,7 @@ def summarize(
         "rho": float(rho) if np.ndim(rho) == 0 else [float(r) for r in rho],
         "prior_mean": prior.mean.tolist(),
         "prior_cov": prior.cov.tolist(),
+        **depth_prior.describe(prior),
         "c": None if c is None else c.tolist(),
         "frames": int(len(mu)),
         "process_noise": q,
@@ -171,9 +181,10 @@ def summarize(
     if smooth:
         kept = mu.copy()
         if gate is not None:  # the bearings the exact filter's gate skips are left out
-            skipped = FILTERS["optimal"](mu, rho, prior.mean, prior.cov, q, **track_options)
+            skipped = _run("optimal", mu, rho, prior, None, process_noise=q, **track_options)
             kept[skipped.updates.gated] = np.nan
         more = {} if steps is None else {"steps": track_options["steps"]}
+        more |= {"law": prior} if not paper_prior else {}
         sm = posterior.posterior(
             kept, rho, prior.mean, prior.cov, q, history=True, **more
         ).smoothed()
