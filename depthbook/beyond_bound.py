@@ -4,6 +4,8 @@ Recommended import: ``from depthbook import beyond_bound``.
 
 :func:`bound_study` runs every named filter over the trials and returns the
 errors and claimed SDs that the chapter holds against :mod:`depthcore.analysis.bound`;
+:func:`noise_free_depth_rmse` integrates the error of the noise-free solution of Eq. (7),
+:func:`value_se_digits` prints a Monte Carlo value to the digits its error allows;
 :func:`bound_figure` draws them over the bound; :func:`frame_bound_figure` draws the
 RMSE over the bound at every frame, from :func:`depthbook.studies.per_frame.per_frame_study`.
 """
@@ -13,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from depthbook.style import MIN_FONT, STYLE, WIDTH, legend_below, subplots
-from depthcore.problem import checks
+from depthcore.problem import checks, model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.registry.filters import FILTERS, check_names
@@ -145,6 +147,95 @@ def bound_study(
         by_frame = [runs[name][j] for j in range(len(frames))]
         out[name] = {k: np.array([r[k] for r in by_frame]) for k in BOUND_ERRORS}
     return out
+
+
+def value_se_digits(value: float, se: float) -> str:
+    """``"value ± se"`` to the decimals of the SE's second significant digit: ``"1.446 ± 0.016"``.
+
+    Parameters
+    ----------
+    value : float
+    se : float
+        > 0.
+
+    Returns
+    -------
+    str
+    """
+    se = checks.positive_scalar(se, "se")
+    decimals = max(0, 1 - int(np.floor(np.log10(se))))
+    return f"{float(value) + 0.0:.{decimals}f} ± {se:.{decimals}f}"
+
+
+#: Where :func:`noise_free_depth_rmse` cuts the denominator of Eq. (7): in its SDs from its mean.
+NOISE_FREE_CUT = 6.0
+
+
+def noise_free_depth_rmse(truth, rho: float, cut: float = NOISE_FREE_CUT) -> dict:
+    """The RMS depth error of the noise-free solution ``c`` (Eq. (7)) at time 3, by quadrature.
+
+    With bearings ``mu_k = b_k + w_k`` at times 1 to 3 (``b_k`` noise-free, ``w_k`` i.i.d.
+    ``N(0, rho**2)``) and true depth ``y`` at time 3, ``c2 - y = E / D`` with
+    ``D = mu1 + mu3 - 2 mu2`` (mean ``D0 = b1 + b3 - 2 b2``, variance ``6 rho**2``) and
+    ``E = (2 - y) w1 + (2 y - 2) w2 - y w3``. Given ``D = d``, ``E`` is Gaussian with mean
+    ``(1 - y) (d - D0)`` and variance ``2 rho**2`` (for every ``y``), so
+
+        E[(c2 - y)**2 | D = d] = (2 rho**2 + (y - 1)**2 (d - D0)**2) / d**2,
+
+    a one-dimensional integral over ``D``. Its density is positive at ``d = 0``, where
+    ``c2`` has a pole, so the mean square error is infinite; what is computed is the mean
+    square over ``|D - D0| <= cut * SD(D)``, the pole left out, which is what a Monte Carlo
+    of far fewer than ``1 / excluded`` trials estimates. The error is the larger of the
+    adaptive quadrature's estimate and its difference from a 400-point Gauss-Legendre rule.
+
+    Parameters
+    ----------
+    truth : array_like, shape (3,)
+        ``(x, y, v)`` at time 3, ``y > 2``, with ``b1 + b3 - 2 b2 != 0``.
+    rho : float
+        Bearing noise SD, > 0.
+    cut : float
+        > 0, below ``|D0| / SD(D)``, so that the pole is left out.
+
+    Returns
+    -------
+    dict of float
+        ``"rmse"``, its absolute ``"error"``, ``"excluded"`` (the probability of
+        ``|D - D0| > cut * SD(D)``) and ``"delta"`` (the first-order value,
+        ``sqrt(2 + 6 (y - 1)**2) rho / |D0|``).
+    """
+    from scipy import integrate, special
+
+    truth = checks.finite_array(truth, "truth", (3,))
+    rho = checks.positive_scalar(rho, "rho")
+    cut = checks.positive_scalar(cut, "cut")
+    y = float(truth[1])
+    if not y > 2:
+        raise ValueError(f"truth must have depth > 2, got {y:g}")
+    b = [float(np.squeeze(model.project(model.G(truth, k - 3)))) for k in (1, 2, 3)]
+    d0, sd = b[0] + b[2] - 2.0 * b[1], np.sqrt(6.0) * rho
+    if not cut * sd < abs(d0):
+        raise ValueError(
+            f"cut must leave out the pole of Eq. (7): below |D0| / SD(D) = {abs(d0) / sd:.3g}, "
+            f"got {cut:g}"
+        )
+
+    def mean_square(z):  # z = (d - D0) / SD(D), weighted by the normal density
+        d = d0 + sd * z
+        return np.exp(-0.5 * z**2) / np.sqrt(2 * np.pi) * (2 + 6 * (y - 1) ** 2 * z**2) / d**2
+
+    inside = 1.0 - 2.0 * special.ndtr(-cut)
+    value, err = integrate.quad(mean_square, -cut, cut, epsabs=0.0, epsrel=1e-13, limit=200)
+    nodes, weights = np.polynomial.legendre.leggauss(400)
+    check = cut * float(np.sum(weights * mean_square(cut * nodes)))
+    ms = rho**2 * value / inside
+    error = rho**2 * max(err, abs(value - check)) / inside
+    return {
+        "rmse": float(np.sqrt(ms)),
+        "error": float(error / (2.0 * np.sqrt(ms))),
+        "excluded": float(1.0 - inside),
+        "delta": float(np.sqrt(2.0 + 6.0 * (y - 1) ** 2) * rho / abs(d0)),
+    }
 
 
 #: The errors and claimed SDs of each filter that :func:`bound_study` returns.
