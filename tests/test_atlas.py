@@ -10,8 +10,9 @@ import pytest
 
 from depthcore.analysis import batch_ml, bound
 from depthcore.cli.main import main
+from depthcore.exact import posterior
 from depthcore.problem import model
-from depthcore.studies import atlas, coverage_verdicts, monte_carlo, tasks
+from depthcore.studies import atlas, coverage_verdicts, monte_carlo, tasks, trials
 from depthcore.studies.scores import TEST_Z
 
 from helpers import exit_status
@@ -380,3 +381,37 @@ def test_a_filter_runs_up_to_its_most_frames_in_a_grid():
     assert set(result["cells"][1]["filters"]) == {"ekf"}
     for size in ("book", "full"):
         assert all(atlas.SIZES[size].runs("iterated", n) for n in (3, 10, 30))
+
+
+def test_the_exact_filter_under_the_drawn_law_is_a_row_of_its_own():
+    """Each drawn cell scores the exact filter under the law itself beside its Gaussian."""
+    grid = atlas.Grid(
+        parallax=(0.2,),
+        depth=(6.0,),
+        prior_scale=(1000.0,),
+        rho=(0.005,),
+        frames=(10,),
+        forms=("paper", "log_uniform"),
+        trials=40,
+        n_particles=60,
+        chunk=40,
+        names=("optimal", "ekf"),
+    )
+    result = atlas.atlas(grid, seed=6)
+    paper, drawn = result["cells"]
+    law = result["under_law"]
+    assert law not in paper["filters"] and law in drawn["filters"]
+    assert law not in result["names"]  # a row beside the filters, not a filter
+    row, stand_in = drawn["filters"][law], drawn["filters"]["optimal"]
+    assert row["trials"] == stand_in["trials"]
+    assert row["coverage_68"] != stand_in["coverage_68"] or row["rmse"] != stand_in["rmse"]
+    # the row is the exact filter under the law on the cell's own trials
+    tr = trials.simulate(
+        drawn["truth"], 0.005, 40, np.random.default_rng(0), prior="log_uniform", frames=10
+    )
+    own = trials.run_filters(tr, ("optimal",))
+    ref = posterior.posterior(tr.mu[0], 0.005, None, None, law=tr.law)
+    assert abs(own[trials.UNDER_LAW].mean[0, 1] - ref.depth_mean) <= 1e-8 * ref.depth_sd
+    assert trials.UNDER_LAW not in trials.run_filters(
+        trials.simulate(drawn["truth"], 0.005, 5, np.random.default_rng(0), frames=3), ("optimal",)
+    )

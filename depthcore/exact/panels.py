@@ -13,7 +13,9 @@ integrand's mode (found by a scan and Newton steps) and evenly elsewhere. Each
 panel's 8-point Gauss-Legendre rule is compared with the rule on its two halves;
 panels whose change moves the depth's or the velocity's mean or SD by more than
 their share of ``rtol`` SDs are halved, until the changes summed over the panels
-are within ``rtol`` of each SD. The nodes returned are the halves' (:func:`place`).
+are within ``rtol`` of each SD (or of the moments' own rounding, as
+:func:`depthcore.exact.quadrature.integrate` allows). The nodes returned are the
+halves' (:func:`place`).
 """
 
 from __future__ import annotations
@@ -197,30 +199,33 @@ def _first_panels(target: Target, law, t_lo, t_hi, t0, width):
     return np.concatenate(idx), np.concatenate(a), np.concatenate(b)
 
 
-def _sums(t_a, t_b, idx, target, shift):
-    """Each panel's Gauss-Legendre sums (5, P), scaled by ``e^-shift[idx]``, its nodes'
-    depths (P, n) and log weights in ``y`` (P, n), and the largest ``log f`` (P,)."""
+def _sums(t_a, t_b, idx, target, shift, centre):
+    """Each panel's Gauss-Legendre sums (5, P) of ``1``, ``d``, ``d**2``, ``u``, ``u**2 +
+    Var[v | y]`` (``d``, ``u`` the depth and ``E[v | y]`` less the problem's ``centre`` (2, B),
+    against cancellation), scaled by ``e^-shift[idx]``; its nodes' depths (P, n) and log
+    weights in ``y`` (P, n), and the largest ``log f`` (P,)."""
     half = 0.5 * (t_b - t_a)
     t = (0.5 * (t_a + t_b))[:, None] + half[:, None] * _X
     y, log_f, v, c = _log_f(t, idx, target)
     log_q = np.log(half)[:, None] + np.log(_W) + log_f  # the panel's terms, in t
     e = np.exp(log_q - shift[idx][:, None])
+    d, u = y - centre[0, idx][:, None], v - centre[1, idx][:, None]
     sums = np.stack(
-        [e.sum(1), (e * y).sum(1), (e * y * y).sum(1), (e * v).sum(1), (e * (v * v + c)).sum(1)]
+        [e.sum(1), (e * d).sum(1), (e * d * d).sum(1), (e * u).sum(1), (e * (u * u + c)).sum(1)]
     )
     log_wy = np.log(half)[:, None] + np.log(_W) + t  # dy = e^t dt
     return sums, y, log_wy, np.max(log_f, axis=1)
 
 
-def _halves(t_a, t_b, idx, target, shift):
+def _halves(t_a, t_b, idx, target, shift, centre):
     m = 0.5 * (t_a + t_b)
-    left = _sums(t_a, m, idx, target, shift)
-    right = _sums(m, t_b, idx, target, shift)
+    left = _sums(t_a, m, idx, target, shift, centre)
+    right = _sums(m, t_b, idx, target, shift, centre)
     return left, right
 
 
 def _moments(totals):
-    """Mean and SD of ``y`` and ``v`` (B,) each, from summed totals (5, B)."""
+    """Mean (less the centre) and SD of ``y`` and ``v`` (B,) each, from summed totals (5, B)."""
     Z = totals[0]
     my, mv = totals[1] / Z, totals[3] / Z
     vy = np.maximum(totals[2] / Z - my * my, 0.0)
@@ -239,6 +244,12 @@ def _errors(diff, idx, totals):
         ey = np.maximum(np.abs(dmy), np.abs(dvy) / (2.0 * sy))
         ev = np.maximum(np.abs(dmv), np.abs(dvv) / (2.0 * sv))
     return np.where(np.isfinite(ey), ey, np.inf), np.where(np.isfinite(ev), ev, np.inf)
+
+
+def _rounding(mean, sd, offset, top):
+    """The rounding of a mean and SD in units of ``eps``, as the trapezoid quadrature's:
+    the mean's size, the log integrand's (``top``) and the centre's offset."""
+    return np.abs(mean) + sd * (1.0 + np.abs(top)) + np.where(sd > 0, offset**2 / sd, 0.0)
 
 
 def _refuse(target: Target, k: int, why: str) -> ValueError:
@@ -284,9 +295,12 @@ def place(target: Target, law: DepthPrior, rtol: float) -> Placed:
                 target, k, "the posterior of the depth does not decay at the prior's open end"
             )
     idx, a, b = _first_panels(target, law, t_lo, t_hi, t0, width)
-    coarse = _sums(a, b, idx, target, top)[0]
+    rows = np.arange(B)
+    centre = np.stack([target.floor + np.exp(t0), _log_f(t0[:, None], rows, target)[2][:, 0]])
+    centre[1] = np.where(np.isfinite(centre[1]), centre[1], 0.0)
+    coarse = _sums(a, b, idx, target, top, centre)[0]
     for _ in range(ROUNDS):
-        (left, yl, wl, fl), (right, yr, wr, fr) = _halves(a, b, idx, target, top)
+        (left, yl, wl, fl), (right, yr, wr, fr) = _halves(a, b, idx, target, top, centre)
         high = np.full(B, -np.inf)
         np.maximum.at(high, idx, np.maximum(fl, fr))
         fine = left + right
@@ -296,9 +310,14 @@ def place(target: Target, law: DepthPrior, rtol: float) -> Placed:
         err_y, err_v = np.zeros(B), np.zeros(B)
         np.add.at(err_y, idx, ey)
         np.add.at(err_v, idx, ev)
-        _, _, sy, _, sv = _moments(totals)
+        _, my, sy, mv, sv = _moments(totals)
+        # the roundoff floor, as the trapezoid quadrature's: the moments' own rounding
+        eps = 64.0 * np.finfo(float).eps
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tol_y = np.maximum(rtol * sy, eps * _rounding(centre[0] + my, sy, my, top))
+            tol_v = np.maximum(rtol * sv, eps * _rounding(centre[1] + mv, sv, mv, top))
         count = np.bincount(idx, minlength=B)
-        lagging = ~((err_y <= rtol * sy) & (err_v <= rtol * sv))
+        lagging = ~((err_y <= tol_y) & (err_v <= tol_v))
         if np.any(high > top + CUTOFF):
             k = int(np.argmax(high > top + CUTOFF))
             raise _refuse(
@@ -306,8 +325,8 @@ def place(target: Target, law: DepthPrior, rtol: float) -> Placed:
             )
         if not np.any(lagging):
             break
-        share = np.maximum(ey / np.where(sy > 0, sy, 1.0)[idx], ev / np.where(sv > 0, sv, 1.0)[idx])
-        split = lagging[idx] & (share * count[idx] >= rtol)
+        share = np.maximum(ey / tol_y[idx], ev / tol_v[idx])
+        split = lagging[idx] & (share * count[idx] >= 1.0)
         if np.any(count + np.bincount(idx[split], minlength=B) > PANEL_BUDGET):
             k = int(np.argmax(count + np.bincount(idx[split], minlength=B) > PANEL_BUDGET))
             raise _refuse(target, k, f"the depth quadrature needs over {PANEL_BUDGET} panels")

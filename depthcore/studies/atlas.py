@@ -73,7 +73,7 @@ from depthcore.registry.filters import ALL_NAMES, FILTERS
 from depthcore.studies import coverage_verdicts, monte_carlo, tasks
 from depthcore.studies import priors as prior_forms
 from depthcore.studies.scores import TEST_Z, difference_verdict, proportion_se
-from depthcore.studies.trials import run_filters
+from depthcore.studies.trials import UNDER_LAW, run_filters
 
 #: The bearing noise of one pixel of the paper's camera, 512 pixels over 30 degrees (radians).
 PIXEL = 1.0 / model.noise_in_pixels(1.0)
@@ -431,7 +431,7 @@ class _Cell:
         out.update(valid_trials=run.n_valid, rejected_trials=run.n_rejected, filters={})
         if run.n_valid == 0:
             return out
-        for name in run.names:
+        for name in [*run.names, *([UNDER_LAW] if UNDER_LAW in run.tallies else [])]:
             if name in self.failed:
                 out["filters"][name] = {"failed": self.failed[name], **dict.fromkeys(VERDICTS)}
                 continue
@@ -527,6 +527,7 @@ def atlas(
         "particles": grid.n_particles,
         "chunk": grid.chunk,
         "names": list(grid.names),
+        "under_law": UNDER_LAW,
         "max_frames": dict(grid.max_frames),
         "levels": {
             "loss_level": LOSS_LEVEL,

@@ -223,7 +223,7 @@ def with_calibration(result: dict, tolerance=TOLERANCE, rate=FALSE_DISCOVERY) ->
     cells = [
         {**c, "filters": {n: dict(e) for n, e in c["filters"].items()}} for c in result["cells"]
     ]
-    for name in result["names"]:
+    for name in [*result["names"], *([result["under_law"]] if "under_law" in result else [])]:
         entries = [c["filters"].get(name) for c in cells if not fixed_truth(c)]
         entries = [e for e in entries if e is not None and e.get("coverage_68") is not None]
         k = [round(e["coverage_68"] * e["trials"]) for e in entries]

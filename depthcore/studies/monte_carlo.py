@@ -304,8 +304,8 @@ class Study:
         if estimates is None:
             return
         self.n_valid += len(part.mu)
-        for name, est in estimates.items():
-            self.tallies[name].add(est)
+        for name, est in estimates.items():  # a row beside the filters (trials.UNDER_LAW) too
+            self.tallies.setdefault(name, Tally(part.truth)).add(est)
         if self.paired:
             per_trial, both = _paired_rows(estimates, part.truth, len(part.mu))
             if self.comoments is None:

@@ -25,6 +25,7 @@ import numpy as np
 
 from depthcore.exact import optimal
 from depthcore.problem import checks, model
+from depthcore.problem.depth_prior import DepthPrior
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE, gaussian_logpdf, paper_prior_means
 from depthcore.registry.estimates import exact_depth_range
 from depthcore.registry.filters import FILTERS, NAMES, check_names
@@ -36,6 +37,10 @@ PRIORS = ("paper", "fixed", *prior_forms.DRAWN)
 
 #: Particles per trial of the particle filter.
 PARTICLES = 2000
+
+#: The row of the exact filter under a drawn form's law itself (:attr:`Trials.law`), beside
+#: ``"optimal"`` under the law's Gaussian: what the Gaussian stand-in costs.
+UNDER_LAW = "optimal_under_law"
 
 
 @dataclass(frozen=True)
@@ -62,6 +67,9 @@ class Trials:
     tracks : ndarray, shape (N, K, 3), or None
         The true state at every frame ``1 .. K`` of each trial, where asked
         for (:func:`simulate`'s ``tracks``); ``None`` otherwise.
+    law : depthcore.problem.depth_prior.DepthPrior or None
+        The law the truths were drawn from (a drawn form), whose Gaussian is
+        ``prior_mean`` and ``prior_cov``; ``None`` otherwise.
     """
 
     truth: np.ndarray
@@ -73,6 +81,7 @@ class Trials:
     process_noise: float = 0.0
     states: np.ndarray | None = None
     tracks: np.ndarray | None = None
+    law: DepthPrior | None = None
 
     @property
     def truths(self) -> np.ndarray:
@@ -234,6 +243,7 @@ def _drawn_trials(truth, rho, n, rng, form, frames, q, tracks) -> Trials:
         q,
         sim.states[keep, -1, :],
         sim.states[keep] if tracks else None,
+        prior_forms.law(form, centre, rho),
     )
 
 
@@ -391,6 +401,10 @@ def run_filters(
             continue
         out[name] = _run_one(trials, name, rng, n_particles, noise, ref)
         clock[name] = time.perf_counter() - start
+    if trials.law is not None and "optimal" in names:  # the exact filter under the law itself
+        start = time.perf_counter()
+        out[UNDER_LAW] = _run_one(trials, "optimal", rng, n_particles, noise | {"law": trials.law})
+        clock[UNDER_LAW] = time.perf_counter() - start
     return out
 
 
@@ -402,8 +416,8 @@ FAILURES = (ValueError, np.linalg.LinAlgError)
 ROUNDS = 5
 
 
-def _run_one(trials: Trials, name: str, rng, n_particles: int, noise: dict, ref) -> Estimates:
-    """One non-exact filter's :class:`Estimates` over the trials it answers."""
+def _run_one(trials: Trials, name: str, rng, n_particles: int, noise: dict, ref=None) -> Estimates:
+    """One filter's :class:`Estimates` over the trials it answers (``noise``: its options)."""
     f = FILTERS[name]
     options = dict(noise)
     if f.random:
