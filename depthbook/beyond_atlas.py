@@ -415,3 +415,52 @@ def cost_rows(cost: dict, names) -> list[dict]:
 
 def _frames(item) -> int:
     return int(item[0])
+
+
+def under_law(result: dict) -> dict:
+    """The exact filter under each drawn form's law and under its Gaussian, pooled over cells.
+
+    Per form (and ``"all"``), for ``"law"`` (the record's ``"under_law"`` row) and
+    ``"gaussian"`` (``"optimal"``): the 68 % coverage pooled over the drawn cells'
+    trials with its binomial SE, the mean of the cells' depth RMSE, and the
+    calibration counts (:func:`depthcore.studies.coverage_verdicts.with_calibration`).
+    Empty for a record without the row.
+    """
+    if "under_law" not in result:
+        return {}
+    result = read(result)
+    drawn = [c for c in result["cells"] if not coverage_verdicts.fixed_truth(c)]
+    out = {}
+    for form in [*sorted({c["form"] for c in drawn}), "all"]:
+        cells = [c for c in drawn if form in ("all", c["form"])]
+        out[form] = {}
+        for key, name in (("law", result["under_law"]), ("gaussian", "optimal")):
+            rows = [c["filters"][name] for c in cells if name in c["filters"]]
+            rows = [r for r in rows if r.get("coverage_68") is not None]
+            n = sum(r["trials"] for r in rows)
+            p = sum(r["coverage_68"] * r["trials"] for r in rows) / n
+            verdicts = [r["calibrated"] for r in rows]
+            out[form][key] = {
+                "coverage": p,
+                "coverage_se": float(np.sqrt(p * (1.0 - p) / n)),
+                "rmse": float(np.mean([r["rmse"] for r in rows])),
+                "cells": len(rows),
+                "yes": verdicts.count(True),
+                "no": verdicts.count(False),
+                "undecided": verdicts.count(None),
+            }
+    return out
+
+
+def under_law_table(rows: dict) -> MarkdownTable:
+    """Per drawn form, the exact filter's pooled coverage and mean RMSE, law and Gaussian."""
+    body = []
+    for form, r in rows.items():
+        label = "all drawn" if form == "all" else prior_label(form, None)
+        body.append(
+            [label]
+            + [f"{r[k]['coverage']:.3f} ± {r[k]['coverage_se']:.3f}" for k in ("law", "gaussian")]
+            + [f"{r[k]['rmse']:.3g}" for k in ("law", "gaussian")]
+        )
+    header = ["prior", "coverage, law", "coverage, Gaussian", "RMSE, law", "RMSE, Gaussian"]
+    return MarkdownTable(header, body)
