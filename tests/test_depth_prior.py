@@ -27,7 +27,7 @@ LAWS = {
 }
 
 
-def grid_moments(law, mu, rho, steps, q, panels=2000, order=10):
+def grid_moments(law, mu, rho, steps, q, panels=2000, order=10, cdf_at=()):
     """Posterior mean and SD of ``y_N``, ``v_N`` and ``x_1`` (given every bearing), and the
     log marginal likelihood of the bearings, (7,)."""
     N = len(mu)
@@ -38,7 +38,9 @@ def grid_moments(law, mu, rho, steps, q, panels=2000, order=10):
     ey, ey2 = law.depth_moments()
     lo = max(lo, 1e-6, -elapsed.min() + 1e-9)
     hi = hi if np.isfinite(hi) else ey + 40 * math.sqrt(ey2 - ey * ey)
-    cuts = np.unique(np.r_[np.log(np.clip(law.breakpoints, lo, hi)), np.log(lo), np.log(hi)])
+    at = [y - elapsed[-1] for y in cdf_at]  # depths at frame 1 where a CDF is read: cuts
+    cuts = np.log(np.clip(np.r_[law.breakpoints, lo, hi, at], lo, hi))
+    cuts = np.unique(cuts)
     edges = np.unique(
         np.concatenate(
             [
@@ -88,7 +90,8 @@ def grid_moments(law, mu, rho, steps, q, panels=2000, order=10):
     mx = p @ out[:, 3]
     log_z = logp.max() + math.log(np.sum(np.exp(logp - logp.max())))
     sx = math.sqrt(p @ (out[:, 4] + (out[:, 3] - mx) ** 2))
-    return np.array([my, sy, mv, sv, mx, sx, log_z])
+    cdfs = [float(np.sum(p[yN < y])) for y in cdf_at]
+    return np.array([my, sy, mv, sv, mx, sx, log_z, *cdfs])
 
 
 def _track(law, N, steps, rho, q, seed):
@@ -321,3 +324,15 @@ def test_learning_rho_under_a_law_finds_the_maximum_of_its_likelihood():
     assert fit.rho_interval[0] < fit.rho < fit.rho_interval[1]
     stand_in = learning.fit(mu, *law.gaussian(), process_noise=0.0)
     assert abs(stand_in.rho - fit.rho) > 1e-6 * fit.rho  # the law is not its Gaussian
+
+
+@pytest.mark.parametrize("form", LAWS)
+def test_the_depth_cdf_under_a_law_is_the_grids_up_to_its_edges(form):
+    law = LAWS[form]
+    mu = _track(law, 6, None, 0.01, 0.0, seed=51)
+    post = posterior.posterior(mu, 0.01, None, None, law=law)
+    at = post.depth_mean + post.depth_sd * np.array([-1.5, 0.0, 1.0])
+    lo, hi = law.support
+    at = np.clip(at, lo + 5.0 + 1e-6, (hi if np.isfinite(hi) else 1e9) + 5.0 - 1e-6)
+    ref = grid_moments(law, mu, 0.01, None, 0.0, cdf_at=at)[7:]
+    assert np.all(np.abs(post.depth_cdf(at) - ref) <= 1e-8)

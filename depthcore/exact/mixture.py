@@ -260,7 +260,8 @@ class Mixture:
     def depth_cdf(self, y, rtol: float = 1e-10) -> np.ndarray:
         """``P(y_N <= y)``, integrated from the density.
 
-        0 and 1 beyond the nodes within ``e**-60`` of the largest; between,
+        0 and 1 beyond the nodes within ``e**-60`` of the largest (beyond a law's edges,
+        :attr:`Bank.law <depthcore.exact.bank.Bank.law>`); between,
         :func:`depthcore.exact.cdf.gauss_legendre_cdf` in ``t = log(y_1)``.
 
         Parameters
@@ -278,6 +279,8 @@ class Mixture:
         nodes = np.broadcast_to(b.nodes, big.shape)
         lo = np.log(np.min(np.where(big, nodes, np.inf), axis=-1))[..., None]
         hi = np.log(np.max(np.where(big, nodes, 0.0), axis=-1))[..., None]
+        if b.law is not None:  # a law's edges bound its mass: the nodes lie inside them
+            lo, hi = _law_ends(b, lo, hi)
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.log(np.maximum(y - _travelled(b), 0.0))
         top = np.minimum(t, hi)
@@ -373,6 +376,15 @@ class Mixture:
             b.nodes[..., None, :] + frames[..., :, None],
         )
         return Smoothed(mean, cov)
+
+
+def _law_ends(bank: Bank, lo, hi):
+    """``log y_1`` at the ends of the depth CDF's range under the bank's law: its edges where
+    they are finite and above the floor, else the nodes' ``lo`` and ``hi``."""
+    edge_lo, edge_hi = bank.law.support
+    floor = np.asarray(bank.floor)[..., None]
+    lo = np.where(edge_lo > floor, np.log(max(edge_lo, 1e-300)), lo)
+    return lo, np.log(edge_hi) + 0.0 * hi if np.isfinite(edge_hi) else hi
 
 
 def _travelled(bank: Bank):
