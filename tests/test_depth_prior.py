@@ -336,3 +336,15 @@ def test_the_depth_cdf_under_a_law_is_the_grids_up_to_its_edges(form):
     at = np.clip(at, lo + 5.0 + 1e-6, (hi if np.isfinite(hi) else 1e9) + 5.0 - 1e-6)
     ref = grid_moments(law, mu, 0.01, None, 0.0, cdf_at=at)[7:]
     assert np.all(np.abs(post.depth_cdf(at) - ref) <= 1e-8)
+
+
+def test_a_batch_larger_than_one_placement_chunk_keeps_its_law():
+    """Past posterior's chunk of problems the joined bank still carries the law."""
+    law = LAWS["log_uniform"]
+    mu = np.stack([_track(law, 5, None, 0.01, 0.0, seed=60 + i) for i in range(70)])
+    batch = posterior.posterior(mu, 0.01, None, None, law=law)
+    assert batch.bank.law is law
+    for i in (0, 69):
+        one = posterior.posterior(mu[i], 0.01, None, None, law=law)
+        y = one.depth_mean + one.depth_sd
+        assert abs(batch.depth_cdf(np.full((70, 1), y))[i, 0] - one.depth_cdf(y)) <= 1e-9

@@ -8,9 +8,11 @@ prior of Figure 2's truth, the filter's probability integral transforms at frame
 ``N``) in each setting of numbers of frames ``N``, process noise ``q`` and bearing
 noise ``rho`` (:func:`factorial` makes every combination), each on its own stream
 spawned from one seed, and keeps the central 68 % and 95 % intervals' coverage, which
-the hard chapter tests. :func:`coverage_verdicts` reads each setting's depth coverages
-with their binomial standard errors, the two-sided test of each against its level,
-and the uniformity tests of the transforms.
+the hard chapter tests. :func:`law_calibration` does the same with truths drawn from
+each of the tracking literature's laws of the depth and the exact filter under that
+law itself. :func:`coverage_verdicts` reads each setting's depth coverages with their
+binomial standard errors, the two-sided test of each against its level, and the
+uniformity tests of the transforms.
 """
 
 from __future__ import annotations
@@ -20,10 +22,12 @@ import itertools
 import numpy as np
 
 from depthcore.analysis import bound, calibration
+from depthcore.exact import posterior
 from depthcore.problem import checks
 from depthcore.problem.gaussian import paper_prior_means
 from depthcore.problem.scenarios import SCENARIOS
 from depthcore.studies import scores, tasks
+from depthcore.studies import trials as drawn_trials
 from depthcore.studies.monte_carlo import FALSE_ALARM
 
 #: The central intervals whose depth coverage :func:`coverage_verdicts` tests.
@@ -145,6 +149,87 @@ def calibration_grid(settings, trials: int, seed, prior_scale: float = 1000.0, c
             }
         out.append(result)
     return out
+
+
+def law_calibration(forms, frames, trials: int, seed, rho: float, client=None):
+    """Simulation-based calibration of the exact filter under each drawn law, at frame ``N``.
+
+    In each setting ``(form, N)`` (every combination, ``N`` varying fastest) the truths
+    are drawn from the form's law about Figure 2's truth
+    (:func:`depthcore.studies.trials.simulate`, truths kept where the first three
+    bearings have a noise-free solution in front of the camera, a selection by the
+    bearings alone), followed to frame ``N`` without process noise, and the exact
+    filter runs under that law itself (:attr:`depthcore.studies.trials.Trials.law`);
+    its depth and velocity CDFs at the truth are kept as :func:`calibration_grid`
+    keeps them.
+
+    Parameters
+    ----------
+    forms : sequence of str
+        Of :data:`depthcore.studies.priors.DRAWN`.
+    frames : sequence of int
+    trials : int
+        Truths drawn per setting, >= 2.
+    seed : int or numpy.random.SeedSequence
+        Setting ``k`` draws from the seed's child ``k``.
+    rho : float
+        The bearing noise, > 0.
+    client : distributed.Client, optional
+        As for :func:`calibration_grid`.
+
+    Returns
+    -------
+    list of dict, one per setting
+        ``"form"`` and :func:`calibration_grid`'s keys (``"process_noise"`` 0).
+    """
+    settings = list(itertools.product(forms, [checks.frames(n) for n in frames]))
+    if not settings:
+        raise ValueError("forms, frames: each must hold at least one value")
+    trials = checks.count(trials, "trials")
+    rho = checks.positive_scalar(rho, "rho")
+    truth = np.asarray(SCENARIOS["fig2"].c, dtype=float)
+    out = []
+    for (form, n), s in zip(settings, checks.seed_sequence(seed).spawn(len(settings)), strict=True):
+        tr = drawn_trials.simulate(truth, rho, trials, np.random.default_rng(s), form, frames=n)
+        pits = []
+        tasks.fold_chunks(
+            _law_pit_chunk,
+            (
+                (tr.mu[i : i + CHUNK], tr.truths[i : i + CHUNK], rho, tr.law)
+                for i in range(0, len(tr.mu), CHUNK)
+            ),
+            lambda k, pit, pits=pits: pits.append(pit),
+            client=client,
+        )
+        result = {
+            "form": form,
+            "frames": n,
+            "process_noise": 0.0,
+            "rho": rho,
+            "valid_trials": len(tr.mu),
+            "rejected_trials": tr.n_rejected,
+            "levels": list(TESTED_LEVELS),
+        }
+        for j, quantity in enumerate(("depth", "velocity")):
+            u = np.concatenate([p[j] for p in pits])
+            tests = calibration.uniformity(u)
+            tests.pop("counts")
+            result[quantity] = {
+                "coverage": calibration.coverage(u, TESTED_LEVELS).tolist(),
+                **tests,
+            }
+        out.append(result)
+    return out
+
+
+def _law_pit_chunk(item) -> tuple:
+    """The exact filter's CDFs under the law at each truth's depth and velocity at frame ``N``:
+    a task of :func:`law_calibration`. ``item`` is ``(mu, truths, rho, law)``."""
+    mu, truths, rho, law = item
+    post = posterior.posterior(mu, rho, None, None, law=law)
+    depth = post.depth_cdf(truths[:, 1:2])[:, 0]
+    velocity = post.velocity_cdf(truths[:, 2:3])[:, 0]
+    return depth, velocity
 
 
 def _pit_chunk(item) -> tuple:

@@ -346,6 +346,7 @@ def _concatenate(parts) -> Mixture:
         prior_cov=np.concatenate([b.prior_cov for b in banks]),
         frame_steps=np.concatenate([b.frame_steps for b in banks]),
         frame_noise=np.concatenate([b.frame_noise for b in banks]),
+        law=banks[0].law,  # one law for the batch
         history=None
         if banks[0].history is None
         else linear.FilterResult(
