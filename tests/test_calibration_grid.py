@@ -67,3 +67,20 @@ def test_the_verdicts_pass_uniform_transforms_and_fail_those_of_a_filter_too_nar
     bad = calibration_grid.coverage_verdicts(_result(narrow))
     assert not bad["passes_68"] and not bad["passes_95"] and not bad["uniform"]
     assert bad["coverage_68"] < 0.68 - 0.1
+
+
+def test_law_calibration_draws_each_laws_truths_and_runs_the_exact_filter_under_it():
+    out = calibration_grid.law_calibration(("log_uniform", "inverse_depth"), (3, 10), 40, 5, 0.005)
+    assert [(r["form"], r["frames"]) for r in out] == [
+        ("log_uniform", 3),
+        ("log_uniform", 10),
+        ("inverse_depth", 3),
+        ("inverse_depth", 10),
+    ]
+    again = calibration_grid.law_calibration(("log_uniform",), (3,), 40, 5, 0.005)
+    assert again[0] == out[0]  # setting k draws from the seed's child k
+    for r in out:
+        assert r["valid_trials"] + r["rejected_trials"] == 40
+        assert len(r["depth"]["coverage"]) == len(calibration_grid.TESTED_LEVELS)
+    with pytest.raises(ValueError, match="forms, frames"):
+        calibration_grid.law_calibration((), (3,), 40, 5, 0.005)
