@@ -280,7 +280,7 @@ class Mixture:
         lo = np.log(np.min(np.where(big, nodes, np.inf), axis=-1))[..., None]
         hi = np.log(np.max(np.where(big, nodes, 0.0), axis=-1))[..., None]
         if b.law is not None:  # a law's edges bound its mass: the nodes lie inside them
-            lo, hi = _law_ends(b, lo, hi)
+            lo, hi = _law_ends(b, lo, hi, big, np.isfinite(self.log_weights))
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.log(np.maximum(y - _travelled(b), 0.0))
         top = np.minimum(t, hi)
@@ -378,13 +378,24 @@ class Mixture:
         return Smoothed(mean, cov)
 
 
-def _law_ends(bank: Bank, lo, hi):
-    """``log y_1`` at the ends of the depth CDF's range under the bank's law: its edges where
-    they are finite and above the floor, else the nodes' ``lo`` and ``hi``."""
+def _law_ends(bank: Bank, lo, hi, big, valid):
+    """``log y_1`` at the ends of the depth CDF's range under the bank's law.
+
+    Where the first (last) node that carries weight, of ``big`` (..., J), is the first
+    (last) node of all, of ``valid``, the law's edge there, when finite and above the
+    floor: the nodes lie inside the panels that end at it. Elsewhere the nodes' ``lo``
+    and ``hi``: what lies beyond them is negligible.
+    """
     edge_lo, edge_hi = bank.law.support
-    floor = np.asarray(bank.floor)[..., None]
-    lo = np.where(edge_lo > floor, np.log(max(edge_lo, 1e-300)), lo)
-    return lo, np.log(edge_hi) + 0.0 * hi if np.isfinite(edge_hi) else hi
+    J = big.shape[-1]
+    first = np.argmax(big, axis=-1) == np.argmax(valid, axis=-1)
+    last = np.argmax(big[..., ::-1], axis=-1) == np.argmax(valid[..., ::-1], axis=-1)
+    floor = np.asarray(bank.floor)
+    use_lo = (first & (edge_lo > floor))[..., None]
+    lo = np.where(use_lo, np.log(max(edge_lo, 1e-300)), lo)
+    if np.isfinite(edge_hi):
+        hi = np.where(last[..., None] & (J > 0), np.log(edge_hi), hi)
+    return lo, hi
 
 
 def _travelled(bank: Bank):
