@@ -159,7 +159,7 @@ def law_calibration(forms, frames, trials: int, seed, rho: float, client=None):
     (:func:`depthcore.studies.trials.simulate`, truths kept where the first three
     bearings have a noise-free solution in front of the camera, a selection by the
     bearings alone), followed to frame ``N`` without process noise, and the exact
-    filter runs under that law itself (:attr:`depthcore.studies.trials.Trials.law`);
+    filter runs under that law itself (``Trials.law`` of :class:`depthcore.studies.trials.Trials`);
     its depth and velocity CDFs at the truth are kept as :func:`calibration_grid`
     keeps them.
 

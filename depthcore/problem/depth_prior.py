@@ -165,7 +165,7 @@ class DepthPrior:
 
     @property
     def breakpoints(self) -> np.ndarray:
-        """Where the density has an edge or a kink: the finite ends and a table's depths."""
+        """The depths where the density has an edge or a kink, the finite ends and a table's."""
         if self.form == "table":
             return np.array(self.parameters[: len(self.parameters) // 2])
         return np.array([e for e in self.support if np.isfinite(e) and e > 0])

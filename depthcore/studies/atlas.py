@@ -84,12 +84,12 @@ FORMS = prior_forms.FORMS
 #: The axes of the grid, outermost first, in the order of :func:`cells`.
 AXES = ("form", "frames", "rho", "prior_scale", "depth", "parallax")
 
-#: Trials per cell: what the calibration verdict needs at its tolerance, in whole chunks of
-#: 100 (:func:`depthcore.studies.coverage_verdicts.trials_needed`); the full size runs them.
+#: The trials per cell the calibration verdict needs at its tolerance, in whole chunks of
+#: 100 (:func:`depthcore.studies.coverage_verdicts.trials_needed`), which the full size runs.
 TRIALS = 100 * math.ceil(coverage_verdicts.trials_needed() / 100)
 
-#: Trials per cell of the book's record: at 300 no coverage can be called calibrated within
-#: the tolerance, and the verdicts say so (undecided); :data:`TRIALS` can.
+#: The trials per cell of the book's record, at which no coverage can be called calibrated
+#: within the tolerance (the verdicts say undecided), as :data:`TRIALS` can be.
 BOOK_TRIALS = 300
 
 #: The fraction of lost tracks above which a filter loses the track.

@@ -47,7 +47,7 @@ from depthcore.studies import priors as prior_forms
 LEVEL = 0.68
 #: The false-discovery rate held for each claim, each filter's cells one family.
 FALSE_DISCOVERY = 0.05
-#: The one-sided tests' size the trials are designed for: half :data:`FALSE_DISCOVERY`.
+#: The size of the one-sided tests the trials are designed for, half :data:`FALSE_DISCOVERY`.
 DESIGN_FALSE_ALARM = FALSE_DISCOVERY / 2
 #: The probability with which :data:`NEAR` and :data:`FAR` are to be decided.
 DESIGN_POWER = 0.9

@@ -38,7 +38,7 @@ PRIORS = ("paper", "fixed", *prior_forms.DRAWN)
 #: Particles per trial of the particle filter.
 PARTICLES = 2000
 
-#: The row of the exact filter under a drawn form's law itself (:attr:`Trials.law`), beside
+#: The row of the exact filter under a drawn form's law itself (``Trials.law``), beside
 #: ``"optimal"`` under the law's Gaussian: what the Gaussian stand-in costs.
 UNDER_LAW = "optimal_under_law"
 
