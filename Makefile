@@ -33,7 +33,7 @@ KERNEL := $(VENV)/share/jupyter/kernels/python3
 
 .PHONY: help venv book book-html pdf pdf-latex builds builds-html builds-xelatex downloads lab test \
   article core core-and-setup lint notebooks notebooks-kernels notebooks-update notebooks-alone \
-  check-downloads check-book check-lab figures records bench clean distclean
+  check-downloads check-book check-lab figures records atlas bench clean distclean
 
 help: ## this list of the targets a reader runs
 	@awk -F ':.*## ' '/^[a-z-]+:.*## /{printf "  make %-21s %s\n", $$1, $$2}' Makefile
@@ -217,6 +217,16 @@ RECORD_PAGES := marginals discrepancies beyond_filters beyond_particles beyond_s
 records: $(EDITABLE) ## every study the book reads from a record, again (and the README and article)
 	$(PY) tools/records.py -- $(PY) tools/cluster.py $(PY) tools/check_notebooks.py update $(RECORD_PAGES)
 	$(PY) tools/check_notebooks.py update $(RECORD_PAGES)
+	$(PY) tools/readme.py
+	$(PY) tools/article.py write
+
+# The atlas's record alone (book/beyond_atlas.md; about 80 minutes on 2 cores), the other
+# records kept; then the pages, the README and the article that read it.
+ATLAS_PAGES := beyond_atlas conclusions
+atlas: $(EDITABLE) ## the atlas's record alone, again (and the pages, README and article)
+	$(PY) tools/records.py --keep -- $(PY) tools/cluster.py \
+	  $(PY) -c "from depthbook import beyond_atlas; beyond_atlas.runs()"
+	$(PY) tools/check_notebooks.py update $(ATLAS_PAGES)
 	$(PY) tools/readme.py
 	$(PY) tools/article.py write
 

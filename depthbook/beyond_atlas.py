@@ -16,11 +16,33 @@ from __future__ import annotations
 import numpy as np
 
 from depthbook.notebook import MarkdownTable
+from depthbook.provenance import records
 from depthbook.style import MIN_FONT, STYLE, WIDTH, subplots
 from depthcore.studies import atlas, coverage_verdicts
 
 #: The seed of the book's atlas (cell ``i`` is seeded by its child ``i``).
 SEED = 34
+
+#: The trials per number of frames at which the chapter times the filters the atlas leaves out.
+PROBE_TRIALS = 50
+
+
+def runs() -> tuple:
+    """The chapter's two records: the atlas's and the cost probe's of :data:`atlas.COSTLY`.
+
+    ``make atlas`` computes them again, the other records kept.
+
+    Returns
+    -------
+    tuple of depthbook.provenance.records.Recorded
+        ``(atlas_run, probe_run)``.
+    """
+    atlas_run = records.recorded(atlas.atlas, "book", SEED)
+    probe_run = records.recorded(
+        atlas.probe_cost, atlas.COSTLY, (3, 10, 30), PROBE_TRIALS, 200, SEED
+    )
+    return atlas_run, probe_run
+
 
 #: The filters the chapter finds miscalibrated in few cells (its checks assert it).
 CALIBRATED_GROUP = ("optimal", "second_order", "modified_polar", "batch_ml", "particle")

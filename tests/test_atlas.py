@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -86,6 +87,23 @@ def test_progress_counts_every_cells_trials():
     calls = []
     atlas.atlas(TINY, seed=0, progress=lambda d, t: calls.append((d, t)))
     assert calls[-1] == (4 * 24, 4 * 24) and len(calls) == 4 * 3
+
+
+def test_cells_whose_truth_is_fixed_draw_their_own_trials():
+    grid = dataclasses.replace(
+        TINY, parallax=(0.2,), frames=(3,), forms=("paper", "range"), fixed_trials=8
+    )
+    result = atlas.atlas(grid, seed=4)
+    paper, drawn = result["cells"]
+    assert (paper["form"], drawn["form"]) == ("paper", "range")
+    assert paper["valid_trials"] + paper["rejected_trials"] == 8
+    assert drawn["valid_trials"] + drawn["rejected_trials"] == 24
+    assert (result["trials"], result["fixed_trials"]) == (24, 8)
+    # the paper's cell is the study of its 8 trials, the same as a grid of 8 trials gives
+    alone = atlas.atlas(dataclasses.replace(grid, trials=8, forms=("paper",)), seed=4)
+    assert alone["cells"][0]["filters"] == paper["filters"]
+    cost = {"seconds_per_trial": {n: {"3": 1.0} for n in TINY.names}, "particles": 60}
+    assert atlas.estimated_cost(cost, grid)["core_hours"] * 3600 == pytest.approx((8 + 24) * 3)
 
 
 def _summary(**kw):

@@ -85,11 +85,13 @@ def test_the_trials_needed_give_the_stated_power_exactly():
         p = cv.power(edge, n, 0.68, t)
         assert p["calibrated"] <= cv.DESIGN_FALSE_ALARM
         assert p["miscalibrated"] <= cv.DESIGN_FALSE_ALARM + 1e-12
-    # the full atlas runs what the verdicts need, in whole chunks; the book's record has fewer
-    assert (
-        atlas.TRIALS >= n and atlas.TRIALS - n < 100 and atlas.SIZES["full"].trials == atlas.TRIALS
-    )
-    assert atlas.SIZES["book"].trials == atlas.BOOK_TRIALS < n
+    # both atlases run what the verdicts need where they draw one, in whole chunks; a cell
+    # whose truth is fixed (no calibration verdict) runs the 2,200 its error scores need
+    assert atlas.TRIALS >= n and atlas.TRIALS - n < 100
+    for grid in atlas.SIZES.values():
+        assert grid.trials == atlas.TRIALS and grid.fixed_trials == atlas.FIXED_TRIALS == 2200
+        assert grid.trials_of({"form": "range"}) == atlas.TRIALS
+        assert grid.trials_of({"form": "paper"}) == atlas.FIXED_TRIALS
     with pytest.raises(ValueError, match="^tolerance"):
         cv.trials_needed(0.05)
 

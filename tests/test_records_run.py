@@ -56,7 +56,8 @@ def _pages(references: Path, outcome: str) -> list[str]:
 
 
 def _start(current: Path, references: Path, command: list[str]) -> subprocess.Popen:
-    """tools/records.py on these folders, running ``command``."""
+    """tools/records.py on these folders, running ``command`` (``--keep`` first: the option)."""
+    keep = command[:1] == ["--keep"]
     return subprocess.Popen(
         [
             sys.executable,
@@ -65,8 +66,9 @@ def _start(current: Path, references: Path, command: list[str]) -> subprocess.Po
             str(current),
             "--references",
             str(references),
+            *command[:keep],
             "--",
-            *command,
+            *command[keep:],
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -142,4 +144,41 @@ def test_make_records_writes_beside_the_committed_records_and_never_deletes_them
     makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
     recipe = makefile.split("\nrecords:", 1)[1].split("\n\n", 1)[0]
     assert "tools/records.py --" in recipe
+    assert "rm " not in recipe
+
+
+#: A second command that stands for one page: another small study recorded, and nothing else.
+ONE_PAGE = """
+from depthbook.studies import frames
+from depthbook.provenance import records
+records.recorded(frames.frames_study, [3, 5], 12, 2, ("optimal",))
+"""
+
+
+def test_a_kept_run_writes_its_records_and_keeps_the_others(tmp_path):
+    current, references = tmp_path / "study_records", tmp_path / "_nbval"
+    references.mkdir()
+    first = _start(current, references, _pages(references, "0"))
+    assert first.communicate(timeout=120) and first.returncode == 0
+    (old,) = _contents(current)
+    for keep, expected in ((["--keep"], 2), ([], 1)):
+        command = [*keep, sys.executable, "-c", ONE_PAGE]
+        process = _start(current, references, command)
+        _, err = process.communicate(timeout=120)
+        assert process.returncode == 0, err
+        names = sorted(_contents(current))
+        assert len(names) == expected and (old in names) == bool(keep), names
+    # a kept record that is not of the current code stops the run, and the folder stays
+    (current / "frames_study-0000000000000000.json").write_text('{"old": true}\n')
+    before = _contents(current)
+    process = _start(current, references, ["--keep", sys.executable, "-c", ONE_PAGE])
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 1 and "not current after the run" in err
+    assert _contents(current) == before
+
+
+def test_make_atlas_recomputes_the_atlas_alone_keeping_the_other_records():
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    recipe = makefile.split("\natlas:", 1)[1].split("\n\n", 1)[0]
+    assert "tools/records.py --keep --" in recipe and "beyond_atlas" in recipe
     assert "rm " not in recipe

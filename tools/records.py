@@ -12,6 +12,10 @@ fails, or is interrupted (Ctrl-C, SIGTERM), the committed records, and the
 pages' references that COMMAND rewrites, are left as they were, so that the
 book still builds from them; the partial new set is removed.
 
+With ``--keep`` the new folder starts as a copy of the committed one, so
+that COMMAND may compute a few records again (``make atlas``, the atlas's
+alone) and the others stay; each must still be of the current code.
+
 Exits with COMMAND's status (130 when interrupted).
 """
 
@@ -62,13 +66,20 @@ def swap(new: Path, current: Path) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
-def run(command: list[str], current: Path, references: Path) -> int:
-    """Run ``command`` writing records beside ``current``; swap them in only if it ends well."""
+def run(command: list[str], current: Path, references: Path, keep: bool = False) -> int:
+    """Run ``command`` writing records beside ``current``; swap them in only if it ends well.
+
+    ``keep``: the new folder starts as a copy of ``current``, whose records
+    ``command`` does not write again stay.
+    """
     new = current.with_name(current.name + ".new")
     kept = references.with_name(references.name + ".kept")
     for folder in (new, kept):
         shutil.rmtree(folder, ignore_errors=True)
-    new.mkdir(parents=True)
+    if keep and current.is_dir():
+        shutil.copytree(current, new)
+    else:
+        new.mkdir(parents=True)
     if references.is_dir():
         shutil.copytree(references, kept)
     env = {**os.environ, records.ENVIRONMENT: "write", records.DIRECTORY: str(new)}
@@ -108,12 +119,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--records", type=Path, default=records.RECORDS, help=argparse.SUPPRESS)
     parser.add_argument("--references", type=Path, default=REFERENCES, help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--keep", action="store_true", help="keep the records the command does not write again"
+    )
     parser.add_argument("command", nargs=argparse.REMAINDER, help="-- COMMAND [ARG ...]")
     args = parser.parse_args(argv)
     command = args.command[1:] if args.command[:1] == ["--"] else args.command
     if not command:
         parser.error("a command to run is required, after --")
-    return run(command, args.records, args.references)
+    return run(command, args.records, args.references, args.keep)
 
 
 if __name__ == "__main__":

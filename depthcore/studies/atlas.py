@@ -48,7 +48,10 @@ returns with that seed (:func:`cell_study`); the atlas is the same, bit for
 bit, on any number of workers (its ``cost`` aside).
 
 Two sizes, :data:`SIZES`: the book's (``"book"``) and the full one
-(``"full"``, every axis finer and thousands of trials per cell), whose cost a
+(``"full"``, every axis finer). Both draw the :data:`TRIALS` a calibration
+verdict needs where the truths are drawn from the prior, and
+:data:`FIXED_TRIALS` where the truth is fixed and only the error is scored
+(:meth:`Grid.trials_of`). The full one's cost a
 user can estimate from the book's measured cost per trial
 (:func:`estimated_cost`) before running it on a cluster
 (``python -m depthcore atlas --size full --scheduler ADDRESS``).
@@ -88,9 +91,9 @@ AXES = ("form", "frames", "rho", "prior_scale", "depth", "parallax")
 #: 100 (:func:`depthcore.studies.coverage_verdicts.trials_needed`), which the full size runs.
 TRIALS = 100 * math.ceil(coverage_verdicts.trials_needed() / 100)
 
-#: The trials per cell of the book's record, at which no coverage can be called calibrated
-#: within the tolerance (the verdicts say undecided), as :data:`TRIALS` can be.
-BOOK_TRIALS = 300
+#: The trials of a cell whose truth is fixed (the paper's rule), scored for error and not
+#: for calibration (:func:`depthcore.studies.coverage_verdicts.fixed_truth`).
+FIXED_TRIALS = 2200
 
 #: The fraction of lost tracks above which a filter loses the track.
 LOSS_LEVEL = 0.1
@@ -128,7 +131,7 @@ class Grid:
     forms : tuple of str
         The prior's forms.
     trials : int
-        Trials drawn per cell.
+        Trials drawn per cell whose truths are drawn from the prior.
     n_particles : int
         Particles per trial of the filters that draw them.
     chunk : int
@@ -137,6 +140,9 @@ class Grid:
         The filters; those that cannot run at a cell's frames are left out there.
     max_frames : tuple of (str, int)
         Filters run only up to a number of frames, ``(name, N)`` pairs.
+    fixed_trials : int, optional
+        Trials drawn per cell whose truth is fixed (the paper's rule), where
+        no calibration verdict is drawn; ``trials`` when not given.
     """
 
     parallax: tuple
@@ -150,6 +156,12 @@ class Grid:
     chunk: int
     names: tuple = ALL_NAMES
     max_frames: tuple = ()
+    fixed_trials: int | None = None
+
+    def trials_of(self, cell: dict) -> int:
+        """The trials drawn at ``cell``: :attr:`fixed_trials` where its truth is fixed."""
+        fixed = coverage_verdicts.fixed_truth(cell) and self.fixed_trials is not None
+        return self.fixed_trials if fixed else self.trials
 
     def runs(self, name: str, frames: int) -> bool:
         """Whether filter ``name`` runs on ``frames`` frames in this grid."""
@@ -177,10 +189,11 @@ SIZES = {
         rho=(PIXEL, PIXEL / 10),
         frames=(3, 10, 30),
         forms=FORMS,
-        trials=BOOK_TRIALS,
+        trials=TRIALS,
         n_particles=200,
         chunk=100,
         names=tuple(n for n in ALL_NAMES if n not in COSTLY),
+        fixed_trials=FIXED_TRIALS,
     ),
     "full": Grid(
         parallax=(0.0, 0.05, 0.1, 0.2, 0.3, 0.4, 0.6),
@@ -192,6 +205,7 @@ SIZES = {
         trials=TRIALS,
         n_particles=500,
         chunk=100,
+        fixed_trials=FIXED_TRIALS,
     ),
 }
 
@@ -250,7 +264,7 @@ def cell_study(grid: Grid, cell: dict, seed) -> monte_carlo.Study:
     return monte_carlo.Study(
         truth_of(cell["parallax"], cell["depth"]),
         rho=cell["rho"],
-        trials=grid.trials,
+        trials=grid.trials_of(cell),
         seed=seed,
         prior=cell["form"],
         prior_scale=PAPER_PRIOR_SCALE if cell["prior_scale"] is None else cell["prior_scale"],
@@ -513,17 +527,17 @@ def atlas(
             if on_cell is not None:
                 on_cell(summary)
 
-    sizes = (s for _ in settings for s in _chunk_sizes(grid))
+    sizes = (s for setting in settings for s in _chunk_sizes(grid, grid.trials_of(setting)))
+    total = sum(grid.trials_of(s) for s in settings)
     start = time.perf_counter()
-    tasks.fold_chunks(
-        chunk_task, items(), fold, sizes, grid.trials * len(settings), progress, client
-    )
+    tasks.fold_chunks(chunk_task, items(), fold, sizes, total, progress, client)
     wall = time.perf_counter() - start
     out = {
         "axes": {a: list(grid.axis(a)) for a in AXES},
         "shape": list(grid.shape),
         "seed": root.entropy,
         "trials": grid.trials,
+        "fixed_trials": grid.trials if grid.fixed_trials is None else grid.fixed_trials,
         "particles": grid.n_particles,
         "chunk": grid.chunk,
         "names": list(grid.names),
@@ -540,8 +554,8 @@ def atlas(
     return coverage_verdicts.with_calibration(out)
 
 
-def _chunk_sizes(grid: Grid) -> list[int]:
-    return [min(grid.chunk, grid.trials - s) for s in range(0, grid.trials, grid.chunk)]
+def _chunk_sizes(grid: Grid, trials: int) -> list[int]:
+    return [min(grid.chunk, trials - s) for s in range(0, trials, grid.chunk)]
 
 
 def cost_of(clock: dict, grid: Grid, wall: float) -> dict:
@@ -600,7 +614,7 @@ def estimated_cost(cost: dict, size="full") -> dict:
             seconds = float(np.interp(s["frames"], f, t))
             if FILTERS[name].random:
                 seconds *= grid.n_particles / cost["particles"]
-            total += grid.trials * seconds
+            total += grid.trials_of(s) * seconds
     return {
         "core_hours": total / 3600.0,
         "cells": len(settings),
