@@ -486,3 +486,88 @@ def under_law_table(rows: dict) -> MarkdownTable:
         )
     header = ["prior", "coverage, law", "coverage, Gaussian", "RMSE, law", "RMSE, Gaussian"]
     return MarkdownTable(header, body)
+
+
+def undecided(result: dict, names=None, tolerance: float | None = None) -> dict:
+    """Per filter, the drawn cells its calibration leaves undecided, and why.
+
+    A coverage is undecided where its binomial interval reaches across an edge
+    of the band ``0.68 ± t``: its distance to the nearer edge, in standard
+    errors, says how near it lies; a cell where the filter answered fewer of
+    its trials (refusals) has a wider interval.
+
+    Parameters
+    ----------
+    result : dict
+        An atlas record's result, read by :func:`read`.
+    names : sequence of str, optional
+        Default the atlas's filters and its row under the law.
+    tolerance : float, optional
+        ``t``; default :data:`depthcore.studies.coverage_verdicts.TOLERANCE`.
+
+    Returns
+    -------
+    dict
+        ``{name: {"cells", "coverages" (list), "ses" (list), "trials" (list),
+        "edge_se" (the largest distance to the nearer edge, in SEs; None
+        without a cell)}}``.
+    """
+    result = read(result)
+    t = coverage_verdicts.TOLERANCE if tolerance is None else tolerance
+    if names is None:
+        names = [*result["names"], *([result["under_law"]] if "under_law" in result else [])]
+    edges = (coverage_verdicts.LEVEL - t, coverage_verdicts.LEVEL + t)
+    out = {}
+    for name in names:
+        rows = [
+            c["filters"][name]
+            for c in result["cells"]
+            if not coverage_verdicts.fixed_truth(c)
+            and name in c["filters"]
+            and "failed" not in c["filters"][name]
+            and c["filters"][name]["calibrated"] is None
+        ]
+        distance = [
+            min(abs(r["coverage_68"] - e) for e in edges) / r["coverage_68_se"] for r in rows
+        ]
+        out[name] = {
+            "cells": len(rows),
+            "coverages": [r["coverage_68"] for r in rows],
+            "ses": [r["coverage_68_se"] for r in rows],
+            "trials": [r["trials"] for r in rows],
+            "edge_se": max(distance) if distance else None,
+        }
+    return out
+
+
+def undecided_table(rows: dict, trials: int) -> MarkdownTable:
+    """Per filter with an undecided cell (:func:`undecided`): their coverages and why.
+
+    ``trials``: the trials each drawn cell ran; a cell where the filter
+    answered fewer than nine in ten of them is counted apart.
+    """
+    body = []
+    for name, r in rows.items():
+        if not r["cells"]:
+            continue
+        label = "exact, under the law" if name not in STYLE else STYLE[name]["label"]
+        few = sum(n < 0.9 * trials for n in r["trials"])
+        body.append(
+            [
+                label,
+                f"{r['cells']}",
+                f"{min(r['coverages']):.3f} to {max(r['coverages']):.3f}",
+                f"{max(r['ses']):.4f}",
+                f"{r['edge_se']:.1f}",
+                f"{few}",
+            ]
+        )
+    header = [
+        "filter",
+        "undecided cells",
+        "their coverages",
+        "largest SE",
+        "farthest from an edge (SEs)",
+        "answering < 90 %",
+    ]
+    return MarkdownTable(header, body)

@@ -353,8 +353,14 @@ def extension_numbers(bench: dict) -> list[Number]:
 def atlas_numbers() -> list[Number]:
     """The atlas's calibrated cells per group of filters, from its record (book/beyond_atlas.md)."""
     run = readme.atlas_run()
-    texts = {k: v for k, v in readme.atlas_texts(run).items() if k != "trials"}
-    args = f"size 'book', {len(run.result['cells'])} cells of {run.result['trials']} trials"
+    texts = {
+        k: v.replace(" %", r"~\%") for k, v in readme.atlas_texts(run).items() if k != "trials"
+    }
+    result = run.result
+    args = (
+        f"size 'book', {len(result['cells'])} cells of {result['trials']:,} trials "
+        f"({result.get('fixed_trials', result['trials']):,} at a fixed truth)"
+    )
     return [
         Number(
             f"atlas-{key.replace('_', '-')}",

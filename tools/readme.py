@@ -157,13 +157,21 @@ def atlas_texts(run=None) -> dict[str, str]:
     """The atlas's cells and calibrated cells per group of filters (book/beyond_atlas.md).
 
     :func:`depthbook.beyond_atlas.calibration_texts` of ``run`` (default
-    :func:`atlas_run`), with ``"cells"`` and ``"trials"``.
+    :func:`atlas_run`), with ``"cells"``, ``"trials"``, ``"tolerance"``, ``"fdr"``
+    (the false-discovery rate) and ``"law"`` (the headline of the exact filter under
+    the depth's true law).
     """
     run = atlas_run() if run is None else run
     counts = beyond_atlas.verdict_counts(run.result)
+    levels = beyond_atlas.read(run.result)["levels"]
+    tolerance = levels["calibration_tolerance"]
+    law = beyond_atlas.under_law(run.result)["all"]["law"]
     return {
         "cells": f"{len(run.result['cells'])}",
-        "trials": f"{run.result['trials']}",
+        "trials": f"{run.result['trials']:,}",
+        "tolerance": f"{tolerance:g}",
+        "fdr": f"{100 * levels['false_discovery_rate']:g} %",
+        "law": beyond_atlas.headline(law, tolerance),
         **beyond_atlas.calibration_texts(counts),
     }
 
@@ -230,11 +238,14 @@ def blocks(bench: dict | None = None) -> dict[str, str]:
         f"stated SDs within {b['near']}).",
         f"**Where each filter holds.** Over an atlas of {a['cells']} settings of parallax, "
         "prior (the paper's rule and three forms of the tracking literature), noise and "
-        f"frames, {a['trials']} trials each, the optimal filter, the second-order filter, "
-        "the modified-polar EKF, the batch maximum-likelihood estimate and an importance "
-        f"sampler have calibrated 68 % intervals in {a['good_min']} to {a['good_max']} "
-        f"settings; the EKF in {a['ekf']}, the UKF and the inverse-depth filters in at most "
-        f"{a['poor_max']}.",
+        f"frames, {a['judged']} with truths drawn from the prior at {a['trials']} trials each, "
+        "the optimal filter, the second-order filter, the modified-polar EKF, the batch "
+        "maximum-likelihood estimate and an importance sampler have 68 % intervals "
+        f"calibrated within ±{a['tolerance']} in {a['good_min']} to {a['good_max']} of "
+        f"those and miscalibrated in at most {a['good_no_max']}; the EKF, the UKF and the "
+        f"inverse-depth filters are miscalibrated in {a['poor_no_min']} to "
+        f"{a['poor_no_max']}. Given the depth's true law rather than its Gaussian stand-in, "
+        f"the exact filter is {a['law']}.",
         f"**Cost.** In the benchmarks' records (measured {c['date']}) the optimal "
         f"filter costs {c['optimal_ekf_min']} to {c['optimal_ekf_max']} times the EKF per "
         f"triple of bearings ({c['figures']}), where brute-force quadrature of Eq. (6) on a "
