@@ -356,3 +356,23 @@ def test_figure_verdicts_of_the_paper(found):
     assert summary["Figure 3"][:2] == (claims.NOT_REPRODUCED, claims.PRINTED_FORMULA)
     assert summary["Theorem 1"][0] == claims.AFTER_CORRECTION
     assert summary["Figure 4"] == (claims.NOT_CHECKABLE,)
+
+
+def test_the_chapter_counts_and_lays_out_the_claims(found):
+    from depthbook import claims as chapter
+
+    found = list(found.values())
+    n = chapter.counts(found)
+    assert list(n)[:-1] == list(claims.VERDICTS) and n["all"] == len(found)
+    assert sum(n[v] for v in claims.VERDICTS) == n["all"]
+    table = chapter.claims_table(found)
+    assert len(table.rows) == len(found) and table.rows[0][0] == found[0].item
+    assert all(row[-1].strip("*") in chapter.SHORT.values() for row in table.rows)
+    items = chapter.items_table(found, {"Figure 2": "[Figure 2](fig2.md)"})
+    by_item = {row[0]: row for row in items.rows}
+    assert "[Figure 2](fig2.md)" in by_item and "Figure 3" in by_item
+    # Figure 3's verdicts, worst first, each with its count; the counts add to its claims
+    row = by_item["Figure 3"]
+    said = row[2].split("; ")
+    assert said[0].startswith(chapter.SHORT[claims.NOT_REPRODUCED])
+    assert sum(int(part.rsplit(" ", 1)[1]) for part in said) == int(row[1])

@@ -40,8 +40,9 @@ sys.path.insert(0, str(ROOT / "tools"))
 import readme  # noqa: E402  (the README's numbers: the same computations, shared)
 
 from depthbook import beyond_atlas, formatting, reference  # noqa: E402
+from depthbook import claims as claims_chapter  # noqa: E402
 from depthbook.provenance import environment, records  # noqa: E402
-from depthbook.studies import verdicts  # noqa: E402
+from depthbook.studies import claims  # noqa: E402
 from depthcore import SCENARIOS, Gaussian, __version__  # noqa: E402
 from depthcore.exact import optimal  # noqa: E402
 from depthcore.kalman import second_order  # noqa: E402
@@ -148,8 +149,22 @@ def paper_numbers() -> list[Number]:
         ),
     ]
 
-    for v in verdicts.verdicts():
-        out.append(Number(f"verdict-{v.page}", v.verdict, "studies.verdicts.verdicts", v.item))
+    found = claims.claims()
+    pages = {s.figure: key for key, s in SCENARIOS.items()}
+    for item, verdicts_of_item in claims.figure_verdicts(found).items():
+        words = item.split()
+        if item == "Theorem 1":
+            key = "appendix"
+        elif words[0] == "Figure" and int(words[1]) in pages:
+            key = pages[int(words[1])]
+        else:
+            continue
+        mine = [c for c in found if c.item == item]
+        text = "; ".join(
+            f"{claims_chapter.SHORT[v]} {sum(c.verdict == v for c in mine)}"
+            for v in verdicts_of_item
+        )
+        out.append(Number(f"verdict-{key}", text, "studies.claims.claims", item))
 
     fig2, fig3 = SCENARIOS["fig2"], SCENARIOS["fig3"]
     broad = Gaussian(fig2.prior.mean, LIMIT_PRIOR * np.eye(3))

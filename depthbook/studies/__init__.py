@@ -8,8 +8,12 @@
   parallax, prior and depth;
 * :mod:`~depthbook.studies.replication`: a study replicated on independent
   seeds, its stated errors set against the spread across replicates;
-* :mod:`~depthbook.studies.verdicts`: what the replication found, one verdict
-  per figure and for Theorem 1.
+* :mod:`~depthbook.studies.claims`: every checkable claim of the paper, each
+  decided by a test stated before its number, from the numbers of
+  :mod:`~depthbook.studies.evidence`;
+* :mod:`~depthbook.studies.verdicts`: the numbers behind the print's errors;
+* :mod:`~depthbook.studies.calibration_grid`: simulation-based calibration over
+  settings of frames, noise, process noise and the depth's law.
 
 Where a new thing goes: a study a chapter needs that no user of ``depthcore``
 runs. A study users run goes to :mod:`depthcore.studies`.
