@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from depthbook.studies import evidence
+from depthbook.studies import evidence, verdicts
 from depthbook.studies.evidence import FILTER_ROWS, PAPER, PRINT_FORMULAS
 from depthcore.problem.scenarios import REPORTED_DECIMALS, SCAN_TEXT, SCENARIOS
 
@@ -77,10 +77,11 @@ AGREE = 0.5 * 10.0**-REPORTED_DECIMALS
 #: Closed forms that hold exactly (Eqs. (7), (19)) hold in double precision to this,
 #: relative to the largest component of ``c``: rounding (``1e-16``) with a wide margin.
 ROUNDING = 1e-12
-#: Theorem 1 holds when ``P_3^-1 D - I`` and the means' difference (relative to ``|c|``) are
-#: below this: the bound book/appendix.md asserts, double-precision rounding amplified by
-#: linear solves whose condition numbers reach about ``1e6`` (a bound, not a measured residue).
-THEOREM_BOUND = 1e-8
+#: Theorem 1 holds when ``||D - P_3||_F / ||P_3||_F`` and the means' difference (relative to
+#: ``|c|``) are below this: the bound book/appendix.md asserts
+#: (:data:`depthbook.studies.verdicts.THEOREM_TOL`), a hundred times the rounding of the two
+#: formulas (a bound, not a measured residue).
+THEOREM_BOUND = verdicts.THEOREM_TOL
 #: A printed formula fails when it misses the right covariance by more than this factor, minus 1.
 PRINTED_MISS = 0.1
 #: Eq. (16)'s dropped factor counts as independent of ``y`` when its log varies by less than
