@@ -582,6 +582,29 @@ def abstract_keys() -> list[str]:
     return re.findall(r"\{([a-z0-9-]+)\}", ABSTRACT)
 
 
+#: The fields of ReScience C's metadata template (its ``metadata.yaml``), in its order: each
+#: top-level key and, for a list of one-key entries, those keys in order.
+TEMPLATE_FIELDS = {
+    "title": None,
+    "authors": None,
+    "affiliations": None,
+    "keywords": None,
+    "code": ("url", "doi", "swh"),
+    "data": ("url", "doi"),
+    "replication": ("cite", "bib", "url", "doi"),
+    "abstract": None,
+    "bibliography": None,
+    "type": None,
+    "domain": None,
+    "language": None,
+    "review": ("url",),
+    "contributors": None,
+    "dates": ("received", "accepted", "published"),
+    "article": ("number", "doi", "url"),
+    "journal": ("name", "issn", "volume", "issue"),
+}
+
+
 def metadata(values: dict[str, str]) -> str:
     """``article/metadata.yaml``: the journal's metadata, from CITATION.cff and the abstract."""
     import yaml
@@ -593,15 +616,11 @@ def metadata(values: dict[str, str]) -> str:
     assert str(cited["year"]) == bib["year"], "CITATION.cff and the bibliography disagree"
     data = {
         "title": "[Re] Filter based estimates of depth",
-        "authors": [{"name": a["name"]} for a in cff["authors"]],
+        "authors": [{"name": a["name"], "affiliations": "*"} for a in cff["authors"]],
+        "affiliations": [],
         "keywords": ", ".join([*cff["keywords"], "rescience c", "python"]),
-        "code": [
-            {"url": CODE_ARCHIVE},
-            {"version": cff["version"]},
-            {"date-released": str(cff["date-released"])},
-            {"license": cff["license"]},
-        ],
-        "data": [{"url": None}],
+        "code": [{"url": CODE_ARCHIVE}, {"doi": None}, {"swh": None}],
+        "data": [{"url": None}, {"doi": None}],
         "replication": [
             {
                 "cite": f"{author['family-names']}, {author['given-names']} ({cited['year']}). "
@@ -616,14 +635,25 @@ def metadata(values: dict[str, str]) -> str:
         "type": "Replication",
         "domain": "Computer vision",
         "language": "Python",
-        "date": str(cff["date-released"]),
+        "review": [{"url": None}],
+        "contributors": [],
+        "dates": [{"received": None}, {"accepted": None}, {"published": None}],
+        "article": [{"number": None}, {"doi": None}, {"url": None}],
+        "journal": [
+            {"name": "ReScience C"},
+            {"issn": "2430-3658"},
+            {"volume": None},
+            {"issue": None},
+        ],
     }
     header = (
         "# The metadata of the replication article, in ReScience C's form; written by\n"
         "# tools/article.py from CITATION.cff and the article's numbers: do not edit.\n"
-        "# The original's url and doi are left empty: no source at hand confirms either.\n"
-        f"# The code is depthcore {cff['version']}, whose source archive the book ships as\n"
-        f"# {CODE_ARCHIVE}; the repository's address is not part of its metadata.\n"
+        "# Its fields are the template's (TEMPLATE_FIELDS); those the journal fills after\n"
+        "# acceptance are empty. The original's pages, url and doi are left out: no source\n"
+        "# at hand confirms them. The code is depthcore "
+        f"{cff['version']} ({cff['license']} licence, released\n"
+        f"# {cff['date-released']}), whose source archive the book ships as {CODE_ARCHIVE}.\n"
     )
     return header + yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=88)
 
