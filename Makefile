@@ -135,9 +135,9 @@ builds-xelatex:
 # The replication article: its numbers checked against the computations, then typeset.
 ARTICLE := _build/article
 ARTICLE_PDF := $(ARTICLE)/article.pdf
-article: $(EDITABLE) $(FIGURES)/.written ## the replication article, _build/article/article.pdf (needs xelatex)
+article: $(EDITABLE) ## the replication article, _build/article/article.pdf (needs xelatex)
 	tools/xelatex.sh --check
-	$(PY) tools/article.py build --figures $(FIGURES) --out $(ARTICLE)
+	$(PY) tools/article.py build --out $(ARTICLE)
 
 LAB_ARGS ?=# e.g. --no-browser; the MyST pages open as notebooks (tools/jupyter/lab/settings/)
 lab: $(EDITABLE) ## JupyterLab on the book's pages, which open as notebooks

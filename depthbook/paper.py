@@ -168,6 +168,69 @@ def save_all(out_dir, formats=("pdf", "png", "svg"), progress=None) -> list[Path
     return paths
 
 
+#: The width of a figure printed in half a column of the replication article (inches), at
+#: which its labels print at the book's type size, :data:`depthbook.style.MIN_FONT`.
+PRINT_WIDTH = 3.2
+
+#: The depth axes of the printed figures where they differ from :data:`GRIDS`: Figure 3's
+#: reaches far enough for the density of Eq. (16) as printed, whose mean is past 60.
+PRINT_GRIDS = {"fig3": (2.5, 150.0)}
+
+#: The printed figures that take the full width of the article's text (two half columns),
+#: their depth axes logarithmic, so that the long tail of Eq. (16) as printed shows.
+PRINT_WIDE = ("fig3",)
+
+
+def scenario_title(key: str) -> str:
+    """A printed figure's title: its scenario, not its number (``"fig6"``: its prior)."""
+    s = SCENARIOS[key]
+    equation = s.description.split("measurements ")[1].split(",")[0]
+    title = f"{s.quantity}: bearings {equation}, ρ = 1/{1 / s.rho:.0f}"
+    return title + (f", prior depth +{s.depth_offset:g}" if s.depth_offset else "")
+
+
+def print_figure(key: str, n: int = 1201):
+    """Figure ``key`` of the paper's three filters at the size the article prints it.
+
+    :data:`PRINT_WIDTH` wide (twice that for :data:`PRINT_WIDE`), so that its
+    type prints at the book's size; titled by its scenario
+    (:func:`scenario_title`); the depth axis of :data:`PRINT_GRIDS` where
+    given. Returns a matplotlib figure.
+    """
+    s = SCENARIOS[key]
+    lo, hi = PRINT_GRIDS.get(key, GRIDS[key])
+    curves = reproduce.curves(s, np.linspace(lo, hi, n), filters=_filters.PAPER_FILTERS)
+    width = PRINT_WIDTH * (2 if key in PRINT_WIDE else 1)
+    fig, ax = subplots(figsize=(width, 2.5))
+    if key in PRINTED_OVERLAY:
+        printed = optimal.run(s.mu, s.rho, s.prior.mean, s.prior.cov, reading="printed")
+        ax.plot(curves["grid"], printed.depth_pdf(curves["grid"]), linewidth=1.2, **PRINTED_STYLE)
+    plot_marginals(ax, curves, s.quantity)
+    if key in YLIM:
+        ax.set_ylim(0, YLIM[key])
+    if key in PRINT_WIDE:
+        ax.set_xscale("log")
+        ax.set_xlim(lo, hi)
+    ax.set_title(scenario_title(key), fontsize=MIN_FONT, loc="left")
+    return fig
+
+
+def save_print(out_dir) -> list[Path]:
+    """Write :func:`print_figure` of Figures 2-6 as ``print-figure<N>.pdf``; returns the paths."""
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for key, s in SCENARIOS.items():
+        fig = print_figure(key)
+        path = out / f"print-figure{s.figure}.pdf"
+        fig.savefig(path, metadata=_NO_DATE["pdf"])
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
 def readings_figure(key: str, y_max: float = 150.0, n: int = 1201):
     """The optimal depth marginal of a figure under both readings of Eq. (16).
 

@@ -607,3 +607,28 @@ def test_track_loss_figure_draws_each_threshold_and_the_rmse_over_the_tracks_kep
             assert_allclose(lines[label].get_ydata(), loss["fraction"][i])
             assert_allclose(kept[label].get_ydata(), loss["depth"]["rmse_kept"][i])
     plt.close(fig)
+
+
+@pytest.mark.parametrize("key", list(SCENARIOS))
+def test_the_articles_figures_print_at_their_size_titled_by_their_scenario(key):
+    fig = paper.print_figure(key, n=101)
+    ax = fig.axes[0]
+    wide = key in paper.PRINT_WIDE
+    assert fig.get_size_inches()[0] == pytest.approx(paper.PRINT_WIDTH * (2 if wide else 1))
+    # every text prints at 7 pt or more: drawn at the size the article prints it
+    texts = [t for t in ax.get_children() if isinstance(t, matplotlib.text.Text)]
+    texts += [ax.xaxis.label, ax.yaxis.label, *ax.get_legend().get_texts()]
+    texts += ax.get_xticklabels() + ax.get_yticklabels()
+    assert min(t.get_fontsize() for t in texts if t.get_text()) >= 7
+    title = ax.get_title(loc="left")
+    assert "Figure" not in title and f"1/{1 / SCENARIOS[key].rho:.0f}" in title
+    assert title.startswith(SCENARIOS[key].quantity)
+    if wide:  # Figure 3 reaches far enough to show Eq. (16) as printed, mean past 60
+        assert ax.get_xscale() == "log" and ax.get_xlim()[1] >= 150
+    plt.close(fig)
+
+
+def test_the_articles_figures_are_written_as_it_names_them(tmp_path):
+    paths = paper.save_print(tmp_path)
+    assert [p.name for p in paths] == [f"print-figure{s.figure}.pdf" for s in SCENARIOS.values()]
+    assert all(p.read_bytes().startswith(b"%PDF") for p in paths)

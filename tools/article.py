@@ -39,7 +39,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tools"))
 import readme  # noqa: E402  (the README's numbers: the same computations, shared)
 
-from depthbook import beyond_atlas, formatting, reference  # noqa: E402
+from depthbook import beyond_atlas, formatting, paper, reference  # noqa: E402
 from depthbook import claims as claims_chapter  # noqa: E402
 from depthbook.provenance import environment, records  # noqa: E402
 from depthbook.studies import claims  # noqa: E402
@@ -60,8 +60,9 @@ METADATA = ARTICLE / "metadata.yaml"
 BIB = ROOT / "book" / "references.bib"
 #: What the command line says when a generated file is not what this writes.
 COMMAND = "python tools/article.py"
-#: The figures the article shows: the book's, as vector PDF.
-FIGURES = tuple(f"figure{SCENARIOS[key].figure}.pdf" for key in SCENARIOS)
+#: The figures the article shows, drawn at the size it prints them
+#: (:func:`depthbook.paper.save_print`), as vector PDF.
+FIGURES = tuple(f"print-figure{SCENARIOS[key].figure}.pdf" for key in SCENARIOS)
 #: The Monte Carlo study of the coverage, as book/beyond_study.md reads it from its record.
 STUDY = readme.intro.COVERAGE_STUDY
 #: The noise levels of the small-noise limit of Eq. (8) (book/discrepancies.md).
@@ -720,22 +721,22 @@ def _current(files: dict[Path, str]) -> bool:
     return not changed
 
 
-def build(figures: Path, out: Path) -> int:
-    """Typeset the article into ``out/article.pdf`` once its generated files are current."""
+def build(out: Path) -> int:
+    """Typeset the article into ``out/article.pdf`` once its generated files are current.
+
+    Its figures are drawn into ``out`` at the size it prints them
+    (:func:`depthbook.paper.save_print`).
+    """
     files = generated()
     if not _current(files):
-        return 1
-    missing = [name for name in FIGURES if not (figures / name).is_file()]
-    if missing:
-        print(f"--figures {figures}: no {', '.join(missing)}: run `make figures`", file=sys.stderr)
         return 1
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
     for path in (SOURCE, *files):
         shutil.copy(path, out / path.name)
-    for name in FIGURES:
-        shutil.copy(figures / name, out / name)
+    drawn = {path.name for path in paper.save_print(out)}
+    assert drawn == set(FIGURES), drawn
     sentence = environment.records_sentence() + " " + environment.sentence(environment.statement())
     (out / "environment.tex").write_text(_tex(sentence) + "\n", encoding="utf-8")
     done = subprocess.run([str(ROOT / "tools" / "xelatex.sh"), str(out), "article"], check=False)
@@ -746,13 +747,12 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("action", nargs="?", choices=("write", "build"), default="write")
     p.add_argument("--check", action="store_true", help="fail if a generated file is not current")
-    p.add_argument("--figures", type=Path, help="build: the folder of figure2.pdf ... figure6.pdf")
     p.add_argument("--out", type=Path, help="build: the folder to typeset the article in")
     args = p.parse_args(argv)
     if args.action == "build":
-        if args.figures is None or args.out is None:
-            p.error("build needs --figures DIR and --out DIR")
-        return build(args.figures, args.out)
+        if args.out is None:
+            p.error("build needs --out DIR")
+        return build(args.out)
     files = generated()
     if args.check:
         return 0 if _current(files) else 1
