@@ -178,7 +178,8 @@ def test_the_metadata_has_the_journals_fields_and_agrees_with_citation_cff():
         article.METADATA.read_text(encoding="utf-8")
     )
     replication = {k: v for item in meta["replication"] for k, v in item.items()}
-    assert replication["bib"] == "maybank1990" and replication["doi"] is None
+    assert replication["bib"] == "maybank1990" and replication["doi"] == "10.5244/C.4.62"
+    assert "pp. 62.1–62.6" in replication["cite"] and replication["doi"] in replication["cite"]
     assert (
         "Maybank" in replication["cite"]
         and str(cff["preferred-citation"]["year"]) in (replication["cite"])

@@ -421,6 +421,7 @@ def software_numbers() -> list[Number]:
         Number("version", cff["version"], "CITATION.cff", "version"),
         Number("released", str(cff["date-released"]), "CITATION.cff", "date-released"),
         Number("licence", cff["license"], "CITATION.cff", "license"),
+        Number("original-doi", cff["preferred-citation"]["doi"], "CITATION.cff", "doi"),
         Number("pins", f"{len(pins)}", "requirements.txt", "lines pinned with =="),
     ]
 
@@ -648,11 +649,13 @@ def metadata(values: dict[str, str]) -> str:
         "replication": [
             {
                 "cite": f"{author['family-names']}, {author['given-names']} ({cited['year']}). "
-                f"{cited['title']}. {cited['collection-title']}, {cited['conference']['city']}.",
+                f"{cited['title']}. In {bib['editor']} (ed.), {cited['collection-title']}, "
+                f"pp. {bib['pages'].replace('--', '–')}. {bib['publisher']}, "
+                f"{cited['conference']['city']}. doi:{bib['doi']}",
             },
             {"bib": "maybank1990"},
             {"url": None},
-            {"doi": None},
+            {"doi": bib["doi"]},
         ],
         "abstract": abstract(values),
         "bibliography": "references.tex (from book/references.bib)",
@@ -674,8 +677,8 @@ def metadata(values: dict[str, str]) -> str:
         "# The metadata of the replication article, in ReScience C's form; written by\n"
         "# tools/article.py from CITATION.cff and the article's numbers: do not edit.\n"
         "# Its fields are the template's (TEMPLATE_FIELDS); those the journal fills after\n"
-        "# acceptance are empty. The original's pages, url and doi are left out: no source\n"
-        "# at hand confirms them. The code is depthcore "
+        "# acceptance are empty. The original's reference, pages and doi are the book's\n"
+        "# bibliography's; its url is left out (no copy at hand to point to). depthcore "
         f"{cff['version']} ({cff['license']} licence, released\n"
         f"# {cff['date-released']}), whose source archive the book ships as {CODE_ARCHIVE}.\n"
     )
