@@ -451,8 +451,11 @@ FORBIDDEN = {
         "optimal_under_law": False,
         "modified_polar": True,
     },
-    ("inverse_depth", 3, 1.0, 0.1): {"optimal": True, "optimal_under_law": False},
-    ("inverse_depth", 10, 1.0, 0.1): {"modified_polar": True},
+    ("inverse_depth", 3, 1.0, 0.1): {
+        "optimal": True,
+        "optimal_under_law": False,
+        "modified_polar": True,
+    },
 }
 
 

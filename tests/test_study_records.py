@@ -295,7 +295,10 @@ def test_every_page_that_reads_a_record_is_recomputed_by_make_records():
     reading = {
         p.stem
         for p in (ROOT / "book").glob("*.md")
-        if any(call in p.read_text() for call in ("records.recorded(", "records.committed("))
+        if any(
+            call in p.read_text()
+            for call in ("records.recorded(", "records.committed(", "records.read(")
+        )
     }
     assert reading == listed
 

@@ -678,9 +678,9 @@ def metadata(values: dict[str, str]) -> str:
         "# tools/article.py from CITATION.cff and the article's numbers: do not edit.\n"
         "# Its fields are the template's (TEMPLATE_FIELDS); those the journal fills after\n"
         "# acceptance are empty. The original's reference, pages and doi are the book's\n"
-        "# bibliography's; its url is left out (no copy at hand to point to). depthcore "
-        f"{cff['version']} ({cff['license']} licence, released\n"
-        f"# {cff['date-released']}), whose source archive the book ships as {CODE_ARCHIVE}.\n"
+        "# bibliography's; its url is left out (no copy at hand to point to).\n"
+        f"# The code is depthcore {cff['version']} ({cff['license']} licence, released "
+        f"{cff['date-released']}),\n# whose source archive the book ships as {CODE_ARCHIVE}.\n"
     )
     return header + yaml.safe_dump(data, sort_keys=False, allow_unicode=True, width=88)
 

@@ -245,9 +245,9 @@ def blocks(bench: dict | None = None) -> dict[str, str]:
         f"(ρ = {b['rho2']}, {b['n_first']} to {b['n_last']} frames, no process noise, the "
         "paper's prior rule) it claims an SD below the Cramér–Rao bound at every number of "
         f"frames ({b['ekf_sd3']} of it at {b['n_first']}) and from {b['n_second']} frames on "
-        f"its error is at least {b['ekf_rmse']} times the bound, while the second-order "
-        f"filter and the iterated EKF sit on it (errors within {b['z']} standard errors, "
-        f"stated SDs within {b['near']}).",
+        f"its error is at least {b['ekf_rmse']} times the bound, while on these tracks the "
+        f"second-order filter and the iterated EKF sit on it (errors within {b['z']} standard "
+        f"errors, stated SDs within {b['near']}).",
         f"**Where each filter holds.** Over an atlas of {a['cells']} settings of parallax, "
         "prior (the paper's rule and three forms of the tracking literature), noise and "
         f"frames, {a['judged']} with truths drawn from the prior at {a['trials']} trials each, "
