@@ -28,7 +28,7 @@ PROBE_TRIALS = 50
 
 
 def runs() -> tuple:
-    """The chapter's two records: the atlas's and the cost probe's of :data:`atlas.COSTLY`.
+    """The chapter's two records: the atlas's and the cost probe's of the costly filters.
 
     ``make atlas`` computes them again, the other records kept.
 

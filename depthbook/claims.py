@@ -14,7 +14,8 @@ from __future__ import annotations
 from depthbook.notebook import MarkdownTable
 from depthbook.studies import claims as decided
 
-#: The verdicts' short names, as the tables print them, in :data:`decided.VERDICTS` order.
+#: The verdicts' short names, as the tables print them, in the order of
+#: :data:`depthbook.studies.claims.VERDICTS`.
 SHORT = {
     decided.NOT_REPRODUCED: "not reproduced",
     decided.PRINTED_FORMULA: "only with the print's wrong formula",

@@ -68,7 +68,8 @@ AFTER_CORRECTION = "reproduced after correcting the print"
 NOT_REPRODUCED = "not reproduced"
 #: What the paper gives does not allow a test; the claim's reason says why.
 NOT_CHECKABLE = "not checkable from what the paper gives"
-#: The vocabulary, worst first: the order in which :func:`figure_verdicts` lists an item's verdicts.
+#: The vocabulary, worst first, in the order in which :func:`figure_verdicts` lists an item's
+#: verdicts.
 VERDICTS = (NOT_REPRODUCED, PRINTED_FORMULA, AFTER_CORRECTION, AS_PRINTED, NOT_CHECKABLE)
 
 #: A computed number agrees with a printed one when it rounds to it at the paper's printed

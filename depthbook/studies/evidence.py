@@ -30,8 +30,8 @@ __all__ = ["FILTER_ROWS", "PAPER", "PRINT_FORMULAS", "QUANTILES", "numbers", "to
 QUANTILES = (0.01, 0.25, 0.5, 0.75, 0.99)
 #: The paper's three filters by the row ids of ``reproduce.comparison``, with their symbols.
 FILTER_ROWS = {"opt": ("optimal", "o"), "so": ("second_order", "s"), "ekf": ("ekf", "e")}
-#: Where the print has a formula of its own that the derivation corrects: the row id of
-#: ``reproduce.comparison`` computed with it, and its name.
+#: The print's own formulas that the derivation corrects, by filter row, each with the row
+#: id of ``reproduce.comparison`` computed with it and the formula's name.
 PRINT_FORMULAS = {
     "opt": ("opt_printed", "Eq. (16) as printed"),
     "so": ("so_printed", "Eq. (8)'s ρ²J⁻¹ as printed"),

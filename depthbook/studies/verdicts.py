@@ -23,7 +23,7 @@ from depthcore.studies import reproduce
 
 __all__ = ["THEOREM_TOL", "paper_numbers", "relative_misfit"]
 
-#: The bound of Theorem 1's check: with the theorem's prior the second-order filter's
+#: The bound of Theorem 1's check. With the theorem's prior the second-order filter's
 #: covariance ``D`` and the EKF's ``P_3`` differ by less than this relative to ``P_3``, in
 #: the Frobenius norm (:func:`relative_misfit`); the rounding of the two formulas leaves
 #: about 1e-14, a hundredth of it (book/appendix.md asserts the same bound).

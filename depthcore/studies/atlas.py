@@ -159,7 +159,7 @@ class Grid:
     fixed_trials: int | None = None
 
     def trials_of(self, cell: dict) -> int:
-        """The trials drawn at ``cell``: :attr:`fixed_trials` where its truth is fixed."""
+        """The trials drawn at ``cell``: ``fixed_trials`` where its truth is fixed."""
         fixed = coverage_verdicts.fixed_truth(cell) and self.fixed_trials is not None
         return self.fixed_trials if fixed else self.trials
 
