@@ -78,7 +78,7 @@ AGREE = 0.5 * 10.0**-REPORTED_DECIMALS
 #: Closed forms that hold exactly (Eqs. (7), (19)) hold in double precision to this,
 #: relative to the largest component of ``c``: rounding (``1e-16``) with a wide margin.
 ROUNDING = 1e-12
-#: Theorem 1 holds when ``||D - P_3||_F / ||P_3||_F`` and the means' difference (relative to
+#: Theorem 1 holds when ``norm(D - P_3) / norm(P_3)`` and the means' difference (relative to
 #: ``|c|``) are below this: the bound book/appendix.md asserts
 #: (:data:`depthbook.studies.verdicts.THEOREM_TOL`), a hundred times the rounding of the two
 #: formulas (a bound, not a measured residue).

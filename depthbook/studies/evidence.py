@@ -94,7 +94,7 @@ def _marginals(key: str) -> dict:
 def _theorem(key: str) -> dict:
     """Theorem 1 and Eq. (19) with the prior mean ``G^-2 c`` (the paper's covariance).
 
-    ``misfit``: ``||D - P_3||_F / ||P_3||_F`` and the means' difference over ``max |c|``, ``D`` with
+    ``misfit``: ``norm(D - P_3) / norm(P_3)`` and the means' difference over ``max |c|``, ``D`` with
     ``2 rho^2 J^-1``; ``factor``: the mean eigenvalue of ``D^-1 P_3`` with the printed
     ``rho^2 J^-1``; ``means``: ``max |m_k - G^(k-3) c| / max |c|`` of the EKF, Eq. (19).
     """
@@ -145,7 +145,7 @@ def numbers() -> dict:
         depth marginal's at :data:`QUANTILES`; ``eq16_spread``: the range of the log of
         the factor Eq. (16) drops, over its q01 to q99; ``pixels``: the noise of Figures
         2 and 5 in pixels; ``prior_shift``: Figure 6's raise of the prior's depth;
-        ``theorem``: with the prior mean ``G^-2 c``, ``misfit`` (``||D - P_3||_F / ||P_3||_F``
+        ``theorem``: with the prior mean ``G^-2 c``, ``misfit`` (``norm(D - P_3) / norm(P_3)``
         with ``2 rho^2 J^-1``, and the means' difference over ``max |c|``), ``factor``
         (the mean eigenvalue of ``D^-1 P_3`` with the printed ``rho^2 J^-1``) and
         ``means`` (``max |m_k - G^(k-3) c| / max |c|`` of the EKF, Eq. (19)).

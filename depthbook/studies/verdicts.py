@@ -31,7 +31,7 @@ THEOREM_TOL = 1e-12
 
 
 def relative_misfit(d: np.ndarray, p3: np.ndarray) -> float:
-    """``||D - P_3||_F / ||P_3||_F``: Theorem 1's misfit of two covariances, shape (3, 3)."""
+    """``norm(D - P_3) / norm(P_3)``, Frobenius norms: Theorem 1's misfit, shapes (3, 3)."""
     return float(np.linalg.norm(d - p3) / np.linalg.norm(p3))
 
 
