@@ -55,6 +55,7 @@ def test_formulas_become_latex(text, latex):
         "depthcore.problem.checks.MAX_FRAMES",
         "focal * tan(rho)",
         "log_ndtr",
+        "f_at_c",  # a name of three words, not f with two subscripts
     ],
 )
 def test_code_stays_code(text):

@@ -137,7 +137,7 @@ def numbers() -> dict:
         ``printed``, ``derived``: for ``"fig2"`` and ``"fig3"``, the printed and computed
         ``[mean, sd]`` of each filter by row id (``"opt"``, ``"so"``, ``"ekf"``);
         ``print_formula``: the same with the print's formulas (``"opt"``, ``"so"``);
-        ``c``, ``f_at_c``: Eq. (7)'s ``c`` and ``f(c)`` of Eq. (5); ``marginals``: for
+        ``"c"``, ``"f_at_c"``: Eq. (7)'s ``c`` and ``f(c)`` of Eq. (5); ``marginals``: for
         each figure, ``{"optimal" | "second_order" | "ekf": {"mean", "sd", "peak"},
         "distance": {"second_order", "ekf"}}``, each filter's marginal of the figure's
         quantity (Figure 4: the velocity) and the :func:`total_variation` of the

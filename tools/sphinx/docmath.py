@@ -48,7 +48,10 @@ LITERAL_RE = re.compile(r"``([^`]+)``")
 NAME_RE = re.compile(
     r"(?<![A-Za-z0-9\\])([A-Za-z]+)(\d*)(?:_(\{[^{}]*\}|[A-Za-z0-9]+|[+\-](?![\w(])))?"
 )
-CODE_RE = re.compile(r"[\"'`:;@#$%&\[\]\\]|\.\w|\w\.|\bimport\b|\d[eE][+\-]?\d|^\s*-?[\d.]+\s*$")
+CODE_RE = re.compile(
+    r"[\"'`:;@#$%&\[\]\\]|\.\w|\w\.|\bimport\b|\d[eE][+\-]?\d|^\s*-?[\d.]+\s*$"
+    r"|[A-Za-z0-9]_[A-Za-z0-9]+_[A-Za-z0-9]"  # a name of three words (f_at_c): a subscript's twice
+)
 SIGNAL_RE = re.compile(r"[=+\-*/^~<>|_]|\.\.")
 
 
