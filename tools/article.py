@@ -477,8 +477,22 @@ COLUMNS = (
 )
 
 
+#: The sources whose numbers the appendix leaves out: the software's own metadata (its
+#: version, date, licence, pins), read from the files named, not computed.
+TRIVIAL_SOURCES = ("CITATION.cff", "requirements.txt")
+#: The keys of the verdicts' words (Table 1's), which the appendix names once rather than
+#: row by row: each is :func:`depthbook.studies.claims.claims`'s.
+VERDICT_KEYS = ("row-", "verdict-")
+
+
 def provenance_tex(found: list[Number], used: set[str]) -> str:
-    """``article/provenance.tex``: the appendix's table, for the numbers the text uses."""
+    """``article/provenance.tex``: the appendix's table, for the numbers the text uses.
+
+    The numbers of :data:`TRIVIAL_SOURCES` and :data:`VERDICT_KEYS` are left
+    out; numbers of one function, arguments, seed and record share a row, in
+    the order of their first; the seed's column of a number no random draw
+    enters holds a dash.
+    """
     spec = " ".join(
         rf">{{\raggedright\arraybackslash}}p{{{width}\textwidth}}" for _, width in COLUMNS
     )
@@ -489,13 +503,21 @@ def provenance_tex(found: list[Number], used: set[str]) -> str:
         r"\midrule",
         r"\endhead",
     ]
+    groups: dict[tuple, list[Number]] = {}
     for n in found:
-        if n.key not in used:
+        if n.key not in used or n.source in TRIVIAL_SOURCES or n.key.startswith(VERDICT_KEYS):
             continue
-        value = f"${n.text}$" if "^" in n.text else n.text
+        groups.setdefault((n.source, n.arguments, n.seed, n.record), []).append(n)
+    for (source, arguments, seed, record), members in groups.items():
+        keys = ", ".join(_code(n.key) for n in members)
+        values = ", ".join(
+            f"${n.text}$" if "^" in n.text else n.text.replace("/", "/\\allowbreak{}")
+            for n in members
+        )
+        seed = "--" if seed == "none" else seed
         lines.append(
-            f"{_code(n.key)} & {value} & {_code(n.source)} & {_tex(n.arguments)} & {n.seed} & "
-            f"{_code(n.record)} \\\\"
+            f"{keys} & {values} & {_code(source)} & {_tex(arguments)} & {seed} & "
+            f"{_code(record)} \\\\"
         )
     lines += [r"\bottomrule", r"\end{longtable}"]
     return _HEADER + "\n".join(lines) + "\n"
