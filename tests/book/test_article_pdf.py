@@ -74,3 +74,12 @@ def test_the_html_book_ships_the_article(pdf):
     if not HTML_DOWNLOADS.is_dir():
         pytest.skip("no built HTML book: run `make builds`")
     assert shipped.is_file() and shipped.read_bytes() == pdf.read_bytes()
+
+
+def test_the_article_has_no_overfull_line(pdf):
+    log = pdf.with_suffix(".log")
+    assert log.is_file(), f"no {log.name} beside the article"
+    overfull = re.findall(
+        r"^Overfull \\[hv]box \(([\d.]+)pt too \w+\)", log.read_text(errors="replace"), re.M
+    )
+    assert not overfull, f"overfull boxes in the article: {overfull} pt"
