@@ -222,7 +222,7 @@ records: $(EDITABLE) ## every study the book reads from a record, again (and the
 
 # The atlas's record alone (book/beyond_atlas.md; about 80 minutes on 2 cores), the other
 # records kept; then the pages, the README and the article that read it.
-ATLAS_PAGES := beyond_atlas conclusions
+ATLAS_PAGES := beyond_atlas conclusions reproducing
 atlas: $(EDITABLE) ## the atlas's record alone, again (and the pages, README and article)
 	$(PY) tools/records.py --keep -- $(PY) tools/cluster.py \
 	  $(PY) -c "from depthbook import beyond_atlas; beyond_atlas.runs()"
