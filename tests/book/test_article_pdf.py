@@ -83,3 +83,12 @@ def test_the_article_has_no_overfull_line(pdf):
         r"^Overfull \\[hv]box \(([\d.]+)pt too \w+\)", log.read_text(errors="replace"), re.M
     )
     assert not overfull, f"overfull boxes in the article: {overfull} pt"
+
+
+def test_the_provenance_appendix_takes_at_most_two_pages(pdf):
+    pages = subprocess.run(
+        ["pdftotext", "-layout", str(pdf), "-"], check=True, capture_output=True, text=True
+    ).stdout.split("\f")
+    pages = [p for p in pages if p.strip()]
+    first = next(i for i, p in enumerate(pages) if "Where each number comes from" in p)
+    assert len(pages) - first <= 2, f"the appendix spans {len(pages) - first} pages"
