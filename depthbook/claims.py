@@ -49,6 +49,13 @@ def claims_table(found) -> MarkdownTable:
     return MarkdownTable(["where", "the paper says", "test", "computed", "verdict"], rows)
 
 
+def item_summary(found, item: str) -> str:
+    """An item's verdicts, worst first, each with its count of claims ("as printed 9; ...")."""
+    mine = [c for c in found if c.item == item]
+    verdicts = decided.figure_verdicts(mine)[item]
+    return "; ".join(f"{SHORT[v]} {sum(c.verdict == v for c in mine)}" for v in verdicts)
+
+
 def items_table(found, pages: dict) -> MarkdownTable:
     """Each item of the paper and its claims' verdicts, worst first, with their counts.
 
@@ -56,8 +63,7 @@ def items_table(found, pages: dict) -> MarkdownTable:
     an item not in it is named as it is.
     """
     rows = []
-    for item, verdicts in decided.figure_verdicts(found).items():
-        mine = [c for c in found if c.item == item]
-        said = "; ".join(f"{SHORT[v]} {sum(c.verdict == v for c in mine)}" for v in verdicts)
-        rows.append([pages.get(item, item), f"{len(mine)}", said])
+    for item in decided.figure_verdicts(found):
+        mine = sum(c.item == item for c in found)
+        rows.append([pages.get(item, item), f"{mine}", item_summary(found, item)])
     return MarkdownTable(["item", "claims", "verdicts"], rows)

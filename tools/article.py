@@ -169,7 +169,7 @@ def paper_numbers() -> list[Number]:
             text = short[0] if short[0] == short[1] else f"mean {short[0]}; SD {short[1]}"
             out.append(Number(f"row-{key}-{rid}", text, "studies.claims.claims", key))
     pages = {s.figure: key for key, s in SCENARIOS.items()}
-    for item, verdicts_of_item in claims.figure_verdicts(found).items():
+    for item in claims.figure_verdicts(found):
         words = item.split()
         if item == "Theorem 1":
             key = "appendix"
@@ -177,11 +177,7 @@ def paper_numbers() -> list[Number]:
             key = pages[int(words[1])]
         else:
             continue
-        mine = [c for c in found if c.item == item]
-        text = "; ".join(
-            f"{claims_chapter.SHORT[v]} {sum(c.verdict == v for c in mine)}"
-            for v in verdicts_of_item
-        )
+        text = claims_chapter.item_summary(found, item)
         out.append(Number(f"verdict-{key}", text, "studies.claims.claims", item))
 
     fig2, fig3 = SCENARIOS["fig2"], SCENARIOS["fig3"]
