@@ -7,7 +7,10 @@
 * :mod:`~depthcore.particles.resample_move`: the causal bootstrap filter with
   resample-move;
 * :mod:`~depthcore.particles.rbpf`: the Rao-Blackwellised particle filter over
-  depth, a Kalman filter per particle (textbook 19.5.3).
+  depth, a Kalman filter per particle (textbook 19.5.3);
+* :mod:`~depthcore.particles.depth_hypotheses`: MonoSLAM's depth initialisation,
+  its deterministic kin: a fixed grid of depths, each with a Kalman filter,
+  reweighted by the bearings and collapsed to a Gaussian that the EKF carries on.
 
 Where a new thing goes: a new particle filter is a module here that takes its
 randomness from a ``numpy.random.Generator`` or ``SeedSequence`` argument and
