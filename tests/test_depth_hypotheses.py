@@ -18,7 +18,8 @@ from depthcore.kalman import ekf
 from depthcore.particles import depth_hypotheses as dh
 from depthcore.problem import model
 from depthcore.problem.scenarios import SCENARIOS
-from depthcore.registry.filters import FILTERS
+from depthcore.registry.filters import ALL_NAMES, FILTERS, names
+from depthcore.studies import atlas
 
 FIG2 = SCENARIOS["fig2"]
 Q = 0.01
@@ -213,10 +214,11 @@ def test_meaningless_options_are_refused_in_one_line_naming_the_argument(arg, va
         mean, options = value, {}
     else:
         options = {arg: value}
-    with pytest.raises(ValueError) as info:
-        dh.run(mu, rho, mean, cov, **options)
-    message = str(info.value)
-    assert message.startswith(arg) and "\n" not in message, message
+    for door in (dh.run, FILTERS["depth_hypotheses"]):  # the module's and the registry's
+        with pytest.raises(ValueError) as info:
+            door(mu, rho, mean, cov, **options)
+        message = str(info.value)
+        assert message.startswith(arg) and "\n" not in message, message
 
 
 @pytest.mark.parametrize(
@@ -258,3 +260,24 @@ def test_given_nodes_and_weights_are_checked(arg, nodes, log_widths):
     with pytest.raises(ValueError, match=f"^{arg}") as info:
         dh.filter_nodes(nodes, log_widths, mu, rho, mean, cov)
     assert "\n" not in str(info.value)
+
+
+# --- the registry ---------------------------------------------------------------------------
+
+
+def test_the_registry_runs_it_by_name_and_the_atlas_does_not():
+    """Its entry reads run's Gaussian summary; it is registered after ALL_NAMES, so the atlas
+    (which runs ALL_NAMES but its costly filters) and its recorded run are without it."""
+    entry = FILTERS["depth_hypotheses"]
+    assert entry.any_frames and entry.with_process_noise and not entry.default
+    assert "depth_hypotheses" in names() and "depth_hypotheses" not in ALL_NAMES
+    for size in atlas.SIZES.values():
+        assert "depth_hypotheses" not in size.names
+    mu, rho, mean, cov, q = _ten_frames()
+    est = entry(mu, rho, mean, cov, process_noise=q)
+    h = dh.run(mu, rho, mean, cov, q)
+    assert_array_equal(est.mean, h.mean)
+    assert_array_equal(est.cov, h.cov)
+    assert est.depth_sd == np.sqrt(h.cov[1, 1]) and est.detail is not None
+    with pytest.raises(ValueError, match="^gate: the depth_hypotheses filter has no gate"):
+        entry(mu, rho, mean, cov, gate=1e-3)

@@ -37,7 +37,10 @@ the command line and the book's chapters (:mod:`depthbook`)
 iterate the entries marked ``default`` (:data:`NAMES`), which are the five of
 the paper's problem; the N-frame filters (``iterated``, ``inverse_depth``,
 ``resample_move``, ``rbpf``) are registered with ``default=False`` and run only when
-named (:data:`ALL_NAMES`).
+named (:data:`ALL_NAMES`, every filter the studies of all filters run, the atlas's
+among them). MonoSLAM's depth hypotheses (``depth_hypotheses``) are registered after
+:data:`ALL_NAMES` was fixed, outside it: they run only when named, and the atlas's
+record stands without them.
 
 Adding a filter to the package means three things: its module in its family
 (:mod:`depthcore.kalman`, :mod:`depthcore.exact`, :mod:`depthcore.particles`),
@@ -56,8 +59,10 @@ the unscented Kalman filter (:mod:`depthcore.kalman.ukf`) and a particle filter
 resample-move (:mod:`depthcore.particles.resample_move`), the Rao-Blackwellised
 particle filter (:mod:`depthcore.particles.rbpf`), the range-parametrised EKF
 (:mod:`depthcore.kalman.range_ekf`), the inverse-depth UKF
-(:mod:`depthcore.kalman.inverse_depth_ukf`) and the EKF in modified polar coordinates
-(:mod:`depthcore.kalman.modified_polar`); and, as a baseline without a prior, the
+(:mod:`depthcore.kalman.inverse_depth_ukf`), the EKF in modified polar coordinates
+(:mod:`depthcore.kalman.modified_polar`) and MonoSLAM's depth initialisation, a grid of
+depth hypotheses that collapses to the EKF (:mod:`depthcore.particles.depth_hypotheses`);
+and, as a baseline without a prior, the
 batch maximum-likelihood estimate (:mod:`depthcore.analysis.batch_ml`, ``batch_ml``: the
 state that maximises the likelihood of all the bearings, with the inverse Fisher
 information there as its covariance; ``q = 0`` only), which ignores the prior it is given.
@@ -87,7 +92,7 @@ from depthcore.kalman import (
     spatial_inverse,
     ukf,
 )
-from depthcore.particles import importance, rbpf, resample_move
+from depthcore.particles import depth_hypotheses, importance, rbpf, resample_move
 from depthcore.problem import checks, frames, model, predictive
 from depthcore.problem.gaussian import Gaussian
 from depthcore.registry import adapters
@@ -541,11 +546,31 @@ PAPER_FILTERS = tuple(name for name, f in FILTERS.items() if f.in_paper)
 #: the paper's three, the UKF and the particle filter.
 NAMES = names(default=True)
 
-#: Every registered filter's name, the N-frame filters run only when named among them.
+#: The filters of the entries above, the N-frame filters run only when named among them, which
+#: the studies of every filter run (the atlas, :mod:`depthcore.studies.atlas`). A filter
+#: registered after (below, or by :func:`register`) is read from :data:`FILTERS` (:func:`names`).
 ALL_NAMES = names()
 
 #: The filters with a smoother, which :func:`~depthcore.registry.tracking.track` runs.
 SMOOTHED = names(smoothed=True)
+
+# --- filters run only when named --------------------------------------------------------
+#
+# Registered after ALL_NAMES, so that the atlas, which runs every filter of ALL_NAMES, and
+# its record stand without them: each runs when named (the command line, a study's names).
+
+FILTERS["depth_hypotheses"] = Filter(
+    "depth_hypotheses",
+    depth_hypotheses.run,
+    label="MonoSLAM's depth hypotheses",
+    style={"color": "darkgoldenrod", "linestyle": (0, (3, 1, 1, 1, 1, 1))},
+    family="rao_blackwellised",
+    variants=(("-", "front", {}),),
+    any_frames=True,
+    with_process_noise=True,
+    default=False,
+    estimate=checked_gaussian("MonoSLAM's depth hypotheses"),
+)
 
 
 def get(name: str) -> Filter:
