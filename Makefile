@@ -209,7 +209,7 @@ figures: $(EDITABLE) ## the paper's figures into figures/
 	$(PY) -m depthbook figures --out figures/
 
 # The pages that read studies from their records: executed writing them, then reading them.
-RECORD_PAGES := marginals discrepancies beyond_filters beyond_particles beyond_study beyond_sweeps beyond_frames beyond_bound beyond_hard beyond_conjecture beyond_atlas intro conclusions reproducing
+RECORD_PAGES := marginals discrepancies beyond_filters beyond_particles beyond_study beyond_sweeps beyond_frames beyond_bound beyond_hard beyond_conjecture beyond_atlas related intro conclusions reproducing
 # Their studies' chunks run on a local Dask cluster of every core (tools/cluster.py).
 # The new records are written beside the committed ones, which they replace only once every
 # page has run (tools/records.py): an interrupted run leaves the committed set, and the pages'
