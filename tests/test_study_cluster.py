@@ -82,6 +82,27 @@ def _same(a: dict, b: dict) -> bool:
     return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
 
 
+def _leaves(value, path=""):
+    """``(path, leaf)`` of every number, string or None in nested dicts and lists."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            yield from _leaves(item, f"{path}/{key}")
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            yield from _leaves(item, f"{path}[{i}]")
+    else:
+        yield path, value
+
+
+def _differences(a: dict, b: dict, shown: int = 8) -> str:
+    """The first ``shown`` leaves where ``a`` and ``b`` differ, with both values, for a message."""
+    left, right = dict(_leaves(a)), dict(_leaves(b))
+    keys = sorted(k for k in left.keys() | right.keys() if repr(left.get(k)) != repr(right.get(k)))
+    return "; ".join(f"{k}: {left.get(k)!r} vs {right.get(k)!r}" for k in keys[:shown]) + (
+        f" and {len(keys) - shown} more" if len(keys) > shown else ""
+    )
+
+
 def test_a_study_on_a_cluster_that_loses_a_worker_equals_it_in_process(tmp_path, monkeypatch):
     from distributed import Client
 
@@ -111,7 +132,8 @@ def test_a_study_on_a_cluster_that_loses_a_worker_equals_it_in_process(tmp_path,
         finally:
             tasks.disconnect()
     assert killed and killed[0][1] >= 1  # a chunk was running on the worker killed
-    assert _same(there, here) and _same(named, alone)
+    assert _same(there, here), _differences(there, here)
+    assert _same(named, alone), _differences(named, alone)
     assert there["trials"] == STUDY["trials"]
     # each chunk counted once, as it completed: 6 chunks of 8 trials
     done = [d for d, _ in calls]
