@@ -7,19 +7,18 @@ collapses them to a Gaussian once the depth's SD over its mean falls below a
 ratio (:mod:`depthcore.particles.depth_hypotheses`). The chapter asks two
 questions of it on tracks of :data:`FRAMES` frames whose truths are drawn from
 the filters' own prior (:data:`PRIOR`, :func:`depthcore.studies.trials.simulate`),
-so that the exact filter's intervals are calibrated by construction:
+so that the exact filter's intervals are calibrated by construction. How many
+hypotheses does the grid need before its depth mean and SD lie within
+:data:`TOLERANCE` exact SDs of the exact filter's, track by track, for each
+spacing of :data:`SPACINGS` and number of :data:`COUNTS`, without a collapse
+(:func:`agreeing_counts`, :func:`agreement_table`)? And what does the collapse
+to a Gaussian at each ratio of :data:`RATIOS` do to the 68 % interval's
+coverage of the true depth, at MonoSLAM's :data:`MONOSLAM_COUNT` hypotheses
+(:func:`collapse_table`)?
 
-* :func:`agreement`: how many hypotheses the grid needs before its depth mean and
-  SD lie within :data:`TOLERANCE` of the exact filter's SD of the exact filter's
-  own, trial by trial, for each spacing of :data:`SPACINGS` and number of
-  :data:`COUNTS`, without a collapse;
-* :func:`collapse`: what the collapse to a Gaussian at each ratio of
-  :data:`RATIOS` does to the 68 % interval's coverage of the true depth, at
-  MonoSLAM's :data:`MONOSLAM_COUNT` hypotheses.
-
-:func:`hypotheses_study` runs both over the same trials and times each filter in the
-same run (seconds per track), so that the cost ratios are measured side by
-side; the book reads it from a record.
+:func:`hypotheses_study` answers both over the same tracks and times each
+filter in the same run (seconds per track), so that the cost ratios are
+measured side by side; the book reads it from a record.
 """
 
 from __future__ import annotations
@@ -40,9 +39,9 @@ from depthcore.studies import scores, trials
 FRAMES = (3, 10, 30)
 #: The numbers of hypotheses tried, ten to a thousand.
 COUNTS = (10, 30, 100, 300, 1000)
-#: The hypotheses' spacings: equal cells in depth (MonoSLAM's) or in inverse depth.
+#: The hypotheses' spacings, equal cells in depth (MonoSLAM's) or in inverse depth.
 SPACINGS = depth_hypotheses.SPACINGS
-#: The collapse ratios tried: never, then up to above MonoSLAM's 0.3.
+#: The collapse ratios tried, never (0) and then up to above MonoSLAM's 0.3.
 RATIOS = (0.0, 0.1, 0.2, 0.3, 0.5)
 #: MonoSLAM's number of hypotheses and collapse ratio.
 MONOSLAM_COUNT = depth_hypotheses.N_HYPOTHESES
@@ -51,7 +50,7 @@ MONOSLAM_RATIO = depth_hypotheses.COLLAPSE_RATIO
 TRIALS = 2200
 #: The prior's form, from which each trial's truth is drawn (a Gaussian range prior).
 PRIOR = "range"
-#: The agreement asked of the hypotheses: both moments within this many exact SDs.
+#: The agreement asked of the hypotheses, both moments within this many exact SDs.
 TOLERANCE = 0.1
 #: The share of trials that must agree, at every number of frames, for a count to agree.
 AGREE_SHARE = 0.99
