@@ -26,7 +26,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.special import ndtr
 
 from depthbook import formatting
 from depthbook.notebook import MarkdownTable
@@ -63,17 +62,6 @@ CHUNK = 275
 def _moments(estimate) -> tuple[np.ndarray, np.ndarray]:
     """The depth's mean and SD of a registry estimate, (B,) each."""
     return np.asarray(estimate.depth_mean, dtype=float), np.asarray(estimate.depth_sd, dtype=float)
-
-
-def hypotheses_pit(result: depth_hypotheses.Hypotheses, depth) -> np.ndarray:
-    """The hypotheses' depth CDF at ``depth`` (B,): the weighted hypotheses' step function
-    where they never collapsed, the Gaussian's CDF where they did (its own answer)."""
-    depth = np.asarray(depth, dtype=float)
-    out = np.sum(result.probabilities * (result.depths <= depth[..., None]), axis=-1)
-    c = result.collapsed
-    m, s = result.mean[c, 1], np.sqrt(result.cov[c, 1, 1])
-    out[c] = ndtr((depth[c] - m) / s)
-    return out
 
 
 def _clocked(function, *args, **kwargs):
@@ -133,7 +121,7 @@ def _chunk(part: trials.Trials) -> dict:
             collapse_ratio=ratio,
         )
         out["collapse"][ratio] = {
-            "covered": scores.interval_holds(hypotheses_pit(h, truth), LEVEL),
+            "covered": scores.interval_holds(h.depth_cdf(truth), LEVEL),
             "collapsed_at": h.collapsed_at,
             "mean_gap": np.abs(h.mean[:, 1] - m0) / s0,
             "seconds": seconds,

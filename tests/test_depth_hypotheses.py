@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
+from scipy.special import ndtr
 
 from depthcore.exact import posterior
 from depthcore.exact.mixture import mixture_moments
@@ -281,3 +282,50 @@ def test_the_registry_runs_it_by_name_and_the_atlas_does_not():
     assert est.depth_sd == np.sqrt(h.cov[1, 1]) and est.detail is not None
     with pytest.raises(ValueError, match="^gate: the depth_hypotheses filter has no gate"):
         entry(mu, rho, mean, cov, gate=1e-3)
+
+
+# --- the law it answers: the hypotheses, or the Gaussian once collapsed --------------------
+
+
+def _mixed_batch():
+    """Eight noisy copies of Figure 2's bearings at a collapse ratio of 0.14: some collapse at
+    frame 3 and some never do."""
+    rng = np.random.default_rng(3)
+    mu = FIG2.mu + rng.normal(0.0, FIG2.rho, (8, 3))
+    result = dh.run(mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov, collapse_ratio=0.14)
+    assert np.any(result.collapsed) and not np.all(result.collapsed)
+    return result
+
+
+@pytest.mark.parametrize("grid", [False, True])
+def test_where_collapsed_the_marginal_cdfs_are_the_gaussians_and_elsewhere_the_hypotheses(grid):
+    """A collapsed track's answer is the EKF's Gaussian, so its depth and velocity CDFs are
+    Phi((value - m) / s) exactly, not its J-point stand-in; an uncollapsed track's depth CDF is
+    the weighted hypotheses' step function and its velocity CDF their mixture's."""
+    h = _mixed_batch()
+    c = h.collapsed
+    for k, cdf in ((1, h.depth_cdf), (2, h.velocity_cdf)):
+        m, s = h.mean[:, k], np.sqrt(h.cov[:, k, k])
+        value = (m + 0.3 * s)[:, None] + np.array([-1.0, 0.0, 1.0]) * s[:, None]
+        got = cdf(value) if grid else cdf(value[:, 1])
+        want = ndtr((value - m[:, None]) / s[:, None])
+        want = want if grid else want[:, 1]
+        assert_allclose(got[c], want[c], rtol=1e-14)
+        if k == 1:  # the step function of the hypotheses where they never collapsed
+            y = value if grid else value[:, 1:2]
+            step = np.sum(h.probabilities[:, None, :] * (h.depths[:, None, :] <= y[..., None]), -1)
+            assert_allclose(got[~c], (step if grid else step[:, 0])[~c], rtol=1e-14)
+            assert np.any(np.abs(got[c] - (step if grid else step[:, 0])[c]) > 1e-6)
+
+
+def test_where_collapsed_the_velocity_density_is_the_gaussians():
+    h = _mixed_batch()
+    c = h.collapsed
+    m, s = h.mean[:, 2], np.sqrt(h.cov[:, 2, 2])
+    v = m + 0.5 * s
+    want = np.exp(-0.5 * 0.25) / (np.sqrt(2.0 * np.pi) * s)
+    assert_allclose(h.velocity_pdf(v)[c], want[c], rtol=1e-13)
+    # uncollapsed: the mixture's density integrates its CDF
+    dv = 1e-6 * s
+    slope = (h.velocity_cdf(v + dv) - h.velocity_cdf(v - dv)) / (2 * dv)
+    assert_allclose(h.velocity_pdf(v)[~c], slope[~c], rtol=1e-5)

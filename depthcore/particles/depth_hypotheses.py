@@ -188,21 +188,38 @@ class Hypotheses:
             )
         return value[..., None], W, depths, m, s
 
+    def _collapsed_gaussian(self, value, k: int):
+        """Where the hypotheses collapsed, the Gaussian's marginal of component ``k`` at
+        ``value`` (...) or (..., G): the mask, the standardised value and the SD, aligned."""
+        value = np.asarray(value, dtype=float)
+        c, m, s = self.collapsed, self.mean[..., k], np.sqrt(self.cov[..., k, k])
+        if value.ndim > c.ndim:
+            c, m, s = c[..., None], m[..., None], s[..., None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.where(c, (value - m) / np.where(c, s, 1.0), 0.0)
+        return c, z, np.where(c, s, 1.0)
+
     def depth_cdf(self, y) -> np.ndarray:
-        """``P(y_N <= y)`` under :meth:`pooled`, a step function; ``y`` (...) or (..., G)."""
+        """``P(y_N <= y)``, ``y`` (...) or (..., G): the weighted hypotheses' step function,
+        or, where they collapsed, the Gaussian's CDF (the answer the EKF carried on)."""
+        c, z, _ = self._collapsed_gaussian(y, 1)
         y, W, depths, _, _ = self._aligned(y)
-        return np.sum(W * (depths <= y), axis=-1)
+        return np.where(c, ndtr(z), np.sum(W * (depths <= y), axis=-1))
 
     def velocity_cdf(self, v) -> np.ndarray:
-        """``P(v_N <= v)`` under :meth:`pooled`, a mixture of Gaussians; ``v`` (...) or (..., G)."""
+        """``P(v_N <= v)``, ``v`` (...) or (..., G): the hypotheses' mixture of Gaussians, or,
+        where they collapsed, the Gaussian's CDF."""
+        c, z, _ = self._collapsed_gaussian(v, 2)
         v, W, _, m, s = self._aligned(v)
-        return np.sum(W * ndtr((v - m) / s), axis=-1)
+        return np.where(c, ndtr(z), np.sum(W * ndtr((v - m) / s), axis=-1))
 
     def velocity_pdf(self, v) -> np.ndarray:
-        """The density of ``v_N`` under :meth:`pooled`; shapes as :meth:`velocity_cdf`."""
+        """The density of ``v_N``; shapes and laws as :meth:`velocity_cdf`."""
+        c, zc, sc = self._collapsed_gaussian(v, 2)
         v, W, _, m, s = self._aligned(v)
         z = (v - m) / s
-        return np.sum(W * np.exp(-0.5 * z * z) / (np.sqrt(2.0 * np.pi) * s), axis=-1)
+        mixed = np.sum(W * np.exp(-0.5 * z * z) / (np.sqrt(2.0 * np.pi) * s), axis=-1)
+        return np.where(c, np.exp(-0.5 * zc * zc) / (np.sqrt(2.0 * np.pi) * sc), mixed)
 
 
 # --- the options -----------------------------------------------------------------------
