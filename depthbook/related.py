@@ -92,18 +92,13 @@ def _chunk(part: trials.Trials) -> dict:
         "agreement": {},
         "collapse": {},
     }
+
+    def hypotheses(**options):
+        return _clocked(depth_hypotheses.run, mu, rho, pm, pc, **options)
+
     for spacing in SPACINGS:
         for count in COUNTS:
-            h, seconds = _clocked(
-                depth_hypotheses.run,
-                mu,
-                rho,
-                pm,
-                pc,
-                n_hypotheses=count,
-                spacing=spacing,
-                collapse_ratio=0.0,
-            )
+            h, seconds = hypotheses(n_hypotheses=count, spacing=spacing, collapse_ratio=0.0)
             m, s = h.mean[:, 1], np.sqrt(h.cov[:, 1, 1])
             out["agreement"][spacing, count] = {
                 "mean_gap": np.abs(m - m0) / s0,
@@ -111,15 +106,7 @@ def _chunk(part: trials.Trials) -> dict:
                 "seconds": seconds,
             }
     for ratio in RATIOS:
-        h, seconds = _clocked(
-            depth_hypotheses.run,
-            mu,
-            rho,
-            pm,
-            pc,
-            n_hypotheses=MONOSLAM_COUNT,
-            collapse_ratio=ratio,
-        )
+        h, seconds = hypotheses(n_hypotheses=MONOSLAM_COUNT, collapse_ratio=ratio)
         out["collapse"][ratio] = {
             "covered": scores.interval_holds(h.depth_cdf(truth), LEVEL),
             "collapsed_at": h.collapsed_at,
@@ -133,7 +120,7 @@ def _share(flags) -> dict:
     """A share of trials and its binomial standard error."""
     flags = np.asarray(flags, dtype=bool)
     p = float(np.mean(flags))
-    return {"share": p, "se": float(np.sqrt(p * (1.0 - p) / flags.size))}
+    return {"share": p, "se": float(scores.coverage_se(p, flags.size))}
 
 
 def _mean_se(values) -> dict:
