@@ -19,7 +19,12 @@ and checks that
   no line of the code shown is broken (Sphinx marks a broken line with ↪);
   the intro is one chapter, its opening paragraph on the page of its title;
   the list of downloads is printed with their addresses; the API reference is
-  a short list of module summaries.
+  a short list of module summaries; the book is at most 110 pages and prints at
+  most 500 lines of code and output, no check (``assert``) and no gluing; no
+  line overruns the text by over 10 pt and no float its page; no link leads to
+  a page the PDF leaves out; at least 14 exercises, their solutions gathered in
+  the closing chapter; the proof titled; Notation after the model and
+  Reproducing the first appendix.
 
 Without the PDF or pdftotext the checks are skipped with a message, and fail
 under CI (``CI=true``).
@@ -296,6 +301,98 @@ def test_the_api_reference_is_a_short_list_of_module_summaries(pages, plain_text
     # summaries only: no module's functions are documented in print
     assert "depthcore.problem.gaussian.paper_prior" not in plain_text
     assert "Python Module Index" not in plain_text
-    assert len(pages) - first <= 8, (
-        f"the API reference and what follows fill {len(pages) - first} pages"
+    end = [i for i, page in enumerate(pages) if "SOLUTIONS TO THE EXERCISES" in page.upper()]
+    assert end and end[-1] > first, "the solutions do not follow the API reference"
+    assert end[-1] - first <= 6, f"the API reference fills {end[-1] - first} pages"
+
+
+# The printed book's targets: its length, the code it prints, what fits its pages.
+TEX = ROOT / "_build" / "latex" / "depthcore.tex"
+LOG = ROOT / "_build" / "latex" / "depthcore.log"
+#: At most this many pages in all, appendices included.
+MAX_PAGES = 110
+#: At most this many lines of code and output printed (the verbatim blocks of the LaTeX).
+MAX_PRINTED_LINES = 500
+#: The widest overfull line the LaTeX log may report, in points.
+MAX_OVERFULL_PT = 10.0
+#: At least this many exercises, and this many in the chapters beyond the paper.
+MIN_EXERCISES, MIN_EXERCISES_BEYOND = 14, 6
+VERBATIM = re.compile(r"\\begin\{sphinxVerbatim\}[^\n]*\n(.*?)\\end\{sphinxVerbatim\}", re.DOTALL)
+OVERFULL = re.compile(r"Overfull \\hbox \((\d+(?:\.\d+)?)pt too wide\)")
+
+
+@pytest.fixture(scope="module")
+def tex(pdf) -> str:
+    return TEX.read_text(encoding="utf-8")
+
+
+@pytest.fixture(scope="module")
+def latex_log(pdf) -> str:
+    return LOG.read_text(encoding="utf-8", errors="replace")
+
+
+def printed_lines(tex: str) -> list[str]:
+    """Every line of code and output the PDF prints (its verbatim blocks)."""
+    return [line for block in VERBATIM.findall(tex) for line in block.splitlines()]
+
+
+def overfull(log: str) -> list[float]:
+    """The widths by which the LaTeX log's overfull lines overrun the text, in points."""
+    return [float(width) for width in OVERFULL.findall(log)]
+
+
+def test_the_targets_read_what_they_measure():
+    block = "\\begin{sphinxVerbatim}[commandchars=\\\\\\{\\}]\nx = 1\nassert x\n\\end{sphinxVerbatim}\n"
+    assert printed_lines("text " + block * 2) == ["x = 1", "assert x"] * 2
+    log = "Overfull \\hbox (12.5pt too wide) in paragraph\nOverfull \\hbox (0.3pt too wide)"
+    assert overfull(log) == [12.5, 0.3]
+
+
+def test_the_pdf_has_at_most_its_pages(pages):
+    assert len(pages) <= MAX_PAGES, f"the PDF has {len(pages)} pages (at most {MAX_PAGES})"
+
+
+def test_the_pdf_prints_little_code_and_no_checks(tex):
+    lines = printed_lines(tex)
+    assert len(lines) <= MAX_PRINTED_LINES, (
+        f"{len(lines)} lines of code and output printed (at most {MAX_PRINTED_LINES})"
+    )
+    checks = [line for line in lines if re.match(r"\s*(assert\b|glue\()", line)]
+    assert not checks, f"checks or gluing printed: {checks[:3]}"
+
+
+def test_every_line_and_float_fits_its_page(latex_log):
+    wide = [w for w in overfull(latex_log) if w > MAX_OVERFULL_PT]
+    assert not wide, f"{len(wide)} lines overrun the text by over {MAX_OVERFULL_PT} pt: {wide[:5]}"
+    assert "Float too large for page" not in latex_log
+    assert "There were undefined references" not in latex_log
+
+
+def test_no_link_leads_to_a_page_the_pdf_leaves_out(tex):
+    dangling = re.findall(r"\\hyperref\[\\detokenize\{book/api/[^}]*\}\]", tex)
+    assert not dangling, f"{len(dangling)} links to API pages the PDF leaves out: {dangling[:3]}"
+    assert "\\detokenize{book/api:module-summary-depthcore.kalman.ekf}" in tex
+
+
+def test_the_exercises_are_many_and_their_solutions_gathered_at_the_end(plain_text):
+    questions = re.findall(r"Exercise (\d+) ", plain_text.split("Solutions to the exercises")[-2])
+    assert len(set(questions)) >= MIN_EXERCISES, f"{len(set(questions))} exercises in the PDF"
+    before, _, gathered = plain_text.rpartition("Solutions to the exercises")
+    assert "Solution to Exercise" not in before, "a solution printed under its question"
+    solved = set(re.findall(r"Solution to Exercise (\d+)", gathered))
+    assert solved >= set(questions), f"exercises without a printed solution: {set(questions) - solved}"
+
+
+def test_the_proof_is_titled_and_sections_are_numbered_once(plain_text):
+    assert "Proof Both densities are Gaussian" in plain_text
+    assert "Proof. Both" not in plain_text
+    doubled = re.findall(r"\b\d+\.\d+(?:\.\d+)? \d+\. [A-Z][a-z]+", plain_text)
+    assert not doubled, f"sections numbered twice: {doubled[:3]}"
+
+
+def test_notation_follows_the_model_and_reproducing_opens_the_appendices(plain_text):
+    body = plain_text.split("Contents", 1)[-1]
+    assert re.search(r"The model and the optimal filter \d+ \d+ Notation", body)
+    assert re.search(r"Part \w+ Appendices \d+ A Reproducing this book", body) or re.search(
+        r"Appendices \d+ A Reproducing this book", body
     )

@@ -485,13 +485,18 @@ def book_parts(env) -> dict[str, str]:
     return first
 
 
+#: The caption of the book's last part, whose chapters the PDF letters as appendices.
+APPENDICES = "Appendices"
+
+
 class PrintParts(SphinxPostTransform):
     """In the PDF, open each of the book's parts with ``\\part{caption}``.
 
     The HTML book shows its parts as the captions of the sidebar's sections; the
     LaTeX builder drops toctree captions. Each part's first page (its
     ``start_of_file`` node in the PDF's single document) is preceded by a raw
-    LaTeX ``\\part``, so that the printed book and its contents show the parts.
+    LaTeX ``\\part``, so that the printed book and its contents show the parts;
+    the part :data:`APPENDICES` is preceded by ``\\appendix`` as well.
     """
 
     default_priority = 6
@@ -503,7 +508,8 @@ class PrintParts(SphinxPostTransform):
             caption = first.get(node["docname"])
             if caption is None:
                 continue
-            raw = nodes.raw("", f"\\part{{{caption}}}\n", format="latex")
+            opening = "\\appendix\n" if caption == APPENDICES else ""
+            raw = nodes.raw("", f"{opening}\\part{{{caption}}}\n", format="latex")
             node.parent.insert(node.parent.index(node), raw)
 
 
