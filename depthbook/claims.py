@@ -46,7 +46,8 @@ def counts(found) -> dict:
 def claims_table(found) -> MarkdownTable:
     """Every claim: where the paper makes it, what it says, the test, the number, the verdict."""
     rows = [[c.item, c.statement, c.criterion, c.value, f"**{SHORT[c.verdict]}**"] for c in found]
-    return MarkdownTable(["where", "the paper says", "test", "computed", "verdict"], rows)
+    header = ["where", "the paper says", "test", "computed", "verdict"]
+    return MarkdownTable(header, rows, widths=(12, 32, 32, 12, 12))
 
 
 def item_summary(found, item: str) -> str:

@@ -25,10 +25,19 @@ class MarkdownTable:
     ----------
     header : sequence of str, shape (n_columns,)
     rows : sequence of sequence of str, shape (n_rows, n_columns)
+    widths : sequence of int, shape (n_columns,), optional
+        The columns' relative widths: the Markdown is then a ``{table}`` directive
+        with ``:widths:``, whose columns the PDF wraps (without them a long
+        table's columns run off the page).
     """
 
-    def __init__(self, header, rows):
+    def __init__(self, header, rows, widths=None):
         self.header = [str(cell) for cell in header]
+        self.widths = None if widths is None else [int(w) for w in widths]
+        if self.widths is not None and (
+            len(self.widths) != len(self.header) or min(self.widths) < 1
+        ):
+            raise ValueError(f"widths must be {len(self.header)} positive integers")
         self.rows = [[str(cell) for cell in row] for row in rows]
         if not self.header:
             raise ValueError("header must name at least one column")
@@ -39,13 +48,18 @@ class MarkdownTable:
                 )
 
     def markdown(self) -> str:
-        """The table as a Markdown table, one line per row, ending in a newline."""
+        """The table as a Markdown table, one line per row, ending in a newline (inside
+        a ``{table}`` directive when the table has widths)."""
 
         def line(cells):
             return "| " + " | ".join(c.replace("|", r"\|") for c in cells) + " |"
 
         lines = [line(self.header), line(["---"] * len(self.header))]
-        return "\n".join(lines + [line(row) for row in self.rows]) + "\n"
+        table = "\n".join(lines + [line(row) for row in self.rows]) + "\n"
+        if self.widths is None:
+            return table
+        widths = " ".join(map(str, self.widths))
+        return f"```{{table}}\n:widths: {widths}\n\n{table}```\n"
 
     def _repr_markdown_(self) -> str:
         return self.markdown()

@@ -2,8 +2,8 @@
 
 Recommended import: ``from depthbook import using``.
 
-:func:`module_map` lists every module of ``depthcore.MODULES`` by family with
-the first paragraph of its docstring (:func:`module_summary`), and
+:func:`module_map` lists the families of ``depthcore.SUBPACKAGES``, each with
+the first paragraph of its docstring (:func:`module_summary`) and its modules, and
 :func:`filter_table` every filter of the registry, so that the page's tables
 follow the package rather than a copy of it; :func:`command_help` is a
 command's ``--help`` as the command line prints it, and :func:`limit` prints a
@@ -52,12 +52,16 @@ def module_summary(module: str) -> str:
 
 
 def module_map() -> MarkdownTable:
-    """Every module of ``depthcore.MODULES``: its family (named once), its path, its summary."""
+    """Every family of ``depthcore.SUBPACKAGES``: its package, what it holds (the first
+    paragraph of its docstring, :func:`module_summary`) and its modules, in the order of
+    ``depthcore.MODULES``; each module's own summary is the API reference's."""
     rows = []
-    for name in depthcore.MODULES:
-        heading = name.count(".") == 1
-        rows.append([f"**{family(name)}**" if heading else "", f"`{name}`", module_summary(name)])
-    return MarkdownTable(["family", "module", "what it holds"], rows)
+    for name in depthcore.SUBPACKAGES:
+        package = f"depthcore.{name}"
+        modules = [m.rpartition(".")[2] for m in depthcore.MODULES if m.startswith(package + ".")]
+        listed = ", ".join(f"`{m}`" for m in modules)
+        rows.append([f"`{package}`", module_summary(package), listed])
+    return MarkdownTable(["family", "what it holds", "its modules"], rows)
 
 
 def filter_table() -> MarkdownTable:

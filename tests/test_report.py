@@ -192,6 +192,14 @@ def test_markdown_table_renders_as_markdown_and_aligned_text():
         notebook.MarkdownTable(["name", "value"], [["a"]])
     with pytest.raises(ValueError, match="header"):
         notebook.MarkdownTable([], [])
+    # with widths, a table directive whose columns the PDF wraps
+    wide = notebook.MarkdownTable(["name", "value"], [["c", "3"]], widths=(30, 70))
+    assert wide.markdown() == (
+        "```{table}\n:widths: 30 70\n\n| name | value |\n| --- | --- |\n| c | 3 |\n```\n"
+    )
+    for widths in ((30,), (0, 70)):
+        with pytest.raises(ValueError, match="widths"):
+            notebook.MarkdownTable(["name", "value"], [["c", "3"]], widths=widths)
 
 
 def test_glue_log_pastes_texts_as_glue_text_does_and_needs_a_kernel():

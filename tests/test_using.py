@@ -23,12 +23,14 @@ def test_module_summary_is_the_first_paragraph_with_markdown_for_rest():
     assert using.module_summary("depthcore.registry").endswith("and one result.")
 
 
-def test_the_module_map_has_a_row_per_module_and_names_each_family_once():
-    table = using.module_map()
-    rows = table.rows
-    assert [r[1] for r in rows] == [f"`{m}`" for m in depthcore.MODULES]
-    named = [r[0] for r in rows if r[0]]
-    assert named == [f"**{using.family(m)}**" for m in depthcore.MODULES if m.count(".") == 1]
+def test_the_module_map_has_a_row_per_family_listing_each_module_once():
+    rows = using.module_map().rows
+    assert [r[0] for r in rows] == [f"`depthcore.{f}`" for f in depthcore.SUBPACKAGES]
+    assert rows[1][1] == using.module_summary("depthcore.kalman")
+    listed = [
+        f"{r[0].strip('`')}.{m.strip(' `')}" for r in rows for m in r[2].split(",") if m.strip()
+    ]
+    assert listed == [m for m in depthcore.MODULES if m.count(".") > 1]
 
 
 def test_the_filter_table_has_a_row_per_registered_filter():
