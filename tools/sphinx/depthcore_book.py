@@ -414,24 +414,6 @@ class DownloadsDirective(SphinxDirective):
         return [only_html, only_latex, *messages]
 
 
-class DropHiddenCellsWithoutOutput(SphinxPostTransform):
-    """Remove the ``hide-input`` code cells that show no output (before myst-nb wraps them)."""
-
-    default_priority = 198  # myst-nb's HideInputCells, which makes the toggles, runs at 199
-
-    def run(self, **kwargs):
-        for node in list(self.document.findall(nodes.container)):
-            if node.get("nb_element") != "cell_code" or node.get("hide_mode") != "input":
-                continue
-            shown = [
-                child
-                for child in node.children
-                if child.get("nb_element") == "cell_code_output" and child.children
-            ]
-            if not shown:
-                node.parent.remove(node)
-
-
 #: Pages of the HTML book that the PDF leaves out: the API reference's page per
 #: family (the PDF prints the summaries of ``book/api`` instead).
 HTML_ONLY_PAGES = re.compile(r"^book/api/")
@@ -686,7 +668,6 @@ def setup(app):
     app.add_post_transform(PrintParts)
     app.connect("builder-inited", contents_heading)
     app.connect("doctree-resolved", root_page_as_one_chapter)
-    app.add_post_transform(DropHiddenCellsWithoutOutput)
     app.add_config_value("depthcore_downloads", "_build/extra/downloads", "env")
     app.add_directive("depthcore-downloads", DownloadsDirective)
     # Before sphinx-book-theme builds its header buttons (priority 501).
