@@ -61,7 +61,7 @@ def module_map() -> MarkdownTable:
         modules = [m.rpartition(".")[2] for m in depthcore.MODULES if m.startswith(package + ".")]
         listed = ", ".join(f"`{m}`" for m in modules)
         rows.append([f"`{package}`", module_summary(package), listed])
-    return MarkdownTable(["family", "what it holds", "its modules"], rows)
+    return MarkdownTable(["family", "what it holds", "its modules"], rows, widths=(22, 43, 35))
 
 
 def filter_table() -> MarkdownTable:
