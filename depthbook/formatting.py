@@ -46,6 +46,17 @@ def rho_label(rho: float) -> str:
     return f"1/{1.0 / rho:.0f}"
 
 
+def names(items) -> str:
+    """Names as a list in plain prose, each in quotes: ``'"optimal", "ekf" and "ukf"'``.
+
+    A glued text is pasted as plain text, so it holds no Markdown (no backticks).
+    """
+    texts = [f'"{name}"' for name in items]
+    if not texts:
+        raise ValueError("names needs at least one name")
+    return texts[0] if len(texts) == 1 else ", ".join(texts[:-1]) + " and " + texts[-1]
+
+
 def sci(x: float, digits: int = 1) -> str:
     """``x`` in scientific notation without a plus sign or leading zeros: ``"1.5e8"``, ``"1e-8"``.
 

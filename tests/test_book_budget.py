@@ -1,7 +1,7 @@
 """The book's pages within their budgets: prose words, shown code, glue out of sight.
 
 ``tools/prose.py`` measures a page as its reader meets it: at most 2,500 words of
-prose on a page and 33,600 in the book, no shown code line over 88 characters,
+prose on a page and 33,200 in the book, no shown code line over 88 characters,
 and no cell the book shows that glues (gluing is plumbing: the book hides those
 cells and a notebook shows them).
 """

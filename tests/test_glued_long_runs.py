@@ -37,7 +37,7 @@ def hard_long_run():
 
 
 def bound_page_ratios():
-    """The exact filter's RMSE over the bound at each N, as the bound page and conclusions glue."""
+    """The exact filter's RMSE over the bound at each N, as the bound page glues it."""
     s = intro.BOUND_STUDY
     result = committed(
         beyond_bound.bound_study,

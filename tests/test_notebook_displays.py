@@ -140,6 +140,21 @@ def test_every_glued_text_is_displayed_with_its_value(page):
     assert not missing, f"{page.name}: not displayed in the notebook: {', '.join(missing)}"
 
 
+MARKDOWN = re.compile(r"`|\*\*|\]\(")
+
+
+def test_a_pasted_text_holds_no_markdown(page):
+    # {eval} and {glue:text} paste plain text: a backtick or ** would reach the page as is.
+    glued, _ = executed(page)
+    raw = [
+        f"{name} = {value!r}"
+        for name in dict.fromkeys(TEXT_ROLE.findall(markdown(page)))
+        if "image/png" not in glued[name]
+        and MARKDOWN.search(value := pasted_text(glued[name]["text/plain"]))
+    ]
+    assert not raw, f"{page.name}: pasted as plain text but written in Markdown: {raw}"
+
+
 def test_the_tables_of_numbers_are_displayed_whole(page):
     glued, displayed = executed(page)
     shown = [data["text/markdown"] for data in displayed if "text/markdown" in data]
