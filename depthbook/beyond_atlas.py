@@ -322,7 +322,9 @@ def verdict_map(result: dict, verdict: str, names=None):
     m, rows, columns = verdict_grid(result, verdict, names)
     n_row, n_par = len(rows), len(result["axes"]["parallax"])
     width = WIDTH
-    height = 1.0 + m.shape[0] / m.shape[1] * width * 0.78
+    # tiles wider than tall (rows 0.62 of a column), so that the map and a short
+    # caption fit one printed page, and the row labels still stand apart
+    height = 1.0 + m.shape[0] / m.shape[1] * width * 0.62
     fig, ax = subplots(figsize=(width, height))
     colours = ListedColormap([*COLOURS, "#ffffff", "#f0f0f0"])
     bounds = [-0.5, 0.5, 1.5, 2.5, 3.5, 4.5, 5.5]

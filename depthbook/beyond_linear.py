@@ -207,7 +207,7 @@ def smoothing_figure(track, states, first: int = 1):
     return fig
 
 
-def rbpf_convergence_figure(result: dict):
+def rbpf_convergence_figure(result: dict, rmse_se: dict | None = None):
     """The Rao-Blackwellised particle filter's depth moments against the number of particles.
 
     Parameters
@@ -215,6 +215,11 @@ def rbpf_convergence_figure(result: dict):
     result : dict
         The clouds of :func:`depthbook.beyond_linear.rbpf_convergence`, with
         the exact bank's moments they are measured from.
+    rmse_se : dict, optional
+        ``{"depth_mean": (S,), "depth_sd": (S,)}``, the standard errors of the
+        RMS errors (:func:`depthbook.beyond_particles.rms_se` of the clouds'
+        errors); given, the left panel's points carry bars of two of them
+        either side, cut at a tenth of the point on the log axis.
 
     Returns
     -------
@@ -229,8 +234,17 @@ def rbpf_convergence_figure(result: dict):
     exact = result["exact"]
     fig, axes = subplots(1, 2, figsize=(WIDTH, 4.2))
     ax = axes[0]
-    ax.plot(J, result["rmse"]["depth_mean"], "o-", color="tab:purple", label="depth mean")
-    ax.plot(J, result["rmse"]["depth_sd"], "s--", color="tab:orange", label="depth SD")
+    for moment, fmt, colour, label in (
+        ("depth_mean", "o-", "tab:purple", "depth mean"),
+        ("depth_sd", "s--", "tab:orange", "depth SD"),
+    ):
+        y = np.asarray(result["rmse"][moment], dtype=float)
+        if rmse_se is None:
+            ax.plot(J, y, fmt, color=colour, label=label)
+        else:
+            se = 2 * np.asarray(rmse_se[moment], dtype=float)
+            yerr = (np.minimum(se, 0.9 * y), se)
+            ax.errorbar(J, y, yerr=yerr, fmt=fmt, color=colour, capsize=2, label=label)
     reference_rate(ax, J, exact["depth_sd"] / np.sqrt(J), r"exact depth SD$/\sqrt{J}$")
     ax.set_xlabel("particles per cloud $J$")
     ax.set_ylabel("RMS error from the exact bank")

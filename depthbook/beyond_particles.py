@@ -7,7 +7,9 @@ Recommended import: ``from depthbook import beyond_particles``.
   :data:`SETTINGS`;
 * :func:`resample_move_runs`: the causal particle filter with resample-move
   (:mod:`depthcore.particles.resample_move`) run independently several times on a
-  scenario, against the optimal filter.
+  scenario, against the optimal filter;
+* :func:`rms_se`: the Monte Carlo standard error of an RMS error over
+  independent runs, for the error bars of these curves.
 """
 
 from __future__ import annotations
@@ -34,6 +36,46 @@ SETTINGS = {
 #: Particles per call of :func:`depthcore.particles.importance.run` (bounds the memory, about 200
 #: bytes each).
 CHUNK_PARTICLES = 200_000
+
+
+# --- the standard error of an RMS error ----------------------------------------------------
+
+
+def rms_se(errors, axis: int = -1):
+    """The RMS of independent errors and its Monte Carlo standard error.
+
+    Over ``R`` independent runs with errors ``e_r``, the mean square
+    ``m = mean(e_r**2)`` has the standard error ``s = SD(e_r**2) / sqrt(R)``,
+    and the RMS ``sqrt(m)`` the delta method's ``s / (2 sqrt(m))``: the
+    derivative of the square root, ``1 / (2 sqrt(m))``, times ``s``. Like
+    every delta-method error it is a first-order one: it needs enough runs
+    for ``m`` to lie near its expectation, and it is 0 where every error is 0.
+
+    Parameters
+    ----------
+    errors : array_like
+        The errors of the runs along ``axis`` (at least two runs), finite.
+    axis : int
+        The axis of the runs.
+
+    Returns
+    -------
+    rms, se : ndarray
+        The RMS error and its standard error, each of the shape of ``errors``
+        without ``axis``.
+    """
+    e = np.asarray(errors, dtype=float)
+    if e.ndim == 0 or e.shape[axis] < 2:
+        raise ValueError("errors: at least two runs are needed along the axis")
+    if not np.all(np.isfinite(e)):
+        raise ValueError("errors must be finite")
+    squares = e**2
+    runs = e.shape[axis]
+    mean_square = np.mean(squares, axis=axis)
+    square_se = np.std(squares, axis=axis, ddof=1) / np.sqrt(runs)
+    rms = np.sqrt(mean_square)
+    safe = np.where(rms > 0, rms, 1.0)
+    return rms, np.where(rms > 0, square_se / (2.0 * safe), 0.0)
 
 
 # --- convergence of the particle filter ------------------------------------------------------
@@ -233,13 +275,17 @@ def convergence_figure(result: dict, quantity: str = "depth"):
     """RMS errors of the mean and the SD of one marginal against ``N``, on log axes.
 
     The grey line is ``sd / sqrt(N)``, the standard error of the mean of
-    ``N`` independent draws from the optimal posterior.
+    ``N`` independent draws from the optimal posterior. Where the result
+    holds ``"rmse_se"`` (``{setting: {moment: (S,)}}``, as :func:`rms_se`
+    gives it from the runs' errors), each point carries bars of two standard
+    errors either side, cut at a tenth of the point on the log axis.
 
     Parameters
     ----------
     result : dict
         The errors of :func:`depthbook.beyond_particles.particle_convergence` at
-        its ``"sizes"`` ``N``, of each setting of ``"rmse"``, over ``"repeats"`` runs.
+        its ``"sizes"`` ``N``, of each setting of ``"rmse"``, over ``"repeats"`` runs,
+        and optionally their standard errors ``"rmse_se"``.
     quantity : {"depth", "velocity"}
 
     Returns
@@ -255,12 +301,14 @@ def convergence_figure(result: dict, quantity: str = "depth"):
     fig, axes = subplots(1, 2, figsize=(WIDTH, 4.4), sharey=True)
     for ax, moment, label in zip(axes, ("mean", "sd"), ("(a) mean", "(b) SD"), strict=True):
         for name, err in result["rmse"].items():
-            ax.plot(
-                N,
-                err[f"{quantity}_{moment}"],
-                markersize=4,
-                **SETTING_STYLE.get(name, {"label": name}),
-            )
+            y = np.asarray(err[f"{quantity}_{moment}"], dtype=float)
+            style = SETTING_STYLE.get(name, {"label": name})
+            if "rmse_se" in result:
+                se = np.asarray(result["rmse_se"][name][f"{quantity}_{moment}"], dtype=float)
+                lower = np.minimum(2 * se, 0.9 * y)
+                ax.errorbar(N, y, yerr=(lower, 2 * se), markersize=4, capsize=2, **style)
+            else:
+                ax.plot(N, y, markersize=4, **style)
         reference_rate(ax, N, ideal, r"posterior SD$/\sqrt{N}$")
         ax.set_xlabel("number of particles $N$")
         ax.set_title(f"{label} of {quantity} ${_SYMBOL[quantity]}$", fontsize=MIN_FONT)
