@@ -100,16 +100,18 @@ def _convergence_task(item) -> tuple:
     """One setting of :func:`particle_convergence`, every ``N`` in turn from its own stream.
 
     ``item`` is ``(scenario, sizes, repeats, kwargs, stream, exact)``; returns the
-    RMSE of each moment (S, 4) and the mean ESS fraction after each measurement (S, 3).
+    RMSE of each moment (S, 4), its standard error (S, 4; :func:`rms_se`) and the mean
+    ESS fraction after each measurement (S, 3).
     """
     scenario, sizes, repeats, kwargs, stream, exact = item
     rng = np.random.default_rng(stream)
-    err, frac = [], []
+    err, err_se, frac = [], [], []
     for n in sizes:
         m, e = _run_repeats(scenario, int(n), repeats, rng, kwargs)
         err.append(np.sqrt(np.mean((m - exact) ** 2, axis=0)))
+        err_se.append(rms_se(m - exact, axis=0)[1])
         frac.append(np.mean(e, axis=0) / n)
-    return np.array(err), np.array(frac)
+    return np.array(err), np.array(err_se), np.array(frac)
 
 
 def particle_convergence(
@@ -140,7 +142,8 @@ def particle_convergence(
     -------
     dict
         ``"sizes"`` (S,), ``"repeats"``, ``"exact"``: ``{moment: float}`` for
-        :data:`~depthcore.registry.estimates.MOMENTS`, ``"rmse"``: ``{setting: {moment: (S,)}}`` and
+        :data:`~depthcore.registry.estimates.MOMENTS`, ``"rmse"``: ``{setting: {moment: (S,)}}``,
+        ``"rmse_se"`` its standard errors (:func:`rms_se`), alike, and
         ``"ess"``: ``{setting: (S, 3)}``, the mean ESS after each measurement
         as a fraction of ``N``.
     """
@@ -159,15 +162,17 @@ def particle_convergence(
     ]
     runs = []
     tasks.fold_chunks(_convergence_task, items, lambda k, r: runs.append(r), client=client)
-    rmse, ess = {}, {}
-    for name, (err, frac) in zip(settings, runs, strict=True):
+    rmse, rmse_se, ess = {}, {}, {}
+    for name, (err, err_se, frac) in zip(settings, runs, strict=True):
         rmse[name] = {m: err[:, i] for i, m in enumerate(MOMENTS)}
+        rmse_se[name] = {m: err_se[:, i] for i, m in enumerate(MOMENTS)}
         ess[name] = frac
     return {
         "sizes": sizes,
         "repeats": int(repeats),
         "exact": {m: float(v) for m, v in zip(MOMENTS, exact, strict=True)},
         "rmse": rmse,
+        "rmse_se": rmse_se,
         "ess": ess,
     }
 

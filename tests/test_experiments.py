@@ -75,6 +75,9 @@ def test_particle_convergence_shapes(convergence):
         assert set(r["rmse"][name]) == set(estimates.MOMENTS)
         assert r["rmse"][name]["depth_mean"].shape == (2,)
         assert r["ess"][name].shape == (2, 3)
+        # each RMSE carries its delta-method standard error, smaller than itself
+        se = r["rmse_se"][name]["depth_mean"]
+        assert se.shape == (2,) and np.all((se > 0) & (se < r["rmse"][name]["depth_mean"]))
     m = optimal.run(FIG2.mu, FIG2.rho, FIG2.prior.mean, FIG2.prior.cov)
     assert r["exact"]["depth_sd"] == m.depth_sd
 
