@@ -194,9 +194,10 @@ def origins_sentence(found: list[dict]) -> str:
     parts = []
     for i, o in enumerate(found):
         days = " to ".join(dict.fromkeys(o["dates"]))
-        verb = " were computed" if i == 0 else ""
+        verb = (" was computed" if o["count"] == 1 else " were computed") if i == 0 else ""
+        kind = o["kind"].removesuffix("s") if o["count"] == 1 else o["kind"]
         parts.append(
-            f"{'The' if i == 0 else 'the'} {o['count']} {o['kind']}{verb} on {days} on "
+            f"{'The' if i == 0 else 'the'} {o['count']} {kind}{verb} on {days} on "
             f"{o['machine']}, with depthcore {' and '.join(o['versions'])} on {o['software']}"
         )
     return "; ".join(parts) + "."
