@@ -80,6 +80,7 @@ def filter_table() -> MarkdownTable:
             ]
             for name, f in FILTERS.items()
         ],
+        widths=(20, 22, 14, 13, 11, 10, 10),
     )
 
 
