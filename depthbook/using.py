@@ -80,7 +80,7 @@ def filter_table() -> MarkdownTable:
             ]
             for name, f in FILTERS.items()
         ],
-        widths=(20, 22, 14, 13, 11, 10, 10),
+        widths=(25, 21, 13, 12, 11, 9, 9),
     )
 
 
