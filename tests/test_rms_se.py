@@ -67,10 +67,10 @@ def test_the_convergence_figure_draws_bars_only_with_standard_errors():
         "rmse": {name: dict.fromkeys(moments, np.array([0.1, 0.03])) for name in SETTINGS},
     }
     plain = convergence_figure(result)
-    assert not any(c.__class__.__name__ == "ErrorbarContainer"
-                   for ax in plain.axes for c in ax.containers)
-    result["rmse_se"] = {name: dict.fromkeys(moments, np.array([0.01, 0.005]))
-                         for name in SETTINGS}
+    assert not any(
+        c.__class__.__name__ == "ErrorbarContainer" for ax in plain.axes for c in ax.containers
+    )
+    result["rmse_se"] = {name: dict.fromkeys(moments, np.array([0.01, 0.005])) for name in SETTINGS}
     barred = convergence_figure(result)
     bars = [c for c in barred.axes[0].containers if c.__class__.__name__ == "ErrorbarContainer"]
     assert len(bars) == len(SETTINGS)

@@ -150,8 +150,9 @@ class GatherSolutions(SphinxPostTransform):
             holder += solution
             chapter += holder
         # after the book's last page (the last part's last chapter)
-        last = [p for p in pages if not any(isinstance(a, addnodes.start_of_file)
-                                            for a in ancestors(p))][-1]
+        last = [
+            p for p in pages if not any(isinstance(a, addnodes.start_of_file) for a in ancestors(p))
+        ][-1]
         last.parent.insert(last.parent.index(last) + 1, chapter)
 
 
@@ -188,9 +189,10 @@ class LinkToSummaries(SphinxPostTransform):
     """In the PDF, lead the links to the API reference's pages to the printed summaries.
 
     Each module's entry in :data:`API_PAGE`'s list gets a target
-    (:func:`summary_id`), the list printed in two columns (:func:`compact`); a link into :data:`API_PAGES` (a module, a function,
-    a class) leads to its module's entry; a link to anything else there (the
-    book's own package, which the list does not hold) becomes its text.
+    (:func:`summary_id`), the list printed in two columns (:func:`compact`); a
+    link into :data:`API_PAGES` (a module, a function, a class) leads to its
+    module's entry; a link to anything else there (the book's own package, which
+    the list does not hold) becomes its text.
     Runs after Sphinx has resolved the links (priority 10).
     """
 
