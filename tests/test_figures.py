@@ -181,10 +181,18 @@ def convergence():
     return beyond_particles.particle_convergence(FIG2, [300, 600], repeats=4, seed=3)
 
 
+def drawn_curves(ax):
+    """The data line of each error-bar series of ``ax``, then its lines drawn alone."""
+    bars = [c for c in ax.containers if c.__class__.__name__ == "ErrorbarContainer"]
+    in_bars = {id(line) for c in bars for line in c.get_children()}
+    return [c.lines[0] for c in bars], [x for x in ax.get_lines() if id(x) not in in_bars]
+
+
 def test_convergence_figure_draws_each_setting_and_the_reference(convergence):
     fig = beyond_particles.convergence_figure(convergence)
     assert len(fig.axes) == 2
-    assert len(fig.axes[0].get_lines()) == len(beyond_particles.SETTINGS) + 1
+    series, alone = drawn_curves(fig.axes[0])
+    assert len(series) == len(beyond_particles.SETTINGS) and len(alone) == 1
     assert fig.axes[0].get_xscale() == "log" and fig.axes[0].get_yscale() == "log"
     plt.close(fig)
     with pytest.raises(ValueError, match="quantity must be one of"):
@@ -338,12 +346,12 @@ def test_convergence_figure_draws_the_errors_and_the_ideal_line(convergence):
         fig = beyond_particles.convergence_figure(convergence, quantity)
         N = np.asarray(convergence["sizes"])
         for ax, moment in zip(fig.axes, ("mean", "sd"), strict=True):
-            lines = ax.get_lines()
-            for line, err in zip(lines[:-1], convergence["rmse"].values(), strict=True):
+            series, (ideal_line,) = drawn_curves(ax)
+            for line, err in zip(series, convergence["rmse"].values(), strict=True):
                 assert_allclose(line.get_xdata(), N)
                 assert_allclose(line.get_ydata(), err[f"{quantity}_{moment}"], rtol=1e-15)
             ideal = convergence["exact"][f"{quantity}_sd"] / np.sqrt(N)
-            assert_allclose(lines[-1].get_ydata(), ideal, rtol=1e-15)
+            assert_allclose(ideal_line.get_ydata(), ideal, rtol=1e-15)
         plt.close(fig)
 
 
