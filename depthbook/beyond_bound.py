@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthbook.style import MIN_FONT, STYLE, WIDTH, legend_below, subplots
+from depthbook.style import MIN_FONT, STYLE, WIDTH, legend_below, log_bars, subplots
 from depthcore.problem import checks, model
 from depthcore.problem.gaussian import PAPER_PRIOR_SCALE
 from depthcore.problem.scenarios import SCENARIOS
@@ -312,7 +312,7 @@ def bound_figure(frames, columns):
                 ax.errorbar(
                     x,
                     y,
-                    yerr=np.vstack([np.minimum(2 * se, 0.9 * y), 2 * se]),
+                    yerr=log_bars(y, se),
                     color=style["color"],
                     linestyle=style["linestyle"],
                     label=style["label"],

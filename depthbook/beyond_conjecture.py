@@ -16,7 +16,7 @@ import numpy as np
 
 from depthbook.formatting import rho_label, value_se
 from depthbook.studies.frames import frames_study
-from depthbook.style import WIDTH, subplots
+from depthbook.style import WIDTH, log_bars, subplots
 from depthcore.problem import checks
 from depthcore.registry import filters as _filters
 from depthcore.studies import pairs as study_pairs
@@ -246,11 +246,10 @@ def conjecture_figure(result: dict, scores=("hellinger", "coverage_68", "rmse"))
                 for name, style, shift in styles:
                     y = result[name][score][:, d, j]
                     se = result[name][f"{score}_se"][:, d, j]
-                    lower = np.minimum(2 * se, 0.9 * y) if log_y else 2 * se
                     ax.errorbar(
                         rho * shift,
                         y,
-                        yerr=np.vstack([lower, 2 * se]),
+                        yerr=log_bars(y, se) if log_y else 2 * se,
                         color=colour,
                         linestyle=style,
                         marker="o",

@@ -16,7 +16,7 @@ import numpy as np
 
 from depthbook.formatting import value_se
 from depthbook.studies import hardness
-from depthbook.style import MIN_FONT, STYLE, WIDTH, subplots
+from depthbook.style import MIN_FONT, STYLE, WIDTH, log_bars, subplots
 from depthcore.studies.medians import INTERVAL_LEVEL
 
 #: The long run of the chapter's setting at Figure 2's truth with the paper's prior
@@ -139,9 +139,7 @@ def hard_figure(cells: list, labels, level: int = 68):
         for k, name in enumerate(names):
             if score == "ratio":
                 y, se = _ratios(cells, reading, name)
-                # on a log axis the lower bar stops short of zero
-                lower = np.minimum(2 * se, 0.9 * y)
-                yerr = np.vstack([lower, 2 * se])
+                yerr = log_bars(y, se)
             else:
                 s = [c[reading]["filters"][name] for c in cells]
                 y = np.array([v[score] for v in s])

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthbook.style import MIN_FONT, WIDTH, legend_below, reference_rate, subplots
+from depthbook.style import MIN_FONT, WIDTH, legend_below, log_bars, reference_rate, subplots
 from depthcore.exact import posterior
 from depthcore.particles import rbpf
 from depthcore.problem import checks
@@ -242,8 +242,7 @@ def rbpf_convergence_figure(result: dict, rmse_se: dict | None = None):
         if rmse_se is None:
             ax.plot(J, y, fmt, color=colour, label=label)
         else:
-            se = 2 * np.asarray(rmse_se[moment], dtype=float)
-            yerr = (np.minimum(se, 0.9 * y), se)
+            yerr = log_bars(y, rmse_se[moment])
             ax.errorbar(J, y, yerr=yerr, fmt=fmt, color=colour, capsize=2, label=label)
     reference_rate(ax, J, exact["depth_sd"] / np.sqrt(J), r"exact depth SD$/\sqrt{J}$")
     ax.set_xlabel("particles per cloud $J$")

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from depthbook.style import MIN_FONT, WIDTH, legend_below, reference_rate, subplots
+from depthbook.style import MIN_FONT, WIDTH, legend_below, log_bars, reference_rate, subplots
 from depthcore.exact import optimal
 from depthcore.particles import importance, resample_move
 from depthcore.problem import checks
@@ -310,8 +310,7 @@ def convergence_figure(result: dict, quantity: str = "depth"):
             style = SETTING_STYLE.get(name, {"label": name})
             if "rmse_se" in result:
                 se = np.asarray(result["rmse_se"][name][f"{quantity}_{moment}"], dtype=float)
-                lower = np.minimum(2 * se, 0.9 * y)
-                ax.errorbar(N, y, yerr=(lower, 2 * se), markersize=4, capsize=2, **style)
+                ax.errorbar(N, y, yerr=log_bars(y, se), markersize=4, capsize=2, **style)
             else:
                 ax.plot(N, y, markersize=4, **style)
         reference_rate(ax, N, ideal, r"posterior SD$/\sqrt{N}$")

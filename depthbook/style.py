@@ -10,6 +10,8 @@ font smaller than :data:`MIN_FONT` points where the chapters set one.
 
 from __future__ import annotations
 
+import numpy as np
+
 from depthcore.registry.filters import FILTERS
 
 #: One vocabulary for every plot, the label, colour and line style of each filter,
@@ -65,6 +67,21 @@ def legend_below(fig, axes, ncol: int) -> None:
     fig.legend(
         handles, labels, loc="outside lower center", ncol=ncol, frameon=False, fontsize=MIN_FONT
     )
+
+
+def log_bars(y, se):
+    """Bars of two standard errors either side of ``y`` for a log axis, shape (2, n).
+
+    The lower bar stops at a tenth of its point, short of zero, where a log axis
+    cannot go; the upper is two standard errors. For ``errorbar(..., yerr=...)``.
+
+    Parameters
+    ----------
+    y, se : array_like, shape (n,)
+        The values, positive, and their standard errors.
+    """
+    y, se = np.asarray(y, dtype=float), np.asarray(se, dtype=float)
+    return np.vstack([np.minimum(2 * se, 0.9 * y), 2 * se])
 
 
 def reference_rate(ax, x, y, label: str) -> None:

@@ -640,3 +640,10 @@ def test_the_articles_figures_are_written_as_it_names_them(tmp_path):
     paths = paper.save_print(tmp_path)
     assert [p.name for p in paths] == [f"print-figure{s.figure}.pdf" for s in SCENARIOS.values()]
     assert all(p.read_bytes().startswith(b"%PDF") for p in paths)
+
+
+def test_log_bars_are_two_standard_errors_the_lower_short_of_zero():
+    from depthbook.style import log_bars
+
+    bars = log_bars([1.0, 0.1], [0.01, 0.2])
+    assert_allclose(bars, [[0.02, 0.09], [0.02, 0.4]], rtol=1e-15)
