@@ -108,8 +108,9 @@ def _convergence_task(item) -> tuple:
     err, err_se, frac = [], [], []
     for n in sizes:
         m, e = _run_repeats(scenario, int(n), repeats, rng, kwargs)
-        err.append(np.sqrt(np.mean((m - exact) ** 2, axis=0)))
-        err_se.append(rms_se(m - exact, axis=0)[1])
+        rms, se = rms_se(m - exact, axis=0)
+        err.append(rms)
+        err_se.append(se)
         frac.append(np.mean(e, axis=0) / n)
     return np.array(err), np.array(err_se), np.array(frac)
 
