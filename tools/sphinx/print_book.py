@@ -64,8 +64,8 @@ def drop_printed_text(output: nodes.Element) -> None:
 class PrintTheLesson(SphinxPostTransform):
     """In the PDF, keep of each code cell what :data:`PRINTED` says for its ``hide_mode``.
 
-    Runs before the book's and myst-nb's transforms of hidden cells (priorities
-    198 and 199), which act on the HTML's toggles.
+    Runs before myst-nb's transform of hidden cells (priority 199), which makes
+    the HTML's toggles.
     """
 
     default_priority = 197
@@ -138,9 +138,9 @@ class GatherSolutions(SphinxPostTransform):
             "folds each under its question.",
         )
         for solution in found:
-            page = solution
-            while page is not None and not isinstance(page, addnodes.start_of_file):
-                page = page.parent
+            page = next(
+                (a for a in ancestors(solution) if isinstance(a, addnodes.start_of_file)), None
+            )
             solution.parent.remove(solution)
             if page is None:
                 chapter += solution
