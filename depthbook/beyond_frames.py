@@ -248,7 +248,7 @@ def frame_marginals_figure(result: list, names=None):
     fig, axes = subplots(
         len(names),
         len(result),
-        figsize=(WIDTH, 1.05 * len(names) + 0.9),
+        figsize=(WIDTH, 0.82 * len(names) + 0.9),
         squeeze=False,
     )
     exact = {**STYLE["optimal"], "color": "black", "linestyle": "-", "linewidth": 1.0}
@@ -333,7 +333,7 @@ def frames_study_figure(result: dict, names=None):
     Returns
     -------
     matplotlib.figure.Figure
-        Six panels, :data:`FRAMES_ROWS`, two to a row, each score with bars of
+        Six panels, :data:`FRAMES_ROWS`, three to a row, each score with bars of
         two Monte Carlo standard errors either side (its ``"<score>_se"``), the
         filters' points spread a little along ``N`` so that their bars do not
         overlap. The coverage panels shade
@@ -346,7 +346,7 @@ def frames_study_figure(result: dict, names=None):
     if names is None:
         names = [k for k, v in result.items() if isinstance(v, dict)]
     names = [n for n in names if n in result]
-    fig, axes = subplots(3, 2, figsize=(WIDTH, 8.0), sharex=True)
+    fig, axes = subplots(2, 3, figsize=(WIDTH, 5.2), sharex=True)
     frames = np.asarray(result["frames"])
     spread = SPREAD ** (np.arange(len(names)) - (len(names) - 1) / 2)
     for ax, (score, label, log, nominal) in zip(axes.ravel(), FRAMES_ROWS, strict=True):
@@ -504,20 +504,20 @@ def track_loss_figure(result: dict, names=None):
     Returns
     -------
     matplotlib.figure.Figure
-        One row per threshold of ``result["levels"]``: at the left the
-        fraction of tracks lost at frame ``k``, at the right the depth RMSE
-        over the tracks not lost (logarithmic, with the bound's depth SD in
+        One column per threshold of ``result["levels"]``: above, the
+        fraction of tracks lost at frame ``k``; below, the depth RMSE over
+        the tracks not lost (logarithmic, with the bound's depth SD in
         grey); each filter shaded two standard errors either side.
     """
     if names is None:
         names = list(result["filters"])
     levels = result["levels"]
     fig, axes = subplots(
-        len(levels),
         2,
-        figsize=(WIDTH, 1.9 * len(levels) + 1.2),
+        len(levels),
+        figsize=(WIDTH, 5.0),
         sharex=True,
-        sharey="col",
+        sharey="row",
         squeeze=False,
     )
     k = np.asarray(result["frames"], dtype=float)
@@ -527,7 +527,7 @@ def track_loss_figure(result: dict, names=None):
                 continue
             loss = result["filters"][name]["track_loss"]
             _band(
-                axes[i, 0],
+                axes[0, i],
                 k,
                 np.asarray(loss["fraction"][i]),
                 np.asarray(loss["se"][i]),
@@ -536,13 +536,13 @@ def track_loss_figure(result: dict, names=None):
             )
             kept = loss["depth"]
             _band(
-                axes[i, 1],
+                axes[1, i],
                 k,
                 np.asarray(kept["rmse_kept"][i]),
                 np.asarray(kept["rmse_kept_se"][i]),
                 name,
             )
-        axes[i, 1].plot(
+        axes[1, i].plot(
             k,
             result["bound"]["depth"],
             color="0.5",
@@ -551,10 +551,11 @@ def track_loss_figure(result: dict, names=None):
             alpha=0.6,
             label="bound (depth SD)",
         )
-        axes[i, 1].set_yscale("log")
-        axes[i, 0].set_ylim(-0.02, 1.02)
-        axes[i, 0].set_ylabel(f"lost at {t:g}\nof the distance", fontsize=MIN_FONT)
-        axes[i, 1].set_ylabel("depth RMSE,\ntracks kept", fontsize=MIN_FONT)
+        axes[1, i].set_yscale("log")
+        axes[0, i].set_ylim(-0.02, 1.02)
+        axes[0, i].set_title(f"lost at {t:g}\nof the distance", fontsize=MIN_FONT)
+    axes[0, 0].set_ylabel("fraction of tracks lost", fontsize=MIN_FONT)
+    axes[1, 0].set_ylabel("depth RMSE, tracks kept", fontsize=MIN_FONT)
     for ax in axes[-1]:
         ax.set_xlabel("frame $k$")
         ax.set_xlim(k[0], k[-1])

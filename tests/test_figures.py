@@ -605,10 +605,10 @@ def test_track_loss_figure_draws_each_threshold_and_the_rmse_over_the_tracks_kep
 
     r = _per_frame_run()
     fig = beyond_frames.track_loss_figure(r)
-    axes = np.reshape(fig.axes, (len(r["levels"]), 2))
+    axes = np.reshape(fig.axes, (2, len(r["levels"])))
     for i in range(len(r["levels"])):
-        lines = {line.get_label(): line for line in axes[i, 0].get_lines()}
-        kept = {line.get_label(): line for line in axes[i, 1].get_lines()}
+        lines = {line.get_label(): line for line in axes[0, i].get_lines()}
+        kept = {line.get_label(): line for line in axes[1, i].get_lines()}
         for name in ("optimal", "ekf"):
             loss = r["filters"][name]["track_loss"]
             label = style.STYLE[name]["label"]
