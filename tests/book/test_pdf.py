@@ -315,10 +315,8 @@ def test_the_api_reference_is_a_short_list_of_module_summaries(pages, plain_text
 TEX = ROOT / "_build" / "latex" / "depthcore.tex"
 LOG = ROOT / "_build" / "latex" / "depthcore.log"
 #: At most this many pages in all, appendices included: the printed book's budget, a
-#: ceiling that only falls. Its aim is 110; what stands between is mostly eleven tall
-#: figures of many panels (the frames chapter's and the atlas's maps, 8 to 10.5 inches
-#: tall as drawn), which a page holds one at a time.
-MAX_PAGES = 122
+#: ceiling that only falls.
+MAX_PAGES = 110
 #: At most this many lines of code and output printed (the verbatim blocks of the LaTeX).
 MAX_PRINTED_LINES = 500
 #: The widest overfull line the LaTeX log may report, in points.
@@ -360,6 +358,38 @@ def test_the_targets_read_what_they_measure():
 
 def test_the_pdf_has_at_most_its_pages(pages):
     assert len(pages) <= MAX_PAGES, f"the PDF has {len(pages)} pages (at most {MAX_PAGES})"
+
+
+#: The smallest text a printed figure may have, in points.
+MIN_PRINTED_FONT = 7.0
+#: A4's width in centimetres.
+A4_WIDTH_CM = 21.0
+
+
+def printed_font(config: str, width_in: float, font_pt: float) -> float:
+    """The printed size of ``font_pt`` in a figure ``width_in`` inches wide, under ``config``.
+
+    ``config`` is the text of ``_config.yml``: its ``hmargin={L,R}`` (centimetres) gives
+    the text width of an A4 page and its ``\\linewidth=F\\linewidth`` the share of it a
+    figure is printed at (a narrower figure keeps its size).
+    """
+    left, right = map(float, re.search(r"hmargin=\{([\d.]+)cm,([\d.]+)cm\}", config).groups())
+    share = float(re.search(r"\\linewidth=([\d.]+)\\linewidth", config).group(1))
+    width = share * (A4_WIDTH_CM - left - right) / 2.54
+    return font_pt * min(1.0, width / width_in)
+
+
+def test_finds_the_printed_size_of_a_figures_text():
+    config = "hmargin={2cm,2cm}\n{\\linewidth=0.5\\linewidth"
+    assert printed_font(config, 17 / 2.54, 10.0) == pytest.approx(5.0)
+    assert printed_font(config, 1.0, 10.0) == 10.0
+
+
+def test_the_widest_figures_smallest_text_prints_legibly():
+    from depthbook import style
+
+    config = (ROOT / "_config.yml").read_text(encoding="utf-8")
+    assert printed_font(config, style.WIDTH, style.MIN_FONT) >= MIN_PRINTED_FONT
 
 
 def test_the_pdf_prints_little_code_and_no_checks(tex):
