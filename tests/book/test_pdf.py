@@ -424,6 +424,27 @@ def test_the_exercises_are_many_and_their_solutions_gathered_at_the_end(plain_te
     assert not unsolved, f"exercises without a printed solution: {unsolved}"
 
 
+def exercise_chapters(text: str) -> dict[str, str]:
+    """The chapter number of each exercise's question: that of the Exercises section before it."""
+    found = {}
+    for match in re.finditer(r"Exercise (\d+) ", text):
+        sections = re.findall(r"\b(\d+)\.\d+ Exercises\b", text[: match.start()])
+        if sections:
+            found.setdefault(match.group(1), sections[-1])
+    return found
+
+
+def test_finds_the_chapter_of_each_exercise():
+    text = "3.4 Exercises Exercise 1 ask 9.1 Other 9.2 Exercises Exercise 2 ask Exercise 3 ask"
+    assert exercise_chapters(text) == {"1": "3", "2": "9", "3": "9"}
+
+
+def test_each_solution_names_the_chapter_of_its_exercise(plain_text):
+    before, _, gathered = plain_text.rpartition("Solutions to the exercises")
+    named = dict(re.findall(r"Solution to Exercise (\d+) \(chapter (\d+)\)", gathered))
+    assert named and named == exercise_chapters(before)
+
+
 def test_the_proof_is_titled_and_sections_are_numbered_once(plain_text):
     assert "Proof Both densities are Gaussian" in plain_text
     assert "Proof. Both" not in plain_text

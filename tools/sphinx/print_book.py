@@ -117,7 +117,7 @@ class GatherSolutions(SphinxPostTransform):
 
     Runs after sphinx-exercise has titled the solutions ("Solution to Exercise
     N", priorities 20-22), on the book's single document, whose root section
-    holds every page.
+    holds every page. Each solution's title names its chapter by number.
     """
 
     default_priority = 30
@@ -134,21 +134,19 @@ class GatherSolutions(SphinxPostTransform):
         chapter += nodes.title(SOLUTIONS, SOLUTIONS)
         chapter += nodes.paragraph(
             "",
-            "Each exercise's solution, in the order of the exercises; the HTML book "
-            "folds each under its question.",
+            "Each exercise's solution, in the order of the exercises, with the number of "
+            "its chapter; the HTML book folds each under its question.",
         )
         for solution in found:
-            page = next(
-                (a for a in ancestors(solution) if isinstance(a, addnodes.start_of_file)), None
-            )
             solution.parent.remove(solution)
-            if page is None:
-                chapter += solution
-                continue
-            # the solution's own page, as the LaTeX writer's stack of files reads it
-            holder = addnodes.start_of_file(docname=page["docname"])
-            holder += solution
-            chapter += holder
+            docname = solution.get("docname")  # the page of the solution's exercise
+            title = next(iter(solution.findall(nodes.title)), None)
+            if docname and title is not None:
+                # "Solution to Exercise N (chapter C)", C the number LaTeX gives its page
+                title += nodes.Text(" (chapter ")
+                title += nodes.raw("", f"\\ref{{\\detokenize{{{docname}::doc}}}}", format="latex")
+                title += nodes.Text(")")
+            chapter += solution
         # after the book's last page (the last part's last chapter)
         last = [
             p for p in pages if not any(isinstance(a, addnodes.start_of_file) for a in ancestors(p))
