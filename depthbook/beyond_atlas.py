@@ -303,63 +303,73 @@ def _noise_label(rho: float) -> str:
     return f"{rho / atlas.PIXEL:.2g} px"
 
 
-def verdict_map(result: dict, verdict: str, names=None):
-    """One verdict in every cell: a block of tiles per filter (rows), per frames and noise.
+#: The height of a row of tiles in :func:`verdict_map`, in inches: its label's
+#: :data:`~depthbook.style.MIN_FONT` points and a little space.
+MAP_ROW = 0.15
 
-    Each block is headed by its filter; within it the prior settings (and
-    depths) run down, the parallaxes (increasing) to the right; a tile is
-    dark where the verdict holds, light where it does not, grey where the
-    test cannot decide, white with a cross where the filter has no answer,
-    white with a dot where the verdict is not tested (no bound, or a fixed
-    truth for the calibration), pale grey
-    where the grid does not run the filter.
+
+def verdict_map(result: dict, verdict: str, names=None):
+    """One verdict in every cell: a block of tiles per filter, per frames and noise.
+
+    The filters' blocks stand in two columns, the first half of ``names`` at the
+    left; each block is headed by its filter, and within it the prior settings
+    (and depths) run down, labelled at the left for both columns, the
+    parallaxes (increasing) to the right. A tile is dark where the verdict
+    holds, light where it does not, grey where the test cannot decide, white
+    with a cross where the filter has no answer, white with a dot where the
+    verdict is not tested (no bound, or a fixed truth for the calibration),
+    pale grey where the grid does not run the filter.
     """
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    names = result["names"] if names is None else names
-    m, rows, columns = verdict_grid(result, verdict, names)
+    names = list(result["names"] if names is None else names)
+    half = (len(names) + 1) // 2
+    columns_of_blocks = [names[:half], names[half:]] if len(names) > 1 else [names]
+    grids = [verdict_grid(result, verdict, block) for block in columns_of_blocks]
+    m, rows, columns = grids[0]
     n_row, n_par = len(rows), len(result["axes"]["parallax"])
-    width = WIDTH
-    # tiles wider than tall (rows 0.62 of a column), so that the map and a short
-    # caption fit one printed page, and the row labels still stand apart
-    height = 1.0 + m.shape[0] / m.shape[1] * width * 0.62
-    fig, ax = subplots(figsize=(width, height))
+    height = 1.3 + (m.shape[0] + 1.5) * MAP_ROW
+    fig, axes = subplots(1, len(grids), figsize=(WIDTH, height), squeeze=False)
     colours = ListedColormap([*COLOURS, "#ffffff", "#f0f0f0"])
     bounds = [-0.5, 0.5, 1.5, 2.5, 3.5, 4.5, 5.5]
-    ax.pcolormesh(  # tiles as vector rectangles; the gaps between blocks left blank
-        np.arange(m.shape[1] + 1) - 0.5,
-        np.arange(m.shape[0] + 1) - 0.5,
-        np.ma.masked_invalid(m),
-        cmap=colours,
-        norm=BoundaryNorm(bounds, 6),
-    )
-    for code, marker, size in ((NO_ANSWER, "x", 8), (UNTESTED, ".", 3)):
-        r, c = np.nonzero(m == code)
-        ax.scatter(c, r, marker=marker, s=size, color="0.3", linewidths=0.6)
     depths = {d for _, _, d in rows}
     labels = [
         prior_label(form, scale) + (f", $y = {d:g}$" if len(depths) > 1 else "")
         for form, scale, d in rows
     ]
-    ticks, tick_labels, headings = [], [], []
-    for f, name in enumerate(names):  # each block headed by its filter, in the gap above it
-        headings.append(len(ticks))
-        ticks += [f * (n_row + 1) - 1] + [f * (n_row + 1) + r for r in range(n_row)]
-        tick_labels += [STYLE[name]["label"]] + labels
-    ax.set_yticks(ticks)
-    ax.set_yticklabels(tick_labels, fontsize=MIN_FONT)
-    for i in headings:
-        ax.get_yticklabels()[i].set_fontweight("bold")
-    ax.set_ylim(m.shape[0] - 0.5, -1.5)
-    ax.set_xticks([c * (n_par + 1) + (n_par - 1) / 2 for c in range(len(columns))])
-    ax.set_xticklabels(
-        [f"N = {frames}\n{_noise_label(rho)}" for frames, rho in columns], fontsize=MIN_FONT
-    )
-    ax.tick_params(length=0)
-    for spine in ax.spines.values():
-        spine.set_visible(False)
+    for ax, block, (grid, _, _) in zip(axes[0], columns_of_blocks, grids, strict=True):
+        ax.pcolormesh(  # tiles as vector rectangles; the gaps between blocks left blank
+            np.arange(grid.shape[1] + 1) - 0.5,
+            np.arange(grid.shape[0] + 1) - 0.5,
+            np.ma.masked_invalid(grid),
+            cmap=colours,
+            norm=BoundaryNorm(bounds, 6),
+        )
+        for code, marker, size in ((NO_ANSWER, "x", 8), (UNTESTED, ".", 3)):
+            r, c = np.nonzero(grid == code)
+            ax.scatter(c, r, marker=marker, s=size, color="0.3", linewidths=0.6)
+        for f, name in enumerate(block):  # each block headed by its filter, in the gap above
+            ax.text(
+                -0.5,
+                f * (n_row + 1) - 1,
+                STYLE[name]["label"],
+                fontsize=MIN_FONT,
+                fontweight="bold",
+                va="center",
+            )
+        ax.set_ylim(m.shape[0] - 0.5, -1.5)
+        ax.set_xlim(-0.5, grid.shape[1] - 0.5)
+        ax.set_xticks([c * (n_par + 1) + (n_par - 1) / 2 for c in range(len(columns))])
+        ax.set_xticklabels(
+            [f"N = {frames}\n{_noise_label(rho)}" for frames, rho in columns], fontsize=MIN_FONT
+        )
+        ax.set_yticks([f * (n_row + 1) + r for f in range(half) for r in range(n_row)])
+        ax.set_yticklabels(labels * half if ax is axes[0, 0] else [], fontsize=MIN_FONT)
+        ax.tick_params(length=0)
+        for spine in ax.spines.values():
+            spine.set_visible(False)
     handles = [
         Patch(facecolor=COLOURS[1], label="yes"),
         Patch(facecolor=COLOURS[0], edgecolor="0.6", label="no"),

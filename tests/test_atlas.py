@@ -309,6 +309,41 @@ def test_the_chapter_counts_and_maps_each_verdict():
     assert beyond_atlas.prior_label("paper", 1.0) == "paper, $s = 1$"
 
 
+def test_the_verdict_map_stands_the_filters_blocks_in_two_columns_labelled_at_the_left():
+    import matplotlib.pyplot as plt
+
+    from depthbook import beyond_atlas
+
+    names = ["optimal", "ekf", "ukf"]
+    cells = [
+        {
+            **dict(form=form, frames=3, rho=0.005, prior_scale=None, depth=6.0),
+            "parallax": parallax,
+            "filters": {n: {"trials": 100, "coverage_68": 0.68, "lost": False} for n in names},
+        }
+        for form in ("range", "log-uniform")
+        for parallax in (0, 1)
+    ]
+    result = {
+        "names": names,
+        "axes": {**{a: ["x"] for a in atlas.AXES}, "frames": [3], "parallax": [0, 1]},
+        "cells": cells,
+    }
+    fig = beyond_atlas.verdict_map(result, "calibrated")
+    left, right = fig.axes
+    headings = [[t.get_text() for t in ax.texts] for ax in (left, right)]
+    assert headings == [
+        [beyond_atlas.STYLE["optimal"]["label"], beyond_atlas.STYLE["ekf"]["label"]],
+        [beyond_atlas.STYLE["ukf"]["label"]],
+    ]
+    # the rows of each block labelled once, at the left, for both columns
+    labels = [t.get_text() for t in left.get_yticklabels()]
+    assert labels == 2 * [beyond_atlas.prior_label(f, None) for f in ("range", "log-uniform")]
+    assert not [t.get_text() for t in right.get_yticklabels() if t.get_text()]
+    assert left.get_ylim() == right.get_ylim()
+    plt.close(fig)
+
+
 def test_the_prior_forms_are_an_axis_and_refused_trials_are_counted_apart():
     grid = atlas.Grid(
         parallax=(0.2,),
