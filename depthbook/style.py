@@ -23,10 +23,10 @@ STYLE = {name: f.plot_style for name, f in FILTERS.items()}
 #: most ``WIDTH`` inches wide, rendered at ``DPI`` dots per inch (Jupyter and
 #: the book draw the PNG at ``fig.dpi``), with no text smaller than ``MIN_FONT``
 #: points (tick labels, legends and titles at matplotlib's 10 points unless
-#: stated). The PDF prints a figure at most 0.85 of its text's width (``_config.yml``),
-#: so one ``WIDTH`` inches wide shrinks to 0.79 of its size and its smallest text
-#: prints at 7 points (``tests/book/test_pdf.py``); a figure taller than 0.7 of the
-#: text is shrunk further, and the frames chapter's are drawn short enough not to be.
+#: stated). The PDF prints a figure at most 0.85 of its text's width and 0.7 of its
+#: height (``_config.yml``), so one ``WIDTH`` inches wide shrinks to 0.79 of its size;
+#: every figure is drawn short enough that its smallest text prints at 6.8 points or
+#: more (``tests/book/test_pdf.py`` checks each image of the built book).
 WIDTH = 7.2
 
 

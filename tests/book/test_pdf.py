@@ -360,36 +360,60 @@ def test_the_pdf_has_at_most_its_pages(pages):
     assert len(pages) <= MAX_PAGES, f"the PDF has {len(pages)} pages (at most {MAX_PAGES})"
 
 
-#: The smallest text a printed figure may have, in points.
-MIN_PRINTED_FONT = 7.0
-#: A4's width in centimetres.
-A4_WIDTH_CM = 21.0
+#: The smallest text a printed figure may have, in points: the book's smallest font
+#: (:data:`depthbook.style.MIN_FONT`, 9 pt) at 0.76 of its size.
+MIN_PRINTED_FONT = 6.8
 
 
-def printed_font(config: str, width_in: float, font_pt: float) -> float:
-    """The printed size of ``font_pt`` in a figure ``width_in`` inches wide, under ``config``.
+def printed_scale(config: str, log: str, width_pt: float, height_pt: float) -> float:
+    """The scale at which the PDF prints an image ``width_pt`` by ``height_pt`` points.
 
-    ``config`` is the text of ``_config.yml``: its ``hmargin={L,R}`` (centimetres) gives
-    the text width of an A4 page and its ``\\linewidth=F\\linewidth`` the share of it a
-    figure is printed at (a narrower figure keeps its size).
+    As Sphinx's ``\\sphinxincludegraphics`` does: an image wider than the figures'
+    share of the text width (``\\linewidth=F\\linewidth`` in ``config``, the text of
+    ``_config.yml``), or taller than its ``\\spx@image@maxheight=H\\textheight``, is
+    shrunk to fit both; a smaller one keeps its size. The text's width and height are
+    read from the LaTeX ``log`` (geometry's ``textwidth=...pt``, ``textheight=...pt``).
     """
-    left, right = map(float, re.search(r"hmargin=\{([\d.]+)cm,([\d.]+)cm\}", config).groups())
     share = float(re.search(r"\\linewidth=([\d.]+)\\linewidth", config).group(1))
-    width = share * (A4_WIDTH_CM - left - right) / 2.54
-    return font_pt * min(1.0, width / width_in)
+    tall = float(re.search(r"maxheight=([\d.]+)\\textheight", config).group(1))
+    text_width = float(re.search(r"textwidth=([\d.]+)pt", log).group(1))
+    text_height = float(re.search(r"textheight=([\d.]+)pt", log).group(1))
+    return min(1.0, share * text_width / width_pt, tall * text_height / height_pt)
 
 
-def test_finds_the_printed_size_of_a_figures_text():
-    config = "hmargin={2cm,2cm}\n{\\linewidth=0.5\\linewidth"
-    assert printed_font(config, 17 / 2.54, 10.0) == pytest.approx(5.0)
-    assert printed_font(config, 1.0, 10.0) == 10.0
+def test_finds_the_scale_at_which_an_image_prints():
+    config = "{\\linewidth=0.5\\linewidth ... maxheight=0.5\\textheight}"
+    log = "* textwidth=400.0pt\n* textheight=600.0pt\n"
+    assert printed_scale(config, log, 400.0, 100.0) == pytest.approx(0.5)  # too wide
+    assert printed_scale(config, log, 100.0, 600.0) == pytest.approx(0.5)  # too tall
+    assert printed_scale(config, log, 100.0, 100.0) == 1.0
 
 
-def test_the_widest_figures_smallest_text_prints_legibly():
+def image_sizes() -> dict[str, tuple[float, float]]:
+    """Width and height in points of each figure's image the LaTeX build holds (its PDFs)."""
+    sizes = {}
+    for path in sorted(PDF.parent.glob("*.pdf")):
+        if path != PDF:
+            info = subprocess.run(
+                ["pdfinfo", str(path)], capture_output=True, text=True, check=True, timeout=60
+            ).stdout
+            w, h = re.search(r"Page size:\s+([\d.]+) x ([\d.]+) pts", info).groups()
+            sizes[path.name] = (float(w), float(h))
+    return sizes
+
+
+def test_every_figures_smallest_text_prints_legibly(pdf, latex_log):
     from depthbook import style
 
     config = (ROOT / "_config.yml").read_text(encoding="utf-8")
-    assert printed_font(config, style.WIDTH, style.MIN_FONT) >= MIN_PRINTED_FONT
+    sizes = image_sizes()
+    assert len(sizes) >= 30, f"only {len(sizes)} images beside the LaTeX"
+    small = {
+        name: round(style.MIN_FONT * scale, 2)
+        for name, (w, h) in sizes.items()
+        if style.MIN_FONT * (scale := printed_scale(config, latex_log, w, h)) < MIN_PRINTED_FONT
+    }
+    assert not small, f"figures whose smallest text prints below {MIN_PRINTED_FONT} pt: {small}"
 
 
 def test_the_pdf_prints_little_code_and_no_checks(tex):
