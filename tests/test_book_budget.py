@@ -105,3 +105,20 @@ def test_a_long_shown_line_is_a_fault_named_by_its_line(tmp_path):
     page = tmp_path / "p.md"
     page.write_text("# T\n\n```{code-cell} ipython3\nx = 1\ny = '" + "a" * 90 + "'\n```\n")
     assert prose.faults(page) == ["p.md:5: a shown code line of 96 characters"]
+
+
+def test_directives_are_read_whole_with_their_options_and_tags():
+    text = (
+        "````{exercise}\n:label: ex-a\n\n```{code-cell} ipython3\nx = 1\n```\n````\n"
+        "```{code-cell} ipython3\n:tags: [hide-input, 'remove-output']\n\nassert x\n```\n"
+        "```python\n```{code-cell}\n```\n"
+    )
+    found = prose.directives(text)
+    assert [(d.name, d.first, d.last) for d in found] == [
+        ("exercise", 0, 6),
+        ("code-cell", 7, 11),
+        ("", 12, 14),
+    ]
+    assert found[0].options == {"label": "ex-a"} and found[0].body[1] == "```{code-cell} ipython3"
+    assert prose.tags(found[1].options) == ["hide-input", "remove-output"]
+    assert prose.cells(text) == [(7, 11, ["hide-input", "remove-output"], ["", "assert x"])]

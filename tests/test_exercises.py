@@ -14,51 +14,25 @@ their labels are unique.
 from __future__ import annotations
 
 import re
+import sys
 from collections import Counter
 from pathlib import Path
 
 import pytest
 
-BOOK = Path(__file__).resolve().parent.parent / "book"
-PAGES = sorted(BOOK.glob("*.md"))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+import prose  # noqa: E402
+
+BOOK = prose.BOOK
+PAGES = prose.pages()
 AT_LEAST, BEYOND_AT_LEAST = 14, 6
 
-_FENCE = re.compile(r"^(`{3,})\{([\w:-]+)\}\s*(.*)$")
 _CHECKS = re.compile(r"^\s*assert\b|\bglue\(")
-
-
-def blocks(text):
-    """The page's directives in order: (name, argument, options, body lines, line)."""
-    lines, found, i = text.splitlines(), [], 0
-    while i < len(lines):
-        m = _FENCE.match(lines[i])
-        if not m:
-            i += 1
-            continue
-        fence, name, argument, start = m.group(1), m.group(2), m.group(3).strip(), i
-        i += 1
-        options = {}
-        while i < len(lines) and lines[i].startswith(":"):
-            key, _, value = lines[i][1:].partition(":")
-            options[key.strip()] = value.strip()
-            i += 1
-        body = []
-        while i < len(lines) and lines[i].rstrip() != fence:
-            body.append(lines[i])
-            i += 1
-        found.append((name, argument, options, body, start))
-        i += 1
-    return found
-
-
-def tags(options):
-    """A code cell's tags, from its ``:tags: [a, b]`` option."""
-    return [t.strip(" '\"") for t in options.get("tags", "").strip("[]").split(",") if t.strip()]
 
 
 def exercises(text):
     """The labels of the page's exercises, in order."""
-    return [opts.get("label") for name, _, opts, _, _ in blocks(text) if name == "exercise"]
+    return [d.options.get("label") for d in prose.directives(text) if d.name == "exercise"]
 
 
 def faults(text):
@@ -68,7 +42,7 @@ def faults(text):
         found.append("an exercise without a label")
     labels = [label for label in labels if label]
     solutions, open_label, cells = Counter(), None, 0
-    for name, argument, options, body, line in blocks(text):
+    for name, argument, options, body, line, _ in prose.directives(text):
         if name == "solution-start":
             if open_label is not None:
                 found.append(f"line {line + 1}: solution {argument} opens inside {open_label}")
@@ -84,7 +58,9 @@ def faults(text):
             open_label = None
         elif name == "code-cell" and open_label is not None:
             cells += 1
-            shown = not any(t.startswith("remove-") or t == "hide-input" for t in tags(options))
+            shown = not any(
+                t.startswith("remove-") or t == "hide-input" for t in prose.tags(options)
+            )
             if shown and any(_CHECKS.search(code) for code in body):
                 found.append(f"line {line + 1}: solution {open_label} shows assert or glue(")
     if open_label is not None:
@@ -97,7 +73,7 @@ def faults(text):
     if labels:
         headings = [i for i, s in enumerate(text.splitlines()) if s.startswith("## ")]
         exercises_at = [i for i in headings if text.splitlines()[i].strip() == "## Exercises"]
-        first = next(line for name, _, _, _, line in blocks(text) if name == "exercise")
+        first = next(d.first for d in prose.directives(text) if d.name == "exercise")
         if len(exercises_at) != 1:
             found.append(f"{len(exercises_at)} '## Exercises' headings")
         elif exercises_at[0] > first or headings[-1] != exercises_at[0]:

@@ -18,6 +18,7 @@ import ast
 import re
 import sys
 from pathlib import Path
+from typing import NamedTuple
 
 BOOK = Path(__file__).resolve().parent.parent / "book"
 PAGE_WORDS = 2500
@@ -30,6 +31,7 @@ CODE_WIDTH = 88
 HIDDEN = ("remove-cell", "remove-input")
 
 _FENCE = re.compile(r"^(`{3,}|~{3,}|:{3,})\s*(\{([^}]*)\})?")
+_OPTION = re.compile(r":[\w-]+:")
 _ROLE = re.compile(r"\{[A-Za-z:-]+\}`[^`]*`")
 _WORD = re.compile(r"[A-Za-z0-9][\w'’.,/-]*")
 
@@ -39,26 +41,57 @@ def pages():
     return sorted(BOOK.glob("*.md"))
 
 
-def cells(text):
-    """The code cells of a MyST page: (first line, last line, tags, code lines)."""
+class Directive(NamedTuple):
+    """A fenced block of a MyST page: a directive (``name``) or a plain code block (``""``)."""
+
+    name: str
+    argument: str
+    options: dict
+    body: list
+    first: int
+    last: int
+
+
+def directives(text):
+    """The fenced blocks of a MyST page in order, each read whole: a block inside
+    another's body is part of that body. ``first`` and ``last`` are the lines of the
+    opening and closing fences; the options are the ``:key: value`` lines that open it."""
     lines = text.splitlines()
     found, i = [], 0
     while i < len(lines):
         m = _FENCE.match(lines[i])
-        if m and m.group(3) == "code-cell":
-            start, fence, i = i, m.group(1), i + 1
-            tags = []
-            while i < len(lines) and lines[i].startswith(":"):
-                t = re.match(r":tags:\s*\[(.*)\]", lines[i])
-                if t:
-                    tags = [x.strip().strip("'\"") for x in t.group(1).split(",") if x.strip()]
-                i += 1
-            body_start = i
-            while lines[i].strip() != fence:
-                i += 1
-            found.append((start, i, tags, lines[body_start:i]))
+        if not m:
+            i += 1
+            continue
+        first, fence, name = i, m.group(1), m.group(3) or ""
+        argument = lines[i][m.end() :].strip()
+        i += 1
+        options = {}
+        while i < len(lines) and _OPTION.match(lines[i]):
+            key, _, value = lines[i][1:].partition(":")
+            options[key.strip()] = value.strip()
+            i += 1
+        body_start = i
+        while i < len(lines) and lines[i].strip() != fence:
+            i += 1
+        found.append(Directive(name, argument, options, lines[body_start:i], first, i))
         i += 1
     return found
+
+
+def tags(options):
+    """A code cell's tags, from its ``:tags: [a, b]`` option."""
+    listed = options.get("tags", "").strip().removeprefix("[").removesuffix("]")
+    return [t.strip().strip("'\"") for t in listed.split(",") if t.strip()]
+
+
+def cells(text):
+    """The code cells of a MyST page: (first line, last line, tags, code lines)."""
+    return [
+        (d.first, d.last, tags(d.options), d.body)
+        for d in directives(text)
+        if d.name == "code-cell"
+    ]
 
 
 def prose_words(text):
