@@ -147,10 +147,10 @@ class GatherSolutions(SphinxPostTransform):
                 title += nodes.raw("", f"\\ref{{\\detokenize{{{docname}::doc}}}}", format="latex")
                 title += nodes.Text(")")
             chapter += solution
-        # after the book's last page (the last part's last chapter)
-        last = [
-            p for p in pages if not any(isinstance(a, addnodes.start_of_file) for a in ancestors(p))
-        ][-1]
+        # after the book's last page (the last part's last chapter); the LaTeX builder
+        # inlines each page without re-parenting its nodes, so no page is found inside
+        # another by walking up from it, and the last in document order is the one
+        last = pages[-1]
         last.parent.insert(last.parent.index(last) + 1, chapter)
 
 
@@ -159,13 +159,6 @@ def compact(node: nodes.Element) -> None:
     index = node.parent.index(node)
     node.parent.insert(index + 1, nodes.raw("", "\\end{multicols}\n", format="latex"))
     node.parent.insert(index, nodes.raw("", "\\begin{multicols}{2}\\small\n", format="latex"))
-
-
-def ancestors(node: nodes.Node):
-    """The nodes that hold ``node``, innermost first."""
-    while node.parent is not None:
-        node = node.parent
-        yield node
 
 
 def module_of(name: str, modules) -> str | None:
