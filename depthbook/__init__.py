@@ -22,7 +22,8 @@ plots' style, :mod:`~depthbook.notebook` what a page shows when it runs as a
 plain notebook, :mod:`~depthbook.crossref` the book's references resolved in
 Jupyter, :mod:`~depthbook.live` the figure pages' live controls,
 :mod:`~depthbook.benchmark_tables` the benchmarks' tables,
-:mod:`~depthbook.formatting` the numbers as the book prints them and
+:mod:`~depthbook.formatting` the numbers as the book prints them,
+:mod:`~depthbook.errors` the Monte Carlo standard errors of their curves and
 :mod:`~depthbook.reference` the independent routes the pages and the tests
 check the package against. Two subpackages:
 

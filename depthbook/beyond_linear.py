@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from depthbook.errors import rms_se
 from depthbook.style import MIN_FONT, WIDTH, legend_below, log_bars, reference_rate, subplots
 from depthcore.exact import posterior
 from depthcore.particles import rbpf
@@ -207,7 +208,7 @@ def smoothing_figure(track, states, first: int = 1):
     return fig
 
 
-def rbpf_convergence_figure(result: dict, rmse_se: dict | None = None):
+def rbpf_convergence_figure(result: dict):
     """The Rao-Blackwellised particle filter's depth moments against the number of particles.
 
     Parameters
@@ -215,17 +216,14 @@ def rbpf_convergence_figure(result: dict, rmse_se: dict | None = None):
     result : dict
         The clouds of :func:`depthbook.beyond_linear.rbpf_convergence`, with
         the exact bank's moments they are measured from.
-    rmse_se : dict, optional
-        ``{"depth_mean": (S,), "depth_sd": (S,)}``, the standard errors of the
-        RMS errors (:func:`depthbook.beyond_particles.rms_se` of the clouds'
-        errors); given, the left panel's points carry bars of two of them
-        either side, cut at a tenth of the point on the log axis.
 
     Returns
     -------
     matplotlib.figure.Figure
         Left: the RMS error of one cloud's depth mean and SD from the exact
-        bank's, on log axes, beside the exact SD over ``sqrt(J)``. Right: each
+        bank's, on log axes, beside the exact SD over ``sqrt(J)``, with bars of
+        two standard errors either side (:func:`depthbook.errors.rms_se` of the
+        clouds' errors), cut at a tenth of the point on the log axis. Right: each
         cloud's depth mean, and their average with two standard errors, about
         the exact value.
     """
@@ -239,11 +237,8 @@ def rbpf_convergence_figure(result: dict, rmse_se: dict | None = None):
         ("depth_sd", "s--", "tab:orange", "depth SD"),
     ):
         y = np.asarray(result["rmse"][moment], dtype=float)
-        if rmse_se is None:
-            ax.plot(J, y, fmt, color=colour, label=label)
-        else:
-            yerr = log_bars(y, rmse_se[moment])
-            ax.errorbar(J, y, yerr=yerr, fmt=fmt, color=colour, capsize=2, label=label)
+        _, se = rms_se(result["runs"][moment] - exact[moment], axis=1)
+        ax.errorbar(J, y, yerr=log_bars(y, se), fmt=fmt, color=colour, capsize=2, label=label)
     reference_rate(ax, J, exact["depth_sd"] / np.sqrt(J), r"exact depth SD$/\sqrt{J}$")
     ax.set_xlabel("particles per cloud $J$")
     ax.set_ylabel("RMS error from the exact bank")

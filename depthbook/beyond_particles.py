@@ -7,15 +7,14 @@ Recommended import: ``from depthbook import beyond_particles``.
   :data:`SETTINGS`;
 * :func:`resample_move_runs`: the causal particle filter with resample-move
   (:mod:`depthcore.particles.resample_move`) run independently several times on a
-  scenario, against the optimal filter;
-* :func:`rms_se`: the Monte Carlo standard error of an RMS error over
-  independent runs, for the error bars of these curves.
+  scenario, against the optimal filter.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from depthbook.errors import rms_se
 from depthbook.style import MIN_FONT, WIDTH, legend_below, log_bars, reference_rate, subplots
 from depthcore.exact import optimal
 from depthcore.particles import importance, resample_move
@@ -36,46 +35,6 @@ SETTINGS = {
 #: Particles per call of :func:`depthcore.particles.importance.run` (bounds the memory, about 200
 #: bytes each).
 CHUNK_PARTICLES = 200_000
-
-
-# --- the standard error of an RMS error ----------------------------------------------------
-
-
-def rms_se(errors, axis: int = -1):
-    """The RMS of independent errors and its Monte Carlo standard error.
-
-    Over ``R`` independent runs with errors ``e_r``, the mean square
-    ``m = mean(e_r**2)`` has the standard error ``s = SD(e_r**2) / sqrt(R)``,
-    and the RMS ``sqrt(m)`` the delta method's ``s / (2 sqrt(m))``: the
-    derivative of the square root, ``1 / (2 sqrt(m))``, times ``s``. Like
-    every delta-method error it is a first-order one: it needs enough runs
-    for ``m`` to lie near its expectation, and it is 0 where every error is 0.
-
-    Parameters
-    ----------
-    errors : array_like
-        The errors of the runs along ``axis`` (at least two runs), finite.
-    axis : int
-        The axis of the runs.
-
-    Returns
-    -------
-    rms, se : ndarray
-        The RMS error and its standard error, each of the shape of ``errors``
-        without ``axis``.
-    """
-    e = np.asarray(errors, dtype=float)
-    if e.ndim == 0 or e.shape[axis] < 2:
-        raise ValueError("errors: at least two runs are needed along the axis")
-    if not np.all(np.isfinite(e)):
-        raise ValueError("errors must be finite")
-    squares = e**2
-    runs = e.shape[axis]
-    mean_square = np.mean(squares, axis=axis)
-    square_se = np.std(squares, axis=axis, ddof=1) / np.sqrt(runs)
-    rms = np.sqrt(mean_square)
-    safe = np.where(rms > 0, rms, 1.0)
-    return rms, np.where(rms > 0, square_se / (2.0 * safe), 0.0)
 
 
 # --- convergence of the particle filter ------------------------------------------------------
@@ -100,8 +59,9 @@ def _convergence_task(item) -> tuple:
     """One setting of :func:`particle_convergence`, every ``N`` in turn from its own stream.
 
     ``item`` is ``(scenario, sizes, repeats, kwargs, stream, exact)``; returns the
-    RMSE of each moment (S, 4), its standard error (S, 4; :func:`rms_se`) and the mean
-    ESS fraction after each measurement (S, 3).
+    RMSE of each moment (S, 4), its standard error (S, 4;
+    :func:`~depthbook.errors.rms_se`) and the mean ESS fraction after each
+    measurement (S, 3).
     """
     scenario, sizes, repeats, kwargs, stream, exact = item
     rng = np.random.default_rng(stream)
@@ -144,7 +104,7 @@ def particle_convergence(
     dict
         ``"sizes"`` (S,), ``"repeats"``, ``"exact"``: ``{moment: float}`` for
         :data:`~depthcore.registry.estimates.MOMENTS`, ``"rmse"``: ``{setting: {moment: (S,)}}``,
-        ``"rmse_se"`` its standard errors (:func:`rms_se`), alike, and
+        ``"rmse_se"`` its standard errors (:func:`~depthbook.errors.rms_se`), alike, and
         ``"ess"``: ``{setting: (S, 3)}``, the mean ESS after each measurement
         as a fraction of ``N``.
     """
@@ -282,7 +242,7 @@ def convergence_figure(result: dict, quantity: str = "depth"):
 
     The grey line is ``sd / sqrt(N)``, the standard error of the mean of
     ``N`` independent draws from the optimal posterior. Where the result
-    holds ``"rmse_se"`` (``{setting: {moment: (S,)}}``, as :func:`rms_se`
+    holds ``"rmse_se"`` (``{setting: {moment: (S,)}}``, as :func:`~depthbook.errors.rms_se`
     gives it from the runs' errors), each point carries bars of two standard
     errors either side, cut at a tenth of the point on the log axis.
 

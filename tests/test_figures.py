@@ -15,6 +15,7 @@ from depthbook import (
     beyond_particles,
     beyond_study,
     beyond_sweeps,
+    errors,
     paper,
     style,
 )
@@ -473,6 +474,14 @@ def test_rbpf_convergence_figure_draws_the_errors(fig2_track):
     first = fig.axes[0].get_lines()[0]
     assert_allclose(first.get_ydata(), r["rmse"]["depth_mean"])
     assert_allclose(first.get_xdata(), [10, 40])
+    # each RMS error with bars of two standard errors over the clouds, from their runs
+    bars = [c for c in fig.axes[0].containers if c.__class__.__name__ == "ErrorbarContainer"]
+    for container, moment in zip(bars, ("depth_mean", "depth_sd"), strict=True):
+        y, low, high = _bars(container)
+        _, se = errors.rms_se(r["runs"][moment] - r["exact"][moment], axis=1)
+        assert_allclose(y, r["rmse"][moment])
+        assert_allclose(high - y, 2 * se)
+        assert_allclose(y - low, np.minimum(2 * se, 0.9 * y))
     plt.close(fig)
 
 

@@ -1,7 +1,7 @@
-"""The standard error of an RMS error (beyond_particles.rms_se) against a direct simulation.
+"""The standard error of an RMS error (depthbook.errors.rms_se) against a direct simulation.
 
 Many independent studies of ``R`` runs each are simulated; the SD of their
-RMS errors is the standard error that :func:`depthbook.beyond_particles.rms_se`
+RMS errors is the standard error that :func:`depthbook.errors.rms_se`
 estimates from one study's runs alone. The delta method is first order: with
 the page's 20 runs its mean estimate falls short of the simulated SD by about
 a tenth for normal errors and a seventh for Student t errors with 8 degrees of
@@ -11,7 +11,7 @@ freedom; with 100 runs it is within a tenth for both.
 import numpy as np
 import pytest
 
-from depthbook.beyond_particles import rms_se
+from depthbook.errors import rms_se
 
 #: Simulated studies per case.
 STUDIES = 20_000
